@@ -1,0 +1,59 @@
+// broadphase/broadphase.hpp — the broad phase as callers see it.
+//
+// Contract (DESIGN.md): given N spheres, emit every pair (i, j), i < j, with
+//   |c_i - c_j|^2 < (r_i + r_j + margin)^2     (spheres_overlap in broadphase_math.hpp)
+// each exactly once, in an order that depends only on the input. The
+// subdivision backends (CPU, CUDA) and the O(N^2) oracle use the same
+// predicate, so their pair sets must be equal bit for bit.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/spheres.hpp"
+
+namespace marbles::broadphase {
+
+struct Pair {
+  std::uint32_t i = 0, j = 0;  // i < j
+  friend bool operator==(const Pair& a, const Pair& b) { return a.i == b.i && a.j == b.j; }
+  friend bool operator<(const Pair& a, const Pair& b) { return a.i < b.i || (a.i == b.i && a.j < b.j); }
+};
+
+enum class Backend { cpu, cuda };
+enum class SortKind { seed, cub };  // CUDA only: the seed's radix sort or CUB's
+
+// Per-call figures, for the benchmark and the run summary.
+struct Stats {
+  double ms_cell_ids = 0, ms_sort = 0, ms_cell_list = 0, ms_traversal = 0, ms_total = 0;
+  std::size_t cell_entries = 0;     // valid (non-0xffffffff) entries sorted
+  std::size_t collision_cells = 0;  // cells with >= 2 occupants, >= 1 home
+  std::size_t tests = 0;            // exact sphere tests made in traversal
+  std::size_t pairs = 0;            // pairs emitted
+  unsigned key_bits = 0;            // bits of the cell key that the sort had to look at
+  double cell_size = 0;
+};
+
+class BroadPhase {
+ public:
+  virtual ~BroadPhase() = default;
+  // Host arrays in, host pairs out. `out` is cleared first.
+  virtual void find_pairs(const SpheresIn& spheres, real margin, std::vector<Pair>& out) = 0;
+  virtual const Stats& last_stats() const = 0;
+  virtual std::string name() const = 0;
+};
+
+// The seed algorithm on the CPU (OpenMP where it pays).
+std::unique_ptr<BroadPhase> make_subdivision_cpu();
+
+// The seed algorithm on the GPU. Throws RuntimeFailure when the build has no
+// CUDA backend or there is no device.
+std::unique_ptr<BroadPhase> make_subdivision_cuda(SortKind sort = SortKind::cub);
+
+// The O(N^2) oracle: same predicate, pairs in (i, j) lexicographic order.
+void brute_force_pairs(const SpheresIn& spheres, real margin, std::vector<Pair>& out);
+
+}  // namespace marbles::broadphase

@@ -1,0 +1,44 @@
+// core/vec3.hpp — a plain 3-vector of `real`, usable on host and device.
+//
+// Kept deliberately small (no expression templates): every operation is a
+// handful of flops that the compiler inlines in both the CPU loops and the
+// CUDA kernels.
+#pragma once
+
+#include <cmath>
+
+#include "core/config.hpp"
+
+namespace marbles {
+
+struct Vec3 {
+  real x = 0, y = 0, z = 0;
+
+  MARBLES_HD_INLINE constexpr Vec3() = default;
+  MARBLES_HD_INLINE constexpr Vec3(real x_, real y_, real z_) : x(x_), y(y_), z(z_) {}
+
+  MARBLES_HD_INLINE Vec3& operator+=(const Vec3& o) { x += o.x; y += o.y; z += o.z; return *this; }
+  MARBLES_HD_INLINE Vec3& operator-=(const Vec3& o) { x -= o.x; y -= o.y; z -= o.z; return *this; }
+  MARBLES_HD_INLINE Vec3& operator*=(real s) { x *= s; y *= s; z *= s; return *this; }
+  MARBLES_HD_INLINE real operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
+};
+
+MARBLES_HD_INLINE Vec3 operator+(Vec3 a, const Vec3& b) { return a += b; }
+MARBLES_HD_INLINE Vec3 operator-(Vec3 a, const Vec3& b) { return a -= b; }
+MARBLES_HD_INLINE Vec3 operator-(const Vec3& a) { return {-a.x, -a.y, -a.z}; }
+MARBLES_HD_INLINE Vec3 operator*(Vec3 a, real s) { return a *= s; }
+MARBLES_HD_INLINE Vec3 operator*(real s, Vec3 a) { return a *= s; }
+MARBLES_HD_INLINE Vec3 operator/(const Vec3& a, real s) { return {a.x / s, a.y / s, a.z / s}; }
+MARBLES_HD_INLINE bool operator==(const Vec3& a, const Vec3& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+
+MARBLES_HD_INLINE real dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+MARBLES_HD_INLINE Vec3 cross(const Vec3& a, const Vec3& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+MARBLES_HD_INLINE real length_squared(const Vec3& a) { return dot(a, a); }
+MARBLES_HD_INLINE real length(const Vec3& a) { return std::sqrt(dot(a, a)); }
+MARBLES_HD_INLINE bool is_finite(const Vec3& a) {
+  return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z);
+}
+
+}  // namespace marbles

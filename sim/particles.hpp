@@ -1,0 +1,30 @@
+// sim/particles.hpp — the scene's particle blocks expanded into spheres.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/vec3.hpp"
+#include "sim/scene.hpp"
+
+namespace marbles::scene {
+
+struct GeneratedParticles {
+  std::vector<Vec3> position;
+  std::vector<Vec3> velocity;
+  std::vector<real> radius;
+  std::vector<std::uint32_t> material;  // index into Scene::materials
+  std::size_t size() const { return position.size(); }
+};
+
+// Expands every block in order (ids follow that order). Deterministic for a
+// given scene (seeded generators). Throws InputError for a missing or
+// malformed CSV (file:line:column of the CSV), a block that cannot hold the
+// requested count of non-overlapping spheres, or an unknown material.
+GeneratedParticles generate_particles(const Scene& scene);
+
+// Reads `x,y,z,r[,vx,vy,vz]` rows (an optional header line, '#' comments);
+// used by the csv block and by `marbles pairs`.
+GeneratedParticles read_spheres_csv(const std::string& path);
+
+}  // namespace marbles::scene

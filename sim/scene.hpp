@@ -1,0 +1,143 @@
+// sim/scene.hpp — a scene file turned into a plain description.
+//
+// load_scene() parses and validates a YAML scene (format v1, docs/scene-format.md)
+// and returns this description; nothing here knows about YAML. Every value
+// that came from the file keeps its SourceLocation so later checks (e.g. a
+// block naming an unknown material) can still point at the line.
+// All quantities are SI: m, s, kg, kg/m^3, m/s, rad/s.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/error.hpp"
+#include "core/vec3.hpp"
+
+namespace marbles::scene {
+
+struct TimeSpec {
+  double duration = 0;  // s, simulated time
+  double dt = 0;        // s, one step (output cadence counts steps)
+  int substeps = 1;     // substeps per step, h = dt / substeps
+};
+
+struct SolverSpec {
+  int iterations = 10;                        // velocity sweeps per substep
+  std::string integrator = "symplectic_euler";
+};
+
+struct Material {
+  std::string name;
+  double density = 1000;        // kg/m^3, > 0
+  double restitution = 0.5;     // [0, 1]
+  double friction = 0.5;        // Coulomb mu, >= 0
+  double rolling_friction = 0;  // dimensionless rolling resistance coefficient, >= 0
+  SourceLocation where;
+};
+
+struct WallSpec {
+  enum class Kind { plane, box };
+  Kind kind = Kind::plane;
+  Vec3 point, normal{0, 0, 1};  // plane: a point on it and the normal towards free space (normalised on load)
+  Vec3 lo, hi;                  // box: spheres are kept inside [lo, hi]
+  std::string material;         // name; empty = the first material
+  SourceLocation where;
+};
+
+struct RadiusSpec {
+  enum class Kind { constant, uniform, log_uniform };
+  Kind kind = Kind::constant;
+  double value = 0;       // constant
+  double min = 0, max = 0; // uniform, log_uniform
+};
+
+struct VelocitySpec {
+  enum class Kind { zero, constant, random };
+  Kind kind = Kind::zero;
+  Vec3 value;              // constant
+  double speed = 0;        // random: each component uniform in [-speed, speed]
+  std::uint64_t seed = 1;  // random
+};
+
+struct ParticleBlock {
+  enum class Kind { list, lattice, random, csv };
+  Kind kind = Kind::list;
+  std::string material;  // name; empty = the first material
+
+  // list: explicit spheres (positions and radii; velocities optional, one per sphere)
+  std::vector<Vec3> positions;
+  std::vector<double> radii;
+  std::vector<Vec3> velocities;
+
+  // lattice: cubic lattice of spheres filling [lo, hi] with the given spacing,
+  // each centre moved by a uniform jitter in [-jitter, jitter] per axis
+  // random: `count` non-overlapping spheres with centres in [lo, hi] (whole sphere inside)
+  Vec3 lo, hi;
+  double spacing = 0;
+  double jitter = 0;
+  std::size_t count = 0;
+  RadiusSpec radius;
+  std::uint64_t seed = 1;
+
+  // csv: rows x,y,z,r[,vx,vy,vz]; path resolved relative to the scene file
+  std::string csv_path;
+
+  VelocitySpec velocity;  // initial velocities (lists and CSV may give their own)
+  SourceLocation where;
+};
+
+struct CameraSpec {
+  bool given = false;  // false: frame the whole scene
+  Vec3 position, look_at, up{0, 0, 1};
+  double fov = 40;     // vertical field of view, degrees
+};
+
+struct RenderSpec {
+  bool enabled = false;
+  int every = 1;       // steps
+  int width = 1280, height = 720;
+  CameraSpec camera;
+  std::string color_by = "speed";  // speed | id | radius | material
+};
+
+struct MovieSpec {
+  bool enabled = false;
+  double fps = 30;
+};
+
+struct OutputSpec {
+  std::string dir = "out";          // resolved relative to the current directory
+  int vtk_every = 0;                // steps; 0 = no VTK frames
+  std::vector<std::string> fields{"radius", "velocity", "angular_velocity", "id", "material"};
+  RenderSpec render;
+  MovieSpec movie;
+};
+
+enum class Effect { gravity, collisions, walls, restitution, friction, rolling_resistance, drag };
+const char* effect_name(Effect e);
+
+struct Scene {
+  std::string path;  // the file it came from
+  std::string name;  // optional `name:`; defaults to the file stem
+  TimeSpec time;
+  SolverSpec solver;
+  std::vector<Effect> effects;
+  Vec3 gravity{0, 0, -9.81};
+  std::vector<Material> materials;  // at least one
+  std::vector<WallSpec> walls;
+  std::vector<ParticleBlock> particles;
+  OutputSpec output;
+
+  bool has(Effect e) const {
+    for (Effect x : effects) if (x == e) return true;
+    return false;
+  }
+  // Index of a material by name (empty = 0); throws InputError at `where` if unknown.
+  std::uint32_t material_index(const std::string& name, const SourceLocation& where, const std::string& key) const;
+};
+
+// Parses and validates; throws InputError (file:line:column: key: message).
+Scene load_scene(const std::string& path);
+
+}  // namespace marbles::scene
