@@ -13,15 +13,12 @@
 #include <string>
 #include <vector>
 
+#include "core/pair.hpp"
 #include "core/spheres.hpp"
 
 namespace marbles::broadphase {
 
-struct Pair {
-  std::uint32_t i = 0, j = 0;  // i < j
-  friend bool operator==(const Pair& a, const Pair& b) { return a.i == b.i && a.j == b.j; }
-  friend bool operator<(const Pair& a, const Pair& b) { return a.i < b.i || (a.i == b.i && a.j < b.j); }
-};
+using Pair = IndexPair;
 
 enum class Backend { cpu, cuda };
 enum class SortKind { seed, cub };  // CUDA only: the seed's radix sort or CUB's
