@@ -43,6 +43,7 @@ struct WallSpec {
   Vec3 lo, hi;                  // box: spheres are kept inside [lo, hi]
   std::string material;         // name; empty = the first material
   SourceLocation where;
+  SourceLocation material_where;  // the `material:` value (file:0:0 when not given)
 };
 
 struct RadiusSpec {
@@ -85,6 +86,13 @@ struct ParticleBlock {
 
   VelocitySpec velocity;  // initial velocities (lists and CSV may give their own)
   SourceLocation where;
+
+  // Where single keys were written, for problems found only while generating
+  // (a line of 0 means the key was not given).
+  SourceLocation material_where;  // `material:`
+  SourceLocation count_where;     // random: `count:`
+  SourceLocation csv_path_where;  // csv: `path:`
+  SourceLocation velocity_where;  // `velocity:`
 };
 
 struct CameraSpec {
@@ -124,6 +132,7 @@ struct Scene {
   SolverSpec solver;
   std::vector<Effect> effects;
   Vec3 gravity{0, 0, -9.81};
+  double drag = 0;  // 1/s, linear drag rate (effect drag): dv/dt = -drag * v
   std::vector<Material> materials;  // at least one
   std::vector<WallSpec> walls;
   std::vector<ParticleBlock> particles;

@@ -1,0 +1,22 @@
+// integrator/integrator_math.hpp — per-body updates of the semi-implicit
+// (symplectic) Euler scheme, host and device.
+//
+//   v(t+h) = v(t) + h a(t)          velocities first (forces, then contacts)
+//   x(t+h) = x(t) + h v(t+h)        positions from the new velocities
+// Symplectic: energy errors stay bounded for conservative forces instead of
+// growing as with explicit Euler.
+#pragma once
+
+#include "core/vec3.hpp"
+
+namespace marbles::integrator {
+
+// v += h g for a movable body (inv_mass > 0); immovable bodies keep their velocity.
+MARBLES_HD_INLINE Vec3 gravity_kick(const Vec3& v, const Vec3& g, real inv_mass, real h) {
+  return inv_mass > 0 ? v + g * h : v;
+}
+
+// x += h v
+MARBLES_HD_INLINE Vec3 drift(const Vec3& x, const Vec3& v, real h) { return x + v * h; }
+
+}  // namespace marbles::integrator

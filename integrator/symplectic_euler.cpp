@@ -1,0 +1,21 @@
+#include "integrator/symplectic_euler.hpp"
+
+#include "integrator/integrator_math.hpp"
+
+namespace marbles::integrator {
+
+void apply_gravity(const BodiesView& bodies, const Vec3& g, real h) {
+  const auto n = static_cast<std::ptrdiff_t>(bodies.count);
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t i = 0; i < n; ++i)
+    bodies.velocity[i] = gravity_kick(bodies.velocity[i], g, bodies.inv_mass[i], h);
+}
+
+void integrate_positions(const BodiesView& bodies, real h) {
+  const auto n = static_cast<std::ptrdiff_t>(bodies.count);
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t i = 0; i < n; ++i)
+    bodies.position[i] = drift(bodies.position[i], bodies.velocity[i], h);
+}
+
+}  // namespace marbles::integrator

@@ -1,0 +1,62 @@
+// narrowphase/contact.hpp — one contact between a sphere and another sphere or a wall.
+//
+// Sign conventions: `normal` is the unit vector from the other body (b) towards
+// sphere a; `separation` is the gap along it (m), negative when they overlap.
+// The contact point on a is  p_a - ra·n, on b it is  p_b + rb·n  (rb = 0 for walls).
+// The solver's accumulated impulses live here too, so that a contact carries
+// everything one velocity iteration needs and nothing else.
+#pragma once
+
+#include <cstdint>
+
+#include "core/vec3.hpp"
+
+namespace marbles::narrowphase {
+
+// `b` of a wall contact: kWallFlag | wall index (planes first, then box faces).
+inline constexpr std::uint32_t kWallFlag = 0x80000000u;
+MARBLES_HD_INLINE bool is_wall(std::uint32_t b) { return (b & kWallFlag) != 0; }
+
+// Coefficients of one material pair, mixed once when the scene is loaded.
+struct PairCoefficients {
+  real restitution = 0;       // e in [0, 1]
+  real friction = 0;          // Coulomb mu
+  real rolling_friction = 0;  // mu_r: rolling torque <= mu_r * R_eff * normal force
+};
+
+// Material pair table, row-major over material ids (walls use their own
+// material id in the same table).
+struct PairTable {
+  const PairCoefficients* coefficients = nullptr;
+  std::uint32_t material_count = 0;
+  MARBLES_HD_INLINE const PairCoefficients& operator()(std::uint32_t m1, std::uint32_t m2) const {
+    return coefficients[m1 * material_count + m2];
+  }
+};
+
+struct Contact {
+  std::uint32_t a = 0, b = 0;
+  Vec3 normal;             // from b towards a, unit
+  real separation = 0;     // m, < 0 when overlapping
+  real ra = 0, rb = 0;     // m, lever arms along the normal
+  Vec3 wall_velocity;      // m/s, velocity of the wall surface (b is a wall)
+  PairCoefficients coeff;
+
+  // Filled by the solver's prepare stage.
+  real normal_mass = 0;     // kg,   1 / (1/m_a + 1/m_b)
+  real tangent_mass = 0;    // kg,   1 / (1/m_a + 1/m_b + ra^2/I_a + rb^2/I_b)
+  real rolling_mass = 0;    // kg m^2, 1 / (1/I_a + 1/I_b)
+  real approach_speed = 0;  // m/s, normal relative velocity before the solve (< 0: approaching)
+
+  // Accumulated impulses of this substep.
+  real normal_impulse = 0;  // N s, >= 0
+  Vec3 tangent_impulse;     // N s, |.| <= mu * normal_impulse
+  Vec3 rolling_impulse;     // N m s
+
+  // World-space point midway across the overlap (or gap).
+  MARBLES_HD_INLINE Vec3 point(const Vec3& position_a) const {
+    return position_a - normal * (ra + real(0.5) * separation);
+  }
+};
+
+}  // namespace marbles::narrowphase

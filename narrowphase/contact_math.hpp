@@ -1,0 +1,141 @@
+// narrowphase/contact_math.hpp — per-contact math, host and device.
+//
+// Contact generation (exact sphere–sphere, sphere–plane, sphere–inside-of-box)
+// and the impulse updates of one contact. The CPU loops in contacts.cpp and
+// solver.cpp, and any CUDA kernel, call exactly these functions.
+//
+// Units: positions m, velocities m/s, angular velocities rad/s, impulses N s,
+// angular impulses N m s.
+#pragma once
+
+#include <cmath>
+
+#include "core/vec3.hpp"
+#include "narrowphase/contact.hpp"
+
+namespace marbles::narrowphase {
+
+// The velocity state of one body as the solver sees it.
+struct BodyState {
+  Vec3 v, w;
+  real inv_mass = 0, inv_inertia = 0;
+};
+
+// Sphere a (centre pa, radius ra) against sphere b. Returns false when the gap
+// is not below `margin`. Coincident centres get the normal +z, so the result
+// is always finite.
+MARBLES_HD_INLINE bool sphere_sphere(const Vec3& pa, real ra, const Vec3& pb, real rb, real margin,
+                                     Vec3& normal, real& separation) {
+  const Vec3 d = pa - pb;
+  const real dist2 = length_squared(d);
+  const real reach = ra + rb + margin;
+  if (!(dist2 < reach * reach)) return false;
+  const real dist = std::sqrt(dist2);
+  const real tiny = real(1e-7) * (ra + rb);
+  normal = dist > tiny ? d / dist : Vec3(0, 0, 1);
+  separation = dist - ra - rb;
+  return true;
+}
+
+// Sphere against a half-space (point on plane q, unit normal n towards free space).
+MARBLES_HD_INLINE bool sphere_plane(const Vec3& p, real r, const Vec3& q, const Vec3& n, real margin,
+                                    real& separation) {
+  separation = dot(p - q, n) - r;
+  return separation < margin;
+}
+
+// Prepare stage: effective masses and the approach speed before the solve.
+MARBLES_HD_INLINE void prepare_contact(Contact& c, const BodyState& A, const BodyState& B) {
+  const real k_normal = A.inv_mass + B.inv_mass;
+  c.normal_mass = k_normal > 0 ? real(1) / k_normal : real(0);
+  const real k_tangent = k_normal + A.inv_inertia * c.ra * c.ra + B.inv_inertia * c.rb * c.rb;
+  c.tangent_mass = k_tangent > 0 ? real(1) / k_tangent : real(0);
+  const real k_roll = A.inv_inertia + B.inv_inertia;
+  c.rolling_mass = k_roll > 0 ? real(1) / k_roll : real(0);
+  c.approach_speed = dot(A.v - B.v, c.normal);
+}
+
+// Relative velocity of the contact points (a minus b).
+MARBLES_HD_INLINE Vec3 contact_relative_velocity(const Contact& c, const BodyState& A, const BodyState& B) {
+  const Vec3 va = A.v + cross(A.w, c.normal * (-c.ra));
+  const Vec3 vb = B.v + cross(B.w, c.normal * c.rb);
+  return va - vb;
+}
+
+MARBLES_HD_INLINE void apply_impulse(const Contact& c, BodyState& A, BodyState& B, const Vec3& impulse) {
+  A.v += impulse * A.inv_mass;
+  A.w += cross(c.normal * (-c.ra), impulse) * A.inv_inertia;
+  B.v -= impulse * B.inv_mass;
+  B.w -= cross(c.normal * c.rb, impulse) * B.inv_inertia;
+}
+
+// Clamp a vector impulse to a disc of radius `limit`.
+MARBLES_HD_INLINE Vec3 clamp_length(const Vec3& v, real limit) {
+  const real len2 = length_squared(v);
+  if (len2 <= limit * limit) return v;
+  return v * (limit / std::sqrt(len2));
+}
+
+// Normal constraint: the gap may close by at most max(separation, 0) this
+// substep (speculative contact); accumulated impulse stays >= 0.
+MARBLES_HD_INLINE void solve_normal(Contact& c, BodyState& A, BodyState& B, real inv_h) {
+  const real vn = dot(A.v - B.v, c.normal);
+  const real allowed = c.separation > 0 ? c.separation * inv_h : real(0);
+  real lambda = -c.normal_mass * (vn + allowed);
+  const real old = c.normal_impulse;
+  c.normal_impulse = old + lambda > 0 ? old + lambda : real(0);
+  lambda = c.normal_impulse - old;
+  const Vec3 p = c.normal * lambda;
+  A.v += p * A.inv_mass;
+  B.v -= p * B.inv_mass;
+}
+
+// Coulomb friction: the tangential impulse stays in the circular cone
+// |P_t| <= mu * P_n.
+MARBLES_HD_INLINE void solve_friction(Contact& c, BodyState& A, BodyState& B) {
+  const Vec3 vrel = contact_relative_velocity(c, A, B);
+  const Vec3 vt = vrel - c.normal * dot(vrel, c.normal);
+  const Vec3 old = c.tangent_impulse;
+  c.tangent_impulse = clamp_length(old - vt * c.tangent_mass, c.coeff.friction * c.normal_impulse);
+  apply_impulse(c, A, B, c.tangent_impulse - old);
+}
+
+// Rolling resistance: an angular impulse opposing the relative rolling
+// (the tangential part of w_a - w_b), limited to mu_r * R_eff * P_n.
+MARBLES_HD_INLINE void solve_rolling(Contact& c, BodyState& A, BodyState& B) {
+  const Vec3 dw = A.w - B.w;
+  const Vec3 roll = dw - c.normal * dot(dw, c.normal);
+  const real r_eff = c.rb > 0 ? c.ra * c.rb / (c.ra + c.rb) : c.ra;
+  const Vec3 old = c.rolling_impulse;
+  c.rolling_impulse = clamp_length(old - roll * c.rolling_mass, c.coeff.rolling_friction * r_eff * c.normal_impulse);
+  const Vec3 d = c.rolling_impulse - old;
+  A.w += d * A.inv_inertia;
+  B.w -= d * B.inv_inertia;
+}
+
+// Restitution stage (after the velocity iterations): a contact that was
+// approaching faster than `rest_speed` before the solve and is pushing leaves
+// with -e times its approach speed.
+MARBLES_HD_INLINE void apply_restitution(Contact& c, BodyState& A, BodyState& B, real rest_speed) {
+  if (c.approach_speed > -rest_speed || c.normal_impulse <= 0 || c.coeff.restitution <= 0) return;
+  const real vn = dot(A.v - B.v, c.normal);
+  real lambda = -c.normal_mass * (vn + c.coeff.restitution * c.approach_speed);
+  const real old = c.normal_impulse;
+  c.normal_impulse = old + lambda > 0 ? old + lambda : real(0);
+  lambda = c.normal_impulse - old;
+  const Vec3 p = c.normal * lambda;
+  A.v += p * A.inv_mass;
+  B.v -= p * B.inv_mass;
+}
+
+// Position projection: move the bodies apart along the normal to remove a
+// fraction `beta` of the overlap beyond `slop`, at most `max_step` per call.
+// Only positions change, never velocities, so no kinetic energy is added.
+MARBLES_HD_INLINE real projection_step(real separation, real slop, real beta, real max_step) {
+  const real error = separation + slop;  // < 0 when overlapping more than slop
+  if (error >= 0) return 0;
+  const real step = -beta * error;
+  return step < max_step ? step : max_step;
+}
+
+}  // namespace marbles::narrowphase

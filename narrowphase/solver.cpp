@@ -1,0 +1,93 @@
+#include "narrowphase/solver.hpp"
+
+#include <algorithm>
+
+#include "narrowphase/contact_math.hpp"
+
+namespace marbles::narrowphase {
+namespace {
+
+// Loads the velocity state of body `index` (a wall is immovable and moves
+// with its surface velocity).
+inline BodyState load(const BodiesView& bodies, std::uint32_t index, const Contact& c) {
+  if (is_wall(index)) return {c.wall_velocity, Vec3{}, 0, 0};
+  return {bodies.velocity[index], bodies.angular_velocity[index], bodies.inv_mass[index], bodies.inv_inertia[index]};
+}
+
+inline void store(const BodiesView& bodies, std::uint32_t index, const BodyState& s) {
+  if (is_wall(index)) return;
+  bodies.velocity[index] = s.v;
+  bodies.angular_velocity[index] = s.w;
+}
+
+template <bool Friction, bool Rolling>
+void sweep(std::vector<Contact>& contacts, const BodiesView& bodies, real inv_h) {
+  for (Contact& c : contacts) {
+    BodyState A = load(bodies, c.a, c);
+    BodyState B = load(bodies, c.b, c);
+    if constexpr (Friction) solve_friction(c, A, B);
+    if constexpr (Rolling) solve_rolling(c, A, B);
+    solve_normal(c, A, B, inv_h);
+    store(bodies, c.a, A);
+    store(bodies, c.b, B);
+  }
+}
+
+}  // namespace
+
+ContactSolver::ContactSolver(const SolverSettings& settings) : m_settings(settings) {
+  if (settings.friction && settings.rolling) m_sweep = &sweep<true, true>;
+  else if (settings.friction) m_sweep = &sweep<true, false>;
+  else if (settings.rolling) m_sweep = &sweep<false, true>;
+  else m_sweep = &sweep<false, false>;
+}
+
+void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const BodiesView& bodies, real h) const {
+  for (Contact& c : contacts) prepare_contact(c, load(bodies, c.a, c), load(bodies, c.b, c));
+
+  const real inv_h = real(1) / h;
+  for (int it = 0; it < m_settings.iterations; ++it) m_sweep(contacts, bodies, inv_h);
+
+  if (m_settings.restitution) {
+    for (Contact& c : contacts) {
+      BodyState A = load(bodies, c.a, c);
+      BodyState B = load(bodies, c.b, c);
+      apply_restitution(c, A, B, m_settings.rest_speed);
+      store(bodies, c.a, A);
+      store(bodies, c.b, B);
+    }
+  }
+}
+
+void ContactSolver::project_positions(const std::vector<Contact>& contacts, const BodiesView& bodies,
+                                      const std::vector<PlaneWall>& half_spaces) const {
+  const SolverSettings& s = m_settings;
+  for (int it = 0; it < s.position_iterations; ++it) {
+    for (const Contact& c : contacts) {
+      const real inv_ma = bodies.inv_mass[c.a];
+      if (is_wall(c.b)) {
+        if (inv_ma <= 0) continue;
+        const PlaneWall& wall = half_spaces[c.b & ~kWallFlag];
+        const real r = bodies.radius[c.a];
+        const real separation = dot(bodies.position[c.a] - wall.point, wall.normal) - r;
+        const real move = projection_step(separation, s.slop * r, s.beta, s.max_correction * r);
+        if (move > 0) bodies.position[c.a] += wall.normal * move;
+        continue;
+      }
+      const real inv_mb = bodies.inv_mass[c.b];
+      const real k = inv_ma + inv_mb;
+      if (k <= 0) continue;
+      const real ra = bodies.radius[c.a], rb = bodies.radius[c.b];
+      const Vec3 d = bodies.position[c.a] - bodies.position[c.b];
+      const real dist = length(d);
+      const Vec3 n = dist > real(1e-7) * (ra + rb) ? d / dist : c.normal;
+      const real r_min = std::min(ra, rb);
+      const real move = projection_step(dist - ra - rb, s.slop * r_min, s.beta, s.max_correction * r_min);
+      if (move <= 0) continue;
+      bodies.position[c.a] += n * (move * inv_ma / k);
+      bodies.position[c.b] -= n * (move * inv_mb / k);
+    }
+  }
+}
+
+}  // namespace marbles::narrowphase

@@ -1,0 +1,114 @@
+// sim/main.cpp — the `marbles` command line.
+//
+// Exit codes: 0 success; 2 bad input (scene, CSV or arguments; the message
+// names file:line:column and key, or the argument); 1 failure while running.
+#include <CLI/CLI.hpp>
+
+#include <iostream>
+#include <string>
+
+#include "bench/broadphase_bench.hpp"
+#include "core/error.hpp"
+#include "render/render_dir.hpp"
+#include "sim/run.hpp"
+
+namespace {
+
+const std::map<std::string, marbles::BackendChoice> kBackends{
+    {"auto", marbles::BackendChoice::automatic},
+    {"cpu", marbles::BackendChoice::cpu},
+    {"cuda", marbles::BackendChoice::cuda}};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace marbles;
+  CLI::App app{"marbles: a rigid-sphere simulator (spatial-subdivision broad phase, impulse contacts)"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "marbles 0.1");
+
+  RunOptions run;
+  double run_duration = -1;
+  bool no_render = false;
+  auto* run_cmd = app.add_subcommand("run", "run a scene and write its output");
+  run_cmd->add_option("scene", run.scene_path, "scene file (YAML)")->required();
+  run_cmd->add_option("--out", run.out_dir, "output folder (overrides output.dir)");
+  run_cmd->add_option("--backend", run.backend, "broad phase backend: auto|cpu|cuda")
+      ->transform(CLI::CheckedTransformer(kBackends, CLI::ignore_case));
+  run_cmd->add_flag("--quiet", run.quiet, "print only the summary");
+  run_cmd->add_flag("--no-render", no_render, "skip images and movie even if the scene asks for them");
+  run_cmd->add_option("--duration", run_duration, "simulated seconds (overrides time.duration)")
+      ->check(CLI::PositiveNumber);
+
+  std::string check_path;
+  auto* check_cmd = app.add_subcommand("check", "validate a scene without running it");
+  check_cmd->add_option("scene", check_path, "scene file (YAML)")->required();
+
+  std::string pairs_csv, pairs_algorithm = "subdivision";
+  BackendChoice pairs_backend = BackendChoice::cpu;
+  double pairs_margin = 0;
+  auto* pairs_cmd = app.add_subcommand("pairs", "print the overlapping pairs 'i j' of spheres given as x,y,z,r rows");
+  pairs_cmd->add_option("spheres", pairs_csv, "CSV file of x,y,z,r rows")->required();
+  pairs_cmd->add_option("--algorithm", pairs_algorithm, "subdivision|brute")
+      ->check(CLI::IsMember({"subdivision", "brute"}));
+  pairs_cmd->add_option("--backend", pairs_backend, "auto|cpu|cuda (subdivision only)")
+      ->transform(CLI::CheckedTransformer(kBackends, CLI::ignore_case));
+  pairs_cmd->add_option("--margin", pairs_margin, "report pairs whose gap is below this (m)")
+      ->check(CLI::NonNegativeNumber);
+
+  auto* bench_cmd = app.add_subcommand("bench", "benchmarks (JSON and a table)");
+  bench_cmd->require_subcommand(1);
+  bench::BroadphaseBenchOptions bp;
+  std::vector<std::size_t> bp_n;
+  auto* bench_bp = bench_cmd->add_subcommand("broadphase", "time the broad phase per stage");
+  bench_bp->add_option("--backend", bp.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  bench_bp->add_option("--sort", bp.sort, "seed|cub (cuda)")->check(CLI::IsMember({"seed", "cub"}));
+  bench_bp->add_option("--scene", bp.scene, "gas|pile|poly")->check(CLI::IsMember({"gas", "pile", "poly"}));
+  bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(CLI::PositiveNumber);
+  bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")->check(CLI::PositiveNumber);
+  bench_bp->add_flag("--json", bp.json, "print JSON");
+
+  render::RenderDirOptions rd;
+  std::string rd_dir;
+  auto* render_cmd = app.add_subcommand("render", "render the frames of an output folder to PNG and a movie");
+  render_cmd->add_option("outdir", rd_dir, "output folder of a run (holds series.pvd)")->required();
+  render::add_render_dir_options(*render_cmd, rd);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "marbles: " << e.what() << "\n(see marbles --help)\n";
+    return 2;
+  }
+
+  try {
+    if (*run_cmd) {
+      if (run_duration > 0) run.duration = run_duration;
+      run.render = !no_render;
+      return run_scene(run, std::cout, std::cerr);
+    }
+    if (*check_cmd) return check_scene(check_path, std::cout, std::cerr);
+    if (*pairs_cmd) return print_pairs(pairs_csv, pairs_algorithm, pairs_backend, pairs_margin, std::cout, std::cerr);
+    if (*bench_bp) {
+      if (!bp_n.empty()) bp.n = bp_n;
+      return bench::run_broadphase_bench(bp, std::cout);
+    }
+    if (*render_cmd) return render::render_output_dir(rd_dir, rd, std::cout, std::cerr);
+  } catch (const InputError& e) {
+    std::cerr << e.what() << "\n";
+    return 2;
+  } catch (const RuntimeFailure& e) {
+    std::cerr << "marbles: " << e.what() << "\n";
+    return 1;
+  } catch (const std::exception& e) {
+    std::cerr << "marbles: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

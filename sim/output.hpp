@@ -1,0 +1,39 @@
+// sim/output.hpp — what a run writes, and when: VTK frames + series.pvd,
+// rendered images + movie, all from host snapshots taken only when due.
+#pragma once
+
+#include <iosfwd>
+#include <memory>
+#include <string>
+
+#include "core/walls.hpp"
+#include "render/snapshot.hpp"
+
+namespace marbles {
+
+namespace scene {
+struct Scene;
+}
+class Simulation;
+
+render::Snapshot make_snapshot(const Simulation& sim);
+
+class RunOutput {
+ public:
+  // Creates `dir`; `render` false skips images and movie.
+  RunOutput(const scene::Scene& scene, const std::string& dir, const Walls& walls, bool render, std::ostream& log);
+  ~RunOutput();
+
+  // True when the step just completed (or step 0) has output due.
+  bool due(std::uint64_t step) const;
+  // Writes what is due for sim.steps().
+  void write(const Simulation& sim);
+  // Closes the movie; returns a short description of what was written.
+  std::string finish();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> m;
+};
+
+}  // namespace marbles

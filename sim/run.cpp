@@ -1,0 +1,188 @@
+#include "sim/run.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+
+#include "core/device.hpp"
+#include "core/error.hpp"
+#include "sim/atomic_file.hpp"
+#include "sim/output.hpp"
+#include "sim/particles.hpp"
+#include "sim/progress.hpp"
+#include "sim/scene.hpp"
+#include "sim/simulation.hpp"
+#include "sim/world.hpp"
+
+namespace marbles {
+
+broadphase::Backend select_backend(BackendChoice choice, std::ostream& log) {
+  switch (choice) {
+    case BackendChoice::cpu:
+      return broadphase::Backend::cpu;
+    case BackendChoice::cuda: {
+      const DeviceInfo& dev = cuda_device();
+      if (!dev.available) throw RuntimeFailure("--backend cuda: no CUDA device (" + dev.why_not + ")");
+      return broadphase::Backend::cuda;
+    }
+    case BackendChoice::automatic:
+      break;
+  }
+  const DeviceInfo& dev = cuda_device();
+  if (dev.available) {
+    log << "backend: CUDA on " << dev.name << " (auto)\n";
+    return broadphase::Backend::cuda;
+  }
+  log << "backend: CPU (auto: " << dev.why_not << ")\n";
+  return broadphase::Backend::cpu;
+}
+
+namespace {
+
+// Counts initial overlaps deeper than `tolerance` times the smaller radius.
+std::size_t count_initial_overlaps(const World& world, double tolerance) {
+  std::vector<broadphase::Pair> pairs;
+  auto bp = broadphase::make_subdivision_cpu();
+  bp->find_pairs({world.position.data(), world.radius.data(), world.size()}, 0, pairs);
+  std::size_t deep = 0;
+  for (const auto& p : pairs) {
+    const double d = length(world.position[p.i] - world.position[p.j]);
+    const double depth = world.radius[p.i] + world.radius[p.j] - d;
+    if (depth > tolerance * std::min(world.radius[p.i], world.radius[p.j])) ++deep;
+  }
+  return deep;
+}
+
+std::string json_number(double v) {
+  if (!std::isfinite(v)) return "null";
+  std::ostringstream s;
+  s << std::setprecision(10) << v;
+  return s.str();
+}
+
+std::string json_string(const std::string& v) {
+  std::string out = "\"";
+  for (char c : v) {
+    if (c == '"' || c == '\\') out += '\\';
+    if (c == '\n') { out += "\\n"; continue; }
+    out += c;
+  }
+  return out + "\"";
+}
+
+}  // namespace
+
+int check_scene(const std::string& scene_path, std::ostream& out, std::ostream& err) {
+  const scene::Scene sc = scene::load_scene(scene_path);
+  const scene::GeneratedParticles particles = scene::generate_particles(sc);
+  out << scene_path << ": ok (" << particles.size() << " spheres, " << sc.materials.size() << " material(s), "
+      << sc.walls.size() << " wall(s), " << std::llround(sc.time.duration / sc.time.dt) << " steps of "
+      << sc.time.dt << " s)\n";
+  return 0;
+}
+
+int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
+  scene::Scene sc = scene::load_scene(options.scene_path);
+  if (options.duration) sc.time.duration = *options.duration;
+  if (options.out_dir) sc.output.dir = *options.out_dir;
+  const scene::GeneratedParticles particles = scene::generate_particles(sc);
+  const broadphase::Backend backend = select_backend(options.backend, options.quiet ? err : out);
+
+  World world = make_world(sc, particles);
+  if (std::size_t deep = count_initial_overlaps(world, 0.01))
+    err << "warning: " << deep << " pair(s) of spheres start overlapping by more than 1% of the smaller radius\n";
+
+  Simulation sim(sc, std::move(world), backend);
+  if (!options.quiet) out << sc.name << ": " << sim.world().size() << " spheres\n" << sim.describe_pipeline();
+
+  RunOutput output(sc, sc.output.dir, sim.walls(), options.render, options.quiet ? err : out);
+  const double e_start = sim.world().kinetic_energy();
+  const std::uint64_t total_steps = static_cast<std::uint64_t>(std::llround(sc.time.duration / sc.time.dt));
+
+  Progress progress(!options.quiet);
+  double candidate_sum = 0, contact_sum = 0, step_seconds = 0;
+  output.write(sim);
+  const auto t0 = std::chrono::steady_clock::now();
+  while (sim.steps() < total_steps) {
+    const auto s0 = std::chrono::steady_clock::now();
+    sim.step();
+    step_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
+    candidate_sum += static_cast<double>(sim.last_step().candidate_pairs) / sim.substeps();
+    contact_sum += static_cast<double>(sim.last_step().contacts) / sim.substeps();
+    const std::size_t bad = sim.world().first_non_finite();
+    if (bad != sim.world().size())
+      throw RuntimeFailure("the state became non-finite at step " + std::to_string(sim.steps()) + " (t = " +
+                           json_number(sim.time()) + " s), sphere " + std::to_string(bad) +
+                           ": reduce dt or increase substeps");
+    if (output.due(sim.steps())) {
+      progress.finish();
+      output.write(sim);
+    }
+    progress.update(sim.time(), sc.time.duration, sim.steps(), total_steps);
+  }
+  progress.finish();
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const std::string written = output.finish();
+
+  const double steps = std::max<double>(1, static_cast<double>(sim.steps()));
+  const double e_end = sim.world().kinetic_energy();
+  std::ostringstream json;
+  json << "{\n"
+       << "  \"scene\": " << json_string(sc.path) << ",\n"
+       << "  \"spheres\": " << sim.world().size() << ",\n"
+       << "  \"backend\": " << json_string(backend == broadphase::Backend::cuda ? "cuda" : "cpu") << ",\n"
+       << "  \"precision\": " << json_string(kRealName) << ",\n"
+       << "  \"steps\": " << sim.steps() << ",\n"
+       << "  \"substeps\": " << sim.substeps() << ",\n"
+       << "  \"dt\": " << json_number(sim.dt()) << ",\n"
+       << "  \"simulated_time\": " << json_number(sim.time()) << ",\n"
+       << "  \"wall_time\": " << json_number(wall) << ",\n"
+       << "  \"mean_ms_per_step\": " << json_number(1e3 * step_seconds / steps) << ",\n"
+       << "  \"mean_candidate_pairs\": " << json_number(candidate_sum / steps) << ",\n"
+       << "  \"mean_contacts\": " << json_number(contact_sum / steps) << ",\n"
+       << "  \"kinetic_energy_start\": " << json_number(e_start) << ",\n"
+       << "  \"kinetic_energy_end\": " << json_number(e_end) << "\n"
+       << "}\n";
+  std::filesystem::create_directories(sc.output.dir);
+  const std::string summary_path = (std::filesystem::path(sc.output.dir) / "summary.json").string();
+  write_file_atomically(summary_path, json.str());
+
+  out << std::setprecision(4) << sc.name << ": " << sim.steps() << " steps, " << sim.time() << " s simulated in "
+      << wall << " s (" << 1e3 * step_seconds / steps << " ms/step; " << candidate_sum / steps
+      << " candidate pairs, " << contact_sum / steps << " contacts per substep); kinetic energy " << e_start
+      << " -> " << e_end << " J\n"
+      << "output: " << sc.output.dir << "  (" << written << "summary.json)\n";
+  return 0;
+}
+
+int print_pairs(const std::string& csv_path, const std::string& algorithm, BackendChoice choice, double margin,
+                std::ostream& out, std::ostream& err) {
+  const scene::GeneratedParticles spheres = scene::read_spheres_csv(csv_path);
+  const SpheresIn in{spheres.position.data(), spheres.radius.data(), spheres.size()};
+  std::vector<broadphase::Pair> pairs;
+  if (algorithm == "brute") {
+    broadphase::brute_force_pairs(in, static_cast<real>(margin), pairs);
+  } else {
+    const broadphase::Backend backend = select_backend(choice, err);
+    auto bp = backend == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda()
+                                                   : broadphase::make_subdivision_cpu();
+    bp->find_pairs(in, static_cast<real>(margin), pairs);
+  }
+  std::sort(pairs.begin(), pairs.end());
+  std::string text;
+  text.reserve(pairs.size() * 12);
+  for (const auto& p : pairs) {
+    text += std::to_string(p.i);
+    text += ' ';
+    text += std::to_string(p.j);
+    text += '\n';
+  }
+  out << text;
+  return 0;
+}
+
+}  // namespace marbles

@@ -1,0 +1,43 @@
+// sim/run.hpp — the verbs of the command line that run or inspect a scene.
+//
+// Data flows one way: scene file → Scene → GeneratedParticles → World →
+// Simulation::step() → output (VTK frames, images, summary.json).
+#pragma once
+
+#include <iosfwd>
+#include <optional>
+#include <string>
+
+#include "broadphase/broadphase.hpp"
+
+namespace marbles {
+
+enum class BackendChoice { automatic, cpu, cuda };
+
+// Resolves auto/cpu/cuda to a backend; says on `log` what auto chose and why.
+// `cuda` without a device (or without the CUDA build) throws RuntimeFailure.
+broadphase::Backend select_backend(BackendChoice choice, std::ostream& log);
+
+struct RunOptions {
+  std::string scene_path;
+  std::optional<std::string> out_dir;  // overrides output.dir
+  BackendChoice backend = BackendChoice::automatic;
+  bool quiet = false;
+  bool render = true;                  // false: skip images and movie even if the scene asks
+  std::optional<double> duration;      // overrides time.duration
+};
+
+// `marbles run`. Returns the process exit code; throws InputError for scene
+// problems and RuntimeFailure for failures while running.
+int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err);
+
+// `marbles check`: loads, validates and generates the particles without
+// running; prints a one-line summary.
+int check_scene(const std::string& scene_path, std::ostream& out, std::ostream& err);
+
+// `marbles pairs`: prints the overlapping pairs "i j" (i < j, sorted) of the
+// spheres in a CSV of x,y,z,r rows.
+int print_pairs(const std::string& csv_path, const std::string& algorithm, BackendChoice backend, double margin,
+                std::ostream& out, std::ostream& err);
+
+}  // namespace marbles

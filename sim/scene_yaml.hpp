@@ -1,0 +1,105 @@
+// sim/scene_yaml.hpp — reading validated values out of a yaml-cpp tree.
+//
+// Private to the scene loader (sim/scene.cpp): nothing outside sim/ includes
+// yaml-cpp. A Field is a node plus the dotted key that leads to it
+// ("materials.glass.restitution", "particles[2].random.count") and the file
+// it came from, so that every check can throw an InputError that reads
+// `file:line:column: key: message` with the node's own position.
+// MapFields checks a map's keys against the allowed ones once (unknown keys
+// with a suggestion, duplicates, non-scalar keys) and then hands out fields.
+#pragma once
+
+#include <cstdint>
+#include <initializer_list>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include <yaml-cpp/yaml.h>
+
+#include "core/error.hpp"
+#include "core/vec3.hpp"
+
+namespace marbles::scene::detail {
+
+// Position of a yaml-cpp mark as 1-based line and column (0 when unknown).
+SourceLocation location_of(const std::string& file, const YAML::Mark& mark);
+
+// The closest candidate by edit distance, or empty when none is close enough
+// to be a likely typo.
+std::string nearest_name(std::string_view word, const std::vector<std::string>& candidates);
+
+// " (did you mean 'x'?)" when one candidate is close, else "; expected one of: a, b, c".
+std::string suggestion(std::string_view word, const std::vector<std::string>& candidates);
+
+// Shortest text that reads back as the same double ("0.1", "1e-05").
+std::string format_number(double value);
+
+class Field {
+ public:
+  Field(YAML::Node node, std::string key, const std::string& file);
+
+  const YAML::Node& node() const { return m_node; }
+  const std::string& key() const { return m_key; }
+  const std::string& file() const { return m_file; }
+  SourceLocation where() const;
+
+  [[noreturn]] void fail(const std::string& message) const;
+
+  bool is_map() const { return m_node.IsMap(); }
+  bool is_sequence() const { return m_node.IsSequence(); }
+  bool is_scalar() const { return m_node.IsScalar(); }
+
+  // What the node is, for "expected X, got <description>".
+  std::string description() const;
+
+  // Checked conversions; each throws at this node on failure.
+  double number() const;                        // finite
+  double positive() const;                      // > 0
+  double non_negative() const;                  // >= 0
+  double within(double lo, double hi) const;    // [lo, hi]
+  long long integer() const;                    // exact integer (1e5 is accepted)
+  int integer_at_least(long long lo, long long hi = 1'000'000'000) const;
+  std::uint64_t seed() const;                   // integer >= 0
+  std::string word() const;                     // a scalar (string)
+  Vec3 vec3() const;                            // [x, y, z], finite
+  void expect_map() const;
+  void expect_sequence() const;
+
+  // Elements of a sequence, keyed "key[i]".
+  std::vector<Field> items() const;
+
+ private:
+  YAML::Node m_node;
+  std::string m_key;
+  std::string m_file;
+};
+
+class MapFields {
+ public:
+  // `allowed` empty: any key (a map of user names such as `materials`).
+  MapFields(const Field& map, std::initializer_list<const char*> allowed);
+  MapFields(const Field& map, const std::vector<std::string>& allowed);
+
+  const Field& self() const { return m_self; }
+  bool has(const char* name) const;
+  std::optional<Field> optional(const char* name) const;
+  Field required(const char* name) const;
+  // The entries in file order: key text, key location and the value.
+  struct Entry {
+    std::string name;
+    SourceLocation name_where;
+    Field value;
+  };
+  const std::vector<Entry>& entries() const { return m_entries; }
+
+ private:
+  void read(const std::vector<std::string>& allowed);
+
+  Field m_self;
+  std::vector<Entry> m_entries;
+};
+
+}  // namespace marbles::scene::detail

@@ -1,0 +1,131 @@
+#include "sim/simulation.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "integrator/symplectic_euler.hpp"
+#include "narrowphase/contacts.hpp"
+#include "sim/scene.hpp"
+
+namespace marbles {
+
+narrowphase::PairCoefficients mix_materials(double e1, double mu1, double mur1, double e2, double mu2, double mur2) {
+  return {static_cast<real>(std::sqrt(e1 * e2)), static_cast<real>(std::sqrt(mu1 * mu2)),
+          static_cast<real>(std::sqrt(mur1 * mur2))};
+}
+
+namespace {
+
+Walls make_walls(const scene::Scene& scene) {
+  Walls walls;
+  for (const scene::WallSpec& w : scene.walls) {
+    const std::uint32_t material = scene.material_index(w.material, w.where, "walls.material");
+    if (w.kind == scene::WallSpec::Kind::plane) walls.planes.push_back({w.point, w.normal, material});
+    else walls.boxes.push_back({w.lo, w.hi, material});
+  }
+  return walls;
+}
+
+narrowphase::SolverSettings solver_settings(const scene::Scene& scene) {
+  narrowphase::SolverSettings s;
+  s.iterations = scene.solver.iterations;
+  s.restitution = scene.has(scene::Effect::restitution);
+  s.friction = scene.has(scene::Effect::friction);
+  s.rolling = scene.has(scene::Effect::rolling_resistance);
+  // Approaches slower than what gravity adds in a few substeps do not bounce,
+  // so a ball comes to rest instead of hopping forever.
+  const double h = scene.time.dt / scene.time.substeps;
+  const double g = scene.has(scene::Effect::gravity) ? length(scene.gravity) : 0.0;
+  s.rest_speed = static_cast<real>(std::max(1e-3, 4.0 * g * h));
+  return s;
+}
+
+}  // namespace
+
+Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backend backend)
+    : m_world(std::move(world)),
+      m_walls(make_walls(scene)),
+      m_half_spaces(narrowphase::wall_half_spaces(m_walls)),
+      m_solver(solver_settings(scene)),
+      m_gravity(scene.has(scene::Effect::gravity)),
+      m_collisions(scene.has(scene::Effect::collisions)),
+      m_wall_contacts(scene.has(scene::Effect::walls) && !m_walls.empty()),
+      m_g(scene.gravity),
+      m_dt(scene.time.dt),
+      m_substeps(scene.time.substeps) {
+  const std::size_t nm = scene.materials.size();
+  m_pair_coefficients.resize(nm * nm);
+  for (std::size_t a = 0; a < nm; ++a)
+    for (std::size_t b = 0; b < nm; ++b) {
+      const scene::Material& ma = scene.materials[a];
+      const scene::Material& mb = scene.materials[b];
+      m_pair_coefficients[a * nm + b] = mix_materials(ma.restitution, ma.friction, ma.rolling_friction,
+                                                      mb.restitution, mb.friction, mb.rolling_friction);
+    }
+  m_pair_table = {m_pair_coefficients.data(), static_cast<std::uint32_t>(nm)};
+  if (m_collisions)
+    m_broadphase = backend == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda()
+                                                        : broadphase::make_subdivision_cpu();
+}
+
+std::string Simulation::describe_pipeline() const {
+  std::ostringstream out;
+  const narrowphase::SolverSettings& s = m_solver.settings();
+  out << "pipeline (" << m_substeps << " substep" << (m_substeps > 1 ? "s" : "") << " of h = " << m_dt / m_substeps
+      << " s per step, " << kRealName << "):\n";
+  if (m_gravity) out << "  body forces    gravity (" << m_g.x << ", " << m_g.y << ", " << m_g.z << ") m/s^2\n";
+  if (m_collisions) out << "  broad phase    " << m_broadphase->name() << "\n";
+  if (m_collisions) out << "  narrow phase   sphere-sphere\n";
+  if (m_wall_contacts)
+    out << "  narrow phase   sphere-wall (" << m_walls.planes.size() << " plane(s), " << m_walls.boxes.size()
+        << " box(es))\n";
+  if (m_collisions || m_wall_contacts) {
+    out << "  contact solver " << s.iterations << " sequential-impulse sweeps: normal";
+    if (s.friction) out << " + friction";
+    if (s.rolling) out << " + rolling resistance";
+    out << (s.restitution ? "; restitution stage" : "; no restitution (e = 0)") << "\n";
+  }
+  out << "  integrate      symplectic Euler\n";
+  if (m_collisions || m_wall_contacts) out << "  project        positions (overlap beyond slop)\n";
+  return out.str();
+}
+
+void Simulation::step() {
+  m_last = {};
+  const real h = static_cast<real>(m_dt / m_substeps);
+  for (int k = 0; k < m_substeps; ++k) substep(h);
+  ++m_steps;
+  m_time = m_steps * m_dt;
+}
+
+void Simulation::substep(real h) {
+  const BodiesView bodies = m_world.view();
+
+  if (m_gravity) integrator::apply_gravity(bodies, m_g, h);
+
+  m_contacts.clear();
+  if (m_collisions || m_wall_contacts) find_contacts(h);
+  if (!m_contacts.empty()) m_solver.solve_velocities(m_contacts, bodies, h);
+
+  integrator::integrate_positions(bodies, h);
+
+  if (!m_contacts.empty()) m_solver.project_positions(m_contacts, bodies, m_half_spaces);
+  m_last.contacts += m_contacts.size();
+}
+
+// Speculative margin: a gap that two spheres could close within this substep
+// (each moving at most max_speed) becomes a contact now, so fast spheres are
+// caught before they overlap deeply.
+void Simulation::find_contacts(real h) {
+  const BodiesView bodies = m_world.view();
+  const real margin = real(2) * m_world.max_speed() * h;
+  if (m_collisions) {
+    m_broadphase->find_pairs(bodies.spheres(), margin, m_pairs);
+    m_last.candidate_pairs += m_pairs.size();
+    narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_pair_table, margin, m_contacts);
+  }
+  if (m_wall_contacts) narrowphase::wall_contacts(bodies, m_half_spaces, m_pair_table, margin, m_contacts);
+}
+
+}  // namespace marbles

@@ -1,0 +1,66 @@
+#include "sim/world.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "sim/particles.hpp"
+#include "sim/scene.hpp"
+
+namespace marbles {
+
+double World::kinetic_energy() const {
+  double e = 0;
+  for (std::size_t i = 0; i < size(); ++i) {
+    if (inv_mass[i] <= 0) continue;
+    e += 0.5 * length_squared(velocity[i]) / inv_mass[i];
+    e += 0.5 * length_squared(angular_velocity[i]) / inv_inertia[i];
+  }
+  return e;
+}
+
+void World::momentum(double out[3]) const {
+  out[0] = out[1] = out[2] = 0;
+  for (std::size_t i = 0; i < size(); ++i) {
+    if (inv_mass[i] <= 0) continue;
+    const double m = 1.0 / inv_mass[i];
+    out[0] += m * velocity[i].x;
+    out[1] += m * velocity[i].y;
+    out[2] += m * velocity[i].z;
+  }
+}
+
+real World::max_speed() const {
+  real v2 = 0;
+  for (const Vec3& v : velocity) v2 = std::max(v2, length_squared(v));
+  return std::sqrt(v2);
+}
+
+std::size_t World::first_non_finite() const {
+  for (std::size_t i = 0; i < size(); ++i)
+    if (!is_finite(position[i]) || !is_finite(velocity[i]) || !is_finite(angular_velocity[i])) return i;
+  return size();
+}
+
+World make_world(const scene::Scene& scene, const scene::GeneratedParticles& particles) {
+  World w;
+  const std::size_t n = particles.size();
+  w.position = particles.position;
+  w.velocity = particles.velocity;
+  w.velocity.resize(n);
+  w.angular_velocity.assign(n, Vec3{});
+  w.radius = particles.radius;
+  w.material = particles.material;
+  w.inv_mass.resize(n);
+  w.inv_inertia.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double r = w.radius[i];
+    const double density = scene.materials.at(w.material[i]).density;
+    const double mass = density * 4.0 / 3.0 * std::numbers::pi * r * r * r;
+    w.inv_mass[i] = static_cast<real>(1.0 / mass);
+    w.inv_inertia[i] = static_cast<real>(1.0 / (0.4 * mass * r * r));
+  }
+  return w;
+}
+
+}  // namespace marbles

@@ -1,0 +1,49 @@
+// sim/world.hpp — the state of every sphere, as a structure of arrays.
+//
+// The world owns the arrays; stages get a BodiesView (core/spheres.hpp) of
+// raw pointers. Mass properties are derived once from radius and density:
+//   m = rho (4/3) pi r^3,   I = (2/5) m r^2   (solid sphere)
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/spheres.hpp"
+#include "core/vec3.hpp"
+
+namespace marbles {
+
+namespace scene {
+struct Scene;
+struct GeneratedParticles;
+}  // namespace scene
+
+struct World {
+  std::vector<Vec3> position;          // m
+  std::vector<Vec3> velocity;          // m/s
+  std::vector<Vec3> angular_velocity;  // rad/s
+  std::vector<real> radius;            // m
+  std::vector<real> inv_mass;          // 1/kg
+  std::vector<real> inv_inertia;       // 1/(kg m^2)
+  std::vector<std::uint32_t> material; // index into the scene's materials
+
+  std::size_t size() const { return position.size(); }
+  BodiesView view() {
+    return {position.data(), velocity.data(), angular_velocity.data(), radius.data(),
+            inv_mass.data(),  inv_inertia.data(), material.data(), size()};
+  }
+
+  // Sum of (1/2) m v^2 + (1/2) I w^2 over movable spheres, J (in double).
+  double kinetic_energy() const;
+  // Total linear momentum, kg m/s (in double).
+  void momentum(double out[3]) const;
+  // Largest |v|, m/s.
+  real max_speed() const;
+  // Index of the first sphere with a non-finite position or velocity, or size().
+  std::size_t first_non_finite() const;
+};
+
+// Builds the world from the scene's materials and its generated particles.
+World make_world(const scene::Scene& scene, const scene::GeneratedParticles& particles);
+
+}  // namespace marbles
