@@ -1,0 +1,47 @@
+# scripts/setup.sh — sourced by scripts/run and scripts/test: installs the
+# Debian packages that are missing, then configures and builds (Release).
+# Environment: BUILD_DIR (default build), MARBLES_CMAKE_ARGS (extra -D flags).
+set -euo pipefail
+
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+BUILD_DIR=${BUILD_DIR:-$ROOT/build}
+JOBS=$(nproc 2>/dev/null || echo 2)
+
+# Needed to build the core at all.
+REQUIRED_PKGS=(cmake g++ make pkg-config libyaml-cpp-dev libeigen3-dev libgtest-dev libbenchmark-dev libcli11-dev)
+# Found -> on: VTK output, OSMesa rendering, PNG, movies.
+OPTIONAL_PKGS=(libvtk9-dev libosmesa6-dev libpng-dev ffmpeg)
+
+missing_packages() {
+  local p
+  for p in "$@"; do
+    dpkg -s "$p" >/dev/null 2>&1 || echo "$p"
+  done
+}
+
+install_packages() {
+  local pkgs=("$@") sudo=""
+  [ ${#pkgs[@]} -eq 0 ] && return 0
+  if [ "$(id -u)" -ne 0 ]; then
+    command -v sudo >/dev/null 2>&1 && sudo="sudo" || return 1
+  fi
+  echo "setup: installing ${pkgs[*]}"
+  $sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${pkgs[@]}"
+}
+
+if command -v dpkg >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1; then
+  mapfile -t need < <(missing_packages "${REQUIRED_PKGS[@]}")
+  mapfile -t want < <(missing_packages "${OPTIONAL_PKGS[@]}")
+  if ! install_packages "${need[@]}" "${want[@]}"; then
+    # Offline or unprivileged: the required set must install, the rest is optional.
+    install_packages "${need[@]}" || { echo "setup: cannot install ${need[*]}" >&2; exit 1; }
+    echo "setup: warning: optional packages not installed: ${want[*]} (no VTK output / rendering / movies)" >&2
+  fi
+fi
+
+echo "setup: configuring $BUILD_DIR (Release)"
+cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release ${MARBLES_CMAKE_ARGS:-} >"$BUILD_DIR.configure.log" 2>&1 \
+  || { cat "$BUILD_DIR.configure.log" >&2; exit 1; }
+grep -E "^-- marbles:" "$BUILD_DIR.configure.log" || true
+echo "setup: building with $JOBS jobs"
+cmake --build "$BUILD_DIR" -j "$JOBS"
