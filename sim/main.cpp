@@ -8,6 +8,7 @@
 #include <string>
 
 #include "bench/broadphase_bench.hpp"
+#include "bench/step_bench.hpp"
 #include "core/error.hpp"
 #include "render/render_dir.hpp"
 #include "sim/run.hpp"
@@ -68,6 +69,15 @@ int main(int argc, char** argv) {
   bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")->check(CLI::PositiveNumber);
   bench_bp->add_flag("--json", bp.json, "print JSON");
 
+  bench::StepBenchOptions st;
+  std::vector<std::size_t> st_n;
+  auto* bench_step = bench_cmd->add_subcommand("step", "time whole steps of a gas at volume fraction 0.1");
+  bench_step->add_option("--backend", st.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->check(CLI::PositiveNumber);
+  bench_step->add_option("--repeats", st.repeats, "timed steps per size")->check(CLI::PositiveNumber);
+  bench_step->add_option("--effects", st.effects, "effects of the pipeline")->delimiter(',');
+  bench_step->add_flag("--json", st.json, "print JSON");
+
   render::RenderDirOptions rd;
   std::string rd_dir;
   auto* render_cmd = app.add_subcommand("render", "render the frames of an output folder to PNG and a movie");
@@ -98,6 +108,11 @@ int main(int argc, char** argv) {
     if (*bench_bp) {
       if (!bp_n.empty()) bp.n = bp_n;
       return bench::run_broadphase_bench(bp, std::cout);
+    }
+    if (*bench_step) {
+      if (!st_n.empty()) st.n = st_n;
+      if (st.backend == "cuda") select_backend(BackendChoice::cuda, std::cerr);
+      return bench::run_step_bench(st, std::cout);
     }
     if (*render_cmd) return render::render_output_dir(rd_dir, rd, std::cout, std::cerr);
   } catch (const InputError& e) {

@@ -1,0 +1,186 @@
+// Whole-step physics against analytic results: rebound height, momentum,
+// determinism. Scenes are built in code so each test states its physics.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <random>
+
+#include "sim/particles.hpp"
+#include "sim/scene.hpp"
+#include "sim/simulation.hpp"
+
+using namespace marbles;
+
+namespace {
+
+scene::Scene base_scene(double dt, int substeps, std::vector<scene::Effect> effects, double e) {
+  scene::Scene s;
+  s.path = "test";
+  s.name = "test";
+  s.time = {1.0, dt, substeps};
+  s.effects = std::move(effects);
+  scene::Material m;
+  m.name = "m";
+  m.density = 1000;
+  m.restitution = e;
+  m.friction = 0;
+  s.materials.push_back(m);
+  return s;
+}
+
+scene::GeneratedParticles one_ball(Vec3 p, real r, Vec3 v = {}) {
+  scene::GeneratedParticles g;
+  g.position.push_back(p);
+  g.velocity.push_back(v);
+  g.radius.push_back(r);
+  g.material.push_back(0);
+  return g;
+}
+
+// Drop from height h0 (bottom of the ball above the plane); the first apex
+// after the bounce is e^2 h0.
+double first_rebound_height(double e, double dt, int substeps, double h0) {
+  using scene::Effect;
+  scene::Scene s = base_scene(dt, substeps, {Effect::gravity, Effect::walls, Effect::restitution}, e);
+  scene::WallSpec floor;
+  floor.kind = scene::WallSpec::Kind::plane;
+  floor.point = {0, 0, 0};
+  floor.normal = {0, 0, 1};
+  s.walls.push_back(floor);
+  const real r = real(0.05);
+  Simulation sim(s, make_world(s, one_ball({0, 0, real(h0 + r)}, r)), broadphase::Backend::cpu);
+  bool bounced = false;
+  double apex = 0;
+  for (int k = 0; k < 200000; ++k) {
+    sim.step();
+    const Vec3 v = sim.world().velocity[0];
+    const double z = sim.world().position[0].z - r;
+    if (!bounced && v.z > 0) bounced = true;
+    if (bounced) {
+      apex = std::max(apex, z);
+      if (v.z < 0) break;
+    }
+  }
+  EXPECT_TRUE(bounced);
+  return apex;
+}
+
+}  // namespace
+
+class Rebound : public ::testing::TestWithParam<std::tuple<double, double, int>> {};
+
+TEST_P(Rebound, ReachesESquaredOfDropHeight) {
+  const auto [e, dt, substeps] = GetParam();
+  const double h0 = 1.0;
+  const double apex = first_rebound_height(e, dt, substeps, h0);
+  EXPECT_NEAR(apex, e * e * h0, 0.01 * e * e * h0) << "e=" << e << " dt=" << dt << " substeps=" << substeps;
+}
+
+INSTANTIATE_TEST_SUITE_P(Restitution, Rebound,
+                         ::testing::Values(std::tuple{0.8, 1e-3, 1}, std::tuple{0.5, 1e-3, 2},
+                                           std::tuple{0.9, 1.0 / 240, 4}, std::tuple{1.0, 1e-3, 1},
+                                           std::tuple{0.3, 2e-3, 1}));
+
+TEST(Rebound, InelasticBallComesToRest) {
+  using scene::Effect;
+  scene::Scene s = base_scene(1e-3, 1, {Effect::gravity, Effect::walls, Effect::restitution}, 0.5);
+  scene::WallSpec floor;
+  floor.point = {0, 0, 0};
+  floor.normal = {0, 0, 1};
+  s.walls.push_back(floor);
+  const real r = real(0.05);
+  Simulation sim(s, make_world(s, one_ball({0, 0, real(0.5)}, r)), broadphase::Backend::cpu);
+  for (int k = 0; k < 5000; ++k) sim.step();
+  EXPECT_LT(std::abs(sim.world().velocity[0].z), 0.02);
+  EXPECT_NEAR(sim.world().position[0].z, r, 0.01 * r);
+}
+
+// Elastic gas with no gravity and no walls: sphere–sphere impulses are equal
+// and opposite, so total momentum is conserved.
+TEST(Momentum, ConservedByElasticCollisions) {
+  using scene::Effect;
+  scene::Scene s = base_scene(1e-3, 1, {Effect::collisions, Effect::restitution}, 1.0);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  scene::GeneratedParticles g;
+  const real r = real(0.05);
+  for (int x = 0; x < 8; ++x)
+    for (int y = 0; y < 8; ++y)
+      for (int z = 0; z < 8; ++z) {
+        g.position.push_back({real(x * 0.12), real(y * 0.12), real(z * 0.12)});
+        g.velocity.push_back({real(u(rng) + 0.3), real(u(rng)), real(u(rng))});
+        g.radius.push_back(real(r * (1 + 0.2 * u(rng))));
+        g.material.push_back(0);
+      }
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  double p0[3], p1[3];
+  sim.world().momentum(p0);
+  std::uint64_t contacts = 0;
+  for (int k = 0; k < 300; ++k) {
+    sim.step();
+    contacts += sim.last_step().contacts;
+  }
+  sim.world().momentum(p1);
+  EXPECT_GT(contacts, 1000u);
+  const double scale = std::sqrt(p0[0] * p0[0] + p0[1] * p0[1] + p0[2] * p0[2]);
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(p1[a], p0[a], 1e-6 * scale) << "axis " << a;
+}
+
+// The same scene run twice gives bit-identical states.
+TEST(Determinism, SameSceneSameState) {
+  using scene::Effect;
+  auto run = [] {
+    scene::Scene s = base_scene(1e-3, 2, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution}, 0.6);
+    scene::WallSpec box;
+    box.kind = scene::WallSpec::Kind::box;
+    box.lo = {0, 0, 0};
+    box.hi = {1, 1, 2};
+    s.walls.push_back(box);
+    std::mt19937_64 rng(9);
+    std::uniform_real_distribution<double> u(0.1, 0.9);
+    scene::GeneratedParticles g;
+    for (int i = 0; i < 300; ++i) {
+      g.position.push_back({real(u(rng)), real(u(rng)), real(2 * u(rng))});
+      g.velocity.push_back({});
+      g.radius.push_back(real(0.03));
+      g.material.push_back(0);
+    }
+    Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+    for (int k = 0; k < 200; ++k) sim.step();
+    return sim.world();
+  };
+  const World a = run(), b = run();
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_EQ(0, std::memcmp(a.position.data(), b.position.data(), a.size() * sizeof(Vec3)));
+  EXPECT_EQ(0, std::memcmp(a.velocity.data(), b.velocity.data(), a.size() * sizeof(Vec3)));
+}
+
+// Spheres poured into a closed box stay inside it.
+TEST(Walls, BoxKeepsEverySphereInside) {
+  using scene::Effect;
+  scene::Scene s = base_scene(1e-3, 2, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution}, 0.3);
+  scene::WallSpec box;
+  box.kind = scene::WallSpec::Kind::box;
+  box.lo = {0, 0, 0};
+  box.hi = {0.5, 0.5, 1};
+  s.walls.push_back(box);
+  std::mt19937_64 rng(21);
+  std::uniform_real_distribution<double> u(0.05, 0.45), v(-2, 2);
+  scene::GeneratedParticles g;
+  for (int i = 0; i < 500; ++i) {
+    g.position.push_back({real(u(rng)), real(u(rng)), real(2 * u(rng))});
+    g.velocity.push_back({real(v(rng)), real(v(rng)), real(v(rng))});
+    g.radius.push_back(real(0.02));
+    g.material.push_back(0);
+  }
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  for (int k = 0; k < 1000; ++k) sim.step();
+  for (std::size_t i = 0; i < sim.world().size(); ++i) {
+    const Vec3 p = sim.world().position[i];
+    const real r = sim.world().radius[i];
+    EXPECT_GE(p.x, -0.1 * r); EXPECT_LE(p.x, 0.5 + 0.1 * r);
+    EXPECT_GE(p.y, -0.1 * r); EXPECT_LE(p.y, 0.5 + 0.1 * r);
+    EXPECT_GE(p.z, -0.1 * r); EXPECT_LE(p.z, 1.0 + 0.1 * r);
+  }
+}
