@@ -1,0 +1,498 @@
+// sim/scene.cpp — YAML scene (format v1) → marbles::scene::Scene.
+//
+// One function per section of the file, each reading its keys through
+// MapFields (unknown keys, duplicates, types, ranges) so that every problem
+// is reported once, at the node that caused it, as
+// `file:line:column: dotted.key: message`. Checks that span sections
+// (a block naming a material, dt against duration, movie needing render)
+// run after the section they depend on. The format is described for users
+// in docs/scene-format.md; keep the two in step.
+#include "sim/scene.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <sstream>
+
+#include "sim/scene_yaml.hpp"
+
+namespace marbles::scene {
+
+using detail::Field;
+using detail::format_number;
+using detail::MapFields;
+
+namespace {
+
+constexpr int kFormatVersion = 1;
+
+const std::vector<std::string> kEffectNames = {"gravity",  "collisions",         "walls", "restitution",
+                                               "friction", "rolling_resistance", "drag"};
+const std::vector<Effect> kDefaultEffects = {Effect::gravity, Effect::collisions, Effect::walls,
+                                             Effect::restitution, Effect::friction};
+const std::vector<std::string> kIntegrators = {"symplectic_euler"};
+const std::vector<std::string> kColorBy = {"speed", "id", "radius", "material"};
+const std::vector<std::string> kOutputFields = {"radius", "velocity", "angular_velocity", "id", "material"};
+
+std::string axis_name(int axis) { return axis == 0 ? "x" : (axis == 1 ? "y" : "z"); }
+
+// min < max on every axis; the error points at `max`.
+void check_box(const Vec3& lo, const Vec3& hi, const Field& max_field) {
+  for (int a = 0; a < 3; ++a) {
+    if (!(lo[a] < hi[a]))
+      max_field.fail("must be greater than min on every axis, got max." + axis_name(a) + " = " +
+                     format_number(hi[a]) + " <= min." + axis_name(a) + " = " + format_number(lo[a]));
+  }
+}
+
+TimeSpec read_time(const Field& field) {
+  const MapFields map(field, {"duration", "dt", "substeps"});
+  TimeSpec time;
+  time.duration = map.required("duration").positive();
+  const Field dt = map.required("dt");
+  time.dt = dt.positive();
+  if (time.dt > time.duration)
+    dt.fail("must be <= time.duration (" + format_number(time.duration) + "), got " + dt.node().Scalar());
+  if (auto f = map.optional("substeps")) time.substeps = f->integer_at_least(1);
+  return time;
+}
+
+SolverSpec read_solver(const Field& field) {
+  const MapFields map(field, {"iterations", "integrator"});
+  SolverSpec solver;
+  if (auto f = map.optional("iterations")) solver.iterations = f->integer_at_least(1);
+  if (auto f = map.optional("integrator")) {
+    solver.integrator = f->word();
+    if (std::find(kIntegrators.begin(), kIntegrators.end(), solver.integrator) == kIntegrators.end())
+      f->fail("unknown integrator '" + solver.integrator + "'" + detail::suggestion(solver.integrator, kIntegrators));
+  }
+  return solver;
+}
+
+std::vector<Effect> read_effects(const Field& field) {
+  std::vector<Effect> effects;
+  for (const Field& item : field.items()) {
+    const std::string name = item.word();
+    const auto it = std::find(kEffectNames.begin(), kEffectNames.end(), name);
+    if (it == kEffectNames.end()) item.fail("unknown effect '" + name + "'" + detail::suggestion(name, kEffectNames));
+    const Effect e = static_cast<Effect>(it - kEffectNames.begin());
+    if (std::find(effects.begin(), effects.end(), e) != effects.end())
+      item.fail("effect '" + name + "' is listed twice");
+    effects.push_back(e);
+  }
+  return effects;
+}
+
+std::vector<Material> read_materials(const Field& field) {
+  const MapFields map(field, std::vector<std::string>{});
+  std::vector<Material> materials;
+  for (const MapFields::Entry& entry : map.entries()) {
+    Material m;
+    m.name = entry.name;
+    m.where = entry.name_where;
+    if (m.name.empty()) throw InputError(entry.name_where, field.key(), "a material needs a name");
+    if (!entry.value.node().IsNull()) {  // `glass:` alone takes every default
+      const MapFields props(entry.value, {"density", "restitution", "friction", "rolling_friction"});
+      if (auto f = props.optional("density")) m.density = f->positive();
+      if (auto f = props.optional("restitution")) m.restitution = f->within(0, 1);
+      if (auto f = props.optional("friction")) m.friction = f->non_negative();
+      if (auto f = props.optional("rolling_friction")) m.rolling_friction = f->non_negative();
+    }
+    materials.push_back(std::move(m));
+  }
+  if (materials.empty()) field.fail("needs at least one material, e.g. `steel: {density: 7800}`");
+  return materials;
+}
+
+// Reads `material: NAME` of a wall or block and checks that the material exists.
+void read_material_ref(const Scene& scene, const MapFields& map, std::string& name, SourceLocation& where) {
+  where.file = scene.path;
+  if (auto f = map.optional("material")) {
+    name = f->word();
+    where = f->where();
+    scene.material_index(name, where, f->key());
+  }
+}
+
+std::vector<WallSpec> read_walls(const Scene& scene, const Field& field) {
+  std::vector<WallSpec> walls;
+  for (const Field& item : field.items()) {
+    const MapFields map(item, {"plane", "box", "material"});
+    WallSpec wall;
+    wall.where = item.where();
+    const bool plane = map.has("plane"), box = map.has("box");
+    if (plane == box)
+      item.fail(plane ? "a wall is either a plane or a box, not both" : "missing the wall's shape: 'plane' or 'box'");
+    if (plane) {
+      wall.kind = WallSpec::Kind::plane;
+      const MapFields shape(map.required("plane"), {"point", "normal"});
+      wall.point = shape.required("point").vec3();
+      const Field normal = shape.required("normal");
+      const Vec3 n = normal.vec3();
+      const double len = std::sqrt(double(n.x) * n.x + double(n.y) * n.y + double(n.z) * n.z);
+      if (!(len > 0)) normal.fail("must not be the zero vector");
+      wall.normal = Vec3(real(n.x / len), real(n.y / len), real(n.z / len));
+    } else {
+      wall.kind = WallSpec::Kind::box;
+      const MapFields shape(map.required("box"), {"min", "max"});
+      wall.lo = shape.required("min").vec3();
+      const Field max = shape.required("max");
+      wall.hi = max.vec3();
+      check_box(wall.lo, wall.hi, max);
+    }
+    read_material_ref(scene, map, wall.material, wall.material_where);
+    walls.push_back(std::move(wall));
+  }
+  return walls;
+}
+
+// `radius: 0.01` or `radius: {constant: r}`, `{uniform: [a, b]}`, `{log_uniform: [a, b]}`.
+RadiusSpec read_radius(const Field& field) {
+  RadiusSpec radius;
+  if (field.is_scalar()) {
+    radius.value = field.positive();
+    return radius;
+  }
+  if (!field.is_map())
+    field.fail("expected a number or one of {constant: r}, {uniform: [min, max]}, {log_uniform: [min, max]}, got " +
+               field.description());
+  const MapFields map(field, {"constant", "uniform", "log_uniform"});
+  if (map.entries().size() != 1)
+    field.fail("give exactly one of constant, uniform, log_uniform");
+  const MapFields::Entry& entry = map.entries().front();
+  if (entry.name == "constant") {
+    radius.value = entry.value.positive();
+    return radius;
+  }
+  radius.kind = entry.name == "uniform" ? RadiusSpec::Kind::uniform : RadiusSpec::Kind::log_uniform;
+  if (!entry.value.is_sequence() || entry.value.node().size() != 2)
+    entry.value.fail("expected [min, max], got " + (entry.value.is_sequence()
+                                                       ? "a sequence of " + std::to_string(entry.value.node().size())
+                                                       : entry.value.description()));
+  const std::vector<Field> range = entry.value.items();
+  radius.min = range[0].positive();
+  radius.max = range[1].positive();
+  if (radius.min > radius.max)
+    range[1].fail("must be >= the minimum radius " + format_number(radius.min) + ", got " + range[1].node().Scalar());
+  return radius;
+}
+
+double largest(const RadiusSpec& r) { return r.kind == RadiusSpec::Kind::constant ? r.value : r.max; }
+
+VelocitySpec read_velocity(const Field& field) {
+  VelocitySpec velocity;
+  if (field.is_sequence()) {
+    velocity.kind = VelocitySpec::Kind::constant;
+    velocity.value = field.vec3();
+    return velocity;
+  }
+  if (!field.is_map()) field.fail("expected [vx, vy, vz] or {random: {speed, seed}}, got " + field.description());
+  const MapFields map(field, {"random"});
+  const MapFields random(map.required("random"), {"speed", "seed"});
+  velocity.kind = VelocitySpec::Kind::random;
+  velocity.speed = random.required("speed").non_negative();
+  if (auto f = random.optional("seed")) velocity.seed = f->seed();
+  return velocity;
+}
+
+void read_list(ParticleBlock& block, const Field& field) {
+  const MapFields map(field, {"positions", "radii", "radius", "velocities"});
+  const Field positions = map.required("positions");
+  for (const Field& p : positions.items()) block.positions.push_back(p.vec3());
+  if (block.positions.empty()) positions.fail("needs at least one position");
+  const std::size_t n = block.positions.size();
+  const bool radii = map.has("radii"), radius = map.has("radius");
+  if (radii == radius)
+    field.fail(radii ? "give either 'radii' (one per sphere) or 'radius' (for all), not both"
+                     : "missing 'radii' (one per sphere) or 'radius' (for all)");
+  if (radii) {
+    const Field list = map.required("radii");
+    for (const Field& r : list.items()) block.radii.push_back(r.positive());
+    if (block.radii.size() != n)
+      list.fail("has " + std::to_string(block.radii.size()) + " entries but positions has " + std::to_string(n));
+  } else {
+    block.radii.assign(n, map.required("radius").positive());
+  }
+  if (auto f = map.optional("velocities")) {
+    for (const Field& v : f->items()) block.velocities.push_back(v.vec3());
+    if (block.velocities.size() != n)
+      f->fail("has " + std::to_string(block.velocities.size()) + " entries but positions has " + std::to_string(n));
+  }
+}
+
+void read_lattice(ParticleBlock& block, const Field& field) {
+  const MapFields map(field, {"min", "max", "spacing", "radius", "jitter", "seed"});
+  block.lo = map.required("min").vec3();
+  const Field max = map.required("max");
+  block.hi = max.vec3();
+  check_box(block.lo, block.hi, max);
+  const Field spacing = map.required("spacing");
+  block.spacing = spacing.positive();
+  block.radius = read_radius(map.required("radius"));
+  if (auto f = map.optional("jitter")) block.jitter = f->non_negative();
+  if (auto f = map.optional("seed")) block.seed = f->seed();
+  const double margin = largest(block.radius) + block.jitter;
+  if (block.spacing < 2 * margin)
+    spacing.fail("must be >= 2 * (largest radius + jitter) = " + format_number(2 * margin) +
+                 " so that spheres cannot overlap, got " + spacing.node().Scalar());
+  for (int a = 0; a < 3; ++a) {
+    if (block.hi[a] - block.lo[a] < 2 * margin)
+      max.fail("the box is too small on " + axis_name(a) + " for one sphere (needs " + format_number(2 * margin) +
+               " = 2 * (largest radius + jitter), has " + format_number(block.hi[a] - block.lo[a]) + ")");
+  }
+}
+
+void read_random(ParticleBlock& block, const Field& field) {
+  const MapFields map(field, {"count", "min", "max", "radius", "seed"});
+  const Field count = map.required("count");
+  block.count = static_cast<std::size_t>(count.integer_at_least(1, 1'000'000'000));
+  block.count_where = count.where();
+  block.lo = map.required("min").vec3();
+  const Field max = map.required("max");
+  block.hi = max.vec3();
+  check_box(block.lo, block.hi, max);
+  block.radius = read_radius(map.required("radius"));
+  if (auto f = map.optional("seed")) block.seed = f->seed();
+  const double r = largest(block.radius);
+  for (int a = 0; a < 3; ++a) {
+    if (block.hi[a] - block.lo[a] < 2 * r)
+      max.fail("the box is too small on " + axis_name(a) + " for the largest sphere (needs " + format_number(2 * r) +
+               ", has " + format_number(block.hi[a] - block.lo[a]) + ")");
+  }
+}
+
+void read_csv(ParticleBlock& block, const Field& field, const std::string& scene_path) {
+  const MapFields map(field, {"path"});
+  const Field path = map.required("path");
+  const std::string given = path.word();
+  if (given.empty()) path.fail("must not be empty");
+  std::filesystem::path resolved(given);
+  if (resolved.is_relative()) resolved = std::filesystem::path(scene_path).parent_path() / resolved;
+  block.csv_path = resolved.lexically_normal().string();
+  block.csv_path_where = path.where();
+  std::error_code ec;
+  if (std::filesystem::is_directory(block.csv_path, ec)) path.fail("'" + block.csv_path + "' is a folder, not a CSV file");
+  std::ifstream probe(block.csv_path);
+  if (!probe) path.fail("cannot open '" + block.csv_path + "': " + std::strerror(errno));
+}
+
+std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field) {
+  static const std::vector<std::string> kinds = {"list", "lattice", "random", "csv"};
+  std::vector<ParticleBlock> blocks;
+  for (const Field& item : field.items()) {
+    const MapFields map(item, {"list", "lattice", "random", "csv", "material", "velocity"});
+    ParticleBlock block;
+    block.where = item.where();
+    const MapFields::Entry* source = nullptr;
+    for (const MapFields::Entry& e : map.entries()) {
+      if (std::find(kinds.begin(), kinds.end(), e.name) == kinds.end()) continue;
+      if (source)
+        throw InputError(e.name_where, item.key(),
+                         "a block has one source; got both '" + source->name + "' and '" + e.name + "'");
+      source = &e;
+    }
+    if (!source) item.fail("missing the block's source: one of list, lattice, random, csv");
+    const Field& spec = source->value;
+    if (source->name == "list") {
+      block.kind = ParticleBlock::Kind::list;
+      read_list(block, spec);
+    } else if (source->name == "lattice") {
+      block.kind = ParticleBlock::Kind::lattice;
+      read_lattice(block, spec);
+    } else if (source->name == "random") {
+      block.kind = ParticleBlock::Kind::random;
+      read_random(block, spec);
+    } else {
+      block.kind = ParticleBlock::Kind::csv;
+      read_csv(block, spec, scene.path);
+    }
+    read_material_ref(scene, map, block.material, block.material_where);
+    block.velocity_where.file = scene.path;
+    if (auto f = map.optional("velocity")) {
+      block.velocity = read_velocity(*f);
+      block.velocity_where = f->where();
+      if (!block.velocities.empty())
+        f->fail("list.velocities already gives every sphere its velocity; give one or the other");
+    }
+    blocks.push_back(std::move(block));
+  }
+  if (blocks.empty()) field.fail("needs at least one block (list, lattice, random or csv)");
+  return blocks;
+}
+
+CameraSpec read_camera(const Field& field) {
+  const MapFields map(field, {"position", "look_at", "up", "fov"});
+  CameraSpec camera;
+  camera.given = true;
+  camera.position = map.required("position").vec3();
+  const Field look_at = map.required("look_at");
+  camera.look_at = look_at.vec3();
+  const Vec3 view = camera.look_at - camera.position;
+  if (!(length(view) > 0)) look_at.fail("must differ from the camera position");
+  if (auto f = map.optional("up")) {
+    camera.up = f->vec3();
+    if (!(length(camera.up) > 0)) f->fail("must not be the zero vector");
+    if (!(length(cross(view, camera.up)) > 1e-6 * length(view) * length(camera.up)))
+      f->fail("must not be parallel to the viewing direction (look_at - position)");
+  } else if (!(length(cross(view, camera.up)) > 1e-6 * length(view))) {
+    field.fail("the default up [0, 0, 1] is parallel to the viewing direction; give camera.up");
+  }
+  if (auto f = map.optional("fov")) {
+    camera.fov = f->number();
+    if (!(camera.fov > 0 && camera.fov < 180))
+      f->fail("must be within (0, 180) degrees, got " + f->node().Scalar());
+  }
+  return camera;
+}
+
+OutputSpec read_output(const Field& field, const std::string& stem) {
+  const MapFields map(field, {"dir", "vtk", "fields", "render", "movie"});
+  OutputSpec output;
+  output.dir = "out/" + stem;
+  if (auto f = map.optional("dir")) {
+    output.dir = f->word();
+    if (output.dir.empty()) f->fail("must not be empty");
+  }
+  if (auto f = map.optional("vtk")) {
+    const MapFields vtk(*f, {"every"});
+    output.vtk_every = 1;
+    if (auto e = vtk.optional("every")) output.vtk_every = e->integer_at_least(1);
+  }
+  if (auto f = map.optional("fields")) {
+    output.fields.clear();
+    for (const Field& item : f->items()) {
+      const std::string name = item.word();
+      if (std::find(kOutputFields.begin(), kOutputFields.end(), name) == kOutputFields.end())
+        item.fail("unknown field '" + name + "'" + detail::suggestion(name, kOutputFields));
+      if (std::find(output.fields.begin(), output.fields.end(), name) != output.fields.end())
+        item.fail("field '" + name + "' is listed twice");
+      output.fields.push_back(name);
+    }
+  }
+  std::optional<Field> width, height;
+  if (auto f = map.optional("render")) {
+    const MapFields render(*f, {"every", "width", "height", "color_by", "camera"});
+    output.render.enabled = true;
+    if (auto e = render.optional("every")) output.render.every = e->integer_at_least(1);
+    width = render.optional("width");
+    height = render.optional("height");
+    if (width) output.render.width = width->integer_at_least(16, 16384);
+    if (height) output.render.height = height->integer_at_least(16, 16384);
+    if (auto e = render.optional("color_by")) {
+      output.render.color_by = e->word();
+      if (std::find(kColorBy.begin(), kColorBy.end(), output.render.color_by) == kColorBy.end())
+        e->fail("unknown color_by '" + output.render.color_by + "'" +
+                detail::suggestion(output.render.color_by, kColorBy));
+    }
+    if (auto e = render.optional("camera")) output.render.camera = read_camera(*e);
+  }
+  if (auto f = map.optional("movie")) {
+    const MapFields movie(*f, {"fps"});
+    output.movie.enabled = true;
+    if (auto e = movie.optional("fps")) output.movie.fps = e->positive();
+    if (!output.render.enabled) f->fail("needs output.render: the movie is made of the rendered frames");
+    // H.264 in yuv420p, the format every player reads, needs even frame sizes.
+    if (output.render.width % 2) {
+      if (width) width->fail("must be even for a movie, got " + width->node().Scalar());
+    }
+    if (output.render.height % 2) {
+      if (height) height->fail("must be even for a movie, got " + height->node().Scalar());
+    }
+  }
+  return output;
+}
+
+std::string read_file(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw InputError(SourceLocation{path, 0, 0}, "", "is a folder, not a scene file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(SourceLocation{path, 0, 0}, "", std::string("cannot open the scene file: ") + std::strerror(errno));
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+}  // namespace
+
+const char* effect_name(Effect e) {
+  switch (e) {
+    case Effect::gravity: return "gravity";
+    case Effect::collisions: return "collisions";
+    case Effect::walls: return "walls";
+    case Effect::restitution: return "restitution";
+    case Effect::friction: return "friction";
+    case Effect::rolling_resistance: return "rolling_resistance";
+    case Effect::drag: return "drag";
+  }
+  return "unknown";
+}
+
+std::uint32_t Scene::material_index(const std::string& name, const SourceLocation& where, const std::string& key) const {
+  if (name.empty()) return 0;
+  std::vector<std::string> names;
+  for (std::size_t i = 0; i < materials.size(); ++i) {
+    if (materials[i].name == name) return static_cast<std::uint32_t>(i);
+    names.push_back(materials[i].name);
+  }
+  throw InputError(where, key, "unknown material '" + name + "'" + detail::suggestion(name, names));
+}
+
+Scene load_scene(const std::string& path) {
+  const std::string text = read_file(path);
+  std::vector<YAML::Node> documents;
+  try {
+    documents = YAML::LoadAll(text);
+  } catch (const YAML::Exception& e) {
+    throw InputError(detail::location_of(path, e.mark), "", "not valid YAML: " + e.msg);
+  }
+  if (documents.empty() || (documents.size() == 1 && documents[0].IsNull()))
+    throw InputError(SourceLocation{path, 0, 0}, "", "the scene file is empty");
+  if (documents.size() > 1)
+    throw InputError(detail::location_of(path, documents[1].Mark()), "",
+                     "a scene is one YAML document, this file holds " + std::to_string(documents.size()));
+
+  const Field root(documents[0], "", path);
+  if (!root.is_map())
+    root.fail("a scene is a map of keys (time, materials, particles, ...), got " + root.description());
+  const MapFields top(root, {"format", "name", "time", "solver", "effects", "gravity", "drag", "materials", "walls",
+                             "particles", "output"});
+
+  if (auto f = top.optional("format")) {
+    const long long version = f->integer();
+    if (version != kFormatVersion)
+      f->fail("unsupported scene format " + f->node().Scalar() + "; this version reads format " +
+              std::to_string(kFormatVersion));
+  }
+
+  Scene scene;
+  scene.path = path;
+  const std::string stem = std::filesystem::path(path).stem().string();
+  scene.name = stem;
+  if (auto f = top.optional("name")) scene.name = f->word();
+
+  scene.time = read_time(top.required("time"));
+  if (auto f = top.optional("solver")) scene.solver = read_solver(*f);
+
+  scene.effects = kDefaultEffects;
+  if (auto f = top.optional("effects")) scene.effects = read_effects(*f);
+  if (auto f = top.optional("gravity")) scene.gravity = f->vec3();
+  if (auto f = top.optional("drag")) scene.drag = f->non_negative();
+  if (scene.has(Effect::drag) && !top.has("drag")) {
+    const Field effects = *top.optional("effects");
+    for (const Field& item : effects.items())
+      if (item.word() == "drag") item.fail("the drag effect needs the top-level key 'drag' (linear drag rate, 1/s)");
+  }
+
+  scene.materials = read_materials(top.required("materials"));
+  if (auto f = top.optional("walls")) scene.walls = read_walls(scene, *f);
+  scene.particles = read_particles(scene, top.required("particles"));
+
+  scene.output.dir = "out/" + stem;
+  if (auto f = top.optional("output")) scene.output = read_output(*f, stem);
+  return scene;
+}
+
+}  // namespace marbles::scene

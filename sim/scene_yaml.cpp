@@ -1,0 +1,263 @@
+// sim/scene_yaml.cpp — checked conversions from yaml-cpp nodes (see scene_yaml.hpp).
+//
+// Numbers are parsed from the scalar text with std::from_chars rather than
+// yaml-cpp's stream conversion, so that YAML's .nan/.inf spellings, trailing
+// garbage and out-of-range values each get their own message, and the
+// message can quote the value exactly as it was written.
+#include "sim/scene_yaml.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <limits>
+
+namespace marbles::scene::detail {
+
+SourceLocation location_of(const std::string& file, const YAML::Mark& mark) {
+  SourceLocation where;
+  where.file = file;
+  where.line = mark.line >= 0 ? mark.line + 1 : 0;
+  where.column = (mark.line >= 0 && mark.column >= 0) ? mark.column + 1 : 0;
+  return where;
+}
+
+namespace {
+
+char lower(char c) { return (c >= 'A' && c <= 'Z') ? char(c - 'A' + 'a') : c; }
+
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t above = row[j];
+      const std::size_t substitute = diagonal + (lower(a[i - 1]) == lower(b[j - 1]) ? 0 : 1);
+      row[j] = std::min({above + 1, row[j - 1] + 1, substitute});
+      diagonal = above;
+    }
+  }
+  return row[b.size()];
+}
+
+std::string join_key(const std::string& parent, const std::string& name) {
+  return parent.empty() ? name : parent + "." + name;
+}
+
+std::string_view trimmed(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+  return s;
+}
+
+bool is_yaml_non_finite(std::string_view s) {
+  std::string t;
+  for (char c : s) t += lower(c);
+  return t == ".nan" || t == ".inf" || t == "+.inf" || t == "-.inf";
+}
+
+// Parses the whole of `text` as a double; false on any leftover character.
+bool parse_double(std::string_view text, double& value) {
+  std::string_view s = trimmed(text);
+  if (!s.empty() && s.front() == '+') s.remove_prefix(1);
+  if (s.empty()) return false;
+  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), value);
+  if (ec == std::errc::result_out_of_range) {
+    value = std::numeric_limits<double>::infinity();
+    return end == s.data() + s.size();
+  }
+  return ec == std::errc() && end == s.data() + s.size();
+}
+
+template <typename Int>
+bool parse_integer(std::string_view text, Int& value) {
+  std::string_view s = trimmed(text);
+  if (!s.empty() && s.front() == '+') s.remove_prefix(1);
+  if (s.empty()) return false;
+  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), value);
+  return ec == std::errc() && end == s.data() + s.size();
+}
+
+}  // namespace
+
+std::string nearest_name(std::string_view word, const std::vector<std::string>& candidates) {
+  std::string best;
+  std::size_t best_distance = std::numeric_limits<std::size_t>::max();
+  for (const std::string& c : candidates) {
+    const std::size_t d = edit_distance(word, c);
+    if (d < best_distance) {
+      best_distance = d;
+      best = c;
+    }
+  }
+  const std::size_t limit = std::max<std::size_t>(1, std::min(word.size(), best.size()) / 3);
+  if (best.empty() || best_distance > limit || best_distance >= word.size()) return {};
+  return best;
+}
+
+std::string suggestion(std::string_view word, const std::vector<std::string>& candidates) {
+  const std::string near = nearest_name(word, candidates);
+  if (!near.empty()) return " (did you mean '" + near + "'?)";
+  std::string out = "; expected one of: ";
+  for (std::size_t i = 0; i < candidates.size(); ++i) out += (i ? ", " : "") + candidates[i];
+  return out;
+}
+
+std::string format_number(double value) {
+  char buffer[64];
+  const auto [end, ec] = std::to_chars(buffer, buffer + sizeof buffer, value);
+  return ec == std::errc() ? std::string(buffer, end) : std::to_string(value);
+}
+
+// --- Field -----------------------------------------------------------------
+
+Field::Field(YAML::Node node, std::string key, const std::string& file)
+    : m_node(std::move(node)), m_key(std::move(key)), m_file(file) {}
+
+SourceLocation Field::where() const { return location_of(m_file, m_node.Mark()); }
+
+void Field::fail(const std::string& message) const { throw InputError(where(), m_key, message); }
+
+std::string Field::description() const {
+  switch (m_node.Type()) {
+    case YAML::NodeType::Map: return "a map";
+    case YAML::NodeType::Sequence: return "a sequence";
+    case YAML::NodeType::Scalar: return "'" + m_node.Scalar() + "'";
+    default: return "nothing (null)";
+  }
+}
+
+double Field::number() const {
+  if (!is_scalar()) fail("expected a number, got " + description());
+  const std::string& text = m_node.Scalar();
+  if (is_yaml_non_finite(text)) fail("must be a finite number, got " + text);
+  double value = 0;
+  if (!parse_double(text, value)) fail("expected a number, got " + description());
+  if (!std::isfinite(value)) fail("must be a finite number, got " + text);
+  return value;
+}
+
+double Field::positive() const {
+  const double v = number();
+  if (!(v > 0)) fail("must be > 0, got " + m_node.Scalar());
+  return v;
+}
+
+double Field::non_negative() const {
+  const double v = number();
+  if (!(v >= 0)) fail("must be >= 0, got " + m_node.Scalar());
+  return v;
+}
+
+double Field::within(double lo, double hi) const {
+  const double v = number();
+  if (!(v >= lo && v <= hi))
+    fail("must be within [" + format_number(lo) + ", " + format_number(hi) + "], got " + m_node.Scalar());
+  return v;
+}
+
+long long Field::integer() const {
+  if (!is_scalar()) fail("expected an integer, got " + description());
+  long long value = 0;
+  if (parse_integer(m_node.Scalar(), value)) return value;
+  const double d = number();  // reports non-numbers and non-finite values
+  if (d != std::floor(d) || std::fabs(d) > 9.0e15) fail("expected an integer, got " + m_node.Scalar());
+  return static_cast<long long>(d);
+}
+
+int Field::integer_at_least(long long lo, long long hi) const {
+  const long long v = integer();
+  if (v < lo) fail("must be >= " + std::to_string(lo) + ", got " + m_node.Scalar());
+  if (v > hi) fail("must be <= " + std::to_string(hi) + ", got " + m_node.Scalar());
+  return static_cast<int>(v);
+}
+
+std::uint64_t Field::seed() const {
+  if (!is_scalar()) fail("expected an integer, got " + description());
+  std::uint64_t value = 0;
+  if (parse_integer(m_node.Scalar(), value)) return value;
+  const long long v = integer();
+  if (v < 0) fail("must be >= 0, got " + m_node.Scalar());
+  return static_cast<std::uint64_t>(v);
+}
+
+std::string Field::word() const {
+  if (!is_scalar()) fail("expected a name, got " + description());
+  return m_node.Scalar();
+}
+
+Vec3 Field::vec3() const {
+  if (!is_sequence()) fail("expected [x, y, z], got " + description());
+  if (m_node.size() != 3)
+    fail("expected [x, y, z], got a sequence of " + std::to_string(m_node.size()));
+  const std::vector<Field> xyz = items();
+  return {real(xyz[0].number()), real(xyz[1].number()), real(xyz[2].number())};
+}
+
+void Field::expect_map() const {
+  if (!is_map()) fail("expected a map, got " + description());
+}
+
+void Field::expect_sequence() const {
+  if (!is_sequence()) fail("expected a sequence, got " + description());
+}
+
+std::vector<Field> Field::items() const {
+  expect_sequence();
+  std::vector<Field> out;
+  out.reserve(m_node.size());
+  for (std::size_t i = 0; i < m_node.size(); ++i)
+    out.emplace_back(m_node[i], m_key + "[" + std::to_string(i) + "]", m_file);
+  return out;
+}
+
+// --- MapFields -------------------------------------------------------------
+
+MapFields::MapFields(const Field& map, std::initializer_list<const char*> allowed) : m_self(map) {
+  std::vector<std::string> names;
+  for (const char* a : allowed) names.emplace_back(a);
+  read(names);
+}
+
+MapFields::MapFields(const Field& map, const std::vector<std::string>& allowed) : m_self(map) {
+  read(allowed);
+}
+
+void MapFields::read(const std::vector<std::string>& allowed) {
+  m_self.expect_map();
+  for (auto it = m_self.node().begin(); it != m_self.node().end(); ++it) {
+    const YAML::Node key = it->first;
+    const SourceLocation key_where = location_of(m_self.file(), key.Mark());
+    if (!key.IsScalar()) {
+      Field(key, m_self.key(), m_self.file()).fail("expected a key name, got " +
+                                                   Field(key, "", "").description());
+    }
+    const std::string name = key.Scalar();
+    if (!allowed.empty() && std::find(allowed.begin(), allowed.end(), name) == allowed.end())
+      throw InputError(key_where, m_self.key(), "unknown key '" + name + "'" + suggestion(name, allowed));
+    for (const Entry& e : m_entries) {
+      if (e.name == name)
+        throw InputError(key_where, m_self.key(),
+                         "duplicate key '" + name + "' (first given at line " + std::to_string(e.name_where.line) + ")");
+    }
+    m_entries.push_back({name, key_where, Field(it->second, join_key(m_self.key(), name), m_self.file())});
+  }
+}
+
+bool MapFields::has(const char* name) const {
+  return std::any_of(m_entries.begin(), m_entries.end(), [&](const Entry& e) { return e.name == name; });
+}
+
+std::optional<Field> MapFields::optional(const char* name) const {
+  for (const Entry& e : m_entries)
+    if (e.name == name) return e.value;
+  return std::nullopt;
+}
+
+Field MapFields::required(const char* name) const {
+  if (auto f = optional(name)) return *f;
+  m_self.fail(std::string("missing required key '") + name + "'");
+}
+
+}  // namespace marbles::scene::detail
