@@ -9,6 +9,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstdint>
 
 #include "core/vec3.hpp"
 #include "narrowphase/contact.hpp"
@@ -42,6 +43,70 @@ MARBLES_HD_INLINE bool sphere_plane(const Vec3& p, real r, const Vec3& q, const 
                                     real& separation) {
   separation = dot(p - q, n) - r;
   return separation < margin;
+}
+
+// A wall as the narrow phase sees it: every wall kind of core/walls.hpp is
+// flattened into these (a box is six half-spaces).
+struct WallShape {
+  enum class Kind : std::uint8_t { half_space, cylinder_inside, cylinder_outside, sphere };
+  Kind kind = Kind::half_space;
+  Vec3 point;            // plane point / cylinder base / sphere centre
+  Vec3 direction{0, 0, 1};  // plane normal (towards free space) / cylinder axis
+  real radius = 0;       // cylinder / sphere
+  real length = 0;       // cylinder, 0 = infinite
+  Vec3 velocity;         // m/s, translation
+  real angular_velocity = 0;  // rad/s about `direction` through `point` (cylinders)
+  std::uint32_t material = 0;
+};
+
+// Any unit vector perpendicular to unit `a` (used when a sphere sits exactly
+// on a cylinder's axis, so the normal is still defined).
+MARBLES_HD_INLINE Vec3 any_perpendicular(const Vec3& a) {
+  const Vec3 t = std::fabs(a.x) < real(0.9) ? Vec3(1, 0, 0) : Vec3(0, 1, 0);
+  const Vec3 c = cross(a, t);
+  return c / length(c);
+}
+
+// Signed gap between sphere (p, r) and wall `w` and the normal from the wall
+// towards the sphere. Returns false where the wall does not act on the sphere
+// (beyond the ends of a finite cylinder).
+MARBLES_HD_INLINE bool wall_gap(const WallShape& w, const Vec3& p, real r, Vec3& normal, real& separation) {
+  switch (w.kind) {
+    case WallShape::Kind::half_space:
+      normal = w.direction;
+      separation = dot(p - w.point, w.direction) - r;
+      return true;
+    case WallShape::Kind::sphere: {
+      const Vec3 d = p - w.point;
+      const real dist = length(d);
+      normal = dist > real(1e-7) * (w.radius + r) ? d / dist : Vec3(0, 0, 1);
+      separation = dist - w.radius - r;
+      return true;
+    }
+    case WallShape::Kind::cylinder_inside:
+    case WallShape::Kind::cylinder_outside: {
+      const Vec3 q = p - w.point;
+      const real t = dot(q, w.direction);
+      if (w.length > 0 && (t < 0 || t > w.length)) return false;
+      const Vec3 rho = q - w.direction * t;
+      const real dist = length(rho);
+      const Vec3 out = dist > real(1e-7) * w.radius ? rho / dist : any_perpendicular(w.direction);
+      if (w.kind == WallShape::Kind::cylinder_inside) {
+        normal = -out;
+        separation = w.radius - dist - r;
+      } else {
+        normal = out;
+        separation = dist - w.radius - r;
+      }
+      return true;
+    }
+  }
+  return false;
+}
+
+// Velocity of the wall's surface at world point x.
+MARBLES_HD_INLINE Vec3 wall_surface_velocity(const WallShape& w, const Vec3& x) {
+  return w.velocity + cross(w.direction * w.angular_velocity, x - w.point);
 }
 
 // Prepare stage: effective masses and the approach speed before the solve.

@@ -1,29 +1,63 @@
 #include "narrowphase/contacts.hpp"
 
-#include "narrowphase/contact_math.hpp"
 
 namespace marbles::narrowphase {
 
-std::vector<PlaneWall> wall_half_spaces(const Walls& walls) {
-  std::vector<PlaneWall> out(walls.planes.begin(), walls.planes.end());
+std::vector<WallShape> wall_shapes(const Walls& walls) {
+  std::vector<WallShape> out;
+  auto half_space = [&](const Vec3& point, const Vec3& normal, std::uint32_t material, const Vec3& velocity) {
+    WallShape w;
+    w.kind = WallShape::Kind::half_space;
+    w.point = point;
+    w.direction = normal;
+    w.material = material;
+    w.velocity = velocity;
+    out.push_back(w);
+  };
+  for (const PlaneWall& p : walls.planes) half_space(p.point, p.normal, p.material, p.velocity);
   for (const BoxWall& box : walls.boxes) {
-    out.push_back({box.lo, {1, 0, 0}, box.material});
-    out.push_back({box.hi, {-1, 0, 0}, box.material});
-    out.push_back({box.lo, {0, 1, 0}, box.material});
-    out.push_back({box.hi, {0, -1, 0}, box.material});
-    out.push_back({box.lo, {0, 0, 1}, box.material});
-    out.push_back({box.hi, {0, 0, -1}, box.material});
+    half_space(box.lo, {1, 0, 0}, box.material, box.velocity);
+    half_space(box.hi, {-1, 0, 0}, box.material, box.velocity);
+    half_space(box.lo, {0, 1, 0}, box.material, box.velocity);
+    half_space(box.hi, {0, -1, 0}, box.material, box.velocity);
+    half_space(box.lo, {0, 0, 1}, box.material, box.velocity);
+    half_space(box.hi, {0, 0, -1}, box.material, box.velocity);
+  }
+  for (const CylinderWall& c : walls.cylinders) {
+    WallShape w;
+    w.kind = c.inside ? WallShape::Kind::cylinder_inside : WallShape::Kind::cylinder_outside;
+    w.point = c.base;
+    w.direction = c.axis;
+    w.radius = c.radius;
+    w.length = c.length;
+    w.angular_velocity = c.angular_velocity;
+    w.material = c.material;
+    out.push_back(w);
+  }
+  for (const SphereWall& s : walls.spheres) {
+    WallShape w;
+    w.kind = WallShape::Kind::sphere;
+    w.point = s.centre;
+    w.radius = s.radius;
+    w.velocity = s.velocity;
+    w.material = s.material;
+    out.push_back(w);
   }
   return out;
 }
 
+void advance_walls(std::vector<WallShape>& shapes, real h) {
+  for (WallShape& w : shapes) w.point += w.velocity * h;
+}
+
 void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
-                     const PairTable& table, real margin, std::vector<Contact>& out) {
+                     const PairTable& table, real margin, const real* margins, std::vector<Contact>& out) {
   for (std::size_t k = 0; k < pair_count; ++k) {
     const IndexPair pair = pairs[k];
+    const real m = margins ? margins[pair.i] + margins[pair.j] : margin;
     Contact c;
     if (!sphere_sphere(bodies.position[pair.i], bodies.radius[pair.i], bodies.position[pair.j],
-                       bodies.radius[pair.j], margin, c.normal, c.separation))
+                       bodies.radius[pair.j], m, c.normal, c.separation))
       continue;
     c.a = pair.i;
     c.b = pair.j;
@@ -34,20 +68,22 @@ void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size
   }
 }
 
-void wall_contacts(const BodiesView& bodies, const std::vector<PlaneWall>& half_spaces,
-                   const PairTable& table, real margin, std::vector<Contact>& out) {
-  const std::uint32_t wall_count = static_cast<std::uint32_t>(half_spaces.size());
+void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table,
+                   real margin, const real* margins, std::vector<Contact>& out) {
+  const std::uint32_t wall_count = static_cast<std::uint32_t>(walls.size());
   for (std::size_t i = 0; i < bodies.count; ++i) {
-    for (std::uint32_t w = 0; w < wall_count; ++w) {
-      const PlaneWall& wall = half_spaces[w];
+    const Vec3 p = bodies.position[i];
+    const real r = bodies.radius[i];
+    const real m = margins ? margins[i] : margin;
+    for (std::uint32_t k = 0; k < wall_count; ++k) {
+      const WallShape& wall = walls[k];
       Contact c;
-      if (!sphere_plane(bodies.position[i], bodies.radius[i], wall.point, wall.normal, margin, c.separation))
-        continue;
+      if (!wall_gap(wall, p, r, c.normal, c.separation) || !(c.separation < m)) continue;
       c.a = static_cast<std::uint32_t>(i);
-      c.b = kWallFlag | w;
-      c.normal = wall.normal;
-      c.ra = bodies.radius[i];
+      c.b = kWallFlag | k;
+      c.ra = r;
       c.rb = 0;
+      c.wall_velocity = wall_surface_velocity(wall, p - c.normal * r);
       c.coeff = table(bodies.material[i], wall.material);
       out.push_back(c);
     }

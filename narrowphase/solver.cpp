@@ -33,17 +33,37 @@ void sweep(std::vector<Contact>& contacts, const BodiesView& bodies, real inv_h)
   }
 }
 
+// Warm start: apply the impulses the contacts start with (from the cache).
+template <bool Friction, bool Rolling>
+void warm_start(std::vector<Contact>& contacts, const BodiesView& bodies) {
+  for (Contact& c : contacts) {
+    if (c.normal_impulse <= 0) continue;
+    BodyState A = load(bodies, c.a, c);
+    BodyState B = load(bodies, c.b, c);
+    Vec3 impulse = c.normal * c.normal_impulse;
+    if constexpr (Friction) impulse += c.tangent_impulse;
+    apply_impulse(c, A, B, impulse);
+    if constexpr (Rolling) {
+      A.w += c.rolling_impulse * A.inv_inertia;
+      B.w -= c.rolling_impulse * B.inv_inertia;
+    }
+    store(bodies, c.a, A);
+    store(bodies, c.b, B);
+  }
+}
+
 }  // namespace
 
 ContactSolver::ContactSolver(const SolverSettings& settings) : m_settings(settings) {
-  if (settings.friction && settings.rolling) m_sweep = &sweep<true, true>;
-  else if (settings.friction) m_sweep = &sweep<true, false>;
-  else if (settings.rolling) m_sweep = &sweep<false, true>;
-  else m_sweep = &sweep<false, false>;
+  if (settings.friction && settings.rolling) m_sweep = &sweep<true, true>, m_warm_start = &warm_start<true, true>;
+  else if (settings.friction) m_sweep = &sweep<true, false>, m_warm_start = &warm_start<true, false>;
+  else if (settings.rolling) m_sweep = &sweep<false, true>, m_warm_start = &warm_start<false, true>;
+  else m_sweep = &sweep<false, false>, m_warm_start = &warm_start<false, false>;
 }
 
 void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const BodiesView& bodies, real h) const {
   for (Contact& c : contacts) prepare_contact(c, load(bodies, c.a, c), load(bodies, c.b, c));
+  if (m_settings.warm_start) m_warm_start(contacts, bodies);
 
   const real inv_h = real(1) / h;
   for (int it = 0; it < m_settings.iterations; ++it) m_sweep(contacts, bodies, inv_h);
@@ -60,18 +80,19 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Bodie
 }
 
 void ContactSolver::project_positions(const std::vector<Contact>& contacts, const BodiesView& bodies,
-                                      const std::vector<PlaneWall>& half_spaces) const {
+                                      const std::vector<WallShape>& walls) const {
   const SolverSettings& s = m_settings;
   for (int it = 0; it < s.position_iterations; ++it) {
     for (const Contact& c : contacts) {
       const real inv_ma = bodies.inv_mass[c.a];
       if (is_wall(c.b)) {
         if (inv_ma <= 0) continue;
-        const PlaneWall& wall = half_spaces[c.b & ~kWallFlag];
         const real r = bodies.radius[c.a];
-        const real separation = dot(bodies.position[c.a] - wall.point, wall.normal) - r;
+        Vec3 normal;
+        real separation;
+        if (!wall_gap(walls[c.b & ~kWallFlag], bodies.position[c.a], r, normal, separation)) continue;
         const real move = projection_step(separation, s.slop * r, s.beta, s.max_correction * r);
-        if (move > 0) bodies.position[c.a] += wall.normal * move;
+        if (move > 0) bodies.position[c.a] += normal * move;
         continue;
       }
       const real inv_mb = bodies.inv_mass[c.b];

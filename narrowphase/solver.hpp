@@ -3,6 +3,8 @@
 // Stages of one substep, in order (each a loop over the contacts in their
 // fixed order, so a run repeats bit for bit):
 //   prepare       effective masses; approach speed before the solve
+//   warm start    apply the impulses carried over from the last substep
+//                 (ContactCache, matched by body pair) when enabled
 //   solve         `iterations` sweeps: friction, rolling resistance (when the
 //                 scene enables them), then the normal impulse (speculative:
 //                 a positive gap may close within the substep, never more)
@@ -20,6 +22,7 @@
 #include "core/spheres.hpp"
 #include "core/walls.hpp"
 #include "narrowphase/contact.hpp"
+#include "narrowphase/contact_math.hpp"
 
 namespace marbles::narrowphase {
 
@@ -33,6 +36,7 @@ struct SolverSettings {
   real beta = real(0.2);          // fraction of the remaining overlap removed per projection
   real max_correction = real(0.2);// fraction of the smaller radius moved per projection, at most
   int position_iterations = 2;    // projection sweeps per substep
+  bool warm_start = true;         // start from the last substep's impulses
 };
 
 class ContactSolver {
@@ -46,12 +50,14 @@ class ContactSolver {
 
   // Position projection over the same contacts at the integrated positions.
   void project_positions(const std::vector<Contact>& contacts, const BodiesView& bodies,
-                         const std::vector<PlaneWall>& half_spaces) const;
+                         const std::vector<WallShape>& walls) const;
 
  private:
   using SweepFn = void (*)(std::vector<Contact>&, const BodiesView&, real inv_h);
+  using WarmStartFn = void (*)(std::vector<Contact>&, const BodiesView&);
   SolverSettings m_settings;
   SweepFn m_sweep = nullptr;
+  WarmStartFn m_warm_start = nullptr;
 };
 
 }  // namespace marbles::narrowphase

@@ -21,8 +21,8 @@ Walls make_walls(const scene::Scene& scene) {
   Walls walls;
   for (const scene::WallSpec& w : scene.walls) {
     const std::uint32_t material = scene.material_index(w.material, w.where, "walls.material");
-    if (w.kind == scene::WallSpec::Kind::plane) walls.planes.push_back({w.point, w.normal, material});
-    else walls.boxes.push_back({w.lo, w.hi, material});
+    if (w.kind == scene::WallSpec::Kind::plane) walls.planes.push_back({w.point, w.normal, material, {}});
+    else walls.boxes.push_back({w.lo, w.hi, material, {}});
   }
   return walls;
 }
@@ -46,7 +46,7 @@ narrowphase::SolverSettings solver_settings(const scene::Scene& scene) {
 Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backend backend)
     : m_world(std::move(world)),
       m_walls(make_walls(scene)),
-      m_half_spaces(narrowphase::wall_half_spaces(m_walls)),
+      m_wall_shapes(narrowphase::wall_shapes(m_walls)),
       m_solver(solver_settings(scene)),
       m_gravity(scene.has(scene::Effect::gravity)),
       m_collisions(scene.has(scene::Effect::collisions)),
@@ -64,6 +64,7 @@ Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backe
                                                       mb.restitution, mb.friction, mb.rolling_friction);
     }
   m_pair_table = {m_pair_coefficients.data(), static_cast<std::uint32_t>(nm)};
+  for (const narrowphase::WallShape& w : m_wall_shapes) m_max_wall_speed = std::max(m_max_wall_speed, length(w.velocity));
   if (m_collisions)
     m_broadphase = backend == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda()
                                                         : broadphase::make_subdivision_cpu();
@@ -106,26 +107,40 @@ void Simulation::substep(real h) {
 
   m_contacts.clear();
   if (m_collisions || m_wall_contacts) find_contacts(h);
-  if (!m_contacts.empty()) m_solver.solve_velocities(m_contacts, bodies, h);
+  if (!m_contacts.empty()) {
+    m_cache.restore(m_contacts);
+    m_solver.solve_velocities(m_contacts, bodies, h);
+    m_cache.store(m_contacts);
+  }
 
   integrator::integrate_positions(bodies, h);
+  narrowphase::advance_walls(m_wall_shapes, h);
 
-  if (!m_contacts.empty()) m_solver.project_positions(m_contacts, bodies, m_half_spaces);
+  if (!m_contacts.empty()) m_solver.project_positions(m_contacts, bodies, m_wall_shapes);
   m_last.contacts += m_contacts.size();
 }
 
-// Speculative margin: a gap that two spheres could close within this substep
-// (each moving at most max_speed) becomes a contact now, so fast spheres are
-// caught before they overlap deeply.
+// Swept bounds: each sphere's margin is its travel |v| h within the substep,
+// so any gap two spheres (or a sphere and a wall) can close in this substep is
+// a contact now (speculative contact) and nothing tunnels, however fast.
 void Simulation::find_contacts(real h) {
   const BodiesView bodies = m_world.view();
-  const real margin = real(2) * m_world.max_speed() * h;
+  const std::size_t n = m_world.size();
+  m_travel.resize(n);
+  for (std::size_t i = 0; i < n; ++i) m_travel[i] = length(bodies.velocity[i]) * h;
   if (m_collisions) {
-    m_broadphase->find_pairs(bodies.spheres(), margin, m_pairs);
+    m_bound_radius.resize(n);
+    for (std::size_t i = 0; i < n; ++i) m_bound_radius[i] = bodies.radius[i] + m_travel[i];
+    m_broadphase->find_pairs({bodies.position, m_bound_radius.data(), n}, 0, m_pairs);
     m_last.candidate_pairs += m_pairs.size();
-    narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_pair_table, margin, m_contacts);
+    narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_pair_table, 0, m_travel.data(),
+                                 m_contacts);
   }
-  if (m_wall_contacts) narrowphase::wall_contacts(bodies, m_half_spaces, m_pair_table, margin, m_contacts);
+  if (m_wall_contacts) {
+    if (m_max_wall_speed > 0)
+      for (real& t : m_travel) t += m_max_wall_speed * h;
+    narrowphase::wall_contacts(bodies, m_wall_shapes, m_pair_table, 0, m_travel.data(), m_contacts);
+  }
 }
 
 }  // namespace marbles

@@ -6,6 +6,7 @@
 //     apply body forces              gravity (if the scene lists it)
 //     broad phase → candidate pairs  spatial subdivision (if `collisions`)
 //     narrow phase → contacts        sphere–sphere (`collisions`), sphere–wall (`walls`)
+//     warm start from last substep   impulses of persisting contacts
 //     solve contacts with impulses   friction / rolling / restitution as enabled
 //     integrate positions            x += h v
 //     project positions              remove overlap without adding energy
@@ -21,6 +22,8 @@
 #include "broadphase/broadphase.hpp"
 #include "core/walls.hpp"
 #include "narrowphase/contact.hpp"
+#include "narrowphase/contact_cache.hpp"
+#include "narrowphase/contact_math.hpp"
 #include "narrowphase/solver.hpp"
 #include "sim/world.hpp"
 
@@ -50,6 +53,8 @@ class Simulation {
   double dt() const { return m_dt; }
   int substeps() const { return m_substeps; }
   const StepCounters& last_step() const { return m_last; }
+  // Direct access to the state, for tests and tools that edit it between steps.
+  World& edit_world() { return m_world; }
   const broadphase::BroadPhase* broad_phase() const { return m_broadphase.get(); }
 
   // The stages this scene's pipeline runs, one per line.
@@ -61,7 +66,8 @@ class Simulation {
 
   World m_world;
   Walls m_walls;
-  std::vector<PlaneWall> m_half_spaces;
+  std::vector<narrowphase::WallShape> m_wall_shapes;
+  real m_max_wall_speed = 0;
   std::vector<narrowphase::PairCoefficients> m_pair_coefficients;
   narrowphase::PairTable m_pair_table;
   std::unique_ptr<broadphase::BroadPhase> m_broadphase;
@@ -74,8 +80,11 @@ class Simulation {
   Vec3 m_g;
 
   // Per-substep buffers, reused.
+  std::vector<real> m_travel;        // m, |v| h per sphere: the swept-bound margin
+  std::vector<real> m_bound_radius;  // m, radius + travel: what the broad phase sees
   std::vector<broadphase::Pair> m_pairs;
   std::vector<narrowphase::Contact> m_contacts;
+  narrowphase::ContactCache m_cache;
 
   double m_dt = 0;
   int m_substeps = 1;

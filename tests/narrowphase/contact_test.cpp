@@ -64,12 +64,12 @@ TEST(SpherePlane, SeparationIsSignedDistanceMinusRadius) {
 
 TEST(BoxWall, SixInwardFacesKeepSpheresInside) {
   Walls walls;
-  walls.boxes.push_back({{-1, -2, -3}, {1, 2, 3}, 0});
-  const auto faces = wall_half_spaces(walls);
+  walls.boxes.push_back({{-1, -2, -3}, {1, 2, 3}, 0, {}});
+  const auto faces = wall_shapes(walls);
   ASSERT_EQ(faces.size(), 6u);
   // The centre is in free space for every face; a point beyond any face is not.
-  for (const PlaneWall& f : faces) EXPECT_GT(dot(Vec3{} - f.point, f.normal), 0);
-  for (const PlaneWall& f : faces) EXPECT_LT(dot(f.point + f.normal * real(-0.5) - f.point, f.normal), 0);
+  for (const WallShape& f : faces) EXPECT_GT(dot(Vec3{} - f.point, f.direction), 0);
+  for (const WallShape& f : faces) EXPECT_LT(dot(f.point + f.direction * real(-0.5) - f.point, f.direction), 0);
 }
 
 // Head-on impact of two free spheres: the 1-D rigid-body impact law
@@ -92,7 +92,7 @@ TEST(Solver, HeadOnImpactFollowsImpactLaw) {
     PairTable table{&coeff, 1};
     std::vector<Contact> contacts;
     IndexPair pair{0, 1};
-    sphere_contacts(bodies, &pair, 1, table, real(0), contacts);
+    sphere_contacts(bodies, &pair, 1, table, real(0), nullptr, contacts);
     ASSERT_EQ(contacts.size(), 1u);
     SolverSettings s;
     s.rest_speed = real(1e-3);
@@ -119,9 +119,9 @@ TEST(Solver, FrictionStaysInsideTheCone) {
     PairCoefficients coeff{0, real(mu_dist(rng)), 0};
     PairTable table{&coeff, 1};
     Walls walls;
-    walls.planes.push_back({{0, 0, 0}, {0, 0, 1}, 0});
+    walls.planes.push_back({{0, 0, 0}, {0, 0, 1}, 0, {}});
     std::vector<Contact> contacts;
-    wall_contacts(bodies, wall_half_spaces(walls), table, real(0), contacts);
+    wall_contacts(bodies, wall_shapes(walls), table, real(0), nullptr, contacts);
     ASSERT_EQ(contacts.size(), 1u);
     SolverSettings s;
     s.friction = true;
