@@ -36,11 +36,31 @@ struct Material {
   SourceLocation where;
 };
 
+// An explicit coefficient set for one pair of materials, replacing the mixing rule.
+struct ContactPairSpec {
+  std::string first, second;  // material names (order does not matter)
+  double restitution = -1, friction = -1, rolling_friction = -1;  // < 0: use the mixing rule for this one
+  SourceLocation where;
+};
+
+// Air drag on every sphere: F = -(linear + quadratic |v|) v  (N).
+struct DragSpec {
+  double linear = 0;     // N s/m
+  double quadratic = 0;  // N s^2/m^2
+};
+
 struct WallSpec {
-  enum class Kind { plane, box };
+  enum class Kind { plane, box, cylinder, sphere };
   Kind kind = Kind::plane;
   Vec3 point, normal{0, 0, 1};  // plane: a point on it and the normal towards free space (normalised on load)
   Vec3 lo, hi;                  // box: spheres are kept inside [lo, hi]
+  Vec3 base, axis{0, 0, 1};     // cylinder: a point on the axis and the axis direction (normalised on load)
+  double radius = 0;            // cylinder, sphere (m)
+  double length = 0;            // cylinder: from base along axis; 0 = infinite
+  bool inside = true;           // cylinder: keep spheres inside (tube, drum) or outside (post)
+  double angular_velocity = 0;  // cylinder: spin about the axis, rad/s
+  Vec3 centre;                  // sphere: a fixed spherical obstacle
+  Vec3 velocity;                // plane, box, sphere: prescribed translation, m/s
   std::string material;         // name; empty = the first material
   SourceLocation where;
   SourceLocation material_where;  // the `material:` value (file:0:0 when not given)
@@ -134,6 +154,8 @@ struct Scene {
   Vec3 gravity{0, 0, -9.81};
   double drag = 0;  // 1/s, linear drag rate (effect drag): dv/dt = -drag * v
   std::vector<Material> materials;  // at least one
+  std::vector<ContactPairSpec> contact_pairs;
+  DragSpec drag;
   std::vector<WallSpec> walls;
   std::vector<ParticleBlock> particles;
   OutputSpec output;
