@@ -43,11 +43,6 @@ struct ContactPairSpec {
   SourceLocation where;
 };
 
-// Air drag on every sphere: F = -(linear + quadratic |v|) v  (N).
-struct DragSpec {
-  double linear = 0;     // N s/m
-  double quadratic = 0;  // N s^2/m^2
-};
 
 struct WallSpec {
   enum class Kind { plane, box, cylinder, sphere };
@@ -155,7 +150,6 @@ struct Scene {
   double drag = 0;  // 1/s, linear drag rate (effect drag): dv/dt = -drag * v
   std::vector<Material> materials;  // at least one
   std::vector<ContactPairSpec> contact_pairs;
-  DragSpec drag;
   std::vector<WallSpec> walls;
   std::vector<ParticleBlock> particles;
   OutputSpec output;
