@@ -16,6 +16,14 @@ MARBLES_HD_INLINE Vec3 gravity_kick(const Vec3& v, const Vec3& g, real inv_mass,
   return inv_mass > 0 ? v + g * h : v;
 }
 
+// Air drag dv/dt = -(k1 + k2 |v|) v, integrated implicitly in the speed:
+//   v' = v / (1 + h (k1 + k2 |v|))
+// which never reverses a velocity, however large h k is (explicit Euler would).
+// k1 in 1/s (linear), k2 in 1/m (quadratic).
+MARBLES_HD_INLINE Vec3 drag_kick(const Vec3& v, real k1, real k2, real h) {
+  return v / (real(1) + h * (k1 + k2 * length(v)));
+}
+
 // x += h v
 MARBLES_HD_INLINE Vec3 drift(const Vec3& x, const Vec3& v, real h) { return x + v * h; }
 

@@ -9,6 +9,10 @@ namespace marbles::integrator {
 // Body-force stage: v += h g on every movable sphere.
 void apply_gravity(const BodiesView& bodies, const Vec3& g, real h);
 
+// Body-force stage: air drag with linear rate k1 (1/s) and quadratic
+// coefficient k2 (1/m), see drag_kick.
+void apply_drag(const BodiesView& bodies, real k1, real k2, real h);
+
 // Position stage: x += h v.
 void integrate_positions(const BodiesView& bodies, real h);
 
