@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -45,7 +46,7 @@ void check_box(const Vec3& lo, const Vec3& hi, const Field& max_field) {
   for (int a = 0; a < 3; ++a) {
     if (!(lo[a] < hi[a]))
       max_field.fail("must be greater than min on every axis, got max." + axis_name(a) + " = " +
-                     format_number(hi[a]) + " <= min." + axis_name(a) + " = " + format_number(lo[a]));
+                     detail::format_real(hi[a]) + " <= min." + axis_name(a) + " = " + detail::format_real(lo[a]));
   }
 }
 
@@ -242,7 +243,7 @@ void read_lattice(ParticleBlock& block, const Field& field) {
   for (int a = 0; a < 3; ++a) {
     if (block.hi[a] - block.lo[a] < 2 * margin)
       max.fail("the box is too small on " + axis_name(a) + " for one sphere (needs " + format_number(2 * margin) +
-               " = 2 * (largest radius + jitter), has " + format_number(block.hi[a] - block.lo[a]) + ")");
+               " = 2 * (largest radius + jitter), has " + detail::format_real(block.hi[a] - block.lo[a]) + ")");
   }
 }
 
@@ -261,7 +262,7 @@ void read_random(ParticleBlock& block, const Field& field) {
   for (int a = 0; a < 3; ++a) {
     if (block.hi[a] - block.lo[a] < 2 * r)
       max.fail("the box is too small on " + axis_name(a) + " for the largest sphere (needs " + format_number(2 * r) +
-               ", has " + format_number(block.hi[a] - block.lo[a]) + ")");
+               ", has " + detail::format_real(block.hi[a] - block.lo[a]) + ")");
   }
 }
 
@@ -406,6 +407,21 @@ OutputSpec read_output(const Field& field, const std::string& stem) {
   return output;
 }
 
+// yaml-cpp quotes the offending character, which may be any byte of a binary file.
+std::string printable(const std::string& text) {
+  std::string out;
+  for (unsigned char c : text) {
+    if (c >= 0x20 && c < 0x7f) {
+      out += char(c);
+    } else {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "\\x%02x", c);
+      out += hex;
+    }
+  }
+  return out;
+}
+
 std::string read_file(const std::string& path) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec))
@@ -446,7 +462,7 @@ Scene load_scene(const std::string& path) {
   try {
     documents = YAML::LoadAll(text);
   } catch (const YAML::Exception& e) {
-    throw InputError(detail::location_of(path, e.mark), "", "not valid YAML: " + e.msg);
+    throw InputError(detail::location_of(path, e.mark), "", "not valid YAML: " + printable(e.msg));
   }
   if (documents.empty() || (documents.size() == 1 && documents[0].IsNull()))
     throw InputError(SourceLocation{path, 0, 0}, "", "the scene file is empty");

@@ -110,12 +110,23 @@ std::string format_number(double value) {
   return ec == std::errc() ? std::string(buffer, end) : std::to_string(value);
 }
 
+std::string format_real(real value) {
+  char buffer[64];
+  const auto [end, ec] = std::to_chars(buffer, buffer + sizeof buffer, value);
+  return ec == std::errc() ? std::string(buffer, end) : std::to_string(value);
+}
+
 // --- Field -----------------------------------------------------------------
 
 Field::Field(YAML::Node node, std::string key, const std::string& file)
-    : m_node(std::move(node)), m_key(std::move(key)), m_file(file) {}
+    : m_node(std::move(node)), m_key(std::move(key)), m_file(file), m_mark(m_node.Mark()) {}
 
-SourceLocation Field::where() const { return location_of(m_file, m_node.Mark()); }
+Field::Field(YAML::Node node, std::string key, const std::string& file, const YAML::Mark& fallback)
+    : Field(std::move(node), std::move(key), file) {
+  if (m_node.IsNull()) m_mark = fallback;
+}
+
+SourceLocation Field::where() const { return location_of(m_file, m_mark); }
 
 void Field::fail(const std::string& message) const { throw InputError(where(), m_key, message); }
 
@@ -241,7 +252,8 @@ void MapFields::read(const std::vector<std::string>& allowed) {
         throw InputError(key_where, m_self.key(),
                          "duplicate key '" + name + "' (first given at line " + std::to_string(e.name_where.line) + ")");
     }
-    m_entries.push_back({name, key_where, Field(it->second, join_key(m_self.key(), name), m_self.file())});
+    m_entries.push_back(
+        {name, key_where, Field(it->second, join_key(m_self.key(), name), m_self.file(), key.Mark())});
   }
 }
 

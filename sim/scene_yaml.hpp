@@ -36,10 +36,15 @@ std::string suggestion(std::string_view word, const std::vector<std::string>& ca
 
 // Shortest text that reads back as the same double ("0.1", "1e-05").
 std::string format_number(double value);
+// The same for a value stored as `real` (0.1f prints as 0.1, not 0.10000000149011612).
+std::string format_real(real value);
 
 class Field {
  public:
   Field(YAML::Node node, std::string key, const std::string& file);
+  // `fallback` is where to point when the node is null: yaml-cpp marks an
+  // empty value (`key:` and nothing) at the next token, often lines below.
+  Field(YAML::Node node, std::string key, const std::string& file, const YAML::Mark& fallback);
 
   const YAML::Node& node() const { return m_node; }
   const std::string& key() const { return m_key; }
@@ -75,6 +80,7 @@ class Field {
   YAML::Node m_node;
   std::string m_key;
   std::string m_file;
+  YAML::Mark m_mark;
 };
 
 class MapFields {

@@ -1,0 +1,93 @@
+// tests/sim/cli_check_test.cpp — `marbles check SCENE` as a user runs it:
+// exit 0 and a summary on stdout for every shipped scene; exit 2 and the
+// loader's message on stderr for every bad-input rule.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "tests/sim/scene_cases.hpp"
+
+namespace marbles {
+namespace {
+
+const std::string kMarbles = MARBLES_BINARY_DIR "/bin/marbles";
+
+struct Outcome {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+std::string quoted(const std::string& s) { return "'" + test::replace_all(s, "'", "'\\''") + "'"; }
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+Outcome run_check(const std::string& scene, const test::ScratchDir& scratch) {
+  const std::string out = scratch.path() + "/stdout.txt", err = scratch.path() + "/stderr.txt";
+  const std::string command = quoted(kMarbles) + " check " + quoted(scene) + " >" + quoted(out) + " 2>" + quoted(err);
+  const int status = std::system(command.c_str());
+  Outcome o;
+  o.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  o.out = slurp(out);
+  o.err = slurp(err);
+  return o;
+}
+
+class CliCheck : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!std::filesystem::exists(kMarbles)) GTEST_SKIP() << kMarbles << " is not built";
+  }
+};
+
+TEST_F(CliCheck, EveryShippedSceneExitsZero) {
+  std::vector<std::string> scenes;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(MARBLES_SOURCE_DIR "/scenes"))
+    if (entry.is_regular_file() && entry.path().extension() == ".yaml") scenes.push_back(entry.path().string());
+  std::sort(scenes.begin(), scenes.end());
+  ASSERT_FALSE(scenes.empty());
+  const test::ScratchDir scratch("cli_good");
+  for (const std::string& scene : scenes) {
+    SCOPED_TRACE(scene);
+    const Outcome o = run_check(scene, scratch);
+    EXPECT_EQ(o.exit_code, 0) << o.err;
+    EXPECT_FALSE(o.out.empty());
+    EXPECT_EQ(std::count(o.out.begin(), o.out.end(), '\n'), 1) << "one summary line, got:\n" << o.out;
+  }
+}
+
+class CliCheckBad : public ::testing::TestWithParam<test::BadScene> {
+ protected:
+  void SetUp() override {
+    if (!std::filesystem::exists(kMarbles)) GTEST_SKIP() << kMarbles << " is not built";
+  }
+};
+
+TEST_P(CliCheckBad, ExitsTwoWithTheMessageOnStderr) {
+  const test::BadScene& c = GetParam();
+  const test::ScratchDir dir(std::string("cli_") + c.name);
+  const std::string path = test::write_case(c, dir);
+  const Outcome o = run_check(path, dir);
+  EXPECT_EQ(o.exit_code, 2) << o.err;
+  std::string expected = test::expected_message(c, path, dir.path());
+  if (expected.size() >= 3 && expected.compare(expected.size() - 3, 3, "...") == 0) expected.resize(expected.size() - 3);
+  EXPECT_NE(o.err.find(expected), std::string::npos) << "expected on stderr: " << expected << "\ngot: " << o.err;
+  EXPECT_TRUE(o.out.empty()) << o.out;
+}
+
+INSTANTIATE_TEST_SUITE_P(Rules, CliCheckBad, ::testing::ValuesIn(test::bad_scenes()),
+                         [](const ::testing::TestParamInfo<test::BadScene>& info) { return std::string(info.param.name); });
+
+}  // namespace
+}  // namespace marbles

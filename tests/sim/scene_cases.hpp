@@ -1,0 +1,207 @@
+// tests/sim/scene_cases.hpp — bad scene files and the exact message each must
+// produce; shared by the loader test (scene_test.cpp) and the command-line
+// test (cli_check_test.cpp).
+//
+// `expected` holds `{scene}` (the scene path as given) and `{dir}` (its
+// folder); a trailing "..." means "starts with".
+#pragma once
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <unistd.h>
+
+namespace marbles::test {
+
+struct BadScene {
+  const char* name;
+  const char* yaml;      // nullptr: the scene file does not exist
+  const char* expected;  // see above
+  const char* csv = nullptr;  // written as data.csv beside the scene when given
+};
+
+#define SCENE_TIME "time: {duration: 1, dt: 0.001}\n"
+#define SCENE_MATERIALS "materials:\n  glass: {density: 2500}\n"
+#define SCENE_PARTICLES "particles:\n  - list: {positions: [[0, 0, 1]], radius: 0.1}\n"
+#define SCENE_VALID SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES
+
+inline const std::vector<BadScene>& bad_scenes() {
+  static const std::vector<BadScene> cases = {
+      {"unknown_key_near", SCENE_TIME "materials:\n  glass: {densty: 2500}\n" SCENE_PARTICLES,
+       "{scene}:3:11: materials.glass: unknown key 'densty' (did you mean 'density'?)"},
+      {"unknown_key_far", SCENE_VALID "colour: red\n",
+       "{scene}:6:1: unknown key 'colour'; expected one of: format, name, time, solver, effects, gravity, drag, "
+       "materials, walls, particles, output"},
+      {"duplicate_key", SCENE_VALID "time: {duration: 2, dt: 0.001}\n",
+       "{scene}:6:1: duplicate key 'time' (first given at line 1)"},
+      {"wrong_type_sequence", "time: {duration: [1, 2], dt: 0.001}\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:1:18: time.duration: expected a number, got a sequence"},
+      {"wrong_type_text", "time: {duration: soon, dt: 0.001}\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:1:18: time.duration: expected a number, got 'soon'"},
+      {"wrong_type_map", SCENE_TIME "materials: glass\n" SCENE_PARTICLES,
+       "{scene}:2:12: materials: expected a map, got 'glass'"},
+      {"wrong_type_null", SCENE_VALID "gravity:\n", "{scene}:6:1: gravity: expected [x, y, z], got nothing (null)"},
+      {"vector_length", SCENE_VALID "gravity: [0, -9.81]\n",
+       "{scene}:6:10: gravity: expected [x, y, z], got a sequence of 2"},
+      {"not_integer", "time: {duration: 1, dt: 0.001, substeps: 2.5}\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:1:42: time.substeps: expected an integer, got 2.5"},
+      {"missing_key", "time: {duration: 1}\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:1:7: time: missing required key 'dt'"},
+      {"missing_top_key", SCENE_TIME SCENE_MATERIALS, "{scene}:1:1: missing required key 'particles'"},
+      {"radius_negative", SCENE_TIME SCENE_MATERIALS "particles:\n  - list: {positions: [[0, 0, 1]], radius: -0.1}\n",
+       "{scene}:5:44: particles[0].list.radius: must be > 0, got -0.1"},
+      {"density_zero", SCENE_TIME "materials:\n  glass: {density: 0}\n" SCENE_PARTICLES,
+       "{scene}:3:20: materials.glass.density: must be > 0, got 0"},
+      {"dt_zero", "time: {duration: 1, dt: 0}\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:1:25: time.dt: must be > 0, got 0"},
+      {"duration_negative", "time: {duration: -1, dt: 0.001}\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:1:18: time.duration: must be > 0, got -1"},
+      {"dt_above_duration", "time: {duration: 1, dt: 2}\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:1:25: time.dt: must be <= time.duration (1), got 2"},
+      {"spacing_zero",
+       SCENE_TIME SCENE_MATERIALS
+       "particles:\n  - lattice: {min: [0, 0, 0], max: [1, 1, 1], spacing: 0, radius: 0.1}\n",
+       "{scene}:5:56: particles[0].lattice.spacing: must be > 0, got 0"},
+      {"spacing_too_small",
+       SCENE_TIME SCENE_MATERIALS
+       "particles:\n  - lattice: {min: [0, 0, 0], max: [1, 1, 1], spacing: 0.1, radius: 0.1}\n",
+       "{scene}:5:56: particles[0].lattice.spacing: must be >= 2 * (largest radius + jitter) = 0.2 so that "
+       "spheres cannot overlap, got 0.1"},
+      {"count_zero",
+       SCENE_TIME SCENE_MATERIALS "particles:\n  - random: {count: 0, min: [0, 0, 0], max: [1, 1, 1], radius: 0.1}\n",
+       "{scene}:5:21: particles[0].random.count: must be >= 1, got 0"},
+      {"substeps_zero", "time: {duration: 1, dt: 0.001, substeps: 0}\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:1:42: time.substeps: must be >= 1, got 0"},
+      {"iterations_zero", SCENE_VALID "solver: {iterations: 0}\n",
+       "{scene}:6:22: solver.iterations: must be >= 1, got 0"},
+      {"unknown_integrator", SCENE_VALID "solver: {integrator: rk4}\n",
+       "{scene}:6:22: solver.integrator: unknown integrator 'rk4'; expected one of: symplectic_euler"},
+      {"restitution_range", SCENE_TIME "materials:\n  glass: {density: 2500, restitution: 1.3}\n" SCENE_PARTICLES,
+       "{scene}:3:39: materials.glass.restitution: must be within [0, 1], got 1.3"},
+      {"friction_negative", SCENE_TIME "materials:\n  glass: {friction: -0.2}\n" SCENE_PARTICLES,
+       "{scene}:3:21: materials.glass.friction: must be >= 0, got -0.2"},
+      {"no_materials", SCENE_TIME "materials: {}\n" SCENE_PARTICLES,
+       "{scene}:2:12: materials: needs at least one material, e.g. `steel: {density: 7800}`"},
+      {"nan", SCENE_VALID "gravity: [0, 0, .nan]\n", "{scene}:6:17: gravity[2]: must be a finite number, got .nan"},
+      {"inf", "time: {duration: .inf, dt: 0.001}\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:1:18: time.duration: must be a finite number, got .inf"},
+      {"not_yaml", "time: {duration: 1, dt: [0.001\nmaterials:\n",
+       "{scene}:2:10: not valid YAML: end of sequence flow not found"},
+      {"not_a_map", "- time\n- materials\n",
+       "{scene}:1:1: a scene is a map of keys (time, materials, particles, ...), got a sequence"},
+      {"empty_file", "", "{scene}: the scene file is empty"},
+      {"only_comments", "# nothing here\n", "{scene}: the scene file is empty"},
+      {"missing_file", nullptr, "{scene}: cannot open the scene file: No such file or directory"},
+      {"unsupported_format", "format: 2\n" SCENE_VALID,
+       "{scene}:1:9: format: unsupported scene format 2; this version reads format 1"},
+      {"missing_csv", SCENE_TIME SCENE_MATERIALS "particles:\n  - csv: {path: nowhere.csv}\n",
+       "{scene}:5:17: particles[0].csv.path: cannot open '{dir}/nowhere.csv': No such file or directory"},
+      {"csv_bad_number", SCENE_TIME SCENE_MATERIALS "particles:\n  - csv: {path: data.csv}\n",
+       "{dir}/data.csv:3:5: z: expected a number, got 'abc'", "# x,y,z,r\n0,0,0,0.1\n1,1,abc,0.1\n"},
+      {"csv_bad_radius", SCENE_TIME SCENE_MATERIALS "particles:\n  - csv: {path: data.csv}\n",
+       "{dir}/data.csv:3:10: r: must be > 0, got -1", "x, y, z, r\n0, 0, 0, 1\n5, 5, 5, -1\n"},
+      {"csv_bad_width", SCENE_TIME SCENE_MATERIALS "particles:\n  - csv: {path: data.csv}\n",
+       "{dir}/data.csv:2:1: expected 4 or 7 comma-separated values (x,y,z,r[,vx,vy,vz]), got 5",
+       "# spheres\n0,0,0,1,2\n"},
+      {"unknown_material", SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "    material: glas\n",
+       "{scene}:6:15: particles[0].material: unknown material 'glas' (did you mean 'glass'?)"},
+      {"unknown_wall_material", SCENE_VALID "walls:\n  - plane: {point: [0, 0, 0], normal: [0, 0, 1]}\n"
+                                            "    material: rubber\n",
+       "{scene}:8:15: walls[0].material: unknown material 'rubber'; expected one of: glass"},
+      {"box_min_max", SCENE_VALID "walls:\n  - box: {min: [0, 0, 0], max: [1, 1, 0]}\n",
+       "{scene}:7:32: walls[0].box.max: must be greater than min on every axis, got max.z = 0 <= min.z = 0"},
+      {"zero_normal", SCENE_VALID "walls:\n  - plane: {point: [0, 0, 0], normal: [0, 0, 0]}\n",
+       "{scene}:7:39: walls[0].plane.normal: must not be the zero vector"},
+      {"wall_without_shape", SCENE_VALID "walls:\n  - material: glass\n",
+       "{scene}:7:5: walls[0]: missing the wall's shape: 'plane' or 'box'"},
+      {"random_overfull",
+       SCENE_TIME SCENE_MATERIALS
+       "particles:\n  - random: {count: 1000, min: [0, 0, 0], max: [0.1, 0.1, 0.1], radius: 0.02}\n",
+       "{scene}:5:21: particles[0].random.count: could place only ..."},
+      {"random_box_too_small",
+       SCENE_TIME SCENE_MATERIALS
+       "particles:\n  - random: {count: 10, min: [0, 0, 0], max: [1, 1, 0.1], radius: 0.1}\n",
+       "{scene}:5:46: particles[0].random.max: the box is too small on z for the largest sphere (needs 0.2, has 0.1)"},
+      {"two_sources", SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "    csv: {path: data.csv}\n",
+       "{scene}:6:5: particles[0]: a block has one source; got both 'list' and 'csv'"},
+      {"radii_count", SCENE_TIME SCENE_MATERIALS "particles:\n  - list: {positions: [[0, 0, 1], [1, 0, 1]], radii: [0.1]}\n",
+       "{scene}:5:54: particles[0].list.radii: has 1 entries but positions has 2"},
+      {"unknown_effect", SCENE_VALID "effects: [gravity, colisions]\n",
+       "{scene}:6:20: effects[1]: unknown effect 'colisions' (did you mean 'collisions'?)"},
+      {"effect_twice", SCENE_VALID "effects: [walls, walls]\n", "{scene}:6:18: effects[1]: effect 'walls' is listed twice"},
+      {"drag_without_rate", SCENE_VALID "effects: [gravity, drag]\n",
+       "{scene}:6:20: effects[1]: the drag effect needs the top-level key 'drag' (linear drag rate, 1/s)"},
+      {"unknown_color_by", SCENE_VALID "output:\n  render: {color_by: velocity}\n",
+       "{scene}:7:22: output.render.color_by: unknown color_by 'velocity'; expected one of: speed, id, radius, material"},
+      {"unknown_field", SCENE_VALID "output:\n  fields: [radius, sped]\n",
+       "{scene}:7:20: output.fields[1]: unknown field 'sped'; expected one of: radius, velocity, angular_velocity, id, "
+       "material"},
+      {"movie_without_render", SCENE_VALID "output:\n  movie: {fps: 30}\n",
+       "{scene}:7:10: output.movie: needs output.render: the movie is made of the rendered frames"},
+      {"movie_odd_width", SCENE_VALID "output:\n  render: {width: 641}\n  movie: {fps: 30}\n",
+       "{scene}:7:19: output.render.width: must be even for a movie, got 641"},
+      {"camera_fov", SCENE_VALID "output:\n  render:\n    camera: {position: [1, 1, 1], look_at: [0, 0, 0], fov: 180}\n",
+       "{scene}:8:60: output.render.camera.fov: must be within (0, 180) degrees, got 180"},
+      {"velocity_twice",
+       SCENE_TIME SCENE_MATERIALS
+       "particles:\n  - list: {positions: [[0, 0, 1]], radius: 0.1, velocities: [[1, 0, 0]]}\n"
+       "    velocity: [0, 0, 1]\n",
+       "{scene}:6:15: particles[0].velocity: list.velocities already gives every sphere its velocity; give one or the "
+       "other"},
+  };
+  return cases;
+}
+
+// A scratch folder for one case, removed on destruction.
+class ScratchDir {
+ public:
+  explicit ScratchDir(const std::string& name)
+      : m_path(std::filesystem::temp_directory_path() /
+               ("marbles_scene_" + std::to_string(::getpid()) + "_" + name)) {
+    std::filesystem::remove_all(m_path);
+    std::filesystem::create_directories(m_path);
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(m_path, ec);
+  }
+  std::string path() const { return m_path.string(); }
+  std::string write(const std::string& file, const std::string& text) const {
+    const std::string p = (m_path / file).string();
+    std::ofstream(p, std::ios::binary) << text;
+    return p;
+  }
+
+ private:
+  std::filesystem::path m_path;
+};
+
+// Writes the case's files; returns the scene path.
+inline std::string write_case(const BadScene& c, const ScratchDir& dir) {
+  if (c.csv) dir.write("data.csv", c.csv);
+  if (!c.yaml) return dir.path() + "/scene.yaml";
+  return dir.write("scene.yaml", c.yaml);
+}
+
+inline std::string replace_all(std::string text, const std::string& from, const std::string& to) {
+  for (std::size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size()))
+    text.replace(at, from.size(), to);
+  return text;
+}
+
+inline std::string expected_message(const BadScene& c, const std::string& scene_path, const std::string& dir) {
+  return replace_all(replace_all(c.expected, "{scene}", scene_path), "{dir}", dir);
+}
+
+// True when `message` is what the case expects (exactly, or as a prefix for "...").
+inline bool message_matches(const std::string& expected, const std::string& message) {
+  const std::string dots = "...";
+  if (expected.size() >= dots.size() && expected.compare(expected.size() - dots.size(), dots.size(), dots) == 0)
+    return message.compare(0, expected.size() - dots.size(), expected, 0, expected.size() - dots.size()) == 0;
+  return message == expected;
+}
+
+}  // namespace marbles::test

@@ -1,0 +1,226 @@
+// tests/sim/scene_test.cpp — the scene loader: values, defaults, and the exact
+// message of every bad-input rule (file:line:column: key: text).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "sim/particles.hpp"
+#include "sim/scene.hpp"
+#include "tests/sim/scene_cases.hpp"
+
+namespace marbles::scene {
+namespace {
+
+using test::BadScene;
+using test::ScratchDir;
+
+// --- every bad-input rule ---------------------------------------------------
+
+class BadSceneTest : public ::testing::TestWithParam<BadScene> {};
+
+TEST_P(BadSceneTest, ThrowsInputErrorWithExactMessage) {
+  const BadScene& c = GetParam();
+  const ScratchDir dir(std::string("load_") + c.name);
+  const std::string path = test::write_case(c, dir);
+  const std::string expected = test::expected_message(c, path, dir.path());
+  try {
+    const Scene scene = load_scene(path);
+    generate_particles(scene);
+    FAIL() << "no error; expected: " << expected;
+  } catch (const InputError& e) {
+    EXPECT_TRUE(test::message_matches(expected, e.what())) << "expected: " << expected << "\n     got: " << e.what();
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Rules, BadSceneTest, ::testing::ValuesIn(test::bad_scenes()),
+                         [](const ::testing::TestParamInfo<BadScene>& info) { return std::string(info.param.name); });
+
+TEST(SceneErrors, CarryLocationAndKeySeparately) {
+  const ScratchDir dir("parts");
+  const std::string path = dir.write("s.yaml", SCENE_TIME "materials:\n  glass: {density: 2500, restitution: 1.3}\n"
+                                                SCENE_PARTICLES);
+  try {
+    load_scene(path);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.where().file, path);
+    EXPECT_EQ(e.where().line, 3);
+    EXPECT_EQ(e.where().column, 39);
+    EXPECT_EQ(e.key(), "materials.glass.restitution");
+    EXPECT_EQ(e.message(), "must be within [0, 1], got 1.3");
+  }
+}
+
+TEST(SceneErrors, RandomOverfullSaysHowManyWerePlaced) {
+  const ScratchDir dir("overfull");
+  const std::string path = dir.write(
+      "s.yaml", SCENE_TIME SCENE_MATERIALS
+      "particles:\n  - random: {count: 1000, min: [0, 0, 0], max: [0.1, 0.1, 0.1], radius: 0.02}\n");
+  const Scene scene = load_scene(path);
+  try {
+    generate_particles(scene);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    const std::string m = e.message();
+    EXPECT_NE(m.find("could place only "), std::string::npos) << m;
+    EXPECT_NE(m.find(" of 1000 non-overlapping spheres"), std::string::npos) << m;
+    EXPECT_NE(m.find("1000 attempts"), std::string::npos) << m;
+  }
+}
+
+// --- values and defaults -------------------------------------------------------
+
+TEST(SceneLoad, MinimalSceneTakesDocumentedDefaults) {
+  const ScratchDir dir("defaults");
+  const std::string path = dir.write("tiny.yaml", SCENE_VALID);
+  const Scene s = load_scene(path);
+  EXPECT_EQ(s.path, path);
+  EXPECT_EQ(s.name, "tiny");
+  EXPECT_DOUBLE_EQ(s.time.duration, 1);
+  EXPECT_DOUBLE_EQ(s.time.dt, 0.001);
+  EXPECT_EQ(s.time.substeps, 1);
+  EXPECT_EQ(s.solver.iterations, 10);
+  EXPECT_EQ(s.solver.integrator, "symplectic_euler");
+  const std::vector<Effect> defaults = {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
+                                        Effect::friction};
+  EXPECT_EQ(s.effects, defaults);
+  EXPECT_FLOAT_EQ(s.gravity.z, -9.81f);
+  ASSERT_EQ(s.materials.size(), 1u);
+  EXPECT_EQ(s.materials[0].name, "glass");
+  EXPECT_DOUBLE_EQ(s.materials[0].density, 2500);
+  EXPECT_DOUBLE_EQ(s.materials[0].restitution, 0.5);
+  EXPECT_DOUBLE_EQ(s.materials[0].friction, 0.5);
+  EXPECT_DOUBLE_EQ(s.materials[0].rolling_friction, 0);
+  EXPECT_EQ(s.materials[0].where.line, 3);
+  EXPECT_TRUE(s.walls.empty());
+  ASSERT_EQ(s.particles.size(), 1u);
+  EXPECT_EQ(s.particles[0].kind, ParticleBlock::Kind::list);
+  EXPECT_EQ(s.particles[0].velocity.kind, VelocitySpec::Kind::zero);
+  EXPECT_EQ(s.output.dir, "out/tiny");
+  EXPECT_EQ(s.output.vtk_every, 0);
+  EXPECT_FALSE(s.output.render.enabled);
+  EXPECT_FALSE(s.output.movie.enabled);
+  EXPECT_EQ(s.output.fields.size(), 5u);
+}
+
+TEST(SceneLoad, ReadsEverySection) {
+  const ScratchDir dir("full");
+  dir.write("pile.csv", "x,y,z,r\n0,0,0.5,0.05\n");
+  const std::string path = dir.write("full.yaml", R"(format: 1
+name: Full scene
+time: {duration: 2, dt: 0.01, substeps: 4}
+solver: {iterations: 25, integrator: symplectic_euler}
+effects: [gravity, walls, drag]
+gravity: [0, -9.8, 0]
+drag: 0.25
+materials:
+  steel: {density: 7800, restitution: 0.6, friction: 0.3, rolling_friction: 0.01}
+  glass:
+walls:
+  - plane: {point: [0, 0, 0], normal: [0, 0, 2]}
+    material: glass
+  - box: {min: [-1, -1, 0], max: [1, 1, 2]}
+particles:
+  - lattice: {min: [0, 0, 0], max: [0.5, 0.5, 0.5], spacing: 0.1, radius: 0.02, jitter: 0.01, seed: 5}
+    material: glass
+    velocity: [1, 2, 3]
+  - random: {count: 10, min: [0, 0, 1], max: [1, 1, 2], radius: {log_uniform: [0.01, 0.05]}, seed: 9}
+    velocity: {random: {speed: 2, seed: 11}}
+  - csv: {path: pile.csv}
+output:
+  dir: results
+  vtk: {every: 5}
+  fields: [radius, id]
+  render:
+    every: 3
+    width: 640
+    height: 480
+    color_by: radius
+    camera: {position: [3, 0, 1], look_at: [0, 0, 0.5], up: [0, 0, 1], fov: 50}
+  movie: {fps: 24}
+)");
+  const Scene s = load_scene(path);
+  EXPECT_EQ(s.name, "Full scene");
+  EXPECT_EQ(s.time.substeps, 4);
+  EXPECT_EQ(s.solver.iterations, 25);
+  EXPECT_EQ(s.effects, (std::vector<Effect>{Effect::gravity, Effect::walls, Effect::drag}));
+  EXPECT_TRUE(s.has(Effect::drag));
+  EXPECT_FALSE(s.has(Effect::collisions));
+  EXPECT_FLOAT_EQ(s.gravity.y, -9.8f);
+  EXPECT_DOUBLE_EQ(s.drag, 0.25);
+  ASSERT_EQ(s.materials.size(), 2u);
+  EXPECT_EQ(s.materials[0].name, "steel");  // file order
+  EXPECT_EQ(s.materials[1].name, "glass");
+  EXPECT_DOUBLE_EQ(s.materials[1].density, 1000);  // `glass:` alone: defaults
+  EXPECT_EQ(s.material_index("glass", {}, "k"), 1u);
+  EXPECT_EQ(s.material_index("", {}, "k"), 0u);
+  ASSERT_EQ(s.walls.size(), 2u);
+  EXPECT_EQ(s.walls[0].kind, WallSpec::Kind::plane);
+  EXPECT_FLOAT_EQ(s.walls[0].normal.z, 1.0f);  // normalised
+  EXPECT_EQ(s.walls[0].material, "glass");
+  EXPECT_EQ(s.walls[1].kind, WallSpec::Kind::box);
+  EXPECT_FLOAT_EQ(s.walls[1].hi.z, 2.0f);
+  ASSERT_EQ(s.particles.size(), 3u);
+  EXPECT_EQ(s.particles[0].kind, ParticleBlock::Kind::lattice);
+  EXPECT_DOUBLE_EQ(s.particles[0].jitter, 0.01);
+  EXPECT_EQ(s.particles[0].seed, 5u);
+  EXPECT_EQ(s.particles[0].velocity.kind, VelocitySpec::Kind::constant);
+  EXPECT_EQ(s.particles[1].radius.kind, RadiusSpec::Kind::log_uniform);
+  EXPECT_DOUBLE_EQ(s.particles[1].radius.max, 0.05);
+  EXPECT_EQ(s.particles[1].velocity.kind, VelocitySpec::Kind::random);
+  EXPECT_EQ(s.particles[1].velocity.seed, 11u);
+  EXPECT_EQ(s.particles[2].kind, ParticleBlock::Kind::csv);
+  EXPECT_EQ(s.particles[2].csv_path, dir.path() + "/pile.csv");
+  EXPECT_EQ(s.output.dir, "results");
+  EXPECT_EQ(s.output.vtk_every, 5);
+  EXPECT_EQ(s.output.fields, (std::vector<std::string>{"radius", "id"}));
+  EXPECT_TRUE(s.output.render.enabled);
+  EXPECT_EQ(s.output.render.every, 3);
+  EXPECT_EQ(s.output.render.width, 640);
+  EXPECT_EQ(s.output.render.color_by, "radius");
+  EXPECT_TRUE(s.output.render.camera.given);
+  EXPECT_DOUBLE_EQ(s.output.render.camera.fov, 50);
+  EXPECT_TRUE(s.output.movie.enabled);
+  EXPECT_DOUBLE_EQ(s.output.movie.fps, 24);
+
+  const GeneratedParticles p = generate_particles(s);
+  EXPECT_EQ(p.size(), 5u * 5u * 5u + 10u + 1u);  // (0.5 - 2 * 0.03) / 0.1 = 4.4 → 5 per axis
+  EXPECT_EQ(p.material[0], 1u);
+  EXPECT_EQ(p.material[125], 0u);
+  EXPECT_FLOAT_EQ(p.velocity[0].y, 2.0f);
+}
+
+TEST(SceneLoad, NumbersInEveryYamlSpelling) {
+  const ScratchDir dir("numbers");
+  const std::string path = dir.write("n.yaml", "time: {duration: 1e1, dt: +2.5E-3, substeps: 1e1}\n" SCENE_MATERIALS
+                                               SCENE_PARTICLES "gravity: [0, 0, -10]\n");
+  const Scene s = load_scene(path);
+  EXPECT_DOUBLE_EQ(s.time.duration, 10);
+  EXPECT_DOUBLE_EQ(s.time.dt, 0.0025);
+  EXPECT_EQ(s.time.substeps, 10);
+}
+
+TEST(SceneLoad, EffectNames) {
+  EXPECT_STREQ(effect_name(Effect::gravity), "gravity");
+  EXPECT_STREQ(effect_name(Effect::collisions), "collisions");
+  EXPECT_STREQ(effect_name(Effect::walls), "walls");
+  EXPECT_STREQ(effect_name(Effect::restitution), "restitution");
+  EXPECT_STREQ(effect_name(Effect::friction), "friction");
+  EXPECT_STREQ(effect_name(Effect::rolling_resistance), "rolling_resistance");
+  EXPECT_STREQ(effect_name(Effect::drag), "drag");
+}
+
+TEST(SceneLoad, MaterialIndexThrowsAtTheGivenPlace) {
+  const ScratchDir dir("material_index");
+  const Scene s = load_scene(dir.write("m.yaml", SCENE_VALID));
+  try {
+    s.material_index("steel", SourceLocation{"x.yaml", 4, 7}, "particles[3].material");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "x.yaml:4:7: particles[3].material: unknown material 'steel'; expected one of: glass");
+  }
+}
+
+}  // namespace
+}  // namespace marbles::scene
