@@ -32,6 +32,11 @@ struct Stats {
   std::size_t pairs = 0;            // pairs emitted
   unsigned key_bits = 0;            // bits of the cell key that the sort had to look at
   double cell_size = 0;
+  // Added: how the call went.
+  unsigned key_width = 0;           // 32 or 64: the key type sorted
+  unsigned sort_passes = 0;         // 8-bit radix passes made
+  bool compressed_keys = false;     // the grid was too wide for 63 key bits: per-axis ranks were used
+  std::size_t cells_per_type[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // collision cells per pass
 };
 
 class BroadPhase {

@@ -1,0 +1,89 @@
+// broadphase/grid.hpp — choosing the grid of one call (host side, both backends).
+//
+// The grid is rebuilt each call from the bounding box of the centres, so no
+// sphere is ever outside it, however far it has travelled. Cell coordinates
+// are counted from two cells below the box's lower corner (all >= 0, also
+// for the neighbours); the key needs bit_width(max >> 1) bits per axis plus
+// 3 type bits. KeyWidth says which key type holds them with the all-ones
+// value still free for "unused".
+#pragma once
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <string>
+
+#include "broadphase/broadphase_math.hpp"
+#include "core/error.hpp"
+#include "core/spheres.hpp"
+
+namespace marbles::broadphase {
+
+enum class KeyWidth { bits32, bits64, too_wide };
+
+struct Bounds {
+  Vec3 lo{0, 0, 0}, hi{0, 0, 0};
+  real r_max = 0;
+};
+
+struct GridChoice {
+  Grid grid;
+  KeyWidth width = KeyWidth::bits32;
+  CellCoord max_coord;  // largest cell coordinate (neighbours included) per axis
+};
+
+// Bounding box of the centres and largest radius (host arrays; OpenMP).
+// Throws RuntimeFailure on a non-finite centre or radius or a negative radius.
+Bounds bounds_of(const SpheresIn& spheres);
+
+inline KeyWidth key_width_for(std::uint32_t key_bits) {
+  if (key_bits <= 31) return KeyWidth::bits32;
+  if (key_bits <= 63) return KeyWidth::bits64;
+  return KeyWidth::too_wide;
+}
+
+// Packs the given per-axis maxima into key shifts.
+inline void set_key_layout(Grid& g, const std::uint64_t half_max[3]) {
+  std::uint32_t bits = 0;
+  for (int k = 0; k < 3; ++k) {
+    g.shift[k] = bits;
+    bits += static_cast<std::uint32_t>(std::bit_width(half_max[k]));
+  }
+  g.type_shift = bits;
+  g.key_bits = bits + 3;
+}
+
+inline GridChoice choose_grid(const Bounds& b, real margin) {
+  if (!(margin >= 0) || !std::isfinite(static_cast<double>(margin)))
+    throw RuntimeFailure("broad phase: margin must be finite and >= 0");
+  for (int k = 0; k < 3; ++k)
+    if (!std::isfinite(static_cast<double>(b.lo[k])) || !std::isfinite(static_cast<double>(b.hi[k])))
+      throw RuntimeFailure("broad phase: a sphere centre is not finite");
+  if (!std::isfinite(static_cast<double>(b.r_max)) || b.r_max < 0)
+    throw RuntimeFailure("broad phase: a radius is negative or not finite");
+
+  GridChoice out;
+  Grid& g = out.grid;
+  const double reach = static_cast<double>(b.r_max) + 0.5 * static_cast<double>(margin);
+  g.cell = reach > 0 ? kCellFactor * reach : 1.0;
+  g.inv_cell = 1.0 / g.cell;
+  g.scaled_per_length = kSqrt2 * (1.0 + kPhantomSlack) * g.inv_cell;
+  g.half_margin = 0.5 * static_cast<double>(margin);
+  for (int k = 0; k < 3; ++k) g.origin[k] = static_cast<double>(b.lo[k]) - 2.0 * g.cell;
+
+  std::uint64_t half_max[3];
+  std::int64_t maxc[3];
+  for (int k = 0; k < 3; ++k) {
+    const double span = (static_cast<double>(b.hi[k]) - g.origin[k]) * g.inv_cell;
+    if (!(span < 4.0e18)) throw RuntimeFailure("broad phase: the spheres span more than 2^62 cells");
+    maxc[k] = cell_coord(b.hi[k], g.origin[k], g.inv_cell) + 1;  // the neighbour above the top cell
+    half_max[k] = static_cast<std::uint64_t>(maxc[k]) >> 1;
+  }
+  out.max_coord = {maxc[0], maxc[1], maxc[2]};
+  set_key_layout(g, half_max);
+  out.width = key_width_for(g.key_bits);
+  return out;
+}
+
+}  // namespace marbles::broadphase

@@ -1,0 +1,27 @@
+// broadphase/radix_sort.hpp — the CPU radix sort of (key, value) pairs.
+//
+// LSD radix sort, 8-bit digits, stable, with only the passes that the keys'
+// `key_bits` low bits need (a pass whose digit is equal for every key is
+// skipped). Each pass: per-thread digit counts over contiguous blocks, an
+// exclusive prefix sum in (digit, block) order, a scatter in input order —
+// so the result does not depend on the number of threads.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace marbles::broadphase {
+
+// Sorts keys[0, n) and moves values with them. `scratch_*` are resized as
+// needed and may be reused between calls. Returns the passes made.
+unsigned radix_sort_pairs(std::vector<std::uint32_t>& keys, std::vector<std::uint32_t>& values, unsigned key_bits,
+                          std::vector<std::uint32_t>& scratch_keys, std::vector<std::uint32_t>& scratch_values);
+unsigned radix_sort_pairs(std::vector<std::uint64_t>& keys, std::vector<std::uint32_t>& values, unsigned key_bits,
+                          std::vector<std::uint64_t>& scratch_keys, std::vector<std::uint32_t>& scratch_values);
+
+// Convenience overloads with their own scratch.
+unsigned radix_sort_pairs(std::vector<std::uint32_t>& keys, std::vector<std::uint32_t>& values, unsigned key_bits);
+unsigned radix_sort_pairs(std::vector<std::uint64_t>& keys, std::vector<std::uint32_t>& values, unsigned key_bits);
+
+}  // namespace marbles::broadphase
