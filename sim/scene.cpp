@@ -119,36 +119,95 @@ void read_material_ref(const Scene& scene, const MapFields& map, std::string& na
   }
 }
 
+Vec3 unit_vector(const Field& field) {
+  const Vec3 v = field.vec3();
+  const double len = std::sqrt(double(v.x) * v.x + double(v.y) * v.y + double(v.z) * v.z);
+  if (!(len > 0)) field.fail("must not be the zero vector");
+  return Vec3(real(v.x / len), real(v.y / len), real(v.z / len));
+}
+
 std::vector<WallSpec> read_walls(const Scene& scene, const Field& field) {
+  static const std::vector<std::string> shapes = {"plane", "box", "cylinder", "sphere"};
   std::vector<WallSpec> walls;
   for (const Field& item : field.items()) {
-    const MapFields map(item, {"plane", "box", "material"});
+    const MapFields map(item, {"plane", "box", "cylinder", "sphere", "material", "velocity"});
     WallSpec wall;
     wall.where = item.where();
-    const bool plane = map.has("plane"), box = map.has("box");
-    if (plane == box)
-      item.fail(plane ? "a wall is either a plane or a box, not both" : "missing the wall's shape: 'plane' or 'box'");
-    if (plane) {
+    const MapFields::Entry* shape = nullptr;
+    for (const MapFields::Entry& e : map.entries()) {
+      if (std::find(shapes.begin(), shapes.end(), e.name) == shapes.end()) continue;
+      if (shape)
+        throw InputError(e.name_where, item.key(), "a wall has one shape; got both '" + shape->name + "' and '" + e.name + "'");
+      shape = &e;
+    }
+    if (!shape) item.fail("missing the wall's shape: one of plane, box, cylinder, sphere");
+    if (shape->name == "plane") {
       wall.kind = WallSpec::Kind::plane;
-      const MapFields shape(map.required("plane"), {"point", "normal"});
-      wall.point = shape.required("point").vec3();
-      const Field normal = shape.required("normal");
-      const Vec3 n = normal.vec3();
-      const double len = std::sqrt(double(n.x) * n.x + double(n.y) * n.y + double(n.z) * n.z);
-      if (!(len > 0)) normal.fail("must not be the zero vector");
-      wall.normal = Vec3(real(n.x / len), real(n.y / len), real(n.z / len));
-    } else {
+      const MapFields spec(shape->value, {"point", "normal"});
+      wall.point = spec.required("point").vec3();
+      wall.normal = unit_vector(spec.required("normal"));
+    } else if (shape->name == "box") {
       wall.kind = WallSpec::Kind::box;
-      const MapFields shape(map.required("box"), {"min", "max"});
-      wall.lo = shape.required("min").vec3();
-      const Field max = shape.required("max");
+      const MapFields spec(shape->value, {"min", "max"});
+      wall.lo = spec.required("min").vec3();
+      const Field max = spec.required("max");
       wall.hi = max.vec3();
       check_box(wall.lo, wall.hi, max);
+    } else if (shape->name == "cylinder") {
+      wall.kind = WallSpec::Kind::cylinder;
+      const MapFields spec(shape->value, {"base", "axis", "radius", "length", "inside", "angular_velocity"});
+      wall.base = spec.required("base").vec3();
+      wall.axis = unit_vector(spec.required("axis"));
+      wall.radius = spec.required("radius").positive();
+      if (auto f = spec.optional("length")) wall.length = f->non_negative();
+      if (auto f = spec.optional("inside")) wall.inside = f->boolean();
+      if (auto f = spec.optional("angular_velocity")) wall.angular_velocity = f->number();
+    } else {
+      wall.kind = WallSpec::Kind::sphere;
+      const MapFields spec(shape->value, {"centre", "radius"});
+      wall.centre = spec.required("centre").vec3();
+      wall.radius = spec.required("radius").positive();
+    }
+    if (auto f = map.optional("velocity")) {
+      if (wall.kind == WallSpec::Kind::cylinder)
+        f->fail("a cylinder cannot translate; spin it with cylinder.angular_velocity");
+      wall.velocity = f->vec3();
     }
     read_material_ref(scene, map, wall.material, wall.material_where);
     walls.push_back(std::move(wall));
   }
   return walls;
+}
+
+std::vector<ContactPairSpec> read_contact_pairs(const Scene& scene, const Field& field) {
+  std::vector<ContactPairSpec> pairs;
+  for (const Field& item : field.items()) {
+    const MapFields map(item, {"materials", "restitution", "friction", "rolling_friction"});
+    ContactPairSpec pair;
+    pair.where = item.where();
+    const Field names = map.required("materials");
+    if (!names.is_sequence() || names.node().size() != 2)
+      names.fail("expected [material, material], got " +
+                 (names.is_sequence() ? "a sequence of " + std::to_string(names.node().size()) : names.description()));
+    const std::vector<Field> two = names.items();
+    pair.first = two[0].word();
+    pair.second = two[1].word();
+    scene.material_index(pair.first, two[0].where(), two[0].key());
+    scene.material_index(pair.second, two[1].where(), two[1].key());
+    if (auto f = map.optional("restitution")) pair.restitution = f->within(0, 1);
+    if (auto f = map.optional("friction")) pair.friction = f->non_negative();
+    if (auto f = map.optional("rolling_friction")) pair.rolling_friction = f->non_negative();
+    if (pair.restitution < 0 && pair.friction < 0 && pair.rolling_friction < 0)
+      item.fail("give at least one of restitution, friction, rolling_friction");
+    for (const ContactPairSpec& other : pairs) {
+      if ((other.first == pair.first && other.second == pair.second) ||
+          (other.first == pair.second && other.second == pair.first))
+        names.fail("the pair " + pair.first + "/" + pair.second + " is already given at line " +
+                   std::to_string(other.where.line));
+    }
+    pairs.push_back(std::move(pair));
+  }
+  return pairs;
 }
 
 // `radius: 0.01` or `radius: {constant: r}`, `{uniform: [a, b]}`, `{log_uniform: [a, b]}`.
@@ -473,8 +532,8 @@ Scene load_scene(const std::string& path) {
   const Field root(documents[0], "", path);
   if (!root.is_map())
     root.fail("a scene is a map of keys (time, materials, particles, ...), got " + root.description());
-  const MapFields top(root, {"format", "name", "time", "solver", "effects", "gravity", "drag", "materials", "walls",
-                             "particles", "output"});
+  const MapFields top(root, {"format", "name", "time", "solver", "effects", "gravity", "drag", "materials",
+                             "contact_pairs", "walls", "particles", "output"});
 
   if (auto f = top.optional("format")) {
     const long long version = f->integer();
@@ -495,14 +554,24 @@ Scene load_scene(const std::string& path) {
   scene.effects = kDefaultEffects;
   if (auto f = top.optional("effects")) scene.effects = read_effects(*f);
   if (auto f = top.optional("gravity")) scene.gravity = f->vec3();
-  if (auto f = top.optional("drag")) scene.drag = f->non_negative();
+  if (auto f = top.optional("drag")) {
+    if (f->is_map()) {
+      const MapFields drag(*f, {"linear", "quadratic"});
+      if (drag.entries().empty()) f->fail("give linear (1/s), quadratic (1/m) or both");
+      if (auto g = drag.optional("linear")) scene.drag = g->non_negative();
+      if (auto g = drag.optional("quadratic")) scene.drag_quadratic = g->non_negative();
+    } else {
+      scene.drag = f->non_negative();
+    }
+  }
   if (scene.has(Effect::drag) && !top.has("drag")) {
     const Field effects = *top.optional("effects");
     for (const Field& item : effects.items())
-      if (item.word() == "drag") item.fail("the drag effect needs the top-level key 'drag' (linear drag rate, 1/s)");
+      if (item.word() == "drag") item.fail("the drag effect needs the top-level key 'drag' (linear rate 1/s, or {linear, quadratic})");
   }
 
   scene.materials = read_materials(top.required("materials"));
+  if (auto f = top.optional("contact_pairs")) scene.contact_pairs = read_contact_pairs(scene, *f);
   if (auto f = top.optional("walls")) scene.walls = read_walls(scene, *f);
   scene.particles = read_particles(scene, top.required("particles"));
 

@@ -147,7 +147,8 @@ struct Scene {
   SolverSpec solver;
   std::vector<Effect> effects;
   Vec3 gravity{0, 0, -9.81};
-  double drag = 0;  // 1/s, linear drag rate (effect drag): dv/dt = -drag * v
+  double drag = 0;            // 1/s, linear drag rate (effect drag): dv/dt = -(drag + drag_quadratic |v|) v
+  double drag_quadratic = 0;  // 1/m, quadratic drag coefficient (effect drag)
   std::vector<Material> materials;  // at least one
   std::vector<ContactPairSpec> contact_pairs;
   std::vector<WallSpec> walls;

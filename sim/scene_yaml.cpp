@@ -198,6 +198,16 @@ std::string Field::word() const {
   return m_node.Scalar();
 }
 
+bool Field::boolean() const {
+  if (is_scalar()) {
+    std::string t;
+    for (char c : m_node.Scalar()) t += lower(c);
+    if (t == "true" || t == "yes" || t == "on") return true;
+    if (t == "false" || t == "no" || t == "off") return false;
+  }
+  fail("expected true or false, got " + description());
+}
+
 Vec3 Field::vec3() const {
   if (!is_sequence()) fail("expected [x, y, z], got " + description());
   if (m_node.size() != 3)

@@ -69,6 +69,7 @@ class Field {
   int integer_at_least(long long lo, long long hi = 1'000'000'000) const;
   std::uint64_t seed() const;                   // integer >= 0
   std::string word() const;                     // a scalar (string)
+  bool boolean() const;                         // true/false (also yes/no, on/off)
   Vec3 vec3() const;                            // [x, y, z], finite
   void expect_map() const;
   void expect_sequence() const;

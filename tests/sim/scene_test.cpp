@@ -113,14 +113,20 @@ time: {duration: 2, dt: 0.01, substeps: 4}
 solver: {iterations: 25, integrator: symplectic_euler}
 effects: [gravity, walls, drag]
 gravity: [0, -9.8, 0]
-drag: 0.25
+drag: {linear: 0.25, quadratic: 0.5}
 materials:
   steel: {density: 7800, restitution: 0.6, friction: 0.3, rolling_friction: 0.01}
   glass:
+contact_pairs:
+  - materials: [steel, glass]
+    restitution: 0.9
 walls:
   - plane: {point: [0, 0, 0], normal: [0, 0, 2]}
     material: glass
+    velocity: [0, 0, 0.5]
   - box: {min: [-1, -1, 0], max: [1, 1, 2]}
+  - cylinder: {base: [0, 0, 0], axis: [0, 0, 3], radius: 0.8, length: 2, inside: false, angular_velocity: 1.5}
+  - sphere: {centre: [0, 0, 1], radius: 0.2}
 particles:
   - lattice: {min: [0, 0, 0], max: [0.5, 0.5, 0.5], spacing: 0.1, radius: 0.02, jitter: 0.01, seed: 5}
     material: glass
@@ -149,18 +155,34 @@ output:
   EXPECT_FALSE(s.has(Effect::collisions));
   EXPECT_FLOAT_EQ(s.gravity.y, -9.8f);
   EXPECT_DOUBLE_EQ(s.drag, 0.25);
+  EXPECT_DOUBLE_EQ(s.drag_quadratic, 0.5);
+  ASSERT_EQ(s.contact_pairs.size(), 1u);
+  EXPECT_EQ(s.contact_pairs[0].first, "steel");
+  EXPECT_EQ(s.contact_pairs[0].second, "glass");
+  EXPECT_DOUBLE_EQ(s.contact_pairs[0].restitution, 0.9);
+  EXPECT_LT(s.contact_pairs[0].friction, 0);  // not given: mixing rule
   ASSERT_EQ(s.materials.size(), 2u);
   EXPECT_EQ(s.materials[0].name, "steel");  // file order
   EXPECT_EQ(s.materials[1].name, "glass");
   EXPECT_DOUBLE_EQ(s.materials[1].density, 1000);  // `glass:` alone: defaults
   EXPECT_EQ(s.material_index("glass", {}, "k"), 1u);
   EXPECT_EQ(s.material_index("", {}, "k"), 0u);
-  ASSERT_EQ(s.walls.size(), 2u);
+  ASSERT_EQ(s.walls.size(), 4u);
   EXPECT_EQ(s.walls[0].kind, WallSpec::Kind::plane);
   EXPECT_FLOAT_EQ(s.walls[0].normal.z, 1.0f);  // normalised
   EXPECT_EQ(s.walls[0].material, "glass");
+  EXPECT_FLOAT_EQ(s.walls[0].velocity.z, 0.5f);
   EXPECT_EQ(s.walls[1].kind, WallSpec::Kind::box);
   EXPECT_FLOAT_EQ(s.walls[1].hi.z, 2.0f);
+  EXPECT_EQ(s.walls[2].kind, WallSpec::Kind::cylinder);
+  EXPECT_FLOAT_EQ(s.walls[2].axis.z, 1.0f);
+  EXPECT_DOUBLE_EQ(s.walls[2].radius, 0.8);
+  EXPECT_DOUBLE_EQ(s.walls[2].length, 2);
+  EXPECT_FALSE(s.walls[2].inside);
+  EXPECT_DOUBLE_EQ(s.walls[2].angular_velocity, 1.5);
+  EXPECT_EQ(s.walls[3].kind, WallSpec::Kind::sphere);
+  EXPECT_FLOAT_EQ(s.walls[3].centre.z, 1.0f);
+  EXPECT_DOUBLE_EQ(s.walls[3].radius, 0.2);
   ASSERT_EQ(s.particles.size(), 3u);
   EXPECT_EQ(s.particles[0].kind, ParticleBlock::Kind::lattice);
   EXPECT_DOUBLE_EQ(s.particles[0].jitter, 0.01);
