@@ -53,6 +53,11 @@ struct Contact {
   Vec3 tangent_impulse;     // N s, |.| <= mu * normal_impulse
   Vec3 rolling_impulse;     // N m s
 
+  // Set by the restitution stage when a speculative contact (gap > 0)
+  // bounced: how far (m) the bodies must come back together after the
+  // position update, so the bounce happens at the surface and not at the gap.
+  real rebound_shift = 0;
+
   // World-space point midway across the overlap (or gap).
   MARBLES_HD_INLINE Vec3 point(const Vec3& position_a) const {
     return position_a - normal * (ra + real(0.5) * separation);

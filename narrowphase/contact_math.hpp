@@ -191,6 +191,11 @@ MARBLES_HD_INLINE void apply_restitution(Contact& c, BodyState& A, BodyState& B,
   const Vec3 p = c.normal * lambda;
   A.v += p * A.inv_mass;
   B.v -= p * B.inv_mass;
+  // Time of impact: the bodies met at t = gap / |v_n0| into the substep and
+  // separated at e |v_n0| from then on; the solve let them close only the gap
+  // and the new velocity acts over the whole substep, so they end (1 + e) gap
+  // too far apart. The projection stage takes that back.
+  if (c.separation > 0) c.rebound_shift = (1 + c.coeff.restitution) * c.separation;
 }
 
 // Position projection: move the bodies apart along the normal to remove a

@@ -52,6 +52,24 @@ void warm_start(std::vector<Contact>& contacts, const BodiesView& bodies) {
   }
 }
 
+// Restitution stage. With friction the tangential impulse is solved once more
+// at the contact's final normal impulse, so an impact's friction is limited by
+// mu (1 + e) times the normal impulse of approach, as rigid-body impact theory has it.
+template <bool Friction>
+void restitution(std::vector<Contact>& contacts, const BodiesView& bodies, real rest_speed) {
+  for (Contact& c : contacts) {
+    BodyState A = load(bodies, c.a, c);
+    BodyState B = load(bodies, c.b, c);
+    const real before = c.normal_impulse;
+    apply_restitution(c, A, B, rest_speed);
+    if constexpr (Friction) {
+      if (c.normal_impulse != before) solve_friction(c, A, B);
+    }
+    store(bodies, c.a, A);
+    store(bodies, c.b, B);
+  }
+}
+
 }  // namespace
 
 ContactSolver::ContactSolver(const SolverSettings& settings) : m_settings(settings) {
@@ -59,6 +77,7 @@ ContactSolver::ContactSolver(const SolverSettings& settings) : m_settings(settin
   else if (settings.friction) m_sweep = &sweep<true, false>, m_warm_start = &warm_start<true, false>;
   else if (settings.rolling) m_sweep = &sweep<false, true>, m_warm_start = &warm_start<false, true>;
   else m_sweep = &sweep<false, false>, m_warm_start = &warm_start<false, false>;
+  m_restitution = settings.friction ? &restitution<true> : &restitution<false>;
 }
 
 void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const BodiesView& bodies, real h) const {
@@ -68,20 +87,23 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Bodie
   const real inv_h = real(1) / h;
   for (int it = 0; it < m_settings.iterations; ++it) m_sweep(contacts, bodies, inv_h);
 
-  if (m_settings.restitution) {
-    for (Contact& c : contacts) {
-      BodyState A = load(bodies, c.a, c);
-      BodyState B = load(bodies, c.b, c);
-      apply_restitution(c, A, B, m_settings.rest_speed);
-      store(bodies, c.a, A);
-      store(bodies, c.b, B);
-    }
-  }
+  if (m_settings.restitution) m_restitution(contacts, bodies, m_settings.rest_speed);
 }
 
 void ContactSolver::project_positions(const std::vector<Contact>& contacts, const BodiesView& bodies,
                                       const std::vector<WallShape>& walls) const {
   const SolverSettings& s = m_settings;
+  if (s.restitution) {
+    for (const Contact& c : contacts) {
+      if (c.rebound_shift <= 0) continue;
+      const real inv_ma = bodies.inv_mass[c.a];
+      const real inv_mb = is_wall(c.b) ? real(0) : bodies.inv_mass[c.b];
+      const real k = inv_ma + inv_mb;
+      if (k <= 0) continue;
+      bodies.position[c.a] -= c.normal * (c.rebound_shift * inv_ma / k);
+      if (!is_wall(c.b)) bodies.position[c.b] += c.normal * (c.rebound_shift * inv_mb / k);
+    }
+  }
   for (int it = 0; it < s.position_iterations; ++it) {
     for (const Contact& c : contacts) {
       const real inv_ma = bodies.inv_mass[c.a];

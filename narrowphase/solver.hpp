@@ -9,7 +9,9 @@
 //                 scene enables them), then the normal impulse (speculative:
 //                 a positive gap may close within the substep, never more)
 //   restitution   one sweep: contacts that approached faster than the rest
-//                 speed leave at -e times that speed (when enabled)
+//                 speed leave at -e times that speed (when enabled); with
+//                 friction, the tangential impulse is re-solved at the final
+//                 normal impulse (impact theory's mu (1 + e) limit)
 // and after the positions are integrated:
 //   project       remove overlap beyond a slop by moving positions only
 //                 (no velocity change, so no kinetic energy is added)
@@ -58,6 +60,8 @@ class ContactSolver {
   SolverSettings m_settings;
   SweepFn m_sweep = nullptr;
   WarmStartFn m_warm_start = nullptr;
+  using RestitutionFn = void (*)(std::vector<Contact>&, const BodiesView&, real rest_speed);
+  RestitutionFn m_restitution = nullptr;
 };
 
 }  // namespace marbles::narrowphase

@@ -49,6 +49,8 @@ Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backe
       m_wall_shapes(narrowphase::wall_shapes(m_walls)),
       m_solver(solver_settings(scene)),
       m_gravity(scene.has(scene::Effect::gravity)),
+      m_drag(scene.has(scene::Effect::drag)),
+      m_drag_linear(static_cast<real>(scene.drag)),
       m_collisions(scene.has(scene::Effect::collisions)),
       m_wall_contacts(scene.has(scene::Effect::walls) && !m_walls.empty()),
       m_g(scene.gravity),
@@ -76,6 +78,7 @@ std::string Simulation::describe_pipeline() const {
   out << "pipeline (" << m_substeps << " substep" << (m_substeps > 1 ? "s" : "") << " of h = " << m_dt / m_substeps
       << " s per step, " << kRealName << "):\n";
   if (m_gravity) out << "  body forces    gravity (" << m_g.x << ", " << m_g.y << ", " << m_g.z << ") m/s^2\n";
+  if (m_drag) out << "  body forces    air drag (linear " << m_drag_linear << " 1/s, quadratic " << m_drag_quadratic << " 1/m)\n";
   if (m_collisions) out << "  broad phase    " << m_broadphase->name() << "\n";
   if (m_collisions) out << "  narrow phase   sphere-sphere\n";
   if (m_wall_contacts)
@@ -104,6 +107,7 @@ void Simulation::substep(real h) {
   const BodiesView bodies = m_world.view();
 
   if (m_gravity) integrator::apply_gravity(bodies, m_g, h);
+  if (m_drag) integrator::apply_drag(bodies, m_drag_linear, m_drag_quadratic, h);
 
   m_contacts.clear();
   if (m_collisions || m_wall_contacts) find_contacts(h);

@@ -3,7 +3,7 @@
 // One step advances dt in `substeps` substeps of h = dt / substeps:
 //
 //   for each substep:
-//     apply body forces              gravity (if the scene lists it)
+//     apply body forces              gravity, air drag (if the scene lists them)
 //     broad phase → candidate pairs  spatial subdivision (if `collisions`)
 //     narrow phase → contacts        sphere–sphere (`collisions`), sphere–wall (`walls`)
 //     warm start from last substep   impulses of persisting contacts
@@ -75,6 +75,8 @@ class Simulation {
 
   // The pipeline (fixed at construction).
   bool m_gravity = false;
+  bool m_drag = false;
+  real m_drag_linear = 0, m_drag_quadratic = 0;
   bool m_collisions = false;
   bool m_wall_contacts = false;
   Vec3 m_g;

@@ -1,0 +1,143 @@
+// Friction, spin and impacts against rigid-body mechanics (each within 1 %).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "tests/sim/test_scenes.hpp"
+
+using namespace marbles;
+using namespace marbles::testing;
+using scene::Effect;
+
+namespace {
+
+constexpr double kG = 9.81;
+
+// Acceleration along the slope of a sphere released at rest on an incline of
+// angle theta with friction mu, measured over 0.5 s.
+double incline_acceleration(double theta, double mu) {
+  scene::Scene s = make_scene(1e-3, 4, {Effect::gravity, Effect::walls, Effect::friction}, 0.0, mu);
+  s.gravity = {0, 0, real(-kG)};
+  const Vec3 n(real(-std::sin(theta)), 0, real(std::cos(theta)));
+  s.walls.push_back(plane({0, 0, 0}, n));
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  add_sphere(g, n * r, r);
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  const Vec3 downslope(real(-std::cos(theta)), 0, real(-std::sin(theta)));
+  for (int k = 0; k < 100; ++k) sim.step();  // settle into contact
+  const double v0 = dot(sim.world().velocity[0], downslope);
+  const double t0 = sim.time();
+  for (int k = 0; k < 500; ++k) sim.step();
+  return (dot(sim.world().velocity[0], downslope) - v0) / (sim.time() - t0);
+}
+
+}  // namespace
+
+class Incline : public ::testing::TestWithParam<std::tuple<double, double>> {};
+
+TEST_P(Incline, RollsOrSlidesAsMechanicsSays) {
+  const auto [theta_deg, mu] = GetParam();
+  const double theta = theta_deg * std::numbers::pi / 180;
+  const bool rolls = std::tan(theta) <= 3.5 * mu;
+  const double expected = rolls ? 5.0 / 7.0 * kG * std::sin(theta) : kG * (std::sin(theta) - mu * std::cos(theta));
+  EXPECT_NEAR(incline_acceleration(theta, mu), expected, 0.01 * expected)
+      << (rolls ? "rolling" : "sliding") << " theta=" << theta_deg << " mu=" << mu;
+}
+
+INSTANTIATE_TEST_SUITE_P(RollingAndSliding, Incline,
+                         ::testing::Values(std::tuple{10.0, 0.3}, std::tuple{30.0, 0.3}, std::tuple{45.0, 0.5},
+                                           std::tuple{40.0, 0.2}, std::tuple{60.0, 0.3}, std::tuple{30.0, 0.1}));
+
+// Launched sliding without spin: friction slows it to 5/7 v0, rolling from
+// t = 2 v0 / (7 mu g) on.
+TEST(SlideToRoll, EndsRollingAtFiveSevenths) {
+  const double v0 = 2.0, mu = 0.3;
+  scene::Scene s = make_scene(1e-3, 4, {Effect::gravity, Effect::walls, Effect::friction}, 0.0, mu);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, r}, r, {real(v0), 0, 0});
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  const double t_roll = 2 * v0 / (7 * mu * kG);
+  double t_measured = -1;
+  while (sim.time() < 2 * t_roll) {
+    sim.step();
+    const double slip = sim.world().velocity[0].x - sim.world().angular_velocity[0].y * r;
+    if (t_measured < 0 && std::abs(slip) < 1e-3 * v0) t_measured = sim.time();
+  }
+  EXPECT_NEAR(sim.world().velocity[0].x, 5.0 / 7.0 * v0, 0.01 * 5.0 / 7.0 * v0);
+  EXPECT_NEAR(sim.world().angular_velocity[0].y * r, 5.0 / 7.0 * v0, 0.01 * 5.0 / 7.0 * v0);
+  EXPECT_NEAR(t_measured, t_roll, 0.01 * t_roll);
+}
+
+// Oblique impact of a sphere without spin on a wall (no gravity). Impact
+// theory: v_n' = -e v_n; the contact point sticks if (2/7)|v_t| <= mu (1+e)|v_n|
+// (then v_t' = 5/7 v_t), else it slides with v_t' = v_t - mu (1+e)|v_n|.
+class ObliqueImpact : public ::testing::TestWithParam<std::tuple<double, double, double>> {};
+
+TEST_P(ObliqueImpact, FollowsRigidBodyImpactTheory) {
+  const auto [e, mu, angle_deg] = GetParam();
+  const double speed = 3.0, angle = angle_deg * std::numbers::pi / 180;
+  const double vt = speed * std::sin(angle), vn = -speed * std::cos(angle);
+  scene::Scene s = make_scene(1e-3, 1, {Effect::walls, Effect::friction, Effect::restitution}, e, mu);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, real(r + 0.1)}, r, {real(vt), 0, real(vn)});
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  while (sim.world().velocity[0].z < 0 && sim.time() < 1) sim.step();
+  for (int k = 0; k < 5; ++k) sim.step();  // clear of the wall
+  const bool sticks = 2.0 / 7.0 * std::abs(vt) <= mu * (1 + e) * std::abs(vn);
+  const double vt_expected = sticks ? 5.0 / 7.0 * vt : vt - mu * (1 + e) * std::abs(vn);
+  const double spin_expected = (vt - vt_expected) * 5.0 / (2.0 * r);  // I w = r m (vt - vt')
+  EXPECT_NEAR(sim.world().velocity[0].z, -e * vn, 0.01 * std::abs(e * vn) + 1e-9);
+  EXPECT_NEAR(sim.world().velocity[0].x, vt_expected, 0.01 * std::abs(vt_expected));
+  EXPECT_NEAR(sim.world().angular_velocity[0].y, spin_expected, 0.01 * std::abs(spin_expected));
+}
+
+INSTANTIATE_TEST_SUITE_P(StickingAndSliding, ObliqueImpact,
+                         ::testing::Values(std::tuple{0.8, 0.5, 30.0}, std::tuple{0.5, 0.4, 20.0},
+                                           std::tuple{0.8, 0.1, 45.0}, std::tuple{0.5, 0.05, 60.0},
+                                           std::tuple{1.0, 0.2, 50.0}));
+
+// Two equal spheres whose contact points move together (w_b = -w_a about z)
+// collide head-on: no slip, so friction leaves both spins unchanged.
+TEST(HeadOnSpinning, SpinsUnchanged) {
+  scene::Scene s = make_scene(1e-3, 1, {Effect::collisions, Effect::friction, Effect::restitution}, 0.7, 0.5);
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  add_sphere(g, {real(-0.1), 0, 0}, r, {1, 0, 0});
+  add_sphere(g, {real(0.1), 0, 0}, r, {-1, 0, 0});
+  World w = make_world(s, g);
+  w.angular_velocity[0] = {0, 0, 20};
+  w.angular_velocity[1] = {0, 0, -20};
+  Simulation sim(s, std::move(w), broadphase::Backend::cpu);
+  for (int k = 0; k < 200; ++k) sim.step();
+  EXPECT_NEAR(sim.world().velocity[0].x, -0.7, 0.007);  // they did collide
+  EXPECT_NEAR(sim.world().angular_velocity[0].z, 20, 1e-4);
+  EXPECT_NEAR(sim.world().angular_velocity[1].z, -20, 1e-4);
+}
+
+// Restitution is an input: an isolated impact rebounds with e whatever the
+// step and the size.
+class RestitutionInput : public ::testing::TestWithParam<std::tuple<double, double>> {};
+
+TEST_P(RestitutionInput, ReboundSpeedIsEApproachSpeed) {
+  const auto [dt, radius] = GetParam();
+  const double e = 0.6, v = 2.0;
+  scene::Scene s = make_scene(dt, 1, {Effect::collisions, Effect::restitution}, e);
+  scene::GeneratedParticles g;
+  add_sphere(g, {real(-radius - 0.01), 0, 0}, real(radius), {real(v), 0, 0});
+  add_sphere(g, {real(radius + 0.01), 0, 0}, real(radius), {real(-v), 0, 0});
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  for (int k = 0; k < 2000 && sim.world().velocity[0].x > 0; ++k) sim.step();
+  ASSERT_LT(sim.world().velocity[0].x, 0) << "no impact";
+  EXPECT_NEAR(sim.world().velocity[0].x, -e * v, 1e-3 * e * v);
+  EXPECT_NEAR(sim.world().velocity[1].x, e * v, 1e-3 * e * v);
+}
+
+INSTANTIATE_TEST_SUITE_P(AnyStepAnySize, RestitutionInput,
+                         ::testing::Combine(::testing::Values(1e-4, 1e-3, 1.0 / 60),
+                                            ::testing::Values(1e-3, 0.05, 2.0)));
