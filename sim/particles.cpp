@@ -265,6 +265,7 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
   while (std::getline(in, line)) {
     ++line_number;
     std::string_view content(line);
+    if (line_number == 1 && content.substr(0, 3) == "\xEF\xBB\xBF") content.remove_prefix(3);  // UTF-8 byte order mark
     if (const std::size_t hash = content.find('#'); hash != std::string_view::npos) content = content.substr(0, hash);
     if (trim(content).empty()) continue;
     const std::vector<CsvField> fields = split_row(content);

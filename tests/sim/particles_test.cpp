@@ -267,7 +267,7 @@ TEST(Csv, RoundTrip) {
 TEST(Csv, HeaderInAnyOrderCommentsAndBlankLines) {
   const ScratchDir dir("csv_header");
   const std::string path = dir.write("h.csv",
-                                     "# a comment\n"
+                                     "\xEF\xBB\xBF# a comment (after a UTF-8 byte order mark)\n"
                                      "\n"
                                      " radius , z, y, x\n"
                                      "0.5, 3, 2, 1   # trailing comment\n"
