@@ -93,7 +93,7 @@ void print_json(std::ostream& out, const BroadphaseBenchOptions& o, const CaseRe
     if (r.copy_bytes_per_ms > 0) out << ",\"floor_ms\":" << bytes / r.copy_bytes_per_ms;
     out << ",\"floor_bytes\":" << bytes << "}";
   };
-  out << "{\"bench\":\"broadphase\",\"backend\":\"" << o.backend << "\",\"sort\":\""
+  out << "{\"bench\":\"broadphase\",\"backend\":\"" << o.backend << "\",\"sort_kind\":\""
       << (o.backend == "cuda" ? o.sort : "radix-cpu") << "\",\"scene\":\"" << o.scene << "\",\"n\":" << r.n
       << ",\"repeats\":" << o.repeats << ",\"margin\":" << o.margin << ",";
   stage("cell_ids", r.cell_ids, r.bytes.cell_ids);

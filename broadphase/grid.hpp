@@ -9,7 +9,6 @@
 #pragma once
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <string>
@@ -43,12 +42,23 @@ inline KeyWidth key_width_for(std::uint32_t key_bits) {
   return KeyWidth::too_wide;
 }
 
+// Bits needed to write v (0 for 0); std::bit_width without C++20, so that
+// .cu files compiled as C++17 can include this header.
+inline std::uint32_t bits_needed(std::uint64_t v) {
+  std::uint32_t b = 0;
+  while (v) {
+    ++b;
+    v >>= 1;
+  }
+  return b;
+}
+
 // Packs the given per-axis maxima into key shifts.
 inline void set_key_layout(Grid& g, const std::uint64_t half_max[3]) {
   std::uint32_t bits = 0;
   for (int k = 0; k < 3; ++k) {
     g.shift[k] = bits;
-    bits += static_cast<std::uint32_t>(std::bit_width(half_max[k]));
+    bits += bits_needed(half_max[k]);
   }
   g.type_shift = bits;
   g.key_bits = bits + 3;

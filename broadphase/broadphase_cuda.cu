@@ -1,0 +1,240 @@
+// broadphase/broadphase_cuda.cu — SubdivisionCuda: the CUDA stages strung
+// together, the same stages as the CPU backend (broadphase_cpu.cpp):
+//
+//   cell IDs   bounds (one kernel, 1 readback) -> grid -> counts -> scan
+//              (readback: entry count) -> cell IDs
+//   sort       seed radix sort or CUB, over the key's used bits
+//   cell list  flags -> scan (readback: cell count) -> write + 8 type ranges
+//   traversal  count -> scan (readback: pair count) -> write
+//
+// Every buffer is sized from a count (count, scan, allocate) and only grows;
+// there is no fixed capacity. The four readbacks are the only host syncs.
+// Grids too wide for 63 key bits (a sphere very far from the rest) go
+// through the CPU backend's exact key compression, then back to the device.
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+
+#include "broadphase/broadphase_cuda.cuh"
+#include "broadphase/broadphase_cuda.hpp"
+#include "core/device.hpp"
+
+namespace marbles::broadphase {
+
+using namespace marbles::broadphase::cuda;
+
+struct SubdivisionCuda::Impl {
+  SortKind sort = SortKind::cub;
+  bool timing = true;
+  int sm_count = 1;
+  Stats stats;
+  std::unique_ptr<BroadPhase> cpu_fallback;
+
+  DeviceBuffer centre, radius;  // for the host entry point
+  DeviceBuffer bounds, counts, offsets, info;
+  DeviceBuffer keys, keys_alt, values, values_alt;
+  DeviceBuffer flags, cell_index, cells, pass_begin;
+  DeviceBuffer pair_counts, pair_offsets, pairs, tests;
+  DeviceBuffer cub_temp, seed_scratch;
+  std::size_t pair_count = 0;
+
+  BoundsAccum* h_bounds = nullptr;  // pinned
+  std::uint32_t* h_small = nullptr; // pinned: readbacks
+  cudaEvent_t ev[5] = {};
+
+  Impl() {
+    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&h_bounds), sizeof(BoundsAccum)));
+    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&h_small), 64 * sizeof(std::uint32_t)));
+    for (auto& e : ev) MARBLES_CUDA_CHECK(cudaEventCreate(&e));
+  }
+  ~Impl() {
+    for (auto& e : ev)
+      if (e) cudaEventDestroy(e);
+    if (h_bounds) cudaFreeHost(h_bounds);
+    if (h_small) cudaFreeHost(h_small);
+  }
+
+  void mark(int k, cudaStream_t s) {
+    if (timing) MARBLES_CUDA_CHECK(cudaEventRecord(ev[k], s));
+  }
+  std::uint32_t read_u32(const std::uint32_t* d, cudaStream_t s) {
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small, d, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+    return h_small[0];
+  }
+
+  std::size_t run(const SpheresIn& d, real margin, cudaStream_t s);
+  template <class Key>
+  std::size_t run_keys(const SpheresIn& d, real margin, const Grid& g, cudaStream_t s);
+  std::size_t run_on_cpu(const SpheresIn& d, real margin, cudaStream_t s);
+};
+
+std::size_t SubdivisionCuda::Impl::run(const SpheresIn& d, real margin, cudaStream_t s) {
+  stats = Stats{};
+  pair_count = 0;
+  const std::size_t n = d.count;
+  if (n >= kMaxObjects) throw RuntimeFailure("broad phase: more than 2^28 spheres");
+  if (n < 2) return 0;
+  mark(0, s);
+
+  // --- cell IDs: bounds -> grid ---------------------------------------------
+  auto* acc = bounds.as<BoundsAccum>(1);
+  launch_bounds(d.centre, d.radius, n, acc, sm_count, s);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_bounds, acc, sizeof(BoundsAccum), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  if (h_bounds->bad) throw RuntimeFailure("broad phase: a centre or radius is not finite, or a radius is negative");
+  const GridChoice gc = choose_grid(decode_bounds(*h_bounds), margin);
+  if (gc.width == KeyWidth::too_wide) return run_on_cpu(d, margin, s);
+  stats.cell_size = gc.grid.cell;
+  stats.key_bits = gc.grid.key_bits;
+  if (gc.width == KeyWidth::bits32) {
+    stats.key_width = 32;
+    return run_keys<std::uint32_t>(d, margin, gc.grid, s);
+  }
+  stats.key_width = 64;
+  return run_keys<std::uint64_t>(d, margin, gc.grid, s);
+}
+
+template <class Key>
+std::size_t SubdivisionCuda::Impl::run_keys(const SpheresIn& d, real margin, const Grid& g, cudaStream_t s) {
+  const std::size_t n = d.count;
+  auto* d_counts = counts.as<std::uint32_t>(n + 1);
+  auto* d_offsets = offsets.as<std::uint32_t>(n + 1);
+  auto* d_info = info.as<std::uint16_t>(n);
+  launch_cell_counts(d.centre, d.radius, n, g, d_counts, d_info, sm_count, s);
+  exclusive_sum(d_counts, d_offsets, n + 1, cub_temp, s);
+  const std::size_t m = read_u32(d_offsets + n, s);
+  auto* d_keys = keys.as<Key>(m);
+  auto* d_keys_alt = keys_alt.as<Key>(m);
+  auto* d_values = values.as<std::uint32_t>(m);
+  auto* d_values_alt = values_alt.as<std::uint32_t>(m);
+  launch_cell_ids<Key>(d.centre, d.radius, n, g, d_offsets, d_keys, d_values, sm_count, s);
+  stats.cell_entries = m;
+  mark(1, s);
+
+  // --- sort -------------------------------------------------------------------
+  const bool in_alt =
+      sort == SortKind::seed
+          ? seed_radix_sort<Key>(d_keys, d_values, d_keys_alt, d_values_alt, m, g.key_bits, seed_scratch, sm_count, s)
+          : cub_radix_sort<Key>(d_keys, d_values, d_keys_alt, d_values_alt, m, g.key_bits, cub_temp, s);
+  if (in_alt) {
+    std::swap(d_keys, d_keys_alt);
+    std::swap(d_values, d_values_alt);
+  }
+  stats.sort_passes = (std::min<unsigned>(g.key_bits, 8 * sizeof(Key)) + 7) / 8;
+  mark(2, s);
+
+  // --- collision-cell list ----------------------------------------------------
+  auto* d_flags = flags.as<std::uint32_t>(m + 1);
+  auto* d_index = cell_index.as<std::uint32_t>(m + 1);
+  launch_cell_flags<Key>(d_keys, d_values, m, d_flags, sm_count, s);
+  exclusive_sum(d_flags, d_index, m + 1, cub_temp, s);
+  const std::size_t cell_count = read_u32(d_index + m, s);
+  auto* d_cells = cells.as<CollisionCell>(cell_count);
+  auto* d_pass = pass_begin.as<std::uint32_t>(9);
+  launch_cell_write<Key>(d_keys, d_values, m, d_index, d_cells, d_pass, sm_count, s);
+  stats.collision_cells = cell_count;
+  mark(3, s);
+
+  // --- traversal --------------------------------------------------------------
+  auto* d_pair_counts = pair_counts.as<std::uint32_t>(cell_count + 1);
+  auto* d_pair_offsets = pair_offsets.as<std::uint32_t>(cell_count + 1);
+  auto* d_tests = tests.as<unsigned long long>(1);
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(d_tests, 0, sizeof(unsigned long long), s));
+  const TraversalInput in{d_cells, cell_count, d_values, d.centre, d.radius, d_info, margin};
+  launch_traversal_count(in, d_pair_counts, d_tests, sm_count, s);
+  exclusive_sum(d_pair_counts, d_pair_offsets, cell_count + 1, cub_temp, s);
+  // one readback: pair count, tests and the 8 type ranges
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small, d_pair_offsets + cell_count, 4, cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small + 2, d_tests, 8, cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small + 4, d_pass, 9 * 4, cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  pair_count = h_small[0];
+  unsigned long long t = 0;
+  std::memcpy(&t, h_small + 2, 8);
+  stats.tests = t;
+  for (int k = 0; k < 8; ++k) stats.cells_per_type[k] = h_small[4 + k + 1] - h_small[4 + k];
+  auto* d_pairs = pairs.as<IndexPair>(pair_count);
+  launch_traversal_write(in, d_pair_offsets, d_pairs, sm_count, s);
+  stats.pairs = pair_count;
+  mark(4, s);
+
+  if (timing) {
+    MARBLES_CUDA_CHECK(cudaEventSynchronize(ev[4]));
+    float ms[4];
+    for (int k = 0; k < 4; ++k) MARBLES_CUDA_CHECK(cudaEventElapsedTime(&ms[k], ev[k], ev[k + 1]));
+    stats.ms_cell_ids = ms[0];
+    stats.ms_sort = ms[1];
+    stats.ms_cell_list = ms[2];
+    stats.ms_traversal = ms[3];
+    float total = 0;
+    MARBLES_CUDA_CHECK(cudaEventElapsedTime(&total, ev[0], ev[4]));
+    stats.ms_total = total;
+  }
+  return pair_count;
+}
+
+std::size_t SubdivisionCuda::Impl::run_on_cpu(const SpheresIn& d, real margin, cudaStream_t s) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::size_t n = d.count;
+  std::vector<Vec3> c(n);
+  std::vector<real> r(n);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(c.data(), d.centre, n * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(r.data(), d.radius, n * sizeof(real), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  if (!cpu_fallback) cpu_fallback = make_subdivision_cpu();
+  std::vector<Pair> out;
+  cpu_fallback->find_pairs({c.data(), r.data(), n}, margin, out);
+  auto* d_pairs = pairs.as<IndexPair>(out.size());
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(d_pairs, out.data(), out.size() * sizeof(Pair), cudaMemcpyHostToDevice, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  stats = cpu_fallback->last_stats();
+  stats.ms_total = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  pair_count = out.size();
+  return pair_count;
+}
+
+SubdivisionCuda::SubdivisionCuda(SortKind sort) {
+  const DeviceInfo& dev = cuda_device();
+  if (!dev.available) throw RuntimeFailure("broad phase: no CUDA device (" + dev.why_not + ")");
+  m = std::make_unique<Impl>();
+  m->sort = sort;
+  m->sm_count = std::max(1, dev.multiprocessors);
+}
+
+SubdivisionCuda::~SubdivisionCuda() = default;
+
+const Stats& SubdivisionCuda::last_stats() const { return m->stats; }
+std::string SubdivisionCuda::name() const {
+  return m->sort == SortKind::seed ? "subdivision-cuda-seed-sort" : "subdivision-cuda-cub-sort";
+}
+void SubdivisionCuda::set_stage_timing(bool on) { m->timing = on; }
+SortKind SubdivisionCuda::sort_kind() const { return m->sort; }
+const Pair* SubdivisionCuda::device_pairs() const { return static_cast<const Pair*>(m->pairs.get()); }
+
+std::size_t SubdivisionCuda::find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream) {
+  return m->run(device_spheres, margin, static_cast<cudaStream_t>(stream));
+}
+
+void SubdivisionCuda::find_pairs(const SpheresIn& s, real margin, std::vector<Pair>& out) {
+  out.clear();
+  const std::size_t n = s.count;
+  cudaStream_t stream = nullptr;
+  auto* c = m->centre.as<Vec3>(n);
+  auto* r = m->radius.as<real>(n);
+  if (n > 0) {
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(c, s.centre, n * sizeof(Vec3), cudaMemcpyHostToDevice, stream));
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(r, s.radius, n * sizeof(real), cudaMemcpyHostToDevice, stream));
+  }
+  const std::size_t count = m->run({c, r, n}, margin, stream);
+  out.resize(count);
+  if (count > 0)
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(out.data(), m->pairs.get(), count * sizeof(Pair), cudaMemcpyDeviceToHost, stream));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(stream));
+}
+
+std::unique_ptr<BroadPhase> make_subdivision_cuda(SortKind sort) { return std::make_unique<SubdivisionCuda>(sort); }
+
+}  // namespace marbles::broadphase

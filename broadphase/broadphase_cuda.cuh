@@ -1,0 +1,121 @@
+// broadphase/broadphase_cuda.cuh — the CUDA stages of the broad phase as
+// free launch functions over raw device pointers, counts and a stream (the
+// kernels are in cell_ids_cuda.cu, radix_sort_cuda.cu, cell_list_cuda.cu,
+// traversal_cuda.cu; broadphase_cuda.cu strings them together). Only .cu
+// files include this header.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstddef>
+#include <cstdint>
+
+#include "broadphase/broadphase_math.hpp"
+#include "broadphase/grid.hpp"
+#include "core/cuda_check.hpp"
+#include "core/pair.hpp"
+
+namespace marbles::broadphase::cuda {
+
+constexpr int kBlock = 256;
+
+// Blocks for a grid-stride loop over n items.
+inline int grid_for(std::size_t n, int sm_count, int per_sm = 8) {
+  const std::size_t want = (n + kBlock - 1) / kBlock;
+  const std::size_t cap = static_cast<std::size_t>(sm_count) * static_cast<std::size_t>(per_sm);
+  return static_cast<int>(want < 1 ? 1 : (want < cap ? want : cap));
+}
+
+// A device allocation that only grows.
+class DeviceBuffer {
+ public:
+  DeviceBuffer() = default;
+  DeviceBuffer(const DeviceBuffer&) = delete;
+  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
+  ~DeviceBuffer() {
+    if (m_ptr) cudaFree(m_ptr);
+  }
+  void* reserve(std::size_t bytes) {
+    if (bytes > m_bytes) {
+      if (m_ptr) MARBLES_CUDA_CHECK(cudaFree(m_ptr));
+      m_ptr = nullptr;
+      const std::size_t grown = bytes + bytes / 4 + 256;
+      MARBLES_CUDA_CHECK(cudaMalloc(&m_ptr, grown));
+      m_bytes = grown;
+    }
+    return m_ptr;
+  }
+  template <class T>
+  T* as(std::size_t count) {
+    return static_cast<T*>(reserve(count * sizeof(T) + 16));
+  }
+  void* get() const { return m_ptr; }
+  std::size_t bytes() const { return m_bytes; }
+
+ private:
+  void* m_ptr = nullptr;
+  std::size_t m_bytes = 0;
+};
+
+// --- cell IDs (cell_ids_cuda.cu) ---------------------------------------------
+// Bounds of the centres as order-preserving integer encodings, so that
+// atomicMin/atomicMax give the exact float (or double) extremes.
+struct BoundsAccum {
+  unsigned long long lo[3], hi[3], r_max;
+  unsigned int bad;  // a centre or radius not finite, or a radius < 0
+};
+void launch_bounds(const Vec3* centre, const real* radius, std::size_t n, BoundsAccum* acc, int sm_count,
+                   cudaStream_t stream);
+Bounds decode_bounds(const BoundsAccum& acc);
+// counts[i] = occupied cells of sphere i, info[i] = home type and type mask.
+void launch_cell_counts(const Vec3* centre, const real* radius, std::size_t n, const Grid& grid, std::uint32_t* counts,
+                        std::uint16_t* info, int sm_count, cudaStream_t stream);
+// Writes sphere i's entries at offsets[i] (exclusive scan of counts).
+template <class Key>
+void launch_cell_ids(const Vec3* centre, const real* radius, std::size_t n, const Grid& grid,
+                     const std::uint32_t* offsets, Key* keys, std::uint32_t* values, int sm_count, cudaStream_t stream);
+
+// --- sort (radix_sort_cuda.cu) -------------------------------------------------
+// Both sorts are stable, sort keys[0, n) by bits [0, key_bits) and move the
+// values with them; they ping-pong between (keys, values) and (keys_alt,
+// values_alt) and return true when the result is in the _alt pair.
+template <class Key>
+bool seed_radix_sort(Key* keys, std::uint32_t* values, Key* keys_alt, std::uint32_t* values_alt, std::size_t n,
+                     unsigned key_bits, DeviceBuffer& scratch, int sm_count, cudaStream_t stream);
+template <class Key>
+bool cub_radix_sort(Key* keys, std::uint32_t* values, Key* keys_alt, std::uint32_t* values_alt, std::size_t n,
+                    unsigned key_bits, DeviceBuffer& temp, cudaStream_t stream);
+// Exclusive sum of in[0, n) into out[0, n) through CUB (temp grown as needed).
+void exclusive_sum(const std::uint32_t* in, std::uint32_t* out, std::size_t n, DeviceBuffer& temp,
+                   cudaStream_t stream);
+
+// --- collision-cell list (cell_list_cuda.cu) -----------------------------------
+// flags[i] = 1 when a collision cell starts at sorted entry i (flags[m] = 0).
+template <class Key>
+void launch_cell_flags(const Key* keys, const std::uint32_t* values, std::size_t m, std::uint32_t* flags,
+                       int sm_count, cudaStream_t stream);
+// cells[index[i]] = the cell starting at i, for each flagged i; then
+// pass_begin[t - 1] = first cell of type t (t = 1..8), pass_begin[8] = cell count
+// (index[m] = cell count), all on the device.
+template <class Key>
+void launch_cell_write(const Key* keys, const std::uint32_t* values, std::size_t m, const std::uint32_t* index,
+                       CollisionCell* cells, std::uint32_t* pass_begin, int sm_count, cudaStream_t stream);
+
+// --- traversal (traversal_cuda.cu) ---------------------------------------------
+struct TraversalInput {
+  const CollisionCell* cells;
+  std::size_t cell_count;
+  const std::uint32_t* values;
+  const Vec3* centre;
+  const real* radius;
+  const std::uint16_t* info;
+  real margin;
+};
+// counts[c] = pairs cell c emits; *tests += exact tests made (counts[cell_count] = 0).
+void launch_traversal_count(const TraversalInput& in, std::uint32_t* counts, unsigned long long* tests, int sm_count,
+                            cudaStream_t stream);
+// Writes cell c's pairs at offsets[c].
+void launch_traversal_write(const TraversalInput& in, const std::uint32_t* offsets, IndexPair* pairs, int sm_count,
+                            cudaStream_t stream);
+
+}  // namespace marbles::broadphase::cuda

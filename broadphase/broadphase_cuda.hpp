@@ -1,0 +1,59 @@
+// broadphase/broadphase_cuda.hpp — the CUDA subdivision backend as callers
+// see it (plain C++: no CUDA types). Defined only in builds with the CUDA
+// backend (MARBLES_HAVE_CUDA); make_subdivision_cuda() in broadphase.hpp is
+// the portable way to get one.
+//
+// Two entry points:
+//   find_pairs()        host arrays in, host pairs out (uploads, runs, downloads);
+//   find_pairs_device() centres and radii already on the device, pairs left
+//                       on the device (device_pairs(), valid until the next
+//                       call): the entry point for a GPU step and the bench.
+// Both emit the same pairs in the same order as the CPU backend.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "broadphase/broadphase.hpp"
+
+namespace marbles::broadphase {
+
+class SubdivisionCuda final : public BroadPhase {
+ public:
+  // Throws RuntimeFailure("... no CUDA device") when there is none.
+  explicit SubdivisionCuda(SortKind sort = SortKind::cub);
+  ~SubdivisionCuda() override;
+  SubdivisionCuda(const SubdivisionCuda&) = delete;
+  SubdivisionCuda& operator=(const SubdivisionCuda&) = delete;
+
+  void find_pairs(const SpheresIn& spheres, real margin, std::vector<Pair>& out) override;
+  const Stats& last_stats() const override;
+  std::string name() const override;
+
+  // `device_spheres` holds device pointers. `stream` is a cudaStream_t (null:
+  // the default stream). Returns the number of pairs; the call synchronises
+  // the stream a few times to size its buffers (count, scan, allocate).
+  std::size_t find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream = nullptr);
+  const Pair* device_pairs() const;  // device pointer
+
+  // Record CUDA events between the stages so that last_stats() carries
+  // per-stage times (on by default; costs a few microseconds).
+  void set_stage_timing(bool on);
+  SortKind sort_kind() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> m;
+};
+
+// The GPU sorts on host vectors (upload, sort bits [0, key_bits), download):
+// for tests and comparisons.
+void sort_pairs_cuda(std::vector<std::uint32_t>& keys, std::vector<std::uint32_t>& values, unsigned key_bits,
+                     SortKind sort);
+void sort_pairs_cuda(std::vector<std::uint64_t>& keys, std::vector<std::uint32_t>& values, unsigned key_bits,
+                     SortKind sort);
+
+}  // namespace marbles::broadphase

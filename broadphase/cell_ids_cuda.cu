@@ -1,0 +1,155 @@
+// broadphase/cell_ids_cuda.cu — bounds of the centres and the cell-ID
+// arrays, one thread per sphere (grid-stride).
+//
+// Bounds: per-thread extremes, a block reduction in shared memory, then one
+// atomicMin/atomicMax per block on order-preserving integer encodings (exact:
+// the grid must see the same extremes as the CPU backend). Cell IDs: count
+// the occupied cells of each sphere, exclusive-scan (CUB), write: only used
+// entries are stored, in sphere order, so the stable sort keeps each cell's
+// occupants in id order.
+#include <cfloat>
+#include <cstring>
+
+#include "broadphase/broadphase_cuda.cuh"
+
+namespace marbles::broadphase::cuda {
+namespace {
+
+// Order-preserving integer encoding of a float or double.
+template <class T>
+__device__ __forceinline__ unsigned long long ordered(T v) {
+  if constexpr (sizeof(T) == 4) {
+    const unsigned int u = __float_as_uint(v);
+    return (u & 0x80000000u) ? static_cast<unsigned long long>(~u) : static_cast<unsigned long long>(u | 0x80000000u);
+  } else {
+    const auto u = static_cast<unsigned long long>(__double_as_longlong(v));
+    return (u & 0x8000000000000000ull) ? ~u : (u | 0x8000000000000000ull);
+  }
+}
+
+real decode(unsigned long long k) {
+  if constexpr (sizeof(real) == 4) {
+    const auto e = static_cast<unsigned int>(k);
+    const unsigned int u = (e & 0x80000000u) ? (e & 0x7fffffffu) : ~e;
+    float f;
+    std::memcpy(&f, &u, 4);
+    return f;
+  } else {
+    const unsigned long long u = (k & 0x8000000000000000ull) ? (k & 0x7fffffffffffffffull) : ~k;
+    double d;
+    std::memcpy(&d, &u, 8);
+    return static_cast<real>(d);
+  }
+}
+
+__global__ void bounds_kernel(const Vec3* __restrict__ centre, const real* __restrict__ radius, std::size_t n,
+                              BoundsAccum* acc) {
+  real lo[3] = {real(FLT_MAX), real(FLT_MAX), real(FLT_MAX)};
+  real hi[3] = {-real(FLT_MAX), -real(FLT_MAX), -real(FLT_MAX)};
+  real r_max = 0;
+  bool bad = false;
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n;
+       i += std::size_t(gridDim.x) * blockDim.x) {
+    const Vec3 c = centre[i];
+    const real r = radius[i];
+    bad = bad || !isfinite(c.x) || !isfinite(c.y) || !isfinite(c.z) || !isfinite(r) || r < 0;
+    lo[0] = min(lo[0], c.x), lo[1] = min(lo[1], c.y), lo[2] = min(lo[2], c.z);
+    hi[0] = max(hi[0], c.x), hi[1] = max(hi[1], c.y), hi[2] = max(hi[2], c.z);
+    r_max = max(r_max, r);
+  }
+  __shared__ real s[7][kBlock];
+  __shared__ int s_bad;
+  if (threadIdx.x == 0) s_bad = 0;
+  for (int k = 0; k < 3; ++k) s[k][threadIdx.x] = lo[k], s[3 + k][threadIdx.x] = hi[k];
+  s[6][threadIdx.x] = r_max;
+  __syncthreads();
+  if (bad) s_bad = 1;
+  for (int stride = kBlock / 2; stride > 0; stride >>= 1) {
+    if (threadIdx.x < stride) {
+      for (int k = 0; k < 3; ++k) s[k][threadIdx.x] = min(s[k][threadIdx.x], s[k][threadIdx.x + stride]);
+      for (int k = 3; k < 7; ++k) s[k][threadIdx.x] = max(s[k][threadIdx.x], s[k][threadIdx.x + stride]);
+    }
+    __syncthreads();
+  }
+  if (threadIdx.x == 0) {
+    for (int k = 0; k < 3; ++k) {
+      atomicMin(&acc->lo[k], ordered(s[k][0]));
+      atomicMax(&acc->hi[k], ordered(s[3 + k][0]));
+    }
+    atomicMax(&acc->r_max, ordered(s[6][0]));
+    if (s_bad) atomicOr(&acc->bad, 1u);
+  }
+}
+
+__global__ void cell_counts_kernel(const Vec3* __restrict__ centre, const real* __restrict__ radius, std::size_t n,
+                                   Grid grid, std::uint32_t* __restrict__ counts, std::uint16_t* __restrict__ info) {
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n;
+       i += std::size_t(gridDim.x) * blockDim.x) {
+    const Neighbourhood nb = sphere_neighbourhood(centre[i], radius[i], grid);
+    counts[i] = occupied_count(nb.occupied);
+    info[i] = make_info(cell_type(nb.home), type_mask(nb));
+  }
+  if (blockIdx.x == 0 && threadIdx.x == 0) counts[n] = 0;
+}
+
+template <class Key>
+__global__ void cell_ids_kernel(const Vec3* __restrict__ centre, const real* __restrict__ radius, std::size_t n,
+                                Grid grid, const std::uint32_t* __restrict__ offsets, Key* __restrict__ keys,
+                                std::uint32_t* __restrict__ values) {
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n;
+       i += std::size_t(gridDim.x) * blockDim.x) {
+    const SphereCellIds ids = sphere_cell_ids(centre[i], radius[i], grid);
+    std::uint32_t at = offsets[i];
+    const auto id = static_cast<std::uint32_t>(i);
+#pragma unroll
+    for (unsigned e = 0; e < 8; ++e) {
+      if (e < ids.count) {
+        keys[at] = static_cast<Key>(ids.key[e]);
+        values[at] = make_value(id, e != 0, key_type(ids.key[e], grid));
+        ++at;
+      }
+    }
+  }
+}
+
+}  // namespace
+
+void launch_bounds(const Vec3* centre, const real* radius, std::size_t n, BoundsAccum* acc, int sm_count,
+                   cudaStream_t stream) {
+  BoundsAccum init{};
+  for (int k = 0; k < 3; ++k) init.lo[k] = ~0ull, init.hi[k] = 0;
+  init.r_max = 0;
+  init.bad = 0;
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(acc, &init, sizeof init, cudaMemcpyHostToDevice, stream));
+  bounds_kernel<<<grid_for(n, sm_count, 4), kBlock, 0, stream>>>(centre, radius, n, acc);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+Bounds decode_bounds(const BoundsAccum& acc) {
+  Bounds b;
+  b.lo = Vec3(decode(acc.lo[0]), decode(acc.lo[1]), decode(acc.lo[2]));
+  b.hi = Vec3(decode(acc.hi[0]), decode(acc.hi[1]), decode(acc.hi[2]));
+  b.r_max = decode(acc.r_max);
+  return b;
+}
+
+void launch_cell_counts(const Vec3* centre, const real* radius, std::size_t n, const Grid& grid, std::uint32_t* counts,
+                        std::uint16_t* info, int sm_count, cudaStream_t stream) {
+  cell_counts_kernel<<<grid_for(n, sm_count), kBlock, 0, stream>>>(centre, radius, n, grid, counts, info);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+template <class Key>
+void launch_cell_ids(const Vec3* centre, const real* radius, std::size_t n, const Grid& grid,
+                     const std::uint32_t* offsets, Key* keys, std::uint32_t* values, int sm_count,
+                     cudaStream_t stream) {
+  cell_ids_kernel<Key><<<grid_for(n, sm_count), kBlock, 0, stream>>>(centre, radius, n, grid, offsets, keys, values);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+template void launch_cell_ids<std::uint32_t>(const Vec3*, const real*, std::size_t, const Grid&, const std::uint32_t*,
+                                             std::uint32_t*, std::uint32_t*, int, cudaStream_t);
+template void launch_cell_ids<std::uint64_t>(const Vec3*, const real*, std::size_t, const Grid&, const std::uint32_t*,
+                                             std::uint64_t*, std::uint32_t*, int, cudaStream_t);
+
+}  // namespace marbles::broadphase::cuda

@@ -1,0 +1,146 @@
+// The CUDA subdivision backend against the oracle and the CPU backend, and
+// both GPU sorts against std::stable_sort. Label `gpu`; every case skips,
+// saying so, where no CUDA device is present.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <numeric>
+#include <random>
+
+#include "broadphase/broadphase.hpp"
+#include "core/device.hpp"
+#include "core/error.hpp"
+#include "pair_check.hpp"
+#include "sphere_sets.hpp"
+#if defined(MARBLES_BROADPHASE_CUDA)
+#include <cuda_runtime.h>
+
+#include "broadphase/broadphase_cuda.hpp"
+#endif
+
+namespace mb = marbles::broadphase;
+namespace mt = marbles::broadphase::testing;
+using marbles::real;
+
+#define REQUIRE_DEVICE()                                                      \
+  do {                                                                        \
+    if (!marbles::cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device"; \
+  } while (0)
+
+#if defined(MARBLES_BROADPHASE_CUDA)
+
+class SubdivisionCuda : public ::testing::TestWithParam<mb::SortKind> {};
+
+TEST_P(SubdivisionCuda, EqualsOracleOnRandomAndAdversarialSets) {
+  REQUIRE_DEVICE();
+  auto gpu = mb::make_subdivision_cuda(GetParam());
+  std::uint64_t seed = 4242;
+  std::size_t sets = 0;
+  for (int k = 0; k < int(mt::SetKind::count); ++k) {
+    const auto kind = mt::SetKind(k);
+    for (int rep = 0; rep < 14; ++rep) {
+      const std::size_t n = 2 + (seed * 7919) % 3000;
+      const mt::SphereSet s = mt::make_set(kind, n, ++seed);
+      for (real margin : {real(0), real(0.05 + 0.1 * (rep % 3))}) {
+        std::vector<mb::Pair> got, expected;
+        gpu->find_pairs(s.view(), margin, got);
+        mb::brute_force_pairs(s.view(), margin, expected);
+        ASSERT_TRUE(mt::same_pair_set(got, expected))
+            << mt::set_name(kind) << " n=" << n << " seed=" << seed << " margin=" << margin;
+        ++sets;
+      }
+    }
+  }
+  EXPECT_GE(sets, 200u);
+}
+
+// Large sets: the GPU emits exactly the CPU backend's pairs, in the same order.
+TEST_P(SubdivisionCuda, LargeSetsEqualCpuBackend) {
+  REQUIRE_DEVICE();
+  auto gpu = mb::make_subdivision_cuda(GetParam());
+  auto cpu = mb::make_subdivision_cpu();
+  std::uint64_t seed = 777;
+  for (std::size_t n : {100000ul, 1000000ul, 4000000ul}) {
+    for (auto kind : {mt::SetKind::mono, mt::SetKind::poly20, mt::SetKind::clustered, mt::SetKind::far_away,
+                      mt::SetKind::outlier}) {
+      if (n == 4000000ul && kind != mt::SetKind::mono && kind != mt::SetKind::poly20) continue;
+      const mt::SphereSet s = mt::make_set(kind, n, ++seed);
+      std::vector<mb::Pair> a, b;
+      gpu->find_pairs(s.view(), real(0.01), a);
+      cpu->find_pairs(s.view(), real(0.01), b);
+      ASSERT_EQ(a.size(), b.size()) << mt::set_name(kind) << " n=" << n;
+      ASSERT_TRUE(a == b) << mt::set_name(kind) << " n=" << n << ": same pairs, different order";
+      EXPECT_EQ(gpu->last_stats().cell_entries, cpu->last_stats().cell_entries);
+      EXPECT_EQ(gpu->last_stats().collision_cells, cpu->last_stats().collision_cells);
+      EXPECT_EQ(gpu->last_stats().tests, cpu->last_stats().tests);
+    }
+  }
+}
+
+TEST_P(SubdivisionCuda, DeviceResidentEntryPoint) {
+  REQUIRE_DEVICE();
+  mb::SubdivisionCuda gpu(GetParam());
+  const mt::SphereSet s = mt::make_set(mt::SetKind::mono, 20000, 99);
+  marbles::Vec3* c = nullptr;
+  real* r = nullptr;
+  ASSERT_EQ(cudaMalloc(&c, s.centre.size() * sizeof(marbles::Vec3)), cudaSuccess);
+  ASSERT_EQ(cudaMalloc(&r, s.radius.size() * sizeof(real)), cudaSuccess);
+  cudaMemcpy(c, s.centre.data(), s.centre.size() * sizeof(marbles::Vec3), cudaMemcpyHostToDevice);
+  cudaMemcpy(r, s.radius.data(), s.radius.size() * sizeof(real), cudaMemcpyHostToDevice);
+  cudaStream_t stream;
+  ASSERT_EQ(cudaStreamCreate(&stream), cudaSuccess);
+  const std::size_t count = gpu.find_pairs_device({c, r, s.centre.size()}, real(0), stream);
+  std::vector<mb::Pair> got(count), expected;
+  cudaMemcpy(got.data(), gpu.device_pairs(), count * sizeof(mb::Pair), cudaMemcpyDeviceToHost);
+  mb::brute_force_pairs(s.view(), 0, expected);
+  EXPECT_TRUE(mt::same_pair_set(got, expected));
+  cudaStreamDestroy(stream);
+  cudaFree(c);
+  cudaFree(r);
+}
+
+template <class Key>
+void check_sort(mb::SortKind sort, int pattern, std::size_t n, unsigned bits, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  const Key mask = bits >= 8 * sizeof(Key) ? ~Key{0} : ((Key{1} << bits) - 1);
+  std::vector<Key> keys(n);
+  for (auto& k : keys) k = static_cast<Key>(rng()) & mask;
+  if (pattern == 1) std::fill(keys.begin(), keys.end(), keys.empty() ? Key{0} : keys[0]);
+  if (pattern == 2) std::sort(keys.begin(), keys.end());
+  if (pattern == 3) std::sort(keys.begin(), keys.end(), std::greater<Key>());
+  if (pattern == 4)
+    for (auto& k : keys) k = static_cast<Key>((rng() % 7) << (bits - 3)) & mask;
+  std::vector<std::uint32_t> values(n);
+  std::iota(values.begin(), values.end(), 0u);
+  std::vector<std::size_t> order(n);
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return keys[a] < keys[b]; });
+  std::vector<Key> k2 = keys;
+  std::vector<std::uint32_t> v2 = values;
+  mb::sort_pairs_cuda(k2, v2, bits, sort);
+  for (std::size_t i = 0; i < n; ++i) {
+    ASSERT_EQ(k2[i], keys[order[i]]) << "pattern " << pattern << " n " << n << " bits " << bits << " at " << i;
+    ASSERT_EQ(v2[i], values[order[i]]) << "pattern " << pattern << " n " << n << " bits " << bits << " at " << i;
+  }
+}
+
+TEST_P(SubdivisionCuda, SortEqualsStableSort) {
+  REQUIRE_DEVICE();
+  std::uint64_t seed = 31;
+  for (int pattern = 0; pattern < 5; ++pattern)
+    for (std::size_t n : {0ul, 1ul, 17ul, 1000ul, 65537ul, 1000003ul, 8000000ul}) {
+      for (unsigned bits : {5u, 16u, 23u, 32u}) check_sort<std::uint32_t>(GetParam(), pattern, n, bits, ++seed);
+      if (n <= 1000003ul)
+        for (unsigned bits : {37u, 64u}) check_sort<std::uint64_t>(GetParam(), pattern, n, bits, ++seed);
+    }
+}
+
+INSTANTIATE_TEST_SUITE_P(Sorts, SubdivisionCuda, ::testing::Values(mb::SortKind::seed, mb::SortKind::cub),
+                         [](const auto& info) { return info.param == mb::SortKind::seed ? "seed" : "cub"; });
+
+#endif
+
+TEST(SubdivisionCudaAvailability, ThrowsWithoutDevice) {
+  if (marbles::cuda_device().available) GTEST_SKIP() << "skipped: a CUDA device is present";
+  EXPECT_THROW(mb::make_subdivision_cuda(mb::SortKind::cub), marbles::RuntimeFailure);
+}
