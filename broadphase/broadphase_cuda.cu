@@ -4,11 +4,12 @@
 //   cell IDs   bounds (one kernel, 1 readback) -> grid -> counts -> scan
 //              (readback: entry count) -> cell IDs
 //   sort       seed radix sort or CUB, over the key's used bits
-//   cell list  flags -> scan (readback: cell count) -> write + 8 type ranges
-//   traversal  count -> scan (readback: pair count) -> write
+//   cell list  flags -> scan -> write + 8 type ranges (cells sized by m / 2)
+//   traversal  gather spheres in sorted order -> count per H entry -> scan
+//              (readback: pair count) -> write
 //
 // Every buffer is sized from a count (count, scan, allocate) and only grows;
-// there is no fixed capacity. The four readbacks are the only host syncs.
+// there is no fixed capacity. The three readbacks (bounds, entries, pairs) are the only host syncs.
 // Grids too wide for 63 key bits (a sphere very far from the rest) go
 // through the CPU backend's exact key compression, then back to the device.
 #include <cuda_runtime.h>
@@ -36,7 +37,7 @@ struct SubdivisionCuda::Impl {
   DeviceBuffer bounds, counts, offsets, info;
   DeviceBuffer keys, keys_alt, values, values_alt;
   DeviceBuffer flags, cell_index, cells, pass_begin;
-  DeviceBuffer pair_counts, pair_offsets, pairs, tests;
+  DeviceBuffer pair_counts, pair_offsets, pairs, tests, sorted_sphere, sorted_info;
   DeviceBuffer cub_temp, seed_scratch;
   std::size_t pair_count = 0;
 
@@ -127,27 +128,29 @@ std::size_t SubdivisionCuda::Impl::run_keys(const SpheresIn& d, real margin, con
   mark(2, s);
 
   // --- collision-cell list ----------------------------------------------------
+  // A collision cell holds >= 2 entries: m / 2 cells at most (no readback).
   auto* d_flags = flags.as<std::uint32_t>(m + 1);
   auto* d_index = cell_index.as<std::uint32_t>(m + 1);
+  auto* d_cells = cells.as<CollisionCell>(m / 2 + 1);
+  auto* d_pass = pass_begin.as<std::uint32_t>(9);
   launch_cell_flags<Key>(d_keys, d_values, m, d_flags, sm_count, s);
   exclusive_sum(d_flags, d_index, m + 1, cub_temp, s);
-  const std::size_t cell_count = read_u32(d_index + m, s);
-  auto* d_cells = cells.as<CollisionCell>(cell_count);
-  auto* d_pass = pass_begin.as<std::uint32_t>(9);
   launch_cell_write<Key>(d_keys, d_values, m, d_index, d_cells, d_pass, sm_count, s);
-  stats.collision_cells = cell_count;
   mark(3, s);
 
   // --- traversal --------------------------------------------------------------
-  auto* d_pair_counts = pair_counts.as<std::uint32_t>(cell_count + 1);
-  auto* d_pair_offsets = pair_offsets.as<std::uint32_t>(cell_count + 1);
+  auto* d_pair_counts = pair_counts.as<std::uint32_t>(m + 1);
+  auto* d_pair_offsets = pair_offsets.as<std::uint32_t>(m + 1);
   auto* d_tests = tests.as<unsigned long long>(1);
+  auto* d_sorted = sorted_sphere.as<SortedSphere>(m);
+  auto* d_sorted_info = sorted_info.as<std::uint16_t>(m);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(d_tests, 0, sizeof(unsigned long long), s));
-  const TraversalInput in{d_cells, cell_count, d_values, d.centre, d.radius, d_info, margin};
-  launch_traversal_count(in, d_pair_counts, d_tests, sm_count, s);
-  exclusive_sum(d_pair_counts, d_pair_offsets, cell_count + 1, cub_temp, s);
-  // one readback: pair count, tests and the 8 type ranges
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small, d_pair_offsets + cell_count, 4, cudaMemcpyDeviceToHost, s));
+  const TraversalInput in{d_cells, d_index, d_values, d.centre, d.radius, d_info, d_sorted, d_sorted_info, margin};
+  launch_gather(in, m, sm_count, s);
+  launch_traversal_count(in, m, d_pair_counts, d_tests, sm_count, s);
+  exclusive_sum(d_pair_counts, d_pair_offsets, m + 1, cub_temp, s);
+  // one readback: pair count, tests and the 8 type ranges (the last is the cell count)
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small, d_pair_offsets + m, 4, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small + 2, d_tests, 8, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small + 4, d_pass, 9 * 4, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
@@ -156,8 +159,9 @@ std::size_t SubdivisionCuda::Impl::run_keys(const SpheresIn& d, real margin, con
   std::memcpy(&t, h_small + 2, 8);
   stats.tests = t;
   for (int k = 0; k < 8; ++k) stats.cells_per_type[k] = h_small[4 + k + 1] - h_small[4 + k];
+  stats.collision_cells = h_small[4 + 8];
   auto* d_pairs = pairs.as<IndexPair>(pair_count);
-  launch_traversal_write(in, d_pair_offsets, d_pairs, sm_count, s);
+  launch_traversal_write(in, m, d_pair_offsets, d_pairs, sm_count, s);
   stats.pairs = pair_count;
   mark(4, s);
 

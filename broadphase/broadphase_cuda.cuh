@@ -102,20 +102,28 @@ void launch_cell_write(const Key* keys, const std::uint32_t* values, std::size_t
                        CollisionCell* cells, std::uint32_t* pass_begin, int sm_count, cudaStream_t stream);
 
 // --- traversal (traversal_cuda.cu) ---------------------------------------------
+struct alignas(sizeof(real) * 4) SortedSphere {
+  Vec3 centre;
+  real radius;
+};
 struct TraversalInput {
   const CollisionCell* cells;
-  std::size_t cell_count;
-  const std::uint32_t* values;
-  const Vec3* centre;
+  const std::uint32_t* cell_index;  // exclusive scan of the cell flags, m + 1 entries
+  const std::uint32_t* values;      // sorted object-list values
+  const Vec3* centre;               // by object id
   const real* radius;
   const std::uint16_t* info;
+  SortedSphere* sorted_sphere;      // by sorted entry (written by launch_gather)
+  std::uint16_t* sorted_info;
   real margin;
 };
-// counts[c] = pairs cell c emits; *tests += exact tests made (counts[cell_count] = 0).
-void launch_traversal_count(const TraversalInput& in, std::uint32_t* counts, unsigned long long* tests, int sm_count,
-                            cudaStream_t stream);
-// Writes cell c's pairs at offsets[c].
-void launch_traversal_write(const TraversalInput& in, const std::uint32_t* offsets, IndexPair* pairs, int sm_count,
-                            cudaStream_t stream);
+// sorted_sphere[e], sorted_info[e] = the sphere of sorted entry e.
+void launch_gather(const TraversalInput& in, std::size_t m, int sm_count, cudaStream_t stream);
+// counts[e] = pairs sorted entry e emits (counts[m] = 0); *tests += exact tests made.
+void launch_traversal_count(const TraversalInput& in, std::size_t m, std::uint32_t* counts, unsigned long long* tests,
+                            int sm_count, cudaStream_t stream);
+// Writes entry e's pairs at offsets[e].
+void launch_traversal_write(const TraversalInput& in, std::size_t m, const std::uint32_t* offsets, IndexPair* pairs,
+                            int sm_count, cudaStream_t stream);
 
 }  // namespace marbles::broadphase::cuda

@@ -181,11 +181,30 @@ MARBLES_HD_INLINE bool cell_tests_pair(bool b_phantom, std::uint32_t pos_a, std:
   return b_phantom || pos_b > pos_a;
 }
 
-// The exact predicate: |ci - cj|^2 < (ri + rj + margin)^2.
+// The exact predicate: |ci - cj|^2 < (ri + rj + margin)^2, evaluated in the
+// same order with the same roundings on host and device: on the device each
+// product and sum is an explicitly rounded operation, so the compiler cannot
+// fuse them into FMAs (which round once, and would flip exactly-touching
+// pairs against the CPU oracle).
+MARBLES_HD_INLINE real mul_rn(real a, real b) {
+#if defined(__CUDA_ARCH__)
+  if constexpr (sizeof(real) == 4) return __fmul_rn(a, b); else return __dmul_rn(a, b);
+#else
+  return a * b;
+#endif
+}
+MARBLES_HD_INLINE real add_rn(real a, real b) {
+#if defined(__CUDA_ARCH__)
+  if constexpr (sizeof(real) == 4) return __fadd_rn(a, b); else return __dadd_rn(a, b);
+#else
+  return a + b;
+#endif
+}
 MARBLES_HD_INLINE bool spheres_overlap(const Vec3& ci, real ri, const Vec3& cj, real rj, real margin) {
-  const Vec3 d = ci - cj;
-  const real reach = ri + rj + margin;
-  return dot(d, d) < reach * reach;
+  const real dx = ci.x - cj.x, dy = ci.y - cj.y, dz = ci.z - cj.z;
+  const real d2 = add_rn(add_rn(mul_rn(dx, dx), mul_rn(dy, dy)), mul_rn(dz, dz));
+  const real reach = add_rn(add_rn(ri, rj), margin);
+  return d2 < mul_rn(reach, reach);
 }
 
 // A collision cell: a run of equal keys in the sorted cell-ID array with at
@@ -196,40 +215,60 @@ struct CollisionCell {
   std::uint32_t n_phantom = 0;  // P occupants
 };
 
-// The work of one collision cell in its pass (T = the cell's type): every H
-// occupant against every other occupant (P, or H further on), the skip rule,
-// then the exact test. emit(i, j) is called with i < j for each overlapping
-// pair; returns the number of exact tests made. Entries of a cell are in
-// object-id order (stable sort of entries written in id order), so the order
-// of emission depends only on the input.
+// The work of one H occupant (position a in its collision cell; the pass T
+// is the cell's type): tested against every other occupant that is P, or H
+// further on (so an H-H pair once), unless the skip rule says the pair was
+// tested in an earlier pass; then the exact test. `sphere(k)` gives the
+// centre, radius and info of the cell's k-th occupant. emit(i, j) is called
+// with i < j for each overlapping pair; returns the exact tests made.
+struct Occupant {
+  Vec3 centre;
+  real radius;
+  std::uint16_t info;
+};
+
+template <class SphereOf, class Emit>
+MARBLES_HD_INLINE unsigned traverse_home_occupant(std::uint32_t a, const CollisionCell& cell,
+                                                  const std::uint32_t* values, SphereOf&& sphere, real margin,
+                                                  Emit&& emit) {
+  const std::uint32_t n = cell.n_home + cell.n_phantom;
+  const std::uint32_t va = values[cell.start + a];
+  const unsigned pass_type = value_type(va);
+  const std::uint32_t ia = value_id(va);
+  const Occupant oa = sphere(a);
+  unsigned tests = 0;
+  for (std::uint32_t b = 0; b < n; ++b) {
+    if (b == a) continue;
+    const std::uint32_t vb = values[cell.start + b];
+    if (!cell_tests_pair(value_phantom(vb), a, b)) continue;
+    const Occupant ob = sphere(b);
+    if (tested_in_earlier_pass(pass_type, oa.info, ob.info)) continue;
+    ++tests;
+    if (spheres_overlap(oa.centre, oa.radius, ob.centre, ob.radius, margin)) {
+      const std::uint32_t ib = value_id(vb);
+      if (ia < ib)
+        emit(ia, ib);
+      else
+        emit(ib, ia);
+    }
+  }
+  return tests;
+}
+
+// One collision cell: each H occupant in order. Entries of a cell are in
+// object-id order (stable sort of entries written in id order), so the
+// order of emission depends only on the input.
 template <class Emit>
 MARBLES_HD_INLINE unsigned traverse_cell(const CollisionCell& cell, const std::uint32_t* values, const Vec3* centre,
                                          const real* radius, const std::uint16_t* info, real margin, Emit&& emit) {
   const std::uint32_t n = cell.n_home + cell.n_phantom;
-  const unsigned pass_type = value_type(values[cell.start]);
+  auto sphere = [&](std::uint32_t k) {
+    const std::uint32_t id = value_id(values[cell.start + k]);
+    return Occupant{centre[id], radius[id], info[id]};
+  };
   unsigned tests = 0;
-  for (std::uint32_t a = 0; a < n; ++a) {
-    const std::uint32_t va = values[cell.start + a];
-    if (value_phantom(va)) continue;
-    const std::uint32_t ia = value_id(va);
-    const Vec3 ca = centre[ia];
-    const real ra = radius[ia];
-    const std::uint16_t info_a = info[ia];
-    for (std::uint32_t b = 0; b < n; ++b) {
-      if (b == a) continue;
-      const std::uint32_t vb = values[cell.start + b];
-      if (!cell_tests_pair(value_phantom(vb), a, b)) continue;
-      const std::uint32_t ib = value_id(vb);
-      if (tested_in_earlier_pass(pass_type, info_a, info[ib])) continue;
-      ++tests;
-      if (spheres_overlap(ca, ra, centre[ib], radius[ib], margin)) {
-        if (ia < ib)
-          emit(ia, ib);
-        else
-          emit(ib, ia);
-      }
-    }
-  }
+  for (std::uint32_t a = 0; a < n; ++a)
+    if (!value_phantom(values[cell.start + a])) tests += traverse_home_occupant(a, cell, values, sphere, margin, emit);
   return tests;
 }
 
