@@ -1,0 +1,26 @@
+// render/atomic_file.hpp — write-then-rename, so that a reader (ParaView, a
+// movie player, a later `marbles render`) never sees half a file.
+//
+// Every output file of render/ is first written under a hidden temporary name
+// in the same folder (`.NAME.tmp-PID-K`) and then renamed over the final name;
+// rename() within one folder is atomic on POSIX file systems.
+#pragma once
+
+#include <filesystem>
+#include <string_view>
+
+namespace marbles::render {
+
+/// A fresh temporary name beside `final_path` (same folder, hidden, unique per
+/// process and call).
+std::filesystem::path temp_path_beside(const std::filesystem::path& final_path);
+
+/// Renames `tmp` over `final_path`. On failure removes `tmp` and throws
+/// marbles::RuntimeFailure naming both paths.
+void commit_file(const std::filesystem::path& tmp, const std::filesystem::path& final_path);
+
+/// Writes `contents` to `path` atomically (temporary file + rename).
+/// Throws marbles::RuntimeFailure on any I/O error.
+void write_file_atomic(const std::filesystem::path& path, std::string_view contents);
+
+}  // namespace marbles::render

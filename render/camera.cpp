@@ -1,0 +1,137 @@
+// render/camera.cpp — scene bounds and the default view.
+#include "render/camera.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace marbles::render {
+
+namespace {
+
+struct D3 {
+  double x = 0, y = 0, z = 0;
+};
+D3 d3(const Vec3& v) { return {double(v.x), double(v.y), double(v.z)}; }
+D3 operator+(D3 a, D3 b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+D3 operator-(D3 a, D3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+D3 operator*(double s, D3 a) { return {s * a.x, s * a.y, s * a.z}; }
+double dot(D3 a, D3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+D3 cross(D3 a, D3 b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
+D3 normalize(D3 a) {
+  const double l = std::sqrt(dot(a, a));
+  return l > 0 ? (1 / l) * a : D3{0, 0, 1};
+}
+
+}  // namespace
+
+void Bounds::add(double x, double y, double z, double pad) {
+  const double p[3] = {x, y, z};
+  for (int a = 0; a < 3; ++a) {
+    if (!std::isfinite(p[a])) return;
+  }
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::min(lo[a], p[a] - pad);
+    hi[a] = std::max(hi[a], p[a] + pad);
+  }
+}
+
+void Bounds::add(const Bounds& o) {
+  if (o.empty()) return;
+  add(o.lo[0], o.lo[1], o.lo[2]);
+  add(o.hi[0], o.hi[1], o.hi[2]);
+}
+
+double Bounds::radius() const {
+  if (empty()) return 0;
+  return 0.5 * std::sqrt(extent(0) * extent(0) + extent(1) * extent(1) + extent(2) * extent(2));
+}
+
+Bounds scene_bounds(const Snapshot& s, const Walls& walls) {
+  Bounds b;
+  const bool have_radius = s.radius.size() == s.position.size();
+  for (std::size_t i = 0; i < s.position.size(); ++i) {
+    const Vec3& p = s.position[i];
+    b.add(p.x, p.y, p.z, have_radius ? double(s.radius[i]) : 0.0);
+  }
+  for (const BoxWall& box : walls.boxes) {
+    b.add(box.lo.x, box.lo.y, box.lo.z);
+    b.add(box.hi.x, box.hi.y, box.hi.z);
+  }
+  for (const SphereWall& sp : walls.spheres) b.add(sp.centre.x, sp.centre.y, sp.centre.z, sp.radius);
+  for (const CylinderWall& c : walls.cylinders) {
+    if (!(c.length > 0)) continue;  // infinite: framed by what it holds
+    const Vec3 top = c.base + c.axis * (c.length / length(c.axis));
+    b.add(c.base.x, c.base.y, c.base.z, c.radius);
+    b.add(top.x, top.y, top.z, c.radius);
+  }
+  if (b.empty()) {
+    for (const PlaneWall& p : walls.planes) b.add(p.point.x, p.point.y, p.point.z, 1.0);
+  }
+  if (b.empty()) b.add(0, 0, 0, 1.0);
+  // The shadow of the bounds on each plane (the floor under the spheres).
+  const Bounds inner = b;
+  for (const PlaneWall& plane : walls.planes) {
+    const D3 n = normalize(d3(plane.normal)), q = d3(plane.point);
+    for (int corner = 0; corner < 8; ++corner) {
+      const D3 c{corner & 1 ? inner.hi[0] : inner.lo[0], corner & 2 ? inner.hi[1] : inner.lo[1],
+                 corner & 4 ? inner.hi[2] : inner.lo[2]};
+      const D3 on_plane = c - dot(c - q, n) * n;
+      b.add(on_plane.x, on_plane.y, on_plane.z);
+    }
+  }
+  // A flat scene (all spheres in a plane, no radius) still needs some depth.
+  const double r = std::max(b.radius(), 1e-9);
+  for (int a = 0; a < 3; ++a) {
+    if (b.extent(a) < 1e-3 * r) {
+      b.lo[a] -= 5e-4 * r;
+      b.hi[a] += 5e-4 * r;
+    }
+  }
+  return b;
+}
+
+Camera default_camera(const Bounds& bounds, int width, int height, double fov, Vec3 up_in) {
+  constexpr double kPi = 3.14159265358979323846;
+  constexpr double kAzimuth = -110 * kPi / 180;   // from the front (-x_perp side), a little to the left
+  constexpr double kElevation = 25 * kPi / 180;   // above the horizon
+  constexpr double kMargin = 1.06;                 // 6 % air around the scene
+  constexpr double kColorBarShare = 0.86;          // horizontal share left free of the colour bar
+
+  const D3 up = normalize(d3(up_in));
+  D3 ex = D3{1, 0, 0} - dot(D3{1, 0, 0}, up) * up;
+  if (dot(ex, ex) < 1e-6) ex = D3{0, 1, 0} - dot(D3{0, 1, 0}, up) * up;
+  ex = normalize(ex);
+  const D3 ey = cross(up, ex);
+  const D3 towards_camera = normalize(std::cos(kElevation) * (std::cos(kAzimuth) * ex + std::sin(kAzimuth) * ey) +
+                                      std::sin(kElevation) * up);
+  const D3 forward = -1.0 * towards_camera;
+  const D3 right = normalize(cross(forward, up));
+  const D3 cam_up = cross(right, forward);
+
+  const double aspect = double(std::max(width, 1)) / double(std::max(height, 1));
+  const double tan_v = std::tan(0.5 * std::clamp(fov, 1.0, 170.0) * kPi / 180);
+  const double tan_h = tan_v * aspect * kColorBarShare;
+  const D3 center{bounds.center(0), bounds.center(1), bounds.center(2)};
+
+  // Distance along -forward at which every corner of the bounds is in view:
+  // a corner at (x, y) across and f along the view needs |x| <= tan_h (D + f).
+  double distance = 0;
+  for (int corner = 0; corner < 8; ++corner) {
+    const D3 c{corner & 1 ? bounds.hi[0] : bounds.lo[0], corner & 2 ? bounds.hi[1] : bounds.lo[1],
+               corner & 4 ? bounds.hi[2] : bounds.lo[2]};
+    const D3 d = c - center;
+    const double need = std::max(std::abs(dot(d, right)) / tan_h, std::abs(dot(d, cam_up)) / tan_v) - dot(d, forward);
+    distance = std::max(distance, need);
+  }
+  distance = std::max(distance * kMargin, 1e-6 + 1.5 * bounds.radius());
+
+  Camera cam;
+  const D3 eye = center - distance * forward;
+  cam.position = Vec3(real(eye.x), real(eye.y), real(eye.z));
+  cam.look_at = Vec3(real(center.x), real(center.y), real(center.z));
+  cam.up = up_in;
+  cam.fov = fov;
+  return cam;
+}
+
+}  // namespace marbles::render

@@ -1,0 +1,196 @@
+// render/frame_output.cpp — see frame_output.hpp.
+#include "render/frame_output.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <regex>
+
+#include "core/error.hpp"
+#include "render/image.hpp"
+#include "render/vtk_output.hpp"
+#include "render/walls_json.hpp"
+
+namespace marbles::render {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+fs::path image_path(const fs::path& dir, std::size_t frame) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frame_%06zu.png", frame);
+  return dir / "images" / name;
+}
+
+void make_images_dir(const fs::path& dir) {
+  std::error_code ec;
+  fs::create_directories(dir / "images", ec);
+  if (ec) throw RuntimeFailure("cannot create " + (dir / "images").string() + ": " + ec.message());
+}
+
+// "\rrender [##########..........]  12/40  0.31 s/frame  ETA 9 s"
+void draw_progress(std::ostream& log, const char* what, std::size_t done, std::size_t total, double elapsed) {
+  constexpr int kWidth = 30;
+  const int filled = total ? int(kWidth * done / total) : kWidth;
+  std::string bar(filled, '#');
+  bar.append(kWidth - filled, '.');
+  char tail[96];
+  const double per = done ? elapsed / done : 0;
+  std::snprintf(tail, sizeof tail, " %zu/%zu  %.2f s/frame  ETA %.0f s   ", done, total, per, per * (total - done));
+  log << '\r' << what << " [" << bar << "]" << tail << std::flush;
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+// ---- during a run ------------------------------------------------------------
+
+FrameOutput::FrameOutput(std::string dir, RenderOptions options, MovieOptions movie, Walls walls, std::ostream& log)
+    : m_dir(std::move(dir)),
+      m_options(std::move(options)),
+      m_movie_options(movie),
+      m_walls(std::move(walls)),
+      m_log(log) {
+  make_images_dir(m_dir);
+  m_renderer = std::make_unique<Renderer>(m_options);
+  if (m_movie_options.enabled) {
+    if (ffmpeg_available())
+      m_movie = std::make_unique<MovieWriter>(m_dir / "movie.mp4", m_options.width, m_options.height,
+                                              m_movie_options.fps, m_movie_options.crf);
+    else
+      m_log << "warning: ffmpeg is not on PATH: no movie.mp4, only PNG frames\n";
+  }
+  if (!png_available()) m_log << "warning: built without libpng: no PNG frames are written\n";
+}
+
+FrameOutput::~FrameOutput() {
+  if (m_finished) return;
+  try {
+    finish();
+  } catch (const std::exception& e) {
+    m_log << "warning: " << e.what() << "\n";
+  }
+}
+
+void FrameOutput::add(const Snapshot& snapshot) {
+  if (!m_camera)
+    m_camera = m_options.camera ? *m_options.camera
+                                : default_camera(scene_bounds(snapshot, m_walls), m_options.width, m_options.height);
+  ColorRange range = data_range(snapshot, m_options.color_by);
+  if (m_range) range.add(*m_range);
+  m_range = range;
+  if (m_options.color_min) range.lo = *m_options.color_min;
+  if (m_options.color_max) range.hi = *m_options.color_max;
+
+  const Image image = m_renderer->render(snapshot, m_walls, *m_camera, range);
+  if (png_available()) write_png(image_path(m_dir, m_frames), image);
+  if (m_movie) {
+    try {
+      m_movie->add(image);
+    } catch (const RuntimeFailure& e) {
+      m_log << "warning: " << e.what() << "; continuing without a movie\n";
+      m_movie.reset();
+    }
+  }
+  ++m_frames;
+}
+
+void FrameOutput::finish() {
+  if (m_finished) return;
+  m_finished = true;
+  if (m_movie) m_movie->finish();
+}
+
+// ---- after a run -------------------------------------------------------------
+
+int render_output_dir(const std::string& out_dir, const RenderOptions& options, const MovieOptions& movie,
+                      bool progress, std::ostream& log) {
+  const fs::path dir(out_dir);
+  const fs::path pvd = dir / "series.pvd";
+  if (!fs::exists(pvd))
+    throw RuntimeFailure(pvd.string() +
+                         " not found: `marbles render` draws the VTK frames of a finished run; run the scene with "
+                         "VTK output (output.vtk_every > 0) first");
+  if (!vtk_available())
+    throw RuntimeFailure("marbles was built without VTK (libvtk9-dev): cannot read the frames of " + pvd.string());
+  if (!renderer_available())
+    throw RuntimeFailure("marbles was built without OSMesa (libosmesa6-dev): cannot render images");
+
+  const std::vector<SeriesEntry> entries = read_pvd(pvd);
+  const Walls walls = read_walls_json(dir);
+  Renderer renderer(options);
+  const auto t0 = std::chrono::steady_clock::now();
+
+  // Pass 1 (only when needed): the view and colour range that suit every frame.
+  Bounds bounds;
+  ColorRange range{1e300, -1e300};
+  const bool need_camera = !options.camera;
+  const bool need_range = !(options.color_min && options.color_max);
+  if (need_camera || need_range) {
+    for (std::size_t k = 0; k < entries.size(); ++k) {
+      const Snapshot s = read_vtp(entries[k].path);
+      if (need_camera) bounds.add(scene_bounds(s, walls));
+      if (need_range) range.add(data_range(s, options.color_by));
+      if (progress) draw_progress(log, "scan  ", k + 1, entries.size(), seconds_since(t0));
+    }
+    if (progress) log << "\n";
+  }
+  if (range.lo > range.hi) range = {0, 1};
+  if (options.color_min) range.lo = *options.color_min;
+  if (options.color_max) range.hi = *options.color_max;
+  const Camera camera = options.camera ? *options.camera : default_camera(bounds, options.width, options.height);
+
+  double fps = movie.fps;
+  if (fps <= 0) {
+    fps = 30;
+    if (entries.size() >= 2) {
+      const double dt = (entries.back().time - entries.front().time) / double(entries.size() - 1);
+      if (dt > 0 && 1 / dt >= 10 && 1 / dt <= 60) fps = 1 / dt;
+    }
+  }
+  std::unique_ptr<MovieWriter> writer;
+  if (movie.enabled) {
+    if (ffmpeg_available())
+      writer = std::make_unique<MovieWriter>(dir / "movie.mp4", options.width, options.height, fps, movie.crf);
+    else
+      log << "warning: ffmpeg is not on PATH: no movie.mp4, only PNG frames\n";
+  }
+  if (!png_available()) log << "warning: built without libpng: no PNG frames are written\n";
+  make_images_dir(dir);
+
+  // Pass 2: render. Images keep the frame numbers of the .vtp files.
+  static const std::regex numbered(R"(frame_(\d+)\.vtp)");
+  const auto t1 = std::chrono::steady_clock::now();
+  for (std::size_t k = 0; k < entries.size(); ++k) {
+    Snapshot s = read_vtp(entries[k].path);
+    if (s.time == 0 && entries[k].time != 0) s.time = entries[k].time;
+    const Image image = renderer.render(s, walls, camera, range);
+    std::size_t number = k;
+    std::smatch m;
+    const std::string name = entries[k].path.filename().string();
+    if (std::regex_match(name, m, numbered)) number = std::stoul(m[1].str());
+    if (png_available()) write_png(image_path(dir, number), image);
+    if (writer) writer->add(image);
+    if (progress) draw_progress(log, "render", k + 1, entries.size(), seconds_since(t1));
+  }
+  if (progress) log << "\n";
+  if (writer) writer->finish();
+
+  const double total = seconds_since(t1);
+  char line[256];
+  std::snprintf(line, sizeof line, "rendered %zu frames (%dx%d) in %.1f s (%.2f s/frame)", entries.size(),
+                options.width, options.height, total, total / double(entries.size()));
+  log << line << " to " << (dir / "images").string();
+  if (writer) {
+    std::snprintf(line, sizeof line, "%.3g", fps);
+    log << "; movie " << (dir / "movie.mp4").string() << " at " << line << " fps";
+  }
+  log << "\n";
+  return 0;
+}
+
+}  // namespace marbles::render

@@ -1,0 +1,312 @@
+// tests/render/basics_test.cpp — the parts of render/ that need no optional
+// library: colour maps, font, overlay text, walls file, atomic files, default
+// camera, occlusion culling, .pvd parsing.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <set>
+
+#include "core/error.hpp"
+#include "render/atomic_file.hpp"
+#include "render/bitmap_font.hpp"
+#include "render/camera.hpp"
+#include "render/color_map.hpp"
+#include "render/occlusion.hpp"
+#include "render/overlay.hpp"
+#include "render/vtk_output.hpp"
+#include "render/walls_json.hpp"
+
+namespace fs = std::filesystem;
+using namespace marbles;
+using namespace marbles::render;
+
+namespace {
+
+fs::path fresh_dir(const std::string& name) {
+  const fs::path dir = fs::path(MARBLES_BINARY_DIR) / "test-output" / "render" / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+std::size_t count_temp_files(const fs::path& dir) {
+  std::size_t n = 0;
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.path().filename().string().find(".tmp") != std::string::npos) ++n;
+  return n;
+}
+
+}  // namespace
+
+TEST(ColorMap, EndsAreThePublishedColours) {
+  const Rgb lo = sample_color_map(ColorMapName::viridis, 0), hi = sample_color_map(ColorMapName::viridis, 1);
+  EXPECT_NEAR(lo.r, 0.267004, 1e-6);
+  EXPECT_NEAR(lo.b, 0.329415, 1e-6);
+  EXPECT_NEAR(hi.r, 0.993248, 1e-6);
+  EXPECT_NEAR(hi.g, 0.906157, 1e-6);
+  // Clamped outside [0, 1]; NaN goes to the low end.
+  EXPECT_EQ(sample_color_map(ColorMapName::viridis, -3).r, lo.r);
+  EXPECT_EQ(sample_color_map(ColorMapName::viridis, 7).g, hi.g);
+  EXPECT_EQ(sample_color_map(ColorMapName::viridis, std::nan("")).r, lo.r);
+  const Rgb t0 = sample_color_map(ColorMapName::turbo, 0), t1 = sample_color_map(ColorMapName::turbo, 1);
+  EXPECT_NEAR(t0.r, 0.18995, 1e-6);
+  EXPECT_NEAR(t1.r, 0.47960, 1e-6);
+  // Viridis brightens monotonically (its luminance rises along the map).
+  double last = -1;
+  for (int i = 0; i <= 100; ++i) {
+    const Rgb c = sample_color_map(ColorMapName::viridis, i / 100.0);
+    const double y = 0.2126 * c.r + 0.7152 * c.g + 0.0722 * c.b;
+    EXPECT_GT(y, last - 1e-6);
+    last = y;
+  }
+}
+
+TEST(ColorMap, NamesParse) {
+  EXPECT_EQ(parse_color_by("speed"), ColorBy::speed);
+  EXPECT_EQ(parse_color_by("material"), ColorBy::material);
+  EXPECT_FALSE(parse_color_by("colour").has_value());
+  EXPECT_EQ(parse_color_map("turbo"), ColorMapName::turbo);
+  for (ColorBy c : {ColorBy::speed, ColorBy::id, ColorBy::radius, ColorBy::material})
+    EXPECT_EQ(parse_color_by(color_by_name(c)), c);
+  std::set<std::tuple<float, float, float>> distinct;
+  for (std::uint32_t i = 0; i < 8; ++i) distinct.insert({category_color(i).r, category_color(i).g, category_color(i).b});
+  EXPECT_EQ(distinct.size(), 8u);
+}
+
+TEST(BitmapFont, GlyphsAndWidths) {
+  // '1' has its stem in the middle column; space is empty; unknown -> '?'.
+  for (int y = 0; y < 6; ++y) EXPECT_TRUE(glyph_pixel('1', 2, y)) << y;
+  for (int y = 0; y < kGlyphHeight; ++y)
+    for (int x = 0; x < kGlyphWidth; ++x) {
+      EXPECT_FALSE(glyph_pixel(' ', x, y));
+      EXPECT_EQ(glyph_pixel('\x7f', x, y), glyph_pixel('?', x, y));
+    }
+  EXPECT_FALSE(glyph_pixel('A', -1, 0));
+  EXPECT_EQ(text_width("", 3), 0);
+  EXPECT_EQ(text_width("ab", 1), 11);
+  EXPECT_EQ(text_width("ab", 2), 22);
+  // Every printable character other than space sets some pixel.
+  for (char c = 33; c < 127; ++c) {
+    int on = 0;
+    for (int y = 0; y < kGlyphHeight; ++y)
+      for (int x = 0; x < kGlyphWidth; ++x) on += glyph_pixel(c, x, y);
+    EXPECT_GT(on, 0) << c;
+  }
+}
+
+TEST(BitmapFont, DrawsIntoTheImageAndClips) {
+  Image image(40, 12);
+  const std::uint8_t white[3] = {255, 255, 255};
+  draw_text(image, 1, 1, "1", 1, white);
+  EXPECT_EQ(image.pixel(3, 1)[0], 255);  // stem of '1' at column 2 of the glyph
+  EXPECT_EQ(image.pixel(0, 0)[0], 0);
+  draw_text(image, 35, 8, "WWW", 2, white);  // mostly outside: must not crash
+}
+
+TEST(Overlay, ValueFormatting) {
+  EXPECT_EQ(format_value(0), "0");
+  EXPECT_EQ(format_value(1.5), "1.5");
+  EXPECT_EQ(format_value(29.0213), "29.02");
+  EXPECT_EQ(format_value(2e-5), "2.000e-05");
+  EXPECT_EQ(format_value(-3e6), "-3.000e+06");
+  EXPECT_EQ(overlay_scale(720), 2);
+  EXPECT_EQ(overlay_scale(100), 1);
+}
+
+TEST(WallsJson, RoundTripsEveryKindOfWall) {
+  Walls w;
+  PlaneWall p;
+  p.point = Vec3(0.1f, -2, 3);
+  p.normal = Vec3(0, 0, 1);
+  p.velocity = Vec3(1, 0, 0);
+  p.material = 2;
+  w.planes.push_back(p);
+  BoxWall b;
+  b.lo = Vec3(-1, -1, 0);
+  b.hi = Vec3(1, 1, 2.5f);
+  w.boxes.push_back(b);
+  CylinderWall c;
+  c.base = Vec3(0, 0, 0.25f);
+  c.axis = Vec3(0, 1, 0);
+  c.radius = 0.75f;
+  c.length = 2;
+  c.inside = false;
+  c.angular_velocity = 3.5f;
+  c.material = 1;
+  w.cylinders.push_back(c);
+  SphereWall s;
+  s.centre = Vec3(0.5f, 0.5f, 1);
+  s.radius = 0.2f;
+  w.spheres.push_back(s);
+
+  const fs::path dir = fresh_dir("walls_json");
+  write_walls_json(dir, w);
+  EXPECT_EQ(count_temp_files(dir), 0u);
+  const Walls r = read_walls_json(dir);
+  ASSERT_EQ(r.planes.size(), 1u);
+  ASSERT_EQ(r.boxes.size(), 1u);
+  ASSERT_EQ(r.cylinders.size(), 1u);
+  ASSERT_EQ(r.spheres.size(), 1u);
+  EXPECT_EQ(r.planes[0].point, p.point);
+  EXPECT_EQ(r.planes[0].normal, p.normal);
+  EXPECT_EQ(r.planes[0].velocity, p.velocity);
+  EXPECT_EQ(r.planes[0].material, 2u);
+  EXPECT_EQ(r.boxes[0].lo, b.lo);
+  EXPECT_EQ(r.boxes[0].hi, b.hi);
+  EXPECT_EQ(r.cylinders[0].base, c.base);
+  EXPECT_EQ(r.cylinders[0].axis, c.axis);
+  EXPECT_EQ(r.cylinders[0].radius, c.radius);
+  EXPECT_EQ(r.cylinders[0].length, c.length);
+  EXPECT_FALSE(r.cylinders[0].inside);
+  EXPECT_EQ(r.cylinders[0].angular_velocity, c.angular_velocity);
+  EXPECT_EQ(r.spheres[0].centre, s.centre);
+  EXPECT_EQ(r.spheres[0].radius, s.radius);
+}
+
+TEST(WallsJson, MissingFileMeansNoWallsAndBadFilesSayWhere) {
+  const fs::path dir = fresh_dir("walls_json_bad");
+  EXPECT_TRUE(read_walls_json(dir).empty());
+  EXPECT_TRUE(walls_from_json("{\"planes\": []}").empty());
+  try {
+    walls_from_json("{\n  \"boxes\": [ {\"lo\": [0, 0], \"hi\": [1, 1, 1]} ]\n}", "w.json");
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.key(), "boxes[0].lo");
+    EXPECT_EQ(e.where().file, "w.json");
+    EXPECT_EQ(e.where().line, 2);
+  }
+  EXPECT_THROW(walls_from_json("{\"boxes\": [ {\"lo\": [1, 0, 0], \"hi\": [0, 1, 1]} ]}"), InputError);
+  EXPECT_THROW(walls_from_json("{\"planes\": [ {\"point\": [0,0,0], \"normal\": [0,0,0]} ]}"), InputError);
+  EXPECT_THROW(walls_from_json("{\"planes\": "), InputError);
+}
+
+TEST(AtomicFile, WritesAndLeavesNoTemporaries) {
+  const fs::path dir = fresh_dir("atomic");
+  write_file_atomic(dir / "a.txt", "hello");
+  write_file_atomic(dir / "a.txt", "world");  // replaces
+  std::ifstream in(dir / "a.txt");
+  std::string text;
+  in >> text;
+  EXPECT_EQ(text, "world");
+  EXPECT_EQ(count_temp_files(dir), 0u);
+  EXPECT_NE(temp_path_beside(dir / "a.txt"), temp_path_beside(dir / "a.txt"));
+  EXPECT_EQ(temp_path_beside(dir / "a.txt").parent_path(), dir);
+  EXPECT_THROW(write_file_atomic(dir / "no-such-folder" / "b.txt", "x"), RuntimeFailure);
+}
+
+TEST(Camera, DefaultViewFramesTheBounds) {
+  Bounds b;
+  b.add(-1, -2, 0);
+  b.add(3, 2, 1.5);
+  const int w = 1280, h = 720;
+  const Camera cam = default_camera(b, w, h, 40);
+  // Project the eight corners with the camera: all inside the frame.
+  const double fx = cam.look_at.x - cam.position.x, fy = cam.look_at.y - cam.position.y,
+               fz = cam.look_at.z - cam.position.z;
+  const double fl = std::sqrt(fx * fx + fy * fy + fz * fz);
+  const double f[3] = {fx / fl, fy / fl, fz / fl};
+  double r[3] = {f[1] * 1 - f[2] * 0, f[2] * 0 - f[0] * 1, 0};  // forward x up(0,0,1)
+  const double rl = std::hypot(r[0], r[1]);
+  r[0] /= rl, r[1] /= rl;
+  const double u[3] = {r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]};
+  const double t = std::tan(20.0 * M_PI / 180);
+  for (int i = 0; i < 8; ++i) {
+    const double p[3] = {i & 1 ? b.hi[0] : b.lo[0], i & 2 ? b.hi[1] : b.lo[1], i & 4 ? b.hi[2] : b.lo[2]};
+    const double d[3] = {p[0] - cam.position.x, p[1] - cam.position.y, p[2] - cam.position.z};
+    const double z = d[0] * f[0] + d[1] * f[1] + d[2] * f[2];
+    ASSERT_GT(z, 0);
+    const double x = (d[0] * r[0] + d[1] * r[1] + d[2] * r[2]) / (z * t * w / h);
+    const double y = (d[0] * u[0] + d[1] * u[1] + d[2] * u[2]) / (z * t);
+    EXPECT_LE(std::abs(x), 1.0) << i;
+    EXPECT_LE(std::abs(y), 1.0) << i;
+  }
+  // Looking down on it (elevation above the horizon).
+  EXPECT_GT(cam.position.z, cam.look_at.z);
+}
+
+TEST(Camera, SceneBoundsIncludeSpheresBoxesAndTheFloorBelow) {
+  Snapshot s;
+  s.position = {Vec3(0, 0, 5), Vec3(1, 0, 6)};
+  s.radius = {0.5f, 0.5f};
+  Walls w;
+  PlaneWall floor;
+  floor.point = Vec3(0, 0, 0);
+  w.planes.push_back(floor);
+  const Bounds b = scene_bounds(s, w);
+  EXPECT_NEAR(b.lo[0], -0.5, 1e-6);
+  EXPECT_NEAR(b.hi[0], 1.5, 1e-6);
+  EXPECT_NEAR(b.hi[2], 6.5, 1e-6);
+  EXPECT_NEAR(b.lo[2], 0.0, 1e-6);  // the floor under the spheres
+  EXPECT_FALSE(scene_bounds(Snapshot{}, Walls{}).empty());
+}
+
+TEST(Occlusion, KeepsFrontAndDropsWhatIsBehindOrOffScreen) {
+  std::vector<ProjectedSphere> s(4);
+  s[0] = {50, 50, 10, 1, 20, 21};   // big, near
+  s[1] = {50, 50, 20, 1, 5, 6};     // small, right behind it: hidden
+  s[2] = {90, 50, 20, 1, 5, 6};     // beside it: visible
+  s[3] = {500, 50, 5, 1, 5, 6};     // off screen
+  const auto kept = visible_spheres(s, 100, 100, 2, 0.1f);
+  EXPECT_EQ(kept, (std::vector<std::uint32_t>{0, 2}));
+  // A sphere reaching the near plane is always kept.
+  std::vector<ProjectedSphere> t = {s[0], {50, 50, 0.5f, 1, 0, 1e30f}};
+  EXPECT_EQ(visible_spheres(t, 100, 100, 2, 0.1f).size(), 2u);
+}
+
+TEST(Occlusion, NeverDropsASphereThatOwnsAPixel) {
+  // Random discs: brute-force which disc wins each pixel centre (nearest
+  // front, using the inner disk where the surface is at most `depth` and the
+  // outer disk otherwise) and check every winner is kept.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> pos(0, 64), dep(5, 50), rad(2, 9);
+  std::vector<ProjectedSphere> s(300);
+  for (auto& q : s) {
+    q.x = pos(rng), q.y = pos(rng), q.depth = dep(rng), q.radius = 0.5f;
+    q.inner = rad(rng), q.outer = q.inner * 1.05f + 1;
+  }
+  const auto kept = visible_spheres(s, 64, 64, 2, 0.1f);
+  const std::set<std::uint32_t> keep(kept.begin(), kept.end());
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) {
+      // The drawn depth of a disc at a pixel lies in [depth - radius, depth]
+      // inside `inner`; the winner with the nearest possible front must be kept.
+      int best = -1;
+      float best_front = 1e30f;
+      for (std::size_t i = 0; i < s.size(); ++i) {
+        const float dx = x + 0.5f - s[i].x, dy = y + 0.5f - s[i].y;
+        if (dx * dx + dy * dy > s[i].inner * s[i].inner) continue;
+        if (s[i].depth - s[i].radius < best_front) best_front = s[i].depth - s[i].radius, best = int(i);
+      }
+      if (best >= 0) {
+        EXPECT_TRUE(keep.count(std::uint32_t(best))) << x << "," << y;
+      }
+    }
+  EXPECT_LT(kept.size(), s.size());  // and it does drop something
+}
+
+TEST(PointFields, ParseAndReject) {
+  EXPECT_EQ(parse_point_fields({"radius", "velocity", "radius", "speed"}),
+            (std::vector<PointField>{PointField::radius, PointField::velocity, PointField::speed}));
+  EXPECT_THROW(parse_point_fields({"radius", "colour"}), InputError);
+  for (PointField f : {PointField::radius, PointField::velocity, PointField::angular_velocity, PointField::id,
+                       PointField::material, PointField::speed})
+    EXPECT_EQ(parse_point_field(point_field_name(f)), f);
+}
+
+TEST(Pvd, ParsesEntriesRelativeToItsFolder) {
+  const fs::path dir = fresh_dir("pvd");
+  write_file_atomic(dir / "series.pvd",
+                    "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\">\n<Collection>\n"
+                    "  <DataSet timestep=\"0\" part=\"0\" file=\"frames/frame_000000.vtp\"/>\n"
+                    "  <DataSet file='frames/frame_000001.vtp' timestep='0.25'/>\n"
+                    "</Collection>\n</VTKFile>\n");
+  const auto entries = read_pvd(dir / "series.pvd");
+  ASSERT_EQ(entries.size(), 2u);
+  EXPECT_EQ(entries[0].time, 0);
+  EXPECT_EQ(entries[1].time, 0.25);
+  EXPECT_EQ(entries[1].path, dir / "frames" / "frame_000001.vtp");
+  EXPECT_THROW(read_pvd(dir / "missing.pvd"), RuntimeFailure);
+}
