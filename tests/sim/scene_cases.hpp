@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -22,6 +23,9 @@ struct BadScene {
   const char* expected;  // see above
   const char* csv = nullptr;  // written as data.csv beside the scene when given
 };
+
+// GoogleTest prints a case by its name.
+inline void PrintTo(const BadScene& c, std::ostream* os) { *os << c.name; }
 
 #define SCENE_TIME "time: {duration: 1, dt: 0.001}\n"
 #define SCENE_MATERIALS "materials:\n  glass: {density: 2500}\n"
