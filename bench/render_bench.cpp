@@ -1,13 +1,15 @@
 // bench/render_bench.cpp — time to render one frame of a large pile of spheres
 // off-screen (OSMesa / llvmpipe, CPU only).
 //
-// Scene: N spheres (default 100,000) on a jittered cubic lattice filling the
-// lower part of a box, with a floor plane under it, coloured by speed; the
-// default camera frames it. Renders a warm-up frame, then F timed frames
+// Scene (--layout): `pile` (default) puts N spheres (default 100,000) on a
+// jittered cubic lattice filling the lower part of a box, with a floor plane
+// under it; `gas` scatters them at random through the same box (about 3 %
+// volume fraction: little is hidden, the worst case for occlusion culling).
+// Coloured by speed; the default camera frames it. Renders a warm-up frame, then F timed frames
 // (default 5) at W x H (default 1280 x 720) and reports the median, plus the
 // time of writing one PNG.
 //
-//   render_bench [--n N] [--width W] [--height H] [--frames F]
+//   render_bench [--n N] [--layout pile|gas] [--width W] [--height H] [--frames F]
 //                [--supersample S] [--no-shadows] [--no-cull] [--png FILE]
 //
 // Prints one JSON object, then a one-line table.
@@ -39,7 +41,7 @@ int main(int argc, char** argv) {
   std::size_t n = 100000;
   int width = 1280, height = 720, frames = 5, supersample = RenderOptions{}.supersample;
   bool shadows = true, cull = true;
-  std::string png;
+  std::string png, layout = "pile";
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> std::string {
@@ -50,6 +52,7 @@ int main(int argc, char** argv) {
       return argv[++i];
     };
     if (a == "--n") n = std::stoul(value());
+    else if (a == "--layout") layout = value();
     else if (a == "--width") width = std::stoi(value());
     else if (a == "--height") height = std::stoi(value());
     else if (a == "--frames") frames = std::max(1, std::stoi(value()));
@@ -58,7 +61,7 @@ int main(int argc, char** argv) {
     else if (a == "--no-cull") cull = false;
     else if (a == "--png") png = value();
     else {
-      std::cerr << "usage: render_bench [--n N] [--width W] [--height H] [--frames F] [--supersample S] "
+      std::cerr << "usage: render_bench [--n N] [--layout pile|gas] [--width W] [--height H] [--frames F] [--supersample S] "
                    "[--no-shadows] [--no-cull] [--png FILE]\n";
       return 2;
     }
@@ -82,6 +85,13 @@ int main(int argc, char** argv) {
     s.material.push_back(0);
   }
   const int layers = int((n + per_layer - 1) / per_layer);
+  if (layout == "gas") {  // same spheres, scattered through a box three times as tall
+    std::uniform_real_distribution<double> ux(0, nx * spacing), uz(r, 3 * layers * spacing);
+    for (Vec3& p : s.position) p = Vec3(real(ux(rng)), real(ux(rng)), real(uz(rng)));
+  } else if (layout != "pile") {
+    std::cerr << "render_bench: unknown layout '" << layout << "' (pile or gas)\n";
+    return 2;
+  }
   Walls walls;
   PlaneWall floor;
   floor.point = Vec3(0, 0, 0);
@@ -89,7 +99,7 @@ int main(int argc, char** argv) {
   walls.planes.push_back(floor);
   BoxWall box;
   box.lo = Vec3(real(-spacing), real(-spacing), 0);
-  box.hi = Vec3(real(nx * spacing), real(ny * spacing), real((layers + 2) * spacing));
+  box.hi = Vec3(real(nx * spacing), real(ny * spacing), real((layout == "gas" ? 3 * layers : layers + 2) * spacing));
   walls.boxes.push_back(box);
 
   RenderOptions options;
@@ -120,17 +130,17 @@ int main(int argc, char** argv) {
       png_s = seconds(p0, std::chrono::steady_clock::now());
     }
     std::printf(
-        "{\"bench\": \"render\", \"spheres\": %zu, \"width\": %d, \"height\": %d, \"supersample\": %d, "
+        "{\"bench\": \"render\", \"layout\": \"%s\", \"spheres\": %zu, \"width\": %d, \"height\": %d, \"supersample\": %d, "
         "\"shadows\": %s, \"frames\": %d, \"first_frame_s\": %.4f, \"median_s\": %.4f, \"min_s\": %.4f, "
         "\"max_s\": %.4f, \"png_write_s\": %.4f, \"culling\": %s, \"spheres_drawn\": %zu, \"shadow_casters\": %zu, "
         "\"gl\": \"%s\"}\n",
-        n, width, height, options.supersample, shadows ? "true" : "false", frames, seconds(c0, c1), median,
+        layout.c_str(), n, width, height, options.supersample, shadows ? "true" : "false", frames, seconds(c0, c1), median,
         times.front(), times.back(), png_s, cull ? "true" : "false", renderer.last_frame_stats().spheres_drawn,
         renderer.last_frame_stats().shadow_casters, renderer.gl_description().c_str());
     std::printf(
-        "render  %zu spheres (%zu drawn)  %dx%d  ss %d  shadows %s  median %.3f s/frame  (min %.3f, max %.3f, %d "
+        "render  %s  %zu spheres (%zu drawn)  %dx%d  ss %d  shadows %s  median %.3f s/frame  (min %.3f, max %.3f, %d "
         "frames)\n",
-        n, renderer.last_frame_stats().spheres_drawn, width, height, options.supersample, shadows ? "on" : "off",
+        layout.c_str(), n, renderer.last_frame_stats().spheres_drawn, width, height, options.supersample, shadows ? "on" : "off",
         median, times.front(), times.back(), frames);
   } catch (const RuntimeFailure& e) {
     std::cerr << "render_bench: " << e.what() << "\n";
