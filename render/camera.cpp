@@ -3,6 +3,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <string>
+
+#include "core/error.hpp"
 
 namespace marbles::render {
 
@@ -131,6 +135,37 @@ Camera default_camera(const Bounds& bounds, int width, int height, double fov, V
   cam.look_at = Vec3(real(center.x), real(center.y), real(center.z));
   cam.up = up_in;
   cam.fov = fov;
+  return cam;
+}
+
+Camera parse_camera(std::string_view text, std::string_view key) {
+  const std::string k(key);
+  const auto fail = [&]() -> Camera {
+    throw InputError({}, k, "expected x,y,z:lx,ly,lz (camera position : look-at point), got '" + std::string(text) + "'");
+  };
+  const auto colon = text.find(':');
+  if (colon == std::string_view::npos) return fail();
+  auto parse3 = [&](std::string_view part, Vec3& out) {
+    double v[3];
+    std::string s(part);
+    const char* p = s.c_str();
+    for (int i = 0; i < 3; ++i) {
+      char* end = nullptr;
+      v[i] = std::strtod(p, &end);
+      if (end == p || !std::isfinite(v[i])) return false;
+      p = end;
+      if (i < 2) {
+        if (*p != ',') return false;
+        ++p;
+      }
+    }
+    if (*p != '\0') return false;
+    out = Vec3(real(v[0]), real(v[1]), real(v[2]));
+    return true;
+  };
+  Camera cam;
+  if (!parse3(text.substr(0, colon), cam.position) || !parse3(text.substr(colon + 1), cam.look_at)) return fail();
+  if (cam.position == cam.look_at) throw InputError({}, k, "camera position and look-at point coincide");
   return cam;
 }
 

@@ -2,6 +2,8 @@
 // that shows the whole scene.
 #pragma once
 
+#include <string_view>
+
 #include "core/vec3.hpp"
 #include "core/walls.hpp"
 #include "render/snapshot.hpp"
@@ -40,5 +42,9 @@ Bounds scene_bounds(const Snapshot& snapshot, const Walls& walls);
 /// looking from the front-left and 25 degrees above (with `up` as up), with
 /// some room on the right for the colour bar.
 Camera default_camera(const Bounds& bounds, int width, int height, double fov = 40, Vec3 up = {0, 0, 1});
+
+/// Parses the command-line form "x,y,z:lx,ly,lz" (position : look-at; up
+/// +z, fov 40 unless given). Throws marbles::InputError with key `key`.
+Camera parse_camera(std::string_view text, std::string_view key = "--camera");
 
 }  // namespace marbles::render

@@ -310,3 +310,12 @@ TEST(Pvd, ParsesEntriesRelativeToItsFolder) {
   EXPECT_EQ(entries[1].path, dir / "frames" / "frame_000001.vtp");
   EXPECT_THROW(read_pvd(dir / "missing.pvd"), RuntimeFailure);
 }
+
+TEST(Camera, ParsesTheCommandLineForm) {
+  const Camera c = parse_camera("1,2.5,-3:0,0,0.5");
+  EXPECT_EQ(c.position, Vec3(1, 2.5f, -3));
+  EXPECT_EQ(c.look_at, Vec3(0, 0, 0.5f));
+  EXPECT_EQ(c.up, Vec3(0, 0, 1));
+  for (const char* bad : {"1,2,3", "1,2:0,0,0", "1,2,3:0,0,0,4", "a,b,c:0,0,0", "1,1,1:1,1,1", ""})
+    EXPECT_THROW(parse_camera(bad), InputError) << bad;
+}
