@@ -33,8 +33,12 @@ class InputError : public std::runtime_error {
     if (!where.file.empty()) {
       out += where.file;
       if (where.line > 0) {
-        out += ":" + std::to_string(where.line);
-        if (where.column > 0) out += ":" + std::to_string(where.column);
+        out += ':';
+        out += std::to_string(where.line);
+        if (where.column > 0) {
+          out += ':';
+          out += std::to_string(where.column);
+        }
       }
       out += ": ";
     }

@@ -50,6 +50,7 @@ struct Contact {
 
   // Accumulated impulses of this substep.
   real normal_impulse = 0;  // N s, >= 0
+  real impact_impulse = 0;  // N s, the part of normal_impulse the restitution stage added
   Vec3 tangent_impulse;     // N s, |.| <= mu * normal_impulse
   Vec3 rolling_impulse;     // N m s
 

@@ -188,6 +188,7 @@ MARBLES_HD_INLINE void apply_restitution(Contact& c, BodyState& A, BodyState& B,
   const real old = c.normal_impulse;
   c.normal_impulse = old + lambda > 0 ? old + lambda : real(0);
   lambda = c.normal_impulse - old;
+  c.impact_impulse = lambda;
   const Vec3 p = c.normal * lambda;
   A.v += p * A.inv_mass;
   B.v -= p * B.inv_mass;

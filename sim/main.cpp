@@ -4,13 +4,18 @@
 // names file:line:column and key, or the argument); 1 failure while running.
 #include <CLI/CLI.hpp>
 
+#include <unistd.h>
+
+#include <cstdio>
 #include <iostream>
 #include <string>
 
 #include "bench/broadphase_bench.hpp"
 #include "bench/step_bench.hpp"
 #include "core/error.hpp"
-#include "render/render_dir.hpp"
+#include "render/camera.hpp"
+#include "render/color_map.hpp"
+#include "render/frame_output.hpp"
 #include "sim/run.hpp"
 
 namespace {
@@ -67,6 +72,8 @@ int main(int argc, char** argv) {
   bench_bp->add_option("--scene", bp.scene, "gas|pile|poly")->check(CLI::IsMember({"gas", "pile", "poly"}));
   bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(CLI::PositiveNumber);
   bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")->check(CLI::PositiveNumber);
+  bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(CLI::NonNegativeNumber);
+  bench_bp->add_option("--seed", bp.seed, "random seed of the sphere sets");
   bench_bp->add_flag("--json", bp.json, "print JSON");
 
   bench::StepBenchOptions st;
@@ -78,11 +85,21 @@ int main(int argc, char** argv) {
   bench_step->add_option("--effects", st.effects, "effects of the pipeline")->delimiter(',');
   bench_step->add_flag("--json", st.json, "print JSON");
 
-  render::RenderDirOptions rd;
-  std::string rd_dir;
+  render::RenderOptions rd;
+  render::MovieOptions rd_movie;
+  rd_movie.fps = 0;  // from the frame times unless given
+  std::string rd_dir, rd_color_by, rd_camera;
   auto* render_cmd = app.add_subcommand("render", "render the frames of an output folder to PNG and a movie");
   render_cmd->add_option("outdir", rd_dir, "output folder of a run (holds series.pvd)")->required();
-  render::add_render_dir_options(*render_cmd, rd);
+  render_cmd->add_option("--color-by", rd_color_by, "speed|id|radius|material")
+      ->check(CLI::IsMember({"speed", "id", "radius", "material"}));
+  render_cmd->add_option("--camera", rd_camera, "camera position and target: x,y,z:lx,ly,lz");
+  render_cmd->add_option("--width", rd.width, "image width in pixels")->check(CLI::Range(16, 16384));
+  render_cmd->add_option("--height", rd.height, "image height in pixels")->check(CLI::Range(16, 16384));
+  render_cmd->add_option("--fps", rd_movie.fps, "movie frames per second (default: from the frame times)")
+      ->check(CLI::PositiveNumber);
+  bool rd_no_movie = false;
+  render_cmd->add_flag("--no-movie", rd_no_movie, "PNG frames only");
 
   try {
     app.parse(argc, argv);
@@ -114,7 +131,12 @@ int main(int argc, char** argv) {
       if (st.backend == "cuda") select_backend(BackendChoice::cuda, std::cerr);
       return bench::run_step_bench(st, std::cout);
     }
-    if (*render_cmd) return render::render_output_dir(rd_dir, rd, std::cout, std::cerr);
+    if (*render_cmd) {
+      if (!rd_color_by.empty()) rd.color_by = *render::parse_color_by(rd_color_by);
+      if (!rd_camera.empty()) rd.camera = render::parse_camera(rd_camera, "--camera");
+      rd_movie.enabled = !rd_no_movie;
+      return render::render_output_dir(rd_dir, rd, rd_movie, isatty(fileno(stderr)) != 0, std::cerr);
+    }
   } catch (const InputError& e) {
     std::cerr << e.what() << "\n";
     return 2;

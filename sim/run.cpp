@@ -10,7 +10,7 @@
 
 #include "core/device.hpp"
 #include "core/error.hpp"
-#include "sim/atomic_file.hpp"
+#include "render/atomic_file.hpp"
 #include "sim/output.hpp"
 #include "sim/particles.hpp"
 #include "sim/progress.hpp"
@@ -149,7 +149,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
        << "}\n";
   std::filesystem::create_directories(sc.output.dir);
   const std::string summary_path = (std::filesystem::path(sc.output.dir) / "summary.json").string();
-  write_file_atomically(summary_path, json.str());
+  render::write_file_atomic(summary_path, json.str());
 
   out << std::setprecision(4) << sc.name << ": " << sim.steps() << " steps, " << sim.time() << " s simulated in "
       << wall << " s (" << 1e3 * step_seconds / steps << " ms/step; " << candidate_sum / steps

@@ -21,10 +21,47 @@ Walls make_walls(const scene::Scene& scene) {
   Walls walls;
   for (const scene::WallSpec& w : scene.walls) {
     const std::uint32_t material = scene.material_index(w.material, w.where, "walls.material");
-    if (w.kind == scene::WallSpec::Kind::plane) walls.planes.push_back({w.point, w.normal, material, {}});
-    else walls.boxes.push_back({w.lo, w.hi, material, {}});
+    switch (w.kind) {
+      case scene::WallSpec::Kind::plane:
+        walls.planes.push_back({w.point, w.normal, material, w.velocity});
+        break;
+      case scene::WallSpec::Kind::box:
+        walls.boxes.push_back({w.lo, w.hi, material, w.velocity});
+        break;
+      case scene::WallSpec::Kind::cylinder:
+        walls.cylinders.push_back({w.base, w.axis, static_cast<real>(w.radius), static_cast<real>(w.length), w.inside,
+                                   static_cast<real>(w.angular_velocity), material});
+        break;
+      case scene::WallSpec::Kind::sphere:
+        walls.spheres.push_back({w.centre, static_cast<real>(w.radius), material, w.velocity});
+        break;
+    }
   }
   return walls;
+}
+
+// Coefficients of every material pair: the mixing rule, then the scene's
+// explicit contact_pairs (each coefficient it gives replaces the mixed one).
+std::vector<narrowphase::PairCoefficients> pair_coefficients(const scene::Scene& scene) {
+  const std::size_t nm = scene.materials.size();
+  std::vector<narrowphase::PairCoefficients> table(nm * nm);
+  for (std::size_t a = 0; a < nm; ++a)
+    for (std::size_t b = 0; b < nm; ++b) {
+      const scene::Material& ma = scene.materials[a];
+      const scene::Material& mb = scene.materials[b];
+      table[a * nm + b] = mix_materials(ma.restitution, ma.friction, ma.rolling_friction, mb.restitution,
+                                        mb.friction, mb.rolling_friction);
+    }
+  for (const scene::ContactPairSpec& p : scene.contact_pairs) {
+    const std::uint32_t a = scene.material_index(p.first, p.where, "contact_pairs");
+    const std::uint32_t b = scene.material_index(p.second, p.where, "contact_pairs");
+    for (narrowphase::PairCoefficients* c : {&table[a * nm + b], &table[b * nm + a]}) {
+      if (p.restitution >= 0) c->restitution = static_cast<real>(p.restitution);
+      if (p.friction >= 0) c->friction = static_cast<real>(p.friction);
+      if (p.rolling_friction >= 0) c->rolling_friction = static_cast<real>(p.rolling_friction);
+    }
+  }
+  return table;
 }
 
 narrowphase::SolverSettings solver_settings(const scene::Scene& scene) {
@@ -47,25 +84,18 @@ Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backe
     : m_world(std::move(world)),
       m_walls(make_walls(scene)),
       m_wall_shapes(narrowphase::wall_shapes(m_walls)),
+      m_pair_coefficients(pair_coefficients(scene)),
       m_solver(solver_settings(scene)),
       m_gravity(scene.has(scene::Effect::gravity)),
       m_drag(scene.has(scene::Effect::drag)),
       m_drag_linear(static_cast<real>(scene.drag)),
+      m_drag_quadratic(static_cast<real>(scene.drag_quadratic)),
       m_collisions(scene.has(scene::Effect::collisions)),
       m_wall_contacts(scene.has(scene::Effect::walls) && !m_walls.empty()),
       m_g(scene.gravity),
       m_dt(scene.time.dt),
       m_substeps(scene.time.substeps) {
-  const std::size_t nm = scene.materials.size();
-  m_pair_coefficients.resize(nm * nm);
-  for (std::size_t a = 0; a < nm; ++a)
-    for (std::size_t b = 0; b < nm; ++b) {
-      const scene::Material& ma = scene.materials[a];
-      const scene::Material& mb = scene.materials[b];
-      m_pair_coefficients[a * nm + b] = mix_materials(ma.restitution, ma.friction, ma.rolling_friction,
-                                                      mb.restitution, mb.friction, mb.rolling_friction);
-    }
-  m_pair_table = {m_pair_coefficients.data(), static_cast<std::uint32_t>(nm)};
+  m_pair_table = {m_pair_coefficients.data(), static_cast<std::uint32_t>(scene.materials.size())};
   for (const narrowphase::WallShape& w : m_wall_shapes) m_max_wall_speed = std::max(m_max_wall_speed, length(w.velocity));
   if (m_collisions)
     m_broadphase = backend == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda()
@@ -83,7 +113,7 @@ std::string Simulation::describe_pipeline() const {
   if (m_collisions) out << "  narrow phase   sphere-sphere\n";
   if (m_wall_contacts)
     out << "  narrow phase   sphere-wall (" << m_walls.planes.size() << " plane(s), " << m_walls.boxes.size()
-        << " box(es))\n";
+        << " box(es), " << m_walls.cylinders.size() << " cylinder(s), " << m_walls.spheres.size() << " sphere(s))\n";
   if (m_collisions || m_wall_contacts) {
     out << "  contact solver " << s.iterations << " sequential-impulse sweeps: normal";
     if (s.friction) out << " + friction";

@@ -1,0 +1,104 @@
+#include "sim/output.hpp"
+
+#include <filesystem>
+#include <ostream>
+#include <sstream>
+
+#include "core/error.hpp"
+#include "render/frame_output.hpp"
+#include "render/vtk_output.hpp"
+#include "render/walls_json.hpp"
+#include "sim/scene.hpp"
+#include "sim/simulation.hpp"
+
+namespace marbles {
+
+render::Snapshot make_snapshot(const Simulation& sim) {
+  const World& w = sim.world();
+  render::Snapshot s;
+  s.time = sim.time();
+  s.step = sim.steps();
+  s.position = w.position;
+  s.velocity = w.velocity;
+  s.angular_velocity = w.angular_velocity;
+  s.radius = w.radius;
+  s.material = w.material;
+  s.id.resize(w.size());
+  for (std::size_t i = 0; i < w.size(); ++i) s.id[i] = static_cast<std::uint32_t>(i);
+  return s;
+}
+
+render::RenderOptions render_options(const scene::RenderSpec& spec) {
+  render::RenderOptions o;
+  o.width = spec.width;
+  o.height = spec.height;
+  if (spec.camera.given) o.camera = render::Camera{spec.camera.position, spec.camera.look_at, spec.camera.up, spec.camera.fov};
+  if (auto by = render::parse_color_by(spec.color_by)) o.color_by = *by;
+  return o;
+}
+
+struct RunOutput::Impl {
+  std::string dir;
+  int vtk_every = 0;
+  int render_every = 0;
+  std::unique_ptr<render::VtkSeriesWriter> vtk;
+  std::unique_ptr<render::FrameOutput> frames;
+};
+
+RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Walls& walls, bool render,
+                     std::ostream& log)
+    : m(std::make_unique<Impl>()) {
+  m->dir = dir;
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) throw RuntimeFailure("cannot create the output folder " + dir + ": " + ec.message());
+  render::write_walls_json(dir, walls);
+
+  if (scene.output.vtk_every > 0) {
+    if (render::vtk_available()) {
+      m->vtk = std::make_unique<render::VtkSeriesWriter>(dir, render::parse_point_fields(scene.output.fields));
+      m->vtk_every = scene.output.vtk_every;
+    } else {
+      log << "warning: this build has no VTK: no .vtp frames are written\n";
+    }
+  }
+  if (render && scene.output.render.enabled) {
+    try {
+      render::MovieOptions movie;
+      movie.enabled = scene.output.movie.enabled;
+      movie.fps = scene.output.movie.fps;
+      m->frames = std::make_unique<render::FrameOutput>(dir, render_options(scene.output.render), movie, walls, log);
+      m->render_every = scene.output.render.every;
+    } catch (const RuntimeFailure& e) {
+      log << "warning: no images: " << e.what() << "\n";
+    }
+  }
+}
+
+RunOutput::~RunOutput() = default;
+
+bool RunOutput::due(std::uint64_t step) const {
+  return (m->vtk && step % m->vtk_every == 0) || (m->frames && step % m->render_every == 0);
+}
+
+void RunOutput::write(const Simulation& sim) {
+  const std::uint64_t step = sim.steps();
+  if (!due(step)) return;
+  const render::Snapshot snapshot = make_snapshot(sim);
+  if (m->vtk && step % m->vtk_every == 0) m->vtk->write(snapshot);
+  if (m->frames && step % m->render_every == 0) m->frames->add(snapshot);
+}
+
+std::string RunOutput::finish() {
+  std::ostringstream out;
+  if (m->vtk) out << m->vtk->frames() << " frames in frames/, series.pvd, ";
+  if (m->frames) {
+    m->frames->finish();
+    out << m->frames->frames() << " images in images/";
+    if (std::filesystem::exists(std::filesystem::path(m->dir) / "movie.mp4")) out << ", movie.mp4";
+    out << ", ";
+  }
+  return out.str();
+}
+
+}  // namespace marbles
