@@ -1,0 +1,287 @@
+// The stability suite (ctest label `stability`): hard cases that must stay
+// numerically stable. Each runs the real step pipeline on the CPU backend.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include "tests/sim/test_scenes.hpp"
+
+using namespace marbles;
+using namespace marbles::testing;
+using scene::Effect;
+
+namespace {
+
+constexpr std::initializer_list<Effect> kGranular{Effect::gravity, Effect::collisions, Effect::walls,
+                                                  Effect::restitution, Effect::friction};
+
+double max_speed(const World& w) { return w.max_speed(); }
+
+double max_drift(const World& a, const std::vector<Vec3>& reference) {
+  double d = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) d = std::max(d, double(length(a.position[i] - reference[i])));
+  return d;
+}
+
+// Square pyramid: layer k has (base - k)^2 spheres on a square grid of pitch
+// `pitch`, each layer resting in the hollows of the one below.
+scene::GeneratedParticles pyramid(int base, real r, real pitch) {
+  scene::GeneratedParticles g;
+  const real rise = std::sqrt(std::max(real(0), pitch * pitch - pitch * pitch / 2));
+  for (int k = 0; k < base; ++k)
+    for (int i = 0; i < base - k; ++i)
+      for (int j = 0; j < base - k; ++j)
+        add_sphere(g, {r + (i + k * real(0.5)) * pitch, r + (j + k * real(0.5)) * pitch, r + k * rise}, r);
+  return g;
+}
+
+// Runs `seconds` of simulated time, tracking the largest kinetic energy seen
+// in the first and the last quarter.
+struct Watch {
+  double early_peak = 0, late_peak = 0, peak_speed = 0;
+};
+
+Watch run_for(Simulation& sim, double seconds) {
+  Watch w;
+  const double t0 = sim.time();
+  while (sim.time() < t0 + seconds - 1e-9) {
+    sim.step();
+    const double f = (sim.time() - t0) / seconds;
+    const double ke = sim.world().kinetic_energy();
+    if (f <= 0.25) w.early_peak = std::max(w.early_peak, ke);
+    if (f >= 0.75) w.late_peak = std::max(w.late_peak, ke);
+    w.peak_speed = std::max(w.peak_speed, max_speed(sim.world()));
+    EXPECT_EQ(sim.world().first_non_finite(), sim.world().size());
+    if (sim.world().first_non_finite() != sim.world().size()) break;
+  }
+  return w;
+}
+
+}  // namespace
+
+// 15 spheres stacked in a tube barely wider than they are.
+TEST(Stability, ColumnInTubeStands) {
+  scene::Scene s = make_scene(2e-3, 2, kGranular, 0.3, 0.5);
+  const real r = real(0.02);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  scene::WallSpec tube;
+  tube.kind = scene::WallSpec::Kind::cylinder;
+  tube.base = {0, 0, 0};
+  tube.axis = {0, 0, 1};
+  tube.radius = 1.02 * r;
+  tube.inside = true;
+  s.walls.push_back(tube);
+  scene::GeneratedParticles g;
+  for (int k = 0; k < 15; ++k) add_sphere(g, {0, 0, r + 2 * r * k}, r);
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  run_for(sim, 0.5);  // settle
+  const std::vector<Vec3> settled = sim.world().position;
+  const Watch w = run_for(sim, 10.0);
+  EXPECT_LT(max_drift(sim.world(), settled), 0.01 * r);
+  EXPECT_LE(w.late_peak, std::max(w.early_peak, 1e-12));
+}
+
+// A 20x20-based square pyramid (2870 spheres), friction 0.5, bottom layer held
+// by a close-fitting box frame.
+TEST(Stability, PyramidStands) {
+  scene::Scene s = make_scene(2e-3, 2, kGranular, 0.3, 0.5);
+  const real r = real(0.02);
+  const int base = 20;
+  s.walls.push_back(box({0, 0, 0}, {real(2 * r * base), real(2 * r * base), real(4 * r * base)}));
+  Simulation sim(s, make_world(s, pyramid(base, r, 2 * r)), broadphase::Backend::cpu);
+  run_for(sim, 0.5);
+  const std::vector<Vec3> settled = sim.world().position;
+  const Watch w = run_for(sim, 10.0);
+  EXPECT_LT(max_drift(sim.world(), settled), 0.01 * r);
+  EXPECT_LE(w.late_peak, std::max(w.early_peak, 1e-12));
+}
+
+// A sphere 100 times denser than the four it rests on.
+TEST(Stability, HeavySphereOnLightOnes) {
+  scene::Scene s = make_scene(2e-3, 2, kGranular, 0.3, 0.5);
+  scene::Material heavy = s.materials[0];
+  heavy.name = "heavy";
+  heavy.density *= 100;
+  s.materials.push_back(heavy);
+  const real r = real(0.02);
+  s.walls.push_back(box({0, 0, 0}, {4 * r, 4 * r, 10 * r}));
+  scene::GeneratedParticles g = pyramid(2, r, 2 * r);
+  g.material.back() = 1;
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  run_for(sim, 0.5);
+  const std::vector<Vec3> settled = sim.world().position;
+  const Watch w = run_for(sim, 10.0);
+  EXPECT_LT(max_drift(sim.world(), settled), 0.01 * r);
+  EXPECT_LE(w.late_peak, std::max(w.early_peak, 1e-12));
+}
+
+// A pyramid built with 25 % overlaps (pitch 1.5 r instead of 2 r) pushes
+// itself apart by position projection alone: no sphere gets faster than a
+// free fall from the top of the pile would make it.
+TEST(Stability, OverlappingPyramidSeparatesWithoutExploding) {
+  scene::Scene s = make_scene(2e-3, 2, kGranular, 0.3, 0.5);
+  const real r = real(0.02);
+  const int base = 10;
+  s.walls.push_back(box({0, 0, 0}, {real(2 * r * base), real(2 * r * base), real(4 * r * base)}));
+  Simulation sim(s, make_world(s, pyramid(base, r, real(1.5) * r)), broadphase::Backend::cpu);
+  const double height = 2 * r * base;
+  const Watch w = run_for(sim, 2.0);
+  EXPECT_LT(w.peak_speed, std::sqrt(2 * 9.81 * height));
+  // Separated: no overlap deeper than a few per cent of a radius remains.
+  double deepest = 0;
+  for (std::size_t i = 0; i < sim.world().size(); ++i)
+    for (std::size_t j = i + 1; j < sim.world().size(); ++j)
+      deepest = std::max(deepest, 2.0 * r - length(sim.world().position[i] - sim.world().position[j]));
+  EXPECT_LT(deepest, 0.05 * r);
+}
+
+// Warm starting carries last substep's impulses; when the heavy top of a
+// stack disappears those impulses must not launch the spheres below.
+TEST(Stability, RemovingTheHeavyTopDoesNotLaunchTheStack) {
+  scene::Scene s = make_scene(2e-3, 2, kGranular, 0.3, 0.5);
+  scene::Material heavy = s.materials[0];
+  heavy.name = "heavy";
+  heavy.density *= 100;
+  s.materials.push_back(heavy);
+  const real r = real(0.02);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  scene::WallSpec tube;
+  tube.kind = scene::WallSpec::Kind::cylinder;
+  tube.axis = {0, 0, 1};
+  tube.radius = 1.02 * r;
+  s.walls.push_back(tube);
+  scene::GeneratedParticles g;
+  for (int k = 0; k < 6; ++k) add_sphere(g, {0, 0, r + 2 * r * k}, r, {}, k == 5 ? 1 : 0);
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  run_for(sim, 1.0);
+  const std::vector<Vec3> settled = sim.world().position;
+  sim.edit_world().position[5] = {10, 10, 10};  // lift the top away
+  sim.edit_world().velocity[5] = {};
+  double highest_rise = 0;
+  for (int k = 0; k < 500; ++k) {
+    sim.step();
+    for (int i = 0; i < 5; ++i) {
+      highest_rise = std::max(highest_rise, double(sim.world().position[i].z - settled[i].z));
+      EXPECT_LT(sim.world().velocity[i].z, 0.05) << "sphere " << i << " jumped at step " << k;
+    }
+  }
+  // Relieved of the load the stack may expand by its compression, no more.
+  EXPECT_LT(highest_rise, 0.02 * r);
+}
+
+// 10,000 spheres poured into a box come to rest, and none leaves it.
+TEST(Stability, TenThousandSpheresSettleInABox) {
+  scene::Scene s = make_scene(2e-3, 2, kGranular, 0.3, 0.5);
+  const real r = real(0.01);
+  const real side = 0.6;
+  s.walls.push_back(box({0, 0, 0}, {side, side, 2}));
+  std::mt19937_64 rng(1);
+  std::uniform_real_distribution<double> jitter(-0.2 * r, 0.2 * r), vel(-0.5, 0.5);
+  scene::GeneratedParticles g;
+  const int per_row = static_cast<int>(side / (2.5 * r));
+  for (int i = 0; i < 10000; ++i) {
+    const int x = i % per_row, y = (i / per_row) % per_row, z = i / (per_row * per_row);
+    add_sphere(g, {real(1.25 * r + 2.5 * r * x + jitter(rng)), real(1.25 * r + 2.5 * r * y + jitter(rng)),
+                   real(1.25 * r + 2.5 * r * z + jitter(rng))}, r, {real(vel(rng)), real(vel(rng)), real(vel(rng))});
+  }
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  double peak = 0, last = 0;
+  while (sim.time() < 4.0) {
+    sim.step();
+    last = sim.world().kinetic_energy();
+    peak = std::max(peak, last);
+  }
+  EXPECT_LT(last, 1e-6 * peak);
+  for (std::size_t i = 0; i < sim.world().size(); ++i) {
+    const Vec3 p = sim.world().position[i];
+    ASSERT_TRUE(p.x > 0 && p.x < side && p.y > 0 && p.y < side && p.z > 0 && p.z < 2) << "sphere " << i << " left";
+  }
+}
+
+// A 5 cm sphere at 100 m/s with dt = 1/60 s travels 33 radii per step: it
+// must stop at a wall (here the face of a 1 cm thick wall) and at another
+// sphere, never pass through.
+TEST(Stability, FastSphereDoesNotTunnelThroughAWall) {
+  scene::Scene s = make_scene(1.0 / 60, 1, {Effect::walls, Effect::restitution}, 0.5);
+  const real r = real(0.05);
+  s.walls.push_back(plane({2, 0, 0}, {-1, 0, 0}));  // wall face at x = 2, 1 cm thick behind it
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, 0}, r, {100, 0, 0});
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  for (int k = 0; k < 120; ++k) {
+    sim.step();
+    ASSERT_LT(sim.world().position[0].x + r, 2 + 0.01) << "crossed the wall at step " << k;
+  }
+  EXPECT_LT(sim.world().velocity[0].x, 0);  // bounced back
+}
+
+TEST(Stability, FastSphereDoesNotPassThroughAnother) {
+  for (double speed : {10.0, 100.0, 1000.0}) {
+    scene::Scene s = make_scene(1.0 / 60, 1, {Effect::collisions, Effect::restitution}, 0.5);
+    const real r = real(0.05);
+    scene::GeneratedParticles g;
+    add_sphere(g, {0, 0, 0}, r, {real(speed), 0, 0});
+    add_sphere(g, {3, real(0.02), 0}, r);  // slightly off-centre
+    Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+    for (int k = 0; k < 60; ++k) {
+      sim.step();
+      ASSERT_LT(sim.world().position[0].x, sim.world().position[1].x) << "passed through at speed " << speed;
+    }
+  }
+}
+
+// Degenerate inputs: coincident centres, zero relative velocity, a centre
+// exactly on a wall, a sphere on a tube's axis. No NaN, and they come apart.
+TEST(Stability, DegenerateContactsStayFinite) {
+  scene::Scene s = make_scene(1e-3, 1, kGranular, 0.5, 0.5);
+  const real r = real(0.05);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  scene::WallSpec post;
+  post.kind = scene::WallSpec::Kind::cylinder;
+  post.base = {1, 1, 0};
+  post.axis = {0, 0, 1};
+  post.radius = 0.01;
+  post.inside = false;
+  s.walls.push_back(post);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, 1}, r);
+  add_sphere(g, {0, 0, 1}, r);          // coincident, same velocity
+  add_sphere(g, {real(0.5), 0, 0}, r);  // centre exactly on the floor
+  add_sphere(g, {1, 1, real(0.5)}, r);  // centre on the post's axis
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  for (int k = 0; k < 2000; ++k) {
+    sim.step();
+    ASSERT_EQ(sim.world().first_non_finite(), sim.world().size()) << "step " << k;
+  }
+  EXPECT_GT(length(sim.world().position[0] - sim.world().position[1]), 1.9 * r);
+  EXPECT_GT(sim.world().position[2].z, 0.95 * r);
+  const Vec3 d = sim.world().position[3] - Vec3(1, 1, 0);
+  EXPECT_GT(std::hypot(d.x, d.y), 0.01 + 0.95 * r);
+}
+
+// 10^5 steps of an elastic, frictionless gas in a box: energy drifts by less
+// than 1e-4 of itself.
+TEST(Stability, ElasticGasConservesEnergy) {
+  scene::Scene s = make_scene(1e-3, 1, {Effect::collisions, Effect::walls, Effect::restitution}, 1.0);
+  const real r = real(0.02);
+  s.walls.push_back(box({0, 0, 0}, {real(0.4), real(0.4), real(0.4)}));
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> vel(-1, 1);
+  scene::GeneratedParticles g;
+  for (int x = 0; x < 4; ++x)
+    for (int y = 0; y < 4; ++y)
+      for (int z = 0; z < 4; ++z)
+        add_sphere(g, {real(0.05 + 0.1 * x), real(0.05 + 0.1 * y), real(0.05 + 0.1 * z)}, r,
+                   {real(vel(rng)), real(vel(rng)), real(vel(rng))});
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  const double e0 = sim.world().kinetic_energy();
+  std::uint64_t contacts = 0;
+  for (int k = 0; k < 100000; ++k) {
+    sim.step();
+    contacts += sim.last_step().contacts;
+  }
+  EXPECT_GT(contacts, 10000u);
+  EXPECT_NEAR(sim.world().kinetic_energy(), e0, 1e-4 * e0);
+}
