@@ -39,7 +39,22 @@ struct StageBytes {
   double total() const { return cell_ids + sort + cell_list + traversal; }
 };
 
-StageBytes floor_bytes(const bp::Stats& s, std::size_t n) {
+// Home-cell variant: keys (centres in, one entry out), sort, reorder (ids
+// in, spheres gathered, lower bounds written), traversal (spheres and lower
+// bounds read once, counts, offsets, pairs).
+StageBytes floor_bytes_home(const bp::Stats& s, std::size_t n) {
+  const double kb = s.key_width / 8.0, entry = kb + 4.0, nn = double(n);
+  const double lb = s.dense_cell_starts ? 4.0 * double(s.grid_cells + 1) : 0.0;
+  StageBytes b;
+  b.cell_ids = nn * 12.0 + nn * entry;
+  b.sort = 2.0 * nn * entry * s.sort_passes;
+  b.cell_list = nn * entry + nn * 16.0 + nn * 16.0 + lb;
+  b.traversal = nn * (16.0 + kb) + lb + nn * 12.0 + double(s.pairs) * 8.0;
+  return b;
+}
+
+StageBytes floor_bytes(const bp::Stats& s, std::size_t n, bool home) {
+  if (home) return floor_bytes_home(s, n);
   const double kb = s.key_width / 8.0, entry = kb + 4.0;
   const double entries = double(s.cell_entries);
   const unsigned passes = (s.key_bits + 7) / 8;
@@ -66,7 +81,7 @@ struct CaseResult {
   std::string device;
 };
 
-CaseResult summarise_calls(std::size_t n, const std::vector<bp::Stats>& calls) {
+CaseResult summarise_calls(std::size_t n, const std::vector<bp::Stats>& calls, bool home) {
   CaseResult r;
   r.n = n;
   std::vector<double> a, b, c, d, e;
@@ -83,7 +98,7 @@ CaseResult summarise_calls(std::size_t n, const std::vector<bp::Stats>& calls) {
   r.traversal = summarise(d);
   r.total = summarise(e);
   r.last = calls.back();
-  r.bytes = floor_bytes(r.last, n);
+  r.bytes = floor_bytes(r.last, n, home);
   return r;
 }
 
@@ -93,7 +108,8 @@ void print_json(std::ostream& out, const BroadphaseBenchOptions& o, const CaseRe
     if (r.copy_bytes_per_ms > 0) out << ",\"floor_ms\":" << bytes / r.copy_bytes_per_ms;
     out << ",\"floor_bytes\":" << bytes << "}";
   };
-  out << "{\"bench\":\"broadphase\",\"backend\":\"" << o.backend << "\",\"sort_kind\":\""
+  out << "{\"bench\":\"broadphase\",\"backend\":\"" << o.backend << "\",\"algorithm\":\"" << o.algorithm
+      << "\",\"sort_kind\":\""
       << (o.backend == "cuda" ? o.sort : "radix-cpu") << "\",\"scene\":\"" << o.scene << "\",\"n\":" << r.n
       << ",\"repeats\":" << o.repeats << ",\"margin\":" << o.margin << ",";
   stage("cell_ids", r.cell_ids, r.bytes.cell_ids);
@@ -108,7 +124,8 @@ void print_json(std::ostream& out, const BroadphaseBenchOptions& o, const CaseRe
   out << ",\"pairs\":" << r.last.pairs << ",\"cell_entries\":" << r.last.cell_entries
       << ",\"collision_cells\":" << r.last.collision_cells << ",\"tests\":" << r.last.tests
       << ",\"key_bits\":" << r.last.key_bits << ",\"key_width\":" << r.last.key_width
-      << ",\"sort_passes\":" << r.last.sort_passes << ",\"cell_size\":" << r.last.cell_size;
+      << ",\"sort_passes\":" << r.last.sort_passes << ",\"cell_size\":" << r.last.cell_size
+      << ",\"grid_cells\":" << r.last.grid_cells << ",\"dense_cell_starts\":" << (r.last.dense_cell_starts ? "true" : "false");
   if (r.copy_bytes_per_ms > 0)
     out << ",\"copy_GBps\":" << r.copy_bytes_per_ms * 1e-6 << ",\"device\":\"" << r.device << "\"";
   out << "}\n";
@@ -116,7 +133,8 @@ void print_json(std::ostream& out, const BroadphaseBenchOptions& o, const CaseRe
 
 void print_table(std::ostream& out, const BroadphaseBenchOptions& o, const std::vector<CaseResult>& rs) {
   const bool gpu = !rs.empty() && rs.front().copy_bytes_per_ms > 0;
-  out << "broadphase " << o.backend << (o.backend == "cuda" ? " sort=" + o.sort : std::string()) << " scene="
+  out << "broadphase " << o.backend << " algorithm=" << o.algorithm
+      << (o.backend == "cuda" ? " sort=" + o.sort : std::string()) << " scene="
       << o.scene << "  (ms: median/min over " << o.repeats << " calls"
       << (gpu ? "; [floor] = bytes / measured copy bandwidth" : "") << ")\n";
   if (gpu) out << "device: " << rs.front().device << ", copy " << fmt(rs.front().copy_bytes_per_ms * 1e-6, 0) << " GB/s\n";
@@ -155,6 +173,7 @@ BroadphaseBenchOptions parse_broadphase_bench_args(const std::vector<std::string
       return args[++k];
     };
     if (a == "--backend") o.backend = value();
+    else if (a == "--algorithm") o.algorithm = value();
     else if (a == "--sort") o.sort = value();
     else if (a == "--scene") o.scene = value();
     else if (a == "--repeats") o.repeats = std::stoi(value());
@@ -178,6 +197,10 @@ int run_broadphase_bench(const BroadphaseBenchOptions& opt, std::ostream& out) {
     out << "bench broadphase: --backend must be cpu or cuda\n";
     return 2;
   }
+  if (o.algorithm != "seed" && o.algorithm != "home") {
+    out << "bench broadphase: --algorithm must be seed or home\n";
+    return 2;
+  }
   if (o.sort != "seed" && o.sort != "cub") {
     out << "bench broadphase: --sort must be seed or cub\n";
     return 2;
@@ -194,8 +217,10 @@ int run_broadphase_bench(const BroadphaseBenchOptions& opt, std::ostream& out) {
     for (std::size_t n : o.n) {
       const BenchSpheres s = make_bench_scene(o.scene, n, o.seed);
       CaseResult r;
+      const bool home = o.algorithm == "home";
+      const bp::Algorithm algorithm = home ? bp::Algorithm::home : bp::Algorithm::seed;
       if (o.backend == "cpu") {
-        auto bp = bp::make_subdivision_cpu();
+        auto bp = bp::make_subdivision_cpu(algorithm);
         const SpheresIn view{s.centre.data(), s.radius.data(), n};
         std::vector<bp::Pair> pairs;
         bp->find_pairs(view, real(o.margin), pairs);  // warm-up: buffers grow once
@@ -204,12 +229,12 @@ int run_broadphase_bench(const BroadphaseBenchOptions& opt, std::ostream& out) {
           bp->find_pairs(view, real(o.margin), pairs);
           calls.push_back(bp->last_stats());
         }
-        r = summarise_calls(n, calls);
+        r = summarise_calls(n, calls, home);
       } else {
 #if defined(MARBLES_BROADPHASE_CUDA)
-        const CudaBenchRun run =
-            run_cuda_broadphase(s, o.sort == "seed" ? bp::SortKind::seed : bp::SortKind::cub, o.repeats, o.margin);
-        r = summarise_calls(n, run.calls);
+        const CudaBenchRun run = run_cuda_broadphase(
+            s, algorithm, o.sort == "seed" ? bp::SortKind::seed : bp::SortKind::cub, o.repeats, o.margin);
+        r = summarise_calls(n, run.calls, home);
         r.copy_bytes_per_ms = run.copy_bytes_per_ms;
         r.device = run.device;
 #else

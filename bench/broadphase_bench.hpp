@@ -19,6 +19,7 @@ namespace marbles::bench {
 
 struct BroadphaseBenchOptions {
   std::string backend = "cpu";   // cpu | cuda
+  std::string algorithm = "home";  // seed | home
   std::string sort = "cub";      // seed | cub (cuda only)
   std::string scene = "gas";     // gas | pile | poly
   std::vector<std::size_t> n;    // empty: 10^4, 10^5, 10^6
@@ -32,7 +33,7 @@ struct BroadphaseBenchOptions {
 // backend cannot run (e.g. no CUDA device; message on `out`).
 int run_broadphase_bench(const BroadphaseBenchOptions& options, std::ostream& out);
 
-// Parses `--backend X --sort X --scene X --n N[,N...] --repeats K --json --seed S --margin M`
+// Parses `--backend X --algorithm X --sort X --scene X --n N[,N...] --repeats K --json --seed S --margin M`
 // (argv without the program and verb names). Throws std::invalid_argument.
 BroadphaseBenchOptions parse_broadphase_bench_args(const std::vector<std::string>& args);
 

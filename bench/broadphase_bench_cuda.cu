@@ -47,7 +47,8 @@ double measure_copy_bytes_per_ms() {
 
 }  // namespace
 
-CudaBenchRun run_cuda_broadphase(const BenchSpheres& s, broadphase::SortKind sort, int repeats, double margin) {
+CudaBenchRun run_cuda_broadphase(const BenchSpheres& s, broadphase::Algorithm algorithm, broadphase::SortKind sort,
+                                 int repeats, double margin) {
   CudaBenchRun run;
   const DeviceInfo& dev = cuda_device();
   if (!dev.available) throw RuntimeFailure("no CUDA device (" + dev.why_not + ")");
@@ -62,7 +63,7 @@ CudaBenchRun run_cuda_broadphase(const BenchSpheres& s, broadphase::SortKind sor
   MARBLES_CUDA_CHECK(cudaMemcpy(c, s.centre.data(), n * sizeof(Vec3), cudaMemcpyHostToDevice));
   MARBLES_CUDA_CHECK(cudaMemcpy(r, s.radius.data(), n * sizeof(real), cudaMemcpyHostToDevice));
   {
-    broadphase::SubdivisionCuda bp(sort);
+    broadphase::SubdivisionCuda bp(algorithm, sort);
     const SpheresIn view{c, r, n};
     for (int k = 0; k < 3; ++k) bp.find_pairs_device(view, real(margin));  // warm-up: buffers, modules
     for (int k = 0; k < repeats; ++k) {

@@ -18,6 +18,7 @@ struct CudaBenchRun {
 };
 
 // Throws RuntimeFailure when there is no device.
-CudaBenchRun run_cuda_broadphase(const BenchSpheres& spheres, broadphase::SortKind sort, int repeats, double margin);
+CudaBenchRun run_cuda_broadphase(const BenchSpheres& spheres, broadphase::Algorithm algorithm, broadphase::SortKind sort,
+                                 int repeats, double margin);
 
 }  // namespace marbles::bench

@@ -23,6 +23,17 @@ using Pair = IndexPair;
 enum class Backend { cpu, cuda };
 enum class SortKind { seed, cub };  // CUDA only: the seed's radix sort or CUB's
 
+// seed: the seed's spatial subdivision (home and phantom cells, 8 passes).
+// home: one entry per sphere (its home cell), sorted, then a search of the
+//       neighbouring cells (home_cell_math.hpp). Same contract, same oracle.
+enum class Algorithm { seed, home };
+inline const char* algorithm_name(Algorithm a) { return a == Algorithm::seed ? "seed" : "home"; }
+
+// What the step and the command line get: the home-cell variant is faster on
+// both backends (docs/broadphase.md, "Measured").
+inline constexpr Algorithm kDefaultCpuAlgorithm = Algorithm::home;
+inline constexpr Algorithm kDefaultCudaAlgorithm = Algorithm::home;
+
 // Per-call figures, for the benchmark and the run summary.
 struct Stats {
   double ms_cell_ids = 0, ms_sort = 0, ms_cell_list = 0, ms_traversal = 0, ms_total = 0;
@@ -37,6 +48,9 @@ struct Stats {
   unsigned sort_passes = 0;         // 8-bit radix passes made
   bool compressed_keys = false;     // the grid was too wide for 63 key bits: per-axis ranks were used
   std::size_t cells_per_type[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // collision cells per pass
+  // Home-cell variant: cells of the grid and how their starts were found.
+  std::size_t grid_cells = 0;
+  bool dense_cell_starts = false;   // a lower-bound array over all cells (else binary search)
 };
 
 class BroadPhase {
@@ -48,12 +62,17 @@ class BroadPhase {
   virtual std::string name() const = 0;
 };
 
-// The seed algorithm on the CPU (OpenMP where it pays).
-std::unique_ptr<BroadPhase> make_subdivision_cpu();
+// The CPU backends (OpenMP where it pays).
+std::unique_ptr<BroadPhase> make_subdivision_cpu(Algorithm algorithm = kDefaultCpuAlgorithm);
 
-// The seed algorithm on the GPU. Throws RuntimeFailure when the build has no
-// CUDA backend or there is no device.
-std::unique_ptr<BroadPhase> make_subdivision_cuda(SortKind sort = SortKind::cub);
+// The GPU backends; `sort` picks the radix sort of either algorithm. Throws
+// RuntimeFailure when the build has no CUDA backend or there is no device.
+std::unique_ptr<BroadPhase> make_subdivision_cuda(Algorithm algorithm = kDefaultCudaAlgorithm,
+                                                  SortKind sort = SortKind::cub);
+
+// The home-cell variant on the CPU (home_cell_cpu.cpp); the CUDA backend's
+// route for grids too wide for 62-bit keys.
+std::unique_ptr<BroadPhase> make_home_cell_cpu();
 
 // The O(N^2) oracle: same predicate, pairs in (i, j) lexicographic order.
 void brute_force_pairs(const SpheresIn& spheres, real margin, std::vector<Pair>& out);

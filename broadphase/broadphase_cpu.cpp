@@ -294,7 +294,10 @@ Bounds bounds_of(const SpheresIn& s) {
   return b;
 }
 
-std::unique_ptr<BroadPhase> make_subdivision_cpu() { return std::make_unique<SubdivisionCpu>(); }
+std::unique_ptr<BroadPhase> make_subdivision_cpu(Algorithm algorithm) {
+  if (algorithm == Algorithm::home) return make_home_cell_cpu();
+  return std::make_unique<SubdivisionCpu>();
+}
 
 void brute_force_pairs(const SpheresIn& s, real margin, std::vector<Pair>& out) {
   out.clear();
@@ -306,7 +309,7 @@ void brute_force_pairs(const SpheresIn& s, real margin, std::vector<Pair>& out) 
 }
 
 #if !defined(MARBLES_BROADPHASE_CUDA)
-std::unique_ptr<BroadPhase> make_subdivision_cuda(SortKind) {
+std::unique_ptr<BroadPhase> make_subdivision_cuda(Algorithm, SortKind) {
   throw RuntimeFailure("broad phase: this build has no CUDA backend (no CUDA device)");
 }
 #endif

@@ -1,6 +1,8 @@
 // broadphase/broadphase_cuda.cu — SubdivisionCuda: the CUDA stages strung
-// together, the same stages as the CPU backend (broadphase_cpu.cpp):
+// together, the same stages as the CPU backends (broadphase_cpu.cpp for the
+// seed algorithm, home_cell_cpu.cpp for the home-cell variant).
 //
+// Seed algorithm:
 //   cell IDs   bounds (one kernel, 1 readback) -> grid -> counts -> scan
 //              (readback: entry count) -> cell IDs
 //   sort       seed radix sort or CUB, over the key's used bits
@@ -8,10 +10,17 @@
 //   traversal  gather spheres in sorted order -> count per H entry -> scan
 //              (readback: pair count) -> write
 //
+// Home-cell variant (home_cell_cuda.cu):
+//   cell IDs   bounds (1 readback) -> grid -> home keys
+//   sort       the same two sorts, one (key, id) entry per sphere
+//   cell list  spheres gathered into sorted order + dense lower-bound array
+//   traversal  count per sphere -> scan (readback: pair count) -> write
+//
 // Every buffer is sized from a count (count, scan, allocate) and only grows;
-// there is no fixed capacity. The three readbacks (bounds, entries, pairs) are the only host syncs.
-// Grids too wide for 63 key bits (a sphere very far from the rest) go
-// through the CPU backend's exact key compression, then back to the device.
+// there is no fixed capacity. The readbacks named above are the only host
+// syncs (seed: 3, home: 2). Grids too wide for 63 (seed) or 62 (home) key
+// bits (a sphere very far from the rest) go through the CPU twin's exact
+// key compression, then back to the device.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -27,6 +36,7 @@ namespace marbles::broadphase {
 using namespace marbles::broadphase::cuda;
 
 struct SubdivisionCuda::Impl {
+  Algorithm algorithm = kDefaultCudaAlgorithm;
   SortKind sort = SortKind::cub;
   bool timing = true;
   int sm_count = 1;
@@ -39,6 +49,7 @@ struct SubdivisionCuda::Impl {
   DeviceBuffer flags, cell_index, cells, pass_begin;
   DeviceBuffer pair_counts, pair_offsets, pairs, tests, sorted_sphere, sorted_info;
   DeviceBuffer cub_temp, seed_scratch;
+  DeviceBuffer cell_lb;  // home-cell variant: dense lower bounds
   std::size_t pair_count = 0;
 
   BoundsAccum* h_bounds = nullptr;  // pinned
@@ -67,6 +78,10 @@ struct SubdivisionCuda::Impl {
   }
 
   std::size_t run(const SpheresIn& d, real margin, cudaStream_t s);
+  std::size_t run_home(const SpheresIn& d, real margin, cudaStream_t s);
+  template <class Key>
+  std::size_t run_home_keys(const SpheresIn& d, real margin, const HomeGrid& g, cudaStream_t s);
+  void finish_timing();
   template <class Key>
   std::size_t run_keys(const SpheresIn& d, real margin, const Grid& g, cudaStream_t s);
   std::size_t run_on_cpu(const SpheresIn& d, real margin, cudaStream_t s);
@@ -79,6 +94,8 @@ std::size_t SubdivisionCuda::Impl::run(const SpheresIn& d, real margin, cudaStre
   if (n >= kMaxObjects) throw RuntimeFailure("broad phase: more than 2^28 spheres");
   if (n < 2) return 0;
   mark(0, s);
+
+  if (algorithm == Algorithm::home) return run_home(d, margin, s);
 
   // --- cell IDs: bounds -> grid ---------------------------------------------
   auto* acc = bounds.as<BoundsAccum>(1);
@@ -164,7 +181,11 @@ std::size_t SubdivisionCuda::Impl::run_keys(const SpheresIn& d, real margin, con
   launch_traversal_write(in, m, d_pair_offsets, d_pairs, sm_count, s);
   stats.pairs = pair_count;
   mark(4, s);
+  finish_timing();
+  return pair_count;
+}
 
+void SubdivisionCuda::Impl::finish_timing() {
   if (timing) {
     MARBLES_CUDA_CHECK(cudaEventSynchronize(ev[4]));
     float ms[4];
@@ -177,6 +198,79 @@ std::size_t SubdivisionCuda::Impl::run_keys(const SpheresIn& d, real margin, con
     MARBLES_CUDA_CHECK(cudaEventElapsedTime(&total, ev[0], ev[4]));
     stats.ms_total = total;
   }
+}
+
+std::size_t SubdivisionCuda::Impl::run_home(const SpheresIn& d, real margin, cudaStream_t s) {
+  // --- cell IDs: bounds -> grid -> home keys -----------------------------------
+  auto* acc = bounds.as<BoundsAccum>(1);
+  launch_bounds(d.centre, d.radius, d.count, acc, sm_count, s);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_bounds, acc, sizeof(BoundsAccum), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  if (h_bounds->bad) throw RuntimeFailure("broad phase: a centre or radius is not finite, or a radius is negative");
+  const HomeGridChoice hc = choose_home_grid(decode_bounds(*h_bounds), margin);
+  if (hc.width == KeyWidth::too_wide) return run_on_cpu(d, margin, s);
+  stats.cell_size = hc.grid.cell;
+  stats.key_bits = hc.grid.key_bits;
+  stats.grid_cells = hc.grid.cells;
+  if (hc.width == KeyWidth::bits32) {
+    stats.key_width = 32;
+    return run_home_keys<std::uint32_t>(d, margin, hc.grid, s);
+  }
+  stats.key_width = 64;
+  return run_home_keys<std::uint64_t>(d, margin, hc.grid, s);
+}
+
+template <class Key>
+std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin, const HomeGrid& g, cudaStream_t s) {
+  const std::size_t n = d.count;
+  auto* d_keys = keys.as<Key>(n);
+  auto* d_keys_alt = keys_alt.as<Key>(n);
+  auto* d_ids = values.as<std::uint32_t>(n);
+  auto* d_ids_alt = values_alt.as<std::uint32_t>(n);
+  launch_home_keys<Key>(d.centre, n, g, d_keys, d_ids, sm_count, s);
+  stats.cell_entries = n;
+  mark(1, s);
+
+  // --- sort: (home key, id), one entry per sphere -----------------------------------
+  const bool in_alt =
+      sort == SortKind::seed
+          ? seed_radix_sort<Key>(d_keys, d_ids, d_keys_alt, d_ids_alt, n, g.key_bits, seed_scratch, sm_count, s)
+          : cub_radix_sort<Key>(d_keys, d_ids, d_keys_alt, d_ids_alt, n, g.key_bits, cub_temp, s);
+  if (in_alt) {
+    std::swap(d_keys, d_keys_alt);
+    std::swap(d_ids, d_ids_alt);
+  }
+  stats.sort_passes = (g.key_bits + 7) / 8;
+  mark(2, s);
+
+  // --- cell list: spheres in sorted order, cell lower bounds -------------------------
+  const bool dense = use_dense_cell_starts(g, n);
+  stats.dense_cell_starts = dense;
+  auto* d_lb = dense ? cell_lb.as<std::uint32_t>(g.cells + 1) : nullptr;
+  auto* d_sorted = sorted_sphere.as<SortedSphere>(n);
+  launch_home_reorder<Key>(d_keys, d_ids, n, d.centre, d.radius, g.cells, d_sorted, d_lb, sm_count, s);
+  mark(3, s);
+
+  // --- traversal: count -> scan -> (readback) -> write -------------------------------
+  auto* d_counts = pair_counts.as<std::uint32_t>(n + 1);
+  auto* d_offsets = pair_offsets.as<std::uint32_t>(n + 1);
+  auto* d_tests = tests.as<unsigned long long>(1);
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(d_tests, 0, sizeof(unsigned long long), s));
+  const HomeTraversal<Key> in{d_keys, d_ids, d_sorted, d_lb, g, static_cast<std::uint32_t>(n), margin};
+  launch_home_count<Key>(in, d_counts, d_tests, sm_count, s);
+  exclusive_sum(d_counts, d_offsets, n + 1, cub_temp, s);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small, d_offsets + n, 4, cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small + 2, d_tests, 8, cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  pair_count = h_small[0];
+  unsigned long long t = 0;
+  std::memcpy(&t, h_small + 2, 8);
+  stats.tests = t;
+  auto* d_pairs = pairs.as<IndexPair>(pair_count);
+  if (pair_count > 0) launch_home_write<Key>(in, d_offsets, d_pairs, sm_count, s);
+  stats.pairs = pair_count;
+  mark(4, s);
+  finish_timing();
   return pair_count;
 }
 
@@ -188,7 +282,7 @@ std::size_t SubdivisionCuda::Impl::run_on_cpu(const SpheresIn& d, real margin, c
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(c.data(), d.centre, n * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(r.data(), d.radius, n * sizeof(real), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  if (!cpu_fallback) cpu_fallback = make_subdivision_cpu();
+  if (!cpu_fallback) cpu_fallback = make_subdivision_cpu(algorithm);
   std::vector<Pair> out;
   cpu_fallback->find_pairs({c.data(), r.data(), n}, margin, out);
   auto* d_pairs = pairs.as<IndexPair>(out.size());
@@ -200,10 +294,11 @@ std::size_t SubdivisionCuda::Impl::run_on_cpu(const SpheresIn& d, real margin, c
   return pair_count;
 }
 
-SubdivisionCuda::SubdivisionCuda(SortKind sort) {
+SubdivisionCuda::SubdivisionCuda(Algorithm algorithm, SortKind sort) {
   const DeviceInfo& dev = cuda_device();
   if (!dev.available) throw RuntimeFailure("broad phase: no CUDA device (" + dev.why_not + ")");
   m = std::make_unique<Impl>();
+  m->algorithm = algorithm;
   m->sort = sort;
   m->sm_count = std::max(1, dev.multiprocessors);
 }
@@ -212,10 +307,12 @@ SubdivisionCuda::~SubdivisionCuda() = default;
 
 const Stats& SubdivisionCuda::last_stats() const { return m->stats; }
 std::string SubdivisionCuda::name() const {
-  return m->sort == SortKind::seed ? "subdivision-cuda-seed-sort" : "subdivision-cuda-cub-sort";
+  const std::string sort = m->sort == SortKind::seed ? "seed-sort" : "cub-sort";
+  return (m->algorithm == Algorithm::seed ? "subdivision-cuda-" : "home-cell-cuda-") + sort;
 }
 void SubdivisionCuda::set_stage_timing(bool on) { m->timing = on; }
 SortKind SubdivisionCuda::sort_kind() const { return m->sort; }
+Algorithm SubdivisionCuda::algorithm() const { return m->algorithm; }
 const Pair* SubdivisionCuda::device_pairs() const { return static_cast<const Pair*>(m->pairs.get()); }
 
 std::size_t SubdivisionCuda::find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream) {
@@ -239,6 +336,8 @@ void SubdivisionCuda::find_pairs(const SpheresIn& s, real margin, std::vector<Pa
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
-std::unique_ptr<BroadPhase> make_subdivision_cuda(SortKind sort) { return std::make_unique<SubdivisionCuda>(sort); }
+std::unique_ptr<BroadPhase> make_subdivision_cuda(Algorithm algorithm, SortKind sort) {
+  return std::make_unique<SubdivisionCuda>(algorithm, sort);
+}
 
 }  // namespace marbles::broadphase

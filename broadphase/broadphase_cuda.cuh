@@ -12,6 +12,7 @@
 
 #include "broadphase/broadphase_math.hpp"
 #include "broadphase/grid.hpp"
+#include "broadphase/home_cell_math.hpp"
 #include "core/cuda_check.hpp"
 #include "core/pair.hpp"
 
@@ -125,5 +126,35 @@ void launch_traversal_count(const TraversalInput& in, std::size_t m, std::uint32
 // Writes entry e's pairs at offsets[e].
 void launch_traversal_write(const TraversalInput& in, std::size_t m, const std::uint32_t* offsets, IndexPair* pairs,
                             int sm_count, cudaStream_t stream);
+
+// --- home-cell variant (home_cell_cuda.cu) -------------------------------------
+// keys[i] = home key of sphere i, ids[i] = i.
+template <class Key>
+void launch_home_keys(const Vec3* centre, std::size_t n, const HomeGrid& grid, Key* keys, std::uint32_t* ids,
+                      int sm_count, cudaStream_t stream);
+// sorted[i] = sphere ids[i] (centre, radius); with `lb` (cells + 1 entries):
+// lb[k] = first sorted index whose key is >= k.
+template <class Key>
+void launch_home_reorder(const Key* keys, const std::uint32_t* ids, std::size_t n, const Vec3* centre,
+                         const real* radius, std::uint64_t cells, SortedSphere* sorted, std::uint32_t* lb,
+                         int sm_count, cudaStream_t stream);
+template <class Key>
+struct HomeTraversal {
+  const Key* keys;             // sorted home keys
+  const std::uint32_t* ids;    // sorted ids
+  const SortedSphere* sphere;  // spheres in sorted order
+  const std::uint32_t* lb;     // dense lower bounds, or null: binary search over keys
+  HomeGrid grid;
+  std::uint32_t n;
+  real margin;
+};
+// counts[i] = pairs sorted sphere i finds (counts[n] = 0); *tests += exact tests.
+template <class Key>
+void launch_home_count(const HomeTraversal<Key>& in, std::uint32_t* counts, unsigned long long* tests, int sm_count,
+                       cudaStream_t stream);
+// Writes sphere i's pairs at offsets[i].
+template <class Key>
+void launch_home_write(const HomeTraversal<Key>& in, const std::uint32_t* offsets, IndexPair* pairs, int sm_count,
+                       cudaStream_t stream);
 
 }  // namespace marbles::broadphase::cuda

@@ -8,7 +8,9 @@
 //   find_pairs_device() centres and radii already on the device, pairs left
 //                       on the device (device_pairs(), valid until the next
 //                       call): the entry point for a GPU step and the bench.
-// Both emit the same pairs in the same order as the CPU backend.
+// Both emit the same pairs in the same order as the CPU backend of the same
+// algorithm (seed: make_subdivision_cpu(Algorithm::seed), home:
+// make_home_cell_cpu()).
 #pragma once
 
 #include <cstddef>
@@ -24,7 +26,7 @@ namespace marbles::broadphase {
 class SubdivisionCuda final : public BroadPhase {
  public:
   // Throws RuntimeFailure("... no CUDA device") when there is none.
-  explicit SubdivisionCuda(SortKind sort = SortKind::cub);
+  explicit SubdivisionCuda(Algorithm algorithm = kDefaultCudaAlgorithm, SortKind sort = SortKind::cub);
   ~SubdivisionCuda() override;
   SubdivisionCuda(const SubdivisionCuda&) = delete;
   SubdivisionCuda& operator=(const SubdivisionCuda&) = delete;
@@ -35,7 +37,8 @@ class SubdivisionCuda final : public BroadPhase {
 
   // `device_spheres` holds device pointers. `stream` is a cudaStream_t (null:
   // the default stream). Returns the number of pairs; the call synchronises
-  // the stream a few times to size its buffers (count, scan, allocate).
+  // the stream to size its buffers (count, scan, allocate): 3 times for the
+  // seed algorithm, twice (bounds, pair count) for the home-cell variant.
   std::size_t find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream = nullptr);
   const Pair* device_pairs() const;  // device pointer
 
@@ -43,6 +46,7 @@ class SubdivisionCuda final : public BroadPhase {
   // per-stage times (on by default; costs a few microseconds).
   void set_stage_timing(bool on);
   SortKind sort_kind() const;
+  Algorithm algorithm() const;
 
  private:
   struct Impl;

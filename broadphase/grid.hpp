@@ -10,10 +10,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <string>
 
 #include "broadphase/broadphase_math.hpp"
+#include "broadphase/home_cell_math.hpp"
 #include "core/error.hpp"
 #include "core/spheres.hpp"
 
@@ -94,6 +96,58 @@ inline GridChoice choose_grid(const Bounds& b, real margin) {
   set_key_layout(g, half_max);
   out.width = key_width_for(g.key_bits);
   return out;
+}
+
+}  // namespace marbles::broadphase
+
+namespace marbles::broadphase {
+
+// --- the home-cell grid (home_cell_math.hpp) ----------------------------------
+// Largest span of the centres' box in cells: beyond it the cell grows, so
+// that the double-precision cell coordinates of two spheres closer than one
+// cell never differ by two (their rounding error stays under 2^-20 cells,
+// far inside kHomeCellSlack).
+inline constexpr double kHomeMaxSpanCells = 4294967296.0;  // 2^32
+
+struct HomeGridChoice {
+  HomeGrid grid;
+  KeyWidth width = KeyWidth::bits32;  // bits32: cells <= 2^31; too_wide: X * Y * Z > 2^62
+};
+
+inline HomeGridChoice choose_home_grid(const Bounds& b, real margin) {
+  if (!(margin >= 0) || !std::isfinite(static_cast<double>(margin)))
+    throw RuntimeFailure("broad phase: margin must be finite and >= 0");
+  for (int k = 0; k < 3; ++k)
+    if (!std::isfinite(static_cast<double>(b.lo[k])) || !std::isfinite(static_cast<double>(b.hi[k])))
+      throw RuntimeFailure("broad phase: a sphere centre is not finite");
+  if (!std::isfinite(static_cast<double>(b.r_max)) || b.r_max < 0)
+    throw RuntimeFailure("broad phase: a radius is negative or not finite");
+
+  HomeGridChoice out;
+  HomeGrid& g = out.grid;
+  const double contact = 2.0 * static_cast<double>(b.r_max) + static_cast<double>(margin);
+  double cell = contact > 0 ? contact * (1.0 + kHomeCellSlack) : 1.0;
+  for (int k = 0; k < 3; ++k)
+    cell = std::max(cell, (static_cast<double>(b.hi[k]) - static_cast<double>(b.lo[k])) / kHomeMaxSpanCells);
+  g.cell = cell;
+  g.inv_cell = 1.0 / cell;
+  for (int k = 0; k < 3; ++k) {
+    g.origin[k] = static_cast<double>(b.lo[k]) - 2.0 * cell;
+    // homes are in [1, top]; two more cells above for the x + 2 lookups
+    g.dim[k] = static_cast<std::uint64_t>(cell_coord(b.hi[k], g.origin[k], g.inv_cell)) + 3;
+  }
+  if (!set_home_layout(g)) {
+    out.width = KeyWidth::too_wide;
+    return out;
+  }
+  out.width = g.cells <= (std::uint64_t{1} << 31) ? KeyWidth::bits32 : KeyWidth::bits64;
+  return out;
+}
+
+// A dense lower-bound array (cells + 1 entries) is used when the grid is not
+// much larger than the sphere count; sparser grids binary-search the keys.
+inline bool use_dense_cell_starts(const HomeGrid& g, std::size_t n) {
+  return g.cells + 1 <= 16 * static_cast<std::uint64_t>(n) + (std::uint64_t{1} << 22);
 }
 
 }  // namespace marbles::broadphase

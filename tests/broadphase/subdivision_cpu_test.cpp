@@ -1,4 +1,4 @@
-// The CPU subdivision backend against the O(N^2) oracle.
+// The CPU backends (seed algorithm and home-cell variant) against the O(N^2) oracle.
 #include <gtest/gtest.h>
 
 #include <limits>
@@ -28,9 +28,11 @@ void check_against_oracle(mb::BroadPhase& bp, const mt::SphereSet& s, real margi
 
 }  // namespace
 
+class SubdivisionCpu : public ::testing::TestWithParam<mb::Algorithm> {};
+
 // 8 kinds x 2 margins x 14 seeds = 224 random sets.
-TEST(SubdivisionCpu, EqualsOracleOnRandomAndAdversarialSets) {
-  auto bp = mb::make_subdivision_cpu();
+TEST_P(SubdivisionCpu, EqualsOracleOnRandomAndAdversarialSets) {
+  auto bp = mb::make_subdivision_cpu(GetParam());
   std::uint64_t seed = 42;
   std::size_t sets = 0, pairs = 0;
   for (int k = 0; k < int(mt::SetKind::count); ++k) {
@@ -51,8 +53,8 @@ TEST(SubdivisionCpu, EqualsOracleOnRandomAndAdversarialSets) {
   EXPECT_GT(pairs, 10000u);  // the sets are not trivially empty
 }
 
-TEST(SubdivisionCpu, KeyWidthsAreExercised) {
-  auto bp = mb::make_subdivision_cpu();
+TEST_P(SubdivisionCpu, KeyWidthsAreExercised) {
+  auto bp = mb::make_subdivision_cpu(GetParam());
   std::vector<mb::Pair> out;
   bool saw32 = false, saw64 = false, sawc = false;
   for (std::uint64_t seed = 1; seed < 40 && !(saw32 && saw64 && sawc); ++seed) {
@@ -70,8 +72,8 @@ TEST(SubdivisionCpu, KeyWidthsAreExercised) {
   EXPECT_TRUE(sawc);
 }
 
-TEST(SubdivisionCpu, LargerSetsEqualOracle) {
-  auto bp = mb::make_subdivision_cpu();
+TEST_P(SubdivisionCpu, LargerSetsEqualOracle) {
+  auto bp = mb::make_subdivision_cpu(GetParam());
   std::uint64_t seed = 9000;
   for (auto kind : {mt::SetKind::mono, mt::SetKind::poly20, mt::SetKind::clustered}) {
     const mt::SphereSet s = mt::make_set(kind, 20000, ++seed);
@@ -79,9 +81,9 @@ TEST(SubdivisionCpu, LargerSetsEqualOracle) {
   }
 }
 
-TEST(SubdivisionCpu, OrderIndependentOfThreadCount) {
+TEST_P(SubdivisionCpu, OrderIndependentOfThreadCount) {
 #if defined(_OPENMP)
-  auto bp = mb::make_subdivision_cpu();
+  auto bp = mb::make_subdivision_cpu(GetParam());
   const int before = omp_get_max_threads();
   for (auto kind : {mt::SetKind::mono, mt::SetKind::poly20, mt::SetKind::clustered}) {
     const mt::SphereSet s = mt::make_set(kind, 60000, 77 + int(kind));
@@ -103,8 +105,8 @@ TEST(SubdivisionCpu, OrderIndependentOfThreadCount) {
 #endif
 }
 
-TEST(SubdivisionCpu, EdgeCases) {
-  auto bp = mb::make_subdivision_cpu();
+TEST_P(SubdivisionCpu, EdgeCases) {
+  auto bp = mb::make_subdivision_cpu(GetParam());
   std::vector<mb::Pair> out;
   mt::SphereSet s;
   bp->find_pairs(s.view(), 0, out);
@@ -126,3 +128,6 @@ TEST(SubdivisionCpu, EdgeCases) {
   s.centre[1] = marbles::Vec3(std::numeric_limits<real>::quiet_NaN(), 0, 0);
   EXPECT_THROW(bp->find_pairs(s.view(), 0, out), marbles::RuntimeFailure);
 }
+
+INSTANTIATE_TEST_SUITE_P(Algorithms, SubdivisionCpu, ::testing::Values(mb::Algorithm::seed, mb::Algorithm::home),
+                         [](const auto& info) { return std::string(mb::algorithm_name(info.param)); });

@@ -1,4 +1,5 @@
-// The CUDA subdivision backend against the oracle and the CPU backend, and
+// The CUDA backends (seed algorithm and home-cell variant, each with both
+// sorts) against the oracle and the CPU backend of the same algorithm, and
 // both GPU sorts against std::stable_sort. Label `gpu`; every case skips,
 // saying so, where no CUDA device is present.
 #include <gtest/gtest.h>
@@ -29,11 +30,20 @@ using marbles::real;
 
 #if defined(MARBLES_BROADPHASE_CUDA)
 
-class SubdivisionCuda : public ::testing::TestWithParam<mb::SortKind> {};
+struct Variant {
+  mb::Algorithm algorithm;
+  mb::SortKind sort;
+};
+
+class SubdivisionCuda : public ::testing::TestWithParam<Variant> {
+ protected:
+  mb::Algorithm algorithm() const { return GetParam().algorithm; }
+  mb::SortKind sort() const { return GetParam().sort; }
+};
 
 TEST_P(SubdivisionCuda, EqualsOracleOnRandomAndAdversarialSets) {
   REQUIRE_DEVICE();
-  auto gpu = mb::make_subdivision_cuda(GetParam());
+  auto gpu = mb::make_subdivision_cuda(algorithm(), sort());
   std::uint64_t seed = 4242;
   std::size_t sets = 0;
   for (int k = 0; k < int(mt::SetKind::count); ++k) {
@@ -54,11 +64,14 @@ TEST_P(SubdivisionCuda, EqualsOracleOnRandomAndAdversarialSets) {
   EXPECT_GE(sets, 200u);
 }
 
-// Large sets: the GPU emits exactly the CPU backend's pairs, in the same order.
+// Large sets: the GPU emits exactly the CPU backend's pairs of the same
+// algorithm, in the same order; the home-cell variant's pair set also equals
+// the seed algorithm's (oracle-checked above; O(N^2) is out of reach here).
 TEST_P(SubdivisionCuda, LargeSetsEqualCpuBackend) {
   REQUIRE_DEVICE();
-  auto gpu = mb::make_subdivision_cuda(GetParam());
-  auto cpu = mb::make_subdivision_cpu();
+  auto gpu = mb::make_subdivision_cuda(algorithm(), sort());
+  auto cpu = mb::make_subdivision_cpu(algorithm());
+  auto seed_cpu = mb::make_subdivision_cpu(mb::Algorithm::seed);
   std::uint64_t seed = 777;
   for (std::size_t n : {100000ul, 1000000ul, 4000000ul}) {
     for (auto kind : {mt::SetKind::mono, mt::SetKind::poly20, mt::SetKind::clustered, mt::SetKind::far_away,
@@ -73,30 +86,44 @@ TEST_P(SubdivisionCuda, LargeSetsEqualCpuBackend) {
       EXPECT_EQ(gpu->last_stats().cell_entries, cpu->last_stats().cell_entries);
       EXPECT_EQ(gpu->last_stats().collision_cells, cpu->last_stats().collision_cells);
       EXPECT_EQ(gpu->last_stats().tests, cpu->last_stats().tests);
+      if (algorithm() == mb::Algorithm::home) {
+        std::vector<mb::Pair> c;
+        seed_cpu->find_pairs(s.view(), real(0.01), c);
+        std::sort(a.begin(), a.end());
+        ASSERT_TRUE(mt::same_pair_set(a, c)) << mt::set_name(kind) << " n=" << n << ": home vs seed";
+      }
     }
   }
 }
 
+// Also the sanitizer's case (scripts/gpu-check): a dense grid, and a sparse
+// one (one sphere far out: the home-cell variant binary-searches the keys).
 TEST_P(SubdivisionCuda, DeviceResidentEntryPoint) {
   REQUIRE_DEVICE();
-  mb::SubdivisionCuda gpu(GetParam());
-  const mt::SphereSet s = mt::make_set(mt::SetKind::mono, 20000, 99);
-  marbles::Vec3* c = nullptr;
-  real* r = nullptr;
-  ASSERT_EQ(cudaMalloc(&c, s.centre.size() * sizeof(marbles::Vec3)), cudaSuccess);
-  ASSERT_EQ(cudaMalloc(&r, s.radius.size() * sizeof(real)), cudaSuccess);
-  cudaMemcpy(c, s.centre.data(), s.centre.size() * sizeof(marbles::Vec3), cudaMemcpyHostToDevice);
-  cudaMemcpy(r, s.radius.data(), s.radius.size() * sizeof(real), cudaMemcpyHostToDevice);
-  cudaStream_t stream;
-  ASSERT_EQ(cudaStreamCreate(&stream), cudaSuccess);
-  const std::size_t count = gpu.find_pairs_device({c, r, s.centre.size()}, real(0), stream);
-  std::vector<mb::Pair> got(count), expected;
-  cudaMemcpy(got.data(), gpu.device_pairs(), count * sizeof(mb::Pair), cudaMemcpyDeviceToHost);
-  mb::brute_force_pairs(s.view(), 0, expected);
-  EXPECT_TRUE(mt::same_pair_set(got, expected));
-  cudaStreamDestroy(stream);
-  cudaFree(c);
-  cudaFree(r);
+  mb::SubdivisionCuda gpu(algorithm(), sort());
+  for (bool sparse : {false, true}) {
+    mt::SphereSet s = mt::make_set(mt::SetKind::mono, 20000, 99);
+    if (sparse) s.centre[123] = marbles::Vec3(real(2.0e5), real(-1.0e5), real(3.0e5));
+    marbles::Vec3* c = nullptr;
+    real* r = nullptr;
+    ASSERT_EQ(cudaMalloc(&c, s.centre.size() * sizeof(marbles::Vec3)), cudaSuccess);
+    ASSERT_EQ(cudaMalloc(&r, s.radius.size() * sizeof(real)), cudaSuccess);
+    cudaMemcpy(c, s.centre.data(), s.centre.size() * sizeof(marbles::Vec3), cudaMemcpyHostToDevice);
+    cudaMemcpy(r, s.radius.data(), s.radius.size() * sizeof(real), cudaMemcpyHostToDevice);
+    cudaStream_t stream;
+    ASSERT_EQ(cudaStreamCreate(&stream), cudaSuccess);
+    const std::size_t count = gpu.find_pairs_device({c, r, s.centre.size()}, real(0), stream);
+    std::vector<mb::Pair> got(count), expected;
+    cudaMemcpy(got.data(), gpu.device_pairs(), count * sizeof(mb::Pair), cudaMemcpyDeviceToHost);
+    mb::brute_force_pairs(s.view(), 0, expected);
+    EXPECT_TRUE(mt::same_pair_set(got, expected)) << (sparse ? "sparse" : "dense");
+    if (algorithm() == mb::Algorithm::home) {
+      EXPECT_EQ(gpu.last_stats().dense_cell_starts, !sparse);
+    }
+    cudaStreamDestroy(stream);
+    cudaFree(c);
+    cudaFree(r);
+  }
 }
 
 template <class Key>
@@ -126,21 +153,30 @@ void check_sort(mb::SortKind sort, int pattern, std::size_t n, unsigned bits, st
 
 TEST_P(SubdivisionCuda, SortEqualsStableSort) {
   REQUIRE_DEVICE();
+  if (algorithm() != mb::Algorithm::seed) GTEST_SKIP() << "the sorts are the same for both algorithms: run once";
   std::uint64_t seed = 31;
   for (int pattern = 0; pattern < 5; ++pattern)
     for (std::size_t n : {0ul, 1ul, 17ul, 1000ul, 65537ul, 1000003ul, 8000000ul}) {
-      for (unsigned bits : {5u, 16u, 23u, 32u}) check_sort<std::uint32_t>(GetParam(), pattern, n, bits, ++seed);
+      for (unsigned bits : {5u, 16u, 23u, 32u}) check_sort<std::uint32_t>(sort(), pattern, n, bits, ++seed);
       if (n <= 1000003ul)
-        for (unsigned bits : {37u, 64u}) check_sort<std::uint64_t>(GetParam(), pattern, n, bits, ++seed);
+        for (unsigned bits : {37u, 64u}) check_sort<std::uint64_t>(sort(), pattern, n, bits, ++seed);
     }
 }
 
-INSTANTIATE_TEST_SUITE_P(Sorts, SubdivisionCuda, ::testing::Values(mb::SortKind::seed, mb::SortKind::cub),
-                         [](const auto& info) { return info.param == mb::SortKind::seed ? "seed" : "cub"; });
+INSTANTIATE_TEST_SUITE_P(Variants, SubdivisionCuda,
+                         ::testing::Values(Variant{mb::Algorithm::seed, mb::SortKind::seed},
+                                           Variant{mb::Algorithm::seed, mb::SortKind::cub},
+                                           Variant{mb::Algorithm::home, mb::SortKind::seed},
+                                           Variant{mb::Algorithm::home, mb::SortKind::cub}),
+                         [](const auto& info) {
+                           return std::string(mb::algorithm_name(info.param.algorithm)) + "_" +
+                                  (info.param.sort == mb::SortKind::seed ? "seedsort" : "cubsort");
+                         });
 
 #endif
 
 TEST(SubdivisionCudaAvailability, ThrowsWithoutDevice) {
   if (marbles::cuda_device().available) GTEST_SKIP() << "skipped: a CUDA device is present";
-  EXPECT_THROW(mb::make_subdivision_cuda(mb::SortKind::cub), marbles::RuntimeFailure);
+  EXPECT_THROW(mb::make_subdivision_cuda(mb::Algorithm::seed), marbles::RuntimeFailure);
+  EXPECT_THROW(mb::make_subdivision_cuda(mb::Algorithm::home), marbles::RuntimeFailure);
 }
