@@ -49,12 +49,12 @@ struct Contact {
   real approach_speed = 0;  // m/s, normal relative velocity before the solve (< 0: approaching)
 
   // Accumulated impulses of this substep.
-  real normal_impulse = 0;  // N s, >= 0
-  real impact_impulse = 0;  // N s, the part of normal_impulse the restitution stage added
+  real normal_impulse = 0;  // N s, >= 0, the sustained (velocity-solve) part
+  real impact_impulse = 0;  // N s, what the impact stage applied (not carried over)
   Vec3 tangent_impulse;     // N s, |.| <= mu * normal_impulse
   Vec3 rolling_impulse;     // N m s
 
-  // Set by the restitution stage when a speculative contact (gap > 0)
+  // Set by the impact stage when a speculative contact (gap > 0)
   // bounced: how far (m) the bodies must come back together after the
   // position update, so the bounce happens at the surface and not at the gap.
   real rebound_shift = 0;

@@ -30,12 +30,10 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts) const {
 void ContactCache::store(const std::vector<Contact>& contacts) {
   m_entries.clear();
   m_entries.reserve(contacts.size());
-  // An impact's restitution impulse is not a sustained load: only what the
-  // contact carried before the restitution stage is carried over.
-  for (const Contact& c : contacts) {
-    const real sustained = c.normal_impulse - c.impact_impulse;
-    if (sustained > 0) m_entries.push_back({key_of(c), sustained, c.tangent_impulse, c.rolling_impulse});
-  }
+  // Only the sustained impulses of the velocity solve are carried over; an
+  // impact's impulse (Contact::impact_impulse) is not a load.
+  for (const Contact& c : contacts)
+    if (c.normal_impulse > 0) m_entries.push_back({key_of(c), c.normal_impulse, c.tangent_impulse, c.rolling_impulse});
   std::sort(m_entries.begin(), m_entries.end(), [](const Entry& x, const Entry& y) { return x.key < y.key; });
 }
 

@@ -109,6 +109,12 @@ MARBLES_HD_INLINE Vec3 wall_surface_velocity(const WallShape& w, const Vec3& x) 
   return w.velocity + cross(w.direction * w.angular_velocity, x - w.point);
 }
 
+// Contact test of the narrow phase: overlapping, or a gap that the current
+// normal approach speed (v_n < 0) closes within the substep h.
+MARBLES_HD_INLINE bool speculative_closes(real separation, real normal_velocity, real h) {
+  return separation < 0 || separation < -normal_velocity * h;
+}
+
 // Prepare stage: effective masses and the approach speed before the solve.
 MARBLES_HD_INLINE void prepare_contact(Contact& c, const BodyState& A, const BodyState& B) {
   const real k_normal = A.inv_mass + B.inv_mass;
@@ -178,25 +184,33 @@ MARBLES_HD_INLINE void solve_rolling(Contact& c, BodyState& A, BodyState& B) {
   B.w -= d * B.inv_inertia;
 }
 
-// Restitution stage (after the velocity iterations): a contact that was
-// approaching faster than `rest_speed` before the solve and is pushing leaves
-// with -e times its approach speed.
-MARBLES_HD_INLINE void apply_restitution(Contact& c, BodyState& A, BodyState& B, real rest_speed) {
-  if (c.approach_speed > -rest_speed || c.normal_impulse <= 0 || c.coeff.restitution <= 0) return;
+// Impact stage: a contact still approaching faster than `rest_speed` whose
+// gap closes within the substep h collides as a binary impact,
+//   P_n = (1 + e) m_n |v_n|   along the normal, then, with friction, a
+//   tangential impulse that stops the slip, limited to mu P_n (circular cone),
+// as rigid-body impact theory has it. Returns true if it hit. Impacts are
+// applied in time-of-impact order with the velocities left by the earlier
+// ones, so a chain (Newton's cradle) or a triple collision resolves as a
+// sequence of binary impacts: with e = 1 each conserves energy exactly.
+template <bool Friction>
+MARBLES_HD_INLINE bool apply_impact(Contact& c, BodyState& A, BodyState& B, real rest_speed, real h) {
   const real vn = dot(A.v - B.v, c.normal);
-  real lambda = -c.normal_mass * (vn + c.coeff.restitution * c.approach_speed);
-  const real old = c.normal_impulse;
-  c.normal_impulse = old + lambda > 0 ? old + lambda : real(0);
-  lambda = c.normal_impulse - old;
-  c.impact_impulse = lambda;
-  const Vec3 p = c.normal * lambda;
-  A.v += p * A.inv_mass;
-  B.v -= p * B.inv_mass;
-  // Time of impact: the bodies met at t = gap / |v_n0| into the substep and
-  // separated at e |v_n0| from then on; the solve let them close only the gap
-  // and the new velocity acts over the whole substep, so they end (1 + e) gap
-  // too far apart. The projection stage takes that back.
-  if (c.separation > 0) c.rebound_shift = (1 + c.coeff.restitution) * c.separation;
+  if (vn > -rest_speed || !(c.separation < -vn * h)) return false;
+  const real e = c.coeff.restitution;
+  const real lambda = -(1 + e) * c.normal_mass * vn;
+  c.impact_impulse += lambda;
+  apply_impulse(c, A, B, c.normal * lambda);
+  if constexpr (Friction) {
+    const Vec3 vrel = contact_relative_velocity(c, A, B);
+    const Vec3 vt = vrel - c.normal * dot(vrel, c.normal);
+    apply_impulse(c, A, B, clamp_length(vt * (-c.tangent_mass), c.coeff.friction * lambda));
+  }
+  // Time of impact: the bodies meet at t = gap / |v_n| into the substep and
+  // separate at e |v_n| from then on; with the new velocity acting over the
+  // whole substep they would end (1 + e) gap too far apart. The projection
+  // stage takes that back (positions only).
+  if (c.separation > 0) c.rebound_shift += (1 + e) * c.separation;
+  return true;
 }
 
 // Position projection: move the bodies apart along the normal to remove a

@@ -51,14 +51,16 @@ void advance_walls(std::vector<WallShape>& shapes, real h) {
 }
 
 void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
-                     const PairTable& table, real margin, const real* margins, std::vector<Contact>& out) {
+                     const PairTable& table, real h, std::vector<Contact>& out) {
   for (std::size_t k = 0; k < pair_count; ++k) {
     const IndexPair pair = pairs[k];
-    const real m = margins ? margins[pair.i] + margins[pair.j] : margin;
+    const Vec3 dv = bodies.velocity[pair.i] - bodies.velocity[pair.j];
+    const real reach = length(dv) * h;  // no gap wider than this can close in the substep
     Contact c;
     if (!sphere_sphere(bodies.position[pair.i], bodies.radius[pair.i], bodies.position[pair.j],
-                       bodies.radius[pair.j], m, c.normal, c.separation))
+                       bodies.radius[pair.j], reach, c.normal, c.separation))
       continue;
+    if (!speculative_closes(c.separation, dot(dv, c.normal), h)) continue;
     c.a = pair.i;
     c.b = pair.j;
     c.ra = bodies.radius[pair.i];
@@ -68,22 +70,22 @@ void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size
   }
 }
 
-void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table,
-                   real margin, const real* margins, std::vector<Contact>& out) {
+void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
+                   std::vector<Contact>& out) {
   const std::uint32_t wall_count = static_cast<std::uint32_t>(walls.size());
   for (std::size_t i = 0; i < bodies.count; ++i) {
     const Vec3 p = bodies.position[i];
     const real r = bodies.radius[i];
-    const real m = margins ? margins[i] : margin;
     for (std::uint32_t k = 0; k < wall_count; ++k) {
       const WallShape& wall = walls[k];
       Contact c;
-      if (!wall_gap(wall, p, r, c.normal, c.separation) || !(c.separation < m)) continue;
+      if (!wall_gap(wall, p, r, c.normal, c.separation)) continue;
+      c.wall_velocity = wall_surface_velocity(wall, p - c.normal * r);
+      if (!speculative_closes(c.separation, dot(bodies.velocity[i] - c.wall_velocity, c.normal), h)) continue;
       c.a = static_cast<std::uint32_t>(i);
       c.b = kWallFlag | k;
       c.ra = r;
       c.rb = 0;
-      c.wall_velocity = wall_surface_velocity(wall, p - c.normal * r);
       c.coeff = table(bodies.material[i], wall.material);
       out.push_back(c);
     }

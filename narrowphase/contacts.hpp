@@ -1,7 +1,6 @@
 // narrowphase/contacts.hpp — exact contact generation.
 //
-// Sphere pairs come from the broad phase (candidate pairs whose gap is below
-// the margin); walls are flattened once into WallShapes (a box container is
+// Sphere pairs come from the broad phase (candidates from swept bounds); walls are flattened once into WallShapes (a box container is
 // its six inward faces), so one gap function serves every wall kind.
 // Contacts come out in a fixed order: sphere pairs in the order given, then
 // walls by sphere then wall index — the solver's order, so runs repeat exactly.
@@ -25,15 +24,18 @@ std::vector<WallShape> wall_shapes(const Walls& walls);
 // Moves translating walls by h times their velocity.
 void advance_walls(std::vector<WallShape>& shapes, real h);
 
-// Appends a contact for each pair whose gap is below `margin`, or, when
-// `margins` is given, below margins[i] + margins[j] (swept bounds: each
-// sphere's travel within the substep).
+// Appends a contact for each pair that overlaps or whose gap closes within
+// the substep h at the current approach speed (a speculative contact):
+//   separation < max(0, -v_n) h.
+// Pairs drifting apart or passing at a distance make no contact, so a
+// contact never holds back bodies that would not have met (which would
+// swallow kinetic energy); h = 0 keeps overlaps only.
 void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
-                     const PairTable& table, real margin, const real* margins, std::vector<Contact>& out);
+                     const PairTable& table, real h, std::vector<Contact>& out);
 
-// Appends a contact for each sphere–wall gap below `margin`; `margins`, when
-// given, holds one margin per sphere instead (swept bounds).
-void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table,
-                   real margin, const real* margins, std::vector<Contact>& out);
+// The same for every sphere against every wall (approach speed relative to
+// the wall's surface).
+void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
+                   std::vector<Contact>& out);
 
 }  // namespace marbles::narrowphase

@@ -52,21 +52,42 @@ void warm_start(std::vector<Contact>& contacts, const BodiesView& bodies) {
   }
 }
 
-// Restitution stage. With friction the tangential impulse is solved once more
-// at the contact's final normal impulse, so an impact's friction is limited by
-// mu (1 + e) times the normal impulse of approach, as rigid-body impact theory has it.
+// Impact stage: binary impacts in time-of-impact order, repeated while
+// impacts make new approaches (a chain of touching spheres), at most
+// kImpactPasses times.
+constexpr int kImpactPasses = 4;
+
 template <bool Friction>
-void restitution(std::vector<Contact>& contacts, const BodiesView& bodies, real rest_speed) {
-  for (Contact& c : contacts) {
-    BodyState A = load(bodies, c.a, c);
-    BodyState B = load(bodies, c.b, c);
-    const real before = c.normal_impulse;
-    apply_restitution(c, A, B, rest_speed);
-    if constexpr (Friction) {
-      if (c.normal_impulse != before) solve_friction(c, A, B);
-    }
-    store(bodies, c.a, A);
-    store(bodies, c.b, B);
+void impacts(std::vector<Contact>& contacts, const BodiesView& bodies, real rest_speed, real h,
+             std::vector<std::uint32_t>& order) {
+  order.clear();
+  for (std::uint32_t k = 0; k < contacts.size(); ++k)
+    if (contacts[k].approach_speed < -rest_speed) order.push_back(k);
+  if (order.empty()) return;
+  auto toi = [&](std::uint32_t k) {
+    const Contact& c = contacts[k];
+    return c.separation > 0 ? c.separation / -c.approach_speed : real(0);
+  };
+  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
+    const real tx = toi(x), ty = toi(y);
+    return tx < ty || (tx == ty && x < y);
+  });
+  // Later passes look at every contact: an impact can set a touching neighbour approaching.
+  for (int pass = 0; pass < kImpactPasses; ++pass) {
+    bool hit = false;
+    auto visit = [&](Contact& c) {
+      BodyState A = load(bodies, c.a, c);
+      BodyState B = load(bodies, c.b, c);
+      if (!apply_impact<Friction>(c, A, B, rest_speed, h)) return;
+      store(bodies, c.a, A);
+      store(bodies, c.b, B);
+      hit = true;
+    };
+    if (pass == 0)
+      for (std::uint32_t k : order) visit(contacts[k]);
+    else
+      for (Contact& c : contacts) visit(c);
+    if (!hit) break;
   }
 }
 
@@ -77,17 +98,17 @@ ContactSolver::ContactSolver(const SolverSettings& settings) : m_settings(settin
   else if (settings.friction) m_sweep = &sweep<true, false>, m_warm_start = &warm_start<true, false>;
   else if (settings.rolling) m_sweep = &sweep<false, true>, m_warm_start = &warm_start<false, true>;
   else m_sweep = &sweep<false, false>, m_warm_start = &warm_start<false, false>;
-  m_restitution = settings.friction ? &restitution<true> : &restitution<false>;
+  m_impacts = settings.friction ? &impacts<true> : &impacts<false>;
 }
 
 void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const BodiesView& bodies, real h) const {
   for (Contact& c : contacts) prepare_contact(c, load(bodies, c.a, c), load(bodies, c.b, c));
+  if (m_settings.restitution) m_impacts(contacts, bodies, m_settings.rest_speed, h, m_order);
   if (m_settings.warm_start) m_warm_start(contacts, bodies);
 
   const real inv_h = real(1) / h;
   for (int it = 0; it < m_settings.iterations; ++it) m_sweep(contacts, bodies, inv_h);
 
-  if (m_settings.restitution) m_restitution(contacts, bodies, m_settings.rest_speed);
 }
 
 void ContactSolver::project_positions(const std::vector<Contact>& contacts, const BodiesView& bodies,

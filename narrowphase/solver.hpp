@@ -1,17 +1,16 @@
 // narrowphase/solver.hpp — sequential-impulse contact solver.
 //
-// Stages of one substep, in order (each a loop over the contacts in their
-// fixed order, so a run repeats bit for bit):
+// Stages of one substep, in order (each in a fixed order, so a run repeats
+// bit for bit):
 //   prepare       effective masses; approach speed before the solve
+//   impacts       (with restitution) contacts approaching faster than the
+//                 rest speed collide as binary impacts, P_n = (1 + e) m |v_n|
+//                 with friction limited to mu P_n, in time-of-impact order
 //   warm start    apply the impulses carried over from the last substep
 //                 (ContactCache, matched by body pair) when enabled
 //   solve         `iterations` sweeps: friction, rolling resistance (when the
 //                 scene enables them), then the normal impulse (speculative:
 //                 a positive gap may close within the substep, never more)
-//   restitution   one sweep: contacts that approached faster than the rest
-//                 speed leave at -e times that speed (when enabled); with
-//                 friction, the tangential impulse is re-solved at the final
-//                 normal impulse (impact theory's mu (1 + e) limit)
 // and after the positions are integrated:
 //   project       remove overlap beyond a slop by moving positions only
 //                 (no velocity change, so no kinetic energy is added)
@@ -19,6 +18,7 @@
 // built: a disabled effect costs no branch per contact (template dispatch).
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "core/spheres.hpp"
@@ -30,7 +30,7 @@ namespace marbles::narrowphase {
 
 struct SolverSettings {
   int iterations = 10;            // velocity sweeps per substep
-  bool restitution = true;        // restitution stage
+  bool restitution = true;        // impact stage (without it impacts are plastic)
   bool friction = false;          // Coulomb friction term
   bool rolling = false;           // rolling resistance term
   real rest_speed = real(0.01);   // m/s: slower approaches do not bounce
@@ -60,8 +60,10 @@ class ContactSolver {
   SolverSettings m_settings;
   SweepFn m_sweep = nullptr;
   WarmStartFn m_warm_start = nullptr;
-  using RestitutionFn = void (*)(std::vector<Contact>&, const BodiesView&, real rest_speed);
-  RestitutionFn m_restitution = nullptr;
+  using ImpactFn = void (*)(std::vector<Contact>&, const BodiesView&, real rest_speed, real h,
+                           std::vector<std::uint32_t>& order);
+  ImpactFn m_impacts = nullptr;
+  mutable std::vector<std::uint32_t> m_order;  // scratch: impact order
 };
 
 }  // namespace marbles::narrowphase

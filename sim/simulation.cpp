@@ -96,7 +96,6 @@ Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backe
       m_dt(scene.time.dt),
       m_substeps(scene.time.substeps) {
   m_pair_table = {m_pair_coefficients.data(), static_cast<std::uint32_t>(scene.materials.size())};
-  for (const narrowphase::WallShape& w : m_wall_shapes) m_max_wall_speed = std::max(m_max_wall_speed, length(w.velocity));
   if (m_collisions)
     m_broadphase = backend == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda()
                                                         : broadphase::make_subdivision_cpu();
@@ -154,27 +153,22 @@ void Simulation::substep(real h) {
   m_last.contacts += m_contacts.size();
 }
 
-// Swept bounds: each sphere's margin is its travel |v| h within the substep,
-// so any gap two spheres (or a sphere and a wall) can close in this substep is
-// a contact now (speculative contact) and nothing tunnels, however fast.
+// Swept bounds: the broad phase sees each sphere grown by its travel |v| h
+// within the substep, so every pair that can meet in this substep is a
+// candidate, however fast; the narrow phase keeps those that overlap or close
+// their gap at the current approach speed (speculative contacts), so nothing
+// tunnels.
 void Simulation::find_contacts(real h) {
   const BodiesView bodies = m_world.view();
   const std::size_t n = m_world.size();
-  m_travel.resize(n);
-  for (std::size_t i = 0; i < n; ++i) m_travel[i] = length(bodies.velocity[i]) * h;
   if (m_collisions) {
     m_bound_radius.resize(n);
-    for (std::size_t i = 0; i < n; ++i) m_bound_radius[i] = bodies.radius[i] + m_travel[i];
+    for (std::size_t i = 0; i < n; ++i) m_bound_radius[i] = bodies.radius[i] + length(bodies.velocity[i]) * h;
     m_broadphase->find_pairs({bodies.position, m_bound_radius.data(), n}, 0, m_pairs);
     m_last.candidate_pairs += m_pairs.size();
-    narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_pair_table, 0, m_travel.data(),
-                                 m_contacts);
+    narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_pair_table, h, m_contacts);
   }
-  if (m_wall_contacts) {
-    if (m_max_wall_speed > 0)
-      for (real& t : m_travel) t += m_max_wall_speed * h;
-    narrowphase::wall_contacts(bodies, m_wall_shapes, m_pair_table, 0, m_travel.data(), m_contacts);
-  }
+  if (m_wall_contacts) narrowphase::wall_contacts(bodies, m_wall_shapes, m_pair_table, h, m_contacts);
 }
 
 }  // namespace marbles

@@ -67,7 +67,6 @@ class Simulation {
   World m_world;
   Walls m_walls;
   std::vector<narrowphase::WallShape> m_wall_shapes;
-  real m_max_wall_speed = 0;
   std::vector<narrowphase::PairCoefficients> m_pair_coefficients;
   narrowphase::PairTable m_pair_table;
   std::unique_ptr<broadphase::BroadPhase> m_broadphase;
@@ -82,7 +81,6 @@ class Simulation {
   Vec3 m_g;
 
   // Per-substep buffers, reused.
-  std::vector<real> m_travel;        // m, |v| h per sphere: the swept-bound margin
   std::vector<real> m_bound_radius;  // m, radius + travel: what the broad phase sees
   std::vector<broadphase::Pair> m_pairs;
   std::vector<narrowphase::Contact> m_contacts;
