@@ -1,6 +1,7 @@
 #include "narrowphase/contact_cache.hpp"
 
 #include <algorithm>
+#include <numeric>
 
 namespace marbles::narrowphase {
 namespace {
@@ -9,10 +10,17 @@ inline std::uint64_t key_of(const Contact& c) { return (std::uint64_t(c.a) << 32
 
 inline Vec3 tangential(const Vec3& v, const Vec3& n) { return v - n * dot(v, n); }
 
+// Union-find root with path halving.
+inline std::uint32_t root(std::vector<std::uint32_t>& parent, std::uint32_t i) {
+  while (parent[i] != i) i = parent[i] = parent[parent[i]];
+  return i;
+}
+
 }  // namespace
 
-std::size_t ContactCache::restore(std::vector<Contact>& contacts) const {
+std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse) {
   if (m_entries.empty()) return 0;
+  m_matched.assign(m_entries.size(), 0);
   std::size_t matched = 0;
   for (Contact& c : contacts) {
     const std::uint64_t key = key_of(c);
@@ -22,7 +30,37 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts) const {
     c.normal_impulse = it->normal_impulse;
     c.tangent_impulse = tangential(it->tangent_impulse, c.normal);
     c.rolling_impulse = tangential(it->rolling_impulse, c.normal);
+    m_matched[it - m_entries.begin()] = 1;
     ++matched;
+  }
+
+  // Loads that went away.
+  m_unloaded.clear();
+  for (std::size_t k = 0; k < m_entries.size(); ++k) {
+    if (m_matched[k]) continue;
+    const auto a = static_cast<std::uint32_t>(m_entries[k].key >> 32);
+    const auto b = static_cast<std::uint32_t>(m_entries[k].key & 0xffffffffu);
+    if (a >= bodies.count || bodies.inv_mass[a] <= 0) continue;
+    if (m_entries[k].normal_impulse <= 4 * weight_impulse / bodies.inv_mass[a]) continue;
+    m_unloaded.push_back(a);
+    if (!is_wall(b) && b < bodies.count) m_unloaded.push_back(b);
+  }
+  if (m_unloaded.empty()) return matched;
+
+  // Islands of touching spheres; those holding an unloaded sphere start cold.
+  m_parent.resize(bodies.count);
+  std::iota(m_parent.begin(), m_parent.end(), 0u);
+  for (const Contact& c : contacts)
+    if (!is_wall(c.b)) m_parent[root(m_parent, c.a)] = root(m_parent, c.b);
+  std::vector<char>& cold = m_matched;  // reuse as a per-root flag
+  cold.assign(bodies.count, 0);
+  for (std::uint32_t i : m_unloaded) cold[root(m_parent, i)] = 1;
+  for (Contact& c : contacts) {
+    if (!cold[root(m_parent, c.a)] || c.normal_impulse <= 0) continue;
+    c.normal_impulse = 0;
+    c.tangent_impulse = Vec3{};
+    c.rolling_impulse = Vec3{};
+    --matched;
   }
   return matched;
 }

@@ -20,9 +20,14 @@ inline void store(const BodiesView& bodies, std::uint32_t index, const BodyState
   bodies.angular_velocity[index] = s.w;
 }
 
+// One Gauss-Seidel sweep, forwards or backwards over the contacts:
+// alternating the direction lets a correction cross a chain of contacts (a
+// stack) in both directions within one pair of sweeps.
 template <bool Friction, bool Rolling>
-void sweep(std::vector<Contact>& contacts, const BodiesView& bodies, real inv_h) {
-  for (Contact& c : contacts) {
+void sweep(std::vector<Contact>& contacts, const BodiesView& bodies, real inv_h, bool backwards) {
+  const std::size_t n = contacts.size();
+  for (std::size_t k = 0; k < n; ++k) {
+    Contact& c = contacts[backwards ? n - 1 - k : k];
     BodyState A = load(bodies, c.a, c);
     BodyState B = load(bodies, c.b, c);
     if constexpr (Friction) solve_friction(c, A, B);
@@ -107,7 +112,7 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Bodie
   if (m_settings.warm_start) m_warm_start(contacts, bodies);
 
   const real inv_h = real(1) / h;
-  for (int it = 0; it < m_settings.iterations; ++it) m_sweep(contacts, bodies, inv_h);
+  for (int it = 0; it < m_settings.iterations; ++it) m_sweep(contacts, bodies, inv_h, it % 2 == 1);
 
 }
 

@@ -8,7 +8,7 @@
 //                 with friction limited to mu P_n, in time-of-impact order
 //   warm start    apply the impulses carried over from the last substep
 //                 (ContactCache, matched by body pair) when enabled
-//   solve         `iterations` sweeps: friction, rolling resistance (when the
+//   solve         `iterations` sweeps, alternately forwards and backwards: friction, rolling resistance (when the
 //                 scene enables them), then the normal impulse (speculative:
 //                 a positive gap may close within the substep, never more)
 // and after the positions are integrated:
@@ -55,7 +55,7 @@ class ContactSolver {
                          const std::vector<WallShape>& walls) const;
 
  private:
-  using SweepFn = void (*)(std::vector<Contact>&, const BodiesView&, real inv_h);
+  using SweepFn = void (*)(std::vector<Contact>&, const BodiesView&, real inv_h, bool backwards);
   using WarmStartFn = void (*)(std::vector<Contact>&, const BodiesView&);
   SolverSettings m_settings;
   SweepFn m_sweep = nullptr;

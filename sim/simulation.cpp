@@ -141,7 +141,7 @@ void Simulation::substep(real h) {
   m_contacts.clear();
   if (m_collisions || m_wall_contacts) find_contacts(h);
   if (!m_contacts.empty()) {
-    m_cache.restore(m_contacts);
+    m_cache.restore(m_contacts, bodies, m_gravity ? length(m_g) * h : real(0));
     m_solver.solve_velocities(m_contacts, bodies, h);
     m_cache.store(m_contacts);
   }

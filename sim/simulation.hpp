@@ -55,6 +55,8 @@ class Simulation {
   const StepCounters& last_step() const { return m_last; }
   // Direct access to the state, for tests and tools that edit it between steps.
   World& edit_world() { return m_world; }
+  // The contacts of the last substep (solver order), for diagnostics and tests.
+  const std::vector<narrowphase::Contact>& contacts() const { return m_contacts; }
   const broadphase::BroadPhase* broad_phase() const { return m_broadphase.get(); }
 
   // The stages this scene's pipeline runs, one per line.
