@@ -1,6 +1,7 @@
 // The CPU backends (seed algorithm and home-cell variant) against the O(N^2) oracle.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <limits>
 
 #if defined(_OPENMP)
@@ -78,6 +79,23 @@ TEST_P(SubdivisionCpu, LargerSetsEqualOracle) {
   for (auto kind : {mt::SetKind::mono, mt::SetKind::poly20, mt::SetKind::clustered}) {
     const mt::SphereSet s = mt::make_set(kind, 20000, ++seed);
     check_against_oracle(*bp, s, real(0.02), mt::set_name(kind));
+  }
+}
+
+// Sets too large for the oracle: both algorithms find the same pair set.
+TEST(SubdivisionCpuAlgorithms, HomeAndSeedAgreeOnLargeSets) {
+  auto home = mb::make_subdivision_cpu(mb::Algorithm::home);
+  auto seed = mb::make_subdivision_cpu(mb::Algorithm::seed);
+  std::uint64_t rng = 31337;
+  for (auto kind : {mt::SetKind::mono, mt::SetKind::poly20, mt::SetKind::clustered, mt::SetKind::far_away,
+                    mt::SetKind::outlier, mt::SetKind::on_boundaries, mt::SetKind::coincident}) {
+    const mt::SphereSet s = mt::make_set(kind, 150000, ++rng);
+    std::vector<mb::Pair> a, b;
+    home->find_pairs(s.view(), real(0.01), a);
+    seed->find_pairs(s.view(), real(0.01), b);
+    std::sort(b.begin(), b.end());
+    ASSERT_TRUE(mt::same_pair_set(a, b)) << mt::set_name(kind);
+    EXPECT_GT(a.size(), 0u) << mt::set_name(kind);
   }
 }
 
