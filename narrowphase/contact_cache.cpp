@@ -34,27 +34,42 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
     ++matched;
   }
 
-  // Loads that went away.
+  // Loads that went away: lost contacts that carried more than 4 times the
+  // weight impulse of their sphere.
   m_unloaded.clear();
   for (std::size_t k = 0; k < m_entries.size(); ++k) {
     if (m_matched[k]) continue;
     const auto a = static_cast<std::uint32_t>(m_entries[k].key >> 32);
-    const auto b = static_cast<std::uint32_t>(m_entries[k].key & 0xffffffffu);
     if (a >= bodies.count || bodies.inv_mass[a] <= 0) continue;
     if (m_entries[k].normal_impulse <= 4 * weight_impulse / bodies.inv_mass[a]) continue;
-    m_unloaded.push_back(a);
-    if (!is_wall(b) && b < bodies.count) m_unloaded.push_back(b);
+    m_unloaded.push_back(static_cast<std::uint32_t>(k));
   }
   if (m_unloaded.empty()) return matched;
 
-  // Islands of touching spheres; those holding an unloaded sphere start cold.
+  // Islands of touching spheres. An island starts cold when it lost a load
+  // of at least a quarter of the largest impulse it still carries (the top of
+  // a stack removed), not when a sphere merely leaves the surface of a deep pile.
   m_parent.resize(bodies.count);
   std::iota(m_parent.begin(), m_parent.end(), 0u);
   for (const Contact& c : contacts)
     if (!is_wall(c.b)) m_parent[root(m_parent, c.a)] = root(m_parent, c.b);
-  std::vector<char>& cold = m_matched;  // reuse as a per-root flag
+  m_island_max.assign(bodies.count, 0);
+  for (const Contact& c : contacts) {
+    real& m = m_island_max[root(m_parent, c.a)];
+    m = std::max(m, c.normal_impulse);
+  }
+  std::vector<char>& cold = m_matched;  // reused as a per-root flag
   cold.assign(bodies.count, 0);
-  for (std::uint32_t i : m_unloaded) cold[root(m_parent, i)] = 1;
+  for (std::uint32_t k : m_unloaded) {
+    const Entry& lost = m_entries[k];
+    const auto a = static_cast<std::uint32_t>(lost.key >> 32);
+    const auto b = static_cast<std::uint32_t>(lost.key & 0xffffffffu);
+    for (std::uint32_t body : {a, b}) {
+      if (is_wall(body) || body >= bodies.count) continue;
+      const std::uint32_t r = root(m_parent, body);
+      if (lost.normal_impulse >= real(0.25) * m_island_max[r]) cold[r] = 1;
+    }
+  }
   for (Contact& c : contacts) {
     if (!cold[root(m_parent, c.a)] || c.normal_impulse <= 0) continue;
     c.normal_impulse = 0;

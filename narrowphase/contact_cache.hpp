@@ -11,7 +11,9 @@
 // or through other spheres, are too large: applied, they would launch the
 // stack, and a few sweeps cannot take the excess back out of a long chain.
 // So the whole group of touching spheres (its island) starts cold for that
-// substep: a cold start can only under-support, never push.
+// substep when the lost impulse is at least a quarter of the largest one the
+// island still carries: a cold start can only under-support, never push. (A
+// sphere leaving the surface of a deep pile is no such load.)
 #pragma once
 
 #include <cstdint>
@@ -45,6 +47,7 @@ class ContactCache {
   // Scratch, reused.
   std::vector<char> m_matched;
   std::vector<std::uint32_t> m_unloaded, m_parent;
+  std::vector<real> m_island_max;
 };
 
 }  // namespace marbles::narrowphase

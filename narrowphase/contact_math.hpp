@@ -109,10 +109,15 @@ MARBLES_HD_INLINE Vec3 wall_surface_velocity(const WallShape& w, const Vec3& x) 
   return w.velocity + cross(w.direction * w.angular_velocity, x - w.point);
 }
 
-// Contact test of the narrow phase: overlapping, or a gap that the current
-// normal approach speed (v_n < 0) closes within the substep h.
-MARBLES_HD_INLINE bool speculative_closes(real separation, real normal_velocity, real h) {
-  return separation < 0 || separation < -normal_velocity * h;
+// Resting contacts keep a skin: a gap below kContactSkin times the smaller
+// radius still counts as touching, so a contact whose gap flickers around
+// zero in a resting pile is not dropped and re-made (losing its warm start).
+inline constexpr real kContactSkin = real(0.005);
+
+// Contact test of the narrow phase: touching (gap below `skin`), or a gap
+// that the current normal approach speed (v_n < 0) closes within the substep h.
+MARBLES_HD_INLINE bool speculative_closes(real separation, real normal_velocity, real h, real skin) {
+  return separation < skin || separation < -normal_velocity * h;
 }
 
 // Prepare stage: effective masses and the approach speed before the solve.

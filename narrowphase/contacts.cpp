@@ -1,5 +1,7 @@
 #include "narrowphase/contacts.hpp"
 
+#include <algorithm>
+
 
 namespace marbles::narrowphase {
 
@@ -55,12 +57,13 @@ void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size
   for (std::size_t k = 0; k < pair_count; ++k) {
     const IndexPair pair = pairs[k];
     const Vec3 dv = bodies.velocity[pair.i] - bodies.velocity[pair.j];
-    const real reach = length(dv) * h;  // no gap wider than this can close in the substep
+    const real skin = kContactSkin * std::min(bodies.radius[pair.i], bodies.radius[pair.j]);
+    const real reach = length(dv) * h + skin;  // no wider gap can close in the substep
     Contact c;
     if (!sphere_sphere(bodies.position[pair.i], bodies.radius[pair.i], bodies.position[pair.j],
                        bodies.radius[pair.j], reach, c.normal, c.separation))
       continue;
-    if (!speculative_closes(c.separation, dot(dv, c.normal), h)) continue;
+    if (!speculative_closes(c.separation, dot(dv, c.normal), h, skin)) continue;
     c.a = pair.i;
     c.b = pair.j;
     c.ra = bodies.radius[pair.i];
@@ -81,7 +84,8 @@ void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls
       Contact c;
       if (!wall_gap(wall, p, r, c.normal, c.separation)) continue;
       c.wall_velocity = wall_surface_velocity(wall, p - c.normal * r);
-      if (!speculative_closes(c.separation, dot(bodies.velocity[i] - c.wall_velocity, c.normal), h)) continue;
+      if (!speculative_closes(c.separation, dot(bodies.velocity[i] - c.wall_velocity, c.normal), h, kContactSkin * r))
+        continue;
       c.a = static_cast<std::uint32_t>(i);
       c.b = kWallFlag | k;
       c.ra = r;
