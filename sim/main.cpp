@@ -41,6 +41,11 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--out", run.out_dir, "output folder (overrides output.dir)");
   run_cmd->add_option("--backend", run.backend, "broad phase backend: auto|cpu|cuda")
       ->transform(CLI::CheckedTransformer(kBackends, CLI::ignore_case));
+  run_cmd->add_option("--broadphase", run.algorithm, "broad phase algorithm: home (default) or seed")
+      ->transform(CLI::CheckedTransformer(
+          std::map<std::string, broadphase::Algorithm>{{"home", broadphase::Algorithm::home},
+                                                       {"seed", broadphase::Algorithm::seed}},
+          CLI::ignore_case));
   run_cmd->add_flag("--quiet", run.quiet, "print only the summary");
   run_cmd->add_flag("--no-render", no_render, "skip images and movie even if the scene asks for them");
   run_cmd->add_option("--duration", run_duration, "simulated seconds (overrides time.duration)")
@@ -55,8 +60,9 @@ int main(int argc, char** argv) {
   double pairs_margin = 0;
   auto* pairs_cmd = app.add_subcommand("pairs", "print the overlapping pairs 'i j' of spheres given as x,y,z,r rows");
   pairs_cmd->add_option("spheres", pairs_csv, "CSV file of x,y,z,r rows")->required();
-  pairs_cmd->add_option("--algorithm", pairs_algorithm, "subdivision|brute")
-      ->check(CLI::IsMember({"subdivision", "brute"}));
+  pairs_cmd->add_option("--algorithm", pairs_algorithm,
+                        "subdivision (the seed's spatial subdivision), home (its home-cell variant) or brute")
+      ->check(CLI::IsMember({"subdivision", "home", "brute"}));
   pairs_cmd->add_option("--backend", pairs_backend, "auto|cpu|cuda (subdivision only)")
       ->transform(CLI::CheckedTransformer(kBackends, CLI::ignore_case));
   pairs_cmd->add_option("--margin", pairs_margin, "report pairs whose gap is below this (m)")
@@ -68,6 +74,7 @@ int main(int argc, char** argv) {
   std::vector<std::size_t> bp_n;
   auto* bench_bp = bench_cmd->add_subcommand("broadphase", "time the broad phase per stage");
   bench_bp->add_option("--backend", bp.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  bench_bp->add_option("--algorithm", bp.algorithm, "seed|home")->check(CLI::IsMember({"seed", "home"}));
   bench_bp->add_option("--sort", bp.sort, "seed|cub (cuda)")->check(CLI::IsMember({"seed", "cub"}));
   bench_bp->add_option("--scene", bp.scene, "gas|pile|poly")->check(CLI::IsMember({"gas", "pile", "poly"}));
   bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(CLI::PositiveNumber);

@@ -96,7 +96,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   if (std::size_t deep = count_initial_overlaps(world, 0.01))
     err << "warning: " << deep << " pair(s) of spheres start overlapping by more than 1% of the smaller radius\n";
 
-  Simulation sim(sc, std::move(world), backend);
+  Simulation sim(sc, std::move(world), backend, options.algorithm);
   if (!options.quiet) out << sc.name << ": " << sim.world().size() << " spheres\n" << sim.describe_pipeline();
 
   RunOutput output(sc, sc.output.dir, sim.walls(), options.render, options.quiet ? err : out);
@@ -168,8 +168,9 @@ int print_pairs(const std::string& csv_path, const std::string& algorithm, Backe
     broadphase::brute_force_pairs(in, static_cast<real>(margin), pairs);
   } else {
     const broadphase::Backend backend = select_backend(choice, err);
-    auto bp = backend == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda()
-                                                   : broadphase::make_subdivision_cpu();
+    const auto alg = algorithm == "home" ? broadphase::Algorithm::home : broadphase::Algorithm::seed;
+    auto bp = backend == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda(alg)
+                                                   : broadphase::make_subdivision_cpu(alg);
     bp->find_pairs(in, static_cast<real>(margin), pairs);
   }
   std::sort(pairs.begin(), pairs.end());

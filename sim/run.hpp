@@ -22,6 +22,7 @@ struct RunOptions {
   std::string scene_path;
   std::optional<std::string> out_dir;  // overrides output.dir
   BackendChoice backend = BackendChoice::automatic;
+  broadphase::Algorithm algorithm = broadphase::kDefaultCpuAlgorithm;  // seed | home
   bool quiet = false;
   bool render = true;                  // false: skip images and movie even if the scene asks
   std::optional<double> duration;      // overrides time.duration
@@ -36,7 +37,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err);
 int check_scene(const std::string& scene_path, std::ostream& out, std::ostream& err);
 
 // `marbles pairs`: prints the overlapping pairs "i j" (i < j, sorted) of the
-// spheres in a CSV of x,y,z,r rows.
+// spheres in a CSV of x,y,z,r rows. `algorithm`: subdivision (the seed's
+// spatial subdivision), home (its home-cell variant) or brute (the oracle).
 int print_pairs(const std::string& csv_path, const std::string& algorithm, BackendChoice backend, double margin,
                 std::ostream& out, std::ostream& err);
 

@@ -80,7 +80,8 @@ narrowphase::SolverSettings solver_settings(const scene::Scene& scene) {
 
 }  // namespace
 
-Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backend backend)
+Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backend backend,
+                       broadphase::Algorithm algorithm)
     : m_world(std::move(world)),
       m_walls(make_walls(scene)),
       m_wall_shapes(narrowphase::wall_shapes(m_walls)),
@@ -97,8 +98,8 @@ Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backe
       m_substeps(scene.time.substeps) {
   m_pair_table = {m_pair_coefficients.data(), static_cast<std::uint32_t>(scene.materials.size())};
   if (m_collisions)
-    m_broadphase = backend == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda()
-                                                        : broadphase::make_subdivision_cpu();
+    m_broadphase = backend == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda(algorithm)
+                                                        : broadphase::make_subdivision_cpu(algorithm);
 }
 
 std::string Simulation::describe_pipeline() const {

@@ -41,7 +41,8 @@ struct StepCounters {
 class Simulation {
  public:
   // `backend` picks the broad phase; auto-selection happens in the caller.
-  Simulation(const scene::Scene& scene, World world, broadphase::Backend backend);
+  Simulation(const scene::Scene& scene, World world, broadphase::Backend backend,
+             broadphase::Algorithm algorithm = broadphase::kDefaultCpuAlgorithm);
 
   // Advances one step (dt).
   void step();
