@@ -144,7 +144,7 @@ void SubdivisionCpu::run(const SpheresIn& s, real margin, const GridChoice& gc, 
   m_info.resize(n);
   {
     const std::ptrdiff_t chunks = static_cast<std::ptrdiff_t>(n_chunks(n, kSphereChunk));
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (chunks > 1)
     for (std::ptrdiff_t c = 0; c < chunks; ++c) {
       const std::size_t end = std::min(n, (static_cast<std::size_t>(c) + 1) * kSphereChunk);
       for (std::size_t i = static_cast<std::size_t>(c) * kSphereChunk; i < end; ++i) {
@@ -162,7 +162,7 @@ void SubdivisionCpu::run(const SpheresIn& s, real margin, const GridChoice& gc, 
   m_values.resize(entries);
   {
     const std::ptrdiff_t chunks = static_cast<std::ptrdiff_t>(n_chunks(n, kSphereChunk));
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (chunks > 1)
     for (std::ptrdiff_t c = 0; c < chunks; ++c) {
       const std::size_t end = std::min(n, (static_cast<std::size_t>(c) + 1) * kSphereChunk);
       for (std::size_t i = static_cast<std::size_t>(c) * kSphereChunk; i < end; ++i) {
@@ -200,7 +200,7 @@ void SubdivisionCpu::run(const SpheresIn& s, real margin, const GridChoice& gc, 
   {
     const std::size_t chunks = n_chunks(entries, kEntryChunk);
     m_cell_chunks.resize(chunks);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (chunks > 1)
     for (std::ptrdiff_t c = 0; c < static_cast<std::ptrdiff_t>(chunks); ++c) {
       auto& local = m_cell_chunks[static_cast<std::size_t>(c)];
       local.clear();
@@ -238,7 +238,7 @@ void SubdivisionCpu::run(const SpheresIn& s, real margin, const GridChoice& gc, 
     const std::size_t chunks = n_chunks(cells, kCellChunk);
     m_pair_chunks.resize(chunks);
     m_test_chunks.assign(chunks, 0);
-#pragma omp parallel for schedule(dynamic, 4)
+#pragma omp parallel for schedule(dynamic, 4) if (chunks > 1)
     for (std::ptrdiff_t c = 0; c < static_cast<std::ptrdiff_t>(chunks); ++c) {
       auto& local = m_pair_chunks[static_cast<std::size_t>(c)];
       local.clear();

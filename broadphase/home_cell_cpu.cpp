@@ -31,6 +31,8 @@ double ms_between(Clock::time_point a, Clock::time_point b) {
 }
 
 constexpr std::size_t kChunk = 1 << 14;
+// Below this many spheres a parallel loop costs more than it saves.
+constexpr std::size_t kParallelMinimum = kChunk;
 
 struct Record {
   Vec3 centre;
@@ -120,7 +122,7 @@ void HomeCellCpu::run(const SpheresIn& s, real margin, const HomeGrid& g, std::v
   // --- keys ---------------------------------------------------------------------
   keys.resize(n);
   m_ids.resize(n);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (n > kParallelMinimum)
   for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i) {
     const CellCoord h = m_compressed ? m_home[i] : home_cell(s.centre[i], g);
     keys[i] = static_cast<Key>(home_key(h, g));
@@ -135,7 +137,7 @@ void HomeCellCpu::run(const SpheresIn& s, real margin, const HomeGrid& g, std::v
 
   // --- cell starts: spheres in sorted order, lower bounds -------------------------
   m_sorted.resize(n);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (n > kParallelMinimum)
   for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i)
     m_sorted[i] = {s.centre[m_ids[i]], s.radius[m_ids[i]]};
   const bool dense = use_dense_cell_starts(g, n);
@@ -157,7 +159,7 @@ void HomeCellCpu::run(const SpheresIn& s, real margin, const HomeGrid& g, std::v
   const std::ptrdiff_t chunks = chunks_of(n);
   m_pair_chunks.resize(static_cast<std::size_t>(chunks));
   m_test_chunks.assign(static_cast<std::size_t>(chunks), 0);
-#pragma omp parallel for schedule(dynamic, 1)
+#pragma omp parallel for schedule(dynamic, 1) if (chunks > 1)
   for (std::ptrdiff_t c = 0; c < chunks; ++c) {
     auto& local = m_pair_chunks[static_cast<std::size_t>(c)];
     local.clear();
