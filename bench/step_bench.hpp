@@ -19,4 +19,16 @@ struct StepBenchOptions {
 
 int run_step_bench(const StepBenchOptions& options, std::ostream& out);
 
+// The cost of each effect: the same dense gas stepped with collisions and
+// walls only, then with each effect added, then with all of them.
+struct EffectsBenchOptions {
+  std::string backend = "cpu";
+  std::size_t n = 20000;
+  double volume_fraction = 0.4;
+  int repeats = 20;
+  bool json = false;
+};
+
+int run_effects_bench(const EffectsBenchOptions& options, std::ostream& out);
+
 }  // namespace marbles::bench

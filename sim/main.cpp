@@ -92,6 +92,14 @@ int main(int argc, char** argv) {
   bench_step->add_option("--effects", st.effects, "effects of the pipeline")->delimiter(',');
   bench_step->add_flag("--json", st.json, "print JSON");
 
+  bench::EffectsBenchOptions ef;
+  auto* bench_effects = bench_cmd->add_subcommand("effects", "time the step with and without each effect");
+  bench_effects->add_option("--backend", ef.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  bench_effects->add_option("--n", ef.n, "sphere count")->check(CLI::PositiveNumber);
+  bench_effects->add_option("--volume-fraction", ef.volume_fraction, "packing of the gas")->check(CLI::Range(0.01, 0.5));
+  bench_effects->add_option("--repeats", ef.repeats, "timed steps per pipeline")->check(CLI::PositiveNumber);
+  bench_effects->add_flag("--json", ef.json, "print JSON");
+
   render::RenderOptions rd;
   render::MovieOptions rd_movie;
   rd_movie.fps = 0;  // from the frame times unless given
@@ -137,6 +145,10 @@ int main(int argc, char** argv) {
       if (!st_n.empty()) st.n = st_n;
       if (st.backend == "cuda") select_backend(BackendChoice::cuda, std::cerr);
       return bench::run_step_bench(st, std::cout);
+    }
+    if (*bench_effects) {
+      if (ef.backend == "cuda") select_backend(BackendChoice::cuda, std::cerr);
+      return bench::run_effects_bench(ef, std::cout);
     }
     if (*render_cmd) {
       if (!rd_color_by.empty()) rd.color_by = *render::parse_color_by(rd_color_by);
