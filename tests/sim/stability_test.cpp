@@ -1,5 +1,6 @@
 // The stability suite (ctest label `stability`): hard cases that must stay
-// numerically stable. Each runs the real step pipeline on the CPU backend.
+// numerically stable. Each runs the real step pipeline, with the CPU broad
+// phase or (MARBLES_TEST_BACKEND=cuda) the CUDA one.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -84,7 +85,7 @@ TEST(Stability, ColumnInTubeStands) {
   s.walls.push_back(tube);
   scene::GeneratedParticles g;
   for (int k = 0; k < 15; ++k) add_sphere(g, {0, 0, r + 2 * r * k}, r);
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   run_for(sim, 0.5);  // settle
   const std::vector<Vec3> settled = sim.world().position;
   const Watch w = run_for(sim, 10.0);
@@ -99,7 +100,7 @@ TEST(Stability, PyramidStands) {
   const real r = real(0.02);
   const int base = 20;
   s.walls.push_back(box({0, 0, 0}, {real(2 * r * base), real(2 * r * base), real(4 * r * base)}));
-  Simulation sim(s, make_world(s, pyramid(base, r, 2 * r)), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, pyramid(base, r, 2 * r)), test_backend());
   run_for(sim, 0.5);
   const std::vector<Vec3> settled = sim.world().position;
   const Watch w = run_for(sim, 10.0);
@@ -118,7 +119,7 @@ TEST(Stability, HeavySphereOnLightOnes) {
   s.walls.push_back(box({0, 0, 0}, {4 * r, 4 * r, 10 * r}));
   scene::GeneratedParticles g = pyramid(2, r, 2 * r);
   g.material.back() = 1;
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   run_for(sim, 0.5);
   const std::vector<Vec3> settled = sim.world().position;
   const Watch w = run_for(sim, 10.0);
@@ -134,7 +135,7 @@ TEST(Stability, OverlappingPyramidSeparatesWithoutExploding) {
   const real r = real(0.02);
   const int base = 10;
   s.walls.push_back(box({0, 0, 0}, {real(2 * r * base), real(2 * r * base), real(4 * r * base)}));
-  Simulation sim(s, make_world(s, pyramid(base, r, real(1.5) * r)), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, pyramid(base, r, real(1.5) * r)), test_backend());
   const double height = 2 * r * base;
   const Watch w = run_for(sim, 2.0);
   EXPECT_LT(w.peak_speed, std::sqrt(2 * 9.81 * height));
@@ -163,7 +164,7 @@ TEST(Stability, RemovingTheHeavyTopDoesNotLaunchTheStack) {
   s.walls.push_back(tube);
   scene::GeneratedParticles g;
   for (int k = 0; k < 6; ++k) add_sphere(g, {0, 0, r + 2 * r * k}, r, {}, k == 5 ? 1 : 0);
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   run_for(sim, 1.0);
   const std::vector<Vec3> settled = sim.world().position;
   sim.edit_world().position[5] = {10, 10, 10};  // lift the top away
@@ -195,7 +196,7 @@ TEST(Stability, TenThousandSpheresSettleInABox) {
     add_sphere(g, {real(1.25 * r + 2.5 * r * x + jitter(rng)), real(1.25 * r + 2.5 * r * y + jitter(rng)),
                    real(1.25 * r + 2.5 * r * z + jitter(rng))}, r, {real(vel(rng)), real(vel(rng)), real(vel(rng))});
   }
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   double peak = 0, last = 0;
   while (sim.time() < 4.0) {
     sim.step();
@@ -218,7 +219,7 @@ TEST(Stability, FastSphereDoesNotTunnelThroughAWall) {
   s.walls.push_back(plane({2, 0, 0}, {-1, 0, 0}));  // wall face at x = 2, 1 cm thick behind it
   scene::GeneratedParticles g;
   add_sphere(g, {0, 0, 0}, r, {100, 0, 0});
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   for (int k = 0; k < 120; ++k) {
     sim.step();
     ASSERT_LT(sim.world().position[0].x + r, 2 + 0.01) << "crossed the wall at step " << k;
@@ -233,7 +234,7 @@ TEST(Stability, FastSphereDoesNotPassThroughAnother) {
     scene::GeneratedParticles g;
     add_sphere(g, {0, 0, 0}, r, {real(speed), 0, 0});
     add_sphere(g, {3, real(0.02), 0}, r);  // slightly off-centre
-    Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+    Simulation sim(s, make_world(s, g), test_backend());
     for (int k = 0; k < 60; ++k) {
       sim.step();
       ASSERT_LT(sim.world().position[0].x, sim.world().position[1].x) << "passed through at speed " << speed;
@@ -259,7 +260,7 @@ TEST(Stability, DegenerateContactsStayFinite) {
   add_sphere(g, {0, 0, 1}, r);          // coincident, same velocity
   add_sphere(g, {real(0.5), 0, 0}, r);  // centre exactly on the floor
   add_sphere(g, {1, 1, real(0.5)}, r);  // centre on the post's axis
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   for (int k = 0; k < 2000; ++k) {
     sim.step();
     ASSERT_EQ(sim.world().first_non_finite(), sim.world().size()) << "step " << k;
@@ -284,7 +285,7 @@ TEST(Stability, ElasticGasConservesEnergy) {
       for (int z = 0; z < 4; ++z)
         add_sphere(g, {real(0.05 + 0.1 * x), real(0.05 + 0.1 * y), real(0.05 + 0.1 * z)}, r,
                    {real(vel(rng)), real(vel(rng)), real(vel(rng))});
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   const double e0 = sim.world().kinetic_energy();
   std::uint64_t contacts = 0;
   for (int k = 0; k < 100000; ++k) {

@@ -2,6 +2,8 @@
 // own physics in a few lines.
 #pragma once
 
+#include <cstdlib>
+#include <cstring>
 #include <initializer_list>
 
 #include "sim/particles.hpp"
@@ -9,6 +11,14 @@
 #include "sim/simulation.hpp"
 
 namespace marbles::testing {
+
+// The broad phase the whole-step tests run on: the CPU backend, or the CUDA
+// one when MARBLES_TEST_BACKEND=cuda (scripts/gpu-check runs the stability
+// suite both ways).
+inline broadphase::Backend test_backend() {
+  const char* v = std::getenv("MARBLES_TEST_BACKEND");
+  return v != nullptr && std::strcmp(v, "cuda") == 0 ? broadphase::Backend::cuda : broadphase::Backend::cpu;
+}
 
 inline scene::Scene make_scene(double dt, int substeps, std::initializer_list<scene::Effect> effects,
                                double restitution, double friction = 0, double rolling_friction = 0) {
