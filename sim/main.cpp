@@ -39,13 +39,12 @@ int main(int argc, char** argv) {
   auto* run_cmd = app.add_subcommand("run", "run a scene and write its output");
   run_cmd->add_option("scene", run.scene_path, "scene file (YAML)")->required();
   run_cmd->add_option("--out", run.out_dir, "output folder (overrides output.dir)");
-  run_cmd->add_option("--backend", run.backend, "broad phase backend: auto|cpu|cuda")
-      ->transform(CLI::CheckedTransformer(kBackends, CLI::ignore_case));
-  run_cmd->add_option("--broadphase", run.algorithm, "broad phase algorithm: home (default) or seed")
-      ->transform(CLI::CheckedTransformer(
-          std::map<std::string, broadphase::Algorithm>{{"home", broadphase::Algorithm::home},
-                                                       {"seed", broadphase::Algorithm::seed}},
-          CLI::ignore_case));
+  std::string run_backend = "auto", run_broadphase = "home";
+  run_cmd->add_option("--backend", run_backend, "broad phase backend: auto (CUDA when a device is there), cpu, cuda")
+      ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
+  run_cmd->add_option("--broadphase", run_broadphase,
+                      "broad phase algorithm: home (home-cell variant, default) or seed (8 cells per sphere)")
+      ->check(CLI::IsMember({"home", "seed"}));
   run_cmd->add_flag("--quiet", run.quiet, "print only the summary");
   run_cmd->add_flag("--no-render", no_render, "skip images and movie even if the scene asks for them");
   run_cmd->add_option("--duration", run_duration, "simulated seconds (overrides time.duration)")
@@ -56,15 +55,15 @@ int main(int argc, char** argv) {
   check_cmd->add_option("scene", check_path, "scene file (YAML)")->required();
 
   std::string pairs_csv, pairs_algorithm = "subdivision";
-  BackendChoice pairs_backend = BackendChoice::cpu;
+  std::string pairs_backend = "cpu";
   double pairs_margin = 0;
   auto* pairs_cmd = app.add_subcommand("pairs", "print the overlapping pairs 'i j' of spheres given as x,y,z,r rows");
   pairs_cmd->add_option("spheres", pairs_csv, "CSV file of x,y,z,r rows")->required();
   pairs_cmd->add_option("--algorithm", pairs_algorithm,
                         "subdivision (the seed's spatial subdivision), home (its home-cell variant) or brute")
       ->check(CLI::IsMember({"subdivision", "home", "brute"}));
-  pairs_cmd->add_option("--backend", pairs_backend, "auto|cpu|cuda (subdivision only)")
-      ->transform(CLI::CheckedTransformer(kBackends, CLI::ignore_case));
+  pairs_cmd->add_option("--backend", pairs_backend, "cpu (default), cuda or auto (subdivision and home)")
+      ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   pairs_cmd->add_option("--margin", pairs_margin, "report pairs whose gap is below this (m)")
       ->check(CLI::NonNegativeNumber);
 
@@ -132,11 +131,13 @@ int main(int argc, char** argv) {
   try {
     if (*run_cmd) {
       if (run_duration > 0) run.duration = run_duration;
+      run.backend = kBackends.at(run_backend);
+      run.algorithm = run_broadphase == "seed" ? broadphase::Algorithm::seed : broadphase::Algorithm::home;
       run.render = !no_render;
       return run_scene(run, std::cout, std::cerr);
     }
     if (*check_cmd) return check_scene(check_path, std::cout, std::cerr);
-    if (*pairs_cmd) return print_pairs(pairs_csv, pairs_algorithm, pairs_backend, pairs_margin, std::cout, std::cerr);
+    if (*pairs_cmd) return print_pairs(pairs_csv, pairs_algorithm, kBackends.at(pairs_backend), pairs_margin, std::cout, std::cerr);
     if (*bench_bp) {
       if (!bp_n.empty()) bp.n = bp_n;
       return bench::run_broadphase_bench(bp, std::cout);
