@@ -118,7 +118,8 @@ std::string Simulation::describe_pipeline() const {
     out << "  contact solver " << s.iterations << " sequential-impulse sweeps: normal";
     if (s.friction) out << " + friction";
     if (s.rolling) out << " + rolling resistance";
-    out << (s.restitution ? "; restitution stage" : "; no restitution (e = 0)") << "\n";
+    out << (s.restitution ? "; impacts with restitution" : "; plastic impacts (no restitution)")
+        << (s.warm_start ? "; warm start" : "") << "\n";
   }
   out << "  integrate      symplectic Euler\n";
   if (m_collisions || m_wall_contacts) out << "  project        positions (overlap beyond slop)\n";
