@@ -1,32 +1,16 @@
 // render/camera.cpp — scene bounds and the default view.
 #include "render/camera.hpp"
 
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <string>
 
 #include "core/error.hpp"
+#include "render/d3.hpp"
 
 namespace marbles::render {
-
-namespace {
-
-struct D3 {
-  double x = 0, y = 0, z = 0;
-};
-D3 d3(const Vec3& v) { return {double(v.x), double(v.y), double(v.z)}; }
-D3 operator+(D3 a, D3 b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
-D3 operator-(D3 a, D3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-D3 operator*(double s, D3 a) { return {s * a.x, s * a.y, s * a.z}; }
-double dot(D3 a, D3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-D3 cross(D3 a, D3 b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
-D3 normalize(D3 a) {
-  const double l = std::sqrt(dot(a, a));
-  return l > 0 ? (1 / l) * a : D3{0, 0, 1};
-}
-
-}  // namespace
 
 void Bounds::add(double x, double y, double z, double pad) {
   const double p[3] = {x, y, z};

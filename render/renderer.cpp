@@ -14,6 +14,7 @@
 // scene far from the origin renders as well as one around it.
 #include "render/renderer.hpp"
 
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -30,6 +31,7 @@
 #if defined(MARBLES_HAVE_OSMESA)
 #include "render/gl.hpp"
 #include "render/shaders.hpp"
+#include "render/d3.hpp"
 #endif
 
 namespace marbles::render {
@@ -94,20 +96,6 @@ namespace {
 
 // ---- small double-precision 3-D math for the camera and light -------------
 
-struct D3 {
-  double x = 0, y = 0, z = 0;
-};
-D3 d3(const Vec3& v) { return {double(v.x), double(v.y), double(v.z)}; }
-D3 operator+(D3 a, D3 b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
-D3 operator-(D3 a, D3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-D3 operator*(double s, D3 a) { return {s * a.x, s * a.y, s * a.z}; }
-double dot(D3 a, D3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-D3 cross(D3 a, D3 b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
-double norm(D3 a) { return std::sqrt(dot(a, a)); }
-D3 normalize(D3 a) {
-  const double l = norm(a);
-  return l > 0 ? (1 / l) * a : D3{0, 0, 1};
-}
 D3 any_perpendicular(D3 n) {
   const D3 a = std::abs(n.x) < 0.9 ? D3{1, 0, 0} : D3{0, 1, 0};
   return normalize(cross(n, a));
