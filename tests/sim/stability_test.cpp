@@ -69,6 +69,16 @@ Watch run_for(Simulation& sim, double seconds) {
   return w;
 }
 
+// Settles for 0.5 s, then stands for 10 s: drift below 1 % of a radius and
+// no jitter growth.
+void expect_stands(Simulation& sim, double r) {
+  run_for(sim, 0.5);
+  const std::vector<Vec3> settled = sim.world().position;
+  const Watch w = run_for(sim, 10.0);
+  EXPECT_LT(max_drift(sim.world(), settled), 0.01 * r);
+  EXPECT_LE(w.late_peak, std::max(w.early_peak, jitter_floor(sim.world(), r)));
+}
+
 }  // namespace
 
 // 15 spheres stacked in a tube barely wider than they are.
@@ -86,11 +96,7 @@ TEST(Stability, ColumnInTubeStands) {
   scene::GeneratedParticles g;
   for (int k = 0; k < 15; ++k) add_sphere(g, {0, 0, r + 2 * r * k}, r);
   Simulation sim(s, make_world(s, g), test_backend());
-  run_for(sim, 0.5);  // settle
-  const std::vector<Vec3> settled = sim.world().position;
-  const Watch w = run_for(sim, 10.0);
-  EXPECT_LT(max_drift(sim.world(), settled), 0.01 * r);
-  EXPECT_LE(w.late_peak, std::max(w.early_peak, jitter_floor(sim.world(), r)));
+  expect_stands(sim, r);
 }
 
 // A 20x20-based square pyramid (2870 spheres), friction 0.5, bottom layer held
@@ -101,11 +107,7 @@ TEST(Stability, PyramidStands) {
   const int base = 20;
   s.walls.push_back(box({0, 0, 0}, {real(2 * r * base), real(2 * r * base), real(4 * r * base)}));
   Simulation sim(s, make_world(s, pyramid(base, r, 2 * r)), test_backend());
-  run_for(sim, 0.5);
-  const std::vector<Vec3> settled = sim.world().position;
-  const Watch w = run_for(sim, 10.0);
-  EXPECT_LT(max_drift(sim.world(), settled), 0.01 * r);
-  EXPECT_LE(w.late_peak, std::max(w.early_peak, jitter_floor(sim.world(), r)));
+  expect_stands(sim, r);
 }
 
 // A sphere 100 times denser than the four it rests on.
@@ -120,11 +122,7 @@ TEST(Stability, HeavySphereOnLightOnes) {
   scene::GeneratedParticles g = pyramid(2, r, 2 * r);
   g.material.back() = 1;
   Simulation sim(s, make_world(s, g), test_backend());
-  run_for(sim, 0.5);
-  const std::vector<Vec3> settled = sim.world().position;
-  const Watch w = run_for(sim, 10.0);
-  EXPECT_LT(max_drift(sim.world(), settled), 0.01 * r);
-  EXPECT_LE(w.late_peak, std::max(w.early_peak, jitter_floor(sim.world(), r)));
+  expect_stands(sim, r);
 }
 
 // A pyramid built with 25 % overlaps (pitch 1.5 r instead of 2 r) pushes
