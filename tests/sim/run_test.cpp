@@ -1,0 +1,94 @@
+// `marbles run` end to end: rendering does not change the simulation, and the
+// summary is written. Runs the real run_scene() on a small scene written here.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "render/renderer.hpp"
+#include "render/vtk_output.hpp"
+#include "sim/run.hpp"
+
+namespace fs = std::filesystem;
+using namespace marbles;
+
+namespace {
+
+fs::path temp_dir(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("marbles_run_test_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+std::string read_file(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::ostringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+// 200 spheres falling into a box with friction; frames every 10 steps, images
+// every 10 steps when rendering is on.
+fs::path write_scene(const fs::path& dir) {
+  const fs::path path = dir / "scene.yaml";
+  std::ofstream(path) << R"(format: 1
+name: render_invariance
+time: {duration: 0.2, dt: 1.0e-3, substeps: 2}
+effects: [gravity, collisions, walls, restitution, friction, rolling_resistance]
+materials:
+  glass: {density: 2500, restitution: 0.6, friction: 0.4, rolling_friction: 0.01}
+walls:
+  - box: {min: [0, 0, 0], max: [0.2, 0.2, 0.6]}
+particles:
+  - random: {count: 200, min: [0.02, 0.02, 0.05], max: [0.18, 0.18, 0.55], radius: {uniform: [0.006, 0.01]}, seed: 3}
+    velocity: {random: {speed: 0.3, seed: 4}}
+output:
+  vtk: {every: 10}
+  render: {every: 10, width: 160, height: 96, color_by: speed}
+  movie: {fps: 10}
+)";
+  return path;
+}
+
+}  // namespace
+
+TEST(Run, RenderingDoesNotChangeTheSimulation) {
+  if (!render::vtk_available()) GTEST_SKIP() << "skipped: this build has no VTK (frames are compared)";
+  const fs::path dir = temp_dir("render");
+  const fs::path scene = write_scene(dir);
+  std::ostringstream out, err;
+  RunOptions with;
+  with.scene_path = scene.string();
+  with.out_dir = (dir / "with").string();
+  with.backend = BackendChoice::cpu;
+  with.quiet = true;
+  RunOptions without = with;
+  without.out_dir = (dir / "without").string();
+  without.render = false;
+  ASSERT_EQ(run_scene(with, out, err), 0) << err.str();
+  ASSERT_EQ(run_scene(without, out, err), 0) << err.str();
+
+  // Every frame of the two runs holds the same state, byte for byte.
+  const auto frames_with = render::read_pvd(dir / "with" / "series.pvd");
+  const auto frames_without = render::read_pvd(dir / "without" / "series.pvd");
+  ASSERT_EQ(frames_with.size(), 21u);
+  ASSERT_EQ(frames_with.size(), frames_without.size());
+  for (std::size_t k = 0; k < frames_with.size(); ++k) {
+    const render::Snapshot a = render::read_vtp(frames_with[k].path);
+    const render::Snapshot b = render::read_vtp(frames_without[k].path);
+    ASSERT_EQ(a.size(), b.size());
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      ASSERT_EQ(a.position[i], b.position[i]) << "frame " << k << " sphere " << i;
+      ASSERT_EQ(a.velocity[i], b.velocity[i]) << "frame " << k << " sphere " << i;
+    }
+  }
+  // The rendered run did render (where this build can), the other did not.
+  if (render::renderer_available()) EXPECT_TRUE(fs::exists(dir / "with" / "images" / "frame_000020.png"));
+  EXPECT_FALSE(fs::exists(dir / "without" / "images"));
+  EXPECT_TRUE(fs::exists(dir / "with" / "summary.json"));
+  EXPECT_NE(read_file(dir / "without" / "summary.json").find("\"steps\": 200"), std::string::npos);
+  fs::remove_all(dir);
+}
