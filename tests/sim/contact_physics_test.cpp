@@ -141,3 +141,50 @@ TEST_P(RestitutionInput, ReboundSpeedIsEApproachSpeed) {
 INSTANTIATE_TEST_SUITE_P(AnyStepAnySize, RestitutionInput,
                          ::testing::Combine(::testing::Values(1e-4, 1e-3, 1.0 / 60),
                                             ::testing::Values(1e-3, 0.05, 2.0)));
+
+// A floor moving at u (a conveyor) under a sphere at rest: in the belt's
+// frame the sphere is launched sliding at -u, so it ends rolling with the
+// centre at u - 5/7 u = 2/7 u.
+TEST(MovingWall, ConveyorCarriesASphereToTwoSevenths) {
+  const double u = 1.5, mu = 0.4;
+  scene::Scene s = make_scene(1e-3, 4, {Effect::gravity, Effect::walls, Effect::friction}, 0.0, mu);
+  scene::WallSpec belt = plane({0, 0, 0}, {0, 0, 1});
+  belt.velocity = {real(u), 0, 0};
+  s.walls.push_back(belt);
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, r}, r);
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  while (sim.time() < 2 * (2 * u / (7 * mu * kG))) sim.step();
+  EXPECT_NEAR(sim.world().velocity[0].x, 2.0 / 7.0 * u, 0.01 * 2.0 / 7.0 * u);
+  EXPECT_NEAR(sim.world().position[0].z, r, 0.01 * r);  // the belt moves along itself, not up
+}
+
+// A drum (horizontal cylinder, inside) spinning at w drags a sphere resting
+// on its bottom: the contact point ends moving with the drum surface, so the
+// sphere's centre, rolling without slip on the belt-like surface, moves at
+// 2/7 of the surface speed w R at first.
+TEST(MovingWall, SpinningDrumDragsASphere) {
+  const double R = 0.5, w = 2.0, mu = 0.5;
+  scene::Scene s = make_scene(1e-3, 4, {Effect::gravity, Effect::walls, Effect::friction}, 0.0, mu);
+  scene::WallSpec drum;
+  drum.kind = scene::WallSpec::Kind::cylinder;
+  drum.base = {0, -1, 0};
+  drum.axis = {0, 1, 0};
+  drum.radius = R;
+  drum.length = 2;
+  drum.inside = true;
+  drum.angular_velocity = w;  // about +y: the bottom surface moves along -x
+  s.walls.push_back(drum);
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, real(-R + r)}, r);
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  for (int k = 0; k < 100; ++k) sim.step();
+  const double surface_speed = w * R;
+  EXPECT_LT(sim.world().velocity[0].x, 0);  // dragged the way the bottom moves
+  EXPECT_NEAR(sim.world().velocity[0].x, -2.0 / 7.0 * surface_speed, 0.05 * 2.0 / 7.0 * surface_speed);
+  // It stays on the drum's surface.
+  const Vec3 p = sim.world().position[0];
+  EXPECT_NEAR(std::hypot(p.x, p.z), R - r, 0.01 * r);
+}
