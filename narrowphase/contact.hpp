@@ -22,6 +22,7 @@ struct PairCoefficients {
   real restitution = 0;       // e in [0, 1]
   real friction = 0;          // Coulomb mu
   real rolling_friction = 0;  // mu_r: rolling torque <= mu_r * R_eff * normal force
+  real twisting_friction = 0; // mu_t: torque about the normal <= mu_t * R_eff * normal force
 };
 
 // Material pair table, row-major over material ids (walls use their own

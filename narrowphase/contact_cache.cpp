@@ -29,7 +29,7 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
     if (it == m_entries.end() || it->key != key) continue;
     c.normal_impulse = it->normal_impulse;
     c.tangent_impulse = tangential(it->tangent_impulse, c.normal);
-    c.rolling_impulse = tangential(it->rolling_impulse, c.normal);
+    c.rolling_impulse = it->rolling_impulse;  // rolling (tangential) and twisting (normal) parts
     m_matched[it - m_entries.begin()] = 1;
     ++matched;
   }

@@ -177,13 +177,24 @@ MARBLES_HD_INLINE void solve_friction(Contact& c, BodyState& A, BodyState& B) {
 }
 
 // Rolling resistance: an angular impulse opposing the relative rolling
-// (the tangential part of w_a - w_b), limited to mu_r * R_eff * P_n.
+// (the tangential part of w_a - w_b), limited to mu_r * R_eff * P_n; and
+// twisting resistance: one opposing the relative spin about the normal,
+// limited to mu_t * R_eff * P_n. Both live in `rolling_impulse` (tangential
+// and normal parts).
 MARBLES_HD_INLINE void solve_rolling(Contact& c, BodyState& A, BodyState& B) {
   const Vec3 dw = A.w - B.w;
-  const Vec3 roll = dw - c.normal * dot(dw, c.normal);
+  const real spin = dot(dw, c.normal);
+  const Vec3 roll = dw - c.normal * spin;
   const real r_eff = c.rb > 0 ? c.ra * c.rb / (c.ra + c.rb) : c.ra;
   const Vec3 old = c.rolling_impulse;
-  c.rolling_impulse = clamp_length(old - roll * c.rolling_mass, c.coeff.rolling_friction * r_eff * c.normal_impulse);
+  const real old_twist = dot(old, c.normal);
+  const Vec3 old_roll = old - c.normal * old_twist;
+  const Vec3 new_roll =
+      clamp_length(old_roll - roll * c.rolling_mass, c.coeff.rolling_friction * r_eff * c.normal_impulse);
+  const real twist_limit = c.coeff.twisting_friction * r_eff * c.normal_impulse;
+  real new_twist = old_twist - spin * c.rolling_mass;
+  new_twist = new_twist > twist_limit ? twist_limit : (new_twist < -twist_limit ? -twist_limit : new_twist);
+  c.rolling_impulse = new_roll + c.normal * new_twist;
   const Vec3 d = c.rolling_impulse - old;
   A.w += d * A.inv_inertia;
   B.w -= d * B.inv_inertia;

@@ -97,11 +97,13 @@ std::vector<Material> read_materials(const Field& field) {
     m.where = entry.name_where;
     if (m.name.empty()) throw InputError(entry.name_where, field.key(), "a material needs a name");
     if (!entry.value.node().IsNull()) {  // `glass:` alone takes every default
-      const MapFields props(entry.value, {"density", "restitution", "friction", "rolling_friction"});
+      const MapFields props(entry.value,
+                            {"density", "restitution", "friction", "rolling_friction", "twisting_friction"});
       if (auto f = props.optional("density")) m.density = f->positive();
       if (auto f = props.optional("restitution")) m.restitution = f->within(0, 1);
       if (auto f = props.optional("friction")) m.friction = f->non_negative();
       if (auto f = props.optional("rolling_friction")) m.rolling_friction = f->non_negative();
+      if (auto f = props.optional("twisting_friction")) m.twisting_friction = f->non_negative();
     }
     materials.push_back(std::move(m));
   }
@@ -182,7 +184,7 @@ std::vector<WallSpec> read_walls(const Scene& scene, const Field& field) {
 std::vector<ContactPairSpec> read_contact_pairs(const Scene& scene, const Field& field) {
   std::vector<ContactPairSpec> pairs;
   for (const Field& item : field.items()) {
-    const MapFields map(item, {"materials", "restitution", "friction", "rolling_friction"});
+    const MapFields map(item, {"materials", "restitution", "friction", "rolling_friction", "twisting_friction"});
     ContactPairSpec pair;
     pair.where = item.where();
     const Field names = map.required("materials");
@@ -197,8 +199,9 @@ std::vector<ContactPairSpec> read_contact_pairs(const Scene& scene, const Field&
     if (auto f = map.optional("restitution")) pair.restitution = f->within(0, 1);
     if (auto f = map.optional("friction")) pair.friction = f->non_negative();
     if (auto f = map.optional("rolling_friction")) pair.rolling_friction = f->non_negative();
-    if (pair.restitution < 0 && pair.friction < 0 && pair.rolling_friction < 0)
-      item.fail("give at least one of restitution, friction, rolling_friction");
+    if (auto f = map.optional("twisting_friction")) pair.twisting_friction = f->non_negative();
+    if (pair.restitution < 0 && pair.friction < 0 && pair.rolling_friction < 0 && pair.twisting_friction < 0)
+      item.fail("give at least one of restitution, friction, rolling_friction, twisting_friction");
     for (const ContactPairSpec& other : pairs) {
       if ((other.first == pair.first && other.second == pair.second) ||
           (other.first == pair.second && other.second == pair.first))

@@ -33,13 +33,14 @@ struct Material {
   double restitution = 0.5;     // [0, 1]
   double friction = 0.5;        // Coulomb mu, >= 0
   double rolling_friction = 0;  // dimensionless rolling resistance coefficient, >= 0
+  double twisting_friction = 0; // dimensionless twisting (spin) resistance coefficient, >= 0
   SourceLocation where;
 };
 
 // An explicit coefficient set for one pair of materials, replacing the mixing rule.
 struct ContactPairSpec {
   std::string first, second;  // material names (order does not matter)
-  double restitution = -1, friction = -1, rolling_friction = -1;  // < 0: use the mixing rule for this one
+  double restitution = -1, friction = -1, rolling_friction = -1, twisting_friction = -1;  // < 0: mixing rule
   SourceLocation where;
 };
 

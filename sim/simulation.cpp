@@ -10,9 +10,10 @@
 
 namespace marbles {
 
-narrowphase::PairCoefficients mix_materials(double e1, double mu1, double mur1, double e2, double mu2, double mur2) {
-  return {static_cast<real>(std::sqrt(e1 * e2)), static_cast<real>(std::sqrt(mu1 * mu2)),
-          static_cast<real>(std::sqrt(mur1 * mur2))};
+narrowphase::PairCoefficients mix_materials(const scene::Material& a, const scene::Material& b) {
+  auto mean = [](double x, double y) { return static_cast<real>(std::sqrt(x * y)); };
+  return {mean(a.restitution, b.restitution), mean(a.friction, b.friction),
+          mean(a.rolling_friction, b.rolling_friction), mean(a.twisting_friction, b.twisting_friction)};
 }
 
 namespace {
@@ -47,10 +48,7 @@ std::vector<narrowphase::PairCoefficients> pair_coefficients(const scene::Scene&
   std::vector<narrowphase::PairCoefficients> table(nm * nm);
   for (std::size_t a = 0; a < nm; ++a)
     for (std::size_t b = 0; b < nm; ++b) {
-      const scene::Material& ma = scene.materials[a];
-      const scene::Material& mb = scene.materials[b];
-      table[a * nm + b] = mix_materials(ma.restitution, ma.friction, ma.rolling_friction, mb.restitution,
-                                        mb.friction, mb.rolling_friction);
+      table[a * nm + b] = mix_materials(scene.materials[a], scene.materials[b]);
     }
   for (const scene::ContactPairSpec& p : scene.contact_pairs) {
     const std::uint32_t a = scene.material_index(p.first, p.where, "contact_pairs");
@@ -59,6 +57,7 @@ std::vector<narrowphase::PairCoefficients> pair_coefficients(const scene::Scene&
       if (p.restitution >= 0) c->restitution = static_cast<real>(p.restitution);
       if (p.friction >= 0) c->friction = static_cast<real>(p.friction);
       if (p.rolling_friction >= 0) c->rolling_friction = static_cast<real>(p.rolling_friction);
+      if (p.twisting_friction >= 0) c->twisting_friction = static_cast<real>(p.twisting_friction);
     }
   }
   return table;

@@ -31,6 +31,7 @@ namespace marbles {
 
 namespace scene {
 struct Scene;
+struct Material;
 }
 
 struct StepCounters {
@@ -99,6 +100,6 @@ class Simulation {
 // Mixing rule for a material pair (documented in docs/solver.md): the
 // geometric mean of each coefficient, so a pair of equal materials keeps its
 // values and a zero on either side gives zero.
-narrowphase::PairCoefficients mix_materials(double e1, double mu1, double mur1, double e2, double mu2, double mur2);
+narrowphase::PairCoefficients mix_materials(const scene::Material& a, const scene::Material& b);
 
 }  // namespace marbles

@@ -88,7 +88,7 @@ TEST(Solver, HeadOnImpactFollowsImpactLaw) {
     std::vector<std::uint32_t> material{0, 0};
     BodiesView bodies{pos.data(), vel.data(), omega.data(), radius.data(), inv_mass.data(), inv_inertia.data(),
                       material.data(), 2};
-    PairCoefficients coeff{real(e), 0, 0};
+    PairCoefficients coeff{real(e), 0, 0, 0};
     PairTable table{&coeff, 1};
     std::vector<Contact> contacts;
     IndexPair pair{0, 1};
@@ -116,7 +116,7 @@ TEST(Solver, FrictionStaysInsideTheCone) {
     std::vector<std::uint32_t> material{0};
     BodiesView bodies{pos.data(), vel.data(), omega.data(), radius.data(), inv_mass.data(), inv_inertia.data(),
                       material.data(), 1};
-    PairCoefficients coeff{0, real(mu_dist(rng)), 0};
+    PairCoefficients coeff{0, real(mu_dist(rng)), 0, 0};
     PairTable table{&coeff, 1};
     Walls walls;
     walls.planes.push_back({{0, 0, 0}, {0, 0, 1}, 0, {}});

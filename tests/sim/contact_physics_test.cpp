@@ -188,3 +188,46 @@ TEST(MovingWall, SpinningDrumDragsASphere) {
   const Vec3 p = sim.world().position[0];
   EXPECT_NEAR(std::hypot(p.x, p.z), R - r, 0.01 * r);
 }
+
+// Rolling resistance: a ball rolling on a floor with rolling-resistance
+// torque mu_r r N decelerates at 5/7 mu_r g (and keeps rolling).
+TEST(RollingResistance, RollingBallDeceleratesAtFiveSeventhsMuRG) {
+  const double mu_r = 0.05, v0 = 1.0;
+  scene::Scene s =
+      make_scene(1e-3, 4, {Effect::gravity, Effect::walls, Effect::friction, Effect::rolling_resistance}, 0, 0.5, mu_r);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, r}, r, {real(v0), 0, 0});
+  World w = make_world(s, g);
+  w.angular_velocity[0] = {0, real(v0 / r), 0};  // already rolling
+  Simulation sim(s, std::move(w), broadphase::Backend::cpu);
+  for (int k = 0; k < 50; ++k) sim.step();
+  const double v1 = sim.world().velocity[0].x, t1 = sim.time();
+  for (int k = 0; k < 500; ++k) sim.step();
+  const double a = (sim.world().velocity[0].x - v1) / (sim.time() - t1);
+  EXPECT_NEAR(a, -5.0 / 7.0 * mu_r * kG, 0.01 * 5.0 / 7.0 * mu_r * kG);
+  EXPECT_NEAR(sim.world().angular_velocity[0].y * r, sim.world().velocity[0].x, 1e-3);  // still rolling
+}
+
+// Twisting resistance: a ball spinning about the vertical on a floor slows at
+// alpha = mu_t r m g / (2/5 m r^2) = 5/2 mu_t g / r, then stops (no reversal).
+TEST(TwistingResistance, SpinDeceleratesAndStops) {
+  const double mu_t = 0.02, w0 = 30.0;
+  scene::Scene s = make_scene(1e-3, 4, {Effect::gravity, Effect::walls, Effect::friction, Effect::rolling_resistance},
+                              0, 0.5, 0, mu_t);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, r}, r);
+  World w = make_world(s, g);
+  w.angular_velocity[0] = {0, 0, real(w0)};
+  Simulation sim(s, std::move(w), broadphase::Backend::cpu);
+  for (int k = 0; k < 20; ++k) sim.step();
+  const double w1 = sim.world().angular_velocity[0].z, t1 = sim.time();
+  for (int k = 0; k < 200; ++k) sim.step();
+  const double alpha = (w1 - sim.world().angular_velocity[0].z) / (sim.time() - t1);
+  EXPECT_NEAR(alpha, 2.5 * mu_t * kG / r, 0.01 * 2.5 * mu_t * kG / r);
+  for (int k = 0; k < 5000; ++k) sim.step();
+  EXPECT_NEAR(sim.world().angular_velocity[0].z, 0, 1e-3);
+}

@@ -134,7 +134,7 @@ inline const std::vector<BadScene>& bad_scenes() {
       {"contact_pair_material", SCENE_VALID "contact_pairs:\n  - {materials: [glass, steel], friction: 0.1}\n",
        "{scene}:7:25: contact_pairs[0].materials[1]: unknown material 'steel'; expected one of: glass"},
       {"contact_pair_empty", SCENE_VALID "contact_pairs:\n  - {materials: [glass, glass]}\n",
-       "{scene}:7:5: contact_pairs[0]: give at least one of restitution, friction, rolling_friction"},
+       "{scene}:7:5: contact_pairs[0]: give at least one of restitution, friction, rolling_friction, twisting_friction"},
       {"drag_negative", SCENE_VALID "effects: [drag]\ndrag: {linear: 0.1, quadratic: -1}\n",
        "{scene}:7:32: drag.quadratic: must be >= 0, got -1"},
       {"random_overfull",

@@ -21,7 +21,8 @@ inline broadphase::Backend test_backend() {
 }
 
 inline scene::Scene make_scene(double dt, int substeps, std::initializer_list<scene::Effect> effects,
-                               double restitution, double friction = 0, double rolling_friction = 0) {
+                               double restitution, double friction = 0, double rolling_friction = 0,
+                               double twisting_friction = 0) {
   scene::Scene s;
   s.path = s.name = "test";
   s.time = {1.0, dt, substeps};
@@ -32,6 +33,7 @@ inline scene::Scene make_scene(double dt, int substeps, std::initializer_list<sc
   m.restitution = restitution;
   m.friction = friction;
   m.rolling_friction = rolling_friction;
+  m.twisting_friction = twisting_friction;
   s.materials.push_back(m);
   return s;
 }
