@@ -4,9 +4,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <regex>
 
 #include "core/error.hpp"
+#include "render/atomic_file.hpp"
 #include "render/image.hpp"
 #include "render/vtk_output.hpp"
 #include "render/walls_json.hpp"
@@ -107,6 +109,19 @@ void FrameOutput::finish() {
 
 // ---- after a run -------------------------------------------------------------
 
+void write_material_names(const fs::path& dir, const std::vector<std::string>& names) {
+  std::string text;
+  for (const std::string& name : names) text += name + "\n";
+  write_file_atomic(dir / "materials.txt", text);
+}
+
+std::vector<std::string> read_material_names(const fs::path& dir) {
+  std::vector<std::string> names;
+  std::ifstream in(dir / "materials.txt");
+  for (std::string line; std::getline(in, line);) names.push_back(line);
+  return names;
+}
+
 int render_output_dir(const std::string& out_dir, const RenderOptions& options, const MovieOptions& movie,
                       bool progress, std::ostream& log) {
   const fs::path dir(out_dir);
@@ -122,7 +137,9 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
 
   const std::vector<SeriesEntry> entries = read_pvd(pvd);
   const Walls walls = read_walls_json(dir);
-  Renderer renderer(options);
+  RenderOptions with_names = options;
+  if (with_names.material_names.empty()) with_names.material_names = read_material_names(dir);
+  Renderer renderer(with_names);
   const auto t0 = std::chrono::steady_clock::now();
 
   // Pass 1 (only when needed): the view and colour range that suit every frame.

@@ -15,6 +15,7 @@
 #include <optional>
 #include <ostream>
 #include <string>
+#include <vector>
 
 #include "core/walls.hpp"
 #include "render/movie.hpp"
@@ -68,6 +69,12 @@ class FrameOutput {
   bool m_finished = false;
   bool m_png_warned = false;
 };
+
+/// DIR/materials.txt: the scene's material names, one a line in id order,
+/// written at the start of a run (atomically) so that `marbles render` can
+/// label the colour-by-material legend. Reading a missing file gives none.
+void write_material_names(const std::filesystem::path& dir, const std::vector<std::string>& names);
+std::vector<std::string> read_material_names(const std::filesystem::path& dir);
 
 /// Re-renders every frame of OUT_DIR/series.pvd into OUT_DIR/images and
 /// OUT_DIR/movie.mp4 (for `marbles render OUTDIR`).

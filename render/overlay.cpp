@@ -77,6 +77,16 @@ void draw_time_label(Image& image, double time) {
   draw_text(image, pad + margin, pad + margin, text, s, kInk);
 }
 
+namespace {
+
+std::string category_label(const ColorLegend& legend, std::uint32_t category) {
+  if (category < legend.category_names.size() && !legend.category_names[category].empty())
+    return legend.category_names[category];
+  return std::to_string(category);
+}
+
+}  // namespace
+
 void draw_color_legend(Image& image, const ColorLegend& legend) {
   const int s = overlay_scale(image.height);
   const int pad = 8 * s, margin = 5 * s, line = (kGlyphHeight + 4) * s;
@@ -87,7 +97,7 @@ void draw_color_legend(Image& image, const ColorLegend& legend) {
     const std::size_t shown = std::min<std::size_t>(legend.categories.size(), 16);
     int content_w = text_width(title, s);
     for (std::size_t i = 0; i < shown; ++i)
-      content_w = std::max(content_w, swatch + 4 * s + text_width(std::to_string(legend.categories[i]), s));
+      content_w = std::max(content_w, swatch + 4 * s + text_width(category_label(legend, legend.categories[i]), s));
     const int panel_w = content_w + 2 * margin;
     const int panel_h = line * static_cast<int>(shown + 1) + 2 * margin - 4 * s;
     const int x0 = image.width - pad - panel_w, y0 = pad;
@@ -99,7 +109,7 @@ void draw_color_legend(Image& image, const ColorLegend& legend) {
       const std::uint8_t rgb[3] = {to_byte(c.r), to_byte(c.g), to_byte(c.b)};
       fill_rect(image, x0 + margin, y, x0 + margin + swatch, y + swatch, rgb);
       frame_rect(image, x0 + margin, y, x0 + margin + swatch, y + swatch, 1, kBorder);
-      draw_text(image, x0 + margin + swatch + 4 * s, y, std::to_string(legend.categories[i]), s, kInk);
+      draw_text(image, x0 + margin + swatch + 4 * s, y, category_label(legend, legend.categories[i]), s, kInk);
     }
     return;
   }

@@ -17,6 +17,7 @@ struct ColorLegend {
   ColorMapName map = ColorMapName::viridis;
   double lo = 0, hi = 1;                    ///< continuous quantities
   std::vector<std::uint32_t> categories;    ///< categorical (material): the indices present
+  std::vector<std::string> category_names;  ///< labels by index (the index itself where missing)
 };
 
 /// Text for a colour-bar end: 4 significant digits, exponent form for very

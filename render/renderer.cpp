@@ -777,7 +777,7 @@ Image Renderer::Impl::render(const Snapshot& s, const Walls& initial_walls, cons
   if (options.overlay) {
     draw_time_label(image, s.time);
     if (have_color && n > 0) {
-      ColorLegend legend{options.color_by, options.color_map, range.lo, range.hi, {}};
+      ColorLegend legend{options.color_by, options.color_map, range.lo, range.hi, {}, options.material_names};
       if (categorical) {
         std::vector<bool> seen;
         for (std::uint32_t m : s.material) {

@@ -14,6 +14,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "core/walls.hpp"
 #include "render/camera.hpp"
@@ -36,6 +37,8 @@ struct RenderOptions {
   bool lighting = true;  ///< false: flat, unlit colours (exactly the colour map; for tests and diagnostics)
   bool shadows = true;   ///< cast shadows from a light above the camera (only with lighting)
   bool overlay = true;   ///< colour bar and simulated-time label
+  /// Legend labels of colour-by-material, by material id (the id where missing).
+  std::vector<std::string> material_names;
   int supersample = 2;   ///< samples per pixel along each axis, 1..4 (anti-aliasing; cost ~ square)
   /// Skip spheres that are off screen or certainly hidden behind nearer ones
   /// before drawing (see occlusion.hpp); the picture is the same either way.

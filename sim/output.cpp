@@ -28,8 +28,10 @@ render::Snapshot make_snapshot(const Simulation& sim) {
   return s;
 }
 
-render::RenderOptions render_options(const scene::RenderSpec& spec) {
+render::RenderOptions render_options(const scene::Scene& scene) {
+  const scene::RenderSpec& spec = scene.output.render;
   render::RenderOptions o;
+  for (const scene::Material& m : scene.materials) o.material_names.push_back(m.name);
   o.width = spec.width;
   o.height = spec.height;
   if (spec.camera.given) o.camera = render::Camera{spec.camera.position, spec.camera.look_at, spec.camera.up, spec.camera.fov};
@@ -53,6 +55,9 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
   std::filesystem::create_directories(dir, ec);
   if (ec) throw RuntimeFailure("cannot create the output folder " + dir + ": " + ec.message());
   render::write_walls_json(dir, walls);
+  std::vector<std::string> names;
+  for (const scene::Material& m : scene.materials) names.push_back(m.name);
+  render::write_material_names(dir, names);
 
   if (scene.output.vtk_every > 0) {
     if (render::vtk_available()) {
@@ -67,7 +72,7 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
       render::MovieOptions movie;
       movie.enabled = scene.output.movie.enabled;
       movie.fps = scene.output.movie.fps;
-      m->frames = std::make_unique<render::FrameOutput>(dir, render_options(scene.output.render), movie, walls, log);
+      m->frames = std::make_unique<render::FrameOutput>(dir, render_options(scene), movie, walls, log);
       m->render_every = scene.output.render.every;
     } catch (const RuntimeFailure& e) {
       log << "warning: no images: " << e.what() << "\n";

@@ -14,6 +14,7 @@
 #include "render/bitmap_font.hpp"
 #include "render/camera.hpp"
 #include "render/color_map.hpp"
+#include "render/frame_output.hpp"
 #include "render/occlusion.hpp"
 #include "render/overlay.hpp"
 #include "render/vtk_output.hpp"
@@ -318,4 +319,27 @@ TEST(Camera, ParsesTheCommandLineForm) {
   EXPECT_EQ(c.up, Vec3(0, 0, 1));
   for (const char* bad : {"1,2,3", "1,2:0,0,0", "1,2,3:0,0,0,4", "a,b,c:0,0,0", "1,1,1:1,1,1", ""})
     EXPECT_THROW(parse_camera(bad), InputError) << bad;
+}
+
+TEST(MaterialNames, RoundTripAndLegendLabels) {
+  const fs::path dir = fresh_dir("material-names");
+  EXPECT_TRUE(read_material_names(dir).empty());  // no file: no names
+  const std::vector<std::string> names{"steel", "glass", "wood"};
+  write_material_names(dir, names);
+  EXPECT_EQ(read_material_names(dir), names);
+  EXPECT_EQ(count_temp_files(dir), 0u);
+
+  // The legend with names is wider than with bare ids: the labels are drawn.
+  auto legend_ink = [](std::vector<std::string> labels) {
+    Image image(400, 200);
+    ColorLegend legend;
+    legend.by = ColorBy::material;
+    legend.categories = {0, 1, 2};
+    legend.category_names = std::move(labels);
+    draw_color_legend(image, legend);
+    std::size_t changed = 0;
+    for (std::uint8_t v : image.rgb) changed += v != 0;
+    return changed;
+  };
+  EXPECT_GT(legend_ink(names), legend_ink({}));
 }
