@@ -90,7 +90,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   if (options.duration) sc.time.duration = *options.duration;
   if (options.out_dir) sc.output.dir = *options.out_dir;
   const scene::GeneratedParticles particles = scene::generate_particles(sc);
-  const broadphase::Backend backend = select_backend(options.backend, options.quiet ? err : out);
+  std::ostringstream quiet_sink;  // --quiet: only the summary
+  const broadphase::Backend backend = select_backend(options.backend, options.quiet ? quiet_sink : out);
 
   World world = make_world(sc, particles);
   if (std::size_t deep = count_initial_overlaps(world, 0.01))
@@ -99,7 +100,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   Simulation sim(sc, std::move(world), backend, options.algorithm);
   if (!options.quiet) out << sc.name << ": " << sim.world().size() << " spheres\n" << sim.describe_pipeline();
 
-  RunOutput output(sc, sc.output.dir, sim.walls(), options.render, options.quiet ? err : out);
+  RunOutput output(sc, sc.output.dir, sim.walls(), options.render, err);
   const double e_start = sim.world().kinetic_energy();
   const std::uint64_t total_steps = static_cast<std::uint64_t>(std::llround(sc.time.duration / sc.time.dt));
 
