@@ -78,6 +78,7 @@ struct SubdivisionCuda::Impl {
   }
 
   std::size_t run(const SpheresIn& d, real margin, cudaStream_t s);
+  Bounds device_bounds(const SpheresIn& d, cudaStream_t s);
   std::size_t run_home(const SpheresIn& d, real margin, cudaStream_t s);
   template <class Key>
   std::size_t run_home_keys(const SpheresIn& d, real margin, const HomeGrid& g, cudaStream_t s);
@@ -98,12 +99,7 @@ std::size_t SubdivisionCuda::Impl::run(const SpheresIn& d, real margin, cudaStre
   if (algorithm == Algorithm::home) return run_home(d, margin, s);
 
   // --- cell IDs: bounds -> grid ---------------------------------------------
-  auto* acc = bounds.as<BoundsAccum>(1);
-  launch_bounds(d.centre, d.radius, n, acc, sm_count, s);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_bounds, acc, sizeof(BoundsAccum), cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  if (h_bounds->bad) throw RuntimeFailure("broad phase: a centre or radius is not finite, or a radius is negative");
-  const GridChoice gc = choose_grid(decode_bounds(*h_bounds), margin);
+  const GridChoice gc = choose_grid(device_bounds(d, s), margin);
   if (gc.width == KeyWidth::too_wide) return run_on_cpu(d, margin, s);
   stats.cell_size = gc.grid.cell;
   stats.key_bits = gc.grid.key_bits;
@@ -200,14 +196,20 @@ void SubdivisionCuda::Impl::finish_timing() {
   }
 }
 
-std::size_t SubdivisionCuda::Impl::run_home(const SpheresIn& d, real margin, cudaStream_t s) {
-  // --- cell IDs: bounds -> grid -> home keys -----------------------------------
+// The bounding box of the centres and the largest radius, reduced on the
+// device and read back (the one host sync before the grid is chosen).
+Bounds SubdivisionCuda::Impl::device_bounds(const SpheresIn& d, cudaStream_t s) {
   auto* acc = bounds.as<BoundsAccum>(1);
   launch_bounds(d.centre, d.radius, d.count, acc, sm_count, s);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_bounds, acc, sizeof(BoundsAccum), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   if (h_bounds->bad) throw RuntimeFailure("broad phase: a centre or radius is not finite, or a radius is negative");
-  const HomeGridChoice hc = choose_home_grid(decode_bounds(*h_bounds), margin);
+  return decode_bounds(*h_bounds);
+}
+
+std::size_t SubdivisionCuda::Impl::run_home(const SpheresIn& d, real margin, cudaStream_t s) {
+  // --- cell IDs: bounds -> grid -> home keys -----------------------------------
+  const HomeGridChoice hc = choose_home_grid(device_bounds(d, s), margin);
   if (hc.width == KeyWidth::too_wide) return run_on_cpu(d, margin, s);
   stats.cell_size = hc.grid.cell;
   stats.key_bits = hc.grid.key_bits;

@@ -66,7 +66,9 @@ inline void set_key_layout(Grid& g, const std::uint64_t half_max[3]) {
   g.key_bits = bits + 3;
 }
 
-inline GridChoice choose_grid(const Bounds& b, real margin) {
+// Both grids refuse non-finite centres, negative or non-finite radii, and a
+// negative or non-finite margin (RuntimeFailure).
+inline void check_inputs(const Bounds& b, real margin) {
   if (!(margin >= 0) || !std::isfinite(static_cast<double>(margin)))
     throw RuntimeFailure("broad phase: margin must be finite and >= 0");
   for (int k = 0; k < 3; ++k)
@@ -74,6 +76,10 @@ inline GridChoice choose_grid(const Bounds& b, real margin) {
       throw RuntimeFailure("broad phase: a sphere centre is not finite");
   if (!std::isfinite(static_cast<double>(b.r_max)) || b.r_max < 0)
     throw RuntimeFailure("broad phase: a radius is negative or not finite");
+}
+
+inline GridChoice choose_grid(const Bounds& b, real margin) {
+  check_inputs(b, margin);
 
   GridChoice out;
   Grid& g = out.grid;
@@ -115,13 +121,7 @@ struct HomeGridChoice {
 };
 
 inline HomeGridChoice choose_home_grid(const Bounds& b, real margin) {
-  if (!(margin >= 0) || !std::isfinite(static_cast<double>(margin)))
-    throw RuntimeFailure("broad phase: margin must be finite and >= 0");
-  for (int k = 0; k < 3; ++k)
-    if (!std::isfinite(static_cast<double>(b.lo[k])) || !std::isfinite(static_cast<double>(b.hi[k])))
-      throw RuntimeFailure("broad phase: a sphere centre is not finite");
-  if (!std::isfinite(static_cast<double>(b.r_max)) || b.r_max < 0)
-    throw RuntimeFailure("broad phase: a radius is negative or not finite");
+  check_inputs(b, margin);
 
   HomeGridChoice out;
   HomeGrid& g = out.grid;
