@@ -79,20 +79,37 @@ void expect_stands(Simulation& sim, double r) {
   EXPECT_LE(w.late_peak, std::max(w.early_peak, jitter_floor(sim.world(), r)));
 }
 
+// A floor and a vertical tube 2 % wider than spheres of radius r.
+void add_tube(scene::Scene& s, real r) {
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  scene::WallSpec tube;
+  tube.kind = scene::WallSpec::Kind::cylinder;
+  tube.axis = {0, 0, 1};
+  tube.radius = 1.02 * r;
+  tube.inside = true;
+  s.walls.push_back(tube);
+}
+
+// Material 1: the first material, 100 times denser.
+void add_heavy_material(scene::Scene& s) {
+  scene::Material heavy = s.materials[0];
+  heavy.name = "heavy";
+  heavy.density *= 100;
+  s.materials.push_back(heavy);
+}
+
+// The box frame that holds the bottom layer of pyramid(base, r, 2 r).
+scene::WallSpec frame(int base, real r) {
+  return box({0, 0, 0}, {real(2 * r * base), real(2 * r * base), real(4 * r * base)});
+}
+
 }  // namespace
 
 // 15 spheres stacked in a tube barely wider than they are.
 TEST(Stability, ColumnInTubeStands) {
   scene::Scene s = make_scene(2e-3, 2, kGranular, 0.3, 0.5);
   const real r = real(0.02);
-  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
-  scene::WallSpec tube;
-  tube.kind = scene::WallSpec::Kind::cylinder;
-  tube.base = {0, 0, 0};
-  tube.axis = {0, 0, 1};
-  tube.radius = 1.02 * r;
-  tube.inside = true;
-  s.walls.push_back(tube);
+  add_tube(s, r);
   scene::GeneratedParticles g;
   for (int k = 0; k < 15; ++k) add_sphere(g, {0, 0, r + 2 * r * k}, r);
   Simulation sim(s, make_world(s, g), test_backend());
@@ -105,7 +122,7 @@ TEST(Stability, PyramidStands) {
   scene::Scene s = make_scene(2e-3, 2, kGranular, 0.3, 0.5);
   const real r = real(0.02);
   const int base = 20;
-  s.walls.push_back(box({0, 0, 0}, {real(2 * r * base), real(2 * r * base), real(4 * r * base)}));
+  s.walls.push_back(frame(base, r));
   Simulation sim(s, make_world(s, pyramid(base, r, 2 * r)), test_backend());
   expect_stands(sim, r);
 }
@@ -113,10 +130,7 @@ TEST(Stability, PyramidStands) {
 // A sphere 100 times denser than the four it rests on.
 TEST(Stability, HeavySphereOnLightOnes) {
   scene::Scene s = make_scene(2e-3, 2, kGranular, 0.3, 0.5);
-  scene::Material heavy = s.materials[0];
-  heavy.name = "heavy";
-  heavy.density *= 100;
-  s.materials.push_back(heavy);
+  add_heavy_material(s);
   const real r = real(0.02);
   s.walls.push_back(box({0, 0, 0}, {4 * r, 4 * r, 10 * r}));
   scene::GeneratedParticles g = pyramid(2, r, 2 * r);
@@ -132,7 +146,7 @@ TEST(Stability, OverlappingPyramidSeparatesWithoutExploding) {
   scene::Scene s = make_scene(2e-3, 2, kGranular, 0.3, 0.5);
   const real r = real(0.02);
   const int base = 10;
-  s.walls.push_back(box({0, 0, 0}, {real(2 * r * base), real(2 * r * base), real(4 * r * base)}));
+  s.walls.push_back(frame(base, r));
   Simulation sim(s, make_world(s, pyramid(base, r, real(1.5) * r)), test_backend());
   const double height = 2 * r * base;
   const Watch w = run_for(sim, 2.0);
@@ -149,17 +163,9 @@ TEST(Stability, OverlappingPyramidSeparatesWithoutExploding) {
 // stack disappears those impulses must not launch the spheres below.
 TEST(Stability, RemovingTheHeavyTopDoesNotLaunchTheStack) {
   scene::Scene s = make_scene(2e-3, 2, kGranular, 0.3, 0.5);
-  scene::Material heavy = s.materials[0];
-  heavy.name = "heavy";
-  heavy.density *= 100;
-  s.materials.push_back(heavy);
+  add_heavy_material(s);
   const real r = real(0.02);
-  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
-  scene::WallSpec tube;
-  tube.kind = scene::WallSpec::Kind::cylinder;
-  tube.axis = {0, 0, 1};
-  tube.radius = 1.02 * r;
-  s.walls.push_back(tube);
+  add_tube(s, r);
   scene::GeneratedParticles g;
   for (int k = 0; k < 6; ++k) add_sphere(g, {0, 0, r + 2 * r * k}, r, {}, k == 5 ? 1 : 0);
   Simulation sim(s, make_world(s, g), test_backend());
