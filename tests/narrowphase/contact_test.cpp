@@ -40,6 +40,13 @@ TEST(SphereSphere, SeparationAndNormalMatchGeometry) {
     if (!hit) continue;
     EXPECT_NEAR(separation, gap, 1e-5 * (ra + rb));
     EXPECT_NEAR(dot(normal, n), 1.0, 1e-5);
+    // The contact point lies midway across the overlap, on the centre line.
+    Contact c;
+    c.normal = normal;
+    c.separation = separation;
+    c.ra = ra;
+    const Vec3 expected_point = pb + n * (rb + real(0.5) * gap);
+    EXPECT_NEAR(length(c.point(pa) - expected_point), 0.0, 1e-5 * (ra + rb + length(pb)));
   }
 }
 
