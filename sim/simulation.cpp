@@ -144,8 +144,8 @@ void Simulation::substep(real h) {
   if (!m_contacts.empty()) {
     m_cache.restore(m_contacts, bodies, m_gravity ? length(m_g) * h : real(0));
     m_solver.solve_velocities(m_contacts, bodies, h);
-    m_cache.store(m_contacts);
   }
+  m_cache.store(m_contacts);  // also when empty: no stale impulses survive a contact-free substep
 
   integrator::integrate_positions(bodies, h);
   narrowphase::advance_walls(m_wall_shapes, h);
