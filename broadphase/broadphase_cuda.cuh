@@ -14,49 +14,14 @@
 #include "broadphase/grid.hpp"
 #include "broadphase/home_cell_math.hpp"
 #include "core/cuda_check.hpp"
+#include "core/device_buffer.cuh"
 #include "core/pair.hpp"
 
 namespace marbles::broadphase::cuda {
 
-constexpr int kBlock = 256;
-
-// Blocks for a grid-stride loop over n items.
-inline int grid_for(std::size_t n, int sm_count, int per_sm = 8) {
-  const std::size_t want = (n + kBlock - 1) / kBlock;
-  const std::size_t cap = static_cast<std::size_t>(sm_count) * static_cast<std::size_t>(per_sm);
-  return static_cast<int>(want < 1 ? 1 : (want < cap ? want : cap));
-}
-
-// A device allocation that only grows.
-class DeviceBuffer {
- public:
-  DeviceBuffer() = default;
-  DeviceBuffer(const DeviceBuffer&) = delete;
-  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
-  ~DeviceBuffer() {
-    if (m_ptr) cudaFree(m_ptr);
-  }
-  void* reserve(std::size_t bytes) {
-    if (bytes > m_bytes) {
-      if (m_ptr) MARBLES_CUDA_CHECK(cudaFree(m_ptr));
-      m_ptr = nullptr;
-      const std::size_t grown = bytes + bytes / 4 + 256;
-      MARBLES_CUDA_CHECK(cudaMalloc(&m_ptr, grown));
-      m_bytes = grown;
-    }
-    return m_ptr;
-  }
-  template <class T>
-  T* as(std::size_t count) {
-    return static_cast<T*>(reserve(count * sizeof(T) + 16));
-  }
-  void* get() const { return m_ptr; }
-  std::size_t bytes() const { return m_bytes; }
-
- private:
-  void* m_ptr = nullptr;
-  std::size_t m_bytes = 0;
-};
+using ::marbles::cuda::DeviceBuffer;
+using ::marbles::cuda::grid_for;
+using ::marbles::cuda::kBlock;
 
 // --- cell IDs (cell_ids_cuda.cu) ---------------------------------------------
 // Bounds of the centres as order-preserving integer encodings, so that

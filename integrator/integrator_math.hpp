@@ -27,4 +27,9 @@ MARBLES_HD_INLINE Vec3 drag_kick(const Vec3& v, real k1, real k2, real h) {
 // x += h v
 MARBLES_HD_INLINE Vec3 drift(const Vec3& x, const Vec3& v, real h) { return x + v * h; }
 
+// The non-finite check of the position stage.
+MARBLES_HD_INLINE bool body_is_finite(const Vec3& x, const Vec3& v, const Vec3& w) {
+  return is_finite(x) && is_finite(v) && is_finite(w);
+}
+
 }  // namespace marbles::integrator

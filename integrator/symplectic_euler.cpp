@@ -18,11 +18,15 @@ void apply_drag(const BodiesView& bodies, real k1, real k2, real h) {
     if (bodies.inv_mass[i] > 0) bodies.velocity[i] = drag_kick(bodies.velocity[i], k1, k2, h);
 }
 
-void integrate_positions(const BodiesView& bodies, real h) {
+bool integrate_positions(const BodiesView& bodies, real h) {
   const auto n = static_cast<std::ptrdiff_t>(bodies.count);
-#pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t i = 0; i < n; ++i)
+  bool bad = false;
+#pragma omp parallel for schedule(static) reduction(|| : bad) if (n > 20000)
+  for (std::ptrdiff_t i = 0; i < n; ++i) {
     bodies.position[i] = drift(bodies.position[i], bodies.velocity[i], h);
+    bad = bad || !body_is_finite(bodies.position[i], bodies.velocity[i], bodies.angular_velocity[i]);
+  }
+  return bad;
 }
 
 }  // namespace marbles::integrator

@@ -13,7 +13,8 @@ void apply_gravity(const BodiesView& bodies, const Vec3& g, real h);
 // coefficient k2 (1/m), see drag_kick.
 void apply_drag(const BodiesView& bodies, real k1, real k2, real h);
 
-// Position stage: x += h v.
-void integrate_positions(const BodiesView& bodies, real h);
+// Position stage: x += h v. Returns true when a position, velocity or
+// angular velocity is not finite afterwards (the step's non_finite flag).
+bool integrate_positions(const BodiesView& bodies, real h);
 
 }  // namespace marbles::integrator

@@ -3,12 +3,10 @@
 #include <algorithm>
 #include <numeric>
 
+#include "narrowphase/contact_cache_math.hpp"
+
 namespace marbles::narrowphase {
 namespace {
-
-inline std::uint64_t key_of(const Contact& c) { return (std::uint64_t(c.a) << 32) | c.b; }
-
-inline Vec3 tangential(const Vec3& v, const Vec3& n) { return v - n * dot(v, n); }
 
 // Union-find root with path halving.
 inline std::uint32_t root(std::vector<std::uint32_t>& parent, std::uint32_t i) {
@@ -16,78 +14,96 @@ inline std::uint32_t root(std::vector<std::uint32_t>& parent, std::uint32_t i) {
   return i;
 }
 
+constexpr std::ptrdiff_t kParallelFrom = 20000;
+
 }  // namespace
 
-std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse) {
-  if (m_entries.empty()) return 0;
-  m_matched.assign(m_entries.size(), 0);
-  std::size_t matched = 0;
-  for (Contact& c : contacts) {
-    const std::uint64_t key = key_of(c);
-    auto it = std::lower_bound(m_entries.begin(), m_entries.end(), key,
-                               [](const Entry& e, std::uint64_t k) { return e.key < k; });
-    if (it == m_entries.end() || it->key != key) continue;
-    c.normal_impulse = it->normal_impulse;
-    c.tangent_impulse = tangential(it->tangent_impulse, c.normal);
-    c.rolling_impulse = it->rolling_impulse;  // rolling (tangential) and twisting (normal) parts
-    m_matched[it - m_entries.begin()] = 1;
-    ++matched;
+std::size_t cold_start_unloaded_islands(std::vector<Contact>& contacts, const std::uint64_t* keys,
+                                        const real* normal_impulse, const std::uint8_t* matched,
+                                        std::size_t entry_count, const BodiesView& bodies, real weight_impulse) {
+  std::vector<std::uint32_t> unloaded;
+  for (std::size_t k = 0; k < entry_count; ++k) {
+    if (matched[k]) continue;
+    const auto a = static_cast<std::uint32_t>(keys[k] >> 32);
+    if (a >= bodies.count || !is_lost_load(normal_impulse[k], bodies.inv_mass[a], weight_impulse)) continue;
+    unloaded.push_back(static_cast<std::uint32_t>(k));
   }
-
-  // Loads that went away: lost contacts that carried more than 4 times the
-  // weight impulse of their sphere.
-  m_unloaded.clear();
-  for (std::size_t k = 0; k < m_entries.size(); ++k) {
-    if (m_matched[k]) continue;
-    const auto a = static_cast<std::uint32_t>(m_entries[k].key >> 32);
-    if (a >= bodies.count || bodies.inv_mass[a] <= 0) continue;
-    if (m_entries[k].normal_impulse <= 4 * weight_impulse / bodies.inv_mass[a]) continue;
-    m_unloaded.push_back(static_cast<std::uint32_t>(k));
-  }
-  if (m_unloaded.empty()) return matched;
+  if (unloaded.empty()) return 0;
 
   // Islands of touching spheres. An island starts cold when it lost a load
   // of at least a quarter of the largest impulse it still carries (the top of
   // a stack removed), not when a sphere merely leaves the surface of a deep pile.
-  m_parent.resize(bodies.count);
-  std::iota(m_parent.begin(), m_parent.end(), 0u);
+  std::vector<std::uint32_t> parent(bodies.count);
+  std::iota(parent.begin(), parent.end(), 0u);
   for (const Contact& c : contacts)
-    if (!is_wall(c.b)) m_parent[root(m_parent, c.a)] = root(m_parent, c.b);
-  m_island_max.assign(bodies.count, 0);
+    if (!is_wall(c.b)) parent[root(parent, c.a)] = root(parent, c.b);
+  std::vector<real> island_max(bodies.count, 0);
   for (const Contact& c : contacts) {
-    real& m = m_island_max[root(m_parent, c.a)];
+    real& m = island_max[root(parent, c.a)];
     m = std::max(m, c.normal_impulse);
   }
-  std::vector<char>& cold = m_matched;  // reused as a per-root flag
-  cold.assign(bodies.count, 0);
-  for (std::uint32_t k : m_unloaded) {
-    const Entry& lost = m_entries[k];
-    const auto a = static_cast<std::uint32_t>(lost.key >> 32);
-    const auto b = static_cast<std::uint32_t>(lost.key & 0xffffffffu);
+  std::vector<char> cold(bodies.count, 0);
+  for (std::uint32_t k : unloaded) {
+    const auto a = static_cast<std::uint32_t>(keys[k] >> 32);
+    const auto b = static_cast<std::uint32_t>(keys[k] & 0xffffffffu);
     for (std::uint32_t body : {a, b}) {
       if (is_wall(body) || body >= bodies.count) continue;
-      const std::uint32_t r = root(m_parent, body);
-      if (lost.normal_impulse >= real(0.25) * m_island_max[r]) cold[r] = 1;
+      const std::uint32_t r = root(parent, body);
+      if (normal_impulse[k] >= real(0.25) * island_max[r]) cold[r] = 1;
     }
   }
+  std::size_t set_cold = 0;
   for (Contact& c : contacts) {
-    if (!cold[root(m_parent, c.a)] || c.normal_impulse <= 0) continue;
+    if (!cold[root(parent, c.a)] || c.normal_impulse <= 0) continue;
     c.normal_impulse = 0;
     c.tangent_impulse = Vec3{};
     c.rolling_impulse = Vec3{};
-    --matched;
+    ++set_cold;
   }
-  return matched;
+  return set_cold;
+}
+
+std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse) {
+  const auto m = static_cast<std::uint32_t>(m_entries.size());
+  if (m == 0) return 0;
+  m_matched.assign(m, 0);
+  const std::uint64_t* keys = m_entries.key.data();
+  const auto n = static_cast<std::ptrdiff_t>(contacts.size());
+  std::size_t matched = 0;
+#pragma omp parallel for schedule(static) reduction(+ : matched) if (n >= kParallelFrom)
+  for (std::ptrdiff_t t = 0; t < n; ++t) {
+    Contact& c = contacts[t];
+    const std::uint64_t key = cache_key(c.a, c.b);
+    const std::uint32_t k = cache_lower_bound(keys, m, key);
+    if (k == m || keys[k] != key) continue;
+    restore_impulses(c, m_entries.normal_impulse[k], m_entries.tangent_impulse[k], m_entries.rolling_impulse[k]);
+    m_matched[k] = 1;  // keys are unique: one contact per entry
+    ++matched;
+  }
+  return matched - cold_start_unloaded_islands(contacts, keys, m_entries.normal_impulse.data(), m_matched.data(), m,
+                                                bodies, weight_impulse);
 }
 
 void ContactCache::store(const std::vector<Contact>& contacts) {
-  m_entries.clear();
-  m_entries.reserve(contacts.size());
   // Only the sustained impulses of the velocity solve are carried over; an
   // impact's impulse (Contact::impact_impulse) is not a load.
-  for (const Contact& c : contacts)
-    if (c.normal_impulse > 0) m_entries.push_back({key_of(c), c.normal_impulse, c.tangent_impulse, c.rolling_impulse});
-  std::sort(m_entries.begin(), m_entries.end(), [](const Entry& x, const Entry& y) { return x.key < y.key; });
+  m_order.clear();
+  for (std::uint32_t k = 0; k < contacts.size(); ++k)
+    if (contacts[k].normal_impulse > 0) m_order.push_back(k);
+  auto key = [&](std::uint32_t k) { return cache_key(contacts[k].a, contacts[k].b); };
+  std::sort(m_order.begin(), m_order.end(), [&](std::uint32_t x, std::uint32_t y) { return key(x) < key(y); });
+  const std::size_t m = m_order.size();
+  m_entries.key.resize(m);
+  m_entries.normal_impulse.resize(m);
+  m_entries.tangent_impulse.resize(m);
+  m_entries.rolling_impulse.resize(m);
+  for (std::size_t k = 0; k < m; ++k) {
+    const Contact& c = contacts[m_order[k]];
+    m_entries.key[k] = key(m_order[k]);
+    m_entries.normal_impulse[k] = c.normal_impulse;
+    m_entries.tangent_impulse[k] = c.tangent_impulse;
+    m_entries.rolling_impulse[k] = c.rolling_impulse;
+  }
 }
 
 }  // namespace marbles::narrowphase

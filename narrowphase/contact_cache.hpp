@@ -1,8 +1,9 @@
 // narrowphase/contact_cache.hpp — warm starting.
 //
 // The accumulated impulses of the last substep, keyed by body pair (a, b)
-// (b a sphere, or a wall with kWallFlag). A contact that persists starts the
-// next solve from its old impulses, so a resting stack needs few iterations
+// (b a sphere, or a wall with kWallFlag), sorted by key. A contact that
+// persists starts the next solve from its old impulses (found by binary
+// search: contact_cache_math.hpp), so a resting stack needs few iterations
 // to hold.
 //
 // When a load goes away (a contact that carried more than a few times its
@@ -24,30 +25,38 @@
 
 namespace marbles::narrowphase {
 
+// The cache's entries as arrays, sorted by key.
+struct CacheEntries {
+  std::vector<std::uint64_t> key;
+  std::vector<real> normal_impulse;
+  std::vector<Vec3> tangent_impulse, rolling_impulse;
+  std::size_t size() const { return key.size(); }
+};
+
+// The island rule: contacts of islands that lost a load (unmatched entries
+// for which is_lost_load holds) start cold. `matched[k]` says whether entry
+// k found its contact. Returns the number of contacts it set cold. Used by
+// the CPU cache and, when a load was lost, by the CUDA one.
+std::size_t cold_start_unloaded_islands(std::vector<Contact>& contacts, const std::uint64_t* keys,
+                                        const real* normal_impulse, const std::uint8_t* matched,
+                                        std::size_t entry_count, const BodiesView& bodies, real weight_impulse);
+
 class ContactCache {
  public:
-  // Copies the impulses of matching cached contacts into `contacts`
-  // (tangential and rolling parts projected onto the new tangent plane),
-  // except in islands that lost a load. `weight_impulse` is |g| h (m/s): a
-  // lost contact counts as a load when its impulse exceeds 4 m |g| h of its
-  // sphere. Returns the number of contacts warm-started.
+  // Copies the impulses of matching cached contacts into `contacts`, except
+  // in islands that lost a load. `weight_impulse` is |g| h (m/s). Returns the
+  // number of contacts warm-started.
   std::size_t restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse);
   // Remembers the impulses of `contacts` for the next substep.
   void store(const std::vector<Contact>& contacts);
-  void clear() { m_entries.clear(); }
+  void clear() { m_entries = {}; }
   std::size_t size() const { return m_entries.size(); }
 
  private:
-  struct Entry {
-    std::uint64_t key;
-    real normal_impulse;
-    Vec3 tangent_impulse, rolling_impulse;
-  };
-  std::vector<Entry> m_entries;  // sorted by key
+  CacheEntries m_entries;
   // Scratch, reused.
-  std::vector<char> m_matched;
-  std::vector<std::uint32_t> m_unloaded, m_parent;
-  std::vector<real> m_island_max;
+  std::vector<std::uint8_t> m_matched;
+  std::vector<std::uint32_t> m_order;
 };
 
 }  // namespace marbles::narrowphase

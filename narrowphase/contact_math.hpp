@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include "core/spheres.hpp"
 #include "core/vec3.hpp"
 #include "narrowphase/contact.hpp"
 
@@ -118,6 +119,57 @@ inline constexpr real kContactSkin = real(0.005);
 // that the current normal approach speed (v_n < 0) closes within the substep h.
 MARBLES_HD_INLINE bool speculative_closes(real separation, real normal_velocity, real h, real skin) {
   return separation < skin || separation < -normal_velocity * h;
+}
+
+// One candidate pair of the broad phase -> a contact, when the spheres touch
+// (gap below the skin) or their gap closes within the substep h at the
+// current approach speed. The loop body of sphere_contacts (contacts.cpp) and
+// of its CUDA twin.
+MARBLES_HD_INLINE bool make_sphere_contact(const BodiesView& bodies, std::uint32_t i, std::uint32_t j,
+                                           const PairTable& table, real h, Contact& c) {
+  const Vec3 dv = bodies.velocity[i] - bodies.velocity[j];
+  const real ri = bodies.radius[i], rj = bodies.radius[j];
+  const real skin = kContactSkin * (ri < rj ? ri : rj);
+  const real reach = length(dv) * h + skin;  // no wider gap can close in the substep
+  if (!sphere_sphere(bodies.position[i], ri, bodies.position[j], rj, reach, c.normal, c.separation)) return false;
+  if (!speculative_closes(c.separation, dot(dv, c.normal), h, skin)) return false;
+  c.a = i;
+  c.b = j;
+  c.ra = ri;
+  c.rb = rj;
+  c.coeff = table(bodies.material[i], bodies.material[j]);
+  return true;
+}
+
+// Sphere i against wall k -> a contact under the same rule (approach speed
+// relative to the wall's surface). The loop body of wall_contacts.
+MARBLES_HD_INLINE bool make_wall_contact(const BodiesView& bodies, std::uint32_t i, const WallShape& wall,
+                                         std::uint32_t k, const PairTable& table, real h, Contact& c) {
+  const Vec3 p = bodies.position[i];
+  const real r = bodies.radius[i];
+  if (!wall_gap(wall, p, r, c.normal, c.separation)) return false;
+  c.wall_velocity = wall_surface_velocity(wall, p - c.normal * r);
+  if (!speculative_closes(c.separation, dot(bodies.velocity[i] - c.wall_velocity, c.normal), h, kContactSkin * r))
+    return false;
+  c.a = i;
+  c.b = kWallFlag | k;
+  c.ra = r;
+  c.rb = 0;
+  c.coeff = table(bodies.material[i], wall.material);
+  return true;
+}
+
+// The velocity state of body `index` as the solver sees it (a wall is
+// immovable and moves with its surface velocity), and its write-back.
+MARBLES_HD_INLINE BodyState load_body(const BodiesView& bodies, std::uint32_t index, const Contact& c) {
+  if (is_wall(index)) return {c.wall_velocity, Vec3{}, 0, 0};
+  return {bodies.velocity[index], bodies.angular_velocity[index], bodies.inv_mass[index], bodies.inv_inertia[index]};
+}
+
+MARBLES_HD_INLINE void store_body(const BodiesView& bodies, std::uint32_t index, const BodyState& s) {
+  if (is_wall(index)) return;
+  bodies.velocity[index] = s.v;
+  bodies.angular_velocity[index] = s.w;
 }
 
 // Prepare stage: effective masses and the approach speed before the solve.

@@ -55,45 +55,19 @@ void advance_walls(std::vector<WallShape>& shapes, real h) {
 void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
                      const PairTable& table, real h, std::vector<Contact>& out) {
   for (std::size_t k = 0; k < pair_count; ++k) {
-    const IndexPair pair = pairs[k];
-    const Vec3 dv = bodies.velocity[pair.i] - bodies.velocity[pair.j];
-    const real skin = kContactSkin * std::min(bodies.radius[pair.i], bodies.radius[pair.j]);
-    const real reach = length(dv) * h + skin;  // no wider gap can close in the substep
     Contact c;
-    if (!sphere_sphere(bodies.position[pair.i], bodies.radius[pair.i], bodies.position[pair.j],
-                       bodies.radius[pair.j], reach, c.normal, c.separation))
-      continue;
-    if (!speculative_closes(c.separation, dot(dv, c.normal), h, skin)) continue;
-    c.a = pair.i;
-    c.b = pair.j;
-    c.ra = bodies.radius[pair.i];
-    c.rb = bodies.radius[pair.j];
-    c.coeff = table(bodies.material[pair.i], bodies.material[pair.j]);
-    out.push_back(c);
+    if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, c)) out.push_back(c);
   }
 }
 
 void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
                    std::vector<Contact>& out) {
-  const std::uint32_t wall_count = static_cast<std::uint32_t>(walls.size());
-  for (std::size_t i = 0; i < bodies.count; ++i) {
-    const Vec3 p = bodies.position[i];
-    const real r = bodies.radius[i];
+  const auto wall_count = static_cast<std::uint32_t>(walls.size());
+  for (std::size_t i = 0; i < bodies.count; ++i)
     for (std::uint32_t k = 0; k < wall_count; ++k) {
-      const WallShape& wall = walls[k];
       Contact c;
-      if (!wall_gap(wall, p, r, c.normal, c.separation)) continue;
-      c.wall_velocity = wall_surface_velocity(wall, p - c.normal * r);
-      if (!speculative_closes(c.separation, dot(bodies.velocity[i] - c.wall_velocity, c.normal), h, kContactSkin * r))
-        continue;
-      c.a = static_cast<std::uint32_t>(i);
-      c.b = kWallFlag | k;
-      c.ra = r;
-      c.rb = 0;
-      c.coeff = table(bodies.material[i], wall.material);
-      out.push_back(c);
+      if (make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, c)) out.push_back(c);
     }
-  }
 }
 
 }  // namespace marbles::narrowphase

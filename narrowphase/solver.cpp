@@ -2,161 +2,143 @@
 
 #include <algorithm>
 
-#include "narrowphase/contact_math.hpp"
-
 namespace marbles::narrowphase {
 namespace {
 
-// Loads the velocity state of body `index` (a wall is immovable and moves
-// with its surface velocity).
-inline BodyState load(const BodiesView& bodies, std::uint32_t index, const Contact& c) {
-  if (is_wall(index)) return {c.wall_velocity, Vec3{}, 0, 0};
-  return {bodies.velocity[index], bodies.angular_velocity[index], bodies.inv_mass[index], bodies.inv_inertia[index]};
+// Contacts of one colour: in parallel when there are enough of them to pay
+// for waking the threads (a colour is a few microseconds of work per
+// thousand contacts); the overflow set always one by one.
+constexpr std::ptrdiff_t kParallelFrom = 4096;
+
+template <class F>
+void for_colour(std::uint32_t begin, std::uint32_t end, F&& f) {
+  const auto n = static_cast<std::ptrdiff_t>(end - begin);
+#pragma omp parallel for schedule(static) if (n >= kParallelFrom)
+  for (std::ptrdiff_t t = 0; t < n; ++t) f(begin + static_cast<std::uint32_t>(t));
 }
 
-inline void store(const BodiesView& bodies, std::uint32_t index, const BodyState& s) {
-  if (is_wall(index)) return;
-  bodies.velocity[index] = s.v;
-  bodies.angular_velocity[index] = s.w;
-}
-
-// One Gauss-Seidel sweep, forwards or backwards over the contacts:
-// alternating the direction lets a correction cross a chain of contacts (a
-// stack) in both directions within one pair of sweeps.
 template <bool Friction, bool Rolling>
-void sweep(std::vector<Contact>& contacts, const BodiesView& bodies, real inv_h, bool backwards) {
-  const std::size_t n = contacts.size();
-  for (std::size_t k = 0; k < n; ++k) {
-    Contact& c = contacts[backwards ? n - 1 - k : k];
-    BodyState A = load(bodies, c.a, c);
-    BodyState B = load(bodies, c.b, c);
-    if constexpr (Friction) solve_friction(c, A, B);
-    if constexpr (Rolling) solve_rolling(c, A, B);
-    solve_normal(c, A, B, inv_h);
-    store(bodies, c.a, A);
-    store(bodies, c.b, B);
-  }
+void sweep_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, const BodiesView& bodies, real inv_h,
+                 bool) {
+  for_colour(begin, end, [&](std::uint32_t k) { solve_one<Friction, Rolling>(contacts[k], bodies, inv_h); });
 }
 
-// Warm start: apply the impulses the contacts start with (from the cache).
 template <bool Friction, bool Rolling>
-void warm_start(std::vector<Contact>& contacts, const BodiesView& bodies) {
-  for (Contact& c : contacts) {
-    if (c.normal_impulse <= 0) continue;
-    BodyState A = load(bodies, c.a, c);
-    BodyState B = load(bodies, c.b, c);
-    Vec3 impulse = c.normal * c.normal_impulse;
-    if constexpr (Friction) impulse += c.tangent_impulse;
-    apply_impulse(c, A, B, impulse);
-    if constexpr (Rolling) {
-      A.w += c.rolling_impulse * A.inv_inertia;
-      B.w -= c.rolling_impulse * B.inv_inertia;
-    }
-    store(bodies, c.a, A);
-    store(bodies, c.b, B);
-  }
+void warm_start_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, const BodiesView& bodies, real,
+                      bool) {
+  for_colour(begin, end, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(contacts[k], bodies); });
 }
 
-// Impact stage: binary impacts in time-of-impact order, repeated while
-// impacts make new approaches (a chain of touching spheres), at most
-// kImpactPasses times.
-constexpr int kImpactPasses = 4;
-
+// Impacts of order[begin, end) (one colour or level); true if any hit.
 template <bool Friction>
-void impacts(std::vector<Contact>& contacts, const BodiesView& bodies, real rest_speed, real h,
-             std::vector<std::uint32_t>& order) {
-  order.clear();
-  for (std::uint32_t k = 0; k < contacts.size(); ++k)
-    if (contacts[k].approach_speed < -rest_speed) order.push_back(k);
-  if (order.empty()) return;
-  auto toi = [&](std::uint32_t k) {
-    const Contact& c = contacts[k];
-    return c.separation > 0 ? c.separation / -c.approach_speed : real(0);
-  };
-  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
-    const real tx = toi(x), ty = toi(y);
-    return tx < ty || (tx == ty && x < y);
-  });
-  // Later passes look at every contact: an impact can set a touching neighbour approaching.
-  for (int pass = 0; pass < kImpactPasses; ++pass) {
-    bool hit = false;
-    auto visit = [&](Contact& c) {
-      BodyState A = load(bodies, c.a, c);
-      BodyState B = load(bodies, c.b, c);
-      if (!apply_impact<Friction>(c, A, B, rest_speed, h)) return;
-      store(bodies, c.a, A);
-      store(bodies, c.b, B);
-      hit = true;
-    };
-    if (pass == 0)
-      for (std::uint32_t k : order) visit(contacts[k]);
-    else
-      for (Contact& c : contacts) visit(c);
-    if (!hit) break;
+bool impact_range(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
+                  const BodiesView& bodies, real rest_speed, real h) {
+  bool hit = false;
+  const auto n = static_cast<std::ptrdiff_t>(end - begin);
+#pragma omp parallel for schedule(static) reduction(|| : hit) if (n >= kParallelFrom)
+  for (std::ptrdiff_t t = 0; t < n; ++t)
+    hit = impact_one<Friction>(contacts[order[begin + t]], bodies, rest_speed, h) || hit;
+  return hit;
+}
+
+// Runs `range(begin, end)` over the colours forwards (or backwards), the
+// overflow set (one by one) last (first).
+template <class F>
+void over_colours(const ColourRanges& colours, bool backwards, F&& range) {
+  const std::uint32_t nc = colours.colours;
+  const std::uint32_t ob = colours.begin[nc], oe = colours.begin[nc + 1];
+  if (backwards) {
+    for (std::uint32_t k = oe; k > ob; --k) range(k - 1, k);
+    for (std::uint32_t c = nc; c-- > 0;) range(colours.begin[c], colours.begin[c + 1]);
+  } else {
+    for (std::uint32_t c = 0; c < nc; ++c) range(colours.begin[c], colours.begin[c + 1]);
+    for (std::uint32_t k = ob; k < oe; ++k) range(k, k + 1);
   }
 }
 
 }  // namespace
 
 ContactSolver::ContactSolver(const SolverSettings& settings) : m_settings(settings) {
-  if (settings.friction && settings.rolling) m_sweep = &sweep<true, true>, m_warm_start = &warm_start<true, true>;
-  else if (settings.friction) m_sweep = &sweep<true, false>, m_warm_start = &warm_start<true, false>;
-  else if (settings.rolling) m_sweep = &sweep<false, true>, m_warm_start = &warm_start<false, true>;
-  else m_sweep = &sweep<false, false>, m_warm_start = &warm_start<false, false>;
-  m_impacts = settings.friction ? &impacts<true> : &impacts<false>;
+  if (settings.friction && settings.rolling) m_sweep = &sweep_range<true, true>, m_warm_start = &warm_start_range<true, true>;
+  else if (settings.friction) m_sweep = &sweep_range<true, false>, m_warm_start = &warm_start_range<true, false>;
+  else if (settings.rolling) m_sweep = &sweep_range<false, true>, m_warm_start = &warm_start_range<false, true>;
+  else m_sweep = &sweep_range<false, false>, m_warm_start = &warm_start_range<false, false>;
+  m_impact = settings.friction ? &impact_range<true> : &impact_range<false>;
 }
 
-void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const BodiesView& bodies, real h) const {
-  for (Contact& c : contacts) prepare_contact(c, load(bodies, c.a, c), load(bodies, c.b, c));
-  if (m_settings.restitution) m_impacts(contacts, bodies, m_settings.rest_speed, h, m_order);
-  if (m_settings.warm_start) m_warm_start(contacts, bodies);
+void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours,
+                                     const BodiesView& bodies, real h) {
+  Contact* cs = contacts.data();
+  for_colour(0, static_cast<std::uint32_t>(contacts.size()), [&](std::uint32_t k) { prepare_one(cs[k], bodies); });
+  if (m_settings.restitution) impacts(contacts, colours, bodies, h);
+  if (m_settings.warm_start)
+    over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(cs, b, e, bodies, 0, false); });
 
   const real inv_h = real(1) / h;
-  for (int it = 0; it < m_settings.iterations; ++it) m_sweep(contacts, bodies, inv_h, it % 2 == 1);
-
+  for (int it = 0; it < m_settings.iterations; ++it) {
+    const bool backwards = it % 2 == 1;
+    over_colours(colours, backwards, [&](std::uint32_t b, std::uint32_t e) { m_sweep(cs, b, e, bodies, inv_h, backwards); });
+  }
 }
 
-void ContactSolver::project_positions(const std::vector<Contact>& contacts, const BodiesView& bodies,
-                                      const std::vector<WallShape>& walls) const {
-  const SolverSettings& s = m_settings;
-  if (s.restitution) {
-    for (const Contact& c : contacts) {
-      if (c.rebound_shift <= 0) continue;
-      const real inv_ma = bodies.inv_mass[c.a];
-      const real inv_mb = is_wall(c.b) ? real(0) : bodies.inv_mass[c.b];
-      const real k = inv_ma + inv_mb;
-      if (k <= 0) continue;
-      bodies.position[c.a] -= c.normal * (c.rebound_shift * inv_ma / k);
-      if (!is_wall(c.b)) bodies.position[c.b] += c.normal * (c.rebound_shift * inv_mb / k);
-    }
+// Impact stage. Pass 0: the candidates, levelled by time of impact (a
+// by_round colouring: of two candidates sharing a sphere the earlier is in
+// the lower level), level by level. Later passes: every contact, colour by
+// colour, while the pass before hit something.
+void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& colours, const BodiesView& bodies,
+                            real h) {
+  const real rest = m_settings.rest_speed;
+  const auto n = static_cast<std::uint32_t>(contacts.size());
+  m_candidates.clear();
+  for (std::uint32_t k = 0; k < n; ++k)
+    if (is_impact_candidate(contacts[k], rest)) m_candidates.push_back(k);
+  if (m_candidates.empty()) return;
+  m_rank.resize(n);
+  m_level.assign(n, kUncoloured);
+  for (std::uint32_t k : m_candidates) m_rank[k] = impact_rank(time_of_impact(contacts[k]), k);
+  std::uint32_t rounds = 0;
+  m_impact_colouring.colour(contacts.data(), m_candidates, m_rank.data(), bodies.count, ColourRule::by_round,
+                            m_level, &rounds);
+  // Candidates level by level (overflow last), index order within a level.
+  std::vector<std::uint32_t> begin(rounds + 2, 0);
+  auto level_of = [&](std::uint32_t k) { return m_level[k] == kOverflowColour ? rounds : m_level[k]; };
+  for (std::uint32_t k : m_candidates) ++begin[level_of(k) + 1];
+  for (std::uint32_t l = 0; l <= rounds; ++l) begin[l + 1] += begin[l];
+  m_order.resize(m_candidates.size());
+  {
+    std::vector<std::uint32_t> cursor(begin.begin(), begin.end() - 1);
+    for (std::uint32_t k : m_candidates) m_order[cursor[level_of(k)]++] = k;
   }
-  for (int it = 0; it < s.position_iterations; ++it) {
-    for (const Contact& c : contacts) {
-      const real inv_ma = bodies.inv_mass[c.a];
-      if (is_wall(c.b)) {
-        if (inv_ma <= 0) continue;
-        const real r = bodies.radius[c.a];
-        Vec3 normal;
-        real separation;
-        if (!wall_gap(walls[c.b & ~kWallFlag], bodies.position[c.a], r, normal, separation)) continue;
-        const real move = projection_step(separation, s.slop * r, s.beta, s.max_correction * r);
-        if (move > 0) bodies.position[c.a] += normal * move;
-        continue;
-      }
-      const real inv_mb = bodies.inv_mass[c.b];
-      const real k = inv_ma + inv_mb;
-      if (k <= 0) continue;
-      const real ra = bodies.radius[c.a], rb = bodies.radius[c.b];
-      const Vec3 d = bodies.position[c.a] - bodies.position[c.b];
-      const real dist = length(d);
-      const Vec3 n = dist > real(1e-7) * (ra + rb) ? d / dist : c.normal;
-      const real r_min = std::min(ra, rb);
-      const real move = projection_step(dist - ra - rb, s.slop * r_min, s.beta, s.max_correction * r_min);
-      if (move <= 0) continue;
-      bodies.position[c.a] += n * (move * inv_ma / k);
-      bodies.position[c.b] -= n * (move * inv_mb / k);
-    }
+  Contact* cs = contacts.data();
+  bool hit = false;
+  for (std::uint32_t l = 0; l < rounds; ++l) hit = m_impact(cs, m_order.data(), begin[l], begin[l + 1], bodies, rest, h) || hit;
+  for (std::uint32_t k = begin[rounds]; k < begin[rounds + 1]; ++k)
+    hit = m_impact(cs, m_order.data(), k, k + 1, bodies, rest, h) || hit;
+
+  if (m_identity.size() < n) {
+    m_identity.resize(n);
+    for (std::uint32_t k = 0; k < n; ++k) m_identity[k] = k;
   }
+  for (int pass = 1; pass < kImpactPasses && hit; ++pass) {
+    hit = false;
+    over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
+      hit = m_impact(cs, m_identity.data(), b, e, bodies, rest, h) || hit;
+    });
+  }
+}
+
+void ContactSolver::project_positions(const std::vector<Contact>& contacts, const ColourRanges& colours,
+                                      const BodiesView& bodies, const std::vector<WallShape>& walls) const {
+  const Contact* cs = contacts.data();
+  const WallShape* ws = walls.data();
+  if (m_settings.restitution)
+    over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
+      for_colour(b, e, [&](std::uint32_t k) { rebound_one(cs[k], bodies); });
+    });
+  for (int it = 0; it < m_settings.position_iterations; ++it)
+    over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
+      for_colour(b, e, [&](std::uint32_t k) { project_one(cs[k], bodies, ws, m_settings); });
+    });
 }
 
 }  // namespace marbles::narrowphase

@@ -1,19 +1,29 @@
-// narrowphase/solver.hpp — sequential-impulse contact solver.
+// narrowphase/solver.hpp — the contact solver: sequential impulses, solved
+// colour by colour (colouring.hpp), on the CPU.
 //
-// Stages of one substep, in order (each in a fixed order, so a run repeats
-// bit for bit):
+// Stages of one substep, in order; each visits the colours in order and the
+// contacts of one colour in parallel (OpenMP), then the overflow set one by
+// one. A colour's contacts share no sphere, so the result does not depend on
+// the thread count, and it is the result of the CUDA twin bit for bit (both
+// call the per-contact functions of solver_math.hpp):
 //   prepare       effective masses; approach speed before the solve
 //   impacts       (with restitution) contacts approaching faster than the
 //                 rest speed collide as binary impacts, P_n = (1 + e) m |v_n|
-//                 with friction limited to mu P_n, in time-of-impact order
+//                 with friction limited to mu P_n. The first pass visits them
+//                 in time-of-impact order wherever two share a sphere (a
+//                 by_round colouring by time of impact); later passes, while
+//                 impacts make new approaches (a chain of touching spheres),
+//                 visit every contact colour by colour, at most kImpactPasses.
 //   warm start    apply the impulses carried over from the last substep
 //                 (ContactCache, matched by body pair) when enabled
-//   solve         `iterations` sweeps, alternately forwards and backwards: friction, rolling resistance (when the
+//   solve         `iterations` sweeps, alternately forwards and backwards
+//                 through the colours: friction, rolling resistance (when the
 //                 scene enables them), then the normal impulse (speculative:
 //                 a positive gap may close within the substep, never more)
 // and after the positions are integrated:
-//   project       remove overlap beyond a slop by moving positions only
-//                 (no velocity change, so no kinetic energy is added)
+//   project       undo the speculative bounces' extra travel, then remove
+//                 overlap beyond a slop by moving positions only (no velocity
+//                 change, so no kinetic energy is added), colour by colour
 // Which stages and which per-contact terms run is fixed when the solver is
 // built: a disabled effect costs no branch per contact (template dispatch).
 #pragma once
@@ -22,24 +32,14 @@
 #include <vector>
 
 #include "core/spheres.hpp"
-#include "core/walls.hpp"
+#include "narrowphase/colouring.hpp"
 #include "narrowphase/contact.hpp"
 #include "narrowphase/contact_math.hpp"
+#include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase {
 
-struct SolverSettings {
-  int iterations = 10;            // velocity sweeps per substep
-  bool restitution = true;        // impact stage (without it impacts are plastic)
-  bool friction = false;          // Coulomb friction term
-  bool rolling = false;           // rolling resistance term
-  real rest_speed = real(0.01);   // m/s: slower approaches do not bounce
-  real slop = real(0.005);        // fraction of the smaller radius left overlapping
-  real beta = real(0.2);          // fraction of the remaining overlap removed per projection
-  real max_correction = real(0.2);// fraction of the smaller radius moved per projection, at most
-  int position_iterations = 2;    // projection sweeps per substep
-  bool warm_start = true;         // start from the last substep's impulses
-};
+inline constexpr int kImpactPasses = 4;
 
 class ContactSolver {
  public:
@@ -47,23 +47,31 @@ class ContactSolver {
 
   const SolverSettings& settings() const { return m_settings; }
 
-  // prepare + solve (+ restitution) on the velocities in `bodies`.
-  void solve_velocities(std::vector<Contact>& contacts, const BodiesView& bodies, real h) const;
+  // prepare, impacts, warm start, sweeps on the velocities in `bodies`;
+  // `contacts` in colour-major order as `colours` describes.
+  void solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours, const BodiesView& bodies,
+                        real h);
 
   // Position projection over the same contacts at the integrated positions.
-  void project_positions(const std::vector<Contact>& contacts, const BodiesView& bodies,
-                         const std::vector<WallShape>& walls) const;
+  void project_positions(const std::vector<Contact>& contacts, const ColourRanges& colours,
+                         const BodiesView& bodies, const std::vector<WallShape>& walls) const;
 
  private:
-  using SweepFn = void (*)(std::vector<Contact>&, const BodiesView&, real inv_h, bool backwards);
-  using WarmStartFn = void (*)(std::vector<Contact>&, const BodiesView&);
+  void impacts(std::vector<Contact>& contacts, const ColourRanges& colours, const BodiesView& bodies, real h);
+
+  using RangeFn = void (*)(Contact* contacts, std::uint32_t begin, std::uint32_t end, const BodiesView& bodies,
+                           real inv_h, bool backwards);
+  using ImpactFn = bool (*)(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
+                            const BodiesView& bodies, real rest_speed, real h);
   SolverSettings m_settings;
-  SweepFn m_sweep = nullptr;
-  WarmStartFn m_warm_start = nullptr;
-  using ImpactFn = void (*)(std::vector<Contact>&, const BodiesView&, real rest_speed, real h,
-                           std::vector<std::uint32_t>& order);
-  ImpactFn m_impacts = nullptr;
-  mutable std::vector<std::uint32_t> m_order;  // scratch: impact order
+  RangeFn m_sweep = nullptr;
+  RangeFn m_warm_start = nullptr;
+  ImpactFn m_impact = nullptr;
+
+  // Scratch of the impact stage.
+  ContactColouring m_impact_colouring;
+  std::vector<std::uint32_t> m_candidates, m_level, m_order, m_identity;
+  std::vector<std::uint64_t> m_rank;
 };
 
 }  // namespace marbles::narrowphase

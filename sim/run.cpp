@@ -114,11 +114,12 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     step_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
     candidate_sum += static_cast<double>(sim.last_step().candidate_pairs) / sim.substeps();
     contact_sum += static_cast<double>(sim.last_step().contacts) / sim.substeps();
-    const std::size_t bad = sim.world().first_non_finite();
-    if (bad != sim.world().size())
+    if (sim.non_finite()) {
+      const std::size_t bad = sim.world().first_non_finite();
       throw RuntimeFailure("the state became non-finite at step " + std::to_string(sim.steps()) + " (t = " +
                            json_number(sim.time()) + " s), sphere " + std::to_string(bad) +
                            ": reduce dt or increase substeps");
+    }
     if (output.due(sim.steps())) {
       progress.finish();
       output.write(sim);

@@ -103,7 +103,9 @@ TEST(Solver, HeadOnImpactFollowsImpactLaw) {
     ASSERT_EQ(contacts.size(), 1u);
     SolverSettings s;
     s.rest_speed = real(1e-3);
-    ContactSolver(s).solve_velocities(contacts, bodies, real(1e-3));
+    ColourRanges colours;
+    ContactColouring().colour_and_sort(contacts, bodies.count, colours);
+    ContactSolver(s).solve_velocities(contacts, colours, bodies, real(1e-3));
     const double v1_expect = (m1 * v1 + m2 * v2 - m2 * e * (v1 - v2)) / (m1 + m2);
     const double v2_expect = (m1 * v1 + m2 * v2 + m1 * e * (v1 - v2)) / (m1 + m2);
     EXPECT_NEAR(vel[0].x, v1_expect, 1e-4 * (std::abs(v1) + std::abs(v2))) << "e=" << e;
@@ -133,7 +135,9 @@ TEST(Solver, FrictionStaysInsideTheCone) {
     SolverSettings s;
     s.friction = true;
     s.restitution = false;
-    ContactSolver(s).solve_velocities(contacts, bodies, real(1e-3));
+    ColourRanges colours;
+    ContactColouring().colour_and_sort(contacts, bodies.count, colours);
+    ContactSolver(s).solve_velocities(contacts, colours, bodies, real(1e-3));
     const Contact& c = contacts[0];
     EXPECT_LE(length(c.tangent_impulse), coeff.friction * c.normal_impulse * (1 + 1e-5) + 1e-7);
     EXPECT_NEAR(vel[0].z, 0, 1e-4);  // e = 0: normal velocity removed

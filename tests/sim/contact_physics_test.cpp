@@ -24,7 +24,7 @@ double incline_acceleration(double theta, double mu) {
   const real r = real(0.05);
   scene::GeneratedParticles g;
   add_sphere(g, n * r, r);
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   const Vec3 downslope(real(-std::cos(theta)), 0, real(-std::sin(theta)));
   for (int k = 0; k < 100; ++k) sim.step();  // settle into contact
   const double v0 = dot(sim.world().velocity[0], downslope);
@@ -59,7 +59,7 @@ TEST(SlideToRoll, EndsRollingAtFiveSevenths) {
   const real r = real(0.05);
   scene::GeneratedParticles g;
   add_sphere(g, {0, 0, r}, r, {real(v0), 0, 0});
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   const double t_roll = 2 * v0 / (7 * mu * kG);
   double t_measured = -1;
   while (sim.time() < 2 * t_roll) {
@@ -86,7 +86,7 @@ TEST_P(ObliqueImpact, FollowsRigidBodyImpactTheory) {
   const real r = real(0.05);
   scene::GeneratedParticles g;
   add_sphere(g, {0, 0, real(r + 0.1)}, r, {real(vt), 0, real(vn)});
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   while (sim.world().velocity[0].z < 0 && sim.time() < 1) sim.step();
   for (int k = 0; k < 5; ++k) sim.step();  // clear of the wall
   const bool sticks = 2.0 / 7.0 * std::abs(vt) <= mu * (1 + e) * std::abs(vn);
@@ -113,7 +113,7 @@ TEST(HeadOnSpinning, SpinsUnchanged) {
   World w = make_world(s, g);
   w.angular_velocity[0] = {0, 0, 20};
   w.angular_velocity[1] = {0, 0, -20};
-  Simulation sim(s, std::move(w), broadphase::Backend::cpu);
+  Simulation sim(s, std::move(w), test_backend());
   for (int k = 0; k < 200; ++k) sim.step();
   EXPECT_NEAR(sim.world().velocity[0].x, -0.7, 0.007);  // they did collide
   EXPECT_NEAR(sim.world().angular_velocity[0].z, 20, 1e-4);
@@ -131,7 +131,7 @@ TEST_P(RestitutionInput, ReboundSpeedIsEApproachSpeed) {
   scene::GeneratedParticles g;
   add_sphere(g, {real(-radius - 0.01), 0, 0}, real(radius), {real(v), 0, 0});
   add_sphere(g, {real(radius + 0.01), 0, 0}, real(radius), {real(-v), 0, 0});
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   for (int k = 0; k < 2000 && sim.world().velocity[0].x > 0; ++k) sim.step();
   ASSERT_LT(sim.world().velocity[0].x, 0) << "no impact";
   EXPECT_NEAR(sim.world().velocity[0].x, -e * v, 1e-3 * e * v);
@@ -154,7 +154,7 @@ TEST(MovingWall, ConveyorCarriesASphereToTwoSevenths) {
   const real r = real(0.05);
   scene::GeneratedParticles g;
   add_sphere(g, {0, 0, r}, r);
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   while (sim.time() < 2 * (2 * u / (7 * mu * kG))) sim.step();
   EXPECT_NEAR(sim.world().velocity[0].x, 2.0 / 7.0 * u, 0.01 * 2.0 / 7.0 * u);
   EXPECT_NEAR(sim.world().position[0].z, r, 0.01 * r);  // the belt moves along itself, not up
@@ -179,7 +179,7 @@ TEST(MovingWall, SpinningDrumDragsASphere) {
   const real r = real(0.05);
   scene::GeneratedParticles g;
   add_sphere(g, {0, 0, real(-R + r)}, r);
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   for (int k = 0; k < 100; ++k) sim.step();
   const double surface_speed = w * R;
   EXPECT_LT(sim.world().velocity[0].x, 0);  // dragged the way the bottom moves
@@ -201,7 +201,7 @@ TEST(RollingResistance, RollingBallDeceleratesAtFiveSeventhsMuRG) {
   add_sphere(g, {0, 0, r}, r, {real(v0), 0, 0});
   World w = make_world(s, g);
   w.angular_velocity[0] = {0, real(v0 / r), 0};  // already rolling
-  Simulation sim(s, std::move(w), broadphase::Backend::cpu);
+  Simulation sim(s, std::move(w), test_backend());
   for (int k = 0; k < 50; ++k) sim.step();
   const double v1 = sim.world().velocity[0].x, t1 = sim.time();
   for (int k = 0; k < 500; ++k) sim.step();
@@ -222,7 +222,7 @@ TEST(TwistingResistance, SpinDeceleratesAndStops) {
   add_sphere(g, {0, 0, r}, r);
   World w = make_world(s, g);
   w.angular_velocity[0] = {0, 0, real(w0)};
-  Simulation sim(s, std::move(w), broadphase::Backend::cpu);
+  Simulation sim(s, std::move(w), test_backend());
   for (int k = 0; k < 20; ++k) sim.step();
   const double w1 = sim.world().angular_velocity[0].z, t1 = sim.time();
   for (int k = 0; k < 200; ++k) sim.step();
@@ -230,4 +230,23 @@ TEST(TwistingResistance, SpinDeceleratesAndStops) {
   EXPECT_NEAR(alpha, 2.5 * mu_t * kG / r, 0.01 * 2.5 * mu_t * kG / r);
   for (int k = 0; k < 5000; ++k) sim.step();
   EXPECT_NEAR(sim.world().angular_velocity[0].z, 0, 1e-3);
+}
+
+// Newton's cradle: five touching elastic balls in a row, the first arriving
+// at v0. The impacts pass the momentum down the chain as binary collisions,
+// so the last ball leaves with (nearly) all the energy and the others stop.
+TEST(Impacts, NewtonsCradlePassesTheEnergyToTheLastBall) {
+  scene::Scene s = make_scene(1e-3, 1, {Effect::collisions, Effect::restitution}, 1.0);
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  add_sphere(g, {real(-0.2), 0, 0}, r, {1, 0, 0});
+  for (int k = 1; k < 5; ++k) add_sphere(g, {real(2 * r * (k - 1)), 0, 0}, r);
+  Simulation sim(s, make_world(s, g), test_backend());
+  const double e0 = sim.world().kinetic_energy();
+  for (int k = 0; k < 400; ++k) sim.step();
+  const World& w = sim.world();
+  const double last = 0.5 * length_squared(w.velocity[4]) / w.inv_mass[4];
+  EXPECT_GE(last, 0.95 * e0) << "last ball's share of the energy";
+  EXPECT_NEAR(w.kinetic_energy(), e0, 1e-3 * e0);
+  EXPECT_GT(w.velocity[4].x, 0.95);
 }

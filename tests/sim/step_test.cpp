@@ -9,8 +9,10 @@
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
 #include "sim/simulation.hpp"
+#include "tests/sim/test_scenes.hpp"
 
 using namespace marbles;
+using marbles::testing::test_backend;
 
 namespace {
 
@@ -49,7 +51,7 @@ double first_rebound_height(double e, double dt, int substeps, double h0) {
   floor.normal = {0, 0, 1};
   s.walls.push_back(floor);
   const real r = real(0.05);
-  Simulation sim(s, make_world(s, one_ball({0, 0, real(h0 + r)}, r)), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, one_ball({0, 0, real(h0 + r)}, r)), test_backend());
   bool bounced = false;
   double apex = 0;
   for (int k = 0; k < 200000; ++k) {
@@ -94,7 +96,7 @@ TEST(Rebound, InelasticBallComesToRest) {
   floor.normal = {0, 0, 1};
   s.walls.push_back(floor);
   const real r = real(0.05);
-  Simulation sim(s, make_world(s, one_ball({0, 0, real(0.5)}, r)), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, one_ball({0, 0, real(0.5)}, r)), test_backend());
   for (int k = 0; k < 5000; ++k) sim.step();
   EXPECT_LT(std::abs(sim.world().velocity[0].z), 0.02);
   EXPECT_NEAR(sim.world().position[0].z, r, 0.01 * r);
@@ -117,7 +119,7 @@ TEST(Momentum, ConservedByElasticCollisions) {
         g.radius.push_back(real(r * (1 + 0.2 * u(rng))));
         g.material.push_back(0);
       }
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   double p0[3], p1[3];
   sim.world().momentum(p0);
   std::uint64_t contacts = 0;
@@ -150,7 +152,7 @@ TEST(Determinism, SameSceneSameState) {
       g.radius.push_back(real(0.03));
       g.material.push_back(0);
     }
-    Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+    Simulation sim(s, make_world(s, g), test_backend());
     for (int k = 0; k < 200; ++k) sim.step();
     return sim.world();
   };
@@ -178,7 +180,7 @@ TEST(Walls, BoxKeepsEverySphereInside) {
     g.radius.push_back(real(0.02));
     g.material.push_back(0);
   }
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation sim(s, make_world(s, g), test_backend());
   for (int k = 0; k < 1000; ++k) sim.step();
   for (std::size_t i = 0; i < sim.world().size(); ++i) {
     const Vec3 p = sim.world().position[i];

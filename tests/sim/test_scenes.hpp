@@ -4,7 +4,11 @@
 
 #include <cstdlib>
 #include <cstring>
+#include <cstdint>
 #include <initializer_list>
+#include <random>
+#include <utility>
+#include <vector>
 
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
@@ -59,6 +63,63 @@ inline void add_sphere(scene::GeneratedParticles& g, Vec3 p, real r, Vec3 v = {}
   g.velocity.push_back(v);
   g.radius.push_back(r);
   g.material.push_back(material);
+}
+
+// FNV-1a over the bytes of every position, velocity and angular velocity:
+// two states with the same hash are (all but surely) equal bit for bit.
+inline std::uint64_t state_hash(const World& w) {
+  std::uint64_t h = 1469598103934665603ull;
+  auto mix = [&](const std::vector<Vec3>& v) {
+    const auto* bytes = reinterpret_cast<const unsigned char*>(v.data());
+    for (std::size_t k = 0; k < v.size() * sizeof(Vec3); ++k) h = (h ^ bytes[k]) * 1099511628211ull;
+  };
+  mix(w.position);
+  mix(w.velocity);
+  mix(w.angular_velocity);
+  return h;
+}
+
+// Scenes that exercise every stage, for the determinism and backend-parity
+// tests: a polydisperse pour of two materials into a box with every effect,
+// over a fixed sphere and past a spinning post, under air drag.
+inline std::pair<scene::Scene, scene::GeneratedParticles> pour_scene(int count, std::uint64_t seed) {
+  using scene::Effect;
+  scene::Scene s = make_scene(1e-3, 2,
+                              {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
+                               Effect::friction, Effect::rolling_resistance, Effect::drag},
+                              0.6, 0.4, 0.02, 0.01);
+  scene::Material heavy = s.materials[0];
+  heavy.name = "heavy";
+  heavy.density = 7800;
+  heavy.restitution = 0.3;
+  s.materials.push_back(heavy);
+  s.drag = 0.05;
+  s.walls.push_back(box({0, 0, 0}, {real(0.3), real(0.3), real(1.0)}));
+  scene::WallSpec post;
+  post.kind = scene::WallSpec::Kind::cylinder;
+  post.base = {real(0.2), real(0.15), 0};
+  post.radius = 0.02;
+  post.length = 0.3;
+  post.inside = false;
+  post.angular_velocity = 3;
+  s.walls.push_back(post);
+  scene::WallSpec rock;
+  rock.kind = scene::WallSpec::Kind::sphere;
+  rock.centre = {real(0.1), real(0.15), real(0.05)};
+  rock.radius = 0.04;
+  s.walls.push_back(rock);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  scene::GeneratedParticles g;
+  const int side = 8;
+  for (int k = 0; k < count; ++k) {
+    const int x = k % side, y = (k / side) % side, z = k / (side * side);
+    const real r = real(0.008 + 0.006 * u(rng));
+    add_sphere(g, {real(0.03 + 0.03 * x + 0.004 * u(rng)), real(0.03 + 0.03 * y + 0.004 * u(rng)),
+                   real(0.15 + 0.03 * z)},
+               r, {real(u(rng) - 0.5), real(u(rng) - 0.5), real(-u(rng))}, static_cast<std::uint32_t>(k % 2));
+  }
+  return {s, g};
 }
 
 }  // namespace marbles::testing

@@ -1,0 +1,18 @@
+// integrator/integrator_cuda.cuh — the CUDA twin of symplectic_euler.cpp:
+// one thread per sphere over integrator_math.hpp. Only .cu files include it.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include "core/spheres.hpp"
+
+namespace marbles::integrator::cuda {
+
+void launch_apply_gravity(const BodiesView& bodies, const Vec3& g, real h, int sm_count, cudaStream_t stream);
+void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, int sm_count, cudaStream_t stream);
+// x += h v; sets *non_finite = 1 when a position, velocity or angular
+// velocity is not finite afterwards (never clears it).
+void launch_integrate_positions(const BodiesView& bodies, real h, unsigned* non_finite, int sm_count,
+                                cudaStream_t stream);
+
+}  // namespace marbles::integrator::cuda

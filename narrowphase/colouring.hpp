@@ -1,0 +1,60 @@
+// narrowphase/colouring.hpp — contacts into colours (colouring_math.hpp has
+// the method), on the CPU.
+//
+// The solver colouring puts the contacts in colour-major order: colour 0's
+// contacts first, each colour in contact-index order, the overflow set last.
+// Cost: a few passes over a shrinking list of uncoloured contacts (each round
+// colours a large share of what is left).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "narrowphase/colouring_math.hpp"
+#include "narrowphase/contact.hpp"
+
+namespace marbles::narrowphase {
+
+// Contacts [begin[c], begin[c + 1]) have colour c; the last range
+// [begin[colours], begin[colours + 1]) is the overflow set.
+struct ColourRanges {
+  std::vector<std::uint32_t> begin{0, 0};
+  std::uint32_t colours = 0;
+  std::uint32_t rounds = 0;  // colouring rounds it took
+  std::size_t overflow() const { return begin[colours + 1] - begin[colours]; }
+  std::size_t size() const { return begin[colours + 1]; }
+};
+
+class ContactColouring {
+ public:
+  // Colours `active` (indices into contacts, ascending) by `rank` (one per
+  // contact index, ending in 0xffffffff - index as contact_rank and
+  // impact_rank do) under `rule`; writes colour[k] for each active k and
+  // returns the number of colours (lowest_free) or rounds (by_round) used,
+  // overflow not counted.
+  // `body_count`: spheres (contacts' a and b are below it, or walls).
+  std::uint32_t colour(const Contact* contacts, const std::vector<std::uint32_t>& active,
+                       const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
+                       std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr);
+
+  // The same colouring computed in Jones–Plassmann rounds (the data-parallel
+  // form the CUDA twin runs); kept on the CPU as its reference.
+  std::uint32_t colour_in_rounds(const Contact* contacts, const std::vector<std::uint32_t>& active,
+                                 const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
+                                 std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr);
+
+  // The solver colouring of all contacts: colours by contact_rank, then puts
+  // `contacts` in colour-major order.
+  void colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out);
+
+ private:
+  std::vector<std::uint64_t> m_body_word, m_body_used, m_rank, m_by_rank;
+  std::vector<std::uint32_t> m_body_next_round;
+  std::vector<std::uint32_t> m_all, m_active, m_next, m_colour;
+  std::vector<Contact> m_sorted;
+};
+
+// True when no two contacts of one colour share a sphere (tests, checks).
+bool colouring_is_proper(const std::vector<Contact>& contacts, const ColourRanges& ranges, std::size_t body_count);
+
+}  // namespace marbles::narrowphase

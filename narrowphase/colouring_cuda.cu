@@ -1,0 +1,190 @@
+#include "core/cuda_check.hpp"
+#include "narrowphase/colouring_cuda.cuh"
+#include "narrowphase/solver_math.hpp"
+
+namespace marbles::narrowphase::cuda {
+namespace {
+
+using ::marbles::cuda::grid_for;
+using ::marbles::cuda::kBlock;
+
+constexpr std::uint32_t kBatch = 8;  // rounds launched between two reads of what is left
+
+__global__ void contact_ranks_kernel(const Contact* contacts, std::uint32_t n, std::uint64_t* rank,
+                                     std::uint32_t* colour) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
+    colour[k] = kUncoloured;
+  }
+}
+
+__global__ void impact_candidates_kernel(const Contact* contacts, std::uint32_t n, real rest_speed,
+                                         std::uint64_t* rank, std::uint32_t* colour, std::uint32_t* count) {
+  std::uint32_t mine = 0;
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    const bool candidate = is_impact_candidate(contacts[k], rest_speed);
+    colour[k] = candidate ? kUncoloured : kNotActive;
+    if (candidate) rank[k] = impact_rank(time_of_impact(contacts[k]), k), ++mine;
+  }
+  if (mine) atomicAdd(count, mine);
+}
+
+// Step 1 of a round: offers (an atomic max: the result does not depend on order).
+__global__ void offer_kernel(const Contact* contacts, std::uint32_t n, const std::uint64_t* rank,
+                             const std::uint32_t* colour, std::uint32_t round, unsigned long long* body_word) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    if (colour[k] != kUncoloured) continue;
+    const Contact& c = contacts[k];
+    const unsigned long long word = round_word(round, rank[k]);
+    atomicMax(&body_word[c.a], word);
+    if (!is_wall(c.b)) atomicMax(&body_word[c.b], word);
+  }
+}
+
+// Step 2: the contacts holding both offers take a colour (they share no sphere).
+__global__ void select_kernel(const Contact* contacts, std::uint32_t n, const std::uint64_t* rank,
+                              std::uint32_t* colour, std::uint32_t round, ColourRule rule,
+                              const unsigned long long* body_word, unsigned long long* body_used,
+                              std::uint32_t* remaining) {
+  std::uint32_t left = 0;
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    if (colour[k] != kUncoloured) continue;
+    const Contact& c = contacts[k];
+    const bool wall = is_wall(c.b);
+    const std::uint64_t word = round_word(round, rank[k]);
+    if (!holds_both(word, body_word[c.a], wall ? 0 : body_word[c.b], wall)) {
+      ++left;
+      continue;
+    }
+    if (rule == ColourRule::by_round) {
+      colour[k] = round;
+      continue;
+    }
+    colour[k] = take_lowest_free(body_used[c.a], wall ? nullptr : &body_used[c.b]);
+  }
+  if (left) atomicAdd(&remaining[round], left);
+}
+
+__global__ void keys_kernel(const std::uint32_t* colour, std::uint32_t n, std::uint32_t overflow_key,
+                            std::uint32_t* keys, std::uint32_t* index, std::uint32_t* histogram) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    const std::uint32_t c = colour[k];
+    const std::uint32_t key = c == kNotActive ? overflow_key + 1
+                              : (c == kUncoloured || c == kOverflowColour) ? overflow_key
+                                                                           : c;
+    keys[k] = key;
+    index[k] = k;
+    if (key <= overflow_key) atomicAdd(&histogram[key], 1u);
+  }
+}
+
+__global__ void gather_kernel(const Contact* in, const std::uint32_t* order, std::uint32_t n, Contact* out) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
+    out[k] = in[order[k]];
+}
+
+}  // namespace
+
+ColouringCuda::ColouringCuda() {
+  MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_host), (kMaxColourRounds + 8) * sizeof(std::uint32_t)));
+}
+ColouringCuda::~ColouringCuda() {
+  if (m_host) cudaFreeHost(m_host);
+}
+
+std::uint32_t ColouringCuda::rounds(const Contact* contacts, std::uint32_t n, std::size_t body_count,
+                                    ColourRule rule, int sm_count, cudaStream_t s) {
+  auto* body_word = m_body_word.as<unsigned long long>(body_count);
+  auto* body_used = m_body_used.as<unsigned long long>(body_count);
+  auto* remaining = m_remaining.as<std::uint32_t>(kMaxColourRounds);
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(body_word, 0, body_count * sizeof(unsigned long long), s));
+  if (rule == ColourRule::lowest_free)
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(body_used, 0, body_count * sizeof(unsigned long long), s));
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(remaining, 0, kMaxColourRounds * sizeof(std::uint32_t), s));
+  const auto* rank = m_rank.get_as<std::uint64_t>();
+  auto* colour = m_colour.get_as<std::uint32_t>();
+  const int grid = grid_for(n, sm_count);
+  for (std::uint32_t round = 0; round < kMaxColourRounds;) {
+    const std::uint32_t batch = std::min(kBatch, kMaxColourRounds - round);
+    for (std::uint32_t r = round; r < round + batch; ++r) {
+      offer_kernel<<<grid, kBlock, 0, s>>>(contacts, n, rank, colour, r, body_word);
+      MARBLES_CUDA_CHECK_LAUNCH();
+      select_kernel<<<grid, kBlock, 0, s>>>(contacts, n, rank, colour, r, rule, body_word, body_used, remaining);
+      MARBLES_CUDA_CHECK_LAUNCH();
+    }
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, remaining + round, batch * sizeof(std::uint32_t),
+                                       cudaMemcpyDeviceToHost, s));
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+    for (std::uint32_t r = 0; r < batch; ++r)
+      if (m_host[r] == 0) return round + r + 1;
+    round += batch;
+  }
+  return kMaxColourRounds;
+}
+
+void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, int key_bits,
+                                   std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t s) {
+  auto* keys = m_keys.as<std::uint32_t>(n);
+  auto* keys_out = m_keys_out.as<std::uint32_t>(n);
+  auto* index = m_index.as<std::uint32_t>(n);
+  auto* index_out = m_index_out.as<std::uint32_t>(n);
+  auto* histogram = m_histogram.as<std::uint32_t>(overflow_key + 1);
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(histogram, 0, (overflow_key + 1) * sizeof(std::uint32_t), s));
+  keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(m_colour.get_as<std::uint32_t>(), n, overflow_key, keys, index,
+                                                       histogram);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  ::marbles::cuda::device_sort_pairs(keys, keys_out, index, index_out, n, key_bits, m_temp, s);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, histogram, (overflow_key + 1) * sizeof(std::uint32_t),
+                                     cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  std::uint32_t colours = 0;
+  for (std::uint32_t c = 0; c < overflow_key; ++c)
+    if (m_host[c] > 0) colours = c + 1;
+  begin.assign(colours + 2, 0);
+  for (std::uint32_t c = 0; c < colours; ++c) begin[c + 1] = begin[c] + m_host[c];
+  begin[colours + 1] = begin[colours] + m_host[overflow_key];
+}
+
+std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count,
+                                             Contact* sorted, std::vector<std::uint32_t>& begin,
+                                             std::uint32_t& rounds_run, int sm_count, cudaStream_t s) {
+  rounds_run = 0;
+  if (n == 0) {
+    begin.assign(2, 0);
+    return 0;
+  }
+  m_rank.as<std::uint64_t>(n);
+  m_colour.as<std::uint32_t>(n);
+  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, m_rank.get_as<std::uint64_t>(),
+                                                                m_colour.get_as<std::uint32_t>());
+  MARBLES_CUDA_CHECK_LAUNCH();
+  rounds_run = rounds(contacts, n, body_count, ColourRule::lowest_free, sm_count, s);
+  sort_by_colour(n, kMaxColours, 7, begin, sm_count, s);
+  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, m_index_out.get_as<std::uint32_t>(), n, sorted);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  return static_cast<std::uint32_t>(begin.size() - 2);
+}
+
+std::uint32_t ColouringCuda::impact_levels(const Contact* contacts, std::uint32_t n, std::size_t body_count,
+                                           real rest_speed, std::uint32_t*& order, std::vector<std::uint32_t>& begin,
+                                           int sm_count, cudaStream_t s) {
+  begin.assign(2, 0);
+  if (n == 0) return 0;
+  m_rank.as<std::uint64_t>(n);
+  m_colour.as<std::uint32_t>(n);
+  auto* count = m_histogram.as<std::uint32_t>(kMaxColourRounds + 1);
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
+  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, rest_speed,
+                                                                    m_rank.get_as<std::uint64_t>(),
+                                                                    m_colour.get_as<std::uint32_t>(), count);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, count, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  if (m_host[0] == 0) return 0;
+  rounds(contacts, n, body_count, ColourRule::by_round, sm_count, s);
+  sort_by_colour(n, kMaxColourRounds, 8, begin, sm_count, s);
+  order = m_index_out.get_as<std::uint32_t>();
+  return static_cast<std::uint32_t>(begin.size() - 2);
+}
+
+}  // namespace marbles::narrowphase::cuda

@@ -1,0 +1,61 @@
+// narrowphase/colouring_cuda.cuh — the CUDA twin of colouring.cpp: the
+// Jones–Plassmann rounds (colouring_math.hpp) as kernels, then a stable sort
+// of the contacts by colour. Gives the CPU's colouring bit for bit (the CPU
+// computes the same colours in one sequential pass; tests prove the two
+// forms equal). Only .cu files include this header.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+#include <vector>
+
+#include "core/device_buffer.cuh"
+#include "narrowphase/colouring_math.hpp"
+#include "narrowphase/contact.hpp"
+
+namespace marbles::narrowphase::cuda {
+
+using ::marbles::cuda::DeviceBuffer;
+
+// Contacts that take no part in a colouring (not impact candidates).
+inline constexpr std::uint32_t kNotActive = 0xfffffffdu;
+
+class ColouringCuda {
+ public:
+  ColouringCuda();
+  ~ColouringCuda();
+  ColouringCuda(const ColouringCuda&) = delete;
+  ColouringCuda& operator=(const ColouringCuda&) = delete;
+
+  // The solver colouring of contacts[0, n): colours by contact_rank, then
+  // writes the contacts in colour-major order to `sorted` (index order
+  // within a colour, overflow last); `begin` gets the host ranges as
+  // ColourRanges::begin (colours + 2 entries). Returns the colour count.
+  std::uint32_t colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count, Contact* sorted,
+                                std::vector<std::uint32_t>& begin, std::uint32_t& rounds, int sm_count,
+                                cudaStream_t stream);
+
+  // The impact stage's levels: the candidates (approach faster than
+  // rest_speed) coloured by_round on impact_rank; `order` (device) gets them
+  // level by level (overflow last), `begin` the host ranges (levels + 2
+  // entries). Returns the level count (0: no candidate).
+  std::uint32_t impact_levels(const Contact* contacts, std::uint32_t n, std::size_t body_count, real rest_speed,
+                              std::uint32_t*& order, std::vector<std::uint32_t>& begin, int sm_count,
+                              cudaStream_t stream);
+
+ private:
+  // Rounds over contacts whose colour is kUncoloured; returns rounds run.
+  std::uint32_t rounds(const Contact* contacts, std::uint32_t n, std::size_t body_count, ColourRule rule,
+                       int sm_count, cudaStream_t stream);
+  // Stable sort of the indices by key (overflow -> overflow_key, inactive
+  // last) and the host ranges [0, key_count + 1].
+  void sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, int key_bits, std::vector<std::uint32_t>& begin,
+                      int sm_count, cudaStream_t stream);
+
+  DeviceBuffer m_rank, m_colour, m_body_word, m_body_used, m_remaining, m_keys, m_keys_out, m_index, m_index_out,
+      m_histogram, m_temp;
+  std::uint32_t* m_host = nullptr;  // pinned readbacks
+};
+
+}  // namespace marbles::narrowphase::cuda

@@ -1,0 +1,101 @@
+// narrowphase/colouring_math.hpp — per-contact steps of the contact
+// colouring, host and device.
+//
+// A colour is a set of contacts of which no two share a sphere (walls take no
+// colour), so the contacts of one colour can be solved at once, in any order,
+// with the same result bit for bit. The colouring is Jones–Plassmann with
+// fixed ranks, in rounds:
+//   1. every uncoloured contact offers its rank to both its spheres
+//      (body_word = max of the offers: an atomic max, whose result does not
+//      depend on the order of the offers);
+//   2. a contact that holds the largest offer at both its spheres is coloured
+//      in this round: with the lowest colour that no coloured contact of its
+//      spheres has (rule lowest_free), or with the round number (by_round).
+// No two contacts coloured in one round share a sphere, so step 2 has no
+// conflicts. A contact is coloured exactly when all its higher-ranked
+// neighbours are, so `lowest_free` gives the colouring of the sequential
+// greedy rule in rank order, and `by_round` orders every two contacts that
+// share a sphere by rank (the impact stage uses it for time-of-impact order).
+// The result depends on the ranks only: the CPU and the GPU agree bit for bit.
+#pragma once
+
+#include <cstdint>
+
+#include "core/config.hpp"
+#include "narrowphase/contact.hpp"
+
+namespace marbles::narrowphase {
+
+inline constexpr std::uint32_t kUncoloured = 0xffffffffu;
+inline constexpr std::uint32_t kOverflowColour = 0xfffffffeu;  // solved one by one, after the colours
+inline constexpr std::uint32_t kMaxColours = 64;               // one bit each in a 64-bit body mask
+inline constexpr std::uint32_t kMaxColourRounds = 250;     // left uncoloured after these: overflow
+
+enum class ColourRule : std::uint8_t { lowest_free, by_round };
+
+// A 32-bit integer hash (lowbias32): spreads ranks so that colouring rounds
+// stay few (index order would make long chains of dependent contacts).
+MARBLES_HD_INLINE std::uint32_t mix32(std::uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x7feb352du;
+  x ^= x >> 15;
+  x *= 0x846ca68bu;
+  x ^= x >> 16;
+  return x;
+}
+
+// Rank of contact k for the solver colouring: a hash of its body pair (stable
+// while the contact persists), ties broken towards the lower index. 56 bits.
+MARBLES_HD_INLINE std::uint64_t contact_rank(std::uint32_t a, std::uint32_t b, std::uint32_t k) {
+  const std::uint32_t h = mix32(a * 0x9e3779b1u ^ mix32(b)) & 0xffffffu;
+  return (std::uint64_t(h) << 32) | (0xffffffffu - k);
+}
+
+// Rank of an impact: earlier time of impact first, then the lower index (the
+// order of the sequential impact stage). toi >= 0 (s).
+MARBLES_HD_INLINE std::uint64_t impact_rank(real toi, std::uint32_t k) {
+  const float t = static_cast<float>(toi);
+#if defined(__CUDA_ARCH__)
+  const std::uint32_t bits = __float_as_uint(t);
+#else
+  std::uint32_t bits;
+  static_assert(sizeof(bits) == sizeof(t));
+  __builtin_memcpy(&bits, &t, sizeof(bits));
+#endif
+  const std::uint32_t earlier = (0x7fffffffu - (bits & 0x7fffffffu)) >> 7;  // 24 bits, larger = earlier
+  return (std::uint64_t(earlier) << 32) | (0xffffffffu - k);
+}
+
+// The offer of a contact in round r: the round in the top byte, so an offer
+// of this round beats every stale offer of an earlier one (no reset needed).
+MARBLES_HD_INLINE std::uint64_t round_word(std::uint32_t round, std::uint64_t rank) {
+  return (std::uint64_t(round + 1) << 56) | rank;
+}
+
+// Step 2 for one contact: true if it is coloured in this round.
+MARBLES_HD_INLINE bool holds_both(std::uint64_t word, std::uint64_t word_a, std::uint64_t word_b, bool b_is_wall) {
+  return word == word_a && (b_is_wall || word == word_b);
+}
+
+// The lowest colour free at both spheres, or kOverflowColour.
+MARBLES_HD_INLINE std::uint32_t lowest_free_colour(std::uint64_t used) {
+  if (used == ~std::uint64_t(0)) return kOverflowColour;
+  const std::uint64_t free = ~used;
+  std::uint32_t c = 0;
+  while (!((free >> c) & 1u)) ++c;
+  return c;
+}
+
+// Gives a contact the lowest colour free at both its spheres and marks it
+// used there (used_b null for a wall); kOverflowColour, marking nothing,
+// when every colour is taken. Word: a 64-bit unsigned integer type.
+template <class Word>
+MARBLES_HD_INLINE std::uint32_t take_lowest_free(Word& used_a, Word* used_b) {
+  const std::uint32_t col = lowest_free_colour(used_a | (used_b ? *used_b : Word(0)));
+  if (col == kOverflowColour) return col;
+  used_a |= Word(1) << col;
+  if (used_b) *used_b |= Word(1) << col;
+  return col;
+}
+
+}  // namespace marbles::narrowphase

@@ -1,0 +1,42 @@
+// narrowphase/contact_cache_math.hpp — per-contact steps of the warm-start
+// cache, host and device: the loop bodies of contact_cache.cpp and of its
+// CUDA twin. The cache is a list of entries sorted by key (a << 32 | b);
+// a contact finds its entry by binary search, so lookups are independent.
+#pragma once
+
+#include <cstdint>
+
+#include "core/vec3.hpp"
+#include "narrowphase/contact.hpp"
+
+namespace marbles::narrowphase {
+
+MARBLES_HD_INLINE std::uint64_t cache_key(std::uint32_t a, std::uint32_t b) { return (std::uint64_t(a) << 32) | b; }
+
+// First index in keys[0, n) whose key is >= key.
+MARBLES_HD_INLINE std::uint32_t cache_lower_bound(const std::uint64_t* keys, std::uint32_t n, std::uint64_t key) {
+  std::uint32_t lo = 0, hi = n;
+  while (lo < hi) {
+    const std::uint32_t mid = lo + (hi - lo) / 2;
+    if (keys[mid] < key) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo;
+}
+
+// The carried impulses of a matched contact: tangential part projected onto
+// the new tangent plane; rolling (tangential) and twisting (normal) parts as
+// they were.
+MARBLES_HD_INLINE void restore_impulses(Contact& c, real normal, const Vec3& tangent, const Vec3& rolling) {
+  c.normal_impulse = normal;
+  c.tangent_impulse = tangent - c.normal * dot(tangent, c.normal);
+  c.rolling_impulse = rolling;
+}
+
+// A lost contact counts as a lost load when it carried more than 4 times the
+// weight impulse m |g| h of its sphere (sphere a, inverse mass inv_mass_a).
+MARBLES_HD_INLINE bool is_lost_load(real normal_impulse, real inv_mass_a, real weight_impulse) {
+  return inv_mass_a > 0 && normal_impulse > 4 * weight_impulse / inv_mass_a;
+}
+
+}  // namespace marbles::narrowphase

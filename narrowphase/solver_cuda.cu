@@ -1,0 +1,114 @@
+#include "core/cuda_check.hpp"
+#include "core/device_buffer.cuh"
+#include "narrowphase/solver_cuda.cuh"
+
+namespace marbles::narrowphase::cuda {
+namespace {
+
+using ::marbles::cuda::kBlock;
+
+// Thread t of a range: contact begin + t, or for a serial range, one thread
+// visiting the whole range in order.
+template <class F>
+__device__ void for_range(const ContactRange& r, F&& f) {
+  if (r.serial) {
+    if (blockIdx.x != 0 || threadIdx.x != 0) return;
+    if (r.backwards)
+      for (std::uint32_t k = r.end; k > r.begin; --k) f(k - 1);
+    else
+      for (std::uint32_t k = r.begin; k < r.end; ++k) f(k);
+    return;
+  }
+  const std::uint32_t k = r.begin + blockIdx.x * blockDim.x + threadIdx.x;
+  if (k < r.end) f(k);
+}
+
+inline int blocks(const ContactRange& r) {
+  return r.serial ? 1 : static_cast<int>((r.end - r.begin + kBlock - 1) / kBlock);
+}
+
+__global__ void prepare_kernel(Contact* contacts, std::uint32_t n, BodiesView bodies) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
+    prepare_one(contacts[k], bodies);
+}
+
+template <bool Friction, bool Rolling>
+__global__ void warm_start_kernel(Contact* contacts, ContactRange r, BodiesView bodies) {
+  for_range(r, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(contacts[k], bodies); });
+}
+
+template <bool Friction, bool Rolling>
+__global__ void sweep_kernel(Contact* contacts, ContactRange r, BodiesView bodies, real inv_h) {
+  for_range(r, [&](std::uint32_t k) { solve_one<Friction, Rolling>(contacts[k], bodies, inv_h); });
+}
+
+template <bool Friction>
+__global__ void impact_kernel(Contact* contacts, const std::uint32_t* order, ContactRange r, BodiesView bodies,
+                              real rest_speed, real h, unsigned* hit) {
+  bool any = false;
+  for_range(r, [&](std::uint32_t k) {
+    any = impact_one<Friction>(contacts[order ? order[k] : k], bodies, rest_speed, h) || any;
+  });
+  if (any) *hit = 1u;
+}
+
+__global__ void rebound_kernel(const Contact* contacts, ContactRange r, BodiesView bodies) {
+  for_range(r, [&](std::uint32_t k) { rebound_one(contacts[k], bodies); });
+}
+
+__global__ void project_kernel(const Contact* contacts, ContactRange r, BodiesView bodies, const WallShape* walls,
+                               SolverSettings s) {
+  for_range(r, [&](std::uint32_t k) { project_one(contacts[k], bodies, walls, s); });
+}
+
+}  // namespace
+
+void launch_prepare(Contact* contacts, std::uint32_t n, const BodiesView& bodies, int sm_count, cudaStream_t s) {
+  if (n == 0) return;
+  prepare_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, bodies);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_warm_start(Contact* contacts, ContactRange r, const BodiesView& bodies, SolverTerms t, cudaStream_t s) {
+  if (r.end <= r.begin) return;
+  if (t.friction && t.rolling) warm_start_kernel<true, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
+  else if (t.friction) warm_start_kernel<true, false><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
+  else if (t.rolling) warm_start_kernel<false, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
+  else warm_start_kernel<false, false><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_sweep(Contact* contacts, ContactRange r, const BodiesView& bodies, real inv_h, SolverTerms t,
+                  cudaStream_t s) {
+  if (r.end <= r.begin) return;
+  if (t.friction && t.rolling) sweep_kernel<true, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, inv_h);
+  else if (t.friction) sweep_kernel<true, false><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, inv_h);
+  else if (t.rolling) sweep_kernel<false, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, inv_h);
+  else sweep_kernel<false, false><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, inv_h);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange r, const BodiesView& bodies,
+                    real rest_speed, real h, bool friction, unsigned* hit, cudaStream_t s) {
+  if (r.end <= r.begin) return;
+  if (friction)
+    impact_kernel<true><<<blocks(r), kBlock, 0, s>>>(contacts, order, r, bodies, rest_speed, h, hit);
+  else
+    impact_kernel<false><<<blocks(r), kBlock, 0, s>>>(contacts, order, r, bodies, rest_speed, h, hit);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_rebound(const Contact* contacts, ContactRange r, const BodiesView& bodies, cudaStream_t s) {
+  if (r.end <= r.begin) return;
+  rebound_kernel<<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_project(const Contact* contacts, ContactRange r, const BodiesView& bodies, const WallShape* walls,
+                    const SolverSettings& settings, cudaStream_t s) {
+  if (r.end <= r.begin) return;
+  project_kernel<<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, walls, settings);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+}  // namespace marbles::narrowphase::cuda

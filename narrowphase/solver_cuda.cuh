@@ -1,0 +1,42 @@
+// narrowphase/solver_cuda.cuh — the CUDA twin of solver.cpp: one launch per
+// colour (a thread per contact) over the per-contact functions of
+// solver_math.hpp; the overflow set by one thread in order. The host walks
+// the colours in the CPU's order, so the result is the CPU's bit for bit.
+// Only .cu files include this header.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+#include "core/spheres.hpp"
+#include "narrowphase/solver_math.hpp"
+
+namespace marbles::narrowphase::cuda {
+
+// The per-contact terms a scene enables: picks the kernel instance once.
+struct SolverTerms {
+  bool friction = false, rolling = false;
+};
+
+// A range of contacts: one colour (in parallel) or the overflow set (serial,
+// forwards or backwards).
+struct ContactRange {
+  std::uint32_t begin = 0, end = 0;
+  bool serial = false, backwards = false;
+};
+
+void launch_prepare(Contact* contacts, std::uint32_t n, const BodiesView& bodies, int sm_count, cudaStream_t stream);
+void launch_warm_start(Contact* contacts, ContactRange range, const BodiesView& bodies, SolverTerms terms,
+                       cudaStream_t stream);
+void launch_sweep(Contact* contacts, ContactRange range, const BodiesView& bodies, real inv_h, SolverTerms terms,
+                  cudaStream_t stream);
+// Impacts of contacts[order[k]] for k in range (order null: k itself);
+// sets *hit = 1 when any hit.
+void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange range, const BodiesView& bodies,
+                    real rest_speed, real h, bool friction, unsigned* hit, cudaStream_t stream);
+void launch_rebound(const Contact* contacts, ContactRange range, const BodiesView& bodies, cudaStream_t stream);
+void launch_project(const Contact* contacts, ContactRange range, const BodiesView& bodies, const WallShape* walls,
+                    const SolverSettings& settings, cudaStream_t stream);
+
+}  // namespace marbles::narrowphase::cuda

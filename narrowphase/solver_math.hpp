@@ -1,0 +1,127 @@
+// narrowphase/solver_math.hpp — one contact through each solver stage,
+// host and device: the loop bodies of solver.cpp and of its CUDA twin.
+//
+// Each function loads the two bodies' state, updates the contact and the
+// bodies, and stores them back. Called for the contacts of one colour at a
+// time (no two share a sphere), so calls within a colour are independent.
+#pragma once
+
+#include <cstdint>
+
+#include "core/spheres.hpp"
+#include "narrowphase/contact_math.hpp"
+
+namespace marbles::narrowphase {
+
+// Settings of the solver stages (the plain values every stage reads).
+struct SolverSettings {
+  int iterations = 10;            // velocity sweeps per substep
+  bool restitution = true;        // impact stage (without it impacts are plastic)
+  bool friction = false;          // Coulomb friction term
+  bool rolling = false;           // rolling resistance term
+  real rest_speed = real(0.01);   // m/s: slower approaches do not bounce
+  real slop = real(0.005);        // fraction of the smaller radius left overlapping
+  real beta = real(0.2);          // fraction of the remaining overlap removed per projection
+  real max_correction = real(0.2);// fraction of the smaller radius moved per projection, at most
+  int position_iterations = 2;    // projection sweeps per substep
+  bool warm_start = true;         // start from the last substep's impulses
+};
+
+// Prepare: effective masses and the approach speed before the solve.
+MARBLES_HD_INLINE void prepare_one(Contact& c, const BodiesView& bodies) {
+  prepare_contact(c, load_body(bodies, c.a, c), load_body(bodies, c.b, c));
+}
+
+// Warm start: apply the impulses the contact starts with (from the cache).
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE void warm_start_one(const Contact& c, const BodiesView& bodies) {
+  if (c.normal_impulse <= 0) return;
+  BodyState A = load_body(bodies, c.a, c);
+  BodyState B = load_body(bodies, c.b, c);
+  Vec3 impulse = c.normal * c.normal_impulse;
+  if constexpr (Friction) impulse += c.tangent_impulse;
+  apply_impulse(c, A, B, impulse);
+  if constexpr (Rolling) {
+    A.w += c.rolling_impulse * A.inv_inertia;
+    B.w -= c.rolling_impulse * B.inv_inertia;
+  }
+  store_body(bodies, c.a, A);
+  store_body(bodies, c.b, B);
+}
+
+// One Gauss–Seidel update of one contact: friction, rolling resistance (when
+// enabled), then the normal impulse.
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE void solve_one(Contact& c, const BodiesView& bodies, real inv_h) {
+  BodyState A = load_body(bodies, c.a, c);
+  BodyState B = load_body(bodies, c.b, c);
+  if constexpr (Friction) solve_friction(c, A, B);
+  if constexpr (Rolling) solve_rolling(c, A, B);
+  solve_normal(c, A, B, inv_h);
+  store_body(bodies, c.a, A);
+  store_body(bodies, c.b, B);
+}
+
+// The impact of one contact (apply_impact); true if it hit.
+template <bool Friction>
+MARBLES_HD_INLINE bool impact_one(Contact& c, const BodiesView& bodies, real rest_speed, real h) {
+  BodyState A = load_body(bodies, c.a, c);
+  BodyState B = load_body(bodies, c.b, c);
+  if (!apply_impact<Friction>(c, A, B, rest_speed, h)) return false;
+  store_body(bodies, c.a, A);
+  store_body(bodies, c.b, B);
+  return true;
+}
+
+// A contact takes part in the impact stage's first pass when it approaches
+// faster than the rest speed; its time of impact orders that pass.
+MARBLES_HD_INLINE bool is_impact_candidate(const Contact& c, real rest_speed) {
+  return c.approach_speed < -rest_speed;
+}
+MARBLES_HD_INLINE real time_of_impact(const Contact& c) {
+  return c.separation > 0 ? c.separation / -c.approach_speed : real(0);
+}
+
+// After a speculative bounce: bring the bodies back together by the
+// contact's rebound shift, split by inverse mass (positions only).
+MARBLES_HD_INLINE void rebound_one(const Contact& c, const BodiesView& bodies) {
+  if (c.rebound_shift <= 0) return;
+  const real inv_ma = bodies.inv_mass[c.a];
+  const real inv_mb = is_wall(c.b) ? real(0) : bodies.inv_mass[c.b];
+  const real k = inv_ma + inv_mb;
+  if (k <= 0) return;
+  bodies.position[c.a] -= c.normal * (c.rebound_shift * inv_ma / k);
+  if (!is_wall(c.b)) bodies.position[c.b] += c.normal * (c.rebound_shift * inv_mb / k);
+}
+
+// Position projection of one contact at the integrated positions: remove a
+// share of the overlap beyond the slop (projection_step), split by inverse
+// mass. Positions only, so no kinetic energy is added.
+MARBLES_HD_INLINE void project_one(const Contact& c, const BodiesView& bodies, const WallShape* walls,
+                                   const SolverSettings& s) {
+  const real inv_ma = bodies.inv_mass[c.a];
+  if (is_wall(c.b)) {
+    if (inv_ma <= 0) return;
+    const real r = bodies.radius[c.a];
+    Vec3 normal;
+    real separation;
+    if (!wall_gap(walls[c.b & ~kWallFlag], bodies.position[c.a], r, normal, separation)) return;
+    const real move = projection_step(separation, s.slop * r, s.beta, s.max_correction * r);
+    if (move > 0) bodies.position[c.a] += normal * move;
+    return;
+  }
+  const real inv_mb = bodies.inv_mass[c.b];
+  const real k = inv_ma + inv_mb;
+  if (k <= 0) return;
+  const real ra = bodies.radius[c.a], rb = bodies.radius[c.b];
+  const Vec3 d = bodies.position[c.a] - bodies.position[c.b];
+  const real dist = length(d);
+  const Vec3 n = dist > real(1e-7) * (ra + rb) ? d / dist : c.normal;
+  const real r_min = ra < rb ? ra : rb;
+  const real move = projection_step(dist - ra - rb, s.slop * r_min, s.beta, s.max_correction * r_min);
+  if (move <= 0) return;
+  bodies.position[c.a] += n * (move * inv_ma / k);
+  bodies.position[c.b] -= n * (move * inv_mb / k);
+}
+
+}  // namespace marbles::narrowphase

@@ -1,0 +1,126 @@
+// sim/cpu_step.cpp — the substep's verbs on host arrays (StepBackend).
+//
+// Each verb is a loop (OpenMP where it pays) over the per-element functions
+// of the stages' *_math.hpp; the solver runs colour by colour, so the result
+// is the same for any thread count and the same as CudaStep's.
+#include <cmath>
+
+#include "core/error.hpp"
+#include "integrator/symplectic_euler.hpp"
+#include "narrowphase/colouring.hpp"
+#include "narrowphase/contact_cache.hpp"
+#include "narrowphase/contacts.hpp"
+#include "narrowphase/solver.hpp"
+#include "sim/step_backend.hpp"
+
+namespace marbles {
+namespace {
+
+class CpuStep final : public StepBackend {
+ public:
+  CpuStep(const StepModel& model, World world, std::unique_ptr<broadphase::BroadPhase> broad_phase)
+      : m_model(model),
+        m_world(std::move(world)),
+        m_walls(model.wall_shapes),
+        m_broadphase(std::move(broad_phase)),
+        m_solver(model.solver) {}
+
+  void apply_body_forces(real h) override {
+    const BodiesView bodies = m_world.view();
+    if (m_model.gravity) integrator::apply_gravity(bodies, m_model.g, h);
+    if (m_model.drag) integrator::apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h);
+  }
+
+  // Swept bounds: the broad phase sees each sphere grown by its travel |v| h
+  // within the substep, so every pair that can meet in this substep is a
+  // candidate, however fast; the narrow phase keeps those that overlap or
+  // close their gap at the current approach speed (speculative contacts), so
+  // nothing tunnels.
+  void find_contacts(real h) override {
+    m_contacts.clear();
+    const BodiesView bodies = m_world.view();
+    const std::size_t n = m_world.size();
+    if (m_model.collisions) {
+      m_bound_radius.resize(n);
+      for (std::size_t i = 0; i < n; ++i) m_bound_radius[i] = bodies.radius[i] + length(bodies.velocity[i]) * h;
+      m_broadphase->find_pairs({bodies.position, m_bound_radius.data(), n}, 0, m_pairs);
+      m_counters.candidate_pairs += m_pairs.size();
+      m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
+      narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_model.pair_table(), h, m_contacts);
+    }
+    if (m_model.wall_contacts) narrowphase::wall_contacts(bodies, m_walls, m_model.pair_table(), h, m_contacts);
+    m_counters.contacts += m_contacts.size();
+  }
+
+  void colour_contacts() override {
+    m_colouring.colour_and_sort(m_contacts, m_world.size(), m_colours);
+    m_counters.colours = std::max(m_counters.colours, m_colours.colours);
+    m_counters.overflow += m_colours.overflow();
+  }
+
+  void warm_start() override {
+    if (m_contacts.empty()) return;
+    m_cache.restore(m_contacts, m_world.view(), m_model.gravity ? length(m_model.g) * m_model.substep() : real(0));
+  }
+
+  void solve_velocities(real h) override {
+    if (!m_contacts.empty()) m_solver.solve_velocities(m_contacts, m_colours, m_world.view(), h);
+  }
+
+  void integrate_positions(real h) override {
+    m_non_finite = integrator::integrate_positions(m_world.view(), h) || m_non_finite;
+    narrowphase::advance_walls(m_walls, h);
+  }
+
+  void project_positions() override {
+    if (!m_contacts.empty()) m_solver.project_positions(m_contacts, m_colours, m_world.view(), m_walls);
+  }
+
+  // Also when there are no contacts: no stale impulses survive a contact-free substep.
+  void store_impulses() override { m_cache.store(m_contacts); }
+
+  void begin_step() override {
+    m_counters = {};
+    m_non_finite = false;
+  }
+  void end_step(StepCounters& counters) override { counters = m_counters; }
+  bool non_finite() const override { return m_non_finite; }
+
+  const World& world() override { return m_world; }
+  World& edit_world() override { return m_world; }
+  const std::vector<narrowphase::Contact>& contacts() override { return m_contacts; }
+  const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }
+  std::string name() const override { return "cpu"; }
+
+ private:
+  const StepModel& m_model;
+  World m_world;
+  std::vector<narrowphase::WallShape> m_walls;  // moving walls move
+  std::unique_ptr<broadphase::BroadPhase> m_broadphase;
+  narrowphase::ContactColouring m_colouring;
+  narrowphase::ContactSolver m_solver;
+  narrowphase::ContactCache m_cache;
+
+  // Per-substep buffers, reused.
+  std::vector<real> m_bound_radius;  // m, radius + travel: what the broad phase sees
+  std::vector<broadphase::Pair> m_pairs;
+  std::vector<narrowphase::Contact> m_contacts;
+  narrowphase::ColourRanges m_colours;
+  StepCounters m_counters;
+  bool m_non_finite = false;
+};
+
+}  // namespace
+
+std::unique_ptr<StepBackend> make_cpu_step(const StepModel& model, World world) {
+  return std::make_unique<CpuStep>(model, std::move(world),
+                                   model.collisions ? broadphase::make_subdivision_cpu(model.algorithm) : nullptr);
+}
+
+#if !defined(MARBLES_HAVE_CUDA)
+std::unique_ptr<StepBackend> make_cuda_step(const StepModel&, World) {
+  throw RuntimeFailure("the CUDA step: this build has no CUDA backend");
+}
+#endif
+
+}  // namespace marbles

@@ -1,0 +1,291 @@
+// sim/cuda_step.cu — the substep's verbs on device arrays (StepBackend).
+//
+// The world lives on the device (DeviceWorld) for the whole run; the host
+// copy is refreshed only when world() is asked for (output, tests), and an
+// edit of it is sent back before the next step. Each verb is one or a few
+// launches over the stage twins (*_cuda.cuh), which call the per-element
+// functions the CPU loops call, in the CPU's coloured order: CudaStep and
+// CpuStep give the same bits.
+//
+// Host syncs (for now, per substep): the broad phase's pair count (2), the
+// contact count, the colouring's rounds (one per 8 rounds) and colour
+// ranges, the impact stage's candidates and hits, the cache size. One sync
+// per step with buffers sized from the last step is the next step
+// (docs/architecture.md).
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "broadphase/broadphase_cuda.hpp"
+#include "core/cuda_check.hpp"
+#include "core/device.hpp"
+#include "core/error.hpp"
+#include "integrator/integrator_cuda.cuh"
+#include "narrowphase/colouring_cuda.cuh"
+#include "narrowphase/contact_cache_cuda.cuh"
+#include "narrowphase/contacts_cuda.cuh"
+#include "narrowphase/solver.hpp"
+#include "narrowphase/solver_cuda.cuh"
+#include "sim/device_world.cuh"
+#include "sim/step_backend.hpp"
+
+namespace marbles {
+namespace {
+
+namespace nc = narrowphase::cuda;
+using ::marbles::cuda::DeviceBuffer;
+
+class CudaStep final : public StepBackend {
+ public:
+  CudaStep(const StepModel& model, World world) : m_model(model), m_host(std::move(world)) {
+    const DeviceInfo& dev = cuda_device();
+    if (!dev.available) throw RuntimeFailure("the CUDA step: no CUDA device (" + dev.why_not + ")");
+    m_sm = std::max(1, dev.multiprocessors);
+    MARBLES_CUDA_CHECK(cudaStreamCreateWithFlags(&m_stream, cudaStreamNonBlocking));
+    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_pinned), 8 * sizeof(std::uint32_t)));
+    m_device.upload(m_host, m_stream);
+    upload(m_walls, model.wall_shapes);
+    upload(m_pair_table, model.pair_coefficients);
+    m_table = {m_pair_table.get_as<narrowphase::PairCoefficients>(), model.material_count};
+    m_flags.as<unsigned>(1);
+    if (model.collisions) m_broadphase = std::make_unique<broadphase::SubdivisionCuda>(model.algorithm);
+    m_terms = {model.solver.friction, model.solver.rolling};
+  }
+  ~CudaStep() override {
+    if (m_pinned) cudaFreeHost(m_pinned);
+    if (m_stream) cudaStreamDestroy(m_stream);
+  }
+
+  void apply_body_forces(real h) override {
+    const BodiesView bodies = m_device.view();
+    if (m_model.gravity) integrator::cuda::launch_apply_gravity(bodies, m_model.g, h, m_sm, m_stream);
+    if (m_model.drag)
+      integrator::cuda::launch_apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h, m_sm, m_stream);
+  }
+
+  // Swept bounds -> broad phase -> sphere contacts (in pair order), then wall
+  // contacts (by sphere, then wall): flag, scan, one read of both counts, write.
+  void find_contacts(real h) override {
+    const BodiesView bodies = m_device.view();
+    const std::size_t n = bodies.count;
+    std::size_t pair_count = 0, wall_items = 0;
+    std::uint32_t *pair_offsets = nullptr, *wall_offsets = nullptr;
+    const IndexPair* pairs = nullptr;
+    if (m_model.collisions) {
+      real* bound = m_bound.as<real>(n);
+      nc::launch_swept_radius(bodies, h, bound, m_sm, m_stream);
+      pair_count = m_broadphase->find_pairs_device({bodies.position, bound, n}, 0, m_stream);
+      pairs = m_broadphase->device_pairs();
+      m_counters.candidate_pairs += pair_count;
+      m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
+      auto* flags = m_pair_flags.as<std::uint32_t>(pair_count + 1);
+      pair_offsets = m_pair_offsets.as<std::uint32_t>(pair_count + 1);
+      nc::launch_sphere_contact_flags(bodies, pairs, pair_count, m_table, h, flags, m_sm, m_stream);
+      ::marbles::cuda::device_exclusive_sum(flags, pair_offsets, pair_count + 1, m_temp, m_stream);
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned, pair_offsets + pair_count, 4, cudaMemcpyDeviceToHost, m_stream));
+    }
+    const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
+    if (m_model.wall_contacts) {
+      wall_items = n * wall_count;
+      auto* flags = m_wall_flags.as<std::uint32_t>(wall_items + 1);
+      wall_offsets = m_wall_offsets.as<std::uint32_t>(wall_items + 1);
+      nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, flags, m_sm, m_stream);
+      ::marbles::cuda::device_exclusive_sum(flags, wall_offsets, wall_items + 1, m_temp, m_stream);
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 1, wall_offsets + wall_items, 4, cudaMemcpyDeviceToHost, m_stream));
+    }
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+    const std::uint32_t sphere_contacts = m_model.collisions ? m_pinned[0] : 0;
+    const std::uint32_t wall_contacts = m_model.wall_contacts ? m_pinned[1] : 0;
+    m_count = sphere_contacts + wall_contacts;
+    auto* contacts = m_contacts.as<narrowphase::Contact>(m_count);
+    if (sphere_contacts > 0)
+      nc::launch_sphere_contact_write(bodies, pairs, pair_count, m_table, h, pair_offsets, contacts, m_sm, m_stream);
+    if (wall_contacts > 0)
+      nc::launch_wall_contact_write(bodies, walls(), wall_count, m_table, h, wall_offsets, contacts + sphere_contacts,
+                                    m_sm, m_stream);
+    m_counters.contacts += m_count;
+  }
+
+  void colour_contacts() override {
+    auto* sorted = m_sorted.as<narrowphase::Contact>(m_count);
+    std::uint32_t rounds = 0;
+    m_colours = m_colouring.colour_and_sort(contacts_d(), m_count, m_device.size(), sorted, m_begin, rounds, m_sm,
+                                            m_stream);
+    m_contacts.swap(m_sorted);
+    m_counters.colours = std::max(m_counters.colours, m_colours);
+    m_counters.overflow += m_begin[m_colours + 1] - m_begin[m_colours];
+  }
+
+  void warm_start() override {
+    const real weight = m_model.gravity ? length(m_model.g) * m_model.substep() : real(0);
+    m_cache.restore(contacts_d(), m_count, m_device.view(), m_host.inv_mass.data(), weight, m_sm, m_stream);
+  }
+
+  void solve_velocities(real h) override {
+    if (m_count == 0) return;
+    const BodiesView bodies = m_device.view();
+    narrowphase::Contact* contacts = contacts_d();
+    nc::launch_prepare(contacts, m_count, bodies, m_sm, m_stream);
+    if (m_model.solver.restitution) impacts(h);
+    if (m_model.solver.warm_start)
+      over_colours(false, [&](nc::ContactRange r) { nc::launch_warm_start(contacts, r, bodies, m_terms, m_stream); });
+    const real inv_h = real(1) / h;
+    for (int it = 0; it < m_model.solver.iterations; ++it)
+      over_colours(it % 2 == 1, [&](nc::ContactRange r) {
+        nc::launch_sweep(contacts, r, bodies, inv_h, m_terms, m_stream);
+      });
+  }
+
+  void integrate_positions(real h) override {
+    integrator::cuda::launch_integrate_positions(m_device.view(), h, m_flags.get_as<unsigned>(), m_sm, m_stream);
+    nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream);
+  }
+
+  void project_positions() override {
+    if (m_count == 0) return;
+    const BodiesView bodies = m_device.view();
+    const narrowphase::Contact* contacts = contacts_d();
+    if (m_model.solver.restitution)
+      over_colours(false, [&](nc::ContactRange r) { nc::launch_rebound(contacts, r, bodies, m_stream); });
+    for (int it = 0; it < m_model.solver.position_iterations; ++it)
+      over_colours(false, [&](nc::ContactRange r) {
+        nc::launch_project(contacts, r, bodies, walls(), m_model.solver, m_stream);
+      });
+  }
+
+  void store_impulses() override { m_cache.store(contacts_d(), m_count, m_sm, m_stream); }
+
+  void begin_step() override {
+    if (m_host_edited) {
+      m_device.upload(m_host, m_stream);
+      m_host_edited = false;
+    }
+    m_counters = {};
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(m_flags.get(), 0, sizeof(unsigned), m_stream));
+  }
+
+  // The one read of flags at the end of a step.
+  void end_step(StepCounters& counters) override {
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 2, m_flags.get(), sizeof(unsigned), cudaMemcpyDeviceToHost, m_stream));
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+    m_non_finite = m_pinned[2] != 0;
+    m_host_stale = true;
+    m_contacts_stale = true;
+    counters = m_counters;
+  }
+  bool non_finite() const override { return m_non_finite; }
+
+  const World& world() override {
+    if (m_host_stale) {
+      m_device.download_state(m_host, m_stream);
+      m_host_stale = false;
+    }
+    return m_host;
+  }
+  World& edit_world() override {
+    world();
+    m_host_edited = true;
+    return m_host;
+  }
+  const std::vector<narrowphase::Contact>& contacts() override {
+    if (m_contacts_stale) {
+      m_host_contacts.resize(m_count);
+      if (m_count > 0)
+        MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host_contacts.data(), contacts_d(), m_count * sizeof(narrowphase::Contact),
+                                           cudaMemcpyDeviceToHost, m_stream));
+      MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+      m_contacts_stale = false;
+    }
+    return m_host_contacts;
+  }
+  const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }
+  std::string name() const override { return "cuda"; }
+
+ private:
+  template <class T>
+  void upload(DeviceBuffer& buffer, const std::vector<T>& host) {
+    T* d = buffer.as<T>(host.size());
+    if (!host.empty())
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(d, host.data(), host.size() * sizeof(T), cudaMemcpyHostToDevice, m_stream));
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+  }
+  narrowphase::Contact* contacts_d() const { return m_contacts.get_as<narrowphase::Contact>(); }
+  narrowphase::WallShape* walls() const { return m_walls.get_as<narrowphase::WallShape>(); }
+
+  // The colours forwards (then the overflow set, one by one) or backwards
+  // (the overflow set backwards first): the CPU solver's order.
+  template <class F>
+  void over_colours(bool backwards, F&& launch) {
+    const std::uint32_t nc = m_colours;
+    const nc::ContactRange overflow{m_begin[nc], m_begin[nc + 1], true, backwards};
+    if (backwards) {
+      launch(overflow);
+      for (std::uint32_t c = nc; c-- > 0;) launch(nc::ContactRange{m_begin[c], m_begin[c + 1]});
+    } else {
+      for (std::uint32_t c = 0; c < nc; ++c) launch(nc::ContactRange{m_begin[c], m_begin[c + 1]});
+      launch(overflow);
+    }
+  }
+
+  bool read_hit() {
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 3, m_hit.get(), sizeof(unsigned), cudaMemcpyDeviceToHost, m_stream));
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+    return m_pinned[3] != 0;
+  }
+
+  // The impact stage (ContactSolver::impacts): candidates level by level,
+  // then every contact colour by colour while the pass before hit.
+  void impacts(real h) {
+    const BodiesView bodies = m_device.view();
+    narrowphase::Contact* contacts = contacts_d();
+    const real rest = m_model.solver.rest_speed;
+    std::uint32_t* order = nullptr;
+    const std::uint32_t levels =
+        m_colouring.impact_levels(contacts, m_count, m_device.size(), rest, order, m_levels, m_sm, m_stream);
+    if (m_levels.back() == 0) return;
+    auto* hit = m_hit.as<unsigned>(1);
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, sizeof(unsigned), m_stream));
+    const bool friction = m_model.solver.friction;
+    for (std::uint32_t l = 0; l < levels; ++l)
+      nc::launch_impacts(contacts, order, {m_levels[l], m_levels[l + 1]}, bodies, rest, h, friction, hit, m_stream);
+    nc::launch_impacts(contacts, order, {m_levels[levels], m_levels[levels + 1], true, false}, bodies, rest, h,
+                       friction, hit, m_stream);
+    for (int pass = 1; pass < narrowphase::kImpactPasses && read_hit(); ++pass) {
+      MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, sizeof(unsigned), m_stream));
+      over_colours(false, [&](nc::ContactRange r) {
+        nc::launch_impacts(contacts, nullptr, r, bodies, rest, h, friction, hit, m_stream);
+      });
+    }
+  }
+
+  const StepModel& m_model;
+  World m_host;  // the host copy: stale after a step until world() is asked for
+  DeviceWorld m_device;
+  cudaStream_t m_stream = nullptr;
+  int m_sm = 1;
+  std::uint32_t* m_pinned = nullptr;
+
+  DeviceBuffer m_walls, m_pair_table, m_bound, m_pair_flags, m_pair_offsets, m_wall_flags, m_wall_offsets,
+      m_contacts, m_sorted, m_flags, m_hit, m_temp;
+  narrowphase::PairTable m_table;
+  nc::SolverTerms m_terms;
+  std::unique_ptr<broadphase::SubdivisionCuda> m_broadphase;
+  nc::ColouringCuda m_colouring;
+  nc::ContactCacheCuda m_cache;
+
+  std::uint32_t m_count = 0;          // contacts of this substep
+  std::uint32_t m_colours = 0;
+  std::vector<std::uint32_t> m_begin{0, 0}, m_levels{0, 0};
+  std::vector<narrowphase::Contact> m_host_contacts;
+  StepCounters m_counters;
+  bool m_non_finite = false, m_host_stale = false, m_host_edited = false, m_contacts_stale = true;
+};
+
+}  // namespace
+
+std::unique_ptr<StepBackend> make_cuda_step(const StepModel& model, World world) {
+  return std::make_unique<CudaStep>(model, std::move(world));
+}
+
+}  // namespace marbles

@@ -1,0 +1,34 @@
+// sim/device_world.cuh — the world's struct of arrays in device memory.
+//
+// Hands out the same BodiesView as World::view(), with device pointers, so
+// every stage's kernels take what the CPU loops take. Uploaded once (and
+// after an edit), downloaded only when output or a test asks. Only .cu
+// files include it.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include "core/device_buffer.cuh"
+#include "sim/world.hpp"
+
+namespace marbles {
+
+class DeviceWorld {
+ public:
+  // Allocates for `world`'s spheres and uploads all of it.
+  void upload(const World& world, cudaStream_t stream);
+  // The moving state (positions, velocities, angular velocities) into `world`.
+  void download_state(World& world, cudaStream_t stream) const;
+
+  BodiesView view() const;
+  std::size_t size() const { return m_count; }
+  // Device bytes per sphere of the state itself.
+  static constexpr std::size_t kBytesPerSphere = 3 * sizeof(Vec3) + 3 * sizeof(real) + sizeof(std::uint32_t);
+
+ private:
+  ::marbles::cuda::DeviceBuffer m_position, m_velocity, m_angular_velocity, m_radius, m_inv_mass, m_inv_inertia,
+      m_material;
+  std::size_t m_count = 0;
+};
+
+}  // namespace marbles

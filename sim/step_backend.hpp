@@ -1,0 +1,70 @@
+// sim/step_backend.hpp — the verbs of a substep, and where the state lives.
+//
+// Simulation::substep (simulation.cpp) is one text for every backend: it
+// calls these verbs in the order of DESIGN.md. CpuStep (cpu_step.cpp) runs
+// them on host arrays with OpenMP; CudaStep (cuda_step.cu) on device arrays
+// in one stream, the world staying on the device and coming back only when
+// asked for (output, tests). Both call the same per-element functions
+// (the stages' *_math.hpp) in the same coloured order, so they give the
+// same bits.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "broadphase/broadphase.hpp"
+#include "narrowphase/contact.hpp"
+#include "sim/step_model.hpp"
+#include "sim/world.hpp"
+
+namespace marbles {
+
+// Figures of the last step, summed (or maximised) over its substeps.
+struct StepCounters {
+  std::uint64_t candidate_pairs = 0;  // summed over substeps
+  std::uint64_t contacts = 0;         // summed over substeps
+  std::uint32_t colours = 0;          // most colours of a substep
+  std::uint64_t overflow = 0;         // contacts solved one by one (beyond the colours), summed
+  double broadphase_ms = 0;           // summed over substeps
+};
+
+class StepBackend {
+ public:
+  virtual ~StepBackend() = default;
+
+  // --- the verbs of one substep, in order ----------------------------------
+  virtual void apply_body_forces(real h) = 0;    // gravity, drag: what the model enables
+  virtual void find_contacts(real h) = 0;        // swept bounds -> broad phase -> sphere and wall contacts
+  virtual void colour_contacts() = 0;            // no sphere twice in a colour; walls take none
+  virtual void warm_start() = 0;                 // impulses of persisting contacts
+  virtual void solve_velocities(real h) = 0;     // impacts, warm start, sweeps: colour by colour
+  virtual void integrate_positions(real h) = 0;  // x += h v, walls move; raises non_finite
+  virtual void project_positions() = 0;          // colour by colour; positions only
+  virtual void store_impulses() = 0;             // for the next substep's warm start
+
+  // --- around a step --------------------------------------------------------
+  virtual void begin_step() = 0;
+  // The one read of counters and flags per step.
+  virtual void end_step(StepCounters& counters) = 0;
+  // True when the last step left a non-finite position or velocity.
+  virtual bool non_finite() const = 0;
+
+  // --- state ----------------------------------------------------------------
+  // A host copy of the world, refreshed from the device when stale.
+  virtual const World& world() = 0;
+  // The host copy for editing between steps; sent back before the next step.
+  virtual World& edit_world() = 0;
+  // The contacts of the last substep, in solver (colour-major) order.
+  virtual const std::vector<narrowphase::Contact>& contacts() = 0;
+  virtual const broadphase::BroadPhase* broad_phase() const = 0;
+  virtual std::string name() const = 0;
+};
+
+// Host arrays, OpenMP.
+std::unique_ptr<StepBackend> make_cpu_step(const StepModel& model, World world);
+// Device arrays, one stream. Throws RuntimeFailure without a CUDA build or device.
+std::unique_ptr<StepBackend> make_cuda_step(const StepModel& model, World world);
+
+}  // namespace marbles

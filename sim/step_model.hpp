@@ -1,0 +1,59 @@
+// sim/step_model.hpp — the scene compiled once into the plain values a step
+// reads: which effects run, g, drag, the material-pair table, the walls,
+// the solver settings, dt and substeps.
+//
+// Both step backends (CpuStep, CudaStep) read only this: the step never sees
+// YAML types and never throws input errors (compile_step_model does, with
+// the scene's file, line and key).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "broadphase/broadphase.hpp"
+#include "core/walls.hpp"
+#include "narrowphase/contact.hpp"
+#include "narrowphase/contact_math.hpp"
+#include "narrowphase/solver_math.hpp"
+
+namespace marbles {
+
+namespace scene {
+struct Scene;
+struct Material;
+}  // namespace scene
+
+struct StepModel {
+  // The effects of the pipeline (each false costs nothing at run time).
+  bool gravity = false;
+  bool drag = false;
+  bool collisions = false;     // sphere-sphere contacts (broad phase + narrow phase)
+  bool wall_contacts = false;  // sphere-wall contacts (the scene has walls and the `walls` effect)
+
+  Vec3 g;                                   // m/s^2
+  real drag_linear = 0, drag_quadratic = 0; // 1/s, 1/m
+
+  // Coefficients of every material pair, row-major over material ids.
+  std::vector<narrowphase::PairCoefficients> pair_coefficients;
+  std::uint32_t material_count = 0;
+
+  Walls walls;                                     // as the scene gives them (output, rendering)
+  std::vector<narrowphase::WallShape> wall_shapes; // flattened for the narrow phase, at t = 0
+
+  narrowphase::SolverSettings solver;
+  broadphase::Algorithm algorithm = broadphase::kDefaultCpuAlgorithm;
+  double dt = 0;
+  int substeps = 1;
+
+  narrowphase::PairTable pair_table() const { return {pair_coefficients.data(), material_count}; }
+  real substep() const { return static_cast<real>(dt / substeps); }
+};
+
+StepModel compile_step_model(const scene::Scene& scene, broadphase::Algorithm algorithm);
+
+// Mixing rule for a material pair (documented in docs/solver.md): the
+// geometric mean of each coefficient, so a pair of equal materials keeps its
+// values and a zero on either side gives zero.
+narrowphase::PairCoefficients mix_materials(const scene::Material& a, const scene::Material& b);
+
+}  // namespace marbles
