@@ -114,6 +114,7 @@ std::uint32_t ColouringCuda::rounds(const Contact* contacts, std::uint32_t n, st
     }
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, remaining + round, batch * sizeof(std::uint32_t),
                                        cudaMemcpyDeviceToHost, s));
+    m_bytes += batch * sizeof(std::uint32_t);
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
     for (std::uint32_t r = 0; r < batch; ++r)
       if (m_host[r] == 0) return round + r + 1;
@@ -136,6 +137,7 @@ void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, 
   ::marbles::cuda::device_sort_pairs(keys, keys_out, index, index_out, n, key_bits, m_temp, s);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, histogram, (overflow_key + 1) * sizeof(std::uint32_t),
                                      cudaMemcpyDeviceToHost, s));
+  m_bytes += (overflow_key + 1) * sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   std::uint32_t colours = 0;
   for (std::uint32_t c = 0; c < overflow_key; ++c)
@@ -179,6 +181,7 @@ std::uint32_t ColouringCuda::impact_levels(const Contact* contacts, std::uint32_
                                                                     m_colour.get_as<std::uint32_t>(), count);
   MARBLES_CUDA_CHECK_LAUNCH();
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, count, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  m_bytes += sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   if (m_host[0] == 0) return 0;
   rounds(contacts, n, body_count, ColourRule::by_round, sm_count, s);

@@ -44,7 +44,11 @@ class ColouringCuda {
                               std::uint32_t*& order, std::vector<std::uint32_t>& begin, int sm_count,
                               cudaStream_t stream);
 
+ // Host<->device bytes copied so far (all calls).
+  std::uint64_t bytes_copied() const { return m_bytes; }
+
  private:
+  std::uint64_t m_bytes = 0;
   // Rounds over contacts whose colour is kUncoloured; returns rounds run.
   std::uint32_t rounds(const Contact* contacts, std::uint32_t n, std::size_t body_count, ColourRule rule,
                        int sm_count, cudaStream_t stream);

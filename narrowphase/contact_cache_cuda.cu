@@ -74,6 +74,7 @@ void ContactCacheCuda::store(const Contact* contacts, std::uint32_t n, int sm_co
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_exclusive_sum(flags, offsets, n + 1, m_temp, s);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, offsets + n, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  m_bytes += sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   m_count = m_host[0];
   if (m_count == 0) return;
@@ -107,6 +108,7 @@ void ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
                                                              counter);
   MARBLES_CUDA_CHECK_LAUNCH();
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, counter, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  m_bytes += sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   if (m_host[0] == 0) return;
 
@@ -116,16 +118,22 @@ void ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   std::vector<real> h_normal(m);
   std::vector<std::uint8_t> h_matched(m);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host_contacts.data(), contacts, n * sizeof(Contact), cudaMemcpyDeviceToHost, s));
+  m_bytes += n * sizeof(Contact);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_keys.data(), keys, m * sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
+  m_bytes += m * sizeof(std::uint64_t);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_normal.data(), normal, m * sizeof(real), cudaMemcpyDeviceToHost, s));
+  m_bytes += m * sizeof(real);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_matched.data(), matched, m, cudaMemcpyDeviceToHost, s));
+  m_bytes += m;
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   BodiesView host_bodies;
   host_bodies.inv_mass = host_inv_mass;
   host_bodies.count = bodies.count;
   if (cold_start_unloaded_islands(m_host_contacts, h_keys.data(), h_normal.data(), h_matched.data(), m, host_bodies,
-                                  weight_impulse) > 0)
+                                  weight_impulse) > 0) {
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(contacts, m_host_contacts.data(), n * sizeof(Contact), cudaMemcpyHostToDevice, s));
+    m_bytes += n * sizeof(Contact);
+  }
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
 }
 

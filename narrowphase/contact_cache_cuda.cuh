@@ -33,7 +33,11 @@ class ContactCacheCuda {
   void store(const Contact* contacts, std::uint32_t n, int sm_count, cudaStream_t stream);
   std::uint32_t size() const { return m_count; }
 
+ // Host<->device bytes copied so far (all calls).
+  std::uint64_t bytes_copied() const { return m_bytes; }
+
  private:
+  std::uint64_t m_bytes = 0;
   DeviceBuffer m_flags, m_offsets, m_keys_in, m_index_in, m_keys, m_index, m_normal, m_tangent, m_rolling,
       m_matched, m_counter, m_temp;
   std::uint32_t m_count = 0;

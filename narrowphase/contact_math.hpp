@@ -115,24 +115,53 @@ MARBLES_HD_INLINE Vec3 wall_surface_velocity(const WallShape& w, const Vec3& x) 
 // zero in a resting pile is not dropped and re-made (losing its warm start).
 inline constexpr real kContactSkin = real(0.005);
 
-// Contact test of the narrow phase: touching (gap below `skin`), or a gap
-// that the current normal approach speed (v_n < 0) closes within the substep h.
-MARBLES_HD_INLINE bool speculative_closes(real separation, real normal_velocity, real h, real skin) {
-  return separation < skin || separation < -normal_velocity * h;
+// Contact test of the narrow phase: touching (gap below `skin`), a gap that
+// the current normal approach speed (v_n < 0) closes within the substep h, or
+// a gap within `reach` (m, the pair's contact_reach summed): a gap the solve
+// may close by passing a neighbour's speed on.
+MARBLES_HD_INLINE bool speculative_closes(real separation, real normal_velocity, real h, real skin, real reach) {
+  return separation < skin || separation < -normal_velocity * h || separation < reach;
+}
+
+// How far (m) a sphere's speculative contacts reach: its own travel |v| h,
+// and at least the travel of the fastest sphere of the substep, up to half
+// its radius. An impact or a push within the solve passes speed on to a
+// sphere at rest, which then meets a neighbour whose gap no velocity before
+// the solve would close; without that contact the two overlap by up to v h
+// within one substep, and the projection, which sees only contacts, never
+// separates them (docs/solver.md, "Rigid means rigid").
+MARBLES_HD_INLINE real contact_reach(real speed, real max_speed, real radius, real h) {
+  const real own = speed * h;
+  real passed = max_speed * h;
+  if (passed > real(0.5) * radius) passed = real(0.5) * radius;
+  return own > passed ? own : passed;
+}
+
+// The rebound shift actually applied: it brings the pair back to the
+// distance a bounce at the time of impact leaves, never into overlap (gap_now:
+// the gap after the position update). When the solve left the pair slower
+// apart than e |v_n| (neighbours pushed them together), the full (1 + e) gap
+// shift would overlap them by up to e times the gap.
+MARBLES_HD_INLINE real rebound_step(real shift, real gap_now) {
+  if (gap_now <= 0) return 0;
+  return shift < gap_now ? shift : gap_now;
 }
 
 // One candidate pair of the broad phase -> a contact, when the spheres touch
 // (gap below the skin) or their gap closes within the substep h at the
 // current approach speed. The loop body of sphere_contacts (contacts.cpp) and
 // of its CUDA twin.
+// `reach`: contact_reach of each sphere (m).
 MARBLES_HD_INLINE bool make_sphere_contact(const BodiesView& bodies, std::uint32_t i, std::uint32_t j,
-                                           const PairTable& table, real h, Contact& c) {
+                                           const PairTable& table, real h, const real* reach, Contact& c) {
   const Vec3 dv = bodies.velocity[i] - bodies.velocity[j];
   const real ri = bodies.radius[i], rj = bodies.radius[j];
   const real skin = kContactSkin * (ri < rj ? ri : rj);
-  const real reach = length(dv) * h + skin;  // no wider gap can close in the substep
-  if (!sphere_sphere(bodies.position[i], ri, bodies.position[j], rj, reach, c.normal, c.separation)) return false;
-  if (!speculative_closes(c.separation, dot(dv, c.normal), h, skin)) return false;
+  const real pair_reach = reach[i] + reach[j];
+  const real closing = length(dv) * h;
+  const real margin = (closing > pair_reach ? closing : pair_reach) + skin;  // no wider gap can matter
+  if (!sphere_sphere(bodies.position[i], ri, bodies.position[j], rj, margin, c.normal, c.separation)) return false;
+  if (!speculative_closes(c.separation, dot(dv, c.normal), h, skin, pair_reach)) return false;
   c.a = i;
   c.b = j;
   c.ra = ri;
@@ -142,14 +171,17 @@ MARBLES_HD_INLINE bool make_sphere_contact(const BodiesView& bodies, std::uint32
 }
 
 // Sphere i against wall k -> a contact under the same rule (approach speed
-// relative to the wall's surface). The loop body of wall_contacts.
+// relative to the wall's surface, the sphere's reach alone). The loop body of
+// wall_contacts.
 MARBLES_HD_INLINE bool make_wall_contact(const BodiesView& bodies, std::uint32_t i, const WallShape& wall,
-                                         std::uint32_t k, const PairTable& table, real h, Contact& c) {
+                                         std::uint32_t k, const PairTable& table, real h, const real* reach,
+                                         Contact& c) {
   const Vec3 p = bodies.position[i];
   const real r = bodies.radius[i];
   if (!wall_gap(wall, p, r, c.normal, c.separation)) return false;
   c.wall_velocity = wall_surface_velocity(wall, p - c.normal * r);
-  if (!speculative_closes(c.separation, dot(bodies.velocity[i] - c.wall_velocity, c.normal), h, kContactSkin * r))
+  if (!speculative_closes(c.separation, dot(bodies.velocity[i] - c.wall_velocity, c.normal), h, kContactSkin * r,
+                          reach[i]))
     return false;
   c.a = i;
   c.b = kWallFlag | k;

@@ -53,21 +53,33 @@ void advance_walls(std::vector<WallShape>& shapes, real h) {
 }
 
 void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
-                     const PairTable& table, real h, std::vector<Contact>& out) {
+                     const PairTable& table, real h, const real* reach, std::vector<Contact>& out) {
   for (std::size_t k = 0; k < pair_count; ++k) {
     Contact c;
-    if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, c)) out.push_back(c);
+    if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c)) out.push_back(c);
   }
 }
 
 void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
-                   std::vector<Contact>& out) {
+                   const real* reach, std::vector<Contact>& out) {
   const auto wall_count = static_cast<std::uint32_t>(walls.size());
   for (std::size_t i = 0; i < bodies.count; ++i)
     for (std::uint32_t k = 0; k < wall_count; ++k) {
       Contact c;
-      if (make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, c)) out.push_back(c);
+      if (make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, reach, c)) out.push_back(c);
     }
+}
+
+real contact_reaches(const BodiesView& bodies, real h, std::vector<real>& reach) {
+  const auto n = static_cast<std::ptrdiff_t>(bodies.count);
+  real max_speed = 0;
+#pragma omp parallel for schedule(static) reduction(max : max_speed) if (n > 20000)
+  for (std::ptrdiff_t i = 0; i < n; ++i) max_speed = std::max(max_speed, length(bodies.velocity[i]));
+  reach.resize(bodies.count);
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t i = 0; i < n; ++i)
+    reach[i] = contact_reach(length(bodies.velocity[i]), max_speed, bodies.radius[i], h);
+  return max_speed;
 }
 
 }  // namespace marbles::narrowphase

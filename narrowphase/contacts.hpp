@@ -30,12 +30,17 @@ void advance_walls(std::vector<WallShape>& shapes, real h);
 // Pairs drifting apart or passing at a distance make no contact, so a
 // contact never holds back bodies that would not have met (which would
 // swallow kinetic energy); h = 0 keeps overlaps only.
+// A gap within reach[i] + reach[j] (contact_reach) makes a contact too.
 void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
-                     const PairTable& table, real h, std::vector<Contact>& out);
+                     const PairTable& table, real h, const real* reach, std::vector<Contact>& out);
 
 // The same for every sphere against every wall (approach speed relative to
-// the wall's surface).
+// the wall's surface, a gap within reach[i]).
 void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
-                   std::vector<Contact>& out);
+                   const real* reach, std::vector<Contact>& out);
+
+// reach[i] = contact_reach of sphere i for the substep h (the fastest
+// sphere's speed is a reduction over all); returns that speed.
+real contact_reaches(const BodiesView& bodies, real h, std::vector<real>& reach);
 
 }  // namespace marbles::narrowphase

@@ -8,35 +8,55 @@ namespace {
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 
-__global__ void swept_radius_kernel(BodiesView bodies, real h, real* bound) {
-  for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x)
-    bound[i] = bodies.radius[i] + length(bodies.velocity[i]) * h;
+// A speed (>= 0) as an unsigned word that orders as the speed does, so an
+// atomic max gives the exact largest speed whatever the order.
+__device__ unsigned long long speed_word(float v) { return __float_as_uint(v); }
+__device__ unsigned long long speed_word(double v) { return static_cast<unsigned long long>(__double_as_longlong(v)); }
+__device__ float speed_of(unsigned long long w, float) { return __uint_as_float(static_cast<unsigned>(w)); }
+__device__ double speed_of(unsigned long long w, double) { return __longlong_as_double(static_cast<long long>(w)); }
+
+__global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_speed) {
+  real v = 0;
+  for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x) {
+    const real s = length(bodies.velocity[i]);
+    v = s > v ? s : v;
+  }
+  if (v > 0) atomicMax(max_speed, speed_word(v));
+}
+
+__global__ void reach_kernel(BodiesView bodies, real h, const unsigned long long* max_speed, real* reach,
+                             real* bound) {
+  const real v_max = speed_of(*max_speed, real(0));
+  for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x) {
+    reach[i] = contact_reach(length(bodies.velocity[i]), v_max, bodies.radius[i], h);
+    if (bound) bound[i] = bodies.radius[i] + reach[i];
+  }
 }
 
 __global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, std::size_t count, PairTable table,
-                                    real h, std::uint32_t* flags) {
+                                    real h, const real* reach, std::uint32_t* flags) {
   for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= count; k += gridDim.x * blockDim.x) {
     if (k == count) {
       flags[k] = 0;
       continue;
     }
     Contact c;
-    flags[k] = make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, c) ? 1u : 0u;
+    flags[k] = make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c) ? 1u : 0u;
   }
 }
 
 __global__ void sphere_write_kernel(BodiesView bodies, const IndexPair* pairs, std::size_t count, PairTable table,
-                                    real h, const std::uint32_t* offsets, Contact* out) {
+                                    real h, const real* reach, const std::uint32_t* offsets, Contact* out) {
   for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k < count; k += gridDim.x * blockDim.x) {
     if (offsets[k + 1] == offsets[k]) continue;
     Contact c;
-    make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, c);
+    make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c);
     out[offsets[k]] = c;
   }
 }
 
 __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std::uint32_t wall_count,
-                                  PairTable table, real h, std::uint32_t* flags) {
+                                  PairTable table, real h, const real* reach, std::uint32_t* flags) {
   const std::size_t items = bodies.count * wall_count;
   for (std::size_t t = blockIdx.x * blockDim.x + threadIdx.x; t <= items; t += gridDim.x * blockDim.x) {
     if (t == items) {
@@ -45,18 +65,19 @@ __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std
     }
     const auto i = static_cast<std::uint32_t>(t / wall_count), k = static_cast<std::uint32_t>(t % wall_count);
     Contact c;
-    flags[t] = make_wall_contact(bodies, i, walls[k], k, table, h, c) ? 1u : 0u;
+    flags[t] = make_wall_contact(bodies, i, walls[k], k, table, h, reach, c) ? 1u : 0u;
   }
 }
 
 __global__ void wall_write_kernel(BodiesView bodies, const WallShape* walls, std::uint32_t wall_count,
-                                  PairTable table, real h, const std::uint32_t* offsets, Contact* out) {
+                                  PairTable table, real h, const real* reach, const std::uint32_t* offsets,
+                                  Contact* out) {
   const std::size_t items = bodies.count * wall_count;
   for (std::size_t t = blockIdx.x * blockDim.x + threadIdx.x; t < items; t += gridDim.x * blockDim.x) {
     if (offsets[t + 1] == offsets[t]) continue;
     const auto i = static_cast<std::uint32_t>(t / wall_count), k = static_cast<std::uint32_t>(t % wall_count);
     Contact c;
-    make_wall_contact(bodies, i, walls[k], k, table, h, c);
+    make_wall_contact(bodies, i, walls[k], k, table, h, reach, c);
     out[offsets[t]] = c;
   }
 }
@@ -68,42 +89,46 @@ __global__ void advance_walls_kernel(WallShape* walls, std::uint32_t count, real
 
 }  // namespace
 
-void launch_swept_radius(const BodiesView& bodies, real h, real* bound, int sm_count, cudaStream_t stream) {
+void launch_contact_reaches(const BodiesView& bodies, real h, unsigned long long* max_speed, real* reach,
+                            real* bound, int sm_count, cudaStream_t stream) {
   if (bodies.count == 0) return;
-  swept_radius_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, h, bound);
+  max_speed_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, max_speed);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  reach_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, h, max_speed, reach, bound);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pairs, std::size_t count,
-                                 const PairTable& table, real h, std::uint32_t* flags, int sm_count,
-                                 cudaStream_t stream) {
-  sphere_flags_kernel<<<grid_for(count + 1, sm_count), kBlock, 0, stream>>>(bodies, pairs, count, table, h, flags);
+                                 const PairTable& table, real h, const real* reach, std::uint32_t* flags,
+                                 int sm_count, cudaStream_t stream) {
+  sphere_flags_kernel<<<grid_for(count + 1, sm_count), kBlock, 0, stream>>>(bodies, pairs, count, table, h, reach,
+                                                                            flags);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 void launch_sphere_contact_write(const BodiesView& bodies, const IndexPair* pairs, std::size_t count,
-                                 const PairTable& table, real h, const std::uint32_t* offsets, Contact* out,
-                                 int sm_count, cudaStream_t stream) {
+                                 const PairTable& table, real h, const real* reach, const std::uint32_t* offsets,
+                                 Contact* out, int sm_count, cudaStream_t stream) {
   if (count == 0) return;
-  sphere_write_kernel<<<grid_for(count, sm_count), kBlock, 0, stream>>>(bodies, pairs, count, table, h, offsets, out);
+  sphere_write_kernel<<<grid_for(count, sm_count), kBlock, 0, stream>>>(bodies, pairs, count, table, h, reach,
+                                                                        offsets, out);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
-                               const PairTable& table, real h, std::uint32_t* flags, int sm_count,
-                               cudaStream_t stream) {
-  wall_flags_kernel<<<grid_for(bodies.count * wall_count + 1, sm_count), kBlock, 0, stream>>>(bodies, walls,
-                                                                                              wall_count, table, h,
-                                                                                              flags);
+                               const PairTable& table, real h, const real* reach, std::uint32_t* flags,
+                               int sm_count, cudaStream_t stream) {
+  wall_flags_kernel<<<grid_for(bodies.count * wall_count + 1, sm_count), kBlock, 0, stream>>>(
+      bodies, walls, wall_count, table, h, reach, flags);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 void launch_wall_contact_write(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
-                               const PairTable& table, real h, const std::uint32_t* offsets, Contact* out,
-                               int sm_count, cudaStream_t stream) {
+                               const PairTable& table, real h, const real* reach, const std::uint32_t* offsets,
+                               Contact* out, int sm_count, cudaStream_t stream) {
   if (bodies.count * wall_count == 0) return;
-  wall_write_kernel<<<grid_for(bodies.count * wall_count, sm_count), kBlock, 0, stream>>>(bodies, walls, wall_count,
-                                                                                          table, h, offsets, out);
+  wall_write_kernel<<<grid_for(bodies.count * wall_count, sm_count), kBlock, 0, stream>>>(
+      bodies, walls, wall_count, table, h, reach, offsets, out);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -15,24 +15,27 @@
 
 namespace marbles::narrowphase::cuda {
 
-// bound[i] = radius + |v| h: the swept bound the broad phase sees.
-void launch_swept_radius(const BodiesView& bodies, real h, real* bound, int sm_count, cudaStream_t stream);
+// The fastest sphere's speed into *max_speed (its bits as an unsigned word;
+// zero it first), then reach[i] = contact_reach and bound[i] = radius +
+// reach[i] (the swept bound the broad phase sees; bound may be null).
+void launch_contact_reaches(const BodiesView& bodies, real h, unsigned long long* max_speed, real* reach,
+                            real* bound, int sm_count, cudaStream_t stream);
 
 // flags[k] = 1 when candidate pair k makes a contact (flags[count] = 0).
 void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pairs, std::size_t count,
-                                 const PairTable& table, real h, std::uint32_t* flags, int sm_count,
-                                 cudaStream_t stream);
+                                 const PairTable& table, real h, const real* reach, std::uint32_t* flags,
+                                 int sm_count, cudaStream_t stream);
 // Writes the contact of each flagged pair k at out[offsets[k]].
 void launch_sphere_contact_write(const BodiesView& bodies, const IndexPair* pairs, std::size_t count,
-                                 const PairTable& table, real h, const std::uint32_t* offsets,
+                                 const PairTable& table, real h, const real* reach, const std::uint32_t* offsets,
                                  narrowphase::Contact* out, int sm_count, cudaStream_t stream);
 
 // The same over sphere i x wall k, item i * wall_count + k.
 void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
-                               const PairTable& table, real h, std::uint32_t* flags, int sm_count,
-                               cudaStream_t stream);
+                               const PairTable& table, real h, const real* reach, std::uint32_t* flags,
+                               int sm_count, cudaStream_t stream);
 void launch_wall_contact_write(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
-                               const PairTable& table, real h, const std::uint32_t* offsets,
+                               const PairTable& table, real h, const real* reach, const std::uint32_t* offsets,
                                narrowphase::Contact* out, int sm_count, cudaStream_t stream);
 
 // Moves translating walls by h times their velocity.

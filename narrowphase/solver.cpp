@@ -133,7 +133,7 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
   const WallShape* ws = walls.data();
   if (m_settings.restitution)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      for_colour(b, e, [&](std::uint32_t k) { rebound_one(cs[k], bodies); });
+      for_colour(b, e, [&](std::uint32_t k) { rebound_one(cs[k], bodies, ws); });
     });
   for (int it = 0; it < m_settings.position_iterations; ++it)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {

@@ -52,8 +52,8 @@ __global__ void impact_kernel(Contact* contacts, const std::uint32_t* order, Con
   if (any) *hit = 1u;
 }
 
-__global__ void rebound_kernel(const Contact* contacts, ContactRange r, BodiesView bodies) {
-  for_range(r, [&](std::uint32_t k) { rebound_one(contacts[k], bodies); });
+__global__ void rebound_kernel(const Contact* contacts, ContactRange r, BodiesView bodies, const WallShape* walls) {
+  for_range(r, [&](std::uint32_t k) { rebound_one(contacts[k], bodies, walls); });
 }
 
 __global__ void project_kernel(const Contact* contacts, ContactRange r, BodiesView bodies, const WallShape* walls,
@@ -61,7 +61,27 @@ __global__ void project_kernel(const Contact* contacts, ContactRange r, BodiesVi
   for_range(r, [&](std::uint32_t k) { project_one(contacts[k], bodies, walls, s); });
 }
 
+__global__ void max_overlap_kernel(const Contact* contacts, std::uint32_t n, BodiesView bodies, const WallShape* walls,
+                                   unsigned long long* deepest) {
+  real d = 0;
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    const real o = overlap_ratio(contacts[k], bodies, walls);
+    d = o > d ? o : d;
+  }
+  if (d > 0) {
+    if constexpr (sizeof(real) == 4) atomicMax(deepest, static_cast<unsigned long long>(__float_as_uint(d)));
+    else atomicMax(deepest, static_cast<unsigned long long>(__double_as_longlong(d)));
+  }
+}
+
 }  // namespace
+
+void launch_max_overlap(const Contact* contacts, std::uint32_t n, const BodiesView& bodies, const WallShape* walls,
+                        unsigned long long* deepest, int sm_count, cudaStream_t s) {
+  if (n == 0) return;
+  max_overlap_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, bodies, walls, deepest);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
 
 void launch_prepare(Contact* contacts, std::uint32_t n, const BodiesView& bodies, int sm_count, cudaStream_t s) {
   if (n == 0) return;
@@ -98,9 +118,10 @@ void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange 
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_rebound(const Contact* contacts, ContactRange r, const BodiesView& bodies, cudaStream_t s) {
+void launch_rebound(const Contact* contacts, ContactRange r, const BodiesView& bodies, const WallShape* walls,
+                    cudaStream_t s) {
   if (r.end <= r.begin) return;
-  rebound_kernel<<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
+  rebound_kernel<<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, walls);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -35,8 +35,14 @@ void launch_sweep(Contact* contacts, ContactRange range, const BodiesView& bodie
 // sets *hit = 1 when any hit.
 void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange range, const BodiesView& bodies,
                     real rest_speed, real h, bool friction, unsigned* hit, cudaStream_t stream);
-void launch_rebound(const Contact* contacts, ContactRange range, const BodiesView& bodies, cudaStream_t stream);
+void launch_rebound(const Contact* contacts, ContactRange range, const BodiesView& bodies, const WallShape* walls,
+                    cudaStream_t stream);
 void launch_project(const Contact* contacts, ContactRange range, const BodiesView& bodies, const WallShape* walls,
                     const SolverSettings& settings, cudaStream_t stream);
+
+// *deepest = max(*deepest, overlap_ratio) over contacts[0, n) (as the bits
+// of a non-negative real: an atomic max, the same whatever the order).
+void launch_max_overlap(const Contact* contacts, std::uint32_t n, const BodiesView& bodies, const WallShape* walls,
+                        unsigned long long* deepest, int sm_count, cudaStream_t stream);
 
 }  // namespace marbles::narrowphase::cuda

@@ -21,9 +21,9 @@ struct SolverSettings {
   bool rolling = false;           // rolling resistance term
   real rest_speed = real(0.01);   // m/s: slower approaches do not bounce
   real slop = real(0.005);        // fraction of the smaller radius left overlapping
-  real beta = real(0.2);          // fraction of the remaining overlap removed per projection
+  real beta = real(0.8);          // fraction of the remaining overlap removed per projection
   real max_correction = real(0.2);// fraction of the smaller radius moved per projection, at most
-  int position_iterations = 2;    // projection sweeps per substep
+  int position_iterations = 4;    // projection sweeps per substep
   bool warm_start = true;         // start from the last substep's impulses
 };
 
@@ -83,15 +83,25 @@ MARBLES_HD_INLINE real time_of_impact(const Contact& c) {
 }
 
 // After a speculative bounce: bring the bodies back together by the
-// contact's rebound shift, split by inverse mass (positions only).
-MARBLES_HD_INLINE void rebound_one(const Contact& c, const BodiesView& bodies) {
+// contact's rebound shift, never into overlap (rebound_step), split by
+// inverse mass (positions only).
+MARBLES_HD_INLINE void rebound_one(const Contact& c, const BodiesView& bodies, const WallShape* walls) {
   if (c.rebound_shift <= 0) return;
   const real inv_ma = bodies.inv_mass[c.a];
   const real inv_mb = is_wall(c.b) ? real(0) : bodies.inv_mass[c.b];
   const real k = inv_ma + inv_mb;
   if (k <= 0) return;
-  bodies.position[c.a] -= c.normal * (c.rebound_shift * inv_ma / k);
-  if (!is_wall(c.b)) bodies.position[c.b] += c.normal * (c.rebound_shift * inv_mb / k);
+  real gap;
+  if (is_wall(c.b)) {
+    Vec3 normal;
+    if (!wall_gap(walls[c.b & ~kWallFlag], bodies.position[c.a], bodies.radius[c.a], normal, gap)) return;
+  } else {
+    gap = length(bodies.position[c.a] - bodies.position[c.b]) - bodies.radius[c.a] - bodies.radius[c.b];
+  }
+  const real shift = rebound_step(c.rebound_shift, gap);
+  if (shift <= 0) return;
+  bodies.position[c.a] -= c.normal * (shift * inv_ma / k);
+  if (!is_wall(c.b)) bodies.position[c.b] += c.normal * (shift * inv_mb / k);
 }
 
 // Position projection of one contact at the integrated positions: remove a
@@ -122,6 +132,23 @@ MARBLES_HD_INLINE void project_one(const Contact& c, const BodiesView& bodies, c
   if (move <= 0) return;
   bodies.position[c.a] += n * (move * inv_ma / k);
   bodies.position[c.b] -= n * (move * inv_mb / k);
+}
+
+// How deep a contact's bodies overlap now, as a fraction of the smaller
+// radius (a wall's: of the sphere's radius); 0 when apart. The step's
+// max_overlap is the largest of these after the projection.
+MARBLES_HD_INLINE real overlap_ratio(const Contact& c, const BodiesView& bodies, const WallShape* walls) {
+  const real ra = bodies.radius[c.a];
+  real gap, r_min = ra;
+  if (is_wall(c.b)) {
+    Vec3 normal;
+    if (!wall_gap(walls[c.b & ~kWallFlag], bodies.position[c.a], ra, normal, gap)) return 0;
+  } else {
+    const real rb = bodies.radius[c.b];
+    gap = length(bodies.position[c.a] - bodies.position[c.b]) - ra - rb;
+    r_min = ra < rb ? ra : rb;
+  }
+  return gap < 0 ? -gap / r_min : real(0);
 }
 
 }  // namespace marbles::narrowphase

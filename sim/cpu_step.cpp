@@ -3,6 +3,7 @@
 // Each verb is a loop (OpenMP where it pays) over the per-element functions
 // of the stages' *_math.hpp; the solver runs colour by colour, so the result
 // is the same for any thread count and the same as CudaStep's.
+#include <algorithm>
 #include <cmath>
 
 #include "core/error.hpp"
@@ -31,24 +32,28 @@ class CpuStep final : public StepBackend {
     if (m_model.drag) integrator::apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h);
   }
 
-  // Swept bounds: the broad phase sees each sphere grown by its travel |v| h
-  // within the substep, so every pair that can meet in this substep is a
+  // Swept bounds: the broad phase sees each sphere grown by its reach (its
+  // travel |v| h, at least the fastest sphere's up to half its radius:
+  // contact_reach), so every pair that can meet in this substep is a
   // candidate, however fast; the narrow phase keeps those that overlap or
-  // close their gap at the current approach speed (speculative contacts), so
-  // nothing tunnels.
+  // can close their gap (speculative contacts), so nothing tunnels.
   void find_contacts(real h) override {
     m_contacts.clear();
+    if (!m_model.collisions && !m_model.wall_contacts) return;
     const BodiesView bodies = m_world.view();
     const std::size_t n = m_world.size();
+    narrowphase::contact_reaches(bodies, h, m_reach);
     if (m_model.collisions) {
       m_bound_radius.resize(n);
-      for (std::size_t i = 0; i < n; ++i) m_bound_radius[i] = bodies.radius[i] + length(bodies.velocity[i]) * h;
+      for (std::size_t i = 0; i < n; ++i) m_bound_radius[i] = bodies.radius[i] + m_reach[i];
       m_broadphase->find_pairs({bodies.position, m_bound_radius.data(), n}, 0, m_pairs);
       m_counters.candidate_pairs += m_pairs.size();
       m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
-      narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_model.pair_table(), h, m_contacts);
+      narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_model.pair_table(), h, m_reach.data(),
+                                   m_contacts);
     }
-    if (m_model.wall_contacts) narrowphase::wall_contacts(bodies, m_walls, m_model.pair_table(), h, m_contacts);
+    if (m_model.wall_contacts)
+      narrowphase::wall_contacts(bodies, m_walls, m_model.pair_table(), h, m_reach.data(), m_contacts);
     m_counters.contacts += m_contacts.size();
   }
 
@@ -83,7 +88,16 @@ class CpuStep final : public StepBackend {
     m_counters = {};
     m_non_finite = false;
   }
-  void end_step(StepCounters& counters) override { counters = m_counters; }
+  void end_step(StepCounters& counters) override {
+    const BodiesView bodies = m_world.view();
+    const auto n = static_cast<std::ptrdiff_t>(m_contacts.size());
+    real deepest = 0;
+#pragma omp parallel for schedule(static) reduction(max : deepest) if (n > 20000)
+    for (std::ptrdiff_t k = 0; k < n; ++k)
+      deepest = std::max(deepest, narrowphase::overlap_ratio(m_contacts[k], bodies, m_walls.data()));
+    m_counters.max_overlap = deepest;
+    counters = m_counters;
+  }
   bool non_finite() const override { return m_non_finite; }
 
   const World& world() override { return m_world; }
@@ -102,7 +116,8 @@ class CpuStep final : public StepBackend {
   narrowphase::ContactCache m_cache;
 
   // Per-substep buffers, reused.
-  std::vector<real> m_bound_radius;  // m, radius + travel: what the broad phase sees
+  std::vector<real> m_reach;         // m, contact_reach per sphere
+  std::vector<real> m_bound_radius;  // m, radius + reach: what the broad phase sees
   std::vector<broadphase::Pair> m_pairs;
   std::vector<narrowphase::Contact> m_contacts;
   narrowphase::ColourRanges m_colours;

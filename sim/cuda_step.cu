@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "broadphase/broadphase_cuda.hpp"
 #include "core/cuda_check.hpp"
@@ -42,18 +43,22 @@ class CudaStep final : public StepBackend {
     const DeviceInfo& dev = cuda_device();
     if (!dev.available) throw RuntimeFailure("the CUDA step: no CUDA device (" + dev.why_not + ")");
     m_sm = std::max(1, dev.multiprocessors);
+    std::size_t total = 0;
+    MARBLES_CUDA_CHECK(cudaMemGetInfo(&m_free_at_start, &total));
     MARBLES_CUDA_CHECK(cudaStreamCreateWithFlags(&m_stream, cudaStreamNonBlocking));
     MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_pinned), 8 * sizeof(std::uint32_t)));
     m_device.upload(m_host, m_stream);
     upload(m_walls, model.wall_shapes);
     upload(m_pair_table, model.pair_coefficients);
     m_table = {m_pair_table.get_as<narrowphase::PairCoefficients>(), model.material_count};
-    m_flags.as<unsigned>(1);
+    m_flags.as<unsigned long long>(2);
+    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_end_flags), 2 * sizeof(unsigned long long)));
     if (model.collisions) m_broadphase = std::make_unique<broadphase::SubdivisionCuda>(model.algorithm);
     m_terms = {model.solver.friction, model.solver.rolling};
   }
   ~CudaStep() override {
     if (m_pinned) cudaFreeHost(m_pinned);
+    if (m_end_flags) cudaFreeHost(m_end_flags);
     if (m_stream) cudaStreamDestroy(m_stream);
   }
 
@@ -67,32 +72,39 @@ class CudaStep final : public StepBackend {
   // Swept bounds -> broad phase -> sphere contacts (in pair order), then wall
   // contacts (by sphere, then wall): flag, scan, one read of both counts, write.
   void find_contacts(real h) override {
+    m_count = 0;
+    if (!m_model.collisions && !m_model.wall_contacts) return;
     const BodiesView bodies = m_device.view();
     const std::size_t n = bodies.count;
     std::size_t pair_count = 0, wall_items = 0;
     std::uint32_t *pair_offsets = nullptr, *wall_offsets = nullptr;
     const IndexPair* pairs = nullptr;
+    auto* max_speed = m_max_speed.as<unsigned long long>(1);
+    real* reach = m_reach.as<real>(n);
+    real* bound = m_model.collisions ? m_bound.as<real>(n) : nullptr;
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(max_speed, 0, sizeof(unsigned long long), m_stream));
+    nc::launch_contact_reaches(bodies, h, max_speed, reach, bound, m_sm, m_stream);
     if (m_model.collisions) {
-      real* bound = m_bound.as<real>(n);
-      nc::launch_swept_radius(bodies, h, bound, m_sm, m_stream);
       pair_count = m_broadphase->find_pairs_device({bodies.position, bound, n}, 0, m_stream);
       pairs = m_broadphase->device_pairs();
       m_counters.candidate_pairs += pair_count;
       m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
       auto* flags = m_pair_flags.as<std::uint32_t>(pair_count + 1);
       pair_offsets = m_pair_offsets.as<std::uint32_t>(pair_count + 1);
-      nc::launch_sphere_contact_flags(bodies, pairs, pair_count, m_table, h, flags, m_sm, m_stream);
+      nc::launch_sphere_contact_flags(bodies, pairs, pair_count, m_table, h, reach, flags, m_sm, m_stream);
       ::marbles::cuda::device_exclusive_sum(flags, pair_offsets, pair_count + 1, m_temp, m_stream);
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned, pair_offsets + pair_count, 4, cudaMemcpyDeviceToHost, m_stream));
+      m_bytes += 4 + kBroadPhaseReadback;
     }
     const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
     if (m_model.wall_contacts) {
       wall_items = n * wall_count;
       auto* flags = m_wall_flags.as<std::uint32_t>(wall_items + 1);
       wall_offsets = m_wall_offsets.as<std::uint32_t>(wall_items + 1);
-      nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, flags, m_sm, m_stream);
+      nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, reach, flags, m_sm, m_stream);
       ::marbles::cuda::device_exclusive_sum(flags, wall_offsets, wall_items + 1, m_temp, m_stream);
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 1, wall_offsets + wall_items, 4, cudaMemcpyDeviceToHost, m_stream));
+      m_bytes += 4;
     }
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     const std::uint32_t sphere_contacts = m_model.collisions ? m_pinned[0] : 0;
@@ -100,10 +112,11 @@ class CudaStep final : public StepBackend {
     m_count = sphere_contacts + wall_contacts;
     auto* contacts = m_contacts.as<narrowphase::Contact>(m_count);
     if (sphere_contacts > 0)
-      nc::launch_sphere_contact_write(bodies, pairs, pair_count, m_table, h, pair_offsets, contacts, m_sm, m_stream);
+      nc::launch_sphere_contact_write(bodies, pairs, pair_count, m_table, h, reach, pair_offsets, contacts, m_sm,
+                                      m_stream);
     if (wall_contacts > 0)
-      nc::launch_wall_contact_write(bodies, walls(), wall_count, m_table, h, wall_offsets, contacts + sphere_contacts,
-                                    m_sm, m_stream);
+      nc::launch_wall_contact_write(bodies, walls(), wall_count, m_table, h, reach, wall_offsets,
+                                    contacts + sphere_contacts, m_sm, m_stream);
     m_counters.contacts += m_count;
   }
 
@@ -138,7 +151,7 @@ class CudaStep final : public StepBackend {
   }
 
   void integrate_positions(real h) override {
-    integrator::cuda::launch_integrate_positions(m_device.view(), h, m_flags.get_as<unsigned>(), m_sm, m_stream);
+    integrator::cuda::launch_integrate_positions(m_device.view(), h, m_flags.get_as<unsigned>(), m_sm, m_stream);  // flags[0]
     nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream);
   }
 
@@ -147,7 +160,7 @@ class CudaStep final : public StepBackend {
     const BodiesView bodies = m_device.view();
     const narrowphase::Contact* contacts = contacts_d();
     if (m_model.solver.restitution)
-      over_colours(false, [&](nc::ContactRange r) { nc::launch_rebound(contacts, r, bodies, m_stream); });
+      over_colours(false, [&](nc::ContactRange r) { nc::launch_rebound(contacts, r, bodies, walls(), m_stream); });
     for (int it = 0; it < m_model.solver.position_iterations; ++it)
       over_colours(false, [&](nc::ContactRange r) {
         nc::launch_project(contacts, r, bodies, walls(), m_model.solver, m_stream);
@@ -162,19 +175,40 @@ class CudaStep final : public StepBackend {
       m_host_edited = false;
     }
     m_counters = {};
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(m_flags.get(), 0, sizeof(unsigned), m_stream));
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(m_flags.get(), 0, 2 * sizeof(unsigned long long), m_stream));
   }
 
-  // The one read of flags at the end of a step.
+  // The one read of flags at the end of a step: non_finite, the deepest overlap.
   void end_step(StepCounters& counters) override {
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 2, m_flags.get(), sizeof(unsigned), cudaMemcpyDeviceToHost, m_stream));
+    auto* flags = m_flags.get_as<unsigned long long>();  // [0]: non_finite, [1]: deepest overlap (bits)
+    nc::launch_max_overlap(contacts_d(), m_count, m_device.view(), walls(), flags + 1, m_sm, m_stream);
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_end_flags, flags, 2 * sizeof(unsigned long long), cudaMemcpyDeviceToHost,
+                                       m_stream));
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
-    m_non_finite = m_pinned[2] != 0;
+    m_bytes += 2 * sizeof(unsigned long long);
+    const std::uint64_t bytes = m_bytes + m_colouring.bytes_copied() + m_cache.bytes_copied();
+    m_counters.bytes_copied = bytes - m_bytes_at_step_start;
+    m_bytes_at_step_start = bytes;
+    m_non_finite = m_end_flags[0] != 0;
+    if constexpr (sizeof(real) == 4) {
+      const auto bits = static_cast<std::uint32_t>(m_end_flags[1]);
+      std::memcpy(&m_counters.max_overlap, &bits, sizeof(real));
+    } else {
+      std::memcpy(&m_counters.max_overlap, &m_end_flags[1], sizeof(real));
+    }
     m_host_stale = true;
     m_contacts_stale = true;
     counters = m_counters;
   }
   bool non_finite() const override { return m_non_finite; }
+  void synchronize() override { MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream)); }
+  // What the device lost in free memory since before this step was built:
+  // the world, every buffer of every stage and the broad phase's.
+  std::size_t device_bytes() const override {
+    std::size_t free = 0, total = 0;
+    MARBLES_CUDA_CHECK(cudaMemGetInfo(&free, &total));
+    return m_free_at_start > free ? m_free_at_start - free : 0;
+  }
 
   const World& world() override {
     if (m_host_stale) {
@@ -230,6 +264,7 @@ class CudaStep final : public StepBackend {
 
   bool read_hit() {
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 3, m_hit.get(), sizeof(unsigned), cudaMemcpyDeviceToHost, m_stream));
+    m_bytes += sizeof(unsigned);
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     return m_pinned[3] != 0;
   }
@@ -264,9 +299,15 @@ class CudaStep final : public StepBackend {
   DeviceWorld m_device;
   cudaStream_t m_stream = nullptr;
   int m_sm = 1;
+  std::size_t m_free_at_start = 0;
+  std::uint64_t m_bytes = 0, m_bytes_at_step_start = 0;  // host<->device bytes copied by this class
+  // The broad phase's own readbacks per call (home-cell variant): the bounds
+  // accumulator, the pair count and the test count.
+  static constexpr std::uint64_t kBroadPhaseReadback = 7 * 8 + 4 + 4 + 8;
   std::uint32_t* m_pinned = nullptr;
+  unsigned long long* m_end_flags = nullptr;  // pinned: the end-of-step read
 
-  DeviceBuffer m_walls, m_pair_table, m_bound, m_pair_flags, m_pair_offsets, m_wall_flags, m_wall_offsets,
+  DeviceBuffer m_walls, m_pair_table, m_max_speed, m_reach, m_bound, m_pair_flags, m_pair_offsets, m_wall_flags, m_wall_offsets,
       m_contacts, m_sorted, m_flags, m_hit, m_temp;
   narrowphase::PairTable m_table;
   nc::SolverTerms m_terms;

@@ -106,6 +106,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
 
   Progress progress(!options.quiet);
   double candidate_sum = 0, contact_sum = 0, step_seconds = 0;
+  double deepest = 0;  // largest overlap at the end of any step, of the smaller radius
   output.write(sim);
   const auto t0 = std::chrono::steady_clock::now();
   while (sim.steps() < total_steps) {
@@ -114,6 +115,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     step_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
     candidate_sum += static_cast<double>(sim.last_step().candidate_pairs) / sim.substeps();
     contact_sum += static_cast<double>(sim.last_step().contacts) / sim.substeps();
+    deepest = std::max(deepest, static_cast<double>(sim.last_step().max_overlap));
     if (sim.non_finite()) {
       const std::size_t bad = sim.world().first_non_finite();
       throw RuntimeFailure("the state became non-finite at step " + std::to_string(sim.steps()) + " (t = " +
@@ -146,6 +148,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
        << "  \"mean_ms_per_step\": " << json_number(1e3 * step_seconds / steps) << ",\n"
        << "  \"mean_candidate_pairs\": " << json_number(candidate_sum / steps) << ",\n"
        << "  \"mean_contacts\": " << json_number(contact_sum / steps) << ",\n"
+       << "  \"max_overlap\": " << json_number(deepest) << ",\n"
+       << "  \"max_overlap_end\": " << json_number(sim.last_step().max_overlap) << ",\n"
        << "  \"kinetic_energy_start\": " << json_number(e_start) << ",\n"
        << "  \"kinetic_energy_end\": " << json_number(e_end) << "\n"
        << "}\n";
@@ -155,7 +159,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
 
   out << std::setprecision(4) << sc.name << ": " << sim.steps() << " steps, " << sim.time() << " s simulated in "
       << wall << " s (" << 1e3 * step_seconds / steps << " ms/step; " << candidate_sum / steps
-      << " candidate pairs, " << contact_sum / steps << " contacts per substep); kinetic energy " << e_start
+      << " candidate pairs, " << contact_sum / steps << " contacts per substep); largest overlap "
+      << 100 * deepest << " % of a radius (" << 100 * sim.last_step().max_overlap << " % at the end); kinetic energy " << e_start
       << " -> " << e_end << " J\n"
       << "output: " << sc.output.dir << "  (" << written << "summary.json)\n";
   return 0;

@@ -1,5 +1,8 @@
 #include "sim/simulation.hpp"
 
+#include <algorithm>
+#include <chrono>
+#include <iterator>
 #include <sstream>
 
 #include "sim/scene.hpp"
@@ -41,22 +44,38 @@ std::string Simulation::describe_pipeline() const {
 void Simulation::step() {
   const real h = m_model->substep();
   m_backend->begin_step();
+  std::fill(std::begin(m_verb_ms), std::end(m_verb_ms), 0.0);
   for (int k = 0; k < m_model->substeps; ++k) substep(h);
   m_backend->end_step(m_last);
+  std::copy(std::begin(m_verb_ms), std::end(m_verb_ms), m_last.verb_ms);
   ++m_steps;
   m_time = m_steps * m_model->dt;
 }
 
 void Simulation::substep(real h) {
   StepBackend& b = *m_backend;
-  b.apply_body_forces(h);
-  b.find_contacts(h);
-  b.colour_contacts();
-  b.warm_start();
-  b.solve_velocities(h);
-  b.integrate_positions(h);
-  b.project_positions();
-  b.store_impulses();
+  run_verb(Verb::body_forces, [&] { b.apply_body_forces(h); });
+  run_verb(Verb::find_contacts, [&] { b.find_contacts(h); });
+  run_verb(Verb::colour_contacts, [&] { b.colour_contacts(); });
+  run_verb(Verb::warm_start, [&] { b.warm_start(); });
+  run_verb(Verb::solve_velocities, [&] { b.solve_velocities(h); });
+  run_verb(Verb::integrate_positions, [&] { b.integrate_positions(h); });
+  run_verb(Verb::project_positions, [&] { b.project_positions(); });
+  run_verb(Verb::store_impulses, [&] { b.store_impulses(); });
+}
+
+// Runs one verb; with profiling on, waits for it and adds its wall time.
+template <class F>
+void Simulation::run_verb(Verb verb, F&& f) {
+  if (!m_profiling) {
+    f();
+    return;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  f();
+  m_backend->synchronize();
+  m_verb_ms[static_cast<int>(verb)] +=
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
 }  // namespace marbles

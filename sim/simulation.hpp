@@ -65,17 +65,26 @@ class Simulation {
   const broadphase::BroadPhase* broad_phase() const { return m_backend->broad_phase(); }
   std::string backend_name() const { return m_backend->name(); }
 
+  // Per-verb timing (StepCounters::verb_ms): the backend synchronises after
+  // each verb, which costs time on the GPU; for the benchmark.
+  void set_profiling(bool on) { m_profiling = on; }
+  std::size_t device_bytes() const { return m_backend->device_bytes(); }
+
   // The stages this scene's pipeline runs, one per line.
   std::string describe_pipeline() const;
 
  private:
   void substep(real h);
+  template <class F>
+  void run_verb(Verb verb, F&& f);
 
   std::unique_ptr<const StepModel> m_model;  // stable address: the backend keeps a reference
   std::unique_ptr<StepBackend> m_backend;
   double m_time = 0;
   std::uint64_t m_steps = 0;
   StepCounters m_last;
+  bool m_profiling = false;
+  double m_verb_ms[static_cast<int>(Verb::count)] = {};
 };
 
 }  // namespace marbles

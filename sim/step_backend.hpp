@@ -21,6 +21,15 @@
 
 namespace marbles {
 
+// The verbs of a substep, for per-verb timing.
+enum class Verb : int {
+  body_forces, find_contacts, colour_contacts, warm_start, solve_velocities, integrate_positions,
+  project_positions, store_impulses, count
+};
+inline constexpr const char* kVerbNames[] = {"body_forces", "find_contacts", "colour_contacts", "warm_start",
+                                             "solve_velocities", "integrate_positions", "project_positions",
+                                             "store_impulses"};
+
 // Figures of the last step, summed (or maximised) over its substeps.
 struct StepCounters {
   std::uint64_t candidate_pairs = 0;  // summed over substeps
@@ -28,6 +37,9 @@ struct StepCounters {
   std::uint32_t colours = 0;          // most colours of a substep
   std::uint64_t overflow = 0;         // contacts solved one by one (beyond the colours), summed
   double broadphase_ms = 0;           // summed over substeps
+  real max_overlap = 0;               // deepest overlap at the end of the step (overlap_ratio: of the smaller radius)
+  std::uint64_t bytes_copied = 0;     // host<->device traffic of the step (CUDA)
+  double verb_ms[static_cast<int>(Verb::count)] = {};  // with profiling on: wall ms per verb, summed
 };
 
 class StepBackend {
@@ -50,6 +62,10 @@ class StepBackend {
   virtual void end_step(StepCounters& counters) = 0;
   // True when the last step left a non-finite position or velocity.
   virtual bool non_finite() const = 0;
+  // Waits until the verbs issued so far are done (profiling only).
+  virtual void synchronize() {}
+  // Device memory the step holds (bytes; 0 on the CPU).
+  virtual std::size_t device_bytes() const { return 0; }
 
   // --- state ----------------------------------------------------------------
   // A host copy of the world, refreshed from the device when stale.

@@ -99,7 +99,8 @@ TEST(Solver, HeadOnImpactFollowsImpactLaw) {
     PairTable table{&coeff, 1};
     std::vector<Contact> contacts;
     IndexPair pair{0, 1};
-    sphere_contacts(bodies, &pair, 1, table, real(0), contacts);
+    const std::vector<real> reach(2, 0);
+    sphere_contacts(bodies, &pair, 1, table, real(0), reach.data(), contacts);
     ASSERT_EQ(contacts.size(), 1u);
     SolverSettings s;
     s.rest_speed = real(1e-3);
@@ -130,7 +131,8 @@ TEST(Solver, FrictionStaysInsideTheCone) {
     Walls walls;
     walls.planes.push_back({{0, 0, 0}, {0, 0, 1}, 0, {}});
     std::vector<Contact> contacts;
-    wall_contacts(bodies, wall_shapes(walls), table, real(0), contacts);
+    const std::vector<real> reach(1, 0);
+    wall_contacts(bodies, wall_shapes(walls), table, real(0), reach.data(), contacts);
     ASSERT_EQ(contacts.size(), 1u);
     SolverSettings s;
     s.friction = true;
