@@ -1,13 +1,27 @@
 #include "bench/step_bench.hpp"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <iomanip>
+#include <iostream>
 #include <numbers>
+#include <optional>
 #include <ostream>
 #include <random>
 #include <sstream>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 #include "core/error.hpp"
 #include "sim/particles.hpp"
@@ -132,39 +146,400 @@ int run_effects_bench(const EffectsBenchOptions& options, std::ostream& out) {
   return 0;
 }
 
+namespace {
+
+// --- the pile ------------------------------------------------------------------
+
+// Bump when pile() or its scene changes: older cache files are then not used.
+constexpr std::uint32_t kPileVersion = 4;
+constexpr char kPileMagic[8] = {'M', 'B', 'L', 'P', 'I', 'L', 'E', '\0'};
+constexpr double kPileRadius = 0.01;
+constexpr double kPileLayers = 30;  // about this many layers deep
+
+scene::Scene pile_scene() {
+  using E = scene::Effect;
+  scene::Scene s;
+  s.path = s.name = "bench-pile";
+  s.time = {1.0, 1e-3, 1};
+  s.solver.iterations = 10;
+  s.effects = {E::gravity, E::collisions, E::walls, E::restitution, E::friction, E::rolling_resistance};
+  scene::Material m;
+  m.name = "m";
+  m.density = 1000;
+  m.restitution = 0.3;
+  m.friction = 0.5;
+  m.rolling_friction = 0.05;
+  s.materials.push_back(m);
+  return s;
+}
+
+// The loose lattice the pile settles from, and the box around it: triangular
+// layers (in-plane spacing a = 2.004 r, rows alternately shifted by a/2),
+// stacked A B C so that each sphere sits over a hollow of three below, each
+// layer 0.003 r higher than resting (the top layer falls about 0.1 r); a floor
+// about square, wide enough for kPileLayers layers; a horizontal jitter of
+// 0.001 r per axis (no overlaps: that needs a layer gap above 0.002 r).
+// The gaps are within the contact skin, so the pile starts with its final
+// contacts: 6 in the layer, 3 below, 3 above (about 11 a sphere with the
+// surfaces; contacts / N about 5.5, each pair counted once). A looser lattice
+// (2.02 r) first settles with about 6 a sphere, then, stepped on, closes its
+// in-plane gaps within some tens of steps and ends at the same 11.
+std::pair<scene::Scene, scene::GeneratedParticles> pile(std::size_t n) {
+  scene::Scene s = pile_scene();
+  const double r = kPileRadius;
+  const double a = 2.004 * r;
+  const double row = a * std::sqrt(3.0) / 2;                   // between rows of a layer
+  const double dz = std::sqrt(4 * r * r - a * a / 3) + 0.003 * r;  // between layers
+  const double per_layer = std::max(1.0, static_cast<double>(n) / kPileLayers);
+  const auto ny = static_cast<std::size_t>(std::max(1.0, std::round(std::sqrt(per_layer * 2 / std::sqrt(3.0)))));
+  const auto nx = static_cast<std::size_t>(std::max(1.0, std::ceil(per_layer / static_cast<double>(ny))));
+  const std::size_t layers = (n + nx * ny - 1) / (nx * ny);
+  const double gap = 0.003 * r, x0 = r + gap, y0 = r + gap, z0 = r + gap;
+  const double offset_x[3] = {0, a / 2, 0}, offset_y[3] = {0, a / (2 * std::sqrt(3.0)), a / std::sqrt(3.0)};
+  scene::WallSpec box;
+  box.kind = scene::WallSpec::Kind::box;
+  box.lo = {0, 0, 0};
+  box.hi = {real(x0 + nx * a + r + gap), real(y0 + (ny - 1) * row + a / std::sqrt(3.0) + r + gap),
+            real(z0 + (layers - 1) * dz + 5 * r)};
+  s.walls.push_back(box);
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> jitter(-0.001 * r, 0.001 * r);
+  scene::GeneratedParticles g;
+  g.position.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t x = i % nx, y = (i / nx) % ny, k = i / (nx * ny);
+    g.position.push_back({real(x0 + x * a + (y % 2) * a / 2 + offset_x[k % 3] + jitter(rng)),
+                          real(y0 + y * row + offset_y[k % 3] + jitter(rng)), real(z0 + k * dz)});
+    g.velocity.push_back({});
+    g.radius.push_back(real(r));
+    g.material.push_back(0);
+  }
+  return {s, g};
+}
+
+std::string default_cache_dir() {
+  const char* xdg = std::getenv("XDG_CACHE_HOME");
+  if (xdg != nullptr && *xdg != '\0') return std::string(xdg) + "/marbles";
+  const char* home = std::getenv("HOME");
+  if (home != nullptr && *home != '\0') return std::string(home) + "/.cache/marbles";
+  return ".marbles-cache";
+}
+
+// How the pile was made (from the file when it came from the cache).
+struct SettleInfo {
+  bool cached = false;
+  std::string backend;
+  std::uint64_t steps = 0;
+  double seconds = 0;
+  double ke_per_sphere = 0;  // J
+  double max_overlap = 0;    // of a radius, at the last settle step
+};
+
+struct PileState {
+  World world;
+  SettleInfo settle;
+};
+
+template <class T>
+void put(std::ostream& f, const T& v) {
+  f.write(reinterpret_cast<const char*>(&v), sizeof v);
+}
+template <class T>
+bool get(std::istream& f, T& v) {
+  return static_cast<bool>(f.read(reinterpret_cast<char*>(&v), sizeof v));
+}
+
+// The file: magic, version, sizeof(real), N, how it settled (backend, steps,
+// seconds, kinetic energy per sphere, largest overlap), then positions,
+// velocities, angular velocities (x y z per sphere) and radii, all as `real`.
+void save_pile(const std::string& path, const World& w, const SettleInfo& info) {
+  namespace fs = std::filesystem;
+  fs::create_directories(fs::path(path).parent_path());
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    if (!f) throw RuntimeFailure("cannot write " + tmp);
+    f.write(kPileMagic, sizeof kPileMagic);
+    put(f, kPileVersion);
+    put(f, static_cast<std::uint32_t>(sizeof(real)));
+    put(f, static_cast<std::uint64_t>(w.size()));
+    char backend[8] = {};
+    std::snprintf(backend, sizeof backend, "%s", info.backend.c_str());
+    f.write(backend, sizeof backend);
+    put(f, info.steps);
+    put(f, info.seconds);
+    put(f, info.ke_per_sphere);
+    put(f, info.max_overlap);
+    for (const auto* v : {&w.position, &w.velocity, &w.angular_velocity})
+      for (const Vec3& p : *v) {
+        put(f, p.x);
+        put(f, p.y);
+        put(f, p.z);
+      }
+    for (real x : w.radius) put(f, x);
+    if (!f.flush()) throw RuntimeFailure("cannot write " + tmp);
+  }
+  fs::rename(tmp, path);
+}
+
+// The cached pile, or nothing when the file is missing, of another version,
+// precision or N, or short.
+std::optional<PileState> load_pile(const std::string& path, std::size_t n) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return std::nullopt;
+  char magic[8];
+  std::uint32_t version = 0, real_bytes = 0;
+  std::uint64_t count = 0;
+  char backend[8];
+  if (!f.read(magic, sizeof magic) || std::memcmp(magic, kPileMagic, sizeof magic) != 0) return std::nullopt;
+  if (!get(f, version) || version != kPileVersion || !get(f, real_bytes) || real_bytes != sizeof(real)) return std::nullopt;
+  if (!get(f, count) || count != n || !f.read(backend, sizeof backend)) return std::nullopt;
+  SettleInfo info;
+  info.cached = true;
+  info.backend.assign(backend, strnlen(backend, sizeof backend));
+  if (!get(f, info.steps) || !get(f, info.seconds) || !get(f, info.ke_per_sphere) || !get(f, info.max_overlap))
+    return std::nullopt;
+  auto [s, g] = pile(n);  // materials, masses; positions replaced below
+  std::vector<Vec3> arrays[3];
+  for (auto& v : arrays) {
+    v.resize(n);
+    for (Vec3& p : v)
+      if (!get(f, p.x) || !get(f, p.y) || !get(f, p.z)) return std::nullopt;
+  }
+  for (real& x : g.radius)
+    if (!get(f, x)) return std::nullopt;
+  g.position = arrays[0];
+  g.velocity = arrays[1];
+  World w = make_world(s, g);
+  w.angular_velocity = arrays[2];
+  return PileState{std::move(w), info};
+}
+
+// Steps the loose lattice on `backend` until the kinetic energy per sphere
+// is below options.settle_ke (after the top layer has had time to land) or
+// the budget is spent; progress on `log`. Every options.settle_quench steps
+// the velocities are set to zero once the energy has been read (a quench):
+// the energy read is then what the pile gains from rest in that many steps,
+// and no fast sphere widens every sphere's contact reach for long (the
+// settle costs a fraction of the steps and of the time per step).
+PileState settle_pile(std::size_t n, broadphase::Backend backend, const StepBenchOptions& options,
+                      std::ostream& log) {
+  auto [s, g] = pile(n);
+  Simulation sim(s, make_world(s, g), backend);
+  const int check = 10, min_steps = 50;
+  SettleInfo info;
+  info.backend = sim.backend_name();
+  const auto t0 = std::chrono::steady_clock::now();
+  double ke = 0;
+  log << "pile N = " << n << ": settling on " << info.backend << " (budget " << options.settle_steps
+      << " steps, until KE/sphere < " << options.settle_ke << " J";
+  if (options.settle_quench > 0) log << ", velocities zeroed every " << options.settle_quench << " steps";
+  log << ")\n";
+  for (int k = 1; k <= options.settle_steps; ++k) {
+    sim.step();
+    if (sim.non_finite()) throw RuntimeFailure("pile N = " + std::to_string(n) + ": non-finite state while settling");
+    if (k % check != 0 && k % std::max(1, options.settle_quench) != 0 && k != options.settle_steps) continue;
+    ke = sim.world().kinetic_energy() / static_cast<double>(n);
+    info.steps = static_cast<std::uint64_t>(k);
+    const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (k % (5 * check) == 0)
+      log << "  step " << k << ": KE/sphere " << ke << " J, max overlap " << 100 * sim.last_step().max_overlap
+          << " %, " << secs << " s\n";
+    if (k >= min_steps && ke < options.settle_ke) break;
+    if (options.settle_quench > 0 && k % options.settle_quench == 0) {
+      World& w = sim.edit_world();
+      std::fill(w.velocity.begin(), w.velocity.end(), Vec3{});
+      std::fill(w.angular_velocity.begin(), w.angular_velocity.end(), Vec3{});
+    }
+  }
+  info.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  info.ke_per_sphere = ke;
+  info.max_overlap = sim.last_step().max_overlap;
+  log << "pile N = " << n << ": " << (ke < options.settle_ke ? "settled" : "step budget spent") << " after "
+      << info.steps << " steps in " << info.seconds << " s, KE/sphere " << ke << " J, max overlap "
+      << 100 * info.max_overlap << " %\n";
+  World w = sim.world();
+  return {std::move(w), info};
+}
+
+// --- the measurements ----------------------------------------------------------
+
+struct Row {
+  std::size_t n = 0;
+  double step_ms = 0, step_min_ms = 0, broadphase_ms = 0, pairs = 0, contacts = 0;
+  double contacts_per_sphere = 0;  // contacts / substeps / N, mean over the timed steps
+  double coordination = 0;         // contacts a sphere takes part in (2 per sphere pair, 1 per wall), last substep
+  std::uint32_t colours = 0;       // most of a timed step
+  double overflow = 0;             // median over the timed steps
+  double max_overlap_pct = 0;      // largest of the timed steps, % of a radius
+  double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
+  double bytes_per_step = 0;       // median host<->device bytes
+  double device_bytes_per_sphere = 0;
+  double verb_ms[static_cast<int>(Verb::count)] = {};  // medians of the profiled steps
+  std::optional<SettleInfo> settle;
+};
+
+Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
+  Row row;
+  row.n = n;
+  for (int k = 0; k < warmup; ++k) sim.step();
+  std::vector<double> step_ms, bp_ms, overflow, bytes;
+  double max_overlap = 0;
+  for (int k = 0; k < repeats; ++k) {
+    const auto t0 = std::chrono::steady_clock::now();
+    sim.step();
+    step_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    const StepCounters& c = sim.last_step();
+    bp_ms.push_back(c.broadphase_ms);
+    row.pairs += static_cast<double>(c.candidate_pairs) / repeats;
+    row.contacts += static_cast<double>(c.contacts) / repeats;
+    row.colours = std::max(row.colours, c.colours);
+    overflow.push_back(static_cast<double>(c.overflow));
+    bytes.push_back(static_cast<double>(c.bytes_copied));
+    max_overlap = std::max(max_overlap, static_cast<double>(c.max_overlap));
+  }
+  if (sim.non_finite()) throw RuntimeFailure("N = " + std::to_string(n) + ": non-finite state in the timed steps");
+  row.step_ms = median(step_ms);
+  row.step_min_ms = *std::min_element(step_ms.begin(), step_ms.end());
+  row.broadphase_ms = median(bp_ms);
+  row.contacts_per_sphere = row.contacts / sim.substeps() / static_cast<double>(n);
+  row.overflow = median(overflow);
+  row.max_overlap_pct = 100 * max_overlap;
+  row.bytes_per_step = median(bytes);
+  row.device_bytes_per_sphere = static_cast<double>(sim.device_bytes()) / static_cast<double>(n);
+
+  // Per verb: a separate run, since profiling waits for each verb.
+  sim.set_profiling(true);
+  std::vector<double> verb[static_cast<int>(Verb::count)];
+  for (int k = 0; k < repeats; ++k) {
+    sim.step();
+    for (int v = 0; v < static_cast<int>(Verb::count); ++v) verb[v].push_back(sim.last_step().verb_ms[v]);
+  }
+  sim.set_profiling(false);
+  for (int v = 0; v < static_cast<int>(Verb::count); ++v) row.verb_ms[v] = median(verb[v]);
+
+  std::size_t touches = 0;
+  for (const narrowphase::Contact& c : sim.contacts()) touches += narrowphase::is_wall(c.b) ? 1 : 2;
+  row.coordination = static_cast<double>(touches) / static_cast<double>(n);
+  row.ke_per_sphere = sim.world().kinetic_energy() / static_cast<double>(n);
+  return row;
+}
+
+// A JSON number (null when not finite).
+std::string num(double x) {
+  if (!std::isfinite(x)) return "null";
+  std::ostringstream s;
+  s << std::setprecision(8) << x;
+  return s.str();
+}
+
+int threads() {
+#ifdef _OPENMP
+  return omp_get_max_threads();
+#else
+  return 1;
+#endif
+}
+
+}  // namespace
+
+std::string pile_cache_path(const std::string& cache_dir, std::size_t n) {
+  const std::string dir = cache_dir.empty() ? default_cache_dir() : cache_dir;
+  return dir + "/pile-v" + std::to_string(kPileVersion) + "-n" + std::to_string(n) + "-" + kRealName + ".bin";
+}
+
 int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   const broadphase::Backend backend = options.backend == "cuda" ? broadphase::Backend::cuda : broadphase::Backend::cpu;
-  struct Row {
-    std::size_t n;
-    double step_ms, step_min_ms, broadphase_ms, pairs, contacts;
-  };
+  const bool is_pile = options.scene == "pile";
+  if (!is_pile && options.scene != "gas") throw InputError({}, "--scene", "unknown scene '" + options.scene + "'");
+  const int warmup = options.warmup >= 0 ? options.warmup : (is_pile ? 5 : 2);
+  std::ostream& log = std::cerr;
   std::vector<Row> rows;
   for (std::size_t n : options.n) {
-    auto [s, g] = gas(n, options.effects);
-    Simulation sim(s, make_world(s, g), backend);
-    const Timing t = time_steps(sim, 2, options.repeats);
-    rows.push_back({n, t.step_ms, t.step_min_ms, t.broadphase_ms, t.pairs, t.contacts});
+    if (is_pile) {
+      const std::string path = pile_cache_path(options.cache_dir, n);
+      std::optional<PileState> state = options.rebuild ? std::nullopt : load_pile(path, n);
+      if (state) {
+        log << "pile N = " << n << ": loaded " << path << " (settled on " << state->settle.backend << " in "
+            << state->settle.steps << " steps, " << state->settle.seconds << " s, KE/sphere "
+            << state->settle.ke_per_sphere << " J)\n";
+      } else {
+        state = settle_pile(n, backend, options, log);
+        save_pile(path, state->world, state->settle);
+        log << "pile N = " << n << ": saved " << path << "\n";
+      }
+      const scene::Scene s = pile(n).first;  // the box (the lattice is cheap next to the steps)
+      Simulation sim(s, std::move(state->world), backend);
+      rows.push_back(measure(sim, n, warmup, options.repeats));
+      rows.back().settle = state->settle;
+    } else {
+      auto [s, g] = gas(n, options.effects);
+      Simulation sim(s, make_world(s, g), backend);
+      rows.push_back(measure(sim, n, warmup, options.repeats));
+    }
   }
+  constexpr int kVerbs = static_cast<int>(Verb::count);
   if (options.json) {
-    out << "{\"benchmark\": \"step\", \"backend\": \"" << options.backend << "\", \"precision\": \"" << kRealName
-        << "\", \"repeats\": " << options.repeats << ", \"results\": [\n";
+    out << "{\"benchmark\": \"step\", \"backend\": \"" << options.backend << "\", \"scene\": \"" << options.scene
+        << "\", \"precision\": \"" << kRealName << "\", \"threads\": " << threads()
+        << ", \"repeats\": " << options.repeats << ", \"warmup\": " << warmup
+        << ", \"launches_per_step\": null, \"results\": [\n";
     for (std::size_t k = 0; k < rows.size(); ++k) {
       const Row& r = rows[k];
-      out << "  {\"n\": " << r.n << ", \"step_ms_median\": " << r.step_ms << ", \"step_ms_min\": " << r.step_min_ms
-          << ", \"broadphase_ms_median\": " << r.broadphase_ms << ", \"candidate_pairs\": " << r.pairs
-          << ", \"contacts\": " << r.contacts << "}" << (k + 1 < rows.size() ? "," : "") << "\n";
+      out << "  {\"n\": " << r.n << ", \"step_ms_median\": " << num(r.step_ms) << ", \"step_ms_min\": "
+          << num(r.step_min_ms) << ", \"broadphase_ms_median\": " << num(r.broadphase_ms)
+          << ", \"candidate_pairs\": " << num(r.pairs) << ", \"contacts\": " << num(r.contacts)
+          << ", \"contacts_per_sphere\": " << num(r.contacts_per_sphere) << ", \"coordination\": "
+          << num(r.coordination) << ", \"colours\": " << r.colours << ", \"overflow_median\": " << num(r.overflow)
+          << ", \"max_overlap_pct\": " << num(r.max_overlap_pct) << ", \"ke_per_sphere_J\": " << num(r.ke_per_sphere)
+          << ", \"bytes_per_step_median\": "
+          << num(r.bytes_per_step) << ", \"device_bytes_per_sphere\": " << num(r.device_bytes_per_sphere)
+          << ",\n   \"verb_ms\": {";
+      for (int v = 0; v < kVerbs; ++v)
+        out << "\"" << kVerbNames[v] << "\": " << num(r.verb_ms[v]) << (v + 1 < kVerbs ? ", " : "");
+      out << "}";
+      if (r.settle)
+        out << ",\n   \"settle\": {\"cached\": " << (r.settle->cached ? "true" : "false") << ", \"backend\": \""
+            << r.settle->backend << "\", \"steps\": " << r.settle->steps << ", \"seconds\": "
+            << num(r.settle->seconds) << ", \"ke_per_sphere_J\": " << num(r.settle->ke_per_sphere)
+            << ", \"max_overlap_pct\": " << num(100 * r.settle->max_overlap) << "}";
+      out << "}" << (k + 1 < rows.size() ? "," : "") << "\n";
     }
     out << "]}\n";
+    return 0;
   }
-  out << "step benchmark (" << options.backend << ", " << kRealName << ", gas at volume fraction 0.1, median of "
-      << options.repeats << " steps)\n";
-  out << std::setw(10) << "N" << std::setw(14) << "step ms" << std::setw(14) << "min ms" << std::setw(16)
-      << "broad phase ms" << std::setw(12) << "pairs" << std::setw(12) << "contacts" << "\n";
+  out << "step benchmark (" << options.backend << ", " << kRealName << ", " << threads() << " thread(s), "
+      << (is_pile ? "settled pile (friction, 10 iterations, dt 1 ms)" : "gas at volume fraction 0.1") << ", median of "
+      << options.repeats << " steps after " << warmup << " warm-up)\n";
+  out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"
+      << std::setw(10) << "contacts" << std::setw(7) << "coord" << std::setw(8) << "colours" << std::setw(9)
+      << "overflow" << std::setw(9) << "overlap%" << std::setw(12) << "bytes/step" << std::setw(11) << "dev B/sph"
+      << "\n";
   for (const Row& r : rows)
-    out << std::setw(10) << r.n << std::setw(14) << std::fixed << std::setprecision(2) << r.step_ms << std::setw(14)
-        << r.step_min_ms << std::setw(16) << r.broadphase_ms << std::setw(12) << std::setprecision(0) << r.pairs
-        << std::setw(12) << r.contacts << "\n"
+    out << std::setw(9) << r.n << std::fixed << std::setprecision(2) << std::setw(10) << r.step_ms << std::setw(9)
+        << r.step_min_ms << std::setw(9) << r.broadphase_ms << std::setprecision(3) << std::setw(10)
+        << r.contacts_per_sphere << std::setprecision(2) << std::setw(7) << r.coordination << std::setw(8)
+        << r.colours << std::setprecision(0) << std::setw(9) << r.overflow << std::setprecision(3) << std::setw(9)
+        << r.max_overlap_pct << std::setprecision(0) << std::setw(12) << r.bytes_per_step << std::setprecision(1)
+        << std::setw(11) << r.device_bytes_per_sphere << "\n"
         << std::defaultfloat;
+  out << "(contacts = contacts per sphere per substep; coord = contacts a sphere takes part in; overlap% = largest,\n"
+         " of a radius; launches per step are not counted)\n";
+  out << "per verb, median ms of " << options.repeats << " profiled steps (profiling waits for each verb)\n";
+  out << std::setw(20) << std::left << "verb" << std::right;
+  for (const Row& r : rows) out << std::setw(11) << r.n;
+  out << "\n";
+  for (int v = 0; v < kVerbs; ++v) {
+    out << std::setw(20) << std::left << kVerbNames[v] << std::right << std::fixed << std::setprecision(3);
+    for (const Row& r : rows) out << std::setw(11) << r.verb_ms[v];
+    out << "\n" << std::defaultfloat;
+  }
+  for (const Row& r : rows)
+    if (r.settle)
+      out << "pile N = " << r.n << ": " << (r.settle->cached ? "from the cache, " : "") << "settled on "
+          << r.settle->backend << " in " << r.settle->steps << " steps, " << std::setprecision(3)
+          << r.settle->seconds << " s, KE/sphere " << r.settle->ke_per_sphere << " J\n"
+          << std::defaultfloat;
   return 0;
 }
 

@@ -1,5 +1,22 @@
 // bench/step_bench.hpp — time one full step (forces, broad phase, contacts,
-// solver, integration) of a gas at volume fraction 0.1 in a box.
+// solver, integration) of one of two scenes in a box:
+//
+//   gas   a jittered lattice at volume fraction 0.1 with random velocities
+//         (few contacts: the cost of the step's fixed stages);
+//   pile  a dense settled pile of spheres of r = 1 cm, about 30 layers deep,
+//         friction 0.5, rolling friction 0.05, restitution 0.3, 10 solver
+//         iterations, dt 1 ms, one substep, gravity: an fcc stack, every
+//         sphere touching 6 in its layer, 3 below and 3 above (about 5.5
+//         contacts per sphere, each pair counted once).
+//
+// The pile is made once per N: a loose ABC-stacked lattice, in-plane spacing
+// 2.004 r, each layer 0.003 r above resting on the one below, with a small
+// horizontal jitter, stepped on the benchmark's backend (velocities zeroed
+// every few steps) until the kinetic energy per sphere is small or the step
+// budget is spent, then saved to <cache>/pile-v<version>-n<N>-<precision>.bin
+// and reloaded by later runs, which time only steps. The file holds no
+// warm-start impulses: the first steps after loading rebuild them (the pile
+// moves by a few cm/s for some tens of steps; the contacts stay the same).
 #pragma once
 
 #include <cstddef>
@@ -10,12 +27,22 @@
 namespace marbles::bench {
 
 struct StepBenchOptions {
-  std::string backend = "cpu";       // cpu | cuda (broad phase)
+  std::string backend = "cpu";       // cpu | cuda (the step backend)
+  std::string scene = "gas";         // gas | pile
   std::vector<std::size_t> n{10000, 100000, 1000000};
-  int repeats = 10;                  // timed steps per size (after 2 warm-up steps)
-  bool json = false;
-  std::vector<std::string> effects{"gravity", "collisions", "walls", "restitution"};
+  int repeats = 10;                  // timed steps per size (after the warm-up steps), and as many profiled ones
+  int warmup = -1;                   // untimed steps first; < 0: 2 (gas) or 5 (pile: warm starts rebuilt)
+  bool json = false;                 // JSON only on stdout (progress on stderr)
+  std::vector<std::string> effects{"gravity", "collisions", "walls", "restitution"};  // gas only
+  std::string cache_dir;             // pile cache; empty: $XDG_CACHE_HOME/marbles or ~/.cache/marbles
+  int settle_steps = 3000;           // pile: step budget of the settle
+  double settle_ke = 1e-8;           // pile: settled when the kinetic energy per sphere is below this (J)
+  int settle_quench = 10;            // pile: zero the velocities every this many settle steps (0: never)
+  bool rebuild = false;              // pile: settle again even when a cached pile is there
 };
+
+// The pile cache's file for N spheres (version and precision in the name).
+std::string pile_cache_path(const std::string& cache_dir, std::size_t n);
 
 int run_step_bench(const StepBenchOptions& options, std::ostream& out);
 

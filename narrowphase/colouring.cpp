@@ -26,8 +26,15 @@ inline void offer(std::uint64_t& body_word, std::uint64_t word) {
 std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vector<std::uint32_t>& active,
                                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
                                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds_out) {
-  m_body_next_round.assign(body_count, 0);
-  if (rule == ColourRule::lowest_free) m_body_used.assign(body_count, 0);
+  // Clear only the spheres these contacts touch: the work stays in
+  // proportion to the contacts, not to the spheres.
+  m_body_next_round.resize(body_count);
+  m_body_used.resize(body_count);
+  for (const std::uint32_t k : active) {
+    const Contact& c = contacts[k];
+    m_body_next_round[c.a] = 0, m_body_used[c.a] = 0;
+    if (!is_wall(c.b)) m_body_next_round[c.b] = 0, m_body_used[c.b] = 0;
+  }
   m_by_rank.resize(active.size());
   for (std::size_t t = 0; t < active.size(); ++t) m_by_rank[t] = rank[active[t]];
   std::sort(m_by_rank.begin(), m_by_rank.end(), std::greater<>());

@@ -10,59 +10,66 @@ using ::marbles::cuda::kBlock;
 
 constexpr std::uint32_t kBatch = 8;  // rounds launched between two reads of what is left
 
-__global__ void contact_ranks_kernel(const Contact* contacts, std::uint32_t n, std::uint64_t* rank,
-                                     std::uint32_t* colour) {
+// The spheres of contact k as one 8-byte word, so the rounds read 16 bytes
+// per contact (bodies and rank) instead of the whole Contact.
+__global__ void contact_ranks_kernel(const Contact* contacts, std::uint32_t n, std::uint64_t* rank, uint2* bodies,
+                                     std::uint32_t* colour, std::uint32_t* active, std::uint32_t* count) {
+  if (blockIdx.x == 0 && threadIdx.x == 0) count[0] = n;  // round 0's list: every contact
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
+    bodies[k] = make_uint2(contacts[k].a, contacts[k].b);
     colour[k] = kUncoloured;
+    active[k] = k;
   }
 }
 
+// The impact candidates join the active list (in any order: a round's
+// result does not depend on the order it visits its contacts).
 __global__ void impact_candidates_kernel(const Contact* contacts, std::uint32_t n, real rest_speed,
-                                         std::uint64_t* rank, std::uint32_t* colour, std::uint32_t* count) {
-  std::uint32_t mine = 0;
+                                         std::uint64_t* rank, uint2* bodies, std::uint32_t* colour,
+                                         std::uint32_t* active, std::uint32_t* count) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const bool candidate = is_impact_candidate(contacts[k], rest_speed);
     colour[k] = candidate ? kUncoloured : kNotActive;
-    if (candidate) rank[k] = impact_rank(time_of_impact(contacts[k]), k), ++mine;
+    if (!candidate) continue;
+    rank[k] = impact_rank(time_of_impact(contacts[k]), k);
+    bodies[k] = make_uint2(contacts[k].a, contacts[k].b);
+    active[atomicAdd(count, 1u)] = k;
   }
-  if (mine) atomicAdd(count, mine);
 }
 
-// Step 1 of a round: offers (an atomic max: the result does not depend on order).
-__global__ void offer_kernel(const Contact* contacts, std::uint32_t n, const std::uint64_t* rank,
-                             const std::uint32_t* colour, std::uint32_t round, unsigned long long* body_word) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    if (colour[k] != kUncoloured) continue;
-    const Contact& c = contacts[k];
+// Step 1 of round r over its active list (count[r] long): offers, an atomic
+// max whose result does not depend on order.
+__global__ void offer_kernel(const uint2* bodies, const std::uint64_t* rank, const std::uint32_t* active,
+                             const std::uint32_t* count, std::uint32_t round, unsigned long long* body_word) {
+  const std::uint32_t n = count[round];
+  for (std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < n; t += gridDim.x * blockDim.x) {
+    const std::uint32_t k = active[t];
+    const uint2 ab = bodies[k];
     const unsigned long long word = round_word(round, rank[k]);
-    atomicMax(&body_word[c.a], word);
-    if (!is_wall(c.b)) atomicMax(&body_word[c.b], word);
+    atomicMax(&body_word[ab.x], word);
+    if (!is_wall(ab.y)) atomicMax(&body_word[ab.y], word);
   }
 }
 
-// Step 2: the contacts holding both offers take a colour (they share no sphere).
-__global__ void select_kernel(const Contact* contacts, std::uint32_t n, const std::uint64_t* rank,
-                              std::uint32_t* colour, std::uint32_t round, ColourRule rule,
-                              const unsigned long long* body_word, unsigned long long* body_used,
-                              std::uint32_t* remaining) {
-  std::uint32_t left = 0;
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    if (colour[k] != kUncoloured) continue;
-    const Contact& c = contacts[k];
-    const bool wall = is_wall(c.b);
+// Step 2: the contacts holding both offers take a colour (they share no
+// sphere); the others go on to round r + 1's list.
+__global__ void select_kernel(const uint2* bodies, const std::uint64_t* rank, const std::uint32_t* active,
+                              std::uint32_t* next, std::uint32_t* count, std::uint32_t* colour, std::uint32_t round,
+                              ColourRule rule, const unsigned long long* body_word, unsigned long long* body_used) {
+  const std::uint32_t n = count[round];
+  for (std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < n; t += gridDim.x * blockDim.x) {
+    const std::uint32_t k = active[t];
+    const uint2 ab = bodies[k];
+    const bool wall = is_wall(ab.y);
     const std::uint64_t word = round_word(round, rank[k]);
-    if (!holds_both(word, body_word[c.a], wall ? 0 : body_word[c.b], wall)) {
-      ++left;
+    if (!holds_both(word, body_word[ab.x], wall ? 0 : body_word[ab.y], wall)) {
+      next[atomicAdd(&count[round + 1], 1u)] = k;
       continue;
     }
-    if (rule == ColourRule::by_round) {
-      colour[k] = round;
-      continue;
-    }
-    colour[k] = take_lowest_free(body_used[c.a], wall ? nullptr : &body_used[c.b]);
+    colour[k] = rule == ColourRule::by_round ? round
+                                             : take_lowest_free(body_used[ab.x], wall ? nullptr : &body_used[ab.y]);
   }
-  if (left) atomicAdd(&remaining[round], left);
 }
 
 __global__ void keys_kernel(const std::uint32_t* colour, std::uint32_t n, std::uint32_t overflow_key,
@@ -92,27 +99,32 @@ ColouringCuda::~ColouringCuda() {
   if (m_host) cudaFreeHost(m_host);
 }
 
-std::uint32_t ColouringCuda::rounds(const Contact* contacts, std::uint32_t n, std::size_t body_count,
-                                    ColourRule rule, int sm_count, cudaStream_t s) {
+// Rounds until the active list is empty: launched in batches of kBatch, the
+// list sizes read once per batch.
+std::uint32_t ColouringCuda::rounds(std::uint32_t n, std::size_t body_count, ColourRule rule, int sm_count,
+                                    cudaStream_t s) {
   auto* body_word = m_body_word.as<unsigned long long>(body_count);
   auto* body_used = m_body_used.as<unsigned long long>(body_count);
-  auto* remaining = m_remaining.as<std::uint32_t>(kMaxColourRounds);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(body_word, 0, body_count * sizeof(unsigned long long), s));
   if (rule == ColourRule::lowest_free)
     MARBLES_CUDA_CHECK(cudaMemsetAsync(body_used, 0, body_count * sizeof(unsigned long long), s));
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(remaining, 0, kMaxColourRounds * sizeof(std::uint32_t), s));
+  auto* count = m_count.get_as<std::uint32_t>();  // count[0] is set by the caller
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(count + 1, 0, kMaxColourRounds * sizeof(std::uint32_t), s));
   const auto* rank = m_rank.get_as<std::uint64_t>();
+  const auto* bodies = m_bodies.get_as<uint2>();
+  std::uint32_t* list[2] = {m_active.get_as<std::uint32_t>(), m_next.get_as<std::uint32_t>()};
   auto* colour = m_colour.get_as<std::uint32_t>();
   const int grid = grid_for(n, sm_count);
   for (std::uint32_t round = 0; round < kMaxColourRounds;) {
     const std::uint32_t batch = std::min(kBatch, kMaxColourRounds - round);
     for (std::uint32_t r = round; r < round + batch; ++r) {
-      offer_kernel<<<grid, kBlock, 0, s>>>(contacts, n, rank, colour, r, body_word);
+      offer_kernel<<<grid, kBlock, 0, s>>>(bodies, rank, list[r % 2], count, r, body_word);
       MARBLES_CUDA_CHECK_LAUNCH();
-      select_kernel<<<grid, kBlock, 0, s>>>(contacts, n, rank, colour, r, rule, body_word, body_used, remaining);
+      select_kernel<<<grid, kBlock, 0, s>>>(bodies, rank, list[r % 2], list[(r + 1) % 2], count, colour, r, rule,
+                                            body_word, body_used);
       MARBLES_CUDA_CHECK_LAUNCH();
     }
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, remaining + round, batch * sizeof(std::uint32_t),
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, count + round + 1, batch * sizeof(std::uint32_t),
                                        cudaMemcpyDeviceToHost, s));
     m_bytes += batch * sizeof(std::uint32_t);
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
@@ -120,7 +132,7 @@ std::uint32_t ColouringCuda::rounds(const Contact* contacts, std::uint32_t n, st
       if (m_host[r] == 0) return round + r + 1;
     round += batch;
   }
-  return kMaxColourRounds;
+  return kMaxColourRounds;  // the rest stay uncoloured: the overflow set
 }
 
 void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, int key_bits,
@@ -155,12 +167,13 @@ std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint3
     begin.assign(2, 0);
     return 0;
   }
-  m_rank.as<std::uint64_t>(n);
-  m_colour.as<std::uint32_t>(n);
+  reserve(n);
   contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, m_rank.get_as<std::uint64_t>(),
-                                                                m_colour.get_as<std::uint32_t>());
+                                                                m_bodies.get_as<uint2>(), m_colour.get_as<std::uint32_t>(),
+                                                                m_active.get_as<std::uint32_t>(),
+                                                                m_count.get_as<std::uint32_t>());
   MARBLES_CUDA_CHECK_LAUNCH();
-  rounds_run = rounds(contacts, n, body_count, ColourRule::lowest_free, sm_count, s);
+  rounds_run = rounds(n, body_count, ColourRule::lowest_free, sm_count, s);
   sort_by_colour(n, kMaxColours, 7, begin, sm_count, s);
   gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, m_index_out.get_as<std::uint32_t>(), n, sorted);
   MARBLES_CUDA_CHECK_LAUNCH();
@@ -172,22 +185,30 @@ std::uint32_t ColouringCuda::impact_levels(const Contact* contacts, std::uint32_
                                            int sm_count, cudaStream_t s) {
   begin.assign(2, 0);
   if (n == 0) return 0;
-  m_rank.as<std::uint64_t>(n);
-  m_colour.as<std::uint32_t>(n);
-  auto* count = m_histogram.as<std::uint32_t>(kMaxColourRounds + 1);
+  reserve(n);
+  auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
-  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, rest_speed,
-                                                                    m_rank.get_as<std::uint64_t>(),
-                                                                    m_colour.get_as<std::uint32_t>(), count);
+  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(
+      contacts, n, rest_speed, m_rank.get_as<std::uint64_t>(), m_bodies.get_as<uint2>(),
+      m_colour.get_as<std::uint32_t>(), m_active.get_as<std::uint32_t>(), count);
   MARBLES_CUDA_CHECK_LAUNCH();
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, count, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   m_bytes += sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   if (m_host[0] == 0) return 0;
-  rounds(contacts, n, body_count, ColourRule::by_round, sm_count, s);
+  rounds(n, body_count, ColourRule::by_round, sm_count, s);
   sort_by_colour(n, kMaxColourRounds, 8, begin, sm_count, s);
   order = m_index_out.get_as<std::uint32_t>();
   return static_cast<std::uint32_t>(begin.size() - 2);
+}
+
+void ColouringCuda::reserve(std::uint32_t n) {
+  m_rank.as<std::uint64_t>(n);
+  m_bodies.as<uint2>(n);
+  m_colour.as<std::uint32_t>(n);
+  m_active.as<std::uint32_t>(n);
+  m_next.as<std::uint32_t>(n);
+  m_count.as<std::uint32_t>(kMaxColourRounds + 1);
 }
 
 }  // namespace marbles::narrowphase::cuda

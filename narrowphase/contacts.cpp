@@ -2,6 +2,10 @@
 
 #include <algorithm>
 
+#if defined(_OPENMP)
+#include <omp.h>
+#endif
+
 
 namespace marbles::narrowphase {
 
@@ -52,22 +56,59 @@ void advance_walls(std::vector<WallShape>& shapes, real h) {
   for (WallShape& w : shapes) w.point += w.velocity * h;
 }
 
+namespace {
+
+// Appends what make(k, out) appends for k = 0..count-1 to `out`, in order of
+// k: each thread fills its own buffer over a contiguous (static) chunk and the
+// buffers are joined in thread order, so the order is the sequential one.
+template <class Make>
+void collect_in_order(std::size_t count, std::vector<Contact>& out, Make&& make) {
+  constexpr std::size_t kParallelFrom = 20000;
+#if defined(_OPENMP)
+  const int threads = count >= kParallelFrom ? omp_get_max_threads() : 1;
+#else
+  const int threads = 1;
+#endif
+  if (threads == 1) {
+    for (std::size_t k = 0; k < count; ++k) make(k, out);
+    return;
+  }
+  std::vector<std::vector<Contact>> parts(threads);
+#pragma omp parallel num_threads(threads)
+  {
+#if defined(_OPENMP)
+    std::vector<Contact>& mine = parts[omp_get_thread_num()];
+#else
+    std::vector<Contact>& mine = parts[0];
+#endif
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(count); ++k) make(static_cast<std::size_t>(k), mine);
+  }
+  std::size_t total = out.size();
+  for (const auto& p : parts) total += p.size();
+  out.reserve(total);
+  for (const auto& p : parts) out.insert(out.end(), p.begin(), p.end());
+}
+
+}  // namespace
+
 void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
                      const PairTable& table, real h, const real* reach, std::vector<Contact>& out) {
-  for (std::size_t k = 0; k < pair_count; ++k) {
+  collect_in_order(pair_count, out, [&](std::size_t k, std::vector<Contact>& to) {
     Contact c;
-    if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c)) out.push_back(c);
-  }
+    if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c)) to.push_back(c);
+  });
 }
 
 void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
                    const real* reach, std::vector<Contact>& out) {
   const auto wall_count = static_cast<std::uint32_t>(walls.size());
-  for (std::size_t i = 0; i < bodies.count; ++i)
+  collect_in_order(bodies.count, out, [&](std::size_t i, std::vector<Contact>& to) {
     for (std::uint32_t k = 0; k < wall_count; ++k) {
       Contact c;
-      if (make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, reach, c)) out.push_back(c);
+      if (make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, reach, c)) to.push_back(c);
     }
+  });
 }
 
 real contact_reaches(const BodiesView& bodies, real h, std::vector<real>& reach) {

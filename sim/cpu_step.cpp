@@ -45,7 +45,9 @@ class CpuStep final : public StepBackend {
     narrowphase::contact_reaches(bodies, h, m_reach);
     if (m_model.collisions) {
       m_bound_radius.resize(n);
-      for (std::size_t i = 0; i < n; ++i) m_bound_radius[i] = bodies.radius[i] + m_reach[i];
+#pragma omp parallel for schedule(static) if (n > 20000)
+      for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i)
+        m_bound_radius[i] = bodies.radius[i] + m_reach[i];
       m_broadphase->find_pairs({bodies.position, m_bound_radius.data(), n}, 0, m_pairs);
       m_counters.candidate_pairs += m_pairs.size();
       m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;

@@ -53,7 +53,10 @@ class CudaStep final : public StepBackend {
     m_table = {m_pair_table.get_as<narrowphase::PairCoefficients>(), model.material_count};
     m_flags.as<unsigned long long>(2);
     MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_end_flags), 2 * sizeof(unsigned long long)));
-    if (model.collisions) m_broadphase = std::make_unique<broadphase::SubdivisionCuda>(model.algorithm);
+    if (model.collisions) {
+      m_broadphase = std::make_unique<broadphase::SubdivisionCuda>(model.algorithm);
+      m_broadphase->set_stage_timing(false);  // its events cost a sync per call: profiling only
+    }
     m_terms = {model.solver.friction, model.solver.rolling};
   }
   ~CudaStep() override {
@@ -202,6 +205,9 @@ class CudaStep final : public StepBackend {
   }
   bool non_finite() const override { return m_non_finite; }
   void synchronize() override { MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream)); }
+  void set_profiling(bool on) override {
+    if (m_broadphase) m_broadphase->set_stage_timing(on);
+  }
   // What the device lost in free memory since before this step was built:
   // the world, every buffer of every stage and the broad phase's.
   std::size_t device_bytes() const override {

@@ -84,12 +84,28 @@ int main(int argc, char** argv) {
 
   bench::StepBenchOptions st;
   std::vector<std::size_t> st_n;
-  auto* bench_step = bench_cmd->add_subcommand("step", "time whole steps of a gas at volume fraction 0.1");
-  bench_step->add_option("--backend", st.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  auto* bench_step = bench_cmd->add_subcommand(
+      "step", "time whole steps of a gas at volume fraction 0.1 or of a dense settled pile (cached per N)");
+  bench_step->add_option("--backend", st.backend, "cpu|cuda (the pile also settles there)")
+      ->check(CLI::IsMember({"cpu", "cuda"}));
+  bench_step->add_option("--scene", st.scene, "gas (default) | pile")->check(CLI::IsMember({"gas", "pile"}));
   bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->check(CLI::PositiveNumber);
-  bench_step->add_option("--repeats", st.repeats, "timed steps per size")->check(CLI::PositiveNumber);
-  bench_step->add_option("--effects", st.effects, "effects of the pipeline")->delimiter(',');
-  bench_step->add_flag("--json", st.json, "print JSON");
+  bench_step->add_option("--repeats", st.repeats, "timed steps per size (and as many profiled ones)")
+      ->check(CLI::PositiveNumber);
+  bench_step->add_option("--warmup", st.warmup, "untimed steps first (default 2 for gas, 5 for pile)")
+      ->check(CLI::NonNegativeNumber);
+  bench_step->add_option("--effects", st.effects, "effects of the pipeline (gas only)")->delimiter(',');
+  bench_step->add_option("--cache", st.cache_dir,
+                         "folder of settled piles (default $XDG_CACHE_HOME/marbles or ~/.cache/marbles)");
+  bench_step->add_option("--settle-steps", st.settle_steps, "pile: step budget of the settle")
+      ->check(CLI::PositiveNumber);
+  bench_step->add_option("--settle-ke", st.settle_ke, "pile: settled below this kinetic energy per sphere (J)")
+      ->check(CLI::PositiveNumber);
+  bench_step->add_option("--settle-quench", st.settle_quench,
+                         "pile: zero the velocities every this many settle steps (0: never)")
+      ->check(CLI::NonNegativeNumber);
+  bench_step->add_flag("--rebuild", st.rebuild, "pile: settle again, replacing the cached pile");
+  bench_step->add_flag("--json", st.json, "print JSON only (progress on stderr)");
 
   bench::EffectsBenchOptions ef;
   auto* bench_effects = bench_cmd->add_subcommand("effects", "time the step with and without each effect");

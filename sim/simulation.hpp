@@ -67,7 +67,10 @@ class Simulation {
 
   // Per-verb timing (StepCounters::verb_ms): the backend synchronises after
   // each verb, which costs time on the GPU; for the benchmark.
-  void set_profiling(bool on) { m_profiling = on; }
+  void set_profiling(bool on) {
+    m_profiling = on;
+    m_backend->set_profiling(on);
+  }
   std::size_t device_bytes() const { return m_backend->device_bytes(); }
 
   // The stages this scene's pipeline runs, one per line.

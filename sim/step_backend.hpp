@@ -64,6 +64,8 @@ class StepBackend {
   virtual bool non_finite() const = 0;
   // Waits until the verbs issued so far are done (profiling only).
   virtual void synchronize() {}
+  // Profiling on: stage timings that cost syncs (the CUDA broad phase's events).
+  virtual void set_profiling(bool on) {}
   // Device memory the step holds (bytes; 0 on the CPU).
   virtual std::size_t device_bytes() const { return 0; }
 

@@ -56,6 +56,22 @@ TEST(StepCuda, LargerPourMatchesTheCpuBitForBit) {
   expect_same_run(s, g, 150);
 }
 
+// A dense block (touching spheres on a lattice) dropped onto a floor: the
+// contact count jumps from the block's own to thousands more in one step;
+// every contact is kept (the CPU's, one for one).
+TEST(StepCuda, DroppedDenseBlockKeepsEveryContact) {
+  REQUIRE_DEVICE();
+  scene::Scene s = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
+                                        Effect::friction}, 0.2, 0.5);
+  const real r = real(0.01);
+  s.walls.push_back(box({0, 0, 0}, {real(0.5), real(0.5), real(1)}));
+  scene::GeneratedParticles g;
+  for (int x = 0; x < 24; ++x)
+    for (int y = 0; y < 24; ++y)
+      for (int z = 0; z < 12; ++z) add_sphere(g, {r * (2 * x + 2), r * (2 * y + 2), real(0.02) + r * (2 * z + 1)}, r);
+  expect_same_run(s, g, 120);
+}
+
 TEST(StepCuda, NewtonsCradleMatchesTheCpu) {
   REQUIRE_DEVICE();
   scene::Scene s = make_scene(1e-3, 1, {Effect::collisions, Effect::restitution}, 1.0);
