@@ -366,7 +366,8 @@ PileState settle_pile(std::size_t n, broadphase::Backend backend, const StepBenc
 
 struct Row {
   std::size_t n = 0;
-  double step_ms = 0, step_min_ms = 0, broadphase_ms = 0, pairs = 0, contacts = 0;
+  double step_ms = 0, step_min_ms = 0, pairs = 0, contacts = 0;
+  double broadphase_ms = 0;        // median of the profiled steps
   double contacts_per_sphere = 0;  // contacts / substeps / N, mean over the timed steps
   double coordination = 0;         // contacts a sphere takes part in (2 per sphere pair, 1 per wall), last substep
   std::uint32_t colours = 0;       // most of a timed step
@@ -383,14 +384,13 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   Row row;
   row.n = n;
   for (int k = 0; k < warmup; ++k) sim.step();
-  std::vector<double> step_ms, bp_ms, overflow, bytes;
+  std::vector<double> step_ms, overflow, bytes;
   double max_overlap = 0;
   for (int k = 0; k < repeats; ++k) {
     const auto t0 = std::chrono::steady_clock::now();
     sim.step();
     step_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     const StepCounters& c = sim.last_step();
-    bp_ms.push_back(c.broadphase_ms);
     row.pairs += static_cast<double>(c.candidate_pairs) / repeats;
     row.contacts += static_cast<double>(c.contacts) / repeats;
     row.colours = std::max(row.colours, c.colours);
@@ -401,22 +401,24 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   if (sim.non_finite()) throw RuntimeFailure("N = " + std::to_string(n) + ": non-finite state in the timed steps");
   row.step_ms = median(step_ms);
   row.step_min_ms = *std::min_element(step_ms.begin(), step_ms.end());
-  row.broadphase_ms = median(bp_ms);
   row.contacts_per_sphere = row.contacts / sim.substeps() / static_cast<double>(n);
   row.overflow = median(overflow);
   row.max_overlap_pct = 100 * max_overlap;
   row.bytes_per_step = median(bytes);
   row.device_bytes_per_sphere = static_cast<double>(sim.device_bytes()) / static_cast<double>(n);
 
-  // Per verb: a separate run, since profiling waits for each verb.
+  // Per verb and the broad phase: a separate run, since profiling waits for
+  // each verb (and the CUDA broad phase times its stages only then).
   sim.set_profiling(true);
-  std::vector<double> verb[static_cast<int>(Verb::count)];
+  std::vector<double> verb[static_cast<int>(Verb::count)], bp_ms;
   for (int k = 0; k < repeats; ++k) {
     sim.step();
     for (int v = 0; v < static_cast<int>(Verb::count); ++v) verb[v].push_back(sim.last_step().verb_ms[v]);
+    bp_ms.push_back(sim.last_step().broadphase_ms);
   }
   sim.set_profiling(false);
   for (int v = 0; v < static_cast<int>(Verb::count); ++v) row.verb_ms[v] = median(verb[v]);
+  row.broadphase_ms = median(bp_ms);
 
   std::size_t touches = 0;
   for (const narrowphase::Contact& c : sim.contacts()) touches += narrowphase::is_wall(c.b) ? 1 : 2;
@@ -524,7 +526,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         << std::setw(11) << r.device_bytes_per_sphere << "\n"
         << std::defaultfloat;
   out << "(contacts = contacts per sphere per substep; coord = contacts a sphere takes part in; overlap% = largest,\n"
-         " of a radius; launches per step are not counted)\n";
+         " of a radius; bp ms: of the profiled steps; launches per step are not counted)\n";
   out << "per verb, median ms of " << options.repeats << " profiled steps (profiling waits for each verb)\n";
   out << std::setw(20) << std::left << "verb" << std::right;
   for (const Row& r : rows) out << std::setw(11) << r.n;
