@@ -135,7 +135,7 @@ std::uint32_t ColouringCuda::rounds(std::uint32_t n, std::size_t body_count, Col
   return kMaxColourRounds;  // the rest stay uncoloured: the overflow set
 }
 
-void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, int key_bits,
+void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, int key_bits, std::uint32_t key_bound,
                                    std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t s) {
   auto* keys = m_keys.as<std::uint32_t>(n);
   auto* keys_out = m_keys_out.as<std::uint32_t>(n);
@@ -147,16 +147,20 @@ void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, 
                                                        histogram);
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_sort_pairs(keys, keys_out, index, index_out, n, key_bits, m_temp, s);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, histogram, (overflow_key + 1) * sizeof(std::uint32_t),
+  // No key but the overflow's is at or above key_bound: read only those and the overflow.
+  const std::uint32_t used = std::min(key_bound, overflow_key);
+  if (used > 0)
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, histogram, used * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host + used, histogram + overflow_key, sizeof(std::uint32_t),
                                      cudaMemcpyDeviceToHost, s));
-  m_bytes += (overflow_key + 1) * sizeof(std::uint32_t);
+  m_bytes += (used + 1) * sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   std::uint32_t colours = 0;
-  for (std::uint32_t c = 0; c < overflow_key; ++c)
+  for (std::uint32_t c = 0; c < used; ++c)
     if (m_host[c] > 0) colours = c + 1;
   begin.assign(colours + 2, 0);
   for (std::uint32_t c = 0; c < colours; ++c) begin[c + 1] = begin[c] + m_host[c];
-  begin[colours + 1] = begin[colours] + m_host[overflow_key];
+  begin[colours + 1] = begin[colours] + m_host[used];
 }
 
 std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count,
@@ -174,7 +178,9 @@ std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint3
                                                                 m_count.get_as<std::uint32_t>());
   MARBLES_CUDA_CHECK_LAUNCH();
   rounds_run = rounds(n, body_count, ColourRule::lowest_free, sm_count, s);
-  sort_by_colour(n, kMaxColours, 7, begin, sm_count, s);
+  // A contact coloured in round r has at most 2 r coloured neighbours (one per
+  // sphere and round), so its colour is at most 2 r.
+  sort_by_colour(n, kMaxColours, 7, 2 * rounds_run, begin, sm_count, s);
   gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, m_index_out.get_as<std::uint32_t>(), n, sorted);
   MARBLES_CUDA_CHECK_LAUNCH();
   return static_cast<std::uint32_t>(begin.size() - 2);
@@ -196,8 +202,8 @@ std::uint32_t ColouringCuda::impact_levels(const Contact* contacts, std::uint32_
   m_bytes += sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   if (m_host[0] == 0) return 0;
-  rounds(n, body_count, ColourRule::by_round, sm_count, s);
-  sort_by_colour(n, kMaxColourRounds, 8, begin, sm_count, s);
+  const std::uint32_t rounds_run = rounds(n, body_count, ColourRule::by_round, sm_count, s);
+  sort_by_colour(n, kMaxColourRounds, 8, rounds_run, begin, sm_count, s);
   order = m_index_out.get_as<std::uint32_t>();
   return static_cast<std::uint32_t>(begin.size() - 2);
 }

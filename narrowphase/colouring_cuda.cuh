@@ -54,9 +54,10 @@ class ColouringCuda {
   std::uint32_t rounds(std::uint32_t n, std::size_t body_count, ColourRule rule, int sm_count, cudaStream_t stream);
   void reserve(std::uint32_t n);
   // Stable sort of the indices by key (overflow -> overflow_key, inactive
-  // last) and the host ranges [0, key_count + 1].
-  void sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, int key_bits, std::vector<std::uint32_t>& begin,
-                      int sm_count, cudaStream_t stream);
+  // last) and the host ranges [0, key_count + 1]; no key is at or above
+  // key_bound except the overflow's.
+  void sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, int key_bits, std::uint32_t key_bound,
+                      std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t stream);
 
   DeviceBuffer m_rank, m_bodies, m_colour, m_active, m_next, m_count, m_body_word, m_body_used, m_keys, m_keys_out,
       m_index, m_index_out, m_histogram, m_temp;
