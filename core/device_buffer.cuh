@@ -64,6 +64,16 @@ class DeviceBuffer {
   std::size_t m_bytes = 0;
 };
 
+// *target = max(*target, v) for the warp's values, one atomic per warp. Every
+// thread of the warp must call it (after a grid-stride loop, not inside).
+__device__ inline void warp_atomic_max(unsigned long long* target, unsigned long long v) {
+  for (int offset = 16; offset > 0; offset >>= 1) {
+    const unsigned long long other = __shfl_down_sync(0xffffffffu, v, offset);
+    v = other > v ? other : v;
+  }
+  if ((threadIdx.x & 31) == 0 && v != 0) atomicMax(target, v);
+}
+
 // Exclusive sum of in[0, n) into out[0, n).
 template <class T>
 void device_exclusive_sum(const T* in, T* out, std::size_t n, DeviceBuffer& temp, cudaStream_t stream) {

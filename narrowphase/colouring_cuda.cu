@@ -10,6 +10,21 @@ using ::marbles::cuda::kBlock;
 
 constexpr std::uint32_t kBatch = 8;  // rounds launched between two reads of what is left
 
+// Appends k to list when `want`, one atomic per warp (a single counter taken
+// by every thread would serialise). The order within the list is free: a
+// round's result does not depend on the order it visits its contacts.
+__device__ void append(std::uint32_t* list, std::uint32_t* count, std::uint32_t k, bool want) {
+  const unsigned active = __activemask();
+  const unsigned wanting = __ballot_sync(active, want);
+  if (wanting == 0) return;
+  const int lane = threadIdx.x & 31;
+  const int leader = __ffs(wanting) - 1;
+  std::uint32_t base = 0;
+  if (lane == leader) base = atomicAdd(count, static_cast<std::uint32_t>(__popc(wanting)));
+  base = __shfl_sync(active, base, leader);
+  if (want) list[base + __popc(wanting & ((1u << lane) - 1u))] = k;
+}
+
 // The spheres of contact k as one 8-byte word, so the rounds read 16 bytes
 // per contact (bodies and rank) instead of the whole Contact.
 __global__ void contact_ranks_kernel(const Contact* contacts, std::uint32_t n, std::uint64_t* rank, uint2* bodies,
@@ -31,10 +46,11 @@ __global__ void impact_candidates_kernel(const Contact* contacts, std::uint32_t 
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const bool candidate = is_impact_candidate(contacts[k], rest_speed);
     colour[k] = candidate ? kUncoloured : kNotActive;
-    if (!candidate) continue;
-    rank[k] = impact_rank(time_of_impact(contacts[k]), k);
-    bodies[k] = make_uint2(contacts[k].a, contacts[k].b);
-    active[atomicAdd(count, 1u)] = k;
+    if (candidate) {
+      rank[k] = impact_rank(time_of_impact(contacts[k]), k);
+      bodies[k] = make_uint2(contacts[k].a, contacts[k].b);
+    }
+    append(active, count, k, candidate);
   }
 }
 
@@ -63,26 +79,28 @@ __global__ void select_kernel(const uint2* bodies, const std::uint64_t* rank, co
     const uint2 ab = bodies[k];
     const bool wall = is_wall(ab.y);
     const std::uint64_t word = round_word(round, rank[k]);
-    if (!holds_both(word, body_word[ab.x], wall ? 0 : body_word[ab.y], wall)) {
-      next[atomicAdd(&count[round + 1], 1u)] = k;
-      continue;
-    }
-    colour[k] = rule == ColourRule::by_round ? round
-                                             : take_lowest_free(body_used[ab.x], wall ? nullptr : &body_used[ab.y]);
+    const bool coloured = holds_both(word, body_word[ab.x], wall ? 0 : body_word[ab.y], wall);
+    if (coloured)
+      colour[k] = rule == ColourRule::by_round ? round
+                                               : take_lowest_free(body_used[ab.x], wall ? nullptr : &body_used[ab.y]);
+    append(next, &count[round + 1], k, !coloured);
   }
 }
 
 __global__ void keys_kernel(const std::uint32_t* colour, std::uint32_t n, std::uint32_t overflow_key,
-                            std::uint32_t* keys, std::uint32_t* index, std::uint32_t* histogram) {
+                            std::uint32_t* keys, std::uint32_t* index) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const std::uint32_t c = colour[k];
-    const std::uint32_t key = c == kNotActive ? overflow_key + 1
-                              : (c == kUncoloured || c == kOverflowColour) ? overflow_key
-                                                                           : c;
-    keys[k] = key;
+    keys[k] = c == kNotActive ? overflow_key + 1 : (c == kUncoloured || c == kOverflowColour) ? overflow_key : c;
     index[k] = k;
-    if (key <= overflow_key) atomicAdd(&histogram[key], 1u);
   }
+}
+
+// first[key] = the first sorted position holding `key` (left 0xffffffff
+// where no key is): the transitions of the sorted keys, no atomics.
+__global__ void first_of_key_kernel(const std::uint32_t* sorted_keys, std::uint32_t n, std::uint32_t* first) {
+  for (std::uint32_t j = blockIdx.x * blockDim.x + threadIdx.x; j < n; j += gridDim.x * blockDim.x)
+    if (j == 0 || sorted_keys[j] != sorted_keys[j - 1]) first[sorted_keys[j]] = j;
 }
 
 __global__ void gather_kernel(const Contact* in, const std::uint32_t* order, std::uint32_t n, Contact* out) {
@@ -141,26 +159,34 @@ void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, 
   auto* keys_out = m_keys_out.as<std::uint32_t>(n);
   auto* index = m_index.as<std::uint32_t>(n);
   auto* index_out = m_index_out.as<std::uint32_t>(n);
-  auto* histogram = m_histogram.as<std::uint32_t>(overflow_key + 1);
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(histogram, 0, (overflow_key + 1) * sizeof(std::uint32_t), s));
-  keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(m_colour.get_as<std::uint32_t>(), n, overflow_key, keys, index,
-                                                       histogram);
+  auto* first = m_histogram.as<std::uint32_t>(overflow_key + 2);
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0xff, (overflow_key + 2) * sizeof(std::uint32_t), s));
+  keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(m_colour.get_as<std::uint32_t>(), n, overflow_key, keys, index);
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_sort_pairs(keys, keys_out, index, index_out, n, key_bits, m_temp, s);
-  // No key but the overflow's is at or above key_bound: read only those and the overflow.
+  first_of_key_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(keys_out, n, first);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  // No key but the overflow's (and the inactive) is at or above key_bound:
+  // read only those firsts, then the overflow's and the inactive's.
   const std::uint32_t used = std::min(key_bound, overflow_key);
   if (used > 0)
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, histogram, used * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host + used, histogram + overflow_key, sizeof(std::uint32_t),
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, first, used * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host + used, first + overflow_key, 2 * sizeof(std::uint32_t),
                                      cudaMemcpyDeviceToHost, s));
-  m_bytes += (used + 1) * sizeof(std::uint32_t);
+  m_bytes += (used + 2) * sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  constexpr std::uint32_t kNone = 0xffffffffu;
+  // Colours are contiguous from 0 (a contact of colour c has neighbours of
+  // every colour below c; a level-l impact one of level l - 1).
   std::uint32_t colours = 0;
-  for (std::uint32_t c = 0; c < used; ++c)
-    if (m_host[c] > 0) colours = c + 1;
+  while (colours < used && m_host[colours] != kNone) ++colours;
+  const std::uint32_t overflow_first = m_host[used], inactive_first = m_host[used + 1];
+  const std::uint32_t coloured_end = overflow_first != kNone ? overflow_first : inactive_first != kNone ? inactive_first : n;
+  const std::uint32_t overflow_end = inactive_first != kNone ? inactive_first : n;
   begin.assign(colours + 2, 0);
-  for (std::uint32_t c = 0; c < colours; ++c) begin[c + 1] = begin[c] + m_host[c];
-  begin[colours + 1] = begin[colours] + m_host[used];
+  for (std::uint32_t c = 1; c < colours; ++c) begin[c] = m_host[c];
+  begin[colours] = coloured_end;
+  begin[colours + 1] = overflow_first != kNone ? overflow_end : coloured_end;
 }
 
 std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count,

@@ -191,19 +191,6 @@ MARBLES_HD_INLINE bool make_wall_contact(const BodiesView& bodies, std::uint32_t
   return true;
 }
 
-// The velocity state of body `index` as the solver sees it (a wall is
-// immovable and moves with its surface velocity), and its write-back.
-MARBLES_HD_INLINE BodyState load_body(const BodiesView& bodies, std::uint32_t index, const Contact& c) {
-  if (is_wall(index)) return {c.wall_velocity, Vec3{}, 0, 0};
-  return {bodies.velocity[index], bodies.angular_velocity[index], bodies.inv_mass[index], bodies.inv_inertia[index]};
-}
-
-MARBLES_HD_INLINE void store_body(const BodiesView& bodies, std::uint32_t index, const BodyState& s) {
-  if (is_wall(index)) return;
-  bodies.velocity[index] = s.v;
-  bodies.angular_velocity[index] = s.w;
-}
-
 // Prepare stage: effective masses and the approach speed before the solve.
 MARBLES_HD_INLINE void prepare_contact(Contact& c, const BodyState& A, const BodyState& B) {
   const real k_normal = A.inv_mass + B.inv_mass;

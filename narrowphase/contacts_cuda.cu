@@ -21,7 +21,7 @@ __global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_spee
     const real s = length(bodies.velocity[i]);
     v = s > v ? s : v;
   }
-  if (v > 0) atomicMax(max_speed, speed_word(v));
+  ::marbles::cuda::warp_atomic_max(max_speed, speed_word(v));
 }
 
 __global__ void reach_kernel(BodiesView bodies, real h, const unsigned long long* max_speed, real* reach,

@@ -6,9 +6,10 @@ namespace marbles::narrowphase {
 namespace {
 
 // Contacts of one colour: in parallel when there are enough of them to pay
-// for waking the threads (a colour is a few microseconds of work per
-// thousand contacts); the overflow set always one by one.
-constexpr std::ptrdiff_t kParallelFrom = 4096;
+// for waking the threads (a colour is ~40 us of work per thousand contacts,
+// a fork and join a few us, but far more when the cores are shared with
+// other processes, as under `ctest -j`); the overflow set always one by one.
+constexpr std::ptrdiff_t kParallelFrom = 16384;
 
 template <class F>
 void for_colour(std::uint32_t begin, std::uint32_t end, F&& f) {
@@ -18,21 +19,19 @@ void for_colour(std::uint32_t begin, std::uint32_t end, F&& f) {
 }
 
 template <bool Friction, bool Rolling>
-void sweep_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, const BodiesView& bodies, real inv_h,
-                 bool) {
+void sweep_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, SolverBody* bodies, real inv_h, bool) {
   for_colour(begin, end, [&](std::uint32_t k) { solve_one<Friction, Rolling>(contacts[k], bodies, inv_h); });
 }
 
 template <bool Friction, bool Rolling>
-void warm_start_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, const BodiesView& bodies, real,
-                      bool) {
+void warm_start_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, SolverBody* bodies, real, bool) {
   for_colour(begin, end, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(contacts[k], bodies); });
 }
 
 // Impacts of order[begin, end) (one colour or level); true if any hit.
 template <bool Friction>
 bool impact_range(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
-                  const BodiesView& bodies, real rest_speed, real h) {
+                  SolverBody* bodies, real rest_speed, real h) {
   bool hit = false;
   const auto n = static_cast<std::ptrdiff_t>(end - begin);
 #pragma omp parallel for schedule(static) reduction(|| : hit) if (n >= kParallelFrom)
@@ -67,10 +66,16 @@ ContactSolver::ContactSolver(const SolverSettings& settings) : m_settings(settin
 }
 
 void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours,
-                                     const BodiesView& bodies, real h) {
+                                     const BodiesView& world, real h) {
+  const auto n = static_cast<std::ptrdiff_t>(world.count);
+  m_bodies.resize(world.count);
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t i = 0; i < n; ++i) m_bodies[i] = gather_solver_body(world, i);
+  SolverBody* bodies = m_bodies.data();
+
   Contact* cs = contacts.data();
   for_colour(0, static_cast<std::uint32_t>(contacts.size()), [&](std::uint32_t k) { prepare_one(cs[k], bodies); });
-  if (m_settings.restitution) impacts(contacts, colours, bodies, h);
+  if (m_settings.restitution) impacts(contacts, colours, bodies, world.count, h);
   if (m_settings.warm_start)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(cs, b, e, bodies, 0, false); });
 
@@ -79,14 +84,16 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
     const bool backwards = it % 2 == 1;
     over_colours(colours, backwards, [&](std::uint32_t b, std::uint32_t e) { m_sweep(cs, b, e, bodies, inv_h, backwards); });
   }
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t i = 0; i < n; ++i) scatter_solver_body(world, i, m_bodies[i]);
 }
 
 // Impact stage. Pass 0: the candidates, levelled by time of impact (a
 // by_round colouring: of two candidates sharing a sphere the earlier is in
 // the lower level), level by level. Later passes: every contact, colour by
 // colour, while the pass before hit something.
-void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& colours, const BodiesView& bodies,
-                            real h) {
+void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& colours, SolverBody* bodies,
+                            std::size_t body_count, real h) {
   const real rest = m_settings.rest_speed;
   const auto n = static_cast<std::uint32_t>(contacts.size());
   m_candidates.clear();
@@ -97,8 +104,8 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
   m_level.assign(n, kUncoloured);
   for (std::uint32_t k : m_candidates) m_rank[k] = impact_rank(time_of_impact(contacts[k]), k);
   std::uint32_t rounds = 0;
-  m_impact_colouring.colour(contacts.data(), m_candidates, m_rank.data(), bodies.count, ColourRule::by_round,
-                            m_level, &rounds);
+  m_impact_colouring.colour(contacts.data(), m_candidates, m_rank.data(), body_count, ColourRule::by_round, m_level,
+                            &rounds);
   // Candidates level by level (overflow last), index order within a level.
   std::vector<std::uint32_t> begin(rounds + 2, 0);
   auto level_of = [&](std::uint32_t k) { return m_level[k] == kOverflowColour ? rounds : m_level[k]; };

@@ -57,12 +57,13 @@ class ContactSolver {
                          const BodiesView& bodies, const std::vector<WallShape>& walls) const;
 
  private:
-  void impacts(std::vector<Contact>& contacts, const ColourRanges& colours, const BodiesView& bodies, real h);
+  void impacts(std::vector<Contact>& contacts, const ColourRanges& colours, SolverBody* bodies, std::size_t body_count,
+               real h);
 
-  using RangeFn = void (*)(Contact* contacts, std::uint32_t begin, std::uint32_t end, const BodiesView& bodies,
+  using RangeFn = void (*)(Contact* contacts, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
                            real inv_h, bool backwards);
   using ImpactFn = bool (*)(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
-                            const BodiesView& bodies, real rest_speed, real h);
+                            SolverBody* bodies, real rest_speed, real h);
   SolverSettings m_settings;
   RangeFn m_sweep = nullptr;
   RangeFn m_warm_start = nullptr;
@@ -72,6 +73,7 @@ class ContactSolver {
   ContactColouring m_impact_colouring;
   std::vector<std::uint32_t> m_candidates, m_level, m_order, m_identity;
   std::vector<std::uint64_t> m_rank;
+  std::vector<SolverBody> m_bodies;  // the velocity state, packed for the solve
 };
 
 }  // namespace marbles::narrowphase

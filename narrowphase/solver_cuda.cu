@@ -27,23 +27,33 @@ inline int blocks(const ContactRange& r) {
   return r.serial ? 1 : static_cast<int>((r.end - r.begin + kBlock - 1) / kBlock);
 }
 
-__global__ void prepare_kernel(Contact* contacts, std::uint32_t n, BodiesView bodies) {
+__global__ void gather_bodies_kernel(BodiesView world, SolverBody* bodies) {
+  for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < world.count; i += gridDim.x * blockDim.x)
+    bodies[i] = gather_solver_body(world, i);
+}
+
+__global__ void scatter_bodies_kernel(const SolverBody* bodies, BodiesView world) {
+  for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < world.count; i += gridDim.x * blockDim.x)
+    scatter_solver_body(world, i, bodies[i]);
+}
+
+__global__ void prepare_kernel(Contact* contacts, std::uint32_t n, const SolverBody* bodies) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
     prepare_one(contacts[k], bodies);
 }
 
 template <bool Friction, bool Rolling>
-__global__ void warm_start_kernel(Contact* contacts, ContactRange r, BodiesView bodies) {
+__global__ void warm_start_kernel(Contact* contacts, ContactRange r, SolverBody* bodies) {
   for_range(r, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(contacts[k], bodies); });
 }
 
 template <bool Friction, bool Rolling>
-__global__ void sweep_kernel(Contact* contacts, ContactRange r, BodiesView bodies, real inv_h) {
+__global__ void sweep_kernel(Contact* contacts, ContactRange r, SolverBody* bodies, real inv_h) {
   for_range(r, [&](std::uint32_t k) { solve_one<Friction, Rolling>(contacts[k], bodies, inv_h); });
 }
 
 template <bool Friction>
-__global__ void impact_kernel(Contact* contacts, const std::uint32_t* order, ContactRange r, BodiesView bodies,
+__global__ void impact_kernel(Contact* contacts, const std::uint32_t* order, ContactRange r, SolverBody* bodies,
                               real rest_speed, real h, unsigned* hit) {
   bool any = false;
   for_range(r, [&](std::uint32_t k) {
@@ -68,10 +78,10 @@ __global__ void max_overlap_kernel(const Contact* contacts, std::uint32_t n, Bod
     const real o = overlap_ratio(contacts[k], bodies, walls);
     d = o > d ? o : d;
   }
-  if (d > 0) {
-    if constexpr (sizeof(real) == 4) atomicMax(deepest, static_cast<unsigned long long>(__float_as_uint(d)));
-    else atomicMax(deepest, static_cast<unsigned long long>(__double_as_longlong(d)));
-  }
+  if constexpr (sizeof(real) == 4)
+    ::marbles::cuda::warp_atomic_max(deepest, static_cast<unsigned long long>(__float_as_uint(d)));
+  else
+    ::marbles::cuda::warp_atomic_max(deepest, static_cast<unsigned long long>(__double_as_longlong(d)));
 }
 
 }  // namespace
@@ -83,13 +93,25 @@ void launch_max_overlap(const Contact* contacts, std::uint32_t n, const BodiesVi
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_prepare(Contact* contacts, std::uint32_t n, const BodiesView& bodies, int sm_count, cudaStream_t s) {
+void launch_gather_bodies(const BodiesView& world, SolverBody* bodies, int sm_count, cudaStream_t s) {
+  if (world.count == 0) return;
+  gather_bodies_kernel<<<::marbles::cuda::grid_for(world.count, sm_count), kBlock, 0, s>>>(world, bodies);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, int sm_count, cudaStream_t s) {
+  if (world.count == 0) return;
+  scatter_bodies_kernel<<<::marbles::cuda::grid_for(world.count, sm_count), kBlock, 0, s>>>(bodies, world);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_prepare(Contact* contacts, std::uint32_t n, const SolverBody* bodies, int sm_count, cudaStream_t s) {
   if (n == 0) return;
   prepare_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, bodies);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_warm_start(Contact* contacts, ContactRange r, const BodiesView& bodies, SolverTerms t, cudaStream_t s) {
+void launch_warm_start(Contact* contacts, ContactRange r, SolverBody* bodies, SolverTerms t, cudaStream_t s) {
   if (r.end <= r.begin) return;
   if (t.friction && t.rolling) warm_start_kernel<true, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
   else if (t.friction) warm_start_kernel<true, false><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
@@ -98,7 +120,7 @@ void launch_warm_start(Contact* contacts, ContactRange r, const BodiesView& bodi
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_sweep(Contact* contacts, ContactRange r, const BodiesView& bodies, real inv_h, SolverTerms t,
+void launch_sweep(Contact* contacts, ContactRange r, SolverBody* bodies, real inv_h, SolverTerms t,
                   cudaStream_t s) {
   if (r.end <= r.begin) return;
   if (t.friction && t.rolling) sweep_kernel<true, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, inv_h);
@@ -108,7 +130,7 @@ void launch_sweep(Contact* contacts, ContactRange r, const BodiesView& bodies, r
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange r, const BodiesView& bodies,
+void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange r, SolverBody* bodies,
                     real rest_speed, real h, bool friction, unsigned* hit, cudaStream_t s) {
   if (r.end <= r.begin) return;
   if (friction)

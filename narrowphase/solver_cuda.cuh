@@ -26,14 +26,18 @@ struct ContactRange {
   bool serial = false, backwards = false;
 };
 
-void launch_prepare(Contact* contacts, std::uint32_t n, const BodiesView& bodies, int sm_count, cudaStream_t stream);
-void launch_warm_start(Contact* contacts, ContactRange range, const BodiesView& bodies, SolverTerms terms,
+// The packed velocity state (solver_math.hpp) from the world, and back.
+void launch_gather_bodies(const BodiesView& world, SolverBody* bodies, int sm_count, cudaStream_t stream);
+void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, int sm_count, cudaStream_t stream);
+
+void launch_prepare(Contact* contacts, std::uint32_t n, const SolverBody* bodies, int sm_count, cudaStream_t stream);
+void launch_warm_start(Contact* contacts, ContactRange range, SolverBody* bodies, SolverTerms terms,
                        cudaStream_t stream);
-void launch_sweep(Contact* contacts, ContactRange range, const BodiesView& bodies, real inv_h, SolverTerms terms,
+void launch_sweep(Contact* contacts, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,
                   cudaStream_t stream);
 // Impacts of contacts[order[k]] for k in range (order null: k itself);
 // sets *hit = 1 when any hit.
-void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange range, const BodiesView& bodies,
+void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange range, SolverBody* bodies,
                     real rest_speed, real h, bool friction, unsigned* hit, cudaStream_t stream);
 void launch_rebound(const Contact* contacts, ContactRange range, const BodiesView& bodies, const WallShape* walls,
                     cudaStream_t stream);

@@ -27,14 +27,44 @@ struct SolverSettings {
   bool warm_start = true;         // start from the last substep's impulses
 };
 
+// The velocity state of one sphere as the velocity stages read and write it,
+// packed: a contact's two random body accesses touch one 32-byte record each
+// (in float) instead of four arrays, and a million of them fit in an H100's
+// L2. Gathered from the world before the velocity solve, scattered after.
+struct alignas(4 * sizeof(real)) SolverBody {
+  Vec3 v;
+  real inv_mass;
+  Vec3 w;
+  real inv_inertia;
+};
+
+MARBLES_HD_INLINE SolverBody gather_solver_body(const BodiesView& bodies, std::size_t i) {
+  return {bodies.velocity[i], bodies.inv_mass[i], bodies.angular_velocity[i], bodies.inv_inertia[i]};
+}
+MARBLES_HD_INLINE void scatter_solver_body(const BodiesView& bodies, std::size_t i, const SolverBody& s) {
+  bodies.velocity[i] = s.v;
+  bodies.angular_velocity[i] = s.w;
+}
+
+MARBLES_HD_INLINE BodyState load_body(const SolverBody* bodies, std::uint32_t index, const Contact& c) {
+  if (is_wall(index)) return {c.wall_velocity, Vec3{}, 0, 0};
+  const SolverBody& b = bodies[index];
+  return {b.v, b.w, b.inv_mass, b.inv_inertia};
+}
+MARBLES_HD_INLINE void store_body(SolverBody* bodies, std::uint32_t index, const BodyState& s) {
+  if (is_wall(index)) return;
+  bodies[index].v = s.v;
+  bodies[index].w = s.w;
+}
+
 // Prepare: effective masses and the approach speed before the solve.
-MARBLES_HD_INLINE void prepare_one(Contact& c, const BodiesView& bodies) {
+MARBLES_HD_INLINE void prepare_one(Contact& c, const SolverBody* bodies) {
   prepare_contact(c, load_body(bodies, c.a, c), load_body(bodies, c.b, c));
 }
 
 // Warm start: apply the impulses the contact starts with (from the cache).
 template <bool Friction, bool Rolling>
-MARBLES_HD_INLINE void warm_start_one(const Contact& c, const BodiesView& bodies) {
+MARBLES_HD_INLINE void warm_start_one(const Contact& c, SolverBody* bodies) {
   if (c.normal_impulse <= 0) return;
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
@@ -52,7 +82,7 @@ MARBLES_HD_INLINE void warm_start_one(const Contact& c, const BodiesView& bodies
 // One Gauss–Seidel update of one contact: friction, rolling resistance (when
 // enabled), then the normal impulse.
 template <bool Friction, bool Rolling>
-MARBLES_HD_INLINE void solve_one(Contact& c, const BodiesView& bodies, real inv_h) {
+MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
   if constexpr (Friction) solve_friction(c, A, B);
@@ -64,7 +94,7 @@ MARBLES_HD_INLINE void solve_one(Contact& c, const BodiesView& bodies, real inv_
 
 // The impact of one contact (apply_impact); true if it hit.
 template <bool Friction>
-MARBLES_HD_INLINE bool impact_one(Contact& c, const BodiesView& bodies, real rest_speed, real h) {
+MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, real rest_speed, real h) {
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
   if (!apply_impact<Friction>(c, A, B, rest_speed, h)) return false;

@@ -138,12 +138,15 @@ class CudaStep final : public StepBackend {
     m_cache.restore(contacts_d(), m_count, m_device.view(), m_host.inv_mass.data(), weight, m_sm, m_stream);
   }
 
+  // The velocity state packed (SolverBody) for the solve, then back.
   void solve_velocities(real h) override {
     if (m_count == 0) return;
-    const BodiesView bodies = m_device.view();
+    const BodiesView world = m_device.view();
+    auto* bodies = m_solver_bodies.as<narrowphase::SolverBody>(world.count);
+    nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     narrowphase::Contact* contacts = contacts_d();
     nc::launch_prepare(contacts, m_count, bodies, m_sm, m_stream);
-    if (m_model.solver.restitution) impacts(h);
+    if (m_model.solver.restitution) impacts(bodies, h);
     if (m_model.solver.warm_start)
       over_colours(false, [&](nc::ContactRange r) { nc::launch_warm_start(contacts, r, bodies, m_terms, m_stream); });
     const real inv_h = real(1) / h;
@@ -151,6 +154,7 @@ class CudaStep final : public StepBackend {
       over_colours(it % 2 == 1, [&](nc::ContactRange r) {
         nc::launch_sweep(contacts, r, bodies, inv_h, m_terms, m_stream);
       });
+    nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
   }
 
   void integrate_positions(real h) override {
@@ -277,8 +281,7 @@ class CudaStep final : public StepBackend {
 
   // The impact stage (ContactSolver::impacts): candidates level by level,
   // then every contact colour by colour while the pass before hit.
-  void impacts(real h) {
-    const BodiesView bodies = m_device.view();
+  void impacts(narrowphase::SolverBody* bodies, real h) {
     narrowphase::Contact* contacts = contacts_d();
     const real rest = m_model.solver.rest_speed;
     std::uint32_t* order = nullptr;
@@ -314,7 +317,7 @@ class CudaStep final : public StepBackend {
   unsigned long long* m_end_flags = nullptr;  // pinned: the end-of-step read
 
   DeviceBuffer m_walls, m_pair_table, m_max_speed, m_reach, m_bound, m_pair_flags, m_pair_offsets, m_wall_flags, m_wall_offsets,
-      m_contacts, m_sorted, m_flags, m_hit, m_temp;
+      m_contacts, m_sorted, m_solver_bodies, m_flags, m_hit, m_temp;
   narrowphase::PairTable m_table;
   nc::SolverTerms m_terms;
   std::unique_ptr<broadphase::SubdivisionCuda> m_broadphase;
