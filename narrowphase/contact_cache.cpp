@@ -49,7 +49,7 @@ std::size_t cold_start_unloaded_islands(std::vector<Contact>& contacts, const st
     for (std::uint32_t body : {a, b}) {
       if (is_wall(body) || body >= bodies.count) continue;
       const std::uint32_t r = root(parent, body);
-      if (normal_impulse[k] >= real(0.25) * island_max[r]) cold[r] = 1;
+      if (island_starts_cold(normal_impulse[k], island_max[r])) cold[r] = 1;
     }
   }
   std::size_t set_cold = 0;

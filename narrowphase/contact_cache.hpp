@@ -35,8 +35,9 @@ struct CacheEntries {
 
 // The island rule: contacts of islands that lost a load (unmatched entries
 // for which is_lost_load holds) start cold. `matched[k]` says whether entry
-// k found its contact. Returns the number of contacts it set cold. Used by
-// the CPU cache and, when a load was lost, by the CUDA one.
+// k found its contact. Returns the number of contacts it set cold. Islands
+// by union-find here; the CUDA twin finds the same islands by min-label
+// propagation (contact_cache_cuda.cu).
 std::size_t cold_start_unloaded_islands(std::vector<Contact>& contacts, const std::uint64_t* keys,
                                         const real* normal_impulse, const std::uint8_t* matched,
                                         std::size_t entry_count, const BodiesView& bodies, real weight_impulse);

@@ -1,5 +1,3 @@
-#include <vector>
-
 #include "core/cuda_check.hpp"
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_cache_cuda.cuh"
@@ -58,6 +56,82 @@ __global__ void lost_loads_kernel(const std::uint64_t* keys, const real* normal,
   if (mine) atomicAdd(count, mine);
 }
 
+// --- the island rule, data-parallel ----------------------------------------
+// Islands are the connected components of the sphere-sphere contacts; each
+// sphere's label converges to the smallest index of its island (min-label
+// propagation with pointer jumping), whatever the order of the updates: the
+// CPU's union-find gives the same islands.
+__global__ void label_init_kernel(std::uint32_t* label, std::uint32_t n) {
+  for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) label[i] = i;
+}
+
+__global__ void label_hook_kernel(const Contact* contacts, std::uint32_t n, std::uint32_t* label, unsigned* changed) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    const Contact& c = contacts[k];
+    if (is_wall(c.b)) continue;
+    const std::uint32_t la = label[c.a], lb = label[c.b];
+    if (la == lb) continue;
+    const std::uint32_t lo = la < lb ? la : lb, hi = la < lb ? lb : la;
+    atomicMin(&label[hi], lo);  // hook the larger label's root onto the smaller
+    atomicMin(&label[c.a], lo);
+    atomicMin(&label[c.b], lo);
+    *changed = 1u;
+  }
+}
+
+__global__ void label_jump_kernel(std::uint32_t* label, std::uint32_t n) {
+  for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
+    std::uint32_t l = label[i];
+    while (label[l] != l) l = label[l];
+    label[i] = l;
+  }
+}
+
+// The largest impulse each island carries (non-negative reals order as their bits).
+__global__ void island_max_kernel(const Contact* contacts, std::uint32_t n, const std::uint32_t* label,
+                                  unsigned long long* island_max) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    const real p = contacts[k].normal_impulse;
+    if (!(p > 0)) continue;
+    unsigned long long bits;
+    if constexpr (sizeof(real) == 4) bits = __float_as_uint(p);
+    else bits = static_cast<unsigned long long>(__double_as_longlong(p));
+    atomicMax(&island_max[label[contacts[k].a]], bits);
+  }
+}
+
+__device__ real real_of_bits(unsigned long long bits) {
+  if constexpr (sizeof(real) == 4) return __uint_as_float(static_cast<unsigned>(bits));
+  else return __longlong_as_double(static_cast<long long>(bits));
+}
+
+// Islands that lost a load start cold (a plain store of 1: order-free).
+__global__ void island_cold_kernel(const std::uint64_t* keys, const real* normal, const std::uint8_t* matched,
+                                   std::uint32_t m, BodiesView bodies, real weight_impulse, const std::uint32_t* label,
+                                   const unsigned long long* island_max, std::uint8_t* cold) {
+  for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
+    if (matched[e]) continue;
+    const auto a = static_cast<std::uint32_t>(keys[e] >> 32);
+    if (a >= bodies.count || !is_lost_load(normal[e], bodies.inv_mass[a], weight_impulse)) continue;
+    for (const std::uint32_t body : {a, static_cast<std::uint32_t>(keys[e] & 0xffffffffu)}) {
+      if (is_wall(body) || body >= bodies.count) continue;
+      const std::uint32_t r = label[body];
+      if (island_starts_cold(normal[e], real_of_bits(island_max[r]))) cold[r] = 1;
+    }
+  }
+}
+
+__global__ void island_clear_kernel(Contact* contacts, std::uint32_t n, const std::uint32_t* label,
+                                    const std::uint8_t* cold) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    Contact& c = contacts[k];
+    if (!cold[label[c.a]] || c.normal_impulse <= 0) continue;
+    c.normal_impulse = 0;
+    c.tangent_impulse = Vec3{};
+    c.rolling_impulse = Vec3{};
+  }
+}
+
 }  // namespace
 
 ContactCacheCuda::ContactCacheCuda() {
@@ -91,8 +165,8 @@ void ContactCacheCuda::store(const Contact* contacts, std::uint32_t n, int sm_co
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies,
-                               const real* host_inv_mass, real weight_impulse, int sm_count, cudaStream_t s) {
+void ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
+                               int sm_count, cudaStream_t s) {
   const std::uint32_t m = m_count;
   if (m == 0 || n == 0) return;
   auto* matched = m_matched.as<std::uint8_t>(m);
@@ -112,29 +186,34 @@ void ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   if (m_host[0] == 0) return;
 
-  // A load was lost: the island rule on the host, over the CPU's own code.
-  m_host_contacts.resize(n);
-  std::vector<std::uint64_t> h_keys(m);
-  std::vector<real> h_normal(m);
-  std::vector<std::uint8_t> h_matched(m);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host_contacts.data(), contacts, n * sizeof(Contact), cudaMemcpyDeviceToHost, s));
-  m_bytes += n * sizeof(Contact);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_keys.data(), keys, m * sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
-  m_bytes += m * sizeof(std::uint64_t);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_normal.data(), normal, m * sizeof(real), cudaMemcpyDeviceToHost, s));
-  m_bytes += m * sizeof(real);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_matched.data(), matched, m, cudaMemcpyDeviceToHost, s));
-  m_bytes += m;
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  BodiesView host_bodies;
-  host_bodies.inv_mass = host_inv_mass;
-  host_bodies.count = bodies.count;
-  if (cold_start_unloaded_islands(m_host_contacts, h_keys.data(), h_normal.data(), h_matched.data(), m, host_bodies,
-                                  weight_impulse) > 0) {
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(contacts, m_host_contacts.data(), n * sizeof(Contact), cudaMemcpyHostToDevice, s));
-    m_bytes += n * sizeof(Contact);
+  // A load was lost: the island rule, on the device.
+  const std::uint32_t bodies_n = static_cast<std::uint32_t>(bodies.count);
+  auto* label = m_label.as<std::uint32_t>(bodies_n);
+  auto* island_max = m_island_max.as<unsigned long long>(bodies_n);
+  auto* cold = m_cold.as<std::uint8_t>(bodies_n);
+  const int body_grid = grid_for(bodies_n, sm_count), contact_grid = grid_for(n, sm_count);
+  label_init_kernel<<<body_grid, kBlock, 0, s>>>(label, bodies_n);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  for (;;) {  // until no contact joins two labels
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
+    label_hook_kernel<<<contact_grid, kBlock, 0, s>>>(contacts, n, label, counter);
+    MARBLES_CUDA_CHECK_LAUNCH();
+    label_jump_kernel<<<body_grid, kBlock, 0, s>>>(label, bodies_n);
+    MARBLES_CUDA_CHECK_LAUNCH();
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, counter, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+    m_bytes += sizeof(std::uint32_t);
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+    if (m_host[0] == 0) break;
   }
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(island_max, 0, bodies_n * sizeof(unsigned long long), s));
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(cold, 0, bodies_n, s));
+  island_max_kernel<<<contact_grid, kBlock, 0, s>>>(contacts, n, label, island_max);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  island_cold_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, m, bodies, weight_impulse, label,
+                                                               island_max, cold);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  island_clear_kernel<<<contact_grid, kBlock, 0, s>>>(contacts, n, label, cold);
+  MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 }  // namespace marbles::narrowphase::cuda

@@ -2,14 +2,14 @@
 // entries sorted by key on the device (flag, scan, write, CUB sort), looked
 // up by binary search (contact_cache_math.hpp), one thread per contact. When
 // a load was lost (rare: a counter says so), the island rule runs on the
-// host over the downloaded contacts (cold_start_unloaded_islands, the CPU's
-// own code), so the result stays the CPU's. Only .cu files include it.
+// device: islands by min-label propagation with pointer jumping (the same
+// islands as the CPU's union-find), their largest impulse by an atomic max,
+// then the cold islands' contacts cleared. Only .cu files include it.
 #pragma once
 
 #include <cuda_runtime.h>
 
 #include <cstdint>
-#include <vector>
 
 #include "core/device_buffer.cuh"
 #include "core/spheres.hpp"
@@ -26,10 +26,9 @@ class ContactCacheCuda {
   ContactCacheCuda(const ContactCacheCuda&) = delete;
   ContactCacheCuda& operator=(const ContactCacheCuda&) = delete;
 
-  // Warm start of contacts[0, n) (device); `host_inv_mass` is the host copy
-  // of the spheres' inverse masses (for the island rule).
-  void restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, const real* host_inv_mass,
-               real weight_impulse, int sm_count, cudaStream_t stream);
+  // Warm start of contacts[0, n) (device).
+  void restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse, int sm_count,
+               cudaStream_t stream);
   void store(const Contact* contacts, std::uint32_t n, int sm_count, cudaStream_t stream);
   std::uint32_t size() const { return m_count; }
 
@@ -39,10 +38,9 @@ class ContactCacheCuda {
  private:
   std::uint64_t m_bytes = 0;
   DeviceBuffer m_flags, m_offsets, m_keys_in, m_index_in, m_keys, m_index, m_normal, m_tangent, m_rolling,
-      m_matched, m_counter, m_temp;
+      m_matched, m_counter, m_label, m_island_max, m_cold, m_temp;
   std::uint32_t m_count = 0;
   std::uint32_t* m_host = nullptr;  // pinned readback
-  std::vector<Contact> m_host_contacts;
 };
 
 }  // namespace marbles::narrowphase::cuda

@@ -39,4 +39,10 @@ MARBLES_HD_INLINE bool is_lost_load(real normal_impulse, real inv_mass_a, real w
   return inv_mass_a > 0 && normal_impulse > 4 * weight_impulse / inv_mass_a;
 }
 
+// The island rule: an island starts cold when a load it lost is at least a
+// quarter of the largest impulse it still carries.
+MARBLES_HD_INLINE bool island_starts_cold(real lost_impulse, real island_max) {
+  return lost_impulse >= real(0.25) * island_max;
+}
+
 }  // namespace marbles::narrowphase

@@ -135,7 +135,7 @@ class CudaStep final : public StepBackend {
 
   void warm_start() override {
     const real weight = m_model.gravity ? length(m_model.g) * m_model.substep() : real(0);
-    m_cache.restore(contacts_d(), m_count, m_device.view(), m_host.inv_mass.data(), weight, m_sm, m_stream);
+    m_cache.restore(contacts_d(), m_count, m_device.view(), weight, m_sm, m_stream);
   }
 
   // The velocity state packed (SolverBody) for the solve, then back.
