@@ -65,7 +65,8 @@ class DeviceBuffer {
 };
 
 // *target = max(*target, v) for the warp's values, one atomic per warp. Every
-// thread of the warp must call it (after a grid-stride loop, not inside).
+// thread of the warp must call it (after a grid-stride loop, not inside); a
+// maximum of 0 writes nothing, so the target must start at 0.
 __device__ inline void warp_atomic_max(unsigned long long* target, unsigned long long v) {
   for (int offset = 16; offset > 0; offset >>= 1) {
     const unsigned long long other = __shfl_down_sync(0xffffffffu, v, offset);

@@ -37,20 +37,14 @@ class ContactColouring {
                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr);
 
-  // The same colouring computed in Jones–Plassmann rounds (the data-parallel
-  // form the CUDA twin runs); kept on the CPU as its reference.
-  std::uint32_t colour_in_rounds(const Contact* contacts, const std::vector<std::uint32_t>& active,
-                                 const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
-                                 std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr);
-
   // The solver colouring of all contacts: colours by contact_rank, then puts
   // `contacts` in colour-major order.
   void colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out);
 
  private:
-  std::vector<std::uint64_t> m_body_word, m_body_used, m_rank, m_by_rank;
+  std::vector<std::uint64_t> m_body_used, m_rank, m_by_rank;
   std::vector<std::uint32_t> m_body_next_round;
-  std::vector<std::uint32_t> m_all, m_active, m_next, m_colour;
+  std::vector<std::uint32_t> m_all, m_colour;
   std::vector<Contact> m_sorted;
 };
 

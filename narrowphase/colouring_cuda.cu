@@ -159,7 +159,7 @@ void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, 
   auto* keys_out = m_keys_out.as<std::uint32_t>(n);
   auto* index = m_index.as<std::uint32_t>(n);
   auto* index_out = m_index_out.as<std::uint32_t>(n);
-  auto* first = m_histogram.as<std::uint32_t>(overflow_key + 2);
+  auto* first = m_first_of_key.as<std::uint32_t>(overflow_key + 2);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0xff, (overflow_key + 2) * sizeof(std::uint32_t), s));
   keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(m_colour.get_as<std::uint32_t>(), n, overflow_key, keys, index);
   MARBLES_CUDA_CHECK_LAUNCH();

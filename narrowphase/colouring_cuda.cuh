@@ -60,7 +60,7 @@ class ColouringCuda {
                       std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t stream);
 
   DeviceBuffer m_rank, m_bodies, m_colour, m_active, m_next, m_count, m_body_word, m_body_used, m_keys, m_keys_out,
-      m_index, m_index_out, m_histogram, m_temp;
+      m_index, m_index_out, m_first_of_key, m_temp;
   std::uint32_t* m_host = nullptr;  // pinned readbacks
 };
 

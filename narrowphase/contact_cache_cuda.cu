@@ -60,7 +60,10 @@ __global__ void lost_loads_kernel(const std::uint64_t* keys, const real* normal,
 // Islands are the connected components of the sphere-sphere contacts; each
 // sphere's label converges to the smallest index of its island (min-label
 // propagation with pointer jumping), whatever the order of the updates: the
-// CPU's union-find gives the same islands.
+// CPU's union-find gives the same islands. The plain reads of labels that
+// other threads lower at the same time are intended: a label only ever falls
+// to another sphere of the same island, so any value read is a valid one, and
+// the loop ends only after a pass that changed nothing.
 __global__ void label_init_kernel(std::uint32_t* label, std::uint32_t n) {
   for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) label[i] = i;
 }

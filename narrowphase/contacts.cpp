@@ -111,7 +111,7 @@ void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls
   });
 }
 
-real contact_reaches(const BodiesView& bodies, real h, std::vector<real>& reach) {
+void contact_reaches(const BodiesView& bodies, real h, std::vector<real>& reach) {
   const auto n = static_cast<std::ptrdiff_t>(bodies.count);
   real max_speed = 0;
 #pragma omp parallel for schedule(static) reduction(max : max_speed) if (n > 20000)
@@ -120,7 +120,6 @@ real contact_reaches(const BodiesView& bodies, real h, std::vector<real>& reach)
 #pragma omp parallel for schedule(static) if (n > 20000)
   for (std::ptrdiff_t i = 0; i < n; ++i)
     reach[i] = contact_reach(length(bodies.velocity[i]), max_speed, bodies.radius[i], h);
-  return max_speed;
 }
 
 }  // namespace marbles::narrowphase

@@ -40,7 +40,7 @@ void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls
                    const real* reach, std::vector<Contact>& out);
 
 // reach[i] = contact_reach of sphere i for the substep h (the fastest
-// sphere's speed is a reduction over all); returns that speed.
-real contact_reaches(const BodiesView& bodies, real h, std::vector<real>& reach);
+// sphere's speed is a reduction over all).
+void contact_reaches(const BodiesView& bodies, real h, std::vector<real>& reach);
 
 }  // namespace marbles::narrowphase

@@ -13,7 +13,8 @@
 //                 in time-of-impact order wherever two share a sphere (a
 //                 by_round colouring by time of impact); later passes, while
 //                 impacts make new approaches (a chain of touching spheres),
-//                 visit every contact colour by colour, at most kImpactPasses.
+//                 visit every contact colour by colour, kImpactPasses passes
+//                 in all at most.
 //   warm start    apply the impulses carried over from the last substep
 //                 (ContactCache, matched by body pair) when enabled
 //   solve         `iterations` sweeps, alternately forwards and backwards

@@ -7,10 +7,12 @@
 // functions the CPU loops call, in the CPU's coloured order: CudaStep and
 // CpuStep give the same bits.
 //
-// Host syncs (for now, per substep): the broad phase's pair count (2), the
-// contact count, the colouring's rounds (one per 8 rounds) and colour
-// ranges, the impact stage's candidates and hits, the cache size. One sync
-// per step with buffers sized from the last step is the next step
+// Host syncs (for now, per substep): the broad phase's bounds and pair
+// count, the contact count, the colouring's rounds (one per 8 rounds) and
+// colour ranges, the cache's lost-load counter (and one per label pass of the
+// island rule when a load was lost), the impact stage's candidates, rounds,
+// levels and hits, the cache size; per step, the flags. One sync per step
+// with buffers sized from the last step is the next step
 // (docs/architecture.md).
 #include <cuda_runtime.h>
 
@@ -97,7 +99,7 @@ class CudaStep final : public StepBackend {
       nc::launch_sphere_contact_flags(bodies, pairs, pair_count, m_table, h, reach, flags, m_sm, m_stream);
       ::marbles::cuda::device_exclusive_sum(flags, pair_offsets, pair_count + 1, m_temp, m_stream);
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned, pair_offsets + pair_count, 4, cudaMemcpyDeviceToHost, m_stream));
-      m_bytes += 4 + kBroadPhaseReadback;
+      m_bytes += 4 + broad_phase_readback();
     }
     const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
     if (m_model.wall_contacts) {
@@ -213,7 +215,9 @@ class CudaStep final : public StepBackend {
     if (m_broadphase) m_broadphase->set_stage_timing(on);
   }
   // What the device lost in free memory since before this step was built:
-  // the world, every buffer of every stage and the broad phase's.
+  // the world, every buffer of every stage and the broad phase's (and
+  // anything else allocated on the device meanwhile: a benchmark's figure,
+  // with one simulation on the device).
   std::size_t device_bytes() const override {
     std::size_t free = 0, total = 0;
     MARBLES_CUDA_CHECK(cudaMemGetInfo(&free, &total));
@@ -310,9 +314,10 @@ class CudaStep final : public StepBackend {
   int m_sm = 1;
   std::size_t m_free_at_start = 0;
   std::uint64_t m_bytes = 0, m_bytes_at_step_start = 0;  // host<->device bytes copied by this class
-  // The broad phase's own readbacks per call (home-cell variant): the bounds
-  // accumulator, the pair count and the test count.
-  static constexpr std::uint64_t kBroadPhaseReadback = 7 * 8 + 4 + 4 + 8;
+  // The broad phase's own readbacks per call: the bounds accumulator (64 B)
+  // and the pair and test counts (12 B); the seed algorithm also reads its
+  // entry count and the 9 cell-type bounds (40 B).
+  std::uint64_t broad_phase_readback() const { return m_model.algorithm == broadphase::Algorithm::home ? 76 : 116; }
   std::uint32_t* m_pinned = nullptr;
   unsigned long long* m_end_flags = nullptr;  // pinned: the end-of-step read
 

@@ -36,7 +36,7 @@ struct StepCounters {
   std::uint64_t contacts = 0;         // summed over substeps
   std::uint32_t colours = 0;          // most colours of a substep
   std::uint64_t overflow = 0;         // contacts solved one by one (beyond the colours), summed
-  double broadphase_ms = 0;           // summed over substeps
+  double broadphase_ms = 0;           // summed over substeps (CUDA: with profiling on only)
   real max_overlap = 0;               // deepest overlap at the end of the step (overlap_ratio: of the smaller radius)
   std::uint64_t bytes_copied = 0;     // host<->device traffic of the step (CUDA)
   double verb_ms[static_cast<int>(Verb::count)] = {};  // with profiling on: wall ms per verb, summed
