@@ -22,7 +22,7 @@
 
 #include "broadphase/broadphase.hpp"
 #include "broadphase/grid.hpp"
-#include "broadphase/radix_sort.hpp"
+#include "core/radix_sort.hpp"
 #include "core/error.hpp"
 
 namespace marbles::broadphase {

@@ -1,9 +1,12 @@
 #include "narrowphase/colouring.hpp"
 
 #include <algorithm>
-#include <functional>
+
+#include "core/radix_sort.hpp"
 
 namespace marbles::narrowphase {
+
+constexpr std::uint64_t kRankMask = (std::uint64_t(1) << 56) - 1;  // ranks are below 2^56
 
 // The sequential form: in decreasing rank, each contact's round is one more
 // than the latest round among its spheres' earlier (higher-ranked) contacts,
@@ -22,12 +25,17 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
     m_body_next_round[c.a] = 0, m_body_used[c.a] = 0;
     if (!is_wall(c.b)) m_body_next_round[c.b] = 0, m_body_used[c.b] = 0;
   }
+  // Decreasing rank: an ascending radix sort of (2^56 - 1 - rank) (ranks are
+  // 56 bits and unique), carrying the contact index.
   m_by_rank.resize(active.size());
-  for (std::size_t t = 0; t < active.size(); ++t) m_by_rank[t] = rank[active[t]];
-  std::sort(m_by_rank.begin(), m_by_rank.end(), std::greater<>());
+  m_order.resize(active.size());
+  for (std::size_t t = 0; t < active.size(); ++t) {
+    m_by_rank[t] = kRankMask - rank[active[t]];
+    m_order[t] = active[t];
+  }
+  radix_sort_pairs(m_by_rank, m_order, 56, m_sort_keys, m_sort_values);
   std::uint32_t colours = 0, rounds = 0;
-  for (const std::uint64_t r : m_by_rank) {
-    const std::uint32_t k = 0xffffffffu - static_cast<std::uint32_t>(r);  // ranks end in the index
+  for (const std::uint32_t k : m_order) {
     const Contact& c = contacts[k];
     const bool wall = is_wall(c.b);
     std::uint32_t round = m_body_next_round[c.a];

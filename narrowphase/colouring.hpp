@@ -42,9 +42,9 @@ class ContactColouring {
   void colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out);
 
  private:
-  std::vector<std::uint64_t> m_body_used, m_rank, m_by_rank;
+  std::vector<std::uint64_t> m_body_used, m_rank, m_by_rank, m_sort_keys;
   std::vector<std::uint32_t> m_body_next_round;
-  std::vector<std::uint32_t> m_all, m_colour;
+  std::vector<std::uint32_t> m_all, m_colour, m_order, m_sort_values;
   std::vector<Contact> m_sorted;
 };
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <numeric>
 
+#include "core/radix_sort.hpp"
 #include "narrowphase/contact_cache_math.hpp"
 
 namespace marbles::narrowphase {
@@ -88,18 +89,19 @@ void ContactCache::store(const std::vector<Contact>& contacts) {
   // Only the sustained impulses of the velocity solve are carried over; an
   // impact's impulse (Contact::impact_impulse) is not a load.
   m_order.clear();
+  m_entries.key.clear();
   for (std::uint32_t k = 0; k < contacts.size(); ++k)
-    if (contacts[k].normal_impulse > 0) m_order.push_back(k);
-  auto key = [&](std::uint32_t k) { return cache_key(contacts[k].a, contacts[k].b); };
-  std::sort(m_order.begin(), m_order.end(), [&](std::uint32_t x, std::uint32_t y) { return key(x) < key(y); });
+    if (contacts[k].normal_impulse > 0) {
+      m_order.push_back(k);
+      m_entries.key.push_back(cache_key(contacts[k].a, contacts[k].b));
+    }
+  radix_sort_pairs(m_entries.key, m_order, 64, m_sort_keys, m_sort_values);  // keys are unique
   const std::size_t m = m_order.size();
-  m_entries.key.resize(m);
   m_entries.normal_impulse.resize(m);
   m_entries.tangent_impulse.resize(m);
   m_entries.rolling_impulse.resize(m);
   for (std::size_t k = 0; k < m; ++k) {
     const Contact& c = contacts[m_order[k]];
-    m_entries.key[k] = key(m_order[k]);
     m_entries.normal_impulse[k] = c.normal_impulse;
     m_entries.tangent_impulse[k] = c.tangent_impulse;
     m_entries.rolling_impulse[k] = c.rolling_impulse;

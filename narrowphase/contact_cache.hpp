@@ -57,7 +57,8 @@ class ContactCache {
   CacheEntries m_entries;
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
-  std::vector<std::uint32_t> m_order;
+  std::vector<std::uint32_t> m_order, m_sort_values;
+  std::vector<std::uint64_t> m_sort_keys;
 };
 
 }  // namespace marbles::narrowphase

@@ -6,7 +6,7 @@
 #include <numeric>
 #include <random>
 
-#include "broadphase/radix_sort.hpp"
+#include "core/radix_sort.hpp"
 
 namespace mb = marbles::broadphase;
 

@@ -1,9 +1,9 @@
-// broadphase/radix_sort_cpu.cpp — see radix_sort.hpp.
+// core/radix_sort.cpp — see radix_sort.hpp.
 //
 // Cost per pass: one read of the keys (count), one read of keys and values
 // and one write of both (scatter). Blocks are at least kMinBlock entries so
 // small sorts stay on one thread.
-#include "broadphase/radix_sort.hpp"
+#include "core/radix_sort.hpp"
 
 #include <algorithm>
 #include <array>
@@ -13,7 +13,7 @@
 #include <omp.h>
 #endif
 
-namespace marbles::broadphase {
+namespace marbles {
 namespace {
 
 constexpr std::size_t kRadix = 256;
@@ -117,4 +117,4 @@ unsigned radix_sort_pairs(std::vector<std::uint64_t>& keys, std::vector<std::uin
   return sort_pairs(keys, values, key_bits, sk, sv);
 }
 
-}  // namespace marbles::broadphase
+}  // namespace marbles

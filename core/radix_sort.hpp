@@ -1,4 +1,5 @@
-// broadphase/radix_sort.hpp — the CPU radix sort of (key, value) pairs.
+// core/radix_sort.hpp — the CPU radix sort of (key, value) pairs (the broad
+// phase's cell keys, the colouring's ranks, the warm-start cache's keys).
 //
 // LSD radix sort, 8-bit digits, stable, with only the passes that the keys'
 // `key_bits` low bits need (a pass whose digit is equal for every key is
@@ -11,7 +12,7 @@
 #include <cstdint>
 #include <vector>
 
-namespace marbles::broadphase {
+namespace marbles {
 
 // Sorts keys[0, n) and moves values with them. `scratch_*` are resized as
 // needed and may be reused between calls. Returns the passes made.
@@ -24,4 +25,8 @@ unsigned radix_sort_pairs(std::vector<std::uint64_t>& keys, std::vector<std::uin
 unsigned radix_sort_pairs(std::vector<std::uint32_t>& keys, std::vector<std::uint32_t>& values, unsigned key_bits);
 unsigned radix_sort_pairs(std::vector<std::uint64_t>& keys, std::vector<std::uint32_t>& values, unsigned key_bits);
 
+}  // namespace marbles
+
+namespace marbles::broadphase {
+using marbles::radix_sort_pairs;
 }  // namespace marbles::broadphase
