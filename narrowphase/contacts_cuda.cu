@@ -10,10 +10,14 @@ using ::marbles::cuda::kBlock;
 
 // A speed (>= 0) as an unsigned word that orders as the speed does, so an
 // atomic max gives the exact largest speed whatever the order.
-__device__ unsigned long long speed_word(float v) { return __float_as_uint(v); }
-__device__ unsigned long long speed_word(double v) { return static_cast<unsigned long long>(__double_as_longlong(v)); }
-__device__ float speed_of(unsigned long long w, float) { return __uint_as_float(static_cast<unsigned>(w)); }
-__device__ double speed_of(unsigned long long w, double) { return __longlong_as_double(static_cast<long long>(w)); }
+__device__ unsigned long long speed_word(real v) {
+  if constexpr (sizeof(real) == 4) return __float_as_uint(v);
+  else return static_cast<unsigned long long>(__double_as_longlong(v));
+}
+__device__ real speed_of(unsigned long long w) {
+  if constexpr (sizeof(real) == 4) return __uint_as_float(static_cast<unsigned>(w));
+  else return __longlong_as_double(static_cast<long long>(w));
+}
 
 __global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_speed) {
   real v = 0;
@@ -26,7 +30,7 @@ __global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_spee
 
 __global__ void reach_kernel(BodiesView bodies, real h, const unsigned long long* max_speed, real* reach,
                              real* bound) {
-  const real v_max = speed_of(*max_speed, real(0));
+  const real v_max = speed_of(*max_speed);
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x) {
     reach[i] = contact_reach(length(bodies.velocity[i]), v_max, bodies.radius[i], h);
     if (bound) bound[i] = bodies.radius[i] + reach[i];
