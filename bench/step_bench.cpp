@@ -25,6 +25,7 @@
 
 #include "core/error.hpp"
 #include "sim/particles.hpp"
+#include "sim/run.hpp"
 #include "sim/scene.hpp"
 #include "sim/simulation.hpp"
 
@@ -427,13 +428,6 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   return row;
 }
 
-// A JSON number (null when not finite).
-std::string num(double x) {
-  if (!std::isfinite(x)) return "null";
-  std::ostringstream s;
-  s << std::setprecision(8) << x;
-  return s.str();
-}
 
 int threads() {
 #ifdef _OPENMP
@@ -488,23 +482,23 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         << ", \"launches_per_step\": null, \"results\": [\n";
     for (std::size_t k = 0; k < rows.size(); ++k) {
       const Row& r = rows[k];
-      out << "  {\"n\": " << r.n << ", \"step_ms_median\": " << num(r.step_ms) << ", \"step_ms_min\": "
-          << num(r.step_min_ms) << ", \"broadphase_ms_median\": " << num(r.broadphase_ms)
-          << ", \"candidate_pairs\": " << num(r.pairs) << ", \"contacts\": " << num(r.contacts)
-          << ", \"contacts_per_sphere\": " << num(r.contacts_per_sphere) << ", \"coordination\": "
-          << num(r.coordination) << ", \"colours\": " << r.colours << ", \"overflow_median\": " << num(r.overflow)
-          << ", \"max_overlap_pct\": " << num(r.max_overlap_pct) << ", \"ke_per_sphere_J\": " << num(r.ke_per_sphere)
+      out << "  {\"n\": " << r.n << ", \"step_ms_median\": " << json_number(r.step_ms) << ", \"step_ms_min\": "
+          << json_number(r.step_min_ms) << ", \"broadphase_ms_median\": " << json_number(r.broadphase_ms)
+          << ", \"candidate_pairs\": " << json_number(r.pairs) << ", \"contacts\": " << json_number(r.contacts)
+          << ", \"contacts_per_sphere\": " << json_number(r.contacts_per_sphere) << ", \"coordination\": "
+          << json_number(r.coordination) << ", \"colours\": " << r.colours << ", \"overflow_median\": " << json_number(r.overflow)
+          << ", \"max_overlap_pct\": " << json_number(r.max_overlap_pct) << ", \"ke_per_sphere_J\": " << json_number(r.ke_per_sphere)
           << ", \"bytes_per_step_median\": "
-          << num(r.bytes_per_step) << ", \"device_bytes_per_sphere\": " << num(r.device_bytes_per_sphere)
+          << json_number(r.bytes_per_step) << ", \"device_bytes_per_sphere\": " << json_number(r.device_bytes_per_sphere)
           << ",\n   \"verb_ms\": {";
       for (int v = 0; v < kVerbs; ++v)
-        out << "\"" << kVerbNames[v] << "\": " << num(r.verb_ms[v]) << (v + 1 < kVerbs ? ", " : "");
+        out << "\"" << kVerbNames[v] << "\": " << json_number(r.verb_ms[v]) << (v + 1 < kVerbs ? ", " : "");
       out << "}";
       if (r.settle)
         out << ",\n   \"settle\": {\"cached\": " << (r.settle->cached ? "true" : "false") << ", \"backend\": \""
             << r.settle->backend << "\", \"steps\": " << r.settle->steps << ", \"seconds\": "
-            << num(r.settle->seconds) << ", \"ke_per_sphere_J\": " << num(r.settle->ke_per_sphere)
-            << ", \"max_overlap_pct\": " << num(100 * r.settle->max_overlap) << "}";
+            << json_number(r.settle->seconds) << ", \"ke_per_sphere_J\": " << json_number(r.settle->ke_per_sphere)
+            << ", \"max_overlap_pct\": " << json_number(100 * r.settle->max_overlap) << "}";
       out << "}" << (k + 1 < rows.size() ? "," : "") << "\n";
     }
     out << "]}\n";

@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <utility>
+#include <vector>
 
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
@@ -63,6 +64,16 @@ class DeviceBuffer {
   void* m_ptr = nullptr;
   std::size_t m_bytes = 0;
 };
+
+// Copies host[] into `buffer` (grown to fit), asynchronously on `stream`: the
+// host vector must outlive the copy (synchronise before changing it).
+template <class T>
+T* upload(DeviceBuffer& buffer, const std::vector<T>& host, cudaStream_t stream) {
+  T* d = buffer.as<T>(host.size());
+  if (!host.empty())
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(d, host.data(), host.size() * sizeof(T), cudaMemcpyHostToDevice, stream));
+  return d;
+}
 
 // *target = max(*target, v) for the warp's values, one atomic per warp. Every
 // thread of the warp must call it (after a grid-stride loop, not inside); a

@@ -28,7 +28,8 @@ void warm_start_range(Contact* contacts, std::uint32_t begin, std::uint32_t end,
   for_colour(begin, end, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(contacts[k], bodies); });
 }
 
-// Impacts of order[begin, end) (one colour or level); true if any hit.
+// Impacts of contacts[order[k]] for k in [begin, end) (one level; order null:
+// contacts[k], one colour); true if any hit.
 template <bool Friction>
 bool impact_range(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
                   SolverBody* bodies, real rest_speed, real h) {
@@ -36,23 +37,24 @@ bool impact_range(Contact* contacts, const std::uint32_t* order, std::uint32_t b
   const auto n = static_cast<std::ptrdiff_t>(end - begin);
 #pragma omp parallel for schedule(static) reduction(|| : hit) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t)
-    hit = impact_one<Friction>(contacts[order[begin + t]], bodies, rest_speed, h) || hit;
+    hit = impact_one<Friction>(contacts[order ? order[begin + t] : begin + t], bodies, rest_speed, h) || hit;
   return hit;
 }
 
 // Runs `range(begin, end)` over the colours forwards (or backwards), the
 // overflow set (one by one) last (first).
+// Runs `range(begin, end)` over the colours in the solver's order
+// (visit_colours); the overflow set one contact at a time.
 template <class F>
 void over_colours(const ColourRanges& colours, bool backwards, F&& range) {
-  const std::uint32_t nc = colours.colours;
-  const std::uint32_t ob = colours.begin[nc], oe = colours.begin[nc + 1];
-  if (backwards) {
-    for (std::uint32_t k = oe; k > ob; --k) range(k - 1, k);
-    for (std::uint32_t c = nc; c-- > 0;) range(colours.begin[c], colours.begin[c + 1]);
-  } else {
-    for (std::uint32_t c = 0; c < nc; ++c) range(colours.begin[c], colours.begin[c + 1]);
-    for (std::uint32_t k = ob; k < oe; ++k) range(k, k + 1);
-  }
+  visit_colours(colours.begin, colours.colours, backwards,
+                [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
+                  if (!serial) return range(b, e);
+                  if (reversed)
+                    for (std::uint32_t k = e; k > b; --k) range(k - 1, k);
+                  else
+                    for (std::uint32_t k = b; k < e; ++k) range(k, k + 1);
+                });
 }
 
 }  // namespace
@@ -122,14 +124,10 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
   for (std::uint32_t k = begin[rounds]; k < begin[rounds + 1]; ++k)
     hit = m_impact(cs, m_order.data(), k, k + 1, bodies, rest, h) || hit;
 
-  if (m_identity.size() < n) {
-    m_identity.resize(n);
-    for (std::uint32_t k = 0; k < n; ++k) m_identity[k] = k;
-  }
   for (int pass = 1; pass < kImpactPasses && hit; ++pass) {
     hit = false;
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      hit = m_impact(cs, m_identity.data(), b, e, bodies, rest, h) || hit;
+      hit = m_impact(cs, nullptr, b, e, bodies, rest, h) || hit;
     });
   }
 }

@@ -72,7 +72,7 @@ class ContactSolver {
 
   // Scratch of the impact stage.
   ContactColouring m_impact_colouring;
-  std::vector<std::uint32_t> m_candidates, m_level, m_order, m_identity;
+  std::vector<std::uint32_t> m_candidates, m_level, m_order;
   std::vector<std::uint64_t> m_rank;
   std::vector<SolverBody> m_bodies;  // the velocity state, packed for the solve
 };

@@ -25,6 +25,7 @@
 #include "core/device.hpp"
 #include "core/error.hpp"
 #include "integrator/integrator_cuda.cuh"
+#include "narrowphase/colouring.hpp"
 #include "narrowphase/colouring_cuda.cuh"
 #include "narrowphase/contact_cache_cuda.cuh"
 #include "narrowphase/contacts_cuda.cuh"
@@ -50,8 +51,9 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaStreamCreateWithFlags(&m_stream, cudaStreamNonBlocking));
     MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_pinned), 8 * sizeof(std::uint32_t)));
     m_device.upload(m_host, m_stream);
-    upload(m_walls, model.wall_shapes);
-    upload(m_pair_table, model.pair_coefficients);
+    ::marbles::cuda::upload(m_walls, model.wall_shapes, m_stream);
+    ::marbles::cuda::upload(m_pair_table, model.pair_coefficients, m_stream);
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     m_table = {m_pair_table.get_as<narrowphase::PairCoefficients>(), model.material_count};
     m_flags.as<unsigned long long>(2);
     MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_end_flags), 2 * sizeof(unsigned long long)));
@@ -251,29 +253,17 @@ class CudaStep final : public StepBackend {
   std::string name() const override { return "cuda"; }
 
  private:
-  template <class T>
-  void upload(DeviceBuffer& buffer, const std::vector<T>& host) {
-    T* d = buffer.as<T>(host.size());
-    if (!host.empty())
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(d, host.data(), host.size() * sizeof(T), cudaMemcpyHostToDevice, m_stream));
-    MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
-  }
   narrowphase::Contact* contacts_d() const { return m_contacts.get_as<narrowphase::Contact>(); }
   narrowphase::WallShape* walls() const { return m_walls.get_as<narrowphase::WallShape>(); }
 
-  // The colours forwards (then the overflow set, one by one) or backwards
-  // (the overflow set backwards first): the CPU solver's order.
+  // One launch per colour range in the solver's order (visit_colours, the
+  // CPU solver's too); the overflow set by one thread.
   template <class F>
   void over_colours(bool backwards, F&& launch) {
-    const std::uint32_t nc = m_colours;
-    const nc::ContactRange overflow{m_begin[nc], m_begin[nc + 1], true, backwards};
-    if (backwards) {
-      launch(overflow);
-      for (std::uint32_t c = nc; c-- > 0;) launch(nc::ContactRange{m_begin[c], m_begin[c + 1]});
-    } else {
-      for (std::uint32_t c = 0; c < nc; ++c) launch(nc::ContactRange{m_begin[c], m_begin[c + 1]});
-      launch(overflow);
-    }
+    narrowphase::visit_colours(m_begin, m_colours, backwards,
+                               [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
+                                 launch(nc::ContactRange{b, e, serial, reversed});
+                               });
   }
 
   bool read_hit() {

@@ -5,13 +5,6 @@ namespace marbles {
 namespace {
 
 template <class T>
-void put(::marbles::cuda::DeviceBuffer& buffer, const std::vector<T>& host, cudaStream_t s) {
-  T* d = buffer.as<T>(host.size());
-  if (!host.empty())
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(d, host.data(), host.size() * sizeof(T), cudaMemcpyHostToDevice, s));
-}
-
-template <class T>
 void get(const ::marbles::cuda::DeviceBuffer& buffer, std::vector<T>& host, std::size_t n, cudaStream_t s) {
   host.resize(n);
   if (n > 0)
@@ -22,13 +15,13 @@ void get(const ::marbles::cuda::DeviceBuffer& buffer, std::vector<T>& host, std:
 
 void DeviceWorld::upload(const World& w, cudaStream_t s) {
   m_count = w.size();
-  put(m_position, w.position, s);
-  put(m_velocity, w.velocity, s);
-  put(m_angular_velocity, w.angular_velocity, s);
-  put(m_radius, w.radius, s);
-  put(m_inv_mass, w.inv_mass, s);
-  put(m_inv_inertia, w.inv_inertia, s);
-  put(m_material, w.material, s);
+  ::marbles::cuda::upload(m_position, w.position, s);
+  ::marbles::cuda::upload(m_velocity, w.velocity, s);
+  ::marbles::cuda::upload(m_angular_velocity, w.angular_velocity, s);
+  ::marbles::cuda::upload(m_radius, w.radius, s);
+  ::marbles::cuda::upload(m_inv_mass, w.inv_mass, s);
+  ::marbles::cuda::upload(m_inv_inertia, w.inv_inertia, s);
+  ::marbles::cuda::upload(m_material, w.material, s);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));  // the host vectors may change after this returns
 }
 

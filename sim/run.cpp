@@ -57,12 +57,6 @@ std::size_t count_initial_overlaps(const World& world, double tolerance) {
   return deep;
 }
 
-std::string json_number(double v) {
-  if (!std::isfinite(v)) return "null";
-  std::ostringstream s;
-  s << std::setprecision(10) << v;
-  return s.str();
-}
 
 std::string json_string(const std::string& v) {
   std::string out = "\"";
@@ -75,6 +69,13 @@ std::string json_string(const std::string& v) {
 }
 
 }  // namespace
+
+std::string json_number(double v) {
+  if (!std::isfinite(v)) return "null";
+  std::ostringstream s;
+  s << std::setprecision(10) << v;
+  return s.str();
+}
 
 int check_scene(const std::string& scene_path, std::ostream& out, std::ostream& err) {
   const scene::Scene sc = scene::load_scene(scene_path);

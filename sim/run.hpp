@@ -12,6 +12,9 @@
 
 namespace marbles {
 
+// A number for JSON output: 10 significant digits, null when not finite.
+std::string json_number(double v);
+
 enum class BackendChoice { automatic, cpu, cuda };
 
 // Resolves auto/cpu/cuda to a backend; says on `log` what auto chose and why.
