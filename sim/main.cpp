@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include "bench/broadphase_bench.hpp"
 #include "bench/step_bench.hpp"
@@ -24,6 +25,14 @@ const std::map<std::string, marbles::BackendChoice> kBackends{
     {"auto", marbles::BackendChoice::automatic},
     {"cpu", marbles::BackendChoice::cpu},
     {"cuda", marbles::BackendChoice::cuda}};
+
+// `--set key.path=value`, repeatable; one value per `--set`.
+void add_set_option(CLI::App* command, std::vector<std::string>& overrides) {
+  command->add_option("--set", overrides,
+                      "override a scene value: key.path=value, e.g. time.dt=5e-4, particles[0].random.count=500, "
+                      "gravity=[0,0,-1] (repeatable)")
+      ->allow_extra_args(false);
+}
 
 }  // namespace
 
@@ -49,10 +58,13 @@ int main(int argc, char** argv) {
   run_cmd->add_flag("--no-render", no_render, "skip images and movie even if the scene asks for them");
   run_cmd->add_option("--duration", run_duration, "simulated seconds (overrides time.duration)")
       ->check(CLI::PositiveNumber);
+  add_set_option(run_cmd, run.overrides);
 
   std::string check_path;
+  std::vector<std::string> check_overrides;
   auto* check_cmd = app.add_subcommand("check", "validate a scene without running it");
   check_cmd->add_option("scene", check_path, "scene file (YAML)")->required();
+  add_set_option(check_cmd, check_overrides);
 
   std::string pairs_csv, pairs_algorithm = "subdivision";
   std::string pairs_backend = "cpu";
@@ -152,7 +164,7 @@ int main(int argc, char** argv) {
       run.render = !no_render;
       return run_scene(run, std::cout, std::cerr);
     }
-    if (*check_cmd) return check_scene(check_path, std::cout, std::cerr);
+    if (*check_cmd) return check_scene(check_path, check_overrides, std::cout, std::cerr);
     if (*pairs_cmd) return print_pairs(pairs_csv, pairs_algorithm, kBackends.at(pairs_backend), pairs_margin, std::cout, std::cerr);
     if (*bench_bp) {
       if (!bp_n.empty()) bp.n = bp_n;

@@ -77,8 +77,9 @@ std::string json_number(double v) {
   return s.str();
 }
 
-int check_scene(const std::string& scene_path, std::ostream& out, std::ostream& err) {
-  const scene::Scene sc = scene::load_scene(scene_path);
+int check_scene(const std::string& scene_path, const std::vector<std::string>& overrides, std::ostream& out,
+                std::ostream& err) {
+  const scene::Scene sc = scene::load_scene(scene_path, overrides);
   const scene::GeneratedParticles particles = scene::generate_particles(sc);
   out << scene_path << ": ok (" << particles.size() << " spheres, " << sc.materials.size() << " material(s), "
       << sc.walls.size() << " wall(s), " << std::llround(sc.time.duration / sc.time.dt) << " steps of "
@@ -87,7 +88,7 @@ int check_scene(const std::string& scene_path, std::ostream& out, std::ostream& 
 }
 
 int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
-  scene::Scene sc = scene::load_scene(options.scene_path);
+  scene::Scene sc = scene::load_scene(options.scene_path, options.overrides);
   if (options.duration) sc.time.duration = *options.duration;
   if (options.out_dir) sc.output.dir = *options.out_dir;
   const scene::GeneratedParticles particles = scene::generate_particles(sc);

@@ -7,6 +7,7 @@
 #include <iosfwd>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "broadphase/broadphase.hpp"
 
@@ -29,15 +30,17 @@ struct RunOptions {
   bool quiet = false;
   bool render = true;                  // false: skip images and movie even if the scene asks
   std::optional<double> duration;      // overrides time.duration
+  std::vector<std::string> overrides;  // --set key.path=value, applied to the scene in order
 };
 
 // `marbles run`. Returns the process exit code; throws InputError for scene
 // problems and RuntimeFailure for failures while running.
 int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err);
 
-// `marbles check`: loads, validates and generates the particles without
-// running; prints a one-line summary.
-int check_scene(const std::string& scene_path, std::ostream& out, std::ostream& err);
+// `marbles check`: loads (with the `--set` overrides), validates and
+// generates the particles without running; prints a one-line summary.
+int check_scene(const std::string& scene_path, const std::vector<std::string>& overrides, std::ostream& out,
+                std::ostream& err);
 
 // `marbles pairs`: prints the overlapping pairs "i j" (i < j, sorted) of the
 // spheres in a CSV of x,y,z,r rows. `algorithm`: subdivision (the seed's

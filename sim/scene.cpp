@@ -5,8 +5,9 @@
 // is reported once, at the node that caused it, as
 // `file:line:column: dotted.key: message`. Checks that span sections
 // (a block naming a material, dt against duration, movie needing render)
-// run after the section they depend on. The format is described for users
-// in docs/scene-format.md; keep the two in step.
+// run after the section they depend on. `--set` overrides are applied to the
+// YAML tree first (sim/scene_overrides.cpp), so they pass the same checks.
+// The format is described for users in docs/scene-format.md; keep the two in step.
 #include "sim/scene.hpp"
 
 #include <algorithm>
@@ -19,6 +20,7 @@
 #include <iterator>
 #include <sstream>
 
+#include "sim/scene_overrides.hpp"
 #include "sim/scene_yaml.hpp"
 
 namespace marbles::scene {
@@ -518,7 +520,10 @@ std::uint32_t Scene::material_index(const std::string& name, const SourceLocatio
   throw InputError(where, key, "unknown material '" + name + "'" + detail::suggestion(name, names));
 }
 
-Scene load_scene(const std::string& path) {
+namespace {
+
+// The file's one YAML document, which must be a map.
+YAML::Node read_document(const std::string& path) {
   const std::string text = read_file(path);
   std::vector<YAML::Node> documents;
   try {
@@ -531,10 +536,13 @@ Scene load_scene(const std::string& path) {
   if (documents.size() > 1)
     throw InputError(detail::location_of(path, documents[1].Mark()), "",
                      "a scene is one YAML document, this file holds " + std::to_string(documents.size()));
-
   const Field root(documents[0], "", path);
   if (!root.is_map())
     root.fail("a scene is a map of keys (time, materials, particles, ...), got " + root.description());
+  return documents[0];
+}
+
+Scene read_scene(const Field& root, const std::string& path) {
   const MapFields top(root, {"format", "name", "time", "solver", "effects", "gravity", "drag", "materials",
                              "contact_pairs", "walls", "particles", "output"});
 
@@ -581,6 +589,17 @@ Scene load_scene(const std::string& path) {
   scene.output.dir = "out/" + stem;
   if (auto f = top.optional("output")) scene.output = read_output(*f, stem);
   return scene;
+}
+
+}  // namespace
+
+Scene load_scene(const std::string& path) { return load_scene(path, {}); }
+
+Scene load_scene(const std::string& path, const std::vector<std::string>& overrides) {
+  const YAML::Node document = read_document(path);
+  detail::Origins origins;
+  detail::apply_overrides(document, overrides, origins);
+  return read_scene(Field(document, "", path, &origins), path);
 }
 
 }  // namespace marbles::scene

@@ -167,4 +167,10 @@ struct Scene {
 // Parses and validates; throws InputError (file:line:column: key: message).
 Scene load_scene(const std::string& path);
 
+// The same with `--set` overrides ("time.dt=5e-4", "particles[0].random.count=500",
+// "gravity=[0, 0, -1]": a dotted key path, then a YAML value) applied in order to
+// the file's tree before validation. A problem in an overridden value is
+// reported at the override ("--set time.dt=-1: time.dt: must be > 0, got -1").
+Scene load_scene(const std::string& path, const std::vector<std::string>& overrides);
+
 }  // namespace marbles::scene

@@ -116,17 +116,38 @@ std::string format_real(real value) {
   return ec == std::errc() ? std::string(buffer, end) : std::to_string(value);
 }
 
+// --- Origins ---------------------------------------------------------------
+
+void Origins::add(const YAML::Node& node, const std::string& text) { m_nodes.emplace_back(node, text); }
+
+const std::string* Origins::find(const YAML::Node& node) const {
+  for (auto it = m_nodes.rbegin(); it != m_nodes.rend(); ++it)
+    if (it->first.is(node)) return &it->second;
+  return nullptr;
+}
+
 // --- Field -----------------------------------------------------------------
 
-Field::Field(YAML::Node node, std::string key, const std::string& file)
-    : m_node(std::move(node)), m_key(std::move(key)), m_file(file), m_mark(m_node.Mark()) {}
+Field::Field(YAML::Node node, std::string key, const std::string& file, const Origins* origins)
+    : m_node(std::move(node)), m_key(std::move(key)), m_file(file), m_mark(m_node.Mark()), m_origins(origins) {}
 
-Field::Field(YAML::Node node, std::string key, const std::string& file, const YAML::Mark& fallback)
-    : Field(std::move(node), std::move(key), file) {
+Field::Field(YAML::Node node, std::string key, const Field& parent)
+    : Field(std::move(node), std::move(key), parent.m_file, parent.m_origins) {
+  m_from_override = parent.m_from_override;
+  if (const std::string* text = m_origins ? m_origins->find(m_node) : nullptr) {
+    m_file = *text;
+    m_from_override = true;
+  }
+}
+
+Field::Field(YAML::Node node, std::string key, const Field& parent, const YAML::Mark& fallback)
+    : Field(std::move(node), std::move(key), parent) {
   if (m_node.IsNull()) m_mark = fallback;
 }
 
-SourceLocation Field::where() const { return location_of(m_file, m_mark); }
+SourceLocation Field::where() const {
+  return m_from_override ? SourceLocation{m_file, 0, 0} : location_of(m_file, m_mark);
+}
 
 void Field::fail(const std::string& message) const { throw InputError(where(), m_key, message); }
 
@@ -229,7 +250,7 @@ std::vector<Field> Field::items() const {
   std::vector<Field> out;
   out.reserve(m_node.size());
   for (std::size_t i = 0; i < m_node.size(); ++i)
-    out.emplace_back(m_node[i], m_key + "[" + std::to_string(i) + "]", m_file);
+    out.emplace_back(m_node[i], m_key + "[" + std::to_string(i) + "]", *this);
   return out;
 }
 
@@ -249,12 +270,12 @@ void MapFields::read(const std::vector<std::string>& allowed) {
   m_self.expect_map();
   for (auto it = m_self.node().begin(); it != m_self.node().end(); ++it) {
     const YAML::Node key = it->first;
-    const SourceLocation key_where = location_of(m_self.file(), key.Mark());
-    if (!key.IsScalar()) {
-      Field(key, m_self.key(), m_self.file()).fail("expected a key name, got " +
-                                                   Field(key, "", "").description());
-    }
+    if (!key.IsScalar())
+      Field(key, m_self.key(), m_self).fail("expected a key name, got " + Field(key, "", "").description());
     const std::string name = key.Scalar();
+    const Field value(it->second, join_key(m_self.key(), name), m_self, key.Mark());
+    const SourceLocation key_where =
+        value.from_override() ? value.where() : location_of(m_self.file(), key.Mark());
     if (!allowed.empty() && std::find(allowed.begin(), allowed.end(), name) == allowed.end())
       throw InputError(key_where, m_self.key(), "unknown key '" + name + "'" + suggestion(name, allowed));
     for (const Entry& e : m_entries) {
@@ -262,8 +283,7 @@ void MapFields::read(const std::vector<std::string>& allowed) {
         throw InputError(key_where, m_self.key(),
                          "duplicate key '" + name + "' (first given at line " + std::to_string(e.name_where.line) + ")");
     }
-    m_entries.push_back(
-        {name, key_where, Field(it->second, join_key(m_self.key(), name), m_self.file(), key.Mark())});
+    m_entries.push_back({name, key_where, value});
   }
 }
 

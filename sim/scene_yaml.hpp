@@ -7,6 +7,8 @@
 // `file:line:column: key: message` with the node's own position.
 // MapFields checks a map's keys against the allowed ones once (unknown keys
 // with a suggestion, duplicates, non-scalar keys) and then hands out fields.
+// Nodes put in by `--set` overrides (Origins) report the override instead of
+// a file line.
 #pragma once
 
 #include <cstdint>
@@ -39,16 +41,33 @@ std::string format_number(double value);
 // The same for a value stored as `real` (0.1f prints as 0.1, not 0.10000000149011612).
 std::string format_real(real value);
 
+// The nodes that `--set` overrides put into a tree, each with the text of its
+// override ("--set time.dt=-1").
+class Origins {
+ public:
+  void add(const YAML::Node& node, const std::string& text);
+  // The override that put `node` in (the latest when several did), or nullptr.
+  const std::string* find(const YAML::Node& node) const;
+
+ private:
+  std::vector<std::pair<YAML::Node, std::string>> m_nodes;
+};
+
 class Field {
  public:
-  Field(YAML::Node node, std::string key, const std::string& file);
+  Field(YAML::Node node, std::string key, const std::string& file, const Origins* origins = nullptr);
+  // A node inside `parent` (an item or a map value): the same file, unless an
+  // override put the node (or one above it) in; then the override's text.
+  Field(YAML::Node node, std::string key, const Field& parent);
   // `fallback` is where to point when the node is null: yaml-cpp marks an
   // empty value (`key:` and nothing) at the next token, often lines below.
-  Field(YAML::Node node, std::string key, const std::string& file, const YAML::Mark& fallback);
+  Field(YAML::Node node, std::string key, const Field& parent, const YAML::Mark& fallback);
 
   const YAML::Node& node() const { return m_node; }
   const std::string& key() const { return m_key; }
   const std::string& file() const { return m_file; }
+  bool from_override() const { return m_from_override; }
+  // file:line:column, or the override's text without a line.
   SourceLocation where() const;
 
   [[noreturn]] void fail(const std::string& message) const;
@@ -82,6 +101,8 @@ class Field {
   std::string m_key;
   std::string m_file;
   YAML::Mark m_mark;
+  const Origins* m_origins = nullptr;
+  bool m_from_override = false;
 };
 
 class MapFields {

@@ -1,6 +1,6 @@
 // tests/sim/cli_check_test.cpp — `marbles check SCENE` as a user runs it:
 // exit 0 and a summary on stdout for every shipped scene; exit 2 and the
-// loader's message on stderr for every bad-input rule.
+// loader's message on stderr for every bad-input rule and for a bad `--set`.
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
@@ -11,6 +11,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "tests/sim/scene_cases.hpp"
 
@@ -24,7 +25,13 @@ struct Outcome {
   std::string out, err;
 };
 
-std::string quoted(const std::string& s) { return "'" + test::replace_all(s, "'", "'\\''") + "'"; }
+// Single-quoted for the shell (built by appending: GCC 12 warns falsely on "'" + std::string&&).
+std::string quoted(const std::string& s) {
+  std::string out = "'";
+  out += test::replace_all(s, "'", "'\\''");
+  out += "'";
+  return out;
+}
 
 std::string slurp(const std::string& path) {
   std::ifstream in(path);
@@ -33,9 +40,13 @@ std::string slurp(const std::string& path) {
   return text.str();
 }
 
-Outcome run_check(const std::string& scene, const test::ScratchDir& scratch) {
+// `marbles check SCENE [--set OVERRIDE]...`
+Outcome run_check(const std::string& scene, const test::ScratchDir& scratch,
+                  const std::vector<std::string>& overrides = {}) {
   const std::string out = scratch.path() + "/stdout.txt", err = scratch.path() + "/stderr.txt";
-  const std::string command = quoted(kMarbles) + " check " + quoted(scene) + " >" + quoted(out) + " 2>" + quoted(err);
+  std::string command = quoted(kMarbles) + " check " + quoted(scene);
+  for (const std::string& o : overrides) command += " --set " + quoted(o);
+  command += " >" + quoted(out) + " 2>" + quoted(err);
   const int status = std::system(command.c_str());
   Outcome o;
   o.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -65,6 +76,29 @@ TEST_F(CliCheck, EveryShippedSceneExitsZero) {
     EXPECT_FALSE(o.out.empty());
     EXPECT_EQ(std::count(o.out.begin(), o.out.end(), '\n'), 1) << "one summary line, got:\n" << o.out;
   }
+}
+
+TEST_F(CliCheck, SetOverridesTheScene) {
+  const test::ScratchDir scratch("cli_set");
+  const Outcome o = run_check(MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml", scratch,
+                              {"time.dt=5e-4", "solver.iterations=20"});
+  EXPECT_EQ(o.exit_code, 0) << o.err;
+  EXPECT_NE(o.out.find("6000 steps of 0.0005 s"), std::string::npos) << o.out;
+}
+
+TEST_F(CliCheck, BadSetValueExitsTwoNamingTheOverride) {
+  const test::ScratchDir scratch("cli_set_bad");
+  const Outcome o = run_check(MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml", scratch, {"time.dt=-1"});
+  EXPECT_EQ(o.exit_code, 2);
+  EXPECT_NE(o.err.find("--set time.dt=-1: time.dt: must be > 0"), std::string::npos) << o.err;
+  EXPECT_TRUE(o.out.empty()) << o.out;
+}
+
+TEST_F(CliCheck, MalformedSetExitsTwo) {
+  const test::ScratchDir scratch("cli_set_malformed");
+  const Outcome o = run_check(MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml", scratch, {"time.dt"});
+  EXPECT_EQ(o.exit_code, 2);
+  EXPECT_NE(o.err.find("--set time.dt: expected key.path=value"), std::string::npos) << o.err;
 }
 
 class CliCheckBad : public ::testing::TestWithParam<test::BadScene> {

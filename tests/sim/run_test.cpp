@@ -92,3 +92,20 @@ TEST(Run, RenderingDoesNotChangeTheSimulation) {
   EXPECT_NE(read_file(dir / "without" / "summary.json").find("\"steps\": 200"), std::string::npos);
   fs::remove_all(dir);
 }
+
+TEST(Run, SetOverridesChangeTheRun) {
+  const fs::path dir = temp_dir("set");
+  RunOptions options;
+  options.scene_path = write_scene(dir).string();
+  options.out_dir = (dir / "out").string();
+  options.backend = BackendChoice::cpu;
+  options.quiet = true;
+  options.render = false;
+  options.overrides = {"time.duration=0.01", "time.dt=5e-4", "particles[0].random.count=20"};
+  std::ostringstream out, err;
+  ASSERT_EQ(run_scene(options, out, err), 0) << err.str();
+  const std::string summary = read_file(dir / "out" / "summary.json");
+  EXPECT_NE(summary.find("\"steps\": 20"), std::string::npos) << summary;
+  EXPECT_NE(summary.find("\"spheres\": 20"), std::string::npos) << summary;
+  fs::remove_all(dir);
+}

@@ -244,5 +244,98 @@ TEST(SceneLoad, MaterialIndexThrowsAtTheGivenPlace) {
   }
 }
 
+// --- --set overrides -----------------------------------------------------------
+
+#define SET_SCENE                                  \
+  SCENE_TIME                                       \
+  "materials:\n  glass: {density: 2500}\n"         \
+  "particles:\n  - random: {count: 10, min: [0, 0, 0], max: [1, 1, 1], radius: 0.02}\n"
+
+TEST(SceneOverrides, ChangeTheLoadedValues) {
+  const ScratchDir dir("set_values");
+  const std::string path = dir.write("s.yaml", SET_SCENE);
+  const Scene s = load_scene(path, {"time.dt=5e-4", "particles[0].random.count=500", "materials.glass.restitution=0.9",
+                                    "solver.iterations=20", "gravity=[0, 0, -1]", "time.substeps=2",
+                                    "time.substeps=3", "particles[0].velocity={random: {speed: 2}}"});
+  EXPECT_DOUBLE_EQ(s.time.dt, 5e-4);
+  EXPECT_DOUBLE_EQ(s.time.duration, 1);  // untouched
+  EXPECT_EQ(s.time.substeps, 3);         // the later override wins
+  ASSERT_EQ(s.particles.size(), 1u);
+  EXPECT_EQ(s.particles[0].count, 500u);
+  EXPECT_EQ(s.particles[0].velocity.kind, VelocitySpec::Kind::random);
+  EXPECT_DOUBLE_EQ(s.particles[0].velocity.speed, 2);
+  EXPECT_DOUBLE_EQ(s.materials[0].density, 2500);
+  EXPECT_DOUBLE_EQ(s.materials[0].restitution, 0.9);
+  EXPECT_EQ(s.solver.iterations, 20);  // `solver:` created
+  EXPECT_FLOAT_EQ(s.gravity.z, -1.0f);
+  EXPECT_EQ(generate_particles(s).size(), 500u);
+
+  const Scene plain = load_scene(path);
+  EXPECT_DOUBLE_EQ(plain.time.dt, 0.001);
+  EXPECT_EQ(plain.solver.iterations, 10);
+}
+
+TEST(SceneOverrides, NullValueBecomesAMap) {
+  const ScratchDir dir("set_null");
+  const std::string path =
+      dir.write("s.yaml", SCENE_TIME "materials:\n  glass:\n" "particles:\n  - list: {positions: [[0, 0, 1]], radius: 0.1}\n");
+  const Scene s = load_scene(path, {"materials.glass.density=3000", "particles[0].list.positions[0]=[1, 2, 3]"});
+  EXPECT_DOUBLE_EQ(s.materials[0].density, 3000);
+  EXPECT_FLOAT_EQ(s.particles[0].positions[0].y, 2.0f);
+}
+
+struct BadOverride {
+  const char* name;
+  const char* text;
+  const char* expected;  // the whole message; a trailing "..." means "starts with"
+};
+
+void PrintTo(const BadOverride& c, std::ostream* os) { *os << c.name; }
+
+class BadOverrideTest : public ::testing::TestWithParam<BadOverride> {};
+
+TEST_P(BadOverrideTest, NamesTheOverride) {
+  const BadOverride& c = GetParam();
+  const ScratchDir dir(std::string("set_") + c.name);
+  const std::string path = dir.write("s.yaml", SET_SCENE);
+  try {  // a valid override first: the error names the one at fault
+    generate_particles(load_scene(path, {"time.substeps=2", c.text}));
+    FAIL() << "no error; expected: " << c.expected;
+  } catch (const InputError& e) {
+    EXPECT_TRUE(test::message_matches(c.expected, e.what())) << "expected: " << c.expected << "\n     got: " << e.what();
+    EXPECT_EQ(e.where().file, std::string("--set ") + c.text);
+    EXPECT_EQ(e.where().line, 0);
+  }
+}
+
+const BadOverride kBadOverrides[] = {
+    // invalid values: the same checks as in a file, at the override
+    {"negative_dt", "time.dt=-1", "--set time.dt=-1: time.dt: must be > 0, got -1"},
+    {"dt_over_duration", "time.dt=2", "--set time.dt=2: time.dt: must be <= time.duration (1), got 2"},
+    {"under_the_value", "materials.glass={density: -5}", "--set materials.glass={density: -5}: materials.glass.density: must be > 0, got -5"},
+    {"created_key_unknown", "time.dtt=5", "--set time.dtt=5: time: unknown key 'dtt' (did you mean 'dt'?)"},
+    {"created_section_unknown", "solvr.iterations=5", "--set solvr.iterations=5: unknown key 'solvr' (did you mean 'solver'?)"},
+    {"short_vector", "gravity=[0, -1]", "--set gravity=[0, -1]: gravity: expected [x, y, z], got a sequence of 2"},
+    {"empty_value", "solver.iterations=", "--set solver.iterations=: solver.iterations: expected an integer, got nothing (null)"},
+    {"found_while_generating", "particles[0].random={count: 1000, min: [0, 0, 0], max: [0.1, 0.1, 0.1], radius: 0.02}",
+     "--set particles[0].random={count: 1000, min: [0, 0, 0], max: [0.1, 0.1, 0.1], radius: 0.02}: "
+     "particles[0].random.count: could place only ..."},
+    // paths that do not fit the tree
+    {"past_the_end", "particles[1].random.count=5", "--set particles[1].random.count=5: particles: has 1 item(s); [1] is past the end"},
+    {"into_a_scalar", "time.dt.x=5", "--set time.dt.x=5: time.dt: cannot hold key 'x': expected a map, got '0.001'"},
+    {"index_a_map", "time[0]=5", "--set time[0]=5: time: cannot take item [0]: expected a sequence, got a map"},
+    // malformed overrides
+    {"no_equals", "time.dt", "--set time.dt: expected key.path=value, e.g. time.dt=5e-4"},
+    {"empty_key", "=5", "--set =5: expected key.path=value, e.g. time.dt=5e-4"},
+    {"bad_index", "particles[x].random.count=5", "--set particles[x].random.count=5: expected an index such as [0] after 'particles'"},
+    {"unclosed_index", "particles[0=5", "--set particles[0=5: expected an index such as [0] after 'particles'"},
+    {"empty_segment", "time..dt=5", "--set time..dt=5: expected a key name at character 6 of 'time..dt'"},
+    {"stray_bracket", "time]=5", "--set time]=5: unexpected ']' at character 5 of 'time]'"},
+    {"bad_yaml", "gravity=[0, 0", "--set gravity=[0, 0: the value is not valid YAML: end of sequence flow not found"},
+};
+
+INSTANTIATE_TEST_SUITE_P(Rules, BadOverrideTest, ::testing::ValuesIn(kBadOverrides),
+                         [](const ::testing::TestParamInfo<BadOverride>& info) { return std::string(info.param.name); });
+
 }  // namespace
 }  // namespace marbles::scene
