@@ -4,7 +4,14 @@
 //   v(t+h) = v(t) + h a(t)          velocities first (forces, then contacts)
 //   x(t+h) = x(t) + h v(t+h)        positions from the new velocities
 // Symplectic: energy errors stay bounded for conservative forces instead of
-// growing as with explicit Euler.
+// growing as with explicit Euler. Its free flight under gravity is off by
+// g h^2 / 2 per substep (first order in h over a flight).
+//
+// Velocity Verlet (solver.integrator: velocity_verlet) is the same functions
+// in kick-drift-kick order: gravity_kick(h/2), contacts, drift(h),
+// gravity_kick(h/2). Under constant forces x(t+h) = x + h v + h^2 g / 2
+// exactly; contacts act on the half-step velocity, the one the drift uses,
+// so speculative contacts keep their no-tunnelling guarantee.
 #pragma once
 
 #include "core/vec3.hpp"

@@ -279,12 +279,34 @@ MARBLES_HD_INLINE void solve_rolling(Contact& c, BodyState& A, BodyState& B) {
 // applied in time-of-impact order with the velocities left by the earlier
 // ones, so a chain (Newton's cradle) or a triple collision resolves as a
 // sequence of binary impacts: with e = 1 each conserves energy exactly.
+//
+// `accel_n`: the pair's relative acceleration along the normal during the
+// substep (gravity against a wall under velocity Verlet, whose v_n is the
+// half-step velocity; 0 otherwise). The impact then happens at the time the
+// accelerated gap closes, with the speed it has then, and the bodies leave
+// with the velocity and gap that the exact motion reaches at the end of the
+// substep: a ball bouncing on a floor keeps its rebound heights exactly.
 template <bool Friction>
-MARBLES_HD_INLINE bool apply_impact(Contact& c, BodyState& A, BodyState& B, real rest_speed, real h) {
+MARBLES_HD_INLINE bool apply_impact(Contact& c, BodyState& A, BodyState& B, real rest_speed, real h, real accel_n) {
   const real vn = dot(A.v - B.v, c.normal);
   if (vn > -rest_speed || !(c.separation < -vn * h)) return false;
   const real e = c.coeff.restitution;
-  const real lambda = -(1 + e) * c.normal_mass * vn;
+  real target = -e * vn;  // the normal velocity after the impact
+  real shift = c.separation > 0 ? (1 + e) * c.separation : real(0);
+  if (accel_n != 0 && c.separation > 0) {
+    const real half = real(0.5) * h;
+    const real vs = vn - accel_n * half;  // at the start of the substep
+    const real disc = vs * vs - 2 * accel_n * c.separation;
+    real toi = disc > 0 ? 2 * c.separation / (-vs + std::sqrt(disc)) : c.separation / -vn;
+    if (!(toi >= 0)) toi = 0;
+    if (toi > h) toi = h;
+    const real v_hit = vn + accel_n * (toi - half);  // < 0
+    const real left = h - toi;
+    target = -e * v_hit + accel_n * (half - toi);
+    const real gap_end = -e * v_hit * left + real(0.5) * accel_n * left * left;
+    shift = c.separation + h * target - gap_end;
+  }
+  const real lambda = c.normal_mass * (target - vn);
   c.impact_impulse += lambda;
   apply_impulse(c, A, B, c.normal * lambda);
   if constexpr (Friction) {
@@ -296,7 +318,7 @@ MARBLES_HD_INLINE bool apply_impact(Contact& c, BodyState& A, BodyState& B, real
   // separate at e |v_n| from then on; with the new velocity acting over the
   // whole substep they would end (1 + e) gap too far apart. The projection
   // stage takes that back (positions only).
-  if (c.separation > 0) c.rebound_shift += (1 + e) * c.separation;
+  if (shift > 0) c.rebound_shift += shift;
   return true;
 }
 

@@ -32,12 +32,12 @@ void warm_start_range(Contact* contacts, std::uint32_t begin, std::uint32_t end,
 // contacts[k], one colour); true if any hit.
 template <bool Friction>
 bool impact_range(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
-                  SolverBody* bodies, real rest_speed, real h) {
+                  SolverBody* bodies, const ImpactParams& p) {
   bool hit = false;
   const auto n = static_cast<std::ptrdiff_t>(end - begin);
 #pragma omp parallel for schedule(static) reduction(|| : hit) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t)
-    hit = impact_one<Friction>(contacts[order ? order[begin + t] : begin + t], bodies, rest_speed, h) || hit;
+    hit = impact_one<Friction>(contacts[order ? order[begin + t] : begin + t], bodies, p) || hit;
   return hit;
 }
 
@@ -97,6 +97,7 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
 void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& colours, SolverBody* bodies,
                             std::size_t body_count, real h) {
   const real rest = m_settings.rest_speed;
+  const ImpactParams params{rest, h, m_settings.wall_accel};
   const auto n = static_cast<std::uint32_t>(contacts.size());
   m_candidates.clear();
   for (std::uint32_t k = 0; k < n; ++k)
@@ -120,14 +121,14 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
   }
   Contact* cs = contacts.data();
   bool hit = false;
-  for (std::uint32_t l = 0; l < rounds; ++l) hit = m_impact(cs, m_order.data(), begin[l], begin[l + 1], bodies, rest, h) || hit;
+  for (std::uint32_t l = 0; l < rounds; ++l) hit = m_impact(cs, m_order.data(), begin[l], begin[l + 1], bodies, params) || hit;
   for (std::uint32_t k = begin[rounds]; k < begin[rounds + 1]; ++k)
-    hit = m_impact(cs, m_order.data(), k, k + 1, bodies, rest, h) || hit;
+    hit = m_impact(cs, m_order.data(), k, k + 1, bodies, params) || hit;
 
   for (int pass = 1; pass < kImpactPasses && hit; ++pass) {
     hit = false;
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      hit = m_impact(cs, nullptr, b, e, bodies, rest, h) || hit;
+      hit = m_impact(cs, nullptr, b, e, bodies, params) || hit;
     });
   }
 }

@@ -64,7 +64,7 @@ class ContactSolver {
   using RangeFn = void (*)(Contact* contacts, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
                            real inv_h, bool backwards);
   using ImpactFn = bool (*)(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
-                            SolverBody* bodies, real rest_speed, real h);
+                            SolverBody* bodies, const ImpactParams& p);
   SolverSettings m_settings;
   RangeFn m_sweep = nullptr;
   RangeFn m_warm_start = nullptr;

@@ -54,10 +54,10 @@ __global__ void sweep_kernel(Contact* contacts, ContactRange r, SolverBody* bodi
 
 template <bool Friction>
 __global__ void impact_kernel(Contact* contacts, const std::uint32_t* order, ContactRange r, SolverBody* bodies,
-                              real rest_speed, real h, unsigned* hit) {
+                              ImpactParams p, unsigned* hit) {
   bool any = false;
   for_range(r, [&](std::uint32_t k) {
-    any = impact_one<Friction>(contacts[order ? order[k] : k], bodies, rest_speed, h) || any;
+    any = impact_one<Friction>(contacts[order ? order[k] : k], bodies, p) || any;
   });
   if (any) *hit = 1u;
 }
@@ -131,12 +131,12 @@ void launch_sweep(Contact* contacts, ContactRange r, SolverBody* bodies, real in
 }
 
 void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange r, SolverBody* bodies,
-                    real rest_speed, real h, bool friction, unsigned* hit, cudaStream_t s) {
+                    const ImpactParams& p, bool friction, unsigned* hit, cudaStream_t s) {
   if (r.end <= r.begin) return;
   if (friction)
-    impact_kernel<true><<<blocks(r), kBlock, 0, s>>>(contacts, order, r, bodies, rest_speed, h, hit);
+    impact_kernel<true><<<blocks(r), kBlock, 0, s>>>(contacts, order, r, bodies, p, hit);
   else
-    impact_kernel<false><<<blocks(r), kBlock, 0, s>>>(contacts, order, r, bodies, rest_speed, h, hit);
+    impact_kernel<false><<<blocks(r), kBlock, 0, s>>>(contacts, order, r, bodies, p, hit);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

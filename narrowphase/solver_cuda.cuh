@@ -38,7 +38,7 @@ void launch_sweep(Contact* contacts, ContactRange range, SolverBody* bodies, rea
 // Impacts of contacts[order[k]] for k in range (order null: k itself);
 // sets *hit = 1 when any hit.
 void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange range, SolverBody* bodies,
-                    real rest_speed, real h, bool friction, unsigned* hit, cudaStream_t stream);
+                    const ImpactParams& p, bool friction, unsigned* hit, cudaStream_t stream);
 void launch_rebound(const Contact* contacts, ContactRange range, const BodiesView& bodies, const WallShape* walls,
                     cudaStream_t stream);
 void launch_project(const Contact* contacts, ContactRange range, const BodiesView& bodies, const WallShape* walls,

@@ -25,6 +25,15 @@ struct SolverSettings {
   real max_correction = real(0.2);// fraction of the smaller radius moved per projection, at most
   int position_iterations = 4;    // projection sweeps per substep
   bool warm_start = true;         // start from the last substep's impulses
+  Vec3 wall_accel{};              // m/s^2: the spheres' acceleration seen by wall impacts (gravity under
+                                  // velocity Verlet, whose impacts see half-step velocities; else 0)
+};
+
+// What the impact stage reads besides the contacts and bodies.
+struct ImpactParams {
+  real rest_speed;  // m/s: slower approaches do not bounce
+  real h;           // s, the substep
+  Vec3 wall_accel;  // SolverSettings::wall_accel
 };
 
 // The velocity state of one sphere as the velocity stages read and write it,
@@ -94,10 +103,11 @@ MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
 
 // The impact of one contact (apply_impact); true if it hit.
 template <bool Friction>
-MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, real rest_speed, real h) {
+MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactParams& p) {
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
-  if (!apply_impact<Friction>(c, A, B, rest_speed, h)) return false;
+  const real accel_n = is_wall(c.b) ? dot(p.wall_accel, c.normal) : real(0);
+  if (!apply_impact<Friction>(c, A, B, p.rest_speed, p.h, accel_n)) return false;
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
   return true;

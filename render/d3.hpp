@@ -1,6 +1,7 @@
 // render/d3.hpp — small double-precision 3-D vectors for the camera and the
-// light (render-internal): view matrices are built in double so that scenes
-// far from the origin still project without jitter.
+// light (view matrices are built in double so that scenes far from the
+// origin still project without jitter) and for the reference probe's
+// measurements (sim/reference.cpp).
 #pragma once
 
 #include <cmath>

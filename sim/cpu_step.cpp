@@ -28,7 +28,7 @@ class CpuStep final : public StepBackend {
 
   void apply_body_forces(real h) override {
     const BodiesView bodies = m_world.view();
-    if (m_model.gravity) integrator::apply_gravity(bodies, m_model.g, h);
+    if (m_model.gravity) integrator::apply_gravity(bodies, m_model.g, m_model.first_kick(h));
     if (m_model.drag) integrator::apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h);
   }
 
@@ -37,7 +37,8 @@ class CpuStep final : public StepBackend {
   // contact_reach), so every pair that can meet in this substep is a
   // candidate, however fast; the narrow phase keeps those that overlap or
   // can close their gap (speculative contacts), so nothing tunnels.
-  void find_contacts(real h) override {
+  void find_contacts(real substep) override {
+    const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_contacts.clear();
     if (!m_model.collisions && !m_model.wall_contacts) return;
     const BodiesView bodies = m_world.view();
@@ -76,6 +77,7 @@ class CpuStep final : public StepBackend {
 
   void integrate_positions(real h) override {
     m_non_finite = integrator::integrate_positions(m_world.view(), h) || m_non_finite;
+    if (m_model.gravity && m_model.verlet) integrator::apply_gravity(m_world.view(), m_model.g, m_model.second_kick(h));
     narrowphase::advance_walls(m_walls, h);
   }
 

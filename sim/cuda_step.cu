@@ -71,14 +71,16 @@ class CudaStep final : public StepBackend {
 
   void apply_body_forces(real h) override {
     const BodiesView bodies = m_device.view();
-    if (m_model.gravity) integrator::cuda::launch_apply_gravity(bodies, m_model.g, h, m_sm, m_stream);
+    if (m_model.gravity)
+      integrator::cuda::launch_apply_gravity(bodies, m_model.g, m_model.first_kick(h), m_sm, m_stream);
     if (m_model.drag)
       integrator::cuda::launch_apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h, m_sm, m_stream);
   }
 
   // Swept bounds -> broad phase -> sphere contacts (in pair order), then wall
   // contacts (by sphere, then wall): flag, scan, one read of both counts, write.
-  void find_contacts(real h) override {
+  void find_contacts(real substep) override {
+    const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_count = 0;
     if (!m_model.collisions && !m_model.wall_contacts) return;
     const BodiesView bodies = m_device.view();
@@ -163,6 +165,8 @@ class CudaStep final : public StepBackend {
 
   void integrate_positions(real h) override {
     integrator::cuda::launch_integrate_positions(m_device.view(), h, m_flags.get_as<unsigned>(), m_sm, m_stream);  // flags[0]
+    if (m_model.gravity && m_model.verlet)
+      integrator::cuda::launch_apply_gravity(m_device.view(), m_model.g, m_model.second_kick(h), m_sm, m_stream);
     nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream);
   }
 
@@ -278,6 +282,7 @@ class CudaStep final : public StepBackend {
   void impacts(narrowphase::SolverBody* bodies, real h) {
     narrowphase::Contact* contacts = contacts_d();
     const real rest = m_model.solver.rest_speed;
+    const narrowphase::ImpactParams params{rest, h, m_model.solver.wall_accel};
     std::uint32_t* order = nullptr;
     const std::uint32_t levels =
         m_colouring.impact_levels(contacts, m_count, m_device.size(), rest, order, m_levels, m_sm, m_stream);
@@ -286,13 +291,13 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, sizeof(unsigned), m_stream));
     const bool friction = m_model.solver.friction;
     for (std::uint32_t l = 0; l < levels; ++l)
-      nc::launch_impacts(contacts, order, {m_levels[l], m_levels[l + 1]}, bodies, rest, h, friction, hit, m_stream);
-    nc::launch_impacts(contacts, order, {m_levels[levels], m_levels[levels + 1], true, false}, bodies, rest, h,
+      nc::launch_impacts(contacts, order, {m_levels[l], m_levels[l + 1]}, bodies, params, friction, hit, m_stream);
+    nc::launch_impacts(contacts, order, {m_levels[levels], m_levels[levels + 1], true, false}, bodies, params,
                        friction, hit, m_stream);
     for (int pass = 1; pass < narrowphase::kImpactPasses && read_hit(); ++pass) {
       MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, sizeof(unsigned), m_stream));
       over_colours(false, [&](nc::ContactRange r) {
-        nc::launch_impacts(contacts, nullptr, r, bodies, rest, h, friction, hit, m_stream);
+        nc::launch_impacts(contacts, nullptr, r, bodies, params, friction, hit, m_stream);
       });
     }
   }

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
+#include <optional>
 #include <sstream>
 
 #include "core/device.hpp"
@@ -14,6 +15,7 @@
 #include "sim/output.hpp"
 #include "sim/particles.hpp"
 #include "sim/progress.hpp"
+#include "sim/reference.hpp"
 #include "sim/scene.hpp"
 #include "sim/simulation.hpp"
 #include "sim/world.hpp"
@@ -77,13 +79,19 @@ std::string json_number(double v) {
   return s.str();
 }
 
+std::string json_numbers(const std::vector<double>& values) {
+  std::string out = "[";
+  for (std::size_t i = 0; i < values.size(); ++i) out += (i ? ", " : "") + json_number(values[i]);
+  return out + "]";
+}
+
 int check_scene(const std::string& scene_path, const std::vector<std::string>& overrides, std::ostream& out,
                 std::ostream& err) {
   const scene::Scene sc = scene::load_scene(scene_path, overrides);
   const scene::GeneratedParticles particles = scene::generate_particles(sc);
   out << scene_path << ": ok (" << particles.size() << " spheres, " << sc.materials.size() << " material(s), "
       << sc.walls.size() << " wall(s), " << std::llround(sc.time.duration / sc.time.dt) << " steps of "
-      << sc.time.dt << " s)\n";
+      << sc.time.dt << " s, " << kRealName << ")\n";
   return 0;
 }
 
@@ -91,6 +99,11 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   scene::Scene sc = scene::load_scene(options.scene_path, options.overrides);
   if (options.duration) sc.time.duration = *options.duration;
   if (options.out_dir) sc.output.dir = *options.out_dir;
+  if (options.summary_only) {
+    sc.output.vtk_every = 0;
+    sc.output.render.enabled = false;
+    sc.output.movie.enabled = false;
+  }
   const scene::GeneratedParticles particles = scene::generate_particles(sc);
   std::ostringstream quiet_sink;  // --quiet: only the summary
   const broadphase::Backend backend = select_backend(options.backend, options.quiet ? quiet_sink : out);
@@ -105,6 +118,9 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   RunOutput output(sc, sc.output.dir, sim.walls(), options.render, err);
   const double e_start = sim.world().kinetic_energy();
   const std::uint64_t total_steps = static_cast<std::uint64_t>(std::llround(sc.time.duration / sc.time.dt));
+  std::optional<ReferenceProbe> probe;
+  if (sc.reference.kind != scene::ReferenceSpec::Kind::none) probe.emplace(sc, sim.world());
+  const std::uint64_t probe_every = probe ? probe->every(total_steps) : 0;
 
   Progress progress(!options.quiet);
   double candidate_sum = 0, contact_sum = 0, step_seconds = 0;
@@ -124,6 +140,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
                            json_number(sim.time()) + " s), sphere " + std::to_string(bad) +
                            ": reduce dt or increase substeps");
     }
+    if (probe && sim.steps() % probe_every == 0) probe->sample(sim.time(), sim.world());
     if (output.due(sim.steps())) {
       progress.finish();
       output.write(sim);
@@ -136,6 +153,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
 
   const double steps = std::max<double>(1, static_cast<double>(sim.steps()));
   const double e_end = sim.world().kinetic_energy();
+  std::optional<ReferenceResult> reference;
+  if (probe) reference = probe->finish(sim.time(), sim.world());
   std::ostringstream json;
   json << "{\n"
        << "  \"scene\": " << json_string(sc.path) << ",\n"
@@ -153,8 +172,13 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
        << "  \"max_overlap\": " << json_number(deepest) << ",\n"
        << "  \"max_overlap_end\": " << json_number(sim.last_step().max_overlap) << ",\n"
        << "  \"kinetic_energy_start\": " << json_number(e_start) << ",\n"
-       << "  \"kinetic_energy_end\": " << json_number(e_end) << "\n"
-       << "}\n";
+       << "  \"kinetic_energy_end\": " << json_number(e_end);
+  if (reference)
+    json << ",\n  \"reference\": {\"kind\": " << json_string(reference->kind)
+         << ", \"expected\": " << json_numbers(reference->expected) << ", \"measured\": "
+         << json_numbers(reference->measured) << ", \"error\": " << json_number(reference->error)
+         << ", \"note\": " << json_string(reference->note) << "}";
+  json << "\n}\n";
   std::filesystem::create_directories(sc.output.dir);
   const std::string summary_path = (std::filesystem::path(sc.output.dir) / "summary.json").string();
   render::write_file_atomic(summary_path, json.str());
@@ -164,6 +188,9 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       << " candidate pairs, " << contact_sum / steps << " contacts per substep); largest overlap "
       << 100 * deepest << " % of a radius (" << 100 * sim.last_step().max_overlap << " % at the end); kinetic energy " << e_start
       << " -> " << e_end << " J\n"
+      << (reference && std::isfinite(reference->error)
+              ? "reference " + reference->kind + ": error " + json_number(100 * reference->error) + " %\n"
+              : std::string())
       << "output: " << sc.output.dir << "  (" << written << "summary.json)\n";
   return 0;
 }

@@ -15,6 +15,8 @@ namespace marbles {
 
 // A number for JSON output: 10 significant digits, null when not finite.
 std::string json_number(double v);
+// A JSON array of json_number values.
+std::string json_numbers(const std::vector<double>& values);
 
 enum class BackendChoice { automatic, cpu, cuda };
 
@@ -31,6 +33,7 @@ struct RunOptions {
   bool render = true;                  // false: skip images and movie even if the scene asks
   std::optional<double> duration;      // overrides time.duration
   std::vector<std::string> overrides;  // --set key.path=value, applied to the scene in order
+  bool summary_only = false;           // write only summary.json (no frames, images or movie)
 };
 
 // `marbles run`. Returns the process exit code; throws InputError for scene

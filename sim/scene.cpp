@@ -37,7 +37,8 @@ const std::vector<std::string> kEffectNames = {"gravity",  "collisions",        
                                                "friction", "rolling_resistance", "drag"};
 const std::vector<Effect> kDefaultEffects = {Effect::gravity, Effect::collisions, Effect::walls,
                                              Effect::restitution, Effect::friction};
-const std::vector<std::string> kIntegrators = {"symplectic_euler"};
+const std::vector<std::string> kIntegrators = {"symplectic_euler", "velocity_verlet"};
+const std::vector<std::string> kPrecisions = {"float", "double"};
 const std::vector<std::string> kColorBy = {"speed", "id", "radius", "material"};
 const std::vector<std::string> kOutputFields = {"radius", "velocity", "angular_velocity", "id", "material"};
 
@@ -65,7 +66,7 @@ TimeSpec read_time(const Field& field) {
 }
 
 SolverSpec read_solver(const Field& field) {
-  const MapFields map(field, {"iterations", "integrator"});
+  const MapFields map(field, {"iterations", "integrator", "speculative", "precision"});
   SolverSpec solver;
   if (auto f = map.optional("iterations")) solver.iterations = f->integer_at_least(1);
   if (auto f = map.optional("integrator")) {
@@ -73,7 +74,76 @@ SolverSpec read_solver(const Field& field) {
     if (std::find(kIntegrators.begin(), kIntegrators.end(), solver.integrator) == kIntegrators.end())
       f->fail("unknown integrator '" + solver.integrator + "'" + detail::suggestion(solver.integrator, kIntegrators));
   }
+  if (auto f = map.optional("speculative")) solver.speculative = f->boolean();
+  if (auto f = map.optional("precision")) {
+    solver.precision = f->word();
+    solver.precision_where = f->where();
+    if (std::find(kPrecisions.begin(), kPrecisions.end(), solver.precision) == kPrecisions.end())
+      f->fail("unknown precision '" + solver.precision + "'" + detail::suggestion(solver.precision, kPrecisions));
+  }
   return solver;
+}
+
+const std::vector<std::string> kReferenceKinds = {"rebound_heights", "time_to_rest",    "incline",  "slide_to_roll",
+                                                   "oblique_rebound", "kinetic_energy", "momentum", "finest"};
+
+// `reference:` is one kind: a map {kind: {parameters}}, `kind: conserved`
+// for the conservation kinds, or the word `finest`.
+ReferenceSpec read_reference(const Field& field) {
+  using Kind = ReferenceSpec::Kind;
+  ReferenceSpec ref;
+  ref.where = field.where();
+  if (field.is_scalar()) {
+    if (field.word() != "finest")
+      field.fail("expected a map {kind: {...}} or 'finest', got " + field.description() +
+                 detail::suggestion(field.word(), kReferenceKinds));
+    ref.kind = Kind::finest;
+    return ref;
+  }
+  const MapFields top(field, kReferenceKinds);
+  if (top.entries().size() != 1)
+    field.fail("give exactly one reference kind (" + std::to_string(top.entries().size()) + " given)");
+  const MapFields::Entry& e = top.entries().front();
+  const Field& value = e.value;
+  const std::size_t kind_index =
+      std::find(kReferenceKinds.begin(), kReferenceKinds.end(), e.name) - kReferenceKinds.begin();
+  ref.kind = static_cast<Kind>(kind_index + 1);
+  if (ref.kind == Kind::kinetic_energy || ref.kind == Kind::momentum) {
+    if (!value.is_scalar() || value.word() != "conserved") value.fail("expected 'conserved', got " + value.description());
+    return ref;
+  }
+  if (ref.kind == Kind::finest) value.fail("'finest' takes no parameters: write `reference: finest`");
+  if (value.node().IsNull()) {
+    if (ref.kind != Kind::slide_to_roll) value.fail("needs its parameters (docs/accuracy.md)");
+    return ref;
+  }
+  std::vector<std::string> allowed{"sphere"};
+  switch (ref.kind) {
+    case Kind::rebound_heights: allowed.insert(allowed.end(), {"restitution", "floor", "bounces"}); break;
+    case Kind::time_to_rest: allowed.insert(allowed.end(), {"restitution", "floor"}); break;
+    case Kind::incline: allowed.insert(allowed.end(), {"angle", "friction"}); break;
+    case Kind::oblique_rebound: allowed.insert(allowed.end(), {"restitution", "friction"}); break;
+    default: break;
+  }
+  const MapFields map(value, allowed);
+  if (auto f = map.optional("sphere")) ref.sphere = static_cast<std::uint32_t>(f->integer_at_least(0, 4'000'000'000));
+  if (map.has("restitution") || ref.kind == Kind::rebound_heights || ref.kind == Kind::time_to_rest ||
+      ref.kind == Kind::oblique_rebound) {
+    const Field f = map.required("restitution");
+    ref.restitution = f.within(0, 1);
+    if (ref.kind == Kind::time_to_rest && !(ref.restitution < 1))
+      f.fail("must be < 1: with e = 1 the ball never comes to rest");
+    if (ref.kind == Kind::rebound_heights && !(ref.restitution > 0)) f.fail("must be > 0: with e = 0 nothing rebounds");
+  }
+  if (ref.kind == Kind::incline || ref.kind == Kind::oblique_rebound) ref.friction = map.required("friction").non_negative();
+  if (ref.kind == Kind::incline) {
+    const Field f = map.required("angle");
+    ref.angle = f.number();
+    if (!(ref.angle > 0 && ref.angle < 90)) f.fail("must be within (0, 90) degrees, got " + f.node().Scalar());
+  }
+  if (auto f = map.optional("floor")) ref.floor = f->number();
+  if (auto f = map.optional("bounces")) ref.bounces = f->integer_at_least(1, 50);
+  return ref;
 }
 
 std::vector<Effect> read_effects(const Field& field) {
@@ -510,6 +580,11 @@ const char* effect_name(Effect e) {
   return "unknown";
 }
 
+const char* reference_name(ReferenceSpec::Kind kind) {
+  if (kind == ReferenceSpec::Kind::none) return "none";
+  return kReferenceKinds[static_cast<std::size_t>(kind) - 1].c_str();
+}
+
 std::uint32_t Scene::material_index(const std::string& name, const SourceLocation& where, const std::string& key) const {
   if (name.empty()) return 0;
   std::vector<std::string> names;
@@ -518,6 +593,17 @@ std::uint32_t Scene::material_index(const std::string& name, const SourceLocatio
     names.push_back(materials[i].name);
   }
   throw InputError(where, key, "unknown material '" + name + "'" + detail::suggestion(name, names));
+}
+
+std::string scene_precision(const std::string& path) {
+  try {
+    const YAML::Node root = YAML::Load(read_file(path));
+    if (root.IsMap() && root["solver"].IsMap() && root["solver"]["precision"].IsScalar() &&
+        root["solver"]["precision"].Scalar() == "double")
+      return "double";
+  } catch (const std::exception&) {
+  }
+  return "float";
 }
 
 namespace {
@@ -544,7 +630,7 @@ YAML::Node read_document(const std::string& path) {
 
 Scene read_scene(const Field& root, const std::string& path) {
   const MapFields top(root, {"format", "name", "time", "solver", "effects", "gravity", "drag", "materials",
-                             "contact_pairs", "walls", "particles", "output"});
+                             "contact_pairs", "walls", "particles", "output", "reference"});
 
   if (auto f = top.optional("format")) {
     const long long version = f->integer();
@@ -588,6 +674,7 @@ Scene read_scene(const Field& root, const std::string& path) {
 
   scene.output.dir = "out/" + stem;
   if (auto f = top.optional("output")) scene.output = read_output(*f, stem);
+  if (auto f = top.optional("reference")) scene.reference = read_reference(*f);
   return scene;
 }
 

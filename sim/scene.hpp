@@ -24,7 +24,10 @@ struct TimeSpec {
 
 struct SolverSpec {
   int iterations = 10;                        // velocity sweeps per substep
-  std::string integrator = "symplectic_euler";
+  std::string integrator = "symplectic_euler";  // symplectic_euler | velocity_verlet
+  bool speculative = true;                    // speculative contacts (gaps that close within a substep)
+  std::string precision = "float";            // float | double: the type the run computes in
+  SourceLocation precision_where;             // the `precision:` value (line 0 when not given)
 };
 
 struct Material {
@@ -138,6 +141,32 @@ struct OutputSpec {
   MovieSpec movie;
 };
 
+// A known answer the run is measured against (`reference:`, docs/accuracy.md).
+// Each kind states the physics it expects; the run measures the same
+// quantity from its own trajectory (sim/reference.hpp).
+struct ReferenceSpec {
+  enum class Kind {
+    none,
+    rebound_heights,  // a dropped ball: apex k above the contact height = H0 e^(2k)
+    time_to_rest,     // a dropped ball: T = sqrt(2 H0 / g) (1 + e) / (1 - e)
+    incline,          // from rest on an incline: a = 5/7 g sin(angle) rolling, g (sin - mu cos) sliding
+    slide_to_roll,    // launched sliding without spin on a floor: ends rolling at 5/7 v0
+    oblique_rebound,  // an oblique impact on a plane: v_n' = e v_n; v_t' = 5/7 v_t (stick) or v_t - mu (1+e) v_n
+    kinetic_energy,   // conserved (elastic, frictionless, no gravity)
+    momentum,         // conserved (no walls, no gravity)
+    finest            // no analytic answer: the study's finest setting is the reference
+  };
+  Kind kind = Kind::none;
+  std::uint32_t sphere = 0;  // the ball of the single-ball kinds
+  double restitution = 0;    // rebound_heights, time_to_rest, oblique_rebound
+  double friction = 0;       // incline, oblique_rebound
+  double angle = 0;          // incline, degrees
+  double floor = 0;          // rebound_heights, time_to_rest: height of the floor along -g (m)
+  int bounces = 3;           // rebound_heights
+  SourceLocation where;
+};
+const char* reference_name(ReferenceSpec::Kind kind);
+
 enum class Effect { gravity, collisions, walls, restitution, friction, rolling_resistance, drag };
 const char* effect_name(Effect e);
 
@@ -155,6 +184,7 @@ struct Scene {
   std::vector<WallSpec> walls;
   std::vector<ParticleBlock> particles;
   OutputSpec output;
+  ReferenceSpec reference;
 
   bool has(Effect e) const {
     for (Effect x : effects) if (x == e) return true;
@@ -172,5 +202,8 @@ Scene load_scene(const std::string& path);
 // the file's tree before validation. A problem in an overridden value is
 // reported at the override ("--set time.dt=-1: time.dt: must be > 0, got -1").
 Scene load_scene(const std::string& path, const std::vector<std::string>& overrides);
+// The scene's `solver.precision` ("float" or "double"), read without
+// validating anything else; "float" when the file cannot be read or parsed.
+std::string scene_precision(const std::string& path);
 
 }  // namespace marbles::scene

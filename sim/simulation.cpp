@@ -29,6 +29,7 @@ std::string Simulation::describe_pipeline() const {
     out << "  narrow phase   sphere-wall (" << m.walls.planes.size() << " plane(s), " << m.walls.boxes.size()
         << " box(es), " << m.walls.cylinders.size() << " cylinder(s), " << m.walls.spheres.size() << " sphere(s))\n";
   if (m.collisions || m.wall_contacts) {
+    if (!m.speculative) out << "  narrow phase   touching pairs only (speculative contacts off)\n";
     out << "  colouring      contacts into colours (no sphere twice in a colour)\n";
     out << "  contact solver " << s.iterations << " sequential-impulse sweeps, colour by colour: normal";
     if (s.friction) out << " + friction";
@@ -36,7 +37,8 @@ std::string Simulation::describe_pipeline() const {
     out << (s.restitution ? "; impacts with restitution" : "; plastic impacts (no restitution)")
         << (s.warm_start ? "; warm start" : "") << "\n";
   }
-  out << "  integrate      symplectic Euler\n";
+  out << (m.verlet ? "  integrate      velocity Verlet (gravity in half kicks around the drift)\n"
+                   : "  integrate      symplectic Euler\n");
   if (m.collisions || m.wall_contacts) out << "  project        positions (overlap beyond slop)\n";
   return out.str();
 }

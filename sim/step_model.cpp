@@ -70,6 +70,7 @@ narrowphase::SolverSettings solver_settings(const scene::Scene& scene) {
   const double h = scene.time.dt / scene.time.substeps;
   const double g = scene.has(scene::Effect::gravity) ? length(scene.gravity) : 0.0;
   s.rest_speed = static_cast<real>(std::max(1e-3, 4.0 * g * h));
+  if (scene.solver.integrator == "velocity_verlet" && scene.has(scene::Effect::gravity)) s.wall_accel = scene.gravity;
   return s;
 }
 
@@ -88,6 +89,8 @@ StepModel compile_step_model(const scene::Scene& scene, broadphase::Algorithm al
   m.drag_quadratic = static_cast<real>(scene.drag_quadratic);
   m.collisions = scene.has(scene::Effect::collisions);
   m.wall_contacts = scene.has(scene::Effect::walls) && !m.walls.empty();
+  m.speculative = scene.solver.speculative;
+  m.verlet = scene.solver.integrator == "velocity_verlet";
   m.g = scene.gravity;
   m.dt = scene.time.dt;
   m.substeps = scene.time.substeps;

@@ -29,6 +29,11 @@ struct StepModel {
   bool drag = false;
   bool collisions = false;     // sphere-sphere contacts (broad phase + narrow phase)
   bool wall_contacts = false;  // sphere-wall contacts (the scene has walls and the `walls` effect)
+  bool speculative = true;     // contacts for gaps that can close within the substep (else touching only)
+  // Velocity Verlet (kick-drift-kick): gravity is applied in two half kicks
+  // around the drift, so free flight under gravity is exact; symplectic Euler
+  // applies it in one kick before.
+  bool verlet = false;
 
   Vec3 g;                                   // m/s^2
   real drag_linear = 0, drag_quadratic = 0; // 1/s, 1/m
@@ -47,6 +52,11 @@ struct StepModel {
 
   narrowphase::PairTable pair_table() const { return {pair_coefficients.data(), material_count}; }
   real substep() const { return static_cast<real>(dt / substeps); }
+  // The gravity kick before the contacts (h, or h/2 for velocity Verlet) and after the drift (0 or h/2).
+  real first_kick(real h) const { return verlet ? h / 2 : h; }
+  real second_kick(real h) const { return verlet ? h / 2 : real(0); }
+  // The substep the contact test looks ahead (0 without speculative contacts).
+  real lookahead(real h) const { return speculative ? h : real(0); }
 };
 
 StepModel compile_step_model(const scene::Scene& scene, broadphase::Algorithm algorithm);

@@ -1,0 +1,265 @@
+// sim/cli.cpp — the `marbles` command line (sim/main.cpp picks the precision
+// and calls cli_main of the library built for it).
+//
+// Exit codes: 0 success; 2 bad input (scene, CSV or arguments; the message
+// names file:line:column and key, or the argument); 1 failure while running.
+#include <CLI/CLI.hpp>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "bench/broadphase_bench.hpp"
+#include "bench/step_bench.hpp"
+#include "core/error.hpp"
+#include "render/camera.hpp"
+#include "render/color_map.hpp"
+#include "render/frame_output.hpp"
+#include "sim/cli.hpp"
+#include "sim/run.hpp"
+#include "sim/scene.hpp"
+#include "sim/study.hpp"
+
+namespace {
+
+const std::map<std::string, marbles::BackendChoice> kBackends{
+    {"auto", marbles::BackendChoice::automatic},
+    {"cpu", marbles::BackendChoice::cpu},
+    {"cuda", marbles::BackendChoice::cuda}};
+
+// `--set key.path=value`, repeatable; one value per `--set`.
+void add_set_option(CLI::App* command, std::vector<std::string>& overrides) {
+  command->add_option("--set", overrides,
+                      "override a scene value: key.path=value, e.g. time.dt=5e-4, particles[0].random.count=500, "
+                      "gravity=[0,0,-1] (repeatable)")
+      ->allow_extra_args(false);
+}
+
+// The --precision option as every command that runs a scene takes it.
+void add_precision_option(CLI::App* cmd, std::string& precision) {
+  cmd->add_option("--precision", precision, "float|double: the type the run computes in (overrides solver.precision)")
+      ->check(CLI::IsMember({"float", "double"}));
+}
+
+}  // namespace
+
+namespace marbles {
+
+std::string requested_precision(int argc, char** argv) {
+  static const std::vector<std::string> kTakesValue{"--out", "--backend", "--broadphase", "--duration", "--set"};
+  std::string command, scene_path, from_set;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--precision" && i + 1 < argc) return argv[i + 1];
+    if (a.rfind("--precision=", 0) == 0) return a.substr(12);
+    if (a == "--set" && i + 1 < argc) {
+      const std::string s = argv[++i];
+      if (s.rfind("solver.precision=", 0) == 0) from_set = s.substr(17);
+      continue;
+    }
+    if (std::find(kTakesValue.begin(), kTakesValue.end(), a) != kTakesValue.end()) {
+      ++i;
+      continue;
+    }
+    if (a.empty() || a[0] == '-') continue;
+    if (command.empty()) command = a;
+    else if (scene_path.empty()) scene_path = a;
+  }
+  if (!from_set.empty()) return from_set;
+  if ((command == "run" || command == "check") && !scene_path.empty()) return scene::scene_precision(scene_path);
+  return "float";
+}
+
+int cli_main(int argc, char** argv) {
+  CLI::App app{"marbles: a rigid-sphere simulator (spatial-subdivision broad phase, impulse contacts)"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "marbles 0.1");
+
+  RunOptions run;
+  double run_duration = -1;
+  bool no_render = false;
+  auto* run_cmd = app.add_subcommand("run", "run a scene and write its output");
+  run_cmd->add_option("scene", run.scene_path, "scene file (YAML)")->required();
+  run_cmd->add_option("--out", run.out_dir, "output folder (overrides output.dir)");
+  std::string run_backend = "auto", run_broadphase = "home";
+  run_cmd->add_option("--backend", run_backend, "broad phase backend: auto (CUDA when a device is there), cpu, cuda")
+      ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
+  run_cmd->add_option("--broadphase", run_broadphase,
+                      "broad phase algorithm: home (home-cell variant, default) or seed (8 cells per sphere)")
+      ->check(CLI::IsMember({"home", "seed"}));
+  run_cmd->add_flag("--quiet", run.quiet, "print only the summary");
+  run_cmd->add_flag("--no-render", no_render, "skip images and movie even if the scene asks for them");
+  run_cmd->add_option("--duration", run_duration, "simulated seconds (overrides time.duration)")
+      ->check(CLI::PositiveNumber);
+  add_set_option(run_cmd, run.overrides);
+  run_cmd->add_flag("--summary-only", run.summary_only, "write only summary.json (no frames, images or movie)");
+  std::string precision;
+  add_precision_option(run_cmd, precision);
+
+  std::string check_path;
+  auto* check_cmd = app.add_subcommand("check", "validate a scene without running it");
+  std::vector<std::string> check_overrides;
+  check_cmd->add_option("scene", check_path, "scene file (YAML)")->required();
+  add_set_option(check_cmd, check_overrides);
+  add_precision_option(check_cmd, precision);
+
+  StudyOptions study;
+  std::vector<std::string> study_vary;
+  auto* study_cmd = app.add_subcommand(
+      "study", "run a scene at every combination of accuracy settings: error against its reference, and cost");
+  study_cmd->add_option("scene", study.scene_path, "scene file (YAML) with a reference: block")->required();
+  study_cmd->add_option("--vary", study_vary,
+                        "KEY=v1,v2,... (repeatable): time.dt, time.substeps, solver.iterations, solver.integrator, "
+                        "solver.speculative, precision, backend or any scene key");
+  add_set_option(study_cmd, study.set);
+  study_cmd->add_option("--backend", study.backend, "auto|cpu|cuda (unless varied)")
+      ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
+  study_cmd->add_option("--out", study.out_dir, "output folder (default out/study/<scene>)");
+  study_cmd->add_option("--repeats", study.repeats, "runs per setting (the cost is their median)")
+      ->check(CLI::Range(1, 1000));
+  bool study_quiet = false;
+  study_cmd->add_flag("--quiet", study_quiet, "no progress bar");
+
+  std::string pairs_csv, pairs_algorithm = "subdivision";
+  std::string pairs_backend = "cpu";
+  double pairs_margin = 0;
+  auto* pairs_cmd = app.add_subcommand("pairs", "print the overlapping pairs 'i j' of spheres given as x,y,z,r rows");
+  pairs_cmd->add_option("spheres", pairs_csv, "CSV file of x,y,z,r rows")->required();
+  pairs_cmd->add_option("--algorithm", pairs_algorithm,
+                        "subdivision (the seed's spatial subdivision), home (its home-cell variant) or brute")
+      ->check(CLI::IsMember({"subdivision", "home", "brute"}));
+  pairs_cmd->add_option("--backend", pairs_backend, "cpu (default), cuda or auto (subdivision and home)")
+      ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
+  pairs_cmd->add_option("--margin", pairs_margin, "report pairs whose gap is below this (m)")
+      ->check(CLI::NonNegativeNumber);
+
+  auto* bench_cmd = app.add_subcommand("bench", "benchmarks (JSON and a table)");
+  bench_cmd->require_subcommand(1);
+  bench::BroadphaseBenchOptions bp;
+  std::vector<std::size_t> bp_n;
+  auto* bench_bp = bench_cmd->add_subcommand("broadphase", "time the broad phase per stage");
+  bench_bp->add_option("--backend", bp.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  bench_bp->add_option("--algorithm", bp.algorithm, "seed|home")->check(CLI::IsMember({"seed", "home"}));
+  bench_bp->add_option("--sort", bp.sort, "seed|cub (cuda)")->check(CLI::IsMember({"seed", "cub"}));
+  bench_bp->add_option("--scene", bp.scene, "gas|pile|poly")->check(CLI::IsMember({"gas", "pile", "poly"}));
+  bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(CLI::PositiveNumber);
+  bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")->check(CLI::PositiveNumber);
+  bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(CLI::NonNegativeNumber);
+  bench_bp->add_option("--seed", bp.seed, "random seed of the sphere sets");
+  bench_bp->add_flag("--json", bp.json, "print JSON");
+
+  bench::StepBenchOptions st;
+  std::vector<std::size_t> st_n;
+  auto* bench_step = bench_cmd->add_subcommand(
+      "step", "time whole steps of a gas at volume fraction 0.1 or of a dense settled pile (cached per N)");
+  bench_step->add_option("--backend", st.backend, "cpu|cuda (the pile also settles there)")
+      ->check(CLI::IsMember({"cpu", "cuda"}));
+  bench_step->add_option("--scene", st.scene, "gas (default) | pile")->check(CLI::IsMember({"gas", "pile"}));
+  bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->check(CLI::PositiveNumber);
+  bench_step->add_option("--repeats", st.repeats, "timed steps per size (and as many profiled ones)")
+      ->check(CLI::PositiveNumber);
+  bench_step->add_option("--warmup", st.warmup, "untimed steps first (default 2 for gas, 5 for pile)")
+      ->check(CLI::NonNegativeNumber);
+  bench_step->add_option("--effects", st.effects, "effects of the pipeline (gas only)")->delimiter(',');
+  bench_step->add_option("--cache", st.cache_dir,
+                         "folder of settled piles (default $XDG_CACHE_HOME/marbles or ~/.cache/marbles)");
+  bench_step->add_option("--settle-steps", st.settle_steps, "pile: step budget of the settle")
+      ->check(CLI::PositiveNumber);
+  bench_step->add_option("--settle-ke", st.settle_ke, "pile: settled below this kinetic energy per sphere (J)")
+      ->check(CLI::PositiveNumber);
+  bench_step->add_option("--settle-quench", st.settle_quench,
+                         "pile: zero the velocities every this many settle steps (0: never)")
+      ->check(CLI::NonNegativeNumber);
+  bench_step->add_flag("--rebuild", st.rebuild, "pile: settle again, replacing the cached pile");
+  bench_step->add_flag("--json", st.json, "print JSON only (progress on stderr)");
+
+  bench::EffectsBenchOptions ef;
+  auto* bench_effects = bench_cmd->add_subcommand("effects", "time the step with and without each effect");
+  bench_effects->add_option("--backend", ef.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  bench_effects->add_option("--n", ef.n, "sphere count")->check(CLI::PositiveNumber);
+  bench_effects->add_option("--volume-fraction", ef.volume_fraction, "packing of the gas")->check(CLI::Range(0.01, 0.5));
+  bench_effects->add_option("--repeats", ef.repeats, "timed steps per pipeline")->check(CLI::PositiveNumber);
+  bench_effects->add_flag("--json", ef.json, "print JSON");
+
+  render::RenderOptions rd;
+  render::MovieOptions rd_movie;
+  rd_movie.fps = 0;  // from the frame times unless given
+  std::string rd_dir, rd_color_by, rd_camera;
+  auto* render_cmd = app.add_subcommand("render", "render the frames of an output folder to PNG and a movie");
+  render_cmd->add_option("outdir", rd_dir, "output folder of a run (holds series.pvd)")->required();
+  render_cmd->add_option("--color-by", rd_color_by, "speed|id|radius|material")
+      ->check(CLI::IsMember({"speed", "id", "radius", "material"}));
+  render_cmd->add_option("--camera", rd_camera, "camera position and target: x,y,z:lx,ly,lz");
+  render_cmd->add_option("--width", rd.width, "image width in pixels")->check(CLI::Range(16, 16384));
+  render_cmd->add_option("--height", rd.height, "image height in pixels")->check(CLI::Range(16, 16384));
+  render_cmd->add_option("--fps", rd_movie.fps, "movie frames per second (default: from the frame times)")
+      ->check(CLI::PositiveNumber);
+  bool rd_no_movie = false;
+  render_cmd->add_flag("--no-movie", rd_no_movie, "PNG frames only");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "marbles: " << e.what() << "\n(see marbles --help)\n";
+    return 2;
+  }
+
+  try {
+    if (*run_cmd) {
+      if (run_duration > 0) run.duration = run_duration;
+      run.backend = kBackends.at(run_backend);
+      run.algorithm = run_broadphase == "seed" ? broadphase::Algorithm::seed : broadphase::Algorithm::home;
+      run.render = !no_render;
+      return run_scene(run, std::cout, std::cerr);
+    }
+    if (*check_cmd) return check_scene(check_path, check_overrides, std::cout, std::cerr);
+    if (*study_cmd) {
+      for (const std::string& v : study_vary) study.vary.push_back(parse_vary(v));
+      study.progress = !study_quiet;
+      run_study(study, std::cout, std::cerr);
+      return 0;
+    }
+    if (*pairs_cmd) return print_pairs(pairs_csv, pairs_algorithm, kBackends.at(pairs_backend), pairs_margin, std::cout, std::cerr);
+    if (*bench_bp) {
+      if (!bp_n.empty()) bp.n = bp_n;
+      return bench::run_broadphase_bench(bp, std::cout);
+    }
+    if (*bench_step) {
+      if (!st_n.empty()) st.n = st_n;
+      if (st.backend == "cuda") select_backend(BackendChoice::cuda, std::cerr);
+      return bench::run_step_bench(st, std::cout);
+    }
+    if (*bench_effects) {
+      if (ef.backend == "cuda") select_backend(BackendChoice::cuda, std::cerr);
+      return bench::run_effects_bench(ef, std::cout);
+    }
+    if (*render_cmd) {
+      if (!rd_color_by.empty()) rd.color_by = *render::parse_color_by(rd_color_by);
+      if (!rd_camera.empty()) rd.camera = render::parse_camera(rd_camera, "--camera");
+      rd_movie.enabled = !rd_no_movie;
+      return render::render_output_dir(rd_dir, rd, rd_movie, isatty(fileno(stderr)) != 0, std::cerr);
+    }
+  } catch (const InputError& e) {
+    std::cerr << e.what() << "\n";
+    return 2;
+  } catch (const RuntimeFailure& e) {
+    std::cerr << "marbles: " << e.what() << "\n";
+    return 1;
+  } catch (const std::exception& e) {
+    std::cerr << "marbles: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace marbles

@@ -1,0 +1,330 @@
+#include "sim/study.hpp"
+
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <ostream>
+#include <sstream>
+
+#include "core/error.hpp"
+#include "render/atomic_file.hpp"
+#include "sim/run.hpp"
+#include "sim/scene.hpp"
+
+extern char** environ;
+
+namespace marbles {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string read_text(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// The raw JSON value after "key": in a summary.json we wrote ourselves (flat
+// keys; arrays of numbers; the first match wins).
+std::string json_value(const std::string& text, const std::string& key) {
+  const std::string tag = "\"" + key + "\": ";
+  const std::size_t at = text.find(tag);
+  if (at == std::string::npos) return {};
+  const std::size_t start = at + tag.size();
+  if (text[start] == '[') return text.substr(start, text.find(']', start) - start + 1);
+  if (text[start] == '"') return text.substr(start + 1, text.find('"', start + 1) - start - 1);
+  const std::size_t end = text.find_first_of(",}\n", start);
+  return text.substr(start, end - start);
+}
+
+double json_double(const std::string& text, const std::string& key) {
+  const std::string v = json_value(text, key);
+  if (v.empty() || v == "null") return std::nan("");
+  return std::stod(v);
+}
+
+std::vector<double> json_doubles(const std::string& text, const std::string& key) {
+  std::string v = json_value(text, key);
+  std::vector<double> out;
+  if (v.size() < 2) return out;
+  std::stringstream s(v.substr(1, v.size() - 2));
+  std::string item;
+  while (std::getline(s, item, ','))
+    if (item.find_first_not_of(" ") != std::string::npos) out.push_back(item == " null" ? std::nan("") : std::stod(item));
+  return out;
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n == 0 ? std::nan("") : (n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]));
+}
+
+// Runs argv[0] with stdout and stderr to `log`; returns its exit status (-1 if it did not exit).
+int run_process(const std::vector<std::string>& args, const std::string& log) {
+  std::vector<char*> argv;
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&actions, 1, 2);
+  pid_t pid = 0;
+  const int rc = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) throw RuntimeFailure("cannot start " + args[0] + ": " + std::strerror(rc));
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// Every combination of the varied values, first key slowest.
+std::vector<std::vector<std::string>> combinations(const std::vector<StudyVary>& vary) {
+  std::vector<std::vector<std::string>> out{{}};
+  for (const StudyVary& v : vary) {
+    std::vector<std::vector<std::string>> next;
+    for (const auto& prefix : out)
+      for (const std::string& value : v.values) {
+        next.push_back(prefix);
+        next.back().push_back(value);
+      }
+    out = std::move(next);
+  }
+  return out;
+}
+
+std::string label_of(const std::vector<StudyVary>& vary, const std::vector<std::string>& values) {
+  std::string out;
+  for (std::size_t k = 0; k < vary.size(); ++k) out += (k ? " " : "") + vary[k].key + "=" + values[k];
+  return out.empty() ? "(scene as is)" : out;
+}
+
+std::string fixed(double v, int digits) {
+  if (!std::isfinite(v)) return "-";
+  std::ostringstream s;
+  s << std::setprecision(digits) << v;
+  return s.str();
+}
+
+// One line rewritten in place on a terminal, one line per run otherwise.
+void show_progress(std::ostream& err, bool tty, std::size_t done, std::size_t total, const std::string& what) {
+  const int width = 30;
+  const int filled = static_cast<int>(width * done / std::max<std::size_t>(1, total));
+  std::string bar(filled, '#');
+  bar += std::string(width - filled, '.');
+  if (tty) {
+    err << "\r[" << bar << "] " << done << "/" << total << "  " << what << "\033[K" << std::flush;
+    if (done == total) err << "\n";
+  } else {
+    err << "study: run " << done << "/" << total << "  " << what << "\n";
+  }
+}
+
+bool have_gnuplot() { return std::system("gnuplot --version >/dev/null 2>&1") == 0; }
+
+}  // namespace
+
+StudyVary parse_vary(const std::string& text) {
+  const std::size_t eq = text.find('=');
+  const SourceLocation where{"--vary " + text, 0, 0};
+  if (eq == std::string::npos || eq == 0) throw InputError(where, "", "expected KEY=v1,v2,...");
+  StudyVary v;
+  v.key = text.substr(0, eq);
+  std::stringstream s(text.substr(eq + 1));
+  std::string item;
+  while (std::getline(s, item, ',')) {
+    if (item.empty()) throw InputError(where, v.key, "an empty value in the list");
+    v.values.push_back(item);
+  }
+  if (v.values.empty()) throw InputError(where, v.key, "no values");
+  return v;
+}
+
+void mark_pareto(std::vector<StudyRow>& rows) {
+  for (StudyRow& r : rows) {
+    r.pareto = std::isfinite(r.error) && std::isfinite(r.ms_per_simulated_second);
+    for (const StudyRow& o : rows) {
+      if (&o == &r || !std::isfinite(o.error) || !std::isfinite(o.ms_per_simulated_second)) continue;
+      const bool no_worse = o.error <= r.error && o.ms_per_simulated_second <= r.ms_per_simulated_second;
+      const bool better = o.error < r.error || o.ms_per_simulated_second < r.ms_per_simulated_second;
+      if (no_worse && better) r.pareto = false;
+    }
+  }
+}
+
+StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostream& err) {
+  const scene::Scene scene = scene::load_scene(options.scene_path, options.set);
+  if (scene.reference.kind == scene::ReferenceSpec::Kind::none)
+    throw InputError(SourceLocation{scene.path, 1, 1}, "reference",
+                     "the study needs the scene's known answer: add a `reference:` block (docs/accuracy.md), "
+                     "or `reference: finest` to compare with the finest setting");
+  StudyResult result;
+  result.reference = scene::reference_name(scene.reference.kind);
+  const fs::path dir = options.out_dir.empty() ? fs::path("out/study") / fs::path(scene.path).stem()
+                                               : fs::path(options.out_dir);
+  fs::create_directories(dir / "runs");
+
+  const auto combos = combinations(options.vary);
+  const std::size_t total = combos.size() * static_cast<std::size_t>(options.repeats);
+  const bool tty = options.progress && isatty(fileno(stderr));
+  std::size_t done = 0;
+  std::vector<std::vector<double>> shapes;  // reference finest: what each run measured
+  std::vector<double> fineness;             // h = dt / substeps, then iterations, precision: smaller is finer
+  for (std::size_t c = 0; c < combos.size(); ++c) {
+    StudyRow row;
+    row.values = combos[c];
+    std::vector<double> per_step, per_second;
+    std::string backend = options.backend, precision;
+    std::vector<std::string> args{options.marbles, "run", options.scene_path, "--quiet", "--summary-only"};
+    for (const std::string& s : options.set) args.insert(args.end(), {"--set", s});
+    for (std::size_t k = 0; k < options.vary.size(); ++k) {
+      const std::string& key = options.vary[k].key;
+      if (key == "backend") backend = row.values[k];
+      else if (key == "precision") precision = row.values[k];
+      else args.insert(args.end(), {"--set", key + "=" + row.values[k]});
+    }
+    args.insert(args.end(), {"--backend", backend});
+    if (!precision.empty()) args.insert(args.end(), {"--precision", precision});
+    const fs::path run_dir = dir / "runs" / std::to_string(c);
+    args.insert(args.end(), {"--out", run_dir.string()});
+    std::string summary;
+    for (int r = 0; r < options.repeats; ++r) {
+      if (options.progress) show_progress(err, tty, done, total, label_of(options.vary, row.values));
+      const std::string log = (run_dir.string() + ".log");
+      fs::create_directories(run_dir);
+      const int status = run_process(args, log);
+      if (status != 0) {
+        if (tty) err << "\n";
+        const std::string text = read_text(log);
+        if (status == 2) throw InputError(SourceLocation{}, "", "study run " + label_of(options.vary, row.values) + ": " + text);
+        throw RuntimeFailure("study run " + label_of(options.vary, row.values) + " failed (exit " +
+                             std::to_string(status) + "): " + text);
+      }
+      summary = read_text(run_dir / "summary.json");
+      const double steps = json_double(summary, "steps");
+      const double wall = json_double(summary, "wall_time");
+      per_step.push_back(json_double(summary, "mean_ms_per_step"));
+      per_second.push_back(1e3 * wall / std::max(1e-300, json_double(summary, "simulated_time")));
+      row.steps = static_cast<std::uint64_t>(steps);
+      ++done;
+    }
+    row.ms_per_step = median(per_step);
+    row.ms_per_simulated_second = median(per_second);
+    row.error = json_double(summary, "error");
+    row.measured = json_doubles(summary, "measured");
+    const double h = json_double(summary, "dt") / std::max(1.0, json_double(summary, "substeps"));
+    fineness.push_back(h * (json_value(summary, "precision") == "double" ? 0.999 : 1.0));
+    shapes.push_back(row.measured);
+    result.rows.push_back(std::move(row));
+  }
+  if (options.progress) show_progress(err, tty, done, total, "done");
+
+  if (scene.reference.kind == scene::ReferenceSpec::Kind::finest) {
+    // The finest combination (smallest substep; double before float) is the
+    // reference: each row's error is the largest change of the centre of
+    // mass or radius of gyration, in mean radii.
+    const std::size_t f = std::min_element(fineness.begin(), fineness.end()) - fineness.begin();
+    result.finest = label_of(options.vary, result.rows[f].values);
+    for (StudyRow& row : result.rows) {
+      const std::vector<double>& a = row.measured;
+      const std::vector<double>& b = result.rows[f].measured;
+      double e = 0;
+      if (a.size() >= 5 && b.size() >= 5)
+        for (int k = 0; k < 4; ++k) e = std::max(e, std::abs(a[k] - b[k]) / b[4]);
+      row.error = e;
+    }
+  }
+  mark_pareto(result.rows);
+
+  // study.csv and study.md
+  std::ostringstream csv, md;
+  for (const StudyVary& v : options.vary) csv << v.key << ",";
+  csv << "error,ms_per_simulated_second,ms_per_step,steps,pareto\n";
+  md << "# Study: " << scene.name << "\n\n"
+     << "Scene `" << scene.path << "`, reference `" << result.reference << "`"
+     << (result.finest.empty() ? "" : " (finest setting: " + result.finest + ")") << "; " << options.repeats
+     << " runs per setting, cost = median wall time.\n\n|";
+  for (const StudyVary& v : options.vary) md << " " << v.key << " |";
+  md << " error | ms per simulated s | ms per step | steps | Pareto |\n|";
+  for (std::size_t k = 0; k < options.vary.size() + 5; ++k) md << "---|";
+  md << "\n";
+  for (const StudyRow& r : result.rows) {
+    md << "|";
+    for (const std::string& v : r.values) {
+      csv << v << ",";
+      md << " " << v << " |";
+    }
+    csv << json_number(r.error) << "," << json_number(r.ms_per_simulated_second) << "," << json_number(r.ms_per_step)
+        << "," << r.steps << "," << (r.pareto ? 1 : 0) << "\n";
+    md << " " << fixed(100 * r.error, 3) << " % | " << fixed(r.ms_per_simulated_second, 4) << " | "
+       << fixed(r.ms_per_step, 4) << " | " << r.steps << " | " << (r.pareto ? "yes" : "") << " |\n";
+  }
+  render::write_file_atomic((dir / "study.csv").string(), csv.str());
+  render::write_file_atomic((dir / "study.md").string(), md.str());
+
+  // study.png: error against cost, log-log; the Pareto front as a line.
+  std::ostringstream data, front;
+  for (const StudyRow& r : result.rows) {
+    std::string label = label_of(options.vary, r.values);
+    std::replace(label.begin(), label.end(), ' ', '_');
+    data << json_number(r.ms_per_simulated_second) << " " << json_number(std::max(r.error, 1e-9)) << " " << label
+         << "\n";
+  }
+  std::vector<const StudyRow*> on_front;
+  for (const StudyRow& r : result.rows)
+    if (r.pareto) on_front.push_back(&r);
+  std::sort(on_front.begin(), on_front.end(),
+            [](const StudyRow* a, const StudyRow* b) { return a->ms_per_simulated_second < b->ms_per_simulated_second; });
+  for (const StudyRow* r : on_front)
+    front << json_number(r->ms_per_simulated_second) << " " << json_number(std::max(r->error, 1e-9)) << "\n";
+  render::write_file_atomic((dir / "study.dat").string(), data.str());
+  render::write_file_atomic((dir / "study_front.dat").string(), front.str());
+  const std::string png = (dir / "study.png").string();
+  std::ostringstream gp;
+  gp << "set terminal pngcairo size 1000,700 noenhanced\n"
+     << "set output '" << png << ".tmp'\n"
+     << "set logscale xy\nset grid\nset key top right\n"
+     << "set title '" << scene.name << ": error against cost (" << result.reference << ")'\n"
+     << "set xlabel 'wall ms per simulated second'\nset ylabel 'relative error (floor 1e-9)'\n"
+     << "plot '" << (dir / "study.dat").string() << "' using 1:2 with points pt 7 ps 1.5 title 'settings', \\\n"
+     << "     '' using 1:2:3 with labels font ',8' offset 0,1 notitle, \\\n"
+     << "     '" << (dir / "study_front.dat").string() << "' using 1:2 with linespoints lw 2 pt 6 ps 2.2 title 'Pareto front'\n";
+  render::write_file_atomic((dir / "study.gp").string(), gp.str());
+  if (have_gnuplot()) {
+    const std::string command = "gnuplot '" + (dir / "study.gp").string() + "' 2>'" + (dir / "study.gp.log").string() + "'";
+    if (std::system(command.c_str()) == 0 && fs::exists(png + ".tmp")) {
+      fs::rename(png + ".tmp", png);
+      result.plotted = true;
+    } else {
+      err << "warning: gnuplot failed (see " << (dir / "study.gp.log").string() << "); study.png not written\n";
+    }
+  } else {
+    err << "warning: gnuplot not found: study.png not written (install gnuplot-nox; study.gp is ready for it)\n";
+  }
+
+  out << "study of " << scene.name << " (" << result.rows.size() << " settings x " << options.repeats
+      << " runs), reference " << result.reference << ":\n";
+  out << std::left << std::setw(48) << "setting" << std::right << std::setw(12) << "error %" << std::setw(14)
+      << "ms/sim s" << std::setw(12) << "ms/step" << "  Pareto\n";
+  for (const StudyRow& r : result.rows)
+    out << std::left << std::setw(48) << label_of(options.vary, r.values) << std::right << std::setw(12)
+        << fixed(100 * r.error, 3) << std::setw(14) << fixed(r.ms_per_simulated_second, 4) << std::setw(12)
+        << fixed(r.ms_per_step, 4) << (r.pareto ? "  *" : "") << "\n";
+  out << "output: " << dir.string() << "  (study.md, study.csv" << (result.plotted ? ", study.png" : "") << ")\n";
+  return result;
+}
+
+}  // namespace marbles

@@ -1,0 +1,187 @@
+// tests/sim/study_test.cpp — `marbles study` end to end (each setting is a
+// run of the real program), the Pareto front against a second oracle, and
+// float against double runs of one build.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/error.hpp"
+#include "sim/study.hpp"
+#include "tests/sim/scene_cases.hpp"
+
+namespace marbles {
+namespace {
+
+namespace fs = std::filesystem;
+const std::string kMarbles = MARBLES_BINARY_DIR "/bin/marbles";
+const std::string kValidation = MARBLES_SOURCE_DIR "/scenes/validation/";
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+class Study : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!fs::exists(kMarbles)) GTEST_SKIP() << kMarbles << " is not built";
+  }
+  StudyResult study(const std::string& scene, std::vector<std::string> vary, const test::ScratchDir& dir) {
+    StudyOptions o;
+    o.scene_path = scene;
+    for (const std::string& v : vary) o.vary.push_back(parse_vary(v));
+    o.backend = "cpu";
+    o.out_dir = dir.path();
+    o.repeats = 1;
+    o.marbles = kMarbles;
+    o.progress = false;
+    std::ostringstream out, err;
+    return run_study(o, out, err);
+  }
+};
+
+// Least-squares slope of log(error) against log(dt).
+double slope(const std::vector<double>& dt, const std::vector<double>& error) {
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  const double n = static_cast<double>(dt.size());
+  for (std::size_t k = 0; k < dt.size(); ++k) {
+    const double x = std::log(dt[k]), y = std::log(error[k]);
+    sx += x;
+    sy += y;
+    sxx += x * x;
+    sxy += x * y;
+  }
+  return (n * sxy - sx * sy) / (n * sxx - sx * sx);
+}
+
+// The errors of symplectic Euler fall at first order in dt on the incline
+// and on the bouncing ball; velocity Verlet is exact there (float rounding).
+TEST_F(Study, ErrorFallsWithDtAtTheIntegratorsOrder) {
+  for (const std::string scene : {"incline_slide.yaml", "bouncing_ball.yaml"}) {
+    const test::ScratchDir dir("study_order");
+    const StudyResult r = study(kValidation + scene,
+                                {"solver.integrator=symplectic_euler,velocity_verlet", "time.dt=8e-3,4e-3,2e-3,1e-3,5e-4,2.5e-4"},
+                                dir);
+    ASSERT_EQ(r.rows.size(), 12u);
+    std::vector<double> dt, euler;
+    for (const StudyRow& row : r.rows) {
+      if (row.values[0] == "symplectic_euler") {
+        dt.push_back(std::stod(row.values[1]));
+        euler.push_back(row.error);
+      } else {
+        EXPECT_LT(row.error, 1e-4) << scene << " verlet dt " << row.values[1];
+      }
+      EXPECT_GT(row.ms_per_simulated_second, 0);
+      EXPECT_GT(row.steps, 0u);
+    }
+    EXPECT_NEAR(slope(dt, euler), 1.0, 0.35) << scene;
+    EXPECT_LT(euler.back(), euler.front()) << scene;
+    // The files: a row per setting in the CSV, the table in study.md.
+    const std::string csv = slurp(dir.path() + "/study.csv");
+    EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 13) << csv;
+    EXPECT_EQ(csv.rfind("solver.integrator,time.dt,error,", 0), 0u) << csv;
+    EXPECT_NE(slurp(dir.path() + "/study.md").find("| velocity_verlet | 5e-4 |"), std::string::npos);
+  }
+}
+
+// A reference that is deliberately wrong shows as a large error in the study.
+TEST_F(Study, AWrongReferenceShowsAsALargeError) {
+  const test::ScratchDir dir("study_wrong");
+  StudyOptions o;
+  o.scene_path = kValidation + "bouncing_ball.yaml";
+  o.set = {"reference.rebound_heights.restitution=0.7"};
+  o.out_dir = dir.path();
+  o.repeats = 1;
+  o.marbles = kMarbles;
+  o.progress = false;
+  std::ostringstream out, err;
+  const StudyResult r = run_study(o, out, err);
+  ASSERT_EQ(r.rows.size(), 1u);
+  EXPECT_GT(r.rows[0].error, 0.2);
+}
+
+// A scene without a reference is a located error (file:line:col).
+TEST_F(Study, MissingReferenceIsALocatedError) {
+  const test::ScratchDir dir("study_missing");
+  try {
+    study(MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml", {"time.dt=1e-3"}, dir);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.where().line, 1);
+    EXPECT_EQ(e.where().column, 1);
+    EXPECT_NE(std::string(e.what()).find("bouncing_ball.yaml:1:1: reference:"), std::string::npos) << e.what();
+  }
+}
+
+// `reference: finest`: the finest setting is the reference, its own error 0.
+TEST_F(Study, FinestSettingIsTheReference) {
+  const test::ScratchDir dir("study_finest");
+  const StudyResult r = study(kValidation + "free_fall.yaml", {"time.dt=4e-3,1e-3"}, dir);
+  ASSERT_EQ(r.rows.size(), 2u);
+  EXPECT_EQ(r.finest, "time.dt=1e-3");
+  EXPECT_EQ(r.rows[1].error, 0.0);
+  EXPECT_GT(r.rows[0].error, 0.0);
+}
+
+// The Pareto front against a second oracle: sorted by cost, a row is on the
+// front when it is strictly more accurate than every cheaper row and no row
+// of equal cost is more accurate.
+TEST(Pareto, EqualsTheSweepOracle) {
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> pick(0, 5);
+  for (int trial = 0; trial < 200; ++trial) {
+    std::vector<StudyRow> rows(1 + trial % 12);
+    for (StudyRow& r : rows) {
+      r.error = std::pow(10.0, -pick(rng));
+      r.ms_per_simulated_second = 1 + pick(rng);
+    }
+    mark_pareto(rows);
+    for (const StudyRow& r : rows) {
+      bool front = true;
+      for (const StudyRow& o : rows) {
+        if (o.ms_per_simulated_second < r.ms_per_simulated_second && o.error <= r.error) front = false;
+        if (o.ms_per_simulated_second == r.ms_per_simulated_second && o.error < r.error) front = false;
+      }
+      EXPECT_EQ(r.pareto, front) << "trial " << trial;
+    }
+  }
+}
+
+// Float and double runs of one program agree within float rounding, and the
+// summary says which ran.
+TEST_F(Study, FloatAndDoubleRunsAgree) {
+  const test::ScratchDir dir("study_precision");
+  std::map<std::string, std::string> summaries;
+  for (const std::string p : {"float", "double"}) {
+    const std::string out = dir.path() + "/" + p;
+    const std::string command = "'" + kMarbles + "' run " + kValidation +
+                                "slide_to_roll.yaml --quiet --summary-only --backend cpu --precision " + p +
+                                " --out '" + out + "' >/dev/null 2>&1";
+    ASSERT_EQ(std::system(command.c_str()), 0) << command;
+    summaries[p] = slurp(out + "/summary.json");
+    EXPECT_NE(summaries[p].find("\"precision\": \"" + p + "\""), std::string::npos);
+  }
+  auto measured = [](const std::string& s) {
+    const std::size_t at = s.find("\"measured\": [") + 13;
+    return std::stod(s.substr(at));
+  };
+  const double f = measured(summaries["float"]), d = measured(summaries["double"]);
+  EXPECT_NEAR(f, d, 1e-5 * d);
+  EXPECT_NE(f, d);  // really two precisions
+}
+
+}  // namespace
+}  // namespace marbles
