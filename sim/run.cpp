@@ -17,6 +17,7 @@
 #include "sim/progress.hpp"
 #include "sim/reference.hpp"
 #include "sim/scene.hpp"
+#include "sim/settings_check.hpp"
 #include "sim/simulation.hpp"
 #include "sim/world.hpp"
 
@@ -59,6 +60,10 @@ std::size_t count_initial_overlaps(const World& world, double tolerance) {
   return deep;
 }
 
+// The risky-settings warnings (sim/settings_check.hpp), one line each.
+void warn_risky_settings(const scene::Scene& sc, const scene::GeneratedParticles& particles, std::ostream& err) {
+  for (const std::string& w : risky_settings(sc, particles, sizeof(real) == 4)) err << "warning: " << w << "\n";
+}
 
 std::string json_string(const std::string& v) {
   std::string out = "\"";
@@ -92,6 +97,7 @@ int check_scene(const std::string& scene_path, const std::vector<std::string>& o
   out << scene_path << ": ok (" << particles.size() << " spheres, " << sc.materials.size() << " material(s), "
       << sc.walls.size() << " wall(s), " << std::llround(sc.time.duration / sc.time.dt) << " steps of "
       << sc.time.dt << " s, " << kRealName << ")\n";
+  warn_risky_settings(sc, particles, err);
   return 0;
 }
 
@@ -105,6 +111,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     sc.output.movie.enabled = false;
   }
   const scene::GeneratedParticles particles = scene::generate_particles(sc);
+  warn_risky_settings(sc, particles, err);
   std::ostringstream quiet_sink;  // --quiet: only the summary
   const broadphase::Backend backend = select_backend(options.backend, options.quiet ? quiet_sink : out);
 

@@ -1,6 +1,7 @@
 // tests/sim/cli_check_test.cpp — `marbles check SCENE` as a user runs it:
 // exit 0 and a summary on stdout for every shipped scene; exit 2 and the
-// loader's message on stderr for every bad-input rule and for a bad `--set`.
+// loader's message on stderr for every bad-input rule and for a bad `--set`;
+// risky settings as warnings on stderr, still exit 0.
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
@@ -99,6 +100,14 @@ TEST_F(CliCheck, MalformedSetExitsTwo) {
   const Outcome o = run_check(MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml", scratch, {"time.dt"});
   EXPECT_EQ(o.exit_code, 2);
   EXPECT_NE(o.err.find("--set time.dt: expected key.path=value"), std::string::npos) << o.err;
+}
+
+TEST_F(CliCheck, RiskySettingsWarnOnStderrAndExitZero) {
+  const test::ScratchDir scratch("cli_warn");
+  const Outcome o = run_check(MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml", scratch, {"time.dt=0.01"});
+  EXPECT_EQ(o.exit_code, 0) << o.err;
+  EXPECT_EQ(std::count(o.out.begin(), o.out.end(), '\n'), 1) << o.out;
+  EXPECT_EQ(o.err.rfind("warning: substeps too coarse for gravity: ", 0), 0u) << o.err;
 }
 
 class CliCheckBad : public ::testing::TestWithParam<test::BadScene> {

@@ -1,5 +1,6 @@
-// `marbles run` end to end: rendering does not change the simulation, and the
-// summary is written. Runs the real run_scene() on a small scene written here.
+// `marbles run` end to end: rendering does not change the simulation, the
+// summary is written, `--set` overrides reach the run and risky settings are
+// warned of. Runs the real run_scene() on a small scene written here.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -107,5 +108,20 @@ TEST(Run, SetOverridesChangeTheRun) {
   const std::string summary = read_file(dir / "out" / "summary.json");
   EXPECT_NE(summary.find("\"steps\": 20"), std::string::npos) << summary;
   EXPECT_NE(summary.find("\"spheres\": 20"), std::string::npos) << summary;
+  fs::remove_all(dir);
+}
+
+TEST(Run, QuietRunStillWarnsOfRiskySettings) {
+  const fs::path dir = temp_dir("warn");
+  RunOptions options;
+  options.scene_path = write_scene(dir).string();
+  options.out_dir = (dir / "out").string();
+  options.backend = BackendChoice::cpu;
+  options.quiet = true;
+  options.render = false;
+  options.overrides = {"time.duration=0.04", "time.dt=0.02"};
+  std::ostringstream out, err;
+  ASSERT_EQ(run_scene(options, out, err), 0) << err.str();
+  EXPECT_NE(err.str().find("warning: substeps too coarse for gravity: "), std::string::npos) << err.str();
   fs::remove_all(dir);
 }

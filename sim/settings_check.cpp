@@ -1,0 +1,239 @@
+// sim/settings_check.cpp — the risky-settings rules (see settings_check.hpp).
+//
+// Each rule is one function returning its message, or nothing when the
+// scene passes it. Quantities are computed in double from the scene and the
+// initial spheres; numbers in messages have three significant digits.
+#include "sim/settings_check.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <iomanip>
+#include <limits>
+#include <numbers>
+#include <optional>
+#include <sstream>
+
+#include "narrowphase/solver_math.hpp"
+
+namespace marbles {
+
+namespace {
+
+using scene::Effect;
+using Axis = std::array<double, 3>;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kPacking = 0.6;     // volume fraction of a settled random pile
+constexpr double kFloatRange = 1e5;  // scene extent over the smallest radius that float still resolves well
+const double kSlop = narrowphase::SolverSettings{}.slop;  // overlap the solver leaves, of the smaller radius
+
+std::string num(double v) {
+  std::ostringstream s;
+  s << std::setprecision(3) << v;
+  return s.str();
+}
+
+// The smallest whole number >= v, for "raise X to at least N".
+std::string at_least(double v) { return std::to_string(static_cast<long long>(std::ceil(v))); }
+
+double along(const Vec3& p, const Axis& a) { return double(p.x) * a[0] + double(p.y) * a[1] + double(p.z) * a[2]; }
+
+Axis cross(const Axis& a, const Axis& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+
+// An axis-aligned box grown point by point.
+struct Box {
+  Axis lo{kInf, kInf, kInf}, hi{-kInf, -kInf, -kInf};
+
+  void add(const Vec3& p, double r) {
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], double(p[a]) - r);
+      hi[a] = std::max(hi[a], double(p[a]) + r);
+    }
+  }
+  void add(const Box& b) {
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], b.lo[a]);
+      hi[a] = std::max(hi[a], b.hi[a]);
+    }
+  }
+  double largest_side() const { return std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]}); }
+  // The lowest corner's height along `up`.
+  double bottom(const Axis& up) const {
+    double h = 0;
+    for (int a = 0; a < 3; ++a) h += std::min(lo[a] * up[a], hi[a] * up[a]);
+    return h;
+  }
+};
+
+// The box around a wall of finite size (box, sphere, cylinder of given length).
+std::optional<Box> wall_box(const scene::WallSpec& w) {
+  Box box;
+  switch (w.kind) {
+    case scene::WallSpec::Kind::box:
+      box.add(w.lo, 0);
+      box.add(w.hi, 0);
+      return box;
+    case scene::WallSpec::Kind::sphere:
+      box.add(w.centre, w.radius);
+      return box;
+    case scene::WallSpec::Kind::cylinder:
+      if (w.length <= 0) return std::nullopt;
+      box.add(w.base, w.radius);
+      box.add(w.base + w.axis * real(w.length), w.radius);
+      return box;
+    case scene::WallSpec::Kind::plane:
+      break;
+  }
+  return std::nullopt;
+}
+
+// The lowest point of a wall along `up`, where it has one: a finite wall, or
+// a plane square to gravity.
+std::optional<double> wall_bottom(const scene::WallSpec& w, const Axis& up) {
+  if (auto box = wall_box(w)) return box->bottom(up);
+  if (w.kind == scene::WallSpec::Kind::plane && std::fabs(along(w.normal, up)) > 1 - 1e-6) return along(w.point, up);
+  return std::nullopt;
+}
+
+// Two unit axes square to `up` and to each other.
+std::array<Axis, 2> across(const Axis& up) {
+  int least = 0;  // the world axis least aligned with up
+  for (int a = 1; a < 3; ++a)
+    if (std::fabs(up[a]) < std::fabs(up[least])) least = a;
+  Axis e{0, 0, 0};
+  e[least] = 1;
+  const Axis c = cross(up, e);
+  const double n = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+  const Axis e1{c[0] / n, c[1] / n, c[2] / n};
+  return {e1, cross(up, e1)};
+}
+
+// What the rules read from the scene and its initial spheres.
+struct Setting {
+  double dt = 0, h = 0;  // step, substep
+  double g = 0;          // |g| when gravity is on, else 0
+  Axis up{0, 0, 1};      // against gravity
+  double r_min = kInf, r_mean = 0;
+  double volume = 0;     // of all spheres
+  double speed = 0;      // the largest initial speed
+};
+
+Setting read_setting(const scene::Scene& scene, const scene::GeneratedParticles& p) {
+  Setting s;
+  s.dt = scene.time.dt;
+  s.h = scene.time.dt / scene.time.substeps;
+  const Axis g{scene.gravity.x, scene.gravity.y, scene.gravity.z};
+  const double g_len = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+  if (scene.has(Effect::gravity) && g_len > 0) {
+    s.g = g_len;
+    s.up = {-g[0] / g_len, -g[1] / g_len, -g[2] / g_len};
+  }
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const double r = p.radius[i];
+    s.r_min = std::min(s.r_min, r);
+    s.r_mean += r / double(p.size());
+    s.volume += 4.0 / 3.0 * std::numbers::pi * r * r * r;
+    s.speed = std::max(s.speed, double(length(p.velocity[i])));
+  }
+  return s;
+}
+
+// Fastest sphere: its initial speed plus a fall from the highest centre to
+// the lowest centre or wall bottom, against the smallest radius per substep.
+std::optional<std::string> fast_motion(const Setting& s, const scene::Scene& scene,
+                                       const scene::GeneratedParticles& p) {
+  double fall = 0;
+  if (s.g > 0) {
+    double top = -kInf, bottom = kInf;
+    for (const Vec3& c : p.position) {
+      top = std::max(top, along(c, s.up));
+      bottom = std::min(bottom, along(c, s.up));
+    }
+    if (scene.has(Effect::walls))
+      for (const scene::WallSpec& w : scene.walls)
+        if (auto b = wall_bottom(w, s.up)) bottom = std::min(bottom, *b);
+    fall = std::max(0.0, top - bottom);
+  }
+  const double v = s.speed + std::sqrt(2 * s.g * fall);
+  const double move = v * s.h;
+  if (!(move > s.r_min)) return std::nullopt;
+  return "dt so large that the fastest sphere moves " + num(move) + " m (" + num(move / s.r_min) +
+         " radii) per substep: up to " + num(v) + " m/s (" + num(s.speed) + " m/s at the start, plus a fall of " +
+         num(fall) + " m) over h = dt / substeps = " + num(s.h) + " s, more than the smallest radius " +
+         num(s.r_min) + " m, so it can pass through a sphere or a wall; raise time.substeps to at least " +
+         at_least(v * s.dt / s.r_min) + " (or lower time.dt)";
+}
+
+// Settled layers: the spheres' volume at packing 0.6 spread over the area of
+// their centres square to gravity, in layers one mean diameter thick.
+std::optional<std::string> stack_height(const Setting& s, const scene::Scene& scene,
+                                        const scene::GeneratedParticles& p) {
+  if (!(s.g > 0) || !scene.has(Effect::collisions)) return std::nullopt;
+  const double d = 2 * s.r_mean;
+  double area = 1;
+  for (const Axis& e : across(s.up)) {
+    double lo = kInf, hi = -kInf;
+    for (const Vec3& c : p.position) {
+      lo = std::min(lo, along(c, e));
+      hi = std::max(hi, along(c, e));
+    }
+    area *= std::max(hi - lo, d);
+  }
+  const double layers = s.volume / kPacking / area / d;
+  if (!(scene.solver.iterations < layers / 2)) return std::nullopt;
+  return "stack too tall for the solver: about " + num(layers) + " layers of spheres will settle (" +
+         num(s.volume) + " m^3 of spheres at packing " + num(kPacking) + " over " + num(area) + " m^2, " + num(d) +
+         " m a layer), more than twice solver.iterations = " + std::to_string(scene.solver.iterations) +
+         ": its sweeps will not carry the weight down the stack, which sinks into itself; raise solver.iterations "
+         "to at least " + at_least(layers / 2);
+}
+
+// A resting sphere falls g h^2 in a substep before its contact pushes back;
+// beyond the solver's slop the overlap shows as sinking and jitter.
+std::optional<std::string> coarse_substeps(const Setting& s, const scene::Scene& scene) {
+  if (!(s.g > 0) || !(scene.has(Effect::collisions) || scene.has(Effect::walls))) return std::nullopt;
+  const double sink = s.g * s.h * s.h;
+  const double slop = kSlop * s.r_min;
+  if (!(sink > slop)) return std::nullopt;
+  return "substeps too coarse for gravity: a resting sphere falls |g| h^2 = " + num(sink) +
+         " m per substep, more than the solver's slop " + num(kSlop) + " x the smallest radius = " + num(slop) +
+         " m, so resting contacts sink and jitter; raise time.substeps to at least " +
+         at_least(s.dt * std::sqrt(s.g / slop)) + " (or lower time.dt)";
+}
+
+// Float keeps 24 bits: positions across the scene are rounded to about
+// extent * 2^-24, which reaches the solver's slop at 1e5 smallest radii.
+std::optional<std::string> float_precision(const Setting& s, const scene::Scene& scene,
+                                           const scene::GeneratedParticles& p, bool single_precision) {
+  if (!single_precision) return std::nullopt;
+  Box box;
+  for (std::size_t i = 0; i < p.size(); ++i) box.add(p.position[i], p.radius[i]);
+  for (const scene::WallSpec& w : scene.walls)
+    if (auto b = wall_box(w)) box.add(*b);
+  const double extent = box.largest_side();
+  if (!(extent > kFloatRange * s.r_min)) return std::nullopt;
+  const double rounding = std::ldexp(extent, -24);
+  return "float precision: the scene spans " + num(extent) + " m, " + num(extent / s.r_min) +
+         " times the smallest radius (more than " + num(kFloatRange) + "): float positions there are rounded to about " +
+         num(rounding) + " m, " + num(100 * rounding / s.r_min) +
+         " % of that radius; build with -DMARBLES_DOUBLE=ON or make the scene smaller";
+}
+
+}  // namespace
+
+std::vector<std::string> risky_settings(const scene::Scene& scene, const scene::GeneratedParticles& particles,
+                                        bool single_precision) {
+  if (particles.size() == 0) return {};
+  const Setting s = read_setting(scene, particles);
+  std::vector<std::string> warnings;
+  for (std::optional<std::string> w :
+       {fast_motion(s, scene, particles), stack_height(s, scene, particles), coarse_substeps(s, scene),
+        float_precision(s, scene, particles, single_precision)})
+    if (w) warnings.push_back(std::move(*w));
+  return warnings;
+}
+
+}  // namespace marbles

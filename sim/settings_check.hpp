@@ -1,0 +1,24 @@
+// sim/settings_check.hpp — warnings about settings that are valid but likely
+// to give a poor run: spheres tunnelling through each other or the walls,
+// a stack too tall for the solver's sweeps, substeps too coarse for a
+// resting contact, positions too large for float.
+//
+// Estimates from the scene and its initial spheres only (nothing is
+// simulated). `marbles check` and `marbles run` print them; the rules are
+// stated for users in docs/scene-format.md ("Warnings").
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "sim/particles.hpp"
+#include "sim/scene.hpp"
+
+namespace marbles {
+
+// One message per rule that fires, quoting the number that triggered it, the
+// threshold and what to change. `single_precision`: positions are floats.
+std::vector<std::string> risky_settings(const scene::Scene& scene, const scene::GeneratedParticles& particles,
+                                        bool single_precision);
+
+}  // namespace marbles

@@ -1,0 +1,165 @@
+// tests/sim/settings_check_test.cpp — the risky-settings warnings: each rule
+// fires on a scene built to trigger it, quoting the number the test works out
+// on its own, goes quiet with the setting it suggests, and every shipped scene
+// is silent.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <iomanip>
+#include <numbers>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "sim/settings_check.hpp"
+#include "tests/sim/test_scenes.hpp"
+
+using namespace marbles;
+using namespace marbles::testing;
+using scene::Effect;
+
+namespace {
+
+constexpr bool kFloat = true, kDouble = false;
+
+// Three significant digits, as the messages write numbers.
+std::string sig3(double v) {
+  std::ostringstream s;
+  s << std::setprecision(3) << v;
+  return s.str();
+}
+
+double sphere_volume(double r) { return 4.0 / 3.0 * std::numbers::pi * r * r * r; }
+
+// The warnings, each checked to start with one of the rules' openings.
+std::vector<std::string> warnings(const scene::Scene& s, const scene::GeneratedParticles& g, bool single) {
+  const std::vector<std::string> w = risky_settings(s, g, single);
+  for (const std::string& m : w) {
+    const bool known = m.rfind("dt so large", 0) == 0 || m.rfind("stack too tall", 0) == 0 ||
+                       m.rfind("substeps too coarse", 0) == 0 || m.rfind("float precision", 0) == 0;
+    EXPECT_TRUE(known) << m;
+  }
+  return w;
+}
+
+bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+}  // namespace
+
+TEST(SettingsCheck, FastMotionCountsTheFallToTheFloor) {
+  const double dt = 1e-3, r = 0.004, height = 1.0;
+  scene::Scene s = make_scene(dt, 1, {Effect::gravity, Effect::collisions, Effect::walls}, 0.5);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, real(height)}, real(r));
+
+  const std::vector<std::string> w = warnings(s, g, kDouble);
+  ASSERT_EQ(w.size(), 1u);
+  const double move = std::sqrt(2 * 9.81 * height) * dt;  // the speed at the floor, over one substep
+  EXPECT_TRUE(contains(w[0], "dt so large that the fastest sphere moves " + sig3(move) + " m (" + sig3(move / r) +
+                                 " radii) per substep"))
+      << w[0];
+  const int substeps = static_cast<int>(std::ceil(move / r));
+  EXPECT_TRUE(contains(w[0], "raise time.substeps to at least " + std::to_string(substeps))) << w[0];
+
+  s.time.substeps = substeps;
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  s.time.substeps = 1;
+  s.effects = {Effect::gravity, Effect::collisions};  // no wall contacts: no floor to fall to
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+}
+
+TEST(SettingsCheck, FastMotionFromTheInitialSpeed) {
+  const double dt = 0.01, r = 0.01;
+  const scene::Scene s = make_scene(dt, 1, {Effect::collisions}, 1.0);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, 0}, real(r), {3, 0, 4});
+  add_sphere(g, {1, 0, 0}, real(r), {0, 1, 0});
+
+  const std::vector<std::string> w = warnings(s, g, kDouble);
+  ASSERT_EQ(w.size(), 1u);
+  const double move = std::hypot(3.0, 4.0) * dt;
+  EXPECT_TRUE(contains(w[0], "moves " + sig3(move) + " m (" + sig3(move / r) + " radii) per substep")) << w[0];
+}
+
+TEST(SettingsCheck, TallStackWantsMoreIterations) {
+  // A column of 2 x 2 x 50 touching spheres on a floor.
+  const double r = 0.01;
+  scene::Scene s = make_scene(1e-4, 1, {Effect::gravity, Effect::collisions, Effect::walls}, 0.5);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  scene::GeneratedParticles g;
+  for (int k = 0; k < 50; ++k)
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i)
+        add_sphere(g, {real(r * (1 + 2 * i)), real(r * (1 + 2 * j)), real(r * (1 + 2 * k))}, real(r));
+
+  const std::vector<std::string> w = warnings(s, g, kDouble);
+  ASSERT_EQ(w.size(), 1u);
+  const double spread = 3 * r - r;  // of the centres on x and on y (here also the one-diameter minimum)
+  const double layers = double(g.size()) * sphere_volume(r) / 0.6 / (spread * spread) / (2 * r);
+  EXPECT_TRUE(contains(w[0], "stack too tall for the solver: about " + sig3(layers) + " layers")) << w[0];
+  EXPECT_TRUE(contains(w[0], "more than twice solver.iterations = 10")) << w[0];
+
+  s.solver.iterations = static_cast<int>(std::ceil(layers / 2));
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  s.solver.iterations = 10;
+  s.effects = {Effect::gravity, Effect::walls};  // no sphere contacts: no stack
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+}
+
+TEST(SettingsCheck, CoarseSubstepsUnderGravity) {
+  const double dt = 0.01, r = 0.05;
+  scene::Scene s = make_scene(dt, 1, {Effect::gravity, Effect::walls}, 0.5);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, real(r)}, real(r));  // resting on the floor
+
+  const std::vector<std::string> w = warnings(s, g, kDouble);
+  ASSERT_EQ(w.size(), 1u);
+  const double sink = 9.81 * dt * dt, slop = 0.005 * r;
+  EXPECT_TRUE(contains(w[0], "a resting sphere falls |g| h^2 = " + sig3(sink) + " m per substep")) << w[0];
+  EXPECT_TRUE(contains(w[0], "the smallest radius = " + sig3(slop) + " m")) << w[0];
+
+  s.time.substeps = static_cast<int>(std::ceil(std::sqrt(sink / slop)));
+  EXPECT_TRUE(contains(w[0], "raise time.substeps to at least " + std::to_string(s.time.substeps))) << w[0];
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+}
+
+TEST(SettingsCheck, FloatPrecisionOnlyInFloat) {
+  const double r = 0.001, apart = 200;
+  scene::Scene s = make_scene(1e-3, 1, {Effect::collisions}, 0.5);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, 0}, real(r));
+  add_sphere(g, {real(apart), 0, 0}, real(r));
+
+  const std::vector<std::string> w = warnings(s, g, kFloat);
+  ASSERT_EQ(w.size(), 1u);
+  const double extent = apart + 2 * r;
+  EXPECT_TRUE(contains(w[0], "the scene spans " + sig3(extent) + " m, " + sig3(extent / r) + " times")) << w[0];
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+
+  // Close spheres in a large box: the walls count too.
+  g = {};
+  add_sphere(g, {0, 0, 0}, real(r));
+  add_sphere(g, {real(4 * r), 0, 0}, real(r));
+  EXPECT_TRUE(warnings(s, g, kFloat).empty());
+  s.walls.push_back(box({-300, -1, -1}, {300, 1, 1}));
+  const std::vector<std::string> boxed = warnings(s, g, kFloat);
+  ASSERT_EQ(boxed.size(), 1u);
+  EXPECT_TRUE(contains(boxed[0], "the scene spans " + sig3(600.0) + " m")) << boxed[0];
+}
+
+TEST(SettingsCheck, ShippedScenesAreSilent) {
+  std::vector<std::string> scenes;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(MARBLES_SOURCE_DIR "/scenes"))
+    if (entry.is_regular_file() && entry.path().extension() == ".yaml") scenes.push_back(entry.path().string());
+  ASSERT_FALSE(scenes.empty());
+  for (const std::string& path : scenes) {
+    SCOPED_TRACE(path);
+    const scene::Scene s = scene::load_scene(path);
+    const scene::GeneratedParticles g = scene::generate_particles(s);
+    EXPECT_TRUE(warnings(s, g, kFloat).empty()) << warnings(s, g, kFloat).front();
+    EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  }
+}
