@@ -10,7 +10,7 @@ JOBS=$(nproc 2>/dev/null || echo 2)
 # Needed to build the core at all.
 REQUIRED_PKGS=(cmake g++ make pkg-config libyaml-cpp-dev libeigen3-dev libgtest-dev libbenchmark-dev libcli11-dev)
 # Found -> on: VTK output, OSMesa rendering, PNG, movies.
-OPTIONAL_PKGS=(libvtk9-dev libosmesa6-dev libpng-dev ffmpeg)
+OPTIONAL_PKGS=(libvtk9-dev libosmesa6-dev libpng-dev ffmpeg gnuplot-nox)
 
 missing_packages() {
   local p

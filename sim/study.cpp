@@ -256,13 +256,14 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   md << "# Study: " << scene.name << "\n\n"
      << "Scene `" << scene.path << "`, reference `" << result.reference << "`"
      << (result.finest.empty() ? "" : " (finest setting: " + result.finest + ")") << "; " << options.repeats
-     << " runs per setting, cost = median wall time.\n\n|";
+     << " runs per setting, cost = median wall time; # is the point's number in study.png.\n\n| # |";
   for (const StudyVary& v : options.vary) md << " " << v.key << " |";
   md << " error | ms per simulated s | ms per step | steps | Pareto |\n|";
-  for (std::size_t k = 0; k < options.vary.size() + 5; ++k) md << "---|";
+  for (std::size_t k = 0; k < options.vary.size() + 6; ++k) md << "---|";
   md << "\n";
-  for (const StudyRow& r : result.rows) {
-    md << "|";
+  for (std::size_t i = 0; i < result.rows.size(); ++i) {
+    const StudyRow& r = result.rows[i];
+    md << "| " << i + 1 << " |";
     for (const std::string& v : r.values) {
       csv << v << ",";
       md << " " << v << " |";
@@ -276,11 +277,15 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   render::write_file_atomic((dir / "study.md").string(), md.str());
 
   // study.png: error against cost, log-log; the Pareto front as a line.
+  // Points are numbered as in study.md; the front's points also say their values.
+  constexpr double kFloor = 1e-15;  // a zero error (the finest setting itself) is drawn here
   std::ostringstream data, front;
-  for (const StudyRow& r : result.rows) {
-    std::string label = label_of(options.vary, r.values);
-    std::replace(label.begin(), label.end(), ' ', '_');
-    data << json_number(r.ms_per_simulated_second) << " " << json_number(std::max(r.error, 1e-9)) << " " << label
+  for (std::size_t i = 0; i < result.rows.size(); ++i) {
+    const StudyRow& r = result.rows[i];
+    std::string label = std::to_string(i + 1);
+    if (r.pareto)
+      for (const std::string& v : r.values) label += "_" + v;
+    data << json_number(r.ms_per_simulated_second) << " " << json_number(std::max(r.error, kFloor)) << " " << label
          << "\n";
   }
   std::vector<const StudyRow*> on_front;
@@ -289,7 +294,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   std::sort(on_front.begin(), on_front.end(),
             [](const StudyRow* a, const StudyRow* b) { return a->ms_per_simulated_second < b->ms_per_simulated_second; });
   for (const StudyRow* r : on_front)
-    front << json_number(r->ms_per_simulated_second) << " " << json_number(std::max(r->error, 1e-9)) << "\n";
+    front << json_number(r->ms_per_simulated_second) << " " << json_number(std::max(r->error, kFloor)) << "\n";
   render::write_file_atomic((dir / "study.dat").string(), data.str());
   render::write_file_atomic((dir / "study_front.dat").string(), front.str());
   const std::string png = (dir / "study.png").string();
@@ -298,9 +303,9 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
      << "set output '" << png << ".tmp'\n"
      << "set logscale xy\nset grid\nset key top right\n"
      << "set title '" << scene.name << ": error against cost (" << result.reference << ")'\n"
-     << "set xlabel 'wall ms per simulated second'\nset ylabel 'relative error (floor 1e-9)'\n"
+     << "set xlabel 'wall ms per simulated second'\nset ylabel 'relative error (0 drawn at 1e-15)'\n"
      << "plot '" << (dir / "study.dat").string() << "' using 1:2 with points pt 7 ps 1.5 title 'settings', \\\n"
-     << "     '' using 1:2:3 with labels font ',8' offset 0,1 notitle, \\\n"
+     << "     '' using 1:2:3 with labels font ',8' left offset 0.7,0.5 notitle, \\\n"
      << "     '" << (dir / "study_front.dat").string() << "' using 1:2 with linespoints lw 2 pt 6 ps 2.2 title 'Pareto front'\n";
   render::write_file_atomic((dir / "study.gp").string(), gp.str());
   if (have_gnuplot()) {
@@ -317,10 +322,12 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
 
   out << "study of " << scene.name << " (" << result.rows.size() << " settings x " << options.repeats
       << " runs), reference " << result.reference << ":\n";
-  out << std::left << std::setw(48) << "setting" << std::right << std::setw(12) << "error %" << std::setw(14)
+  std::size_t width = 8;
+  for (const StudyRow& r : result.rows) width = std::max(width, label_of(options.vary, r.values).size() + 2);
+  out << std::left << std::setw(static_cast<int>(width)) << "setting" << std::right << std::setw(12) << "error %" << std::setw(14)
       << "ms/sim s" << std::setw(12) << "ms/step" << "  Pareto\n";
   for (const StudyRow& r : result.rows)
-    out << std::left << std::setw(48) << label_of(options.vary, r.values) << std::right << std::setw(12)
+    out << std::left << std::setw(static_cast<int>(width)) << label_of(options.vary, r.values) << std::right << std::setw(12)
         << fixed(100 * r.error, 3) << std::setw(14) << fixed(r.ms_per_simulated_second, 4) << std::setw(12)
         << fixed(r.ms_per_step, 4) << (r.pareto ? "  *" : "") << "\n";
   out << "output: " << dir.string() << "  (study.md, study.csv" << (result.plotted ? ", study.png" : "") << ")\n";
