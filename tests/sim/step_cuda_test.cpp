@@ -50,6 +50,18 @@ TEST(StepCuda, PourMatchesTheCpuBitForBit) {
   expect_same_run(s, g, 400);
 }
 
+// The accuracy knobs: velocity Verlet (its half kicks and its wall impacts at
+// the accelerated time of impact) and speculative contacts off.
+TEST(StepCuda, VerletAndNoSpeculativePoursMatchTheCpuBitForBit) {
+  REQUIRE_DEVICE();
+  for (const bool speculative : {true, false}) {
+    auto [s, g] = pour_scene(400, 3);
+    s.solver.integrator = "velocity_verlet";
+    s.solver.speculative = speculative;
+    expect_same_run(s, g, 300);
+  }
+}
+
 TEST(StepCuda, LargerPourMatchesTheCpuBitForBit) {
   REQUIRE_DEVICE();
   auto [s, g] = pour_scene(3000, 5);
