@@ -10,6 +10,7 @@
 // against cost, log-log, with the Pareto front marked.
 #pragma once
 
+#include <cstdint>
 #include <iosfwd>
 #include <string>
 #include <vector>
