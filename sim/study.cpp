@@ -15,6 +15,7 @@
 #include <iomanip>
 #include <ostream>
 #include <sstream>
+#include <tuple>
 
 #include "core/error.hpp"
 #include "render/atomic_file.hpp"
@@ -182,7 +183,9 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   const bool tty = options.progress && isatty(fileno(stderr));
   std::size_t done = 0;
   std::vector<std::vector<double>> shapes;  // reference finest: what each run measured
-  std::vector<double> fineness;             // h = dt / substeps, then iterations, precision: smaller is finer
+  // How fine each setting is: smaller substep, then more iterations, then
+  // double, then velocity Verlet, then speculative contacts on.
+  std::vector<std::tuple<double, double, int, int, int>> fineness;
   for (std::size_t c = 0; c < combos.size(); ++c) {
     StudyRow row;
     row.values = combos[c];
@@ -226,14 +229,16 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     row.error = json_double(summary, "error");
     row.measured = json_doubles(summary, "measured");
     const double h = json_double(summary, "dt") / std::max(1.0, json_double(summary, "substeps"));
-    fineness.push_back(h * (json_value(summary, "precision") == "double" ? 0.999 : 1.0));
+    fineness.emplace_back(h, -json_double(summary, "iterations"), json_value(summary, "precision") == "double" ? 0 : 1,
+                          json_value(summary, "integrator") == "velocity_verlet" ? 0 : 1,
+                          json_value(summary, "speculative") == "true" ? 0 : 1);
     shapes.push_back(row.measured);
     result.rows.push_back(std::move(row));
   }
   if (options.progress) show_progress(err, tty, done, total, "done");
 
   if (scene.reference.kind == scene::ReferenceSpec::Kind::finest) {
-    // The finest combination (smallest substep; double before float) is the
+    // The finest combination (smallest substep, most iterations, double, ...) is the
     // reference: each row's error is the largest change of the centre of
     // mass or radius of gyration, in mean radii.
     const std::size_t f = std::min_element(fineness.begin(), fineness.end()) - fineness.begin();

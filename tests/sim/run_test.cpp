@@ -94,14 +94,24 @@ TEST(Run, RenderingDoesNotChangeTheSimulation) {
   fs::remove_all(dir);
 }
 
-TEST(Run, SetOverridesChangeTheRun) {
-  const fs::path dir = temp_dir("set");
+namespace {
+
+// The test scene on the CPU, quiet, without rendering, output in dir/out.
+RunOptions quiet_cpu_run(const fs::path& dir) {
   RunOptions options;
   options.scene_path = write_scene(dir).string();
   options.out_dir = (dir / "out").string();
   options.backend = BackendChoice::cpu;
   options.quiet = true;
   options.render = false;
+  return options;
+}
+
+}  // namespace
+
+TEST(Run, SetOverridesChangeTheRun) {
+  const fs::path dir = temp_dir("set");
+  RunOptions options = quiet_cpu_run(dir);
   options.overrides = {"time.duration=0.01", "time.dt=5e-4", "particles[0].random.count=20"};
   std::ostringstream out, err;
   ASSERT_EQ(run_scene(options, out, err), 0) << err.str();
@@ -113,12 +123,7 @@ TEST(Run, SetOverridesChangeTheRun) {
 
 TEST(Run, QuietRunStillWarnsOfRiskySettings) {
   const fs::path dir = temp_dir("warn");
-  RunOptions options;
-  options.scene_path = write_scene(dir).string();
-  options.out_dir = (dir / "out").string();
-  options.backend = BackendChoice::cpu;
-  options.quiet = true;
-  options.render = false;
+  RunOptions options = quiet_cpu_run(dir);
   options.overrides = {"time.duration=0.04", "time.dt=0.02"};
   std::ostringstream out, err;
   ASSERT_EQ(run_scene(options, out, err), 0) << err.str();
