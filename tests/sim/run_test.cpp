@@ -87,7 +87,9 @@ TEST(Run, RenderingDoesNotChangeTheSimulation) {
     }
   }
   // The rendered run did render (where this build can), the other did not.
-  if (render::renderer_available()) EXPECT_TRUE(fs::exists(dir / "with" / "images" / "frame_000020.png"));
+  if (render::renderer_available()) {
+    EXPECT_TRUE(fs::exists(dir / "with" / "images" / "frame_000020.png"));
+  }
   EXPECT_FALSE(fs::exists(dir / "without" / "images"));
   EXPECT_TRUE(fs::exists(dir / "with" / "summary.json"));
   EXPECT_NE(read_file(dir / "without" / "summary.json").find("\"steps\": 200"), std::string::npos);
