@@ -22,6 +22,7 @@
 
 #include "broadphase/broadphase.hpp"
 #include "broadphase/grid.hpp"
+#include "broadphase/pair_chunks.hpp"
 #include "core/radix_sort.hpp"
 #include "core/error.hpp"
 
@@ -238,27 +239,23 @@ void SubdivisionCpu::run(const SpheresIn& s, real margin, const GridChoice& gc, 
     const std::size_t chunks = n_chunks(cells, kCellChunk);
     m_pair_chunks.resize(chunks);
     m_test_chunks.assign(chunks, 0);
+    ParallelErrors errors;
 #pragma omp parallel for schedule(dynamic, 4) if (chunks > 1)
     for (std::ptrdiff_t c = 0; c < static_cast<std::ptrdiff_t>(chunks); ++c) {
-      auto& local = m_pair_chunks[static_cast<std::size_t>(c)];
-      local.clear();
-      std::size_t tests = 0;
-      const std::size_t end = std::min(cells, (static_cast<std::size_t>(c) + 1) * kCellChunk);
-      for (std::size_t k = static_cast<std::size_t>(c) * kCellChunk; k < end; ++k) {
-        tests += traverse_cell(m_cells[k], m_values.data(), s.centre, s.radius, m_info.data(), margin,
-                               [&](std::uint32_t i, std::uint32_t j) { local.push_back({i, j}); });
-      }
-      m_test_chunks[static_cast<std::size_t>(c)] = tests;
+      errors.run([&] {
+        auto& local = m_pair_chunks[static_cast<std::size_t>(c)];
+        local.clear();
+        std::size_t tests = 0;
+        const std::size_t end = std::min(cells, (static_cast<std::size_t>(c) + 1) * kCellChunk);
+        for (std::size_t k = static_cast<std::size_t>(c) * kCellChunk; k < end; ++k) {
+          tests += traverse_cell(m_cells[k], m_values.data(), s.centre, s.radius, m_info.data(), margin,
+                                 [&](std::uint32_t i, std::uint32_t j) { local.push_back({i, j}); });
+        }
+        m_test_chunks[static_cast<std::size_t>(c)] = tests;
+      });
     }
-    std::size_t total = 0;
-    for (const auto& local : m_pair_chunks) total += local.size();
-    out.resize(total);
-    std::size_t at = 0;
-    for (std::size_t c = 0; c < chunks; ++c) {
-      std::copy(m_pair_chunks[c].begin(), m_pair_chunks[c].end(), out.begin() + static_cast<std::ptrdiff_t>(at));
-      at += m_pair_chunks[c].size();
-      m_stats.tests += m_test_chunks[c];
-    }
+    gather_pair_chunks(m_pair_chunks, errors, out);
+    for (std::size_t c = 0; c < chunks; ++c) m_stats.tests += m_test_chunks[c];
   }
   m_stats.pairs = out.size();
   m_stats.ms_traversal = ms_since(t3);

@@ -19,6 +19,7 @@
 
 #include "broadphase/broadphase.hpp"
 #include "broadphase/grid.hpp"
+#include "broadphase/pair_chunks.hpp"
 #include "core/radix_sort.hpp"
 #include "core/error.hpp"
 
@@ -159,30 +160,26 @@ void HomeCellCpu::run(const SpheresIn& s, real margin, const HomeGrid& g, std::v
   const std::ptrdiff_t chunks = chunks_of(n);
   m_pair_chunks.resize(static_cast<std::size_t>(chunks));
   m_test_chunks.assign(static_cast<std::size_t>(chunks), 0);
+  ParallelErrors errors;
 #pragma omp parallel for schedule(dynamic, 1) if (chunks > 1)
   for (std::ptrdiff_t c = 0; c < chunks; ++c) {
-    auto& local = m_pair_chunks[static_cast<std::size_t>(c)];
-    local.clear();
-    std::size_t tests = 0;
-    const std::size_t end = std::min(n, (static_cast<std::size_t>(c) + 1) * kChunk);
-    for (std::size_t i = static_cast<std::size_t>(c) * kChunk; i < end; ++i) {
-      const auto si = static_cast<std::uint32_t>(i);
-      tests += traverse_home_sphere(
-          si, keys[i], m_sorted[i], g, lb, [&](std::uint32_t j) -> const Record& { return m_sorted[j]; }, margin,
-          [&](std::uint32_t j) { local.push_back(ordered_pair(m_ids[i], m_ids[j])); });
-    }
-    m_test_chunks[static_cast<std::size_t>(c)] = tests;
+    errors.run([&] {
+      auto& local = m_pair_chunks[static_cast<std::size_t>(c)];
+      local.clear();
+      std::size_t tests = 0;
+      const std::size_t end = std::min(n, (static_cast<std::size_t>(c) + 1) * kChunk);
+      for (std::size_t i = static_cast<std::size_t>(c) * kChunk; i < end; ++i) {
+        const auto si = static_cast<std::uint32_t>(i);
+        tests += traverse_home_sphere(
+            si, keys[i], m_sorted[i], g, lb, [&](std::uint32_t j) -> const Record& { return m_sorted[j]; }, margin,
+            [&](std::uint32_t j) { local.push_back(ordered_pair(m_ids[i], m_ids[j])); });
+      }
+      m_test_chunks[static_cast<std::size_t>(c)] = tests;
+    });
   }
-  std::size_t total = 0;
-  for (const auto& local : m_pair_chunks) total += local.size();
-  out.resize(total);
-  std::size_t at = 0;
-  for (std::size_t c = 0; c < m_pair_chunks.size(); ++c) {
-    std::copy(m_pair_chunks[c].begin(), m_pair_chunks[c].end(), out.begin() + static_cast<std::ptrdiff_t>(at));
-    at += m_pair_chunks[c].size();
-    m_stats.tests += m_test_chunks[c];
-  }
-  m_stats.pairs = total;
+  gather_pair_chunks(m_pair_chunks, errors, out);
+  for (std::size_t c = 0; c < m_pair_chunks.size(); ++c) m_stats.tests += m_test_chunks[c];
+  m_stats.pairs = out.size();
   const auto t4 = Clock::now();
   m_stats.ms_cell_ids = ms_between(t0, t1);
   m_stats.ms_sort = ms_between(t1, t2);

@@ -1,11 +1,13 @@
 // render/atomic_file.cpp — see atomic_file.hpp.
 #include "render/atomic_file.hpp"
 
+#include <signal.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <string>
 
@@ -17,8 +19,12 @@ namespace fs = std::filesystem;
 
 fs::path temp_path_beside(const fs::path& final_path) {
   static std::atomic<unsigned> counter{0};
-  const std::string name = "." + final_path.filename().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
-                           std::to_string(counter++);
+  std::string name = ".";  // appended piece by piece (GCC 12 warns falsely on "." + std::string)
+  name += final_path.filename().string();
+  name += ".tmp-";
+  name += std::to_string(::getpid());
+  name += '-';
+  name += std::to_string(counter++);
   return final_path.parent_path() / name;
 }
 
@@ -29,6 +35,22 @@ void commit_file(const fs::path& tmp, const fs::path& final_path) {
     fs::remove(tmp, ec);
     throw RuntimeFailure("cannot rename " + tmp.string() + " to " + final_path.string() + ": " + ec.message());
   }
+}
+
+std::size_t remove_stale_temporaries(const fs::path& dir) {
+  std::size_t removed = 0;
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    const std::size_t tag = name.rfind(".tmp-");
+    if (name.empty() || name[0] != '.' || tag == std::string::npos) continue;
+    const long pid = std::strtol(name.c_str() + tag + 5, nullptr, 10);
+    const bool writer_gone = pid > 0 && ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
+    if (!writer_gone) continue;
+    std::error_code remove_ec;
+    if (fs::remove(it->path(), remove_ec)) ++removed;
+  }
+  return removed;
 }
 
 void write_file_atomic(const fs::path& path, std::string_view contents) {

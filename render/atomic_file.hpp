@@ -19,6 +19,10 @@ std::filesystem::path temp_path_beside(const std::filesystem::path& final_path);
 /// marbles::RuntimeFailure naming both paths.
 void commit_file(const std::filesystem::path& tmp, const std::filesystem::path& final_path);
 
+/// Removes the temporary files in `dir` (not below) left by processes that
+/// no longer run (a `kill -9` mid-write); returns how many it removed.
+std::size_t remove_stale_temporaries(const std::filesystem::path& dir);
+
 /// Writes `contents` to `path` atomically (temporary file + rename).
 /// Throws marbles::RuntimeFailure on any I/O error.
 void write_file_atomic(const std::filesystem::path& path, std::string_view contents);

@@ -8,7 +8,10 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <new>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -30,6 +33,15 @@ const std::map<std::string, marbles::BackendChoice> kBackends{
     {"auto", marbles::BackendChoice::automatic},
     {"cpu", marbles::BackendChoice::cpu},
     {"cuda", marbles::BackendChoice::cuda}};
+
+// Numbers given on the command line must be finite (CLI11 reads "nan").
+const CLI::Validator kFinite(
+    [](std::string& text) {
+      char* end = nullptr;
+      const double v = std::strtod(text.c_str(), &end);
+      return std::isfinite(v) ? std::string() : "must be a finite number, got " + text;
+    },
+    "FINITE");
 
 // `--set key.path=value`, repeatable; one value per `--set`.
 void add_set_option(CLI::App* command, std::vector<std::string>& overrides) {
@@ -94,7 +106,7 @@ int cli_main(int argc, char** argv) {
   run_cmd->add_flag("--quiet", run.quiet, "print only the summary");
   run_cmd->add_flag("--no-render", no_render, "skip images and movie even if the scene asks for them");
   run_cmd->add_option("--duration", run_duration, "simulated seconds (overrides time.duration)")
-      ->check(CLI::PositiveNumber);
+      ->check(kFinite & CLI::PositiveNumber);
   add_set_option(run_cmd, run.overrides);
   run_cmd->add_flag("--summary-only", run.summary_only, "write only summary.json (no frames, images or movie)");
   std::string precision;
@@ -135,7 +147,7 @@ int cli_main(int argc, char** argv) {
   pairs_cmd->add_option("--backend", pairs_backend, "cpu (default), cuda or auto (subdivision and home)")
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   pairs_cmd->add_option("--margin", pairs_margin, "report pairs whose gap is below this (m)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kFinite & CLI::NonNegativeNumber);
 
   auto* bench_cmd = app.add_subcommand("bench", "benchmarks (JSON and a table)");
   bench_cmd->require_subcommand(1);
@@ -194,8 +206,8 @@ int cli_main(int argc, char** argv) {
   render_cmd->add_option("--color-by", rd_color_by, "speed|id|radius|material")
       ->check(CLI::IsMember({"speed", "id", "radius", "material"}));
   render_cmd->add_option("--camera", rd_camera, "camera position and target: x,y,z:lx,ly,lz");
-  render_cmd->add_option("--width", rd.width, "image width in pixels")->check(CLI::Range(16, 16384));
-  render_cmd->add_option("--height", rd.height, "image height in pixels")->check(CLI::Range(16, 16384));
+  render_cmd->add_option("--width", rd.width, "image width in pixels")->check(CLI::Range(16, 8192));
+  render_cmd->add_option("--height", rd.height, "image height in pixels")->check(CLI::Range(16, 8192));
   render_cmd->add_option("--fps", rd_movie.fps, "movie frames per second (default: from the frame times)")
       ->check(CLI::PositiveNumber);
   bool rd_no_movie = false;
@@ -254,6 +266,9 @@ int cli_main(int argc, char** argv) {
     return 2;
   } catch (const RuntimeFailure& e) {
     std::cerr << "marbles: " << e.what() << "\n";
+    return 1;
+  } catch (const std::bad_alloc&) {
+    std::cerr << "marbles: out of memory\n";
     return 1;
   } catch (const std::exception& e) {
     std::cerr << "marbles: " << e.what() << "\n";

@@ -41,6 +41,7 @@ class CpuStep final : public StepBackend {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_contacts.clear();
     if (!m_model.collisions && !m_model.wall_contacts) return;
+    if (m_non_finite) return;  // the step ends with "non-finite at step N, sphere i", not a broad-phase error
     const BodiesView bodies = m_world.view();
     const std::size_t n = m_world.size();
     narrowphase::contact_reaches(bodies, h, m_reach);

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "core/error.hpp"
+#include "render/atomic_file.hpp"
 #include "render/frame_output.hpp"
 #include "render/vtk_output.hpp"
 #include "render/walls_json.hpp"
@@ -54,6 +55,7 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) throw RuntimeFailure("cannot create the output folder " + dir + ": " + ec.message());
+  for (const char* sub : {"", "frames", "images"}) render::remove_stale_temporaries(std::filesystem::path(dir) / sub);
   render::write_walls_json(dir, walls);
   std::vector<std::string> names;
   for (const scene::Material& m : scene.materials) names.push_back(m.name);

@@ -27,6 +27,8 @@
 #include <fstream>
 #include <functional>
 #include <random>
+#include <sstream>
+#include <string>
 #include <string_view>
 
 namespace marbles::scene {
@@ -74,22 +76,64 @@ void push_sphere(GeneratedParticles& out, const Vec3& position, double radius, s
   out.material.push_back(material);
 }
 
+// --- resource guard --------------------------------------------------------
+
+// Memory a run needs per sphere, roughly: the world, the step's buffers and
+// the broad phase's, for a pile (~6 contacts per sphere); measured peak
+// resident size of `marbles run` on piles of 10^5 and 10^6 spheres, rounded up.
+// A count as text: exact below 1e15, else in e-notation.
+std::string format_count(double n) {
+  if (n < 1e15) return std::to_string(static_cast<long long>(n));
+  std::ostringstream s;
+  s << n;
+  return s.str();
+}
+
+constexpr double kBytesPerSphere = 120.0 * sizeof(real) + 300.0;
+
+// Bytes of memory available now (MemAvailable), or 0 when unknown.
+double available_memory() {
+  std::ifstream in("/proc/meminfo");
+  std::string key;
+  double kib = 0;
+  std::string unit;
+  while (in >> key >> kib >> unit)
+    if (key == "MemAvailable:") return kib * 1024;
+  return 0;
+}
+
+// Refuses a block that would take the scene past what memory can hold,
+// before it is generated (never an out-of-memory kill half way through).
+void check_sphere_budget(double total, const SourceLocation& where, const std::string& key) {
+  const double memory = available_memory();
+  if (memory > 0 && total * kBytesPerSphere > memory)
+    throw InputError(where, key,
+                     "would make " + std::to_string(static_cast<long long>(total)) + " spheres, about " +
+                         std::to_string(static_cast<long long>(total * kBytesPerSphere / 1e9)) +
+                         " GB to run; this machine has " + std::to_string(static_cast<long long>(memory / 1e9)) +
+                         " GB available");
+}
+
 // --- lattice ---------------------------------------------------------------
 
 void expand_lattice(const ParticleBlock& block, std::size_t index, std::uint32_t material, GeneratedParticles& out) {
   const double margin = largest_radius(block.radius) + block.jitter;
   std::array<long long, 3> n{};
   std::array<double, 3> start{};
+  std::array<double, 3> room{};
   double total = 1;
   for (int a = 0; a < 3; ++a) {
-    const double room = double(block.hi[a]) - double(block.lo[a]) - 2 * margin;
-    n[a] = static_cast<long long>(std::floor(room / block.spacing + 1e-9)) + 1;
-    start[a] = double(block.lo[a]) + margin + 0.5 * (room - double(n[a] - 1) * block.spacing);  // centred in the box
-    total *= double(n[a]);
+    room[a] = double(block.hi[a]) - double(block.lo[a]) - 2 * margin;
+    total *= std::floor(room[a] / block.spacing + 1e-9) + 1;  // in double: no cast before the cap
   }
-  if (total > 1e9)
+  if (!(total <= 1e9))
     throw InputError(block.where, block_key(index) + ".lattice",
-                     "would make " + std::to_string(static_cast<long long>(total)) + " spheres; enlarge the spacing");
+                     "would make " + format_count(total) + " spheres; enlarge the spacing");
+  check_sphere_budget(double(out.size()) + total, block.where, block_key(index) + ".lattice");
+  for (int a = 0; a < 3; ++a) {
+    n[a] = static_cast<long long>(std::floor(room[a] / block.spacing + 1e-9)) + 1;
+    start[a] = double(block.lo[a]) + margin + 0.5 * (room[a] - double(n[a] - 1) * block.spacing);  // centred in the box
+  }
   Random rng(block.seed);
   out.position.reserve(out.size() + std::size_t(total));
   for (long long k = 0; k < n[2]; ++k) {
@@ -173,6 +217,7 @@ class PlacementGrid {
 };
 
 void expand_random(const ParticleBlock& block, std::size_t index, std::uint32_t material, GeneratedParticles& out) {
+  check_sphere_budget(double(out.size()) + double(block.count), block.count_where, block_key(index) + ".random.count");
   Random rng(block.seed);
   std::vector<double> radii(block.count);
   for (double& r : radii) r = double(real(draw_radius(block.radius, rng)));

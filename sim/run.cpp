@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
@@ -65,12 +66,22 @@ void warn_risky_settings(const scene::Scene& sc, const scene::GeneratedParticles
   for (const std::string& w : risky_settings(sc, particles, sizeof(real) == 4)) err << "warning: " << w << "\n";
 }
 
+// A JSON string: quotes, backslashes and every control character escaped
+// (a path with a tab or a newline stays valid JSON).
 std::string json_string(const std::string& v) {
   std::string out = "\"";
-  for (char c : v) {
-    if (c == '"' || c == '\\') out += '\\';
-    if (c == '\n') { out += "\\n"; continue; }
-    out += c;
+  for (const char c : v) {
+    const auto u = static_cast<unsigned char>(c);
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += c;
+    } else if (u < 0x20) {
+      char code[8];
+      std::snprintf(code, sizeof code, "\\u%04x", u);
+      out += code;
+    } else {
+      out += c;
+    }
   }
   return out + "\"";
 }
@@ -94,6 +105,7 @@ int check_scene(const std::string& scene_path, const std::vector<std::string>& o
                 std::ostream& err) {
   const scene::Scene sc = scene::load_scene(scene_path, overrides);
   const scene::GeneratedParticles particles = scene::generate_particles(sc);
+  make_world(sc, particles);  // masses and inertias in range for the precision
   out << scene_path << ": ok (" << particles.size() << " spheres, " << sc.materials.size() << " material(s), "
       << sc.walls.size() << " wall(s), " << std::llround(sc.time.duration / sc.time.dt) << " steps of "
       << sc.time.dt << " s, " << kRealName << ")\n";

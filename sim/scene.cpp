@@ -20,6 +20,8 @@
 #include <iterator>
 #include <sstream>
 
+#include <yaml-cpp/eventhandler.h>
+
 #include "sim/scene_overrides.hpp"
 #include "sim/scene_yaml.hpp"
 
@@ -32,6 +34,8 @@ using detail::MapFields;
 namespace {
 
 constexpr int kFormatVersion = 1;
+constexpr double kMaxSubsteps = 1e10;  // a run of more substeps would not finish
+constexpr std::size_t kMaxSceneBytes = std::size_t(64) << 20;  // a scene file is small; bulk data goes in CSV
 
 const std::vector<std::string> kEffectNames = {"gravity",  "collisions",         "walls", "restitution",
                                                "friction", "rolling_resistance", "drag"};
@@ -62,6 +66,12 @@ TimeSpec read_time(const Field& field) {
   if (time.dt > time.duration)
     dt.fail("must be <= time.duration (" + format_number(time.duration) + "), got " + dt.node().Scalar());
   if (auto f = map.optional("substeps")) time.substeps = f->integer_at_least(1);
+  const double steps = time.duration / time.dt * time.substeps;
+  if (!(steps <= kMaxSubsteps))
+    dt.fail("time.duration / time.dt x time.substeps = " + format_number(steps) + " substeps, more than the limit " +
+            format_number(kMaxSubsteps));
+  if (!(static_cast<real>(time.dt / time.substeps) > 0))
+    dt.fail("the substep dt / substeps rounds to 0 in " + std::string(kRealName) + " precision");
   return time;
 }
 
@@ -168,6 +178,8 @@ std::vector<Material> read_materials(const Field& field) {
     m.name = entry.name;
     m.where = entry.name_where;
     if (m.name.empty()) throw InputError(entry.name_where, field.key(), "a material needs a name");
+    if (std::any_of(m.name.begin(), m.name.end(), [](char c) { return static_cast<unsigned char>(c) < 0x20; }))
+      throw InputError(entry.name_where, field.key(), "a material name cannot hold a control character (tab, newline)");
     if (!entry.value.node().IsNull()) {  // `glass:` alone takes every default
       const MapFields props(entry.value,
                             {"density", "restitution", "friction", "rolling_friction", "twisting_friction"});
@@ -515,8 +527,8 @@ OutputSpec read_output(const Field& field, const std::string& stem) {
     if (auto e = render.optional("every")) output.render.every = e->integer_at_least(1);
     width = render.optional("width");
     height = render.optional("height");
-    if (width) output.render.width = width->integer_at_least(16, 16384);
-    if (height) output.render.height = height->integer_at_least(16, 16384);
+    if (width) output.render.width = width->integer_at_least(16, 8192);
+    if (height) output.render.height = height->integer_at_least(16, 8192);
     if (auto e = render.optional("color_by")) {
       output.render.color_by = e->word();
       if (std::find(kColorBy.begin(), kColorBy.end(), output.render.color_by) == kColorBy.end())
@@ -562,7 +574,59 @@ std::string read_file(const std::string& path) {
     throw InputError(SourceLocation{path, 0, 0}, "", "is a folder, not a scene file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(SourceLocation{path, 0, 0}, "", std::string("cannot open the scene file: ") + std::strerror(errno));
-  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  // Read at most the limit (and one byte more, to know): /dev/zero or a
+  // runaway pipe is refused instead of filling the memory.
+  std::string text(kMaxSceneBytes + 1, '\0');
+  in.read(text.data(), static_cast<std::streamsize>(text.size()));
+  text.resize(static_cast<std::size_t>(in.gcount()));
+  if (text.size() > kMaxSceneBytes)
+    throw InputError(SourceLocation{path, 0, 0}, "",
+                     "larger than " + std::to_string(kMaxSceneBytes >> 20) + " MiB: not a scene file (particles in "
+                     "bulk belong in a csv block)");
+  return text;
+}
+
+// Counts the YAML documents of `text`, stopping at `limit` (yaml-cpp 0.7's
+// LoadAll yields empty documents forever after a leading ','); `second` is
+// where the second one starts.
+class DocumentCounter : public YAML::EventHandler {
+ public:
+  void OnDocumentStart(const YAML::Mark& mark) override {
+    if (++m_count == 2) m_second = mark;
+  }
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnAlias(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t, const std::string&) override {}
+  void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {}
+  void OnSequenceEnd() override {}
+  void OnMapStart(const YAML::Mark&, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {}
+  void OnMapEnd() override {}
+
+  static std::size_t count(const std::string& text, std::size_t limit, YAML::Mark& second) {
+    std::istringstream in(text);
+    YAML::Parser parser(in);
+    DocumentCounter counter;
+    while (counter.m_count < limit && parser.HandleNextDocument(counter)) {
+    }
+    second = counter.m_second;
+    return counter.m_count;
+  }
+
+ private:
+  std::size_t m_count = 0;
+  YAML::Mark m_second;
+};
+
+// True when the text holds nothing but blanks and comments.
+bool blank_yaml(const std::string& text) {
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    const std::size_t at = line.find_first_not_of(" \t\r");
+    if (at != std::string::npos && line[at] != '#') return false;
+  }
+  return true;
 }
 
 }  // namespace
@@ -611,21 +675,25 @@ namespace {
 // The file's one YAML document, which must be a map.
 YAML::Node read_document(const std::string& path) {
   const std::string text = read_file(path);
-  std::vector<YAML::Node> documents;
+  YAML::Node document;
+  std::size_t count = 0;
+  YAML::Mark second;
   try {
-    documents = YAML::LoadAll(text);
+    document = YAML::Load(text);
+    count = DocumentCounter::count(text, 2, second);
   } catch (const YAML::Exception& e) {
     throw InputError(detail::location_of(path, e.mark), "", "not valid YAML: " + printable(e.msg));
   }
-  if (documents.empty() || (documents.size() == 1 && documents[0].IsNull()))
-    throw InputError(SourceLocation{path, 0, 0}, "", "the scene file is empty");
-  if (documents.size() > 1)
-    throw InputError(detail::location_of(path, documents[1].Mark()), "",
-                     "a scene is one YAML document, this file holds " + std::to_string(documents.size()));
-  const Field root(documents[0], "", path);
+  if (document.IsNull() && blank_yaml(text)) throw InputError(SourceLocation{path, 0, 0}, "", "the scene file is empty");
+  if (document.IsNull())
+    throw InputError(SourceLocation{path, 1, 1}, "", "not valid YAML: no document could be read (does it begin with "
+                                                     "a stray ',', '-' or ':'?)");
+  if (count > 1)
+    throw InputError(detail::location_of(path, second), "", "a scene is one YAML document, this file holds more");
+  const Field root(document, "", path);
   if (!root.is_map())
     root.fail("a scene is a map of keys (time, materials, particles, ...), got " + root.description());
-  return documents[0];
+  return document;
 }
 
 Scene read_scene(const Field& root, const std::string& path) {

@@ -167,6 +167,14 @@ double Field::number() const {
   double value = 0;
   if (!parse_double(text, value)) fail("expected a number, got " + description());
   if (!std::isfinite(value)) fail("must be a finite number, got " + text);
+  // Every value reaches the step as `real`: it must stay finite, and a
+  // non-zero one non-zero, in the precision of the run.
+  if (!std::isfinite(static_cast<real>(value)))
+    fail("out of range for " + std::string(kRealName) + " precision (largest " +
+         format_real(std::numeric_limits<real>::max()) + "), got " + text);
+  if (value != 0 && !(std::abs(static_cast<real>(value)) >= std::numeric_limits<real>::min()))
+    fail("too small for " + std::string(kRealName) + " precision (smallest " +
+         format_real(std::numeric_limits<real>::min()) + "), got " + text);
   return value;
 }
 

@@ -2,7 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <numbers>
+#include <string>
+
+#include "core/error.hpp"
 
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
@@ -42,6 +47,16 @@ std::size_t World::first_non_finite() const {
   return size();
 }
 
+namespace {
+
+std::string short_number(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.6g", v);
+  return text;
+}
+
+}  // namespace
+
 World make_world(const scene::Scene& scene, const scene::GeneratedParticles& particles) {
   World w;
   const std::size_t n = particles.size();
@@ -59,6 +74,12 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
     const double mass = density * 4.0 / 3.0 * std::numbers::pi * r * r * r;
     w.inv_mass[i] = static_cast<real>(1.0 / mass);
     w.inv_inertia[i] = static_cast<real>(1.0 / (0.4 * mass * r * r));
+    const auto usable = [](real v) { return std::isfinite(v) && v >= std::numeric_limits<real>::min(); };
+    if (!usable(w.inv_mass[i]) || !usable(w.inv_inertia[i]))
+      throw InputError(SourceLocation{scene.path, 0, 0}, "particles",
+                       "sphere " + std::to_string(i) + " (radius " + short_number(r) + " m, density " +
+                           short_number(density) + " kg/m^3): its mass " + short_number(mass) +
+                           " kg or moment of inertia is out of range for " + kRealName + " precision");
   }
   return w;
 }

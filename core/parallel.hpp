@@ -1,0 +1,39 @@
+// core/parallel.hpp — exceptions out of OpenMP loops.
+//
+// An exception that leaves an OpenMP parallel region calls std::terminate
+// (SIGABRT). Loop bodies that can throw (allocations: std::bad_alloc) run
+// through ParallelErrors::run, which keeps the first exception; after the
+// loop, rethrow() throws it on the calling thread, where it can become a
+// message and an exit code.
+#pragma once
+
+#include <exception>
+#include <mutex>
+
+namespace marbles {
+
+class ParallelErrors {
+ public:
+  template <class F>
+  void run(F&& body) noexcept {
+    if (m_failed) return;  // a racy read at worst runs one more body
+    try {
+      body();
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(m_mutex);
+      if (!m_first) m_first = std::current_exception();
+      m_failed = true;
+    }
+  }
+  bool failed() const { return m_failed; }
+  void rethrow() const {
+    if (m_first) std::rethrow_exception(m_first);
+  }
+
+ private:
+  std::mutex m_mutex;
+  std::exception_ptr m_first;
+  volatile bool m_failed = false;
+};
+
+}  // namespace marbles

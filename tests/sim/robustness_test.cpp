@@ -1,0 +1,145 @@
+// tests/sim/robustness_test.cpp — inputs that used to crash, hang or run
+// silently wrong, each run through the real program: every one now ends with
+// a message and exit code 1 or 2, quickly, and nothing is left half-written.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "tests/sim/scene_cases.hpp"
+
+namespace marbles {
+namespace {
+
+namespace fs = std::filesystem;
+const std::string kMarbles = MARBLES_BINARY_DIR "/bin/marbles";
+
+struct Outcome {
+  int exit_code = -1;
+  std::string err;
+  double seconds = 0;
+};
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// Runs `marbles ARGS` under bash (for ulimit), stderr captured; 20 s at most.
+Outcome marbles(const std::string& args, const test::ScratchDir& dir, const std::string& prefix = "") {
+  const std::string err = dir.path() + "/stderr.txt";
+  const std::string command = "bash -c '" + prefix + " timeout 20 \"" + kMarbles + "\" " + args + "' >/dev/null 2>'" +
+                              err + "'";
+  const auto t0 = std::chrono::steady_clock::now();
+  const int status = std::system(command.c_str());
+  Outcome o;
+  o.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  o.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  o.err = slurp(err);
+  return o;
+}
+
+class Robustness : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!fs::exists(kMarbles)) GTEST_SKIP() << kMarbles << " is not built";
+  }
+};
+
+// yaml-cpp 0.7 yields empty documents forever after a leading ','.
+TEST_F(Robustness, LeadingCommaIsAnErrorNotAnEndlessAllocation) {
+  const test::ScratchDir dir("robust_comma");
+  const std::string scene = dir.write("s.yaml", ",");
+  const Outcome o = marbles("check " + scene, dir);
+  EXPECT_EQ(o.exit_code, 2) << o.err;
+  EXPECT_NE(o.err.find(":1:1: not valid YAML"), std::string::npos) << o.err;
+  EXPECT_LT(o.seconds, 5);
+}
+
+// A device that never ends is refused after the size limit.
+TEST_F(Robustness, EndlessFileIsRefused) {
+  const test::ScratchDir dir("robust_zero");
+  const Outcome o = marbles("check /dev/zero", dir);
+  EXPECT_EQ(o.exit_code, 2) << o.err;
+  EXPECT_NE(o.err.find("larger than 64 MiB"), std::string::npos) << o.err;
+}
+
+// A pair set that cannot fit (coincident centres) is a message with the
+// count, not std::terminate from inside an OpenMP loop.
+TEST_F(Robustness, PairSetBeyondMemoryIsAMessage) {
+  const test::ScratchDir dir("robust_pairs");
+  std::ofstream csv(dir.path() + "/c.csv");
+  for (int i = 0; i < 40000; ++i) csv << "0,0,0,0.1\n";
+  csv.close();
+  const Outcome o = marbles("pairs " + dir.path() + "/c.csv", dir, "ulimit -v 1500000;");
+  EXPECT_EQ(o.exit_code, 1) << o.err;
+  EXPECT_NE(o.err.find("out of memory for the candidate pairs: "), std::string::npos) << o.err;
+}
+
+// Counts a machine cannot hold are refused up front, with the number.
+TEST_F(Robustness, AbsurdCountsAreRefusedUpFront) {
+  const test::ScratchDir dir("robust_count");
+  const std::string scene = dir.write(
+      "s.yaml",
+      "time: {duration: 1, dt: 0.001}\nmaterials: {a: }\nparticles:\n"
+      "  - random: {count: 9e8, min: [0, 0, 0], max: [10000, 10000, 10000], radius: 0.1}\n");
+  const Outcome o = marbles("check " + scene, dir);
+  EXPECT_EQ(o.exit_code, 2) << o.err;
+  EXPECT_NE(o.err.find("would make 900000000 spheres, about "), std::string::npos) << o.err;
+  EXPECT_LT(o.seconds, 5);
+  const std::string lattice = dir.write(
+      "l.yaml",
+      "time: {duration: 1, dt: 0.001}\nmaterials: {a: }\nparticles:\n"
+      "  - lattice: {min: [0, 0, 0], max: [1, 1, 1], spacing: 1e-30, radius: 1e-31}\n");
+  const Outcome l = marbles("check " + lattice, dir);
+  EXPECT_EQ(l.exit_code, 2) << l.err;
+  EXPECT_NE(l.err.find("would make 1e+90 spheres"), std::string::npos) << l.err;
+}
+
+// A mass beyond the precision of the run (radius 1e30) is an input error,
+// not a run with energies of 0.
+TEST_F(Robustness, MassBeyondThePrecisionIsRefused) {
+  const test::ScratchDir dir("robust_mass");
+  const std::string scene =
+      dir.write("s.yaml", "time: {duration: 1, dt: 0.001}\nmaterials: {a: }\nparticles:\n"
+                          "  - list: {positions: [[0, 0, 0]], radius: 1e30}\n");
+  const Outcome o = marbles("check " + scene, dir);
+  EXPECT_EQ(o.exit_code, 2) << o.err;
+  EXPECT_NE(o.err.find("is out of range for float precision"), std::string::npos) << o.err;
+  // In double the same sphere fits.
+  EXPECT_EQ(marbles("check " + scene + " --precision double", dir).exit_code, 0);
+}
+
+// Non-finite numbers on the command line are bad arguments (exit 2).
+TEST_F(Robustness, NanArgumentsAreBadArguments) {
+  const test::ScratchDir dir("robust_nan");
+  const Outcome run = marbles("run " MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml --duration nan", dir);
+  EXPECT_EQ(run.exit_code, 2) << run.err;
+  EXPECT_NE(run.err.find("--duration: must be a finite number, got nan"), std::string::npos) << run.err;
+  const Outcome pairs = marbles("pairs " MARBLES_SOURCE_DIR "/scenes/spheres.csv --margin nan", dir);
+  EXPECT_EQ(pairs.exit_code, 2) << pairs.err;
+}
+
+// summary.json stays valid JSON for a scene path with a tab and a quote.
+TEST_F(Robustness, SummaryEscapesControlCharacters) {
+  const test::ScratchDir dir("robust_json");
+  const std::string scene = dir.path() + "/ball\tx.yaml";
+  fs::copy_file(MARBLES_SOURCE_DIR "/scenes/validation/bouncing_ball.yaml", scene);
+  const Outcome o = marbles("run \"" + scene + "\" --quiet --summary-only --backend cpu --out " + dir.path() + "/out",
+                            dir);
+  ASSERT_EQ(o.exit_code, 0) << o.err;
+  const std::string summary = slurp(dir.path() + "/out/summary.json");
+  EXPECT_EQ(summary.find('\t'), std::string::npos) << summary;
+  EXPECT_NE(summary.find("ball\\u0009x.yaml"), std::string::npos) << summary;
+}
+
+}  // namespace
+}  // namespace marbles
