@@ -4,11 +4,13 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <string>
 
 #include "core/error.hpp"
@@ -28,8 +30,58 @@ fs::path temp_path_beside(const fs::path& final_path) {
   return final_path.parent_path() / name;
 }
 
-void commit_file(const fs::path& tmp, const fs::path& final_path) {
+CompleteCheck has_size(std::uintmax_t bytes) {
+  return [bytes](const fs::path& p) {
+    std::error_code ec;
+    return fs::file_size(p, ec) == bytes && !ec;
+  };
+}
+
+CompleteCheck ends_with(std::string_view tail) {
+  return [tail = std::string(tail)](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    in.seekg(0, std::ios::end);
+    const std::streamoff size = in.tellg();
+    const std::streamoff span = std::min<std::streamoff>(size, static_cast<std::streamoff>(tail.size()) + 16);
+    std::string end(static_cast<std::size_t>(span), '\0');
+    in.seekg(size - span);
+    in.read(end.data(), span);
+    while (!end.empty() && (end.back() == '\n' || end.back() == ' ' || end.back() == '\r')) end.pop_back();
+    return in.good() && end.size() >= tail.size() && end.compare(end.size() - tail.size(), tail.size(), tail) == 0;
+  };
+}
+
+CompleteCheck mp4_has_index() {
+  return [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    std::error_code ec;
+    const std::uintmax_t size = fs::file_size(p, ec);
+    std::uintmax_t at = 0;
+    unsigned char h[16];
+    while (!ec && at + 8 <= size && in.seekg(static_cast<std::streamoff>(at)) && in.read(reinterpret_cast<char*>(h), 8)) {
+      std::uintmax_t box = (std::uintmax_t(h[0]) << 24) | (h[1] << 16) | (h[2] << 8) | h[3];
+      if (std::string(reinterpret_cast<char*>(h + 4), 4) == "moov") return at + box <= size;
+      if (box == 1 && in.read(reinterpret_cast<char*>(h + 8), 8)) {  // 64-bit size
+        box = 0;
+        for (int k = 8; k < 16; ++k) box = (box << 8) | h[k];
+      }
+      if (box < 8) return false;
+      at += box;
+    }
+    return false;
+  };
+}
+
+void commit_file(const fs::path& tmp, const fs::path& final_path, const CompleteCheck& complete) {
   std::error_code ec;
+  if (const char* fault = std::getenv("MARBLES_FAULT_TRUNCATE");
+      fault != nullptr && *fault != '\0' && final_path.filename().string().find(fault) != std::string::npos)
+    fs::resize_file(tmp, fs::file_size(tmp, ec) / 2, ec);
+  if (complete && !complete(tmp)) {
+    fs::remove(tmp, ec);
+    throw RuntimeFailure("cannot write " + final_path.string() +
+                         ": the file was left incomplete (disk full?); nothing was written under its name");
+  }
   fs::rename(tmp, final_path, ec);
   if (ec) {
     fs::remove(tmp, ec);
@@ -64,7 +116,7 @@ void write_file_atomic(const fs::path& path, std::string_view contents) {
     fs::remove(tmp, ec);
     throw RuntimeFailure("cannot write " + tmp.string() + ": " + std::strerror(errno));
   }
-  commit_file(tmp, path);
+  commit_file(tmp, path, has_size(contents.size()));
 }
 
 }  // namespace marbles::render

@@ -6,7 +6,9 @@
 // rename() within one folder is atomic on POSIX file systems.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <string_view>
 
 namespace marbles::render {
@@ -15,9 +17,19 @@ namespace marbles::render {
 /// process and call).
 std::filesystem::path temp_path_beside(const std::filesystem::path& final_path);
 
-/// Renames `tmp` over `final_path`. On failure removes `tmp` and throws
-/// marbles::RuntimeFailure naming both paths.
-void commit_file(const std::filesystem::path& tmp, const std::filesystem::path& final_path);
+/// What a finished file of a kind looks like; a writer that reported success
+/// on a full disk leaves a file that is not.
+using CompleteCheck = std::function<bool(const std::filesystem::path&)>;
+CompleteCheck has_size(std::uintmax_t bytes);
+CompleteCheck ends_with(std::string_view tail);   // e.g. "</VTKFile>" (trailing whitespace allowed)
+CompleteCheck mp4_has_index();                    // a top-level `moov` box
+
+/// Renames `tmp` over `final_path` once `complete` (when given) accepts it.
+/// On failure removes `tmp` and throws marbles::RuntimeFailure naming the
+/// final path. Test hook: MARBLES_FAULT_TRUNCATE=TEXT truncates every file
+/// whose final name holds TEXT to half its size first (what a full disk leaves).
+void commit_file(const std::filesystem::path& tmp, const std::filesystem::path& final_path,
+                 const CompleteCheck& complete = nullptr);
 
 /// Removes the temporary files in `dir` (not below) left by processes that
 /// no longer run (a `kill -9` mid-write); returns how many it removed.

@@ -69,7 +69,7 @@ void write_png(const fs::path& path, const Image& image) {
     fs::remove(tmp, ec);
     throw RuntimeFailure("cannot write PNG " + path.string() + ": " + (error.empty() ? std::strerror(errno) : error));
   }
-  commit_file(tmp, path);
+  commit_file(tmp, path, ends_with(std::string_view("IEND\xae\x42\x60\x82", 8)));
 }
 
 Image read_png(const fs::path& path) {

@@ -153,7 +153,7 @@ void MovieWriter::finish() {
     throw RuntimeFailure("ffmpeg failed to write " + m_path.string() + ": " + tail);
   }
   fs::remove(m_log, ec);
-  commit_file(m_tmp, m_path);
+  commit_file(m_tmp, m_path, mp4_has_index());
 }
 
 }  // namespace marbles::render

@@ -236,7 +236,7 @@ fs::path VtkSeriesWriter::write(const Snapshot& s) {
     fs::remove(tmp, ec);
     throw RuntimeFailure("cannot write " + final_path.string() + " (disk full or not writable?)");
   }
-  commit_file(tmp, final_path);
+  commit_file(tmp, final_path, ends_with("</VTKFile>"));
 
   m_entries.emplace_back(s.time, std::string("frames/") + name);
   write_file_atomic(pvd_path(), pvd_text(m_entries));

@@ -12,6 +12,7 @@
 #include <sstream>
 #include <string>
 
+#include "render/atomic_file.hpp"
 #include "tests/sim/scene_cases.hpp"
 
 namespace marbles {
@@ -139,6 +140,45 @@ TEST_F(Robustness, SummaryEscapesControlCharacters) {
   const std::string summary = slurp(dir.path() + "/out/summary.json");
   EXPECT_EQ(summary.find('\t'), std::string::npos) << summary;
   EXPECT_NE(summary.find("ball\\u0009x.yaml"), std::string::npos) << summary;
+}
+
+// A full disk (simulated: MARBLES_FAULT_TRUNCATE cuts the file in half
+// before it is checked) is exit 1 with the path, and nothing incomplete under
+// a final name.
+TEST_F(Robustness, IncompleteFilesAreNeverCommitted) {
+  const test::ScratchDir dir("robust_disk");
+  for (const std::string victim : {"summary", "frame_000002"}) {
+    const std::string out = dir.path() + "/" + victim;
+    const Outcome o = marbles("run " MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml --quiet --no-render --backend cpu "
+                              "--out " + out, dir, "MARBLES_FAULT_TRUNCATE=" + victim);
+    if (victim == "frame_000002" && o.err.find("VTK") != std::string::npos) continue;  // a build without VTK
+    EXPECT_EQ(o.exit_code, 1) << o.err;
+    EXPECT_NE(o.err.find("the file was left incomplete (disk full?)"), std::string::npos) << o.err;
+    EXPECT_NE(o.err.find(victim), std::string::npos) << o.err;
+    for (const auto& entry : fs::recursive_directory_iterator(out)) {
+      const std::string name = entry.path().filename().string();
+      EXPECT_EQ(name.find(victim), std::string::npos) << "left behind: " << entry.path();
+    }
+  }
+}
+
+// The movie check: an MP4 without its index (moov box) is incomplete.
+TEST(CompleteChecks, Mp4NeedsItsIndex) {
+  const test::ScratchDir dir("robust_mp4");
+  auto box = [](const std::string& type, std::size_t payload) {
+    const std::size_t size = 8 + payload;
+    std::string b{char(size >> 24), char(size >> 16), char(size >> 8), char(size)};
+    return b + type + std::string(payload, 'x');
+  };
+  const std::string whole = box("ftyp", 12) + box("mdat", 100) + box("moov", 40);
+  const std::string good = dir.write("good.mp4", whole);
+  const std::string cut = dir.write("cut.mp4", whole.substr(0, whole.size() - 20));
+  const std::string none = dir.write("none.mp4", box("ftyp", 12) + box("mdat", 100));
+  EXPECT_TRUE(render::mp4_has_index()(good));
+  EXPECT_FALSE(render::mp4_has_index()(cut));
+  EXPECT_FALSE(render::mp4_has_index()(none));
+  EXPECT_TRUE(render::ends_with("</VTKFile>")(dir.write("a.vtp", "<VTKFile>...</VTKFile>\n")));
+  EXPECT_FALSE(render::ends_with("</VTKFile>")(dir.write("b.vtp", "<VTKFile>...</VTKF")));
 }
 
 }  // namespace
