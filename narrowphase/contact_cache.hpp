@@ -18,6 +18,7 @@
 #pragma once
 
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "core/spheres.hpp"
@@ -51,6 +52,9 @@ class ContactCache {
   // Remembers the impulses of `contacts` for the next substep.
   void store(const std::vector<Contact>& contacts);
   void clear() { m_entries = {}; }
+  // The entries themselves (a checkpoint's copy).
+  const CacheEntries& entries() const { return m_entries; }
+  void set_entries(CacheEntries entries) { m_entries = std::move(entries); }
   std::size_t size() const { return m_entries.size(); }
 
  private:

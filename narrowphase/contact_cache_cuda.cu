@@ -168,6 +168,33 @@ void ContactCacheCuda::store(const Contact* contacts, std::uint32_t n, int sm_co
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
+CacheEntries ContactCacheCuda::download(cudaStream_t s) {
+  CacheEntries e;
+  const std::size_t m = m_count;
+  e.key.resize(m);
+  e.normal_impulse.resize(m);
+  e.tangent_impulse.resize(m);
+  e.rolling_impulse.resize(m);
+  if (m == 0) return e;
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.key.data(), m_keys.get(), m * sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.normal_impulse.data(), m_normal.get(), m * sizeof(real), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.tangent_impulse.data(), m_tangent.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.rolling_impulse.data(), m_rolling.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  return e;
+}
+
+void ContactCacheCuda::upload(const CacheEntries& e, cudaStream_t s) {
+  const auto m = static_cast<std::uint32_t>(e.size());
+  m_count = m;
+  if (m == 0) return;
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_keys.as<std::uint64_t>(m), e.key.data(), m * sizeof(std::uint64_t), cudaMemcpyHostToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_normal.as<real>(m), e.normal_impulse.data(), m * sizeof(real), cudaMemcpyHostToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_tangent.as<Vec3>(m), e.tangent_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_rolling.as<Vec3>(m), e.rolling_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+}
+
 void ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
                                int sm_count, cudaStream_t s) {
   const std::uint32_t m = m_count;

@@ -14,6 +14,7 @@
 #include "core/device_buffer.cuh"
 #include "core/spheres.hpp"
 #include "narrowphase/contact.hpp"
+#include "narrowphase/contact_cache.hpp"
 
 namespace marbles::narrowphase::cuda {
 
@@ -31,6 +32,9 @@ class ContactCacheCuda {
                cudaStream_t stream);
   void store(const Contact* contacts, std::uint32_t n, int sm_count, cudaStream_t stream);
   std::uint32_t size() const { return m_count; }
+  // The entries as the CPU cache holds them (a checkpoint's copy), and back.
+  CacheEntries download(cudaStream_t stream);
+  void upload(const CacheEntries& entries, cudaStream_t stream);
 
  // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }

@@ -121,6 +121,19 @@ std::vector<SeriesEntry> read_pvd(const fs::path& pvd_path) {
   return entries;
 }
 
+namespace {
+
+// frames/frame_NNNNNN.vtp, numbered in write order.
+std::string frame_name(std::size_t index) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frame_%06zu.vtp", index);
+  return name;
+}
+
+}  // namespace
+
+void VtkSeriesWriter::adopt(double time) { m_entries.emplace_back(time, "frames/" + frame_name(m_entries.size())); }
+
 #if defined(MARBLES_HAVE_VTK)
 
 bool vtk_available() { return true; }
@@ -220,8 +233,7 @@ fs::path VtkSeriesWriter::write(const Snapshot& s) {
   step->InsertNextValue(s.step);
   poly->GetFieldData()->AddArray(step);
 
-  char name[32];
-  std::snprintf(name, sizeof name, "frame_%06zu.vtp", m_entries.size());
+  const std::string name = frame_name(m_entries.size());
   const fs::path final_path = m_dir / "frames" / name;
   const fs::path tmp = temp_path_beside(final_path);
   vtkNew<vtkXMLPolyDataWriter> writer;
@@ -238,7 +250,7 @@ fs::path VtkSeriesWriter::write(const Snapshot& s) {
   }
   commit_file(tmp, final_path, ends_with("</VTKFile>"));
 
-  m_entries.emplace_back(s.time, std::string("frames/") + name);
+  m_entries.emplace_back(s.time, "frames/" + name);
   write_file_atomic(pvd_path(), pvd_text(m_entries));
   return final_path;
 }

@@ -55,6 +55,9 @@ class VtkSeriesWriter {
 
   std::size_t frames() const { return m_entries.size(); }
   std::filesystem::path pvd_path() const { return m_dir / "series.pvd"; }
+  /// A resumed run: counts the next frame (as write() would name it) as
+  /// already written at `time`, without writing it.
+  void adopt(double time);
 
  private:
   std::filesystem::path m_dir;

@@ -23,6 +23,7 @@
 #include "render/color_map.hpp"
 #include "render/frame_output.hpp"
 #include "sim/cli.hpp"
+#include "sim/checkpoint.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
 #include "sim/study.hpp"
@@ -63,7 +64,7 @@ namespace marbles {
 
 std::string requested_precision(int argc, char** argv) {
   static const std::vector<std::string> kTakesValue{"--out", "--backend", "--broadphase", "--duration", "--set"};
-  std::string command, scene_path, from_set;
+  std::string command, scene_path, from_set, restart;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--precision" && i + 1 < argc) return argv[i + 1];
@@ -71,6 +72,10 @@ std::string requested_precision(int argc, char** argv) {
     if (a == "--set" && i + 1 < argc) {
       const std::string s = argv[++i];
       if (s.rfind("solver.precision=", 0) == 0) from_set = s.substr(17);
+      continue;
+    }
+    if (a == "--restart" && i + 1 < argc) {
+      restart = argv[++i];
       continue;
     }
     if (std::find(kTakesValue.begin(), kTakesValue.end(), a) != kTakesValue.end()) {
@@ -82,6 +87,7 @@ std::string requested_precision(int argc, char** argv) {
     else if (scene_path.empty()) scene_path = a;
   }
   if (!from_set.empty()) return from_set;
+  if (!restart.empty()) return checkpoint_precision(restart);
   if ((command == "run" || command == "check") && !scene_path.empty()) return scene::scene_precision(scene_path);
   return "float";
 }
@@ -108,6 +114,8 @@ int cli_main(int argc, char** argv) {
   run_cmd->add_option("--duration", run_duration, "simulated seconds (overrides time.duration)")
       ->check(kFinite & CLI::PositiveNumber);
   add_set_option(run_cmd, run.overrides);
+  run_cmd->add_option("--restart", run.restart, "resume from a checkpoint (OUTDIR/checkpoints/step_NNNNNN.mck)")
+      ->check(CLI::ExistingFile);
   run_cmd->add_flag("--summary-only", run.summary_only, "write only summary.json (no frames, images or movie)");
   std::string precision;
   add_precision_option(run_cmd, precision);

@@ -14,8 +14,9 @@ namespace marbles {
 int cli_main(int argc, char** argv);
 
 // "double" when the arguments ask for it (--precision double, or
-// --set solver.precision=double), or when the scene file of `run` or `check`
-// says `solver.precision: double`; "float" otherwise (also when the scene
+// --set solver.precision=double), when `--restart` names a double
+// checkpoint, or when the scene file of `run` or `check` says
+// `solver.precision: double`; "float" otherwise (also when the scene
 // cannot be read: the float build then reports why).
 std::string requested_precision(int argc, char** argv);
 

@@ -110,6 +110,11 @@ class CpuStep final : public StepBackend {
   const std::vector<narrowphase::Contact>& contacts() override { return m_contacts; }
   const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }
   std::string name() const override { return "cpu"; }
+  StepState save_state() override { return {m_cache.entries(), m_walls}; }
+  void load_state(const StepState& state) override {
+    m_cache.set_entries(state.cache);
+    m_walls = state.walls;
+  }
 
  private:
   const StepModel& m_model;

@@ -255,6 +255,21 @@ class CudaStep final : public StepBackend {
   }
   const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }
   std::string name() const override { return "cuda"; }
+  StepState save_state() override {
+    StepState state;
+    state.cache = m_cache.download(m_stream);
+    state.walls.resize(m_model.wall_shapes.size());
+    if (!state.walls.empty()) {
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(state.walls.data(), walls(), state.walls.size() * sizeof(narrowphase::WallShape),
+                                         cudaMemcpyDeviceToHost, m_stream));
+      MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+    }
+    return state;
+  }
+  void load_state(const StepState& state) override {
+    m_cache.upload(state.cache, m_stream);
+    if (!state.walls.empty()) ::marbles::cuda::upload(m_walls, state.walls, m_stream);
+  }
 
  private:
   narrowphase::Contact* contacts_d() const { return m_contacts.get_as<narrowphase::Contact>(); }

@@ -96,6 +96,12 @@ void RunOutput::write(const Simulation& sim) {
   if (m->frames && step % m->render_every == 0) m->frames->add(snapshot);
 }
 
+void RunOutput::resume(std::uint64_t steps, double dt) {
+  if (!m->vtk) return;
+  for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->vtk_every))
+    m->vtk->adopt(static_cast<double>(step) * dt);
+}
+
 std::string RunOutput::finish() {
   std::ostringstream out;
   if (m->vtk) out << m->vtk->frames() << " frames in frames/, series.pvd, ";

@@ -28,6 +28,8 @@ class RunOutput {
   bool due(std::uint64_t step) const;
   // Writes what is due for sim.steps().
   void write(const Simulation& sim);
+  // A run resumed at `steps`: the frames due up to it count as written.
+  void resume(std::uint64_t steps, double dt);
   // Closes the movie; returns a short description of what was written.
   std::string finish();
 

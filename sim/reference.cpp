@@ -144,6 +144,26 @@ void ReferenceProbe::sample(double time, const World& w) {
   }
 }
 
+std::vector<double> ReferenceProbe::progress() const {
+  std::vector<double> p{m_last_up, m_rising ? 1.0 : 0.0, m_last_off_floor, m_max_error,
+                        static_cast<double>(m_apexes.size()), static_cast<double>(m_recent.size())};
+  p.insert(p.end(), m_apexes.begin(), m_apexes.end());
+  p.insert(p.end(), m_recent.begin(), m_recent.end());
+  return p;
+}
+
+void ReferenceProbe::resume(const std::vector<double>& p) {
+  if (p.size() < 6) return;  // a scene without a reference wrote none
+  m_last_up = p[0];
+  m_rising = p[1] != 0;
+  m_last_off_floor = p[2];
+  m_max_error = p[3];
+  const auto apexes = static_cast<std::size_t>(p[4]), recent = static_cast<std::size_t>(p[5]);
+  if (p.size() != 6 + apexes + recent) return;
+  m_apexes.assign(p.begin() + 6, p.begin() + 6 + static_cast<std::ptrdiff_t>(apexes));
+  m_recent.assign(p.begin() + 6 + static_cast<std::ptrdiff_t>(apexes), p.end());
+}
+
 ReferenceResult ReferenceProbe::finish(double time, const World& w) {
   sample(time, w);
   const scene::ReferenceSpec& s = m_spec;

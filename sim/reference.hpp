@@ -36,6 +36,11 @@ class ReferenceProbe {
   std::uint64_t every(std::uint64_t total_steps) const;
   void sample(double time, const World& world);
   ReferenceResult finish(double time, const World& world);
+  // What the probe has gathered so far (a checkpoint's copy), and back: a
+  // probe made from the same scene's initial world then goes on as if it had
+  // watched the whole run.
+  std::vector<double> progress() const;
+  void resume(const std::vector<double>& progress);
 
  private:
   using Kind = scene::ReferenceSpec::Kind;

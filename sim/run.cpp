@@ -13,6 +13,7 @@
 #include "core/device.hpp"
 #include "core/error.hpp"
 #include "render/atomic_file.hpp"
+#include "sim/checkpoint.hpp"
 #include "sim/output.hpp"
 #include "sim/particles.hpp"
 #include "sim/progress.hpp"
@@ -134,25 +135,46 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   Simulation sim(sc, std::move(world), backend, options.algorithm);
   if (!options.quiet) out << sc.name << ": " << sim.world().size() << " spheres\n" << sim.describe_pipeline();
 
-  RunOutput output(sc, sc.output.dir, sim.walls(), options.render, err);
-  const double e_start = sim.world().kinetic_energy();
   const std::uint64_t total_steps = static_cast<std::uint64_t>(std::llround(sc.time.duration / sc.time.dt));
   std::optional<ReferenceProbe> probe;
   if (sc.reference.kind != scene::ReferenceSpec::Kind::none) probe.emplace(sc, sim.world());
   const std::uint64_t probe_every = probe ? probe->every(total_steps) : 0;
+  const std::uint64_t fingerprint = scene_fingerprint(options.scene_path, options.overrides);
 
+  RunTotals totals;
+  totals.energy_start = sim.world().kinetic_energy();
+  bool render = options.render;
+  if (options.restart) {
+    Checkpoint c = read_checkpoint(*options.restart, fingerprint);
+    if (c.world.size() != sim.world().size())
+      throw InputError(SourceLocation{*options.restart, 0, 0}, "--restart",
+                       "the checkpoint holds " + std::to_string(c.world.size()) + " spheres, the scene makes " +
+                           std::to_string(sim.world().size()));
+    sim.restore(c.world, c.state, c.steps);
+    totals = c.totals;
+    if (probe) probe->resume(c.probe);
+    if (render && sc.output.render.enabled)
+      err << "warning: a resumed run writes no images or movie; `marbles render " << sc.output.dir
+          << "` makes them from the frames afterwards\n";
+    render = false;
+    if (!options.quiet) out << "resumed from " << *options.restart << " at step " << c.steps << "\n";
+  }
+
+  RunOutput output(sc, sc.output.dir, sim.walls(), render, err);
   Progress progress(!options.quiet);
-  double candidate_sum = 0, contact_sum = 0, step_seconds = 0;
-  double deepest = 0;  // largest overlap at the end of any step, of the smaller radius
-  output.write(sim);
+  double step_seconds = 0;
+  const std::uint64_t first_step = sim.steps();
+  if (options.restart) output.resume(sim.steps(), sim.dt());
+  else output.write(sim);
   const auto t0 = std::chrono::steady_clock::now();
   while (sim.steps() < total_steps) {
     const auto s0 = std::chrono::steady_clock::now();
     sim.step();
     step_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
-    candidate_sum += static_cast<double>(sim.last_step().candidate_pairs) / sim.substeps();
-    contact_sum += static_cast<double>(sim.last_step().contacts) / sim.substeps();
-    deepest = std::max(deepest, static_cast<double>(sim.last_step().max_overlap));
+    totals.candidate_sum += static_cast<double>(sim.last_step().candidate_pairs) / sim.substeps();
+    totals.contact_sum += static_cast<double>(sim.last_step().contacts) / sim.substeps();
+    totals.deepest = std::max(totals.deepest, static_cast<double>(sim.last_step().max_overlap));
+    totals.overlap_end = sim.last_step().max_overlap;
     if (sim.non_finite()) {
       const std::size_t bad = sim.world().first_non_finite();
       throw RuntimeFailure("the state became non-finite at step " + std::to_string(sim.steps()) + " (t = " +
@@ -164,13 +186,23 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       progress.finish();
       output.write(sim);
     }
+    if (sc.output.checkpoint_every > 0 && sim.steps() % static_cast<std::uint64_t>(sc.output.checkpoint_every) == 0) {
+      write_checkpoint(checkpoint_path(sc.output.dir, sim.steps()),
+                       {fingerprint, sim.steps(), sim.world(), sim.save_state(), totals,
+                        probe ? probe->progress() : std::vector<double>{}});
+      prune_checkpoints(sc.output.dir, sc.output.checkpoint_keep);
+    }
     progress.update(sim.time(), sc.time.duration, sim.steps(), total_steps);
   }
   progress.finish();
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const std::string written = output.finish();
 
+  // Per-step means over the steps this run and the run it resumed made.
   const double steps = std::max<double>(1, static_cast<double>(sim.steps()));
+  const double candidate_sum = totals.candidate_sum, contact_sum = totals.contact_sum, deepest = totals.deepest;
+  const double e_start = totals.energy_start;
+  const double steps_run = std::max<double>(1, static_cast<double>(sim.steps() - first_step));
   const double e_end = sim.world().kinetic_energy();
   std::optional<ReferenceResult> reference;
   if (probe) reference = probe->finish(sim.time(), sim.world());
@@ -188,11 +220,11 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
        << "  \"dt\": " << json_number(sim.dt()) << ",\n"
        << "  \"simulated_time\": " << json_number(sim.time()) << ",\n"
        << "  \"wall_time\": " << json_number(wall) << ",\n"
-       << "  \"mean_ms_per_step\": " << json_number(1e3 * step_seconds / steps) << ",\n"
+       << "  \"mean_ms_per_step\": " << json_number(1e3 * step_seconds / steps_run) << ",\n"
        << "  \"mean_candidate_pairs\": " << json_number(candidate_sum / steps) << ",\n"
        << "  \"mean_contacts\": " << json_number(contact_sum / steps) << ",\n"
        << "  \"max_overlap\": " << json_number(deepest) << ",\n"
-       << "  \"max_overlap_end\": " << json_number(sim.last_step().max_overlap) << ",\n"
+       << "  \"max_overlap_end\": " << json_number(totals.overlap_end) << ",\n"
        << "  \"kinetic_energy_start\": " << json_number(e_start) << ",\n"
        << "  \"kinetic_energy_end\": " << json_number(e_end);
   if (reference)
@@ -206,9 +238,9 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   render::write_file_atomic(summary_path, json.str());
 
   out << std::setprecision(4) << sc.name << ": " << sim.steps() << " steps, " << sim.time() << " s simulated in "
-      << wall << " s (" << 1e3 * step_seconds / steps << " ms/step; " << candidate_sum / steps
+      << wall << " s (" << 1e3 * step_seconds / steps_run << " ms/step; " << candidate_sum / steps
       << " candidate pairs, " << contact_sum / steps << " contacts per substep); largest overlap "
-      << 100 * deepest << " % of a radius (" << 100 * sim.last_step().max_overlap << " % at the end); kinetic energy " << e_start
+      << 100 * deepest << " % of a radius (" << 100 * totals.overlap_end << " % at the end); kinetic energy " << e_start
       << " -> " << e_end << " J\n"
       << (reference && std::isfinite(reference->error)
               ? "reference " + reference->kind + ": error " + json_number(100 * reference->error) + " %\n"

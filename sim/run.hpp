@@ -33,6 +33,7 @@ struct RunOptions {
   bool render = true;                  // false: skip images and movie even if the scene asks
   std::optional<double> duration;      // overrides time.duration
   std::vector<std::string> overrides;  // --set key.path=value, applied to the scene in order
+  std::optional<std::string> restart;  // a checkpoint to resume from
   bool summary_only = false;           // write only summary.json (no frames, images or movie)
 };
 

@@ -497,12 +497,17 @@ CameraSpec read_camera(const Field& field) {
 }
 
 OutputSpec read_output(const Field& field, const std::string& stem) {
-  const MapFields map(field, {"dir", "vtk", "fields", "render", "movie"});
+  const MapFields map(field, {"dir", "vtk", "fields", "render", "movie", "checkpoint"});
   OutputSpec output;
   output.dir = "out/" + stem;
   if (auto f = map.optional("dir")) {
     output.dir = f->word();
     if (output.dir.empty()) f->fail("must not be empty");
+  }
+  if (auto f = map.optional("checkpoint")) {
+    const MapFields checkpoint(*f, {"every", "keep"});
+    output.checkpoint_every = checkpoint.required("every").integer_at_least(1);
+    if (auto k = checkpoint.optional("keep")) output.checkpoint_keep = k->integer_at_least(1, 1000000);
   }
   if (auto f = map.optional("vtk")) {
     const MapFields vtk(*f, {"every"});

@@ -139,6 +139,8 @@ struct OutputSpec {
   std::vector<std::string> fields{"radius", "velocity", "angular_velocity", "id", "material"};
   RenderSpec render;
   MovieSpec movie;
+  int checkpoint_every = 0;         // steps; 0 = no checkpoints (OUTDIR/checkpoints/step_NNNNNN.mck)
+  int checkpoint_keep = 3;          // the newest this many are kept
 };
 
 // A known answer the run is measured against (`reference:`, docs/accuracy.md).

@@ -73,6 +73,16 @@ class Simulation {
   }
   std::size_t device_bytes() const { return m_backend->device_bytes(); }
 
+  // The state beside the world that the next step depends on (cache, walls),
+  // and a restart: world, that state and the step count put back.
+  StepState save_state() { return m_backend->save_state(); }
+  void restore(const World& world, const StepState& state, std::uint64_t steps) {
+    m_backend->edit_world() = world;
+    m_backend->load_state(state);
+    m_steps = steps;
+    m_time = static_cast<double>(steps) * m_model->dt;
+  }
+
   // The stages this scene's pipeline runs, one per line.
   std::string describe_pipeline() const;
 

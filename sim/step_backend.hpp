@@ -17,6 +17,7 @@
 #include "broadphase/broadphase.hpp"
 #include "narrowphase/contact.hpp"
 #include "sim/step_model.hpp"
+#include "narrowphase/contact_cache.hpp"
 #include "sim/world.hpp"
 
 namespace marbles {
@@ -40,6 +41,14 @@ struct StepCounters {
   real max_overlap = 0;               // deepest overlap at the end of the step (overlap_ratio: of the smaller radius)
   std::uint64_t bytes_copied = 0;     // host<->device traffic of the step (CUDA)
   double verb_ms[static_cast<int>(Verb::count)] = {};  // with profiling on: wall ms per verb, summed
+};
+
+// What a step depends on besides the world: the warm-start cache and the
+// walls as they have moved. With the world and the step count it is a
+// checkpoint (sim/checkpoint.hpp): restored, the run goes on bit for bit.
+struct StepState {
+  narrowphase::CacheEntries cache;
+  std::vector<narrowphase::WallShape> walls;
 };
 
 class StepBackend {
@@ -78,6 +87,9 @@ class StepBackend {
   virtual const std::vector<narrowphase::Contact>& contacts() = 0;
   virtual const broadphase::BroadPhase* broad_phase() const = 0;
   virtual std::string name() const = 0;
+  // The state beside the world, between steps (a host copy on the GPU).
+  virtual StepState save_state() = 0;
+  virtual void load_state(const StepState& state) = 0;
 };
 
 // Host arrays, OpenMP.

@@ -1,0 +1,196 @@
+#include "sim/checkpoint.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+
+#include "core/error.hpp"
+#include "render/atomic_file.hpp"
+
+namespace marbles {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr char kMagic[8] = {'M', 'A', 'R', 'B', 'L', 'C', 'K', '\n'};
+constexpr std::uint32_t kFormat = 1;
+constexpr char kVersion[16] = "marbles 0.1";
+
+// FNV-1a, 64 bit.
+std::uint64_t fnv1a(const void* data, std::size_t size, std::uint64_t h = 14695981039346656037ull) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (std::size_t i = 0; i < size; ++i) h = (h ^ p[i]) * 1099511628211ull;
+  return h;
+}
+
+class Writer {
+ public:
+  template <class T>
+  void put(const T& v) {
+    raw(&v, sizeof v);
+  }
+  template <class T>
+  void put(const std::vector<T>& v) {
+    put<std::uint64_t>(v.size());
+    raw(v.data(), v.size() * sizeof(T));
+  }
+  void raw(const void* p, std::size_t n) { m_bytes.append(static_cast<const char*>(p), n); }
+  std::string finish() {
+    put<std::uint64_t>(fnv1a(m_bytes.data(), m_bytes.size()));  // checksum of all before it
+    return std::move(m_bytes);
+  }
+
+ private:
+  std::string m_bytes;
+};
+
+class Reader {
+ public:
+  Reader(std::string bytes, std::string path) : m_bytes(std::move(bytes)), m_path(std::move(path)) {}
+  template <class T>
+  T get() {
+    T v;
+    raw(&v, sizeof v);
+    return v;
+  }
+  template <class T>
+  void get(std::vector<T>& v) {
+    const auto n = get<std::uint64_t>();
+    if (n > (m_bytes.size() - m_at) / std::max<std::size_t>(1, sizeof(T))) fail("is truncated or damaged");
+    v.resize(n);
+    raw(v.data(), n * sizeof(T));
+  }
+  void raw(void* p, std::size_t n) {
+    if (m_at + n > m_bytes.size()) fail("is truncated or damaged");
+    std::memcpy(p, m_bytes.data() + m_at, n);
+    m_at += n;
+  }
+  [[noreturn]] void fail(const std::string& what) const {
+    throw InputError(SourceLocation{m_path, 0, 0}, "--restart", "the checkpoint " + what);
+  }
+  const std::string& bytes() const { return m_bytes; }
+
+ private:
+  std::string m_bytes;
+  std::string m_path;
+  std::size_t m_at = 0;
+};
+
+}  // namespace
+
+std::uint64_t scene_fingerprint(const std::string& scene_path, const std::vector<std::string>& overrides) {
+  std::ifstream in(scene_path, std::ios::binary);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::uint64_t h = fnv1a(text.data(), text.size());
+  for (const std::string& o : overrides) h = fnv1a(o.data(), o.size() + 1, h);  // with its terminator
+  return h;
+}
+
+std::string checkpoint_precision(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  char head[sizeof kMagic + 4 + sizeof kVersion + 4] = {};
+  if (!in.read(head, sizeof head) || std::memcmp(head, kMagic, sizeof kMagic) != 0) return "float";
+  std::uint32_t real_bytes = 0;
+  std::memcpy(&real_bytes, head + sizeof kMagic + 4 + sizeof kVersion, 4);
+  return real_bytes == 8 ? "double" : "float";
+}
+
+std::string checkpoint_path(const std::string& out_dir, std::uint64_t steps) {
+  char name[40];
+  std::snprintf(name, sizeof name, "step_%06llu.mck", static_cast<unsigned long long>(steps));
+  return (fs::path(out_dir) / "checkpoints" / name).string();
+}
+
+void write_checkpoint(const std::string& path, const Checkpoint& c) {
+  Writer w;
+  w.raw(kMagic, sizeof kMagic);
+  w.put(kFormat);
+  w.raw(kVersion, sizeof kVersion);
+  w.put<std::uint32_t>(sizeof(real));
+  w.put<std::uint32_t>(sizeof(narrowphase::WallShape));
+  w.put(c.scene_hash);
+  w.put(c.steps);
+  w.put(c.world.position);
+  w.put(c.world.velocity);
+  w.put(c.world.angular_velocity);
+  w.put(c.world.radius);
+  w.put(c.world.inv_mass);
+  w.put(c.world.inv_inertia);
+  w.put(c.world.material);
+  w.put(c.state.cache.key);
+  w.put(c.state.cache.normal_impulse);
+  w.put(c.state.cache.tangent_impulse);
+  w.put(c.state.cache.rolling_impulse);
+  w.put(c.state.walls);
+  w.put(c.totals);
+  w.put(c.probe);
+  fs::create_directories(fs::path(path).parent_path());
+  render::write_file_atomic(path, w.finish());
+}
+
+Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(SourceLocation{path, 0, 0}, "--restart", "cannot open the checkpoint");
+  Reader r(std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>()), path);
+  const std::string& bytes = r.bytes();
+  if (bytes.size() < sizeof kMagic + 8 || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0)
+    r.fail("is not a marbles checkpoint");
+  std::uint64_t sum = 0;
+  std::memcpy(&sum, bytes.data() + bytes.size() - 8, 8);
+  if (sum != fnv1a(bytes.data(), bytes.size() - 8)) r.fail("is truncated or damaged (checksum)");
+  char magic[sizeof kMagic];
+  r.raw(magic, sizeof magic);
+  if (r.get<std::uint32_t>() != kFormat) r.fail("has another format version");
+  char version[sizeof kVersion];
+  r.raw(version, sizeof version);
+  if (std::memcmp(version, kVersion, sizeof kVersion) != 0)
+    r.fail("was written by " + std::string(version, strnlen(version, sizeof version)) + ", this is " + kVersion);
+  const auto real_bytes = r.get<std::uint32_t>();
+  if (real_bytes != sizeof(real))
+    r.fail(std::string("is in ") + (real_bytes == 8 ? "double" : "float") + " precision, this run in " + kRealName +
+           " (use --precision)");
+  if (r.get<std::uint32_t>() != sizeof(narrowphase::WallShape)) r.fail("comes from an incompatible build");
+  Checkpoint c;
+  c.scene_hash = r.get<std::uint64_t>();
+  if (c.scene_hash != scene_hash)
+    r.fail("belongs to another scene (or other --set overrides): the scene file or its overrides changed");
+  c.steps = r.get<std::uint64_t>();
+  r.get(c.world.position);
+  r.get(c.world.velocity);
+  r.get(c.world.angular_velocity);
+  r.get(c.world.radius);
+  r.get(c.world.inv_mass);
+  r.get(c.world.inv_inertia);
+  r.get(c.world.material);
+  r.get(c.state.cache.key);
+  r.get(c.state.cache.normal_impulse);
+  r.get(c.state.cache.tangent_impulse);
+  r.get(c.state.cache.rolling_impulse);
+  r.get(c.state.walls);
+  c.totals = r.get<RunTotals>();
+  r.get(c.probe);
+  const std::size_t n = c.world.position.size();
+  for (std::size_t size : {c.world.velocity.size(), c.world.angular_velocity.size(), c.world.radius.size(),
+                           c.world.inv_mass.size(), c.world.inv_inertia.size(), c.world.material.size()})
+    if (size != n) r.fail("is damaged (array lengths differ)");
+  return c;
+}
+
+void prune_checkpoints(const std::string& out_dir, int keep) {
+  const fs::path dir = fs::path(out_dir) / "checkpoints";
+  std::vector<fs::path> files;
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
+    if (it->path().extension() == ".mck" && it->path().filename().string().rfind("step_", 0) == 0)
+      files.push_back(it->path());
+  auto step_of = [](const fs::path& p) { return std::strtoull(p.filename().string().c_str() + 5, nullptr, 10); };
+  std::sort(files.begin(), files.end(), [&](const fs::path& a, const fs::path& b) { return step_of(a) < step_of(b); });
+  for (std::size_t k = 0; k + static_cast<std::size_t>(keep) < files.size(); ++k) fs::remove(files[k], ec);
+}
+
+}  // namespace marbles

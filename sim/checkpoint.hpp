@@ -1,0 +1,60 @@
+// sim/checkpoint.hpp — a run's state on disk, to resume it bit for bit.
+//
+// A checkpoint holds everything the rest of a run depends on: the world in
+// the run's precision, the step count (time = steps x dt), the warm-start
+// cache and the walls as they have moved (StepState), the running totals of
+// summary.json and the reference probe's progress. Written under a temporary
+// name and renamed (kill -9 at any moment leaves the last complete one);
+// refused with a clear message when it belongs to another scene, precision or
+// format. The byte layout is in docs/checkpoints.md.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "sim/step_backend.hpp"
+#include "sim/world.hpp"
+
+namespace marbles {
+
+// The running totals behind summary.json.
+struct RunTotals {
+  double candidate_sum = 0;  // candidate pairs per substep, summed over steps
+  double contact_sum = 0;    // contacts per substep, summed over steps
+  double deepest = 0;        // largest overlap at the end of any step (of the smaller radius)
+  double energy_start = 0;   // kinetic energy at step 0, J
+  double overlap_end = 0;    // the last step's largest overlap
+};
+
+struct Checkpoint {
+  std::uint64_t scene_hash = 0;  // scene_fingerprint of the run that wrote it
+  std::uint64_t steps = 0;
+  World world;
+  StepState state;
+  RunTotals totals;
+  std::vector<double> probe;     // ReferenceProbe::progress()
+};
+
+// What a checkpoint must match: the scene file's bytes and the --set
+// overrides (not --duration or --out: a resumed run may run longer, elsewhere).
+std::uint64_t scene_fingerprint(const std::string& scene_path, const std::vector<std::string>& overrides);
+
+// Writes atomically; throws RuntimeFailure on I/O errors.
+void write_checkpoint(const std::string& path, const Checkpoint& checkpoint);
+
+// Reads and checks (format, precision, scene, completeness); throws
+// InputError naming the file and what does not match.
+Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash);
+
+// "double" or "float": the precision a checkpoint was written in ("float"
+// when the file is not one; read_checkpoint then says why).
+std::string checkpoint_precision(const std::string& path);
+
+// OUTDIR/checkpoints/step_000123.mck
+std::string checkpoint_path(const std::string& out_dir, std::uint64_t steps);
+
+// Removes all but the newest `keep` checkpoints of OUTDIR/checkpoints.
+void prune_checkpoints(const std::string& out_dir, int keep);
+
+}  // namespace marbles

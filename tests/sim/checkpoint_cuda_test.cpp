@@ -1,0 +1,40 @@
+// tests/sim/checkpoint_cuda_test.cpp — checkpoint and restart on the GPU
+// (label gpu): resumed on the device equals the whole device run, and a CPU
+// checkpoint continued on the GPU equals the CPU run (the steps are
+// bit-identical).
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "core/device.hpp"
+#include "tests/sim/checkpoint_cases.hpp"
+#include "tests/sim/scene_cases.hpp"
+
+namespace marbles {
+namespace {
+
+using namespace test;
+
+// On the GPU: resumed on the device equals the whole device run, and a CPU
+// checkpoint continued on the GPU equals the CPU run.
+TEST_F(Checkpoints, GpuRestartEqualsTheUninterruptedRun) {
+  if (!cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device";
+  const test::ScratchDir dir("ck_gpu");
+  const std::string scene = dir.write("s.yaml", kScene);
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cuda --out " + dir.path() + "/gpu"), 0);
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cuda --duration 0.15 --out " + dir.path() + "/gpu_resumed"), 0);
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cuda --out " + dir.path() + "/gpu_resumed --restart " +
+                    dir.path() + "/gpu_resumed/checkpoints/step_000150.mck"),
+            0);
+  expect_same_output(dir.path() + "/gpu", dir.path() + "/gpu_resumed");
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/cpu"), 0);
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cuda --out " + dir.path() + "/cpu_then_gpu --restart " +
+                    dir.path() + "/cpu/checkpoints/step_000100.mck"),
+            0);
+  std::string cpu = physics_of(dir.path() + "/cpu/summary.json"), mixed = physics_of(dir.path() + "/cpu_then_gpu/summary.json");
+  cpu.replace(cpu.find("\"cpu\""), 5, "\"cuda\"");  // the backend line says where the rest ran
+  EXPECT_EQ(cpu, mixed);
+}
+
+}  // namespace
+}  // namespace marbles
