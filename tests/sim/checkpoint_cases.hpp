@@ -64,6 +64,9 @@ inline std::string physics_of(const fs::path& summary) {
 }
 
 inline void expect_same_output(const fs::path& a, const fs::path& b) {
+  EXPECT_EQ(physics_of(a / "summary.json"), physics_of(b / "summary.json"));
+  EXPECT_EQ(fs::exists(a / "frames"), fs::exists(b / "frames"));
+  if (!fs::exists(a / "frames")) return;  // a build without VTK writes no frames
   int frames = 0;
   for (const auto& entry : fs::directory_iterator(a / "frames")) {
     ++frames;
@@ -72,7 +75,6 @@ inline void expect_same_output(const fs::path& a, const fs::path& b) {
   }
   EXPECT_GT(frames, 0);
   EXPECT_EQ(slurp(a / "series.pvd"), slurp(b / "series.pvd"));
-  EXPECT_EQ(physics_of(a / "summary.json"), physics_of(b / "summary.json"));
 }
 
 class Checkpoints : public ::testing::Test {
