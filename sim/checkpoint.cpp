@@ -39,6 +39,10 @@ class Writer {
     put<std::uint64_t>(v.size());
     raw(v.data(), v.size() * sizeof(T));
   }
+  template <class T>
+  void field(const T& v) {
+    put(v);
+  }
   void raw(const void* p, std::size_t n) { m_bytes.append(static_cast<const char*>(p), n); }
   std::string finish() {
     put<std::uint64_t>(fnv1a(m_bytes.data(), m_bytes.size()));  // checksum of all before it
@@ -65,6 +69,11 @@ class Reader {
     v.resize(n);
     raw(v.data(), n * sizeof(T));
   }
+  template <class T>
+  void field(T& v) {
+    if constexpr (requires { v.data(); v.resize(0); }) get(v);
+    else v = get<T>();
+  }
   void raw(void* p, std::size_t n) {
     if (m_at + n > m_bytes.size()) fail("is truncated or damaged");
     std::memcpy(p, m_bytes.data() + m_at, n);
@@ -80,6 +89,27 @@ class Reader {
   std::string m_path;
   std::size_t m_at = 0;
 };
+
+// The checkpoint's body after the scene fingerprint, in file order: one list
+// for writing (Writer) and reading (Reader).
+template <class IO, class C>
+void body(IO& io, C& c) {
+  io.field(c.steps);
+  io.field(c.world.position);
+  io.field(c.world.velocity);
+  io.field(c.world.angular_velocity);
+  io.field(c.world.radius);
+  io.field(c.world.inv_mass);
+  io.field(c.world.inv_inertia);
+  io.field(c.world.material);
+  io.field(c.state.cache.key);
+  io.field(c.state.cache.normal_impulse);
+  io.field(c.state.cache.tangent_impulse);
+  io.field(c.state.cache.rolling_impulse);
+  io.field(c.state.walls);
+  io.field(c.totals);
+  io.field(c.probe);
+}
 
 }  // namespace
 
@@ -114,21 +144,7 @@ void write_checkpoint(const std::string& path, const Checkpoint& c) {
   w.put<std::uint32_t>(sizeof(real));
   w.put<std::uint32_t>(sizeof(narrowphase::WallShape));
   w.put(c.scene_hash);
-  w.put(c.steps);
-  w.put(c.world.position);
-  w.put(c.world.velocity);
-  w.put(c.world.angular_velocity);
-  w.put(c.world.radius);
-  w.put(c.world.inv_mass);
-  w.put(c.world.inv_inertia);
-  w.put(c.world.material);
-  w.put(c.state.cache.key);
-  w.put(c.state.cache.normal_impulse);
-  w.put(c.state.cache.tangent_impulse);
-  w.put(c.state.cache.rolling_impulse);
-  w.put(c.state.walls);
-  w.put(c.totals);
-  w.put(c.probe);
+  body(w, c);
   fs::create_directories(fs::path(path).parent_path());
   render::write_file_atomic(path, w.finish());
 }
@@ -159,21 +175,7 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   c.scene_hash = r.get<std::uint64_t>();
   if (c.scene_hash != scene_hash)
     r.fail("belongs to another scene (or other --set overrides): the scene file or its overrides changed");
-  c.steps = r.get<std::uint64_t>();
-  r.get(c.world.position);
-  r.get(c.world.velocity);
-  r.get(c.world.angular_velocity);
-  r.get(c.world.radius);
-  r.get(c.world.inv_mass);
-  r.get(c.world.inv_inertia);
-  r.get(c.world.material);
-  r.get(c.state.cache.key);
-  r.get(c.state.cache.normal_impulse);
-  r.get(c.state.cache.tangent_impulse);
-  r.get(c.state.cache.rolling_impulse);
-  r.get(c.state.walls);
-  c.totals = r.get<RunTotals>();
-  r.get(c.probe);
+  body(r, c);
   const std::size_t n = c.world.position.size();
   for (std::size_t size : {c.world.velocity.size(), c.world.angular_velocity.size(), c.world.radius.size(),
                            c.world.inv_mass.size(), c.world.inv_inertia.size(), c.world.material.size()})
