@@ -148,10 +148,11 @@ void print_table(std::ostream& out, const BroadphaseBenchOptions& o, const std::
     out << line;
     if (gpu) {
       const double f = r.copy_bytes_per_ms;
+      auto bracketed = [](std::string s) { return s.insert(0, 1, '[') + ']'; };  // not "[" + s: a GCC 12 false -Wrestrict
       std::snprintf(line, sizeof line, "   floor %10s %10s %10s %10s %10s   min %s\n",
-                    ("[" + fmt(r.bytes.cell_ids / f) + "]").c_str(), ("[" + fmt(r.bytes.sort / f) + "]").c_str(),
-                    ("[" + fmt(r.bytes.cell_list / f) + "]").c_str(), ("[" + fmt(r.bytes.traversal / f) + "]").c_str(),
-                    ("[" + fmt(r.bytes.total() / f) + "]").c_str(), fmt(r.total.min).c_str());
+                    bracketed(fmt(r.bytes.cell_ids / f)).c_str(), bracketed(fmt(r.bytes.sort / f)).c_str(),
+                    bracketed(fmt(r.bytes.cell_list / f)).c_str(), bracketed(fmt(r.bytes.traversal / f)).c_str(),
+                    bracketed(fmt(r.bytes.total() / f)).c_str(), fmt(r.total.min).c_str());
       out << line;
     } else {
       std::snprintf(line, sizeof line, "     min %10s %10s %10s %10s %10s\n", fmt(r.cell_ids.min).c_str(),

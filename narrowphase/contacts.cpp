@@ -6,6 +6,7 @@
 #include <omp.h>
 #endif
 
+#include "core/parallel.hpp"
 
 namespace marbles::narrowphase {
 
@@ -74,6 +75,7 @@ void collect_in_order(std::size_t count, std::vector<Contact>& out, Make&& make)
     return;
   }
   std::vector<std::vector<Contact>> parts(threads);
+  ParallelErrors errors;  // an allocation that fails in a thread is rethrown here, not std::terminate
 #pragma omp parallel num_threads(threads)
   {
 #if defined(_OPENMP)
@@ -82,8 +84,10 @@ void collect_in_order(std::size_t count, std::vector<Contact>& out, Make&& make)
     std::vector<Contact>& mine = parts[0];
 #endif
 #pragma omp for schedule(static)
-    for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(count); ++k) make(static_cast<std::size_t>(k), mine);
+    for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(count); ++k)
+      errors.run([&] { make(static_cast<std::size_t>(k), mine); });
   }
+  errors.rethrow();
   std::size_t total = out.size();
   for (const auto& p : parts) total += p.size();
   out.reserve(total);

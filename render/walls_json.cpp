@@ -28,7 +28,16 @@ std::string number(double v) {
   return text;
 }
 
-std::string vec(const Vec3& v) { return "[" + number(v.x) + ", " + number(v.y) + ", " + number(v.z) + "]"; }
+std::string vec(const Vec3& v) {
+  std::string out(1, '[');  // appended piece by piece: GCC 12 warns falsely (-Wrestrict) on "[" + std::string
+  out += number(v.x);
+  out += ", ";
+  out += number(v.y);
+  out += ", ";
+  out += number(v.z);
+  out += ']';
+  return out;
+}
 
 // ---- a tiny JSON value and parser ------------------------------------------
 
