@@ -195,6 +195,19 @@ void ContactCacheCuda::upload(const CacheEntries& e, cudaStream_t s) {
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
 }
 
+void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
+  const std::uint32_t m = m_count;
+  to.m_count = m;
+  if (m == 0) return;
+  auto copy = [&](DeviceBuffer& dst, const DeviceBuffer& src, std::size_t bytes) {
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(dst.as<char>(bytes), src.get(), bytes, cudaMemcpyDeviceToDevice, s));
+  };
+  copy(to.m_keys, m_keys, m * sizeof(std::uint64_t));
+  copy(to.m_normal, m_normal, m * sizeof(real));
+  copy(to.m_tangent, m_tangent, m * sizeof(Vec3));
+  copy(to.m_rolling, m_rolling, m * sizeof(Vec3));
+}
+
 void ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
                                int sm_count, cudaStream_t s) {
   const std::uint32_t m = m_count;

@@ -35,6 +35,8 @@ class ContactCacheCuda {
   // The entries as the CPU cache holds them (a checkpoint's copy), and back.
   CacheEntries download(cudaStream_t stream);
   void upload(const CacheEntries& entries, cudaStream_t stream);
+  // The entries copied on the device into `to` (the watchdog's undo).
+  void copy_to(ContactCacheCuda& to, cudaStream_t stream) const;
 
  // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }

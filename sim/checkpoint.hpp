@@ -25,6 +25,7 @@ struct RunTotals {
   double deepest = 0;        // largest overlap at the end of any step (of the smaller radius)
   double energy_start = 0;   // kinetic energy at step 0, J
   double overlap_end = 0;    // the last step's largest overlap
+  double rollbacks = 0;      // steps the watchdog redid
 };
 
 struct Checkpoint {

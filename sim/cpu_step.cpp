@@ -111,6 +111,19 @@ class CpuStep final : public StepBackend {
   const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }
   std::string name() const override { return "cpu"; }
   StepState save_state() override { return {m_cache.entries(), m_walls}; }
+  void keep_step_start() override {
+    m_kept.position = m_world.position;
+    m_kept.velocity = m_world.velocity;
+    m_kept.angular_velocity = m_world.angular_velocity;
+    m_kept_state = save_state();
+  }
+  void undo_step() override {
+    m_world.position = m_kept.position;
+    m_world.velocity = m_kept.velocity;
+    m_world.angular_velocity = m_kept.angular_velocity;
+    load_state(m_kept_state);
+    m_non_finite = false;
+  }
   void load_state(const StepState& state) override {
     m_cache.set_entries(state.cache);
     m_walls = state.walls;
@@ -120,6 +133,8 @@ class CpuStep final : public StepBackend {
   const StepModel& m_model;
   World m_world;
   std::vector<narrowphase::WallShape> m_walls;  // moving walls move
+  World m_kept;             // the moving state at the start of the step (watchdog)
+  StepState m_kept_state;
   std::unique_ptr<broadphase::BroadPhase> m_broadphase;
   narrowphase::ContactColouring m_colouring;
   narrowphase::ContactSolver m_solver;

@@ -266,6 +266,30 @@ class CudaStep final : public StepBackend {
     }
     return state;
   }
+  void keep_step_start() override {
+    if (m_host_edited) {  // edits between steps belong to the step's start
+      m_device.upload(m_host, m_stream);
+      m_host_edited = false;
+    }
+    m_device.copy_state_to(m_kept, m_stream);
+    m_cache.copy_to(m_kept_cache, m_stream);
+    const std::size_t wall_bytes = m_model.wall_shapes.size() * sizeof(narrowphase::WallShape);
+    if (wall_bytes > 0)
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_kept_walls.as<char>(wall_bytes), m_walls.get(), wall_bytes,
+                                         cudaMemcpyDeviceToDevice, m_stream));
+  }
+  void undo_step() override {
+    m_kept.copy_state_to(m_device, m_stream);
+    m_kept_cache.copy_to(m_cache, m_stream);
+    const std::size_t wall_bytes = m_model.wall_shapes.size() * sizeof(narrowphase::WallShape);
+    if (wall_bytes > 0)
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_walls.get(), m_kept_walls.get(), wall_bytes, cudaMemcpyDeviceToDevice,
+                                         m_stream));
+    m_host_stale = true;
+    m_host_edited = false;
+    m_contacts_stale = true;
+    m_non_finite = false;
+  }
   void load_state(const StepState& state) override {
     m_cache.upload(state.cache, m_stream);
     if (!state.walls.empty()) ::marbles::cuda::upload(m_walls, state.walls, m_stream);
@@ -338,6 +362,9 @@ class CudaStep final : public StepBackend {
   std::unique_ptr<broadphase::SubdivisionCuda> m_broadphase;
   nc::ColouringCuda m_colouring;
   nc::ContactCacheCuda m_cache;
+  DeviceWorld m_kept;                 // the watchdog's copy of the step's start
+  nc::ContactCacheCuda m_kept_cache;
+  DeviceBuffer m_kept_walls;
 
   std::uint32_t m_count = 0;          // contacts of this substep
   std::uint32_t m_colours = 0;

@@ -32,6 +32,15 @@ void DeviceWorld::download_state(World& w, cudaStream_t s) const {
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
 }
 
+void DeviceWorld::copy_state_to(DeviceWorld& to, cudaStream_t s) const {
+  to.m_count = m_count;
+  const std::size_t bytes = m_count * sizeof(Vec3);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_position.as<Vec3>(m_count), m_position.get(), bytes, cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_velocity.as<Vec3>(m_count), m_velocity.get(), bytes, cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_angular_velocity.as<Vec3>(m_count), m_angular_velocity.get(), bytes,
+                                     cudaMemcpyDeviceToDevice, s));
+}
+
 BodiesView DeviceWorld::view() const {
   return {m_position.get_as<Vec3>(),       m_velocity.get_as<Vec3>(),   m_angular_velocity.get_as<Vec3>(),
           m_radius.get_as<real>(),         m_inv_mass.get_as<real>(),   m_inv_inertia.get_as<real>(),

@@ -20,6 +20,10 @@ class DeviceWorld {
   // The moving state (positions, velocities, angular velocities) into `world`.
   void download_state(World& world, cudaStream_t stream) const;
 
+  // The moving state (positions, velocities, angular velocities) copied on
+  // the device into `to`, which is sized to match.
+  void copy_state_to(DeviceWorld& to, cudaStream_t stream) const;
+
   BodiesView view() const;
   std::size_t size() const { return m_count; }
   // Device bytes per sphere of the state itself.

@@ -4,6 +4,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
@@ -160,6 +162,11 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     if (!options.quiet) out << "resumed from " << *options.restart << " at step " << c.steps << "\n";
   }
 
+  sim.set_watchdog(true);
+  // Test hook: MARBLES_FAULT_NAN_STEP=N (the first try of step N goes non-finite) or N:all (every try).
+  if (const char* fault = std::getenv("MARBLES_FAULT_NAN_STEP"))
+    sim.inject_fault_at(std::strtoull(fault, nullptr, 10), std::strstr(fault, ":all") != nullptr);
+
   RunOutput output(sc, sc.output.dir, sim.walls(), render, err);
   Progress progress(!options.quiet);
   double step_seconds = 0;
@@ -169,12 +176,27 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   const auto t0 = std::chrono::steady_clock::now();
   while (sim.steps() < total_steps) {
     const auto s0 = std::chrono::steady_clock::now();
-    sim.step();
+    try {
+      sim.step();
+    } catch (const WatchdogFailure& e) {
+      // The step is back at its start: that is the last good state.
+      progress.finish();
+      const std::string path = checkpoint_path(sc.output.dir, sim.steps());
+      write_checkpoint(path, {fingerprint, sim.steps(), sim.world(), sim.save_state(), totals,
+                              probe ? probe->progress() : std::vector<double>{}});
+      throw RuntimeFailure(std::string(e.what()) + "; the last good state is in " + path +
+                           " (resume with marbles run --restart)");
+    }
     step_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
+    for (const std::string& why : sim.last_rollbacks()) {
+      progress.finish();
+      err << "watchdog: step " << sim.steps() << ": " << why << "; rolled back and redone with the substep halved\n";
+    }
     totals.candidate_sum += static_cast<double>(sim.last_step().candidate_pairs) / sim.substeps();
     totals.contact_sum += static_cast<double>(sim.last_step().contacts) / sim.substeps();
     totals.deepest = std::max(totals.deepest, static_cast<double>(sim.last_step().max_overlap));
     totals.overlap_end = sim.last_step().max_overlap;
+    totals.rollbacks += static_cast<double>(sim.last_rollbacks().size());
     if (sim.non_finite()) {
       const std::size_t bad = sim.world().first_non_finite();
       throw RuntimeFailure("the state became non-finite at step " + std::to_string(sim.steps()) + " (t = " +
@@ -225,6 +247,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
        << "  \"mean_contacts\": " << json_number(contact_sum / steps) << ",\n"
        << "  \"max_overlap\": " << json_number(deepest) << ",\n"
        << "  \"max_overlap_end\": " << json_number(totals.overlap_end) << ",\n"
+       << "  \"rollbacks\": " << totals.rollbacks << ",\n"
        << "  \"kinetic_energy_start\": " << json_number(e_start) << ",\n"
        << "  \"kinetic_energy_end\": " << json_number(e_end);
   if (reference)

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <string>
 #include <iterator>
 #include <sstream>
 
@@ -44,14 +46,43 @@ std::string Simulation::describe_pipeline() const {
 }
 
 void Simulation::step() {
-  const real h = m_model->substep();
-  m_backend->begin_step();
-  std::fill(std::begin(m_verb_ms), std::end(m_verb_ms), 0.0);
-  for (int k = 0; k < m_model->substeps; ++k) substep(h);
-  m_backend->end_step(m_last);
-  std::copy(std::begin(m_verb_ms), std::end(m_verb_ms), m_last.verb_ms);
+  m_last_rollbacks.clear();
+  const real overlap_before = m_last.max_overlap;
+  if (m_watchdog) m_backend->keep_step_start();
+  for (int retry = 0;; ++retry) {
+    attempt(1 << retry);
+    std::string broken = m_watchdog ? violation() : std::string();
+    if (broken.empty() && m_watchdog && m_last.max_overlap > kWatchdogOverlap && overlap_before < kWatchdogOverlap / 2)
+      broken = "overlap " + std::to_string(m_last.max_overlap) + " of a radius";
+    if (broken.empty()) break;
+    m_backend->undo_step();
+    m_last.max_overlap = overlap_before;
+    ++m_rollbacks;
+    m_last_rollbacks.push_back(broken);
+    if (retry == kWatchdogRetries)
+      throw WatchdogFailure("watchdog: step " + std::to_string(m_steps + 1) + ": " + broken + " after " +
+                            std::to_string(kWatchdogRetries) + " retries down to " +
+                            std::to_string(m_model->substeps << kWatchdogRetries) + " substeps");
+  }
   ++m_steps;
   m_time = m_steps * m_model->dt;
+}
+
+void Simulation::attempt(int split) {
+  if ((split == 1 || m_fault_every_try) && m_fault_step == m_steps + 1)
+    m_backend->edit_world().velocity.at(0).x = std::nan("");
+  const real h = m_model->substep() / static_cast<real>(split);
+  m_backend->begin_step();
+  std::fill(std::begin(m_verb_ms), std::end(m_verb_ms), 0.0);
+  for (int k = 0; k < m_model->substeps * split; ++k) substep(h);
+  m_backend->end_step(m_last);
+  std::copy(std::begin(m_verb_ms), std::end(m_verb_ms), m_last.verb_ms);
+}
+
+std::string Simulation::violation() {
+  if (m_backend->non_finite())
+    return "non-finite state (sphere " + std::to_string(m_backend->world().first_non_finite()) + ")";
+  return {};
 }
 
 void Simulation::substep(real h) {

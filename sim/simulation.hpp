@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "broadphase/broadphase.hpp"
+#include "core/error.hpp"
 #include "core/walls.hpp"
 #include "narrowphase/contact.hpp"
 #include "sim/step_backend.hpp"
@@ -31,6 +32,13 @@
 #include "sim/world.hpp"
 
 namespace marbles {
+
+// The watchdog gave up: the step is back at its start (a checkpoint of it is
+// the last good state).
+class WatchdogFailure : public RuntimeFailure {
+ public:
+  using RuntimeFailure::RuntimeFailure;
+};
 
 namespace scene {
 struct Scene;
@@ -83,11 +91,30 @@ class Simulation {
     m_time = static_cast<double>(steps) * m_model->dt;
   }
 
+  // The watchdog (off unless set; `marbles run` sets it): after each step,
+  // a non-finite state or an overlap deeper than kWatchdogOverlap of a radius
+  // (from below half of it) rolls the step back and redoes it with the
+  // substep halved, up to kWatchdogRetries times; then step() throws
+  // WatchdogFailure with the step back at its start.
+  void set_watchdog(bool on) { m_watchdog = on; }
+  static constexpr int kWatchdogRetries = 3;
+  static constexpr real kWatchdogOverlap = real(1);
+  // Rollbacks of the last step (each with its reason) and of the whole run.
+  const std::vector<std::string>& last_rollbacks() const { return m_last_rollbacks; }
+  std::uint64_t rollbacks() const { return m_rollbacks; }
+  // Test hook: the first try (or every try) of step `step` starts with a NaN velocity.
+  void inject_fault_at(std::uint64_t step, bool every_try = false) {
+    m_fault_step = step;
+    m_fault_every_try = every_try;
+  }
+
   // The stages this scene's pipeline runs, one per line.
   std::string describe_pipeline() const;
 
  private:
   void substep(real h);
+  void attempt(int split);  // one try of the step with `split` times the substeps
+  std::string violation();  // the broken invariant after a try, or empty
   template <class F>
   void run_verb(Verb verb, F&& f);
 
@@ -97,6 +124,10 @@ class Simulation {
   std::uint64_t m_steps = 0;
   StepCounters m_last;
   bool m_profiling = false;
+  bool m_watchdog = false;
+  std::uint64_t m_rollbacks = 0, m_fault_step = 0;
+  bool m_fault_every_try = false;
+  std::vector<std::string> m_last_rollbacks;
   double m_verb_ms[static_cast<int>(Verb::count)] = {};
 };
 

@@ -90,6 +90,10 @@ class StepBackend {
   // The state beside the world, between steps (a host copy on the GPU).
   virtual StepState save_state() = 0;
   virtual void load_state(const StepState& state) = 0;
+  // The watchdog's undo: keep the state at the start of a step (positions,
+  // velocities, cache, walls; in device memory on the GPU), and go back to it.
+  virtual void keep_step_start() = 0;
+  virtual void undo_step() = 0;
 };
 
 // Host arrays, OpenMP.

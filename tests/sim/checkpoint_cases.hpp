@@ -46,9 +46,10 @@ inline std::string slurp(const fs::path& path) {
   return text.str();
 }
 
-inline int marbles(const std::string& args, std::string* err_text = nullptr) {
+// Runs `marbles ARGS` with `env` (NAME=VALUE ...) set; stderr into *err_text.
+inline int marbles(const std::string& args, std::string* err_text = nullptr, const std::string& env = "") {
   const std::string err = fs::temp_directory_path() / ("marbles_ck_err_" + std::to_string(::getpid()));
-  const int status = std::system(("'" + kMarbles + "' " + args + " >/dev/null 2>'" + err + "'").c_str());
+  const int status = std::system((env + " '" + kMarbles + "' " + args + " >/dev/null 2>'" + err + "'").c_str());
   if (err_text) *err_text = slurp(err);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }

@@ -36,5 +36,23 @@ TEST_F(Checkpoints, GpuRestartEqualsTheUninterruptedRun) {
   EXPECT_EQ(cpu, mixed);
 }
 
+// The watchdog on the device (its undo copies device memory): an injected
+// fault is rolled back and redone as on the CPU, bit for bit.
+TEST_F(Checkpoints, GpuWatchdogRepairsAsTheCpuDoes) {
+  if (!cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device";
+  const test::ScratchDir dir("ck_gpu_watchdog");
+  const std::string scene = dir.write("s.yaml", kScene);
+  std::string err;
+  for (const std::string backend : {"cpu", "cuda"})
+    ASSERT_EQ(marbles("run " + scene + " --quiet --backend " + backend + " --out " + dir.path() + "/" + backend, &err,
+                      "MARBLES_FAULT_NAN_STEP=100"),
+              0)
+        << err;
+  std::string cpu = physics_of(dir.path() + "/cpu/summary.json"), gpu = physics_of(dir.path() + "/cuda/summary.json");
+  cpu.replace(cpu.find("\"cpu\""), 5, "\"cuda\"");
+  EXPECT_EQ(cpu, gpu);
+  EXPECT_NE(gpu.find("\"rollbacks\": 1,"), std::string::npos) << gpu;
+}
+
 }  // namespace
 }  // namespace marbles

@@ -72,5 +72,36 @@ TEST_F(Checkpoints, ForeignOrDamagedCheckpointsAreRefused) {
   EXPECT_NE(err.find("is not a marbles checkpoint"), std::string::npos) << err;
 }
 
+// The watchdog: an injected non-finite velocity (test hook) is rolled back
+// and the step redone; the run finishes and counts the rollback.
+TEST_F(Checkpoints, WatchdogRepairsAnInjectedFault) {
+  const test::ScratchDir dir("ck_watchdog");
+  const std::string scene = dir.write("s.yaml", kScene);
+  std::string err;
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/o", &err, "MARBLES_FAULT_NAN_STEP=100"),
+            0)
+      << err;
+  EXPECT_NE(err.find("watchdog: step 100: non-finite state (sphere 0); rolled back"), std::string::npos) << err;
+  EXPECT_NE(slurp(dir.path() + "/o/summary.json").find("\"rollbacks\": 1,"), std::string::npos);
+}
+
+// A fault that every retry meets: exit 1 naming the step and the invariant,
+// and a checkpoint of the last good state, from which the run (without the
+// fault) goes on exactly as one that never met it.
+TEST_F(Checkpoints, WatchdogGivesUpWithTheLastGoodState) {
+  const test::ScratchDir dir("ck_watchdog_fail");
+  const std::string scene = dir.write("s.yaml", kScene);
+  std::string err;
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/o", &err,
+                    "MARBLES_FAULT_NAN_STEP=120:all"),
+            1);
+  EXPECT_NE(err.find("watchdog: step 120: non-finite state (sphere 0) after 3 retries"), std::string::npos) << err;
+  const std::string last_good = dir.path() + "/o/checkpoints/step_000119.mck";
+  ASSERT_TRUE(fs::exists(last_good)) << err;
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/o --restart " + last_good), 0);
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/whole"), 0);
+  expect_same_output(dir.path() + "/whole", dir.path() + "/o");
+}
+
 }  // namespace
 }  // namespace marbles
