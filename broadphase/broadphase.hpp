@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "core/error.hpp"
 #include "core/pair.hpp"
 #include "core/spheres.hpp"
 
@@ -51,6 +52,13 @@ struct Stats {
   // Home-cell variant: cells of the grid and how their starts were found.
   std::size_t grid_cells = 0;
   bool dense_cell_starts = false;   // a lower-bound array over all cells (else binary search)
+};
+
+// A centre or radius that is not finite (a step that went non-finite):
+// the step backends turn it into their non-finite flag.
+class NonFiniteInput : public RuntimeFailure {
+ public:
+  NonFiniteInput() : RuntimeFailure("broad phase: a centre or radius is not finite, or a radius is negative") {}
 };
 
 class BroadPhase {

@@ -284,7 +284,7 @@ Bounds bounds_of(const SpheresIn& s) {
     }
     r_max = std::max(r_max, r);
   }
-  if (!finite) throw RuntimeFailure("broad phase: a centre or radius is not finite, or a radius is negative");
+  if (!finite) throw NonFiniteInput();
   b.lo = {lo[0], lo[1], lo[2]};
   b.hi = {hi[0], hi[1], hi[2]};
   b.r_max = r_max;

@@ -203,7 +203,7 @@ Bounds SubdivisionCuda::Impl::device_bounds(const SpheresIn& d, cudaStream_t s) 
   launch_bounds(d.centre, d.radius, d.count, acc, sm_count, s);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_bounds, acc, sizeof(BoundsAccum), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  if (h_bounds->bad) throw RuntimeFailure("broad phase: a centre or radius is not finite, or a radius is negative");
+  if (h_bounds->bad) throw NonFiniteInput();
   return decode_bounds(*h_bounds);
 }
 

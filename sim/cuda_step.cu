@@ -94,7 +94,13 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaMemsetAsync(max_speed, 0, sizeof(unsigned long long), m_stream));
     nc::launch_contact_reaches(bodies, h, max_speed, reach, bound, m_sm, m_stream);
     if (m_model.collisions) {
-      pair_count = m_broadphase->find_pairs_device({bodies.position, bound, n}, 0, m_stream);
+      try {
+        pair_count = m_broadphase->find_pairs_device({bodies.position, bound, n}, 0, m_stream);
+      } catch (const broadphase::NonFiniteInput&) {
+        m_non_finite_seen = true;  // an earlier substep went non-finite: the step ends with that flag
+        m_count = 0;
+        return;
+      }
       pairs = m_broadphase->device_pairs();
       m_counters.candidate_pairs += pair_count;
       m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
@@ -204,7 +210,8 @@ class CudaStep final : public StepBackend {
     const std::uint64_t bytes = m_bytes + m_colouring.bytes_copied() + m_cache.bytes_copied();
     m_counters.bytes_copied = bytes - m_bytes_at_step_start;
     m_bytes_at_step_start = bytes;
-    m_non_finite = m_end_flags[0] != 0;
+    m_non_finite = m_end_flags[0] != 0 || m_non_finite_seen;
+    m_non_finite_seen = false;
     if constexpr (sizeof(real) == 4) {
       const auto bits = static_cast<std::uint32_t>(m_end_flags[1]);
       std::memcpy(&m_counters.max_overlap, &bits, sizeof(real));
@@ -371,6 +378,7 @@ class CudaStep final : public StepBackend {
   std::vector<std::uint32_t> m_begin{0, 0}, m_levels{0, 0};
   std::vector<narrowphase::Contact> m_host_contacts;
   StepCounters m_counters;
+  bool m_non_finite_seen = false;  // the broad phase met a non-finite centre in this step
   bool m_non_finite = false, m_host_stale = false, m_host_edited = false, m_contacts_stale = true;
 };
 
