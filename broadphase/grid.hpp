@@ -21,6 +21,15 @@
 
 namespace marbles::broadphase {
 
+// The spheres lie too far apart for their sizes: more than 2^62 cells of the
+// grid (sized from the largest radius) along an axis.
+class SpanTooLarge : public RuntimeFailure {
+ public:
+  SpanTooLarge()
+      : RuntimeFailure("broad phase: the spheres span more than 2^62 cells of their largest diameter: coordinates too "
+                       "far apart for their radii") {}
+};
+
 enum class KeyWidth { bits32, bits64, too_wide };
 
 struct Bounds {
@@ -94,7 +103,7 @@ inline GridChoice choose_grid(const Bounds& b, real margin) {
   std::int64_t maxc[3];
   for (int k = 0; k < 3; ++k) {
     const double span = (static_cast<double>(b.hi[k]) - g.origin[k]) * g.inv_cell;
-    if (!(span < 4.0e18)) throw RuntimeFailure("broad phase: the spheres span more than 2^62 cells");
+    if (!(span < 4.0e18)) throw SpanTooLarge();
     maxc[k] = cell_coord(b.hi[k], g.origin[k], g.inv_cell) + 1;  // the neighbour above the top cell
     half_max[k] = static_cast<std::uint64_t>(maxc[k]) >> 1;
   }

@@ -9,8 +9,8 @@ JOBS=$(nproc 2>/dev/null || echo 2)
 
 # Needed to build the core at all.
 REQUIRED_PKGS=(cmake g++ make pkg-config libyaml-cpp-dev libeigen3-dev libgtest-dev libbenchmark-dev libcli11-dev)
-# Found -> on: VTK output, OSMesa rendering, PNG, movies.
-OPTIONAL_PKGS=(libvtk9-dev libosmesa6-dev libpng-dev ffmpeg gnuplot-nox)
+# Found -> on: VTK output, OSMesa rendering, PNG, movies, study plots, the scene fuzzer (clang, libFuzzer).
+OPTIONAL_PKGS=(libvtk9-dev libosmesa6-dev libpng-dev ffmpeg gnuplot-nox clang libclang-rt-dev)
 
 missing_packages() {
   local p

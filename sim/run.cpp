@@ -12,6 +12,7 @@
 #include <optional>
 #include <sstream>
 
+#include "broadphase/grid.hpp"
 #include "core/device.hpp"
 #include "core/error.hpp"
 #include "render/atomic_file.hpp"
@@ -284,7 +285,11 @@ int print_pairs(const std::string& csv_path, const std::string& algorithm, Backe
     const auto alg = algorithm == "home" ? broadphase::Algorithm::home : broadphase::Algorithm::seed;
     auto bp = backend == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda(alg)
                                                    : broadphase::make_subdivision_cpu(alg);
-    bp->find_pairs(in, static_cast<real>(margin), pairs);
+    try {
+      bp->find_pairs(in, static_cast<real>(margin), pairs);
+    } catch (const broadphase::SpanTooLarge& e) {  // a property of the input, not a failure of the run
+      throw InputError(SourceLocation{csv_path, 0, 0}, "", e.what());
+    }
   }
   std::sort(pairs.begin(), pairs.end());
   std::string text;

@@ -579,15 +579,17 @@ std::string read_file(const std::string& path) {
     throw InputError(SourceLocation{path, 0, 0}, "", "is a folder, not a scene file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(SourceLocation{path, 0, 0}, "", std::string("cannot open the scene file: ") + std::strerror(errno));
-  // Read at most the limit (and one byte more, to know): /dev/zero or a
-  // runaway pipe is refused instead of filling the memory.
-  std::string text(kMaxSceneBytes + 1, '\0');
-  in.read(text.data(), static_cast<std::streamsize>(text.size()));
-  text.resize(static_cast<std::size_t>(in.gcount()));
-  if (text.size() > kMaxSceneBytes)
-    throw InputError(SourceLocation{path, 0, 0}, "",
-                     "larger than " + std::to_string(kMaxSceneBytes >> 20) + " MiB: not a scene file (particles in "
-                     "bulk belong in a csv block)");
+  // Read in chunks up to the limit: /dev/zero or a runaway pipe is refused
+  // instead of filling the memory.
+  std::string text;
+  char chunk[1 << 16];
+  while (in.read(chunk, sizeof chunk) || in.gcount() > 0) {
+    text.append(chunk, static_cast<std::size_t>(in.gcount()));
+    if (text.size() > kMaxSceneBytes)
+      throw InputError(SourceLocation{path, 0, 0}, "",
+                       "larger than " + std::to_string(kMaxSceneBytes >> 20) + " MiB: not a scene file (particles in "
+                       "bulk belong in a csv block)");
+  }
   return text;
 }
 

@@ -9,8 +9,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "render/atomic_file.hpp"
 #include "tests/sim/scene_cases.hpp"
@@ -158,6 +160,38 @@ TEST_F(Robustness, IncompleteFilesAreNeverCommitted) {
     for (const auto& entry : fs::recursive_directory_iterator(out)) {
       const std::string name = entry.path().filename().string();
       EXPECT_EQ(name.find(victim), std::string::npos) << "left behind: " << entry.path();
+    }
+  }
+}
+
+// Mutation test of `marbles pairs` input: 300 mutants of scenes/spheres.csv
+// (bytes flipped, replaced by separators, digits, signs, exponents and
+// non-finite spellings, lines cut or doubled) each end with exit 0 or 2 and,
+// for exit 2, a message naming the file; never a crash, a hang or exit 1.
+TEST_F(Robustness, MutatedCsvNeverCrashes) {
+  const test::ScratchDir dir("robust_csv");
+  const std::string original = slurp(MARBLES_SOURCE_DIR "/scenes/spheres.csv");
+  std::mt19937 rng(2026);
+  const std::vector<std::string> pieces = {",", "\n", "-", "e", "e999", "nan", "inf", "1e-400", "0x1p3", " ",
+                                           "\r\n", "#", "\"", "9999999999999999999", ".", "+", "\t", "\0"};
+  for (int k = 0; k < 300; ++k) {
+    std::string text = original;
+    const int edits = 1 + static_cast<int>(rng() % 4);
+    for (int e = 0; e < edits && !text.empty(); ++e) {
+      const std::size_t at = rng() % text.size();
+      switch (rng() % 4) {
+        case 0: text[at] = static_cast<char>(rng() % 256); break;
+        case 1: text.insert(at, pieces[rng() % pieces.size()]); break;
+        case 2: text.erase(at, 1 + rng() % 8); break;
+        case 3: text.insert(at, text.substr(at, 1 + rng() % 40)); break;
+      }
+    }
+    const std::string csv = dir.write("m.csv", text);
+    const Outcome o = marbles("pairs " + csv, dir);
+    ASSERT_TRUE(o.exit_code == 0 || o.exit_code == 2) << "mutant " << k << " exit " << o.exit_code << ": " << o.err
+                                                      << "\n--- input:\n" << text;
+    if (o.exit_code == 2) {
+      EXPECT_NE(o.err.find("m.csv"), std::string::npos) << o.err;
     }
   }
 }
