@@ -34,7 +34,8 @@ using detail::MapFields;
 namespace {
 
 constexpr int kFormatVersion = 1;
-constexpr double kMaxSubsteps = 1e10;  // a run of more substeps would not finish
+constexpr double kMaxSubsteps = 1e10;
+constexpr std::size_t kMaxMaterials = 1024;  // the pair table holds kMaxMaterials^2 entries  // a run of more substeps would not finish
 constexpr std::size_t kMaxSceneBytes = std::size_t(64) << 20;  // a scene file is small; bulk data goes in CSV
 
 const std::vector<std::string> kEffectNames = {"gravity",  "collisions",         "walls", "restitution",
@@ -192,6 +193,9 @@ std::vector<Material> read_materials(const Field& field) {
     materials.push_back(std::move(m));
   }
   if (materials.empty()) field.fail("needs at least one material, e.g. `steel: {density: 7800}`");
+  if (materials.size() > kMaxMaterials)
+    field.fail(std::to_string(materials.size()) + " materials, more than the limit " + std::to_string(kMaxMaterials) +
+               " (the step keeps a coefficient table of every pair)");
   return materials;
 }
 

@@ -286,11 +286,11 @@ void MapFields::read(const std::vector<std::string>& allowed) {
         value.from_override() ? value.where() : location_of(m_self.file(), key.Mark());
     if (!allowed.empty() && std::find(allowed.begin(), allowed.end(), name) == allowed.end())
       throw InputError(key_where, m_self.key(), "unknown key '" + name + "'" + suggestion(name, allowed));
-    for (const Entry& e : m_entries) {
-      if (e.name == name)
-        throw InputError(key_where, m_self.key(),
-                         "duplicate key '" + name + "' (first given at line " + std::to_string(e.name_where.line) + ")");
-    }
+    if (const auto first = m_index.find(name); first != m_index.end())
+      throw InputError(key_where, m_self.key(),
+                       "duplicate key '" + name + "' (first given at line " +
+                           std::to_string(m_entries[first->second].name_where.line) + ")");
+    m_index.emplace(name, m_entries.size());
     m_entries.push_back({name, key_where, value});
   }
 }

@@ -16,6 +16,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -128,6 +129,7 @@ class MapFields {
 
   Field m_self;
   std::vector<Entry> m_entries;
+  std::unordered_map<std::string, std::size_t> m_index;  // name -> entry: duplicates found in O(1)
 };
 
 }  // namespace marbles::scene::detail

@@ -32,6 +32,16 @@ inline void PrintTo(const BadScene& c, std::ostream* os) { *os << c.name; }
 #define SCENE_PARTICLES "particles:\n  - list: {positions: [[0, 0, 1]], radius: 0.1}\n"
 #define SCENE_VALID SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES
 
+// A valid scene but for its `count` materials m0, m1, ... (kept for the process).
+inline const std::string& many_materials_scene(int count) {
+  static const std::string text = [count] {
+    std::string t = SCENE_TIME "materials: {";
+    for (int i = 0; i < count; ++i) t += (i ? ", m" : "m") + std::to_string(i) + ": {}";
+    return t + "}\n" SCENE_PARTICLES;
+  }();
+  return text;
+}
+
 inline const std::vector<BadScene>& bad_scenes() {
   static const std::vector<BadScene> cases = {
       {"unknown_key_near", SCENE_TIME "materials:\n  glass: {densty: 2500}\n" SCENE_PARTICLES,
@@ -130,6 +140,9 @@ inline const std::vector<BadScene>& bad_scenes() {
        "{scene}:3:3: materials: a material name cannot hold a control character (tab, newline)"},
       {"render_too_wide", SCENE_VALID "output: {render: {width: 9000}}\n",
        "{scene}:6:26: output.render.width: must be <= 8192, got 9000"},
+      {"too_many_materials", many_materials_scene(1025).c_str(),
+       "{scene}:2:12: materials: 1025 materials, more than the limit 1024 (the step keeps a coefficient table of "
+       "every pair)"},
       {"empty_file", "", "{scene}: the scene file is empty"},
       {"only_comments", "# nothing here\n", "{scene}: the scene file is empty"},
       {"leading_comma", ",", "{scene}:1:1: not valid YAML: no document could be read (does it begin with a stray ',', "
