@@ -168,6 +168,11 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   if (const char* fault = std::getenv("MARBLES_FAULT_NAN_STEP"))
     sim.inject_fault_at(std::strtoull(fault, nullptr, 10), std::strstr(fault, ":all") != nullptr);
 
+  auto save_checkpoint = [&](const std::string& path) {
+    write_checkpoint(path, {fingerprint, sim.steps(), sim.world(), sim.save_state(), totals,
+                            probe ? probe->progress() : std::vector<double>{}});
+  };
+
   RunOutput output(sc, sc.output.dir, sim.walls(), render, err);
   Progress progress(!options.quiet);
   double step_seconds = 0;
@@ -183,8 +188,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       // The step is back at its start: that is the last good state.
       progress.finish();
       const std::string path = checkpoint_path(sc.output.dir, sim.steps());
-      write_checkpoint(path, {fingerprint, sim.steps(), sim.world(), sim.save_state(), totals,
-                              probe ? probe->progress() : std::vector<double>{}});
+      save_checkpoint(path);
       throw RuntimeFailure(std::string(e.what()) + "; the last good state is in " + path +
                            " (resume with marbles run --restart)");
     }
@@ -198,21 +202,13 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     totals.deepest = std::max(totals.deepest, static_cast<double>(sim.last_step().max_overlap));
     totals.overlap_end = sim.last_step().max_overlap;
     totals.rollbacks += static_cast<double>(sim.last_rollbacks().size());
-    if (sim.non_finite()) {
-      const std::size_t bad = sim.world().first_non_finite();
-      throw RuntimeFailure("the state became non-finite at step " + std::to_string(sim.steps()) + " (t = " +
-                           json_number(sim.time()) + " s), sphere " + std::to_string(bad) +
-                           ": reduce dt or increase substeps");
-    }
     if (probe && sim.steps() % probe_every == 0) probe->sample(sim.time(), sim.world());
     if (output.due(sim.steps())) {
       progress.finish();
       output.write(sim);
     }
     if (sc.output.checkpoint_every > 0 && sim.steps() % static_cast<std::uint64_t>(sc.output.checkpoint_every) == 0) {
-      write_checkpoint(checkpoint_path(sc.output.dir, sim.steps()),
-                       {fingerprint, sim.steps(), sim.world(), sim.save_state(), totals,
-                        probe ? probe->progress() : std::vector<double>{}});
+      save_checkpoint(checkpoint_path(sc.output.dir, sim.steps()));
       prune_checkpoints(sc.output.dir, sc.output.checkpoint_keep);
     }
     progress.update(sim.time(), sc.time.duration, sim.steps(), total_steps);
