@@ -7,6 +7,7 @@
 // message and an exit code.
 #pragma once
 
+#include <atomic>
 #include <exception>
 #include <mutex>
 
@@ -16,16 +17,15 @@ class ParallelErrors {
  public:
   template <class F>
   void run(F&& body) noexcept {
-    if (m_failed) return;  // a racy read at worst runs one more body
+    if (m_failed.load(std::memory_order_relaxed)) return;  // later bodies are skipped once one failed
     try {
       body();
     } catch (...) {
       const std::lock_guard<std::mutex> lock(m_mutex);
       if (!m_first) m_first = std::current_exception();
-      m_failed = true;
+      m_failed.store(true, std::memory_order_relaxed);
     }
   }
-  bool failed() const { return m_failed; }
   void rethrow() const {
     if (m_first) std::rethrow_exception(m_first);
   }
@@ -33,7 +33,7 @@ class ParallelErrors {
  private:
   std::mutex m_mutex;
   std::exception_ptr m_first;
-  volatile bool m_failed = false;
+  std::atomic<bool> m_failed{false};
 };
 
 }  // namespace marbles

@@ -115,7 +115,8 @@ class CpuStep final : public StepBackend {
     m_kept.position = m_world.position;
     m_kept.velocity = m_world.velocity;
     m_kept.angular_velocity = m_world.angular_velocity;
-    m_kept_state = save_state();
+    m_kept_state.cache = m_cache.entries();  // assignments reuse the copies' capacity: no allocation per step
+    m_kept_state.walls = m_walls;
   }
   void undo_step() override {
     m_world.position = m_kept.position;
