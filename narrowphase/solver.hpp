@@ -47,6 +47,8 @@ class ContactSolver {
   explicit ContactSolver(const SolverSettings& settings);
 
   const SolverSettings& settings() const { return m_settings; }
+  // The velocity sweeps per substep (the watchdog's retries raise it).
+  void set_iterations(int n) { m_settings.iterations = n; }
 
   // prepare, impacts, warm start, sweeps on the velocities in `bodies`;
   // `contacts` in colour-major order as `colours` describes.

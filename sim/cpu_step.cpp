@@ -13,6 +13,7 @@
 #include "narrowphase/contacts.hpp"
 #include "narrowphase/solver.hpp"
 #include "sim/step_backend.hpp"
+#include "sim/watch_math.hpp"
 
 namespace marbles {
 namespace {
@@ -101,8 +102,11 @@ class CpuStep final : public StepBackend {
     for (std::ptrdiff_t k = 0; k < n; ++k)
       deepest = std::max(deepest, narrowphase::overlap_ratio(m_contacts[k], bodies, m_walls.data()));
     m_counters.max_overlap = deepest;
+    if (m_watch) watch(bodies);
     counters = m_counters;
   }
+  void set_watch(bool on) override { m_watch = on; }
+  void set_iteration_factor(int factor) override { m_solver.set_iterations(m_model.solver.iterations * factor); }
   bool non_finite() const override { return m_non_finite; }
 
   const World& world() override { return m_world; }
@@ -131,6 +135,22 @@ class CpuStep final : public StepBackend {
   }
 
  private:
+  // The watchdog's figures (watch_math.hpp); walls count only where they act.
+  void watch(const BodiesView& b) {
+    const auto n = static_cast<std::ptrdiff_t>(b.count);
+    const narrowphase::WallShape* walls = m_walls.data();
+    const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_walls.size()) : 0u;
+    double energy = 0;
+    std::uint64_t beyond = 0;
+#pragma omp parallel for schedule(static) reduction(+ : energy, beyond) if (n > 20000)
+    for (std::ptrdiff_t i = 0; i < n; ++i) {
+      energy += watch::kinetic_energy(b.velocity[i], b.angular_velocity[i], b.inv_mass[i], b.inv_inertia[i]);
+      beyond += watch::beyond_walls(b.position[i], b.radius[i], walls, wall_count) ? 1 : 0;
+    }
+    m_counters.kinetic_energy = energy;
+    m_counters.beyond_walls = beyond;
+  }
+
   const StepModel& m_model;
   World m_world;
   std::vector<narrowphase::WallShape> m_walls;  // moving walls move
@@ -149,6 +169,7 @@ class CpuStep final : public StepBackend {
   narrowphase::ColourRanges m_colours;
   StepCounters m_counters;
   bool m_non_finite = false;
+  bool m_watch = false;
 };
 
 }  // namespace

@@ -33,12 +33,37 @@
 #include "narrowphase/solver_cuda.cuh"
 #include "sim/device_world.cuh"
 #include "sim/step_backend.hpp"
+#include "sim/watch_math.hpp"
 
 namespace marbles {
 namespace {
 
 namespace nc = narrowphase::cuda;
 using ::marbles::cuda::DeviceBuffer;
+
+constexpr int kWatchBlock = 256;
+
+// The watchdog's figures (watch_math.hpp): out[0] the kinetic energy (a
+// double, summed in no fixed order: it decides a rollback, it never reaches
+// the state), out[1] the spheres beyond a wall.
+__global__ void watch_kernel(BodiesView b, const narrowphase::WallShape* walls, std::uint32_t wall_count,
+                             unsigned long long* out) {
+  double energy = 0;
+  unsigned long long beyond = 0;
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < b.count;
+       i += std::size_t(gridDim.x) * blockDim.x) {
+    energy += watch::kinetic_energy(b.velocity[i], b.angular_velocity[i], b.inv_mass[i], b.inv_inertia[i]);
+    beyond += watch::beyond_walls(b.position[i], b.radius[i], walls, wall_count) ? 1 : 0;
+  }
+  for (int d = 16; d > 0; d /= 2) {
+    energy += __shfl_down_sync(0xffffffffu, energy, d);
+    beyond += __shfl_down_sync(0xffffffffu, beyond, d);
+  }
+  if ((threadIdx.x & 31) == 0) {
+    if (energy != 0) atomicAdd(reinterpret_cast<double*>(out), energy);
+    if (beyond != 0) atomicAdd(out + 1, beyond);
+  }
+}
 
 class CudaStep final : public StepBackend {
  public:
@@ -55,8 +80,8 @@ class CudaStep final : public StepBackend {
     ::marbles::cuda::upload(m_pair_table, model.pair_coefficients, m_stream);
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     m_table = {m_pair_table.get_as<narrowphase::PairCoefficients>(), model.material_count};
-    m_flags.as<unsigned long long>(2);
-    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_end_flags), 2 * sizeof(unsigned long long)));
+    m_flags.as<unsigned long long>(kFlagWords);
+    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_end_flags), kFlagWords * sizeof(unsigned long long)));
     if (model.collisions) {
       m_broadphase = std::make_unique<broadphase::SubdivisionCuda>(model.algorithm);
       m_broadphase->set_stage_timing(false);  // its events cost a sync per call: profiling only
@@ -162,7 +187,7 @@ class CudaStep final : public StepBackend {
     if (m_model.solver.warm_start)
       over_colours(false, [&](nc::ContactRange r) { nc::launch_warm_start(contacts, r, bodies, m_terms, m_stream); });
     const real inv_h = real(1) / h;
-    for (int it = 0; it < m_model.solver.iterations; ++it)
+    for (int it = 0; it < m_model.solver.iterations * m_iteration_factor; ++it)
       over_colours(it % 2 == 1, [&](nc::ContactRange r) {
         nc::launch_sweep(contacts, r, bodies, inv_h, m_terms, m_stream);
       });
@@ -196,17 +221,29 @@ class CudaStep final : public StepBackend {
       m_host_edited = false;
     }
     m_counters = {};
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(m_flags.get(), 0, 2 * sizeof(unsigned long long), m_stream));
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(m_flags.get(), 0, kFlagWords * sizeof(unsigned long long), m_stream));
   }
 
-  // The one read of flags at the end of a step: non_finite, the deepest overlap.
+  // The one read of flags at the end of a step: non_finite, the deepest
+  // overlap, and with the watch on the watchdog's figures.
   void end_step(StepCounters& counters) override {
-    auto* flags = m_flags.get_as<unsigned long long>();  // [0]: non_finite, [1]: deepest overlap (bits)
+    auto* flags = m_flags.get_as<unsigned long long>();  // [0]: non_finite, [1]: deepest overlap (bits), [2..3]: watch
     nc::launch_max_overlap(contacts_d(), m_count, m_device.view(), walls(), flags + 1, m_sm, m_stream);
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_end_flags, flags, 2 * sizeof(unsigned long long), cudaMemcpyDeviceToHost,
+    const int words = m_watch ? kFlagWords : 2;
+    if (m_watch && m_device.view().count > 0) {
+      const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
+      watch_kernel<<<::marbles::cuda::grid_for(m_device.view().count, m_sm), kWatchBlock, 0, m_stream>>>(
+          m_device.view(), walls(), wall_count, flags + 2);
+      MARBLES_CUDA_CHECK_LAUNCH();
+    }
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_end_flags, flags, words * sizeof(unsigned long long), cudaMemcpyDeviceToHost,
                                        m_stream));
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
-    m_bytes += 2 * sizeof(unsigned long long);
+    m_bytes += words * sizeof(unsigned long long);
+    if (m_watch) {
+      std::memcpy(&m_counters.kinetic_energy, &m_end_flags[2], sizeof(double));
+      m_counters.beyond_walls = m_end_flags[3];
+    }
     const std::uint64_t bytes = m_bytes + m_colouring.bytes_copied() + m_cache.bytes_copied();
     m_counters.bytes_copied = bytes - m_bytes_at_step_start;
     m_bytes_at_step_start = bytes;
@@ -223,6 +260,8 @@ class CudaStep final : public StepBackend {
     counters = m_counters;
   }
   bool non_finite() const override { return m_non_finite; }
+  void set_watch(bool on) override { m_watch = on; }
+  void set_iteration_factor(int factor) override { m_iteration_factor = factor; }
   void synchronize() override { MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream)); }
   void set_profiling(bool on) override {
     if (m_broadphase) m_broadphase->set_stage_timing(on);
@@ -361,6 +400,9 @@ class CudaStep final : public StepBackend {
   std::uint64_t broad_phase_readback() const { return m_model.algorithm == broadphase::Algorithm::home ? 76 : 116; }
   std::uint32_t* m_pinned = nullptr;
   unsigned long long* m_end_flags = nullptr;  // pinned: the end-of-step read
+  static constexpr int kFlagWords = 4;
+  bool m_watch = false;
+  int m_iteration_factor = 1;
 
   DeviceBuffer m_walls, m_pair_table, m_max_speed, m_reach, m_bound, m_pair_flags, m_pair_offsets, m_wall_flags, m_wall_offsets,
       m_contacts, m_sorted, m_solver_bodies, m_flags, m_hit, m_temp;

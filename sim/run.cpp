@@ -164,9 +164,16 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   }
 
   sim.set_watchdog(true);
-  // Test hook: MARBLES_FAULT_NAN_STEP=N (the first try of step N goes non-finite) or N:all (every try).
-  if (const char* fault = std::getenv("MARBLES_FAULT_NAN_STEP"))
-    sim.inject_fault_at(std::strtoull(fault, nullptr, 10), std::strstr(fault, ":all") != nullptr);
+  // Test hooks: MARBLES_FAULT_NAN_STEP=N (the first try of step N goes
+  // non-finite) or N:all (every try); MARBLES_FAULT_KICK_STEP=N[:all] (sphere
+  // 0 kicked to 100 radii per step), MARBLES_FAULT_ESCAPE_STEP=N[:all]
+  // (sphere 0 put beyond the first wall).
+  const std::pair<const char*, Simulation::Fault> hooks[] = {{"MARBLES_FAULT_NAN_STEP", Simulation::Fault::nan},
+                                                             {"MARBLES_FAULT_KICK_STEP", Simulation::Fault::kick},
+                                                             {"MARBLES_FAULT_ESCAPE_STEP", Simulation::Fault::escape}};
+  for (const auto& [name, kind] : hooks)
+    if (const char* fault = std::getenv(name))
+      sim.inject_fault_at(std::strtoull(fault, nullptr, 10), std::strstr(fault, ":all") != nullptr, kind);
 
   auto save_checkpoint = [&](const std::string& path) {
     write_checkpoint(path, {fingerprint, sim.steps(), sim.world(), sim.save_state(), totals,
@@ -195,7 +202,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     step_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
     for (const std::string& why : sim.last_rollbacks()) {
       progress.finish();
-      err << "watchdog: step " << sim.steps() << ": " << why << "; rolled back and redone with the substep halved\n";
+      err << "watchdog: step " << sim.steps() << ": " << why << "; rolled back and redone with the substep halved and the sweeps doubled\n";
     }
     totals.candidate_sum += static_cast<double>(sim.last_step().candidate_pairs) / sim.substeps();
     totals.contact_sum += static_cast<double>(sim.last_step().contacts) / sim.substeps();

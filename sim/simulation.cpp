@@ -2,14 +2,25 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <string>
 #include <iterator>
 #include <sstream>
 
 #include "sim/scene.hpp"
+#include "sim/watch_math.hpp"
 
 namespace marbles {
+namespace {
+
+std::string short_number(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.4g", v);
+  return text;
+}
+
+}  // namespace
 
 Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backend backend,
                        broadphase::Algorithm algorithm)
@@ -45,33 +56,114 @@ std::string Simulation::describe_pipeline() const {
   return out.str();
 }
 
+void Simulation::set_watchdog(bool on) {
+  m_watchdog = on;
+  m_backend->set_watch(on);
+  if (on) watch_from_host();
+}
+
+void Simulation::watch_from_host() {
+  const World& w = world();
+  const auto& walls = m_model->wall_shapes;
+  const auto wall_count = m_model->wall_contacts ? static_cast<std::uint32_t>(walls.size()) : 0u;
+  Watch& s = m_watch;
+  s.energy = 0;
+  s.beyond = 0;
+  s.mass = 0;
+  double radius_sum = 0;
+  for (std::size_t i = 0; i < w.size(); ++i) {
+    s.energy += watch::kinetic_energy(w.velocity[i], w.angular_velocity[i], w.inv_mass[i], w.inv_inertia[i]);
+    s.beyond += watch::beyond_walls(w.position[i], w.radius[i], walls.data(), wall_count) ? 1 : 0;
+    if (w.inv_mass[i] > 0) s.mass += 1.0 / w.inv_mass[i];
+    radius_sum += w.radius[i];
+  }
+  s.radius = w.size() > 0 ? radius_sum / static_cast<double>(w.size()) : 0.0;
+  s.wall_speed = 0;
+  for (const narrowphase::WallShape& shape : walls)
+    s.wall_speed = std::max(s.wall_speed, static_cast<double>(length(shape.velocity)) +
+                                              std::fabs(static_cast<double>(shape.angular_velocity)) * shape.radius);
+  s.known = true;
+}
+
+// The largest kinetic energy a step from `e0` may reach. With M the movable
+// mass, |v| summed over spheres is at most sqrt(2 M e0) (Cauchy–Schwarz), so
+//   gravity over dt adds at most |g| dt sqrt(2 M e0) + M (|g| dt)^2 / 2,
+//   a wall hit at surface speed u adds at most 2 u (|v| + u) m per sphere,
+//   once per substep;
+// contacts, drag and the projection add none. The bound doubles those, lets
+// the energy grow by half, and never falls below every sphere moving 1 % of
+// the mean radius per step, so only a jump (an explosion) trips it.
+double Simulation::watch_bound(double e0) const {
+  const Watch& s = m_watch;
+  const double dt = m_model->dt;
+  const double sum_speed = std::sqrt(2 * s.mass * std::max(e0, 0.0));
+  double gain = 0;
+  if (m_model->gravity) {
+    const double gdt = static_cast<double>(length(m_model->g)) * dt;
+    gain += gdt * sum_speed + 0.5 * s.mass * gdt * gdt;
+  }
+  if (m_model->wall_contacts && s.wall_speed > 0)
+    gain += m_model->substeps * m_split * 2 * s.wall_speed * (sum_speed + 2 * s.mass * s.wall_speed);
+  const double floor = 0.5 * s.mass * std::pow(0.01 * s.radius / dt, 2);
+  return std::max(1.5 * e0 + 2 * gain, floor);
+}
+
 void Simulation::step() {
   m_last_rollbacks.clear();
-  const real overlap_before = m_last.max_overlap;
+  const StepCounters before = m_last;
   if (m_watchdog) m_backend->keep_step_start();
   for (int retry = 0;; ++retry) {
+    m_backend->set_iteration_factor(1 << retry);
     attempt(1 << retry);
-    std::string broken = m_watchdog ? violation() : std::string();
-    if (broken.empty() && m_watchdog && m_last.max_overlap > kWatchdogOverlap && overlap_before < kWatchdogOverlap / 2)
-      broken = "overlap " + std::to_string(m_last.max_overlap) + " of a radius";
+    const std::string broken = m_watchdog ? violation(before) : std::string();
     if (broken.empty()) break;
     m_backend->undo_step();
-    m_last.max_overlap = overlap_before;
+    m_last.max_overlap = before.max_overlap;
     ++m_rollbacks;
     m_last_rollbacks.push_back(broken);
-    if (retry == kWatchdogRetries)
+    if (retry == kWatchdogRetries) {
+      m_backend->set_iteration_factor(1);
       throw WatchdogFailure("watchdog: step " + std::to_string(m_steps + 1) + ": " + broken + " after " +
                             std::to_string(kWatchdogRetries) + " retries down to " +
                             std::to_string(m_model->substeps << kWatchdogRetries) + " substeps");
+    }
+  }
+  m_backend->set_iteration_factor(1);
+  if (m_watchdog) {
+    m_watch.energy = m_last.kinetic_energy;
+    m_watch.beyond = m_last.beyond_walls;
+    m_watch.known = true;
   }
   ++m_steps;
   m_time = m_steps * m_model->dt;
 }
 
+void Simulation::inject_fault() {
+  World& w = m_backend->edit_world();  // within the step: the watchdog's figures of its start stay
+  if (w.size() == 0) return;
+  switch (m_fault) {
+    case Fault::nan: w.velocity[0].x = std::nan(""); break;
+    case Fault::kick: {
+      const Vec3 up = m_model->gravity ? -m_model->g / length(m_model->g) : Vec3(1, 0, 0);
+      w.velocity[0] = w.velocity[0] + up * (100 * w.radius[0] / static_cast<real>(m_model->dt));
+      break;
+    }
+    case Fault::escape:
+      for (const narrowphase::WallShape& shape : m_model->wall_shapes) {
+        Vec3 normal;
+        real separation = 0;
+        if (!narrowphase::wall_gap(shape, w.position[0], w.radius[0], normal, separation)) continue;
+        w.position[0] = w.position[0] - normal * (separation + 4 * w.radius[0]);
+        break;
+      }
+      break;
+  }
+}
+
 void Simulation::attempt(int split) {
-  if ((split == 1 || m_fault_every_try) && m_fault_step == m_steps + 1)
-    m_backend->edit_world().velocity.at(0).x = std::nan("");
+  if ((split == 1 || m_fault_every_try) && m_fault_step == m_steps + 1) inject_fault();
   const real h = m_model->substep() / static_cast<real>(split);
+  m_split = split;
   m_backend->begin_step();
   std::fill(std::begin(m_verb_ms), std::end(m_verb_ms), 0.0);
   for (int k = 0; k < m_model->substeps * split; ++k) substep(h);
@@ -79,9 +171,19 @@ void Simulation::attempt(int split) {
   std::copy(std::begin(m_verb_ms), std::end(m_verb_ms), m_last.verb_ms);
 }
 
-std::string Simulation::violation() {
+std::string Simulation::violation(const StepCounters& before) {
   if (m_backend->non_finite())
     return "non-finite state (sphere " + std::to_string(m_backend->world().first_non_finite()) + ")";
+  if (m_watch.known) {
+    const double bound = watch_bound(m_watch.energy);
+    if (!(m_last.kinetic_energy <= bound))
+      return "kinetic energy jumped from " + short_number(m_watch.energy) + " J to " +
+             short_number(m_last.kinetic_energy) + " J (at most " + short_number(bound) + " J from gravity and walls)";
+    if (m_last.beyond_walls > m_watch.beyond)
+      return std::to_string(m_last.beyond_walls - m_watch.beyond) + " sphere(s) went through a wall";
+  }
+  if (m_last.max_overlap > kWatchdogOverlap && before.max_overlap < kWatchdogOverlap / 2)
+    return "overlap " + short_number(m_last.max_overlap) + " of a radius";
   return {};
 }
 

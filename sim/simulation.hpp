@@ -67,7 +67,10 @@ class Simulation {
   bool non_finite() const { return m_backend->non_finite(); }
   // Direct access to the state, for tests and tools that edit it between
   // steps (sent to the device before the next step).
-  World& edit_world() { return m_backend->edit_world(); }
+  World& edit_world() {
+    m_watch.known = false;
+    return m_backend->edit_world();
+  }
   // The contacts of the last substep (solver order), for diagnostics and tests.
   const std::vector<narrowphase::Contact>& contacts() const { return m_backend->contacts(); }
   const broadphase::BroadPhase* broad_phase() const { return m_backend->broad_phase(); }
@@ -89,23 +92,35 @@ class Simulation {
     m_backend->load_state(state);
     m_steps = steps;
     m_time = static_cast<double>(steps) * m_model->dt;
+    if (m_watchdog) watch_from_host();
   }
 
-  // The watchdog (off unless set; `marbles run` sets it): after each step,
-  // a non-finite state or an overlap deeper than kWatchdogOverlap of a radius
-  // (from below half of it) rolls the step back and redoes it with the
-  // substep halved, up to kWatchdogRetries times; then step() throws
-  // WatchdogFailure with the step back at its start.
-  void set_watchdog(bool on) { m_watchdog = on; }
+  // The watchdog (off unless set; `marbles run` sets it): after each step it
+  // checks cheap invariants, in this order:
+  //   non-finite      a position or velocity is not finite
+  //   energy jump     the kinetic energy rose beyond what gravity and moving
+  //                   walls can give in one step (watch_bound)
+  //   escape          more spheres lie wholly beyond a wall than before
+  //   overlap         an overlap deeper than kWatchdogOverlap of a radius
+  //                   appeared (from below half of it)
+  // A violation rolls the step back and redoes it with the substep halved and
+  // the velocity sweeps doubled, up to kWatchdogRetries times; then step()
+  // throws WatchdogFailure with the step back at its start. After an edit of
+  // the world (edit_world) the next step checks only non-finite and overlap.
+  void set_watchdog(bool on);
   static constexpr int kWatchdogRetries = 3;
   static constexpr real kWatchdogOverlap = real(1);
   // Rollbacks of the last step (each with its reason) and of the whole run.
   const std::vector<std::string>& last_rollbacks() const { return m_last_rollbacks; }
   std::uint64_t rollbacks() const { return m_rollbacks; }
-  // Test hook: the first try (or every try) of step `step` starts with a NaN velocity.
-  void inject_fault_at(std::uint64_t step, bool every_try = false) {
+  // Test hooks: the first try (or every try) of step `step` starts with a
+  // fault in sphere 0: a NaN velocity, a kick of 100 radii per step, or the
+  // sphere put wholly beyond the first wall.
+  enum class Fault { nan, kick, escape };
+  void inject_fault_at(std::uint64_t step, bool every_try = false, Fault kind = Fault::nan) {
     m_fault_step = step;
     m_fault_every_try = every_try;
+    m_fault = kind;
   }
 
   // The stages this scene's pipeline runs, one per line.
@@ -114,7 +129,10 @@ class Simulation {
  private:
   void substep(real h);
   void attempt(int split);  // one try of the step with `split` times the substeps
-  std::string violation();  // the broken invariant after a try, or empty
+  std::string violation(const StepCounters& before);  // the broken invariant after a try, or empty
+  double watch_bound(double energy_before) const;    // the largest kinetic energy a step may reach
+  void watch_from_host();                            // the figures of the host world
+  void inject_fault();
   template <class F>
   void run_verb(Verb verb, F&& f);
 
@@ -127,6 +145,17 @@ class Simulation {
   bool m_watchdog = false;
   std::uint64_t m_rollbacks = 0, m_fault_step = 0;
   bool m_fault_every_try = false;
+  Fault m_fault = Fault::nan;
+  int m_split = 1;  // the try's substeps per model substep
+  // The watchdog's view of the state before the step, and the scene's scales.
+  struct Watch {
+    bool known = false;   // energy and beyond of the step's start are known
+    double energy = 0;    // J
+    std::uint64_t beyond = 0;
+    double mass = 0;      // kg, of the movable spheres
+    double radius = 0;    // m, mean
+    double wall_speed = 0;  // m/s, the fastest wall surface
+  } m_watch;
   std::vector<std::string> m_last_rollbacks;
   double m_verb_ms[static_cast<int>(Verb::count)] = {};
 };

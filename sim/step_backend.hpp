@@ -40,6 +40,10 @@ struct StepCounters {
   double broadphase_ms = 0;           // summed over substeps (CUDA: with profiling on only)
   real max_overlap = 0;               // deepest overlap at the end of the step (overlap_ratio: of the smaller radius)
   std::uint64_t bytes_copied = 0;     // host<->device traffic of the step (CUDA)
+  // With the watch on (StepBackend::set_watch), the figures of the watchdog's
+  // invariants at the end of the step (sim/watch_math.hpp):
+  double kinetic_energy = 0;          // J, translational + rotational
+  std::uint64_t beyond_walls = 0;     // spheres wholly past a wall's surface
   double verb_ms[static_cast<int>(Verb::count)] = {};  // with profiling on: wall ms per verb, summed
 };
 
@@ -94,6 +98,12 @@ class StepBackend {
   // velocities, cache, walls; in device memory on the GPU), and go back to it.
   virtual void keep_step_start() = 0;
   virtual void undo_step() = 0;
+  // The watchdog's figures in end_step (kinetic_energy, beyond_walls): one
+  // more pass over the spheres per step, folded into the step's one read.
+  virtual void set_watch(bool on) = 0;
+  // A retry's effort: the velocity sweeps run `factor` times the model's
+  // iterations until set back to 1.
+  virtual void set_iteration_factor(int factor) = 0;
 };
 
 // Host arrays, OpenMP.

@@ -34,7 +34,7 @@ TEST(SphereSphere, SeparationAndNormalMatchGeometry) {
     const Vec3 pb(real(u(rng)), real(u(rng)), real(u(rng)));
     const Vec3 pa = pb + n * (ra + rb + gap);
     Vec3 normal;
-    real separation;
+    real separation = 0;
     const bool hit = sphere_sphere(pa, ra, pb, rb, real(0), normal, separation);
     ASSERT_EQ(hit, gap < 0) << "gap " << gap;
     if (!hit) continue;

@@ -85,6 +85,60 @@ TEST_F(Checkpoints, WatchdogRepairsAnInjectedFault) {
   EXPECT_NE(slurp(dir.path() + "/o/summary.json").find("\"rollbacks\": 1,"), std::string::npos);
 }
 
+// The other invariants: a kick of 100 radii per step (a finite blow-up) is
+// an energy jump, a sphere put beyond a wall went through it; both are
+// rolled back and the run finishes.
+TEST_F(Checkpoints, WatchdogCatchesAnEnergyJumpAndAnEscape) {
+  const test::ScratchDir dir("ck_watchdog_kinds");
+  const std::string scene = dir.write("s.yaml", kScene);
+  std::string err;
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/kick", &err,
+                    "MARBLES_FAULT_KICK_STEP=80"),
+            0)
+      << err;
+  EXPECT_NE(err.find("watchdog: step 80: kinetic energy jumped from "), std::string::npos) << err;
+  EXPECT_NE(slurp(dir.path() + "/kick/summary.json").find("\"rollbacks\": 1,"), std::string::npos) << err;
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/escape", &err,
+                    "MARBLES_FAULT_ESCAPE_STEP=90"),
+            0)
+      << err;
+  EXPECT_NE(err.find("watchdog: step 90: 1 sphere(s) went through a wall"), std::string::npos) << err;
+  EXPECT_NE(slurp(dir.path() + "/escape/summary.json").find("\"rollbacks\": 1,"), std::string::npos) << err;
+}
+
+// No false alarms where walls inject energy: a spinning drum and a ball
+// ploughing through a bed at 2 m/s (plus the rising floor of kScene, which
+// every other test here runs).
+TEST_F(Checkpoints, WatchdogStaysQuietWhereWallsDoWork) {
+  const test::ScratchDir dir("ck_watchdog_quiet");
+  const std::string bed = R"(format: 1
+name: quiet
+time: {duration: 0.5, dt: 1.0e-3, substeps: 2}
+effects: [gravity, collisions, walls, restitution, friction]
+materials:
+  steel: {density: 7800, restitution: 0.9, friction: 0.5}
+particles:
+  - lattice: {min: [-0.1, -0.08, -0.15], max: [0.1, 0.08, 0.0], spacing: 0.021, radius: 0.01}
+    velocity: {random: {speed: 0.5, seed: 1}}
+walls:
+)";
+  const std::string drum = dir.write("drum.yaml", bed + R"(  - cylinder: {base: [0, -0.1, 0], axis: [0, 1, 0], radius: 0.2, length: 0.2, inside: true, angular_velocity: 8.0}
+  - plane: {point: [0, -0.1, 0], normal: [0, 1, 0]}
+  - plane: {point: [0, 0.1, 0], normal: [0, -1, 0]}
+)");
+  const std::string plough = dir.write("plough.yaml", bed + R"(  - plane: {point: [0, 0, -0.16], normal: [0, 0, 1]}
+  - sphere: {centre: [-0.4, 0, -0.1], radius: 0.08}
+    velocity: [2, 0, 0]
+)");
+  for (const std::string& scene : {drum, plough}) {
+    std::string err;
+    const std::string out = dir.path() + "/" + fs::path(scene).stem().string();
+    ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + out, &err), 0) << err;
+    EXPECT_EQ(err.find("watchdog"), std::string::npos) << scene << ": " << err;
+    EXPECT_NE(slurp(out + "/summary.json").find("\"rollbacks\": 0,"), std::string::npos) << scene;
+  }
+}
+
 // A fault that every retry meets: exit 1 naming the step and the invariant,
 // and a checkpoint of the last good state, from which the run (without the
 // fault) goes on exactly as one that never met it.
