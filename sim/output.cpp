@@ -7,6 +7,7 @@
 #include "core/error.hpp"
 #include "render/atomic_file.hpp"
 #include "render/frame_output.hpp"
+#include "render/renderer.hpp"
 #include "render/vtk_output.hpp"
 #include "render/walls_json.hpp"
 #include "sim/scene.hpp"
@@ -46,12 +47,17 @@ struct RunOutput::Impl {
   int render_every = 0;
   std::unique_ptr<render::VtkSeriesWriter> vtk;
   std::unique_ptr<render::FrameOutput> frames;
+  bool render_at_finish = false;  // a resumed run: images and movie from the frames
+  render::RenderOptions render_options;
+  render::MovieOptions movie;
+  std::ostream* log = nullptr;
 };
 
 RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Walls& walls, bool render,
-                     std::ostream& log)
+                     std::ostream& log, bool resumed)
     : m(std::make_unique<Impl>()) {
   m->dir = dir;
+  m->log = &log;
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) throw RuntimeFailure("cannot create the output folder " + dir + ": " + ec.message());
@@ -69,7 +75,18 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
       log << "warning: this build has no VTK: no .vtp frames are written\n";
     }
   }
-  if (render && scene.output.render.enabled) {
+  if (render && scene.output.render.enabled && resumed) {
+    if (!m->vtk) {
+      log << "warning: a resumed run renders its images from the VTK frames, and this run writes none: no images\n";
+    } else if (!render::renderer_available()) {
+      log << "warning: no images: this build has no OSMesa\n";
+    } else {
+      m->render_at_finish = true;
+      m->render_options = render_options(scene);
+      m->movie.enabled = scene.output.movie.enabled;
+      m->movie.fps = scene.output.movie.fps;
+    }
+  } else if (render && scene.output.render.enabled) {
     try {
       render::MovieOptions movie;
       movie.enabled = scene.output.movie.enabled;
@@ -105,6 +122,12 @@ void RunOutput::resume(std::uint64_t steps, double dt) {
 std::string RunOutput::finish() {
   std::ostringstream out;
   if (m->vtk) out << m->vtk->frames() << " frames in frames/, series.pvd, ";
+  if (m->render_at_finish) {
+    render::render_output_dir(m->dir, m->render_options, m->movie, false, *m->log);
+    out << "images in images/";
+    if (std::filesystem::exists(std::filesystem::path(m->dir) / "movie.mp4")) out << ", movie.mp4";
+    out << ", ";
+  }
   if (m->frames) {
     m->frames->finish();
     out << m->frames->frames() << " images in images/";

@@ -20,8 +20,12 @@ render::Snapshot make_snapshot(const Simulation& sim);
 
 class RunOutput {
  public:
-  // Creates `dir`; `render` false skips images and movie.
-  RunOutput(const scene::Scene& scene, const std::string& dir, const Walls& walls, bool render, std::ostream& log);
+  // Creates `dir`; `render` false skips images and movie. A run resumed from
+  // a checkpoint (`resumed`) renders its images and movie at finish() from
+  // every frame of the series, as `marbles render DIR` does, so the camera
+  // and colour range span the whole run.
+  RunOutput(const scene::Scene& scene, const std::string& dir, const Walls& walls, bool render, std::ostream& log,
+            bool resumed = false);
   ~RunOutput();
 
   // True when the step just completed (or step 0) has output due.
@@ -30,7 +34,8 @@ class RunOutput {
   void write(const Simulation& sim);
   // A run resumed at `steps`: the frames due up to it count as written.
   void resume(std::uint64_t steps, double dt);
-  // Closes the movie; returns a short description of what was written.
+  // Closes the movie (a resumed run: renders images and movie from the
+  // frames); returns a short description of what was written.
   std::string finish();
 
  private:

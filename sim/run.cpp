@@ -146,7 +146,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
 
   RunTotals totals;
   totals.energy_start = sim.world().kinetic_energy();
-  bool render = options.render;
+  const bool render = options.render;
   if (options.restart) {
     Checkpoint c = read_checkpoint(*options.restart, fingerprint);
     if (c.world.size() != sim.world().size())
@@ -156,10 +156,6 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     sim.restore(c.world, c.state, c.steps);
     totals = c.totals;
     if (probe) probe->resume(c.probe);
-    if (render && sc.output.render.enabled)
-      err << "warning: a resumed run writes no images or movie; `marbles render " << sc.output.dir
-          << "` makes them from the frames afterwards\n";
-    render = false;
     if (!options.quiet) out << "resumed from " << *options.restart << " at step " << c.steps << "\n";
   }
 
@@ -180,7 +176,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
                             probe ? probe->progress() : std::vector<double>{}});
   };
 
-  RunOutput output(sc, sc.output.dir, sim.walls(), render, err);
+  RunOutput output(sc, sc.output.dir, sim.walls(), render, err, options.restart.has_value());
   Progress progress(!options.quiet);
   double step_seconds = 0;
   const std::uint64_t first_step = sim.steps();

@@ -40,6 +40,34 @@ TEST_F(Checkpoints, RestartEqualsTheUninterruptedRun) {
   }
 }
 
+// A resumed run that renders makes the images (one per frame, the ones
+// before the cut included) and the movie the uninterrupted run makes.
+TEST_F(Checkpoints, ResumedRunRendersItsImagesAndMovie) {
+  const test::ScratchDir dir("ck_render");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string common = " --quiet --backend cpu --set output.render.every=20 --set output.render.width=64"
+                             " --set output.render.height=48";
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + dir.path() + "/whole"), 0);
+  const std::string resumed = dir.path() + "/resumed";
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + resumed + " --duration 0.1"), 0);
+  fs::remove_all(resumed + "/images");
+  fs::remove(resumed + "/movie.mp4");
+  std::string err;
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + resumed + " --restart " + resumed +
+                        "/checkpoints/step_000100.mck", &err),
+            0)
+      << err;
+  auto names = [](const fs::path& folder) {
+    std::vector<std::string> out;
+    if (fs::exists(folder))
+      for (const auto& entry : fs::directory_iterator(folder)) out.push_back(entry.path().filename().string());
+    std::sort(out.begin(), out.end());
+    return out;
+  };
+  EXPECT_EQ(names(resumed + "/images"), names(dir.path() + "/whole/images")) << err;
+  EXPECT_EQ(fs::exists(resumed + "/movie.mp4"), fs::exists(dir.path() + "/whole/movie.mp4")) << err;
+}
+
 // The newest `keep` checkpoints stay.
 TEST_F(Checkpoints, KeepsTheNewest) {
   const test::ScratchDir dir("ck_keep");
