@@ -26,6 +26,7 @@
 #include "sim/checkpoint.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
+#include "sim/signals.hpp"
 #include "sim/study.hpp"
 
 namespace {
@@ -93,6 +94,7 @@ std::string requested_precision(int argc, char** argv) {
 }
 
 int cli_main(int argc, char** argv) {
+  install_fatal_handlers();
   CLI::App app{"marbles: a rigid-sphere simulator (spatial-subdivision broad phase, impulse contacts)"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "marbles 0.1");

@@ -1,6 +1,7 @@
 #include "sim/run.hpp"
 
 #include <algorithm>
+#include <csignal>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -23,6 +24,7 @@
 #include "sim/reference.hpp"
 #include "sim/scene.hpp"
 #include "sim/settings_check.hpp"
+#include "sim/signals.hpp"
 #include "sim/simulation.hpp"
 #include "sim/world.hpp"
 
@@ -183,6 +185,17 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   if (options.restart) output.resume(sim.steps(), sim.dt());
   else output.write(sim);
   const auto t0 = std::chrono::steady_clock::now();
+  // Test hook: MARBLES_FAULT_SIGNAL=NAME@N raises SIGNAME (SEGV, ABRT, INT, TERM) after step N.
+  int fault_signal = 0;
+  std::uint64_t fault_signal_step = 0;
+  if (const char* hook = std::getenv("MARBLES_FAULT_SIGNAL")) {
+    const std::string text = hook;
+    const std::size_t at = text.find('@');
+    const std::string name = text.substr(0, at);
+    fault_signal = name == "SEGV" ? SIGSEGV : name == "ABRT" ? SIGABRT : name == "INT" ? SIGINT : name == "TERM" ? SIGTERM : 0;
+    if (at != std::string::npos) fault_signal_step = std::strtoull(text.c_str() + at + 1, nullptr, 10);
+  }
+  const StopRequests stop;  // SIGINT, SIGTERM: end this step, checkpoint, exit 1
   while (sim.steps() < total_steps) {
     const auto s0 = std::chrono::steady_clock::now();
     try {
@@ -215,6 +228,16 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       prune_checkpoints(sc.output.dir, sc.output.checkpoint_keep);
     }
     progress.update(sim.time(), sc.time.duration, sim.steps(), total_steps);
+    if (fault_signal != 0 && sim.steps() == fault_signal_step) std::raise(fault_signal);
+    if (const int sig = stop.received()) {
+      progress.finish();
+      const std::string path = checkpoint_path(sc.output.dir, sim.steps());
+      if (!std::filesystem::exists(path)) save_checkpoint(path);
+      throw RuntimeFailure(std::string("stopped by ") + signal_name(sig) + " after step " + std::to_string(sim.steps()) +
+                           " of " + std::to_string(total_steps) + "; the state is in " + path +
+                           " (resume with marbles run " + options.scene_path + " --out " + sc.output.dir +
+                           " --restart " + path + ")");
+    }
   }
   progress.finish();
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

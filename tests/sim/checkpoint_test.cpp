@@ -17,6 +17,12 @@ namespace {
 
 using namespace test;
 
+std::string replace_all(std::string text, const std::string& from, const std::string& to) {
+  for (std::size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size()))
+    text.replace(at, from.size(), to);
+  return text;
+}
+
 // Several cut points, both precisions: the resumed run equals the whole run.
 TEST_F(Checkpoints, RestartEqualsTheUninterruptedRun) {
   const test::ScratchDir dir("ck_equal");
@@ -164,6 +170,66 @@ walls:
     ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + out, &err), 0) << err;
     EXPECT_EQ(err.find("watchdog"), std::string::npos) << scene << ": " << err;
     EXPECT_NE(slurp(out + "/summary.json").find("\"rollbacks\": 0,"), std::string::npos) << scene;
+  }
+}
+
+// A stop request (SIGINT, SIGTERM; raised by a test hook after step 130):
+// the run ends that step, writes a checkpoint, exits 1 with the command that
+// resumes it, and the resumed run equals the run that was never stopped.
+TEST_F(Checkpoints, StopRequestCheckpointsAndResumes) {
+  const test::ScratchDir dir("ck_stop");
+  const std::string scene = dir.write("s.yaml", kScene);
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/whole"), 0);
+  for (const std::string sig : {"INT", "TERM"}) {
+    const std::string out = dir.path() + "/stopped_" + sig;
+    std::string err;
+    EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + out, &err, "MARBLES_FAULT_SIGNAL=" + sig + "@130"),
+              1);
+    const std::string path = out + "/checkpoints/step_000130.mck";
+    EXPECT_NE(err.find("stopped by SIG" + sig + " after step 130 of 300; the state is in " + path), std::string::npos)
+        << err;
+    EXPECT_FALSE(fs::exists(out + "/summary.json")) << "a stopped run wrote a summary";
+    ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + out + " --restart " + path, &err), 0) << err;
+    expect_same_output(dir.path() + "/whole", out);
+  }
+}
+
+// A real SIGINT from outside, once the steps run: exit 1, and the checkpoint
+// it names resumes.
+TEST_F(Checkpoints, InterruptFromOutsideLeavesAResumableCheckpoint) {
+  const test::ScratchDir dir("ck_interrupt");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string out = dir.path() + "/o", err_file = dir.path() + "/err.txt";
+  const std::string script = "'" + kMarbles + "' run " + scene + " --quiet --backend cpu --duration 30 --out " + out +
+                             " >/dev/null 2>" + err_file + " & pid=$!; for i in $(seq 600); do [ -e " + out +
+                             "/checkpoints/step_000050.mck ] && break; sleep 0.05; done; kill -INT $pid; wait $pid";
+  const int status = std::system(("bash -c '" + replace_all(script, "'", "'\\''") + "'").c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1) << slurp(err_file);
+  const std::string err = slurp(err_file);
+  const std::size_t at = err.find("the state is in ");
+  ASSERT_NE(at, std::string::npos) << err;
+  const std::string path = err.substr(at + 16, err.find(' ', at + 16) - (at + 16));
+  ASSERT_TRUE(fs::exists(path)) << err;
+  const unsigned long steps = std::stoul(path.substr(path.size() - 10, 6));
+  std::string err2;
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + out + " --restart " + path + " --duration " +
+                        std::to_string((steps + 20) * 1e-3),
+                    &err2),
+            0)
+      << err2;
+}
+
+// Internal errors (a test hook raises the signal): one line naming it, exit 1.
+TEST_F(Checkpoints, FatalSignalsBecomeAMessageAndExitOne) {
+  const test::ScratchDir dir("ck_fatal");
+  const std::string scene = dir.write("s.yaml", kScene);
+  for (const std::string sig : {"SEGV", "ABRT"}) {
+    std::string err;
+    EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/o", &err,
+                      "MARBLES_FAULT_SIGNAL=" + sig + "@40"),
+              1);
+    EXPECT_NE(err.find("marbles: internal error: fatal signal SIG" + sig), std::string::npos) << err;
   }
 }
 

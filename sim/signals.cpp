@@ -1,0 +1,107 @@
+#include "sim/signals.hpp"
+
+#include <signal.h>
+#include <unistd.h>
+
+#include <csignal>
+#include <cstring>
+#include <exception>
+#include <initializer_list>
+
+namespace marbles {
+namespace {
+
+volatile std::sig_atomic_t g_stop = 0;
+struct sigaction g_previous_int, g_previous_term;
+
+// Async-signal-safe: write(2) and _exit only.
+void say(const char* text) {
+  for (std::size_t n = std::strlen(text); n > 0;) {
+    const ssize_t k = ::write(STDERR_FILENO, text, n);
+    if (k <= 0) return;
+    text += k;
+    n -= static_cast<std::size_t>(k);
+  }
+}
+
+void on_fatal(int sig) {
+  say("marbles: internal error: fatal signal ");
+  say(signal_name(sig));
+  say("; files under their final names are complete. Please report it with the scene and the command line.\n");
+  ::_exit(1);
+}
+
+void on_terminate() {
+  say("marbles: internal error: ");
+  if (std::exception_ptr e = std::current_exception()) {
+    try {
+      std::rethrow_exception(e);
+    } catch (const std::exception& x) {
+      say("an exception escaped: ");
+      say(x.what());
+    } catch (...) {
+      say("an exception escaped");
+    }
+  } else {
+    say("std::terminate");
+  }
+  say("; files under their final names are complete. Please report it with the scene and the command line.\n");
+  ::_exit(1);
+}
+
+void on_stop(int sig) {
+  if (g_stop != 0) {  // the second request: now
+    ::signal(sig, SIG_DFL);
+    ::raise(sig);
+    return;
+  }
+  g_stop = sig;
+}
+
+}  // namespace
+
+const char* signal_name(int sig) {
+  switch (sig) {
+    case SIGSEGV: return "SIGSEGV (invalid memory access)";
+    case SIGBUS: return "SIGBUS (bus error)";
+    case SIGFPE: return "SIGFPE (arithmetic exception)";
+    case SIGILL: return "SIGILL (illegal instruction)";
+    case SIGABRT: return "SIGABRT (abort)";
+    case SIGINT: return "SIGINT";
+    case SIGTERM: return "SIGTERM";
+    default: return "(another signal)";
+  }
+}
+
+void install_fatal_handlers() {
+  // An alternate stack, so that a stack overflow still gets its message.
+  static char alternate[64 * 1024];
+  stack_t stack{};
+  stack.ss_sp = alternate;
+  stack.ss_size = sizeof alternate;
+  ::sigaltstack(&stack, nullptr);
+  struct sigaction action {};
+  action.sa_handler = on_fatal;
+  action.sa_flags = SA_ONSTACK | SA_RESETHAND;
+  sigemptyset(&action.sa_mask);
+  for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT}) ::sigaction(sig, &action, nullptr);
+  std::set_terminate(on_terminate);
+}
+
+StopRequests::StopRequests() {
+  g_stop = 0;
+  struct sigaction action {};
+  action.sa_handler = on_stop;
+  sigemptyset(&action.sa_mask);
+  ::sigaction(SIGINT, &action, &g_previous_int);
+  ::sigaction(SIGTERM, &action, &g_previous_term);
+}
+
+StopRequests::~StopRequests() {
+  ::sigaction(SIGINT, &g_previous_int, nullptr);
+  ::sigaction(SIGTERM, &g_previous_term, nullptr);
+}
+
+int StopRequests::received() const { return g_stop; }
+
+}  // namespace marbles
