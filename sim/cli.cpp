@@ -24,6 +24,7 @@
 #include "render/frame_output.hpp"
 #include "sim/cli.hpp"
 #include "sim/checkpoint.hpp"
+#include "sim/limits.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
 #include "sim/signals.hpp"
@@ -53,6 +54,14 @@ void add_set_option(CLI::App* command, std::vector<std::string>& overrides) {
       ->allow_extra_args(false);
 }
 
+// `--limit NAME=VALUE`, repeatable: raises a guard (sim/limits.hpp).
+void add_limit_option(CLI::App* command, std::vector<std::string>& limits) {
+  command->add_option("--limit", limits,
+                      "raise a guard: scene_mib, materials, substeps, spheres (per block) or memory (fraction of the "
+                      "available memory), e.g. spheres=2e9 (repeatable)")
+      ->allow_extra_args(false);
+}
+
 // The --precision option as every command that runs a scene takes it.
 void add_precision_option(CLI::App* cmd, std::string& precision) {
   cmd->add_option("--precision", precision, "float|double: the type the run computes in (overrides solver.precision)")
@@ -64,7 +73,8 @@ void add_precision_option(CLI::App* cmd, std::string& precision) {
 namespace marbles {
 
 std::string requested_precision(int argc, char** argv) {
-  static const std::vector<std::string> kTakesValue{"--out", "--backend", "--broadphase", "--duration", "--set"};
+  static const std::vector<std::string> kTakesValue{"--out", "--backend", "--broadphase", "--duration", "--set",
+                                                    "--limit"};
   std::string command, scene_path, from_set, restart;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -116,6 +126,8 @@ int cli_main(int argc, char** argv) {
   run_cmd->add_option("--duration", run_duration, "simulated seconds (overrides time.duration)")
       ->check(kFinite & CLI::PositiveNumber);
   add_set_option(run_cmd, run.overrides);
+  std::vector<std::string> limit_args;
+  add_limit_option(run_cmd, limit_args);
   run_cmd->add_option("--restart", run.restart, "resume from a checkpoint (OUTDIR/checkpoints/step_NNNNNN.mck)")
       ->check(CLI::ExistingFile);
   run_cmd->add_flag("--summary-only", run.summary_only, "write only summary.json (no frames, images or movie)");
@@ -127,6 +139,7 @@ int cli_main(int argc, char** argv) {
   std::vector<std::string> check_overrides;
   check_cmd->add_option("scene", check_path, "scene file (YAML)")->required();
   add_set_option(check_cmd, check_overrides);
+  add_limit_option(check_cmd, limit_args);
   add_precision_option(check_cmd, precision);
 
   StudyOptions study;
@@ -138,6 +151,7 @@ int cli_main(int argc, char** argv) {
                         "KEY=v1,v2,... (repeatable): time.dt, time.substeps, solver.iterations, solver.integrator, "
                         "solver.speculative, precision, backend or any scene key");
   add_set_option(study_cmd, study.set);
+  add_limit_option(study_cmd, study.limits);
   study_cmd->add_option("--backend", study.backend, "auto|cpu|cuda (unless varied)")
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   study_cmd->add_option("--out", study.out_dir, "output folder (default out/study/<scene>)");
@@ -237,6 +251,8 @@ int cli_main(int argc, char** argv) {
   }
 
   try {
+    for (const std::string& l : limit_args) raise_limit(l);
+    for (const std::string& l : study.limits) raise_limit(l);
     if (*run_cmd) {
       if (run_duration > 0) run.duration = run_duration;
       run.backend = kBackends.at(run_backend);

@@ -31,6 +31,8 @@
 #include <string>
 #include <string_view>
 
+#include "sim/limits.hpp"
+
 namespace marbles::scene {
 
 namespace {
@@ -105,13 +107,13 @@ double available_memory() {
 // Refuses a block that would take the scene past what memory can hold,
 // before it is generated (never an out-of-memory kill half way through).
 void check_sphere_budget(double total, const SourceLocation& where, const std::string& key) {
-  const double memory = available_memory();
+  const double memory = available_memory() * limits().memory;
   if (memory > 0 && total * kBytesPerSphere > memory)
     throw InputError(where, key,
                      "would make " + std::to_string(static_cast<long long>(total)) + " spheres, about " +
                          std::to_string(static_cast<long long>(total * kBytesPerSphere / 1e9)) +
                          " GB to run; this machine has " + std::to_string(static_cast<long long>(memory / 1e9)) +
-                         " GB available");
+                         " GB available (--limit memory=F lets the spheres take F times that)");
 }
 
 // --- lattice ---------------------------------------------------------------
@@ -126,9 +128,10 @@ void expand_lattice(const ParticleBlock& block, std::size_t index, std::uint32_t
     room[a] = double(block.hi[a]) - double(block.lo[a]) - 2 * margin;
     total *= std::floor(room[a] / block.spacing + 1e-9) + 1;  // in double: no cast before the cap
   }
-  if (!(total <= 1e9))
+  if (!(total <= limits().spheres))
     throw InputError(block.where, block_key(index) + ".lattice",
-                     "would make " + format_count(total) + " spheres; enlarge the spacing");
+                     "would make " + format_count(total) + " spheres, more than the limit " +
+                         format_count(limits().spheres) + "; enlarge the spacing (or --limit spheres=N)");
   check_sphere_budget(double(out.size()) + total, block.where, block_key(index) + ".lattice");
   for (int a = 0; a < 3; ++a) {
     n[a] = static_cast<long long>(std::floor(room[a] / block.spacing + 1e-9)) + 1;

@@ -22,6 +22,7 @@
 
 #include <yaml-cpp/eventhandler.h>
 
+#include "sim/limits.hpp"
 #include "sim/scene_overrides.hpp"
 #include "sim/scene_yaml.hpp"
 
@@ -34,9 +35,6 @@ using detail::MapFields;
 namespace {
 
 constexpr int kFormatVersion = 1;
-constexpr double kMaxSubsteps = 1e10;
-constexpr std::size_t kMaxMaterials = 1024;  // the pair table holds kMaxMaterials^2 entries  // a run of more substeps would not finish
-constexpr std::size_t kMaxSceneBytes = std::size_t(64) << 20;  // a scene file is small; bulk data goes in CSV
 
 const std::vector<std::string> kEffectNames = {"gravity",  "collisions",         "walls", "restitution",
                                                "friction", "rolling_resistance", "drag"};
@@ -68,9 +66,9 @@ TimeSpec read_time(const Field& field) {
     dt.fail("must be <= time.duration (" + format_number(time.duration) + "), got " + dt.node().Scalar());
   if (auto f = map.optional("substeps")) time.substeps = f->integer_at_least(1);
   const double steps = time.duration / time.dt * time.substeps;
-  if (!(steps <= kMaxSubsteps))
+  if (!(steps <= limits().substeps))
     dt.fail("time.duration / time.dt x time.substeps = " + format_number(steps) + " substeps, more than the limit " +
-            format_number(kMaxSubsteps));
+            format_number(limits().substeps) + " (--limit substeps=N raises it)");
   if (!(static_cast<real>(time.dt / time.substeps) > 0))
     dt.fail("the substep dt / substeps rounds to 0 in " + std::string(kRealName) + " precision");
   return time;
@@ -193,9 +191,9 @@ std::vector<Material> read_materials(const Field& field) {
     materials.push_back(std::move(m));
   }
   if (materials.empty()) field.fail("needs at least one material, e.g. `steel: {density: 7800}`");
-  if (materials.size() > kMaxMaterials)
-    field.fail(std::to_string(materials.size()) + " materials, more than the limit " + std::to_string(kMaxMaterials) +
-               " (the step keeps a coefficient table of every pair)");
+  if (static_cast<double>(materials.size()) > limits().materials)
+    field.fail(std::to_string(materials.size()) + " materials, more than the limit " + format_number(limits().materials) +
+               " (the step keeps a coefficient table of every pair; --limit materials=N raises it)");
   return materials;
 }
 
@@ -400,7 +398,12 @@ void read_lattice(ParticleBlock& block, const Field& field) {
 void read_random(ParticleBlock& block, const Field& field) {
   const MapFields map(field, {"count", "min", "max", "radius", "seed"});
   const Field count = map.required("count");
-  block.count = static_cast<std::size_t>(count.integer_at_least(1, 1'000'000'000));
+  const long long n = count.integer();
+  if (n < 1) count.fail("must be >= 1, got " + count.node().Scalar());
+  if (static_cast<double>(n) > limits().spheres)
+    count.fail("must be <= " + format_number(limits().spheres) + " (--limit spheres=N raises it), got " +
+               count.node().Scalar());
+  block.count = static_cast<std::size_t>(n);
   block.count_where = count.where();
   block.lo = map.required("min").vec3();
   const Field max = map.required("max");
@@ -589,10 +592,10 @@ std::string read_file(const std::string& path) {
   char chunk[1 << 16];
   while (in.read(chunk, sizeof chunk) || in.gcount() > 0) {
     text.append(chunk, static_cast<std::size_t>(in.gcount()));
-    if (text.size() > kMaxSceneBytes)
+    if (static_cast<double>(text.size()) > limits().scene_mib * 1048576.0)
       throw InputError(SourceLocation{path, 0, 0}, "",
-                       "larger than " + std::to_string(kMaxSceneBytes >> 20) + " MiB: not a scene file (particles in "
-                       "bulk belong in a csv block)");
+                       "larger than " + format_number(limits().scene_mib) + " MiB: not a scene file (particles in "
+                       "bulk belong in a csv block; --limit scene_mib=N raises it)");
   }
   return text;
 }

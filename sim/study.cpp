@@ -193,6 +193,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     std::string backend = options.backend, precision;
     std::vector<std::string> args{options.marbles, "run", options.scene_path, "--quiet", "--summary-only"};
     for (const std::string& s : options.set) args.insert(args.end(), {"--set", s});
+    for (const std::string& l : options.limits) args.insert(args.end(), {"--limit", l});
     for (std::size_t k = 0; k < options.vary.size(); ++k) {
       const std::string& key = options.vary[k].key;
       if (key == "backend") backend = row.values[k];

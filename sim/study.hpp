@@ -26,6 +26,7 @@ struct StudyOptions {
   std::string scene_path;
   std::vector<StudyVary> vary;      // the cartesian product is run, first key slowest
   std::vector<std::string> set;     // --set overrides applied to every run
+  std::vector<std::string> limits;  // --limit raises, passed to every run
   std::string backend = "auto";     // unless varied
   std::string out_dir;              // default: out/study/<scene stem>
   int repeats = 3;                  // runs per combination; the cost is their median

@@ -102,6 +102,37 @@ TEST_F(Robustness, AbsurdCountsAreRefusedUpFront) {
   EXPECT_NE(l.err.find("would make 1e+90 spheres"), std::string::npos) << l.err;
 }
 
+// Every guard can be raised (--limit NAME=VALUE) and lowered: the scene that
+// passes is refused under a tighter limit, with the number and the flag.
+TEST_F(Robustness, LimitsCanBeRaised) {
+  const test::ScratchDir dir("robust_limits");
+  const std::string scene = dir.write(
+      "s.yaml",
+      "time: {duration: 1, dt: 0.001}\nmaterials: {a: , b: }\nparticles:\n"
+      "  - random: {count: 300, min: [0, 0, 0], max: [1, 1, 1], radius: 0.01}\n");
+  ASSERT_EQ(marbles("check " + scene, dir).exit_code, 0);
+  const std::pair<std::string, std::string> cases[] = {
+      {"substeps=999", "1000 substeps, more than the limit 999 (--limit substeps=N raises it)"},
+      {"materials=1", "2 materials, more than the limit 1"},
+      {"spheres=299", "must be <= 299 (--limit spheres=N raises it), got 300"},
+      {"memory=1e-12", "would make 300 spheres"},
+      {"scene_mib=1e-5", "larger than 1e-05 MiB"}};
+  for (const auto& [limit, message] : cases) {
+    const Outcome o = marbles("check " + scene + " --limit " + limit, dir);
+    EXPECT_EQ(o.exit_code, 2) << limit << ": " << o.err;
+    EXPECT_NE(o.err.find(message), std::string::npos) << limit << ": " << o.err;
+  }
+  // Raised: a run of more substeps than the default allows passes the check.
+  const std::string long_run = dir.write(
+      "long.yaml",
+      "time: {duration: 1e8, dt: 0.001}\nmaterials: {a: }\nparticles:\n  - list: {positions: [[0, 0, 0]], radius: 0.1}\n");
+  EXPECT_EQ(marbles("check " + long_run, dir).exit_code, 2);
+  EXPECT_EQ(marbles("check " + long_run + " --limit substeps=1e12", dir).exit_code, 0);
+  const Outcome bad = marbles("check " + scene + " --limit spheres=lots", dir);
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("--limit: spheres must be a positive number, got 'lots'"), std::string::npos) << bad.err;
+}
+
 // A mass beyond the precision of the run (radius 1e30) is an input error,
 // not a run with energies of 0.
 TEST_F(Robustness, MassBeyondThePrecisionIsRefused) {
