@@ -131,6 +131,8 @@ int cli_main(int argc, char** argv) {
   run_cmd->add_option("--restart", run.restart, "resume from a checkpoint (OUTDIR/checkpoints/step_NNNNNN.mck)")
       ->check(CLI::ExistingFile);
   run_cmd->add_flag("--summary-only", run.summary_only, "write only summary.json (no frames, images or movie)");
+  run_cmd->add_flag("--overwrite", run.overwrite,
+                    "replace an earlier run's output in the folder (without it such a folder is refused)");
   std::string precision;
   add_precision_option(run_cmd, precision);
 

@@ -30,6 +30,26 @@ render::Snapshot make_snapshot(const Simulation& sim) {
   return s;
 }
 
+std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir) {
+  namespace fs = std::filesystem;
+  std::vector<fs::path> found;
+  std::error_code ec;
+  for (const char* name : {"summary.json", "series.pvd", "walls.json", "materials.txt", "movie.mp4"})
+    if (fs::is_regular_file(dir / name, ec)) found.push_back(dir / name);
+  const std::pair<const char*, const char*> series[] = {
+      {"frames", ".vtp"}, {"images", ".png"}, {"checkpoints", ".mck"}};
+  for (const auto& [sub, extension] : series) {
+    if (!fs::is_directory(dir / sub, ec)) continue;
+    for (const auto& entry : fs::directory_iterator(dir / sub, ec)) {
+      const std::string name = entry.path().filename().string();
+      if (entry.is_regular_file(ec) && entry.path().extension() == extension &&
+          (name.rfind("frame_", 0) == 0 || name.rfind("step_", 0) == 0))
+        found.push_back(entry.path());
+    }
+  }
+  return found;
+}
+
 render::RenderOptions render_options(const scene::Scene& scene) {
   const scene::RenderSpec& spec = scene.output.render;
   render::RenderOptions o;

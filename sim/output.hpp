@@ -4,7 +4,9 @@
 
 #include <iosfwd>
 #include <memory>
+#include <filesystem>
 #include <string>
+#include <vector>
 
 #include "core/walls.hpp"
 #include "render/snapshot.hpp"
@@ -17,6 +19,11 @@ struct Scene;
 class Simulation;
 
 render::Snapshot make_snapshot(const Simulation& sim);
+
+// The files of an earlier run in `dir` (what a run writes: summary.json,
+// series.pvd, walls.json, materials.txt, movie.mp4, frames/frame_*.vtp,
+// images/frame_*.png, checkpoints/step_*.mck); other files are not ours.
+std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir);
 
 class RunOutput {
  public:

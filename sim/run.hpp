@@ -35,6 +35,7 @@ struct RunOptions {
   std::vector<std::string> overrides;  // --set key.path=value, applied to the scene in order
   std::optional<std::string> restart;  // a checkpoint to resume from
   bool summary_only = false;           // write only summary.json (no frames, images or movie)
+  bool overwrite = false;              // replace an earlier run's output in the folder (else refused)
 };
 
 // `marbles run`. Returns the process exit code; throws InputError for scene

@@ -191,7 +191,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     row.values = combos[c];
     std::vector<double> per_step, per_second;
     std::string backend = options.backend, precision;
-    std::vector<std::string> args{options.marbles, "run", options.scene_path, "--quiet", "--summary-only"};
+    std::vector<std::string> args{options.marbles, "run", options.scene_path, "--quiet", "--summary-only", "--overwrite"};
     for (const std::string& s : options.set) args.insert(args.end(), {"--set", s});
     for (const std::string& l : options.limits) args.insert(args.end(), {"--limit", l});
     for (std::size_t k = 0; k < options.vary.size(); ++k) {

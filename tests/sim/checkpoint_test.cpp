@@ -74,6 +74,43 @@ TEST_F(Checkpoints, ResumedRunRendersItsImagesAndMovie) {
   EXPECT_EQ(fs::exists(resumed + "/movie.mp4"), fs::exists(dir.path() + "/whole/movie.mp4")) << err;
 }
 
+// A folder holding an earlier run is refused (exit 2, nothing touched);
+// --overwrite replaces that run's files, so no stale frame survives, and
+// leaves the user's own files.
+TEST_F(Checkpoints, EarlierRunIsRefusedOrOverwritten) {
+  const test::ScratchDir dir("ck_overwrite");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string out = dir.path() + "/o";
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + out), 0);
+  std::ofstream(out + "/notes.txt") << "mine";
+  auto listing = [&] {
+    std::vector<std::string> names;
+    for (const auto& entry : fs::recursive_directory_iterator(out))
+      names.push_back(fs::relative(entry.path(), out).string());
+    std::sort(names.begin(), names.end());
+    return names;
+  };
+  const std::vector<std::string> before = listing();
+  const std::string summary = slurp(out + "/summary.json");
+  std::string err;
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --duration 0.1 --out " + out, &err), 2);
+  EXPECT_NE(err.find("--out: " + out + " holds the output of an earlier run ("), std::string::npos) << err;
+  EXPECT_NE(err.find("--overwrite replaces it"), std::string::npos) << err;
+  EXPECT_EQ(listing(), before);
+  EXPECT_EQ(slurp(out + "/summary.json"), summary);
+
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --duration 0.1 --overwrite --out " + out, &err), 0) << err;
+  const std::string fresh = dir.path() + "/fresh";
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --duration 0.1 --out " + fresh), 0);
+  std::vector<std::string> expected;
+  for (const auto& entry : fs::recursive_directory_iterator(fresh))
+    expected.push_back(fs::relative(entry.path(), fresh).string());
+  expected.push_back("notes.txt");
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(listing(), expected);
+  expect_same_output(fresh, out);
+}
+
 // The newest `keep` checkpoints stay.
 TEST_F(Checkpoints, KeepsTheNewest) {
   const test::ScratchDir dir("ck_keep");
@@ -226,7 +263,7 @@ TEST_F(Checkpoints, FatalSignalsBecomeAMessageAndExitOne) {
   const std::string scene = dir.write("s.yaml", kScene);
   for (const std::string sig : {"SEGV", "ABRT"}) {
     std::string err;
-    EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/o", &err,
+    EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/" + sig, &err,
                       "MARBLES_FAULT_SIGNAL=" + sig + "@40"),
               1);
     EXPECT_NE(err.find("marbles: internal error: fatal signal SIG" + sig), std::string::npos) << err;

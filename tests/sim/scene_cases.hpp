@@ -135,14 +135,15 @@ inline const std::vector<BadScene>& bad_scenes() {
       {"normal_beyond_real", SCENE_VALID "walls:\n  - plane: {point: [0, 0, 0], normal: [1e39, 0, 0]}\n",
        "{scene}:7:40: walls[0].plane.normal[0]: out of range for ..."},
       {"too_many_substeps", "time: {duration: 1e9, dt: 1e-3, substeps: 4}\n" SCENE_MATERIALS SCENE_PARTICLES,
-       "{scene}:1:27: time.dt: time.duration / time.dt x time.substeps = 4e+12 substeps, more than the limit 1e+10"},
+       "{scene}:1:27: time.dt: time.duration / time.dt x time.substeps = 4e+12 substeps, more than the limit 1e+10 "
+       "(--limit substeps=N raises it)"},
       {"material_name_newline", SCENE_TIME "materials:\n  \"gl\\nass\": {density: 2500}\n" SCENE_PARTICLES,
        "{scene}:3:3: materials: a material name cannot hold a control character (tab, newline)"},
       {"render_too_wide", SCENE_VALID "output: {render: {width: 9000}}\n",
        "{scene}:6:26: output.render.width: must be <= 8192, got 9000"},
       {"too_many_materials", many_materials_scene(1025).c_str(),
        "{scene}:2:12: materials: 1025 materials, more than the limit 1024 (the step keeps a coefficient table of "
-       "every pair)"},
+       "every pair; --limit materials=N raises it)"},
       {"empty_file", "", "{scene}: the scene file is empty"},
       {"only_comments", "# nothing here\n", "{scene}: the scene file is empty"},
       {"leading_comma", ",", "{scene}:1:1: not valid YAML: no document could be read (does it begin with a stray ',', "
