@@ -84,8 +84,9 @@ void commit_file(const fs::path& tmp, const fs::path& final_path, const Complete
   }
   fs::rename(tmp, final_path, ec);
   if (ec) {
+    const std::string why = ec.message();  // before the clean-up reuses ec
     fs::remove(tmp, ec);
-    throw RuntimeFailure("cannot rename " + tmp.string() + " to " + final_path.string() + ": " + ec.message());
+    throw RuntimeFailure("cannot rename " + tmp.string() + " to " + final_path.string() + ": " + why);
   }
 }
 

@@ -133,6 +133,26 @@ TEST_F(Robustness, LimitsCanBeRaised) {
   EXPECT_NE(bad.err.find("--limit: spheres must be a positive number, got 'lots'"), std::string::npos) << bad.err;
 }
 
+// Output that cannot be written (the folder is a file; a folder sits where
+// summary.json goes; as root, permissions would not stop us): exit 1 with
+// the path and the reason.
+TEST_F(Robustness, UnwritableOutputIsExitOneWithThePath) {
+  const test::ScratchDir dir("robust_unwritable");
+  const std::string blocker = dir.write("file", "not a folder");
+  const Outcome a = marbles("run " MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml --quiet --summary-only --backend cpu "
+                            "--out " + blocker + "/out", dir);
+  EXPECT_EQ(a.exit_code, 1) << a.err;
+  EXPECT_NE(a.err.find("cannot create the output folder " + blocker + "/out: Not a directory"), std::string::npos)
+      << a.err;
+  const std::string out = dir.path() + "/o";
+  fs::create_directories(out + "/summary.json");
+  const Outcome b = marbles("run " MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml --quiet --summary-only --backend cpu "
+                            "--out " + out, dir);
+  EXPECT_EQ(b.exit_code, 1) << b.err;
+  EXPECT_NE(b.err.find(out + "/summary.json: Is a directory"), std::string::npos) << b.err;
+  EXPECT_TRUE(fs::is_directory(out + "/summary.json"));
+}
+
 // A mass beyond the precision of the run (radius 1e30) is an input error,
 // not a run with energies of 0.
 TEST_F(Robustness, MassBeyondThePrecisionIsRefused) {
