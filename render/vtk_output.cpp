@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/error.hpp"
+#include "core/format.hpp"
 #include "render/atomic_file.hpp"
 
 #if defined(MARBLES_HAVE_VTK)
@@ -77,10 +78,8 @@ namespace {
   out << "<?xml version=\"1.0\"?>\n"
          "<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
          "  <Collection>\n";
-  char time[40];
   for (const auto& [t, file] : entries) {
-    std::snprintf(time, sizeof time, "%.17g", t);
-    out << "    <DataSet timestep=\"" << time << "\" group=\"\" part=\"0\" file=\"" << file << "\"/>\n";
+    out << "    <DataSet timestep=\"" << time_text(t) << "\" group=\"\" part=\"0\" file=\"" << file << "\"/>\n";
   }
   out << "  </Collection>\n</VTKFile>\n";
   return out.str();

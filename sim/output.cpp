@@ -1,10 +1,15 @@
 #include "sim/output.hpp"
 
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <ostream>
 #include <sstream>
 
 #include "core/error.hpp"
+#include "core/format.hpp"
 #include "render/atomic_file.hpp"
 #include "render/frame_output.hpp"
 #include "render/renderer.hpp"
@@ -34,7 +39,7 @@ std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path
   namespace fs = std::filesystem;
   std::vector<fs::path> found;
   std::error_code ec;
-  for (const char* name : {"summary.json", "series.pvd", "walls.json", "materials.txt", "movie.mp4"})
+  for (const char* name : {"summary.json", "series.pvd", "thermo.csv", "walls.json", "materials.txt", "movie.mp4"})
     if (fs::is_regular_file(dir / name, ec)) found.push_back(dir / name);
   const std::pair<const char*, const char*> series[] = {
       {"frames", ".vtp"}, {"images", ".png"}, {"checkpoints", ".mck"}};
@@ -71,13 +76,52 @@ struct RunOutput::Impl {
   render::RenderOptions render_options;
   render::MovieOptions movie;
   std::ostream* log = nullptr;
+  bool thermo = false;
+  int thermo_every = 0;     // steps: the VTK cadence, else the images' (also in builds without VTK or OSMesa)
+  std::string thermo_text;  // header and rows so far, rewritten whole (atomically) per row
+  std::uint64_t thermo_step = 0;
+  double thermo_seconds = 0;
 };
+
+namespace {
+
+std::string thermo_row(const Simulation& sim, double ms_per_step) {
+  const World& w = sim.world();
+  const StepModel& model = sim.model();
+  double translational = 0, rotational = 0, potential = 0, speed2 = 0;
+  for (std::size_t i = 0; i < w.size(); ++i) {
+    speed2 = std::max(speed2, static_cast<double>(length_squared(w.velocity[i])));
+    if (!(w.inv_mass[i] > 0)) continue;
+    const double m = 1.0 / w.inv_mass[i];
+    translational += 0.5 * m * length_squared(w.velocity[i]);
+    if (w.inv_inertia[i] > 0) rotational += 0.5 * length_squared(w.angular_velocity[i]) / w.inv_inertia[i];
+    if (model.gravity) potential -= m * static_cast<double>(dot(model.g, w.position[i]));
+  }
+  const StepCounters& last = sim.last_step();
+  std::string row = std::to_string(sim.steps());
+  row += ',';
+  row += time_text(sim.time());
+  for (const double v : {translational, rotational, potential, static_cast<double>(last.contacts) / sim.substeps(),
+                         static_cast<double>(last.max_overlap), std::sqrt(speed2), ms_per_step}) {
+    row += ',';
+    row += shortest(v);
+  }
+  row += '\n';
+  return row;
+}
+
+}  // namespace
 
 RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Walls& walls, bool render,
                      std::ostream& log, bool resumed)
     : m(std::make_unique<Impl>()) {
   m->dir = dir;
   m->log = &log;
+  m->thermo_every = scene.output.vtk_every > 0                        ? scene.output.vtk_every
+                    : render && scene.output.render.enabled ? scene.output.render.every
+                                                             : 0;
+  m->thermo = m->thermo_every > 0;
+  if (m->thermo) m->thermo_text = std::string(kThermoHeader) + "\n";
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) throw RuntimeFailure("cannot create the output folder " + dir + ": " + ec.message());
@@ -122,18 +166,39 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
 RunOutput::~RunOutput() = default;
 
 bool RunOutput::due(std::uint64_t step) const {
-  return (m->vtk && step % m->vtk_every == 0) || (m->frames && step % m->render_every == 0);
+  return (m->vtk && step % m->vtk_every == 0) || (m->frames && step % m->render_every == 0) ||
+         (m->thermo && step % m->thermo_every == 0);
 }
 
-void RunOutput::write(const Simulation& sim) {
+void RunOutput::write(const Simulation& sim, double step_seconds) {
   const std::uint64_t step = sim.steps();
   if (!due(step)) return;
+  if (m->thermo && step % m->thermo_every == 0) {
+    const double ms = step > m->thermo_step ? 1e3 * (step_seconds - m->thermo_seconds) / double(step - m->thermo_step) : 0.0;
+    m->thermo_text += thermo_row(sim, ms);
+    m->thermo_step = step;
+    m->thermo_seconds = step_seconds;
+    render::write_file_atomic((std::filesystem::path(m->dir) / "thermo.csv").string(), m->thermo_text);
+  }
+  if (!(m->vtk && step % m->vtk_every == 0) && !(m->frames && step % m->render_every == 0)) return;
   const render::Snapshot snapshot = make_snapshot(sim);
   if (m->vtk && step % m->vtk_every == 0) m->vtk->write(snapshot);
   if (m->frames && step % m->render_every == 0) m->frames->add(snapshot);
 }
 
 void RunOutput::resume(std::uint64_t steps, double dt) {
+  m->thermo_step = steps;
+  if (m->thermo) {  // the rows up to the checkpoint's step, from the run that wrote it
+    std::ifstream in(std::filesystem::path(m->dir) / "thermo.csv");
+    std::string line;
+    if (std::getline(in, line) && line == kThermoHeader) {
+      while (std::getline(in, line)) {
+        const std::uint64_t row_step = std::strtoull(line.c_str(), nullptr, 10);
+        if (row_step > steps || line.empty()) break;
+        m->thermo_text += line + "\n";
+      }
+    }
+  }
   if (!m->vtk) return;
   for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->vtk_every))
     m->vtk->adopt(static_cast<double>(step) * dt);

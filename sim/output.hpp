@@ -21,9 +21,17 @@ class Simulation;
 render::Snapshot make_snapshot(const Simulation& sim);
 
 // The files of an earlier run in `dir` (what a run writes: summary.json,
-// series.pvd, walls.json, materials.txt, movie.mp4, frames/frame_*.vtp,
+// series.pvd, thermo.csv, walls.json, materials.txt, movie.mp4, frames/frame_*.vtp,
 // images/frame_*.png, checkpoints/step_*.mck); other files are not ours.
 std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir);
+
+// OUTDIR/thermo.csv, one row per output frame (VTK or image):
+//   step,t,ke_translational,ke_rotational,potential_energy,contacts,max_overlap,max_speed,ms_per_step
+// J for energies (potential: of gravity, zero at the origin), contacts per
+// substep of the last step, max_overlap in radii of the smaller sphere, m/s,
+// ms per step since the row before.
+inline constexpr const char* kThermoHeader =
+    "step,t,ke_translational,ke_rotational,potential_energy,contacts,max_overlap,max_speed,ms_per_step";
 
 class RunOutput {
  public:
@@ -37,9 +45,12 @@ class RunOutput {
 
   // True when the step just completed (or step 0) has output due.
   bool due(std::uint64_t step) const;
-  // Writes what is due for sim.steps().
-  void write(const Simulation& sim);
-  // A run resumed at `steps`: the frames due up to it count as written.
+  // Writes what is due for sim.steps(): frames, images and a row of
+  // thermo.csv; `step_seconds` is the wall time of the steps so far (this
+  // process), for the row's ms per step.
+  void write(const Simulation& sim, double step_seconds = 0);
+  // A run resumed at `steps`: the frames due up to it count as written, and
+  // thermo.csv keeps its rows up to it.
   void resume(std::uint64_t steps, double dt);
   // Closes the movie (a resumed run: renders images and movie from the
   // frames); returns a short description of what was written.

@@ -235,7 +235,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     if (probe && sim.steps() % probe_every == 0) probe->sample(sim.time(), sim.world());
     if (output.due(sim.steps())) {
       progress.finish();
-      output.write(sim);
+      output.write(sim, step_seconds);
     }
     if (sc.output.checkpoint_every > 0 && sim.steps() % static_cast<std::uint64_t>(sc.output.checkpoint_every) == 0) {
       save_checkpoint(checkpoint_path(sc.output.dir, sim.steps()));

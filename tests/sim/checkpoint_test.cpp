@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -109,6 +111,73 @@ TEST_F(Checkpoints, EarlierRunIsRefusedOrOverwritten) {
   std::sort(expected.begin(), expected.end());
   EXPECT_EQ(listing(), expected);
   expect_same_output(fresh, out);
+}
+
+// thermo.csv: one row per frame; its energies are the summary's at the
+// start and the end; under gravity alone with velocity Verlet the mechanical
+// energy it reports is conserved; a resumed run keeps the rows before its
+// checkpoint and writes the same ones after (all but the timing column).
+std::vector<std::vector<std::string>> csv_rows(const std::string& path) {
+  std::vector<std::vector<std::string>> rows;
+  std::istringstream in(slurp(path));
+  std::string line;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::istringstream cells_in(line);
+    for (std::string cell; std::getline(cells_in, cell, ',');) cells.push_back(cell);
+    rows.push_back(cells);
+  }
+  return rows;
+}
+
+double summary_number(const std::string& summary, const std::string& key) {
+  const std::size_t at = summary.find("\"" + key + "\": ");
+  return at == std::string::npos ? std::nan("") : std::strtod(summary.c_str() + at + key.size() + 4, nullptr);
+}
+
+TEST_F(Checkpoints, ThermoRowsFollowTheRun) {
+  const test::ScratchDir dir("ck_thermo");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string out = dir.path() + "/o";
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + out), 0);
+  const auto rows = csv_rows(out + "/thermo.csv");
+  ASSERT_EQ(rows.size(), 1u + 16u);  // the header and a row per 20 steps, 0 to 300
+  EXPECT_EQ(rows[0], (std::vector<std::string>{"step", "t", "ke_translational", "ke_rotational", "potential_energy",
+                                               "contacts", "max_overlap", "max_speed", "ms_per_step"}));
+  const std::string summary = slurp(out + "/summary.json");
+  auto kinetic = [&](std::size_t r) { return std::stod(rows[r][2]) + std::stod(rows[r][3]); };
+  EXPECT_NEAR(kinetic(1), summary_number(summary, "kinetic_energy_start"), 1e-6 * kinetic(1));
+  EXPECT_NEAR(kinetic(16), summary_number(summary, "kinetic_energy_end"), 1e-6 * kinetic(16));
+  for (std::size_t r = 1; r < rows.size(); ++r) {
+    ASSERT_EQ(rows[r].size(), 9u);
+    EXPECT_EQ(std::stoul(rows[r][0]), 20 * (r - 1));
+    EXPECT_LE(std::stod(rows[r][6]), summary_number(summary, "max_overlap") + 1e-12);
+  }
+  EXPECT_EQ(rows[3][1], "0.04");  // the shortest text of the frame time
+
+  // Resumed at step 150: the rows up to it are kept, the later ones equal.
+  const std::string resumed = dir.path() + "/resumed";
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --duration 0.15 --out " + resumed), 0);
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + resumed + " --restart " + resumed +
+                    "/checkpoints/step_000150.mck"),
+            0);
+  auto physics = [](std::vector<std::vector<std::string>> table) {
+    for (auto& row : table) row.pop_back();  // ms_per_step times this process
+    return table;
+  };
+  EXPECT_EQ(physics(csv_rows(resumed + "/thermo.csv")), physics(rows));
+
+  // Gravity alone, velocity Verlet: kinetic + potential energy is constant.
+  ASSERT_EQ(marbles("run " MARBLES_SOURCE_DIR "/scenes/validation/free_fall.yaml --quiet --backend cpu --precision double "
+                    "--set solver.integrator=velocity_verlet --set output.vtk.every=100 --out " + dir.path() + "/fall"),
+            0);
+  const auto fall = csv_rows(dir.path() + "/fall/thermo.csv");
+  ASSERT_EQ(fall.size(), 1u + 11u);
+  const double e0 = std::stod(fall[1][2]) + std::stod(fall[1][4]);
+  for (std::size_t r = 2; r < fall.size(); ++r) {
+    EXPECT_GT(std::stod(fall[r][8]), 0.0);
+    EXPECT_NEAR(std::stod(fall[r][2]) + std::stod(fall[r][4]), e0, 1e-9 * std::fabs(e0)) << "row " << r;
+  }
 }
 
 // The newest `keep` checkpoints stay.
