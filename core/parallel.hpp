@@ -1,4 +1,7 @@
-// core/parallel.hpp — exceptions out of OpenMP loops.
+// core/parallel.hpp — the CPU's threads, and exceptions out of OpenMP loops.
+//
+// thread_count() / set_thread_count(n): OpenMP's team size for the loops
+// that follow (1 in a build without OpenMP).
 //
 // An exception that leaves an OpenMP parallel region calls std::terminate
 // (SIGABRT). Loop bodies that can throw (allocations: std::bad_alloc) run
@@ -11,7 +14,27 @@
 #include <exception>
 #include <mutex>
 
+#if defined(_OPENMP)
+#include <omp.h>
+#endif
+
 namespace marbles {
+
+inline int thread_count() {
+#if defined(_OPENMP)
+  return omp_get_max_threads();
+#else
+  return 1;
+#endif
+}
+
+inline void set_thread_count(int n) {
+#if defined(_OPENMP)
+  if (n > 0) omp_set_num_threads(n);
+#else
+  (void)n;
+#endif
+}
 
 class ParallelErrors {
  public:

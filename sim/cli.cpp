@@ -74,7 +74,7 @@ namespace marbles {
 
 std::string requested_precision(int argc, char** argv) {
   static const std::vector<std::string> kTakesValue{"--out", "--backend", "--broadphase", "--duration", "--set",
-                                                    "--limit"};
+                                                    "--limit", "--threads"};
   std::string command, scene_path, from_set, restart;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -110,6 +110,10 @@ int cli_main(int argc, char** argv) {
   app.set_version_flag("--version", "marbles 0.1");
 
   RunOptions run;
+  for (int i = 0; i < argc; ++i) {
+    if (i > 0) run.command_line += ' ';
+    run.command_line += argv[i];
+  }
   double run_duration = -1;
   bool no_render = false;
   auto* run_cmd = app.add_subcommand("run", "run a scene and write its output");
@@ -131,6 +135,8 @@ int cli_main(int argc, char** argv) {
   run_cmd->add_option("--restart", run.restart, "resume from a checkpoint (OUTDIR/checkpoints/step_NNNNNN.mck)")
       ->check(CLI::ExistingFile);
   run_cmd->add_flag("--summary-only", run.summary_only, "write only summary.json (no frames, images or movie)");
+  run_cmd->add_option("--threads", run.threads, "CPU threads (default: OMP_NUM_THREADS, else every core)")
+      ->check(CLI::Range(1, 4096));
   run_cmd->add_flag("--overwrite", run.overwrite,
                     "replace an earlier run's output in the folder (without it such a folder is refused)");
   std::string precision;

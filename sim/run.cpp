@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
@@ -16,6 +17,8 @@
 #include "broadphase/grid.hpp"
 #include "core/device.hpp"
 #include "core/error.hpp"
+#include "core/format.hpp"
+#include "core/parallel.hpp"
 #include "render/atomic_file.hpp"
 #include "sim/checkpoint.hpp"
 #include "sim/output.hpp"
@@ -26,6 +29,7 @@
 #include "sim/settings_check.hpp"
 #include "sim/signals.hpp"
 #include "sim/simulation.hpp"
+#include "sim/version.hpp"
 #include "sim/world.hpp"
 
 namespace marbles {
@@ -47,11 +51,23 @@ broadphase::Backend select_backend(BackendChoice choice, std::ostream& log) {
     log << "backend: CUDA on " << dev.name << " (auto)\n";
     return broadphase::Backend::cuda;
   }
-  log << "backend: CPU (auto: " << dev.why_not << ")\n";
+  // A machine without a GPU (no driver: cudaGetDeviceCount fails) is the common case: say so plainly.
+  const bool none = dev.why_not == "no CUDA device" || dev.why_not.rfind("cudaGetDeviceCount failed", 0) == 0;
+  log << "backend: CPU (" << (none ? std::string("no CUDA device") : dev.why_not) << ")\n";
   return broadphase::Backend::cpu;
 }
 
 namespace {
+
+// The time now, UTC, ISO 8601 to the second.
+std::string utc_now() {
+  const std::time_t now = std::time(nullptr);
+  std::tm utc{};
+  gmtime_r(&now, &utc);
+  char text[32];
+  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &utc);
+  return text;
+}
 
 // Counts initial overlaps deeper than `tolerance` times the smaller radius.
 std::size_t count_initial_overlaps(const World& world, double tolerance) {
@@ -140,6 +156,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   const scene::GeneratedParticles particles = scene::generate_particles(sc);
   warn_risky_settings(sc, particles, err);
   std::ostringstream quiet_sink;  // --quiet: only the summary
+  set_thread_count(options.threads);
+  const std::string started_at = utc_now();
   const broadphase::Backend backend = select_backend(options.backend, options.quiet ? quiet_sink : out);
 
   World world = make_world(sc, particles);
@@ -266,8 +284,18 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   std::optional<ReferenceResult> reference;
   if (probe) reference = probe->finish(sim.time(), sim.world());
   std::ostringstream json;
+  std::string material_names;
+  for (const scene::Material& m : sc.materials) material_names += (material_names.empty() ? "" : ", ") + json_string(m.name);
   json << "{\n"
        << "  \"scene\": " << json_string(sc.path) << ",\n"
+       << "  \"marbles_version\": " << json_string(kMarblesVersion) << ",\n"
+       << "  \"commit\": " << json_string(kMarblesCommit) << ",\n"
+       << "  \"command_line\": " << json_string(options.command_line) << ",\n"
+       << "  \"date\": " << json_string(started_at) << ",\n"
+       << "  \"threads\": " << thread_count() << ",\n"
+       << "  \"units\": {\"length\": \"m\", \"time\": \"s\", \"mass\": \"kg\", \"energy\": \"J\", \"velocity\": \"m/s\", "
+          "\"angular_velocity\": \"rad/s\"},\n"
+       << "  \"materials\": [" << material_names << "],\n"
        << "  \"spheres\": " << sim.world().size() << ",\n"
        << "  \"backend\": " << json_string(backend == broadphase::Backend::cuda ? "cuda" : "cpu") << ",\n"
        << "  \"precision\": " << json_string(kRealName) << ",\n"

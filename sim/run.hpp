@@ -36,6 +36,8 @@ struct RunOptions {
   std::optional<std::string> restart;  // a checkpoint to resume from
   bool summary_only = false;           // write only summary.json (no frames, images or movie)
   bool overwrite = false;              // replace an earlier run's output in the folder (else refused)
+  int threads = 0;                     // CPU threads (0: OpenMP's default, OMP_NUM_THREADS or every core)
+  std::string command_line;            // as typed, for summary.json
 };
 
 // `marbles run`. Returns the process exit code; throws InputError for scene

@@ -8,6 +8,7 @@
 #include <iterator>
 #include <sstream>
 
+#include "core/parallel.hpp"
 #include "sim/scene.hpp"
 #include "sim/watch_math.hpp"
 
@@ -33,7 +34,10 @@ std::string Simulation::describe_pipeline() const {
   const narrowphase::SolverSettings& s = m.solver;
   std::ostringstream out;
   out << "pipeline (" << m.substeps << " substep" << (m.substeps > 1 ? "s" : "") << " of h = " << m.dt / m.substeps
-      << " s per step, " << kRealName << ", " << (m_backend->name() == "cuda" ? "on the GPU" : "on the CPU") << "):\n";
+      << " s per step, " << kRealName << ", " << (m_backend->name() == "cuda" ? std::string("on the GPU")
+                                         : "on the CPU, " + std::to_string(thread_count()) + " thread" +
+                                               (thread_count() > 1 ? "s" : ""))
+      << "):\n";
   if (m.gravity) out << "  body forces    gravity (" << m.g.x << ", " << m.g.y << ", " << m.g.z << ") m/s^2\n";
   if (m.drag) out << "  body forces    air drag (linear " << m.drag_linear << " 1/s, quadratic " << m.drag_quadratic << " 1/m)\n";
   if (m.collisions) out << "  broad phase    " << m_backend->broad_phase()->name() << "\n";

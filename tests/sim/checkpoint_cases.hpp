@@ -54,13 +54,17 @@ inline int marbles(const std::string& args, std::string* err_text = nullptr, con
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
-// summary.json without the lines that time the run.
+// summary.json without the lines that describe this process rather than
+// the run: its timings, command line, start date and thread count.
 inline std::string physics_of(const fs::path& summary) {
   std::istringstream in(slurp(summary));
   std::string line, out;
-  while (std::getline(in, line))
-    if (line.find("wall_time") == std::string::npos && line.find("mean_ms_per_step") == std::string::npos)
-      out += line + "\n";
+  while (std::getline(in, line)) {
+    bool process = false;
+    for (const char* key : {"\"wall_time\"", "\"mean_ms_per_step\"", "\"command_line\"", "\"date\"", "\"threads\""})
+      process = process || line.find(key) != std::string::npos;
+    if (!process) out += line + "\n";
+  }
   return out;
 }
 

@@ -180,6 +180,42 @@ TEST_F(Checkpoints, ThermoRowsFollowTheRun) {
   }
 }
 
+// summary.json says what made it: version, the commit of this source tree,
+// the command line, the threads asked for, units and material names; the
+// pipeline line prints the threads.
+TEST_F(Checkpoints, SummaryCarriesItsProvenance) {
+  const test::ScratchDir dir("ck_provenance");
+  const std::string scene = dir.write("s.yaml", kScene);
+  for (const int threads : {1, 3}) {
+    const std::string out = dir.path() + "/t" + std::to_string(threads);
+    const std::string listing = dir.path() + "/stdout.txt";
+    ASSERT_EQ(std::system(("'" + kMarbles + "' run " + scene + " --backend cpu --summary-only --threads " +
+                           std::to_string(threads) + " --out " + out + " >" + listing + " 2>/dev/null")
+                              .c_str()),
+              0);
+    EXPECT_NE(slurp(listing).find("on the CPU, " + std::to_string(threads) + (threads == 1 ? " thread)" : " threads)")),
+              std::string::npos)
+        << slurp(listing);
+    const std::string summary = slurp(out + "/summary.json");
+    EXPECT_NE(summary.find("\"threads\": " + std::to_string(threads) + ","), std::string::npos) << summary;
+    EXPECT_NE(summary.find("\"command_line\": \"" + kMarbles + " run " + scene), std::string::npos) << summary;
+    EXPECT_NE(summary.find("\"materials\": [\"glass\"],"), std::string::npos) << summary;
+    EXPECT_NE(summary.find("\"units\": {\"length\": \"m\""), std::string::npos) << summary;
+    EXPECT_NE(summary.find("\"marbles_version\": \""), std::string::npos) << summary;
+    // The commit: git's own answer for this source tree (when it is a git checkout).
+    const std::string head = dir.path() + "/head.txt";
+    if (std::system(("git -C " MARBLES_SOURCE_DIR " rev-parse --short=12 HEAD >" + head + " 2>/dev/null").c_str()) == 0) {
+      std::string commit = slurp(head);
+      commit.erase(commit.find_last_not_of(" \n") + 1);
+      EXPECT_NE(summary.find("\"commit\": \"" + commit), std::string::npos) << summary;
+    }
+    const std::size_t date = summary.find("\"date\": \"");
+    ASSERT_NE(date, std::string::npos);
+    EXPECT_EQ(summary.substr(date + 9 + 4, 1), "-");
+    EXPECT_EQ(summary.substr(date + 9 + 19, 2), "Z\"");
+  }
+}
+
 // The newest `keep` checkpoints stay.
 TEST_F(Checkpoints, KeepsTheNewest) {
   const test::ScratchDir dir("ck_keep");
