@@ -250,7 +250,7 @@ int run_broadphase_bench(const BroadphaseBenchOptions& opt, std::ostream& out) {
     out << "bench broadphase: " << e.what() << "\n";
     return 1;
   }
-  print_table(out, o, results);
+  if (!o.json) print_table(out, o, results);  // --json: JSON only, one object per line
   return 0;
 }
 

@@ -132,6 +132,7 @@ int run_effects_bench(const EffectsBenchOptions& options, std::ostream& out) {
           << ", \"contacts\": " << rows[k].contacts << ", \"us_per_contact\": "
           << 1e3 * rows[k].step_ms / std::max(1.0, rows[k].contacts) << "}" << (k + 1 < rows.size() ? "," : "") << "\n";
     out << "]}\n";
+    return 0;  // --json: JSON only
   }
   out << "effect cost (" << options.backend << ", " << kRealName << ", N = " << options.n << ", volume fraction "
       << options.volume_fraction << ", median of " << options.repeats << " steps)\n";
