@@ -35,6 +35,11 @@ struct Variant {
   mb::SortKind sort;
 };
 
+// How gtest (and ctest's listing) shows a variant: "home, cub sort", not bytes.
+void PrintTo(const Variant& v, std::ostream* out) {
+  *out << mb::algorithm_name(v.algorithm) << ", " << (v.sort == mb::SortKind::seed ? "seed" : "cub") << " sort";
+}
+
 class SubdivisionCuda : public ::testing::TestWithParam<Variant> {
  protected:
   mb::Algorithm algorithm() const { return GetParam().algorithm; }
