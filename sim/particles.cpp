@@ -75,7 +75,9 @@ void push_sphere(GeneratedParticles& out, const Vec3& position, double radius, s
   out.position.push_back(position);
   out.radius.push_back(real(radius));
   out.velocity.push_back(Vec3{});
+  out.angular_velocity.push_back(Vec3{});
   out.material.push_back(material);
+  out.fixed.push_back(0);
 }
 
 // --- resource guard --------------------------------------------------------
@@ -260,6 +262,7 @@ void expand_random(const ParticleBlock& block, std::size_t index, std::uint32_t 
 struct CsvSpheres {
   GeneratedParticles spheres;
   bool has_velocity = false;
+  bool has_angular_velocity = false;
 };
 
 std::string_view trim(std::string_view s) {
@@ -295,9 +298,9 @@ bool parse_number(std::string_view s, double& value) {
   return ec == std::errc() && end == s.data() + s.size();
 }
 
-// Columns: x y z r vx vy vz (indices 0..6) → position in the row, or -1.
-constexpr int kColumns = 7;
-const char* const kColumnNames[kColumns] = {"x", "y", "z", "r", "vx", "vy", "vz"};
+// Columns: x y z r vx vy vz wx wy wz (indices 0..9) → position in the row, or -1.
+constexpr int kColumns = 10;
+const char* const kColumnNames[kColumns] = {"x", "y", "z", "r", "vx", "vy", "vz", "wx", "wy", "wz"};
 
 CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, const std::string& open_key) {
   std::ifstream in(path, std::ios::binary);
@@ -334,7 +337,8 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
           const auto it = std::find(std::begin(kColumnNames), std::end(kColumnNames), name);
           if (it == std::end(kColumnNames))
             fail(fields[f].column, "", "unknown column '" + std::string(fields[f].text) +
-                                           "' in the header; expected x, y, z, r (or radius) and optionally vx, vy, vz");
+                                           "' in the header; expected x, y, z, r (or radius) and optionally vx, vy, vz "
+                                           "and wx, wy, wz");
           const int c = int(it - std::begin(kColumnNames));
           if (column_of[c] >= 0) fail(fields[f].column, "", "column '" + name + "' appears twice in the header");
           column_of[c] = int(f);
@@ -344,15 +348,21 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
         const int velocity_columns = (column_of[4] >= 0) + (column_of[5] >= 0) + (column_of[6] >= 0);
         if (velocity_columns != 0 && velocity_columns != 3)
           fail(1, "", "the header must name all of vx, vy, vz or none of them");
+        const int spin_columns = (column_of[7] >= 0) + (column_of[8] >= 0) + (column_of[9] >= 0);
+        if (spin_columns != 0 && spin_columns != 3)
+          fail(1, "", "the header must name all of wx, wy, wz or none of them");
         expected_fields = fields.size();
         result.has_velocity = velocity_columns == 3;
+        result.has_angular_velocity = spin_columns == 3;
         continue;
       }
-      if (fields.size() != 4 && fields.size() != 7)
-        fail(1, "", "expected 4 or 7 comma-separated values (x,y,z,r[,vx,vy,vz]), got " + std::to_string(fields.size()));
+      if (fields.size() != 4 && fields.size() != 7 && fields.size() != 10)
+        fail(1, "", "expected 4, 7 or 10 comma-separated values (x,y,z,r[,vx,vy,vz[,wx,wy,wz]]), got " +
+                        std::to_string(fields.size()));
       for (std::size_t f = 0; f < fields.size(); ++f) column_of[f] = int(f);
       expected_fields = fields.size();
-      result.has_velocity = fields.size() == 7;
+      result.has_velocity = fields.size() >= 7;
+      result.has_angular_velocity = fields.size() == 10;
     }
 
     if (fields.size() != expected_fields)
@@ -371,9 +381,10 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
     }
     push_sphere(result.spheres, Vec3(real(value[0]), real(value[1]), real(value[2])), value[3], 0);
     result.spheres.velocity.back() = Vec3(real(value[4]), real(value[5]), real(value[6]));
+    result.spheres.angular_velocity.back() = Vec3(real(value[7]), real(value[8]), real(value[9]));
   }
   if (result.spheres.size() == 0)
-    throw InputError(SourceLocation{path, 0, 0}, "", "holds no spheres (rows x,y,z,r[,vx,vy,vz])");
+    throw InputError(SourceLocation{path, 0, 0}, "", "holds no spheres (rows x,y,z,r[,vx,vy,vz[,wx,wy,wz]])");
   return result;
 }
 
@@ -405,7 +416,7 @@ GeneratedParticles generate_particles(const Scene& scene) {
     const ParticleBlock& block = scene.particles[b];
     const std::uint32_t material = scene.material_index(block.material, block.material_where, block_key(b) + ".material");
     const std::size_t first = out.size();
-    bool velocities_given = false;
+    bool velocities_given = false, spins_given = false;
     switch (block.kind) {
       case ParticleBlock::Kind::list:
         for (std::size_t i = 0; i < block.positions.size(); ++i)
@@ -422,6 +433,7 @@ GeneratedParticles generate_particles(const Scene& scene) {
         for (std::size_t i = 0; i < csv.spheres.size(); ++i) {
           push_sphere(out, csv.spheres.position[i], csv.spheres.radius[i], material);
           out.velocity.back() = csv.spheres.velocity[i];
+          out.angular_velocity.back() = csv.spheres.angular_velocity[i];
         }
         if (csv.has_velocity) {
           velocities_given = true;
@@ -429,10 +441,24 @@ GeneratedParticles generate_particles(const Scene& scene) {
             throw InputError(block.velocity_where, block_key(b) + ".velocity",
                              "'" + block.csv_path + "' gives every sphere its velocity (vx,vy,vz); give one or the other");
         }
+        if (csv.has_angular_velocity) {
+          spins_given = true;
+          if (block.angular_velocity_where.line > 0)
+            throw InputError(block.angular_velocity_where, block_key(b) + ".angular_velocity",
+                             "'" + block.csv_path +
+                                 "' gives every sphere its angular velocity (wx,wy,wz); give one or the other");
+        }
+        if (block.fixed && (csv.has_velocity || csv.has_angular_velocity))
+          throw InputError(block.fixed_where, block_key(b) + ".fixed",
+                           "fixed spheres never move, but '" + block.csv_path + "' gives them velocities");
         break;
       }
     }
     if (!velocities_given) assign_velocities(block.velocity, out, first);
+    if (!spins_given)
+      for (std::size_t i = first; i < out.size(); ++i) out.angular_velocity[i] = block.angular_velocity;
+    if (block.fixed)
+      for (std::size_t i = first; i < out.size(); ++i) out.fixed[i] = 1;
   }
   return out;
 }

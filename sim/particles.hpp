@@ -13,7 +13,9 @@ struct GeneratedParticles {
   std::vector<Vec3> position;
   std::vector<Vec3> velocity;
   std::vector<real> radius;
+  std::vector<Vec3> angular_velocity;   // rad/s
   std::vector<std::uint32_t> material;  // index into Scene::materials
+  std::vector<std::uint8_t> fixed;      // 1: collides, never moves (inverse mass and inertia 0)
   std::size_t size() const { return position.size(); }
 };
 
@@ -23,7 +25,7 @@ struct GeneratedParticles {
 // requested count of non-overlapping spheres, or an unknown material.
 GeneratedParticles generate_particles(const Scene& scene);
 
-// Reads `x,y,z,r[,vx,vy,vz]` rows (an optional header line, '#' comments);
+// Reads `x,y,z,r[,vx,vy,vz[,wx,wy,wz]]` rows (an optional header line, '#' comments);
 // used by the csv block and by `marbles pairs`.
 GeneratedParticles read_spheres_csv(const std::string& path);
 

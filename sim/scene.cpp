@@ -438,7 +438,7 @@ std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field
   static const std::vector<std::string> kinds = {"list", "lattice", "random", "csv"};
   std::vector<ParticleBlock> blocks;
   for (const Field& item : field.items()) {
-    const MapFields map(item, {"list", "lattice", "random", "csv", "material", "velocity"});
+    const MapFields map(item, {"list", "lattice", "random", "csv", "material", "velocity", "angular_velocity", "fixed"});
     ParticleBlock block;
     block.where = item.where();
     const MapFields::Entry* source = nullptr;
@@ -471,6 +471,21 @@ std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field
       block.velocity_where = f->where();
       if (!block.velocities.empty())
         f->fail("list.velocities already gives every sphere its velocity; give one or the other");
+    }
+    block.angular_velocity_where.file = scene.path;
+    if (auto f = map.optional("angular_velocity")) {
+      block.angular_velocity = f->vec3();
+      block.angular_velocity_where = f->where();
+    }
+    block.fixed_where.file = scene.path;
+    if (auto f = map.optional("fixed")) {
+      block.fixed = f->boolean();
+      block.fixed_where = f->where();
+      if (block.fixed) {
+        if (map.optional("velocity") || !block.velocities.empty())
+          f->fail("fixed spheres never move: give them no velocity");
+        if (map.optional("angular_velocity")) f->fail("fixed spheres never move: give them no angular_velocity");
+      }
     }
     blocks.push_back(std::move(block));
   }
@@ -686,6 +701,69 @@ std::string scene_precision(const std::string& path) {
 
 namespace {
 
+// YAML merge keys (`<<: *anchor`, `<<: [*a, *b]`), which yaml-cpp leaves as
+// ordinary keys: each map takes the keys of the merged maps it does not give
+// itself (of a list, the earlier map wins), then loses its `<<`. Merged
+// values are the anchor's nodes, so an error in one names the anchor's line.
+// Visits are counted: an alias bomb is refused, not expanded.
+class MergeKeys {
+ public:
+  explicit MergeKeys(std::string path) : m_path(std::move(path)) {}
+
+  void resolve(YAML::Node node, const std::string& key) {
+    if (++m_visits > kMaxVisits)
+      throw InputError(SourceLocation{m_path, 0, 0}, "", "aliases expand to more than 20,000,000 nodes");
+    if (node.IsSequence()) {
+      for (std::size_t i = 0; i < node.size(); ++i) resolve(node[i], key + "[" + std::to_string(i) + "]");
+      return;
+    }
+    if (!node.IsMap()) return;
+    std::vector<YAML::Node> sources;
+    bool merges = false;
+    for (auto it = node.begin(); it != node.end(); ++it) {
+      if (!it->first.IsScalar() || it->first.Scalar() != "<<") continue;
+      merges = true;
+      const YAML::Node value = it->second;
+      const std::string merge_key = (key.empty() ? "" : key + ".") + "<<";
+      const auto fail = [&] {
+        throw InputError(detail::location_of(m_path, value.Mark()), merge_key, "a merge key takes a map or a list of maps");
+      };
+      if (value.IsMap()) {
+        sources.push_back(value);
+      } else if (value.IsSequence()) {
+        for (const YAML::Node& item : value) {
+          if (!item.IsMap()) fail();
+          sources.push_back(item);
+        }
+      } else {
+        fail();
+      }
+    }
+    if (merges) {
+      for (YAML::Node& source : sources) resolve(source, key);  // merged maps may merge too
+      std::vector<std::string> present;
+      for (auto it = node.begin(); it != node.end(); ++it)
+        if (it->first.IsScalar()) present.push_back(it->first.Scalar());
+      node.remove("<<");
+      for (const YAML::Node& source : sources)
+        for (auto it = source.begin(); it != source.end(); ++it) {
+          if (!it->first.IsScalar() || it->first.Scalar() == "<<") continue;
+          const std::string& name = it->first.Scalar();
+          if (std::find(present.begin(), present.end(), name) != present.end()) continue;
+          node.force_insert(it->first, it->second);
+          present.push_back(name);
+        }
+    }
+    for (auto it = node.begin(); it != node.end(); ++it)
+      resolve(it->second, (key.empty() ? "" : key + ".") + (it->first.IsScalar() ? it->first.Scalar() : "?"));
+  }
+
+ private:
+  static constexpr std::size_t kMaxVisits = 20'000'000;
+  std::string m_path;
+  std::size_t m_visits = 0;
+};
+
 // The file's one YAML document, which must be a map.
 YAML::Node read_document(const std::string& path) {
   const std::string text = read_file(path);
@@ -707,6 +785,7 @@ YAML::Node read_document(const std::string& path) {
   const Field root(document, "", path);
   if (!root.is_map())
     root.fail("a scene is a map of keys (time, materials, particles, ...), got " + root.description());
+  if (text.find("<<") != std::string::npos) MergeKeys(path).resolve(document, "");
   return document;
 }
 

@@ -104,6 +104,8 @@ struct ParticleBlock {
   std::string csv_path;
 
   VelocitySpec velocity;  // initial velocities (lists and CSV may give their own)
+  Vec3 angular_velocity;  // rad/s, every sphere of the block (CSV may give its own: wx,wy,wz)
+  bool fixed = false;     // the spheres collide but never move (pegs, rough floors)
   SourceLocation where;
 
   // Where single keys were written, for problems found only while generating
@@ -112,6 +114,8 @@ struct ParticleBlock {
   SourceLocation count_where;     // random: `count:`
   SourceLocation csv_path_where;  // csv: `path:`
   SourceLocation velocity_where;  // `velocity:`
+  SourceLocation angular_velocity_where;  // `angular_velocity:`
+  SourceLocation fixed_where;     // `fixed:`
 };
 
 struct CameraSpec {

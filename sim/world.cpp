@@ -63,12 +63,18 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
   w.position = particles.position;
   w.velocity = particles.velocity;
   w.velocity.resize(n);
-  w.angular_velocity.assign(n, Vec3{});
+  w.angular_velocity = particles.angular_velocity;
+  w.angular_velocity.resize(n);
   w.radius = particles.radius;
   w.material = particles.material;
   w.inv_mass.resize(n);
   w.inv_inertia.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
+    if (i < particles.fixed.size() && particles.fixed[i]) {  // collides, never moves
+      w.inv_mass[i] = 0;
+      w.inv_inertia[i] = 0;
+      continue;
+    }
     const double r = w.radius[i];
     const double density = scene.materials.at(w.material[i]).density;
     const double mass = density * 4.0 / 3.0 * std::numbers::pi * r * r * r;

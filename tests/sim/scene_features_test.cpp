@@ -1,0 +1,136 @@
+// tests/sim/scene_features_test.cpp — initial angular velocity (per block and
+// per CSV row), fixed spheres (collide, never move) and YAML merge keys.
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "broadphase/broadphase.hpp"
+#include "core/error.hpp"
+#include "sim/particles.hpp"
+#include "sim/scene.hpp"
+#include "sim/simulation.hpp"
+#include "sim/world.hpp"
+#include "tests/sim/scene_cases.hpp"
+
+namespace marbles {
+namespace {
+
+using test::ScratchDir;
+
+std::string load_error(const std::string& path) {
+  try {
+    const scene::Scene s = scene::load_scene(path);
+    scene::generate_particles(s);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(SceneFeatures, AngularVelocityPerBlockAndPerCsvRow) {
+  const ScratchDir dir("features_spin");
+  dir.write("rows.csv", "1,0,0,0.1,0,0,0,4,5,6\n3,0,0,0.1,0,0,0,-1,0,0.5\n");
+  dir.write("named.csv", "wz,x,y,z,r,wx,wy\n7,0,2,0,0.1,8,9\n");
+  const std::string path = dir.write("s.yaml", SCENE_TIME SCENE_MATERIALS
+                                     "particles:\n"
+                                     "  - list: {positions: [[0, 0, 5], [1, 0, 5]], radius: 0.1}\n"
+                                     "    angular_velocity: [1, 2, 3]\n"
+                                     "  - csv: {path: rows.csv}\n"
+                                     "  - csv: {path: named.csv}\n");
+  const scene::Scene s = scene::load_scene(path);
+  const World w = make_world(s, scene::generate_particles(s));
+  ASSERT_EQ(w.size(), 5u);
+  const Vec3 expected[] = {{1, 2, 3}, {1, 2, 3}, {4, 5, 6}, {-1, 0, real(0.5)}, {8, 9, 7}};
+  for (std::size_t i = 0; i < 5; ++i) {
+    EXPECT_EQ(w.angular_velocity[i].x, expected[i].x) << i;
+    EXPECT_EQ(w.angular_velocity[i].y, expected[i].y) << i;
+    EXPECT_EQ(w.angular_velocity[i].z, expected[i].z) << i;
+  }
+  // Half the columns, or both sources, are errors naming where.
+  dir.write("half.csv", "x,y,z,r,wx\n0,0,0,0.1,1\n");
+  EXPECT_NE(load_error(dir.write("h.yaml", SCENE_TIME SCENE_MATERIALS "particles:\n  - csv: {path: half.csv}\n"))
+                .find("half.csv:1:1: the header must name all of wx, wy, wz or none of them"),
+            std::string::npos);
+  const std::string both = load_error(dir.write(
+      "b.yaml", SCENE_TIME SCENE_MATERIALS "particles:\n  - csv: {path: rows.csv}\n    angular_velocity: [0, 0, 1]\n"));
+  EXPECT_NE(both.find("b.yaml:6:23: particles[0].angular_velocity: '" + dir.path() +
+                      "/rows.csv' gives every sphere its angular velocity"),
+            std::string::npos)
+      << both;
+}
+
+// Pegs: a fixed row under a falling sphere hold it up, and never move (bit
+// for bit); the same sphere without the pegs falls through their place.
+TEST(SceneFeatures, FixedSpheresCollideButNeverMove) {
+  const ScratchDir dir("features_fixed");
+  const std::string common = "time: {duration: 1, dt: 0.001, substeps: 2}\n"
+                             "effects: [gravity, collisions, restitution, friction]\n"
+                             "materials:\n  glass: {density: 2500, restitution: 0.3, friction: 0.5}\n"
+                             "particles:\n"
+                             "  - list: {positions: [[0.02, 0.01, 0.3]], radius: 0.05}\n";
+  const std::string pegs = "  - lattice: {min: [-0.3, -0.3, -0.05], max: [0.3, 0.3, 0.05], spacing: 0.1, radius: 0.05}\n"
+                           "    fixed: true\n";
+  for (const bool with_pegs : {true, false}) {
+    const scene::Scene s = scene::load_scene(dir.write("s.yaml", common + (with_pegs ? pegs : "")));
+    World start = make_world(s, scene::generate_particles(s));
+    Simulation sim(s, start, broadphase::Backend::cpu);
+    for (int k = 0; k < 1000; ++k) sim.step();
+    const World& w = sim.world();
+    ASSERT_FALSE(sim.non_finite());
+    if (!with_pegs) {
+      EXPECT_LT(w.position[0].z, -3.0);  // free fall: 0.3 - g / 2
+      continue;
+    }
+    ASSERT_GT(w.size(), 1u);
+    for (std::size_t i = 1; i < w.size(); ++i) {
+      EXPECT_EQ(w.position[i].x, start.position[i].x);
+      EXPECT_EQ(w.position[i].y, start.position[i].y);
+      EXPECT_EQ(w.position[i].z, start.position[i].z);
+      EXPECT_EQ(length_squared(w.velocity[i]), 0);
+      EXPECT_EQ(length_squared(w.angular_velocity[i]), 0);
+    }
+    EXPECT_GT(w.position[0].z, 0.05);  // resting on the pegs (their tops at z = 0.05)
+    EXPECT_LT(w.position[0].z, 0.16);
+  }
+  // A fixed block given a velocity is a contradiction.
+  EXPECT_NE(load_error(dir.write("v.yaml", common + pegs + "    velocity: [0, 0, 1]\n"))
+                .find("particles[1].fixed: fixed spheres never move: give them no velocity"),
+            std::string::npos);
+}
+
+// YAML merge keys: `<<: *anchor` (and a list of them) supply the keys a map
+// does not give itself; errors in merged values still name their lines.
+TEST(SceneFeatures, MergeKeysSupplyDefaults) {
+  const ScratchDir dir("features_merge");
+  const std::string path = dir.write("s.yaml", SCENE_TIME
+                                     "materials:\n"
+                                     "  base: &glass {density: 2500, restitution: 0.6, friction: 0.4}\n"
+                                     "  sticky:\n"
+                                     "    <<: *glass\n"
+                                     "    friction: 0.9\n"
+                                     "  heavy: {<<: [*glass], density: 7800}\n"
+                                     "particles:\n  - list: {positions: [[0, 0, 1]], radius: 0.1}\n");
+  const scene::Scene s = scene::load_scene(path);
+  ASSERT_EQ(s.materials.size(), 3u);
+  EXPECT_EQ(s.materials[1].name, "sticky");
+  EXPECT_DOUBLE_EQ(s.materials[1].density, 2500);
+  EXPECT_DOUBLE_EQ(s.materials[1].restitution, 0.6);
+  EXPECT_DOUBLE_EQ(s.materials[1].friction, 0.9);
+  EXPECT_DOUBLE_EQ(s.materials[2].density, 7800);
+  EXPECT_DOUBLE_EQ(s.materials[2].friction, 0.4);
+  const std::string bad = dir.write("bad.yaml", SCENE_TIME
+                                    "materials:\n"
+                                    "  base: &glass {density: 2500, restitution: 1.6}\n"
+                                    "  other: {<<: *glass, friction: 0.2}\n"
+                                    "particles:\n  - list: {positions: [[0, 0, 1]], radius: 0.1}\n");
+  EXPECT_NE(load_error(bad).find("bad.yaml:3:45: materials.base.restitution: must be within [0, 1]"), std::string::npos)
+      << load_error(bad);
+  const std::string scalar = dir.write("scalar.yaml", SCENE_TIME "materials:\n  a: {<<: 3, density: 1}\n"
+                                       "particles:\n  - list: {positions: [[0, 0, 1]], radius: 0.1}\n");
+  EXPECT_NE(load_error(scalar).find("scalar.yaml:3:11: materials.a.<<: a merge key takes a map or a list of maps"),
+            std::string::npos)
+      << load_error(scalar);
+}
+
+}  // namespace
+}  // namespace marbles
