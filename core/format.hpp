@@ -2,6 +2,7 @@
 //
 //   shortest(v)      the shortest text that reads back as exactly v
 //                    (std::to_chars): 0.1, 1e-07, 2.5
+//   significant(v, n) v to n significant digits (%g): messages
 //   time_text(t)     the shortest text within 1e-13 of t relative: a frame
 //                    time k dt written as 0.03, not 0.030000000000000002
 #pragma once
@@ -19,6 +20,12 @@ inline std::string shortest(double v) {
   char text[32];
   const auto result = std::to_chars(text, text + sizeof text, v);
   return std::string(text, result.ptr);
+}
+
+inline std::string significant(double v, int digits) {
+  char text[40];
+  std::snprintf(text, sizeof text, "%.*g", digits, v);
+  return text;
 }
 
 inline std::string time_text(double t) {

@@ -8,20 +8,12 @@
 #include <iterator>
 #include <sstream>
 
+#include "core/format.hpp"
 #include "core/parallel.hpp"
 #include "sim/scene.hpp"
 #include "sim/watch_math.hpp"
 
 namespace marbles {
-namespace {
-
-std::string short_number(double v) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%.4g", v);
-  return text;
-}
-
-}  // namespace
 
 Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backend backend,
                        broadphase::Algorithm algorithm)
@@ -181,13 +173,14 @@ std::string Simulation::violation(const StepCounters& before) {
   if (m_watch.known) {
     const double bound = watch_bound(m_watch.energy);
     if (!(m_last.kinetic_energy <= bound))
-      return "kinetic energy jumped from " + short_number(m_watch.energy) + " J to " +
-             short_number(m_last.kinetic_energy) + " J (at most " + short_number(bound) + " J from gravity and walls)";
+      return "kinetic energy jumped from " + significant(m_watch.energy, 4) + " J to " +
+             significant(m_last.kinetic_energy, 4) + " J (at most " + significant(bound, 4) +
+             " J from gravity and walls)";
     if (m_last.beyond_walls > m_watch.beyond)
       return std::to_string(m_last.beyond_walls - m_watch.beyond) + " sphere(s) went through a wall";
   }
   if (m_last.max_overlap > kWatchdogOverlap && before.max_overlap < kWatchdogOverlap / 2)
-    return "overlap " + short_number(m_last.max_overlap) + " of a radius";
+    return "overlap " + significant(m_last.max_overlap, 4) + " of a radius";
   return {};
 }
 

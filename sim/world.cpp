@@ -8,6 +8,7 @@
 #include <string>
 
 #include "core/error.hpp"
+#include "core/format.hpp"
 
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
@@ -47,16 +48,6 @@ std::size_t World::first_non_finite() const {
   return size();
 }
 
-namespace {
-
-std::string short_number(double v) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%.6g", v);
-  return text;
-}
-
-}  // namespace
-
 World make_world(const scene::Scene& scene, const scene::GeneratedParticles& particles) {
   World w;
   const std::size_t n = particles.size();
@@ -83,8 +74,8 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
     const auto usable = [](real v) { return std::isfinite(v) && v >= std::numeric_limits<real>::min(); };
     if (!usable(w.inv_mass[i]) || !usable(w.inv_inertia[i]))
       throw InputError(SourceLocation{scene.path, 0, 0}, "particles",
-                       "sphere " + std::to_string(i) + " (radius " + short_number(r) + " m, density " +
-                           short_number(density) + " kg/m^3): its mass " + short_number(mass) +
+                       "sphere " + std::to_string(i) + " (radius " + significant(r, 6) + " m, density " +
+                           significant(density, 6) + " kg/m^3): its mass " + significant(mass, 6) +
                            " kg or moment of inertia is out of range for " + kRealName + " precision");
   }
   return w;

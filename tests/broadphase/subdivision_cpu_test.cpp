@@ -31,6 +31,11 @@ void check_against_oracle(mb::BroadPhase& bp, const mt::SphereSet& s, real margi
 
 class SubdivisionCpu : public ::testing::TestWithParam<mb::Algorithm> {};
 
+// How gtest (and ctest's listing) shows the parameter: "home", not bytes.
+namespace marbles::broadphase {
+void PrintTo(Algorithm a, std::ostream* out) { *out << algorithm_name(a); }
+}  // namespace marbles::broadphase
+
 // 8 kinds x 2 margins x 14 seeds = 224 random sets.
 TEST_P(SubdivisionCpu, EqualsOracleOnRandomAndAdversarialSets) {
   auto bp = mb::make_subdivision_cpu(GetParam());

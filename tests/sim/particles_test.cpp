@@ -305,9 +305,10 @@ TEST(Csv, Errors) {
   EXPECT_EQ(error_of("0,0,0,1\n0, 0, nan, 1\n"), "e.csv:2:7: z: must be a finite number, got nan");
   EXPECT_EQ(error_of("x,y,z\n"), "e.csv:1:1: the header lacks column 'r'");
   EXPECT_EQ(error_of("x,y,z,r,speed\n"),
-            "e.csv:1:9: unknown column 'speed' in the header; expected x, y, z, r (or radius) and optionally vx, vy, vz");
+            "e.csv:1:9: unknown column 'speed' in the header; expected x, y, z, r (or radius) and optionally vx, vy, vz "
+            "and wx, wy, wz");
   EXPECT_EQ(error_of("x,y,z,r,vx\n"), "e.csv:1:1: the header must name all of vx, vy, vz or none of them");
-  EXPECT_EQ(error_of("# nothing\n"), "e.csv: holds no spheres (rows x,y,z,r[,vx,vy,vz])");
+  EXPECT_EQ(error_of("# nothing\n"), "e.csv: holds no spheres (rows x,y,z,r[,vx,vy,vz[,wx,wy,wz]])");
   try {
     read_spheres_csv(dir.path() + "/absent.csv");
     FAIL() << "no error";

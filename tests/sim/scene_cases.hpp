@@ -162,7 +162,7 @@ inline const std::vector<BadScene>& bad_scenes() {
       {"csv_bad_radius", SCENE_TIME SCENE_MATERIALS "particles:\n  - csv: {path: data.csv}\n",
        "{dir}/data.csv:3:10: r: must be > 0, got -1", "x, y, z, r\n0, 0, 0, 1\n5, 5, 5, -1\n"},
       {"csv_bad_width", SCENE_TIME SCENE_MATERIALS "particles:\n  - csv: {path: data.csv}\n",
-       "{dir}/data.csv:2:1: expected 4 or 7 comma-separated values (x,y,z,r[,vx,vy,vz]), got 5",
+       "{dir}/data.csv:2:1: expected 4, 7 or 10 comma-separated values (x,y,z,r[,vx,vy,vz[,wx,wy,wz]]), got 5",
        "# spheres\n0,0,0,1,2\n"},
       {"unknown_material", SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "    material: glas\n",
        "{scene}:6:15: particles[0].material: unknown material 'glas' (did you mean 'glass'?)"},
