@@ -130,8 +130,6 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
     throw RuntimeFailure(pvd.string() +
                          " not found: `marbles render` draws the VTK frames of a finished run; run the scene with "
                          "VTK output (output.vtk_every > 0) first");
-  if (!vtk_available())
-    throw RuntimeFailure("marbles was built without VTK (libvtk9-dev): cannot read the frames of " + pvd.string());
   if (!renderer_available())
     throw RuntimeFailure("marbles was built without OSMesa (libosmesa6-dev): cannot render images");
 

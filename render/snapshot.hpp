@@ -19,6 +19,7 @@ struct Snapshot {
   std::vector<real> radius;
   std::vector<std::uint32_t> id;
   std::vector<std::uint32_t> material;
+  std::vector<std::uint32_t> contacts;  // per sphere, contacts that press (walls too); filled when asked for
   std::size_t size() const { return position.size(); }
 };
 

@@ -2,6 +2,7 @@
 #include "render/vtk_output.hpp"
 
 #include <algorithm>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -12,23 +13,8 @@
 #include "core/format.hpp"
 #include "render/atomic_file.hpp"
 
-#if defined(MARBLES_HAVE_VTK)
-#include <vtkCellArray.h>
-#include <vtkDataArray.h>
-#include <vtkDoubleArray.h>
-#include <vtkFieldData.h>
-#include <vtkFloatArray.h>
-#include <vtkNew.h>
-#include <vtkPointData.h>
-#include <vtkPoints.h>
-#include <vtkPolyData.h>
-#include <vtkTypeInt32Array.h>
-#include <vtkTypeInt64Array.h>
-#include <vtkTypeUInt32Array.h>
-#include <vtkTypeUInt64Array.h>
-#include <vtkVariant.h>
-#include <vtkXMLPolyDataReader.h>
-#include <vtkXMLPolyDataWriter.h>
+#if defined(MARBLES_HAVE_ZLIB)
+#include <zlib.h>
 #endif
 
 namespace marbles::render {
@@ -44,6 +30,7 @@ std::optional<PointField> parse_point_field(std::string_view name) {
   if (name == "id") return PointField::id;
   if (name == "material") return PointField::material;
   if (name == "speed") return PointField::speed;
+  if (name == "contacts") return PointField::contacts;
   return std::nullopt;
 }
 
@@ -55,6 +42,7 @@ const char* point_field_name(PointField f) {
     case PointField::id: return "id";
     case PointField::material: return "material";
     case PointField::speed: return "speed";
+    case PointField::contacts: return "contacts";
   }
   return "?";
 }
@@ -65,7 +53,7 @@ std::vector<PointField> parse_point_fields(const std::vector<std::string>& names
     const auto f = parse_point_field(name);
     if (!f)
       throw InputError({}, "output.fields",
-                       "unknown field '" + name + "' (expected radius, velocity, angular_velocity, id, material, speed)");
+                       "unknown field '" + name + "' (expected radius, velocity, angular_velocity, id, material, speed, contacts)");
     if (std::find(fields.begin(), fields.end(), *f) == fields.end()) fields.push_back(*f);
   }
   return fields;
@@ -122,34 +110,96 @@ std::vector<SeriesEntry> read_pvd(const fs::path& pvd_path) {
 
 namespace {
 
-// frames/frame_NNNNNN.vtp, numbered in write order.
-std::string frame_name(std::size_t index) {
-  char name[32];
-  std::snprintf(name, sizeof name, "frame_%06zu.vtp", index);
+// NAME_NNNNNN.vtp, numbered in write order.
+std::string numbered(const char* prefix, std::size_t index) {
+  char name[48];
+  std::snprintf(name, sizeof name, "%s_%06zu.vtp", prefix, index);
   return name;
 }
 
 }  // namespace
 
-void VtkSeriesWriter::adopt(double time) { m_entries.emplace_back(time, "frames/" + frame_name(m_entries.size())); }
-
-#if defined(MARBLES_HAVE_VTK)
-
 bool vtk_available() { return true; }
+
+bool vtk_compressed() {
+#if defined(MARBLES_HAVE_ZLIB)
+  return true;
+#else
+  return false;
+#endif
+}
 
 namespace {
 
-// vtkFloatArray or vtkDoubleArray, matching `real`.
-using RealArray = std::conditional_t<sizeof(real) == sizeof(float), vtkFloatArray, vtkDoubleArray>;
+constexpr std::size_t kBlockBytes = 32768;  // VTK's default compression block
 
-template <typename Array, typename T>
-vtkSmartPointer<Array> make_array(const char* name, int components, const T* data, std::size_t tuples) {
-  auto a = vtkSmartPointer<Array>::New();
-  a->SetName(name);
-  a->SetNumberOfComponents(components);
-  a->SetNumberOfTuples(vtkIdType(tuples));
-  if (tuples) std::memcpy(a->GetPointer(0), data, tuples * components * sizeof(T));
-  return a;
+// The appended-data section of a VTK XML file: each array is a header of
+// UInt64 words followed by its bytes. Compressed (zlib): [blocks, block
+// size, last block size, compressed size of each block], then the blocks;
+// raw: [byte count], then the bytes.
+class AppendedData {
+ public:
+  // Appends `bytes` bytes at `data`; returns the array's offset attribute.
+  std::size_t add(const void* data, std::size_t bytes) {
+    const std::size_t offset = m_bytes.size();
+    const auto* in = static_cast<const unsigned char*>(data);
+#if defined(MARBLES_HAVE_ZLIB)
+    const std::size_t blocks = (bytes + kBlockBytes - 1) / kBlockBytes;
+    std::vector<std::uint64_t> header{blocks, kBlockBytes, blocks == 0 ? 0 : bytes - (blocks - 1) * kBlockBytes};
+    std::string compressed;
+    for (std::size_t b = 0; b < blocks; ++b) {
+      const std::size_t size = std::min(kBlockBytes, bytes - b * kBlockBytes);
+      uLongf out_size = compressBound(static_cast<uLong>(size));
+      std::string block(out_size, '\0');
+      if (compress2(reinterpret_cast<Bytef*>(block.data()), &out_size, in + b * kBlockBytes, static_cast<uLong>(size),
+                    Z_BEST_SPEED) != Z_OK)
+        throw RuntimeFailure("VTK output: zlib could not compress a block");
+      header.push_back(out_size);
+      compressed.append(block.data(), out_size);
+    }
+    m_bytes.append(reinterpret_cast<const char*>(header.data()), header.size() * sizeof(std::uint64_t));
+    m_bytes += compressed;
+#else
+    const std::uint64_t count = bytes;
+    m_bytes.append(reinterpret_cast<const char*>(&count), sizeof count);
+    m_bytes.append(reinterpret_cast<const char*>(in), bytes);
+#endif
+    return offset;
+  }
+  const std::string& bytes() const { return m_bytes; }
+
+ private:
+  std::string m_bytes;
+};
+
+template <typename T>
+constexpr const char* vtk_type() {
+  if constexpr (std::is_same_v<T, float>) return "Float32";
+  else if constexpr (std::is_same_v<T, double>) return "Float64";
+  else if constexpr (std::is_same_v<T, std::uint32_t>) return "UInt32";
+  else if constexpr (std::is_same_v<T, std::uint64_t>) return "UInt64";
+  else return "Int64";
+}
+
+// One <DataArray .../> of `tuples` x `components` values of T.
+template <typename T>
+std::string data_array(AppendedData& data, const char* name, int components, const T* values, std::size_t tuples,
+                       const char* indent) {
+  const std::size_t offset = data.add(values, tuples * std::size_t(components) * sizeof(T));
+  std::string tag = std::string(indent) + "<DataArray type=\"" + vtk_type<T>() + "\" Name=\"" + name + "\"";
+  if (components != 1) tag += " NumberOfComponents=\"" + std::to_string(components) + "\"";
+  tag += " NumberOfTuples=\"" + std::to_string(tuples) + "\" format=\"appended\" offset=\"" + std::to_string(offset) +
+         "\"/>\n";
+  return tag;
+}
+
+// A field-data string array: each string's bytes and a terminating NUL.
+std::string string_array(AppendedData& data, const char* name, const std::vector<std::string>& strings) {
+  std::string bytes;
+  for (const std::string& s : strings) bytes.append(s).push_back('\0');
+  const std::size_t offset = data.add(bytes.data(), bytes.size());
+  return std::string("      <Array type=\"String\" Name=\"") + name + "\" NumberOfTuples=\"" +
+         std::to_string(strings.size()) + "\" format=\"appended\" offset=\"" + std::to_string(offset) + "\"/>\n";
 }
 
 void check_length(const char* name, std::size_t have, std::size_t n) {
@@ -158,169 +208,405 @@ void check_length(const char* name, std::size_t have, std::size_t n) {
                          " values for " + std::to_string(n) + " spheres");
 }
 
+// A VTK XML poly data file under construction: field data, points, one
+// kind of cell (vertices or lines), point and cell data; every array in the
+// appended section.
+class PolyDataFile {
+ public:
+  template <typename T>
+  void field(const char* name, const T& value) {
+    m_field += data_array(m_data, name, 1, &value, 1, "      ");
+  }
+  void field_strings(const char* name, const std::vector<std::string>& strings) {
+    if (!strings.empty()) m_field += string_array(m_data, name, strings);
+  }
+  void metadata(const FrameMetadata& m) {
+    field_strings("material_names", m.material_names);
+    field_strings("units", {"length m", "time s", "mass kg", "velocity m/s", "angular_velocity rad/s", "force N"});
+    if (!m.producer.empty()) field_strings("producer", {m.producer});
+  }
+  void points(const Vec3* p, std::size_t n) {
+    m_points = n;
+    m_point_xyz = data_array(m_data, "Points", 3, &p->x, n, "        ");
+  }
+  template <typename T>
+  void point_array(const char* name, int components, const T* values) {
+    m_point += data_array(m_data, name, components, values, m_points, "        ");
+  }
+  template <typename T>
+  void cell_array(const char* name, int components, const T* values, std::size_t cells) {
+    m_cell += data_array(m_data, name, components, values, cells, "        ");
+  }
+  // `cells` cells of `per_cell` consecutive points each: "Verts" or "Lines".
+  void cells(const char* kind, std::size_t cells, std::size_t per_cell) {
+    m_kind = kind;
+    m_cells = cells;
+    std::vector<std::int64_t> connectivity(cells * per_cell), offsets(cells);
+    for (std::size_t i = 0; i < connectivity.size(); ++i) connectivity[i] = std::int64_t(i);
+    for (std::size_t c = 0; c < cells; ++c) offsets[c] = std::int64_t((c + 1) * per_cell);
+    m_topology = data_array(m_data, "connectivity", 1, connectivity.data(), connectivity.size(), "        ") +
+                 data_array(m_data, "offsets", 1, offsets.data(), cells, "        ");
+  }
+  void active_scalars(const char* name) { m_scalars = name; }
+
+  std::string text() const {
+    std::string xml = "<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" "
+                      "header_type=\"UInt64\"";
+    if (vtk_compressed()) xml += " compressor=\"vtkZLibDataCompressor\"";
+    const std::string verts = m_kind == "Verts" ? std::to_string(m_cells) : "0";
+    const std::string lines = m_kind == "Lines" ? std::to_string(m_cells) : "0";
+    xml += ">\n  <PolyData>\n    <FieldData>\n" + m_field + "    </FieldData>\n    <Piece NumberOfPoints=\"" +
+           std::to_string(m_points) + "\" NumberOfVerts=\"" + verts + "\" NumberOfLines=\"" + lines +
+           "\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">\n";
+    xml += "      <PointData" + (m_scalars.empty() ? std::string() : " Scalars=\"" + m_scalars + "\"") + ">\n" + m_point +
+           "      </PointData>\n";
+    if (!m_cell.empty()) xml += "      <CellData>\n" + m_cell + "      </CellData>\n";
+    xml += "      <Points>\n" + m_point_xyz + "      </Points>\n";
+    if (!m_kind.empty()) xml += "      <" + m_kind + ">\n" + m_topology + "      </" + m_kind + ">\n";
+    xml += "    </Piece>\n  </PolyData>\n  <AppendedData encoding=\"raw\">\n   _";
+    xml += m_data.bytes();
+    xml += "\n  </AppendedData>\n</VTKFile>\n";
+    return xml;
+  }
+
+ private:
+  AppendedData m_data;
+  std::string m_field, m_point, m_cell, m_point_xyz, m_topology, m_kind, m_scalars;
+  std::size_t m_points = 0, m_cells = 0;
+};
+
 }  // namespace
 
-VtkSeriesWriter::VtkSeriesWriter(fs::path dir, std::vector<PointField> fields)
-    : m_dir(std::move(dir)), m_fields(std::move(fields)) {
-  std::error_code ec;
-  fs::create_directories(m_dir / "frames", ec);
-  if (ec) throw RuntimeFailure("cannot create " + (m_dir / "frames").string() + ": " + ec.message());
+// --- a series: numbered files and their .pvd ---------------------------------
+
+fs::path Series::next_path() const { return m_dir / m_folder / numbered(m_prefix.c_str(), m_entries.size()); }
+
+fs::path Series::add(double time, const std::string& file_text) {
+  const fs::path path = next_path();
+  if (m_entries.empty()) {
+    std::error_code ec;
+    fs::create_directories(m_dir / m_folder, ec);
+    if (ec) throw RuntimeFailure("cannot create " + (m_dir / m_folder).string() + ": " + ec.message());
+  }
+  write_file_atomic(path, file_text);
+  adopt(time);
+  write_file_atomic(pvd_path(), pvd_text(m_entries));
+  return path;
 }
+
+void Series::adopt(double time) {
+  m_entries.emplace_back(time, m_folder + "/" + numbered(m_prefix.c_str(), m_entries.size()));
+}
+
+// --- spheres ------------------------------------------------------------------
+
+VtkSeriesWriter::VtkSeriesWriter(fs::path dir, std::vector<PointField> fields, FrameMetadata metadata)
+    : m_series(dir, "frames", "frame", "series.pvd"), m_fields(std::move(fields)), m_metadata(std::move(metadata)) {
+  std::error_code ec;
+  fs::create_directories(dir / "frames", ec);
+  if (ec) throw RuntimeFailure("cannot create " + (dir / "frames").string() + ": " + ec.message());
+}
+
+void VtkSeriesWriter::adopt(double time) { m_series.adopt(time); }
 
 fs::path VtkSeriesWriter::write(const Snapshot& s) {
   const std::size_t n = s.size();
-  vtkNew<vtkPolyData> poly;
-
-  vtkNew<vtkPoints> points;
-  points->SetData(make_array<RealArray>("Points", 3, &s.position.data()->x, n));
-  poly->SetPoints(points);
-
-  // One vertex cell per sphere.
-  vtkNew<vtkTypeInt64Array> offsets, connectivity;
-  offsets->SetNumberOfTuples(vtkIdType(n + 1));
-  connectivity->SetNumberOfTuples(vtkIdType(n));
-  for (std::size_t i = 0; i < n; ++i) {
-    offsets->SetValue(vtkIdType(i), vtkTypeInt64(i));
-    connectivity->SetValue(vtkIdType(i), vtkTypeInt64(i));
-  }
-  offsets->SetValue(vtkIdType(n), vtkTypeInt64(n));
-  vtkNew<vtkCellArray> verts;
-  verts->SetData(offsets, connectivity);
-  poly->SetVerts(verts);
-
-  vtkPointData* pd = poly->GetPointData();
+  PolyDataFile file;
+  file.field("TimeValue", s.time);
+  file.field("step", std::uint64_t(s.step));
+  file.metadata(m_metadata);
+  file.points(s.position.data(), n);
   for (PointField f : m_fields) {
     const char* name = point_field_name(f);
     switch (f) {
       case PointField::radius:
         check_length(name, s.radius.size(), n);
-        pd->AddArray(make_array<RealArray>(name, 1, s.radius.data(), n));
+        file.point_array(name, 1, s.radius.data());
         break;
       case PointField::velocity:
         check_length(name, s.velocity.size(), n);
-        pd->AddArray(make_array<RealArray>(name, 3, &s.velocity.data()->x, n));
+        file.point_array(name, 3, &s.velocity.data()->x);
         break;
       case PointField::angular_velocity:
         check_length(name, s.angular_velocity.size(), n);
-        pd->AddArray(make_array<RealArray>(name, 3, &s.angular_velocity.data()->x, n));
+        file.point_array(name, 3, &s.angular_velocity.data()->x);
         break;
       case PointField::id:
         check_length(name, s.id.size(), n);
-        pd->AddArray(make_array<vtkTypeUInt32Array>(name, 1, s.id.data(), n));
+        file.point_array(name, 1, s.id.data());
         break;
       case PointField::material:
         check_length(name, s.material.size(), n);
-        pd->AddArray(make_array<vtkTypeUInt32Array>(name, 1, s.material.data(), n));
+        file.point_array(name, 1, s.material.data());
         break;
       case PointField::speed: {
         check_length("velocity (for speed)", s.velocity.size(), n);
         std::vector<real> speed(n);
         for (std::size_t i = 0; i < n; ++i) speed[i] = length(s.velocity[i]);
-        pd->AddArray(make_array<RealArray>(name, 1, speed.data(), n));
+        file.point_array(name, 1, speed.data());
         break;
       }
+      case PointField::contacts:
+        check_length(name, s.contacts.size(), n);
+        file.point_array(name, 1, s.contacts.data());
+        break;
     }
   }
-  if (!m_fields.empty() && m_fields.front() == PointField::radius) pd->SetActiveScalars("radius");
-
-  vtkNew<vtkDoubleArray> time;
-  time->SetName("TimeValue");
-  time->InsertNextValue(s.time);
-  poly->GetFieldData()->AddArray(time);
-  vtkNew<vtkTypeUInt64Array> step;
-  step->SetName("step");
-  step->InsertNextValue(s.step);
-  poly->GetFieldData()->AddArray(step);
-
-  const std::string name = frame_name(m_entries.size());
-  const fs::path final_path = m_dir / "frames" / name;
-  const fs::path tmp = temp_path_beside(final_path);
-  vtkNew<vtkXMLPolyDataWriter> writer;
-  writer->SetFileName(tmp.c_str());
-  writer->SetInputData(poly);
-  writer->SetDataModeToAppended();
-  writer->EncodeAppendedDataOff();
-  writer->SetCompressorTypeToZLib();
-  writer->SetHeaderTypeToUInt64();
-  if (writer->Write() != 1) {
-    std::error_code ec;
-    fs::remove(tmp, ec);
-    throw RuntimeFailure("cannot write " + final_path.string() + " (disk full or not writable?)");
-  }
-  commit_file(tmp, final_path, ends_with("</VTKFile>"));
-
-  m_entries.emplace_back(s.time, "frames/" + name);
-  write_file_atomic(pvd_path(), pvd_text(m_entries));
-  return final_path;
+  if (!m_fields.empty() && m_fields.front() == PointField::radius) file.active_scalars("radius");
+  file.cells("Verts", n, 1);  // one vertex cell per sphere
+  return m_series.add(s.time, file.text());
 }
+
+// --- contacts -----------------------------------------------------------------
+
+ContactSeriesWriter::ContactSeriesWriter(fs::path dir, FrameMetadata metadata)
+    : m_series(std::move(dir), "contacts", "contacts", "contacts.pvd"), m_metadata(std::move(metadata)) {}
+
+void ContactSeriesWriter::adopt(double time) { m_series.adopt(time); }
+
+fs::path ContactSeriesWriter::write(const ContactSnapshot& c) {
+  const std::size_t n = c.a.size();
+  for (const std::size_t size : {c.b.size(), c.sphere_a.size(), c.sphere_b.size(), c.normal_force.size(),
+                                 c.tangential_force.size(), c.overlap.size(), c.material_a.size(),
+                                 c.material_b.size()})
+    if (size != n) throw RuntimeFailure("contact output: arrays of different lengths");
+  std::vector<Vec3> points(2 * n);
+  std::vector<Vec3> force(n);
+  std::vector<std::uint32_t> wall(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    points[2 * k] = c.a[k];
+    points[2 * k + 1] = c.b[k];
+    force[k] = c.normal[k] * c.normal_force[k] + c.tangential_force[k];
+    wall[k] = c.wall[k];
+  }
+  PolyDataFile file;
+  file.field("TimeValue", c.time);
+  file.field("step", std::uint64_t(c.step));
+  file.metadata(m_metadata);
+  file.points(points.data(), points.size());
+  file.cells("Lines", n, 2);
+  file.cell_array("normal_force", 1, c.normal_force.data(), n);
+  file.cell_array("tangential_force", 3, &c.tangential_force.data()->x, n);
+  file.cell_array("force", 3, &force.data()->x, n);
+  file.cell_array("normal", 3, &c.normal.data()->x, n);
+  file.cell_array("overlap", 1, c.overlap.data(), n);
+  file.cell_array("sphere_a", 1, c.sphere_a.data(), n);
+  file.cell_array("sphere_b", 1, c.sphere_b.data(), n);
+  file.cell_array("material_a", 1, c.material_a.data(), n);
+  file.cell_array("material_b", 1, c.material_b.data(), n);
+  file.cell_array("wall", 1, wall.data(), n);
+  return m_series.add(c.time, file.text());
+}
+
+// --- reading ----------------------------------------------------------------
 
 namespace {
 
-template <typename T>
-void read_scalars(vtkDataArray* a, std::vector<T>& out, vtkIdType n) {
-  if (!a || a->GetNumberOfComponents() != 1 || a->GetNumberOfTuples() != n) return;
-  out.resize(std::size_t(n));
-  for (vtkIdType i = 0; i < n; ++i) out[std::size_t(i)] = static_cast<T>(a->GetComponent(i, 0));
+// The attributes of one XML tag, e.g. type="Float32" Name="radius".
+std::vector<std::pair<std::string, std::string>> attributes_of(const std::string& tag) {
+  static const std::regex attribute(R"re(([A-Za-z_]+)\s*=\s*"([^"]*)")re");
+  std::vector<std::pair<std::string, std::string>> out;
+  for (auto a = std::sregex_iterator(tag.begin(), tag.end(), attribute); a != std::sregex_iterator(); ++a)
+    out.emplace_back((*a)[1].str(), (*a)[2].str());
+  return out;
 }
 
-void read_vectors(vtkDataArray* a, std::vector<Vec3>& out, vtkIdType n) {
-  if (!a || a->GetNumberOfComponents() != 3 || a->GetNumberOfTuples() != n) return;
-  out.resize(std::size_t(n));
-  for (vtkIdType i = 0; i < n; ++i) {
-    double v[3];
-    a->GetTuple(i, v);
-    out[std::size_t(i)] = Vec3(real(v[0]), real(v[1]), real(v[2]));
+std::string attribute(const std::vector<std::pair<std::string, std::string>>& attrs, const std::string& key) {
+  for (const auto& [k, v] : attrs)
+    if (k == key) return v;
+  return {};
+}
+
+struct ArrayTag {
+  std::string section;  // FieldData, PointData, Points, Verts
+  std::string name, type;
+  int components = 1;
+  std::size_t offset = 0;
+};
+
+class AppendedReader {
+ public:
+  AppendedReader(const fs::path& path, std::string_view bytes, bool compressed, bool header64)
+      : m_path(path), m_bytes(bytes), m_compressed(compressed), m_header64(header64) {}
+
+  // The decoded bytes of the array at `offset`.
+  std::string read(std::size_t offset) const {
+    std::size_t at = offset;
+    auto word = [&]() -> std::uint64_t {
+      const std::size_t size = m_header64 ? 8 : 4;
+      if (at + size > m_bytes.size()) fail();
+      std::uint64_t v = 0;
+      if (m_header64) std::memcpy(&v, m_bytes.data() + at, 8);
+      else {
+        std::uint32_t w = 0;
+        std::memcpy(&w, m_bytes.data() + at, 4);
+        v = w;
+      }
+      at += size;
+      return v;
+    };
+    if (!m_compressed) {
+      const std::uint64_t count = word();
+      if (count > m_bytes.size() - at) fail();
+      return std::string(m_bytes.substr(at, count));
+    }
+    const std::uint64_t blocks = word(), block_size = word(), last_size = word();
+    if (blocks > m_bytes.size()) fail();
+    std::vector<std::uint64_t> sizes(blocks);
+    for (auto& s : sizes) s = word();
+    std::string out;
+#if defined(MARBLES_HAVE_ZLIB)
+    for (std::uint64_t b = 0; b < blocks; ++b) {
+      const std::uint64_t raw = (b + 1 == blocks && last_size != 0) ? last_size : block_size;
+      if (sizes[b] > m_bytes.size() - at || raw > (std::uint64_t(1) << 31)) fail();
+      std::string block(raw, '\0');
+      uLongf got = static_cast<uLongf>(raw);
+      if (uncompress(reinterpret_cast<Bytef*>(block.data()), &got, reinterpret_cast<const Bytef*>(m_bytes.data() + at),
+                     static_cast<uLong>(sizes[b])) != Z_OK || got != raw)
+        fail();
+      out += block;
+      at += sizes[b];
+    }
+#else
+    (void)block_size;
+    (void)last_size;
+    if (blocks > 0)
+      throw RuntimeFailure("cannot read " + m_path.string() + ": it is zlib-compressed and this build has no zlib");
+#endif
+    return out;
   }
+
+ private:
+  [[noreturn]] void fail() const {
+    throw RuntimeFailure("cannot read " + m_path.string() + ": its appended data is truncated or damaged");
+  }
+  fs::path m_path;
+  std::string_view m_bytes;
+  bool m_compressed, m_header64;
+};
+
+template <typename T>
+std::vector<double> as_doubles(const std::string& bytes) {
+  std::vector<double> out(bytes.size() / sizeof(T));
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    T v;
+    std::memcpy(&v, bytes.data() + i * sizeof(T), sizeof(T));
+    out[i] = static_cast<double>(v);
+  }
+  return out;
+}
+
+std::vector<double> decode_numbers(const fs::path& path, const ArrayTag& tag, const std::string& bytes) {
+  if (tag.type == "Float32") return as_doubles<float>(bytes);
+  if (tag.type == "Float64") return as_doubles<double>(bytes);
+  if (tag.type == "UInt32") return as_doubles<std::uint32_t>(bytes);
+  if (tag.type == "Int32") return as_doubles<std::int32_t>(bytes);
+  if (tag.type == "UInt64") return as_doubles<std::uint64_t>(bytes);
+  if (tag.type == "Int64") return as_doubles<std::int64_t>(bytes);
+  throw RuntimeFailure("cannot read " + path.string() + ": array '" + tag.name + "' has the unsupported type " + tag.type);
 }
 
 }  // namespace
 
-Snapshot read_vtp(const fs::path& vtp_path) {
-  if (!fs::exists(vtp_path)) throw RuntimeFailure("cannot read " + vtp_path.string() + ": no such file");
-  vtkNew<vtkXMLPolyDataReader> reader;
-  reader->SetFileName(vtp_path.c_str());
-  reader->Update();
-  vtkPolyData* poly = reader->GetOutput();
-  if (reader->GetErrorCode() != 0 || !poly)
-    throw RuntimeFailure("cannot read " + vtp_path.string() + ": not a valid VTK poly data file");
-  Snapshot s;
-  const vtkIdType n = poly->GetNumberOfPoints();
-  s.position.resize(std::size_t(n));
-  for (vtkIdType i = 0; i < n; ++i) {
-    double p[3];
-    poly->GetPoint(i, p);
-    s.position[std::size_t(i)] = Vec3(real(p[0]), real(p[1]), real(p[2]));
+VtpArrays read_vtp_arrays(const fs::path& vtp_path) {
+  std::ifstream in(vtp_path, std::ios::binary);
+  if (!in) throw RuntimeFailure("cannot read " + vtp_path.string() + ": no such file");
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  const std::string text = buffer.str();
+  const auto bad = [&](const std::string& why) { return RuntimeFailure("cannot read " + vtp_path.string() + ": " + why); };
+
+  const std::size_t appended = text.find("<AppendedData");
+  const std::string head = text.substr(0, appended);
+  const std::size_t root = head.find("<VTKFile");
+  if (root == std::string::npos || head.find("type=\"PolyData\"") == std::string::npos)
+    throw bad("not a VTK poly data file");
+  const auto root_attrs = attributes_of(head.substr(root, head.find('>', root) - root));
+  if (attribute(root_attrs, "byte_order") != "LittleEndian") throw bad("not little-endian");
+  const bool compressed = !attribute(root_attrs, "compressor").empty();
+  if (compressed && attribute(root_attrs, "compressor") != "vtkZLibDataCompressor")
+    throw bad("compressed with " + attribute(root_attrs, "compressor") + " (only zlib is read)");
+  const bool header64 = attribute(root_attrs, "header_type") == "UInt64";
+
+  // The arrays, with the section each sits in.
+  std::vector<ArrayTag> tags;
+  std::string section;
+  std::size_t points = 0;
+  static const std::regex tag_re(R"(<(/?)([A-Za-z]+)([^>]*)>)");
+  for (auto it = std::sregex_iterator(head.begin(), head.end(), tag_re); it != std::sregex_iterator(); ++it) {
+    const std::string name = (*it)[2].str();
+    const bool closing = (*it)[1].matched && (*it)[1].length() > 0;
+    const auto attrs = attributes_of((*it)[3].str());
+    if (name == "FieldData" || name == "PointData" || name == "Points" || name == "Verts" || name == "CellData" ||
+        name == "Lines" || name == "Polys" || name == "Strips") {
+      section = closing ? "" : name;
+    } else if (name == "Piece" && !closing) {
+      points = std::strtoull(attribute(attrs, "NumberOfPoints").c_str(), nullptr, 10);
+    } else if ((name == "DataArray" || name == "Array") && !closing) {
+      if (attribute(attrs, "format") != "appended")
+        throw bad("array '" + attribute(attrs, "Name") + "' is not in appended format (marbles writes and reads that)");
+      ArrayTag tag;
+      tag.section = section;
+      tag.name = attribute(attrs, "Name");
+      tag.type = attribute(attrs, "type");
+      const std::string components = attribute(attrs, "NumberOfComponents");
+      tag.components = components.empty() ? 1 : std::atoi(components.c_str());
+      tag.offset = std::strtoull(attribute(attrs, "offset").c_str(), nullptr, 10);
+      tags.push_back(tag);
+    }
   }
-  vtkPointData* pd = poly->GetPointData();
-  read_scalars(pd->GetArray("radius"), s.radius, n);
-  read_vectors(pd->GetArray("velocity"), s.velocity, n);
-  read_vectors(pd->GetArray("angular_velocity"), s.angular_velocity, n);
-  read_scalars(pd->GetArray("id"), s.id, n);
-  read_scalars(pd->GetArray("material"), s.material, n);
-  if (vtkDataArray* t = poly->GetFieldData()->GetArray("TimeValue"); t && t->GetNumberOfTuples() > 0)
-    s.time = t->GetComponent(0, 0);
-  if (vtkAbstractArray* st = poly->GetFieldData()->GetAbstractArray("step"); st && st->GetNumberOfTuples() > 0)
-    s.step = st->GetVariantValue(0).ToTypeUInt64();
+  if (appended == std::string::npos) throw bad("no appended data");
+  const std::size_t underscore = text.find('_', text.find('>', appended));
+  if (underscore == std::string::npos) throw bad("no appended data");
+  const AppendedReader data(vtp_path, std::string_view(text).substr(underscore + 1), compressed, header64);
+
+  VtpArrays out;
+  out.points = points;
+  for (const ArrayTag& tag : tags) {
+    if (tag.type == "String") continue;
+    out.arrays[tag.section + "/" + tag.name] = {tag.components, decode_numbers(vtp_path, tag, data.read(tag.offset))};
+  }
+  return out;
+}
+
+Snapshot read_vtp(const fs::path& vtp_path) {
+  const VtpArrays file = read_vtp_arrays(vtp_path);
+  const std::size_t points = file.points;
+  Snapshot s;
+  auto find = [&](const std::string& key, int components) -> const std::vector<double>* {
+    const auto it = file.arrays.find(key);
+    if (it == file.arrays.end() || it->second.components != components ||
+        it->second.values.size() != points * std::size_t(components))
+      return nullptr;
+    return &it->second.values;
+  };
+  auto vectors = [&](const std::string& key, std::vector<Vec3>& out) {
+    if (const auto* v = find(key, 3)) {
+      out.resize(points);
+      for (std::size_t i = 0; i < points; ++i) out[i] = Vec3(real((*v)[3 * i]), real((*v)[3 * i + 1]), real((*v)[3 * i + 2]));
+    }
+  };
+  auto scalars = [&](const std::string& key, auto& out) {
+    if (const auto* v = find(key, 1)) {
+      out.resize(points);
+      for (std::size_t i = 0; i < points; ++i) out[i] = static_cast<std::decay_t<decltype(out[0])>>((*v)[i]);
+    }
+  };
+  if (!find("Points/Points", 3) && points > 0)
+    throw RuntimeFailure("cannot read " + vtp_path.string() + ": its points are not " + std::to_string(points) +
+                         " triples");
+  vectors("Points/Points", s.position);
+  scalars("PointData/radius", s.radius);
+  vectors("PointData/velocity", s.velocity);
+  vectors("PointData/angular_velocity", s.angular_velocity);
+  scalars("PointData/id", s.id);
+  scalars("PointData/material", s.material);
+  scalars("PointData/contacts", s.contacts);
+  if (const auto it = file.arrays.find("FieldData/TimeValue"); it != file.arrays.end() && !it->second.values.empty())
+    s.time = it->second.values[0];
+  if (const auto it = file.arrays.find("FieldData/step"); it != file.arrays.end() && !it->second.values.empty())
+    s.step = static_cast<std::uint64_t>(it->second.values[0]);
   return s;
 }
-
-#else  // !MARBLES_HAVE_VTK
-
-bool vtk_available() { return false; }
-
-namespace {
-const char* kNoVtk = "marbles was built without VTK (libvtk9-dev): no .vtp frames can be written or read";
-}
-
-VtkSeriesWriter::VtkSeriesWriter(fs::path dir, std::vector<PointField> fields)
-    : m_dir(std::move(dir)), m_fields(std::move(fields)) {
-  throw RuntimeFailure(kNoVtk);
-}
-
-fs::path VtkSeriesWriter::write(const Snapshot&) { throw RuntimeFailure(kNoVtk); }
-
-Snapshot read_vtp(const fs::path&) { throw RuntimeFailure(kNoVtk); }
-
-#endif
 
 }  // namespace marbles::render

@@ -9,60 +9,123 @@
 //                                TimeValue (s) and step
 //   DIR/series.pvd               <DataSet timestep="t" file="frames/frame_000123.vtp"/>
 //
-// Frames are written with vtkXMLPolyDataWriter in appended raw-binary mode,
-// zlib-compressed. Every file goes to a temporary name in its folder and is
-// renamed into place, and the .pvd is rewritten after each frame, so an
-// interrupted run leaves a valid series of complete frames.
-//
-// VTK is optional: without it vtk_available() is false and the writer and
-// read_vtp throw marbles::RuntimeFailure (read_pvd needs no VTK).
+// Frames are VTK XML poly data written here (no VTK library: see
+// docs/vtk-output.md), arrays in appended raw-binary mode, zlib-compressed
+// in 32 KiB blocks with UInt64 headers (as vtkXMLPolyDataWriter writes them;
+// uncompressed in a build without zlib). Field data: TimeValue, step, the
+// material names, the units and the producer (marbles version and commit).
+// Every file goes to a temporary name in its folder and is renamed into
+// place, and the .pvd is rewritten after each frame, so an interrupted run
+// leaves a valid series of complete frames. read_vtp reads these files (and
+// vtkXMLPolyDataWriter's appended ones) back.
 #pragma once
 
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <string_view>
+#include <cstdint>
 #include <vector>
 
 #include "render/snapshot.hpp"
 
 namespace marbles::render {
 
-/// True when this build has VTK (can write and read .vtp).
+/// True: every build writes and reads .vtp frames (kept for callers that ask).
 bool vtk_available();
+/// True when frames are zlib-compressed (the build has zlib).
+bool vtk_compressed();
+
+/// What every frame's field data carries besides its time and step.
+struct FrameMetadata {
+  std::vector<std::string> material_names;  ///< by material id
+  std::string producer;                     ///< e.g. "marbles 0.1 (commit 1a2b3c)"
+};
 
 /// A per-sphere quantity written to the .vtp point data.
-enum class PointField { radius, velocity, angular_velocity, id, material, speed };
+enum class PointField { radius, velocity, angular_velocity, id, material, speed, contacts };
 
-/// "radius" | "velocity" | "angular_velocity" | "id" | "material" | "speed".
+/// "radius" | "velocity" | "angular_velocity" | "id" | "material" | "speed" |
+/// "contacts" (the coordination number: contacts that press, walls included).
 std::optional<PointField> parse_point_field(std::string_view name);
 const char* point_field_name(PointField f);
 /// Parses a list of names; throws marbles::InputError (key "output.fields")
 /// naming an unknown entry and the accepted names. Duplicates are dropped.
 std::vector<PointField> parse_point_fields(const std::vector<std::string>& names);
 
+/// Numbered files DIR/FOLDER/PREFIX_NNNNNN.vtp listed with their times in
+/// DIR/PVD, rewritten (atomically) after each file.
+class Series {
+ public:
+  Series(std::filesystem::path dir, std::string folder, std::string prefix, std::string pvd)
+      : m_dir(std::move(dir)), m_folder(std::move(folder)), m_prefix(std::move(prefix)), m_pvd(std::move(pvd)) {}
+  /// Writes the next file and the .pvd; returns the file's path.
+  std::filesystem::path add(double time, const std::string& file_text);
+  /// Counts the next file as written at `time` (a resumed run).
+  void adopt(double time);
+  std::filesystem::path next_path() const;
+  std::filesystem::path pvd_path() const { return m_dir / m_pvd; }
+  std::size_t size() const { return m_entries.size(); }
+
+ private:
+  std::filesystem::path m_dir;
+  std::string m_folder, m_prefix, m_pvd;
+  std::vector<std::pair<double, std::string>> m_entries;  // time, file relative to m_dir
+};
+
 /// Writes DIR/frames/frame_NNNNNN.vtp and keeps DIR/series.pvd up to date.
 class VtkSeriesWriter {
  public:
-  /// Creates DIR/frames. Throws marbles::RuntimeFailure when built without VTK
-  /// or when the folder cannot be created.
-  VtkSeriesWriter(std::filesystem::path dir, std::vector<PointField> fields);
+  /// Creates DIR/frames. Throws marbles::RuntimeFailure when the folder
+  /// cannot be created.
+  VtkSeriesWriter(std::filesystem::path dir, std::vector<PointField> fields, FrameMetadata metadata = {});
 
   /// Writes the next frame (numbered 0, 1, 2, ... in call order) and rewrites
   /// the .pvd; returns the frame's path. Throws marbles::RuntimeFailure when a
   /// requested field has the wrong length or on I/O errors.
   std::filesystem::path write(const Snapshot& snapshot);
 
-  std::size_t frames() const { return m_entries.size(); }
-  std::filesystem::path pvd_path() const { return m_dir / "series.pvd"; }
+  std::size_t frames() const { return m_series.size(); }
+  std::filesystem::path pvd_path() const { return m_series.pvd_path(); }
   /// A resumed run: counts the next frame (as write() would name it) as
   /// already written at `time`, without writing it.
   void adopt(double time);
 
  private:
-  std::filesystem::path m_dir;
+  Series m_series;
   std::vector<PointField> m_fields;
-  std::vector<std::pair<double, std::string>> m_entries;  // time, file relative to m_dir
+  FrameMetadata m_metadata;
+};
+
+/// The contacts of one moment: one line cell per contact, from sphere a's
+/// centre to sphere b's (or to the contact point on a wall).
+struct ContactSnapshot {
+  double time = 0;
+  std::uint64_t step = 0;
+  std::vector<Vec3> a, b;                    // line ends, m
+  std::vector<Vec3> normal;                  // unit, from b towards a
+  std::vector<real> normal_force;            // N, >= 0 (impulse / substep)
+  std::vector<Vec3> tangential_force;        // N (impulse / substep)
+  std::vector<real> overlap;                 // m, >= 0
+  std::vector<std::uint32_t> sphere_a, sphere_b;      // ids (b: the wall's index for a wall)
+  std::vector<std::uint32_t> material_a, material_b;  // material ids (b: the wall's material)
+  std::vector<std::uint8_t> wall;            // 1: b is a wall
+};
+
+/// Writes DIR/contacts/contacts_NNNNNN.vtp (cell data normal_force,
+/// tangential_force, force, normal, overlap, sphere_a, sphere_b, material_a,
+/// material_b, wall) and keeps DIR/contacts.pvd up to date.
+class ContactSeriesWriter {
+ public:
+  ContactSeriesWriter(std::filesystem::path dir, FrameMetadata metadata = {});
+  std::filesystem::path write(const ContactSnapshot& contacts);
+  void adopt(double time);
+  std::size_t frames() const { return m_series.size(); }
+
+ private:
+  Series m_series;
+  FrameMetadata m_metadata;
 };
 
 /// One entry of a .pvd collection.
@@ -74,6 +137,19 @@ struct SeriesEntry {
 /// The <DataSet> entries of a .pvd file, in file order. Throws
 /// marbles::RuntimeFailure when the file cannot be read or lists no valid entry.
 std::vector<SeriesEntry> read_pvd(const std::filesystem::path& pvd_path);
+
+/// Every numeric array of a .vtp in appended format, by "Section/Name"
+/// (e.g. "PointData/radius", "CellData/normal_force", "FieldData/TimeValue",
+/// "Points/Points"), as doubles. Throws marbles::RuntimeFailure.
+struct VtpArrays {
+  struct Array {
+    int components = 1;
+    std::vector<double> values;
+  };
+  std::size_t points = 0;
+  std::map<std::string, Array> arrays;
+};
+VtpArrays read_vtp_arrays(const std::filesystem::path& vtp_path);
 
 /// Reads a .vtp written by VtkSeriesWriter (or any poly data with points and
 /// some of the arrays radius, velocity, angular_velocity, id, material) into a

@@ -7,10 +7,12 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 BUILD_DIR=${BUILD_DIR:-$ROOT/build}
 JOBS=$(nproc 2>/dev/null || echo 2)
 
-# Needed to build the core at all.
-REQUIRED_PKGS=(cmake g++ make pkg-config libyaml-cpp-dev libeigen3-dev libgtest-dev libbenchmark-dev libcli11-dev)
-# Found -> on: VTK output, OSMesa rendering, PNG, movies, study plots, the scene fuzzer (clang, libFuzzer).
-OPTIONAL_PKGS=(libvtk9-dev libosmesa6-dev libpng-dev ffmpeg gnuplot-nox clang libclang-rt-dev)
+# Needed to build the core at all (zlib: compressed VTK frames, written by marbles itself).
+REQUIRED_PKGS=(cmake g++ make pkg-config libyaml-cpp-dev libgtest-dev libcli11-dev zlib1g-dev)
+# Found -> on: OSMesa rendering, PNG, movies, study plots, the scene fuzzer (clang, libFuzzer), and
+# python3 for the tests' independent reader of the frames. VTK itself is not installed (docs/vtk-output.md):
+# where libvtk9-dev is already present its reader checks the frames too.
+OPTIONAL_PKGS=(libosmesa6-dev libpng-dev ffmpeg gnuplot-nox clang libclang-rt-dev python3)
 
 missing_packages() {
   local p
@@ -35,7 +37,7 @@ if command -v dpkg >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1; then
   if ! install_packages "${need[@]}" "${want[@]}"; then
     # Offline or unprivileged: the required set must install, the rest is optional.
     install_packages "${need[@]}" || { echo "setup: cannot install ${need[*]}" >&2; exit 1; }
-    echo "setup: warning: optional packages not installed: ${want[*]} (no VTK output / rendering / movies)" >&2
+    echo "setup: warning: optional packages not installed: ${want[*]} (no rendering / movies / plots)" >&2
   fi
 fi
 

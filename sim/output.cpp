@@ -17,12 +17,58 @@
 #include "render/walls_json.hpp"
 #include "sim/scene.hpp"
 #include "sim/simulation.hpp"
+#include "sim/version.hpp"
 
 namespace marbles {
 
-render::Snapshot make_snapshot(const Simulation& sim) {
+namespace {
+
+// A contact that presses: it carries an impulse or its spheres overlap (not
+// a speculative contact whose gap stayed open).
+bool presses(const narrowphase::Contact& c) {
+  return c.normal_impulse + c.impact_impulse > 0 || c.separation < 0;
+}
+
+}  // namespace
+
+render::ContactSnapshot make_contact_snapshot(const Simulation& sim) {
+  const World& w = sim.world();
+  const auto& shapes = sim.model().wall_shapes;
+  const double h = sim.dt() / sim.substeps();  // the contacts are the last substep's
+  render::ContactSnapshot c;
+  c.time = sim.time();
+  c.step = sim.steps();
+  for (const narrowphase::Contact& k : sim.contacts()) {
+    if (!presses(k)) continue;
+    const bool wall = narrowphase::is_wall(k.b);
+    const std::uint32_t b = wall ? (k.b & ~narrowphase::kWallFlag) : k.b;
+    c.a.push_back(w.position[k.a]);
+    // The wall end: the contact point on the wall's surface.
+    c.b.push_back(wall ? w.position[k.a] - k.normal * (w.radius[k.a] + k.separation) : w.position[b]);
+    c.normal.push_back(k.normal);
+    c.normal_force.push_back(static_cast<real>((k.normal_impulse + k.impact_impulse) / h));
+    c.tangential_force.push_back(k.tangent_impulse * static_cast<real>(1 / h));
+    c.overlap.push_back(k.separation < 0 ? -k.separation : real(0));
+    c.sphere_a.push_back(k.a);
+    c.sphere_b.push_back(b);
+    c.material_a.push_back(w.material[k.a]);
+    c.material_b.push_back(wall ? shapes.at(b).material : w.material[b]);
+    c.wall.push_back(wall ? 1 : 0);
+  }
+  return c;
+}
+
+render::Snapshot make_snapshot(const Simulation& sim, bool with_contacts) {
   const World& w = sim.world();
   render::Snapshot s;
+  if (with_contacts) {
+    s.contacts.assign(w.size(), 0);
+    for (const narrowphase::Contact& k : sim.contacts()) {
+      if (!presses(k)) continue;
+      ++s.contacts[k.a];
+      if (!narrowphase::is_wall(k.b)) ++s.contacts[k.b];
+    }
+  }
   s.time = sim.time();
   s.step = sim.steps();
   s.position = w.position;
@@ -39,16 +85,17 @@ std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path
   namespace fs = std::filesystem;
   std::vector<fs::path> found;
   std::error_code ec;
-  for (const char* name : {"summary.json", "series.pvd", "thermo.csv", "walls.json", "materials.txt", "movie.mp4"})
+  for (const char* name :
+       {"summary.json", "series.pvd", "contacts.pvd", "thermo.csv", "walls.json", "materials.txt", "movie.mp4"})
     if (fs::is_regular_file(dir / name, ec)) found.push_back(dir / name);
   const std::pair<const char*, const char*> series[] = {
-      {"frames", ".vtp"}, {"images", ".png"}, {"checkpoints", ".mck"}};
+      {"frames", ".vtp"}, {"images", ".png"}, {"checkpoints", ".mck"}, {"contacts", ".vtp"}};
   for (const auto& [sub, extension] : series) {
     if (!fs::is_directory(dir / sub, ec)) continue;
     for (const auto& entry : fs::directory_iterator(dir / sub, ec)) {
       const std::string name = entry.path().filename().string();
       if (entry.is_regular_file(ec) && entry.path().extension() == extension &&
-          (name.rfind("frame_", 0) == 0 || name.rfind("step_", 0) == 0))
+          (name.rfind("frame_", 0) == 0 || name.rfind("step_", 0) == 0 || name.rfind("contacts_", 0) == 0))
         found.push_back(entry.path());
     }
   }
@@ -72,6 +119,9 @@ struct RunOutput::Impl {
   int render_every = 0;
   std::unique_ptr<render::VtkSeriesWriter> vtk;
   std::unique_ptr<render::FrameOutput> frames;
+  std::unique_ptr<render::ContactSeriesWriter> contacts;
+  int contacts_every = 0;
+  bool with_contact_counts = false;  // the `contacts` point field is asked for
   bool render_at_finish = false;  // a resumed run: images and movie from the frames
   render::RenderOptions render_options;
   render::MovieOptions movie;
@@ -132,12 +182,17 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
   render::write_material_names(dir, names);
 
   if (scene.output.vtk_every > 0) {
-    if (render::vtk_available()) {
-      m->vtk = std::make_unique<render::VtkSeriesWriter>(dir, render::parse_point_fields(scene.output.fields));
-      m->vtk_every = scene.output.vtk_every;
-    } else {
-      log << "warning: this build has no VTK: no .vtp frames are written\n";
-    }
+    const std::string producer = std::string("marbles ") + kMarblesVersion + " (commit " + kMarblesCommit + ")";
+    const std::vector<render::PointField> fields = render::parse_point_fields(scene.output.fields);
+    m->with_contact_counts =
+        std::find(fields.begin(), fields.end(), render::PointField::contacts) != fields.end();
+    m->vtk = std::make_unique<render::VtkSeriesWriter>(dir, fields, render::FrameMetadata{names, producer});
+    m->vtk_every = scene.output.vtk_every;
+  }
+  if (scene.output.contacts_every > 0) {
+    const std::string producer = std::string("marbles ") + kMarblesVersion + " (commit " + kMarblesCommit + ")";
+    m->contacts = std::make_unique<render::ContactSeriesWriter>(dir, render::FrameMetadata{names, producer});
+    m->contacts_every = scene.output.contacts_every;
   }
   if (render && scene.output.render.enabled && resumed) {
     if (!m->vtk) {
@@ -167,7 +222,7 @@ RunOutput::~RunOutput() = default;
 
 bool RunOutput::due(std::uint64_t step) const {
   return (m->vtk && step % m->vtk_every == 0) || (m->frames && step % m->render_every == 0) ||
-         (m->thermo && step % m->thermo_every == 0);
+         (m->thermo && step % m->thermo_every == 0) || (m->contacts && step % m->contacts_every == 0);
 }
 
 void RunOutput::write(const Simulation& sim, double step_seconds) {
@@ -180,8 +235,9 @@ void RunOutput::write(const Simulation& sim, double step_seconds) {
     m->thermo_seconds = step_seconds;
     render::write_file_atomic((std::filesystem::path(m->dir) / "thermo.csv").string(), m->thermo_text);
   }
+  if (m->contacts && step % m->contacts_every == 0) m->contacts->write(make_contact_snapshot(sim));
   if (!(m->vtk && step % m->vtk_every == 0) && !(m->frames && step % m->render_every == 0)) return;
-  const render::Snapshot snapshot = make_snapshot(sim);
+  const render::Snapshot snapshot = make_snapshot(sim, m->with_contact_counts);
   if (m->vtk && step % m->vtk_every == 0) m->vtk->write(snapshot);
   if (m->frames && step % m->render_every == 0) m->frames->add(snapshot);
 }
@@ -199,6 +255,9 @@ void RunOutput::resume(std::uint64_t steps, double dt) {
       }
     }
   }
+  if (m->contacts)
+    for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->contacts_every))
+      m->contacts->adopt(static_cast<double>(step) * dt);
   if (!m->vtk) return;
   for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->vtk_every))
     m->vtk->adopt(static_cast<double>(step) * dt);
@@ -207,6 +266,7 @@ void RunOutput::resume(std::uint64_t steps, double dt) {
 std::string RunOutput::finish() {
   std::ostringstream out;
   if (m->vtk) out << m->vtk->frames() << " frames in frames/, series.pvd, ";
+  if (m->contacts) out << m->contacts->frames() << " contact frames in contacts/, contacts.pvd, ";
   if (m->render_at_finish) {
     render::render_output_dir(m->dir, m->render_options, m->movie, false, *m->log);
     out << "images in images/";

@@ -10,6 +10,7 @@
 
 #include "core/walls.hpp"
 #include "render/snapshot.hpp"
+#include "render/vtk_output.hpp"
 
 namespace marbles {
 
@@ -18,11 +19,15 @@ struct Scene;
 }
 class Simulation;
 
-render::Snapshot make_snapshot(const Simulation& sim);
+// `with_contacts`: also count each sphere's pressing contacts (the
+// `contacts` field; on the GPU this downloads the contacts).
+render::Snapshot make_snapshot(const Simulation& sim, bool with_contacts = false);
+// The pressing contacts of the last substep, with forces = impulses / substep.
+render::ContactSnapshot make_contact_snapshot(const Simulation& sim);
 
 // The files of an earlier run in `dir` (what a run writes: summary.json,
-// series.pvd, thermo.csv, walls.json, materials.txt, movie.mp4, frames/frame_*.vtp,
-// images/frame_*.png, checkpoints/step_*.mck); other files are not ours.
+// series.pvd, contacts.pvd, thermo.csv, walls.json, materials.txt, movie.mp4, frames/frame_*.vtp,
+// images/frame_*.png, checkpoints/step_*.mck, contacts/contacts_*.vtp); other files are not ours.
 std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir);
 
 // OUTDIR/thermo.csv, one row per output frame (VTK or image):

@@ -43,7 +43,8 @@ const std::vector<Effect> kDefaultEffects = {Effect::gravity, Effect::collisions
 const std::vector<std::string> kIntegrators = {"symplectic_euler", "velocity_verlet"};
 const std::vector<std::string> kPrecisions = {"float", "double"};
 const std::vector<std::string> kColorBy = {"speed", "id", "radius", "material"};
-const std::vector<std::string> kOutputFields = {"radius", "velocity", "angular_velocity", "id", "material"};
+const std::vector<std::string> kOutputFields = {"radius", "velocity", "angular_velocity", "id", "material", "speed",
+                                                "contacts"};
 
 std::string axis_name(int axis) { return axis == 0 ? "x" : (axis == 1 ? "y" : "z"); }
 
@@ -519,7 +520,7 @@ CameraSpec read_camera(const Field& field) {
 }
 
 OutputSpec read_output(const Field& field, const std::string& stem) {
-  const MapFields map(field, {"dir", "vtk", "fields", "render", "movie", "checkpoint"});
+  const MapFields map(field, {"dir", "vtk", "fields", "render", "movie", "checkpoint", "contacts"});
   OutputSpec output;
   output.dir = "out/" + stem;
   if (auto f = map.optional("dir")) {
@@ -535,6 +536,11 @@ OutputSpec read_output(const Field& field, const std::string& stem) {
     const MapFields vtk(*f, {"every"});
     output.vtk_every = 1;
     if (auto e = vtk.optional("every")) output.vtk_every = e->integer_at_least(1);
+  }
+  if (auto f = map.optional("contacts")) {
+    const MapFields contacts(*f, {"every"});
+    output.contacts_every = 1;
+    if (auto e = contacts.optional("every")) output.contacts_every = e->integer_at_least(1);
   }
   if (auto f = map.optional("fields")) {
     output.fields.clear();

@@ -140,6 +140,7 @@ struct MovieSpec {
 struct OutputSpec {
   std::string dir = "out";          // resolved relative to the current directory
   int vtk_every = 0;                // steps; 0 = no VTK frames
+  int contacts_every = 0;           // steps; 0 = no contact frames (OUTDIR/contacts/, contacts.pvd)
   std::vector<std::string> fields{"radius", "velocity", "angular_velocity", "id", "material"};
   RenderSpec render;
   MovieSpec movie;

@@ -361,7 +361,7 @@ TEST(FrameOutput, WritesNumberedImagesAndAMovie) {
 }
 #endif
 
-#if defined(MARBLES_HAVE_PNG) && defined(MARBLES_HAVE_VTK)
+#if defined(MARBLES_HAVE_PNG)
 TEST(RenderOutputDir, RerendersEveryFrameOfASeries) {
   const fs::path dir = fresh_dir("render_output_dir");
   {

@@ -66,5 +66,24 @@ TEST_F(Checkpoints, GpuWatchdogRepairsAsTheCpuDoes) {
   }
 }
 
+// The contact frames (forces, normals, overlaps, ids) and the sphere frames
+// with the per-sphere contact count are the same bytes on both backends.
+TEST_F(Checkpoints, GpuContactFramesEqualTheCpus) {
+  if (!cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device";
+  const test::ScratchDir dir("ck_gpu_contacts");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string extra = " --set output.contacts.every=50 --set 'output.fields=[radius, velocity, contacts]'";
+  for (const std::string backend : {"cpu", "cuda"})
+    ASSERT_EQ(marbles("run " + scene + " --quiet --backend " + backend + extra + " --out " + dir.path() + "/" + backend), 0);
+  int files = 0;
+  for (const std::string folder : {"contacts", "frames"})
+    for (const auto& entry : fs::directory_iterator(dir.path() + "/cpu/" + folder)) {
+      ++files;
+      EXPECT_TRUE(slurp(entry.path()) == slurp(dir.path() + "/cuda/" + folder + "/" + entry.path().filename().string()))
+          << folder << "/" << entry.path().filename() << " differs";
+    }
+  EXPECT_EQ(files, 7 + 16);
+}
+
 }  // namespace
 }  // namespace marbles

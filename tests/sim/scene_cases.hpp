@@ -210,9 +210,9 @@ inline const std::vector<BadScene>& bad_scenes() {
        "{scene}:6:20: effects[1]: the drag effect needs the top-level key 'drag' (linear rate 1/s, or {linear, quadratic})"},
       {"unknown_color_by", SCENE_VALID "output:\n  render: {color_by: velocity}\n",
        "{scene}:7:22: output.render.color_by: unknown color_by 'velocity'; expected one of: speed, id, radius, material"},
-      {"unknown_field", SCENE_VALID "output:\n  fields: [radius, sped]\n",
-       "{scene}:7:20: output.fields[1]: unknown field 'sped'; expected one of: radius, velocity, angular_velocity, id, "
-       "material"},
+      {"unknown_field", SCENE_VALID "output:\n  fields: [radius, colour]\n",
+       "{scene}:7:20: output.fields[1]: unknown field 'colour'; expected one of: radius, velocity, angular_velocity, id, "
+       "material, speed, contacts"},
       {"movie_without_render", SCENE_VALID "output:\n  movie: {fps: 30}\n",
        "{scene}:7:10: output.movie: needs output.render: the movie is made of the rendered frames"},
       {"movie_odd_width", SCENE_VALID "output:\n  render: {width: 641}\n  movie: {fps: 30}\n",
