@@ -11,7 +11,6 @@
 #include "render/atomic_file.hpp"
 #include "render/image.hpp"
 #include "render/vtk_output.hpp"
-#include "render/walls_json.hpp"
 
 namespace marbles::render {
 
@@ -134,7 +133,12 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
     throw RuntimeFailure("marbles was built without OSMesa (libosmesa6-dev): cannot render images");
 
   const std::vector<SeriesEntry> entries = read_pvd(pvd);
-  const Walls walls = read_walls_json(dir);
+  // The walls of each frame (moving walls move), from walls.pvd when the run had walls.
+  std::vector<SeriesEntry> wall_entries;
+  if (fs::exists(dir / "walls.pvd")) wall_entries = read_pvd(dir / "walls.pvd");
+  auto walls_of = [&](std::size_t k) {
+    return wall_entries.empty() ? Walls{} : read_walls_vtp(wall_entries[std::min(k, wall_entries.size() - 1)].path);
+  };
   RenderOptions with_names = options;
   if (with_names.material_names.empty()) with_names.material_names = read_material_names(dir);
   Renderer renderer(with_names);
@@ -148,7 +152,7 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   if (need_camera || need_range) {
     for (std::size_t k = 0; k < entries.size(); ++k) {
       const Snapshot s = read_vtp(entries[k].path);
-      if (need_camera) bounds.add(scene_bounds(s, walls));
+      if (need_camera) bounds.add(scene_bounds(s, walls_of(k)));
       if (need_range) range.add(data_range(s, options.color_by));
       if (progress) draw_progress(log, "scan  ", k + 1, entries.size(), seconds_since(t0));
     }
@@ -183,7 +187,7 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   for (std::size_t k = 0; k < entries.size(); ++k) {
     Snapshot s = read_vtp(entries[k].path);
     if (s.time == 0 && entries[k].time != 0) s.time = entries[k].time;
-    const Image image = renderer.render(s, walls, camera, range);
+    const Image image = renderer.render(s, walls_of(k), camera, range);
     std::size_t number = k;
     std::smatch m;
     const std::string name = entries[k].path.filename().string();

@@ -3,7 +3,7 @@
 // During a run the simulation owns a FrameOutput and hands it a snapshot
 // whenever a frame is due; afterwards `marbles render OUTDIR` calls
 // render_output_dir(), which re-renders every frame listed in
-// OUTDIR/series.pvd (with the walls from OUTDIR/walls.json, if present).
+// OUTDIR/series.pvd (with the walls of OUTDIR/walls.pvd, if present).
 //
 //   DIR/images/frame_000123.png   one per frame, written atomically
 //   DIR/movie.mp4                 H.264, yuv420p, when ffmpeg is on PATH
@@ -79,7 +79,7 @@ std::vector<std::string> read_material_names(const std::filesystem::path& dir);
 /// Re-renders every frame of OUT_DIR/series.pvd into OUT_DIR/images and
 /// OUT_DIR/movie.mp4 (for `marbles render OUTDIR`).
 ///
-/// Walls come from OUT_DIR/walls.json when present. Without a camera in
+/// Walls come from OUT_DIR/walls.pvd when present (frame k, the walls' k-th). Without a camera in
 /// `options`, the view frames everything any frame contains; without fixed
 /// colour limits, the colour range spans all frames (both found in a first
 /// pass over the frames). `movie.fps <= 0` derives the rate from the frame

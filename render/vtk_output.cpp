@@ -2,6 +2,8 @@
 #include "render/vtk_output.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <initializer_list>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
@@ -217,6 +219,10 @@ class PolyDataFile {
   void field(const char* name, const T& value) {
     m_field += data_array(m_data, name, 1, &value, 1, "      ");
   }
+  template <typename T>
+  void field_array(const char* name, int components, const T* values, std::size_t tuples) {
+    if (tuples > 0) m_field += data_array(m_data, name, components, values, tuples, "      ");
+  }
   void field_strings(const char* name, const std::vector<std::string>& strings) {
     if (!strings.empty()) m_field += string_array(m_data, name, strings);
   }
@@ -247,6 +253,15 @@ class PolyDataFile {
     m_topology = data_array(m_data, "connectivity", 1, connectivity.data(), connectivity.size(), "        ") +
                  data_array(m_data, "offsets", 1, offsets.data(), cells, "        ");
   }
+  // Cells of varying size, their points consecutive: `ends` are the cells' end offsets.
+  void cells(const char* kind, const std::vector<std::int64_t>& ends) {
+    m_kind = kind;
+    m_cells = ends.size();
+    std::vector<std::int64_t> connectivity(ends.empty() ? 0 : std::size_t(ends.back()));
+    for (std::size_t i = 0; i < connectivity.size(); ++i) connectivity[i] = std::int64_t(i);
+    m_topology = data_array(m_data, "connectivity", 1, connectivity.data(), connectivity.size(), "        ") +
+                 data_array(m_data, "offsets", 1, ends.data(), ends.size(), "        ");
+  }
   void active_scalars(const char* name) { m_scalars = name; }
 
   std::string text() const {
@@ -255,9 +270,10 @@ class PolyDataFile {
     if (vtk_compressed()) xml += " compressor=\"vtkZLibDataCompressor\"";
     const std::string verts = m_kind == "Verts" ? std::to_string(m_cells) : "0";
     const std::string lines = m_kind == "Lines" ? std::to_string(m_cells) : "0";
+    const std::string polys = m_kind == "Polys" ? std::to_string(m_cells) : "0";
     xml += ">\n  <PolyData>\n    <FieldData>\n" + m_field + "    </FieldData>\n    <Piece NumberOfPoints=\"" +
            std::to_string(m_points) + "\" NumberOfVerts=\"" + verts + "\" NumberOfLines=\"" + lines +
-           "\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">\n";
+           "\" NumberOfStrips=\"0\" NumberOfPolys=\"" + polys + "\">\n";
     xml += "      <PointData" + (m_scalars.empty() ? std::string() : " Scalars=\"" + m_scalars + "\"") + ">\n" + m_point +
            "      </PointData>\n";
     if (!m_cell.empty()) xml += "      <CellData>\n" + m_cell + "      </CellData>\n";
@@ -396,6 +412,134 @@ fs::path ContactSeriesWriter::write(const ContactSnapshot& c) {
   file.cell_array("material_b", 1, c.material_b.data(), n);
   file.cell_array("wall", 1, wall.data(), n);
   return m_series.add(c.time, file.text());
+}
+
+// --- walls ------------------------------------------------------------------
+
+namespace {
+
+// Wall surfaces as polygons: quads (planes, box faces, cylinder and sphere
+// bands), each cell tagged with its wall and material.
+struct WallMesh {
+  std::vector<Vec3> points;
+  std::vector<std::int64_t> ends;
+  std::vector<std::uint32_t> wall, material;
+  void quad(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d, std::uint32_t w, std::uint32_t m) {
+    for (const Vec3& p : {a, b, c, d}) points.push_back(p);
+    ends.push_back(std::int64_t(points.size()));
+    wall.push_back(w);
+    material.push_back(m);
+  }
+};
+
+Vec3 perpendicular(const Vec3& a) {
+  const Vec3 t = std::fabs(a.x) < real(0.9) ? Vec3(1, 0, 0) : Vec3(0, 1, 0);
+  const Vec3 c = cross(a, t);
+  return c / length(c);
+}
+
+constexpr int kSegments = 48;  // around cylinders and spheres
+
+}  // namespace
+
+WallSeriesWriter::WallSeriesWriter(fs::path dir, const Vec3& lo, const Vec3& hi, FrameMetadata metadata)
+    : m_series(std::move(dir), "walls", "walls", "walls.pvd"), m_lo(lo), m_hi(hi), m_metadata(std::move(metadata)) {}
+
+void WallSeriesWriter::adopt(double time) { m_series.adopt(time); }
+
+fs::path WallSeriesWriter::write(const Walls& walls, double time, std::uint64_t step) {
+  const Vec3 centre = (m_lo + m_hi) * real(0.5);
+  const real size = std::max(real(0.6) * length(m_hi - m_lo), real(1e-3));  // half the side of a plane's square
+  WallMesh mesh;
+  std::uint32_t index = 0;
+  std::vector<double> planes, boxes, cylinders, spheres;  // the parameters, to read the walls back
+  auto push = [](std::vector<double>& out, std::initializer_list<double> values) {
+    out.insert(out.end(), values.begin(), values.end());
+  };
+  for (const PlaneWall& p : walls.planes) {
+    const Vec3 c = centre - p.normal * dot(centre - p.point, p.normal);
+    const Vec3 u = perpendicular(p.normal) * size, v = cross(p.normal, perpendicular(p.normal)) * size;
+    mesh.quad(c - u - v, c + u - v, c + u + v, c - u + v, index++, p.material);
+    push(planes, {p.point.x, p.point.y, p.point.z, p.normal.x, p.normal.y, p.normal.z, p.velocity.x, p.velocity.y,
+                  p.velocity.z, double(p.material)});
+  }
+  for (const BoxWall& b : walls.boxes) {
+    const Vec3 l = b.lo, h = b.hi;
+    const Vec3 c[8] = {{l.x, l.y, l.z}, {h.x, l.y, l.z}, {h.x, h.y, l.z}, {l.x, h.y, l.z},
+                       {l.x, l.y, h.z}, {h.x, l.y, h.z}, {h.x, h.y, h.z}, {l.x, h.y, h.z}};
+    const int faces[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4}, {2, 3, 7, 6}, {1, 2, 6, 5}, {0, 4, 7, 3}};
+    for (const auto& f : faces) mesh.quad(c[f[0]], c[f[1]], c[f[2]], c[f[3]], index, b.material);
+    ++index;
+    push(boxes, {l.x, l.y, l.z, h.x, h.y, h.z, b.velocity.x, b.velocity.y, b.velocity.z, double(b.material)});
+  }
+  for (const CylinderWall& c : walls.cylinders) {
+    Vec3 base = c.base;
+    real len = c.length;
+    if (len <= 0) {  // infinite: drawn across the scene
+      len = 2 * size;
+      base = c.base + c.axis * (dot(centre - c.base, c.axis) - size);
+    }
+    const Vec3 u = perpendicular(c.axis), v = cross(c.axis, u);
+    for (int k = 0; k < kSegments; ++k) {
+      const double a0 = 2 * M_PI * k / kSegments, a1 = 2 * M_PI * (k + 1) / kSegments;
+      const Vec3 r0 = (u * real(std::cos(a0)) + v * real(std::sin(a0))) * c.radius;
+      const Vec3 r1 = (u * real(std::cos(a1)) + v * real(std::sin(a1))) * c.radius;
+      mesh.quad(base + r0, base + r1, base + r1 + c.axis * len, base + r0 + c.axis * len, index, c.material);
+    }
+    ++index;
+    push(cylinders, {c.base.x, c.base.y, c.base.z, c.axis.x, c.axis.y, c.axis.z, c.radius, c.length,
+                     c.inside ? 1.0 : 0.0, c.angular_velocity, double(c.material)});
+  }
+  for (const SphereWall& s : walls.spheres) {
+    auto at = [&](int i, int j) {
+      const double theta = M_PI * i / (kSegments / 2), phi = 2 * M_PI * j / kSegments;
+      return s.centre + Vec3(real(std::sin(theta) * std::cos(phi)), real(std::sin(theta) * std::sin(phi)),
+                             real(std::cos(theta))) * s.radius;
+    };
+    for (int i = 0; i < kSegments / 2; ++i)
+      for (int j = 0; j < kSegments; ++j) mesh.quad(at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1), index, s.material);
+    ++index;
+    push(spheres, {s.centre.x, s.centre.y, s.centre.z, s.radius, s.velocity.x, s.velocity.y, s.velocity.z,
+                   double(s.material)});
+  }
+  PolyDataFile file;
+  file.field("TimeValue", time);
+  file.field("step", step);
+  file.metadata(m_metadata);
+  file.field_array("planes", 10, planes.data(), planes.size() / 10);
+  file.field_array("boxes", 10, boxes.data(), boxes.size() / 10);
+  file.field_array("cylinders", 11, cylinders.data(), cylinders.size() / 11);
+  file.field_array("spheres", 8, spheres.data(), spheres.size() / 8);
+  file.points(mesh.points.data(), mesh.points.size());
+  file.cells("Polys", mesh.ends);
+  file.cell_array("wall", 1, mesh.wall.data(), mesh.wall.size());
+  file.cell_array("material", 1, mesh.material.data(), mesh.material.size());
+  return m_series.add(time, file.text());
+}
+
+Walls read_walls_vtp(const fs::path& path) {
+  const VtpArrays file = read_vtp_arrays(path);
+  auto rows = [&](const char* name, int components) {
+    std::vector<std::vector<double>> out;
+    const auto it = file.arrays.find(std::string("FieldData/") + name);
+    if (it == file.arrays.end()) return out;
+    if (it->second.components != components || it->second.values.size() % std::size_t(components) != 0)
+      throw RuntimeFailure("cannot read " + path.string() + ": '" + name + "' is not rows of " +
+                           std::to_string(components));
+    for (std::size_t k = 0; k < it->second.values.size(); k += std::size_t(components))
+      out.emplace_back(it->second.values.begin() + long(k), it->second.values.begin() + long(k) + components);
+    return out;
+  };
+  auto vec = [](const std::vector<double>& r, int at) { return Vec3(real(r[at]), real(r[at + 1]), real(r[at + 2])); };
+  Walls w;
+  for (const auto& r : rows("planes", 10))
+    w.planes.push_back({vec(r, 0), vec(r, 3), std::uint32_t(r[9]), vec(r, 6)});
+  for (const auto& r : rows("boxes", 10)) w.boxes.push_back({vec(r, 0), vec(r, 3), std::uint32_t(r[9]), vec(r, 6)});
+  for (const auto& r : rows("cylinders", 11))
+    w.cylinders.push_back({vec(r, 0), vec(r, 3), real(r[6]), real(r[7]), r[8] != 0, real(r[9]), std::uint32_t(r[10])});
+  for (const auto& r : rows("spheres", 8))
+    w.spheres.push_back({vec(r, 0), real(r[3]), std::uint32_t(r[7]), vec(r, 4)});
+  return w;
 }
 
 // --- reading ----------------------------------------------------------------

@@ -28,6 +28,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/walls.hpp"
 #include "render/snapshot.hpp"
 
 namespace marbles::render {
@@ -127,6 +128,28 @@ class ContactSeriesWriter {
   Series m_series;
   FrameMetadata m_metadata;
 };
+
+/// Writes the walls as surfaces, DIR/walls/walls_NNNNNN.vtp (polygons with
+/// cell data `wall` and `material`; planes as squares sized to the scene's
+/// bounds [lo, hi], infinite cylinders across them) and keeps DIR/walls.pvd
+/// up to date, so that moving walls move in ParaView. The field data also
+/// holds every wall's parameters (arrays planes, boxes, cylinders, spheres),
+/// which read_walls_vtp turns back into Walls for `marbles render`.
+class WallSeriesWriter {
+ public:
+  WallSeriesWriter(std::filesystem::path dir, const Vec3& lo, const Vec3& hi, FrameMetadata metadata = {});
+  std::filesystem::path write(const Walls& walls, double time, std::uint64_t step);
+  void adopt(double time);
+  std::size_t frames() const { return m_series.size(); }
+
+ private:
+  Series m_series;
+  Vec3 m_lo, m_hi;
+  FrameMetadata m_metadata;
+};
+
+/// The walls stored in a walls_NNNNNN.vtp. Throws marbles::RuntimeFailure.
+Walls read_walls_vtp(const std::filesystem::path& path);
 
 /// One entry of a .pvd collection.
 struct SeriesEntry {

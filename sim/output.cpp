@@ -14,7 +14,6 @@
 #include "render/frame_output.hpp"
 #include "render/renderer.hpp"
 #include "render/vtk_output.hpp"
-#include "render/walls_json.hpp"
 #include "sim/scene.hpp"
 #include "sim/simulation.hpp"
 #include "sim/version.hpp"
@@ -30,6 +29,19 @@ bool presses(const narrowphase::Contact& c) {
 }
 
 }  // namespace
+
+// The walls at time t: translated by their velocities (cylinders spin in place).
+Walls walls_at(const Walls& initial, double t) {
+  Walls w = initial;
+  const real s = static_cast<real>(t);
+  for (PlaneWall& p : w.planes) p.point = p.point + p.velocity * s;
+  for (BoxWall& b : w.boxes) {
+    b.lo = b.lo + b.velocity * s;
+    b.hi = b.hi + b.velocity * s;
+  }
+  for (SphereWall& sphere : w.spheres) sphere.centre = sphere.centre + sphere.velocity * s;
+  return w;
+}
 
 render::ContactSnapshot make_contact_snapshot(const Simulation& sim) {
   const World& w = sim.world();
@@ -85,17 +97,18 @@ std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path
   namespace fs = std::filesystem;
   std::vector<fs::path> found;
   std::error_code ec;
-  for (const char* name :
-       {"summary.json", "series.pvd", "contacts.pvd", "thermo.csv", "walls.json", "materials.txt", "movie.mp4"})
+  for (const char* name : {"summary.json", "series.pvd", "contacts.pvd", "walls.pvd", "thermo.csv", "walls.json",
+                           "materials.txt", "movie.mp4"})
     if (fs::is_regular_file(dir / name, ec)) found.push_back(dir / name);
   const std::pair<const char*, const char*> series[] = {
-      {"frames", ".vtp"}, {"images", ".png"}, {"checkpoints", ".mck"}, {"contacts", ".vtp"}};
+      {"frames", ".vtp"}, {"images", ".png"}, {"checkpoints", ".mck"}, {"contacts", ".vtp"}, {"walls", ".vtp"}};
   for (const auto& [sub, extension] : series) {
     if (!fs::is_directory(dir / sub, ec)) continue;
     for (const auto& entry : fs::directory_iterator(dir / sub, ec)) {
       const std::string name = entry.path().filename().string();
       if (entry.is_regular_file(ec) && entry.path().extension() == extension &&
-          (name.rfind("frame_", 0) == 0 || name.rfind("step_", 0) == 0 || name.rfind("contacts_", 0) == 0))
+          (name.rfind("frame_", 0) == 0 || name.rfind("step_", 0) == 0 || name.rfind("contacts_", 0) == 0 ||
+           name.rfind("walls_", 0) == 0))
         found.push_back(entry.path());
     }
   }
@@ -120,6 +133,8 @@ struct RunOutput::Impl {
   std::unique_ptr<render::VtkSeriesWriter> vtk;
   std::unique_ptr<render::FrameOutput> frames;
   std::unique_ptr<render::ContactSeriesWriter> contacts;
+  std::unique_ptr<render::WallSeriesWriter> walls;  // with the VTK frames, when the scene has walls
+  Walls initial_walls;
   int contacts_every = 0;
   bool with_contact_counts = false;  // the `contacts` point field is asked for
   bool render_at_finish = false;  // a resumed run: images and movie from the frames
@@ -163,7 +178,7 @@ std::string thermo_row(const Simulation& sim, double ms_per_step) {
 }  // namespace
 
 RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Walls& walls, bool render,
-                     std::ostream& log, bool resumed)
+                     std::ostream& log, bool resumed, const render::Bounds* view)
     : m(std::make_unique<Impl>()) {
   m->dir = dir;
   m->log = &log;
@@ -176,7 +191,6 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
   std::filesystem::create_directories(dir, ec);
   if (ec) throw RuntimeFailure("cannot create the output folder " + dir + ": " + ec.message());
   for (const char* sub : {"", "frames", "images"}) render::remove_stale_temporaries(std::filesystem::path(dir) / sub);
-  render::write_walls_json(dir, walls);
   std::vector<std::string> names;
   for (const scene::Material& m : scene.materials) names.push_back(m.name);
   render::write_material_names(dir, names);
@@ -188,6 +202,14 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
         std::find(fields.begin(), fields.end(), render::PointField::contacts) != fields.end();
     m->vtk = std::make_unique<render::VtkSeriesWriter>(dir, fields, render::FrameMetadata{names, producer});
     m->vtk_every = scene.output.vtk_every;
+    if (!walls.empty()) {
+      const render::Bounds b = view ? *view : render::Bounds{};
+      const bool known = view && !b.empty();
+      const Vec3 lo = known ? Vec3(real(b.lo[0]), real(b.lo[1]), real(b.lo[2])) : Vec3(-1, -1, -1);
+      const Vec3 hi = known ? Vec3(real(b.hi[0]), real(b.hi[1]), real(b.hi[2])) : Vec3(1, 1, 1);
+      m->walls = std::make_unique<render::WallSeriesWriter>(dir, lo, hi, render::FrameMetadata{names, producer});
+      m->initial_walls = walls;
+    }
   }
   if (scene.output.contacts_every > 0) {
     const std::string producer = std::string("marbles ") + kMarblesVersion + " (commit " + kMarblesCommit + ")";
@@ -238,7 +260,10 @@ void RunOutput::write(const Simulation& sim, double step_seconds) {
   if (m->contacts && step % m->contacts_every == 0) m->contacts->write(make_contact_snapshot(sim));
   if (!(m->vtk && step % m->vtk_every == 0) && !(m->frames && step % m->render_every == 0)) return;
   const render::Snapshot snapshot = make_snapshot(sim, m->with_contact_counts);
-  if (m->vtk && step % m->vtk_every == 0) m->vtk->write(snapshot);
+  if (m->vtk && step % m->vtk_every == 0) {
+    m->vtk->write(snapshot);
+    if (m->walls) m->walls->write(walls_at(m->initial_walls, sim.time()), sim.time(), step);
+  }
   if (m->frames && step % m->render_every == 0) m->frames->add(snapshot);
 }
 
@@ -259,8 +284,10 @@ void RunOutput::resume(std::uint64_t steps, double dt) {
     for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->contacts_every))
       m->contacts->adopt(static_cast<double>(step) * dt);
   if (!m->vtk) return;
-  for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->vtk_every))
+  for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->vtk_every)) {
     m->vtk->adopt(static_cast<double>(step) * dt);
+    if (m->walls) m->walls->adopt(static_cast<double>(step) * dt);
+  }
 }
 
 std::string RunOutput::finish() {

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/walls.hpp"
+#include "render/camera.hpp"
 #include "render/snapshot.hpp"
 #include "render/vtk_output.hpp"
 
@@ -22,6 +23,8 @@ class Simulation;
 // `with_contacts`: also count each sphere's pressing contacts (the
 // `contacts` field; on the GPU this downloads the contacts).
 render::Snapshot make_snapshot(const Simulation& sim, bool with_contacts = false);
+// The walls at time t (translated by their velocities).
+Walls walls_at(const Walls& initial, double t);
 // The pressing contacts of the last substep, with forces = impulses / substep.
 render::ContactSnapshot make_contact_snapshot(const Simulation& sim);
 
@@ -44,8 +47,10 @@ class RunOutput {
   // a checkpoint (`resumed`) renders its images and movie at finish() from
   // every frame of the series, as `marbles render DIR` does, so the camera
   // and colour range span the whole run.
+  // `view`: the bounds the walls' drawing is sized to (planes as squares
+  // across it): the scene at its start, so a resumed run draws the same.
   RunOutput(const scene::Scene& scene, const std::string& dir, const Walls& walls, bool render, std::ostream& log,
-            bool resumed = false);
+            bool resumed = false, const render::Bounds* view = nullptr);
   ~RunOutput();
 
   // True when the step just completed (or step 0) has output due.

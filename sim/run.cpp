@@ -165,6 +165,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     err << "warning: " << deep << " pair(s) of spheres start overlapping by more than 1% of the smaller radius\n";
 
   Simulation sim(sc, std::move(world), backend, options.algorithm);
+  const render::Bounds view = render::scene_bounds(make_snapshot(sim), sim.walls());  // before any restart
   if (!options.quiet) out << sc.name << ": " << sim.world().size() << " spheres\n" << sim.describe_pipeline();
 
   const std::uint64_t total_steps = static_cast<std::uint64_t>(std::llround(sc.time.duration / sc.time.dt));
@@ -210,7 +211,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     std::filesystem::remove(file, ec);
     if (ec) throw RuntimeFailure("cannot remove " + file.string() + " of the earlier run: " + ec.message());
   }
-  RunOutput output(sc, sc.output.dir, sim.walls(), render, err, options.restart.has_value());
+  RunOutput output(sc, sc.output.dir, sim.walls(), render, err, options.restart.has_value(), &view);
   Progress progress(!options.quiet);
   double step_seconds = 0;
   const std::uint64_t first_step = sim.steps();

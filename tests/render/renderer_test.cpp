@@ -15,7 +15,6 @@
 #include "render/movie.hpp"
 #include "render/renderer.hpp"
 #include "render/vtk_output.hpp"
-#include "render/walls_json.hpp"
 
 namespace fs = std::filesystem;
 using namespace marbles;
@@ -383,7 +382,8 @@ TEST(RenderOutputDir, RerendersEveryFrameOfASeries) {
   BoxWall box;
   box.lo = Vec3(-0.1f, -0.1f, 0), box.hi = Vec3(0.5f, 0.6f, 0.5f);
   walls.boxes.push_back(box);
-  write_walls_json(dir, walls);
+  WallSeriesWriter wall_series(dir, Vec3(-0.1f, -0.1f, 0), Vec3(0.5f, 0.6f, 0.5f));
+  for (int f = 0; f < 3; ++f) wall_series.write(walls, 0.05 * f, std::uint64_t(f));
 
   RenderOptions o;
   o.width = 128, o.height = 72;

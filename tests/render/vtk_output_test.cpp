@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #if defined(MARBLES_HAVE_VTK)
+#include <vtkCellData.h>
 #include <vtkDataArray.h>
 #include <vtkFieldData.h>
 #include <vtkNew.h>
@@ -161,6 +162,26 @@ TEST(VtkOutput, FieldDataCarriesMaterialNamesUnitsAndProducer) {
   EXPECT_EQ(strings("units").front(), "length m");
   ASSERT_NE(fd->GetArray("TimeValue"), nullptr);
   EXPECT_EQ(fd->GetArray("TimeValue")->GetComponent(0, 0), 0.25);
+}
+
+// VTK's reader sees the walls as polygons with their cell data.
+TEST(VtkOutput, WallSurfacesReadBackWithVtkReader) {
+  const fs::path dir = fresh_dir("vtk_walls");
+  Walls walls;
+  walls.planes.push_back({Vec3(0, 0, 0), Vec3(0, 0, 1), 1, Vec3()});
+  walls.boxes.push_back({Vec3(0, 0, 0), Vec3(1, 1, 1), 0, Vec3()});
+  WallSeriesWriter writer(dir, Vec3(0, 0, 0), Vec3(1, 1, 1));
+  const fs::path file = writer.write(walls, 0.5, 10);
+  vtkNew<vtkXMLPolyDataReader> reader;
+  reader->SetFileName(file.c_str());
+  reader->Update();
+  ASSERT_EQ(reader->GetErrorCode(), 0);
+  vtkPolyData* poly = reader->GetOutput();
+  EXPECT_EQ(poly->GetNumberOfPolys(), 7);  // a square and six faces
+  EXPECT_EQ(poly->GetNumberOfPoints(), 28);
+  ASSERT_NE(poly->GetCellData()->GetArray("material"), nullptr);
+  EXPECT_EQ(poly->GetCellData()->GetArray("material")->GetComponent(0, 0), 1.0);
+  EXPECT_EQ(poly->GetCellData()->GetArray("wall")->GetComponent(6, 0), 1.0);
 }
 #endif
 

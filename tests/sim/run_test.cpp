@@ -185,3 +185,51 @@ TEST(Run, ContactForcesOfARestingStackBalanceItsWeight) {
   EXPECT_EQ(frame.contacts[0], 2u);
   fs::remove_all(dir);
 }
+
+// Walls in the output: a rising floor (a plane moving at 0.02 m/s) and a box,
+// drawn in walls/walls_NNNNNN.vtp beside every sphere frame; the floor of
+// frame k has risen by 0.02 t, and `marbles render` finds the walls there.
+TEST(Run, MovingWallsMoveInTheWallSeries) {
+  const fs::path dir = temp_dir("walls");
+  const fs::path scene = dir / "scene.yaml";
+  std::ofstream(scene) << R"(format: 1
+time: {duration: 0.1, dt: 1.0e-3}
+effects: [gravity, collisions, walls]
+materials:
+  glass: {density: 2500}
+walls:
+  - box: {min: [0, 0, 0], max: [0.2, 0.2, 0.6]}
+  - plane: {point: [0, 0, 0.05], normal: [0, 0, 1]}
+    velocity: [0, 0, 0.02]
+particles:
+  - random: {count: 20, min: [0.02, 0.02, 0.1], max: [0.18, 0.18, 0.5], radius: 0.01, seed: 3}
+output:
+  vtk: {every: 25}
+)";
+  RunOptions options;
+  options.scene_path = scene.string();
+  options.out_dir = (dir / "out").string();
+  options.backend = BackendChoice::cpu;
+  options.quiet = true;
+  std::ostringstream out, err;
+  ASSERT_EQ(run_scene(options, out, err), 0) << err.str();
+  const auto frames = render::read_pvd(dir / "out" / "series.pvd");
+  const auto walls = render::read_pvd(dir / "out" / "walls.pvd");
+  ASSERT_EQ(walls.size(), frames.size());
+  ASSERT_EQ(walls.size(), 5u);
+  for (std::size_t k = 0; k < walls.size(); ++k) {
+    EXPECT_EQ(walls[k].time, frames[k].time);
+    const Walls w = render::read_walls_vtp(walls[k].path);
+    ASSERT_EQ(w.planes.size(), 1u);
+    ASSERT_EQ(w.boxes.size(), 1u);
+    EXPECT_NEAR(w.planes[0].point.z, 0.05 + 0.02 * walls[k].time, 1e-6) << "frame " << k;
+    EXPECT_EQ(w.boxes[0].hi.z, real(0.6));
+    // The drawn floor (planes are drawn first) sits at the plane's height.
+    const render::VtpArrays surfaces = render::read_vtp_arrays(walls[k].path);
+    const auto& wall = surfaces.arrays.at("CellData/wall").values;
+    const auto& points = surfaces.arrays.at("Points/Points").values;
+    ASSERT_EQ(wall[0], 0.0);  // the plane's square comes first
+    for (int corner = 0; corner < 4; ++corner) EXPECT_NEAR(points[3 * corner + 2], w.planes[0].point.z, 1e-6);
+  }
+  fs::remove_all(dir);
+}
