@@ -45,5 +45,11 @@ echo "setup: configuring $BUILD_DIR (Release)"
 cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release ${MARBLES_CMAKE_ARGS:-} >"$BUILD_DIR.configure.log" 2>&1 \
   || { cat "$BUILD_DIR.configure.log" >&2; exit 1; }
 grep -E "^-- marbles:" "$BUILD_DIR.configure.log" || true
-echo "setup: building with $JOBS jobs"
-cmake --build "$BUILD_DIR" -j "$JOBS"
+# scripts/run builds only the program (MARBLES_BUILD_TARGETS=marbles); scripts/test builds everything.
+if [ -n "${MARBLES_BUILD_TARGETS:-}" ]; then
+  echo "setup: building ${MARBLES_BUILD_TARGETS} with $JOBS jobs"
+  cmake --build "$BUILD_DIR" -j "$JOBS" --target ${MARBLES_BUILD_TARGETS}
+else
+  echo "setup: building with $JOBS jobs"
+  cmake --build "$BUILD_DIR" -j "$JOBS"
+fi

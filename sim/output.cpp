@@ -293,6 +293,7 @@ void RunOutput::resume(std::uint64_t steps, double dt) {
 std::string RunOutput::finish() {
   std::ostringstream out;
   if (m->vtk) out << m->vtk->frames() << " frames in frames/, series.pvd, ";
+  if (m->walls) out << "walls in walls/, walls.pvd, ";
   if (m->contacts) out << m->contacts->frames() << " contact frames in contacts/, contacts.pvd, ";
   if (m->render_at_finish) {
     render::render_output_dir(m->dir, m->render_options, m->movie, false, *m->log);
