@@ -54,15 +54,12 @@ def show_run(args):
     glyph.GlyphType.ThetaResolution = 16
     glyph.GlyphType.PhiResolution = 12
     shown = pv.Show(glyph, view)
-    pv.ColorBy(shown, ("POINTS", color))
-    shown.RescaleTransferFunctionToDataRange(True, False)
-    shown.SetScalarBarVisibility(view, True)
 
     walls_pvd = os.path.join(args.outdir, "walls.pvd")
     if os.path.exists(walls_pvd):
         walls = pv.PVDReader(registrationName="walls", FileName=walls_pvd)
         wall_display = pv.Show(walls, view)
-        pv.ColorBy(wall_display, None)
+        wall_display.ColorArrayName = ["POINTS", ""]  # a plain colour, not an array
         wall_display.DiffuseColor = [0.75, 0.75, 0.8]
         wall_display.Opacity = 0.3
 
@@ -74,11 +71,15 @@ def show_run(args):
         contact_display.LineWidth = 2.0
 
     times = spheres.TimestepValues
-    if not isinstance(times, (list, tuple)):
-        times = [times]
+    times = [times] if isinstance(times, (int, float)) else list(times)
     scene = pv.GetAnimationScene()
     scene.UpdateAnimationUsingDataTimeSteps()
     view.ViewTime = args.time if args.time is not None else (times[-1] if times else 0.0)
+    scene.AnimationTime = view.ViewTime
+    glyph.UpdatePipeline(view.ViewTime)
+    pv.ColorBy(shown, ("POINTS", color))
+    shown.RescaleTransferFunctionToDataRange(False, True)  # the range of the frame shown
+    shown.SetScalarBarVisibility(view, True)
     view.CameraPosition = [1, -1.5, 1]
     view.CameraFocalPoint = [0, 0, 0]
     view.CameraViewUp = [0, 0, 1]

@@ -50,7 +50,8 @@ series = os.path.join(outdir, "series.pvd")
 times = listed_times(series)
 spheres = pv.PVDReader(FileName=series)
 spheres.UpdatePipelineInformation()
-steps = list(spheres.TimestepValues) if isinstance(spheres.TimestepValues, (list, tuple)) else [spheres.TimestepValues]
+steps = spheres.TimestepValues
+steps = [steps] if isinstance(steps, (int, float)) else list(steps)
 if len(steps) != len(times) or any(abs(a - b) > 1e-12 for a, b in zip(steps, times)):
     fail("ParaView sees time steps %s, series.pvd lists %s" % (steps, times))
 expected_arrays = {"radius", "velocity", "angular_velocity", "id", "material", "speed", "contacts"}
