@@ -29,7 +29,7 @@ Walls walls_at(const Walls& initial, double t);
 render::ContactSnapshot make_contact_snapshot(const Simulation& sim);
 
 // The files of an earlier run in `dir` (what a run writes: summary.json,
-// series.pvd, contacts.pvd, thermo.csv, walls.json, materials.txt, movie.mp4, frames/frame_*.vtp,
+// series.pvd, contacts.pvd, walls.pvd, thermo.csv, an old walls.json, materials.txt, movie.mp4, frames/frame_*.vtp,
 // images/frame_*.png, checkpoints/step_*.mck, contacts/contacts_*.vtp); other files are not ours.
 std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir);
 
