@@ -121,8 +121,6 @@ std::string numbered(const char* prefix, std::size_t index) {
 
 }  // namespace
 
-bool vtk_available() { return true; }
-
 bool vtk_compressed() {
 #if defined(MARBLES_HAVE_ZLIB)
   return true;
@@ -245,13 +243,9 @@ class PolyDataFile {
   }
   // `cells` cells of `per_cell` consecutive points each: "Verts" or "Lines".
   void cells(const char* kind, std::size_t cells, std::size_t per_cell) {
-    m_kind = kind;
-    m_cells = cells;
-    std::vector<std::int64_t> connectivity(cells * per_cell), offsets(cells);
-    for (std::size_t i = 0; i < connectivity.size(); ++i) connectivity[i] = std::int64_t(i);
-    for (std::size_t c = 0; c < cells; ++c) offsets[c] = std::int64_t((c + 1) * per_cell);
-    m_topology = data_array(m_data, "connectivity", 1, connectivity.data(), connectivity.size(), "        ") +
-                 data_array(m_data, "offsets", 1, offsets.data(), cells, "        ");
+    std::vector<std::int64_t> ends(cells);
+    for (std::size_t c = 0; c < cells; ++c) ends[c] = std::int64_t((c + 1) * per_cell);
+    this->cells(kind, ends);
   }
   // Cells of varying size, their points consecutive: `ends` are the cells' end offsets.
   void cells(const char* kind, const std::vector<std::int64_t>& ends) {

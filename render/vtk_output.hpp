@@ -33,8 +33,6 @@
 
 namespace marbles::render {
 
-/// True: every build writes and reads .vtp frames (kept for callers that ask).
-bool vtk_available();
 /// True when frames are zlib-compressed (the build has zlib).
 bool vtk_compressed();
 

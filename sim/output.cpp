@@ -100,17 +100,19 @@ std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path
   for (const char* name : {"summary.json", "series.pvd", "contacts.pvd", "walls.pvd", "thermo.csv", "walls.json",
                            "materials.txt", "movie.mp4"})
     if (fs::is_regular_file(dir / name, ec)) found.push_back(dir / name);
-  const std::pair<const char*, const char*> series[] = {
-      {"frames", ".vtp"}, {"images", ".png"}, {"checkpoints", ".mck"}, {"contacts", ".vtp"}, {"walls", ".vtp"}};
-  for (const auto& [sub, extension] : series) {
-    if (!fs::is_directory(dir / sub, ec)) continue;
-    for (const auto& entry : fs::directory_iterator(dir / sub, ec)) {
-      const std::string name = entry.path().filename().string();
-      if (entry.is_regular_file(ec) && entry.path().extension() == extension &&
-          (name.rfind("frame_", 0) == 0 || name.rfind("step_", 0) == 0 || name.rfind("contacts_", 0) == 0 ||
-           name.rfind("walls_", 0) == 0))
+  struct Numbered {
+    const char* folder;
+    const char* prefix;
+    const char* extension;
+  };
+  for (const Numbered& n : {Numbered{"frames", "frame_", ".vtp"}, Numbered{"images", "frame_", ".png"},
+                            Numbered{"checkpoints", "step_", ".mck"}, Numbered{"contacts", "contacts_", ".vtp"},
+                            Numbered{"walls", "walls_", ".vtp"}}) {
+    if (!fs::is_directory(dir / n.folder, ec)) continue;
+    for (const auto& entry : fs::directory_iterator(dir / n.folder, ec))
+      if (entry.is_regular_file(ec) && entry.path().extension() == n.extension &&
+          entry.path().filename().string().rfind(n.prefix, 0) == 0)
         found.push_back(entry.path());
-    }
   }
   return found;
 }
@@ -195,8 +197,8 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
   for (const scene::Material& m : scene.materials) names.push_back(m.name);
   render::write_material_names(dir, names);
 
+  const std::string producer = std::string("marbles ") + kMarblesVersion + " (commit " + kMarblesCommit + ")";
   if (scene.output.vtk_every > 0) {
-    const std::string producer = std::string("marbles ") + kMarblesVersion + " (commit " + kMarblesCommit + ")";
     const std::vector<render::PointField> fields = render::parse_point_fields(scene.output.fields);
     m->with_contact_counts =
         std::find(fields.begin(), fields.end(), render::PointField::contacts) != fields.end();
@@ -212,7 +214,6 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
     }
   }
   if (scene.output.contacts_every > 0) {
-    const std::string producer = std::string("marbles ") + kMarblesVersion + " (commit " + kMarblesCommit + ")";
     m->contacts = std::make_unique<render::ContactSeriesWriter>(dir, render::FrameMetadata{names, producer});
     m->contacts_every = scene.output.contacts_every;
   }

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cstdio>
 #include <cmath>
 #include <string>
 #include <iterator>
@@ -62,14 +61,16 @@ void Simulation::watch_from_host() {
   const World& w = world();
   const auto& walls = m_model->wall_shapes;
   const auto wall_count = m_model->wall_contacts ? static_cast<std::uint32_t>(walls.size()) : 0u;
+  // The figures of the state as it stands, as the step's end would give them.
+  m_last.kinetic_energy = 0;
+  m_last.beyond_walls = 0;
   Watch& s = m_watch;
-  s.energy = 0;
-  s.beyond = 0;
   s.mass = 0;
   double radius_sum = 0;
   for (std::size_t i = 0; i < w.size(); ++i) {
-    s.energy += watch::kinetic_energy(w.velocity[i], w.angular_velocity[i], w.inv_mass[i], w.inv_inertia[i]);
-    s.beyond += watch::beyond_walls(w.position[i], w.radius[i], walls.data(), wall_count) ? 1 : 0;
+    m_last.kinetic_energy +=
+        watch::kinetic_energy(w.velocity[i], w.angular_velocity[i], w.inv_mass[i], w.inv_inertia[i]);
+    m_last.beyond_walls += watch::beyond_walls(w.position[i], w.radius[i], walls.data(), wall_count) ? 1 : 0;
     if (w.inv_mass[i] > 0) s.mass += 1.0 / w.inv_mass[i];
     radius_sum += w.radius[i];
   }
@@ -114,7 +115,7 @@ void Simulation::step() {
     const std::string broken = m_watchdog ? violation(before) : std::string();
     if (broken.empty()) break;
     m_backend->undo_step();
-    m_last.max_overlap = before.max_overlap;
+    m_last = before;
     ++m_rollbacks;
     m_last_rollbacks.push_back(broken);
     if (retry == kWatchdogRetries) {
@@ -125,11 +126,7 @@ void Simulation::step() {
     }
   }
   m_backend->set_iteration_factor(1);
-  if (m_watchdog) {
-    m_watch.energy = m_last.kinetic_energy;
-    m_watch.beyond = m_last.beyond_walls;
-    m_watch.known = true;
-  }
+  m_watch.known = m_watchdog;  // the end-of-step figures describe the next step's start
   ++m_steps;
   m_time = m_steps * m_model->dt;
 }
@@ -171,13 +168,13 @@ std::string Simulation::violation(const StepCounters& before) {
   if (m_backend->non_finite())
     return "non-finite state (sphere " + std::to_string(m_backend->world().first_non_finite()) + ")";
   if (m_watch.known) {
-    const double bound = watch_bound(m_watch.energy);
+    const double bound = watch_bound(before.kinetic_energy);
     if (!(m_last.kinetic_energy <= bound))
-      return "kinetic energy jumped from " + significant(m_watch.energy, 4) + " J to " +
+      return "kinetic energy jumped from " + significant(before.kinetic_energy, 4) + " J to " +
              significant(m_last.kinetic_energy, 4) + " J (at most " + significant(bound, 4) +
              " J from gravity and walls)";
-    if (m_last.beyond_walls > m_watch.beyond)
-      return std::to_string(m_last.beyond_walls - m_watch.beyond) + " sphere(s) went through a wall";
+    if (m_last.beyond_walls > before.beyond_walls)
+      return std::to_string(m_last.beyond_walls - before.beyond_walls) + " sphere(s) went through a wall";
   }
   if (m_last.max_overlap > kWatchdogOverlap && before.max_overlap < kWatchdogOverlap / 2)
     return "overlap " + significant(m_last.max_overlap, 4) + " of a radius";

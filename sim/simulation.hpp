@@ -131,7 +131,7 @@ class Simulation {
   void attempt(int split);  // one try of the step with `split` times the substeps
   std::string violation(const StepCounters& before);  // the broken invariant after a try, or empty
   double watch_bound(double energy_before) const;    // the largest kinetic energy a step may reach
-  void watch_from_host();                            // the figures of the host world
+  void watch_from_host();                            // the figures of the host world, into m_last
   void inject_fault();
   template <class F>
   void run_verb(Verb verb, F&& f);
@@ -148,10 +148,9 @@ class Simulation {
   Fault m_fault = Fault::nan;
   int m_split = 1;  // the try's substeps per model substep
   // The watchdog's view of the state before the step, and the scene's scales.
+  // (Its figures of the state itself are m_last's kinetic_energy and beyond_walls.)
   struct Watch {
-    bool known = false;   // energy and beyond of the step's start are known
-    double energy = 0;    // J
-    std::uint64_t beyond = 0;
+    bool known = false;   // m_last's figures describe the state (no edit since)
     double mass = 0;      // kg, of the movable spheres
     double radius = 0;    // m, mean
     double wall_speed = 0;  // m/s, the fastest wall surface
