@@ -293,7 +293,8 @@ fs::path Series::next_path() const { return m_dir / m_folder / numbered(m_prefix
 
 fs::path Series::add(double time, const std::string& file_text) {
   const fs::path path = next_path();
-  if (m_entries.empty()) {
+  if (!m_folder_made) {  // on the first file of this process (a resumed run may adopt earlier ones)
+    m_folder_made = true;
     std::error_code ec;
     fs::create_directories(m_dir / m_folder, ec);
     if (ec) throw RuntimeFailure("cannot create " + (m_dir / m_folder).string() + ": " + ec.message());

@@ -71,6 +71,7 @@ class Series {
   std::filesystem::path m_dir;
   std::string m_folder, m_prefix, m_pvd;
   std::vector<std::pair<double, std::string>> m_entries;  // time, file relative to m_dir
+  bool m_folder_made = false;
 };
 
 /// Writes DIR/frames/frame_NNNNNN.vtp and keeps DIR/series.pvd up to date.

@@ -242,6 +242,24 @@ TEST_F(Checkpoints, BenchJsonIsJsonOnly) {
   }
 }
 
+// A restart into another folder (the checkpoint taken elsewhere) writes
+// every series there too: frames, walls and contacts.
+TEST_F(Checkpoints, RestartIntoAnotherFolderWritesEverySeries) {
+  const test::ScratchDir dir("ck_elsewhere");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string common = " --quiet --backend cpu --set output.contacts.every=50";
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + dir.path() + "/first --duration 0.1"), 0);
+  std::string err;
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + dir.path() + "/second --restart " + dir.path() +
+                        "/first/checkpoints/step_000100.mck",
+                    &err),
+            0)
+      << err;
+  for (const std::string file : {"frames/frame_000015.vtp", "walls/walls_000015.vtp", "contacts/contacts_000006.vtp",
+                                 "series.pvd", "walls.pvd", "contacts.pvd", "summary.json"})
+    EXPECT_TRUE(fs::exists(dir.path() + "/second/" + file)) << file;
+}
+
 // The newest `keep` checkpoints stay.
 TEST_F(Checkpoints, KeepsTheNewest) {
   const test::ScratchDir dir("ck_keep");
