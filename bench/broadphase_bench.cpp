@@ -8,6 +8,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <nlohmann/json.hpp>
+
 #include "bench/bench_scenes.hpp"
 #include "broadphase/broadphase.hpp"
 #include "core/error.hpp"
@@ -102,33 +104,42 @@ CaseResult summarise_calls(std::size_t n, const std::vector<bp::Stats>& calls, b
   return r;
 }
 
+// One JSON object on one line per case (gpu-check collects them as JSON lines).
 void print_json(std::ostream& out, const BroadphaseBenchOptions& o, const CaseResult& r) {
-  auto stage = [&](const char* name, const Summary& s, double bytes) {
-    out << "\"" << name << "\":{\"median_ms\":" << s.median << ",\"min_ms\":" << s.min;
-    if (r.copy_bytes_per_ms > 0) out << ",\"floor_ms\":" << bytes / r.copy_bytes_per_ms;
-    out << ",\"floor_bytes\":" << bytes << "}";
+  auto stage = [&](const Summary& s, double bytes) {
+    nlohmann::ordered_json j{{"median_ms", s.median}, {"min_ms", s.min}};
+    if (r.copy_bytes_per_ms > 0) j["floor_ms"] = bytes / r.copy_bytes_per_ms;
+    j["floor_bytes"] = bytes;
+    return j;
   };
-  out << "{\"bench\":\"broadphase\",\"backend\":\"" << o.backend << "\",\"algorithm\":\"" << o.algorithm
-      << "\",\"sort_kind\":\""
-      << (o.backend == "cuda" ? o.sort : "radix-cpu") << "\",\"scene\":\"" << o.scene << "\",\"n\":" << r.n
-      << ",\"repeats\":" << o.repeats << ",\"margin\":" << o.margin << ",";
-  stage("cell_ids", r.cell_ids, r.bytes.cell_ids);
-  out << ",";
-  stage("sort", r.sort, r.bytes.sort);
-  out << ",";
-  stage("cell_list", r.cell_list, r.bytes.cell_list);
-  out << ",";
-  stage("traversal", r.traversal, r.bytes.traversal);
-  out << ",";
-  stage("total", r.total, r.bytes.total());
-  out << ",\"pairs\":" << r.last.pairs << ",\"cell_entries\":" << r.last.cell_entries
-      << ",\"collision_cells\":" << r.last.collision_cells << ",\"tests\":" << r.last.tests
-      << ",\"key_bits\":" << r.last.key_bits << ",\"key_width\":" << r.last.key_width
-      << ",\"sort_passes\":" << r.last.sort_passes << ",\"cell_size\":" << r.last.cell_size
-      << ",\"grid_cells\":" << r.last.grid_cells << ",\"dense_cell_starts\":" << (r.last.dense_cell_starts ? "true" : "false");
-  if (r.copy_bytes_per_ms > 0)
-    out << ",\"copy_GBps\":" << r.copy_bytes_per_ms * 1e-6 << ",\"device\":\"" << r.device << "\"";
-  out << "}\n";
+  nlohmann::ordered_json j{{"bench", "broadphase"},
+                           {"backend", o.backend},
+                           {"algorithm", o.algorithm},
+                           {"sort_kind", o.backend == "cuda" ? o.sort : std::string("radix-cpu")},
+                           {"scene", o.scene},
+                           {"n", r.n},
+                           {"repeats", o.repeats},
+                           {"margin", o.margin},
+                           {"cell_ids", stage(r.cell_ids, r.bytes.cell_ids)},
+                           {"sort", stage(r.sort, r.bytes.sort)},
+                           {"cell_list", stage(r.cell_list, r.bytes.cell_list)},
+                           {"traversal", stage(r.traversal, r.bytes.traversal)},
+                           {"total", stage(r.total, r.bytes.total())},
+                           {"pairs", r.last.pairs},
+                           {"cell_entries", r.last.cell_entries},
+                           {"collision_cells", r.last.collision_cells},
+                           {"tests", r.last.tests},
+                           {"key_bits", r.last.key_bits},
+                           {"key_width", r.last.key_width},
+                           {"sort_passes", r.last.sort_passes},
+                           {"cell_size", r.last.cell_size},
+                           {"grid_cells", r.last.grid_cells},
+                           {"dense_cell_starts", r.last.dense_cell_starts}};
+  if (r.copy_bytes_per_ms > 0) {
+    j["copy_GBps"] = r.copy_bytes_per_ms * 1e-6;
+    j["device"] = r.device;
+  }
+  out << j.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace) << "\n";
 }
 
 void print_table(std::ostream& out, const BroadphaseBenchOptions& o, const std::vector<CaseResult>& rs) {

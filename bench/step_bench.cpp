@@ -23,6 +23,8 @@
 #include <omp.h>
 #endif
 
+#include <nlohmann/json.hpp>
+
 #include "core/error.hpp"
 #include "sim/particles.hpp"
 #include "sim/run.hpp"
@@ -124,14 +126,15 @@ int run_effects_bench(const EffectsBenchOptions& options, std::ostream& out) {
     rows.push_back(time_steps(sim, 5, options.repeats));
   }
   if (options.json) {
-    out << "{\"benchmark\": \"effects\", \"backend\": \"" << options.backend << "\", \"n\": " << options.n
-        << ", \"volume_fraction\": " << options.volume_fraction << ", \"repeats\": " << options.repeats
-        << ", \"results\": [\n";
+    nlohmann::ordered_json doc{{"benchmark", "effects"}, {"backend", options.backend}, {"n", options.n},
+                               {"volume_fraction", options.volume_fraction}, {"repeats", options.repeats},
+                               {"results", nlohmann::ordered_json::array()}};
     for (std::size_t k = 0; k < rows.size(); ++k)
-      out << "  {\"pipeline\": \"" << configs[k].first << "\", \"step_ms_median\": " << rows[k].step_ms
-          << ", \"contacts\": " << rows[k].contacts << ", \"us_per_contact\": "
-          << 1e3 * rows[k].step_ms / std::max(1.0, rows[k].contacts) << "}" << (k + 1 < rows.size() ? "," : "") << "\n";
-    out << "]}\n";
+      doc["results"].push_back({{"pipeline", configs[k].first},
+                                {"step_ms_median", rows[k].step_ms},
+                                {"contacts", rows[k].contacts},
+                                {"us_per_contact", 1e3 * rows[k].step_ms / std::max(1.0, rows[k].contacts)}});
+    out << json_text(doc);
     return 0;  // --json: JSON only
   }
   out << "effect cost (" << options.backend << ", " << kRealName << ", N = " << options.n << ", volume fraction "
@@ -477,32 +480,34 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   }
   constexpr int kVerbs = static_cast<int>(Verb::count);
   if (options.json) {
-    out << "{\"benchmark\": \"step\", \"backend\": \"" << options.backend << "\", \"scene\": \"" << options.scene
-        << "\", \"precision\": \"" << kRealName << "\", \"threads\": " << threads()
-        << ", \"repeats\": " << options.repeats << ", \"warmup\": " << warmup
-        << ", \"launches_per_step\": null, \"results\": [\n";
-    for (std::size_t k = 0; k < rows.size(); ++k) {
-      const Row& r = rows[k];
-      out << "  {\"n\": " << r.n << ", \"step_ms_median\": " << json_number(r.step_ms) << ", \"step_ms_min\": "
-          << json_number(r.step_min_ms) << ", \"broadphase_ms_median\": " << json_number(r.broadphase_ms)
-          << ", \"candidate_pairs\": " << json_number(r.pairs) << ", \"contacts\": " << json_number(r.contacts)
-          << ", \"contacts_per_sphere\": " << json_number(r.contacts_per_sphere) << ", \"coordination\": "
-          << json_number(r.coordination) << ", \"colours\": " << r.colours << ", \"overflow_median\": " << json_number(r.overflow)
-          << ", \"max_overlap_pct\": " << json_number(r.max_overlap_pct) << ", \"ke_per_sphere_J\": " << json_number(r.ke_per_sphere)
-          << ", \"bytes_per_step_median\": "
-          << json_number(r.bytes_per_step) << ", \"device_bytes_per_sphere\": " << json_number(r.device_bytes_per_sphere)
-          << ",\n   \"verb_ms\": {";
-      for (int v = 0; v < kVerbs; ++v)
-        out << "\"" << kVerbNames[v] << "\": " << json_number(r.verb_ms[v]) << (v + 1 < kVerbs ? ", " : "");
-      out << "}";
+    nlohmann::ordered_json doc{{"benchmark", "step"}, {"backend", options.backend}, {"scene", options.scene},
+                               {"precision", kRealName}, {"threads", threads()}, {"repeats", options.repeats},
+                               {"warmup", warmup}, {"launches_per_step", nullptr},
+                               {"results", nlohmann::ordered_json::array()}};
+    for (const Row& r : rows) {
+      nlohmann::ordered_json row{{"n", r.n},
+                                 {"step_ms_median", r.step_ms},
+                                 {"step_ms_min", r.step_min_ms},
+                                 {"broadphase_ms_median", r.broadphase_ms},
+                                 {"candidate_pairs", r.pairs},
+                                 {"contacts", r.contacts},
+                                 {"contacts_per_sphere", r.contacts_per_sphere},
+                                 {"coordination", r.coordination},
+                                 {"colours", r.colours},
+                                 {"overflow_median", r.overflow},
+                                 {"max_overlap_pct", r.max_overlap_pct},
+                                 {"ke_per_sphere_J", r.ke_per_sphere},
+                                 {"bytes_per_step_median", r.bytes_per_step},
+                                 {"device_bytes_per_sphere", r.device_bytes_per_sphere},
+                                 {"verb_ms", nlohmann::ordered_json::object()}};
+      for (int v = 0; v < kVerbs; ++v) row["verb_ms"][kVerbNames[v]] = r.verb_ms[v];
       if (r.settle)
-        out << ",\n   \"settle\": {\"cached\": " << (r.settle->cached ? "true" : "false") << ", \"backend\": \""
-            << r.settle->backend << "\", \"steps\": " << r.settle->steps << ", \"seconds\": "
-            << json_number(r.settle->seconds) << ", \"ke_per_sphere_J\": " << json_number(r.settle->ke_per_sphere)
-            << ", \"max_overlap_pct\": " << json_number(100 * r.settle->max_overlap) << "}";
-      out << "}" << (k + 1 < rows.size() ? "," : "") << "\n";
+        row["settle"] = {{"cached", r.settle->cached},          {"backend", r.settle->backend},
+                         {"steps", r.settle->steps},            {"seconds", r.settle->seconds},
+                         {"ke_per_sphere_J", r.settle->ke_per_sphere}, {"max_overlap_pct", 100 * r.settle->max_overlap}};
+      doc["results"].push_back(std::move(row));
     }
-    out << "]}\n";
+    out << json_text(doc);
     return 0;
   }
   out << "step benchmark (" << options.backend << ", " << kRealName << ", " << threads() << " thread(s), "

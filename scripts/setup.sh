@@ -8,7 +8,7 @@ BUILD_DIR=${BUILD_DIR:-$ROOT/build}
 JOBS=$(nproc 2>/dev/null || echo 2)
 
 # Needed to build the core at all (zlib: compressed VTK frames, written by marbles itself).
-REQUIRED_PKGS=(cmake g++ make pkg-config libyaml-cpp-dev libgtest-dev libcli11-dev zlib1g-dev)
+REQUIRED_PKGS=(cmake g++ make pkg-config libyaml-cpp-dev libgtest-dev libcli11-dev zlib1g-dev nlohmann-json3-dev)
 # Found -> on: OSMesa rendering, PNG, movies, study plots, the scene fuzzer (clang, libFuzzer), and
 # python3 for the tests' independent reader of the frames. VTK itself is not installed (docs/vtk-output.md):
 # where libvtk9-dev is already present its reader checks the frames too.

@@ -14,6 +14,8 @@
 #include <optional>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "broadphase/grid.hpp"
 #include "core/device.hpp"
 #include "core/error.hpp"
@@ -88,39 +90,12 @@ void warn_risky_settings(const scene::Scene& sc, const scene::GeneratedParticles
   for (const std::string& w : risky_settings(sc, particles, sizeof(real) == 4)) err << "warning: " << w << "\n";
 }
 
-// A JSON string: quotes, backslashes and every control character escaped
-// (a path with a tab or a newline stays valid JSON).
-std::string json_string(const std::string& v) {
-  std::string out = "\"";
-  for (const char c : v) {
-    const auto u = static_cast<unsigned char>(c);
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += c;
-    } else if (u < 0x20) {
-      char code[8];
-      std::snprintf(code, sizeof code, "\\u%04x", u);
-      out += code;
-    } else {
-      out += c;
-    }
-  }
-  return out + "\"";
-}
-
 }  // namespace
 
-std::string json_number(double v) {
-  if (!std::isfinite(v)) return "null";
-  std::ostringstream s;
-  s << std::setprecision(10) << v;
-  return s.str();
-}
-
-std::string json_numbers(const std::vector<double>& values) {
-  std::string out = "[";
-  for (std::size_t i = 0; i < values.size(); ++i) out += (i ? ", " : "") + json_number(values[i]);
-  return out + "]";
+std::string json_text(const nlohmann::ordered_json& document) {
+  // Text that is not UTF-8 (a path's bytes) is replaced, not refused; a
+  // non-finite number is written as null.
+  return document.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
 }
 
 int check_scene(const std::string& scene_path, const std::vector<std::string>& overrides, std::ostream& out,
@@ -284,47 +259,45 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   const double e_end = sim.world().kinetic_energy();
   std::optional<ReferenceResult> reference;
   if (probe) reference = probe->finish(sim.time(), sim.world());
-  std::ostringstream json;
-  std::string material_names;
-  for (const scene::Material& m : sc.materials) material_names += (material_names.empty() ? "" : ", ") + json_string(m.name);
-  json << "{\n"
-       << "  \"scene\": " << json_string(sc.path) << ",\n"
-       << "  \"marbles_version\": " << json_string(kMarblesVersion) << ",\n"
-       << "  \"commit\": " << json_string(kMarblesCommit) << ",\n"
-       << "  \"command_line\": " << json_string(options.command_line) << ",\n"
-       << "  \"date\": " << json_string(started_at) << ",\n"
-       << "  \"threads\": " << thread_count() << ",\n"
-       << "  \"units\": {\"length\": \"m\", \"time\": \"s\", \"mass\": \"kg\", \"energy\": \"J\", \"velocity\": \"m/s\", "
-          "\"angular_velocity\": \"rad/s\"},\n"
-       << "  \"materials\": [" << material_names << "],\n"
-       << "  \"spheres\": " << sim.world().size() << ",\n"
-       << "  \"backend\": " << json_string(backend == broadphase::Backend::cuda ? "cuda" : "cpu") << ",\n"
-       << "  \"precision\": " << json_string(kRealName) << ",\n"
-       << "  \"steps\": " << sim.steps() << ",\n"
-       << "  \"substeps\": " << sim.substeps() << ",\n"
-       << "  \"iterations\": " << sc.solver.iterations << ",\n"
-       << "  \"integrator\": " << json_string(sc.solver.integrator) << ",\n"
-       << "  \"speculative\": " << (sc.solver.speculative ? "true" : "false") << ",\n"
-       << "  \"dt\": " << json_number(sim.dt()) << ",\n"
-       << "  \"simulated_time\": " << json_number(sim.time()) << ",\n"
-       << "  \"wall_time\": " << json_number(wall) << ",\n"
-       << "  \"mean_ms_per_step\": " << json_number(1e3 * step_seconds / steps_run) << ",\n"
-       << "  \"mean_candidate_pairs\": " << json_number(candidate_sum / steps) << ",\n"
-       << "  \"mean_contacts\": " << json_number(contact_sum / steps) << ",\n"
-       << "  \"max_overlap\": " << json_number(deepest) << ",\n"
-       << "  \"max_overlap_end\": " << json_number(totals.overlap_end) << ",\n"
-       << "  \"rollbacks\": " << totals.rollbacks << ",\n"
-       << "  \"kinetic_energy_start\": " << json_number(e_start) << ",\n"
-       << "  \"kinetic_energy_end\": " << json_number(e_end);
+  nlohmann::ordered_json summary;
+  summary["scene"] = sc.path;
+  summary["marbles_version"] = kMarblesVersion;
+  summary["commit"] = kMarblesCommit;
+  summary["command_line"] = options.command_line;
+  summary["date"] = started_at;
+  summary["threads"] = thread_count();
+  summary["units"] = {{"length", "m"}, {"time", "s"}, {"mass", "kg"}, {"energy", "J"}, {"velocity", "m/s"},
+                      {"angular_velocity", "rad/s"}};
+  summary["materials"] = nlohmann::ordered_json::array();
+  for (const scene::Material& m : sc.materials) summary["materials"].push_back(m.name);
+  summary["spheres"] = sim.world().size();
+  summary["backend"] = backend == broadphase::Backend::cuda ? "cuda" : "cpu";
+  summary["precision"] = kRealName;
+  summary["steps"] = sim.steps();
+  summary["substeps"] = sim.substeps();
+  summary["iterations"] = sc.solver.iterations;
+  summary["integrator"] = sc.solver.integrator;
+  summary["speculative"] = sc.solver.speculative;
+  summary["dt"] = sim.dt();
+  summary["simulated_time"] = sim.time();
+  summary["wall_time"] = wall;
+  summary["mean_ms_per_step"] = 1e3 * step_seconds / steps_run;
+  summary["mean_candidate_pairs"] = candidate_sum / steps;
+  summary["mean_contacts"] = contact_sum / steps;
+  summary["max_overlap"] = deepest;
+  summary["max_overlap_end"] = totals.overlap_end;
+  summary["rollbacks"] = static_cast<std::uint64_t>(totals.rollbacks);  // a count (held as a double in the checkpoint)
+  summary["kinetic_energy_start"] = e_start;
+  summary["kinetic_energy_end"] = e_end;
   if (reference)
-    json << ",\n  \"reference\": {\"kind\": " << json_string(reference->kind)
-         << ", \"expected\": " << json_numbers(reference->expected) << ", \"measured\": "
-         << json_numbers(reference->measured) << ", \"error\": " << json_number(reference->error)
-         << ", \"note\": " << json_string(reference->note) << "}";
-  json << "\n}\n";
+    summary["reference"] = {{"kind", reference->kind},
+                            {"expected", reference->expected},
+                            {"measured", reference->measured},
+                            {"error", reference->error},
+                            {"note", reference->note}};
   std::filesystem::create_directories(sc.output.dir);
   const std::string summary_path = (std::filesystem::path(sc.output.dir) / "summary.json").string();
-  render::write_file_atomic(summary_path, json.str());
+  render::write_file_atomic(summary_path, json_text(summary));
 
   out << std::setprecision(4) << sc.name << ": " << sim.steps() << " steps, " << sim.time() << " s simulated in "
       << wall << " s (" << 1e3 * step_seconds / steps_run << " ms/step; " << candidate_sum / steps
@@ -332,7 +305,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       << 100 * deepest << " % of a radius (" << 100 * totals.overlap_end << " % at the end); kinetic energy " << e_start
       << " -> " << e_end << " J\n"
       << (reference && std::isfinite(reference->error)
-              ? "reference " + reference->kind + ": error " + json_number(100 * reference->error) + " %\n"
+              ? "reference " + reference->kind + ": error " + significant(100 * reference->error, 10) + " %\n"
               : std::string())
       << "output: " << sc.output.dir << "  (" << written << "summary.json)\n";
   return 0;

@@ -9,14 +9,16 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json_fwd.hpp>
+
 #include "broadphase/broadphase.hpp"
 
 namespace marbles {
 
-// A number for JSON output: 10 significant digits, null when not finite.
-std::string json_number(double v);
-// A JSON array of json_number values.
-std::string json_numbers(const std::vector<double>& values);
+// A JSON document as marbles writes it (summary.json, bench --json): two
+// spaces of indent, keys in the order given, non-finite numbers as null,
+// bytes that are not UTF-8 replaced; ends with a newline.
+std::string json_text(const nlohmann::ordered_json& document);
 
 enum class BackendChoice { automatic, cpu, cuda };
 

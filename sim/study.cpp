@@ -17,7 +17,10 @@
 #include <sstream>
 #include <tuple>
 
+#include <nlohmann/json.hpp>
+
 #include "core/error.hpp"
+#include "core/format.hpp"
 #include "render/atomic_file.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
@@ -37,34 +40,29 @@ std::string read_text(const fs::path& path) {
   return s.str();
 }
 
-// The raw JSON value after "key": in a summary.json we wrote ourselves (flat
-// keys; arrays of numbers; the first match wins).
-std::string json_value(const std::string& text, const std::string& key) {
-  const std::string tag = "\"" + key + "\": ";
-  const std::size_t at = text.find(tag);
-  if (at == std::string::npos) return {};
-  const std::size_t start = at + tag.size();
-  if (text[start] == '[') return text.substr(start, text.find(']', start) - start + 1);
-  if (text[start] == '"') return text.substr(start + 1, text.find('"', start + 1) - start - 1);
-  const std::size_t end = text.find_first_of(",}\n", start);
-  return text.substr(start, end - start);
+// A run's summary.json (sim/run.cpp), parsed; a file that is not JSON is a
+// failure of that run, named by its path.
+nlohmann::json read_summary(const fs::path& path) {
+  try {
+    return nlohmann::json::parse(read_text(path));
+  } catch (const nlohmann::json::exception& e) {
+    throw RuntimeFailure("cannot read " + path.string() + ": " + e.what());
+  }
 }
 
-double json_double(const std::string& text, const std::string& key) {
-  const std::string v = json_value(text, key);
-  if (v.empty() || v == "null") return std::nan("");
-  return std::stod(v);
+// A number in study.csv and the plot's data: 10 significant digits ("nan"
+// where not finite: a missing point to gnuplot and to CSV readers).
+std::string table_number(double v) { return significant(v, 10); }
+
+// A number of the summary (NaN where absent or null).
+double number_of(const nlohmann::json& summary, const char* key) {
+  const auto it = summary.find(key);
+  return it != summary.end() && it->is_number() ? it->get<double>() : std::nan("");
 }
 
-std::vector<double> json_doubles(const std::string& text, const std::string& key) {
-  std::string v = json_value(text, key);
-  std::vector<double> out;
-  if (v.size() < 2) return out;
-  std::stringstream s(v.substr(1, v.size() - 2));
-  std::string item;
-  while (std::getline(s, item, ','))
-    if (item.find_first_not_of(" ") != std::string::npos) out.push_back(item == " null" ? std::nan("") : std::stod(item));
-  return out;
+std::string text_of(const nlohmann::json& summary, const char* key) {
+  const auto it = summary.find(key);
+  return it != summary.end() && it->is_string() ? it->get<std::string>() : std::string();
 }
 
 double median(std::vector<double> v) {
@@ -204,7 +202,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     if (!precision.empty()) args.insert(args.end(), {"--precision", precision});
     const fs::path run_dir = dir / "runs" / std::to_string(c);
     args.insert(args.end(), {"--out", run_dir.string()});
-    std::string summary;
+    nlohmann::json summary;
     for (int r = 0; r < options.repeats; ++r) {
       if (options.progress) show_progress(err, tty, done, total, label_of(options.vary, row.values));
       const std::string log = (run_dir.string() + ".log");
@@ -217,22 +215,24 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
         throw RuntimeFailure("study run " + label_of(options.vary, row.values) + " failed (exit " +
                              std::to_string(status) + "): " + text);
       }
-      summary = read_text(run_dir / "summary.json");
-      const double steps = json_double(summary, "steps");
-      const double wall = json_double(summary, "wall_time");
-      per_step.push_back(json_double(summary, "mean_ms_per_step"));
-      per_second.push_back(1e3 * wall / std::max(1e-300, json_double(summary, "simulated_time")));
+      summary = read_summary(run_dir / "summary.json");
+      const double steps = number_of(summary, "steps");
+      const double wall = number_of(summary, "wall_time");
+      per_step.push_back(number_of(summary, "mean_ms_per_step"));
+      per_second.push_back(1e3 * wall / std::max(1e-300, number_of(summary, "simulated_time")));
       row.steps = static_cast<std::uint64_t>(steps);
       ++done;
     }
     row.ms_per_step = median(per_step);
     row.ms_per_simulated_second = median(per_second);
-    row.error = json_double(summary, "error");
-    row.measured = json_doubles(summary, "measured");
-    const double h = json_double(summary, "dt") / std::max(1.0, json_double(summary, "substeps"));
-    fineness.emplace_back(h, -json_double(summary, "iterations"), json_value(summary, "precision") == "double" ? 0 : 1,
-                          json_value(summary, "integrator") == "velocity_verlet" ? 0 : 1,
-                          json_value(summary, "speculative") == "true" ? 0 : 1);
+    const nlohmann::json reference = summary.value("reference", nlohmann::json::object());
+    row.error = number_of(reference, "error");
+    for (const auto& v : reference.value("measured", nlohmann::json::array()))
+      row.measured.push_back(v.is_number() ? v.get<double>() : std::nan(""));
+    const double h = number_of(summary, "dt") / std::max(1.0, number_of(summary, "substeps"));
+    fineness.emplace_back(h, -number_of(summary, "iterations"), text_of(summary, "precision") == "double" ? 0 : 1,
+                          text_of(summary, "integrator") == "velocity_verlet" ? 0 : 1,
+                          summary.value("speculative", false) ? 0 : 1);
     shapes.push_back(row.measured);
     result.rows.push_back(std::move(row));
   }
@@ -274,7 +274,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
       csv << v << ",";
       md << " " << v << " |";
     }
-    csv << json_number(r.error) << "," << json_number(r.ms_per_simulated_second) << "," << json_number(r.ms_per_step)
+    csv << table_number(r.error) << "," << table_number(r.ms_per_simulated_second) << "," << table_number(r.ms_per_step)
         << "," << r.steps << "," << (r.pareto ? 1 : 0) << "\n";
     md << " " << fixed(100 * r.error, 3) << " % | " << fixed(r.ms_per_simulated_second, 4) << " | "
        << fixed(r.ms_per_step, 4) << " | " << r.steps << " | " << (r.pareto ? "yes" : "") << " |\n";
@@ -291,7 +291,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     std::string label = std::to_string(i + 1);
     if (r.pareto)
       for (const std::string& v : r.values) label += "_" + v;
-    data << json_number(r.ms_per_simulated_second) << " " << json_number(std::max(r.error, kFloor)) << " " << label
+    data << table_number(r.ms_per_simulated_second) << " " << table_number(std::max(r.error, kFloor)) << " " << label
          << "\n";
   }
   std::vector<const StudyRow*> on_front;
@@ -300,7 +300,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   std::sort(on_front.begin(), on_front.end(),
             [](const StudyRow* a, const StudyRow* b) { return a->ms_per_simulated_second < b->ms_per_simulated_second; });
   for (const StudyRow* r : on_front)
-    front << json_number(r->ms_per_simulated_second) << " " << json_number(std::max(r->error, kFloor)) << "\n";
+    front << table_number(r->ms_per_simulated_second) << " " << table_number(std::max(r->error, kFloor)) << "\n";
   render::write_file_atomic((dir / "study.dat").string(), data.str());
   render::write_file_atomic((dir / "study_front.dat").string(), front.str());
   const std::string png = (dir / "study.png").string();

@@ -2,6 +2,7 @@
 // run of the real program), the Pareto front against a second oracle, and
 // float against double runs of one build.
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <sys/wait.h>
 
@@ -164,20 +165,17 @@ TEST(Pareto, EqualsTheSweepOracle) {
 // summary says which ran.
 TEST_F(Study, FloatAndDoubleRunsAgree) {
   const test::ScratchDir dir("study_precision");
-  std::map<std::string, std::string> summaries;
+  std::map<std::string, nlohmann::json> summaries;
   for (const std::string p : {"float", "double"}) {
     const std::string out = dir.path() + "/" + p;
     const std::string command = "'" + kMarbles + "' run " + kValidation +
                                 "slide_to_roll.yaml --quiet --summary-only --backend cpu --precision " + p +
                                 " --out '" + out + "' >/dev/null 2>&1";
     ASSERT_EQ(std::system(command.c_str()), 0) << command;
-    summaries[p] = slurp(out + "/summary.json");
-    EXPECT_NE(summaries[p].find("\"precision\": \"" + p + "\""), std::string::npos);
+    summaries[p] = nlohmann::json::parse(slurp(out + "/summary.json"));
+    EXPECT_EQ(summaries[p].at("precision"), p);
   }
-  auto measured = [](const std::string& s) {
-    const std::size_t at = s.find("\"measured\": [") + 13;
-    return std::stod(s.substr(at));
-  };
+  auto measured = [](const nlohmann::json& s) { return s.at("reference").at("measured").at(0).get<double>(); };
   const double f = measured(summaries["float"]), d = measured(summaries["double"]);
   EXPECT_NEAR(f, d, 1e-5 * d);
   EXPECT_NE(f, d);  // really two precisions
