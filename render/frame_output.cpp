@@ -87,7 +87,7 @@ void FrameOutput::add(const Snapshot& snapshot) {
   if (m_options.color_min) range.lo = *m_options.color_min;
   if (m_options.color_max) range.hi = *m_options.color_max;
 
-  const Image image = m_renderer->render(snapshot, m_walls, *m_camera, range);
+  const Image image = m_renderer->render(snapshot, walls_at(m_walls, snapshot.time), *m_camera, range);
   if (png_available()) write_png(image_path(m_dir, m_frames), image);
   if (m_movie) {
     try {

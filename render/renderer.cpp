@@ -367,11 +367,10 @@ struct Renderer::Impl {
     glDeleteTextures(1, &shadow_texture);
   }
 
-  Image render(const Snapshot& s, const Walls& initial_walls, const Camera& camera, ColorRange range);
+  Image render(const Snapshot& s, const Walls& walls, const Camera& camera, ColorRange range);
 };
 
-Image Renderer::Impl::render(const Snapshot& s, const Walls& initial_walls, const Camera& camera, ColorRange range) {
-  const Walls walls = walls_at(initial_walls, s.time);
+Image Renderer::Impl::render(const Snapshot& s, const Walls& walls, const Camera& camera, ColorRange range) {
   const std::size_t n = s.size();
   if (s.radius.size() != n)
     throw RuntimeFailure("renderer: the snapshot has " + std::to_string(s.radius.size()) + " radii for " +

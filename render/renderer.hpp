@@ -63,8 +63,9 @@ ColorRange data_range(const Snapshot& snapshot, ColorBy by);
 
 /// The walls where they are at `time` (s) when each moves with its constant
 /// velocity from its given position at time 0 (what the narrow phase does).
-/// The renderer draws every snapshot with walls_at(walls, snapshot.time);
-/// a spinning drum's grid turns by angular_velocity * time.
+/// The renderer draws the walls it is given where they are (a wall frame of
+/// a run is already at its time; FrameOutput moves the scene's walls with
+/// this); a spinning drum's grid turns by angular_velocity * snapshot.time.
 Walls walls_at(const Walls& walls, double time);
 
 /// True when this build can render (it was built with OSMesa).

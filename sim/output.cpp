@@ -30,19 +30,6 @@ bool presses(const narrowphase::Contact& c) {
 
 }  // namespace
 
-// The walls at time t: translated by their velocities (cylinders spin in place).
-Walls walls_at(const Walls& initial, double t) {
-  Walls w = initial;
-  const real s = static_cast<real>(t);
-  for (PlaneWall& p : w.planes) p.point = p.point + p.velocity * s;
-  for (BoxWall& b : w.boxes) {
-    b.lo = b.lo + b.velocity * s;
-    b.hi = b.hi + b.velocity * s;
-  }
-  for (SphereWall& sphere : w.spheres) sphere.centre = sphere.centre + sphere.velocity * s;
-  return w;
-}
-
 render::ContactSnapshot make_contact_snapshot(const Simulation& sim) {
   const World& w = sim.world();
   const auto& shapes = sim.model().wall_shapes;
@@ -263,7 +250,7 @@ void RunOutput::write(const Simulation& sim, double step_seconds) {
   const render::Snapshot snapshot = make_snapshot(sim, m->with_contact_counts);
   if (m->vtk && step % m->vtk_every == 0) {
     m->vtk->write(snapshot);
-    if (m->walls) m->walls->write(walls_at(m->initial_walls, sim.time()), sim.time(), step);
+    if (m->walls) m->walls->write(render::walls_at(m->initial_walls, sim.time()), sim.time(), step);
   }
   if (m->frames && step % m->render_every == 0) m->frames->add(snapshot);
 }

@@ -23,8 +23,6 @@ class Simulation;
 // `with_contacts`: also count each sphere's pressing contacts (the
 // `contacts` field; on the GPU this downloads the contacts).
 render::Snapshot make_snapshot(const Simulation& sim, bool with_contacts = false);
-// The walls at time t (translated by their velocities).
-Walls walls_at(const Walls& initial, double t);
 // The pressing contacts of the last substep, with forces = impulses / substep.
 render::ContactSnapshot make_contact_snapshot(const Simulation& sim);
 

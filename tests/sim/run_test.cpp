@@ -9,6 +9,9 @@
 #include <string>
 #include <vector>
 
+#include "render/frame_output.hpp"
+#include "render/image.hpp"
+#include "render/movie.hpp"
 #include "render/renderer.hpp"
 #include "render/vtk_output.hpp"
 #include "sim/particles.hpp"
@@ -183,6 +186,57 @@ TEST(Run, ContactForcesOfARestingStackBalanceItsWeight) {
   // A sphere on the floor of the simple-cubic stack presses only the floor and
   // the sphere above: its side neighbours touch it without force or overlap.
   EXPECT_EQ(frame.contacts[0], 2u);
+  fs::remove_all(dir);
+}
+
+// The images a run draws as it goes and the images `marbles render` draws
+// afterwards from its frames are the same pixels, moving walls included (the
+// run moves the scene's walls to each frame's time; the frames' walls are
+// already there and are drawn where they are, not moved again).
+TEST(Run, ImagesOfTheRunEqualImagesRenderedFromItsFrames) {
+  if (!render::renderer_available() || !render::png_available()) GTEST_SKIP() << "skipped: built without OSMesa or libpng";
+  const fs::path dir = temp_dir("images_equal");
+  const fs::path scene = dir / "scene.yaml";
+  std::ofstream(scene) << R"(format: 1
+time: {duration: 0.2, dt: 1.0e-3}
+effects: [gravity, collisions, walls]
+materials:
+  glass: {density: 2500}
+walls:
+  - box: {min: [0, 0, 0], max: [0.2, 0.2, 0.6]}
+  - plane: {point: [0, 0, 0.05], normal: [0, 0, 1]}
+    velocity: [0, 0, 0.5]
+particles:
+  - random: {count: 20, min: [0.02, 0.02, 0.3], max: [0.18, 0.18, 0.5], radius: 0.01, seed: 3}
+output:
+  vtk: {every: 100}
+  render: {every: 100, width: 96, height: 64, color_by: id,
+           camera: {position: [1.0, -1.2, 0.6], look_at: [0.1, 0.1, 0.2], fov: 40}}
+)";
+  RunOptions options;
+  options.scene_path = scene.string();
+  options.out_dir = (dir / "out").string();
+  options.backend = BackendChoice::cpu;
+  options.quiet = true;
+  std::ostringstream out, err;
+  ASSERT_EQ(run_scene(options, out, err), 0) << err.str();
+  auto image = [&](int k) { return render::read_png(dir / "out" / "images" / ("frame_00000" + std::to_string(k) + ".png")); };
+  std::vector<render::Image> during;
+  for (int k = 0; k < 3; ++k) during.push_back(image(k));
+  render::RenderOptions o;
+  o.width = 96, o.height = 64, o.color_by = render::ColorBy::id;
+  o.camera = render::Camera{Vec3(1.0f, -1.2f, 0.6f), Vec3(0.1f, 0.1f, 0.2f), Vec3(0, 0, 1), 40};
+  render::MovieOptions no_movie;
+  no_movie.enabled = false;
+  std::ostringstream log;
+  ASSERT_EQ(render::render_output_dir((dir / "out").string(), o, no_movie, false, log), 0) << log.str();
+  for (int k = 0; k < 3; ++k) {
+    const render::Image after = image(k);
+    EXPECT_TRUE(after.rgb == during[k].rgb) << "frame " << k;
+    if (k > 0) {
+      EXPECT_FALSE(during[k].rgb == during[0].rgb);  // the floor moved (0.05 m per frame)
+    }
+  }
   fs::remove_all(dir);
 }
 
