@@ -10,10 +10,21 @@ using ::marbles::cuda::kBlock;
 
 constexpr std::uint32_t kBatch = 8;  // rounds launched between two reads of what is left
 
-// Appends k to list when `want`, one atomic per warp (a single counter taken
+// One entry of a round's active list: the contact's spheres and rank in one
+// 16-byte word, so a round reads its list in order (coalesced) and never
+// gathers per-contact arrays; the contact's index is in the rank's low bits.
+struct alignas(16) ColourEntry {
+  std::uint32_t a, b;
+  std::uint64_t rank;
+};
+__device__ __forceinline__ std::uint32_t index_of(const ColourEntry& e) {
+  return 0xffffffffu - static_cast<std::uint32_t>(e.rank);  // contact_rank, impact_rank: low bits 0xffffffff - k
+}
+
+// Appends e to list when `want`, one atomic per warp (a single counter taken
 // by every thread would serialise). The order within the list is free: a
 // round's result does not depend on the order it visits its contacts.
-__device__ void append(std::uint32_t* list, std::uint32_t* count, std::uint32_t k, bool want) {
+__device__ void append(ColourEntry* list, std::uint32_t* count, const ColourEntry& e, bool want) {
   const unsigned active = __activemask();
   const unsigned wanting = __ballot_sync(active, want);
   if (wanting == 0) return;
@@ -22,68 +33,62 @@ __device__ void append(std::uint32_t* list, std::uint32_t* count, std::uint32_t 
   std::uint32_t base = 0;
   if (lane == leader) base = atomicAdd(count, static_cast<std::uint32_t>(__popc(wanting)));
   base = __shfl_sync(active, base, leader);
-  if (want) list[base + __popc(wanting & ((1u << lane) - 1u))] = k;
+  if (want) list[base + __popc(wanting & ((1u << lane) - 1u))] = e;
 }
 
-// The spheres of contact k as one 8-byte word, so the rounds read 16 bytes
-// per contact (bodies and rank) instead of the whole Contact.
-__global__ void contact_ranks_kernel(const Contact* contacts, std::uint32_t n, std::uint64_t* rank, uint2* bodies,
-                                     std::uint32_t* colour, std::uint32_t* active, std::uint32_t* count) {
-  if (blockIdx.x == 0 && threadIdx.x == 0) count[0] = n;  // round 0's list: every contact
+// Round 0's list: every contact, in index order.
+__global__ void contact_ranks_kernel(const Contact* contacts, std::uint32_t n, std::uint32_t* colour,
+                                     ColourEntry* active, std::uint32_t* count) {
+  if (blockIdx.x == 0 && threadIdx.x == 0) count[0] = n;
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
-    bodies[k] = make_uint2(contacts[k].a, contacts[k].b);
+    const std::uint32_t a = contacts[k].a, b = contacts[k].b;
+    active[k] = ColourEntry{a, b, contact_rank(a, b, k)};
     colour[k] = kUncoloured;
-    active[k] = k;
   }
 }
 
 // The impact candidates join the active list (in any order: a round's
 // result does not depend on the order it visits its contacts).
 __global__ void impact_candidates_kernel(const Contact* contacts, std::uint32_t n, real rest_speed,
-                                         std::uint64_t* rank, uint2* bodies, std::uint32_t* colour,
-                                         std::uint32_t* active, std::uint32_t* count) {
+                                         std::uint32_t* colour, ColourEntry* active, std::uint32_t* count) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const bool candidate = is_impact_candidate(contacts[k], rest_speed);
     colour[k] = candidate ? kUncoloured : kNotActive;
-    if (candidate) {
-      rank[k] = impact_rank(time_of_impact(contacts[k]), k);
-      bodies[k] = make_uint2(contacts[k].a, contacts[k].b);
-    }
-    append(active, count, k, candidate);
+    ColourEntry e{};
+    if (candidate) e = ColourEntry{contacts[k].a, contacts[k].b, impact_rank(time_of_impact(contacts[k]), k)};
+    append(active, count, e, candidate);
   }
 }
 
 // Step 1 of round r over its active list (count[r] long): offers, an atomic
 // max whose result does not depend on order.
-__global__ void offer_kernel(const uint2* bodies, const std::uint64_t* rank, const std::uint32_t* active,
-                             const std::uint32_t* count, std::uint32_t round, unsigned long long* body_word) {
+__global__ void offer_kernel(const ColourEntry* active, const std::uint32_t* count, std::uint32_t round,
+                             unsigned long long* body_word) {
   const std::uint32_t n = count[round];
   for (std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < n; t += gridDim.x * blockDim.x) {
-    const std::uint32_t k = active[t];
-    const uint2 ab = bodies[k];
-    const unsigned long long word = round_word(round, rank[k]);
-    atomicMax(&body_word[ab.x], word);
-    if (!is_wall(ab.y)) atomicMax(&body_word[ab.y], word);
+    const ColourEntry e = active[t];
+    const unsigned long long word = round_word(round, e.rank);
+    atomicMax(&body_word[e.a], word);
+    if (!is_wall(e.b)) atomicMax(&body_word[e.b], word);
   }
 }
 
 // Step 2: the contacts holding both offers take a colour (they share no
 // sphere); the others go on to round r + 1's list.
-__global__ void select_kernel(const uint2* bodies, const std::uint64_t* rank, const std::uint32_t* active,
-                              std::uint32_t* next, std::uint32_t* count, std::uint32_t* colour, std::uint32_t round,
-                              ColourRule rule, const unsigned long long* body_word, unsigned long long* body_used) {
+__global__ void select_kernel(const ColourEntry* active, ColourEntry* next, std::uint32_t* count,
+                              std::uint32_t* colour, std::uint32_t round, ColourRule rule,
+                              const unsigned long long* body_word, unsigned long long* body_used) {
   const std::uint32_t n = count[round];
   for (std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < n; t += gridDim.x * blockDim.x) {
-    const std::uint32_t k = active[t];
-    const uint2 ab = bodies[k];
-    const bool wall = is_wall(ab.y);
-    const std::uint64_t word = round_word(round, rank[k]);
-    const bool coloured = holds_both(word, body_word[ab.x], wall ? 0 : body_word[ab.y], wall);
+    const ColourEntry e = active[t];
+    const bool wall = is_wall(e.b);
+    const std::uint64_t word = round_word(round, e.rank);
+    const bool coloured = holds_both(word, body_word[e.a], wall ? 0 : body_word[e.b], wall);
     if (coloured)
-      colour[k] = rule == ColourRule::by_round ? round
-                                               : take_lowest_free(body_used[ab.x], wall ? nullptr : &body_used[ab.y]);
-    append(next, &count[round + 1], k, !coloured);
+      colour[index_of(e)] = rule == ColourRule::by_round
+                                ? round
+                                : take_lowest_free(body_used[e.a], wall ? nullptr : &body_used[e.b]);
+    append(next, &count[round + 1], e, !coloured);
   }
 }
 
@@ -128,18 +133,16 @@ std::uint32_t ColouringCuda::rounds(std::uint32_t n, std::size_t body_count, Col
     MARBLES_CUDA_CHECK(cudaMemsetAsync(body_used, 0, body_count * sizeof(unsigned long long), s));
   auto* count = m_count.get_as<std::uint32_t>();  // count[0] is set by the caller
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count + 1, 0, kMaxColourRounds * sizeof(std::uint32_t), s));
-  const auto* rank = m_rank.get_as<std::uint64_t>();
-  const auto* bodies = m_bodies.get_as<uint2>();
-  std::uint32_t* list[2] = {m_active.get_as<std::uint32_t>(), m_next.get_as<std::uint32_t>()};
+  ColourEntry* list[2] = {m_active.get_as<ColourEntry>(), m_next.get_as<ColourEntry>()};
   auto* colour = m_colour.get_as<std::uint32_t>();
   const int grid = grid_for(n, sm_count);
   for (std::uint32_t round = 0; round < kMaxColourRounds;) {
     const std::uint32_t batch = std::min(kBatch, kMaxColourRounds - round);
     for (std::uint32_t r = round; r < round + batch; ++r) {
-      offer_kernel<<<grid, kBlock, 0, s>>>(bodies, rank, list[r % 2], count, r, body_word);
+      offer_kernel<<<grid, kBlock, 0, s>>>(list[r % 2], count, r, body_word);
       MARBLES_CUDA_CHECK_LAUNCH();
-      select_kernel<<<grid, kBlock, 0, s>>>(bodies, rank, list[r % 2], list[(r + 1) % 2], count, colour, r, rule,
-                                            body_word, body_used);
+      select_kernel<<<grid, kBlock, 0, s>>>(list[r % 2], list[(r + 1) % 2], count, colour, r, rule, body_word,
+                                            body_used);
       MARBLES_CUDA_CHECK_LAUNCH();
     }
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, count + round + 1, batch * sizeof(std::uint32_t),
@@ -198,9 +201,8 @@ std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint3
     return 0;
   }
   reserve(n);
-  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, m_rank.get_as<std::uint64_t>(),
-                                                                m_bodies.get_as<uint2>(), m_colour.get_as<std::uint32_t>(),
-                                                                m_active.get_as<std::uint32_t>(),
+  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, m_colour.get_as<std::uint32_t>(),
+                                                                m_active.get_as<ColourEntry>(),
                                                                 m_count.get_as<std::uint32_t>());
   MARBLES_CUDA_CHECK_LAUNCH();
   rounds_run = rounds(n, body_count, ColourRule::lowest_free, sm_count, s);
@@ -221,8 +223,7 @@ std::uint32_t ColouringCuda::impact_levels(const Contact* contacts, std::uint32_
   auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
   impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(
-      contacts, n, rest_speed, m_rank.get_as<std::uint64_t>(), m_bodies.get_as<uint2>(),
-      m_colour.get_as<std::uint32_t>(), m_active.get_as<std::uint32_t>(), count);
+      contacts, n, rest_speed, m_colour.get_as<std::uint32_t>(), m_active.get_as<ColourEntry>(), count);
   MARBLES_CUDA_CHECK_LAUNCH();
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, count, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   m_bytes += sizeof(std::uint32_t);
@@ -235,11 +236,9 @@ std::uint32_t ColouringCuda::impact_levels(const Contact* contacts, std::uint32_
 }
 
 void ColouringCuda::reserve(std::uint32_t n) {
-  m_rank.as<std::uint64_t>(n);
-  m_bodies.as<uint2>(n);
   m_colour.as<std::uint32_t>(n);
-  m_active.as<std::uint32_t>(n);
-  m_next.as<std::uint32_t>(n);
+  m_active.as<ColourEntry>(n);
+  m_next.as<ColourEntry>(n);
   m_count.as<std::uint32_t>(kMaxColourRounds + 1);
 }
 

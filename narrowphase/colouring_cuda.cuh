@@ -59,7 +59,7 @@ class ColouringCuda {
   void sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, int key_bits, std::uint32_t key_bound,
                       std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t stream);
 
-  DeviceBuffer m_rank, m_bodies, m_colour, m_active, m_next, m_count, m_body_word, m_body_used, m_keys, m_keys_out,
+  DeviceBuffer m_colour, m_active, m_next, m_count, m_body_word, m_body_used, m_keys, m_keys_out,
       m_index, m_index_out, m_first_of_key, m_temp;
   std::uint32_t* m_host = nullptr;  // pinned readbacks
 };

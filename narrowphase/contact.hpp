@@ -7,6 +7,7 @@
 // everything one velocity iteration needs and nothing else.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 
 #include "core/vec3.hpp"
@@ -35,13 +36,15 @@ struct PairTable {
   }
 };
 
-struct Contact {
-  std::uint32_t a = 0, b = 0;
-  Vec3 normal;             // from b towards a, unit
-  real separation = 0;     // m, < 0 when overlapping
-  real ra = 0, rb = 0;     // m, lever arms along the normal
-  Vec3 wall_velocity;      // m/s, velocity of the wall surface (b is a wall)
-  PairCoefficients coeff;
+// 16-byte aligned, fields in 16-byte groups: the GPU loads a contact whole
+// and the sweep stores its results (the first group of eight reals) as
+// whole words (core/whole_record.hpp, solver_math.hpp).
+struct alignas(16) Contact {
+  // Accumulated impulses of this substep: what a velocity sweep writes.
+  real normal_impulse = 0;  // N s, >= 0, the sustained (velocity-solve) part
+  Vec3 tangent_impulse;     // N s, |.| <= mu * normal_impulse
+  Vec3 rolling_impulse;     // N m s
+  real impact_impulse = 0;  // N s, what the impact stage applied (not carried over)
 
   // Filled by the solver's prepare stage.
   real normal_mass = 0;     // kg,   1 / (1/m_a + 1/m_b)
@@ -49,21 +52,24 @@ struct Contact {
   real rolling_mass = 0;    // kg m^2, 1 / (1/I_a + 1/I_b)
   real approach_speed = 0;  // m/s, normal relative velocity before the solve (< 0: approaching)
 
-  // Accumulated impulses of this substep.
-  real normal_impulse = 0;  // N s, >= 0, the sustained (velocity-solve) part
-  real impact_impulse = 0;  // N s, what the impact stage applied (not carried over)
-  Vec3 tangent_impulse;     // N s, |.| <= mu * normal_impulse
-  Vec3 rolling_impulse;     // N m s
-
+  std::uint32_t a = 0, b = 0;
+  real separation = 0;     // m, < 0 when overlapping
   // Set by the impact stage when a speculative contact (gap > 0)
   // bounced: how far (m) the bodies must come back together after the
   // position update, so the bounce happens at the surface and not at the gap.
   real rebound_shift = 0;
+  Vec3 normal;             // from b towards a, unit
+  real ra = 0, rb = 0;     // m, lever arms along the normal
+  Vec3 wall_velocity;      // m/s, velocity of the wall surface (b is a wall)
+  PairCoefficients coeff;
 
   // World-space point midway across the overlap (or gap).
   MARBLES_HD_INLINE Vec3 point(const Vec3& position_a) const {
     return position_a - normal * (ra + real(0.5) * separation);
   }
 };
+// store_impulses writes the first eight reals as one block.
+static_assert(offsetof(Contact, impact_impulse) == 7 * sizeof(real) && offsetof(Contact, normal_mass) == 8 * sizeof(real));
+static_assert(sizeof(Contact) % 16 == 0);
 
 }  // namespace marbles::narrowphase

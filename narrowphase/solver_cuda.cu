@@ -44,12 +44,16 @@ __global__ void prepare_kernel(Contact* contacts, std::uint32_t n, const SolverB
 
 template <bool Friction, bool Rolling>
 __global__ void warm_start_kernel(Contact* contacts, ContactRange r, SolverBody* bodies) {
-  for_range(r, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(contacts[k], bodies); });
+  for_range(r, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(load_whole(contacts + k), bodies); });
 }
 
 template <bool Friction, bool Rolling>
 __global__ void sweep_kernel(Contact* contacts, ContactRange r, SolverBody* bodies, real inv_h) {
-  for_range(r, [&](std::uint32_t k) { solve_one<Friction, Rolling>(contacts[k], bodies, inv_h); });
+  for_range(r, [&](std::uint32_t k) {
+    Contact c = load_whole(contacts + k);  // the contact in 16-byte words, its results back the same way
+    solve_one<Friction, Rolling>(c, bodies, inv_h);
+    store_impulses(contacts + k, c);
+  });
 }
 
 template <bool Friction>

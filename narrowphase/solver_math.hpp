@@ -9,6 +9,7 @@
 #include <cstdint>
 
 #include "core/spheres.hpp"
+#include "core/whole_record.hpp"
 #include "narrowphase/contact_math.hpp"
 
 namespace marbles::narrowphase {
@@ -55,15 +56,39 @@ MARBLES_HD_INLINE void scatter_solver_body(const BodiesView& bodies, std::size_t
   bodies.angular_velocity[i] = s.w;
 }
 
+// A body's record moves whole (two or four 16-byte words on the GPU); a
+// colour has no two contacts on one sphere, so no other thread writes it.
 MARBLES_HD_INLINE BodyState load_body(const SolverBody* bodies, std::uint32_t index, const Contact& c) {
   if (is_wall(index)) return {c.wall_velocity, Vec3{}, 0, 0};
-  const SolverBody& b = bodies[index];
+  const SolverBody b = load_whole(bodies + index);
   return {b.v, b.w, b.inv_mass, b.inv_inertia};
 }
 MARBLES_HD_INLINE void store_body(SolverBody* bodies, std::uint32_t index, const BodyState& s) {
   if (is_wall(index)) return;
-  bodies[index].v = s.v;
-  bodies[index].w = s.w;
+  store_whole(bodies + index, SolverBody{s.v, s.inv_mass, s.w, s.inv_inertia});
+}
+
+// A sweep's results, the contact's first eight reals (contact.hpp), stored as
+// whole 16-byte words on the GPU; on the host the fields are written.
+MARBLES_HD_INLINE void store_impulses(Contact* to, const Contact& c) {
+#if defined(__CUDA_ARCH__)
+  if constexpr (sizeof(real) == 4) {
+    float4* w = reinterpret_cast<float4*>(to);
+    w[0] = make_float4(c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z);
+    w[1] = make_float4(c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.impact_impulse);
+  } else {
+    double2* w = reinterpret_cast<double2*>(to);
+    w[0] = make_double2(c.normal_impulse, c.tangent_impulse.x);
+    w[1] = make_double2(c.tangent_impulse.y, c.tangent_impulse.z);
+    w[2] = make_double2(c.rolling_impulse.x, c.rolling_impulse.y);
+    w[3] = make_double2(c.rolling_impulse.z, c.impact_impulse);
+  }
+#else
+  to->normal_impulse = c.normal_impulse;
+  to->tangent_impulse = c.tangent_impulse;
+  to->rolling_impulse = c.rolling_impulse;
+  to->impact_impulse = c.impact_impulse;
+#endif
 }
 
 // Prepare: effective masses and the approach speed before the solve.

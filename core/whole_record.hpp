@@ -1,0 +1,46 @@
+// core/whole_record.hpp — load or store a record whole.
+//
+// On the GPU a record of 16-byte multiples (alignas(16) or more) moves in
+// 16-byte words: one wide access per 16 bytes instead of one per field. A
+// warp whose 32 threads each touch their own record then makes one memory
+// request per word, not per field; the solver's sweep was bound by L2
+// traffic made of such per-field requests (docs/architecture.md). On the host
+// it is a plain copy. Either way the bytes moved are the same, so no
+// arithmetic changes.
+#pragma once
+
+#include <cstddef>
+
+#include "core/config.hpp"
+
+namespace marbles {
+
+template <class T>
+MARBLES_HD_INLINE T load_whole(const T* p) {
+#if defined(__CUDA_ARCH__)
+  static_assert(sizeof(T) % 16 == 0 && alignof(T) >= 16, "whole records are 16-byte words");
+  T out;
+  const int4* from = reinterpret_cast<const int4*>(p);
+  int4* to = reinterpret_cast<int4*>(&out);
+#pragma unroll
+  for (std::size_t i = 0; i < sizeof(T) / 16; ++i) to[i] = from[i];
+  return out;
+#else
+  return *p;
+#endif
+}
+
+template <class T>
+MARBLES_HD_INLINE void store_whole(T* p, const T& value) {
+#if defined(__CUDA_ARCH__)
+  static_assert(sizeof(T) % 16 == 0 && alignof(T) >= 16, "whole records are 16-byte words");
+  const int4* from = reinterpret_cast<const int4*>(&value);
+  int4* to = reinterpret_cast<int4*>(p);
+#pragma unroll
+  for (std::size_t i = 0; i < sizeof(T) / 16; ++i) to[i] = from[i];
+#else
+  *p = value;
+#endif
+}
+
+}  // namespace marbles
