@@ -60,25 +60,11 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
 
 void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out) {
   const auto n = static_cast<std::uint32_t>(contacts.size());
-  // The colouring is a function of the list of sphere pairs alone (ranks
-  // come from the pairs and their positions): the same list as last time
-  // (a settled pile) gets last time's order without colouring again.
-  bool same = m_coloured && n == m_pairs.size() && body_count == m_body_count;
-  for (std::uint32_t k = 0; same && k < n; ++k) same = m_pairs[k] == pair_word(contacts[k]);
-  if (same) {
-    out = m_ranges;
-    m_sorted.resize(n);
-    for (std::uint32_t j = 0; j < n; ++j) m_sorted[j] = contacts[m_solver_order[j]];
-    contacts.swap(m_sorted);
-    return;
-  }
   m_rank.resize(n);
   m_all.resize(n);
-  m_pairs.resize(n);
   for (std::uint32_t k = 0; k < n; ++k) {
     m_rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
     m_all[k] = k;
-    m_pairs[k] = pair_word(contacts[k]);
   }
   m_colour.assign(n, kUncoloured);
   out.colours = colour(contacts.data(), m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
@@ -93,16 +79,11 @@ void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size
   for (std::uint32_t c = 0; c <= out.colours; ++c) out.begin[c + 1] += out.begin[c];
   std::vector<std::uint32_t> cursor(out.begin.begin(), out.begin.end() - 1);
   m_sorted.resize(n);
-  m_solver_order.resize(n);
   for (std::uint32_t k = 0; k < n; ++k) {
     const std::uint32_t c = m_colour[k] == kOverflowColour ? out.colours : m_colour[k];
-    m_solver_order[cursor[c]] = k;
     m_sorted[cursor[c]++] = contacts[k];
   }
   contacts.swap(m_sorted);
-  m_ranges = out;
-  m_body_count = body_count;
-  m_coloured = true;
 }
 
 bool colouring_is_proper(const std::vector<Contact>& contacts, const ColourRanges& ranges, std::size_t body_count) {

@@ -38,25 +38,14 @@ class ContactColouring {
                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr);
 
   // The solver colouring of all contacts: colours by contact_rank, then puts
-  // `contacts` in colour-major order. A list of the same sphere pairs in the
-  // same order as the last call's gets the last call's result without
-  // colouring again (the result depends on that list alone).
+  // `contacts` in colour-major order.
   void colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out);
 
  private:
-  static std::uint64_t pair_word(const Contact& c) { return (std::uint64_t(c.a) << 32) | c.b; }
-
   std::vector<std::uint64_t> m_body_used, m_rank, m_by_rank, m_sort_keys;
   std::vector<std::uint32_t> m_body_next_round;
   std::vector<std::uint32_t> m_all, m_colour, m_order, m_sort_values;
   std::vector<Contact> m_sorted;
-  // The last solver colouring: its pairs, its order (sorted position ->
-  // index) and its ranges.
-  bool m_coloured = false;
-  std::size_t m_body_count = 0;
-  std::vector<std::uint64_t> m_pairs;
-  std::vector<std::uint32_t> m_solver_order;
-  ColourRanges m_ranges;
 };
 
 // The solver's order over colour-major contacts, the same on every backend:

@@ -36,26 +36,15 @@ __device__ void append(ColourEntry* list, std::uint32_t* count, const ColourEntr
   if (want) list[base + __popc(wanting & ((1u << lane) - 1u))] = e;
 }
 
-// Round 0's list: every contact, in index order; the pairs remembered.
+// Round 0's list: every contact, in index order.
 __global__ void contact_ranks_kernel(const Contact* contacts, std::uint32_t n, std::uint32_t* colour,
-                                     ColourEntry* active, std::uint32_t* count, uint2* pairs) {
+                                     ColourEntry* active, std::uint32_t* count) {
   if (blockIdx.x == 0 && threadIdx.x == 0) count[0] = n;
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const std::uint32_t a = contacts[k].a, b = contacts[k].b;
     active[k] = ColourEntry{a, b, contact_rank(a, b, k)};
     colour[k] = kUncoloured;
-    pairs[k] = make_uint2(a, b);
   }
-}
-
-// differ = 1 when some contact's pair is not the remembered one.
-__global__ void same_pairs_kernel(const Contact* contacts, std::uint32_t n, const uint2* pairs, unsigned* differ) {
-  bool d = false;
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const uint2 p = pairs[k];
-    d = d || p.x != contacts[k].a || p.y != contacts[k].b;
-  }
-  if (__syncthreads_or(d) && threadIdx.x == 0) *differ = 1u;
 }
 
 // The impact candidates join the active list (in any order: a round's
@@ -211,29 +200,10 @@ std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint3
     begin.assign(2, 0);
     return 0;
   }
-  // The same pairs in the same order as the last colouring (a settled pile):
-  // its order again, without the rounds (the colouring is a function of the
-  // pair list alone, so the result is the same either way).
-  if (m_coloured && n == m_last_n && body_count == m_last_bodies) {
-    auto* differ = m_count.get_as<std::uint32_t>();
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(differ, 0, sizeof(std::uint32_t), s));
-    same_pairs_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, m_pairs.get_as<uint2>(), differ);
-    MARBLES_CUDA_CHECK_LAUNCH();
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, differ, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-    m_bytes += sizeof(std::uint32_t);
-    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-    if (m_host[0] == 0) {
-      gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, m_order.get_as<std::uint32_t>(), n, sorted);
-      MARBLES_CUDA_CHECK_LAUNCH();
-      begin = m_last_begin;
-      rounds_run = m_last_rounds;
-      return static_cast<std::uint32_t>(begin.size() - 2);
-    }
-  }
   reserve(n);
   contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, m_colour.get_as<std::uint32_t>(),
                                                                 m_active.get_as<ColourEntry>(),
-                                                                m_count.get_as<std::uint32_t>(), m_pairs.as<uint2>(n));
+                                                                m_count.get_as<std::uint32_t>());
   MARBLES_CUDA_CHECK_LAUNCH();
   rounds_run = rounds(n, body_count, ColourRule::lowest_free, sm_count, s);
   // A contact coloured in round r has at most 2 r coloured neighbours (one per
@@ -241,14 +211,6 @@ std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint3
   sort_by_colour(n, kMaxColours, 7, 2 * rounds_run, begin, sm_count, s);
   gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, m_index_out.get_as<std::uint32_t>(), n, sorted);
   MARBLES_CUDA_CHECK_LAUNCH();
-  // Keep this order (the impact levels reuse m_index_out); stream order
-  // makes the swap safe: the gather above is queued before any later write.
-  m_order.swap(m_index_out);
-  m_coloured = true;
-  m_last_n = n;
-  m_last_bodies = body_count;
-  m_last_begin = begin;
-  m_last_rounds = rounds_run;
   return static_cast<std::uint32_t>(begin.size() - 2);
 }
 

@@ -32,8 +32,6 @@ class ColouringCuda {
   // writes the contacts in colour-major order to `sorted` (index order
   // within a colour, overflow last); `begin` gets the host ranges as
   // ColourRanges::begin (colours + 2 entries). Returns the colour count.
-  // The same pair list as the last call's (one check, one read of a flag)
-  // gets the last call's order without the rounds.
   std::uint32_t colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count, Contact* sorted,
                                 std::vector<std::uint32_t>& begin, std::uint32_t& rounds, int sm_count,
                                 cudaStream_t stream);
@@ -64,13 +62,6 @@ class ColouringCuda {
   DeviceBuffer m_colour, m_active, m_next, m_count, m_body_word, m_body_used, m_keys, m_keys_out,
       m_index, m_index_out, m_first_of_key, m_temp;
   std::uint32_t* m_host = nullptr;  // pinned readbacks
-  // The last solver colouring: its pairs (m_pairs), order (m_order: sorted
-  // position -> index), ranges and rounds.
-  DeviceBuffer m_pairs, m_order;
-  bool m_coloured = false;
-  std::uint32_t m_last_n = 0, m_last_rounds = 0;
-  std::size_t m_last_bodies = 0;
-  std::vector<std::uint32_t> m_last_begin;
 };
 
 }  // namespace marbles::narrowphase::cuda

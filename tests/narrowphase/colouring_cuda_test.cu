@@ -125,43 +125,6 @@ TEST(ColouringCuda, EqualsTheCpuColouringOnRandomSets) {
   }
 }
 
-// One GPU colouring object over a sequence of lists, as a run uses it: a
-// list equal to the last one takes the remembered order without the rounds;
-// every result equals the CPU's fresh colouring, whatever the history.
-TEST(ColouringCuda, ARepeatedListGivesTheCpusColouring) {
-  REQUIRE_DEVICE();
-  std::mt19937_64 rng(33);
-  const std::uint32_t bodies = 20000;
-  std::vector<Contact> list = random_contacts(rng, bodies, 100000);
-  narrowphase::cuda::ColouringCuda kept;
-  auto check = [&](const char* what) {
-    std::vector<Contact> cpu = list;
-    ColourRanges ranges;
-    ContactColouring().colour_and_sort(cpu, bodies, ranges);
-    DeviceContacts d(list);
-    std::vector<std::uint32_t> begin;
-    std::uint32_t rounds = 0;
-    const auto n = static_cast<std::uint32_t>(list.size());
-    const std::uint32_t colours = kept.colour_and_sort(d.in, n, bodies, d.out, begin, rounds, 8, nullptr);
-    ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
-    EXPECT_EQ(colours, ranges.colours) << what;
-    EXPECT_EQ(begin, ranges.begin) << what;
-    EXPECT_EQ(rounds, ranges.rounds) << what;
-    std::vector<Contact> sorted(n);
-    ASSERT_EQ(cudaMemcpy(sorted.data(), d.out, n * sizeof(Contact), cudaMemcpyDeviceToHost), cudaSuccess);
-    for (std::uint32_t k = 0; k < n; ++k)
-      ASSERT_EQ(sorted[k].normal_impulse, cpu[k].normal_impulse) << what << ", position " << k;
-  };
-  check("first");
-  for (std::size_t k = 0; k < list.size(); ++k) list[k].normal_impulse = real(list.size() - k);  // new tags
-  check("same pairs");
-  list[777].b = list[777].a == 5 ? 6 : 5;
-  check("one pair changed");
-  std::swap(list[3], list[90000]);
-  check("two swapped");
-  check("same again");
-}
-
 TEST(ColouringCuda, LargeSetAndAStarBeyondSixtyFourColours) {
   REQUIRE_DEVICE();
   std::mt19937_64 rng(4);

@@ -198,48 +198,6 @@ TEST(Colouring, SameColouringTwiceAndForAnyThreadCount) {
 #endif
 }
 
-// One colouring object over a sequence of lists, as a run uses it: a list
-// equal to the last one (same pairs, same order) takes the remembered order,
-// and whatever the history, each result equals a fresh object's. The lists:
-// the same pairs again (new values, which must be the ones gathered), one
-// pair changed, two contacts swapped, one contact fewer, fewer spheres.
-TEST(Colouring, ARepeatedListGivesWhatAFreshColouringGives) {
-  std::mt19937_64 rng(31);
-  const std::uint32_t bodies = 5000;
-  std::vector<Contact> list = random_contacts(rng, bodies, 30000, 0.1);
-  ContactColouring kept;
-  auto check = [&](const std::vector<Contact>& input, std::size_t body_count, const char* what) {
-    std::vector<Contact> fresh = input, reused = input;
-    ColourRanges fresh_ranges, reused_ranges;
-    ContactColouring().colour_and_sort(fresh, body_count, fresh_ranges);
-    kept.colour_and_sort(reused, body_count, reused_ranges);
-    EXPECT_EQ(reused_ranges.begin, fresh_ranges.begin) << what;
-    EXPECT_EQ(reused_ranges.colours, fresh_ranges.colours) << what;
-    EXPECT_EQ(reused_ranges.rounds, fresh_ranges.rounds) << what;
-    ASSERT_EQ(reused.size(), fresh.size());
-    for (std::size_t j = 0; j < fresh.size(); ++j) {
-      ASSERT_EQ(reused[j].a, fresh[j].a) << what << ", position " << j;
-      ASSERT_EQ(reused[j].b, fresh[j].b) << what << ", position " << j;
-      ASSERT_EQ(reused[j].separation, fresh[j].separation) << what << ", position " << j;
-    }
-    EXPECT_TRUE(colouring_is_proper(reused, reused_ranges, body_count)) << what;
-  };
-  check(list, bodies, "first");
-  for (Contact& c : list) c.separation += real(1);  // the same pairs, new values
-  check(list, bodies, "same pairs");
-  check(list, bodies, "same pairs again");
-  list[1234].b = list[1234].b == 7 ? 8 : 7;  // one pair changed (a may equal 7 or 8: still a valid test list)
-  if (list[1234].a == list[1234].b) list[1234].b = 9;
-  check(list, bodies, "one pair changed");
-  std::swap(list[10], list[20000]);
-  check(list, bodies, "two swapped");
-  list.pop_back();
-  check(list, bodies, "one fewer");
-  check(list, bodies + 1, "more spheres");
-  check({}, bodies, "empty");
-  check(list, bodies, "after empty");
-}
-
 // The impact stage's levels: of two contacts sharing a sphere, the one with
 // the higher rank (earlier impact) is in the lower level.
 TEST(Colouring, ByRoundOrdersNeighboursByRank) {
