@@ -47,16 +47,8 @@ __global__ void warm_start_kernel(Contact* contacts, ContactRange r, SolverBody*
   for_range(r, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(load_whole(contacts + k), bodies); });
 }
 
-// Blocks of the sweep resident per SM at least (bounds its registers): an
-// experiment knob, set from CMake (MARBLES_SWEEP_MIN_BLOCKS).
-#if defined(MARBLES_SWEEP_MIN_BLOCKS)
-#define MARBLES_SWEEP_BOUNDS __launch_bounds__(kBlock, MARBLES_SWEEP_MIN_BLOCKS)
-#else
-#define MARBLES_SWEEP_BOUNDS
-#endif
-
 template <bool Friction, bool Rolling>
-__global__ void MARBLES_SWEEP_BOUNDS sweep_kernel(Contact* contacts, ContactRange r, SolverBody* bodies, real inv_h) {
+__global__ void sweep_kernel(Contact* contacts, ContactRange r, SolverBody* bodies, real inv_h) {
   for_range(r, [&](std::uint32_t k) {
     Contact c = load_whole(contacts + k);  // the contact in 16-byte words, its results back the same way
     solve_one<Friction, Rolling>(c, bodies, inv_h);
