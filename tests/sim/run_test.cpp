@@ -31,6 +31,32 @@ fs::path temp_dir(const std::string& name) {
   return dir;
 }
 
+// A box whose floor (a plane at z = 0.05) rises at `speed` m/s, with 20
+// spheres dropped from z in [low, 0.5]; `output` is the scene's output block.
+std::string rising_floor_scene(double duration, double speed, double low, const std::string& output) {
+  return "format: 1\ntime: {duration: " + std::to_string(duration) +
+         ", dt: 1.0e-3}\neffects: [gravity, collisions, walls]\nmaterials:\n  glass: {density: 2500}\nwalls:\n"
+         "  - box: {min: [0, 0, 0], max: [0.2, 0.2, 0.6]}\n"
+         "  - plane: {point: [0, 0, 0.05], normal: [0, 0, 1]}\n    velocity: [0, 0, " +
+         std::to_string(speed) + "]\nparticles:\n  - random: {count: 20, min: [0.02, 0.02, " + std::to_string(low) +
+         "], max: [0.18, 0.18, 0.5], radius: 0.01, seed: 3}\noutput:\n" + output;
+}
+
+// Writes `yaml` to DIR/scene.yaml and runs it quietly on the CPU into DIR/out.
+int run_on_cpu(const fs::path& dir, const std::string& yaml, std::string& err) {
+  const fs::path scene = dir / "scene.yaml";
+  std::ofstream(scene) << yaml;
+  RunOptions options;
+  options.scene_path = scene.string();
+  options.out_dir = (dir / "out").string();
+  options.backend = BackendChoice::cpu;
+  options.quiet = true;
+  std::ostringstream out, errors;
+  const int status = run_scene(options, out, errors);
+  err = errors.str();
+  return status;
+}
+
 std::string read_file(const fs::path& p) {
   std::ifstream f(p, std::ios::binary);
   std::ostringstream s;
@@ -196,30 +222,15 @@ TEST(Run, ContactForcesOfARestingStackBalanceItsWeight) {
 TEST(Run, ImagesOfTheRunEqualImagesRenderedFromItsFrames) {
   if (!render::renderer_available() || !render::png_available()) GTEST_SKIP() << "skipped: built without OSMesa or libpng";
   const fs::path dir = temp_dir("images_equal");
-  const fs::path scene = dir / "scene.yaml";
-  std::ofstream(scene) << R"(format: 1
-time: {duration: 0.2, dt: 1.0e-3}
-effects: [gravity, collisions, walls]
-materials:
-  glass: {density: 2500}
-walls:
-  - box: {min: [0, 0, 0], max: [0.2, 0.2, 0.6]}
-  - plane: {point: [0, 0, 0.05], normal: [0, 0, 1]}
-    velocity: [0, 0, 0.5]
-particles:
-  - random: {count: 20, min: [0.02, 0.02, 0.3], max: [0.18, 0.18, 0.5], radius: 0.01, seed: 3}
-output:
-  vtk: {every: 100}
-  render: {every: 100, width: 96, height: 64, color_by: id,
-           camera: {position: [1.0, -1.2, 0.6], look_at: [0.1, 0.1, 0.2], fov: 40}}
-)";
-  RunOptions options;
-  options.scene_path = scene.string();
-  options.out_dir = (dir / "out").string();
-  options.backend = BackendChoice::cpu;
-  options.quiet = true;
-  std::ostringstream out, err;
-  ASSERT_EQ(run_scene(options, out, err), 0) << err.str();
+  std::string err;
+  ASSERT_EQ(run_on_cpu(dir, rising_floor_scene(0.2, 0.5, 0.3,
+                                               "  vtk: {every: 100}\n"
+                                               "  render: {every: 100, width: 96, height: 64, color_by: id,\n"
+                                               "           camera: {position: [1.0, -1.2, 0.6], look_at: [0.1, 0.1, 0.2], "
+                                               "fov: 40}}\n"),
+                       err),
+            0)
+      << err;
   auto image = [&](int k) { return render::read_png(dir / "out" / "images" / ("frame_00000" + std::to_string(k) + ".png")); };
   std::vector<render::Image> during;
   for (int k = 0; k < 3; ++k) during.push_back(image(k));
@@ -245,28 +256,8 @@ output:
 // frame k has risen by 0.02 t, and `marbles render` finds the walls there.
 TEST(Run, MovingWallsMoveInTheWallSeries) {
   const fs::path dir = temp_dir("walls");
-  const fs::path scene = dir / "scene.yaml";
-  std::ofstream(scene) << R"(format: 1
-time: {duration: 0.1, dt: 1.0e-3}
-effects: [gravity, collisions, walls]
-materials:
-  glass: {density: 2500}
-walls:
-  - box: {min: [0, 0, 0], max: [0.2, 0.2, 0.6]}
-  - plane: {point: [0, 0, 0.05], normal: [0, 0, 1]}
-    velocity: [0, 0, 0.02]
-particles:
-  - random: {count: 20, min: [0.02, 0.02, 0.1], max: [0.18, 0.18, 0.5], radius: 0.01, seed: 3}
-output:
-  vtk: {every: 25}
-)";
-  RunOptions options;
-  options.scene_path = scene.string();
-  options.out_dir = (dir / "out").string();
-  options.backend = BackendChoice::cpu;
-  options.quiet = true;
-  std::ostringstream out, err;
-  ASSERT_EQ(run_scene(options, out, err), 0) << err.str();
+  std::string err;
+  ASSERT_EQ(run_on_cpu(dir, rising_floor_scene(0.1, 0.02, 0.1, "  vtk: {every: 25}\n"), err), 0) << err;
   const auto frames = render::read_pvd(dir / "out" / "series.pvd");
   const auto walls = render::read_pvd(dir / "out" / "walls.pvd");
   ASSERT_EQ(walls.size(), frames.size());
