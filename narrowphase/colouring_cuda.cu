@@ -12,14 +12,11 @@ constexpr std::uint32_t kBatch = 8;  // rounds launched between two reads of wha
 
 // One entry of a round's active list: the contact's spheres and rank in one
 // 16-byte word, so a round reads its list in order (coalesced) and never
-// gathers per-contact arrays; the contact's index is in the rank's low bits.
+// gathers per-contact arrays; the contact's index is rank_index(rank).
 struct alignas(16) ColourEntry {
   std::uint32_t a, b;
   std::uint64_t rank;
 };
-__device__ __forceinline__ std::uint32_t index_of(const ColourEntry& e) {
-  return 0xffffffffu - static_cast<std::uint32_t>(e.rank);  // contact_rank, impact_rank: low bits 0xffffffff - k
-}
 
 // Appends e to list when `want`, one atomic per warp (a single counter taken
 // by every thread would serialise). The order within the list is free: a
@@ -85,7 +82,7 @@ __global__ void select_kernel(const ColourEntry* active, ColourEntry* next, std:
     const std::uint64_t word = round_word(round, e.rank);
     const bool coloured = holds_both(word, body_word[e.a], wall ? 0 : body_word[e.b], wall);
     if (coloured)
-      colour[index_of(e)] = rule == ColourRule::by_round
+      colour[rank_index(e.rank)] = rule == ColourRule::by_round
                                 ? round
                                 : take_lowest_free(body_used[e.a], wall ? nullptr : &body_used[e.b]);
     append(next, &count[round + 1], e, !coloured);

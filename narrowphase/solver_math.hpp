@@ -68,29 +68,6 @@ MARBLES_HD_INLINE void store_body(SolverBody* bodies, std::uint32_t index, const
   store_whole(bodies + index, SolverBody{s.v, s.inv_mass, s.w, s.inv_inertia});
 }
 
-// A sweep's results, the contact's first eight reals (contact.hpp), stored as
-// whole 16-byte words on the GPU; on the host the fields are written.
-MARBLES_HD_INLINE void store_impulses(Contact* to, const Contact& c) {
-#if defined(__CUDA_ARCH__)
-  if constexpr (sizeof(real) == 4) {
-    float4* w = reinterpret_cast<float4*>(to);
-    w[0] = make_float4(c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z);
-    w[1] = make_float4(c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.impact_impulse);
-  } else {
-    double2* w = reinterpret_cast<double2*>(to);
-    w[0] = make_double2(c.normal_impulse, c.tangent_impulse.x);
-    w[1] = make_double2(c.tangent_impulse.y, c.tangent_impulse.z);
-    w[2] = make_double2(c.rolling_impulse.x, c.rolling_impulse.y);
-    w[3] = make_double2(c.rolling_impulse.z, c.impact_impulse);
-  }
-#else
-  to->normal_impulse = c.normal_impulse;
-  to->tangent_impulse = c.tangent_impulse;
-  to->rolling_impulse = c.rolling_impulse;
-  to->impact_impulse = c.impact_impulse;
-#endif
-}
-
 // Prepare: effective masses and the approach speed before the solve.
 MARBLES_HD_INLINE void prepare_one(Contact& c, const SolverBody* bodies) {
   prepare_contact(c, load_body(bodies, c.a, c), load_body(bodies, c.b, c));
