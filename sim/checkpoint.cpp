@@ -116,6 +116,10 @@ void body(IO& io, C& c) {
 std::uint64_t scene_fingerprint(const std::string& scene_path, const std::vector<std::string>& overrides) {
   std::ifstream in(scene_path, std::ios::binary);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  return text_fingerprint(text, overrides);
+}
+
+std::uint64_t text_fingerprint(const std::string& text, const std::vector<std::string>& overrides) {
   std::uint64_t h = fnv1a(text.data(), text.size());
   for (const std::string& o : overrides) h = fnv1a(o.data(), o.size() + 1, h);  // with its terminator
   return h;

@@ -40,6 +40,8 @@ struct Checkpoint {
 // What a checkpoint must match: the scene file's bytes and the --set
 // overrides (not --duration or --out: a resumed run may run longer, elsewhere).
 std::uint64_t scene_fingerprint(const std::string& scene_path, const std::vector<std::string>& overrides);
+// The same of a scene's text (a scene given as JSON).
+std::uint64_t text_fingerprint(const std::string& text, const std::vector<std::string>& overrides);
 
 // Writes atomically; throws RuntimeFailure on I/O errors.
 void write_checkpoint(const std::string& path, const Checkpoint& checkpoint);

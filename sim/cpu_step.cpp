@@ -111,6 +111,8 @@ class CpuStep final : public StepBackend {
 
   const World& world() override { return m_world; }
   World& edit_world() override { return m_world; }
+  BodiesView state_in_place() override { return m_world.view(); }
+  void state_written() override {}
   const std::vector<narrowphase::Contact>& contacts() override { return m_contacts; }
   const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }
   std::string name() const override { return "cpu"; }

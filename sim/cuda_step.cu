@@ -288,6 +288,20 @@ class CudaStep final : public StepBackend {
     m_host_edited = true;
     return m_host;
   }
+  BodiesView state_in_place() override {
+    if (m_host_edited) {  // host edits first, so that the device arrays hold every change
+      m_device.upload(m_host, m_stream);
+      m_host_edited = false;
+    }
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+    return m_device.view();
+  }
+  void state_written() override {
+    // Writes may come from any stream (CuPy's, PyTorch's): wait for all of
+    // them. The device arrays win over unsent host edits.
+    MARBLES_CUDA_CHECK(cudaDeviceSynchronize());
+    m_host_stale = true;
+  }
   const std::vector<narrowphase::Contact>& contacts() override {
     if (m_contacts_stale) {
       m_host_contacts.resize(m_count);

@@ -20,6 +20,7 @@
 #include <iterator>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
 #include <yaml-cpp/eventhandler.h>
 
 #include "sim/limits.hpp"
@@ -795,7 +796,8 @@ YAML::Node read_document(const std::string& path) {
   return document;
 }
 
-Scene read_scene(const Field& root, const std::string& path) {
+// `path`: where the scene came from (errors name it); `stem`: the default name and output folder.
+Scene read_scene(const Field& root, const std::string& path, const std::string& stem) {
   const MapFields top(root, {"format", "name", "time", "solver", "effects", "gravity", "drag", "materials",
                              "contact_pairs", "walls", "particles", "output", "reference"});
 
@@ -808,7 +810,6 @@ Scene read_scene(const Field& root, const std::string& path) {
 
   Scene scene;
   scene.path = path;
-  const std::string stem = std::filesystem::path(path).stem().string();
   scene.name = stem;
   if (auto f = top.optional("name")) scene.name = f->word();
 
@@ -853,7 +854,57 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
   const YAML::Node document = read_document(path);
   detail::Origins origins;
   detail::apply_overrides(document, overrides, origins);
-  return read_scene(Field(document, "", path, &origins), path);
+  return read_scene(Field(document, "", path, &origins), path, std::filesystem::path(path).stem().string());
+}
+
+namespace {
+
+// A JSON value as the YAML tree the file loader would have built; nodes made
+// here carry no position, so errors name the key path alone.
+YAML::Node yaml_of(const nlohmann::ordered_json& value) {
+  switch (value.type()) {
+    case nlohmann::ordered_json::value_t::object: {
+      YAML::Node map(YAML::NodeType::Map);
+      for (const auto& [key, item] : value.items()) map.force_insert(key, yaml_of(item));
+      return map;
+    }
+    case nlohmann::ordered_json::value_t::array: {
+      YAML::Node sequence(YAML::NodeType::Sequence);
+      for (const auto& item : value) sequence.push_back(yaml_of(item));
+      return sequence;
+    }
+    case nlohmann::ordered_json::value_t::string:
+      return YAML::Node(value.get<std::string>());
+    case nlohmann::ordered_json::value_t::boolean:
+      return YAML::Node(value.get<bool>() ? "true" : "false");
+    case nlohmann::ordered_json::value_t::number_integer:
+      return YAML::Node(std::to_string(value.get<std::int64_t>()));
+    case nlohmann::ordered_json::value_t::number_unsigned:
+      return YAML::Node(std::to_string(value.get<std::uint64_t>()));
+    case nlohmann::ordered_json::value_t::number_float:
+      return YAML::Node(detail::format_number(value.get<double>()));
+    default:
+      return YAML::Node(YAML::NodeType::Null);
+  }
+}
+
+}  // namespace
+
+Scene load_scene_json(const std::string& text, const std::string& label, const std::string& stem,
+                      const std::vector<std::string>& overrides) {
+  nlohmann::ordered_json json;
+  try {
+    json = nlohmann::ordered_json::parse(text);
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(SourceLocation{label, 0, 0}, "", std::string("not a scene: ") + e.what());
+  }
+  YAML::Node document = yaml_of(json);
+  const Field root(document, "", label);
+  if (!root.is_map())
+    root.fail("a scene is a map of keys (time, materials, particles, ...), got " + root.description());
+  detail::Origins origins;
+  detail::apply_overrides(document, overrides, origins);
+  return read_scene(Field(document, "", label, &origins), label, stem);
 }
 
 }  // namespace marbles::scene

@@ -209,6 +209,13 @@ Scene load_scene(const std::string& path);
 // the file's tree before validation. A problem in an overridden value is
 // reported at the override ("--set time.dt=-1: time.dt: must be > 0, got -1").
 Scene load_scene(const std::string& path, const std::vector<std::string>& overrides);
+
+// A scene given as JSON text (the Python module's dicts): the same keys, the
+// same checks and messages; errors name `label` and the key path (there are
+// no lines). `stem` is the default name and output folder (out/<stem>);
+// relative paths in it (CSV blocks) are taken from the current directory.
+Scene load_scene_json(const std::string& text, const std::string& label, const std::string& stem,
+                      const std::vector<std::string>& overrides = {});
 // The scene's `solver.precision` ("float" or "double"), read without
 // validating anything else; "float" when the file cannot be read or parsed.
 std::string scene_precision(const std::string& path);

@@ -71,6 +71,14 @@ class Simulation {
     m_watch.known = false;
     return m_backend->edit_world();
   }
+  // The state where the step keeps it (device pointers on the CUDA backend),
+  // to read and write in place between steps; after writing, state_written()
+  // (the watchdog then treats the next step as after an edit).
+  BodiesView state_in_place() { return m_backend->state_in_place(); }
+  void state_written() {
+    m_watch.known = false;
+    m_backend->state_written();
+  }
   // The contacts of the last substep (solver order), for diagnostics and tests.
   const std::vector<narrowphase::Contact>& contacts() const { return m_backend->contacts(); }
   const broadphase::BroadPhase* broad_phase() const { return m_backend->broad_phase(); }

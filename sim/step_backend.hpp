@@ -87,6 +87,12 @@ class StepBackend {
   virtual const World& world() = 0;
   // The host copy for editing between steps; sent back before the next step.
   virtual World& edit_world() = 0;
+  // The arrays the step itself reads and writes (device pointers on the GPU),
+  // for tools that change the state in place between steps (the Python
+  // module's views); after such writes, state_written() before anything else.
+  virtual BodiesView state_in_place() = 0;
+  // The arrays of state_in_place() may have changed (the host copy is stale).
+  virtual void state_written() = 0;
   // The contacts of the last substep, in solver (colour-major) order.
   virtual const std::vector<narrowphase::Contact>& contacts() = 0;
   virtual const broadphase::BroadPhase* broad_phase() const = 0;

@@ -1,0 +1,421 @@
+// python/bind_simulation.cpp — the Simulation of one precision, for Python.
+//
+// Built twice into the module, like every library of the program: once as
+// is (float) and once with `marbles` renamed to `marbles_f64` and `real` =
+// double (python/CMakeLists.txt); marbles/__init__.py picks the class that
+// matches the scene's `solver.precision`, as `marbles run` does.
+//
+// A run from Python is `marbles run` without its output: the same scene
+// loading, world, backend and watchdog, the same running totals and reference
+// probe (so a checkpoint written here resumes with `marbles run --restart`
+// and back). The state is handed out in place: NumPy views of the step's own
+// arrays on the CPU, device pointers on the GPU; each step() first checks
+// them (non-finite values are refused) when they are out.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include "broadphase/grid.hpp"
+#include "core/error.hpp"
+#include "core/parallel.hpp"
+#include "render/vtk_output.hpp"
+#include "sim/checkpoint.hpp"
+#include "sim/output.hpp"
+#include "sim/particles.hpp"
+#include "sim/reference.hpp"
+#include "sim/run.hpp"
+#include "sim/scene.hpp"
+#include "sim/settings_check.hpp"
+#include "sim/simulation.hpp"
+#include "sim/version.hpp"
+
+namespace nb = nanobind;
+
+namespace marbles {
+
+namespace {
+
+template <class T, ssize_t... Shape>
+using HostArray = nb::ndarray<nb::numpy, T, nb::shape<Shape...>, nb::c_contig>;
+template <class T, ssize_t... Shape>
+using DeviceArray = nb::ndarray<T, nb::shape<Shape...>, nb::c_contig, nb::device::cuda>;
+
+constexpr ssize_t kAny = -1;  // a dimension of any length
+
+BackendChoice backend_choice(const std::string& name) {
+  if (name == "auto") return BackendChoice::automatic;
+  if (name == "cpu") return BackendChoice::cpu;
+  if (name == "cuda") return BackendChoice::cuda;
+  throw InputError(SourceLocation{}, "backend", "must be auto, cpu or cuda, got '" + name + "'");
+}
+
+class PySimulation {
+ public:
+  // `source`: a scene file's path, or a scene as JSON text when `label` is
+  // not empty (errors then name `label`; `stem` names the output folder).
+  PySimulation(const std::string& source, const std::string& label, const std::string& stem,
+               const std::vector<std::string>& overrides, const std::string& backend, int threads)
+      : m_overrides(overrides) {
+    const bool from_text = !label.empty();
+    m_scene = from_text ? scene::load_scene_json(source, label, stem, overrides) : scene::load_scene(source, overrides);
+    m_fingerprint = from_text ? text_fingerprint(source, overrides) : scene_fingerprint(source, overrides);
+    const scene::GeneratedParticles particles = scene::generate_particles(m_scene);
+    m_warnings = risky_settings(m_scene, particles, sizeof(real) == 4);
+    const BackendChoice choice = backend_choice(backend);
+    set_thread_count(threads);
+    std::ostringstream log;
+    m_backend = select_backend(choice, log);
+    m_backend_note = log.str();
+    if (!m_backend_note.empty() && m_backend_note.back() == '\n') m_backend_note.pop_back();
+    m_sim = std::make_unique<Simulation>(m_scene, make_world(m_scene, particles), m_backend);
+    m_totals.energy_start = m_sim->world().kinetic_energy();
+    m_total_steps = static_cast<std::uint64_t>(std::llround(m_scene.time.duration / m_scene.time.dt));
+    if (m_scene.reference.kind != scene::ReferenceSpec::Kind::none) {
+      m_probe.emplace(m_scene, m_sim->world());
+      m_probe_every = m_probe->every(m_total_steps);
+    }
+    m_sim->set_watchdog(true);
+  }
+
+  // Advances n steps (the GIL released); views handed out are checked first.
+  void step(std::uint64_t n) {
+    if (m_views_out) check_views();
+    nb::gil_scoped_release release;
+    for (std::uint64_t i = 0; i < n; ++i) {
+      try {
+        m_sim->step();
+      } catch (const WatchdogFailure& e) {
+        throw RuntimeFailure(std::string(e.what()) + " (the state is back at the start of step " +
+                             std::to_string(m_sim->steps() + 1) + ")");
+      }
+      const StepCounters& last = m_sim->last_step();
+      m_totals.candidate_sum += static_cast<double>(last.candidate_pairs) / m_sim->substeps();
+      m_totals.contact_sum += static_cast<double>(last.contacts) / m_sim->substeps();
+      m_totals.deepest = std::max(m_totals.deepest, static_cast<double>(last.max_overlap));
+      m_totals.overlap_end = last.max_overlap;
+      m_totals.rollbacks += static_cast<double>(m_sim->last_rollbacks().size());
+      if (m_probe && m_sim->steps() % m_probe_every == 0) m_probe->sample(m_sim->time(), m_sim->world());
+    }
+  }
+
+  // --- the state ---------------------------------------------------------
+  std::size_t size() const { return m_sim->world().size(); }
+  bool on_device() const { return m_backend == broadphase::Backend::cuda; }
+
+  // A view of one of the step's own arrays: `what` is position, velocity,
+  // angular_velocity (writable), radius or material (read-only).
+  nb::object view(const std::string& what) {
+    nb::object owner = nb::find(this);
+    const BodiesView v = m_sim->state_in_place();
+    m_views_out = true;
+    const std::size_t n = v.count;
+    real* vec = what == "position" ? &v.position[0].x
+                : what == "velocity" ? &v.velocity[0].x
+                : what == "angular_velocity" ? &v.angular_velocity[0].x
+                                             : nullptr;
+    if (n == 0) vec = nullptr;
+    if (!on_device()) {
+      if (what == "radius") return nb::cast(HostArray<const real, kAny>(v.radius, {n}, owner));
+      if (what == "material") return nb::cast(HostArray<const std::uint32_t, kAny>(v.material, {n}, owner));
+      return nb::cast(HostArray<real, kAny, 3>(vec, {n, 3}, owner));
+    }
+    // (the array for DLPack, the address for __cuda_array_interface__)
+    if (what == "radius")
+      return nb::make_tuple(DeviceArray<const real, kAny>(v.radius, {n}, owner), reinterpret_cast<std::uintptr_t>(v.radius));
+    if (what == "material")
+      return nb::make_tuple(DeviceArray<const std::uint32_t, kAny>(v.material, {n}, owner),
+                            reinterpret_cast<std::uintptr_t>(v.material));
+    return nb::make_tuple(DeviceArray<real, kAny, 3>(vec, {n, 3}, owner), reinterpret_cast<std::uintptr_t>(vec));
+  }
+
+  // A host copy of one array (any backend).
+  nb::object copy(const std::string& what) {
+    if (m_views_out) m_sim->state_written();  // device views may have been written
+    const World& w = m_sim->world();
+    const std::size_t n = w.size();
+    if (what == "radius") return nb::cast(to_numpy(w.radius.data(), {n}));
+    if (what == "material") return nb::cast(to_numpy(w.material.data(), {n}));
+    const std::vector<Vec3>& vec = what == "position" ? w.position : what == "velocity" ? w.velocity : w.angular_velocity;
+    return nb::cast(to_numpy(n ? &vec[0].x : nullptr, {n, 3}));
+  }
+
+  // Writes a whole array from a host array of the same shape (a copy; the
+  // values are checked first).
+  void assign(const std::string& what, HostArray<const real, kAny, 3> values) {
+    const std::size_t n = size();
+    if (values.shape(0) != n)
+      throw nb::value_error((what + "s: expected " + std::to_string(n) + " rows, got " + std::to_string(values.shape(0))).c_str());
+    for (std::size_t i = 0; i < 3 * n; ++i)
+      if (!std::isfinite(values.data()[i]))
+        throw nb::value_error((what + "s[" + std::to_string(i / 3) + "] is not finite; the state is unchanged").c_str());
+    if (m_views_out) m_sim->state_written();
+    World& w = m_sim->edit_world();
+    std::vector<Vec3>& vec = what == "position" ? w.position : what == "velocity" ? w.velocity : w.angular_velocity;
+    std::copy(values.data(), values.data() + 3 * n, &vec[0].x);
+  }
+
+  // --- what the step knows ------------------------------------------------
+  nb::dict contacts() {
+    if (m_views_out) m_sim->state_written();
+    const render::ContactSnapshot c = make_contact_snapshot(*m_sim);
+    const std::size_t m = c.sphere_a.size();
+    std::vector<std::uint32_t> pairs(2 * m);
+    for (std::size_t k = 0; k < m; ++k) {
+      pairs[2 * k] = c.sphere_a[k];
+      pairs[2 * k + 1] = c.sphere_b[k];
+    }
+    nb::dict d;
+    d["pairs"] = to_numpy(pairs.data(), {m, 2});
+    d["wall"] = to_numpy(c.wall.data(), {m}).attr("astype")("bool");
+    d["normal"] = to_numpy(m ? &c.normal[0].x : nullptr, {m, 3});
+    d["normal_force"] = to_numpy(c.normal_force.data(), {m});
+    d["tangential_force"] = to_numpy(m ? &c.tangential_force[0].x : nullptr, {m, 3});
+    d["overlap"] = to_numpy(c.overlap.data(), {m});
+    d["point_a"] = to_numpy(m ? &c.a[0].x : nullptr, {m, 3});
+    d["point_b"] = to_numpy(m ? &c.b[0].x : nullptr, {m, 3});
+    return d;
+  }
+
+  double kinetic_energy() {
+    if (m_views_out) m_sim->state_written();
+    return m_sim->world().kinetic_energy();
+  }
+
+  // OUTDIR/frames/frame_NNNNNN.vtp and OUTDIR/series.pvd, as `marbles run`
+  // writes them (the scene's point fields); frames written to one folder
+  // from one simulation make one series.
+  std::string write_frame(const std::string& dir) {
+    if (m_views_out) check_views();
+    auto it = m_frames.find(dir);
+    if (it == m_frames.end()) {
+      std::vector<std::string> names;
+      for (const scene::Material& mat : m_scene.materials) names.push_back(mat.name);
+      const std::string producer = std::string("marbles ") + kMarblesVersion + " (commit " + kMarblesCommit + ")";
+      auto writer = std::make_unique<render::VtkSeriesWriter>(dir, render::parse_point_fields(m_scene.output.fields),
+                                                              render::FrameMetadata{names, producer});
+      it = m_frames.emplace(dir, std::move(writer)).first;
+    }
+    const bool counts = std::find(m_scene.output.fields.begin(), m_scene.output.fields.end(), "contacts") !=
+                        m_scene.output.fields.end();
+    return it->second->write(make_snapshot(*m_sim, counts)).string();
+  }
+
+  // A checkpoint `marbles run --restart` reads (and restart() here).
+  void checkpoint(const std::string& path) {
+    if (m_views_out) check_views();
+    write_checkpoint(path, {m_fingerprint, m_sim->steps(), m_sim->world(), m_sim->save_state(), m_totals,
+                            m_probe ? m_probe->progress() : std::vector<double>{}});
+  }
+
+  void restart(const std::string& path) {
+    Checkpoint c = read_checkpoint(path, m_fingerprint);
+    if (c.world.size() != size())
+      throw InputError(SourceLocation{path, 0, 0}, "restart",
+                       "the checkpoint holds " + std::to_string(c.world.size()) + " spheres, the scene makes " +
+                           std::to_string(size()));
+    if (m_views_out) m_sim->state_written();
+    m_sim->restore(c.world, c.state, c.steps);
+    m_totals = c.totals;
+    if (m_probe) m_probe->resume(c.probe);
+  }
+
+  // The reference's verdict so far (kind, expected, measured, error, note).
+  nb::object reference() {
+    if (!m_probe) return nb::none();
+    if (m_views_out) m_sim->state_written();
+    ReferenceProbe probe = *m_probe;  // finish() on a copy: stepping may go on
+    const ReferenceResult r = probe.finish(m_sim->time(), m_sim->world());
+    nb::dict d;
+    d["kind"] = r.kind;
+    d["expected"] = r.expected;
+    d["measured"] = r.measured;
+    d["error"] = r.error;
+    d["note"] = r.note;
+    return d;
+  }
+
+  nb::dict totals() const {
+    const double steps = std::max<double>(1, static_cast<double>(m_sim->steps()));
+    nb::dict d;
+    d["mean_candidate_pairs"] = m_totals.candidate_sum / steps;
+    d["mean_contacts"] = m_totals.contact_sum / steps;
+    d["max_overlap"] = m_totals.deepest;
+    d["max_overlap_end"] = m_totals.overlap_end;
+    d["rollbacks"] = static_cast<std::uint64_t>(m_totals.rollbacks);
+    d["kinetic_energy_start"] = m_totals.energy_start;
+    return d;
+  }
+
+  const Simulation& sim() const { return *m_sim; }
+  const scene::Scene& scene() const { return m_scene; }
+  const std::vector<std::string>& warnings() const { return m_warnings; }
+  const std::string& backend_note() const { return m_backend_note; }
+  std::uint64_t total_steps() const { return m_total_steps; }
+
+ private:
+  template <class T>
+  static nb::object to_numpy(const T* data, std::initializer_list<std::size_t> shape) {
+    std::size_t count = 1;
+    for (std::size_t s : shape) count *= s;
+    T* copy = new T[count > 0 ? count : 1];
+    if (count > 0) std::copy(data, data + count, copy);
+    nb::capsule owner(copy, [](void* p) noexcept { delete[] static_cast<T*>(p); });
+    return nb::cast(nb::ndarray<nb::numpy, T>(copy, shape.size(), shape.begin(), owner));
+  }
+
+  // The arrays handed out may have been written: the step takes them as an
+  // edit, after checking that every value is finite.
+  void check_views() {
+    m_sim->state_written();
+    const World& w = m_sim->world();
+    const std::pair<const char*, const std::vector<Vec3>*> arrays[] = {
+        {"positions", &w.position}, {"velocities", &w.velocity}, {"angular_velocities", &w.angular_velocity}};
+    for (const auto& [name, vec] : arrays)
+      for (std::size_t i = 0; i < vec->size(); ++i) {
+        const Vec3& p = (*vec)[i];
+        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+          throw nb::value_error((std::string(name) + "[" + std::to_string(i) +
+                                 "] is not finite; write a finite value before stepping")
+                                    .c_str());
+      }
+  }
+
+  scene::Scene m_scene;
+  std::vector<std::string> m_overrides;
+  std::uint64_t m_fingerprint = 0;
+  std::vector<std::string> m_warnings;
+  broadphase::Backend m_backend = broadphase::Backend::cpu;
+  std::string m_backend_note;
+  std::unique_ptr<Simulation> m_sim;
+  RunTotals m_totals;
+  std::optional<ReferenceProbe> m_probe;
+  std::uint64_t m_probe_every = 1, m_total_steps = 0;
+  bool m_views_out = false;
+  std::map<std::string, std::unique_ptr<render::VtkSeriesWriter>> m_frames;
+};
+
+// Raises marbles.errors.<name>(*args) as the pending Python exception.
+template <class... Args>
+void raise(const char* name, Args&&... args) {
+  nb::object type = nb::module_::import_("marbles.errors").attr(name);
+  nb::object error = type(std::forward<Args>(args)...);
+  PyErr_SetObject(type.ptr(), error.ptr());
+}
+
+// InputError -> marbles.SceneError (file, line, column, key, message);
+// RuntimeFailure -> marbles.RuntimeFailure (marbles/errors.py).
+void translate(const std::exception_ptr& p, void*) {
+  try {
+    std::rethrow_exception(p);
+  } catch (const InputError& e) {
+    raise("SceneError", std::string(e.what()), e.where().file, e.where().line, e.where().column, e.key(),
+          e.message());
+  } catch (const RuntimeFailure& e) {
+    raise("RuntimeFailure", std::string(e.what()));
+  }
+}
+
+// The overlapping pairs (i < j, sorted) of the spheres of an (N, 4) array of
+// x, y, z, r, as `marbles pairs` prints them.
+nb::object pairs(HostArray<const real, kAny, 4> xyzr, const std::string& algorithm, const std::string& backend,
+                 double margin) {
+  const std::size_t n = xyzr.shape(0);
+  std::vector<Vec3> centre(n);
+  std::vector<real> radius(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const real* row = xyzr.data() + 4 * i;
+    if (!std::isfinite(row[0]) || !std::isfinite(row[1]) || !std::isfinite(row[2]) || !(row[3] >= 0) ||
+        !std::isfinite(row[3]))
+      throw InputError(SourceLocation{}, "xyzr[" + std::to_string(i) + "]",
+                       "a sphere needs a finite centre and a finite radius >= 0");
+    centre[i] = {row[0], row[1], row[2]};
+    radius[i] = row[3];
+  }
+  if (!(margin >= 0) || !std::isfinite(margin)) throw InputError(SourceLocation{}, "margin", "must be finite and >= 0");
+  const SpheresIn in{centre.data(), radius.data(), n};
+  std::vector<broadphase::Pair> found;
+  if (algorithm == "brute") {
+    broadphase::brute_force_pairs(in, static_cast<real>(margin), found);
+  } else if (algorithm == "home" || algorithm == "subdivision") {
+    std::ostringstream log;
+    const broadphase::Backend where = select_backend(backend_choice(backend), log);
+    const auto alg = algorithm == "home" ? broadphase::Algorithm::home : broadphase::Algorithm::seed;
+    auto bp = where == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda(alg)
+                                                 : broadphase::make_subdivision_cpu(alg);
+    nb::gil_scoped_release release;
+    try {
+      bp->find_pairs(in, static_cast<real>(margin), found);
+    } catch (const broadphase::SpanTooLarge& e) {
+      throw InputError(SourceLocation{}, "xyzr", e.what());
+    }
+  } else {
+    throw InputError(SourceLocation{}, "algorithm", "must be home, subdivision or brute, got '" + algorithm + "'");
+  }
+  std::sort(found.begin(), found.end());
+  std::uint32_t* out = new std::uint32_t[2 * found.size() + 1];
+  for (std::size_t k = 0; k < found.size(); ++k) {
+    out[2 * k] = found[k].i;
+    out[2 * k + 1] = found[k].j;
+  }
+  nb::capsule owner(out, [](void* p) noexcept { delete[] static_cast<std::uint32_t*>(p); });
+  return nb::cast(HostArray<std::uint32_t, kAny, 2>(out, {found.size(), 2}, owner));
+}
+
+}  // namespace
+
+void bind_simulation(nb::module_& m, const char* name, const char* pairs_name) {
+  nb::register_exception_translator(translate);
+  m.def(pairs_name, &pairs, nb::arg("xyzr"), nb::arg("algorithm"), nb::arg("backend"), nb::arg("margin"));
+  nb::class_<PySimulation>(m, name)
+      .def(nb::init<const std::string&, const std::string&, const std::string&, const std::vector<std::string>&,
+                    const std::string&, int>(),
+           nb::arg("source"), nb::arg("label"), nb::arg("stem"), nb::arg("overrides"), nb::arg("backend"),
+           nb::arg("threads"))
+      .def("step", &PySimulation::step, nb::arg("n"))
+      .def("view", &PySimulation::view, nb::arg("what"))
+      .def("copy", &PySimulation::copy, nb::arg("what"))
+      .def("assign", &PySimulation::assign, nb::arg("what"), nb::arg("values"))
+      .def("contacts", &PySimulation::contacts)
+      .def("kinetic_energy", &PySimulation::kinetic_energy)
+      .def("write_frame", &PySimulation::write_frame, nb::arg("dir"))
+      .def("checkpoint", &PySimulation::checkpoint, nb::arg("path"))
+      .def("restart", &PySimulation::restart, nb::arg("path"))
+      .def("reference", &PySimulation::reference)
+      .def("totals", &PySimulation::totals)
+      .def_prop_ro("size", &PySimulation::size)
+      .def_prop_ro("on_device", &PySimulation::on_device)
+      .def_prop_ro("time", [](const PySimulation& s) { return s.sim().time(); })
+      .def_prop_ro("steps", [](const PySimulation& s) { return s.sim().steps(); })
+      .def_prop_ro("dt", [](const PySimulation& s) { return s.sim().dt(); })
+      .def_prop_ro("substeps", [](const PySimulation& s) { return s.sim().substeps(); })
+      .def_prop_ro("duration", [](const PySimulation& s) { return s.scene().time.duration; })
+      .def_prop_ro("total_steps", &PySimulation::total_steps)
+      .def_prop_ro("name", [](const PySimulation& s) { return s.scene().name; })
+      .def_prop_ro("output_dir", [](const PySimulation& s) { return s.scene().output.dir; })
+      .def_prop_ro("materials", [](const PySimulation& s) {
+        std::vector<std::string> names;
+        for (const scene::Material& mat : s.scene().materials) names.push_back(mat.name);
+        return names;
+      })
+      .def_prop_ro("pipeline", [](const PySimulation& s) { return s.sim().describe_pipeline(); })
+      .def_prop_ro("backend", [](const PySimulation& s) { return s.sim().backend_name(); })
+      .def_prop_ro("backend_note", &PySimulation::backend_note)
+      .def_prop_ro("precision", [](const PySimulation&) { return std::string(kRealName); })
+      .def_prop_ro("warnings", &PySimulation::warnings)
+      .def_prop_ro("max_overlap", [](const PySimulation& s) { return static_cast<double>(s.sim().last_step().max_overlap); })
+      .def_prop_ro("rollbacks", [](const PySimulation& s) { return s.sim().rollbacks(); });
+}
+
+}  // namespace marbles

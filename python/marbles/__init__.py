@@ -1,0 +1,413 @@
+"""marbles from Python: build scenes, step, and read and change the state as arrays.
+
+    import marbles
+    sim = marbles.Simulation("scenes/demo.yaml", backend="auto", set={"time.dt": 5e-4})
+    sim.step(100)
+    z = sim.positions[:, 2]          # a NumPy view of the step's own array (CPU backend)
+
+The scene format, its checks and its error messages are those of ``marbles run``
+(docs/scene-format.md); docs/python.md describes this module.
+"""
+
+import json
+import math
+import os
+import warnings
+
+import numpy as np
+
+from .errors import RuntimeFailure, SceneError
+from . import _marbles
+
+__all__ = ["Simulation", "DeviceArray", "SceneError", "RuntimeFailure", "pairs", "study", "cuda_device",
+           "__version__"]
+
+__version__ = _marbles.version
+
+
+# --- scenes and overrides ------------------------------------------------------
+
+def _yaml_text(value, key):
+    """A value as the YAML text of a ``--set key=value`` override."""
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        if math.isnan(v):
+            return ".nan"
+        if math.isinf(v):
+            return ".inf" if v > 0 else "-.inf"
+        return repr(v)
+    if isinstance(value, str):
+        return value
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_yaml_text(v, key) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k}: {_yaml_text(v, key)}" for k, v in value.items()) + "}"
+    raise SceneError(f"set: {key}: cannot be written as a scene value: {value!r}", key=key,
+                     message=f"cannot be written as a scene value: {value!r}")
+
+
+def _overrides(set):
+    """``{"time.dt": 5e-4}`` (or ``["time.dt=5e-4"]``) as the command line's ``--set`` texts."""
+    if set is None:
+        return []
+    if isinstance(set, dict):
+        return [f"{key}={_yaml_text(value, key)}" for key, value in set.items()]
+    if isinstance(set, str):
+        return [set]
+    return [str(item) for item in set]
+
+
+def _plain(value, key):
+    """A scene dict as JSON-ready data: NumPy arrays and scalars as lists and
+    numbers; non-finite numbers as YAML's .nan/.inf, which the checks refuse
+    with the key's name."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise SceneError(f"<dict>: {key}: keys are strings, got {k!r}", file="<dict>", key=key,
+                                 message=f"keys are strings, got {k!r}")
+            out[k] = _plain(v, f"{key}.{k}" if key else k)
+        return out
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v, f"{key}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        if math.isfinite(v):
+            return v
+        return ".nan" if math.isnan(v) else (".inf" if v > 0 else "-.inf")
+    if value is None or isinstance(value, str):
+        return value
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    raise SceneError(f"<dict>: {key}: not a scene value: {value!r}", file="<dict>", key=key,
+                     message=f"not a scene value: {value!r}")
+
+
+def _requested_precision(overrides):
+    """The precision a --set override asks for, or None."""
+    for text in reversed(overrides):
+        key, _, value = text.partition("=")
+        if key.strip() in ("solver.precision", "solver"):
+            if key.strip() == "solver":
+                return "double" if "double" in value else None
+            return value.strip()
+    return None
+
+
+def _implementation(precision):
+    return _marbles.SimulationDouble if precision == "double" else _marbles.SimulationFloat
+
+
+# --- device arrays -------------------------------------------------------------
+
+class DeviceArray:
+    """A sphere array of the CUDA backend, in device memory, without a copy.
+
+    ``cupy.asarray(a)`` (``__cuda_array_interface__``) and
+    ``torch.from_dlpack(a)`` (DLPack) see the step's own memory; ``a.numpy()``
+    is a host copy. Writes through the device memory are taken, and checked,
+    at the next step, like writes through the NumPy views of the CPU backend.
+    """
+
+    def __init__(self, simulation, what, array, address, shape, dtype, readonly):
+        self._simulation = simulation  # keeps the device memory alive
+        self._what = what
+        self._array = array
+        self._address = address
+        self.shape = shape
+        self.dtype = np.dtype(dtype)
+        self.readonly = readonly
+
+    @property
+    def __cuda_array_interface__(self):
+        return {"shape": self.shape, "typestr": self.dtype.str, "data": (self._address, self.readonly),
+                "strides": None, "version": 3}
+
+    def __dlpack__(self, **kwargs):
+        return self._array.__dlpack__(**kwargs)
+
+    def __dlpack_device__(self):
+        return self._array.__dlpack_device__()
+
+    def __len__(self):
+        return self.shape[0]
+
+    def numpy(self):
+        """A host copy (NumPy)."""
+        return self._simulation._impl.copy(self._what)
+
+    def __repr__(self):
+        return f"DeviceArray({self._what}, shape={self.shape}, dtype={self.dtype}, device=cuda)"
+
+
+# --- the simulation ------------------------------------------------------------
+
+class Simulation:
+    """A scene, stepped: ``marbles run`` without the files.
+
+    ``Simulation("scene.yaml", backend="auto", set={"time.dt": 5e-4}, threads=0)``
+    loads and checks the scene as ``marbles run`` does (``set`` are its
+    ``--set`` overrides; ``threads`` its ``--threads``); the same scene stepped
+    here and by ``marbles run`` gives the same bits. The precision is the
+    scene's ``solver.precision``.
+    """
+
+    def __init__(self, scene, backend="auto", set=None, threads=0):
+        path = os.fspath(scene)
+        overrides = _overrides(set)
+        precision = _requested_precision(overrides) or _marbles.scene_precision(path)
+        impl = _implementation(precision)(path, "", "", overrides, backend, threads)
+        self._setup(impl, {"scene": os.path.abspath(path), "set": overrides})
+
+    @classmethod
+    def from_dict(cls, scene, backend="auto", set=None, threads=0, name=None):
+        """A scene given as a dict with the keys of a scene file. Errors name
+        the key path (``SceneError.key``; ``line`` is 0). ``name`` (or the
+        scene's ``name``) names the default output folder, ``out/<name>``."""
+        if not isinstance(scene, dict):
+            raise SceneError(f"<dict>: a scene is a dict of keys (time, materials, particles, ...), got "
+                             f"{type(scene).__name__}", file="<dict>",
+                             message="a scene is a dict of keys (time, materials, particles, ...)")
+        text = json.dumps(_plain(scene, ""))
+        overrides = _overrides(set)
+        solver = scene.get("solver")
+        precision = _requested_precision(overrides) or (
+            solver.get("precision", "float") if isinstance(solver, dict) else "float")
+        stem = name or (scene.get("name") if isinstance(scene.get("name"), str) else None) or "scene"
+        impl = _implementation(precision)(text, "<dict>", stem, overrides, backend, threads)
+        self = cls.__new__(cls)
+        self._setup(impl, {"dict": text, "name": stem, "set": overrides})
+        return self
+
+    @classmethod
+    def restart(cls, path, scene=None, backend="auto", set=None, threads=0):
+        """Resumes from a checkpoint (``sim.checkpoint(path)``, or one of
+        ``marbles run``'s). Without ``scene``, the scene and overrides are
+        those recorded beside a checkpoint written from Python
+        (``path + ".scene.json"``); a checkpoint of ``marbles run`` needs
+        ``scene`` (and the run's ``set``)."""
+        path = os.fspath(path)
+        if scene is None:
+            try:
+                with open(path + ".scene.json", encoding="utf-8") as f:
+                    source = json.load(f)
+            except FileNotFoundError:
+                raise SceneError(f"{path}: restart: no {os.path.basename(path)}.scene.json beside the checkpoint "
+                                 "says which scene it belongs to; give scene=", file=path, key="restart",
+                                 message="give scene=") from None
+            overrides = source["set"] if set is None else _overrides(set)
+            if source.get("dict") is not None:
+                self = cls.from_dict(json.loads(source["dict"]), backend=backend, set=overrides, threads=threads,
+                                     name=source.get("name"))
+            else:
+                self = cls(source["scene"], backend=backend, set=overrides, threads=threads)
+        elif isinstance(scene, dict):
+            self = cls.from_dict(scene, backend=backend, set=set, threads=threads)
+        else:
+            self = cls(scene, backend=backend, set=set, threads=threads)
+        if self.precision != _marbles.checkpoint_precision(path) and os.path.exists(path):
+            # The checkpoint's precision wins, as with marbles run --restart.
+            overrides = self._source["set"] + [f"solver.precision={_marbles.checkpoint_precision(path)}"]
+            if "dict" in self._source:
+                self = cls.from_dict(json.loads(self._source["dict"]), backend=backend, set=overrides,
+                                     threads=threads, name=self._source.get("name"))
+            else:
+                self = cls(self._source["scene"], backend=backend, set=overrides, threads=threads)
+        self._impl.restart(path)
+        return self
+
+    def _setup(self, impl, source):
+        self._impl = impl
+        self._source = source
+        for text in impl.warnings:
+            warnings.warn(text, stacklevel=3)
+
+    # --- stepping ---
+    def step(self, n=1):
+        """Advances n steps of dt. Arrays handed out are checked first (a
+        non-finite value raises ValueError and nothing moves)."""
+        n = int(n)
+        if n < 0:
+            raise ValueError(f"step: n must be >= 0, got {n}")
+        self._impl.step(n)
+        return self
+
+    def run(self, until=None, callback=None, every=1):
+        """Steps until the time ``until`` (default: the scene's duration),
+        calling ``callback(sim)`` every ``every`` steps; a callback that
+        returns False stops the run."""
+        every = int(every)
+        if every < 1:
+            raise ValueError(f"run: every must be >= 1, got {every}")
+        target = self._impl.total_steps if until is None else int(round(float(until) / self.dt))
+        while self.steps < target:
+            self._impl.step(min(every, target - self.steps))
+            if callback is not None and callback(self) is False:
+                break
+        return self
+
+    # --- what the run is ---
+    time = property(lambda self: self._impl.time, doc="simulated time, s")
+    steps = property(lambda self: self._impl.steps, doc="steps taken")
+    dt = property(lambda self: self._impl.dt, doc="the step, s")
+    substeps = property(lambda self: self._impl.substeps, doc="substeps per step")
+    duration = property(lambda self: self._impl.duration, doc="the scene's time.duration, s")
+    pipeline = property(lambda self: self._impl.pipeline, doc="the stages the step runs, one per line")
+    backend = property(lambda self: self._impl.backend, doc="'cpu' or 'cuda'")
+    precision = property(lambda self: self._impl.precision, doc="'float' or 'double'")
+    name = property(lambda self: self._impl.name, doc="the scene's name")
+    material_names = property(lambda self: self._impl.materials, doc="material names, by material id")
+    max_overlap = property(lambda self: self._impl.max_overlap,
+                           doc="the last step's deepest overlap, of the smaller radius")
+    rollbacks = property(lambda self: self._impl.rollbacks, doc="steps the watchdog redid")
+
+    def __len__(self):
+        return self._impl.size
+
+    def __repr__(self):
+        return (f"<marbles.Simulation {self.name!r}: {len(self)} spheres, {self.backend}, {self.precision}, "
+                f"t = {self.time:g} s, {self.steps} steps>")
+
+    # --- the state ---
+    def _array(self, what):
+        if not self._impl.on_device:
+            return self._impl.view(what)
+        array, address = self._impl.view(what)
+        shape = (len(self), 3) if what in ("position", "velocity", "angular_velocity") else (len(self),)
+        dtype = np.uint32 if what == "material" else (np.float64 if self.precision == "double" else np.float32)
+        return DeviceArray(self, what, array, address, shape, dtype, what in ("radius", "material"))
+
+    positions = property(lambda self: self._array("position"),
+                         lambda self, values: self._assign("position", values),
+                         doc="(N, 3) centres, m: writable in place; assigning copies")
+    velocities = property(lambda self: self._array("velocity"),
+                          lambda self, values: self._assign("velocity", values), doc="(N, 3) m/s")
+    angular_velocities = property(lambda self: self._array("angular_velocity"),
+                                  lambda self, values: self._assign("angular_velocity", values),
+                                  doc="(N, 3) rad/s")
+    radii = property(lambda self: self._array("radius"), doc="(N,) m, read-only")
+    materials = property(lambda self: self._array("material"), doc="(N,) material ids, read-only")
+
+    @property
+    def ids(self):
+        """(N,) sphere ids (the order of the scene's particle blocks), read-only."""
+        ids = np.arange(len(self), dtype=np.uint32)
+        ids.flags.writeable = False
+        return ids
+
+    def _assign(self, what, values):
+        dtype = np.float64 if self.precision == "double" else np.float32
+        if hasattr(values, "__cuda_array_interface__") and hasattr(values, "get"):
+            values = values.get()
+        array = np.ascontiguousarray(values, dtype=dtype)
+        if array.shape != (len(self), 3):
+            raise ValueError(f"{what}s: expected shape ({len(self)}, 3), got {array.shape}")
+        self._impl.assign(what, array)
+
+    def contacts(self):
+        """The contacts of the last substep that press: a dict of arrays —
+        pairs (M, 2) (b is a wall's index where wall is True), wall, normal
+        (M, 3, from b to a), normal_force (M,) N, tangential_force (M, 3) N,
+        overlap (M,) m, point_a and point_b (M, 3): the line's ends."""
+        return self._impl.contacts()
+
+    def kinetic_energy(self):
+        """Translational and rotational kinetic energy of the movable spheres, J."""
+        return self._impl.kinetic_energy()
+
+    def write_frame(self, dir):
+        """Writes the state as ``dir/frames/frame_NNNNNN.vtp`` and keeps
+        ``dir/series.pvd`` (ParaView) up to date; returns the frame's path."""
+        return self._impl.write_frame(os.fspath(dir))
+
+    def checkpoint(self, path):
+        """Writes a checkpoint (``marbles run --restart`` reads it too) and,
+        beside it, ``path + ".scene.json"``: the scene it belongs to."""
+        path = os.fspath(path)
+        self._impl.checkpoint(path)
+        tmp = path + ".scene.json.tmp"
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(self._source, f)
+        os.replace(tmp, path + ".scene.json")
+
+    def reference(self):
+        """The scene's reference (``reference:``) against the run so far, as a
+        dict (kind, expected, measured, error, note), or None."""
+        return self._impl.reference()
+
+    def summary(self):
+        """The run's figures as summary.json has them (means over the steps)."""
+        out = {"scene": self._source.get("scene", "<dict>"), "spheres": len(self), "backend": self.backend,
+               "precision": self.precision, "steps": self.steps, "substeps": self.substeps, "dt": self.dt,
+               "simulated_time": self.time}
+        out.update(self._impl.totals())
+        out["kinetic_energy_end"] = self.kinetic_energy()
+        return out
+
+
+# --- the broad phase and the study ---------------------------------------------
+
+def pairs(xyzr, backend="auto", algorithm="home", margin=0.0):
+    """The overlapping pairs of an (N, 4) array of x, y, z, r: an (M, 2) uint32
+    array of i < j, sorted — what ``marbles pairs`` prints. ``algorithm``:
+    home, subdivision (the broad phase of the step) or brute (the oracle);
+    ``backend`` auto|cpu|cuda. A float64 array is searched in double, anything
+    else in float; a device array (CuPy, PyTorch) is copied to the host."""
+    if hasattr(xyzr, "__cuda_array_interface__"):
+        xyzr = xyzr.get() if hasattr(xyzr, "get") else xyzr.cpu().numpy()
+    array = np.asarray(xyzr)
+    double = array.dtype == np.float64
+    array = np.ascontiguousarray(array, dtype=np.float64 if double else np.float32)
+    if array.ndim != 2 or array.shape[1] != 4:
+        raise SceneError(f"xyzr: expected an (N, 4) array of x, y, z, r, got shape {array.shape}", key="xyzr",
+                         message=f"expected an (N, 4) array of x, y, z, r, got shape {array.shape}")
+    find = _marbles.pairs_double if double else _marbles.pairs_float
+    return find(array, algorithm, backend, float(margin))
+
+
+def _program():
+    """The marbles program that runs each combination of a study."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    candidates = [os.environ.get("MARBLES_PROGRAM"), os.path.join(here, "bin", "marbles")]
+    try:
+        from ._program import PROGRAM
+        candidates.append(PROGRAM)
+    except ImportError:
+        pass
+    for candidate in candidates:
+        if candidate and os.access(candidate, os.X_OK):
+            return candidate
+    raise RuntimeFailure("the marbles program is not found (set MARBLES_PROGRAM)")
+
+
+def study(scene, vary, set=None, backend="auto", repeats=1, out=None):
+    """``marbles study``: the scene at every combination of ``vary``
+    (``{"time.dt": [1e-3, 5e-4], "solver.iterations": [5, 10]}``), each run
+    ``repeats`` times; returns the table as a list of dicts (the varied keys,
+    reference, error, measured, ms_per_step, ms_per_simulated_second, steps,
+    pareto) and writes study.md, study.csv (and study.png) under ``out``
+    (default out/study/<scene>)."""
+    if not isinstance(vary, dict) or not vary:
+        raise SceneError("vary: give a dict of key -> list of values", key="vary",
+                         message="give a dict of key -> list of values")
+    texts = []
+    for key, values in vary.items():
+        if isinstance(values, (str, bytes)) or not hasattr(values, "__iter__"):
+            values = [values]
+        texts.append(f"{key}=" + ",".join(_yaml_text(v, key) for v in values))
+    return _marbles.study(os.fspath(scene), texts, _overrides(set), backend, int(repeats),
+                          os.fspath(out) if out is not None else "", _program())
+
+
+def cuda_device():
+    """(available, name or why not) of the CUDA device marbles would use."""
+    return _marbles.cuda_device()

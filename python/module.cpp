@@ -1,0 +1,81 @@
+// python/module.cpp — the extension `marbles._marbles`.
+//
+// Holds the Simulation and the broad phase of both precisions, each with
+// the translation of its failures into Python exceptions
+// (bind_simulation.cpp, built twice), and the study.
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nanobind/nanobind.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include "core/device.hpp"
+#include "core/error.hpp"
+#include "sim/checkpoint.hpp"
+#include "sim/scene.hpp"
+#include "sim/study.hpp"
+#include "sim/version.hpp"
+
+namespace nb = nanobind;
+
+namespace marbles {
+void bind_simulation(nb::module_& m, const char* name, const char* pairs_name);
+}
+namespace marbles_f64 {
+void bind_simulation(nb::module_& m, const char* name, const char* pairs_name);
+}
+
+namespace {
+
+// `marbles study`, each combination run by `program`; the rows as dicts.
+nb::list study(const std::string& scene_path, const std::vector<std::string>& vary, const std::vector<std::string>& set,
+               const std::string& backend, int repeats, const std::string& out_dir, const std::string& program) {
+  marbles::StudyOptions options;
+  options.scene_path = scene_path;
+  for (const std::string& v : vary) options.vary.push_back(marbles::parse_vary(v));
+  options.set = set;
+  options.backend = backend;
+  options.repeats = repeats;
+  options.out_dir = out_dir;
+  options.marbles = program;
+  options.progress = false;
+  std::ostringstream out, err;
+  marbles::StudyResult result;
+  {
+    nb::gil_scoped_release release;
+    result = marbles::run_study(options, out, err);
+  }
+  nb::list rows;
+  for (const marbles::StudyRow& r : result.rows) {
+    nb::dict row;
+    for (std::size_t k = 0; k < options.vary.size(); ++k) row[options.vary[k].key.c_str()] = r.values[k];
+    row["reference"] = result.reference;
+    row["error"] = r.error;
+    row["measured"] = r.measured;
+    row["ms_per_step"] = r.ms_per_step;
+    row["ms_per_simulated_second"] = r.ms_per_simulated_second;
+    row["steps"] = r.steps;
+    row["pareto"] = r.pareto;
+    rows.append(row);
+  }
+  return rows;
+}
+
+}  // namespace
+
+NB_MODULE(_marbles, m) {
+  marbles::bind_simulation(m, "SimulationFloat", "pairs_float");
+  marbles_f64::bind_simulation(m, "SimulationDouble", "pairs_double");
+  m.def("study", &study, nb::arg("scene"), nb::arg("vary"), nb::arg("set"), nb::arg("backend"), nb::arg("repeats"),
+        nb::arg("out"), nb::arg("program"));
+  m.def("scene_precision", &marbles::scene::scene_precision, nb::arg("path"));
+  m.def("checkpoint_precision", &marbles::checkpoint_precision, nb::arg("path"));
+  m.def("cuda_device", [] {
+    const marbles::DeviceInfo& d = marbles::cuda_device();
+    return nb::make_tuple(d.available, d.available ? d.name : d.why_not);
+  });
+  m.attr("version") = marbles::kMarblesVersion;
+  m.attr("commit") = marbles::kMarblesCommit;
+}
