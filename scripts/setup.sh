@@ -12,7 +12,8 @@ REQUIRED_PKGS=(cmake g++ make pkg-config libyaml-cpp-dev libgtest-dev libcli11-d
 # Found -> on: OSMesa rendering, PNG, movies, study plots, the scene fuzzer (clang, libFuzzer), and
 # python3 for the tests' independent reader of the frames. VTK itself is not installed (docs/vtk-output.md):
 # where libvtk9-dev is already present its reader checks the frames too.
-OPTIONAL_PKGS=(libosmesa6-dev libpng-dev ffmpeg gnuplot-nox clang libclang-rt-dev python3)
+# python3-dev and python3-venv: the Python module (below).
+OPTIONAL_PKGS=(libosmesa6-dev libpng-dev ffmpeg gnuplot-nox clang libclang-rt-dev python3 python3-dev python3-venv)
 
 missing_packages() {
   local p
@@ -41,8 +42,23 @@ if command -v dpkg >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1; then
   fi
 fi
 
+# The Python module (docs/python.md) builds with nanobind and is tested with
+# pytest, from PyPI: a virtual environment in the build folder holds them
+# (with NumPy, and SciPy and Matplotlib for the examples), made once. Offline,
+# the module is not built. MARBLES_PYTHON=OFF skips it.
+python_args=()
+if [ "${MARBLES_PYTHON:-AUTO}" != OFF ] && command -v python3 >/dev/null 2>&1; then
+  . "$ROOT/scripts/python-env.sh"
+  if python_env "$BUILD_DIR/python-env" nanobind numpy pytest scipy matplotlib; then
+    python_args=(-DPython_EXECUTABLE="$BUILD_DIR/python-env/bin/python")
+  else
+    echo "setup: warning: no Python environment (PyPI unreachable?): the Python module is not built" >&2
+  fi
+fi
+
 echo "setup: configuring $BUILD_DIR (Release)"
-cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release ${MARBLES_CMAKE_ARGS:-} >"$BUILD_DIR.configure.log" 2>&1 \
+mkdir -p "$BUILD_DIR"
+cmake -S "$ROOT" -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release "${python_args[@]}" ${MARBLES_CMAKE_ARGS:-} >"$BUILD_DIR.configure.log" 2>&1 \
   || { cat "$BUILD_DIR.configure.log" >&2; exit 1; }
 grep -E "^-- marbles:" "$BUILD_DIR.configure.log" || true
 # scripts/run builds only the program (MARBLES_BUILD_TARGETS=marbles); scripts/test builds everything.

@@ -1,0 +1,75 @@
+# tests/python/test_errors.py — bad input raises marbles.SceneError with the
+# place it names (file, line, column, key), as the command line says it.
+import subprocess
+
+import numpy as np
+import pytest
+
+import marbles
+from conftest import HAS_CUDA, PROGRAM
+
+
+def test_file_error_names_line_column_and_key(tmp_path):
+    scene = tmp_path / "bad.yaml"
+    scene.write_text("time: {duration: 1, dt: 1e-3}\n"
+                     "materials:\n"
+                     "  glass: {density: 2500, restitution: 1.3}\n"
+                     "particles:\n"
+                     "  - list: {positions: [[0, 0, 1]], radius: 0.1}\n")
+    with pytest.raises(marbles.SceneError) as caught:
+        marbles.Simulation(scene)
+    e = caught.value
+    assert (e.file, e.line, e.key) == (str(scene), 3, "materials.glass.restitution")
+    assert e.column > 0 and "within [0, 1]" in e.message
+    # the same text as marbles check prints
+    cli = subprocess.run([PROGRAM, "check", str(scene)], capture_output=True, text=True)
+    assert cli.returncode == 2 and str(e) in cli.stderr
+
+
+def test_dict_error_names_the_key_path(pile):
+    pile["materials"]["glass"]["friction"] = -1
+    with pytest.raises(marbles.SceneError) as caught:
+        marbles.Simulation.from_dict(pile)
+    e = caught.value
+    assert (e.file, e.line, e.column, e.key) == ("<dict>", 0, 0, "materials.glass.friction")
+    assert str(e).startswith("<dict>: materials.glass.friction: ")
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda s: s["time"].update(dt=float("nan")), "time.dt"),
+    (lambda s: s["particles"][0]["lattice"].update(spacing="wide"), "particles[0].lattice.spacing"),
+    (lambda s: s.update(gravity=[0, 0]), "gravity"),
+    (lambda s: s.update(efects=[]), "efects"),
+    (lambda s: s["walls"][0]["box"].update(max=np.array([0.1, 0.1, np.inf])), "walls[0].box.max"),
+])
+def test_dict_values_are_checked(pile, edit, key):
+    edit(pile)
+    with pytest.raises(marbles.SceneError) as caught:
+        marbles.Simulation.from_dict(pile)
+    assert caught.value.key.startswith(key) and caught.value.line == 0
+
+
+def test_set_errors_name_the_override(pile):
+    with pytest.raises(marbles.SceneError) as caught:
+        marbles.Simulation.from_dict(pile, set={"time.dt": -1})
+    assert caught.value.file == "--set time.dt=-1" and caught.value.key == "time.dt"
+
+
+def test_missing_file_and_bad_arguments(tmp_path, pile):
+    with pytest.raises(marbles.SceneError) as caught:
+        marbles.Simulation(tmp_path / "none.yaml")
+    assert "none.yaml" in caught.value.file
+    with pytest.raises(marbles.SceneError, match="backend"):
+        marbles.Simulation.from_dict(pile, backend="gpu")
+    with pytest.raises(marbles.SceneError):
+        marbles.Simulation.from_dict([1, 2])
+    with pytest.raises(marbles.SceneError, match="xyzr"):
+        marbles.pairs(np.zeros((3, 3)))
+    with pytest.raises(marbles.SceneError, match=r"xyzr\[1\]"):
+        marbles.pairs(np.array([[0, 0, 0, 1], [0, 0, np.nan, 1]], np.float32))
+
+
+@pytest.mark.skipif(HAS_CUDA, reason="a CUDA device is present")
+def test_cuda_without_a_device_is_a_runtime_failure(pile):
+    with pytest.raises(marbles.RuntimeFailure, match="no CUDA device"):
+        marbles.Simulation.from_dict(pile, backend="cuda")

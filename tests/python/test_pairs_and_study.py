@@ -1,0 +1,62 @@
+# tests/python/test_pairs_and_study.py — marbles.pairs against a NumPy brute
+# force on random and adversarial sets; marbles.study as a table.
+import numpy as np
+import pytest
+
+import marbles
+from conftest import SCENES
+
+
+def brute(xyzr, margin=0.0):
+    x = xyzr.astype(np.float64)
+    d = np.linalg.norm(x[:, None, :3] - x[None, :, :3], axis=2)
+    reach = x[:, None, 3] + x[None, :, 3] + margin
+    i, j = np.nonzero(np.triu(d <= reach, 1))
+    return {(a, b) for a, b in zip(i.tolist(), j.tolist())}
+
+
+def sets():
+    rng = np.random.default_rng(7)
+    gas = np.column_stack([rng.uniform(0, 1, (800, 3)), rng.uniform(0.005, 0.03, 800)])
+    poly = np.column_stack([rng.uniform(0, 1, (400, 3)), rng.lognormal(-4, 1, 400).clip(0, 0.3)])
+    same = np.tile([0.5, 0.5, 0.5, 0.1], (20, 1))  # every sphere at one point
+    line = np.column_stack([np.arange(50) * 0.2, np.zeros(50), np.zeros(50), np.full(50, 0.1)])  # touching chain
+    return {"gas": gas, "poly": poly, "same": same, "line": line}
+
+
+@pytest.mark.parametrize("name", ["gas", "poly", "same", "line"])
+@pytest.mark.parametrize("algorithm", ["home", "subdivision", "brute"])
+def test_pairs_equal_brute_force(name, algorithm):
+    xyzr = sets()[name].astype(np.float32)
+    found = marbles.pairs(xyzr, backend="cpu", algorithm=algorithm)
+    assert found.dtype == np.uint32 and found.shape[1] == 2
+    assert (found[:, 0] < found[:, 1]).all()
+    assert np.array_equal(found, np.array(sorted(map(tuple, found.tolist())), dtype=np.uint32).reshape(-1, 2))
+    truth = brute(xyzr)
+    got = {tuple(p) for p in found.tolist()}
+    # float32 spheres exactly touching (the chain) may fall either side: all others must match
+    if name == "line":
+        assert got <= truth and len(truth - got) <= len(truth)
+        assert len(got) >= 1
+    else:
+        assert got == truth
+
+
+def test_pairs_double_and_margin():
+    xyzr = sets()["gas"]
+    found = marbles.pairs(xyzr, backend="cpu", margin=0.01)
+    assert {tuple(p) for p in found.tolist()} == brute(xyzr, 0.01)
+    assert len(marbles.pairs(np.zeros((0, 4)))) == 0
+
+
+def test_study_returns_the_table(tmp_path):
+    rows = marbles.study(SCENES / "validation" / "bouncing_ball.yaml", vary={"time.dt": [2e-3, 1e-3]},
+                         set={"time.duration": 1.5}, backend="cpu", repeats=1, out=tmp_path)
+    assert [r["time.dt"] for r in rows] == ["0.002", "0.001"]
+    for r in rows:
+        assert r["reference"] == "rebound_heights" and np.isfinite(r["error"]) and r["ms_per_step"] > 0
+        assert r["steps"] == round(1.5 / float(r["time.dt"]))
+    assert any(r["pareto"] for r in rows)
+    assert (tmp_path / "study.csv").exists() and (tmp_path / "study.md").exists()
+    with pytest.raises(marbles.SceneError):
+        marbles.study(SCENES / "validation" / "bouncing_ball.yaml", vary={})

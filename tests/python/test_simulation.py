@@ -1,0 +1,191 @@
+# tests/python/test_simulation.py — stepping, the state as arrays, contacts,
+# frames and checkpoints from Python, each against an oracle: the program
+# itself (marbles run), NumPy arithmetic on the arrays, the laws of statics.
+import json
+import pathlib
+import subprocess
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+import marbles
+from conftest import PROGRAM, SCENES
+
+
+def test_step_and_run_advance_time(pile):
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    assert (sim.steps, sim.time, len(sim)) == (0, 0.0, 4 * 4 * 4)
+    sim.step()
+    sim.step(4)
+    assert sim.steps == 5 and sim.time == pytest.approx(5 * sim.dt)
+    seen = []
+    sim.run(until=0.02, callback=lambda s: seen.append(s.steps), every=4)
+    assert sim.steps == 20 and seen == [9, 13, 17, 20]
+    sim.run(until=0.03, callback=lambda s: False, every=2)  # False stops the run
+    assert sim.steps == 22
+    assert "contact solver" in sim.pipeline and "friction" in sim.pipeline
+    assert sim.backend == "cpu" and sim.precision == "float"
+    with pytest.raises(ValueError):
+        sim.step(-1)
+
+
+def test_views_are_the_step_arrays(pile):
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    x = sim.positions
+    assert x.shape == (len(sim), 3) and x.dtype == np.float32 and x.flags.writeable
+    before = x.copy()
+    sim.step(3)
+    # the same memory, moved by the step (no copy was made)
+    assert np.shares_memory(x, sim.positions)
+    assert not np.array_equal(before, x)
+    assert np.array_equal(x, sim.positions)
+    for name in ("radii", "materials", "ids"):
+        assert not getattr(sim, name).flags.writeable
+    with pytest.raises(ValueError):
+        sim.radii[0] = 1.0
+
+
+def test_writes_through_views_change_the_next_step(pile):
+    # Oracle: the same edit made by assignment (a copy) in a twin.
+    edited = marbles.Simulation.from_dict(pile, backend="cpu")
+    twin = marbles.Simulation.from_dict(pile, backend="cpu")
+    for s in (edited, twin):
+        s.step(5)
+    kick = np.zeros((len(twin), 3), np.float32)
+    kick[7] = [0.3, -0.2, 1.5]
+    edited.velocities[7] += kick[7]          # in place, through the view
+    twin.velocities = twin.velocities + kick  # assigned
+    untouched = marbles.Simulation.from_dict(pile, backend="cpu")
+    untouched.step(5)
+    for s in (edited, twin, untouched):
+        s.step(5)
+    assert np.array_equal(edited.positions, twin.positions)
+    assert np.array_equal(edited.velocities, twin.velocities)
+    assert not np.array_equal(edited.positions, untouched.positions)
+
+
+def test_non_finite_writes_are_refused(pile):
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    sim.step(2)
+    x = sim.positions
+    good = x[4, 1]
+    x[4, 1] = np.nan
+    with pytest.raises(ValueError, match=r"positions\[4\] is not finite"):
+        sim.step()
+    assert sim.steps == 2  # nothing moved
+    x[4, 1] = good
+    sim.step()
+    assert sim.steps == 3
+    v = np.array(sim.velocities)
+    v[2, 0] = np.inf
+    with pytest.raises(ValueError, match=r"velocity"):
+        sim.velocities = v
+    with pytest.raises(ValueError, match="shape"):
+        sim.angular_velocities = np.zeros((3, 3))
+    assert np.isfinite(sim.velocities).all()
+
+
+def test_kinetic_energy_from_the_arrays(pile):
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    sim.step(30)
+    r = sim.radii.astype(np.float64)
+    m = 2500 * 4 / 3 * np.pi * r**3
+    inertia = 0.4 * m * r**2
+    v = sim.velocities.astype(np.float64)
+    w = sim.angular_velocities.astype(np.float64)
+    expected = 0.5 * (m * (v**2).sum(1)).sum() + 0.5 * (inertia * (w**2).sum(1)).sum()
+    assert expected > 0
+    assert sim.kinetic_energy() == pytest.approx(expected, rel=1e-5)
+
+
+def test_contacts_of_a_resting_pile_carry_its_weight(pile):
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    sim.run(until=0.6)
+    c = sim.contacts()
+    m_total = (2500 * 4 / 3 * np.pi * sim.radii.astype(np.float64) ** 3).sum()
+    wall = c["wall"]
+    # statics: the walls' forces (normal and friction) on the pile carry its whole weight
+    force = c["normal_force"][:, None] * c["normal"] + c["tangential_force"]
+    assert force[wall, 2].astype(np.float64).sum() == pytest.approx(m_total * 9.81, rel=0.02)
+    # (sideways the walls balance to within the solver's residual: 10 sweeps, not converged)
+    assert np.abs(force[wall, :2].astype(np.float64).sum(0)).max() < 0.05 * m_total * 9.81
+    assert (c["normal_force"] >= 0).all()
+    # every sphere-sphere contact is a pair of spheres within touch (the broad phase's brute oracle)
+    xyzr = np.column_stack([sim.positions, sim.radii])
+    near = {tuple(p) for p in marbles.pairs(xyzr, algorithm="brute", margin=1e-4)}
+    spheres = c["pairs"][~c["wall"]]
+    assert len(spheres) > len(sim)
+    assert all(tuple(sorted(p)) in near for p in spheres)
+    assert (c["pairs"][wall][:, 1] < 6).all()  # the box is six wall faces
+
+
+def test_python_run_equals_marbles_run(tmp_path):
+    # marbles run writes a checkpoint at its last step; the Python run of the
+    # same scene and overrides reaches the same bits.
+    scene = SCENES / "demo.yaml"
+    overrides = ["time.duration=0.06", "output.checkpoint={every: 60, keep: 1}"]
+    out = tmp_path / "run"
+    args = [PROGRAM, "run", str(scene), "--out", str(out), "--summary-only", "--quiet", "--backend", "cpu"]
+    for o in overrides:
+        args += ["--set", o]
+    subprocess.run(args, check=True, capture_output=True)
+    sim = marbles.Simulation(scene, backend="cpu", set=overrides)
+    sim.run()
+    assert sim.steps == 60
+    done = marbles.Simulation.restart(out / "checkpoints" / "step_000060.mck", scene=scene, backend="cpu",
+                                      set=overrides)
+    assert done.steps == 60
+    for name in ("positions", "velocities", "angular_velocities"):
+        assert np.array_equal(getattr(sim, name), getattr(done, name)), name
+    summary = json.loads((out / "summary.json").read_text())
+    assert sim.kinetic_energy() == summary["kinetic_energy_end"]
+    assert sim.summary()["max_overlap"] == summary["max_overlap"]
+
+
+def test_checkpoint_and_restart_go_on_bit_for_bit(pile, tmp_path):
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    sim.step(10)
+    path = tmp_path / "c.mck"
+    sim.checkpoint(path)
+    sim.step(10)
+    again = marbles.Simulation.restart(path, backend="cpu")  # the scene from path.scene.json
+    assert again.steps == 10
+    again.step(10)
+    assert np.array_equal(sim.positions, again.positions)
+    assert np.array_equal(sim.angular_velocities, again.angular_velocities)
+    with pytest.raises(marbles.SceneError, match="another scene"):
+        marbles.Simulation.restart(path, scene=SCENES / "demo.yaml")
+    (tmp_path / "c.mck.scene.json").unlink()
+    with pytest.raises(marbles.SceneError, match="scene="):
+        marbles.Simulation.restart(path)
+
+
+def test_double_precision_scene(pile):
+    pile["solver"] = {"precision": "double"}
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    assert sim.precision == "double" and sim.positions.dtype == np.float64
+    single = marbles.Simulation.from_dict(pile, backend="cpu", set={"solver.precision": "float"})
+    assert single.precision == "float"
+    sim.step(20)
+    single.step(20)
+    assert np.allclose(sim.positions, single.positions, atol=1e-5)
+
+
+def test_write_frame(pile, tmp_path):
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    first = sim.write_frame(tmp_path)
+    sim.step(5)
+    second = sim.write_frame(tmp_path)
+    assert pathlib.Path(first).name == "frame_000000.vtp" and pathlib.Path(second).name == "frame_000001.vtp"
+    datasets = ET.parse(tmp_path / "series.pvd").getroot().iter("DataSet")
+    times = [float(d.get("timestep")) for d in datasets]
+    assert times == [0.0, pytest.approx(5 * sim.dt)]
+    head = pathlib.Path(second).read_bytes()[:4000].decode("latin-1")
+    assert f'NumberOfPoints="{len(sim)}"' in head
+
+
+def test_warnings_and_repr(pile):
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    assert "64 spheres" in repr(sim) and "pile" in repr(sim)
+    assert sim.material_names == ["glass"]
