@@ -50,7 +50,7 @@ namespace {
 template <class T, ssize_t... Shape>
 using HostArray = nb::ndarray<nb::numpy, T, nb::shape<Shape...>, nb::c_contig>;
 template <class T, ssize_t... Shape>
-using DeviceArray = nb::ndarray<T, nb::shape<Shape...>, nb::c_contig, nb::device::cuda>;
+using DeviceArray = nb::ndarray<nb::array_api, T, nb::shape<Shape...>, nb::c_contig, nb::device::cuda>;
 
 constexpr ssize_t kAny = -1;  // a dimension of any length
 
