@@ -286,7 +286,7 @@ void MapFields::read(const std::vector<std::string>& allowed) {
         value.from_override() ? value.where() : location_of(m_self.file(), key.Mark());
     // Where there is no line to point at (a scene from a dict), the key names itself.
     if (!allowed.empty() && std::find(allowed.begin(), allowed.end(), name) == allowed.end())
-      throw InputError(key_where, key_where.line > 0 ? m_self.key() : value.key(),
+      throw InputError(key_where, key_where.line > 0 || value.from_override() ? m_self.key() : value.key(),
                        "unknown key '" + name + "'" + suggestion(name, allowed));
     if (const auto first = m_index.find(name); first != m_index.end())
       throw InputError(key_where, m_self.key(),
