@@ -164,6 +164,7 @@ class PySimulation {
     World& w = m_sim->edit_world();
     std::vector<Vec3>& vec = what == "position" ? w.position : what == "velocity" ? w.velocity : w.angular_velocity;
     std::copy(values.data(), values.data() + 3 * n, &vec[0].x);
+    host_edited();
   }
 
   // --- what the step knows ------------------------------------------------
@@ -227,6 +228,7 @@ class PySimulation {
                            std::to_string(size()));
     if (m_views_out) m_sim->state_written();
     m_sim->restore(c.world, c.state, c.steps);
+    host_edited();
     m_totals = c.totals;
     if (m_probe) m_probe->resume(c.probe);
   }
@@ -273,6 +275,12 @@ class PySimulation {
     if (count > 0) std::copy(data, data + count, copy);
     nb::capsule owner(copy, [](void* p) noexcept { delete[] static_cast<T*>(p); });
     return nb::cast(nb::ndarray<nb::numpy, T>(copy, shape.size(), shape.begin(), owner));
+  }
+
+  // An edit of the host copy goes to the arrays handed out at once (on the
+  // GPU they are device memory, which would otherwise win at the next step).
+  void host_edited() {
+    if (m_views_out) m_sim->state_in_place();
   }
 
   // The arrays handed out may have been written: the step takes them as an
