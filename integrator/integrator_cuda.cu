@@ -28,7 +28,20 @@ __global__ void drift_kernel(BodiesView bodies, real h, unsigned* non_finite) {
   if (bad) *non_finite = 1u;  // a plain store: every writer writes the same value
 }
 
+__global__ void finite_kernel(BodiesView bodies, unsigned* non_finite) {
+  bool bad = false;
+  for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x)
+    bad = bad || !body_is_finite(bodies.position[i], bodies.velocity[i], bodies.angular_velocity[i]);
+  if (bad) *non_finite = 1u;
+}
+
 }  // namespace
+
+void launch_check_finite(const BodiesView& bodies, unsigned* non_finite, int sm_count, cudaStream_t stream) {
+  if (bodies.count == 0) return;
+  finite_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, non_finite);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
 
 void launch_apply_gravity(const BodiesView& bodies, const Vec3& g, real h, int sm_count, cudaStream_t stream) {
   if (bodies.count == 0) return;

@@ -15,4 +15,8 @@ void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, int s
 void launch_integrate_positions(const BodiesView& bodies, real h, unsigned* non_finite, int sm_count,
                                 cudaStream_t stream);
 
+// Sets *non_finite = 1 when a position, velocity or angular velocity is not
+// finite (never clears it): the check of a state written from outside.
+void launch_check_finite(const BodiesView& bodies, unsigned* non_finite, int sm_count, cudaStream_t stream);
+
 }  // namespace marbles::integrator::cuda

@@ -287,6 +287,7 @@ class PySimulation {
   // edit, after checking that every value is finite.
   void check_views() {
     m_sim->state_written();
+    if (m_sim->state_finite()) return;  // on the GPU a flag, not a copy
     const World& w = m_sim->world();
     const std::pair<const char*, const std::vector<Vec3>*> arrays[] = {
         {"positions", &w.position}, {"velocities", &w.velocity}, {"angular_velocities", &w.angular_velocity}};

@@ -113,6 +113,7 @@ class CpuStep final : public StepBackend {
   World& edit_world() override { return m_world; }
   BodiesView state_in_place() override { return m_world.view(); }
   void state_written() override {}
+  bool state_finite() override { return m_world.first_non_finite() == m_world.size(); }
   const std::vector<narrowphase::Contact>& contacts() override { return m_contacts; }
   const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }
   std::string name() const override { return "cpu"; }

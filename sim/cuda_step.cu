@@ -302,6 +302,16 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaDeviceSynchronize());
     m_host_stale = true;
   }
+  bool state_finite() override {
+    const BodiesView bodies = state_in_place();
+    auto* bad = m_check.as<unsigned>(1);
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(bad, 0, sizeof(unsigned), m_stream));
+    integrator::cuda::launch_check_finite(bodies, bad, m_sm, m_stream);
+    unsigned found = 0;
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(&found, bad, sizeof found, cudaMemcpyDeviceToHost, m_stream));
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+    return found == 0;
+  }
   const std::vector<narrowphase::Contact>& contacts() override {
     if (m_contacts_stale) {
       m_host_contacts.resize(m_count);
@@ -428,6 +438,7 @@ class CudaStep final : public StepBackend {
   DeviceWorld m_kept;                 // the watchdog's copy of the step's start
   nc::ContactCacheCuda m_kept_cache;
   DeviceBuffer m_kept_walls;
+  DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep
   std::uint32_t m_colours = 0;

@@ -93,6 +93,9 @@ class StepBackend {
   virtual BodiesView state_in_place() = 0;
   // The arrays of state_in_place() may have changed (the host copy is stale).
   virtual void state_written() = 0;
+  // True when every position, velocity and angular velocity of the arrays
+  // the step works on is finite (on the GPU, checked there: one flag read).
+  virtual bool state_finite() = 0;
   // The contacts of the last substep, in solver (colour-major) order.
   virtual const std::vector<narrowphase::Contact>& contacts() = 0;
   virtual const broadphase::BroadPhase* broad_phase() const = 0;
