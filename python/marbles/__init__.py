@@ -93,12 +93,10 @@ def _plain(value, key):
 
 
 def _requested_precision(overrides):
-    """The precision a --set override asks for, or None."""
+    """The precision a ``solver.precision`` override asks for, or None."""
     for text in reversed(overrides):
         key, _, value = text.partition("=")
-        if key.strip() in ("solver.precision", "solver"):
-            if key.strip() == "solver":
-                return "double" if "double" in value else None
+        if key.strip() == "solver.precision":
             return value.strip()
     return None
 
