@@ -66,8 +66,7 @@ class PySimulation {
   // `source`: a scene file's path, or a scene as JSON text when `label` is
   // not empty (errors then name `label`; `stem` names the output folder).
   PySimulation(const std::string& source, const std::string& label, const std::string& stem,
-               const std::vector<std::string>& overrides, const std::string& backend, int threads)
-      : m_overrides(overrides) {
+               const std::vector<std::string>& overrides, const std::string& backend, int threads) {
     const bool from_text = !label.empty();
     m_scene = from_text ? scene::load_scene_json(source, label, stem, overrides) : scene::load_scene(source, overrides);
     m_fingerprint = from_text ? text_fingerprint(source, overrides) : scene_fingerprint(source, overrides);
@@ -302,7 +301,6 @@ class PySimulation {
   }
 
   scene::Scene m_scene;
-  std::vector<std::string> m_overrides;
   std::uint64_t m_fingerprint = 0;
   std::vector<std::string> m_warnings;
   broadphase::Backend m_backend = broadphase::Backend::cpu;
