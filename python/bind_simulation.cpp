@@ -99,12 +99,7 @@ class PySimulation {
         throw RuntimeFailure(std::string(e.what()) + " (the state is back at the start of step " +
                              std::to_string(m_sim->steps() + 1) + ")");
       }
-      const StepCounters& last = m_sim->last_step();
-      m_totals.candidate_sum += static_cast<double>(last.candidate_pairs) / m_sim->substeps();
-      m_totals.contact_sum += static_cast<double>(last.contacts) / m_sim->substeps();
-      m_totals.deepest = std::max(m_totals.deepest, static_cast<double>(last.max_overlap));
-      m_totals.overlap_end = last.max_overlap;
-      m_totals.rollbacks += static_cast<double>(m_sim->last_rollbacks().size());
+      m_totals.add(m_sim->last_step(), m_sim->substeps(), m_sim->last_rollbacks().size());
       if (m_probe && m_sim->steps() % m_probe_every == 0) m_probe->sample(m_sim->time(), m_sim->world());
     }
   }
@@ -200,11 +195,8 @@ class PySimulation {
     if (m_views_out) check_views();
     auto it = m_frames.find(dir);
     if (it == m_frames.end()) {
-      std::vector<std::string> names;
-      for (const scene::Material& mat : m_scene.materials) names.push_back(mat.name);
-      const std::string producer = std::string("marbles ") + kMarblesVersion + " (commit " + kMarblesCommit + ")";
       auto writer = std::make_unique<render::VtkSeriesWriter>(dir, render::parse_point_fields(m_scene.output.fields),
-                                                              render::FrameMetadata{names, producer});
+                                                              frame_metadata(m_scene));
       it = m_frames.emplace(dir, std::move(writer)).first;
     }
     const bool counts = std::find(m_scene.output.fields.begin(), m_scene.output.fields.end(), "contacts") !=

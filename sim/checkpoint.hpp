@@ -26,6 +26,15 @@ struct RunTotals {
   double energy_start = 0;   // kinetic energy at step 0, J
   double overlap_end = 0;    // the last step's largest overlap
   double rollbacks = 0;      // steps the watchdog redid
+
+  // Adds a step: its counters (of `substeps` substeps) and the rollbacks it took.
+  void add(const StepCounters& last, int substeps, std::size_t step_rollbacks) {
+    candidate_sum += static_cast<double>(last.candidate_pairs) / substeps;
+    contact_sum += static_cast<double>(last.contacts) / substeps;
+    deepest = deepest > static_cast<double>(last.max_overlap) ? deepest : static_cast<double>(last.max_overlap);
+    overlap_end = last.max_overlap;
+    rollbacks += static_cast<double>(step_rollbacks);
+  }
 };
 
 struct Checkpoint {

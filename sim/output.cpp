@@ -30,6 +30,13 @@ bool presses(const narrowphase::Contact& c) {
 
 }  // namespace
 
+render::FrameMetadata frame_metadata(const scene::Scene& scene) {
+  render::FrameMetadata metadata;
+  for (const scene::Material& m : scene.materials) metadata.material_names.push_back(m.name);
+  metadata.producer = std::string("marbles ") + kMarblesVersion + " (commit " + kMarblesCommit + ")";
+  return metadata;
+}
+
 render::ContactSnapshot make_contact_snapshot(const Simulation& sim) {
   const World& w = sim.world();
   const auto& shapes = sim.model().wall_shapes;
@@ -180,28 +187,25 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
   std::filesystem::create_directories(dir, ec);
   if (ec) throw RuntimeFailure("cannot create the output folder " + dir + ": " + ec.message());
   for (const char* sub : {"", "frames", "images"}) render::remove_stale_temporaries(std::filesystem::path(dir) / sub);
-  std::vector<std::string> names;
-  for (const scene::Material& m : scene.materials) names.push_back(m.name);
-  render::write_material_names(dir, names);
-
-  const std::string producer = std::string("marbles ") + kMarblesVersion + " (commit " + kMarblesCommit + ")";
+  const render::FrameMetadata metadata = frame_metadata(scene);
+  render::write_material_names(dir, metadata.material_names);
   if (scene.output.vtk_every > 0) {
     const std::vector<render::PointField> fields = render::parse_point_fields(scene.output.fields);
     m->with_contact_counts =
         std::find(fields.begin(), fields.end(), render::PointField::contacts) != fields.end();
-    m->vtk = std::make_unique<render::VtkSeriesWriter>(dir, fields, render::FrameMetadata{names, producer});
+    m->vtk = std::make_unique<render::VtkSeriesWriter>(dir, fields, metadata);
     m->vtk_every = scene.output.vtk_every;
     if (!walls.empty()) {
       const render::Bounds b = view ? *view : render::Bounds{};
       const bool known = view && !b.empty();
       const Vec3 lo = known ? Vec3(real(b.lo[0]), real(b.lo[1]), real(b.lo[2])) : Vec3(-1, -1, -1);
       const Vec3 hi = known ? Vec3(real(b.hi[0]), real(b.hi[1]), real(b.hi[2])) : Vec3(1, 1, 1);
-      m->walls = std::make_unique<render::WallSeriesWriter>(dir, lo, hi, render::FrameMetadata{names, producer});
+      m->walls = std::make_unique<render::WallSeriesWriter>(dir, lo, hi, metadata);
       m->initial_walls = walls;
     }
   }
   if (scene.output.contacts_every > 0) {
-    m->contacts = std::make_unique<render::ContactSeriesWriter>(dir, render::FrameMetadata{names, producer});
+    m->contacts = std::make_unique<render::ContactSeriesWriter>(dir, metadata);
     m->contacts_every = scene.output.contacts_every;
   }
   if (render && scene.output.render.enabled && resumed) {

@@ -20,6 +20,9 @@ struct Scene;
 }
 class Simulation;
 
+// The frames' metadata of a scene's run: its material names and the producer.
+render::FrameMetadata frame_metadata(const scene::Scene& scene);
+
 // `with_contacts`: also count each sphere's pressing contacts (the
 // `contacts` field; on the GPU this downloads the contacts).
 render::Snapshot make_snapshot(const Simulation& sim, bool with_contacts = false);

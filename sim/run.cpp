@@ -221,11 +221,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       progress.finish();
       err << "watchdog: step " << sim.steps() << ": " << why << "; rolled back and redone with the substep halved and the sweeps doubled\n";
     }
-    totals.candidate_sum += static_cast<double>(sim.last_step().candidate_pairs) / sim.substeps();
-    totals.contact_sum += static_cast<double>(sim.last_step().contacts) / sim.substeps();
-    totals.deepest = std::max(totals.deepest, static_cast<double>(sim.last_step().max_overlap));
-    totals.overlap_end = sim.last_step().max_overlap;
-    totals.rollbacks += static_cast<double>(sim.last_rollbacks().size());
+    totals.add(sim.last_step(), sim.substeps(), sim.last_rollbacks().size());
     if (probe && sim.steps() % probe_every == 0) probe->sample(sim.time(), sim.world());
     if (output.due(sim.steps())) {
       progress.finish();

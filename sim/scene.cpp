@@ -771,6 +771,13 @@ class MergeKeys {
   std::size_t m_visits = 0;
 };
 
+// A scene's tree is a map of keys.
+void expect_scene_map(const YAML::Node& document, const std::string& source) {
+  const Field root(document, "", source);
+  if (!root.is_map())
+    root.fail("a scene is a map of keys (time, materials, particles, ...), got " + root.description());
+}
+
 // The file's one YAML document, which must be a map.
 YAML::Node read_document(const std::string& path) {
   const std::string text = read_file(path);
@@ -789,15 +796,18 @@ YAML::Node read_document(const std::string& path) {
                                                      "a stray ',', '-' or ':'?)");
   if (count > 1)
     throw InputError(detail::location_of(path, second), "", "a scene is one YAML document, this file holds more");
-  const Field root(document, "", path);
-  if (!root.is_map())
-    root.fail("a scene is a map of keys (time, materials, particles, ...), got " + root.description());
+  expect_scene_map(document, path);
   if (text.find("<<") != std::string::npos) MergeKeys(path).resolve(document, "");
   return document;
 }
 
-// `path`: where the scene came from (errors name it); `stem`: the default name and output folder.
-Scene read_scene(const Field& root, const std::string& path, const std::string& stem) {
+// `path`: where the scene came from (errors name it); `stem`: the default name
+// and output folder; the `--set` overrides are applied to the tree first.
+Scene read_scene(YAML::Node document, const std::string& path, const std::string& stem,
+                 const std::vector<std::string>& overrides) {
+  detail::Origins origins;
+  detail::apply_overrides(document, overrides, origins);
+  const Field root(document, "", path, &origins);
   const MapFields top(root, {"format", "name", "time", "solver", "effects", "gravity", "drag", "materials",
                              "contact_pairs", "walls", "particles", "output", "reference"});
 
@@ -851,10 +861,7 @@ Scene read_scene(const Field& root, const std::string& path, const std::string& 
 Scene load_scene(const std::string& path) { return load_scene(path, {}); }
 
 Scene load_scene(const std::string& path, const std::vector<std::string>& overrides) {
-  const YAML::Node document = read_document(path);
-  detail::Origins origins;
-  detail::apply_overrides(document, overrides, origins);
-  return read_scene(Field(document, "", path, &origins), path, std::filesystem::path(path).stem().string());
+  return read_scene(read_document(path), path, std::filesystem::path(path).stem().string(), overrides);
 }
 
 namespace {
@@ -898,13 +905,9 @@ Scene load_scene_json(const std::string& text, const std::string& label, const s
   } catch (const nlohmann::json::exception& e) {
     throw InputError(SourceLocation{label, 0, 0}, "", std::string("not a scene: ") + e.what());
   }
-  YAML::Node document = yaml_of(json);
-  const Field root(document, "", label);
-  if (!root.is_map())
-    root.fail("a scene is a map of keys (time, materials, particles, ...), got " + root.description());
-  detail::Origins origins;
-  detail::apply_overrides(document, overrides, origins);
-  return read_scene(Field(document, "", label, &origins), label, stem);
+  const YAML::Node document = yaml_of(json);
+  expect_scene_map(document, label);
+  return read_scene(document, label, stem, overrides);
 }
 
 }  // namespace marbles::scene
