@@ -62,8 +62,9 @@ namespace {
 // Appends what make(k, out) appends for k = 0..count-1 to `out`, in order of
 // k: each thread fills its own buffer over a contiguous (static) chunk and the
 // buffers are joined in thread order, so the order is the sequential one.
+// The buffers are `scratch`'s when given (kept between calls).
 template <class Make>
-void collect_in_order(std::size_t count, std::vector<Contact>& out, Make&& make) {
+void collect_in_order(std::size_t count, std::vector<Contact>& out, ContactScratch* scratch, Make&& make) {
   constexpr std::size_t kParallelFrom = 20000;
 #if defined(_OPENMP)
   const int threads = count >= kParallelFrom ? omp_get_max_threads() : 1;
@@ -74,7 +75,10 @@ void collect_in_order(std::size_t count, std::vector<Contact>& out, Make&& make)
     for (std::size_t k = 0; k < count; ++k) make(k, out);
     return;
   }
-  std::vector<std::vector<Contact>> parts(threads);
+  ContactScratch local;
+  std::vector<std::vector<Contact>>& parts = (scratch ? *scratch : local).parts;
+  if (parts.size() < static_cast<std::size_t>(threads)) parts.resize(threads);
+  for (auto& p : parts) p.clear();
   ParallelErrors errors;  // an allocation that fails in a thread is rethrown here, not std::terminate
 #pragma omp parallel num_threads(threads)
   {
@@ -97,17 +101,18 @@ void collect_in_order(std::size_t count, std::vector<Contact>& out, Make&& make)
 }  // namespace
 
 void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
-                     const PairTable& table, real h, const real* reach, std::vector<Contact>& out) {
-  collect_in_order(pair_count, out, [&](std::size_t k, std::vector<Contact>& to) {
+                     const PairTable& table, real h, const real* reach, std::vector<Contact>& out,
+                     ContactScratch* scratch) {
+  collect_in_order(pair_count, out, scratch, [&](std::size_t k, std::vector<Contact>& to) {
     Contact c;
     if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c)) to.push_back(c);
   });
 }
 
 void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
-                   const real* reach, std::vector<Contact>& out) {
+                   const real* reach, std::vector<Contact>& out, ContactScratch* scratch) {
   const auto wall_count = static_cast<std::uint32_t>(walls.size());
-  collect_in_order(bodies.count, out, [&](std::size_t i, std::vector<Contact>& to) {
+  collect_in_order(bodies.count, out, scratch, [&](std::size_t i, std::vector<Contact>& to) {
     for (std::uint32_t k = 0; k < wall_count; ++k) {
       Contact c;
       if (make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, reach, c)) to.push_back(c);

@@ -55,10 +55,11 @@ class CpuStep final : public StepBackend {
       m_counters.candidate_pairs += m_pairs.size();
       m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
       narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_model.pair_table(), h, m_reach.data(),
-                                   m_contacts);
+                                   m_contacts, &m_contact_scratch);
     }
     if (m_model.wall_contacts)
-      narrowphase::wall_contacts(bodies, m_walls, m_model.pair_table(), h, m_reach.data(), m_contacts);
+      narrowphase::wall_contacts(bodies, m_walls, m_model.pair_table(), h, m_reach.data(), m_contacts,
+                                 &m_contact_scratch);
     m_counters.contacts += m_contacts.size();
   }
 
@@ -169,6 +170,7 @@ class CpuStep final : public StepBackend {
   std::vector<real> m_bound_radius;  // m, radius + reach: what the broad phase sees
   std::vector<broadphase::Pair> m_pairs;
   std::vector<narrowphase::Contact> m_contacts;
+  narrowphase::ContactScratch m_contact_scratch;
   narrowphase::ColourRanges m_colours;
   StepCounters m_counters;
   bool m_non_finite = false;
