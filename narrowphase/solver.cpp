@@ -1,5 +1,7 @@
 #include "narrowphase/solver.hpp"
 
+#include "narrowphase/solver_lanes.hpp"
+
 #include <algorithm>
 
 namespace marbles::narrowphase {
@@ -46,10 +48,20 @@ void for_colour_bodies(const Contact* contacts, std::uint32_t begin, std::uint32
   }
 }
 
+// The sweep over one colour: blocks of lanes::W contacts side by side
+// (solver_lanes.hpp, the same bits as solve_one), the rest one by one.
 template <bool Friction, bool Rolling>
 void sweep_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, SolverBody* bodies, real inv_h, bool) {
-  for_colour_bodies(contacts, begin, end, bodies,
-                    [&](std::uint32_t k) { solve_one<Friction, Rolling>(contacts[k], bodies, inv_h); });
+  constexpr std::uint32_t w = lanes::W;
+  const std::uint32_t blocks = (end - begin) / w;
+  const auto nb = static_cast<std::ptrdiff_t>(blocks);
+#pragma omp parallel for schedule(static) if (nb * w >= kParallelFrom)
+  for (std::ptrdiff_t t = 0; t < nb; ++t) {
+    const std::uint32_t k = begin + static_cast<std::uint32_t>(t) * w;
+    for (std::uint32_t l = 0; l < w; ++l) prefetch_bodies(contacts, k + kPrefetchAhead + l, end - 1, bodies);
+    lanes::solve_block<Friction, Rolling>(contacts + k, bodies, inv_h);
+  }
+  for (std::uint32_t k = begin + blocks * w; k < end; ++k) solve_one<Friction, Rolling>(contacts[k], bodies, inv_h);
 }
 
 template <bool Friction, bool Rolling>
