@@ -8,6 +8,23 @@ namespace marbles::narrowphase {
 
 constexpr std::uint64_t kRankMask = (std::uint64_t(1) << 56) - 1;  // ranks are below 2^56
 
+// The sequential pass visits the contacts in rank order, which is random in
+// memory: each visit would wait for a contact (a 112-byte record of a list
+// far larger than the caches) and then for its spheres' words. So it asks
+// for the contact 16 visits ahead and for the spheres' words of the contact
+// 8 ahead (by then in cache). Branch-free (GCC drops a prefetch under a
+// condition); hints only, the result is the same.
+void ContactColouring::prefetch_ahead(const Contact* contacts, std::size_t t, std::size_t count) const {
+  const std::size_t last = count - 1;
+  __builtin_prefetch(&contacts[m_order[t + 16 < last ? t + 16 : last]].a);
+  const Contact& c = contacts[m_order[t + 8 < last ? t + 8 : last]];
+  const std::uint32_t b = c.b & ~kWallFlag;  // a wall's: some sphere's words, harmless
+  __builtin_prefetch(m_body_next_round.data() + c.a);
+  __builtin_prefetch(m_body_next_round.data() + b);
+  __builtin_prefetch(m_body_used.data() + c.a);
+  __builtin_prefetch(m_body_used.data() + b);
+}
+
 // The sequential form: in decreasing rank, each contact's round is one more
 // than the latest round among its spheres' earlier (higher-ranked) contacts,
 // which is the round Jones–Plassmann colours it in; its colour is the lowest
@@ -35,7 +52,10 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
   }
   radix_sort_pairs(m_by_rank, m_order, 56, m_sort_keys, m_sort_values);
   std::uint32_t colours = 0, rounds = 0;
-  for (const std::uint32_t k : m_order) {
+  const std::size_t count = m_order.size();
+  for (std::size_t t = 0; t < count; ++t) {
+    prefetch_ahead(contacts, t, count);
+    const std::uint32_t k = m_order[t];
     const Contact& c = contacts[k];
     const bool wall = is_wall(c.b);
     std::uint32_t round = m_body_next_round[c.a];

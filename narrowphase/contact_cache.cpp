@@ -69,14 +69,28 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
   if (m == 0) return 0;
   m_matched.assign(m, 0);
   const std::uint64_t* keys = m_entries.key.data();
+  // The entries of sphere a are keys[first[a], first[a + 1]) (sorted by key,
+  // so grouped by a): a contact scans its sphere's few entries instead of
+  // searching all of them, and finds the same entry (keys are unique).
+  // Entries of spheres that no longer exist (a >= count) are never matched.
+  const std::size_t spheres = bodies.count;
+  m_first.assign(spheres + 1, 0);
+  for (std::uint32_t k = 0; k < m; ++k) {
+    const std::uint64_t a = keys[k] >> 32;
+    if (a < spheres) ++m_first[a + 1];
+  }
+  for (std::size_t i = 0; i < spheres; ++i) m_first[i + 1] += m_first[i];
+  const std::uint32_t* first = m_first.data();
   const auto n = static_cast<std::ptrdiff_t>(contacts.size());
   std::size_t matched = 0;
 #pragma omp parallel for schedule(static) reduction(+ : matched) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t) {
     Contact& c = contacts[t];
+    if (c.a >= spheres) continue;
     const std::uint64_t key = cache_key(c.a, c.b);
-    const std::uint32_t k = cache_lower_bound(keys, m, key);
-    if (k == m || keys[k] != key) continue;
+    std::uint32_t k = first[c.a];
+    while (k < first[c.a + 1] && keys[k] < key) ++k;
+    if (k == first[c.a + 1] || keys[k] != key) continue;
     restore_impulses(c, m_entries.normal_impulse[k], m_entries.tangent_impulse[k], m_entries.rolling_impulse[k]);
     m_matched[k] = 1;  // keys are unique: one contact per entry
     ++matched;

@@ -3,8 +3,8 @@
 // The accumulated impulses of the last substep, keyed by body pair (a, b)
 // (b a sphere, or a wall with kWallFlag), sorted by key. A contact that
 // persists starts the next solve from its old impulses (found by binary
-// search: contact_cache_math.hpp), so a resting stack needs few iterations
-// to hold.
+// search on the GPU, contact_cache_math.hpp; on the CPU by a scan of its
+// sphere's few entries), so a resting stack needs few iterations to hold.
 //
 // When a load goes away (a contact that carried more than a few times its
 // sphere's weight impulse is gone, e.g. the heavy top of a stack was lifted
@@ -61,7 +61,7 @@ class ContactCache {
   CacheEntries m_entries;
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
-  std::vector<std::uint32_t> m_order, m_sort_values;
+  std::vector<std::uint32_t> m_order, m_sort_values, m_first;
   std::vector<std::uint64_t> m_sort_keys;
 };
 
