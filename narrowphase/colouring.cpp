@@ -43,16 +43,28 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
     if (!is_wall(c.b)) m_body_next_round[c.b] = 0, m_body_used[c.b] = 0;
   }
   // Decreasing rank: an ascending radix sort of (2^56 - 1 - rank) (ranks are
-  // 56 bits and unique), carrying the contact index.
-  m_by_rank.resize(active.size());
-  m_order.resize(active.size());
-  for (std::size_t t = 0; t < active.size(); ++t) {
+  // 56 bits and unique), carrying the contact index. The ranks of
+  // contact_rank and impact_rank keep the index in their low 32 bits, so in
+  // index order the keys' low words ascend; then a stable sort of the top 24
+  // bits alone (3 passes instead of 7) gives the same order.
+  const std::size_t count = active.size();
+  m_by_rank.resize(count);
+  m_order.resize(count);
+  bool low_ascending = true;
+  for (std::size_t t = 0; t < count; ++t) {
     m_by_rank[t] = kRankMask - rank[active[t]];
     m_order[t] = active[t];
+    if (t > 0 && static_cast<std::uint32_t>(m_by_rank[t]) <= static_cast<std::uint32_t>(m_by_rank[t - 1]))
+      low_ascending = false;
   }
-  radix_sort_pairs(m_by_rank, m_order, 56, m_sort_keys, m_sort_values);
+  if (low_ascending) {
+    m_high.resize(count);
+    for (std::size_t t = 0; t < count; ++t) m_high[t] = static_cast<std::uint32_t>(m_by_rank[t] >> 32);
+    radix_sort_pairs(m_high, m_order, 24, m_sort_high, m_sort_values);
+  } else {
+    radix_sort_pairs(m_by_rank, m_order, 56, m_sort_keys, m_sort_values);
+  }
   std::uint32_t colours = 0, rounds = 0;
-  const std::size_t count = m_order.size();
   for (std::size_t t = 0; t < count; ++t) {
     prefetch_ahead(contacts, t, count);
     const std::uint32_t k = m_order[t];

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <numeric>
 
-#include "core/radix_sort.hpp"
 #include "narrowphase/contact_cache_math.hpp"
 
 namespace marbles::narrowphase {
@@ -102,24 +101,40 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
 void ContactCache::store(const std::vector<Contact>& contacts) {
   // Only the sustained impulses of the velocity solve are carried over; an
   // impact's impulse (Contact::impact_impulse) is not a load.
-  m_order.clear();
-  m_entries.key.clear();
-  for (std::uint32_t k = 0; k < contacts.size(); ++k)
-    if (contacts[k].normal_impulse > 0) {
-      m_order.push_back(k);
-      m_entries.key.push_back(cache_key(contacts[k].a, contacts[k].b));
-    }
-  radix_sort_pairs(m_entries.key, m_order, 64, m_sort_keys, m_sort_values);  // keys are unique
-  const std::size_t m = m_order.size();
+  // Sorted by key = grouped by sphere a, then by b within a group: a
+  // counting sort by a (the contacts are read in order, each written once
+  // to its group), then each group (a few entries) sorted by b in place.
+  const auto n = static_cast<std::uint32_t>(contacts.size());
+  std::uint32_t groups = 0;
+  for (const Contact& c : contacts)
+    if (c.normal_impulse > 0) groups = std::max(groups, c.a + 1);
+  m_first.assign(groups + 1, 0);
+  for (const Contact& c : contacts)
+    if (c.normal_impulse > 0) ++m_first[c.a + 1];
+  for (std::uint32_t a = 0; a < groups; ++a) m_first[a + 1] += m_first[a];
+  const std::size_t m = m_first[groups];
+  m_entries.key.resize(m);
   m_entries.normal_impulse.resize(m);
   m_entries.tangent_impulse.resize(m);
   m_entries.rolling_impulse.resize(m);
-  for (std::size_t k = 0; k < m; ++k) {
-    const Contact& c = contacts[m_order[k]];
-    m_entries.normal_impulse[k] = c.normal_impulse;
-    m_entries.tangent_impulse[k] = c.tangent_impulse;
-    m_entries.rolling_impulse[k] = c.rolling_impulse;
+  m_order.assign(m_first.begin(), m_first.end() - 1);  // the next free entry of each group
+  for (std::uint32_t k = 0; k < n; ++k) {
+    const Contact& c = contacts[k];
+    if (!(c.normal_impulse > 0)) continue;
+    const std::uint32_t e = m_order[c.a]++;
+    m_entries.key[e] = cache_key(c.a, c.b);
+    m_entries.normal_impulse[e] = c.normal_impulse;
+    m_entries.tangent_impulse[e] = c.tangent_impulse;
+    m_entries.rolling_impulse[e] = c.rolling_impulse;
   }
+  for (std::uint32_t a = 0; a < groups; ++a)  // insertion sort by key (unique) within the group
+    for (std::uint32_t e = m_first[a] + 1; e < m_first[a + 1]; ++e)
+      for (std::uint32_t j = e; j > m_first[a] && m_entries.key[j - 1] > m_entries.key[j]; --j) {
+        std::swap(m_entries.key[j - 1], m_entries.key[j]);
+        std::swap(m_entries.normal_impulse[j - 1], m_entries.normal_impulse[j]);
+        std::swap(m_entries.tangent_impulse[j - 1], m_entries.tangent_impulse[j]);
+        std::swap(m_entries.rolling_impulse[j - 1], m_entries.rolling_impulse[j]);
+      }
 }
 
 }  // namespace marbles::narrowphase

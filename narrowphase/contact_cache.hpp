@@ -61,8 +61,7 @@ class ContactCache {
   CacheEntries m_entries;
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
-  std::vector<std::uint32_t> m_order, m_sort_values, m_first;
-  std::vector<std::uint64_t> m_sort_keys;
+  std::vector<std::uint32_t> m_order, m_first;
 };
 
 }  // namespace marbles::narrowphase

@@ -64,6 +64,30 @@ void sweep_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, Solv
   for (std::uint32_t k = begin + blocks * w; k < end; ++k) solve_one<Friction, Rolling>(contacts[k], bodies, inv_h);
 }
 
+// The same for the projection, whose bodies are the world's arrays.
+inline void prefetch_positions(const Contact* contacts, std::uint32_t k, std::uint32_t last, const BodiesView& bodies) {
+  const Contact& c = contacts[k < last ? k : last];
+  const std::uint32_t b = c.b & ~kWallFlag;
+  __builtin_prefetch(bodies.position + c.a);
+  __builtin_prefetch(bodies.position + b);
+  __builtin_prefetch(bodies.radius + c.a);
+  __builtin_prefetch(bodies.radius + b);
+  __builtin_prefetch(bodies.inv_mass + c.a);
+  __builtin_prefetch(bodies.inv_mass + b);
+}
+
+template <class F>
+void for_colour_positions(const Contact* contacts, std::uint32_t begin, std::uint32_t end, const BodiesView& bodies,
+                          F&& f) {
+  const auto n = static_cast<std::ptrdiff_t>(end - begin);
+#pragma omp parallel for schedule(static) if (n >= kParallelFrom)
+  for (std::ptrdiff_t t = 0; t < n; ++t) {
+    const std::uint32_t k = begin + static_cast<std::uint32_t>(t);
+    prefetch_positions(contacts, k + kPrefetchAhead, end - 1, bodies);
+    f(k);
+  }
+}
+
 template <bool Friction, bool Rolling>
 void warm_start_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, SolverBody* bodies, real, bool) {
   for_colour_bodies(contacts, begin, end, bodies,
@@ -186,7 +210,7 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
     });
   for (int it = 0; it < m_settings.position_iterations; ++it)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      for_colour(b, e, [&](std::uint32_t k) { project_one(cs[k], bodies, ws, m_settings); });
+      for_colour_positions(cs, b, e, bodies, [&](std::uint32_t k) { project_one(cs[k], bodies, ws, m_settings); });
     });
 }
 
