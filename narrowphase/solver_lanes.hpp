@@ -30,7 +30,7 @@ using Mask = decltype(L{} < L{});
 inline L splat(real x) { return L{} + x; }
 inline L select(Mask m, L a, L b) { return m ? a : b; }
 inline L sqrt_lanes(L x) {
-  L r;
+  L r{};
   for (std::uint32_t l = 0; l < W; ++l) r[l] = std::sqrt(x[l]);
   return r;
 }
@@ -207,7 +207,7 @@ inline void store_impulses(const ContactLanes& k, Contact* c) {
 inline BodyLanes load_bodies(const SolverBody* bodies, const Contact* c, bool side_b) {
   {
     alignas(16) static constexpr SolverBody kNone{};
-    Mask wall;
+    Mask wall{};
     L r[4], q[4];
     for (int l = 0; l < 4; ++l) {
       const std::uint32_t index = side_b ? c[l].b : c[l].a;
