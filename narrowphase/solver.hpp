@@ -5,7 +5,8 @@
 // contacts of one colour in parallel (OpenMP), then the overflow set one by
 // one. A colour's contacts share no sphere, so the result does not depend on
 // the thread count, and it is the result of the CUDA twin bit for bit (both
-// call the per-contact functions of solver_math.hpp):
+// call the per-contact functions of solver_math.hpp; the CPU's sweep takes
+// them four at a time in SIMD lanes, solver_lanes.hpp, with the same bits):
 //   prepare       effective masses; approach speed before the solve
 //   impacts       (with restitution) contacts approaching faster than the
 //                 rest speed collide as binary impacts, P_n = (1 + e) m |v_n|
