@@ -27,23 +27,23 @@ void for_colour(std::uint32_t begin, std::uint32_t end, F&& f) {
 // no arithmetic. Settled pile of 10^5 on 2 cores: see docs/architecture.md.
 constexpr std::uint32_t kPrefetchAhead = 8;
 
-// Branch-free: GCC drops a __builtin_prefetch under a condition. A wall's
-// index (b without kWallFlag) points at some sphere's record: harmless.
-inline void prefetch_bodies(const Contact* contacts, std::uint32_t k, std::uint32_t last, const SolverBody* bodies) {
-  const Contact& c = contacts[k < last ? k : last];
+// The hints, branch-free (GCC drops a __builtin_prefetch under a condition):
+// the callers clamp the index instead. A wall's index (b without kWallFlag)
+// points at some sphere's record: harmless.
+inline void prefetch_bodies(const Contact& c, const SolverBody* bodies) {
   __builtin_prefetch(bodies + c.a);
   __builtin_prefetch(bodies + (c.b & ~kWallFlag));
 }
 
-// for_colour over contacts whose bodies are fetched kPrefetchAhead early.
+// for_colour that asks for the bodies of the contact kPrefetchAhead later.
 template <class F>
-void for_colour_bodies(const Contact* contacts, std::uint32_t begin, std::uint32_t end, const SolverBody* bodies,
-                       F&& f) {
+void for_colour_ahead(const Contact* contacts, std::uint32_t begin, std::uint32_t end, const SolverBody* bodies,
+                      F&& f) {
   const auto n = static_cast<std::ptrdiff_t>(end - begin);
 #pragma omp parallel for schedule(static) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t) {
     const std::uint32_t k = begin + static_cast<std::uint32_t>(t);
-    prefetch_bodies(contacts, k + kPrefetchAhead, end - 1, bodies);
+    prefetch_bodies(contacts[std::min(k + kPrefetchAhead, end - 1)], bodies);
     f(k);
   }
 }
@@ -58,40 +58,16 @@ void sweep_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, Solv
 #pragma omp parallel for schedule(static) if (nb * w >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < nb; ++t) {
     const std::uint32_t k = begin + static_cast<std::uint32_t>(t) * w;
-    for (std::uint32_t l = 0; l < w; ++l) prefetch_bodies(contacts, k + kPrefetchAhead + l, end - 1, bodies);
+    for (std::uint32_t l = 0; l < w; ++l) prefetch_bodies(contacts[std::min(k + kPrefetchAhead + l, end - 1)], bodies);
     lanes::solve_block<Friction, Rolling>(contacts + k, bodies, inv_h);
   }
   for (std::uint32_t k = begin + blocks * w; k < end; ++k) solve_one<Friction, Rolling>(contacts[k], bodies, inv_h);
 }
 
-// The same for the projection, whose bodies are the world's arrays.
-inline void prefetch_positions(const Contact* contacts, std::uint32_t k, std::uint32_t last, const BodiesView& bodies) {
-  const Contact& c = contacts[k < last ? k : last];
-  const std::uint32_t b = c.b & ~kWallFlag;
-  __builtin_prefetch(bodies.position + c.a);
-  __builtin_prefetch(bodies.position + b);
-  __builtin_prefetch(bodies.radius + c.a);
-  __builtin_prefetch(bodies.radius + b);
-  __builtin_prefetch(bodies.inv_mass + c.a);
-  __builtin_prefetch(bodies.inv_mass + b);
-}
-
-template <class F>
-void for_colour_positions(const Contact* contacts, std::uint32_t begin, std::uint32_t end, const BodiesView& bodies,
-                          F&& f) {
-  const auto n = static_cast<std::ptrdiff_t>(end - begin);
-#pragma omp parallel for schedule(static) if (n >= kParallelFrom)
-  for (std::ptrdiff_t t = 0; t < n; ++t) {
-    const std::uint32_t k = begin + static_cast<std::uint32_t>(t);
-    prefetch_positions(contacts, k + kPrefetchAhead, end - 1, bodies);
-    f(k);
-  }
-}
-
 template <bool Friction, bool Rolling>
 void warm_start_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, SolverBody* bodies, real, bool) {
-  for_colour_bodies(contacts, begin, end, bodies,
-                    [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(contacts[k], bodies); });
+  for_colour_ahead(contacts, begin, end, bodies,
+                   [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(contacts[k], bodies); });
 }
 
 // Impacts of contacts[order[k]] for k in [begin, end) (one level; order null:
@@ -142,8 +118,8 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
   SolverBody* bodies = m_bodies.data();
 
   Contact* cs = contacts.data();
-  for_colour_bodies(cs, 0, static_cast<std::uint32_t>(contacts.size()), bodies,
-                    [&](std::uint32_t k) { prepare_one(cs[k], bodies); });
+  for_colour_ahead(cs, 0, static_cast<std::uint32_t>(contacts.size()), bodies,
+                   [&](std::uint32_t k) { prepare_one(cs[k], bodies); });
   if (m_settings.restitution) impacts(contacts, colours, bodies, world.count, h);
   if (m_settings.warm_start)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(cs, b, e, bodies, 0, false); });
@@ -210,7 +186,7 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
     });
   for (int it = 0; it < m_settings.position_iterations; ++it)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      for_colour_positions(cs, b, e, bodies, [&](std::uint32_t k) { project_one(cs[k], bodies, ws, m_settings); });
+      for_colour(b, e, [&](std::uint32_t k) { project_one(cs[k], bodies, ws, m_settings); });
     });
 }
 
