@@ -105,12 +105,13 @@ void ContactCache::store(const std::vector<Contact>& contacts) {
   // counting sort by a (the contacts are read in order, each written once
   // to its group), then each group (a few entries) sorted by b in place.
   const auto n = static_cast<std::uint32_t>(contacts.size());
-  std::uint32_t groups = 0;
-  for (const Contact& c : contacts)
-    if (c.normal_impulse > 0) groups = std::max(groups, c.a + 1);
-  m_first.assign(groups + 1, 0);
-  for (const Contact& c : contacts)
-    if (c.normal_impulse > 0) ++m_first[c.a + 1];
+  m_first.assign(1, 0);  // grows to the largest a + 2 seen
+  for (const Contact& c : contacts) {
+    if (!(c.normal_impulse > 0)) continue;
+    if (c.a + 2 > m_first.size()) m_first.resize(c.a + 2, 0);
+    ++m_first[c.a + 1];
+  }
+  const auto groups = static_cast<std::uint32_t>(m_first.size() - 1);
   for (std::uint32_t a = 0; a < groups; ++a) m_first[a + 1] += m_first[a];
   const std::size_t m = m_first[groups];
   m_entries.key.resize(m);

@@ -27,7 +27,6 @@ using L = real __attribute__((vector_size(kVectorBytes)));
 inline constexpr std::uint32_t W = kVectorBytes / sizeof(real);  // contacts per block
 using Mask = decltype(L{} < L{});
 
-inline L splat(real x) { return L{} + x; }
 inline L select(Mask m, L a, L b) { return m ? a : b; }
 inline L sqrt_lanes(L x) {
   L r{};
@@ -127,7 +126,6 @@ inline void store_bodies_each(SolverBody* bodies, const Contact* c, bool side_b,
                          s.inv_inertia[l]});
 }
 
-
 #if !defined(MARBLES_DOUBLE)
 using Word = Mask;  // shuffle indices
 
@@ -164,84 +162,75 @@ static_assert((offsetof(Contact, tangent_impulse) == 4 && offsetof(Contact, roll
                            sizeof(Contact) == 112 && sizeof(SolverBody) == 32),
               "the float Contact is seven groups of four reals, a SolverBody two");
 
-
 inline ContactLanes load_contacts(const Contact* c) {
-  {
-    ContactLanes k;
-    L r[4];
-    load_group(c, 0, r);
-    k.normal_impulse = r[0], k.tangent_impulse = {r[1], r[2], r[3]};
-    load_group(c, 1, r);
-    k.rolling_impulse = {r[0], r[1], r[2]};
-    load_group(c, 2, r);
-    k.normal_mass = r[0], k.tangent_mass = r[1], k.rolling_mass = r[2];
-    load_group(c, 3, r);
-    k.separation = r[2];
-    load_group(c, 4, r);
-    k.normal = {r[0], r[1], r[2]}, k.ra = r[3];
-    load_group(c, 5, r);
-    k.rb = r[0];
-    load_group(c, 6, r);
-    k.friction = r[1], k.rolling_friction = r[2], k.twisting_friction = r[3];
-    return k;
-  }
+  ContactLanes k;
+  L r[4];
+  load_group(c, 0, r);
+  k.normal_impulse = r[0], k.tangent_impulse = {r[1], r[2], r[3]};
+  load_group(c, 1, r);
+  k.rolling_impulse = {r[0], r[1], r[2]};
+  load_group(c, 2, r);
+  k.normal_mass = r[0], k.tangent_mass = r[1], k.rolling_mass = r[2];
+  load_group(c, 3, r);
+  k.separation = r[2];
+  load_group(c, 4, r);
+  k.normal = {r[0], r[1], r[2]}, k.ra = r[3];
+  load_group(c, 5, r);
+  k.rb = r[0];
+  load_group(c, 6, r);
+  k.friction = r[1], k.rolling_friction = r[2], k.twisting_friction = r[3];
+  return k;
 }
 
 // Writes the impulses back: groups 0 and 1 whole (the impact impulse, the
 // last real of group 1, as it was).
 inline void store_impulses(const ContactLanes& k, Contact* c) {
-  {
-    L r[4] = {k.normal_impulse, k.tangent_impulse.x, k.tangent_impulse.y, k.tangent_impulse.z};
-    transpose4(r);
-    for (int l = 0; l < 4; ++l) set_group(c + l, 0, r[l]);
-    for (int l = 0; l < 4; ++l) r[l] = group(c + l, 1);
-    transpose4(r);
-    r[0] = k.rolling_impulse.x, r[1] = k.rolling_impulse.y, r[2] = k.rolling_impulse.z;
-    transpose4(r);
-    for (int l = 0; l < 4; ++l) set_group(c + l, 1, r[l]);
-  }
+  L r[4] = {k.normal_impulse, k.tangent_impulse.x, k.tangent_impulse.y, k.tangent_impulse.z};
+  transpose4(r);
+  for (int l = 0; l < 4; ++l) set_group(c + l, 0, r[l]);
+  for (int l = 0; l < 4; ++l) r[l] = group(c + l, 1);
+  transpose4(r);
+  r[0] = k.rolling_impulse.x, r[1] = k.rolling_impulse.y, r[2] = k.rolling_impulse.z;
+  transpose4(r);
+  for (int l = 0; l < 4; ++l) set_group(c + l, 1, r[l]);
 }
 
 // load_body of W contacts' side a (side_b false) or b: a wall's lane holds
 // the contact's wall velocity, zero spin and zero inverse mass and inertia.
 inline BodyLanes load_bodies(const SolverBody* bodies, const Contact* c, bool side_b) {
-  {
-    alignas(16) static constexpr SolverBody kNone{};
-    Mask wall{};
-    L r[4], q[4];
-    for (int l = 0; l < 4; ++l) {
-      const std::uint32_t index = side_b ? c[l].b : c[l].a;
-      wall[l] = is_wall(index) ? -1 : 0;
-      const SolverBody* b = is_wall(index) ? &kNone : bodies + index;
-      r[l] = group(b, 0);
-      q[l] = group(b, 1);
-    }
-    transpose4(r);
-    transpose4(q);
-    L g[4];
-    load_group(c, 5, g);  // rb, wall velocity
-    BodyLanes s;
-    s.v = select(wall, V3{g[1], g[2], g[3]}, V3{r[0], r[1], r[2]});
-    s.inv_mass = r[3];
-    s.w = {q[0], q[1], q[2]};
-    s.inv_inertia = q[3];
-    return s;
+  alignas(16) static constexpr SolverBody kNone{};
+  Mask wall{};
+  L r[4], q[4];
+  for (int l = 0; l < 4; ++l) {
+    const std::uint32_t index = side_b ? c[l].b : c[l].a;
+    wall[l] = is_wall(index) ? -1 : 0;
+    const SolverBody* b = is_wall(index) ? &kNone : bodies + index;
+    r[l] = group(b, 0);
+    q[l] = group(b, 1);
   }
+  transpose4(r);
+  transpose4(q);
+  L g[4];
+  load_group(c, 5, g);  // rb, wall velocity
+  BodyLanes s;
+  s.v = select(wall, V3{g[1], g[2], g[3]}, V3{r[0], r[1], r[2]});
+  s.inv_mass = r[3];
+  s.w = {q[0], q[1], q[2]};
+  s.inv_inertia = q[3];
+  return s;
 }
 
 // store_body of W contacts' side a or b (walls are not stored).
 inline void store_bodies(SolverBody* bodies, const Contact* c, bool side_b, const BodyLanes& s) {
-  {
-    L r[4] = {s.v.x, s.v.y, s.v.z, s.inv_mass};
-    L q[4] = {s.w.x, s.w.y, s.w.z, s.inv_inertia};
-    transpose4(r);
-    transpose4(q);
-    for (int l = 0; l < 4; ++l) {
-      const std::uint32_t index = side_b ? c[l].b : c[l].a;
-      if (is_wall(index)) continue;
-      set_group(bodies + index, 0, r[l]);
-      set_group(bodies + index, 1, q[l]);
-    }
+  L r[4] = {s.v.x, s.v.y, s.v.z, s.inv_mass};
+  L q[4] = {s.w.x, s.w.y, s.w.z, s.inv_inertia};
+  transpose4(r);
+  transpose4(q);
+  for (int l = 0; l < 4; ++l) {
+    const std::uint32_t index = side_b ? c[l].b : c[l].a;
+    if (is_wall(index)) continue;
+    set_group(bodies + index, 0, r[l]);
+    set_group(bodies + index, 1, q[l]);
   }
 }
 

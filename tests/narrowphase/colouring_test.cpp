@@ -198,6 +198,31 @@ TEST(Colouring, SameColouringTwiceAndForAnyThreadCount) {
 #endif
 }
 
+// colour() sorts only the ranks' top 24 bits when the active list's index
+// order already orders their low words, and all 56 bits otherwise (here: the
+// active list shuffled, or ranks whose low words are not the index). Both
+// paths must give the colouring of the rounds oracle.
+TEST(Colouring, EitherRankSortGivesTheOracle) {
+  std::mt19937_64 rng(17);
+  for (int trial = 0; trial < 20; ++trial) {
+    const std::uint32_t bodies = 50 + static_cast<std::uint32_t>(rng() % 500);
+    const std::vector<Contact> contacts = random_contacts(rng, bodies, 4 * bodies, 0.1);
+    const auto n = static_cast<std::uint32_t>(contacts.size());
+    std::vector<std::uint64_t> rank(n);
+    // Four top values only, so that the low words decide most orders: the
+    // index form of contact_rank and impact_rank, or any low words.
+    for (std::uint32_t k = 0; k < n; ++k)
+      rank[k] = ((rng() % 4) << 32) | (trial % 2 == 0 ? 0xffffffffu - k : rng() & 0xffffffffu);
+    std::vector<std::uint32_t> active(n);
+    std::iota(active.begin(), active.end(), 0u);
+    if (trial % 4 < 2) std::shuffle(active.begin(), active.end(), rng);
+    std::vector<std::uint32_t> colour(n, kUncoloured), oracle(n, kUncoloured);
+    ContactColouring().colour(contacts.data(), active, rank.data(), bodies, ColourRule::lowest_free, colour);
+    colour_in_rounds(contacts.data(), active, rank.data(), bodies, ColourRule::lowest_free, oracle);
+    EXPECT_EQ(colour, oracle) << "trial " << trial;
+  }
+}
+
 // The impact stage's levels: of two contacts sharing a sphere, the one with
 // the higher rank (earlier impact) is in the lower level.
 TEST(Colouring, ByRoundOrdersNeighboursByRank) {
