@@ -1,3 +1,5 @@
+#include <algorithm>
+
 #include "core/cuda_check.hpp"
 #include "narrowphase/colouring_cuda.cuh"
 #include "narrowphase/solver_math.hpp"
@@ -107,7 +109,7 @@ __global__ void first_of_key_kernel(const std::uint32_t* sorted_keys, std::uint3
 
 __global__ void gather_kernel(const Contact* in, const std::uint32_t* order, std::uint32_t n, Contact* out) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
-    out[k] = in[order[k]];
+    store_whole(out + k, load_whole(in + order[k]));  // 16-byte words, not field by field
 }
 
 }  // namespace
@@ -119,8 +121,8 @@ ColouringCuda::~ColouringCuda() {
   if (m_host) cudaFreeHost(m_host);
 }
 
-// Rounds until the active list is empty: launched in batches of kBatch, the
-// list sizes read once per batch.
+// Rounds until the active list is empty: launched in batches, the list
+// sizes read once per batch.
 std::uint32_t ColouringCuda::rounds(std::uint32_t n, std::size_t body_count, ColourRule rule, int sm_count,
                                     cudaStream_t s) {
   auto* body_word = m_body_word.as<unsigned long long>(body_count);
@@ -133,8 +135,13 @@ std::uint32_t ColouringCuda::rounds(std::uint32_t n, std::size_t body_count, Col
   ColourEntry* list[2] = {m_active.get_as<ColourEntry>(), m_next.get_as<ColourEntry>()};
   auto* colour = m_colour.get_as<std::uint32_t>();
   const int grid = grid_for(n, sm_count);
+  // The first batch is as long as the last colouring of this rule took and
+  // a little more (a round past the end costs two launches that find an
+  // empty list, a read of the counts a wait for the stream), later ones kBatch.
+  std::uint32_t& last = m_last_rounds[rule == ColourRule::lowest_free ? 0 : 1];
   for (std::uint32_t round = 0; round < kMaxColourRounds;) {
-    const std::uint32_t batch = std::min(kBatch, kMaxColourRounds - round);
+    const std::uint32_t want = round == 0 ? std::max(kBatch, last + last / 8 + 1) : kBatch;
+    const std::uint32_t batch = std::min(want, kMaxColourRounds - round);
     for (std::uint32_t r = round; r < round + batch; ++r) {
       offer_kernel<<<grid, kBlock, 0, s>>>(list[r % 2], count, r, body_word);
       MARBLES_CUDA_CHECK_LAUNCH();
@@ -147,10 +154,10 @@ std::uint32_t ColouringCuda::rounds(std::uint32_t n, std::size_t body_count, Col
     m_bytes += batch * sizeof(std::uint32_t);
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
     for (std::uint32_t r = 0; r < batch; ++r)
-      if (m_host[r] == 0) return round + r + 1;
+      if (m_host[r] == 0) return last = round + r + 1;
     round += batch;
   }
-  return kMaxColourRounds;  // the rest stay uncoloured: the overflow set
+  return last = kMaxColourRounds;  // the rest stay uncoloured: the overflow set
 }
 
 void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, int key_bits, std::uint32_t key_bound,

@@ -62,6 +62,7 @@ class ColouringCuda {
   DeviceBuffer m_colour, m_active, m_next, m_count, m_body_word, m_body_used, m_keys, m_keys_out,
       m_index, m_index_out, m_first_of_key, m_temp;
   std::uint32_t* m_host = nullptr;  // pinned readbacks
+  std::uint32_t m_last_rounds[2] = {0, 0};  // rounds of the last colouring by rule (lowest_free, by_round)
 };
 
 }  // namespace marbles::narrowphase::cuda

@@ -2,6 +2,7 @@
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_cache_cuda.cuh"
 #include "narrowphase/contact_cache_math.hpp"
+#include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase::cuda {
 namespace {
@@ -9,24 +10,28 @@ namespace {
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 
-__global__ void flags_kernel(const Contact* contacts, std::uint32_t n, std::uint32_t* flags) {
+// The store reads the contacts' bodies and impulses from the sweep's records
+// (solver_math.hpp), where the last sweep left them.
+__global__ void flags_kernel(SweepRecords records, std::uint32_t n, std::uint32_t* flags) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= n; k += gridDim.x * blockDim.x)
-    flags[k] = k < n && contacts[k].normal_impulse > 0 ? 1u : 0u;
+    flags[k] = k < n && records.impulse[k].x > 0 ? 1u : 0u;
 }
 
-__global__ void keys_kernel(const Contact* contacts, std::uint32_t n, const std::uint32_t* offsets,
+__global__ void keys_kernel(SweepRecords records, std::uint32_t n, const std::uint32_t* offsets,
                             std::uint64_t* keys, std::uint32_t* index) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     if (offsets[k + 1] == offsets[k]) continue;
-    keys[offsets[k]] = cache_key(contacts[k].a, contacts[k].b);
+    const BodyPair ab = records.bodies[k];
+    keys[offsets[k]] = cache_key(ab.a, ab.b);
     index[offsets[k]] = k;
   }
 }
 
-__global__ void gather_kernel(const Contact* contacts, const std::uint32_t* index, std::uint32_t m, real* normal,
+__global__ void gather_kernel(SweepRecords records, const std::uint32_t* index, std::uint32_t m, real* normal,
                               Vec3* tangent, Vec3* rolling) {
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
-    const Contact& c = contacts[index[e]];
+    Contact c;
+    unpack_sweep_impulses(records, index[e], c);
     normal[e] = c.normal_impulse;
     tangent[e] = c.tangent_impulse;
     rolling[e] = c.rolling_impulse;
@@ -144,7 +149,7 @@ ContactCacheCuda::~ContactCacheCuda() {
   if (m_host) cudaFreeHost(m_host);
 }
 
-void ContactCacheCuda::store(const Contact* contacts, std::uint32_t n, int sm_count, cudaStream_t s) {
+void ContactCacheCuda::store(const SweepRecords& contacts, std::uint32_t n, int sm_count, cudaStream_t s) {
   auto* flags = m_flags.as<std::uint32_t>(n + 1);
   auto* offsets = m_offsets.as<std::uint32_t>(n + 1);
   flags_kernel<<<grid_for(n + 1, sm_count), kBlock, 0, s>>>(contacts, n, flags);

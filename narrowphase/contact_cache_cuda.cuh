@@ -15,6 +15,7 @@
 #include "core/spheres.hpp"
 #include "narrowphase/contact.hpp"
 #include "narrowphase/contact_cache.hpp"
+#include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase::cuda {
 
@@ -30,7 +31,8 @@ class ContactCacheCuda {
   // Warm start of contacts[0, n) (device).
   void restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse, int sm_count,
                cudaStream_t stream);
-  void store(const Contact* contacts, std::uint32_t n, int sm_count, cudaStream_t stream);
+  // The contacts as the sweep's records hold them after the last sweep.
+  void store(const SweepRecords& contacts, std::uint32_t n, int sm_count, cudaStream_t stream);
   std::uint32_t size() const { return m_count; }
   // The entries as the CPU cache holds them (a checkpoint's copy), and back.
   CacheEntries download(cudaStream_t stream);

@@ -1,5 +1,6 @@
 #include "core/cuda_check.hpp"
 #include "core/device_buffer.cuh"
+#include "core/whole_record.hpp"
 #include "narrowphase/contacts_cuda.cuh"
 
 namespace marbles::narrowphase::cuda {
@@ -55,7 +56,7 @@ __global__ void sphere_write_kernel(BodiesView bodies, const IndexPair* pairs, s
     if (offsets[k + 1] == offsets[k]) continue;
     Contact c;
     make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c);
-    out[offsets[k]] = c;
+    store_whole(out + offsets[k], c);
   }
 }
 
@@ -82,7 +83,7 @@ __global__ void wall_write_kernel(BodiesView bodies, const WallShape* walls, std
     const auto i = static_cast<std::uint32_t>(t / wall_count), k = static_cast<std::uint32_t>(t % wall_count);
     Contact c;
     make_wall_contact(bodies, i, walls[k], k, table, h, reach, c);
-    out[offsets[t]] = c;
+    store_whole(out + offsets[t], c);
   }
 }
 

@@ -27,8 +27,8 @@ inline int blocks(const ContactRange& r) {
   return r.serial ? 1 : static_cast<int>((r.end - r.begin + kBlock - 1) / kBlock);
 }
 
-// A sweep's results, the contact's first eight reals (contact.hpp), stored
-// as whole 16-byte words.
+// The impulses, the contact's first eight reals (contact.hpp), stored as
+// whole 16-byte words.
 __device__ __forceinline__ void store_impulses(Contact* to, const Contact& c) {
   if constexpr (sizeof(real) == 4) {
     float4* w = reinterpret_cast<float4*>(to);
@@ -55,7 +55,11 @@ __global__ void scatter_bodies_kernel(const SolverBody* bodies, BodiesView world
 
 __global__ void prepare_kernel(Contact* contacts, std::uint32_t n, const SolverBody* bodies) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
-    prepare_one(contacts[k], bodies);
+  {
+    Contact c = load_whole(contacts + k);  // whole records in and out: a field-by-field update of
+    prepare_one(c, bodies);                // 112-byte records writes partial sectors
+    store_whole(contacts + k, c);
+  }
 }
 
 template <bool Friction, bool Rolling>
@@ -64,12 +68,26 @@ __global__ void warm_start_kernel(Contact* contacts, ContactRange r, SolverBody*
 }
 
 template <bool Friction, bool Rolling>
-__global__ void sweep_kernel(Contact* contacts, ContactRange r, SolverBody* bodies, real inv_h) {
+__global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
   for_range(r, [&](std::uint32_t k) {
-    Contact c = load_whole(contacts + k);  // the contact in 16-byte words, its results back the same way
+    Contact c = load_sweep_contact<Friction, Rolling>(s, k);
     solve_one<Friction, Rolling>(c, bodies, inv_h);
-    store_impulses(contacts + k, c);
+    store_sweep_impulses<Friction, Rolling>(s, k, c);
   });
+}
+
+__global__ void pack_sweep_kernel(const Contact* contacts, std::uint32_t n, SweepRecords s) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
+    pack_sweep_record(load_whole(contacts + k), s, k);
+}
+
+__global__ void unpack_sweep_kernel(Contact* contacts, std::uint32_t n, SweepRecords s) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    Contact c;
+    c.impact_impulse = contacts[k].impact_impulse;
+    unpack_sweep_impulses(s, k, c);
+    store_impulses(contacts + k, c);
+  }
 }
 
 template <bool Friction>
@@ -82,20 +100,20 @@ __global__ void impact_kernel(Contact* contacts, const std::uint32_t* order, Con
   if (any) *hit = 1u;
 }
 
-__global__ void rebound_kernel(const Contact* contacts, ContactRange r, BodiesView bodies, const WallShape* walls) {
-  for_range(r, [&](std::uint32_t k) { rebound_one(contacts[k], bodies, walls); });
+__global__ void rebound_kernel(SweepRecords records, ContactRange r, BodiesView bodies, const WallShape* walls) {
+  for_range(r, [&](std::uint32_t k) { rebound_one(load_position_contact<true>(records, k), bodies, walls); });
 }
 
-__global__ void project_kernel(const Contact* contacts, ContactRange r, BodiesView bodies, const WallShape* walls,
+__global__ void project_kernel(SweepRecords records, ContactRange r, BodiesView bodies, const WallShape* walls,
                                SolverSettings s) {
-  for_range(r, [&](std::uint32_t k) { project_one(contacts[k], bodies, walls, s); });
+  for_range(r, [&](std::uint32_t k) { project_one(load_position_contact<false>(records, k), bodies, walls, s); });
 }
 
-__global__ void max_overlap_kernel(const Contact* contacts, std::uint32_t n, BodiesView bodies, const WallShape* walls,
+__global__ void max_overlap_kernel(SweepRecords records, std::uint32_t n, BodiesView bodies, const WallShape* walls,
                                    unsigned long long* deepest) {
   real d = 0;
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const real o = overlap_ratio(contacts[k], bodies, walls);
+    const real o = overlap_ratio(load_position_contact<false>(records, k), bodies, walls);
     d = o > d ? o : d;
   }
   if constexpr (sizeof(real) == 4)
@@ -106,10 +124,10 @@ __global__ void max_overlap_kernel(const Contact* contacts, std::uint32_t n, Bod
 
 }  // namespace
 
-void launch_max_overlap(const Contact* contacts, std::uint32_t n, const BodiesView& bodies, const WallShape* walls,
+void launch_max_overlap(const SweepRecords& records, std::uint32_t n, const BodiesView& bodies, const WallShape* walls,
                         unsigned long long* deepest, int sm_count, cudaStream_t s) {
   if (n == 0) return;
-  max_overlap_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, bodies, walls, deepest);
+  max_overlap_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(records, n, bodies, walls, deepest);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
@@ -140,13 +158,28 @@ void launch_warm_start(Contact* contacts, ContactRange r, SolverBody* bodies, So
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_sweep(Contact* contacts, ContactRange r, SolverBody* bodies, real inv_h, SolverTerms t,
+void launch_pack_sweep(const Contact* contacts, std::uint32_t n, const SweepRecords& records, int sm_count,
+                       cudaStream_t s) {
+  if (n == 0) return;
+  pack_sweep_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, records);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_unpack_sweep(Contact* contacts, std::uint32_t n, const SweepRecords& records, int sm_count,
+                         cudaStream_t s) {
+  if (n == 0) return;
+  unpack_sweep_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, records);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, SolverTerms t,
                   cudaStream_t s) {
   if (r.end <= r.begin) return;
-  if (t.friction && t.rolling) sweep_kernel<true, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, inv_h);
-  else if (t.friction) sweep_kernel<true, false><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, inv_h);
-  else if (t.rolling) sweep_kernel<false, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, inv_h);
-  else sweep_kernel<false, false><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, inv_h);
+  const int g = blocks(r);
+  if (t.friction && t.rolling) record_sweep_kernel<true, true><<<g, kBlock, 0, s>>>(records, r, bodies, inv_h);
+  else if (t.friction) record_sweep_kernel<true, false><<<g, kBlock, 0, s>>>(records, r, bodies, inv_h);
+  else if (t.rolling) record_sweep_kernel<false, true><<<g, kBlock, 0, s>>>(records, r, bodies, inv_h);
+  else record_sweep_kernel<false, false><<<g, kBlock, 0, s>>>(records, r, bodies, inv_h);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
@@ -160,17 +193,17 @@ void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange 
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_rebound(const Contact* contacts, ContactRange r, const BodiesView& bodies, const WallShape* walls,
+void launch_rebound(const SweepRecords& records, ContactRange r, const BodiesView& bodies, const WallShape* walls,
                     cudaStream_t s) {
   if (r.end <= r.begin) return;
-  rebound_kernel<<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, walls);
+  rebound_kernel<<<blocks(r), kBlock, 0, s>>>(records, r, bodies, walls);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_project(const Contact* contacts, ContactRange r, const BodiesView& bodies, const WallShape* walls,
+void launch_project(const SweepRecords& records, ContactRange r, const BodiesView& bodies, const WallShape* walls,
                     const SolverSettings& settings, cudaStream_t s) {
   if (r.end <= r.begin) return;
-  project_kernel<<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies, walls, settings);
+  project_kernel<<<blocks(r), kBlock, 0, s>>>(records, r, bodies, walls, settings);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -33,20 +33,28 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
 void launch_prepare(Contact* contacts, std::uint32_t n, const SolverBody* bodies, int sm_count, cudaStream_t stream);
 void launch_warm_start(Contact* contacts, ContactRange range, SolverBody* bodies, SolverTerms terms,
                        cudaStream_t stream);
-void launch_sweep(Contact* contacts, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,
+// The stages after the warm start on the sweep's records (solver_math.hpp):
+// packed from the contacts after the warm start; the sweeps, the position
+// stages and the overlap read them; the impulses go back into the contacts
+// when those are asked for (unpack). The same bits as on the contacts.
+void launch_pack_sweep(const Contact* contacts, std::uint32_t n, const SweepRecords& records, int sm_count,
+                       cudaStream_t stream);
+void launch_sweep(const SweepRecords& records, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,
                   cudaStream_t stream);
+void launch_unpack_sweep(Contact* contacts, std::uint32_t n, const SweepRecords& records, int sm_count,
+                         cudaStream_t stream);
 // Impacts of contacts[order[k]] for k in range (order null: k itself);
 // sets *hit = 1 when any hit.
 void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange range, SolverBody* bodies,
                     const ImpactParams& p, bool friction, unsigned* hit, cudaStream_t stream);
-void launch_rebound(const Contact* contacts, ContactRange range, const BodiesView& bodies, const WallShape* walls,
+void launch_rebound(const SweepRecords& records, ContactRange range, const BodiesView& bodies, const WallShape* walls,
                     cudaStream_t stream);
-void launch_project(const Contact* contacts, ContactRange range, const BodiesView& bodies, const WallShape* walls,
+void launch_project(const SweepRecords& records, ContactRange range, const BodiesView& bodies, const WallShape* walls,
                     const SolverSettings& settings, cudaStream_t stream);
 
-// *deepest = max(*deepest, overlap_ratio) over contacts[0, n) (as the bits
+// *deepest = max(*deepest, overlap_ratio) over the records' contacts [0, n) (as the bits
 // of a non-negative real: an atomic max, the same whatever the order).
-void launch_max_overlap(const Contact* contacts, std::uint32_t n, const BodiesView& bodies, const WallShape* walls,
+void launch_max_overlap(const SweepRecords& records, std::uint32_t n, const BodiesView& bodies, const WallShape* walls,
                         unsigned long long* deepest, int sm_count, cudaStream_t stream);
 
 }  // namespace marbles::narrowphase::cuda

@@ -6,6 +6,7 @@
 // time (no two share a sphere), so calls within a colour are independent.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 
 #include "core/spheres.hpp"
@@ -101,6 +102,115 @@ MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
   solve_normal(c, A, B, inv_h);
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
+}
+
+// --- the sweep's records -------------------------------------------------------
+// What the stages after the warm start read of a contact (about 90 of its
+// 112 bytes in float), as a structure of arrays of 4-real words: thread k of
+// a launch reads word k of each array, so a warp's request is whole sectors,
+// where a whole Contact per thread made every request span 32 records, and a
+// field-by-field update of one wrote partial sectors. The GPU packs them once
+// per substep after the warm start (pack_sweep_record); every sweep reads and
+// writes them (load_sweep_contact, store_sweep_impulses), the position stages
+// read them (load_position_contact), and the impulses go back into the
+// contacts only when the contacts are asked for (unpack_sweep_impulses) or
+// stored in the cache. Each stage runs its per-contact function on the
+// contact loaded from them: the same fields, the same arithmetic, the same
+// bits as on the whole Contact.
+struct alignas(4 * sizeof(real)) Real4 {
+  real x = 0, y = 0, z = 0, w = 0;
+};
+struct alignas(8) BodyPair {
+  std::uint32_t a = 0, b = 0;
+};
+struct SweepRecords {
+  Real4* impulse = nullptr;   // normal_impulse, tangent_impulse            (read and written)
+  Real4* rolling = nullptr;   // rolling_impulse, -                          (read and written, with rolling)
+  Real4* geometry = nullptr;  // normal, separation
+  Real4* masses = nullptr;    // ra, rb, normal_mass, tangent_mass
+  Real4* terms = nullptr;     // rolling_mass, friction, rolling_friction, twisting_friction
+  Real4* extra = nullptr;     // wall_velocity (read by the sweeps for wall contacts only), rebound_shift
+  BodyPair* bodies = nullptr; // a, b
+
+  // Bytes of the records of n contacts, every array 16-byte aligned.
+  static constexpr std::size_t bytes_for(std::size_t n) { return n * (6 * sizeof(Real4) + sizeof(BodyPair)) + 64; }
+  // The arrays of n contacts laid out in `memory` (bytes_for(n) bytes, 16-byte aligned).
+  static SweepRecords in(void* memory, std::size_t n) {
+    SweepRecords s;
+    auto* p = static_cast<Real4*>(memory);
+    s.impulse = p, s.rolling = p + n, s.geometry = p + 2 * n, s.masses = p + 3 * n, s.terms = p + 4 * n;
+    s.extra = p + 5 * n;
+    s.bodies = reinterpret_cast<BodyPair*>(p + 6 * n);
+    return s;
+  }
+};
+
+MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s, std::uint32_t k) {
+  s.impulse[k] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
+  s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, real(0)};
+  s.geometry[k] = {c.normal.x, c.normal.y, c.normal.z, c.separation};
+  s.masses[k] = {c.ra, c.rb, c.normal_mass, c.tangent_mass};
+  s.terms[k] = {c.rolling_mass, c.coeff.friction, c.coeff.rolling_friction, c.coeff.twisting_friction};
+  s.extra[k] = {c.wall_velocity.x, c.wall_velocity.y, c.wall_velocity.z, c.rebound_shift};
+  s.bodies[k] = {c.a, c.b};
+}
+
+// The contact as solve_one<Friction, Rolling> reads it: every field it reads
+// is the packed contact's, the others are left at their defaults.
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE Contact load_sweep_contact(const SweepRecords& s, std::uint32_t k) {
+  Contact c;
+  const BodyPair ab = s.bodies[k];
+  c.a = ab.a, c.b = ab.b;
+  const Real4 i = load_whole(s.impulse + k), g = load_whole(s.geometry + k), m = load_whole(s.masses + k);
+  c.normal_impulse = i.x;
+  c.tangent_impulse = {i.y, i.z, i.w};
+  c.normal = {g.x, g.y, g.z};
+  c.separation = g.w;
+  c.ra = m.x, c.rb = m.y, c.normal_mass = m.z, c.tangent_mass = m.w;
+  if constexpr (Friction || Rolling) {
+    const Real4 t = load_whole(s.terms + k);
+    c.rolling_mass = t.x;
+    c.coeff.friction = t.y, c.coeff.rolling_friction = t.z, c.coeff.twisting_friction = t.w;
+  }
+  if constexpr (Rolling) {
+    const Real4 r = load_whole(s.rolling + k);
+    c.rolling_impulse = {r.x, r.y, r.z};
+  }
+  if (is_wall(c.b)) {
+    const Real4 w = load_whole(s.extra + k);
+    c.wall_velocity = {w.x, w.y, w.z};
+  }
+  return c;
+}
+
+// What a sweep changed: the accumulated impulses.
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE void store_sweep_impulses(const SweepRecords& s, std::uint32_t k, const Contact& c) {
+  store_whole(s.impulse + k, Real4{c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z});
+  if constexpr (Rolling)
+    store_whole(s.rolling + k, Real4{c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, real(0)});
+}
+
+// The contact as the position stages read it (rebound_one, project_one,
+// overlap_ratio): its bodies and normal, and with Rebound its rebound shift.
+template <bool Rebound>
+MARBLES_HD_INLINE Contact load_position_contact(const SweepRecords& s, std::uint32_t k) {
+  Contact c;
+  const BodyPair ab = s.bodies[k];
+  c.a = ab.a, c.b = ab.b;
+  const Real4 g = load_whole(s.geometry + k);
+  c.normal = {g.x, g.y, g.z};
+  if constexpr (Rebound) c.rebound_shift = s.extra[k].w;
+  return c;
+}
+
+// The impulses back into the contact after the last sweep.
+MARBLES_HD_INLINE void unpack_sweep_impulses(const SweepRecords& s, std::uint32_t k, Contact& c) {
+  const Real4 i = s.impulse[k], r = s.rolling[k];
+  c.normal_impulse = i.x;
+  c.tangent_impulse = {i.y, i.z, i.w};
+  c.rolling_impulse = {r.x, r.y, r.z};
 }
 
 // The impact of one contact (apply_impact); true if it hit.

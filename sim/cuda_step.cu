@@ -107,6 +107,7 @@ class CudaStep final : public StepBackend {
   void find_contacts(real substep) override {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_count = 0;
+    m_records_live = false;
     if (!m_model.collisions && !m_model.wall_contacts) return;
     const BodiesView bodies = m_device.view();
     const std::size_t n = bodies.count;
@@ -186,10 +187,16 @@ class CudaStep final : public StepBackend {
     if (m_model.solver.restitution) impacts(bodies, h);
     if (m_model.solver.warm_start)
       over_colours(false, [&](nc::ContactRange r) { nc::launch_warm_start(contacts, r, bodies, m_terms, m_stream); });
+    // From here on the stages read the sweep's records (solver_math.hpp);
+    // they live in the colouring's gather buffer, free from the gather until
+    // the next substep's colouring.
+    m_records = narrowphase::SweepRecords::in(m_sorted.as<char>(narrowphase::SweepRecords::bytes_for(m_count)), m_count);
+    nc::launch_pack_sweep(contacts, m_count, m_records, m_sm, m_stream);
+    m_records_live = true;
     const real inv_h = real(1) / h;
     for (int it = 0; it < m_model.solver.iterations * m_iteration_factor; ++it)
       over_colours(it % 2 == 1, [&](nc::ContactRange r) {
-        nc::launch_sweep(contacts, r, bodies, inv_h, m_terms, m_stream);
+        nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_stream);
       });
     nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
   }
@@ -204,16 +211,15 @@ class CudaStep final : public StepBackend {
   void project_positions() override {
     if (m_count == 0) return;
     const BodiesView bodies = m_device.view();
-    const narrowphase::Contact* contacts = contacts_d();
     if (m_model.solver.restitution)
-      over_colours(false, [&](nc::ContactRange r) { nc::launch_rebound(contacts, r, bodies, walls(), m_stream); });
+      over_colours(false, [&](nc::ContactRange r) { nc::launch_rebound(m_records, r, bodies, walls(), m_stream); });
     for (int it = 0; it < m_model.solver.position_iterations; ++it)
       over_colours(false, [&](nc::ContactRange r) {
-        nc::launch_project(contacts, r, bodies, walls(), m_model.solver, m_stream);
+        nc::launch_project(m_records, r, bodies, walls(), m_model.solver, m_stream);
       });
   }
 
-  void store_impulses() override { m_cache.store(contacts_d(), m_count, m_sm, m_stream); }
+  void store_impulses() override { m_cache.store(m_records, m_count, m_sm, m_stream); }
 
   void begin_step() override {
     if (m_host_edited) {
@@ -228,7 +234,7 @@ class CudaStep final : public StepBackend {
   // overlap, and with the watch on the watchdog's figures.
   void end_step(StepCounters& counters) override {
     auto* flags = m_flags.get_as<unsigned long long>();  // [0]: non_finite, [1]: deepest overlap (bits), [2..3]: watch
-    nc::launch_max_overlap(contacts_d(), m_count, m_device.view(), walls(), flags + 1, m_sm, m_stream);
+    nc::launch_max_overlap(m_records, m_count, m_device.view(), walls(), flags + 1, m_sm, m_stream);
     const int words = m_watch ? kFlagWords : 2;
     if (m_watch && m_device.view().count > 0) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
@@ -314,6 +320,10 @@ class CudaStep final : public StepBackend {
   }
   const std::vector<narrowphase::Contact>& contacts() override {
     if (m_contacts_stale) {
+      if (m_records_live) {  // the impulses of the last sweep, back into the contacts
+        nc::launch_unpack_sweep(contacts_d(), m_count, m_records, m_sm, m_stream);
+        m_records_live = false;
+      }
       m_host_contacts.resize(m_count);
       if (m_count > 0)
         MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host_contacts.data(), contacts_d(), m_count * sizeof(narrowphase::Contact),
@@ -441,6 +451,11 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep
+  // The substep's contacts as the stages after the warm start read them, and
+  // whether they hold impulses the contacts do not (set by the solve, cleared
+  // by the next find_contacts or by unpacking them into the contacts).
+  narrowphase::SweepRecords m_records;
+  bool m_records_live = false;
   std::uint32_t m_colours = 0;
   std::vector<std::uint32_t> m_begin{0, 0}, m_levels{0, 0};
   std::vector<narrowphase::Contact> m_host_contacts;

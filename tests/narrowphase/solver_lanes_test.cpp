@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <numeric>
 #include <random>
@@ -162,6 +163,112 @@ TEST(SolverLanes, GroupedMovesEqualFieldByField) {
       }
     }
   }
+}
+
+// The GPU's sweep on the sweep's records (solver_math.hpp): the contacts
+// packed, swept through load_sweep_contact / solve_one / store_sweep_impulses,
+// and unpacked must equal solve_one on the whole contacts, contacts and
+// bodies bit for bit (the fields it leaves out are the ones no sweep reads).
+template <bool Friction, bool Rolling>
+void expect_records_equal_contacts(std::uint32_t seed, bool edge) {
+  std::mt19937 rng(seed);
+  Case whole = make_case(rng, edge);
+  Case packed = whole;
+  std::vector<unsigned char> memory(SweepRecords::bytes_for(W) + 64);
+  void* aligned = memory.data() + (64 - reinterpret_cast<std::uintptr_t>(memory.data()) % 64);
+  const SweepRecords records = SweepRecords::in(aligned, W);
+  for (std::uint32_t k = 0; k < W; ++k) pack_sweep_record(packed.contacts[k], records, k);
+  const real inv_h = real(1000);
+  for (int sweep = 0; sweep < 3; ++sweep)
+    for (std::uint32_t k = 0; k < W; ++k) {
+      solve_one<Friction, Rolling>(whole.contacts[k], whole.bodies.data(), inv_h);
+      Contact c = load_sweep_contact<Friction, Rolling>(records, k);
+      solve_one<Friction, Rolling>(c, packed.bodies.data(), inv_h);
+      store_sweep_impulses<Friction, Rolling>(records, k, c);
+    }
+  for (std::uint32_t k = 0; k < W; ++k) unpack_sweep_impulses(records, k, packed.contacts[k]);
+  ASSERT_TRUE(same_bits(whole.contacts.data(), packed.contacts.data(), sizeof(Contact) * W))
+      << "seed " << seed << (edge ? " (edge)" : "");
+  ASSERT_TRUE(same_bits(whole.bodies.data(), packed.bodies.data(), sizeof(SolverBody) * whole.bodies.size()))
+      << "seed " << seed << (edge ? " (edge)" : "");
+}
+
+TEST(SweepRecords, SweepOnTheRecordsEqualsSolveOneBitForBit) {
+  for (std::uint32_t seed = 1; seed <= 200; ++seed)
+    for (bool edge : {false, true}) {
+      expect_records_equal_contacts<true, true>(seed, edge);
+      expect_records_equal_contacts<true, false>(seed, edge);
+      expect_records_equal_contacts<false, true>(seed, edge);
+      expect_records_equal_contacts<false, false>(seed, edge);
+    }
+}
+
+// The records hold what they were given: a field left out of the packing
+// (here the wall's velocity of a wall contact) changes the sweep's result.
+TEST(SweepRecords, AFieldLeftOutIsSeen) {
+  std::mt19937 rng(7);
+  Case c = make_case(rng, false);
+  std::vector<unsigned char> memory(SweepRecords::bytes_for(W) + 64);
+  void* aligned = memory.data() + (64 - reinterpret_cast<std::uintptr_t>(memory.data()) % 64);
+  const SweepRecords records = SweepRecords::in(aligned, W);
+  Contact wall;
+  wall.a = 0, wall.b = kWallFlag | 1u, wall.normal = {0, 0, 1}, wall.ra = real(0.01), wall.normal_mass = 1;
+  wall.tangent_mass = 1, wall.coeff.friction = 1, wall.normal_impulse = 1, wall.wall_velocity = {1, 0, 0};
+  pack_sweep_record(wall, records, 0);
+  Contact loaded = load_sweep_contact<true, false>(records, 0);
+  EXPECT_EQ(loaded.wall_velocity.x, real(1));
+  records.extra[0] = {};
+  loaded = load_sweep_contact<true, false>(records, 0);
+  std::vector<SolverBody> a = c.bodies, b = c.bodies;
+  Contact w1 = wall, w2 = loaded;
+  solve_one<true, false>(w1, a.data(), real(1000));
+  solve_one<true, false>(w2, b.data(), real(1000));
+  EXPECT_FALSE(same_bits(&w1.tangent_impulse, &w2.tangent_impulse, sizeof(Vec3)));
+}
+
+// The position stages on the records: rebound_one, project_one and
+// overlap_ratio of the contact load_position_contact gives must move the
+// spheres and measure the overlap exactly as on the whole contact.
+TEST(SweepRecords, PositionStagesOnTheRecordsEqualTheContacts) {
+  int moved = 0;
+  for (std::uint32_t seed = 1; seed <= 100; ++seed) {
+    std::mt19937 rng(seed);
+    Case cs = make_case(rng, seed % 2 == 0);
+    std::uniform_real_distribution<real> u(-1, 1);
+    const std::size_t n = cs.bodies.size();
+    std::vector<Vec3> position(n);
+    std::vector<real> radius(n), inv_mass(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      position[i] = Vec3(u(rng), u(rng), u(rng)) * real(0.015);
+      radius[i] = real(0.01) + real(0.003) * u(rng);
+      inv_mass[i] = cs.bodies[i].inv_mass;
+    }
+    std::vector<WallShape> walls(8);
+    for (WallShape& w : walls) w.point = Vec3(u(rng), u(rng), u(rng)) * real(0.01), w.direction = unit(rng);
+    std::vector<unsigned char> memory(SweepRecords::bytes_for(W) + 64);
+    void* aligned = memory.data() + (64 - reinterpret_cast<std::uintptr_t>(memory.data()) % 64);
+    const SweepRecords records = SweepRecords::in(aligned, W);
+    for (std::uint32_t k = 0; k < W; ++k) {
+      cs.contacts[k].rebound_shift = std::max(real(0), u(rng)) * real(2e-3);
+      pack_sweep_record(cs.contacts[k], records, k);
+    }
+    std::vector<Vec3> whole = position, packed = position;
+    const BodiesView bw{whole.data(), nullptr, nullptr, radius.data(), inv_mass.data(), nullptr, nullptr, n};
+    const BodiesView bp{packed.data(), nullptr, nullptr, radius.data(), inv_mass.data(), nullptr, nullptr, n};
+    const SolverSettings settings;
+    for (std::uint32_t k = 0; k < W; ++k) {
+      rebound_one(cs.contacts[k], bw, walls.data());
+      rebound_one(load_position_contact<true>(records, k), bp, walls.data());
+      project_one(cs.contacts[k], bw, walls.data(), settings);
+      project_one(load_position_contact<false>(records, k), bp, walls.data(), settings);
+      const real o1 = overlap_ratio(cs.contacts[k], bw, walls.data());
+      const real o2 = overlap_ratio(load_position_contact<false>(records, k), bp, walls.data());
+      ASSERT_TRUE(same_bits(&o1, &o2, sizeof o1)) << "seed " << seed << " contact " << k;
+    }
+    ASSERT_TRUE(same_bits(whole.data(), packed.data(), sizeof(Vec3) * n)) << "seed " << seed;
+    moved += same_bits(whole.data(), position.data(), sizeof(Vec3) * n) ? 0 : 1;
+  }
+  EXPECT_GT(moved, 80);  // the cases reach the stages' arithmetic
 }
 
 }  // namespace
