@@ -32,15 +32,30 @@ void ContactColouring::prefetch_ahead(const Contact* contacts, std::size_t t, st
 // (colouring_cuda.cu), in one pass.
 std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vector<std::uint32_t>& active,
                                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
-                                       std::vector<std::uint32_t>& colour, std::uint32_t* rounds_out) {
+                                       std::vector<std::uint32_t>& colour, std::uint32_t* rounds_out,
+                                       const std::vector<std::uint32_t>* kept) {
   // Clear only the spheres these contacts touch: the work stays in
   // proportion to the contacts, not to the spheres.
   m_body_next_round.resize(body_count);
   m_body_used.resize(body_count);
-  for (const std::uint32_t k : active) {
-    const Contact& c = contacts[k];
-    m_body_next_round[c.a] = 0, m_body_used[c.a] = 0;
-    if (!is_wall(c.b)) m_body_next_round[c.b] = 0, m_body_used[c.b] = 0;
+  auto clear = [&](const std::vector<std::uint32_t>& list) {
+    for (const std::uint32_t k : list) {
+      const Contact& c = contacts[k];
+      m_body_next_round[c.a] = 0, m_body_used[c.a] = 0;
+      if (!is_wall(c.b)) m_body_next_round[c.b] = 0, m_body_used[c.b] = 0;
+    }
+  };
+  clear(active);
+  std::uint32_t colours = 0, rounds = 0;
+  if (kept) {  // the kept colours hold their spheres first; they take no round
+    clear(*kept);
+    for (const std::uint32_t k : *kept) {
+      const Contact& c = contacts[k];
+      const std::uint64_t bit = std::uint64_t(1) << colour[k];
+      m_body_used[c.a] |= bit;
+      if (!is_wall(c.b)) m_body_used[c.b] |= bit;
+      colours = std::max(colours, colour[k] + 1);
+    }
   }
   // Decreasing rank: an ascending radix sort of (2^56 - 1 - rank) (ranks are
   // 56 bits and unique), carrying the contact index. The ranks of
@@ -64,7 +79,6 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
   } else {
     radix_sort_pairs(m_by_rank, m_order, 56, m_sort_keys, m_sort_values);
   }
-  std::uint32_t colours = 0, rounds = 0;
   for (std::size_t t = 0; t < count; ++t) {
     prefetch_ahead(contacts, t, count);
     const std::uint32_t k = m_order[t];
@@ -90,17 +104,26 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
   return rule == ColourRule::by_round ? rounds : colours;
 }
 
-void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out) {
+void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
+                                       const std::uint8_t* kept_colour) {
   const auto n = static_cast<std::uint32_t>(contacts.size());
   m_rank.resize(n);
-  m_all.resize(n);
+  m_colour.resize(n);
+  m_all.clear();
+  m_kept.clear();
   for (std::uint32_t k = 0; k < n; ++k) {
+    const std::uint8_t kept = kept_colour ? kept_colour[k] : kNoKeptColour;
+    if (kept < kMaxColours) {
+      m_colour[k] = kept;
+      m_kept.push_back(k);
+      continue;
+    }
     m_rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
-    m_all[k] = k;
+    m_colour[k] = kUncoloured;
+    m_all.push_back(k);
   }
-  m_colour.assign(n, kUncoloured);
   out.colours = colour(contacts.data(), m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
-                       &out.rounds);
+                       &out.rounds, &m_kept);
 
   // Counting sort by colour, stable: colour-major, index order within a colour.
   out.begin.assign(out.colours + 2, 0);

@@ -16,7 +16,8 @@
 namespace marbles::narrowphase {
 
 // Contacts [begin[c], begin[c + 1]) have colour c; the last range
-// [begin[colours], begin[colours + 1]) is the overflow set.
+// [begin[colours], begin[colours + 1]) is the overflow set. With kept colours
+// a colour may be empty (its contacts all gone).
 struct ColourRanges {
   std::vector<std::uint32_t> begin{0, 0};
   std::uint32_t colours = 0;
@@ -33,19 +34,26 @@ class ContactColouring {
   // returns the number of colours (lowest_free) or rounds (by_round) used,
   // overflow not counted.
   // `body_count`: spheres (contacts' a and b are below it, or walls).
+  // `kept` (lowest_free only): contacts whose colour[k] is already set (a
+  // proper colouring among themselves); they hold their colours at their
+  // spheres and take no part in the rounds.
   std::uint32_t colour(const Contact* contacts, const std::vector<std::uint32_t>& active,
                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
-                       std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr);
+                       std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr,
+                       const std::vector<std::uint32_t>* kept = nullptr);
 
-  // The solver colouring of all contacts: colours by contact_rank, then puts
-  // `contacts` in colour-major order.
-  void colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out);
+  // The solver colouring of all contacts: contact k keeps kept_colour[k] when
+  // it is not kNoKeptColour (kept_colour null: none kept), the others are
+  // coloured by contact_rank around them; then puts `contacts` in
+  // colour-major order.
+  void colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
+                       const std::uint8_t* kept_colour = nullptr);
 
  private:
   void prefetch_ahead(const Contact* contacts, std::size_t t, std::size_t count) const;
   std::vector<std::uint64_t> m_body_used, m_rank, m_by_rank, m_sort_keys;
   std::vector<std::uint32_t> m_body_next_round;
-  std::vector<std::uint32_t> m_all, m_colour, m_order, m_sort_values, m_high, m_sort_high;
+  std::vector<std::uint32_t> m_all, m_kept, m_colour, m_order, m_sort_values, m_high, m_sort_high;
   std::vector<Contact> m_sorted;
 };
 
@@ -68,5 +76,14 @@ void visit_colours(const std::vector<std::uint32_t>& begin, std::uint32_t colour
 
 // True when no two contacts of one colour share a sphere (tests, checks).
 bool colouring_is_proper(const std::vector<Contact>& contacts, const ColourRanges& ranges, std::size_t body_count);
+
+// The colour of each contact of colour-major `ranges` as the cache keeps it:
+// its colour, or kNoKeptColour in the overflow set.
+template <class F>
+void for_each_colour(const ColourRanges& ranges, F&& f) {
+  for (std::uint32_t c = 0; c <= ranges.colours; ++c)
+    for (std::uint32_t k = ranges.begin[c]; k < ranges.begin[c + 1]; ++k)
+      f(k, c < ranges.colours ? static_cast<std::uint8_t>(c) : kNoKeptColour);
+}
 
 }  // namespace marbles::narrowphase

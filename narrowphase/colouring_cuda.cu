@@ -35,14 +35,23 @@ __device__ void append(ColourEntry* list, std::uint32_t* count, const ColourEntr
   if (want) list[base + __popc(wanting & ((1u << lane) - 1u))] = e;
 }
 
-// Round 0's list: every contact, in index order.
-__global__ void contact_ranks_kernel(const Contact* contacts, std::uint32_t n, std::uint32_t* colour,
-                                     ColourEntry* active, std::uint32_t* count) {
-  if (blockIdx.x == 0 && threadIdx.x == 0) count[0] = n;
+// Round 0's list: every contact without a kept colour (in any order); a
+// contact with one takes it and marks it at its spheres (an atomic or: the
+// masks do not depend on the order). count[0] and body_used start at 0.
+__global__ void contact_ranks_kernel(const Contact* contacts, std::uint32_t n, const std::uint8_t* kept,
+                                     std::uint32_t* colour, ColourEntry* active, std::uint32_t* count,
+                                     unsigned long long* body_used) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const std::uint32_t a = contacts[k].a, b = contacts[k].b;
-    active[k] = ColourEntry{a, b, contact_rank(a, b, k)};
-    colour[k] = kUncoloured;
+    const std::uint32_t c = kept ? kept[k] : kNoKeptColour;
+    const bool keeps = c < kMaxColours;
+    if (keeps) {
+      const unsigned long long bit = 1ull << c;
+      atomicOr(&body_used[a], bit);
+      if (!is_wall(b)) atomicOr(&body_used[b], bit);
+    }
+    colour[k] = keeps ? c : kUncoloured;
+    append(active, count, ColourEntry{a, b, contact_rank(a, b, k)}, !keeps);
   }
 }
 
@@ -107,9 +116,14 @@ __global__ void first_of_key_kernel(const std::uint32_t* sorted_keys, std::uint3
     if (j == 0 || sorted_keys[j] != sorted_keys[j - 1]) first[sorted_keys[j]] = j;
 }
 
-__global__ void gather_kernel(const Contact* in, const std::uint32_t* order, std::uint32_t n, Contact* out) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
+// The contacts in colour-major order, and each one's colour as the cache
+// keeps it (sorted_colour may be null).
+__global__ void gather_kernel(const Contact* in, const std::uint32_t* order, const std::uint32_t* sorted_keys,
+                              std::uint32_t n, Contact* out, std::uint8_t* sorted_colour) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     store_whole(out + k, load_whole(in + order[k]));  // 16-byte words, not field by field
+    if (sorted_colour) sorted_colour[k] = sorted_keys[k] < kMaxColours ? sorted_keys[k] : kNoKeptColour;
+  }
 }
 
 }  // namespace
@@ -128,8 +142,7 @@ std::uint32_t ColouringCuda::rounds(std::uint32_t n, std::size_t body_count, Col
   auto* body_word = m_body_word.as<unsigned long long>(body_count);
   auto* body_used = m_body_used.as<unsigned long long>(body_count);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(body_word, 0, body_count * sizeof(unsigned long long), s));
-  if (rule == ColourRule::lowest_free)
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(body_used, 0, body_count * sizeof(unsigned long long), s));
+  // body_used (lowest_free) is cleared, and holds the kept colours, before this.
   auto* count = m_count.get_as<std::uint32_t>();  // count[0] is set by the caller
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count + 1, 0, kMaxColourRounds * sizeof(std::uint32_t), s));
   ColourEntry* list[2] = {m_active.get_as<ColourEntry>(), m_next.get_as<ColourEntry>()};
@@ -183,37 +196,45 @@ void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, 
   m_bytes += (used + 2) * sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   constexpr std::uint32_t kNone = 0xffffffffu;
-  // Colours are contiguous from 0 (a contact of colour c has neighbours of
-  // every colour below c; a level-l impact one of level l - 1).
-  std::uint32_t colours = 0;
-  while (colours < used && m_host[colours] != kNone) ++colours;
+  // Impact levels are contiguous from 0 (a level-l impact has a neighbour of
+  // level l - 1); solver colours may have gaps (a kept colour whose other
+  // contacts are gone): an empty colour's range is empty.
+  std::uint32_t colours = used;
+  while (colours > 0 && m_host[colours - 1] == kNone) --colours;
   const std::uint32_t overflow_first = m_host[used], inactive_first = m_host[used + 1];
   const std::uint32_t coloured_end = overflow_first != kNone ? overflow_first : inactive_first != kNone ? inactive_first : n;
   const std::uint32_t overflow_end = inactive_first != kNone ? inactive_first : n;
   begin.assign(colours + 2, 0);
-  for (std::uint32_t c = 1; c < colours; ++c) begin[c] = m_host[c];
   begin[colours] = coloured_end;
+  for (std::uint32_t c = colours; c-- > 1;) begin[c] = m_host[c] != kNone ? m_host[c] : begin[c + 1];
   begin[colours + 1] = overflow_first != kNone ? overflow_end : coloured_end;
 }
 
 std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count,
                                              Contact* sorted, std::vector<std::uint32_t>& begin,
-                                             std::uint32_t& rounds_run, int sm_count, cudaStream_t s) {
+                                             std::uint32_t& rounds_run, int sm_count, cudaStream_t s,
+                                             const std::uint8_t* kept_colour, std::uint8_t* sorted_colour) {
   rounds_run = 0;
   if (n == 0) {
     begin.assign(2, 0);
     return 0;
   }
   reserve(n);
-  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, m_colour.get_as<std::uint32_t>(),
-                                                                m_active.get_as<ColourEntry>(),
-                                                                m_count.get_as<std::uint32_t>());
+  auto* body_used = m_body_used.as<unsigned long long>(body_count);
+  auto* count = m_count.get_as<std::uint32_t>();
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(body_used, 0, body_count * sizeof(unsigned long long), s));
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
+  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, kept_colour,
+                                                                m_colour.get_as<std::uint32_t>(),
+                                                                m_active.get_as<ColourEntry>(), count, body_used);
   MARBLES_CUDA_CHECK_LAUNCH();
   rounds_run = rounds(n, body_count, ColourRule::lowest_free, sm_count, s);
-  // A contact coloured in round r has at most 2 r coloured neighbours (one per
-  // sphere and round), so its colour is at most 2 r.
-  sort_by_colour(n, kMaxColours, 7, 2 * rounds_run, begin, sm_count, s);
-  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, m_index_out.get_as<std::uint32_t>(), n, sorted);
+  // Without kept colours, a contact coloured in round r has at most 2 r
+  // coloured neighbours (one per sphere and round), so its colour is at most
+  // 2 r; kept colours may be any below kMaxColours.
+  sort_by_colour(n, kMaxColours, 7, kept_colour ? kMaxColours : 2 * rounds_run, begin, sm_count, s);
+  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, m_index_out.get_as<std::uint32_t>(),
+                                                         m_keys_out.get_as<std::uint32_t>(), n, sorted, sorted_colour);
   MARBLES_CUDA_CHECK_LAUNCH();
   return static_cast<std::uint32_t>(begin.size() - 2);
 }

@@ -32,9 +32,13 @@ class ColouringCuda {
   // writes the contacts in colour-major order to `sorted` (index order
   // within a colour, overflow last); `begin` gets the host ranges as
   // ColourRanges::begin (colours + 2 entries). Returns the colour count.
+  // kept_colour (device, one per contact, may be null): colours kept as
+  // ContactColouring::colour_and_sort keeps them; sorted_colour (device, may
+  // be null) gets each sorted contact's colour (kNoKeptColour: overflow).
   std::uint32_t colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count, Contact* sorted,
                                 std::vector<std::uint32_t>& begin, std::uint32_t& rounds, int sm_count,
-                                cudaStream_t stream);
+                                cudaStream_t stream, const std::uint8_t* kept_colour = nullptr,
+                                std::uint8_t* sorted_colour = nullptr);
 
   // The impact stage's levels: the candidates (approach faster than
   // rest_speed) coloured by_round on impact_rank; `order` (device) gets them

@@ -63,9 +63,35 @@ std::size_t cold_start_unloaded_islands(std::vector<Contact>& contacts, const st
   return set_cold;
 }
 
-std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse) {
+bool keep_proper_colours(CacheEntries& e) {
+  const std::size_t m = e.size();
+  bool proper = e.colour.size() == m;
+  // Entries are sorted by key, so grouped by sphere a; a sphere's colours as
+  // b are gathered in a map of its own.
+  std::vector<std::pair<std::uint32_t, std::uint64_t>> used;  // (sphere, colour mask)
+  used.reserve(2 * m);
+  for (std::size_t k = 0; proper && k < m; ++k) {
+    if (e.colour[k] == kNoKeptColour) continue;
+    if (e.colour[k] >= kMaxColours) proper = false;
+    const auto a = static_cast<std::uint32_t>(e.key[k] >> 32), b = static_cast<std::uint32_t>(e.key[k]);
+    used.push_back({a, std::uint64_t(1) << (e.colour[k] & 63)});
+    if (!is_wall(b)) used.push_back({b, std::uint64_t(1) << (e.colour[k] & 63)});
+  }
+  if (proper) {
+    std::sort(used.begin(), used.end());
+    for (std::size_t k = 1; k < used.size(); ++k)
+      if (used[k] == used[k - 1]) proper = false;  // one sphere, one colour, twice
+  }
+  if (!proper) e.colour.assign(m, kNoKeptColour);
+  return proper;
+}
+
+std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse,
+                                  std::vector<std::uint8_t>& kept_colour) {
+  kept_colour.assign(contacts.size(), kNoKeptColour);
   const auto m = static_cast<std::uint32_t>(m_entries.size());
   if (m == 0) return 0;
+  const std::uint8_t* colour = m_entries.colour.size() == m ? m_entries.colour.data() : nullptr;
   m_matched.assign(m, 0);
   const std::uint64_t* keys = m_entries.key.data();
   // The entries of sphere a are keys[first[a], first[a + 1]) (sorted by key,
@@ -91,6 +117,7 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
     while (k < first[c.a + 1] && keys[k] < key) ++k;
     if (k == first[c.a + 1] || keys[k] != key) continue;
     restore_impulses(c, m_entries.normal_impulse[k], m_entries.tangent_impulse[k], m_entries.rolling_impulse[k]);
+    if (colour) kept_colour[t] = colour[k];
     m_matched[k] = 1;  // keys are unique: one contact per entry
     ++matched;
   }
@@ -98,13 +125,15 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
                                                 bodies, weight_impulse);
 }
 
-void ContactCache::store(const std::vector<Contact>& contacts) {
+void ContactCache::store(const std::vector<Contact>& contacts, const ColourRanges& ranges) {
   // Only the sustained impulses of the velocity solve are carried over; an
   // impact's impulse (Contact::impact_impulse) is not a load.
   // Sorted by key = grouped by sphere a, then by b within a group: a
   // counting sort by a (the contacts are read in order, each written once
   // to its group), then each group (a few entries) sorted by b in place.
   const auto n = static_cast<std::uint32_t>(contacts.size());
+  m_contact_colour.assign(n, kNoKeptColour);
+  if (ranges.size() == n) for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) { m_contact_colour[k] = c; });
   m_first.assign(1, 0);  // grows to the largest a + 2 seen
   for (const Contact& c : contacts) {
     if (!(c.normal_impulse > 0)) continue;
@@ -118,6 +147,7 @@ void ContactCache::store(const std::vector<Contact>& contacts) {
   m_entries.normal_impulse.resize(m);
   m_entries.tangent_impulse.resize(m);
   m_entries.rolling_impulse.resize(m);
+  m_entries.colour.resize(m);
   m_order.assign(m_first.begin(), m_first.end() - 1);  // the next free entry of each group
   for (std::uint32_t k = 0; k < n; ++k) {
     const Contact& c = contacts[k];
@@ -127,6 +157,7 @@ void ContactCache::store(const std::vector<Contact>& contacts) {
     m_entries.normal_impulse[e] = c.normal_impulse;
     m_entries.tangent_impulse[e] = c.tangent_impulse;
     m_entries.rolling_impulse[e] = c.rolling_impulse;
+    m_entries.colour[e] = m_contact_colour[k];
   }
   for (std::uint32_t a = 0; a < groups; ++a)  // insertion sort by key (unique) within the group
     for (std::uint32_t e = m_first[a] + 1; e < m_first[a + 1]; ++e)
@@ -135,6 +166,7 @@ void ContactCache::store(const std::vector<Contact>& contacts) {
         std::swap(m_entries.normal_impulse[j - 1], m_entries.normal_impulse[j]);
         std::swap(m_entries.tangent_impulse[j - 1], m_entries.tangent_impulse[j]);
         std::swap(m_entries.rolling_impulse[j - 1], m_entries.rolling_impulse[j]);
+        std::swap(m_entries.colour[j - 1], m_entries.colour[j]);
       }
 }
 

@@ -22,17 +22,28 @@
 #include <vector>
 
 #include "core/spheres.hpp"
+#include "narrowphase/colouring.hpp"
 #include "narrowphase/contact.hpp"
 
 namespace marbles::narrowphase {
 
-// The cache's entries as arrays, sorted by key.
+// The cache's entries as arrays, sorted by key. `colour`: the solver colour
+// each entry's contact had (kNoKeptColour: none), which it keeps while it
+// persists (colouring_math.hpp); empty when no colours are known (a
+// checkpoint of format 1).
 struct CacheEntries {
   std::vector<std::uint64_t> key;
   std::vector<real> normal_impulse;
   std::vector<Vec3> tangent_impulse, rolling_impulse;
+  std::vector<std::uint8_t> colour;
   std::size_t size() const { return key.size(); }
 };
+
+// Entries from outside the run (a checkpoint) keep their colours only if they
+// are a proper colouring: one colour per entry, below kMaxColours or none,
+// no sphere with two entries of one colour. Otherwise every colour is
+// dropped (the next colouring starts afresh). True if they were kept.
+bool keep_proper_colours(CacheEntries& entries);
 
 // The island rule: contacts of islands that lost a load (unmatched entries
 // for which is_lost_load holds) start cold. `matched[k]` says whether entry
@@ -47,10 +58,14 @@ class ContactCache {
  public:
   // Copies the impulses of matching cached contacts into `contacts`, except
   // in islands that lost a load. `weight_impulse` is |g| h (m/s). Returns the
-  // number of contacts warm-started.
-  std::size_t restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse);
-  // Remembers the impulses of `contacts` for the next substep.
-  void store(const std::vector<Contact>& contacts);
+  // number of contacts warm-started. `kept_colour` (one per contact) gets the
+  // colour of each matching entry, kNoKeptColour for the others (also for
+  // those of an island started cold: a colour does not depend on impulses).
+  std::size_t restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse,
+                      std::vector<std::uint8_t>& kept_colour);
+  // Remembers the impulses and colours of `contacts` (colour-major, as
+  // `ranges` says) for the next substep.
+  void store(const std::vector<Contact>& contacts, const ColourRanges& ranges);
   void clear() { m_entries = {}; }
   // The entries themselves (a checkpoint's copy).
   const CacheEntries& entries() const { return m_entries; }
@@ -62,6 +77,7 @@ class ContactCache {
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
   std::vector<std::uint32_t> m_order, m_first;
+  std::vector<std::uint8_t> m_contact_colour;
 };
 
 }  // namespace marbles::narrowphase

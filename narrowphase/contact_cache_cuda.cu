@@ -27,24 +27,28 @@ __global__ void keys_kernel(SweepRecords records, std::uint32_t n, const std::ui
   }
 }
 
-__global__ void gather_kernel(SweepRecords records, const std::uint32_t* index, std::uint32_t m, real* normal,
-                              Vec3* tangent, Vec3* rolling) {
+__global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_colour, const std::uint32_t* index,
+                              std::uint32_t m, real* normal, Vec3* tangent, Vec3* rolling, std::uint8_t* colour) {
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
     Contact c;
     unpack_sweep_impulses(records, index[e], c);
     normal[e] = c.normal_impulse;
     tangent[e] = c.tangent_impulse;
     rolling[e] = c.rolling_impulse;
+    colour[e] = contact_colour ? contact_colour[index[e]] : kNoKeptColour;
   }
 }
 
 __global__ void restore_kernel(Contact* contacts, std::uint32_t n, const std::uint64_t* keys, std::uint32_t m,
-                               const real* normal, const Vec3* tangent, const Vec3* rolling, std::uint8_t* matched) {
+                               const real* normal, const Vec3* tangent, const Vec3* rolling,
+                               const std::uint8_t* colour, std::uint8_t* matched, std::uint8_t* kept_colour) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     Contact& c = contacts[k];
     const std::uint64_t key = cache_key(c.a, c.b);
     const std::uint32_t e = cache_lower_bound(keys, m, key);
-    if (e == m || keys[e] != key) continue;
+    const bool found = e < m && keys[e] == key;
+    kept_colour[k] = found ? colour[e] : kNoKeptColour;
+    if (!found) continue;
     restore_impulses(c, normal[e], tangent[e], rolling[e]);
     matched[e] = 1;  // keys are unique: one contact per entry
   }
@@ -149,7 +153,8 @@ ContactCacheCuda::~ContactCacheCuda() {
   if (m_host) cudaFreeHost(m_host);
 }
 
-void ContactCacheCuda::store(const SweepRecords& contacts, std::uint32_t n, int sm_count, cudaStream_t s) {
+void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
+                             int sm_count, cudaStream_t s) {
   auto* flags = m_flags.as<std::uint32_t>(n + 1);
   auto* offsets = m_offsets.as<std::uint32_t>(n + 1);
   flags_kernel<<<grid_for(n + 1, sm_count), kBlock, 0, s>>>(contacts, n, flags);
@@ -167,9 +172,10 @@ void ContactCacheCuda::store(const SweepRecords& contacts, std::uint32_t n, int 
   keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, offsets, keys_in, index_in);
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_sort_pairs(keys_in, keys, index_in, index, m_count, 64, m_temp, s);
-  gather_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(contacts, index, m_count, m_normal.as<real>(m_count),
-                                                               m_tangent.as<Vec3>(m_count),
-                                                               m_rolling.as<Vec3>(m_count));
+  gather_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, m_count,
+                                                               m_normal.as<real>(m_count), m_tangent.as<Vec3>(m_count),
+                                                               m_rolling.as<Vec3>(m_count),
+                                                               m_colour.as<std::uint8_t>(m_count));
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
@@ -180,11 +186,13 @@ CacheEntries ContactCacheCuda::download(cudaStream_t s) {
   e.normal_impulse.resize(m);
   e.tangent_impulse.resize(m);
   e.rolling_impulse.resize(m);
+  e.colour.resize(m);
   if (m == 0) return e;
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.key.data(), m_keys.get(), m * sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.normal_impulse.data(), m_normal.get(), m * sizeof(real), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.tangent_impulse.data(), m_tangent.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.rolling_impulse.data(), m_rolling.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.colour.data(), m_colour.get(), m, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   return e;
 }
@@ -197,6 +205,11 @@ void ContactCacheCuda::upload(const CacheEntries& e, cudaStream_t s) {
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_normal.as<real>(m), e.normal_impulse.data(), m * sizeof(real), cudaMemcpyHostToDevice, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_tangent.as<Vec3>(m), e.tangent_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_rolling.as<Vec3>(m), e.rolling_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
+  auto* colour = m_colour.as<std::uint8_t>(m);
+  if (e.colour.size() == m)
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(colour, e.colour.data(), m, cudaMemcpyHostToDevice, s));
+  else
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(colour, kNoKeptColour, m, s));  // none known: coloured afresh
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
 }
 
@@ -211,12 +224,13 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
   copy(to.m_normal, m_normal, m * sizeof(real));
   copy(to.m_tangent, m_tangent, m * sizeof(Vec3));
   copy(to.m_rolling, m_rolling, m * sizeof(Vec3));
+  copy(to.m_colour, m_colour, m);
 }
 
-void ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
-                               int sm_count, cudaStream_t s) {
+bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
+                               std::uint8_t* kept_colour, int sm_count, cudaStream_t s) {
   const std::uint32_t m = m_count;
-  if (m == 0 || n == 0) return;
+  if (m == 0 || n == 0) return false;
   auto* matched = m_matched.as<std::uint8_t>(m);
   auto* counter = m_counter.as<std::uint32_t>(1);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(matched, 0, m, s));
@@ -224,7 +238,8 @@ void ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   const auto* keys = m_keys.get_as<std::uint64_t>();
   const auto* normal = m_normal.get_as<real>();
   restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, keys, m, normal, m_tangent.get_as<Vec3>(),
-                                                          m_rolling.get_as<Vec3>(), matched);
+                                                          m_rolling.get_as<Vec3>(), m_colour.get_as<std::uint8_t>(),
+                                                          matched, kept_colour);
   MARBLES_CUDA_CHECK_LAUNCH();
   lost_loads_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, m, bodies, weight_impulse,
                                                              counter);
@@ -232,7 +247,7 @@ void ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, counter, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   m_bytes += sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  if (m_host[0] == 0) return;
+  if (m_host[0] == 0) return true;
 
   // A load was lost: the island rule, on the device.
   const std::uint32_t bodies_n = static_cast<std::uint32_t>(bodies.count);
@@ -262,6 +277,7 @@ void ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   MARBLES_CUDA_CHECK_LAUNCH();
   island_clear_kernel<<<contact_grid, kBlock, 0, s>>>(contacts, n, label, cold);
   MARBLES_CUDA_CHECK_LAUNCH();
+  return true;
 }
 
 }  // namespace marbles::narrowphase::cuda

@@ -28,11 +28,15 @@ class ContactCacheCuda {
   ContactCacheCuda(const ContactCacheCuda&) = delete;
   ContactCacheCuda& operator=(const ContactCacheCuda&) = delete;
 
-  // Warm start of contacts[0, n) (device).
-  void restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse, int sm_count,
-               cudaStream_t stream);
-  // The contacts as the sweep's records hold them after the last sweep.
-  void store(const SweepRecords& contacts, std::uint32_t n, int sm_count, cudaStream_t stream);
+  // Warm start of contacts[0, n) (device), and each contact's kept colour
+  // (kept_colour, device, n entries; ContactCache::restore). False, writing
+  // nothing, when the cache or the contacts are empty.
+  bool restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
+               std::uint8_t* kept_colour, int sm_count, cudaStream_t stream);
+  // The contacts as the sweep's records hold them after the last sweep, with
+  // their colours (contact_colour, device, per contact; null: none).
+  void store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n, int sm_count,
+             cudaStream_t stream);
   std::uint32_t size() const { return m_count; }
   // The entries as the CPU cache holds them (a checkpoint's copy), and back.
   CacheEntries download(cudaStream_t stream);
@@ -46,7 +50,7 @@ class ContactCacheCuda {
  private:
   std::uint64_t m_bytes = 0;
   DeviceBuffer m_flags, m_offsets, m_keys_in, m_index_in, m_keys, m_index, m_normal, m_tangent, m_rolling,
-      m_matched, m_counter, m_label, m_island_max, m_cold, m_temp;
+      m_colour, m_matched, m_counter, m_label, m_island_max, m_cold, m_temp;
   std::uint32_t m_count = 0;
   std::uint32_t* m_host = nullptr;  // pinned readback
 };

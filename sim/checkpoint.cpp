@@ -18,7 +18,9 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr char kMagic[8] = {'M', 'A', 'R', 'B', 'L', 'C', 'K', '\n'};
-constexpr std::uint32_t kFormat = 1;
+// Format 2 adds the cache's kept colours; format 1 (without them) still
+// loads, its contacts then coloured afresh in the first substep.
+constexpr std::uint32_t kFormat = 2;
 constexpr char kVersion[16] = "marbles 0.1";
 
 // FNV-1a, 64 bit.
@@ -93,7 +95,7 @@ class Reader {
 // The checkpoint's body after the scene fingerprint, in file order: one list
 // for writing (Writer) and reading (Reader).
 template <class IO, class C>
-void body(IO& io, C& c) {
+void body(IO& io, C& c, std::uint32_t format = kFormat) {
   io.field(c.steps);
   io.field(c.world.position);
   io.field(c.world.velocity);
@@ -106,6 +108,7 @@ void body(IO& io, C& c) {
   io.field(c.state.cache.normal_impulse);
   io.field(c.state.cache.tangent_impulse);
   io.field(c.state.cache.rolling_impulse);
+  if (format >= 2) io.field(c.state.cache.colour);
   io.field(c.state.walls);
   io.field(c.totals);
   io.field(c.probe);
@@ -165,7 +168,8 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   if (sum != fnv1a(bytes.data(), bytes.size() - 8)) r.fail("is truncated or damaged (checksum)");
   char magic[sizeof kMagic];
   r.raw(magic, sizeof magic);
-  if (r.get<std::uint32_t>() != kFormat) r.fail("has another format version");
+  const auto format = r.get<std::uint32_t>();
+  if (format != kFormat && format != 1) r.fail("has another format version");
   char version[sizeof kVersion];
   r.raw(version, sizeof version);
   if (std::memcmp(version, kVersion, sizeof kVersion) != 0)
@@ -179,7 +183,8 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   c.scene_hash = r.get<std::uint64_t>();
   if (c.scene_hash != scene_hash)
     r.fail("belongs to another scene (or other --set overrides): the scene file or its overrides changed");
-  body(r, c);
+  body(r, c, format);
+  if (c.state.cache.colour.size() != c.state.cache.key.size()) c.state.cache.colour.clear();
   const std::size_t n = c.world.position.size();
   for (std::size_t size : {c.world.velocity.size(), c.world.angular_velocity.size(), c.world.radius.size(),
                            c.world.inv_mass.size(), c.world.inv_inertia.size(), c.world.material.size()})

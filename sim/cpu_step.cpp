@@ -64,14 +64,19 @@ class CpuStep final : public StepBackend {
   }
 
   void colour_contacts() override {
-    m_colouring.colour_and_sort(m_contacts, m_world.size(), m_colours);
+    const bool kept = m_kept_colour.size() == m_contacts.size() && !m_contacts.empty();
+    m_colouring.colour_and_sort(m_contacts, m_world.size(), m_colours, kept ? m_kept_colour.data() : nullptr);
     m_counters.colours = std::max(m_counters.colours, m_colours.colours);
     m_counters.overflow += m_colours.overflow();
   }
 
+  // Before the colouring: the contacts that persist get their impulses and
+  // the colour they had (kept by the colouring).
   void warm_start() override {
+    m_kept_colour.clear();
     if (m_contacts.empty()) return;
-    m_cache.restore(m_contacts, m_world.view(), m_model.gravity ? length(m_model.g) * m_model.substep() : real(0));
+    m_cache.restore(m_contacts, m_world.view(), m_model.gravity ? length(m_model.g) * m_model.substep() : real(0),
+                    m_kept_colour);
   }
 
   void solve_velocities(real h) override {
@@ -89,7 +94,7 @@ class CpuStep final : public StepBackend {
   }
 
   // Also when there are no contacts: no stale impulses survive a contact-free substep.
-  void store_impulses() override { m_cache.store(m_contacts); }
+  void store_impulses() override { m_cache.store(m_contacts, m_colours); }
 
   void begin_step() override {
     m_counters = {};
@@ -172,6 +177,7 @@ class CpuStep final : public StepBackend {
   std::vector<narrowphase::Contact> m_contacts;
   narrowphase::ContactScratch m_contact_scratch;
   narrowphase::ColourRanges m_colours;
+  std::vector<std::uint8_t> m_kept_colour;  // per contact: its colour of the last substep, or none
   StepCounters m_counters;
   bool m_non_finite = false;
   bool m_watch = false;

@@ -165,15 +165,19 @@ class CudaStep final : public StepBackend {
     auto* sorted = m_sorted.as<narrowphase::Contact>(m_count);
     std::uint32_t rounds = 0;
     m_colours = m_colouring.colour_and_sort(contacts_d(), m_count, m_device.size(), sorted, m_begin, rounds, m_sm,
-                                            m_stream);
+                                            m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
+                                            m_sorted_colour.as<std::uint8_t>(m_count));
     m_contacts.swap(m_sorted);
     m_counters.colours = std::max(m_counters.colours, m_colours);
     m_counters.overflow += m_begin[m_colours + 1] - m_begin[m_colours];
   }
 
+  // Before the colouring: the contacts that persist get their impulses and
+  // the colour they had (kept by the colouring).
   void warm_start() override {
     const real weight = m_model.gravity ? length(m_model.g) * m_model.substep() : real(0);
-    m_cache.restore(contacts_d(), m_count, m_device.view(), weight, m_sm, m_stream);
+    m_kept_valid = m_cache.restore(contacts_d(), m_count, m_device.view(), weight,
+                                   m_kept_colour.as<std::uint8_t>(m_count), m_sm, m_stream);
   }
 
   // The velocity state packed (SolverBody) for the solve, then back.
@@ -219,7 +223,9 @@ class CudaStep final : public StepBackend {
       });
   }
 
-  void store_impulses() override { m_cache.store(m_records, m_count, m_sm, m_stream); }
+  void store_impulses() override {
+    m_cache.store(m_records, m_sorted_colour.get_as<std::uint8_t>(), m_count, m_sm, m_stream);
+  }
 
   void begin_step() override {
     if (m_host_edited) {
@@ -439,7 +445,7 @@ class CudaStep final : public StepBackend {
   int m_iteration_factor = 1;
 
   DeviceBuffer m_walls, m_pair_table, m_max_speed, m_reach, m_bound, m_pair_flags, m_pair_offsets, m_wall_flags, m_wall_offsets,
-      m_contacts, m_sorted, m_solver_bodies, m_flags, m_hit, m_temp;
+      m_contacts, m_sorted, m_kept_colour, m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_temp;
   narrowphase::PairTable m_table;
   nc::SolverTerms m_terms;
   std::unique_ptr<broadphase::SubdivisionCuda> m_broadphase;
@@ -451,6 +457,7 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep
+  bool m_kept_valid = false;          // m_kept_colour holds this substep's kept colours
   // The substep's contacts as the stages after the warm start read them, and
   // whether they hold impulses the contacts do not (set by the solve, cleared
   // by the next find_contacts or by unpacking them into the contacts).

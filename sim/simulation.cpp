@@ -185,8 +185,8 @@ void Simulation::substep(real h) {
   StepBackend& b = *m_backend;
   run_verb(Verb::body_forces, [&] { b.apply_body_forces(h); });
   run_verb(Verb::find_contacts, [&] { b.find_contacts(h); });
+  run_verb(Verb::warm_start, [&] { b.warm_start(); });  // impulses and kept colours of persisting contacts
   run_verb(Verb::colour_contacts, [&] { b.colour_contacts(); });
-  run_verb(Verb::warm_start, [&] { b.warm_start(); });
   run_verb(Verb::solve_velocities, [&] { b.solve_velocities(h); });
   run_verb(Verb::integrate_positions, [&] { b.integrate_positions(h); });
   run_verb(Verb::project_positions, [&] { b.project_positions(); });

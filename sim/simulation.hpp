@@ -99,7 +99,9 @@ class Simulation {
   StepState save_state() { return m_backend->save_state(); }
   void restore(const World& world, const StepState& state, std::uint64_t steps) {
     m_backend->edit_world() = world;
-    m_backend->load_state(state);
+    StepState checked = state;
+    narrowphase::keep_proper_colours(checked.cache);  // colours from outside: only a proper colouring is kept
+    m_backend->load_state(checked);
     m_steps = steps;
     m_time = static_cast<double>(steps) * m_model->dt;
     if (m_watchdog) watch_from_host();

@@ -62,8 +62,8 @@ class StepBackend {
   // --- the verbs of one substep, in order ----------------------------------
   virtual void apply_body_forces(real h) = 0;    // gravity, drag: what the model enables
   virtual void find_contacts(real h) = 0;        // swept bounds -> broad phase -> sphere and wall contacts
-  virtual void colour_contacts() = 0;            // no sphere twice in a colour; walls take none
-  virtual void warm_start() = 0;                 // impulses of persisting contacts
+  virtual void warm_start() = 0;                 // impulses and colours of persisting contacts
+  virtual void colour_contacts() = 0;            // no sphere twice in a colour; walls take none; kept colours kept
   virtual void solve_velocities(real h) = 0;     // impacts, warm start, sweeps: colour by colour
   virtual void integrate_positions(real h) = 0;  // x += h v, walls move; raises non_finite
   virtual void project_positions() = 0;          // colour by colour; positions only

@@ -7,6 +7,7 @@
 
 #include <cuda_runtime.h>
 
+#include <algorithm>
 #include <numeric>
 #include <random>
 #include <set>
@@ -63,23 +64,37 @@ struct DeviceContacts {
   }
 };
 
-void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies) {
+// kept: colours kept from the last substep (colour_and_sort), or empty.
+void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
+                        const std::vector<std::uint8_t>& kept = {}) {
   std::vector<Contact> cpu = input;
   ColourRanges ranges;
-  ContactColouring().colour_and_sort(cpu, bodies, ranges);
+  ContactColouring().colour_and_sort(cpu, bodies, ranges, kept.empty() ? nullptr : kept.data());
 
   DeviceContacts d(input);
   narrowphase::cuda::ColouringCuda gpu;
   std::vector<std::uint32_t> begin;
   std::uint32_t rounds = 0;
   const auto n = static_cast<std::uint32_t>(input.size());
-  const std::uint32_t colours = gpu.colour_and_sort(d.in, n, bodies, d.out, begin, rounds, 8, nullptr);
+  std::uint8_t *kept_d = nullptr, *sorted_colour = nullptr;
+  ASSERT_EQ(cudaMalloc(&kept_d, n + 1), cudaSuccess);
+  ASSERT_EQ(cudaMalloc(&sorted_colour, n + 1), cudaSuccess);
+  ASSERT_EQ(cudaMemset(sorted_colour, 0xab, n + 1), cudaSuccess);  // poisoned
+  if (!kept.empty()) ASSERT_EQ(cudaMemcpy(kept_d, kept.data(), n, cudaMemcpyHostToDevice), cudaSuccess);
+  const std::uint32_t colours = gpu.colour_and_sort(d.in, n, bodies, d.out, begin, rounds, 8, nullptr,
+                                                    kept.empty() ? nullptr : kept_d, sorted_colour);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
   EXPECT_EQ(colours, ranges.colours);
   EXPECT_EQ(begin, ranges.begin);
   std::vector<Contact> sorted(n);
+  std::vector<std::uint8_t> gpu_colour(n), cpu_colour(n, 0xcd);
   if (n > 0) ASSERT_EQ(cudaMemcpy(sorted.data(), d.out, n * sizeof(Contact), cudaMemcpyDeviceToHost), cudaSuccess);
+  if (n > 0) ASSERT_EQ(cudaMemcpy(gpu_colour.data(), sorted_colour, n, cudaMemcpyDeviceToHost), cudaSuccess);
+  cudaFree(kept_d);
+  cudaFree(sorted_colour);
   for (std::uint32_t k = 0; k < n; ++k) ASSERT_EQ(sorted[k].normal_impulse, cpu[k].normal_impulse) << "position " << k;
+  for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) { cpu_colour[k] = c; });
+  EXPECT_EQ(gpu_colour, cpu_colour);
 
   // Impact levels: the candidates of each level, in index order, as the CPU's.
   const real rest = real(0.1);
@@ -122,6 +137,40 @@ TEST(ColouringCuda, EqualsTheCpuColouringOnRandomSets) {
     const std::uint32_t bodies = 2 + static_cast<std::uint32_t>(rng() % 20000);
     const std::size_t count = std::min<std::size_t>(std::size_t(bodies) * (bodies - 1) / 2, rng() % 60000);
     expect_same_as_cpu(random_contacts(rng, bodies, count), bodies);
+  }
+}
+
+// Substep after substep: a share of the contacts persists (shuffled) with
+// the colours the last colouring gave them, new ones join; the GPU keeps and
+// colours them as the CPU does.
+TEST(ColouringCuda, EqualsTheCpuWithKeptColours) {
+  REQUIRE_DEVICE();
+  std::mt19937_64 rng(27);
+  for (int trial = 0; trial < 10; ++trial) {
+    const std::uint32_t bodies = 100 + static_cast<std::uint32_t>(rng() % 20000);
+    std::vector<Contact> contacts = random_contacts(rng, bodies, std::min<std::size_t>(5 * bodies, 60000));
+    ColourRanges ranges;
+    std::vector<std::uint8_t> kept;
+    for (int substep = 0; substep < 3; ++substep) {
+      ContactColouring().colour_and_sort(contacts, bodies, ranges, kept.empty() ? nullptr : kept.data());
+      std::vector<std::pair<Contact, std::uint8_t>> next;
+      std::set<std::pair<std::uint32_t, std::uint32_t>> seen;
+      for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) {
+        if (rng() % 10 < 8) next.push_back({contacts[k], rng() % 10 < 9 ? c : kNoKeptColour});
+        seen.insert({contacts[k].a, contacts[k].b});
+      });
+      for (const Contact& c : random_contacts(rng, bodies, bodies / 3))
+        if (seen.insert({c.a, c.b}).second) next.push_back({c, kNoKeptColour});
+      std::shuffle(next.begin(), next.end(), rng);
+      contacts.clear();
+      kept.clear();
+      for (auto& [c, colour] : next) {
+        c.normal_impulse = real(contacts.size());  // the tag
+        contacts.push_back(c);
+        kept.push_back(colour);
+      }
+      expect_same_as_cpu(contacts, bodies, kept);
+    }
   }
 }
 

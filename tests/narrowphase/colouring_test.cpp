@@ -16,6 +16,7 @@
 #endif
 
 #include "narrowphase/colouring.hpp"
+#include "narrowphase/contact_cache.hpp"
 
 namespace marbles::narrowphase {
 namespace {
@@ -25,10 +26,16 @@ namespace {
 // contacts, offers by max, the holders of both offers coloured. The library's
 // colour() computes the same in one sequential pass; these tests hold the two
 // (and the GPU, in colouring_cuda_test.cu) to the same answer.
+// `kept`: contacts whose colour[k] is set beforehand; they mark their spheres
+// and take no part in the rounds.
 std::uint32_t colour_in_rounds(const Contact* contacts, const std::vector<std::uint32_t>& active,
                                const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
-                               std::vector<std::uint32_t>& colour) {
+                               std::vector<std::uint32_t>& colour, const std::vector<std::uint32_t>& kept = {}) {
   std::vector<std::uint64_t> body_word(body_count, 0), body_used(body_count, 0);
+  for (const std::uint32_t k : kept) {
+    body_used[contacts[k].a] |= std::uint64_t(1) << colour[k];
+    if (!is_wall(contacts[k].b)) body_used[contacts[k].b] |= std::uint64_t(1) << colour[k];
+  }
   std::vector<std::uint32_t> left = active, next;
   std::uint32_t round = 0;
   for (; !left.empty() && round < kMaxColourRounds; ++round) {
@@ -77,16 +84,26 @@ std::vector<Contact> random_contacts(std::mt19937_64& rng, std::uint32_t bodies,
   return out;
 }
 
-// The oracle: contacts in decreasing rank, each takes the lowest colour its
-// spheres' earlier contacts do not have.
-std::vector<std::uint32_t> greedy_colours(const std::vector<Contact>& contacts) {
+// The oracle: contacts with a kept colour keep it; the others in decreasing
+// rank, each takes the lowest colour its spheres' kept and earlier contacts
+// do not have.
+std::vector<std::uint32_t> greedy_colours(const std::vector<Contact>& contacts,
+                                          const std::vector<std::uint8_t>& kept = {}) {
   const auto n = static_cast<std::uint32_t>(contacts.size());
-  std::vector<std::uint32_t> order(n);
-  std::iota(order.begin(), order.end(), 0u);
-  auto rank = [&](std::uint32_t k) { return contact_rank(contacts[k].a, contacts[k].b, k); };
-  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) { return rank(x) > rank(y); });
+  std::vector<std::uint32_t> order;
   std::map<std::uint32_t, std::uint64_t> used;
   std::vector<std::uint32_t> colour(n);
+  for (std::uint32_t k = 0; k < n; ++k) {
+    if (kept.empty() || kept[k] == kNoKeptColour) {
+      order.push_back(k);
+      continue;
+    }
+    colour[k] = kept[k];
+    used[contacts[k].a] |= std::uint64_t(1) << kept[k];
+    if (!is_wall(contacts[k].b)) used[contacts[k].b] |= std::uint64_t(1) << kept[k];
+  }
+  auto rank = [&](std::uint32_t k) { return contact_rank(contacts[k].a, contacts[k].b, k); };
+  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) { return rank(x) > rank(y); });
   for (std::uint32_t k : order) {
     const Contact& c = contacts[k];
     const std::uint64_t u = used[c.a] | (is_wall(c.b) ? 0 : used[c.b]);
@@ -98,14 +115,15 @@ std::vector<std::uint32_t> greedy_colours(const std::vector<Contact>& contacts) 
   return colour;
 }
 
-void expect_matches_oracle(const std::vector<Contact>& input, std::uint32_t bodies) {
+void expect_matches_oracle(const std::vector<Contact>& input, std::uint32_t bodies,
+                           const std::vector<std::uint8_t>& kept = {}) {
   std::vector<Contact> contacts = input;
   ColourRanges ranges;
-  ContactColouring().colour_and_sort(contacts, bodies, ranges);
+  ContactColouring().colour_and_sort(contacts, bodies, ranges, kept.empty() ? nullptr : kept.data());
   ASSERT_EQ(contacts.size(), input.size());
   EXPECT_EQ(ranges.size(), input.size());
   EXPECT_TRUE(colouring_is_proper(contacts, ranges, bodies));
-  const std::vector<std::uint32_t> expect = greedy_colours(input);
+  const std::vector<std::uint32_t> expect = greedy_colours(input, kept);
   std::vector<int> seen(input.size(), 0);
   for (std::uint32_t c = 0; c <= ranges.colours; ++c)
     for (std::uint32_t k = ranges.begin[c]; k < ranges.begin[c + 1]; ++k) {
@@ -122,10 +140,42 @@ void expect_matches_oracle(const std::vector<Contact>& input, std::uint32_t bodi
   // The data-parallel form (the GPU's) colours every contact alike.
   const auto n = static_cast<std::uint32_t>(input.size());
   std::vector<std::uint64_t> rank(n);
-  std::vector<std::uint32_t> active(n), colour(n, kUncoloured);
-  for (std::uint32_t k = 0; k < n; ++k) rank[k] = contact_rank(input[k].a, input[k].b, k), active[k] = k;
-  colour_in_rounds(input.data(), active, rank.data(), bodies, ColourRule::lowest_free, colour);
+  std::vector<std::uint32_t> active, preset, colour(n, kUncoloured);
+  for (std::uint32_t k = 0; k < n; ++k) {
+    rank[k] = contact_rank(input[k].a, input[k].b, k);
+    if (!kept.empty() && kept[k] != kNoKeptColour) colour[k] = kept[k], preset.push_back(k);
+    else active.push_back(k);
+  }
+  colour_in_rounds(input.data(), active, rank.data(), bodies, ColourRule::lowest_free, colour, preset);
   EXPECT_EQ(colour, expect);
+}
+
+// The contacts of a substep after `previous`: a random share of them persist
+// (in a new order), new ones join. kept[k] is the colour a persisting contact
+// had in the previous colouring, for a random share of them (the cache keeps
+// only loaded contacts), else none.
+std::vector<Contact> next_substep(std::mt19937_64& rng, const std::vector<Contact>& previous,
+                                  const ColourRanges& ranges, std::uint32_t bodies, std::size_t fresh,
+                                  std::vector<std::uint8_t>& kept) {
+  std::vector<std::pair<Contact, std::uint8_t>> next;
+  std::set<std::pair<std::uint32_t, std::uint32_t>> seen;
+  std::bernoulli_distribution persists(0.8), cached(0.9);
+  for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) {
+    if (!persists(rng)) return;
+    next.push_back({previous[k], cached(rng) ? c : kNoKeptColour});
+    seen.insert({previous[k].a, previous[k].b});
+  });
+  for (const Contact& c : random_contacts(rng, bodies, fresh, 0.1))
+    if (seen.insert({c.a, c.b}).second) next.push_back({c, kNoKeptColour});
+  std::shuffle(next.begin(), next.end(), rng);
+  std::vector<Contact> out;
+  kept.clear();
+  for (auto& [c, colour] : next) {
+    c.separation = real(out.size());
+    out.push_back(c);
+    kept.push_back(colour);
+  }
+  return out;
 }
 
 TEST(Colouring, MatchesSequentialGreedyOnRandomSets) {
@@ -136,6 +186,91 @@ TEST(Colouring, MatchesSequentialGreedyOnRandomSets) {
     const std::size_t count = std::min<std::size_t>(max_pairs, rng() % 9000);
     expect_matches_oracle(random_contacts(rng, bodies, count, trial % 3 == 0 ? 0.3 : 0.05), bodies);
   }
+}
+
+// Substep after substep: persisting contacts keep their colours, the new ones
+// take the oracle's colours around them, in both forms; colours may be left
+// empty (their contacts gone) and the ranges stay right.
+TEST(Colouring, KeptColoursStayAndTheRestMatchTheOracle) {
+  std::mt19937_64 rng(23);
+  for (int trial = 0; trial < 12; ++trial) {
+    const std::uint32_t bodies = 20 + static_cast<std::uint32_t>(rng() % 2000);
+    std::vector<Contact> contacts = random_contacts(rng, bodies, std::min<std::size_t>(4 * bodies, 6000), 0.1);
+    ColourRanges ranges;
+    ContactColouring().colour_and_sort(contacts, bodies, ranges);
+    for (int substep = 0; substep < 4; ++substep) {
+      std::vector<std::uint8_t> kept;
+      const std::vector<Contact> next = next_substep(rng, contacts, ranges, bodies, bodies / 2, kept);
+      expect_matches_oracle(next, bodies, kept);
+      contacts = next;
+      ContactColouring().colour_and_sort(contacts, bodies, ranges, kept.data());
+      // Every kept colour is where it was kept.
+      for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) {
+        const std::uint8_t want = kept[static_cast<std::size_t>(contacts[k].separation)];
+        if (want != kNoKeptColour) EXPECT_EQ(c, want);
+      });
+    }
+  }
+  // A colour left empty: two contacts on sphere 0 kept at colours 0 and 5.
+  std::vector<Contact> two(2);
+  two[0].a = 0, two[0].b = 1, two[1].a = 0, two[1].b = 2, two[1].separation = 1;
+  ColourRanges r;
+  ContactColouring().colour_and_sort(two, 3, r, std::vector<std::uint8_t>{0, 5}.data());
+  EXPECT_EQ(r.colours, 6u);
+  EXPECT_EQ(r.begin, (std::vector<std::uint32_t>{0, 1, 1, 1, 1, 1, 2, 2}));
+  expect_matches_oracle(two, 3, {0, 5});
+}
+
+// The cache remembers each loaded contact's colour and hands it back to the
+// same pair in the next substep, wherever that contact stands in the list; a
+// colouring from outside is kept only if it is proper.
+TEST(ContactCache, KeepsThePersistingContactsColours) {
+  std::mt19937_64 rng(31);
+  const std::uint32_t bodies = 3000;
+  std::vector<Contact> contacts = random_contacts(rng, bodies, 9000, 0.1);
+  for (std::size_t k = 0; k < contacts.size(); ++k) contacts[k].normal_impulse = k % 5 == 0 ? real(0) : real(1e-3);
+  ColourRanges ranges;
+  ContactColouring().colour_and_sort(contacts, bodies, ranges);
+  ContactCache cache;
+  cache.store(contacts, ranges);
+  std::map<std::pair<std::uint32_t, std::uint32_t>, std::uint8_t> had;
+  for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) {
+    if (contacts[k].normal_impulse > 0) had[{contacts[k].a, contacts[k].b}] = c;
+  });
+  std::vector<std::uint8_t> unused;
+  std::vector<Contact> next = next_substep(rng, contacts, ranges, bodies, 1000, unused);
+  std::vector<real> inv_mass(bodies, real(1));
+  BodiesView view;
+  view.inv_mass = inv_mass.data();
+  view.count = bodies;
+  std::vector<std::uint8_t> kept;
+  cache.restore(next, view, real(0), kept);
+  ASSERT_EQ(kept.size(), next.size());
+  std::size_t found = 0;
+  for (std::size_t k = 0; k < next.size(); ++k) {
+    const auto it = had.find({next[k].a, next[k].b});
+    EXPECT_EQ(kept[k], it == had.end() ? kNoKeptColour : it->second) << k;
+    found += it != had.end();
+  }
+  EXPECT_GT(found, next.size() / 2);
+
+  CacheEntries entries = cache.entries();
+  EXPECT_TRUE(keep_proper_colours(entries));
+  EXPECT_EQ(entries.colour, cache.entries().colour);
+  // Two entries of one sphere with one colour: every colour is dropped.
+  std::size_t first = 0;
+  while (entries.colour[first] == kNoKeptColour) ++first;
+  const auto a = static_cast<std::uint32_t>(entries.key[first] >> 32);
+  std::size_t second = first + 1;
+  while (second < entries.size() && static_cast<std::uint32_t>(entries.key[second] >> 32) != a) ++second;
+  if (second == entries.size()) second = first;  // (not met with these contacts)
+  ASSERT_NE(second, first);
+  entries.colour[second] = entries.colour[first];
+  EXPECT_FALSE(keep_proper_colours(entries));
+  EXPECT_EQ(entries.colour, std::vector<std::uint8_t>(entries.size(), kNoKeptColour));
+  entries.colour = {1};  // one colour for many entries: dropped
+  EXPECT_FALSE(keep_proper_colours(entries));
+  EXPECT_EQ(entries.colour.size(), entries.size());
 }
 
 // Adversarial: one sphere touching 200 others (more than 64 colours: the rest
