@@ -127,7 +127,9 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
 
 void ContactCache::store(const std::vector<Contact>& contacts, const ColourRanges& ranges) {
   // Only the sustained impulses of the velocity solve are carried over; an
-  // impact's impulse (Contact::impact_impulse) is not a load.
+  // impact's impulse (Contact::impact_impulse) is not a load. A contact
+  // without load is kept for its colour alone, with no impulses (restored,
+  // it starts as an uncached contact does).
   // Sorted by key = grouped by sphere a, then by b within a group: a
   // counting sort by a (the contacts are read in order, each written once
   // to its group), then each group (a few entries) sorted by b in place.
@@ -135,8 +137,9 @@ void ContactCache::store(const std::vector<Contact>& contacts, const ColourRange
   m_contact_colour.assign(n, kNoKeptColour);
   if (ranges.size() == n) for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) { m_contact_colour[k] = c; });
   m_first.assign(1, 0);  // grows to the largest a + 2 seen
-  for (const Contact& c : contacts) {
-    if (!(c.normal_impulse > 0)) continue;
+  for (std::uint32_t k = 0; k < n; ++k) {
+    const Contact& c = contacts[k];
+    if (!(c.normal_impulse > 0) && m_contact_colour[k] == kNoKeptColour) continue;
     if (c.a + 2 > m_first.size()) m_first.resize(c.a + 2, 0);
     ++m_first[c.a + 1];
   }
@@ -151,12 +154,13 @@ void ContactCache::store(const std::vector<Contact>& contacts, const ColourRange
   m_order.assign(m_first.begin(), m_first.end() - 1);  // the next free entry of each group
   for (std::uint32_t k = 0; k < n; ++k) {
     const Contact& c = contacts[k];
-    if (!(c.normal_impulse > 0)) continue;
+    const bool loaded = c.normal_impulse > 0;
+    if (!loaded && m_contact_colour[k] == kNoKeptColour) continue;
     const std::uint32_t e = m_order[c.a]++;
     m_entries.key[e] = cache_key(c.a, c.b);
-    m_entries.normal_impulse[e] = c.normal_impulse;
-    m_entries.tangent_impulse[e] = c.tangent_impulse;
-    m_entries.rolling_impulse[e] = c.rolling_impulse;
+    m_entries.normal_impulse[e] = loaded ? c.normal_impulse : real(0);
+    m_entries.tangent_impulse[e] = loaded ? c.tangent_impulse : Vec3{};
+    m_entries.rolling_impulse[e] = loaded ? c.rolling_impulse : Vec3{};
     m_entries.colour[e] = m_contact_colour[k];
   }
   for (std::uint32_t a = 0; a < groups; ++a)  // insertion sort by key (unique) within the group

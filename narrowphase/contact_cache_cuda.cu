@@ -11,10 +11,11 @@ using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 
 // The store reads the contacts' bodies and impulses from the sweep's records
-// (solver_math.hpp), where the last sweep left them.
-__global__ void flags_kernel(SweepRecords records, std::uint32_t n, std::uint32_t* flags) {
+// (solver_math.hpp), where the last sweep left them. A contact without load
+// is kept for its colour alone (ContactCache::store).
+__global__ void flags_kernel(SweepRecords records, const std::uint8_t* colour, std::uint32_t n, std::uint32_t* flags) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= n; k += gridDim.x * blockDim.x)
-    flags[k] = k < n && records.impulse[k].x > 0 ? 1u : 0u;
+    flags[k] = k < n && (records.impulse[k].x > 0 || (colour && colour[k] != kNoKeptColour)) ? 1u : 0u;
 }
 
 __global__ void keys_kernel(SweepRecords records, std::uint32_t n, const std::uint32_t* offsets,
@@ -32,9 +33,10 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
     Contact c;
     unpack_sweep_impulses(records, index[e], c);
-    normal[e] = c.normal_impulse;
-    tangent[e] = c.tangent_impulse;
-    rolling[e] = c.rolling_impulse;
+    const bool loaded = c.normal_impulse > 0;
+    normal[e] = loaded ? c.normal_impulse : real(0);
+    tangent[e] = loaded ? c.tangent_impulse : Vec3{};
+    rolling[e] = loaded ? c.rolling_impulse : Vec3{};
     colour[e] = contact_colour ? contact_colour[index[e]] : kNoKeptColour;
   }
 }
@@ -157,7 +159,7 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
                              int sm_count, cudaStream_t s) {
   auto* flags = m_flags.as<std::uint32_t>(n + 1);
   auto* offsets = m_offsets.as<std::uint32_t>(n + 1);
-  flags_kernel<<<grid_for(n + 1, sm_count), kBlock, 0, s>>>(contacts, n, flags);
+  flags_kernel<<<grid_for(n + 1, sm_count), kBlock, 0, s>>>(contacts, contact_colour, n, flags);
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_exclusive_sum(flags, offsets, n + 1, m_temp, s);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, offsets + n, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
