@@ -28,6 +28,22 @@ inline int thread_count() {
 #endif
 }
 
+// Inside a parallel region: this thread's number and the team's size.
+inline int thread_index() {
+#if defined(_OPENMP)
+  return omp_get_thread_num();
+#else
+  return 0;
+#endif
+}
+inline int team_size() {
+#if defined(_OPENMP)
+  return omp_get_num_threads();
+#else
+  return 1;
+#endif
+}
+
 inline void set_thread_count(int n) {
 #if defined(_OPENMP)
   if (n > 0) omp_set_num_threads(n);

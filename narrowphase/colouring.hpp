@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/spheres.hpp"
 #include "narrowphase/colouring_math.hpp"
 #include "narrowphase/contact.hpp"
 
@@ -45,15 +46,17 @@ class ContactColouring {
   // The solver colouring of all contacts: contact k keeps kept_colour[k] when
   // it is not kNoKeptColour (kept_colour null: none kept), the others are
   // coloured by contact_rank around them; then puts `contacts` in
-  // colour-major order.
+  // colour-major order. With `prepare` (the world's bodies) each contact is
+  // also prepared on its way (prepare_from_world, solver_math.hpp): the
+  // solver is then told the contacts are prepared.
   void colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
-                       const std::uint8_t* kept_colour = nullptr);
+                       const std::uint8_t* kept_colour = nullptr, const BodiesView* prepare = nullptr);
 
  private:
   void prefetch_ahead(const Contact* contacts, std::size_t t, std::size_t count) const;
   std::vector<std::uint64_t> m_body_used, m_rank, m_by_rank, m_sort_keys;
   std::vector<std::uint32_t> m_body_next_round;
-  std::vector<std::uint32_t> m_all, m_kept, m_colour, m_order, m_sort_values, m_high, m_sort_high;
+  std::vector<std::uint32_t> m_all, m_kept, m_colour, m_bucket_count, m_order, m_sort_values, m_high, m_sort_high;
   std::vector<Contact> m_sorted;
 };
 

@@ -116,12 +116,15 @@ __global__ void first_of_key_kernel(const std::uint32_t* sorted_keys, std::uint3
     if (j == 0 || sorted_keys[j] != sorted_keys[j - 1]) first[sorted_keys[j]] = j;
 }
 
-// The contacts in colour-major order, and each one's colour as the cache
-// keeps it (sorted_colour may be null).
+// The contacts in colour-major order (prepared on the way when `prepare`),
+// and each one's colour as the cache keeps it (sorted_colour may be null).
 __global__ void gather_kernel(const Contact* in, const std::uint32_t* order, const std::uint32_t* sorted_keys,
-                              std::uint32_t n, Contact* out, std::uint8_t* sorted_colour) {
+                              std::uint32_t n, Contact* out, std::uint8_t* sorted_colour, BodiesView world,
+                              bool prepare) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    store_whole(out + k, load_whole(in + order[k]));  // 16-byte words, not field by field
+    Contact c = load_whole(in + order[k]);  // 16-byte words, not field by field
+    if (prepare) prepare_from_world(c, world);
+    store_whole(out + k, c);
     if (sorted_colour) sorted_colour[k] = sorted_keys[k] < kMaxColours ? sorted_keys[k] : kNoKeptColour;
   }
 }
@@ -213,7 +216,8 @@ void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, 
 std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count,
                                              Contact* sorted, std::vector<std::uint32_t>& begin,
                                              std::uint32_t& rounds_run, int sm_count, cudaStream_t s,
-                                             const std::uint8_t* kept_colour, std::uint8_t* sorted_colour) {
+                                             const std::uint8_t* kept_colour, std::uint8_t* sorted_colour,
+                                             const BodiesView* prepare) {
   rounds_run = 0;
   if (n == 0) {
     begin.assign(2, 0);
@@ -234,7 +238,8 @@ std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint3
   // 2 r; kept colours may be any below kMaxColours.
   sort_by_colour(n, kMaxColours, 7, kept_colour ? kMaxColours : 2 * rounds_run, begin, sm_count, s);
   gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, m_index_out.get_as<std::uint32_t>(),
-                                                         m_keys_out.get_as<std::uint32_t>(), n, sorted, sorted_colour);
+                                                         m_keys_out.get_as<std::uint32_t>(), n, sorted, sorted_colour,
+                                                         prepare ? *prepare : BodiesView{}, prepare != nullptr);
   MARBLES_CUDA_CHECK_LAUNCH();
   return static_cast<std::uint32_t>(begin.size() - 2);
 }

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/device_buffer.cuh"
+#include "core/spheres.hpp"
 #include "narrowphase/colouring_math.hpp"
 #include "narrowphase/contact.hpp"
 
@@ -34,11 +35,13 @@ class ColouringCuda {
   // ColourRanges::begin (colours + 2 entries). Returns the colour count.
   // kept_colour (device, one per contact, may be null): colours kept as
   // ContactColouring::colour_and_sort keeps them; sorted_colour (device, may
-  // be null) gets each sorted contact's colour (kNoKeptColour: overflow).
+  // be null) gets each sorted contact's colour (kNoKeptColour: overflow);
+  // with `prepare` (the world's bodies, device) the sorted contacts come out
+  // prepared (prepare_from_world).
   std::uint32_t colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count, Contact* sorted,
                                 std::vector<std::uint32_t>& begin, std::uint32_t& rounds, int sm_count,
                                 cudaStream_t stream, const std::uint8_t* kept_colour = nullptr,
-                                std::uint8_t* sorted_colour = nullptr);
+                                std::uint8_t* sorted_colour = nullptr, const BodiesView* prepare = nullptr);
 
   // The impact stage's levels: the candidates (approach faster than
   // rest_speed) coloured by_round on impact_rank; `order` (device) gets them

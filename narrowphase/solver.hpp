@@ -52,9 +52,10 @@ class ContactSolver {
   void set_iterations(int n) { m_settings.iterations = n; }
 
   // prepare, impacts, warm start, sweeps on the velocities in `bodies`;
-  // `contacts` in colour-major order as `colours` describes.
+  // `contacts` in colour-major order as `colours` describes. `prepared`: the
+  // colouring prepared them already (ContactColouring::colour_and_sort).
   void solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours, const BodiesView& bodies,
-                        real h);
+                        real h, bool prepared = false);
 
   // Position projection over the same contacts at the integrated positions.
   void project_positions(const std::vector<Contact>& contacts, const ColourRanges& colours,

@@ -53,15 +53,6 @@ __global__ void scatter_bodies_kernel(const SolverBody* bodies, BodiesView world
     scatter_solver_body(world, i, bodies[i]);
 }
 
-__global__ void prepare_kernel(Contact* contacts, std::uint32_t n, const SolverBody* bodies) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
-  {
-    Contact c = load_whole(contacts + k);  // whole records in and out: a field-by-field update of
-    prepare_one(c, bodies);                // 112-byte records writes partial sectors
-    store_whole(contacts + k, c);
-  }
-}
-
 template <bool Friction, bool Rolling>
 __global__ void warm_start_kernel(Contact* contacts, ContactRange r, SolverBody* bodies) {
   for_range(r, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(load_whole(contacts + k), bodies); });
@@ -140,12 +131,6 @@ void launch_gather_bodies(const BodiesView& world, SolverBody* bodies, int sm_co
 void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, int sm_count, cudaStream_t s) {
   if (world.count == 0) return;
   scatter_bodies_kernel<<<::marbles::cuda::grid_for(world.count, sm_count), kBlock, 0, s>>>(bodies, world);
-  MARBLES_CUDA_CHECK_LAUNCH();
-}
-
-void launch_prepare(Contact* contacts, std::uint32_t n, const SolverBody* bodies, int sm_count, cudaStream_t s) {
-  if (n == 0) return;
-  prepare_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, bodies);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -30,7 +30,7 @@ struct ContactRange {
 void launch_gather_bodies(const BodiesView& world, SolverBody* bodies, int sm_count, cudaStream_t stream);
 void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, int sm_count, cudaStream_t stream);
 
-void launch_prepare(Contact* contacts, std::uint32_t n, const SolverBody* bodies, int sm_count, cudaStream_t stream);
+// (The contacts come prepared from the colouring: ColouringCuda::colour_and_sort.)
 void launch_warm_start(Contact* contacts, ContactRange range, SolverBody* bodies, SolverTerms terms,
                        cudaStream_t stream);
 // The stages after the warm start on the sweep's records (solver_math.hpp):

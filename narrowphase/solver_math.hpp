@@ -74,6 +74,17 @@ MARBLES_HD_INLINE void prepare_one(Contact& c, const SolverBody* bodies) {
   prepare_contact(c, load_body(bodies, c.a, c), load_body(bodies, c.b, c));
 }
 
+// The same from the world's arrays (the values SolverBody copies): the
+// colouring prepares each contact as it moves it into colour-major order,
+// so the solve does not stream the contacts once more for it.
+MARBLES_HD_INLINE BodyState world_body(const BodiesView& w, std::uint32_t index, const Contact& c) {
+  if (is_wall(index)) return {c.wall_velocity, Vec3{}, 0, 0};
+  return {w.velocity[index], w.angular_velocity[index], w.inv_mass[index], w.inv_inertia[index]};
+}
+MARBLES_HD_INLINE void prepare_from_world(Contact& c, const BodiesView& w) {
+  prepare_contact(c, world_body(w, c.a, c), world_body(w, c.b, c));
+}
+
 // Warm start: apply the impulses the contact starts with (from the cache).
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void warm_start_one(const Contact& c, SolverBody* bodies) {

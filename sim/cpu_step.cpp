@@ -65,7 +65,9 @@ class CpuStep final : public StepBackend {
 
   void colour_contacts() override {
     const bool kept = m_kept_colour.size() == m_contacts.size() && !m_contacts.empty();
-    m_colouring.colour_and_sort(m_contacts, m_world.size(), m_colours, kept ? m_kept_colour.data() : nullptr);
+    // Prepared on the way: nothing moves the bodies before the solve.
+    const BodiesView bodies = m_world.view();
+    m_colouring.colour_and_sort(m_contacts, m_world.size(), m_colours, kept ? m_kept_colour.data() : nullptr, &bodies);
     m_counters.colours = std::max(m_counters.colours, m_colours.colours);
     m_counters.overflow += m_colours.overflow();
   }
@@ -80,7 +82,7 @@ class CpuStep final : public StepBackend {
   }
 
   void solve_velocities(real h) override {
-    if (!m_contacts.empty()) m_solver.solve_velocities(m_contacts, m_colours, m_world.view(), h);
+    if (!m_contacts.empty()) m_solver.solve_velocities(m_contacts, m_colours, m_world.view(), h, true);
   }
 
   void integrate_positions(real h) override {

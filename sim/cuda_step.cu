@@ -164,9 +164,11 @@ class CudaStep final : public StepBackend {
   void colour_contacts() override {
     auto* sorted = m_sorted.as<narrowphase::Contact>(m_count);
     std::uint32_t rounds = 0;
+    // Prepared on the way: nothing moves the bodies before the solve.
+    const BodiesView bodies = m_device.view();
     m_colours = m_colouring.colour_and_sort(contacts_d(), m_count, m_device.size(), sorted, m_begin, rounds, m_sm,
                                             m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
-                                            m_sorted_colour.as<std::uint8_t>(m_count));
+                                            m_sorted_colour.as<std::uint8_t>(m_count), &bodies);
     m_contacts.swap(m_sorted);
     m_counters.colours = std::max(m_counters.colours, m_colours);
     m_counters.overflow += m_begin[m_colours + 1] - m_begin[m_colours];
@@ -186,8 +188,7 @@ class CudaStep final : public StepBackend {
     const BodiesView world = m_device.view();
     auto* bodies = m_solver_bodies.as<narrowphase::SolverBody>(world.count);
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
-    narrowphase::Contact* contacts = contacts_d();
-    nc::launch_prepare(contacts, m_count, bodies, m_sm, m_stream);
+    narrowphase::Contact* contacts = contacts_d();  // prepared by the colouring
     if (m_model.solver.restitution) impacts(bodies, h);
     if (m_model.solver.warm_start)
       over_colours(false, [&](nc::ContactRange r) { nc::launch_warm_start(contacts, r, bodies, m_terms, m_stream); });

@@ -17,6 +17,7 @@
 
 #include "narrowphase/colouring.hpp"
 #include "narrowphase/contact_cache.hpp"
+#include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase {
 namespace {
@@ -283,6 +284,61 @@ TEST(ContactCache, KeepsThePersistingContactsColours) {
   entries.colour = {1};  // one colour for many entries: dropped
   EXPECT_FALSE(keep_proper_colours(entries));
   EXPECT_EQ(entries.colour.size(), entries.size());
+}
+
+// Prepared on the way: the colour-major contacts carry the masses and
+// approach speed that the solver's prepare stage gives them, bit for bit,
+// for any thread count.
+TEST(Colouring, PreparesOnTheWayAsTheSolverWould) {
+  std::mt19937_64 rng(37);
+  const std::uint32_t bodies = 30000;
+  std::vector<Contact> input = random_contacts(rng, bodies, 90000, 0.1);
+  std::uniform_real_distribution<double> u(-1, 1), pos(0.2, 2);
+  std::vector<Vec3> v(bodies), w(bodies);
+  std::vector<real> inv_mass(bodies), inv_inertia(bodies);
+  for (std::uint32_t i = 0; i < bodies; ++i) {
+    v[i] = Vec3(real(u(rng)), real(u(rng)), real(u(rng)));
+    w[i] = Vec3(real(u(rng)), real(u(rng)), real(u(rng)));
+    inv_mass[i] = i % 97 == 0 ? real(0) : real(pos(rng));  // some immovable
+    inv_inertia[i] = i % 97 == 0 ? real(0) : real(pos(rng));
+  }
+  for (Contact& c : input) {
+    const Vec3 d = Vec3(real(u(rng)), real(u(rng)), real(u(rng))) + Vec3(0, 0, 2);
+    c.normal = d / length(d);
+    c.ra = real(pos(rng)), c.rb = is_wall(c.b) ? real(0) : real(pos(rng));
+    c.wall_velocity = Vec3(real(u(rng)), 0, real(u(rng)));
+  }
+  BodiesView view;
+  view.velocity = v.data(), view.angular_velocity = w.data();
+  view.inv_mass = inv_mass.data(), view.inv_inertia = inv_inertia.data();
+  view.count = bodies;
+  std::vector<SolverBody> solver_bodies(bodies);
+  for (std::uint32_t i = 0; i < bodies; ++i) solver_bodies[i] = gather_solver_body(view, i);
+  std::vector<Contact> plain = input;
+  ColourRanges plain_ranges;
+  ContactColouring().colour_and_sort(plain, bodies, plain_ranges);
+  for (Contact& c : plain) prepare_one(c, solver_bodies.data());
+  for (int threads : {1, 2}) {
+#if defined(_OPENMP)
+    const int was = omp_get_max_threads();
+    omp_set_num_threads(threads);
+#endif
+    std::vector<Contact> prepared = input;
+    ColourRanges ranges;
+    ContactColouring().colour_and_sort(prepared, bodies, ranges, nullptr, &view);
+#if defined(_OPENMP)
+    omp_set_num_threads(was);
+#endif
+    ASSERT_EQ(ranges.begin, plain_ranges.begin);
+    for (std::size_t k = 0; k < plain.size(); ++k) {
+      ASSERT_EQ(prepared[k].separation, plain[k].separation) << k;  // the same contact in the same place
+      EXPECT_EQ(prepared[k].normal_mass, plain[k].normal_mass) << k;
+      EXPECT_EQ(prepared[k].tangent_mass, plain[k].tangent_mass) << k;
+      EXPECT_EQ(prepared[k].rolling_mass, plain[k].rolling_mass) << k;
+      EXPECT_EQ(prepared[k].approach_speed, plain[k].approach_speed) << k;
+    }
+    EXPECT_NE(plain[0].normal_mass, real(0)) << "the comparison must see prepared values";
+  }
 }
 
 // Adversarial: one sphere touching 200 others (more than 64 colours: the rest
