@@ -5,16 +5,6 @@
 #include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase::cuda {
-
-// One entry's payload as one record (32 bytes in float, 64 in double): a
-// matched contact fetches one sector for it, not one from each of four arrays.
-struct alignas(8 * sizeof(real)) CachedImpulses {
-  real normal;
-  Vec3 tangent, rolling;
-  std::uint32_t colour;  // a colour, or kNoKeptColour
-};
-static_assert(sizeof(CachedImpulses) == 8 * sizeof(real));
-
 namespace {
 
 using ::marbles::cuda::grid_for;
@@ -39,14 +29,15 @@ __global__ void keys_kernel(SweepRecords records, std::uint32_t n, const std::ui
 }
 
 __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_colour, const std::uint32_t* index,
-                              std::uint32_t m, CachedImpulses* entries) {
+                              std::uint32_t m, real* normal, Vec3* tangent, Vec3* rolling, std::uint8_t* colour) {
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
     Contact c;
     unpack_sweep_impulses(records, index[e], c);
     const bool loaded = c.normal_impulse > 0;
-    store_whole(entries + e, CachedImpulses{loaded ? c.normal_impulse : real(0), loaded ? c.tangent_impulse : Vec3{},
-                                            loaded ? c.rolling_impulse : Vec3{},
-                                            contact_colour ? contact_colour[index[e]] : kNoKeptColour});
+    normal[e] = loaded ? c.normal_impulse : real(0);
+    tangent[e] = loaded ? c.tangent_impulse : Vec3{};
+    rolling[e] = loaded ? c.rolling_impulse : Vec3{};
+    colour[e] = contact_colour ? contact_colour[index[e]] : kNoKeptColour;
   }
 }
 
@@ -65,31 +56,27 @@ __global__ void groups_kernel(const std::uint64_t* keys, std::uint32_t m, std::u
 
 // A contact scans its sphere's few entries (cache_find), as the CPU does.
 __global__ void restore_kernel(Contact* contacts, std::uint32_t n, const std::uint64_t* keys, const uint2* group,
-                               std::uint32_t spheres, const CachedImpulses* entries, std::uint8_t* matched,
-                               std::uint8_t* kept_colour) {
+                               std::uint32_t spheres, const real* normal, const Vec3* tangent, const Vec3* rolling,
+                               const std::uint8_t* colour, std::uint8_t* matched, std::uint8_t* kept_colour) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     Contact& c = contacts[k];
     const uint2 g = c.a < spheres ? group[c.a] : make_uint2(0, 0);
     const std::uint32_t e = cache_find(keys, g.x, g.y, cache_key(c.a, c.b));
     const bool found = e < g.y;
-    if (!found) {
-      kept_colour[k] = kNoKeptColour;
-      continue;
-    }
-    const CachedImpulses p = load_whole(entries + e);
-    kept_colour[k] = static_cast<std::uint8_t>(p.colour);
-    restore_impulses(c, p.normal, p.tangent, p.rolling);
+    kept_colour[k] = found ? colour[e] : kNoKeptColour;
+    if (!found) continue;
+    restore_impulses(c, normal[e], tangent[e], rolling[e]);
     matched[e] = 1;  // keys are unique: one contact per entry
   }
 }
 
-__global__ void lost_loads_kernel(const std::uint64_t* keys, const CachedImpulses* entries, const std::uint8_t* matched,
+__global__ void lost_loads_kernel(const std::uint64_t* keys, const real* normal, const std::uint8_t* matched,
                                   std::uint32_t m, BodiesView bodies, real weight_impulse, std::uint32_t* count) {
   std::uint32_t mine = 0;
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
     if (matched[e]) continue;
     const auto a = static_cast<std::uint32_t>(keys[e] >> 32);
-    if (a < bodies.count && is_lost_load(entries[e].normal, bodies.inv_mass[a], weight_impulse)) ++mine;
+    if (a < bodies.count && is_lost_load(normal[e], bodies.inv_mass[a], weight_impulse)) ++mine;
   }
   if (mine) atomicAdd(count, mine);
 }
@@ -147,17 +134,17 @@ __device__ real real_of_bits(unsigned long long bits) {
 }
 
 // Islands that lost a load start cold (a plain store of 1: order-free).
-__global__ void island_cold_kernel(const std::uint64_t* keys, const CachedImpulses* entries, const std::uint8_t* matched,
+__global__ void island_cold_kernel(const std::uint64_t* keys, const real* normal, const std::uint8_t* matched,
                                    std::uint32_t m, BodiesView bodies, real weight_impulse, const std::uint32_t* label,
                                    const unsigned long long* island_max, std::uint8_t* cold) {
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
     if (matched[e]) continue;
     const auto a = static_cast<std::uint32_t>(keys[e] >> 32);
-    if (a >= bodies.count || !is_lost_load(entries[e].normal, bodies.inv_mass[a], weight_impulse)) continue;
+    if (a >= bodies.count || !is_lost_load(normal[e], bodies.inv_mass[a], weight_impulse)) continue;
     for (const std::uint32_t body : {a, static_cast<std::uint32_t>(keys[e] & 0xffffffffu)}) {
       if (is_wall(body) || body >= bodies.count) continue;
       const std::uint32_t r = label[body];
-      if (island_starts_cold(entries[e].normal, real_of_bits(island_max[r]))) cold[r] = 1;
+      if (island_starts_cold(normal[e], real_of_bits(island_max[r]))) cold[r] = 1;
     }
   }
 }
@@ -202,27 +189,27 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_sort_pairs(keys_in, keys, index_in, index, m_count, 64, m_temp, s);
   gather_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, m_count,
-                                                               m_entries.as<CachedImpulses>(m_count));
+                                                               m_normal.as<real>(m_count), m_tangent.as<Vec3>(m_count),
+                                                               m_rolling.as<Vec3>(m_count),
+                                                               m_colour.as<std::uint8_t>(m_count));
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 CacheEntries ContactCacheCuda::download(cudaStream_t s) {
   CacheEntries e;
   const std::size_t m = m_count;
-  std::vector<CachedImpulses> records(m);
   e.key.resize(m);
-  if (m > 0) {
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.key.data(), m_keys.get(), m * sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(records.data(), m_entries.get(), m * sizeof(CachedImpulses),
-                                       cudaMemcpyDeviceToHost, s));
-    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  }
-  for (const CachedImpulses& r : records) {
-    e.normal_impulse.push_back(r.normal);
-    e.tangent_impulse.push_back(r.tangent);
-    e.rolling_impulse.push_back(r.rolling);
-    e.colour.push_back(static_cast<std::uint8_t>(r.colour));
-  }
+  e.normal_impulse.resize(m);
+  e.tangent_impulse.resize(m);
+  e.rolling_impulse.resize(m);
+  e.colour.resize(m);
+  if (m == 0) return e;
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.key.data(), m_keys.get(), m * sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.normal_impulse.data(), m_normal.get(), m * sizeof(real), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.tangent_impulse.data(), m_tangent.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.rolling_impulse.data(), m_rolling.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.colour.data(), m_colour.get(), m, cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   return e;
 }
 
@@ -230,14 +217,15 @@ void ContactCacheCuda::upload(const CacheEntries& e, cudaStream_t s) {
   const auto m = static_cast<std::uint32_t>(e.size());
   m_count = m;
   if (m == 0) return;
-  const bool colours = e.colour.size() == m;  // none known: coloured afresh
-  std::vector<CachedImpulses> records(m);
-  for (std::uint32_t k = 0; k < m; ++k)
-    records[k] = {e.normal_impulse[k], e.tangent_impulse[k], e.rolling_impulse[k],
-                  colours ? e.colour[k] : kNoKeptColour};
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_keys.as<std::uint64_t>(m), e.key.data(), m * sizeof(std::uint64_t), cudaMemcpyHostToDevice, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_entries.as<CachedImpulses>(m), records.data(), m * sizeof(CachedImpulses),
-                                     cudaMemcpyHostToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_normal.as<real>(m), e.normal_impulse.data(), m * sizeof(real), cudaMemcpyHostToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_tangent.as<Vec3>(m), e.tangent_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_rolling.as<Vec3>(m), e.rolling_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
+  auto* colour = m_colour.as<std::uint8_t>(m);
+  if (e.colour.size() == m)
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(colour, e.colour.data(), m, cudaMemcpyHostToDevice, s));
+  else
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(colour, kNoKeptColour, m, s));  // none known: coloured afresh
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
 }
 
@@ -249,7 +237,10 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(dst.as<char>(bytes), src.get(), bytes, cudaMemcpyDeviceToDevice, s));
   };
   copy(to.m_keys, m_keys, m * sizeof(std::uint64_t));
-  copy(to.m_entries, m_entries, m * sizeof(CachedImpulses));
+  copy(to.m_normal, m_normal, m * sizeof(real));
+  copy(to.m_tangent, m_tangent, m * sizeof(Vec3));
+  copy(to.m_rolling, m_rolling, m * sizeof(Vec3));
+  copy(to.m_colour, m_colour, m);
 }
 
 bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
@@ -261,16 +252,17 @@ bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   MARBLES_CUDA_CHECK(cudaMemsetAsync(matched, 0, m, s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
   const auto* keys = m_keys.get_as<std::uint64_t>();
-  const auto* entries = m_entries.get_as<CachedImpulses>();
+  const auto* normal = m_normal.get_as<real>();
   const auto spheres = static_cast<std::uint32_t>(bodies.count);
   auto* group = m_group.as<uint2>(spheres + 1);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(group, 0, (spheres + 1) * sizeof(uint2), s));
   groups_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, m, spheres, group);
   MARBLES_CUDA_CHECK_LAUNCH();
-  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, keys, group, spheres, entries, matched,
-                                                          kept_colour);
+  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, keys, group, spheres, normal,
+                                                          m_tangent.get_as<Vec3>(), m_rolling.get_as<Vec3>(),
+                                                          m_colour.get_as<std::uint8_t>(), matched, kept_colour);
   MARBLES_CUDA_CHECK_LAUNCH();
-  lost_loads_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, entries, matched, m, bodies, weight_impulse,
+  lost_loads_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, m, bodies, weight_impulse,
                                                              counter);
   MARBLES_CUDA_CHECK_LAUNCH();
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, counter, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
@@ -301,7 +293,7 @@ bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   MARBLES_CUDA_CHECK(cudaMemsetAsync(cold, 0, bodies_n, s));
   island_max_kernel<<<contact_grid, kBlock, 0, s>>>(contacts, n, label, island_max);
   MARBLES_CUDA_CHECK_LAUNCH();
-  island_cold_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, entries, matched, m, bodies, weight_impulse, label,
+  island_cold_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, m, bodies, weight_impulse, label,
                                                                island_max, cold);
   MARBLES_CUDA_CHECK_LAUNCH();
   island_clear_kernel<<<contact_grid, kBlock, 0, s>>>(contacts, n, label, cold);

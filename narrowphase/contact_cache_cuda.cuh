@@ -11,7 +11,6 @@
 #include <cuda_runtime.h>
 
 #include <cstdint>
-#include <vector>
 
 #include "core/device_buffer.cuh"
 #include "core/spheres.hpp"
@@ -51,8 +50,8 @@ class ContactCacheCuda {
 
  private:
   std::uint64_t m_bytes = 0;
-  DeviceBuffer m_flags, m_offsets, m_keys_in, m_index_in, m_keys, m_index, m_entries, m_group,
-      m_matched, m_counter, m_label, m_island_max, m_cold, m_temp;
+  DeviceBuffer m_flags, m_offsets, m_keys_in, m_index_in, m_keys, m_index, m_normal, m_tangent, m_rolling,
+      m_colour, m_group, m_matched, m_counter, m_label, m_island_max, m_cold, m_temp;
   std::uint32_t m_count = 0;
   std::uint32_t* m_host = nullptr;  // pinned readback
 };
