@@ -112,8 +112,10 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
   for (std::ptrdiff_t t = 0; t < n; ++t) {
     Contact& c = contacts[t];
     if (c.a >= spheres) continue;
-    const std::uint32_t k = cache_find(keys, first[c.a], first[c.a + 1], cache_key(c.a, c.b));
-    if (k == first[c.a + 1]) continue;
+    const std::uint64_t key = cache_key(c.a, c.b);
+    std::uint32_t k = first[c.a];
+    while (k < first[c.a + 1] && keys[k] < key) ++k;
+    if (k == first[c.a + 1] || keys[k] != key) continue;
     restore_impulses(c, m_entries.normal_impulse[k], m_entries.tangent_impulse[k], m_entries.rolling_impulse[k]);
     if (colour) kept_colour[t] = colour[k];
     m_matched[k] = 1;  // keys are unique: one contact per entry

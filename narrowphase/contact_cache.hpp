@@ -2,9 +2,9 @@
 //
 // The accumulated impulses of the last substep, keyed by body pair (a, b)
 // (b a sphere, or a wall with kWallFlag), sorted by key. A contact that
-// persists starts the next solve from its old impulses (found by a scan of
-// its sphere's few entries, cache_find, on both backends), so a resting
-// stack needs few iterations to hold.
+// persists starts the next solve from its old impulses (found by binary
+// search on the GPU, contact_cache_math.hpp; on the CPU by a scan of its
+// sphere's few entries), so a resting stack needs few iterations to hold.
 //
 // When a load goes away (a contact that carried more than a few times its
 // sphere's weight impulse is gone, e.g. the heavy top of a stack was lifted

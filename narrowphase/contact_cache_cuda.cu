@@ -41,28 +41,14 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
   }
 }
 
-// The entries of sphere a are keys[group[a].x, group[a].y) (entries sorted
-// by key are grouped by a; spheres without entries keep the empty [0, 0)):
-// marked at the transitions of the sorted keys, no atomics. Entries of
-// spheres that no longer exist (a >= spheres) are never matched.
-__global__ void groups_kernel(const std::uint64_t* keys, std::uint32_t m, std::uint32_t spheres, uint2* group) {
-  for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
-    const auto a = static_cast<std::uint32_t>(keys[e] >> 32);
-    if (a >= spheres) continue;
-    if (e == 0 || static_cast<std::uint32_t>(keys[e - 1] >> 32) != a) group[a].x = e;
-    if (e + 1 == m || static_cast<std::uint32_t>(keys[e + 1] >> 32) != a) group[a].y = e + 1;
-  }
-}
-
-// A contact scans its sphere's few entries (cache_find), as the CPU does.
-__global__ void restore_kernel(Contact* contacts, std::uint32_t n, const std::uint64_t* keys, const uint2* group,
-                               std::uint32_t spheres, const real* normal, const Vec3* tangent, const Vec3* rolling,
+__global__ void restore_kernel(Contact* contacts, std::uint32_t n, const std::uint64_t* keys, std::uint32_t m,
+                               const real* normal, const Vec3* tangent, const Vec3* rolling,
                                const std::uint8_t* colour, std::uint8_t* matched, std::uint8_t* kept_colour) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     Contact& c = contacts[k];
-    const uint2 g = c.a < spheres ? group[c.a] : make_uint2(0, 0);
-    const std::uint32_t e = cache_find(keys, g.x, g.y, cache_key(c.a, c.b));
-    const bool found = e < g.y;
+    const std::uint64_t key = cache_key(c.a, c.b);
+    const std::uint32_t e = cache_lower_bound(keys, m, key);
+    const bool found = e < m && keys[e] == key;
     kept_colour[k] = found ? colour[e] : kNoKeptColour;
     if (!found) continue;
     restore_impulses(c, normal[e], tangent[e], rolling[e]);
@@ -253,14 +239,9 @@ bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
   const auto* keys = m_keys.get_as<std::uint64_t>();
   const auto* normal = m_normal.get_as<real>();
-  const auto spheres = static_cast<std::uint32_t>(bodies.count);
-  auto* group = m_group.as<uint2>(spheres + 1);
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(group, 0, (spheres + 1) * sizeof(uint2), s));
-  groups_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, m, spheres, group);
-  MARBLES_CUDA_CHECK_LAUNCH();
-  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, keys, group, spheres, normal,
-                                                          m_tangent.get_as<Vec3>(), m_rolling.get_as<Vec3>(),
-                                                          m_colour.get_as<std::uint8_t>(), matched, kept_colour);
+  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, keys, m, normal, m_tangent.get_as<Vec3>(),
+                                                          m_rolling.get_as<Vec3>(), m_colour.get_as<std::uint8_t>(),
+                                                          matched, kept_colour);
   MARBLES_CUDA_CHECK_LAUNCH();
   lost_loads_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, m, bodies, weight_impulse,
                                                              counter);

@@ -1,7 +1,6 @@
 // narrowphase/contact_cache_cuda.cuh — the CUDA twin of contact_cache.cpp:
 // entries sorted by key on the device (flag, scan, write, CUB sort), looked
-// up in their sphere's group of entries (contact_cache_math.hpp), one thread
-// per contact. When
+// up by binary search (contact_cache_math.hpp), one thread per contact. When
 // a load was lost (rare: a counter says so), the island rule runs on the
 // device: islands by min-label propagation with pointer jumping (the same
 // islands as the CPU's union-find), their largest impulse by an atomic max,
@@ -51,7 +50,7 @@ class ContactCacheCuda {
  private:
   std::uint64_t m_bytes = 0;
   DeviceBuffer m_flags, m_offsets, m_keys_in, m_index_in, m_keys, m_index, m_normal, m_tangent, m_rolling,
-      m_colour, m_group, m_matched, m_counter, m_label, m_island_max, m_cold, m_temp;
+      m_colour, m_matched, m_counter, m_label, m_island_max, m_cold, m_temp;
   std::uint32_t m_count = 0;
   std::uint32_t* m_host = nullptr;  // pinned readback
 };

@@ -1,7 +1,7 @@
 // narrowphase/contact_cache_math.hpp — per-contact steps of the warm-start
 // cache, host and device: the loop bodies of contact_cache.cpp and of its
 // CUDA twin. The cache is a list of entries sorted by key (a << 32 | b);
-// a contact finds its entry in its sphere's group (cache_find), so lookups are independent.
+// a contact finds its entry by binary search, so lookups are independent.
 #pragma once
 
 #include <cstdint>
@@ -13,14 +13,15 @@ namespace marbles::narrowphase {
 
 MARBLES_HD_INLINE std::uint64_t cache_key(std::uint32_t a, std::uint32_t b) { return (std::uint64_t(a) << 32) | b; }
 
-// The entry of `key` among keys[begin, end), the entries of its sphere a
-// (sorted by key, so grouped by a, and by b within a group): a scan of a few
-// entries. `end` when it is not there.
-MARBLES_HD_INLINE std::uint32_t cache_find(const std::uint64_t* keys, std::uint32_t begin, std::uint32_t end,
-                                           std::uint64_t key) {
-  std::uint32_t k = begin;
-  while (k < end && keys[k] < key) ++k;
-  return k < end && keys[k] == key ? k : end;
+// First index in keys[0, n) whose key is >= key.
+MARBLES_HD_INLINE std::uint32_t cache_lower_bound(const std::uint64_t* keys, std::uint32_t n, std::uint64_t key) {
+  std::uint32_t lo = 0, hi = n;
+  while (lo < hi) {
+    const std::uint32_t mid = lo + (hi - lo) / 2;
+    if (keys[mid] < key) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo;
 }
 
 // The carried impulses of a matched contact: tangential part projected onto
