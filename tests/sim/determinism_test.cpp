@@ -8,8 +8,14 @@
 #include <omp.h>
 #endif
 
+#include <algorithm>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <iterator>
 #include <random>
 
+#include "sim/checkpoint.hpp"
 #include "tests/sim/test_scenes.hpp"
 
 using namespace marbles;
@@ -79,4 +85,104 @@ TEST(Determinism, PourIsTheSameOnEveryRunAndThreadCount) {
   EXPECT_EQ(run_pour(2, 300), one);
   EXPECT_EQ(run_pour(3, 300), one);
   EXPECT_NE(run_pour(1, 299), one) << "the hash must see the state change";
+}
+
+// The kept colours are part of the state a checkpoint carries: saved and
+// restored, the run goes on with the same bits; a restored state without
+// colours (a format-1 checkpoint) or with an improper colouring colours
+// afresh, and the run still goes on, properly coloured.
+TEST(Determinism, KeptColoursTravelWithTheState) {
+  auto [s, g] = pour_scene(400, 3);
+  Simulation whole(s, make_world(s, g), broadphase::Backend::cpu);
+  for (int k = 0; k < 60; ++k) whole.step();
+  const World at60 = whole.world();
+  const StepState state = whole.save_state();
+  ASSERT_EQ(state.cache.colour.size(), state.cache.size());
+  ASSERT_GT(std::count_if(state.cache.colour.begin(), state.cache.colour.end(),
+                          [](std::uint8_t c) { return c != narrowphase::kNoKeptColour; }),
+            0);
+  for (int k = 0; k < 40; ++k) whole.step();
+
+  Simulation resumed(s, make_world(s, g), broadphase::Backend::cpu);
+  resumed.restore(at60, state, 60);
+  for (int k = 0; k < 40; ++k) resumed.step();
+  EXPECT_EQ(state_hash(resumed.world()), state_hash(whole.world()));
+
+  // Without colours: coloured afresh, so another order and other bits; the
+  // cache then keeps colours again.
+  StepState plain = state;
+  plain.cache.colour.clear();
+  Simulation fresh(s, make_world(s, g), broadphase::Backend::cpu);
+  fresh.restore(at60, plain, 60);
+  EXPECT_EQ(fresh.save_state().cache.colour,
+            std::vector<std::uint8_t>(state.cache.size(), narrowphase::kNoKeptColour));
+  for (int k = 0; k < 40; ++k) fresh.step();
+  EXPECT_NE(state_hash(fresh.world()), state_hash(whole.world())) << "the colours must reach the result";
+  EXPECT_EQ(fresh.save_state().cache.colour.size(), fresh.save_state().cache.size());
+
+  // Two entries of one sphere with one colour: not a proper colouring, dropped.
+  StepState bad = state;
+  std::size_t first = 0;  // an entry with a colour, followed by another entry of its sphere a
+  while (first + 1 < bad.cache.size() && (bad.cache.colour[first] == narrowphase::kNoKeptColour ||
+                                          (bad.cache.key[first + 1] >> 32) != (bad.cache.key[first] >> 32)))
+    ++first;
+  ASSERT_LT(first + 1, bad.cache.size());
+  bad.cache.colour[first + 1] = bad.cache.colour[first];
+  Simulation guarded(s, make_world(s, g), broadphase::Backend::cpu);
+  guarded.restore(at60, bad, 60);
+  EXPECT_EQ(guarded.save_state().cache.colour,
+            std::vector<std::uint8_t>(state.cache.size(), narrowphase::kNoKeptColour));
+  for (int k = 0; k < 5; ++k) guarded.step();
+  EXPECT_EQ(guarded.world().first_non_finite(), guarded.world().size());
+}
+
+// A checkpoint carries the cache's colours (format 2); one of format 1 (the
+// same file without them) still loads, with no colours.
+TEST(Determinism, CheckpointsOfBothFormatsLoad) {
+  auto [s, g] = pour_scene(300, 3);
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  for (int k = 0; k < 30; ++k) sim.step();
+  Checkpoint c;
+  c.scene_hash = 42;
+  c.steps = 30;
+  c.world = sim.world();
+  c.state = sim.save_state();
+  ASSERT_GT(c.state.cache.size(), 0u);
+  const std::string path = ::testing::TempDir() + "/marbles_formats.mck";
+  write_checkpoint(path, c);
+  const Checkpoint back = read_checkpoint(path, 42);
+  EXPECT_EQ(back.state.cache.colour, c.state.cache.colour);
+  EXPECT_EQ(back.state.cache.key, c.state.cache.key);
+
+  // The same file as format 1: the colour array cut out, the format word 1,
+  // the checksum made anew.
+  std::ifstream in(path, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::size_t at = 8 + 4 + 16 + 4 + 4 + 8 + 8;  // magic, format, version, real and wall sizes, scene hash, steps
+  auto skip = [&](std::size_t element) {
+    std::uint64_t n = 0;
+    std::memcpy(&n, bytes.data() + at, 8);
+    at += 8 + n * element;
+  };
+  for (std::size_t element : {sizeof(Vec3), sizeof(Vec3), sizeof(Vec3), sizeof(real), sizeof(real), sizeof(real),
+                              sizeof(std::uint32_t), sizeof(std::uint64_t), sizeof(real), sizeof(Vec3), sizeof(Vec3)})
+    skip(element);
+  const std::size_t colour_at = at;
+  skip(1);
+  bytes.erase(colour_at, at - colour_at);
+  const std::uint32_t one = 1;
+  std::memcpy(bytes.data() + 8, &one, 4);
+  std::uint64_t h = 14695981039346656037ull;  // FNV-1a of all before the checksum
+  for (std::size_t i = 0; i + 8 < bytes.size(); ++i) h = (h ^ static_cast<unsigned char>(bytes[i])) * 1099511628211ull;
+  std::memcpy(bytes.data() + bytes.size() - 8, &h, 8);
+  const std::string old_path = ::testing::TempDir() + "/marbles_format1.mck";
+  std::ofstream(old_path, std::ios::binary) << bytes;
+  const Checkpoint old = read_checkpoint(old_path, 42);
+  EXPECT_TRUE(old.state.cache.colour.empty());
+  EXPECT_EQ(old.state.cache.key, c.state.cache.key);
+  EXPECT_EQ(old.state.cache.normal_impulse, c.state.cache.normal_impulse);
+  EXPECT_EQ(old.totals.contact_sum, c.totals.contact_sum);
+  EXPECT_EQ(state_hash(old.world), state_hash(c.world));
+  std::remove(path.c_str());
+  std::remove(old_path.c_str());
 }
