@@ -2,7 +2,7 @@
 
 #include <algorithm>
 
-#include "core/parallel.hpp"
+#include "core/counting_sort.hpp"
 #include "core/radix_sort.hpp"
 #include "narrowphase/solver_math.hpp"
 
@@ -127,55 +127,28 @@ void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size
   out.colours = colour(contacts.data(), m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
                        &out.rounds, &m_kept);
 
-  // Counting sort by colour, stable: colour-major, index order within a
-  // colour. In parallel: each thread counts its slice of the contacts per
-  // colour, the slices' places follow colour by colour and slice by slice,
-  // then each thread moves (and prepares) its slice: the same order for any
-  // thread count.
-  const std::uint32_t buckets = out.colours + 1;  // the colours, then the overflow set
-  const int most = n >= 20000 ? thread_count() : 1;
-  m_bucket_count.assign(std::size_t(most) * buckets, 0);
-  out.begin.assign(buckets + 1, 0);
+  // Colour-major, index order within a colour (a stable counting sort, in
+  // parallel), each contact prepared on its way when asked.
   m_sorted.resize(n);
   const Contact* in = contacts.data();
   Contact* sorted = m_sorted.data();
-  std::uint32_t* count = m_bucket_count.data();
   const std::uint32_t* colour_of = m_colour.data();
   const std::uint32_t overflow_bucket = out.colours;
-  auto bucket = [&](std::uint32_t k) { return colour_of[k] == kOverflowColour ? overflow_bucket : colour_of[k]; };
-#pragma omp parallel num_threads(most) if (most > 1)
-  {
-    const int t = thread_index(), threads = team_size();
-    const auto lo = static_cast<std::uint32_t>(std::uint64_t(n) * t / threads);
-    const auto hi = static_cast<std::uint32_t>(std::uint64_t(n) * (t + 1) / threads);
-    std::uint32_t* mine = count + std::size_t(t) * buckets;
-    for (std::uint32_t k = lo; k < hi; ++k) ++mine[bucket(k)];
-#pragma omp barrier
-#pragma omp single
-    {
-      std::uint32_t at = 0;
-      for (std::uint32_t c = 0; c < buckets; ++c) {
-        out.begin[c] = at;
-        for (int u = 0; u < threads; ++u) {
-          const std::uint32_t v = count[std::size_t(u) * buckets + c];
-          count[std::size_t(u) * buckets + c] = at;
-          at += v;
-        }
-      }
-      out.begin[buckets] = at;
-    }
-    for (std::uint32_t k = lo; k < hi; ++k) {
-      Contact& c = sorted[mine[bucket(k)]++];
-      c = in[k];
-      if (!prepare) continue;
-      const Contact& ahead = in[std::min(k + 8, hi - 1)];  // hints only: the bodies of a contact 8 ahead
-      __builtin_prefetch(prepare->velocity + ahead.a);
-      __builtin_prefetch(prepare->velocity + (ahead.b & ~kWallFlag));
-      __builtin_prefetch(prepare->angular_velocity + ahead.a);
-      __builtin_prefetch(prepare->angular_velocity + (ahead.b & ~kWallFlag));
-      prepare_from_world(c, *prepare);
-    }
-  }
+  counting_sort(
+      n, out.colours + 1,  // the colours, then the overflow set
+      [&](std::uint32_t k) { return colour_of[k] == kOverflowColour ? overflow_bucket : colour_of[k]; },
+      [&](std::uint32_t k, std::uint32_t place) {
+        Contact& c = sorted[place];
+        c = in[k];
+        if (!prepare) return;
+        const Contact& ahead = in[std::min(k + 8, n - 1)];  // hints only: the bodies of a contact 8 ahead
+        __builtin_prefetch(prepare->velocity + ahead.a);
+        __builtin_prefetch(prepare->velocity + (ahead.b & ~kWallFlag));
+        __builtin_prefetch(prepare->angular_velocity + ahead.a);
+        __builtin_prefetch(prepare->angular_velocity + (ahead.b & ~kWallFlag));
+        prepare_from_world(c, *prepare);
+      },
+      out.begin, m_bucket_count);
   contacts.swap(m_sorted);
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <numeric>
 
+#include "core/counting_sort.hpp"
 #include "narrowphase/contact_cache_math.hpp"
 
 namespace marbles::narrowphase {
@@ -131,47 +132,54 @@ void ContactCache::store(const std::vector<Contact>& contacts, const ColourRange
   // without load is kept for its colour alone, with no impulses (restored,
   // it starts as an uncached contact does).
   // Sorted by key = grouped by sphere a, then by b within a group: a
-  // counting sort by a (the contacts are read in order, each written once
-  // to its group), then each group (a few entries) sorted by b in place.
+  // counting sort by a (in parallel: core/counting_sort.hpp), then each group
+  // (a few entries) sorted by b in place.
   const auto n = static_cast<std::uint32_t>(contacts.size());
   m_contact_colour.assign(n, kNoKeptColour);
   if (ranges.size() == n) for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) { m_contact_colour[k] = c; });
-  m_first.assign(1, 0);  // grows to the largest a + 2 seen
-  for (std::uint32_t k = 0; k < n; ++k) {
-    const Contact& c = contacts[k];
-    if (!(c.normal_impulse > 0) && m_contact_colour[k] == kNoKeptColour) continue;
-    if (c.a + 2 > m_first.size()) m_first.resize(c.a + 2, 0);
-    ++m_first[c.a + 1];
-  }
-  const auto groups = static_cast<std::uint32_t>(m_first.size() - 1);
-  for (std::uint32_t a = 0; a < groups; ++a) m_first[a + 1] += m_first[a];
+  const Contact* cs = contacts.data();
+  const std::uint8_t* colour = m_contact_colour.data();
+  auto kept = [&](std::uint32_t k) { return cs[k].normal_impulse > 0 || colour[k] != kNoKeptColour; };
+  std::uint32_t groups = 0;  // the largest a kept, plus one
+#pragma omp parallel for schedule(static) reduction(max : groups) if (n >= kParallelFrom)
+  for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(n); ++k)
+    if (kept(static_cast<std::uint32_t>(k))) groups = std::max(groups, cs[k].a + 1);
+  CacheEntries& e = m_entries;  // sized for every contact, cut to the kept ones after
+  e.key.resize(n);
+  e.normal_impulse.resize(n);
+  e.tangent_impulse.resize(n);
+  e.rolling_impulse.resize(n);
+  e.colour.resize(n);
+  counting_sort(
+      n, groups, [&](std::uint32_t k) { return kept(k) ? cs[k].a : kSkipItem; },
+      [&](std::uint32_t k, std::uint32_t place) {
+        const Contact& c = cs[k];
+        const bool loaded = c.normal_impulse > 0;
+        e.key[place] = cache_key(c.a, c.b);
+        e.normal_impulse[place] = loaded ? c.normal_impulse : real(0);
+        e.tangent_impulse[place] = loaded ? c.tangent_impulse : Vec3{};
+        e.rolling_impulse[place] = loaded ? c.rolling_impulse : Vec3{};
+        e.colour[place] = colour[k];
+      },
+      m_first, m_order);
   const std::size_t m = m_first[groups];
-  m_entries.key.resize(m);
-  m_entries.normal_impulse.resize(m);
-  m_entries.tangent_impulse.resize(m);
-  m_entries.rolling_impulse.resize(m);
-  m_entries.colour.resize(m);
-  m_order.assign(m_first.begin(), m_first.end() - 1);  // the next free entry of each group
-  for (std::uint32_t k = 0; k < n; ++k) {
-    const Contact& c = contacts[k];
-    const bool loaded = c.normal_impulse > 0;
-    if (!loaded && m_contact_colour[k] == kNoKeptColour) continue;
-    const std::uint32_t e = m_order[c.a]++;
-    m_entries.key[e] = cache_key(c.a, c.b);
-    m_entries.normal_impulse[e] = loaded ? c.normal_impulse : real(0);
-    m_entries.tangent_impulse[e] = loaded ? c.tangent_impulse : Vec3{};
-    m_entries.rolling_impulse[e] = loaded ? c.rolling_impulse : Vec3{};
-    m_entries.colour[e] = m_contact_colour[k];
-  }
-  for (std::uint32_t a = 0; a < groups; ++a)  // insertion sort by key (unique) within the group
-    for (std::uint32_t e = m_first[a] + 1; e < m_first[a + 1]; ++e)
-      for (std::uint32_t j = e; j > m_first[a] && m_entries.key[j - 1] > m_entries.key[j]; --j) {
-        std::swap(m_entries.key[j - 1], m_entries.key[j]);
-        std::swap(m_entries.normal_impulse[j - 1], m_entries.normal_impulse[j]);
-        std::swap(m_entries.tangent_impulse[j - 1], m_entries.tangent_impulse[j]);
-        std::swap(m_entries.rolling_impulse[j - 1], m_entries.rolling_impulse[j]);
-        std::swap(m_entries.colour[j - 1], m_entries.colour[j]);
+  e.key.resize(m);
+  e.normal_impulse.resize(m);
+  e.tangent_impulse.resize(m);
+  e.rolling_impulse.resize(m);
+  e.colour.resize(m);
+#pragma omp parallel for schedule(static) if (groups >= kParallelFrom)
+  for (std::ptrdiff_t g = 0; g < static_cast<std::ptrdiff_t>(groups); ++g) {
+    const std::uint32_t a = static_cast<std::uint32_t>(g);
+    for (std::uint32_t x = m_first[a] + 1; x < m_first[a + 1]; ++x)  // insertion sort by key (unique)
+      for (std::uint32_t j = x; j > m_first[a] && e.key[j - 1] > e.key[j]; --j) {
+        std::swap(e.key[j - 1], e.key[j]);
+        std::swap(e.normal_impulse[j - 1], e.normal_impulse[j]);
+        std::swap(e.tangent_impulse[j - 1], e.tangent_impulse[j]);
+        std::swap(e.rolling_impulse[j - 1], e.rolling_impulse[j]);
+        std::swap(e.colour[j - 1], e.colour[j]);
       }
+  }
 }
 
 }  // namespace marbles::narrowphase

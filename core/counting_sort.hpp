@@ -1,0 +1,59 @@
+// core/counting_sort.hpp — a stable counting sort, in parallel.
+//
+// Items 0..n-1 go to buckets (bucket(k) < buckets, or kSkipItem: left out);
+// move(k, place) puts item k at its place: bucket by bucket, and within a
+// bucket in item order, whatever the thread count. Each thread counts its
+// slice of the items per bucket; the slices' places follow bucket by bucket
+// and slice by slice; then each thread moves its slice. `begin` gets the
+// buckets' first places (buckets + 1 entries, the last one the total).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "core/parallel.hpp"
+
+namespace marbles {
+
+inline constexpr std::uint32_t kSkipItem = 0xffffffffu;
+
+template <class Bucket, class Move>
+void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move&& move,
+                   std::vector<std::uint32_t>& begin, std::vector<std::uint32_t>& scratch) {
+  const int most = n >= 20000 ? thread_count() : 1;
+  scratch.assign(std::size_t(most) * buckets, 0);
+  begin.assign(std::size_t(buckets) + 1, 0);
+  std::uint32_t* count = scratch.data();
+#pragma omp parallel num_threads(most) if (most > 1)
+  {
+    const int t = thread_index(), threads = team_size();
+    const auto lo = static_cast<std::uint32_t>(std::uint64_t(n) * t / threads);
+    const auto hi = static_cast<std::uint32_t>(std::uint64_t(n) * (t + 1) / threads);
+    std::uint32_t* mine = count + std::size_t(t) * buckets;
+    for (std::uint32_t k = lo; k < hi; ++k) {
+      const std::uint32_t b = bucket(k);
+      if (b != kSkipItem) ++mine[b];
+    }
+#pragma omp barrier
+#pragma omp single
+    {
+      std::uint32_t at = 0;
+      for (std::uint32_t b = 0; b < buckets; ++b) {
+        begin[b] = at;
+        for (int u = 0; u < threads; ++u) {
+          const std::uint32_t v = count[std::size_t(u) * buckets + b];
+          count[std::size_t(u) * buckets + b] = at;
+          at += v;
+        }
+      }
+      begin[buckets] = at;
+    }
+    for (std::uint32_t k = lo; k < hi; ++k) {
+      const std::uint32_t b = bucket(k);
+      if (b != kSkipItem) move(k, mine[b]++);
+    }
+  }
+}
+
+}  // namespace marbles
