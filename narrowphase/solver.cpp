@@ -110,7 +110,7 @@ ContactSolver::ContactSolver(const SolverSettings& settings) : m_settings(settin
 }
 
 void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours,
-                                     const BodiesView& world, real h, bool prepared) {
+                                     const BodiesView& world, real h) {
   const auto n = static_cast<std::ptrdiff_t>(world.count);
   m_bodies.resize(world.count);
 #pragma omp parallel for schedule(static) if (n > 20000)
@@ -118,9 +118,6 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
   SolverBody* bodies = m_bodies.data();
 
   Contact* cs = contacts.data();
-  if (!prepared)
-    for_colour_ahead(cs, 0, static_cast<std::uint32_t>(contacts.size()), bodies,
-                     [&](std::uint32_t k) { prepare_one(cs[k], bodies); });
   if (m_settings.restitution) impacts(contacts, colours, bodies, world.count, h);
   if (m_settings.warm_start)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(cs, b, e, bodies, 0, false); });

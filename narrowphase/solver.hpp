@@ -7,7 +7,8 @@
 // the thread count, and it is the result of the CUDA twin bit for bit (both
 // call the per-contact functions of solver_math.hpp; the CPU's sweep takes
 // them four at a time in SIMD lanes, solver_lanes.hpp, with the same bits):
-//   prepare       effective masses; approach speed before the solve
+//   prepare       effective masses; approach speed before the solve (done as
+//                 the colouring moves the contacts: prepare_from_world)
 //   impacts       (with restitution) contacts approaching faster than the
 //                 rest speed collide as binary impacts, P_n = (1 + e) m |v_n|
 //                 with friction limited to mu P_n. The first pass visits them
@@ -51,11 +52,11 @@ class ContactSolver {
   // The velocity sweeps per substep (the watchdog's retries raise it).
   void set_iterations(int n) { m_settings.iterations = n; }
 
-  // prepare, impacts, warm start, sweeps on the velocities in `bodies`;
-  // `contacts` in colour-major order as `colours` describes. `prepared`: the
-  // colouring prepared them already (ContactColouring::colour_and_sort).
+  // impacts, warm start, sweeps on the velocities in `bodies`; `contacts` in
+  // colour-major order as `colours` describes, prepared on the way there
+  // (ContactColouring::colour_and_sort with the bodies).
   void solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours, const BodiesView& bodies,
-                        real h, bool prepared = false);
+                        real h);
 
   // Position projection over the same contacts at the integrated positions.
   void project_positions(const std::vector<Contact>& contacts, const ColourRanges& colours,

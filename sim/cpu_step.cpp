@@ -82,7 +82,7 @@ class CpuStep final : public StepBackend {
   }
 
   void solve_velocities(real h) override {
-    if (!m_contacts.empty()) m_solver.solve_velocities(m_contacts, m_colours, m_world.view(), h, true);
+    if (!m_contacts.empty()) m_solver.solve_velocities(m_contacts, m_colours, m_world.view(), h);
   }
 
   void integrate_positions(real h) override {

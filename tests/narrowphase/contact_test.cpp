@@ -105,7 +105,7 @@ TEST(Solver, HeadOnImpactFollowsImpactLaw) {
     SolverSettings s;
     s.rest_speed = real(1e-3);
     ColourRanges colours;
-    ContactColouring().colour_and_sort(contacts, bodies.count, colours);
+    ContactColouring().colour_and_sort(contacts, bodies.count, colours, nullptr, &bodies);
     ContactSolver(s).solve_velocities(contacts, colours, bodies, real(1e-3));
     const double v1_expect = (m1 * v1 + m2 * v2 - m2 * e * (v1 - v2)) / (m1 + m2);
     const double v2_expect = (m1 * v1 + m2 * v2 + m1 * e * (v1 - v2)) / (m1 + m2);
@@ -138,7 +138,7 @@ TEST(Solver, FrictionStaysInsideTheCone) {
     s.friction = true;
     s.restitution = false;
     ColourRanges colours;
-    ContactColouring().colour_and_sort(contacts, bodies.count, colours);
+    ContactColouring().colour_and_sort(contacts, bodies.count, colours, nullptr, &bodies);
     ContactSolver(s).solve_velocities(contacts, colours, bodies, real(1e-3));
     const Contact& c = contacts[0];
     EXPECT_LE(length(c.tangent_impulse), coeff.friction * c.normal_impulse * (1 + 1e-5) + 1e-7);
