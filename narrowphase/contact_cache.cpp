@@ -67,16 +67,20 @@ std::size_t cold_start_unloaded_islands(std::vector<Contact>& contacts, const st
 bool keep_proper_colours(CacheEntries& e) {
   const std::size_t m = e.size();
   bool proper = e.colour.size() == m;
-  // Entries are sorted by key, so grouped by sphere a; a sphere's colours as
-  // b are gathered in a map of its own.
-  std::vector<std::pair<std::uint32_t, std::uint64_t>> used;  // (sphere, colour mask)
+  // Every (sphere, colour) an entry holds, at both its spheres (not at a
+  // wall); sorted, a pair that stands twice is a conflict.
+  std::vector<std::pair<std::uint32_t, std::uint8_t>> used;
   used.reserve(2 * m);
   for (std::size_t k = 0; proper && k < m; ++k) {
-    if (e.colour[k] == kNoKeptColour) continue;
-    if (e.colour[k] >= kMaxColours) proper = false;
+    const std::uint8_t c = e.colour[k];
+    if (c == kNoKeptColour) continue;
+    if (c >= kMaxColours) {
+      proper = false;
+      break;
+    }
     const auto a = static_cast<std::uint32_t>(e.key[k] >> 32), b = static_cast<std::uint32_t>(e.key[k]);
-    used.push_back({a, std::uint64_t(1) << (e.colour[k] & 63)});
-    if (!is_wall(b)) used.push_back({b, std::uint64_t(1) << (e.colour[k] & 63)});
+    used.push_back({a, c});
+    if (!is_wall(b)) used.push_back({b, c});
   }
   if (proper) {
     std::sort(used.begin(), used.end());
