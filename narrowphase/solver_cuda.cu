@@ -54,12 +54,8 @@ __global__ void scatter_bodies_kernel(const SolverBody* bodies, BodiesView world
 }
 
 template <bool Friction, bool Rolling>
-__global__ void warm_start_kernel(Contact* contacts, ContactRange r, SolverBody* bodies, SweepRecords records) {
-  for_range(r, [&](std::uint32_t k) {
-    const Contact c = load_whole(contacts + k);
-    warm_start_one<Friction, Rolling>(c, bodies);
-    pack_sweep_record(c, records, k);  // the sweep's records from the same read
-  });
+__global__ void warm_start_kernel(Contact* contacts, ContactRange r, SolverBody* bodies) {
+  for_range(r, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(load_whole(contacts + k), bodies); });
 }
 
 template <bool Friction, bool Rolling>
@@ -138,14 +134,12 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_warm_start(Contact* contacts, ContactRange r, SolverBody* bodies, SolverTerms t,
-                       const SweepRecords& records, cudaStream_t s) {
+void launch_warm_start(Contact* contacts, ContactRange r, SolverBody* bodies, SolverTerms t, cudaStream_t s) {
   if (r.end <= r.begin) return;
-  const int g = blocks(r);
-  if (t.friction && t.rolling) warm_start_kernel<true, true><<<g, kBlock, 0, s>>>(contacts, r, bodies, records);
-  else if (t.friction) warm_start_kernel<true, false><<<g, kBlock, 0, s>>>(contacts, r, bodies, records);
-  else if (t.rolling) warm_start_kernel<false, true><<<g, kBlock, 0, s>>>(contacts, r, bodies, records);
-  else warm_start_kernel<false, false><<<g, kBlock, 0, s>>>(contacts, r, bodies, records);
+  if (t.friction && t.rolling) warm_start_kernel<true, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
+  else if (t.friction) warm_start_kernel<true, false><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
+  else if (t.rolling) warm_start_kernel<false, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
+  else warm_start_kernel<false, false><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

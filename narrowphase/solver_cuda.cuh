@@ -31,10 +31,8 @@ void launch_gather_bodies(const BodiesView& world, SolverBody* bodies, int sm_co
 void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, int sm_count, cudaStream_t stream);
 
 // (The contacts come prepared from the colouring: ColouringCuda::colour_and_sort.)
-// The warm start also packs the sweep's records of its range (one read of
-// each contact for both).
 void launch_warm_start(Contact* contacts, ContactRange range, SolverBody* bodies, SolverTerms terms,
-                       const SweepRecords& records, cudaStream_t stream);
+                       cudaStream_t stream);
 // The stages after the warm start on the sweep's records (solver_math.hpp):
 // packed from the contacts after the warm start; the sweeps, the position
 // stages and the overlap read them; the impulses go back into the contacts

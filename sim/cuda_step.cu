@@ -190,17 +190,13 @@ class CudaStep final : public StepBackend {
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     narrowphase::Contact* contacts = contacts_d();  // prepared by the colouring
     if (m_model.solver.restitution) impacts(bodies, h);
-    // From the warm start on the stages read the sweep's records
-    // (solver_math.hpp), packed by the warm start as it reads each contact
-    // (or alone without it); they live in the colouring's gather buffer,
-    // free from the gather until the next substep's colouring.
-    m_records = narrowphase::SweepRecords::in(m_sorted.as<char>(narrowphase::SweepRecords::bytes_for(m_count)), m_count);
     if (m_model.solver.warm_start)
-      over_colours(false, [&](nc::ContactRange r) {
-        nc::launch_warm_start(contacts, r, bodies, m_terms, m_records, m_stream);
-      });
-    else
-      nc::launch_pack_sweep(contacts, m_count, m_records, m_sm, m_stream);
+      over_colours(false, [&](nc::ContactRange r) { nc::launch_warm_start(contacts, r, bodies, m_terms, m_stream); });
+    // From here on the stages read the sweep's records (solver_math.hpp);
+    // they live in the colouring's gather buffer, free from the gather until
+    // the next substep's colouring.
+    m_records = narrowphase::SweepRecords::in(m_sorted.as<char>(narrowphase::SweepRecords::bytes_for(m_count)), m_count);
+    nc::launch_pack_sweep(contacts, m_count, m_records, m_sm, m_stream);
     m_records_live = true;
     const real inv_h = real(1) / h;
     for (int it = 0; it < m_model.solver.iterations * m_iteration_factor; ++it)
