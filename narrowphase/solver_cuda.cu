@@ -55,7 +55,7 @@ __global__ void scatter_bodies_kernel(const SolverBody* bodies, BodiesView world
 
 template <bool Friction, bool Rolling>
 __global__ void warm_start_kernel(Contact* contacts, ContactRange r, SolverBody* bodies) {
-  for_range(r, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(load_whole(contacts + k), bodies); });
+  for_range(r, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(load_streaming(contacts + k), bodies); });
 }
 
 template <bool Friction, bool Rolling>

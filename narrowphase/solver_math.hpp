@@ -127,7 +127,8 @@ MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
 // contacts only when the contacts are asked for (unpack_sweep_impulses) or
 // stored in the cache. Each stage runs its per-contact function on the
 // contact loaded from them: the same fields, the same arithmetic, the same
-// bits as on the whole Contact.
+// bits as on the whole Contact. The records move with the evict-first hint
+// (load_streaming), so the bodies every colour reads again stay in L2.
 struct alignas(4 * sizeof(real)) Real4 {
   real x = 0, y = 0, z = 0, w = 0;
 };
@@ -171,25 +172,25 @@ MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE Contact load_sweep_contact(const SweepRecords& s, std::uint32_t k) {
   Contact c;
-  const BodyPair ab = s.bodies[k];
+  const BodyPair ab = load_streaming(s.bodies + k);
   c.a = ab.a, c.b = ab.b;
-  const Real4 i = load_whole(s.impulse + k), g = load_whole(s.geometry + k), m = load_whole(s.masses + k);
+  const Real4 i = load_streaming(s.impulse + k), g = load_streaming(s.geometry + k), m = load_streaming(s.masses + k);
   c.normal_impulse = i.x;
   c.tangent_impulse = {i.y, i.z, i.w};
   c.normal = {g.x, g.y, g.z};
   c.separation = g.w;
   c.ra = m.x, c.rb = m.y, c.normal_mass = m.z, c.tangent_mass = m.w;
   if constexpr (Friction || Rolling) {
-    const Real4 t = load_whole(s.terms + k);
+    const Real4 t = load_streaming(s.terms + k);
     c.rolling_mass = t.x;
     c.coeff.friction = t.y, c.coeff.rolling_friction = t.z, c.coeff.twisting_friction = t.w;
   }
   if constexpr (Rolling) {
-    const Real4 r = load_whole(s.rolling + k);
+    const Real4 r = load_streaming(s.rolling + k);
     c.rolling_impulse = {r.x, r.y, r.z};
   }
   if (is_wall(c.b)) {
-    const Real4 w = load_whole(s.extra + k);
+    const Real4 w = load_streaming(s.extra + k);
     c.wall_velocity = {w.x, w.y, w.z};
   }
   return c;
@@ -198,9 +199,9 @@ MARBLES_HD_INLINE Contact load_sweep_contact(const SweepRecords& s, std::uint32_
 // What a sweep changed: the accumulated impulses.
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void store_sweep_impulses(const SweepRecords& s, std::uint32_t k, const Contact& c) {
-  store_whole(s.impulse + k, Real4{c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z});
+  store_streaming(s.impulse + k, Real4{c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z});
   if constexpr (Rolling)
-    store_whole(s.rolling + k, Real4{c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, real(0)});
+    store_streaming(s.rolling + k, Real4{c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, real(0)});
 }
 
 // The contact as the position stages read it (rebound_one, project_one,
