@@ -19,8 +19,8 @@ __device__ void for_range(const ContactRange& r, F&& f) {
       for (std::uint32_t k = r.begin; k < r.end; ++k) f(k);
     return;
   }
-  const std::uint32_t k = r.begin + blockIdx.x * blockDim.x + threadIdx.x;
-  if (k < r.end) f(k);
+  const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
+  if (t < r.end - r.begin) f(r.mirrored ? r.end - 1 - t : r.begin + t);
 }
 
 inline int blocks(const ContactRange& r) {

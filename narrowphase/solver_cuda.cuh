@@ -24,6 +24,7 @@ struct SolverTerms {
 struct ContactRange {
   std::uint32_t begin = 0, end = 0;
   bool serial = false, backwards = false;
+  bool mirrored = false;  // parallel: thread t takes contact end - 1 - t
 };
 
 // The packed velocity state (solver_math.hpp) from the world, and back.

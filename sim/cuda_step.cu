@@ -388,11 +388,17 @@ class CudaStep final : public StepBackend {
 
   // One launch per colour range in the solver's order (visit_colours, the
   // CPU solver's too); the overflow set by one thread.
+  // Parallel launches take their colour in turn forwards and mirrored (the
+  // last contact first): the bodies a colour touched last are still in L2
+  // when the next one starts with them (each large colour touches nearly
+  // every sphere). Within a colour the order changes no bit.
   template <class F>
   void over_colours(bool backwards, F&& launch) {
     narrowphase::visit_colours(m_begin, m_colours, backwards,
                                [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
-                                 launch(nc::ContactRange{b, e, serial, reversed});
+                                 nc::ContactRange r{b, e, serial, reversed};
+                                 if (!serial) r.mirrored = m_mirror, m_mirror = !m_mirror;
+                                 launch(r);
                                });
   }
 
@@ -459,6 +465,7 @@ class CudaStep final : public StepBackend {
 
   std::uint32_t m_count = 0;          // contacts of this substep
   bool m_kept_valid = false;          // m_kept_colour holds this substep's kept colours
+  bool m_mirror = false;              // the next parallel colour launch runs mirrored (over_colours)
   // The substep's contacts as the stages after the warm start read them, and
   // whether they hold impulses the contacts do not (set by the solve, cleared
   // by the next find_contacts or by unpacking them into the contacts).
