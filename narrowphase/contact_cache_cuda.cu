@@ -18,19 +18,30 @@ __global__ void flags_kernel(SweepRecords records, const std::uint8_t* colour, s
     flags[k] = k < n && (records.impulse[k].x > 0 || (colour && colour[k] != kNoKeptColour)) ? 1u : 0u;
 }
 
-__global__ void keys_kernel(SweepRecords records, std::uint32_t n, const std::uint32_t* offsets,
-                            std::uint64_t* keys, std::uint32_t* index) {
+// The sort's key: (a, b) as the cache key orders them, in as few bits as
+// the spheres and walls need (a wall b after every sphere, walls in index
+// order), so the radix sort makes 5 passes at 10^6 spheres instead of 8.
+__device__ __forceinline__ std::uint64_t sort_key(const BodyPair& ab, std::uint32_t spheres, int b_bits) {
+  const std::uint32_t b = is_wall(ab.b) ? spheres + (ab.b & ~kWallFlag) : ab.b;
+  return (std::uint64_t(ab.a) << b_bits) | b;
+}
+
+__global__ void keys_kernel(SweepRecords records, std::uint32_t n, const std::uint32_t* offsets, std::uint32_t spheres,
+                            int b_bits, std::uint64_t* keys, std::uint32_t* index) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     if (offsets[k + 1] == offsets[k]) continue;
-    const BodyPair ab = records.bodies[k];
-    keys[offsets[k]] = cache_key(ab.a, ab.b);
+    keys[offsets[k]] = sort_key(records.bodies[k], spheres, b_bits);
     index[offsets[k]] = k;
   }
 }
 
+// The entries in key order, with their cache keys in place of the sort's.
 __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_colour, const std::uint32_t* index,
-                              std::uint32_t m, real* normal, Vec3* tangent, Vec3* rolling, std::uint8_t* colour) {
+                              std::uint32_t m, std::uint64_t* keys, real* normal, Vec3* tangent, Vec3* rolling,
+                              std::uint8_t* colour) {
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
+    const BodyPair ab = records.bodies[index[e]];
+    keys[e] = cache_key(ab.a, ab.b);
     Contact c;
     unpack_sweep_impulses(records, index[e], c);
     const bool loaded = c.normal_impulse > 0;
@@ -155,8 +166,16 @@ ContactCacheCuda::~ContactCacheCuda() {
   if (m_host) cudaFreeHost(m_host);
 }
 
+namespace {
+int bits_for(std::uint64_t values) {  // bits that hold 0 .. values - 1
+  int bits = 0;
+  while (bits < 64 && (std::uint64_t(1) << bits) < values) ++bits;
+  return bits;
+}
+}  // namespace
+
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
-                             int sm_count, cudaStream_t s) {
+                             std::uint32_t spheres, std::uint32_t walls, int sm_count, cudaStream_t s) {
   auto* flags = m_flags.as<std::uint32_t>(n + 1);
   auto* offsets = m_offsets.as<std::uint32_t>(n + 1);
   flags_kernel<<<grid_for(n + 1, sm_count), kBlock, 0, s>>>(contacts, contact_colour, n, flags);
@@ -171,10 +190,11 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   auto* index_in = m_index_in.as<std::uint32_t>(m_count);
   auto* keys = m_keys.as<std::uint64_t>(m_count);
   auto* index = m_index.as<std::uint32_t>(m_count);
-  keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, offsets, keys_in, index_in);
+  const int b_bits = bits_for(std::uint64_t(spheres) + walls), a_bits = bits_for(spheres);
+  keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, offsets, spheres, b_bits, keys_in, index_in);
   MARBLES_CUDA_CHECK_LAUNCH();
-  ::marbles::cuda::device_sort_pairs(keys_in, keys, index_in, index, m_count, 64, m_temp, s);
-  gather_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, m_count,
+  ::marbles::cuda::device_sort_pairs(keys_in, keys, index_in, index, m_count, a_bits + b_bits, m_temp, s);
+  gather_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, m_count, keys,
                                                                m_normal.as<real>(m_count), m_tangent.as<Vec3>(m_count),
                                                                m_rolling.as<Vec3>(m_count),
                                                                m_colour.as<std::uint8_t>(m_count));

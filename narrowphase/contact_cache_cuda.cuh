@@ -35,8 +35,9 @@ class ContactCacheCuda {
                std::uint8_t* kept_colour, int sm_count, cudaStream_t stream);
   // The contacts as the sweep's records hold them after the last sweep, with
   // their colours (contact_colour, device, per contact; null: none).
-  void store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n, int sm_count,
-             cudaStream_t stream);
+  // `spheres` and `walls`: how many there are (the sort's key bits).
+  void store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n, std::uint32_t spheres,
+             std::uint32_t walls, int sm_count, cudaStream_t stream);
   std::uint32_t size() const { return m_count; }
   // The entries as the CPU cache holds them (a checkpoint's copy), and back.
   CacheEntries download(cudaStream_t stream);

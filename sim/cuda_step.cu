@@ -225,7 +225,9 @@ class CudaStep final : public StepBackend {
   }
 
   void store_impulses() override {
-    m_cache.store(m_records, m_sorted_colour.get_as<std::uint8_t>(), m_count, m_sm, m_stream);
+    m_cache.store(m_records, m_sorted_colour.get_as<std::uint8_t>(), m_count,
+                  static_cast<std::uint32_t>(m_device.size()),
+                  static_cast<std::uint32_t>(m_model.wall_shapes.size()), m_sm, m_stream);
   }
 
   void begin_step() override {
