@@ -191,14 +191,29 @@ MARBLES_HD_INLINE bool make_wall_contact(const BodiesView& bodies, std::uint32_t
   return true;
 }
 
+// Effective masses of a contact between A and B (arms ra, rb along the
+// normal). Each is a function of the two bodies' inverse masses and inertias
+// and the arms alone: the GPU's sweeps compute the ones they need from the
+// bodies they load instead of streaming them (solver_math.hpp, solve_record),
+// with these same expressions, so the bits equal the prepared ones.
+MARBLES_HD_INLINE real normal_mass_of(const BodyState& A, const BodyState& B) {
+  const real k_normal = A.inv_mass + B.inv_mass;
+  return k_normal > 0 ? real(1) / k_normal : real(0);
+}
+MARBLES_HD_INLINE real tangent_mass_of(const BodyState& A, const BodyState& B, real ra, real rb) {
+  const real k_tangent = (A.inv_mass + B.inv_mass) + A.inv_inertia * ra * ra + B.inv_inertia * rb * rb;
+  return k_tangent > 0 ? real(1) / k_tangent : real(0);
+}
+MARBLES_HD_INLINE real rolling_mass_of(const BodyState& A, const BodyState& B) {
+  const real k_roll = A.inv_inertia + B.inv_inertia;
+  return k_roll > 0 ? real(1) / k_roll : real(0);
+}
+
 // Prepare stage: effective masses and the approach speed before the solve.
 MARBLES_HD_INLINE void prepare_contact(Contact& c, const BodyState& A, const BodyState& B) {
-  const real k_normal = A.inv_mass + B.inv_mass;
-  c.normal_mass = k_normal > 0 ? real(1) / k_normal : real(0);
-  const real k_tangent = k_normal + A.inv_inertia * c.ra * c.ra + B.inv_inertia * c.rb * c.rb;
-  c.tangent_mass = k_tangent > 0 ? real(1) / k_tangent : real(0);
-  const real k_roll = A.inv_inertia + B.inv_inertia;
-  c.rolling_mass = k_roll > 0 ? real(1) / k_roll : real(0);
+  c.normal_mass = normal_mass_of(A, B);
+  c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
+  c.rolling_mass = rolling_mass_of(A, B);
   c.approach_speed = dot(A.v - B.v, c.normal);
 }
 

@@ -60,11 +60,7 @@ __global__ void warm_start_kernel(Contact* contacts, ContactRange r, SolverBody*
 
 template <bool Friction, bool Rolling>
 __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
-  for_range(r, [&](std::uint32_t k) {
-    Contact c = load_sweep_contact<Friction, Rolling>(s, k);
-    solve_one<Friction, Rolling>(c, bodies, inv_h);
-    store_sweep_impulses<Friction, Rolling>(s, k, c);
-  });
+  for_range(r, [&](std::uint32_t k) { solve_record<Friction, Rolling>(s, k, bodies, inv_h); });
 }
 
 __global__ void pack_sweep_kernel(const Contact* contacts, std::uint32_t n, SweepRecords s) {

@@ -105,19 +105,24 @@ MARBLES_HD_INLINE void warm_start_one(const Contact& c, SolverBody* bodies) {
 // One Gauss–Seidel update of one contact: friction, rolling resistance (when
 // enabled), then the normal impulse.
 template <bool Friction, bool Rolling>
-MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
-  BodyState A = load_body(bodies, c.a, c);
-  BodyState B = load_body(bodies, c.b, c);
+MARBLES_HD_INLINE void solve_states(Contact& c, BodyState& A, BodyState& B, real inv_h) {
   if constexpr (Friction) solve_friction(c, A, B);
   if constexpr (Rolling) solve_rolling(c, A, B);
   solve_normal(c, A, B, inv_h);
+}
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
+  BodyState A = load_body(bodies, c.a, c);
+  BodyState B = load_body(bodies, c.b, c);
+  solve_states<Friction, Rolling>(c, A, B, inv_h);
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
 }
 
 // --- the sweep's records -------------------------------------------------------
-// What the stages after the warm start read of a contact (about 90 of its
-// 112 bytes in float), as a structure of arrays of 4-real words: thread k of
+// What the stages after the warm start read of a contact (56 of its 112
+// bytes in float with friction, 40 without), as a structure of arrays of
+// 4-real words: thread k of
 // a launch reads word k of each array, so a warp's request is whole sectors,
 // where a whole Contact per thread made every request span 32 records, and a
 // field-by-field update of one wrote partial sectors. The GPU packs them once
@@ -128,7 +133,11 @@ MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
 // stored in the cache. Each stage runs its per-contact function on the
 // contact loaded from them: the same fields, the same arithmetic, the same
 // bits as on the whole Contact. The records move with the evict-first hint
-// (load_streaming), so the bodies every colour reads again stay in L2.
+// (load_streaming), so the bodies every colour reads again stay in L2. The
+// effective masses are not in them: a sweep computes the ones it needs from
+// the two bodies it loads anyway (solve_record), the same expressions the
+// prepare stage used, so a record is 16 bytes shorter with friction and 32
+// without; the sweeps are bound by memory, not arithmetic.
 struct alignas(4 * sizeof(real)) Real4 {
   real x = 0, y = 0, z = 0, w = 0;
 };
@@ -136,58 +145,55 @@ struct alignas(8) BodyPair {
   std::uint32_t a = 0, b = 0;
 };
 struct SweepRecords {
-  Real4* impulse = nullptr;   // normal_impulse, tangent_impulse            (read and written)
-  Real4* rolling = nullptr;   // rolling_impulse, -                          (read and written, with rolling)
+  Real4* impulse = nullptr;   // normal_impulse, tangent_impulse               (read and written)
+  Real4* rolling = nullptr;   // rolling_impulse, twisting_friction            (read and written, with rolling)
   Real4* geometry = nullptr;  // normal, separation
-  Real4* masses = nullptr;    // ra, rb, normal_mass, tangent_mass
-  Real4* terms = nullptr;     // rolling_mass, friction, rolling_friction, twisting_friction
+  Real4* arms = nullptr;      // ra, rb, friction, rolling_friction            (with friction or rolling)
   Real4* extra = nullptr;     // wall_velocity (read by the sweeps for wall contacts only), rebound_shift
   BodyPair* bodies = nullptr; // a, b
 
   // Bytes of the records of n contacts, every array 16-byte aligned.
-  static constexpr std::size_t bytes_for(std::size_t n) { return n * (6 * sizeof(Real4) + sizeof(BodyPair)) + 64; }
+  static constexpr std::size_t bytes_for(std::size_t n) { return n * (5 * sizeof(Real4) + sizeof(BodyPair)) + 64; }
   // The arrays of n contacts laid out in `memory` (bytes_for(n) bytes, 16-byte aligned).
   static SweepRecords in(void* memory, std::size_t n) {
     SweepRecords s;
     auto* p = static_cast<Real4*>(memory);
-    s.impulse = p, s.rolling = p + n, s.geometry = p + 2 * n, s.masses = p + 3 * n, s.terms = p + 4 * n;
-    s.extra = p + 5 * n;
-    s.bodies = reinterpret_cast<BodyPair*>(p + 6 * n);
+    s.impulse = p, s.rolling = p + n, s.geometry = p + 2 * n, s.arms = p + 3 * n, s.extra = p + 4 * n;
+    s.bodies = reinterpret_cast<BodyPair*>(p + 5 * n);
     return s;
   }
 };
 
 MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s, std::uint32_t k) {
   s.impulse[k] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
-  s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, real(0)};
+  s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.coeff.twisting_friction};
   s.geometry[k] = {c.normal.x, c.normal.y, c.normal.z, c.separation};
-  s.masses[k] = {c.ra, c.rb, c.normal_mass, c.tangent_mass};
-  s.terms[k] = {c.rolling_mass, c.coeff.friction, c.coeff.rolling_friction, c.coeff.twisting_friction};
+  s.arms[k] = {c.ra, c.rb, c.coeff.friction, c.coeff.rolling_friction};
   s.extra[k] = {c.wall_velocity.x, c.wall_velocity.y, c.wall_velocity.z, c.rebound_shift};
   s.bodies[k] = {c.a, c.b};
 }
 
-// The contact as solve_one<Friction, Rolling> reads it: every field it reads
-// is the packed contact's, the others are left at their defaults.
+// The contact as solve_one<Friction, Rolling> reads it, less the effective
+// masses (solve_record adds them): every field it reads is the packed
+// contact's, the others are left at their defaults.
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE Contact load_sweep_contact(const SweepRecords& s, std::uint32_t k) {
   Contact c;
   const BodyPair ab = load_streaming(s.bodies + k);
   c.a = ab.a, c.b = ab.b;
-  const Real4 i = load_streaming(s.impulse + k), g = load_streaming(s.geometry + k), m = load_streaming(s.masses + k);
+  const Real4 i = load_streaming(s.impulse + k), g = load_streaming(s.geometry + k);
   c.normal_impulse = i.x;
   c.tangent_impulse = {i.y, i.z, i.w};
   c.normal = {g.x, g.y, g.z};
   c.separation = g.w;
-  c.ra = m.x, c.rb = m.y, c.normal_mass = m.z, c.tangent_mass = m.w;
   if constexpr (Friction || Rolling) {
-    const Real4 t = load_streaming(s.terms + k);
-    c.rolling_mass = t.x;
-    c.coeff.friction = t.y, c.coeff.rolling_friction = t.z, c.coeff.twisting_friction = t.w;
+    const Real4 m = load_streaming(s.arms + k);
+    c.ra = m.x, c.rb = m.y, c.coeff.friction = m.z, c.coeff.rolling_friction = m.w;
   }
   if constexpr (Rolling) {
     const Real4 r = load_streaming(s.rolling + k);
     c.rolling_impulse = {r.x, r.y, r.z};
+    c.coeff.twisting_friction = r.w;
   }
   if (is_wall(c.b)) {
     const Real4 w = load_streaming(s.extra + k);
@@ -201,7 +207,26 @@ template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void store_sweep_impulses(const SweepRecords& s, std::uint32_t k, const Contact& c) {
   store_streaming(s.impulse + k, Real4{c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z});
   if constexpr (Rolling)
-    store_streaming(s.rolling + k, Real4{c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, real(0)});
+    store_streaming(s.rolling + k, Real4{c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z,
+                                         c.coeff.twisting_friction});
+}
+
+// One sweep's update of record k (the GPU's sweep kernel): solve_one on the
+// loaded contact, its effective masses computed from the bodies as the
+// prepare stage computed them (contact_math.hpp), only the ones the terms
+// read.
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE void solve_record(const SweepRecords& s, std::uint32_t k, SolverBody* bodies, real inv_h) {
+  Contact c = load_sweep_contact<Friction, Rolling>(s, k);
+  BodyState A = load_body(bodies, c.a, c);
+  BodyState B = load_body(bodies, c.b, c);
+  c.normal_mass = normal_mass_of(A, B);
+  if constexpr (Friction) c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
+  if constexpr (Rolling) c.rolling_mass = rolling_mass_of(A, B);
+  solve_states<Friction, Rolling>(c, A, B, inv_h);
+  store_body(bodies, c.a, A);
+  store_body(bodies, c.b, B);
+  store_sweep_impulses<Friction, Rolling>(s, k, c);
 }
 
 // The contact as the position stages read it (rebound_one, project_one,

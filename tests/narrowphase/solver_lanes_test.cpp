@@ -166,9 +166,10 @@ TEST(SolverLanes, GroupedMovesEqualFieldByField) {
 }
 
 // The GPU's sweep on the sweep's records (solver_math.hpp): the contacts
-// packed, swept through load_sweep_contact / solve_one / store_sweep_impulses,
-// and unpacked must equal solve_one on the whole contacts, contacts and
-// bodies bit for bit (the fields it leaves out are the ones no sweep reads).
+// packed, swept through solve_record (the effective masses computed from the
+// bodies, not read), and unpacked must equal solve_one on the whole prepared
+// contacts, contacts and bodies bit for bit (the fields it leaves out are the
+// ones no sweep reads).
 template <bool Friction, bool Rolling>
 void expect_records_equal_contacts(std::uint32_t seed, bool edge) {
   std::mt19937 rng(seed);
@@ -182,9 +183,7 @@ void expect_records_equal_contacts(std::uint32_t seed, bool edge) {
   for (int sweep = 0; sweep < 3; ++sweep)
     for (std::uint32_t k = 0; k < W; ++k) {
       solve_one<Friction, Rolling>(whole.contacts[k], whole.bodies.data(), inv_h);
-      Contact c = load_sweep_contact<Friction, Rolling>(records, k);
-      solve_one<Friction, Rolling>(c, packed.bodies.data(), inv_h);
-      store_sweep_impulses<Friction, Rolling>(records, k, c);
+      solve_record<Friction, Rolling>(records, k, packed.bodies.data(), inv_h);
     }
   for (std::uint32_t k = 0; k < W; ++k) unpack_sweep_impulses(records, k, packed.contacts[k]);
   ASSERT_TRUE(same_bits(whole.contacts.data(), packed.contacts.data(), sizeof(Contact) * W))
@@ -217,13 +216,40 @@ TEST(SweepRecords, AFieldLeftOutIsSeen) {
   pack_sweep_record(wall, records, 0);
   Contact loaded = load_sweep_contact<true, false>(records, 0);
   EXPECT_EQ(loaded.wall_velocity.x, real(1));
-  records.extra[0] = {};
-  loaded = load_sweep_contact<true, false>(records, 0);
   std::vector<SolverBody> a = c.bodies, b = c.bodies;
-  Contact w1 = wall, w2 = loaded;
-  solve_one<true, false>(w1, a.data(), real(1000));
-  solve_one<true, false>(w2, b.data(), real(1000));
-  EXPECT_FALSE(same_bits(&w1.tangent_impulse, &w2.tangent_impulse, sizeof(Vec3)));
+  solve_record<true, false>(records, 0, a.data(), real(1000));
+  const Real4 with = records.impulse[0];
+  pack_sweep_record(wall, records, 0);
+  records.extra[0] = {};
+  solve_record<true, false>(records, 0, b.data(), real(1000));
+  const Real4 without = records.impulse[0];
+  EXPECT_FALSE(same_bits(&with, &without, sizeof(Real4)));
+}
+
+// The masses a record's sweep computes are the prepared ones: a contact whose
+// stored masses disagree with its bodies (here prepared from other bodies)
+// gives another result on the whole contact than on its record.
+TEST(SweepRecords, TheMassesComeFromTheBodies) {
+  std::mt19937 rng(11);
+  Case c = make_case(rng, false);
+  std::vector<unsigned char> memory(SweepRecords::bytes_for(W) + 64);
+  void* aligned = memory.data() + (64 - reinterpret_cast<std::uintptr_t>(memory.data()) % 64);
+  const SweepRecords records = SweepRecords::in(aligned, W);
+  int differ = 0;
+  for (std::uint32_t k = 0; k < W; ++k) {
+    Contact stale = c.contacts[k];
+    stale.normal_mass *= real(2), stale.tangent_mass *= real(2);
+    pack_sweep_record(stale, records, k);
+    std::vector<SolverBody> a = c.bodies, b = c.bodies;
+    solve_one<true, false>(stale, a.data(), real(1000));
+    solve_record<true, false>(records, k, b.data(), real(1000));
+    Contact fresh = c.contacts[k];
+    std::vector<SolverBody> f = c.bodies;
+    solve_one<true, false>(fresh, f.data(), real(1000));
+    EXPECT_TRUE(same_bits(f.data(), b.data(), sizeof(SolverBody) * f.size())) << k;
+    if (!same_bits(a.data(), b.data(), sizeof(SolverBody) * a.size())) ++differ;
+  }
+  EXPECT_GT(differ, 0);
 }
 
 // The position stages on the records: rebound_one, project_one and
