@@ -165,6 +165,15 @@ TEST(SolverLanes, GroupedMovesEqualFieldByField) {
   }
 }
 
+// Records of W contacts in 64-byte-aligned host memory.
+struct RecordsMemory {
+  std::vector<unsigned char> bytes = std::vector<unsigned char>(SweepRecords::bytes_for(W) + 64);
+  SweepRecords records() {
+    void* aligned = bytes.data() + (64 - reinterpret_cast<std::uintptr_t>(bytes.data()) % 64);
+    return SweepRecords::in(aligned, W);
+  }
+};
+
 // The GPU's sweep on the sweep's records (solver_math.hpp): the contacts
 // packed, swept through solve_record (the effective masses computed from the
 // bodies, not read), and unpacked must equal solve_one on the whole prepared
@@ -175,9 +184,8 @@ void expect_records_equal_contacts(std::uint32_t seed, bool edge) {
   std::mt19937 rng(seed);
   Case whole = make_case(rng, edge);
   Case packed = whole;
-  std::vector<unsigned char> memory(SweepRecords::bytes_for(W) + 64);
-  void* aligned = memory.data() + (64 - reinterpret_cast<std::uintptr_t>(memory.data()) % 64);
-  const SweepRecords records = SweepRecords::in(aligned, W);
+  RecordsMemory memory;
+  const SweepRecords records = memory.records();
   for (std::uint32_t k = 0; k < W; ++k) pack_sweep_record(packed.contacts[k], records, k);
   const real inv_h = real(1000);
   for (int sweep = 0; sweep < 3; ++sweep)
@@ -207,9 +215,8 @@ TEST(SweepRecords, SweepOnTheRecordsEqualsSolveOneBitForBit) {
 TEST(SweepRecords, AFieldLeftOutIsSeen) {
   std::mt19937 rng(7);
   Case c = make_case(rng, false);
-  std::vector<unsigned char> memory(SweepRecords::bytes_for(W) + 64);
-  void* aligned = memory.data() + (64 - reinterpret_cast<std::uintptr_t>(memory.data()) % 64);
-  const SweepRecords records = SweepRecords::in(aligned, W);
+  RecordsMemory memory;
+  const SweepRecords records = memory.records();
   Contact wall;
   wall.a = 0, wall.b = kWallFlag | 1u, wall.normal = {0, 0, 1}, wall.ra = real(0.01), wall.normal_mass = 1;
   wall.tangent_mass = 1, wall.coeff.friction = 1, wall.normal_impulse = 1, wall.wall_velocity = {1, 0, 0};
@@ -232,9 +239,8 @@ TEST(SweepRecords, AFieldLeftOutIsSeen) {
 TEST(SweepRecords, TheMassesComeFromTheBodies) {
   std::mt19937 rng(11);
   Case c = make_case(rng, false);
-  std::vector<unsigned char> memory(SweepRecords::bytes_for(W) + 64);
-  void* aligned = memory.data() + (64 - reinterpret_cast<std::uintptr_t>(memory.data()) % 64);
-  const SweepRecords records = SweepRecords::in(aligned, W);
+  RecordsMemory memory;
+  const SweepRecords records = memory.records();
   int differ = 0;
   for (std::uint32_t k = 0; k < W; ++k) {
     Contact stale = c.contacts[k];
@@ -271,9 +277,8 @@ TEST(SweepRecords, PositionStagesOnTheRecordsEqualTheContacts) {
     }
     std::vector<WallShape> walls(8);
     for (WallShape& w : walls) w.point = Vec3(u(rng), u(rng), u(rng)) * real(0.01), w.direction = unit(rng);
-    std::vector<unsigned char> memory(SweepRecords::bytes_for(W) + 64);
-    void* aligned = memory.data() + (64 - reinterpret_cast<std::uintptr_t>(memory.data()) % 64);
-    const SweepRecords records = SweepRecords::in(aligned, W);
+    RecordsMemory memory;
+    const SweepRecords records = memory.records();
     for (std::uint32_t k = 0; k < W; ++k) {
       cs.contacts[k].rebound_shift = std::max(real(0), u(rng)) * real(2e-3);
       pack_sweep_record(cs.contacts[k], records, k);
