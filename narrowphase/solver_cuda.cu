@@ -54,8 +54,8 @@ __global__ void scatter_bodies_kernel(const SolverBody* bodies, BodiesView world
 }
 
 template <bool Friction, bool Rolling>
-__global__ void warm_start_kernel(Contact* contacts, ContactRange r, SolverBody* bodies) {
-  for_range(r, [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(load_streaming(contacts + k), bodies); });
+__global__ void warm_start_kernel(SweepRecords records, ContactRange r, SolverBody* bodies) {
+  for_range(r, [&](std::uint32_t k) { warm_start_record<Friction, Rolling>(records, k, bodies); });
 }
 
 template <bool Friction, bool Rolling>
@@ -130,12 +130,12 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_warm_start(Contact* contacts, ContactRange r, SolverBody* bodies, SolverTerms t, cudaStream_t s) {
+void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* bodies, SolverTerms t, cudaStream_t s) {
   if (r.end <= r.begin) return;
-  if (t.friction && t.rolling) warm_start_kernel<true, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
-  else if (t.friction) warm_start_kernel<true, false><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
-  else if (t.rolling) warm_start_kernel<false, true><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
-  else warm_start_kernel<false, false><<<blocks(r), kBlock, 0, s>>>(contacts, r, bodies);
+  if (t.friction && t.rolling) warm_start_kernel<true, true><<<blocks(r), kBlock, 0, s>>>(records, r, bodies);
+  else if (t.friction) warm_start_kernel<true, false><<<blocks(r), kBlock, 0, s>>>(records, r, bodies);
+  else if (t.rolling) warm_start_kernel<false, true><<<blocks(r), kBlock, 0, s>>>(records, r, bodies);
+  else warm_start_kernel<false, false><<<blocks(r), kBlock, 0, s>>>(records, r, bodies);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -31,13 +31,14 @@ struct ContactRange {
 void launch_gather_bodies(const BodiesView& world, SolverBody* bodies, int sm_count, cudaStream_t stream);
 void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, int sm_count, cudaStream_t stream);
 
-// (The contacts come prepared from the colouring: ColouringCuda::colour_and_sort.)
-void launch_warm_start(Contact* contacts, ContactRange range, SolverBody* bodies, SolverTerms terms,
+// The stages after the impacts on the sweep's records (solver_math.hpp):
+// packed from the contacts (prepared by the colouring:
+// ColouringCuda::colour_and_sort) after the impacts; the warm start, the
+// sweeps, the position stages and the overlap read them; the impulses go back
+// into the contacts when those are asked for (unpack). The same bits as on
+// the contacts.
+void launch_warm_start(const SweepRecords& records, ContactRange range, SolverBody* bodies, SolverTerms terms,
                        cudaStream_t stream);
-// The stages after the warm start on the sweep's records (solver_math.hpp):
-// packed from the contacts after the warm start; the sweeps, the position
-// stages and the overlap read them; the impulses go back into the contacts
-// when those are asked for (unpack). The same bits as on the contacts.
 void launch_pack_sweep(const Contact* contacts, std::uint32_t n, const SweepRecords& records, int sm_count,
                        cudaStream_t stream);
 void launch_sweep(const SweepRecords& records, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,

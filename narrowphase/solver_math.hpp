@@ -211,6 +211,32 @@ MARBLES_HD_INLINE void store_sweep_impulses(const SweepRecords& s, std::uint32_t
                                          c.coeff.twisting_friction});
 }
 
+// warm_start_one on record k (the GPU's warm start, after the packing): the
+// impulses first, the rest only for a contact that carries a load (about half
+// of a settled pile's carry none).
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE void warm_start_record(const SweepRecords& s, std::uint32_t k, SolverBody* bodies) {
+  const Real4 i = load_streaming(s.impulse + k);
+  if (i.x <= 0) return;
+  Contact c;
+  c.normal_impulse = i.x;
+  c.tangent_impulse = {i.y, i.z, i.w};
+  const BodyPair ab = load_streaming(s.bodies + k);
+  c.a = ab.a, c.b = ab.b;
+  const Real4 g = load_streaming(s.geometry + k), m = load_streaming(s.arms + k);
+  c.normal = {g.x, g.y, g.z};
+  c.ra = m.x, c.rb = m.y;
+  if constexpr (Rolling) {
+    const Real4 r = load_streaming(s.rolling + k);
+    c.rolling_impulse = {r.x, r.y, r.z};
+  }
+  if (is_wall(c.a) || is_wall(c.b)) {
+    const Real4 w = load_streaming(s.extra + k);
+    c.wall_velocity = {w.x, w.y, w.z};
+  }
+  warm_start_one<Friction, Rolling>(c, bodies);
+}
+
 // One sweep's update of record k (the GPU's sweep kernel): solve_one on the
 // loaded contact, its effective masses computed from the bodies as the
 // prepare stage computed them (contact_math.hpp), only the ones the terms

@@ -190,14 +190,14 @@ class CudaStep final : public StepBackend {
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     narrowphase::Contact* contacts = contacts_d();  // prepared by the colouring
     if (m_model.solver.restitution) impacts(bodies, h);
-    if (m_model.solver.warm_start)
-      over_colours(false, [&](nc::ContactRange r) { nc::launch_warm_start(contacts, r, bodies, m_terms, m_stream); });
     // From here on the stages read the sweep's records (solver_math.hpp);
     // they live in the colouring's gather buffer, free from the gather until
     // the next substep's colouring.
     m_records = narrowphase::SweepRecords::in(m_sorted.as<char>(narrowphase::SweepRecords::bytes_for(m_count)), m_count);
     nc::launch_pack_sweep(contacts, m_count, m_records, m_sm, m_stream);
     m_records_live = true;
+    if (m_model.solver.warm_start)
+      over_colours(false, [&](nc::ContactRange r) { nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream); });
     const real inv_h = real(1) / h;
     for (int it = 0; it < m_model.solver.iterations * m_iteration_factor; ++it)
       over_colours(it % 2 == 1, [&](nc::ContactRange r) {

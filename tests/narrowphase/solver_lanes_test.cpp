@@ -210,6 +210,43 @@ TEST(SweepRecords, SweepOnTheRecordsEqualsSolveOneBitForBit) {
     }
 }
 
+// The GPU's warm start on the records (warm_start_record: the impulses
+// first, the rest only with a load) equals warm_start_one on the whole
+// contacts, bodies bit for bit; make_case's edge cases carry unloaded
+// contacts and walls.
+template <bool Friction, bool Rolling>
+void expect_warm_start_records_equal(std::uint32_t seed, bool edge) {
+  std::mt19937 rng(seed);
+  Case whole = make_case(rng, edge);
+  Case packed = whole;
+  RecordsMemory memory;
+  const SweepRecords records = memory.records();
+  for (std::uint32_t k = 0; k < W; ++k) pack_sweep_record(packed.contacts[k], records, k);
+  for (std::uint32_t k = 0; k < W; ++k) {
+    warm_start_one<Friction, Rolling>(whole.contacts[k], whole.bodies.data());
+    warm_start_record<Friction, Rolling>(records, k, packed.bodies.data());
+  }
+  ASSERT_TRUE(same_bits(whole.bodies.data(), packed.bodies.data(), sizeof(SolverBody) * whole.bodies.size()))
+      << "seed " << seed << (edge ? " (edge)" : "");
+}
+
+TEST(SweepRecords, WarmStartOnTheRecordsEqualsTheContacts) {
+  int moved = 0;
+  for (std::uint32_t seed = 1; seed <= 200; ++seed)
+    for (bool edge : {false, true}) {
+      expect_warm_start_records_equal<true, true>(seed, edge);
+      expect_warm_start_records_equal<true, false>(seed, edge);
+      expect_warm_start_records_equal<false, true>(seed, edge);
+      expect_warm_start_records_equal<false, false>(seed, edge);
+      std::mt19937 rng(seed);
+      Case c = make_case(rng, edge);
+      const std::vector<SolverBody> before = c.bodies;
+      for (const Contact& k : c.contacts) warm_start_one<true, true>(k, c.bodies.data());
+      if (!same_bits(before.data(), c.bodies.data(), sizeof(SolverBody) * before.size())) ++moved;
+    }
+  EXPECT_GT(moved, 300);  // the warm start moved the bodies: the comparison is not of untouched states
+}
+
 // The records hold what they were given: a field left out of the packing
 // (here the wall's velocity of a wall contact) changes the sweep's result.
 TEST(SweepRecords, AFieldLeftOutIsSeen) {
