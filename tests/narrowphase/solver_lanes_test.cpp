@@ -174,6 +174,20 @@ struct RecordsMemory {
   }
 };
 
+// A case twice: whole contacts, and the same packed into records.
+struct PackedCase {
+  Case whole, packed;
+  RecordsMemory memory;
+  SweepRecords records;
+  PackedCase(std::uint32_t seed, bool edge) {
+    std::mt19937 rng(seed);
+    whole = make_case(rng, edge);
+    packed = whole;
+    records = memory.records();
+    for (std::uint32_t k = 0; k < W; ++k) pack_sweep_record(packed.contacts[k], records, k);
+  }
+};
+
 // The GPU's sweep on the sweep's records (solver_math.hpp): the contacts
 // packed, swept through solve_record (the effective masses computed from the
 // bodies, not read), and unpacked must equal solve_one on the whole prepared
@@ -181,12 +195,9 @@ struct RecordsMemory {
 // ones no sweep reads).
 template <bool Friction, bool Rolling>
 void expect_records_equal_contacts(std::uint32_t seed, bool edge) {
-  std::mt19937 rng(seed);
-  Case whole = make_case(rng, edge);
-  Case packed = whole;
-  RecordsMemory memory;
-  const SweepRecords records = memory.records();
-  for (std::uint32_t k = 0; k < W; ++k) pack_sweep_record(packed.contacts[k], records, k);
+  PackedCase p(seed, edge);
+  Case &whole = p.whole, &packed = p.packed;
+  const SweepRecords& records = p.records;
   const real inv_h = real(1000);
   for (int sweep = 0; sweep < 3; ++sweep)
     for (std::uint32_t k = 0; k < W; ++k) {
@@ -216,12 +227,9 @@ TEST(SweepRecords, SweepOnTheRecordsEqualsSolveOneBitForBit) {
 // contacts and walls.
 template <bool Friction, bool Rolling>
 void expect_warm_start_records_equal(std::uint32_t seed, bool edge) {
-  std::mt19937 rng(seed);
-  Case whole = make_case(rng, edge);
-  Case packed = whole;
-  RecordsMemory memory;
-  const SweepRecords records = memory.records();
-  for (std::uint32_t k = 0; k < W; ++k) pack_sweep_record(packed.contacts[k], records, k);
+  PackedCase p(seed, edge);
+  Case &whole = p.whole, &packed = p.packed;
+  const SweepRecords& records = p.records;
   for (std::uint32_t k = 0; k < W; ++k) {
     warm_start_one<Friction, Rolling>(whole.contacts[k], whole.bodies.data());
     warm_start_record<Friction, Rolling>(records, k, packed.bodies.data());
