@@ -1,5 +1,6 @@
 #include <algorithm>
 
+#include "core/block_stage.cuh"
 #include "core/cuda_check.hpp"
 #include "narrowphase/colouring_cuda.cuh"
 #include "narrowphase/solver_math.hpp"
@@ -118,14 +119,23 @@ __global__ void first_of_key_kernel(const std::uint32_t* sorted_keys, std::uint3
 
 // The contacts in colour-major order (prepared on the way when `prepare`),
 // and each one's colour as the cache keeps it (sorted_colour may be null).
-__global__ void gather_kernel(const Contact* in, const std::uint32_t* order, const std::uint32_t* sorted_keys,
-                              std::uint32_t n, Contact* out, std::uint8_t* sorted_colour, BodiesView world,
-                              bool prepare) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    Contact c = load_whole(in + order[k]);  // 16-byte words, not field by field
-    if (prepare) prepare_from_world(c, world);
-    store_whole(out + k, c);
-    if (sorted_colour) sorted_colour[k] = sorted_keys[k] < kMaxColours ? sorted_keys[k] : kNoKeptColour;
+// A block's outputs are one run: staged, written out whole (block_stage.cuh).
+__global__ void __launch_bounds__(kBlock) gather_kernel(const Contact* in, const std::uint32_t* order,
+                                                        const std::uint32_t* sorted_keys, std::uint32_t n,
+                                                        Contact* out, std::uint8_t* sorted_colour, BodiesView world,
+                                                        bool prepare) {
+  __shared__ ::marbles::cuda::RunStage<Contact, kBlock> stage;
+  for (std::uint32_t base = blockIdx.x * blockDim.x; base < n; base += gridDim.x * blockDim.x) {
+    const std::uint32_t k = base + threadIdx.x;
+    if (k < n) {
+      Contact c = load_whole(in + order[k]);  // 16-byte words, not field by field
+      if (prepare) prepare_from_world(c, world);
+      stage.put(out + base, threadIdx.x, c);
+      if (sorted_colour) sorted_colour[k] = sorted_keys[k] < kMaxColours ? sorted_keys[k] : kNoKeptColour;
+    }
+    __syncthreads();
+    stage.flush(out + base, n - base < blockDim.x ? n - base : blockDim.x);
+    __syncthreads();
   }
 }
 

@@ -1,3 +1,4 @@
+#include "core/block_stage.cuh"
 #include "core/cuda_check.hpp"
 #include "core/device_buffer.cuh"
 #include "core/whole_record.hpp"
@@ -50,13 +51,25 @@ __global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, s
   }
 }
 
-__global__ void sphere_write_kernel(BodiesView bodies, const IndexPair* pairs, std::size_t count, PairTable table,
-                                    real h, const real* reach, const std::uint32_t* offsets, Contact* out) {
-  for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k < count; k += gridDim.x * blockDim.x) {
-    if (offsets[k + 1] == offsets[k]) continue;
-    Contact c;
-    make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c);
-    store_whole(out + offsets[k], c);
+// A block's pairs are consecutive, so their contacts are one run of the
+// output: staged in shared memory, written out whole (core/block_stage.cuh).
+__global__ void __launch_bounds__(kBlock) sphere_write_kernel(BodiesView bodies, const IndexPair* pairs,
+                                                              std::size_t count, PairTable table, real h,
+                                                              const real* reach, const std::uint32_t* offsets,
+                                                              Contact* out) {
+  __shared__ ::marbles::cuda::RunStage<Contact, kBlock> stage;
+  for (std::size_t base = std::size_t(blockIdx.x) * blockDim.x; base < count;
+       base += std::size_t(gridDim.x) * blockDim.x) {
+    const std::size_t k = base + threadIdx.x, end = base + blockDim.x < count ? base + blockDim.x : count;
+    Contact* run = out + offsets[base];
+    if (k < count && offsets[k + 1] != offsets[k]) {
+      Contact c;
+      make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c);
+      stage.put(run, offsets[k] - offsets[base], c);
+    }
+    __syncthreads();
+    stage.flush(run, offsets[end] - offsets[base]);
+    __syncthreads();
   }
 }
 

@@ -1,3 +1,4 @@
+#include "core/block_stage.cuh"
 #include "core/cuda_check.hpp"
 #include "core/device_buffer.cuh"
 #include "narrowphase/solver_cuda.cuh"
@@ -63,9 +64,18 @@ __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* 
   for_range(r, [&](std::uint32_t k) { solve_record<Friction, Rolling>(s, k, bodies, inv_h); });
 }
 
-__global__ void pack_sweep_kernel(const Contact* contacts, std::uint32_t n, SweepRecords s) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
-    pack_sweep_record(load_whole(contacts + k), s, k);
+// A block's contacts are one run: read in whole to shared memory first
+// (core/block_stage.cuh), each then packed from there.
+__global__ void __launch_bounds__(kBlock) pack_sweep_kernel(const Contact* contacts, std::uint32_t n,
+                                                            SweepRecords s) {
+  __shared__ ::marbles::cuda::RunStage<Contact, kBlock> stage;
+  for (std::uint32_t base = blockIdx.x * blockDim.x; base < n; base += gridDim.x * blockDim.x) {
+    stage.fill(contacts + base, n - base < blockDim.x ? n - base : blockDim.x);
+    __syncthreads();
+    const std::uint32_t k = base + threadIdx.x;
+    if (k < n) pack_sweep_record(stage.get(contacts + base, threadIdx.x), s, k);
+    __syncthreads();
+  }
 }
 
 __global__ void unpack_sweep_kernel(Contact* contacts, std::uint32_t n, SweepRecords s) {
