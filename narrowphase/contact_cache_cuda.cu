@@ -1,7 +1,9 @@
+#include "core/block_stage.cuh"
 #include "core/cuda_check.hpp"
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_cache_cuda.cuh"
 #include "narrowphase/contact_cache_math.hpp"
+#include "narrowphase/solver_cuda.cuh"
 #include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase::cuda {
@@ -52,18 +54,34 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
   }
 }
 
-__global__ void restore_kernel(Contact* contacts, std::uint32_t n, const std::uint64_t* keys, std::uint32_t m,
-                               const real* normal, const Vec3* tangent, const Vec3* rolling,
-                               const std::uint8_t* colour, std::uint8_t* matched, std::uint8_t* kept_colour) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    Contact& c = contacts[k];
-    const std::uint64_t key = cache_key(c.a, c.b);
-    const std::uint32_t e = cache_lower_bound(keys, m, key);
-    const bool found = e < m && keys[e] == key;
-    kept_colour[k] = found ? colour[e] : kNoKeptColour;
-    if (!found) continue;
-    restore_impulses(c, normal[e], tangent[e], rolling[e]);
-    matched[e] = 1;  // keys are unique: one contact per entry
+// A block's contacts are one run, read in whole through shared memory
+// (core/block_stage.cuh), not field by field; a matched contact's impulses
+// go back as two 16-byte words.
+__global__ void __launch_bounds__(kBlock) restore_kernel(Contact* contacts, std::uint32_t n,
+                                                         const std::uint64_t* keys, std::uint32_t m,
+                                                         const real* normal, const Vec3* tangent, const Vec3* rolling,
+                                                         const std::uint8_t* colour, std::uint8_t* matched,
+                                                         std::uint8_t* kept_colour) {
+  __shared__ ::marbles::cuda::RunStage<Contact, kBlock> stage;
+  for (std::uint32_t base = blockIdx.x * blockDim.x; base < n; base += gridDim.x * blockDim.x) {
+    const std::uint32_t count = n - base < blockDim.x ? n - base : blockDim.x;
+    Contact* run = contacts + base;
+    stage.fill(run, count);
+    __syncthreads();
+    if (threadIdx.x < count) {
+      const std::uint32_t k = base + threadIdx.x;
+      Contact c = stage.get(run, threadIdx.x);
+      const std::uint64_t key = cache_key(c.a, c.b);
+      const std::uint32_t e = cache_lower_bound(keys, m, key);
+      const bool found = e < m && keys[e] == key;
+      kept_colour[k] = found ? colour[e] : kNoKeptColour;
+      if (found) {
+        restore_impulses(c, normal[e], tangent[e], rolling[e]);
+        matched[e] = 1;  // keys are unique: one contact per entry
+        store_impulses(run + threadIdx.x, c);
+      }
+    }
+    __syncthreads();
   }
 }
 

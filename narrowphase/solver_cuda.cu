@@ -28,22 +28,6 @@ inline int blocks(const ContactRange& r) {
   return r.serial ? 1 : static_cast<int>((r.end - r.begin + kBlock - 1) / kBlock);
 }
 
-// The impulses, the contact's first eight reals (contact.hpp), stored as
-// whole 16-byte words.
-__device__ __forceinline__ void store_impulses(Contact* to, const Contact& c) {
-  if constexpr (sizeof(real) == 4) {
-    float4* w = reinterpret_cast<float4*>(to);
-    w[0] = make_float4(c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z);
-    w[1] = make_float4(c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.impact_impulse);
-  } else {
-    double2* w = reinterpret_cast<double2*>(to);
-    w[0] = make_double2(c.normal_impulse, c.tangent_impulse.x);
-    w[1] = make_double2(c.tangent_impulse.y, c.tangent_impulse.z);
-    w[2] = make_double2(c.rolling_impulse.x, c.rolling_impulse.y);
-    w[3] = make_double2(c.rolling_impulse.z, c.impact_impulse);
-  }
-}
-
 __global__ void gather_bodies_kernel(BodiesView world, SolverBody* bodies) {
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < world.count; i += gridDim.x * blockDim.x)
     bodies[i] = gather_solver_body(world, i);

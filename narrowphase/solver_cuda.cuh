@@ -14,6 +14,22 @@
 
 namespace marbles::narrowphase::cuda {
 
+// The impulses, the contact's first eight reals (contact.hpp), stored as
+// whole 16-byte words.
+__device__ __forceinline__ void store_impulses(Contact* to, const Contact& c) {
+  if constexpr (sizeof(real) == 4) {
+    float4* w = reinterpret_cast<float4*>(to);
+    w[0] = make_float4(c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z);
+    w[1] = make_float4(c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.impact_impulse);
+  } else {
+    double2* w = reinterpret_cast<double2*>(to);
+    w[0] = make_double2(c.normal_impulse, c.tangent_impulse.x);
+    w[1] = make_double2(c.tangent_impulse.y, c.tangent_impulse.z);
+    w[2] = make_double2(c.rolling_impulse.x, c.rolling_impulse.y);
+    w[3] = make_double2(c.rolling_impulse.z, c.impact_impulse);
+  }
+}
+
 // The per-contact terms a scene enables: picks the kernel instance once.
 struct SolverTerms {
   bool friction = false, rolling = false;
