@@ -38,18 +38,23 @@ __global__ void keys_kernel(SweepRecords records, std::uint32_t n, const std::ui
 }
 
 // The entries in key order, with their cache keys in place of the sort's.
+// tangent and rolling are null when the scene has no friction or no rolling
+// resistance: those impulses stay zero, nothing to keep.
 __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_colour, const std::uint32_t* index,
                               std::uint32_t m, std::uint64_t* keys, real* normal, Vec3* tangent, Vec3* rolling,
                               std::uint8_t* colour) {
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
-    const BodyPair ab = records.bodies[index[e]];
+    const std::uint32_t k = index[e];
+    const BodyPair ab = records.bodies[k];
     keys[e] = cache_key(ab.a, ab.b);
-    Contact c;
-    unpack_sweep_impulses(records, index[e], c);
-    const bool loaded = c.normal_impulse > 0;
-    normal[e] = loaded ? c.normal_impulse : real(0);
-    tangent[e] = loaded ? c.tangent_impulse : Vec3{};
-    rolling[e] = loaded ? c.rolling_impulse : Vec3{};
+    const Real4 i = records.impulse[k];
+    const bool loaded = i.x > 0;
+    normal[e] = loaded ? i.x : real(0);
+    if (tangent) tangent[e] = loaded ? Vec3{i.y, i.z, i.w} : Vec3{};
+    if (rolling) {
+      const Real4 r = records.rolling[k];
+      rolling[e] = loaded ? Vec3{r.x, r.y, r.z} : Vec3{};
+    }
     colour[e] = contact_colour ? contact_colour[index[e]] : kNoKeptColour;
   }
 }
@@ -76,7 +81,7 @@ __global__ void __launch_bounds__(kBlock) restore_kernel(Contact* contacts, std:
       const bool found = e < m && keys[e] == key;
       kept_colour[k] = found ? colour[e] : kNoKeptColour;
       if (found) {
-        restore_impulses(c, normal[e], tangent[e], rolling[e]);
+        restore_impulses(c, normal[e], tangent ? tangent[e] : Vec3{}, rolling ? rolling[e] : Vec3{});
         matched[e] = 1;  // keys are unique: one contact per entry
         store_impulses(run + threadIdx.x, c);
       }
@@ -213,8 +218,8 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_sort_pairs(keys_in, keys, index_in, index, m_count, a_bits + b_bits, m_temp, s);
   gather_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, m_count, keys,
-                                                               m_normal.as<real>(m_count), m_tangent.as<Vec3>(m_count),
-                                                               m_rolling.as<Vec3>(m_count),
+                                                               m_normal.as<real>(m_count), tangent_entries(m_count),
+                                                               rolling_entries(m_count),
                                                                m_colour.as<std::uint8_t>(m_count));
   MARBLES_CUDA_CHECK_LAUNCH();
 }
@@ -230,8 +235,10 @@ CacheEntries ContactCacheCuda::download(cudaStream_t s) {
   if (m == 0) return e;
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.key.data(), m_keys.get(), m * sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.normal_impulse.data(), m_normal.get(), m * sizeof(real), cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.tangent_impulse.data(), m_tangent.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.rolling_impulse.data(), m_rolling.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
+  if (m_friction)  // else zero, as resize left them
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.tangent_impulse.data(), m_tangent.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
+  if (m_rolling_on)
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.rolling_impulse.data(), m_rolling.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.colour.data(), m_colour.get(), m, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   return e;
@@ -243,8 +250,10 @@ void ContactCacheCuda::upload(const CacheEntries& e, cudaStream_t s) {
   if (m == 0) return;
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_keys.as<std::uint64_t>(m), e.key.data(), m * sizeof(std::uint64_t), cudaMemcpyHostToDevice, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_normal.as<real>(m), e.normal_impulse.data(), m * sizeof(real), cudaMemcpyHostToDevice, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_tangent.as<Vec3>(m), e.tangent_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_rolling.as<Vec3>(m), e.rolling_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
+  if (m_friction)
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_tangent.as<Vec3>(m), e.tangent_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
+  if (m_rolling_on)
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_rolling.as<Vec3>(m), e.rolling_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
   auto* colour = m_colour.as<std::uint8_t>(m);
   if (e.colour.size() == m)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(colour, e.colour.data(), m, cudaMemcpyHostToDevice, s));
@@ -262,8 +271,8 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
   };
   copy(to.m_keys, m_keys, m * sizeof(std::uint64_t));
   copy(to.m_normal, m_normal, m * sizeof(real));
-  copy(to.m_tangent, m_tangent, m * sizeof(Vec3));
-  copy(to.m_rolling, m_rolling, m * sizeof(Vec3));
+  if (m_friction) copy(to.m_tangent, m_tangent, m * sizeof(Vec3));
+  if (m_rolling_on) copy(to.m_rolling, m_rolling, m * sizeof(Vec3));
   copy(to.m_colour, m_colour, m);
 }
 
@@ -277,8 +286,10 @@ bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
   const auto* keys = m_keys.get_as<std::uint64_t>();
   const auto* normal = m_normal.get_as<real>();
-  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, keys, m, normal, m_tangent.get_as<Vec3>(),
-                                                          m_rolling.get_as<Vec3>(), m_colour.get_as<std::uint8_t>(),
+  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, keys, m, normal,
+                                                          m_friction ? m_tangent.get_as<Vec3>() : nullptr,
+                                                          m_rolling_on ? m_rolling.get_as<Vec3>() : nullptr,
+                                                          m_colour.get_as<std::uint8_t>(),
                                                           matched, kept_colour);
   MARBLES_CUDA_CHECK_LAUNCH();
   lost_loads_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, m, bodies, weight_impulse,

@@ -51,26 +51,35 @@ __global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, s
   }
 }
 
-// A block's pairs are consecutive, so their contacts are one run of the
-// output: staged in shared memory, written out whole (core/block_stage.cuh).
-__global__ void __launch_bounds__(kBlock) sphere_write_kernel(BodiesView bodies, const IndexPair* pairs,
-                                                              std::size_t count, PairTable table, real h,
-                                                              const real* reach, const std::uint32_t* offsets,
-                                                              Contact* out) {
+// The contacts of items [0, count) whose flag was set (offsets: the flags'
+// exclusive scan), make(t, c) writing item t's. A block's items are
+// consecutive, so their contacts are one run of the output: staged in shared
+// memory, written out whole (core/block_stage.cuh).
+template <class Make>
+__device__ void write_contacts(std::size_t count, const std::uint32_t* offsets, Contact* out, Make&& make) {
   __shared__ ::marbles::cuda::RunStage<Contact, kBlock> stage;
   for (std::size_t base = std::size_t(blockIdx.x) * blockDim.x; base < count;
        base += std::size_t(gridDim.x) * blockDim.x) {
-    const std::size_t k = base + threadIdx.x, end = base + blockDim.x < count ? base + blockDim.x : count;
+    const std::size_t t = base + threadIdx.x, end = base + blockDim.x < count ? base + blockDim.x : count;
     Contact* run = out + offsets[base];
-    if (k < count && offsets[k + 1] != offsets[k]) {
+    if (t < count && offsets[t + 1] != offsets[t]) {
       Contact c;
-      make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c);
-      stage.put(run, offsets[k] - offsets[base], c);
+      make(t, c);
+      stage.put(run, offsets[t] - offsets[base], c);
     }
     __syncthreads();
     stage.flush(run, offsets[end] - offsets[base]);
     __syncthreads();
   }
+}
+
+__global__ void __launch_bounds__(kBlock) sphere_write_kernel(BodiesView bodies, const IndexPair* pairs,
+                                                              std::size_t count, PairTable table, real h,
+                                                              const real* reach, const std::uint32_t* offsets,
+                                                              Contact* out) {
+  write_contacts(count, offsets, out, [&](std::size_t k, Contact& c) {
+    make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c);
+  });
 }
 
 __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std::uint32_t wall_count,
@@ -87,17 +96,14 @@ __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std
   }
 }
 
-__global__ void wall_write_kernel(BodiesView bodies, const WallShape* walls, std::uint32_t wall_count,
-                                  PairTable table, real h, const real* reach, const std::uint32_t* offsets,
-                                  Contact* out) {
-  const std::size_t items = bodies.count * wall_count;
-  for (std::size_t t = blockIdx.x * blockDim.x + threadIdx.x; t < items; t += gridDim.x * blockDim.x) {
-    if (offsets[t + 1] == offsets[t]) continue;
+__global__ void __launch_bounds__(kBlock) wall_write_kernel(BodiesView bodies, const WallShape* walls,
+                                                            std::uint32_t wall_count, PairTable table, real h,
+                                                            const real* reach, const std::uint32_t* offsets,
+                                                            Contact* out) {
+  write_contacts(bodies.count * wall_count, offsets, out, [&](std::size_t t, Contact& c) {
     const auto i = static_cast<std::uint32_t>(t / wall_count), k = static_cast<std::uint32_t>(t % wall_count);
-    Contact c;
     make_wall_contact(bodies, i, walls[k], k, table, h, reach, c);
-    store_whole(out + offsets[t], c);
-  }
+  });
 }
 
 __global__ void advance_walls_kernel(WallShape* walls, std::uint32_t count, real h) {

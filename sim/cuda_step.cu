@@ -87,6 +87,8 @@ class CudaStep final : public StepBackend {
       m_broadphase->set_stage_timing(false);  // its events cost a sync per call: profiling only
     }
     m_terms = {model.solver.friction, model.solver.rolling};
+    m_cache.set_terms(m_terms.friction, m_terms.rolling);
+    m_kept_cache.set_terms(m_terms.friction, m_terms.rolling);
   }
   ~CudaStep() override {
     if (m_pinned) cudaFreeHost(m_pinned);
