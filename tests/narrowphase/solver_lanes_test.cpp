@@ -252,7 +252,7 @@ TEST(SweepRecords, WarmStartOnTheRecordsEqualsTheContacts) {
       for (const Contact& k : c.contacts) warm_start_one<true, true>(k, c.bodies.data());
       if (!same_bits(before.data(), c.bodies.data(), sizeof(SolverBody) * before.size())) ++moved;
     }
-  EXPECT_GT(moved, 300);  // the warm start moved the bodies: the comparison is not of untouched states
+  EXPECT_GT(moved, 200);  // in most of the 400 cases the warm start moved the bodies: not untouched states compared
 }
 
 // The records hold what they were given: a field left out of the packing
