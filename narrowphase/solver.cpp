@@ -182,9 +182,27 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
       for_colour(b, e, [&](std::uint32_t k) { rebound_one(cs[k], bodies, ws); });
     });
+  if (m_settings.position_iterations <= 0) return;
+  // The sweeps read the position records (load_position_contact, as the
+  // GPU's do): the contacts' a, b and normal packed once, 24 bytes a contact
+  // where each sweep over the contacts read two 64-byte lines of each.
+  // Settled pile of 10^5: 14 MB that stay in cache instead of 75 MB a sweep.
+  const auto n = static_cast<std::ptrdiff_t>(contacts.size());
+  m_position_pairs.resize(contacts.size());
+  m_position_geometry.resize(contacts.size());
+  SweepRecords records;
+  records.bodies = m_position_pairs.data();
+  records.geometry = m_position_geometry.data();
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t k = 0; k < n; ++k) {
+    records.bodies[k] = {cs[k].a, cs[k].b};
+    records.geometry[k] = {cs[k].normal.x, cs[k].normal.y, cs[k].normal.z, cs[k].separation};
+  }
   for (int it = 0; it < m_settings.position_iterations; ++it)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      for_colour(b, e, [&](std::uint32_t k) { project_one(cs[k], bodies, ws, m_settings); });
+      for_colour(b, e, [&](std::uint32_t k) {
+        project_one(load_position_contact<false>(records, k), bodies, ws, m_settings);
+      });
     });
 }
 

@@ -80,6 +80,10 @@ class ContactSolver {
   std::vector<std::uint32_t> m_candidates, m_level, m_order;
   std::vector<std::uint64_t> m_rank;
   std::vector<SolverBody> m_bodies;  // the velocity state, packed for the solve
+  // The projection's records (the GPU's position records: a, b and the
+  // normal, 24 of a contact's 112 bytes), packed once per projection.
+  mutable std::vector<BodyPair> m_position_pairs;
+  mutable std::vector<Real4> m_position_geometry;
 };
 
 }  // namespace marbles::narrowphase
