@@ -36,8 +36,11 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
                                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
                                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds_out,
                                        const std::vector<std::uint32_t>* kept) {
-  // Clear only the spheres these contacts touch: the work stays in
-  // proportion to the contacts, not to the spheres.
+  // Clear only the spheres these contacts touch, so that the work stays in
+  // proportion to the contacts (the impact stage's few candidates); when the
+  // contacts outnumber the spheres (a settled pile keeps ~6 per sphere) the
+  // whole arrays are cleared instead, which is cheaper than a pass over the
+  // contacts. Either way every touched sphere starts at 0.
   m_body_next_round.resize(body_count);
   m_body_used.resize(body_count);
   auto clear = [&](const std::vector<std::uint32_t>& list) {
@@ -47,17 +50,35 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
       if (!is_wall(c.b)) m_body_next_round[c.b] = 0, m_body_used[c.b] = 0;
     }
   };
-  clear(active);
+  if (active.size() + (kept ? kept->size() : 0) >= body_count) {
+    std::fill(m_body_next_round.begin(), m_body_next_round.end(), 0u);
+    std::fill(m_body_used.begin(), m_body_used.end(), std::uint64_t(0));
+  } else {
+    clear(active);
+    if (kept) clear(*kept);
+  }
   std::uint32_t colours = 0, rounds = 0;
   if (kept) {  // the kept colours hold their spheres first; they take no round
-    clear(*kept);
-    for (const std::uint32_t k : *kept) {
-      const Contact& c = contacts[k];
-      const std::uint64_t bit = std::uint64_t(1) << colour[k];
-      m_body_used[c.a] |= bit;
-      if (!is_wall(c.b)) m_body_used[c.b] |= bit;
-      colours = std::max(colours, colour[k] + 1);
+    // In parallel: an or of bits gives the same masks in any order.
+    const auto m = static_cast<std::ptrdiff_t>(kept->size());
+    const std::uint32_t* kk = kept->data();
+    const std::uint32_t* colour_of = colour.data();
+    std::uint64_t* used = m_body_used.data();
+    std::uint32_t top = 0;
+#pragma omp parallel for schedule(static) reduction(max : top) if (m >= 16384)
+    for (std::ptrdiff_t t = 0; t < m; ++t) {
+      const Contact& c = contacts[kk[t]];
+      const std::uint32_t kept_colour = colour_of[kk[t]];
+      const std::uint64_t bit = std::uint64_t(1) << kept_colour;
+#pragma omp atomic update
+      used[c.a] |= bit;
+      if (!is_wall(c.b)) {
+#pragma omp atomic update
+        used[c.b] |= bit;
+      }
+      top = std::max(top, kept_colour + 1);
     }
+    colours = top;
   }
   // Decreasing rank: an ascending radix sort of (2^56 - 1 - rank) (ranks are
   // 56 bits and unique), carrying the contact index. The ranks of
