@@ -15,16 +15,40 @@
 
 namespace marbles {
 
-template <class T>
-MARBLES_HD_INLINE T load_whole(const T* p) {
+namespace whole_record_detail {
 #if defined(__CUDA_ARCH__)
+// T moved as 16-byte words, plain or with the evict-first hint.
+template <bool Streaming, class T>
+__device__ __forceinline__ T load_words(const T* p) {
   static_assert(sizeof(T) % 16 == 0 && alignof(T) >= 16, "whole records are 16-byte words");
   T out;
   const int4* from = reinterpret_cast<const int4*>(p);
   int4* to = reinterpret_cast<int4*>(&out);
 #pragma unroll
-  for (std::size_t i = 0; i < sizeof(T) / 16; ++i) to[i] = from[i];
+  for (std::size_t i = 0; i < sizeof(T) / 16; ++i) {
+    if constexpr (Streaming) to[i] = __ldcs(from + i);
+    else to[i] = from[i];
+  }
   return out;
+}
+template <bool Streaming, class T>
+__device__ __forceinline__ void store_words(T* p, const T& value) {
+  static_assert(sizeof(T) % 16 == 0 && alignof(T) >= 16, "whole records are 16-byte words");
+  const int4* from = reinterpret_cast<const int4*>(&value);
+  int4* to = reinterpret_cast<int4*>(p);
+#pragma unroll
+  for (std::size_t i = 0; i < sizeof(T) / 16; ++i) {
+    if constexpr (Streaming) __stcs(to + i, from[i]);
+    else to[i] = from[i];
+  }
+}
+#endif
+}  // namespace whole_record_detail
+
+template <class T>
+MARBLES_HD_INLINE T load_whole(const T* p) {
+#if defined(__CUDA_ARCH__)
+  return whole_record_detail::load_words<false>(p);
 #else
   return *p;
 #endif
@@ -33,11 +57,7 @@ MARBLES_HD_INLINE T load_whole(const T* p) {
 template <class T>
 MARBLES_HD_INLINE void store_whole(T* p, const T& value) {
 #if defined(__CUDA_ARCH__)
-  static_assert(sizeof(T) % 16 == 0 && alignof(T) >= 16, "whole records are 16-byte words");
-  const int4* from = reinterpret_cast<const int4*>(&value);
-  int4* to = reinterpret_cast<int4*>(p);
-#pragma unroll
-  for (std::size_t i = 0; i < sizeof(T) / 16; ++i) to[i] = from[i];
+  whole_record_detail::store_words<false>(p, value);
 #else
   *p = value;
 #endif
@@ -58,13 +78,7 @@ MARBLES_HD_INLINE T load_streaming(const T* p) {
     *reinterpret_cast<uint2*>(&out) = w;
     return out;
   } else {
-    static_assert(sizeof(T) % 16 == 0 && alignof(T) >= 16, "streamed records are 16-byte words");
-    T out;
-    const int4* from = reinterpret_cast<const int4*>(p);
-    int4* to = reinterpret_cast<int4*>(&out);
-#pragma unroll
-    for (std::size_t i = 0; i < sizeof(T) / 16; ++i) to[i] = __ldcs(from + i);
-    return out;
+    return whole_record_detail::load_words<true>(p);
   }
 #else
   return *p;
@@ -74,11 +88,7 @@ MARBLES_HD_INLINE T load_streaming(const T* p) {
 template <class T>
 MARBLES_HD_INLINE void store_streaming(T* p, const T& value) {
 #if defined(__CUDA_ARCH__)
-  static_assert(sizeof(T) % 16 == 0 && alignof(T) >= 16, "streamed records are 16-byte words");
-  const int4* from = reinterpret_cast<const int4*>(&value);
-  int4* to = reinterpret_cast<int4*>(p);
-#pragma unroll
-  for (std::size_t i = 0; i < sizeof(T) / 16; ++i) __stcs(to + i, from[i]);
+  whole_record_detail::store_words<true>(p, value);
 #else
   *p = value;
 #endif
