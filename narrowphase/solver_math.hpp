@@ -173,20 +173,21 @@ MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s
   s.bodies[k] = {c.a, c.b};
 }
 
-// The contact as solve_one<Friction, Rolling> reads it, less the effective
-// masses (solve_record adds them): every field it reads is the packed
-// contact's, the others are left at their defaults.
-template <bool Friction, bool Rolling>
-MARBLES_HD_INLINE Contact load_sweep_contact(const SweepRecords& s, std::uint32_t k) {
+// Record k as a contact, its impulse word `i` already loaded: the bodies,
+// impulses, normal and separation, with Arms the arms and the friction
+// coefficients, with Rolling the rolling impulse and the twisting friction,
+// and a wall's velocity; the other fields are left at their defaults.
+template <bool Arms, bool Rolling>
+MARBLES_HD_INLINE Contact load_record(const SweepRecords& s, std::uint32_t k, const Real4& i) {
   Contact c;
   const BodyPair ab = load_streaming(s.bodies + k);
   c.a = ab.a, c.b = ab.b;
-  const Real4 i = load_streaming(s.impulse + k), g = load_streaming(s.geometry + k);
+  const Real4 g = load_streaming(s.geometry + k);
   c.normal_impulse = i.x;
   c.tangent_impulse = {i.y, i.z, i.w};
   c.normal = {g.x, g.y, g.z};
   c.separation = g.w;
-  if constexpr (Friction || Rolling) {
+  if constexpr (Arms) {
     const Real4 m = load_streaming(s.arms + k);
     c.ra = m.x, c.rb = m.y, c.coeff.friction = m.z, c.coeff.rolling_friction = m.w;
   }
@@ -202,6 +203,13 @@ MARBLES_HD_INLINE Contact load_sweep_contact(const SweepRecords& s, std::uint32_
   return c;
 }
 
+// The contact as solve_one<Friction, Rolling> reads it, less the effective
+// masses (solve_record adds them).
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE Contact load_sweep_contact(const SweepRecords& s, std::uint32_t k) {
+  return load_record<Friction || Rolling, Rolling>(s, k, load_streaming(s.impulse + k));
+}
+
 // What a sweep changed: the accumulated impulses.
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void store_sweep_impulses(const SweepRecords& s, std::uint32_t k, const Contact& c) {
@@ -213,28 +221,13 @@ MARBLES_HD_INLINE void store_sweep_impulses(const SweepRecords& s, std::uint32_t
 
 // warm_start_one on record k (the GPU's warm start, after the packing): the
 // impulses first, the rest only for a contact that carries a load (about half
-// of a settled pile's carry none).
+// of a settled pile's carry none). The arms always: the impulse's moment
+// about each centre needs them, friction or not.
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void warm_start_record(const SweepRecords& s, std::uint32_t k, SolverBody* bodies) {
   const Real4 i = load_streaming(s.impulse + k);
   if (i.x <= 0) return;
-  Contact c;
-  c.normal_impulse = i.x;
-  c.tangent_impulse = {i.y, i.z, i.w};
-  const BodyPair ab = load_streaming(s.bodies + k);
-  c.a = ab.a, c.b = ab.b;
-  const Real4 g = load_streaming(s.geometry + k), m = load_streaming(s.arms + k);
-  c.normal = {g.x, g.y, g.z};
-  c.ra = m.x, c.rb = m.y;
-  if constexpr (Rolling) {
-    const Real4 r = load_streaming(s.rolling + k);
-    c.rolling_impulse = {r.x, r.y, r.z};
-  }
-  if (is_wall(c.a) || is_wall(c.b)) {
-    const Real4 w = load_streaming(s.extra + k);
-    c.wall_velocity = {w.x, w.y, w.z};
-  }
-  warm_start_one<Friction, Rolling>(c, bodies);
+  warm_start_one<Friction, Rolling>(load_record<true, Rolling>(s, k, i), bodies);
 }
 
 // One sweep's update of record k (the GPU's sweep kernel): solve_one on the
