@@ -55,7 +55,7 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
       const Real4 r = records.rolling[k];
       rolling[e] = loaded ? Vec3{r.x, r.y, r.z} : Vec3{};
     }
-    colour[e] = contact_colour ? contact_colour[index[e]] : kNoKeptColour;
+    colour[e] = contact_colour ? contact_colour[k] : kNoKeptColour;
   }
 }
 
@@ -235,9 +235,9 @@ CacheEntries ContactCacheCuda::download(cudaStream_t s) {
   if (m == 0) return e;
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.key.data(), m_keys.get(), m * sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.normal_impulse.data(), m_normal.get(), m * sizeof(real), cudaMemcpyDeviceToHost, s));
-  if (m_friction)  // else zero, as resize left them
+  if (m_keep_tangent)  // else zero, as resize left them
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.tangent_impulse.data(), m_tangent.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
-  if (m_rolling_on)
+  if (m_keep_rolling)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.rolling_impulse.data(), m_rolling.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.colour.data(), m_colour.get(), m, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
@@ -250,9 +250,9 @@ void ContactCacheCuda::upload(const CacheEntries& e, cudaStream_t s) {
   if (m == 0) return;
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_keys.as<std::uint64_t>(m), e.key.data(), m * sizeof(std::uint64_t), cudaMemcpyHostToDevice, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_normal.as<real>(m), e.normal_impulse.data(), m * sizeof(real), cudaMemcpyHostToDevice, s));
-  if (m_friction)
+  if (m_keep_tangent)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_tangent.as<Vec3>(m), e.tangent_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
-  if (m_rolling_on)
+  if (m_keep_rolling)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_rolling.as<Vec3>(m), e.rolling_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
   auto* colour = m_colour.as<std::uint8_t>(m);
   if (e.colour.size() == m)
@@ -271,8 +271,8 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
   };
   copy(to.m_keys, m_keys, m * sizeof(std::uint64_t));
   copy(to.m_normal, m_normal, m * sizeof(real));
-  if (m_friction) copy(to.m_tangent, m_tangent, m * sizeof(Vec3));
-  if (m_rolling_on) copy(to.m_rolling, m_rolling, m * sizeof(Vec3));
+  if (m_keep_tangent) copy(to.m_tangent, m_tangent, m * sizeof(Vec3));
+  if (m_keep_rolling) copy(to.m_rolling, m_rolling, m * sizeof(Vec3));
   copy(to.m_colour, m_colour, m);
 }
 
@@ -287,8 +287,8 @@ bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   const auto* keys = m_keys.get_as<std::uint64_t>();
   const auto* normal = m_normal.get_as<real>();
   restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, keys, m, normal,
-                                                          m_friction ? m_tangent.get_as<Vec3>() : nullptr,
-                                                          m_rolling_on ? m_rolling.get_as<Vec3>() : nullptr,
+                                                          m_keep_tangent ? m_tangent.get_as<Vec3>() : nullptr,
+                                                          m_keep_rolling ? m_rolling.get_as<Vec3>() : nullptr,
                                                           m_colour.get_as<std::uint8_t>(),
                                                           matched, kept_colour);
   MARBLES_CUDA_CHECK_LAUNCH();

@@ -47,7 +47,7 @@ class ContactCacheCuda {
   // Which impulses the scene's terms make (before the first store): without
   // friction the tangential impulses, without rolling resistance the rolling
   // ones stay zero, and the cache neither stores nor reads them.
-  void set_terms(bool friction, bool rolling) { m_friction = friction, m_rolling_on = rolling; }
+  void set_terms(bool friction, bool rolling) { m_keep_tangent = friction, m_keep_rolling = rolling; }
 
  // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }
@@ -58,9 +58,9 @@ class ContactCacheCuda {
       m_colour, m_matched, m_counter, m_label, m_island_max, m_cold, m_temp;
   std::uint32_t m_count = 0;
   std::uint32_t* m_host = nullptr;  // pinned readback
-  bool m_friction = true, m_rolling_on = true;
-  Vec3* tangent_entries(std::uint32_t m) { return m_friction ? m_tangent.as<Vec3>(m) : nullptr; }
-  Vec3* rolling_entries(std::uint32_t m) { return m_rolling_on ? m_rolling.as<Vec3>(m) : nullptr; }
+  bool m_keep_tangent = true, m_keep_rolling = true;
+  Vec3* tangent_entries(std::uint32_t m) { return m_keep_tangent ? m_tangent.as<Vec3>(m) : nullptr; }
+  Vec3* rolling_entries(std::uint32_t m) { return m_keep_rolling ? m_rolling.as<Vec3>(m) : nullptr; }
 };
 
 }  // namespace marbles::narrowphase::cuda
