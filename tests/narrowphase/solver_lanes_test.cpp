@@ -112,14 +112,21 @@ void expect_lanes_equal_scalar(std::uint32_t seed, bool edge) {
   }
 }
 
-TEST(SolverLanes, EqualSolveOneBitForBit) {
-  for (std::uint32_t seed = 1; seed <= 400; ++seed)
+// check.template operator()<Friction, Rolling>(seed, edge) for seeds
+// 1..seeds, plain and edge cases, every combination of the two terms.
+template <class Check>
+void over_cases(std::uint32_t seeds, Check&& check) {
+  for (std::uint32_t seed = 1; seed <= seeds; ++seed)
     for (bool edge : {false, true}) {
-      expect_lanes_equal_scalar<true, true>(seed, edge);
-      expect_lanes_equal_scalar<true, false>(seed, edge);
-      expect_lanes_equal_scalar<false, true>(seed, edge);
-      expect_lanes_equal_scalar<false, false>(seed, edge);
+      check.template operator()<true, true>(seed, edge);
+      check.template operator()<true, false>(seed, edge);
+      check.template operator()<false, true>(seed, edge);
+      check.template operator()<false, false>(seed, edge);
     }
+}
+
+TEST(SolverLanes, EqualSolveOneBitForBit) {
+  over_cases(400, []<bool F, bool R>(std::uint32_t seed, bool edge) { expect_lanes_equal_scalar<F, R>(seed, edge); });
 }
 
 // The test above can fail: a lane that differs from its scalar twin in one
@@ -212,13 +219,7 @@ void expect_records_equal_contacts(std::uint32_t seed, bool edge) {
 }
 
 TEST(SweepRecords, SweepOnTheRecordsEqualsSolveOneBitForBit) {
-  for (std::uint32_t seed = 1; seed <= 200; ++seed)
-    for (bool edge : {false, true}) {
-      expect_records_equal_contacts<true, true>(seed, edge);
-      expect_records_equal_contacts<true, false>(seed, edge);
-      expect_records_equal_contacts<false, true>(seed, edge);
-      expect_records_equal_contacts<false, false>(seed, edge);
-    }
+  over_cases(200, []<bool F, bool R>(std::uint32_t seed, bool edge) { expect_records_equal_contacts<F, R>(seed, edge); });
 }
 
 // The GPU's warm start on the records (warm_start_record: the impulses
@@ -239,13 +240,11 @@ void expect_warm_start_records_equal(std::uint32_t seed, bool edge) {
 }
 
 TEST(SweepRecords, WarmStartOnTheRecordsEqualsTheContacts) {
+  over_cases(200,
+             []<bool F, bool R>(std::uint32_t seed, bool edge) { expect_warm_start_records_equal<F, R>(seed, edge); });
   int moved = 0;
   for (std::uint32_t seed = 1; seed <= 200; ++seed)
     for (bool edge : {false, true}) {
-      expect_warm_start_records_equal<true, true>(seed, edge);
-      expect_warm_start_records_equal<true, false>(seed, edge);
-      expect_warm_start_records_equal<false, true>(seed, edge);
-      expect_warm_start_records_equal<false, false>(seed, edge);
       std::mt19937 rng(seed);
       Case c = make_case(rng, edge);
       const std::vector<SolverBody> before = c.bodies;
