@@ -174,6 +174,34 @@ TEST(ColouringCuda, EqualsTheCpuWithKeptColours) {
   }
 }
 
+// Sets around the block and warp sizes (the staged gathers' partial runs),
+// with and without kept colours. Small enough for compute-sanitizer.
+TEST(ColouringCuda, SetsAroundTheBlockSizes) {
+  REQUIRE_DEVICE();
+  std::mt19937_64 rng(35);
+  for (const std::size_t count : {1, 2, 31, 32, 33, 127, 128, 129, 255, 256, 257, 1000}) {
+    const auto bodies = static_cast<std::uint32_t>(8 + count / 2);
+    const std::vector<Contact> contacts = random_contacts(rng, bodies, count);
+    expect_same_as_cpu(contacts, bodies);
+    std::vector<std::uint8_t> kept(count);
+    for (auto& c : kept) c = rng() % 4 == 0 ? kNoKeptColour : static_cast<std::uint8_t>(rng() % 3);
+    // Kept colours must be a proper colouring: keep a colour only where no
+    // earlier contact of either body kept the same one.
+    std::set<std::pair<std::uint32_t, std::uint8_t>> used;
+    for (std::size_t k = 0; k < count; ++k) {
+      if (kept[k] == kNoKeptColour) continue;
+      const std::uint32_t a = contacts[k].a, b = contacts[k].b;
+      if (used.count({a, kept[k]}) || (!is_wall(b) && used.count({b, kept[k]}))) {
+        kept[k] = kNoKeptColour;
+        continue;
+      }
+      used.insert({a, kept[k]});
+      if (!is_wall(b)) used.insert({b, kept[k]});
+    }
+    expect_same_as_cpu(contacts, bodies, kept);
+  }
+}
+
 TEST(ColouringCuda, LargeSetAndAStarBeyondSixtyFourColours) {
   REQUIRE_DEVICE();
   std::mt19937_64 rng(4);
