@@ -76,8 +76,14 @@ class ContactCache {
   CacheEntries m_entries;
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
-  std::vector<std::uint32_t> m_order, m_first;
-  std::vector<std::uint8_t> m_contact_colour;
+  std::vector<std::uint32_t> m_order, m_first, m_source;
+  struct StagedEntry {  // store(): one contact's entry, in contact order
+    std::uint64_t key;
+    real normal_impulse;
+    Vec3 tangent_impulse, rolling_impulse;
+    std::uint8_t colour;
+  };
+  std::vector<StagedEntry> m_staged;
 };
 
 }  // namespace marbles::narrowphase
