@@ -62,7 +62,9 @@ namespace {
 // Appends what make(k, out) appends for k = 0..count-1 to `out`, in order of
 // k: each thread fills its own buffer over a contiguous (static) chunk and the
 // buffers are joined in thread order, so the order is the sequential one.
-// The buffers are `scratch`'s when given (kept between calls).
+// The first thread's chunk goes straight into `out` (no other thread touches
+// it), so the serial join copies only the other chunks' contacts. The
+// buffers are `scratch`'s when given (kept between calls).
 template <class Make>
 void collect_in_order(std::size_t count, std::vector<Contact>& out, ContactScratch* scratch, Make&& make) {
   constexpr std::size_t kParallelFrom = 20000;
@@ -83,9 +85,9 @@ void collect_in_order(std::size_t count, std::vector<Contact>& out, ContactScrat
 #pragma omp parallel num_threads(threads)
   {
 #if defined(_OPENMP)
-    std::vector<Contact>& mine = parts[omp_get_thread_num()];
+    std::vector<Contact>& mine = omp_get_thread_num() == 0 ? out : parts[omp_get_thread_num()];
 #else
-    std::vector<Contact>& mine = parts[0];
+    std::vector<Contact>& mine = out;
 #endif
 #pragma omp for schedule(static)
     for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(count); ++k)
@@ -93,9 +95,9 @@ void collect_in_order(std::size_t count, std::vector<Contact>& out, ContactScrat
   }
   errors.rethrow();
   std::size_t total = out.size();
-  for (const auto& p : parts) total += p.size();
+  for (int t = 1; t < threads; ++t) total += parts[t].size();
   out.reserve(total);
-  for (const auto& p : parts) out.insert(out.end(), p.begin(), p.end());
+  for (int t = 1; t < threads; ++t) out.insert(out.end(), parts[t].begin(), parts[t].end());
 }
 
 }  // namespace

@@ -78,6 +78,7 @@ class ContactSolver {
   // Scratch of the impact stage.
   ContactColouring m_impact_colouring;
   std::vector<std::uint32_t> m_candidates, m_level, m_order;
+  std::vector<std::vector<std::uint32_t>> m_candidate_parts;  // per thread
   std::vector<std::uint64_t> m_rank;
   std::vector<SolverBody> m_bodies;  // the velocity state, packed for the solve
   // The projection's records (the GPU's position records: a, b and the
