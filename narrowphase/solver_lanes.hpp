@@ -18,6 +18,10 @@
 #include <cstddef>
 #include <cstdint>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase::lanes {
@@ -28,10 +32,19 @@ inline constexpr std::uint32_t W = kVectorBytes / sizeof(real);  // contacts per
 using Mask = decltype(L{} < L{});
 
 inline L select(Mask m, L a, L b) { return m ? a : b; }
+// The lanes' square roots in one instruction where there is one (SSE's
+// sqrtps / sqrtpd round as sqrtss and std::sqrt do: IEEE, correctly
+// rounded, so the bits are the scalar's); else lane by lane.
 inline L sqrt_lanes(L x) {
+#if defined(__SSE2__) && !defined(MARBLES_DOUBLE)
+  return reinterpret_cast<L>(_mm_sqrt_ps(reinterpret_cast<__m128>(x)));
+#elif defined(__SSE2__)
+  return reinterpret_cast<L>(_mm_sqrt_pd(reinterpret_cast<__m128d>(x)));
+#else
   L r{};
   for (std::uint32_t l = 0; l < W; ++l) r[l] = std::sqrt(x[l]);
   return r;
+#endif
 }
 
 // Vec3 of lanes, with Vec3's formulas (core/vec3.hpp).
