@@ -17,10 +17,14 @@ namespace {
 // colours with 16117, 4238, 336 and 12 contacts.
 constexpr std::ptrdiff_t kParallelFrom = 4096;
 
+// The position stages' loop: in chunks of 1024 taken in turn, since the
+// halves of a colour cost unequally (perf: one thread 27 % busier in the
+// projection with halves); the order within a colour changes no bit. The
+// sweeps keep halves: chunks made them slower (66 -> 68 ms at 10^5).
 template <class F>
 void for_colour(std::uint32_t begin, std::uint32_t end, F&& f) {
   const auto n = static_cast<std::ptrdiff_t>(end - begin);
-#pragma omp parallel for schedule(static) if (n >= kParallelFrom)
+#pragma omp parallel for schedule(dynamic, 1024) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t) f(begin + static_cast<std::uint32_t>(t));
 }
 
