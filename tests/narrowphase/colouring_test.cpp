@@ -15,6 +15,7 @@
 #include <omp.h>
 #endif
 
+#include "core/parallel.hpp"
 #include "narrowphase/colouring.hpp"
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/solver_math.hpp"
@@ -453,6 +454,64 @@ TEST(Colouring, ByRoundOrdersNeighboursByRank) {
         EXPECT_EQ(rank[x] > rank[y], level[x] < level[y]) << x << " " << y;
       }
   }
+}
+
+// The cache's entries against a plain oracle: every contact with a load or
+// a colour (not the overflow set's), sorted by key, impulses only where
+// loaded. Large lists (the threaded paths), small ones, every contact
+// dropped, colours unknown (ranges that do not describe the list), on one
+// and two threads.
+TEST(ContactCache, StoreEqualsASortOfTheKeptContacts) {
+  std::mt19937_64 rng(41);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (const int threads : {1, 2})
+    for (const std::size_t count : {std::size_t(0), std::size_t(1), std::size_t(700), std::size_t(45000)})
+      for (const double loaded_share : {0.0, 0.5, 1.0})
+        for (const bool coloured : {true, false}) {
+          const std::uint32_t bodies = 64 + static_cast<std::uint32_t>(count / 3);
+          std::vector<Contact> contacts = random_contacts(rng, bodies, count, 0.1);
+          for (Contact& c : contacts) {
+            c.normal_impulse = u(rng) < loaded_share ? real(0.5 + u(rng)) : real(u(rng) < 0.5 ? 0 : -1);
+            c.tangent_impulse = Vec3(real(u(rng)), real(u(rng)), real(u(rng)));
+            c.rolling_impulse = Vec3(real(u(rng)), real(u(rng)), real(u(rng)));
+          }
+          ColourRanges ranges;
+          if (coloured) ContactColouring().colour_and_sort(contacts, bodies, ranges);
+          struct Entry {
+            std::uint64_t key;
+            real normal;
+            Vec3 tangent, rolling;
+            std::uint8_t colour;
+          };
+          std::vector<Entry> expect;
+          std::vector<std::uint8_t> colour(contacts.size(), kNoKeptColour);
+          if (coloured) for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) { colour[k] = c; });
+          for (std::size_t k = 0; k < contacts.size(); ++k) {
+            const Contact& c = contacts[k];
+            const bool loaded = c.normal_impulse > 0;
+            if (!loaded && colour[k] == kNoKeptColour) continue;
+            expect.push_back({(std::uint64_t(c.a) << 32) | c.b, loaded ? c.normal_impulse : real(0),
+                              loaded ? c.tangent_impulse : Vec3{}, loaded ? c.rolling_impulse : Vec3{}, colour[k]});
+          }
+          std::sort(expect.begin(), expect.end(), [](const Entry& x, const Entry& y) { return x.key < y.key; });
+          const int was = thread_count();
+          set_thread_count(threads);
+          ContactCache cache;
+          cache.store(contacts, ranges);
+          set_thread_count(was);
+          const CacheEntries& e = cache.entries();
+          const std::string where = "threads " + std::to_string(threads) + ", " + std::to_string(count) +
+                                    " contacts, loaded " + std::to_string(loaded_share) + (coloured ? "" : ", uncoloured");
+          ASSERT_EQ(e.size(), expect.size()) << where;
+          ASSERT_EQ(e.colour.size(), expect.size()) << where;
+          for (std::size_t k = 0; k < expect.size(); ++k) {
+            ASSERT_EQ(e.key[k], expect[k].key) << where << ", entry " << k;
+            ASSERT_EQ(e.normal_impulse[k], expect[k].normal) << where << ", entry " << k;
+            ASSERT_EQ(e.tangent_impulse[k], expect[k].tangent) << where << ", entry " << k;
+            ASSERT_EQ(e.rolling_impulse[k], expect[k].rolling) << where << ", entry " << k;
+            ASSERT_EQ(e.colour[k], expect[k].colour) << where << ", entry " << k;
+          }
+        }
 }
 
 }  // namespace
