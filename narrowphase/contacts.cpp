@@ -115,10 +115,12 @@ void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls
                    const real* reach, std::vector<Contact>& out, ContactScratch* scratch) {
   const auto wall_count = static_cast<std::uint32_t>(walls.size());
   collect_in_order(bodies.count, out, scratch, [&](std::size_t i, std::vector<Contact>& to) {
-    for (std::uint32_t k = 0; k < wall_count; ++k) {
-      Contact c;
+    // One contact for all the sphere's walls: make_wall_contact writes every
+    // field it sets on each call and leaves the rest (impulses, masses) at
+    // their defaults, so a reused one pushes what a fresh one would.
+    Contact c;
+    for (std::uint32_t k = 0; k < wall_count; ++k)
       if (make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, reach, c)) to.push_back(c);
-    }
   });
 }
 
