@@ -8,11 +8,15 @@
 // through ParallelErrors::run, which keeps the first exception; after the
 // loop, rethrow() throws it on the calling thread, where it can become a
 // message and an exit code.
+//
+// collect_in_order: a list built on all threads in the sequential order.
 #pragma once
 
 #include <atomic>
+#include <cstddef>
 #include <exception>
 #include <mutex>
+#include <vector>
 
 #if defined(_OPENMP)
 #include <omp.h>
@@ -74,5 +78,37 @@ class ParallelErrors {
   std::exception_ptr m_first;
   std::atomic<bool> m_failed{false};
 };
+
+// Appends what make(k, out) appends for k = 0..count-1 to `out`, in order of
+// k, on all threads when count >= parallel_from: each thread fills its own
+// buffer over a contiguous (static) chunk and the buffers are joined in
+// thread order, so the order is the sequential one. The first thread's chunk
+// goes straight into `out` (no other thread touches it), so the serial join
+// copies only the other chunks'. `parts`: the buffers, kept between calls.
+// An exception in make (an allocation) is rethrown here.
+template <class T, class Make>
+void collect_in_order(std::size_t count, std::size_t parallel_from, std::vector<T>& out,
+                      std::vector<std::vector<T>>& parts, Make&& make) {
+  const int threads = count >= parallel_from ? thread_count() : 1;
+  if (threads == 1) {
+    for (std::size_t k = 0; k < count; ++k) make(k, out);
+    return;
+  }
+  if (parts.size() < static_cast<std::size_t>(threads)) parts.resize(threads);
+  for (auto& p : parts) p.clear();
+  ParallelErrors errors;
+#pragma omp parallel num_threads(threads)
+  {
+    std::vector<T>& mine = thread_index() == 0 ? out : parts[thread_index()];
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(count); ++k)
+      errors.run([&] { make(static_cast<std::size_t>(k), mine); });
+  }
+  errors.rethrow();
+  std::size_t total = out.size();
+  for (int t = 1; t < threads; ++t) total += parts[t].size();
+  out.reserve(total);
+  for (int t = 1; t < threads; ++t) out.insert(out.end(), parts[t].begin(), parts[t].end());
+}
 
 }  // namespace marbles

@@ -2,10 +2,6 @@
 
 #include <algorithm>
 
-#if defined(_OPENMP)
-#include <omp.h>
-#endif
-
 #include "core/parallel.hpp"
 
 namespace marbles::narrowphase {
@@ -59,45 +55,13 @@ void advance_walls(std::vector<WallShape>& shapes, real h) {
 
 namespace {
 
-// Appends what make(k, out) appends for k = 0..count-1 to `out`, in order of
-// k: each thread fills its own buffer over a contiguous (static) chunk and the
-// buffers are joined in thread order, so the order is the sequential one.
-// The first thread's chunk goes straight into `out` (no other thread touches
-// it), so the serial join copies only the other chunks' contacts. The
-// buffers are `scratch`'s when given (kept between calls).
+constexpr std::size_t kParallelFrom = 20000;
+
+// The per-thread buffers: `scratch`'s when given (kept between calls).
 template <class Make>
-void collect_in_order(std::size_t count, std::vector<Contact>& out, ContactScratch* scratch, Make&& make) {
-  constexpr std::size_t kParallelFrom = 20000;
-#if defined(_OPENMP)
-  const int threads = count >= kParallelFrom ? omp_get_max_threads() : 1;
-#else
-  const int threads = 1;
-#endif
-  if (threads == 1) {
-    for (std::size_t k = 0; k < count; ++k) make(k, out);
-    return;
-  }
+void collect(std::size_t count, std::vector<Contact>& out, ContactScratch* scratch, Make&& make) {
   ContactScratch local;
-  std::vector<std::vector<Contact>>& parts = (scratch ? *scratch : local).parts;
-  if (parts.size() < static_cast<std::size_t>(threads)) parts.resize(threads);
-  for (auto& p : parts) p.clear();
-  ParallelErrors errors;  // an allocation that fails in a thread is rethrown here, not std::terminate
-#pragma omp parallel num_threads(threads)
-  {
-#if defined(_OPENMP)
-    std::vector<Contact>& mine = omp_get_thread_num() == 0 ? out : parts[omp_get_thread_num()];
-#else
-    std::vector<Contact>& mine = out;
-#endif
-#pragma omp for schedule(static)
-    for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(count); ++k)
-      errors.run([&] { make(static_cast<std::size_t>(k), mine); });
-  }
-  errors.rethrow();
-  std::size_t total = out.size();
-  for (int t = 1; t < threads; ++t) total += parts[t].size();
-  out.reserve(total);
-  for (int t = 1; t < threads; ++t) out.insert(out.end(), parts[t].begin(), parts[t].end());
+  collect_in_order(count, kParallelFrom, out, (scratch ? *scratch : local).parts, make);
 }
 
 }  // namespace
@@ -105,7 +69,7 @@ void collect_in_order(std::size_t count, std::vector<Contact>& out, ContactScrat
 void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
                      const PairTable& table, real h, const real* reach, std::vector<Contact>& out,
                      ContactScratch* scratch) {
-  collect_in_order(pair_count, out, scratch, [&](std::size_t k, std::vector<Contact>& to) {
+  collect(pair_count, out, scratch, [&](std::size_t k, std::vector<Contact>& to) {
     Contact c;
     if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c)) to.push_back(c);
   });
@@ -114,7 +78,7 @@ void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size
 void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
                    const real* reach, std::vector<Contact>& out, ContactScratch* scratch) {
   const auto wall_count = static_cast<std::uint32_t>(walls.size());
-  collect_in_order(bodies.count, out, scratch, [&](std::size_t i, std::vector<Contact>& to) {
+  collect(bodies.count, out, scratch, [&](std::size_t i, std::vector<Contact>& to) {
     // One contact for all the sphere's walls: make_wall_contact writes every
     // field it sets on each call and leaves the rest (impulses, masses) at
     // their defaults, so a reused one pushes what a fresh one would.

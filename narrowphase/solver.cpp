@@ -148,22 +148,10 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
   const real rest = m_settings.rest_speed;
   const ImpactParams params{rest, h, m_settings.wall_accel};
   const auto n = static_cast<std::uint32_t>(contacts.size());
-  // The candidates in index order: each thread scans its slice of the
-  // contacts into its own list, the lists joined in slice order.
-  m_candidates.clear();
-  const int most = n >= kParallelFrom ? thread_count() : 1;
-  if (m_candidate_parts.size() < static_cast<std::size_t>(most)) m_candidate_parts.resize(most);
-#pragma omp parallel num_threads(most) if (most > 1)
-  {
-    const int t = thread_index(), threads = team_size();
-    std::vector<std::uint32_t>& mine = m_candidate_parts[t];
-    mine.clear();
-    const auto hi = static_cast<std::uint32_t>(std::uint64_t(n) * (t + 1) / threads);
-    for (auto k = static_cast<std::uint32_t>(std::uint64_t(n) * t / threads); k < hi; ++k)
-      if (is_impact_candidate(contacts[k], rest)) mine.push_back(k);
-  }
-  for (int t = 0; t < most; ++t)
-    m_candidates.insert(m_candidates.end(), m_candidate_parts[t].begin(), m_candidate_parts[t].end());
+  m_candidates.clear();  // in index order, scanned on all threads
+  collect_in_order(n, kParallelFrom, m_candidates, m_candidate_parts, [&](std::size_t k, std::vector<std::uint32_t>& to) {
+    if (is_impact_candidate(contacts[k], rest)) to.push_back(static_cast<std::uint32_t>(k));
+  });
   if (m_candidates.empty()) return;
   m_rank.resize(n);
   m_level.assign(n, kUncoloured);
