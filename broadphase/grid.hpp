@@ -17,6 +17,7 @@
 #include "broadphase/broadphase_math.hpp"
 #include "broadphase/home_cell_math.hpp"
 #include "core/error.hpp"
+#include "core/radix_sort.hpp"
 #include "core/spheres.hpp"
 
 namespace marbles::broadphase {
@@ -53,16 +54,6 @@ inline KeyWidth key_width_for(std::uint32_t key_bits) {
   return KeyWidth::too_wide;
 }
 
-// Bits needed to write v (0 for 0); std::bit_width without C++20, so that
-// .cu files compiled as C++17 can include this header.
-inline std::uint32_t bits_needed(std::uint64_t v) {
-  std::uint32_t b = 0;
-  while (v) {
-    ++b;
-    v >>= 1;
-  }
-  return b;
-}
 
 // Packs the given per-axis maxima into key shifts.
 inline void set_key_layout(Grid& g, const std::uint64_t half_max[3]) {

@@ -14,6 +14,18 @@
 
 namespace marbles {
 
+// Bits needed to write v (0 for 0): a sort's key_bits for keys up to v.
+// std::bit_width without C++20, so that .cu files compiled as C++17 can
+// include this header.
+inline unsigned bits_needed(std::uint64_t v) {
+  unsigned b = 0;
+  while (v) {
+    ++b;
+    v >>= 1;
+  }
+  return b;
+}
+
 // Sorts keys[0, n) and moves values with them. `scratch_*` are resized as
 // needed and may be reused between calls. Returns the passes made.
 unsigned radix_sort_pairs(std::vector<std::uint32_t>& keys, std::vector<std::uint32_t>& values, unsigned key_bits,

@@ -1,5 +1,6 @@
 #include "core/block_stage.cuh"
 #include "core/cuda_check.hpp"
+#include "core/radix_sort.hpp"
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_cache_cuda.cuh"
 #include "narrowphase/contact_cache_math.hpp"
@@ -69,7 +70,7 @@ __global__ void __launch_bounds__(kBlock) restore_kernel(Contact* contacts, std:
                                                          std::uint8_t* kept_colour) {
   __shared__ ::marbles::cuda::RunStage<Contact, kBlock> stage;
   for (std::uint32_t base = blockIdx.x * blockDim.x; base < n; base += gridDim.x * blockDim.x) {
-    const std::uint32_t count = n - base < blockDim.x ? n - base : blockDim.x;
+    const std::uint32_t count = ::marbles::cuda::run_length(n, base);
     Contact* run = contacts + base;
     stage.fill(run, count);
     __syncthreads();
@@ -189,14 +190,6 @@ ContactCacheCuda::~ContactCacheCuda() {
   if (m_host) cudaFreeHost(m_host);
 }
 
-namespace {
-int bits_for(std::uint64_t values) {  // bits that hold 0 .. values - 1
-  int bits = 0;
-  while (bits < 64 && (std::uint64_t(1) << bits) < values) ++bits;
-  return bits;
-}
-}  // namespace
-
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
                              std::uint32_t spheres, std::uint32_t walls, int sm_count, cudaStream_t s) {
   auto* flags = m_flags.as<std::uint32_t>(n + 1);
@@ -213,7 +206,9 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   auto* index_in = m_index_in.as<std::uint32_t>(m_count);
   auto* keys = m_keys.as<std::uint64_t>(m_count);
   auto* index = m_index.as<std::uint32_t>(m_count);
-  const int b_bits = bits_for(std::uint64_t(spheres) + walls), a_bits = bits_for(spheres);
+  // Bits of the largest a (a sphere) and the largest b (the last wall).
+  const auto index_bits = [](std::uint64_t count) { return static_cast<int>(bits_needed(count ? count - 1 : 0)); };
+  const int b_bits = index_bits(std::uint64_t(spheres) + walls), a_bits = index_bits(spheres);
   keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, offsets, spheres, b_bits, keys_in, index_in);
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_sort_pairs(keys_in, keys, index_in, index, m_count, a_bits + b_bits, m_temp, s);
