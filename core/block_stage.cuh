@@ -26,6 +26,11 @@ __device__ void copy_words(T* to, const T* from, std::uint32_t count) {
   for (std::uint32_t w = threadIdx.x; w < words; w += blockDim.x) dst[w] = src[w];
 }
 
+// The length of a block's run that starts at `base` of [0, n).
+__device__ inline std::uint32_t run_length(std::uint32_t n, std::uint32_t base) {
+  return n - base < blockDim.x ? n - base : blockDim.x;
+}
+
 // One run of up to Threads records of a block (declare it __shared__). Every
 // thread of the block calls fill and flush; the caller synchronises the block
 // between fill and get, and between put and flush, and before reusing it.

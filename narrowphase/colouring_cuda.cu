@@ -134,7 +134,7 @@ __global__ void __launch_bounds__(kBlock) gather_kernel(const Contact* in, const
       if (sorted_colour) sorted_colour[k] = sorted_keys[k] < kMaxColours ? sorted_keys[k] : kNoKeptColour;
     }
     __syncthreads();
-    stage.flush(out + base, n - base < blockDim.x ? n - base : blockDim.x);
+    stage.flush(out + base, ::marbles::cuda::run_length(n, base));
     __syncthreads();
   }
 }

@@ -54,7 +54,7 @@ __global__ void __launch_bounds__(kBlock) pack_sweep_kernel(const Contact* conta
                                                             SweepRecords s) {
   __shared__ ::marbles::cuda::RunStage<Contact, kBlock> stage;
   for (std::uint32_t base = blockIdx.x * blockDim.x; base < n; base += gridDim.x * blockDim.x) {
-    stage.fill(contacts + base, n - base < blockDim.x ? n - base : blockDim.x);
+    stage.fill(contacts + base, ::marbles::cuda::run_length(n, base));
     __syncthreads();
     const std::uint32_t k = base + threadIdx.x;
     if (k < n) pack_sweep_record(stage.get(contacts + base, threadIdx.x), s, k);
