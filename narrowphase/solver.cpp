@@ -203,10 +203,7 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
   records.bodies = m_position_pairs.data();
   records.geometry = m_position_geometry.data();
 #pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t k = 0; k < n; ++k) {
-    records.bodies[k] = {cs[k].a, cs[k].b};
-    records.geometry[k] = {cs[k].normal.x, cs[k].normal.y, cs[k].normal.z, cs[k].separation};
-  }
+  for (std::ptrdiff_t k = 0; k < n; ++k) pack_position_record(cs[k], records, static_cast<std::uint32_t>(k));
   for (int it = 0; it < m_settings.position_iterations; ++it)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
       for_colour(b, e, [&](std::uint32_t k) {

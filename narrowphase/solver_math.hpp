@@ -164,13 +164,19 @@ struct SweepRecords {
   }
 };
 
+// What the position stages read of a record (load_position_contact<false>):
+// the bodies and the geometry. The CPU's projection packs only these.
+MARBLES_HD_INLINE void pack_position_record(const Contact& c, const SweepRecords& s, std::uint32_t k) {
+  s.geometry[k] = {c.normal.x, c.normal.y, c.normal.z, c.separation};
+  s.bodies[k] = {c.a, c.b};
+}
+
 MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s, std::uint32_t k) {
   s.impulse[k] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
   s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.coeff.twisting_friction};
-  s.geometry[k] = {c.normal.x, c.normal.y, c.normal.z, c.separation};
   s.arms[k] = {c.ra, c.rb, c.coeff.friction, c.coeff.rolling_friction};
   s.extra[k] = {c.wall_velocity.x, c.wall_velocity.y, c.wall_velocity.z, c.rebound_shift};
-  s.bodies[k] = {c.a, c.b};
+  pack_position_record(c, s, k);
 }
 
 // Record k as a contact, its impulse word `i` already loaded: the bodies,
