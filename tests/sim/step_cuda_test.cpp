@@ -42,6 +42,16 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
   }
 }
 
+// Touching spheres of radius r on an nx x ny x nz lattice, one radius in
+// from the walls at x = y = 0, the lowest layer's bottom at height z0.
+scene::GeneratedParticles dense_block(int nx, int ny, int nz, real r, real z0) {
+  scene::GeneratedParticles g;
+  for (int x = 0; x < nx; ++x)
+    for (int y = 0; y < ny; ++y)
+      for (int z = 0; z < nz; ++z) add_sphere(g, {r * (2 * x + 2), r * (2 * y + 2), z0 + r * (2 * z + 1)}, r);
+  return g;
+}
+
 }  // namespace
 
 TEST(StepCuda, PourMatchesTheCpuBitForBit) {
@@ -77,11 +87,7 @@ TEST(StepCuda, DroppedDenseBlockKeepsEveryContact) {
                                         Effect::friction}, 0.2, 0.5);
   const real r = real(0.01);
   s.walls.push_back(box({0, 0, 0}, {real(0.5), real(0.5), real(1)}));
-  scene::GeneratedParticles g;
-  for (int x = 0; x < 24; ++x)
-    for (int y = 0; y < 24; ++y)
-      for (int z = 0; z < 12; ++z) add_sphere(g, {r * (2 * x + 2), r * (2 * y + 2), real(0.02) + r * (2 * z + 1)}, r);
-  expect_same_run(s, g, 120);
+  expect_same_run(s, dense_block(24, 24, 12, r, real(0.02)), 120);
 }
 
 // A small block (105 spheres, 7 x 5 x 3: no kernel's block is full) with
@@ -95,11 +101,7 @@ TEST(StepCuda, SmallDenseBlockWithEveryTermMatchesTheCpu) {
                               0.3, 0.5, 0.02, 0.01);
   const real r = real(0.01);
   s.walls.push_back(box({0, 0, 0}, {real(0.2), real(0.2), real(0.5)}));
-  scene::GeneratedParticles g;
-  for (int x = 0; x < 7; ++x)
-    for (int y = 0; y < 5; ++y)
-      for (int z = 0; z < 3; ++z) add_sphere(g, {r * (2 * x + 2), r * (2 * y + 2), real(0.005) + r * (2 * z + 1)}, r);
-  expect_same_run(s, g, 30);
+  expect_same_run(s, dense_block(7, 5, 3, r, real(0.005)), 30);
 }
 
 TEST(StepCuda, NewtonsCradleMatchesTheCpu) {
