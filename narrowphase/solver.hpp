@@ -6,7 +6,8 @@
 // one. A colour's contacts share no sphere, so the result does not depend on
 // the thread count, and it is the result of the CUDA twin bit for bit (both
 // call the per-contact functions of solver_math.hpp; the CPU's sweep takes
-// them four at a time in SIMD lanes, solver_lanes.hpp, with the same bits):
+// them four at a time in SIMD lanes, or eight where the CPU has AVX2,
+// solver_lanes.hpp, with the same bits):
 //   prepare       effective masses; approach speed before the solve (done as
 //                 the colouring moves the contacts: prepare_from_world)
 //   impacts       (with restitution) contacts approaching faster than the
@@ -44,9 +45,22 @@ namespace marbles::narrowphase {
 
 inline constexpr int kImpactPasses = 4;
 
+// The SIMD lanes the CPU's sweep runs in (solver_lanes.hpp): 4 floats
+// (SSE2, every x86-64 CPU), 8 floats (AVX2), 8 floats with AVX-512's 32
+// registers. Every kind gives the same bits.
+enum class SweepLanes { sse2, avx2, avx512 };
+const char* name(SweepLanes lanes);
+SweepLanes supported_lanes();  // the widest this CPU has
+// supported_lanes(), or fewer where the environment's MARBLES_LANES names
+// fewer ("sse2", "avx2"; for comparisons).
+SweepLanes best_lanes();
+
 class ContactSolver {
  public:
-  explicit ContactSolver(const SolverSettings& settings);
+  // `lanes`: at most what the CPU supports.
+  explicit ContactSolver(const SolverSettings& settings, SweepLanes lanes = best_lanes());
+
+  SweepLanes lanes() const { return m_lanes; }
 
   const SolverSettings& settings() const { return m_settings; }
   // The velocity sweeps per substep (the watchdog's retries raise it).
@@ -71,6 +85,7 @@ class ContactSolver {
   using ImpactFn = bool (*)(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
                             SolverBody* bodies, const ImpactParams& p);
   SolverSettings m_settings;
+  SweepLanes m_lanes = SweepLanes::sse2;
   RangeFn m_sweep = nullptr;
   RangeFn m_warm_start = nullptr;
   ImpactFn m_impact = nullptr;
