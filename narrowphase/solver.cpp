@@ -8,11 +8,6 @@
 #include <cstdlib>
 #include <string_view>
 
-// The wide lanes' functions are always inlined into their AVX callers; GCC
-// still notes, where the templates are instantiated (the end of this file),
-// that a 32-byte vector argument would change the ABI of a non-AVX call.
-#pragma GCC diagnostic ignored "-Wpsabi"
-
 namespace marbles::narrowphase {
 namespace {
 

@@ -32,11 +32,6 @@
 
 #include "narrowphase/solver_math.hpp"
 
-// A 32-byte vector passed by value is an ABI note for non-AVX builds; these
-// functions are always inlined, never called across that boundary.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wpsabi"
-
 #define MARBLES_LANE [[gnu::always_inline]] inline
 
 namespace marbles::narrowphase::lanes {
@@ -506,4 +501,3 @@ MARBLES_LANE void solve_block(Contact* c, SolverBody* bodies, real inv_h) {
 }  // namespace marbles::narrowphase::lanes
 
 #undef MARBLES_LANE
-#pragma GCC diagnostic pop

@@ -17,9 +17,6 @@
 
 #include "narrowphase/solver_lanes.hpp"
 
-// solve_wide_block's 32-byte vectors stay inside AVX2 code.
-#pragma GCC diagnostic ignored "-Wpsabi"
-
 namespace marbles::narrowphase {
 namespace {
 
