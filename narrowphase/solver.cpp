@@ -187,6 +187,7 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
   SolverBody* bodies = m_bodies.data();
 
   Contact* cs = contacts.data();
+  m_rebounds = false;
   if (m_settings.restitution) impacts(contacts, colours, bodies, world.count, h);
   if (m_settings.warm_start)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(cs, b, e, bodies, 0, false); });
@@ -236,11 +237,13 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
   for (std::uint32_t k = begin[rounds]; k < begin[rounds + 1]; ++k)
     hit = m_impact(cs, m_order.data(), k, k + 1, bodies, params) || hit;
 
+  m_rebounds = hit;
   for (int pass = 1; pass < kImpactPasses && hit; ++pass) {
     hit = false;
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
       hit = m_impact(cs, nullptr, b, e, bodies, params) || hit;
     });
+    m_rebounds = m_rebounds || hit;
   }
 }
 
@@ -248,7 +251,9 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
                                       const BodiesView& bodies, const std::vector<WallShape>& walls) const {
   const Contact* cs = contacts.data();
   const WallShape* ws = walls.data();
-  if (m_settings.restitution)
+  // Only an impact gives a contact a rebound shift: a substep without one
+  // (a pile at rest) skips the pass, which would return at every contact.
+  if (m_settings.restitution && m_rebounds)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
       for_colour(b, e, [&](std::uint32_t k) { rebound_one(cs[k], bodies, ws); });
     });

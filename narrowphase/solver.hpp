@@ -86,6 +86,7 @@ class ContactSolver {
                             SolverBody* bodies, const ImpactParams& p);
   SolverSettings m_settings;
   SweepLanes m_lanes = SweepLanes::sse2;
+  bool m_rebounds = false;  // an impact hit in this substep's solve (some contact has a rebound shift)
   RangeFn m_sweep = nullptr;
   RangeFn m_warm_start = nullptr;
   ImpactFn m_impact = nullptr;
