@@ -1,6 +1,7 @@
 #include "narrowphase/colouring.hpp"
 
 #include <algorithm>
+#include <atomic>
 
 #include "core/counting_sort.hpp"
 #include "core/radix_sort.hpp"
@@ -128,7 +129,7 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
 }
 
 void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
-                                       const std::uint8_t* kept_colour, const BodiesView* prepare) {
+                                       const std::uint8_t* kept_colour, const BodiesView* prepare, real rest_speed) {
   const auto n = static_cast<std::uint32_t>(contacts.size());
   m_rank.resize(n);
   m_colour.resize(n);
@@ -155,6 +156,7 @@ void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size
   Contact* sorted = m_sorted.data();
   const std::uint32_t* colour_of = m_colour.data();
   const std::uint32_t overflow_bucket = out.colours;
+  std::atomic<bool> fast{false};  // written only when seen (rare): no traffic in a pile at rest
   counting_sort(
       n, out.colours + 1,  // the colours, then the overflow set
       [&](std::uint32_t k) { return colour_of[k] == kOverflowColour ? overflow_bucket : colour_of[k]; },
@@ -168,8 +170,10 @@ void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size
         __builtin_prefetch(prepare->angular_velocity + ahead.a);
         __builtin_prefetch(prepare->angular_velocity + (ahead.b & ~kWallFlag));
         prepare_from_world(c, *prepare);
+        if (is_impact_candidate(c, rest_speed)) fast.store(true, std::memory_order_relaxed);
       },
       out.begin, m_bucket_count);
+  out.fast_approach = !prepare || fast.load(std::memory_order_relaxed);
   contacts.swap(m_sorted);
 }
 

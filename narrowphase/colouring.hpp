@@ -23,6 +23,10 @@ struct ColourRanges {
   std::vector<std::uint32_t> begin{0, 0};
   std::uint32_t colours = 0;
   std::uint32_t rounds = 0;  // colouring rounds it took
+  // Whether a contact may approach faster than the rest speed given to
+  // colour_and_sort: false only when it prepared every contact and saw none
+  // (the impact stage then skips its scan for candidates: a pile at rest).
+  bool fast_approach = true;
   std::size_t overflow() const { return begin[colours + 1] - begin[colours]; }
   std::size_t size() const { return begin[colours + 1]; }
 };
@@ -49,8 +53,11 @@ class ContactColouring {
   // colour-major order. With `prepare` (the world's bodies) each contact is
   // also prepared on its way (prepare_from_world, solver_math.hpp): the
   // solver is then told the contacts are prepared.
+  // `rest_speed`: with `prepare`, out.fast_approach tells whether a contact
+  // approaches faster (is_impact_candidate).
   void colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
-                       const std::uint8_t* kept_colour = nullptr, const BodiesView* prepare = nullptr);
+                       const std::uint8_t* kept_colour = nullptr, const BodiesView* prepare = nullptr,
+                       real rest_speed = 0);
 
  private:
   void prefetch_ahead(const Contact* contacts, std::size_t t, std::size_t count) const;

@@ -211,6 +211,7 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
   const ImpactParams params{rest, h, m_settings.wall_accel};
   const auto n = static_cast<std::uint32_t>(contacts.size());
   m_candidates.clear();  // in index order, scanned on all threads
+  if (!colours.fast_approach) return;  // the colouring's move saw every approach speed: none is a candidate
   collect_in_order(n, kParallelFrom, m_candidates, m_candidate_parts, [&](std::size_t k, std::vector<std::uint32_t>& to) {
     if (is_impact_candidate(contacts[k], rest)) to.push_back(static_cast<std::uint32_t>(k));
   });

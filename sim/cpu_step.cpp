@@ -67,7 +67,8 @@ class CpuStep final : public StepBackend {
     const bool kept = m_kept_colour.size() == m_contacts.size() && !m_contacts.empty();
     // Prepared on the way: nothing moves the bodies before the solve.
     const BodiesView bodies = m_world.view();
-    m_colouring.colour_and_sort(m_contacts, m_world.size(), m_colours, kept ? m_kept_colour.data() : nullptr, &bodies);
+    m_colouring.colour_and_sort(m_contacts, m_world.size(), m_colours, kept ? m_kept_colour.data() : nullptr, &bodies,
+                                m_model.solver.rest_speed);
     m_counters.colours = std::max(m_counters.colours, m_colours.colours);
     m_counters.overflow += m_colours.overflow();
   }

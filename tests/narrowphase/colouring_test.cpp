@@ -339,7 +339,31 @@ TEST(Colouring, PreparesOnTheWayAsTheSolverWould) {
       EXPECT_EQ(prepared[k].approach_speed, plain[k].approach_speed) << k;
     }
     EXPECT_NE(plain[0].normal_mass, real(0)) << "the comparison must see prepared values";
+
+    // fast_approach against a scan of the prepared contacts, at rest speeds
+    // just below, at and above the fastest approach.
+    real fastest = 0;
+    for (const Contact& c : plain) fastest = std::min(fastest, c.approach_speed);
+    ASSERT_LT(fastest, real(0));
+    int seen = 0;
+    for (real rest : {real(0), -fastest * real(0.999), -fastest, -fastest * real(2)}) {
+#if defined(_OPENMP)
+      omp_set_num_threads(threads);
+#endif
+      std::vector<Contact> again = input;
+      ColourRanges r;
+      ContactColouring().colour_and_sort(again, bodies, r, nullptr, &view, rest);
+#if defined(_OPENMP)
+      omp_set_num_threads(was);
+#endif
+      const bool any = std::any_of(plain.begin(), plain.end(),
+                                   [&](const Contact& c) { return is_impact_candidate(c, rest); });
+      EXPECT_EQ(r.fast_approach, any) << "rest speed " << rest << ", " << threads << " thread(s)";
+      seen += any ? 1 : 2;
+    }
+    EXPECT_EQ(seen, 6);  // two rest speeds with candidates, two without
   }
+  EXPECT_TRUE(plain_ranges.fast_approach);  // not prepared: unknown
 }
 
 // Adversarial: one sphere touching 200 others (more than 64 colours: the rest
