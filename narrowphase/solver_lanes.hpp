@@ -14,11 +14,11 @@
 //
 // Two widths: L, 16 bytes (SSE2, which every x86-64 CPU has: 4 floats or 2
 // doubles), and Wide, 32 bytes (8 floats or 4 doubles), which the solver
-// runs where the CPU has AVX2 (solver.cpp picks at run time and compiles
-// that sweep for AVX2 alone). The math is written once, for either vector
-// type V; a Wide block moves its contacts and bodies as two L blocks. Every
-// function here is always inlined, so a Wide one is compiled as part of its
-// AVX2 caller and never on its own with a 16-byte baseline.
+// runs where the CPU has AVX2 or AVX-512 (solver.cpp picks at run time and
+// compiles those sweeps alone for them). The math is written once, for
+// either vector type V; a Wide block moves its contacts and bodies as two L
+// blocks. Every function here is always inlined, so a Wide one is compiled
+// as part of its AVX caller and never on its own with a 16-byte baseline.
 #pragma once
 
 #include <cmath>
@@ -46,14 +46,9 @@ template <>
 struct VectorOf<32> {
   typedef real type __attribute__((vector_size(32)));
 };
-template <>
-struct VectorOf<64> {
-  typedef real type __attribute__((vector_size(64)));
-};
 
 using L = VectorOf<16>::type;     // the baseline
-using Wide = VectorOf<32>::type;  // AVX2
-using Wider = VectorOf<64>::type;  // AVX-512
+using Wide = VectorOf<32>::type;  // AVX2, AVX-512
 template <class V>
 inline constexpr std::uint32_t width = sizeof(V) / sizeof(real);  // contacts per block
 inline constexpr std::uint32_t W = width<L>;
