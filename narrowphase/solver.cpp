@@ -95,11 +95,8 @@ MARBLES_SWEEP_RANGE(sweep_range_avx2, gnu::target("avx2"), lanes::Wide)
 MARBLES_SWEEP_RANGE(sweep_range_avx512, gnu::target("avx2,avx512f,avx512vl,avx512dq,avx512bw"), lanes::Wide)
 #undef MARBLES_SWEEP_RANGE
 
-// (ContactSolver::RangeFn)
-using SweepFn = void (*)(Contact*, std::uint32_t, std::uint32_t, SolverBody*, real, bool);
-
 template <bool Friction, bool Rolling>
-SweepFn sweep_for(SweepLanes lanes) {
+auto sweep_for(SweepLanes lanes) {
   switch (lanes) {
     case SweepLanes::avx512: return &sweep_range_avx512<Friction, Rolling>;
     case SweepLanes::avx2: return &sweep_range_avx2<Friction, Rolling>;
