@@ -191,7 +191,6 @@ class CudaStep final : public StepBackend {
     auto* bodies = m_solver_bodies.as<narrowphase::SolverBody>(world.count);
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     narrowphase::Contact* contacts = contacts_d();  // prepared by the colouring
-    m_impact_candidates = false;
     if (m_model.solver.restitution) impacts(bodies, h);
     // From here on the stages read the sweep's records (solver_math.hpp);
     // they live in the colouring's gather buffer, free from the gather until
@@ -220,8 +219,9 @@ class CudaStep final : public StepBackend {
     if (m_count == 0) return;
     const BodiesView bodies = m_device.view();
     // Only an impact gives a contact a rebound shift, and only a substep
-    // with impact candidates can have one (a pile at rest has none).
-    if (m_model.solver.restitution && m_impact_candidates)
+    // with impact candidates (this substep's levels, set by impacts) can
+    // have one (a pile at rest has none).
+    if (m_model.solver.restitution && m_levels.back() != 0)
       over_colours(false, [&](nc::ContactRange r) { nc::launch_rebound(m_records, r, bodies, walls(), m_stream); });
     for (int it = 0; it < m_model.solver.position_iterations; ++it)
       over_colours(false, [&](nc::ContactRange r) {
@@ -426,7 +426,6 @@ class CudaStep final : public StepBackend {
     const std::uint32_t levels =
         m_colouring.impact_levels(contacts, m_count, m_device.size(), rest, order, m_levels, m_sm, m_stream);
     if (m_levels.back() == 0) return;
-    m_impact_candidates = true;
     auto* hit = m_hit.as<unsigned>(1);
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, sizeof(unsigned), m_stream));
     const bool friction = m_model.solver.friction;
@@ -479,7 +478,6 @@ class CudaStep final : public StepBackend {
   // by the next find_contacts or by unpacking them into the contacts).
   narrowphase::SweepRecords m_records;
   bool m_records_live = false;
-  bool m_impact_candidates = false;  // this substep's impact stage had candidates
   std::uint32_t m_colours = 0;
   std::vector<std::uint32_t> m_begin{0, 0}, m_levels{0, 0};
   std::vector<narrowphase::Contact> m_host_contacts;
