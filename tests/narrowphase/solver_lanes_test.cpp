@@ -96,16 +96,28 @@ Case make_case(std::mt19937& rng, bool edge, std::uint32_t count = W) {
   return out;
 }
 
+// The 32-byte lanes (two L blocks joined; solver.cpp runs them compiled for
+// AVX2 or AVX-512), compiled here for AVX2: called only where the CPU has it.
+constexpr std::uint32_t WW = lanes::width<lanes::Wide>;
 template <bool Friction, bool Rolling>
+[[gnu::target("avx2")]] void solve_wide_block(Contact* c, SolverBody* bodies, real inv_h) {
+  lanes::solve_block<Friction, Rolling, lanes::Wide>(c, bodies, inv_h);
+}
+
+// One block (W contacts, or WW with Wide) solved side by side against
+// solve_one contact by contact, over three sweeps.
+template <bool Friction, bool Rolling, bool Wide = false>
 void expect_lanes_equal_scalar(std::uint32_t seed, bool edge) {
+  constexpr std::uint32_t count = Wide ? WW : W;
   std::mt19937 rng(seed);
-  Case scalar = make_case(rng, edge);
+  Case scalar = make_case(rng, edge, count);
   Case block = scalar;
   const real inv_h = real(1000);
   for (int sweep = 0; sweep < 3; ++sweep) {  // later sweeps start from clamped impulses
     for (Contact& c : scalar.contacts) solve_one<Friction, Rolling>(c, scalar.bodies.data(), inv_h);
-    lanes::solve_block<Friction, Rolling>(block.contacts.data(), block.bodies.data(), inv_h);
-    ASSERT_TRUE(same_bits(scalar.contacts.data(), block.contacts.data(), sizeof(Contact) * W))
+    if constexpr (Wide) solve_wide_block<Friction, Rolling>(block.contacts.data(), block.bodies.data(), inv_h);
+    else lanes::solve_block<Friction, Rolling>(block.contacts.data(), block.bodies.data(), inv_h);
+    ASSERT_TRUE(same_bits(scalar.contacts.data(), block.contacts.data(), sizeof(Contact) * count))
         << "seed " << seed << " sweep " << sweep << (edge ? " (edge)" : "");
     ASSERT_TRUE(same_bits(scalar.bodies.data(), block.bodies.data(), sizeof(SolverBody) * scalar.bodies.size()))
         << "seed " << seed << " sweep " << sweep << (edge ? " (edge)" : "");
@@ -129,34 +141,22 @@ TEST(SolverLanes, EqualSolveOneBitForBit) {
   over_cases(400, []<bool F, bool R>(std::uint32_t seed, bool edge) { expect_lanes_equal_scalar<F, R>(seed, edge); });
 }
 
-// The 32-byte lanes (two L blocks joined; solver.cpp runs them compiled for
-// AVX2 or AVX-512) on 2W contacts: the same bits as solve_one. Compiled here
-// for AVX2, so it runs only where the CPU has it.
-constexpr std::uint32_t WW = lanes::width<lanes::Wide>;
-template <bool Friction, bool Rolling>
-[[gnu::target("avx2")]] void solve_wide_block(Contact* c, SolverBody* bodies, real inv_h) {
-  lanes::solve_block<Friction, Rolling, lanes::Wide>(c, bodies, inv_h);
-}
-
-template <bool Friction, bool Rolling>
-void expect_wide_lanes_equal_scalar(std::uint32_t seed, bool edge) {
-  std::mt19937 rng(seed);
-  Case scalar = make_case(rng, edge, WW);
-  Case block = scalar;
-  for (int sweep = 0; sweep < 3; ++sweep) {
-    for (Contact& c : scalar.contacts) solve_one<Friction, Rolling>(c, scalar.bodies.data(), real(1000));
-    solve_wide_block<Friction, Rolling>(block.contacts.data(), block.bodies.data(), real(1000));
-    ASSERT_TRUE(same_bits(scalar.contacts.data(), block.contacts.data(), sizeof(Contact) * WW))
-        << "seed " << seed << " sweep " << sweep << (edge ? " (edge)" : "");
-    ASSERT_TRUE(same_bits(scalar.bodies.data(), block.bodies.data(), sizeof(SolverBody) * scalar.bodies.size()))
-        << "seed " << seed << " sweep " << sweep << (edge ? " (edge)" : "");
-  }
+// The test above can fail: a lane that differs from its scalar twin in one
+// operation (here the sign of a zero) is seen.
+TEST(SolverLanes, TheComparisonSeesOneBit) {
+  std::mt19937 rng(7);
+  Case a = make_case(rng, false);
+  Case b = a;
+  b.contacts[W - 1].normal_impulse = std::nextafter(b.contacts[W - 1].normal_impulse, real(1));
+  for (Contact& c : a.contacts) solve_one<true, true>(c, a.bodies.data(), real(1000));
+  lanes::solve_block<true, true>(b.contacts.data(), b.bodies.data(), real(1000));
+  EXPECT_FALSE(same_bits(a.contacts.data(), b.contacts.data(), sizeof(Contact) * W));
 }
 
 TEST(SolverLanes, WideLanesEqualSolveOneBitForBit) {
   if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "skipped: this CPU has no AVX2";
   static_assert(WW == 2 * W);
-  over_cases(400, []<bool F, bool R>(std::uint32_t seed, bool edge) { expect_wide_lanes_equal_scalar<F, R>(seed, edge); });
+  over_cases(400, []<bool F, bool R>(std::uint32_t seed, bool edge) { expect_lanes_equal_scalar<F, R, true>(seed, edge); });
 }
 
 // It can fail: one bit of the high half's first contact is seen.
@@ -169,18 +169,6 @@ TEST(SolverLanes, TheWideComparisonSeesOneBit) {
   for (Contact& c : a.contacts) solve_one<true, true>(c, a.bodies.data(), real(1000));
   solve_wide_block<true, true>(b.contacts.data(), b.bodies.data(), real(1000));
   EXPECT_FALSE(same_bits(a.contacts.data(), b.contacts.data(), sizeof(Contact) * WW));
-}
-
-// The test above can fail: a lane that differs from its scalar twin in one
-// operation (here the sign of a zero) is seen.
-TEST(SolverLanes, TheComparisonSeesOneBit) {
-  std::mt19937 rng(7);
-  Case a = make_case(rng, false);
-  Case b = a;
-  b.contacts[W - 1].normal_impulse = std::nextafter(b.contacts[W - 1].normal_impulse, real(1));
-  for (Contact& c : a.contacts) solve_one<true, true>(c, a.bodies.data(), real(1000));
-  lanes::solve_block<true, true>(b.contacts.data(), b.bodies.data(), real(1000));
-  EXPECT_FALSE(same_bits(a.contacts.data(), b.contacts.data(), sizeof(Contact) * W));
 }
 
 // The grouped loads and stores (float: 4 x 4 transposes) move the same
