@@ -480,11 +480,13 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
     }
   }
   constexpr int kVerbs = static_cast<int>(Verb::count);
+  // The CPU sweep's SIMD lanes (solver.hpp: SweepLanes); none on the GPU.
+  const char* lanes = options.backend == "cpu" ? narrowphase::name(narrowphase::best_lanes()) : nullptr;
   if (options.json) {
     nlohmann::ordered_json doc{{"benchmark", "step"}, {"backend", options.backend}, {"scene", options.scene},
-                               {"precision", kRealName}, {"threads", threads()}, {"cpu_lanes", narrowphase::name(narrowphase::best_lanes())},
-                               {"repeats", options.repeats},
-                               {"warmup", warmup}, {"launches_per_step", nullptr},
+                               {"precision", kRealName}, {"threads", threads()},
+                               {"cpu_lanes", lanes ? nlohmann::ordered_json(lanes) : nlohmann::ordered_json()},
+                               {"repeats", options.repeats}, {"warmup", warmup}, {"launches_per_step", nullptr},
                                {"results", nlohmann::ordered_json::array()}};
     for (const Row& r : rows) {
       nlohmann::ordered_json row{{"n", r.n},
@@ -513,7 +515,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
     return 0;
   }
   out << "step benchmark (" << options.backend << ", " << kRealName << ", " << threads() << " thread(s), "
-      << (options.backend == "cpu" ? std::string("sweep lanes ") + narrowphase::name(narrowphase::best_lanes()) + ", " : "")
+      << (lanes ? std::string("sweep lanes ") + lanes + ", " : "")
       << (is_pile ? "settled pile (friction, 10 iterations, dt 1 ms)" : "gas at volume fraction 0.1") << ", median of "
       << options.repeats << " steps after " << warmup << " warm-up)\n";
   out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"

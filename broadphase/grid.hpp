@@ -54,7 +54,6 @@ inline KeyWidth key_width_for(std::uint32_t key_bits) {
   return KeyWidth::too_wide;
 }
 
-
 // Packs the given per-axis maxima into key shifts.
 inline void set_key_layout(Grid& g, const std::uint64_t half_max[3]) {
   std::uint32_t bits = 0;

@@ -123,10 +123,9 @@ bool impact_range(Contact* contacts, const std::uint32_t* order, std::uint32_t b
   return hit;
 }
 
-// Runs `range(begin, end)` over the colours forwards (or backwards), the
-// overflow set (one by one) last (first).
 // Runs `range(begin, end)` over the colours in the solver's order
-// (visit_colours); the overflow set one contact at a time.
+// (visit_colours: forwards with the overflow set last, or backwards with it
+// first); the overflow set one contact at a time.
 template <class F>
 void over_colours(const ColourRanges& colours, bool backwards, F&& range) {
   visit_colours(colours.begin, colours.colours, backwards,

@@ -319,17 +319,13 @@ TEST(Colouring, PreparesOnTheWayAsTheSolverWould) {
   ColourRanges plain_ranges;
   ContactColouring().colour_and_sort(plain, bodies, plain_ranges);
   for (Contact& c : plain) prepare_one(c, solver_bodies.data());
+  const int was = thread_count();
   for (int threads : {1, 2}) {
-#if defined(_OPENMP)
-    const int was = omp_get_max_threads();
-    omp_set_num_threads(threads);
-#endif
+    set_thread_count(threads);
     std::vector<Contact> prepared = input;
     ColourRanges ranges;
     ContactColouring().colour_and_sort(prepared, bodies, ranges, nullptr, &view);
-#if defined(_OPENMP)
-    omp_set_num_threads(was);
-#endif
+    set_thread_count(was);
     ASSERT_EQ(ranges.begin, plain_ranges.begin);
     for (std::size_t k = 0; k < plain.size(); ++k) {
       ASSERT_EQ(prepared[k].separation, plain[k].separation) << k;  // the same contact in the same place
@@ -347,15 +343,11 @@ TEST(Colouring, PreparesOnTheWayAsTheSolverWould) {
     ASSERT_LT(fastest, real(0));
     int seen = 0;
     for (real rest : {real(0), -fastest * real(0.999), -fastest, -fastest * real(2)}) {
-#if defined(_OPENMP)
-      omp_set_num_threads(threads);
-#endif
+      set_thread_count(threads);
       std::vector<Contact> again = input;
       ColourRanges r;
       ContactColouring().colour_and_sort(again, bodies, r, nullptr, &view, rest);
-#if defined(_OPENMP)
-      omp_set_num_threads(was);
-#endif
+      set_thread_count(was);
       const bool any = std::any_of(plain.begin(), plain.end(),
                                    [&](const Contact& c) { return is_impact_candidate(c, rest); });
       EXPECT_EQ(r.fast_approach, any) << "rest speed " << rest << ", " << threads << " thread(s)";
