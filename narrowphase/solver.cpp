@@ -22,12 +22,15 @@ constexpr std::ptrdiff_t kParallelFrom = 4096;
 // The position stages' loop: in chunks of 1024 taken in turn, since the
 // halves of a colour cost unequally (perf: one thread 27 % busier in the
 // projection with halves); the order within a colour changes no bit. The
-// sweeps keep halves: chunks made them slower (66 -> 68 ms at 10^5).
+// sweeps keep halves: chunks made them slower (66 -> 68 ms at 10^5). True
+// when f was true for any contact (every f is called).
 template <class F>
-void for_colour(std::uint32_t begin, std::uint32_t end, F&& f) {
+bool any_in_colour(std::uint32_t begin, std::uint32_t end, F&& f) {
   const auto n = static_cast<std::ptrdiff_t>(end - begin);
-#pragma omp parallel for schedule(dynamic, 1024) if (n >= kParallelFrom)
-  for (std::ptrdiff_t t = 0; t < n; ++t) f(begin + static_cast<std::uint32_t>(t));
+  bool any = false;
+#pragma omp parallel for schedule(dynamic, 1024) reduction(|| : any) if (n >= kParallelFrom)
+  for (std::ptrdiff_t t = 0; t < n; ++t) any = f(begin + static_cast<std::uint32_t>(t)) || any;
+  return any;
 }
 
 // How many contacts ahead the body loop asks for the bodies it will touch.
@@ -45,7 +48,8 @@ inline void prefetch_bodies(const Contact& c, const SolverBody* bodies) {
   __builtin_prefetch(bodies + (c.b & ~kWallFlag));
 }
 
-// for_colour that asks for the bodies of the contact kPrefetchAhead later.
+// A colour's contacts in halves (static), asking for the bodies of the
+// contact kPrefetchAhead later.
 template <class F>
 void for_colour_ahead(const Contact* contacts, std::uint32_t begin, std::uint32_t end, const SolverBody* bodies,
                       F&& f) {
@@ -252,7 +256,10 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
   // (a pile at rest) skips the pass, which would return at every contact.
   if (m_settings.restitution && m_rebounds)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      for_colour(b, e, [&](std::uint32_t k) { rebound_one(cs[k], bodies, ws); });
+      any_in_colour(b, e, [&](std::uint32_t k) {
+        rebound_one(cs[k], bodies, ws);
+        return false;
+      });
     });
   if (m_settings.position_iterations <= 0) return;
   // The sweeps read the position records (load_position_contact, as the
@@ -267,12 +274,18 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
   records.geometry = m_position_geometry.data();
 #pragma omp parallel for schedule(static) if (n > 20000)
   for (std::ptrdiff_t k = 0; k < n; ++k) pack_position_record(cs[k], records, static_cast<std::uint32_t>(k));
-  for (int it = 0; it < m_settings.position_iterations; ++it)
+  // Sweeps until one moves no contact by more than settled_move
+  // (project_one), position_iterations at most: a pile at rest takes one, a
+  // pour's impacts the most.
+  bool moved = true;
+  for (int it = 0; it < m_settings.position_iterations && moved; ++it) {
+    moved = false;
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      for_colour(b, e, [&](std::uint32_t k) {
-        project_one(load_position_contact<false>(records, k), bodies, ws, m_settings);
-      });
+      moved = any_in_colour(b, e, [&](std::uint32_t k) {
+        return project_one(load_position_contact<false>(records, k), bodies, ws, m_settings);
+      }) || moved;
     });
+  }
 }
 
 }  // namespace marbles::narrowphase

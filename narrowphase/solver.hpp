@@ -27,7 +27,9 @@
 // and after the positions are integrated:
 //   project       undo the speculative bounces' extra travel, then remove
 //                 overlap beyond a slop by moving positions only (no velocity
-//                 change, so no kinetic energy is added), colour by colour
+//                 change, so no kinetic energy is added), colour by colour,
+//                 in sweeps until one moves no contact by more than
+//                 settled_move (position_iterations sweeps at most)
 // Which stages and which per-contact terms run is fixed when the solver is
 // built: a disabled effect costs no branch per contact (template dispatch).
 #pragma once

@@ -85,9 +85,16 @@ __global__ void rebound_kernel(SweepRecords records, ContactRange r, BodiesView 
   for_range(r, [&](std::uint32_t k) { rebound_one(load_position_contact<true>(records, k), bodies, walls); });
 }
 
+// A sweep after one that moved nothing beyond settled_move (*go == 0)
+// returns at once (solver.cpp ends the projection there).
 __global__ void project_kernel(SweepRecords records, ContactRange r, BodiesView bodies, const WallShape* walls,
-                               SolverSettings s) {
-  for_range(r, [&](std::uint32_t k) { project_one(load_position_contact<false>(records, k), bodies, walls, s); });
+                               SolverSettings s, const unsigned* go, unsigned* moved) {
+  if (go != nullptr && *go == 0u) return;
+  bool any = false;
+  for_range(r, [&](std::uint32_t k) {
+    any = project_one(load_position_contact<false>(records, k), bodies, walls, s) || any;
+  });
+  if (any) *moved = 1u;
 }
 
 __global__ void max_overlap_kernel(SweepRecords records, std::uint32_t n, BodiesView bodies, const WallShape* walls,
@@ -176,9 +183,9 @@ void launch_rebound(const SweepRecords& records, ContactRange r, const BodiesVie
 }
 
 void launch_project(const SweepRecords& records, ContactRange r, const BodiesView& bodies, const WallShape* walls,
-                    const SolverSettings& settings, cudaStream_t s) {
+                    const SolverSettings& settings, const unsigned* go, unsigned* moved, cudaStream_t s) {
   if (r.end <= r.begin) return;
-  project_kernel<<<blocks(r), kBlock, 0, s>>>(records, r, bodies, walls, settings);
+  project_kernel<<<blocks(r), kBlock, 0, s>>>(records, r, bodies, walls, settings, go, moved);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

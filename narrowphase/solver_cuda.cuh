@@ -67,8 +67,11 @@ void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange 
                     const ImpactParams& p, bool friction, unsigned* hit, cudaStream_t stream);
 void launch_rebound(const SweepRecords& records, ContactRange range, const BodiesView& bodies, const WallShape* walls,
                     cudaStream_t stream);
+// One projection sweep's launch: does nothing when `go` (the last sweep's
+// flag; null in the first sweep) is 0, else sets *moved = 1 when a contact
+// moved beyond settled_move (project_one).
 void launch_project(const SweepRecords& records, ContactRange range, const BodiesView& bodies, const WallShape* walls,
-                    const SolverSettings& settings, cudaStream_t stream);
+                    const SolverSettings& settings, const unsigned* go, unsigned* moved, cudaStream_t stream);
 
 // *deepest = max(*deepest, overlap_ratio) over the records' contacts [0, n) (as the bits
 // of a non-negative real: an atomic max, the same whatever the order).

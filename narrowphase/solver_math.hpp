@@ -25,7 +25,9 @@ struct SolverSettings {
   real slop = real(0.005);        // fraction of the smaller radius left overlapping
   real beta = real(0.8);          // fraction of the remaining overlap removed per projection
   real max_correction = real(0.2);// fraction of the smaller radius moved per projection, at most
-  int position_iterations = 4;    // projection sweeps per substep
+  int position_iterations = 6;    // projection sweeps per substep, at most
+  real settled_move = real(0.001);// fraction of the smaller radius: a projection sweep in which no contact
+                                  // moves its bodies further apart than this is the last (project_one)
   bool warm_start = true;         // start from the last substep's impulses
   Vec3 wall_accel{};              // m/s^2: the spheres' acceleration seen by wall impacts (gravity under
                                   // velocity Verlet, whose impacts see half-step velocities; else 0)
@@ -320,32 +322,36 @@ MARBLES_HD_INLINE void rebound_one(const Contact& c, const BodiesView& bodies, c
 
 // Position projection of one contact at the integrated positions: remove a
 // share of the overlap beyond the slop (projection_step), split by inverse
-// mass. Positions only, so no kinetic energy is added.
-MARBLES_HD_INLINE void project_one(const Contact& c, const BodiesView& bodies, const WallShape* walls,
+// mass. Positions only, so no kinetic energy is added. True when it moved
+// the bodies apart by more than s.settled_move of the smaller radius (a
+// wall contact: of the sphere's): a sweep in which no contact does so ends
+// the projection.
+MARBLES_HD_INLINE bool project_one(const Contact& c, const BodiesView& bodies, const WallShape* walls,
                                    const SolverSettings& s) {
   const real inv_ma = bodies.inv_mass[c.a];
   if (is_wall(c.b)) {
-    if (inv_ma <= 0) return;
+    if (inv_ma <= 0) return false;
     const real r = bodies.radius[c.a];
     Vec3 normal;
     real separation;
-    if (!wall_gap(walls[c.b & ~kWallFlag], bodies.position[c.a], r, normal, separation)) return;
+    if (!wall_gap(walls[c.b & ~kWallFlag], bodies.position[c.a], r, normal, separation)) return false;
     const real move = projection_step(separation, s.slop * r, s.beta, s.max_correction * r);
     if (move > 0) bodies.position[c.a] += normal * move;
-    return;
+    return move > s.settled_move * r;
   }
   const real inv_mb = bodies.inv_mass[c.b];
   const real k = inv_ma + inv_mb;
-  if (k <= 0) return;
+  if (k <= 0) return false;
   const real ra = bodies.radius[c.a], rb = bodies.radius[c.b];
   const Vec3 d = bodies.position[c.a] - bodies.position[c.b];
   const real dist = length(d);
   const Vec3 n = dist > real(1e-7) * (ra + rb) ? d / dist : c.normal;
   const real r_min = ra < rb ? ra : rb;
   const real move = projection_step(dist - ra - rb, s.slop * r_min, s.beta, s.max_correction * r_min);
-  if (move <= 0) return;
+  if (move <= 0) return false;
   bodies.position[c.a] += n * (move * inv_ma / k);
   bodies.position[c.b] -= n * (move * inv_mb / k);
+  return move > s.settled_move * r_min;
 }
 
 // How deep a contact's bodies overlap now, as a fraction of the smaller

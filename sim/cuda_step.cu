@@ -223,9 +223,17 @@ class CudaStep final : public StepBackend {
     // have one (a pile at rest has none).
     if (m_model.solver.restitution && m_levels.back() != 0)
       over_colours(false, [&](nc::ContactRange r) { nc::launch_rebound(m_records, r, bodies, walls(), m_stream); });
-    for (int it = 0; it < m_model.solver.position_iterations; ++it)
+    // The CPU's sweeps until one moves nothing beyond settled_move, without
+    // a read-back: sweep `it` sets moved[it], and its launches return at once
+    // when moved[it - 1] is 0.
+    const int sweeps = m_model.solver.position_iterations;
+    if (sweeps <= 0) return;
+    auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(sweeps));
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
+    for (int it = 0; it < sweeps; ++it)
       over_colours(false, [&](nc::ContactRange r) {
-        nc::launch_project(m_records, r, bodies, walls(), m_model.solver, m_stream);
+        nc::launch_project(m_records, r, bodies, walls(), m_model.solver, it > 0 ? moved + it - 1 : nullptr,
+                           moved + it, m_stream);
       });
   }
 
@@ -459,7 +467,7 @@ class CudaStep final : public StepBackend {
   int m_iteration_factor = 1;
 
   DeviceBuffer m_walls, m_pair_table, m_max_speed, m_reach, m_bound, m_pair_flags, m_pair_offsets, m_wall_flags, m_wall_offsets,
-      m_contacts, m_sorted, m_kept_colour, m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_temp;
+      m_contacts, m_sorted, m_kept_colour, m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved, m_temp;
   narrowphase::PairTable m_table;
   nc::SolverTerms m_terms;
   std::unique_ptr<broadphase::SubdivisionCuda> m_broadphase;

@@ -168,7 +168,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   // Test hooks: MARBLES_FAULT_NAN_STEP=N (the first try of step N goes
   // non-finite) or N:all (every try); MARBLES_FAULT_KICK_STEP=N[:all] (sphere
   // 0 kicked to 100 radii per step), MARBLES_FAULT_ESCAPE_STEP=N[:all]
-  // (sphere 0 put beyond the first wall).
+  // (sphere 0 put 10 radii beyond the first wall).
   const std::pair<const char*, Simulation::Fault> hooks[] = {{"MARBLES_FAULT_NAN_STEP", Simulation::Fault::nan},
                                                              {"MARBLES_FAULT_KICK_STEP", Simulation::Fault::kick},
                                                              {"MARBLES_FAULT_ESCAPE_STEP", Simulation::Fault::escape}};

@@ -146,7 +146,9 @@ void Simulation::inject_fault() {
         Vec3 normal;
         real separation = 0;
         if (!narrowphase::wall_gap(shape, w.position[0], w.radius[0], normal, separation)) continue;
-        w.position[0] = w.position[0] - normal * (separation + 4 * w.radius[0]);
+        // 10 radii beyond the face: further than the projection can bring
+        // it back within a step (max_correction a sweep), a true escape.
+        w.position[0] = w.position[0] - normal * (separation + 10 * w.radius[0]);
         break;
       }
       break;
