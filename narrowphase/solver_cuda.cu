@@ -3,8 +3,14 @@
 #include "core/device_buffer.cuh"
 #include "narrowphase/solver_cuda.cuh"
 
+#include <cooperative_groups.h>
+
+#include <algorithm>
+
 namespace marbles::narrowphase::cuda {
 namespace {
+
+namespace cg = cooperative_groups;
 
 using ::marbles::cuda::kBlock;
 
@@ -85,15 +91,25 @@ __global__ void rebound_kernel(SweepRecords records, ContactRange r, BodiesView 
   for_range(r, [&](std::uint32_t k) { rebound_one(load_position_contact<true>(records, k), bodies, walls); });
 }
 
-// A sweep after one that moved nothing beyond settled_move (*go == 0)
-// returns at once (solver.cpp ends the projection there).
-__global__ void project_kernel(SweepRecords records, ContactRange r, BodiesView bodies, const WallShape* walls,
-                               SolverSettings s, const unsigned* go, unsigned* moved) {
+// One projection sweep: the colours in order, a grid-wide barrier after
+// each (a cooperative launch), then the overflow set by one thread. A sweep
+// after one that moved nothing beyond settled_move (*go == 0) returns at
+// once, every block alike (solver.cpp ends the projection there): one
+// launch, where a launch per colour cost ~4 us each of the sweeps not run.
+__global__ void project_sweep_kernel(SweepRecords records, ColourPlan plan, BodiesView bodies,
+                                     const WallShape* walls, SolverSettings s, const unsigned* go, unsigned* moved) {
   if (go != nullptr && *go == 0u) return;
+  const cg::grid_group grid = cg::this_grid();
+  const std::uint32_t first = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
   bool any = false;
-  for_range(r, [&](std::uint32_t k) {
-    any = project_one(load_position_contact<false>(records, k), bodies, walls, s) || any;
-  });
+  for (std::uint32_t c = 0; c < plan.colours; ++c) {
+    for (std::uint32_t k = plan.begin[c] + first; k < plan.begin[c + 1]; k += stride)
+      any = project_one(load_position_contact<false>(records, k), bodies, walls, s) || any;
+    grid.sync();
+  }
+  if (first == 0)
+    for (std::uint32_t k = plan.begin[plan.colours]; k < plan.begin[plan.colours + 1]; ++k)
+      any = project_one(load_position_contact<false>(records, k), bodies, walls, s) || any;
   if (any) *moved = 1u;
 }
 
@@ -182,11 +198,27 @@ void launch_rebound(const SweepRecords& records, ContactRange r, const BodiesVie
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_project(const SweepRecords& records, ContactRange r, const BodiesView& bodies, const WallShape* walls,
-                    const SolverSettings& settings, const unsigned* go, unsigned* moved, cudaStream_t s) {
-  if (r.end <= r.begin) return;
-  project_kernel<<<blocks(r), kBlock, 0, s>>>(records, r, bodies, walls, settings, go, moved);
-  MARBLES_CUDA_CHECK_LAUNCH();
+void launch_project_sweep(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
+                          const WallShape* walls, const SolverSettings& settings, const unsigned* go, unsigned* moved,
+                          int sm_count, cudaStream_t s) {
+  std::uint32_t widest = 0;
+  for (std::uint32_t c = 0; c < plan.colours; ++c) widest = std::max(widest, plan.begin[c + 1] - plan.begin[c]);
+  if (widest == 0 && plan.begin[plan.colours + 1] == plan.begin[plan.colours]) return;
+  // Every block resident at once, as a grid-wide barrier needs.
+  static const int resident = [] {
+    int per_sm = 0;
+    MARBLES_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, project_sweep_kernel, kBlock, 0));
+    return std::max(per_sm, 1);
+  }();
+  const int grid = static_cast<int>(
+      std::clamp<std::uint32_t>((widest + kBlock - 1) / kBlock, 1u, static_cast<std::uint32_t>(resident * sm_count)));
+  SweepRecords r = records;
+  ColourPlan p = plan;
+  BodiesView b = bodies;
+  SolverSettings set = settings;
+  void* args[] = {&r, &p, &b, &walls, &set, &go, &moved};
+  MARBLES_CUDA_CHECK(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&project_sweep_kernel), dim3(grid),
+                                                 dim3(kBlock), args, 0, s));
 }
 
 }  // namespace marbles::narrowphase::cuda

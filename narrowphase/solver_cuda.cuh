@@ -10,6 +10,7 @@
 #include <cstdint>
 
 #include "core/spheres.hpp"
+#include "narrowphase/colouring_math.hpp"
 #include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase::cuda {
@@ -67,11 +68,21 @@ void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange 
                     const ImpactParams& p, bool friction, unsigned* hit, cudaStream_t stream);
 void launch_rebound(const SweepRecords& records, ContactRange range, const BodiesView& bodies, const WallShape* walls,
                     cudaStream_t stream);
-// One projection sweep's launch: does nothing when `go` (the last sweep's
-// flag; null in the first sweep) is 0, else sets *moved = 1 when a contact
-// moved beyond settled_move (project_one).
-void launch_project(const SweepRecords& records, ContactRange range, const BodiesView& bodies, const WallShape* walls,
-                    const SolverSettings& settings, const unsigned* go, unsigned* moved, cudaStream_t stream);
+// The colour ranges of colour-major contacts as one launch takes them:
+// colour c is [begin[c], begin[c + 1]), the overflow set [begin[colours],
+// begin[colours + 1]).
+struct ColourPlan {
+  std::uint32_t begin[kMaxColours + 2] = {};
+  std::uint32_t colours = 0;
+};
+
+// One projection sweep over every colour in one launch, forwards, the
+// overflow set last: does nothing when `go` (the last sweep's flag; null in
+// the first sweep) is 0, else sets *moved = 1 when a contact moved beyond
+// settled_move (project_one).
+void launch_project_sweep(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
+                          const WallShape* walls, const SolverSettings& settings, const unsigned* go, unsigned* moved,
+                          int sm_count, cudaStream_t stream);
 
 // *deepest = max(*deepest, overlap_ratio) over the records' contacts [0, n) (as the bits
 // of a non-negative real: an atomic max, the same whatever the order).

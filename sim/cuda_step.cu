@@ -224,17 +224,18 @@ class CudaStep final : public StepBackend {
     if (m_model.solver.restitution && m_levels.back() != 0)
       over_colours(false, [&](nc::ContactRange r) { nc::launch_rebound(m_records, r, bodies, walls(), m_stream); });
     // The CPU's sweeps until one moves nothing beyond settled_move, without
-    // a read-back: sweep `it` sets moved[it], and its launches return at once
-    // when moved[it - 1] is 0.
+    // a read-back: sweep `it` sets moved[it], and returns at once when
+    // moved[it - 1] is 0.
     const int sweeps = m_model.solver.position_iterations;
     if (sweeps <= 0) return;
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(sweeps));
     MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
+    nc::ColourPlan plan;
+    plan.colours = m_colours;
+    std::copy(m_begin.begin(), m_begin.begin() + m_colours + 2, plan.begin);
     for (int it = 0; it < sweeps; ++it)
-      over_colours(false, [&](nc::ContactRange r) {
-        nc::launch_project(m_records, r, bodies, walls(), m_model.solver, it > 0 ? moved + it - 1 : nullptr,
-                           moved + it, m_stream);
-      });
+      nc::launch_project_sweep(m_records, plan, bodies, walls(), m_model.solver, it > 0 ? moved + it - 1 : nullptr,
+                               moved + it, m_sm, m_stream);
   }
 
   void store_impulses() override {
