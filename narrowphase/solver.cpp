@@ -261,11 +261,11 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
         return false;
       });
     });
-  if (m_settings.position_iterations <= 0) return;
   // The sweeps read the position records (load_position_contact, as the
   // GPU's do): the contacts' a, b and normal packed once, 24 bytes a contact
   // where each sweep over the contacts read two 64-byte lines of each.
   // Settled pile of 10^5: 14 MB that stay in cache instead of 75 MB a sweep.
+  // deepest_overlap reads them after the last sweep.
   const auto n = static_cast<std::ptrdiff_t>(contacts.size());
   m_position_pairs.resize(contacts.size());
   m_position_geometry.resize(contacts.size());
@@ -274,6 +274,7 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
   records.geometry = m_position_geometry.data();
 #pragma omp parallel for schedule(static) if (n > 20000)
   for (std::ptrdiff_t k = 0; k < n; ++k) pack_position_record(cs[k], records, static_cast<std::uint32_t>(k));
+  if (m_settings.position_iterations <= 0) return;
   // Sweeps until one moves no contact by more than settled_move
   // (project_one), position_iterations at most: a pile at rest takes one, a
   // pour's impacts the most.
@@ -286,6 +287,20 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
       }) || moved;
     });
   }
+}
+
+real ContactSolver::deepest_overlap(const BodiesView& bodies, const std::vector<WallShape>& walls) const {
+  const auto n = static_cast<std::ptrdiff_t>(m_position_pairs.size());
+  const BodyPair* pairs = m_position_pairs.data();
+  const WallShape* ws = walls.data();
+  real deepest = 0;
+#pragma omp parallel for schedule(static) reduction(max : deepest) if (n > 20000)
+  for (std::ptrdiff_t k = 0; k < n; ++k) {
+    Contact c;
+    c.a = pairs[k].a, c.b = pairs[k].b;
+    deepest = std::max(deepest, overlap_ratio(c, bodies, ws));
+  }
+  return deepest;
 }
 
 }  // namespace marbles::narrowphase

@@ -105,12 +105,9 @@ class CpuStep final : public StepBackend {
   }
   void end_step(StepCounters& counters) override {
     const BodiesView bodies = m_world.view();
-    const auto n = static_cast<std::ptrdiff_t>(m_contacts.size());
-    real deepest = 0;
-#pragma omp parallel for schedule(static) reduction(max : deepest) if (n > 20000)
-    for (std::ptrdiff_t k = 0; k < n; ++k)
-      deepest = std::max(deepest, narrowphase::overlap_ratio(m_contacts[k], bodies, m_walls.data()));
-    m_counters.max_overlap = deepest;
+    // The last substep projected these contacts (project_positions runs
+    // whenever there are any).
+    m_counters.max_overlap = m_contacts.empty() ? real(0) : m_solver.deepest_overlap(bodies, m_walls);
     if (m_watch) watch(bodies);
     counters = m_counters;
   }
