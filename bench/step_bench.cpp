@@ -379,6 +379,7 @@ struct Row {
   std::uint32_t colours = 0;       // most of a timed step
   double overflow = 0;             // median over the timed steps
   double max_overlap_pct = 0;      // largest of the timed steps, % of a radius
+  double projection_sweeps = 0;    // per substep, mean over the timed steps (the projection sweeps until settled)
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   double bytes_per_step = 0;       // median host<->device bytes
   double device_bytes_per_sphere = 0;
@@ -403,6 +404,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     overflow.push_back(static_cast<double>(c.overflow));
     bytes.push_back(static_cast<double>(c.bytes_copied));
     max_overlap = std::max(max_overlap, static_cast<double>(c.max_overlap));
+    row.projection_sweeps += static_cast<double>(c.projection_sweeps) / sim.substeps() / repeats;
   }
   if (sim.non_finite()) throw RuntimeFailure("N = " + std::to_string(n) + ": non-finite state in the timed steps");
   row.step_ms = median(step_ms);
@@ -500,6 +502,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"colours", r.colours},
                                  {"overflow_median", r.overflow},
                                  {"max_overlap_pct", r.max_overlap_pct},
+                                 {"projection_sweeps", r.projection_sweeps},
                                  {"ke_per_sphere_J", r.ke_per_sphere},
                                  {"bytes_per_step_median", r.bytes_per_step},
                                  {"device_bytes_per_sphere", r.device_bytes_per_sphere},
@@ -520,18 +523,20 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
       << options.repeats << " steps after " << warmup << " warm-up)\n";
   out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"
       << std::setw(10) << "contacts" << std::setw(7) << "coord" << std::setw(8) << "colours" << std::setw(9)
-      << "overflow" << std::setw(9) << "overlap%" << std::setw(12) << "bytes/step" << std::setw(11) << "dev B/sph"
-      << "\n";
+      << "overflow" << std::setw(9) << "overlap%" << std::setw(7) << "proj" << std::setw(12) << "bytes/step"
+      << std::setw(11) << "dev B/sph" << "\n";
   for (const Row& r : rows)
     out << std::setw(9) << r.n << std::fixed << std::setprecision(2) << std::setw(10) << r.step_ms << std::setw(9)
         << r.step_min_ms << std::setw(9) << r.broadphase_ms << std::setprecision(3) << std::setw(10)
         << r.contacts_per_sphere << std::setprecision(2) << std::setw(7) << r.coordination << std::setw(8)
         << r.colours << std::setprecision(0) << std::setw(9) << r.overflow << std::setprecision(3) << std::setw(9)
-        << r.max_overlap_pct << std::setprecision(0) << std::setw(12) << r.bytes_per_step << std::setprecision(1)
+        << r.max_overlap_pct << std::setprecision(2) << std::setw(7) << r.projection_sweeps << std::setprecision(0)
+        << std::setw(12) << r.bytes_per_step << std::setprecision(1)
         << std::setw(11) << r.device_bytes_per_sphere << "\n"
         << std::defaultfloat;
   out << "(contacts = contacts per sphere per substep; coord = contacts a sphere takes part in; overlap% = largest,\n"
-         " of a radius; bp ms: of the profiled steps; launches per step are not counted)\n";
+         " of a radius; proj = projection sweeps per substep (until settled); bp ms: of the profiled steps; launches\n"
+         " per step are not counted)\n";
   out << "per verb, median ms of " << options.repeats << " profiled steps (profiling waits for each verb)\n";
   out << std::setw(20) << std::left << "verb" << std::right;
   for (const Row& r : rows) out << std::setw(11) << r.n;

@@ -248,8 +248,8 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
   }
 }
 
-void ContactSolver::project_positions(const std::vector<Contact>& contacts, const ColourRanges& colours,
-                                      const BodiesView& bodies, const std::vector<WallShape>& walls) const {
+int ContactSolver::project_positions(const std::vector<Contact>& contacts, const ColourRanges& colours,
+                                     const BodiesView& bodies, const std::vector<WallShape>& walls) const {
   const Contact* cs = contacts.data();
   const WallShape* ws = walls.data();
   // Only an impact gives a contact a rebound shift: a substep without one
@@ -274,12 +274,11 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
   records.geometry = m_position_geometry.data();
 #pragma omp parallel for schedule(static) if (n > 20000)
   for (std::ptrdiff_t k = 0; k < n; ++k) pack_position_record(cs[k], records, static_cast<std::uint32_t>(k));
-  if (m_settings.position_iterations <= 0) return;
   // Sweeps until one moves no contact by more than settled_move
   // (project_one), position_iterations at most: a pile at rest takes one, a
   // pour's impacts the most.
-  bool moved = true;
-  for (int it = 0; it < m_settings.position_iterations && moved; ++it) {
+  int sweeps = 0;
+  for (bool moved = true; moved && sweeps < m_settings.position_iterations; ++sweeps) {
     moved = false;
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
       moved = any_in_colour(b, e, [&](std::uint32_t k) {
@@ -287,6 +286,7 @@ void ContactSolver::project_positions(const std::vector<Contact>& contacts, cons
       }) || moved;
     });
   }
+  return sweeps;
 }
 
 real ContactSolver::deepest_overlap(const BodiesView& bodies, const std::vector<WallShape>& walls) const {

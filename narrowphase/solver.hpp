@@ -74,9 +74,10 @@ class ContactSolver {
   void solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours, const BodiesView& bodies,
                         real h);
 
-  // Position projection over the same contacts at the integrated positions.
-  void project_positions(const std::vector<Contact>& contacts, const ColourRanges& colours,
-                         const BodiesView& bodies, const std::vector<WallShape>& walls) const;
+  // Position projection over the same contacts at the integrated positions;
+  // returns the sweeps it ran.
+  int project_positions(const std::vector<Contact>& contacts, const ColourRanges& colours,
+                        const BodiesView& bodies, const std::vector<WallShape>& walls) const;
 
   // The largest overlap_ratio over the contacts of the last project_positions
   // (from its records: 8 bytes a contact read where a contact is 112).

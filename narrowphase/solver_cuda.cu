@@ -113,6 +113,13 @@ __global__ void project_sweep_kernel(SweepRecords records, ColourPlan plan, Bodi
   if (any) *moved = 1u;
 }
 
+// Sweep 0 always runs, sweep it > 0 when sweep it - 1 set moved[it - 1].
+__global__ void count_sweeps_kernel(const unsigned* moved, int sweeps, unsigned long long* total) {
+  unsigned long long ran = 1;
+  for (int it = 1; it < sweeps; ++it) ran += moved[it - 1] != 0u ? 1u : 0u;
+  *total += ran;
+}
+
 __global__ void max_overlap_kernel(SweepRecords records, std::uint32_t n, BodiesView bodies, const WallShape* walls,
                                    unsigned long long* deepest) {
   real d = 0;
@@ -219,6 +226,12 @@ void launch_project_sweep(const SweepRecords& records, const ColourPlan& plan, c
   void* args[] = {&r, &p, &b, &walls, &set, &go, &moved};
   MARBLES_CUDA_CHECK(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&project_sweep_kernel), dim3(grid),
                                                  dim3(kBlock), args, 0, s));
+}
+
+void launch_count_sweeps(const unsigned* moved, int sweeps, unsigned long long* total, cudaStream_t s) {
+  if (sweeps <= 0) return;
+  count_sweeps_kernel<<<1, 1, 0, s>>>(moved, sweeps, total);
+  MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 }  // namespace marbles::narrowphase::cuda

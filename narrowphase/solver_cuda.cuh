@@ -84,6 +84,10 @@ void launch_project_sweep(const SweepRecords& records, const ColourPlan& plan, c
                           const WallShape* walls, const SolverSettings& settings, const unsigned* go, unsigned* moved,
                           int sm_count, cudaStream_t stream);
 
+// *total += the sweeps of a projection that ran, from the flags moved[0,
+// sweeps) its launch_project_sweep calls set.
+void launch_count_sweeps(const unsigned* moved, int sweeps, unsigned long long* total, cudaStream_t stream);
+
 // *deepest = max(*deepest, overlap_ratio) over the records' contacts [0, n) (as the bits
 // of a non-negative real: an atomic max, the same whatever the order).
 void launch_max_overlap(const SweepRecords& records, std::uint32_t n, const BodiesView& bodies, const WallShape* walls,

@@ -93,7 +93,8 @@ class CpuStep final : public StepBackend {
   }
 
   void project_positions() override {
-    if (!m_contacts.empty()) m_solver.project_positions(m_contacts, m_colours, m_world.view(), m_walls);
+    if (!m_contacts.empty())
+      m_counters.projection_sweeps += m_solver.project_positions(m_contacts, m_colours, m_world.view(), m_walls);
   }
 
   // Also when there are no contacts: no stale impulses survive a contact-free substep.

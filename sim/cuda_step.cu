@@ -236,6 +236,7 @@ class CudaStep final : public StepBackend {
     for (int it = 0; it < sweeps; ++it)
       nc::launch_project_sweep(m_records, plan, bodies, walls(), m_model.solver, it > 0 ? moved + it - 1 : nullptr,
                                moved + it, m_sm, m_stream);
+    nc::launch_count_sweeps(moved, sweeps, m_flags.get_as<unsigned long long>() + 2, m_stream);  // flags[2]
   }
 
   void store_impulses() override {
@@ -256,13 +257,14 @@ class CudaStep final : public StepBackend {
   // The one read of flags at the end of a step: non_finite, the deepest
   // overlap, and with the watch on the watchdog's figures.
   void end_step(StepCounters& counters) override {
-    auto* flags = m_flags.get_as<unsigned long long>();  // [0]: non_finite, [1]: deepest overlap (bits), [2..3]: watch
+    // [0]: non_finite, [1]: deepest overlap (bits), [2]: projection sweeps, [3..4]: watch
+    auto* flags = m_flags.get_as<unsigned long long>();
     nc::launch_max_overlap(m_records, m_count, m_device.view(), walls(), flags + 1, m_sm, m_stream);
-    const int words = m_watch ? kFlagWords : 2;
+    const int words = m_watch ? kFlagWords : 3;
     if (m_watch && m_device.view().count > 0) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
       watch_kernel<<<::marbles::cuda::grid_for(m_device.view().count, m_sm), kWatchBlock, 0, m_stream>>>(
-          m_device.view(), walls(), wall_count, flags + 2);
+          m_device.view(), walls(), wall_count, flags + 3);
       MARBLES_CUDA_CHECK_LAUNCH();
     }
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_end_flags, flags, words * sizeof(unsigned long long), cudaMemcpyDeviceToHost,
@@ -270,9 +272,10 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     m_bytes += words * sizeof(unsigned long long);
     if (m_watch) {
-      std::memcpy(&m_counters.kinetic_energy, &m_end_flags[2], sizeof(double));
-      m_counters.beyond_walls = m_end_flags[3];
+      std::memcpy(&m_counters.kinetic_energy, &m_end_flags[3], sizeof(double));
+      m_counters.beyond_walls = m_end_flags[4];
     }
+    m_counters.projection_sweeps = m_end_flags[2];
     const std::uint64_t bytes = m_bytes + m_colouring.bytes_copied() + m_cache.bytes_copied();
     m_counters.bytes_copied = bytes - m_bytes_at_step_start;
     m_bytes_at_step_start = bytes;
@@ -463,7 +466,7 @@ class CudaStep final : public StepBackend {
   std::uint64_t broad_phase_readback() const { return m_model.algorithm == broadphase::Algorithm::home ? 76 : 116; }
   std::uint32_t* m_pinned = nullptr;
   unsigned long long* m_end_flags = nullptr;  // pinned: the end-of-step read
-  static constexpr int kFlagWords = 4;
+  static constexpr int kFlagWords = 5;
   bool m_watch = false;
   int m_iteration_factor = 1;
 

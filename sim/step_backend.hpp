@@ -39,6 +39,7 @@ struct StepCounters {
   std::uint64_t overflow = 0;         // contacts solved one by one (beyond the colours), summed
   double broadphase_ms = 0;           // summed over substeps (CUDA: with profiling on only)
   real max_overlap = 0;               // deepest overlap at the end of the step (overlap_ratio: of the smaller radius)
+  std::uint64_t projection_sweeps = 0;  // projection sweeps run (until settled: ContactSolver), summed over substeps
   std::uint64_t bytes_copied = 0;     // host<->device traffic of the step (CUDA)
   // With the watch on (StepBackend::set_watch), the figures of the watchdog's
   // invariants at the end of the step (sim/watch_math.hpp):

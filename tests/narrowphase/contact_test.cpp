@@ -289,7 +289,7 @@ TEST(Solver, ProjectionEndsAtTheFirstSettledSweep) {
       moved = false;
       for (const Contact& c : contacts) moved = project_one(c, oracle, shapes.data(), s) || moved;
     }
-    ContactSolver(s).project_positions(contacts, colours, bodies, shapes);
+    EXPECT_EQ(ContactSolver(s).project_positions(contacts, colours, bodies, shapes), sweeps) << "squeeze " << squeeze;
     EXPECT_EQ(std::memcmp(pos.data(), expected.data(), sizeof(Vec3) * n), 0) << "squeeze " << squeeze;
     if (cs.several) {
       EXPECT_GT(sweeps, 1);
