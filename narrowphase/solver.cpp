@@ -269,9 +269,7 @@ int ContactSolver::project_positions(const std::vector<Contact>& contacts, const
   const auto n = static_cast<std::ptrdiff_t>(contacts.size());
   m_position_pairs.resize(contacts.size());
   m_position_geometry.resize(contacts.size());
-  SweepRecords records;
-  records.bodies = m_position_pairs.data();
-  records.geometry = m_position_geometry.data();
+  const SweepRecords records = position_records();
 #pragma omp parallel for schedule(static) if (n > 20000)
   for (std::ptrdiff_t k = 0; k < n; ++k) pack_position_record(cs[k], records, static_cast<std::uint32_t>(k));
   // Sweeps until one moves no contact by more than settled_move
@@ -289,17 +287,23 @@ int ContactSolver::project_positions(const std::vector<Contact>& contacts, const
   return sweeps;
 }
 
+SweepRecords ContactSolver::position_records() const {
+  SweepRecords records;
+  records.bodies = m_position_pairs.data();
+  records.geometry = m_position_geometry.data();
+  return records;
+}
+
+// The GPU's max_overlap_kernel on the CPU.
 real ContactSolver::deepest_overlap(const BodiesView& bodies, const std::vector<WallShape>& walls) const {
   const auto n = static_cast<std::ptrdiff_t>(m_position_pairs.size());
-  const BodyPair* pairs = m_position_pairs.data();
+  const SweepRecords records = position_records();
   const WallShape* ws = walls.data();
   real deepest = 0;
 #pragma omp parallel for schedule(static) reduction(max : deepest) if (n > 20000)
-  for (std::ptrdiff_t k = 0; k < n; ++k) {
-    Contact c;
-    c.a = pairs[k].a, c.b = pairs[k].b;
-    deepest = std::max(deepest, overlap_ratio(c, bodies, ws));
-  }
+  for (std::ptrdiff_t k = 0; k < n; ++k)
+    deepest = std::max(deepest, overlap_ratio(load_position_contact<false>(records, static_cast<std::uint32_t>(k)),
+                                              bodies, ws));
   return deepest;
 }
 

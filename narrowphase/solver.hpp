@@ -86,6 +86,8 @@ class ContactSolver {
  private:
   void impacts(std::vector<Contact>& contacts, const ColourRanges& colours, SolverBody* bodies, std::size_t body_count,
                real h);
+  // The position records' arrays (m_position_pairs, m_position_geometry).
+  SweepRecords position_records() const;
 
   using RangeFn = void (*)(Contact* contacts, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
                            real inv_h, bool backwards);

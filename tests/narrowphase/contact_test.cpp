@@ -24,6 +24,55 @@ Vec3 random_unit(std::mt19937_64& rng) {
   }
 }
 
+// side^3 spheres of radius r (about 4.2 g) on a cubic lattice of pitch
+// `pitch` over a floor plane at z = 0, the lowest centres at height z0, each
+// coordinate jittered by up to `jitter` (m); the lattice neighbours are the
+// candidate pairs. contacts() makes the sphere and floor contacts at the
+// given positions and velocities, in colour-major order.
+struct Lattice {
+  std::size_t n;
+  std::vector<Vec3> position;
+  std::vector<real> radius, inv_mass, inv_inertia;
+  std::vector<std::uint32_t> material;
+  std::vector<IndexPair> pairs;
+  std::vector<WallShape> floor;
+
+  Lattice(int side, real r, double pitch, double z0, double jitter, std::mt19937_64& rng)
+      : n(std::size_t(side) * side * side), position(n), radius(n, r), inv_mass(n, real(1 / 0.0042)),
+        inv_inertia(n, real(1 / (0.4 * 0.0042 * r * r))), material(n, 0) {
+    std::uniform_real_distribution<double> u(-jitter, jitter);
+    auto index = [&](int x, int y, int z) { return std::uint32_t((z * side + y) * side + x); };
+    for (int z = 0; z < side; ++z)
+      for (int y = 0; y < side; ++y)
+        for (int x = 0; x < side; ++x) {
+          const std::uint32_t i = index(x, y, z);
+          position[i] = Vec3(real(pitch * x + u(rng)), real(pitch * y + u(rng)), real(z0 + pitch * z + u(rng)));
+          if (x + 1 < side) pairs.push_back({i, index(x + 1, y, z)});
+          if (y + 1 < side) pairs.push_back({i, index(x, y + 1, z)});
+          if (z + 1 < side) pairs.push_back({i, index(x, y, z + 1)});
+        }
+    Walls walls;
+    walls.planes.push_back({{0, 0, 0}, {0, 0, 1}, 0, {}});
+    floor = wall_shapes(walls);
+  }
+
+  BodiesView view(Vec3* pos, Vec3* vel, Vec3* omega) {
+    return {pos, vel, omega, radius.data(), inv_mass.data(), inv_inertia.data(), material.data(), n};
+  }
+
+  // Contacts whose gap closes within h or lies within `reach` of each sphere.
+  std::vector<Contact> contacts(const BodiesView& bodies, const PairTable& table, real h, real reach,
+                                ColourRanges& colours) const {
+    const std::vector<real> reaches(n, reach);
+    std::vector<Contact> out, wall;
+    sphere_contacts(bodies, pairs.data(), pairs.size(), table, h, reaches.data(), out);
+    wall_contacts(bodies, floor, table, h, reaches.data(), wall);
+    out.insert(out.end(), wall.begin(), wall.end());
+    ContactColouring().colour_and_sort(out, n, colours, nullptr, &bodies);
+    return out;
+  }
+};
+
 }  // namespace
 
 TEST(SphereSphere, SeparationAndNormalMatchGeometry) {
@@ -159,33 +208,18 @@ TEST(Solver, FrictionStaysInsideTheCone) {
 // contacts, colours of thousands, so the threads' path and every tail of
 // blocks), each combination of the terms, two substeps (the second warm).
 TEST(Solver, EveryLaneKindGivesTheSameBits) {
-  const int side = 24;
   const real r = real(0.01);
   std::mt19937_64 rng(21);
-  std::uniform_real_distribution<double> jitter(-1e-4, 1e-4), speed(-0.05, 0.05);
-  const std::size_t n = std::size_t(side) * side * side;
-  std::vector<Vec3> pos(n), vel0(n), omega0(n);
-  std::vector<real> radius(n, r), inv_mass(n, real(1 / 0.0042)), inv_inertia(n, real(1 / (0.4 * 0.0042 * r * r)));
-  std::vector<std::uint32_t> material(n, 0);
-  std::vector<IndexPair> pairs;
-  auto index = [&](int x, int y, int z) { return std::uint32_t((z * side + y) * side + x); };
-  for (int z = 0; z < side; ++z)
-    for (int y = 0; y < side; ++y)
-      for (int x = 0; x < side; ++x) {
-        const std::uint32_t i = index(x, y, z);
-        pos[i] = Vec3(real(2 * r * 0.995 * x + jitter(rng)), real(2 * r * 0.995 * y + jitter(rng)),
-                      real(r * 0.999 + 2 * r * 0.995 * z + jitter(rng)));
-        vel0[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng)));
-        omega0[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng))) * real(100);
-        if (x + 1 < side) pairs.push_back({i, index(x + 1, y, z)});
-        if (y + 1 < side) pairs.push_back({i, index(x, y + 1, z)});
-        if (z + 1 < side) pairs.push_back({i, index(x, y, z + 1)});
-      }
+  Lattice lattice(24, r, 2 * r * 0.995, r * 0.999, 1e-4, rng);
+  const std::size_t n = lattice.n;
+  std::uniform_real_distribution<double> speed(-0.05, 0.05);
+  std::vector<Vec3> vel0(n), omega0(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    vel0[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng)));
+    omega0[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng))) * real(100);
+  }
   PairCoefficients coeff{real(0.3), real(0.5), real(0.02), real(0.01)};
   PairTable table{&coeff, 1};
-  Walls walls;
-  walls.planes.push_back({{0, 0, 0}, {0, 0, 1}, 0, {}});
-  const std::vector<real> reach(n, real(1e-4));
   const real h = real(1e-3);
 
   struct Run {
@@ -194,14 +228,9 @@ TEST(Solver, EveryLaneKindGivesTheSameBits) {
   };
   auto run = [&](const SolverSettings& s, SweepLanes lanes) {
     Run out{{}, vel0, omega0};
-    BodiesView bodies{pos.data(), out.vel.data(), out.omega.data(), radius.data(), inv_mass.data(),
-                      inv_inertia.data(), material.data(), n};
-    sphere_contacts(bodies, pairs.data(), pairs.size(), table, h, reach.data(), out.contacts);
-    std::vector<Contact> wall;
-    wall_contacts(bodies, wall_shapes(walls), table, h, reach.data(), wall);
-    out.contacts.insert(out.contacts.end(), wall.begin(), wall.end());
+    const BodiesView bodies = lattice.view(lattice.position.data(), out.vel.data(), out.omega.data());
     ColourRanges colours;
-    ContactColouring().colour_and_sort(out.contacts, n, colours, nullptr, &bodies);
+    out.contacts = lattice.contacts(bodies, table, h, real(1e-4), colours);
     ContactSolver solver(s, lanes);
     EXPECT_EQ(solver.lanes(), lanes);
     for (int substep = 0; substep < 2; ++substep) solver.solve_velocities(out.contacts, colours, bodies, h);
@@ -234,7 +263,6 @@ TEST(Solver, EveryLaneKindGivesTheSameBits) {
 // of a radius (overlaps of a few per cent here and there: several sweeps),
 // one pressed evenly just past the slop (one sweep).
 TEST(Solver, ProjectionEndsAtTheFirstSettledSweep) {
-  const int side = 16;
   const real r = real(0.01);
   struct Case {
     double squeeze, jitter;  // pitch 2 r squeeze; m
@@ -243,40 +271,16 @@ TEST(Solver, ProjectionEndsAtTheFirstSettledSweep) {
   for (const Case& cs : {Case{1.0, 1e-4, true}, Case{0.99745, 2e-7, false}}) {
     const double squeeze = cs.squeeze;
     std::mt19937_64 rng(5);
-    std::uniform_real_distribution<double> jitter(-cs.jitter, cs.jitter);
-    const std::size_t n = std::size_t(side) * side * side;
-    std::vector<Vec3> pos0(n), vel(n), omega(n);
-    std::vector<real> radius(n, r), inv_mass(n, real(1 / 0.0042)), inv_inertia(n, real(1 / (0.4 * 0.0042 * r * r)));
-    std::vector<std::uint32_t> material(n, 0);
-    std::vector<IndexPair> pairs;
-    auto index = [&](int x, int y, int z) { return std::uint32_t((z * side + y) * side + x); };
-    const double pitch = 2 * r * squeeze;
-    for (int z = 0; z < side; ++z)
-      for (int y = 0; y < side; ++y)
-        for (int x = 0; x < side; ++x) {
-          const std::uint32_t i = index(x, y, z);
-          pos0[i] = Vec3(real(pitch * x + jitter(rng)), real(pitch * y + jitter(rng)),
-                         real(r * squeeze + pitch * z + jitter(rng)));
-          if (x + 1 < side) pairs.push_back({i, index(x + 1, y, z)});
-          if (y + 1 < side) pairs.push_back({i, index(x, y + 1, z)});
-          if (z + 1 < side) pairs.push_back({i, index(x, y, z + 1)});
-        }
+    Lattice lattice(16, r, 2 * r * squeeze, r * squeeze, cs.jitter, rng);
+    const std::size_t n = lattice.n;
+    const std::vector<Vec3>& pos0 = lattice.position;
+    const std::vector<WallShape>& shapes = lattice.floor;
+    std::vector<Vec3> pos = pos0, vel(n), omega(n);
+    BodiesView bodies = lattice.view(pos.data(), vel.data(), omega.data());
     PairCoefficients coeff{};
     PairTable table{&coeff, 1};
-    Walls walls;
-    walls.planes.push_back({{0, 0, 0}, {0, 0, 1}, 0, {}});
-    const std::vector<WallShape> shapes = wall_shapes(walls);
-    const std::vector<real> reach(n, 0);
-    std::vector<Vec3> pos = pos0;
-    BodiesView bodies{pos.data(), vel.data(), omega.data(), radius.data(), inv_mass.data(), inv_inertia.data(),
-                      material.data(), n};
-    std::vector<Contact> contacts;
-    sphere_contacts(bodies, pairs.data(), pairs.size(), table, real(0), reach.data(), contacts);
-    std::vector<Contact> wall;
-    wall_contacts(bodies, shapes, table, real(0), reach.data(), wall);
-    contacts.insert(contacts.end(), wall.begin(), wall.end());
     ColourRanges colours;
-    ContactColouring().colour_and_sort(contacts, n, colours, nullptr, &bodies);
+    const std::vector<Contact> contacts = lattice.contacts(bodies, table, real(0), real(0), colours);
     ASSERT_GT(contacts.size(), n);  // the overlapping pairs
 
     // The oracle: whole sweeps in the solver's forward order, one by one.
