@@ -162,41 +162,51 @@ constexpr char kPileMagic[8] = {'M', 'B', 'L', 'P', 'I', 'L', 'E', '\0'};
 constexpr double kPileRadius = 0.01;
 constexpr double kPileLayers = 30;  // about this many layers deep
 
-scene::Scene pile_scene() {
+// A loose lattice on a floor in a box: what the pile settles from, and the
+// issue's CPU settling scene.
+struct Lattice {
+  double layers = kPileLayers;  // about this many layers deep
+  double spacing = 2.004;       // in-plane, of a radius
+  bool rolling = true;          // rolling resistance (rolling friction 0.05)
+};
+
+scene::Scene pile_scene(bool rolling) {
   using E = scene::Effect;
   scene::Scene s;
-  s.path = s.name = "bench-pile";
+  s.path = s.name = rolling ? "bench-pile" : "bench-settle";
   s.time = {1.0, 1e-3, 1};
   s.solver.iterations = 10;
-  s.effects = {E::gravity, E::collisions, E::walls, E::restitution, E::friction, E::rolling_resistance};
+  s.effects = {E::gravity, E::collisions, E::walls, E::restitution, E::friction};
+  if (rolling) s.effects.push_back(E::rolling_resistance);
   scene::Material m;
   m.name = "m";
   m.density = 1000;
   m.restitution = 0.3;
   m.friction = 0.5;
-  m.rolling_friction = 0.05;
+  m.rolling_friction = rolling ? 0.05 : 0;
   s.materials.push_back(m);
   return s;
 }
 
-// The loose lattice the pile settles from, and the box around it: triangular
-// layers (in-plane spacing a = 2.004 r, rows alternately shifted by a/2),
-// stacked A B C so that each sphere sits over a hollow of three below, each
-// layer 0.003 r higher than resting (the top layer falls about 0.1 r); a floor
-// about square, wide enough for kPileLayers layers; a horizontal jitter of
-// 0.001 r per axis (no overlaps: that needs a layer gap above 0.002 r).
-// The gaps are within the contact skin, so the pile starts with its final
-// contacts: 6 in the layer, 3 below, 3 above (about 11 a sphere with the
-// surfaces; contacts / N about 5.5, each pair counted once). A looser lattice
-// (2.02 r) first settles with about 6 a sphere, then, stepped on, closes its
-// in-plane gaps within some tens of steps and ends at the same 11.
-std::pair<scene::Scene, scene::GeneratedParticles> pile(std::size_t n) {
-  scene::Scene s = pile_scene();
+// The loose lattice, and the box around it: triangular layers (in-plane
+// spacing a = lattice.spacing r, 2.004 for the pile, rows alternately shifted
+// by a/2), stacked A B C so that each sphere sits over a hollow of three
+// below, each layer 0.003 r higher than resting (the top layer falls about
+// 0.1 r); a floor about square, wide enough for lattice.layers layers; a
+// horizontal jitter of 0.001 r per axis (no overlaps: that needs a layer gap
+// above 0.002 r). At 2.004 r the gaps are within the contact skin, so the
+// pile starts with its final contacts: 6 in the layer, 3 below, 3 above
+// (about 11 a sphere with the surfaces; contacts / N about 5.5, each pair
+// counted once). A looser lattice (2.02 r) first settles with about 6 a
+// sphere, then, stepped on, closes its in-plane gaps within some tens of
+// steps and ends at the same 11.
+std::pair<scene::Scene, scene::GeneratedParticles> pile(std::size_t n, const Lattice& lattice = {}) {
+  scene::Scene s = pile_scene(lattice.rolling);
   const double r = kPileRadius;
-  const double a = 2.004 * r;
+  const double a = lattice.spacing * r;
   const double row = a * std::sqrt(3.0) / 2;                   // between rows of a layer
   const double dz = std::sqrt(4 * r * r - a * a / 3) + 0.003 * r;  // between layers
-  const double per_layer = std::max(1.0, static_cast<double>(n) / kPileLayers);
+  const double per_layer = std::max(1.0, static_cast<double>(n) / lattice.layers);
   const auto ny = static_cast<std::size_t>(std::max(1.0, std::round(std::sqrt(per_layer * 2 / std::sqrt(3.0)))));
   const auto nx = static_cast<std::size_t>(std::max(1.0, std::ceil(per_layer / static_cast<double>(ny))));
   const std::size_t layers = (n + nx * ny - 1) / (nx * ny);
@@ -222,6 +232,12 @@ std::pair<scene::Scene, scene::GeneratedParticles> pile(std::size_t n) {
   }
   return {s, g};
 }
+
+// The settling scene: 25 layers on a loose lattice (2.02 r in the plane),
+// friction 0.5 and no rolling resistance, stepped from the lattice; the
+// timed steps start once the in-plane gaps have closed (the dense phase).
+constexpr Lattice kSettleLattice{25, 2.02, false};
+constexpr int kSettleWarmup = 40;
 
 std::string default_cache_dir() {
   const char* xdg = std::getenv("XDG_CACHE_HOME");
@@ -453,9 +469,10 @@ std::string pile_cache_path(const std::string& cache_dir, std::size_t n) {
 
 int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   const broadphase::Backend backend = options.backend == "cuda" ? broadphase::Backend::cuda : broadphase::Backend::cpu;
-  const bool is_pile = options.scene == "pile";
-  if (!is_pile && options.scene != "gas") throw InputError({}, "--scene", "unknown scene '" + options.scene + "'");
-  const int warmup = options.warmup >= 0 ? options.warmup : (is_pile ? 5 : 2);
+  const bool is_pile = options.scene == "pile", is_settle = options.scene == "settle";
+  if (!is_pile && !is_settle && options.scene != "gas")
+    throw InputError({}, "--scene", "unknown scene '" + options.scene + "'");
+  const int warmup = options.warmup >= 0 ? options.warmup : (is_pile ? 5 : is_settle ? kSettleWarmup : 2);
   std::ostream& log = std::cerr;
   std::vector<Row> rows;
   for (std::size_t n : options.n) {
@@ -475,6 +492,10 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
       Simulation sim(s, std::move(state->world), backend);
       rows.push_back(measure(sim, n, warmup, options.repeats));
       rows.back().settle = state->settle;
+    } else if (is_settle) {
+      auto [s, g] = pile(n, kSettleLattice);
+      Simulation sim(s, make_world(s, g), backend);
+      rows.push_back(measure(sim, n, warmup, options.repeats));
     } else {
       auto [s, g] = gas(n, options.effects);
       Simulation sim(s, make_world(s, g), backend);
@@ -519,7 +540,10 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   }
   out << "step benchmark (" << options.backend << ", " << kRealName << ", " << threads() << " thread(s), "
       << (lanes ? std::string("sweep lanes ") + lanes + ", " : "")
-      << (is_pile ? "settled pile (friction, 10 iterations, dt 1 ms)" : "gas at volume fraction 0.1") << ", median of "
+      << (is_pile     ? "settled pile (friction, rolling resistance, 10 iterations, dt 1 ms)"
+          : is_settle ? "settling lattice (25 layers, friction, 10 iterations, dt 1 ms)"
+                      : "gas at volume fraction 0.1")
+      << ", median of "
       << options.repeats << " steps after " << warmup << " warm-up)\n";
   out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"
       << std::setw(10) << "contacts" << std::setw(7) << "coord" << std::setw(8) << "colours" << std::setw(9)

@@ -7,7 +7,11 @@
 //         friction 0.5, rolling friction 0.05, restitution 0.3, 10 solver
 //         iterations, dt 1 ms, one substep, gravity: an fcc stack, every
 //         sphere touching 6 in its layer, 3 below and 3 above (about 5.5
-//         contacts per sphere, each pair counted once).
+//         contacts per sphere, each pair counted once);
+//   settle  the same spheres and box, 25 layers on a looser lattice (in-plane
+//         spacing 2.02 r), friction 0.5, no rolling resistance, stepped from
+//         the lattice (not cached): the steps after the warm-up (40 by
+//         default) are the dense phase, when the in-plane gaps have closed.
 //
 // The pile is made once per N: a loose ABC-stacked lattice, in-plane spacing
 // 2.004 r, each layer 0.003 r above resting on the one below, with a small
@@ -28,10 +32,10 @@ namespace marbles::bench {
 
 struct StepBenchOptions {
   std::string backend = "cpu";       // cpu | cuda (the step backend)
-  std::string scene = "gas";         // gas | pile
+  std::string scene = "gas";         // gas | pile | settle
   std::vector<std::size_t> n{10000, 100000, 1000000};
   int repeats = 10;                  // timed steps per size (after the warm-up steps), and as many profiled ones
-  int warmup = -1;                   // untimed steps first; < 0: 2 (gas) or 5 (pile: warm starts rebuilt)
+  int warmup = -1;                   // untimed steps first; < 0: 2 (gas), 5 (pile: warm starts rebuilt) or 40 (settle)
   bool json = false;                 // JSON only on stdout (progress on stderr)
   std::vector<std::string> effects{"gravity", "collisions", "walls", "restitution"};  // gas only
   std::string cache_dir;             // pile cache; empty: $XDG_CACHE_HOME/marbles or ~/.cache/marbles

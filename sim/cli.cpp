@@ -202,7 +202,8 @@ int cli_main(int argc, char** argv) {
       "step", "time whole steps of a gas at volume fraction 0.1 or of a dense settled pile (cached per N)");
   bench_step->add_option("--backend", st.backend, "cpu|cuda (the pile also settles there)")
       ->check(CLI::IsMember({"cpu", "cuda"}));
-  bench_step->add_option("--scene", st.scene, "gas (default) | pile")->check(CLI::IsMember({"gas", "pile"}));
+  bench_step->add_option("--scene", st.scene, "gas (default) | pile | settle")
+      ->check(CLI::IsMember({"gas", "pile", "settle"}));
   bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->check(CLI::PositiveNumber);
   bench_step->add_option("--repeats", st.repeats, "timed steps per size (and as many profiled ones)")
       ->check(CLI::PositiveNumber);
