@@ -86,24 +86,79 @@ __device__ inline void warp_atomic_max(unsigned long long* target, unsigned long
   if ((threadIdx.x & 31) == 0 && v != 0) atomicMax(target, v);
 }
 
-// Exclusive sum of in[0, n) into out[0, n).
-template <class T>
-void device_exclusive_sum(const T* in, T* out, std::size_t n, DeviceBuffer& temp, cudaStream_t stream) {
-  std::size_t bytes = 0;
-  MARBLES_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, bytes, in, out, static_cast<int>(n), stream));
-  MARBLES_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp.reserve(bytes), bytes, in, out, static_cast<int>(n), stream));
+// Arrays carved in turn out of one allocation, each 256-byte aligned, for a
+// stage's temporaries: stages that never run at the same time share one
+// buffer (CudaStep's scratch), so the device holds the largest stage's
+// temporaries, not their sum. A layout runs twice (carve()): on no memory to
+// count the bytes, then on the reserved memory. A copy of a Carve taken at
+// some point starts arrays that overlap those taken after that point (for
+// arrays never live at the same time); merge() then goes on past both.
+class Carve {
+ public:
+  explicit Carve(char* base = nullptr) : m_base(base) {}
+  template <class T>
+  T* take(std::size_t count) {
+    T* p = m_base ? reinterpret_cast<T*>(m_base + m_used) : nullptr;
+    m_used += (count * sizeof(T) + 255) / 256 * 256;
+    return p;
+  }
+  void merge(const Carve& other) { m_used = m_used > other.m_used ? m_used : other.m_used; }
+  std::size_t used() const { return m_used; }
+
+ private:
+  char* m_base = nullptr;
+  std::size_t m_used = 0;
+};
+
+// Runs layout(Carve&) on `memory`, grown to fit: the pointers it takes are
+// valid until the next carve of the same memory.
+template <class Layout>
+void carve(DeviceBuffer& memory, Layout&& layout) {
+  Carve count;
+  layout(count);
+  Carve at(static_cast<char*>(memory.reserve(count.used())));
+  layout(at);
 }
 
-// Stable sort of (keys, values)[0, n) by key bits [0, bits); the result is in
-// (keys_out, values_out).
-template <class Key, class Value>
-void device_sort_pairs(const Key* keys_in, Key* keys_out, const Value* values_in, Value* values_out, std::size_t n,
-                       int bits, DeviceBuffer& temp, cudaStream_t stream) {
+// Temporary bytes of device_exclusive_sum over n items.
+template <class T>
+std::size_t exclusive_sum_bytes(std::size_t n) {
   std::size_t bytes = 0;
-  MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, keys_in, keys_out, values_in, values_out,
-                                                     static_cast<int>(n), 0, bits, stream));
-  MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp.reserve(bytes), bytes, keys_in, keys_out, values_in,
-                                                     values_out, static_cast<int>(n), 0, bits, stream));
+  MARBLES_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, bytes, static_cast<const T*>(nullptr),
+                                                   static_cast<T*>(nullptr), static_cast<int>(n)));
+  return bytes;
+}
+
+// Exclusive sum of in[0, n) into out[0, n); temp holds exclusive_sum_bytes<T>(n).
+template <class T>
+void device_exclusive_sum(const T* in, T* out, std::size_t n, void* temp, std::size_t temp_bytes,
+                          cudaStream_t stream) {
+  MARBLES_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp, temp_bytes, in, out, static_cast<int>(n), stream));
+}
+
+// Temporary bytes of device_sort_pairs over n items (CUB's double-buffer
+// sort: the alternate arrays are the caller's, the temporaries small).
+template <class Key, class Value>
+std::size_t sort_pairs_bytes(std::size_t n, int bits) {
+  std::size_t bytes = 0;
+  cub::DoubleBuffer<Key> keys(nullptr, nullptr);
+  cub::DoubleBuffer<Value> values(nullptr, nullptr);
+  MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, keys, values, static_cast<int>(n), 0, bits));
+  return bytes;
+}
+
+// Stable sort of (keys, values)[0, n) by key bits [0, bits), over the
+// alternate arrays keys_alt and values_alt (n items each); temp holds
+// sort_pairs_bytes<Key, Value>(n, bits). Returns the sorted values (in
+// `values` or in `values_alt`); keys_out, when given, gets the sorted keys.
+template <class Key, class Value>
+Value* device_sort_pairs(Key* keys, Key* keys_alt, Value* values, Value* values_alt, std::size_t n, int bits,
+                         void* temp, std::size_t temp_bytes, cudaStream_t stream, Key** keys_out = nullptr) {
+  cub::DoubleBuffer<Key> k(keys, keys_alt);
+  cub::DoubleBuffer<Value> v(values, values_alt);
+  MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp, temp_bytes, k, v, static_cast<int>(n), 0, bits, stream));
+  if (keys_out) *keys_out = k.Current();
+  return v.Current();
 }
 
 }  // namespace marbles::cuda

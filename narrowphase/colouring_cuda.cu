@@ -141,6 +141,38 @@ __global__ void __launch_bounds__(kBlock) gather_kernel(const Contact* in, const
 
 }  // namespace
 
+// A call's temporaries: the colours and, never live at once, the rounds'
+// lists and body words, or the sort's keys, indices and their alternates.
+struct ColouringArrays {
+  std::uint32_t* colour = nullptr;
+  ColourEntry *active = nullptr, *next = nullptr;
+  unsigned long long *body_word = nullptr, *body_used = nullptr;
+  std::uint32_t *keys = nullptr, *keys_alt = nullptr, *index = nullptr, *index_alt = nullptr;
+  void* temp = nullptr;
+  std::size_t temp_bytes = 0;
+};
+
+ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, int key_bits) {
+  ColouringArrays at;
+  at.temp_bytes = ::marbles::cuda::sort_pairs_bytes<std::uint32_t, std::uint32_t>(n, key_bits);
+  ::marbles::cuda::carve(*m_scratch, [&](::marbles::cuda::Carve& c) {
+    at.colour = c.take<std::uint32_t>(n);
+    ::marbles::cuda::Carve rounds = c;
+    at.active = rounds.take<ColourEntry>(n);
+    at.next = rounds.take<ColourEntry>(n);
+    at.body_word = rounds.take<unsigned long long>(body_count);
+    at.body_used = rounds.take<unsigned long long>(body_count);
+    at.keys = c.take<std::uint32_t>(n);
+    at.keys_alt = c.take<std::uint32_t>(n);
+    at.index = c.take<std::uint32_t>(n);
+    at.index_alt = c.take<std::uint32_t>(n);
+    at.temp = c.take<char>(at.temp_bytes);
+    c.merge(rounds);
+  });
+  m_count.as<std::uint32_t>(kMaxColourRounds + 1);
+  return at;
+}
+
 ColouringCuda::ColouringCuda() {
   MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_host), (kMaxColourRounds + 8) * sizeof(std::uint32_t)));
 }
@@ -150,16 +182,15 @@ ColouringCuda::~ColouringCuda() {
 
 // Rounds until the active list is empty: launched in batches, the list
 // sizes read once per batch.
-std::uint32_t ColouringCuda::rounds(std::uint32_t n, std::size_t body_count, ColourRule rule, int sm_count,
-                                    cudaStream_t s) {
-  auto* body_word = m_body_word.as<unsigned long long>(body_count);
-  auto* body_used = m_body_used.as<unsigned long long>(body_count);
+std::uint32_t ColouringCuda::rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count,
+                                    ColourRule rule, int sm_count, cudaStream_t s) {
+  unsigned long long *body_word = at.body_word, *body_used = at.body_used;
   MARBLES_CUDA_CHECK(cudaMemsetAsync(body_word, 0, body_count * sizeof(unsigned long long), s));
   // body_used (lowest_free) is cleared, and holds the kept colours, before this.
   auto* count = m_count.get_as<std::uint32_t>();  // count[0] is set by the caller
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count + 1, 0, kMaxColourRounds * sizeof(std::uint32_t), s));
-  ColourEntry* list[2] = {m_active.get_as<ColourEntry>(), m_next.get_as<ColourEntry>()};
-  auto* colour = m_colour.get_as<std::uint32_t>();
+  ColourEntry* list[2] = {at.active, at.next};
+  std::uint32_t* colour = at.colour;
   const int grid = grid_for(n, sm_count);
   // The first batch is as long as the last colouring of this rule took and
   // a little more (a round past the end costs two launches that find an
@@ -186,17 +217,18 @@ std::uint32_t ColouringCuda::rounds(std::uint32_t n, std::size_t body_count, Col
   return last = kMaxColourRounds;  // the rest stay uncoloured: the overflow set
 }
 
-void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, int key_bits, std::uint32_t key_bound,
-                                   std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t s) {
-  auto* keys = m_keys.as<std::uint32_t>(n);
-  auto* keys_out = m_keys_out.as<std::uint32_t>(n);
-  auto* index = m_index.as<std::uint32_t>(n);
-  auto* index_out = m_index_out.as<std::uint32_t>(n);
+std::uint32_t* ColouringCuda::sort_by_colour(const ColouringArrays& at, std::uint32_t n,
+                                                   std::uint32_t overflow_key, int key_bits, std::uint32_t key_bound,
+                                                   std::vector<std::uint32_t>& begin,
+                                                   const std::uint32_t** sorted_keys, int sm_count, cudaStream_t s) {
   auto* first = m_first_of_key.as<std::uint32_t>(overflow_key + 2);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0xff, (overflow_key + 2) * sizeof(std::uint32_t), s));
-  keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(m_colour.get_as<std::uint32_t>(), n, overflow_key, keys, index);
+  keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(at.colour, n, overflow_key, at.keys, at.index);
   MARBLES_CUDA_CHECK_LAUNCH();
-  ::marbles::cuda::device_sort_pairs(keys, keys_out, index, index_out, n, key_bits, m_temp, s);
+  std::uint32_t* keys_out = nullptr;
+  std::uint32_t* index_out = ::marbles::cuda::device_sort_pairs(
+      at.keys, at.keys_alt, at.index, at.index_alt, n, key_bits, at.temp, at.temp_bytes, s, &keys_out);
+  if (sorted_keys) *sorted_keys = keys_out;
   first_of_key_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(keys_out, n, first);
   MARBLES_CUDA_CHECK_LAUNCH();
   // No key but the overflow's (and the inactive) is at or above key_bound:
@@ -221,6 +253,7 @@ void ColouringCuda::sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, 
   begin[colours] = coloured_end;
   for (std::uint32_t c = colours; c-- > 1;) begin[c] = m_host[c] != kNone ? m_host[c] : begin[c + 1];
   begin[colours + 1] = overflow_first != kNone ? overflow_end : coloured_end;
+  return index_out;
 }
 
 std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count,
@@ -233,22 +266,22 @@ std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint3
     begin.assign(2, 0);
     return 0;
   }
-  reserve(n);
-  auto* body_used = m_body_used.as<unsigned long long>(body_count);
+  constexpr int kKeyBits = 7;  // the colours (< kMaxColours) and the overflow's key
+  const ColouringArrays at = lay_out(n, body_count, kKeyBits);
   auto* count = m_count.get_as<std::uint32_t>();
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(body_used, 0, body_count * sizeof(unsigned long long), s));
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_used, 0, body_count * sizeof(unsigned long long), s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
-  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, kept_colour,
-                                                                m_colour.get_as<std::uint32_t>(),
-                                                                m_active.get_as<ColourEntry>(), count, body_used);
+  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, kept_colour, at.colour, at.active,
+                                                                count, at.body_used);
   MARBLES_CUDA_CHECK_LAUNCH();
-  rounds_run = rounds(n, body_count, ColourRule::lowest_free, sm_count, s);
+  rounds_run = rounds(at, n, body_count, ColourRule::lowest_free, sm_count, s);
   // Without kept colours, a contact coloured in round r has at most 2 r
   // coloured neighbours (one per sphere and round), so its colour is at most
   // 2 r; kept colours may be any below kMaxColours.
-  sort_by_colour(n, kMaxColours, 7, kept_colour ? kMaxColours : 2 * rounds_run, begin, sm_count, s);
-  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, m_index_out.get_as<std::uint32_t>(),
-                                                         m_keys_out.get_as<std::uint32_t>(), n, sorted, sorted_colour,
+  const std::uint32_t* sorted_keys = nullptr;
+  const std::uint32_t* index = sort_by_colour(at, n, kMaxColours, kKeyBits, kept_colour ? kMaxColours : 2 * rounds_run,
+                                              begin, &sorted_keys, sm_count, s);
+  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, index, sorted_keys, n, sorted, sorted_colour,
                                                          prepare ? *prepare : BodiesView{}, prepare != nullptr);
   MARBLES_CUDA_CHECK_LAUNCH();
   return static_cast<std::uint32_t>(begin.size() - 2);
@@ -259,27 +292,20 @@ std::uint32_t ColouringCuda::impact_levels(const Contact* contacts, std::uint32_
                                            int sm_count, cudaStream_t s) {
   begin.assign(2, 0);
   if (n == 0) return 0;
-  reserve(n);
+  constexpr int kKeyBits = 8;  // the levels (< kMaxColourRounds) and the overflow's key
+  const ColouringArrays at = lay_out(n, body_count, kKeyBits);
   auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
-  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(
-      contacts, n, rest_speed, m_colour.get_as<std::uint32_t>(), m_active.get_as<ColourEntry>(), count);
+  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, rest_speed, at.colour, at.active,
+                                                                    count);
   MARBLES_CUDA_CHECK_LAUNCH();
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, count, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   m_bytes += sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   if (m_host[0] == 0) return 0;
-  const std::uint32_t rounds_run = rounds(n, body_count, ColourRule::by_round, sm_count, s);
-  sort_by_colour(n, kMaxColourRounds, 8, rounds_run, begin, sm_count, s);
-  order = m_index_out.get_as<std::uint32_t>();
+  const std::uint32_t rounds_run = rounds(at, n, body_count, ColourRule::by_round, sm_count, s);
+  order = sort_by_colour(at, n, kMaxColourRounds, kKeyBits, rounds_run, begin, nullptr, sm_count, s);
   return static_cast<std::uint32_t>(begin.size() - 2);
-}
-
-void ColouringCuda::reserve(std::uint32_t n) {
-  m_colour.as<std::uint32_t>(n);
-  m_active.as<ColourEntry>(n);
-  m_next.as<ColourEntry>(n);
-  m_count.as<std::uint32_t>(kMaxColourRounds + 1);
 }
 
 }  // namespace marbles::narrowphase::cuda

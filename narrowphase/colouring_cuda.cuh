@@ -22,6 +22,8 @@ using ::marbles::cuda::DeviceBuffer;
 // Contacts that take no part in a colouring (not impact candidates).
 inline constexpr std::uint32_t kNotActive = 0xfffffffdu;
 
+struct ColouringArrays;  // a call's temporaries (colouring_cuda.cu)
+
 class ColouringCuda {
  public:
   ColouringCuda();
@@ -46,7 +48,8 @@ class ColouringCuda {
   // The impact stage's levels: the candidates (approach faster than
   // rest_speed) coloured by_round on impact_rank; `order` (device) gets them
   // level by level (overflow last), `begin` the host ranges (levels + 2
-  // entries). Returns the level count (0: no candidate).
+  // entries). Returns the level count (0: no candidate). `order` lies in the
+  // scratch memory: valid until its next user.
   std::uint32_t impact_levels(const Contact* contacts, std::uint32_t n, std::size_t body_count, real rest_speed,
                               std::uint32_t*& order, std::vector<std::uint32_t>& begin, int sm_count,
                               cudaStream_t stream);
@@ -54,20 +57,29 @@ class ColouringCuda {
  // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }
 
+  // The temporaries (lists, keys, the sort's arrays) live in `scratch`
+  // from here on, memory that stages which never run at the same time
+  // share (core/device_buffer.cuh: Carve); by default in the colouring's own.
+  void share_scratch(DeviceBuffer& scratch) { m_scratch = &scratch; }
+
  private:
   std::uint64_t m_bytes = 0;
+  // A call's temporaries carved out of the scratch memory: the sort's keys
+  // key_bits wide.
+  ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, int key_bits);
   // Rounds over the active list (count[0] entries, set by the caller);
   // returns the rounds run.
-  std::uint32_t rounds(std::uint32_t n, std::size_t body_count, ColourRule rule, int sm_count, cudaStream_t stream);
-  void reserve(std::uint32_t n);
+  std::uint32_t rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, ColourRule rule,
+                       int sm_count, cudaStream_t stream);
   // Stable sort of the indices by key (overflow -> overflow_key, inactive
   // last) and the host ranges [0, key_count + 1]; no key is at or above
-  // key_bound except the overflow's.
-  void sort_by_colour(std::uint32_t n, std::uint32_t overflow_key, int key_bits, std::uint32_t key_bound,
-                      std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t stream);
+  // key_bound except the overflow's. Returns the sorted indices.
+  std::uint32_t* sort_by_colour(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
+                                      int key_bits, std::uint32_t key_bound, std::vector<std::uint32_t>& begin,
+                                      const std::uint32_t** sorted_keys, int sm_count, cudaStream_t stream);
 
-  DeviceBuffer m_colour, m_active, m_next, m_count, m_body_word, m_body_used, m_keys, m_keys_out,
-      m_index, m_index_out, m_first_of_key, m_temp;
+  DeviceBuffer m_count, m_first_of_key, m_own_scratch;
+  DeviceBuffer* m_scratch = &m_own_scratch;
   std::uint32_t* m_host = nullptr;  // pinned readbacks
   std::uint32_t m_last_rounds[2] = {0, 0};  // rounds of the last colouring by rule (lowest_free, by_round)
 };

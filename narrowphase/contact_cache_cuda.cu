@@ -192,26 +192,42 @@ ContactCacheCuda::~ContactCacheCuda() {
 
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
                              std::uint32_t spheres, std::uint32_t walls, int sm_count, cudaStream_t s) {
-  auto* flags = m_flags.as<std::uint32_t>(n + 1);
-  auto* offsets = m_offsets.as<std::uint32_t>(n + 1);
+  // Temporaries in the scratch memory: the flags and their offsets, then
+  // (the flags no longer live) the sort's keys and indices with their
+  // alternates. Sized for n entries: the count is known only after the scan.
+  // Bits of the largest a (a sphere) and the largest b (the last wall).
+  const auto index_bits = [](std::uint64_t count) { return static_cast<int>(bits_needed(count ? count - 1 : 0)); };
+  const int b_bits = index_bits(std::uint64_t(spheres) + walls), a_bits = index_bits(spheres);
+  const std::size_t scan_bytes = ::marbles::cuda::exclusive_sum_bytes<std::uint32_t>(n + 1);
+  const std::size_t sort_bytes = ::marbles::cuda::sort_pairs_bytes<std::uint64_t, std::uint32_t>(n, a_bits + b_bits);
+  std::uint32_t *flags = nullptr, *offsets = nullptr, *index_in = nullptr, *index_alt = nullptr;
+  std::uint64_t *keys_in = nullptr, *keys_alt = nullptr;
+  void *scan_temp = nullptr, *sort_temp = nullptr;
+  ::marbles::cuda::carve(*m_scratch, [&](::marbles::cuda::Carve& c) {
+    offsets = c.take<std::uint32_t>(n + 1);
+    ::marbles::cuda::Carve scan = c;
+    flags = scan.take<std::uint32_t>(n + 1);
+    scan_temp = scan.take<char>(scan_bytes);
+    keys_in = c.take<std::uint64_t>(n);
+    keys_alt = c.take<std::uint64_t>(n);
+    index_in = c.take<std::uint32_t>(n);
+    index_alt = c.take<std::uint32_t>(n);
+    sort_temp = c.take<char>(sort_bytes);
+    c.merge(scan);
+  });
   flags_kernel<<<grid_for(n + 1, sm_count), kBlock, 0, s>>>(contacts, contact_colour, n, flags);
   MARBLES_CUDA_CHECK_LAUNCH();
-  ::marbles::cuda::device_exclusive_sum(flags, offsets, n + 1, m_temp, s);
+  ::marbles::cuda::device_exclusive_sum(flags, offsets, n + 1, scan_temp, scan_bytes, s);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, offsets + n, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   m_bytes += sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   m_count = m_host[0];
   if (m_count == 0) return;
-  auto* keys_in = m_keys_in.as<std::uint64_t>(m_count);
-  auto* index_in = m_index_in.as<std::uint32_t>(m_count);
-  auto* keys = m_keys.as<std::uint64_t>(m_count);
-  auto* index = m_index.as<std::uint32_t>(m_count);
-  // Bits of the largest a (a sphere) and the largest b (the last wall).
-  const auto index_bits = [](std::uint64_t count) { return static_cast<int>(bits_needed(count ? count - 1 : 0)); };
-  const int b_bits = index_bits(std::uint64_t(spheres) + walls), a_bits = index_bits(spheres);
   keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, offsets, spheres, b_bits, keys_in, index_in);
   MARBLES_CUDA_CHECK_LAUNCH();
-  ::marbles::cuda::device_sort_pairs(keys_in, keys, index_in, index, m_count, a_bits + b_bits, m_temp, s);
+  const std::uint32_t* index = ::marbles::cuda::device_sort_pairs(keys_in, keys_alt, index_in, index_alt, m_count,
+                                                                  a_bits + b_bits, sort_temp, sort_bytes, s);
+  auto* keys = m_keys.as<std::uint64_t>(m_count);
   gather_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, m_count, keys,
                                                                m_normal.as<real>(m_count), tangent_entries(m_count),
                                                                rolling_entries(m_count),
@@ -275,7 +291,18 @@ bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
                                std::uint8_t* kept_colour, int sm_count, cudaStream_t s) {
   const std::uint32_t m = m_count;
   if (m == 0 || n == 0) return false;
-  auto* matched = m_matched.as<std::uint8_t>(m);
+  // Temporaries in the scratch memory: which entries were matched, and for
+  // the island rule the bodies' labels, island maxima and cold flags.
+  const auto bodies_n = static_cast<std::uint32_t>(bodies.count);
+  std::uint8_t *matched = nullptr, *cold = nullptr;
+  std::uint32_t* label = nullptr;
+  unsigned long long* island_max = nullptr;
+  ::marbles::cuda::carve(*m_scratch, [&](::marbles::cuda::Carve& c) {
+    matched = c.take<std::uint8_t>(m);
+    label = c.take<std::uint32_t>(bodies_n);
+    island_max = c.take<unsigned long long>(bodies_n);
+    cold = c.take<std::uint8_t>(bodies_n);
+  });
   auto* counter = m_counter.as<std::uint32_t>(1);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(matched, 0, m, s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
@@ -296,10 +323,6 @@ bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   if (m_host[0] == 0) return true;
 
   // A load was lost: the island rule, on the device.
-  const std::uint32_t bodies_n = static_cast<std::uint32_t>(bodies.count);
-  auto* label = m_label.as<std::uint32_t>(bodies_n);
-  auto* island_max = m_island_max.as<unsigned long long>(bodies_n);
-  auto* cold = m_cold.as<std::uint8_t>(bodies_n);
   const int body_grid = grid_for(bodies_n, sm_count), contact_grid = grid_for(n, sm_count);
   label_init_kernel<<<body_grid, kBlock, 0, s>>>(label, bodies_n);
   MARBLES_CUDA_CHECK_LAUNCH();

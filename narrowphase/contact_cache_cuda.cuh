@@ -48,14 +48,19 @@ class ContactCacheCuda {
   // friction the tangential impulses, without rolling resistance the rolling
   // ones stay zero, and the cache neither stores nor reads them.
   void set_terms(bool friction, bool rolling) { m_keep_tangent = friction, m_keep_rolling = rolling; }
+  // The temporaries (the store's flags, keys and sort, the restore's
+  // matches and island labels) live in `scratch` from here on, memory that
+  // stages which never run at the same time share (core/device_buffer.cuh:
+  // Carve); by default in the cache's own.
+  void share_scratch(DeviceBuffer& scratch) { m_scratch = &scratch; }
 
  // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }
 
  private:
   std::uint64_t m_bytes = 0;
-  DeviceBuffer m_flags, m_offsets, m_keys_in, m_index_in, m_keys, m_index, m_normal, m_tangent, m_rolling,
-      m_colour, m_matched, m_counter, m_label, m_island_max, m_cold, m_temp;
+  DeviceBuffer m_keys, m_normal, m_tangent, m_rolling, m_colour, m_counter, m_own_scratch;
+  DeviceBuffer* m_scratch = &m_own_scratch;
   std::uint32_t m_count = 0;
   std::uint32_t* m_host = nullptr;  // pinned readback
   bool m_keep_tangent = true, m_keep_rolling = true;

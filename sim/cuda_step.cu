@@ -88,6 +88,8 @@ class CudaStep final : public StepBackend {
     }
     m_terms = {model.solver.friction, model.solver.rolling};
     m_cache.set_terms(m_terms.friction, m_terms.rolling);
+    m_cache.share_scratch(m_scratch);
+    m_colouring.share_scratch(m_scratch);
     m_kept_cache.set_terms(m_terms.friction, m_terms.rolling);
   }
   ~CudaStep() override {
@@ -132,20 +134,33 @@ class CudaStep final : public StepBackend {
       pairs = m_broadphase->device_pairs();
       m_counters.candidate_pairs += pair_count;
       m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
-      auto* flags = m_pair_flags.as<std::uint32_t>(pair_count + 1);
-      pair_offsets = m_pair_offsets.as<std::uint32_t>(pair_count + 1);
-      nc::launch_sphere_contact_flags(bodies, pairs, pair_count, m_table, h, reach, flags, m_sm, m_stream);
-      ::marbles::cuda::device_exclusive_sum(flags, pair_offsets, pair_count + 1, m_temp, m_stream);
+    }
+    const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
+    if (m_model.wall_contacts) wall_items = n * wall_count;
+    // The flags and their offsets (and the scans' temporaries) in the scratch
+    // memory: live only until the contacts are written.
+    namespace dev = ::marbles::cuda;
+    std::uint32_t *pair_flags = nullptr, *wall_flags = nullptr;
+    void *pair_temp = nullptr, *wall_temp = nullptr;
+    const std::size_t pair_temp_bytes = m_model.collisions ? dev::exclusive_sum_bytes<std::uint32_t>(pair_count + 1) : 0;
+    const std::size_t wall_temp_bytes = m_model.wall_contacts ? dev::exclusive_sum_bytes<std::uint32_t>(wall_items + 1) : 0;
+    dev::carve(m_scratch, [&](dev::Carve& c) {
+      pair_flags = c.take<std::uint32_t>(pair_count + 1);
+      pair_offsets = c.take<std::uint32_t>(pair_count + 1);
+      pair_temp = c.take<char>(pair_temp_bytes);
+      wall_flags = c.take<std::uint32_t>(wall_items + 1);
+      wall_offsets = c.take<std::uint32_t>(wall_items + 1);
+      wall_temp = c.take<char>(wall_temp_bytes);
+    });
+    if (m_model.collisions) {
+      nc::launch_sphere_contact_flags(bodies, pairs, pair_count, m_table, h, reach, pair_flags, m_sm, m_stream);
+      dev::device_exclusive_sum(pair_flags, pair_offsets, pair_count + 1, pair_temp, pair_temp_bytes, m_stream);
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned, pair_offsets + pair_count, 4, cudaMemcpyDeviceToHost, m_stream));
       m_bytes += 4 + broad_phase_readback();
     }
-    const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
     if (m_model.wall_contacts) {
-      wall_items = n * wall_count;
-      auto* flags = m_wall_flags.as<std::uint32_t>(wall_items + 1);
-      wall_offsets = m_wall_offsets.as<std::uint32_t>(wall_items + 1);
-      nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, reach, flags, m_sm, m_stream);
-      ::marbles::cuda::device_exclusive_sum(flags, wall_offsets, wall_items + 1, m_temp, m_stream);
+      nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, reach, wall_flags, m_sm, m_stream);
+      dev::device_exclusive_sum(wall_flags, wall_offsets, wall_items + 1, wall_temp, wall_temp_bytes, m_stream);
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 1, wall_offsets + wall_items, 4, cudaMemcpyDeviceToHost, m_stream));
       m_bytes += 4;
     }
@@ -470,8 +485,12 @@ class CudaStep final : public StepBackend {
   bool m_watch = false;
   int m_iteration_factor = 1;
 
-  DeviceBuffer m_walls, m_pair_table, m_max_speed, m_reach, m_bound, m_pair_flags, m_pair_offsets, m_wall_flags, m_wall_offsets,
-      m_contacts, m_sorted, m_kept_colour, m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved, m_temp;
+  DeviceBuffer m_walls, m_pair_table, m_max_speed, m_reach, m_bound, m_contacts, m_sorted, m_kept_colour,
+      m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved;
+  // Temporaries of the stages that never run at the same time (the contact
+  // flags, the colouring's lists and sorts, the cache's store and restore):
+  // the device holds the largest stage's, not their sum.
+  DeviceBuffer m_scratch;
   narrowphase::PairTable m_table;
   nc::SolverTerms m_terms;
   std::unique_ptr<broadphase::SubdivisionCuda> m_broadphase;
