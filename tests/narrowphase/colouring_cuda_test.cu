@@ -64,15 +64,19 @@ struct DeviceContacts {
   }
 };
 
-// kept: colours kept from the last substep (colour_and_sort), or empty.
+// kept: colours kept from the last substep (colour_and_sort), or empty;
+// scratch: the temporaries' memory, shared with other users (null: the
+// colouring's own).
 void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
-                        const std::vector<std::uint8_t>& kept = {}) {
+                        const std::vector<std::uint8_t>& kept = {},
+                        ::marbles::cuda::DeviceBuffer* scratch = nullptr) {
   std::vector<Contact> cpu = input;
   ColourRanges ranges;
   ContactColouring().colour_and_sort(cpu, bodies, ranges, kept.empty() ? nullptr : kept.data());
 
   DeviceContacts d(input);
   narrowphase::cuda::ColouringCuda gpu;
+  if (scratch) gpu.share_scratch(*scratch);
   std::vector<std::uint32_t> begin;
   std::uint32_t rounds = 0;
   const auto n = static_cast<std::uint32_t>(input.size());
@@ -171,6 +175,20 @@ TEST(ColouringCuda, EqualsTheCpuWithKeptColours) {
       }
       expect_same_as_cpu(contacts, bodies, kept);
     }
+  }
+}
+
+// The temporaries in memory shared with other stages, which leave it dirty
+// (poisoned here) and grow it or find it larger between calls: the same
+// colouring and impact levels as the CPU's, whatever the memory held.
+TEST(ColouringCuda, SharedScratchLeftDirtyBetweenCalls) {
+  REQUIRE_DEVICE();
+  std::mt19937_64 rng(33);
+  ::marbles::cuda::DeviceBuffer scratch;
+  for (const std::size_t count : {20000, 300, 60000, 1000, 45000}) {
+    if (scratch.bytes() > 0) ASSERT_EQ(cudaMemset(scratch.get(), 0xa5, scratch.bytes()), cudaSuccess);
+    const auto bodies = static_cast<std::uint32_t>(count / 3 + 10);
+    expect_same_as_cpu(random_contacts(rng, bodies, count), bodies, {}, &scratch);
   }
 }
 
