@@ -43,38 +43,38 @@ constexpr std::uint32_t kPrefetchAhead = 8;
 // The hints, branch-free (GCC drops a __builtin_prefetch under a condition):
 // the callers clamp the index instead. A wall's index (b without kWallFlag)
 // points at some sphere's record: harmless.
-inline void prefetch_bodies(const Contact& c, const SolverBody* bodies) {
-  __builtin_prefetch(bodies + c.a);
-  __builtin_prefetch(bodies + (c.b & ~kWallFlag));
+inline void prefetch_bodies(const BodyPair& ab, const SolverBody* bodies) {
+  __builtin_prefetch(bodies + ab.a);
+  __builtin_prefetch(bodies + (ab.b & ~kWallFlag));
 }
 
-// A colour's contacts in halves (static), asking for the bodies of the
+// A colour's records in halves (static), asking for the bodies of the
 // contact kPrefetchAhead later.
 template <class F>
-void for_colour_ahead(const Contact* contacts, std::uint32_t begin, std::uint32_t end, const SolverBody* bodies,
+void for_colour_ahead(const SweepRecords& s, std::uint32_t begin, std::uint32_t end, const SolverBody* bodies,
                       F&& f) {
   const auto n = static_cast<std::ptrdiff_t>(end - begin);
 #pragma omp parallel for schedule(static) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t) {
     const std::uint32_t k = begin + static_cast<std::uint32_t>(t);
-    prefetch_bodies(contacts[std::min(k + kPrefetchAhead, end - 1)], bodies);
+    prefetch_bodies(s.bodies[std::min(k + kPrefetchAhead, end - 1)], bodies);
     f(k);
   }
 }
 
-// Block t of a colour's sweep: width<V> contacts side by side
-// (solver_lanes.hpp, the same bits as solve_one), the bodies of the next
+// Block t of a colour's sweep: width<V> records side by side
+// (solver_lanes.hpp, the same bits as solve_record), the bodies of the next
 // ones asked for first.
 template <class V, bool Friction, bool Rolling>
-[[gnu::always_inline]] inline void sweep_block(Contact* contacts, std::uint32_t begin, std::uint32_t end,
+[[gnu::always_inline]] inline void sweep_block(const SweepRecords& s, std::uint32_t begin, std::uint32_t end,
                                                std::ptrdiff_t t, SolverBody* bodies, real inv_h) {
   constexpr std::uint32_t w = lanes::width<V>;
   const std::uint32_t k = begin + static_cast<std::uint32_t>(t) * w;
-  for (std::uint32_t l = 0; l < w; ++l) prefetch_bodies(contacts[std::min(k + kPrefetchAhead + l, end - 1)], bodies);
-  lanes::solve_block<Friction, Rolling, V>(contacts + k, bodies, inv_h);
+  for (std::uint32_t l = 0; l < w; ++l) prefetch_bodies(s.bodies[std::min(k + kPrefetchAhead + l, end - 1)], bodies);
+  lanes::solve_block<Friction, Rolling, V>(s, k, bodies, inv_h);
 }
 
-// The sweep over one colour: blocks of width<V> contacts, then blocks of
+// The sweep over one colour: blocks of width<V> records, then blocks of
 // lanes::W, the rest one by one; defined once per lane kind, each compiled
 // for its instruction set (ATTRIBUTE). The OpenMP loop must sit in that
 // function: its outlined body takes the target of the function it is
@@ -82,15 +82,15 @@ template <class V, bool Friction, bool Rolling>
 // every operation rounds as the scalar's.
 #define MARBLES_SWEEP_RANGE(NAME, ATTRIBUTE, V)                                                                  \
   template <bool Friction, bool Rolling>                                                                         \
-  [[ATTRIBUTE]] void NAME(Contact* contacts, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,         \
-                          real inv_h, bool) {                                                                    \
+  [[ATTRIBUTE]] void NAME(const SweepRecords& s, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,    \
+                          real inv_h) {                                                                          \
     constexpr std::uint32_t w = lanes::width<V>;                                                                 \
     const auto blocks = static_cast<std::ptrdiff_t>((end - begin) / w);                                          \
     _Pragma("omp parallel for schedule(static) if (blocks * w >= kParallelFrom)")                                \
-    for (std::ptrdiff_t t = 0; t < blocks; ++t) sweep_block<V, Friction, Rolling>(contacts, begin, end, t, bodies, inv_h); \
+    for (std::ptrdiff_t t = 0; t < blocks; ++t) sweep_block<V, Friction, Rolling>(s, begin, end, t, bodies, inv_h); \
     std::uint32_t k = begin + static_cast<std::uint32_t>(blocks) * w;                                            \
-    for (; end - k >= lanes::W; k += lanes::W) lanes::solve_block<Friction, Rolling>(contacts + k, bodies, inv_h); \
-    for (; k < end; ++k) solve_one<Friction, Rolling>(contacts[k], bodies, inv_h);                               \
+    for (; end - k >= lanes::W; k += lanes::W) lanes::solve_block<Friction, Rolling>(s, k, bodies, inv_h);      \
+    for (; k < end; ++k) solve_record<Friction, Rolling>(s, k, bodies, inv_h);                                   \
   }
 MARBLES_SWEEP_RANGE(sweep_range_sse2, , lanes::L)
 MARBLES_SWEEP_RANGE(sweep_range_avx2, gnu::target("avx2"), lanes::Wide)
@@ -109,9 +109,22 @@ auto sweep_for(SweepLanes lanes) {
 }
 
 template <bool Friction, bool Rolling>
-void warm_start_range(Contact* contacts, std::uint32_t begin, std::uint32_t end, SolverBody* bodies, real, bool) {
-  for_colour_ahead(contacts, begin, end, bodies,
-                   [&](std::uint32_t k) { warm_start_one<Friction, Rolling>(contacts[k], bodies); });
+void warm_start_range(const SweepRecords& s, std::uint32_t begin, std::uint32_t end, SolverBody* bodies, real) {
+  for_colour_ahead(s, begin, end, bodies, [&](std::uint32_t k) { warm_start_record<Friction, Rolling>(s, k, bodies); });
+}
+
+// The contacts into the sweep's records and the impulses back, in parallel.
+template <bool Rolling>
+void pack_records(const Contact* contacts, std::size_t count, const SweepRecords& s) {
+  const auto n = static_cast<std::ptrdiff_t>(count);
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t k = 0; k < n; ++k) pack_sweep_record<Rolling, false>(contacts[k], s, static_cast<std::uint32_t>(k));
+}
+template <bool Rolling>
+void unpack_records(const SweepRecords& s, Contact* contacts, std::size_t count) {
+  const auto n = static_cast<std::ptrdiff_t>(count);
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t k = 0; k < n; ++k) unpack_sweep_impulses<Rolling>(s, static_cast<std::uint32_t>(k), contacts[k]);
 }
 
 // Impacts of contacts[order[k]] for k in [begin, end) (one level; order null:
@@ -186,17 +199,23 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
   for (std::ptrdiff_t i = 0; i < n; ++i) m_bodies[i] = gather_solver_body(world, i);
   SolverBody* bodies = m_bodies.data();
 
-  Contact* cs = contacts.data();
   m_rebounds = false;
   if (m_settings.restitution) impacts(contacts, colours, bodies, world.count, h);
-  if (m_settings.warm_start)
-    over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(cs, b, e, bodies, 0, false); });
 
+  // The warm start and the sweeps on the records (48 bytes a contact with
+  // friction where the contact is 112); the impulses back after the last.
+  size_records(contacts.size());
+  const SweepRecords& records = m_records;
+  m_packed_from = contacts.data(), m_packed_count = contacts.size();
+  if (m_settings.rolling) pack_records<true>(contacts.data(), contacts.size(), records);
+  else pack_records<false>(contacts.data(), contacts.size(), records);
+  if (m_settings.warm_start)
+    over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(records, b, e, bodies, 0); });
   const real inv_h = real(1) / h;
-  for (int it = 0; it < m_settings.iterations; ++it) {
-    const bool backwards = it % 2 == 1;
-    over_colours(colours, backwards, [&](std::uint32_t b, std::uint32_t e) { m_sweep(cs, b, e, bodies, inv_h, backwards); });
-  }
+  for (int it = 0; it < m_settings.iterations; ++it)
+    over_colours(colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t e) { m_sweep(records, b, e, bodies, inv_h); });
+  if (m_settings.rolling) unpack_records<true>(records, contacts.data(), contacts.size());
+  else unpack_records<false>(records, contacts.data(), contacts.size());
 #pragma omp parallel for schedule(static) if (n > 20000)
   for (std::ptrdiff_t i = 0; i < n; ++i) scatter_solver_body(world, i, m_bodies[i]);
 }
@@ -262,16 +281,21 @@ int ContactSolver::project_positions(const std::vector<Contact>& contacts, const
       });
     });
   // The sweeps read the position records (load_position_contact, as the
-  // GPU's do): the contacts' a, b and normal packed once, 24 bytes a contact
-  // where each sweep over the contacts read two 64-byte lines of each.
-  // Settled pile of 10^5: 14 MB that stay in cache instead of 75 MB a sweep.
-  // deepest_overlap reads them after the last sweep.
+  // GPU's do): the contacts' a, b and normal, 24 bytes a contact where each
+  // sweep over the contacts read two 64-byte lines of each. Settled pile of
+  // 10^5: 14 MB that stay in cache instead of 75 MB a sweep. They are part of
+  // the sweep's records, which the velocity solve packed from these contacts
+  // (it changes no contact's bodies or normal); packed here only without a
+  // solve since the last projection. deepest_overlap reads them after the
+  // last sweep.
   const auto n = static_cast<std::ptrdiff_t>(contacts.size());
-  m_position_pairs.resize(contacts.size());
-  m_position_geometry.resize(contacts.size());
-  const SweepRecords records = position_records();
+  if (m_packed_from != cs || m_packed_count != contacts.size()) {
+    size_records(contacts.size());
 #pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t k = 0; k < n; ++k) pack_position_record(cs[k], records, static_cast<std::uint32_t>(k));
+    for (std::ptrdiff_t k = 0; k < n; ++k) pack_position_record(cs[k], m_records, static_cast<std::uint32_t>(k));
+  }
+  m_packed_from = nullptr;
+  const SweepRecords& records = m_records;
   // Sweeps until one moves no contact by more than settled_move
   // (project_one), position_iterations at most: a pile at rest takes one, a
   // pour's impacts the most.
@@ -287,17 +311,16 @@ int ContactSolver::project_positions(const std::vector<Contact>& contacts, const
   return sweeps;
 }
 
-SweepRecords ContactSolver::position_records() const {
-  SweepRecords records;
-  records.bodies = m_position_pairs.data();
-  records.geometry = m_position_geometry.data();
-  return records;
+void ContactSolver::size_records(std::size_t count) const {
+  m_record_words.resize((SweepRecords::bytes_for(count) + sizeof(Real4) - 1) / sizeof(Real4));
+  m_records = SweepRecords::in(m_record_words.data(), count);
+  m_record_count = count;
 }
 
 // The GPU's max_overlap_kernel on the CPU.
 real ContactSolver::deepest_overlap(const BodiesView& bodies, const std::vector<WallShape>& walls) const {
-  const auto n = static_cast<std::ptrdiff_t>(m_position_pairs.size());
-  const SweepRecords records = position_records();
+  const auto n = static_cast<std::ptrdiff_t>(m_record_count);
+  const SweepRecords& records = m_records;
   const WallShape* ws = walls.data();
   real deepest = 0;
 #pragma omp parallel for schedule(static) reduction(max : deepest) if (n > 20000)

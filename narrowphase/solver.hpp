@@ -74,8 +74,9 @@ class ContactSolver {
   void solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours, const BodiesView& bodies,
                         real h);
 
-  // Position projection over the same contacts at the integrated positions;
-  // returns the sweeps it ran.
+  // Position projection over the same contacts at the integrated positions
+  // (unchanged since solve_velocities, or not solved: the solve's records
+  // are used when it ran on these contacts); returns the sweeps it ran.
   int project_positions(const std::vector<Contact>& contacts, const ColourRanges& colours,
                         const BodiesView& bodies, const std::vector<WallShape>& walls) const;
 
@@ -86,11 +87,11 @@ class ContactSolver {
  private:
   void impacts(std::vector<Contact>& contacts, const ColourRanges& colours, SolverBody* bodies, std::size_t body_count,
                real h);
-  // The position records' arrays (m_position_pairs, m_position_geometry).
-  SweepRecords position_records() const;
+  // m_records over m_record_words for `count` contacts.
+  void size_records(std::size_t count) const;
 
-  using RangeFn = void (*)(Contact* contacts, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
-                           real inv_h, bool backwards);
+  using RangeFn = void (*)(const SweepRecords& records, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
+                           real inv_h);
   using ImpactFn = bool (*)(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
                             SolverBody* bodies, const ImpactParams& p);
   SolverSettings m_settings;
@@ -106,10 +107,15 @@ class ContactSolver {
   std::vector<std::vector<std::uint32_t>> m_candidate_parts;  // per thread
   std::vector<std::uint64_t> m_rank;
   std::vector<SolverBody> m_bodies;  // the velocity state, packed for the solve
-  // The projection's records (the GPU's position records: a, b and the
-  // normal, 24 of a contact's 112 bytes), packed once per projection.
-  mutable std::vector<BodyPair> m_position_pairs;
-  mutable std::vector<Real4> m_position_geometry;
+  // The sweep's records (SweepRecords::in) of m_record_count contacts,
+  // packed by each velocity solve; the projection and deepest_overlap read
+  // their position part (bodies, geometry). m_packed_from: the contacts the
+  // solve packed them from, until a projection used them.
+  mutable std::vector<Real4> m_record_words;
+  mutable SweepRecords m_records;
+  mutable std::size_t m_record_count = 0;
+  mutable const Contact* m_packed_from = nullptr;
+  std::size_t m_packed_count = 0;
 };
 
 }  // namespace marbles::narrowphase

@@ -1,14 +1,15 @@
 // narrowphase/solver_lanes.hpp — the velocity sweep of solver_math.hpp on
 // several contacts of one colour at once (CPU, SIMD lanes).
 //
-// solve_one is a long chain of scalar operations per contact (about 550
-// instructions with friction and rolling resistance); the contacts of one
-// colour share no sphere, so W of them can run the same chain side by side,
-// one per lane of a vector. Each lane performs exactly the operations of
-// solve_friction, solve_rolling and solve_normal (contact_math.hpp), in the
-// same order, with the branches turned into selects of values both sides
-// compute; IEEE arithmetic is the same per lane as per scalar, so a lane's
-// result is solve_one's bit for bit, and with it the CUDA twin's
+// solve_record (solve_one on a contact loaded from the sweep's records) is a
+// long chain of scalar operations per contact (about 550 instructions with
+// friction and rolling resistance); the contacts of one colour share no
+// sphere, so W of them can run the same chain side by side, one per lane of
+// a vector. Each lane performs exactly the operations of the effective
+// masses, solve_friction, solve_rolling and solve_normal (contact_math.hpp),
+// in the same order, with the branches turned into selects of values both
+// sides compute; IEEE arithmetic is the same per lane as per scalar, so a
+// lane's result is solve_one's bit for bit, and with it the CUDA twin's
 // (tests/narrowphase/solver_lanes_test.cpp holds the two texts together on
 // random and adversarial contacts).
 //
@@ -171,68 +172,79 @@ struct BodyLanes {
   V inv_mass, inv_inertia;
 };
 
-// Moving W contacts and bodies in and out of lanes. In float a contact is
-// seven 16-byte groups of four reals and a body two, so four contacts'
-// group g is a 4 x 4 transpose away from four lanes of fields; in double
-// (two lanes) the fields are gathered one by one (the *_each forms, which
-// are also the reference the float forms are tested against).
+// Moving W contacts and bodies in and out of lanes. The sweep reads the
+// sweep's records (solver_math.hpp: SweepRecords, a structure of arrays of
+// 4-real words), as the GPU's does: 48 bytes a contact with friction where a
+// whole Contact is 112, and 16 written where a Contact's impulses are 32.
+// In float four contacts' words of one array are a 4 x 4 transpose away
+// from four lanes of fields, and a body's record two words; in double (two
+// lanes) the fields are gathered one by one (the *_each forms, which are
+// also the reference the float forms are tested against). A block's body b
+// may be a wall: its lane holds the wall's velocity (the record's extra
+// word, read only for walls), zero spin and zero inverse mass and inertia.
 
-MARBLES_LANE V3<L> lanes_of(const Vec3* v) {
-  V3<L> out;
-  for (std::uint32_t l = 0; l < W; ++l) out.x[l] = v[l].x, out.y[l] = v[l].y, out.z[l] = v[l].z;
+// Record k as the sweep's contact (load_sweep_contact, solver_math.hpp).
+template <bool Arms, bool Rolling>
+MARBLES_LANE ContactLanes<L> load_records_each(const SweepRecords& s, std::uint32_t k) {
+  ContactLanes<L> c{};
+  for (std::uint32_t l = 0; l < W; ++l) {
+    const Real4 i = s.impulse[k + l], g = s.geometry[k + l];
+    c.normal_impulse[l] = i.x;
+    c.tangent_impulse.x[l] = i.y, c.tangent_impulse.y[l] = i.z, c.tangent_impulse.z[l] = i.w;
+    c.normal.x[l] = g.x, c.normal.y[l] = g.y, c.normal.z[l] = g.z;
+    c.separation[l] = g.w;
+    if constexpr (Arms) {
+      const Real4 m = s.arms[k + l];
+      c.ra[l] = m.x, c.rb[l] = m.y, c.friction[l] = m.z, c.rolling_friction[l] = m.w;
+    }
+    if constexpr (Rolling) {
+      const Real4 r = s.rolling[k + l];
+      c.rolling_impulse.x[l] = r.x, c.rolling_impulse.y[l] = r.y, c.rolling_impulse.z[l] = r.z;
+      c.twisting_friction[l] = r.w;
+    }
+  }
+  return c;
+}
+
+// store_sweep_impulses of records k..k+W.
+template <bool Rolling>
+MARBLES_LANE void store_record_impulses_each(const ContactLanes<L>& c, const SweepRecords& s, std::uint32_t k) {
+  for (std::uint32_t l = 0; l < W; ++l) {
+    s.impulse[k + l] = {c.normal_impulse[l], c.tangent_impulse.x[l], c.tangent_impulse.y[l], c.tangent_impulse.z[l]};
+    if constexpr (Rolling)
+      s.rolling[k + l] = {c.rolling_impulse.x[l], c.rolling_impulse.y[l], c.rolling_impulse.z[l],
+                          c.twisting_friction[l]};
+  }
+}
+
+MARBLES_LANE std::uint32_t body_of(const SweepRecords& s, std::uint32_t k, bool side_b) {
+  const BodyPair ab = s.bodies[k];
+  return side_b ? ab.b : ab.a;
+}
+
+// load_body for side a (side_b false) or b of records k..k+W.
+MARBLES_LANE BodyLanes<L> load_bodies_each(const SolverBody* bodies, const SweepRecords& s, std::uint32_t k,
+                                           bool side_b) {
+  BodyLanes<L> out;
+  for (std::uint32_t l = 0; l < W; ++l) {
+    const std::uint32_t index = body_of(s, k + l, side_b);
+    SolverBody b{};
+    if (is_wall(index)) b.v = {s.extra[k + l].x, s.extra[k + l].y, s.extra[k + l].z};
+    else b = bodies[index];
+    out.v.x[l] = b.v.x, out.v.y[l] = b.v.y, out.v.z[l] = b.v.z;
+    out.w.x[l] = b.w.x, out.w.y[l] = b.w.y, out.w.z[l] = b.w.z;
+    out.inv_mass[l] = b.inv_mass;
+    out.inv_inertia[l] = b.inv_inertia;
+  }
   return out;
 }
 
-MARBLES_LANE ContactLanes<L> load_contacts_each(const Contact* c) {
-  ContactLanes<L> k;
-  Vec3 t[W], r[W], n[W];
-  for (std::uint32_t l = 0; l < W; ++l) {
-    k.normal_impulse[l] = c[l].normal_impulse;
-    t[l] = c[l].tangent_impulse;
-    r[l] = c[l].rolling_impulse;
-    n[l] = c[l].normal;
-    k.normal_mass[l] = c[l].normal_mass;
-    k.tangent_mass[l] = c[l].tangent_mass;
-    k.rolling_mass[l] = c[l].rolling_mass;
-    k.separation[l] = c[l].separation;
-    k.ra[l] = c[l].ra;
-    k.rb[l] = c[l].rb;
-    k.friction[l] = c[l].coeff.friction;
-    k.rolling_friction[l] = c[l].coeff.rolling_friction;
-    k.twisting_friction[l] = c[l].coeff.twisting_friction;
-  }
-  k.tangent_impulse = lanes_of(t);
-  k.rolling_impulse = lanes_of(r);
-  k.normal = lanes_of(n);
-  return k;
-}
-
-MARBLES_LANE void store_impulses_each(const ContactLanes<L>& k, Contact* c) {
-  for (std::uint32_t l = 0; l < W; ++l) {
-    c[l].normal_impulse = k.normal_impulse[l];
-    c[l].tangent_impulse = {k.tangent_impulse.x[l], k.tangent_impulse.y[l], k.tangent_impulse.z[l]};
-    c[l].rolling_impulse = {k.rolling_impulse.x[l], k.rolling_impulse.y[l], k.rolling_impulse.z[l]};
-  }
-}
-
-// load_body for side a (b = false) or b (b = true) of W contacts.
-MARBLES_LANE BodyLanes<L> load_bodies_each(const SolverBody* bodies, const Contact* c, bool side_b) {
-  BodyLanes<L> s;
-  for (std::uint32_t l = 0; l < W; ++l) {
-    const BodyState b = load_body(bodies, side_b ? c[l].b : c[l].a, c[l]);
-    s.v.x[l] = b.v.x, s.v.y[l] = b.v.y, s.v.z[l] = b.v.z;
-    s.w.x[l] = b.w.x, s.w.y[l] = b.w.y, s.w.z[l] = b.w.z;
-    s.inv_mass[l] = b.inv_mass;
-    s.inv_inertia[l] = b.inv_inertia;
-  }
-  return s;
-}
-
-MARBLES_LANE void store_bodies_each(SolverBody* bodies, const Contact* c, bool side_b, const BodyLanes<L>& s) {
+MARBLES_LANE void store_bodies_each(SolverBody* bodies, const SweepRecords& s, std::uint32_t k, bool side_b,
+                                    const BodyLanes<L>& b) {
   for (std::uint32_t l = 0; l < W; ++l)
-    store_body(bodies, side_b ? c[l].b : c[l].a,
-               BodyState{{s.v.x[l], s.v.y[l], s.v.z[l]}, {s.w.x[l], s.w.y[l], s.w.z[l]}, s.inv_mass[l],
-                         s.inv_inertia[l]});
+    store_body(bodies, body_of(s, k + l, side_b),
+               BodyState{{b.v.x[l], b.v.y[l], b.v.z[l]}, {b.w.x[l], b.w.y[l], b.w.z[l]}, b.inv_mass[l],
+                         b.inv_inertia[l]});
 }
 
 #if !defined(MARBLES_DOUBLE)
@@ -257,86 +269,77 @@ MARBLES_LANE void transpose4(L r[4]) {
   r[2] = __builtin_shuffle(t1, t3, Word{0, 1, 4, 5});
   r[3] = __builtin_shuffle(t1, t3, Word{2, 3, 6, 7});
 }
-// Group g of contacts c[0, 4), transposed: field j of the group in r[j].
-MARBLES_LANE void load_group(const Contact* c, int g, L r[4]) {
-  for (int l = 0; l < 4; ++l) r[l] = group(c + l, g);
+// Words p[0, 4) transposed: field j of the four in r[j]; and back.
+MARBLES_LANE void load_words(const Real4* p, L r[4]) {
+  for (int l = 0; l < 4; ++l) r[l] = group(p + l, 0);
   transpose4(r);
 }
+MARBLES_LANE void store_words(Real4* p, L r[4]) {
+  transpose4(r);
+  for (int l = 0; l < 4; ++l) set_group(p + l, 0, r[l]);
+}
 
-static_assert((offsetof(Contact, tangent_impulse) == 4 && offsetof(Contact, rolling_impulse) == 16 &&
-                           offsetof(Contact, normal_mass) == 32 && offsetof(Contact, a) == 48 &&
-                           offsetof(Contact, separation) == 56 && offsetof(Contact, normal) == 64 &&
-                           offsetof(Contact, ra) == 76 && offsetof(Contact, rb) == 80 &&
-                           offsetof(Contact, wall_velocity) == 84 && offsetof(Contact, coeff) == 96 &&
-                           sizeof(Contact) == 112 && sizeof(SolverBody) == 32),
-              "the float Contact is seven groups of four reals, a SolverBody two");
+static_assert(sizeof(Real4) == sizeof(L) && sizeof(SolverBody) == 2 * sizeof(L),
+              "in float a record word is four reals, a SolverBody two words");
 
-MARBLES_LANE ContactLanes<L> load_contacts(const Contact* c) {
-  ContactLanes<L> k;
+template <bool Arms, bool Rolling>
+MARBLES_LANE ContactLanes<L> load_records(const SweepRecords& s, std::uint32_t k) {
+  ContactLanes<L> c{};
   L r[4];
-  load_group(c, 0, r);
-  k.normal_impulse = r[0], k.tangent_impulse = {r[1], r[2], r[3]};
-  load_group(c, 1, r);
-  k.rolling_impulse = {r[0], r[1], r[2]};
-  load_group(c, 2, r);
-  k.normal_mass = r[0], k.tangent_mass = r[1], k.rolling_mass = r[2];
-  load_group(c, 3, r);
-  k.separation = r[2];
-  load_group(c, 4, r);
-  k.normal = {r[0], r[1], r[2]}, k.ra = r[3];
-  load_group(c, 5, r);
-  k.rb = r[0];
-  load_group(c, 6, r);
-  k.friction = r[1], k.rolling_friction = r[2], k.twisting_friction = r[3];
-  return k;
+  load_words(s.impulse + k, r);
+  c.normal_impulse = r[0], c.tangent_impulse = {r[1], r[2], r[3]};
+  load_words(s.geometry + k, r);
+  c.normal = {r[0], r[1], r[2]}, c.separation = r[3];
+  if constexpr (Arms) {
+    load_words(s.arms + k, r);
+    c.ra = r[0], c.rb = r[1], c.friction = r[2], c.rolling_friction = r[3];
+  }
+  if constexpr (Rolling) {
+    load_words(s.rolling + k, r);
+    c.rolling_impulse = {r[0], r[1], r[2]}, c.twisting_friction = r[3];
+  }
+  return c;
 }
 
-// Writes the impulses back: groups 0 and 1 whole (the impact impulse, the
-// last real of group 1, as it was).
-MARBLES_LANE void store_impulses(const ContactLanes<L>& k, Contact* c) {
-  L r[4] = {k.normal_impulse, k.tangent_impulse.x, k.tangent_impulse.y, k.tangent_impulse.z};
-  transpose4(r);
-  for (int l = 0; l < 4; ++l) set_group(c + l, 0, r[l]);
-  for (int l = 0; l < 4; ++l) r[l] = group(c + l, 1);
-  transpose4(r);
-  r[0] = k.rolling_impulse.x, r[1] = k.rolling_impulse.y, r[2] = k.rolling_impulse.z;
-  transpose4(r);
-  for (int l = 0; l < 4; ++l) set_group(c + l, 1, r[l]);
+template <bool Rolling>
+MARBLES_LANE void store_record_impulses(const ContactLanes<L>& c, const SweepRecords& s, std::uint32_t k) {
+  L r[4] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
+  store_words(s.impulse + k, r);
+  if constexpr (Rolling) {
+    L q[4] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.twisting_friction};
+    store_words(s.rolling + k, q);
+  }
 }
 
-// load_body of W contacts' side a (side_b false) or b: a wall's lane holds
-// the contact's wall velocity, zero spin and zero inverse mass and inertia.
-MARBLES_LANE BodyLanes<L> load_bodies(const SolverBody* bodies, const Contact* c, bool side_b) {
+MARBLES_LANE BodyLanes<L> load_bodies(const SolverBody* bodies, const SweepRecords& s, std::uint32_t k,
+                                      bool side_b) {
   alignas(16) static constexpr SolverBody kNone{};
-  Mask wall{};
   L r[4], q[4];
   for (int l = 0; l < 4; ++l) {
-    const std::uint32_t index = side_b ? c[l].b : c[l].a;
-    wall[l] = is_wall(index) ? -1 : 0;
-    const SolverBody* b = is_wall(index) ? &kNone : bodies + index;
-    r[l] = group(b, 0);
-    q[l] = group(b, 1);
+    const std::uint32_t index = body_of(s, k + l, side_b);
+    if (is_wall(index)) {
+      // The wall's velocity, its fourth real (the rebound shift) made the zero inverse mass.
+      r[l] = __builtin_shuffle(group(s.extra + k + l, 0), L{}, Word{0, 1, 2, 4});
+      q[l] = group(&kNone, 1);
+    } else {
+      r[l] = group(bodies + index, 0);
+      q[l] = group(bodies + index, 1);
+    }
   }
   transpose4(r);
   transpose4(q);
-  L g[4];
-  load_group(c, 5, g);  // rb, wall velocity
-  BodyLanes<L> s;
-  s.v = select(wall, V3<L>{g[1], g[2], g[3]}, V3<L>{r[0], r[1], r[2]});
-  s.inv_mass = r[3];
-  s.w = {q[0], q[1], q[2]};
-  s.inv_inertia = q[3];
-  return s;
+  return {{r[0], r[1], r[2]}, {q[0], q[1], q[2]}, r[3], q[3]};
 }
 
-// store_body of W contacts' side a or b (walls are not stored).
-MARBLES_LANE void store_bodies(SolverBody* bodies, const Contact* c, bool side_b, const BodyLanes<L>& s) {
-  L r[4] = {s.v.x, s.v.y, s.v.z, s.inv_mass};
-  L q[4] = {s.w.x, s.w.y, s.w.z, s.inv_inertia};
+// store_body of side a or b (walls are not stored).
+MARBLES_LANE void store_bodies(SolverBody* bodies, const SweepRecords& s, std::uint32_t k, bool side_b,
+                               const BodyLanes<L>& b) {
+  L r[4] = {b.v.x, b.v.y, b.v.z, b.inv_mass};
+  L q[4] = {b.w.x, b.w.y, b.w.z, b.inv_inertia};
   transpose4(r);
   transpose4(q);
   for (int l = 0; l < 4; ++l) {
-    const std::uint32_t index = side_b ? c[l].b : c[l].a;
+    const std::uint32_t index = body_of(s, k + l, side_b);
     if (is_wall(index)) continue;
     set_group(bodies + index, 0, r[l]);
     set_group(bodies + index, 1, q[l]);
@@ -344,25 +347,34 @@ MARBLES_LANE void store_bodies(SolverBody* bodies, const Contact* c, bool side_b
 }
 
 #else
-MARBLES_LANE ContactLanes<L> load_contacts(const Contact* c) { return load_contacts_each(c); }
-MARBLES_LANE void store_impulses(const ContactLanes<L>& k, Contact* c) { store_impulses_each(k, c); }
-MARBLES_LANE BodyLanes<L> load_bodies(const SolverBody* bodies, const Contact* c, bool side_b) {
-  return load_bodies_each(bodies, c, side_b);
+template <bool Arms, bool Rolling>
+MARBLES_LANE ContactLanes<L> load_records(const SweepRecords& s, std::uint32_t k) {
+  return load_records_each<Arms, Rolling>(s, k);
 }
-MARBLES_LANE void store_bodies(SolverBody* bodies, const Contact* c, bool side_b, const BodyLanes<L>& s) {
-  store_bodies_each(bodies, c, side_b, s);
+template <bool Rolling>
+MARBLES_LANE void store_record_impulses(const ContactLanes<L>& c, const SweepRecords& s, std::uint32_t k) {
+  store_record_impulses_each<Rolling>(c, s, k);
+}
+MARBLES_LANE BodyLanes<L> load_bodies(const SolverBody* bodies, const SweepRecords& s, std::uint32_t k,
+                                      bool side_b) {
+  return load_bodies_each(bodies, s, k, side_b);
+}
+MARBLES_LANE void store_bodies(SolverBody* bodies, const SweepRecords& s, std::uint32_t k, bool side_b,
+                               const BodyLanes<L>& b) {
+  store_bodies_each(bodies, s, k, side_b, b);
 }
 #endif
 
 // The moves of wider blocks: the first half of a block's contacts in the
 // low halves of the lanes, the second in the high ones (down to L's moves).
-template <class V>
-MARBLES_LANE ContactLanes<V> load_contacts_of(const Contact* c) {
+template <bool Arms, bool Rolling, class V>
+MARBLES_LANE ContactLanes<V> load_records_of(const SweepRecords& s, std::uint32_t k) {
   if constexpr (sizeof(V) == sizeof(L)) {
-    return load_contacts(c);
+    return load_records<Arms, Rolling>(s, k);
   } else {
     using H = Half<V>;
-    const ContactLanes<H> a = load_contacts_of<H>(c), b = load_contacts_of<H>(c + width<H>);
+    const ContactLanes<H> a = load_records_of<Arms, Rolling, H>(s, k);
+    const ContactLanes<H> b = load_records_of<Arms, Rolling, H>(s, k + width<H>);
     return {join(a.normal_impulse, b.normal_impulse),
             join(a.tangent_impulse, b.tangent_impulse),
             join(a.rolling_impulse, b.rolling_impulse),
@@ -378,40 +390,65 @@ MARBLES_LANE ContactLanes<V> load_contacts_of(const Contact* c) {
             join(a.twisting_friction, b.twisting_friction)};
   }
 }
-template <class V>
-MARBLES_LANE void store_impulses_of(const ContactLanes<V>& k, Contact* c) {
+template <bool Rolling, class V>
+MARBLES_LANE void store_record_impulses_of(const ContactLanes<V>& c, const SweepRecords& s, std::uint32_t k) {
   if constexpr (sizeof(V) == sizeof(L)) {
-    store_impulses(k, c);
+    store_record_impulses<Rolling>(c, s, k);
   } else {
     using H = Half<V>;
     ContactLanes<H> lo{}, hi{};
-    lo.normal_impulse = low(k.normal_impulse), hi.normal_impulse = high(k.normal_impulse);
-    lo.tangent_impulse = low(k.tangent_impulse), hi.tangent_impulse = high(k.tangent_impulse);
-    lo.rolling_impulse = low(k.rolling_impulse), hi.rolling_impulse = high(k.rolling_impulse);
-    store_impulses_of<H>(lo, c);
-    store_impulses_of<H>(hi, c + width<H>);
+    lo.normal_impulse = low(c.normal_impulse), hi.normal_impulse = high(c.normal_impulse);
+    lo.tangent_impulse = low(c.tangent_impulse), hi.tangent_impulse = high(c.tangent_impulse);
+    lo.rolling_impulse = low(c.rolling_impulse), hi.rolling_impulse = high(c.rolling_impulse);
+    lo.twisting_friction = low(c.twisting_friction), hi.twisting_friction = high(c.twisting_friction);
+    store_record_impulses_of<Rolling, H>(lo, s, k);
+    store_record_impulses_of<Rolling, H>(hi, s, k + width<H>);
   }
 }
 template <class V>
-MARBLES_LANE BodyLanes<V> load_bodies_of(const SolverBody* bodies, const Contact* c, bool side_b) {
+MARBLES_LANE BodyLanes<V> load_bodies_of(const SolverBody* bodies, const SweepRecords& s, std::uint32_t k,
+                                         bool side_b) {
   if constexpr (sizeof(V) == sizeof(L)) {
-    return load_bodies(bodies, c, side_b);
+    return load_bodies(bodies, s, k, side_b);
   } else {
     using H = Half<V>;
-    const BodyLanes<H> a = load_bodies_of<H>(bodies, c, side_b), b = load_bodies_of<H>(bodies, c + width<H>, side_b);
+    const BodyLanes<H> a = load_bodies_of<H>(bodies, s, k, side_b);
+    const BodyLanes<H> b = load_bodies_of<H>(bodies, s, k + width<H>, side_b);
     return {join(a.v, b.v), join(a.w, b.w), join(a.inv_mass, b.inv_mass), join(a.inv_inertia, b.inv_inertia)};
   }
 }
 template <class V>
-MARBLES_LANE void store_bodies_of(SolverBody* bodies, const Contact* c, bool side_b, const BodyLanes<V>& s) {
+MARBLES_LANE void store_bodies_of(SolverBody* bodies, const SweepRecords& s, std::uint32_t k, bool side_b,
+                                  const BodyLanes<V>& b) {
   if constexpr (sizeof(V) == sizeof(L)) {
-    store_bodies(bodies, c, side_b, s);
+    store_bodies(bodies, s, k, side_b, b);
   } else {
     using H = Half<V>;
-    store_bodies_of<H>(bodies, c, side_b, BodyLanes<H>{low(s.v), low(s.w), low(s.inv_mass), low(s.inv_inertia)});
-    store_bodies_of<H>(bodies, c + width<H>, side_b,
-                       BodyLanes<H>{high(s.v), high(s.w), high(s.inv_mass), high(s.inv_inertia)});
+    store_bodies_of<H>(bodies, s, k, side_b, BodyLanes<H>{low(b.v), low(b.w), low(b.inv_mass), low(b.inv_inertia)});
+    store_bodies_of<H>(bodies, s, k + width<H>, side_b,
+                       BodyLanes<H>{high(b.v), high(b.w), high(b.inv_mass), high(b.inv_inertia)});
   }
+}
+
+// The effective masses (normal_mass_of, tangent_mass_of, rolling_mass_of of
+// contact_math.hpp: the same expressions, a lane whose sum is not positive
+// gets zero).
+template <class V>
+MARBLES_LANE V inverse_or_zero(V k) {
+  const V zero{};
+  return select<V>(k > zero, (zero + real(1)) / k, zero);
+}
+template <class V>
+MARBLES_LANE V normal_mass_of(const BodyLanes<V>& A, const BodyLanes<V>& B) {
+  return inverse_or_zero<V>(A.inv_mass + B.inv_mass);
+}
+template <class V>
+MARBLES_LANE V tangent_mass_of(const BodyLanes<V>& A, const BodyLanes<V>& B, V ra, V rb) {
+  return inverse_or_zero<V>((A.inv_mass + B.inv_mass) + A.inv_inertia * ra * ra + B.inv_inertia * rb * rb);
+}
+template <class V>
+MARBLES_LANE V rolling_mass_of(const BodyLanes<V>& A, const BodyLanes<V>& B) {
+  return inverse_or_zero<V>(A.inv_inertia + B.inv_inertia);
 }
 
 // apply_impulse
@@ -479,18 +516,21 @@ MARBLES_LANE void solve_normal(ContactLanes<V>& c, BodyLanes<V>& A, BodyLanes<V>
   B.v = B.v - p * B.inv_mass;
 }
 
-// solve_one on contacts c[0, width<V>), which share no sphere.
+// solve_record on records k..k + width<V>, whose contacts share no sphere.
 template <bool Friction, bool Rolling, class V = L>
-MARBLES_LANE void solve_block(Contact* c, SolverBody* bodies, real inv_h) {
-  ContactLanes<V> k = load_contacts_of<V>(c);
-  BodyLanes<V> A = load_bodies_of<V>(bodies, c, false);
-  BodyLanes<V> B = load_bodies_of<V>(bodies, c, true);
-  if constexpr (Friction) solve_friction(k, A, B);
-  if constexpr (Rolling) solve_rolling(k, A, B);
-  solve_normal(k, A, B, inv_h);
-  store_impulses_of<V>(k, c);
-  store_bodies_of<V>(bodies, c, false, A);
-  store_bodies_of<V>(bodies, c, true, B);
+MARBLES_LANE void solve_block(const SweepRecords& s, std::uint32_t k, SolverBody* bodies, real inv_h) {
+  ContactLanes<V> c = load_records_of<Friction || Rolling, Rolling, V>(s, k);
+  BodyLanes<V> A = load_bodies_of<V>(bodies, s, k, false);
+  BodyLanes<V> B = load_bodies_of<V>(bodies, s, k, true);
+  c.normal_mass = normal_mass_of(A, B);
+  if constexpr (Friction) c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
+  if constexpr (Rolling) c.rolling_mass = rolling_mass_of(A, B);
+  if constexpr (Friction) solve_friction(c, A, B);
+  if constexpr (Rolling) solve_rolling(c, A, B);
+  solve_normal(c, A, B, inv_h);
+  store_bodies_of<V>(bodies, s, k, false, A);
+  store_bodies_of<V>(bodies, s, k, true, B);
+  store_record_impulses_of<Rolling, V>(c, s, k);
 }
 
 }  // namespace marbles::narrowphase::lanes

@@ -173,11 +173,16 @@ MARBLES_HD_INLINE void pack_position_record(const Contact& c, const SweepRecords
   s.bodies[k] = {c.a, c.b};
 }
 
+// Every array by default (the GPU's); the CPU's sweeps leave out what they do
+// not read: the rolling word without rolling resistance, and the extra word of
+// a sphere pair when the rebound pass reads the whole contacts (Rebound false).
+template <bool Rolling = true, bool Rebound = true>
 MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s, std::uint32_t k) {
   s.impulse[k] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
-  s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.coeff.twisting_friction};
+  if constexpr (Rolling)
+    s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.coeff.twisting_friction};
   s.arms[k] = {c.ra, c.rb, c.coeff.friction, c.coeff.rolling_friction};
-  s.extra[k] = {c.wall_velocity.x, c.wall_velocity.y, c.wall_velocity.z, c.rebound_shift};
+  if (Rebound || is_wall(c.b)) s.extra[k] = {c.wall_velocity.x, c.wall_velocity.y, c.wall_velocity.z, c.rebound_shift};
   pack_position_record(c, s, k);
 }
 
@@ -269,12 +274,17 @@ MARBLES_HD_INLINE Contact load_position_contact(const SweepRecords& s, std::uint
   return c;
 }
 
-// The impulses back into the contact after the last sweep.
+// The impulses back into the contact after the last sweep (Rolling false:
+// the rolling impulse as it was, when the records were packed without it).
+template <bool Rolling = true>
 MARBLES_HD_INLINE void unpack_sweep_impulses(const SweepRecords& s, std::uint32_t k, Contact& c) {
-  const Real4 i = s.impulse[k], r = s.rolling[k];
+  const Real4 i = s.impulse[k];
   c.normal_impulse = i.x;
   c.tangent_impulse = {i.y, i.z, i.w};
-  c.rolling_impulse = {r.x, r.y, r.z};
+  if constexpr (Rolling) {
+    const Real4 r = s.rolling[k];
+    c.rolling_impulse = {r.x, r.y, r.z};
+  }
 }
 
 // The impact of one contact (apply_impact); true if it hit.
