@@ -5,6 +5,7 @@
 
 #include "core/counting_sort.hpp"
 #include "narrowphase/contact_cache_math.hpp"
+#include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase {
 namespace {
@@ -131,6 +132,25 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
 }
 
 void ContactCache::store(const std::vector<Contact>& contacts, const ColourRanges& ranges) {
+  const Contact* cs = contacts.data();
+  store_from(static_cast<std::uint32_t>(contacts.size()), ranges, [cs](std::uint32_t t) {
+    const Contact& c = cs[t];
+    return Stored{c.a, c.b, c.normal_impulse, c.tangent_impulse, c.rolling_impulse};
+  });
+}
+
+void ContactCache::store(const SweepRecords& records, std::uint32_t count, bool rolling, const ColourRanges& ranges) {
+  store_from(count, ranges, [&records, rolling](std::uint32_t t) {
+    const BodyPair ab = records.bodies[t];
+    const Real4 i = records.impulse[t];
+    Stored s{ab.a, ab.b, i.x, {i.y, i.z, i.w}, {}};
+    if (rolling) s.rolling_impulse = {records.rolling[t].x, records.rolling[t].y, records.rolling[t].z};
+    return s;
+  });
+}
+
+template <class Load>
+void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, Load&& load) {
   // Only the sustained impulses of the velocity solve are carried over; an
   // impact's impulse (Contact::impact_impulse) is not a load. A contact
   // without load is kept for its colour alone, with no impulses (restored,
@@ -142,13 +162,12 @@ void ContactCache::store(const std::vector<Contact>& contacts, const ColourRange
   // places each kept contact's index, each group (a few entries) is ordered
   // by b in place, and the entries are filled from the stage in that order
   // (one record read per entry, the one a few places ahead asked for).
-  const auto n = static_cast<std::uint32_t>(contacts.size());
   constexpr std::uint64_t dropped = ~std::uint64_t(0);  // the key of a contact not kept
   m_staged.resize(n);
   StagedEntry* st = m_staged.data();
   // Contact t of colour `colour` staged; returns its a + 1, 0 when dropped.
   auto stage = [&](std::uint32_t t, std::uint8_t colour) -> std::uint32_t {
-    const Contact& c = contacts[t];
+    const Stored c = load(t);
     const bool loaded = c.normal_impulse > 0;
     if (!loaded && colour == kNoKeptColour) {
       st[t].key = dropped;

@@ -27,6 +27,8 @@
 
 namespace marbles::narrowphase {
 
+struct SweepRecords;  // solver_math.hpp
+
 // The cache's entries as arrays, sorted by key. `colour`: the solver colour
 // each entry's contact had (kNoKeptColour: none), which it keeps while it
 // persists (colouring_math.hpp); empty when no colours are known (a
@@ -66,6 +68,13 @@ class ContactCache {
   // Remembers the impulses and colours of `contacts` (colour-major, as
   // `ranges` says) for the next substep.
   void store(const std::vector<Contact>& contacts, const ColourRanges& ranges);
+  // The same from the sweep's records of `count` contacts (solver_math.hpp),
+  // which hold the impulses the solve left there (ContactSolver, Unpack::
+  // when_asked): what store() of the unpacked contacts keeps, without
+  // reading the 112-byte contacts. Without `rolling` (records packed without
+  // their rolling words) the rolling impulses kept are zero, as every
+  // contact's is in a scene without rolling resistance.
+  void store(const SweepRecords& records, std::uint32_t count, bool rolling, const ColourRanges& ranges);
   void clear() { m_entries = {}; }
   // The entries themselves (a checkpoint's copy).
   const CacheEntries& entries() const { return m_entries; }
@@ -77,6 +86,13 @@ class ContactCache {
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
   std::vector<std::uint32_t> m_order, m_first, m_source;
+  struct Stored {  // what store() reads of one contact
+    std::uint32_t a, b;
+    real normal_impulse;
+    Vec3 tangent_impulse, rolling_impulse;
+  };
+  template <class Load>  // Load(t) -> Stored of contact t
+  void store_from(std::uint32_t n, const ColourRanges& ranges, Load&& load);
   struct StagedEntry {  // store(): one contact's entry, in contact order
     std::uint64_t key;
     real normal_impulse;

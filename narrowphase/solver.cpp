@@ -192,7 +192,7 @@ ContactSolver::ContactSolver(const SolverSettings& settings, SweepLanes lanes) :
 }
 
 void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours,
-                                     const BodiesView& world, real h) {
+                                     const BodiesView& world, real h, Unpack unpack) {
   const auto n = static_cast<std::ptrdiff_t>(world.count);
   m_bodies.resize(world.count);
 #pragma omp parallel for schedule(static) if (n > 20000)
@@ -214,10 +214,22 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
   const real inv_h = real(1) / h;
   for (int it = 0; it < m_settings.iterations; ++it)
     over_colours(colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t e) { m_sweep(records, b, e, bodies, inv_h); });
-  if (m_settings.rolling) unpack_records<true>(records, contacts.data(), contacts.size());
-  else unpack_records<false>(records, contacts.data(), contacts.size());
+  m_pending_from = contacts.data();
+  if (unpack == Unpack::now) unpack_impulses(contacts);
 #pragma omp parallel for schedule(static) if (n > 20000)
   for (std::ptrdiff_t i = 0; i < n; ++i) scatter_solver_body(world, i, m_bodies[i]);
+}
+
+const SweepRecords* ContactSolver::pending_records(const std::vector<Contact>& contacts) const {
+  const bool pending = m_pending_from && m_pending_from == contacts.data() && m_record_count == contacts.size();
+  return pending ? &m_records : nullptr;
+}
+
+void ContactSolver::unpack_impulses(std::vector<Contact>& contacts) {
+  if (!pending_records(contacts)) return;
+  if (m_settings.rolling) unpack_records<true>(m_records, contacts.data(), contacts.size());
+  else unpack_records<false>(m_records, contacts.data(), contacts.size());
+  m_pending_from = nullptr;
 }
 
 // Impact stage. Pass 0: the candidates, levelled by time of impact (a

@@ -68,11 +68,24 @@ class ContactSolver {
   // The velocity sweeps per substep (the watchdog's retries raise it).
   void set_iterations(int n) { m_settings.iterations = n; }
 
+  // When the solve's impulses go back into the contacts: at its end, or
+  // when asked (unpack_impulses), the cache storing them from the records
+  // in between (pending_records): 112-byte contacts neither read nor
+  // written for them.
+  enum class Unpack { now, when_asked };
+
   // impacts, warm start, sweeps on the velocities in `bodies`; `contacts` in
   // colour-major order as `colours` describes, prepared on the way there
   // (ContactColouring::colour_and_sort with the bodies).
   void solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours, const BodiesView& bodies,
-                        real h);
+                        real h, Unpack unpack = Unpack::now);
+  // The records holding the impulses of the last solve of `contacts` (with
+  // Unpack::when_asked) not yet unpacked; null when there are none.
+  const SweepRecords* pending_records(const std::vector<Contact>& contacts) const;
+  // Those impulses into the contacts (nothing when none are pending).
+  void unpack_impulses(std::vector<Contact>& contacts);
+  // The solved contacts are being replaced: their records are no longer theirs.
+  void forget_records() { m_pending_from = nullptr, m_packed_from = nullptr; }
 
   // Position projection over the same contacts at the integrated positions
   // (unchanged since solve_velocities, or not solved: the solve's records
@@ -116,6 +129,7 @@ class ContactSolver {
   mutable std::size_t m_record_count = 0;
   mutable const Contact* m_packed_from = nullptr;
   std::size_t m_packed_count = 0;
+  const Contact* m_pending_from = nullptr;  // the contacts whose impulses the records hold, not yet unpacked
 };
 
 }  // namespace marbles::narrowphase

@@ -40,6 +40,7 @@ class CpuStep final : public StepBackend {
   // can close their gap (speculative contacts), so nothing tunnels.
   void find_contacts(real substep) override {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
+    m_solver.forget_records();
     m_contacts.clear();
     if (!m_model.collisions && !m_model.wall_contacts) return;
     if (m_non_finite) return;  // the step ends with "non-finite at step N, sphere i", not a broad-phase error
@@ -83,7 +84,8 @@ class CpuStep final : public StepBackend {
   }
 
   void solve_velocities(real h) override {
-    if (!m_contacts.empty()) m_solver.solve_velocities(m_contacts, m_colours, m_world.view(), h);
+    if (!m_contacts.empty())
+      m_solver.solve_velocities(m_contacts, m_colours, m_world.view(), h, narrowphase::ContactSolver::Unpack::when_asked);
   }
 
   void integrate_positions(real h) override {
@@ -98,7 +100,14 @@ class CpuStep final : public StepBackend {
   }
 
   // Also when there are no contacts: no stale impulses survive a contact-free substep.
-  void store_impulses() override { m_cache.store(m_contacts, m_colours); }
+  // The impulses from the solve's records, which hold them until the
+  // contacts are asked for (contacts()).
+  void store_impulses() override {
+    if (const narrowphase::SweepRecords* records = m_solver.pending_records(m_contacts))
+      m_cache.store(*records, static_cast<std::uint32_t>(m_contacts.size()), m_model.solver.rolling, m_colours);
+    else
+      m_cache.store(m_contacts, m_colours);
+  }
 
   void begin_step() override {
     m_counters = {};
@@ -121,7 +130,10 @@ class CpuStep final : public StepBackend {
   BodiesView state_in_place() override { return m_world.view(); }
   void state_written() override {}
   bool state_finite() override { return m_world.first_non_finite() == m_world.size(); }
-  const std::vector<narrowphase::Contact>& contacts() override { return m_contacts; }
+  const std::vector<narrowphase::Contact>& contacts() override {
+    m_solver.unpack_impulses(m_contacts);
+    return m_contacts;
+  }
   const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }
   std::string name() const override { return "cpu"; }
   StepState save_state() override { return {m_cache.entries(), m_walls}; }

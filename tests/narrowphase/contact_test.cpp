@@ -6,6 +6,7 @@
 #include <random>
 #include <vector>
 
+#include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_math.hpp"
 #include "narrowphase/contacts.hpp"
 #include "narrowphase/solver.hpp"
@@ -254,6 +255,62 @@ TEST(Solver, EveryLaneKindGivesTheSameBits) {
     }
   }
   if (kinds == 0) GTEST_SKIP() << "skipped: this CPU has only the 16-byte lanes";
+}
+
+// The impulses left in the sweep's records (Unpack::when_asked, as the CPU
+// step solves): the cache stored from the records keeps the entries the
+// cache stored from the unpacked contacts keeps, bit for bit, and the
+// contacts unpacked when asked equal those of a solve that unpacked at once.
+TEST(Solver, CacheFromTheRecordsEqualsCacheFromTheContacts) {
+  const real r = real(0.01);
+  std::mt19937_64 rng(23);
+  Lattice lattice(12, r, 2 * r * 0.995, r * 0.999, 1e-4, rng);
+  std::uniform_real_distribution<double> speed(-0.05, 0.05);
+  std::vector<Vec3> vel0(lattice.n), omega0(lattice.n);
+  for (std::size_t i = 0; i < lattice.n; ++i) {
+    vel0[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng)));
+    omega0[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng))) * real(100);
+  }
+  PairCoefficients coeff{real(0.3), real(0.5), real(0.02), real(0.01)};
+  PairTable table{&coeff, 1};
+  const real h = real(1e-3);
+  auto same = [](const auto& a, const auto& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), sizeof(a[0]) * a.size()) == 0;
+  };
+  for (int terms = 0; terms < 4; ++terms) {
+    SolverSettings s;
+    s.friction = terms & 1, s.rolling = terms & 2;
+    std::vector<Vec3> vel = vel0, omega = omega0, vel_now = vel0, omega_now = omega0;
+    const BodiesView bodies = lattice.view(lattice.position.data(), vel.data(), omega.data());
+    const BodiesView bodies_now = lattice.view(lattice.position.data(), vel_now.data(), omega_now.data());
+    ColourRanges colours;
+    std::vector<Contact> contacts = lattice.contacts(bodies, table, h, real(1e-4), colours);
+    std::vector<Contact> contacts_now = contacts;
+    ContactSolver asked(s), now(s);
+    asked.solve_velocities(contacts, colours, bodies, h, ContactSolver::Unpack::when_asked);
+    now.solve_velocities(contacts_now, colours, bodies_now, h);
+    EXPECT_EQ(now.pending_records(contacts_now), nullptr);
+    const SweepRecords* records = asked.pending_records(contacts);
+    ASSERT_NE(records, nullptr);
+    ContactCache from_records, from_contacts;
+    from_records.store(*records, static_cast<std::uint32_t>(contacts.size()), s.rolling, colours);
+    asked.unpack_impulses(contacts);
+    EXPECT_EQ(asked.pending_records(contacts), nullptr);
+    from_contacts.store(contacts, colours);
+    EXPECT_TRUE(same(contacts, contacts_now)) << "terms " << terms;
+    const CacheEntries &a = from_records.entries(), &b = from_contacts.entries();
+    ASSERT_GT(b.size(), contacts.size() / 2) << "terms " << terms;  // most contacts carry a load
+    EXPECT_TRUE(same(a.key, b.key) && same(a.normal_impulse, b.normal_impulse) &&
+                same(a.tangent_impulse, b.tangent_impulse) && same(a.rolling_impulse, b.rolling_impulse) &&
+                same(a.colour, b.colour))
+        << "terms " << terms;
+    // The comparison sees one impulse changed in the records.
+    Real4& first = records->impulse[0];
+    first.x = first.x > 0 ? first.x * 2 : real(1);
+    ContactCache changed;
+    changed.store(*records, static_cast<std::uint32_t>(contacts.size()), s.rolling, colours);
+    EXPECT_FALSE(same(changed.entries().normal_impulse, b.normal_impulse)) << "terms " << terms;
+  }
 }
 
 // The projection sweeps until one moves no contact by more than
