@@ -169,12 +169,12 @@ ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, 
     at.temp = c.take<char>(at.temp_bytes);
     c.merge(rounds);
   });
-  m_count.as<std::uint32_t>(kMaxColourRounds + 1);
   return at;
 }
 
 ColouringCuda::ColouringCuda() {
   MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_host), (kMaxColourRounds + 8) * sizeof(std::uint32_t)));
+  m_count.as<std::uint32_t>(kMaxColourRounds + 1);
 }
 ColouringCuda::~ColouringCuda() {
   if (m_host) cudaFreeHost(m_host);
@@ -217,10 +217,9 @@ std::uint32_t ColouringCuda::rounds(const ColouringArrays& at, std::uint32_t n, 
   return last = kMaxColourRounds;  // the rest stay uncoloured: the overflow set
 }
 
-std::uint32_t* ColouringCuda::sort_by_colour(const ColouringArrays& at, std::uint32_t n,
-                                                   std::uint32_t overflow_key, int key_bits, std::uint32_t key_bound,
-                                                   std::vector<std::uint32_t>& begin,
-                                                   const std::uint32_t** sorted_keys, int sm_count, cudaStream_t s) {
+std::uint32_t* ColouringCuda::sort_by_colour(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
+                                             int key_bits, std::uint32_t key_bound, std::vector<std::uint32_t>& begin,
+                                             const std::uint32_t** sorted_keys, int sm_count, cudaStream_t s) {
   auto* first = m_first_of_key.as<std::uint32_t>(overflow_key + 2);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0xff, (overflow_key + 2) * sizeof(std::uint32_t), s));
   keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(at.colour, n, overflow_key, at.keys, at.index);

@@ -74,9 +74,9 @@ class ColouringCuda {
   // Stable sort of the indices by key (overflow -> overflow_key, inactive
   // last) and the host ranges [0, key_count + 1]; no key is at or above
   // key_bound except the overflow's. Returns the sorted indices.
-  std::uint32_t* sort_by_colour(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
-                                      int key_bits, std::uint32_t key_bound, std::vector<std::uint32_t>& begin,
-                                      const std::uint32_t** sorted_keys, int sm_count, cudaStream_t stream);
+  std::uint32_t* sort_by_colour(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key, int key_bits,
+                                std::uint32_t key_bound, std::vector<std::uint32_t>& begin,
+                                const std::uint32_t** sorted_keys, int sm_count, cudaStream_t stream);
 
   DeviceBuffer m_count, m_first_of_key, m_own_scratch;
   DeviceBuffer* m_scratch = &m_own_scratch;

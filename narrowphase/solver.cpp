@@ -206,7 +206,7 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
   // friction where the contact is 112); the impulses back after the last.
   size_records(contacts.size());
   const SweepRecords& records = m_records;
-  m_packed_from = contacts.data(), m_packed_count = contacts.size();
+  m_packed_from = contacts.data();
   if (m_settings.rolling) pack_records<true>(contacts.data(), contacts.size(), records);
   else pack_records<false>(contacts.data(), contacts.size(), records);
   if (m_settings.warm_start)
@@ -301,7 +301,7 @@ int ContactSolver::project_positions(const std::vector<Contact>& contacts, const
   // solve since the last projection. deepest_overlap reads them after the
   // last sweep.
   const auto n = static_cast<std::ptrdiff_t>(contacts.size());
-  if (m_packed_from != cs || m_packed_count != contacts.size()) {
+  if (m_packed_from != cs || m_record_count != contacts.size()) {
     size_records(contacts.size());
 #pragma omp parallel for schedule(static) if (n > 20000)
     for (std::ptrdiff_t k = 0; k < n; ++k) pack_position_record(cs[k], m_records, static_cast<std::uint32_t>(k));

@@ -128,7 +128,6 @@ class ContactSolver {
   mutable SweepRecords m_records;
   mutable std::size_t m_record_count = 0;
   mutable const Contact* m_packed_from = nullptr;
-  std::size_t m_packed_count = 0;
   const Contact* m_pending_from = nullptr;  // the contacts whose impulses the records hold, not yet unpacked
 };
 

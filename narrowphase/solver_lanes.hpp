@@ -228,9 +228,9 @@ MARBLES_LANE BodyLanes<L> load_bodies_each(const SolverBody* bodies, const Sweep
   BodyLanes<L> out;
   for (std::uint32_t l = 0; l < W; ++l) {
     const std::uint32_t index = body_of(s, k + l, side_b);
-    SolverBody b{};
-    if (is_wall(index)) b.v = {s.extra[k + l].x, s.extra[k + l].y, s.extra[k + l].z};
-    else b = bodies[index];
+    Contact wall;  // load_body reads only a wall's velocity of it
+    if (is_wall(index)) wall.wall_velocity = {s.extra[k + l].x, s.extra[k + l].y, s.extra[k + l].z};
+    const BodyState b = load_body(bodies, index, wall);
     out.v.x[l] = b.v.x, out.v.y[l] = b.v.y, out.v.z[l] = b.v.z;
     out.w.x[l] = b.w.x, out.w.y[l] = b.w.y, out.w.z[l] = b.w.z;
     out.inv_mass[l] = b.inv_mass;
