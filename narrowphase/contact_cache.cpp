@@ -141,11 +141,11 @@ void ContactCache::store(const std::vector<Contact>& contacts, const ColourRange
 
 void ContactCache::store(const SweepRecords& records, std::uint32_t count, bool rolling, const ColourRanges& ranges) {
   store_from(count, ranges, [&records, rolling](std::uint32_t t) {
+    Contact c;  // the impulses as the unpacking reads them (zero rolling without its words)
+    if (rolling) unpack_sweep_impulses<true>(records, t, c);
+    else unpack_sweep_impulses<false>(records, t, c);
     const BodyPair ab = records.bodies[t];
-    const Real4 i = records.impulse[t];
-    Stored s{ab.a, ab.b, i.x, {i.y, i.z, i.w}, {}};
-    if (rolling) s.rolling_impulse = {records.rolling[t].x, records.rolling[t].y, records.rolling[t].z};
-    return s;
+    return Stored{ab.a, ab.b, c.normal_impulse, c.tangent_impulse, c.rolling_impulse};
   });
 }
 
