@@ -84,6 +84,27 @@ void visit_colours(const std::vector<std::uint32_t>& begin, std::uint32_t colour
   }
 }
 
+// The records the launch just before wrote, [begin, end), so that the next
+// one knows whether its own are untouched by it and may be loaded before it
+// ends (the GPU's dependent launches, solver_cuda.cu): the pack writes every
+// record, a warm start none, a sweep its own range. Where a forward sweep
+// ends and a backward one starts the same range comes twice in a row (the
+// last colour, or the overflow set), and the second may not load early.
+class LastWrites {
+ public:
+  explicit LastWrites(std::uint32_t all) : m_end(all) {}
+  // The next launch, over [begin, end) (not empty), writing its records or
+  // not: true when the launch before wrote none of them.
+  bool next(std::uint32_t begin, std::uint32_t end, bool writes) {
+    const bool untouched = end <= m_begin || begin >= m_end;
+    m_begin = writes ? begin : 0, m_end = writes ? end : 0;
+    return untouched;
+  }
+
+ private:
+  std::uint32_t m_begin = 0, m_end;
+};
+
 // True when no two contacts of one colour share a sphere (tests, checks).
 bool colouring_is_proper(const std::vector<Contact>& contacts, const ColourRanges& ranges, std::size_t body_count);
 

@@ -6,6 +6,7 @@
 #include <cooperative_groups.h>
 
 #include <algorithm>
+#include <utility>
 
 namespace marbles::narrowphase::cuda {
 namespace {
@@ -44,14 +45,70 @@ __global__ void scatter_bodies_kernel(const SolverBody* bodies, BodiesView world
     scatter_solver_body(world, i, bodies[i]);
 }
 
+// Programmatic dependent launch (sm_90): a colour's launch lets the next one
+// start as its own last blocks run (launch_dependents), and the next one's
+// threads wait for it to finish, its writes visible (wait), before they touch
+// a body. A block lets the next launch start only after its own wait, so a
+// launch starts early only once the one before the last has ended: what a
+// thread reads before its wait need only be safe from the launch just
+// before, a record of another range (ContactRange::early), never a body.
+// Elsewhere both are no-ops.
+__device__ __forceinline__ void let_next_launch_start() {
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
+  asm volatile("griddepcontrol.launch_dependents;" ::: "memory");
+#endif
+}
+__device__ __forceinline__ void wait_for_last_launch() {
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
+  asm volatile("griddepcontrol.wait;" ::: "memory");
+#endif
+}
+
+// A parallel range's thread loads what it may before its wait (load(k)),
+// then does its work (work(k, loaded)); every thread waits, so the launch
+// ends only after the one before it. A serial range waits first.
+template <class Load, class Work>
+__device__ void for_range_early(const ContactRange& r, Load&& load, Work&& work) {
+  const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
+  const bool early = r.early && !r.serial && t < r.end - r.begin;
+  const std::uint32_t k = r.mirrored ? r.end - 1 - t : r.begin + t;
+  decltype(load(k)) loaded{};
+  if (early) loaded = load(k);
+  // Any thread past its wait means the launch before has ended.
+  wait_for_last_launch();
+  let_next_launch_start();
+  if (early) work(k, loaded);
+  else if (!r.early || r.serial) for_range(r, [&](std::uint32_t j) { work(j, load(j)); });
+}
+
 template <bool Friction, bool Rolling>
 __global__ void warm_start_kernel(SweepRecords records, ContactRange r, SolverBody* bodies) {
-  for_range(r, [&](std::uint32_t k) { warm_start_record<Friction, Rolling>(records, k, bodies); });
+  for_range_early(
+      r, [&](std::uint32_t k) { return load_streaming(records.impulse + k); },
+      [&](std::uint32_t k, const Real4& i) { warm_start_loaded<Friction, Rolling>(records, k, i, bodies); });
 }
 
 template <bool Friction, bool Rolling>
 __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
-  for_range(r, [&](std::uint32_t k) { solve_record<Friction, Rolling>(s, k, bodies, inv_h); });
+  for_range_early(
+      r, [&](std::uint32_t k) { return load_sweep_contact<Friction, Rolling>(s, k); },
+      [&](std::uint32_t k, const Contact& c) { solve_loaded<Friction, Rolling>(s, k, c, bodies, inv_h); });
+}
+
+// A launch of a colour kernel that may start before the last one ends
+// (programmatic stream serialization; its threads wait as above).
+template <class... Params, class... Args>
+void launch_colour(void (*kernel)(Params...), int grid, cudaStream_t s, Args&&... args) {
+  cudaLaunchConfig_t config{};
+  config.gridDim = dim3(static_cast<unsigned>(grid));
+  config.blockDim = dim3(kBlock);
+  config.stream = s;
+  cudaLaunchAttribute attribute[1];
+  attribute[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
+  attribute[0].val.programmaticStreamSerializationAllowed = 1;
+  config.attrs = attribute;
+  config.numAttrs = 1;
+  MARBLES_CUDA_CHECK(cudaLaunchKernelEx(&config, kernel, std::forward<Args>(args)...));
 }
 
 // A block's contacts are one run: read in whole to shared memory first
@@ -156,11 +213,11 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
 
 void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* bodies, SolverTerms t, cudaStream_t s) {
   if (r.end <= r.begin) return;
-  if (t.friction && t.rolling) warm_start_kernel<true, true><<<blocks(r), kBlock, 0, s>>>(records, r, bodies);
-  else if (t.friction) warm_start_kernel<true, false><<<blocks(r), kBlock, 0, s>>>(records, r, bodies);
-  else if (t.rolling) warm_start_kernel<false, true><<<blocks(r), kBlock, 0, s>>>(records, r, bodies);
-  else warm_start_kernel<false, false><<<blocks(r), kBlock, 0, s>>>(records, r, bodies);
-  MARBLES_CUDA_CHECK_LAUNCH();
+  const int g = blocks(r);
+  if (t.friction && t.rolling) launch_colour(warm_start_kernel<true, true>, g, s, records, r, bodies);
+  else if (t.friction) launch_colour(warm_start_kernel<true, false>, g, s, records, r, bodies);
+  else if (t.rolling) launch_colour(warm_start_kernel<false, true>, g, s, records, r, bodies);
+  else launch_colour(warm_start_kernel<false, false>, g, s, records, r, bodies);
 }
 
 void launch_pack_sweep(const Contact* contacts, std::uint32_t n, const SweepRecords& records, int sm_count,
@@ -181,11 +238,10 @@ void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodie
                   cudaStream_t s) {
   if (r.end <= r.begin) return;
   const int g = blocks(r);
-  if (t.friction && t.rolling) record_sweep_kernel<true, true><<<g, kBlock, 0, s>>>(records, r, bodies, inv_h);
-  else if (t.friction) record_sweep_kernel<true, false><<<g, kBlock, 0, s>>>(records, r, bodies, inv_h);
-  else if (t.rolling) record_sweep_kernel<false, true><<<g, kBlock, 0, s>>>(records, r, bodies, inv_h);
-  else record_sweep_kernel<false, false><<<g, kBlock, 0, s>>>(records, r, bodies, inv_h);
-  MARBLES_CUDA_CHECK_LAUNCH();
+  if (t.friction && t.rolling) launch_colour(record_sweep_kernel<true, true>, g, s, records, r, bodies, inv_h);
+  else if (t.friction) launch_colour(record_sweep_kernel<true, false>, g, s, records, r, bodies, inv_h);
+  else if (t.rolling) launch_colour(record_sweep_kernel<false, true>, g, s, records, r, bodies, inv_h);
+  else launch_colour(record_sweep_kernel<false, false>, g, s, records, r, bodies, inv_h);
 }
 
 void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange r, SolverBody* bodies,

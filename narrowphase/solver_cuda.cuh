@@ -42,6 +42,10 @@ struct ContactRange {
   std::uint32_t begin = 0, end = 0;
   bool serial = false, backwards = false;
   bool mirrored = false;  // parallel: thread t takes contact end - 1 - t
+  // Parallel, the warm start and the sweep: the launch before wrote none of
+  // this range's records, so its threads load theirs while that launch ends
+  // (programmatic dependent launch, solver_cuda.cu).
+  bool early = false;
 };
 
 // The packed velocity state (solver_math.hpp) from the world, and back.

@@ -237,10 +237,13 @@ MARBLES_HD_INLINE void store_sweep_impulses(const SweepRecords& s, std::uint32_t
 // of a settled pile's carry none). The arms always: the impulse's moment
 // about each centre needs them, friction or not.
 template <bool Friction, bool Rolling>
-MARBLES_HD_INLINE void warm_start_record(const SweepRecords& s, std::uint32_t k, SolverBody* bodies) {
-  const Real4 i = load_streaming(s.impulse + k);
+MARBLES_HD_INLINE void warm_start_loaded(const SweepRecords& s, std::uint32_t k, const Real4& i, SolverBody* bodies) {
   if (i.x <= 0) return;
   warm_start_one<Friction, Rolling>(load_record<true, Rolling>(s, k, i), bodies);
+}
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE void warm_start_record(const SweepRecords& s, std::uint32_t k, SolverBody* bodies) {
+  warm_start_loaded<Friction, Rolling>(s, k, load_streaming(s.impulse + k), bodies);
 }
 
 // One sweep's update of record k (the GPU's sweep kernel): solve_one on the
@@ -248,8 +251,8 @@ MARBLES_HD_INLINE void warm_start_record(const SweepRecords& s, std::uint32_t k,
 // prepare stage computed them (contact_math.hpp), only the ones the terms
 // read.
 template <bool Friction, bool Rolling>
-MARBLES_HD_INLINE void solve_record(const SweepRecords& s, std::uint32_t k, SolverBody* bodies, real inv_h) {
-  Contact c = load_sweep_contact<Friction, Rolling>(s, k);
+MARBLES_HD_INLINE void solve_loaded(const SweepRecords& s, std::uint32_t k, Contact c, SolverBody* bodies,
+                                    real inv_h) {
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
   c.normal_mass = normal_mass_of(A, B);
@@ -259,6 +262,10 @@ MARBLES_HD_INLINE void solve_record(const SweepRecords& s, std::uint32_t k, Solv
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
   store_sweep_impulses<Friction, Rolling>(s, k, c);
+}
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE void solve_record(const SweepRecords& s, std::uint32_t k, SolverBody* bodies, real inv_h) {
+  solve_loaded<Friction, Rolling>(s, k, load_sweep_contact<Friction, Rolling>(s, k), bodies, inv_h);
 }
 
 // The contact as the position stages read it (rebound_one, project_one,

@@ -213,12 +213,25 @@ class CudaStep final : public StepBackend {
     m_records = narrowphase::SweepRecords::in(m_sorted.as<char>(narrowphase::SweepRecords::bytes_for(m_count)), m_count);
     nc::launch_pack_sweep(contacts, m_count, m_records, m_sm, m_stream);
     m_records_live = true;
+    // A launch loads its records while the launch just before it ends,
+    // unless that one wrote them (LastWrites, ContactRange::early). Empty
+    // ranges launch nothing.
+    narrowphase::LastWrites last(m_count);  // the pack wrote them all
+    auto launched = [&](nc::ContactRange& r, auto&& launch, bool writes) {
+      if (r.end <= r.begin) return;
+      r.early = last.next(r.begin, r.end, writes);
+      launch(r);
+    };
     if (m_model.solver.warm_start)
-      over_colours(false, [&](nc::ContactRange r) { nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream); });
+      over_colours(false, [&](nc::ContactRange r) {
+        launched(r, [&](const nc::ContactRange& q) { nc::launch_warm_start(m_records, q, bodies, m_terms, m_stream); },
+                 false);
+      });
     const real inv_h = real(1) / h;
     for (int it = 0; it < m_model.solver.iterations * m_iteration_factor; ++it)
       over_colours(it % 2 == 1, [&](nc::ContactRange r) {
-        nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_stream);
+        launched(r, [&](const nc::ContactRange& q) { nc::launch_sweep(m_records, q, bodies, inv_h, m_terms, m_stream); },
+                 true);
       });
     nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
   }

@@ -532,3 +532,43 @@ TEST(ContactCache, StoreEqualsASortOfTheKeptContacts) {
 
 }  // namespace
 }  // namespace marbles::narrowphase
+
+namespace marbles::narrowphase {
+namespace {
+
+// The solve's launches as the GPU makes them (the pack, the warm start
+// forwards, then sweeps forwards and backwards in turn, an empty range
+// launching nothing) over random colour ranges, some colours and some
+// overflow sets empty: a launch may load early exactly when the launch just
+// before wrote none of its records, as a record-by-record account says.
+TEST(LastWrites, EarlyExactlyWhenTheLaunchBeforeWroteNoneOfItsRecords) {
+  std::mt19937_64 rng(83);
+  int repeated = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    const std::uint32_t colours = 1 + static_cast<std::uint32_t>(rng() % 20);
+    std::vector<std::uint32_t> begin{0};
+    for (std::uint32_t c = 0; c <= colours; ++c) begin.push_back(begin.back() + static_cast<std::uint32_t>(rng() % 4 == 0 ? 0 : rng() % 50));
+    const std::uint32_t n = begin.back();
+    std::vector<int> writer(n, 0);  // launch 0, the pack, wrote every record
+    int launch = 0;
+    LastWrites last(n);
+    auto run = [&](std::uint32_t b, std::uint32_t e, bool writes) {
+      if (e <= b) return;
+      ++launch;
+      bool untouched = true;
+      for (std::uint32_t k = b; k < e; ++k) untouched = untouched && writer[k] != launch - 1;
+      const bool early = last.next(b, e, writes);
+      ASSERT_EQ(early, untouched) << "trial " << trial << ", launch " << launch << " over [" << b << ", " << e << ")";
+      repeated += early ? 0 : 1;
+      if (writes)
+        for (std::uint32_t k = b; k < e; ++k) writer[k] = launch;
+    };
+    visit_colours(begin, colours, false, [&](std::uint32_t b, std::uint32_t e, bool, bool) { run(b, e, false); });
+    for (int it = 0; it < 10; ++it)
+      visit_colours(begin, colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t e, bool, bool) { run(b, e, true); });
+  }
+  EXPECT_GT(repeated, 200 * 9);  // the first warm start, and every turn of direction, wait
+}
+
+}  // namespace
+}  // namespace marbles::narrowphase
