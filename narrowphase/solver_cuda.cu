@@ -78,7 +78,7 @@ __device__ void for_range_early(const ContactRange& r, Load&& load, Work&& work)
   wait_for_last_launch();
   let_next_launch_start();
   if (early) work(k, loaded);
-  else if (!r.early || r.serial) for_range(r, [&](std::uint32_t j) { work(j, load(j)); });
+  else for_range(r, [&](std::uint32_t j) { work(j, load(j)); });
 }
 
 template <bool Friction, bool Rolling>

@@ -217,21 +217,19 @@ class CudaStep final : public StepBackend {
     // unless that one wrote them (LastWrites, ContactRange::early). Empty
     // ranges launch nothing.
     narrowphase::LastWrites last(m_count);  // the pack wrote them all
-    auto launched = [&](nc::ContactRange& r, auto&& launch, bool writes) {
-      if (r.end <= r.begin) return;
-      r.early = last.next(r.begin, r.end, writes);
-      launch(r);
+    auto early = [&](nc::ContactRange& r, bool writes) {
+      if (r.end > r.begin) r.early = last.next(r.begin, r.end, writes);
     };
     if (m_model.solver.warm_start)
       over_colours(false, [&](nc::ContactRange r) {
-        launched(r, [&](const nc::ContactRange& q) { nc::launch_warm_start(m_records, q, bodies, m_terms, m_stream); },
-                 false);
+        early(r, false);
+        nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);
       });
     const real inv_h = real(1) / h;
     for (int it = 0; it < m_model.solver.iterations * m_iteration_factor; ++it)
       over_colours(it % 2 == 1, [&](nc::ContactRange r) {
-        launched(r, [&](const nc::ContactRange& q) { nc::launch_sweep(m_records, q, bodies, inv_h, m_terms, m_stream); },
-                 true);
+        early(r, true);
+        nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_stream);
       });
     nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
   }
