@@ -1,6 +1,5 @@
 #include <algorithm>
 
-#include "core/block_stage.cuh"
 #include "core/cuda_check.hpp"
 #include "narrowphase/colouring_cuda.cuh"
 #include "narrowphase/solver_math.hpp"
@@ -39,11 +38,12 @@ __device__ void append(ColourEntry* list, std::uint32_t* count, const ColourEntr
 // Round 0's list: every contact without a kept colour (in any order); a
 // contact with one takes it and marks it at its spheres (an atomic or: the
 // masks do not depend on the order). count[0] and body_used start at 0.
-__global__ void contact_ranks_kernel(const Contact* contacts, std::uint32_t n, const std::uint8_t* kept,
+__global__ void contact_ranks_kernel(const BodyPair* pairs, std::uint32_t n, const std::uint8_t* kept,
                                      std::uint32_t* colour, ColourEntry* active, std::uint32_t* count,
                                      unsigned long long* body_used) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const std::uint32_t a = contacts[k].a, b = contacts[k].b;
+    const BodyPair ab = pairs[k];
+    const std::uint32_t a = ab.a, b = ab.b;
     const std::uint32_t c = kept ? kept[k] : kNoKeptColour;
     const bool keeps = c < kMaxColours;
     if (keeps) {
@@ -58,13 +58,18 @@ __global__ void contact_ranks_kernel(const Contact* contacts, std::uint32_t n, c
 
 // The impact candidates join the active list (in any order: a round's
 // result does not depend on the order it visits its contacts).
-__global__ void impact_candidates_kernel(const Contact* contacts, std::uint32_t n, real rest_speed,
-                                         std::uint32_t* colour, ColourEntry* active, std::uint32_t* count) {
+__global__ void impact_candidates_kernel(SweepRecords records, const Real4* impact, std::uint32_t n,
+                                         real rest_speed, std::uint32_t* colour, ColourEntry* active,
+                                         std::uint32_t* count) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const bool candidate = is_impact_candidate(contacts[k], rest_speed);
+    const Contact c = load_approach(records, impact, k);
+    const bool candidate = is_impact_candidate(c, rest_speed);
     colour[k] = candidate ? kUncoloured : kNotActive;
     ColourEntry e{};
-    if (candidate) e = ColourEntry{contacts[k].a, contacts[k].b, impact_rank(time_of_impact(contacts[k]), k)};
+    if (candidate) {
+      const BodyPair ab = records.bodies[k];
+      e = ColourEntry{ab.a, ab.b, impact_rank(time_of_impact(c), k)};
+    }
     append(active, count, e, candidate);
   }
 }
@@ -117,26 +122,10 @@ __global__ void first_of_key_kernel(const std::uint32_t* sorted_keys, std::uint3
     if (j == 0 || sorted_keys[j] != sorted_keys[j - 1]) first[sorted_keys[j]] = j;
 }
 
-// The contacts in colour-major order (prepared on the way when `prepare`),
-// and each one's colour as the cache keeps it (sorted_colour may be null).
-// A block's outputs are one run: staged, written out whole (block_stage.cuh).
-__global__ void __launch_bounds__(kBlock) gather_kernel(const Contact* in, const std::uint32_t* order,
-                                                        const std::uint32_t* sorted_keys, std::uint32_t n,
-                                                        Contact* out, std::uint8_t* sorted_colour, BodiesView world,
-                                                        bool prepare) {
-  __shared__ ::marbles::cuda::RunStage<Contact, kBlock> stage;
-  for (std::uint32_t base = blockIdx.x * blockDim.x; base < n; base += gridDim.x * blockDim.x) {
-    const std::uint32_t k = base + threadIdx.x;
-    if (k < n) {
-      Contact c = load_whole(in + order[k]);  // 16-byte words, not field by field
-      if (prepare) prepare_from_world(c, world);
-      stage.put(out + base, threadIdx.x, c);
-      if (sorted_colour) sorted_colour[k] = sorted_keys[k] < kMaxColours ? sorted_keys[k] : kNoKeptColour;
-    }
-    __syncthreads();
-    stage.flush(out + base, ::marbles::cuda::run_length(n, base));
-    __syncthreads();
-  }
+// Each sorted contact's colour as the cache keeps it.
+__global__ void sorted_colour_kernel(const std::uint32_t* sorted_keys, std::uint32_t n, std::uint8_t* sorted_colour) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
+    sorted_colour[k] = sorted_keys[k] < kMaxColours ? sorted_keys[k] : kNoKeptColour;
 }
 
 }  // namespace
@@ -255,11 +244,11 @@ std::uint32_t* ColouringCuda::sort_by_colour(const ColouringArrays& at, std::uin
   return index_out;
 }
 
-std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count,
-                                             Contact* sorted, std::vector<std::uint32_t>& begin,
+std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,
+                                             const std::uint32_t*& order, std::vector<std::uint32_t>& begin,
                                              std::uint32_t& rounds_run, int sm_count, cudaStream_t s,
-                                             const std::uint8_t* kept_colour, std::uint8_t* sorted_colour,
-                                             const BodiesView* prepare) {
+                                             const std::uint8_t* kept_colour, std::uint8_t* sorted_colour) {
+  order = nullptr;
   rounds_run = 0;
   if (n == 0) {
     begin.assign(2, 0);
@@ -270,7 +259,7 @@ std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint3
   auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_used, 0, body_count * sizeof(unsigned long long), s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
-  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, kept_colour, at.colour, at.active,
+  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, kept_colour, at.colour, at.active,
                                                                 count, at.body_used);
   MARBLES_CUDA_CHECK_LAUNCH();
   rounds_run = rounds(at, n, body_count, ColourRule::lowest_free, sm_count, s);
@@ -278,16 +267,17 @@ std::uint32_t ColouringCuda::colour_and_sort(const Contact* contacts, std::uint3
   // coloured neighbours (one per sphere and round), so its colour is at most
   // 2 r; kept colours may be any below kMaxColours.
   const std::uint32_t* sorted_keys = nullptr;
-  const std::uint32_t* index = sort_by_colour(at, n, kMaxColours, kKeyBits, kept_colour ? kMaxColours : 2 * rounds_run,
-                                              begin, &sorted_keys, sm_count, s);
-  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, index, sorted_keys, n, sorted, sorted_colour,
-                                                         prepare ? *prepare : BodiesView{}, prepare != nullptr);
-  MARBLES_CUDA_CHECK_LAUNCH();
+  order = sort_by_colour(at, n, kMaxColours, kKeyBits, kept_colour ? kMaxColours : 2 * rounds_run, begin, &sorted_keys,
+                         sm_count, s);
+  if (sorted_colour) {
+    sorted_colour_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(sorted_keys, n, sorted_colour);
+    MARBLES_CUDA_CHECK_LAUNCH();
+  }
   return static_cast<std::uint32_t>(begin.size() - 2);
 }
 
-std::uint32_t ColouringCuda::impact_levels(const Contact* contacts, std::uint32_t n, std::size_t body_count,
-                                           real rest_speed, std::uint32_t*& order, std::vector<std::uint32_t>& begin,
+std::uint32_t ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n,
+                                           std::size_t body_count, real rest_speed, std::uint32_t*& order, std::vector<std::uint32_t>& begin,
                                            int sm_count, cudaStream_t s) {
   begin.assign(2, 0);
   if (n == 0) return 0;
@@ -295,7 +285,7 @@ std::uint32_t ColouringCuda::impact_levels(const Contact* contacts, std::uint32_
   const ColouringArrays at = lay_out(n, body_count, kKeyBits);
   auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
-  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, rest_speed, at.colour, at.active,
+  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, rest_speed, at.colour, at.active,
                                                                     count);
   MARBLES_CUDA_CHECK_LAUNCH();
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, count, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));

@@ -14,6 +14,7 @@
 #include "core/spheres.hpp"
 #include "narrowphase/colouring_math.hpp"
 #include "narrowphase/contact.hpp"
+#include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase::cuda {
 
@@ -31,28 +32,29 @@ class ColouringCuda {
   ColouringCuda(const ColouringCuda&) = delete;
   ColouringCuda& operator=(const ColouringCuda&) = delete;
 
-  // The solver colouring of contacts[0, n): colours by contact_rank, then
-  // writes the contacts in colour-major order to `sorted` (index order
-  // within a colour, overflow last); `begin` gets the host ranges as
-  // ColourRanges::begin (colours + 2 entries). Returns the colour count.
-  // kept_colour (device, one per contact, may be null): colours kept as
-  // ContactColouring::colour_and_sort keeps them; sorted_colour (device, may
-  // be null) gets each sorted contact's colour (kNoKeptColour: overflow);
-  // with `prepare` (the world's bodies, device) the sorted contacts come out
-  // prepared (prepare_from_world).
-  std::uint32_t colour_and_sort(const Contact* contacts, std::uint32_t n, std::size_t body_count, Contact* sorted,
-                                std::vector<std::uint32_t>& begin, std::uint32_t& rounds, int sm_count,
-                                cudaStream_t stream, const std::uint8_t* kept_colour = nullptr,
-                                std::uint8_t* sorted_colour = nullptr, const BodiesView* prepare = nullptr);
+  // The solver colouring of the contacts of body pairs[0, n): colours by
+  // contact_rank; `order` (device) gets the contacts' indices in
+  // colour-major order (index order within a colour, overflow last), `begin`
+  // the host ranges as ColourRanges::begin (colours + 2 entries). Returns
+  // the colour count. kept_colour (device, one per contact, may be null):
+  // colours kept as ContactColouring::colour_and_sort keeps them;
+  // sorted_colour (device, may be null) gets each sorted contact's colour
+  // (kNoKeptColour: overflow). `order` lies in the scratch memory: valid
+  // until its next user.
+  std::uint32_t colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,
+                                const std::uint32_t*& order, std::vector<std::uint32_t>& begin, std::uint32_t& rounds,
+                                int sm_count, cudaStream_t stream, const std::uint8_t* kept_colour = nullptr,
+                                std::uint8_t* sorted_colour = nullptr);
 
-  // The impact stage's levels: the candidates (approach faster than
-  // rest_speed) coloured by_round on impact_rank; `order` (device) gets them
-  // level by level (overflow last), `begin` the host ranges (levels + 2
-  // entries). Returns the level count (0: no candidate). `order` lies in the
-  // scratch memory: valid until its next user.
-  std::uint32_t impact_levels(const Contact* contacts, std::uint32_t n, std::size_t body_count, real rest_speed,
-                              std::uint32_t*& order, std::vector<std::uint32_t>& begin, int sm_count,
-                              cudaStream_t stream);
+  // The impact stage's levels over records[0, n) and their impact words
+  // (solver_math.hpp): the candidates (approach faster than rest_speed)
+  // coloured by_round on impact_rank; `order` (device) gets them level by
+  // level (overflow last), `begin` the host ranges (levels + 2 entries).
+  // Returns the level count (0: no candidate). `order` lies in the scratch
+  // memory: valid until its next user.
+  std::uint32_t impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n,
+                              std::size_t body_count, real rest_speed, std::uint32_t*& order,
+                              std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t stream);
 
  // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }

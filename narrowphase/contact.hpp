@@ -36,9 +36,9 @@ struct PairTable {
   }
 };
 
-// 16-byte aligned, fields in 16-byte groups: the GPU loads a contact whole
-// and the sweep stores its results (the first group of eight reals) as
-// whole words (core/whole_record.hpp; store_impulses in solver_cuda.cu).
+// 16-byte aligned, fields in 16-byte groups. The GPU holds no Contact
+// array: a contact lives there as the sweep's records (solver_math.hpp) and
+// is made whole only when the host asks for the contacts.
 struct alignas(16) Contact {
   // Accumulated impulses of this substep: what a velocity sweep writes.
   real normal_impulse = 0;  // N s, >= 0, the sustained (velocity-solve) part
@@ -68,8 +68,6 @@ struct alignas(16) Contact {
     return position_a - normal * (ra + real(0.5) * separation);
   }
 };
-// store_impulses (solver_cuda.cu) writes the first eight reals as one block.
-static_assert(offsetof(Contact, impact_impulse) == 7 * sizeof(real) && offsetof(Contact, normal_mass) == 8 * sizeof(real));
 static_assert(sizeof(Contact) % 16 == 0);
 
 }  // namespace marbles::narrowphase

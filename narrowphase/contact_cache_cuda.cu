@@ -1,4 +1,3 @@
-#include "core/block_stage.cuh"
 #include "core/cuda_check.hpp"
 #include "core/radix_sort.hpp"
 #include "narrowphase/contact_cache.hpp"
@@ -60,35 +59,25 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
   }
 }
 
-// A block's contacts are one run, read in whole through shared memory
-// (core/block_stage.cuh), not field by field; a matched contact's impulses
-// go back as two 16-byte words.
-__global__ void __launch_bounds__(kBlock) restore_kernel(Contact* contacts, std::uint32_t n,
-                                                         const std::uint64_t* keys, std::uint32_t m,
-                                                         const real* normal, const Vec3* tangent, const Vec3* rolling,
-                                                         const std::uint8_t* colour, std::uint8_t* matched,
-                                                         std::uint8_t* kept_colour) {
-  __shared__ ::marbles::cuda::RunStage<Contact, kBlock> stage;
-  for (std::uint32_t base = blockIdx.x * blockDim.x; base < n; base += gridDim.x * blockDim.x) {
-    const std::uint32_t count = ::marbles::cuda::run_length(n, base);
-    Contact* run = contacts + base;
-    stage.fill(run, count);
-    __syncthreads();
-    if (threadIdx.x < count) {
-      const std::uint32_t k = base + threadIdx.x;
-      Contact c = stage.get(run, threadIdx.x);
-      const std::uint64_t key = cache_key(c.a, c.b);
-      const std::uint32_t e = cache_lower_bound(keys, m, key);
-      const bool found = e < m && keys[e] == key;
-      kept_colour[k] = found ? colour[e] : kNoKeptColour;
-      if (found) {
-        restore_impulses(c, normal[e], tangent ? tangent[e] : Vec3{}, rolling ? rolling[e] : Vec3{});
-        matched[e] = 1;  // keys are unique: one contact per entry
-        store_impulses(run + threadIdx.x, c);
-      }
-    }
-    __syncthreads();
+// Each contact's entry (binary search over the sorted keys) and kept colour.
+__global__ void restore_kernel(const BodyPair* pairs, std::uint32_t n, const std::uint64_t* keys, std::uint32_t m,
+                               const std::uint8_t* colour, std::uint8_t* matched, std::uint8_t* kept_colour,
+                               std::uint32_t* match) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    const BodyPair ab = pairs[k];
+    const std::uint64_t key = cache_key(ab.a, ab.b);
+    const std::uint32_t e = cache_lower_bound(keys, m, key);
+    const bool found = e < m && keys[e] == key;
+    kept_colour[k] = found ? colour[e] : kNoKeptColour;
+    match[k] = found ? e : kNoEntry;
+    if (found) matched[e] = 1;  // keys are unique: one contact per entry
   }
+}
+
+// The normal impulse contact k starts with (restore_impulses: the entry's).
+__device__ __forceinline__ real restored_normal(const std::uint32_t* match, const real* normal, std::uint32_t k) {
+  const std::uint32_t e = match[k];
+  return e != kNoEntry ? normal[e] : real(0);
 }
 
 __global__ void lost_loads_kernel(const std::uint64_t* keys, const real* normal, const std::uint8_t* matched,
@@ -114,9 +103,9 @@ __global__ void label_init_kernel(std::uint32_t* label, std::uint32_t n) {
   for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) label[i] = i;
 }
 
-__global__ void label_hook_kernel(const Contact* contacts, std::uint32_t n, std::uint32_t* label, unsigned* changed) {
+__global__ void label_hook_kernel(const BodyPair* pairs, std::uint32_t n, std::uint32_t* label, unsigned* changed) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const Contact& c = contacts[k];
+    const BodyPair c = pairs[k];
     if (is_wall(c.b)) continue;
     const std::uint32_t la = label[c.a], lb = label[c.b];
     if (la == lb) continue;
@@ -137,15 +126,15 @@ __global__ void label_jump_kernel(std::uint32_t* label, std::uint32_t n) {
 }
 
 // The largest impulse each island carries (non-negative reals order as their bits).
-__global__ void island_max_kernel(const Contact* contacts, std::uint32_t n, const std::uint32_t* label,
-                                  unsigned long long* island_max) {
+__global__ void island_max_kernel(const BodyPair* pairs, const std::uint32_t* match, const real* normal,
+                                  std::uint32_t n, const std::uint32_t* label, unsigned long long* island_max) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const real p = contacts[k].normal_impulse;
+    const real p = restored_normal(match, normal, k);
     if (!(p > 0)) continue;
     unsigned long long bits;
     if constexpr (sizeof(real) == 4) bits = __float_as_uint(p);
     else bits = static_cast<unsigned long long>(__double_as_longlong(p));
-    atomicMax(&island_max[label[contacts[k].a]], bits);
+    atomicMax(&island_max[label[pairs[k].a]], bits);
   }
 }
 
@@ -170,15 +159,11 @@ __global__ void island_cold_kernel(const std::uint64_t* keys, const real* normal
   }
 }
 
-__global__ void island_clear_kernel(Contact* contacts, std::uint32_t n, const std::uint32_t* label,
-                                    const std::uint8_t* cold) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    Contact& c = contacts[k];
-    if (!cold[label[c.a]] || c.normal_impulse <= 0) continue;
-    c.normal_impulse = 0;
-    c.tangent_impulse = Vec3{};
-    c.rolling_impulse = Vec3{};
-  }
+// A cold island's contacts start without impulses (no entry).
+__global__ void island_clear_kernel(const BodyPair* pairs, std::uint32_t* match, const real* normal, std::uint32_t n,
+                                    const std::uint32_t* label, const std::uint8_t* cold) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
+    if (cold[label[pairs[k].a]] && restored_normal(match, normal, k) > 0) match[k] = kNoEntry;
 }
 
 }  // namespace
@@ -287,8 +272,9 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
   copy(to.m_colour, m_colour, m);
 }
 
-bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
-                               std::uint8_t* kept_colour, int sm_count, cudaStream_t s) {
+bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const BodiesView& bodies,
+                               real weight_impulse, std::uint8_t* kept_colour, std::uint32_t* match, int sm_count,
+                               cudaStream_t s) {
   const std::uint32_t m = m_count;
   if (m == 0 || n == 0) return false;
   // Temporaries in the scratch memory: which entries were matched, and for
@@ -308,11 +294,8 @@ bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
   const auto* keys = m_keys.get_as<std::uint64_t>();
   const auto* normal = m_normal.get_as<real>();
-  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, keys, m, normal,
-                                                          m_keep_tangent ? m_tangent.get_as<Vec3>() : nullptr,
-                                                          m_keep_rolling ? m_rolling.get_as<Vec3>() : nullptr,
-                                                          m_colour.get_as<std::uint8_t>(),
-                                                          matched, kept_colour);
+  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, keys, m, m_colour.get_as<std::uint8_t>(),
+                                                          matched, kept_colour, match);
   MARBLES_CUDA_CHECK_LAUNCH();
   lost_loads_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, m, bodies, weight_impulse,
                                                              counter);
@@ -328,7 +311,7 @@ bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   MARBLES_CUDA_CHECK_LAUNCH();
   for (;;) {  // until no contact joins two labels
     MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
-    label_hook_kernel<<<contact_grid, kBlock, 0, s>>>(contacts, n, label, counter);
+    label_hook_kernel<<<contact_grid, kBlock, 0, s>>>(pairs, n, label, counter);
     MARBLES_CUDA_CHECK_LAUNCH();
     label_jump_kernel<<<body_grid, kBlock, 0, s>>>(label, bodies_n);
     MARBLES_CUDA_CHECK_LAUNCH();
@@ -339,12 +322,12 @@ bool ContactCacheCuda::restore(Contact* contacts, std::uint32_t n, const BodiesV
   }
   MARBLES_CUDA_CHECK(cudaMemsetAsync(island_max, 0, bodies_n * sizeof(unsigned long long), s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(cold, 0, bodies_n, s));
-  island_max_kernel<<<contact_grid, kBlock, 0, s>>>(contacts, n, label, island_max);
+  island_max_kernel<<<contact_grid, kBlock, 0, s>>>(pairs, match, normal, n, label, island_max);
   MARBLES_CUDA_CHECK_LAUNCH();
   island_cold_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, m, bodies, weight_impulse, label,
                                                                island_max, cold);
   MARBLES_CUDA_CHECK_LAUNCH();
-  island_clear_kernel<<<contact_grid, kBlock, 0, s>>>(contacts, n, label, cold);
+  island_clear_kernel<<<contact_grid, kBlock, 0, s>>>(pairs, match, normal, n, label, cold);
   MARBLES_CUDA_CHECK_LAUNCH();
   return true;
 }

@@ -21,6 +21,16 @@ namespace marbles::narrowphase::cuda {
 
 using ::marbles::cuda::DeviceBuffer;
 
+// A contact without a cache entry (ContactCacheCuda::restore's match).
+inline constexpr std::uint32_t kNoEntry = 0xffffffffu;
+
+// The impulses of the cache's entries, by entry (device pointers).
+struct CacheImpulses {
+  const real* normal = nullptr;
+  const Vec3* tangent = nullptr;  // null: none kept (no friction)
+  const Vec3* rolling = nullptr;  // null: none kept (no rolling resistance)
+};
+
 class ContactCacheCuda {
  public:
   ContactCacheCuda();
@@ -28,11 +38,21 @@ class ContactCacheCuda {
   ContactCacheCuda(const ContactCacheCuda&) = delete;
   ContactCacheCuda& operator=(const ContactCacheCuda&) = delete;
 
-  // Warm start of contacts[0, n) (device), and each contact's kept colour
-  // (kept_colour, device, n entries; ContactCache::restore). False, writing
-  // nothing, when the cache or the contacts are empty.
-  bool restore(Contact* contacts, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
-               std::uint8_t* kept_colour, int sm_count, cudaStream_t stream);
+  // Warm start of the contacts of body pairs[0, n) (device): each one's
+  // entry (match, device, n entries: an index into entries(), or kNoEntry
+  // where it starts cold) and its kept colour (kept_colour, device, n
+  // entries), as ContactCache::restore finds them, the island rule included.
+  // The impulses themselves are restored when the contacts are made
+  // (restore_impulses, with the contact's normal). False, writing nothing,
+  // when the cache or the contacts are empty.
+  bool restore(const BodyPair* pairs, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
+               std::uint8_t* kept_colour, std::uint32_t* match, int sm_count, cudaStream_t stream);
+  // The entries' impulses (device; tangent and rolling null where the scene
+  // keeps none): valid until the next store, upload or copy into this cache.
+  CacheImpulses entries() const {
+    return {m_normal.get_as<real>(), m_keep_tangent ? m_tangent.get_as<Vec3>() : nullptr,
+            m_keep_rolling ? m_rolling.get_as<Vec3>() : nullptr};
+  }
   // The contacts as the sweep's records hold them after the last sweep, with
   // their colours (contact_colour, device, per contact; null: none).
   // `spheres` and `walls`: how many there are (the sort's key bits).

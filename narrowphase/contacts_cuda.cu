@@ -1,7 +1,5 @@
-#include "core/block_stage.cuh"
 #include "core/cuda_check.hpp"
 #include "core/device_buffer.cuh"
-#include "core/whole_record.hpp"
 #include "narrowphase/contacts_cuda.cuh"
 
 namespace marbles::narrowphase::cuda {
@@ -51,35 +49,10 @@ __global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, s
   }
 }
 
-// The contacts of items [0, count) whose flag was set (offsets: the flags'
-// exclusive scan), make(t, c) writing item t's. A block's items are
-// consecutive, so their contacts are one run of the output: staged in shared
-// memory, written out whole (core/block_stage.cuh).
-template <class Make>
-__device__ void write_contacts(std::size_t count, const std::uint32_t* offsets, Contact* out, Make&& make) {
-  __shared__ ::marbles::cuda::RunStage<Contact, kBlock> stage;
-  for (std::size_t base = std::size_t(blockIdx.x) * blockDim.x; base < count;
-       base += std::size_t(gridDim.x) * blockDim.x) {
-    const std::size_t t = base + threadIdx.x, end = base + blockDim.x < count ? base + blockDim.x : count;
-    Contact* run = out + offsets[base];
-    if (t < count && offsets[t + 1] != offsets[t]) {
-      Contact c;
-      make(t, c);
-      stage.put(run, offsets[t] - offsets[base], c);
-    }
-    __syncthreads();
-    stage.flush(run, offsets[end] - offsets[base]);
-    __syncthreads();
-  }
-}
-
-__global__ void __launch_bounds__(kBlock) sphere_write_kernel(BodiesView bodies, const IndexPair* pairs,
-                                                              std::size_t count, PairTable table, real h,
-                                                              const real* reach, const std::uint32_t* offsets,
-                                                              Contact* out) {
-  write_contacts(count, offsets, out, [&](std::size_t k, Contact& c) {
-    make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c);
-  });
+__global__ void sphere_pairs_kernel(const IndexPair* pairs, std::size_t count, const std::uint32_t* offsets,
+                                    BodyPair* out) {
+  for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k < count; k += gridDim.x * blockDim.x)
+    if (offsets[k + 1] != offsets[k]) out[offsets[k]] = BodyPair{pairs[k].i, pairs[k].j};
 }
 
 __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std::uint32_t wall_count,
@@ -96,14 +69,47 @@ __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std
   }
 }
 
-__global__ void __launch_bounds__(kBlock) wall_write_kernel(BodiesView bodies, const WallShape* walls,
-                                                            std::uint32_t wall_count, PairTable table, real h,
-                                                            const real* reach, const std::uint32_t* offsets,
-                                                            Contact* out) {
-  write_contacts(bodies.count * wall_count, offsets, out, [&](std::size_t t, Contact& c) {
-    const auto i = static_cast<std::uint32_t>(t / wall_count), k = static_cast<std::uint32_t>(t % wall_count);
-    make_wall_contact(bodies, i, walls[k], k, table, h, reach, c);
-  });
+__global__ void wall_pairs_kernel(std::size_t items, std::uint32_t wall_count, const std::uint32_t* offsets,
+                                  BodyPair* out) {
+  for (std::size_t t = blockIdx.x * blockDim.x + threadIdx.x; t < items; t += gridDim.x * blockDim.x)
+    if (offsets[t + 1] != offsets[t])
+      out[offsets[t]] = BodyPair{static_cast<std::uint32_t>(t / wall_count),
+                                 kWallFlag | static_cast<std::uint32_t>(t % wall_count)};
+}
+
+// make_sphere_contact / make_wall_contact as the flag pass called them (it
+// found a contact, and so does this call: the same inputs).
+__device__ Contact made_contact(const ContactInputs& in, const BodyPair& ab) {
+  Contact c;
+  if (is_wall(ab.b)) {
+    const std::uint32_t k = ab.b & ~kWallFlag;
+    make_wall_contact(in.bodies, ab.a, in.walls[k], k, in.table, in.h, in.reach, c);
+  } else {
+    make_sphere_contact(in.bodies, ab.a, ab.b, in.table, in.h, in.reach, c);
+  }
+  return c;
+}
+
+__global__ void sorted_records_kernel(ContactInputs in, const BodyPair* pairs, const std::uint32_t* match,
+                                      CacheImpulses cache, const std::uint32_t* order, std::uint32_t n,
+                                      SweepRecords records, Real4* impact) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    const std::uint32_t i = order[k];
+    Contact c = made_contact(in, pairs[i]);
+    const std::uint32_t e = match ? match[i] : kNoEntry;
+    if (e != kNoEntry)
+      restore_impulses(c, cache.normal[e], cache.tangent ? cache.tangent[e] : Vec3{},
+                       cache.rolling ? cache.rolling[e] : Vec3{});
+    prepare_from_world(c, in.bodies);
+    pack_sweep_record(c, records, k);
+    impact[k] = impact_word(c);
+  }
+}
+
+__global__ void contacts_of_records_kernel(SweepRecords records, const Real4* impact, std::uint32_t first,
+                                           std::uint32_t count, BodiesView world, Contact* out) {
+  for (std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < count; t += gridDim.x * blockDim.x)
+    out[t] = contact_of_record(records, impact, first + t, world);
 }
 
 __global__ void advance_walls_kernel(WallShape* walls, std::uint32_t count, real h) {
@@ -130,12 +136,10 @@ void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pair
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_sphere_contact_write(const BodiesView& bodies, const IndexPair* pairs, std::size_t count,
-                                 const PairTable& table, real h, const real* reach, const std::uint32_t* offsets,
-                                 Contact* out, int sm_count, cudaStream_t stream) {
+void launch_sphere_pair_write(const IndexPair* pairs, std::size_t count, const std::uint32_t* offsets, BodyPair* out,
+                              int sm_count, cudaStream_t stream) {
   if (count == 0) return;
-  sphere_write_kernel<<<grid_for(count, sm_count), kBlock, 0, stream>>>(bodies, pairs, count, table, h, reach,
-                                                                        offsets, out);
+  sphere_pairs_kernel<<<grid_for(count, sm_count), kBlock, 0, stream>>>(pairs, count, offsets, out);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
@@ -147,12 +151,29 @@ void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls,
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_wall_contact_write(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
-                               const PairTable& table, real h, const real* reach, const std::uint32_t* offsets,
-                               Contact* out, int sm_count, cudaStream_t stream) {
-  if (bodies.count * wall_count == 0) return;
-  wall_write_kernel<<<grid_for(bodies.count * wall_count, sm_count), kBlock, 0, stream>>>(
-      bodies, walls, wall_count, table, h, reach, offsets, out);
+void launch_wall_pair_write(std::size_t sphere_count, std::uint32_t wall_count, const std::uint32_t* offsets,
+                            BodyPair* out, int sm_count, cudaStream_t stream) {
+  const std::size_t items = sphere_count * wall_count;
+  if (items == 0) return;
+  wall_pairs_kernel<<<grid_for(items, sm_count), kBlock, 0, stream>>>(items, wall_count, offsets, out);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_sorted_records(const ContactInputs& in, const BodyPair* pairs, const std::uint32_t* match,
+                           const CacheImpulses& cache, const std::uint32_t* order, std::uint32_t n,
+                           const SweepRecords& records, Real4* impact, int sm_count, cudaStream_t stream) {
+  if (n == 0) return;
+  sorted_records_kernel<<<grid_for(n, sm_count), kBlock, 0, stream>>>(in, pairs, match, cache, order, n, records,
+                                                                      impact);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_contacts_of_records(const SweepRecords& records, const Real4* impact, std::uint32_t first,
+                                std::uint32_t count, const BodiesView& world, Contact* out, int sm_count,
+                                cudaStream_t stream) {
+  if (count == 0) return;
+  contacts_of_records_kernel<<<grid_for(count, sm_count), kBlock, 0, stream>>>(records, impact, first, count, world,
+                                                                               out);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -2,8 +2,10 @@
 // make_sphere_contact / make_wall_contact (contact_math.hpp), in two passes
 // (flag, then write at the scanned offset) so the contacts come out in the
 // CPU's order: sphere pairs in the broad phase's order, then walls by sphere
-// then wall index. Each candidate is tested twice (flag, then write): the
-// test is a few flops against a 132-byte write it would otherwise stage.
+// then wall index. What is written is each contact's body pair (8 bytes);
+// the contact itself is made again, with the same function and inputs, when
+// it is written in colour-major order as the sweep's records
+// (launch_sorted_records), so the device never holds a 112-byte Contact.
 // Only .cu files include this header.
 #pragma once
 
@@ -13,7 +15,10 @@
 
 #include "core/pair.hpp"
 #include "core/spheres.hpp"
+#include "narrowphase/contact_cache_cuda.cuh"
+#include "narrowphase/contact_cache_math.hpp"
 #include "narrowphase/contact_math.hpp"
+#include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase::cuda {
 
@@ -27,18 +32,41 @@ void launch_contact_reaches(const BodiesView& bodies, real h, unsigned long long
 void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pairs, std::size_t count,
                                  const PairTable& table, real h, const real* reach, std::uint32_t* flags,
                                  int sm_count, cudaStream_t stream);
-// Writes the contact of each flagged pair k at out[offsets[k]].
-void launch_sphere_contact_write(const BodiesView& bodies, const IndexPair* pairs, std::size_t count,
-                                 const PairTable& table, real h, const real* reach, const std::uint32_t* offsets,
-                                 narrowphase::Contact* out, int sm_count, cudaStream_t stream);
+// Writes the body pair of each flagged pair k at out[offsets[k]].
+void launch_sphere_pair_write(const IndexPair* pairs, std::size_t count, const std::uint32_t* offsets, BodyPair* out,
+                              int sm_count, cudaStream_t stream);
 
 // The same over sphere i x wall k, item i * wall_count + k.
 void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
                                const PairTable& table, real h, const real* reach, std::uint32_t* flags,
                                int sm_count, cudaStream_t stream);
-void launch_wall_contact_write(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
-                               const PairTable& table, real h, const real* reach, const std::uint32_t* offsets,
-                               narrowphase::Contact* out, int sm_count, cudaStream_t stream);
+void launch_wall_pair_write(std::size_t sphere_count, std::uint32_t wall_count, const std::uint32_t* offsets,
+                            BodyPair* out, int sm_count, cudaStream_t stream);
+
+// What the contacts are made from once more, unchanged since they were found:
+// the bodies (not moved before the solve), the walls, the pair table, the
+// lookahead and the reaches.
+struct ContactInputs {
+  BodiesView bodies;
+  const WallShape* walls = nullptr;
+  PairTable table;
+  real h = 0;
+  const real* reach = nullptr;
+};
+
+// The sweep's records (and impact words, solver_math.hpp) of the contacts of
+// pairs[order[k]] for k in [0, n): each contact made as it was found,
+// restored from its cache entry (match[i]: an entry of `cache`, or kNoEntry;
+// match null: none), prepared from the world, packed at k.
+void launch_sorted_records(const ContactInputs& in, const BodyPair* pairs, const std::uint32_t* match,
+                           const CacheImpulses& cache, const std::uint32_t* order, std::uint32_t n,
+                           const SweepRecords& records, Real4* impact, int sm_count, cudaStream_t stream);
+
+// Whole contacts of records [first, first + count) into out (device), as the
+// CPU holds them after the step (contact_of_record).
+void launch_contacts_of_records(const SweepRecords& records, const Real4* impact, std::uint32_t first,
+                                std::uint32_t count, const BodiesView& world, Contact* out, int sm_count,
+                                cudaStream_t stream);
 
 // Moves translating walls by h times their velocity.
 void launch_advance_walls(WallShape* walls, std::uint32_t count, real h, cudaStream_t stream);

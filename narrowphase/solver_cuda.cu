@@ -1,4 +1,3 @@
-#include "core/block_stage.cuh"
 #include "core/cuda_check.hpp"
 #include "core/device_buffer.cuh"
 #include "narrowphase/solver_cuda.cuh"
@@ -111,35 +110,12 @@ void launch_colour(void (*kernel)(Params...), int grid, cudaStream_t s, Args&&..
   MARBLES_CUDA_CHECK(cudaLaunchKernelEx(&config, kernel, std::forward<Args>(args)...));
 }
 
-// A block's contacts are one run: read in whole to shared memory first
-// (core/block_stage.cuh), each then packed from there.
-__global__ void __launch_bounds__(kBlock) pack_sweep_kernel(const Contact* contacts, std::uint32_t n,
-                                                            SweepRecords s) {
-  __shared__ ::marbles::cuda::RunStage<Contact, kBlock> stage;
-  for (std::uint32_t base = blockIdx.x * blockDim.x; base < n; base += gridDim.x * blockDim.x) {
-    stage.fill(contacts + base, ::marbles::cuda::run_length(n, base));
-    __syncthreads();
-    const std::uint32_t k = base + threadIdx.x;
-    if (k < n) pack_sweep_record(stage.get(contacts + base, threadIdx.x), s, k);
-    __syncthreads();
-  }
-}
-
-__global__ void unpack_sweep_kernel(Contact* contacts, std::uint32_t n, SweepRecords s) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    Contact c;
-    c.impact_impulse = contacts[k].impact_impulse;
-    unpack_sweep_impulses(s, k, c);
-    store_impulses(contacts + k, c);
-  }
-}
-
 template <bool Friction>
-__global__ void impact_kernel(Contact* contacts, const std::uint32_t* order, ContactRange r, SolverBody* bodies,
-                              ImpactParams p, unsigned* hit) {
+__global__ void impact_kernel(SweepRecords records, Real4* impact, const std::uint32_t* order, ContactRange r,
+                              SolverBody* bodies, ImpactParams p, unsigned* hit) {
   bool any = false;
   for_range(r, [&](std::uint32_t k) {
-    any = impact_one<Friction>(contacts[order ? order[k] : k], bodies, p) || any;
+    any = impact_record<Friction>(records, impact, order ? order[k] : k, bodies, p) || any;
   });
   if (any) *hit = 1u;
 }
@@ -220,20 +196,6 @@ void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* 
   else launch_colour(warm_start_kernel<false, false>, g, s, records, r, bodies);
 }
 
-void launch_pack_sweep(const Contact* contacts, std::uint32_t n, const SweepRecords& records, int sm_count,
-                       cudaStream_t s) {
-  if (n == 0) return;
-  pack_sweep_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, records);
-  MARBLES_CUDA_CHECK_LAUNCH();
-}
-
-void launch_unpack_sweep(Contact* contacts, std::uint32_t n, const SweepRecords& records, int sm_count,
-                         cudaStream_t s) {
-  if (n == 0) return;
-  unpack_sweep_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, records);
-  MARBLES_CUDA_CHECK_LAUNCH();
-}
-
 void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, SolverTerms t,
                   cudaStream_t s) {
   if (r.end <= r.begin) return;
@@ -244,13 +206,13 @@ void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodie
   else launch_colour(record_sweep_kernel<false, false>, g, s, records, r, bodies, inv_h);
 }
 
-void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange r, SolverBody* bodies,
-                    const ImpactParams& p, bool friction, unsigned* hit, cudaStream_t s) {
+void launch_impacts(const SweepRecords& records, Real4* impact, const std::uint32_t* order, ContactRange r,
+                    SolverBody* bodies, const ImpactParams& p, bool friction, unsigned* hit, cudaStream_t s) {
   if (r.end <= r.begin) return;
   if (friction)
-    impact_kernel<true><<<blocks(r), kBlock, 0, s>>>(contacts, order, r, bodies, p, hit);
+    impact_kernel<true><<<blocks(r), kBlock, 0, s>>>(records, impact, order, r, bodies, p, hit);
   else
-    impact_kernel<false><<<blocks(r), kBlock, 0, s>>>(contacts, order, r, bodies, p, hit);
+    impact_kernel<false><<<blocks(r), kBlock, 0, s>>>(records, impact, order, r, bodies, p, hit);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -15,22 +15,6 @@
 
 namespace marbles::narrowphase::cuda {
 
-// The impulses, the contact's first eight reals (contact.hpp), stored as
-// whole 16-byte words.
-__device__ __forceinline__ void store_impulses(Contact* to, const Contact& c) {
-  if constexpr (sizeof(real) == 4) {
-    float4* w = reinterpret_cast<float4*>(to);
-    w[0] = make_float4(c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z);
-    w[1] = make_float4(c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.impact_impulse);
-  } else {
-    double2* w = reinterpret_cast<double2*>(to);
-    w[0] = make_double2(c.normal_impulse, c.tangent_impulse.x);
-    w[1] = make_double2(c.tangent_impulse.y, c.tangent_impulse.z);
-    w[2] = make_double2(c.rolling_impulse.x, c.rolling_impulse.y);
-    w[3] = make_double2(c.rolling_impulse.z, c.impact_impulse);
-  }
-}
-
 // The per-contact terms a scene enables: picks the kernel instance once.
 struct SolverTerms {
   bool friction = false, rolling = false;
@@ -52,24 +36,19 @@ struct ContactRange {
 void launch_gather_bodies(const BodiesView& world, SolverBody* bodies, int sm_count, cudaStream_t stream);
 void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, int sm_count, cudaStream_t stream);
 
-// The stages after the impacts on the sweep's records (solver_math.hpp):
-// packed from the contacts (prepared by the colouring:
-// ColouringCuda::colour_and_sort) after the impacts; the warm start, the
-// sweeps, the position stages and the overlap read them; the impulses go back
-// into the contacts when those are asked for (unpack). The same bits as on
-// the contacts.
+// The stages on the sweep's records (solver_math.hpp), made in colour-major
+// order by launch_sorted_records (contacts_cuda.cuh): the impacts, the warm
+// start, the sweeps, the position stages and the overlap read them, and the
+// whole contacts are made from them when asked for (contact_of_record). The
+// same bits as on the contacts.
 void launch_warm_start(const SweepRecords& records, ContactRange range, SolverBody* bodies, SolverTerms terms,
-                       cudaStream_t stream);
-void launch_pack_sweep(const Contact* contacts, std::uint32_t n, const SweepRecords& records, int sm_count,
                        cudaStream_t stream);
 void launch_sweep(const SweepRecords& records, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,
                   cudaStream_t stream);
-void launch_unpack_sweep(Contact* contacts, std::uint32_t n, const SweepRecords& records, int sm_count,
-                         cudaStream_t stream);
-// Impacts of contacts[order[k]] for k in range (order null: k itself);
-// sets *hit = 1 when any hit.
-void launch_impacts(Contact* contacts, const std::uint32_t* order, ContactRange range, SolverBody* bodies,
-                    const ImpactParams& p, bool friction, unsigned* hit, cudaStream_t stream);
+// Impacts of record order[k] for k in range (order null: k itself), with
+// its impact word (impact_record); sets *hit = 1 when any hit.
+void launch_impacts(const SweepRecords& records, Real4* impact, const std::uint32_t* order, ContactRange range,
+                    SolverBody* bodies, const ImpactParams& p, bool friction, unsigned* hit, cudaStream_t stream);
 void launch_rebound(const SweepRecords& records, ContactRange range, const BodiesView& bodies, const WallShape* walls,
                     cudaStream_t stream);
 // The colour ranges of colour-major contacts as one launch takes them:

@@ -127,10 +127,13 @@ MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
 // 4-real words: thread k of
 // a launch reads word k of each array, so a warp's request is whole sectors,
 // where a whole Contact per thread made every request span 32 records, and a
-// field-by-field update of one wrote partial sectors. The GPU packs them once
-// per substep after the warm start (pack_sweep_record); every sweep reads and
-// writes them (load_sweep_contact, store_sweep_impulses), the position stages
-// read them (load_position_contact), and the impulses go back into the
+// field-by-field update of one wrote partial sectors. The GPU writes them
+// once per substep as it makes the contacts in colour-major order (they are
+// its only form of the contacts, with an impact word each: impact_record,
+// contact_of_record below); the CPU packs them from its contacts
+// (pack_sweep_record). Every sweep reads and writes them
+// (load_sweep_contact, store_sweep_impulses), the position stages read them
+// (load_position_contact), and on the CPU the impulses go back into the
 // contacts only when the contacts are asked for (unpack_sweep_impulses) or
 // stored in the cache. Each stage runs its per-contact function on the
 // contact loaded from them: the same fields, the same arithmetic, the same
@@ -294,16 +297,88 @@ MARBLES_HD_INLINE void unpack_sweep_impulses(const SweepRecords& s, std::uint32_
   }
 }
 
-// The impact of one contact (apply_impact); true if it hit.
+// The impact of one contact on its loaded bodies (apply_impact); true if it hit.
+template <bool Friction>
+MARBLES_HD_INLINE bool impact_states(Contact& c, BodyState& A, BodyState& B, const ImpactParams& p) {
+  const real accel_n = is_wall(c.b) ? dot(p.wall_accel, c.normal) : real(0);
+  return apply_impact<Friction>(c, A, B, p.rest_speed, p.h, accel_n);
+}
 template <bool Friction>
 MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactParams& p) {
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
-  const real accel_n = is_wall(c.b) ? dot(p.wall_accel, c.normal) : real(0);
-  if (!apply_impact<Friction>(c, A, B, p.rest_speed, p.h, accel_n)) return false;
+  if (!impact_states<Friction>(c, A, B, p)) return false;
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
   return true;
+}
+
+// --- the GPU's records: the contact in no other form ------------------------
+// The GPU keeps a substep's contacts only as the sweep's records plus one
+// word each for the impact stage (impact_word: the approach speed, the
+// restitution, the impact impulse), made in colour-major order from the body
+// pairs (make_sphere_contact / make_wall_contact, restore_impulses,
+// prepare_from_world, pack_sweep_record: the CPU's functions, so its bits).
+// The effective masses are computed from the bodies where a stage needs
+// them, as the sweeps do.
+MARBLES_HD_INLINE Real4 impact_word(const Contact& c) {
+  return {c.approach_speed, c.coeff.restitution, c.impact_impulse, real(0)};
+}
+
+// What the impact stage's levels read: the approach speed and the separation
+// (is_impact_candidate, time_of_impact).
+MARBLES_HD_INLINE Contact load_approach(const SweepRecords& s, const Real4* impact, std::uint32_t k) {
+  Contact c;
+  c.separation = s.geometry[k].w;
+  c.approach_speed = impact[k].x;
+  return c;
+}
+
+// impact_one on record k: the contact as apply_impact reads it (the bodies,
+// geometry, arms, friction, a wall's velocity, the rebound shift, the
+// restitution and the impact impulse so far), its masses from the bodies;
+// writes back the impact impulse and the rebound shift.
+template <bool Friction>
+MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::uint32_t k, SolverBody* bodies,
+                                     const ImpactParams& p) {
+  Contact c = load_record<true, false>(s, k, Real4{});
+  Real4 i = impact[k];
+  Real4 extra = s.extra[k];
+  c.coeff.restitution = i.y;
+  c.impact_impulse = i.z;
+  c.rebound_shift = extra.w;
+  BodyState A = load_body(bodies, c.a, c);
+  BodyState B = load_body(bodies, c.b, c);
+  c.normal_mass = normal_mass_of(A, B);
+  if constexpr (Friction) c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
+  if (!impact_states<Friction>(c, A, B, p)) return false;
+  store_body(bodies, c.a, A);
+  store_body(bodies, c.b, B);
+  i.z = c.impact_impulse;
+  extra.w = c.rebound_shift;
+  impact[k] = i;
+  s.extra[k] = extra;
+  return true;
+}
+
+// Record k as the whole contact the CPU holds after the step: every field
+// the records and the impact word keep, the effective masses from the
+// world's inverse masses and inertias (prepare_contact's expressions).
+MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const Real4* impact, std::uint32_t k,
+                                            const BodiesView& world) {
+  Contact c = load_record<true, true>(s, k, s.impulse[k]);
+  const Real4 extra = s.extra[k];
+  c.wall_velocity = {extra.x, extra.y, extra.z};
+  c.rebound_shift = extra.w;
+  const Real4 i = impact[k];
+  c.approach_speed = i.x;
+  c.coeff.restitution = i.y;
+  c.impact_impulse = i.z;
+  const BodyState A = world_body(world, c.a, c), B = world_body(world, c.b, c);
+  c.normal_mass = normal_mass_of(A, B);
+  c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
+  c.rolling_mass = rolling_mass_of(A, B);
+  return c;
 }
 
 // A contact takes part in the impact stage's first pass when it approaches

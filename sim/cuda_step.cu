@@ -7,6 +7,11 @@
 // functions the CPU loops call, in the CPU's coloured order: CudaStep and
 // CpuStep give the same bits.
 //
+// A contact is found as its body pair (8 bytes) and made whole once, in
+// colour-major order, straight into the sweep's records and an impact word
+// (narrowphase/solver_math.hpp): the device holds no 112-byte Contact array.
+// contacts() makes whole contacts from the records when the host asks.
+//
 // Host syncs (for now, per substep): the broad phase's bounds and pair
 // count, the contact count, the colouring's rounds (one per 8 rounds) and
 // colour ranges, the cache's lost-load counter (and one per label pass of the
@@ -110,8 +115,9 @@ class CudaStep final : public StepBackend {
   // contacts (by sphere, then wall): flag, scan, one read of both counts, write.
   void find_contacts(real substep) override {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
+    m_lookahead = h;
     m_count = 0;
-    m_records_live = false;
+    m_records_valid = false;
     if (!m_model.collisions && !m_model.wall_contacts) return;
     const BodiesView bodies = m_device.view();
     const std::size_t n = bodies.count;
@@ -168,35 +174,40 @@ class CudaStep final : public StepBackend {
     const std::uint32_t sphere_contacts = m_model.collisions ? m_pinned[0] : 0;
     const std::uint32_t wall_contacts = m_model.wall_contacts ? m_pinned[1] : 0;
     m_count = sphere_contacts + wall_contacts;
-    auto* contacts = m_contacts.as<narrowphase::Contact>(m_count);
-    if (sphere_contacts > 0)
-      nc::launch_sphere_contact_write(bodies, pairs, pair_count, m_table, h, reach, pair_offsets, contacts, m_sm,
-                                      m_stream);
+    auto* found = m_pairs.as<narrowphase::BodyPair>(m_count);
+    if (sphere_contacts > 0) nc::launch_sphere_pair_write(pairs, pair_count, pair_offsets, found, m_sm, m_stream);
     if (wall_contacts > 0)
-      nc::launch_wall_contact_write(bodies, walls(), wall_count, m_table, h, reach, wall_offsets,
-                                    contacts + sphere_contacts, m_sm, m_stream);
+      nc::launch_wall_pair_write(n, wall_count, wall_offsets, found + sphere_contacts, m_sm, m_stream);
     m_counters.contacts += m_count;
   }
 
+  // Colours the contacts, then makes them in colour-major order as the
+  // sweep's records: nothing moves the bodies before the solve, so each is
+  // made as it was found, restored from its cache entry and prepared.
   void colour_contacts() override {
-    auto* sorted = m_sorted.as<narrowphase::Contact>(m_count);
     std::uint32_t rounds = 0;
-    // Prepared on the way: nothing moves the bodies before the solve.
-    const BodiesView bodies = m_device.view();
-    m_colours = m_colouring.colour_and_sort(contacts_d(), m_count, m_device.size(), sorted, m_begin, rounds, m_sm,
+    const std::uint32_t* order = nullptr;
+    m_colours = m_colouring.colour_and_sort(pairs_d(), m_count, m_device.size(), order, m_begin, rounds, m_sm,
                                             m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
-                                            m_sorted_colour.as<std::uint8_t>(m_count), &bodies);
-    m_contacts.swap(m_sorted);
+                                            m_sorted_colour.as<std::uint8_t>(m_count));
+    if (m_count > 0) {
+      lay_out_records();
+      const nc::ContactInputs in{m_device.view(), walls(), m_table, m_lookahead, m_reach.get_as<real>()};
+      nc::launch_sorted_records(in, pairs_d(), m_kept_valid ? m_match.get_as<std::uint32_t>() : nullptr,
+                                m_cache.entries(), order, m_count, m_records, m_impact, m_sm, m_stream);
+      m_records_valid = true;
+    }
     m_counters.colours = std::max(m_counters.colours, m_colours);
     m_counters.overflow += m_begin[m_colours + 1] - m_begin[m_colours];
   }
 
-  // Before the colouring: the contacts that persist get their impulses and
-  // the colour they had (kept by the colouring).
+  // Before the colouring: the contacts that persist find their cache entry
+  // (their impulses, restored as the records are made) and the colour they
+  // had (kept by the colouring).
   void warm_start() override {
     const real weight = m_model.gravity ? length(m_model.g) * m_model.substep() : real(0);
-    m_kept_valid = m_cache.restore(contacts_d(), m_count, m_device.view(), weight,
-                                   m_kept_colour.as<std::uint8_t>(m_count), m_sm, m_stream);
+    m_kept_valid = m_cache.restore(pairs_d(), m_count, m_device.view(), weight, m_kept_colour.as<std::uint8_t>(m_count),
+                                   m_match.as<std::uint32_t>(m_count), m_sm, m_stream);
   }
 
   // The velocity state packed (SolverBody) for the solve, then back.
@@ -205,18 +216,11 @@ class CudaStep final : public StepBackend {
     const BodiesView world = m_device.view();
     auto* bodies = m_solver_bodies.as<narrowphase::SolverBody>(world.count);
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
-    narrowphase::Contact* contacts = contacts_d();  // prepared by the colouring
     if (m_model.solver.restitution) impacts(bodies, h);
-    // From here on the stages read the sweep's records (solver_math.hpp);
-    // they live in the colouring's gather buffer, free from the gather until
-    // the next substep's colouring.
-    m_records = narrowphase::SweepRecords::in(m_sorted.as<char>(narrowphase::SweepRecords::bytes_for(m_count)), m_count);
-    nc::launch_pack_sweep(contacts, m_count, m_records, m_sm, m_stream);
-    m_records_live = true;
     // A launch loads its records while the launch just before it ends,
     // unless that one wrote them (LastWrites, ContactRange::early). Empty
     // ranges launch nothing.
-    narrowphase::LastWrites last(m_count);  // the pack wrote them all
+    narrowphase::LastWrites last(m_count);  // the records were made (and the impacts wrote) before
     auto early = [&](nc::ContactRange& r, bool writes) {
       if (r.end > r.begin) r.early = last.next(r.begin, r.end, writes);
     };
@@ -370,16 +374,21 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     return found == 0;
   }
+  // The whole contacts, made from the records a chunk at a time (the device
+  // holds no Contact array): the masses from the world's inverse masses and
+  // inertias, which a step leaves as they were.
   const std::vector<narrowphase::Contact>& contacts() override {
     if (m_contacts_stale) {
-      if (m_records_live) {  // the impulses of the last sweep, back into the contacts
-        nc::launch_unpack_sweep(contacts_d(), m_count, m_records, m_sm, m_stream);
-        m_records_live = false;
-      }
-      m_host_contacts.resize(m_count);
-      if (m_count > 0)
-        MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host_contacts.data(), contacts_d(), m_count * sizeof(narrowphase::Contact),
+      const std::uint32_t n = m_records_valid ? m_count : 0;
+      m_host_contacts.resize(n);
+      constexpr std::uint32_t kChunk = 1u << 16;
+      auto* chunk = m_contact_chunk.as<narrowphase::Contact>(std::min(n, kChunk));
+      for (std::uint32_t first = 0; first < n; first += kChunk) {
+        const std::uint32_t count = std::min(kChunk, n - first);
+        nc::launch_contacts_of_records(m_records, m_impact, first, count, m_device.view(), chunk, m_sm, m_stream);
+        MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host_contacts.data() + first, chunk, count * sizeof(narrowphase::Contact),
                                            cudaMemcpyDeviceToHost, m_stream));
+      }
       MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
       m_contacts_stale = false;
     }
@@ -428,7 +437,15 @@ class CudaStep final : public StepBackend {
   }
 
  private:
-  narrowphase::Contact* contacts_d() const { return m_contacts.get_as<narrowphase::Contact>(); }
+  narrowphase::BodyPair* pairs_d() const { return m_pairs.get_as<narrowphase::BodyPair>(); }
+
+  // The records of m_count contacts and their impact words, in one buffer.
+  void lay_out_records() {
+    const std::size_t words = (narrowphase::SweepRecords::bytes_for(m_count) + 15) / 16;
+    auto* memory = m_record_memory.as<narrowphase::Real4>(words + m_count);
+    m_records = narrowphase::SweepRecords::in(memory, m_count);
+    m_impact = memory + words;
+  }
   narrowphase::WallShape* walls() const { return m_walls.get_as<narrowphase::WallShape>(); }
 
   // One launch per colour range in the solver's order (visit_colours, the
@@ -457,24 +474,23 @@ class CudaStep final : public StepBackend {
   // The impact stage (ContactSolver::impacts): candidates level by level,
   // then every contact colour by colour while the pass before hit.
   void impacts(narrowphase::SolverBody* bodies, real h) {
-    narrowphase::Contact* contacts = contacts_d();
     const real rest = m_model.solver.rest_speed;
     const narrowphase::ImpactParams params{rest, h, m_model.solver.wall_accel};
     std::uint32_t* order = nullptr;
     const std::uint32_t levels =
-        m_colouring.impact_levels(contacts, m_count, m_device.size(), rest, order, m_levels, m_sm, m_stream);
+        m_colouring.impact_levels(m_records, m_impact, m_count, m_device.size(), rest, order, m_levels, m_sm, m_stream);
     if (m_levels.back() == 0) return;
     auto* hit = m_hit.as<unsigned>(1);
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, sizeof(unsigned), m_stream));
     const bool friction = m_model.solver.friction;
     for (std::uint32_t l = 0; l < levels; ++l)
-      nc::launch_impacts(contacts, order, {m_levels[l], m_levels[l + 1]}, bodies, params, friction, hit, m_stream);
-    nc::launch_impacts(contacts, order, {m_levels[levels], m_levels[levels + 1], true, false}, bodies, params,
+      nc::launch_impacts(m_records, m_impact, order, {m_levels[l], m_levels[l + 1]}, bodies, params, friction, hit, m_stream);
+    nc::launch_impacts(m_records, m_impact, order, {m_levels[levels], m_levels[levels + 1], true, false}, bodies, params,
                        friction, hit, m_stream);
     for (int pass = 1; pass < narrowphase::kImpactPasses && read_hit(); ++pass) {
       MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, sizeof(unsigned), m_stream));
       over_colours(false, [&](nc::ContactRange r) {
-        nc::launch_impacts(contacts, nullptr, r, bodies, params, friction, hit, m_stream);
+        nc::launch_impacts(m_records, m_impact, nullptr, r, bodies, params, friction, hit, m_stream);
       });
     }
   }
@@ -496,8 +512,11 @@ class CudaStep final : public StepBackend {
   bool m_watch = false;
   int m_iteration_factor = 1;
 
-  DeviceBuffer m_walls, m_pair_table, m_max_speed, m_reach, m_bound, m_contacts, m_sorted, m_kept_colour,
-      m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved;
+  // A substep's contacts: their body pairs as found (m_pairs), each one's
+  // cache entry (m_match) and kept colour, then in colour-major order the
+  // sweep's records and impact words (m_record_memory) and colours.
+  DeviceBuffer m_walls, m_pair_table, m_max_speed, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
+      m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved, m_contact_chunk;
   // Temporaries of the stages that never run at the same time (the contact
   // flags, the colouring's lists and sorts, the cache's store and restore):
   // the device holds the largest stage's, not their sum.
@@ -515,11 +534,13 @@ class CudaStep final : public StepBackend {
   std::uint32_t m_count = 0;          // contacts of this substep
   bool m_kept_valid = false;          // m_kept_colour holds this substep's kept colours
   bool m_mirror = false;              // the next parallel colour launch runs mirrored (over_colours)
-  // The substep's contacts as the stages after the warm start read them, and
-  // whether they hold impulses the contacts do not (set by the solve, cleared
-  // by the next find_contacts or by unpacking them into the contacts).
+  // The substep's contacts as every stage after the colouring reads them,
+  // and whether they are this substep's (made by the colouring, cleared by
+  // the next find_contacts).
   narrowphase::SweepRecords m_records;
-  bool m_records_live = false;
+  narrowphase::Real4* m_impact = nullptr;
+  bool m_records_valid = false;
+  real m_lookahead = 0;  // find_contacts' h: the colouring makes the contacts again with it
   std::uint32_t m_colours = 0;
   std::vector<std::uint32_t> m_begin{0, 0}, m_levels{0, 0};
   std::vector<narrowphase::Contact> m_host_contacts;

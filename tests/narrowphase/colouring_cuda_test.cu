@@ -48,19 +48,37 @@ std::vector<Contact> random_contacts(std::mt19937_64& rng, std::uint32_t bodies,
   return out;
 }
 
+// The contacts as the GPU step holds them: their body pairs before the
+// colouring, the sweep's records and impact words after it (records in
+// input order here: the impact levels read them by contact index).
 struct DeviceContacts {
-  Contact* in = nullptr;
-  Contact* out = nullptr;
+  BodyPair* pairs = nullptr;
+  void* records_memory = nullptr;
+  Real4* impact = nullptr;
+  SweepRecords records;
   explicit DeviceContacts(const std::vector<Contact>& c) {
-    const std::size_t bytes = (c.size() + 1) * sizeof(Contact);
-    EXPECT_EQ(cudaMalloc(&in, bytes), cudaSuccess);
-    EXPECT_EQ(cudaMalloc(&out, bytes), cudaSuccess);
-    EXPECT_EQ(cudaMemset(out, 0xff, bytes), cudaSuccess);  // poisoned
-    EXPECT_EQ(cudaMemcpy(in, c.data(), c.size() * sizeof(Contact), cudaMemcpyHostToDevice), cudaSuccess);
+    const std::size_t n = c.size();
+    std::vector<BodyPair> pairs_h(n);
+    const std::size_t bytes = SweepRecords::bytes_for(n);
+    std::vector<Real4> words((bytes + 15) / 16 + n);
+    const SweepRecords host = SweepRecords::in(words.data(), n);
+    Real4* impact_h = words.data() + (bytes + 15) / 16;
+    for (std::size_t k = 0; k < n; ++k) {
+      pairs_h[k] = {c[k].a, c[k].b};
+      pack_sweep_record(c[k], host, static_cast<std::uint32_t>(k));
+      impact_h[k] = impact_word(c[k]);
+    }
+    EXPECT_EQ(cudaMalloc(&pairs, (n + 1) * sizeof(BodyPair)), cudaSuccess);
+    EXPECT_EQ(cudaMalloc(&records_memory, words.size() * sizeof(Real4)), cudaSuccess);
+    EXPECT_EQ(cudaMemcpy(pairs, pairs_h.data(), n * sizeof(BodyPair), cudaMemcpyHostToDevice), cudaSuccess);
+    EXPECT_EQ(cudaMemcpy(records_memory, words.data(), words.size() * sizeof(Real4), cudaMemcpyHostToDevice),
+              cudaSuccess);
+    records = SweepRecords::in(records_memory, n);
+    impact = static_cast<Real4*>(records_memory) + (bytes + 15) / 16;
   }
   ~DeviceContacts() {
-    cudaFree(in);
-    cudaFree(out);
+    cudaFree(pairs);
+    cudaFree(records_memory);
   }
 };
 
@@ -85,18 +103,20 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   ASSERT_EQ(cudaMalloc(&sorted_colour, n + 1), cudaSuccess);
   ASSERT_EQ(cudaMemset(sorted_colour, 0xab, n + 1), cudaSuccess);  // poisoned
   if (!kept.empty()) ASSERT_EQ(cudaMemcpy(kept_d, kept.data(), n, cudaMemcpyHostToDevice), cudaSuccess);
-  const std::uint32_t colours = gpu.colour_and_sort(d.in, n, bodies, d.out, begin, rounds, 8, nullptr,
+  const std::uint32_t* order_d = nullptr;
+  const std::uint32_t colours = gpu.colour_and_sort(d.pairs, n, bodies, order_d, begin, rounds, 8, nullptr,
                                                     kept.empty() ? nullptr : kept_d, sorted_colour);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
   EXPECT_EQ(colours, ranges.colours);
   EXPECT_EQ(begin, ranges.begin);
-  std::vector<Contact> sorted(n);
+  std::vector<std::uint32_t> sorted(n);
   std::vector<std::uint8_t> gpu_colour(n), cpu_colour(n, 0xcd);
-  if (n > 0) ASSERT_EQ(cudaMemcpy(sorted.data(), d.out, n * sizeof(Contact), cudaMemcpyDeviceToHost), cudaSuccess);
+  if (n > 0) ASSERT_EQ(cudaMemcpy(sorted.data(), order_d, n * 4, cudaMemcpyDeviceToHost), cudaSuccess);
   if (n > 0) ASSERT_EQ(cudaMemcpy(gpu_colour.data(), sorted_colour, n, cudaMemcpyDeviceToHost), cudaSuccess);
   cudaFree(kept_d);
   cudaFree(sorted_colour);
-  for (std::uint32_t k = 0; k < n; ++k) ASSERT_EQ(sorted[k].normal_impulse, cpu[k].normal_impulse) << "position " << k;
+  // The CPU's sorted contacts carry their input index as a tag.
+  for (std::uint32_t k = 0; k < n; ++k) ASSERT_EQ(real(sorted[k]), cpu[k].normal_impulse) << "position " << k;
   for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) { cpu_colour[k] = c; });
   EXPECT_EQ(gpu_colour, cpu_colour);
 
@@ -113,7 +133,7 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   ContactColouring().colour(input.data(), candidates, rank.data(), bodies, ColourRule::by_round, level, &cpu_levels);
   std::uint32_t* order = nullptr;
   std::vector<std::uint32_t> level_begin;
-  const std::uint32_t levels = gpu.impact_levels(d.in, n, bodies, rest, order, level_begin, 8, nullptr);
+  const std::uint32_t levels = gpu.impact_levels(d.records, d.impact, n, bodies, rest, order, level_begin, 8, nullptr);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
   if (candidates.empty()) {
     EXPECT_EQ(levels, 0u);

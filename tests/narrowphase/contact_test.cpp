@@ -367,3 +367,69 @@ TEST(Solver, ProjectionEndsAtTheFirstSettledSweep) {
     EXPECT_NE(std::memcmp(expected.data(), pos0.data(), sizeof(Vec3) * n), 0);  // it moved spheres
   }
 }
+
+// The GPU holds a substep's contacts only as the sweep's records and their
+// impact words (solver_math.hpp): the impact stage on them (impact_record)
+// gives impact_one's bodies and contacts bit for bit, and the whole contacts
+// made from them (contact_of_record) equal the contacts, every field. A
+// lattice of spheres thrown at each other and at the floor (so that most
+// contacts hit), with and without friction, the accumulated impulses random.
+TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
+  const real r = real(0.01);
+  std::mt19937_64 rng(29);
+  Lattice lattice(10, r, 2 * r * 1.002, r * 1.001, 2e-5, rng);
+  const std::size_t n = lattice.n;
+  std::uniform_real_distribution<double> speed(-0.5, 0.5), u(0, 1);
+  std::vector<Vec3> vel(n), omega(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    vel[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng)));
+    omega[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng))) * real(50);
+  }
+  PairCoefficients coeff{real(0.6), real(0.4), real(0.02), real(0.01)};
+  PairTable table{&coeff, 1};
+  const real h = real(1e-3);
+  const BodiesView world = lattice.view(lattice.position.data(), vel.data(), omega.data());
+  ColourRanges colours;
+  std::vector<Contact> contacts = lattice.contacts(world, table, h, real(2e-4), colours);
+  const auto m = static_cast<std::uint32_t>(contacts.size());
+  ASSERT_GT(m, 2000u);
+  for (Contact& c : contacts) {  // as a warm start restores them
+    c.normal_impulse = real(u(rng) * 1e-4);
+    c.tangent_impulse = random_unit(rng) * real(u(rng) * 1e-5);
+    c.rolling_impulse = random_unit(rng) * real(u(rng) * 1e-7);
+  }
+  const ImpactParams params{real(0.01), h, Vec3(0, 0, real(-9.81))};
+  for (const bool friction : {false, true}) {
+    std::vector<SolverBody> expect_bodies(n), got_bodies(n);
+    for (std::size_t i = 0; i < n; ++i) expect_bodies[i] = got_bodies[i] = gather_solver_body(world, i);
+    std::vector<Contact> expect = contacts;
+    const std::size_t record_words = (SweepRecords::bytes_for(m) + 15) / 16;
+    std::vector<Real4> memory(record_words + m);
+    const SweepRecords records = SweepRecords::in(memory.data(), m);
+    Real4* impact = memory.data() + record_words;
+    for (std::uint32_t k = 0; k < m; ++k) {
+      pack_sweep_record(contacts[k], records, k);
+      impact[k] = impact_word(contacts[k]);
+    }
+    std::uint32_t hits = 0;
+    for (std::uint32_t k = 0; k < m; ++k) {
+      const bool hit = friction ? impact_one<true>(expect[k], expect_bodies.data(), params)
+                                : impact_one<false>(expect[k], expect_bodies.data(), params);
+      const bool got = friction ? impact_record<true>(records, impact, k, got_bodies.data(), params)
+                                : impact_record<false>(records, impact, k, got_bodies.data(), params);
+      ASSERT_EQ(hit, got) << "contact " << k;
+      hits += hit ? 1 : 0;
+    }
+    EXPECT_GT(hits, m / 10) << "friction " << friction;  // the impacts did work
+    EXPECT_EQ(std::memcmp(expect_bodies.data(), got_bodies.data(), n * sizeof(SolverBody)), 0) << friction;
+    std::uint32_t walls = 0, rebounds = 0;
+    for (std::uint32_t k = 0; k < m; ++k) {
+      const Contact c = contact_of_record(records, impact, k, world);
+      ASSERT_EQ(std::memcmp(&c, &expect[k], sizeof(Contact)), 0) << "contact " << k << " friction " << friction;
+      walls += is_wall(c.b) ? 1 : 0;
+      rebounds += c.rebound_shift > 0 ? 1 : 0;
+    }
+    EXPECT_GT(walls, 0u);
+    EXPECT_GT(rebounds, 0u);
+  }
+}
