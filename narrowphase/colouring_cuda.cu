@@ -128,6 +128,12 @@ __global__ void sorted_colour_kernel(const std::uint32_t* sorted_keys, std::uint
     sorted_colour[k] = sorted_keys[k] < kMaxColours ? sorted_keys[k] : kNoKeptColour;
 }
 
+// position[order[k]] = k: where each contact goes in colour-major order.
+__global__ void position_kernel(const std::uint32_t* order, std::uint32_t n, std::uint32_t* position) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
+    position[order[k]] = k;
+}
+
 }  // namespace
 
 // A call's temporaries: the colours and, never live at once, the rounds'
@@ -245,10 +251,10 @@ std::uint32_t* ColouringCuda::sort_by_colour(const ColouringArrays& at, std::uin
 }
 
 std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,
-                                             const std::uint32_t*& order, std::vector<std::uint32_t>& begin,
+                                             const std::uint32_t*& position, std::vector<std::uint32_t>& begin,
                                              std::uint32_t& rounds_run, int sm_count, cudaStream_t s,
                                              const std::uint8_t* kept_colour, std::uint8_t* sorted_colour) {
-  order = nullptr;
+  position = nullptr;
   rounds_run = 0;
   if (n == 0) {
     begin.assign(2, 0);
@@ -267,12 +273,16 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   // coloured neighbours (one per sphere and round), so its colour is at most
   // 2 r; kept colours may be any below kMaxColours.
   const std::uint32_t* sorted_keys = nullptr;
-  order = sort_by_colour(at, n, kMaxColours, kKeyBits, kept_colour ? kMaxColours : 2 * rounds_run, begin, &sorted_keys,
-                         sm_count, s);
+  const std::uint32_t* order = sort_by_colour(at, n, kMaxColours, kKeyBits, kept_colour ? kMaxColours : 2 * rounds_run,
+                                              begin, &sorted_keys, sm_count, s);
   if (sorted_colour) {
     sorted_colour_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(sorted_keys, n, sorted_colour);
     MARBLES_CUDA_CHECK_LAUNCH();
   }
+  // The colours are read (keys_kernel): their array takes the positions.
+  position_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(order, n, at.colour);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  position = at.colour;
   return static_cast<std::uint32_t>(begin.size() - 2);
 }
 

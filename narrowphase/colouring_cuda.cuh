@@ -33,16 +33,16 @@ class ColouringCuda {
   ColouringCuda& operator=(const ColouringCuda&) = delete;
 
   // The solver colouring of the contacts of body pairs[0, n): colours by
-  // contact_rank; `order` (device) gets the contacts' indices in
+  // contact_rank; `position` (device) gets each contact's place in
   // colour-major order (index order within a colour, overflow last), `begin`
   // the host ranges as ColourRanges::begin (colours + 2 entries). Returns
   // the colour count. kept_colour (device, one per contact, may be null):
   // colours kept as ContactColouring::colour_and_sort keeps them;
   // sorted_colour (device, may be null) gets each sorted contact's colour
-  // (kNoKeptColour: overflow). `order` lies in the scratch memory: valid
+  // (kNoKeptColour: overflow). `position` lies in the scratch memory: valid
   // until its next user.
   std::uint32_t colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,
-                                const std::uint32_t*& order, std::vector<std::uint32_t>& begin, std::uint32_t& rounds,
+                                const std::uint32_t*& position, std::vector<std::uint32_t>& begin, std::uint32_t& rounds,
                                 int sm_count, cudaStream_t stream, const std::uint8_t* kept_colour = nullptr,
                                 std::uint8_t* sorted_colour = nullptr);
 

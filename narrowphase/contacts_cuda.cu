@@ -90,17 +90,21 @@ __device__ Contact made_contact(const ContactInputs& in, const BodyPair& ab) {
   return c;
 }
 
-__global__ void sorted_records_kernel(ContactInputs in, const BodyPair* pairs, const std::uint32_t* match,
-                                      CacheImpulses cache, const std::uint32_t* order, std::uint32_t n,
-                                      SweepRecords records, Real4* impact) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const std::uint32_t i = order[k];
+// Thread i makes contact i (its pair, entry and bodies read in the order
+// they were found, which the broad phase keeps spatially close) and writes
+// its record at position[i]: colour-major order costs scattered writes, not
+// scattered reads (H100, pile of 10^6: colour verb 1.57 -> 1.38 ms).
+__global__ void records_kernel(ContactInputs in, const BodyPair* pairs, const std::uint32_t* match,
+                               CacheImpulses cache, const std::uint32_t* position, std::uint32_t n,
+                               SweepRecords records, Real4* impact) {
+  for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
     Contact c = made_contact(in, pairs[i]);
     const std::uint32_t e = match ? match[i] : kNoEntry;
     if (e != kNoEntry)
       restore_impulses(c, cache.normal[e], cache.tangent ? cache.tangent[e] : Vec3{},
                        cache.rolling ? cache.rolling[e] : Vec3{});
     prepare_from_world(c, in.bodies);
+    const std::uint32_t k = position[i];
     pack_sweep_record(c, records, k);
     impact[k] = impact_word(c);
   }
@@ -160,11 +164,10 @@ void launch_wall_pair_write(std::size_t sphere_count, std::uint32_t wall_count, 
 }
 
 void launch_sorted_records(const ContactInputs& in, const BodyPair* pairs, const std::uint32_t* match,
-                           const CacheImpulses& cache, const std::uint32_t* order, std::uint32_t n,
+                           const CacheImpulses& cache, const std::uint32_t* position, std::uint32_t n,
                            const SweepRecords& records, Real4* impact, int sm_count, cudaStream_t stream) {
   if (n == 0) return;
-  sorted_records_kernel<<<grid_for(n, sm_count), kBlock, 0, stream>>>(in, pairs, match, cache, order, n, records,
-                                                                      impact);
+  records_kernel<<<grid_for(n, sm_count), kBlock, 0, stream>>>(in, pairs, match, cache, position, n, records, impact);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

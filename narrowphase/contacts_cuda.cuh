@@ -55,11 +55,12 @@ struct ContactInputs {
 };
 
 // The sweep's records (and impact words, solver_math.hpp) of the contacts of
-// pairs[order[k]] for k in [0, n): each contact made as it was found,
-// restored from its cache entry (match[i]: an entry of `cache`, or kNoEntry;
-// match null: none), prepared from the world, packed at k.
+// pairs[0, n), contact i at position[i] (the colouring's colour-major
+// order): each contact made as it was found, restored from its cache entry
+// (match[i]: an entry of `cache`, or kNoEntry; match null: none), prepared
+// from the world, packed.
 void launch_sorted_records(const ContactInputs& in, const BodyPair* pairs, const std::uint32_t* match,
-                           const CacheImpulses& cache, const std::uint32_t* order, std::uint32_t n,
+                           const CacheImpulses& cache, const std::uint32_t* position, std::uint32_t n,
                            const SweepRecords& records, Real4* impact, int sm_count, cudaStream_t stream);
 
 // Whole contacts of records [first, first + count) into out (device), as the

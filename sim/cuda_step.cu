@@ -186,15 +186,15 @@ class CudaStep final : public StepBackend {
   // made as it was found, restored from its cache entry and prepared.
   void colour_contacts() override {
     std::uint32_t rounds = 0;
-    const std::uint32_t* order = nullptr;
-    m_colours = m_colouring.colour_and_sort(pairs_d(), m_count, m_device.size(), order, m_begin, rounds, m_sm,
+    const std::uint32_t* position = nullptr;
+    m_colours = m_colouring.colour_and_sort(pairs_d(), m_count, m_device.size(), position, m_begin, rounds, m_sm,
                                             m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
                                             m_sorted_colour.as<std::uint8_t>(m_count));
     if (m_count > 0) {
       lay_out_records();
       const nc::ContactInputs in{m_device.view(), walls(), m_table, m_lookahead, m_reach.get_as<real>()};
       nc::launch_sorted_records(in, pairs_d(), m_kept_valid ? m_match.get_as<std::uint32_t>() : nullptr,
-                                m_cache.entries(), order, m_count, m_records, m_impact, m_sm, m_stream);
+                                m_cache.entries(), position, m_count, m_records, m_impact, m_sm, m_stream);
       m_records_valid = true;
     }
     m_counters.colours = std::max(m_counters.colours, m_colours);
@@ -484,7 +484,8 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, sizeof(unsigned), m_stream));
     const bool friction = m_model.solver.friction;
     for (std::uint32_t l = 0; l < levels; ++l)
-      nc::launch_impacts(m_records, m_impact, order, {m_levels[l], m_levels[l + 1]}, bodies, params, friction, hit, m_stream);
+      nc::launch_impacts(m_records, m_impact, order, {m_levels[l], m_levels[l + 1]}, bodies, params, friction, hit,
+                         m_stream);
     nc::launch_impacts(m_records, m_impact, order, {m_levels[levels], m_levels[levels + 1], true, false}, bodies, params,
                        friction, hit, m_stream);
     for (int pass = 1; pass < narrowphase::kImpactPasses && read_hit(); ++pass) {

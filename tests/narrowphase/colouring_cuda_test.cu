@@ -103,15 +103,20 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   ASSERT_EQ(cudaMalloc(&sorted_colour, n + 1), cudaSuccess);
   ASSERT_EQ(cudaMemset(sorted_colour, 0xab, n + 1), cudaSuccess);  // poisoned
   if (!kept.empty()) ASSERT_EQ(cudaMemcpy(kept_d, kept.data(), n, cudaMemcpyHostToDevice), cudaSuccess);
-  const std::uint32_t* order_d = nullptr;
-  const std::uint32_t colours = gpu.colour_and_sort(d.pairs, n, bodies, order_d, begin, rounds, 8, nullptr,
+  const std::uint32_t* position_d = nullptr;
+  const std::uint32_t colours = gpu.colour_and_sort(d.pairs, n, bodies, position_d, begin, rounds, 8, nullptr,
                                                     kept.empty() ? nullptr : kept_d, sorted_colour);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
   EXPECT_EQ(colours, ranges.colours);
   EXPECT_EQ(begin, ranges.begin);
-  std::vector<std::uint32_t> sorted(n);
+  std::vector<std::uint32_t> position(n), sorted(n, 0xffffffffu);
   std::vector<std::uint8_t> gpu_colour(n), cpu_colour(n, 0xcd);
-  if (n > 0) ASSERT_EQ(cudaMemcpy(sorted.data(), order_d, n * 4, cudaMemcpyDeviceToHost), cudaSuccess);
+  if (n > 0) ASSERT_EQ(cudaMemcpy(position.data(), position_d, n * 4, cudaMemcpyDeviceToHost), cudaSuccess);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    ASSERT_LT(position[i], n) << "contact " << i;
+    ASSERT_EQ(sorted[position[i]], 0xffffffffu) << "two contacts at position " << position[i];
+    sorted[position[i]] = i;
+  }
   if (n > 0) ASSERT_EQ(cudaMemcpy(gpu_colour.data(), sorted_colour, n, cudaMemcpyDeviceToHost), cudaSuccess);
   cudaFree(kept_d);
   cudaFree(sorted_colour);
