@@ -287,16 +287,16 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
 }
 
 std::uint32_t ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n,
-                                           std::size_t body_count, real rest_speed, std::uint32_t*& order, std::vector<std::uint32_t>& begin,
-                                           int sm_count, cudaStream_t s) {
+                                           std::size_t body_count, real rest_speed, std::uint32_t*& order,
+                                           std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t s) {
   begin.assign(2, 0);
   if (n == 0) return 0;
   constexpr int kKeyBits = 8;  // the levels (< kMaxColourRounds) and the overflow's key
   const ColouringArrays at = lay_out(n, body_count, kKeyBits);
   auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
-  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, rest_speed, at.colour, at.active,
-                                                                    count);
+  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, rest_speed, at.colour,
+                                                                    at.active, count);
   MARBLES_CUDA_CHECK_LAUNCH();
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, count, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   m_bytes += sizeof(std::uint32_t);

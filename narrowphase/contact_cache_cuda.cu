@@ -3,7 +3,6 @@
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_cache_cuda.cuh"
 #include "narrowphase/contact_cache_math.hpp"
-#include "narrowphase/solver_cuda.cuh"
 #include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase::cuda {

@@ -486,8 +486,8 @@ class CudaStep final : public StepBackend {
     for (std::uint32_t l = 0; l < levels; ++l)
       nc::launch_impacts(m_records, m_impact, order, {m_levels[l], m_levels[l + 1]}, bodies, params, friction, hit,
                          m_stream);
-    nc::launch_impacts(m_records, m_impact, order, {m_levels[levels], m_levels[levels + 1], true, false}, bodies, params,
-                       friction, hit, m_stream);
+    nc::launch_impacts(m_records, m_impact, order, {m_levels[levels], m_levels[levels + 1], true, false}, bodies,
+                       params, friction, hit, m_stream);
     for (int pass = 1; pass < narrowphase::kImpactPasses && read_hit(); ++pass) {
       MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, sizeof(unsigned), m_stream));
       over_colours(false, [&](nc::ContactRange r) {
