@@ -86,8 +86,9 @@ void visit_colours(const std::vector<std::uint32_t>& begin, std::uint32_t colour
 
 // The records the launch just before wrote, [begin, end), so that the next
 // one knows whether its own are untouched by it and may be loaded before it
-// ends (the GPU's dependent launches, solver_cuda.cu): the pack writes every
-// record, a warm start none, a sweep its own range. Where a forward sweep
+// ends (the GPU's dependent launches, solver_cuda.cu): whatever ran before
+// the solve's first launch (the records made, the impacts) counts as having
+// written every record, a warm start writes none, a sweep its own range. Where a forward sweep
 // ends and a backward one starts the same range comes twice in a row (the
 // last colour, or the overflow set), and the second may not load early.
 class LastWrites {

@@ -122,16 +122,15 @@ __global__ void first_of_key_kernel(const std::uint32_t* sorted_keys, std::uint3
     if (j == 0 || sorted_keys[j] != sorted_keys[j - 1]) first[sorted_keys[j]] = j;
 }
 
-// Each sorted contact's colour as the cache keeps it.
-__global__ void sorted_colour_kernel(const std::uint32_t* sorted_keys, std::uint32_t n, std::uint8_t* sorted_colour) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
-    sorted_colour[k] = sorted_keys[k] < kMaxColours ? sorted_keys[k] : kNoKeptColour;
-}
-
-// position[order[k]] = k: where each contact goes in colour-major order.
-__global__ void position_kernel(const std::uint32_t* order, std::uint32_t n, std::uint32_t* position) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
+// position[order[k]] = k: where each contact goes in colour-major order;
+// and each sorted contact's colour as the cache keeps it (sorted_colour may
+// be null).
+__global__ void positions_kernel(const std::uint32_t* order, const std::uint32_t* sorted_keys, std::uint32_t n,
+                                 std::uint32_t* position, std::uint8_t* sorted_colour) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     position[order[k]] = k;
+    if (sorted_colour) sorted_colour[k] = sorted_keys[k] < kMaxColours ? sorted_keys[k] : kNoKeptColour;
+  }
 }
 
 }  // namespace
@@ -275,12 +274,8 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   const std::uint32_t* sorted_keys = nullptr;
   const std::uint32_t* order = sort_by_colour(at, n, kMaxColours, kKeyBits, kept_colour ? kMaxColours : 2 * rounds_run,
                                               begin, &sorted_keys, sm_count, s);
-  if (sorted_colour) {
-    sorted_colour_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(sorted_keys, n, sorted_colour);
-    MARBLES_CUDA_CHECK_LAUNCH();
-  }
   // The colours are read (keys_kernel): their array takes the positions.
-  position_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(order, n, at.colour);
+  positions_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(order, sorted_keys, n, at.colour, sorted_colour);
   MARBLES_CUDA_CHECK_LAUNCH();
   position = at.colour;
   return static_cast<std::uint32_t>(begin.size() - 2);

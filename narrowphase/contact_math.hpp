@@ -209,11 +209,19 @@ MARBLES_HD_INLINE real rolling_mass_of(const BodyState& A, const BodyState& B) {
   return k_roll > 0 ? real(1) / k_roll : real(0);
 }
 
+// The effective masses a stage reads: the normal one always, the tangential
+// one with friction, the rolling one with rolling resistance. The stages on
+// the GPU's records compute them from the bodies they load (solver_math.hpp).
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE void set_masses(Contact& c, const BodyState& A, const BodyState& B) {
+  c.normal_mass = normal_mass_of(A, B);
+  if constexpr (Friction) c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
+  if constexpr (Rolling) c.rolling_mass = rolling_mass_of(A, B);
+}
+
 // Prepare stage: effective masses and the approach speed before the solve.
 MARBLES_HD_INLINE void prepare_contact(Contact& c, const BodyState& A, const BodyState& B) {
-  c.normal_mass = normal_mass_of(A, B);
-  c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
-  c.rolling_mass = rolling_mass_of(A, B);
+  set_masses<true, true>(c, A, B);
   c.approach_speed = dot(A.v - B.v, c.normal);
 }
 

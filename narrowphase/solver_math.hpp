@@ -258,9 +258,7 @@ MARBLES_HD_INLINE void solve_loaded(const SweepRecords& s, std::uint32_t k, Cont
                                     real inv_h) {
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
-  c.normal_mass = normal_mass_of(A, B);
-  if constexpr (Friction) c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
-  if constexpr (Rolling) c.rolling_mass = rolling_mass_of(A, B);
+  set_masses<Friction, Rolling>(c, A, B);
   solve_states<Friction, Rolling>(c, A, B, inv_h);
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
@@ -349,8 +347,7 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::
   c.rebound_shift = extra.w;
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
-  c.normal_mass = normal_mass_of(A, B);
-  if constexpr (Friction) c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
+  set_masses<Friction, false>(c, A, B);
   if (!impact_states<Friction>(c, A, B, p)) return false;
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
@@ -363,7 +360,7 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::
 
 // Record k as the whole contact the CPU holds after the step: every field
 // the records and the impact word keep, the effective masses from the
-// world's inverse masses and inertias (prepare_contact's expressions).
+// world's inverse masses and inertias.
 MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const Real4* impact, std::uint32_t k,
                                             const BodiesView& world) {
   Contact c = load_record<true, true>(s, k, s.impulse[k]);
@@ -374,10 +371,7 @@ MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const Real4* 
   c.approach_speed = i.x;
   c.coeff.restitution = i.y;
   c.impact_impulse = i.z;
-  const BodyState A = world_body(world, c.a, c), B = world_body(world, c.b, c);
-  c.normal_mass = normal_mass_of(A, B);
-  c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
-  c.rolling_mass = rolling_mass_of(A, B);
+  set_masses<true, true>(c, world_body(world, c.a, c), world_body(world, c.b, c));
   return c;
 }
 

@@ -117,7 +117,6 @@ class CudaStep final : public StepBackend {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_lookahead = h;
     m_count = 0;
-    m_records_valid = false;
     if (!m_model.collisions && !m_model.wall_contacts) return;
     const BodiesView bodies = m_device.view();
     const std::size_t n = bodies.count;
@@ -195,7 +194,6 @@ class CudaStep final : public StepBackend {
       const nc::ContactInputs in{m_device.view(), walls(), m_table, m_lookahead, m_reach.get_as<real>()};
       nc::launch_sorted_records(in, pairs_d(), m_kept_valid ? m_match.get_as<std::uint32_t>() : nullptr,
                                 m_cache.entries(), position, m_count, m_records, m_impact, m_sm, m_stream);
-      m_records_valid = true;
     }
     m_counters.colours = std::max(m_counters.colours, m_colours);
     m_counters.overflow += m_begin[m_colours + 1] - m_begin[m_colours];
@@ -379,7 +377,7 @@ class CudaStep final : public StepBackend {
   // inertias, which a step leaves as they were.
   const std::vector<narrowphase::Contact>& contacts() override {
     if (m_contacts_stale) {
-      const std::uint32_t n = m_records_valid ? m_count : 0;
+      const std::uint32_t n = m_count;  // the records of a step's last substep hold them all
       m_host_contacts.resize(n);
       constexpr std::uint32_t kChunk = 1u << 16;
       auto* chunk = m_contact_chunk.as<narrowphase::Contact>(std::min(n, kChunk));
@@ -535,12 +533,10 @@ class CudaStep final : public StepBackend {
   std::uint32_t m_count = 0;          // contacts of this substep
   bool m_kept_valid = false;          // m_kept_colour holds this substep's kept colours
   bool m_mirror = false;              // the next parallel colour launch runs mirrored (over_colours)
-  // The substep's contacts as every stage after the colouring reads them,
-  // and whether they are this substep's (made by the colouring, cleared by
-  // the next find_contacts).
+  // The substep's contacts as every stage after the colouring reads them
+  // (made by the colouring).
   narrowphase::SweepRecords m_records;
   narrowphase::Real4* m_impact = nullptr;
-  bool m_records_valid = false;
   real m_lookahead = 0;  // find_contacts' h: the colouring makes the contacts again with it
   std::uint32_t m_colours = 0;
   std::vector<std::uint32_t> m_begin{0, 0}, m_levels{0, 0};

@@ -536,7 +536,7 @@ TEST(ContactCache, StoreEqualsASortOfTheKeptContacts) {
 namespace marbles::narrowphase {
 namespace {
 
-// The solve's launches as the GPU makes them (the pack, the warm start
+// The solve's launches as the GPU makes them (the records made, the warm start
 // forwards, then sweeps forwards and backwards in turn, an empty range
 // launching nothing) over random colour ranges, some colours and some
 // overflow sets empty: a launch may load early exactly when the launch just
@@ -549,7 +549,7 @@ TEST(LastWrites, EarlyExactlyWhenTheLaunchBeforeWroteNoneOfItsRecords) {
     std::vector<std::uint32_t> begin{0};
     for (std::uint32_t c = 0; c <= colours; ++c) begin.push_back(begin.back() + static_cast<std::uint32_t>(rng() % 4 == 0 ? 0 : rng() % 50));
     const std::uint32_t n = begin.back();
-    std::vector<int> writer(n, 0);  // launch 0, the pack, wrote every record
+    std::vector<int> writer(n, 0);  // launch 0, the records made, wrote every record
     int launch = 0;
     LastWrites last(n);
     auto run = [&](std::uint32_t b, std::uint32_t e, bool writes) {
