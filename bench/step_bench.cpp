@@ -25,6 +25,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "bench/api_count.hpp"
 #include "core/error.hpp"
 #include "narrowphase/solver.hpp"
 #include "sim/particles.hpp"
@@ -399,6 +400,7 @@ struct Row {
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   double bytes_per_step = 0;       // median host<->device bytes
   double device_bytes_per_sphere = 0;
+  std::optional<double> launches, waits;  // per step, medians of the counted steps (none where nothing counts)
   double verb_ms[static_cast<int>(Verb::count)] = {};  // medians of the profiled steps
   std::optional<SettleInfo> settle;
 };
@@ -430,6 +432,25 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   row.max_overlap_pct = 100 * max_overlap;
   row.bytes_per_step = median(bytes);
   row.device_bytes_per_sphere = static_cast<double>(sim.device_bytes()) / static_cast<double>(n);
+
+  // Kernel launches and host waits: a few more steps, counted apart, since
+  // counting slows every CUDA call.
+  {
+    ApiCounter counter;
+    if (counter.counting()) {
+      std::vector<double> launches, waits;
+      ApiCounts before = counter.counts();
+      for (int k = 0; k < std::min(repeats, 5); ++k) {
+        sim.step();
+        const ApiCounts after = counter.counts();
+        launches.push_back(static_cast<double>(after.launches - before.launches));
+        waits.push_back(static_cast<double>(after.waits - before.waits));
+        before = after;
+      }
+      row.launches = median(launches);
+      row.waits = median(waits);
+    }
+  }
 
   // Per verb and the broad phase: a separate run, since profiling waits for
   // each verb (and the CUDA broad phase times its stages only then).
@@ -509,8 +530,11 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
     nlohmann::ordered_json doc{{"benchmark", "step"}, {"backend", options.backend}, {"scene", options.scene},
                                {"precision", kRealName}, {"threads", threads()},
                                {"cpu_lanes", lanes ? nlohmann::ordered_json(lanes) : nlohmann::ordered_json()},
-                               {"repeats", options.repeats}, {"warmup", warmup}, {"launches_per_step", nullptr},
+                               {"repeats", options.repeats}, {"warmup", warmup},
+                               {"launches_per_step", nlohmann::ordered_json::array()},
                                {"results", nlohmann::ordered_json::array()}};
+    auto count = [](const std::optional<double>& v) { return v ? nlohmann::ordered_json(*v) : nlohmann::ordered_json(); };
+    for (const Row& r : rows) doc["launches_per_step"].push_back(count(r.launches));  // one per N, as in results
     for (const Row& r : rows) {
       nlohmann::ordered_json row{{"n", r.n},
                                  {"step_ms_median", r.step_ms},
@@ -527,6 +551,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"ke_per_sphere_J", r.ke_per_sphere},
                                  {"bytes_per_step_median", r.bytes_per_step},
                                  {"device_bytes_per_sphere", r.device_bytes_per_sphere},
+                                 {"launches_per_step", count(r.launches)},
+                                 {"host_waits_per_step", count(r.waits)},
                                  {"verb_ms", nlohmann::ordered_json::object()}};
       for (int v = 0; v < kVerbs; ++v) row["verb_ms"][kVerbNames[v]] = r.verb_ms[v];
       if (r.settle)
@@ -548,7 +574,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"
       << std::setw(10) << "contacts" << std::setw(7) << "coord" << std::setw(8) << "colours" << std::setw(9)
       << "overflow" << std::setw(9) << "overlap%" << std::setw(7) << "proj" << std::setw(12) << "bytes/step"
-      << std::setw(11) << "dev B/sph" << "\n";
+      << std::setw(11) << "dev B/sph" << std::setw(9) << "launches" << std::setw(7) << "waits" << "\n";
+  auto counted = [](const std::optional<double>& v) { return v ? std::to_string(std::lround(*v)) : std::string("-"); };
   for (const Row& r : rows)
     out << std::setw(9) << r.n << std::fixed << std::setprecision(2) << std::setw(10) << r.step_ms << std::setw(9)
         << r.step_min_ms << std::setw(9) << r.broadphase_ms << std::setprecision(3) << std::setw(10)
@@ -556,11 +583,12 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         << r.colours << std::setprecision(0) << std::setw(9) << r.overflow << std::setprecision(3) << std::setw(9)
         << r.max_overlap_pct << std::setprecision(2) << std::setw(7) << r.projection_sweeps << std::setprecision(0)
         << std::setw(12) << r.bytes_per_step << std::setprecision(1)
-        << std::setw(11) << r.device_bytes_per_sphere << "\n"
+        << std::setw(11) << r.device_bytes_per_sphere << std::setw(9) << counted(r.launches) << std::setw(7)
+        << counted(r.waits) << "\n"
         << std::defaultfloat;
   out << "(contacts = contacts per sphere per substep; coord = contacts a sphere takes part in; overlap% = largest,\n"
-         " of a radius; proj = projection sweeps per substep (until settled); bp ms: of the profiled steps; launches\n"
-         " per step are not counted)\n";
+         " of a radius; proj = projection sweeps per substep (until settled); bp ms: of the profiled steps;\n"
+         " launches, waits = kernel launches and host waits per step, counted in separate steps (- where not counted))\n";
   out << "per verb, median ms of " << options.repeats << " profiled steps (profiling waits for each verb)\n";
   out << std::setw(20) << std::left << "verb" << std::right;
   for (const Row& r : rows) out << std::setw(11) << r.n;
