@@ -33,4 +33,9 @@ class ApiCounter {
   void* m_subscriber = nullptr;
 };
 
+// A profiler's window (cudaProfilerStart / cudaProfilerStop): the steps
+// between on and off are the ones a profiler started with its collection
+// off (`ncu --profile-from-start off`) looks at. No-op without CUDA.
+void profiled_steps(bool on);
+
 }  // namespace marbles::bench

@@ -1,4 +1,5 @@
 // bench/api_count_cupti.cpp — ApiCounter over CUPTI's runtime callbacks.
+#include <cuda_profiler_api.h>
 #include <cupti.h>
 
 #include <atomic>
@@ -72,5 +73,7 @@ ApiCounts ApiCounter::counts() const {
   if (!m_subscriber) return {};
   return {g_launches.load(), g_waits.load()};
 }
+
+void profiled_steps(bool on) { (void)(on ? cudaProfilerStart() : cudaProfilerStop()); }
 
 }  // namespace marbles::bench

@@ -7,4 +7,6 @@ ApiCounter::ApiCounter() = default;
 ApiCounter::~ApiCounter() = default;
 ApiCounts ApiCounter::counts() const { return {}; }
 
+void profiled_steps(bool) {}
+
 }  // namespace marbles::bench
