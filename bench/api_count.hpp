@@ -15,7 +15,7 @@
 namespace marbles::bench {
 
 struct ApiCounts {
-  std::uint64_t launches = 0;  // kernel launches (plain, extended, cooperative), a CUB call's each
+  std::uint64_t launches = 0;  // kernels launched one by one (plain, extended, cooperative; CUB's each), not graphs
   std::uint64_t waits = 0;     // calls that block the host until the device is done with earlier work
 };
 
