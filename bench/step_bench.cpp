@@ -411,7 +411,8 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   for (int k = 0; k < warmup; ++k) sim.step();
   std::vector<double> step_ms, overflow, bytes;
   double max_overlap = 0;
-  profiled_steps(true);  // a profiler started with its collection off sees the timed steps only
+  const bool on_device = sim.backend_name() == "cuda";  // the CPU backend touches no device
+  if (on_device) profiled_steps(true);  // a profiler started with its collection off sees the timed steps only
   for (int k = 0; k < repeats; ++k) {
     const auto t0 = std::chrono::steady_clock::now();
     sim.step();
@@ -425,7 +426,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     max_overlap = std::max(max_overlap, static_cast<double>(c.max_overlap));
     row.projection_sweeps += static_cast<double>(c.projection_sweeps) / sim.substeps() / repeats;
   }
-  profiled_steps(false);  // each step ends with a wait for its flags: nothing of it is still running
+  if (on_device) profiled_steps(false);  // each step ends with a wait for its flags: nothing of it is still running
   if (sim.non_finite()) throw RuntimeFailure("N = " + std::to_string(n) + ": non-finite state in the timed steps");
   row.step_ms = median(step_ms);
   row.step_min_ms = *std::min_element(step_ms.begin(), step_ms.end());
@@ -435,9 +436,9 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   row.bytes_per_step = median(bytes);
   row.device_bytes_per_sphere = static_cast<double>(sim.device_bytes()) / static_cast<double>(n);
 
-  // Kernel launches and host waits: a few more steps, counted apart, since
+  // Kernel launches and host waits (CUDA backend): a few more steps, counted apart, since
   // counting slows every CUDA call.
-  {
+  if (on_device) {
     ApiCounter counter;
     if (counter.counting()) {
       std::vector<double> launches, waits;
