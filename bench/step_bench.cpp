@@ -536,7 +536,9 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                {"repeats", options.repeats}, {"warmup", warmup},
                                {"launches_per_step", nlohmann::ordered_json::array()},
                                {"results", nlohmann::ordered_json::array()}};
-    auto count = [](const std::optional<double>& v) { return v ? nlohmann::ordered_json(*v) : nlohmann::ordered_json(); };
+    auto count = [](const std::optional<double>& v) {
+      return v ? nlohmann::ordered_json(*v) : nlohmann::ordered_json();
+    };
     for (const Row& r : rows) doc["launches_per_step"].push_back(count(r.launches));  // one per N, as in results
     for (const Row& r : rows) {
       nlohmann::ordered_json row{{"n", r.n},
@@ -591,7 +593,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         << std::defaultfloat;
   out << "(contacts = contacts per sphere per substep; coord = contacts a sphere takes part in; overlap% = largest,\n"
          " of a radius; proj = projection sweeps per substep (until settled); bp ms: of the profiled steps;\n"
-         " launches, waits = kernel launches and host waits per step, counted in separate steps (- where not counted))\n";
+         " launches, waits = kernel launches and host waits per step, counted in separate steps\n"
+         " (- where not counted))\n";
   out << "per verb, median ms of " << options.repeats << " profiled steps (profiling waits for each verb)\n";
   out << std::setw(20) << std::left << "verb" << std::right;
   for (const Row& r : rows) out << std::setw(11) << r.n;

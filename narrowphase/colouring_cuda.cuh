@@ -43,8 +43,8 @@ class ColouringCuda {
   // until its next user.
   std::uint32_t colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,
                                 const std::uint32_t*& position, std::vector<std::uint32_t>& begin,
-                                std::uint32_t& rounds, int sm_count, cudaStream_t stream, const std::uint8_t* kept_colour = nullptr,
-                                std::uint8_t* sorted_colour = nullptr);
+                                std::uint32_t& rounds, int sm_count, cudaStream_t stream,
+                                const std::uint8_t* kept_colour = nullptr, std::uint8_t* sorted_colour = nullptr);
 
   // The impact stage's levels over records[0, n) and their impact words
   // (solver_math.hpp): the candidates (approach faster than rest_speed)

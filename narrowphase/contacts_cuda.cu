@@ -1,5 +1,6 @@
 #include "core/cuda_check.hpp"
 #include "core/device_buffer.cuh"
+#include "narrowphase/contact_cache_math.hpp"
 #include "narrowphase/contacts_cuda.cuh"
 
 namespace marbles::narrowphase::cuda {

@@ -16,7 +16,6 @@
 #include "core/pair.hpp"
 #include "core/spheres.hpp"
 #include "narrowphase/contact_cache_cuda.cuh"
-#include "narrowphase/contact_cache_math.hpp"
 #include "narrowphase/contact_math.hpp"
 #include "narrowphase/solver_math.hpp"
 

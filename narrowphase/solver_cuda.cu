@@ -108,6 +108,7 @@ void launch_colour(void (*kernel)(Params...), int grid, cudaStream_t s, Args&&..
   config.attrs = attribute;
   config.numAttrs = 1;
   MARBLES_CUDA_CHECK(cudaLaunchKernelEx(&config, kernel, std::forward<Args>(args)...));
+  MARBLES_CUDA_CHECK_LAUNCH();  // with MARBLES_CUDA_SYNC=1: a wait, the kernel's error here
 }
 
 template <bool Friction>

@@ -13,11 +13,8 @@ namespace {
 
 __global__ void touch(int* x) { x[threadIdx.x] += 1; }
 
-#define REQUIRE_DEVICE() \
-  if (!marbles::cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device"
-
 TEST(ApiCounter, CountsEachLaunchAndEachWait) {
-  REQUIRE_DEVICE();
+  if (!marbles::cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device";
   int* x = nullptr;
   MARBLES_CUDA_CHECK(cudaMalloc(&x, 32 * sizeof(int)));
   MARBLES_CUDA_CHECK(cudaMemset(x, 0, 32 * sizeof(int)));

@@ -25,6 +25,16 @@ Vec3 random_unit(std::mt19937_64& rng) {
   }
 }
 
+// Random motion, sphere by sphere: each velocity component uniform in
+// (-speed, speed) m/s, each spin component `spin` times one such draw (rad/s).
+void random_motion(std::mt19937_64& rng, double speed, double spin, std::vector<Vec3>& vel, std::vector<Vec3>& omega) {
+  std::uniform_real_distribution<double> u(-speed, speed);
+  for (std::size_t i = 0; i < vel.size(); ++i) {
+    vel[i] = Vec3(real(u(rng)), real(u(rng)), real(u(rng)));
+    omega[i] = Vec3(real(u(rng)), real(u(rng)), real(u(rng))) * real(spin);
+  }
+}
+
 // side^3 spheres of radius r (about 4.2 g) on a cubic lattice of pitch
 // `pitch` over a floor plane at z = 0, the lowest centres at height z0, each
 // coordinate jittered by up to `jitter` (m); the lattice neighbours are the
@@ -213,12 +223,8 @@ TEST(Solver, EveryLaneKindGivesTheSameBits) {
   std::mt19937_64 rng(21);
   Lattice lattice(24, r, 2 * r * 0.995, r * 0.999, 1e-4, rng);
   const std::size_t n = lattice.n;
-  std::uniform_real_distribution<double> speed(-0.05, 0.05);
   std::vector<Vec3> vel0(n), omega0(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    vel0[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng)));
-    omega0[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng))) * real(100);
-  }
+  random_motion(rng, 0.05, 100, vel0, omega0);
   PairCoefficients coeff{real(0.3), real(0.5), real(0.02), real(0.01)};
   PairTable table{&coeff, 1};
   const real h = real(1e-3);
@@ -265,12 +271,8 @@ TEST(Solver, CacheFromTheRecordsEqualsCacheFromTheContacts) {
   const real r = real(0.01);
   std::mt19937_64 rng(23);
   Lattice lattice(12, r, 2 * r * 0.995, r * 0.999, 1e-4, rng);
-  std::uniform_real_distribution<double> speed(-0.05, 0.05);
   std::vector<Vec3> vel0(lattice.n), omega0(lattice.n);
-  for (std::size_t i = 0; i < lattice.n; ++i) {
-    vel0[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng)));
-    omega0[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng))) * real(100);
-  }
+  random_motion(rng, 0.05, 100, vel0, omega0);
   PairCoefficients coeff{real(0.3), real(0.5), real(0.02), real(0.01)};
   PairTable table{&coeff, 1};
   const real h = real(1e-3);
@@ -379,12 +381,9 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
   std::mt19937_64 rng(29);
   Lattice lattice(10, r, 2 * r * 1.002, r * 1.001, 2e-5, rng);
   const std::size_t n = lattice.n;
-  std::uniform_real_distribution<double> speed(-0.5, 0.5), u(0, 1);
+  std::uniform_real_distribution<double> u(0, 1);
   std::vector<Vec3> vel(n), omega(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    vel[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng)));
-    omega[i] = Vec3(real(speed(rng)), real(speed(rng)), real(speed(rng))) * real(50);
-  }
+  random_motion(rng, 0.5, 50, vel, omega);
   PairCoefficients coeff{real(0.6), real(0.4), real(0.02), real(0.01)};
   PairTable table{&coeff, 1};
   const real h = real(1e-3);
