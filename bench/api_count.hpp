@@ -33,6 +33,28 @@ class ApiCounter {
   void* m_subscriber = nullptr;
 };
 
+// The device's busy time over a stretch of host time, from CUPTI's activity
+// records of kernels, copies and sets: the union of their intervals. The rest
+// of the stretch the device waited for the host (its launches, its waits).
+// Tracing is on only while a DeviceTimeline lives; tracing() is false without
+// CUPTI or where a tool already traces (Nsight Compute, compute-sanitizer).
+class DeviceTimeline {
+ public:
+  DeviceTimeline();
+  ~DeviceTimeline();
+  DeviceTimeline(const DeviceTimeline&) = delete;
+  DeviceTimeline& operator=(const DeviceTimeline&) = delete;
+
+  bool tracing() const { return m_on; }
+  std::uint64_t now() const;  // ns, on the records' clock
+  // The device's work that began in [t0, t1), as the length of the union of
+  // its intervals (ns). Flushes the records first: call it once the work is done.
+  std::uint64_t busy_ns(std::uint64_t t0, std::uint64_t t1);
+
+ private:
+  bool m_on = false;
+};
+
 // A profiler's window (cudaProfilerStart / cudaProfilerStop): the steps
 // between on and off are the ones a profiler started with its collection
 // off (`ncu --profile-from-start off`) looks at. No-op without CUDA.

@@ -1,8 +1,13 @@
-// bench/api_count_cupti.cpp — ApiCounter over CUPTI's runtime callbacks.
+// bench/api_count_cupti.cpp — ApiCounter over CUPTI's runtime callbacks,
+// DeviceTimeline over its activity records.
 #include <cuda_profiler_api.h>
 #include <cupti.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cstdlib>
+#include <mutex>
+#include <vector>
 
 #include "bench/api_count.hpp"
 
@@ -51,7 +56,104 @@ void CUPTIAPI on_call(void*, CUpti_CallbackDomain domain, CUpti_CallbackId id, c
   else if (is_wait(id)) g_waits.fetch_add(1, std::memory_order_relaxed);
 }
 
+// The activity records' intervals (kernels, copies, sets), as CUPTI hands
+// over its buffers: from its own thread, or within cuptiActivityFlushAll.
+struct Interval {
+  std::uint64_t start = 0, end = 0;
+};
+std::mutex g_interval_mutex;
+std::vector<Interval> g_intervals;
+constexpr CUpti_ActivityKind kTraced[] = {CUPTI_ACTIVITY_KIND_CONCURRENT_KERNEL, CUPTI_ACTIVITY_KIND_MEMCPY,
+                                          CUPTI_ACTIVITY_KIND_MEMSET};
+
+void CUPTIAPI buffer_requested(uint8_t** buffer, size_t* size, size_t* max_records) {
+  constexpr std::size_t kBytes = std::size_t(4) << 20;
+  *buffer = static_cast<uint8_t*>(std::aligned_alloc(8, kBytes));
+  *size = *buffer ? kBytes : 0;
+  *max_records = 0;
+}
+
+void CUPTIAPI buffer_completed(CUcontext, uint32_t, uint8_t* buffer, size_t, size_t valid) {
+  std::vector<Interval> got;
+  CUpti_Activity* record = nullptr;
+  while (cuptiActivityGetNextRecord(buffer, valid, &record) == CUPTI_SUCCESS) {
+    switch (record->kind) {
+      case CUPTI_ACTIVITY_KIND_CONCURRENT_KERNEL: {
+        const auto* k = reinterpret_cast<const CUpti_ActivityKernel10*>(record);
+        got.push_back({k->start, k->end});
+        break;
+      }
+      case CUPTI_ACTIVITY_KIND_MEMCPY: {
+        const auto* c = reinterpret_cast<const CUpti_ActivityMemcpy6*>(record);
+        got.push_back({c->start, c->end});
+        break;
+      }
+      case CUPTI_ACTIVITY_KIND_MEMSET: {
+        const auto* m = reinterpret_cast<const CUpti_ActivityMemset4*>(record);
+        got.push_back({m->start, m->end});
+        break;
+      }
+      default:
+        break;
+    }
+  }
+  std::free(buffer);
+  const std::lock_guard<std::mutex> lock(g_interval_mutex);
+  g_intervals.insert(g_intervals.end(), got.begin(), got.end());
+}
+
 }  // namespace
+
+DeviceTimeline::DeviceTimeline() {
+  static const bool registered = cuptiActivityRegisterCallbacks(buffer_requested, buffer_completed) == CUPTI_SUCCESS;
+  if (!registered) return;
+  for (CUpti_ActivityKind kind : kTraced)
+    if (cuptiActivityEnable(kind) != CUPTI_SUCCESS) {
+      for (CUpti_ActivityKind k : kTraced) cuptiActivityDisable(k);
+      return;
+    }
+  const std::lock_guard<std::mutex> lock(g_interval_mutex);
+  g_intervals.clear();
+  m_on = true;
+}
+
+DeviceTimeline::~DeviceTimeline() {
+  if (!m_on) return;
+  for (CUpti_ActivityKind kind : kTraced) cuptiActivityDisable(kind);
+  cuptiActivityFlushAll(1);
+  const std::lock_guard<std::mutex> lock(g_interval_mutex);
+  g_intervals.clear();
+}
+
+std::uint64_t DeviceTimeline::now() const {
+  std::uint64_t t = 0;
+  if (m_on) cuptiGetTimestamp(&t);
+  return t;
+}
+
+std::uint64_t DeviceTimeline::busy_ns(std::uint64_t t0, std::uint64_t t1) {
+  if (!m_on) return 0;
+  cuptiActivityFlushAll(1);  // hands over every record made so far, in this call
+  std::vector<Interval> in;
+  {
+    const std::lock_guard<std::mutex> lock(g_interval_mutex);
+    for (const Interval& i : g_intervals)
+      if (i.start >= t0 && i.start < t1 && i.end > i.start) in.push_back(i);
+  }
+  std::sort(in.begin(), in.end(), [](const Interval& a, const Interval& b) { return a.start < b.start; });
+  std::uint64_t busy = 0, open_start = 0, open_end = 0;
+  bool open = false;
+  for (const Interval& i : in) {
+    if (open && i.start <= open_end) {
+      open_end = std::max(open_end, i.end);
+      continue;
+    }
+    if (open) busy += open_end - open_start;
+    open_start = i.start, open_end = i.end, open = true;
+  }
+  if (open) busy += open_end - open_start;
+  return busy;
+}
 
 ApiCounter::ApiCounter() {
   CUpti_SubscriberHandle subscriber = nullptr;

@@ -1,4 +1,5 @@
-// bench/api_count_none.cpp — ApiCounter in a build without CUPTI: counts nothing.
+// bench/api_count_none.cpp — ApiCounter and DeviceTimeline in a build without
+// CUPTI: they count and trace nothing.
 #include "bench/api_count.hpp"
 
 namespace marbles::bench {
@@ -6,6 +7,11 @@ namespace marbles::bench {
 ApiCounter::ApiCounter() = default;
 ApiCounter::~ApiCounter() = default;
 ApiCounts ApiCounter::counts() const { return {}; }
+
+DeviceTimeline::DeviceTimeline() = default;
+DeviceTimeline::~DeviceTimeline() = default;
+std::uint64_t DeviceTimeline::now() const { return 0; }
+std::uint64_t DeviceTimeline::busy_ns(std::uint64_t, std::uint64_t) { return 0; }
 
 void profiled_steps(bool) {}
 

@@ -401,6 +401,7 @@ struct Row {
   double bytes_per_step = 0;       // median host<->device bytes
   double device_bytes_per_sphere = 0;
   std::optional<double> launches, waits;  // per step, medians of the counted steps (none where nothing counts)
+  std::optional<double> idle_ms;          // per step, the device waiting on the host: median of the traced steps
   double verb_ms[static_cast<int>(Verb::count)] = {};  // medians of the profiled steps
   std::optional<SettleInfo> settle;
 };
@@ -452,6 +453,22 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
       }
       row.launches = median(launches);
       row.waits = median(waits);
+    }
+  }
+  // The device's idle time a step (CUDA backend): the step's wall time less
+  // the union of its kernels, copies and sets, in a few more steps, traced
+  // apart (tracing adds a little to each launch).
+  if (on_device) {
+    DeviceTimeline timeline;
+    if (timeline.tracing()) {
+      std::vector<double> idle;
+      for (int k = 0; k < std::min(repeats, 5); ++k) {
+        const std::uint64_t t0 = timeline.now();
+        sim.step();  // ends with its wait for the flags: its work is done
+        const std::uint64_t t1 = timeline.now();
+        idle.push_back(static_cast<double>(t1 - t0 - std::min(t1 - t0, timeline.busy_ns(t0, t1))) * 1e-6);
+      }
+      row.idle_ms = median(idle);
     }
   }
 
@@ -558,6 +575,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"device_bytes_per_sphere", r.device_bytes_per_sphere},
                                  {"launches_per_step", count(r.launches)},
                                  {"host_waits_per_step", count(r.waits)},
+                                 {"device_idle_ms_per_step", count(r.idle_ms)},
                                  {"verb_ms", nlohmann::ordered_json::object()}};
       for (int v = 0; v < kVerbs; ++v) row["verb_ms"][kVerbNames[v]] = r.verb_ms[v];
       if (r.settle)
@@ -579,8 +597,14 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"
       << std::setw(10) << "contacts" << std::setw(7) << "coord" << std::setw(8) << "colours" << std::setw(9)
       << "overflow" << std::setw(9) << "overlap%" << std::setw(7) << "proj" << std::setw(12) << "bytes/step"
-      << std::setw(11) << "dev B/sph" << std::setw(9) << "launches" << std::setw(7) << "waits" << "\n";
+      << std::setw(11) << "dev B/sph" << std::setw(9) << "launches" << std::setw(7) << "waits" << std::setw(8) << "idle ms"
+      << "\n";
   auto counted = [](const std::optional<double>& v) { return v ? std::to_string(std::lround(*v)) : std::string("-"); };
+  auto milliseconds = [](const std::optional<double>& v) {
+    char text[32] = "-";
+    if (v) std::snprintf(text, sizeof text, "%.3f", *v);
+    return std::string(text);
+  };
   for (const Row& r : rows)
     out << std::setw(9) << r.n << std::fixed << std::setprecision(2) << std::setw(10) << r.step_ms << std::setw(9)
         << r.step_min_ms << std::setw(9) << r.broadphase_ms << std::setprecision(3) << std::setw(10)
@@ -589,11 +613,13 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         << r.max_overlap_pct << std::setprecision(2) << std::setw(7) << r.projection_sweeps << std::setprecision(0)
         << std::setw(12) << r.bytes_per_step << std::setprecision(1)
         << std::setw(11) << r.device_bytes_per_sphere << std::setw(9) << counted(r.launches) << std::setw(7)
-        << counted(r.waits) << "\n"
+        << counted(r.waits) << std::setprecision(3) << std::setw(8)
+        << milliseconds(r.idle_ms) << "\n"
         << std::defaultfloat;
   out << "(contacts = contacts per sphere per substep; coord = contacts a sphere takes part in; overlap% = largest,\n"
          " of a radius; proj = projection sweeps per substep (until settled); bp ms: of the profiled steps;\n"
-         " launches, waits = kernel launches and host waits per step, counted in separate steps\n"
+         " launches, waits = kernel launches and host waits per step, counted in separate steps;\n"
+         " idle ms = the device's time a step without a kernel, copy or set, traced in separate steps\n"
          " (- where not counted))\n";
   out << "per verb, median ms of " << options.repeats << " profiled steps (profiling waits for each verb)\n";
   out << std::setw(20) << std::left << "verb" << std::right;
