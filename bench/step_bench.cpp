@@ -401,7 +401,9 @@ struct Row {
   double bytes_per_step = 0;       // median host<->device bytes
   double device_bytes_per_sphere = 0;
   std::optional<double> launches, waits;  // per step, medians of the counted steps (none where nothing counts)
-  std::optional<double> idle_ms;          // per step, the device waiting on the host: median of the traced steps
+  std::optional<double> busy_ms;          // per step, the device at work: median of the traced steps
+  std::optional<double> traced_ms;        // per step, the traced steps' wall time (tracing slows the host)
+  std::optional<double> idle_ms() const { return busy_ms ? std::optional(std::max(0.0, step_ms - *busy_ms)) : std::nullopt; }
   double verb_ms[static_cast<int>(Verb::count)] = {};  // medians of the profiled steps
   std::optional<SettleInfo> settle;
 };
@@ -455,20 +457,23 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
       row.waits = median(waits);
     }
   }
-  // The device's idle time a step (CUDA backend): the step's wall time less
-  // the union of its kernels, copies and sets, in a few more steps, traced
-  // apart (tracing adds a little to each launch).
+  // The device's busy time a step (CUDA backend): the union of a step's
+  // kernels, copies and sets, in a few more steps traced apart. Tracing adds
+  // to each launch on the host, not to the work on the device, so the idle
+  // time is the untraced steps' median less the busy time.
   if (on_device) {
     DeviceTimeline timeline;
     if (timeline.tracing()) {
-      std::vector<double> idle;
+      std::vector<double> busy, wall;
       for (int k = 0; k < std::min(repeats, 5); ++k) {
         const std::uint64_t t0 = timeline.now();
         sim.step();  // ends with its wait for the flags: its work is done
         const std::uint64_t t1 = timeline.now();
-        idle.push_back(static_cast<double>(t1 - t0 - std::min(t1 - t0, timeline.busy_ns(t0, t1))) * 1e-6);
+        busy.push_back(static_cast<double>(timeline.busy_ns(t0, t1)) * 1e-6);
+        wall.push_back(static_cast<double>(t1 - t0) * 1e-6);
       }
-      row.idle_ms = median(idle);
+      row.busy_ms = median(busy);
+      row.traced_ms = median(wall);
     }
   }
 
@@ -575,7 +580,9 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"device_bytes_per_sphere", r.device_bytes_per_sphere},
                                  {"launches_per_step", count(r.launches)},
                                  {"host_waits_per_step", count(r.waits)},
-                                 {"device_idle_ms_per_step", count(r.idle_ms)},
+                                 {"device_busy_ms_per_step", count(r.busy_ms)},
+                                 {"device_idle_ms_per_step", count(r.idle_ms())},
+                                 {"traced_step_ms", count(r.traced_ms)},
                                  {"verb_ms", nlohmann::ordered_json::object()}};
       for (int v = 0; v < kVerbs; ++v) row["verb_ms"][kVerbNames[v]] = r.verb_ms[v];
       if (r.settle)
@@ -597,7 +604,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"
       << std::setw(10) << "contacts" << std::setw(7) << "coord" << std::setw(8) << "colours" << std::setw(9)
       << "overflow" << std::setw(9) << "overlap%" << std::setw(7) << "proj" << std::setw(12) << "bytes/step"
-      << std::setw(11) << "dev B/sph" << std::setw(9) << "launches" << std::setw(7) << "waits" << std::setw(8) << "idle ms"
+      << std::setw(11) << "dev B/sph" << std::setw(9) << "launches" << std::setw(7) << "waits" << std::setw(8) << "busy ms"
       << "\n";
   auto counted = [](const std::optional<double>& v) { return v ? std::to_string(std::lround(*v)) : std::string("-"); };
   auto milliseconds = [](const std::optional<double>& v) {
@@ -614,12 +621,13 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         << std::setw(12) << r.bytes_per_step << std::setprecision(1)
         << std::setw(11) << r.device_bytes_per_sphere << std::setw(9) << counted(r.launches) << std::setw(7)
         << counted(r.waits) << std::setprecision(3) << std::setw(8)
-        << milliseconds(r.idle_ms) << "\n"
+        << milliseconds(r.busy_ms) << "\n"
         << std::defaultfloat;
   out << "(contacts = contacts per sphere per substep; coord = contacts a sphere takes part in; overlap% = largest,\n"
          " of a radius; proj = projection sweeps per substep (until settled); bp ms: of the profiled steps;\n"
          " launches, waits = kernel launches and host waits per step, counted in separate steps;\n"
-         " idle ms = the device's time a step without a kernel, copy or set, traced in separate steps\n"
+         " busy ms = the device's time a step in kernels, copies and sets, traced in separate steps\n"
+         " (ms/step less busy ms: the device waiting on the host)\n"
          " (- where not counted))\n";
   out << "per verb, median ms of " << options.repeats << " profiled steps (profiling waits for each verb)\n";
   out << std::setw(20) << std::left << "verb" << std::right;
