@@ -38,16 +38,35 @@ __global__ void reach_kernel(BodiesView bodies, real h, const unsigned long long
   }
 }
 
+// Whether contact c would enter the impact stage (is_impact_candidate on the
+// approach speed its record will hold: prepare_from_world on the same
+// bodies, which nothing moves before the solve).
+__device__ __forceinline__ bool approaches(Contact& c, const BodiesView& bodies, const ImpactWatch& watch) {
+  if (!watch.any) return false;
+  prepare_from_world(c, bodies);
+  return is_impact_candidate(c, watch.rest_speed);
+}
+
+// Raises *watch.any when some thread of the warp saw a candidate (all of a
+// warp's threads reach it together, after their loops).
+__device__ __forceinline__ void raise_if_any(bool seen, const ImpactWatch& watch) {
+  if (__any_sync(0xffffffffu, seen) && (threadIdx.x & 31) == 0) atomicOr(watch.any, 1u);
+}
+
 __global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, std::size_t count, PairTable table,
-                                    real h, const real* reach, std::uint32_t* flags) {
+                                    real h, const real* reach, std::uint32_t* flags, ImpactWatch watch) {
+  bool seen = false;
   for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= count; k += gridDim.x * blockDim.x) {
     if (k == count) {
       flags[k] = 0;
       continue;
     }
     Contact c;
-    flags[k] = make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c) ? 1u : 0u;
+    const bool found = make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c);
+    flags[k] = found ? 1u : 0u;
+    if (found && !seen) seen = approaches(c, bodies, watch);
   }
+  raise_if_any(seen, watch);
 }
 
 __global__ void sphere_pairs_kernel(const IndexPair* pairs, std::size_t count, const std::uint32_t* offsets,
@@ -57,8 +76,10 @@ __global__ void sphere_pairs_kernel(const IndexPair* pairs, std::size_t count, c
 }
 
 __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std::uint32_t wall_count,
-                                  PairTable table, real h, const real* reach, std::uint32_t* flags) {
+                                  PairTable table, real h, const real* reach, std::uint32_t* flags,
+                                  ImpactWatch watch) {
   const std::size_t items = bodies.count * wall_count;
+  bool seen = false;
   for (std::size_t t = blockIdx.x * blockDim.x + threadIdx.x; t <= items; t += gridDim.x * blockDim.x) {
     if (t == items) {
       flags[t] = 0;
@@ -66,8 +87,11 @@ __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std
     }
     const auto i = static_cast<std::uint32_t>(t / wall_count), k = static_cast<std::uint32_t>(t % wall_count);
     Contact c;
-    flags[t] = make_wall_contact(bodies, i, walls[k], k, table, h, reach, c) ? 1u : 0u;
+    const bool found = make_wall_contact(bodies, i, walls[k], k, table, h, reach, c);
+    flags[t] = found ? 1u : 0u;
+    if (found && !seen) seen = approaches(c, bodies, watch);
   }
+  raise_if_any(seen, watch);
 }
 
 __global__ void wall_pairs_kernel(std::size_t items, std::uint32_t wall_count, const std::uint32_t* offsets,
@@ -135,9 +159,9 @@ void launch_contact_reaches(const BodiesView& bodies, real h, unsigned long long
 
 void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pairs, std::size_t count,
                                  const PairTable& table, real h, const real* reach, std::uint32_t* flags,
-                                 int sm_count, cudaStream_t stream) {
+                                 const ImpactWatch& watch, int sm_count, cudaStream_t stream) {
   sphere_flags_kernel<<<grid_for(count + 1, sm_count), kBlock, 0, stream>>>(bodies, pairs, count, table, h, reach,
-                                                                            flags);
+                                                                            flags, watch);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
@@ -150,9 +174,9 @@ void launch_sphere_pair_write(const IndexPair* pairs, std::size_t count, const s
 
 void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
                                const PairTable& table, real h, const real* reach, std::uint32_t* flags,
-                               int sm_count, cudaStream_t stream) {
+                               const ImpactWatch& watch, int sm_count, cudaStream_t stream) {
   wall_flags_kernel<<<grid_for(bodies.count * wall_count + 1, sm_count), kBlock, 0, stream>>>(
-      bodies, walls, wall_count, table, h, reach, flags);
+      bodies, walls, wall_count, table, h, reach, flags, watch);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -27,10 +27,20 @@ namespace marbles::narrowphase::cuda {
 void launch_contact_reaches(const BodiesView& bodies, real h, unsigned long long* max_speed, real* reach,
                             real* bound, int sm_count, cudaStream_t stream);
 
+// Whether any contact found will be an impact candidate of the impact stage
+// (its prepared approach speed below -rest_speed, is_impact_candidate): *any
+// (device) is set to 1 if so, left as it was if not. any null: not watched.
+// Read with the contact count, it spares the impact stage its own read in a
+// substep without candidates (a pile at rest).
+struct ImpactWatch {
+  unsigned* any = nullptr;
+  real rest_speed = 0;
+};
+
 // flags[k] = 1 when candidate pair k makes a contact (flags[count] = 0).
 void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pairs, std::size_t count,
                                  const PairTable& table, real h, const real* reach, std::uint32_t* flags,
-                                 int sm_count, cudaStream_t stream);
+                                 const ImpactWatch& watch, int sm_count, cudaStream_t stream);
 // Writes the body pair of each flagged pair k at out[offsets[k]].
 void launch_sphere_pair_write(const IndexPair* pairs, std::size_t count, const std::uint32_t* offsets, BodyPair* out,
                               int sm_count, cudaStream_t stream);
@@ -38,7 +48,7 @@ void launch_sphere_pair_write(const IndexPair* pairs, std::size_t count, const s
 // The same over sphere i x wall k, item i * wall_count + k.
 void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
                                const PairTable& table, real h, const real* reach, std::uint32_t* flags,
-                               int sm_count, cudaStream_t stream);
+                               const ImpactWatch& watch, int sm_count, cudaStream_t stream);
 void launch_wall_pair_write(std::size_t sphere_count, std::uint32_t wall_count, const std::uint32_t* offsets,
                             BodyPair* out, int sm_count, cudaStream_t stream);
 

@@ -13,10 +13,11 @@
 // contacts() makes whole contacts from the records when the host asks.
 //
 // Host syncs (for now, per substep): the broad phase's bounds and pair
-// count, the contact count, the colouring's rounds (one per 8 rounds) and
-// colour ranges, the cache's lost-load counter (and one per label pass of the
-// island rule when a load was lost), the impact stage's candidates, rounds,
-// levels and hits, the cache size; per step, the flags. One sync per step
+// count, the contact count (with whether any contact is an impact
+// candidate), the colouring's rounds (one per 8 rounds) and colour ranges,
+// the cache's lost-load counter (and one per label pass of the island rule
+// when a load was lost), where there are impact candidates the impact
+// stage's rounds, levels and hits, the cache size; per step, the flags. One sync per step
 // with buffers sized from the last step is the next step
 // (docs/architecture.md).
 #include <cuda_runtime.h>
@@ -117,6 +118,7 @@ class CudaStep final : public StepBackend {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_lookahead = h;
     m_count = 0;
+    m_impact_candidates = false;
     if (!m_model.collisions && !m_model.wall_contacts) return;
     const BodiesView bodies = m_device.view();
     const std::size_t n = bodies.count;
@@ -157,19 +159,32 @@ class CudaStep final : public StepBackend {
       wall_offsets = c.take<std::uint32_t>(wall_items + 1);
       wall_temp = c.take<char>(wall_temp_bytes);
     });
+    // Any impact candidate among the contacts, read with their counts: a
+    // substep without one skips the impact stage's own read.
+    nc::ImpactWatch watch;
+    if (m_model.solver.restitution) {
+      watch = {m_impact_seen.as<unsigned>(1), m_model.solver.rest_speed};
+      MARBLES_CUDA_CHECK(cudaMemsetAsync(watch.any, 0, sizeof(unsigned), m_stream));
+    }
     if (m_model.collisions) {
-      nc::launch_sphere_contact_flags(bodies, pairs, pair_count, m_table, h, reach, pair_flags, m_sm, m_stream);
+      nc::launch_sphere_contact_flags(bodies, pairs, pair_count, m_table, h, reach, pair_flags, watch, m_sm, m_stream);
       dev::device_exclusive_sum(pair_flags, pair_offsets, pair_count + 1, pair_temp, pair_temp_bytes, m_stream);
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned, pair_offsets + pair_count, 4, cudaMemcpyDeviceToHost, m_stream));
       m_bytes += 4 + broad_phase_readback();
     }
     if (m_model.wall_contacts) {
-      nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, reach, wall_flags, m_sm, m_stream);
+      nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, reach, wall_flags, watch, m_sm,
+                                    m_stream);
       dev::device_exclusive_sum(wall_flags, wall_offsets, wall_items + 1, wall_temp, wall_temp_bytes, m_stream);
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 1, wall_offsets + wall_items, 4, cudaMemcpyDeviceToHost, m_stream));
       m_bytes += 4;
     }
+    if (watch.any) {
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 2, watch.any, 4, cudaMemcpyDeviceToHost, m_stream));
+      m_bytes += 4;
+    }
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+    m_impact_candidates = watch.any && m_pinned[2] != 0;
     const std::uint32_t sphere_contacts = m_model.collisions ? m_pinned[0] : 0;
     const std::uint32_t wall_contacts = m_model.wall_contacts ? m_pinned[1] : 0;
     m_count = sphere_contacts + wall_contacts;
@@ -474,6 +489,10 @@ class CudaStep final : public StepBackend {
   void impacts(narrowphase::SolverBody* bodies, real h) {
     const real rest = m_model.solver.rest_speed;
     const narrowphase::ImpactParams params{rest, h, m_model.solver.wall_accel};
+    if (!m_impact_candidates) {  // found with the contacts: what impact_levels would find, without its read
+      m_levels.assign(2, 0);
+      return;
+    }
     std::uint32_t* order = nullptr;
     const std::uint32_t levels =
         m_colouring.impact_levels(m_records, m_impact, m_count, m_device.size(), rest, order, m_levels, m_sm, m_stream);
@@ -515,7 +534,7 @@ class CudaStep final : public StepBackend {
   // cache entry (m_match) and kept colour, then in colour-major order the
   // sweep's records and impact words (m_record_memory) and colours.
   DeviceBuffer m_walls, m_pair_table, m_max_speed, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
-      m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved, m_contact_chunk;
+      m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved, m_contact_chunk, m_impact_seen;
   // Temporaries of the stages that never run at the same time (the contact
   // flags, the colouring's lists and sorts, the cache's store and restore):
   // the device holds the largest stage's, not their sum.
@@ -531,6 +550,7 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep
+  bool m_impact_candidates = false;   // some contact of this substep is an impact candidate (find_contacts)
   bool m_kept_valid = false;          // m_kept_colour holds this substep's kept colours
   bool m_mirror = false;              // the next parallel colour launch runs mirrored (over_colours)
   // The substep's contacts as every stage after the colouring reads them
