@@ -27,21 +27,31 @@ __device__ __forceinline__ std::uint64_t sort_key(const BodyPair& ab, std::uint3
   return (std::uint64_t(ab.a) << b_bits) | b;
 }
 
+// Contact k's place in the sort's input: a stored one at its offset (the
+// first `stored` places, in contact order), an unstored one after them with
+// the largest key, so that it sorts after every entry (the radix sort is
+// stable: an entry whose key has every bit set stays ahead of them too).
+// Thread 0 writes the entry count, which the host never reads.
 __global__ void keys_kernel(SweepRecords records, std::uint32_t n, const std::uint32_t* offsets, std::uint32_t spheres,
-                            int b_bits, std::uint64_t* keys, std::uint32_t* index) {
+                            int b_bits, std::uint64_t last_key, std::uint64_t* keys, std::uint32_t* index,
+                            std::uint32_t* size) {
+  const std::uint32_t stored = offsets[n];
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    if (offsets[k + 1] == offsets[k]) continue;
-    keys[offsets[k]] = sort_key(records.bodies[k], spheres, b_bits);
-    index[offsets[k]] = k;
+    const bool kept = offsets[k + 1] != offsets[k];
+    const std::uint32_t at = kept ? offsets[k] : stored + (k - offsets[k]);
+    keys[at] = kept ? sort_key(records.bodies[k], spheres, b_bits) : last_key;
+    index[at] = k;
   }
+  if (blockIdx.x == 0 && threadIdx.x == 0) *size = stored;
 }
 
 // The entries in key order, with their cache keys in place of the sort's.
 // tangent and rolling are null when the scene has no friction or no rolling
 // resistance: those impulses stay zero, nothing to keep.
 __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_colour, const std::uint32_t* index,
-                              std::uint32_t m, std::uint64_t* keys, real* normal, Vec3* tangent, Vec3* rolling,
-                              std::uint8_t* colour) {
+                              const std::uint32_t* size, std::uint64_t* keys, real* normal, Vec3* tangent,
+                              Vec3* rolling, std::uint8_t* colour) {
+  const std::uint32_t m = *size;
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
     const std::uint32_t k = index[e];
     const BodyPair ab = records.bodies[k];
@@ -59,9 +69,10 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
 }
 
 // Each contact's entry (binary search over the sorted keys) and kept colour.
-__global__ void restore_kernel(const BodyPair* pairs, std::uint32_t n, const std::uint64_t* keys, std::uint32_t m,
-                               const std::uint8_t* colour, std::uint8_t* matched, std::uint8_t* kept_colour,
-                               std::uint32_t* match) {
+__global__ void restore_kernel(const BodyPair* pairs, std::uint32_t n, const std::uint64_t* keys,
+                               const std::uint32_t* size, const std::uint8_t* colour, std::uint8_t* matched,
+                               std::uint8_t* kept_colour, std::uint32_t* match) {
+  const std::uint32_t m = *size;
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const BodyPair ab = pairs[k];
     const std::uint64_t key = cache_key(ab.a, ab.b);
@@ -80,7 +91,9 @@ __device__ __forceinline__ real restored_normal(const std::uint32_t* match, cons
 }
 
 __global__ void lost_loads_kernel(const std::uint64_t* keys, const real* normal, const std::uint8_t* matched,
-                                  std::uint32_t m, BodiesView bodies, real weight_impulse, std::uint32_t* count) {
+                                  const std::uint32_t* size, BodiesView bodies, real weight_impulse,
+                                  std::uint32_t* count) {
+  const std::uint32_t m = *size;
   std::uint32_t mine = 0;
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
     if (matched[e]) continue;
@@ -144,8 +157,10 @@ __device__ real real_of_bits(unsigned long long bits) {
 
 // Islands that lost a load start cold (a plain store of 1: order-free).
 __global__ void island_cold_kernel(const std::uint64_t* keys, const real* normal, const std::uint8_t* matched,
-                                   std::uint32_t m, BodiesView bodies, real weight_impulse, const std::uint32_t* label,
-                                   const unsigned long long* island_max, std::uint8_t* cold) {
+                                   const std::uint32_t* size, BodiesView bodies, real weight_impulse,
+                                   const std::uint32_t* label, const unsigned long long* island_max,
+                                   std::uint8_t* cold) {
+  const std::uint32_t m = *size;
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
     if (matched[e]) continue;
     const auto a = static_cast<std::uint32_t>(keys[e] >> 32);
@@ -176,14 +191,25 @@ ContactCacheCuda::~ContactCacheCuda() {
 
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
                              std::uint32_t spheres, std::uint32_t walls, int sm_count, cudaStream_t s) {
+  // Entries: the contacts with load or a colour, at most n. Their count stays
+  // on the device (size_word()): every later kernel reads it there, and the
+  // host holds only the bound n (no wait). The sort takes all n contacts,
+  // the unstored ones last (keys_kernel).
+  m_bound = n;
+  auto* size = m_size.as<std::uint32_t>(1);
+  if (n == 0) {
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(size, 0, sizeof(std::uint32_t), s));
+    return;
+  }
   // Temporaries in the scratch memory: the flags and their offsets, then
   // (the flags no longer live) the sort's keys and indices with their
-  // alternates. Sized for n entries: the count is known only after the scan.
-  // Bits of the largest a (a sphere) and the largest b (the last wall).
+  // alternates. Bits of the largest a (a sphere) and the largest b (the last wall).
   const auto index_bits = [](std::uint64_t count) { return static_cast<int>(bits_needed(count ? count - 1 : 0)); };
   const int b_bits = index_bits(std::uint64_t(spheres) + walls), a_bits = index_bits(spheres);
+  const int key_bits = a_bits + b_bits;
+  const std::uint64_t last_key = key_bits >= 64 ? ~std::uint64_t(0) : (std::uint64_t(1) << key_bits) - 1;
   const std::size_t scan_bytes = ::marbles::cuda::exclusive_sum_bytes<std::uint32_t>(n + 1);
-  const std::size_t sort_bytes = ::marbles::cuda::sort_pairs_bytes<std::uint64_t, std::uint32_t>(n, a_bits + b_bits);
+  const std::size_t sort_bytes = ::marbles::cuda::sort_pairs_bytes<std::uint64_t, std::uint32_t>(n, key_bits);
   std::uint32_t *flags = nullptr, *offsets = nullptr, *index_in = nullptr, *index_alt = nullptr;
   std::uint64_t *keys_in = nullptr, *keys_alt = nullptr;
   void *scan_temp = nullptr, *sort_temp = nullptr;
@@ -202,26 +228,22 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   flags_kernel<<<grid_for(n + 1, sm_count), kBlock, 0, s>>>(contacts, contact_colour, n, flags);
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_exclusive_sum(flags, offsets, n + 1, scan_temp, scan_bytes, s);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, offsets + n, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-  m_bytes += sizeof(std::uint32_t);
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  m_count = m_host[0];
-  if (m_count == 0) return;
-  keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, offsets, spheres, b_bits, keys_in, index_in);
+  keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, offsets, spheres, b_bits, last_key, keys_in,
+                                                       index_in, size);
   MARBLES_CUDA_CHECK_LAUNCH();
-  const std::uint32_t* index = ::marbles::cuda::device_sort_pairs(keys_in, keys_alt, index_in, index_alt, m_count,
-                                                                  a_bits + b_bits, sort_temp, sort_bytes, s);
-  auto* keys = m_keys.as<std::uint64_t>(m_count);
-  gather_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, m_count, keys,
-                                                               m_normal.as<real>(m_count), tangent_entries(m_count),
-                                                               rolling_entries(m_count),
-                                                               m_colour.as<std::uint8_t>(m_count));
+  const std::uint32_t* index = ::marbles::cuda::device_sort_pairs(keys_in, keys_alt, index_in, index_alt, n, key_bits,
+                                                                  sort_temp, sort_bytes, s);
+  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, size,
+                                                         m_keys.as<std::uint64_t>(n), m_normal.as<real>(n),
+                                                         tangent_entries(n), rolling_entries(n),
+                                                         m_colour.as<std::uint8_t>(n));
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 CacheEntries ContactCacheCuda::download(cudaStream_t s) {
+  // Everything up to the bound, then cut to the count read with it.
   CacheEntries e;
-  const std::size_t m = m_count;
+  const std::size_t m = m_bound;
   e.key.resize(m);
   e.normal_impulse.resize(m);
   e.tangent_impulse.resize(m);
@@ -235,14 +257,26 @@ CacheEntries ContactCacheCuda::download(cudaStream_t s) {
   if (m_keep_rolling)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.rolling_impulse.data(), m_rolling.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.colour.data(), m_colour.get(), m, cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_size.get(), sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  const std::size_t count = std::min<std::size_t>(m_host[0], m);
+  e.key.resize(count);
+  e.normal_impulse.resize(count);
+  e.tangent_impulse.resize(count);
+  e.rolling_impulse.resize(count);
+  e.colour.resize(count);
   return e;
 }
 
 void ContactCacheCuda::upload(const CacheEntries& e, cudaStream_t s) {
   const auto m = static_cast<std::uint32_t>(e.size());
-  m_count = m;
-  if (m == 0) return;
+  m_bound = m;
+  m_host[0] = m;
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_size.as<std::uint32_t>(1), m_host, sizeof(std::uint32_t), cudaMemcpyHostToDevice, s));
+  if (m == 0) {
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+    return;
+  }
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_keys.as<std::uint64_t>(m), e.key.data(), m * sizeof(std::uint64_t), cudaMemcpyHostToDevice, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_normal.as<real>(m), e.normal_impulse.data(), m * sizeof(real), cudaMemcpyHostToDevice, s));
   if (m_keep_tangent)
@@ -258,12 +292,13 @@ void ContactCacheCuda::upload(const CacheEntries& e, cudaStream_t s) {
 }
 
 void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
-  const std::uint32_t m = m_count;
-  to.m_count = m;
-  if (m == 0) return;
+  const std::uint32_t m = m_bound;
+  to.m_bound = m;
   auto copy = [&](DeviceBuffer& dst, const DeviceBuffer& src, std::size_t bytes) {
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(dst.as<char>(bytes), src.get(), bytes, cudaMemcpyDeviceToDevice, s));
   };
+  copy(to.m_size, m_size, sizeof(std::uint32_t));
+  if (m == 0) return;
   copy(to.m_keys, m_keys, m * sizeof(std::uint64_t));
   copy(to.m_normal, m_normal, m * sizeof(real));
   if (m_keep_tangent) copy(to.m_tangent, m_tangent, m * sizeof(Vec3));
@@ -274,8 +309,9 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
 bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const BodiesView& bodies,
                                real weight_impulse, std::uint8_t* kept_colour, std::uint32_t* match, int sm_count,
                                cudaStream_t s) {
-  const std::uint32_t m = m_count;
+  const std::uint32_t m = m_bound;  // the entries are at most this many (their count: size_word())
   if (m == 0 || n == 0) return false;
+  const std::uint32_t* size = m_size.get_as<std::uint32_t>();
   // Temporaries in the scratch memory: which entries were matched, and for
   // the island rule the bodies' labels, island maxima and cold flags.
   const auto bodies_n = static_cast<std::uint32_t>(bodies.count);
@@ -293,10 +329,10 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
   MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
   const auto* keys = m_keys.get_as<std::uint64_t>();
   const auto* normal = m_normal.get_as<real>();
-  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, keys, m, m_colour.get_as<std::uint8_t>(),
+  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, keys, size, m_colour.get_as<std::uint8_t>(),
                                                           matched, kept_colour, match);
   MARBLES_CUDA_CHECK_LAUNCH();
-  lost_loads_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, m, bodies, weight_impulse,
+  lost_loads_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, size, bodies, weight_impulse,
                                                              counter);
   MARBLES_CUDA_CHECK_LAUNCH();
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, counter, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
@@ -323,8 +359,8 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
   MARBLES_CUDA_CHECK(cudaMemsetAsync(cold, 0, bodies_n, s));
   island_max_kernel<<<contact_grid, kBlock, 0, s>>>(pairs, match, normal, n, label, island_max);
   MARBLES_CUDA_CHECK_LAUNCH();
-  island_cold_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, m, bodies, weight_impulse, label,
-                                                               island_max, cold);
+  island_cold_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, size, bodies, weight_impulse,
+                                                               label, island_max, cold);
   MARBLES_CUDA_CHECK_LAUNCH();
   island_clear_kernel<<<contact_grid, kBlock, 0, s>>>(pairs, match, normal, n, label, cold);
   MARBLES_CUDA_CHECK_LAUNCH();

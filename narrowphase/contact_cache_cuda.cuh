@@ -1,6 +1,7 @@
 // narrowphase/contact_cache_cuda.cuh — the CUDA twin of contact_cache.cpp:
 // entries sorted by key on the device (flag, scan, write, CUB sort), looked
-// up by binary search (contact_cache_math.hpp), one thread per contact. When
+// up by binary search (contact_cache_math.hpp), one thread per contact. The
+// entry count never leaves the device. When
 // a load was lost (rare: a counter says so), the island rule runs on the
 // device: islands by min-label propagation with pointer jumping (the same
 // islands as the CPU's union-find), their largest impulse by an atomic max,
@@ -58,7 +59,9 @@ class ContactCacheCuda {
   // `spheres` and `walls`: how many there are (the sort's key bits).
   void store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n, std::uint32_t spheres,
              std::uint32_t walls, int sm_count, cudaStream_t stream);
-  std::uint32_t size() const { return m_count; }
+  // The entries are at most this many (the contacts of the last store): the
+  // count itself stays on the device, where the kernels read it.
+  std::uint32_t bound() const { return m_bound; }
   // The entries as the CPU cache holds them (a checkpoint's copy), and back.
   CacheEntries download(cudaStream_t stream);
   void upload(const CacheEntries& entries, cudaStream_t stream);
@@ -80,8 +83,9 @@ class ContactCacheCuda {
  private:
   std::uint64_t m_bytes = 0;
   DeviceBuffer m_keys, m_normal, m_tangent, m_rolling, m_colour, m_counter, m_own_scratch;
+  DeviceBuffer m_size;  // the entry count (one word, device)
   DeviceBuffer* m_scratch = &m_own_scratch;
-  std::uint32_t m_count = 0;
+  std::uint32_t m_bound = 0;
   std::uint32_t* m_host = nullptr;  // pinned readback
   bool m_keep_tangent = true, m_keep_rolling = true;
   Vec3* tangent_entries(std::uint32_t m) { return m_keep_tangent ? m_tangent.as<Vec3>(m) : nullptr; }
