@@ -1,3 +1,7 @@
+#include <cooperative_groups.h>
+
+#include <algorithm>
+
 #include "core/cuda_check.hpp"
 #include "core/radix_sort.hpp"
 #include "narrowphase/contact_cache.hpp"
@@ -7,6 +11,8 @@
 
 namespace marbles::narrowphase::cuda {
 namespace {
+
+namespace cg = cooperative_groups;
 
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
@@ -111,73 +117,117 @@ __global__ void lost_loads_kernel(const std::uint64_t* keys, const real* normal,
 // other threads lower at the same time are intended: a label only ever falls
 // to another sphere of the same island, so any value read is a valid one, and
 // the loop ends only after a pass that changed nothing.
-__global__ void label_init_kernel(std::uint32_t* label, std::uint32_t n) {
-  for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) label[i] = i;
-}
-
-__global__ void label_hook_kernel(const BodyPair* pairs, std::uint32_t n, std::uint32_t* label, unsigned* changed) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const BodyPair c = pairs[k];
-    if (is_wall(c.b)) continue;
-    const std::uint32_t la = label[c.a], lb = label[c.b];
-    if (la == lb) continue;
-    const std::uint32_t lo = la < lb ? la : lb, hi = la < lb ? lb : la;
-    atomicMin(&label[hi], lo);  // hook the larger label's root onto the smaller
-    atomicMin(&label[c.a], lo);
-    atomicMin(&label[c.b], lo);
-    *changed = 1u;
-  }
-}
-
-__global__ void label_jump_kernel(std::uint32_t* label, std::uint32_t n) {
-  for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
-    std::uint32_t l = label[i];
-    while (label[l] != l) l = label[l];
-    label[i] = l;
-  }
-}
-
-// The largest impulse each island carries (non-negative reals order as their bits).
-__global__ void island_max_kernel(const BodyPair* pairs, const std::uint32_t* match, const real* normal,
-                                  std::uint32_t n, const std::uint32_t* label, unsigned long long* island_max) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const real p = restored_normal(match, normal, k);
-    if (!(p > 0)) continue;
-    unsigned long long bits;
-    if constexpr (sizeof(real) == 4) bits = __float_as_uint(p);
-    else bits = static_cast<unsigned long long>(__double_as_longlong(p));
-    atomicMax(&island_max[label[pairs[k].a]], bits);
-  }
-}
+// What the island rule reads and writes: the contacts (pairs, match), the
+// cache's entries, the lost-load count, and scratch per body.
+struct IslandRule {
+  const BodyPair* pairs;
+  std::uint32_t* match;
+  std::uint32_t n;  // contacts
+  const std::uint64_t* keys;
+  const real* normal;
+  const std::uint8_t* matched;
+  const std::uint32_t* size;  // entries
+  BodiesView bodies;
+  real weight_impulse;
+  const std::uint32_t* lost;  // lost_loads_kernel's count
+  std::uint32_t* label;
+  unsigned long long* island_max;
+  std::uint8_t* cold;
+  unsigned* changed;  // two words, used in turn by the label passes
+};
 
 __device__ real real_of_bits(unsigned long long bits) {
   if constexpr (sizeof(real) == 4) return __uint_as_float(static_cast<unsigned>(bits));
   else return __longlong_as_double(static_cast<long long>(bits));
 }
 
+// One hook pass: each contact lowers its spheres' labels (and the larger
+// label's root) to the smaller of the two.
+__device__ void label_hook(const IslandRule& r, std::uint32_t first, std::uint32_t stride, unsigned* changed) {
+  for (std::uint32_t k = first; k < r.n; k += stride) {
+    const BodyPair c = r.pairs[k];
+    if (is_wall(c.b)) continue;
+    const std::uint32_t la = r.label[c.a], lb = r.label[c.b];
+    if (la == lb) continue;
+    const std::uint32_t lo = la < lb ? la : lb, hi = la < lb ? lb : la;
+    atomicMin(&r.label[hi], lo);  // hook the larger label's root onto the smaller
+    atomicMin(&r.label[c.a], lo);
+    atomicMin(&r.label[c.b], lo);
+    *changed = 1u;
+  }
+}
+
+__device__ void label_jump(const IslandRule& r, std::uint32_t first, std::uint32_t stride) {
+  for (std::uint32_t i = first; i < r.bodies.count; i += stride) {
+    std::uint32_t l = r.label[i];
+    while (r.label[l] != l) l = r.label[l];
+    r.label[i] = l;
+  }
+}
+
+// The largest impulse each island carries (non-negative reals order as their bits).
+__device__ void island_max_pass(const IslandRule& r, std::uint32_t first, std::uint32_t stride) {
+  for (std::uint32_t k = first; k < r.n; k += stride) {
+    const real p = restored_normal(r.match, r.normal, k);
+    if (!(p > 0)) continue;
+    unsigned long long bits;
+    if constexpr (sizeof(real) == 4) bits = __float_as_uint(p);
+    else bits = static_cast<unsigned long long>(__double_as_longlong(p));
+    atomicMax(&r.island_max[r.label[r.pairs[k].a]], bits);
+  }
+}
+
 // Islands that lost a load start cold (a plain store of 1: order-free).
-__global__ void island_cold_kernel(const std::uint64_t* keys, const real* normal, const std::uint8_t* matched,
-                                   const std::uint32_t* size, BodiesView bodies, real weight_impulse,
-                                   const std::uint32_t* label, const unsigned long long* island_max,
-                                   std::uint8_t* cold) {
-  const std::uint32_t m = *size;
-  for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
-    if (matched[e]) continue;
-    const auto a = static_cast<std::uint32_t>(keys[e] >> 32);
-    if (a >= bodies.count || !is_lost_load(normal[e], bodies.inv_mass[a], weight_impulse)) continue;
-    for (const std::uint32_t body : {a, static_cast<std::uint32_t>(keys[e] & 0xffffffffu)}) {
-      if (is_wall(body) || body >= bodies.count) continue;
-      const std::uint32_t r = label[body];
-      if (island_starts_cold(normal[e], real_of_bits(island_max[r]))) cold[r] = 1;
+__device__ void island_cold_pass(const IslandRule& r, std::uint32_t first, std::uint32_t stride) {
+  const std::uint32_t m = *r.size;
+  for (std::uint32_t e = first; e < m; e += stride) {
+    if (r.matched[e]) continue;
+    const auto a = static_cast<std::uint32_t>(r.keys[e] >> 32);
+    if (a >= r.bodies.count || !is_lost_load(r.normal[e], r.bodies.inv_mass[a], r.weight_impulse)) continue;
+    for (const std::uint32_t body : {a, static_cast<std::uint32_t>(r.keys[e] & 0xffffffffu)}) {
+      if (is_wall(body) || body >= r.bodies.count) continue;
+      const std::uint32_t l = r.label[body];
+      if (island_starts_cold(r.normal[e], real_of_bits(r.island_max[l]))) r.cold[l] = 1;
     }
   }
 }
 
 // A cold island's contacts start without impulses (no entry).
-__global__ void island_clear_kernel(const BodyPair* pairs, std::uint32_t* match, const real* normal, std::uint32_t n,
-                                    const std::uint32_t* label, const std::uint8_t* cold) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
-    if (cold[label[pairs[k].a]] && restored_normal(match, normal, k) > 0) match[k] = kNoEntry;
+__device__ void island_clear_pass(const IslandRule& r, std::uint32_t first, std::uint32_t stride) {
+  for (std::uint32_t k = first; k < r.n; k += stride)
+    if (r.cold[r.label[r.pairs[k].a]] && restored_normal(r.match, r.normal, k) > 0) r.match[k] = kNoEntry;
+}
+
+// The whole island rule in one cooperative launch, a grid-wide barrier
+// between its passes, and nothing at all when no load was lost (every block
+// reads the same count and returns alike): the host never waits for the
+// count. Label passes repeat until one changes nothing; each pass's flag
+// word is cleared a pass ahead, while no thread reads or writes it.
+__global__ void island_rule_kernel(IslandRule r) {
+  if (*r.lost == 0u) return;
+  const cg::grid_group grid = cg::this_grid();
+  const std::uint32_t first = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
+  for (std::uint32_t i = first; i < r.bodies.count; i += stride) {
+    r.label[i] = i;
+    r.island_max[i] = 0;
+    r.cold[i] = 0;
+  }
+  if (first == 0) r.changed[0] = 0u;
+  grid.sync();
+  for (std::uint32_t pass = 0;; ++pass) {
+    unsigned* changed = r.changed + (pass & 1u);
+    label_hook(r, first, stride, changed);
+    grid.sync();
+    label_jump(r, first, stride);
+    if (first == 0) r.changed[(pass + 1) & 1u] = 0u;
+    grid.sync();
+    if (*static_cast<volatile unsigned*>(changed) == 0u) break;
+  }
+  island_max_pass(r, first, stride);
+  grid.sync();
+  island_cold_pass(r, first, stride);
+  grid.sync();
+  island_clear_pass(r, first, stride);
 }
 
 }  // namespace
@@ -324,7 +374,7 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
     island_max = c.take<unsigned long long>(bodies_n);
     cold = c.take<std::uint8_t>(bodies_n);
   });
-  auto* counter = m_counter.as<std::uint32_t>(1);
+  auto* counter = m_counter.as<std::uint32_t>(3);  // the lost loads, then the label passes' two flags
   MARBLES_CUDA_CHECK(cudaMemsetAsync(matched, 0, m, s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
   const auto* keys = m_keys.get_as<std::uint64_t>();
@@ -335,34 +385,21 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
   lost_loads_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, size, bodies, weight_impulse,
                                                              counter);
   MARBLES_CUDA_CHECK_LAUNCH();
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, counter, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-  m_bytes += sizeof(std::uint32_t);
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  if (m_host[0] == 0) return true;
 
-  // A load was lost: the island rule, on the device.
-  const int body_grid = grid_for(bodies_n, sm_count), contact_grid = grid_for(n, sm_count);
-  label_init_kernel<<<body_grid, kBlock, 0, s>>>(label, bodies_n);
-  MARBLES_CUDA_CHECK_LAUNCH();
-  for (;;) {  // until no contact joins two labels
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
-    label_hook_kernel<<<contact_grid, kBlock, 0, s>>>(pairs, n, label, counter);
-    MARBLES_CUDA_CHECK_LAUNCH();
-    label_jump_kernel<<<body_grid, kBlock, 0, s>>>(label, bodies_n);
-    MARBLES_CUDA_CHECK_LAUNCH();
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, counter, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-    m_bytes += sizeof(std::uint32_t);
-    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-    if (m_host[0] == 0) break;
-  }
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(island_max, 0, bodies_n * sizeof(unsigned long long), s));
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(cold, 0, bodies_n, s));
-  island_max_kernel<<<contact_grid, kBlock, 0, s>>>(pairs, match, normal, n, label, island_max);
-  MARBLES_CUDA_CHECK_LAUNCH();
-  island_cold_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, size, bodies, weight_impulse,
-                                                               label, island_max, cold);
-  MARBLES_CUDA_CHECK_LAUNCH();
-  island_clear_kernel<<<contact_grid, kBlock, 0, s>>>(pairs, match, normal, n, label, cold);
+  // The island rule, on the device, where a load was lost (the kernel reads the count).
+  static const int resident = [] {
+    int per_sm = 0;
+    MARBLES_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, island_rule_kernel, kBlock, 0));
+    return std::max(per_sm, 1);
+  }();
+  const std::size_t widest = std::max<std::size_t>({n, m, bodies_n});
+  const int grid = static_cast<int>(std::clamp<std::size_t>((widest + kBlock - 1) / kBlock, 1,
+                                                            static_cast<std::size_t>(resident) * sm_count));
+  IslandRule rule{pairs, match, n, keys, normal, matched, size, bodies, weight_impulse, counter, label, island_max,
+                  cold, counter + 1};
+  void* args[] = {&rule};
+  MARBLES_CUDA_CHECK(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&island_rule_kernel), dim3(grid),
+                                                 dim3(kBlock), args, 0, s));
   MARBLES_CUDA_CHECK_LAUNCH();
   return true;
 }

@@ -1,11 +1,12 @@
 // narrowphase/contact_cache_cuda.cuh — the CUDA twin of contact_cache.cpp:
 // entries sorted by key on the device (flag, scan, write, CUB sort), looked
 // up by binary search (contact_cache_math.hpp), one thread per contact. The
-// entry count never leaves the device. When
-// a load was lost (rare: a counter says so), the island rule runs on the
-// device: islands by min-label propagation with pointer jumping (the same
-// islands as the CPU's union-find), their largest impulse by an atomic max,
-// then the cold islands' contacts cleared. Only .cu files include it.
+// entry count never leaves the device. When a load was lost (rare: a counter
+// says so, read by the device alone), the island rule runs in one
+// cooperative launch: islands by min-label propagation with pointer jumping
+// (the same islands as the CPU's union-find), their largest impulse by an
+// atomic max, then the cold islands' contacts cleared. The host waits for
+// nothing. Only .cu files include it.
 #pragma once
 
 #include <cuda_runtime.h>
