@@ -167,53 +167,74 @@ ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, 
 }
 
 ColouringCuda::ColouringCuda() {
-  MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_host), (kMaxColourRounds + 8) * sizeof(std::uint32_t)));
+  MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_host),
+                                    (kMaxColourRounds + kMaxColourRounds + 8) * sizeof(std::uint32_t)));
   m_count.as<std::uint32_t>(kMaxColourRounds + 1);
 }
 ColouringCuda::~ColouringCuda() {
   if (m_host) cudaFreeHost(m_host);
 }
 
+// Rounds [round, round + batch) over the active lists, and the read of
+// their list sizes queued into host[0, batch).
+void ColouringCuda::queue_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round,
+                                 std::uint32_t batch, ColourRule rule, std::uint32_t* host, int sm_count,
+                                 cudaStream_t s) {
+  auto* count = m_count.get_as<std::uint32_t>();
+  ColourEntry* list[2] = {at.active, at.next};
+  const int grid = grid_for(n, sm_count);
+  for (std::uint32_t r = round; r < round + batch; ++r) {
+    offer_kernel<<<grid, kBlock, 0, s>>>(list[r % 2], count, r, at.body_word);
+    MARBLES_CUDA_CHECK_LAUNCH();
+    select_kernel<<<grid, kBlock, 0, s>>>(list[r % 2], list[(r + 1) % 2], count, at.colour, r, rule, at.body_word,
+                                          at.body_used);
+    MARBLES_CUDA_CHECK_LAUNCH();
+  }
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, count + round + 1, batch * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  m_bytes += batch * sizeof(std::uint32_t);
+}
+
+// The rounds' scratch cleared: no body offers, no list size yet.
+void ColouringCuda::clear_rounds(const ColouringArrays& at, std::size_t body_count, cudaStream_t s) {
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_word, 0, body_count * sizeof(unsigned long long), s));
+  // body_used (lowest_free) is cleared, and holds the kept colours, before this.
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(m_count.get_as<std::uint32_t>() + 1, 0, kMaxColourRounds * sizeof(std::uint32_t), s));
+}
+
+// The first batch is as long as the last colouring of this rule took and a
+// little more (a round past the end costs two launches that find an empty
+// list, a read of the counts a wait for the stream), later ones kBatch.
+std::uint32_t ColouringCuda::first_batch(ColourRule rule) const {
+  const std::uint32_t last = m_last_rounds[rule == ColourRule::lowest_free ? 0 : 1];
+  return std::min(std::max(kBatch, last + last / 8 + 1), kMaxColourRounds);
+}
+
+// The rounds a batch's list sizes show were needed (0: not finished).
+static std::uint32_t finished_in(const std::uint32_t* host, std::uint32_t round, std::uint32_t batch) {
+  for (std::uint32_t r = 0; r < batch; ++r)
+    if (host[r] == 0) return round + r + 1;
+  return 0;
+}
+
 // Rounds until the active list is empty: launched in batches, the list
 // sizes read once per batch.
 std::uint32_t ColouringCuda::rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count,
                                     ColourRule rule, int sm_count, cudaStream_t s) {
-  unsigned long long *body_word = at.body_word, *body_used = at.body_used;
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(body_word, 0, body_count * sizeof(unsigned long long), s));
-  // body_used (lowest_free) is cleared, and holds the kept colours, before this.
-  auto* count = m_count.get_as<std::uint32_t>();  // count[0] is set by the caller
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(count + 1, 0, kMaxColourRounds * sizeof(std::uint32_t), s));
-  ColourEntry* list[2] = {at.active, at.next};
-  std::uint32_t* colour = at.colour;
-  const int grid = grid_for(n, sm_count);
-  // The first batch is as long as the last colouring of this rule took and
-  // a little more (a round past the end costs two launches that find an
-  // empty list, a read of the counts a wait for the stream), later ones kBatch.
+  clear_rounds(at, body_count, s);  // count[0] is set by the caller
   std::uint32_t& last = m_last_rounds[rule == ColourRule::lowest_free ? 0 : 1];
   for (std::uint32_t round = 0; round < kMaxColourRounds;) {
-    const std::uint32_t want = round == 0 ? std::max(kBatch, last + last / 8 + 1) : kBatch;
-    const std::uint32_t batch = std::min(want, kMaxColourRounds - round);
-    for (std::uint32_t r = round; r < round + batch; ++r) {
-      offer_kernel<<<grid, kBlock, 0, s>>>(list[r % 2], count, r, body_word);
-      MARBLES_CUDA_CHECK_LAUNCH();
-      select_kernel<<<grid, kBlock, 0, s>>>(list[r % 2], list[(r + 1) % 2], count, colour, r, rule, body_word,
-                                            body_used);
-      MARBLES_CUDA_CHECK_LAUNCH();
-    }
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, count + round + 1, batch * sizeof(std::uint32_t),
-                                       cudaMemcpyDeviceToHost, s));
-    m_bytes += batch * sizeof(std::uint32_t);
+    const std::uint32_t batch = round == 0 ? first_batch(rule) : std::min(kBatch, kMaxColourRounds - round);
+    queue_rounds(at, n, round, batch, rule, m_host, sm_count, s);
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-    for (std::uint32_t r = 0; r < batch; ++r)
-      if (m_host[r] == 0) return last = round + r + 1;
+    if (const std::uint32_t done = finished_in(m_host, round, batch)) return last = done;
     round += batch;
   }
   return last = kMaxColourRounds;  // the rest stay uncoloured: the overflow set
 }
 
-std::uint32_t* ColouringCuda::sort_by_colour(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
-                                             int key_bits, std::uint32_t key_bound, std::vector<std::uint32_t>& begin,
-                                             const std::uint32_t** sorted_keys, int sm_count, cudaStream_t s) {
+std::uint32_t* ColouringCuda::queue_sort(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
+                                         int key_bits, std::uint32_t used, std::uint32_t* host,
+                                         const std::uint32_t** sorted_keys, int sm_count, cudaStream_t s) {
   auto* first = m_first_of_key.as<std::uint32_t>(overflow_key + 2);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0xff, (overflow_key + 2) * sizeof(std::uint32_t), s));
   keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(at.colour, n, overflow_key, at.keys, at.index);
@@ -224,29 +245,40 @@ std::uint32_t* ColouringCuda::sort_by_colour(const ColouringArrays& at, std::uin
   if (sorted_keys) *sorted_keys = keys_out;
   first_of_key_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(keys_out, n, first);
   MARBLES_CUDA_CHECK_LAUNCH();
-  // No key but the overflow's (and the inactive) is at or above key_bound:
+  // No key but the overflow's (and the inactive) is at or above `used`:
   // read only those firsts, then the overflow's and the inactive's.
-  const std::uint32_t used = std::min(key_bound, overflow_key);
-  if (used > 0)
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, first, used * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host + used, first + overflow_key, 2 * sizeof(std::uint32_t),
+  if (used > 0) MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, first, used * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(host + used, first + overflow_key, 2 * sizeof(std::uint32_t),
                                      cudaMemcpyDeviceToHost, s));
   m_bytes += (used + 2) * sizeof(std::uint32_t);
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  return index_out;
+}
+
+// The ranges from the firsts read (queue_sort).
+static void ranges_of(const std::uint32_t* host, std::uint32_t used, std::uint32_t n, std::vector<std::uint32_t>& begin) {
   constexpr std::uint32_t kNone = 0xffffffffu;
   // Impact levels are contiguous from 0 (a level-l impact has a neighbour of
   // level l - 1); solver colours may have gaps (a kept colour whose other
   // contacts are gone): an empty colour's range is empty.
   std::uint32_t colours = used;
-  while (colours > 0 && m_host[colours - 1] == kNone) --colours;
-  const std::uint32_t overflow_first = m_host[used], inactive_first = m_host[used + 1];
+  while (colours > 0 && host[colours - 1] == kNone) --colours;
+  const std::uint32_t overflow_first = host[used], inactive_first = host[used + 1];
   const std::uint32_t coloured_end = overflow_first != kNone ? overflow_first : inactive_first != kNone ? inactive_first : n;
   const std::uint32_t overflow_end = inactive_first != kNone ? inactive_first : n;
   begin.assign(colours + 2, 0);
   begin[colours] = coloured_end;
-  for (std::uint32_t c = colours; c-- > 1;) begin[c] = m_host[c] != kNone ? m_host[c] : begin[c + 1];
+  for (std::uint32_t c = colours; c-- > 1;) begin[c] = host[c] != kNone ? host[c] : begin[c + 1];
   begin[colours + 1] = overflow_first != kNone ? overflow_end : coloured_end;
-  return index_out;
+}
+
+std::uint32_t* ColouringCuda::sort_by_colour(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
+                                             int key_bits, std::uint32_t key_bound, std::vector<std::uint32_t>& begin,
+                                             const std::uint32_t** sorted_keys, int sm_count, cudaStream_t s) {
+  const std::uint32_t used = std::min(key_bound, overflow_key);
+  std::uint32_t* index = queue_sort(at, n, overflow_key, key_bits, used, m_host, sorted_keys, sm_count, s);
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  ranges_of(m_host, used, n, begin);
+  return index;
 }
 
 std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,
@@ -262,18 +294,46 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   constexpr int kKeyBits = 7;  // the colours (< kMaxColours) and the overflow's key
   const ColouringArrays at = lay_out(n, body_count, kKeyBits);
   auto* count = m_count.get_as<std::uint32_t>();
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_used, 0, body_count * sizeof(unsigned long long), s));
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
-  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, kept_colour, at.colour, at.active,
-                                                                count, at.body_used);
-  MARBLES_CUDA_CHECK_LAUNCH();
-  rounds_run = rounds(at, n, body_count, ColourRule::lowest_free, sm_count, s);
-  // Without kept colours, a contact coloured in round r has at most 2 r
-  // coloured neighbours (one per sphere and round), so its colour is at most
-  // 2 r; kept colours may be any below kMaxColours.
+  auto start = [&] {
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_used, 0, body_count * sizeof(unsigned long long), s));
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
+    contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, kept_colour, at.colour, at.active,
+                                                                  count, at.body_used);
+    MARBLES_CUDA_CHECK_LAUNCH();
+  };
+  start();
   const std::uint32_t* sorted_keys = nullptr;
-  const std::uint32_t* order = sort_by_colour(at, n, kMaxColours, kKeyBits, kept_colour ? kMaxColours : 2 * rounds_run,
-                                              begin, &sorted_keys, sm_count, s);
+  const std::uint32_t* order = nullptr;
+  // With kept colours any colour below kMaxColours may be used, so the sort
+  // and its ranges do not depend on the rounds run: the sort is queued
+  // behind the first batch of rounds and read with its list sizes, one wait
+  // in all. If the batch did not finish, the sort (over the rounds' lists,
+  // in the same memory) is dropped and the colouring starts again: the same
+  // colours, whatever the batches.
+  if (kept_colour) {
+    const std::uint32_t batch = first_batch(ColourRule::lowest_free);
+    clear_rounds(at, body_count, s);
+    queue_rounds(at, n, 0, batch, ColourRule::lowest_free, m_host, sm_count, s);
+    order = queue_sort(at, n, kMaxColours, kKeyBits, kMaxColours, m_host + batch, &sorted_keys, sm_count, s);
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+    rounds_run = finished_in(m_host, 0, batch);
+    if (rounds_run > 0) {
+      m_last_rounds[0] = rounds_run;
+      ranges_of(m_host + batch, kMaxColours, n, begin);
+    } else {
+      m_last_rounds[0] = batch;  // the next first batch a little longer
+      start();
+      order = nullptr;
+    }
+  }
+  if (!order) {
+    rounds_run = rounds(at, n, body_count, ColourRule::lowest_free, sm_count, s);
+    // Without kept colours, a contact coloured in round r has at most 2 r
+    // coloured neighbours (one per sphere and round), so its colour is at
+    // most 2 r; kept colours may be any below kMaxColours.
+    order = sort_by_colour(at, n, kMaxColours, kKeyBits, kept_colour ? kMaxColours : 2 * rounds_run, begin,
+                           &sorted_keys, sm_count, s);
+  }
   // The colours are read (keys_kernel): their array takes the positions.
   positions_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(order, sorted_keys, n, at.colour, sorted_colour);
   MARBLES_CUDA_CHECK_LAUNCH();

@@ -73,6 +73,19 @@ class ColouringCuda {
   // returns the rounds run.
   std::uint32_t rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, ColourRule rule,
                        int sm_count, cudaStream_t stream);
+  // rounds' parts: the scratch cleared; a batch of rounds launched with the
+  // read of its list sizes queued into host[0, batch) (no wait); the first
+  // batch's length for a rule.
+  void clear_rounds(const ColouringArrays& at, std::size_t body_count, cudaStream_t stream);
+  void queue_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round, std::uint32_t batch,
+                    ColourRule rule, std::uint32_t* host, int sm_count, cudaStream_t stream);
+  std::uint32_t first_batch(ColourRule rule) const;
+  // sort_by_colour's launches, with the read of the firsts of the keys below
+  // `used` and of the overflow and inactive keys queued into host[0, used +
+  // 2) (no wait). Returns the sorted indices.
+  std::uint32_t* queue_sort(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key, int key_bits,
+                            std::uint32_t used, std::uint32_t* host, const std::uint32_t** sorted_keys, int sm_count,
+                            cudaStream_t stream);
   // Stable sort of the indices by key (overflow -> overflow_key, inactive
   // last) and the host ranges [0, key_count + 1]; no key is at or above
   // key_bound except the overflow's. Returns the sorted indices.
