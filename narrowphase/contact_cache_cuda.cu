@@ -234,6 +234,7 @@ __global__ void island_rule_kernel(IslandRule r) {
 
 ContactCacheCuda::ContactCacheCuda() {
   MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_host), 4 * sizeof(std::uint32_t)));
+  MARBLES_CUDA_CHECK(cudaMemset(m_size.as<std::uint32_t>(1), 0, sizeof(std::uint32_t)));  // empty until a store
 }
 ContactCacheCuda::~ContactCacheCuda() {
   if (m_host) cudaFreeHost(m_host);
