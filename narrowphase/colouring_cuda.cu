@@ -349,16 +349,33 @@ std::uint32_t ColouringCuda::impact_levels(const SweepRecords& records, const Re
   constexpr int kKeyBits = 8;  // the levels (< kMaxColourRounds) and the overflow's key
   const ColouringArrays at = lay_out(n, body_count, kKeyBits);
   auto* count = m_count.get_as<std::uint32_t>();
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
-  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, rest_speed, at.colour,
-                                                                    at.active, count);
-  MARBLES_CUDA_CHECK_LAUNCH();
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, count, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-  m_bytes += sizeof(std::uint32_t);
+  auto start = [&] {
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
+    impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, rest_speed, at.colour,
+                                                                      at.active, count);
+    MARBLES_CUDA_CHECK_LAUNCH();
+  };
+  start();
+  // The candidates are not counted on the host: without any, the rounds end
+  // at once and every range is empty. A level is the round that coloured it,
+  // so after `batch` rounds no key is at or above `batch`: the sort is queued
+  // behind the first batch and read with its list sizes, one wait in all
+  // (as colour_and_sort does with kept colours).
+  const std::uint32_t batch = first_batch(ColourRule::by_round);
+  clear_rounds(at, body_count, s);
+  queue_rounds(at, n, 0, batch, ColourRule::by_round, m_host, sm_count, s);
+  const std::uint32_t used = std::min(batch, kMaxColourRounds);
+  order = queue_sort(at, n, kMaxColourRounds, kKeyBits, used, m_host + batch, nullptr, sm_count, s);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  if (m_host[0] == 0) return 0;
-  const std::uint32_t rounds_run = rounds(at, n, body_count, ColourRule::by_round, sm_count, s);
-  order = sort_by_colour(at, n, kMaxColourRounds, kKeyBits, rounds_run, begin, nullptr, sm_count, s);
+  if (const std::uint32_t rounds_run = finished_in(m_host, 0, batch)) {
+    m_last_rounds[1] = rounds_run;
+    ranges_of(m_host + batch, used, n, begin);
+  } else {
+    m_last_rounds[1] = batch;  // the next first batch a little longer
+    start();
+    const std::uint32_t all_rounds = rounds(at, n, body_count, ColourRule::by_round, sm_count, s);
+    order = sort_by_colour(at, n, kMaxColourRounds, kKeyBits, all_rounds, begin, nullptr, sm_count, s);
+  }
   return static_cast<std::uint32_t>(begin.size() - 2);
 }
 

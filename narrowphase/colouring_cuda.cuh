@@ -51,7 +51,8 @@ class ColouringCuda {
   // coloured by_round on impact_rank; `order` (device) gets them level by
   // level (overflow last), `begin` the host ranges (levels + 2 entries).
   // Returns the level count (0: no candidate). `order` lies in the scratch
-  // memory: valid until its next user.
+  // memory: valid until its next user. One wait, unless the rounds outlast
+  // the first batch (then one a batch, and one for the ranges).
   std::uint32_t impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n,
                               std::size_t body_count, real rest_speed, std::uint32_t*& order,
                               std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t stream);
