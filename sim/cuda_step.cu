@@ -12,14 +12,14 @@
 // (narrowphase/solver_math.hpp): the device holds no 112-byte Contact array.
 // contacts() makes whole contacts from the records when the host asks.
 //
-// Host syncs (for now, per substep): the broad phase's bounds and pair
-// count, the contact count (with whether any contact is an impact
-// candidate), the colouring's rounds (one per 8 rounds) and colour ranges,
-// the cache's lost-load counter (and one per label pass of the island rule
-// when a load was lost), where there are impact candidates the impact
-// stage's rounds, levels and hits, the cache size; per step, the flags. One sync per step
-// with buffers sized from the last step is the next step
-// (docs/architecture.md).
+// Host waits (docs/architecture.md "Fewer waits"), per substep: the broad
+// phase's bounds and pair count, the contact count (with whether any contact
+// is an impact candidate), the colouring's list sizes and colour ranges (one
+// read), and where there are impact candidates the impact levels (one read)
+// and a read of the hit flag per extra impact pass; per step, the flags. The
+// cache's entry count and the lost-load count stay on the device. A settled
+// pile waits 5 times a step. One wait per step, with buffers sized from the
+// last step, is the next step.
 #include <cuda_runtime.h>
 
 #include <algorithm>
