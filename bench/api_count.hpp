@@ -36,8 +36,9 @@ class ApiCounter {
 // The device's busy time over a stretch of host time, from CUPTI's activity
 // records of kernels, copies and sets: the union of their intervals. The rest
 // of the stretch the device waited for the host (its launches, its waits).
-// Tracing is on only while a DeviceTimeline lives; tracing() is false without
-// CUPTI or where a tool already traces (Nsight Compute, compute-sanitizer).
+// Tracing is on only while a DeviceTimeline lives, one at a time; tracing()
+// is false without CUPTI, where a tool already traces (Nsight Compute,
+// compute-sanitizer) or while another DeviceTimeline lives.
 class DeviceTimeline {
  public:
   DeviceTimeline();
@@ -46,6 +47,8 @@ class DeviceTimeline {
   DeviceTimeline& operator=(const DeviceTimeline&) = delete;
 
   bool tracing() const { return m_on; }
+  // No record was dropped so far (a full buffer would make busy_ns short).
+  bool complete() const;
   std::uint64_t now() const;  // ns, on the records' clock
   // The device's work that began in [t0, t1), as the length of the union of
   // its intervals (ns). Flushes the records first: call it once the work is done.

@@ -63,6 +63,8 @@ struct Interval {
 };
 std::mutex g_interval_mutex;
 std::vector<Interval> g_intervals;
+std::atomic<std::size_t> g_dropped{0};  // records CUPTI could not keep (a full buffer)
+std::atomic<bool> g_timeline_live{false};  // tracing is process-wide: one DeviceTimeline at a time
 constexpr CUpti_ActivityKind kTraced[] = {CUPTI_ACTIVITY_KIND_CONCURRENT_KERNEL, CUPTI_ACTIVITY_KIND_MEMCPY,
                                           CUPTI_ACTIVITY_KIND_MEMSET};
 
@@ -73,7 +75,9 @@ void CUPTIAPI buffer_requested(uint8_t** buffer, size_t* size, size_t* max_recor
   *max_records = 0;
 }
 
-void CUPTIAPI buffer_completed(CUcontext, uint32_t, uint8_t* buffer, size_t, size_t valid) {
+void CUPTIAPI buffer_completed(CUcontext context, uint32_t stream, uint8_t* buffer, size_t, size_t valid) {
+  std::size_t dropped = 0;
+  if (cuptiActivityGetNumDroppedRecords(context, stream, &dropped) == CUPTI_SUCCESS) g_dropped += dropped;
   std::vector<Interval> got;
   CUpti_Activity* record = nullptr;
   while (cuptiActivityGetNextRecord(buffer, valid, &record) == CUPTI_SUCCESS) {
@@ -106,24 +110,31 @@ void CUPTIAPI buffer_completed(CUcontext, uint32_t, uint8_t* buffer, size_t, siz
 
 DeviceTimeline::DeviceTimeline() {
   static const bool registered = cuptiActivityRegisterCallbacks(buffer_requested, buffer_completed) == CUPTI_SUCCESS;
-  if (!registered) return;
+  if (!registered || g_timeline_live.exchange(true)) return;  // a second one traces nothing
   for (CUpti_ActivityKind kind : kTraced)
     if (cuptiActivityEnable(kind) != CUPTI_SUCCESS) {
       for (CUpti_ActivityKind k : kTraced) cuptiActivityDisable(k);
+      g_timeline_live = false;
       return;
     }
   const std::lock_guard<std::mutex> lock(g_interval_mutex);
   g_intervals.clear();
+  g_dropped = 0;
   m_on = true;
 }
 
 DeviceTimeline::~DeviceTimeline() {
   if (!m_on) return;
   for (CUpti_ActivityKind kind : kTraced) cuptiActivityDisable(kind);
-  cuptiActivityFlushAll(1);
-  const std::lock_guard<std::mutex> lock(g_interval_mutex);
-  g_intervals.clear();
+  cuptiActivityFlushAll(CUPTI_ACTIVITY_FLAG_FLUSH_FORCED);
+  {
+    const std::lock_guard<std::mutex> lock(g_interval_mutex);
+    g_intervals.clear();
+  }
+  g_timeline_live = false;
 }
+
+bool DeviceTimeline::complete() const { return m_on && g_dropped == 0; }
 
 std::uint64_t DeviceTimeline::now() const {
   std::uint64_t t = 0;
@@ -133,7 +144,7 @@ std::uint64_t DeviceTimeline::now() const {
 
 std::uint64_t DeviceTimeline::busy_ns(std::uint64_t t0, std::uint64_t t1) {
   if (!m_on) return 0;
-  cuptiActivityFlushAll(1);  // hands over every record made so far, in this call
+  cuptiActivityFlushAll(CUPTI_ACTIVITY_FLAG_FLUSH_FORCED);  // hands over every record made so far, in this call
   std::vector<Interval> in;
   {
     const std::lock_guard<std::mutex> lock(g_interval_mutex);

@@ -10,6 +10,7 @@ ApiCounts ApiCounter::counts() const { return {}; }
 
 DeviceTimeline::DeviceTimeline() = default;
 DeviceTimeline::~DeviceTimeline() = default;
+bool DeviceTimeline::complete() const { return false; }
 std::uint64_t DeviceTimeline::now() const { return 0; }
 std::uint64_t DeviceTimeline::busy_ns(std::uint64_t, std::uint64_t) { return 0; }
 

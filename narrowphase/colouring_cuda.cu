@@ -209,11 +209,13 @@ std::uint32_t ColouringCuda::first_batch(ColourRule rule) const {
   return std::min(std::max(kBatch, last + last / 8 + 1), kMaxColourRounds);
 }
 
-// The rounds a batch's list sizes show were needed (0: not finished).
+// The rounds a batch's list sizes show were needed (0: not finished). A
+// batch that ends at kMaxColourRounds has finished too: what is left is the
+// overflow set.
 static std::uint32_t finished_in(const std::uint32_t* host, std::uint32_t round, std::uint32_t batch) {
   for (std::uint32_t r = 0; r < batch; ++r)
     if (host[r] == 0) return round + r + 1;
-  return 0;
+  return round + batch == kMaxColourRounds ? kMaxColourRounds : 0;
 }
 
 // Rounds until the active list is empty: launched in batches, the list
@@ -229,7 +231,7 @@ std::uint32_t ColouringCuda::rounds(const ColouringArrays& at, std::uint32_t n, 
     if (const std::uint32_t done = finished_in(m_host, round, batch)) return last = done;
     round += batch;
   }
-  return last = kMaxColourRounds;  // the rest stay uncoloured: the overflow set
+  return last = kMaxColourRounds;  // not reached: the batch that ends there has finished
 }
 
 std::uint32_t* ColouringCuda::queue_sort(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
@@ -321,7 +323,7 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
       m_last_rounds[0] = rounds_run;
       ranges_of(m_host + batch, kMaxColours, n, begin);
     } else {
-      m_last_rounds[0] = batch;  // the next first batch a little longer
+      m_last_rounds[0] = batch;  // the colouring again, its first batch a little longer than this one
       start();
       order = nullptr;
     }
@@ -371,7 +373,7 @@ std::uint32_t ColouringCuda::impact_levels(const SweepRecords& records, const Re
     m_last_rounds[1] = rounds_run;
     ranges_of(m_host + batch, used, n, begin);
   } else {
-    m_last_rounds[1] = batch;  // the next first batch a little longer
+    m_last_rounds[1] = batch;  // the levels again, their first batch a little longer than this one
     start();
     const std::uint32_t all_rounds = rounds(at, n, body_count, ColourRule::by_round, sm_count, s);
     order = sort_by_colour(at, n, kMaxColourRounds, kKeyBits, all_rounds, begin, nullptr, sm_count, s);

@@ -37,7 +37,8 @@ __device__ __forceinline__ std::uint64_t sort_key(const BodyPair& ab, std::uint3
 // first `stored` places, in contact order), an unstored one after them with
 // the largest key, so that it sorts after every entry (the radix sort is
 // stable: an entry whose key has every bit set stays ahead of them too).
-// Thread 0 writes the entry count, which the host never reads.
+// Thread 0 writes the entry count, which the step never reads back (only a
+// checkpoint's download does).
 __global__ void keys_kernel(SweepRecords records, std::uint32_t n, const std::uint32_t* offsets, std::uint32_t spheres,
                             int b_bits, std::uint64_t last_key, std::uint64_t* keys, std::uint32_t* index,
                             std::uint32_t* size) {
@@ -234,7 +235,6 @@ __global__ void island_rule_kernel(IslandRule r) {
 
 ContactCacheCuda::ContactCacheCuda() {
   MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_host), 4 * sizeof(std::uint32_t)));
-  MARBLES_CUDA_CHECK(cudaMemset(m_size.as<std::uint32_t>(1), 0, sizeof(std::uint32_t)));  // empty until a store
 }
 ContactCacheCuda::~ContactCacheCuda() {
   if (m_host) cudaFreeHost(m_host);
@@ -243,7 +243,7 @@ ContactCacheCuda::~ContactCacheCuda() {
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
                              std::uint32_t spheres, std::uint32_t walls, int sm_count, cudaStream_t s) {
   // Entries: the contacts with load or a colour, at most n. Their count stays
-  // on the device (size_word()): every later kernel reads it there, and the
+  // on the device (m_size): every later kernel reads it there, and the
   // host holds only the bound n (no wait). The sort takes all n contacts,
   // the unstored ones last (keys_kernel).
   m_bound = n;
@@ -348,7 +348,8 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
   auto copy = [&](DeviceBuffer& dst, const DeviceBuffer& src, std::size_t bytes) {
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(dst.as<char>(bytes), src.get(), bytes, cudaMemcpyDeviceToDevice, s));
   };
-  copy(to.m_size, m_size, sizeof(std::uint32_t));
+  if (m_size.get()) copy(to.m_size, m_size, sizeof(std::uint32_t));
+  else MARBLES_CUDA_CHECK(cudaMemsetAsync(to.m_size.as<std::uint32_t>(1), 0, sizeof(std::uint32_t), s));  // never stored
   if (m == 0) return;
   copy(to.m_keys, m_keys, m * sizeof(std::uint64_t));
   copy(to.m_normal, m_normal, m * sizeof(real));
@@ -360,7 +361,7 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
 bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const BodiesView& bodies,
                                real weight_impulse, std::uint8_t* kept_colour, std::uint32_t* match, int sm_count,
                                cudaStream_t s) {
-  const std::uint32_t m = m_bound;  // the entries are at most this many (their count: size_word())
+  const std::uint32_t m = m_bound;  // the entries are at most this many (their count: m_size)
   if (m == 0 || n == 0) return false;
   const std::uint32_t* size = m_size.get_as<std::uint32_t>();
   // Temporaries in the scratch memory: which entries were matched, and for

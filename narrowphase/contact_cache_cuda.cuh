@@ -1,12 +1,13 @@
 // narrowphase/contact_cache_cuda.cuh — the CUDA twin of contact_cache.cpp:
 // entries sorted by key on the device (flag, scan, write, CUB sort), looked
 // up by binary search (contact_cache_math.hpp), one thread per contact. The
-// entry count never leaves the device. When a load was lost (rare: a counter
-// says so, read by the device alone), the island rule runs in one
-// cooperative launch: islands by min-label propagation with pointer jumping
-// (the same islands as the CPU's union-find), their largest impulse by an
-// atomic max, then the cold islands' contacts cleared. The host waits for
-// nothing. Only .cu files include it.
+// entry count stays on the device (a checkpoint's download reads it). When a
+// load was lost (rare: a counter says so, read by the device alone), the
+// island rule runs in one cooperative launch: islands by min-label
+// propagation with pointer jumping (the same islands as the CPU's
+// union-find), their largest impulse by an atomic max, then the cold
+// islands' contacts cleared. Neither store nor restore waits for the device.
+// Only .cu files include it.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -46,7 +47,9 @@ class ContactCacheCuda {
   // entries), as ContactCache::restore finds them, the island rule included.
   // The impulses themselves are restored when the contacts are made
   // (restore_impulses, with the contact's normal). False, writing nothing,
-  // when the cache or the contacts are empty.
+  // when there are no contacts or the last store had none (the bound is 0);
+  // a cache that kept no entry of its contacts gives every contact no entry
+  // and no kept colour, which colours and restores as `false` does.
   bool restore(const BodyPair* pairs, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
                std::uint8_t* kept_colour, std::uint32_t* match, int sm_count, cudaStream_t stream);
   // The entries' impulses (device; tangent and rolling null where the scene

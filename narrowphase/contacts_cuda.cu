@@ -39,11 +39,11 @@ __global__ void reach_kernel(BodiesView bodies, real h, const unsigned long long
 }
 
 // Whether contact c would enter the impact stage (is_impact_candidate on the
-// approach speed its record will hold: prepare_from_world on the same
+// approach speed its record will hold: prepare_from_world's, from the same
 // bodies, which nothing moves before the solve).
 __device__ __forceinline__ bool approaches(Contact& c, const BodiesView& bodies, const ImpactWatch& watch) {
   if (!watch.any) return false;
-  prepare_from_world(c, bodies);
+  c.approach_speed = approach_from_world(c, bodies);
   return is_impact_candidate(c, watch.rest_speed);
 }
 

@@ -125,6 +125,10 @@ TEST(DeviceTimeline, BusyIsTheUnionOfTheDevicesWorkAndTheRestIsIdle) {
   EXPECT_NEAR(first_part, alone, 0.05) << seen;
   EXPECT_NEAR(second_part, both, 0.05) << seen;
   EXPECT_NEAR(first_part + second_part, busy, 1e-9) << seen;
+  EXPECT_TRUE(timeline.complete());
+  // Tracing is process-wide: a second timeline traces nothing while this one lives.
+  marbles::bench::DeviceTimeline second;
+  EXPECT_FALSE(second.tracing());
   for (auto& x : s) MARBLES_CUDA_CHECK(cudaStreamDestroy(x));
   MARBLES_CUDA_CHECK(cudaFree(times));
 }

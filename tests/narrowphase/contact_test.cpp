@@ -370,6 +370,40 @@ TEST(Solver, ProjectionEndsAtTheFirstSettledSweep) {
   }
 }
 
+// The contact pass asks of each contact whether it will be an impact
+// candidate from approach_from_world alone: the same bits as the approach
+// speed prepare_from_world gives the record, on sphere and floor contacts
+// thrown at each other, candidates and not.
+TEST(Solver, ApproachFromWorldIsThePreparedApproach) {
+  const real r = real(0.01);
+  std::mt19937_64 rng(31);
+  Lattice lattice(8, r, 2 * r * 1.002, r * 1.001, 2e-5, rng);
+  std::vector<Vec3> vel(lattice.n), omega(lattice.n);
+  random_motion(rng, 0.5, 50, vel, omega);
+  PairCoefficients coeff{real(0.6), real(0.4), real(0.02), real(0.01)};
+  PairTable table{&coeff, 1};
+  const BodiesView world = lattice.view(lattice.position.data(), vel.data(), omega.data());
+  ColourRanges colours;
+  const std::vector<Contact> contacts = lattice.contacts(world, table, real(1e-3), real(2e-4), colours);
+  ASSERT_GT(contacts.size(), 1000u);
+  const real rest = real(0.01);
+  std::size_t candidates = 0, walls = 0;
+  for (const Contact& c : contacts) {
+    Contact prepared = c;
+    prepare_from_world(prepared, world);
+    const real alone = approach_from_world(c, world);
+    ASSERT_EQ(std::memcmp(&alone, &prepared.approach_speed, sizeof(real)), 0) << c.a << " " << c.b;
+    Contact asked = c;
+    asked.approach_speed = alone;
+    ASSERT_EQ(is_impact_candidate(asked, rest), is_impact_candidate(prepared, rest));
+    candidates += is_impact_candidate(prepared, rest) ? 1 : 0;
+    walls += is_wall(c.b) ? 1 : 0;
+  }
+  EXPECT_GT(candidates, contacts.size() / 10);
+  EXPECT_LT(candidates, contacts.size());
+  EXPECT_GT(walls, 0u);
+}
+
 // The GPU holds a substep's contacts only as the sweep's records and their
 // impact words (solver_math.hpp): the impact stage on them (impact_record)
 // gives impact_one's bodies and contacts bit for bit, and the whole contacts
