@@ -622,8 +622,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         << r.max_overlap_pct << std::setprecision(2) << std::setw(7) << r.projection_sweeps << std::setprecision(0)
         << std::setw(12) << r.bytes_per_step << std::setprecision(1)
         << std::setw(11) << r.device_bytes_per_sphere << std::setw(9) << counted(r.launches) << std::setw(7)
-        << counted(r.waits) << std::setprecision(3) << std::setw(8)
-        << milliseconds(r.busy_ms) << "\n"
+        << counted(r.waits) << std::setw(8) << milliseconds(r.busy_ms) << "\n"
         << std::defaultfloat;
   out << "(contacts = contacts per sphere per substep; coord = contacts a sphere takes part in; overlap% = largest,\n"
          " of a radius; proj = projection sweeps per substep (until settled); bp ms: of the profiled steps;\n"

@@ -26,6 +26,16 @@ inline int grid_for(std::size_t n, int sm_count, int per_sm = 8) {
   return static_cast<int>(want < 1 ? 1 : (want < cap ? want : cap));
 }
 
+// Blocks of kBlock threads of `kernel` that stay resident on one SM
+// together: a cooperative launch's per_sm for grid_for (a grid-wide barrier
+// needs every block resident at once). Ask once per kernel.
+template <class Kernel>
+int resident_per_sm(Kernel kernel) {
+  int per_sm = 0;
+  MARBLES_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, kernel, kBlock, 0));
+  return per_sm > 1 ? per_sm : 1;
+}
+
 // A device allocation that only grows (by a quarter more than asked).
 class DeviceBuffer {
  public:

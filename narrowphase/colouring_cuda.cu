@@ -204,8 +204,8 @@ void ColouringCuda::clear_rounds(const ColouringArrays& at, std::size_t body_cou
 // The first batch is as long as the last colouring of this rule took and a
 // little more (a round past the end costs two launches that find an empty
 // list, a read of the counts a wait for the stream), later ones kBatch.
-std::uint32_t ColouringCuda::first_batch(ColourRule rule) const {
-  const std::uint32_t last = m_last_rounds[rule == ColourRule::lowest_free ? 0 : 1];
+std::uint32_t ColouringCuda::first_batch(ColourRule rule) {
+  const std::uint32_t last = last_rounds(rule);
   return std::min(std::max(kBatch, last + last / 8 + 1), kMaxColourRounds);
 }
 
@@ -223,7 +223,7 @@ static std::uint32_t finished_in(const std::uint32_t* host, std::uint32_t round,
 std::uint32_t ColouringCuda::rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count,
                                     ColourRule rule, int sm_count, cudaStream_t s) {
   clear_rounds(at, body_count, s);  // count[0] is set by the caller
-  std::uint32_t& last = m_last_rounds[rule == ColourRule::lowest_free ? 0 : 1];
+  std::uint32_t& last = last_rounds(rule);
   for (std::uint32_t round = 0; round < kMaxColourRounds;) {
     const std::uint32_t batch = round == 0 ? first_batch(rule) : std::min(kBatch, kMaxColourRounds - round);
     queue_rounds(at, n, round, batch, rule, m_host, sm_count, s);
@@ -283,6 +283,33 @@ std::uint32_t* ColouringCuda::sort_by_colour(const ColouringArrays& at, std::uin
   return index;
 }
 
+template <class Start, class KeyBound>
+std::uint32_t* ColouringCuda::rounds_and_sort(const ColouringArrays& at, std::uint32_t n, std::size_t body_count,
+                                              ColourRule rule, std::uint32_t overflow_key, int key_bits,
+                                              Start&& start, KeyBound&& key_bound, std::vector<std::uint32_t>& begin,
+                                              const std::uint32_t** sorted_keys, std::uint32_t& rounds_run,
+                                              int sm_count, cudaStream_t s) {
+  start();
+  const std::uint32_t batch = first_batch(rule);
+  clear_rounds(at, body_count, s);
+  queue_rounds(at, n, 0, batch, rule, m_host, sm_count, s);
+  const std::uint32_t used = std::min(key_bound(batch), overflow_key);
+  std::uint32_t* order = queue_sort(at, n, overflow_key, key_bits, used, m_host + batch, sorted_keys, sm_count, s);
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  rounds_run = finished_in(m_host, 0, batch);
+  if (rounds_run > 0) {
+    last_rounds(rule) = rounds_run;
+    ranges_of(m_host + batch, used, n, begin);
+    return order;
+  }
+  // Not finished: the sort (in the rounds' memory) is dropped, and the
+  // rounds start again, their first batch a little longer than this one.
+  last_rounds(rule) = batch;
+  start();
+  rounds_run = rounds(at, n, body_count, rule, sm_count, s);
+  return sort_by_colour(at, n, overflow_key, key_bits, key_bound(rounds_run), begin, sorted_keys, sm_count, s);
+}
+
 std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,
                                              const std::uint32_t*& position, std::vector<std::uint32_t>& begin,
                                              std::uint32_t& rounds_run, int sm_count, cudaStream_t s,
@@ -303,39 +330,13 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
                                                                   count, at.body_used);
     MARBLES_CUDA_CHECK_LAUNCH();
   };
-  start();
+  // Without kept colours, a contact coloured in round r has at most 2 r
+  // coloured neighbours (one per sphere and round), so its colour is at most
+  // 2 r; kept colours may be any below kMaxColours.
+  auto key_bound = [&](std::uint32_t r) { return kept_colour ? kMaxColours : 2 * r; };
   const std::uint32_t* sorted_keys = nullptr;
-  const std::uint32_t* order = nullptr;
-  // With kept colours any colour below kMaxColours may be used, so the sort
-  // and its ranges do not depend on the rounds run: the sort is queued
-  // behind the first batch of rounds and read with its list sizes, one wait
-  // in all. If the batch did not finish, the sort (over the rounds' lists,
-  // in the same memory) is dropped and the colouring starts again: the same
-  // colours, whatever the batches.
-  if (kept_colour) {
-    const std::uint32_t batch = first_batch(ColourRule::lowest_free);
-    clear_rounds(at, body_count, s);
-    queue_rounds(at, n, 0, batch, ColourRule::lowest_free, m_host, sm_count, s);
-    order = queue_sort(at, n, kMaxColours, kKeyBits, kMaxColours, m_host + batch, &sorted_keys, sm_count, s);
-    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-    rounds_run = finished_in(m_host, 0, batch);
-    if (rounds_run > 0) {
-      m_last_rounds[0] = rounds_run;
-      ranges_of(m_host + batch, kMaxColours, n, begin);
-    } else {
-      m_last_rounds[0] = batch;  // the colouring again, its first batch a little longer than this one
-      start();
-      order = nullptr;
-    }
-  }
-  if (!order) {
-    rounds_run = rounds(at, n, body_count, ColourRule::lowest_free, sm_count, s);
-    // Without kept colours, a contact coloured in round r has at most 2 r
-    // coloured neighbours (one per sphere and round), so its colour is at
-    // most 2 r; kept colours may be any below kMaxColours.
-    order = sort_by_colour(at, n, kMaxColours, kKeyBits, kept_colour ? kMaxColours : 2 * rounds_run, begin,
-                           &sorted_keys, sm_count, s);
-  }
+  const std::uint32_t* order = rounds_and_sort(at, n, body_count, ColourRule::lowest_free, kMaxColours, kKeyBits,
+                                               start, key_bound, begin, &sorted_keys, rounds_run, sm_count, s);
   // The colours are read (keys_kernel): their array takes the positions.
   positions_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(order, sorted_keys, n, at.colour, sorted_colour);
   MARBLES_CUDA_CHECK_LAUNCH();
@@ -357,27 +358,11 @@ std::uint32_t ColouringCuda::impact_levels(const SweepRecords& records, const Re
                                                                       at.active, count);
     MARBLES_CUDA_CHECK_LAUNCH();
   };
-  start();
   // The candidates are not counted on the host: without any, the rounds end
-  // at once and every range is empty. A level is the round that coloured it,
-  // so after `batch` rounds no key is at or above `batch`: the sort is queued
-  // behind the first batch and read with its list sizes, one wait in all
-  // (as colour_and_sort does with kept colours).
-  const std::uint32_t batch = first_batch(ColourRule::by_round);
-  clear_rounds(at, body_count, s);
-  queue_rounds(at, n, 0, batch, ColourRule::by_round, m_host, sm_count, s);
-  const std::uint32_t used = std::min(batch, kMaxColourRounds);
-  order = queue_sort(at, n, kMaxColourRounds, kKeyBits, used, m_host + batch, nullptr, sm_count, s);
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  if (const std::uint32_t rounds_run = finished_in(m_host, 0, batch)) {
-    m_last_rounds[1] = rounds_run;
-    ranges_of(m_host + batch, used, n, begin);
-  } else {
-    m_last_rounds[1] = batch;  // the levels again, their first batch a little longer than this one
-    start();
-    const std::uint32_t all_rounds = rounds(at, n, body_count, ColourRule::by_round, sm_count, s);
-    order = sort_by_colour(at, n, kMaxColourRounds, kKeyBits, all_rounds, begin, nullptr, sm_count, s);
-  }
+  // at once and every range is empty. A level is the round that coloured it.
+  std::uint32_t rounds_run = 0;
+  order = rounds_and_sort(at, n, body_count, ColourRule::by_round, kMaxColourRounds, kKeyBits, start,
+                          [](std::uint32_t r) { return r; }, begin, nullptr, rounds_run, sm_count, s);
   return static_cast<std::uint32_t>(begin.size() - 2);
 }
 

@@ -80,7 +80,20 @@ class ColouringCuda {
   void clear_rounds(const ColouringArrays& at, std::size_t body_count, cudaStream_t stream);
   void queue_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round, std::uint32_t batch,
                     ColourRule rule, std::uint32_t* host, int sm_count, cudaStream_t stream);
-  std::uint32_t first_batch(ColourRule rule) const;
+  std::uint32_t first_batch(ColourRule rule);
+  // The rounds from a fresh start (start(): count[0] and the active list,
+  // and what the rule keeps), then the stable sort by key and its ranges; no
+  // key but the overflow's is at or above key_bound(r) after r rounds. The
+  // sort is queued behind the first batch of rounds and read with its list
+  // sizes, one wait in all; a batch that did not finish drops the sort and
+  // the rounds start again (the same result whatever the batches). Returns
+  // the sorted indices.
+  template <class Start, class KeyBound>
+  std::uint32_t* rounds_and_sort(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, ColourRule rule,
+                                 std::uint32_t overflow_key, int key_bits, Start&& start, KeyBound&& key_bound,
+                                 std::vector<std::uint32_t>& begin, const std::uint32_t** sorted_keys,
+                                 std::uint32_t& rounds_run, int sm_count, cudaStream_t stream);
+  std::uint32_t& last_rounds(ColourRule rule) { return m_last_rounds[rule == ColourRule::lowest_free ? 0 : 1]; }
   // sort_by_colour's launches, with the read of the firsts of the keys below
   // `used` and of the overflow and inactive keys queued into host[0, used +
   // 2) (no wait). Returns the sorted indices.

@@ -202,11 +202,7 @@ void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, Load&
         std::swap(source[j - 1], source[j]);
   }
   CacheEntries& e = m_entries;
-  e.key.resize(m);
-  e.normal_impulse.resize(m);
-  e.tangent_impulse.resize(m);
-  e.rolling_impulse.resize(m);
-  e.colour.resize(m);
+  e.resize(m);
 #pragma omp parallel for schedule(static) if (m >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < static_cast<std::ptrdiff_t>(m); ++t) {
     const StagedEntry& next = st[source[std::min(static_cast<std::uint32_t>(t) + 8, m - 1)]];

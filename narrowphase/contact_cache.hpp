@@ -39,6 +39,13 @@ struct CacheEntries {
   std::vector<Vec3> tangent_impulse, rolling_impulse;
   std::vector<std::uint8_t> colour;
   std::size_t size() const { return key.size(); }
+  void resize(std::size_t n) {
+    key.resize(n);
+    normal_impulse.resize(n);
+    tangent_impulse.resize(n);
+    rolling_impulse.resize(n);
+    colour.resize(n);
+  }
 };
 
 // Entries from outside the run (a checkpoint) keep their colours only if they

@@ -97,16 +97,22 @@ __device__ __forceinline__ real restored_normal(const std::uint32_t* match, cons
   return e != kNoEntry ? normal[e] : real(0);
 }
 
+// Entry e found no contact and carried a load (is_lost_load on its sphere a).
+__device__ __forceinline__ bool lost_load_at(const std::uint64_t* keys, const real* normal,
+                                             const std::uint8_t* matched, const BodiesView& bodies,
+                                             real weight_impulse, std::uint32_t e) {
+  if (matched[e]) return false;
+  const auto a = static_cast<std::uint32_t>(keys[e] >> 32);
+  return a < bodies.count && is_lost_load(normal[e], bodies.inv_mass[a], weight_impulse);
+}
+
 __global__ void lost_loads_kernel(const std::uint64_t* keys, const real* normal, const std::uint8_t* matched,
                                   const std::uint32_t* size, BodiesView bodies, real weight_impulse,
                                   std::uint32_t* count) {
   const std::uint32_t m = *size;
   std::uint32_t mine = 0;
-  for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
-    if (matched[e]) continue;
-    const auto a = static_cast<std::uint32_t>(keys[e] >> 32);
-    if (a < bodies.count && is_lost_load(normal[e], bodies.inv_mass[a], weight_impulse)) ++mine;
-  }
+  for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x)
+    if (lost_load_at(keys, normal, matched, bodies, weight_impulse, e)) ++mine;
   if (mine) atomicAdd(count, mine);
 }
 
@@ -182,10 +188,9 @@ __device__ void island_max_pass(const IslandRule& r, std::uint32_t first, std::u
 __device__ void island_cold_pass(const IslandRule& r, std::uint32_t first, std::uint32_t stride) {
   const std::uint32_t m = *r.size;
   for (std::uint32_t e = first; e < m; e += stride) {
-    if (r.matched[e]) continue;
-    const auto a = static_cast<std::uint32_t>(r.keys[e] >> 32);
-    if (a >= r.bodies.count || !is_lost_load(r.normal[e], r.bodies.inv_mass[a], r.weight_impulse)) continue;
-    for (const std::uint32_t body : {a, static_cast<std::uint32_t>(r.keys[e] & 0xffffffffu)}) {
+    if (!lost_load_at(r.keys, r.normal, r.matched, r.bodies, r.weight_impulse, e)) continue;
+    for (const std::uint32_t body : {static_cast<std::uint32_t>(r.keys[e] >> 32),
+                                     static_cast<std::uint32_t>(r.keys[e] & 0xffffffffu)}) {
       if (is_wall(body) || body >= r.bodies.count) continue;
       const std::uint32_t l = r.label[body];
       if (island_starts_cold(r.normal[e], real_of_bits(r.island_max[l]))) r.cold[l] = 1;
@@ -295,11 +300,7 @@ CacheEntries ContactCacheCuda::download(cudaStream_t s) {
   // Everything up to the bound, then cut to the count read with it.
   CacheEntries e;
   const std::size_t m = m_bound;
-  e.key.resize(m);
-  e.normal_impulse.resize(m);
-  e.tangent_impulse.resize(m);
-  e.rolling_impulse.resize(m);
-  e.colour.resize(m);
+  e.resize(m);
   if (m == 0) return e;
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.key.data(), m_keys.get(), m * sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.normal_impulse.data(), m_normal.get(), m * sizeof(real), cudaMemcpyDeviceToHost, s));
@@ -310,12 +311,7 @@ CacheEntries ContactCacheCuda::download(cudaStream_t s) {
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.colour.data(), m_colour.get(), m, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_size.get(), sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  const std::size_t count = std::min<std::size_t>(m_host[0], m);
-  e.key.resize(count);
-  e.normal_impulse.resize(count);
-  e.tangent_impulse.resize(count);
-  e.rolling_impulse.resize(count);
-  e.colour.resize(count);
+  e.resize(std::min<std::size_t>(m_host[0], m));
   return e;
 }
 
@@ -389,14 +385,8 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
   MARBLES_CUDA_CHECK_LAUNCH();
 
   // The island rule, on the device, where a load was lost (the kernel reads the count).
-  static const int resident = [] {
-    int per_sm = 0;
-    MARBLES_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, island_rule_kernel, kBlock, 0));
-    return std::max(per_sm, 1);
-  }();
-  const std::size_t widest = std::max<std::size_t>({n, m, bodies_n});
-  const int grid = static_cast<int>(std::clamp<std::size_t>((widest + kBlock - 1) / kBlock, 1,
-                                                            static_cast<std::size_t>(resident) * sm_count));
+  static const int resident = ::marbles::cuda::resident_per_sm(island_rule_kernel);
+  const int grid = grid_for(std::max<std::size_t>({n, m, bodies_n}), sm_count, resident);
   IslandRule rule{pairs, match, n, keys, normal, matched, size, bodies, weight_impulse, counter, label, island_max,
                   cold, counter + 1};
   void* args[] = {&rule};

@@ -219,10 +219,15 @@ MARBLES_HD_INLINE void set_masses(Contact& c, const BodyState& A, const BodyStat
   if constexpr (Rolling) c.rolling_mass = rolling_mass_of(A, B);
 }
 
+// The normal speed at which a closes on b (< 0: approaching).
+MARBLES_HD_INLINE real approach_speed_of(const Contact& c, const BodyState& A, const BodyState& B) {
+  return dot(A.v - B.v, c.normal);
+}
+
 // Prepare stage: effective masses and the approach speed before the solve.
 MARBLES_HD_INLINE void prepare_contact(Contact& c, const BodyState& A, const BodyState& B) {
   set_masses<true, true>(c, A, B);
-  c.approach_speed = dot(A.v - B.v, c.normal);
+  c.approach_speed = approach_speed_of(c, A, B);
 }
 
 // Relative velocity of the contact points (a minus b).

@@ -230,14 +230,8 @@ void launch_project_sweep(const SweepRecords& records, const ColourPlan& plan, c
   std::uint32_t widest = 0;
   for (std::uint32_t c = 0; c < plan.colours; ++c) widest = std::max(widest, plan.begin[c + 1] - plan.begin[c]);
   if (widest == 0 && plan.begin[plan.colours + 1] == plan.begin[plan.colours]) return;
-  // Every block resident at once, as a grid-wide barrier needs.
-  static const int resident = [] {
-    int per_sm = 0;
-    MARBLES_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, project_sweep_kernel, kBlock, 0));
-    return std::max(per_sm, 1);
-  }();
-  const int grid = static_cast<int>(
-      std::clamp<std::uint32_t>((widest + kBlock - 1) / kBlock, 1u, static_cast<std::uint32_t>(resident * sm_count)));
+  static const int resident = ::marbles::cuda::resident_per_sm(project_sweep_kernel);
+  const int grid = ::marbles::cuda::grid_for(widest, sm_count, resident);
   SweepRecords r = records;
   ColourPlan p = plan;
   BodiesView b = bodies;

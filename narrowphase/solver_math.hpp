@@ -86,9 +86,9 @@ MARBLES_HD_INLINE BodyState world_body(const BodiesView& w, std::uint32_t index,
 MARBLES_HD_INLINE void prepare_from_world(Contact& c, const BodiesView& w) {
   prepare_contact(c, world_body(w, c.a, c), world_body(w, c.b, c));
 }
-// The approach speed prepare_from_world gives c, alone (the same expression).
+// The approach speed prepare_from_world gives c, alone.
 MARBLES_HD_INLINE real approach_from_world(const Contact& c, const BodiesView& w) {
-  return dot(world_body(w, c.a, c).v - world_body(w, c.b, c).v, c.normal);
+  return approach_speed_of(c, world_body(w, c.a, c), world_body(w, c.b, c));
 }
 
 // Warm start: apply the impulses the contact starts with (from the cache).
