@@ -36,6 +36,41 @@ int resident_per_sm(Kernel kernel) {
   return per_sm > 1 ? per_sm : 1;
 }
 
+// resident_per_sm of one kernel, asked on its first use.
+template <auto Kernel>
+int resident_blocks() {
+  static const int per_sm = resident_per_sm(Kernel);
+  return per_sm;
+}
+
+// How a kernel is launched: plainly; cooperatively (its blocks may meet at
+// a grid-wide barrier: every block resident at once, so the grid at most
+// grid_for(n, sm_count, resident_per_sm(kernel))); or dependent on the launch
+// before it (programmatic stream serialization, sm_90: it may start while
+// that one's last blocks run, its threads waiting in griddepcontrol.wait).
+enum class Launch { plain, cooperative, dependent };
+
+// `kernel` on `grid` blocks of kBlock threads, launched `how`, checked.
+template <class... Params, class... Args>
+void launch(Launch how, void (*kernel)(Params...), int grid, cudaStream_t s, Args&&... args) {
+  cudaLaunchConfig_t config{};
+  config.gridDim = dim3(static_cast<unsigned>(grid));
+  config.blockDim = dim3(kBlock);
+  config.stream = s;
+  cudaLaunchAttribute attribute[1];
+  if (how == Launch::cooperative) {
+    attribute[0].id = cudaLaunchAttributeCooperative;
+    attribute[0].val.cooperative = 1;
+  } else if (how == Launch::dependent) {
+    attribute[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
+    attribute[0].val.programmaticStreamSerializationAllowed = 1;
+  }
+  config.attrs = attribute;
+  config.numAttrs = how == Launch::plain ? 0 : 1;
+  MARBLES_CUDA_CHECK(cudaLaunchKernelEx(&config, kernel, std::forward<Args>(args)...));
+  MARBLES_CUDA_CHECK_LAUNCH();  // with MARBLES_CUDA_SYNC=1: a wait, the kernel's error here
+}
+
 // A device allocation that only grows (by a quarter more than asked).
 class DeviceBuffer {
  public:

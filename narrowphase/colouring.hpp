@@ -67,23 +67,6 @@ class ContactColouring {
   std::vector<Contact> m_sorted;
 };
 
-// The solver's order over colour-major contacts, the same on every backend:
-// forwards, colours 0, 1, ... then the overflow set; backwards, the overflow
-// set then the colours down to 0. visit(begin, end, serial, backwards): a
-// colour's range (serial false: any order within, so in parallel) or the
-// overflow set (serial true: one by one, reversed when backwards). `begin`
-// as ColourRanges::begin.
-template <class Visit>
-void visit_colours(const std::vector<std::uint32_t>& begin, std::uint32_t colours, bool backwards, Visit&& visit) {
-  if (backwards) {
-    visit(begin[colours], begin[colours + 1], true, true);
-    for (std::uint32_t c = colours; c-- > 0;) visit(begin[c], begin[c + 1], false, true);
-  } else {
-    for (std::uint32_t c = 0; c < colours; ++c) visit(begin[c], begin[c + 1], false, false);
-    visit(begin[colours], begin[colours + 1], true, false);
-  }
-}
-
 // The records the launch just before wrote, [begin, end), so that the next
 // one knows whether its own are untouched by it and may be loaded before it
 // ends (the GPU's dependent launches, solver_cuda.cu): whatever ran before

@@ -1,5 +1,7 @@
 #include <algorithm>
 
+#include <cooperative_groups.h>
+
 #include "core/cuda_check.hpp"
 #include "narrowphase/colouring_cuda.cuh"
 #include "narrowphase/solver_math.hpp"
@@ -9,8 +11,9 @@ namespace {
 
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
+namespace cg = cooperative_groups;
 
-constexpr std::uint32_t kBatch = 8;  // rounds launched between two reads of what is left
+constexpr std::uint32_t kBatch = 8;  // rounds run between two reads of what is left
 
 // One entry of a round's active list: the contact's spheres and rank in one
 // 16-byte word, so a round reads its list in order (coalesced) and never
@@ -74,12 +77,11 @@ __global__ void impact_candidates_kernel(SweepRecords records, const Real4* impa
   }
 }
 
-// Step 1 of round r over its active list (count[r] long): offers, an atomic
-// max whose result does not depend on order.
-__global__ void offer_kernel(const ColourEntry* active, const std::uint32_t* count, std::uint32_t round,
-                             unsigned long long* body_word) {
-  const std::uint32_t n = count[round];
-  for (std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < n; t += gridDim.x * blockDim.x) {
+// Step 1 of round r over its active list (n long): offers, an atomic max
+// whose result does not depend on order.
+__device__ void offer(const ColourEntry* active, std::uint32_t n, std::uint32_t round, unsigned long long* body_word,
+                      std::uint32_t first, std::uint32_t stride) {
+  for (std::uint32_t t = first; t < n; t += stride) {
     const ColourEntry e = active[t];
     const unsigned long long word = round_word(round, e.rank);
     atomicMax(&body_word[e.a], word);
@@ -88,12 +90,12 @@ __global__ void offer_kernel(const ColourEntry* active, const std::uint32_t* cou
 }
 
 // Step 2: the contacts holding both offers take a colour (they share no
-// sphere); the others go on to round r + 1's list.
-__global__ void select_kernel(const ColourEntry* active, ColourEntry* next, std::uint32_t* count,
-                              std::uint32_t* colour, std::uint32_t round, ColourRule rule,
-                              const unsigned long long* body_word, unsigned long long* body_used) {
-  const std::uint32_t n = count[round];
-  for (std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < n; t += gridDim.x * blockDim.x) {
+// sphere); the others go on to round r + 1's list (count[r + 1] long).
+__device__ void select(const ColourEntry* active, std::uint32_t n, ColourEntry* next, std::uint32_t* count,
+                       std::uint32_t* colour, std::uint32_t round, ColourRule rule,
+                       const unsigned long long* body_word, unsigned long long* body_used, std::uint32_t first,
+                       std::uint32_t stride) {
+  for (std::uint32_t t = first; t < n; t += stride) {
     const ColourEntry e = active[t];
     const bool wall = is_wall(e.b);
     const std::uint64_t word = round_word(round, e.rank);
@@ -103,6 +105,25 @@ __global__ void select_kernel(const ColourEntry* active, ColourEntry* next, std:
                                 ? round
                                 : take_lowest_free(body_used[e.a], wall ? nullptr : &body_used[e.b]);
     append(next, &count[round + 1], e, !coloured);
+  }
+}
+
+// Rounds [round, round + batch) in one cooperative launch, the lists
+// alternating, a grid-wide barrier after each step; it ends after a round
+// that leaves no contact (every block reads the same list size).
+__global__ void rounds_kernel(ColourEntry* list0, ColourEntry* list1, std::uint32_t* count, std::uint32_t round,
+                              std::uint32_t batch, std::uint32_t* colour, ColourRule rule,
+                              unsigned long long* body_word, unsigned long long* body_used) {
+  const cg::grid_group grid = cg::this_grid();
+  const std::uint32_t first = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
+  for (std::uint32_t r = round; r < round + batch; ++r) {
+    const std::uint32_t n = *static_cast<const volatile std::uint32_t*>(count + r);
+    if (n == 0) return;
+    ColourEntry* list = r % 2 == 0 ? list0 : list1;
+    offer(list, n, r, body_word, first, stride);
+    grid.sync();
+    select(list, n, r % 2 == 0 ? list1 : list0, count, colour, r, rule, body_word, body_used, first, stride);
+    grid.sync();
   }
 }
 
@@ -181,15 +202,10 @@ void ColouringCuda::queue_rounds(const ColouringArrays& at, std::uint32_t n, std
                                  std::uint32_t batch, ColourRule rule, std::uint32_t* host, int sm_count,
                                  cudaStream_t s) {
   auto* count = m_count.get_as<std::uint32_t>();
-  ColourEntry* list[2] = {at.active, at.next};
-  const int grid = grid_for(n, sm_count);
-  for (std::uint32_t r = round; r < round + batch; ++r) {
-    offer_kernel<<<grid, kBlock, 0, s>>>(list[r % 2], count, r, at.body_word);
-    MARBLES_CUDA_CHECK_LAUNCH();
-    select_kernel<<<grid, kBlock, 0, s>>>(list[r % 2], list[(r + 1) % 2], count, at.colour, r, rule, at.body_word,
-                                          at.body_used);
-    MARBLES_CUDA_CHECK_LAUNCH();
-  }
+  namespace dev = ::marbles::cuda;
+  const int grid = grid_for(n, sm_count, dev::resident_blocks<rounds_kernel>());
+  dev::launch(dev::Launch::cooperative, rounds_kernel, grid, s, at.active, at.next, count, round, batch, at.colour,
+              rule, at.body_word, at.body_used);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, count + round + 1, batch * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   m_bytes += batch * sizeof(std::uint32_t);
 }
@@ -202,8 +218,9 @@ void ColouringCuda::clear_rounds(const ColouringArrays& at, std::size_t body_cou
 }
 
 // The first batch is as long as the last colouring of this rule took and a
-// little more (a round past the end costs two launches that find an empty
-// list, a read of the counts a wait for the stream), later ones kBatch.
+// little more (the launch ends at the round that finds an empty list, but
+// the sort queued behind the batch reads the firsts of as many keys as the
+// batch could make, and a batch too short costs a wait), later ones kBatch.
 std::uint32_t ColouringCuda::first_batch(ColourRule rule) {
   const std::uint32_t last = last_rounds(rule);
   return std::min(std::max(kBatch, last + last / 8 + 1), kMaxColourRounds);

@@ -44,6 +44,27 @@ inline constexpr std::uint8_t kNoKeptColour = 0xff;
 
 enum class ColourRule : std::uint8_t { lowest_free, by_round };
 
+// The solver's order over colour-major contacts, the same on every backend
+// and on the host and the device: forwards, colours 0, 1, ... then the
+// overflow set; backwards, the overflow set then the colours down to 0.
+// visit(begin, end, serial, backwards): a colour's range (serial false: any
+// order within, so in parallel) or the overflow set (serial true: one by
+// one, reversed when backwards). `begin` as ColourRanges::begin (a vector on
+// the host, an array in a kernel's parameters).
+#if defined(__CUDACC__)
+#pragma nv_exec_check_disable
+#endif
+template <class Begin, class Visit>
+MARBLES_HD_INLINE void visit_colours(const Begin& begin, std::uint32_t colours, bool backwards, Visit&& visit) {
+  if (backwards) {
+    visit(begin[colours], begin[colours + 1], true, true);
+    for (std::uint32_t c = colours; c-- > 0;) visit(begin[c], begin[c + 1], false, true);
+  } else {
+    for (std::uint32_t c = 0; c < colours; ++c) visit(begin[c], begin[c + 1], false, false);
+    visit(begin[colours], begin[colours + 1], true, false);
+  }
+}
+
 // A 32-bit integer hash (lowbias32): spreads ranks so that colouring rounds
 // stay few (index order would make long chains of dependent contacts).
 MARBLES_HD_INLINE std::uint32_t mix32(std::uint32_t x) {

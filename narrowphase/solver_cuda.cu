@@ -13,6 +13,8 @@ namespace {
 namespace cg = cooperative_groups;
 
 using ::marbles::cuda::kBlock;
+using ::marbles::cuda::Launch;
+using ::marbles::cuda::launch;
 
 // Thread t of a range: contact begin + t, or for a serial range, one thread
 // visiting the whole range in order.
@@ -94,23 +96,6 @@ __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* 
       [&](std::uint32_t k, const Contact& c) { solve_loaded<Friction, Rolling>(s, k, c, bodies, inv_h); });
 }
 
-// A launch of a colour kernel that may start before the last one ends
-// (programmatic stream serialization; its threads wait as above).
-template <class... Params, class... Args>
-void launch_colour(void (*kernel)(Params...), int grid, cudaStream_t s, Args&&... args) {
-  cudaLaunchConfig_t config{};
-  config.gridDim = dim3(static_cast<unsigned>(grid));
-  config.blockDim = dim3(kBlock);
-  config.stream = s;
-  cudaLaunchAttribute attribute[1];
-  attribute[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
-  attribute[0].val.programmaticStreamSerializationAllowed = 1;
-  config.attrs = attribute;
-  config.numAttrs = 1;
-  MARBLES_CUDA_CHECK(cudaLaunchKernelEx(&config, kernel, std::forward<Args>(args)...));
-  MARBLES_CUDA_CHECK_LAUNCH();  // with MARBLES_CUDA_SYNC=1: a wait, the kernel's error here
-}
-
 template <bool Friction>
 __global__ void impact_kernel(SweepRecords records, Real4* impact, const std::uint32_t* order, ContactRange r,
                               SolverBody* bodies, ImpactParams p, unsigned* hit) {
@@ -125,33 +110,76 @@ __global__ void rebound_kernel(SweepRecords records, ContactRange r, BodiesView 
   for_range(r, [&](std::uint32_t k) { rebound_one(load_position_contact<true>(records, k), bodies, walls); });
 }
 
-// One projection sweep: the colours in order, a grid-wide barrier after
-// each (a cooperative launch), then the overflow set by one thread. A sweep
-// after one that moved nothing beyond settled_move (*go == 0) returns at
-// once, every block alike (solver.cpp ends the projection there): one
-// launch, where a launch per colour cost ~4 us each of the sweeps not run.
-__global__ void project_sweep_kernel(SweepRecords records, ColourPlan plan, BodiesView bodies,
-                                     const WallShape* walls, SolverSettings s, const unsigned* go, unsigned* moved) {
-  if (go != nullptr && *go == 0u) return;
-  const cg::grid_group grid = cg::this_grid();
+// Every contact of a colour plan in the solver's order (visit_colours) in a
+// cooperative launch: a colour's contacts spread over the grid, the overflow
+// set by one thread in order, a grid-wide barrier after each non-empty range
+// (every block skips the same empty ones). f(k) for each contact k.
+template <class F>
+__device__ void walk_colours(const ColourPlan& plan, bool backwards, const cg::grid_group& grid, F&& f) {
   const std::uint32_t first = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
-  bool any = false;
-  for (std::uint32_t c = 0; c < plan.colours; ++c) {
-    for (std::uint32_t k = plan.begin[c] + first; k < plan.begin[c + 1]; k += stride)
-      any = project_one(load_position_contact<false>(records, k), bodies, walls, s) || any;
-    grid.sync();
-  }
-  if (first == 0)
-    for (std::uint32_t k = plan.begin[plan.colours]; k < plan.begin[plan.colours + 1]; ++k)
-      any = project_one(load_position_contact<false>(records, k), bodies, walls, s) || any;
-  if (any) *moved = 1u;
+  visit_colours(plan.begin, plan.colours, backwards,
+                [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
+                  if (e <= b) return;
+                  if (!serial)
+                    for (std::uint32_t k = b + first; k < e; k += stride) f(k);
+                  else if (first == 0 && reversed)
+                    for (std::uint32_t k = e; k > b; --k) f(k - 1);
+                  else if (first == 0)
+                    for (std::uint32_t k = b; k < e; ++k) f(k);
+                  grid.sync();
+                });
 }
 
-// Sweep 0 always runs, sweep it > 0 when sweep it - 1 set moved[it - 1].
-__global__ void count_sweeps_kernel(const unsigned* moved, int sweeps, unsigned long long* total) {
-  unsigned long long ran = 1;
-  for (int it = 1; it < sweeps; ++it) ran += moved[it - 1] != 0u ? 1u : 0u;
-  *total += ran;
+__device__ __forceinline__ bool flag_set(const unsigned* flag) { return *static_cast<const volatile unsigned*>(flag) != 0u; }
+
+// The projection in one launch: sweeps until one moves nothing beyond
+// settled_move (project_one), at most `sweeps`; sweep `it` sets moved[it]
+// (zeroed before), which every block reads after the barrier that ends the
+// sweep. *total += the sweeps run (solver.cpp ends the projection there too).
+__global__ void project_kernel(ColourPlan plan, SweepRecords records, BodiesView bodies, const WallShape* walls,
+                               SolverSettings s, int sweeps, unsigned* moved, unsigned long long* total) {
+  const cg::grid_group grid = cg::this_grid();
+  int ran = 0;
+  for (int it = 0; it < sweeps; ++it) {
+    ++ran;
+    bool any = false;
+    walk_colours(plan, false, grid, [&](std::uint32_t k) {
+      any = project_one(load_position_contact<false>(records, k), bodies, walls, s) || any;
+    });
+    if (any) moved[it] = 1u;
+    grid.sync();
+    if (!flag_set(moved + it)) break;
+  }
+  if (grid.thread_rank() == 0) *total += static_cast<unsigned long long>(ran);
+}
+
+// The impact stage's passes after the first, in one launch: pass p visits
+// every contact colour by colour while pass p - 1 hit something (hit[p - 1];
+// hit[0] is the levels' flag), and sets hit[p].
+template <bool Friction>
+__global__ void impact_passes_kernel(ColourPlan plan, SweepRecords records, Real4* impact, SolverBody* bodies,
+                                     ImpactParams p, int passes, unsigned* hit) {
+  const cg::grid_group grid = cg::this_grid();
+  for (int pass = 1; pass < passes && flag_set(hit + pass - 1); ++pass) {
+    bool any = false;
+    walk_colours(plan, false, grid, [&](std::uint32_t k) {
+      any = impact_record<Friction>(records, impact, k, bodies, p) || any;
+    });
+    if (any) hit[pass] = 1u;
+    grid.sync();
+  }
+}
+
+// The warm start and every sweep of a substep in one launch, in the order of
+// the launches per colour (forwards, then backwards every other sweep): the
+// same bits. For contacts few enough a colour that the host's launches, not
+// the device, would set the solve's time.
+template <bool Friction, bool Rolling>
+__global__ void solve_kernel(ColourPlan plan, SweepRecords s, SolverBody* bodies, real inv_h, bool warm, int sweeps) {
+  const cg::grid_group grid = cg::this_grid();
+  if (warm) walk_colours(plan, false, grid, [&](std::uint32_t k) { warm_start_record<Friction, Rolling>(s, k, bodies); });
+  for (int it = 0; it < sweeps; ++it)
+    walk_colours(plan, it % 2 == 1, grid, [&](std::uint32_t k) { solve_record<Friction, Rolling>(s, k, bodies, inv_h); });
 }
 
 __global__ void max_overlap_kernel(SweepRecords records, std::uint32_t n, BodiesView bodies, const WallShape* walls,
@@ -191,20 +219,20 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
 void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* bodies, SolverTerms t, cudaStream_t s) {
   if (r.end <= r.begin) return;
   const int g = blocks(r);
-  if (t.friction && t.rolling) launch_colour(warm_start_kernel<true, true>, g, s, records, r, bodies);
-  else if (t.friction) launch_colour(warm_start_kernel<true, false>, g, s, records, r, bodies);
-  else if (t.rolling) launch_colour(warm_start_kernel<false, true>, g, s, records, r, bodies);
-  else launch_colour(warm_start_kernel<false, false>, g, s, records, r, bodies);
+  if (t.friction && t.rolling) launch(Launch::dependent, warm_start_kernel<true, true>, g, s, records, r, bodies);
+  else if (t.friction) launch(Launch::dependent, warm_start_kernel<true, false>, g, s, records, r, bodies);
+  else if (t.rolling) launch(Launch::dependent, warm_start_kernel<false, true>, g, s, records, r, bodies);
+  else launch(Launch::dependent, warm_start_kernel<false, false>, g, s, records, r, bodies);
 }
 
 void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, SolverTerms t,
                   cudaStream_t s) {
   if (r.end <= r.begin) return;
   const int g = blocks(r);
-  if (t.friction && t.rolling) launch_colour(record_sweep_kernel<true, true>, g, s, records, r, bodies, inv_h);
-  else if (t.friction) launch_colour(record_sweep_kernel<true, false>, g, s, records, r, bodies, inv_h);
-  else if (t.rolling) launch_colour(record_sweep_kernel<false, true>, g, s, records, r, bodies, inv_h);
-  else launch_colour(record_sweep_kernel<false, false>, g, s, records, r, bodies, inv_h);
+  if (t.friction && t.rolling) launch(Launch::dependent, record_sweep_kernel<true, true>, g, s, records, r, bodies, inv_h);
+  else if (t.friction) launch(Launch::dependent, record_sweep_kernel<true, false>, g, s, records, r, bodies, inv_h);
+  else if (t.rolling) launch(Launch::dependent, record_sweep_kernel<false, true>, g, s, records, r, bodies, inv_h);
+  else launch(Launch::dependent, record_sweep_kernel<false, false>, g, s, records, r, bodies, inv_h);
 }
 
 void launch_impacts(const SweepRecords& records, Real4* impact, const std::uint32_t* order, ContactRange r,
@@ -224,27 +252,39 @@ void launch_rebound(const SweepRecords& records, ContactRange r, const BodiesVie
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_project_sweep(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
-                          const WallShape* walls, const SolverSettings& settings, const unsigned* go, unsigned* moved,
-                          int sm_count, cudaStream_t s) {
-  std::uint32_t widest = 0;
-  for (std::uint32_t c = 0; c < plan.colours; ++c) widest = std::max(widest, plan.begin[c + 1] - plan.begin[c]);
-  if (widest == 0 && plan.begin[plan.colours + 1] == plan.begin[plan.colours]) return;
-  static const int resident = ::marbles::cuda::resident_per_sm(project_sweep_kernel);
-  const int grid = ::marbles::cuda::grid_for(widest, sm_count, resident);
-  SweepRecords r = records;
-  ColourPlan p = plan;
-  BodiesView b = bodies;
-  SolverSettings set = settings;
-  void* args[] = {&r, &p, &b, &walls, &set, &go, &moved};
-  MARBLES_CUDA_CHECK(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&project_sweep_kernel), dim3(grid),
-                                                 dim3(kBlock), args, 0, s));
+// `Kernel` on a cooperative grid for a plan's widest colour.
+template <auto Kernel, class... Args>
+void launch_on_plan(const ColourPlan& plan, int sm_count, cudaStream_t s, Args&&... args) {
+  const int grid = ::marbles::cuda::grid_for(plan.widest(), sm_count, ::marbles::cuda::resident_blocks<Kernel>());
+  launch(Launch::cooperative, Kernel, grid, s, plan, std::forward<Args>(args)...);
 }
 
-void launch_count_sweeps(const unsigned* moved, int sweeps, unsigned long long* total, cudaStream_t s) {
-  if (sweeps <= 0) return;
-  count_sweeps_kernel<<<1, 1, 0, s>>>(moved, sweeps, total);
-  MARBLES_CUDA_CHECK_LAUNCH();
+void launch_projection(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
+                       const WallShape* walls, const SolverSettings& settings, int sweeps, unsigned* moved,
+                       unsigned long long* total, int sm_count, cudaStream_t s) {
+  if (sweeps <= 0 || plan.empty()) return;
+  launch_on_plan<project_kernel>(plan, sm_count, s, records, bodies, walls, settings, sweeps, moved, total);
+}
+
+void launch_impact_passes(const SweepRecords& records, Real4* impact, const ColourPlan& plan, SolverBody* bodies,
+                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
+                          cudaStream_t s) {
+  if (passes <= 1 || plan.empty()) return;
+  if (friction) launch_on_plan<impact_passes_kernel<true>>(plan, sm_count, s, records, impact, bodies, p, passes, hit);
+  else launch_on_plan<impact_passes_kernel<false>>(plan, sm_count, s, records, impact, bodies, p, passes, hit);
+}
+
+void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h, SolverTerms t,
+                  bool warm, int sweeps, int sm_count, cudaStream_t s) {
+  if (plan.empty()) return;
+  if (t.friction && t.rolling)
+    launch_on_plan<solve_kernel<true, true>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
+  else if (t.friction)
+    launch_on_plan<solve_kernel<true, false>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
+  else if (t.rolling)
+    launch_on_plan<solve_kernel<false, true>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
+  else
+    launch_on_plan<solve_kernel<false, false>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
 }
 
 }  // namespace marbles::narrowphase::cuda

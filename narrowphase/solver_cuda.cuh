@@ -57,19 +57,39 @@ void launch_rebound(const SweepRecords& records, ContactRange range, const Bodie
 struct ColourPlan {
   std::uint32_t begin[kMaxColours + 2] = {};
   std::uint32_t colours = 0;
+
+  // The largest colour (the overflow set is one thread's).
+  std::uint32_t widest() const {
+    std::uint32_t w = 0;
+    for (std::uint32_t c = 0; c < colours; ++c) w = begin[c + 1] - begin[c] > w ? begin[c + 1] - begin[c] : w;
+    return w;
+  }
+  bool empty() const { return begin[colours + 1] == begin[0]; }
 };
 
-// One projection sweep over every colour in one launch, forwards, the
-// overflow set last: does nothing when `go` (the last sweep's flag; null in
-// the first sweep) is 0, else sets *moved = 1 when a contact moved beyond
-// settled_move (project_one).
-void launch_project_sweep(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
-                          const WallShape* walls, const SolverSettings& settings, const unsigned* go, unsigned* moved,
-                          int sm_count, cudaStream_t stream);
+// The stages below walk a plan in one cooperative launch each (the
+// solver's order, visit_colours, a grid-wide barrier after each colour;
+// the overflow set by one thread): the same bits as a launch per colour.
 
-// *total += the sweeps of a projection that ran, from the flags moved[0,
-// sweeps) its launch_project_sweep calls set.
-void launch_count_sweeps(const unsigned* moved, int sweeps, unsigned long long* total, cudaStream_t stream);
+// The projection: sweeps until one moves nothing beyond settled_move
+// (project_one), at most `sweeps`; moved[0, sweeps) zeroed before, sweep
+// `it` sets moved[it]; *total += the sweeps run.
+void launch_projection(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
+                       const WallShape* walls, const SolverSettings& settings, int sweeps, unsigned* moved,
+                       unsigned long long* total, int sm_count, cudaStream_t stream);
+
+// The impact stage's passes 1 .. passes - 1: pass p visits every contact
+// while pass p - 1 hit something (hit[p - 1]; hit[0] set by the levels'
+// launch_impacts), and sets hit[p] (zeroed before).
+void launch_impact_passes(const SweepRecords& records, Real4* impact, const ColourPlan& plan, SolverBody* bodies,
+                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
+                          cudaStream_t stream);
+
+// The warm start (when `warm`) and `sweeps` sweeps in one launch, where a
+// launch per colour would leave the device waiting for the host's launches
+// (contacts few a colour).
+void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h,
+                  SolverTerms terms, bool warm, int sweeps, int sm_count, cudaStream_t stream);
 
 // *deepest = max(*deepest, overlap_ratio) over the records' contacts [0, n) (as the bits
 // of a non-negative real: an atomic max, the same whatever the order).

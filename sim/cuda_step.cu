@@ -24,7 +24,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
+#include <string>
 
 #include "broadphase/broadphase_cuda.hpp"
 #include "core/cuda_check.hpp"
@@ -69,6 +71,19 @@ __global__ void watch_kernel(BodiesView b, const narrowphase::WallShape* walls, 
     if (energy != 0) atomicAdd(reinterpret_cast<double*>(out), energy);
     if (beyond != 0) atomicAdd(out + 1, beyond);
   }
+}
+
+// How the solve is launched (MARBLES_CUDA_SOLVE): auto (the default), a
+// launch per colour (launches), or the warm start and all sweeps in one
+// launch (one). The same bits either way: a choice of speed, and the tests
+// run both.
+enum class SolveMode { auto_, launches, one_launch };
+SolveMode solve_mode_from_environment() {
+  const char* asked = std::getenv("MARBLES_CUDA_SOLVE");
+  if (asked == nullptr || std::strcmp(asked, "auto") == 0) return SolveMode::auto_;
+  if (std::strcmp(asked, "launches") == 0) return SolveMode::launches;
+  if (std::strcmp(asked, "one") == 0) return SolveMode::one_launch;
+  throw RuntimeFailure(std::string("MARBLES_CUDA_SOLVE=") + asked + ": expected auto, launches or one");
 }
 
 class CudaStep final : public StepBackend {
@@ -210,6 +225,8 @@ class CudaStep final : public StepBackend {
       nc::launch_sorted_records(in, pairs_d(), m_kept_valid ? m_match.get_as<std::uint32_t>() : nullptr,
                                 m_cache.entries(), position, m_count, m_records, m_impact, m_sm, m_stream);
     }
+    m_plan.colours = m_colours;
+    std::copy(m_begin.begin(), m_begin.begin() + m_colours + 2, m_plan.begin);
     m_counters.colours = std::max(m_counters.colours, m_colours);
     m_counters.overflow += m_begin[m_colours + 1] - m_begin[m_colours];
   }
@@ -230,6 +247,13 @@ class CudaStep final : public StepBackend {
     auto* bodies = m_solver_bodies.as<narrowphase::SolverBody>(world.count);
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     if (m_model.solver.restitution) impacts(bodies, h);
+    const real inv_h = real(1) / h;
+    const int sweeps = m_model.solver.iterations * m_iteration_factor;
+    if (solve_in_one_launch()) {
+      nc::launch_solve(m_records, m_plan, bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm, m_stream);
+      nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
+      return;
+    }
     // A launch loads its records while the launch just before it ends,
     // unless that one wrote them (LastWrites, ContactRange::early). Empty
     // ranges launch nothing.
@@ -242,8 +266,7 @@ class CudaStep final : public StepBackend {
         early(r, false);
         nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);
       });
-    const real inv_h = real(1) / h;
-    for (int it = 0; it < m_model.solver.iterations * m_iteration_factor; ++it)
+    for (int it = 0; it < sweeps; ++it)
       over_colours(it % 2 == 1, [&](nc::ContactRange r) {
         early(r, true);
         nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_stream);
@@ -266,20 +289,14 @@ class CudaStep final : public StepBackend {
     // have one (a pile at rest has none).
     if (m_model.solver.restitution && m_levels.back() != 0)
       over_colours(false, [&](nc::ContactRange r) { nc::launch_rebound(m_records, r, bodies, walls(), m_stream); });
-    // The CPU's sweeps until one moves nothing beyond settled_move, without
-    // a read-back: sweep `it` sets moved[it], and returns at once when
-    // moved[it - 1] is 0.
+    // The CPU's sweeps until one moves nothing beyond settled_move, in one
+    // launch without a read-back.
     const int sweeps = m_model.solver.position_iterations;
     if (sweeps <= 0) return;
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(sweeps));
     MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
-    nc::ColourPlan plan;
-    plan.colours = m_colours;
-    std::copy(m_begin.begin(), m_begin.begin() + m_colours + 2, plan.begin);
-    for (int it = 0; it < sweeps; ++it)
-      nc::launch_project_sweep(m_records, plan, bodies, walls(), m_model.solver, it > 0 ? moved + it - 1 : nullptr,
-                               moved + it, m_sm, m_stream);
-    nc::launch_count_sweeps(moved, sweeps, m_flags.get_as<unsigned long long>() + 2, m_stream);  // flags[2]
+    nc::launch_projection(m_records, m_plan, bodies, walls(), m_model.solver, sweeps, moved,
+                          m_flags.get_as<unsigned long long>() + 2, m_sm, m_stream);  // flags[2]
   }
 
   void store_impulses() override {
@@ -477,15 +494,17 @@ class CudaStep final : public StepBackend {
                                });
   }
 
-  bool read_hit() {
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 3, m_hit.get(), sizeof(unsigned), cudaMemcpyDeviceToHost, m_stream));
-    m_bytes += sizeof(unsigned);
-    MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
-    return m_pinned[3] != 0;
+  // The solve (warm start and sweeps) in one launch: always, never, or
+  // (auto) where the widest colour is small enough that a launch per colour
+  // would leave the device waiting for the host (MARBLES_CUDA_SOLVE).
+  bool solve_in_one_launch() const {
+    if (m_solve_mode == SolveMode::auto_) return m_plan.widest() <= kOneLaunchWidest;
+    return m_solve_mode == SolveMode::one_launch;
   }
 
   // The impact stage (ContactSolver::impacts): candidates level by level,
-  // then every contact colour by colour while the pass before hit.
+  // then every contact colour by colour while the pass before hit (hit[p]
+  // the flag of pass p).
   void impacts(narrowphase::SolverBody* bodies, real h) {
     const real rest = m_model.solver.rest_speed;
     const narrowphase::ImpactParams params{rest, h, m_model.solver.wall_accel};
@@ -497,20 +516,17 @@ class CudaStep final : public StepBackend {
     const std::uint32_t levels =
         m_colouring.impact_levels(m_records, m_impact, m_count, m_device.size(), rest, order, m_levels, m_sm, m_stream);
     if (m_levels.back() == 0) return;
-    auto* hit = m_hit.as<unsigned>(1);
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, sizeof(unsigned), m_stream));
+    auto* hit = m_hit.as<unsigned>(narrowphase::kImpactPasses);
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, narrowphase::kImpactPasses * sizeof(unsigned), m_stream));
     const bool friction = m_model.solver.friction;
     for (std::uint32_t l = 0; l < levels; ++l)
       nc::launch_impacts(m_records, m_impact, order, {m_levels[l], m_levels[l + 1]}, bodies, params, friction, hit,
                          m_stream);
     nc::launch_impacts(m_records, m_impact, order, {m_levels[levels], m_levels[levels + 1], true, false}, bodies,
                        params, friction, hit, m_stream);
-    for (int pass = 1; pass < narrowphase::kImpactPasses && read_hit(); ++pass) {
-      MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, sizeof(unsigned), m_stream));
-      over_colours(false, [&](nc::ContactRange r) {
-        nc::launch_impacts(m_records, m_impact, nullptr, r, bodies, params, friction, hit, m_stream);
-      });
-    }
+    // The later passes, each while the one before hit (no read-back).
+    nc::launch_impact_passes(m_records, m_impact, m_plan, bodies, params, friction, narrowphase::kImpactPasses, hit,
+                             m_sm, m_stream);
   }
 
   const StepModel& m_model;
@@ -560,6 +576,11 @@ class CudaStep final : public StepBackend {
   real m_lookahead = 0;  // find_contacts' h: the colouring makes the contacts again with it
   std::uint32_t m_colours = 0;
   std::vector<std::uint32_t> m_begin{0, 0}, m_levels{0, 0};
+  nc::ColourPlan m_plan;  // m_begin as a kernel takes it
+  // The solve in one launch (solve_in_one_launch) at most this many
+  // contacts a colour in auto mode.
+  static constexpr std::uint32_t kOneLaunchWidest = 16384;
+  SolveMode m_solve_mode = solve_mode_from_environment();
   std::vector<narrowphase::Contact> m_host_contacts;
   StepCounters m_counters;
   bool m_non_finite_seen = false;  // the broad phase met a non-finite centre in this step
