@@ -6,6 +6,8 @@
 // saying so, without a CUDA device.
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "core/device.hpp"
 #include "tests/sim/test_scenes.hpp"
 
@@ -104,6 +106,30 @@ TEST(StepCuda, SmallDenseBlockWithEveryTermMatchesTheCpu) {
   const real r = real(0.01);
   s.walls.push_back(box({0, 0, 0}, {real(0.2), real(0.2), real(0.5)}));
   expect_same_run(s, dense_block(7, 5, 3, r, real(0.005)), 30);
+}
+
+// A large sphere on a floor with small ones on its upper half, each touching
+// it: more contacts on one sphere than there are colours, so the overflow
+// set (solved one by one, in order, forwards and backwards) is never empty.
+TEST(StepCuda, OverflowSetMatchesTheCpu) {
+  scene::Scene s = make_scene(1e-3, 2, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
+                                        Effect::friction}, 0.4, 0.5);
+  s.walls.push_back(box({0, 0, 0}, {real(0.6), real(0.6), real(1)}));
+  const real big = real(0.1), r = real(0.01);
+  const Vec3 centre{real(0.3), real(0.3), big};
+  scene::GeneratedParticles g;
+  add_sphere(g, centre, big);
+  const int small = 150;  // on a Fibonacci spiral over the upper half, about 2.2 r apart
+  for (int k = 0; k < small; ++k) {
+    const double z = 1 - (k + 0.5) / small, ring = std::sqrt(1 - z * z), phi = 2.399963229728653 * k;
+    const Vec3 n{real(ring * std::cos(phi)), real(ring * std::sin(phi)), real(z)};
+    add_sphere(g, centre + n * (big + r * real(0.98)), r);
+  }
+  Simulation probe(s, make_world(s, g), broadphase::Backend::cpu);
+  probe.step();
+  ASSERT_GT(probe.last_step().overflow, 0u) << "the scene must fill every colour";
+  REQUIRE_DEVICE();
+  expect_same_run(s, g, 100);
 }
 
 TEST(StepCuda, NewtonsCradleMatchesTheCpu) {
