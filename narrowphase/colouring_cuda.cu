@@ -196,16 +196,21 @@ ColouringCuda::~ColouringCuda() {
   if (m_host) cudaFreeHost(m_host);
 }
 
-// Rounds [round, round + batch) over the active lists, and the read of
-// their list sizes queued into host[0, batch).
-void ColouringCuda::queue_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round,
-                                 std::uint32_t batch, ColourRule rule, std::uint32_t* host, int sm_count,
-                                 cudaStream_t s) {
-  auto* count = m_count.get_as<std::uint32_t>();
+// Rounds [round, round + batch) over the active lists, in one launch that
+// ends at the first round to find its list empty.
+void ColouringCuda::launch_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round,
+                                  std::uint32_t batch, ColourRule rule, int sm_count, cudaStream_t s) {
   namespace dev = ::marbles::cuda;
   const int grid = grid_for(n, sm_count, dev::resident_blocks<rounds_kernel>());
-  dev::launch(dev::Launch::cooperative, rounds_kernel, grid, s, at.active, at.next, count, round, batch, at.colour,
-              rule, at.body_word, at.body_used);
+  dev::launch(dev::Launch::cooperative, rounds_kernel, grid, s, at.active, at.next, m_count.get_as<std::uint32_t>(),
+              round, batch, at.colour, rule, at.body_word, at.body_used);
+}
+
+// launch_rounds, and the read of the batch's list sizes queued into host[0, batch).
+void ColouringCuda::queue_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round,
+                                 std::uint32_t batch, std::uint32_t* host, int sm_count, cudaStream_t s) {
+  launch_rounds(at, n, round, batch, ColourRule::lowest_free, sm_count, s);
+  const auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, count + round + 1, batch * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   m_bytes += batch * sizeof(std::uint32_t);
 }
@@ -217,13 +222,12 @@ void ColouringCuda::clear_rounds(const ColouringArrays& at, std::size_t body_cou
   MARBLES_CUDA_CHECK(cudaMemsetAsync(m_count.get_as<std::uint32_t>() + 1, 0, kMaxColourRounds * sizeof(std::uint32_t), s));
 }
 
-// The first batch is as long as the last colouring of this rule took and a
+// The first batch is as long as the last colouring took and a
 // little more (the launch ends at the round that finds an empty list, but
 // the sort queued behind the batch reads the firsts of as many keys as the
 // batch could make, and a batch too short costs a wait), later ones kBatch.
-std::uint32_t ColouringCuda::first_batch(ColourRule rule) {
-  const std::uint32_t last = last_rounds(rule);
-  return std::min(std::max(kBatch, last + last / 8 + 1), kMaxColourRounds);
+std::uint32_t ColouringCuda::first_batch() const {
+  return std::min(std::max(kBatch, m_last_rounds + m_last_rounds / 8 + 1), kMaxColourRounds);
 }
 
 // The rounds a batch's list sizes show were needed (0: not finished). A
@@ -237,13 +241,13 @@ static std::uint32_t finished_in(const std::uint32_t* host, std::uint32_t round,
 
 // Rounds until the active list is empty: launched in batches, the list
 // sizes read once per batch.
-std::uint32_t ColouringCuda::rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count,
-                                    ColourRule rule, int sm_count, cudaStream_t s) {
+std::uint32_t ColouringCuda::rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, int sm_count,
+                                    cudaStream_t s) {
   clear_rounds(at, body_count, s);  // count[0] is set by the caller
-  std::uint32_t& last = last_rounds(rule);
+  std::uint32_t& last = m_last_rounds;
   for (std::uint32_t round = 0; round < kMaxColourRounds;) {
-    const std::uint32_t batch = round == 0 ? first_batch(rule) : std::min(kBatch, kMaxColourRounds - round);
-    queue_rounds(at, n, round, batch, rule, m_host, sm_count, s);
+    const std::uint32_t batch = round == 0 ? first_batch() : std::min(kBatch, kMaxColourRounds - round);
+    queue_rounds(at, n, round, batch, m_host, sm_count, s);
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
     if (const std::uint32_t done = finished_in(m_host, round, batch)) return last = done;
     round += batch;
@@ -254,6 +258,20 @@ std::uint32_t ColouringCuda::rounds(const ColouringArrays& at, std::uint32_t n, 
 std::uint32_t* ColouringCuda::queue_sort(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
                                          int key_bits, std::uint32_t used, std::uint32_t* host,
                                          const std::uint32_t** sorted_keys, int sm_count, cudaStream_t s) {
+  std::uint32_t* index_out = sort_keys(at, n, overflow_key, key_bits, sorted_keys, sm_count, s);
+  const auto* first = m_first_of_key.get_as<std::uint32_t>();
+  // No key but the overflow's (and the inactive) is at or above `used`:
+  // read only those firsts, then the overflow's and the inactive's.
+  if (used > 0) MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, first, used * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(host + used, first + overflow_key, 2 * sizeof(std::uint32_t),
+                                     cudaMemcpyDeviceToHost, s));
+  m_bytes += (used + 2) * sizeof(std::uint32_t);
+  return index_out;
+}
+
+std::uint32_t* ColouringCuda::sort_keys(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
+                                        int key_bits, const std::uint32_t** sorted_keys, int sm_count,
+                                        cudaStream_t s) {
   auto* first = m_first_of_key.as<std::uint32_t>(overflow_key + 2);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0xff, (overflow_key + 2) * sizeof(std::uint32_t), s));
   keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(at.colour, n, overflow_key, at.keys, at.index);
@@ -264,21 +282,14 @@ std::uint32_t* ColouringCuda::queue_sort(const ColouringArrays& at, std::uint32_
   if (sorted_keys) *sorted_keys = keys_out;
   first_of_key_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(keys_out, n, first);
   MARBLES_CUDA_CHECK_LAUNCH();
-  // No key but the overflow's (and the inactive) is at or above `used`:
-  // read only those firsts, then the overflow's and the inactive's.
-  if (used > 0) MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, first, used * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(host + used, first + overflow_key, 2 * sizeof(std::uint32_t),
-                                     cudaMemcpyDeviceToHost, s));
-  m_bytes += (used + 2) * sizeof(std::uint32_t);
   return index_out;
 }
 
 // The ranges from the firsts read (queue_sort).
 static void ranges_of(const std::uint32_t* host, std::uint32_t used, std::uint32_t n, std::vector<std::uint32_t>& begin) {
-  constexpr std::uint32_t kNone = 0xffffffffu;
-  // Impact levels are contiguous from 0 (a level-l impact has a neighbour of
-  // level l - 1); solver colours may have gaps (a kept colour whose other
-  // contacts are gone): an empty colour's range is empty.
+  constexpr std::uint32_t kNone = kNoFirst;
+  // Colours may have gaps (a kept colour whose other contacts are gone): an
+  // empty colour's range is empty.
   std::uint32_t colours = used;
   while (colours > 0 && host[colours - 1] == kNone) --colours;
   const std::uint32_t overflow_first = host[used], inactive_first = host[used + 1];
@@ -302,28 +313,28 @@ std::uint32_t* ColouringCuda::sort_by_colour(const ColouringArrays& at, std::uin
 
 template <class Start, class KeyBound>
 std::uint32_t* ColouringCuda::rounds_and_sort(const ColouringArrays& at, std::uint32_t n, std::size_t body_count,
-                                              ColourRule rule, std::uint32_t overflow_key, int key_bits,
-                                              Start&& start, KeyBound&& key_bound, std::vector<std::uint32_t>& begin,
+                                              std::uint32_t overflow_key, int key_bits, Start&& start,
+                                              KeyBound&& key_bound, std::vector<std::uint32_t>& begin,
                                               const std::uint32_t** sorted_keys, std::uint32_t& rounds_run,
                                               int sm_count, cudaStream_t s) {
   start();
-  const std::uint32_t batch = first_batch(rule);
+  const std::uint32_t batch = first_batch();
   clear_rounds(at, body_count, s);
-  queue_rounds(at, n, 0, batch, rule, m_host, sm_count, s);
+  queue_rounds(at, n, 0, batch, m_host, sm_count, s);
   const std::uint32_t used = std::min(key_bound(batch), overflow_key);
   std::uint32_t* order = queue_sort(at, n, overflow_key, key_bits, used, m_host + batch, sorted_keys, sm_count, s);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   rounds_run = finished_in(m_host, 0, batch);
   if (rounds_run > 0) {
-    last_rounds(rule) = rounds_run;
+    m_last_rounds = rounds_run;
     ranges_of(m_host + batch, used, n, begin);
     return order;
   }
   // Not finished: the sort (in the rounds' memory) is dropped, and the
   // rounds start again, their first batch a little longer than this one.
-  last_rounds(rule) = batch;
+  m_last_rounds = batch;
   start();
-  rounds_run = rounds(at, n, body_count, rule, sm_count, s);
+  rounds_run = rounds(at, n, body_count, sm_count, s);
   return sort_by_colour(at, n, overflow_key, key_bits, key_bound(rounds_run), begin, sorted_keys, sm_count, s);
 }
 
@@ -352,7 +363,7 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   // 2 r; kept colours may be any below kMaxColours.
   auto key_bound = [&](std::uint32_t r) { return kept_colour ? kMaxColours : 2 * r; };
   const std::uint32_t* sorted_keys = nullptr;
-  const std::uint32_t* order = rounds_and_sort(at, n, body_count, ColourRule::lowest_free, kMaxColours, kKeyBits,
+  const std::uint32_t* order = rounds_and_sort(at, n, body_count, kMaxColours, kKeyBits,
                                                start, key_bound, begin, &sorted_keys, rounds_run, sm_count, s);
   // The colours are read (keys_kernel): their array takes the positions.
   positions_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(order, sorted_keys, n, at.colour, sorted_colour);
@@ -361,26 +372,24 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   return static_cast<std::uint32_t>(begin.size() - 2);
 }
 
-std::uint32_t ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n,
-                                           std::size_t body_count, real rest_speed, std::uint32_t*& order,
-                                           std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t s) {
-  begin.assign(2, 0);
-  if (n == 0) return 0;
-  constexpr int kKeyBits = 8;  // the levels (< kMaxColourRounds) and the overflow's key
+void ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n,
+                                  std::size_t body_count, real rest_speed, std::uint32_t*& order,
+                                  const std::uint32_t*& first, int sm_count, cudaStream_t s) {
+  order = nullptr;
+  first = nullptr;
+  if (n == 0) return;
+  constexpr int kKeyBits = 8;  // the levels (< kMaxColourRounds), the overflow's key and the others'
   const ColouringArrays at = lay_out(n, body_count, kKeyBits);
-  auto* count = m_count.get_as<std::uint32_t>();
-  auto start = [&] {
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
-    impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, rest_speed, at.colour,
-                                                                      at.active, count);
-    MARBLES_CUDA_CHECK_LAUNCH();
-  };
-  // The candidates are not counted on the host: without any, the rounds end
-  // at once and every range is empty. A level is the round that coloured it.
-  std::uint32_t rounds_run = 0;
-  order = rounds_and_sort(at, n, body_count, ColourRule::by_round, kMaxColourRounds, kKeyBits, start,
-                          [](std::uint32_t r) { return r; }, begin, nullptr, rounds_run, sm_count, s);
-  return static_cast<std::uint32_t>(begin.size() - 2);
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(m_count.get_as<std::uint32_t>(), 0, sizeof(std::uint32_t), s));
+  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, rest_speed, at.colour,
+                                                                    at.active, m_count.get_as<std::uint32_t>());
+  MARBLES_CUDA_CHECK_LAUNCH();
+  // Every round in one launch, to the first that finds no contact left: a
+  // level is the round that coloured it. Nothing is read on the host.
+  clear_rounds(at, body_count, s);
+  launch_rounds(at, n, 0, kMaxColourRounds, ColourRule::by_round, sm_count, s);
+  order = sort_keys(at, n, kMaxColourRounds, kKeyBits, nullptr, sm_count, s);
+  first = m_first_of_key.get_as<std::uint32_t>();
 }
 
 }  // namespace marbles::narrowphase::cuda

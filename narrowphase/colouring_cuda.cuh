@@ -48,14 +48,16 @@ class ColouringCuda {
 
   // The impact stage's levels over records[0, n) and their impact words
   // (solver_math.hpp): the candidates (approach faster than rest_speed)
-  // coloured by_round on impact_rank; `order` (device) gets them level by
-  // level (overflow last), `begin` the host ranges (levels + 2 entries).
-  // Returns the level count (0: no candidate). `order` lies in the scratch
-  // memory: valid until its next user. One wait, unless the rounds outlast
-  // the first batch (then one a batch, and one for the ranges).
-  std::uint32_t impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n,
-                              std::size_t body_count, real rest_speed, std::uint32_t*& order,
-                              std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t stream);
+  // coloured by_round on impact_rank; `order` (device) gets every contact,
+  // the candidates level by level (overflow next, then the others), and
+  // `first` (device, kMaxColourRounds + 2 words) the firsts of the levels'
+  // keys, from which visit_levels (colouring_math.hpp) gives the ranges.
+  // Every round runs in one launch, to the first with no contact left:
+  // nothing is read on the host, no wait. `order` lies in the scratch
+  // memory, valid until its next user; `first` until the next call.
+  void impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n, std::size_t body_count,
+                     real rest_speed, std::uint32_t*& order, const std::uint32_t*& first, int sm_count,
+                     cudaStream_t stream);
 
  // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }
@@ -72,15 +74,17 @@ class ColouringCuda {
   ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, int key_bits);
   // Rounds over the active list (count[0] entries, set by the caller);
   // returns the rounds run.
-  std::uint32_t rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, ColourRule rule,
-                       int sm_count, cudaStream_t stream);
-  // rounds' parts: the scratch cleared; a batch of rounds launched with the
-  // read of its list sizes queued into host[0, batch) (no wait); the first
-  // batch's length for a rule.
+  std::uint32_t rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, int sm_count,
+                       cudaStream_t stream);
+  // rounds' parts: the scratch cleared; a batch of rounds in one launch (any
+  // rule); that with the read of its list sizes queued into host[0, batch)
+  // (lowest_free, no wait); the first batch's length.
   void clear_rounds(const ColouringArrays& at, std::size_t body_count, cudaStream_t stream);
+  void launch_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round, std::uint32_t batch,
+                     ColourRule rule, int sm_count, cudaStream_t stream);
   void queue_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round, std::uint32_t batch,
-                    ColourRule rule, std::uint32_t* host, int sm_count, cudaStream_t stream);
-  std::uint32_t first_batch(ColourRule rule);
+                    std::uint32_t* host, int sm_count, cudaStream_t stream);
+  std::uint32_t first_batch() const;
   // The rounds from a fresh start (start(): count[0] and the active list,
   // and what the rule keeps), then the stable sort by key and its ranges; no
   // key but the overflow's is at or above key_bound(r) after r rounds. The
@@ -89,17 +93,20 @@ class ColouringCuda {
   // the rounds start again (the same result whatever the batches). Returns
   // the sorted indices.
   template <class Start, class KeyBound>
-  std::uint32_t* rounds_and_sort(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, ColourRule rule,
+  std::uint32_t* rounds_and_sort(const ColouringArrays& at, std::uint32_t n, std::size_t body_count,
                                  std::uint32_t overflow_key, int key_bits, Start&& start, KeyBound&& key_bound,
                                  std::vector<std::uint32_t>& begin, const std::uint32_t** sorted_keys,
                                  std::uint32_t& rounds_run, int sm_count, cudaStream_t stream);
-  std::uint32_t& last_rounds(ColourRule rule) { return m_last_rounds[rule == ColourRule::lowest_free ? 0 : 1]; }
   // sort_by_colour's launches, with the read of the firsts of the keys below
   // `used` and of the overflow and inactive keys queued into host[0, used +
   // 2) (no wait). Returns the sorted indices.
   std::uint32_t* queue_sort(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key, int key_bits,
                             std::uint32_t used, std::uint32_t* host, const std::uint32_t** sorted_keys, int sm_count,
                             cudaStream_t stream);
+  // queue_sort's launches alone: the keys sorted, the firsts of the keys
+  // (m_first_of_key, overflow_key + 2 words) on the device.
+  std::uint32_t* sort_keys(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key, int key_bits,
+                           const std::uint32_t** sorted_keys, int sm_count, cudaStream_t stream);
   // Stable sort of the indices by key (overflow -> overflow_key, inactive
   // last) and the host ranges [0, key_count + 1]; no key is at or above
   // key_bound except the overflow's. Returns the sorted indices.
@@ -110,7 +117,7 @@ class ColouringCuda {
   DeviceBuffer m_count, m_first_of_key, m_own_scratch;
   DeviceBuffer* m_scratch = &m_own_scratch;
   std::uint32_t* m_host = nullptr;  // pinned readbacks
-  std::uint32_t m_last_rounds[2] = {0, 0};  // rounds of the last colouring by rule (lowest_free, by_round)
+  std::uint32_t m_last_rounds = 0;  // rounds of the last colouring (lowest_free)
 };
 
 }  // namespace marbles::narrowphase::cuda

@@ -65,6 +65,25 @@ MARBLES_HD_INLINE void visit_colours(const Begin& begin, std::uint32_t colours, 
   }
 }
 
+// The impact levels' ranges from the firsts their sort left (first[key]:
+// the first sorted position holding key, kNoFirst where none): the levels'
+// keys are 0, 1, ... contiguous (a level-l contact has a neighbour of level
+// l - 1), the overflow's kMaxColourRounds, the other contacts'
+// kMaxColourRounds + 1, n sorted in all. visit(begin, end, serial) for each
+// level in order, then the overflow set (serial: one by one, in order).
+inline constexpr std::uint32_t kNoFirst = 0xffffffffu;
+#if defined(__CUDACC__)
+#pragma nv_exec_check_disable
+#endif
+template <class Visit>
+MARBLES_HD_INLINE void visit_levels(const std::uint32_t* first, std::uint32_t n, Visit&& visit) {
+  const std::uint32_t overflow = first[kMaxColourRounds], others = first[kMaxColourRounds + 1];
+  const std::uint32_t levels_end = overflow != kNoFirst ? overflow : others != kNoFirst ? others : n;
+  for (std::uint32_t l = 0; l < kMaxColourRounds && first[l] != kNoFirst; ++l)
+    visit(first[l], l + 1 < kMaxColourRounds && first[l + 1] != kNoFirst ? first[l + 1] : levels_end, false);
+  if (overflow != kNoFirst) visit(overflow, others != kNoFirst ? others : n, true);
+}
+
 // A 32-bit integer hash (lowbias32): spreads ranks so that colouring rounds
 // stay few (index order would make long chains of dependent contacts).
 MARBLES_HD_INLINE std::uint32_t mix32(std::uint32_t x) {

@@ -96,16 +96,6 @@ __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* 
       [&](std::uint32_t k, const Contact& c) { solve_loaded<Friction, Rolling>(s, k, c, bodies, inv_h); });
 }
 
-template <bool Friction>
-__global__ void impact_kernel(SweepRecords records, Real4* impact, const std::uint32_t* order, ContactRange r,
-                              SolverBody* bodies, ImpactParams p, unsigned* hit) {
-  bool any = false;
-  for_range(r, [&](std::uint32_t k) {
-    any = impact_record<Friction>(records, impact, order ? order[k] : k, bodies, p) || any;
-  });
-  if (any) *hit = 1u;
-}
-
 __global__ void rebound_kernel(SweepRecords records, ContactRange r, BodiesView bodies, const WallShape* walls) {
   for_range(r, [&](std::uint32_t k) { rebound_one(load_position_contact<true>(records, k), bodies, walls); });
 }
@@ -153,15 +143,30 @@ __global__ void project_kernel(ColourPlan plan, SweepRecords records, BodiesView
   if (grid.thread_rank() == 0) *total += static_cast<unsigned long long>(ran);
 }
 
-// The impact stage's passes after the first, in one launch: pass p visits
-// every contact colour by colour while pass p - 1 hit something (hit[p - 1];
-// hit[0] is the levels' flag), and sets hit[p].
+// The impact stage in one launch. Pass 0: the candidates level by level
+// (their order and the firsts of the levels' keys from the colouring's
+// impact_levels; a level's contacts spread over the grid, the overflow set
+// by one thread), a grid-wide barrier after each. Pass p > 0: every contact
+// colour by colour, while pass p - 1 hit something. hit[p] (zeroed before)
+// records what pass p hit.
 template <bool Friction>
-__global__ void impact_passes_kernel(ColourPlan plan, SweepRecords records, Real4* impact, SolverBody* bodies,
-                                     ImpactParams p, int passes, unsigned* hit) {
+__global__ void impact_stage_kernel(ColourPlan plan, SweepRecords records, Real4* impact, const std::uint32_t* order,
+                                    const std::uint32_t* first, std::uint32_t n, SolverBody* bodies, ImpactParams p,
+                                    int passes, unsigned* hit) {
   const cg::grid_group grid = cg::this_grid();
+  const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
+  bool any = false;
+  visit_levels(first, n, [&](std::uint32_t b, std::uint32_t e, bool serial) {
+    if (!serial)
+      for (std::uint32_t k = b + t; k < e; k += stride) any = impact_record<Friction>(records, impact, order[k], bodies, p) || any;
+    else if (t == 0)
+      for (std::uint32_t k = b; k < e; ++k) any = impact_record<Friction>(records, impact, order[k], bodies, p) || any;
+    grid.sync();
+  });
+  if (any) hit[0] = 1u;
+  grid.sync();
   for (int pass = 1; pass < passes && flag_set(hit + pass - 1); ++pass) {
-    bool any = false;
+    any = false;
     walk_colours(plan, false, grid, [&](std::uint32_t k) {
       any = impact_record<Friction>(records, impact, k, bodies, p) || any;
     });
@@ -235,16 +240,6 @@ void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodie
   else launch(Launch::dependent, record_sweep_kernel<false, false>, g, s, records, r, bodies, inv_h);
 }
 
-void launch_impacts(const SweepRecords& records, Real4* impact, const std::uint32_t* order, ContactRange r,
-                    SolverBody* bodies, const ImpactParams& p, bool friction, unsigned* hit, cudaStream_t s) {
-  if (r.end <= r.begin) return;
-  if (friction)
-    impact_kernel<true><<<blocks(r), kBlock, 0, s>>>(records, impact, order, r, bodies, p, hit);
-  else
-    impact_kernel<false><<<blocks(r), kBlock, 0, s>>>(records, impact, order, r, bodies, p, hit);
-  MARBLES_CUDA_CHECK_LAUNCH();
-}
-
 void launch_rebound(const SweepRecords& records, ContactRange r, const BodiesView& bodies, const WallShape* walls,
                     cudaStream_t s) {
   if (r.end <= r.begin) return;
@@ -266,12 +261,17 @@ void launch_projection(const SweepRecords& records, const ColourPlan& plan, cons
   launch_on_plan<project_kernel>(plan, sm_count, s, records, bodies, walls, settings, sweeps, moved, total);
 }
 
-void launch_impact_passes(const SweepRecords& records, Real4* impact, const ColourPlan& plan, SolverBody* bodies,
-                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
-                          cudaStream_t s) {
-  if (passes <= 1 || plan.empty()) return;
-  if (friction) launch_on_plan<impact_passes_kernel<true>>(plan, sm_count, s, records, impact, bodies, p, passes, hit);
-  else launch_on_plan<impact_passes_kernel<false>>(plan, sm_count, s, records, impact, bodies, p, passes, hit);
+void launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
+                         const std::uint32_t* first, std::uint32_t n, const ColourPlan& plan, SolverBody* bodies,
+                         const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
+                         cudaStream_t s) {
+  if (n == 0) return;
+  auto go = [&](auto kernel, int resident) {
+    launch(Launch::cooperative, kernel, ::marbles::cuda::grid_for(n, sm_count, resident), s, plan, records, impact,
+           order, first, n, bodies, p, passes, hit);
+  };
+  if (friction) go(impact_stage_kernel<true>, ::marbles::cuda::resident_blocks<impact_stage_kernel<true>>());
+  else go(impact_stage_kernel<false>, ::marbles::cuda::resident_blocks<impact_stage_kernel<false>>());
 }
 
 void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h, SolverTerms t,

@@ -45,10 +45,6 @@ void launch_warm_start(const SweepRecords& records, ContactRange range, SolverBo
                        cudaStream_t stream);
 void launch_sweep(const SweepRecords& records, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,
                   cudaStream_t stream);
-// Impacts of record order[k] for k in range (order null: k itself), with
-// its impact word (impact_record); sets *hit = 1 when any hit.
-void launch_impacts(const SweepRecords& records, Real4* impact, const std::uint32_t* order, ContactRange range,
-                    SolverBody* bodies, const ImpactParams& p, bool friction, unsigned* hit, cudaStream_t stream);
 void launch_rebound(const SweepRecords& records, ContactRange range, const BodiesView& bodies, const WallShape* walls,
                     cudaStream_t stream);
 // The colour ranges of colour-major contacts as one launch takes them:
@@ -78,12 +74,14 @@ void launch_projection(const SweepRecords& records, const ColourPlan& plan, cons
                        const WallShape* walls, const SolverSettings& settings, int sweeps, unsigned* moved,
                        unsigned long long* total, int sm_count, cudaStream_t stream);
 
-// The impact stage's passes 1 .. passes - 1: pass p visits every contact
-// while pass p - 1 hit something (hit[p - 1]; hit[0] set by the levels'
-// launch_impacts), and sets hit[p] (zeroed before).
-void launch_impact_passes(const SweepRecords& records, Real4* impact, const ColourPlan& plan, SolverBody* bodies,
-                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
-                          cudaStream_t stream);
+// The impact stage (ContactSolver::impacts): the candidates level by level
+// (`order` and `first` from ColouringCuda::impact_levels, n contacts), then
+// passes 1 .. passes - 1 over every contact while the pass before hit
+// something; hit[p] (zeroed before) is set when pass p hits.
+void launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
+                         const std::uint32_t* first, std::uint32_t n, const ColourPlan& plan, SolverBody* bodies,
+                         const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
+                         cudaStream_t stream);
 
 // The warm start (when `warm`) and `sweeps` sweeps in one launch, where a
 // launch per colour would leave the device waiting for the host's launches

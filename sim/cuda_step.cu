@@ -12,14 +12,14 @@
 // (narrowphase/solver_math.hpp): the device holds no 112-byte Contact array.
 // contacts() makes whole contacts from the records when the host asks.
 //
-// Host waits (docs/architecture.md "Fewer waits"), per substep: the broad
-// phase's bounds and pair count, the contact count (with whether any contact
-// is an impact candidate), the colouring's list sizes and colour ranges (one
-// read), and where there are impact candidates the impact levels (one read)
-// and a read of the hit flag per extra impact pass; per step, the flags. The
-// cache's entry count and the lost-load count stay on the device. A settled
-// pile waits 5 times a step. One wait per step, with buffers sized from the
-// last step, is the next step.
+// Host waits (docs/architecture.md "Fewer waits", "Fewer launches"), per
+// substep: the broad phase's bounds and pair count, the contact count (with
+// whether any contact is an impact candidate), and the colouring's list
+// sizes and colour ranges (one read); per step, the flags. The cache's entry
+// count, the lost-load count, the impact levels and the flags of the impact
+// and projection passes stay on the device: those stages run as one
+// cooperative launch each. A settled pile waits 5 times a step, the gas 6.
+// One wait per step, with buffers sized from the last step, is the next step.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -285,9 +285,8 @@ class CudaStep final : public StepBackend {
     if (m_count == 0) return;
     const BodiesView bodies = m_device.view();
     // Only an impact gives a contact a rebound shift, and only a substep
-    // with impact candidates (this substep's levels, set by impacts) can
-    // have one (a pile at rest has none).
-    if (m_model.solver.restitution && m_levels.back() != 0)
+    // with impact candidates can have one (a pile at rest has none).
+    if (m_model.solver.restitution && m_impact_candidates)
       over_colours(false, [&](nc::ContactRange r) { nc::launch_rebound(m_records, r, bodies, walls(), m_stream); });
     // The CPU's sweeps until one moves nothing beyond settled_move, in one
     // launch without a read-back.
@@ -503,30 +502,20 @@ class CudaStep final : public StepBackend {
   }
 
   // The impact stage (ContactSolver::impacts): candidates level by level,
-  // then every contact colour by colour while the pass before hit (hit[p]
-  // the flag of pass p).
+  // then every contact colour by colour while the pass before hit, in one
+  // launch after the levels' colouring; nothing is read on the host. A
+  // substep without candidates (found with the contacts) skips it.
   void impacts(narrowphase::SolverBody* bodies, real h) {
-    const real rest = m_model.solver.rest_speed;
-    const narrowphase::ImpactParams params{rest, h, m_model.solver.wall_accel};
-    if (!m_impact_candidates) {  // found with the contacts: what impact_levels would find, without its read
-      m_levels.assign(2, 0);
-      return;
-    }
+    if (!m_impact_candidates) return;
+    const narrowphase::ImpactParams params{m_model.solver.rest_speed, h, m_model.solver.wall_accel};
     std::uint32_t* order = nullptr;
-    const std::uint32_t levels =
-        m_colouring.impact_levels(m_records, m_impact, m_count, m_device.size(), rest, order, m_levels, m_sm, m_stream);
-    if (m_levels.back() == 0) return;
+    const std::uint32_t* first = nullptr;
+    m_colouring.impact_levels(m_records, m_impact, m_count, m_device.size(), params.rest_speed, order, first, m_sm,
+                              m_stream);
     auto* hit = m_hit.as<unsigned>(narrowphase::kImpactPasses);
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, narrowphase::kImpactPasses * sizeof(unsigned), m_stream));
-    const bool friction = m_model.solver.friction;
-    for (std::uint32_t l = 0; l < levels; ++l)
-      nc::launch_impacts(m_records, m_impact, order, {m_levels[l], m_levels[l + 1]}, bodies, params, friction, hit,
-                         m_stream);
-    nc::launch_impacts(m_records, m_impact, order, {m_levels[levels], m_levels[levels + 1], true, false}, bodies,
-                       params, friction, hit, m_stream);
-    // The later passes, each while the one before hit (no read-back).
-    nc::launch_impact_passes(m_records, m_impact, m_plan, bodies, params, friction, narrowphase::kImpactPasses, hit,
-                             m_sm, m_stream);
+    nc::launch_impact_stage(m_records, m_impact, order, first, m_count, m_plan, bodies, params,
+                            m_model.solver.friction, narrowphase::kImpactPasses, hit, m_sm, m_stream);
   }
 
   const StepModel& m_model;
@@ -575,7 +564,7 @@ class CudaStep final : public StepBackend {
   narrowphase::Real4* m_impact = nullptr;
   real m_lookahead = 0;  // find_contacts' h: the colouring makes the contacts again with it
   std::uint32_t m_colours = 0;
-  std::vector<std::uint32_t> m_begin{0, 0}, m_levels{0, 0};
+  std::vector<std::uint32_t> m_begin{0, 0};
   nc::ColourPlan m_plan;  // m_begin as a kernel takes it
   // The solve in one launch (solve_in_one_launch) at most this many
   // contacts a colour in auto mode.

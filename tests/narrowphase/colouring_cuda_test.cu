@@ -137,9 +137,23 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   std::uint32_t cpu_levels = 0;
   ContactColouring().colour(input.data(), candidates, rank.data(), bodies, ColourRule::by_round, level, &cpu_levels);
   std::uint32_t* order = nullptr;
-  std::vector<std::uint32_t> level_begin;
-  const std::uint32_t levels = gpu.impact_levels(d.records, d.impact, n, bodies, rest, order, level_begin, 8, nullptr);
+  const std::uint32_t* first_d = nullptr;
+  gpu.impact_levels(d.records, d.impact, n, bodies, rest, order, first_d, 8, nullptr);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
+  if (n == 0) return;
+  // The ranges as the impact stage reads them (visit_levels on the firsts).
+  std::vector<std::uint32_t> first(kMaxColourRounds + 2);
+  ASSERT_EQ(cudaMemcpy(first.data(), first_d, first.size() * 4, cudaMemcpyDeviceToHost), cudaSuccess);
+  std::vector<std::uint32_t> level_begin{0};
+  std::uint32_t levels = 0, overflow = 0;
+  visit_levels(first.data(), n, [&](std::uint32_t b, std::uint32_t e, bool serial) {
+    ASSERT_EQ(b, level_begin.back()) << "ranges in order, without gaps";
+    ASSERT_LT(b, e) << "no empty range";
+    level_begin.push_back(e);
+    if (serial) overflow = e - b;
+    else ++levels;
+  });
+  EXPECT_EQ(level_begin.back(), candidates.size());
   if (candidates.empty()) {
     EXPECT_EQ(levels, 0u);
     return;
@@ -153,7 +167,12 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
     for (std::uint32_t k : candidates)
       if (level[k] == (l < levels ? l : kOverflowColour)) expect.push_back(k);
   ASSERT_EQ(expect.size(), candidates.size());
-  EXPECT_EQ(level_begin.back(), candidates.size());
+  for (std::uint32_t l = 0; l < levels; ++l)
+    EXPECT_EQ(level_begin[l + 1] - level_begin[l],
+              std::count_if(candidates.begin(), candidates.end(), [&](std::uint32_t k) { return level[k] == l; }))
+        << "level " << l;
+  EXPECT_EQ(overflow, std::count_if(candidates.begin(), candidates.end(),
+                                    [&](std::uint32_t k) { return level[k] == kOverflowColour; }));
   EXPECT_EQ(gpu_order, expect);
 }
 
