@@ -570,5 +570,35 @@ TEST(LastWrites, EarlyExactlyWhenTheLaunchBeforeWroteNoneOfItsRecords) {
   EXPECT_GT(repeated, 200 * 9);  // the first warm start, and every turn of direction, wait
 }
 
+// The impact levels' ranges from the firsts of their sorted keys (the GPU's
+// impact stage reads them so): on random sorted keys (levels 0 .. L - 1,
+// each present, then maybe the overflow's and the others' keys), every
+// level's range and the overflow's are exactly the positions of its key.
+TEST(VisitLevels, RangesAreThePositionsOfEachKey) {
+  std::mt19937_64 rng(41);
+  for (int trial = 0; trial < 500; ++trial) {
+    const std::uint32_t levels = trial % 7 == 0 ? 0 : 1 + rng() % (trial % 5 == 0 ? kMaxColourRounds : 12);
+    std::vector<std::uint32_t> keys;
+    for (std::uint32_t l = 0; l < levels; ++l) keys.insert(keys.end(), 1 + rng() % 5, l);
+    if (levels > 0 && rng() % 2) keys.insert(keys.end(), 1 + rng() % 4, kMaxColourRounds);  // the overflow
+    if (rng() % 3) keys.insert(keys.end(), rng() % 6, kMaxColourRounds + 1);                 // the others
+    const auto n = static_cast<std::uint32_t>(keys.size());
+    std::vector<std::uint32_t> first(kMaxColourRounds + 2, kNoFirst);
+    for (std::uint32_t j = n; j-- > 0;) first[keys[j]] = j;
+    std::vector<std::uint32_t> seen;  // the key of each position, from the ranges
+    std::uint32_t visited = 0;
+    visit_levels(first.data(), n, [&](std::uint32_t b, std::uint32_t e, bool serial) {
+      const std::uint32_t key = serial ? kMaxColourRounds : visited++;
+      ASSERT_EQ(b, seen.size()) << "trial " << trial;
+      for (std::uint32_t k = b; k < e; ++k) seen.push_back(key);
+    });
+    EXPECT_EQ(visited, levels) << "trial " << trial;
+    std::vector<std::uint32_t> expect;
+    for (std::uint32_t k : keys)
+      if (k <= kMaxColourRounds) expect.push_back(k);
+    EXPECT_EQ(seen, expect) << "trial " << trial;
+  }
+}
+
 }  // namespace
 }  // namespace marbles::narrowphase
