@@ -96,10 +96,6 @@ __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* 
       [&](std::uint32_t k, const Contact& c) { solve_loaded<Friction, Rolling>(s, k, c, bodies, inv_h); });
 }
 
-__global__ void rebound_kernel(SweepRecords records, ContactRange r, BodiesView bodies, const WallShape* walls) {
-  for_range(r, [&](std::uint32_t k) { rebound_one(load_position_contact<true>(records, k), bodies, walls); });
-}
-
 // Every contact of a colour plan in the solver's order (visit_colours) in a
 // cooperative launch: a colour's contacts spread over the grid, the overflow
 // set by one thread in order, a grid-wide barrier after each non-empty range
@@ -122,13 +118,18 @@ __device__ void walk_colours(const ColourPlan& plan, bool backwards, const cg::g
 
 __device__ __forceinline__ bool flag_set(const unsigned* flag) { return *static_cast<const volatile unsigned*>(flag) != 0u; }
 
-// The projection in one launch: sweeps until one moves nothing beyond
-// settled_move (project_one), at most `sweeps`; sweep `it` sets moved[it]
+// The position stages in one launch: with `rebound` the impacts' rebound
+// shifts, colour by colour; then sweeps until one moves nothing beyond
+// settled_move (project_one), at most `sweeps`. Sweep `it` sets moved[it]
 // (zeroed before), which every block reads after the barrier that ends the
 // sweep. *total += the sweeps run (solver.cpp ends the projection there too).
 __global__ void project_kernel(ColourPlan plan, SweepRecords records, BodiesView bodies, const WallShape* walls,
-                               SolverSettings s, int sweeps, unsigned* moved, unsigned long long* total) {
+                               SolverSettings s, bool rebound, int sweeps, unsigned* moved,
+                               unsigned long long* total) {
   const cg::grid_group grid = cg::this_grid();
+  if (rebound)
+    walk_colours(plan, false, grid,
+                 [&](std::uint32_t k) { rebound_one(load_position_contact<true>(records, k), bodies, walls); });
   int ran = 0;
   for (int it = 0; it < sweeps; ++it) {
     ++ran;
@@ -240,13 +241,6 @@ void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodie
   else launch(Launch::dependent, record_sweep_kernel<false, false>, g, s, records, r, bodies, inv_h);
 }
 
-void launch_rebound(const SweepRecords& records, ContactRange r, const BodiesView& bodies, const WallShape* walls,
-                    cudaStream_t s) {
-  if (r.end <= r.begin) return;
-  rebound_kernel<<<blocks(r), kBlock, 0, s>>>(records, r, bodies, walls);
-  MARBLES_CUDA_CHECK_LAUNCH();
-}
-
 // `Kernel` on a cooperative grid for a plan's widest colour.
 template <auto Kernel, class... Args>
 void launch_on_plan(const ColourPlan& plan, int sm_count, cudaStream_t s, Args&&... args) {
@@ -254,11 +248,11 @@ void launch_on_plan(const ColourPlan& plan, int sm_count, cudaStream_t s, Args&&
   launch(Launch::cooperative, Kernel, grid, s, plan, std::forward<Args>(args)...);
 }
 
-void launch_projection(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
-                       const WallShape* walls, const SolverSettings& settings, int sweeps, unsigned* moved,
-                       unsigned long long* total, int sm_count, cudaStream_t s) {
-  if (sweeps <= 0 || plan.empty()) return;
-  launch_on_plan<project_kernel>(plan, sm_count, s, records, bodies, walls, settings, sweeps, moved, total);
+void launch_position_stages(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
+                            const WallShape* walls, const SolverSettings& settings, bool rebound, int sweeps,
+                            unsigned* moved, unsigned long long* total, int sm_count, cudaStream_t s) {
+  if ((sweeps <= 0 && !rebound) || plan.empty()) return;
+  launch_on_plan<project_kernel>(plan, sm_count, s, records, bodies, walls, settings, rebound, sweeps, moved, total);
 }
 
 void launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,

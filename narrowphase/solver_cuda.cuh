@@ -45,8 +45,6 @@ void launch_warm_start(const SweepRecords& records, ContactRange range, SolverBo
                        cudaStream_t stream);
 void launch_sweep(const SweepRecords& records, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,
                   cudaStream_t stream);
-void launch_rebound(const SweepRecords& records, ContactRange range, const BodiesView& bodies, const WallShape* walls,
-                    cudaStream_t stream);
 // The colour ranges of colour-major contacts as one launch takes them:
 // colour c is [begin[c], begin[c + 1]), the overflow set [begin[colours],
 // begin[colours + 1]).
@@ -67,12 +65,13 @@ struct ColourPlan {
 // solver's order, visit_colours, a grid-wide barrier after each colour;
 // the overflow set by one thread): the same bits as a launch per colour.
 
-// The projection: sweeps until one moves nothing beyond settled_move
-// (project_one), at most `sweeps`; moved[0, sweeps) zeroed before, sweep
-// `it` sets moved[it]; *total += the sweeps run.
-void launch_projection(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
-                       const WallShape* walls, const SolverSettings& settings, int sweeps, unsigned* moved,
-                       unsigned long long* total, int sm_count, cudaStream_t stream);
+// The position stages: with `rebound` the impacts' rebound shifts
+// (rebound_one), then the projection, sweeps until one moves nothing beyond
+// settled_move (project_one), at most `sweeps`; moved[0, sweeps) zeroed
+// before, sweep `it` sets moved[it]; *total += the sweeps run.
+void launch_position_stages(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
+                            const WallShape* walls, const SolverSettings& settings, bool rebound, int sweeps,
+                            unsigned* moved, unsigned long long* total, int sm_count, cudaStream_t stream);
 
 // The impact stage (ContactSolver::impacts): the candidates level by level
 // (`order` and `first` from ColouringCuda::impact_levels, n contacts), then

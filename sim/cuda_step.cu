@@ -281,21 +281,18 @@ class CudaStep final : public StepBackend {
     nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream);
   }
 
+  // The rebound shifts (only an impact gives a contact one, and only a
+  // substep with impact candidates can have one: a pile at rest has none),
+  // then the CPU's projection sweeps until one moves nothing beyond
+  // settled_move: one launch, no read-back.
   void project_positions() override {
     if (m_count == 0) return;
-    const BodiesView bodies = m_device.view();
-    // Only an impact gives a contact a rebound shift, and only a substep
-    // with impact candidates can have one (a pile at rest has none).
-    if (m_model.solver.restitution && m_impact_candidates)
-      over_colours(false, [&](nc::ContactRange r) { nc::launch_rebound(m_records, r, bodies, walls(), m_stream); });
-    // The CPU's sweeps until one moves nothing beyond settled_move, in one
-    // launch without a read-back.
-    const int sweeps = m_model.solver.position_iterations;
-    if (sweeps <= 0) return;
-    auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(sweeps));
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
-    nc::launch_projection(m_records, m_plan, bodies, walls(), m_model.solver, sweeps, moved,
-                          m_flags.get_as<unsigned long long>() + 2, m_sm, m_stream);  // flags[2]
+    const int sweeps = std::max(0, m_model.solver.position_iterations);
+    const bool rebound = m_model.solver.restitution && m_impact_candidates;
+    auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(std::max(sweeps, 1)));
+    if (sweeps > 0) MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
+    nc::launch_position_stages(m_records, m_plan, m_device.view(), walls(), m_model.solver, rebound, sweeps, moved,
+                               m_flags.get_as<unsigned long long>() + 2, m_sm, m_stream);  // flags[2]
   }
 
   void store_impulses() override {
