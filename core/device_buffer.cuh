@@ -26,26 +26,22 @@ inline int grid_for(std::size_t n, int sm_count, int per_sm = 8) {
   return static_cast<int>(want < 1 ? 1 : (want < cap ? want : cap));
 }
 
-// Blocks of kBlock threads of `kernel` that stay resident on one SM
+// Blocks of kBlock threads of `Kernel` that stay resident on one SM
 // together: a cooperative launch's per_sm for grid_for (a grid-wide barrier
-// needs every block resident at once). Ask once per kernel.
-template <class Kernel>
-int resident_per_sm(Kernel kernel) {
-  int per_sm = 0;
-  MARBLES_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, kernel, kBlock, 0));
-  return per_sm > 1 ? per_sm : 1;
-}
-
-// resident_per_sm of one kernel, asked on its first use.
+// needs every block resident at once). Asked once per kernel.
 template <auto Kernel>
 int resident_blocks() {
-  static const int per_sm = resident_per_sm(Kernel);
+  static const int per_sm = [] {
+    int n = 0;
+    MARBLES_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&n, Kernel, kBlock, 0));
+    return n > 1 ? n : 1;
+  }();
   return per_sm;
 }
 
 // How a kernel is launched: plainly; cooperatively (its blocks may meet at
 // a grid-wide barrier: every block resident at once, so the grid at most
-// grid_for(n, sm_count, resident_per_sm(kernel))); or dependent on the launch
+// grid_for(n, sm_count, resident_blocks<kernel>())); or dependent on the launch
 // before it (programmatic stream serialization, sm_90: it may start while
 // that one's last blocks run, its threads waiting in griddepcontrol.wait).
 enum class Launch { plain, cooperative, dependent };

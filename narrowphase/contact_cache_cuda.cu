@@ -385,14 +385,11 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
   MARBLES_CUDA_CHECK_LAUNCH();
 
   // The island rule, on the device, where a load was lost (the kernel reads the count).
-  static const int resident = ::marbles::cuda::resident_per_sm(island_rule_kernel);
-  const int grid = grid_for(std::max<std::size_t>({n, m, bodies_n}), sm_count, resident);
-  IslandRule rule{pairs, match, n, keys, normal, matched, size, bodies, weight_impulse, counter, label, island_max,
-                  cold, counter + 1};
-  void* args[] = {&rule};
-  MARBLES_CUDA_CHECK(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&island_rule_kernel), dim3(grid),
-                                                 dim3(kBlock), args, 0, s));
-  MARBLES_CUDA_CHECK_LAUNCH();
+  namespace dev = ::marbles::cuda;
+  const int grid = grid_for(std::max<std::size_t>({n, m, bodies_n}), sm_count, dev::resident_blocks<island_rule_kernel>());
+  const IslandRule rule{pairs, match, n, keys, normal, matched, size, bodies, weight_impulse, counter, label,
+                        island_max, cold, counter + 1};
+  dev::launch(dev::Launch::cooperative, island_rule_kernel, grid, s, rule);
   return true;
 }
 
