@@ -67,6 +67,21 @@ void launch(Launch how, void (*kernel)(Params...), int grid, cudaStream_t s, Arg
   MARBLES_CUDA_CHECK_LAUNCH();  // with MARBLES_CUDA_SYNC=1: a wait, the kernel's error here
 }
 
+// `Kernel` launched cooperatively over n items: as many blocks as n asks
+// for, at most as many as stay resident together.
+template <auto Kernel, class... Args>
+void launch_cooperative(std::size_t n, int sm_count, cudaStream_t s, Args&&... args) {
+  launch(Launch::cooperative, Kernel, grid_for(n, sm_count, resident_blocks<Kernel>()), s, std::forward<Args>(args)...);
+}
+
+#if defined(__CUDACC__)
+// A word another block wrote before a grid-wide barrier, read past any
+// cached copy (every block reads the same value, so all take one branch).
+__device__ __forceinline__ std::uint32_t read_volatile(const std::uint32_t* p) {
+  return *static_cast<const volatile std::uint32_t*>(p);
+}
+#endif
+
 // A device allocation that only grows (by a quarter more than asked).
 class DeviceBuffer {
  public:

@@ -117,7 +117,7 @@ __global__ void rounds_kernel(ColourEntry* list0, ColourEntry* list1, std::uint3
   const cg::grid_group grid = cg::this_grid();
   const std::uint32_t first = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
   for (std::uint32_t r = round; r < round + batch; ++r) {
-    const std::uint32_t n = *static_cast<const volatile std::uint32_t*>(count + r);
+    const std::uint32_t n = ::marbles::cuda::read_volatile(count + r);
     if (n == 0) return;
     ColourEntry* list = r % 2 == 0 ? list0 : list1;
     offer(list, n, r, body_word, first, stride);
@@ -136,7 +136,7 @@ __global__ void keys_kernel(const std::uint32_t* colour, std::uint32_t n, std::u
   }
 }
 
-// first[key] = the first sorted position holding `key` (left 0xffffffff
+// first[key] = the first sorted position holding `key` (left kNoFirst
 // where no key is): the transitions of the sorted keys, no atomics.
 __global__ void first_of_key_kernel(const std::uint32_t* sorted_keys, std::uint32_t n, std::uint32_t* first) {
   for (std::uint32_t j = blockIdx.x * blockDim.x + threadIdx.x; j < n; j += gridDim.x * blockDim.x)
@@ -200,10 +200,9 @@ ColouringCuda::~ColouringCuda() {
 // ends at the first round to find its list empty.
 void ColouringCuda::launch_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round,
                                   std::uint32_t batch, ColourRule rule, int sm_count, cudaStream_t s) {
-  namespace dev = ::marbles::cuda;
-  const int grid = grid_for(n, sm_count, dev::resident_blocks<rounds_kernel>());
-  dev::launch(dev::Launch::cooperative, rounds_kernel, grid, s, at.active, at.next, m_count.get_as<std::uint32_t>(),
-              round, batch, at.colour, rule, at.body_word, at.body_used);
+  ::marbles::cuda::launch_cooperative<rounds_kernel>(n, sm_count, s, at.active, at.next,
+                                                     m_count.get_as<std::uint32_t>(), round, batch, at.colour, rule,
+                                                     at.body_word, at.body_used);
 }
 
 // launch_rounds, and the read of the batch's list sizes queued into host[0, batch).
@@ -287,7 +286,7 @@ std::uint32_t* ColouringCuda::sort_keys(const ColouringArrays& at, std::uint32_t
 
 // The ranges from the firsts read (queue_sort).
 static void ranges_of(const std::uint32_t* host, std::uint32_t used, std::uint32_t n, std::vector<std::uint32_t>& begin) {
-  constexpr std::uint32_t kNone = kNoFirst;
+  constexpr std::uint32_t kNone = kNoFirst;  // a key no contact has
   // Colours may have gaps (a kept colour whose other contacts are gone): an
   // empty colour's range is empty.
   std::uint32_t colours = used;

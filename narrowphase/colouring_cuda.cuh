@@ -85,8 +85,8 @@ class ColouringCuda {
   void queue_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round, std::uint32_t batch,
                     std::uint32_t* host, int sm_count, cudaStream_t stream);
   std::uint32_t first_batch() const;
-  // The rounds from a fresh start (start(): count[0] and the active list,
-  // and what the rule keeps), then the stable sort by key and its ranges; no
+  // The rounds from a fresh start (start(): count[0], the active list and
+  // the kept colours), then the stable sort by key and its ranges; no
   // key but the overflow's is at or above key_bound(r) after r rounds. The
   // sort is queued behind the first batch of rounds and read with its list
   // sizes, one wait in all; a batch that did not finish drops the sort and

@@ -385,11 +385,9 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
   MARBLES_CUDA_CHECK_LAUNCH();
 
   // The island rule, on the device, where a load was lost (the kernel reads the count).
-  namespace dev = ::marbles::cuda;
-  const int grid = grid_for(std::max<std::size_t>({n, m, bodies_n}), sm_count, dev::resident_blocks<island_rule_kernel>());
   const IslandRule rule{pairs, match, n, keys, normal, matched, size, bodies, weight_impulse, counter, label,
                         island_max, cold, counter + 1};
-  dev::launch(dev::Launch::cooperative, island_rule_kernel, grid, s, rule);
+  ::marbles::cuda::launch_cooperative<island_rule_kernel>(std::max<std::size_t>({n, m, bodies_n}), sm_count, s, rule);
   return true;
 }
 

@@ -4,7 +4,6 @@
 
 #include <cooperative_groups.h>
 
-#include <algorithm>
 #include <utility>
 
 namespace marbles::narrowphase::cuda {
@@ -96,27 +95,34 @@ __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* 
       [&](std::uint32_t k, const Contact& c) { solve_loaded<Friction, Rolling>(s, k, c, bodies, inv_h); });
 }
 
-// Every contact of a colour plan in the solver's order (visit_colours) in a
-// cooperative launch: a colour's contacts spread over the grid, the overflow
-// set by one thread in order, a grid-wide barrier after each non-empty range
-// (every block skips the same empty ones). f(k) for each contact k.
+// One range [b, e) of a cooperative launch: spread over the grid, or
+// (serial) by one thread in order, reversed when asked; then a grid-wide
+// barrier. Every block skips the same empty ranges. f(k) for each k.
+template <class F>
+__device__ void walk_range(std::uint32_t b, std::uint32_t e, bool serial, bool reversed, const cg::grid_group& grid,
+                           F&& f) {
+  if (e <= b) return;
+  const std::uint32_t first = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
+  if (!serial)
+    for (std::uint32_t k = b + first; k < e; k += stride) f(k);
+  else if (first == 0 && reversed)
+    for (std::uint32_t k = e; k > b; --k) f(k - 1);
+  else if (first == 0)
+    for (std::uint32_t k = b; k < e; ++k) f(k);
+  grid.sync();
+}
+
+// Every contact of a colour plan in the solver's order (visit_colours), a
+// range at a time (walk_range).
 template <class F>
 __device__ void walk_colours(const ColourPlan& plan, bool backwards, const cg::grid_group& grid, F&& f) {
-  const std::uint32_t first = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
   visit_colours(plan.begin, plan.colours, backwards,
                 [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
-                  if (e <= b) return;
-                  if (!serial)
-                    for (std::uint32_t k = b + first; k < e; k += stride) f(k);
-                  else if (first == 0 && reversed)
-                    for (std::uint32_t k = e; k > b; --k) f(k - 1);
-                  else if (first == 0)
-                    for (std::uint32_t k = b; k < e; ++k) f(k);
-                  grid.sync();
+                  walk_range(b, e, serial, reversed, grid, f);
                 });
 }
 
-__device__ __forceinline__ bool flag_set(const unsigned* flag) { return *static_cast<const volatile unsigned*>(flag) != 0u; }
+__device__ __forceinline__ bool flag_set(const unsigned* flag) { return ::marbles::cuda::read_volatile(flag) != 0u; }
 
 // The position stages in one launch: with `rebound` the impacts' rebound
 // shifts, colour by colour; then sweeps until one moves nothing beyond
@@ -155,14 +161,10 @@ __global__ void impact_stage_kernel(ColourPlan plan, SweepRecords records, Real4
                                     const std::uint32_t* first, std::uint32_t n, SolverBody* bodies, ImpactParams p,
                                     int passes, unsigned* hit) {
   const cg::grid_group grid = cg::this_grid();
-  const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
   bool any = false;
   visit_levels(first, n, [&](std::uint32_t b, std::uint32_t e, bool serial) {
-    if (!serial)
-      for (std::uint32_t k = b + t; k < e; k += stride) any = impact_record<Friction>(records, impact, order[k], bodies, p) || any;
-    else if (t == 0)
-      for (std::uint32_t k = b; k < e; ++k) any = impact_record<Friction>(records, impact, order[k], bodies, p) || any;
-    grid.sync();
+    walk_range(b, e, serial, false, grid,
+               [&](std::uint32_t k) { any = impact_record<Friction>(records, impact, order[k], bodies, p) || any; });
   });
   if (any) hit[0] = 1u;
   grid.sync();
@@ -244,8 +246,7 @@ void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodie
 // `Kernel` on a cooperative grid for a plan's widest colour.
 template <auto Kernel, class... Args>
 void launch_on_plan(const ColourPlan& plan, int sm_count, cudaStream_t s, Args&&... args) {
-  const int grid = ::marbles::cuda::grid_for(plan.widest(), sm_count, ::marbles::cuda::resident_blocks<Kernel>());
-  launch(Launch::cooperative, Kernel, grid, s, plan, std::forward<Args>(args)...);
+  ::marbles::cuda::launch_cooperative<Kernel>(plan.widest(), sm_count, s, plan, std::forward<Args>(args)...);
 }
 
 void launch_position_stages(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
@@ -260,12 +261,13 @@ void launch_impact_stage(const SweepRecords& records, Real4* impact, const std::
                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
                          cudaStream_t s) {
   if (n == 0) return;
-  auto go = [&](auto kernel, int resident) {
-    launch(Launch::cooperative, kernel, ::marbles::cuda::grid_for(n, sm_count, resident), s, plan, records, impact,
-           order, first, n, bodies, p, passes, hit);
-  };
-  if (friction) go(impact_stage_kernel<true>, ::marbles::cuda::resident_blocks<impact_stage_kernel<true>>());
-  else go(impact_stage_kernel<false>, ::marbles::cuda::resident_blocks<impact_stage_kernel<false>>());
+  namespace dev = ::marbles::cuda;
+  if (friction)
+    dev::launch_cooperative<impact_stage_kernel<true>>(n, sm_count, s, plan, records, impact, order, first, n, bodies,
+                                                       p, passes, hit);
+  else
+    dev::launch_cooperative<impact_stage_kernel<false>>(n, sm_count, s, plan, records, impact, order, first, n,
+                                                        bodies, p, passes, hit);
 }
 
 void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h, SolverTerms t,

@@ -1,7 +1,9 @@
-// narrowphase/solver_cuda.cuh — the CUDA twin of solver.cpp: one launch per
-// colour (a thread per contact) over the per-contact functions of
-// solver_math.hpp; the overflow set by one thread in order. The host walks
-// the colours in the CPU's order, so the result is the CPU's bit for bit.
+// narrowphase/solver_cuda.cuh — the CUDA twin of solver.cpp over the
+// per-contact functions of solver_math.hpp: a launch per colour (a thread
+// per contact) walked by the host, or a whole stage in one cooperative
+// launch that walks the colours itself; either way the overflow set by one
+// thread in order and the colours in the CPU's order (visit_colours), so
+// the result is the CPU's bit for bit.
 // Only .cu files include this header.
 #pragma once
 

@@ -18,7 +18,7 @@
 // sizes and colour ranges (one read); per step, the flags. The cache's entry
 // count, the lost-load count, the impact levels and the flags of the impact
 // and projection passes stay on the device: those stages run as one
-// cooperative launch each. A settled pile waits 5 times a step, the gas 6.
+// cooperative launch each. A settled pile and the gas wait 5 times a step.
 // One wait per step, with buffers sized from the last step, is the next step.
 #include <cuda_runtime.h>
 

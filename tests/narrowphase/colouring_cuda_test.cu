@@ -140,7 +140,11 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   const std::uint32_t* first_d = nullptr;
   gpu.impact_levels(d.records, d.impact, n, bodies, rest, order, first_d, 8, nullptr);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
-  if (n == 0) return;
+  if (n == 0) {
+    EXPECT_EQ(order, nullptr);
+    EXPECT_EQ(first_d, nullptr);
+    return;
+  }
   // The ranges as the impact stage reads them (visit_levels on the firsts).
   std::vector<std::uint32_t> first(kMaxColourRounds + 2);
   ASSERT_EQ(cudaMemcpy(first.data(), first_d, first.size() * 4, cudaMemcpyDeviceToHost), cudaSuccess);

@@ -577,11 +577,16 @@ TEST(LastWrites, EarlyExactlyWhenTheLaunchBeforeWroteNoneOfItsRecords) {
 TEST(VisitLevels, RangesAreThePositionsOfEachKey) {
   std::mt19937_64 rng(41);
   for (int trial = 0; trial < 500; ++trial) {
-    const std::uint32_t levels = trial % 7 == 0 ? 0 : 1 + rng() % (trial % 5 == 0 ? kMaxColourRounds : 12);
+    // The first four trials fill every level (the last level's end is then
+    // the overflow's or the others' first, or n), the rest are random.
+    const std::uint32_t levels =
+        trial < 4 ? kMaxColourRounds : trial % 7 == 0 ? 0 : 1 + rng() % (trial % 5 == 0 ? kMaxColourRounds : 12);
     std::vector<std::uint32_t> keys;
     for (std::uint32_t l = 0; l < levels; ++l) keys.insert(keys.end(), 1 + rng() % 5, l);
-    if (levels > 0 && rng() % 2) keys.insert(keys.end(), 1 + rng() % 4, kMaxColourRounds);  // the overflow
-    if (rng() % 3) keys.insert(keys.end(), rng() % 6, kMaxColourRounds + 1);                 // the others
+    if (levels > 0 && (trial < 4 ? trial % 2 == 1 : rng() % 2 == 1))
+      keys.insert(keys.end(), 1 + rng() % 4, kMaxColourRounds);  // the overflow
+    if (trial < 4 ? trial >= 2 : rng() % 3 != 0)
+      keys.insert(keys.end(), 1 + rng() % 6, kMaxColourRounds + 1);  // the others
     const auto n = static_cast<std::uint32_t>(keys.size());
     std::vector<std::uint32_t> first(kMaxColourRounds + 2, kNoFirst);
     for (std::uint32_t j = n; j-- > 0;) first[keys[j]] = j;

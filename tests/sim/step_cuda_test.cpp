@@ -32,6 +32,7 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
     gpu.step();
     ASSERT_EQ(gpu.last_step().contacts, cpu.last_step().contacts) << "step " << k;
     ASSERT_EQ(gpu.last_step().colours, cpu.last_step().colours) << "step " << k;
+    ASSERT_EQ(gpu.last_step().overflow, cpu.last_step().overflow) << "step " << k;
     ASSERT_EQ(gpu.last_step().projection_sweeps, cpu.last_step().projection_sweeps) << "step " << k;
     ASSERT_EQ(gpu.last_step().max_overlap, cpu.last_step().max_overlap) << "step " << k;
     if (k % 10 == 9 || k + 1 == steps) {
