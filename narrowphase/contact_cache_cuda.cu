@@ -227,7 +227,7 @@ __global__ void island_rule_kernel(IslandRule r) {
     label_jump(r, first, stride);
     if (first == 0) r.changed[(pass + 1) & 1u] = 0u;
     grid.sync();
-    if (*static_cast<volatile unsigned*>(changed) == 0u) break;
+    if (::marbles::cuda::read_volatile(changed) == 0u) break;
   }
   island_max_pass(r, first, stride);
   grid.sync();

@@ -82,10 +82,8 @@ class ContactCacheCuda {
   void share_scratch(DeviceBuffer& scratch) { m_scratch = &scratch; }
 
  // Host<->device bytes copied so far (all calls).
-  std::uint64_t bytes_copied() const { return m_bytes; }
 
  private:
-  std::uint64_t m_bytes = 0;
   DeviceBuffer m_keys, m_normal, m_tangent, m_rolling, m_colour, m_counter, m_own_scratch;
   DeviceBuffer m_size;  // the entry count (one word, device)
   DeviceBuffer* m_scratch = &m_own_scratch;

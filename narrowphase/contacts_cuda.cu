@@ -47,6 +47,14 @@ __device__ __forceinline__ bool approaches(Contact& c, const BodiesView& bodies,
   return is_impact_candidate(c, watch.rest_speed);
 }
 
+// Flag k of a flag pass: whether the contact was found; `seen` is set once
+// a found contact will be an impact candidate.
+__device__ __forceinline__ std::uint32_t flag_of(bool found, Contact& c, const BodiesView& bodies,
+                                                 const ImpactWatch& watch, bool& seen) {
+  if (found && !seen) seen = approaches(c, bodies, watch);
+  return found ? 1u : 0u;
+}
+
 // Raises *watch.any when some thread of the warp saw a candidate (all of a
 // warp's threads reach it together, after their loops).
 __device__ __forceinline__ void raise_if_any(bool seen, const ImpactWatch& watch) {
@@ -62,9 +70,7 @@ __global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, s
       continue;
     }
     Contact c;
-    const bool found = make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c);
-    flags[k] = found ? 1u : 0u;
-    if (found && !seen) seen = approaches(c, bodies, watch);
+    flags[k] = flag_of(make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c), c, bodies, watch, seen);
   }
   raise_if_any(seen, watch);
 }
@@ -87,9 +93,7 @@ __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std
     }
     const auto i = static_cast<std::uint32_t>(t / wall_count), k = static_cast<std::uint32_t>(t % wall_count);
     Contact c;
-    const bool found = make_wall_contact(bodies, i, walls[k], k, table, h, reach, c);
-    flags[t] = found ? 1u : 0u;
-    if (found && !seen) seen = approaches(c, bodies, watch);
+    flags[t] = flag_of(make_wall_contact(bodies, i, walls[k], k, table, h, reach, c), c, bodies, watch, seen);
   }
   raise_if_any(seen, watch);
 }

@@ -332,7 +332,7 @@ class CudaStep final : public StepBackend {
       m_counters.beyond_walls = m_end_flags[4];
     }
     m_counters.projection_sweeps = m_end_flags[2];
-    const std::uint64_t bytes = m_bytes + m_colouring.bytes_copied() + m_cache.bytes_copied();
+    const std::uint64_t bytes = m_bytes + m_colouring.bytes_copied();
     m_counters.bytes_copied = bytes - m_bytes_at_step_start;
     m_bytes_at_step_start = bytes;
     m_non_finite = m_end_flags[0] != 0 || m_non_finite_seen;
