@@ -52,20 +52,16 @@ struct SubdivisionCuda::Impl {
   DeviceBuffer cell_lb;  // home-cell variant: dense lower bounds
   std::size_t pair_count = 0;
 
-  BoundsAccum* h_bounds = nullptr;  // pinned
-  std::uint32_t* h_small = nullptr; // pinned: readbacks
+  ::marbles::cuda::PinnedBuffer<BoundsAccum> h_bounds{1};
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> h_small{64};  // readbacks
   cudaEvent_t ev[5] = {};
 
   Impl() {
-    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&h_bounds), sizeof(BoundsAccum)));
-    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&h_small), 64 * sizeof(std::uint32_t)));
     for (auto& e : ev) MARBLES_CUDA_CHECK(cudaEventCreate(&e));
   }
   ~Impl() {
     for (auto& e : ev)
       if (e) cudaEventDestroy(e);
-    if (h_bounds) cudaFreeHost(h_bounds);
-    if (h_small) cudaFreeHost(h_small);
   }
 
   void mark(int k, cudaStream_t s) {

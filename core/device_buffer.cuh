@@ -1,6 +1,7 @@
-// core/device_buffer.cuh — device memory that only grows, launch sizes, and
-// the CUB calls every stage shares (scan, stable radix sort), with their
-// temporary storage held by the caller and reused. Only .cu files include it.
+// core/device_buffer.cuh — device memory that only grows, pinned host memory
+// and streams freed with their owners, launch sizes, and the CUB calls every
+// stage shares (scan, stable radix sort), with their temporary storage held
+// by the caller and reused. Only .cu files include it.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -119,6 +120,44 @@ class DeviceBuffer {
  private:
   void* m_ptr = nullptr;
   std::size_t m_bytes = 0;
+};
+
+// Page-locked host memory for a stage's read-backs (count values of T),
+// freed with its owner: a constructor that throws after it leaks nothing.
+template <class T>
+class PinnedBuffer {
+ public:
+  explicit PinnedBuffer(std::size_t count) {
+    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_ptr), count * sizeof(T)));
+  }
+  PinnedBuffer(const PinnedBuffer&) = delete;
+  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
+  ~PinnedBuffer() {
+    if (m_ptr) cudaFreeHost(m_ptr);
+  }
+  operator T*() const { return m_ptr; }
+  T* operator->() const { return m_ptr; }
+
+ private:
+  T* m_ptr = nullptr;
+};
+
+// A stream destroyed with its owner; empty until create().
+class Stream {
+ public:
+  Stream() = default;
+  Stream(const Stream&) = delete;
+  Stream& operator=(const Stream&) = delete;
+  ~Stream() {
+    if (m_stream) cudaStreamDestroy(m_stream);
+  }
+  void create(unsigned flags = cudaStreamDefault) {
+    if (!m_stream) MARBLES_CUDA_CHECK(cudaStreamCreateWithFlags(&m_stream, flags));
+  }
+  operator cudaStream_t() const { return m_stream; }
+
+ private:
+  cudaStream_t m_stream = nullptr;
 };
 
 // Copies host[] into `buffer` (grown to fit), asynchronously on `stream`: the

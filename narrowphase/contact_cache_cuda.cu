@@ -238,12 +238,8 @@ __global__ void island_rule_kernel(IslandRule r) {
 
 }  // namespace
 
-ContactCacheCuda::ContactCacheCuda() {
-  MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_host), 4 * sizeof(std::uint32_t)));
-}
-ContactCacheCuda::~ContactCacheCuda() {
-  if (m_host) cudaFreeHost(m_host);
-}
+ContactCacheCuda::ContactCacheCuda() : m_host(4) {}
+ContactCacheCuda::~ContactCacheCuda() = default;
 
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
                              std::uint32_t spheres, std::uint32_t walls, int sm_count, cudaStream_t s) {

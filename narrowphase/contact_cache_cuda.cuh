@@ -88,7 +88,7 @@ class ContactCacheCuda {
   DeviceBuffer m_size;  // the entry count (one word, device)
   DeviceBuffer* m_scratch = &m_own_scratch;
   std::uint32_t m_bound = 0;
-  std::uint32_t* m_host = nullptr;  // pinned readback
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_host;  // readback
   bool m_keep_tangent = true, m_keep_rolling = true;
   Vec3* tangent_entries(std::uint32_t m) { return m_keep_tangent ? m_tangent.as<Vec3>(m) : nullptr; }
   Vec3* rolling_entries(std::uint32_t m) { return m_keep_rolling ? m_rolling.as<Vec3>(m) : nullptr; }

@@ -14,19 +14,21 @@
 
 #include "bench/api_count.hpp"
 #include "core/cuda_check.hpp"
+#include "core/device_buffer.cuh"
 #include "core/device.hpp"
+#include "tests/require_device.hpp"
 
 namespace {
 
 __global__ void touch(int* x) { x[threadIdx.x] += 1; }
 
 TEST(ApiCounter, CountsEachLaunchAndEachWait) {
-  if (!marbles::cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device";
-  int* x = nullptr;
-  MARBLES_CUDA_CHECK(cudaMalloc(&x, 32 * sizeof(int)));
+  REQUIRE_DEVICE();
+  marbles::cuda::DeviceBuffer memory;  // freed, as the stream is destroyed, however the test ends
+  int* x = memory.as<int>(32);
   MARBLES_CUDA_CHECK(cudaMemset(x, 0, 32 * sizeof(int)));
-  cudaStream_t s = nullptr;
-  MARBLES_CUDA_CHECK(cudaStreamCreate(&s));
+  marbles::cuda::Stream s;
+  s.create();
   marbles::bench::ApiCounter counter;
   if (!counter.counting()) GTEST_SKIP() << "skipped: CUPTI not available (another tool holds it, or no CUPTI)";
   const marbles::bench::ApiCounts start = counter.counts();
@@ -51,8 +53,6 @@ TEST(ApiCounter, CountsEachLaunchAndEachWait) {
   EXPECT_EQ(end.launches - start.launches, 6u);
   EXPECT_EQ(end.waits - start.waits, 3u);
   for (int v : host) EXPECT_EQ(v, 6);  // every launch ran
-  MARBLES_CUDA_CHECK(cudaStreamDestroy(s));
-  MARBLES_CUDA_CHECK(cudaFree(x));
 }
 
 }  // namespace
@@ -79,12 +79,12 @@ __global__ void spin(std::uint64_t ns, std::uint64_t* began_ended) {
 // then a host pause, then two kernels at once on two streams (their union,
 // not their sum), each spinning 2 ms.
 TEST(DeviceTimeline, BusyIsTheUnionOfTheDevicesWorkAndTheRestIsIdle) {
-  if (!marbles::cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device";
+  REQUIRE_DEVICE();
   constexpr std::uint64_t kSpin = 2000000;
-  std::uint64_t* times = nullptr;  // [began, ended] of each of the three kernels
-  MARBLES_CUDA_CHECK(cudaMalloc(&times, 6 * sizeof(std::uint64_t)));
-  cudaStream_t s[2] = {};
-  for (auto& x : s) MARBLES_CUDA_CHECK(cudaStreamCreateWithFlags(&x, cudaStreamNonBlocking));
+  marbles::cuda::DeviceBuffer memory;  // freed, as the streams are destroyed, however the test ends
+  auto* times = memory.as<std::uint64_t>(6);  // [began, ended] of each of the three kernels
+  marbles::cuda::Stream s[2];
+  for (auto& x : s) x.create(cudaStreamNonBlocking);
   spin<<<1, 32, 0, s[0]>>>(1000, times);  // the module loaded before tracing
   MARBLES_CUDA_CHECK(cudaDeviceSynchronize());
 
@@ -129,8 +129,6 @@ TEST(DeviceTimeline, BusyIsTheUnionOfTheDevicesWorkAndTheRestIsIdle) {
   // Tracing is process-wide: a second timeline traces nothing while this one lives.
   marbles::bench::DeviceTimeline second;
   EXPECT_FALSE(second.tracing());
-  for (auto& x : s) MARBLES_CUDA_CHECK(cudaStreamDestroy(x));
-  MARBLES_CUDA_CHECK(cudaFree(times));
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include "core/error.hpp"
 #include "pair_check.hpp"
 #include "sphere_sets.hpp"
+#include "tests/require_device.hpp"
 #if defined(MARBLES_BROADPHASE_CUDA)
 #include <cuda_runtime.h>
 
@@ -22,11 +23,6 @@
 namespace mb = marbles::broadphase;
 namespace mt = marbles::broadphase::testing;
 using marbles::real;
-
-#define REQUIRE_DEVICE()                                                      \
-  do {                                                                        \
-    if (!marbles::cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device"; \
-  } while (0)
 
 #if defined(MARBLES_BROADPHASE_CUDA)
 

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/device.hpp"
+#include "tests/require_device.hpp"
 #include "tests/sim/checkpoint_cases.hpp"
 #include "tests/sim/scene_cases.hpp"
 
@@ -18,7 +19,7 @@ using namespace test;
 // On the GPU: resumed on the device equals the whole device run, and a CPU
 // checkpoint continued on the GPU equals the CPU run.
 TEST_F(Checkpoints, GpuRestartEqualsTheUninterruptedRun) {
-  if (!cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device";
+  REQUIRE_DEVICE();
   const test::ScratchDir dir("ck_gpu");
   const std::string scene = dir.write("s.yaml", kScene);
   ASSERT_EQ(marbles("run " + scene + " --quiet --backend cuda --out " + dir.path() + "/gpu"), 0);
@@ -40,7 +41,7 @@ TEST_F(Checkpoints, GpuRestartEqualsTheUninterruptedRun) {
 // a kernel's): each injected fault (NaN, energy jump, escape) is rolled back
 // and redone as on the CPU, bit for bit.
 TEST_F(Checkpoints, GpuWatchdogRepairsAsTheCpuDoes) {
-  if (!cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device";
+  REQUIRE_DEVICE();
   const test::ScratchDir dir("ck_gpu_watchdog");
   const std::string scene = dir.write("s.yaml", kScene);
   const std::pair<std::string, std::string> faults[] = {{"NAN", "non-finite state (sphere 0)"},
@@ -69,7 +70,7 @@ TEST_F(Checkpoints, GpuWatchdogRepairsAsTheCpuDoes) {
 // The contact frames (forces, normals, overlaps, ids) and the sphere frames
 // with the per-sphere contact count are the same bytes on both backends.
 TEST_F(Checkpoints, GpuContactFramesEqualTheCpus) {
-  if (!cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device";
+  REQUIRE_DEVICE();
   const test::ScratchDir dir("ck_gpu_contacts");
   const std::string scene = dir.write("s.yaml", kScene);
   const std::string extra = " --set output.contacts.every=50 --set 'output.fields=[radius, velocity, contacts]'";
