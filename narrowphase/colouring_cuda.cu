@@ -13,7 +13,9 @@ using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 namespace cg = cooperative_groups;
 
-constexpr std::uint32_t kBatch = 8;  // rounds run between two reads of what is left
+// What colour_and_sort reads back: the firsts of the kMaxColours colours'
+// keys, of the overflow's and of the inactive's, and the rounds run.
+constexpr std::uint32_t kRead = kMaxColours + 3;
 
 // One entry of a round's active list: the contact's spheres and rank in one
 // 16-byte word, so a round reads its list in order (coalesced) and never
@@ -108,23 +110,25 @@ __device__ void select(const ColourEntry* active, std::uint32_t n, ColourEntry* 
   }
 }
 
-// Rounds [round, round + batch) in one cooperative launch, the lists
-// alternating, a grid-wide barrier after each step; it ends after a round
-// that leaves no contact (every block reads the same list size).
-__global__ void rounds_kernel(ColourEntry* list0, ColourEntry* list1, std::uint32_t* count, std::uint32_t round,
-                              std::uint32_t batch, std::uint32_t* colour, ColourRule rule,
-                              unsigned long long* body_word, unsigned long long* body_used) {
+// Every round in one cooperative launch, the lists alternating, a
+// grid-wide barrier after each step; it ends after a round that leaves no
+// contact (every block reads the same list size) or after the last round,
+// and writes the rounds it ran to count[kMaxColourRounds + 1].
+__global__ void rounds_kernel(ColourEntry* list0, ColourEntry* list1, std::uint32_t* count, std::uint32_t* colour,
+                              ColourRule rule, unsigned long long* body_word, unsigned long long* body_used) {
   const cg::grid_group grid = cg::this_grid();
   const std::uint32_t first = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
-  for (std::uint32_t r = round; r < round + batch; ++r) {
+  std::uint32_t r = 0;
+  for (; r < kMaxColourRounds; ++r) {
     const std::uint32_t n = ::marbles::cuda::read_volatile(count + r);
-    if (n == 0) return;
+    if (n == 0) break;
     ColourEntry* list = r % 2 == 0 ? list0 : list1;
     offer(list, n, r, body_word, first, stride);
     grid.sync();
     select(list, n, r % 2 == 0 ? list1 : list0, count, colour, r, rule, body_word, body_used, first, stride);
     grid.sync();
   }
+  if (first == 0) count[kMaxColourRounds + 1] = r;
 }
 
 __global__ void keys_kernel(const std::uint32_t* colour, std::uint32_t n, std::uint32_t overflow_key,
@@ -187,85 +191,20 @@ ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, 
   return at;
 }
 
-ColouringCuda::ColouringCuda() {
-  MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_host),
-                                    (kMaxColourRounds + kMaxColourRounds + 8) * sizeof(std::uint32_t)));
-  m_count.as<std::uint32_t>(kMaxColourRounds + 1);
-}
-ColouringCuda::~ColouringCuda() {
-  if (m_host) cudaFreeHost(m_host);
-}
+ColouringCuda::ColouringCuda() : m_host(kRead) { m_count.as<std::uint32_t>(kMaxColourRounds + 2); }
+ColouringCuda::~ColouringCuda() = default;
 
-// Rounds [round, round + batch) over the active lists, in one launch that
-// ends at the first round to find its list empty.
-void ColouringCuda::launch_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round,
-                                  std::uint32_t batch, ColourRule rule, int sm_count, cudaStream_t s) {
-  ::marbles::cuda::launch_cooperative<rounds_kernel>(n, sm_count, s, at.active, at.next,
-                                                     m_count.get_as<std::uint32_t>(), round, batch, at.colour, rule,
-                                                     at.body_word, at.body_used);
-}
-
-// launch_rounds, and the read of the batch's list sizes queued into host[0, batch).
-void ColouringCuda::queue_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round,
-                                 std::uint32_t batch, std::uint32_t* host, int sm_count, cudaStream_t s) {
-  launch_rounds(at, n, round, batch, ColourRule::lowest_free, sm_count, s);
-  const auto* count = m_count.get_as<std::uint32_t>();
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, count + round + 1, batch * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-  m_bytes += batch * sizeof(std::uint32_t);
-}
-
-// The rounds' scratch cleared: no body offers, no list size yet.
-void ColouringCuda::clear_rounds(const ColouringArrays& at, std::size_t body_count, cudaStream_t s) {
+// Every round over the active lists, from a clear start (no body offers, no
+// list size yet: count[0] is set by the caller, body_used holds the kept
+// colours), in one launch that ends at the first round to find its list
+// empty and writes the rounds it ran to count[kMaxColourRounds + 1].
+void ColouringCuda::launch_rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, ColourRule rule,
+                                  int sm_count, cudaStream_t s) {
+  auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_word, 0, body_count * sizeof(unsigned long long), s));
-  // body_used (lowest_free) is cleared, and holds the kept colours, before this.
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(m_count.get_as<std::uint32_t>() + 1, 0, kMaxColourRounds * sizeof(std::uint32_t), s));
-}
-
-// The first batch is as long as the last colouring took and a
-// little more (the launch ends at the round that finds an empty list, but
-// the sort queued behind the batch reads the firsts of as many keys as the
-// batch could make, and a batch too short costs a wait), later ones kBatch.
-std::uint32_t ColouringCuda::first_batch() const {
-  return std::min(std::max(kBatch, m_last_rounds + m_last_rounds / 8 + 1), kMaxColourRounds);
-}
-
-// The rounds a batch's list sizes show were needed (0: not finished). A
-// batch that ends at kMaxColourRounds has finished too: what is left is the
-// overflow set.
-static std::uint32_t finished_in(const std::uint32_t* host, std::uint32_t round, std::uint32_t batch) {
-  for (std::uint32_t r = 0; r < batch; ++r)
-    if (host[r] == 0) return round + r + 1;
-  return round + batch == kMaxColourRounds ? kMaxColourRounds : 0;
-}
-
-// Rounds until the active list is empty: launched in batches, the list
-// sizes read once per batch.
-std::uint32_t ColouringCuda::rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, int sm_count,
-                                    cudaStream_t s) {
-  clear_rounds(at, body_count, s);  // count[0] is set by the caller
-  std::uint32_t& last = m_last_rounds;
-  for (std::uint32_t round = 0; round < kMaxColourRounds;) {
-    const std::uint32_t batch = round == 0 ? first_batch() : std::min(kBatch, kMaxColourRounds - round);
-    queue_rounds(at, n, round, batch, m_host, sm_count, s);
-    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-    if (const std::uint32_t done = finished_in(m_host, round, batch)) return last = done;
-    round += batch;
-  }
-  return last = kMaxColourRounds;  // not reached: the batch that ends there has finished
-}
-
-std::uint32_t* ColouringCuda::queue_sort(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
-                                         int key_bits, std::uint32_t used, std::uint32_t* host,
-                                         const std::uint32_t** sorted_keys, int sm_count, cudaStream_t s) {
-  std::uint32_t* index_out = sort_keys(at, n, overflow_key, key_bits, sorted_keys, sm_count, s);
-  const auto* first = m_first_of_key.get_as<std::uint32_t>();
-  // No key but the overflow's (and the inactive) is at or above `used`:
-  // read only those firsts, then the overflow's and the inactive's.
-  if (used > 0) MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, first, used * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(host + used, first + overflow_key, 2 * sizeof(std::uint32_t),
-                                     cudaMemcpyDeviceToHost, s));
-  m_bytes += (used + 2) * sizeof(std::uint32_t);
-  return index_out;
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(count + 1, 0, (kMaxColourRounds + 1) * sizeof(std::uint32_t), s));
+  ::marbles::cuda::launch_cooperative<rounds_kernel>(n, sm_count, s, at.active, at.next, count, at.colour, rule,
+                                                     at.body_word, at.body_used);
 }
 
 std::uint32_t* ColouringCuda::sort_keys(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
@@ -284,14 +223,16 @@ std::uint32_t* ColouringCuda::sort_keys(const ColouringArrays& at, std::uint32_t
   return index_out;
 }
 
-// The ranges from the firsts read (queue_sort).
-static void ranges_of(const std::uint32_t* host, std::uint32_t used, std::uint32_t n, std::vector<std::uint32_t>& begin) {
-  constexpr std::uint32_t kNone = kNoFirst;  // a key no contact has
+// The ranges (ColourRanges::begin) from the firsts of the colours' keys
+// (host[0, kMaxColours), kNoFirst where no contact has it), then the
+// overflow's and the inactive's.
+static void ranges_of(const std::uint32_t* host, std::uint32_t n, std::vector<std::uint32_t>& begin) {
+  constexpr std::uint32_t kNone = kNoFirst;
   // Colours may have gaps (a kept colour whose other contacts are gone): an
   // empty colour's range is empty.
-  std::uint32_t colours = used;
+  std::uint32_t colours = kMaxColours;
   while (colours > 0 && host[colours - 1] == kNone) --colours;
-  const std::uint32_t overflow_first = host[used], inactive_first = host[used + 1];
+  const std::uint32_t overflow_first = host[kMaxColours], inactive_first = host[kMaxColours + 1];
   const std::uint32_t coloured_end = overflow_first != kNone ? overflow_first : inactive_first != kNone ? inactive_first : n;
   const std::uint32_t overflow_end = inactive_first != kNone ? inactive_first : n;
   begin.assign(colours + 2, 0);
@@ -300,49 +241,12 @@ static void ranges_of(const std::uint32_t* host, std::uint32_t used, std::uint32
   begin[colours + 1] = overflow_first != kNone ? overflow_end : coloured_end;
 }
 
-std::uint32_t* ColouringCuda::sort_by_colour(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
-                                             int key_bits, std::uint32_t key_bound, std::vector<std::uint32_t>& begin,
-                                             const std::uint32_t** sorted_keys, int sm_count, cudaStream_t s) {
-  const std::uint32_t used = std::min(key_bound, overflow_key);
-  std::uint32_t* index = queue_sort(at, n, overflow_key, key_bits, used, m_host, sorted_keys, sm_count, s);
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  ranges_of(m_host, used, n, begin);
-  return index;
-}
-
-template <class Start, class KeyBound>
-std::uint32_t* ColouringCuda::rounds_and_sort(const ColouringArrays& at, std::uint32_t n, std::size_t body_count,
-                                              std::uint32_t overflow_key, int key_bits, Start&& start,
-                                              KeyBound&& key_bound, std::vector<std::uint32_t>& begin,
-                                              const std::uint32_t** sorted_keys, std::uint32_t& rounds_run,
-                                              int sm_count, cudaStream_t s) {
-  start();
-  const std::uint32_t batch = first_batch();
-  clear_rounds(at, body_count, s);
-  queue_rounds(at, n, 0, batch, m_host, sm_count, s);
-  const std::uint32_t used = std::min(key_bound(batch), overflow_key);
-  std::uint32_t* order = queue_sort(at, n, overflow_key, key_bits, used, m_host + batch, sorted_keys, sm_count, s);
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  rounds_run = finished_in(m_host, 0, batch);
-  if (rounds_run > 0) {
-    m_last_rounds = rounds_run;
-    ranges_of(m_host + batch, used, n, begin);
-    return order;
-  }
-  // Not finished: the sort (in the rounds' memory) is dropped, and the
-  // rounds start again, their first batch a little longer than this one.
-  m_last_rounds = batch;
-  start();
-  rounds_run = rounds(at, n, body_count, sm_count, s);
-  return sort_by_colour(at, n, overflow_key, key_bits, key_bound(rounds_run), begin, sorted_keys, sm_count, s);
-}
-
 std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,
                                              const std::uint32_t*& position, std::vector<std::uint32_t>& begin,
-                                             std::uint32_t& rounds_run, int sm_count, cudaStream_t s,
-                                             const std::uint8_t* kept_colour, std::uint8_t* sorted_colour) {
+                                             int sm_count, cudaStream_t s, const std::uint8_t* kept_colour,
+                                             std::uint8_t* sorted_colour) {
   position = nullptr;
-  rounds_run = 0;
+  m_rounds = 0;
   if (n == 0) {
     begin.assign(2, 0);
     return 0;
@@ -350,23 +254,26 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   constexpr int kKeyBits = 7;  // the colours (< kMaxColours) and the overflow's key
   const ColouringArrays at = lay_out(n, body_count, kKeyBits);
   auto* count = m_count.get_as<std::uint32_t>();
-  auto start = [&] {
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_used, 0, body_count * sizeof(unsigned long long), s));
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
-    contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, kept_colour, at.colour, at.active,
-                                                                  count, at.body_used);
-    MARBLES_CUDA_CHECK_LAUNCH();
-  };
-  // Without kept colours, a contact coloured in round r has at most 2 r
-  // coloured neighbours (one per sphere and round), so its colour is at most
-  // 2 r; kept colours may be any below kMaxColours.
-  auto key_bound = [&](std::uint32_t r) { return kept_colour ? kMaxColours : 2 * r; };
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_used, 0, body_count * sizeof(unsigned long long), s));
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
+  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, kept_colour, at.colour, at.active, count,
+                                                                at.body_used);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  launch_rounds(at, n, body_count, ColourRule::lowest_free, sm_count, s);
   const std::uint32_t* sorted_keys = nullptr;
-  const std::uint32_t* order = rounds_and_sort(at, n, body_count, kMaxColours, kKeyBits,
-                                               start, key_bound, begin, &sorted_keys, rounds_run, sm_count, s);
+  const std::uint32_t* order = sort_keys(at, n, kMaxColours, kKeyBits, &sorted_keys, sm_count, s);
   // The colours are read (keys_kernel): their array takes the positions.
   positions_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(order, sorted_keys, n, at.colour, sorted_colour);
   MARBLES_CUDA_CHECK_LAUNCH();
+  // One read: the firsts of every key and the rounds run.
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_first_of_key.get_as<std::uint32_t>(),
+                                     (kMaxColours + 2) * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host + kMaxColours + 2, count + kMaxColourRounds + 1, sizeof(std::uint32_t),
+                                     cudaMemcpyDeviceToHost, s));
+  m_bytes += kRead * sizeof(std::uint32_t);
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  m_rounds = m_host[kMaxColours + 2];
+  ranges_of(m_host, n, begin);
   position = at.colour;
   return static_cast<std::uint32_t>(begin.size() - 2);
 }
@@ -383,10 +290,8 @@ void ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impa
   impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, rest_speed, at.colour,
                                                                     at.active, m_count.get_as<std::uint32_t>());
   MARBLES_CUDA_CHECK_LAUNCH();
-  // Every round in one launch, to the first that finds no contact left: a
-  // level is the round that coloured it. Nothing is read on the host.
-  clear_rounds(at, body_count, s);
-  launch_rounds(at, n, 0, kMaxColourRounds, ColourRule::by_round, sm_count, s);
+  // A level is the round that coloured it. Nothing is read on the host.
+  launch_rounds(at, n, body_count, ColourRule::by_round, sm_count, s);
   order = sort_keys(at, n, kMaxColourRounds, kKeyBits, nullptr, sm_count, s);
   first = m_first_of_key.get_as<std::uint32_t>();
 }

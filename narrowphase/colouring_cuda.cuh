@@ -39,12 +39,17 @@ class ColouringCuda {
   // the colour count. kept_colour (device, one per contact, may be null):
   // colours kept as ContactColouring::colour_and_sort keeps them;
   // sorted_colour (device, may be null) gets each sorted contact's colour
-  // (kNoKeptColour: overflow). `position` lies in the scratch memory: valid
+  // (kNoKeptColour: overflow). Every round runs in one launch, to the first
+  // with no contact left; the ranges and the rounds run are read back
+  // together, one wait in all. `position` lies in the scratch memory: valid
   // until its next user.
   std::uint32_t colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,
-                                const std::uint32_t*& position, std::vector<std::uint32_t>& begin,
-                                std::uint32_t& rounds, int sm_count, cudaStream_t stream,
-                                const std::uint8_t* kept_colour = nullptr, std::uint8_t* sorted_colour = nullptr);
+                                const std::uint32_t*& position, std::vector<std::uint32_t>& begin, int sm_count,
+                                cudaStream_t stream, const std::uint8_t* kept_colour = nullptr,
+                                std::uint8_t* sorted_colour = nullptr);
+  // The rounds the last colour_and_sort ran (as ContactColouring::colour
+  // counts them).
+  std::uint32_t rounds() const { return m_rounds; }
 
   // The impact stage's levels over records[0, n) and their impact words
   // (solver_math.hpp): the candidates (approach faster than rest_speed)
@@ -59,7 +64,7 @@ class ColouringCuda {
                      real rest_speed, std::uint32_t*& order, const std::uint32_t*& first, int sm_count,
                      cudaStream_t stream);
 
- // Host<->device bytes copied so far (all calls).
+  // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }
 
   // The temporaries (lists, keys, the sort's arrays) live in `scratch`
@@ -72,52 +77,19 @@ class ColouringCuda {
   // A call's temporaries carved out of the scratch memory: the sort's keys
   // key_bits wide.
   ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, int key_bits);
-  // Rounds over the active list (count[0] entries, set by the caller);
-  // returns the rounds run.
-  std::uint32_t rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, int sm_count,
-                       cudaStream_t stream);
-  // rounds' parts: the scratch cleared; a batch of rounds in one launch (any
-  // rule); that with the read of its list sizes queued into host[0, batch)
-  // (lowest_free, no wait); the first batch's length.
-  void clear_rounds(const ColouringArrays& at, std::size_t body_count, cudaStream_t stream);
-  void launch_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round, std::uint32_t batch,
-                     ColourRule rule, int sm_count, cudaStream_t stream);
-  void queue_rounds(const ColouringArrays& at, std::uint32_t n, std::uint32_t round, std::uint32_t batch,
-                    std::uint32_t* host, int sm_count, cudaStream_t stream);
-  std::uint32_t first_batch() const;
-  // The rounds from a fresh start (start(): count[0], the active list and
-  // the kept colours), then the stable sort by key and its ranges; no
-  // key but the overflow's is at or above key_bound(r) after r rounds. The
-  // sort is queued behind the first batch of rounds and read with its list
-  // sizes, one wait in all; a batch that did not finish drops the sort and
-  // the rounds start again (the same result whatever the batches). Returns
-  // the sorted indices.
-  template <class Start, class KeyBound>
-  std::uint32_t* rounds_and_sort(const ColouringArrays& at, std::uint32_t n, std::size_t body_count,
-                                 std::uint32_t overflow_key, int key_bits, Start&& start, KeyBound&& key_bound,
-                                 std::vector<std::uint32_t>& begin, const std::uint32_t** sorted_keys,
-                                 std::uint32_t& rounds_run, int sm_count, cudaStream_t stream);
-  // sort_by_colour's launches, with the read of the firsts of the keys below
-  // `used` and of the overflow and inactive keys queued into host[0, used +
-  // 2) (no wait). Returns the sorted indices.
-  std::uint32_t* queue_sort(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key, int key_bits,
-                            std::uint32_t used, std::uint32_t* host, const std::uint32_t** sorted_keys, int sm_count,
-                            cudaStream_t stream);
-  // queue_sort's launches alone: the keys sorted, the firsts of the keys
-  // (m_first_of_key, overflow_key + 2 words) on the device.
+  // Every round over the active list (count[0] entries, set by the
+  // caller), in one launch, its scratch cleared first.
+  void launch_rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, ColourRule rule,
+                     int sm_count, cudaStream_t stream);
+  // The keys (overflow -> overflow_key, inactive last) sorted stably with
+  // the indices, and the firsts of the keys (m_first_of_key, overflow_key +
+  // 2 words) on the device. Returns the sorted indices.
   std::uint32_t* sort_keys(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key, int key_bits,
                            const std::uint32_t** sorted_keys, int sm_count, cudaStream_t stream);
-  // Stable sort of the indices by key (overflow -> overflow_key, inactive
-  // last) and the host ranges [0, key_count + 1]; no key is at or above
-  // key_bound except the overflow's. Returns the sorted indices.
-  std::uint32_t* sort_by_colour(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key, int key_bits,
-                                std::uint32_t key_bound, std::vector<std::uint32_t>& begin,
-                                const std::uint32_t** sorted_keys, int sm_count, cudaStream_t stream);
-
   DeviceBuffer m_count, m_first_of_key, m_own_scratch;
   DeviceBuffer* m_scratch = &m_own_scratch;
-  std::uint32_t* m_host = nullptr;  // pinned readbacks
-  std::uint32_t m_last_rounds = 0;  // rounds of the last colouring (lowest_free)
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_host;  // readbacks
+  std::uint32_t m_rounds = 0;       // rounds of the last colour_and_sort
 };
 
 }  // namespace marbles::narrowphase::cuda

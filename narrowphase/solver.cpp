@@ -184,10 +184,11 @@ SweepLanes best_lanes() {
 ContactSolver::ContactSolver(const SolverSettings& settings, SweepLanes lanes) : m_settings(settings) {
   if (lanes > supported_lanes()) lanes = supported_lanes();
   m_lanes = lanes;
-  if (settings.friction && settings.rolling) m_sweep = sweep_for<true, true>(lanes), m_warm_start = &warm_start_range<true, true>;
-  else if (settings.friction) m_sweep = sweep_for<true, false>(lanes), m_warm_start = &warm_start_range<true, false>;
-  else if (settings.rolling) m_sweep = sweep_for<false, true>(lanes), m_warm_start = &warm_start_range<false, true>;
-  else m_sweep = sweep_for<false, false>(lanes), m_warm_start = &warm_start_range<false, false>;
+  with_terms(settings.friction, settings.rolling, [&](auto friction, auto rolling) {
+    constexpr bool Friction = decltype(friction)::value, Rolling = decltype(rolling)::value;
+    m_sweep = sweep_for<Friction, Rolling>(lanes);
+    m_warm_start = &warm_start_range<Friction, Rolling>;
+  });
   m_impact = settings.friction ? &impact_range<true> : &impact_range<false>;
 }
 

@@ -124,27 +124,36 @@ __device__ void walk_colours(const ColourPlan& plan, bool backwards, const cg::g
 
 __device__ __forceinline__ bool flag_set(const unsigned* flag) { return ::marbles::cuda::read_volatile(flag) != 0u; }
 
-// The position stages in one launch: with `rebound` the impacts' rebound
-// shifts, colour by colour; then sweeps until one moves nothing beyond
-// settled_move (project_one), at most `sweeps`. Sweep `it` sets moved[it]
-// (zeroed before), which every block reads after the barrier that ends the
-// sweep. *total += the sweeps run (solver.cpp ends the projection there too).
+// Sets *flag the first time `happened` in this thread (one store a thread at
+// most); the barrier that ends the range makes it visible to every block.
+__device__ __forceinline__ void raise_once(bool happened, bool& raised, unsigned* flag) {
+  if (happened && !raised) {
+    raised = true;
+    *flag = 1u;
+  }
+}
+
+// The position stages in one launch: the impacts' rebound shifts, colour
+// by colour, when the impact stage hit something (hit: its first pass's
+// flag, null when it did not run; only a hit gives a shift); then sweeps
+// until one moves nothing beyond settled_move (project_one), at most
+// `sweeps`. Sweep `it` sets moved[it] (zeroed before), which every block
+// reads after the barrier that ends the sweep's last colour. *total += the
+// sweeps run (solver.cpp ends the projection there too).
 __global__ void project_kernel(ColourPlan plan, SweepRecords records, BodiesView bodies, const WallShape* walls,
-                               SolverSettings s, bool rebound, int sweeps, unsigned* moved,
+                               SolverSettings s, const unsigned* hit, int sweeps, unsigned* moved,
                                unsigned long long* total) {
   const cg::grid_group grid = cg::this_grid();
-  if (rebound)
+  if (hit && flag_set(hit))
     walk_colours(plan, false, grid,
                  [&](std::uint32_t k) { rebound_one(load_position_contact<true>(records, k), bodies, walls); });
   int ran = 0;
   for (int it = 0; it < sweeps; ++it) {
     ++ran;
-    bool any = false;
+    bool raised = false;
     walk_colours(plan, false, grid, [&](std::uint32_t k) {
-      any = project_one(load_position_contact<false>(records, k), bodies, walls, s) || any;
+      raise_once(project_one(load_position_contact<false>(records, k), bodies, walls, s), raised, moved + it);
     });
-    if (any) moved[it] = 1u;
-    grid.sync();
     if (!flag_set(moved + it)) break;
   }
   if (grid.thread_rank() == 0) *total += static_cast<unsigned long long>(ran);
@@ -161,20 +170,17 @@ __global__ void impact_stage_kernel(ColourPlan plan, SweepRecords records, Real4
                                     const std::uint32_t* first, std::uint32_t n, SolverBody* bodies, ImpactParams p,
                                     int passes, unsigned* hit) {
   const cg::grid_group grid = cg::this_grid();
-  bool any = false;
+  bool raised = false;
   visit_levels(first, n, [&](std::uint32_t b, std::uint32_t e, bool serial) {
-    walk_range(b, e, serial, false, grid,
-               [&](std::uint32_t k) { any = impact_record<Friction>(records, impact, order[k], bodies, p) || any; });
-  });
-  if (any) hit[0] = 1u;
-  grid.sync();
-  for (int pass = 1; pass < passes && flag_set(hit + pass - 1); ++pass) {
-    any = false;
-    walk_colours(plan, false, grid, [&](std::uint32_t k) {
-      any = impact_record<Friction>(records, impact, k, bodies, p) || any;
+    walk_range(b, e, serial, false, grid, [&](std::uint32_t k) {
+      raise_once(impact_record<Friction>(records, impact, order[k], bodies, p), raised, hit);
     });
-    if (any) hit[pass] = 1u;
-    grid.sync();
+  });
+  for (int pass = 1; pass < passes && flag_set(hit + pass - 1); ++pass) {
+    raised = false;
+    walk_colours(plan, false, grid, [&](std::uint32_t k) {
+      raise_once(impact_record<Friction>(records, impact, k, bodies, p), raised, hit + pass);
+    });
   }
 }
 
@@ -226,21 +232,19 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
 
 void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* bodies, SolverTerms t, cudaStream_t s) {
   if (r.end <= r.begin) return;
-  const int g = blocks(r);
-  if (t.friction && t.rolling) launch(Launch::dependent, warm_start_kernel<true, true>, g, s, records, r, bodies);
-  else if (t.friction) launch(Launch::dependent, warm_start_kernel<true, false>, g, s, records, r, bodies);
-  else if (t.rolling) launch(Launch::dependent, warm_start_kernel<false, true>, g, s, records, r, bodies);
-  else launch(Launch::dependent, warm_start_kernel<false, false>, g, s, records, r, bodies);
+  with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
+    constexpr bool Friction = decltype(friction)::value, Rolling = decltype(rolling)::value;
+    launch(Launch::dependent, warm_start_kernel<Friction, Rolling>, blocks(r), s, records, r, bodies);
+  });
 }
 
 void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, SolverTerms t,
                   cudaStream_t s) {
   if (r.end <= r.begin) return;
-  const int g = blocks(r);
-  if (t.friction && t.rolling) launch(Launch::dependent, record_sweep_kernel<true, true>, g, s, records, r, bodies, inv_h);
-  else if (t.friction) launch(Launch::dependent, record_sweep_kernel<true, false>, g, s, records, r, bodies, inv_h);
-  else if (t.rolling) launch(Launch::dependent, record_sweep_kernel<false, true>, g, s, records, r, bodies, inv_h);
-  else launch(Launch::dependent, record_sweep_kernel<false, false>, g, s, records, r, bodies, inv_h);
+  with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
+    constexpr bool Friction = decltype(friction)::value, Rolling = decltype(rolling)::value;
+    launch(Launch::dependent, record_sweep_kernel<Friction, Rolling>, blocks(r), s, records, r, bodies, inv_h);
+  });
 }
 
 // `Kernel` on a cooperative grid for a plan's widest colour.
@@ -250,10 +254,10 @@ void launch_on_plan(const ColourPlan& plan, int sm_count, cudaStream_t s, Args&&
 }
 
 void launch_position_stages(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
-                            const WallShape* walls, const SolverSettings& settings, bool rebound, int sweeps,
+                            const WallShape* walls, const SolverSettings& settings, const unsigned* hit, int sweeps,
                             unsigned* moved, unsigned long long* total, int sm_count, cudaStream_t s) {
-  if ((sweeps <= 0 && !rebound) || plan.empty()) return;
-  launch_on_plan<project_kernel>(plan, sm_count, s, records, bodies, walls, settings, rebound, sweeps, moved, total);
+  if ((sweeps <= 0 && !hit) || plan.empty()) return;
+  launch_on_plan<project_kernel>(plan, sm_count, s, records, bodies, walls, settings, hit, sweeps, moved, total);
 }
 
 void launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
@@ -273,14 +277,10 @@ void launch_impact_stage(const SweepRecords& records, Real4* impact, const std::
 void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h, SolverTerms t,
                   bool warm, int sweeps, int sm_count, cudaStream_t s) {
   if (plan.empty()) return;
-  if (t.friction && t.rolling)
-    launch_on_plan<solve_kernel<true, true>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
-  else if (t.friction)
-    launch_on_plan<solve_kernel<true, false>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
-  else if (t.rolling)
-    launch_on_plan<solve_kernel<false, true>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
-  else
-    launch_on_plan<solve_kernel<false, false>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
+  with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
+    constexpr bool Friction = decltype(friction)::value, Rolling = decltype(rolling)::value;
+    launch_on_plan<solve_kernel<Friction, Rolling>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
+  });
 }
 
 }  // namespace marbles::narrowphase::cuda

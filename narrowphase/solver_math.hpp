@@ -8,6 +8,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 
 #include "core/spheres.hpp"
 #include "core/whole_record.hpp"
@@ -32,6 +33,20 @@ struct SolverSettings {
   Vec3 wall_accel{};              // m/s^2: the spheres' acceleration seen by wall impacts (gravity under
                                   // velocity Verlet, whose impacts see half-step velocities; else 0)
 };
+
+// f(friction, rolling) for the terms a scene asks for, each as a
+// std::bool_constant (decltype(friction)::value in a template argument): the
+// one place the effect set picks the solver's instances (a frictionless
+// scene runs no friction code), on the CPU and the GPU alike.
+template <class F>
+void with_terms(bool friction, bool rolling, F&& f) {
+  using On = std::true_type;
+  using Off = std::false_type;
+  if (friction && rolling) f(On{}, On{});
+  else if (friction) f(On{}, Off{});
+  else if (rolling) f(Off{}, On{});
+  else f(Off{}, Off{});
+}
 
 // What the impact stage reads besides the contacts and bodies.
 struct ImpactParams {

@@ -88,21 +88,18 @@ SolveMode solve_mode_from_environment() {
 
 class CudaStep final : public StepBackend {
  public:
+  // Only with a device (make_cuda_step asks first: the members allocate).
   CudaStep(const StepModel& model, World world) : m_model(model), m_host(std::move(world)) {
-    const DeviceInfo& dev = cuda_device();
-    if (!dev.available) throw RuntimeFailure("the CUDA step: no CUDA device (" + dev.why_not + ")");
-    m_sm = std::max(1, dev.multiprocessors);
+    m_sm = std::max(1, cuda_device().multiprocessors);
     std::size_t total = 0;
     MARBLES_CUDA_CHECK(cudaMemGetInfo(&m_free_at_start, &total));
-    MARBLES_CUDA_CHECK(cudaStreamCreateWithFlags(&m_stream, cudaStreamNonBlocking));
-    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_pinned), 8 * sizeof(std::uint32_t)));
+    m_stream.create(cudaStreamNonBlocking);
     m_device.upload(m_host, m_stream);
     ::marbles::cuda::upload(m_walls, model.wall_shapes, m_stream);
     ::marbles::cuda::upload(m_pair_table, model.pair_coefficients, m_stream);
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     m_table = {m_pair_table.get_as<narrowphase::PairCoefficients>(), model.material_count};
     m_flags.as<unsigned long long>(kFlagWords);
-    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_end_flags), kFlagWords * sizeof(unsigned long long)));
     if (model.collisions) {
       m_broadphase = std::make_unique<broadphase::SubdivisionCuda>(model.algorithm);
       m_broadphase->set_stage_timing(false);  // its events cost a sync per call: profiling only
@@ -112,11 +109,6 @@ class CudaStep final : public StepBackend {
     m_cache.share_scratch(m_scratch);
     m_colouring.share_scratch(m_scratch);
     m_kept_cache.set_terms(m_terms.friction, m_terms.rolling);
-  }
-  ~CudaStep() override {
-    if (m_pinned) cudaFreeHost(m_pinned);
-    if (m_end_flags) cudaFreeHost(m_end_flags);
-    if (m_stream) cudaStreamDestroy(m_stream);
   }
 
   void apply_body_forces(real h) override {
@@ -214,10 +206,9 @@ class CudaStep final : public StepBackend {
   // sweep's records: nothing moves the bodies before the solve, so each is
   // made as it was found, restored from its cache entry and prepared.
   void colour_contacts() override {
-    std::uint32_t rounds = 0;
     const std::uint32_t* position = nullptr;
-    m_colours = m_colouring.colour_and_sort(pairs_d(), m_count, m_device.size(), position, m_begin, rounds, m_sm,
-                                            m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
+    m_colours = m_colouring.colour_and_sort(pairs_d(), m_count, m_device.size(), position, m_begin, m_sm, m_stream,
+                                            m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
                                             m_sorted_colour.as<std::uint8_t>(m_count));
     if (m_count > 0) {
       lay_out_records();
@@ -250,6 +241,7 @@ class CudaStep final : public StepBackend {
     const real inv_h = real(1) / h;
     const int sweeps = m_model.solver.iterations * m_iteration_factor;
     if (solve_in_one_launch()) {
+      ++m_counters.one_launch_solves;
       nc::launch_solve(m_records, m_plan, bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm, m_stream);
       nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
       return;
@@ -281,17 +273,18 @@ class CudaStep final : public StepBackend {
     nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream);
   }
 
-  // The rebound shifts (only an impact gives a contact one, and only a
-  // substep with impact candidates can have one: a pile at rest has none),
-  // then the CPU's projection sweeps until one moves nothing beyond
-  // settled_move: one launch, no read-back.
+  // The rebound shifts (only an impact gives a contact one: they are walked
+  // when the impact stage, which ran only with impact candidates, raised its
+  // first pass's flag; a pile at rest has none), then the CPU's projection
+  // sweeps until one moves nothing beyond settled_move: one launch, no
+  // read-back.
   void project_positions() override {
     if (m_count == 0) return;
     const int sweeps = std::max(0, m_model.solver.position_iterations);
-    const bool rebound = m_model.solver.restitution && m_impact_candidates;
+    const unsigned* hit = m_model.solver.restitution && m_impact_candidates ? m_hit.get_as<unsigned>() : nullptr;
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(std::max(sweeps, 1)));
     if (sweeps > 0) MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
-    nc::launch_position_stages(m_records, m_plan, m_device.view(), walls(), m_model.solver, rebound, sweeps, moved,
+    nc::launch_position_stages(m_records, m_plan, m_device.view(), walls(), m_model.solver, hit, sweeps, moved,
                                m_flags.get_as<unsigned long long>() + 2, m_sm, m_stream);  // flags[2]
   }
 
@@ -518,7 +511,7 @@ class CudaStep final : public StepBackend {
   const StepModel& m_model;
   World m_host;  // the host copy: stale after a step until world() is asked for
   DeviceWorld m_device;
-  cudaStream_t m_stream = nullptr;
+  ::marbles::cuda::Stream m_stream;
   int m_sm = 1;
   std::size_t m_free_at_start = 0;
   std::uint64_t m_bytes = 0, m_bytes_at_step_start = 0;  // host<->device bytes copied by this class
@@ -526,9 +519,9 @@ class CudaStep final : public StepBackend {
   // and the pair and test counts (12 B); the seed algorithm also reads its
   // entry count and the 9 cell-type bounds (40 B).
   std::uint64_t broad_phase_readback() const { return m_model.algorithm == broadphase::Algorithm::home ? 76 : 116; }
-  std::uint32_t* m_pinned = nullptr;
-  unsigned long long* m_end_flags = nullptr;  // pinned: the end-of-step read
   static constexpr int kFlagWords = 5;
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{8};
+  ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
   bool m_watch = false;
   int m_iteration_factor = 1;
 
@@ -576,6 +569,8 @@ class CudaStep final : public StepBackend {
 }  // namespace
 
 std::unique_ptr<StepBackend> make_cuda_step(const StepModel& model, World world) {
+  const DeviceInfo& dev = cuda_device();
+  if (!dev.available) throw RuntimeFailure("the CUDA step: no CUDA device (" + dev.why_not + ")");
   return std::make_unique<CudaStep>(model, std::move(world));
 }
 

@@ -17,14 +17,10 @@
 #include "narrowphase/colouring.hpp"
 #include "narrowphase/colouring_cuda.cuh"
 #include "narrowphase/solver_math.hpp"
+#include "tests/require_device.hpp"
 
 using namespace marbles;
 using namespace marbles::narrowphase;
-
-#define REQUIRE_DEVICE()                                                                 \
-  do {                                                                                   \
-    if (!marbles::cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device";  \
-  } while (0)
 
 namespace {
 
@@ -96,7 +92,6 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   narrowphase::cuda::ColouringCuda gpu;
   if (scratch) gpu.share_scratch(*scratch);
   std::vector<std::uint32_t> begin;
-  std::uint32_t rounds = 0;
   const auto n = static_cast<std::uint32_t>(input.size());
   std::uint8_t *kept_d = nullptr, *sorted_colour = nullptr;
   ASSERT_EQ(cudaMalloc(&kept_d, n + 1), cudaSuccess);
@@ -104,11 +99,12 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   ASSERT_EQ(cudaMemset(sorted_colour, 0xab, n + 1), cudaSuccess);  // poisoned
   if (!kept.empty()) ASSERT_EQ(cudaMemcpy(kept_d, kept.data(), n, cudaMemcpyHostToDevice), cudaSuccess);
   const std::uint32_t* position_d = nullptr;
-  const std::uint32_t colours = gpu.colour_and_sort(d.pairs, n, bodies, position_d, begin, rounds, 8, nullptr,
+  const std::uint32_t colours = gpu.colour_and_sort(d.pairs, n, bodies, position_d, begin, 8, nullptr,
                                                     kept.empty() ? nullptr : kept_d, sorted_colour);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
   EXPECT_EQ(colours, ranges.colours);
   EXPECT_EQ(begin, ranges.begin);
+  EXPECT_EQ(gpu.rounds(), ranges.rounds);
   std::vector<std::uint32_t> position(n), sorted(n, 0xffffffffu);
   std::vector<std::uint8_t> gpu_colour(n), cpu_colour(n, 0xcd);
   if (n > 0) ASSERT_EQ(cudaMemcpy(position.data(), position_d, n * 4, cudaMemcpyDeviceToHost), cudaSuccess);

@@ -7,29 +7,44 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <string>
 
 #include "core/device.hpp"
+#include "tests/require_device.hpp"
 #include "tests/sim/test_scenes.hpp"
 
 using namespace marbles;
 using namespace marbles::testing;
 using scene::Effect;
 
-#define REQUIRE_DEVICE()                                                                 \
-  do {                                                                                   \
-    if (!marbles::cuda_device().available) GTEST_SKIP() << "skipped: no CUDA device";  \
-  } while (0)
-
 namespace {
 
-// Steps both backends side by side; the first step whose states differ fails.
+// The solve's form MARBLES_CUDA_SOLVE asks for (sim/cuda_step.cu): auto
+// (unset), launches (a launch per colour) or one (one launch a substep).
+std::string solve_form() {
+  const char* asked = std::getenv("MARBLES_CUDA_SOLVE");
+  return asked ? asked : "auto";
+}
+
+// Steps both backends side by side; the first step whose states differ
+// fails. The GPU's solve takes the form asked for: never one launch when a
+// launch per colour is asked, every substep with contacts in one when one
+// is, and under auto one launch at least once (every scene here has small
+// colours).
 void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps) {
   Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
   ASSERT_EQ(gpu.backend_name(), "cuda");
+  std::uint64_t one_launch = 0, solved = 0;
   for (int k = 0; k < steps; ++k) {
     cpu.step();
     gpu.step();
+    one_launch += gpu.last_step().one_launch_solves;
+    if (cpu.last_step().contacts > 0) solved += 1;
+    if (solve_form() == "one") {
+      ASSERT_EQ(gpu.last_step().one_launch_solves > 0, cpu.last_step().contacts > 0) << "step " << k;
+    }
     ASSERT_EQ(gpu.last_step().contacts, cpu.last_step().contacts) << "step " << k;
     ASSERT_EQ(gpu.last_step().colours, cpu.last_step().colours) << "step " << k;
     ASSERT_EQ(gpu.last_step().overflow, cpu.last_step().overflow) << "step " << k;
@@ -45,6 +60,11 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
       }
     }
   }
+  if (solve_form() == "launches") {
+    EXPECT_EQ(one_launch, 0u);
+  } else if (solved > 0) {
+    EXPECT_GT(one_launch, 0u) << "MARBLES_CUDA_SOLVE=" << solve_form();
+  }
 }
 
 // Touching spheres of radius r on an nx x ny x nz lattice, one radius in
@@ -58,6 +78,22 @@ scene::GeneratedParticles dense_block(int nx, int ny, int nz, real r, real z0) {
 }
 
 }  // namespace
+
+// Without a device the CUDA step is refused with a message that says so,
+// before it touches the CUDA runtime (where a device is present, the rest of
+// this file runs instead).
+TEST(StepCuda, RefusedWithoutADevice) {
+  if (marbles::cuda_device().available) GTEST_SKIP() << "a CUDA device is present";
+  auto [s, g] = pour_scene(50, 1);
+  try {
+    Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+    FAIL() << "the CUDA step was made without a device";
+  } catch (const RuntimeFailure& e) {
+    const std::string what = e.what();
+    EXPECT_TRUE(what.find("no CUDA device") != std::string::npos || what.find("no CUDA backend") != std::string::npos)
+        << what;
+  }
+}
 
 TEST(StepCuda, PourMatchesTheCpuBitForBit) {
   REQUIRE_DEVICE();
