@@ -83,7 +83,10 @@ __device__ __forceinline__ std::uint32_t read_volatile(const std::uint32_t* p) {
 }
 #endif
 
-// A device allocation that only grows (by a quarter more than asked).
+// A device allocation that only grows, to a sixteenth more than asked: room
+// for a settled scene's contacts to come and go without a new allocation,
+// little enough that the headroom is not a fifth of the device memory
+// (docs/architecture.md "Headroom").
 class DeviceBuffer {
  public:
   DeviceBuffer() = default;
@@ -96,7 +99,7 @@ class DeviceBuffer {
     if (bytes > m_bytes) {
       if (m_ptr) MARBLES_CUDA_CHECK(cudaFree(m_ptr));
       m_ptr = nullptr;
-      const std::size_t grown = bytes + bytes / 4 + 256;
+      const std::size_t grown = bytes + bytes / 16 + 256;
       MARBLES_CUDA_CHECK(cudaMalloc(&m_ptr, grown));
       m_bytes = grown;
     }
