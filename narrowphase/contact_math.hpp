@@ -110,6 +110,14 @@ MARBLES_HD_INLINE Vec3 wall_surface_velocity(const WallShape& w, const Vec3& x) 
   return w.velocity + cross(w.direction * w.angular_velocity, x - w.point);
 }
 
+// True when wall_surface_velocity is +0, every component, at every point: no
+// translation (each component +0: +0 plus a product of zeros of either sign
+// is +0) and no spin. A contact with such a wall needs no velocity of its own.
+inline bool surface_at_rest(const WallShape& w) {
+  const auto plus_zero = [](real v) { return v == 0 && !std::signbit(v); };
+  return plus_zero(w.velocity.x) && plus_zero(w.velocity.y) && plus_zero(w.velocity.z) && w.angular_velocity == 0;
+}
+
 // Resting contacts keep a skin: a gap below kContactSkin times the smaller
 // radius still counts as touching, so a contact whose gap flickers around
 // zero in a resting pile is not dropped and re-made (losing its warm start).

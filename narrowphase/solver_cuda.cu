@@ -140,13 +140,14 @@ __device__ __forceinline__ void raise_once(bool happened, bool& raised, unsigned
 // `sweeps`. Sweep `it` sets moved[it] (zeroed before), which every block
 // reads after the barrier that ends the sweep's last colour. *total += the
 // sweeps run (solver.cpp ends the projection there too).
-__global__ void project_kernel(ColourPlan plan, SweepRecords records, BodiesView bodies, const WallShape* walls,
-                               SolverSettings s, const unsigned* hit, int sweeps, unsigned* moved,
-                               unsigned long long* total) {
+__global__ void project_kernel(ColourPlan plan, SweepRecords records, const Real4* impact, BodiesView bodies,
+                               const WallShape* walls, SolverSettings s, const unsigned* hit, int sweeps,
+                               unsigned* moved, unsigned long long* total) {
   const cg::grid_group grid = cg::this_grid();
   if (hit && flag_set(hit))
-    walk_colours(plan, false, grid,
-                 [&](std::uint32_t k) { rebound_one(load_position_contact<true>(records, k), bodies, walls); });
+    walk_colours(plan, false, grid, [&](std::uint32_t k) {
+      rebound_one(load_position_contact<true>(records, k, impact), bodies, walls);
+    });
   int ran = 0;
   for (int it = 0; it < sweeps; ++it) {
     ++ran;
@@ -253,11 +254,13 @@ void launch_on_plan(const ColourPlan& plan, int sm_count, cudaStream_t s, Args&&
   ::marbles::cuda::launch_cooperative<Kernel>(plan.widest(), sm_count, s, plan, std::forward<Args>(args)...);
 }
 
-void launch_position_stages(const SweepRecords& records, const ColourPlan& plan, const BodiesView& bodies,
-                            const WallShape* walls, const SolverSettings& settings, const unsigned* hit, int sweeps,
-                            unsigned* moved, unsigned long long* total, int sm_count, cudaStream_t s) {
+void launch_position_stages(const SweepRecords& records, const Real4* impact, const ColourPlan& plan,
+                            const BodiesView& bodies, const WallShape* walls, const SolverSettings& settings,
+                            const unsigned* hit, int sweeps, unsigned* moved, unsigned long long* total, int sm_count,
+                            cudaStream_t s) {
   if ((sweeps <= 0 && !hit) || plan.empty()) return;
-  launch_on_plan<project_kernel>(plan, sm_count, s, records, bodies, walls, settings, hit, sweeps, moved, total);
+  launch_on_plan<project_kernel>(plan, sm_count, s, records, impact, bodies, walls, settings, hit, sweeps, moved,
+                                 total);
 }
 
 void launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,

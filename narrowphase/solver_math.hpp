@@ -173,17 +173,25 @@ struct SweepRecords {
   Real4* rolling = nullptr;   // rolling_impulse, twisting_friction            (read and written, with rolling)
   Real4* geometry = nullptr;  // normal, separation
   Real4* arms = nullptr;      // ra, rb, friction, rolling_friction            (with friction or rolling)
-  Real4* extra = nullptr;     // wall_velocity (read by the sweeps for wall contacts only), rebound_shift
+  // wall_velocity (read by the sweeps for wall contacts only), rebound_shift
+  // (the CPU's). Null where no wall moves (the GPU's records then leave it
+  // out: a wall at rest has the surface velocity +0 exactly, a contact's
+  // default; the GPU keeps the rebound shift in the impact word).
+  Real4* extra = nullptr;
   BodyPair* bodies = nullptr; // a, b
 
   // Bytes of the records of n contacts, every array 16-byte aligned.
-  static constexpr std::size_t bytes_for(std::size_t n) { return n * (5 * sizeof(Real4) + sizeof(BodyPair)) + 64; }
-  // The arrays of n contacts laid out in `memory` (bytes_for(n) bytes, 16-byte aligned).
-  static SweepRecords in(void* memory, std::size_t n) {
+  static constexpr std::size_t bytes_for(std::size_t n, bool extra = true) {
+    return n * ((extra ? 5 : 4) * sizeof(Real4) + sizeof(BodyPair)) + 64;
+  }
+  // The arrays of n contacts laid out in `memory` (bytes_for(n, extra)
+  // bytes, 16-byte aligned).
+  static SweepRecords in(void* memory, std::size_t n, bool extra = true) {
     SweepRecords s;
     auto* p = static_cast<Real4*>(memory);
-    s.impulse = p, s.rolling = p + n, s.geometry = p + 2 * n, s.arms = p + 3 * n, s.extra = p + 4 * n;
-    s.bodies = reinterpret_cast<BodyPair*>(p + 5 * n);
+    s.impulse = p, s.rolling = p + n, s.geometry = p + 2 * n, s.arms = p + 3 * n;
+    s.extra = extra ? p + 4 * n : nullptr;
+    s.bodies = reinterpret_cast<BodyPair*>(p + (extra ? 5 : 4) * n);
     return s;
   }
 };
@@ -195,16 +203,19 @@ MARBLES_HD_INLINE void pack_position_record(const Contact& c, const SweepRecords
   s.bodies[k] = {c.a, c.b};
 }
 
-// Every array by default (the GPU's); the CPU's sweeps leave out what they do
-// not read: the rolling word without rolling resistance, and the extra word of
-// a sphere pair when the rebound pass reads the whole contacts (Rebound false).
+// Every array by default; the sweeps leave out what they do not read: the
+// rolling word without rolling resistance (the CPU's), and the extra word of
+// a sphere pair when the rebound pass reads the whole contacts or the impact
+// words (Rebound false), and of every contact when no wall moves (no extra
+// array).
 template <bool Rolling = true, bool Rebound = true>
 MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s, std::uint32_t k) {
   s.impulse[k] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
   if constexpr (Rolling)
     s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.coeff.twisting_friction};
   s.arms[k] = {c.ra, c.rb, c.coeff.friction, c.coeff.rolling_friction};
-  if (Rebound || is_wall(c.b)) s.extra[k] = {c.wall_velocity.x, c.wall_velocity.y, c.wall_velocity.z, c.rebound_shift};
+  if ((Rebound || is_wall(c.b)) && s.extra)
+    s.extra[k] = {c.wall_velocity.x, c.wall_velocity.y, c.wall_velocity.z, c.rebound_shift};
   pack_position_record(c, s, k);
 }
 
@@ -231,7 +242,7 @@ MARBLES_HD_INLINE Contact load_record(const SweepRecords& s, std::uint32_t k, co
     c.rolling_impulse = {r.x, r.y, r.z};
     c.coeff.twisting_friction = r.w;
   }
-  if (is_wall(c.b)) {
+  if (is_wall(c.b) && s.extra) {
     const Real4 w = load_streaming(s.extra + k);
     c.wall_velocity = {w.x, w.y, w.z};
   }
@@ -289,15 +300,17 @@ MARBLES_HD_INLINE void solve_record(const SweepRecords& s, std::uint32_t k, Solv
 }
 
 // The contact as the position stages read it (rebound_one, project_one,
-// overlap_ratio): its bodies and normal, and with Rebound its rebound shift.
+// overlap_ratio): its bodies and normal, and with Rebound its rebound shift
+// from its impact word (impact_word, the GPU's).
 template <bool Rebound>
-MARBLES_HD_INLINE Contact load_position_contact(const SweepRecords& s, std::uint32_t k) {
+MARBLES_HD_INLINE Contact load_position_contact(const SweepRecords& s, std::uint32_t k,
+                                                const Real4* impact = nullptr) {
   Contact c;
   const BodyPair ab = s.bodies[k];
   c.a = ab.a, c.b = ab.b;
   const Real4 g = load_whole(s.geometry + k);
   c.normal = {g.x, g.y, g.z};
-  if constexpr (Rebound) c.rebound_shift = s.extra[k].w;
+  if constexpr (Rebound) c.rebound_shift = impact[k].w;
   return c;
 }
 
@@ -333,13 +346,15 @@ MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactPa
 // --- the GPU's records: the contact in no other form ------------------------
 // The GPU keeps a substep's contacts only as the sweep's records plus one
 // word each for the impact stage (impact_word: the approach speed, the
-// restitution, the impact impulse), made in colour-major order from the body
+// restitution, the impact impulse, the rebound shift; the records' extra
+// word then holds only a moving wall's velocity, and no word at all where no
+// wall moves), made in colour-major order from the body
 // pairs (make_sphere_contact / make_wall_contact, restore_impulses,
 // prepare_from_world, pack_sweep_record: the CPU's functions, so its bits).
 // The effective masses are computed from the bodies where a stage needs
 // them, as the sweeps do.
 MARBLES_HD_INLINE Real4 impact_word(const Contact& c) {
-  return {c.approach_speed, c.coeff.restitution, c.impact_impulse, real(0)};
+  return {c.approach_speed, c.coeff.restitution, c.impact_impulse, c.rebound_shift};
 }
 
 // What the impact stage's levels read: the approach speed and the separation
@@ -352,18 +367,17 @@ MARBLES_HD_INLINE Contact load_approach(const SweepRecords& s, const Real4* impa
 }
 
 // impact_one on record k: the contact as apply_impact reads it (the bodies,
-// geometry, arms, friction, a wall's velocity, the rebound shift, the
-// restitution and the impact impulse so far), its masses from the bodies;
-// writes back the impact impulse and the rebound shift.
+// geometry, arms, friction, a wall's velocity, the restitution, the impact
+// impulse so far and the rebound shift), its masses from the bodies; writes
+// back the impact impulse and the rebound shift (its impact word).
 template <bool Friction>
 MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::uint32_t k, SolverBody* bodies,
                                      const ImpactParams& p) {
   Contact c = load_record<true, false>(s, k, Real4{});
   Real4 i = impact[k];
-  Real4 extra = s.extra[k];
   c.coeff.restitution = i.y;
   c.impact_impulse = i.z;
-  c.rebound_shift = extra.w;
+  c.rebound_shift = i.w;
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
   set_masses<Friction, false>(c, A, B);
@@ -371,9 +385,8 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
   i.z = c.impact_impulse;
-  extra.w = c.rebound_shift;
+  i.w = c.rebound_shift;
   impact[k] = i;
-  s.extra[k] = extra;
   return true;
 }
 
@@ -382,14 +395,12 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::
 // world's inverse masses and inertias.
 MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const Real4* impact, std::uint32_t k,
                                             const BodiesView& world) {
-  Contact c = load_record<true, true>(s, k, s.impulse[k]);
-  const Real4 extra = s.extra[k];
-  c.wall_velocity = {extra.x, extra.y, extra.z};
-  c.rebound_shift = extra.w;
+  Contact c = load_record<true, true>(s, k, s.impulse[k]);  // a wall's velocity too
   const Real4 i = impact[k];
   c.approach_speed = i.x;
   c.coeff.restitution = i.y;
   c.impact_impulse = i.z;
+  c.rebound_shift = i.w;
   set_masses<true, true>(c, world_body(world, c.a, c), world_body(world, c.b, c));
   return c;
 }

@@ -284,8 +284,8 @@ class CudaStep final : public StepBackend {
     const unsigned* hit = m_model.solver.restitution && m_impact_candidates ? m_hit.get_as<unsigned>() : nullptr;
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(std::max(sweeps, 1)));
     if (sweeps > 0) MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
-    nc::launch_position_stages(m_records, m_plan, m_device.view(), walls(), m_model.solver, hit, sweeps, moved,
-                               m_flags.get_as<unsigned long long>() + 2, m_sm, m_stream);  // flags[2]
+    nc::launch_position_stages(m_records, m_impact, m_plan, m_device.view(), walls(), m_model.solver, hit, sweeps,
+                               moved, m_flags.get_as<unsigned long long>() + 2, m_sm, m_stream);  // flags[2]
   }
 
   void store_impulses() override {
@@ -459,10 +459,12 @@ class CudaStep final : public StepBackend {
   narrowphase::BodyPair* pairs_d() const { return m_pairs.get_as<narrowphase::BodyPair>(); }
 
   // The records of m_count contacts and their impact words, in one buffer.
+  // The records (with the extra word only where a wall moves) and the impact words.
   void lay_out_records() {
-    const std::size_t words = (narrowphase::SweepRecords::bytes_for(m_count) + 15) / 16;
+    const bool extra = m_model.moving_walls;
+    const std::size_t words = (narrowphase::SweepRecords::bytes_for(m_count, extra) + 15) / 16;
     auto* memory = m_record_memory.as<narrowphase::Real4>(words + m_count);
-    m_records = narrowphase::SweepRecords::in(memory, m_count);
+    m_records = narrowphase::SweepRecords::in(memory, m_count, extra);
     m_impact = memory + words;
   }
   narrowphase::WallShape* walls() const { return m_walls.get_as<narrowphase::WallShape>(); }

@@ -89,6 +89,8 @@ StepModel compile_step_model(const scene::Scene& scene, broadphase::Algorithm al
   m.drag_quadratic = static_cast<real>(scene.drag_quadratic);
   m.collisions = scene.has(scene::Effect::collisions);
   m.wall_contacts = scene.has(scene::Effect::walls) && !m.walls.empty();
+  m.moving_walls = m.wall_contacts && !std::all_of(m.wall_shapes.begin(), m.wall_shapes.end(),
+                                                  narrowphase::surface_at_rest);
   m.speculative = scene.solver.speculative;
   m.verlet = scene.solver.integrator == "velocity_verlet";
   m.g = scene.gravity;

@@ -29,6 +29,7 @@ struct StepModel {
   bool drag = false;
   bool collisions = false;     // sphere-sphere contacts (broad phase + narrow phase)
   bool wall_contacts = false;  // sphere-wall contacts (the scene has walls and the `walls` effect)
+  bool moving_walls = false;   // with wall_contacts: some wall's surface moves (surface_at_rest false)
   bool speculative = true;     // contacts for gaps that can close within the substep (else touching only)
   // Velocity Verlet (kick-drift-kick): gravity is applied in two half kicks
   // around the drift, so free flight under gravity is exact; symplectic Euler

@@ -409,7 +409,9 @@ TEST(Solver, ApproachFromWorldIsThePreparedApproach) {
 // gives impact_one's bodies and contacts bit for bit, and the whole contacts
 // made from them (contact_of_record) equal the contacts, every field. A
 // lattice of spheres thrown at each other and at the floor (so that most
-// contacts hit), with and without friction, the accumulated impulses random.
+// contacts hit), with and without friction, the accumulated impulses random;
+// the records with the extra word and without it (the GPU's where no wall
+// moves: the floor here is at rest).
 TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
   const real r = real(0.01);
   std::mt19937_64 rng(29);
@@ -432,16 +434,18 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
     c.rolling_impulse = random_unit(rng) * real(u(rng) * 1e-7);
   }
   const ImpactParams params{real(0.01), h, Vec3(0, 0, real(-9.81))};
-  for (const bool friction : {false, true}) {
+  for (const int form : {0, 1, 2, 3}) {
+    const bool extra = form < 2, friction = form % 2 == 1;
     std::vector<SolverBody> expect_bodies(n), got_bodies(n);
     for (std::size_t i = 0; i < n; ++i) expect_bodies[i] = got_bodies[i] = gather_solver_body(world, i);
     std::vector<Contact> expect = contacts;
-    const std::size_t record_words = (SweepRecords::bytes_for(m) + 15) / 16;
+    const std::size_t record_words = (SweepRecords::bytes_for(m, extra) + 15) / 16;
     std::vector<Real4> memory(record_words + m);
-    const SweepRecords records = SweepRecords::in(memory.data(), m);
+    const SweepRecords records = SweepRecords::in(memory.data(), m, extra);
+    ASSERT_EQ(records.extra != nullptr, extra);
     Real4* impact = memory.data() + record_words;
     for (std::uint32_t k = 0; k < m; ++k) {
-      pack_sweep_record(contacts[k], records, k);
+      pack_sweep_record<true, false>(contacts[k], records, k);  // as the GPU makes them
       impact[k] = impact_word(contacts[k]);
     }
     std::uint32_t hits = 0;
@@ -458,11 +462,49 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
     std::uint32_t walls = 0, rebounds = 0;
     for (std::uint32_t k = 0; k < m; ++k) {
       const Contact c = contact_of_record(records, impact, k, world);
-      ASSERT_EQ(std::memcmp(&c, &expect[k], sizeof(Contact)), 0) << "contact " << k << " friction " << friction;
+      ASSERT_EQ(std::memcmp(&c, &expect[k], sizeof(Contact)), 0)
+          << "contact " << k << " friction " << friction << " extra " << extra;
       walls += is_wall(c.b) ? 1 : 0;
       rebounds += c.rebound_shift > 0 ? 1 : 0;
     }
     EXPECT_GT(walls, 0u);
     EXPECT_GT(rebounds, 0u);
   }
+}
+
+// A wall at rest (surface_at_rest) has the surface velocity +0 in every
+// component at every point, whatever the signs of its axis and of a zero
+// spin: the value a contact without the extra word takes. A zero of the
+// other sign in its velocity, a translation or a spin is not at rest, and
+// the surface velocity shows why (-0, or not zero).
+TEST(Walls, ASurfaceAtRestHasTheVelocityPlusZero) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const auto bits_of = [](real v) {
+    std::uint64_t b = 0;
+    std::memcpy(&b, &v, sizeof v);
+    return b;
+  };
+  for (int t = 0; t < 200; ++t) {
+    WallShape w;
+    w.kind = t % 2 ? WallShape::Kind::cylinder_inside : WallShape::Kind::half_space;
+    w.point = Vec3(real(u(rng)), real(u(rng)), real(u(rng)));
+    w.direction = random_unit(rng);
+    w.angular_velocity = t % 3 == 0 ? real(-0.0) : real(0);
+    ASSERT_TRUE(surface_at_rest(w));
+    for (int p = 0; p < 20; ++p) {
+      const Vec3 v = wall_surface_velocity(w, Vec3(real(u(rng)), real(u(rng)), real(u(rng))));
+      ASSERT_EQ(bits_of(v.x) | bits_of(v.y) | bits_of(v.z), 0u) << "wall " << t;
+    }
+  }
+  WallShape negative_zero;
+  negative_zero.velocity = Vec3(0, 0, real(-0.0));
+  EXPECT_FALSE(surface_at_rest(negative_zero));
+  EXPECT_NE(bits_of(wall_surface_velocity(negative_zero, Vec3(1, -1, 1)).z), 0u);  // -0 + (+0 * -1 - +0 * 1)
+  WallShape sliding, spinning;
+  sliding.velocity = Vec3(real(0.1), 0, 0);
+  spinning.angular_velocity = real(2);
+  EXPECT_FALSE(surface_at_rest(sliding));
+  EXPECT_FALSE(surface_at_rest(spinning));
+  EXPECT_NE(wall_surface_velocity(spinning, Vec3(1, 0, 0)).y, 0);
 }

@@ -358,9 +358,11 @@ TEST(SweepRecords, PositionStagesOnTheRecordsEqualTheContacts) {
     for (WallShape& w : walls) w.point = Vec3(u(rng), u(rng), u(rng)) * real(0.01), w.direction = unit(rng);
     RecordsMemory memory;
     const SweepRecords records = memory.records();
+    std::vector<Real4> impact(W);  // the GPU's rebound shifts are in the impact words
     for (std::uint32_t k = 0; k < W; ++k) {
       cs.contacts[k].rebound_shift = std::max(real(0), u(rng)) * real(2e-3);
       pack_sweep_record(cs.contacts[k], records, k);
+      impact[k] = impact_word(cs.contacts[k]);
     }
     std::vector<Vec3> whole = position, packed = position;
     const BodiesView bw{whole.data(), nullptr, nullptr, radius.data(), inv_mass.data(), nullptr, nullptr, n};
@@ -368,7 +370,7 @@ TEST(SweepRecords, PositionStagesOnTheRecordsEqualTheContacts) {
     const SolverSettings settings;
     for (std::uint32_t k = 0; k < W; ++k) {
       rebound_one(cs.contacts[k], bw, walls.data());
-      rebound_one(load_position_contact<true>(records, k), bp, walls.data());
+      rebound_one(load_position_contact<true>(records, k, impact.data()), bp, walls.data());
       project_one(cs.contacts[k], bw, walls.data(), settings);
       project_one(load_position_contact<false>(records, k), bp, walls.data(), settings);
       const real o1 = overlap_ratio(cs.contacts[k], bw, walls.data());

@@ -9,6 +9,7 @@
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
 #include "sim/simulation.hpp"
+#include "sim/step_model.hpp"
 #include "tests/sim/test_scenes.hpp"
 
 using namespace marbles;
@@ -160,6 +161,28 @@ TEST(Determinism, SameSceneSameState) {
   ASSERT_EQ(a.size(), b.size());
   EXPECT_EQ(0, std::memcmp(a.position.data(), b.position.data(), a.size() * sizeof(Vec3)));
   EXPECT_EQ(0, std::memcmp(a.velocity.data(), b.velocity.data(), a.size() * sizeof(Vec3)));
+}
+
+// The model says whether a wall's surface moves (the GPU's records then keep
+// each wall contact's surface velocity): a box at rest does not, a spinning
+// post or a sliding plane does, and without the walls effect no wall counts.
+TEST(StepModel, MovingWallsAreTheOnesWhoseSurfaceMoves) {
+  using namespace marbles::testing;
+  using scene::Effect;
+  const auto moving = [](const scene::Scene& s) {
+    return compile_step_model(s, broadphase::kDefaultCpuAlgorithm).moving_walls;
+  };
+  scene::Scene at_rest = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls}, 0.5);
+  at_rest.walls.push_back(box({0, 0, 0}, {1, 1, 1}));
+  EXPECT_FALSE(moving(at_rest));
+  EXPECT_TRUE(moving(pour_scene(10, 1).first));  // its post spins
+  scene::Scene sliding = at_rest;
+  scene::WallSpec lid = plane({0, 0, 1}, {0, 0, -1});
+  lid.velocity = {0, 0, real(-0.01)};
+  sliding.walls.push_back(lid);
+  EXPECT_TRUE(moving(sliding));
+  sliding.effects = {Effect::gravity, Effect::collisions};
+  EXPECT_FALSE(moving(sliding));
 }
 
 // Spheres poured into a closed box stay inside it.
