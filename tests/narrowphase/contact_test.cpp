@@ -84,6 +84,38 @@ struct Lattice {
   }
 };
 
+// A lattice in random motion with one pair of coefficients: packed, touching
+// spheres pressed slightly together and moving slowly (resting contacts, all
+// four terms); or thrown, a hair apart and thrown at each other and at the
+// floor (impacts).
+struct MovingLattice {
+  Lattice lattice;
+  std::vector<Vec3> vel, omega;
+  PairCoefficients coeff;
+
+  static MovingLattice packed(int side, real r, std::mt19937_64& rng) {
+    MovingLattice m{Lattice(side, r, 2 * r * 0.995, r * 0.999, 1e-4, rng), {}, {},
+                    {real(0.3), real(0.5), real(0.02), real(0.01)}};
+    m.move(rng, 0.05, 100);
+    return m;
+  }
+  static MovingLattice thrown(int side, real r, std::mt19937_64& rng) {
+    MovingLattice m{Lattice(side, r, 2 * r * 1.002, r * 1.001, 2e-5, rng), {}, {},
+                    {real(0.6), real(0.4), real(0.02), real(0.01)}};
+    m.move(rng, 0.5, 50);
+    return m;
+  }
+  PairTable table() const { return {&coeff, 1}; }
+  BodiesView view() { return lattice.view(lattice.position.data(), vel.data(), omega.data()); }
+
+ private:
+  void move(std::mt19937_64& rng, double speed, double spin) {
+    vel.resize(lattice.n);
+    omega.resize(lattice.n);
+    random_motion(rng, speed, spin, vel, omega);
+  }
+};
+
 }  // namespace
 
 TEST(SphereSphere, SeparationAndNormalMatchGeometry) {
@@ -221,12 +253,11 @@ TEST(Solver, FrictionStaysInsideTheCone) {
 TEST(Solver, EveryLaneKindGivesTheSameBits) {
   const real r = real(0.01);
   std::mt19937_64 rng(21);
-  Lattice lattice(24, r, 2 * r * 0.995, r * 0.999, 1e-4, rng);
+  MovingLattice packed = MovingLattice::packed(24, r, rng);
+  Lattice& lattice = packed.lattice;
   const std::size_t n = lattice.n;
-  std::vector<Vec3> vel0(n), omega0(n);
-  random_motion(rng, 0.05, 100, vel0, omega0);
-  PairCoefficients coeff{real(0.3), real(0.5), real(0.02), real(0.01)};
-  PairTable table{&coeff, 1};
+  const std::vector<Vec3>&vel0 = packed.vel, &omega0 = packed.omega;
+  const PairTable table = packed.table();
   const real h = real(1e-3);
 
   struct Run {
@@ -270,11 +301,10 @@ TEST(Solver, EveryLaneKindGivesTheSameBits) {
 TEST(Solver, CacheFromTheRecordsEqualsCacheFromTheContacts) {
   const real r = real(0.01);
   std::mt19937_64 rng(23);
-  Lattice lattice(12, r, 2 * r * 0.995, r * 0.999, 1e-4, rng);
-  std::vector<Vec3> vel0(lattice.n), omega0(lattice.n);
-  random_motion(rng, 0.05, 100, vel0, omega0);
-  PairCoefficients coeff{real(0.3), real(0.5), real(0.02), real(0.01)};
-  PairTable table{&coeff, 1};
+  MovingLattice packed = MovingLattice::packed(12, r, rng);
+  Lattice& lattice = packed.lattice;
+  const std::vector<Vec3>&vel0 = packed.vel, &omega0 = packed.omega;
+  const PairTable table = packed.table();
   const real h = real(1e-3);
   auto same = [](const auto& a, const auto& b) {
     return a.size() == b.size() && std::memcmp(a.data(), b.data(), sizeof(a[0]) * a.size()) == 0;
@@ -377,14 +407,10 @@ TEST(Solver, ProjectionEndsAtTheFirstSettledSweep) {
 TEST(Solver, ApproachFromWorldIsThePreparedApproach) {
   const real r = real(0.01);
   std::mt19937_64 rng(31);
-  Lattice lattice(8, r, 2 * r * 1.002, r * 1.001, 2e-5, rng);
-  std::vector<Vec3> vel(lattice.n), omega(lattice.n);
-  random_motion(rng, 0.5, 50, vel, omega);
-  PairCoefficients coeff{real(0.6), real(0.4), real(0.02), real(0.01)};
-  PairTable table{&coeff, 1};
-  const BodiesView world = lattice.view(lattice.position.data(), vel.data(), omega.data());
+  MovingLattice thrown = MovingLattice::thrown(8, r, rng);
+  const BodiesView world = thrown.view();
   ColourRanges colours;
-  const std::vector<Contact> contacts = lattice.contacts(world, table, real(1e-3), real(2e-4), colours);
+  const std::vector<Contact> contacts = thrown.lattice.contacts(world, thrown.table(), real(1e-3), real(2e-4), colours);
   ASSERT_GT(contacts.size(), 1000u);
   const real rest = real(0.01);
   std::size_t candidates = 0, walls = 0;
@@ -415,17 +441,13 @@ TEST(Solver, ApproachFromWorldIsThePreparedApproach) {
 TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
   const real r = real(0.01);
   std::mt19937_64 rng(29);
-  Lattice lattice(10, r, 2 * r * 1.002, r * 1.001, 2e-5, rng);
-  const std::size_t n = lattice.n;
+  MovingLattice thrown = MovingLattice::thrown(10, r, rng);
+  const std::size_t n = thrown.lattice.n;
   std::uniform_real_distribution<double> u(0, 1);
-  std::vector<Vec3> vel(n), omega(n);
-  random_motion(rng, 0.5, 50, vel, omega);
-  PairCoefficients coeff{real(0.6), real(0.4), real(0.02), real(0.01)};
-  PairTable table{&coeff, 1};
   const real h = real(1e-3);
-  const BodiesView world = lattice.view(lattice.position.data(), vel.data(), omega.data());
+  const BodiesView world = thrown.view();
   ColourRanges colours;
-  std::vector<Contact> contacts = lattice.contacts(world, table, h, real(2e-4), colours);
+  std::vector<Contact> contacts = thrown.lattice.contacts(world, thrown.table(), h, real(2e-4), colours);
   const auto m = static_cast<std::uint32_t>(contacts.size());
   ASSERT_GT(m, 2000u);
   for (Contact& c : contacts) {  // as a warm start restores them
