@@ -86,7 +86,8 @@ __device__ __forceinline__ std::uint32_t read_volatile(const std::uint32_t* p) {
 // A device allocation that only grows, to a sixteenth more than asked: room
 // for a settled scene's contacts to come and go without a new allocation,
 // little enough that the headroom is not a fifth of the device memory
-// (docs/architecture.md "Headroom").
+// (docs/architecture.md "Headroom, the extra word and one read for the
+// colouring").
 class DeviceBuffer {
  public:
   DeviceBuffer() = default;

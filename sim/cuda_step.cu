@@ -458,8 +458,8 @@ class CudaStep final : public StepBackend {
  private:
   narrowphase::BodyPair* pairs_d() const { return m_pairs.get_as<narrowphase::BodyPair>(); }
 
-  // The records of m_count contacts and their impact words, in one buffer.
-  // The records (with the extra word only where a wall moves) and the impact words.
+  // The records of m_count contacts (the extra word only where a wall
+  // moves) and their impact words, in one buffer.
   void lay_out_records() {
     const bool extra = m_model.moving_walls;
     const std::size_t words = (narrowphase::SweepRecords::bytes_for(m_count, extra) + 15) / 16;
