@@ -11,6 +11,7 @@
 #include "broadphase/broadphase_cuda.hpp"
 #include "core/cuda_check.hpp"
 #include "core/device.hpp"
+#include "core/device_buffer.cuh"
 
 namespace marbles::bench {
 namespace {
@@ -19,13 +20,11 @@ double measure_copy_bytes_per_ms() {
   static double cached = 0;
   if (cached > 0) return cached;
   const std::size_t bytes = std::size_t(1) << 30;
-  void *a = nullptr, *b = nullptr;
-  MARBLES_CUDA_CHECK(cudaMalloc(&a, bytes));
-  MARBLES_CUDA_CHECK(cudaMalloc(&b, bytes));
+  ::marbles::cuda::DeviceBuffer from, to;  // freed, as the events are destroyed, however this ends
+  void* a = from.reserve(bytes);
+  void* b = to.reserve(bytes);
   MARBLES_CUDA_CHECK(cudaMemset(a, 1, bytes));
-  cudaEvent_t e0, e1;
-  MARBLES_CUDA_CHECK(cudaEventCreate(&e0));
-  MARBLES_CUDA_CHECK(cudaEventCreate(&e1));
+  const ::marbles::cuda::Event e0, e1;
   std::vector<float> ms;
   for (int k = 0; k < 12; ++k) {
     MARBLES_CUDA_CHECK(cudaEventRecord(e0));
@@ -38,10 +37,6 @@ double measure_copy_bytes_per_ms() {
   }
   std::sort(ms.begin(), ms.end());
   cached = 2.0 * double(bytes) / double(ms[ms.size() / 2]);
-  cudaEventDestroy(e0);
-  cudaEventDestroy(e1);
-  cudaFree(a);
-  cudaFree(b);
   return cached;
 }
 

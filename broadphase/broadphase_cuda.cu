@@ -54,15 +54,7 @@ struct SubdivisionCuda::Impl {
 
   ::marbles::cuda::PinnedBuffer<BoundsAccum> h_bounds{1};
   ::marbles::cuda::PinnedBuffer<std::uint32_t> h_small{64};  // readbacks
-  cudaEvent_t ev[5] = {};
-
-  Impl() {
-    for (auto& e : ev) MARBLES_CUDA_CHECK(cudaEventCreate(&e));
-  }
-  ~Impl() {
-    for (auto& e : ev)
-      if (e) cudaEventDestroy(e);
-  }
+  ::marbles::cuda::Event ev[5];
 
   void mark(int k, cudaStream_t s) {
     if (timing) MARBLES_CUDA_CHECK(cudaEventRecord(ev[k], s));

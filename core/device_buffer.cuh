@@ -1,5 +1,5 @@
-// core/device_buffer.cuh — device memory that only grows, pinned host memory
-// and streams freed with their owners, launch sizes, and the CUB calls every
+// core/device_buffer.cuh — device memory that only grows, pinned host memory,
+// streams and events freed with their owners, launch sizes, and the CUB calls every
 // stage shares (scan, stable radix sort), with their temporary storage held
 // by the caller and reused. Only .cu files include it.
 #pragma once
@@ -162,6 +162,21 @@ class Stream {
 
  private:
   cudaStream_t m_stream = nullptr;
+};
+
+// An event destroyed with its owner (created at once: only where a device is).
+class Event {
+ public:
+  Event() { MARBLES_CUDA_CHECK(cudaEventCreate(&m_event)); }
+  Event(const Event&) = delete;
+  Event& operator=(const Event&) = delete;
+  ~Event() {
+    if (m_event) cudaEventDestroy(m_event);
+  }
+  operator cudaEvent_t() const { return m_event; }
+
+ private:
+  cudaEvent_t m_event = nullptr;
 };
 
 // Copies host[] into `buffer` (grown to fit), asynchronously on `stream`: the
