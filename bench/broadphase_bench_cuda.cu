@@ -51,10 +51,9 @@ CudaBenchRun run_cuda_broadphase(const BenchSpheres& s, broadphase::Algorithm al
   run.copy_bytes_per_ms = measure_copy_bytes_per_ms();
 
   const std::size_t n = s.centre.size();
-  Vec3* c = nullptr;
-  real* r = nullptr;
-  MARBLES_CUDA_CHECK(cudaMalloc(&c, n * sizeof(Vec3)));
-  MARBLES_CUDA_CHECK(cudaMalloc(&r, n * sizeof(real)));
+  ::marbles::cuda::DeviceBuffer centre, radius;  // freed however the run ends
+  Vec3* c = centre.as<Vec3>(n);
+  real* r = radius.as<real>(n);
   MARBLES_CUDA_CHECK(cudaMemcpy(c, s.centre.data(), n * sizeof(Vec3), cudaMemcpyHostToDevice));
   MARBLES_CUDA_CHECK(cudaMemcpy(r, s.radius.data(), n * sizeof(real), cudaMemcpyHostToDevice));
   {
@@ -66,8 +65,6 @@ CudaBenchRun run_cuda_broadphase(const BenchSpheres& s, broadphase::Algorithm al
       run.calls.push_back(bp.last_stats());
     }
   }
-  cudaFree(c);
-  cudaFree(r);
   return run;
 }
 
