@@ -48,8 +48,8 @@ std::vector<Contact> random_contacts(std::mt19937_64& rng, std::uint32_t bodies,
 // colouring, the sweep's records and impact words after it (records in
 // input order here: the impact levels read them by contact index).
 struct DeviceContacts {
+  ::marbles::cuda::DeviceBuffer pairs_memory, records_memory;  // freed however the test ends
   BodyPair* pairs = nullptr;
-  void* records_memory = nullptr;
   Real4* impact = nullptr;
   SweepRecords records;
   explicit DeviceContacts(const std::vector<Contact>& c) {
@@ -64,17 +64,12 @@ struct DeviceContacts {
       pack_sweep_record(c[k], host, static_cast<std::uint32_t>(k));
       impact_h[k] = impact_word(c[k]);
     }
-    EXPECT_EQ(cudaMalloc(&pairs, (n + 1) * sizeof(BodyPair)), cudaSuccess);
-    EXPECT_EQ(cudaMalloc(&records_memory, words.size() * sizeof(Real4)), cudaSuccess);
+    pairs = pairs_memory.as<BodyPair>(n + 1);
+    Real4* memory = records_memory.as<Real4>(words.size());
     EXPECT_EQ(cudaMemcpy(pairs, pairs_h.data(), n * sizeof(BodyPair), cudaMemcpyHostToDevice), cudaSuccess);
-    EXPECT_EQ(cudaMemcpy(records_memory, words.data(), words.size() * sizeof(Real4), cudaMemcpyHostToDevice),
-              cudaSuccess);
-    records = SweepRecords::in(records_memory, n);
-    impact = static_cast<Real4*>(records_memory) + (bytes + 15) / 16;
-  }
-  ~DeviceContacts() {
-    cudaFree(pairs);
-    cudaFree(records_memory);
+    EXPECT_EQ(cudaMemcpy(memory, words.data(), words.size() * sizeof(Real4), cudaMemcpyHostToDevice), cudaSuccess);
+    records = SweepRecords::in(memory, n);
+    impact = memory + (bytes + 15) / 16;
   }
 };
 
@@ -93,9 +88,9 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   if (scratch) gpu.share_scratch(*scratch);
   std::vector<std::uint32_t> begin;
   const auto n = static_cast<std::uint32_t>(input.size());
-  std::uint8_t *kept_d = nullptr, *sorted_colour = nullptr;
-  ASSERT_EQ(cudaMalloc(&kept_d, n + 1), cudaSuccess);
-  ASSERT_EQ(cudaMalloc(&sorted_colour, n + 1), cudaSuccess);
+  ::marbles::cuda::DeviceBuffer kept_memory, sorted_memory;  // freed however the test ends
+  auto* kept_d = kept_memory.as<std::uint8_t>(n + 1);
+  auto* sorted_colour = sorted_memory.as<std::uint8_t>(n + 1);
   ASSERT_EQ(cudaMemset(sorted_colour, 0xab, n + 1), cudaSuccess);  // poisoned
   if (!kept.empty()) ASSERT_EQ(cudaMemcpy(kept_d, kept.data(), n, cudaMemcpyHostToDevice), cudaSuccess);
   const std::uint32_t* position_d = nullptr;
@@ -114,8 +109,6 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
     sorted[position[i]] = i;
   }
   if (n > 0) ASSERT_EQ(cudaMemcpy(gpu_colour.data(), sorted_colour, n, cudaMemcpyDeviceToHost), cudaSuccess);
-  cudaFree(kept_d);
-  cudaFree(sorted_colour);
   // The CPU's sorted contacts carry their input index as a tag.
   for (std::uint32_t k = 0; k < n; ++k) ASSERT_EQ(real(sorted[k]), cpu[k].normal_impulse) << "position " << k;
   for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) { cpu_colour[k] = c; });
