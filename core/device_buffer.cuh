@@ -1,7 +1,7 @@
-// core/device_buffer.cuh — device memory that only grows, pinned host memory,
-// streams and events freed with their owners, launch sizes, and the CUB calls every
-// stage shares (scan, stable radix sort), with their temporary storage held
-// by the caller and reused. Only .cu files include it.
+// core/device_buffer.cuh — launch sizes and launches, and the CUB calls
+// every stage shares (scan, stable radix sort), with their temporary storage
+// held by the caller and reused; the memory, streams and events themselves
+// are core/device_memory.hpp's. Only .cu files include it.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -9,12 +9,12 @@
 #include <cstddef>
 #include <cstdint>
 #include <utility>
-#include <vector>
 
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 
 #include "core/cuda_check.hpp"
+#include "core/device_memory.hpp"
 
 namespace marbles::cuda {
 
@@ -82,112 +82,6 @@ __device__ __forceinline__ std::uint32_t read_volatile(const std::uint32_t* p) {
   return *static_cast<const volatile std::uint32_t*>(p);
 }
 #endif
-
-// A device allocation that only grows, to a sixteenth more than asked: room
-// for a settled scene's contacts to come and go without a new allocation,
-// little enough that the headroom is not a fifth of the device memory
-// (docs/architecture.md "Headroom, the extra word and one read for the
-// colouring").
-class DeviceBuffer {
- public:
-  DeviceBuffer() = default;
-  DeviceBuffer(const DeviceBuffer&) = delete;
-  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
-  ~DeviceBuffer() {
-    if (m_ptr) cudaFree(m_ptr);
-  }
-  void* reserve(std::size_t bytes) {
-    if (bytes > m_bytes) {
-      if (m_ptr) MARBLES_CUDA_CHECK(cudaFree(m_ptr));
-      m_ptr = nullptr;
-      const std::size_t grown = bytes + bytes / 16 + 256;
-      MARBLES_CUDA_CHECK(cudaMalloc(&m_ptr, grown));
-      m_bytes = grown;
-    }
-    return m_ptr;
-  }
-  template <class T>
-  T* as(std::size_t count) {
-    return static_cast<T*>(reserve(count * sizeof(T) + 16));
-  }
-  template <class T>
-  T* get_as() const {
-    return static_cast<T*>(m_ptr);
-  }
-  void* get() const { return m_ptr; }
-  std::size_t bytes() const { return m_bytes; }
-  void swap(DeviceBuffer& other) noexcept {
-    std::swap(m_ptr, other.m_ptr);
-    std::swap(m_bytes, other.m_bytes);
-  }
-
- private:
-  void* m_ptr = nullptr;
-  std::size_t m_bytes = 0;
-};
-
-// Page-locked host memory for a stage's read-backs (count values of T),
-// freed with its owner: a constructor that throws after it leaks nothing.
-template <class T>
-class PinnedBuffer {
- public:
-  explicit PinnedBuffer(std::size_t count) {
-    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_ptr), count * sizeof(T)));
-  }
-  PinnedBuffer(const PinnedBuffer&) = delete;
-  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
-  ~PinnedBuffer() {
-    if (m_ptr) cudaFreeHost(m_ptr);
-  }
-  operator T*() const { return m_ptr; }
-  T* operator->() const { return m_ptr; }
-
- private:
-  T* m_ptr = nullptr;
-};
-
-// A stream destroyed with its owner; empty until create().
-class Stream {
- public:
-  Stream() = default;
-  Stream(const Stream&) = delete;
-  Stream& operator=(const Stream&) = delete;
-  ~Stream() {
-    if (m_stream) cudaStreamDestroy(m_stream);
-  }
-  void create(unsigned flags = cudaStreamDefault) {
-    if (!m_stream) MARBLES_CUDA_CHECK(cudaStreamCreateWithFlags(&m_stream, flags));
-  }
-  operator cudaStream_t() const { return m_stream; }
-
- private:
-  cudaStream_t m_stream = nullptr;
-};
-
-// An event destroyed with its owner (created at once: only where a device is).
-class Event {
- public:
-  Event() { MARBLES_CUDA_CHECK(cudaEventCreate(&m_event)); }
-  Event(const Event&) = delete;
-  Event& operator=(const Event&) = delete;
-  ~Event() {
-    if (m_event) cudaEventDestroy(m_event);
-  }
-  operator cudaEvent_t() const { return m_event; }
-
- private:
-  cudaEvent_t m_event = nullptr;
-};
-
-// Copies host[] into `buffer` (grown to fit), asynchronously on `stream`: the
-// host vector must outlive the copy (synchronise before changing it).
-template <class T>
-T* upload(DeviceBuffer& buffer, const std::vector<T>& host, cudaStream_t stream) {
-  T* d = buffer.as<T>(host.size());
-  if (!host.empty())
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(d, host.data(), host.size() * sizeof(T), cudaMemcpyHostToDevice, stream));
-  return d;
-}
 
 // *target = max(*target, v) for the warp's values, one atomic per warp. Every
 // thread of the warp must call it (after a grid-stride loop, not inside); a

@@ -227,18 +227,18 @@ std::uint32_t* ColouringCuda::sort_keys(const ColouringArrays& at, std::uint32_t
 // (host[0, kMaxColours), kNoFirst where no contact has it), then the
 // overflow's and the inactive's.
 static void ranges_of(const std::uint32_t* host, std::uint32_t n, std::vector<std::uint32_t>& begin) {
-  constexpr std::uint32_t kNone = kNoFirst;
   // Colours may have gaps (a kept colour whose other contacts are gone): an
   // empty colour's range is empty.
   std::uint32_t colours = kMaxColours;
-  while (colours > 0 && host[colours - 1] == kNone) --colours;
+  while (colours > 0 && host[colours - 1] == kNoFirst) --colours;
   const std::uint32_t overflow_first = host[kMaxColours], inactive_first = host[kMaxColours + 1];
-  const std::uint32_t coloured_end = overflow_first != kNone ? overflow_first : inactive_first != kNone ? inactive_first : n;
-  const std::uint32_t overflow_end = inactive_first != kNone ? inactive_first : n;
+  const std::uint32_t coloured_end =
+      overflow_first != kNoFirst ? overflow_first : inactive_first != kNoFirst ? inactive_first : n;
+  const std::uint32_t overflow_end = inactive_first != kNoFirst ? inactive_first : n;
   begin.assign(colours + 2, 0);
   begin[colours] = coloured_end;
-  for (std::uint32_t c = colours; c-- > 1;) begin[c] = host[c] != kNone ? host[c] : begin[c + 1];
-  begin[colours + 1] = overflow_first != kNone ? overflow_end : coloured_end;
+  for (std::uint32_t c = colours; c-- > 1;) begin[c] = host[c] != kNoFirst ? host[c] : begin[c + 1];
+  begin[colours + 1] = overflow_first != kNoFirst ? overflow_end : coloured_end;
 }
 
 std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,

@@ -81,8 +81,6 @@ class ContactCacheCuda {
   // Carve); by default in the cache's own.
   void share_scratch(DeviceBuffer& scratch) { m_scratch = &scratch; }
 
- // Host<->device bytes copied so far (all calls).
-
  private:
   DeviceBuffer m_keys, m_normal, m_tangent, m_rolling, m_colour, m_counter, m_own_scratch;
   DeviceBuffer m_size;  // the entry count (one word, device)

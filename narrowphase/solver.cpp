@@ -317,7 +317,7 @@ int ContactSolver::project_positions(const std::vector<Contact>& contacts, const
     moved = false;
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
       moved = any_in_colour(b, e, [&](std::uint32_t k) {
-        return project_one(load_position_contact<false>(records, k), bodies, ws, m_settings);
+        return project_one(load_position_contact(records, k), bodies, ws, m_settings);
       }) || moved;
     });
   }
@@ -338,7 +338,7 @@ real ContactSolver::deepest_overlap(const BodiesView& bodies, const std::vector<
   real deepest = 0;
 #pragma omp parallel for schedule(static) reduction(max : deepest) if (n > 20000)
   for (std::ptrdiff_t k = 0; k < n; ++k)
-    deepest = std::max(deepest, overlap_ratio(load_position_contact<false>(records, static_cast<std::uint32_t>(k)),
+    deepest = std::max(deepest, overlap_ratio(load_position_contact(records, static_cast<std::uint32_t>(k)),
                                               bodies, ws));
   return deepest;
 }

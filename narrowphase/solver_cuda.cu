@@ -146,14 +146,14 @@ __global__ void project_kernel(ColourPlan plan, SweepRecords records, const Real
   const cg::grid_group grid = cg::this_grid();
   if (hit && flag_set(hit))
     walk_colours(plan, false, grid, [&](std::uint32_t k) {
-      rebound_one(load_position_contact<true>(records, k, impact), bodies, walls);
+      rebound_one(load_rebound_contact(records, impact, k), bodies, walls);
     });
   int ran = 0;
   for (int it = 0; it < sweeps; ++it) {
     ++ran;
     bool raised = false;
     walk_colours(plan, false, grid, [&](std::uint32_t k) {
-      raise_once(project_one(load_position_contact<false>(records, k), bodies, walls, s), raised, moved + it);
+      raise_once(project_one(load_position_contact(records, k), bodies, walls, s), raised, moved + it);
     });
     if (!flag_set(moved + it)) break;
   }
@@ -201,7 +201,7 @@ __global__ void max_overlap_kernel(SweepRecords records, std::uint32_t n, Bodies
                                    unsigned long long* deepest) {
   real d = 0;
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const real o = overlap_ratio(load_position_contact<false>(records, k), bodies, walls);
+    const real o = overlap_ratio(load_position_contact(records, k), bodies, walls);
     d = o > d ? o : d;
   }
   if constexpr (sizeof(real) == 4)

@@ -69,14 +69,13 @@ struct ColourPlan {
 
 // The position stages: the impacts' rebound shifts (rebound_one; in the
 // impact words) when *hit (the impact stage's flag of its first pass; null:
-// it did not run),
-// then the projection, sweeps until one moves nothing beyond settled_move
-// (project_one), at most `sweeps`; moved[0, sweeps) zeroed before, sweep
-// `it` sets moved[it]; *total += the sweeps run.
+// it did not run), then the projection, sweeps until one moves nothing
+// beyond settled_move (project_one), at most `sweeps`; moved[0, sweeps)
+// zeroed before, sweep `it` sets moved[it]; *total += the sweeps run.
 void launch_position_stages(const SweepRecords& records, const Real4* impact, const ColourPlan& plan,
                             const BodiesView& bodies, const WallShape* walls, const SolverSettings& settings,
-                            const unsigned* hit, int sweeps,
-                            unsigned* moved, unsigned long long* total, int sm_count, cudaStream_t stream);
+                            const unsigned* hit, int sweeps, unsigned* moved, unsigned long long* total, int sm_count,
+                            cudaStream_t stream);
 
 // The impact stage (ContactSolver::impacts): the candidates level by level
 // (`order` and `first` from ColouringCuda::impact_levels, n contacts), then

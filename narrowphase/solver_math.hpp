@@ -196,7 +196,7 @@ struct SweepRecords {
   }
 };
 
-// What the position stages read of a record (load_position_contact<false>):
+// What the position stages read of a record (load_position_contact):
 // the bodies and the geometry. The CPU's projection packs only these.
 MARBLES_HD_INLINE void pack_position_record(const Contact& c, const SweepRecords& s, std::uint32_t k) {
   s.geometry[k] = {c.normal.x, c.normal.y, c.normal.z, c.separation};
@@ -299,18 +299,21 @@ MARBLES_HD_INLINE void solve_record(const SweepRecords& s, std::uint32_t k, Solv
   solve_loaded<Friction, Rolling>(s, k, load_sweep_contact<Friction, Rolling>(s, k), bodies, inv_h);
 }
 
-// The contact as the position stages read it (rebound_one, project_one,
-// overlap_ratio): its bodies and normal, and with Rebound its rebound shift
-// from its impact word (impact_word, the GPU's).
-template <bool Rebound>
-MARBLES_HD_INLINE Contact load_position_contact(const SweepRecords& s, std::uint32_t k,
-                                                const Real4* impact = nullptr) {
+// The contact as the position stages read it (project_one, overlap_ratio):
+// its bodies and normal.
+MARBLES_HD_INLINE Contact load_position_contact(const SweepRecords& s, std::uint32_t k) {
   Contact c;
   const BodyPair ab = s.bodies[k];
   c.a = ab.a, c.b = ab.b;
   const Real4 g = load_whole(s.geometry + k);
   c.normal = {g.x, g.y, g.z};
-  if constexpr (Rebound) c.rebound_shift = impact[k].w;
+  return c;
+}
+// The same with its rebound shift from its impact word (impact_word, the
+// GPU's), as rebound_one reads it.
+MARBLES_HD_INLINE Contact load_rebound_contact(const SweepRecords& s, const Real4* impact, std::uint32_t k) {
+  Contact c = load_position_contact(s, k);
+  c.rebound_shift = impact[k].w;
   return c;
 }
 

@@ -14,8 +14,8 @@
 //
 // Host waits (docs/architecture.md "Fewer waits", "Fewer launches"), per
 // substep: the broad phase's bounds and pair count, the contact count (with
-// whether any contact is an impact candidate), and the colouring's list
-// sizes and colour ranges (one read); per step, the flags. The cache's entry
+// whether any contact is an impact candidate), and the colouring's colour
+// ranges and rounds run (one read); per step, the flags. The cache's entry
 // count, the lost-load count, the impact levels and the flags of the impact
 // and projection passes stay on the device: those stages run as one
 // cooperative launch each. A settled pile and the gas wait 5 times a step.
@@ -207,19 +207,19 @@ class CudaStep final : public StepBackend {
   // made as it was found, restored from its cache entry and prepared.
   void colour_contacts() override {
     const std::uint32_t* position = nullptr;
-    m_colours = m_colouring.colour_and_sort(pairs_d(), m_count, m_device.size(), position, m_begin, m_sm, m_stream,
-                                            m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
-                                            m_sorted_colour.as<std::uint8_t>(m_count));
+    const std::uint32_t colours = m_colouring.colour_and_sort(
+        pairs_d(), m_count, m_device.size(), position, m_begin, m_sm, m_stream,
+        m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr, m_sorted_colour.as<std::uint8_t>(m_count));
     if (m_count > 0) {
       lay_out_records();
       const nc::ContactInputs in{m_device.view(), walls(), m_table, m_lookahead, m_reach.get_as<real>()};
       nc::launch_sorted_records(in, pairs_d(), m_kept_valid ? m_match.get_as<std::uint32_t>() : nullptr,
                                 m_cache.entries(), position, m_count, m_records, m_impact, m_sm, m_stream);
     }
-    m_plan.colours = m_colours;
-    std::copy(m_begin.begin(), m_begin.begin() + m_colours + 2, m_plan.begin);
-    m_counters.colours = std::max(m_counters.colours, m_colours);
-    m_counters.overflow += m_begin[m_colours + 1] - m_begin[m_colours];
+    m_plan.colours = colours;
+    std::copy(m_begin.begin(), m_begin.begin() + colours + 2, m_plan.begin);
+    m_counters.colours = std::max(m_counters.colours, colours);
+    m_counters.overflow += m_plan.begin[colours + 1] - m_plan.begin[colours];
   }
 
   // Before the colouring: the contacts that persist find their cache entry
@@ -281,7 +281,7 @@ class CudaStep final : public StepBackend {
   void project_positions() override {
     if (m_count == 0) return;
     const int sweeps = std::max(0, m_model.solver.position_iterations);
-    const unsigned* hit = m_model.solver.restitution && m_impact_candidates ? m_hit.get_as<unsigned>() : nullptr;
+    const unsigned* hit = m_impact_candidates ? m_hit.get_as<unsigned>() : nullptr;
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(std::max(sweeps, 1)));
     if (sweeps > 0) MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
     nc::launch_position_stages(m_records, m_impact, m_plan, m_device.view(), walls(), m_model.solver, hit, sweeps,
@@ -477,7 +477,7 @@ class CudaStep final : public StepBackend {
   // every sphere). Within a colour the order changes no bit.
   template <class F>
   void over_colours(bool backwards, F&& launch) {
-    narrowphase::visit_colours(m_begin, m_colours, backwards,
+    narrowphase::visit_colours(m_plan.begin, m_plan.colours, backwards,
                                [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
                                  nc::ContactRange r{b, e, serial, reversed};
                                  if (!serial) r.mirrored = m_mirror, m_mirror = !m_mirror;
@@ -547,7 +547,7 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep
-  bool m_impact_candidates = false;   // some contact of this substep is an impact candidate (find_contacts)
+  bool m_impact_candidates = false;   // with restitution: some contact of this substep is an impact candidate
   bool m_kept_valid = false;          // m_kept_colour holds this substep's kept colours
   bool m_mirror = false;              // the next parallel colour launch runs mirrored (over_colours)
   // The substep's contacts as every stage after the colouring reads them
@@ -555,9 +555,8 @@ class CudaStep final : public StepBackend {
   narrowphase::SweepRecords m_records;
   narrowphase::Real4* m_impact = nullptr;
   real m_lookahead = 0;  // find_contacts' h: the colouring makes the contacts again with it
-  std::uint32_t m_colours = 0;
-  std::vector<std::uint32_t> m_begin{0, 0};
-  nc::ColourPlan m_plan;  // m_begin as a kernel takes it
+  std::vector<std::uint32_t> m_begin{0, 0};  // the colouring's ranges, copied into m_plan
+  nc::ColourPlan m_plan;  // the substep's colours, as the host's walk and the kernels take them
   // The solve in one launch (solve_in_one_launch) at most this many
   // contacts a colour in auto mode.
   static constexpr std::uint32_t kOneLaunchWidest = 16384;

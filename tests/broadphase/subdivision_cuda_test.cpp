@@ -5,7 +5,6 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <memory>
 #include <numeric>
 #include <random>
 
@@ -19,6 +18,7 @@
 #include <cuda_runtime.h>
 
 #include "broadphase/broadphase_cuda.hpp"
+#include "core/device_memory.hpp"
 #endif
 
 namespace mb = marbles::broadphase;
@@ -26,25 +26,6 @@ namespace mt = marbles::broadphase::testing;
 using marbles::real;
 
 #if defined(MARBLES_BROADPHASE_CUDA)
-
-// count values of T in device memory, freed with the owner (null when the
-// allocation failed).
-template <class T>
-class DeviceArray {
- public:
-  explicit DeviceArray(std::size_t count) {
-    void* p = nullptr;
-    if (cudaMalloc(&p, count * sizeof(T)) == cudaSuccess) m_ptr.reset(static_cast<T*>(p));
-  }
-  T* get() const { return m_ptr.get(); }
-  explicit operator bool() const { return m_ptr != nullptr; }
-
- private:
-  struct Free {
-    void operator()(T* p) const { cudaFree(p); }
-  };
-  std::unique_ptr<T, Free> m_ptr;
-};
 
 struct Variant {
   mb::Algorithm algorithm;
@@ -125,16 +106,13 @@ TEST_P(SubdivisionCuda, DeviceResidentEntryPoint) {
   for (bool sparse : {false, true}) {
     mt::SphereSet s = mt::make_set(mt::SetKind::mono, 20000, 99);
     if (sparse) s.centre[123] = marbles::Vec3(real(2.0e5), real(-1.0e5), real(3.0e5));
-    const DeviceArray<marbles::Vec3> centre(s.centre.size());  // freed however the test ends
-    const DeviceArray<real> radius(s.radius.size());
-    ASSERT_TRUE(centre && radius);
-    marbles::Vec3* c = centre.get();
-    real* r = radius.get();
+    marbles::cuda::DeviceBuffer centre, radius;  // freed, as the stream is destroyed, however the test ends
+    marbles::Vec3* c = centre.as<marbles::Vec3>(s.centre.size());
+    real* r = radius.as<real>(s.radius.size());
     cudaMemcpy(c, s.centre.data(), s.centre.size() * sizeof(marbles::Vec3), cudaMemcpyHostToDevice);
     cudaMemcpy(r, s.radius.data(), s.radius.size() * sizeof(real), cudaMemcpyHostToDevice);
-    cudaStream_t stream = nullptr;
-    ASSERT_EQ(cudaStreamCreate(&stream), cudaSuccess);
-    const std::unique_ptr<CUstream_st, cudaError_t (*)(cudaStream_t)> stream_owner(stream, cudaStreamDestroy);
+    marbles::cuda::Stream stream;
+    stream.create();
     const std::size_t count = gpu.find_pairs_device({c, r, s.centre.size()}, real(0), stream);
     std::vector<mb::Pair> got(count), expected;
     cudaMemcpy(got.data(), gpu.device_pairs(), count * sizeof(mb::Pair), cudaMemcpyDeviceToHost);

@@ -370,11 +370,11 @@ TEST(SweepRecords, PositionStagesOnTheRecordsEqualTheContacts) {
     const SolverSettings settings;
     for (std::uint32_t k = 0; k < W; ++k) {
       rebound_one(cs.contacts[k], bw, walls.data());
-      rebound_one(load_position_contact<true>(records, k, impact.data()), bp, walls.data());
+      rebound_one(load_rebound_contact(records, impact.data(), k), bp, walls.data());
       project_one(cs.contacts[k], bw, walls.data(), settings);
-      project_one(load_position_contact<false>(records, k), bp, walls.data(), settings);
+      project_one(load_position_contact(records, k), bp, walls.data(), settings);
       const real o1 = overlap_ratio(cs.contacts[k], bw, walls.data());
-      const real o2 = overlap_ratio(load_position_contact<false>(records, k), bp, walls.data());
+      const real o2 = overlap_ratio(load_position_contact(records, k), bp, walls.data());
       ASSERT_TRUE(same_bits(&o1, &o2, sizeof o1)) << "seed " << seed << " contact " << k;
     }
     ASSERT_TRUE(same_bits(whole.data(), packed.data(), sizeof(Vec3) * n)) << "seed " << seed;

@@ -36,13 +36,14 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
   Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
   ASSERT_EQ(gpu.backend_name(), "cuda");
+  const std::string form = solve_form();
   std::uint64_t one_launch = 0, solved = 0;
   for (int k = 0; k < steps; ++k) {
     cpu.step();
     gpu.step();
     one_launch += gpu.last_step().one_launch_solves;
     if (cpu.last_step().contacts > 0) solved += 1;
-    if (solve_form() == "one") {
+    if (form == "one") {
       ASSERT_EQ(gpu.last_step().one_launch_solves > 0, cpu.last_step().contacts > 0) << "step " << k;
     }
     ASSERT_EQ(gpu.last_step().contacts, cpu.last_step().contacts) << "step " << k;
@@ -60,10 +61,10 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
       }
     }
   }
-  if (solve_form() == "launches") {
+  if (form == "launches") {
     EXPECT_EQ(one_launch, 0u);
   } else if (solved > 0) {
-    EXPECT_GT(one_launch, 0u) << "MARBLES_CUDA_SOLVE=" << solve_form();
+    EXPECT_GT(one_launch, 0u) << "MARBLES_CUDA_SOLVE=" << form;
   }
 }
 

@@ -1,0 +1,121 @@
+// core/device_memory.hpp — device memory that only grows, pinned host
+// memory, streams and events, each freed with its owner (a constructor or a
+// test that stops early leaks nothing). Plain C++ over the CUDA runtime: .cpp
+// files that talk to the runtime include it too (core/device_buffer.cuh adds
+// what needs the CUDA compiler).
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstddef>
+#include <utility>
+#include <vector>
+
+#include "core/cuda_check.hpp"
+
+namespace marbles::cuda {
+
+// A device allocation that only grows, to a sixteenth more than asked: room
+// for a settled scene's contacts to come and go without a new allocation,
+// little enough that the headroom is not a fifth of the device memory
+// (docs/architecture.md "Headroom, the extra word and one read for the
+// colouring").
+class DeviceBuffer {
+ public:
+  DeviceBuffer() = default;
+  DeviceBuffer(const DeviceBuffer&) = delete;
+  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
+  ~DeviceBuffer() {
+    if (m_ptr) cudaFree(m_ptr);
+  }
+  void* reserve(std::size_t bytes) {
+    if (bytes > m_bytes) {
+      if (m_ptr) MARBLES_CUDA_CHECK(cudaFree(m_ptr));
+      m_ptr = nullptr;
+      const std::size_t grown = bytes + bytes / 16 + 256;
+      MARBLES_CUDA_CHECK(cudaMalloc(&m_ptr, grown));
+      m_bytes = grown;
+    }
+    return m_ptr;
+  }
+  template <class T>
+  T* as(std::size_t count) {
+    return static_cast<T*>(reserve(count * sizeof(T) + 16));
+  }
+  template <class T>
+  T* get_as() const {
+    return static_cast<T*>(m_ptr);
+  }
+  void* get() const { return m_ptr; }
+  std::size_t bytes() const { return m_bytes; }
+  void swap(DeviceBuffer& other) noexcept {
+    std::swap(m_ptr, other.m_ptr);
+    std::swap(m_bytes, other.m_bytes);
+  }
+
+ private:
+  void* m_ptr = nullptr;
+  std::size_t m_bytes = 0;
+};
+
+// Page-locked host memory for a stage's read-backs (count values of T),
+// freed with its owner: a constructor that throws after it leaks nothing.
+template <class T>
+class PinnedBuffer {
+ public:
+  explicit PinnedBuffer(std::size_t count) {
+    MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_ptr), count * sizeof(T)));
+  }
+  PinnedBuffer(const PinnedBuffer&) = delete;
+  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
+  ~PinnedBuffer() {
+    if (m_ptr) cudaFreeHost(m_ptr);
+  }
+  operator T*() const { return m_ptr; }
+  T* operator->() const { return m_ptr; }
+
+ private:
+  T* m_ptr = nullptr;
+};
+
+// A runtime handle destroyed with its owner (Stream, Event).
+template <class Handle, cudaError_t (*Destroy)(Handle)>
+class Owned {
+ public:
+  Owned() = default;
+  Owned(const Owned&) = delete;
+  Owned& operator=(const Owned&) = delete;
+  ~Owned() {
+    if (m_handle) Destroy(m_handle);
+  }
+  operator Handle() const { return m_handle; }
+
+ protected:
+  Handle m_handle = nullptr;
+};
+
+// A stream, empty until create().
+class Stream : public Owned<cudaStream_t, cudaStreamDestroy> {
+ public:
+  void create(unsigned flags = cudaStreamDefault) {
+    if (!m_handle) MARBLES_CUDA_CHECK(cudaStreamCreateWithFlags(&m_handle, flags));
+  }
+};
+
+// An event, created at once (only where a device is).
+class Event : public Owned<cudaEvent_t, cudaEventDestroy> {
+ public:
+  Event() { MARBLES_CUDA_CHECK(cudaEventCreate(&m_handle)); }
+};
+
+// Copies host[] into `buffer` (grown to fit), asynchronously on `stream`: the
+// host vector must outlive the copy (synchronise before changing it).
+template <class T>
+T* upload(DeviceBuffer& buffer, const std::vector<T>& host, cudaStream_t stream) {
+  T* d = buffer.as<T>(host.size());
+  if (!host.empty())
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(d, host.data(), host.size() * sizeof(T), cudaMemcpyHostToDevice, stream));
+  return d;
+}
+
+}  // namespace marbles::cuda
