@@ -3,7 +3,6 @@
 #include <algorithm>
 
 #include "core/cuda_check.hpp"
-#include "core/radix_sort.hpp"
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_cache_cuda.cuh"
 #include "narrowphase/contact_cache_math.hpp"
@@ -19,37 +18,60 @@ using ::marbles::cuda::kBlock;
 
 // The store reads the contacts' bodies and impulses from the sweep's records
 // (solver_math.hpp), where the last sweep left them. A contact without load
-// is kept for its colour alone (ContactCache::store).
-__global__ void flags_kernel(SweepRecords records, const std::uint8_t* colour, std::uint32_t n, std::uint32_t* flags) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= n; k += gridDim.x * blockDim.x)
-    flags[k] = k < n && (records.impulse[k].x > 0 || (colour && colour[k] != kNoKeptColour)) ? 1u : 0u;
+// is kept for its colour alone (ContactCache::store); one with neither is
+// dropped.
+__device__ __forceinline__ bool stored(const SweepRecords& records, const std::uint8_t* colour, std::uint32_t k) {
+  return records.impulse[k].x > 0 || (colour && colour[k] != kNoKeptColour);
 }
 
-// The sort's key: (a, b) as the cache key orders them, in as few bits as
-// the spheres and walls need (a wall b after every sphere, walls in index
-// order), so the radix sort makes 5 passes at 10^6 spheres instead of 8.
-__device__ __forceinline__ std::uint64_t sort_key(const BodyPair& ab, std::uint32_t spheres, int b_bits) {
-  const std::uint32_t b = is_wall(ab.b) ? spheres + (ab.b & ~kWallFlag) : ab.b;
-  return (std::uint64_t(ab.a) << b_bits) | b;
+// The counting sort by sphere a (ContactCache::store_from's): each stored
+// contact counted with its sphere, rank[k] its place among that sphere's (in
+// the order the atomics came: order_runs_kernel puts each run in order),
+// kNoEntry for a dropped one.
+__global__ void count_kernel(SweepRecords records, const std::uint8_t* colour, std::uint32_t n, std::uint32_t* count,
+                             std::uint32_t* rank) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
+    rank[k] = stored(records, colour, k) ? atomicAdd(count + records.bodies[k].a, 1u) : kNoEntry;
 }
 
-// Contact k's place in the sort's input: a stored one at its offset (the
-// first `stored` places, in contact order), an unstored one after them with
-// the largest key, so that it sorts after every entry (the radix sort is
-// stable: an entry whose key has every bit set stays ahead of them too).
-// Thread 0 writes the entry count, which the step never reads back (only a
-// checkpoint's download does).
-__global__ void keys_kernel(SweepRecords records, std::uint32_t n, const std::uint32_t* offsets, std::uint32_t spheres,
-                            int b_bits, std::uint64_t last_key, std::uint64_t* keys, std::uint32_t* index,
-                            std::uint32_t* size) {
-  const std::uint32_t stored = offsets[n];
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const bool kept = offsets[k + 1] != offsets[k];
-    const std::uint32_t at = kept ? offsets[k] : stored + (k - offsets[k]);
-    keys[at] = kept ? sort_key(records.bodies[k], spheres, b_bits) : last_key;
-    index[at] = k;
+// Each stored contact's index at its place in its sphere's run (first: the
+// scanned counts). Thread 0 writes the entry count, which the step never
+// reads back (only a checkpoint's download does).
+__global__ void place_kernel(SweepRecords records, std::uint32_t n, const std::uint32_t* rank,
+                             const std::uint32_t* first, std::uint32_t spheres, std::uint32_t* index,
+                             std::uint32_t* size) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
+    if (rank[k] != kNoEntry) index[first[records.bodies[k].a] + rank[k]] = k;
+  if (blockIdx.x == 0 && threadIdx.x == 0) *size = first[spheres];
+}
+
+// Each sphere's run in key order, by insertion sort (a few entries each, as
+// on the CPU): b decides, the cache key's order (a wall after every sphere,
+// walls by index); keys are unique.
+__global__ void order_runs_kernel(SweepRecords records, const std::uint32_t* first, std::uint32_t spheres,
+                                  std::uint32_t* index) {
+  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < spheres; a += gridDim.x * blockDim.x) {
+    const std::uint32_t begin = first[a], end = first[a + 1];
+    for (std::uint32_t x = begin + 1; x < end; ++x) {
+      const std::uint32_t k = index[x], b = records.bodies[k].b;
+      std::uint32_t j = x;
+      for (; j > begin; --j) {
+        const std::uint32_t before = index[j - 1];
+        if (records.bodies[before].b < b) break;
+        index[j] = before;
+      }
+      index[j] = k;
+    }
   }
-  if (blockIdx.x == 0 && threadIdx.x == 0) *size = stored;
+}
+
+// The runs of sorted keys[0, m) (an upload's): first[a], for a <= spheres,
+// the first entry of sphere a or a later one (entries of spheres from
+// `spheres` on are never found).
+__global__ void first_of_keys_kernel(const std::uint64_t* keys, std::uint32_t m, std::uint32_t spheres,
+                                     std::uint32_t* first) {
+  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a <= spheres; a += gridDim.x * blockDim.x)
+    first[a] = cache_lower_bound(keys, m, cache_key(a, 0));
 }
 
 // The entries in key order, with their cache keys in place of the sort's.
@@ -75,16 +97,20 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
   }
 }
 
-// Each contact's entry (binary search over the sorted keys) and kept colour.
+// Each contact's entry (a scan of its sphere's few entries, as on the CPU)
+// and kept colour. A sphere from `spheres` on has no entries.
 __global__ void restore_kernel(const BodyPair* pairs, std::uint32_t n, const std::uint64_t* keys,
-                               const std::uint32_t* size, const std::uint8_t* colour, std::uint8_t* matched,
-                               std::uint8_t* kept_colour, std::uint32_t* match) {
-  const std::uint32_t m = *size;
+                               const std::uint32_t* first, std::uint32_t spheres, const std::uint8_t* colour,
+                               std::uint8_t* matched, std::uint8_t* kept_colour, std::uint32_t* match) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const BodyPair ab = pairs[k];
     const std::uint64_t key = cache_key(ab.a, ab.b);
-    const std::uint32_t e = cache_lower_bound(keys, m, key);
-    const bool found = e < m && keys[e] == key;
+    std::uint32_t e = 0, end = 0;
+    if (ab.a < spheres) {
+      e = first[ab.a], end = first[ab.a + 1];
+      while (e < end && keys[e] < key) ++e;
+    }
+    const bool found = e < end && keys[e] == key;
     kept_colour[k] = found ? colour[e] : kNoKeptColour;
     match[k] = found ? e : kNoEntry;
     if (found) matched[e] = 1;  // keys are unique: one contact per entry
@@ -242,49 +268,41 @@ ContactCacheCuda::ContactCacheCuda() : m_host(4) {}
 ContactCacheCuda::~ContactCacheCuda() = default;
 
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
-                             std::uint32_t spheres, std::uint32_t walls, int sm_count, cudaStream_t s) {
-  // Entries: the contacts with load or a colour, at most n. Their count stays
-  // on the device (m_size): every later kernel reads it there, and the
-  // host holds only the bound n (no wait). The sort takes all n contacts,
-  // the unstored ones last (keys_kernel).
+                             std::uint32_t spheres, int sm_count, cudaStream_t s) {
+  // Entries: the contacts with load or a colour, at most n, in key order by
+  // a counting sort by sphere (count, scan into the kept firsts, place) and
+  // an insertion sort of each sphere's run. Their count stays on the device
+  // (m_size): every later kernel reads it there, and the host holds only the
+  // bound n (no wait).
   m_bound = n;
+  m_spheres = spheres;
   auto* size = m_size.as<std::uint32_t>(1);
+  auto* first = m_first.as<std::uint32_t>(std::size_t(spheres) + 1);
   if (n == 0) {
     MARBLES_CUDA_CHECK(cudaMemsetAsync(size, 0, sizeof(std::uint32_t), s));
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
     return;
   }
-  // Temporaries in the scratch memory: the flags and their offsets, then
-  // (the flags no longer live) the sort's keys and indices with their
-  // alternates. Bits of the largest a (a sphere) and the largest b (the last wall).
-  const auto index_bits = [](std::uint64_t count) { return static_cast<int>(bits_needed(count ? count - 1 : 0)); };
-  const int b_bits = index_bits(std::uint64_t(spheres) + walls), a_bits = index_bits(spheres);
-  const int key_bits = a_bits + b_bits;
-  const std::uint64_t last_key = key_bits >= 64 ? ~std::uint64_t(0) : (std::uint64_t(1) << key_bits) - 1;
-  const std::size_t scan_bytes = ::marbles::cuda::exclusive_sum_bytes<std::uint32_t>(n + 1);
-  const std::size_t sort_bytes = ::marbles::cuda::sort_pairs_bytes<std::uint64_t, std::uint32_t>(n, key_bits);
-  std::uint32_t *flags = nullptr, *offsets = nullptr, *index_in = nullptr, *index_alt = nullptr;
-  std::uint64_t *keys_in = nullptr, *keys_alt = nullptr;
-  void *scan_temp = nullptr, *sort_temp = nullptr;
+  // Temporaries in the scratch memory: the counts (one more than the
+  // spheres: the scan's last is the entry count) with the scan's storage,
+  // each contact's rank among its sphere's, and the entries' contacts.
+  const std::size_t scan_bytes = ::marbles::cuda::exclusive_sum_bytes<std::uint32_t>(std::size_t(spheres) + 1);
+  std::uint32_t *count = nullptr, *rank = nullptr, *index = nullptr;
+  void* scan_temp = nullptr;
   ::marbles::cuda::carve(*m_scratch, [&](::marbles::cuda::Carve& c) {
-    offsets = c.take<std::uint32_t>(n + 1);
-    ::marbles::cuda::Carve scan = c;
-    flags = scan.take<std::uint32_t>(n + 1);
-    scan_temp = scan.take<char>(scan_bytes);
-    keys_in = c.take<std::uint64_t>(n);
-    keys_alt = c.take<std::uint64_t>(n);
-    index_in = c.take<std::uint32_t>(n);
-    index_alt = c.take<std::uint32_t>(n);
-    sort_temp = c.take<char>(sort_bytes);
-    c.merge(scan);
+    count = c.take<std::uint32_t>(std::size_t(spheres) + 1);
+    scan_temp = c.take<char>(scan_bytes);
+    rank = c.take<std::uint32_t>(n);
+    index = c.take<std::uint32_t>(n);
   });
-  flags_kernel<<<grid_for(n + 1, sm_count), kBlock, 0, s>>>(contacts, contact_colour, n, flags);
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
+  count_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, n, count, rank);
   MARBLES_CUDA_CHECK_LAUNCH();
-  ::marbles::cuda::device_exclusive_sum(flags, offsets, n + 1, scan_temp, scan_bytes, s);
-  keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, offsets, spheres, b_bits, last_key, keys_in,
-                                                       index_in, size);
+  ::marbles::cuda::device_exclusive_sum(count, first, std::size_t(spheres) + 1, scan_temp, scan_bytes, s);
+  place_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, rank, first, spheres, index, size);
   MARBLES_CUDA_CHECK_LAUNCH();
-  const std::uint32_t* index = ::marbles::cuda::device_sort_pairs(keys_in, keys_alt, index_in, index_alt, n, key_bits,
-                                                                  sort_temp, sort_bytes, s);
+  order_runs_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(contacts, first, spheres, index);
+  MARBLES_CUDA_CHECK_LAUNCH();
   gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, size,
                                                          m_keys.as<std::uint64_t>(n), m_normal.as<real>(n),
                                                          tangent_entries(n), rolling_entries(n),
@@ -311,16 +329,22 @@ CacheEntries ContactCacheCuda::download(cudaStream_t s) {
   return e;
 }
 
-void ContactCacheCuda::upload(const CacheEntries& e, cudaStream_t s) {
+void ContactCacheCuda::upload(const CacheEntries& e, std::uint32_t spheres, cudaStream_t s) {
   const auto m = static_cast<std::uint32_t>(e.size());
   m_bound = m;
+  m_spheres = spheres;
   m_host[0] = m;
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_size.as<std::uint32_t>(1), m_host, sizeof(std::uint32_t), cudaMemcpyHostToDevice, s));
+  auto* first = m_first.as<std::uint32_t>(std::size_t(spheres) + 1);
   if (m == 0) {
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
     return;
   }
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_keys.as<std::uint64_t>(m), e.key.data(), m * sizeof(std::uint64_t), cudaMemcpyHostToDevice, s));
+  auto* keys = m_keys.as<std::uint64_t>(m);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(keys, e.key.data(), m * sizeof(std::uint64_t), cudaMemcpyHostToDevice, s));
+  first_of_keys_kernel<<<grid_for(std::size_t(spheres) + 1, 16), kBlock, 0, s>>>(keys, m, spheres, first);
+  MARBLES_CUDA_CHECK_LAUNCH();
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_normal.as<real>(m), e.normal_impulse.data(), m * sizeof(real), cudaMemcpyHostToDevice, s));
   if (m_keep_tangent)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_tangent.as<Vec3>(m), e.tangent_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
@@ -337,12 +361,14 @@ void ContactCacheCuda::upload(const CacheEntries& e, cudaStream_t s) {
 void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
   const std::uint32_t m = m_bound;
   to.m_bound = m;
+  to.m_spheres = m_spheres;
   auto copy = [&](DeviceBuffer& dst, const DeviceBuffer& src, std::size_t bytes) {
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(dst.as<char>(bytes), src.get(), bytes, cudaMemcpyDeviceToDevice, s));
   };
   if (m_size.get()) copy(to.m_size, m_size, sizeof(std::uint32_t));
   else MARBLES_CUDA_CHECK(cudaMemsetAsync(to.m_size.as<std::uint32_t>(1), 0, sizeof(std::uint32_t), s));  // never stored
   if (m == 0) return;
+  copy(to.m_first, m_first, (std::size_t(m_spheres) + 1) * sizeof(std::uint32_t));
   copy(to.m_keys, m_keys, m * sizeof(std::uint64_t));
   copy(to.m_normal, m_normal, m * sizeof(real));
   if (m_keep_tangent) copy(to.m_tangent, m_tangent, m * sizeof(Vec3));
@@ -373,8 +399,9 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
   MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
   const auto* keys = m_keys.get_as<std::uint64_t>();
   const auto* normal = m_normal.get_as<real>();
-  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, keys, size, m_colour.get_as<std::uint8_t>(),
-                                                          matched, kept_colour, match);
+  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, keys, m_first.get_as<std::uint32_t>(),
+                                                          std::min(m_spheres, bodies_n),
+                                                          m_colour.get_as<std::uint8_t>(), matched, kept_colour, match);
   MARBLES_CUDA_CHECK_LAUNCH();
   lost_loads_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, size, bodies, weight_impulse,
                                                              counter);

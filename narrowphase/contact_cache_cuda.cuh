@@ -1,13 +1,14 @@
 // narrowphase/contact_cache_cuda.cuh — the CUDA twin of contact_cache.cpp:
-// entries sorted by key on the device (flag, scan, write, CUB sort), looked
-// up by binary search (contact_cache_math.hpp), one thread per contact. The
-// entry count stays on the device (a checkpoint's download reads it). When a
-// load was lost (rare: a counter says so, read by the device alone), the
-// island rule runs in one cooperative launch: islands by min-label
-// propagation with pointer jumping (the same islands as the CPU's
-// union-find), their largest impulse by an atomic max, then the cold
-// islands' contacts cleared. Neither store nor restore waits for the device.
-// Only .cu files include it.
+// entries in key order as the CPU sorts them (a counting sort by sphere a,
+// then each sphere's few entries ordered by b), and each contact's entry
+// found among its sphere's (the counting sort's firsts, kept with the
+// entries), one thread per contact. The entry count stays on the device (a
+// checkpoint's download reads it). When a load was lost (rare: a counter
+// says so, read by the device alone), the island rule runs in one
+// cooperative launch: islands by min-label propagation with pointer jumping
+// (the same islands as the CPU's union-find), their largest impulse by an
+// atomic max, then the cold islands' contacts cleared. Neither store nor
+// restore waits for the device. Only .cu files include it.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -60,15 +61,16 @@ class ContactCacheCuda {
   }
   // The contacts as the sweep's records hold them after the last sweep, with
   // their colours (contact_colour, device, per contact; null: none).
-  // `spheres` and `walls`: how many there are (the sort's key bits).
+  // `spheres`: how many there are (every contact's a is one of them).
   void store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n, std::uint32_t spheres,
-             std::uint32_t walls, int sm_count, cudaStream_t stream);
+             int sm_count, cudaStream_t stream);
   // The entries are at most this many (the contacts of the last store): the
   // count itself stays on the device, where the kernels read it.
   std::uint32_t bound() const { return m_bound; }
   // The entries as the CPU cache holds them (a checkpoint's copy), and back.
   CacheEntries download(cudaStream_t stream);
-  void upload(const CacheEntries& entries, cudaStream_t stream);
+  // `spheres`: the world's (entries of other spheres are never found).
+  void upload(const CacheEntries& entries, std::uint32_t spheres, cudaStream_t stream);
   // The entries copied on the device into `to` (the watchdog's undo).
   void copy_to(ContactCacheCuda& to, cudaStream_t stream) const;
   // Which impulses the scene's terms make (before the first store): without
@@ -84,6 +86,10 @@ class ContactCacheCuda {
  private:
   DeviceBuffer m_keys, m_normal, m_tangent, m_rolling, m_colour, m_counter, m_own_scratch;
   DeviceBuffer m_size;  // the entry count (one word, device)
+  // The entries of sphere a are [first[a], first[a + 1]) for a < m_spheres
+  // (m_spheres + 1 words, device); a sphere from m_spheres on has none.
+  DeviceBuffer m_first;
+  std::uint32_t m_spheres = 0;
   DeviceBuffer* m_scratch = &m_own_scratch;
   std::uint32_t m_bound = 0;
   ::marbles::cuda::PinnedBuffer<std::uint32_t> m_host;  // readback

@@ -290,8 +290,7 @@ class CudaStep final : public StepBackend {
 
   void store_impulses() override {
     m_cache.store(m_records, m_sorted_colour.get_as<std::uint8_t>(), m_count,
-                  static_cast<std::uint32_t>(m_device.size()),
-                  static_cast<std::uint32_t>(m_model.wall_shapes.size()), m_sm, m_stream);
+                  static_cast<std::uint32_t>(m_device.size()), m_sm, m_stream);
   }
 
   void begin_step() override {
@@ -451,7 +450,7 @@ class CudaStep final : public StepBackend {
     m_non_finite = false;
   }
   void load_state(const StepState& state) override {
-    m_cache.upload(state.cache, m_stream);
+    m_cache.upload(state.cache, static_cast<std::uint32_t>(m_device.size()), m_stream);
     if (!state.walls.empty()) ::marbles::cuda::upload(m_walls, state.walls, m_stream);
   }
 

@@ -1,0 +1,277 @@
+// The GPU contact cache (contact_cache_cuda.cu) against the CPU's
+// (contact_cache.cpp) on random and adversarial contact sets: a store gives
+// the same entries (keys, impulses, colours) bit for bit, and a restore,
+// from a store or from an upload of the CPU's entries, gives every contact
+// the same impulses and kept colour, lost loads and cold islands included.
+// Label `gpu`; every case skips, saying so, without a CUDA device.
+#include <gtest/gtest.h>
+
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <cstring>
+#include <random>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "narrowphase/colouring.hpp"
+#include "narrowphase/contact_cache.hpp"
+#include "narrowphase/contact_cache_cuda.cuh"
+#include "narrowphase/contact_cache_math.hpp"
+#include "narrowphase/solver_math.hpp"
+#include "tests/require_device.hpp"
+
+using namespace marbles;
+using namespace marbles::narrowphase;
+using marbles::narrowphase::cuda::ContactCacheCuda;
+using marbles::narrowphase::cuda::kNoEntry;
+
+namespace {
+
+using ::marbles::cuda::DeviceBuffer;
+
+// count unique pairs: a partner of sphere `hub` with probability hub_share,
+// else two random spheres of [lo, hi), a wall (b) one time in ten.
+std::vector<Contact> random_pairs(std::mt19937_64& rng, std::uint32_t lo, std::uint32_t hi, std::size_t count,
+                                  double hub_share = 0, std::uint32_t hub = 0) {
+  std::uniform_int_distribution<std::uint32_t> body(lo, hi - 1), wall(0, 5);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::set<std::pair<std::uint32_t, std::uint32_t>> seen;
+  std::vector<Contact> out;
+  while (out.size() < count) {
+    Contact c;
+    c.a = u(rng) < hub_share ? hub : body(rng);
+    c.b = u(rng) < 0.1 ? (kWallFlag | wall(rng)) : body(rng);
+    if (c.b == c.a) continue;
+    if (!is_wall(c.b) && c.b < c.a) std::swap(c.a, c.b);
+    if (!seen.insert({c.a, c.b}).second) continue;
+    c.normal = {0, 0, 1};
+    out.push_back(c);
+  }
+  return out;
+}
+
+// Impulses (a share `loaded` with load, the rest none) and colours: the
+// contacts in colour-major order, `colours` colours and an overflow set
+// (colour kNoKeptColour), a share `coloured` of the unloaded ones coloured.
+struct Stored {
+  std::vector<Contact> contacts;
+  ColourRanges ranges;
+  std::vector<std::uint8_t> colour;  // per contact, as the GPU's colouring gives it
+};
+
+Stored with_impulses(std::mt19937_64& rng, std::vector<Contact> contacts, double loaded, double coloured,
+                     std::uint32_t colours) {
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<std::uint32_t> of(contacts.size());
+  for (std::size_t k = 0; k < contacts.size(); ++k) {
+    Contact& c = contacts[k];
+    const bool load = u(rng) < loaded;
+    c.normal_impulse = load ? real(u(rng)) : real(0);
+    c.tangent_impulse = {real(u(rng) - 0.5), real(u(rng) - 0.5), 0};
+    c.rolling_impulse = {real(u(rng)), real(u(rng)), real(u(rng))};
+    of[k] = load || u(rng) < coloured ? static_cast<std::uint32_t>(u(rng) * colours) : colours;  // colours: overflow
+  }
+  Stored s;
+  s.ranges.colours = colours;
+  s.ranges.begin.assign(colours + 2, 0);
+  for (std::uint32_t c = 0; c <= colours; ++c) {
+    s.ranges.begin[c + 1] = s.ranges.begin[c];
+    for (std::size_t k = 0; k < contacts.size(); ++k)
+      if (of[k] == c) {
+        s.contacts.push_back(contacts[k]);
+        s.colour.push_back(c < colours ? static_cast<std::uint8_t>(c) : kNoKeptColour);
+        ++s.ranges.begin[c + 1];
+      }
+  }
+  return s;
+}
+
+template <class T>
+T* to_device(DeviceBuffer& memory, const std::vector<T>& host) {
+  T* d = memory.as<T>(host.size() + 1);
+  if (!host.empty()) EXPECT_EQ(cudaMemcpy(d, host.data(), host.size() * sizeof(T), cudaMemcpyHostToDevice), cudaSuccess);
+  return d;
+}
+
+template <class T>
+std::vector<T> to_host(const T* d, std::size_t n) {
+  std::vector<T> h(n);
+  if (n > 0) EXPECT_EQ(cudaMemcpy(h.data(), d, n * sizeof(T), cudaMemcpyDeviceToHost), cudaSuccess);
+  return h;
+}
+
+template <class T>
+bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+// The records of `s` on the host and on the device, with the colours.
+struct Records {
+  std::vector<Real4> host_words;
+  SweepRecords host;
+  DeviceBuffer words, colours;
+  SweepRecords device;
+  std::uint8_t* colour = nullptr;
+  explicit Records(const Stored& s) {
+    const std::size_t n = s.contacts.size();
+    host_words.resize((SweepRecords::bytes_for(n) + 15) / 16 + 1);
+    host = SweepRecords::in(host_words.data(), n);
+    for (std::size_t k = 0; k < n; ++k) pack_sweep_record(s.contacts[k], host, static_cast<std::uint32_t>(k));
+    device = SweepRecords::in(to_device(words, host_words), n);
+    colour = to_device(colours, s.colour);
+  }
+};
+
+// What a restore did: contacts warm-started, and contacts whose entry
+// carried a load but which start cold (the island rule).
+struct Restored {
+  std::size_t warm = 0, cold = 0;
+};
+
+// Restores `next` (contacts of spheres [0, spheres)) on both caches and
+// compares each contact's impulses and kept colour. weight: the weight
+// impulse (inverse masses 1: loads above 4 weight are lost loads).
+Restored expect_same_restore(ContactCache& cpu, ContactCacheCuda& gpu, const std::vector<Contact>& next,
+                         std::uint32_t spheres, real weight, const std::string& what) {
+  const std::size_t n = next.size();
+  std::vector<real> inv_mass(spheres, real(1));
+  DeviceBuffer mass_memory, pair_memory, kept_memory, match_memory;
+  BodiesView bodies;
+  bodies.count = spheres;
+  bodies.inv_mass = inv_mass.data();
+  std::vector<Contact> restored = next;
+  std::vector<std::uint8_t> kept;
+  const CacheEntries& entries = cpu.entries();
+  cpu.restore(restored, bodies, weight, kept);
+
+  std::vector<BodyPair> pairs(n);
+  for (std::size_t k = 0; k < n; ++k) pairs[k] = {next[k].a, next[k].b};
+  BodiesView device_bodies = bodies;
+  device_bodies.inv_mass = to_device(mass_memory, inv_mass);
+  auto* kept_d = kept_memory.as<std::uint8_t>(n + 1);
+  auto* match_d = match_memory.as<std::uint32_t>(n + 1);
+  const bool any = gpu.restore(to_device(pair_memory, pairs), static_cast<std::uint32_t>(n), device_bodies, weight,
+                               kept_d, match_d, 4, nullptr);
+  EXPECT_EQ(cudaDeviceSynchronize(), cudaSuccess) << what;
+  std::vector<std::uint8_t> kept_g(n, kNoKeptColour);
+  std::vector<std::uint32_t> match(n, kNoEntry);
+  if (any) kept_g = to_host(kept_d, n), match = to_host(match_d, n);
+  Restored r;
+  for (std::size_t k = 0; k < n; ++k) {
+    const real p = match[k] != kNoEntry ? entries.normal_impulse.at(match[k]) : real(0);
+    EXPECT_EQ(p, restored[k].normal_impulse) << what << ": contact " << k;
+    EXPECT_EQ(kept_g[k], kept[k]) << what << ": contact " << k;
+    const std::uint64_t key = cache_key(next[k].a, next[k].b);
+    if (match[k] != kNoEntry) EXPECT_EQ(entries.key.at(match[k]), key) << what << ": contact " << k;
+    const auto e = std::lower_bound(entries.key.begin(), entries.key.end(), key);
+    const bool loaded = e != entries.key.end() && *e == key && entries.normal_impulse[e - entries.key.begin()] > 0;
+    r.warm += p > 0;
+    r.cold += loaded && !(p > 0);
+  }
+  return r;
+}
+
+// Stores `s` on both caches, compares the entries, then restores `next`
+// from the GPU's store and from an upload of the CPU's entries.
+Restored expect_same_as_cpu(const Stored& s, std::uint32_t spheres, const std::vector<Contact>& next,
+                            std::uint32_t restore_spheres, real weight, const std::string& what) {
+  const std::size_t n = s.contacts.size();
+  Records records(s);
+  ContactCache cpu;
+  cpu.store(records.host, static_cast<std::uint32_t>(n), true, s.ranges);
+  ContactCacheCuda gpu;
+  DeviceBuffer poison;  // the scratch full of ones: the store must write all it reads
+  const std::size_t poison_bytes = 64 * (n + spheres) + (1 << 20);
+  EXPECT_EQ(cudaMemset(poison.reserve(poison_bytes), 0xff, poison_bytes), cudaSuccess);
+  gpu.share_scratch(poison);
+  gpu.store(records.device, records.colour, static_cast<std::uint32_t>(n), spheres, 4, nullptr);
+  const CacheEntries got = gpu.download(nullptr);
+  const CacheEntries& want = cpu.entries();
+  EXPECT_EQ(got.size(), want.size()) << what;
+  EXPECT_TRUE(same_bits(got.key, want.key)) << what;
+  EXPECT_TRUE(same_bits(got.normal_impulse, want.normal_impulse)) << what;
+  EXPECT_TRUE(same_bits(got.tangent_impulse, want.tangent_impulse)) << what;
+  EXPECT_TRUE(same_bits(got.rolling_impulse, want.rolling_impulse)) << what;
+  EXPECT_TRUE(same_bits(got.colour, want.colour)) << what;
+  const Restored r = expect_same_restore(cpu, gpu, next, restore_spheres, weight, what + " (stored)");
+  ContactCacheCuda uploaded;
+  uploaded.upload(want, restore_spheres, nullptr);
+  expect_same_restore(cpu, uploaded, next, restore_spheres, weight, what + " (uploaded)");
+  return r;
+}
+
+// The next substep's contacts: a share `kept` of `s`'s pairs (a lost load
+// among those left out), and `fresh` new ones of spheres below `spheres`.
+std::vector<Contact> next_contacts(std::mt19937_64& rng, const Stored& s, double kept, std::size_t fresh,
+                                   std::uint32_t spheres) {
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Contact> next;
+  std::set<std::pair<std::uint32_t, std::uint32_t>> seen;
+  for (const Contact& c : s.contacts)
+    if (c.a < spheres && (is_wall(c.b) || c.b < spheres) && u(rng) < kept) {
+      Contact d;
+      d.a = c.a, d.b = c.b, d.normal = c.normal;
+      next.push_back(d);
+      seen.insert({c.a, c.b});
+    }
+  for (const Contact& c : random_pairs(rng, 0, spheres, fresh))
+    if (seen.insert({c.a, c.b}).second) next.push_back(c);
+  std::shuffle(next.begin(), next.end(), rng);
+  return next;
+}
+
+TEST(ContactCacheCuda, RandomContactsAsOnTheCpu) {
+  REQUIRE_DEVICE();
+  std::mt19937_64 rng(41);
+  std::size_t cold = 0;
+  for (int trial = 0; trial < 4; ++trial) {
+    const std::uint32_t spheres = 500u << (2 * trial);  // 500 to 32 000
+    const Stored s = with_impulses(rng, random_pairs(rng, 0, spheres, 3 * spheres), 0.6, 0.5, 14);
+    const std::vector<Contact> next = next_contacts(rng, s, 0.9, spheres / 4, spheres);
+    const Restored r = expect_same_as_cpu(s, spheres, next, spheres, real(0.1), "trial " + std::to_string(trial));
+    EXPECT_GT(r.warm, next.size() / 4) << "trial " << trial;  // the comparison saw impulses restored
+    cold += r.cold;
+  }
+  EXPECT_GT(cold, 0u);  // and islands started cold
+}
+
+// Adversarial: one sphere in a third of the contacts (a run of thousands,
+// the insertion sort's worst), contacts among the middle spheres only (runs
+// empty at both ends), every contact dropped (no load, no colour), one
+// contact, no lost load at all (weight large), and a restore after spheres
+// were removed (entries of spheres past the count never found).
+TEST(ContactCacheCuda, AdversarialContactsAsOnTheCpu) {
+  REQUIRE_DEVICE();
+  std::mt19937_64 rng(43);
+  {
+    const Stored s = with_impulses(rng, random_pairs(rng, 0, 3000, 6000, 0.33, 17), 0.7, 0.3, 9);
+    expect_same_as_cpu(s, 3000, next_contacts(rng, s, 0.8, 500, 3000), 3000, real(0.1), "hub");
+  }
+  {
+    const Stored s = with_impulses(rng, random_pairs(rng, 400, 600, 900), 0.6, 0.5, 12);
+    expect_same_as_cpu(s, 1000, next_contacts(rng, s, 0.9, 100, 1000), 1000, real(0.1), "middle");
+  }
+  {
+    const Stored s = with_impulses(rng, random_pairs(rng, 0, 800, 2000), 0.0, 0.0, 10);
+    ASSERT_EQ(s.ranges.overflow(), s.contacts.size());
+    expect_same_as_cpu(s, 800, next_contacts(rng, s, 0.9, 100, 800), 800, real(0.1), "dropped");
+  }
+  {
+    const Stored s = with_impulses(rng, random_pairs(rng, 0, 2, 1), 1.0, 0.0, 3);
+    expect_same_as_cpu(s, 2, next_contacts(rng, s, 1.0, 0, 2), 2, real(0.1), "one");
+  }
+  {
+    const Stored s = with_impulses(rng, random_pairs(rng, 0, 2000, 6000), 0.6, 0.5, 14);
+    const Restored r =
+        expect_same_as_cpu(s, 2000, next_contacts(rng, s, 0.7, 300, 2000), 2000, real(100), "no lost load");
+    EXPECT_EQ(r.cold, 0u);
+  }
+  {
+    const Stored s = with_impulses(rng, random_pairs(rng, 0, 2000, 6000), 0.6, 0.5, 14);
+    expect_same_as_cpu(s, 2000, next_contacts(rng, s, 0.9, 300, 1200), 1200, real(0.1), "fewer spheres");
+  }
+}
+
+}  // namespace
