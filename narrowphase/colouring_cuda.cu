@@ -17,18 +17,39 @@ namespace cg = cooperative_groups;
 // keys, of the overflow's and of the inactive's, and the rounds run.
 constexpr std::uint32_t kRead = kMaxColours + 3;
 
-// One entry of a round's active list: the contact's spheres and rank in one
-// 16-byte word, so a round reads its list in order (coalesced) and never
-// gathers per-contact arrays; the contact's index is rank_index(rank).
-struct alignas(16) ColourEntry {
+// A contact as a round sees it: its spheres and its rank.
+struct ColourEntry {
   std::uint32_t a, b;
   std::uint64_t rank;
 };
 
-// Appends e to list when `want`, one atomic per warp (a single counter taken
-// by every thread would serialise). The order within the list is free: a
-// round's result does not depend on the order it visits its contacts.
-__device__ void append(ColourEntry* list, std::uint32_t* count, const ColourEntry& e, bool want) {
+// The rounds' lists hold contact indices (4 bytes, not a 16-byte entry: the
+// colouring's lists set the size of the step's scratch memory), and a round
+// makes each contact's entry again from its index, the same way every time.
+// colour_and_sort's: the body pair and contact_rank.
+struct ContactEntries {
+  const BodyPair* pairs;
+  __device__ ColourEntry operator()(std::uint32_t k) const {
+    const BodyPair ab = pairs[k];
+    return {ab.a, ab.b, contact_rank(ab.a, ab.b, k)};
+  }
+};
+// impact_levels': the record's body pair and the impact_rank of its time of
+// impact.
+struct ImpactEntries {
+  SweepRecords records;
+  const Real4* impact;
+  __device__ ColourEntry operator()(std::uint32_t k) const {
+    const BodyPair ab = records.bodies[k];
+    return {ab.a, ab.b, impact_rank(time_of_impact(load_approach(records, impact, k)), k)};
+  }
+};
+
+// Appends contact k to list when `want`, one atomic per warp (a single
+// counter taken by every thread would serialise). The order within the list
+// is free: a round's result does not depend on the order it visits its
+// contacts.
+__device__ void append(std::uint32_t* list, std::uint32_t* count, std::uint32_t k, bool want) {
   const unsigned active = __activemask();
   const unsigned wanting = __ballot_sync(active, want);
   if (wanting == 0) return;
@@ -37,14 +58,14 @@ __device__ void append(ColourEntry* list, std::uint32_t* count, const ColourEntr
   std::uint32_t base = 0;
   if (lane == leader) base = atomicAdd(count, static_cast<std::uint32_t>(__popc(wanting)));
   base = __shfl_sync(active, base, leader);
-  if (want) list[base + __popc(wanting & ((1u << lane) - 1u))] = e;
+  if (want) list[base + __popc(wanting & ((1u << lane) - 1u))] = k;
 }
 
 // Round 0's list: every contact without a kept colour (in any order); a
 // contact with one takes it and marks it at its spheres (an atomic or: the
 // masks do not depend on the order). count[0] and body_used start at 0.
 __global__ void contact_ranks_kernel(const BodyPair* pairs, std::uint32_t n, const std::uint8_t* kept,
-                                     std::uint32_t* colour, ColourEntry* active, std::uint32_t* count,
+                                     std::uint32_t* colour, std::uint32_t* active, std::uint32_t* count,
                                      unsigned long long* body_used) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const BodyPair ab = pairs[k];
@@ -57,34 +78,29 @@ __global__ void contact_ranks_kernel(const BodyPair* pairs, std::uint32_t n, con
       if (!is_wall(b)) atomicOr(&body_used[b], bit);
     }
     colour[k] = keeps ? c : kUncoloured;
-    append(active, count, ColourEntry{a, b, contact_rank(a, b, k)}, !keeps);
+    append(active, count, k, !keeps);
   }
 }
 
 // The impact candidates join the active list (in any order: a round's
 // result does not depend on the order it visits its contacts).
 __global__ void impact_candidates_kernel(SweepRecords records, const Real4* impact, std::uint32_t n,
-                                         real rest_speed, std::uint32_t* colour, ColourEntry* active,
+                                         real rest_speed, std::uint32_t* colour, std::uint32_t* active,
                                          std::uint32_t* count) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const Contact c = load_approach(records, impact, k);
-    const bool candidate = is_impact_candidate(c, rest_speed);
+    const bool candidate = is_impact_candidate(load_approach(records, impact, k), rest_speed);
     colour[k] = candidate ? kUncoloured : kNotActive;
-    ColourEntry e{};
-    if (candidate) {
-      const BodyPair ab = records.bodies[k];
-      e = ColourEntry{ab.a, ab.b, impact_rank(time_of_impact(c), k)};
-    }
-    append(active, count, e, candidate);
+    append(active, count, k, candidate);
   }
 }
 
 // Step 1 of round r over its active list (n long): offers, an atomic max
 // whose result does not depend on order.
-__device__ void offer(const ColourEntry* active, std::uint32_t n, std::uint32_t round, unsigned long long* body_word,
-                      std::uint32_t first, std::uint32_t stride) {
+template <class Entries>
+__device__ void offer(const Entries& entries, const std::uint32_t* active, std::uint32_t n, std::uint32_t round,
+                      unsigned long long* body_word, std::uint32_t first, std::uint32_t stride) {
   for (std::uint32_t t = first; t < n; t += stride) {
-    const ColourEntry e = active[t];
+    const ColourEntry e = entries(active[t]);
     const unsigned long long word = round_word(round, e.rank);
     atomicMax(&body_word[e.a], word);
     if (!is_wall(e.b)) atomicMax(&body_word[e.b], word);
@@ -93,20 +109,21 @@ __device__ void offer(const ColourEntry* active, std::uint32_t n, std::uint32_t 
 
 // Step 2: the contacts holding both offers take a colour (they share no
 // sphere); the others go on to round r + 1's list (count[r + 1] long).
-__device__ void select(const ColourEntry* active, std::uint32_t n, ColourEntry* next, std::uint32_t* count,
-                       std::uint32_t* colour, std::uint32_t round, ColourRule rule,
+template <class Entries>
+__device__ void select(const Entries& entries, const std::uint32_t* active, std::uint32_t n, std::uint32_t* next,
+                       std::uint32_t* count, std::uint32_t* colour, std::uint32_t round, ColourRule rule,
                        const unsigned long long* body_word, unsigned long long* body_used, std::uint32_t first,
                        std::uint32_t stride) {
   for (std::uint32_t t = first; t < n; t += stride) {
-    const ColourEntry e = active[t];
+    const std::uint32_t k = active[t];
+    const ColourEntry e = entries(k);
     const bool wall = is_wall(e.b);
     const std::uint64_t word = round_word(round, e.rank);
     const bool coloured = holds_both(word, body_word[e.a], wall ? 0 : body_word[e.b], wall);
     if (coloured)
-      colour[rank_index(e.rank)] = rule == ColourRule::by_round
-                                ? round
-                                : take_lowest_free(body_used[e.a], wall ? nullptr : &body_used[e.b]);
-    append(next, &count[round + 1], e, !coloured);
+      colour[k] = rule == ColourRule::by_round ? round
+                                               : take_lowest_free(body_used[e.a], wall ? nullptr : &body_used[e.b]);
+    append(next, &count[round + 1], k, !coloured);
   }
 }
 
@@ -114,18 +131,21 @@ __device__ void select(const ColourEntry* active, std::uint32_t n, ColourEntry* 
 // grid-wide barrier after each step; it ends after a round that leaves no
 // contact (every block reads the same list size) or after the last round,
 // and writes the rounds it ran to count[kMaxColourRounds + 1].
-__global__ void rounds_kernel(ColourEntry* list0, ColourEntry* list1, std::uint32_t* count, std::uint32_t* colour,
-                              ColourRule rule, unsigned long long* body_word, unsigned long long* body_used) {
+template <class Entries>
+__global__ void rounds_kernel(Entries entries, std::uint32_t* list0, std::uint32_t* list1, std::uint32_t* count,
+                              std::uint32_t* colour, ColourRule rule, unsigned long long* body_word,
+                              unsigned long long* body_used) {
   const cg::grid_group grid = cg::this_grid();
   const std::uint32_t first = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
   std::uint32_t r = 0;
   for (; r < kMaxColourRounds; ++r) {
     const std::uint32_t n = ::marbles::cuda::read_volatile(count + r);
     if (n == 0) break;
-    ColourEntry* list = r % 2 == 0 ? list0 : list1;
-    offer(list, n, r, body_word, first, stride);
+    std::uint32_t* list = r % 2 == 0 ? list0 : list1;
+    offer(entries, list, n, r, body_word, first, stride);
     grid.sync();
-    select(list, n, r % 2 == 0 ? list1 : list0, count, colour, r, rule, body_word, body_used, first, stride);
+    select(entries, list, n, r % 2 == 0 ? list1 : list0, count, colour, r, rule, body_word, body_used, first,
+           stride);
     grid.sync();
   }
   if (first == 0) count[kMaxColourRounds + 1] = r;
@@ -164,7 +184,7 @@ __global__ void positions_kernel(const std::uint32_t* order, const std::uint32_t
 // lists and body words, or the sort's keys, indices and their alternates.
 struct ColouringArrays {
   std::uint32_t* colour = nullptr;
-  ColourEntry *active = nullptr, *next = nullptr;
+  std::uint32_t *active = nullptr, *next = nullptr;
   unsigned long long *body_word = nullptr, *body_used = nullptr;
   std::uint32_t *keys = nullptr, *keys_alt = nullptr, *index = nullptr, *index_alt = nullptr;
   void* temp = nullptr;
@@ -177,8 +197,8 @@ ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, 
   ::marbles::cuda::carve(*m_scratch, [&](::marbles::cuda::Carve& c) {
     at.colour = c.take<std::uint32_t>(n);
     ::marbles::cuda::Carve rounds = c;
-    at.active = rounds.take<ColourEntry>(n);
-    at.next = rounds.take<ColourEntry>(n);
+    at.active = rounds.take<std::uint32_t>(n);
+    at.next = rounds.take<std::uint32_t>(n);
     at.body_word = rounds.take<unsigned long long>(body_count);
     at.body_used = rounds.take<unsigned long long>(body_count);
     at.keys = c.take<std::uint32_t>(n);
@@ -198,13 +218,14 @@ ColouringCuda::~ColouringCuda() = default;
 // list size yet: count[0] is set by the caller, body_used holds the kept
 // colours), in one launch that ends at the first round to find its list
 // empty and writes the rounds it ran to count[kMaxColourRounds + 1].
-void ColouringCuda::launch_rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, ColourRule rule,
-                                  int sm_count, cudaStream_t s) {
+template <class Entries>
+void ColouringCuda::launch_rounds(const Entries& entries, const ColouringArrays& at, std::uint32_t n,
+                                  std::size_t body_count, ColourRule rule, int sm_count, cudaStream_t s) {
   auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_word, 0, body_count * sizeof(unsigned long long), s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count + 1, 0, (kMaxColourRounds + 1) * sizeof(std::uint32_t), s));
-  ::marbles::cuda::launch_cooperative<rounds_kernel>(n, sm_count, s, at.active, at.next, count, at.colour, rule,
-                                                     at.body_word, at.body_used);
+  ::marbles::cuda::launch_cooperative<rounds_kernel<Entries>>(n, sm_count, s, entries, at.active, at.next, count,
+                                                              at.colour, rule, at.body_word, at.body_used);
 }
 
 std::uint32_t* ColouringCuda::sort_keys(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
@@ -259,7 +280,7 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, kept_colour, at.colour, at.active, count,
                                                                 at.body_used);
   MARBLES_CUDA_CHECK_LAUNCH();
-  launch_rounds(at, n, body_count, ColourRule::lowest_free, sm_count, s);
+  launch_rounds(ContactEntries{pairs}, at, n, body_count, ColourRule::lowest_free, sm_count, s);
   const std::uint32_t* sorted_keys = nullptr;
   const std::uint32_t* order = sort_keys(at, n, kMaxColours, kKeyBits, &sorted_keys, sm_count, s);
   // The colours are read (keys_kernel): their array takes the positions.
@@ -291,7 +312,7 @@ void ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impa
                                                                     at.active, m_count.get_as<std::uint32_t>());
   MARBLES_CUDA_CHECK_LAUNCH();
   // A level is the round that coloured it. Nothing is read on the host.
-  launch_rounds(at, n, body_count, ColourRule::by_round, sm_count, s);
+  launch_rounds(ImpactEntries{records, impact}, at, n, body_count, ColourRule::by_round, sm_count, s);
   order = sort_keys(at, n, kMaxColourRounds, kKeyBits, nullptr, sm_count, s);
   first = m_first_of_key.get_as<std::uint32_t>();
 }

@@ -77,10 +77,12 @@ class ColouringCuda {
   // A call's temporaries carved out of the scratch memory: the sort's keys
   // key_bits wide.
   ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, int key_bits);
-  // Every round over the active list (count[0] entries, set by the
-  // caller), in one launch, its scratch cleared first.
-  void launch_rounds(const ColouringArrays& at, std::uint32_t n, std::size_t body_count, ColourRule rule,
-                     int sm_count, cudaStream_t stream);
+  // Every round over the active list (count[0] contacts, set by the
+  // caller), in one launch, its scratch cleared first; `entries` makes a
+  // contact's spheres and rank from its index (colouring_cuda.cu).
+  template <class Entries>
+  void launch_rounds(const Entries& entries, const ColouringArrays& at, std::uint32_t n, std::size_t body_count,
+                     ColourRule rule, int sm_count, cudaStream_t stream);
   // The keys (overflow -> overflow_key, inactive last) sorted stably with
   // the indices, and the firsts of the keys (m_first_of_key, overflow_key +
   // 2 words) on the device. Returns the sorted indices.

@@ -117,11 +117,6 @@ MARBLES_HD_INLINE std::uint64_t impact_rank(real toi, std::uint32_t k) {
   return (std::uint64_t(earlier) << 32) | (0xffffffffu - k);
 }
 
-// The contact index a rank (contact_rank, impact_rank) was made for.
-MARBLES_HD_INLINE std::uint32_t rank_index(std::uint64_t rank) {
-  return 0xffffffffu - static_cast<std::uint32_t>(rank);
-}
-
 // The offer of a contact in round r: the round in the top byte, so an offer
 // of this round beats every stale offer of an earlier one (no reset needed).
 MARBLES_HD_INLINE std::uint64_t round_word(std::uint32_t round, std::uint64_t rank) {
