@@ -118,10 +118,8 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
   for (std::ptrdiff_t t = 0; t < n; ++t) {
     Contact& c = contacts[t];
     if (c.a >= spheres) continue;
-    const std::uint64_t key = cache_key(c.a, c.b);
-    std::uint32_t k = first[c.a];
-    while (k < first[c.a + 1] && keys[k] < key) ++k;
-    if (k == first[c.a + 1] || keys[k] != key) continue;
+    const std::uint32_t k = find_in_run(keys, first[c.a], first[c.a + 1], cache_key(c.a, c.b));
+    if (k == first[c.a + 1]) continue;
     restore_impulses(c, m_entries.normal_impulse[k], m_entries.tangent_impulse[k], m_entries.rolling_impulse[k]);
     if (colour) kept_colour[t] = colour[k];
     m_matched[k] = 1;  // keys are unique: one contact per entry
@@ -197,9 +195,7 @@ void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, Load&
 #pragma omp parallel for schedule(static) if (groups >= kParallelFrom)
   for (std::ptrdiff_t g = 0; g < static_cast<std::ptrdiff_t>(groups); ++g) {
     const auto a = static_cast<std::uint32_t>(g);
-    for (std::uint32_t x = m_first[a] + 1; x < m_first[a + 1]; ++x)  // insertion sort by key (unique)
-      for (std::uint32_t j = x; j > m_first[a] && st[source[j - 1]].key > st[source[j]].key; --j)
-        std::swap(source[j - 1], source[j]);
+    sort_run(source, m_first[a], m_first[a + 1], [st](std::uint32_t k) { return st[k].key; });
   }
   CacheEntries& e = m_entries;
   e.resize(m);

@@ -45,24 +45,12 @@ __global__ void place_kernel(SweepRecords records, std::uint32_t n, const std::u
   if (blockIdx.x == 0 && threadIdx.x == 0) *size = first[spheres];
 }
 
-// Each sphere's run in key order, by insertion sort (a few entries each, as
-// on the CPU): b decides, the cache key's order (a wall after every sphere,
-// walls by index); keys are unique.
+// Each sphere's run in key order (sort_run, as on the CPU): by b, the cache
+// key's order within a run (a wall after every sphere, walls by index).
 __global__ void order_runs_kernel(SweepRecords records, const std::uint32_t* first, std::uint32_t spheres,
                                   std::uint32_t* index) {
-  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < spheres; a += gridDim.x * blockDim.x) {
-    const std::uint32_t begin = first[a], end = first[a + 1];
-    for (std::uint32_t x = begin + 1; x < end; ++x) {
-      const std::uint32_t k = index[x], b = records.bodies[k].b;
-      std::uint32_t j = x;
-      for (; j > begin; --j) {
-        const std::uint32_t before = index[j - 1];
-        if (records.bodies[before].b < b) break;
-        index[j] = before;
-      }
-      index[j] = k;
-    }
-  }
+  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < spheres; a += gridDim.x * blockDim.x)
+    sort_run(index, first[a], first[a + 1], [&records](std::uint32_t k) { return records.bodies[k].b; });
 }
 
 // The runs of sorted keys[0, m) (an upload's): first[a], for a <= spheres,
@@ -105,12 +93,9 @@ __global__ void restore_kernel(const BodyPair* pairs, std::uint32_t n, const std
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const BodyPair ab = pairs[k];
     const std::uint64_t key = cache_key(ab.a, ab.b);
-    std::uint32_t e = 0, end = 0;
-    if (ab.a < spheres) {
-      e = first[ab.a], end = first[ab.a + 1];
-      while (e < end && keys[e] < key) ++e;
-    }
-    const bool found = e < end && keys[e] == key;
+    const std::uint32_t end = ab.a < spheres ? first[ab.a + 1] : 0;
+    const std::uint32_t e = ab.a < spheres ? find_in_run(keys, first[ab.a], end, key) : 0;
+    const bool found = e < end;
     kept_colour[k] = found ? colour[e] : kNoKeptColour;
     match[k] = found ? e : kNoEntry;
     if (found) matched[e] = 1;  // keys are unique: one contact per entry

@@ -1,7 +1,8 @@
 // narrowphase/contact_cache_math.hpp — per-contact steps of the warm-start
 // cache, host and device: the loop bodies of contact_cache.cpp and of its
-// CUDA twin. The cache is a list of entries sorted by key (a << 32 | b);
-// a contact finds its entry by binary search, so lookups are independent.
+// CUDA twin. The cache is a list of entries sorted by key (a << 32 | b),
+// so grouped by sphere a into runs; a contact finds its entry in its
+// sphere's run (a few entries), so lookups are independent.
 #pragma once
 
 #include <cstdint>
@@ -22,6 +23,27 @@ MARBLES_HD_INLINE std::uint32_t cache_lower_bound(const std::uint64_t* keys, std
     else hi = mid;
   }
   return lo;
+}
+
+// The entry of `key` in a run of sorted keys[begin, end) (one sphere's), or
+// end where there is none.
+MARBLES_HD_INLINE std::uint32_t find_in_run(const std::uint64_t* keys, std::uint32_t begin, std::uint32_t end,
+                                            std::uint64_t key) {
+  while (begin < end && keys[begin] < key) ++begin;
+  return begin < end && keys[begin] == key ? begin : end;
+}
+
+// One sphere's run of a store, index[begin, end), ordered by key_of(index)
+// (the runs' keys are unique) by insertion: a run is a few entries.
+template <class KeyOf>
+MARBLES_HD_INLINE void sort_run(std::uint32_t* index, std::uint32_t begin, std::uint32_t end, const KeyOf& key_of) {
+  for (std::uint32_t x = begin + 1; x < end; ++x) {
+    const std::uint32_t k = index[x];
+    const auto key = key_of(k);
+    std::uint32_t j = x;
+    for (; j > begin && key_of(index[j - 1]) > key; --j) index[j] = index[j - 1];
+    index[j] = k;
+  }
 }
 
 // The carried impulses of a matched contact: tangential part projected onto

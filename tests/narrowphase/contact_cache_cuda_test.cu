@@ -89,13 +89,6 @@ Stored with_impulses(std::mt19937_64& rng, std::vector<Contact> contacts, double
 }
 
 template <class T>
-T* to_device(DeviceBuffer& memory, const std::vector<T>& host) {
-  T* d = memory.as<T>(host.size() + 1);
-  if (!host.empty()) EXPECT_EQ(cudaMemcpy(d, host.data(), host.size() * sizeof(T), cudaMemcpyHostToDevice), cudaSuccess);
-  return d;
-}
-
-template <class T>
 std::vector<T> to_host(const T* d, std::size_t n) {
   std::vector<T> h(n);
   if (n > 0) EXPECT_EQ(cudaMemcpy(h.data(), d, n * sizeof(T), cudaMemcpyDeviceToHost), cudaSuccess);
@@ -119,8 +112,8 @@ struct Records {
     host_words.resize((SweepRecords::bytes_for(n) + 15) / 16 + 1);
     host = SweepRecords::in(host_words.data(), n);
     for (std::size_t k = 0; k < n; ++k) pack_sweep_record(s.contacts[k], host, static_cast<std::uint32_t>(k));
-    device = SweepRecords::in(to_device(words, host_words), n);
-    colour = to_device(colours, s.colour);
+    device = SweepRecords::in(::marbles::cuda::upload(words, host_words, nullptr), n);
+    colour = ::marbles::cuda::upload(colours, s.colour, nullptr);
   }
 };
 
@@ -149,11 +142,12 @@ Restored expect_same_restore(ContactCache& cpu, ContactCacheCuda& gpu, const std
   std::vector<BodyPair> pairs(n);
   for (std::size_t k = 0; k < n; ++k) pairs[k] = {next[k].a, next[k].b};
   BodiesView device_bodies = bodies;
-  device_bodies.inv_mass = to_device(mass_memory, inv_mass);
+  device_bodies.inv_mass = ::marbles::cuda::upload(mass_memory, inv_mass, nullptr);
   auto* kept_d = kept_memory.as<std::uint8_t>(n + 1);
   auto* match_d = match_memory.as<std::uint32_t>(n + 1);
-  const bool any = gpu.restore(to_device(pair_memory, pairs), static_cast<std::uint32_t>(n), device_bodies, weight,
-                               kept_d, match_d, 4, nullptr);
+  const BodyPair* pairs_d = ::marbles::cuda::upload(pair_memory, pairs, nullptr);
+  const bool any =
+      gpu.restore(pairs_d, static_cast<std::uint32_t>(n), device_bodies, weight, kept_d, match_d, 4, nullptr);
   EXPECT_EQ(cudaDeviceSynchronize(), cudaSuccess) << what;
   std::vector<std::uint8_t> kept_g(n, kNoKeptColour);
   std::vector<std::uint32_t> match(n, kNoEntry);
