@@ -15,49 +15,6 @@
 
 namespace marbles::cuda {
 
-// A device allocation that only grows, to a sixteenth more than asked: room
-// for a settled scene's contacts to come and go without a new allocation,
-// little enough that the headroom is not a fifth of the device memory
-// (docs/architecture.md "Headroom, the extra word and one read for the
-// colouring").
-class DeviceBuffer {
- public:
-  DeviceBuffer() = default;
-  DeviceBuffer(const DeviceBuffer&) = delete;
-  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
-  ~DeviceBuffer() {
-    if (m_ptr) cudaFree(m_ptr);
-  }
-  void* reserve(std::size_t bytes) {
-    if (bytes > m_bytes) {
-      if (m_ptr) MARBLES_CUDA_CHECK(cudaFree(m_ptr));
-      m_ptr = nullptr;
-      const std::size_t grown = bytes + bytes / 16 + 256;
-      MARBLES_CUDA_CHECK(cudaMalloc(&m_ptr, grown));
-      m_bytes = grown;
-    }
-    return m_ptr;
-  }
-  template <class T>
-  T* as(std::size_t count) {
-    return static_cast<T*>(reserve(count * sizeof(T) + 16));
-  }
-  template <class T>
-  T* get_as() const {
-    return static_cast<T*>(m_ptr);
-  }
-  void* get() const { return m_ptr; }
-  std::size_t bytes() const { return m_bytes; }
-  void swap(DeviceBuffer& other) noexcept {
-    std::swap(m_ptr, other.m_ptr);
-    std::swap(m_bytes, other.m_bytes);
-  }
-
- private:
-  void* m_ptr = nullptr;
-  std::size_t m_bytes = 0;
-};
-
 // Page-locked host memory for a stage's read-backs (count values of T),
 // freed with its owner: a constructor that throws after it leaks nothing.
 template <class T>
@@ -78,7 +35,7 @@ class PinnedBuffer {
   T* m_ptr = nullptr;
 };
 
-// A runtime handle destroyed with its owner (Stream, Event).
+// A runtime handle destroyed with its owner (DeviceBuffer, Stream, Event).
 template <class Handle, cudaError_t (*Destroy)(Handle)>
 class Owned {
  public:
@@ -106,6 +63,43 @@ class Stream : public Owned<cudaStream_t, cudaStreamDestroy> {
 class Event : public Owned<cudaEvent_t, cudaEventDestroy> {
  public:
   Event() { MARBLES_CUDA_CHECK(cudaEventCreate(&m_handle)); }
+};
+
+// A device allocation that only grows, to a sixteenth more than asked: room
+// for a settled scene's contacts to come and go without a new allocation,
+// little enough that the headroom is not a fifth of the device memory
+// (docs/architecture.md "Headroom, the extra word and one read for the
+// colouring"). Freed with its owner (Owned, kept private: get() says which
+// pointer is meant).
+class DeviceBuffer : private Owned<void*, cudaFree> {
+ public:
+  void* reserve(std::size_t bytes) {
+    if (bytes > m_bytes) {
+      if (m_handle) MARBLES_CUDA_CHECK(cudaFree(m_handle));
+      m_handle = nullptr;
+      const std::size_t grown = bytes + bytes / 16 + 256;
+      MARBLES_CUDA_CHECK(cudaMalloc(&m_handle, grown));
+      m_bytes = grown;
+    }
+    return m_handle;
+  }
+  template <class T>
+  T* as(std::size_t count) {
+    return static_cast<T*>(reserve(count * sizeof(T) + 16));
+  }
+  template <class T>
+  T* get_as() const {
+    return static_cast<T*>(m_handle);
+  }
+  void* get() const { return m_handle; }
+  std::size_t bytes() const { return m_bytes; }
+  void swap(DeviceBuffer& other) noexcept {
+    std::swap(m_handle, other.m_handle);
+    std::swap(m_bytes, other.m_bytes);
+  }
+
+ private:
+  std::size_t m_bytes = 0;
 };
 
 // Copies host[] into `buffer` (grown to fit), asynchronously on `stream`: the

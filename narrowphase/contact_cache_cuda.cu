@@ -249,7 +249,7 @@ __global__ void island_rule_kernel(IslandRule r) {
 
 }  // namespace
 
-ContactCacheCuda::ContactCacheCuda() : m_host(4) {}
+ContactCacheCuda::ContactCacheCuda() : m_host(1) {}
 ContactCacheCuda::~ContactCacheCuda() = default;
 
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,

@@ -92,7 +92,7 @@ class ContactCacheCuda {
   std::uint32_t m_spheres = 0;
   DeviceBuffer* m_scratch = &m_own_scratch;
   std::uint32_t m_bound = 0;
-  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_host;  // readback
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_host;  // the entry count, to or from the device (one word)
   bool m_keep_tangent = true, m_keep_rolling = true;
   Vec3* tangent_entries(std::uint32_t m) { return m_keep_tangent ? m_tangent.as<Vec3>(m) : nullptr; }
   Vec3* rolling_entries(std::uint32_t m) { return m_keep_rolling ? m_rolling.as<Vec3>(m) : nullptr; }

@@ -521,7 +521,7 @@ class CudaStep final : public StepBackend {
   // entry count and the 9 cell-type bounds (40 B).
   std::uint64_t broad_phase_readback() const { return m_model.algorithm == broadphase::Algorithm::home ? 76 : 116; }
   static constexpr int kFlagWords = 5;
-  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{8};
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{3};  // find_contacts' counts and candidate flag
   ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
   bool m_watch = false;
   int m_iteration_factor = 1;
