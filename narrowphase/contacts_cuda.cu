@@ -9,9 +9,9 @@ namespace {
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 
-// A speed (>= 0) as an unsigned word that orders as the speed does, so an
-// atomic max gives the exact largest speed whatever the order.
-__device__ unsigned long long speed_word(real v) {
+// A real's bits as an unsigned word. A speed (>= 0) orders as its word
+// does, so an atomic max gives the exact largest speed whatever the order.
+__device__ unsigned long long bits_of(real v) {
   if constexpr (sizeof(real) == 4) return __float_as_uint(v);
   else return static_cast<unsigned long long>(__double_as_longlong(v));
 }
@@ -26,16 +26,23 @@ __global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_spee
     const real s = length(bodies.velocity[i]);
     v = s > v ? s : v;
   }
-  ::marbles::cuda::warp_atomic_max(max_speed, speed_word(v));
+  ::marbles::cuda::warp_atomic_max(max_speed, bits_of(v));
 }
 
+// With `mixed` (not null), *mixed is set to 1 when some sphere's radius
+// differs from sphere 0's in any bit (every thread of a warp reaches the
+// vote together, after its loop).
 __global__ void reach_kernel(BodiesView bodies, real h, const unsigned long long* max_speed, real* reach,
-                             real* bound) {
+                             real* bound, unsigned* mixed) {
   const real v_max = speed_of(*max_speed);
+  bool differs = false;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x) {
-    reach[i] = contact_reach(length(bodies.velocity[i]), v_max, bodies.radius[i], h);
-    if (bound) bound[i] = bodies.radius[i] + reach[i];
+    const real r = bodies.radius[i];
+    reach[i] = contact_reach(length(bodies.velocity[i]), v_max, r, h);
+    if (bound) bound[i] = r + reach[i];
+    if (mixed) differs = differs || bits_of(r) != bits_of(bodies.radius[0]);
   }
+  if (mixed && __any_sync(0xffffffffu, differs) && (threadIdx.x & 31) == 0) atomicOr(mixed, 1u);
 }
 
 // Whether contact c would enter the impact stage (is_impact_candidate on the
@@ -153,11 +160,12 @@ __global__ void advance_walls_kernel(WallShape* walls, std::uint32_t count, real
 }  // namespace
 
 void launch_contact_reaches(const BodiesView& bodies, real h, unsigned long long* max_speed, real* reach,
-                            real* bound, int sm_count, cudaStream_t stream) {
+                            real* bound, unsigned* mixed_radii, int sm_count, cudaStream_t stream) {
   if (bodies.count == 0) return;
   max_speed_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, max_speed);
   MARBLES_CUDA_CHECK_LAUNCH();
-  reach_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, h, max_speed, reach, bound);
+  reach_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, h, max_speed, reach, bound,
+                                                                      mixed_radii);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -168,30 +168,51 @@ struct alignas(4 * sizeof(real)) Real4 {
 struct alignas(8) BodyPair {
   std::uint32_t a = 0, b = 0;
 };
+// Where every sphere has one radius and every material pair the same
+// coefficients (StepModel::uniform_pairs), every sphere pair's arms word is
+// {R, R, friction, rolling friction} and every wall contact's {R, +0, ...}:
+// the GPU then leaves the arms array out and a record takes them from here
+// (load_record), the same bits make_sphere_contact and make_wall_contact
+// copy into a contact (ra and rb are the radii, the coefficients the pair
+// table's). The radius is read where the spheres' radii live (radius[0]),
+// so no copy of it can go stale.
+struct UniformArms {
+  const real* radius = nullptr;  // the spheres' radii, all equal: R = radius[0]
+  real friction = 0, rolling_friction = 0;
+};
+
 struct SweepRecords {
   Real4* impulse = nullptr;   // normal_impulse, tangent_impulse               (read and written)
   Real4* rolling = nullptr;   // rolling_impulse, twisting_friction            (read and written, with rolling)
   Real4* geometry = nullptr;  // normal, separation
-  Real4* arms = nullptr;      // ra, rb, friction, rolling_friction            (with friction or rolling)
+  // ra, rb, friction, rolling_friction (with friction or rolling). Null
+  // where they are the same for every contact (the GPU's records then leave
+  // them out and read `uniform`).
+  Real4* arms = nullptr;
   // wall_velocity (read by the sweeps for wall contacts only), rebound_shift
   // (the CPU's). Null where no wall moves (the GPU's records then leave it
   // out: a wall at rest has the surface velocity +0 exactly, a contact's
   // default; the GPU keeps the rebound shift in the impact word).
   Real4* extra = nullptr;
   BodyPair* bodies = nullptr; // a, b
+  UniformArms uniform;        // the arms of every contact, where `arms` is null
 
   // Bytes of the records of n contacts, every array 16-byte aligned.
-  static constexpr std::size_t bytes_for(std::size_t n, bool extra = true) {
-    return n * ((extra ? 5 : 4) * sizeof(Real4) + sizeof(BodyPair)) + 64;
+  static constexpr std::size_t bytes_for(std::size_t n, bool extra = true, bool arms = true) {
+    return n * ((3 + (arms ? 1 : 0) + (extra ? 1 : 0)) * sizeof(Real4) + sizeof(BodyPair)) + 64;
   }
-  // The arrays of n contacts laid out in `memory` (bytes_for(n, extra)
-  // bytes, 16-byte aligned).
-  static SweepRecords in(void* memory, std::size_t n, bool extra = true) {
+  // The arrays of n contacts laid out in `memory` (bytes_for(n, extra,
+  // arms) bytes, 16-byte aligned); without arms, `uniform` gives them.
+  static SweepRecords in(void* memory, std::size_t n, bool extra = true, bool arms = true,
+                         const UniformArms& uniform = {}) {
     SweepRecords s;
     auto* p = static_cast<Real4*>(memory);
-    s.impulse = p, s.rolling = p + n, s.geometry = p + 2 * n, s.arms = p + 3 * n;
-    s.extra = extra ? p + 4 * n : nullptr;
-    s.bodies = reinterpret_cast<BodyPair*>(p + (extra ? 5 : 4) * n);
+    s.impulse = p, s.rolling = p + n, s.geometry = p + 2 * n;
+    p += 3 * n;
+    if (arms) s.arms = p, p += n;
+    else s.uniform = uniform;
+    if (extra) s.extra = p, p += n;
+    s.bodies = reinterpret_cast<BodyPair*>(p);
     return s;
   }
 };
@@ -207,13 +228,13 @@ MARBLES_HD_INLINE void pack_position_record(const Contact& c, const SweepRecords
 // rolling word without rolling resistance (the CPU's), and the extra word of
 // a sphere pair when the rebound pass reads the whole contacts or the impact
 // words (Rebound false), and of every contact when no wall moves (no extra
-// array).
+// array); the arms word where every contact has the same (no arms array).
 template <bool Rolling = true, bool Rebound = true>
 MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s, std::uint32_t k) {
   s.impulse[k] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
   if constexpr (Rolling)
     s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.coeff.twisting_friction};
-  s.arms[k] = {c.ra, c.rb, c.coeff.friction, c.coeff.rolling_friction};
+  if (s.arms) s.arms[k] = {c.ra, c.rb, c.coeff.friction, c.coeff.rolling_friction};
   if ((Rebound || is_wall(c.b)) && s.extra)
     s.extra[k] = {c.wall_velocity.x, c.wall_velocity.y, c.wall_velocity.z, c.rebound_shift};
   pack_position_record(c, s, k);
@@ -234,8 +255,14 @@ MARBLES_HD_INLINE Contact load_record(const SweepRecords& s, std::uint32_t k, co
   c.normal = {g.x, g.y, g.z};
   c.separation = g.w;
   if constexpr (Arms) {
-    const Real4 m = load_streaming(s.arms + k);
-    c.ra = m.x, c.rb = m.y, c.coeff.friction = m.z, c.coeff.rolling_friction = m.w;
+    if (s.arms) {
+      const Real4 m = load_streaming(s.arms + k);
+      c.ra = m.x, c.rb = m.y, c.coeff.friction = m.z, c.coeff.rolling_friction = m.w;
+    } else {
+      const real r = *s.uniform.radius;
+      c.ra = r, c.rb = is_wall(c.b) ? real(0) : r;
+      c.coeff.friction = s.uniform.friction, c.coeff.rolling_friction = s.uniform.rolling_friction;
+    }
   }
   if constexpr (Rolling) {
     const Real4 r = load_streaming(s.rolling + k);

@@ -126,17 +126,25 @@ class CudaStep final : public StepBackend {
     m_lookahead = h;
     m_count = 0;
     m_impact_candidates = false;
+    m_uniform_arms = false;
     if (!m_model.collisions && !m_model.wall_contacts) return;
     const BodiesView bodies = m_device.view();
     const std::size_t n = bodies.count;
     std::size_t pair_count = 0, wall_items = 0;
     std::uint32_t *pair_offsets = nullptr, *wall_offsets = nullptr;
     const IndexPair* pairs = nullptr;
-    auto* max_speed = m_max_speed.as<unsigned long long>(1);
+    // The fastest speed, then two words read with the contact counts: [0]
+    // any contact an impact candidate (a substep without one skips the
+    // impact stage), [1] the radii not all the same (the records then keep
+    // their arms word). One set clears all three.
+    auto* words = m_found_words.as<unsigned long long>(2);
+    auto* max_speed = words;
+    auto* seen = reinterpret_cast<unsigned*>(words + 1);
     real* reach = m_reach.as<real>(n);
     real* bound = m_model.collisions ? m_bound.as<real>(n) : nullptr;
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(max_speed, 0, sizeof(unsigned long long), m_stream));
-    nc::launch_contact_reaches(bodies, h, max_speed, reach, bound, m_sm, m_stream);
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(words, 0, 2 * sizeof(unsigned long long), m_stream));
+    unsigned* mixed_radii = m_model.uniform_pairs ? seen + 1 : nullptr;
+    nc::launch_contact_reaches(bodies, h, max_speed, reach, bound, mixed_radii, m_sm, m_stream);
     if (m_model.collisions) {
       try {
         pair_count = m_broadphase->find_pairs_device({bodies.position, bound, n}, 0, m_stream);
@@ -166,13 +174,8 @@ class CudaStep final : public StepBackend {
       wall_offsets = c.take<std::uint32_t>(wall_items + 1);
       wall_temp = c.take<char>(wall_temp_bytes);
     });
-    // Any impact candidate among the contacts, read with their counts: a
-    // substep without one skips the impact stage's own read.
     nc::ImpactWatch watch;
-    if (m_model.solver.restitution) {
-      watch = {m_impact_seen.as<unsigned>(1), m_model.solver.rest_speed};
-      MARBLES_CUDA_CHECK(cudaMemsetAsync(watch.any, 0, sizeof(unsigned), m_stream));
-    }
+    if (m_model.solver.restitution) watch = {seen, m_model.solver.rest_speed};
     if (m_model.collisions) {
       nc::launch_sphere_contact_flags(bodies, pairs, pair_count, m_table, h, reach, pair_flags, watch, m_sm, m_stream);
       dev::device_exclusive_sum(pair_flags, pair_offsets, pair_count + 1, pair_temp, pair_temp_bytes, m_stream);
@@ -186,12 +189,13 @@ class CudaStep final : public StepBackend {
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 1, wall_offsets + wall_items, 4, cudaMemcpyDeviceToHost, m_stream));
       m_bytes += 4;
     }
-    if (watch.any) {
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 2, watch.any, 4, cudaMemcpyDeviceToHost, m_stream));
-      m_bytes += 4;
+    if (watch.any || mixed_radii) {
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 2, seen, 8, cudaMemcpyDeviceToHost, m_stream));
+      m_bytes += 8;
     }
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     m_impact_candidates = watch.any && m_pinned[2] != 0;
+    m_uniform_arms = mixed_radii && m_pinned[3] == 0;
     const std::uint32_t sphere_contacts = m_model.collisions ? m_pinned[0] : 0;
     const std::uint32_t wall_contacts = m_model.wall_contacts ? m_pinned[1] : 0;
     m_count = sphere_contacts + wall_contacts;
@@ -458,13 +462,20 @@ class CudaStep final : public StepBackend {
   narrowphase::BodyPair* pairs_d() const { return m_pairs.get_as<narrowphase::BodyPair>(); }
 
   // The records of m_count contacts (the extra word only where a wall
-  // moves) and their impact words, in one buffer.
+  // moves, the arms word only where contacts' arms differ) and their impact
+  // words, in one buffer.
   void lay_out_records() {
-    const bool extra = m_model.moving_walls;
-    const std::size_t words = (narrowphase::SweepRecords::bytes_for(m_count, extra) + 15) / 16;
+    const bool extra = m_model.moving_walls, arms = !m_uniform_arms;
+    const std::size_t words = (narrowphase::SweepRecords::bytes_for(m_count, extra, arms) + 15) / 16;
     auto* memory = m_record_memory.as<narrowphase::Real4>(words + m_count);
-    m_records = narrowphase::SweepRecords::in(memory, m_count, extra);
+    narrowphase::UniformArms uniform;
+    if (!arms) {
+      const narrowphase::PairCoefficients& c = m_model.pair_coefficients.front();
+      uniform = {m_device.view().radius, c.friction, c.rolling_friction};
+    }
+    m_records = narrowphase::SweepRecords::in(memory, m_count, extra, arms, uniform);
     m_impact = memory + words;
+    m_counters.uniform_arms += arms ? 0 : 1;
   }
   narrowphase::WallShape* walls() const { return m_walls.get_as<narrowphase::WallShape>(); }
 
@@ -521,7 +532,7 @@ class CudaStep final : public StepBackend {
   // entry count and the 9 cell-type bounds (40 B).
   std::uint64_t broad_phase_readback() const { return m_model.algorithm == broadphase::Algorithm::home ? 76 : 116; }
   static constexpr int kFlagWords = 5;
-  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{3};  // find_contacts' counts and candidate flag
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{4};  // find_contacts' counts, candidate and mixed-radii flags
   ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
   bool m_watch = false;
   int m_iteration_factor = 1;
@@ -529,8 +540,8 @@ class CudaStep final : public StepBackend {
   // A substep's contacts: their body pairs as found (m_pairs), each one's
   // cache entry (m_match) and kept colour, then in colour-major order the
   // sweep's records and impact words (m_record_memory) and colours.
-  DeviceBuffer m_walls, m_pair_table, m_max_speed, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
-      m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved, m_contact_chunk, m_impact_seen;
+  DeviceBuffer m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
+      m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved, m_contact_chunk;
   // Temporaries of the stages that never run at the same time (the contact
   // flags, the colouring's lists and sorts, the cache's store and restore):
   // the device holds the largest stage's, not their sum.
@@ -547,6 +558,7 @@ class CudaStep final : public StepBackend {
 
   std::uint32_t m_count = 0;          // contacts of this substep
   bool m_impact_candidates = false;   // with restitution: some contact of this substep is an impact candidate
+  bool m_uniform_arms = false;        // every contact of this substep has the same arms (UniformArms)
   bool m_kept_valid = false;          // m_kept_colour holds this substep's kept colours
   bool m_mirror = false;              // the next parallel colour launch runs mirrored (over_colours)
   // The substep's contacts as every stage after the colouring reads them

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "narrowphase/contacts.hpp"
 #include "sim/scene.hpp"
@@ -82,6 +83,12 @@ StepModel compile_step_model(const scene::Scene& scene, broadphase::Algorithm al
   m.wall_shapes = narrowphase::wall_shapes(m.walls);
   m.pair_coefficients = pair_coefficients(scene);
   m.material_count = static_cast<std::uint32_t>(scene.materials.size());
+  m.uniform_pairs = std::all_of(m.pair_coefficients.begin(), m.pair_coefficients.end(),
+                                [&](const narrowphase::PairCoefficients& c) {
+                                  const narrowphase::PairCoefficients& first = m.pair_coefficients.front();
+                                  return std::memcmp(&c.friction, &first.friction, sizeof(real)) == 0 &&
+                                         std::memcmp(&c.rolling_friction, &first.rolling_friction, sizeof(real)) == 0;
+                                });
   m.solver = solver_settings(scene);
   m.gravity = scene.has(scene::Effect::gravity);
   m.drag = scene.has(scene::Effect::drag);

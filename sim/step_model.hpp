@@ -42,6 +42,10 @@ struct StepModel {
   // Coefficients of every material pair, row-major over material ids.
   std::vector<narrowphase::PairCoefficients> pair_coefficients;
   std::uint32_t material_count = 0;
+  // Every pair has the same friction and rolling friction, bit for bit:
+  // where the spheres also share one radius, every contact has the same arms
+  // word, and the GPU's records leave it out (narrowphase::UniformArms).
+  bool uniform_pairs = false;
 
   Walls walls;                                     // as the scene gives them (output, rendering)
   std::vector<narrowphase::WallShape> wall_shapes; // flattened for the narrow phase, at t = 0

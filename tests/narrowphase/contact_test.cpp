@@ -437,7 +437,10 @@ TEST(Solver, ApproachFromWorldIsThePreparedApproach) {
 // lattice of spheres thrown at each other and at the floor (so that most
 // contacts hit), with and without friction, the accumulated impulses random;
 // the records with the extra word and without it (the GPU's where no wall
-// moves: the floor here is at rest).
+// moves: the floor here is at rest), and with the arms word and without it
+// (the GPU's where every sphere has one radius and every pair the same
+// coefficients, as here: UniformArms). Without the arms word a sweep also
+// leaves the same bodies and impulses as with it.
 TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
   const real r = real(0.01);
   std::mt19937_64 rng(29);
@@ -456,15 +459,21 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
     c.rolling_impulse = random_unit(rng) * real(u(rng) * 1e-7);
   }
   const ImpactParams params{real(0.01), h, Vec3(0, 0, real(-9.81))};
-  for (const int form : {0, 1, 2, 3}) {
-    const bool extra = form < 2, friction = form % 2 == 1;
+  for (std::size_t i = 1; i < n; ++i) ASSERT_EQ(world.radius[i], world.radius[0]);
+  const UniformArms uniform{world.radius, thrown.coeff.friction, thrown.coeff.rolling_friction};
+  std::vector<Real4> after_sweep[2][2];  // [friction][arms]: impulses after a sweep, then the bodies
+  for (int form = 0; form < 8; ++form) {
+    const bool extra = form % 4 < 2, friction = form % 2 == 1, arms = form < 4;
     std::vector<SolverBody> expect_bodies(n), got_bodies(n);
     for (std::size_t i = 0; i < n; ++i) expect_bodies[i] = got_bodies[i] = gather_solver_body(world, i);
     std::vector<Contact> expect = contacts;
-    const std::size_t record_words = (SweepRecords::bytes_for(m, extra) + 15) / 16;
+    const std::size_t record_words = (SweepRecords::bytes_for(m, extra, arms) + 15) / 16;
     std::vector<Real4> memory(record_words + m);
-    const SweepRecords records = SweepRecords::in(memory.data(), m, extra);
+    const SweepRecords records = SweepRecords::in(memory.data(), m, extra, arms, uniform);
     ASSERT_EQ(records.extra != nullptr, extra);
+    ASSERT_EQ(records.arms != nullptr, arms);
+    ASSERT_EQ(reinterpret_cast<const char*>(records.bodies + m) - reinterpret_cast<const char*>(memory.data()) + 64,
+              static_cast<std::ptrdiff_t>(SweepRecords::bytes_for(m, extra, arms)));
     Real4* impact = memory.data() + record_words;
     for (std::uint32_t k = 0; k < m; ++k) {
       pack_sweep_record<true, false>(contacts[k], records, k);  // as the GPU makes them
@@ -491,6 +500,23 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
     }
     EXPECT_GT(walls, 0u);
     EXPECT_GT(rebounds, 0u);
+    // One sweep (friction and rolling, or neither) on the records as they
+    // are now: the same with and without the arms word.
+    std::vector<Real4>& out = after_sweep[friction][arms];
+    for (std::uint32_t k = 0; k < m; ++k) {
+      if (friction) solve_record<true, true>(records, k, got_bodies.data(), real(1) / h);
+      else solve_record<false, false>(records, k, got_bodies.data(), real(1) / h);
+      out.push_back(records.impulse[k]);
+      out.push_back(records.rolling[k]);
+    }
+    for (const SolverBody& b : got_bodies) out.push_back({b.v.x, b.v.y, b.v.z, b.w.x}), out.push_back({b.w.y, b.w.z});
+  }
+  for (const bool friction : {false, true}) {
+    const std::vector<Real4>& with = after_sweep[friction][true];
+    const std::vector<Real4>& without = after_sweep[friction][false];
+    ASSERT_EQ(with.size(), 4 * (std::size_t(m) + n));  // both extra forms, appended in turn
+    ASSERT_EQ(without.size(), with.size());
+    EXPECT_EQ(std::memcmp(with.data(), without.data(), with.size() * sizeof(Real4)), 0) << "friction " << friction;
   }
 }
 

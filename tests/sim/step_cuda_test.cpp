@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <string>
 
 #include "core/device.hpp"
@@ -27,16 +28,25 @@ std::string solve_form() {
   return asked ? asked : "auto";
 }
 
+// Whether every sphere has the same radius, bit for bit.
+bool one_radius(const World& w) {
+  for (std::size_t i = 1; i < w.size(); ++i)
+    if (std::memcmp(&w.radius[i], &w.radius[0], sizeof(real)) != 0) return false;
+  return true;
+}
+
 // Steps both backends side by side; the first step whose states differ
 // fails. The GPU's solve takes the form asked for: never one launch when a
 // launch per colour is asked, every substep with contacts in one when one
 // is, and under auto one launch at least once (every scene here has small
-// colours).
+// colours). The GPU's records leave the arms word out exactly where every
+// contact has the same (one radius and uniform pairs: UniformArms).
 void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps) {
   Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
   ASSERT_EQ(gpu.backend_name(), "cuda");
   const std::string form = solve_form();
+  const bool uniform_arms = gpu.model().uniform_pairs && one_radius(cpu.world());
   std::uint64_t one_launch = 0, solved = 0;
   for (int k = 0; k < steps; ++k) {
     cpu.step();
@@ -46,6 +56,7 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
     if (form == "one") {
       ASSERT_EQ(gpu.last_step().one_launch_solves > 0, cpu.last_step().contacts > 0) << "step " << k;
     }
+    ASSERT_EQ(gpu.last_step().uniform_arms > 0, uniform_arms && cpu.last_step().contacts > 0) << "step " << k;
     ASSERT_EQ(gpu.last_step().contacts, cpu.last_step().contacts) << "step " << k;
     ASSERT_EQ(gpu.last_step().colours, cpu.last_step().colours) << "step " << k;
     ASSERT_EQ(gpu.last_step().overflow, cpu.last_step().overflow) << "step " << k;
@@ -76,6 +87,16 @@ scene::GeneratedParticles dense_block(int nx, int ny, int nz, real r, real z0) {
     for (int y = 0; y < ny; ++y)
       for (int z = 0; z < nz; ++z) add_sphere(g, {r * (2 * x + 2), r * (2 * y + 2), z0 + r * (2 * z + 1)}, r);
   return g;
+}
+
+// Every contact term on (restitution, friction, rolling and twisting
+// resistance), one material, in a small box at rest.
+scene::Scene every_term_box() {
+  scene::Scene s = make_scene(1e-3, 2, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
+                                        Effect::friction, Effect::rolling_resistance},
+                              0.3, 0.5, 0.02, 0.01);
+  s.walls.push_back(box({0, 0, 0}, {real(0.2), real(0.2), real(0.5)}));
+  return s;
 }
 
 }  // namespace
@@ -138,12 +159,7 @@ TEST(StepCuda, DroppedDenseBlockKeepsEveryContact) {
 // to run under compute-sanitizer (scripts/gpu-check).
 TEST(StepCuda, SmallDenseBlockWithEveryTermMatchesTheCpu) {
   REQUIRE_DEVICE();
-  scene::Scene s = make_scene(1e-3, 2, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
-                                        Effect::friction, Effect::rolling_resistance},
-                              0.3, 0.5, 0.02, 0.01);
-  const real r = real(0.01);
-  s.walls.push_back(box({0, 0, 0}, {real(0.2), real(0.2), real(0.5)}));
-  expect_same_run(s, dense_block(7, 5, 3, r, real(0.005)), 30);
+  expect_same_run(every_term_box(), dense_block(7, 5, 3, real(0.01), real(0.005)), 30);
 }
 
 // A large sphere on a floor with small ones on its upper half, each touching
@@ -178,6 +194,30 @@ TEST(StepCuda, NewtonsCradleMatchesTheCpu) {
   add_sphere(g, {real(-0.2), 0, 0}, r, {1, 0, 0});
   for (int k = 1; k < 5; ++k) add_sphere(g, {real(2 * r * (k - 1)), 0, 0}, r);
   expect_same_run(s, g, 300);
+}
+
+// A block of one radius and one material (records without the arms word),
+// then one sphere made a little smaller on both backends (the arms word
+// again, found on the device from the radii), then its radius put back:
+// the CPU's bits throughout, the records' form following the radii.
+TEST(StepCuda, RecordsFollowAnEditedRadius) {
+  REQUIRE_DEVICE();
+  const scene::Scene s = every_term_box();
+  const real r = real(0.01);
+  const scene::GeneratedParticles g = dense_block(6, 5, 4, r, real(0.002));
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  ASSERT_TRUE(gpu.model().uniform_pairs);
+  const real radii[3] = {r, real(0.97) * r, r};
+  for (int phase = 0; phase < 3; ++phase) {
+    for (Simulation* sim : {&cpu, &gpu}) sim->edit_world().radius[17] = radii[phase];
+    for (int k = 0; k < 25; ++k) {
+      cpu.step(), gpu.step();
+      ASSERT_GT(cpu.last_step().contacts, 0u);
+      ASSERT_EQ(gpu.last_step().uniform_arms > 0, phase != 1) << "phase " << phase << " step " << k;
+      ASSERT_EQ(state_hash(gpu.world()), state_hash(cpu.world())) << "phase " << phase << " step " << k;
+    }
+  }
 }
 
 TEST(StepCuda, RepeatsItselfAndTakesEdits) {

@@ -185,6 +185,44 @@ TEST(StepModel, MovingWallsAreTheOnesWhoseSurfaceMoves) {
   EXPECT_FALSE(moving(sliding));
 }
 
+// The model says whether every material pair has the same friction and
+// rolling friction (the arms word a contact's record carries, with one
+// radius: UniformArms): one material does; a second one differing only in
+// density, restitution or twisting friction does too (none of those is in
+// the arms word); a different friction, rolling friction, or an explicit
+// pair that changes either, does not.
+TEST(StepModel, UniformPairsShareFrictionAndRollingFriction) {
+  using namespace marbles::testing;
+  using scene::Effect;
+  const auto uniform = [](const scene::Scene& s) {
+    return compile_step_model(s, broadphase::kDefaultCpuAlgorithm).uniform_pairs;
+  };
+  scene::Scene one = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::friction}, 0.5, 0.4, 0.02, 0.01);
+  ASSERT_EQ(one.materials.size(), 1u);
+  EXPECT_TRUE(uniform(one));
+  scene::Scene two = one;
+  scene::Material other = one.materials[0];
+  other.name = "other";
+  other.density *= 8;
+  other.restitution = 0.1;
+  other.twisting_friction = 0.3;
+  two.materials.push_back(other);
+  EXPECT_TRUE(uniform(two));
+  for (int change = 0; change < 4; ++change) {
+    scene::Scene s = two;
+    if (change == 0) s.materials[1].friction = 0.41;
+    if (change == 1) s.materials[1].rolling_friction = 0.03;
+    if (change >= 2) {
+      scene::ContactPairSpec pair;
+      pair.first = "other";
+      pair.second = one.materials[0].name;
+      (change == 2 ? pair.friction : pair.rolling_friction) = 0.9;
+      s.contact_pairs.push_back(pair);
+    }
+    EXPECT_FALSE(uniform(s)) << "change " << change;
+  }
+}
+
 // Spheres poured into a closed box stay inside it.
 TEST(Walls, BoxKeepsEverySphereInside) {
   using scene::Effect;
