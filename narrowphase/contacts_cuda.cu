@@ -132,7 +132,7 @@ __device__ Contact made_contact(const ContactInputs& in, const BodyPair& ab) {
 // scattered reads (H100, pile of 10^6: colour verb 1.57 -> 1.38 ms).
 __global__ void records_kernel(ContactInputs in, const BodyPair* pairs, const std::uint32_t* match,
                                CacheImpulses cache, const std::uint32_t* position, std::uint32_t n,
-                               SweepRecords records, Real4* impact) {
+                               SweepRecords records, ImpactRecords impacts) {
   for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
     Contact c = made_contact(in, pairs[i]);
     const std::uint32_t e = match ? match[i] : kNoEntry;
@@ -142,14 +142,15 @@ __global__ void records_kernel(ContactInputs in, const BodyPair* pairs, const st
     prepare_from_world(c, in.bodies);
     const std::uint32_t k = position[i];
     pack_sweep_record<true, false>(c, records, k);  // the rebound shift in the impact word
-    impact[k] = impact_word(c);
+    pack_impact(c, impacts, k);
   }
 }
 
-__global__ void contacts_of_records_kernel(SweepRecords records, const Real4* impact, std::uint32_t first,
-                                           std::uint32_t count, BodiesView world, Contact* out) {
+__global__ void contacts_of_records_kernel(SweepRecords records, ImpactRecords impacts, std::uint32_t first,
+                                           std::uint32_t count, BodiesView world, PairTable table,
+                                           const WallShape* walls, Contact* out) {
   for (std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < count; t += gridDim.x * blockDim.x)
-    out[t] = contact_of_record(records, impact, first + t, world);
+    out[t] = contact_of_record(records, impacts, first + t, world, table, walls);
 }
 
 __global__ void advance_walls_kernel(WallShape* walls, std::uint32_t count, real h) {
@@ -202,18 +203,19 @@ void launch_wall_pair_write(std::size_t sphere_count, std::uint32_t wall_count, 
 
 void launch_sorted_records(const ContactInputs& in, const BodyPair* pairs, const std::uint32_t* match,
                            const CacheImpulses& cache, const std::uint32_t* position, std::uint32_t n,
-                           const SweepRecords& records, Real4* impact, int sm_count, cudaStream_t stream) {
+                           const SweepRecords& records, const ImpactRecords& impacts, int sm_count,
+                           cudaStream_t stream) {
   if (n == 0) return;
-  records_kernel<<<grid_for(n, sm_count), kBlock, 0, stream>>>(in, pairs, match, cache, position, n, records, impact);
+  records_kernel<<<grid_for(n, sm_count), kBlock, 0, stream>>>(in, pairs, match, cache, position, n, records, impacts);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_contacts_of_records(const SweepRecords& records, const Real4* impact, std::uint32_t first,
-                                std::uint32_t count, const BodiesView& world, Contact* out, int sm_count,
-                                cudaStream_t stream) {
+void launch_contacts_of_records(const SweepRecords& records, const ImpactRecords& impacts, std::uint32_t first,
+                                std::uint32_t count, const BodiesView& world, const PairTable& table,
+                                const WallShape* walls, Contact* out, int sm_count, cudaStream_t stream) {
   if (count == 0) return;
-  contacts_of_records_kernel<<<grid_for(count, sm_count), kBlock, 0, stream>>>(records, impact, first, count, world,
-                                                                               out);
+  contacts_of_records_kernel<<<grid_for(count, sm_count), kBlock, 0, stream>>>(records, impacts, first, count, world,
+                                                                               table, walls, out);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

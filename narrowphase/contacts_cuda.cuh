@@ -65,20 +65,22 @@ struct ContactInputs {
   const real* reach = nullptr;
 };
 
-// The sweep's records (and impact words, solver_math.hpp) of the contacts of
-// pairs[0, n), contact i at position[i] (the colouring's colour-major
-// order): each contact made as it was found, restored from its cache entry
-// (match[i]: an entry of `cache`, or kNoEntry; match null: none), prepared
-// from the world, packed.
+// The sweep's records (and impact words or approach speeds: ImpactRecords,
+// solver_math.hpp) of the contacts of pairs[0, n), contact i at position[i]
+// (the colouring's colour-major order): each contact made as it was found,
+// restored from its cache entry (match[i]: an entry of `cache`, or kNoEntry;
+// match null: none), prepared from the world, packed.
 void launch_sorted_records(const ContactInputs& in, const BodyPair* pairs, const std::uint32_t* match,
                            const CacheImpulses& cache, const std::uint32_t* position, std::uint32_t n,
-                           const SweepRecords& records, Real4* impact, int sm_count, cudaStream_t stream);
+                           const SweepRecords& records, const ImpactRecords& impacts, int sm_count,
+                           cudaStream_t stream);
 
 // Whole contacts of records [first, first + count) into out (device), as the
-// CPU holds them after the step (contact_of_record).
-void launch_contacts_of_records(const SweepRecords& records, const Real4* impact, std::uint32_t first,
-                                std::uint32_t count, const BodiesView& world, Contact* out, int sm_count,
-                                cudaStream_t stream);
+// CPU holds them after the step (contact_of_record: the table and walls give
+// the restitution where the substep kept approach speeds only).
+void launch_contacts_of_records(const SweepRecords& records, const ImpactRecords& impacts, std::uint32_t first,
+                                std::uint32_t count, const BodiesView& world, const PairTable& table,
+                                const WallShape* walls, Contact* out, int sm_count, cudaStream_t stream);
 
 // Moves translating walls by h times their velocity.
 void launch_advance_walls(WallShape* walls, std::uint32_t count, real h, cudaStream_t stream);

@@ -387,6 +387,20 @@ MARBLES_HD_INLINE Real4 impact_word(const Contact& c) {
   return {c.approach_speed, c.coeff.restitution, c.impact_impulse, c.rebound_shift};
 }
 
+// What the GPU keeps beside the records for the impact stage: an impact word
+// a contact in a substep with impact candidates; in one without, the
+// approach speeds alone (4 bytes a contact, not 16). No impact stage runs
+// there, so every impact impulse and rebound shift stays +0, and the
+// restitution is the pair table's (contact_of_record looks it up).
+struct ImpactRecords {
+  Real4* word = nullptr;     // with impact candidates
+  real* approach = nullptr;  // without
+};
+MARBLES_HD_INLINE void pack_impact(const Contact& c, const ImpactRecords& r, std::uint32_t k) {
+  if (r.word) r.word[k] = impact_word(c);
+  else r.approach[k] = c.approach_speed;
+}
+
 // What the impact stage's levels read: the approach speed and the separation
 // (is_impact_candidate, time_of_impact).
 MARBLES_HD_INLINE Contact load_approach(const SweepRecords& s, const Real4* impact, std::uint32_t k) {
@@ -421,16 +435,24 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::
 }
 
 // Record k as the whole contact the CPU holds after the step: every field
-// the records and the impact word keep, the effective masses from the
-// world's inverse masses and inertias.
-MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const Real4* impact, std::uint32_t k,
-                                            const BodiesView& world) {
+// the records and the impact word keep (without impact words, the approach
+// speed and the pair table's restitution, as make_sphere_contact and
+// make_wall_contact take it), the effective masses from the world's inverse
+// masses and inertias.
+MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const ImpactRecords& impacts, std::uint32_t k,
+                                            const BodiesView& world, const PairTable& table, const WallShape* walls) {
   Contact c = load_record<true, true>(s, k, s.impulse[k]);  // a wall's velocity too
-  const Real4 i = impact[k];
-  c.approach_speed = i.x;
-  c.coeff.restitution = i.y;
-  c.impact_impulse = i.z;
-  c.rebound_shift = i.w;
+  if (impacts.word) {
+    const Real4 i = impacts.word[k];
+    c.approach_speed = i.x;
+    c.coeff.restitution = i.y;
+    c.impact_impulse = i.z;
+    c.rebound_shift = i.w;
+  } else {
+    c.approach_speed = impacts.approach[k];
+    const std::uint32_t b = is_wall(c.b) ? walls[c.b & ~kWallFlag].material : world.material[c.b];
+    c.coeff.restitution = table(world.material[c.a], b).restitution;
+  }
   set_masses<true, true>(c, world_body(world, c.a, c), world_body(world, c.b, c));
   return c;
 }

@@ -218,7 +218,7 @@ class CudaStep final : public StepBackend {
       lay_out_records();
       const nc::ContactInputs in{m_device.view(), walls(), m_table, m_lookahead, m_reach.get_as<real>()};
       nc::launch_sorted_records(in, pairs_d(), m_kept_valid ? m_match.get_as<std::uint32_t>() : nullptr,
-                                m_cache.entries(), position, m_count, m_records, m_impact, m_sm, m_stream);
+                                m_cache.entries(), position, m_count, m_records, m_impacts, m_sm, m_stream);
     }
     m_plan.colours = colours;
     std::copy(m_begin.begin(), m_begin.begin() + colours + 2, m_plan.begin);
@@ -288,7 +288,7 @@ class CudaStep final : public StepBackend {
     const unsigned* hit = m_impact_candidates ? m_hit.get_as<unsigned>() : nullptr;
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(std::max(sweeps, 1)));
     if (sweeps > 0) MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
-    nc::launch_position_stages(m_records, m_impact, m_plan, m_device.view(), walls(), m_model.solver, hit, sweeps,
+    nc::launch_position_stages(m_records, m_impacts.word, m_plan, m_device.view(), walls(), m_model.solver, hit, sweeps,
                                moved, m_flags.get_as<unsigned long long>() + 2, m_sm, m_stream);  // flags[2]
   }
 
@@ -407,7 +407,8 @@ class CudaStep final : public StepBackend {
       auto* chunk = m_contact_chunk.as<narrowphase::Contact>(std::min(n, kChunk));
       for (std::uint32_t first = 0; first < n; first += kChunk) {
         const std::uint32_t count = std::min(kChunk, n - first);
-        nc::launch_contacts_of_records(m_records, m_impact, first, count, m_device.view(), chunk, m_sm, m_stream);
+        nc::launch_contacts_of_records(m_records, m_impacts, first, count, m_device.view(), m_table, walls(), chunk,
+                                       m_sm, m_stream);
         MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host_contacts.data() + first, chunk, count * sizeof(narrowphase::Contact),
                                            cudaMemcpyDeviceToHost, m_stream));
       }
@@ -463,18 +464,22 @@ class CudaStep final : public StepBackend {
 
   // The records of m_count contacts (the extra word only where a wall
   // moves, the arms word only where contacts' arms differ) and their impact
-  // words, in one buffer.
+  // words (approach speeds only in a substep without impact candidates), in
+  // one buffer.
   void lay_out_records() {
     const bool extra = m_model.moving_walls, arms = !m_uniform_arms;
     const std::size_t words = (narrowphase::SweepRecords::bytes_for(m_count, extra, arms) + 15) / 16;
-    auto* memory = m_record_memory.as<narrowphase::Real4>(words + m_count);
+    const std::size_t impact_words = m_impact_candidates ? m_count : (m_count * sizeof(real) + 15) / 16;
+    auto* memory = m_record_memory.as<narrowphase::Real4>(words + impact_words);
     narrowphase::UniformArms uniform;
     if (!arms) {
       const narrowphase::PairCoefficients& c = m_model.pair_coefficients.front();
       uniform = {m_device.view().radius, c.friction, c.rolling_friction};
     }
     m_records = narrowphase::SweepRecords::in(memory, m_count, extra, arms, uniform);
-    m_impact = memory + words;
+    m_impacts = {};
+    if (m_impact_candidates) m_impacts.word = memory + words;
+    else m_impacts.approach = reinterpret_cast<real*>(memory + words);
     m_counters.uniform_arms += arms ? 0 : 1;
   }
   narrowphase::WallShape* walls() const { return m_walls.get_as<narrowphase::WallShape>(); }
@@ -512,11 +517,11 @@ class CudaStep final : public StepBackend {
     const narrowphase::ImpactParams params{m_model.solver.rest_speed, h, m_model.solver.wall_accel};
     std::uint32_t* order = nullptr;
     const std::uint32_t* first = nullptr;
-    m_colouring.impact_levels(m_records, m_impact, m_count, m_device.size(), params.rest_speed, order, first, m_sm,
+    m_colouring.impact_levels(m_records, m_impacts.word, m_count, m_device.size(), params.rest_speed, order, first, m_sm,
                               m_stream);
     auto* hit = m_hit.as<unsigned>(narrowphase::kImpactPasses);
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, narrowphase::kImpactPasses * sizeof(unsigned), m_stream));
-    nc::launch_impact_stage(m_records, m_impact, order, first, m_count, m_plan, bodies, params,
+    nc::launch_impact_stage(m_records, m_impacts.word, order, first, m_count, m_plan, bodies, params,
                             m_model.solver.friction, narrowphase::kImpactPasses, hit, m_sm, m_stream);
   }
 
@@ -564,7 +569,7 @@ class CudaStep final : public StepBackend {
   // The substep's contacts as every stage after the colouring reads them
   // (made by the colouring).
   narrowphase::SweepRecords m_records;
-  narrowphase::Real4* m_impact = nullptr;
+  narrowphase::ImpactRecords m_impacts;  // impact words with impact candidates, else approach speeds
   real m_lookahead = 0;  // find_contacts' h: the colouring makes the contacts again with it
   std::vector<std::uint32_t> m_begin{0, 0};  // the colouring's ranges, copied into m_plan
   nc::ColourPlan m_plan;  // the substep's colours, as the host's walk and the kernels take them

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <set>
 #include <vector>
 
 #include "narrowphase/contact_cache.hpp"
@@ -461,6 +462,8 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
   const ImpactParams params{real(0.01), h, Vec3(0, 0, real(-9.81))};
   for (std::size_t i = 1; i < n; ++i) ASSERT_EQ(world.radius[i], world.radius[0]);
   const UniformArms uniform{world.radius, thrown.coeff.friction, thrown.coeff.rolling_friction};
+  const PairTable table = thrown.table();
+  const WallShape* floor = thrown.lattice.floor.data();
   std::vector<Real4> after_sweep[2][2];  // [friction][arms]: impulses after a sweep, then the bodies
   for (int form = 0; form < 8; ++form) {
     const bool extra = form % 4 < 2, friction = form % 2 == 1, arms = form < 4;
@@ -492,7 +495,7 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
     EXPECT_EQ(std::memcmp(expect_bodies.data(), got_bodies.data(), n * sizeof(SolverBody)), 0) << friction;
     std::uint32_t walls = 0, rebounds = 0;
     for (std::uint32_t k = 0; k < m; ++k) {
-      const Contact c = contact_of_record(records, impact, k, world);
+      const Contact c = contact_of_record(records, {impact, nullptr}, k, world, table, floor);
       ASSERT_EQ(std::memcmp(&c, &expect[k], sizeof(Contact)), 0)
           << "contact " << k << " friction " << friction << " extra " << extra;
       walls += is_wall(c.b) ? 1 : 0;
@@ -518,6 +521,48 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
     ASSERT_EQ(without.size(), with.size());
     EXPECT_EQ(std::memcmp(with.data(), without.data(), with.size() * sizeof(Real4)), 0) << "friction " << friction;
   }
+}
+
+// A substep without impact candidates keeps the approach speeds alone beside
+// the records (ImpactRecords): no impact stage runs, and the contacts made
+// from them are the contacts as made, every field, each one's restitution
+// looked up again from its pair (two materials here, alternating, the floor
+// of the second, every pair's restitution its own).
+TEST(Solver, RecordsWithApproachSpeedsOnlyHoldTheWholeContact) {
+  const real r = real(0.01);
+  std::mt19937_64 rng(31);
+  MovingLattice thrown = MovingLattice::thrown(10, r, rng);
+  Lattice& lattice = thrown.lattice;
+  for (std::size_t i = 0; i < lattice.n; ++i) lattice.material[i] = static_cast<std::uint32_t>(i % 2);
+  lattice.floor[0].material = 1;
+  PairCoefficients pairs[4] = {thrown.coeff, thrown.coeff, thrown.coeff, thrown.coeff};
+  pairs[0].restitution = real(0.1);
+  pairs[1].restitution = pairs[2].restitution = real(0.5);
+  pairs[3].restitution = real(0.9);
+  const PairTable table{pairs, 2};
+  const BodiesView world = thrown.view();
+  ColourRanges colours;
+  const std::vector<Contact> contacts = lattice.contacts(world, table, real(1e-3), real(2e-4), colours);
+  const auto m = static_cast<std::uint32_t>(contacts.size());
+  ASSERT_GT(m, 2000u);
+  std::vector<Real4> memory((SweepRecords::bytes_for(m, false) + 15) / 16);
+  const SweepRecords records = SweepRecords::in(memory.data(), m, false);
+  std::vector<real> approach(m);
+  const ImpactRecords speeds{nullptr, approach.data()};
+  for (std::uint32_t k = 0; k < m; ++k) {
+    pack_sweep_record<true, false>(contacts[k], records, k);
+    pack_impact(contacts[k], speeds, k);
+  }
+  std::set<real> restitutions;
+  std::uint32_t walls = 0;
+  for (std::uint32_t k = 0; k < m; ++k) {
+    const Contact c = contact_of_record(records, speeds, k, world, table, lattice.floor.data());
+    ASSERT_EQ(std::memcmp(&c, &contacts[k], sizeof(Contact)), 0) << "contact " << k;
+    restitutions.insert(c.coeff.restitution);
+    walls += is_wall(c.b) ? 1 : 0;
+  }
+  EXPECT_EQ(restitutions.size(), 3u);
+  EXPECT_GT(walls, 0u);
 }
 
 // A wall at rest (surface_at_rest) has the surface velocity +0 in every

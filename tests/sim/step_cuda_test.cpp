@@ -6,12 +6,14 @@
 // saying so, without a CUDA device.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <string>
 
 #include "core/device.hpp"
+#include "narrowphase/solver_math.hpp"
 #include "tests/require_device.hpp"
 #include "tests/sim/test_scenes.hpp"
 
@@ -87,6 +89,21 @@ scene::GeneratedParticles dense_block(int nx, int ny, int nz, real r, real z0) {
     for (int y = 0; y < ny; ++y)
       for (int z = 0; z < nz; ++z) add_sphere(g, {r * (2 * x + 2), r * (2 * y + 2), z0 + r * (2 * z + 1)}, r);
   return g;
+}
+
+// The last substep's contacts as the host gets them: the CPU's, every field
+// bit for bit (the GPU makes them from its records: contact_of_record).
+// Returns how many were impact candidates.
+std::size_t expect_same_contacts(Simulation& cpu, Simulation& gpu) {
+  const auto& cc = cpu.contacts();
+  const auto& gc = gpu.contacts();
+  EXPECT_EQ(gc.size(), cc.size());
+  std::size_t candidates = 0;
+  for (std::size_t k = 0; k < std::min(cc.size(), gc.size()); ++k) {
+    EXPECT_EQ(std::memcmp(&gc[k], &cc[k], sizeof(narrowphase::Contact)), 0) << "contact " << k;
+    candidates += narrowphase::is_impact_candidate(cc[k], cpu.model().solver.rest_speed) ? 1 : 0;
+  }
+  return candidates;
 }
 
 // Every contact term on (restitution, friction, rolling and twisting
@@ -199,7 +216,8 @@ TEST(StepCuda, NewtonsCradleMatchesTheCpu) {
 // A block of one radius and one material (records without the arms word),
 // then one sphere made a little smaller on both backends (the arms word
 // again, found on the device from the radii), then its radius put back:
-// the CPU's bits throughout, the records' form following the radii.
+// the CPU's bits throughout, the records' form following the radii, and
+// the contacts the host gets the CPU's.
 TEST(StepCuda, RecordsFollowAnEditedRadius) {
   REQUIRE_DEVICE();
   const scene::Scene s = every_term_box();
@@ -209,6 +227,7 @@ TEST(StepCuda, RecordsFollowAnEditedRadius) {
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
   ASSERT_TRUE(gpu.model().uniform_pairs);
   const real radii[3] = {r, real(0.97) * r, r};
+  std::size_t calm = 0;  // phases that ended without an impact candidate (approach speeds only)
   for (int phase = 0; phase < 3; ++phase) {
     for (Simulation* sim : {&cpu, &gpu}) sim->edit_world().radius[17] = radii[phase];
     for (int k = 0; k < 25; ++k) {
@@ -217,7 +236,9 @@ TEST(StepCuda, RecordsFollowAnEditedRadius) {
       ASSERT_EQ(gpu.last_step().uniform_arms > 0, phase != 1) << "phase " << phase << " step " << k;
       ASSERT_EQ(state_hash(gpu.world()), state_hash(cpu.world())) << "phase " << phase << " step " << k;
     }
+    calm += expect_same_contacts(cpu, gpu) == 0 ? 1 : 0;
   }
+  EXPECT_GT(calm, 0u);
 }
 
 TEST(StepCuda, RepeatsItselfAndTakesEdits) {
@@ -241,14 +262,7 @@ TEST(StepCuda, RepeatsItselfAndTakesEdits) {
   gpu.edit_world().velocity[7] = {0, 0, 3};
   for (int k = 0; k < 100; ++k) cpu.step(), gpu.step();
   EXPECT_EQ(state_hash(gpu.world()), state_hash(cpu.world()));
-  const auto& cc = cpu.contacts();
-  const auto& gc = gpu.contacts();
-  ASSERT_EQ(gc.size(), cc.size());
-  for (std::size_t k = 0; k < cc.size(); ++k) {
-    EXPECT_EQ(gc[k].a, cc[k].a) << k;
-    EXPECT_EQ(gc[k].b, cc[k].b) << k;
-    EXPECT_EQ(gc[k].normal_impulse, cc[k].normal_impulse) << k;
-  }
+  expect_same_contacts(cpu, gpu);
 }
 
 // The island rule (a lost load cold-starts its island) runs on the device
