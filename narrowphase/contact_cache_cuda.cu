@@ -1,6 +1,7 @@
 #include <cooperative_groups.h>
 
 #include <algorithm>
+#include <vector>
 
 #include "core/cuda_check.hpp"
 #include "narrowphase/contact_cache.hpp"
@@ -53,26 +54,16 @@ __global__ void order_runs_kernel(SweepRecords records, const std::uint32_t* fir
     sort_run(index, first[a], first[a + 1], [&records](std::uint32_t k) { return records.bodies[k].b; });
 }
 
-// The runs of sorted keys[0, m) (an upload's): first[a], for a <= spheres,
-// the first entry of sphere a or a later one (entries of spheres from
-// `spheres` on are never found).
-__global__ void first_of_keys_kernel(const std::uint64_t* keys, std::uint32_t m, std::uint32_t spheres,
-                                     std::uint32_t* first) {
-  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a <= spheres; a += gridDim.x * blockDim.x)
-    first[a] = cache_lower_bound(keys, m, cache_key(a, 0));
-}
-
-// The entries in key order, with their cache keys in place of the sort's.
-// tangent and rolling are null when the scene has no friction or no rolling
-// resistance: those impulses stay zero, nothing to keep.
+// The entries in key order, each with the b half of its cache key (a is its
+// run's sphere). tangent and rolling are null when the scene has no friction
+// or no rolling resistance: those impulses stay zero, nothing to keep.
 __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_colour, const std::uint32_t* index,
-                              const std::uint32_t* size, std::uint64_t* keys, real* normal, Vec3* tangent,
+                              const std::uint32_t* size, std::uint32_t* keys, real* normal, Vec3* tangent,
                               Vec3* rolling, std::uint8_t* colour) {
   const std::uint32_t m = *size;
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
     const std::uint32_t k = index[e];
-    const BodyPair ab = records.bodies[k];
-    keys[e] = cache_key(ab.a, ab.b);
+    keys[e] = records.bodies[k].b;
     const Real4 i = records.impulse[k];
     const bool loaded = i.x > 0;
     normal[e] = loaded ? i.x : real(0);
@@ -87,14 +78,13 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
 
 // Each contact's entry (a scan of its sphere's few entries, as on the CPU)
 // and kept colour. A sphere from `spheres` on has no entries.
-__global__ void restore_kernel(const BodyPair* pairs, std::uint32_t n, const std::uint64_t* keys,
+__global__ void restore_kernel(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* keys,
                                const std::uint32_t* first, std::uint32_t spheres, const std::uint8_t* colour,
                                std::uint8_t* matched, std::uint8_t* kept_colour, std::uint32_t* match) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const BodyPair ab = pairs[k];
-    const std::uint64_t key = cache_key(ab.a, ab.b);
     const std::uint32_t end = ab.a < spheres ? first[ab.a + 1] : 0;
-    const std::uint32_t e = ab.a < spheres ? find_in_run(keys, first[ab.a], end, key) : 0;
+    const std::uint32_t e = ab.a < spheres ? find_in_run(keys, first[ab.a], end, ab.b) : 0;
     const bool found = e < end;
     kept_colour[k] = found ? colour[e] : kNoKeptColour;
     match[k] = found ? e : kNoEntry;
@@ -108,22 +98,23 @@ __device__ __forceinline__ real restored_normal(const std::uint32_t* match, cons
   return e != kNoEntry ? normal[e] : real(0);
 }
 
-// Entry e found no contact and carried a load (is_lost_load on its sphere a).
-__device__ __forceinline__ bool lost_load_at(const std::uint64_t* keys, const real* normal,
-                                             const std::uint8_t* matched, const BodiesView& bodies,
-                                             real weight_impulse, std::uint32_t e) {
-  if (matched[e]) return false;
-  const auto a = static_cast<std::uint32_t>(keys[e] >> 32);
-  return a < bodies.count && is_lost_load(normal[e], bodies.inv_mass[a], weight_impulse);
+// Entry e of sphere a found no contact and carried a load (is_lost_load).
+__device__ __forceinline__ bool lost_load_at(const real* normal, const std::uint8_t* matched,
+                                             const BodiesView& bodies, real weight_impulse, std::uint32_t a,
+                                             std::uint32_t e) {
+  return !matched[e] && is_lost_load(normal[e], bodies.inv_mass[a], weight_impulse);
 }
 
-__global__ void lost_loads_kernel(const std::uint64_t* keys, const real* normal, const std::uint8_t* matched,
-                                  const std::uint32_t* size, BodiesView bodies, real weight_impulse,
+// The lost loads, sphere by sphere (a thread walks its sphere's run): spheres
+// below `spheres` (the cache's and the world's both), as the CPU counts an
+// entry only of a sphere the world has.
+__global__ void lost_loads_kernel(const std::uint32_t* first, std::uint32_t spheres, const real* normal,
+                                  const std::uint8_t* matched, BodiesView bodies, real weight_impulse,
                                   std::uint32_t* count) {
-  const std::uint32_t m = *size;
   std::uint32_t mine = 0;
-  for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x)
-    if (lost_load_at(keys, normal, matched, bodies, weight_impulse, e)) ++mine;
+  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < spheres; a += gridDim.x * blockDim.x)
+    for (std::uint32_t e = first[a]; e < first[a + 1]; ++e)
+      if (lost_load_at(normal, matched, bodies, weight_impulse, a, e)) ++mine;
   if (mine) atomicAdd(count, mine);
 }
 
@@ -141,10 +132,11 @@ struct IslandRule {
   const BodyPair* pairs;
   std::uint32_t* match;
   std::uint32_t n;  // contacts
-  const std::uint64_t* keys;
+  const std::uint32_t* keys;   // the entries' b
+  const std::uint32_t* first;  // the runs of spheres [0, spheres)
+  std::uint32_t spheres;
   const real* normal;
   const std::uint8_t* matched;
-  const std::uint32_t* size;  // entries
   BodiesView bodies;
   real weight_impulse;
   const std::uint32_t* lost;  // lost_loads_kernel's count
@@ -197,16 +189,15 @@ __device__ void island_max_pass(const IslandRule& r, std::uint32_t first, std::u
 
 // Islands that lost a load start cold (a plain store of 1: order-free).
 __device__ void island_cold_pass(const IslandRule& r, std::uint32_t first, std::uint32_t stride) {
-  const std::uint32_t m = *r.size;
-  for (std::uint32_t e = first; e < m; e += stride) {
-    if (!lost_load_at(r.keys, r.normal, r.matched, r.bodies, r.weight_impulse, e)) continue;
-    for (const std::uint32_t body : {static_cast<std::uint32_t>(r.keys[e] >> 32),
-                                     static_cast<std::uint32_t>(r.keys[e] & 0xffffffffu)}) {
-      if (is_wall(body) || body >= r.bodies.count) continue;
-      const std::uint32_t l = r.label[body];
-      if (island_starts_cold(r.normal[e], real_of_bits(r.island_max[l]))) r.cold[l] = 1;
+  for (std::uint32_t a = first; a < r.spheres; a += stride)
+    for (std::uint32_t e = r.first[a]; e < r.first[a + 1]; ++e) {
+      if (!lost_load_at(r.normal, r.matched, r.bodies, r.weight_impulse, a, e)) continue;
+      for (const std::uint32_t body : {a, r.keys[e]}) {
+        if (is_wall(body) || body >= r.bodies.count) continue;
+        const std::uint32_t l = r.label[body];
+        if (island_starts_cold(r.normal[e], real_of_bits(r.island_max[l]))) r.cold[l] = 1;
+      }
     }
-  }
 }
 
 // A cold island's contacts start without impulses (no entry).
@@ -289,19 +280,23 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   order_runs_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(contacts, first, spheres, index);
   MARBLES_CUDA_CHECK_LAUNCH();
   gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, size,
-                                                         m_keys.as<std::uint64_t>(n), m_normal.as<real>(n),
+                                                         m_keys.as<std::uint32_t>(n), m_normal.as<real>(n),
                                                          tangent_entries(n), rolling_entries(n),
                                                          m_colour.as<std::uint8_t>(n));
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 CacheEntries ContactCacheCuda::download(cudaStream_t s) {
-  // Everything up to the bound, then cut to the count read with it.
+  // Everything up to the bound, then cut to the count read with it; the
+  // whole keys from each run's sphere and the entries' b.
   CacheEntries e;
   const std::size_t m = m_bound;
   e.resize(m);
   if (m == 0) return e;
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.key.data(), m_keys.get(), m * sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
+  std::vector<std::uint32_t> b(m), first(std::size_t(m_spheres) + 1);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(b.data(), m_keys.get(), m * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(first.data(), m_first.get(), first.size() * sizeof(std::uint32_t),
+                                     cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.normal_impulse.data(), m_normal.get(), m * sizeof(real), cudaMemcpyDeviceToHost, s));
   if (m_keep_tangent)  // else zero, as resize left them
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.tangent_impulse.data(), m_tangent.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
@@ -311,32 +306,40 @@ CacheEntries ContactCacheCuda::download(cudaStream_t s) {
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_size.get(), sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   e.resize(std::min<std::size_t>(m_host[0], m));
+  for (std::uint32_t a = 0; a < m_spheres; ++a)
+    for (std::uint32_t k = first[a]; k < first[a + 1] && k < e.size(); ++k) e.key[k] = cache_key(a, b[k]);
   return e;
 }
 
 void ContactCacheCuda::upload(const CacheEntries& e, std::uint32_t spheres, cudaStream_t s) {
-  const auto m = static_cast<std::uint32_t>(e.size());
+  // The entries of the world's spheres (sorted by key, so a prefix: an entry
+  // of a sphere the world does not have is never found, and the CPU counts
+  // no lost load of it either), as runs: the firsts and each entry's b.
+  const std::uint32_t m = cache_lower_bound(e.key.data(), static_cast<std::uint32_t>(e.size()), cache_key(spheres, 0));
   m_bound = m;
   m_spheres = spheres;
   m_host[0] = m;
+  std::vector<std::uint32_t> b(m), first(std::size_t(spheres) + 1);
+  for (std::uint32_t a = 0, k = 0; a <= spheres; ++a) {
+    while (k < m && e.key[k] < cache_key(a, 0)) b[k] = static_cast<std::uint32_t>(e.key[k] & 0xffffffffu), ++k;
+    first[a] = k;
+  }
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_size.as<std::uint32_t>(1), m_host, sizeof(std::uint32_t), cudaMemcpyHostToDevice, s));
-  auto* first = m_first.as<std::uint32_t>(std::size_t(spheres) + 1);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_first.as<std::uint32_t>(first.size()), first.data(),
+                                     first.size() * sizeof(std::uint32_t), cudaMemcpyHostToDevice, s));
   if (m == 0) {
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
     return;
   }
-  auto* keys = m_keys.as<std::uint64_t>(m);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(keys, e.key.data(), m * sizeof(std::uint64_t), cudaMemcpyHostToDevice, s));
-  first_of_keys_kernel<<<grid_for(std::size_t(spheres) + 1, 16), kBlock, 0, s>>>(keys, m, spheres, first);
-  MARBLES_CUDA_CHECK_LAUNCH();
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_keys.as<std::uint32_t>(m), b.data(), m * sizeof(std::uint32_t),
+                                     cudaMemcpyHostToDevice, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_normal.as<real>(m), e.normal_impulse.data(), m * sizeof(real), cudaMemcpyHostToDevice, s));
   if (m_keep_tangent)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_tangent.as<Vec3>(m), e.tangent_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
   if (m_keep_rolling)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_rolling.as<Vec3>(m), e.rolling_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
   auto* colour = m_colour.as<std::uint8_t>(m);
-  if (e.colour.size() == m)
+  if (e.colour.size() == e.size())
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(colour, e.colour.data(), m, cudaMemcpyHostToDevice, s));
   else
     MARBLES_CUDA_CHECK(cudaMemsetAsync(colour, kNoKeptColour, m, s));  // none known: coloured afresh
@@ -354,7 +357,7 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
   else MARBLES_CUDA_CHECK(cudaMemsetAsync(to.m_size.as<std::uint32_t>(1), 0, sizeof(std::uint32_t), s));  // never stored
   if (m == 0) return;
   copy(to.m_first, m_first, (std::size_t(m_spheres) + 1) * sizeof(std::uint32_t));
-  copy(to.m_keys, m_keys, m * sizeof(std::uint64_t));
+  copy(to.m_keys, m_keys, m * sizeof(std::uint32_t));
   copy(to.m_normal, m_normal, m * sizeof(real));
   if (m_keep_tangent) copy(to.m_tangent, m_tangent, m * sizeof(Vec3));
   if (m_keep_rolling) copy(to.m_rolling, m_rolling, m * sizeof(Vec3));
@@ -382,18 +385,21 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
   auto* counter = m_counter.as<std::uint32_t>(3);  // the lost loads, then the label passes' two flags
   MARBLES_CUDA_CHECK(cudaMemsetAsync(matched, 0, m, s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
-  const auto* keys = m_keys.get_as<std::uint64_t>();
+  const auto* keys = m_keys.get_as<std::uint32_t>();
   const auto* normal = m_normal.get_as<real>();
-  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, keys, m_first.get_as<std::uint32_t>(),
-                                                          std::min(m_spheres, bodies_n),
+  const auto* first = m_first.get_as<std::uint32_t>();
+  const std::uint32_t spheres = std::min(m_spheres, bodies_n);  // the spheres with runs that the world has
+  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, keys, first, spheres,
                                                           m_colour.get_as<std::uint8_t>(), matched, kept_colour, match);
   MARBLES_CUDA_CHECK_LAUNCH();
-  lost_loads_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(keys, normal, matched, size, bodies, weight_impulse,
-                                                             counter);
-  MARBLES_CUDA_CHECK_LAUNCH();
+  if (spheres > 0) {
+    lost_loads_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(first, spheres, normal, matched, bodies,
+                                                                     weight_impulse, counter);
+    MARBLES_CUDA_CHECK_LAUNCH();
+  }
 
   // The island rule, on the device, where a load was lost (the kernel reads the count).
-  const IslandRule rule{pairs, match, n, keys, normal, matched, size, bodies, weight_impulse, counter, label,
+  const IslandRule rule{pairs, match, n, keys, first, spheres, normal, matched, bodies, weight_impulse, counter, label,
                         island_max, cold, counter + 1};
   ::marbles::cuda::launch_cooperative<island_rule_kernel>(std::max<std::size_t>({n, m, bodies_n}), sm_count, s, rule);
   return true;

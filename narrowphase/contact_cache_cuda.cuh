@@ -2,7 +2,8 @@
 // entries in key order as the CPU sorts them (a counting sort by sphere a,
 // then each sphere's few entries ordered by b), and each contact's entry
 // found among its sphere's (the counting sort's firsts, kept with the
-// entries), one thread per contact. The entry count stays on the device (a
+// entries), one thread per contact. An entry keeps only the b half of its
+// key (4 bytes, not 8): its run says a. The entry count stays on the device (a
 // checkpoint's download reads it). When a load was lost (rare: a counter
 // says so, read by the device alone), the island rule runs in one
 // cooperative launch: islands by min-label propagation with pointer jumping
@@ -69,7 +70,8 @@ class ContactCacheCuda {
   std::uint32_t bound() const { return m_bound; }
   // The entries as the CPU cache holds them (a checkpoint's copy), and back.
   CacheEntries download(cudaStream_t stream);
-  // `spheres`: the world's (entries of other spheres are never found).
+  // `spheres`: the world's (entries of other spheres are never found, and
+  // left out).
   void upload(const CacheEntries& entries, std::uint32_t spheres, cudaStream_t stream);
   // The entries copied on the device into `to` (the watchdog's undo).
   void copy_to(ContactCacheCuda& to, cudaStream_t stream) const;
@@ -84,6 +86,7 @@ class ContactCacheCuda {
   void share_scratch(DeviceBuffer& scratch) { m_scratch = &scratch; }
 
  private:
+  // The entries: their keys' b halves (m_keys), impulses and colours.
   DeviceBuffer m_keys, m_normal, m_tangent, m_rolling, m_colour, m_counter, m_own_scratch;
   DeviceBuffer m_size;  // the entry count (one word, device)
   // The entries of sphere a are [first[a], first[a + 1]) for a < m_spheres

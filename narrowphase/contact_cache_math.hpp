@@ -26,9 +26,11 @@ MARBLES_HD_INLINE std::uint32_t cache_lower_bound(const std::uint64_t* keys, std
 }
 
 // The entry of `key` in a run of sorted keys[begin, end) (one sphere's), or
-// end where there is none.
-MARBLES_HD_INLINE std::uint32_t find_in_run(const std::uint64_t* keys, std::uint32_t begin, std::uint32_t end,
-                                            std::uint64_t key) {
+// end where there is none. The keys are the whole cache keys (the CPU's) or
+// only their b halves (the GPU's: within a run a is the run's sphere, so b
+// orders the run as the whole key does).
+template <class Key>
+MARBLES_HD_INLINE std::uint32_t find_in_run(const Key* keys, std::uint32_t begin, std::uint32_t end, Key key) {
   while (begin < end && keys[begin] < key) ++begin;
   return begin < end && keys[begin] == key ? begin : end;
 }
