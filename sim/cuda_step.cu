@@ -14,7 +14,8 @@
 //
 // Host waits (docs/architecture.md "Fewer waits", "Fewer launches"), per
 // substep: the broad phase's bounds and pair count, the contact count (with
-// whether any contact is an impact candidate), and the colouring's colour
+// whether any contact is an impact candidate and whether the radii differ),
+// and the colouring's colour
 // ranges and rounds run (one read); per step, the flags. The cache's entry
 // count, the lost-load count, the impact levels and the flags of the impact
 // and projection passes stay on the device: those stages run as one
