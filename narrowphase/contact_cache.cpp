@@ -65,6 +65,15 @@ std::size_t cold_start_unloaded_islands(std::vector<Contact>& contacts, const st
   return set_cold;
 }
 
+void key_runs(const std::uint64_t* keys, std::uint32_t m, std::size_t spheres, std::vector<std::uint32_t>& first) {
+  first.assign(spheres + 1, 0);
+  for (std::uint32_t k = 0; k < m; ++k) {
+    const std::uint64_t a = keys[k] >> 32;
+    if (a < spheres) ++first[a + 1];
+  }
+  for (std::size_t i = 0; i < spheres; ++i) first[i + 1] += first[i];
+}
+
 bool keep_proper_colours(CacheEntries& e) {
   const std::size_t m = e.size();
   bool proper = e.colour.size() == m;
@@ -105,12 +114,7 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
   // searching all of them, and finds the same entry (keys are unique).
   // Entries of spheres that no longer exist (a >= count) are never matched.
   const std::size_t spheres = bodies.count;
-  m_first.assign(spheres + 1, 0);
-  for (std::uint32_t k = 0; k < m; ++k) {
-    const std::uint64_t a = keys[k] >> 32;
-    if (a < spheres) ++m_first[a + 1];
-  }
-  for (std::size_t i = 0; i < spheres; ++i) m_first[i + 1] += m_first[i];
+  key_runs(keys, m, spheres, m_first);
   const std::uint32_t* first = m_first.data();
   const auto n = static_cast<std::ptrdiff_t>(contacts.size());
   std::size_t matched = 0;

@@ -48,6 +48,11 @@ struct CacheEntries {
   }
 };
 
+// The runs of sorted keys[0, m) by sphere a: first[a] for a <= spheres
+// (first[a + 1] - first[a] entries of sphere a; entries of spheres from
+// `spheres` on are in no run).
+void key_runs(const std::uint64_t* keys, std::uint32_t m, std::size_t spheres, std::vector<std::uint32_t>& first);
+
 // Entries from outside the run (a checkpoint) keep their colours only if they
 // are a proper colouring: one colour per entry, below kMaxColours or none,
 // no sphere with two entries of one colour. Otherwise every colour is

@@ -36,14 +36,11 @@ __global__ void count_kernel(SweepRecords records, const std::uint8_t* colour, s
 }
 
 // Each stored contact's index at its place in its sphere's run (first: the
-// scanned counts). Thread 0 writes the entry count, which the step never
-// reads back (only a checkpoint's download does).
+// scanned counts, whose last is the entry count).
 __global__ void place_kernel(SweepRecords records, std::uint32_t n, const std::uint32_t* rank,
-                             const std::uint32_t* first, std::uint32_t spheres, std::uint32_t* index,
-                             std::uint32_t* size) {
+                             const std::uint32_t* first, std::uint32_t* index) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
     if (rank[k] != kNoEntry) index[first[records.bodies[k].a] + rank[k]] = k;
-  if (blockIdx.x == 0 && threadIdx.x == 0) *size = first[spheres];
 }
 
 // Each sphere's run in key order (sort_run, as on the CPU): by b, the cache
@@ -55,8 +52,9 @@ __global__ void order_runs_kernel(SweepRecords records, const std::uint32_t* fir
 }
 
 // The entries in key order, each with the b half of its cache key (a is its
-// run's sphere). tangent and rolling are null when the scene has no friction
-// or no rolling resistance: those impulses stay zero, nothing to keep.
+// run's sphere); *size is their count (the runs' last first). tangent and
+// rolling are null when the scene has no friction or no rolling resistance:
+// those impulses stay zero, nothing to keep.
 __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_colour, const std::uint32_t* index,
                               const std::uint32_t* size, std::uint32_t* keys, real* normal, Vec3* tangent,
                               Vec3* rolling, std::uint8_t* colour) {
@@ -240,22 +238,19 @@ __global__ void island_rule_kernel(IslandRule r) {
 
 }  // namespace
 
-ContactCacheCuda::ContactCacheCuda() : m_host(1) {}
+ContactCacheCuda::ContactCacheCuda() = default;
 ContactCacheCuda::~ContactCacheCuda() = default;
 
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
                              std::uint32_t spheres, int sm_count, cudaStream_t s) {
   // Entries: the contacts with load or a colour, at most n, in key order by
   // a counting sort by sphere (count, scan into the kept firsts, place) and
-  // an insertion sort of each sphere's run. Their count stays on the device
-  // (m_size): every later kernel reads it there, and the host holds only the
-  // bound n (no wait).
+  // an insertion sort of each sphere's run. Their count (the firsts' last)
+  // stays on the device, and the host holds only the bound n (no wait).
   m_bound = n;
   m_spheres = spheres;
-  auto* size = m_size.as<std::uint32_t>(1);
   auto* first = m_first.as<std::uint32_t>(std::size_t(spheres) + 1);
   if (n == 0) {
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(size, 0, sizeof(std::uint32_t), s));
     MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
     return;
   }
@@ -275,11 +270,11 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   count_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, n, count, rank);
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_exclusive_sum(count, first, std::size_t(spheres) + 1, scan_temp, scan_bytes, s);
-  place_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, rank, first, spheres, index, size);
+  place_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, rank, first, index);
   MARBLES_CUDA_CHECK_LAUNCH();
   order_runs_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(contacts, first, spheres, index);
   MARBLES_CUDA_CHECK_LAUNCH();
-  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, size,
+  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, first + spheres,
                                                          m_keys.as<std::uint32_t>(n), m_normal.as<real>(n),
                                                          tangent_entries(n), rolling_entries(n),
                                                          m_colour.as<std::uint8_t>(n));
@@ -287,8 +282,8 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
 }
 
 CacheEntries ContactCacheCuda::download(cudaStream_t s) {
-  // Everything up to the bound, then cut to the count read with it; the
-  // whole keys from each run's sphere and the entries' b.
+  // Everything up to the bound with the runs, then cut to the count (the
+  // runs' last first); the whole keys from each run's sphere and the b.
   CacheEntries e;
   const std::size_t m = m_bound;
   e.resize(m);
@@ -303,28 +298,23 @@ CacheEntries ContactCacheCuda::download(cudaStream_t s) {
   if (m_keep_rolling)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.rolling_impulse.data(), m_rolling.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.colour.data(), m_colour.get(), m, cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_size.get(), sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  e.resize(std::min<std::size_t>(m_host[0], m));
+  e.resize(std::min<std::size_t>(first[m_spheres], m));
   for (std::uint32_t a = 0; a < m_spheres; ++a)
-    for (std::uint32_t k = first[a]; k < first[a + 1] && k < e.size(); ++k) e.key[k] = cache_key(a, b[k]);
+    for (std::uint32_t k = first[a]; k < first[a + 1]; ++k) e.key[k] = cache_key(a, b[k]);
   return e;
 }
 
 void ContactCacheCuda::upload(const CacheEntries& e, std::uint32_t spheres, cudaStream_t s) {
-  // The entries of the world's spheres (sorted by key, so a prefix: an entry
-  // of a sphere the world does not have is never found, and the CPU counts
-  // no lost load of it either), as runs: the firsts and each entry's b.
-  const std::uint32_t m = cache_lower_bound(e.key.data(), static_cast<std::uint32_t>(e.size()), cache_key(spheres, 0));
+  // Sorted by key, so grouped by sphere a: runs over the world's spheres and
+  // any beyond them that have entries (those are never looked up, but a
+  // download gives every entry back), and each entry's b.
+  const auto m = static_cast<std::uint32_t>(e.size());
   m_bound = m;
-  m_spheres = spheres;
-  m_host[0] = m;
-  std::vector<std::uint32_t> b(m), first(std::size_t(spheres) + 1);
-  for (std::uint32_t a = 0, k = 0; a <= spheres; ++a) {
-    while (k < m && e.key[k] < cache_key(a, 0)) b[k] = static_cast<std::uint32_t>(e.key[k] & 0xffffffffu), ++k;
-    first[a] = k;
-  }
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_size.as<std::uint32_t>(1), m_host, sizeof(std::uint32_t), cudaMemcpyHostToDevice, s));
+  m_spheres = m > 0 ? std::max(spheres, static_cast<std::uint32_t>(e.key[m - 1] >> 32) + 1) : spheres;
+  std::vector<std::uint32_t> first, b(m);
+  key_runs(e.key.data(), m, m_spheres, first);
+  for (std::uint32_t k = 0; k < m; ++k) b[k] = static_cast<std::uint32_t>(e.key[k] & 0xffffffffu);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_first.as<std::uint32_t>(first.size()), first.data(),
                                      first.size() * sizeof(std::uint32_t), cudaMemcpyHostToDevice, s));
   if (m == 0) {
@@ -339,7 +329,7 @@ void ContactCacheCuda::upload(const CacheEntries& e, std::uint32_t spheres, cuda
   if (m_keep_rolling)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_rolling.as<Vec3>(m), e.rolling_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
   auto* colour = m_colour.as<std::uint8_t>(m);
-  if (e.colour.size() == e.size())
+  if (e.colour.size() == m)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(colour, e.colour.data(), m, cudaMemcpyHostToDevice, s));
   else
     MARBLES_CUDA_CHECK(cudaMemsetAsync(colour, kNoKeptColour, m, s));  // none known: coloured afresh
@@ -353,9 +343,7 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
   auto copy = [&](DeviceBuffer& dst, const DeviceBuffer& src, std::size_t bytes) {
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(dst.as<char>(bytes), src.get(), bytes, cudaMemcpyDeviceToDevice, s));
   };
-  if (m_size.get()) copy(to.m_size, m_size, sizeof(std::uint32_t));
-  else MARBLES_CUDA_CHECK(cudaMemsetAsync(to.m_size.as<std::uint32_t>(1), 0, sizeof(std::uint32_t), s));  // never stored
-  if (m == 0) return;
+  if (m == 0) return;  // no restore reads the runs
   copy(to.m_first, m_first, (std::size_t(m_spheres) + 1) * sizeof(std::uint32_t));
   copy(to.m_keys, m_keys, m * sizeof(std::uint32_t));
   copy(to.m_normal, m_normal, m * sizeof(real));
@@ -367,9 +355,8 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
 bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const BodiesView& bodies,
                                real weight_impulse, std::uint8_t* kept_colour, std::uint32_t* match, int sm_count,
                                cudaStream_t s) {
-  const std::uint32_t m = m_bound;  // the entries are at most this many (their count: m_size)
+  const std::uint32_t m = m_bound;  // the entries are at most this many (their count: the runs' last first)
   if (m == 0 || n == 0) return false;
-  const std::uint32_t* size = m_size.get_as<std::uint32_t>();
   // Temporaries in the scratch memory: which entries were matched, and for
   // the island rule the bodies' labels, island maxima and cold flags.
   const auto bodies_n = static_cast<std::uint32_t>(bodies.count);
@@ -401,7 +388,7 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
   // The island rule, on the device, where a load was lost (the kernel reads the count).
   const IslandRule rule{pairs, match, n, keys, first, spheres, normal, matched, bodies, weight_impulse, counter, label,
                         island_max, cold, counter + 1};
-  ::marbles::cuda::launch_cooperative<island_rule_kernel>(std::max<std::size_t>({n, m, bodies_n}), sm_count, s, rule);
+  ::marbles::cuda::launch_cooperative<island_rule_kernel>(std::max<std::size_t>(n, bodies_n), sm_count, s, rule);
   return true;
 }
 

@@ -3,8 +3,8 @@
 // then each sphere's few entries ordered by b), and each contact's entry
 // found among its sphere's (the counting sort's firsts, kept with the
 // entries), one thread per contact. An entry keeps only the b half of its
-// key (4 bytes, not 8): its run says a. The entry count stays on the device (a
-// checkpoint's download reads it). When a load was lost (rare: a counter
+// key (4 bytes, not 8): its run says a. The entry count (the runs' last
+// first) stays on the device (a checkpoint's download reads it). When a load was lost (rare: a counter
 // says so, read by the device alone), the island rule runs in one
 // cooperative launch: islands by min-label propagation with pointer jumping
 // (the same islands as the CPU's union-find), their largest impulse by an
@@ -70,8 +70,7 @@ class ContactCacheCuda {
   std::uint32_t bound() const { return m_bound; }
   // The entries as the CPU cache holds them (a checkpoint's copy), and back.
   CacheEntries download(cudaStream_t stream);
-  // `spheres`: the world's (entries of other spheres are never found, and
-  // left out).
+  // `spheres`: the world's (entries of other spheres are never found).
   void upload(const CacheEntries& entries, std::uint32_t spheres, cudaStream_t stream);
   // The entries copied on the device into `to` (the watchdog's undo).
   void copy_to(ContactCacheCuda& to, cudaStream_t stream) const;
@@ -88,14 +87,12 @@ class ContactCacheCuda {
  private:
   // The entries: their keys' b halves (m_keys), impulses and colours.
   DeviceBuffer m_keys, m_normal, m_tangent, m_rolling, m_colour, m_counter, m_own_scratch;
-  DeviceBuffer m_size;  // the entry count (one word, device)
   // The entries of sphere a are [first[a], first[a + 1]) for a < m_spheres
   // (m_spheres + 1 words, device); a sphere from m_spheres on has none.
   DeviceBuffer m_first;
   std::uint32_t m_spheres = 0;
   DeviceBuffer* m_scratch = &m_own_scratch;
   std::uint32_t m_bound = 0;
-  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_host;  // the entry count, to or from the device (one word)
   bool m_keep_tangent = true, m_keep_rolling = true;
   Vec3* tangent_entries(std::uint32_t m) { return m_keep_tangent ? m_tangent.as<Vec3>(m) : nullptr; }
   Vec3* rolling_entries(std::uint32_t m) { return m_keep_rolling ? m_rolling.as<Vec3>(m) : nullptr; }

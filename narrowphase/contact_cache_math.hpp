@@ -14,17 +14,6 @@ namespace marbles::narrowphase {
 
 MARBLES_HD_INLINE std::uint64_t cache_key(std::uint32_t a, std::uint32_t b) { return (std::uint64_t(a) << 32) | b; }
 
-// First index in keys[0, n) whose key is >= key.
-MARBLES_HD_INLINE std::uint32_t cache_lower_bound(const std::uint64_t* keys, std::uint32_t n, std::uint64_t key) {
-  std::uint32_t lo = 0, hi = n;
-  while (lo < hi) {
-    const std::uint32_t mid = lo + (hi - lo) / 2;
-    if (keys[mid] < key) lo = mid + 1;
-    else hi = mid;
-  }
-  return lo;
-}
-
 // The entry of `key` in a run of sorted keys[begin, end) (one sphere's), or
 // end where there is none. The keys are the whole cache keys (the CPU's) or
 // only their b halves (the GPU's: within a run a is the run's sphere, so b

@@ -31,18 +31,21 @@ __global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_spee
 
 // With `mixed` (not null), *mixed is set to 1 when some sphere's radius
 // differs from sphere 0's in any bit (every thread of a warp reaches the
-// vote together, after its loop).
+// vote together, after its loop), and *radius is sphere 0's.
 __global__ void reach_kernel(BodiesView bodies, real h, const unsigned long long* max_speed, real* reach,
-                             real* bound, unsigned* mixed) {
+                             real* bound, unsigned* mixed, real* radius) {
   const real v_max = speed_of(*max_speed);
+  const unsigned long long first = mixed ? bits_of(bodies.radius[0]) : 0;
   bool differs = false;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x) {
     const real r = bodies.radius[i];
     reach[i] = contact_reach(length(bodies.velocity[i]), v_max, r, h);
     if (bound) bound[i] = r + reach[i];
-    if (mixed) differs = differs || bits_of(r) != bits_of(bodies.radius[0]);
+    if (mixed) differs = differs || bits_of(r) != first;
   }
-  if (mixed && __any_sync(0xffffffffu, differs) && (threadIdx.x & 31) == 0) atomicOr(mixed, 1u);
+  if (!mixed) return;
+  if (__any_sync(0xffffffffu, differs) && (threadIdx.x & 31) == 0) atomicOr(mixed, 1u);
+  if (blockIdx.x == 0 && threadIdx.x == 0) *radius = bodies.radius[0];
 }
 
 // Whether contact c would enter the impact stage (is_impact_candidate on the
@@ -161,12 +164,13 @@ __global__ void advance_walls_kernel(WallShape* walls, std::uint32_t count, real
 }  // namespace
 
 void launch_contact_reaches(const BodiesView& bodies, real h, unsigned long long* max_speed, real* reach,
-                            real* bound, unsigned* mixed_radii, int sm_count, cudaStream_t stream) {
+                            real* bound, unsigned* mixed_radii, real* radius, int sm_count,
+                            cudaStream_t stream) {
   if (bodies.count == 0) return;
   max_speed_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, max_speed);
   MARBLES_CUDA_CHECK_LAUNCH();
   reach_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, h, max_speed, reach, bound,
-                                                                      mixed_radii);
+                                                                      mixed_radii, radius);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -25,9 +25,10 @@ namespace marbles::narrowphase::cuda {
 // zero it first), then reach[i] = contact_reach and bound[i] = radius +
 // reach[i] (the swept bound the broad phase sees; bound may be null). With
 // mixed_radii (not null; zero it first), sets *mixed_radii to 1 when the
-// spheres' radii are not all the same, bit for bit (UniformArms).
+// spheres' radii are not all the same, bit for bit, and *radius to sphere
+// 0's (UniformArms).
 void launch_contact_reaches(const BodiesView& bodies, real h, unsigned long long* max_speed, real* reach,
-                            real* bound, unsigned* mixed_radii, int sm_count, cudaStream_t stream);
+                            real* bound, unsigned* mixed_radii, real* radius, int sm_count, cudaStream_t stream);
 
 // Whether any contact found will be an impact candidate of the impact stage
 // (its prepared approach speed below -rest_speed, is_impact_candidate): *any

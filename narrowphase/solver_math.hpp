@@ -142,14 +142,15 @@ MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
 
 // --- the sweep's records -------------------------------------------------------
 // What the stages after the warm start read of a contact (56 of its 112
-// bytes in float with friction, 40 without), as a structure of arrays of
+// bytes in float with friction, 40 without; 16 fewer on the GPU where every
+// contact has the same arms: UniformArms), as a structure of arrays of
 // 4-real words: thread k of
 // a launch reads word k of each array, so a warp's request is whole sectors,
 // where a whole Contact per thread made every request span 32 records, and a
 // field-by-field update of one wrote partial sectors. The GPU writes them
 // once per substep as it makes the contacts in colour-major order (they are
-// its only form of the contacts, with an impact word each: impact_record,
-// contact_of_record below); the CPU packs them from its contacts
+// its only form of the contacts, with an impact word or an approach speed
+// each: ImpactRecords, impact_record, contact_of_record below); the CPU packs them from its contacts
 // (pack_sweep_record). Every sweep reads and writes them
 // (load_sweep_contact, store_sweep_impulses), the position stages read them
 // (load_position_contact), and on the CPU the impulses go back into the
@@ -168,16 +169,16 @@ struct alignas(4 * sizeof(real)) Real4 {
 struct alignas(8) BodyPair {
   std::uint32_t a = 0, b = 0;
 };
-// Where every sphere has one radius and every material pair the same
-// coefficients (StepModel::uniform_pairs), every sphere pair's arms word is
-// {R, R, friction, rolling friction} and every wall contact's {R, +0, ...}:
-// the GPU then leaves the arms array out and a record takes them from here
-// (load_record), the same bits make_sphere_contact and make_wall_contact
-// copy into a contact (ra and rb are the radii, the coefficients the pair
-// table's). The radius is read where the spheres' radii live (radius[0]),
-// so no copy of it can go stale.
+// Where every sphere has one radius R and every material pair the same
+// friction and rolling friction (StepModel::uniform_pairs), every sphere
+// pair's arms word is {R, R, friction, rolling friction} and every wall
+// contact's {R, +0, ...}: the GPU then leaves the arms array out and a record
+// takes them from here (load_record), the same bits make_sphere_contact and
+// make_wall_contact copy into a contact (ra and rb are the radii, the
+// coefficients the pair table's). R is the radius the substep's contacts
+// were made with (read back with the contact counts).
 struct UniformArms {
-  const real* radius = nullptr;  // the spheres' radii, all equal: R = radius[0]
+  real radius = 0;
   real friction = 0, rolling_friction = 0;
 };
 
@@ -259,7 +260,7 @@ MARBLES_HD_INLINE Contact load_record(const SweepRecords& s, std::uint32_t k, co
       const Real4 m = load_streaming(s.arms + k);
       c.ra = m.x, c.rb = m.y, c.coeff.friction = m.z, c.coeff.rolling_friction = m.w;
     } else {
-      const real r = *s.uniform.radius;
+      const real r = s.uniform.radius;
       c.ra = r, c.rb = is_wall(c.b) ? real(0) : r;
       c.coeff.friction = s.uniform.friction, c.coeff.rolling_friction = s.uniform.rolling_friction;
     }
@@ -376,7 +377,8 @@ MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactPa
 // --- the GPU's records: the contact in no other form ------------------------
 // The GPU keeps a substep's contacts only as the sweep's records plus one
 // word each for the impact stage (impact_word: the approach speed, the
-// restitution, the impact impulse, the rebound shift; the records' extra
+// restitution, the impact impulse, the rebound shift; the approach speed
+// alone in a substep without impact candidates: ImpactRecords; the records' extra
 // word then holds only a moving wall's velocity, and no word at all where no
 // wall moves), made in colour-major order from the body
 // pairs (make_sphere_contact / make_wall_contact, restore_impulses,

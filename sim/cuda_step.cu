@@ -9,7 +9,7 @@
 //
 // A contact is found as its body pair (8 bytes) and made whole once, in
 // colour-major order, straight into the sweep's records and an impact word
-// (narrowphase/solver_math.hpp): the device holds no 112-byte Contact array.
+// or approach speed (narrowphase/solver_math.hpp: ImpactRecords): the device holds no 112-byte Contact array.
 // contacts() makes whole contacts from the records when the host asks.
 //
 // Host waits (docs/architecture.md "Fewer waits", "Fewer launches"), per
@@ -134,18 +134,20 @@ class CudaStep final : public StepBackend {
     std::size_t pair_count = 0, wall_items = 0;
     std::uint32_t *pair_offsets = nullptr, *wall_offsets = nullptr;
     const IndexPair* pairs = nullptr;
-    // The fastest speed, then two words read with the contact counts: [0]
+    // The fastest speed, then the words read with the contact counts: [0]
     // any contact an impact candidate (a substep without one skips the
     // impact stage), [1] the radii not all the same (the records then keep
-    // their arms word). One set clears all three.
-    auto* words = m_found_words.as<unsigned long long>(2);
+    // their arms word), [2..] sphere 0's radius (UniformArms'). One set
+    // clears them all.
+    auto* words = m_found_words.as<unsigned long long>(3);
     auto* max_speed = words;
     auto* seen = reinterpret_cast<unsigned*>(words + 1);
     real* reach = m_reach.as<real>(n);
     real* bound = m_model.collisions ? m_bound.as<real>(n) : nullptr;
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(words, 0, 2 * sizeof(unsigned long long), m_stream));
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(words, 0, 3 * sizeof(unsigned long long), m_stream));
     unsigned* mixed_radii = m_model.uniform_pairs ? seen + 1 : nullptr;
-    nc::launch_contact_reaches(bodies, h, max_speed, reach, bound, mixed_radii, m_sm, m_stream);
+    auto* radius = reinterpret_cast<real*>(seen + 2);
+    nc::launch_contact_reaches(bodies, h, max_speed, reach, bound, mixed_radii, radius, m_sm, m_stream);
     if (m_model.collisions) {
       try {
         pair_count = m_broadphase->find_pairs_device({bodies.position, bound, n}, 0, m_stream);
@@ -191,12 +193,14 @@ class CudaStep final : public StepBackend {
       m_bytes += 4;
     }
     if (watch.any || mixed_radii) {
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 2, seen, 8, cudaMemcpyDeviceToHost, m_stream));
-      m_bytes += 8;
+      const std::size_t bytes = mixed_radii ? 8 + sizeof(real) : 4;
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 2, seen, bytes, cudaMemcpyDeviceToHost, m_stream));
+      m_bytes += bytes;
     }
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     m_impact_candidates = watch.any && m_pinned[2] != 0;
     m_uniform_arms = mixed_radii && m_pinned[3] == 0;
+    if (m_uniform_arms) std::memcpy(&m_radius, m_pinned + 4, sizeof(real));
     const std::uint32_t sphere_contacts = m_model.collisions ? m_pinned[0] : 0;
     const std::uint32_t wall_contacts = m_model.wall_contacts ? m_pinned[1] : 0;
     m_count = sphere_contacts + wall_contacts;
@@ -456,7 +460,7 @@ class CudaStep final : public StepBackend {
     m_non_finite = false;
   }
   void load_state(const StepState& state) override {
-    m_cache.upload(state.cache, static_cast<std::uint32_t>(m_device.size()), m_stream);
+    m_cache.upload(state.cache, static_cast<std::uint32_t>(m_host.size()), m_stream);  // the world as restored
     if (!state.walls.empty()) ::marbles::cuda::upload(m_walls, state.walls, m_stream);
   }
 
@@ -475,13 +479,14 @@ class CudaStep final : public StepBackend {
     narrowphase::UniformArms uniform;
     if (!arms) {
       const narrowphase::PairCoefficients& c = m_model.pair_coefficients.front();
-      uniform = {m_device.view().radius, c.friction, c.rolling_friction};
+      uniform = {m_radius, c.friction, c.rolling_friction};
     }
     m_records = narrowphase::SweepRecords::in(memory, m_count, extra, arms, uniform);
     m_impacts = {};
     if (m_impact_candidates) m_impacts.word = memory + words;
     else m_impacts.approach = reinterpret_cast<real*>(memory + words);
     m_counters.uniform_arms += arms ? 0 : 1;
+    m_counters.impact_words += m_impact_candidates ? 1 : 0;
   }
   narrowphase::WallShape* walls() const { return m_walls.get_as<narrowphase::WallShape>(); }
 
@@ -538,14 +543,15 @@ class CudaStep final : public StepBackend {
   // entry count and the 9 cell-type bounds (40 B).
   std::uint64_t broad_phase_readback() const { return m_model.algorithm == broadphase::Algorithm::home ? 76 : 116; }
   static constexpr int kFlagWords = 5;
-  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{4};  // find_contacts' counts, candidate and mixed-radii flags
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{6};  // find_contacts' counts, candidate and mixed-radii flags, sphere 0's radius
   ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
   bool m_watch = false;
   int m_iteration_factor = 1;
 
   // A substep's contacts: their body pairs as found (m_pairs), each one's
   // cache entry (m_match) and kept colour, then in colour-major order the
-  // sweep's records and impact words (m_record_memory) and colours.
+  // sweep's records and impact words or approach speeds (m_record_memory)
+  // and colours.
   DeviceBuffer m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
       m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved, m_contact_chunk;
   // Temporaries of the stages that never run at the same time (the contact
@@ -565,6 +571,7 @@ class CudaStep final : public StepBackend {
   std::uint32_t m_count = 0;          // contacts of this substep
   bool m_impact_candidates = false;   // with restitution: some contact of this substep is an impact candidate
   bool m_uniform_arms = false;        // every contact of this substep has the same arms (UniformArms)
+  real m_radius = 0;                  // with m_uniform_arms: every sphere's radius
   bool m_kept_valid = false;          // m_kept_colour holds this substep's kept colours
   bool m_mirror = false;              // the next parallel colour launch runs mirrored (over_colours)
   // The substep's contacts as every stage after the colouring reads them

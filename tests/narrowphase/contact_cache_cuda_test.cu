@@ -192,6 +192,11 @@ Restored expect_same_as_cpu(const Stored& s, std::uint32_t spheres, const std::v
   const Restored r = expect_same_restore(cpu, gpu, next, restore_spheres, weight, what + " (stored)");
   ContactCacheCuda uploaded;
   uploaded.upload(want, restore_spheres, nullptr);
+  const CacheEntries back = uploaded.download(nullptr);  // every entry, runs made on the host, keys made again
+  EXPECT_EQ(back.size(), want.size()) << what;
+  EXPECT_TRUE(same_bits(back.key, want.key)) << what << " (uploaded)";
+  EXPECT_TRUE(same_bits(back.normal_impulse, want.normal_impulse)) << what << " (uploaded)";
+  EXPECT_TRUE(same_bits(back.colour, want.colour)) << what << " (uploaded)";
   expect_same_restore(cpu, uploaded, next, restore_spheres, weight, what + " (uploaded)");
   return r;
 }

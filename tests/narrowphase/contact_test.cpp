@@ -461,7 +461,7 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
   }
   const ImpactParams params{real(0.01), h, Vec3(0, 0, real(-9.81))};
   for (std::size_t i = 1; i < n; ++i) ASSERT_EQ(world.radius[i], world.radius[0]);
-  const UniformArms uniform{world.radius, thrown.coeff.friction, thrown.coeff.rolling_friction};
+  const UniformArms uniform{world.radius[0], thrown.coeff.friction, thrown.coeff.rolling_friction};
   const PairTable table = thrown.table();
   const WallShape* floor = thrown.lattice.floor.data();
   std::vector<Real4> after_sweep[2][2];  // [friction][arms]: impulses after a sweep, then the bodies
@@ -503,12 +503,13 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
     }
     EXPECT_GT(walls, 0u);
     EXPECT_GT(rebounds, 0u);
-    // One sweep (friction and rolling, or neither) on the records as they
-    // are now: the same with and without the arms word.
+    // One sweep (friction and rolling, or rolling alone: both read the
+    // arms) on the records as they are now: the same with and without the
+    // arms word.
     std::vector<Real4>& out = after_sweep[friction][arms];
     for (std::uint32_t k = 0; k < m; ++k) {
       if (friction) solve_record<true, true>(records, k, got_bodies.data(), real(1) / h);
-      else solve_record<false, false>(records, k, got_bodies.data(), real(1) / h);
+      else solve_record<false, true>(records, k, got_bodies.data(), real(1) / h);
       out.push_back(records.impulse[k]);
       out.push_back(records.rolling[k]);
     }
