@@ -13,6 +13,7 @@
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 
+#include "core/config.hpp"
 #include "core/cuda_check.hpp"
 #include "core/device_memory.hpp"
 
@@ -80,6 +81,18 @@ void launch_cooperative(std::size_t n, int sm_count, cudaStream_t s, Args&&... a
 // cached copy (every block reads the same value, so all take one branch).
 __device__ __forceinline__ std::uint32_t read_volatile(const std::uint32_t* p) {
   return *static_cast<const volatile std::uint32_t*>(p);
+}
+
+// A real's bits as an unsigned word, and back. Non-negative reals order as
+// their words do, so an atomic max over the words gives the exact largest
+// real whatever the order (warp_atomic_max, atomicMax).
+__device__ __forceinline__ unsigned long long bits_of(real v) {
+  if constexpr (sizeof(real) == 4) return __float_as_uint(v);
+  else return static_cast<unsigned long long>(__double_as_longlong(v));
+}
+__device__ __forceinline__ real real_of_bits(unsigned long long w) {
+  if constexpr (sizeof(real) == 4) return __uint_as_float(static_cast<unsigned>(w));
+  else return __longlong_as_double(static_cast<long long>(w));
 }
 #endif
 

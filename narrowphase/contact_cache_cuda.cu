@@ -14,8 +14,10 @@ namespace {
 
 namespace cg = cooperative_groups;
 
+using ::marbles::cuda::bits_of;
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
+using ::marbles::cuda::real_of_bits;
 
 // The store reads the contacts' bodies and impulses from the sweep's records
 // (solver_math.hpp), where the last sweep left them. A contact without load
@@ -144,11 +146,6 @@ struct IslandRule {
   unsigned* changed;  // two words, used in turn by the label passes
 };
 
-__device__ real real_of_bits(unsigned long long bits) {
-  if constexpr (sizeof(real) == 4) return __uint_as_float(static_cast<unsigned>(bits));
-  else return __longlong_as_double(static_cast<long long>(bits));
-}
-
 // One hook pass: each contact lowers its spheres' labels (and the larger
 // label's root) to the smaller of the two.
 __device__ void label_hook(const IslandRule& r, std::uint32_t first, std::uint32_t stride, unsigned* changed) {
@@ -178,10 +175,7 @@ __device__ void island_max_pass(const IslandRule& r, std::uint32_t first, std::u
   for (std::uint32_t k = first; k < r.n; k += stride) {
     const real p = restored_normal(r.match, r.normal, k);
     if (!(p > 0)) continue;
-    unsigned long long bits;
-    if constexpr (sizeof(real) == 4) bits = __float_as_uint(p);
-    else bits = static_cast<unsigned long long>(__double_as_longlong(p));
-    atomicMax(&r.island_max[r.label[r.pairs[k].a]], bits);
+    atomicMax(&r.island_max[r.label[r.pairs[k].a]], bits_of(p));
   }
 }
 

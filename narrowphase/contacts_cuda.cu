@@ -9,16 +9,8 @@ namespace {
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 
-// A real's bits as an unsigned word. A speed (>= 0) orders as its word
-// does, so an atomic max gives the exact largest speed whatever the order.
-__device__ unsigned long long bits_of(real v) {
-  if constexpr (sizeof(real) == 4) return __float_as_uint(v);
-  else return static_cast<unsigned long long>(__double_as_longlong(v));
-}
-__device__ real speed_of(unsigned long long w) {
-  if constexpr (sizeof(real) == 4) return __uint_as_float(static_cast<unsigned>(w));
-  else return __longlong_as_double(static_cast<long long>(w));
-}
+using ::marbles::cuda::bits_of;
+using ::marbles::cuda::real_of_bits;
 
 __global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_speed) {
   real v = 0;
@@ -34,7 +26,7 @@ __global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_spee
 // vote together, after its loop), and *radius is sphere 0's.
 __global__ void reach_kernel(BodiesView bodies, real h, const unsigned long long* max_speed, real* reach,
                              real* bound, unsigned* mixed, real* radius) {
-  const real v_max = speed_of(*max_speed);
+  const real v_max = real_of_bits(*max_speed);
   const unsigned long long first = mixed ? bits_of(bodies.radius[0]) : 0;
   bool differs = false;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x) {
@@ -144,7 +136,7 @@ __global__ void records_kernel(ContactInputs in, const BodyPair* pairs, const st
                        cache.rolling ? cache.rolling[e] : Vec3{});
     prepare_from_world(c, in.bodies);
     const std::uint32_t k = position[i];
-    pack_sweep_record<true, false>(c, records, k);  // the rebound shift in the impact word
+    pack_sweep_record(c, records, k);  // the rebound shift in the impact word
     pack_impact(c, impacts, k);
   }
 }

@@ -118,7 +118,7 @@ template <bool Rolling>
 void pack_records(const Contact* contacts, std::size_t count, const SweepRecords& s) {
   const auto n = static_cast<std::ptrdiff_t>(count);
 #pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t k = 0; k < n; ++k) pack_sweep_record<Rolling, false>(contacts[k], s, static_cast<std::uint32_t>(k));
+  for (std::ptrdiff_t k = 0; k < n; ++k) pack_sweep_record<Rolling>(contacts[k], s, static_cast<std::uint32_t>(k));
 }
 template <bool Rolling>
 void unpack_records(const SweepRecords& s, Contact* contacts, std::size_t count) {
@@ -185,9 +185,8 @@ ContactSolver::ContactSolver(const SolverSettings& settings, SweepLanes lanes) :
   if (lanes > supported_lanes()) lanes = supported_lanes();
   m_lanes = lanes;
   with_terms(settings.friction, settings.rolling, [&](auto friction, auto rolling) {
-    constexpr bool Friction = decltype(friction)::value, Rolling = decltype(rolling)::value;
-    m_sweep = sweep_for<Friction, Rolling>(lanes);
-    m_warm_start = &warm_start_range<Friction, Rolling>;
+    m_sweep = sweep_for<friction, rolling>(lanes);
+    m_warm_start = &warm_start_range<friction, rolling>;
   });
   m_impact = settings.friction ? &impact_range<true> : &impact_range<false>;
 }

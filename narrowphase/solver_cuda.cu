@@ -204,10 +204,7 @@ __global__ void max_overlap_kernel(SweepRecords records, std::uint32_t n, Bodies
     const real o = overlap_ratio(load_position_contact(records, k), bodies, walls);
     d = o > d ? o : d;
   }
-  if constexpr (sizeof(real) == 4)
-    ::marbles::cuda::warp_atomic_max(deepest, static_cast<unsigned long long>(__float_as_uint(d)));
-  else
-    ::marbles::cuda::warp_atomic_max(deepest, static_cast<unsigned long long>(__double_as_longlong(d)));
+  ::marbles::cuda::warp_atomic_max(deepest, ::marbles::cuda::bits_of(d));
 }
 
 }  // namespace
@@ -234,8 +231,7 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
 void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* bodies, SolverTerms t, cudaStream_t s) {
   if (r.end <= r.begin) return;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
-    constexpr bool Friction = decltype(friction)::value, Rolling = decltype(rolling)::value;
-    launch(Launch::dependent, warm_start_kernel<Friction, Rolling>, blocks(r), s, records, r, bodies);
+    launch(Launch::dependent, warm_start_kernel<friction, rolling>, blocks(r), s, records, r, bodies);
   });
 }
 
@@ -243,8 +239,7 @@ void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodie
                   cudaStream_t s) {
   if (r.end <= r.begin) return;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
-    constexpr bool Friction = decltype(friction)::value, Rolling = decltype(rolling)::value;
-    launch(Launch::dependent, record_sweep_kernel<Friction, Rolling>, blocks(r), s, records, r, bodies, inv_h);
+    launch(Launch::dependent, record_sweep_kernel<friction, rolling>, blocks(r), s, records, r, bodies, inv_h);
   });
 }
 
@@ -281,8 +276,7 @@ void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBod
                   bool warm, int sweeps, int sm_count, cudaStream_t s) {
   if (plan.empty()) return;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
-    constexpr bool Friction = decltype(friction)::value, Rolling = decltype(rolling)::value;
-    launch_on_plan<solve_kernel<Friction, Rolling>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
+    launch_on_plan<solve_kernel<friction, rolling>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
   });
 }
 

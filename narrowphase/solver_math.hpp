@@ -35,7 +35,7 @@ struct SolverSettings {
 };
 
 // f(friction, rolling) for the terms a scene asks for, each as a
-// std::bool_constant (decltype(friction)::value in a template argument): the
+// std::bool_constant (itself a template argument: X<friction, rolling>): the
 // one place the effect set picks the solver's instances (a frictionless
 // scene runs no friction code), on the CPU and the GPU alike.
 template <class F>
@@ -150,8 +150,8 @@ MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
 // field-by-field update of one wrote partial sectors. The GPU writes them
 // once per substep as it makes the contacts in colour-major order (they are
 // its only form of the contacts, with an impact word or an approach speed
-// each: ImpactRecords, impact_record, contact_of_record below); the CPU packs them from its contacts
-// (pack_sweep_record). Every sweep reads and writes them
+// each: ImpactRecords, impact_record, contact_of_record below); the CPU
+// packs them from its contacts (pack_sweep_record). Every sweep reads and writes them
 // (load_sweep_contact, store_sweep_impulses), the position stages read them
 // (load_position_contact), and on the CPU the impulses go back into the
 // contacts only when the contacts are asked for (unpack_sweep_impulses) or
@@ -190,10 +190,10 @@ struct SweepRecords {
   // where they are the same for every contact (the GPU's records then leave
   // them out and read `uniform`).
   Real4* arms = nullptr;
-  // wall_velocity (read by the sweeps for wall contacts only), rebound_shift
-  // (the CPU's). Null where no wall moves (the GPU's records then leave it
-  // out: a wall at rest has the surface velocity +0 exactly, a contact's
-  // default; the GPU keeps the rebound shift in the impact word).
+  // wall_velocity, written and read for wall contacts only (the rebound
+  // shift lives in the whole contacts on the CPU, in the impact word on the
+  // GPU). Null where no wall moves (the GPU's records then leave it out: a
+  // wall at rest has the surface velocity +0 exactly, a contact's default).
   Real4* extra = nullptr;
   BodyPair* bodies = nullptr; // a, b
   UniformArms uniform;        // the arms of every contact, where `arms` is null
@@ -225,19 +225,17 @@ MARBLES_HD_INLINE void pack_position_record(const Contact& c, const SweepRecords
   s.bodies[k] = {c.a, c.b};
 }
 
-// Every array by default; the sweeps leave out what they do not read: the
-// rolling word without rolling resistance (the CPU's), and the extra word of
-// a sphere pair when the rebound pass reads the whole contacts or the impact
-// words (Rebound false), and of every contact when no wall moves (no extra
-// array); the arms word where every contact has the same (no arms array).
-template <bool Rolling = true, bool Rebound = true>
+// Every word the sweeps read; they leave out what they do not read: the
+// rolling word without rolling resistance (the CPU's), the extra word of a
+// sphere pair, and of every contact when no wall moves (no extra array); the
+// arms word where every contact has the same (no arms array).
+template <bool Rolling = true>
 MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s, std::uint32_t k) {
   s.impulse[k] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
   if constexpr (Rolling)
     s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.coeff.twisting_friction};
   if (s.arms) s.arms[k] = {c.ra, c.rb, c.coeff.friction, c.coeff.rolling_friction};
-  if ((Rebound || is_wall(c.b)) && s.extra)
-    s.extra[k] = {c.wall_velocity.x, c.wall_velocity.y, c.wall_velocity.z, c.rebound_shift};
+  if (is_wall(c.b) && s.extra) s.extra[k] = {c.wall_velocity.x, c.wall_velocity.y, c.wall_velocity.z, real(0)};
   pack_position_record(c, s, k);
 }
 
@@ -378,9 +376,9 @@ MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactPa
 // The GPU keeps a substep's contacts only as the sweep's records plus one
 // word each for the impact stage (impact_word: the approach speed, the
 // restitution, the impact impulse, the rebound shift; the approach speed
-// alone in a substep without impact candidates: ImpactRecords; the records' extra
-// word then holds only a moving wall's velocity, and no word at all where no
-// wall moves), made in colour-major order from the body
+// alone in a substep without impact candidates: ImpactRecords; the records'
+// extra word then holds only a moving wall's velocity, and no word at all
+// where no wall moves), made in colour-major order from the body
 // pairs (make_sphere_contact / make_wall_contact, restore_impulses,
 // prepare_from_world, pack_sweep_record: the CPU's functions, so its bits).
 // The effective masses are computed from the bodies where a stage needs

@@ -9,14 +9,15 @@
 //
 // A contact is found as its body pair (8 bytes) and made whole once, in
 // colour-major order, straight into the sweep's records and an impact word
-// or approach speed (narrowphase/solver_math.hpp: ImpactRecords): the device holds no 112-byte Contact array.
-// contacts() makes whole contacts from the records when the host asks.
+// or approach speed (narrowphase/solver_math.hpp: ImpactRecords): the device
+// holds no 112-byte Contact array. contacts() makes whole contacts from the
+// records when the host asks.
 //
 // Host waits (docs/architecture.md "Fewer waits", "Fewer launches"), per
 // substep: the broad phase's bounds and pair count, the contact count (with
 // whether any contact is an impact candidate and whether the radii differ),
-// and the colouring's colour
-// ranges and rounds run (one read); per step, the flags. The cache's entry
+// and the colouring's colour ranges and rounds run (one read); per step, the
+// flags. The cache's entry
 // count, the lost-load count, the impact levels and the flags of the impact
 // and projection passes stay on the device: those stages run as one
 // cooperative launch each. A settled pile and the gas wait 5 times a step.

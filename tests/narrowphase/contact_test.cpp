@@ -479,7 +479,7 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
               static_cast<std::ptrdiff_t>(SweepRecords::bytes_for(m, extra, arms)));
     Real4* impact = memory.data() + record_words;
     for (std::uint32_t k = 0; k < m; ++k) {
-      pack_sweep_record<true, false>(contacts[k], records, k);  // as the GPU makes them
+      pack_sweep_record(contacts[k], records, k);  // as the GPU makes them
       impact[k] = impact_word(contacts[k]);
     }
     std::uint32_t hits = 0;
@@ -551,7 +551,7 @@ TEST(Solver, RecordsWithApproachSpeedsOnlyHoldTheWholeContact) {
   std::vector<real> approach(m);
   const ImpactRecords speeds{nullptr, approach.data()};
   for (std::uint32_t k = 0; k < m; ++k) {
-    pack_sweep_record<true, false>(contacts[k], records, k);
+    pack_sweep_record(contacts[k], records, k);
     pack_impact(contacts[k], speeds, k);
   }
   std::set<real> restitutions;
