@@ -1,7 +1,7 @@
-// core/device_buffer.cuh — launch sizes and launches, and the CUB calls
-// every stage shares (scan, stable radix sort), with their temporary storage
-// held by the caller and reused; the memory, streams and events themselves
-// are core/device_memory.hpp's. Only .cu files include it.
+// core/device_buffer.cuh — launch sizes and launches, and the CUB scan
+// every stage shares, with its temporary storage held by the caller and
+// reused; the memory, streams and events themselves are
+// core/device_memory.hpp's. Only .cu files include it.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -10,7 +10,6 @@
 #include <cstdint>
 #include <utility>
 
-#include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 
 #include "core/config.hpp"
@@ -155,31 +154,6 @@ template <class T>
 void device_exclusive_sum(const T* in, T* out, std::size_t n, void* temp, std::size_t temp_bytes,
                           cudaStream_t stream) {
   MARBLES_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp, temp_bytes, in, out, static_cast<int>(n), stream));
-}
-
-// Temporary bytes of device_sort_pairs over n items (CUB's double-buffer
-// sort: the alternate arrays are the caller's, the temporaries small).
-template <class Key, class Value>
-std::size_t sort_pairs_bytes(std::size_t n, int bits) {
-  std::size_t bytes = 0;
-  cub::DoubleBuffer<Key> keys(nullptr, nullptr);
-  cub::DoubleBuffer<Value> values(nullptr, nullptr);
-  MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, keys, values, static_cast<int>(n), 0, bits));
-  return bytes;
-}
-
-// Stable sort of (keys, values)[0, n) by key bits [0, bits), over the
-// alternate arrays keys_alt and values_alt (n items each); temp holds
-// sort_pairs_bytes<Key, Value>(n, bits). Returns the sorted values (in
-// `values` or in `values_alt`); keys_out, when given, gets the sorted keys.
-template <class Key, class Value>
-Value* device_sort_pairs(Key* keys, Key* keys_alt, Value* values, Value* values_alt, std::size_t n, int bits,
-                         void* temp, std::size_t temp_bytes, cudaStream_t stream, Key** keys_out = nullptr) {
-  cub::DoubleBuffer<Key> k(keys, keys_alt);
-  cub::DoubleBuffer<Value> v(values, values_alt);
-  MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp, temp_bytes, k, v, static_cast<int>(n), 0, bits, stream));
-  if (keys_out) *keys_out = k.Current();
-  return v.Current();
 }
 
 }  // namespace marbles::cuda

@@ -2,6 +2,7 @@
 
 #include <cooperative_groups.h>
 
+#include "core/counting_sort_cuda.cuh"
 #include "core/cuda_check.hpp"
 #include "narrowphase/colouring_cuda.cuh"
 #include "narrowphase/solver_math.hpp"
@@ -151,49 +152,53 @@ __global__ void rounds_kernel(Entries entries, std::uint32_t* list0, std::uint32
   if (first == 0) count[kMaxColourRounds + 1] = r;
 }
 
-__global__ void keys_kernel(const std::uint32_t* colour, std::uint32_t n, std::uint32_t overflow_key,
-                            std::uint32_t* keys, std::uint32_t* index) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+// A contact's bucket in colour-major order: its colour, the overflow's key
+// after every colour, the inactive ones last.
+struct ColourKey {
+  const std::uint32_t* colour;
+  std::uint32_t overflow_key;
+  __device__ std::uint32_t operator()(std::uint32_t k) const {
     const std::uint32_t c = colour[k];
-    keys[k] = c == kNotActive ? overflow_key + 1 : (c == kUncoloured || c == kOverflowColour) ? overflow_key : c;
-    index[k] = k;
+    return c == kNotActive ? overflow_key + 1 : (c == kUncoloured || c == kOverflowColour) ? overflow_key : c;
   }
-}
+};
 
-// first[key] = the first sorted position holding `key` (left kNoFirst
-// where no key is): the transitions of the sorted keys, no atomics.
-__global__ void first_of_key_kernel(const std::uint32_t* sorted_keys, std::uint32_t n, std::uint32_t* first) {
-  for (std::uint32_t j = blockIdx.x * blockDim.x + threadIdx.x; j < n; j += gridDim.x * blockDim.x)
-    if (j == 0 || sorted_keys[j] != sorted_keys[j - 1]) first[sorted_keys[j]] = j;
-}
-
-// position[order[k]] = k: where each contact goes in colour-major order;
-// and each sorted contact's colour as the cache keeps it (sorted_colour may
-// be null).
-__global__ void positions_kernel(const std::uint32_t* order, const std::uint32_t* sorted_keys, std::uint32_t n,
-                                 std::uint32_t* position, std::uint8_t* sorted_colour) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    position[order[k]] = k;
-    if (sorted_colour) sorted_colour[k] = sorted_keys[k] < kMaxColours ? sorted_keys[k] : kNoKeptColour;
+// colour_and_sort's: each contact's place in colour-major order, written
+// over its colour (its own, read just before), and each placed contact's
+// colour as the cache keeps it (sorted_colour may be null).
+struct PlaceOverColour {
+  std::uint32_t* position;
+  std::uint8_t* sorted_colour;
+  std::uint32_t overflow_key;
+  __device__ void operator()(std::uint32_t k, std::uint32_t place) const {
+    const std::uint32_t key = ColourKey{position, overflow_key}(k);
+    position[k] = place;
+    if (sorted_colour) sorted_colour[place] = key < kMaxColours ? static_cast<std::uint8_t>(key) : kNoKeptColour;
   }
-}
+};
+
+// impact_levels': the contact at each place.
+struct PlaceInOrder {
+  std::uint32_t* order;
+  __device__ void operator()(std::uint32_t k, std::uint32_t place) const { order[place] = k; }
+};
 
 }  // namespace
 
 // A call's temporaries: the colours and, never live at once, the rounds'
-// lists and body words, or the sort's keys, indices and their alternates.
+// lists and body words, or the counting sort's (core/counting_sort_cuda.cuh)
+// and the impact levels' order.
 struct ColouringArrays {
   std::uint32_t* colour = nullptr;
   std::uint32_t *active = nullptr, *next = nullptr;
   unsigned long long *body_word = nullptr, *body_used = nullptr;
-  std::uint32_t *keys = nullptr, *keys_alt = nullptr, *index = nullptr, *index_alt = nullptr;
-  void* temp = nullptr;
-  std::size_t temp_bytes = 0;
+  std::uint32_t* order = nullptr;
+  ::marbles::cuda::CountingSortArrays sort;
 };
 
-ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, int key_bits) {
+ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets,
+                                       bool ordered) {
   ColouringArrays at;
-  at.temp_bytes = ::marbles::cuda::sort_pairs_bytes<std::uint32_t, std::uint32_t>(n, key_bits);
   ::marbles::cuda::carve(*m_scratch, [&](::marbles::cuda::Carve& c) {
     at.colour = c.take<std::uint32_t>(n);
     ::marbles::cuda::Carve rounds = c;
@@ -201,11 +206,8 @@ ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, 
     at.next = rounds.take<std::uint32_t>(n);
     at.body_word = rounds.take<unsigned long long>(body_count);
     at.body_used = rounds.take<unsigned long long>(body_count);
-    at.keys = c.take<std::uint32_t>(n);
-    at.keys_alt = c.take<std::uint32_t>(n);
-    at.index = c.take<std::uint32_t>(n);
-    at.index_alt = c.take<std::uint32_t>(n);
-    at.temp = c.take<char>(at.temp_bytes);
+    at.order = ordered ? c.take<std::uint32_t>(n) : nullptr;
+    at.sort = ::marbles::cuda::CountingSortArrays::take(c, n, buckets);
     c.merge(rounds);
   });
   return at;
@@ -226,22 +228,6 @@ void ColouringCuda::launch_rounds(const Entries& entries, const ColouringArrays&
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count + 1, 0, (kMaxColourRounds + 1) * sizeof(std::uint32_t), s));
   ::marbles::cuda::launch_cooperative<rounds_kernel<Entries>>(n, sm_count, s, entries, at.active, at.next, count,
                                                               at.colour, rule, at.body_word, at.body_used);
-}
-
-std::uint32_t* ColouringCuda::sort_keys(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key,
-                                        int key_bits, const std::uint32_t** sorted_keys, int sm_count,
-                                        cudaStream_t s) {
-  auto* first = m_first_of_key.as<std::uint32_t>(overflow_key + 2);
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0xff, (overflow_key + 2) * sizeof(std::uint32_t), s));
-  keys_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(at.colour, n, overflow_key, at.keys, at.index);
-  MARBLES_CUDA_CHECK_LAUNCH();
-  std::uint32_t* keys_out = nullptr;
-  std::uint32_t* index_out = ::marbles::cuda::device_sort_pairs(
-      at.keys, at.keys_alt, at.index, at.index_alt, n, key_bits, at.temp, at.temp_bytes, s, &keys_out);
-  if (sorted_keys) *sorted_keys = keys_out;
-  first_of_key_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(keys_out, n, first);
-  MARBLES_CUDA_CHECK_LAUNCH();
-  return index_out;
 }
 
 // The ranges (ColourRanges::begin) from the firsts of the colours' keys
@@ -272,8 +258,8 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
     begin.assign(2, 0);
     return 0;
   }
-  constexpr int kKeyBits = 7;  // the colours (< kMaxColours) and the overflow's key
-  const ColouringArrays at = lay_out(n, body_count, kKeyBits);
+  // Buckets: the colours (< kMaxColours), the overflow's and the inactive's.
+  const ColouringArrays at = lay_out(n, body_count, kMaxColours + 2, false);
   auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_used, 0, body_count * sizeof(unsigned long long), s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
@@ -281,11 +267,9 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
                                                                 at.body_used);
   MARBLES_CUDA_CHECK_LAUNCH();
   launch_rounds(ContactEntries{pairs}, at, n, body_count, ColourRule::lowest_free, sm_count, s);
-  const std::uint32_t* sorted_keys = nullptr;
-  const std::uint32_t* order = sort_keys(at, n, kMaxColours, kKeyBits, &sorted_keys, sm_count, s);
-  // The colours are read (keys_kernel): their array takes the positions.
-  positions_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(order, sorted_keys, n, at.colour, sorted_colour);
-  MARBLES_CUDA_CHECK_LAUNCH();
+  ::marbles::cuda::counting_sort(at.sort, n, ColourKey{at.colour, kMaxColours},
+                                 PlaceOverColour{at.colour, sorted_colour, kMaxColours},
+                                 m_first_of_key.as<std::uint32_t>(kMaxColours + 2), kNoFirst, s);
   // One read: the firsts of every key and the rounds run.
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_first_of_key.get_as<std::uint32_t>(),
                                      (kMaxColours + 2) * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
@@ -305,16 +289,19 @@ void ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impa
   order = nullptr;
   first = nullptr;
   if (n == 0) return;
-  constexpr int kKeyBits = 8;  // the levels (< kMaxColourRounds), the overflow's key and the others'
-  const ColouringArrays at = lay_out(n, body_count, kKeyBits);
+  // Buckets: the levels (< kMaxColourRounds), the overflow's and the others'.
+  const ColouringArrays at = lay_out(n, body_count, kMaxColourRounds + 2, true);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(m_count.get_as<std::uint32_t>(), 0, sizeof(std::uint32_t), s));
   impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, rest_speed, at.colour,
                                                                     at.active, m_count.get_as<std::uint32_t>());
   MARBLES_CUDA_CHECK_LAUNCH();
   // A level is the round that coloured it. Nothing is read on the host.
   launch_rounds(ImpactEntries{records, impact}, at, n, body_count, ColourRule::by_round, sm_count, s);
-  order = sort_keys(at, n, kMaxColourRounds, kKeyBits, nullptr, sm_count, s);
-  first = m_first_of_key.get_as<std::uint32_t>();
+  auto* firsts = m_first_of_key.as<std::uint32_t>(kMaxColourRounds + 2);
+  ::marbles::cuda::counting_sort(at.sort, n, ColourKey{at.colour, kMaxColourRounds}, PlaceInOrder{at.order}, firsts,
+                                 kNoFirst, s);
+  order = at.order;
+  first = firsts;
 }
 
 }  // namespace marbles::narrowphase::cuda

@@ -1,8 +1,8 @@
 // narrowphase/colouring_cuda.cuh — the CUDA twin of colouring.cpp: the
-// Jones–Plassmann rounds (colouring_math.hpp) as kernels, then a stable sort
-// of the contacts by colour. Gives the CPU's colouring bit for bit (the CPU
-// computes the same colours in one sequential pass; tests prove the two
-// forms equal). Only .cu files include this header.
+// Jones–Plassmann rounds (colouring_math.hpp) as kernels, then a stable
+// counting sort of the contacts by colour (core/counting_sort_cuda.cuh).
+// Gives the CPU's colouring bit for bit (the CPU computes the same colours
+// in one sequential pass; tests prove the two forms equal). Only .cu files include this header.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -67,27 +67,24 @@ class ColouringCuda {
   // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }
 
-  // The temporaries (lists, keys, the sort's arrays) live in `scratch`
+  // The temporaries (colours, lists, the sort's counts) live in `scratch`
   // from here on, memory that stages which never run at the same time
   // share (core/device_buffer.cuh: Carve); by default in the colouring's own.
   void share_scratch(DeviceBuffer& scratch) { m_scratch = &scratch; }
 
  private:
   std::uint64_t m_bytes = 0;
-  // A call's temporaries carved out of the scratch memory: the sort's keys
-  // key_bits wide.
-  ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, int key_bits);
+  // A call's temporaries carved out of the scratch memory: a counting sort
+  // over `buckets`, and with `ordered` an array for the sorted order.
+  ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets, bool ordered);
   // Every round over the active list (count[0] contacts, set by the
   // caller), in one launch, its scratch cleared first; `entries` makes a
   // contact's spheres and rank from its index (colouring_cuda.cu).
   template <class Entries>
   void launch_rounds(const Entries& entries, const ColouringArrays& at, std::uint32_t n, std::size_t body_count,
                      ColourRule rule, int sm_count, cudaStream_t stream);
-  // The keys (overflow -> overflow_key, inactive last) sorted stably with
-  // the indices, and the firsts of the keys (m_first_of_key, overflow_key +
-  // 2 words) on the device. Returns the sorted indices.
-  std::uint32_t* sort_keys(const ColouringArrays& at, std::uint32_t n, std::uint32_t overflow_key, int key_bits,
-                           const std::uint32_t** sorted_keys, int sm_count, cudaStream_t stream);
+  // The firsts of the sort's buckets (kNoFirst where empty), read back by
+  // colour_and_sort, read on the device by the impact stage.
   DeviceBuffer m_count, m_first_of_key, m_own_scratch;
   DeviceBuffer* m_scratch = &m_own_scratch;
   ::marbles::cuda::PinnedBuffer<std::uint32_t> m_host;  // readbacks

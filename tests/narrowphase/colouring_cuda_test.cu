@@ -229,12 +229,13 @@ TEST(ColouringCuda, SharedScratchLeftDirtyBetweenCalls) {
   }
 }
 
-// Sets around the block and warp sizes (the staged gathers' partial runs),
-// with and without kept colours. Small enough for compute-sanitizer.
+// Sets around the block and warp sizes (the staged gathers' partial runs)
+// and the counting sort's tiles (1024 contacts a warp, 8 a block), with and
+// without kept colours. Small enough for compute-sanitizer.
 TEST(ColouringCuda, SetsAroundTheBlockSizes) {
   REQUIRE_DEVICE();
   std::mt19937_64 rng(35);
-  for (const std::size_t count : {1, 2, 31, 32, 33, 127, 128, 129, 255, 256, 257, 1000}) {
+  for (const std::size_t count : {1, 2, 31, 32, 33, 127, 128, 129, 255, 256, 257, 1000, 1023, 1024, 1025, 8193}) {
     const auto bodies = static_cast<std::uint32_t>(8 + count / 2);
     const std::vector<Contact> contacts = random_contacts(rng, bodies, count);
     expect_same_as_cpu(contacts, bodies);
