@@ -17,7 +17,9 @@
 //   traversal  count per sphere -> scan (readback: pair count) -> write
 //
 // Every buffer is sized from a count (count, scan, allocate) and only grows;
-// there is no fixed capacity. The readbacks named above are the only host
+// there is no fixed capacity. The home-cell variant carves its temporaries
+// out of one scratch buffer, which a GPU step shares with its other stages
+// (share_scratch). The readbacks named above are the only host
 // syncs (seed: 3, home: 2). Grids too wide for 63 (seed) or 62 (home) key
 // bits (a sphere very far from the rest) go through the CPU twin's exact
 // key compression, then back to the device.
@@ -49,7 +51,8 @@ struct SubdivisionCuda::Impl {
   DeviceBuffer flags, cell_index, cells, pass_begin;
   DeviceBuffer pair_counts, pair_offsets, pairs, tests, sorted_sphere, sorted_info;
   DeviceBuffer cub_temp, seed_scratch;
-  DeviceBuffer cell_lb;  // home-cell variant: dense lower bounds
+  DeviceBuffer own_scratch;                 // the home-cell variant's temporaries, unless shared
+  DeviceBuffer* scratch = &own_scratch;
   std::size_t pair_count = 0;
 
   ::marbles::cuda::PinnedBuffer<BoundsAccum> h_bounds{1};
@@ -213,10 +216,21 @@ std::size_t SubdivisionCuda::Impl::run_home(const SpheresIn& d, real margin, cud
 template <class Key>
 std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin, const HomeGrid& g, cudaStream_t s) {
   const std::size_t n = d.count;
-  auto* d_keys = keys.as<Key>(n);
-  auto* d_keys_alt = keys_alt.as<Key>(n);
-  auto* d_ids = values.as<std::uint32_t>(n);
-  auto* d_ids_alt = values_alt.as<std::uint32_t>(n);
+  // Every temporary in the scratch memory, live only during this call.
+  const bool dense = use_dense_cell_starts(g, n);
+  Key *d_keys = nullptr, *d_keys_alt = nullptr;
+  std::uint32_t *d_ids = nullptr, *d_ids_alt = nullptr, *d_lb = nullptr, *d_counts = nullptr, *d_offsets = nullptr;
+  SortedSphere* d_sorted = nullptr;
+  ::marbles::cuda::carve(*scratch, [&](::marbles::cuda::Carve& c) {
+    d_keys = c.take<Key>(n);
+    d_keys_alt = c.take<Key>(n);
+    d_ids = c.take<std::uint32_t>(n);
+    d_ids_alt = c.take<std::uint32_t>(n);
+    d_lb = dense ? c.take<std::uint32_t>(g.cells + 1) : nullptr;
+    d_sorted = c.take<SortedSphere>(n);
+    d_counts = c.take<std::uint32_t>(n + 1);
+    d_offsets = c.take<std::uint32_t>(n + 1);
+  });
   launch_home_keys<Key>(d.centre, n, g, d_keys, d_ids, sm_count, s);
   stats.cell_entries = n;
   mark(1, s);
@@ -234,16 +248,11 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
   mark(2, s);
 
   // --- cell list: spheres in sorted order, cell lower bounds -------------------------
-  const bool dense = use_dense_cell_starts(g, n);
   stats.dense_cell_starts = dense;
-  auto* d_lb = dense ? cell_lb.as<std::uint32_t>(g.cells + 1) : nullptr;
-  auto* d_sorted = sorted_sphere.as<SortedSphere>(n);
   launch_home_reorder<Key>(d_keys, d_ids, n, d.centre, d.radius, g.cells, d_sorted, d_lb, sm_count, s);
   mark(3, s);
 
   // --- traversal: count -> scan -> (readback) -> write -------------------------------
-  auto* d_counts = pair_counts.as<std::uint32_t>(n + 1);
-  auto* d_offsets = pair_offsets.as<std::uint32_t>(n + 1);
   auto* d_tests = tests.as<unsigned long long>(1);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(d_tests, 0, sizeof(unsigned long long), s));
   const HomeTraversal<Key> in{d_keys, d_ids, d_sorted, d_lb, g, static_cast<std::uint32_t>(n), margin};
@@ -301,6 +310,7 @@ std::string SubdivisionCuda::name() const {
   return (m->algorithm == Algorithm::seed ? "subdivision-cuda-" : "home-cell-cuda-") + sort;
 }
 void SubdivisionCuda::set_stage_timing(bool on) { m->timing = on; }
+void SubdivisionCuda::share_scratch(::marbles::cuda::DeviceBuffer& scratch) { m->scratch = &scratch; }
 SortKind SubdivisionCuda::sort_kind() const { return m->sort; }
 Algorithm SubdivisionCuda::algorithm() const { return m->algorithm; }
 const Pair* SubdivisionCuda::device_pairs() const { return static_cast<const Pair*>(m->pairs.get()); }

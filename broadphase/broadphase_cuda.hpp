@@ -21,6 +21,10 @@
 
 #include "broadphase/broadphase.hpp"
 
+namespace marbles::cuda {
+class DeviceBuffer;  // core/device_memory.hpp
+}
+
 namespace marbles::broadphase {
 
 class SubdivisionCuda final : public BroadPhase {
@@ -41,6 +45,14 @@ class SubdivisionCuda final : public BroadPhase {
   // seed algorithm, twice (bounds, pair count) for the home-cell variant.
   std::size_t find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream = nullptr);
   const Pair* device_pairs() const;  // device pointer
+
+  // The home-cell variant's temporaries (keys, ids and their alternates,
+  // the spheres in sorted order, lower bounds, pair counts and offsets) live
+  // in `scratch` from here on: memory that stages which never run at the
+  // same time share (a GPU step's; core/device_buffer.cuh: Carve), valid
+  // only during a call. By default in the broad phase's own. The pairs are
+  // always its own.
+  void share_scratch(::marbles::cuda::DeviceBuffer& scratch);
 
   // Record CUDA events between the stages so that last_stats() carries
   // per-stage times (on by default; costs a few microseconds).

@@ -105,6 +105,7 @@ class CudaStep final : public StepBackend {
     if (model.collisions) {
       m_broadphase = std::make_unique<broadphase::SubdivisionCuda>(model.algorithm);
       m_broadphase->set_stage_timing(false);  // its events cost a sync per call: profiling only
+      m_broadphase->share_scratch(m_scratch);
     }
     m_terms = {model.solver.friction, model.solver.rolling};
     m_cache.set_terms(m_terms.friction, m_terms.rolling);

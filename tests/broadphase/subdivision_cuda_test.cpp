@@ -124,6 +124,38 @@ TEST_P(SubdivisionCuda, DeviceResidentEntryPoint) {
   }
 }
 
+// The temporaries in a scratch buffer shared with other stages, which leave
+// it dirty (poisoned here) and find it larger or smaller than this call
+// needs: the same pairs as brute force, whatever the memory held.
+TEST_P(SubdivisionCuda, SharedScratchLeftDirtyBetweenCalls) {
+  REQUIRE_DEVICE();
+  mb::SubdivisionCuda gpu(algorithm(), sort());
+  marbles::cuda::DeviceBuffer scratch, centre, radius;  // freed, as the stream is destroyed, however the test ends
+  gpu.share_scratch(scratch);
+  marbles::cuda::Stream stream;
+  stream.create();
+  std::uint64_t seed = 7;
+  const std::pair<std::size_t, mt::SetKind> sets[] = {
+      {20000, mt::SetKind::mono}, {500, mt::SetKind::poly20}, {30000, mt::SetKind::clustered},
+      {2000, mt::SetKind::outlier}, {25000, mt::SetKind::mono}};
+  for (const auto& [n, kind] : sets) {
+    if (scratch.bytes() > 0) {
+      ASSERT_EQ(cudaMemset(scratch.get(), 0xa5, scratch.bytes()), cudaSuccess);
+    }
+    mt::SphereSet s = mt::make_set(kind, n, ++seed);
+    marbles::Vec3* c = centre.as<marbles::Vec3>(n);
+    real* r = radius.as<real>(n);
+    ASSERT_EQ(cudaMemcpy(c, s.centre.data(), n * sizeof(marbles::Vec3), cudaMemcpyHostToDevice), cudaSuccess);
+    ASSERT_EQ(cudaMemcpy(r, s.radius.data(), n * sizeof(real), cudaMemcpyHostToDevice), cudaSuccess);
+    const std::size_t count = gpu.find_pairs_device({c, r, n}, real(0), stream);
+    std::vector<mb::Pair> got(count), expected;
+    ASSERT_EQ(cudaMemcpy(got.data(), gpu.device_pairs(), count * sizeof(mb::Pair), cudaMemcpyDeviceToHost),
+              cudaSuccess);
+    mb::brute_force_pairs(s.view(), 0, expected);
+    EXPECT_TRUE(mt::same_pair_set(got, expected)) << mt::set_name(kind) << " n=" << n;
+  }
+}
+
 template <class Key>
 void check_sort(mb::SortKind sort, int pattern, std::size_t n, unsigned bits, std::uint64_t seed) {
   std::mt19937_64 rng(seed);
