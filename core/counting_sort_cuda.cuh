@@ -110,9 +110,14 @@ __global__ void tile_move_kernel(Bucket bucket, Move move, std::uint32_t n, Coun
   }
 }
 
-// first[b]: the first place of bucket b, `none` where the bucket is empty.
+// first[b]: the first place of bucket b, `none` where the bucket is empty
+// (every bucket, without items: no tiles, nothing counted).
 static __global__ void bucket_first_kernel(CountingSortArrays at, std::uint32_t none, std::uint32_t* first) {
   for (std::uint32_t b = blockIdx.x * blockDim.x + threadIdx.x; b < at.buckets; b += gridDim.x * blockDim.x) {
+    if (at.tiles == 0) {
+      first[b] = none;
+      continue;
+    }
     const std::uint32_t here = at.place[std::size_t(b) * at.tiles], after = at.place[std::size_t(b + 1) * at.tiles];
     first[b] = after > here ? here : none;
   }
@@ -129,14 +134,16 @@ static __global__ void bucket_first_kernel(CountingSortArrays at, std::uint32_t 
 template <class Bucket, class Move>
 void counting_sort(const CountingSortArrays& at, std::uint32_t n, const Bucket& bucket, const Move& move,
                    std::uint32_t* first, std::uint32_t none, cudaStream_t s) {
-  if (n == 0) return;
-  const int grid = static_cast<int>((at.tiles + kSortWarps - 1) / kSortWarps);
-  const std::size_t shared = std::size_t(kSortWarps) * at.buckets * sizeof(std::uint32_t);
-  counting_detail::tile_count_kernel<<<grid, kBlock, shared, s>>>(bucket, n, at);
-  MARBLES_CUDA_CHECK_LAUNCH();
-  device_exclusive_sum(at.count, at.place, std::size_t(at.buckets) * at.tiles + 1, at.temp, at.temp_bytes, s);
-  counting_detail::tile_move_kernel<<<grid, kBlock, shared, s>>>(bucket, move, n, at);
-  MARBLES_CUDA_CHECK_LAUNCH();
+  if (at.buckets == 0) return;
+  if (n > 0) {
+    const int grid = static_cast<int>((at.tiles + kSortWarps - 1) / kSortWarps);
+    const std::size_t shared = std::size_t(kSortWarps) * at.buckets * sizeof(std::uint32_t);
+    counting_detail::tile_count_kernel<<<grid, kBlock, shared, s>>>(bucket, n, at);
+    MARBLES_CUDA_CHECK_LAUNCH();
+    device_exclusive_sum(at.count, at.place, std::size_t(at.buckets) * at.tiles + 1, at.temp, at.temp_bytes, s);
+    counting_detail::tile_move_kernel<<<grid, kBlock, shared, s>>>(bucket, move, n, at);
+    MARBLES_CUDA_CHECK_LAUNCH();
+  }
   counting_detail::bucket_first_kernel<<<(at.buckets + kBlock - 1) / kBlock, kBlock, 0, s>>>(at, none, first);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
