@@ -47,6 +47,8 @@ struct SubdivisionCuda::Impl {
 
   DeviceBuffer centre, radius;  // for the host entry point
   DeviceBuffer bounds, counts, offsets, info;
+  // The seed algorithm's (the home-cell variant's temporaries are carved
+  // out of `scratch`); the pairs and tests are both's.
   DeviceBuffer keys, keys_alt, values, values_alt;
   DeviceBuffer flags, cell_index, cells, pass_begin;
   DeviceBuffer pair_counts, pair_offsets, pairs, tests, sorted_sphere, sorted_info;

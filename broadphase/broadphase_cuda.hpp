@@ -49,9 +49,10 @@ class SubdivisionCuda final : public BroadPhase {
   // The home-cell variant's temporaries (keys, ids and their alternates,
   // the spheres in sorted order, lower bounds, pair counts and offsets) live
   // in `scratch` from here on: memory that stages which never run at the
-  // same time share (a GPU step's; core/device_buffer.cuh: Carve), valid
-  // only during a call. By default in the broad phase's own. The pairs are
-  // always its own.
+  // same time share (a GPU step's; core/device_buffer.cuh: Carve). The
+  // call's last kernel still reads them when it returns, so the scratch's
+  // next user must run after it on the same stream. By default in the broad
+  // phase's own. The pairs are always its own.
   void share_scratch(::marbles::cuda::DeviceBuffer& scratch);
 
   // Record CUDA events between the stages so that last_stats() carries

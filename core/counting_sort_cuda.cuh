@@ -1,6 +1,6 @@
 // core/counting_sort_cuda.cuh — the CUDA twin of core/counting_sort.hpp: a
 // stable counting sort over a few hundred buckets at most, which places each
-// item (move(k, place)) without sorting keys and indices: bucket by bucket,
+// item (move(k, place, bucket)) without sorting keys and indices: bucket by bucket,
 // and within a bucket in item order. The items are cut into tiles of
 // kSortTile, a warp each. A warp counts its tile's items per bucket; an
 // exclusive scan over the counts, bucket-major, gives each tile's first place
@@ -8,7 +8,9 @@
 // order, and ranks each item among its equals with __match_any_sync. The
 // same places as a stable sort, whatever the launch; no atomics. Its
 // temporaries are a count and a place per bucket and tile (2 words per
-// bucket and 1024 items) and the scan's storage. Only .cu files include it.
+// bucket and 1024 items) and the scan's storage. Unlike the CPU's it skips
+// no item and gives each bucket's first place (or none), not the starts.
+// Only .cu files include it.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -35,7 +37,7 @@ struct CountingSortArrays {
   static CountingSortArrays take(Carve& c, std::uint32_t n, std::uint32_t buckets) {
     CountingSortArrays at;
     at.buckets = buckets;
-    at.tiles = (n + kSortTile - 1) / kSortTile;
+    at.tiles = static_cast<std::uint32_t>((std::uint64_t(n) + kSortTile - 1) / kSortTile);
     const std::size_t entries = std::size_t(buckets) * at.tiles + 1;
     at.temp_bytes = exclusive_sum_bytes<std::uint32_t>(entries);
     at.count = c.take<std::uint32_t>(entries);
@@ -67,19 +69,39 @@ __device__ __forceinline__ LaneItem lane_item(const Bucket& bucket, std::uint32_
   return it;
 }
 
+// This warp's tile: its index, its items [begin, end) and its lane; its
+// words of the block's shared memory (buckets a warp).
+struct WarpTile {
+  std::uint32_t tile, begin, end;
+  unsigned lane;
+  std::uint32_t* words;
+  bool valid;
+};
+__device__ __forceinline__ WarpTile warp_tile(std::uint32_t n, const CountingSortArrays& at, std::uint32_t* shared) {
+  WarpTile w;
+  w.lane = threadIdx.x & 31u;
+  const unsigned warp = threadIdx.x >> 5;
+  w.tile = blockIdx.x * kSortWarps + warp;
+  w.valid = w.tile < at.tiles;  // the same for the whole warp
+  w.begin = w.tile * kSortTile;
+  w.end = n - w.begin < kSortTile ? n : w.begin + kSortTile;  // read only where valid (begin < n)
+  w.words = shared + std::size_t(warp) * at.buckets;
+  return w;
+}
+
 // Count[b * tiles + t]: the items of tile t in bucket b. Shared memory:
 // kSortWarps * buckets words.
 template <class Bucket>
 __global__ void tile_count_kernel(Bucket bucket, std::uint32_t n, CountingSortArrays at) {
   extern __shared__ std::uint32_t shared_count[];
-  const unsigned lane = threadIdx.x & 31u, warp = threadIdx.x >> 5;
-  const std::uint32_t tile = blockIdx.x * kSortWarps + warp;
-  if (tile >= at.tiles) return;  // the whole warp
-  std::uint32_t* mine = shared_count + std::size_t(warp) * at.buckets;
+  const WarpTile w = warp_tile(n, at, shared_count);
+  if (!w.valid) return;
+  const unsigned lane = w.lane;
+  std::uint32_t* mine = w.words;
   for (std::uint32_t b = lane; b < at.buckets; b += 32) mine[b] = 0;
   __syncwarp();
-  const std::uint32_t begin = tile * kSortTile, end = n - begin < kSortTile ? n : begin + kSortTile;
-  for (std::uint32_t base = begin; base < end; base += 32) {
+  const std::uint32_t tile = w.tile, end = w.end;
+  for (std::uint32_t base = w.begin; base < end; base += 32) {
     const LaneItem it = lane_item(bucket, base + lane, end, lane);
     if (it.in && it.rank == 0) mine[it.bucket] += __popc(it.equals);  // one lane of each bucket
     __syncwarp();
@@ -88,25 +110,25 @@ __global__ void tile_count_kernel(Bucket bucket, std::uint32_t n, CountingSortAr
   if (tile == 0 && lane == 0) at.count[std::size_t(at.buckets) * at.tiles] = 0;
 }
 
-// move(k, place) for every item of each tile, from the tile's first place
-// in each bucket (the scanned counts).
+// move(k, place, bucket) for every item of each tile, from the tile's first
+// place in each bucket (the scanned counts).
 template <class Bucket, class Move>
 __global__ void tile_move_kernel(Bucket bucket, Move move, std::uint32_t n, CountingSortArrays at) {
   extern __shared__ std::uint32_t shared_next[];
-  const unsigned lane = threadIdx.x & 31u, warp = threadIdx.x >> 5;
-  const std::uint32_t tile = blockIdx.x * kSortWarps + warp;
-  if (tile >= at.tiles) return;
-  std::uint32_t* next = shared_next + std::size_t(warp) * at.buckets;
-  for (std::uint32_t b = lane; b < at.buckets; b += 32) next[b] = at.place[std::size_t(b) * at.tiles + tile];
+  const WarpTile w = warp_tile(n, at, shared_next);
+  if (!w.valid) return;
+  const unsigned lane = w.lane;
+  std::uint32_t* next = w.words;
+  for (std::uint32_t b = lane; b < at.buckets; b += 32) next[b] = at.place[std::size_t(b) * at.tiles + w.tile];
   __syncwarp();
-  const std::uint32_t begin = tile * kSortTile, end = n - begin < kSortTile ? n : begin + kSortTile;
-  for (std::uint32_t base = begin; base < end; base += 32) {
+  const std::uint32_t end = w.end;
+  for (std::uint32_t base = w.begin; base < end; base += 32) {
     const LaneItem it = lane_item(bucket, base + lane, end, lane);
     const std::uint32_t place = it.in ? next[it.bucket] + it.rank : 0;
     __syncwarp();
     if (it.in && it.rank == 0) next[it.bucket] += __popc(it.equals);
     __syncwarp();
-    if (it.in) move(base + lane, place);
+    if (it.in) move(base + lane, place, it.bucket);
   }
 }
 
@@ -126,11 +148,11 @@ static __global__ void bucket_first_kernel(CountingSortArrays at, std::uint32_t 
 }  // namespace counting_detail
 
 // Items [0, n) by bucket(k) < at.buckets (a __device__ functor): move(k,
-// place) puts item k at its place (each k once, in no particular order of
-// calls); first[b] gets bucket b's first place, `none` for an empty bucket.
-// bucket(k) is read again after move(k', ...) of other items, never after
-// move(k, ...): an item's move may overwrite what its own bucket is read
-// from. `at` from CountingSortArrays::take for n and the same buckets.
+// place, bucket(k)) puts item k at its place (each k once, in no particular
+// order of calls); first[b] gets bucket b's first place, `none` for an
+// empty bucket. bucket(k) is read again after move(k', ...) of other items,
+// never after move(k, ...): an item's move may overwrite what its own bucket
+// is read from. `at` from CountingSortArrays::take for n and the same buckets.
 template <class Bucket, class Move>
 void counting_sort(const CountingSortArrays& at, std::uint32_t n, const Bucket& bucket, const Move& move,
                    std::uint32_t* first, std::uint32_t none, cudaStream_t s) {

@@ -169,9 +169,7 @@ struct ColourKey {
 struct PlaceOverColour {
   std::uint32_t* position;
   std::uint8_t* sorted_colour;
-  std::uint32_t overflow_key;
-  __device__ void operator()(std::uint32_t k, std::uint32_t place) const {
-    const std::uint32_t key = ColourKey{position, overflow_key}(k);
+  __device__ void operator()(std::uint32_t k, std::uint32_t place, std::uint32_t key) const {
     position[k] = place;
     if (sorted_colour) sorted_colour[place] = key < kMaxColours ? static_cast<std::uint8_t>(key) : kNoKeptColour;
   }
@@ -180,7 +178,7 @@ struct PlaceOverColour {
 // impact_levels': the contact at each place.
 struct PlaceInOrder {
   std::uint32_t* order;
-  __device__ void operator()(std::uint32_t k, std::uint32_t place) const { order[place] = k; }
+  __device__ void operator()(std::uint32_t k, std::uint32_t place, std::uint32_t) const { order[place] = k; }
 };
 
 }  // namespace
@@ -213,7 +211,12 @@ ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, 
   return at;
 }
 
-ColouringCuda::ColouringCuda() : m_host(kRead) { m_count.as<std::uint32_t>(kMaxColourRounds + 2); }
+// The firsts sized once for the larger use (the impact levels'): no
+// allocation inside a stage that does not wait.
+ColouringCuda::ColouringCuda() : m_host(kRead) {
+  m_count.as<std::uint32_t>(kMaxColourRounds + 2);
+  m_first_of_key.as<std::uint32_t>(kMaxColourRounds + 2);
+}
 ColouringCuda::~ColouringCuda() = default;
 
 // Every round over the active lists, from a clear start (no body offers, no
@@ -268,8 +271,8 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   MARBLES_CUDA_CHECK_LAUNCH();
   launch_rounds(ContactEntries{pairs}, at, n, body_count, ColourRule::lowest_free, sm_count, s);
   ::marbles::cuda::counting_sort(at.sort, n, ColourKey{at.colour, kMaxColours},
-                                 PlaceOverColour{at.colour, sorted_colour, kMaxColours},
-                                 m_first_of_key.as<std::uint32_t>(kMaxColours + 2), kNoFirst, s);
+                                 PlaceOverColour{at.colour, sorted_colour},
+                                 m_first_of_key.get_as<std::uint32_t>(), kNoFirst, s);
   // One read: the firsts of every key and the rounds run.
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_first_of_key.get_as<std::uint32_t>(),
                                      (kMaxColours + 2) * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
@@ -297,7 +300,7 @@ void ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impa
   MARBLES_CUDA_CHECK_LAUNCH();
   // A level is the round that coloured it. Nothing is read on the host.
   launch_rounds(ImpactEntries{records, impact}, at, n, body_count, ColourRule::by_round, sm_count, s);
-  auto* firsts = m_first_of_key.as<std::uint32_t>(kMaxColourRounds + 2);
+  auto* firsts = m_first_of_key.get_as<std::uint32_t>();
   ::marbles::cuda::counting_sort(at.sort, n, ColourKey{at.colour, kMaxColourRounds}, PlaceInOrder{at.order}, firsts,
                                  kNoFirst, s);
   order = at.order;

@@ -556,8 +556,9 @@ class CudaStep final : public StepBackend {
   // and colours.
   DeviceBuffer m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
       m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved, m_contact_chunk;
-  // Temporaries of the stages that never run at the same time (the contact
-  // flags, the colouring's lists and sorts, the cache's store and restore):
+  // Temporaries of the stages that never run at the same time (the broad
+  // phase's, the contact flags, the colouring's lists and counting sort, the
+  // cache's store and restore):
   // the device holds the largest stage's, not their sum.
   DeviceBuffer m_scratch;
   narrowphase::PairTable m_table;

@@ -27,7 +27,11 @@ struct BucketOf {
 };
 struct PlaceOf {
   std::uint32_t* place;
-  __device__ void operator()(std::uint32_t k, std::uint32_t p) const { place[k] = p; }
+  const std::uint32_t* bucket;
+  __device__ void operator()(std::uint32_t k, std::uint32_t p, std::uint32_t b) const {
+    if (b != bucket[k]) p = 0xfffffff1u;  // not the item's own bucket: caught below
+    place[k] = p;
+  }
 };
 
 // The places and firsts the GPU gives; in_place: each item's place written
@@ -53,7 +57,7 @@ void expect_stable_places(const std::vector<std::uint32_t>& bucket, std::uint32_
   dev::CountingSortArrays at;
   dev::carve(scratch, [&](dev::Carve& c) { at = dev::CountingSortArrays::take(c, n, buckets); });
   ASSERT_EQ(cudaMemset(scratch.get(), 0xa5, scratch.bytes()), cudaSuccess);  // dirty, as a shared scratch is
-  dev::counting_sort(at, n, BucketOf{keys}, PlaceOf{places}, first, kNone, nullptr);
+  dev::counting_sort(at, n, BucketOf{keys}, PlaceOf{places, keys}, first, kNone, nullptr);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
 
   std::vector<std::uint32_t> place(n), got_first(buckets);
