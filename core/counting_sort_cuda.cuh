@@ -1,7 +1,7 @@
 // core/counting_sort_cuda.cuh — the CUDA twin of core/counting_sort.hpp: a
 // stable counting sort over a few hundred buckets at most, which places each
-// item (move(k, place, bucket)) without sorting keys and indices: bucket by bucket,
-// and within a bucket in item order. The items are cut into tiles of
+// item (move(k, place, bucket)) without sorting keys and indices: bucket by
+// bucket, and within a bucket in item order. The items are cut into tiles of
 // kSortTile, a warp each. A warp counts its tile's items per bucket; an
 // exclusive scan over the counts, bucket-major, gives each tile's first place
 // in each bucket; the warp then walks its tile again, 32 items at a time in
@@ -26,24 +26,27 @@ namespace marbles::cuda {
 inline constexpr std::uint32_t kSortTile = 1024;         // items a warp counts and places (32 a lane)
 inline constexpr std::uint32_t kSortWarps = kBlock / 32;  // warps, so tiles, a block
 
-// A counting sort's temporaries for n items in `buckets` buckets, carved by
-// the caller (CountingSortArrays::take).
+// A counting sort's temporaries for n items in `buckets` buckets: sized
+// once (for_items), then carved by the caller (take, which a carve runs
+// twice).
 struct CountingSortArrays {
   std::uint32_t buckets = 0, tiles = 0;
   std::uint32_t *count = nullptr, *place = nullptr;  // bucket-major: [b * tiles + t], one more for the total
   void* temp = nullptr;
   std::size_t temp_bytes = 0;
 
-  static CountingSortArrays take(Carve& c, std::uint32_t n, std::uint32_t buckets) {
+  static CountingSortArrays for_items(std::uint32_t n, std::uint32_t buckets) {
     CountingSortArrays at;
     at.buckets = buckets;
     at.tiles = static_cast<std::uint32_t>((std::uint64_t(n) + kSortTile - 1) / kSortTile);
-    const std::size_t entries = std::size_t(buckets) * at.tiles + 1;
-    at.temp_bytes = exclusive_sum_bytes<std::uint32_t>(entries);
-    at.count = c.take<std::uint32_t>(entries);
-    at.place = c.take<std::uint32_t>(entries);
-    at.temp = c.take<char>(at.temp_bytes);
+    at.temp_bytes = exclusive_sum_bytes<std::uint32_t>(at.entries());
     return at;
+  }
+  std::size_t entries() const { return std::size_t(buckets) * tiles + 1; }
+  void take(Carve& c) {
+    count = c.take<std::uint32_t>(entries());
+    place = c.take<std::uint32_t>(entries());
+    temp = c.take<char>(temp_bytes);
   }
 };
 
@@ -152,7 +155,7 @@ static __global__ void bucket_first_kernel(CountingSortArrays at, std::uint32_t 
 // order of calls); first[b] gets bucket b's first place, `none` for an
 // empty bucket. bucket(k) is read again after move(k', ...) of other items,
 // never after move(k, ...): an item's move may overwrite what its own bucket
-// is read from. `at` from CountingSortArrays::take for n and the same buckets.
+// is read from. `at` from CountingSortArrays::for_items(n, buckets), taken.
 template <class Bucket, class Move>
 void counting_sort(const CountingSortArrays& at, std::uint32_t n, const Bucket& bucket, const Move& move,
                    std::uint32_t* first, std::uint32_t none, cudaStream_t s) {
@@ -162,7 +165,7 @@ void counting_sort(const CountingSortArrays& at, std::uint32_t n, const Bucket& 
     const std::size_t shared = std::size_t(kSortWarps) * at.buckets * sizeof(std::uint32_t);
     counting_detail::tile_count_kernel<<<grid, kBlock, shared, s>>>(bucket, n, at);
     MARBLES_CUDA_CHECK_LAUNCH();
-    device_exclusive_sum(at.count, at.place, std::size_t(at.buckets) * at.tiles + 1, at.temp, at.temp_bytes, s);
+    device_exclusive_sum(at.count, at.place, at.entries(), at.temp, at.temp_bytes, s);
     counting_detail::tile_move_kernel<<<grid, kBlock, shared, s>>>(bucket, move, n, at);
     MARBLES_CUDA_CHECK_LAUNCH();
   }

@@ -197,6 +197,7 @@ struct ColouringArrays {
 ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets,
                                        bool ordered) {
   ColouringArrays at;
+  at.sort = ::marbles::cuda::CountingSortArrays::for_items(n, buckets);
   ::marbles::cuda::carve(*m_scratch, [&](::marbles::cuda::Carve& c) {
     at.colour = c.take<std::uint32_t>(n);
     ::marbles::cuda::Carve rounds = c;
@@ -205,7 +206,7 @@ ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, 
     at.body_word = rounds.take<unsigned long long>(body_count);
     at.body_used = rounds.take<unsigned long long>(body_count);
     at.order = ordered ? c.take<std::uint32_t>(n) : nullptr;
-    at.sort = ::marbles::cuda::CountingSortArrays::take(c, n, buckets);
+    at.sort.take(c);
     c.merge(rounds);
   });
   return at;

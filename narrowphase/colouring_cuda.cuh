@@ -2,7 +2,8 @@
 // Jones–Plassmann rounds (colouring_math.hpp) as kernels, then a stable
 // counting sort of the contacts by colour (core/counting_sort_cuda.cuh).
 // Gives the CPU's colouring bit for bit (the CPU computes the same colours
-// in one sequential pass; tests prove the two forms equal). Only .cu files include this header.
+// in one sequential pass; tests prove the two forms equal). Only .cu files
+// include this header.
 #pragma once
 
 #include <cuda_runtime.h>

@@ -144,14 +144,14 @@ MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
 // What the stages after the warm start read of a contact (56 of its 112
 // bytes in float with friction, 40 without; 16 fewer on the GPU where every
 // contact has the same arms: UniformArms), as a structure of arrays of
-// 4-real words: thread k of
-// a launch reads word k of each array, so a warp's request is whole sectors,
-// where a whole Contact per thread made every request span 32 records, and a
-// field-by-field update of one wrote partial sectors. The GPU writes them
-// once per substep as it makes the contacts in colour-major order (they are
-// its only form of the contacts, with an impact word or an approach speed
-// each: ImpactRecords, impact_record, contact_of_record below); the CPU
-// packs them from its contacts (pack_sweep_record). Every sweep reads and writes them
+// 4-real words: thread k of a launch reads word k of each array, so a warp's
+// request is whole sectors, where a whole Contact per thread made every
+// request span 32 records, and a field-by-field update of one wrote partial
+// sectors. The GPU writes them once per substep as it makes the contacts in
+// colour-major order (they are its only form of the contacts, with an impact
+// word or an approach speed each: ImpactRecords, impact_record,
+// contact_of_record below); the CPU packs them from its contacts
+// (pack_sweep_record). Every sweep reads and writes them
 // (load_sweep_contact, store_sweep_impulses), the position stages read them
 // (load_position_contact), and on the CPU the impulses go back into the
 // contacts only when the contacts are asked for (unpack_sweep_impulses) or

@@ -17,9 +17,8 @@
 // substep: the broad phase's bounds and pair count, the contact count (with
 // whether any contact is an impact candidate and whether the radii differ),
 // and the colouring's colour ranges and rounds run (one read); per step, the
-// flags. The cache's entry
-// count, the lost-load count, the impact levels and the flags of the impact
-// and projection passes stay on the device: those stages run as one
+// flags. The cache's entry count, the lost-load count, the impact levels
+// and the flags of the impact and projection passes stay on the device: those stages run as one
 // cooperative launch each. A settled pile and the gas wait 5 times a step.
 // One wait per step, with buffers sized from the last step, is the next step.
 #include <cuda_runtime.h>
@@ -525,8 +524,8 @@ class CudaStep final : public StepBackend {
     const narrowphase::ImpactParams params{m_model.solver.rest_speed, h, m_model.solver.wall_accel};
     std::uint32_t* order = nullptr;
     const std::uint32_t* first = nullptr;
-    m_colouring.impact_levels(m_records, m_impacts.word, m_count, m_device.size(), params.rest_speed, order, first, m_sm,
-                              m_stream);
+    m_colouring.impact_levels(m_records, m_impacts.word, m_count, m_device.size(), params.rest_speed, order, first,
+                              m_sm, m_stream);
     auto* hit = m_hit.as<unsigned>(narrowphase::kImpactPasses);
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, narrowphase::kImpactPasses * sizeof(unsigned), m_stream));
     nc::launch_impact_stage(m_records, m_impacts.word, order, first, m_count, m_plan, bodies, params,
@@ -545,7 +544,9 @@ class CudaStep final : public StepBackend {
   // entry count and the 9 cell-type bounds (40 B).
   std::uint64_t broad_phase_readback() const { return m_model.algorithm == broadphase::Algorithm::home ? 76 : 116; }
   static constexpr int kFlagWords = 5;
-  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{6};  // find_contacts' counts, candidate and mixed-radii flags, sphere 0's radius
+  // find_contacts' read: the counts, the candidate and mixed-radii flags,
+  // sphere 0's radius.
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{6};
   ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
   bool m_watch = false;
   int m_iteration_factor = 1;

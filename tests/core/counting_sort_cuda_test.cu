@@ -54,8 +54,8 @@ void expect_stable_places(const std::vector<std::uint32_t>& bucket, std::uint32_
   ASSERT_EQ(cudaMemcpy(keys, bucket.data(), n * 4, cudaMemcpyHostToDevice), cudaSuccess);
   if (!in_place) ASSERT_EQ(cudaMemset(places, 0xff, (n + 1) * 4), cudaSuccess);  // poisoned
   ASSERT_EQ(cudaMemset(first, 0xab, buckets * 4), cudaSuccess);
-  dev::CountingSortArrays at;
-  dev::carve(scratch, [&](dev::Carve& c) { at = dev::CountingSortArrays::take(c, n, buckets); });
+  dev::CountingSortArrays at = dev::CountingSortArrays::for_items(n, buckets);
+  dev::carve(scratch, [&](dev::Carve& c) { at.take(c); });
   ASSERT_EQ(cudaMemset(scratch.get(), 0xa5, scratch.bytes()), cudaSuccess);  // dirty, as a shared scratch is
   dev::counting_sort(at, n, BucketOf{keys}, PlaceOf{places, keys}, first, kNone, nullptr);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);

@@ -17,6 +17,7 @@
 #include "narrowphase/colouring.hpp"
 #include "narrowphase/colouring_cuda.cuh"
 #include "narrowphase/solver_math.hpp"
+#include "tests/narrowphase/random_pairs.hpp"
 #include "tests/require_device.hpp"
 
 using namespace marbles;
@@ -24,22 +25,16 @@ using namespace marbles::narrowphase;
 
 namespace {
 
+// Distinct pairs, a wall one time in ten (test::random_pairs), each with a
+// separation, an approach speed and its index as a tag.
 std::vector<Contact> random_contacts(std::mt19937_64& rng, std::uint32_t bodies, std::size_t count) {
-  std::uniform_int_distribution<std::uint32_t> body(0, bodies - 1), wall(0, 5);
   std::uniform_real_distribution<double> u(0, 1);
-  std::set<std::pair<std::uint32_t, std::uint32_t>> seen;
-  std::vector<Contact> out;
-  while (out.size() < count) {
-    Contact c;
-    c.a = body(rng);
-    c.b = u(rng) < 0.1 ? (kWallFlag | wall(rng)) : body(rng);
-    if (c.b == c.a) continue;
-    if (!is_wall(c.b) && c.b < c.a) std::swap(c.a, c.b);
-    if (!seen.insert({c.a, c.b}).second) continue;
+  std::vector<Contact> out = test::random_pairs(rng, 0, bodies, count);
+  for (std::size_t k = 0; k < out.size(); ++k) {
+    Contact& c = out[k];
     c.separation = real(1e-3 * u(rng));
     c.approach_speed = real(u(rng) < 0.5 ? -2 * u(rng) : u(rng));  // about half are impacts
-    c.normal_impulse = real(out.size());                          // a tag
-    out.push_back(c);
+    c.normal_impulse = real(k);                                   // a tag
   }
   return out;
 }

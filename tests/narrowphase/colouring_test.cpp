@@ -19,6 +19,7 @@
 #include "narrowphase/colouring.hpp"
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/solver_math.hpp"
+#include "tests/narrowphase/random_pairs.hpp"
 
 namespace marbles::narrowphase {
 namespace {
@@ -64,25 +65,10 @@ std::uint32_t colour_in_rounds(const Contact* contacts, const std::vector<std::u
   return round;
 }
 
+// Distinct pairs (test::random_pairs), each with its index as a tag.
 std::vector<Contact> random_contacts(std::mt19937_64& rng, std::uint32_t bodies, std::size_t count, double wall_share) {
-  std::uniform_int_distribution<std::uint32_t> body(0, bodies - 1), wall(0, 5);
-  std::bernoulli_distribution is_wall(wall_share);
-  std::set<std::pair<std::uint32_t, std::uint32_t>> seen;
-  std::vector<Contact> out;
-  while (out.size() < count) {
-    Contact c;
-    c.a = body(rng);
-    if (is_wall(rng)) {
-      c.b = kWallFlag | wall(rng);
-    } else {
-      c.b = body(rng);
-      if (c.b == c.a) continue;
-      if (c.b < c.a) std::swap(c.a, c.b);
-    }
-    if (!seen.insert({c.a, c.b}).second) continue;
-    c.separation = real(out.size());  // a tag to find the contact after sorting
-    out.push_back(c);
-  }
+  std::vector<Contact> out = test::random_pairs(rng, 0, bodies, count, wall_share);
+  for (std::size_t k = 0; k < out.size(); ++k) out[k].separation = real(k);  // a tag to find the contact after sorting
   return out;
 }
 

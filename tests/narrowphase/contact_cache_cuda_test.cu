@@ -20,6 +20,7 @@
 #include "narrowphase/contact_cache_cuda.cuh"
 #include "narrowphase/contact_cache_math.hpp"
 #include "narrowphase/solver_math.hpp"
+#include "tests/narrowphase/random_pairs.hpp"
 #include "tests/require_device.hpp"
 
 using namespace marbles;
@@ -31,26 +32,7 @@ namespace {
 
 using ::marbles::cuda::DeviceBuffer;
 
-// count unique pairs: a partner of sphere `hub` with probability hub_share,
-// else two random spheres of [lo, hi), a wall (b) one time in ten.
-std::vector<Contact> random_pairs(std::mt19937_64& rng, std::uint32_t lo, std::uint32_t hi, std::size_t count,
-                                  double hub_share = 0, std::uint32_t hub = 0) {
-  std::uniform_int_distribution<std::uint32_t> body(lo, hi - 1), wall(0, 5);
-  std::uniform_real_distribution<double> u(0, 1);
-  std::set<std::pair<std::uint32_t, std::uint32_t>> seen;
-  std::vector<Contact> out;
-  while (out.size() < count) {
-    Contact c;
-    c.a = u(rng) < hub_share ? hub : body(rng);
-    c.b = u(rng) < 0.1 ? (kWallFlag | wall(rng)) : body(rng);
-    if (c.b == c.a) continue;
-    if (!is_wall(c.b) && c.b < c.a) std::swap(c.a, c.b);
-    if (!seen.insert({c.a, c.b}).second) continue;
-    c.normal = {0, 0, 1};
-    out.push_back(c);
-  }
-  return out;
-}
+using test::random_pairs;  // a wall one time in ten
 
 // Impulses (a share `loaded` with load, the rest none) and colours: the
 // contacts in colour-major order, `colours` colours and an overflow set
@@ -67,6 +49,7 @@ Stored with_impulses(std::mt19937_64& rng, std::vector<Contact> contacts, double
   std::vector<std::uint32_t> of(contacts.size());
   for (std::size_t k = 0; k < contacts.size(); ++k) {
     Contact& c = contacts[k];
+    c.normal = {0, 0, 1};
     const bool load = u(rng) < loaded;
     c.normal_impulse = load ? real(u(rng)) : real(0);
     c.tangent_impulse = {real(u(rng) - 0.5), real(u(rng) - 0.5), 0};
@@ -247,7 +230,7 @@ TEST(ContactCacheCuda, AdversarialContactsAsOnTheCpu) {
   REQUIRE_DEVICE();
   std::mt19937_64 rng(43);
   {
-    const Stored s = with_impulses(rng, random_pairs(rng, 0, 3000, 6000, 0.33, 17), 0.7, 0.3, 9);
+    const Stored s = with_impulses(rng, random_pairs(rng, 0, 3000, 6000, 0.1, 0.33, 17), 0.7, 0.3, 9);
     expect_same_as_cpu(s, 3000, next_contacts(rng, s, 0.8, 500, 3000), 3000, real(0.1), "hub");
   }
   {
