@@ -397,6 +397,7 @@ struct Row {
   double overflow = 0;             // median over the timed steps
   double max_overlap_pct = 0;      // largest of the timed steps, % of a radius
   double projection_sweeps = 0;    // per substep, mean over the timed steps (the projection sweeps until settled)
+  std::uint64_t pair_redos = 0;    // substeps of the timed steps whose broad phase ran again (CUDA: pairs' room)
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   double bytes_per_step = 0;       // median host<->device bytes
   double device_bytes_per_sphere = 0;
@@ -428,6 +429,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     bytes.push_back(static_cast<double>(c.bytes_copied));
     max_overlap = std::max(max_overlap, static_cast<double>(c.max_overlap));
     row.projection_sweeps += static_cast<double>(c.projection_sweeps) / sim.substeps() / repeats;
+    row.pair_redos += c.pair_redos;
   }
   if (on_device) profiled_steps(false);  // each step ends with a wait for its flags: nothing of it is still running
   if (sim.non_finite()) throw RuntimeFailure("N = " + std::to_string(n) + ": non-finite state in the timed steps");
@@ -577,6 +579,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"overflow_median", r.overflow},
                                  {"max_overlap_pct", r.max_overlap_pct},
                                  {"projection_sweeps", r.projection_sweeps},
+                                 {"pair_redos", r.pair_redos},
                                  {"ke_per_sphere_J", r.ke_per_sphere},
                                  {"bytes_per_step_median", r.bytes_per_step},
                                  {"device_bytes_per_sphere", r.device_bytes_per_sphere},

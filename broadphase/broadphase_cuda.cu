@@ -14,7 +14,9 @@
 //   cell IDs   bounds (1 readback) -> grid -> home keys
 //   sort       the same two sorts, one (key, id) entry per sphere
 //   cell list  spheres gathered into sorted order + dense lower-bound array
-//   traversal  count per sphere -> scan (readback: pair count) -> write
+//   traversal  count per sphere -> scan (readback: pair count) -> write;
+//              find_pairs_device_within: no readback, the count left on the
+//              device, the pairs written if they fit the caller's capacity
 //
 // Every buffer is sized from a count (count, scan, allocate) and only grows;
 // there is no fixed capacity. The home-cell variant carves its temporaries
@@ -28,6 +30,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <optional>
 
 #include "broadphase/broadphase_cuda.cuh"
 #include "broadphase/broadphase_cuda.hpp"
@@ -55,7 +58,11 @@ struct SubdivisionCuda::Impl {
   DeviceBuffer cub_temp, seed_scratch;
   DeviceBuffer own_scratch;                 // the home-cell variant's temporaries, unless shared
   DeviceBuffer* scratch = &own_scratch;
+  DeviceBuffer count_word;                  // the pair count, left on the device (find_pairs_device_within)
   std::size_t pair_count = 0;
+  // find_pairs_device_within's capacity (no wait for the pair count), or
+  // none: find_pairs_device.
+  std::optional<std::size_t> within;
 
   ::marbles::cuda::PinnedBuffer<BoundsAccum> h_bounds{1};
   ::marbles::cuda::PinnedBuffer<std::uint32_t> h_small{64};  // readbacks
@@ -260,6 +267,16 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
   const HomeTraversal<Key> in{d_keys, d_ids, d_sorted, d_lb, g, static_cast<std::uint32_t>(n), margin};
   launch_home_count<Key>(in, d_counts, d_tests, sm_count, s);
   exclusive_sum(d_counts, d_offsets, n + 1, cub_temp, s);
+  if (within) {
+    // No readback: the count out of the scratch (its next user overwrites
+    // offsets[n]) into a word of its own, the pairs only if they fit.
+    auto* d_count = count_word.as<std::uint32_t>(1);
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(d_count, d_offsets + n, sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, s));
+    launch_home_write<Key>(in, d_offsets, *within, pairs.as<IndexPair>(*within), sm_count, s);
+    mark(4, s);
+    finish_timing();
+    return SubdivisionCuda::kCountOnDevice;  // stats.pairs and stats.tests stay 0: not read
+  }
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small, d_offsets + n, 4, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small + 2, d_tests, 8, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
@@ -268,7 +285,7 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
   std::memcpy(&t, h_small + 2, 8);
   stats.tests = t;
   auto* d_pairs = pairs.as<IndexPair>(pair_count);
-  if (pair_count > 0) launch_home_write<Key>(in, d_offsets, d_pairs, sm_count, s);
+  if (pair_count > 0) launch_home_write<Key>(in, d_offsets, pair_count, d_pairs, sm_count, s);
   stats.pairs = pair_count;
   mark(4, s);
   finish_timing();
@@ -318,8 +335,17 @@ Algorithm SubdivisionCuda::algorithm() const { return m->algorithm; }
 const Pair* SubdivisionCuda::device_pairs() const { return static_cast<const Pair*>(m->pairs.get()); }
 
 std::size_t SubdivisionCuda::find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream) {
+  m->within.reset();
   return m->run(device_spheres, margin, static_cast<cudaStream_t>(stream));
 }
+
+std::size_t SubdivisionCuda::find_pairs_device_within(const SpheresIn& device_spheres, real margin,
+                                                      std::size_t capacity, void* stream) {
+  m->within = capacity;  // each entry point sets it
+  return m->run(device_spheres, margin, static_cast<cudaStream_t>(stream));
+}
+
+const std::uint32_t* SubdivisionCuda::device_pair_count() const { return m->count_word.get_as<std::uint32_t>(); }
 
 void SubdivisionCuda::find_pairs(const SpheresIn& s, real margin, std::vector<Pair>& out) {
   out.clear();
@@ -331,6 +357,7 @@ void SubdivisionCuda::find_pairs(const SpheresIn& s, real margin, std::vector<Pa
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(c, s.centre, n * sizeof(Vec3), cudaMemcpyHostToDevice, stream));
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(r, s.radius, n * sizeof(real), cudaMemcpyHostToDevice, stream));
   }
+  m->within.reset();
   const std::size_t count = m->run({c, r, n}, margin, stream);
   out.resize(count);
   if (count > 0)

@@ -117,9 +117,10 @@ struct HomeTraversal {
 template <class Key>
 void launch_home_count(const HomeTraversal<Key>& in, std::uint32_t* counts, unsigned long long* tests, int sm_count,
                        cudaStream_t stream);
-// Writes sphere i's pairs at offsets[i].
+// Writes sphere i's pairs at offsets[i], unless there are more than
+// `capacity` in all (offsets[n]): then it writes none.
 template <class Key>
-void launch_home_write(const HomeTraversal<Key>& in, const std::uint32_t* offsets, IndexPair* pairs, int sm_count,
-                       cudaStream_t stream);
+void launch_home_write(const HomeTraversal<Key>& in, const std::uint32_t* offsets, std::size_t capacity,
+                       IndexPair* pairs, int sm_count, cudaStream_t stream);
 
 }  // namespace marbles::broadphase::cuda

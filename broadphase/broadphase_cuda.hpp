@@ -46,6 +46,22 @@ class SubdivisionCuda final : public BroadPhase {
   std::size_t find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream = nullptr);
   const Pair* device_pairs() const;  // device pointer
 
+  // The same without the wait for the pair count where the call can do
+  // without (the home-cell variant on the device's keys): the pairs are
+  // written only if all of them fit in `capacity`, and their count is left
+  // in device_pair_count() for the caller to read with its own (it may be
+  // larger than `capacity`: then nothing was written, and the caller asks
+  // again with room for them). Returns kCountOnDevice then; otherwise the
+  // call waited for the count anyway (the seed algorithm, a grid too wide
+  // for the device's keys, fewer than two spheres) and returns it, with
+  // every pair written whatever `capacity`.
+  static constexpr std::size_t kCountOnDevice = ~std::size_t{0};
+  std::size_t find_pairs_device_within(const SpheresIn& device_spheres, real margin, std::size_t capacity,
+                                       void* stream = nullptr);
+  // Device pointer: the pair count of the last find_pairs_device_within
+  // that returned kCountOnDevice, once the stream has got there.
+  const std::uint32_t* device_pair_count() const;
+
   // The home-cell variant's temporaries (keys, ids and their alternates,
   // the spheres in sorted order, lower bounds, pair counts and offsets) live
   // in `scratch` from here on: memory that stages which never run at the

@@ -107,7 +107,8 @@ __global__ void home_count_kernel(HomeTraversal<Key> in, std::uint32_t* __restri
 
 template <class Key, bool Dense>
 __global__ void home_write_kernel(HomeTraversal<Key> in, const std::uint32_t* __restrict__ offsets,
-                                  IndexPair* __restrict__ pairs) {
+                                  std::size_t capacity, IndexPair* __restrict__ pairs) {
+  if (offsets[in.n] > capacity) return;  // they do not fit: the caller asks again
   for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < in.n; i += gridDim.x * blockDim.x) {
     std::uint32_t at = offsets[i];
     if (offsets[i + 1] == at) continue;  // no pairs from this sphere
@@ -150,13 +151,13 @@ void launch_home_count(const HomeTraversal<Key>& in, std::uint32_t* counts, unsi
 }
 
 template <class Key>
-void launch_home_write(const HomeTraversal<Key>& in, const std::uint32_t* offsets, IndexPair* pairs, int sm_count,
-                       cudaStream_t stream) {
+void launch_home_write(const HomeTraversal<Key>& in, const std::uint32_t* offsets, std::size_t capacity,
+                       IndexPair* pairs, int sm_count, cudaStream_t stream) {
   const int blocks = grid_for(in.n, sm_count);
   if (in.lb)
-    home_write_kernel<Key, true><<<blocks, kBlock, 0, stream>>>(in, offsets, pairs);
+    home_write_kernel<Key, true><<<blocks, kBlock, 0, stream>>>(in, offsets, capacity, pairs);
   else
-    home_write_kernel<Key, false><<<blocks, kBlock, 0, stream>>>(in, offsets, pairs);
+    home_write_kernel<Key, false><<<blocks, kBlock, 0, stream>>>(in, offsets, capacity, pairs);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
@@ -167,8 +168,8 @@ void launch_home_write(const HomeTraversal<Key>& in, const std::uint32_t* offset
                                          std::uint64_t, SortedSphere*, std::uint32_t*, int, cudaStream_t);         \
   template void launch_home_count<Key>(const HomeTraversal<Key>&, std::uint32_t*, unsigned long long*, int,       \
                                        cudaStream_t);                                                             \
-  template void launch_home_write<Key>(const HomeTraversal<Key>&, const std::uint32_t*, IndexPair*, int,          \
-                                       cudaStream_t);
+  template void launch_home_write<Key>(const HomeTraversal<Key>&, const std::uint32_t*, std::size_t, IndexPair*,  \
+                                       int, cudaStream_t);
 MARBLES_HOME_INSTANTIATE(std::uint32_t)
 MARBLES_HOME_INSTANTIATE(std::uint64_t)
 #undef MARBLES_HOME_INSTANTIATE

@@ -63,11 +63,22 @@ __device__ __forceinline__ void raise_if_any(bool seen, const ImpactWatch& watch
   if (__any_sync(0xffffffffu, seen) && (threadIdx.x & 31) == 0) atomicOr(watch.any, 1u);
 }
 
-__global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, std::size_t count, PairTable table,
-                                    real h, const real* reach, std::uint32_t* flags, ImpactWatch watch) {
+// The pairs a flag pass over `items` tests: all of them, or with the count
+// on the device, that many if they fit (else none: the broad phase wrote
+// none, and the caller finds them again with room for them).
+__device__ __forceinline__ std::size_t pairs_in(std::size_t items, const std::uint32_t* count_on_device) {
+  if (!count_on_device) return items;
+  const std::size_t count = *count_on_device;
+  return count <= items ? count : 0;
+}
+
+__global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, std::size_t items,
+                                    const std::uint32_t* count_on_device, PairTable table, real h, const real* reach,
+                                    std::uint32_t* flags, ImpactWatch watch) {
+  const std::size_t count = pairs_in(items, count_on_device);
   bool seen = false;
-  for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= count; k += gridDim.x * blockDim.x) {
-    if (k == count) {
+  for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= items; k += gridDim.x * blockDim.x) {
+    if (k >= count) {
       flags[k] = 0;
       continue;
     }
@@ -166,11 +177,12 @@ void launch_contact_reaches(const BodiesView& bodies, real h, unsigned long long
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pairs, std::size_t count,
-                                 const PairTable& table, real h, const real* reach, std::uint32_t* flags,
-                                 const ImpactWatch& watch, int sm_count, cudaStream_t stream) {
-  sphere_flags_kernel<<<grid_for(count + 1, sm_count), kBlock, 0, stream>>>(bodies, pairs, count, table, h, reach,
-                                                                            flags, watch);
+void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pairs, std::size_t items,
+                                 const std::uint32_t* count_on_device, const PairTable& table, real h,
+                                 const real* reach, std::uint32_t* flags, const ImpactWatch& watch, int sm_count,
+                                 cudaStream_t stream) {
+  sphere_flags_kernel<<<grid_for(items + 1, sm_count), kBlock, 0, stream>>>(bodies, pairs, items, count_on_device,
+                                                                            table, h, reach, flags, watch);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -40,10 +40,15 @@ struct ImpactWatch {
   real rest_speed = 0;
 };
 
-// flags[k] = 1 when candidate pair k makes a contact (flags[count] = 0).
-void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pairs, std::size_t count,
-                                 const PairTable& table, real h, const real* reach, std::uint32_t* flags,
-                                 const ImpactWatch& watch, int sm_count, cudaStream_t stream);
+// flags[k] = 1 when candidate pair k makes a contact, for k < items
+// (flags[items] = 0). With `count_on_device` (not null: the broad phase's
+// count, left on the device), only the first *count_on_device pairs are
+// tested and the rest of the items flagged 0; none when the count exceeds
+// `items` (the pairs did not fit and were not written).
+void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pairs, std::size_t items,
+                                 const std::uint32_t* count_on_device, const PairTable& table, real h,
+                                 const real* reach, std::uint32_t* flags, const ImpactWatch& watch, int sm_count,
+                                 cudaStream_t stream);
 // Writes the body pair of each flagged pair k at out[offsets[k]].
 void launch_sphere_pair_write(const IndexPair* pairs, std::size_t count, const std::uint32_t* offsets, BodyPair* out,
                               int sm_count, cudaStream_t stream);

@@ -13,14 +13,18 @@
 // holds no 112-byte Contact array. contacts() makes whole contacts from the
 // records when the host asks.
 //
-// Host waits (docs/architecture.md "Fewer waits", "Fewer launches"), per
-// substep: the broad phase's bounds and pair count, the contact count (with
-// whether any contact is an impact candidate and whether the radii differ),
-// and the colouring's colour ranges and rounds run (one read); per step, the
-// flags. The cache's entry count, the lost-load count, the impact levels
-// and the flags of the impact and projection passes stay on the device: those stages run as one
-// cooperative launch each. A settled pile and the gas wait 5 times a step.
-// One wait per step, with buffers sized from the last step, is the next step.
+// Host waits (docs/architecture.md "Fewer waits", "Fewer launches", "The
+// pair count read with the contacts'"), per substep: the broad phase's
+// bounds, the contact count (with the broad phase's pair count, whether any
+// contact is an impact candidate and whether the radii differ), and the
+// colouring's colour ranges and rounds run (one read); per step, the flags.
+// The broad phase's pairs go into room sized from the last substep's count;
+// a substep whose pairs outgrow it finds them again (find_contacts). The
+// cache's entry count, the lost-load count, the impact levels and the flags
+// of the impact and projection passes stay on the device: those stages run
+// as one cooperative launch each. A settled pile and the gas wait 4 times a
+// step. One wait per step, with every buffer sized from the last step, is
+// the next step.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -122,17 +126,32 @@ class CudaStep final : public StepBackend {
   }
 
   // Swept bounds -> broad phase -> sphere contacts (in pair order), then wall
-  // contacts (by sphere, then wall): flag, scan, one read of both counts, write.
+  // contacts (by sphere, then wall): flag, scan, one read of both counts and
+  // the broad phase's pair count, write. The broad phase writes its pairs
+  // without waiting for their count where they fit the room the last
+  // substep's count leaves them; where they do not, it finds them again,
+  // waiting for the count: the same pairs, so the same contacts and bits.
   void find_contacts(real substep) override {
+    if (find_contacts_within(substep, m_pair_capacity == 0)) return;
+    ++m_counters.pair_redos;
+    find_contacts_within(substep, true);
+  }
+
+  // One try of find_contacts: false when the broad phase's pairs did not
+  // fit their room (nothing written: try again with `wait_for_pairs`).
+  bool find_contacts_within(real substep, bool wait_for_pairs) {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_lookahead = h;
     m_count = 0;
     m_impact_candidates = false;
     m_uniform_arms = false;
-    if (!m_model.collisions && !m_model.wall_contacts) return;
+    if (!m_model.collisions && !m_model.wall_contacts) return true;
     const BodiesView bodies = m_device.view();
     const std::size_t n = bodies.count;
-    std::size_t pair_count = 0, wall_items = 0;
+    // The candidate pairs the flag pass walks (their count, or their room
+    // when the count stays on the device: pair_count_on_device).
+    std::size_t pair_items = 0, wall_items = 0;
+    const std::uint32_t* pair_count_on_device = nullptr;
     std::uint32_t *pair_offsets = nullptr, *wall_offsets = nullptr;
     const IndexPair* pairs = nullptr;
     // The fastest speed, then the words read with the contact counts: [0]
@@ -150,15 +169,21 @@ class CudaStep final : public StepBackend {
     auto* radius = reinterpret_cast<real*>(seen + 2);
     nc::launch_contact_reaches(bodies, h, max_speed, reach, bound, mixed_radii, radius, m_sm, m_stream);
     if (m_model.collisions) {
+      const SpheresIn spheres{bodies.position, bound, n};
       try {
-        pair_count = m_broadphase->find_pairs_device({bodies.position, bound, n}, 0, m_stream);
+        pair_items = wait_for_pairs
+                         ? m_broadphase->find_pairs_device(spheres, 0, m_stream)
+                         : m_broadphase->find_pairs_device_within(spheres, 0, m_pair_capacity, m_stream);
       } catch (const broadphase::NonFiniteInput&) {
         m_non_finite_seen = true;  // an earlier substep went non-finite: the step ends with that flag
         m_count = 0;
-        return;
+        return true;
+      }
+      if (pair_items == broadphase::SubdivisionCuda::kCountOnDevice) {
+        pair_items = m_pair_capacity;
+        pair_count_on_device = m_broadphase->device_pair_count();
       }
       pairs = m_broadphase->device_pairs();
-      m_counters.candidate_pairs += pair_count;
       m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
     }
     const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
@@ -168,11 +193,11 @@ class CudaStep final : public StepBackend {
     namespace dev = ::marbles::cuda;
     std::uint32_t *pair_flags = nullptr, *wall_flags = nullptr;
     void *pair_temp = nullptr, *wall_temp = nullptr;
-    const std::size_t pair_temp_bytes = m_model.collisions ? dev::exclusive_sum_bytes<std::uint32_t>(pair_count + 1) : 0;
+    const std::size_t pair_temp_bytes = m_model.collisions ? dev::exclusive_sum_bytes<std::uint32_t>(pair_items + 1) : 0;
     const std::size_t wall_temp_bytes = m_model.wall_contacts ? dev::exclusive_sum_bytes<std::uint32_t>(wall_items + 1) : 0;
     dev::carve(m_scratch, [&](dev::Carve& c) {
-      pair_flags = c.take<std::uint32_t>(pair_count + 1);
-      pair_offsets = c.take<std::uint32_t>(pair_count + 1);
+      pair_flags = c.take<std::uint32_t>(pair_items + 1);
+      pair_offsets = c.take<std::uint32_t>(pair_items + 1);
       pair_temp = c.take<char>(pair_temp_bytes);
       wall_flags = c.take<std::uint32_t>(wall_items + 1);
       wall_offsets = c.take<std::uint32_t>(wall_items + 1);
@@ -181,10 +206,16 @@ class CudaStep final : public StepBackend {
     nc::ImpactWatch watch;
     if (m_model.solver.restitution) watch = {seen, m_model.solver.rest_speed};
     if (m_model.collisions) {
-      nc::launch_sphere_contact_flags(bodies, pairs, pair_count, m_table, h, reach, pair_flags, watch, m_sm, m_stream);
-      dev::device_exclusive_sum(pair_flags, pair_offsets, pair_count + 1, pair_temp, pair_temp_bytes, m_stream);
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned, pair_offsets + pair_count, 4, cudaMemcpyDeviceToHost, m_stream));
-      m_bytes += 4 + broad_phase_readback();
+      nc::launch_sphere_contact_flags(bodies, pairs, pair_items, pair_count_on_device, m_table, h, reach, pair_flags,
+                                      watch, m_sm, m_stream);
+      dev::device_exclusive_sum(pair_flags, pair_offsets, pair_items + 1, pair_temp, pair_temp_bytes, m_stream);
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned, pair_offsets + pair_items, 4, cudaMemcpyDeviceToHost, m_stream));
+      m_bytes += 4 + broad_phase_readback(pair_count_on_device == nullptr);
+      if (pair_count_on_device) {
+        MARBLES_CUDA_CHECK(
+            cudaMemcpyAsync(m_pinned + 6, pair_count_on_device, 4, cudaMemcpyDeviceToHost, m_stream));
+        m_bytes += 4;
+      }
     }
     if (m_model.wall_contacts) {
       nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, reach, wall_flags, watch, m_sm,
@@ -199,6 +230,10 @@ class CudaStep final : public StepBackend {
       m_bytes += bytes;
     }
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+    const std::size_t pair_count = pair_count_on_device ? m_pinned[6] : pair_items;
+    if (pair_count > pair_items) return false;  // they did not fit: none were written
+    if (m_model.collisions) m_pair_capacity = pair_count + pair_count / 16 + kPairSlack;
+    m_counters.candidate_pairs += pair_count;
     m_impact_candidates = watch.any && m_pinned[2] != 0;
     m_uniform_arms = mixed_radii && m_pinned[3] == 0;
     if (m_uniform_arms) std::memcpy(&m_radius, m_pinned + 4, sizeof(real));
@@ -210,6 +245,7 @@ class CudaStep final : public StepBackend {
     if (wall_contacts > 0)
       nc::launch_wall_pair_write(n, wall_count, wall_offsets, found + sphere_contacts, m_sm, m_stream);
     m_counters.contacts += m_count;
+    return true;
   }
 
   // Colours the contacts, then makes them in colour-major order as the
@@ -540,13 +576,16 @@ class CudaStep final : public StepBackend {
   std::size_t m_free_at_start = 0;
   std::uint64_t m_bytes = 0, m_bytes_at_step_start = 0;  // host<->device bytes copied by this class
   // The broad phase's own readbacks per call: the bounds accumulator (64 B)
-  // and the pair and test counts (12 B); the seed algorithm also reads its
-  // entry count and the 9 cell-type bounds (40 B).
-  std::uint64_t broad_phase_readback() const { return m_model.algorithm == broadphase::Algorithm::home ? 76 : 116; }
+  // and, where it waited for them, the pair and test counts (12 B); the seed
+  // algorithm also reads its entry count and the 9 cell-type bounds (40 B).
+  std::uint64_t broad_phase_readback(bool counts) const {
+    if (m_model.algorithm != broadphase::Algorithm::home) return 116;
+    return counts ? 76 : 64;
+  }
   static constexpr int kFlagWords = 5;
-  // find_contacts' read: the counts, the candidate and mixed-radii flags,
-  // sphere 0's radius.
-  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{6};
+  // find_contacts' read: the contact counts, the candidate and mixed-radii
+  // flags, sphere 0's radius (one or two words), the broad phase's pair count.
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{7};
   ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
   bool m_watch = false;
   int m_iteration_factor = 1;
@@ -573,6 +612,10 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep
+  // Room for the broad phase's pairs: the last substep's count and a
+  // sixteenth more (0: none yet, wait for the count).
+  std::size_t m_pair_capacity = 0;
+  static constexpr std::size_t kPairSlack = 64;
   bool m_impact_candidates = false;   // with restitution: some contact of this substep is an impact candidate
   bool m_uniform_arms = false;        // every contact of this substep has the same arms (UniformArms)
   real m_radius = 0;                  // with m_uniform_arms: every sphere's radius

@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <numeric>
 #include <random>
+#include <string>
+#include <vector>
 
 #include "broadphase/broadphase.hpp"
 #include "core/device.hpp"
@@ -158,6 +160,79 @@ TEST_P(SubdivisionCuda, SharedScratchLeftDirtyBetweenCalls) {
               cudaSuccess);
     mb::brute_force_pairs(s.view(), 0, expected);
     EXPECT_TRUE(mt::same_pair_set(got, expected)) << mt::set_name(kind) << " n=" << n;
+  }
+}
+
+// The pair count left on the device: with room for every pair, the same
+// pairs in the same order as find_pairs_device (and brute force's set);
+// with one pair too few, none written (the memory poisoned before is
+// untouched) and the whole count told, so the caller can ask again. Where
+// the call waits for the count anyway (the seed algorithm, a grid too wide
+// for the device's keys) it returns the count and writes every pair.
+TEST_P(SubdivisionCuda, PairsWithinARoom) {
+  REQUIRE_DEVICE();
+  mb::SubdivisionCuda gpu(algorithm(), sort());
+  marbles::cuda::DeviceBuffer centre, radius;  // freed, as the stream is destroyed, however the test ends
+  marbles::cuda::Stream stream;
+  stream.create();
+  auto download = [&](std::size_t count) {
+    std::vector<mb::Pair> out(count);
+    EXPECT_EQ(cudaMemcpy(out.data(), gpu.device_pairs(), count * sizeof(mb::Pair), cudaMemcpyDeviceToHost),
+              cudaSuccess);
+    return out;
+  };
+  auto device_count = [&] {
+    std::uint32_t count = 0;
+    EXPECT_EQ(cudaMemcpy(&count, gpu.device_pair_count(), sizeof count, cudaMemcpyDeviceToHost), cudaSuccess);
+    return std::size_t{count};
+  };
+  std::size_t on_device = 0;
+  std::uint64_t seed = 11;
+  const std::pair<std::size_t, mt::SetKind> sets[] = {{20000, mt::SetKind::mono},     {30000, mt::SetKind::clustered},
+                                                      {3000, mt::SetKind::coincident}, {2000, mt::SetKind::outlier},
+                                                      {3000, mt::SetKind::far_away},   {1, mt::SetKind::mono}};
+  for (const auto& [n, kind] : sets) {
+    const std::string name = std::string(mt::set_name(kind)) + " n=" + std::to_string(n);
+    mt::SphereSet s = mt::make_set(kind, n, ++seed);
+    marbles::Vec3* c = centre.as<marbles::Vec3>(n);
+    real* r = radius.as<real>(n);
+    ASSERT_EQ(cudaMemcpy(c, s.centre.data(), n * sizeof(marbles::Vec3), cudaMemcpyHostToDevice), cudaSuccess);
+    ASSERT_EQ(cudaMemcpy(r, s.radius.data(), n * sizeof(real), cudaMemcpyHostToDevice), cudaSuccess);
+    const marbles::SpheresIn in{c, r, n};
+    const std::size_t count = gpu.find_pairs_device(in, real(0), stream);
+    const std::vector<mb::Pair> exact = download(count);
+    std::vector<mb::Pair> expected;
+    mb::brute_force_pairs(s.view(), 0, expected);
+    ASSERT_TRUE(mt::same_pair_set(exact, expected)) << name;
+
+    std::size_t told = gpu.find_pairs_device_within(in, real(0), count, stream);
+    ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
+    if (told == mb::SubdivisionCuda::kCountOnDevice) {
+      ++on_device;
+      told = device_count();
+    }
+    ASSERT_EQ(told, count) << name << ": room for all";
+    EXPECT_EQ(download(count), exact) << name << ": room for all";
+    if (count == 0) continue;
+
+    ASSERT_EQ(cudaMemset(const_cast<mb::Pair*>(gpu.device_pairs()), 0xa5, count * sizeof(mb::Pair)), cudaSuccess);
+    told = gpu.find_pairs_device_within(in, real(0), count - 1, stream);
+    ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
+    if (told == mb::SubdivisionCuda::kCountOnDevice) {
+      EXPECT_EQ(device_count(), count) << name << ": one short";
+      const std::vector<mb::Pair> left = download(count);
+      const auto* bytes = reinterpret_cast<const unsigned char*>(left.data());
+      EXPECT_TRUE(std::all_of(bytes, bytes + count * sizeof(mb::Pair), [](unsigned char b) { return b == 0xa5; }))
+          << name << ": one short, yet pairs were written";
+    } else {
+      EXPECT_EQ(told, count) << name << ": one short, waited";
+      EXPECT_EQ(download(count), exact) << name << ": one short, waited";
+    }
+  }
+  if (algorithm() == mb::Algorithm::home) {
+    EXPECT_GE(on_device, 3u) << "the home-cell variant leaves the count on the device";
+  } else {
+    EXPECT_EQ(on_device, 0u) << "the seed algorithm waits for its counts";
   }
 }
 

@@ -43,7 +43,10 @@ bool one_radius(const World& w) {
 // is, and under auto one launch at least once (every scene here has small
 // colours). The GPU's records leave the arms word out exactly where every
 // contact has the same (one radius and uniform pairs: UniformArms).
-void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps) {
+// `pair_redos` (if given) adds up the substeps whose broad phase outgrew
+// its pairs' room and ran again.
+void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps,
+                     std::uint64_t* pair_redos = nullptr) {
   Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
   ASSERT_EQ(gpu.backend_name(), "cuda");
@@ -54,6 +57,7 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
     cpu.step();
     gpu.step();
     one_launch += gpu.last_step().one_launch_solves;
+    if (pair_redos) *pair_redos += gpu.last_step().pair_redos;
     if (cpu.last_step().contacts > 0) solved += 1;
     if (form == "one") {
       ASSERT_EQ(gpu.last_step().one_launch_solves > 0, cpu.last_step().contacts > 0) << "step " << k;
@@ -164,6 +168,31 @@ TEST(StepCuda, DroppedDenseBlockKeepsEveryContact) {
   const real r = real(0.01);
   s.walls.push_back(box({0, 0, 0}, {real(0.5), real(0.5), real(1)}));
   expect_same_run(s, dense_block(24, 24, 12, r, real(0.02)), 120);
+}
+
+// A bed of spheres kept apart (gaps of 0.8 radii) and a ball falling
+// towards it from far above: once the ball passes 4 m/s, every sphere's
+// speculative reach (the fastest sphere's travel in a substep) closes the
+// bed's gaps, and the candidate pairs jump from none to every neighbour in
+// one substep, past the room the last substep's count left them. The step
+// finds them again with room for them: no pair and no bit is lost.
+TEST(StepCuda, PairCountJumpRedoesTheBroadPhase) {
+  REQUIRE_DEVICE();
+  scene::Scene s = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::friction}, 0, 0.5);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  const real r = real(0.01);
+  scene::GeneratedParticles g;
+  for (int x = 0; x < 20; ++x)
+    for (int y = 0; y < 20; ++y) add_sphere(g, {real(2.8) * r * (x + 1), real(2.8) * r * (y + 1), r}, r);
+  add_sphere(g, {real(0.3), real(0.3), real(0.3)}, r, {0, 0, real(-3.95)});
+  Simulation probe(s, make_world(s, g), broadphase::Backend::cpu);
+  probe.step();
+  const std::uint64_t pairs_before = probe.last_step().candidate_pairs;
+  for (int k = 0; k < 20; ++k) probe.step();
+  ASSERT_GT(probe.last_step().candidate_pairs, 8 * (pairs_before + 64)) << "the scene must make the pairs jump";
+  std::uint64_t redos = 0;
+  expect_same_run(s, g, 20, &redos);
+  EXPECT_GT(redos, 0u) << "the jump must outgrow the pairs' room";
 }
 
 // A small block (105 spheres, 7 x 5 x 3: no kernel's block is full) with
