@@ -132,14 +132,15 @@ class CudaStep final : public StepBackend {
   // substep's count leaves them; where they do not, it finds them again,
   // waiting for the count: the same pairs, so the same contacts and bits.
   void find_contacts(real substep) override {
-    if (find_contacts_within(substep, m_pair_capacity == 0)) return;
+    if (find_contacts_within(substep, m_pair_capacity == 0, false)) return;
     ++m_counters.pair_redos;
-    find_contacts_within(substep, true);
+    find_contacts_within(substep, true, true);
   }
 
   // One try of find_contacts: false when the broad phase's pairs did not
   // fit their room (nothing written: try again with `wait_for_pairs`).
-  bool find_contacts_within(real substep, bool wait_for_pairs) {
+  // `again`: the second try.
+  bool find_contacts_within(real substep, bool wait_for_pairs, bool again) {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_lookahead = h;
     m_count = 0;
@@ -232,7 +233,7 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     const std::size_t pair_count = pair_count_on_device ? m_pinned[6] : pair_items;
     if (pair_count > pair_items) return false;  // they did not fit: none were written
-    if (m_model.collisions) m_pair_capacity = pair_count + pair_count / 16 + kPairSlack;
+    if (m_model.collisions) make_room_for_pairs(pair_count, again);
     m_counters.candidate_pairs += pair_count;
     m_impact_candidates = watch.any && m_pinned[2] != 0;
     m_uniform_arms = mixed_radii && m_pinned[3] == 0;
@@ -527,6 +528,17 @@ class CudaStep final : public StepBackend {
   }
   narrowphase::WallShape* walls() const { return m_walls.get_as<narrowphase::WallShape>(); }
 
+  // The next substep's room for the broad phase's pairs, from this one's
+  // count: a sixteenth more (a quarter after a substep that outgrew its
+  // room), never less than it was unless the count fell below half of that.
+  // The candidate pairs swing with the fastest sphere's speed, which sets
+  // every sphere's reach (contact_reach): a room that followed each count
+  // down would be outgrown in two substeps of three in the gas.
+  void make_room_for_pairs(std::size_t count, bool outgrown) {
+    const std::size_t room = count + count / (outgrown ? 4 : 16) + kPairSlack;
+    if (room > m_pair_capacity || 2 * room < m_pair_capacity) m_pair_capacity = room;
+  }
+
   // One launch per colour range in the solver's order (visit_colours, the
   // CPU solver's too); the overflow set by one thread.
   // Parallel launches take their colour in turn forwards and mirrored (the
@@ -612,8 +624,8 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep
-  // Room for the broad phase's pairs: the last substep's count and a
-  // sixteenth more (0: none yet, wait for the count).
+  // Room for the broad phase's pairs (make_room_for_pairs; 0: none yet,
+  // wait for the count).
   std::size_t m_pair_capacity = 0;
   static constexpr std::size_t kPairSlack = 64;
   bool m_impact_candidates = false;   // with restitution: some contact of this substep is an impact candidate
