@@ -534,9 +534,12 @@ class CudaStep final : public StepBackend {
   // count fell below half of that. A gas let go from a lattice grows its
   // pairs by half or more a step for its first dozen steps (the bench's
   // gas: 141, 821, 2137, 5021, 8125, 11 539, ... 40 301 in 20 steps of 10^5
-  // spheres): a sixteenth alone was outgrown in 9 steps of 20.
+  // spheres): a sixteenth alone was outgrown in 9 steps of 20, with twice
+  // the growth in 3 (H100). The first count has no growth: the buffers it
+  // sizes never shrink.
   void make_room_for_pairs(std::size_t count, bool outgrown) {
-    const std::size_t growth = count > m_last_pair_count ? count - m_last_pair_count : 0;
+    const bool first = m_pair_capacity == 0;  // no last count to grow from
+    const std::size_t growth = !first && count > m_last_pair_count ? count - m_last_pair_count : 0;
     m_last_pair_count = count;
     const std::size_t room = count + count / (outgrown ? 4 : 16) + 2 * growth + kPairSlack;
     if (room > m_pair_capacity || 2 * room < m_pair_capacity) m_pair_capacity = room;
