@@ -60,9 +60,6 @@ struct SubdivisionCuda::Impl {
   DeviceBuffer* scratch = &own_scratch;
   DeviceBuffer count_word;                  // the pair count, left on the device (find_pairs_device_within)
   std::size_t pair_count = 0;
-  // find_pairs_device_within's capacity (no wait for the pair count), or
-  // none: find_pairs_device.
-  std::optional<std::size_t> within;
 
   ::marbles::cuda::PinnedBuffer<BoundsAccum> h_bounds{1};
   ::marbles::cuda::PinnedBuffer<std::uint32_t> h_small{64};  // readbacks
@@ -77,18 +74,21 @@ struct SubdivisionCuda::Impl {
     return h_small[0];
   }
 
-  std::size_t run(const SpheresIn& d, real margin, cudaStream_t s);
+  // `within`: find_pairs_device_within's capacity (no wait for the pair
+  // count where the home-cell variant runs on the device), or none.
+  using Within = std::optional<std::size_t>;
+  std::size_t run(const SpheresIn& d, real margin, cudaStream_t s, Within within = {});
   Bounds device_bounds(const SpheresIn& d, cudaStream_t s);
-  std::size_t run_home(const SpheresIn& d, real margin, cudaStream_t s);
+  std::size_t run_home(const SpheresIn& d, real margin, cudaStream_t s, Within within);
   template <class Key>
-  std::size_t run_home_keys(const SpheresIn& d, real margin, const HomeGrid& g, cudaStream_t s);
+  std::size_t run_home_keys(const SpheresIn& d, real margin, const HomeGrid& g, cudaStream_t s, Within within);
   void finish_timing();
   template <class Key>
   std::size_t run_keys(const SpheresIn& d, real margin, const Grid& g, cudaStream_t s);
   std::size_t run_on_cpu(const SpheresIn& d, real margin, cudaStream_t s);
 };
 
-std::size_t SubdivisionCuda::Impl::run(const SpheresIn& d, real margin, cudaStream_t s) {
+std::size_t SubdivisionCuda::Impl::run(const SpheresIn& d, real margin, cudaStream_t s, Within within) {
   stats = Stats{};
   pair_count = 0;
   const std::size_t n = d.count;
@@ -96,7 +96,7 @@ std::size_t SubdivisionCuda::Impl::run(const SpheresIn& d, real margin, cudaStre
   if (n < 2) return 0;
   mark(0, s);
 
-  if (algorithm == Algorithm::home) return run_home(d, margin, s);
+  if (algorithm == Algorithm::home) return run_home(d, margin, s, within);
 
   // --- cell IDs: bounds -> grid ---------------------------------------------
   const GridChoice gc = choose_grid(device_bounds(d, s), margin);
@@ -207,7 +207,7 @@ Bounds SubdivisionCuda::Impl::device_bounds(const SpheresIn& d, cudaStream_t s) 
   return decode_bounds(*h_bounds);
 }
 
-std::size_t SubdivisionCuda::Impl::run_home(const SpheresIn& d, real margin, cudaStream_t s) {
+std::size_t SubdivisionCuda::Impl::run_home(const SpheresIn& d, real margin, cudaStream_t s, Within within) {
   // --- cell IDs: bounds -> grid -> home keys -----------------------------------
   const HomeGridChoice hc = choose_home_grid(device_bounds(d, s), margin);
   if (hc.width == KeyWidth::too_wide) return run_on_cpu(d, margin, s);
@@ -216,14 +216,15 @@ std::size_t SubdivisionCuda::Impl::run_home(const SpheresIn& d, real margin, cud
   stats.grid_cells = hc.grid.cells;
   if (hc.width == KeyWidth::bits32) {
     stats.key_width = 32;
-    return run_home_keys<std::uint32_t>(d, margin, hc.grid, s);
+    return run_home_keys<std::uint32_t>(d, margin, hc.grid, s, within);
   }
   stats.key_width = 64;
-  return run_home_keys<std::uint64_t>(d, margin, hc.grid, s);
+  return run_home_keys<std::uint64_t>(d, margin, hc.grid, s, within);
 }
 
 template <class Key>
-std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin, const HomeGrid& g, cudaStream_t s) {
+std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin, const HomeGrid& g, cudaStream_t s,
+                                                 Within within) {
   const std::size_t n = d.count;
   // Every temporary in the scratch memory, live only during this call.
   const bool dense = use_dense_cell_starts(g, n);
@@ -335,14 +336,12 @@ Algorithm SubdivisionCuda::algorithm() const { return m->algorithm; }
 const Pair* SubdivisionCuda::device_pairs() const { return static_cast<const Pair*>(m->pairs.get()); }
 
 std::size_t SubdivisionCuda::find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream) {
-  m->within.reset();
   return m->run(device_spheres, margin, static_cast<cudaStream_t>(stream));
 }
 
 std::size_t SubdivisionCuda::find_pairs_device_within(const SpheresIn& device_spheres, real margin,
                                                       std::size_t capacity, void* stream) {
-  m->within = capacity;  // each entry point sets it
-  return m->run(device_spheres, margin, static_cast<cudaStream_t>(stream));
+  return m->run(device_spheres, margin, static_cast<cudaStream_t>(stream), capacity);
 }
 
 const std::uint32_t* SubdivisionCuda::device_pair_count() const { return m->count_word.get_as<std::uint32_t>(); }
@@ -357,7 +356,6 @@ void SubdivisionCuda::find_pairs(const SpheresIn& s, real margin, std::vector<Pa
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(c, s.centre, n * sizeof(Vec3), cudaMemcpyHostToDevice, stream));
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(r, s.radius, n * sizeof(real), cudaMemcpyHostToDevice, stream));
   }
-  m->within.reset();
   const std::size_t count = m->run({c, r, n}, margin, stream);
   out.resize(count);
   if (count > 0)

@@ -129,17 +129,19 @@ class CudaStep final : public StepBackend {
   // contacts (by sphere, then wall): flag, scan, one read of both counts and
   // the broad phase's pair count, write. The broad phase writes its pairs
   // without waiting for their count where they fit the room the last
-  // substep's count leaves them; where they do not, it finds them again,
-  // waiting for the count: the same pairs, so the same contacts and bits.
+  // substep's count leaves them; where they do not, the room grows past the
+  // count just read and the substep finds them again: nothing has moved, so
+  // the same pairs, contacts and bits.
   void find_contacts(real substep) override {
     if (find_contacts_within(substep, m_pair_capacity == 0, false)) return;
     ++m_counters.pair_redos;
-    find_contacts_within(substep, true, true);
+    if (!find_contacts_within(substep, false, true))
+      throw RuntimeFailure("the CUDA step: the broad phase found more pairs on the same spheres a second time");
   }
 
   // One try of find_contacts: false when the broad phase's pairs did not
-  // fit their room (nothing written: try again with `wait_for_pairs`).
-  // `again`: the second try.
+  // fit their room (nothing written; the room grown to fit them). `again`:
+  // the second try.
   bool find_contacts_within(real substep, bool wait_for_pairs, bool again) {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_lookahead = h;
@@ -232,8 +234,8 @@ class CudaStep final : public StepBackend {
     }
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     const std::size_t pair_count = pair_count_on_device ? m_pinned[6] : pair_items;
+    if (m_model.collisions) make_room_for_pairs(pair_count, again || pair_count > pair_items);
     if (pair_count > pair_items) return false;  // they did not fit: none were written
-    if (m_model.collisions) make_room_for_pairs(pair_count, again);
     m_counters.candidate_pairs += pair_count;
     m_impact_candidates = watch.any && m_pinned[2] != 0;
     m_uniform_arms = mixed_radii && m_pinned[3] == 0;

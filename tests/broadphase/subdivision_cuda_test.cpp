@@ -204,7 +204,12 @@ TEST_P(SubdivisionCuda, PairsWithinARoom) {
     std::vector<mb::Pair> expected;
     mb::brute_force_pairs(s.view(), 0, expected);
     ASSERT_TRUE(mt::same_pair_set(exact, expected)) << name;
+    auto poison = [&] {
+      if (count == 0) return;
+      ASSERT_EQ(cudaMemset(const_cast<mb::Pair*>(gpu.device_pairs()), 0xa5, count * sizeof(mb::Pair)), cudaSuccess);
+    };
 
+    poison();  // what find_pairs_device left there must not pass for this call's pairs
     std::size_t told = gpu.find_pairs_device_within(in, real(0), count, stream);
     ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
     if (told == mb::SubdivisionCuda::kCountOnDevice) {
@@ -215,7 +220,7 @@ TEST_P(SubdivisionCuda, PairsWithinARoom) {
     EXPECT_EQ(download(count), exact) << name << ": room for all";
     if (count == 0) continue;
 
-    ASSERT_EQ(cudaMemset(const_cast<mb::Pair*>(gpu.device_pairs()), 0xa5, count * sizeof(mb::Pair)), cudaSuccess);
+    poison();
     told = gpu.find_pairs_device_within(in, real(0), count - 1, stream);
     ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
     if (told == mb::SubdivisionCuda::kCountOnDevice) {

@@ -63,6 +63,7 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
       ASSERT_EQ(gpu.last_step().one_launch_solves > 0, cpu.last_step().contacts > 0) << "step " << k;
     }
     ASSERT_EQ(gpu.last_step().uniform_arms > 0, uniform_arms && cpu.last_step().contacts > 0) << "step " << k;
+    ASSERT_EQ(gpu.last_step().candidate_pairs, cpu.last_step().candidate_pairs) << "step " << k;
     ASSERT_EQ(gpu.last_step().contacts, cpu.last_step().contacts) << "step " << k;
     ASSERT_EQ(gpu.last_step().colours, cpu.last_step().colours) << "step " << k;
     ASSERT_EQ(gpu.last_step().overflow, cpu.last_step().overflow) << "step " << k;
