@@ -212,11 +212,11 @@ class CudaStep final : public StepBackend {
       nc::launch_sphere_contact_flags(bodies, pairs, pair_items, pair_count_on_device, m_table, h, reach, pair_flags,
                                       watch, m_sm, m_stream);
       dev::device_exclusive_sum(pair_flags, pair_offsets, pair_items + 1, pair_temp, pair_temp_bytes, m_stream);
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned, pair_offsets + pair_items, 4, cudaMemcpyDeviceToHost, m_stream));
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + kSphereContacts, pair_offsets + pair_items, 4, cudaMemcpyDeviceToHost, m_stream));
       m_bytes += 4 + broad_phase_readback(pair_count_on_device == nullptr);
       if (pair_count_on_device) {
         MARBLES_CUDA_CHECK(
-            cudaMemcpyAsync(m_pinned + 6, pair_count_on_device, 4, cudaMemcpyDeviceToHost, m_stream));
+            cudaMemcpyAsync(m_pinned + kPairCount, pair_count_on_device, 4, cudaMemcpyDeviceToHost, m_stream));
         m_bytes += 4;
       }
     }
@@ -224,24 +224,24 @@ class CudaStep final : public StepBackend {
       nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, reach, wall_flags, watch, m_sm,
                                     m_stream);
       dev::device_exclusive_sum(wall_flags, wall_offsets, wall_items + 1, wall_temp, wall_temp_bytes, m_stream);
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 1, wall_offsets + wall_items, 4, cudaMemcpyDeviceToHost, m_stream));
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + kWallContacts, wall_offsets + wall_items, 4, cudaMemcpyDeviceToHost, m_stream));
       m_bytes += 4;
     }
     if (watch.any || mixed_radii) {
       const std::size_t bytes = mixed_radii ? 8 + sizeof(real) : 4;
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + 2, seen, bytes, cudaMemcpyDeviceToHost, m_stream));
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + kCandidates, seen, bytes, cudaMemcpyDeviceToHost, m_stream));
       m_bytes += bytes;
     }
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
-    const std::size_t pair_count = pair_count_on_device ? m_pinned[6] : pair_items;
+    const std::size_t pair_count = pair_count_on_device ? m_pinned[kPairCount] : pair_items;
     if (m_model.collisions) make_room_for_pairs(pair_count, again || pair_count > pair_items);
     if (pair_count > pair_items) return false;  // they did not fit: none were written
     m_counters.candidate_pairs += pair_count;
-    m_impact_candidates = watch.any && m_pinned[2] != 0;
-    m_uniform_arms = mixed_radii && m_pinned[3] == 0;
-    if (m_uniform_arms) std::memcpy(&m_radius, m_pinned + 4, sizeof(real));
-    const std::uint32_t sphere_contacts = m_model.collisions ? m_pinned[0] : 0;
-    const std::uint32_t wall_contacts = m_model.wall_contacts ? m_pinned[1] : 0;
+    m_impact_candidates = watch.any && m_pinned[kCandidates] != 0;
+    m_uniform_arms = mixed_radii && m_pinned[kMixedRadii] == 0;
+    if (m_uniform_arms) std::memcpy(&m_radius, m_pinned + kRadius, sizeof(real));
+    const std::uint32_t sphere_contacts = m_model.collisions ? m_pinned[kSphereContacts] : 0;
+    const std::uint32_t wall_contacts = m_model.wall_contacts ? m_pinned[kWallContacts] : 0;
     m_count = sphere_contacts + wall_contacts;
     auto* found = m_pairs.as<narrowphase::BodyPair>(m_count);
     if (sphere_contacts > 0) nc::launch_sphere_pair_write(pairs, pair_count, pair_offsets, found, m_sm, m_stream);
@@ -603,9 +603,11 @@ class CudaStep final : public StepBackend {
     return counts ? 76 : 64;
   }
   static constexpr int kFlagWords = 5;
-  // find_contacts' read: the contact counts, the candidate and mixed-radii
-  // flags, sphere 0's radius (one or two words), the broad phase's pair count.
-  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{7};
+  // find_contacts' read, by word: the contact counts, the candidate and
+  // mixed-radii flags and sphere 0's radius (one or two words; these three
+  // in the order of m_found_words, one copy), the broad phase's pair count.
+  enum FoundWord { kSphereContacts, kWallContacts, kCandidates, kMixedRadii, kRadius, kPairCount = kRadius + 2 };
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{kPairCount + 1};
   ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
   bool m_watch = false;
   int m_iteration_factor = 1;

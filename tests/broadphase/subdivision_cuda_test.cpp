@@ -100,6 +100,24 @@ TEST_P(SubdivisionCuda, LargeSetsEqualCpuBackend) {
   }
 }
 
+// The set's centres and radii on the device (core's upload; done when the
+// call returns), as the device entry points take them.
+marbles::SpheresIn on_device(const mt::SphereSet& s, marbles::cuda::DeviceBuffer& centre,
+                             marbles::cuda::DeviceBuffer& radius) {
+  const marbles::Vec3* c = marbles::cuda::upload(centre, s.centre, nullptr);
+  const real* r = marbles::cuda::upload(radius, s.radius, nullptr);
+  EXPECT_EQ(cudaDeviceSynchronize(), cudaSuccess);
+  return {c, r, s.centre.size()};
+}
+
+// The first `count` pairs the broad phase holds on the device.
+std::vector<mb::Pair> pairs_on_device(const mb::SubdivisionCuda& gpu, std::size_t count) {
+  std::vector<mb::Pair> out(count);
+  EXPECT_EQ(cudaMemcpy(out.data(), gpu.device_pairs(), count * sizeof(mb::Pair), cudaMemcpyDeviceToHost),
+            cudaSuccess);
+  return out;
+}
+
 // Also the sanitizer's case (scripts/gpu-check): a dense grid, and a sparse
 // one (one sphere far out: the home-cell variant binary-searches the keys).
 TEST_P(SubdivisionCuda, DeviceResidentEntryPoint) {
@@ -109,15 +127,11 @@ TEST_P(SubdivisionCuda, DeviceResidentEntryPoint) {
     mt::SphereSet s = mt::make_set(mt::SetKind::mono, 20000, 99);
     if (sparse) s.centre[123] = marbles::Vec3(real(2.0e5), real(-1.0e5), real(3.0e5));
     marbles::cuda::DeviceBuffer centre, radius;  // freed, as the stream is destroyed, however the test ends
-    marbles::Vec3* c = centre.as<marbles::Vec3>(s.centre.size());
-    real* r = radius.as<real>(s.radius.size());
-    cudaMemcpy(c, s.centre.data(), s.centre.size() * sizeof(marbles::Vec3), cudaMemcpyHostToDevice);
-    cudaMemcpy(r, s.radius.data(), s.radius.size() * sizeof(real), cudaMemcpyHostToDevice);
     marbles::cuda::Stream stream;
     stream.create();
-    const std::size_t count = gpu.find_pairs_device({c, r, s.centre.size()}, real(0), stream);
-    std::vector<mb::Pair> got(count), expected;
-    cudaMemcpy(got.data(), gpu.device_pairs(), count * sizeof(mb::Pair), cudaMemcpyDeviceToHost);
+    const std::size_t count = gpu.find_pairs_device(on_device(s, centre, radius), real(0), stream);
+    const std::vector<mb::Pair> got = pairs_on_device(gpu, count);
+    std::vector<mb::Pair> expected;
     mb::brute_force_pairs(s.view(), 0, expected);
     EXPECT_TRUE(mt::same_pair_set(got, expected)) << (sparse ? "sparse" : "dense");
     if (algorithm() == mb::Algorithm::home) {
@@ -147,17 +161,12 @@ TEST_P(SubdivisionCuda, SharedScratchLeftDirtyBetweenCalls) {
       ASSERT_EQ(cudaMemset(scratch.get(), 0xa5, scratch.bytes()), cudaSuccess);
     }
     mt::SphereSet s = mt::make_set(kind, n, ++seed);
-    marbles::Vec3* c = centre.as<marbles::Vec3>(n);
-    real* r = radius.as<real>(n);
-    ASSERT_EQ(cudaMemcpy(c, s.centre.data(), n * sizeof(marbles::Vec3), cudaMemcpyHostToDevice), cudaSuccess);
-    ASSERT_EQ(cudaMemcpy(r, s.radius.data(), n * sizeof(real), cudaMemcpyHostToDevice), cudaSuccess);
-    const std::size_t count = gpu.find_pairs_device({c, r, n}, real(0), stream);
+    const std::size_t count = gpu.find_pairs_device(on_device(s, centre, radius), real(0), stream);
     ASSERT_GT(scratch.bytes(), 0u) << "the temporaries went to the shared scratch";
     ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
     ASSERT_EQ(cudaMemset(scratch.get(), 0x5a, scratch.bytes()), cudaSuccess);  // the next user's writes
-    std::vector<mb::Pair> got(count), expected;
-    ASSERT_EQ(cudaMemcpy(got.data(), gpu.device_pairs(), count * sizeof(mb::Pair), cudaMemcpyDeviceToHost),
-              cudaSuccess);
+    const std::vector<mb::Pair> got = pairs_on_device(gpu, count);
+    std::vector<mb::Pair> expected;
     mb::brute_force_pairs(s.view(), 0, expected);
     EXPECT_TRUE(mt::same_pair_set(got, expected)) << mt::set_name(kind) << " n=" << n;
   }
@@ -175,18 +184,12 @@ TEST_P(SubdivisionCuda, PairsWithinARoom) {
   marbles::cuda::DeviceBuffer centre, radius;  // freed, as the stream is destroyed, however the test ends
   marbles::cuda::Stream stream;
   stream.create();
-  auto download = [&](std::size_t count) {
-    std::vector<mb::Pair> out(count);
-    EXPECT_EQ(cudaMemcpy(out.data(), gpu.device_pairs(), count * sizeof(mb::Pair), cudaMemcpyDeviceToHost),
-              cudaSuccess);
-    return out;
-  };
   auto device_count = [&] {
     std::uint32_t count = 0;
     EXPECT_EQ(cudaMemcpy(&count, gpu.device_pair_count(), sizeof count, cudaMemcpyDeviceToHost), cudaSuccess);
     return std::size_t{count};
   };
-  std::size_t on_device = 0;
+  std::size_t counts_left = 0;  // calls that left the count on the device
   std::uint64_t seed = 11;
   const std::pair<std::size_t, mt::SetKind> sets[] = {{20000, mt::SetKind::mono},     {30000, mt::SetKind::clustered},
                                                       {3000, mt::SetKind::coincident}, {2000, mt::SetKind::outlier},
@@ -194,13 +197,9 @@ TEST_P(SubdivisionCuda, PairsWithinARoom) {
   for (const auto& [n, kind] : sets) {
     const std::string name = std::string(mt::set_name(kind)) + " n=" + std::to_string(n);
     mt::SphereSet s = mt::make_set(kind, n, ++seed);
-    marbles::Vec3* c = centre.as<marbles::Vec3>(n);
-    real* r = radius.as<real>(n);
-    ASSERT_EQ(cudaMemcpy(c, s.centre.data(), n * sizeof(marbles::Vec3), cudaMemcpyHostToDevice), cudaSuccess);
-    ASSERT_EQ(cudaMemcpy(r, s.radius.data(), n * sizeof(real), cudaMemcpyHostToDevice), cudaSuccess);
-    const marbles::SpheresIn in{c, r, n};
+    const marbles::SpheresIn in = on_device(s, centre, radius);
     const std::size_t count = gpu.find_pairs_device(in, real(0), stream);
-    const std::vector<mb::Pair> exact = download(count);
+    const std::vector<mb::Pair> exact = pairs_on_device(gpu, count);
     std::vector<mb::Pair> expected;
     mb::brute_force_pairs(s.view(), 0, expected);
     ASSERT_TRUE(mt::same_pair_set(exact, expected)) << name;
@@ -213,11 +212,11 @@ TEST_P(SubdivisionCuda, PairsWithinARoom) {
     std::size_t told = gpu.find_pairs_device_within(in, real(0), count, stream);
     ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
     if (told == mb::SubdivisionCuda::kCountOnDevice) {
-      ++on_device;
+      ++counts_left;
       told = device_count();
     }
     ASSERT_EQ(told, count) << name << ": room for all";
-    EXPECT_EQ(download(count), exact) << name << ": room for all";
+    EXPECT_EQ(pairs_on_device(gpu, count), exact) << name << ": room for all";
     if (count == 0) continue;
 
     poison();
@@ -225,19 +224,19 @@ TEST_P(SubdivisionCuda, PairsWithinARoom) {
     ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
     if (told == mb::SubdivisionCuda::kCountOnDevice) {
       EXPECT_EQ(device_count(), count) << name << ": one short";
-      const std::vector<mb::Pair> left = download(count);
+      const std::vector<mb::Pair> left = pairs_on_device(gpu, count);
       const auto* bytes = reinterpret_cast<const unsigned char*>(left.data());
       EXPECT_TRUE(std::all_of(bytes, bytes + count * sizeof(mb::Pair), [](unsigned char b) { return b == 0xa5; }))
           << name << ": one short, yet pairs were written";
     } else {
       EXPECT_EQ(told, count) << name << ": one short, waited";
-      EXPECT_EQ(download(count), exact) << name << ": one short, waited";
+      EXPECT_EQ(pairs_on_device(gpu, count), exact) << name << ": one short, waited";
     }
   }
   if (algorithm() == mb::Algorithm::home) {
-    EXPECT_GE(on_device, 3u) << "the home-cell variant leaves the count on the device";
+    EXPECT_GE(counts_left, 3u) << "the home-cell variant leaves the count on the device";
   } else {
-    EXPECT_EQ(on_device, 0u) << "the seed algorithm waits for its counts";
+    EXPECT_EQ(counts_left, 0u) << "the seed algorithm waits for its counts";
   }
 }
 
