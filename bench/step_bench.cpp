@@ -397,7 +397,7 @@ struct Row {
   double overflow = 0;             // median over the timed steps
   double max_overlap_pct = 0;      // largest of the timed steps, % of a radius
   double projection_sweeps = 0;    // per substep, mean over the timed steps (the projection sweeps until settled)
-  std::uint64_t pair_redos = 0;    // substeps of the timed steps whose broad phase ran again (CUDA: pairs' room)
+  std::uint64_t pair_redos = 0;    // substeps of the timed steps whose contacts were found again (CUDA: rooms)
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   double bytes_per_step = 0;       // median host<->device bytes
   double device_bytes_per_sphere = 0;

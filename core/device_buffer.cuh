@@ -82,6 +82,16 @@ __device__ __forceinline__ std::uint32_t read_volatile(const std::uint32_t* p) {
   return *static_cast<const volatile std::uint32_t*>(p);
 }
 
+// The items of a kernel over `items` that hold work when their count stays
+// on the device (count_on_device not null: written by an earlier launch,
+// read by the host later): that count where it fits, else none (the caller
+// reads the count, grows the room and runs again). Null: all of them.
+__device__ __forceinline__ std::size_t count_within(std::size_t items, const std::uint32_t* count_on_device) {
+  if (!count_on_device) return items;
+  const std::size_t count = *count_on_device;
+  return count <= items ? count : 0;
+}
+
 // A real's bits as an unsigned word, and back. Non-negative reals order as
 // their words do, so an atomic max over the words gives the exact largest
 // real whatever the order (warp_atomic_max, atomicMax).

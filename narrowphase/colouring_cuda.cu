@@ -15,8 +15,9 @@ using ::marbles::cuda::kBlock;
 namespace cg = cooperative_groups;
 
 // What colour_and_sort reads back: the firsts of the kMaxColours colours'
-// keys, of the overflow's and of the inactive's, and the rounds run.
-constexpr std::uint32_t kRead = kMaxColours + 3;
+// keys, of the overflow's and of the inactive's, the rounds run and the
+// contact count (where it was on the device).
+constexpr std::uint32_t kRounds = kMaxColours + 2, kCount = kRounds + 1, kRead = kCount + 1;
 
 // A contact as a round sees it: its spheres and its rank.
 struct ColourEntry {
@@ -65,10 +66,16 @@ __device__ void append(std::uint32_t* list, std::uint32_t* count, std::uint32_t 
 // Round 0's list: every contact without a kept colour (in any order); a
 // contact with one takes it and marks it at its spheres (an atomic or: the
 // masks do not depend on the order). count[0] and body_used start at 0.
-__global__ void contact_ranks_kernel(const BodyPair* pairs, std::uint32_t n, const std::uint8_t* kept,
-                                     std::uint32_t* colour, std::uint32_t* active, std::uint32_t* count,
-                                     unsigned long long* body_used) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+// Items past the contacts (count_within) are inactive: sorted last.
+__global__ void contact_ranks_kernel(const BodyPair* pairs, std::uint32_t items, const std::uint32_t* count_on_device,
+                                     const std::uint8_t* kept, std::uint32_t* colour, std::uint32_t* active,
+                                     std::uint32_t* count, unsigned long long* body_used) {
+  const std::size_t n = ::marbles::cuda::count_within(items, count_on_device);
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < items; k += gridDim.x * blockDim.x) {
+    if (k >= n) {
+      colour[k] = kNotActive;
+      continue;
+    }
     const BodyPair ab = pairs[k];
     const std::uint32_t a = ab.a, b = ab.b;
     const std::uint32_t c = kept ? kept[k] : kNoKeptColour;
@@ -252,12 +259,14 @@ static void ranges_of(const std::uint32_t* host, std::uint32_t n, std::vector<st
   begin[colours + 1] = overflow_first != kNoFirst ? overflow_end : coloured_end;
 }
 
-std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,
+std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_t n,
+                                             const std::uint32_t* count_on_device, std::size_t body_count,
                                              const std::uint32_t*& position, std::vector<std::uint32_t>& begin,
                                              int sm_count, cudaStream_t s, const std::uint8_t* kept_colour,
                                              std::uint8_t* sorted_colour) {
   position = nullptr;
   m_rounds = 0;
+  m_last_count = n;
   if (n == 0) {
     begin.assign(2, 0);
     return 0;
@@ -267,22 +276,25 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_used, 0, body_count * sizeof(unsigned long long), s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
-  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, kept_colour, at.colour, at.active, count,
-                                                                at.body_used);
+  contact_ranks_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, count_on_device, kept_colour, at.colour,
+                                                                at.active, count, at.body_used);
   MARBLES_CUDA_CHECK_LAUNCH();
   launch_rounds(ContactEntries{pairs}, at, n, body_count, ColourRule::lowest_free, sm_count, s);
   ::marbles::cuda::counting_sort(at.sort, n, ColourKey{at.colour, kMaxColours},
                                  PlaceOverColour{at.colour, sorted_colour},
                                  m_first_of_key.get_as<std::uint32_t>(), kNoFirst, s);
-  // One read: the firsts of every key and the rounds run.
+  // One read: the firsts of every key, the rounds run and the count.
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_first_of_key.get_as<std::uint32_t>(),
                                      (kMaxColours + 2) * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host + kMaxColours + 2, count + kMaxColourRounds + 1, sizeof(std::uint32_t),
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host + kRounds, count + kMaxColourRounds + 1, sizeof(std::uint32_t),
                                      cudaMemcpyDeviceToHost, s));
-  m_bytes += kRead * sizeof(std::uint32_t);
+  if (count_on_device)
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host + kCount, count_on_device, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  m_bytes += (count_on_device ? kRead : kCount) * sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  m_rounds = m_host[kMaxColours + 2];
-  ranges_of(m_host, n, begin);
+  m_rounds = m_host[kRounds];
+  if (count_on_device) m_last_count = m_host[kCount];
+  ranges_of(m_host, m_last_count <= n ? m_last_count : 0, begin);
   position = at.colour;
   return static_cast<std::uint32_t>(begin.size() - 2);
 }

@@ -43,14 +43,22 @@ class ColouringCuda {
   // (kNoKeptColour: overflow). Every round runs in one launch, to the first
   // with no contact left; the ranges and the rounds run are read back
   // together, one wait in all. `position` lies in the scratch memory: valid
-  // until its next user.
-  std::uint32_t colour_and_sort(const BodyPair* pairs, std::uint32_t n, std::size_t body_count,
+  // until its next user. With count_on_device (not null), pairs[0, n) is a
+  // room and the contacts are its first *count_on_device (count_within;
+  // none where they do not fit it): read with the ranges, last_count().
+  // position and sorted_colour then have n entries, those past the contacts
+  // placed after them.
+  std::uint32_t colour_and_sort(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* count_on_device,
+                                std::size_t body_count,
                                 const std::uint32_t*& position, std::vector<std::uint32_t>& begin, int sm_count,
                                 cudaStream_t stream, const std::uint8_t* kept_colour = nullptr,
                                 std::uint8_t* sorted_colour = nullptr);
   // The rounds the last colour_and_sort ran (as ContactColouring::colour
   // counts them).
   std::uint32_t rounds() const { return m_rounds; }
+  // The contacts the last colour_and_sort was given: n, or the count it read
+  // (more than n where they did not fit the room; then it coloured none).
+  std::uint32_t last_count() const { return m_last_count; }
 
   // The impact stage's levels over records[0, n) and their impact words
   // (solver_math.hpp): the candidates (approach faster than rest_speed)
@@ -90,6 +98,7 @@ class ColouringCuda {
   DeviceBuffer* m_scratch = &m_own_scratch;
   ::marbles::cuda::PinnedBuffer<std::uint32_t> m_host;  // readbacks
   std::uint32_t m_rounds = 0;       // rounds of the last colour_and_sort
+  std::uint32_t m_last_count = 0;   // its contacts (last_count)
 };
 
 }  // namespace marbles::narrowphase::cuda

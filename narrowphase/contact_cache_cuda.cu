@@ -78,9 +78,11 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
 
 // Each contact's entry (a scan of its sphere's few entries, as on the CPU)
 // and kept colour. A sphere from `spheres` on has no entries.
-__global__ void restore_kernel(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* keys,
-                               const std::uint32_t* first, std::uint32_t spheres, const std::uint8_t* colour,
-                               std::uint8_t* matched, std::uint8_t* kept_colour, std::uint32_t* match) {
+__global__ void restore_kernel(const BodyPair* pairs, std::uint32_t items, const std::uint32_t* count_on_device,
+                               const std::uint32_t* keys, const std::uint32_t* first, std::uint32_t spheres,
+                               const std::uint8_t* colour, std::uint8_t* matched, std::uint8_t* kept_colour,
+                               std::uint32_t* match) {
+  const auto n = static_cast<std::uint32_t>(::marbles::cuda::count_within(items, count_on_device));
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const BodyPair ab = pairs[k];
     const std::uint32_t end = ab.a < spheres ? first[ab.a + 1] : 0;
@@ -131,7 +133,8 @@ __global__ void lost_loads_kernel(const std::uint32_t* first, std::uint32_t sphe
 struct IslandRule {
   const BodyPair* pairs;
   std::uint32_t* match;
-  std::uint32_t n;  // contacts
+  std::uint32_t n;  // contacts (their room, with `count`)
+  const std::uint32_t* count;  // null, or the contacts' count on the device (count_within)
   const std::uint32_t* keys;   // the entries' b
   const std::uint32_t* first;  // the runs of spheres [0, spheres)
   std::uint32_t spheres;
@@ -205,6 +208,7 @@ __device__ void island_clear_pass(const IslandRule& r, std::uint32_t first, std:
 // word is cleared a pass ahead, while no thread reads or writes it.
 __global__ void island_rule_kernel(IslandRule r) {
   if (*r.lost == 0u) return;
+  r.n = static_cast<std::uint32_t>(::marbles::cuda::count_within(r.n, r.count));
   const cg::grid_group grid = cg::this_grid();
   const std::uint32_t first = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
   for (std::uint32_t i = first; i < r.bodies.count; i += stride) {
@@ -346,9 +350,9 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
   copy(to.m_colour, m_colour, m);
 }
 
-bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const BodiesView& bodies,
-                               real weight_impulse, std::uint8_t* kept_colour, std::uint32_t* match, int sm_count,
-                               cudaStream_t s) {
+bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* count_on_device,
+                               const BodiesView& bodies, real weight_impulse, std::uint8_t* kept_colour,
+                               std::uint32_t* match, int sm_count, cudaStream_t s) {
   const std::uint32_t m = m_bound;  // the entries are at most this many (their count: the runs' last first)
   if (m == 0 || n == 0) return false;
   // Temporaries in the scratch memory: which entries were matched, and for
@@ -370,7 +374,7 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
   const auto* normal = m_normal.get_as<real>();
   const auto* first = m_first.get_as<std::uint32_t>();
   const std::uint32_t spheres = std::min(m_spheres, bodies_n);  // the spheres with runs that the world has
-  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, keys, first, spheres,
+  restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, count_on_device, keys, first, spheres,
                                                           m_colour.get_as<std::uint8_t>(), matched, kept_colour, match);
   MARBLES_CUDA_CHECK_LAUNCH();
   if (spheres > 0) {
@@ -380,7 +384,7 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const Bod
   }
 
   // The island rule, on the device, where a load was lost (the kernel reads the count).
-  const IslandRule rule{pairs, match, n, keys, first, spheres, normal, matched, bodies, weight_impulse, counter, label,
+  const IslandRule rule{pairs, match, n, count_on_device, keys, first, spheres, normal, matched, bodies, weight_impulse, counter, label,
                         island_max, cold, counter + 1};
   ::marbles::cuda::launch_cooperative<island_rule_kernel>(std::max<std::size_t>(n, bodies_n), sm_count, s, rule);
   return true;

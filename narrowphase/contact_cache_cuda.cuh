@@ -43,17 +43,20 @@ class ContactCacheCuda {
   ContactCacheCuda(const ContactCacheCuda&) = delete;
   ContactCacheCuda& operator=(const ContactCacheCuda&) = delete;
 
-  // Warm start of the contacts of body pairs[0, n) (device): each one's
-  // entry (match, device, n entries: an index into entries(), or kNoEntry
-  // where it starts cold) and its kept colour (kept_colour, device, n
-  // entries), as ContactCache::restore finds them, the island rule included.
+  // Warm start of the contacts of body pairs[0, n) (device; with
+  // count_on_device, not null, the first *count_on_device of them where that
+  // fits n, none where it does not: count_within): each one's entry (match,
+  // device, n entries: an index into entries(), or kNoEntry where it starts
+  // cold) and its kept colour (kept_colour, device, n entries), as
+  // ContactCache::restore finds them, the island rule included.
   // The impulses themselves are restored when the contacts are made
   // (restore_impulses, with the contact's normal). False, writing nothing,
   // when there are no contacts or the last store had none (the bound is 0);
   // a cache that kept no entry of its contacts gives every contact no entry
   // and no kept colour, which colours and restores as `false` does.
-  bool restore(const BodyPair* pairs, std::uint32_t n, const BodiesView& bodies, real weight_impulse,
-               std::uint8_t* kept_colour, std::uint32_t* match, int sm_count, cudaStream_t stream);
+  bool restore(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* count_on_device, const BodiesView& bodies,
+               real weight_impulse, std::uint8_t* kept_colour, std::uint32_t* match, int sm_count,
+               cudaStream_t stream);
   // The entries' impulses (device; tangent and rolling null where the scene
   // keeps none): valid until the next store, upload or copy into this cache.
   CacheImpulses entries() const {

@@ -63,19 +63,10 @@ __device__ __forceinline__ void raise_if_any(bool seen, const ImpactWatch& watch
   if (__any_sync(0xffffffffu, seen) && (threadIdx.x & 31) == 0) atomicOr(watch.any, 1u);
 }
 
-// The pairs a flag pass over `items` tests: all of them, or with the count
-// on the device, that many if they fit (else none: the broad phase wrote
-// none, and the caller finds them again with room for them).
-__device__ __forceinline__ std::size_t pairs_in(std::size_t items, const std::uint32_t* count_on_device) {
-  if (!count_on_device) return items;
-  const std::size_t count = *count_on_device;
-  return count <= items ? count : 0;
-}
-
 __global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, std::size_t items,
                                     const std::uint32_t* count_on_device, PairTable table, real h, const real* reach,
                                     std::uint32_t* flags, ImpactWatch watch) {
-  const std::size_t count = pairs_in(items, count_on_device);
+  const std::size_t count = ::marbles::cuda::count_within(items, count_on_device);
   bool seen = false;
   for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= items; k += gridDim.x * blockDim.x) {
     if (k >= count) {
@@ -88,10 +79,18 @@ __global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, s
   raise_if_any(seen, watch);
 }
 
-__global__ void sphere_pairs_kernel(const IndexPair* pairs, std::size_t count, const std::uint32_t* offsets,
-                                    BodyPair* out) {
-  for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k < count; k += gridDim.x * blockDim.x)
-    if (offsets[k + 1] != offsets[k]) out[offsets[k]] = BodyPair{pairs[k].i, pairs[k].j};
+// The pair writes: a flagged item at its offset where it fits the room;
+// the item past the last writes the total.
+__global__ void sphere_pairs_kernel(const IndexPair* pairs, std::size_t items, const std::uint32_t* offsets,
+                                    std::uint32_t room, BodyPair* out, std::uint32_t* total) {
+  for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= items; k += gridDim.x * blockDim.x) {
+    const std::uint32_t at = offsets[k];
+    if (k == items) {
+      if (total) *total = at;
+    } else if (offsets[k + 1] != at && at < room) {
+      out[at] = BodyPair{pairs[k].i, pairs[k].j};
+    }
+  }
 }
 
 __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std::uint32_t wall_count,
@@ -112,11 +111,18 @@ __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std
 }
 
 __global__ void wall_pairs_kernel(std::size_t items, std::uint32_t wall_count, const std::uint32_t* offsets,
-                                  BodyPair* out) {
-  for (std::size_t t = blockIdx.x * blockDim.x + threadIdx.x; t < items; t += gridDim.x * blockDim.x)
-    if (offsets[t + 1] != offsets[t])
-      out[offsets[t]] = BodyPair{static_cast<std::uint32_t>(t / wall_count),
-                                 kWallFlag | static_cast<std::uint32_t>(t % wall_count)};
+                                  const std::uint32_t* first, std::uint32_t room, BodyPair* out,
+                                  std::uint32_t* total) {
+  const std::uint32_t base = first ? *first : 0;
+  for (std::size_t t = blockIdx.x * blockDim.x + threadIdx.x; t <= items; t += gridDim.x * blockDim.x) {
+    const std::uint32_t at = base + offsets[t];
+    if (t == items) {
+      if (total) *total = at;
+    } else if (offsets[t + 1] != offsets[t] && at < room) {
+      out[at] = BodyPair{static_cast<std::uint32_t>(t / wall_count),
+                         kWallFlag | static_cast<std::uint32_t>(t % wall_count)};
+    }
+  }
 }
 
 // make_sphere_contact / make_wall_contact as the flag pass called them (it
@@ -186,10 +192,11 @@ void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pair
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_sphere_pair_write(const IndexPair* pairs, std::size_t count, const std::uint32_t* offsets, BodyPair* out,
-                              int sm_count, cudaStream_t stream) {
-  if (count == 0) return;
-  sphere_pairs_kernel<<<grid_for(count, sm_count), kBlock, 0, stream>>>(pairs, count, offsets, out);
+void launch_sphere_pair_write(const IndexPair* pairs, std::size_t items, const std::uint32_t* offsets,
+                              std::uint32_t room, BodyPair* out, std::uint32_t* total, int sm_count,
+                              cudaStream_t stream) {
+  if (items == 0 && !total) return;
+  sphere_pairs_kernel<<<grid_for(items + 1, sm_count), kBlock, 0, stream>>>(pairs, items, offsets, room, out, total);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
@@ -202,10 +209,12 @@ void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls,
 }
 
 void launch_wall_pair_write(std::size_t sphere_count, std::uint32_t wall_count, const std::uint32_t* offsets,
-                            BodyPair* out, int sm_count, cudaStream_t stream) {
+                            const std::uint32_t* first, std::uint32_t room, BodyPair* out, std::uint32_t* total,
+                            int sm_count, cudaStream_t stream) {
   const std::size_t items = sphere_count * wall_count;
-  if (items == 0) return;
-  wall_pairs_kernel<<<grid_for(items, sm_count), kBlock, 0, stream>>>(items, wall_count, offsets, out);
+  if (items == 0 && !total) return;
+  wall_pairs_kernel<<<grid_for(items + 1, sm_count), kBlock, 0, stream>>>(items, wall_count, offsets, first, room,
+                                                                          out, total);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

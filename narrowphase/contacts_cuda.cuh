@@ -49,16 +49,24 @@ void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pair
                                  const std::uint32_t* count_on_device, const PairTable& table, real h,
                                  const real* reach, std::uint32_t* flags, const ImpactWatch& watch, int sm_count,
                                  cudaStream_t stream);
-// Writes the body pair of each flagged pair k at out[offsets[k]].
-void launch_sphere_pair_write(const IndexPair* pairs, std::size_t count, const std::uint32_t* offsets, BodyPair* out,
-                              int sm_count, cudaStream_t stream);
+// Writes the body pair of each flagged pair k < items at out[offsets[k]],
+// those that fit `room` (out's length; the rest are dropped, and the caller
+// reads the total and runs again with room for it). With `total` (not
+// null), *total = offsets[items], the contacts found: the count the later
+// stages read on the device (count_within) before the host does.
+void launch_sphere_pair_write(const IndexPair* pairs, std::size_t items, const std::uint32_t* offsets,
+                              std::uint32_t room, BodyPair* out, std::uint32_t* total, int sm_count,
+                              cudaStream_t stream);
 
 // The same over sphere i x wall k, item i * wall_count + k.
 void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
                                const PairTable& table, real h, const real* reach, std::uint32_t* flags,
                                const ImpactWatch& watch, int sm_count, cudaStream_t stream);
+// Its write starts at out[*first] (first: the sphere contacts' total on the
+// device; null: at out[0]), and *total = *first + offsets[items].
 void launch_wall_pair_write(std::size_t sphere_count, std::uint32_t wall_count, const std::uint32_t* offsets,
-                            BodyPair* out, int sm_count, cudaStream_t stream);
+                            const std::uint32_t* first, std::uint32_t room, BodyPair* out, std::uint32_t* total,
+                            int sm_count, cudaStream_t stream);
 
 // What the contacts are made from once more, unchanged since they were found:
 // the bodies (not moved before the solve), the walls, the pair table, the

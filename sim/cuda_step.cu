@@ -14,17 +14,19 @@
 // records when the host asks.
 //
 // Host waits (docs/architecture.md "Fewer waits", "Fewer launches", "The
-// pair count read with the contacts'"), per substep: the broad phase's
-// bounds, the contact count (with the broad phase's pair count, whether any
-// contact is an impact candidate and whether the radii differ), and the
-// colouring's colour ranges and rounds run (one read); per step, the flags.
-// The broad phase's pairs go into room sized from the last substep's count;
-// a substep whose pairs outgrow it finds them again (find_contacts). The
-// cache's entry count, the lost-load count, the impact levels and the flags
-// of the impact and projection passes stay on the device: those stages run
-// as one cooperative launch each. A settled pile and the gas wait 4 times a
-// step. One wait per step, with every buffer sized from the last step, is
-// the next step.
+// pair count read with the contacts'", "The contact count read with the
+// colours"), per substep: the broad phase's bounds, and the colouring's
+// colour ranges and rounds run, read with the contact count, the broad
+// phase's pair count and whether any contact is an impact candidate and
+// whether the radii differ (one read); per step, the flags. The pairs and
+// the contacts go into rooms sized from the last substep's counts; a
+// substep whose counts outgrow them finds them again (colour_contacts). The
+// first substep waits for the counts before the colouring too. The cache's
+// entry count, the lost-load count, the impact levels and the flags of the
+// impact and projection passes stay on the device: those stages run as one
+// cooperative launch each. A settled pile and the gas wait 3 times a step.
+// One wait per step, with every buffer sized from the last step, is the
+// next step.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -91,6 +93,27 @@ SolveMode solve_mode_from_environment() {
   throw RuntimeFailure(std::string("MARBLES_CUDA_SOLVE=") + asked + ": expected auto, launches or one");
 }
 
+// Room for a count the host reads only after the stages that fill it (the
+// broad phase's pairs, the contacts): from the last count, a sixteenth more
+// (a quarter after a count that outgrew its room) and twice the last
+// growth, never less than it was unless the count fell below half of that.
+// A gas let go from a lattice grows its pairs by half or more a step for
+// its first dozen steps (the bench's gas: 141, 821, 2137, 5021, 8125,
+// 11 539, ... 40 301 in 20 steps of 10^5 spheres): a sixteenth alone was
+// outgrown in 9 steps of 20, with twice the growth in 3 (H100). The first
+// count has no growth: the buffers it sizes never shrink.
+struct Room {
+  std::size_t capacity = 0;  // 0: no count yet
+  std::size_t last = 0;      // the last count
+  void fit(std::size_t count, bool outgrown) {
+    const std::size_t growth = capacity > 0 && count > last ? count - last : 0;
+    last = count;
+    const std::size_t room = count + count / (outgrown ? 4 : 16) + 2 * growth + kSlack;
+    if (room > capacity || 2 * room < capacity) capacity = room;
+  }
+  static constexpr std::size_t kSlack = 64;
+};
+
 class CudaStep final : public StepBackend {
  public:
   // Only with a device (make_cuda_step asks first: the members allocate).
@@ -126,29 +149,29 @@ class CudaStep final : public StepBackend {
   }
 
   // Swept bounds -> broad phase -> sphere contacts (in pair order), then wall
-  // contacts (by sphere, then wall): flag, scan, one read of both counts and
-  // the broad phase's pair count, write. The broad phase writes its pairs
-  // without waiting for their count where they fit the room the last
-  // substep's count leaves them; where they do not, the room grows past the
-  // count just read and the substep finds them again: nothing has moved, so
-  // the same pairs, contacts and bits.
+  // contacts (by sphere, then wall): flag, scan, write. Where the last
+  // substep left rooms (make_room), nothing here waits: the broad phase writes
+  // its pairs and the contacts their body pairs where they fit their rooms,
+  // and both counts stay on the device, where the restore and the colouring
+  // read them (count_within), until the colouring reads them with its ranges
+  // (colour_contacts). The first substep waits for both counts here.
   void find_contacts(real substep) override {
-    if (find_contacts_within(substep, m_pair_capacity == 0, false)) return;
-    ++m_counters.pair_redos;
-    if (!find_contacts_within(substep, false, true))
-      throw RuntimeFailure("the CUDA step: the broad phase found more pairs on the same spheres a second time");
+    m_substep = substep;
+    find_contacts_within(substep, m_contact_room.capacity == 0);
   }
 
-  // One try of find_contacts: false when the broad phase's pairs did not
-  // fit their room (nothing written; the room grown to fit them). `again`:
-  // the second try.
-  bool find_contacts_within(real substep, bool wait_for_pairs, bool again) {
+  // One try of find_contacts; `wait`: for the counts (then every later stage
+  // has them on the host).
+  void find_contacts_within(real substep, bool wait) {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_lookahead = h;
     m_count = 0;
+    m_count_on_device = nullptr;
+    m_pair_items = 0;
+    m_pair_count_on_device = false;
     m_impact_candidates = false;
     m_uniform_arms = false;
-    if (!m_model.collisions && !m_model.wall_contacts) return true;
+    if (!m_model.collisions && !m_model.wall_contacts) return;
     const BodiesView bodies = m_device.view();
     const std::size_t n = bodies.count;
     // The candidate pairs the flag pass walks (their count, or their room
@@ -160,11 +183,12 @@ class CudaStep final : public StepBackend {
     // The fastest speed, then the words read with the contact counts: [0]
     // any contact an impact candidate (a substep without one skips the
     // impact stage), [1] the radii not all the same (the records then keep
-    // their arms word), [2..] sphere 0's radius (UniformArms'). One set
-    // clears them all.
-    auto* words = m_found_words.as<unsigned long long>(3);
+    // their arms word), [2..] sphere 0's radius (UniformArms'); then the
+    // contact count (the pair writes'). One set clears the first three.
+    auto* words = m_found_words.as<unsigned long long>(4);
     auto* max_speed = words;
     auto* seen = reinterpret_cast<unsigned*>(words + 1);
+    auto* contact_count = reinterpret_cast<std::uint32_t*>(words + 3);
     real* reach = m_reach.as<real>(n);
     real* bound = m_model.collisions ? m_bound.as<real>(n) : nullptr;
     MARBLES_CUDA_CHECK(cudaMemsetAsync(words, 0, 3 * sizeof(unsigned long long), m_stream));
@@ -174,21 +198,22 @@ class CudaStep final : public StepBackend {
     if (m_model.collisions) {
       const SpheresIn spheres{bodies.position, bound, n};
       try {
-        pair_items = wait_for_pairs
+        pair_items = m_pair_room.capacity == 0
                          ? m_broadphase->find_pairs_device(spheres, 0, m_stream)
-                         : m_broadphase->find_pairs_device_within(spheres, 0, m_pair_capacity, m_stream);
+                         : m_broadphase->find_pairs_device_within(spheres, 0, m_pair_room.capacity, m_stream);
       } catch (const broadphase::NonFiniteInput&) {
         m_non_finite_seen = true;  // an earlier substep went non-finite: the step ends with that flag
-        m_count = 0;
-        return true;
+        return;
       }
       if (pair_items == broadphase::SubdivisionCuda::kCountOnDevice) {
-        pair_items = m_pair_capacity;
+        pair_items = m_pair_room.capacity;
         pair_count_on_device = m_broadphase->device_pair_count();
       }
       pairs = m_broadphase->device_pairs();
       m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
     }
+    m_pair_items = pair_items;
+    m_pair_count_on_device = pair_count_on_device != nullptr;
     const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
     if (m_model.wall_contacts) wall_items = n * wall_count;
     // The flags and their offsets (and the scans' temporaries) in the scratch
@@ -208,57 +233,84 @@ class CudaStep final : public StepBackend {
     });
     nc::ImpactWatch watch;
     if (m_model.solver.restitution) watch = {seen, m_model.solver.rest_speed};
+    // Copied for the read (here where it waits, else the colouring's).
+    auto read = [&](FoundWord word, const void* from, std::size_t bytes) {
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + word, from, bytes, cudaMemcpyDeviceToHost, m_stream));
+      m_bytes += bytes;
+    };
     if (m_model.collisions) {
       nc::launch_sphere_contact_flags(bodies, pairs, pair_items, pair_count_on_device, m_table, h, reach, pair_flags,
                                       watch, m_sm, m_stream);
       dev::device_exclusive_sum(pair_flags, pair_offsets, pair_items + 1, pair_temp, pair_temp_bytes, m_stream);
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + kSphereContacts, pair_offsets + pair_items, 4, cudaMemcpyDeviceToHost, m_stream));
-      m_bytes += 4 + broad_phase_readback(pair_count_on_device == nullptr);
-      if (pair_count_on_device) {
-        MARBLES_CUDA_CHECK(
-            cudaMemcpyAsync(m_pinned + kPairCount, pair_count_on_device, 4, cudaMemcpyDeviceToHost, m_stream));
-        m_bytes += 4;
-      }
+      if (wait) read(kSphereContacts, pair_offsets + pair_items, 4);
+      if (pair_count_on_device) read(kPairCount, pair_count_on_device, 4);
+      m_bytes += broad_phase_readback(pair_count_on_device == nullptr);
     }
     if (m_model.wall_contacts) {
       nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, reach, wall_flags, watch, m_sm,
                                     m_stream);
       dev::device_exclusive_sum(wall_flags, wall_offsets, wall_items + 1, wall_temp, wall_temp_bytes, m_stream);
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + kWallContacts, wall_offsets + wall_items, 4, cudaMemcpyDeviceToHost, m_stream));
-      m_bytes += 4;
+      if (wait) read(kWallContacts, wall_offsets + wall_items, 4);
     }
-    if (watch.any || mixed_radii) {
-      const std::size_t bytes = mixed_radii ? 8 + sizeof(real) : 4;
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + kCandidates, seen, bytes, cudaMemcpyDeviceToHost, m_stream));
-      m_bytes += bytes;
+    if (watch.any || mixed_radii) read(kCandidates, seen, mixed_radii ? 8 + sizeof(real) : 4);
+    std::size_t room = m_contact_room.capacity;
+    if (wait) {
+      MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+      room = (m_model.collisions ? m_pinned[kSphereContacts] : 0) + (m_model.wall_contacts ? m_pinned[kWallContacts] : 0);
     }
-    MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
-    const std::size_t pair_count = pair_count_on_device ? m_pinned[kPairCount] : pair_items;
-    if (m_model.collisions) make_room_for_pairs(pair_count, again || pair_count > pair_items);
-    if (pair_count > pair_items) return false;  // they did not fit: none were written
+    // The body pairs, where they fit the room, and their count.
+    auto* found = m_pairs.as<narrowphase::BodyPair>(room);
+    const auto fits = static_cast<std::uint32_t>(room);
+    if (m_model.collisions)
+      nc::launch_sphere_pair_write(pairs, pair_items, pair_offsets, fits, found,
+                                   m_model.wall_contacts ? nullptr : contact_count, m_sm, m_stream);
+    if (m_model.wall_contacts)
+      nc::launch_wall_pair_write(n, wall_count, wall_offsets, m_model.collisions ? pair_offsets + pair_items : nullptr,
+                                 fits, found, contact_count, m_sm, m_stream);
+    m_count = fits;
+    if (wait) take_counts(pair_items, room, false);
+    else m_count_on_device = contact_count;
+  }
+
+  // After the read of the counts (find_contacts' where it waited, else the
+  // colouring's): the next substep's rooms from them, and the words read
+  // with them. False where a count outgrew its room: the pairs or contacts
+  // past it were not written, and the substep finds them again (`again`:
+  // the second try). Pairs that outgrew theirs made no contact, so the
+  // contacts' room then holds one for each.
+  bool take_counts(std::size_t pair_count, std::size_t contacts, bool again) {
+    const bool pairs_fit = pair_count <= m_pair_items, contacts_fit = contacts <= m_count;
+    if (m_model.collisions) m_pair_room.fit(pair_count, again || !pairs_fit);
+    m_contact_room.fit(pairs_fit ? contacts : contacts + pair_count, again || !pairs_fit || !contacts_fit);
+    if (!pairs_fit || !contacts_fit) return false;
+    m_count = static_cast<std::uint32_t>(contacts);
+    m_count_on_device = nullptr;
     m_counters.candidate_pairs += pair_count;
-    m_impact_candidates = watch.any && m_pinned[kCandidates] != 0;
-    m_uniform_arms = mixed_radii && m_pinned[kMixedRadii] == 0;
-    if (m_uniform_arms) std::memcpy(&m_radius, m_pinned + kRadius, sizeof(real));
-    const std::uint32_t sphere_contacts = m_model.collisions ? m_pinned[kSphereContacts] : 0;
-    const std::uint32_t wall_contacts = m_model.wall_contacts ? m_pinned[kWallContacts] : 0;
-    m_count = sphere_contacts + wall_contacts;
-    auto* found = m_pairs.as<narrowphase::BodyPair>(m_count);
-    if (sphere_contacts > 0) nc::launch_sphere_pair_write(pairs, pair_count, pair_offsets, found, m_sm, m_stream);
-    if (wall_contacts > 0)
-      nc::launch_wall_pair_write(n, wall_count, wall_offsets, found + sphere_contacts, m_sm, m_stream);
     m_counters.contacts += m_count;
+    m_impact_candidates = m_model.solver.restitution && m_pinned[kCandidates] != 0;
+    m_uniform_arms = m_model.uniform_pairs && m_pinned[kMixedRadii] == 0;
+    if (m_uniform_arms) std::memcpy(&m_radius, m_pinned + kRadius, sizeof(real));
     return true;
   }
 
   // Colours the contacts, then makes them in colour-major order as the
   // sweep's records: nothing moves the bodies before the solve, so each is
-  // made as it was found, restored from its cache entry and prepared.
+  // made as it was found, restored from its cache entry and prepared. Where
+  // the counts were left on the device, they are read with the colours; a
+  // substep whose pairs or contacts outgrew their rooms finds them again in
+  // rooms grown past them, without a wait: nothing has moved, so the same
+  // pairs, contacts and bits.
   void colour_contacts() override {
     const std::uint32_t* position = nullptr;
-    const std::uint32_t colours = m_colouring.colour_and_sort(
-        pairs_d(), m_count, m_device.size(), position, m_begin, m_sm, m_stream,
-        m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr, m_sorted_colour.as<std::uint8_t>(m_count));
+    std::uint32_t colours = colour_and_sort(position);
+    if (m_count_on_device && !take_counts(pair_count_read(), m_colouring.last_count(), false)) {
+      ++m_counters.pair_redos;
+      find_contacts_within(m_substep, false);
+      warm_start();
+      colours = colour_and_sort(position);
+      if (m_count_on_device && !take_counts(pair_count_read(), m_colouring.last_count(), true))
+        throw RuntimeFailure("the CUDA step: the contacts outgrew their room on the same spheres a second time");
+    }
     if (m_count > 0) {
       lay_out_records();
       const nc::ContactInputs in{m_device.view(), walls(), m_table, m_lookahead, m_reach.get_as<real>()};
@@ -276,8 +328,9 @@ class CudaStep final : public StepBackend {
   // had (kept by the colouring).
   void warm_start() override {
     const real weight = m_model.gravity ? length(m_model.g) * m_model.substep() : real(0);
-    m_kept_valid = m_cache.restore(pairs_d(), m_count, m_device.view(), weight, m_kept_colour.as<std::uint8_t>(m_count),
-                                   m_match.as<std::uint32_t>(m_count), m_sm, m_stream);
+    m_kept_valid = m_cache.restore(pairs_d(), m_count, m_count_on_device, m_device.view(), weight,
+                                   m_kept_colour.as<std::uint8_t>(m_count), m_match.as<std::uint32_t>(m_count), m_sm,
+                                   m_stream);
   }
 
   // The velocity state packed (SolverBody) for the solve, then back.
@@ -507,6 +560,17 @@ class CudaStep final : public StepBackend {
  private:
   narrowphase::BodyPair* pairs_d() const { return m_pairs.get_as<narrowphase::BodyPair>(); }
 
+  // The colouring of this substep's contacts (m_count, or a room of them
+  // with their count on the device); the one wait for its ranges.
+  std::uint32_t colour_and_sort(const std::uint32_t*& position) {
+    return m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_begin, m_sm,
+                                       m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
+                                       m_sorted_colour.as<std::uint8_t>(m_count));
+  }
+  // The broad phase's pair count, read with the colouring's ranges where it
+  // stayed on the device.
+  std::size_t pair_count_read() const { return m_pair_count_on_device ? m_pinned[kPairCount] : m_pair_items; }
+
   // The records of m_count contacts (the extra word only where a wall
   // moves, the arms word only where contacts' arms differ) and their impact
   // words (approach speeds only in a substep without impact candidates), in
@@ -529,23 +593,6 @@ class CudaStep final : public StepBackend {
     m_counters.impact_words += m_impact_candidates ? 1 : 0;
   }
   narrowphase::WallShape* walls() const { return m_walls.get_as<narrowphase::WallShape>(); }
-
-  // The next substep's room for the broad phase's pairs, from this one's
-  // count: a sixteenth more (a quarter after a substep that outgrew its
-  // room) and twice the last growth, never less than it was unless the
-  // count fell below half of that. A gas let go from a lattice grows its
-  // pairs by half or more a step for its first dozen steps (the bench's
-  // gas: 141, 821, 2137, 5021, 8125, 11 539, ... 40 301 in 20 steps of 10^5
-  // spheres): a sixteenth alone was outgrown in 9 steps of 20, with twice
-  // the growth in 3 (H100). The first count has no growth: the buffers it
-  // sizes never shrink.
-  void make_room_for_pairs(std::size_t count, bool outgrown) {
-    const bool first = m_pair_capacity == 0;  // no last count to grow from
-    const std::size_t growth = !first && count > m_last_pair_count ? count - m_last_pair_count : 0;
-    m_last_pair_count = count;
-    const std::size_t room = count + count / (outgrown ? 4 : 16) + 2 * growth + kPairSlack;
-    if (room > m_pair_capacity || 2 * room < m_pair_capacity) m_pair_capacity = room;
-  }
 
   // One launch per colour range in the solver's order (visit_colours, the
   // CPU solver's too); the overflow set by one thread.
@@ -603,9 +650,11 @@ class CudaStep final : public StepBackend {
     return counts ? 76 : 64;
   }
   static constexpr int kFlagWords = 5;
-  // find_contacts' read, by word: the contact counts, the candidate and
-  // mixed-radii flags and sphere 0's radius (one or two words; these three
-  // in the order of m_found_words, one copy), the broad phase's pair count.
+  // find_contacts' read, by word: the contact counts (where it waits), the
+  // candidate and mixed-radii flags and sphere 0's radius (one or two words;
+  // these three in the order of m_found_words, one copy), the broad phase's
+  // pair count (where it stayed on the device). Read with the contact counts
+  // where find_contacts waits, else with the colouring's ranges.
   enum FoundWord { kSphereContacts, kWallContacts, kCandidates, kMixedRadii, kRadius, kPairCount = kRadius + 2 };
   ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{kPairCount + 1};
   ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
@@ -634,11 +683,13 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep
-  // Room for the broad phase's pairs (make_room_for_pairs; 0: none yet,
-  // wait for the count).
-  std::size_t m_pair_capacity = 0;
-  std::size_t m_last_pair_count = 0;  // make_room_for_pairs' last count
-  static constexpr std::size_t kPairSlack = 64;
+  // The rooms of the broad phase's pairs and of the contacts (0: none yet,
+  // wait for the counts).
+  Room m_pair_room, m_contact_room;
+  real m_substep = 0;                 // find_contacts': a substep that outgrew a room finds them again
+  std::size_t m_pair_items = 0;       // the pairs the contact flags walked: their count, or their room
+  bool m_pair_count_on_device = false;  // their count was read with the colours (pair_count_read)
+  const std::uint32_t* m_count_on_device = nullptr;  // m_count is a room, and this the count (count_within)
   bool m_impact_candidates = false;   // with restitution: some contact of this substep is an impact candidate
   bool m_uniform_arms = false;        // every contact of this substep has the same arms (UniformArms)
   real m_radius = 0;                  // with m_uniform_arms: every sphere's radius

@@ -89,7 +89,7 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   ASSERT_EQ(cudaMemset(sorted_colour, 0xab, n + 1), cudaSuccess);  // poisoned
   if (!kept.empty()) ASSERT_EQ(cudaMemcpy(kept_d, kept.data(), n, cudaMemcpyHostToDevice), cudaSuccess);
   const std::uint32_t* position_d = nullptr;
-  const std::uint32_t colours = gpu.colour_and_sort(d.pairs, n, bodies, position_d, begin, 8, nullptr,
+  const std::uint32_t colours = gpu.colour_and_sort(d.pairs, n, nullptr, bodies, position_d, begin, 8, nullptr,
                                                     kept.empty() ? nullptr : kept_d, sorted_colour);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
   EXPECT_EQ(colours, ranges.colours);
@@ -108,6 +108,49 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   for (std::uint32_t k = 0; k < n; ++k) ASSERT_EQ(real(sorted[k]), cpu[k].normal_impulse) << "position " << k;
   for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) { cpu_colour[k] = c; });
   EXPECT_EQ(gpu_colour, cpu_colour);
+  EXPECT_EQ(gpu.last_count(), n);
+
+  // The same contacts as the first n of a room half as large again, their
+  // count on the device: the pairs past them repeat the contacts' own (they
+  // would take offers and colours from them), with kept colour 0 (it would
+  // mark their spheres). The same ranges, places and colours; past the room
+  // (the count one more than it), no colour and the count told.
+  if (n > 0) {
+    const std::uint32_t items = n + n / 2 + 3;
+    std::vector<BodyPair> pairs(items);
+    std::vector<std::uint8_t> kept_room(items, 0);
+    for (std::uint32_t k = 0; k < items; ++k) pairs[k] = {input[k % n].a, input[k % n].b};
+    if (!kept.empty()) std::copy(kept.begin(), kept.end(), kept_room.begin());
+    ::marbles::cuda::DeviceBuffer room_pairs, room_kept, room_sorted, count_memory;
+    const BodyPair* pairs_d = ::marbles::cuda::upload(room_pairs, pairs, nullptr);
+    const std::uint8_t* kept_room_d = ::marbles::cuda::upload(room_kept, kept_room, nullptr);
+    auto* sorted_d = room_sorted.as<std::uint8_t>(items);
+    for (const std::uint32_t count : {n, items + 1}) {
+      const std::uint32_t* count_d =
+          ::marbles::cuda::upload(count_memory, std::vector<std::uint32_t>{count}, nullptr);
+      ASSERT_EQ(cudaMemset(sorted_d, 0xab, items), cudaSuccess);
+      std::vector<std::uint32_t> room_begin;
+      const std::uint32_t room_colours =
+          gpu.colour_and_sort(pairs_d, items, count_d, bodies, position_d, room_begin, 8, nullptr,
+                              kept.empty() ? nullptr : kept_room_d, sorted_d);
+      ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
+      EXPECT_EQ(gpu.last_count(), count);
+      if (count > items) {
+        EXPECT_EQ(room_colours, 0u);
+        EXPECT_EQ(room_begin, (std::vector<std::uint32_t>{0, 0}));
+        continue;
+      }
+      EXPECT_EQ(room_colours, colours);
+      EXPECT_EQ(room_begin, begin);
+      EXPECT_EQ(gpu.rounds(), ranges.rounds);
+      std::vector<std::uint32_t> room_position(n);
+      std::vector<std::uint8_t> room_colour(n);
+      ASSERT_EQ(cudaMemcpy(room_position.data(), position_d, n * 4, cudaMemcpyDeviceToHost), cudaSuccess);
+      ASSERT_EQ(cudaMemcpy(room_colour.data(), sorted_d, n, cudaMemcpyDeviceToHost), cudaSuccess);
+      EXPECT_EQ(room_position, position);
+      EXPECT_EQ(room_colour, cpu_colour);
+    }
+  }
 
   // Impact levels: the candidates of each level, in index order, as the CPU's.
   const real rest = real(0.1);

@@ -108,12 +108,16 @@ struct Restored {
 
 // Restores `next` (contacts of spheres [0, spheres)) on both caches and
 // compares each contact's impulses and kept colour. weight: the weight
-// impulse (inverse masses 1: loads above 4 weight are lost loads).
+// impulse (inverse masses 1: loads above 4 weight are lost loads). The GPU
+// restores twice: the n contacts alone, then in a room half as large again
+// whose pairs past n are the cache's own keys (each would find its entry,
+// and the lost loads and islands would change) with the count n on the
+// device: the same.
 Restored expect_same_restore(ContactCache& cpu, ContactCacheCuda& gpu, const std::vector<Contact>& next,
                          std::uint32_t spheres, real weight, const std::string& what) {
   const std::size_t n = next.size();
   std::vector<real> inv_mass(spheres, real(1));
-  DeviceBuffer mass_memory, pair_memory, kept_memory, match_memory;
+  DeviceBuffer mass_memory, pair_memory, kept_memory, match_memory, count_memory;
   BodiesView bodies;
   bodies.count = spheres;
   bodies.inv_mass = inv_mass.data();
@@ -122,30 +126,47 @@ Restored expect_same_restore(ContactCache& cpu, ContactCacheCuda& gpu, const std
   const CacheEntries& entries = cpu.entries();
   cpu.restore(restored, bodies, weight, kept);
 
-  std::vector<BodyPair> pairs(n);
-  for (std::size_t k = 0; k < n; ++k) pairs[k] = {next[k].a, next[k].b};
   BodiesView device_bodies = bodies;
   device_bodies.inv_mass = ::marbles::cuda::upload(mass_memory, inv_mass, nullptr);
-  auto* kept_d = kept_memory.as<std::uint8_t>(n + 1);
-  auto* match_d = match_memory.as<std::uint32_t>(n + 1);
-  const BodyPair* pairs_d = ::marbles::cuda::upload(pair_memory, pairs, nullptr);
-  const bool any =
-      gpu.restore(pairs_d, static_cast<std::uint32_t>(n), device_bodies, weight, kept_d, match_d, 4, nullptr);
-  EXPECT_EQ(cudaDeviceSynchronize(), cudaSuccess) << what;
-  std::vector<std::uint8_t> kept_g(n, kNoKeptColour);
-  std::vector<std::uint32_t> match(n, kNoEntry);
-  if (any) kept_g = to_host(kept_d, n), match = to_host(match_d, n);
   Restored r;
-  for (std::size_t k = 0; k < n; ++k) {
-    const real p = match[k] != kNoEntry ? entries.normal_impulse.at(match[k]) : real(0);
-    EXPECT_EQ(p, restored[k].normal_impulse) << what << ": contact " << k;
-    EXPECT_EQ(kept_g[k], kept[k]) << what << ": contact " << k;
-    const std::uint64_t key = cache_key(next[k].a, next[k].b);
-    if (match[k] != kNoEntry) EXPECT_EQ(entries.key.at(match[k]), key) << what << ": contact " << k;
-    const auto e = std::lower_bound(entries.key.begin(), entries.key.end(), key);
-    const bool loaded = e != entries.key.end() && *e == key && entries.normal_impulse[e - entries.key.begin()] > 0;
-    r.warm += p > 0;
-    r.cold += loaded && !(p > 0);
+  for (const bool room : {false, true}) {
+    const std::string how = what + (room ? " (in a room)" : "");
+    std::vector<BodyPair> pairs(n);
+    for (std::size_t k = 0; k < n; ++k) pairs[k] = {next[k].a, next[k].b};
+    const std::uint32_t* count_d = nullptr;
+    if (room) {
+      std::vector<BodyPair> poison;
+      for (const std::uint64_t key : entries.key) {
+        const BodyPair ab{static_cast<std::uint32_t>(key >> 32), static_cast<std::uint32_t>(key)};
+        if (ab.a < spheres && (is_wall(ab.b) || ab.b < spheres)) poison.push_back(ab);
+      }
+      if (poison.empty()) poison.push_back({0, kWallFlag});
+      for (std::size_t k = 0; k < n / 2 + 3; ++k) pairs.push_back(poison[k % poison.size()]);
+      count_d = ::marbles::cuda::upload(count_memory, std::vector<std::uint32_t>{static_cast<std::uint32_t>(n)},
+                                        nullptr);
+    }
+    const std::size_t items = pairs.size();
+    auto* kept_d = kept_memory.as<std::uint8_t>(items + 1);
+    auto* match_d = match_memory.as<std::uint32_t>(items + 1);
+    const BodyPair* pairs_d = ::marbles::cuda::upload(pair_memory, pairs, nullptr);
+    const bool any = gpu.restore(pairs_d, static_cast<std::uint32_t>(items), count_d, device_bodies, weight, kept_d,
+                                 match_d, 4, nullptr);
+    EXPECT_EQ(cudaDeviceSynchronize(), cudaSuccess) << how;
+    std::vector<std::uint8_t> kept_g(n, kNoKeptColour);
+    std::vector<std::uint32_t> match(n, kNoEntry);
+    if (any && n > 0) kept_g = to_host(kept_d, n), match = to_host(match_d, n);
+    r = {};
+    for (std::size_t k = 0; k < n; ++k) {
+      const real p = match[k] != kNoEntry ? entries.normal_impulse.at(match[k]) : real(0);
+      EXPECT_EQ(p, restored[k].normal_impulse) << how << ": contact " << k;
+      EXPECT_EQ(kept_g[k], kept[k]) << how << ": contact " << k;
+      const std::uint64_t key = cache_key(next[k].a, next[k].b);
+      if (match[k] != kNoEntry) EXPECT_EQ(entries.key.at(match[k]), key) << how << ": contact " << k;
+      const auto e = std::lower_bound(entries.key.begin(), entries.key.end(), key);
+      const bool loaded = e != entries.key.end() && *e == key && entries.normal_impulse[e - entries.key.begin()] > 0;
+      r.warm += p > 0;
+      r.cold += loaded && !(p > 0);
+    }
   }
   return r;
 }

@@ -117,6 +117,17 @@ scene::Scene every_term_box() {
   return s;
 }
 
+// A bed of 20 x 20 spheres of radius r on a floor (friction, no
+// restitution), `spacing` radii apart, their centres `height` radii up.
+std::pair<scene::Scene, scene::GeneratedParticles> bed_on_a_floor(real spacing, real height, real r) {
+  scene::Scene s = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::friction}, 0, 0.5);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  scene::GeneratedParticles g;
+  for (int x = 0; x < 20; ++x)
+    for (int y = 0; y < 20; ++y) add_sphere(g, {spacing * r * (x + 1), spacing * r * (y + 1), height * r}, r);
+  return {s, g};
+}
+
 }  // namespace
 
 // Without a device the CUDA step is refused with a message that says so,
@@ -179,12 +190,8 @@ TEST(StepCuda, DroppedDenseBlockKeepsEveryContact) {
 // finds them again with room for them: no pair and no bit is lost.
 TEST(StepCuda, PairCountJumpRedoesTheBroadPhase) {
   REQUIRE_DEVICE();
-  scene::Scene s = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::friction}, 0, 0.5);
-  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
   const real r = real(0.01);
-  scene::GeneratedParticles g;
-  for (int x = 0; x < 20; ++x)
-    for (int y = 0; y < 20; ++y) add_sphere(g, {real(2.8) * r * (x + 1), real(2.8) * r * (y + 1), r}, r);
+  auto [s, g] = bed_on_a_floor(real(2.8), 1, r);
   add_sphere(g, {real(0.3), real(0.3), real(0.3)}, r, {0, 0, real(-3.95)});
   Simulation probe(s, make_world(s, g), broadphase::Backend::cpu);
   probe.step();
@@ -194,6 +201,24 @@ TEST(StepCuda, PairCountJumpRedoesTheBroadPhase) {
   std::uint64_t redos = 0;
   expect_same_run(s, g, 20, &redos);
   EXPECT_GT(redos, 0u) << "the jump must outgrow the pairs' room";
+}
+
+// A layer of spheres kept far apart (4 radii) hovering 0.3 radii above a
+// floor: they fall together, and in one substep every sphere's speculative
+// reach meets the floor, so the contacts jump from none to 400, past the
+// room the last substep's count left them. The step finds them again with
+// room for them: no contact and no bit is lost.
+TEST(StepCuda, ContactCountJumpFindsTheContactsAgain) {
+  REQUIRE_DEVICE();
+  auto [s, g] = bed_on_a_floor(4, real(1.3), real(0.01));
+  Simulation probe(s, make_world(s, g), broadphase::Backend::cpu);
+  probe.step();
+  ASSERT_EQ(probe.last_step().contacts, 0u) << "the layer must start clear of the floor";
+  for (int k = 0; k < 40; ++k) probe.step();
+  ASSERT_EQ(probe.last_step().contacts, 400u) << "the scene must make the contacts jump";
+  std::uint64_t redos = 0;
+  expect_same_run(s, g, 40, &redos);
+  EXPECT_GT(redos, 0u) << "the jump must outgrow the contacts' room";
 }
 
 // A small block (105 spheres, 7 x 5 x 3: no kernel's block is full) with
