@@ -273,7 +273,7 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
     // offsets[n]) into a word of its own, the pairs only if they fit.
     auto* d_count = count_word.as<std::uint32_t>(1);
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(d_count, d_offsets + n, sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, s));
-    launch_home_write<Key>(in, d_offsets, *within, pairs.as<IndexPair>(*within), sm_count, s);
+    launch_home_write<Key>(in, d_offsets, *within, pairs.as_room<IndexPair>(*within), sm_count, s);
     mark(4, s);
     finish_timing();
     return SubdivisionCuda::kCountOnDevice;  // stats.pairs and stats.tests stay 0: not read

@@ -73,11 +73,13 @@ class Event : public Owned<cudaEvent_t, cudaEventDestroy> {
 // pointer is meant).
 class DeviceBuffer : private Owned<void*, cudaFree> {
  public:
-  void* reserve(std::size_t bytes) {
+  // headroom false: exactly `bytes` when it grows (for a count that carries
+  // its own headroom: a room sized from the last count).
+  void* reserve(std::size_t bytes, bool headroom = true) {
     if (bytes > m_bytes) {
       if (m_handle) MARBLES_CUDA_CHECK(cudaFree(m_handle));
       m_handle = nullptr;
-      const std::size_t grown = bytes + bytes / 16 + 256;
+      const std::size_t grown = headroom ? bytes + bytes / 16 + 256 : bytes;
       MARBLES_CUDA_CHECK(cudaMalloc(&m_handle, grown));
       m_bytes = grown;
     }
@@ -86,6 +88,11 @@ class DeviceBuffer : private Owned<void*, cudaFree> {
   template <class T>
   T* as(std::size_t count) {
     return static_cast<T*>(reserve(count * sizeof(T) + 16));
+  }
+  // As as(), without the headroom: `count` is a room that has its own.
+  template <class T>
+  T* as_room(std::size_t count) {
+    return static_cast<T*>(reserve(count * sizeof(T) + 16, false));
   }
   template <class T>
   T* get_as() const {

@@ -259,7 +259,7 @@ class CudaStep final : public StepBackend {
       room = (m_model.collisions ? m_pinned[kSphereContacts] : 0) + (m_model.wall_contacts ? m_pinned[kWallContacts] : 0);
     }
     // The body pairs, where they fit the room, and their count.
-    auto* found = m_pairs.as<narrowphase::BodyPair>(room);
+    auto* found = m_pairs.as_room<narrowphase::BodyPair>(room);
     const auto fits = static_cast<std::uint32_t>(room);
     if (m_model.collisions)
       nc::launch_sphere_pair_write(pairs, pair_items, pair_offsets, fits, found,
@@ -328,9 +328,10 @@ class CudaStep final : public StepBackend {
   // had (kept by the colouring).
   void warm_start() override {
     const real weight = m_model.gravity ? length(m_model.g) * m_model.substep() : real(0);
-    m_kept_valid = m_cache.restore(pairs_d(), m_count, m_count_on_device, m_device.view(), weight,
-                                   m_kept_colour.as<std::uint8_t>(m_count), m_match.as<std::uint32_t>(m_count), m_sm,
-                                   m_stream);
+    auto* kept_colour = m_kept_colour.as_room<std::uint8_t>(m_count);
+    auto* match = m_match.as_room<std::uint32_t>(m_count);
+    m_kept_valid = m_cache.restore(pairs_d(), m_count, m_count_on_device, m_device.view(), weight, kept_colour, match,
+                                   m_sm, m_stream);
   }
 
   // The velocity state packed (SolverBody) for the solve, then back.
@@ -565,7 +566,7 @@ class CudaStep final : public StepBackend {
   std::uint32_t colour_and_sort(const std::uint32_t*& position) {
     return m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_begin, m_sm,
                                        m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
-                                       m_sorted_colour.as<std::uint8_t>(m_count));
+                                       m_sorted_colour.as_room<std::uint8_t>(m_count));
   }
   // The broad phase's pair count, read with the colouring's ranges where it
   // stayed on the device.
