@@ -49,10 +49,9 @@ class ColouringCuda {
   // position and sorted_colour then have n entries, those past the contacts
   // placed after them.
   std::uint32_t colour_and_sort(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* count_on_device,
-                                std::size_t body_count,
-                                const std::uint32_t*& position, std::vector<std::uint32_t>& begin, int sm_count,
-                                cudaStream_t stream, const std::uint8_t* kept_colour = nullptr,
-                                std::uint8_t* sorted_colour = nullptr);
+                                std::size_t body_count, const std::uint32_t*& position,
+                                std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t stream,
+                                const std::uint8_t* kept_colour = nullptr, std::uint8_t* sorted_colour = nullptr);
   // The rounds the last colour_and_sort ran (as ContactColouring::colour
   // counts them).
   std::uint32_t rounds() const { return m_rounds; }

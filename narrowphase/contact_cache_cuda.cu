@@ -384,8 +384,9 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const std
   }
 
   // The island rule, on the device, where a load was lost (the kernel reads the count).
-  const IslandRule rule{pairs, match, n, count_on_device, keys, first, spheres, normal, matched, bodies, weight_impulse, counter, label,
-                        island_max, cold, counter + 1};
+  const IslandRule rule{pairs,  match,          n,       count_on_device, keys,       first, spheres,
+                        normal, matched,        bodies,  weight_impulse,  counter,    label, island_max,
+                        cold,   counter + 1};
   ::marbles::cuda::launch_cooperative<island_rule_kernel>(std::max<std::size_t>(n, bodies_n), sm_count, s, rule);
   return true;
 }
