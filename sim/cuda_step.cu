@@ -180,7 +180,7 @@ class CudaStep final : public StepBackend {
     const std::uint32_t* pair_count_on_device = nullptr;
     std::uint32_t *pair_offsets = nullptr, *wall_offsets = nullptr;
     const IndexPair* pairs = nullptr;
-    // The fastest speed, then the words read with the contact counts: [0]
+    // The fastest speed, then the words read with the counts: [0]
     // any contact an impact candidate (a substep without one skips the
     // impact stage), [1] the radii not all the same (the records then keep
     // their arms word), [2..] sphere 0's radius (UniformArms'); then the
