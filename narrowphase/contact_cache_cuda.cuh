@@ -6,10 +6,11 @@
 // key (4 bytes, not 8): its run says a. The entry count (the runs' last
 // first) stays on the device (a checkpoint's download reads it). When a
 // load was lost (rare: a counter says so, read by the device alone), the
-// island rule runs in one cooperative launch: islands by min-label propagation with pointer jumping
-// (the same islands as the CPU's union-find), their largest impulse by an
-// atomic max, then the cold islands' contacts cleared. Neither store nor
-// restore waits for the device. Only .cu files include it.
+// island rule runs in one cooperative launch: islands by min-label
+// propagation with pointer jumping (the same islands as the CPU's
+// union-find), their largest impulse by an atomic max, then the cold
+// islands' contacts cleared. Neither store nor restore waits for the
+// device. Only .cu files include it.
 #pragma once
 
 #include <cuda_runtime.h>

@@ -79,20 +79,6 @@ __global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, s
   raise_if_any(seen, watch);
 }
 
-// The pair writes: a flagged item at its offset where it fits the room;
-// the item past the last writes the total.
-__global__ void sphere_pairs_kernel(const IndexPair* pairs, std::size_t items, const std::uint32_t* offsets,
-                                    std::uint32_t room, BodyPair* out, std::uint32_t* total) {
-  for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= items; k += gridDim.x * blockDim.x) {
-    const std::uint32_t at = offsets[k];
-    if (k == items) {
-      if (total) *total = at;
-    } else if (offsets[k + 1] != at && at < room) {
-      out[at] = BodyPair{pairs[k].i, pairs[k].j};
-    }
-  }
-}
-
 __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std::uint32_t wall_count,
                                   PairTable table, real h, const real* reach, std::uint32_t* flags,
                                   ImpactWatch watch) {
@@ -110,7 +96,11 @@ __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std
   raise_if_any(seen, watch);
 }
 
-__global__ void wall_pairs_kernel(std::size_t items, std::uint32_t wall_count, const std::uint32_t* offsets,
+// The pair writes: flagged item t's body pair (pair_of(t)) at first +
+// offsets[t] where that fits the room; the item past the last writes the
+// total, where asked for.
+template <class PairOf>
+__global__ void pair_write_kernel(PairOf pair_of, std::size_t items, const std::uint32_t* offsets,
                                   const std::uint32_t* first, std::uint32_t room, BodyPair* out,
                                   std::uint32_t* total) {
   const std::uint32_t base = first ? *first : 0;
@@ -119,10 +109,28 @@ __global__ void wall_pairs_kernel(std::size_t items, std::uint32_t wall_count, c
     if (t == items) {
       if (total) *total = at;
     } else if (offsets[t + 1] != offsets[t] && at < room) {
-      out[at] = BodyPair{static_cast<std::uint32_t>(t / wall_count),
-                         kWallFlag | static_cast<std::uint32_t>(t % wall_count)};
+      out[at] = pair_of(t);
     }
   }
+}
+struct SpherePairOf {
+  const IndexPair* pairs;
+  __device__ BodyPair operator()(std::size_t k) const { return {pairs[k].i, pairs[k].j}; }
+};
+struct WallPairOf {  // item i * wall_count + k: sphere i, wall k
+  std::uint32_t wall_count;
+  __device__ BodyPair operator()(std::size_t t) const {
+    return {static_cast<std::uint32_t>(t / wall_count), kWallFlag | static_cast<std::uint32_t>(t % wall_count)};
+  }
+};
+template <class PairOf>
+void launch_pair_write(const PairOf& pair_of, std::size_t items, const std::uint32_t* offsets,
+                       const std::uint32_t* first, std::uint32_t room, BodyPair* out, std::uint32_t* total,
+                       int sm_count, cudaStream_t stream) {
+  if (items == 0 && !total) return;
+  pair_write_kernel<<<grid_for(items + 1, sm_count), kBlock, 0, stream>>>(pair_of, items, offsets, first, room, out,
+                                                                          total);
+  MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 // make_sphere_contact / make_wall_contact as the flag pass called them (it
@@ -195,9 +203,7 @@ void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pair
 void launch_sphere_pair_write(const IndexPair* pairs, std::size_t items, const std::uint32_t* offsets,
                               std::uint32_t room, BodyPair* out, std::uint32_t* total, int sm_count,
                               cudaStream_t stream) {
-  if (items == 0 && !total) return;
-  sphere_pairs_kernel<<<grid_for(items + 1, sm_count), kBlock, 0, stream>>>(pairs, items, offsets, room, out, total);
-  MARBLES_CUDA_CHECK_LAUNCH();
+  launch_pair_write(SpherePairOf{pairs}, items, offsets, nullptr, room, out, total, sm_count, stream);
 }
 
 void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
@@ -211,11 +217,8 @@ void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls,
 void launch_wall_pair_write(std::size_t sphere_count, std::uint32_t wall_count, const std::uint32_t* offsets,
                             const std::uint32_t* first, std::uint32_t room, BodyPair* out, std::uint32_t* total,
                             int sm_count, cudaStream_t stream) {
-  const std::size_t items = sphere_count * wall_count;
-  if (items == 0 && !total) return;
-  wall_pairs_kernel<<<grid_for(items + 1, sm_count), kBlock, 0, stream>>>(items, wall_count, offsets, first, room,
-                                                                          out, total);
-  MARBLES_CUDA_CHECK_LAUNCH();
+  launch_pair_write(WallPairOf{wall_count}, sphere_count * wall_count, offsets, first, room, out, total, sm_count,
+                    stream);
 }
 
 void launch_sorted_records(const ContactInputs& in, const BodyPair* pairs, const std::uint32_t* match,

@@ -150,7 +150,7 @@ class CudaStep final : public StepBackend {
 
   // Swept bounds -> broad phase -> sphere contacts (in pair order), then wall
   // contacts (by sphere, then wall): flag, scan, write. Where the last
-  // substep left rooms (make_room), nothing here waits: the broad phase writes
+  // substep left rooms (Room), nothing here waits: the broad phase writes
   // its pairs and the contacts their body pairs where they fit their rooms,
   // and both counts stay on the device, where the restore and the colouring
   // read them (count_within), until the colouring reads them with its ranges
@@ -684,8 +684,8 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep
-  // The rooms of the broad phase's pairs and of the contacts (0: none yet,
-  // wait for the counts).
+  // The rooms of the broad phase's pairs and of the contacts (capacity 0:
+  // no count yet, find_contacts waits for the counts).
   Room m_pair_room, m_contact_room;
   real m_substep = 0;                 // find_contacts': a substep that outgrew a room finds them again
   std::size_t m_pair_items = 0;       // the pairs the contact flags walked: their count, or their room
