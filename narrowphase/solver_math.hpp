@@ -131,11 +131,40 @@ MARBLES_HD_INLINE void solve_states(Contact& c, BodyState& A, BodyState& B, real
   if constexpr (Rolling) solve_rolling(c, A, B);
   solve_normal(c, A, B, inv_h);
 }
+
+// Idle contacts. A contact that starts its update with no impulse and ends
+// it with none (in value: a clamp to a zero limit leaves signed zeros) moved
+// its bodies by signed zeros at most, nothing of value: its update is
+// dropped, the bodies and the contact left as they were, on every backend
+// (so the same bits), and a sweep writes nothing for it. Half the contacts
+// of a settled pile are such (gaps within the contact skin that no speed
+// closes), and their writes were ~45 % of the GPU sweep's memory
+// transactions (docs/architecture.md, "Idle contacts write nothing").
+// Only the impulses the terms update count.
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE bool carries_no_impulse(const Contact& c) {
+  bool none = c.normal_impulse == 0;  // == in value: -0 is none too
+  if constexpr (Friction) none = none && c.tangent_impulse == Vec3{};
+  if constexpr (Rolling) none = none && c.rolling_impulse == Vec3{};
+  return none;
+}
+
+// solve_states; false where the contact was idle (carries_no_impulse before
+// and after): then neither it nor A and B are to be written back.
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE bool solve_moves(Contact& c, BodyState& A, BodyState& B, real inv_h) {
+  const bool idle = carries_no_impulse<Friction, Rolling>(c);
+  solve_states<Friction, Rolling>(c, A, B, inv_h);
+  return !(idle && carries_no_impulse<Friction, Rolling>(c));
+}
+
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
-  solve_states<Friction, Rolling>(c, A, B, inv_h);
+  Contact next = c;
+  if (!solve_moves<Friction, Rolling>(next, A, B, inv_h)) return;  // idle: as it was
+  c = next;
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
 }
@@ -315,7 +344,7 @@ MARBLES_HD_INLINE void solve_loaded(const SweepRecords& s, std::uint32_t k, Cont
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
   set_masses<Friction, Rolling>(c, A, B);
-  solve_states<Friction, Rolling>(c, A, B, inv_h);
+  if (!solve_moves<Friction, Rolling>(c, A, B, inv_h)) return;  // idle: nothing written
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
   store_sweep_impulses<Friction, Rolling>(s, k, c);
