@@ -252,11 +252,15 @@ MARBLES_HD_INLINE void apply_impulse(const Contact& c, BodyState& A, BodyState& 
   B.w -= cross(c.normal * c.rb, impulse) * B.inv_inertia;
 }
 
-// Clamp a vector impulse to a disc of radius `limit`.
+// Clamp a vector impulse to a disc of radius `limit`. A clamped impulse
+// holds no negative zero (+ 0 turns -0 into +0 and leaves every other value
+// as it is): clamped to a zero limit it is the +0 vector whatever the signs
+// of v, so an unloaded contact's impulse keeps its bits from sweep to sweep
+// (solver_math.hpp, leaves_no_trace).
 MARBLES_HD_INLINE Vec3 clamp_length(const Vec3& v, real limit) {
   const real len2 = length_squared(v);
   if (len2 <= limit * limit) return v;
-  return v * (limit / std::sqrt(len2));
+  return v * (limit / std::sqrt(len2)) + Vec3{};
 }
 
 // Normal constraint: the gap may close by at most max(separation, 0) this

@@ -206,16 +206,10 @@ MARBLES_LANE ContactLanes<L> load_records_each(const SweepRecords& s, std::uint3
   return c;
 }
 
-// Which lanes a block writes back: bit l for lane l (an idle contact's lane
-// writes nothing: solver_math.hpp, carries_no_impulse).
-MARBLES_LANE bool writes(std::uint32_t written, std::uint32_t l) { return (written >> l & 1u) != 0; }
-
-// store_sweep_impulses of records k..k+W, the lanes in `written`.
+// store_sweep_impulses of records k..k+W.
 template <bool Rolling>
-MARBLES_LANE void store_record_impulses_each(const ContactLanes<L>& c, const SweepRecords& s, std::uint32_t k,
-                                             std::uint32_t written) {
+MARBLES_LANE void store_record_impulses_each(const ContactLanes<L>& c, const SweepRecords& s, std::uint32_t k) {
   for (std::uint32_t l = 0; l < W; ++l) {
-    if (!writes(written, l)) continue;
     s.impulse[k + l] = {c.normal_impulse[l], c.tangent_impulse.x[l], c.tangent_impulse.y[l], c.tangent_impulse.z[l]};
     if constexpr (Rolling)
       s.rolling[k + l] = {c.rolling_impulse.x[l], c.rolling_impulse.y[l], c.rolling_impulse.z[l],
@@ -246,12 +240,11 @@ MARBLES_LANE BodyLanes<L> load_bodies_each(const SolverBody* bodies, const Sweep
 }
 
 MARBLES_LANE void store_bodies_each(SolverBody* bodies, const SweepRecords& s, std::uint32_t k, bool side_b,
-                                    const BodyLanes<L>& b, std::uint32_t written) {
+                                    const BodyLanes<L>& b) {
   for (std::uint32_t l = 0; l < W; ++l)
-    if (writes(written, l))
-      store_body(bodies, body_of(s, k + l, side_b),
-                 BodyState{{b.v.x[l], b.v.y[l], b.v.z[l]}, {b.w.x[l], b.w.y[l], b.w.z[l]}, b.inv_mass[l],
-                           b.inv_inertia[l]});
+    store_body(bodies, body_of(s, k + l, side_b),
+               BodyState{{b.v.x[l], b.v.y[l], b.v.z[l]}, {b.w.x[l], b.w.y[l], b.w.z[l]}, b.inv_mass[l],
+                         b.inv_inertia[l]});
 }
 
 #if !defined(MARBLES_DOUBLE)
@@ -281,10 +274,9 @@ MARBLES_LANE void load_words(const Real4* p, L r[4]) {
   for (int l = 0; l < 4; ++l) r[l] = group(p + l, 0);
   transpose4(r);
 }
-MARBLES_LANE void store_words(Real4* p, L r[4], std::uint32_t written) {
+MARBLES_LANE void store_words(Real4* p, L r[4]) {
   transpose4(r);
-  for (std::uint32_t l = 0; l < 4; ++l)
-    if (writes(written, l)) set_group(p + l, 0, r[l]);
+  for (int l = 0; l < 4; ++l) set_group(p + l, 0, r[l]);
 }
 
 static_assert(sizeof(Real4) == sizeof(L) && sizeof(SolverBody) == 2 * sizeof(L),
@@ -310,13 +302,12 @@ MARBLES_LANE ContactLanes<L> load_records(const SweepRecords& s, std::uint32_t k
 }
 
 template <bool Rolling>
-MARBLES_LANE void store_record_impulses(const ContactLanes<L>& c, const SweepRecords& s, std::uint32_t k,
-                                        std::uint32_t written) {
+MARBLES_LANE void store_record_impulses(const ContactLanes<L>& c, const SweepRecords& s, std::uint32_t k) {
   L r[4] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
-  store_words(s.impulse + k, r, written);
+  store_words(s.impulse + k, r);
   if constexpr (Rolling) {
     L q[4] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.twisting_friction};
-    store_words(s.rolling + k, q, written);
+    store_words(s.rolling + k, q);
   }
 }
 
@@ -340,16 +331,16 @@ MARBLES_LANE BodyLanes<L> load_bodies(const SolverBody* bodies, const SweepRecor
   return {{r[0], r[1], r[2]}, {q[0], q[1], q[2]}, r[3], q[3]};
 }
 
-// store_body of side a or b, the lanes in `written` (walls are not stored).
+// store_body of side a or b (walls are not stored).
 MARBLES_LANE void store_bodies(SolverBody* bodies, const SweepRecords& s, std::uint32_t k, bool side_b,
-                               const BodyLanes<L>& b, std::uint32_t written) {
+                               const BodyLanes<L>& b) {
   L r[4] = {b.v.x, b.v.y, b.v.z, b.inv_mass};
   L q[4] = {b.w.x, b.w.y, b.w.z, b.inv_inertia};
   transpose4(r);
   transpose4(q);
   for (int l = 0; l < 4; ++l) {
     const std::uint32_t index = body_of(s, k + l, side_b);
-    if (is_wall(index) || !writes(written, static_cast<std::uint32_t>(l))) continue;
+    if (is_wall(index)) continue;
     set_group(bodies + index, 0, r[l]);
     set_group(bodies + index, 1, q[l]);
   }
@@ -361,17 +352,16 @@ MARBLES_LANE ContactLanes<L> load_records(const SweepRecords& s, std::uint32_t k
   return load_records_each<Arms, Rolling>(s, k);
 }
 template <bool Rolling>
-MARBLES_LANE void store_record_impulses(const ContactLanes<L>& c, const SweepRecords& s, std::uint32_t k,
-                                        std::uint32_t written) {
-  store_record_impulses_each<Rolling>(c, s, k, written);
+MARBLES_LANE void store_record_impulses(const ContactLanes<L>& c, const SweepRecords& s, std::uint32_t k) {
+  store_record_impulses_each<Rolling>(c, s, k);
 }
 MARBLES_LANE BodyLanes<L> load_bodies(const SolverBody* bodies, const SweepRecords& s, std::uint32_t k,
                                       bool side_b) {
   return load_bodies_each(bodies, s, k, side_b);
 }
 MARBLES_LANE void store_bodies(SolverBody* bodies, const SweepRecords& s, std::uint32_t k, bool side_b,
-                               const BodyLanes<L>& b, std::uint32_t written) {
-  store_bodies_each(bodies, s, k, side_b, b, written);
+                               const BodyLanes<L>& b) {
+  store_bodies_each(bodies, s, k, side_b, b);
 }
 #endif
 
@@ -401,10 +391,9 @@ MARBLES_LANE ContactLanes<V> load_records_of(const SweepRecords& s, std::uint32_
   }
 }
 template <bool Rolling, class V>
-MARBLES_LANE void store_record_impulses_of(const ContactLanes<V>& c, const SweepRecords& s, std::uint32_t k,
-                                           std::uint32_t written) {
+MARBLES_LANE void store_record_impulses_of(const ContactLanes<V>& c, const SweepRecords& s, std::uint32_t k) {
   if constexpr (sizeof(V) == sizeof(L)) {
-    store_record_impulses<Rolling>(c, s, k, written);
+    store_record_impulses<Rolling>(c, s, k);
   } else {
     using H = Half<V>;
     ContactLanes<H> lo{}, hi{};
@@ -412,8 +401,8 @@ MARBLES_LANE void store_record_impulses_of(const ContactLanes<V>& c, const Sweep
     lo.tangent_impulse = low(c.tangent_impulse), hi.tangent_impulse = high(c.tangent_impulse);
     lo.rolling_impulse = low(c.rolling_impulse), hi.rolling_impulse = high(c.rolling_impulse);
     lo.twisting_friction = low(c.twisting_friction), hi.twisting_friction = high(c.twisting_friction);
-    store_record_impulses_of<Rolling, H>(lo, s, k, written);
-    store_record_impulses_of<Rolling, H>(hi, s, k + width<H>, written >> width<H>);
+    store_record_impulses_of<Rolling, H>(lo, s, k);
+    store_record_impulses_of<Rolling, H>(hi, s, k + width<H>);
   }
 }
 template <class V>
@@ -430,15 +419,14 @@ MARBLES_LANE BodyLanes<V> load_bodies_of(const SolverBody* bodies, const SweepRe
 }
 template <class V>
 MARBLES_LANE void store_bodies_of(SolverBody* bodies, const SweepRecords& s, std::uint32_t k, bool side_b,
-                                  const BodyLanes<V>& b, std::uint32_t written) {
+                                  const BodyLanes<V>& b) {
   if constexpr (sizeof(V) == sizeof(L)) {
-    store_bodies(bodies, s, k, side_b, b, written);
+    store_bodies(bodies, s, k, side_b, b);
   } else {
     using H = Half<V>;
-    store_bodies_of<H>(bodies, s, k, side_b, BodyLanes<H>{low(b.v), low(b.w), low(b.inv_mass), low(b.inv_inertia)},
-                       written);
+    store_bodies_of<H>(bodies, s, k, side_b, BodyLanes<H>{low(b.v), low(b.w), low(b.inv_mass), low(b.inv_inertia)});
     store_bodies_of<H>(bodies, s, k + width<H>, side_b,
-                       BodyLanes<H>{high(b.v), high(b.w), high(b.inv_mass), high(b.inv_inertia)}, written >> width<H>);
+                       BodyLanes<H>{high(b.v), high(b.w), high(b.inv_mass), high(b.inv_inertia)});
   }
 }
 
@@ -476,7 +464,7 @@ MARBLES_LANE void apply_impulse(const ContactLanes<V>& c, BodyLanes<V>& A, BodyL
 template <class V>
 MARBLES_LANE V3<V> clamp_length(const V3<V>& v, V limit) {
   const V len2 = dot(v, v);
-  return select(len2 <= limit * limit, v, v * (limit / sqrt_lanes(len2)));
+  return select(len2 <= limit * limit, v, v * (limit / sqrt_lanes(len2)) + V3<V>{});
 }
 
 // solve_friction
@@ -528,43 +516,21 @@ MARBLES_LANE void solve_normal(ContactLanes<V>& c, BodyLanes<V>& A, BodyLanes<V>
   B.v = B.v - p * B.inv_mass;
 }
 
-// carries_no_impulse, lane by lane.
-template <bool Friction, bool Rolling, class V>
-MARBLES_LANE MaskOf<V> carries_no_impulse(const ContactLanes<V>& c) {
-  const V zero{};
-  const auto none = [&](const V3<V>& v) { return (v.x == zero) & (v.y == zero) & (v.z == zero); };
-  MaskOf<V> out = c.normal_impulse == zero;
-  if constexpr (Friction) out &= none(c.tangent_impulse);
-  if constexpr (Rolling) out &= none(c.rolling_impulse);
-  return out;
-}
-
-// The lanes of a mask as bits (bit l for lane l).
-template <class V>
-MARBLES_LANE std::uint32_t lane_bits(MaskOf<V> m) {
-  std::uint32_t bits = 0;
-  for (std::uint32_t l = 0; l < width<V>; ++l) bits |= (m[l] != 0 ? 1u : 0u) << l;
-  return bits;
-}
-
-// solve_record on records k..k + width<V>, whose contacts share no sphere;
-// an idle contact's lane writes nothing back (solve_moves).
+// solve_record on records k..k + width<V>, whose contacts share no sphere.
 template <bool Friction, bool Rolling, class V = L>
 MARBLES_LANE void solve_block(const SweepRecords& s, std::uint32_t k, SolverBody* bodies, real inv_h) {
   ContactLanes<V> c = load_records_of<Friction || Rolling, Rolling, V>(s, k);
   BodyLanes<V> A = load_bodies_of<V>(bodies, s, k, false);
   BodyLanes<V> B = load_bodies_of<V>(bodies, s, k, true);
-  const MaskOf<V> idle = carries_no_impulse<Friction, Rolling>(c);
   c.normal_mass = normal_mass_of(A, B);
   if constexpr (Friction) c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
   if constexpr (Rolling) c.rolling_mass = rolling_mass_of(A, B);
   if constexpr (Friction) solve_friction(c, A, B);
   if constexpr (Rolling) solve_rolling(c, A, B);
   solve_normal(c, A, B, inv_h);
-  const std::uint32_t moved = ~lane_bits<V>(idle & carries_no_impulse<Friction, Rolling>(c));
-  store_bodies_of<V>(bodies, s, k, false, A, moved);
-  store_bodies_of<V>(bodies, s, k, true, B, moved);
-  store_record_impulses_of<Rolling, V>(c, s, k, moved);
+  store_bodies_of<V>(bodies, s, k, false, A);
+  store_bodies_of<V>(bodies, s, k, true, B);
+  store_record_impulses_of<Rolling, V>(c, s, k);
 }
 
 }  // namespace marbles::narrowphase::lanes

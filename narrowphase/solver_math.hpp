@@ -131,40 +131,11 @@ MARBLES_HD_INLINE void solve_states(Contact& c, BodyState& A, BodyState& B, real
   if constexpr (Rolling) solve_rolling(c, A, B);
   solve_normal(c, A, B, inv_h);
 }
-
-// Idle contacts. A contact that starts its update with no impulse and ends
-// it with none (in value: a clamp to a zero limit leaves signed zeros) moved
-// its bodies by signed zeros at most, nothing of value: its update is
-// dropped, the bodies and the contact left as they were, on every backend
-// (so the same bits), and a sweep writes nothing for it. Half the updates
-// of a settled pile's sweeps are such (gaps within the contact skin that no
-// speed closes): without their writes the GPU's solve of a pile of 10^5
-// takes 0.73 ms instead of 1.05 (docs/architecture.md, "Idle contacts write
-// nothing"). Only the impulses the terms update count.
-template <bool Friction, bool Rolling>
-MARBLES_HD_INLINE bool carries_no_impulse(const Contact& c) {
-  bool none = c.normal_impulse == 0;  // == in value: -0 is none too
-  if constexpr (Friction) none = none && c.tangent_impulse == Vec3{};
-  if constexpr (Rolling) none = none && c.rolling_impulse == Vec3{};
-  return none;
-}
-
-// solve_states; false where the contact was idle (carries_no_impulse before
-// and after): then neither it nor A and B are to be written back.
-template <bool Friction, bool Rolling>
-MARBLES_HD_INLINE bool solve_moves(Contact& c, BodyState& A, BodyState& B, real inv_h) {
-  const bool idle = carries_no_impulse<Friction, Rolling>(c);
-  solve_states<Friction, Rolling>(c, A, B, inv_h);
-  return !(idle && carries_no_impulse<Friction, Rolling>(c));
-}
-
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
-  Contact next = c;
-  if (!solve_moves<Friction, Rolling>(next, A, B, inv_h)) return;  // idle: as it was
-  c = next;
+  solve_states<Friction, Rolling>(c, A, B, inv_h);
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
 }
@@ -334,20 +305,65 @@ MARBLES_HD_INLINE void warm_start_record(const SweepRecords& s, std::uint32_t k,
   warm_start_loaded<Friction, Rolling>(s, k, load_streaming(s.impulse + k), bodies);
 }
 
+// --- what a sweep writes back -------------------------------------------------
+// The records' sweep (the GPU's, and the CPU's for a colour's last few
+// contacts) writes back only what an update changed; the CPU's lanes write
+// everything: the same memory either way. What pays is a contact that
+// carries no impulse and is given none, half the updates of a settled
+// pile's sweeps (gaps within the contact skin that no speed closes): its
+// impulses stay +0 bit for bit (an impulse an update sets to zero is +0:
+// solve_normal's literal, clamp_length's + 0), so each term applies +0 - +0
+// = +0, and the bodies change by signed zeros, which leave every velocity
+// component other than a zero as it was. Without these writes the GPU's
+// solve of a pile of 10^5 takes 0.73 ms instead of 1.05 (docs/architecture.md,
+// "Idle contacts write nothing").
+MARBLES_HD_INLINE bool is_plus_zero(real x) {
+#if defined(__CUDA_ARCH__) && defined(MARBLES_DOUBLE)
+  return __double_as_longlong(x) == 0;
+#elif defined(__CUDA_ARCH__)
+  return __float_as_uint(x) == 0u;
+#else
+  std::conditional_t<sizeof(real) == 4, std::uint32_t, std::uint64_t> bits;
+  static_assert(sizeof(bits) == sizeof(x));
+  __builtin_memcpy(&bits, &x, sizeof(bits));
+  return bits == 0;
+#endif
+}
+MARBLES_HD_INLINE bool is_plus_zero(const Vec3& v) { return is_plus_zero(v.x) && is_plus_zero(v.y) && is_plus_zero(v.z); }
+MARBLES_HD_INLINE bool has_no_zero(const Vec3& v) { return v.x != 0 && v.y != 0 && v.z != 0; }
+
+// Every impulse the terms update is +0, bit for bit.
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE bool impulses_clear(const Contact& c) {
+  bool clear = is_plus_zero(c.normal_impulse);
+  if constexpr (Friction) clear = clear && is_plus_zero(c.tangent_impulse);
+  if constexpr (Rolling) clear = clear && is_plus_zero(c.rolling_impulse);
+  return clear;
+}
+
+// After an update whose impulses were and are clear (`clear`): true where
+// body b kept every bit, because it has no zero velocity component (a signed
+// zero added to a zero may flip its sign).
+MARBLES_HD_INLINE bool kept_its_bits(bool clear, const BodyState& b) {
+  return clear && has_no_zero(b.v) && has_no_zero(b.w);
+}
+
 // One sweep's update of record k (the GPU's sweep kernel): solve_one on the
 // loaded contact, its effective masses computed from the bodies as the
 // prepare stage computed them (contact_math.hpp), only the ones the terms
-// read.
+// read; written back where it changed something (above).
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void solve_loaded(const SweepRecords& s, std::uint32_t k, Contact c, SolverBody* bodies,
                                     real inv_h) {
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
+  const bool was_clear = impulses_clear<Friction, Rolling>(c);
   set_masses<Friction, Rolling>(c, A, B);
-  if (!solve_moves<Friction, Rolling>(c, A, B, inv_h)) return;  // idle: nothing written
-  store_body(bodies, c.a, A);
-  store_body(bodies, c.b, B);
-  store_sweep_impulses<Friction, Rolling>(s, k, c);
+  solve_states<Friction, Rolling>(c, A, B, inv_h);
+  const bool clear = was_clear && impulses_clear<Friction, Rolling>(c);
+  if (!kept_its_bits(clear, A)) store_body(bodies, c.a, A);
+  if (!kept_its_bits(clear, B)) store_body(bodies, c.b, B);
+  if (!clear) store_sweep_impulses<Friction, Rolling>(s, k, c);
 }
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void solve_record(const SweepRecords& s, std::uint32_t k, SolverBody* bodies, real inv_h) {
