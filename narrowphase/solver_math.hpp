@@ -314,23 +314,27 @@ MARBLES_HD_INLINE void warm_start_record(const SweepRecords& s, std::uint32_t k,
 // impulses stay +0 bit for bit (an impulse an update sets to zero is +0:
 // solve_normal's literal, clamp_length's + 0), so each term applies +0 - +0
 // = +0, and the bodies change by signed zeros, which leave every velocity
-// component other than a zero as it was. Without these writes the GPU's
+// component other than -0 as it was (+0 plus or minus a zero is +0). Without these writes the GPU's
 // solve of a pile of 10^5 takes 0.73 ms instead of 1.05 (docs/architecture.md,
 // "Idle contacts write nothing").
-MARBLES_HD_INLINE bool is_plus_zero(real x) {
+MARBLES_HD_INLINE bool sign_bit(real x) {
 #if defined(__CUDA_ARCH__) && defined(MARBLES_DOUBLE)
-  return __double_as_longlong(x) == 0;
+  return __double_as_longlong(x) < 0;
 #elif defined(__CUDA_ARCH__)
-  return __float_as_uint(x) == 0u;
+  return (__float_as_uint(x) >> 31) != 0u;
 #else
-  std::conditional_t<sizeof(real) == 4, std::uint32_t, std::uint64_t> bits;
+  std::conditional_t<sizeof(real) == 4, std::int32_t, std::int64_t> bits;
   static_assert(sizeof(bits) == sizeof(x));
   __builtin_memcpy(&bits, &x, sizeof(bits));
-  return bits == 0;
+  return bits < 0;
 #endif
 }
+MARBLES_HD_INLINE bool is_plus_zero(real x) { return x == 0 && !sign_bit(x); }
+MARBLES_HD_INLINE bool is_minus_zero(real x) { return x == 0 && sign_bit(x); }
 MARBLES_HD_INLINE bool is_plus_zero(const Vec3& v) { return is_plus_zero(v.x) && is_plus_zero(v.y) && is_plus_zero(v.z); }
-MARBLES_HD_INLINE bool has_no_zero(const Vec3& v) { return v.x != 0 && v.y != 0 && v.z != 0; }
+MARBLES_HD_INLINE bool has_minus_zero(const Vec3& v) {
+  return is_minus_zero(v.x) || is_minus_zero(v.y) || is_minus_zero(v.z);
+}
 
 // Every impulse the terms update is +0, bit for bit.
 template <bool Friction, bool Rolling>
@@ -341,12 +345,10 @@ MARBLES_HD_INLINE bool impulses_clear(const Contact& c) {
   return clear;
 }
 
-// After an update whose impulses were and are clear (`clear`): true where
-// body b kept every bit, because it has no zero velocity component (a signed
-// zero added to a zero may flip its sign).
-MARBLES_HD_INLINE bool kept_its_bits(bool clear, const BodyState& b) {
-  return clear && has_no_zero(b.v) && has_no_zero(b.w);
-}
+// A body as loaded has a velocity component of -0: the one value a signed
+// zero changes (-0 + +0 is +0). After an update whose impulses were and are
+// clear, a body without one kept every bit.
+MARBLES_HD_INLINE bool has_minus_zero(const BodyState& b) { return has_minus_zero(b.v) || has_minus_zero(b.w); }
 
 // One sweep's update of record k (the GPU's sweep kernel): solve_one on the
 // loaded contact, its effective masses computed from the bodies as the
@@ -358,11 +360,12 @@ MARBLES_HD_INLINE void solve_loaded(const SweepRecords& s, std::uint32_t k, Cont
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
   const bool was_clear = impulses_clear<Friction, Rolling>(c);
+  const bool a_may_flip = has_minus_zero(A), b_may_flip = has_minus_zero(B);
   set_masses<Friction, Rolling>(c, A, B);
   solve_states<Friction, Rolling>(c, A, B, inv_h);
   const bool clear = was_clear && impulses_clear<Friction, Rolling>(c);
-  if (!kept_its_bits(clear, A)) store_body(bodies, c.a, A);
-  if (!kept_its_bits(clear, B)) store_body(bodies, c.b, B);
+  if (!clear || a_may_flip) store_body(bodies, c.a, A);
+  if (!clear || b_may_flip) store_body(bodies, c.b, B);
   if (!clear) store_sweep_impulses<Friction, Rolling>(s, k, c);
 }
 template <bool Friction, bool Rolling>
