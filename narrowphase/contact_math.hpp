@@ -256,7 +256,7 @@ MARBLES_HD_INLINE void apply_impulse(const Contact& c, BodyState& A, BodyState& 
 // holds no negative zero (+ 0 turns -0 into +0 and leaves every other value
 // as it is): clamped to a zero limit it is the +0 vector whatever the signs
 // of v, so an unloaded contact's impulse keeps its bits from sweep to sweep
-// (solver_math.hpp, leaves_no_trace).
+// (solver_math.hpp, impulses_clear).
 MARBLES_HD_INLINE Vec3 clamp_length(const Vec3& v, real limit) {
   const real len2 = length_squared(v);
   if (len2 <= limit * limit) return v;
