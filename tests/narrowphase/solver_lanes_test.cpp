@@ -280,12 +280,14 @@ Case unloaded_case(std::mt19937& rng, bool zeros) {
   return c;
 }
 
-// What solve_loaded leaves unwritten (impulses_clear, has_minus_zero) is
-// what an update changed no bit of: bodies and impulses compared with the
-// update written back, on random and signed-zero cases, every effect set.
-// Not a vacuous pass: most bodies of idle contacts keep their bits, which
-// takes clamp_length's +0 (without it the tangential impulse of an idle
-// contact is a -0 about every other time, and it is no longer clear).
+// What solve_loaded leaves unwritten is what an update changed no bit of:
+// the impulses, where they were and are +0 (impulses_clear: the same bits by
+// its definition), and a body loaded without a -0 velocity component
+// (has_minus_zero), compared with the update written back, on random and
+// signed-zero cases, every effect set. Not a vacuous pass: most updates of
+// these unloaded contacts are clear, which takes clamp_length's +0 (without
+// it the tangential impulse of an idle contact is a -0 about every other
+// time, and it is no longer clear).
 template <bool Friction, bool Rolling>
 void expect_unwritten_means_unchanged(int& clear_updates, int& kept_bodies) {
   for (std::uint32_t seed = 1; seed <= 300; ++seed)
@@ -295,17 +297,11 @@ void expect_unwritten_means_unchanged(int& clear_updates, int& kept_bodies) {
       for (Contact c : start.contacts) {
         BodyState A = load_body(start.bodies.data(), c.a, c), B = load_body(start.bodies.data(), c.b, c);
         const BodyState A0 = A, B0 = B;
-        const Contact c0 = c;
         const bool was_clear = impulses_clear<Friction, Rolling>(c);
         set_masses<Friction, Rolling>(c, A, B);
         solve_states<Friction, Rolling>(c, A, B, real(1000));
         const bool clear = was_clear && impulses_clear<Friction, Rolling>(c);
-        if (clear) {
-          ++clear_updates;
-          EXPECT_TRUE(same_bits(&c.normal_impulse, &c0.normal_impulse, sizeof(real)));
-          EXPECT_TRUE(same_bits(&c.tangent_impulse, &c0.tangent_impulse, sizeof(Vec3)));
-          EXPECT_TRUE(same_bits(&c.rolling_impulse, &c0.rolling_impulse, sizeof(Vec3)));
-        }
+        clear_updates += clear ? 1 : 0;
         for (auto [now, before] : {std::pair{&A, &A0}, std::pair{&B, &B0}}) {
           if (!clear || has_minus_zero(*before)) continue;
           ++kept_bodies;
@@ -339,6 +335,7 @@ struct ReadOnlyCase {
     const std::size_t record_bytes = (SweepRecords::bytes_for(W) + page - 1) / page * page;
     bytes = record_bytes + (sizeof(SolverBody) * c.bodies.size() + page - 1) / page * page;
     memory = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (memory == MAP_FAILED) std::abort();
     records = SweepRecords::in(memory, W);
     bodies = reinterpret_cast<SolverBody*>(static_cast<char*>(memory) + record_bytes);
     std::copy(c.bodies.begin(), c.bodies.end(), bodies);
@@ -356,7 +353,7 @@ struct ReadOnlyCase {
 }
 
 // The records' sweep writes nothing for an idle contact whose bodies have
-// no zero velocity component, and writes for one that takes a load (the
+// no -0 velocity component, and writes for one that takes a load (the
 // memory is read-only: it dies, which shows the protection holds).
 TEST(SweepRecords, AnUpdateThatChangesNothingWritesNothing) {
   GTEST_FLAG_SET(death_test_style, "threadsafe");
@@ -369,9 +366,10 @@ TEST(SweepRecords, AnUpdateThatChangesNothingWritesNothing) {
     for (std::uint32_t k = 0; k < W; ++k) {
       Contact probe = c.contacts[k];
       BodyState A = load_body(c.bodies.data(), probe.a, probe), B = load_body(c.bodies.data(), probe.b, probe);
+      const bool no_minus_zero = !has_minus_zero(A) && !has_minus_zero(B);
       set_masses<true, true>(probe, A, B);
       solve_states<true, true>(probe, A, B, real(1000));
-      if (impulses_clear<true, true>(probe) && !has_minus_zero(A) && !has_minus_zero(B))
+      if (impulses_clear<true, true>(probe) && no_minus_zero)
         idle = static_cast<int>(k);
       else if (probe.normal_impulse > 0)
         loaded = static_cast<int>(k);
