@@ -348,9 +348,9 @@ MARBLES_HD_INLINE bool impulses_clear(const Contact& c) {
   return clear;
 }
 
-// A body as loaded has a velocity component of -0: the one value a signed
+// True where a body has a velocity component of -0, the one value a signed
 // zero changes (-0 + +0 is +0). After an update whose impulses were and are
-// clear, a body without one kept every bit.
+// clear, a body loaded without one kept every bit.
 MARBLES_HD_INLINE bool has_minus_zero(const BodyState& b) { return has_minus_zero(b.v) || has_minus_zero(b.w); }
 
 // One sweep's update of record k (the GPU's sweep kernel): solve_one on the
