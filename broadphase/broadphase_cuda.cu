@@ -11,7 +11,8 @@
 //              (readback: pair count) -> write
 //
 // Home-cell variant (home_cell_cuda.cu):
-//   cell IDs   bounds (1 readback) -> grid -> home keys
+//   cell IDs   bounds -> grid (chosen on the device; the host reads the
+//              bounds only where it has no plan yet: run_home) -> home keys
 //   sort       the same two sorts, one (key, id) entry per sphere
 //   cell list  spheres gathered into sorted order + dense lower-bound array
 //   traversal  count per sphere -> scan (readback: pair count) -> write;
@@ -22,7 +23,8 @@
 // there is no fixed capacity. The home-cell variant carves its temporaries
 // out of one scratch buffer, which a GPU step shares with its other stages
 // (share_scratch). The readbacks named above are the only host
-// syncs (seed: 3, home: 2). Grids too wide for 63 (seed) or 62 (home) key
+// syncs (seed: 3; home: 2, 1 within a room while the plan holds, none
+// where the grid was planned before). Grids too wide for 63 (seed) or 62 (home) key
 // bits (a sphere very far from the rest) go through the CPU twin's exact
 // key compression, then back to the device.
 #include <cuda_runtime.h>
@@ -59,7 +61,14 @@ struct SubdivisionCuda::Impl {
   DeviceBuffer own_scratch;                 // the home-cell variant's temporaries, unless shared
   DeviceBuffer* scratch = &own_scratch;
   DeviceBuffer count_word;                  // the pair count, left on the device (find_pairs_device_within)
+  DeviceBuffer grid_word;                   // the home grid of the call, chosen on the device
   std::size_t pair_count = 0;
+  // The home-cell variant's plan: the shape its buffers and sort take from
+  // the grid of the last call that read its bounds, and that grid (for the
+  // stats of the calls that do not read theirs). None: the next call reads.
+  std::optional<HomePlan> plan;
+  HomeGrid planned_grid;
+  std::uint64_t bytes = 0;  // host<->device bytes copied by the device entry points
 
   ::marbles::cuda::PinnedBuffer<BoundsAccum> h_bounds{1};
   ::marbles::cuda::PinnedBuffer<std::uint32_t> h_small{64};  // readbacks
@@ -71,6 +80,7 @@ struct SubdivisionCuda::Impl {
   std::uint32_t read_u32(const std::uint32_t* d, cudaStream_t s) {
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small, d, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+    bytes += sizeof(std::uint32_t);
     return h_small[0];
   }
 
@@ -81,7 +91,8 @@ struct SubdivisionCuda::Impl {
   Bounds device_bounds(const SpheresIn& d, cudaStream_t s);
   std::size_t run_home(const SpheresIn& d, real margin, cudaStream_t s, Within within);
   template <class Key>
-  std::size_t run_home_keys(const SpheresIn& d, real margin, const HomeGrid& g, cudaStream_t s, Within within);
+  std::size_t run_home_keys(const SpheresIn& d, real margin, const HomePlan& p, const HomeGrid* g, cudaStream_t s,
+                            Within within);
   void finish_timing();
   template <class Key>
   std::size_t run_keys(const SpheresIn& d, real margin, const Grid& g, cudaStream_t s);
@@ -167,6 +178,7 @@ std::size_t SubdivisionCuda::Impl::run_keys(const SpheresIn& d, real margin, con
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small + 2, d_tests, 8, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small + 4, d_pass, 9 * 4, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  bytes += 4 + 8 + 9 * 4;
   pair_count = h_small[0];
   unsigned long long t = 0;
   std::memcpy(&t, h_small + 2, 8);
@@ -197,37 +209,66 @@ void SubdivisionCuda::Impl::finish_timing() {
 }
 
 // The bounding box of the centres and the largest radius, reduced on the
-// device and read back (the one host sync before the grid is chosen).
+// device and read back (the host sync before a grid is chosen on the host).
 Bounds SubdivisionCuda::Impl::device_bounds(const SpheresIn& d, cudaStream_t s) {
   auto* acc = bounds.as<BoundsAccum>(1);
   launch_bounds(d.centre, d.radius, d.count, acc, sm_count, s);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_bounds, acc, sizeof(BoundsAccum), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  bytes += sizeof(BoundsAccum);
   if (h_bounds->bad) throw NonFiniteInput();
   return decode_bounds(*h_bounds);
 }
 
+// The plan of a grid chosen on the host: its key type, the sort's bits
+// rounded up to the sort's 8-bit digits (as many passes), and a dense
+// lower-bound array a quarter larger than it needs.
+static HomePlan plan_of(const HomeGridChoice& hc, std::size_t n) {
+  HomePlan p;
+  p.bits32 = hc.width == KeyWidth::bits32;
+  p.key_bits = std::min<std::uint32_t>((hc.grid.key_bits + 7) / 8 * 8, p.bits32 ? 32 : 64);
+  p.dense = use_dense_cell_starts(hc.grid, n);
+  p.cells = p.dense ? hc.grid.cells + hc.grid.cells / 4 + 1024 : 0;
+  return p;
+}
+
+// The grid is chosen on the device, from the bounds reduced there, by the
+// host's function (home_grid_of): the same grid, so the same keys and
+// order. The host lays out the buffers and the sort for a plan. A call that
+// waits (no plan yet, or no `within`) reads the bounds first and plans from
+// the grid it chooses itself; a call within a room does not read them: the
+// device's grid must fit the plan, else it is kNoGrid, the count
+// kNoPairCount, and the caller plans again (replan) and asks again.
 std::size_t SubdivisionCuda::Impl::run_home(const SpheresIn& d, real margin, cudaStream_t s, Within within) {
-  // --- cell IDs: bounds -> grid -> home keys -----------------------------------
-  const HomeGridChoice hc = choose_home_grid(device_bounds(d, s), margin);
-  if (hc.width == KeyWidth::too_wide) return run_on_cpu(d, margin, s);
-  stats.cell_size = hc.grid.cell;
-  stats.key_bits = hc.grid.key_bits;
-  stats.grid_cells = hc.grid.cells;
-  if (hc.width == KeyWidth::bits32) {
-    stats.key_width = 32;
-    return run_home_keys<std::uint32_t>(d, margin, hc.grid, s, within);
+  if (!within || !plan) {
+    const HomeGridChoice hc = choose_home_grid(device_bounds(d, s), margin);
+    if (hc.width == KeyWidth::too_wide) {
+      plan.reset();
+      return run_on_cpu(d, margin, s);
+    }
+    plan = plan_of(hc, d.count);
+    planned_grid = hc.grid;
+  } else {
+    check_inputs(Bounds{}, margin);  // the margin (the bounds the device checks)
+    launch_bounds(d.centre, d.radius, d.count, bounds.as<BoundsAccum>(1), sm_count, s);
   }
-  stats.key_width = 64;
-  return run_home_keys<std::uint64_t>(d, margin, hc.grid, s, within);
+  const HomePlan p = *plan;
+  auto* g = grid_word.as<HomeGrid>(1);
+  launch_home_grid(bounds.get_as<BoundsAccum>(), margin, p, g, s);
+  stats.cell_size = planned_grid.cell;
+  stats.key_bits = planned_grid.key_bits;
+  stats.grid_cells = planned_grid.cells;
+  stats.key_width = p.bits32 ? 32 : 64;
+  return p.bits32 ? run_home_keys<std::uint32_t>(d, margin, p, g, s, within)
+                  : run_home_keys<std::uint64_t>(d, margin, p, g, s, within);
 }
 
 template <class Key>
-std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin, const HomeGrid& g, cudaStream_t s,
-                                                 Within within) {
+std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin, const HomePlan& p,
+                                                 const HomeGrid* g, cudaStream_t s, Within within) {
   const std::size_t n = d.count;
   // Every temporary in the scratch memory, live only during this call.
-  const bool dense = use_dense_cell_starts(g, n);
+  const bool dense = p.dense;
   Key *d_keys = nullptr, *d_keys_alt = nullptr;
   std::uint32_t *d_ids = nullptr, *d_ids_alt = nullptr, *d_lb = nullptr, *d_counts = nullptr, *d_offsets = nullptr;
   SortedSphere* d_sorted = nullptr;
@@ -236,7 +277,7 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
     d_keys_alt = c.take<Key>(n);
     d_ids = c.take<std::uint32_t>(n);
     d_ids_alt = c.take<std::uint32_t>(n);
-    d_lb = dense ? c.take<std::uint32_t>(g.cells + 1) : nullptr;
+    d_lb = dense ? c.take<std::uint32_t>(p.cells + 1) : nullptr;
     d_sorted = c.take<SortedSphere>(n);
     d_counts = c.take<std::uint32_t>(n + 1);
     d_offsets = c.take<std::uint32_t>(n + 1);
@@ -248,39 +289,45 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
   // --- sort: (home key, id), one entry per sphere -----------------------------------
   const bool in_alt =
       sort == SortKind::seed
-          ? seed_radix_sort<Key>(d_keys, d_ids, d_keys_alt, d_ids_alt, n, g.key_bits, seed_scratch, sm_count, s)
-          : cub_radix_sort<Key>(d_keys, d_ids, d_keys_alt, d_ids_alt, n, g.key_bits, cub_temp, s);
+          ? seed_radix_sort<Key>(d_keys, d_ids, d_keys_alt, d_ids_alt, n, p.key_bits, seed_scratch, sm_count, s)
+          : cub_radix_sort<Key>(d_keys, d_ids, d_keys_alt, d_ids_alt, n, p.key_bits, cub_temp, s);
   if (in_alt) {
     std::swap(d_keys, d_keys_alt);
     std::swap(d_ids, d_ids_alt);
   }
-  stats.sort_passes = (g.key_bits + 7) / 8;
+  stats.sort_passes = (p.key_bits + 7) / 8;
   mark(2, s);
 
   // --- cell list: spheres in sorted order, cell lower bounds -------------------------
+  // (the plan's cells: the grid's may be fewer; the lower bounds past them
+  // are n, as those of the grid's last cells, and never read)
   stats.dense_cell_starts = dense;
-  launch_home_reorder<Key>(d_keys, d_ids, n, d.centre, d.radius, g.cells, d_sorted, d_lb, sm_count, s);
+  launch_home_reorder<Key>(d_keys, d_ids, n, d.centre, d.radius, p.cells, d_sorted, d_lb, sm_count, s);
   mark(3, s);
 
-  // --- traversal: count -> scan -> (readback) -> write -------------------------------
+  // --- traversal: count -> scan -> count word -> (readback) -> write ------------------
   auto* d_tests = tests.as<unsigned long long>(1);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(d_tests, 0, sizeof(unsigned long long), s));
   const HomeTraversal<Key> in{d_keys, d_ids, d_sorted, d_lb, g, static_cast<std::uint32_t>(n), margin};
   launch_home_count<Key>(in, d_counts, d_tests, sm_count, s);
   exclusive_sum(d_counts, d_offsets, n + 1, cub_temp, s);
+  // The count out of the scratch (its next user overwrites offsets[n]) into
+  // a word of its own: kNoPairCount where the device's grid did not fit.
+  auto* d_count = count_word.as<std::uint32_t>(1);
+  launch_home_pair_count<Key>(in, d_offsets, d_count, s);
   if (within) {
-    // No readback: the count out of the scratch (its next user overwrites
-    // offsets[n]) into a word of its own, the pairs only if they fit.
-    auto* d_count = count_word.as<std::uint32_t>(1);
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(d_count, d_offsets + n, sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, s));
+    // No readback: the pairs only if they fit.
     launch_home_write<Key>(in, d_offsets, *within, pairs.as_room<IndexPair>(*within), sm_count, s);
     mark(4, s);
     finish_timing();
     return SubdivisionCuda::kCountOnDevice;  // stats.pairs and stats.tests stay 0: not read
   }
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small, d_offsets + n, 4, cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small, d_count, 4, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_small + 2, d_tests, 8, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  bytes += 12;
+  // This call planned from the grid it chose on the host: the device's is the same.
+  if (h_small[0] == kNoPairCount) throw std::logic_error("broad phase: the device chose another home grid than the host");
   pair_count = h_small[0];
   unsigned long long t = 0;
   std::memcpy(&t, h_small + 2, 8);
@@ -301,12 +348,14 @@ std::size_t SubdivisionCuda::Impl::run_on_cpu(const SpheresIn& d, real margin, c
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(c.data(), d.centre, n * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(r.data(), d.radius, n * sizeof(real), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  bytes += n * (sizeof(Vec3) + sizeof(real));
   if (!cpu_fallback) cpu_fallback = make_subdivision_cpu(algorithm);
   std::vector<Pair> out;
   cpu_fallback->find_pairs({c.data(), r.data(), n}, margin, out);
   auto* d_pairs = pairs.as<IndexPair>(out.size());
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(d_pairs, out.data(), out.size() * sizeof(Pair), cudaMemcpyHostToDevice, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  bytes += out.size() * sizeof(Pair);
   stats = cpu_fallback->last_stats();
   stats.ms_total = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   pair_count = out.size();
@@ -345,6 +394,8 @@ std::size_t SubdivisionCuda::find_pairs_device_within(const SpheresIn& device_sp
 }
 
 const std::uint32_t* SubdivisionCuda::device_pair_count() const { return m->count_word.get_as<std::uint32_t>(); }
+void SubdivisionCuda::replan() { m->plan.reset(); }
+std::uint64_t SubdivisionCuda::bytes_copied() const { return m->bytes; }
 
 void SubdivisionCuda::find_pairs(const SpheresIn& s, real margin, std::vector<Pair>& out) {
   out.clear();

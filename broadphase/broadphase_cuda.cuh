@@ -9,7 +9,9 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 
+#include "broadphase/broadphase_cuda.hpp"
 #include "broadphase/broadphase_math.hpp"
 #include "broadphase/grid.hpp"
 #include "broadphase/home_cell_math.hpp"
@@ -30,9 +32,58 @@ struct BoundsAccum {
   unsigned long long lo[3], hi[3], r_max;
   unsigned int bad;  // a centre or radius not finite, or a radius < 0
 };
+// *acc set to its start, then the bounds of the n spheres reduced into it
+// (two launches: nothing copied from the host).
 void launch_bounds(const Vec3* centre, const real* radius, std::size_t n, BoundsAccum* acc, int sm_count,
                    cudaStream_t stream);
-Bounds decode_bounds(const BoundsAccum& acc);
+// An order-preserving encoding (cell_ids_cuda.cu: ordered) back to its real.
+MARBLES_HD_INLINE real decode_ordered(unsigned long long k) {
+  if constexpr (sizeof(real) == 4) {
+    const auto e = static_cast<unsigned int>(k);
+    const unsigned int u = (e & 0x80000000u) ? (e & 0x7fffffffu) : ~e;
+#if defined(__CUDA_ARCH__)
+    return __uint_as_float(u);
+#else
+    float f;
+    std::memcpy(&f, &u, 4);
+    return f;
+#endif
+  } else {
+    const unsigned long long u = (k & 0x8000000000000000ull) ? (k & 0x7fffffffffffffffull) : ~k;
+#if defined(__CUDA_ARCH__)
+    return static_cast<real>(__longlong_as_double(static_cast<long long>(u)));
+#else
+    double d;
+    std::memcpy(&d, &u, 8);
+    return static_cast<real>(d);
+#endif
+  }
+}
+MARBLES_HD_INLINE Bounds decode_bounds(const BoundsAccum& acc) {
+  Bounds b;
+  b.lo = Vec3(decode_ordered(acc.lo[0]), decode_ordered(acc.lo[1]), decode_ordered(acc.lo[2]));
+  b.hi = Vec3(decode_ordered(acc.hi[0]), decode_ordered(acc.hi[1]), decode_ordered(acc.hi[2]));
+  b.r_max = decode_ordered(acc.r_max);
+  return b;
+}
+
+// What a home grid chosen on the device must fit for the buffers and sort
+// that the host laid out without reading the bounds: the key type (bits32:
+// cells <= 2^31), the sort's bits and, with a dense lower-bound array, its
+// cells (the array holds cells + 1 entries). Made from the grid of the last
+// call that read its bounds (SubdivisionCuda's plan).
+struct HomePlan {
+  bool bits32 = true;
+  std::uint32_t key_bits = 0;
+  bool dense = false;
+  std::uint64_t cells = 0;  // with dense: the lower-bound array's cells
+};
+// *grid = the home grid of the bounds in *acc (home_grid_of, the host's
+// function), or a grid with cells = 0 (kNoGrid) where the bounds are not
+// finite, the grid is too wide or it does not fit `plan`: every home kernel
+// then finds no pair. One thread.
+inline constexpr std::uint64_t kNoGrid = 0;
+void launch_home_grid(const BoundsAccum* acc, real margin, const HomePlan& plan, HomeGrid* grid, cudaStream_t stream);
 // counts[i] = occupied cells of sphere i, info[i] = home type and type mask.
 void launch_cell_counts(const Vec3* centre, const real* radius, std::size_t n, const Grid& grid, std::uint32_t* counts,
                         std::uint16_t* info, int sm_count, cudaStream_t stream);
@@ -94,8 +145,9 @@ void launch_traversal_write(const TraversalInput& in, std::size_t m, const std::
 
 // --- home-cell variant (home_cell_cuda.cu) -------------------------------------
 // keys[i] = home key of sphere i, ids[i] = i.
+// `grid` on the device (launch_home_grid); with kNoGrid every key is 0.
 template <class Key>
-void launch_home_keys(const Vec3* centre, std::size_t n, const HomeGrid& grid, Key* keys, std::uint32_t* ids,
+void launch_home_keys(const Vec3* centre, std::size_t n, const HomeGrid* grid, Key* keys, std::uint32_t* ids,
                       int sm_count, cudaStream_t stream);
 // sorted[i] = sphere ids[i] (centre, radius); with `lb` (cells + 1 entries):
 // lb[k] = first sorted index whose key is >= k.
@@ -109,7 +161,7 @@ struct HomeTraversal {
   const std::uint32_t* ids;    // sorted ids
   const SortedSphere* sphere;  // spheres in sorted order
   const std::uint32_t* lb;     // dense lower bounds, or null: binary search over keys
-  HomeGrid grid;
+  const HomeGrid* grid;        // on the device (launch_home_grid); kNoGrid: no pairs
   std::uint32_t n;
   real margin;
 };
@@ -117,8 +169,14 @@ struct HomeTraversal {
 template <class Key>
 void launch_home_count(const HomeTraversal<Key>& in, std::uint32_t* counts, unsigned long long* tests, int sm_count,
                        cudaStream_t stream);
+// *count = the pairs in all (offsets[n]), or kNoPairCount where the grid
+// is kNoGrid.
+inline constexpr std::uint32_t kNoPairCount = SubdivisionCuda::kNoPairCount;
+template <class Key>
+void launch_home_pair_count(const HomeTraversal<Key>& in, const std::uint32_t* offsets, std::uint32_t* count,
+                            cudaStream_t stream);
 // Writes sphere i's pairs at offsets[i], unless there are more than
-// `capacity` in all (offsets[n]): then it writes none.
+// `capacity` in all (offsets[n]) or the grid is kNoGrid: then it writes none.
 template <class Key>
 void launch_home_write(const HomeTraversal<Key>& in, const std::uint32_t* offsets, std::size_t capacity,
                        IndexPair* pairs, int sm_count, cudaStream_t stream);

@@ -42,7 +42,8 @@ class SubdivisionCuda final : public BroadPhase {
   // `device_spheres` holds device pointers. `stream` is a cudaStream_t (null:
   // the default stream). Returns the number of pairs; the call synchronises
   // the stream to size its buffers (count, scan, allocate): 3 times for the
-  // seed algorithm, twice (bounds, pair count) for the home-cell variant.
+  // seed algorithm, twice (bounds, pair count) for the home-cell variant,
+  // which plans from the bounds it read (device_pair_count).
   std::size_t find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream = nullptr);
   const Pair* device_pairs() const;  // device pointer
 
@@ -59,8 +60,20 @@ class SubdivisionCuda final : public BroadPhase {
   std::size_t find_pairs_device_within(const SpheresIn& device_spheres, real margin, std::size_t capacity,
                                        void* stream = nullptr);
   // Device pointer: the pair count of the last find_pairs_device_within
-  // that returned kCountOnDevice, once the stream has got there.
+  // that returned kCountOnDevice, once the stream has got there; or
+  // kNoPairCount (every bit set) where that call did not read its bounds and
+  // the grid the device chose from them does not fit the plan made at the
+  // last read (the key type, the sort's bits, the dense lower bounds'
+  // cells): then nothing was written, and the caller calls replan() and
+  // asks again. A call within a room reads its bounds only without a plan
+  // (the first, or after replan()); find_pairs_device always does.
   const std::uint32_t* device_pair_count() const;
+  static constexpr std::uint32_t kNoPairCount = 0xffffffffu;
+  // The next call reads its bounds and plans from its grid.
+  void replan();
+  // Host<->device bytes the device entry points copied so far (readbacks,
+  // and the CPU fallback's copies).
+  std::uint64_t bytes_copied() const;
 
   // The home-cell variant's temporaries (keys, ids and their alternates,
   // the spheres in sorted order, lower bounds, pair counts and offsets) live

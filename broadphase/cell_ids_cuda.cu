@@ -27,21 +27,6 @@ __device__ __forceinline__ unsigned long long ordered(T v) {
   }
 }
 
-real decode(unsigned long long k) {
-  if constexpr (sizeof(real) == 4) {
-    const auto e = static_cast<unsigned int>(k);
-    const unsigned int u = (e & 0x80000000u) ? (e & 0x7fffffffu) : ~e;
-    float f;
-    std::memcpy(&f, &u, 4);
-    return f;
-  } else {
-    const unsigned long long u = (k & 0x8000000000000000ull) ? (k & 0x7fffffffffffffffull) : ~k;
-    double d;
-    std::memcpy(&d, &u, 8);
-    return static_cast<real>(d);
-  }
-}
-
 __global__ void bounds_kernel(const Vec3* __restrict__ centre, const real* __restrict__ radius, std::size_t n,
                               BoundsAccum* acc) {
   real lo[3] = {real(FLT_MAX), real(FLT_MAX), real(FLT_MAX)};
@@ -81,6 +66,30 @@ __global__ void bounds_kernel(const Vec3* __restrict__ centre, const real* __res
   }
 }
 
+// The accumulator's start: every lo above and every hi below any encoding.
+__global__ void bounds_start_kernel(BoundsAccum* acc) {
+  for (int k = 0; k < 3; ++k) acc->lo[k] = ~0ull, acc->hi[k] = 0;
+  acc->r_max = 0;
+  acc->bad = 0;
+}
+
+// The home grid of the accumulated bounds where it fits the plan, else
+// kNoGrid (the host's check_inputs, on the device: finite bounds, a radius
+// >= 0; the margin the host checked).
+__global__ void home_grid_kernel(const BoundsAccum* acc, real margin, HomePlan plan, HomeGrid* out) {
+  const Bounds b = decode_bounds(*acc);
+  bool ok = acc->bad == 0 && isfinite(b.r_max) && b.r_max >= 0;
+  for (int k = 0; k < 3; ++k) ok = ok && isfinite(b.lo[k]) && isfinite(b.hi[k]);
+  HomeGrid g;
+  if (ok) {
+    const KeyWidth width = home_grid_of(b, margin, g);
+    ok = width != KeyWidth::too_wide && (!plan.bits32 || width == KeyWidth::bits32) && g.key_bits <= plan.key_bits &&
+         (!plan.dense || g.cells <= plan.cells);
+  }
+  if (!ok) g.cells = kNoGrid;
+  *out = g;
+}
+
 __global__ void cell_counts_kernel(const Vec3* __restrict__ centre, const real* __restrict__ radius, std::size_t n,
                                    Grid grid, std::uint32_t* __restrict__ counts, std::uint16_t* __restrict__ info) {
   for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n;
@@ -116,21 +125,15 @@ __global__ void cell_ids_kernel(const Vec3* __restrict__ centre, const real* __r
 
 void launch_bounds(const Vec3* centre, const real* radius, std::size_t n, BoundsAccum* acc, int sm_count,
                    cudaStream_t stream) {
-  BoundsAccum init{};
-  for (int k = 0; k < 3; ++k) init.lo[k] = ~0ull, init.hi[k] = 0;
-  init.r_max = 0;
-  init.bad = 0;
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(acc, &init, sizeof init, cudaMemcpyHostToDevice, stream));
+  bounds_start_kernel<<<1, 1, 0, stream>>>(acc);
+  MARBLES_CUDA_CHECK_LAUNCH();
   bounds_kernel<<<grid_for(n, sm_count, 4), kBlock, 0, stream>>>(centre, radius, n, acc);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-Bounds decode_bounds(const BoundsAccum& acc) {
-  Bounds b;
-  b.lo = Vec3(decode(acc.lo[0]), decode(acc.lo[1]), decode(acc.lo[2]));
-  b.hi = Vec3(decode(acc.hi[0]), decode(acc.hi[1]), decode(acc.hi[2]));
-  b.r_max = decode(acc.r_max);
-  return b;
+void launch_home_grid(const BoundsAccum* acc, real margin, const HomePlan& plan, HomeGrid* grid, cudaStream_t stream) {
+  home_grid_kernel<<<1, 1, 0, stream>>>(acc, margin, plan, grid);
+  MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 void launch_cell_counts(const Vec3* centre, const real* radius, std::size_t n, const Grid& grid, std::uint32_t* counts,

@@ -119,15 +119,17 @@ struct HomeGridChoice {
   KeyWidth width = KeyWidth::bits32;  // bits32: cells <= 2^31; too_wide: X * Y * Z > 2^62
 };
 
-inline HomeGridChoice choose_home_grid(const Bounds& b, real margin) {
-  check_inputs(b, margin);
-
-  HomeGridChoice out;
-  HomeGrid& g = out.grid;
+// The home grid of bounds b (finite: check_inputs) into g; too_wide where
+// X * Y * Z exceeds 2^62. Host and device both (the device chooses the grid
+// of a call that does not wait for its bounds: the same grid, so the same
+// keys and order).
+MARBLES_HD_INLINE KeyWidth home_grid_of(const Bounds& b, real margin, HomeGrid& g) {
   const double contact = 2.0 * static_cast<double>(b.r_max) + static_cast<double>(margin);
   double cell = contact > 0 ? contact * (1.0 + kHomeCellSlack) : 1.0;
-  for (int k = 0; k < 3; ++k)
-    cell = std::max(cell, (static_cast<double>(b.hi[k]) - static_cast<double>(b.lo[k])) / kHomeMaxSpanCells);
+  for (int k = 0; k < 3; ++k) {
+    const double span = (static_cast<double>(b.hi[k]) - static_cast<double>(b.lo[k])) / kHomeMaxSpanCells;
+    cell = span > cell ? span : cell;
+  }
   g.cell = cell;
   g.inv_cell = 1.0 / cell;
   for (int k = 0; k < 3; ++k) {
@@ -135,11 +137,14 @@ inline HomeGridChoice choose_home_grid(const Bounds& b, real margin) {
     // homes are in [1, top]; two more cells above for the x + 2 lookups
     g.dim[k] = static_cast<std::uint64_t>(cell_coord(b.hi[k], g.origin[k], g.inv_cell)) + 3;
   }
-  if (!set_home_layout(g)) {
-    out.width = KeyWidth::too_wide;
-    return out;
-  }
-  out.width = g.cells <= (std::uint64_t{1} << 31) ? KeyWidth::bits32 : KeyWidth::bits64;
+  if (!set_home_layout(g)) return KeyWidth::too_wide;
+  return g.cells <= (std::uint64_t{1} << 31) ? KeyWidth::bits32 : KeyWidth::bits64;
+}
+
+inline HomeGridChoice choose_home_grid(const Bounds& b, real margin) {
+  check_inputs(b, margin);
+  HomeGridChoice out;
+  out.width = home_grid_of(b, margin, out.grid);
   return out;
 }
 

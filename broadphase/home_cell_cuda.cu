@@ -30,11 +30,13 @@ __device__ __forceinline__ SortedSphere load_sphere(const SortedSphere* __restri
 }
 
 template <class Key>
-__global__ void home_keys_kernel(const Vec3* __restrict__ centre, std::size_t n, HomeGrid grid, Key* __restrict__ keys,
-                                 std::uint32_t* __restrict__ ids) {
+__global__ void home_keys_kernel(const Vec3* __restrict__ centre, std::size_t n, const HomeGrid* __restrict__ at,
+                                 Key* __restrict__ keys, std::uint32_t* __restrict__ ids) {
+  const HomeGrid grid = *at;
+  const bool none = grid.cells == kNoGrid;
   for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n;
        i += std::size_t(gridDim.x) * blockDim.x) {
-    keys[i] = static_cast<Key>(home_key(home_cell(centre[i], grid), grid));
+    keys[i] = none ? Key{0} : static_cast<Key>(home_key(home_cell(centre[i], grid), grid));
     ids[i] = static_cast<std::uint32_t>(i);
   }
 }
@@ -79,8 +81,8 @@ __global__ void home_reorder_kernel(const Key* __restrict__ keys, const std::uin
 }
 
 template <class Key, bool Dense, class Emit>
-__device__ __forceinline__ unsigned walk(const HomeTraversal<Key>& in, std::uint32_t i, const SortedSphere& own,
-                                         Emit&& emit) {
+__device__ __forceinline__ unsigned walk(const HomeTraversal<Key>& in, const HomeGrid& grid, std::uint32_t i,
+                                         const SortedSphere& own, Emit&& emit) {
   auto lb = [&](Key k) -> std::uint32_t {
     if constexpr (Dense)
       return __ldg(in.lb + k);
@@ -88,16 +90,18 @@ __device__ __forceinline__ unsigned walk(const HomeTraversal<Key>& in, std::uint
       return lower_bound_key(in.keys, in.n, k);
   };
   auto sphere = [&](std::uint32_t j) { return load_sphere(in.sphere, j); };
-  return traverse_home_sphere(i, in.keys[i], own, in.grid, lb, sphere, in.margin, emit);
+  return traverse_home_sphere(i, in.keys[i], own, grid, lb, sphere, in.margin, emit);
 }
 
 template <class Key, bool Dense>
 __global__ void home_count_kernel(HomeTraversal<Key> in, std::uint32_t* __restrict__ counts,
                                   unsigned long long* __restrict__ tests) {
+  const HomeGrid grid = *in.grid;
+  const bool none = grid.cells == kNoGrid;
   unsigned long long my_tests = 0;
   for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < in.n; i += gridDim.x * blockDim.x) {
     std::uint32_t pairs = 0;
-    my_tests += walk<Key, Dense>(in, i, load_sphere(in.sphere, i), [&](std::uint32_t) { ++pairs; });
+    if (!none) my_tests += walk<Key, Dense>(in, grid, i, load_sphere(in.sphere, i), [&](std::uint32_t) { ++pairs; });
     counts[i] = pairs;
   }
   if (blockIdx.x == 0 && threadIdx.x == 0) counts[in.n] = 0;
@@ -109,19 +113,26 @@ template <class Key, bool Dense>
 __global__ void home_write_kernel(HomeTraversal<Key> in, const std::uint32_t* __restrict__ offsets,
                                   std::size_t capacity, IndexPair* __restrict__ pairs) {
   if (offsets[in.n] > capacity) return;  // they do not fit: the caller asks again
+  const HomeGrid grid = *in.grid;
+  if (grid.cells == kNoGrid) return;  // no grid: the caller plans again and asks again
   for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < in.n; i += gridDim.x * blockDim.x) {
     std::uint32_t at = offsets[i];
     if (offsets[i + 1] == at) continue;  // no pairs from this sphere
     const std::uint32_t id = in.ids[i];
-    walk<Key, Dense>(in, i, load_sphere(in.sphere, i),
+    walk<Key, Dense>(in, grid, i, load_sphere(in.sphere, i),
                      [&](std::uint32_t j) { pairs[at++] = ordered_pair(id, __ldg(in.ids + j)); });
   }
+}
+
+template <class Key>
+__global__ void home_pair_count_kernel(HomeTraversal<Key> in, const std::uint32_t* offsets, std::uint32_t* count) {
+  *count = in.grid->cells == kNoGrid ? kNoPairCount : offsets[in.n];
 }
 
 }  // namespace
 
 template <class Key>
-void launch_home_keys(const Vec3* centre, std::size_t n, const HomeGrid& grid, Key* keys, std::uint32_t* ids,
+void launch_home_keys(const Vec3* centre, std::size_t n, const HomeGrid* grid, Key* keys, std::uint32_t* ids,
                       int sm_count, cudaStream_t stream) {
   home_keys_kernel<Key><<<grid_for(n, sm_count), kBlock, 0, stream>>>(centre, n, grid, keys, ids);
   MARBLES_CUDA_CHECK_LAUNCH();
@@ -151,6 +162,13 @@ void launch_home_count(const HomeTraversal<Key>& in, std::uint32_t* counts, unsi
 }
 
 template <class Key>
+void launch_home_pair_count(const HomeTraversal<Key>& in, const std::uint32_t* offsets, std::uint32_t* count,
+                            cudaStream_t stream) {
+  home_pair_count_kernel<Key><<<1, 1, 0, stream>>>(in, offsets, count);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+template <class Key>
 void launch_home_write(const HomeTraversal<Key>& in, const std::uint32_t* offsets, std::size_t capacity,
                        IndexPair* pairs, int sm_count, cudaStream_t stream) {
   const int blocks = grid_for(in.n, sm_count);
@@ -162,12 +180,14 @@ void launch_home_write(const HomeTraversal<Key>& in, const std::uint32_t* offset
 }
 
 #define MARBLES_HOME_INSTANTIATE(Key)                                                                              \
-  template void launch_home_keys<Key>(const Vec3*, std::size_t, const HomeGrid&, Key*, std::uint32_t*, int,       \
+  template void launch_home_keys<Key>(const Vec3*, std::size_t, const HomeGrid*, Key*, std::uint32_t*, int,       \
                                       cudaStream_t);                                                              \
   template void launch_home_reorder<Key>(const Key*, const std::uint32_t*, std::size_t, const Vec3*, const real*, \
                                          std::uint64_t, SortedSphere*, std::uint32_t*, int, cudaStream_t);         \
   template void launch_home_count<Key>(const HomeTraversal<Key>&, std::uint32_t*, unsigned long long*, int,       \
                                        cudaStream_t);                                                             \
+  template void launch_home_pair_count<Key>(const HomeTraversal<Key>&, const std::uint32_t*, std::uint32_t*,      \
+                                          cudaStream_t);                                                          \
   template void launch_home_write<Key>(const HomeTraversal<Key>&, const std::uint32_t*, std::size_t, IndexPair*,  \
                                        int, cudaStream_t);
 MARBLES_HOME_INSTANTIATE(std::uint32_t)

@@ -62,7 +62,7 @@ MARBLES_HD_INLINE std::uint64_t home_key(const CellCoord& c, const HomeGrid& g) 
 }
 
 // Forward rows (dy, dz) in {(1,0), (-1,1), (0,1), (1,1)} as key offsets.
-inline void set_row_offsets(HomeGrid& g) {
+MARBLES_HD_INLINE void set_row_offsets(HomeGrid& g) {
   const std::uint64_t X = g.dim[0], XY = g.dim[0] * g.dim[1];
   g.row_offset[0] = X;
   g.row_offset[1] = XY - X;
@@ -72,7 +72,7 @@ inline void set_row_offsets(HomeGrid& g) {
 
 // Sets cells, key_bits and row offsets from dim; false when X * Y * Z
 // exceeds 2^62 (the caller then compresses the axes).
-inline bool set_home_layout(HomeGrid& g) {
+MARBLES_HD_INLINE bool set_home_layout(HomeGrid& g) {
   const double product = double(g.dim[0]) * double(g.dim[1]) * double(g.dim[2]);
   if (!(product < 4.0e18)) return false;
   g.cells = g.dim[0] * g.dim[1] * g.dim[2];

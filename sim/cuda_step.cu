@@ -244,7 +244,6 @@ class CudaStep final : public StepBackend {
       dev::device_exclusive_sum(pair_flags, pair_offsets, pair_items + 1, pair_temp, pair_temp_bytes, m_stream);
       if (wait) read(kSphereContacts, pair_offsets + pair_items, 4);
       if (pair_count_on_device) read(kPairCount, pair_count_on_device, 4);
-      m_bytes += broad_phase_readback(pair_count_on_device == nullptr);
     }
     if (m_model.wall_contacts) {
       nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, reach, wall_flags, watch, m_sm,
@@ -279,6 +278,15 @@ class CudaStep final : public StepBackend {
   // the second try). Pairs that outgrew theirs made no contact, so the
   // contacts' room then holds one for each.
   bool take_counts(std::size_t pair_count, std::size_t contacts, bool again) {
+    if (m_pair_count_on_device && pair_count == broadphase::SubdivisionCuda::kNoPairCount) {
+      // The grid the device chose outgrew the broad phase's plan: no pairs.
+      // The substep finds them again as the first one does, waiting for the
+      // bounds and the counts.
+      m_broadphase->replan();
+      m_pair_room = Room{};
+      ++m_counters.grid_replans;
+      return false;
+    }
     const bool pairs_fit = pair_count <= m_pair_items, contacts_fit = contacts <= m_count;
     if (m_model.collisions) m_pair_room.fit(pair_count, again || !pairs_fit);
     m_contact_room.fit(pairs_fit ? contacts : contacts + pair_count, again || !pairs_fit || !contacts_fit);
@@ -305,7 +313,7 @@ class CudaStep final : public StepBackend {
     std::uint32_t colours = colour_and_sort(position);
     if (m_count_on_device && !take_counts(pair_count_read(), m_colouring.last_count(), false)) {
       ++m_counters.pair_redos;
-      find_contacts_within(m_substep, false);
+      find_contacts_within(m_substep, m_pair_room.capacity == 0);  // waits where the grid was planned again
       warm_start();
       colours = colour_and_sort(position);
       if (m_count_on_device && !take_counts(pair_count_read(), m_colouring.last_count(), true))
@@ -427,7 +435,8 @@ class CudaStep final : public StepBackend {
       m_counters.beyond_walls = m_end_flags[4];
     }
     m_counters.projection_sweeps = m_end_flags[2];
-    const std::uint64_t bytes = m_bytes + m_colouring.bytes_copied();
+    const std::uint64_t bytes =
+        m_bytes + m_colouring.bytes_copied() + (m_broadphase ? m_broadphase->bytes_copied() : 0);
     m_counters.bytes_copied = bytes - m_bytes_at_step_start;
     m_bytes_at_step_start = bytes;
     m_non_finite = m_end_flags[0] != 0 || m_non_finite_seen;
@@ -643,13 +652,6 @@ class CudaStep final : public StepBackend {
   int m_sm = 1;
   std::size_t m_free_at_start = 0;
   std::uint64_t m_bytes = 0, m_bytes_at_step_start = 0;  // host<->device bytes copied by this class
-  // The broad phase's own readbacks per call: the bounds accumulator (64 B)
-  // and, where it waited for them, the pair and test counts (12 B); the seed
-  // algorithm also reads its entry count and the 9 cell-type bounds (40 B).
-  std::uint64_t broad_phase_readback(bool counts) const {
-    if (m_model.algorithm != broadphase::Algorithm::home) return 116;
-    return counts ? 76 : 64;
-  }
   static constexpr int kFlagWords = 5;
   // find_contacts' read, by word: the contact counts (where it waits), the
   // candidate and mixed-radii flags and sphere 0's radius (one or two words;

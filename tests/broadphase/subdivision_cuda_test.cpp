@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <limits>
 #include <numeric>
 #include <random>
 #include <string>
@@ -238,6 +239,109 @@ TEST_P(SubdivisionCuda, PairsWithinARoom) {
   } else {
     EXPECT_EQ(counts_left, 0u) << "the seed algorithm waits for its counts";
   }
+}
+
+// The home-cell variant within a room chooses its grid on the device from
+// bounds it does not read, for the buffers and sort of the plan made at the
+// last read. Moved sets whose grids fit that plan (shifted, jittered, shrunk;
+// each grid differs from the planned one in origin or cells) give exactly
+// the CPU twin's pairs in its order, so the device chose the host's grid.
+// Sets whose grid does not fit (spread out: more cells than the dense lower
+// bounds hold; far apart: 64-bit keys) and a non-finite centre give
+// kNoPairCount and write nothing; after replan() the call reads its bounds
+// (and throws on the non-finite one).
+TEST_P(SubdivisionCuda, GridChosenOnTheDevice) {
+  REQUIRE_DEVICE();
+  if (algorithm() != mb::Algorithm::home) GTEST_SKIP() << "the seed algorithm always reads its bounds";
+  mb::SubdivisionCuda gpu(algorithm(), sort());
+  auto cpu = mb::make_home_cell_cpu();
+  marbles::cuda::DeviceBuffer centre, radius;  // freed, as the stream is destroyed, however the test ends
+  marbles::cuda::Stream stream;
+  stream.create();
+  const real margin = real(0.01);
+  auto device_count = [&] {
+    std::uint32_t count = 0;
+    EXPECT_EQ(cudaMemcpy(&count, gpu.device_pair_count(), sizeof count, cudaMemcpyDeviceToHost), cudaSuccess);
+    return count;
+  };
+  constexpr std::size_t kRoom = 400000;
+  auto poison = [&] {
+    ASSERT_EQ(cudaMemset(const_cast<mb::Pair*>(gpu.device_pairs()), 0xa5, kRoom * sizeof(mb::Pair)), cudaSuccess);
+  };
+  // One call within the room; the count it left (the pairs where it fits).
+  auto within = [&](const mt::SphereSet& s) {
+    const std::size_t told = gpu.find_pairs_device_within(on_device(s, centre, radius), margin, kRoom, stream);
+    EXPECT_EQ(told, mb::SubdivisionCuda::kCountOnDevice);
+    EXPECT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
+    return device_count();
+  };
+  auto expect_cpu_pairs = [&](const mt::SphereSet& s, std::uint32_t count, const std::string& name) {
+    std::vector<mb::Pair> expected;
+    cpu->find_pairs(s.view(), margin, expected);
+    ASSERT_EQ(count, expected.size()) << name;
+    EXPECT_TRUE(pairs_on_device(gpu, count) == expected) << name << ": the CPU twin's pairs in its order";
+  };
+  auto expect_nothing_written = [&](const std::string& name) {
+    const std::vector<mb::Pair> left = pairs_on_device(gpu, kRoom);
+    const auto* bytes = reinterpret_cast<const unsigned char*>(left.data());
+    EXPECT_TRUE(std::all_of(bytes, bytes + kRoom * sizeof(mb::Pair), [](unsigned char b) { return b == 0xa5; }))
+        << name << ": pairs written without a grid";
+  };
+
+  const mt::SphereSet base = mt::make_set(mt::SetKind::mono, 30000, 5);
+  (void)within(base);  // no plan yet: reads its bounds and plans
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> unit(-1, 1);
+  int moved = 0;
+  for (int k = 0; k < 8; ++k) {
+    mt::SphereSet s = base;
+    const double shift = 0.37 * k, jitter = 0.02 * (k % 3), shrink = 1.0 - 0.03 * k;
+    for (auto& c : s.centre)
+      c = marbles::Vec3(real(shrink * c.x + shift + jitter * unit(rng)), real(shrink * c.y - 0.5 * shift),
+                        real(shrink * c.z + jitter * unit(rng)));
+    poison();
+    const std::uint32_t count = within(s);
+    ASSERT_NE(count, mb::SubdivisionCuda::kNoPairCount) << "moved " << k << ": within the plan";
+    expect_cpu_pairs(s, count, "moved " + std::to_string(k));
+    ++moved;
+  }
+  EXPECT_EQ(moved, 8);
+
+  struct Outgrown {
+    const char* name;
+    mt::SphereSet set;
+  };
+  std::vector<Outgrown> outgrown;
+  {
+    mt::SphereSet spread = base;
+    for (auto& c : spread.centre) c = c * real(2.5);
+    outgrown.push_back({"spread out", spread});
+    mt::SphereSet far = base;
+    far.centre[77] = marbles::Vec3(real(3.0e6), real(-2.0e6), real(1.0e6));
+    outgrown.push_back({"far apart", far});
+  }
+  for (const Outgrown& o : outgrown) {
+    poison();
+    EXPECT_EQ(within(o.set), mb::SubdivisionCuda::kNoPairCount) << o.name;
+    expect_nothing_written(o.name);
+    gpu.replan();
+    poison();
+    const std::uint32_t count = within(o.set);  // reads its bounds, plans, fits
+    ASSERT_NE(count, mb::SubdivisionCuda::kNoPairCount) << o.name << ", planned again";
+    expect_cpu_pairs(o.set, count, std::string(o.name) + ", planned again");
+    (void)within(base);  // back to the base's plan (fits under a larger one too)
+    gpu.replan();
+    (void)within(base);
+  }
+
+  mt::SphereSet bad = base;
+  bad.centre[4321].y = std::numeric_limits<real>::quiet_NaN();
+  poison();
+  EXPECT_EQ(within(bad), mb::SubdivisionCuda::kNoPairCount) << "a non-finite centre";
+  expect_nothing_written("a non-finite centre");
+  gpu.replan();
+  EXPECT_THROW(gpu.find_pairs_device_within(on_device(bad, centre, radius), margin, kRoom, stream),
+               mb::NonFiniteInput);
 }
 
 template <class Key>

@@ -44,9 +44,10 @@ bool one_radius(const World& w) {
 // colours). The GPU's records leave the arms word out exactly where every
 // contact has the same (one radius and uniform pairs: UniformArms).
 // `pair_redos` (if given) adds up the substeps whose broad phase outgrew
-// its pairs' room and ran again.
+// its pairs' room and ran again; `grid_replans` those whose grid outgrew
+// the broad phase's plan.
 void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps,
-                     std::uint64_t* pair_redos = nullptr) {
+                     std::uint64_t* pair_redos = nullptr, std::uint64_t* grid_replans = nullptr) {
   Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
   ASSERT_EQ(gpu.backend_name(), "cuda");
@@ -58,6 +59,7 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
     gpu.step();
     one_launch += gpu.last_step().one_launch_solves;
     if (pair_redos) *pair_redos += gpu.last_step().pair_redos;
+    if (grid_replans) *grid_replans += gpu.last_step().grid_replans;
     if (cpu.last_step().contacts > 0) solved += 1;
     if (form == "one") {
       ASSERT_EQ(gpu.last_step().one_launch_solves > 0, cpu.last_step().contacts > 0) << "step " << k;
@@ -201,6 +203,24 @@ TEST(StepCuda, PairCountJumpRedoesTheBroadPhase) {
   std::uint64_t redos = 0;
   expect_same_run(s, g, 20, &redos);
   EXPECT_GT(redos, 0u) << "the jump must outgrow the pairs' room";
+}
+
+// A ball shot away from a bed at 40 m/s: the centres' bounds, and with them
+// the broad phase's grid (chosen on the device from bounds the host does
+// not read), grow by two cells a step, past the plan the host laid the
+// broad phase's buffers out for (dense lower bounds a quarter larger than
+// the grid it read last) every few steps. Each time the substep finds its
+// pairs again, waiting for the bounds and planning from them: no pair and
+// no bit is lost.
+TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
+  REQUIRE_DEVICE();
+  const real r = real(0.01);
+  auto [s, g] = bed_on_a_floor(real(2.8), 1, r);
+  add_sphere(g, {real(0.3), real(0.3), real(0.05)}, r, {real(40), real(0), real(5)});
+  std::uint64_t redos = 0, replans = 0;
+  expect_same_run(s, g, 60, &redos, &replans);
+  EXPECT_GE(replans, 3u) << "the growing grid must outgrow the plan, again and again";
+  EXPECT_GE(redos, replans) << "a replan is a redo";
 }
 
 // A layer of spheres kept far apart (4 radii) hovering 0.3 radii above a
