@@ -29,10 +29,21 @@ __device__ __forceinline__ SortedSphere load_sphere(const SortedSphere* __restri
   }
 }
 
+// The launch's grid (launch_home_grid's) in shared memory, one copy a block,
+// read there as it was from the kernel's parameters before the device chose
+// it: held in registers a thread, its 13 words cost the traversal kernels
+// 8 registers and a block a SM.
+__device__ __forceinline__ const HomeGrid& block_grid(const HomeGrid* at) {
+  __shared__ alignas(HomeGrid) unsigned char copy[sizeof(HomeGrid)];
+  if (threadIdx.x == 0) *reinterpret_cast<HomeGrid*>(copy) = *at;
+  __syncthreads();
+  return *reinterpret_cast<const HomeGrid*>(copy);
+}
+
 template <class Key>
 __global__ void home_keys_kernel(const Vec3* __restrict__ centre, std::size_t n, const HomeGrid* __restrict__ at,
                                  Key* __restrict__ keys, std::uint32_t* __restrict__ ids) {
-  const HomeGrid grid = *at;
+  const HomeGrid& grid = block_grid(at);
   const bool none = grid.cells == kNoGrid;
   for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n;
        i += std::size_t(gridDim.x) * blockDim.x) {
@@ -96,7 +107,7 @@ __device__ __forceinline__ unsigned walk(const HomeTraversal<Key>& in, const Hom
 template <class Key, bool Dense>
 __global__ void home_count_kernel(HomeTraversal<Key> in, std::uint32_t* __restrict__ counts,
                                   unsigned long long* __restrict__ tests) {
-  const HomeGrid grid = *in.grid;
+  const HomeGrid& grid = block_grid(in.grid);
   const bool none = grid.cells == kNoGrid;
   unsigned long long my_tests = 0;
   for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < in.n; i += gridDim.x * blockDim.x) {
@@ -113,7 +124,7 @@ template <class Key, bool Dense>
 __global__ void home_write_kernel(HomeTraversal<Key> in, const std::uint32_t* __restrict__ offsets,
                                   std::size_t capacity, IndexPair* __restrict__ pairs) {
   if (offsets[in.n] > capacity) return;  // they do not fit: the caller asks again
-  const HomeGrid grid = *in.grid;
+  const HomeGrid& grid = block_grid(in.grid);
   if (grid.cells == kNoGrid) return;  // no grid: the caller plans again and asks again
   for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < in.n; i += gridDim.x * blockDim.x) {
     std::uint32_t at = offsets[i];

@@ -317,7 +317,7 @@ TEST_P(SubdivisionCuda, GridChosenOnTheDevice) {
     for (auto& c : spread.centre) c = c * real(2.5);
     outgrown.push_back({"spread out", spread});
     mt::SphereSet far = base;
-    far.centre[77] = marbles::Vec3(real(3.0e6), real(-2.0e6), real(1.0e6));
+    far.centre[77] = marbles::Vec3(real(3.0e5), real(-2.0e5), real(1.0e5));  // more than 2^31 cells, not 2^62
     outgrown.push_back({"far apart", far});
   }
   for (const Outgrown& o : outgrown) {

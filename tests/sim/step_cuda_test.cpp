@@ -205,9 +205,9 @@ TEST(StepCuda, PairCountJumpRedoesTheBroadPhase) {
   EXPECT_GT(redos, 0u) << "the jump must outgrow the pairs' room";
 }
 
-// A ball shot away from a bed at 40 m/s: the centres' bounds, and with them
-// the broad phase's grid (chosen on the device from bounds the host does
-// not read), grow by two cells a step, past the plan the host laid the
+// A ball shot away from a bed at 100 m/s: the centres' bounds, and with
+// them the broad phase's grid (chosen on the device from bounds the host
+// does not read), grow by three cells a step, past the plan the host laid the
 // broad phase's buffers out for (dense lower bounds a quarter larger than
 // the grid it read last) every few steps. Each time the substep finds its
 // pairs again, waiting for the bounds and planning from them: no pair and
@@ -216,9 +216,9 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
   REQUIRE_DEVICE();
   const real r = real(0.01);
   auto [s, g] = bed_on_a_floor(real(2.8), 1, r);
-  add_sphere(g, {real(0.3), real(0.3), real(0.05)}, r, {real(40), real(0), real(5)});
+  add_sphere(g, {real(0.3), real(0.3), real(0.05)}, r, {real(100), real(0), real(20)});
   std::uint64_t redos = 0, replans = 0;
-  expect_same_run(s, g, 60, &redos, &replans);
+  expect_same_run(s, g, 40, &redos, &replans);
   EXPECT_GE(replans, 3u) << "the growing grid must outgrow the plan, again and again";
   EXPECT_GE(redos, replans) << "a replan is a redo";
 }
