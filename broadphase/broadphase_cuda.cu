@@ -299,10 +299,9 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
   mark(2, s);
 
   // --- cell list: spheres in sorted order, cell lower bounds -------------------------
-  // (the plan's cells: the grid's may be fewer; the lower bounds past them
-  // are n, as those of the grid's last cells, and never read)
+  // (up to the grid's cells: the plan's array may hold more, never read)
   stats.dense_cell_starts = dense;
-  launch_home_reorder<Key>(d_keys, d_ids, n, d.centre, d.radius, p.cells, d_sorted, d_lb, sm_count, s);
+  launch_home_reorder<Key>(d_keys, d_ids, n, d.centre, d.radius, g, d_sorted, d_lb, sm_count, s);
   mark(3, s);
 
   // --- traversal: count -> scan -> count word -> (readback) -> write ------------------

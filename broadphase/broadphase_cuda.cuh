@@ -149,11 +149,11 @@ void launch_traversal_write(const TraversalInput& in, std::size_t m, const std::
 template <class Key>
 void launch_home_keys(const Vec3* centre, std::size_t n, const HomeGrid* grid, Key* keys, std::uint32_t* ids,
                       int sm_count, cudaStream_t stream);
-// sorted[i] = sphere ids[i] (centre, radius); with `lb` (cells + 1 entries):
-// lb[k] = first sorted index whose key is >= k.
+// sorted[i] = sphere ids[i] (centre, radius); with `lb` (at least the
+// grid's cells + 1 entries): lb[k] = first sorted index whose key is >= k.
 template <class Key>
 void launch_home_reorder(const Key* keys, const std::uint32_t* ids, std::size_t n, const Vec3* centre,
-                         const real* radius, std::uint64_t cells, SortedSphere* sorted, std::uint32_t* lb,
+                         const real* radius, const HomeGrid* grid, SortedSphere* sorted, std::uint32_t* lb,
                          int sm_count, cudaStream_t stream);
 template <class Key>
 struct HomeTraversal {

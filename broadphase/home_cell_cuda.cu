@@ -54,11 +54,16 @@ __global__ void home_keys_kernel(const Vec3* __restrict__ centre, std::size_t n,
 
 constexpr std::uint64_t kOwnFill = 8;  // lb entries a thread writes itself; the rest the warp writes
 
+// lb up to the grid's cells (the device's grid: the plan's array may be
+// larger, and its entries past them are never read; one warp fills the
+// last key's tail, so filling up to the plan's would cost a quarter of the
+// cells in one warp).
 template <class Key, bool Dense>
 __global__ void home_reorder_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ ids, std::size_t n,
                                     const Vec3* __restrict__ centre, const real* __restrict__ radius,
-                                    std::uint64_t cells, SortedSphere* __restrict__ sorted,
+                                    const HomeGrid* __restrict__ grid, SortedSphere* __restrict__ sorted,
                                     std::uint32_t* __restrict__ lb) {
+  const std::uint64_t cells = block_grid(grid).cells;
   const unsigned lane = threadIdx.x & 31u;
   const std::size_t warp = (blockIdx.x * std::size_t(blockDim.x) + threadIdx.x) >> 5;
   const std::size_t warps = (std::size_t(gridDim.x) * blockDim.x) >> 5;
@@ -151,13 +156,13 @@ void launch_home_keys(const Vec3* centre, std::size_t n, const HomeGrid* grid, K
 
 template <class Key>
 void launch_home_reorder(const Key* keys, const std::uint32_t* ids, std::size_t n, const Vec3* centre,
-                         const real* radius, std::uint64_t cells, SortedSphere* sorted, std::uint32_t* lb,
+                         const real* radius, const HomeGrid* grid, SortedSphere* sorted, std::uint32_t* lb,
                          int sm_count, cudaStream_t stream) {
   const int blocks = grid_for(n + 1, sm_count);
   if (lb)
-    home_reorder_kernel<Key, true><<<blocks, kBlock, 0, stream>>>(keys, ids, n, centre, radius, cells, sorted, lb);
+    home_reorder_kernel<Key, true><<<blocks, kBlock, 0, stream>>>(keys, ids, n, centre, radius, grid, sorted, lb);
   else
-    home_reorder_kernel<Key, false><<<blocks, kBlock, 0, stream>>>(keys, ids, n, centre, radius, cells, sorted, lb);
+    home_reorder_kernel<Key, false><<<blocks, kBlock, 0, stream>>>(keys, ids, n, centre, radius, grid, sorted, lb);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
@@ -194,7 +199,7 @@ void launch_home_write(const HomeTraversal<Key>& in, const std::uint32_t* offset
   template void launch_home_keys<Key>(const Vec3*, std::size_t, const HomeGrid*, Key*, std::uint32_t*, int,       \
                                       cudaStream_t);                                                              \
   template void launch_home_reorder<Key>(const Key*, const std::uint32_t*, std::size_t, const Vec3*, const real*, \
-                                         std::uint64_t, SortedSphere*, std::uint32_t*, int, cudaStream_t);         \
+                                         const HomeGrid*, SortedSphere*, std::uint32_t*, int, cudaStream_t);         \
   template void launch_home_count<Key>(const HomeTraversal<Key>&, std::uint32_t*, unsigned long long*, int,       \
                                        cudaStream_t);                                                             \
   template void launch_home_pair_count<Key>(const HomeTraversal<Key>&, const std::uint32_t*, std::uint32_t*,      \

