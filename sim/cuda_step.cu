@@ -15,16 +15,19 @@
 //
 // Host waits (docs/architecture.md "Fewer waits", "Fewer launches", "The
 // pair count read with the contacts'", "The contact count read with the
-// colours"), per substep: the broad phase's bounds, and the colouring's
+// colours", "The grid chosen on the device"), per substep: the colouring's
 // colour ranges and rounds run, read with the contact count, the broad
 // phase's pair count and whether any contact is an impact candidate and
-// whether the radii differ (one read); per step, the flags. The pairs and
+// whether the radii differ (one read); per step, the flags. The broad
+// phase chooses its grid on the device, for the plan its last read of the
+// bounds made; a grid past the plan leaves the pair count kNoPairCount,
+// and the substep is found again with the waits of a first one. The pairs and
 // the contacts go into rooms sized from the last substep's counts; a
 // substep whose counts outgrow them finds them again (colour_contacts). The
 // first substep waits for the counts before the colouring too. The cache's
 // entry count, the lost-load count, the impact levels and the flags of the
 // impact and projection passes stay on the device: those stages run as one
-// cooperative launch each. A settled pile and the gas wait 3 times a step.
+// cooperative launch each. A settled pile and the gas wait 2 times a step.
 // One wait per step, with every buffer sized from the last step, is the
 // next step.
 #include <cuda_runtime.h>
