@@ -23,8 +23,8 @@
 // there is no fixed capacity. The home-cell variant carves its temporaries
 // out of one scratch buffer, which a GPU step shares with its other stages
 // (share_scratch). The readbacks named above are the only host
-// syncs (seed: 3; home: 2, 1 within a room while the plan holds, none
-// where the grid was planned before). Grids too wide for 63 (seed) or 62 (home) key
+// syncs (seed: 3; home: 2, and within a room 1 without a plan, none with
+// one). Grids too wide for 63 (seed) or 62 (home) key
 // bits (a sphere very far from the rest) go through the CPU twin's exact
 // key compression, then back to the device.
 #include <cuda_runtime.h>
