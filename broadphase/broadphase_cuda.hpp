@@ -72,7 +72,7 @@ class SubdivisionCuda final : public BroadPhase {
   // The next call reads its bounds and plans from its grid.
   void replan();
   // Host<->device bytes the device entry points copied so far (readbacks,
-  // and the CPU fallback's copies).
+  // and the CPU fallback's copies; find_pairs' uploads and downloads too).
   std::uint64_t bytes_copied() const;
 
   // The home-cell variant's temporaries (keys, ids and their alternates,

@@ -8,7 +8,6 @@
 // entries are stored, in sphere order, so the stable sort keeps each cell's
 // occupants in id order.
 #include <cfloat>
-#include <cstring>
 
 #include "broadphase/broadphase_cuda.cuh"
 

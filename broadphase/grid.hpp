@@ -1,4 +1,5 @@
-// broadphase/grid.hpp — choosing the grid of one call (host side, both backends).
+// broadphase/grid.hpp — choosing the grid of one call (both backends; the
+// home grid also on the device, home_grid_of).
 //
 // The grid is rebuilt each call from the bounding box of the centres, so no
 // sphere is ever outside it, however far it has travelled. Cell coordinates
@@ -9,6 +10,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -130,6 +132,7 @@ MARBLES_HD_INLINE KeyWidth home_grid_of(const Bounds& b, real margin, HomeGrid& 
     const double span = (static_cast<double>(b.hi[k]) - static_cast<double>(b.lo[k])) / kHomeMaxSpanCells;
     cell = span > cell ? span : cell;
   }
+  if (!(cell <= DBL_MAX)) return KeyWidth::too_wide;  // a span past the doubles (double build): compressed keys
   g.cell = cell;
   g.inv_cell = 1.0 / cell;
   for (int k = 0; k < 3; ++k) {

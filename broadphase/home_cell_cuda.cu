@@ -128,9 +128,9 @@ __global__ void home_count_kernel(HomeTraversal<Key> in, std::uint32_t* __restri
 template <class Key, bool Dense>
 __global__ void home_write_kernel(HomeTraversal<Key> in, const std::uint32_t* __restrict__ offsets,
                                   std::size_t capacity, IndexPair* __restrict__ pairs) {
-  if (offsets[in.n] > capacity) return;  // they do not fit: the caller asks again
-  const HomeGrid& grid = block_grid(in.grid);
-  if (grid.cells == kNoGrid) return;  // no grid: the caller plans again and asks again
+  const HomeGrid& grid = block_grid(in.grid);  // every thread, before any returns
+  if (offsets[in.n] > capacity) return;        // they do not fit: the caller asks again
+  if (grid.cells == kNoGrid) return;           // no grid: the caller plans again and asks again
   for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < in.n; i += gridDim.x * blockDim.x) {
     std::uint32_t at = offsets[i];
     if (offsets[i + 1] == at) continue;  // no pairs from this sphere

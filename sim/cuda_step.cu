@@ -287,6 +287,7 @@ class CudaStep final : public StepBackend {
       // bounds and the counts.
       m_broadphase->replan();
       m_pair_room = Room{};
+      m_replanned = true;
       ++m_counters.grid_replans;
       return false;
     }
@@ -316,7 +317,8 @@ class CudaStep final : public StepBackend {
     std::uint32_t colours = colour_and_sort(position);
     if (m_count_on_device && !take_counts(pair_count_read(), m_colouring.last_count(), false)) {
       ++m_counters.pair_redos;
-      find_contacts_within(m_substep, m_pair_room.capacity == 0);  // waits where the grid was planned again
+      find_contacts_within(m_substep, m_replanned);  // waits where the grid was planned again
+      m_replanned = false;
       warm_start();
       colours = colour_and_sort(position);
       if (m_count_on_device && !take_counts(pair_count_read(), m_colouring.last_count(), true))
@@ -695,6 +697,7 @@ class CudaStep final : public StepBackend {
   real m_substep = 0;                 // find_contacts': a substep that outgrew a room finds them again
   std::size_t m_pair_items = 0;       // the pairs the contact flags walked: their count, or their room
   bool m_pair_count_on_device = false;  // their count was read with the colours (pair_count_read)
+  bool m_replanned = false;           // take_counts found the broad phase's grid past its plan: redo waiting
   const std::uint32_t* m_count_on_device = nullptr;  // m_count is a room, and this the count (count_within)
   bool m_impact_candidates = false;   // with restitution: some contact of this substep is an impact candidate
   bool m_uniform_arms = false;        // every contact of this substep has the same arms (UniformArms)

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "broadphase/broadphase.hpp"
+#include "broadphase/grid.hpp"
 #include "core/device.hpp"
 #include "core/error.hpp"
 #include "pair_check.hpp"
@@ -247,9 +248,11 @@ TEST_P(SubdivisionCuda, PairsWithinARoom) {
 // each grid differs from the planned one in origin or cells) give exactly
 // the CPU twin's pairs in its order, so the device chose the host's grid.
 // Sets whose grid does not fit (spread out: more cells than the dense lower
-// bounds hold; far apart: 64-bit keys) and a non-finite centre give
+// bounds hold, its key bits within the plan's, 20 against 24 on the host's
+// grid; far apart: 64-bit keys) and a non-finite centre give
 // kNoPairCount and write nothing; after replan() the call reads its bounds
-// (and throws on the non-finite one).
+// (and throws on the non-finite one). A call within the plan reads nothing
+// back. A sparse plan is outgrown by its key bits alone.
 TEST_P(SubdivisionCuda, GridChosenOnTheDevice) {
   REQUIRE_DEVICE();
   if (algorithm() != mb::Algorithm::home) GTEST_SKIP() << "the seed algorithm always reads its bounds";
@@ -300,7 +303,9 @@ TEST_P(SubdivisionCuda, GridChosenOnTheDevice) {
       c = marbles::Vec3(real(shrink * c.x + shift + jitter * unit(rng)), real(shrink * c.y - 0.5 * shift),
                         real(shrink * c.z + jitter * unit(rng)));
     poison();
+    const std::uint64_t copied = gpu.bytes_copied();
     const std::uint32_t count = within(s);
+    EXPECT_EQ(gpu.bytes_copied(), copied) << "moved " << k << ": nothing read back within the plan";
     ASSERT_NE(count, mb::SubdivisionCuda::kNoPairCount) << "moved " << k << ": within the plan";
     expect_cpu_pairs(s, count, "moved " + std::to_string(k));
     ++moved;
@@ -333,6 +338,47 @@ TEST_P(SubdivisionCuda, GridChosenOnTheDevice) {
     gpu.replan();
     (void)within(base);
   }
+
+  // A sparse plan (binary-searched keys, no lower bounds to outgrow): one
+  // sphere far out along x. The host's grid finds the cases: with the
+  // sphere nearer, the CPU twin's pairs; moved out until the grid's key bits
+  // pass the plan's (rounded up to the sort's 8-bit digits), with 32-bit
+  // keys still, kNoPairCount: the key bits alone decide.
+  auto grid_of = [&](const mt::SphereSet& s) {
+    marbles::Vec3 lo = s.centre[0], hi = s.centre[0];
+    real r_max = 0;
+    for (std::size_t i = 0; i < s.centre.size(); ++i) {
+      const marbles::Vec3 c = s.centre[i];
+      lo = marbles::Vec3(std::min(lo.x, c.x), std::min(lo.y, c.y), std::min(lo.z, c.z));
+      hi = marbles::Vec3(std::max(hi.x, c.x), std::max(hi.y, c.y), std::max(hi.z, c.z));
+      r_max = std::max(r_max, s.radius[i]);
+    }
+    return mb::choose_home_grid(mb::Bounds{lo, hi, r_max}, margin);
+  };
+  auto with_outlier = [&](double x) {
+    mt::SphereSet s = base;
+    s.centre[77].x = real(x);
+    return s;
+  };
+  double x = 1e3;
+  while (mb::use_dense_cell_starts(grid_of(with_outlier(x)).grid, base.centre.size())) x *= 2;
+  const mb::HomeGridChoice sparse = grid_of(with_outlier(x));
+  ASSERT_EQ(sparse.width, mb::KeyWidth::bits32) << "premise: a sparse grid of 32-bit keys";
+  const std::uint32_t rounded = (sparse.grid.key_bits + 7) / 8 * 8;
+  ASSERT_LT(rounded, 32u) << "premise: room above the plan's bits";
+  double past = x;
+  while (grid_of(with_outlier(past)).grid.key_bits <= rounded) past *= 2;
+  ASSERT_EQ(grid_of(with_outlier(past)).width, mb::KeyWidth::bits32) << "premise: 32-bit keys past the plan's bits";
+  gpu.replan();
+  (void)within(with_outlier(x));  // reads its bounds: the sparse plan
+  const mt::SphereSet nearer = with_outlier(0.75 * x);
+  poison();
+  const std::uint32_t nearer_count = within(nearer);
+  ASSERT_NE(nearer_count, mb::SubdivisionCuda::kNoPairCount) << "sparse, nearer: within the plan";
+  expect_cpu_pairs(nearer, nearer_count, "sparse, nearer");
+  poison();
+  EXPECT_EQ(within(with_outlier(past)), mb::SubdivisionCuda::kNoPairCount) << "sparse, past the plan's key bits";
+  expect_nothing_written("sparse, past the plan's key bits");
 
   mt::SphereSet bad = base;
   bad.centre[4321].y = std::numeric_limits<real>::quiet_NaN();
