@@ -249,7 +249,7 @@ std::size_t SubdivisionCuda::Impl::run_home(const SpheresIn& d, real margin, cud
     plan = plan_of(hc, d.count);
     planned_grid = hc.grid;
   } else {
-    check_inputs(Bounds{}, margin);  // the margin (the bounds the device checks)
+    check_margin(margin);  // the bounds the device checks
     launch_bounds(d.centre, d.radius, d.count, bounds.as<BoundsAccum>(1), sm_count, s);
   }
   const HomePlan p = *plan;

@@ -9,12 +9,12 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <cstring>
 
 #include "broadphase/broadphase_cuda.hpp"
 #include "broadphase/broadphase_math.hpp"
 #include "broadphase/grid.hpp"
 #include "broadphase/home_cell_math.hpp"
+#include "core/bits.hpp"
 #include "core/cuda_check.hpp"
 #include "core/device_buffer.cuh"
 #include "core/pair.hpp"
@@ -39,24 +39,10 @@ void launch_bounds(const Vec3* centre, const real* radius, std::size_t n, Bounds
 // An order-preserving encoding (cell_ids_cuda.cu: ordered) back to its real.
 MARBLES_HD_INLINE real decode_ordered(unsigned long long k) {
   if constexpr (sizeof(real) == 4) {
-    const auto e = static_cast<unsigned int>(k);
-    const unsigned int u = (e & 0x80000000u) ? (e & 0x7fffffffu) : ~e;
-#if defined(__CUDA_ARCH__)
-    return __uint_as_float(u);
-#else
-    float f;
-    std::memcpy(&f, &u, 4);
-    return f;
-#endif
+    const auto e = static_cast<std::uint32_t>(k);
+    return float_of_bits((e & 0x80000000u) ? (e & 0x7fffffffu) : ~e);
   } else {
-    const unsigned long long u = (k & 0x8000000000000000ull) ? (k & 0x7fffffffffffffffull) : ~k;
-#if defined(__CUDA_ARCH__)
-    return static_cast<real>(__longlong_as_double(static_cast<long long>(u)));
-#else
-    double d;
-    std::memcpy(&d, &u, 8);
-    return static_cast<real>(d);
-#endif
+    return static_cast<real>(double_of_bits((k & 0x8000000000000000ull) ? (k & 0x7fffffffffffffffull) : ~k));
   }
 }
 MARBLES_HD_INLINE Bounds decode_bounds(const BoundsAccum& acc) {

@@ -77,8 +77,7 @@ __global__ void bounds_start_kernel(BoundsAccum* acc) {
 // >= 0; the margin the host checked).
 __global__ void home_grid_kernel(const BoundsAccum* acc, real margin, HomePlan plan, HomeGrid* out) {
   const Bounds b = decode_bounds(*acc);
-  bool ok = acc->bad == 0 && isfinite(b.r_max) && b.r_max >= 0;
-  for (int k = 0; k < 3; ++k) ok = ok && isfinite(b.lo[k]) && isfinite(b.hi[k]);
+  bool ok = acc->bad == 0 && centres_finite(b) && radius_valid(b);
   HomeGrid g;
   if (ok) {
     const KeyWidth width = home_grid_of(b, margin, g);

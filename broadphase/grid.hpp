@@ -67,16 +67,22 @@ inline void set_key_layout(Grid& g, const std::uint64_t half_max[3]) {
   g.key_bits = bits + 3;
 }
 
+// Finite centres, and a largest radius finite and >= 0 (host and device:
+// the device checks the bounds it does not read back).
+MARBLES_HD_INLINE bool centres_finite(const Bounds& b) { return is_finite(b.lo) && is_finite(b.hi); }
+MARBLES_HD_INLINE bool radius_valid(const Bounds& b) { return std::isfinite(b.r_max) && b.r_max >= 0; }
+
+inline void check_margin(real margin) {
+  if (!(margin >= 0) || !std::isfinite(static_cast<double>(margin)))
+    throw RuntimeFailure("broad phase: margin must be finite and >= 0");
+}
+
 // Both grids refuse non-finite centres, negative or non-finite radii, and a
 // negative or non-finite margin (RuntimeFailure).
 inline void check_inputs(const Bounds& b, real margin) {
-  if (!(margin >= 0) || !std::isfinite(static_cast<double>(margin)))
-    throw RuntimeFailure("broad phase: margin must be finite and >= 0");
-  for (int k = 0; k < 3; ++k)
-    if (!std::isfinite(static_cast<double>(b.lo[k])) || !std::isfinite(static_cast<double>(b.hi[k])))
-      throw RuntimeFailure("broad phase: a sphere centre is not finite");
-  if (!std::isfinite(static_cast<double>(b.r_max)) || b.r_max < 0)
-    throw RuntimeFailure("broad phase: a radius is negative or not finite");
+  check_margin(margin);
+  if (!centres_finite(b)) throw RuntimeFailure("broad phase: a sphere centre is not finite");
+  if (!radius_valid(b)) throw RuntimeFailure("broad phase: a radius is negative or not finite");
 }
 
 inline GridChoice choose_grid(const Bounds& b, real margin) {

@@ -29,6 +29,7 @@
 
 #include <cstdint>
 
+#include "core/bits.hpp"
 #include "core/config.hpp"
 #include "narrowphase/contact.hpp"
 
@@ -105,14 +106,7 @@ MARBLES_HD_INLINE std::uint64_t contact_rank(std::uint32_t a, std::uint32_t b, s
 // Rank of an impact: earlier time of impact first, then the lower index (the
 // order of the sequential impact stage). toi >= 0 (s).
 MARBLES_HD_INLINE std::uint64_t impact_rank(real toi, std::uint32_t k) {
-  const float t = static_cast<float>(toi);
-#if defined(__CUDA_ARCH__)
-  const std::uint32_t bits = __float_as_uint(t);
-#else
-  std::uint32_t bits;
-  static_assert(sizeof(bits) == sizeof(t));
-  __builtin_memcpy(&bits, &t, sizeof(bits));
-#endif
+  const std::uint32_t bits = bits_of_float(static_cast<float>(toi));
   const std::uint32_t earlier = (0x7fffffffu - (bits & 0x7fffffffu)) >> 7;  // 24 bits, larger = earlier
   return (std::uint64_t(earlier) << 32) | (0xffffffffu - k);
 }

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <type_traits>
 
+#include "core/bits.hpp"
 #include "core/spheres.hpp"
 #include "core/whole_record.hpp"
 #include "narrowphase/contact_math.hpp"
@@ -318,18 +319,6 @@ MARBLES_HD_INLINE void warm_start_record(const SweepRecords& s, std::uint32_t k,
 // Without these writes a step of a pile of 10^5 keeps an H100 busy 1.16 ms
 // instead of 1.29, and the gas of 10^6 solves in 0.68 ms instead of 1.08
 // (docs/architecture.md, "Idle contacts write nothing").
-MARBLES_HD_INLINE bool sign_bit(real x) {
-#if defined(__CUDA_ARCH__) && defined(MARBLES_DOUBLE)
-  return __double_as_longlong(x) < 0;
-#elif defined(__CUDA_ARCH__)
-  return (__float_as_uint(x) >> 31) != 0u;
-#else
-  std::conditional_t<sizeof(real) == 4, std::int32_t, std::int64_t> bits;
-  static_assert(sizeof(bits) == sizeof(x));
-  __builtin_memcpy(&bits, &x, sizeof(bits));
-  return bits < 0;
-#endif
-}
 MARBLES_HD_INLINE bool is_plus_zero(real x) { return x == 0 && !sign_bit(x); }
 MARBLES_HD_INLINE bool is_minus_zero(real x) { return x == 0 && sign_bit(x); }
 MARBLES_HD_INLINE bool is_plus_zero(const Vec3& v) {

@@ -344,17 +344,7 @@ TEST_P(SubdivisionCuda, GridChosenOnTheDevice) {
   // sphere nearer, the CPU twin's pairs; moved out until the grid's key bits
   // pass the plan's (rounded up to the sort's 8-bit digits), with 32-bit
   // keys still, kNoPairCount: the key bits alone decide.
-  auto grid_of = [&](const mt::SphereSet& s) {
-    marbles::Vec3 lo = s.centre[0], hi = s.centre[0];
-    real r_max = 0;
-    for (std::size_t i = 0; i < s.centre.size(); ++i) {
-      const marbles::Vec3 c = s.centre[i];
-      lo = marbles::Vec3(std::min(lo.x, c.x), std::min(lo.y, c.y), std::min(lo.z, c.z));
-      hi = marbles::Vec3(std::max(hi.x, c.x), std::max(hi.y, c.y), std::max(hi.z, c.z));
-      r_max = std::max(r_max, s.radius[i]);
-    }
-    return mb::choose_home_grid(mb::Bounds{lo, hi, r_max}, margin);
-  };
+  auto grid_of = [&](const mt::SphereSet& s) { return mb::choose_home_grid(mb::bounds_of(s.view()), margin); };
   auto with_outlier = [&](double x) {
     mt::SphereSet s = base;
     s.centre[77].x = real(x);
