@@ -399,6 +399,7 @@ struct Row {
   double projection_sweeps = 0;    // per substep, mean over the timed steps (the projection sweeps until settled)
   std::uint64_t pair_redos = 0;    // substeps of the timed steps whose contacts were found again (CUDA: rooms)
   std::uint64_t grid_replans = 0;  // of those, the broad phase's grid outgrew its plan (CUDA)
+  std::uint64_t grid_shrinks = 0;  // substeps whose grid fit a plan larger than it asks: planned smaller (CUDA)
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   double bytes_per_step = 0;       // median host<->device bytes
   double device_bytes_per_sphere = 0;
@@ -432,6 +433,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     row.projection_sweeps += static_cast<double>(c.projection_sweeps) / sim.substeps() / repeats;
     row.pair_redos += c.pair_redos;
     row.grid_replans += c.grid_replans;
+    row.grid_shrinks += c.grid_shrinks;
   }
   if (on_device) profiled_steps(false);  // each step ends with a wait for its flags: nothing of it is still running
   if (sim.non_finite()) throw RuntimeFailure("N = " + std::to_string(n) + ": non-finite state in the timed steps");
@@ -583,6 +585,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"projection_sweeps", r.projection_sweeps},
                                  {"pair_redos", r.pair_redos},
                                  {"grid_replans", r.grid_replans},
+                                 {"grid_shrinks", r.grid_shrinks},
                                  {"ke_per_sphere_J", r.ke_per_sphere},
                                  {"bytes_per_step_median", r.bytes_per_step},
                                  {"device_bytes_per_sphere", r.device_bytes_per_sphere},

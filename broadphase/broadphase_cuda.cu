@@ -60,7 +60,7 @@ struct SubdivisionCuda::Impl {
   DeviceBuffer cub_temp, seed_scratch;
   DeviceBuffer own_scratch;                 // the home-cell variant's temporaries, unless shared
   DeviceBuffer* scratch = &own_scratch;
-  DeviceBuffer count_word;                  // the pair count, left on the device (find_pairs_device_within)
+  DeviceBuffer count_word;                  // the pair count and the plan outsized (find_pairs_device_within)
   DeviceBuffer grid_word;                   // the home grid of the call, chosen on the device
   std::size_t pair_count = 0;
   // The home-cell variant's plan: the shape its buffers and sort take from
@@ -220,18 +220,6 @@ Bounds SubdivisionCuda::Impl::device_bounds(const SpheresIn& d, cudaStream_t s) 
   return decode_bounds(*h_bounds);
 }
 
-// The plan of a grid chosen on the host: its key type, the sort's bits
-// rounded up to the sort's 8-bit digits (as many passes), and a dense
-// lower-bound array a quarter larger than it needs.
-static HomePlan plan_of(const HomeGridChoice& hc, std::size_t n) {
-  HomePlan p;
-  p.bits32 = hc.width == KeyWidth::bits32;
-  p.key_bits = std::min<std::uint32_t>((hc.grid.key_bits + 7) / 8 * 8, p.bits32 ? 32 : 64);
-  p.dense = use_dense_cell_starts(hc.grid, n);
-  p.cells = p.dense ? hc.grid.cells + hc.grid.cells / 4 + 1024 : 0;
-  return p;
-}
-
 // The grid is chosen on the device, from the bounds reduced there, by the
 // host's function (home_grid_of): the same grid, so the same keys and
 // order. The host lays out the buffers and the sort for a plan. A call that
@@ -246,7 +234,7 @@ std::size_t SubdivisionCuda::Impl::run_home(const SpheresIn& d, real margin, cud
       plan.reset();
       return run_on_cpu(d, margin, s);
     }
-    plan = plan_of(hc, d.count);
+    plan = plan_of(hc.grid, hc.width, d.count);
     planned_grid = hc.grid;
   } else {
     check_margin(margin);  // the bounds the device checks
@@ -254,7 +242,8 @@ std::size_t SubdivisionCuda::Impl::run_home(const SpheresIn& d, real margin, cud
   }
   const HomePlan p = *plan;
   auto* g = grid_word.as<HomeGrid>(1);
-  launch_home_grid(bounds.get_as<BoundsAccum>(), margin, p, g, s);
+  auto* count = count_word.as<std::uint32_t>(SubdivisionCuda::kPairCountWords);  // [1]: the plan outsized
+  launch_home_grid(bounds.get_as<BoundsAccum>(), margin, p, d.count, g, count + 1, s);
   stats.cell_size = planned_grid.cell;
   stats.key_bits = planned_grid.key_bits;
   stats.grid_cells = planned_grid.cells;
@@ -312,7 +301,7 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
   exclusive_sum(d_counts, d_offsets, n + 1, cub_temp, s);
   // The count out of the scratch (its next user overwrites offsets[n]) into
   // a word of its own: kNoPairCount where the device's grid did not fit.
-  auto* d_count = count_word.as<std::uint32_t>(1);
+  auto* d_count = count_word.get_as<std::uint32_t>();
   launch_home_pair_count<Key>(in, d_offsets, d_count, s);
   if (within) {
     // No readback: the pairs only if they fit.

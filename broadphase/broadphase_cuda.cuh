@@ -53,23 +53,14 @@ MARBLES_HD_INLINE Bounds decode_bounds(const BoundsAccum& acc) {
   return b;
 }
 
-// What a home grid chosen on the device must fit for the buffers and sort
-// that the host laid out without reading the bounds: the key type (bits32:
-// cells <= 2^31), the sort's bits and, with a dense lower-bound array, its
-// cells (the array holds cells + 1 entries). Made from the grid of the last
-// call that read its bounds (SubdivisionCuda's plan).
-struct HomePlan {
-  bool bits32 = true;
-  std::uint32_t key_bits = 0;
-  bool dense = false;
-  std::uint64_t cells = 0;  // with dense: the lower-bound array's cells
-};
 // *grid = the home grid of the bounds in *acc (home_grid_of, the host's
 // function), or a grid with cells = 0 (kNoGrid) where the bounds are not
-// finite, the grid is too wide or it does not fit `plan`: every home kernel
-// then finds no pair. One thread.
+// finite, the grid is too wide or it does not fit `plan` (plan_fits): every
+// home kernel then finds no pair. *outsized = 1 where the grid fits a plan
+// larger than it asks (plan_outsized, for n spheres), else 0. One thread.
 inline constexpr std::uint64_t kNoGrid = 0;
-void launch_home_grid(const BoundsAccum* acc, real margin, const HomePlan& plan, HomeGrid* grid, cudaStream_t stream);
+void launch_home_grid(const BoundsAccum* acc, real margin, const HomePlan& plan, std::size_t n, HomeGrid* grid,
+                      std::uint32_t* outsized, cudaStream_t stream);
 // counts[i] = occupied cells of sphere i, info[i] = home type and type mask.
 void launch_cell_counts(const Vec3* centre, const real* radius, std::size_t n, const Grid& grid, std::uint32_t* counts,
                         std::uint16_t* info, int sm_count, cudaStream_t stream);

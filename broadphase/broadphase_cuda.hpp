@@ -66,9 +66,15 @@ class SubdivisionCuda final : public BroadPhase {
   // last read (the key type, the sort's bits, the dense lower bounds'
   // cells): then nothing was written, and the caller calls replan() and
   // asks again. A call within a room reads its bounds only without a plan
-  // (the first, or after replan()); find_pairs_device always does.
+  // (the first, or after replan()); find_pairs_device always does. The word
+  // after the count is 1 where the grid fit a plan larger than it asks
+  // (plan_outsized, grid.hpp: more sort passes, wider keys or a larger
+  // lower-bound array than a plan made now would take, by a margin): the
+  // pairs are right, and a caller may replan() for a smaller plan (the next
+  // call then reads its bounds).
   const std::uint32_t* device_pair_count() const;
   static constexpr std::uint32_t kNoPairCount = 0xffffffffu;
+  static constexpr std::size_t kPairCountWords = 2;  // the count, the plan outsized
   // The next call reads its bounds and plans from its grid.
   void replan();
   // Host<->device bytes the device entry points copied so far (readbacks,

@@ -74,16 +74,17 @@ __global__ void bounds_start_kernel(BoundsAccum* acc) {
 
 // The home grid of the accumulated bounds where it fits the plan, else
 // kNoGrid (the host's check_inputs, on the device: finite bounds, a radius
-// >= 0; the margin the host checked).
-__global__ void home_grid_kernel(const BoundsAccum* acc, real margin, HomePlan plan, HomeGrid* out) {
+// >= 0; the margin the host checked); and whether the plan is outsized.
+__global__ void home_grid_kernel(const BoundsAccum* acc, real margin, HomePlan plan, std::size_t n, HomeGrid* out,
+                                 std::uint32_t* outsized) {
   const Bounds b = decode_bounds(*acc);
   bool ok = acc->bad == 0 && centres_finite(b) && radius_valid(b);
   HomeGrid g;
   if (ok) {
     const KeyWidth width = home_grid_of(b, margin, g);
-    ok = width != KeyWidth::too_wide && (!plan.bits32 || width == KeyWidth::bits32) && g.key_bits <= plan.key_bits &&
-         (!plan.dense || g.cells <= plan.cells);
+    ok = plan_fits(plan, g, width);
   }
+  *outsized = ok && plan_outsized(plan, g, n) ? 1u : 0u;
   if (!ok) g.cells = kNoGrid;
   *out = g;
 }
@@ -129,8 +130,9 @@ void launch_bounds(const Vec3* centre, const real* radius, std::size_t n, Bounds
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_home_grid(const BoundsAccum* acc, real margin, const HomePlan& plan, HomeGrid* grid, cudaStream_t stream) {
-  home_grid_kernel<<<1, 1, 0, stream>>>(acc, margin, plan, grid);
+void launch_home_grid(const BoundsAccum* acc, real margin, const HomePlan& plan, std::size_t n, HomeGrid* grid,
+                      std::uint32_t* outsized, cudaStream_t stream) {
+  home_grid_kernel<<<1, 1, 0, stream>>>(acc, margin, plan, n, grid, outsized);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -159,8 +159,63 @@ inline HomeGridChoice choose_home_grid(const Bounds& b, real margin) {
 
 // A dense lower-bound array (cells + 1 entries) is used when the grid is not
 // much larger than the sphere count; sparser grids binary-search the keys.
-inline bool use_dense_cell_starts(const HomeGrid& g, std::size_t n) {
+MARBLES_HD_INLINE bool use_dense_cell_starts(const HomeGrid& g, std::size_t n) {
   return g.cells + 1 <= 16 * static_cast<std::uint64_t>(n) + (std::uint64_t{1} << 22);
+}
+
+// --- the plan of the GPU's home grid (broadphase_cuda.cu) -----------------------
+// What a home grid chosen on the device must fit for the buffers and sort
+// that the host laid out without reading the bounds: the key type (bits32:
+// cells <= 2^31), the sort's bits and, with a dense lower-bound array, its
+// cells (the array holds cells + 1 entries). Made from the grid of the last
+// call that read its bounds.
+struct HomePlan {
+  bool bits32 = true;
+  std::uint32_t key_bits = 0;
+  bool dense = false;
+  std::uint64_t cells = 0;  // with dense: the lower-bound array's cells
+};
+
+// The sort's 8-bit digits (passes) for `bits` key bits.
+MARBLES_HD_INLINE std::uint32_t sort_digits(std::uint32_t bits) { return (bits + 7) / 8; }
+
+// The plan of a grid (of `width`, not too_wide) for n spheres: its key
+// type, the sort's bits rounded up to whole digits (as many passes), and a
+// dense lower-bound array a quarter larger (and 1024 cells) than the grid
+// needs.
+MARBLES_HD_INLINE HomePlan plan_of(const HomeGrid& g, KeyWidth width, std::size_t n) {
+  HomePlan p;
+  p.bits32 = width == KeyWidth::bits32;
+  const std::uint32_t bits = 8 * sort_digits(g.key_bits), cap = p.bits32 ? 32u : 64u;
+  p.key_bits = bits < cap ? bits : cap;
+  p.dense = use_dense_cell_starts(g, n);
+  p.cells = p.dense ? g.cells + g.cells / 4 + 1024 : 0;
+  return p;
+}
+
+// Whether grid g (of `width`) fits plan p: the same key type or a narrower
+// one, no more key bits, and no more cells than a dense plan's array holds.
+MARBLES_HD_INLINE bool plan_fits(const HomePlan& p, const HomeGrid& g, KeyWidth width) {
+  return width != KeyWidth::too_wide && (!p.bits32 || width == KeyWidth::bits32) && g.key_bits <= p.key_bits &&
+         (!p.dense || g.cells <= p.cells);
+}
+
+// Whether a plan that grid g fits is larger than g asks, by a margin: the
+// plan of a grid with two more key bits (each axis a third longer, or one
+// axis four times) would sort fewer digits, or 64-bit keys where g has a
+// quarter of the 32-bit keys' cells, or a dense array more than four times
+// the plan g would make, or binary search where g at twice its cells would
+// still get a dense array. The plan of g itself is never outsized for g,
+// and a plan made for an outsized grid is smaller or faster in one of these
+// and no larger in any: a grid that shrinks and grows back a little moves
+// its plan at most once each way. The host plans again (replan) where the
+// device finds its plan outsized.
+MARBLES_HD_INLINE bool plan_outsized(const HomePlan& p, const HomeGrid& g, std::size_t n) {
+  if (!p.bits32 && g.cells <= (std::uint64_t{1} << 29)) return true;
+  if (sort_digits(g.key_bits + 2) < sort_digits(p.key_bits)) return true;
+  if (p.dense && p.cells / 4 > g.cells + g.cells / 4 + 1024) return true;
+  if (!p.dense && 2 * g.cells + 1 <= 16 * static_cast<std::uint64_t>(n) + (std::uint64_t{1} << 22)) return true;
+  return false;
 }
 
 }  // namespace marbles::broadphase

@@ -246,7 +246,8 @@ class CudaStep final : public StepBackend {
                                       watch, m_sm, m_stream);
       dev::device_exclusive_sum(pair_flags, pair_offsets, pair_items + 1, pair_temp, pair_temp_bytes, m_stream);
       if (wait) read(kSphereContacts, pair_offsets + pair_items, 4);
-      if (pair_count_on_device) read(kPairCount, pair_count_on_device, 4);
+      if (pair_count_on_device)  // the count and the plan outsized
+        read(kPairCount, pair_count_on_device, 4 * broadphase::SubdivisionCuda::kPairCountWords);
     }
     if (m_model.wall_contacts) {
       nc::launch_wall_contact_flags(bodies, walls(), wall_count, m_table, h, reach, wall_flags, watch, m_sm,
@@ -290,6 +291,12 @@ class CudaStep final : public StepBackend {
       m_replanned = true;
       ++m_counters.grid_replans;
       return false;
+    }
+    if (m_pair_count_on_device && m_pinned[kPlanOutsized] != 0) {
+      // The grid fit a plan larger than it asks (a far sphere come back):
+      // the next substep reads its bounds and plans smaller, one wait.
+      m_broadphase->replan();
+      ++m_counters.grid_shrinks;
     }
     const bool pairs_fit = pair_count <= m_pair_items, contacts_fit = contacts <= m_count;
     if (m_model.collisions) m_pair_room.fit(pair_count, again || !pairs_fit);
@@ -661,10 +668,19 @@ class CudaStep final : public StepBackend {
   // find_contacts' read, by word: the contact counts (where it waits), the
   // candidate and mixed-radii flags and sphere 0's radius (one or two words;
   // these three in the order of m_found_words, one copy), the broad phase's
-  // pair count (where it stayed on the device). Read with the contact counts
-  // where find_contacts waits, else with the colouring's ranges.
-  enum FoundWord { kSphereContacts, kWallContacts, kCandidates, kMixedRadii, kRadius, kPairCount = kRadius + 2 };
-  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{kPairCount + 1};
+  // pair count and whether its plan is outsized (where the count stayed on
+  // the device). Read with the contact counts where find_contacts waits,
+  // else with the colouring's ranges.
+  enum FoundWord {
+    kSphereContacts,
+    kWallContacts,
+    kCandidates,
+    kMixedRadii,
+    kRadius,
+    kPairCount = kRadius + 2,
+    kPlanOutsized
+  };
+  ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{kPlanOutsized + 1};
   ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
   bool m_watch = false;
   int m_iteration_factor = 1;

@@ -152,3 +152,69 @@ TEST(HomeCellMath, WideGridsAreFlaggedAndHugeSpansGrowTheCell) {
   EXPECT_EQ(small.width, mb::KeyWidth::bits32);
   EXPECT_TRUE(mb::use_dense_cell_starts(small.grid, 100));
 }
+
+// The GPU's plan (plan_of, plan_fits, plan_outsized; grid.hpp) on families
+// of random grids: boxes of one radius and corner, each axis scaled by its
+// own factor over four orders, for sphere counts from 10 to 10^7. A plan
+// fits the grid it was made from and is never outsized for it. Where a
+// grid that fits a plan finds it outsized, the plan made from that grid is
+// smaller or faster in one respect (narrower keys, fewer sort digits, a
+// smaller dense array, a dense array for binary search) and larger in
+// none. And the margin: a grid that grows back a little from there (two
+// key bits, twice the cells) and outgrows the new plan gets one in which
+// the smaller grid is not outsized again: no plan moves back and forth.
+TEST(HomeCellMath, PlansFitTheirGridAndShrinkOnlyByAMargin) {
+  std::mt19937_64 rng(29);
+  std::uniform_real_distribution<double> unit(0, 1);
+  int shrinks = 0, checked_margin = 0, outgrown = 0;
+  const std::size_t counts[] = {10, 1000, 100000, 10000000};
+  for (int family = 0; family < 200; ++family) {
+    const real r = real(0.001 * std::pow(10.0, 2 * unit(rng)));
+    const Vec3 lo(real(unit(rng) - 0.5), real(unit(rng) - 0.5), real(unit(rng) - 0.5));
+    const double base = r * std::pow(10.0, 1 + 4 * unit(rng));
+    std::vector<mb::HomeGridChoice> grids;
+    for (int k = 0; k < 12; ++k) {
+      double span[3];
+      for (double& d : span) d = base * std::pow(10.0, 3 * unit(rng) - 1.5);
+      const Vec3 hi(lo.x + real(span[0]), lo.y + real(span[1]), lo.z + real(span[2]));
+      const mb::HomeGridChoice hc = mb::choose_home_grid(mb::Bounds{lo, hi, r}, real(0.1) * r);
+      if (hc.width != mb::KeyWidth::too_wide) grids.push_back(hc);
+    }
+    for (const std::size_t n : counts) {
+      for (const auto& a : grids) {
+        const mb::HomePlan pa = mb::plan_of(a.grid, a.width, n);
+        ASSERT_TRUE(mb::plan_fits(pa, a.grid, a.width)) << "a plan fits its own grid";
+        ASSERT_FALSE(mb::plan_outsized(pa, a.grid, n)) << "a plan is not outsized for its own grid";
+        for (const auto& b : grids) {
+          if (!mb::plan_fits(pa, b.grid, b.width)) {
+            ++outgrown;
+            continue;
+          }
+          if (!mb::plan_outsized(pa, b.grid, n)) continue;
+          ++shrinks;
+          const mb::HomePlan pb = mb::plan_of(b.grid, b.width, n);
+          ASSERT_FALSE(pa.bits32 && !pb.bits32) << "no wider keys";
+          ASSERT_LE(pb.key_bits, pa.key_bits) << "no more sort bits";
+          if (pa.dense) {
+            ASSERT_TRUE(pb.dense) << "no binary search where there was an array";
+            ASSERT_LE(pb.cells, pa.cells) << "no larger array";
+          }
+          const bool smaller = (!pa.bits32 && pb.bits32) || mb::sort_digits(pb.key_bits) < mb::sort_digits(pa.key_bits) ||
+                               (pa.dense && pb.cells < pa.cells) || (!pa.dense && pb.dense);
+          ASSERT_TRUE(smaller) << "a shrink gives a smaller or faster plan";
+          for (const auto& c : grids) {
+            if (mb::plan_fits(pb, c.grid, c.width)) continue;  // not outgrown: the plan stays
+            if (c.grid.key_bits > b.grid.key_bits + 2 || c.grid.cells > 2 * b.grid.cells) continue;  // grown a lot
+            ++checked_margin;
+            EXPECT_FALSE(mb::plan_outsized(mb::plan_of(c.grid, c.width, n), b.grid, n))
+                << "grown back a little, then smaller again: the plan moves back";
+          }
+        }
+      }
+    }
+  }
+  // The families must reach every case the checks are for.
+  EXPECT_GT(shrinks, 1000);
+  EXPECT_GT(outgrown, 1000);
+  EXPECT_GT(checked_margin, 100);
+}

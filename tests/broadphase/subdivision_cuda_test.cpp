@@ -251,8 +251,11 @@ TEST_P(SubdivisionCuda, PairsWithinARoom) {
 // bounds hold, its key bits within the plan's, 20 against 24 on the host's
 // grid; far apart: 64-bit keys) and a non-finite centre give
 // kNoPairCount and write nothing; after replan() the call reads its bounds
-// (and throws on the non-finite one). A call within the plan reads nothing
-// back. A sparse plan is outgrown by its key bits alone.
+// (and throws on the non-finite one). Back to the first set under the
+// larger plan: its pairs, and the word after the count says the plan is
+// outsized (plan_outsized), until replan() plans from the smaller grid. A
+// call within the plan reads nothing back. A sparse plan is outgrown by its
+// key bits alone.
 TEST_P(SubdivisionCuda, GridChosenOnTheDevice) {
   REQUIRE_DEVICE();
   if (algorithm() != mb::Algorithm::home) GTEST_SKIP() << "the seed algorithm always reads its bounds";
@@ -262,10 +265,12 @@ TEST_P(SubdivisionCuda, GridChosenOnTheDevice) {
   marbles::cuda::Stream stream;
   stream.create();
   const real margin = real(0.01);
+  std::uint32_t outsized = 2;  // the word after the count, as the last call left it
   auto device_count = [&] {
-    std::uint32_t count = 0;
-    EXPECT_EQ(cudaMemcpy(&count, gpu.device_pair_count(), sizeof count, cudaMemcpyDeviceToHost), cudaSuccess);
-    return count;
+    std::uint32_t words[mb::SubdivisionCuda::kPairCountWords] = {};
+    EXPECT_EQ(cudaMemcpy(words, gpu.device_pair_count(), sizeof words, cudaMemcpyDeviceToHost), cudaSuccess);
+    outsized = words[1];
+    return words[0];
   };
   constexpr std::size_t kRoom = 400000;
   auto poison = [&] {
@@ -308,10 +313,12 @@ TEST_P(SubdivisionCuda, GridChosenOnTheDevice) {
     EXPECT_EQ(gpu.bytes_copied(), copied) << "moved " << k << ": nothing read back within the plan";
     ASSERT_NE(count, mb::SubdivisionCuda::kNoPairCount) << "moved " << k << ": within the plan";
     expect_cpu_pairs(s, count, "moved " + std::to_string(k));
+    EXPECT_EQ(outsized, 0u) << "moved " << k << ": the plan is the base's";
     ++moved;
   }
   EXPECT_EQ(moved, 8);
 
+  auto grid_of = [&](const mt::SphereSet& s) { return mb::choose_home_grid(mb::bounds_of(s.view()), margin); };
   struct Outgrown {
     const char* name;
     mt::SphereSet set;
@@ -334,9 +341,23 @@ TEST_P(SubdivisionCuda, GridChosenOnTheDevice) {
     const std::uint32_t count = within(o.set);  // reads its bounds, plans, fits
     ASSERT_NE(count, mb::SubdivisionCuda::kNoPairCount) << o.name << ", planned again";
     expect_cpu_pairs(o.set, count, std::string(o.name) + ", planned again");
-    (void)within(base);  // back to the base's plan (fits under a larger one too)
+    EXPECT_EQ(outsized, 0u) << o.name << ": planned from its own grid";
+    // Back to the base under the larger plan: its pairs, and the plan found
+    // outsized (the premise from the host's grids); planned again, not.
+    const std::size_t n = base.centre.size();
+    const mb::HomeGridChoice big = grid_of(o.set), small = grid_of(base);
+    ASSERT_TRUE(mb::plan_outsized(mb::plan_of(big.grid, big.width, n), small.grid, n)) << o.name << ": premise";
+    poison();
+    const std::uint32_t back = within(base);
+    ASSERT_NE(back, mb::SubdivisionCuda::kNoPairCount) << o.name << ": the base fits under the larger plan";
+    expect_cpu_pairs(base, back, std::string(o.name) + ", then the base under its plan");
+    EXPECT_EQ(outsized, 1u) << o.name << ": the base's grid finds the larger plan outsized";
     gpu.replan();
     (void)within(base);
+    EXPECT_EQ(outsized, 0u) << o.name << ": the base planned again";
+    const mb::HomePlan own = mb::plan_of(small.grid, small.width, n);
+    EXPECT_EQ(gpu.last_stats().key_width, own.bits32 ? 32u : 64u) << o.name << ": the base's plan";
+    EXPECT_EQ(gpu.last_stats().sort_passes, mb::sort_digits(own.key_bits)) << o.name << ": the base's plan";
   }
 
   // A sparse plan (binary-searched keys, no lower bounds to outgrow): one
@@ -344,7 +365,6 @@ TEST_P(SubdivisionCuda, GridChosenOnTheDevice) {
   // sphere nearer, the CPU twin's pairs; moved out until the grid's key bits
   // pass the plan's (rounded up to the sort's 8-bit digits), with 32-bit
   // keys still, kNoPairCount: the key bits alone decide.
-  auto grid_of = [&](const mt::SphereSet& s) { return mb::choose_home_grid(mb::bounds_of(s.view()), margin); };
   auto with_outlier = [&](double x) {
     mt::SphereSet s = base;
     s.centre[77].x = real(x);

@@ -12,6 +12,7 @@
 #include <cstring>
 #include <string>
 
+#include "broadphase/grid.hpp"
 #include "core/device.hpp"
 #include "narrowphase/contact.hpp"
 #include "tests/require_device.hpp"
@@ -37,30 +38,29 @@ bool one_radius(const World& w) {
   return true;
 }
 
+// What the GPU's steps did, added up over the steps of expect_same_steps.
+struct GpuCounts {
+  std::uint64_t one_launch = 0;    // substeps whose solve took one launch
+  std::uint64_t solved = 0;        // steps with contacts (the CPU's count)
+  std::uint64_t pair_redos = 0;    // substeps whose broad phase outgrew its pairs' room and ran again
+  std::uint64_t grid_replans = 0;  // of those, the grid outgrew the broad phase's plan
+  std::uint64_t grid_shrinks = 0;  // substeps whose grid found the plan outsized: the next one plans
+};
+
 // Steps both backends side by side; the first step whose states differ
-// fails. The GPU's solve takes the form asked for: never one launch when a
-// launch per colour is asked, every substep with contacts in one when one
-// is, and under auto one launch at least once (every scene here has small
-// colours). The GPU's records leave the arms word out exactly where every
+// fails. The GPU's records leave the arms word out exactly where every
 // contact has the same (one radius and uniform pairs: UniformArms).
-// `pair_redos` (if given) adds up the substeps whose broad phase outgrew
-// its pairs' room and ran again; `grid_replans` those whose grid outgrew
-// the broad phase's plan.
-void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps,
-                     std::uint64_t* pair_redos = nullptr, std::uint64_t* grid_replans = nullptr) {
-  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
-  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
-  ASSERT_EQ(gpu.backend_name(), "cuda");
+void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& counts) {
   const std::string form = solve_form();
   const bool uniform_arms = gpu.model().uniform_pairs && one_radius(cpu.world());
-  std::uint64_t one_launch = 0, solved = 0;
   for (int k = 0; k < steps; ++k) {
     cpu.step();
     gpu.step();
-    one_launch += gpu.last_step().one_launch_solves;
-    if (pair_redos) *pair_redos += gpu.last_step().pair_redos;
-    if (grid_replans) *grid_replans += gpu.last_step().grid_replans;
-    if (cpu.last_step().contacts > 0) solved += 1;
+    counts.one_launch += gpu.last_step().one_launch_solves;
+    counts.pair_redos += gpu.last_step().pair_redos;
+    counts.grid_replans += gpu.last_step().grid_replans;
+    counts.grid_shrinks += gpu.last_step().grid_shrinks;
+    if (cpu.last_step().contacts > 0) counts.solved += 1;
     if (form == "one") {
       ASSERT_EQ(gpu.last_step().one_launch_solves > 0, cpu.last_step().contacts > 0) << "step " << k;
     }
@@ -81,10 +81,30 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
       }
     }
   }
+}
+
+// A run of both backends from the same scene (expect_same_steps). The GPU's
+// solve takes the form asked for: never one launch when a launch per colour
+// is asked, every substep with contacts in one when one is, and under auto
+// one launch at least once (every scene here has small colours).
+// `pair_redos` (if given) adds up the substeps whose broad phase outgrew
+// its pairs' room and ran again; `grid_replans` those whose grid outgrew
+// the broad phase's plan.
+void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps,
+                     std::uint64_t* pair_redos = nullptr, std::uint64_t* grid_replans = nullptr) {
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  ASSERT_EQ(gpu.backend_name(), "cuda");
+  GpuCounts counts;
+  expect_same_steps(cpu, gpu, steps, counts);
+  if (::testing::Test::HasFatalFailure()) return;
+  if (pair_redos) *pair_redos += counts.pair_redos;
+  if (grid_replans) *grid_replans += counts.grid_replans;
+  const std::string form = solve_form();
   if (form == "launches") {
-    EXPECT_EQ(one_launch, 0u);
-  } else if (solved > 0) {
-    EXPECT_GT(one_launch, 0u) << "MARBLES_CUDA_SOLVE=" << form;
+    EXPECT_EQ(counts.one_launch, 0u);
+  } else if (counts.solved > 0) {
+    EXPECT_GT(counts.one_launch, 0u) << "MARBLES_CUDA_SOLVE=" << form;
   }
 }
 
@@ -224,6 +244,53 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
   // it at shorter and shorter intervals of its growing grid.
   EXPECT_GE(replans, 2u) << "the growing grid must outgrow the plan, and again";
   EXPECT_GE(redos, replans) << "a replan is a redo";
+}
+
+// A free ball moved far out along x, then back above the bed (the same
+// edit on both backends): far out, the grid outgrows the broad phase's plan
+// (more cells and key bits); back, the grid fits that plan but finds it
+// outsized (two sort digits where one plan of its own takes, binary search
+// where it would get an array; the premise from the host's grids), and the
+// next substep plans from its bounds. The CPU's bits throughout.
+TEST(StepCuda, PlanShrinksWithItsGrid) {
+  REQUIRE_DEVICE();
+  const real r = real(0.01);
+  auto [s, g] = bed_on_a_floor(real(2.8), 1, r);
+  add_sphere(g, {real(0.3), real(0.3), real(0.3)}, r);
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  const std::size_t ball = cpu.world().size() - 1;
+  auto move_ball = [&](real x) {
+    for (Simulation* sim : {&cpu, &gpu}) {
+      World& w = sim->edit_world();
+      w.position[ball] = {x, real(0.3), real(0.3)};
+      w.velocity[ball] = {0, 0, 0};
+    }
+  };
+  // The home grid of the world's radii (the broad phase's are a little
+  // larger, swept: the premise is about sort digits, a dozen key bits apart).
+  auto grid_of = [&] {
+    const World& w = cpu.world();
+    return broadphase::choose_home_grid(broadphase::bounds_of({w.position.data(), w.radius.data(), w.size()}), 0);
+  };
+  GpuCounts counts;
+  expect_same_steps(cpu, gpu, 5, counts);
+  ASSERT_FALSE(HasFatalFailure());
+  EXPECT_EQ(counts.grid_shrinks, 0u) << "the first plan is the bed's own";
+  move_ball(real(3000));
+  expect_same_steps(cpu, gpu, 5, counts);
+  ASSERT_FALSE(HasFatalFailure());
+  EXPECT_GE(counts.grid_replans, 1u) << "far out, the grid outgrows the bed's plan";
+  const broadphase::HomeGridChoice far = grid_of();
+  move_ball(real(0.3));
+  const broadphase::HomeGridChoice near = grid_of();
+  const std::size_t n = cpu.world().size();
+  ASSERT_TRUE(broadphase::plan_outsized(broadphase::plan_of(far.grid, far.width, n), near.grid, n)) << "premise";
+  const std::uint64_t shrinks_far = counts.grid_shrinks;
+  expect_same_steps(cpu, gpu, 5, counts);
+  ASSERT_FALSE(HasFatalFailure());
+  EXPECT_EQ(shrinks_far, 0u) << "far out, the plan is the far grid's own";
+  EXPECT_EQ(counts.grid_shrinks, 1u) << "back, the plan is found outsized once, then planned from the bed";
 }
 
 // A layer of spheres kept far apart (4 radii) hovering 0.3 radii above a
