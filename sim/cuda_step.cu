@@ -21,7 +21,9 @@
 // whether the radii differ (one read); per step, the flags. The broad
 // phase chooses its grid on the device, for the plan its last read of the
 // bounds made; a grid past the plan leaves the pair count kNoPairCount,
-// and the substep is found again with the waits of a first one. The pairs and
+// and the substep is found again with the waits of a first one; a plan the
+// device finds outsized for its grid (read with the pair count) is made again
+// at the next substep, which waits for its bounds. The pairs and
 // the contacts go into rooms sized from the last substep's counts; a
 // substep whose counts outgrow them finds them again (colour_contacts). The
 // first substep waits for the counts before the colouring too. The cache's
