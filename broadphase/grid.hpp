@@ -201,14 +201,18 @@ MARBLES_HD_INLINE bool plan_fits(const HomePlan& p, const HomeGrid& g, KeyWidth 
 }
 
 // Whether a plan that grid g fits is larger than g asks, by a margin: the
-// plan of a grid with two more key bits (each axis a third longer, or one
-// axis four times) would sort fewer digits, or 64-bit keys where g has a
-// quarter of the 32-bit keys' cells, or a dense array more than four times
-// the plan g would make, or binary search where g at twice its cells would
-// still get a dense array. The plan of g itself is never outsized for g,
-// and a plan made for an outsized grid is smaller or faster in one of these
-// and no larger in any: a grid that shrinks and grows back a little moves
-// its plan at most once each way. The host plans again (replan) where the
+// plan of a grid with four times the cells (two more key bits: each axis
+// about 1.6 times as long, or one axis four times) would sort fewer digits;
+// 64-bit keys where four times g's cells still fit 32-bit keys; a dense
+// array more than four times the one g's own plan takes; binary search where
+// g at twice its cells would get an array. The plan of g itself is never
+// outsized for g, and the plan an outsized grid makes has no wider keys, no
+// more sort digits and no larger array (binary search may become an array),
+// and is smaller or faster in one of these. The margins keep a plan from
+// moving back and forth: where a grid grows back from the one that made
+// the plan (up to four times the cells; twice where that would leave the
+// array for binary search) past it, the plan the larger grid makes is not
+// outsized for the smaller one. The host plans again (replan) where the
 // device finds its plan outsized.
 MARBLES_HD_INLINE bool plan_outsized(const HomePlan& p, const HomeGrid& g, std::size_t n) {
   if (!p.bits32 && g.cells <= (std::uint64_t{1} << 29)) return true;

@@ -319,8 +319,9 @@ class CudaStep final : public StepBackend {
   // made as it was found, restored from its cache entry and prepared. Where
   // the counts were left on the device, they are read with the colours; a
   // substep whose pairs or contacts outgrew their rooms finds them again in
-  // rooms grown past them, without a wait: nothing has moved, so the same
-  // pairs, contacts and bits.
+  // rooms grown past them, without a wait (but for the bounds' read where
+  // the broad phase plans again: a grid past its plan, or a plan outsized):
+  // nothing has moved, so the same pairs, contacts and bits.
   void colour_contacts() override {
     const std::uint32_t* position = nullptr;
     std::uint32_t colours = colour_and_sort(position);

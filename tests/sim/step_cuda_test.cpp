@@ -248,10 +248,10 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
 
 // A free ball moved far out along x, then back above the bed (the same
 // edit on both backends): far out, the grid outgrows the broad phase's plan
-// (more cells and key bits); back, the grid fits that plan but finds it
-// outsized (two sort digits where one plan of its own takes, binary search
-// where it would get an array; the premise from the host's grids), and the
-// next substep plans from its bounds. The CPU's bits throughout.
+// once (27 key bits against 15: four sort digits against two, and binary
+// search); back, the grid fits that plan but finds it outsized (the premise
+// from the host's grids), and the next substep plans from its bounds, once.
+// The CPU's bits throughout.
 TEST(StepCuda, PlanShrinksWithItsGrid) {
   REQUIRE_DEVICE();
   const real r = real(0.01);
@@ -280,7 +280,7 @@ TEST(StepCuda, PlanShrinksWithItsGrid) {
   move_ball(real(3000));
   expect_same_steps(cpu, gpu, 5, counts);
   ASSERT_FALSE(HasFatalFailure());
-  EXPECT_GE(counts.grid_replans, 1u) << "far out, the grid outgrows the bed's plan";
+  EXPECT_EQ(counts.grid_replans, 1u) << "far out, the grid outgrows the bed's plan, once";
   const broadphase::HomeGridChoice far = grid_of();
   move_ball(real(0.3));
   const broadphase::HomeGridChoice near = grid_of();
@@ -291,6 +291,7 @@ TEST(StepCuda, PlanShrinksWithItsGrid) {
   ASSERT_FALSE(HasFatalFailure());
   EXPECT_EQ(shrinks_far, 0u) << "far out, the plan is the far grid's own";
   EXPECT_EQ(counts.grid_shrinks, 1u) << "back, the plan is found outsized once, then planned from the bed";
+  EXPECT_EQ(counts.grid_replans, 1u) << "back, the bed's grid fits the far plan: no grid outgrows one";
 }
 
 // A layer of spheres kept far apart (4 radii) hovering 0.3 radii above a
