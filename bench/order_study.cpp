@@ -1,0 +1,236 @@
+// bench/order_study.cpp — how fast the velocity solve converges on a deep
+// pile in the solver's order against a local order (marbles_order_study).
+//
+// The solver sweeps every contact of a substep colour by colour, forwards
+// then backwards, `iterations` times: each sweep is a pass over memory (the
+// records and the bodies; docs/architecture.md "Where the pile's step goes
+// now"). A local order cuts space into cubes (tiles) and, in each pass,
+// sweeps each tile's own contacts (both spheres in the tile, or a sphere and
+// a wall) several times before the contacts between tiles once: a GPU block
+// could keep a tile's bodies on the chip for its local sweeps, so a pass
+// would cost about one sweep's memory traffic. This program measures what
+// each order leaves undone, on the CPU, with the solver's per-contact
+// functions (prepare_one, warm_start_one, solve_one; friction, no rolling
+// resistance, the contacts of the settle scene):
+//
+//   a pile of close-packed layers (ABC stacking, a rhombus of side x side
+//   spheres a layer, radius 1 cm, on a floor, friction 0.5) held still: each
+//   substep gives every sphere gravity's kick g h, warm-starts the contacts
+//   from the last substep's impulses and solves; the pile does not move
+//   between substeps, so the impulses can only converge towards the static
+//   ones. After the substeps: the spheres' speeds left (the 99th percentile
+//   and the root mean square, in units of g h: 0 is converged, 1 is no
+//   support at all; the rhombus's overhanging edges keep the largest near
+//   1) and the floor's impulse over the pile's weight (1 when the floor
+//   carries it all).
+//
+//   marbles_order_study [--side 30] [--layers 30] [--substeps 30] [--json]
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "broadphase/broadphase.hpp"
+#include "narrowphase/colouring.hpp"
+#include "narrowphase/contacts.hpp"
+#include "narrowphase/solver_math.hpp"
+#include "sim/world.hpp"
+
+namespace marbles {
+namespace {
+
+using narrowphase::Contact;
+
+// Close-packed layers stacked ABC (each sphere in a pocket of three below),
+// a rhombus of side x side spheres a layer, the lowest touching z = 0.
+World close_packed_pile(int side, int layers, real r) {
+  World w;
+  const real sq3 = std::sqrt(real(3)), dz = 2 * r * std::sqrt(real(2) / 3);
+  for (int z = 0; z < layers; ++z) {
+    const int k = z % 3;
+    const real ox = k * r, oy = k * sq3 * r / 3;
+    for (int j = 0; j < side; ++j)
+      for (int i = 0; i < side; ++i) w.position.push_back(Vec3(i * 2 * r + j * r + ox, j * sq3 * r + oy, r + z * dz));
+  }
+  const std::size_t n = w.position.size();
+  const real mass = real(4.0 / 3.0 * M_PI) * r * r * r * 2500;
+  w.velocity.assign(n, Vec3{});
+  w.angular_velocity.assign(n, Vec3{});
+  w.radius.assign(n, r);
+  w.inv_mass.assign(n, 1 / mass);
+  w.inv_inertia.assign(n, 1 / (real(0.4) * mass * r * r));
+  w.material.assign(n, 0);
+  return w;
+}
+
+struct Order {
+  std::string name;
+  int passes;  // over memory
+  int local;   // sweeps of a tile's own contacts a pass (0: the solver's order)
+  int tile;    // the tiles' edge, in diameters
+};
+
+struct Result {
+  double p99 = 0, rms = 0, floor_ratio = 0, ms = 0, between = 0;
+  std::size_t tiles = 0;
+};
+
+// The contacts (colour-major, as the colouring sorted them) of each tile and
+// those between tiles; within each list the colour-major order.
+void split_by_tile(const std::vector<Contact>& contacts, const BodiesView& bodies, real edge,
+                   std::vector<std::vector<std::uint32_t>>& tiles, std::vector<std::uint32_t>& between) {
+  auto tile_of = [&](std::uint32_t i) {
+    const Vec3 p = bodies.position[i];
+    const auto c = [&](real x) { return static_cast<long long>(std::floor(x / edge)); };
+    return (c(p.x) * 4096 + c(p.y)) * 4096 + c(p.z);
+  };
+  std::vector<std::pair<long long, std::uint32_t>> own;
+  for (std::uint32_t k = 0; k < contacts.size(); ++k) {
+    const Contact& c = contacts[k];
+    const long long t = tile_of(c.a);
+    if (narrowphase::is_wall(c.b) || tile_of(c.b) == t) own.push_back({t, k});
+    else between.push_back(k);
+  }
+  std::stable_sort(own.begin(), own.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+  for (std::size_t i = 0; i < own.size(); ++i) {
+    if (i == 0 || own[i].first != own[i - 1].first) tiles.emplace_back();
+    tiles.back().push_back(own[i].second);
+  }
+}
+
+Result run(const Order& o, const std::vector<Contact>& found, World& w, int substeps, real r, real g, real h) {
+  BodiesView view = w.view();
+  const std::size_t n = view.count, m = found.size();
+  Result res;
+  std::vector<std::vector<std::uint32_t>> tiles;
+  std::vector<std::uint32_t> between;
+  if (o.local > 0) split_by_tile(found, view, o.tile * 2 * r, tiles, between);
+  res.tiles = tiles.size();
+  res.between = m ? double(between.size()) / m : 0;
+  std::vector<Contact> cs = found;
+  for (Contact& c : cs) c.normal_impulse = 0, c.tangent_impulse = Vec3{};
+  std::vector<narrowphase::SolverBody> bodies(n);
+  narrowphase::SolverBody* b = bodies.data();
+  const real inv_h = 1 / h;
+  auto solve = [&](std::uint32_t k) { narrowphase::solve_one<true, false>(cs[k], b, inv_h); };
+  auto sweep = [&](const std::vector<std::uint32_t>& list, bool backwards) {
+    if (backwards) std::for_each(list.rbegin(), list.rend(), solve);
+    else std::for_each(list.begin(), list.end(), solve);
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int s = 0; s < substeps; ++s) {
+    for (std::size_t i = 0; i < n; ++i) {  // at rest, then gravity's kick
+      view.velocity[i] = Vec3(0, 0, -g * h);
+      view.angular_velocity[i] = Vec3{};
+      bodies[i] = narrowphase::gather_solver_body(view, i);
+    }
+    for (Contact& c : cs) narrowphase::prepare_one(c, b);
+    for (const Contact& c : cs) narrowphase::warm_start_one<true, false>(c, b);
+    for (int p = 0; p < o.passes; ++p) {
+      if (o.local == 0) {
+        for (std::uint32_t k = 0; k < m; ++k) solve(p % 2 == 0 ? k : std::uint32_t(m - 1 - k));
+        continue;
+      }
+      for (const auto& t : tiles)
+        for (int l = 0; l < o.local; ++l) sweep(t, (l + p) % 2 == 1);
+      sweep(between, p % 2 == 1);
+    }
+  }
+  res.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / substeps;
+  std::vector<double> speed(n);
+  double sum = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    speed[i] = length(bodies[i].v) / (g * h);
+    sum += speed[i] * speed[i];
+  }
+  res.rms = std::sqrt(sum / double(n));
+  std::nth_element(speed.begin(), speed.begin() + n * 99 / 100, speed.end());
+  res.p99 = speed[n * 99 / 100];
+  double floor = 0;
+  for (const Contact& c : cs)
+    if (narrowphase::is_wall(c.b)) floor += c.normal_impulse;
+  res.floor_ratio = floor / (double(n) / view.inv_mass[0] * g * h);
+  return res;
+}
+
+int parse(const char* name, const char* value, int lo, int hi) {
+  char* end = nullptr;
+  const long v = value ? std::strtol(value, &end, 10) : 0;
+  if (!value || *end != '\0' || v < lo || v > hi) {
+    std::fprintf(stderr, "marbles_order_study: %s needs an integer in [%d, %d], got '%s'\n", name, lo, hi,
+                 value ? value : "");
+    std::exit(2);
+  }
+  return static_cast<int>(v);
+}
+
+}  // namespace
+}  // namespace marbles
+
+int main(int argc, char** argv) {
+  using namespace marbles;
+  int side = 30, layers = 30, substeps = 30;
+  bool json = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const char* next = i + 1 < argc ? argv[i + 1] : nullptr;
+    if (a == "--side") side = parse("--side", next, 2, 400), ++i;
+    else if (a == "--layers") layers = parse("--layers", next, 1, 400), ++i;
+    else if (a == "--substeps") substeps = parse("--substeps", next, 1, 10000), ++i;
+    else if (a == "--json") json = true;
+    else {
+      std::fprintf(stderr, "marbles_order_study: unknown argument '%s' (usage: marbles_order_study [--side N] "
+                           "[--layers N] [--substeps N] [--json])\n", a.c_str());
+      return 2;
+    }
+  }
+  const real r = real(0.01), h = real(1e-3), g = real(9.81);
+  World w = close_packed_pile(side, layers, r);
+  BodiesView view = w.view();
+  const std::size_t n = view.count;
+  const std::vector<narrowphase::PairCoefficients> coefficients{{0, real(0.5), 0, 0}};
+  const narrowphase::PairTable table{coefficients.data(), 1};
+  const std::vector<narrowphase::WallShape> walls{narrowphase::WallShape{}};  // the floor z = 0
+  // The contacts once (the pile does not move), in the colouring's order.
+  std::vector<broadphase::Pair> pairs;
+  broadphase::make_home_cell_cpu()->find_pairs({view.position, view.radius, n}, real(0.001) * r, pairs);
+  for (Vec3& v : w.velocity) v = Vec3(0, 0, -g * h);
+  std::vector<real> reach;
+  narrowphase::contact_reaches(view, h, reach);
+  std::vector<Contact> contacts;
+  narrowphase::sphere_contacts(view, pairs.data(), pairs.size(), table, h, reach.data(), contacts);
+  narrowphase::wall_contacts(view, walls, table, h, reach.data(), contacts);
+  narrowphase::ContactColouring colouring;
+  narrowphase::ColourRanges ranges;
+  colouring.colour_and_sort(contacts, n, ranges, nullptr, nullptr, 0);
+
+  const std::vector<Order> orders = {
+      {"solver 10", 10, 0, 0},       {"solver 20", 20, 0, 0},       {"solver 3", 3, 0, 0},
+      {"local 3x4 tile 4", 3, 4, 4}, {"local 3x4 tile 8", 3, 4, 8}, {"local 4x3 tile 6", 4, 3, 6},
+      {"local 2x10 tile 8", 2, 10, 8}, {"local 10x1 tile 8", 10, 1, 8}};
+  std::printf("order study: %zu spheres (%d layers), %zu contacts, %u colours, %d substeps held still\n", n, layers,
+              contacts.size(), ranges.colours, substeps);
+  std::printf("%-20s %6s %9s %9s %12s %7s %9s %10s\n", "order", "passes", "p99 v/gh", "rms v/gh", "floor/weight",
+              "tiles", "between", "ms/substep");
+  std::string out = "{\"spheres\": " + std::to_string(n) + ", \"contacts\": " + std::to_string(contacts.size()) +
+                    ", \"orders\": [";
+  for (std::size_t i = 0; i < orders.size(); ++i) {
+    const Order& o = orders[i];
+    const Result res = run(o, contacts, w, substeps, r, g, h);
+    std::printf("%-20s %6d %9.4f %9.4f %12.4f %7zu %8.1f%% %10.1f\n", o.name.c_str(), o.passes, res.p99, res.rms,
+                res.floor_ratio, res.tiles, 100 * res.between, res.ms);
+    char buf[400];
+    std::snprintf(buf, sizeof buf,
+                  "%s{\"order\": \"%s\", \"passes\": %d, \"local_sweeps\": %d, \"tile_diameters\": %d, "
+                  "\"p99_speed_over_gh\": %.6g, \"rms_speed_over_gh\": %.6g, \"floor_over_weight\": %.6g, "
+                  "\"tiles\": %zu, \"between_fraction\": %.6g, \"ms_per_substep\": %.4g}",
+                  i ? ", " : "", o.name.c_str(), o.passes, o.local, o.tile, res.p99, res.rms, res.floor_ratio,
+                  res.tiles, res.between, res.ms);
+    out += buf;
+  }
+  out += "]}";
+  if (json) std::printf("%s\n", out.c_str());
+}
