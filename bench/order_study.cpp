@@ -24,7 +24,12 @@
 //   1) and the floor's impulse over the pile's weight (1 when the floor
 //   carries it all).
 //
-//   marbles_order_study [--side 30] [--layers 30] [--substeps 30] [--json]
+//   With --pile cubic, columns of touching spheres on a cubic lattice in a
+//   box that touches them (side walls and floor): every speed is then 0 and
+//   the floor carries the whole weight once converged.
+//
+//   marbles_order_study [--side 30] [--layers 30] [--substeps 30]
+//                       [--pile close-packed|cubic] [--json]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -64,6 +69,42 @@ World close_packed_pile(int side, int layers, real r) {
   w.inv_inertia.assign(n, 1 / (real(0.4) * mass * r * r));
   w.material.assign(n, 0);
   return w;
+}
+
+// Columns: side x side x layers touching spheres on a cubic lattice, in a
+// box whose four side walls and floor touch the outer spheres. Its static
+// impulses are known: each column carries the weight above, the floor all
+// of it, and every speed is 0.
+World cubic_pile(int side, int layers, real r) {
+  World w;
+  for (int z = 0; z < layers; ++z)
+    for (int j = 0; j < side; ++j)
+      for (int i = 0; i < side; ++i) w.position.push_back(Vec3(r + 2 * r * i, r + 2 * r * j, r + 2 * r * z));
+  const std::size_t n = w.position.size();
+  const real mass = real(4.0 / 3.0 * M_PI) * r * r * r * 2500;
+  w.velocity.assign(n, Vec3{});
+  w.angular_velocity.assign(n, Vec3{});
+  w.radius.assign(n, r);
+  w.inv_mass.assign(n, 1 / mass);
+  w.inv_inertia.assign(n, 1 / (real(0.4) * mass * r * r));
+  w.material.assign(n, 0);
+  return w;
+}
+
+// The floor z = 0, and for the cubic pile the box's sides at 0 and side 2r.
+std::vector<narrowphase::WallShape> walls_for(bool cubic, int side, real r) {
+  std::vector<narrowphase::WallShape> walls(1);
+  if (!cubic) return walls;
+  const real far = 2 * r * side;
+  const Vec3 normals[4] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}};
+  const Vec3 points[4] = {{0, 0, 0}, {far, 0, 0}, {0, 0, 0}, {0, far, 0}};
+  for (int k = 0; k < 4; ++k) {
+    narrowphase::WallShape w;
+    w.point = points[k];
+    w.direction = normals[k];
+    walls.push_back(w);
+  }
+  return walls;
 }
 
 struct Order {
@@ -151,7 +192,7 @@ Result run(const Order& o, const std::vector<Contact>& found, World& w, int subs
   res.p99 = speed[n * 99 / 100];
   double floor = 0;
   for (const Contact& c : cs)
-    if (narrowphase::is_wall(c.b)) floor += c.normal_impulse;
+    if (narrowphase::is_wall(c.b) && c.normal.z > real(0.5)) floor += c.normal_impulse;
   res.floor_ratio = floor / (double(n) / view.inv_mass[0] * g * h);
   return res;
 }
@@ -173,7 +214,7 @@ int parse(const char* name, const char* value, int lo, int hi) {
 int main(int argc, char** argv) {
   using namespace marbles;
   int side = 30, layers = 30, substeps = 30;
-  bool json = false;
+  bool json = false, cubic = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const char* next = i + 1 < argc ? argv[i + 1] : nullptr;
@@ -181,19 +222,21 @@ int main(int argc, char** argv) {
     else if (a == "--layers") layers = parse("--layers", next, 1, 400), ++i;
     else if (a == "--substeps") substeps = parse("--substeps", next, 1, 10000), ++i;
     else if (a == "--json") json = true;
+    else if (a == "--pile" && next && std::string(next) == "cubic") cubic = true, ++i;
+    else if (a == "--pile" && next && std::string(next) == "close-packed") cubic = false, ++i;
     else {
       std::fprintf(stderr, "marbles_order_study: unknown argument '%s' (usage: marbles_order_study [--side N] "
-                           "[--layers N] [--substeps N] [--json])\n", a.c_str());
+                           "[--layers N] [--substeps N] [--pile close-packed|cubic] [--json])\n", a.c_str());
       return 2;
     }
   }
   const real r = real(0.01), h = real(1e-3), g = real(9.81);
-  World w = close_packed_pile(side, layers, r);
+  World w = cubic ? cubic_pile(side, layers, r) : close_packed_pile(side, layers, r);
   BodiesView view = w.view();
   const std::size_t n = view.count;
   const std::vector<narrowphase::PairCoefficients> coefficients{{0, real(0.5), 0, 0}};
   const narrowphase::PairTable table{coefficients.data(), 1};
-  const std::vector<narrowphase::WallShape> walls{narrowphase::WallShape{}};  // the floor z = 0
+  const std::vector<narrowphase::WallShape> walls = walls_for(cubic, side, r);
   // The contacts once (the pile does not move), in the colouring's order.
   std::vector<broadphase::Pair> pairs;
   broadphase::make_home_cell_cpu()->find_pairs({view.position, view.radius, n}, real(0.001) * r, pairs);
@@ -210,9 +253,10 @@ int main(int argc, char** argv) {
   const std::vector<Order> orders = {
       {"solver 10", 10, 0, 0},       {"solver 20", 20, 0, 0},       {"solver 3", 3, 0, 0},
       {"local 3x4 tile 4", 3, 4, 4}, {"local 3x4 tile 8", 3, 4, 8}, {"local 4x3 tile 6", 4, 3, 6},
-      {"local 2x10 tile 8", 2, 10, 8}, {"local 10x1 tile 8", 10, 1, 8}};
-  std::printf("order study: %zu spheres (%d layers), %zu contacts, %u colours, %d substeps held still\n", n, layers,
-              contacts.size(), ranges.colours, substeps);
+      {"local 3x4 tile 12", 3, 4, 12}, {"local 2x10 tile 8", 2, 10, 8}, {"local 1x10 tile 8", 1, 10, 8},
+      {"local 10x1 tile 8", 10, 1, 8}};
+  std::printf("order study: %s pile, %zu spheres (%d layers), %zu contacts, %u colours, %d substeps held still\n",
+              cubic ? "cubic" : "close-packed", n, layers, contacts.size(), ranges.colours, substeps);
   std::printf("%-20s %6s %9s %9s %12s %7s %9s %10s\n", "order", "passes", "p99 v/gh", "rms v/gh", "floor/weight",
               "tiles", "between", "ms/substep");
   std::string out = "{\"spheres\": " + std::to_string(n) + ", \"contacts\": " + std::to_string(contacts.size()) +
