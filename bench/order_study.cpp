@@ -30,24 +30,36 @@
 //
 //   marbles_order_study [--side 30] [--layers 30] [--substeps 30]
 //                       [--pile close-packed|cubic] [--json]
+#include "bench/order_study.hpp"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
-#include <string>
-#include <vector>
+#include <utility>
 
 #include "broadphase/broadphase.hpp"
-#include "narrowphase/colouring.hpp"
 #include "narrowphase/contacts.hpp"
 #include "narrowphase/solver_math.hpp"
-#include "sim/world.hpp"
 
-namespace marbles {
+namespace marbles::order_study {
 namespace {
 
 using narrowphase::Contact;
+
+
+// The world of w's positions: spheres of radius r and density 2500 kg/m^3
+// at rest.
+World with_glass_spheres(World w, real r) {
+  const std::size_t n = w.position.size();
+  const real mass = real(4.0 / 3.0 * M_PI) * r * r * r * 2500;
+  w.velocity.assign(n, Vec3{});
+  w.angular_velocity.assign(n, Vec3{});
+  w.radius.assign(n, r);
+  w.inv_mass.assign(n, 1 / mass);
+  w.inv_inertia.assign(n, 1 / (real(0.4) * mass * r * r));
+  w.material.assign(n, 0);
+  return w;
+}
 
 // Close-packed layers stacked ABC (each sphere in a pocket of three below),
 // a rhombus of side x side spheres a layer, the lowest touching z = 0.
@@ -60,15 +72,7 @@ World close_packed_pile(int side, int layers, real r) {
     for (int j = 0; j < side; ++j)
       for (int i = 0; i < side; ++i) w.position.push_back(Vec3(i * 2 * r + j * r + ox, j * sq3 * r + oy, r + z * dz));
   }
-  const std::size_t n = w.position.size();
-  const real mass = real(4.0 / 3.0 * M_PI) * r * r * r * 2500;
-  w.velocity.assign(n, Vec3{});
-  w.angular_velocity.assign(n, Vec3{});
-  w.radius.assign(n, r);
-  w.inv_mass.assign(n, 1 / mass);
-  w.inv_inertia.assign(n, 1 / (real(0.4) * mass * r * r));
-  w.material.assign(n, 0);
-  return w;
+  return with_glass_spheres(std::move(w), r);
 }
 
 // Columns: side x side x layers touching spheres on a cubic lattice, in a
@@ -80,15 +84,7 @@ World cubic_pile(int side, int layers, real r) {
   for (int z = 0; z < layers; ++z)
     for (int j = 0; j < side; ++j)
       for (int i = 0; i < side; ++i) w.position.push_back(Vec3(r + 2 * r * i, r + 2 * r * j, r + 2 * r * z));
-  const std::size_t n = w.position.size();
-  const real mass = real(4.0 / 3.0 * M_PI) * r * r * r * 2500;
-  w.velocity.assign(n, Vec3{});
-  w.angular_velocity.assign(n, Vec3{});
-  w.radius.assign(n, r);
-  w.inv_mass.assign(n, 1 / mass);
-  w.inv_inertia.assign(n, 1 / (real(0.4) * mass * r * r));
-  w.material.assign(n, 0);
-  return w;
+  return with_glass_spheres(std::move(w), r);
 }
 
 // The floor z = 0, and for the cubic pile the box's sides at 0 and side 2r.
@@ -106,18 +102,6 @@ std::vector<narrowphase::WallShape> walls_for(bool cubic, int side, real r) {
   }
   return walls;
 }
-
-struct Order {
-  std::string name;
-  int passes;  // over memory
-  int local;   // sweeps of a tile's own contacts a pass (0: the solver's order)
-  int tile;    // the tiles' edge, in diameters
-};
-
-struct Result {
-  double p99 = 0, rms = 0, floor_ratio = 0, ms = 0, between = 0;
-  std::size_t tiles = 0;
-};
 
 // The contacts (colour-major, as the colouring sorted them) of each tile and
 // those between tiles; within each list the colour-major order.
@@ -142,8 +126,45 @@ void split_by_tile(const std::vector<Contact>& contacts, const BodiesView& bodie
   }
 }
 
-Result run(const Order& o, const std::vector<Contact>& found, World& w, int substeps, real r, real g, real h) {
+constexpr real kRadius = real(0.01), kSubstep = real(1e-3), kGravity = real(9.81);
+
+}  // namespace
+
+Pile make_pile(PileKind kind, int side, int layers) {
+  const bool cubic = kind == PileKind::cubic;
+  const real r = kRadius, h = kSubstep, g = kGravity;
+  Pile p;
+  p.world = cubic ? cubic_pile(side, layers, r) : close_packed_pile(side, layers, r);
+  p.walls = walls_for(cubic, side, r);
+  World& w = p.world;
   BodiesView view = w.view();
+  const std::size_t n = view.count;
+  const std::vector<narrowphase::PairCoefficients> coefficients{{0, real(0.5), 0, 0}};
+  const narrowphase::PairTable table{coefficients.data(), 1};
+  std::vector<broadphase::Pair> pairs;
+  broadphase::make_home_cell_cpu()->find_pairs({view.position, view.radius, n}, real(0.001) * r, pairs);
+  for (Vec3& v : w.velocity) v = Vec3(0, 0, -g * h);  // the contacts of spheres given gravity's kick
+  std::vector<real> reach;
+  narrowphase::contact_reaches(view, h, reach);
+  narrowphase::sphere_contacts(view, pairs.data(), pairs.size(), table, h, reach.data(), p.contacts);
+  narrowphase::wall_contacts(view, p.walls, table, h, reach.data(), p.contacts);
+  narrowphase::ContactColouring colouring;
+  colouring.colour_and_sort(p.contacts, n, p.ranges, nullptr, nullptr, 0);
+  for (Vec3& v : w.velocity) v = Vec3{};
+  return p;
+}
+
+std::vector<Order> default_orders() {
+  return {{"solver 10", 10, 0, 0},         {"solver 20", 20, 0, 0},        {"solver 3", 3, 0, 0},
+          {"local 3x4 tile 4", 3, 4, 4},   {"local 3x4 tile 8", 3, 4, 8},  {"local 4x3 tile 6", 4, 3, 6},
+          {"local 3x4 tile 12", 3, 4, 12}, {"local 2x10 tile 8", 2, 10, 8}, {"local 1x10 tile 8", 1, 10, 8},
+          {"local 10x1 tile 8", 10, 1, 8}};
+}
+
+Result run(const Order& o, Pile& pile, int substeps) {
+  const real r = kRadius, h = kSubstep, g = kGravity;
+  const std::vector<Contact>& found = pile.contacts;
+  BodiesView view = pile.world.view();
   const std::size_t n = view.count, m = found.size();
   Result res;
   std::vector<std::vector<std::uint32_t>> tiles;
@@ -194,87 +215,10 @@ Result run(const Order& o, const std::vector<Contact>& found, World& w, int subs
   for (const Contact& c : cs)
     if (narrowphase::is_wall(c.b) && c.normal.z > real(0.5)) floor += c.normal_impulse;
   res.floor_ratio = floor / (double(n) / view.inv_mass[0] * g * h);
+  res.velocity.resize(n);
+  for (std::size_t i = 0; i < n; ++i) res.velocity[i] = bodies[i].v;
   return res;
 }
 
-int parse(const char* name, const char* value, int lo, int hi) {
-  char* end = nullptr;
-  const long v = value ? std::strtol(value, &end, 10) : 0;
-  if (!value || *end != '\0' || v < lo || v > hi) {
-    std::fprintf(stderr, "marbles_order_study: %s needs an integer in [%d, %d], got '%s'\n", name, lo, hi,
-                 value ? value : "");
-    std::exit(2);
-  }
-  return static_cast<int>(v);
-}
+}  // namespace marbles::order_study
 
-}  // namespace
-}  // namespace marbles
-
-int main(int argc, char** argv) {
-  using namespace marbles;
-  int side = 30, layers = 30, substeps = 30;
-  bool json = false, cubic = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const char* next = i + 1 < argc ? argv[i + 1] : nullptr;
-    if (a == "--side") side = parse("--side", next, 2, 400), ++i;
-    else if (a == "--layers") layers = parse("--layers", next, 1, 400), ++i;
-    else if (a == "--substeps") substeps = parse("--substeps", next, 1, 10000), ++i;
-    else if (a == "--json") json = true;
-    else if (a == "--pile" && next && std::string(next) == "cubic") cubic = true, ++i;
-    else if (a == "--pile" && next && std::string(next) == "close-packed") cubic = false, ++i;
-    else {
-      std::fprintf(stderr, "marbles_order_study: unknown argument '%s' (usage: marbles_order_study [--side N] "
-                           "[--layers N] [--substeps N] [--pile close-packed|cubic] [--json])\n", a.c_str());
-      return 2;
-    }
-  }
-  const real r = real(0.01), h = real(1e-3), g = real(9.81);
-  World w = cubic ? cubic_pile(side, layers, r) : close_packed_pile(side, layers, r);
-  BodiesView view = w.view();
-  const std::size_t n = view.count;
-  const std::vector<narrowphase::PairCoefficients> coefficients{{0, real(0.5), 0, 0}};
-  const narrowphase::PairTable table{coefficients.data(), 1};
-  const std::vector<narrowphase::WallShape> walls = walls_for(cubic, side, r);
-  // The contacts once (the pile does not move), in the colouring's order.
-  std::vector<broadphase::Pair> pairs;
-  broadphase::make_home_cell_cpu()->find_pairs({view.position, view.radius, n}, real(0.001) * r, pairs);
-  for (Vec3& v : w.velocity) v = Vec3(0, 0, -g * h);
-  std::vector<real> reach;
-  narrowphase::contact_reaches(view, h, reach);
-  std::vector<Contact> contacts;
-  narrowphase::sphere_contacts(view, pairs.data(), pairs.size(), table, h, reach.data(), contacts);
-  narrowphase::wall_contacts(view, walls, table, h, reach.data(), contacts);
-  narrowphase::ContactColouring colouring;
-  narrowphase::ColourRanges ranges;
-  colouring.colour_and_sort(contacts, n, ranges, nullptr, nullptr, 0);
-
-  const std::vector<Order> orders = {
-      {"solver 10", 10, 0, 0},       {"solver 20", 20, 0, 0},       {"solver 3", 3, 0, 0},
-      {"local 3x4 tile 4", 3, 4, 4}, {"local 3x4 tile 8", 3, 4, 8}, {"local 4x3 tile 6", 4, 3, 6},
-      {"local 3x4 tile 12", 3, 4, 12}, {"local 2x10 tile 8", 2, 10, 8}, {"local 1x10 tile 8", 1, 10, 8},
-      {"local 10x1 tile 8", 10, 1, 8}};
-  std::printf("order study: %s pile, %zu spheres (%d layers), %zu contacts, %u colours, %d substeps held still\n",
-              cubic ? "cubic" : "close-packed", n, layers, contacts.size(), ranges.colours, substeps);
-  std::printf("%-20s %6s %9s %9s %12s %7s %9s %10s\n", "order", "passes", "p99 v/gh", "rms v/gh", "floor/weight",
-              "tiles", "between", "ms/substep");
-  std::string out = "{\"spheres\": " + std::to_string(n) + ", \"contacts\": " + std::to_string(contacts.size()) +
-                    ", \"orders\": [";
-  for (std::size_t i = 0; i < orders.size(); ++i) {
-    const Order& o = orders[i];
-    const Result res = run(o, contacts, w, substeps, r, g, h);
-    std::printf("%-20s %6d %9.4f %9.4f %12.4f %7zu %8.1f%% %10.1f\n", o.name.c_str(), o.passes, res.p99, res.rms,
-                res.floor_ratio, res.tiles, 100 * res.between, res.ms);
-    char buf[400];
-    std::snprintf(buf, sizeof buf,
-                  "%s{\"order\": \"%s\", \"passes\": %d, \"local_sweeps\": %d, \"tile_diameters\": %d, "
-                  "\"p99_speed_over_gh\": %.6g, \"rms_speed_over_gh\": %.6g, \"floor_over_weight\": %.6g, "
-                  "\"tiles\": %zu, \"between_fraction\": %.6g, \"ms_per_substep\": %.4g}",
-                  i ? ", " : "", o.name.c_str(), o.passes, o.local, o.tile, res.p99, res.rms, res.floor_ratio,
-                  res.tiles, res.between, res.ms);
-    out += buf;
-  }
-  out += "]}";
-  if (json) std::printf("%s\n", out.c_str());
-}

@@ -1,0 +1,51 @@
+// bench/order_study.hpp — the velocity solve's convergence on a deep pile
+// held still, in the solver's order and in a local order (the study behind
+// marbles_order_study; bench/order_study.cpp says what it measures).
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "narrowphase/colouring.hpp"
+#include "narrowphase/contact.hpp"
+#include "narrowphase/contact_math.hpp"
+#include "sim/world.hpp"
+
+namespace marbles::order_study {
+
+enum class PileKind { close_packed, cubic };
+
+// A pile, its walls and its contacts (found once: the pile does not move),
+// in the colouring's colour-major order.
+struct Pile {
+  World world;
+  std::vector<narrowphase::WallShape> walls;
+  std::vector<narrowphase::Contact> contacts;
+  narrowphase::ColourRanges ranges;
+};
+// side x side x layers spheres of radius 1 cm (close-packed: layers stacked
+// ABC on a floor; cubic: columns in a box that touches them).
+Pile make_pile(PileKind kind, int side, int layers);
+
+struct Order {
+  std::string name;
+  int passes;     // over memory
+  int local;      // sweeps of a tile's own contacts a pass (0: the solver's order)
+  int tile;       // the tiles' edge, in diameters
+};
+// The orders marbles_order_study compares.
+std::vector<Order> default_orders();
+
+struct Result {
+  double p99 = 0, rms = 0;   // speeds left after the last substep, in units of g h
+  double floor_ratio = 0;    // the floor's impulse over the weight's
+  double ms = 0;             // per substep
+  double between = 0;        // share of the contacts between tiles
+  std::size_t tiles = 0;
+  std::vector<Vec3> velocity;  // every sphere's after the last substep's solve
+};
+// `substeps` substeps of order `o` on the pile from impulses of 0.
+Result run(const Order& o, Pile& pile, int substeps);
+
+}  // namespace marbles::order_study

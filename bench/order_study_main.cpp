@@ -1,0 +1,80 @@
+// bench/order_study_main.cpp — marbles_order_study: the table (and with
+// --json the figures) of bench/order_study.hpp's orders on one pile.
+//
+//   marbles_order_study [--side 30] [--layers 30] [--substeps 30]
+//                       [--pile close-packed|cubic] [--json]
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "bench/order_study.hpp"
+
+namespace {
+
+int parse(const char* name, const char* value, int lo, int hi) {
+  char* end = nullptr;
+  const long v = value ? std::strtol(value, &end, 10) : 0;
+  if (!value || *end != '\0' || v < lo || v > hi) {
+    std::fprintf(stderr, "marbles_order_study: %s needs an integer in [%d, %d], got '%s'\n", name, lo, hi,
+                 value ? value : "");
+    std::exit(2);
+  }
+  return static_cast<int>(v);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace marbles::order_study;
+  int side = 30, layers = 30, substeps = 30;
+  bool json = false;
+  PileKind kind = PileKind::close_packed;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const char* next = i + 1 < argc ? argv[i + 1] : nullptr;
+    if (a == "--side") side = parse("--side", next, 2, 400), ++i;
+    else if (a == "--layers") layers = parse("--layers", next, 1, 400), ++i;
+    else if (a == "--substeps") substeps = parse("--substeps", next, 1, 10000), ++i;
+    else if (a == "--json") json = true;
+    else if (a == "--pile") {
+      const std::string v = next ? next : "";
+      if (v != "cubic" && v != "close-packed") {
+        std::fprintf(stderr, "marbles_order_study: --pile needs close-packed or cubic, got '%s'\n", v.c_str());
+        return 2;
+      }
+      kind = v == "cubic" ? PileKind::cubic : PileKind::close_packed;
+      ++i;
+    } else {
+      std::fprintf(stderr,
+                   "marbles_order_study: unknown argument '%s' (usage: marbles_order_study [--side N] [--layers N] "
+                   "[--substeps N] [--pile close-packed|cubic] [--json])\n",
+                   a.c_str());
+      return 2;
+    }
+  }
+  Pile pile = make_pile(kind, side, layers);
+  std::printf("order study: %s pile, %zu spheres (%d layers), %zu contacts, %u colours, %d substeps held still\n",
+              kind == PileKind::cubic ? "cubic" : "close-packed", pile.world.size(), layers, pile.contacts.size(),
+              pile.ranges.colours, substeps);
+  std::printf("%-20s %6s %9s %9s %12s %7s %9s %10s\n", "order", "passes", "p99 v/gh", "rms v/gh", "floor/weight",
+              "tiles", "between", "ms/substep");
+  std::string out = "{\"spheres\": " + std::to_string(pile.world.size()) +
+                    ", \"contacts\": " + std::to_string(pile.contacts.size()) + ", \"orders\": [";
+  const auto orders = default_orders();
+  for (std::size_t i = 0; i < orders.size(); ++i) {
+    const Order& o = orders[i];
+    const Result res = run(o, pile, substeps);
+    std::printf("%-20s %6d %9.4f %9.4f %12.4f %7zu %8.1f%% %10.1f\n", o.name.c_str(), o.passes, res.p99, res.rms,
+                res.floor_ratio, res.tiles, 100 * res.between, res.ms);
+    char buf[400];
+    std::snprintf(buf, sizeof buf,
+                  "%s{\"order\": \"%s\", \"passes\": %d, \"local_sweeps\": %d, \"tile_diameters\": %d, "
+                  "\"p99_speed_over_gh\": %.6g, \"rms_speed_over_gh\": %.6g, \"floor_over_weight\": %.6g, "
+                  "\"tiles\": %zu, \"between_fraction\": %.6g, \"ms_per_substep\": %.4g}",
+                  i ? ", " : "", o.name.c_str(), o.passes, o.local, o.tile, res.p99, res.rms, res.floor_ratio,
+                  res.tiles, res.between, res.ms);
+    out += buf;
+  }
+  out += "]}";
+  if (json) std::printf("%s\n", out.c_str());
+}

@@ -1,0 +1,49 @@
+// Tests of the order study (bench/order_study.hpp): its local order is the
+// solver's where a single tile holds every contact and each pass sweeps it
+// once (the same updates in the same order: the same bits), and on columns
+// in a box, whose static solution is known (every speed 0, the floor under
+// the whole weight), more sweeps of the solver's order leave less undone.
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "bench/order_study.hpp"
+
+namespace os = marbles::order_study;
+
+TEST(OrderStudy, OneTileSweptOnceAPassIsTheSolversOrder) {
+  for (const os::PileKind kind : {os::PileKind::cubic, os::PileKind::close_packed}) {
+    os::Pile pile = os::make_pile(kind, 6, 5);
+    ASSERT_GT(pile.contacts.size(), 100u);
+    const os::Result solver = os::run({"solver 5", 5, 0, 0}, pile, 4);
+    const os::Result one_tile = os::run({"local 5x1, one tile", 5, 1, 1000}, pile, 4);
+    EXPECT_EQ(one_tile.tiles, 1u);
+    EXPECT_EQ(one_tile.between, 0.0);
+    ASSERT_EQ(one_tile.velocity.size(), solver.velocity.size());
+    EXPECT_EQ(std::memcmp(one_tile.velocity.data(), solver.velocity.data(),
+                          solver.velocity.size() * sizeof(marbles::Vec3)),
+              0)
+        << "the same updates in the same order";
+    // Small tiles: another order, other bits, contacts between tiles.
+    const os::Result tiles = os::run({"local 5x1 tile 2", 5, 1, 2}, pile, 4);
+    EXPECT_GT(tiles.tiles, 1u);
+    EXPECT_GT(tiles.between, 0.0);
+    EXPECT_NE(std::memcmp(tiles.velocity.data(), solver.velocity.data(),
+                          solver.velocity.size() * sizeof(marbles::Vec3)),
+              0);
+  }
+}
+
+TEST(OrderStudy, MoreSweepsLeaveLessUndoneOnColumns) {
+  os::Pile pile = os::make_pile(os::PileKind::cubic, 8, 12);
+  double last_rms = 2, last_floor = -1;
+  for (const int sweeps : {1, 3, 10, 30}) {
+    const os::Result res = os::run({"solver", sweeps, 0, 0}, pile, 20);
+    EXPECT_LT(res.rms, last_rms) << sweeps << " sweeps";
+    EXPECT_GT(res.floor_ratio, last_floor) << sweeps << " sweeps";
+    EXPECT_LE(res.floor_ratio, 1.001) << sweeps << " sweeps: the floor carries no more than the weight";
+    last_rms = res.rms, last_floor = res.floor_ratio;
+  }
+  EXPECT_LT(last_rms, 0.05) << "thirty sweeps a substep bring twelve layers near rest";
+  EXPECT_GT(last_floor, 0.95);
+}
