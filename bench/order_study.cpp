@@ -29,7 +29,7 @@
 //   the floor carries the whole weight once converged.
 //
 //   marbles_order_study [--side 30] [--layers 30] [--substeps 30]
-//                       [--pile close-packed|cubic] [--json]
+//                       [--pile close-packed|cubic] [--rolling] [--json]
 #include "bench/order_study.hpp"
 
 #include <algorithm>
@@ -130,7 +130,7 @@ constexpr real kRadius = real(0.01), kSubstep = real(1e-3), kGravity = real(9.81
 
 }  // namespace
 
-Pile make_pile(PileKind kind, int side, int layers) {
+Pile make_pile(PileKind kind, int side, int layers, bool rolling) {
   const bool cubic = kind == PileKind::cubic;
   const real r = kRadius, h = kSubstep, g = kGravity;
   Pile p;
@@ -139,7 +139,8 @@ Pile make_pile(PileKind kind, int side, int layers) {
   World& w = p.world;
   BodiesView view = w.view();
   const std::size_t n = view.count;
-  const std::vector<narrowphase::PairCoefficients> coefficients{{0, real(0.5), 0, 0}};
+  p.rolling = rolling;
+  const std::vector<narrowphase::PairCoefficients> coefficients{{0, real(0.5), rolling ? real(0.05) : 0, 0}};
   const narrowphase::PairTable table{coefficients.data(), 1};
   std::vector<broadphase::Pair> pairs;
   broadphase::make_home_cell_cpu()->find_pairs({view.position, view.radius, n}, real(0.001) * r, pairs);
@@ -161,7 +162,10 @@ std::vector<Order> default_orders() {
           {"local 10x1 tile 8", 10, 1, 8}};
 }
 
-Result run(const Order& o, Pile& pile, int substeps) {
+namespace {
+
+template <bool Rolling>
+Result run_with(const Order& o, Pile& pile, int substeps) {
   const real r = kRadius, h = kSubstep, g = kGravity;
   const std::vector<Contact>& found = pile.contacts;
   BodiesView view = pile.world.view();
@@ -173,11 +177,11 @@ Result run(const Order& o, Pile& pile, int substeps) {
   res.tiles = tiles.size();
   res.between = m ? double(between.size()) / m : 0;
   std::vector<Contact> cs = found;
-  for (Contact& c : cs) c.normal_impulse = 0, c.tangent_impulse = Vec3{};
+  for (Contact& c : cs) c.normal_impulse = 0, c.tangent_impulse = Vec3{}, c.rolling_impulse = Vec3{};
   std::vector<narrowphase::SolverBody> bodies(n);
   narrowphase::SolverBody* b = bodies.data();
   const real inv_h = 1 / h;
-  auto solve = [&](std::uint32_t k) { narrowphase::solve_one<true, false>(cs[k], b, inv_h); };
+  auto solve = [&](std::uint32_t k) { narrowphase::solve_one<true, Rolling>(cs[k], b, inv_h); };
   auto sweep = [&](const std::vector<std::uint32_t>& list, bool backwards) {
     if (backwards) std::for_each(list.rbegin(), list.rend(), solve);
     else std::for_each(list.begin(), list.end(), solve);
@@ -190,7 +194,7 @@ Result run(const Order& o, Pile& pile, int substeps) {
       bodies[i] = narrowphase::gather_solver_body(view, i);
     }
     for (Contact& c : cs) narrowphase::prepare_one(c, b);
-    for (const Contact& c : cs) narrowphase::warm_start_one<true, false>(c, b);
+    for (const Contact& c : cs) narrowphase::warm_start_one<true, Rolling>(c, b);
     for (int p = 0; p < o.passes; ++p) {
       if (o.local == 0) {
         for (std::uint32_t k = 0; k < m; ++k) solve(p % 2 == 0 ? k : std::uint32_t(m - 1 - k));
@@ -218,6 +222,12 @@ Result run(const Order& o, Pile& pile, int substeps) {
   res.velocity.resize(n);
   for (std::size_t i = 0; i < n; ++i) res.velocity[i] = bodies[i].v;
   return res;
+}
+
+}  // namespace
+
+Result run(const Order& o, Pile& pile, int substeps) {
+  return pile.rolling ? run_with<true>(o, pile, substeps) : run_with<false>(o, pile, substeps);
 }
 
 }  // namespace marbles::order_study

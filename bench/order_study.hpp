@@ -23,10 +23,12 @@ struct Pile {
   std::vector<narrowphase::WallShape> walls;
   std::vector<narrowphase::Contact> contacts;
   narrowphase::ColourRanges ranges;
+  bool rolling = false;  // rolling resistance (rolling friction 0.05, the benchmark pile's)
 };
 // side x side x layers spheres of radius 1 cm (close-packed: layers stacked
-// ABC on a floor; cubic: columns in a box that touches them).
-Pile make_pile(PileKind kind, int side, int layers);
+// ABC on a floor; cubic: columns in a box that touches them), friction 0.5
+// and, with `rolling`, rolling resistance.
+Pile make_pile(PileKind kind, int side, int layers, bool rolling = false);
 
 struct Order {
   std::string name;

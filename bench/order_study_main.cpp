@@ -2,7 +2,7 @@
 // --json the figures) of bench/order_study.hpp's orders on one pile.
 //
 //   marbles_order_study [--side 30] [--layers 30] [--substeps 30]
-//                       [--pile close-packed|cubic] [--json]
+//                       [--pile close-packed|cubic] [--rolling] [--json]
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -27,7 +27,7 @@ int parse(const char* name, const char* value, int lo, int hi) {
 int main(int argc, char** argv) {
   using namespace marbles::order_study;
   int side = 30, layers = 30, substeps = 30;
-  bool json = false;
+  bool json = false, rolling = false;
   PileKind kind = PileKind::close_packed;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -36,6 +36,7 @@ int main(int argc, char** argv) {
     else if (a == "--layers") layers = parse("--layers", next, 1, 400), ++i;
     else if (a == "--substeps") substeps = parse("--substeps", next, 1, 10000), ++i;
     else if (a == "--json") json = true;
+    else if (a == "--rolling") rolling = true;
     else if (a == "--pile") {
       const std::string v = next ? next : "";
       if (v != "cubic" && v != "close-packed") {
@@ -47,14 +48,14 @@ int main(int argc, char** argv) {
     } else {
       std::fprintf(stderr,
                    "marbles_order_study: unknown argument '%s' (usage: marbles_order_study [--side N] [--layers N] "
-                   "[--substeps N] [--pile close-packed|cubic] [--json])\n",
+                   "[--substeps N] [--pile close-packed|cubic] [--rolling] [--json])\n",
                    a.c_str());
       return 2;
     }
   }
-  Pile pile = make_pile(kind, side, layers);
-  std::printf("order study: %s pile, %zu spheres (%d layers), %zu contacts, %u colours, %d substeps held still\n",
-              kind == PileKind::cubic ? "cubic" : "close-packed", pile.world.size(), layers, pile.contacts.size(),
+  Pile pile = make_pile(kind, side, layers, rolling);
+  std::printf("order study: %s pile%s, %zu spheres (%d layers), %zu contacts, %u colours, %d substeps held still\n",
+              kind == PileKind::cubic ? "cubic" : "close-packed", rolling ? " (rolling resistance)" : "", pile.world.size(), layers, pile.contacts.size(),
               pile.ranges.colours, substeps);
   std::printf("%-20s %6s %9s %9s %12s %7s %9s %10s\n", "order", "passes", "p99 v/gh", "rms v/gh", "floor/weight",
               "tiles", "between", "ms/substep");

@@ -12,8 +12,10 @@
 namespace os = marbles::order_study;
 
 TEST(OrderStudy, OneTileSweptOnceAPassIsTheSolversOrder) {
+  for (const bool rolling : {false, true})
   for (const os::PileKind kind : {os::PileKind::cubic, os::PileKind::close_packed}) {
-    os::Pile pile = os::make_pile(kind, 6, 5);
+    SCOPED_TRACE(rolling ? "rolling resistance" : "friction");
+    os::Pile pile = os::make_pile(kind, 6, 5, rolling);
     ASSERT_GT(pile.contacts.size(), 100u);
     const os::Result solver = os::run({"solver 5", 5, 0, 0}, pile, 4);
     const os::Result one_tile = os::run({"local 5x1, one tile", 5, 1, 1000}, pile, 4);
