@@ -5,8 +5,13 @@
 #include "core/parallel.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
+#include <string>
 #include <string_view>
+
+#include "core/error.hpp"
 
 namespace marbles::narrowphase {
 namespace {
@@ -191,6 +196,92 @@ ContactSolver::ContactSolver(const SolverSettings& settings, SweepLanes lanes) :
   m_impact = settings.friction ? &impact_range<true> : &impact_range<false>;
 }
 
+std::optional<LocalOrder> local_order_from_environment() {
+  const char* asked = std::getenv("MARBLES_SOLVE_ORDER");
+  if (asked == nullptr || std::string_view(asked) == "colours") return std::nullopt;
+  LocalOrder o;
+  char tail = 0;
+  if (std::sscanf(asked, "tiles:%lf:%d:%d%c", &o.tile_diameters, &o.passes, &o.local, &tail) != 3 ||
+      !(o.tile_diameters > 0) || !std::isfinite(o.tile_diameters) || o.passes < 1 || o.local < 1)
+    throw RuntimeFailure(std::string("MARBLES_SOLVE_ORDER=") + asked +
+                         ": expected colours or tiles:D:P:L (a cube edge of D > 0 largest diameters, P >= 1 passes, "
+                         "L >= 1 local sweeps)");
+  return o;
+}
+
+void ContactSolver::local_sweeps(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies,
+                                 real inv_h) {
+  const SweepRecords& s = m_records;
+  const auto m = static_cast<std::uint32_t>(m_record_count);
+  real r_max = 0;
+  for (std::size_t i = 0; i < world.count; ++i) r_max = std::max(r_max, world.radius[i]);
+  const double edge = m_local->tile_diameters * 2 * double(r_max > 0 ? r_max : real(1));
+  // A sphere's cube, 21 bits an axis (coordinates within a million cubes of
+  // the origin: a study's scenes).
+  auto cube = [&](std::uint32_t i) {
+    const Vec3 p = world.position[i];
+    auto axis = [&](real x) {
+      return static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(double(x) / edge)) + (1 << 20)) &
+             0x1fffffu;
+    };
+    return (axis(p.x) << 42) | (axis(p.y) << 21) | axis(p.z);
+  };
+  // Each cube's own contacts, cube by cube, in the colour-major order within;
+  // those between cubes in the colour-major order, with each colour's start.
+  m_tiled.clear();
+  m_between.clear();
+  for (std::uint32_t k = 0; k < m; ++k) {
+    const BodyPair ab = s.bodies[k];
+    const std::uint64_t t = cube(ab.a);
+    if (is_wall(ab.b) || cube(ab.b) == t) m_tiled.push_back({t, k});
+    else m_between.push_back(k);
+  }
+  std::stable_sort(m_tiled.begin(), m_tiled.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+  std::vector<std::uint32_t> start;
+  for (std::uint32_t i = 0; i < m_tiled.size(); ++i)
+    if (i == 0 || m_tiled[i].first != m_tiled[i - 1].first) start.push_back(i);
+  start.push_back(static_cast<std::uint32_t>(m_tiled.size()));
+  const std::uint32_t last = colours.colours;  // the overflow set's
+  std::vector<std::uint32_t> from(last + 2);
+  for (std::uint32_t c = 0; c <= last; ++c)
+    from[c] = static_cast<std::uint32_t>(std::lower_bound(m_between.begin(), m_between.end(), colours.begin[c]) -
+                                         m_between.begin());
+  from[last + 1] = static_cast<std::uint32_t>(m_between.size());
+
+  with_terms(m_settings.friction, m_settings.rolling, [&](auto friction, auto rolling) {
+    auto solve = [&](std::uint32_t k) { solve_record<friction, rolling>(s, k, bodies, inv_h); };
+    const auto tiles = static_cast<std::ptrdiff_t>(start.size()) - 1;
+    for (int p = 0; p < m_local->passes; ++p) {
+      // The cubes share no sphere: at once, each one's sweeps in turn.
+#pragma omp parallel for schedule(dynamic, 1) if (tiles > 1)
+      for (std::ptrdiff_t t = 0; t < tiles; ++t)
+        for (int l = 0; l < m_local->local; ++l) {
+          if ((l + p) % 2 == 0)
+            for (std::uint32_t i = start[t]; i < start[t + 1]; ++i) solve(m_tiled[i].second);
+          else
+            for (std::uint32_t i = start[t + 1]; i-- > start[t];) solve(m_tiled[i].second);
+        }
+      // Between cubes: colour by colour as visit_colours walks them (the
+      // overflow set last forwards, first backwards, one by one).
+      const bool backwards = p % 2 == 1;
+      for (std::uint32_t j = 0; j <= last; ++j) {
+        const std::uint32_t c = backwards ? last - j : j;
+        const std::uint32_t b = from[c], e = from[c + 1];
+        if (c == last) {
+          if (backwards)
+            for (std::uint32_t i = e; i-- > b;) solve(m_between[i]);
+          else
+            for (std::uint32_t i = b; i < e; ++i) solve(m_between[i]);
+          continue;
+        }
+        const auto count = static_cast<std::ptrdiff_t>(e - b);
+#pragma omp parallel for schedule(static) if (count >= kParallelFrom)
+        for (std::ptrdiff_t i = 0; i < count; ++i) solve(m_between[b + static_cast<std::uint32_t>(i)]);
+      }
+    }
+  });
+}
+
 void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours,
                                      const BodiesView& world, real h, Unpack unpack) {
   const auto n = static_cast<std::ptrdiff_t>(world.count);
@@ -212,8 +303,11 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
   if (m_settings.warm_start)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(records, b, e, bodies, 0); });
   const real inv_h = real(1) / h;
-  for (int it = 0; it < m_settings.iterations; ++it)
-    over_colours(colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t e) { m_sweep(records, b, e, bodies, inv_h); });
+  if (m_local) local_sweeps(colours, world, bodies, inv_h);
+  else
+    for (int it = 0; it < m_settings.iterations; ++it)
+      over_colours(colours, it % 2 == 1,
+                   [&](std::uint32_t b, std::uint32_t e) { m_sweep(records, b, e, bodies, inv_h); });
   m_pending_from = contacts.data();
   if (unpack == Unpack::now) unpack_impulses(contacts);
 #pragma omp parallel for schedule(static) if (n > 20000)

@@ -35,6 +35,8 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
+#include <utility>
 #include <vector>
 
 #include "core/spheres.hpp"
@@ -56,6 +58,22 @@ SweepLanes supported_lanes();  // the widest this CPU has
 // supported_lanes(), or fewer where the environment's MARBLES_LANES names
 // fewer ("sse2", "avx2"; for comparisons).
 SweepLanes best_lanes();
+
+// A study of another order for the velocity sweeps (docs/architecture.md
+// "A local order, studied on the CPU"), CPU only, from the environment:
+// MARBLES_SOLVE_ORDER=tiles:D:P:L cuts space into cubes of D largest
+// diameters and, in each of P passes (in place of the scene's iterations),
+// sweeps each cube's own contacts (both spheres in it, or a sphere and a
+// wall) L times, cubes at once, then the contacts between cubes once,
+// colour by colour. Unset (or `colours`): the solver's order. It changes
+// the results; the CUDA step refuses it.
+struct LocalOrder {
+  double tile_diameters = 0;
+  int passes = 0, local = 0;
+};
+// The order asked for by MARBLES_SOLVE_ORDER (none: the solver's); throws
+// RuntimeFailure on a value it cannot read.
+std::optional<LocalOrder> local_order_from_environment();
 
 class ContactSolver {
  public:
@@ -102,6 +120,8 @@ class ContactSolver {
                real h);
   // m_records over m_record_words for `count` contacts.
   void size_records(std::size_t count) const;
+  // The sweeps in the local order (LocalOrder) on the packed records.
+  void local_sweeps(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies, real inv_h);
 
   using RangeFn = void (*)(const SweepRecords& records, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
                            real inv_h);
@@ -129,6 +149,9 @@ class ContactSolver {
   mutable std::size_t m_record_count = 0;
   mutable const Contact* m_packed_from = nullptr;
   const Contact* m_pending_from = nullptr;  // the contacts whose impulses the records hold, not yet unpacked
+  std::optional<LocalOrder> m_local = local_order_from_environment();
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> m_tiled;  // the local order's scratch
+  std::vector<std::uint32_t> m_between;
 };
 
 }  // namespace marbles::narrowphase

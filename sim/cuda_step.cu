@@ -745,6 +745,9 @@ class CudaStep final : public StepBackend {
 std::unique_ptr<StepBackend> make_cuda_step(const StepModel& model, World world) {
   const DeviceInfo& dev = cuda_device();
   if (!dev.available) throw RuntimeFailure("the CUDA step: no CUDA device (" + dev.why_not + ")");
+  if (narrowphase::local_order_from_environment())
+    throw RuntimeFailure("MARBLES_SOLVE_ORDER: the CUDA step runs the solver's colour order only (the local order is a "
+                         "study on the CPU)");
   return std::make_unique<CudaStep>(model, std::move(world));
 }
 

@@ -186,3 +186,44 @@ TEST(Determinism, CheckpointsOfBothFormatsLoad) {
   std::remove(path.c_str());
   std::remove(old_path.c_str());
 }
+
+namespace {
+
+// MARBLES_SOLVE_ORDER set while it lives (the solver reads it when made).
+class SolveOrder {
+ public:
+  explicit SolveOrder(const char* value) { setenv("MARBLES_SOLVE_ORDER", value, 1); }
+  ~SolveOrder() { unsetenv("MARBLES_SOLVE_ORDER"); }
+  SolveOrder(const SolveOrder&) = delete;
+  SolveOrder& operator=(const SolveOrder&) = delete;
+};
+
+}  // namespace
+
+// The local order of the CPU study (narrowphase/solver.hpp, LocalOrder):
+// one cube around everything swept once a pass, as many passes as the
+// scene's iterations, is the solver's order (the same updates, in the same
+// order within each colour's sphere-disjoint set: the same bits); smaller
+// cubes give another state, the same for every thread count (cubes share no
+// sphere, and the contacts between them go colour by colour); a value it
+// cannot read is refused.
+TEST(Determinism, LocalOrderStudy) {
+  const std::uint64_t colours = run_pour(2, 150);
+  {
+    SolveOrder one_cube("tiles:1e6:10:1");  // pour_scene's solver takes 10 iterations
+    EXPECT_EQ(run_pour(2, 150), colours) << "one cube, one sweep a pass: the solver's order";
+  }
+  std::uint64_t cubes_one = 0;
+  {
+    SolveOrder cubes("tiles:3:3:4");
+    cubes_one = run_pour(1, 150);
+    EXPECT_EQ(run_pour(2, 150), cubes_one);
+    EXPECT_EQ(run_pour(3, 150), cubes_one);
+  }
+  EXPECT_NE(cubes_one, colours) << "another order, other bits";
+  {
+    SolveOrder bad("tiles:0:3:4");
+    EXPECT_THROW(run_pour(1, 1), RuntimeFailure);
+  }
+  EXPECT_EQ(run_pour(2, 150), colours) << "unset: the solver's order again";
+}
