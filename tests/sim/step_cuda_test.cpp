@@ -246,6 +246,25 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
   EXPECT_GE(redos, replans) << "a replan is a redo";
 }
 
+// The CPU's study of a local order (MARBLES_SOLVE_ORDER) changes the
+// results, and the CUDA step does not run it: it refuses, saying why,
+// rather than give other bits than the CPU.
+TEST(StepCuda, RefusesTheLocalOrderStudy) {
+  REQUIRE_DEVICE();
+  auto [s, g] = pour_scene(50, 1);
+  setenv("MARBLES_SOLVE_ORDER", "tiles:8:3:4", 1);
+  try {
+    Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+    unsetenv("MARBLES_SOLVE_ORDER");
+    FAIL() << "the CUDA step was made under MARBLES_SOLVE_ORDER";
+  } catch (const RuntimeFailure& e) {
+    unsetenv("MARBLES_SOLVE_ORDER");
+    EXPECT_NE(std::string(e.what()).find("MARBLES_SOLVE_ORDER"), std::string::npos) << e.what();
+  }
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);  // unset: made
+  EXPECT_EQ(gpu.backend_name(), "cuda");
+}
+
 // A free ball moved far out along x, then back above the bed (the same
 // edit on both backends): far out, the grid outgrows the broad phase's plan
 // once (27 key bits against 15: four sort digits against two, and binary
