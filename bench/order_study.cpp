@@ -10,8 +10,8 @@
 // could keep a tile's bodies on the chip for its local sweeps, so a pass
 // would cost about one sweep's memory traffic. This program measures what
 // each order leaves undone, on the CPU, with the solver's per-contact
-// functions (prepare_one, warm_start_one, solve_one; friction, no rolling
-// resistance, the contacts of the settle scene):
+// functions (prepare_one, warm_start_one, solve_one; friction, and rolling
+// resistance with --rolling):
 //
 //   a pile of close-packed layers (ABC stacking, a rhombus of side x side
 //   spheres a layer, radius 1 cm, on a floor, friction 0.5) held still: each

@@ -198,7 +198,7 @@ ContactSolver::ContactSolver(const SolverSettings& settings, SweepLanes lanes) :
 
 std::optional<LocalOrder> local_order_from_environment() {
   const char* asked = std::getenv("MARBLES_SOLVE_ORDER");
-  if (asked == nullptr || std::string_view(asked) == "colours") return std::nullopt;
+  if (asked == nullptr || *asked == '\0' || std::string_view(asked) == "colours") return std::nullopt;
   LocalOrder o;
   char tail = 0;
   if (std::sscanf(asked, "tiles:%lf:%d:%d%c", &o.tile_diameters, &o.passes, &o.local, &tail) != 3 ||
@@ -216,13 +216,16 @@ void ContactSolver::local_sweeps(const ColourRanges& colours, const BodiesView& 
   real r_max = 0;
   for (std::size_t i = 0; i < world.count; ++i) r_max = std::max(r_max, world.radius[i]);
   const double edge = m_local->tile_diameters * 2 * double(r_max > 0 ? r_max : real(1));
-  // A sphere's cube, 21 bits an axis (coordinates within a million cubes of
-  // the origin: a study's scenes).
+  // A sphere's cube, 21 bits an axis: coordinates clamped to a million
+  // cubes either side of the origin (a non-finite one to 0), so that cubes
+  // farther out merge: a merged cube is still one cube, swept in turn, so
+  // that only locality is lost, never the order's determinism.
   auto cube = [&](std::uint32_t i) {
     const Vec3 p = world.position[i];
     auto axis = [&](real x) {
-      return static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(double(x) / edge)) + (1 << 20)) &
-             0x1fffffu;
+      double c = std::floor(double(x) / edge);
+      c = std::isfinite(c) ? std::clamp(c, -1048575.0, 1048575.0) : 0.0;
+      return static_cast<std::uint64_t>(static_cast<std::int64_t>(c) + (1 << 20)) & 0x1fffffu;
     };
     return (axis(p.x) << 42) | (axis(p.y) << 21) | axis(p.z);
   };

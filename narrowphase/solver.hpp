@@ -65,8 +65,10 @@ SweepLanes best_lanes();
 // diameters and, in each of P passes (in place of the scene's iterations),
 // sweeps each cube's own contacts (both spheres in it, or a sphere and a
 // wall) L times, cubes at once, then the contacts between cubes once,
-// colour by colour. Unset (or `colours`): the solver's order. It changes
-// the results; the CUDA step refuses it.
+// colour by colour. Unset (or empty, or `colours`): the solver's order. It
+// changes the results; the CUDA step refuses it. A study: the watchdog's
+// extra sweeps (set_iterations) do not reach it, and the run's description
+// still names the scene's iterations.
 struct LocalOrder {
   double tile_diameters = 0;
   int passes = 0, local = 0;

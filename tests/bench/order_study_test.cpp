@@ -1,6 +1,6 @@
-// Tests of the order study (bench/order_study.hpp): its local order is the
-// solver's where a single tile holds every contact and each pass sweeps it
-// once (the same updates in the same order: the same bits), and on columns
+// Tests of the order study (bench/order_study.hpp): its tiles' machinery
+// (one tile holding every contact and swept once a pass issues the plain
+// order's updates: the same bits; small tiles do not), and on columns
 // in a box, whose static solution is known (every speed 0, the floor under
 // the whole weight), more sweeps of the solver's order leave less undone.
 #include <gtest/gtest.h>

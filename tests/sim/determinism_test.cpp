@@ -15,6 +15,7 @@
 #include <iterator>
 #include <random>
 
+#include "narrowphase/solver.hpp"
 #include "sim/checkpoint.hpp"
 #include "tests/sim/test_scenes.hpp"
 
@@ -187,43 +188,90 @@ TEST(Determinism, CheckpointsOfBothFormatsLoad) {
   std::remove(old_path.c_str());
 }
 
-namespace {
+// A block of spheres on a cubic lattice, each overlapping its neighbours a
+// little and moving at random (up to 5 cm/s an axis), in free space (no
+// walls, no gravity): every contact is between two spheres, about 10 000 a
+// colour, so the colour loops run in parallel, and the velocity solve has
+// work to do.
+std::uint64_t run_free_block(int threads, int steps, int* iterations = nullptr) {
+#if defined(_OPENMP)
+  const int before = omp_get_max_threads();
+  omp_set_num_threads(threads);
+#endif
+  using scene::Effect;
+  scene::Scene s = make_scene(1e-3, 1, {Effect::collisions, Effect::friction}, 0, 0.5);
+  if (iterations) *iterations = s.solver.iterations;
+  const real r = real(0.01);
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> speed(-0.05, 0.05);
+  auto v = [&] { return real(speed(rng)); };
+  scene::GeneratedParticles g;
+  for (int z = 0; z < 30; ++z)
+    for (int y = 0; y < 30; ++y)
+      for (int x = 0; x < 30; ++x)
+        add_sphere(g, {real(1.98 * r * x), real(1.98 * r * y), real(1.98 * r * z)}, r, {v(), v(), v()});
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  for (int k = 0; k < steps; ++k) sim.step();
+#if defined(_OPENMP)
+  omp_set_num_threads(before);
+#endif
+  EXPECT_GT(sim.last_step().contacts, 60000u) << "the colours must be large enough to run in parallel";
+  return state_hash(sim.world());
+}
 
-// MARBLES_SOLVE_ORDER set while it lives (the solver reads it when made).
-class SolveOrder {
- public:
-  explicit SolveOrder(const char* value) { setenv("MARBLES_SOLVE_ORDER", value, 1); }
-  ~SolveOrder() { unsetenv("MARBLES_SOLVE_ORDER"); }
-  SolveOrder(const SolveOrder&) = delete;
-  SolveOrder& operator=(const SolveOrder&) = delete;
-};
-
-}  // namespace
-
-// The local order of the CPU study (narrowphase/solver.hpp, LocalOrder):
-// one cube around everything swept once a pass, as many passes as the
-// scene's iterations, is the solver's order (the same updates, in the same
-// order within each colour's sphere-disjoint set: the same bits); smaller
-// cubes give another state, the same for every thread count (cubes share no
-// sphere, and the contacts between them go colour by colour); a value it
-// cannot read is refused.
+// The local order of the CPU study (narrowphase/solver.hpp, LocalOrder)
+// against the solver's, where the two must agree bit for bit: one cube
+// around everything swept once a pass (the same updates in the same order),
+// and cubes smaller than a sphere in a scene without walls (every contact
+// between cubes, walked colour by colour as the solver walks them, in
+// parallel within a colour), as many passes as the scene's iterations.
+// Cubes of a few diameters give another state, the same for every thread
+// count (cubes share no sphere).
 TEST(Determinism, LocalOrderStudy) {
-  const std::uint64_t colours = run_pour(2, 150);
+  int iterations = 0;
+  const std::uint64_t block = run_free_block(2, 4, &iterations);
+  const std::string passes = std::to_string(iterations);
   {
-    SolveOrder one_cube("tiles:1e6:10:1");  // pour_scene's solver takes 10 iterations
-    EXPECT_EQ(run_pour(2, 150), colours) << "one cube, one sweep a pass: the solver's order";
+    SolveOrder between("tiles:0.01:" + passes + ":3");
+    EXPECT_EQ(run_free_block(2, 4), block) << "every contact between cubes: the solver's order";
   }
-  std::uint64_t cubes_one = 0;
   {
     SolveOrder cubes("tiles:3:3:4");
-    cubes_one = run_pour(1, 150);
-    EXPECT_EQ(run_pour(2, 150), cubes_one);
-    EXPECT_EQ(run_pour(3, 150), cubes_one);
+    const std::uint64_t one = run_free_block(1, 4);
+    EXPECT_EQ(run_free_block(2, 4), one);
+    EXPECT_EQ(run_free_block(3, 4), one);
+    EXPECT_NE(one, block) << "another order, other bits";
   }
-  EXPECT_NE(cubes_one, colours) << "another order, other bits";
+  auto [s, g] = pour_scene(400, 3);
+  const std::uint64_t pour = run_pour(2, 150);
   {
-    SolveOrder bad("tiles:0:3:4");
-    EXPECT_THROW(run_pour(1, 1), RuntimeFailure);
+    // The pour's box starts at the origin: one cube of a million diameters holds it.
+    SolveOrder one_cube("tiles:1e6:" + std::to_string(s.solver.iterations) + ":1");
+    EXPECT_EQ(run_pour(2, 150), pour) << "one cube, one sweep a pass: the solver's order";
   }
-  EXPECT_EQ(run_pour(2, 150), colours) << "unset: the solver's order again";
+  {
+    SolveOrder cubes("tiles:3:3:4");
+    const std::uint64_t one = run_pour(1, 150);
+    EXPECT_EQ(run_pour(2, 150), one);
+    EXPECT_NE(one, pour) << "another order, other bits";
+  }
+  EXPECT_EQ(run_pour(2, 150), pour) << "restored: the solver's order again";
+}
+
+TEST(Determinism, LocalOrderStudyRefusesWhatItCannotRead) {
+  for (const char* bad : {"tiles:0:3:4", "tiles:8:0:4", "tiles:8:3:0", "tiles:8:3", "tiles:8:3:4x", "tiles:nan:3:4",
+                          "cubes", "tiles:inf:3:4"}) {
+    SolveOrder order(bad);
+    EXPECT_THROW(narrowphase::local_order_from_environment(), RuntimeFailure) << bad;
+  }
+  for (const char* none : {"", "colours"}) {
+    SolveOrder order(none);
+    EXPECT_FALSE(narrowphase::local_order_from_environment().has_value()) << "'" << none << "'";
+  }
+  SolveOrder order("tiles:12:2:6");
+  const auto o = narrowphase::local_order_from_environment();
+  ASSERT_TRUE(o.has_value());
+  EXPECT_EQ(o->tile_diameters, 12.0);
+  EXPECT_EQ(o->passes, 2);
+  EXPECT_EQ(o->local, 6);
 }

@@ -252,14 +252,14 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
 TEST(StepCuda, RefusesTheLocalOrderStudy) {
   REQUIRE_DEVICE();
   auto [s, g] = pour_scene(50, 1);
-  setenv("MARBLES_SOLVE_ORDER", "tiles:8:3:4", 1);
-  try {
-    Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
-    unsetenv("MARBLES_SOLVE_ORDER");
-    FAIL() << "the CUDA step was made under MARBLES_SOLVE_ORDER";
-  } catch (const RuntimeFailure& e) {
-    unsetenv("MARBLES_SOLVE_ORDER");
-    EXPECT_NE(std::string(e.what()).find("MARBLES_SOLVE_ORDER"), std::string::npos) << e.what();
+  {
+    SolveOrder order("tiles:8:3:4");
+    try {
+      Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+      FAIL() << "the CUDA step was made under MARBLES_SOLVE_ORDER";
+    } catch (const RuntimeFailure& e) {
+      EXPECT_NE(std::string(e.what()).find("MARBLES_SOLVE_ORDER"), std::string::npos) << e.what();
+    }
   }
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);  // unset: made
   EXPECT_EQ(gpu.backend_name(), "cuda");

@@ -6,7 +6,9 @@
 #include <cstring>
 #include <cstdint>
 #include <initializer_list>
+#include <optional>
 #include <random>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -23,6 +25,25 @@ inline broadphase::Backend test_backend() {
   const char* v = std::getenv("MARBLES_TEST_BACKEND");
   return v != nullptr && std::strcmp(v, "cuda") == 0 ? broadphase::Backend::cuda : broadphase::Backend::cpu;
 }
+
+// MARBLES_SOLVE_ORDER (narrowphase/solver.hpp: LocalOrder) set to `value`
+// while it lives, then as it was (a solver reads it when made).
+class SolveOrder {
+ public:
+  explicit SolveOrder(const std::string& value) {
+    if (const char* was = std::getenv("MARBLES_SOLVE_ORDER")) m_was = was;
+    setenv("MARBLES_SOLVE_ORDER", value.c_str(), 1);
+  }
+  ~SolveOrder() {
+    if (m_was) setenv("MARBLES_SOLVE_ORDER", m_was->c_str(), 1);
+    else unsetenv("MARBLES_SOLVE_ORDER");
+  }
+  SolveOrder(const SolveOrder&) = delete;
+  SolveOrder& operator=(const SolveOrder&) = delete;
+
+ private:
+  std::optional<std::string> m_was;
+};
 
 inline scene::Scene make_scene(double dt, int substeps, std::initializer_list<scene::Effect> effects,
                                double restitution, double friction = 0, double rolling_friction = 0,
