@@ -24,17 +24,35 @@ using namespace marbles::testing;
 
 namespace {
 
-std::uint64_t run_pour(int threads, int steps) {
+// OpenMP's thread count set while it lives, then as it was (however the
+// scope ends).
+class Threads {
+ public:
+  explicit Threads(int threads) {
 #if defined(_OPENMP)
-  const int before = omp_get_max_threads();
-  omp_set_num_threads(threads);
+    m_before = omp_get_max_threads();
+    omp_set_num_threads(threads);
+#else
+    (void)threads;
 #endif
+  }
+  ~Threads() {
+#if defined(_OPENMP)
+    omp_set_num_threads(m_before);
+#endif
+  }
+  Threads(const Threads&) = delete;
+  Threads& operator=(const Threads&) = delete;
+
+ private:
+  int m_before = 1;
+};
+
+std::uint64_t run_pour(int threads, int steps) {
+  const Threads team(threads);
   auto [s, g] = pour_scene(400, 3);
   Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
   for (int k = 0; k < steps; ++k) sim.step();
-#if defined(_OPENMP)
-  omp_set_num_threads(before);
-#endif
   return state_hash(sim.world());
 }
 
@@ -44,10 +62,7 @@ std::uint64_t run_pour(int threads, int steps) {
 // settling in a box: ~140,000 contacts, about 20,000 per colour, so every
 // OpenMP path runs in parallel (contact gathering, reach, colours, cache).
 std::uint64_t run_block(int threads, int steps) {
-#if defined(_OPENMP)
-  const int before = omp_get_max_threads();
-  omp_set_num_threads(threads);
-#endif
+  const Threads team(threads);
   using scene::Effect;
   scene::Scene s = make_scene(1e-3, 1,
                               {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
@@ -67,9 +82,6 @@ std::uint64_t run_block(int threads, int steps) {
                    r);
   Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
   for (int k = 0; k < steps; ++k) sim.step();
-#if defined(_OPENMP)
-  omp_set_num_threads(before);
-#endif
   EXPECT_GT(sim.last_step().contacts, 100000u) << "the block must be large enough to run the parallel paths";
   return state_hash(sim.world());
 }
@@ -194,10 +206,7 @@ TEST(Determinism, CheckpointsOfBothFormatsLoad) {
 // colour, so the colour loops run in parallel, and the velocity solve has
 // work to do.
 std::uint64_t run_free_block(int threads, int steps, int* iterations = nullptr) {
-#if defined(_OPENMP)
-  const int before = omp_get_max_threads();
-  omp_set_num_threads(threads);
-#endif
+  const Threads team(threads);
   using scene::Effect;
   scene::Scene s = make_scene(1e-3, 1, {Effect::collisions, Effect::friction}, 0, 0.5);
   if (iterations) *iterations = s.solver.iterations;
@@ -212,9 +221,6 @@ std::uint64_t run_free_block(int threads, int steps, int* iterations = nullptr) 
         add_sphere(g, {real(1.98 * r * x), real(1.98 * r * y), real(1.98 * r * z)}, r, {v(), v(), v()});
   Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
   for (int k = 0; k < steps; ++k) sim.step();
-#if defined(_OPENMP)
-  omp_set_num_threads(before);
-#endif
   EXPECT_GT(sim.last_step().contacts, 60000u) << "the colours must be large enough to run in parallel";
   return state_hash(sim.world());
 }
