@@ -1,0 +1,59 @@
+#!/usr/bin/env python3
+"""scripts/ncu_table.py NCU_CSV — Nsight Compute's CSV (one row per kernel
+and metric) as a table by kernel: launches, time, share, and where measured
+the DRAM and L2 bytes with their rates. Used by scripts/gpu-profile."""
+import csv
+import re
+import sys
+from collections import defaultdict
+
+TIME = {"ns": 1e-6, "nsecond": 1e-6, "us": 1e-3, "usecond": 1e-3, "ms": 1.0, "msecond": 1.0, "s": 1e3, "second": 1e3}
+BYTES = {"byte": 1, "B": 1, "Kbyte": 1e3, "KB": 1e3, "Mbyte": 1e6, "MB": 1e6, "Gbyte": 1e9, "GB": 1e9}
+
+
+def short(name):
+    name = re.sub(r"\(.*", "", name).replace("void ", "")
+    return re.sub(r"marbles::(narrowphase::|broadphase::|integrator::)?(cuda::)?(\(anonymous namespace\)::)?", "", name)
+
+
+def main(path):
+    rows = [r for r in csv.reader(line for line in open(path) if line.startswith('"'))]
+    if not rows:
+        print(f"ncu_table: no rows in {path}")
+        return 1
+    head, rows = rows[0], rows[1:]
+    ki, mi, ui, vi = (head.index(k) for k in ("Kernel Name", "Metric Name", "Metric Unit", "Metric Value"))
+    ms, dram, l2, count = defaultdict(float), defaultdict(float), defaultdict(float), defaultdict(int)
+    for r in rows:
+        name, metric, unit = short(r[ki]), r[mi], r[ui]
+        value = float(r[vi].replace(",", "") or 0)
+        if metric == "gpu__time_duration.sum":
+            if unit not in TIME:
+                print(f"ncu_table: unknown time unit {unit!r}")
+                return 1
+            ms[name] += value * TIME[unit]
+            count[name] += 1
+        elif metric in ("dram__bytes.sum", "lts__t_bytes.sum"):
+            if unit not in BYTES:
+                print(f"ncu_table: unknown byte unit {unit!r}")
+                return 1
+            (dram if metric.startswith("dram") else l2)[name] += value * BYTES[unit]
+    all_ms = sum(ms.values())
+    launches = sum(count.values())
+    print(f"{launches} launches, {all_ms:.2f} ms of kernels in the step (each kernel alone, serialised)")
+    with_bytes = bool(dram)
+    line = f"{'kernel':60} {'launches':>8} {'ms':>8} {'%':>6}"
+    if with_bytes:
+        line += f" {'DRAM MB':>9} {'TB/s':>6} {'L2 MB':>9} {'TB/s':>6}"
+    print(line)
+    for name, t in sorted(ms.items(), key=lambda kv: -kv[1])[:30]:
+        line = f"{name[:60]:60} {count[name]:>8} {t:8.3f} {100 * t / all_ms:6.1f}"
+        if with_bytes:
+            rate = lambda b: b / (t * 1e-3) / 1e12 if t > 0 else 0.0
+            line += f" {dram[name] / 1e6:9.1f} {rate(dram[name]):6.2f} {l2[name] / 1e6:9.1f} {rate(l2[name]):6.2f}"
+        print(line)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1]) if len(sys.argv) == 2 else (print("usage: ncu_table.py NCU_CSV") or 2))
