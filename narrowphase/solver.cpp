@@ -406,14 +406,17 @@ int ContactSolver::project_positions(const std::vector<Contact>& contacts, const
   m_packed_from = nullptr;
   const SweepRecords& records = m_records;
   // Sweeps until one moves no contact by more than settled_move
-  // (project_one), position_iterations at most: a pile at rest takes one, a
-  // pour's impacts the most.
+  // (project_one), position_iterations at most, and on while one moves some
+  // contact by more than deep_move (projection_sweep_settings): a pile at
+  // rest takes one, a pour's impacts the most.
   int sweeps = 0;
-  for (bool moved = true; moved && sweeps < m_settings.position_iterations; ++sweeps) {
+  const int limit = projection_limit(m_settings);
+  for (bool moved = true; moved && sweeps < limit; ++sweeps) {
     moved = false;
+    const SolverSettings settings = projection_sweep_settings(m_settings, sweeps);
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
       moved = any_in_colour(b, e, [&](std::uint32_t k) {
-        return project_one(load_position_contact(records, k), bodies, ws, m_settings);
+        return project_one(load_position_contact(records, k), bodies, ws, settings);
       }) || moved;
     });
   }

@@ -137,7 +137,8 @@ __device__ __forceinline__ void raise_once(bool happened, bool& raised, unsigned
 // by colour, when the impact stage hit something (hit: its first pass's
 // flag, null when it did not run; only a hit gives a shift); then sweeps
 // until one moves nothing beyond settled_move (project_one), at most
-// `sweeps`. Sweep `it` sets moved[it] (zeroed before), which every block
+// `sweeps` (projection_limit), each with projection_sweep_settings, as
+// solver.cpp runs them. Sweep `it` sets moved[it] (zeroed before), which every block
 // reads after the barrier that ends the sweep's last colour. *total += the
 // sweeps run (solver.cpp ends the projection there too).
 __global__ void project_kernel(ColourPlan plan, SweepRecords records, const Real4* impact, BodiesView bodies,
@@ -152,8 +153,9 @@ __global__ void project_kernel(ColourPlan plan, SweepRecords records, const Real
   for (int it = 0; it < sweeps; ++it) {
     ++ran;
     bool raised = false;
+    const SolverSettings sweep = projection_sweep_settings(s, it);
     walk_colours(plan, false, grid, [&](std::uint32_t k) {
-      raise_once(project_one(load_position_contact(records, k), bodies, walls, s), raised, moved + it);
+      raise_once(project_one(load_position_contact(records, k), bodies, walls, sweep), raised, moved + it);
     });
     if (!flag_set(moved + it)) break;
   }

@@ -27,13 +27,35 @@ struct SolverSettings {
   real slop = real(0.005);        // fraction of the smaller radius left overlapping
   real beta = real(0.8);          // fraction of the remaining overlap removed per projection
   real max_correction = real(0.2);// fraction of the smaller radius moved per projection, at most
-  int position_iterations = 6;    // projection sweeps per substep, at most
+  int position_iterations = 6;    // projection sweeps per substep, at most, but see below
   real settled_move = real(0.001);// fraction of the smaller radius: a projection sweep in which no contact
                                   // moves its bodies further apart than this is the last (project_one)
+  // Past position_iterations, the projection sweeps on, up to this many in
+  // all, while a sweep still moves some contact's bodies apart by more than
+  // deep_move of its smaller radius: an impact's deep overlap is removed
+  // within its substep, where a pile at rest (or a stack under a heavy
+  // sphere, whose projection and velocity solve would work against each
+  // other) stops as before (projection_sweep_settings).
+  int deep_position_iterations = 20;
+  real deep_move = real(0.02);
   bool warm_start = true;         // start from the last substep's impulses
   Vec3 wall_accel{};              // m/s^2: the spheres' acceleration seen by wall impacts (gravity under
                                   // velocity Verlet, whose impacts see half-step velocities; else 0)
 };
+
+// The projection's sweeps at most (0 without a projection).
+MARBLES_HD_INLINE int projection_limit(const SolverSettings& s) {
+  if (s.position_iterations <= 0) return 0;
+  return s.deep_position_iterations > s.position_iterations ? s.deep_position_iterations : s.position_iterations;
+}
+// The settings projection sweep `it` (from 0) runs with: from the last of
+// position_iterations on, a sweep is the last unless it moved some contact
+// by more than deep_move (the sweeps both backends run).
+MARBLES_HD_INLINE SolverSettings projection_sweep_settings(const SolverSettings& s, int it) {
+  SolverSettings t = s;
+  if (it + 1 >= s.position_iterations) t.settled_move = s.deep_move;
+  return t;
+}
 
 // f(friction, rolling) for the terms a scene asks for, each as a
 // std::bool_constant (itself a template argument: X<friction, rolling>): the

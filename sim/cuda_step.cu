@@ -406,7 +406,7 @@ class CudaStep final : public StepBackend {
   // read-back.
   void project_positions() override {
     if (m_count == 0) return;
-    const int sweeps = std::max(0, m_model.solver.position_iterations);
+    const int sweeps = narrowphase::projection_limit(m_model.solver);
     const unsigned* hit = m_impact_candidates ? m_hit.get_as<unsigned>() : nullptr;
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(std::max(sweeps, 1)));
     if (sweeps > 0) MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));

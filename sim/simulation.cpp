@@ -146,9 +146,10 @@ void Simulation::inject_fault() {
         Vec3 normal;
         real separation = 0;
         if (!narrowphase::wall_gap(shape, w.position[0], w.radius[0], normal, separation)) continue;
-        // 10 radii beyond the face: further than the projection can bring
-        // it back within a step (max_correction a sweep), a true escape.
-        w.position[0] = w.position[0] - normal * (separation + 10 * w.radius[0]);
+        // 20 radii beyond the face: further than the projection can bring
+        // it back within a step (max_correction a sweep, deep_position_iterations
+        // sweeps), a true escape.
+        w.position[0] = w.position[0] - normal * (separation + 20 * w.radius[0]);
         break;
       }
       break;

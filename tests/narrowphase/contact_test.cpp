@@ -347,18 +347,23 @@ TEST(Solver, CacheFromTheRecordsEqualsCacheFromTheContacts) {
 }
 
 // The projection sweeps until one moves no contact by more than
-// settled_move (position_iterations at most): the positions of a plain
-// serial loop over the colour-major contacts that stops at that sweep, bit
-// for bit, on lattices of touching spheres on a floor: one jittered by 1 %
-// of a radius (overlaps of a few per cent here and there: several sweeps),
-// one pressed evenly just past the slop (one sweep).
+// settled_move (position_iterations at most), and past that while one moves
+// some contact by more than deep_move (deep_position_iterations at most):
+// the positions of a plain serial loop over the colour-major contacts that
+// stops at that sweep, bit for bit, on lattices of touching spheres on a
+// floor: one jittered by 1 % of a radius (overlaps of a few per cent here
+// and there: several sweeps), one pressed evenly just past the slop (one
+// sweep), one jittered by 15 % (deep overlaps: more sweeps than
+// position_iterations, and other bits than stopping there).
 TEST(Solver, ProjectionEndsAtTheFirstSettledSweep) {
   const real r = real(0.01);
+  enum class Sweeps { one, several, deep };
   struct Case {
     double squeeze, jitter;  // pitch 2 r squeeze; m
-    bool several;            // sweeps expected: several, or one
+    Sweeps expect;
   };
-  for (const Case& cs : {Case{1.0, 1e-4, true}, Case{0.99745, 2e-7, false}}) {
+  for (const Case& cs : {Case{1.0, 1e-4, Sweeps::several}, Case{0.99745, 2e-7, Sweeps::one},
+                         Case{1.0, 1.5e-3, Sweeps::deep}}) {
     const double squeeze = cs.squeeze;
     std::mt19937_64 rng(5);
     Lattice lattice(16, r, 2 * r * squeeze, r * squeeze, cs.jitter, rng);
@@ -379,13 +384,24 @@ TEST(Solver, ProjectionEndsAtTheFirstSettledSweep) {
     BodiesView oracle = bodies;
     oracle.position = expected.data();
     int sweeps = 0;
-    for (bool moved = true; moved && sweeps < s.position_iterations; ++sweeps) {
+    const int most = std::max(s.position_iterations, s.deep_position_iterations);
+    for (bool moved = true; moved && sweeps < most; ++sweeps) {
+      SolverSettings t = s;  // from the last regular sweep on, only a deep move goes on
+      if (sweeps + 1 >= s.position_iterations) t.settled_move = s.deep_move;
       moved = false;
-      for (const Contact& c : contacts) moved = project_one(c, oracle, shapes.data(), s) || moved;
+      for (const Contact& c : contacts) moved = project_one(c, oracle, shapes.data(), t) || moved;
     }
     EXPECT_EQ(ContactSolver(s).project_positions(contacts, colours, bodies, shapes), sweeps) << "squeeze " << squeeze;
     EXPECT_EQ(std::memcmp(pos.data(), expected.data(), sizeof(Vec3) * n), 0) << "squeeze " << squeeze;
-    if (cs.several) {
+    if (cs.expect == Sweeps::deep) {
+      EXPECT_GT(sweeps, s.position_iterations) << "deep overlaps sweep on";
+      SolverSettings regular = s;
+      regular.deep_position_iterations = 0;  // the limit alone, as before
+      std::vector<Vec3> stopped = pos0;
+      bodies.position = stopped.data();
+      EXPECT_EQ(ContactSolver(regular).project_positions(contacts, colours, bodies, shapes), s.position_iterations);
+      EXPECT_NE(std::memcmp(stopped.data(), expected.data(), sizeof(Vec3) * n), 0);
+    } else if (cs.expect == Sweeps::several) {
       EXPECT_GT(sweeps, 1);
       EXPECT_LT(sweeps, s.position_iterations);  // ended early, so the sweeps' limit alone gives other bits:
       SolverSettings all = s;
