@@ -284,7 +284,7 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
     std::swap(d_keys, d_keys_alt);
     std::swap(d_ids, d_ids_alt);
   }
-  stats.sort_passes = (p.key_bits + 7) / 8;
+  stats.sort_passes = sort_digits(p.key_bits);
   mark(2, s);
 
   // --- cell list: spheres in sorted order, cell lower bounds -------------------------
