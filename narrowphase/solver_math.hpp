@@ -374,7 +374,9 @@ MARBLES_HD_INLINE void solve_loaded(const SweepRecords& s, std::uint32_t k, Cont
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
   const bool was_clear = impulses_clear<Friction, Rolling>(c);
-  const bool a_may_flip = has_minus_zero(A), b_may_flip = has_minus_zero(B);
+  // Asked only where the update may leave everything as it was: a contact
+  // that carried an impulse writes its bodies anyway.
+  const bool a_may_flip = was_clear && has_minus_zero(A), b_may_flip = was_clear && has_minus_zero(B);
   set_masses<Friction, Rolling>(c, A, B);
   solve_states<Friction, Rolling>(c, A, B, inv_h);
   const bool clear = was_clear && impulses_clear<Friction, Rolling>(c);
