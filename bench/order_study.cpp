@@ -39,6 +39,7 @@
 
 #include "broadphase/broadphase.hpp"
 #include "narrowphase/contacts.hpp"
+#include "narrowphase/solver.hpp"
 #include "narrowphase/solver_math.hpp"
 
 namespace marbles::order_study {
@@ -103,27 +104,19 @@ std::vector<narrowphase::WallShape> walls_for(bool cubic, int side, real r) {
   return walls;
 }
 
-// The contacts (colour-major, as the colouring sorted them) of each tile and
-// those between tiles; within each list the colour-major order.
+// Each tile's contacts (colour-major, as the colouring sorted them: the
+// solver's own cubes, split_by_cube) and those between tiles.
 void split_by_tile(const std::vector<Contact>& contacts, const BodiesView& bodies, real edge,
                    std::vector<std::vector<std::uint32_t>>& tiles, std::vector<std::uint32_t>& between) {
-  auto tile_of = [&](std::uint32_t i) {
-    const Vec3 p = bodies.position[i];
-    const auto c = [&](real x) { return static_cast<long long>(std::floor(x / edge)); };
-    return (c(p.x) * 4096 + c(p.y)) * 4096 + c(p.z);
-  };
-  std::vector<std::pair<long long, std::uint32_t>> own;
-  for (std::uint32_t k = 0; k < contacts.size(); ++k) {
-    const Contact& c = contacts[k];
-    const long long t = tile_of(c.a);
-    if (narrowphase::is_wall(c.b) || tile_of(c.b) == t) own.push_back({t, k});
-    else between.push_back(k);
+  std::vector<narrowphase::BodyPair> pairs(contacts.size());
+  for (std::size_t k = 0; k < contacts.size(); ++k) pairs[k] = {contacts[k].a, contacts[k].b};
+  narrowphase::CubeSplit split;
+  narrowphase::split_by_cube(pairs.data(), static_cast<std::uint32_t>(pairs.size()), bodies.position, edge, split);
+  for (std::size_t t = 0; t + 1 < split.starts.size(); ++t) {
+    tiles.emplace_back();
+    for (std::uint32_t i = split.starts[t]; i < split.starts[t + 1]; ++i) tiles.back().push_back(split.own[i].second);
   }
-  std::stable_sort(own.begin(), own.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
-  for (std::size_t i = 0; i < own.size(); ++i) {
-    if (i == 0 || own[i].first != own[i - 1].first) tiles.emplace_back();
-    tiles.back().push_back(own[i].second);
-  }
+  between = std::move(split.between);
 }
 
 constexpr real kRadius = real(0.01), kSubstep = real(1e-3), kGravity = real(9.81);

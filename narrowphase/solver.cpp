@@ -209,19 +209,9 @@ std::optional<LocalOrder> local_order_from_environment() {
   return o;
 }
 
-void ContactSolver::local_sweeps(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies,
-                                 real inv_h) {
-  const SweepRecords& s = m_records;
-  const auto m = static_cast<std::uint32_t>(m_record_count);
-  real r_max = 0;
-  for (std::size_t i = 0; i < world.count; ++i) r_max = std::max(r_max, world.radius[i]);
-  const double edge = m_local->tile_diameters * 2 * double(r_max > 0 ? r_max : real(1));
-  // A sphere's cube, 21 bits an axis: coordinates clamped to a million
-  // cubes either side of the origin (a non-finite one to 0), so that cubes
-  // farther out merge: a merged cube is still one cube, swept in turn, so
-  // that only locality is lost, never the order's determinism.
+void split_by_cube(const BodyPair* pairs, std::uint32_t count, const Vec3* position, double edge, CubeSplit& out) {
   auto cube = [&](std::uint32_t i) {
-    const Vec3 p = world.position[i];
+    const Vec3 p = position[i];
     auto axis = [&](real x) {
       double c = std::floor(double(x) / edge);
       c = std::isfinite(c) ? std::clamp(c, -1048575.0, 1048575.0) : 0.0;
@@ -229,58 +219,66 @@ void ContactSolver::local_sweeps(const ColourRanges& colours, const BodiesView& 
     };
     return (axis(p.x) << 42) | (axis(p.y) << 21) | axis(p.z);
   };
-  // Each cube's own contacts, cube by cube, in the colour-major order within;
-  // those between cubes in the colour-major order, with each colour's start.
-  m_tiled.clear();
-  m_between.clear();
-  for (std::uint32_t k = 0; k < m; ++k) {
-    const BodyPair ab = s.bodies[k];
+  out.own.clear();
+  out.starts.clear();
+  out.between.clear();
+  for (std::uint32_t k = 0; k < count; ++k) {
+    const BodyPair ab = pairs[k];
     const std::uint64_t t = cube(ab.a);
-    if (is_wall(ab.b) || cube(ab.b) == t) m_tiled.push_back({t, k});
-    else m_between.push_back(k);
+    if (is_wall(ab.b) || cube(ab.b) == t) out.own.push_back({t, k});
+    else out.between.push_back(k);
   }
-  std::stable_sort(m_tiled.begin(), m_tiled.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
-  std::vector<std::uint32_t> start;
-  for (std::uint32_t i = 0; i < m_tiled.size(); ++i)
-    if (i == 0 || m_tiled[i].first != m_tiled[i - 1].first) start.push_back(i);
-  start.push_back(static_cast<std::uint32_t>(m_tiled.size()));
-  const std::uint32_t last = colours.colours;  // the overflow set's
-  std::vector<std::uint32_t> from(last + 2);
-  for (std::uint32_t c = 0; c <= last; ++c)
-    from[c] = static_cast<std::uint32_t>(std::lower_bound(m_between.begin(), m_between.end(), colours.begin[c]) -
-                                         m_between.begin());
-  from[last + 1] = static_cast<std::uint32_t>(m_between.size());
+  std::stable_sort(out.own.begin(), out.own.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+  for (std::uint32_t i = 0; i < out.own.size(); ++i)
+    if (i == 0 || out.own[i].first != out.own[i - 1].first) out.starts.push_back(i);
+  out.starts.push_back(static_cast<std::uint32_t>(out.own.size()));
+}
+
+void ContactSolver::local_sweeps(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies,
+                                 real inv_h) {
+  const SweepRecords& s = m_records;
+  real r_max = 0;
+  for (std::size_t i = 0; i < world.count; ++i) r_max = std::max(r_max, world.radius[i]);
+  const double edge = m_local->tile_diameters * 2 * double(r_max > 0 ? r_max : real(1));
+  split_by_cube(s.bodies, static_cast<std::uint32_t>(m_record_count), world.position, edge, m_cubes);
+  // The contacts between cubes are in the records' colour-major order: each
+  // colour's first among them, as ColourRanges::begin gives the records'.
+  const std::vector<std::uint32_t>& between = m_cubes.between;
+  m_between_begin.resize(std::size_t(colours.colours) + 2);
+  for (std::uint32_t c = 0; c <= colours.colours; ++c)
+    m_between_begin[c] = static_cast<std::uint32_t>(
+        std::lower_bound(between.begin(), between.end(), colours.begin[c]) - between.begin());
+  m_between_begin[colours.colours + 1] = static_cast<std::uint32_t>(between.size());
 
   with_terms(m_settings.friction, m_settings.rolling, [&](auto friction, auto rolling) {
     auto solve = [&](std::uint32_t k) { solve_record<friction, rolling>(s, k, bodies, inv_h); };
-    const auto tiles = static_cast<std::ptrdiff_t>(start.size()) - 1;
+    const std::vector<std::uint32_t>& start = m_cubes.starts;
+    const auto& own = m_cubes.own;
+    const auto cubes = static_cast<std::ptrdiff_t>(start.size()) - 1;
     for (int p = 0; p < m_local->passes; ++p) {
       // The cubes share no sphere: at once, each one's sweeps in turn.
-#pragma omp parallel for schedule(dynamic, 1) if (tiles > 1)
-      for (std::ptrdiff_t t = 0; t < tiles; ++t)
+#pragma omp parallel for schedule(dynamic, 1) if (cubes > 1)
+      for (std::ptrdiff_t t = 0; t < cubes; ++t)
         for (int l = 0; l < m_local->local; ++l) {
           if ((l + p) % 2 == 0)
-            for (std::uint32_t i = start[t]; i < start[t + 1]; ++i) solve(m_tiled[i].second);
+            for (std::uint32_t i = start[t]; i < start[t + 1]; ++i) solve(own[i].second);
           else
-            for (std::uint32_t i = start[t + 1]; i-- > start[t];) solve(m_tiled[i].second);
+            for (std::uint32_t i = start[t + 1]; i-- > start[t];) solve(own[i].second);
         }
-      // Between cubes: colour by colour as visit_colours walks them (the
-      // overflow set last forwards, first backwards, one by one).
-      const bool backwards = p % 2 == 1;
-      for (std::uint32_t j = 0; j <= last; ++j) {
-        const std::uint32_t c = backwards ? last - j : j;
-        const std::uint32_t b = from[c], e = from[c + 1];
-        if (c == last) {
-          if (backwards)
-            for (std::uint32_t i = e; i-- > b;) solve(m_between[i]);
-          else
-            for (std::uint32_t i = b; i < e; ++i) solve(m_between[i]);
-          continue;
-        }
-        const auto count = static_cast<std::ptrdiff_t>(e - b);
+      // Between cubes: colour by colour, in the solver's walk (visit_colours).
+      visit_colours(m_between_begin, colours.colours, p % 2 == 1,
+                    [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
+                      if (serial) {
+                        if (reversed)
+                          for (std::uint32_t i = e; i-- > b;) solve(between[i]);
+                        else
+                          for (std::uint32_t i = b; i < e; ++i) solve(between[i]);
+                        return;
+                      }
+                      const auto count = static_cast<std::ptrdiff_t>(e - b);
 #pragma omp parallel for schedule(static) if (count >= kParallelFrom)
-        for (std::ptrdiff_t i = 0; i < count; ++i) solve(m_between[b + static_cast<std::uint32_t>(i)]);
-      }
+                      for (std::ptrdiff_t i = 0; i < count; ++i) solve(between[b + static_cast<std::uint32_t>(i)]);
+                    });
     }
   });
 }

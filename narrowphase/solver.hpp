@@ -77,6 +77,19 @@ struct LocalOrder {
 // RuntimeFailure on a value it cannot read.
 std::optional<LocalOrder> local_order_from_environment();
 
+// The local order's cubes: contact k (its bodies pairs[k]) is its cube's own
+// where both spheres lie in one cube of edge `edge` (or b is a wall), else
+// it lies between cubes. A sphere's cube is its centre's, 21 bits an axis
+// (clamped to a million cubes either side of the origin, a non-finite
+// coordinate to 0: cubes farther out merge, which loses locality, never the
+// order's determinism).
+struct CubeSplit {
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> own;  // (cube, k), by cube, k ascending within
+  std::vector<std::uint32_t> starts;   // each cube's first in `own`, then own.size()
+  std::vector<std::uint32_t> between;  // k ascending
+};
+void split_by_cube(const BodyPair* pairs, std::uint32_t count, const Vec3* position, double edge, CubeSplit& out);
+
 class ContactSolver {
  public:
   // `lanes`: at most what the CPU supports.
@@ -152,8 +165,8 @@ class ContactSolver {
   mutable const Contact* m_packed_from = nullptr;
   const Contact* m_pending_from = nullptr;  // the contacts whose impulses the records hold, not yet unpacked
   std::optional<LocalOrder> m_local = local_order_from_environment();
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> m_tiled;  // the local order's scratch
-  std::vector<std::uint32_t> m_between;
+  CubeSplit m_cubes;                      // the local order's scratch
+  std::vector<std::uint32_t> m_between_begin;  // its contacts between cubes, by colour
 };
 
 }  // namespace marbles::narrowphase
