@@ -210,15 +210,7 @@ std::optional<LocalOrder> local_order_from_environment() {
 }
 
 void split_by_cube(const BodyPair* pairs, std::uint32_t count, const Vec3* position, double edge, CubeSplit& out) {
-  auto cube = [&](std::uint32_t i) {
-    const Vec3 p = position[i];
-    auto axis = [&](real x) {
-      double c = std::floor(double(x) / edge);
-      c = std::isfinite(c) ? std::clamp(c, -1048575.0, 1048575.0) : 0.0;
-      return static_cast<std::uint64_t>(static_cast<std::int64_t>(c) + (1 << 20)) & 0x1fffffu;
-    };
-    return (axis(p.x) << 42) | (axis(p.y) << 21) | axis(p.z);
-  };
+  auto cube = [&](std::uint32_t i) { return local_cube(position[i], edge); };
   out.own.clear();
   out.starts.clear();
   out.between.clear();

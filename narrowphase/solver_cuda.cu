@@ -3,7 +3,9 @@
 #include "narrowphase/solver_cuda.cuh"
 
 #include <cooperative_groups.h>
+#include <cub/device/device_radix_sort.cuh>
 
+#include <algorithm>
 #include <utility>
 
 namespace marbles::narrowphase::cuda {
@@ -209,6 +211,128 @@ __global__ void max_overlap_kernel(SweepRecords records, std::uint32_t n, Bodies
   ::marbles::cuda::warp_atomic_max(deepest, ::marbles::cuda::bits_of(d));
 }
 
+
+// --- the local order (LocalSweepsCuda) -----------------------------------------
+// A contact between cubes sorts after every cube's own (a cube is 63 bits).
+constexpr std::uint64_t kBetweenCubes = ~std::uint64_t(0);
+
+// Record k's cube where it is that cube's own (both spheres in it, or b a
+// wall), else kBetweenCubes; order[k] = k, so the stable sort keeps k
+// ascending within a cube, as split_by_cube does.
+__global__ void cube_keys_kernel(const BodyPair* pairs, std::uint32_t n, const Vec3* position, double edge,
+                                 std::uint64_t* keys, std::uint32_t* order) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
+    const BodyPair ab = pairs[k];
+    const std::uint64_t t = local_cube(position[ab.a], edge);
+    keys[k] = is_wall(ab.b) || local_cube(position[ab.b], edge) == t ? t : kBetweenCubes;
+    order[k] = k;
+  }
+}
+
+// heads[k] = 1 where sorted key k starts a cube; heads[n] = 0.
+__global__ void cube_heads_kernel(const std::uint64_t* keys, std::uint32_t n, std::uint32_t* heads) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= n; k += gridDim.x * blockDim.x)
+    heads[k] = k < n && keys[k] != kBetweenCubes && (k == 0 || keys[k - 1] != keys[k]) ? 1u : 0u;
+}
+
+// starts[slot[k]] = k at each head; starts[cubes] = the own contacts' count
+// (cubes = slot[n]).
+__global__ void cube_starts_kernel(const std::uint64_t* keys, std::uint32_t n, const std::uint32_t* heads,
+                                   const std::uint32_t* slot, std::uint32_t* starts) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k <= n; k += gridDim.x * blockDim.x) {
+    if (k < n && heads[k]) starts[slot[k]] = k;
+    const bool own_before = k > 0 && keys[k - 1] != kBetweenCubes;
+    const bool own_here = k < n && keys[k] != kBetweenCubes;
+    if ((k == 0 && !own_here) || (own_before && !own_here)) starts[slot[n]] = k;
+  }
+}
+
+// First i in [b, e) with order[i] >= v (order ascending there).
+__device__ std::uint32_t first_at_or_past(const std::uint32_t* order, std::uint32_t b, std::uint32_t e,
+                                          std::uint32_t v) {
+  while (b < e) {
+    const std::uint32_t m = b + (e - b) / 2;
+    if (order[m] < v) b = m + 1;
+    else e = m;
+  }
+  return b;
+}
+
+// The contacts between cubes, order[own, n): each colour's first among them
+// (ContactSolver::local_sweeps' m_between_begin), as positions in order.
+__global__ void between_begin_kernel(const std::uint32_t* order, std::uint32_t n, const std::uint32_t* starts,
+                                     const std::uint32_t* cubes, ColourPlan plan, std::uint32_t* between_begin) {
+  const std::uint32_t own = starts[*cubes];
+  for (std::uint32_t c = threadIdx.x; c <= plan.colours + 1; c += blockDim.x)
+    between_begin[c] = c <= plan.colours ? first_at_or_past(order, own, n, plan.begin[c]) : n;
+}
+
+// One pass over the cubes: each cube's own contacts swept `local` times,
+// forwards where (l + pass) is even (colour by colour, the overflow last, one
+// thread in order), else backwards (the overflow first, in reverse, then the
+// colours from the last); a barrier after each. Within a colour no two
+// contacts share a sphere and no two cubes share one, so the threads' order
+// changes no bit: the CPU's walk, one by one in record order.
+template <bool Friction, bool Rolling>
+__global__ void local_pass_kernel(SweepRecords s, const std::uint32_t* order, const std::uint32_t* starts,
+                                  const std::uint32_t* cubes, ColourPlan plan, SolverBody* bodies, real inv_h,
+                                  int pass, int local) {
+  __shared__ std::uint32_t bound[kMaxColours + 2];
+  const std::uint32_t count = *cubes, colours = plan.colours;
+  for (std::uint32_t t = blockIdx.x; t < count; t += gridDim.x) {
+    const std::uint32_t b = starts[t], e = starts[t + 1];
+    for (std::uint32_t c = threadIdx.x; c <= colours + 1; c += blockDim.x)
+      bound[c] = c <= colours ? first_at_or_past(order, b, e, plan.begin[c]) : e;
+    __syncthreads();
+    auto colour = [&](std::uint32_t c) {
+      const std::uint32_t from = bound[c], to = bound[c + 1];
+      if (from == to) return;
+      for (std::uint32_t i = from + threadIdx.x; i < to; i += blockDim.x)
+        solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
+      __syncthreads();
+    };
+    auto overflow = [&](bool backwards) {
+      const std::uint32_t from = bound[colours], to = bound[colours + 1];
+      if (from == to) return;
+      if (threadIdx.x == 0) {
+        if (backwards)
+          for (std::uint32_t i = to; i-- > from;) solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
+        else
+          for (std::uint32_t i = from; i < to; ++i) solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
+      }
+      __syncthreads();
+    };
+    for (int l = 0; l < local; ++l) {
+      if ((l + pass) % 2 == 0) {
+        for (std::uint32_t c = 0; c < colours; ++c) colour(c);
+        overflow(false);
+      } else {
+        overflow(true);
+        for (std::uint32_t c = colours; c-- > 0;) colour(c);
+      }
+    }
+    __syncthreads();  // every thread done with bound[] before the next cube's
+  }
+}
+
+// Colour c of the contacts between cubes: in parallel, or (serial) by one
+// thread in order, reversed when asked.
+template <bool Friction, bool Rolling>
+__global__ void between_kernel(SweepRecords s, const std::uint32_t* order, const std::uint32_t* between_begin,
+                               std::uint32_t c, bool serial, bool reversed, SolverBody* bodies, real inv_h) {
+  const std::uint32_t b = between_begin[c], e = between_begin[c + 1];
+  if (serial) {
+    if (blockIdx.x != 0 || threadIdx.x != 0) return;
+    if (reversed)
+      for (std::uint32_t i = e; i-- > b;) solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
+    else
+      for (std::uint32_t i = b; i < e; ++i) solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
+    return;
+  }
+  for (std::uint32_t i = b + blockIdx.x * blockDim.x + threadIdx.x; i < e; i += gridDim.x * blockDim.x)
+    solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
+}
+
 }  // namespace
 
 void launch_max_overlap(const SweepRecords& records, std::uint32_t n, const BodiesView& bodies, const WallShape* walls,
@@ -279,6 +403,55 @@ void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBod
   if (plan.empty()) return;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
     launch_on_plan<solve_kernel<friction, rolling>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
+  });
+}
+
+
+void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan,
+                          const Vec3* position, double edge, int passes, int local, SolverBody* bodies, real inv_h,
+                          SolverTerms t, int sm_count, cudaStream_t s) {
+  if (count == 0) return;
+  namespace dev = ::marbles::cuda;
+  using dev::Launch;
+  const std::size_t n = count;
+  auto* keys = m_keys.as<std::uint64_t>(2 * n);
+  auto* order = m_order.as<std::uint32_t>(2 * n);
+  auto* heads = m_heads.as<std::uint32_t>(2 * (n + 1));
+  std::uint32_t* slot = heads + (n + 1);
+  auto* starts = m_starts.as<std::uint32_t>(n + 2 + kMaxColours + 2);
+  std::uint32_t* between_begin = starts + (n + 2);
+  cub::DoubleBuffer<std::uint64_t> sorted_keys(keys, keys + n);
+  cub::DoubleBuffer<std::uint32_t> sorted(order, order + n);
+  std::size_t sort_bytes = 0;
+  MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, sort_bytes, sorted_keys, sorted, static_cast<int>(n)));
+  const std::size_t scan_bytes = dev::exclusive_sum_bytes<std::uint32_t>(n + 1);
+  void* temp = m_temp.reserve(std::max(sort_bytes, scan_bytes));
+  const int grid = dev::grid_for(n + 1, sm_count);
+  dev::launch(Launch::plain, cube_keys_kernel, grid, s, records.bodies, count, position, edge, keys, order);
+  MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp, sort_bytes, sorted_keys, sorted, static_cast<int>(n), 0,
+                                                     64, s));
+  const std::uint64_t* k = sorted_keys.Current();
+  const std::uint32_t* o = sorted.Current();
+  dev::launch(Launch::plain, cube_heads_kernel, grid, s, k, count, heads);
+  dev::device_exclusive_sum(heads, slot, n + 1, temp, scan_bytes, s);
+  dev::launch(Launch::plain, cube_starts_kernel, grid, s, k, count, static_cast<const std::uint32_t*>(heads),
+              static_cast<const std::uint32_t*>(slot), starts);
+  const std::uint32_t* cubes = slot + n;
+  dev::launch(Launch::plain, between_begin_kernel, 1, s, o, count, static_cast<const std::uint32_t*>(starts), cubes,
+              plan, between_begin);
+
+  std::uint32_t index[kMaxColours + 2];
+  for (std::uint32_t c = 0; c < kMaxColours + 2; ++c) index[c] = c;
+  const int between_grid = dev::grid_for(plan.widest(), sm_count);
+  with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
+    for (int p = 0; p < passes; ++p) {
+      dev::launch(Launch::plain, local_pass_kernel<friction, rolling>, sm_count * 8, s, records, o,
+                  static_cast<const std::uint32_t*>(starts), cubes, plan, bodies, inv_h, p, local);
+      visit_colours(index, plan.colours, p % 2 == 1, [&](std::uint32_t c, std::uint32_t, bool serial, bool reversed) {
+        dev::launch(Launch::plain, between_kernel<friction, rolling>, serial ? 1 : between_grid, s, records, o,
+                    static_cast<const std::uint32_t*>(between_begin), c, serial, reversed, bodies, inv_h);
+      });
+    }
   });
 }
 

@@ -11,6 +11,7 @@
 
 #include <cstdint>
 
+#include "core/device_memory.hpp"
 #include "core/spheres.hpp"
 #include "narrowphase/colouring_math.hpp"
 #include "narrowphase/solver_math.hpp"
@@ -96,5 +97,24 @@ void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBod
 // of a non-negative real: an atomic max, the same whatever the order).
 void launch_max_overlap(const SweepRecords& records, std::uint32_t n, const BodiesView& bodies, const WallShape* walls,
                         unsigned long long* deepest, int sm_count, cudaStream_t stream);
+
+// The local order's sweeps (solver.hpp LocalOrder, a study switch): the
+// CPU's ContactSolver::local_sweeps on the device, the same bits. Each pass
+// sweeps every cube's own contacts `local` times (a block a cube, a barrier
+// between its colours, its overflow by one thread), then the contacts
+// between cubes once, a launch per colour (visit_colours). The split is made
+// on the device each substep (a sort of the contacts by cube); nothing is
+// read on the host.
+class LocalSweepsCuda {
+ public:
+  // count records in colour-major order as `plan` ranges them; the cubes
+  // of edge `edge` over the centres `position` (those of the solve).
+  void run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan, const Vec3* position,
+           double edge, int passes, int local, SolverBody* bodies, real inv_h, SolverTerms terms, int sm_count,
+           cudaStream_t stream);
+
+ private:
+  ::marbles::cuda::DeviceBuffer m_keys, m_order, m_heads, m_starts, m_temp;
+};
 
 }  // namespace marbles::narrowphase::cuda

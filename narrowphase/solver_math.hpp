@@ -6,6 +6,7 @@
 // time (no two share a sphere), so calls within a colour are independent.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <type_traits>
@@ -161,6 +162,20 @@ MARBLES_HD_INLINE void solve_one(Contact& c, SolverBody* bodies, real inv_h) {
   solve_states<Friction, Rolling>(c, A, B, inv_h);
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
+}
+
+// The local order's cube of a centre (solver.hpp LocalOrder, split_by_cube;
+// the GPU's split the same): cubes of edge `edge`, 21 bits an axis, clamped
+// to a million cubes either side of the origin, a non-finite coordinate in
+// cube 0 of its axis. In double on both sides, so both find the same cube.
+MARBLES_HD_INLINE std::uint64_t local_cube(const Vec3& p, double edge) {
+  auto axis = [edge](real x) -> std::uint64_t {
+    double c = floor(double(x) / edge);
+    if (!(c - c == 0)) c = 0;  // NaN or an infinity
+    else c = c < -1048575.0 ? -1048575.0 : (c > 1048575.0 ? 1048575.0 : c);
+    return static_cast<std::uint64_t>(static_cast<std::int64_t>(c) + (1 << 20)) & 0x1fffffu;
+  };
+  return (axis(p.x) << 42) | (axis(p.y) << 21) | axis(p.z);
 }
 
 // --- the sweep's records -------------------------------------------------------

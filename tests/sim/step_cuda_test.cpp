@@ -150,6 +150,26 @@ std::pair<scene::Scene, scene::GeneratedParticles> bed_on_a_floor(real spacing, 
   return {s, g};
 }
 
+// A large sphere on a floor with small ones on its upper half, each touching
+// it: more contacts on one sphere than there are colours, so the overflow
+// set (solved one by one, in order, forwards and backwards) is never empty.
+std::pair<scene::Scene, scene::GeneratedParticles> overflow_scene() {
+  scene::Scene s = make_scene(1e-3, 2, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
+                                        Effect::friction}, 0.4, 0.5);
+  s.walls.push_back(box({0, 0, 0}, {real(0.6), real(0.6), real(1)}));
+  const real big = real(0.1), r = real(0.01);
+  const Vec3 centre{real(0.3), real(0.3), big};
+  scene::GeneratedParticles g;
+  add_sphere(g, centre, big);
+  const int small = 150;  // on a Fibonacci spiral over the upper half, about 2.2 r apart
+  for (int k = 0; k < small; ++k) {
+    const double z = 1 - (k + 0.5) / small, ring = std::sqrt(1 - z * z), phi = 2.399963229728653 * k;
+    const Vec3 n{real(ring * std::cos(phi)), real(ring * std::sin(phi)), real(z)};
+    add_sphere(g, centre + n * (big + r * real(0.98)), r);
+  }
+  return {s, g};
+}
+
 }  // namespace
 
 // Without a device the CUDA step is refused with a message that says so,
@@ -246,23 +266,45 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
   EXPECT_GE(redos, replans) << "a replan is a redo";
 }
 
-// The CPU's study of a local order (MARBLES_SOLVE_ORDER) changes the
-// results, and the CUDA step does not run it: it refuses, saying why,
-// rather than give other bits than the CPU.
-TEST(StepCuda, RefusesTheLocalOrderStudy) {
+// The study of a local order (MARBLES_SOLVE_ORDER) on the CUDA step: the
+// CPU's bits (LocalSweepsCuda). Cubes of a few diameters split the pour and
+// the dense block into many, with contacts between them; in the overflow
+// scene cubes of half the large sphere's diameter keep its overflow set in
+// its own cube (one thread's walk, forwards and backwards) and put others
+// between cubes. The order reaches the GPU: its bits differ from the
+// solver's order's.
+TEST(StepCuda, LocalOrderStudyMatchesTheCpu) {
   REQUIRE_DEVICE();
-  auto [s, g] = pour_scene(50, 1);
+  auto run = [](const scene::Scene& s, const scene::GeneratedParticles& g, int steps) {
+    Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+    Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+    EXPECT_EQ(gpu.backend_name(), "cuda");
+    GpuCounts counts;
+    expect_same_steps(cpu, gpu, steps, counts);
+    EXPECT_EQ(counts.one_launch, 0u) << "the local order runs its own launches";
+    return gpu.world().position;
+  };
+  auto [pour, grains] = pour_scene(400, 3);
+  const std::vector<Vec3> solver_order = run(pour, grains, 150);
+  if (HasFatalFailure()) return;
   {
-    SolveOrder order("tiles:8:3:4");
-    try {
-      Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
-      FAIL() << "the CUDA step was made under MARBLES_SOLVE_ORDER";
-    } catch (const RuntimeFailure& e) {
-      EXPECT_NE(std::string(e.what()).find("MARBLES_SOLVE_ORDER"), std::string::npos) << e.what();
-    }
+    SolveOrder order("tiles:3:3:4");
+    EXPECT_NE(run(pour, grains, 150), solver_order) << "another order, other bits";
+    if (HasFatalFailure()) return;
+    run(every_term_box(), dense_block(7, 5, 3, real(0.01), real(0.005)), 30);
+    if (HasFatalFailure()) return;
   }
-  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);  // unset: made
-  EXPECT_EQ(gpu.backend_name(), "cuda");
+  {
+    SolveOrder order("tiles:2:2:3");
+    run(pour, grains, 100);
+    if (HasFatalFailure()) return;
+  }
+  SolveOrder order("tiles:0.5:2:3");
+  auto [s, g] = overflow_scene();
+  Simulation probe(s, make_world(s, g), broadphase::Backend::cpu);
+  probe.step();
+  ASSERT_GT(probe.last_step().overflow, 0u) << "the scene must fill every colour";
+  run(s, g, 60);
 }
 
 // A free ball moved far out along x, then back above the bed (the same
@@ -344,19 +386,7 @@ TEST(StepCuda, SmallDenseBlockWithEveryTermMatchesTheCpu) {
 // it: more contacts on one sphere than there are colours, so the overflow
 // set (solved one by one, in order, forwards and backwards) is never empty.
 TEST(StepCuda, OverflowSetMatchesTheCpu) {
-  scene::Scene s = make_scene(1e-3, 2, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
-                                        Effect::friction}, 0.4, 0.5);
-  s.walls.push_back(box({0, 0, 0}, {real(0.6), real(0.6), real(1)}));
-  const real big = real(0.1), r = real(0.01);
-  const Vec3 centre{real(0.3), real(0.3), big};
-  scene::GeneratedParticles g;
-  add_sphere(g, centre, big);
-  const int small = 150;  // on a Fibonacci spiral over the upper half, about 2.2 r apart
-  for (int k = 0; k < small; ++k) {
-    const double z = 1 - (k + 0.5) / small, ring = std::sqrt(1 - z * z), phi = 2.399963229728653 * k;
-    const Vec3 n{real(ring * std::cos(phi)), real(ring * std::sin(phi)), real(z)};
-    add_sphere(g, centre + n * (big + r * real(0.98)), r);
-  }
+  auto [s, g] = overflow_scene();
   Simulation probe(s, make_world(s, g), broadphase::Backend::cpu);
   probe.step();
   ASSERT_GT(probe.last_step().overflow, 0u) << "the scene must fill every colour";
