@@ -6,6 +6,7 @@
 #include <cub/device/device_radix_sort.cuh>
 
 #include <algorithm>
+#include <cstdlib>
 #include <utility>
 
 namespace marbles::narrowphase::cuda {
@@ -440,13 +441,21 @@ void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, cons
   dev::launch(Launch::plain, between_begin_kernel, 1, s, o, count, static_cast<const std::uint32_t*>(starts), cubes,
               plan, between_begin);
 
+  // Threads a cube's block (a study's knob, MARBLES_LOCAL_THREADS: 32 to
+  // 1024, a multiple of 32; 256 unset).
+  static const int threads = [] {
+    const char* v = std::getenv("MARBLES_LOCAL_THREADS");
+    const int t = v ? std::atoi(v) : 256;
+    return t >= 32 && t <= 1024 && t % 32 == 0 ? t : 256;
+  }();
   std::uint32_t index[kMaxColours + 2];
   for (std::uint32_t c = 0; c < kMaxColours + 2; ++c) index[c] = c;
   const int between_grid = dev::grid_for(plan.widest(), sm_count);
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
     for (int p = 0; p < passes; ++p) {
-      dev::launch(Launch::plain, local_pass_kernel<friction, rolling>, sm_count * 8, s, records, o,
-                  static_cast<const std::uint32_t*>(starts), cubes, plan, bodies, inv_h, p, local);
+      local_pass_kernel<friction, rolling><<<sm_count * (8 * dev::kBlock / threads), threads, 0, s>>>(
+          records, o, starts, cubes, plan, bodies, inv_h, p, local);
+      MARBLES_CUDA_CHECK_LAUNCH();
       visit_colours(index, plan.colours, p % 2 == 1, [&](std::uint32_t c, std::uint32_t, bool serial, bool reversed) {
         dev::launch(Launch::plain, between_kernel<friction, rolling>, serial ? 1 : between_grid, s, records, o,
                     static_cast<const std::uint32_t*>(between_begin), c, serial, reversed, bodies, inv_h);
