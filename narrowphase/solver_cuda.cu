@@ -329,6 +329,7 @@ struct LocalPass {
   const BodyPair* slots = nullptr;
   const BodyPair* cube_spheres = nullptr;  // each cube's [first, end) in sphere_order
   std::uint32_t spheres = 0, stage = 0;
+  bool prefetch = false;
 };
 
 // One pass over the cubes: each cube's own contacts swept `local` times,
@@ -342,7 +343,7 @@ struct LocalPass {
 // order: the same bits); a thread takes the same contacts of a colour in
 // every sweep, so with `prefetch` it loads its first record of the next
 // colour while it solves this one's (no other thread writes it).
-template <bool Friction, bool Rolling, bool Prefetch>
+template <bool Friction, bool Rolling>
 __global__ void local_pass_kernel(SweepRecords s, LocalPass lp, ColourPlan plan, SolverBody* bodies, real inv_h,
                                   int pass, int local) {
   extern __shared__ __align__(16) unsigned char stage_memory[];
@@ -390,32 +391,22 @@ __global__ void local_pass_kernel(SweepRecords s, LocalPass lp, ColourPlan plan,
       return true;
     };
     auto sweep_colours = [&](bool forwards) {
-      if constexpr (Prefetch) {
-        Loaded next;
-        bool have = colours > 0 && first_of(forwards ? 0 : colours - 1, next);
-        for (std::uint32_t n = 0; n < colours; ++n) {
-          const std::uint32_t c = forwards ? n : colours - 1 - n;
-          const std::uint32_t from = bound[c], to = bound[c + 1];
-          if (from == to) {
-            have = false;
-            continue;
-          }
-          const Loaded current = next;
-          const bool had = have;
-          have = n + 1 < colours && first_of(forwards ? c + 1 : c - 1, next);
-          std::uint32_t i = from + threadIdx.x;
-          if (had) solve(current), i += blockDim.x;
-          for (; i < to; i += blockDim.x) solve(load_at(i));
-          __syncthreads();
+      Loaded next;
+      bool have = lp.prefetch && colours > 0 && first_of(forwards ? 0 : colours - 1, next);
+      for (std::uint32_t n = 0; n < colours; ++n) {
+        const std::uint32_t c = forwards ? n : colours - 1 - n;
+        const std::uint32_t from = bound[c], to = bound[c + 1];
+        if (from == to) {
+          have = false;
+          continue;
         }
-      } else {
-        for (std::uint32_t n = 0; n < colours; ++n) {
-          const std::uint32_t c = forwards ? n : colours - 1 - n;
-          const std::uint32_t from = bound[c], to = bound[c + 1];
-          if (from == to) continue;
-          for (std::uint32_t i = from + threadIdx.x; i < to; i += blockDim.x) solve(load_at(i));
-          __syncthreads();
-        }
+        const Loaded current = next;
+        const bool had = have;
+        have = lp.prefetch && n + 1 < colours && first_of(forwards ? c + 1 : c - 1, next);
+        std::uint32_t i = from + threadIdx.x;
+        if (had) solve(current), i += blockDim.x;
+        for (; i < to; i += blockDim.x) solve(load_at(i));
+        __syncthreads();
       }
     };
     auto overflow = [&](bool backwards) {
@@ -596,7 +587,7 @@ void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, cons
               plan, between_begin);
 
   LocalPass lp;
-  lp.order = o, lp.starts = starts, lp.cubes = cubes, lp.keys = k;
+  lp.order = o, lp.starts = starts, lp.cubes = cubes, lp.keys = k, lp.prefetch = prefetch;
   if (stage > 0) {
     auto* skeys = m_sphere_keys.as<std::uint64_t>(2 * std::size_t(spheres));
     auto* sorder = m_sphere_order.as<std::uint32_t>(3 * std::size_t(spheres));
@@ -627,7 +618,7 @@ void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, cons
   for (std::uint32_t c = 0; c < kMaxColours + 2; ++c) index[c] = c;
   const int between_grid = dev::grid_for(plan.widest(), sm_count);
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
-    auto* kernel = prefetch ? local_pass_kernel<friction, rolling, true> : local_pass_kernel<friction, rolling, false>;
+    auto* kernel = local_pass_kernel<friction, rolling>;
     if (stage_bytes > 48 * 1024)
       MARBLES_CUDA_CHECK(cudaFuncSetAttribute(kernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
                                               static_cast<int>(stage_bytes)));
