@@ -293,17 +293,6 @@ __global__ void sphere_slots_kernel(const std::uint64_t* keys, const std::uint32
   for (std::uint32_t j = blockIdx.x * blockDim.x + threadIdx.x; j < n; j += gridDim.x * blockDim.x)
     slot[order[j]] = j - key_bound(keys, n, keys[j], false);
 }
-// Each cube's spheres: [first, end) of the spheres in cube order.
-__global__ void cube_spheres_kernel(const std::uint64_t* keys, const std::uint32_t* starts, const std::uint32_t* cubes,
-                                    std::uint32_t n, const std::uint64_t* sphere_keys, std::uint32_t spheres,
-                                    BodyPair* range) {
-  const std::uint32_t count = *cubes;
-  for (std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < count && t < n; t += gridDim.x * blockDim.x) {
-    const std::uint64_t key = keys[starts[t]];
-    range[t] = {key_bound(sphere_keys, spheres, key, false), key_bound(sphere_keys, spheres, key, true)};
-  }
-}
-
 // Each own contact's bodies as slots of its cube's stage (a wall stays a wall).
 __global__ void pair_slots_kernel(const BodyPair* pairs, const std::uint32_t* order, std::uint32_t n,
                                   const std::uint32_t* starts, const std::uint32_t* cubes, const std::uint32_t* slot,
@@ -327,7 +316,6 @@ struct LocalPass {
   const std::uint64_t* sphere_keys = nullptr;
   const std::uint32_t* sphere_order = nullptr;
   const BodyPair* slots = nullptr;
-  const BodyPair* cube_spheres = nullptr;  // each cube's [first, end) in sphere_order
   std::uint32_t spheres = 0, stage = 0;
   bool prefetch = false;
 };
@@ -360,8 +348,12 @@ __global__ void local_pass_kernel(SweepRecords s, LocalPass lp, ColourPlan plan,
     for (std::uint32_t c = threadIdx.x; c <= colours + 1; c += blockDim.x)
       bound[c] = c <= colours ? first_at_or_past(lp.order, b, e, plan.begin[c]) : e;
     if (threadIdx.x == 0) {
-      const BodyPair r = lp.stage > 0 ? lp.cube_spheres[t] : BodyPair{};
-      range[0] = r.a, range[1] = r.b;
+      range[0] = range[1] = 0;
+      if (lp.stage > 0) {
+        const std::uint64_t key = lp.keys[b];
+        range[0] = key_bound(lp.sphere_keys, lp.spheres, key, false);
+        range[1] = key_bound(lp.sphere_keys, lp.spheres, key, true);
+      }
     }
     __syncthreads();
     const std::uint32_t first_sphere = range[0], held = range[1] - range[0];
@@ -605,11 +597,7 @@ void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, cons
     dev::launch(Launch::plain, pair_slots_kernel, grid, s, static_cast<const BodyPair*>(records.bodies), o, count,
                 static_cast<const std::uint32_t*>(starts), cubes, static_cast<const std::uint32_t*>(sphere_slot),
                 pair_slots);
-    auto* cube_spheres = m_cube_spheres.as<BodyPair>(n);
-    dev::launch(Launch::plain, cube_spheres_kernel, grid, s, k, static_cast<const std::uint32_t*>(starts), cubes,
-                count, static_cast<const std::uint64_t*>(sphere_keys.Current()), spheres, cube_spheres);
     lp.sphere_keys = sphere_keys.Current(), lp.sphere_order = sphere_order.Current(), lp.slots = pair_slots;
-    lp.cube_spheres = cube_spheres;
     lp.spheres = spheres, lp.stage = static_cast<std::uint32_t>(stage);
   }
   const std::size_t stage_bytes = static_cast<std::size_t>(stage) * sizeof(SolverBody);

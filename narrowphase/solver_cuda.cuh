@@ -117,8 +117,7 @@ class LocalSweepsCuda {
   void set_largest_radius(real r) { m_largest_radius_hint = r > 0 ? double(r) : 1.0; }
 
  private:
-  ::marbles::cuda::DeviceBuffer m_keys, m_order, m_heads, m_starts, m_temp, m_sphere_keys, m_sphere_order, m_slots,
-      m_cube_spheres;
+  ::marbles::cuda::DeviceBuffer m_keys, m_order, m_heads, m_starts, m_temp, m_sphere_keys, m_sphere_order, m_slots;
   double m_largest_radius_hint = 1.0;
 };
 
