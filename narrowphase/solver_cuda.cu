@@ -268,165 +268,51 @@ __global__ void between_begin_kernel(const std::uint32_t* order, std::uint32_t n
     between_begin[c] = c <= plan.colours ? first_at_or_past(order, own, n, plan.begin[c]) : n;
 }
 
-// First i in [0, n) with keys[i] >= v (past: > v).
-__device__ std::uint32_t key_bound(const std::uint64_t* keys, std::uint32_t n, std::uint64_t v, bool past) {
-  std::uint32_t b = 0, e = n;
-  while (b < e) {
-    const std::uint32_t m = b + (e - b) / 2;
-    if (keys[m] < v || (past && keys[m] == v)) b = m + 1;
-    else e = m;
-  }
-  return b;
-}
-
-// The spheres by cube (sphere_keys: each centre's cube, sphere_order the
-// spheres in cube order): sphere i's slot in its cube's stage.
-__global__ void sphere_keys_kernel(const Vec3* position, std::uint32_t n, double edge, std::uint64_t* keys,
-                                   std::uint32_t* order) {
-  for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
-    keys[i] = local_cube(position[i], edge);
-    order[i] = i;
-  }
-}
-__global__ void sphere_slots_kernel(const std::uint64_t* keys, const std::uint32_t* order, std::uint32_t n,
-                                    std::uint32_t* slot) {
-  for (std::uint32_t j = blockIdx.x * blockDim.x + threadIdx.x; j < n; j += gridDim.x * blockDim.x)
-    slot[order[j]] = j - key_bound(keys, n, keys[j], false);
-}
-// Each own contact's bodies as slots of its cube's stage (a wall stays a wall).
-__global__ void pair_slots_kernel(const BodyPair* pairs, const std::uint32_t* order, std::uint32_t n,
-                                  const std::uint32_t* starts, const std::uint32_t* cubes, const std::uint32_t* slot,
-                                  BodyPair* slots) {
-  const std::uint32_t own = starts[*cubes];
-  for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < own && i < n; i += gridDim.x * blockDim.x) {
-    const BodyPair ab = pairs[order[i]];
-    slots[i] = {slot[ab.a], is_wall(ab.b) ? ab.b : slot[ab.b]};
-  }
-}
-
-// What a local pass reads besides the records: the split (order, starts,
-// cubes, the contacts' sorted keys) and, to stage a cube's bodies in shared
-// memory, the spheres by cube and the own contacts' slots (stage: the
-// bodies a stage holds, 0 for none).
-struct LocalPass {
-  const std::uint32_t* order = nullptr;
-  const std::uint32_t* starts = nullptr;
-  const std::uint32_t* cubes = nullptr;
-  const std::uint64_t* keys = nullptr;
-  const std::uint64_t* sphere_keys = nullptr;
-  const std::uint32_t* sphere_order = nullptr;
-  const BodyPair* slots = nullptr;
-  std::uint32_t spheres = 0, stage = 0;
-  bool prefetch = false;
-};
-
 // One pass over the cubes: each cube's own contacts swept `local` times,
 // forwards where (l + pass) is even (colour by colour, the overflow last, one
 // thread in order), else backwards (the overflow first, in reverse, then the
 // colours from the last); a barrier after each. Within a colour no two
 // contacts share a sphere and no two cubes share one, so the threads' order
-// changes no bit: the CPU's walk, one by one in record order. A cube whose
-// spheres fit the stage has its bodies copied into shared memory for its
-// sweeps and back after (the same values, read and written in the same
-// order: the same bits); a thread takes the same contacts of a colour in
-// every sweep, so with `prefetch` it loads its first record of the next
-// colour while it solves this one's (no other thread writes it).
+// changes no bit: the CPU's walk, one by one in record order.
 template <bool Friction, bool Rolling>
-__global__ void local_pass_kernel(SweepRecords s, LocalPass lp, ColourPlan plan, SolverBody* bodies, real inv_h,
+__global__ void local_pass_kernel(SweepRecords s, const std::uint32_t* order, const std::uint32_t* starts,
+                                  const std::uint32_t* cubes, ColourPlan plan, SolverBody* bodies, real inv_h,
                                   int pass, int local) {
-  extern __shared__ __align__(16) unsigned char stage_memory[];
-  auto* stage = reinterpret_cast<SolverBody*>(stage_memory);
   __shared__ std::uint32_t bound[kMaxColours + 2];
-  __shared__ std::uint32_t range[2];
-  struct Loaded {
-    Contact c;
-    std::uint32_t k = 0;
-  };
-  const std::uint32_t count = *lp.cubes, colours = plan.colours;
+  const std::uint32_t count = *cubes, colours = plan.colours;
   for (std::uint32_t t = blockIdx.x; t < count; t += gridDim.x) {
-    const std::uint32_t b = lp.starts[t], e = lp.starts[t + 1];
+    const std::uint32_t b = starts[t], e = starts[t + 1];
     for (std::uint32_t c = threadIdx.x; c <= colours + 1; c += blockDim.x)
-      bound[c] = c <= colours ? first_at_or_past(lp.order, b, e, plan.begin[c]) : e;
-    if (threadIdx.x == 0) {
-      range[0] = range[1] = 0;
-      if (lp.stage > 0) {
-        const std::uint64_t key = lp.keys[b];
-        range[0] = key_bound(lp.sphere_keys, lp.spheres, key, false);
-        range[1] = key_bound(lp.sphere_keys, lp.spheres, key, true);
-      }
-    }
+      bound[c] = c <= colours ? first_at_or_past(order, b, e, plan.begin[c]) : e;
     __syncthreads();
-    const std::uint32_t first_sphere = range[0], held = range[1] - range[0];
-    const bool staged = lp.stage > 0 && held <= lp.stage;
-    if (staged) {
-      for (std::uint32_t j = threadIdx.x; j < held; j += blockDim.x)
-        stage[j] = load_whole(bodies + lp.sphere_order[first_sphere + j]);
+    auto colour = [&](std::uint32_t c) {
+      const std::uint32_t from = bound[c], to = bound[c + 1];
+      if (from == to) return;
+      for (std::uint32_t i = from + threadIdx.x; i < to; i += blockDim.x)
+        solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
       __syncthreads();
-    }
-    SolverBody* on = staged ? stage : bodies;
-    auto load_at = [&](std::uint32_t i) {
-      Loaded l;
-      l.k = lp.order[i];
-      l.c = load_sweep_contact<Friction, Rolling>(s, l.k);
-      if (staged) {
-        const BodyPair slot = lp.slots[i];
-        l.c.a = slot.a, l.c.b = slot.b;
-      }
-      return l;
-    };
-    auto solve = [&](const Loaded& l) { solve_loaded<Friction, Rolling>(s, l.k, l.c, on, inv_h); };
-    // This thread's first contact of colour c, where it has one.
-    auto first_of = [&](std::uint32_t c, Loaded& out) {
-      const std::uint32_t i = bound[c] + threadIdx.x;
-      if (i >= bound[c + 1]) return false;
-      out = load_at(i);
-      return true;
-    };
-    auto sweep_colours = [&](bool forwards) {
-      Loaded next;
-      bool have = lp.prefetch && colours > 0 && first_of(forwards ? 0 : colours - 1, next);
-      for (std::uint32_t n = 0; n < colours; ++n) {
-        const std::uint32_t c = forwards ? n : colours - 1 - n;
-        const std::uint32_t from = bound[c], to = bound[c + 1];
-        if (from == to) {
-          have = false;
-          continue;
-        }
-        const Loaded current = next;
-        const bool had = have;
-        have = lp.prefetch && n + 1 < colours && first_of(forwards ? c + 1 : c - 1, next);
-        std::uint32_t i = from + threadIdx.x;
-        if (had) solve(current), i += blockDim.x;
-        for (; i < to; i += blockDim.x) solve(load_at(i));
-        __syncthreads();
-      }
     };
     auto overflow = [&](bool backwards) {
       const std::uint32_t from = bound[colours], to = bound[colours + 1];
       if (from == to) return;
       if (threadIdx.x == 0) {
         if (backwards)
-          for (std::uint32_t i = to; i-- > from;) solve(load_at(i));
+          for (std::uint32_t i = to; i-- > from;) solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
         else
-          for (std::uint32_t i = from; i < to; ++i) solve(load_at(i));
+          for (std::uint32_t i = from; i < to; ++i) solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
       }
       __syncthreads();
     };
     for (int l = 0; l < local; ++l) {
       if ((l + pass) % 2 == 0) {
-        sweep_colours(true);
+        for (std::uint32_t c = 0; c < colours; ++c) colour(c);
         overflow(false);
       } else {
         overflow(true);
-        sweep_colours(false);
+        for (std::uint32_t c = colours; c-- > 0;) colour(c);
       }
     }
-    if (staged) {
-      __syncthreads();
-      for (std::uint32_t j = threadIdx.x; j < held; j += blockDim.x)
-        store_whole(bodies + lp.sphere_order[first_sphere + j], stage[j]);
-    }
-    __syncthreads();  // every thread done with bound[], range[] and the stage before the next cube's
+    __syncthreads();  // every thread done with bound[] before the next cube's
   }
 }
 
@@ -523,29 +409,11 @@ void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBod
 
 
 void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan,
-                          const Vec3* position, std::uint32_t spheres, double edge, int passes, int local,
-                          SolverBody* bodies, real inv_h, SolverTerms t, int sm_count, cudaStream_t s) {
+                          const Vec3* position, double edge, int passes, int local, SolverBody* bodies, real inv_h,
+                          SolverTerms t, int sm_count, cudaStream_t s) {
   if (count == 0) return;
   namespace dev = ::marbles::cuda;
   using dev::Launch;
-  // The study's knobs, read each call: threads a cube's block
-  // (MARBLES_LOCAL_THREADS, 32 to 1024, a multiple of 32; 256 unset), the
-  // bodies a stage holds (MARBLES_LOCAL_STAGE; unset: about one and a half
-  // times a close-packed cube's; 0: none staged) and the next colour's
-  // records loaded early (MARBLES_LOCAL_PREFETCH=0: not).
-  auto knob = [](const char* name, long fallback) {
-    const char* v = std::getenv(name);
-    return v && *v ? std::strtol(v, nullptr, 10) : fallback;
-  };
-  const long asked_threads = knob("MARBLES_LOCAL_THREADS", 256);
-  const int threads = asked_threads >= 32 && asked_threads <= 1024 && asked_threads % 32 == 0
-                          ? static_cast<int>(asked_threads) : 256;
-  const double diameters = edge / (2 * m_largest_radius_hint);
-  const long packed = static_cast<long>(1.5 * 1.41 * diameters * diameters * diameters) + 32;
-  const long max_stage = 200 * 1024 / static_cast<long>(sizeof(SolverBody));
-  const long stage = std::clamp(knob("MARBLES_LOCAL_STAGE", std::min(packed, max_stage)), 0L, max_stage);
-  const bool prefetch = knob("MARBLES_LOCAL_PREFETCH", 1) != 0;
-
   const std::size_t n = count;
   auto* keys = m_keys.as<std::uint64_t>(2 * n);
   auto* order = m_order.as<std::uint32_t>(2 * n);
@@ -555,15 +423,10 @@ void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, cons
   std::uint32_t* between_begin = starts + (n + 2);
   cub::DoubleBuffer<std::uint64_t> sorted_keys(keys, keys + n);
   cub::DoubleBuffer<std::uint32_t> sorted(order, order + n);
-  std::size_t sort_bytes = 0, sphere_sort_bytes = 0;
+  std::size_t sort_bytes = 0;
   MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, sort_bytes, sorted_keys, sorted, static_cast<int>(n)));
-  cub::DoubleBuffer<std::uint64_t> sphere_keys(nullptr, nullptr);
-  cub::DoubleBuffer<std::uint32_t> sphere_order(nullptr, nullptr);
-  if (stage > 0)
-    MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, sphere_sort_bytes, sphere_keys, sphere_order,
-                                                       static_cast<int>(spheres)));
   const std::size_t scan_bytes = dev::exclusive_sum_bytes<std::uint32_t>(n + 1);
-  void* temp = m_temp.reserve(std::max({sort_bytes, scan_bytes, sphere_sort_bytes}));
+  void* temp = m_temp.reserve(std::max(sort_bytes, scan_bytes));
   const int grid = dev::grid_for(n + 1, sm_count);
   dev::launch(Launch::plain, cube_keys_kernel, grid, s, records.bodies, count, position, edge, keys, order);
   MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp, sort_bytes, sorted_keys, sorted, static_cast<int>(n), 0,
@@ -578,41 +441,20 @@ void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, cons
   dev::launch(Launch::plain, between_begin_kernel, 1, s, o, count, static_cast<const std::uint32_t*>(starts), cubes,
               plan, between_begin);
 
-  LocalPass lp;
-  lp.order = o, lp.starts = starts, lp.cubes = cubes, lp.keys = k, lp.prefetch = prefetch;
-  if (stage > 0) {
-    auto* skeys = m_sphere_keys.as<std::uint64_t>(2 * std::size_t(spheres));
-    auto* sorder = m_sphere_order.as<std::uint32_t>(3 * std::size_t(spheres));
-    auto* pair_slots = m_slots.as<BodyPair>(n);
-    std::uint32_t* sphere_slot = sorder + 2 * std::size_t(spheres);
-    sphere_keys = cub::DoubleBuffer<std::uint64_t>(skeys, skeys + spheres);
-    sphere_order = cub::DoubleBuffer<std::uint32_t>(sorder, sorder + spheres);
-    const int sphere_grid = dev::grid_for(spheres, sm_count);
-    dev::launch(Launch::plain, sphere_keys_kernel, sphere_grid, s, position, spheres, edge, skeys, sorder);
-    MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp, sphere_sort_bytes, sphere_keys, sphere_order,
-                                                       static_cast<int>(spheres), 0, 64, s));
-    dev::launch(Launch::plain, sphere_slots_kernel, sphere_grid, s,
-                static_cast<const std::uint64_t*>(sphere_keys.Current()),
-                static_cast<const std::uint32_t*>(sphere_order.Current()), spheres, sphere_slot);
-    dev::launch(Launch::plain, pair_slots_kernel, grid, s, static_cast<const BodyPair*>(records.bodies), o, count,
-                static_cast<const std::uint32_t*>(starts), cubes, static_cast<const std::uint32_t*>(sphere_slot),
-                pair_slots);
-    lp.sphere_keys = sphere_keys.Current(), lp.sphere_order = sphere_order.Current(), lp.slots = pair_slots;
-    lp.spheres = spheres, lp.stage = static_cast<std::uint32_t>(stage);
-  }
-  const std::size_t stage_bytes = static_cast<std::size_t>(stage) * sizeof(SolverBody);
-
+  // Threads a cube's block (a study's knob, MARBLES_LOCAL_THREADS: 32 to
+  // 1024, a multiple of 32; 256 unset).
+  static const int threads = [] {
+    const char* v = std::getenv("MARBLES_LOCAL_THREADS");
+    const int t = v ? std::atoi(v) : 256;
+    return t >= 32 && t <= 1024 && t % 32 == 0 ? t : 256;
+  }();
   std::uint32_t index[kMaxColours + 2];
   for (std::uint32_t c = 0; c < kMaxColours + 2; ++c) index[c] = c;
   const int between_grid = dev::grid_for(plan.widest(), sm_count);
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
-    auto* kernel = local_pass_kernel<friction, rolling>;
-    if (stage_bytes > 48 * 1024)
-      MARBLES_CUDA_CHECK(cudaFuncSetAttribute(kernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                              static_cast<int>(stage_bytes)));
     for (int p = 0; p < passes; ++p) {
-      kernel<<<sm_count * (8 * dev::kBlock / threads), threads, stage_bytes, s>>>(records, lp, plan, bodies, inv_h,
-                                                                                  p, local);
+      local_pass_kernel<friction, rolling><<<sm_count * (8 * dev::kBlock / threads), threads, 0, s>>>(
+          records, o, starts, cubes, plan, bodies, inv_h, p, local);
       MARBLES_CUDA_CHECK_LAUNCH();
       visit_colours(index, plan.colours, p % 2 == 1, [&](std::uint32_t c, std::uint32_t, bool serial, bool reversed) {
         dev::launch(Launch::plain, between_kernel<friction, rolling>, serial ? 1 : between_grid, s, records, o,

@@ -109,16 +109,12 @@ class LocalSweepsCuda {
  public:
   // count records in colour-major order as `plan` ranges them; the cubes
   // of edge `edge` over the centres `position` (those of the solve).
-  // A cube whose spheres fit a stage in shared memory has its bodies there
-  // for its sweeps (the same bits); `largest_radius` sizes the stage.
   void run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan, const Vec3* position,
-           std::uint32_t spheres, double edge, int passes, int local, SolverBody* bodies, real inv_h,
-           SolverTerms terms, int sm_count, cudaStream_t stream);
-  void set_largest_radius(real r) { m_largest_radius_hint = r > 0 ? double(r) : 1.0; }
+           double edge, int passes, int local, SolverBody* bodies, real inv_h, SolverTerms terms, int sm_count,
+           cudaStream_t stream);
 
  private:
-  ::marbles::cuda::DeviceBuffer m_keys, m_order, m_heads, m_starts, m_temp, m_sphere_keys, m_sphere_order, m_slots;
-  double m_largest_radius_hint = 1.0;
+  ::marbles::cuda::DeviceBuffer m_keys, m_order, m_heads, m_starts, m_temp;
 };
 
 }  // namespace marbles::narrowphase::cuda

@@ -373,9 +373,8 @@ class CudaStep final : public StepBackend {
           nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);
         });
       const double edge = m_local->tile_diameters * 2 * double(m_largest_radius > 0 ? m_largest_radius : real(1));
-      m_local_sweeps.set_largest_radius(m_largest_radius);
-      m_local_sweeps.run(m_records, m_count, m_plan, world.position, static_cast<std::uint32_t>(world.count), edge,
-                         m_local->passes, m_local->local, bodies, inv_h, m_terms, m_sm, m_stream);
+      m_local_sweeps.run(m_records, m_count, m_plan, world.position, edge, m_local->passes, m_local->local, bodies,
+                         inv_h, m_terms, m_sm, m_stream);
       nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
       return;
     }

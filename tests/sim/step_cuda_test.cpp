@@ -272,10 +272,8 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
 // the dense block into many, with contacts between them; in the overflow
 // scene cubes of half the large sphere's diameter keep its overflow set in
 // its own cube (one thread's walk, forwards and backwards) and put others
-// between cubes (too many spheres for its stage: that cube's bodies stay in
-// global memory, the others' are staged). Stages too small for most cubes,
-// and none with no record loaded early, give the same bits. The order
-// reaches the GPU: its bits differ from the solver's order's.
+// between cubes. The order reaches the GPU: its bits differ from the
+// solver's order's.
 TEST(StepCuda, LocalOrderStudyMatchesTheCpu) {
   REQUIRE_DEVICE();
   auto run = [](const scene::Scene& s, const scene::GeneratedParticles& g, int steps) {
@@ -303,14 +301,6 @@ TEST(StepCuda, LocalOrderStudyMatchesTheCpu) {
     SolveOrder order("tiles:2:2:3");
     run(pour, grains, 100);
     if (HasFatalFailure()) return;
-    // Stages of 3 bodies: a few cubes staged, the rest on global memory;
-    // then none staged, and no record loaded early.
-    for (const char* stage : {"3", "0"}) {
-      ScopedEnv small("MARBLES_LOCAL_STAGE", stage);
-      ScopedEnv late("MARBLES_LOCAL_PREFETCH", stage[0] == '0' ? "0" : "1");
-      run(pour, grains, 60);
-      if (HasFatalFailure()) return;
-    }
   }
   SolveOrder order("tiles:0.5:2:3");
   auto [s, g] = overflow_scene();

@@ -26,30 +26,23 @@ inline broadphase::Backend test_backend() {
   return v != nullptr && std::strcmp(v, "cuda") == 0 ? broadphase::Backend::cuda : broadphase::Backend::cpu;
 }
 
-// The environment's `name` set to `value` while it lives, then as it was.
-class ScopedEnv {
+// MARBLES_SOLVE_ORDER (narrowphase/solver.hpp: LocalOrder) set to `value`
+// while it lives, then as it was (a solver reads it when made).
+class SolveOrder {
  public:
-  ScopedEnv(std::string name, const std::string& value) : m_name(std::move(name)) {
-    if (const char* was = std::getenv(m_name.c_str())) m_was = was;
-    setenv(m_name.c_str(), value.c_str(), 1);
+  explicit SolveOrder(const std::string& value) {
+    if (const char* was = std::getenv("MARBLES_SOLVE_ORDER")) m_was = was;
+    setenv("MARBLES_SOLVE_ORDER", value.c_str(), 1);
   }
-  ~ScopedEnv() {
-    if (m_was) setenv(m_name.c_str(), m_was->c_str(), 1);
-    else unsetenv(m_name.c_str());
+  ~SolveOrder() {
+    if (m_was) setenv("MARBLES_SOLVE_ORDER", m_was->c_str(), 1);
+    else unsetenv("MARBLES_SOLVE_ORDER");
   }
-  ScopedEnv(const ScopedEnv&) = delete;
-  ScopedEnv& operator=(const ScopedEnv&) = delete;
+  SolveOrder(const SolveOrder&) = delete;
+  SolveOrder& operator=(const SolveOrder&) = delete;
 
  private:
-  std::string m_name;
   std::optional<std::string> m_was;
-};
-
-// MARBLES_SOLVE_ORDER (narrowphase/solver.hpp: LocalOrder) set to `value`
-// while it lives (a solver reads it when made).
-class SolveOrder : public ScopedEnv {
- public:
-  explicit SolveOrder(const std::string& value) : ScopedEnv("MARBLES_SOLVE_ORDER", value) {}
 };
 
 inline scene::Scene make_scene(double dt, int substeps, std::initializer_list<scene::Effect> effects,
