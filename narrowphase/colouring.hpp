@@ -63,7 +63,8 @@ class ContactColouring {
   void prefetch_ahead(const Contact* contacts, std::size_t t, std::size_t count) const;
   std::vector<std::uint64_t> m_body_used, m_rank, m_by_rank, m_sort_keys;
   std::vector<std::uint32_t> m_body_next_round;
-  std::vector<std::uint32_t> m_all, m_kept, m_colour, m_bucket_count, m_order, m_sort_values, m_high, m_sort_high;
+  std::vector<std::uint32_t> m_all, m_kept, m_colour, m_bucket_count, m_order, m_sort_values, m_high, m_sort_high,
+      m_source;
   std::vector<Contact> m_sorted;
 };
 
