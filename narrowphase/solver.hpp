@@ -60,13 +60,15 @@ SweepLanes supported_lanes();  // the widest this CPU has
 SweepLanes best_lanes();
 
 // A study of another order for the velocity sweeps (docs/architecture.md
-// "A local order, studied on the CPU"), CPU only, from the environment:
+// "A local order, studied on the CPU"; on the GPU too: "The local order on
+// the GPU, first form"), from the environment:
 // MARBLES_SOLVE_ORDER=tiles:D:P:L cuts space into cubes of D largest
 // diameters and, in each of P passes (in place of the scene's iterations),
 // sweeps each cube's own contacts (both spheres in it, or a sphere and a
 // wall) L times, cubes at once, then the contacts between cubes once,
 // colour by colour. Unset (or empty, or `colours`): the solver's order. It
-// changes the results; the CUDA step refuses it. A study: the watchdog's
+// changes the results, the same bits on both backends (the CUDA step's
+// LocalSweepsCuda, slower there than the solver's order). A study: the watchdog's
 // extra sweeps (set_iterations) do not reach it, and the run's description
 // still names the scene's iterations.
 struct LocalOrder {

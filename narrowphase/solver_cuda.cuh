@@ -104,7 +104,9 @@ void launch_max_overlap(const SweepRecords& records, std::uint32_t n, const Bodi
 // between its colours, its overflow by one thread), then the contacts
 // between cubes once, a launch per colour (visit_colours). The split is made
 // on the device each substep (a sort of the contacts by cube); nothing is
-// read on the host.
+// read on the host. Slower than the solver's order on an H100 (pile of 10^6:
+// 9.6-12.4 against 8.0 ms a step; docs/architecture.md "The local order on
+// the GPU, first form").
 class LocalSweepsCuda {
  public:
   // count records in colour-major order as `plan` ranges them; the cubes
