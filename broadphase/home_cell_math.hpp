@@ -34,6 +34,7 @@
 #include <cstdint>
 
 #include "broadphase/broadphase_math.hpp"
+#include "core/lower_bound.hpp"  // lower_bound_key: the lookup for grids too sparse for a dense array
 #include "core/pair.hpp"
 
 namespace marbles::broadphase {
@@ -111,21 +112,6 @@ MARBLES_HD_INLINE unsigned traverse_home_sphere(std::uint32_t i, Key k, const Re
     }
   });
   return tests;
-}
-
-// First index in keys[0, n) whose key is >= k (binary search): the lookup
-// for grids too sparse for a dense array.
-template <class Key>
-MARBLES_HD_INLINE std::uint32_t lower_bound_key(const Key* keys, std::uint32_t n, Key k) {
-  std::uint32_t lo = 0, hi = n;
-  while (lo < hi) {
-    const std::uint32_t mid = lo + (hi - lo) / 2;
-    if (keys[mid] < k)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  return lo;
 }
 
 // The pair of original ids, smaller first.

@@ -1,5 +1,6 @@
 #include "core/cuda_check.hpp"
 #include "core/device_buffer.cuh"
+#include "core/lower_bound.hpp"
 #include "narrowphase/solver_cuda.cuh"
 
 #include <cooperative_groups.h>
@@ -251,12 +252,7 @@ __global__ void cube_starts_kernel(const std::uint64_t* keys, std::uint32_t n, c
 // First i in [b, e) with order[i] >= v (order ascending there).
 __device__ std::uint32_t first_at_or_past(const std::uint32_t* order, std::uint32_t b, std::uint32_t e,
                                           std::uint32_t v) {
-  while (b < e) {
-    const std::uint32_t m = b + (e - b) / 2;
-    if (order[m] < v) b = m + 1;
-    else e = m;
-  }
-  return b;
+  return b + lower_bound_key(order + b, e - b, v);
 }
 
 // The contacts between cubes, order[own, n): each colour's first among them

@@ -122,7 +122,7 @@ TEST(HomeCellMath, CandidateRangesVisitEachNeighbourPairOnce) {
     std::stable_sort(e.begin(), e.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     std::vector<std::uint64_t> keys(n);
     for (std::size_t i = 0; i < n; ++i) keys[i] = e[i].first;
-    auto lb = [&](std::uint64_t k) { return mb::lower_bound_key(keys.data(), std::uint32_t(n), k); };
+    auto lb = [&](std::uint64_t k) { return marbles::lower_bound_key(keys.data(), std::uint32_t(n), k); };
     std::vector<int> seen(n * n, 0);
     for (std::uint32_t i = 0; i < n; ++i)
       mb::for_each_candidate_range(i, keys[i], g, lb, [&](std::uint32_t b, std::uint32_t end) {
