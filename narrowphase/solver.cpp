@@ -231,7 +231,7 @@ void ContactSolver::local_sweeps(const ColourRanges& colours, const BodiesView& 
   const SweepRecords& s = m_records;
   real r_max = 0;
   for (std::size_t i = 0; i < world.count; ++i) r_max = std::max(r_max, world.radius[i]);
-  const double edge = m_local->tile_diameters * 2 * double(r_max > 0 ? r_max : real(1));
+  const double edge = local_cube_edge(m_local->tile_diameters, r_max);
   split_by_cube(s.bodies, static_cast<std::uint32_t>(m_record_count), world.position, edge, m_cubes);
   // The contacts between cubes are in the records' colour-major order: each
   // colour's first among them, as ColourRanges::begin gives the records'.

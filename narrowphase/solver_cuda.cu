@@ -218,11 +218,24 @@ __global__ void max_overlap_kernel(SweepRecords records, std::uint32_t n, Bodies
 // A contact between cubes sorts after every cube's own (a cube is 63 bits).
 constexpr std::uint64_t kBetweenCubes = ~std::uint64_t(0);
 
+// *largest = the largest radius's bits (zeroed before; radii are >= 0, so
+// their bits order as they do: the exact largest, as the CPU's scan finds).
+__global__ void largest_radius_kernel(const real* radius, std::size_t n, unsigned long long* largest) {
+  unsigned long long top = 0;
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n; i += std::size_t(gridDim.x) * blockDim.x) {
+    const unsigned long long b = ::marbles::cuda::bits_of(radius[i]);
+    top = b > top ? b : top;
+  }
+  ::marbles::cuda::warp_atomic_max(largest, top);
+}
+
 // Record k's cube where it is that cube's own (both spheres in it, or b a
 // wall), else kBetweenCubes; order[k] = k, so the stable sort keeps k
-// ascending within a cube, as split_by_cube does.
-__global__ void cube_keys_kernel(const BodyPair* pairs, std::uint32_t n, const Vec3* position, double edge,
-                                 std::uint64_t* keys, std::uint32_t* order) {
+// ascending within a cube, as split_by_cube does. The cubes' edge is
+// `diameters` of the largest diameter.
+__global__ void cube_keys_kernel(const BodyPair* pairs, std::uint32_t n, const Vec3* position, double diameters,
+                                 const unsigned long long* largest, std::uint64_t* keys, std::uint32_t* order) {
+  const double edge = local_cube_edge(diameters, ::marbles::cuda::real_of_bits(*largest));
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const BodyPair ab = pairs[k];
     const std::uint64_t t = local_cube(position[ab.a], edge);
@@ -405,8 +418,8 @@ void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBod
 
 
 void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan,
-                          const Vec3* position, double edge, int passes, int local, SolverBody* bodies, real inv_h,
-                          SolverTerms t, int sm_count, cudaStream_t s) {
+                          const BodiesView& world, double diameters, int passes, int local, SolverBody* bodies,
+                          real inv_h, SolverTerms t, int sm_count, cudaStream_t s) {
   if (count == 0) return;
   namespace dev = ::marbles::cuda;
   using dev::Launch;
@@ -424,7 +437,12 @@ void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, cons
   const std::size_t scan_bytes = dev::exclusive_sum_bytes<std::uint32_t>(n + 1);
   void* temp = m_temp.reserve(std::max(sort_bytes, scan_bytes));
   const int grid = dev::grid_for(n + 1, sm_count);
-  dev::launch(Launch::plain, cube_keys_kernel, grid, s, records.bodies, count, position, edge, keys, order);
+  auto* largest = m_largest.as<unsigned long long>(1);
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(largest, 0, sizeof(unsigned long long), s));
+  dev::launch(Launch::plain, largest_radius_kernel, dev::grid_for(world.count, sm_count), s, world.radius,
+              world.count, largest);
+  dev::launch(Launch::plain, cube_keys_kernel, grid, s, records.bodies, count, static_cast<const Vec3*>(world.position),
+              diameters, static_cast<const unsigned long long*>(largest), keys, order);
   MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp, sort_bytes, sorted_keys, sorted, static_cast<int>(n), 0,
                                                      64, s));
   const std::uint64_t* k = sorted_keys.Current();

@@ -110,13 +110,14 @@ void launch_max_overlap(const SweepRecords& records, std::uint32_t n, const Bodi
 class LocalSweepsCuda {
  public:
   // count records in colour-major order as `plan` ranges them; the cubes
-  // of edge `edge` over the centres `position` (those of the solve).
-  void run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan, const Vec3* position,
-           double edge, int passes, int local, SolverBody* bodies, real inv_h, SolverTerms terms, int sm_count,
+  // of `diameters` of the world's largest diameter (local_cube_edge, the
+  // radius found on the device) over its centres (those of the solve).
+  void run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan, const BodiesView& world,
+           double diameters, int passes, int local, SolverBody* bodies, real inv_h, SolverTerms terms, int sm_count,
            cudaStream_t stream);
 
  private:
-  ::marbles::cuda::DeviceBuffer m_keys, m_order, m_heads, m_starts, m_temp;
+  ::marbles::cuda::DeviceBuffer m_keys, m_order, m_heads, m_starts, m_temp, m_largest;
 };
 
 }  // namespace marbles::narrowphase::cuda

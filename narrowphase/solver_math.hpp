@@ -177,6 +177,11 @@ MARBLES_HD_INLINE std::uint64_t local_cube(const Vec3& p, double edge) {
   };
   return (axis(p.x) << 42) | (axis(p.y) << 21) | axis(p.z);
 }
+// The local order's cube edge: so many largest diameters (of radius 1 where
+// the largest radius is 0: no spheres).
+MARBLES_HD_INLINE double local_cube_edge(double diameters, real largest_radius) {
+  return diameters * 2 * double(largest_radius > 0 ? largest_radius : real(1));
+}
 
 // --- the sweep's records -------------------------------------------------------
 // What the stages after the warm start read of a contact (56 of its 112

@@ -129,7 +129,6 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaMemGetInfo(&m_free_at_start, &total));
     m_stream.create(cudaStreamNonBlocking);
     m_device.upload(m_host, m_stream);
-    note_radii();
     ::marbles::cuda::upload(m_walls, model.wall_shapes, m_stream);
     ::marbles::cuda::upload(m_pair_table, model.pair_coefficients, m_stream);
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
@@ -372,9 +371,8 @@ class CudaStep final : public StepBackend {
       if (m_model.solver.warm_start) over_colours(false, [&](nc::ContactRange r) {
           nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);
         });
-      const double edge = m_local->tile_diameters * 2 * double(m_largest_radius > 0 ? m_largest_radius : real(1));
-      m_local_sweeps.run(m_records, m_count, m_plan, world.position, edge, m_local->passes, m_local->local, bodies,
-                         inv_h, m_terms, m_sm, m_stream);
+      m_local_sweeps.run(m_records, m_count, m_plan, world, m_local->tile_diameters, m_local->passes,
+                         m_local->local, bodies, inv_h, m_terms, m_sm, m_stream);
       nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
       return;
     }
@@ -434,7 +432,6 @@ class CudaStep final : public StepBackend {
   void begin_step() override {
     if (m_host_edited) {
       m_device.upload(m_host, m_stream);
-    note_radii();
       m_host_edited = false;
     }
     m_counters = {};
@@ -511,7 +508,6 @@ class CudaStep final : public StepBackend {
   BodiesView state_in_place() override {
     if (m_host_edited) {  // host edits first, so that the device arrays hold every change
       m_device.upload(m_host, m_stream);
-    note_radii();
       m_host_edited = false;
     }
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
@@ -570,7 +566,6 @@ class CudaStep final : public StepBackend {
   void keep_step_start() override {
     if (m_host_edited) {  // edits between steps belong to the step's start
       m_device.upload(m_host, m_stream);
-    note_radii();
       m_host_edited = false;
     }
     m_device.copy_state_to(m_kept, m_stream);
@@ -653,14 +648,6 @@ class CudaStep final : public StepBackend {
   // The solve (warm start and sweeps) in one launch: always, never, or
   // (auto) where the widest colour is small enough that a launch per colour
   // would leave the device waiting for the host (MARBLES_CUDA_SOLVE).
-  // The largest radius of the host's copy (the local order's cubes are
-  // ContactSolver's: so many of its diameters), after each upload.
-  void note_radii() {
-    real r = 0;
-    for (const real x : m_host.radius) r = std::max(r, x);
-    m_largest_radius = r;
-  }
-
   bool solve_in_one_launch() const {
     if (m_solve_mode == SolveMode::auto_) return m_plan.widest() <= kOneLaunchWidest;
     return m_solve_mode == SolveMode::one_launch;
@@ -760,7 +747,6 @@ class CudaStep final : public StepBackend {
   // MARBLES_SOLVE_ORDER's local order (a study; none: the solver's order).
   std::optional<narrowphase::LocalOrder> m_local = narrowphase::local_order_from_environment();
   nc::LocalSweepsCuda m_local_sweeps;
-  real m_largest_radius = 0;
   std::vector<narrowphase::Contact> m_host_contacts;
   StepCounters m_counters;
   bool m_non_finite_seen = false;  // the broad phase met a non-finite centre in this step
