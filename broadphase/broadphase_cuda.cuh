@@ -36,7 +36,17 @@ struct BoundsAccum {
 // (two launches: nothing copied from the host).
 void launch_bounds(const Vec3* centre, const real* radius, std::size_t n, BoundsAccum* acc, int sm_count,
                    cudaStream_t stream);
-// An order-preserving encoding (cell_ids_cuda.cu: ordered) back to its real.
+// A real as an order-preserving integer (negative reals below positive
+// ones, each in its order), and back.
+MARBLES_HD_INLINE unsigned long long encode_ordered(real v) {
+  if constexpr (sizeof(real) == 4) {
+    const std::uint32_t u = bits_of_float(v);
+    return (u & 0x80000000u) ? static_cast<unsigned long long>(~u) : static_cast<unsigned long long>(u | 0x80000000u);
+  } else {
+    const std::uint64_t u = bits_of_double(v);
+    return (u & 0x8000000000000000ull) ? ~u : (u | 0x8000000000000000ull);
+  }
+}
 MARBLES_HD_INLINE real decode_ordered(unsigned long long k) {
   if constexpr (sizeof(real) == 4) {
     const auto e = static_cast<std::uint32_t>(k);

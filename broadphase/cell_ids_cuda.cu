@@ -14,18 +14,6 @@
 namespace marbles::broadphase::cuda {
 namespace {
 
-// Order-preserving integer encoding of a float or double.
-template <class T>
-__device__ __forceinline__ unsigned long long ordered(T v) {
-  if constexpr (sizeof(T) == 4) {
-    const unsigned int u = __float_as_uint(v);
-    return (u & 0x80000000u) ? static_cast<unsigned long long>(~u) : static_cast<unsigned long long>(u | 0x80000000u);
-  } else {
-    const auto u = static_cast<unsigned long long>(__double_as_longlong(v));
-    return (u & 0x8000000000000000ull) ? ~u : (u | 0x8000000000000000ull);
-  }
-}
-
 __global__ void bounds_kernel(const Vec3* __restrict__ centre, const real* __restrict__ radius, std::size_t n,
                               BoundsAccum* acc) {
   real lo[3] = {real(FLT_MAX), real(FLT_MAX), real(FLT_MAX)};
@@ -57,10 +45,10 @@ __global__ void bounds_kernel(const Vec3* __restrict__ centre, const real* __res
   }
   if (threadIdx.x == 0) {
     for (int k = 0; k < 3; ++k) {
-      atomicMin(&acc->lo[k], ordered(s[k][0]));
-      atomicMax(&acc->hi[k], ordered(s[3 + k][0]));
+      atomicMin(&acc->lo[k], encode_ordered(s[k][0]));
+      atomicMax(&acc->hi[k], encode_ordered(s[3 + k][0]));
     }
-    atomicMax(&acc->r_max, ordered(s[6][0]));
+    atomicMax(&acc->r_max, encode_ordered(s[6][0]));
     if (s_bad) atomicOr(&acc->bad, 1u);
   }
 }

@@ -12,6 +12,7 @@
 
 #include <cub/device/device_scan.cuh>
 
+#include "core/bits.hpp"
 #include "core/config.hpp"
 #include "core/cuda_check.hpp"
 #include "core/device_memory.hpp"
@@ -96,12 +97,12 @@ __device__ __forceinline__ std::size_t count_within(std::size_t items, const std
 // their words do, so an atomic max over the words gives the exact largest
 // real whatever the order (warp_atomic_max, atomicMax).
 __device__ __forceinline__ unsigned long long bits_of(real v) {
-  if constexpr (sizeof(real) == 4) return __float_as_uint(v);
-  else return static_cast<unsigned long long>(__double_as_longlong(v));
+  if constexpr (sizeof(real) == 4) return bits_of_float(v);
+  else return bits_of_double(v);
 }
 __device__ __forceinline__ real real_of_bits(unsigned long long w) {
-  if constexpr (sizeof(real) == 4) return __uint_as_float(static_cast<unsigned>(w));
-  else return __longlong_as_double(static_cast<long long>(w));
+  if constexpr (sizeof(real) == 4) return float_of_bits(static_cast<std::uint32_t>(w));
+  else return double_of_bits(w);
 }
 #endif
 
