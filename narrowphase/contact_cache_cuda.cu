@@ -280,16 +280,20 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
 }
 
 CacheEntries ContactCacheCuda::download(cudaStream_t s) {
-  // Everything up to the bound with the runs, then cut to the count (the
-  // runs' last first); the whole keys from each run's sphere and the b.
+  // The runs first: their last first is the entry count (the store leaves
+  // the room past it unwritten); then that many entries, and the whole keys
+  // from each run's sphere and the b.
   CacheEntries e;
-  const std::size_t m = m_bound;
-  e.resize(m);
-  if (m == 0) return e;
-  std::vector<std::uint32_t> b(m), first(std::size_t(m_spheres) + 1);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(b.data(), m_keys.get(), m * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  if (m_bound == 0) return e;
+  std::vector<std::uint32_t> first(std::size_t(m_spheres) + 1);
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(first.data(), m_first.get(), first.size() * sizeof(std::uint32_t),
                                      cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  const std::size_t m = std::min<std::size_t>(first[m_spheres], m_bound);
+  e.resize(m);
+  if (m == 0) return e;
+  std::vector<std::uint32_t> b(m);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(b.data(), m_keys.get(), m * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.normal_impulse.data(), m_normal.get(), m * sizeof(real), cudaMemcpyDeviceToHost, s));
   if (m_keep_tangent)  // else zero, as resize left them
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.tangent_impulse.data(), m_tangent.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
@@ -297,9 +301,8 @@ CacheEntries ContactCacheCuda::download(cudaStream_t s) {
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.rolling_impulse.data(), m_rolling.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.colour.data(), m_colour.get(), m, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  e.resize(std::min<std::size_t>(first[m_spheres], m));
   for (std::uint32_t a = 0; a < m_spheres; ++a)
-    for (std::uint32_t k = first[a]; k < first[a + 1]; ++k) e.key[k] = cache_key(a, b[k]);
+    for (std::uint32_t k = first[a]; k < std::min<std::size_t>(first[a + 1], m); ++k) e.key[k] = cache_key(a, b[k]);
   return e;
 }
 
