@@ -403,6 +403,7 @@ struct Row {
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   double bytes_per_step = 0;       // median host<->device bytes
   double device_bytes_per_sphere = 0;
+  std::vector<DeviceBytes> device_buffers;  // by part; the last, "runtime", is what their sum leaves of the total
   std::optional<double> launches, waits;  // per step, medians of the counted steps (none where nothing counts)
   std::optional<double> busy_ms;          // per step, the device at work: median of the traced steps
   std::optional<double> traced_ms;        // per step, the traced steps' wall time (tracing slows the host)
@@ -444,6 +445,13 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   row.max_overlap_pct = 100 * max_overlap;
   row.bytes_per_step = median(bytes);
   row.device_bytes_per_sphere = static_cast<double>(sim.device_bytes()) / static_cast<double>(n);
+  row.device_buffers = sim.device_buffers();
+  if (!row.device_buffers.empty()) {
+    std::size_t named = 0;
+    for (const DeviceBytes& b : row.device_buffers) named += b.bytes;
+    const std::size_t total = sim.device_bytes();
+    row.device_buffers.push_back({"runtime", total > named ? total - named : 0});
+  }
 
   // Kernel launches and host waits (CUDA backend): a few more steps, counted apart, since
   // counting slows every CUDA call.
@@ -596,6 +604,9 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"traced_step_ms", count(r.traced_ms)},
                                  {"verb_ms", nlohmann::ordered_json::object()}};
       for (int v = 0; v < kVerbs; ++v) row["verb_ms"][kVerbNames[v]] = r.verb_ms[v];
+      row["device_bytes_per_sphere_by_part"] = nlohmann::ordered_json::object();
+      for (const DeviceBytes& b : r.device_buffers)
+        row["device_bytes_per_sphere_by_part"][b.name] = static_cast<double>(b.bytes) / static_cast<double>(r.n);
       if (r.settle)
         row["settle"] = {{"cached", r.settle->cached},          {"backend", r.settle->backend},
                          {"steps", r.settle->steps},            {"seconds", r.settle->seconds},
@@ -646,6 +657,13 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   for (int v = 0; v < kVerbs; ++v) {
     out << std::setw(20) << std::left << kVerbNames[v] << std::right << std::fixed << std::setprecision(3);
     for (const Row& r : rows) out << std::setw(11) << r.verb_ms[v];
+    out << "\n" << std::defaultfloat;
+  }
+  for (const Row& r : rows) {
+    if (r.device_buffers.empty()) continue;
+    out << "device B/sphere by part, N = " << r.n << ":" << std::fixed << std::setprecision(1);
+    for (const DeviceBytes& b : r.device_buffers)
+      if (b.bytes > 0) out << " " << b.name << " " << static_cast<double>(b.bytes) / static_cast<double>(r.n) << ";";
     out << "\n" << std::defaultfloat;
   }
   for (const Row& r : rows)

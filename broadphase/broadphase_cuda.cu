@@ -385,6 +385,14 @@ const std::uint32_t* SubdivisionCuda::device_pair_count() const { return m->coun
 void SubdivisionCuda::replan() { m->plan.reset(); }
 std::uint64_t SubdivisionCuda::bytes_copied() const { return m->bytes; }
 
+std::size_t SubdivisionCuda::device_bytes() const {
+  const Impl& i = *m;
+  return ::marbles::cuda::bytes_of(i.centre, i.radius, i.bounds, i.counts, i.offsets, i.info, i.keys, i.keys_alt, i.values,
+                                   i.values_alt, i.flags, i.cell_index, i.cells, i.pass_begin, i.pair_counts,
+                                   i.pair_offsets, i.pairs, i.tests, i.sorted_sphere, i.sorted_info, i.cub_temp,
+                                   i.seed_scratch, i.own_scratch, i.count_word, i.grid_word);
+}
+
 void SubdivisionCuda::find_pairs(const SpheresIn& s, real margin, std::vector<Pair>& out) {
   out.clear();
   const std::size_t n = s.count;

@@ -80,6 +80,8 @@ class SubdivisionCuda final : public BroadPhase {
   // Host<->device bytes the device entry points copied so far (readbacks,
   // and the CPU fallback's copies; find_pairs' uploads and downloads too).
   std::uint64_t bytes_copied() const;
+  // Device bytes it holds of its own (not a shared scratch).
+  std::size_t device_bytes() const;
 
   // The home-cell variant's temporaries (keys, ids and their alternates,
   // the spheres in sorted order, lower bounds, pair counts and offsets) live

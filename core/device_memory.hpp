@@ -109,6 +109,12 @@ class DeviceBuffer : private Owned<void*, cudaFree> {
   std::size_t m_bytes = 0;
 };
 
+// The bytes the buffers hold together.
+template <class... Buffers>
+std::size_t bytes_of(const Buffers&... buffers) {
+  return (std::size_t{0} + ... + buffers.bytes());
+}
+
 // Copies host[] into `buffer` (grown to fit), asynchronously on `stream`: the
 // host vector must outlive the copy (synchronise before changing it).
 template <class T>

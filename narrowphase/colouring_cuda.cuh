@@ -74,6 +74,8 @@ class ColouringCuda {
 
   // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }
+  // Device bytes it holds of its own (not the shared scratch).
+  std::size_t device_bytes() const { return ::marbles::cuda::bytes_of(m_count, m_first_of_key, m_own_scratch); }
 
   // The temporaries (colours, lists, the sort's counts) live in `scratch`
   // from here on, memory that stages which never run at the same time

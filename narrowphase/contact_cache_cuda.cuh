@@ -72,6 +72,12 @@ class ContactCacheCuda {
   // The entries are at most this many (the contacts of the last store): the
   // count itself stays on the device, where the kernels read it.
   std::uint32_t bound() const { return m_bound; }
+  // Device bytes it holds of its own (the entries, their runs; not the
+  // shared scratch).
+  std::size_t device_bytes() const {
+    return ::marbles::cuda::bytes_of(m_keys, m_normal, m_tangent, m_rolling, m_colour, m_counter, m_own_scratch,
+                                     m_first);
+  }
   // The entries as the CPU cache holds them (a checkpoint's copy), and back.
   CacheEntries download(cudaStream_t stream);
   // `spheres`: the world's (entries of other spheres are never found).

@@ -115,6 +115,10 @@ class LocalSweepsCuda {
   void run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan, const BodiesView& world,
            double diameters, int passes, int local, SolverBody* bodies, real inv_h, SolverTerms terms, int sm_count,
            cudaStream_t stream);
+  // Device bytes it holds (none until it first runs).
+  std::size_t device_bytes() const {
+    return ::marbles::cuda::bytes_of(m_keys, m_order, m_heads, m_starts, m_temp, m_largest);
+  }
 
  private:
   ::marbles::cuda::DeviceBuffer m_keys, m_order, m_heads, m_starts, m_temp, m_largest;

@@ -492,6 +492,24 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaMemGetInfo(&free, &total));
     return m_free_at_start > free ? m_free_at_start - free : 0;
   }
+  std::vector<DeviceBytes> device_buffers() const override {
+    using ::marbles::cuda::bytes_of;
+    return {
+        {"world", m_device.device_bytes()},
+        {"solver bodies", m_solver_bodies.bytes()},
+        {"broad phase pairs", m_pairs.bytes()},
+        {"broad phase", m_broadphase ? m_broadphase->device_bytes() : 0},
+        {"records", m_record_memory.bytes()},
+        {"matches and colours", bytes_of(m_match, m_kept_colour, m_sorted_colour)},
+        {"cache", m_cache.device_bytes()},
+        {"colouring", m_colouring.device_bytes()},
+        {"scratch", m_scratch.bytes()},
+        {"watchdog's copy", m_kept.device_bytes() + m_kept_cache.device_bytes() + m_kept_walls.bytes()},
+        {"local order", m_local_sweeps.device_bytes()},
+        {"small", bytes_of(m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_flags, m_hit, m_moved,
+                           m_contact_chunk, m_check)},
+    };
+  }
 
   const World& world() override {
     if (m_host_stale) {

@@ -26,6 +26,11 @@ class DeviceWorld {
 
   BodiesView view() const;
   std::size_t size() const { return m_count; }
+  // Device bytes it holds.
+  std::size_t device_bytes() const {
+    return ::marbles::cuda::bytes_of(m_position, m_velocity, m_angular_velocity, m_radius, m_inv_mass, m_inv_inertia,
+                                     m_material);
+  }
   // Device bytes per sphere of the state itself.
   static constexpr std::size_t kBytesPerSphere = 3 * sizeof(Vec3) + 3 * sizeof(real) + sizeof(std::uint32_t);
 

@@ -93,6 +93,7 @@ class Simulation {
     m_backend->set_profiling(on);
   }
   std::size_t device_bytes() const { return m_backend->device_bytes(); }
+  std::vector<DeviceBytes> device_buffers() const { return m_backend->device_buffers(); }
 
   // The state beside the world that the next step depends on (cache, walls),
   // and a restart: world, that state and the step count put back.

@@ -54,6 +54,12 @@ struct StepCounters {
   double verb_ms[static_cast<int>(Verb::count)] = {};  // with profiling on: wall ms per verb, summed
 };
 
+// Device memory that one part of the step holds (StepBackend::device_buffers).
+struct DeviceBytes {
+  std::string name;
+  std::size_t bytes = 0;
+};
+
 // What a step depends on besides the world: the warm-start cache and the
 // walls as they have moved. With the world and the step count it is a
 // checkpoint (sim/checkpoint.hpp): restored, the run goes on bit for bit.
@@ -88,6 +94,10 @@ class StepBackend {
   virtual void set_profiling(bool on) {}
   // Device memory the step holds (bytes; 0 on the CPU).
   virtual std::size_t device_bytes() const { return 0; }
+  // The device memory the step's own buffers hold, by part (empty on the
+  // CPU); what device_bytes() has beyond their sum is the runtime's (its
+  // pools, allocation granularity).
+  virtual std::vector<DeviceBytes> device_buffers() const { return {}; }
 
   // --- state ----------------------------------------------------------------
   // A host copy of the world, refreshed from the device when stale.

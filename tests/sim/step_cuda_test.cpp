@@ -495,3 +495,53 @@ TEST(StepCuda, LostLoadMatchesTheCpu) {
     for (int i = 0; i < 5; ++i) EXPECT_LT(gpu.world().velocity[i].z, 0.01) << "sphere " << i << " step " << k;
   }
 }
+
+// The device memory by part (what `marbles bench step` prints): each part
+// at least what its arrays need for the step's spheres and contacts, their
+// sum within the memory the device lost since the step was built (what
+// device_bytes() measures from the device's free memory), and the
+// watchdog's copy there only once the watchdog keeps a step's start.
+TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
+  REQUIRE_DEVICE();
+  scene::Scene s = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
+                                        Effect::friction, Effect::rolling_resistance}, 0.2, 0.5, 0.02);
+  const real r = real(0.01);
+  s.walls.push_back(box({0, 0, 0}, {real(1.25), real(1.25), real(1)}));
+  Simulation gpu(s, make_world(s, dense_block(60, 60, 30, r, real(0.02))), broadphase::Backend::cuda);
+  const std::size_t n = gpu.world().size();
+  auto part = [](const std::vector<DeviceBytes>& parts, const std::string& name) {
+    for (const DeviceBytes& p : parts)
+      if (p.name == name) return p.bytes;
+    ADD_FAILURE() << "no part named " << name;
+    return std::size_t{0};
+  };
+  auto named = [](const std::vector<DeviceBytes>& parts) {
+    std::size_t sum = 0;
+    for (const DeviceBytes& p : parts) sum += p.bytes;
+    return sum;
+  };
+  for (int k = 0; k < 40; ++k) gpu.step();
+  const std::uint64_t contacts = gpu.last_step().contacts;
+  ASSERT_GT(contacts, n);  // a block resting in layers: several contacts a sphere
+  std::vector<DeviceBytes> parts = gpu.device_buffers();
+  EXPECT_GE(part(parts, "world"), n * (3 * sizeof(Vec3) + 3 * sizeof(real)));
+  EXPECT_GE(part(parts, "solver bodies"), n * sizeof(narrowphase::SolverBody));
+  // Impulse, rolling and geometry words and the body pair, at least.
+  EXPECT_GE(part(parts, "records"), contacts * (3 * sizeof(narrowphase::Real4) + sizeof(narrowphase::BodyPair)));
+  // Every contact but a wall's is a pair (fewer wall contacts than spheres).
+  EXPECT_GE(part(parts, "broad phase pairs"), (contacts - n) * sizeof(narrowphase::BodyPair));
+  EXPECT_GT(part(parts, "cache"), n * sizeof(std::uint32_t));  // the runs' firsts, then the entries
+  EXPECT_GT(part(parts, "scratch"), 0u);
+  EXPECT_EQ(part(parts, "watchdog's copy"), 0u);
+  EXPECT_EQ(part(parts, "local order"), 0u);
+  // The device's free memory moves in pages: a few MB of slack.
+  constexpr std::size_t kSlack = std::size_t(8) << 20;
+  EXPECT_LE(named(parts), gpu.device_bytes() + kSlack);
+  EXPECT_GE(named(parts) + kSlack, gpu.device_bytes() / 2) << "most of the memory the step holds is named";
+
+  gpu.set_watchdog(true);
+  gpu.step();
+  parts = gpu.device_buffers();
+  EXPECT_GE(part(parts, "watchdog's copy"), n * 3 * sizeof(Vec3));  // positions, velocities, angular velocities
+  EXPECT_LE(named(parts), gpu.device_bytes() + kSlack);
+}
