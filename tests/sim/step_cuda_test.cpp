@@ -267,39 +267,51 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
   EXPECT_GE(redos, replans) << "a replan is a redo";
 }
 
+// Both backends under the order MARBLES_SOLVE_ORDER (or SolveOrder) asks
+// for, step by step; the GPU's positions at the end. A local order runs its
+// own launches, never the one-launch solve.
+namespace {
+std::vector<Vec3> run_in_order(const scene::Scene& s, const scene::GeneratedParticles& g, int steps) {
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  EXPECT_EQ(gpu.backend_name(), "cuda");
+  GpuCounts counts;
+  expect_same_steps(cpu, gpu, steps, counts);
+  if (narrowphase::local_order_from_environment()) {
+    EXPECT_EQ(counts.one_launch, 0u) << "the local order runs its own launches";
+  }
+  return gpu.world().position;
+}
+}  // namespace
+
 // The study of a local order (MARBLES_SOLVE_ORDER) on the CUDA step: the
-// CPU's bits (LocalSweepsCuda). Cubes of a few diameters split the pour and
-// the dense block into many, with contacts between them; in the overflow
-// scene cubes of half the large sphere's diameter keep its overflow set in
-// its own cube (one thread's walk, forwards and backwards) and put others
-// between cubes. The order reaches the GPU: its bits differ from the
-// solver's order's.
+// CPU's bits (LocalSweepsCuda). Cubes of a few diameters split the pour
+// into many, with contacts between them. The order reaches the GPU: its
+// bits differ from the solver's order's.
 TEST(StepCuda, LocalOrderStudyMatchesTheCpu) {
   REQUIRE_DEVICE();
-  auto run = [](const scene::Scene& s, const scene::GeneratedParticles& g, int steps) {
-    Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
-    Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
-    EXPECT_EQ(gpu.backend_name(), "cuda");
-    GpuCounts counts;
-    expect_same_steps(cpu, gpu, steps, counts);
-    if (narrowphase::local_order_from_environment()) {
-      EXPECT_EQ(counts.one_launch, 0u) << "the local order runs its own launches";
-    }
-    return gpu.world().position;
-  };
   auto [pour, grains] = pour_scene(400, 3);
-  const std::vector<Vec3> solver_order = run(pour, grains, 150);
+  const std::vector<Vec3> solver_order = run_in_order(pour, grains, 150);
   if (HasFatalFailure()) return;
   {
     SolveOrder order("tiles:3:3:4");
-    EXPECT_NE(run(pour, grains, 150), solver_order) << "another order, other bits";
-    if (HasFatalFailure()) return;
-    run(every_term_box(), dense_block(7, 5, 3, real(0.01), real(0.005)), 30);
+    EXPECT_NE(run_in_order(pour, grains, 150), solver_order) << "another order, other bits";
     if (HasFatalFailure()) return;
   }
+  SolveOrder order("tiles:2:2:3");
+  run_in_order(pour, grains, 100);
+}
+
+// The local order's small cases (short enough for the sanitizers): the
+// dense block with every term in cubes of three diameters, and the
+// overflow scene in cubes of half the large sphere's diameter, which keep
+// its overflow set in its own cube (one thread's walk, forwards and
+// backwards) and put others between cubes.
+TEST(StepCuda, LocalOrderSmallCasesMatchTheCpu) {
+  REQUIRE_DEVICE();
   {
-    SolveOrder order("tiles:2:2:3");
-    run(pour, grains, 100);
+    SolveOrder order("tiles:3:3:4");
+    run_in_order(every_term_box(), dense_block(7, 5, 3, real(0.01), real(0.005)), 30);
     if (HasFatalFailure()) return;
   }
   SolveOrder order("tiles:0.5:2:3");
@@ -307,7 +319,7 @@ TEST(StepCuda, LocalOrderStudyMatchesTheCpu) {
   Simulation probe(s, make_world(s, g), broadphase::Backend::cpu);
   probe.step();
   ASSERT_GT(probe.last_step().overflow, 0u) << "the scene must fill every colour";
-  run(s, g, 60);
+  run_in_order(s, g, 60);
 }
 
 // A free ball moved far out along x, then back above the bed (the same
