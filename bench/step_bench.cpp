@@ -403,7 +403,7 @@ struct Row {
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   double bytes_per_step = 0;       // median host<->device bytes
   double device_bytes_per_sphere = 0;
-  std::vector<DeviceBytes> device_buffers;  // by part; the last, "runtime", is what their sum leaves of the total
+  std::vector<DeviceBytes> device_buffers;  // by part (StepBackend::device_buffers)
   std::optional<double> launches, waits;  // per step, medians of the counted steps (none where nothing counts)
   std::optional<double> busy_ms;          // per step, the device at work: median of the traced steps
   std::optional<double> traced_ms;        // per step, the traced steps' wall time (tracing slows the host)
@@ -446,12 +446,6 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   row.bytes_per_step = median(bytes);
   row.device_bytes_per_sphere = static_cast<double>(sim.device_bytes()) / static_cast<double>(n);
   row.device_buffers = sim.device_buffers();
-  if (!row.device_buffers.empty()) {
-    std::size_t named = 0;
-    for (const DeviceBytes& b : row.device_buffers) named += b.bytes;
-    const std::size_t total = sim.device_bytes();
-    row.device_buffers.push_back({"runtime", total > named ? total - named : 0});
-  }
 
   // Kernel launches and host waits (CUDA backend): a few more steps, counted apart, since
   // counting slows every CUDA call.

@@ -31,7 +31,7 @@ using ::marbles::cuda::kBlock;
 struct BoundsAccum {
   unsigned long long lo[3], hi[3], r_max;
   unsigned int bad;  // a centre or radius not finite, or a radius < 0
-  unsigned int unused;  // named padding, set at the start: the host reads the accumulator whole
+  unsigned int padding;  // set at the start: the host reads the accumulator whole
 };
 // *acc set to its start, then the bounds of the n spheres reduced into it
 // (two launches: nothing copied from the host).

@@ -58,7 +58,7 @@ __global__ void bounds_start_kernel(BoundsAccum* acc) {
   for (int k = 0; k < 3; ++k) acc->lo[k] = ~0ull, acc->hi[k] = 0;
   acc->r_max = 0;
   acc->bad = 0;
-  acc->unused = 0;
+  acc->padding = 0;
 }
 
 // The home grid of the accumulated bounds where it fits the plan, else

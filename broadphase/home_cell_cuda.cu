@@ -31,8 +31,8 @@ __device__ __forceinline__ SortedSphere load_sphere(const SortedSphere* __restri
 
 // The launch's grid (launch_home_grid's) in shared memory, one copy a block,
 // read there as it was from the kernel's parameters before the device chose
-// it: held in registers a thread, its 13 words cost the traversal kernels
-// 8 registers and a block a SM.
+// it: held in registers a thread, its words (sizeof(HomeGrid), 112 bytes)
+// cost the traversal kernels 8 registers and a block a SM.
 __device__ __forceinline__ const HomeGrid& block_grid(const HomeGrid* at) {
   __shared__ alignas(HomeGrid) unsigned char copy[sizeof(HomeGrid)];
   if (threadIdx.x == 0) *reinterpret_cast<HomeGrid*>(copy) = *at;

@@ -51,7 +51,7 @@ struct HomeGrid {
   std::uint32_t key_bits = 0;        // bits of cells - 1
   // Named padding: the device writes a grid whole (home_grid_kernel) and
   // blocks copy it whole (block_grid), so no byte of it is left unwritten.
-  std::uint32_t unused = 0;
+  std::uint32_t padding = 0;
   std::uint64_t row_offset[4] = {0, 0, 0, 0};  // key offsets of the forward rows
 };
 

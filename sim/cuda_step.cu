@@ -494,7 +494,7 @@ class CudaStep final : public StepBackend {
   }
   std::vector<DeviceBytes> device_buffers() const override {
     using ::marbles::cuda::bytes_of;
-    return {
+    std::vector<DeviceBytes> parts{
         {"world", m_device.device_bytes()},
         {"solver bodies", m_solver_bodies.bytes()},
         {"broad phase pairs", m_pairs.bytes()},
@@ -509,6 +509,11 @@ class CudaStep final : public StepBackend {
         {"small", bytes_of(m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_flags, m_hit, m_moved,
                            m_contact_chunk, m_check)},
     };
+    std::size_t named = 0;
+    for (const DeviceBytes& p : parts) named += p.bytes;
+    const std::size_t total = device_bytes();
+    parts.push_back({"runtime", total > named ? total - named : 0});
+    return parts;
   }
 
   const World& world() override {

@@ -95,8 +95,8 @@ class StepBackend {
   // Device memory the step holds (bytes; 0 on the CPU).
   virtual std::size_t device_bytes() const { return 0; }
   // The device memory the step's own buffers hold, by part (empty on the
-  // CPU); what device_bytes() has beyond their sum is the runtime's (its
-  // pools, allocation granularity).
+  // CPU), the last part "runtime": what device_bytes() has beyond their sum
+  // (the runtime's modules and local memory, allocation granularity).
   virtual std::vector<DeviceBytes> device_buffers() const { return {}; }
 
   // --- state ----------------------------------------------------------------

@@ -119,6 +119,21 @@ scene::GeneratedParticles dense_block(int nx, int ny, int nz, real r, real z0) {
   return g;
 }
 
+// Both backends under the order MARBLES_SOLVE_ORDER (or SolveOrder) asks
+// for, step by step; the GPU's positions at the end. A local order runs its
+// own launches, never the one-launch solve.
+std::vector<Vec3> run_in_order(const scene::Scene& s, const scene::GeneratedParticles& g, int steps) {
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  EXPECT_EQ(gpu.backend_name(), "cuda");
+  GpuCounts counts;
+  expect_same_steps(cpu, gpu, steps, counts);
+  if (narrowphase::local_order_from_environment()) {
+    EXPECT_EQ(counts.one_launch, 0u) << "the local order runs its own launches";
+  }
+  return gpu.world().position;
+}
+
 // The last substep's contacts as the host gets them: the CPU's, every field
 // bit for bit (the GPU makes them from its records: contact_of_record); the
 // first contact that differs fails.
@@ -266,23 +281,6 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
   EXPECT_GE(replans, 2u) << "the growing grid must outgrow the plan, and again";
   EXPECT_GE(redos, replans) << "a replan is a redo";
 }
-
-// Both backends under the order MARBLES_SOLVE_ORDER (or SolveOrder) asks
-// for, step by step; the GPU's positions at the end. A local order runs its
-// own launches, never the one-launch solve.
-namespace {
-std::vector<Vec3> run_in_order(const scene::Scene& s, const scene::GeneratedParticles& g, int steps) {
-  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
-  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
-  EXPECT_EQ(gpu.backend_name(), "cuda");
-  GpuCounts counts;
-  expect_same_steps(cpu, gpu, steps, counts);
-  if (narrowphase::local_order_from_environment()) {
-    EXPECT_EQ(counts.one_launch, 0u) << "the local order runs its own launches";
-  }
-  return gpu.world().position;
-}
-}  // namespace
 
 // The study of a local order (MARBLES_SOLVE_ORDER) on the CUDA step: the
 // CPU's bits (LocalSweepsCuda). Cubes of a few diameters split the pour
@@ -509,10 +507,10 @@ TEST(StepCuda, LostLoadMatchesTheCpu) {
 }
 
 // The device memory by part (what `marbles bench step` prints): each part
-// at least what its arrays need for the step's spheres and contacts, their
-// sum within the memory the device lost since the step was built (what
-// device_bytes() measures from the device's free memory), and the
-// watchdog's copy there only once the watchdog keeps a step's start.
+// at least what its arrays need for the step's spheres and contacts, the
+// watchdog's copy there only once the watchdog keeps a step's start, and
+// "runtime" last. Not held to device_bytes(): that is the device's free
+// memory, which other processes move (the gpu tests run side by side).
 TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
   REQUIRE_DEVICE();
   scene::Scene s = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
@@ -527,14 +525,11 @@ TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
     ADD_FAILURE() << "no part named " << name;
     return std::size_t{0};
   };
-  auto named = [](const std::vector<DeviceBytes>& parts) {
-    std::size_t sum = 0;
-    for (const DeviceBytes& p : parts) sum += p.bytes;
-    return sum;
-  };
   for (int k = 0; k < 40; ++k) gpu.step();
   const std::uint64_t contacts = gpu.last_step().contacts;
   ASSERT_GT(contacts, n);  // a block resting in layers: several contacts a sphere
+  const std::size_t entries = gpu.save_state().cache.size();
+  ASSERT_GT(entries, n);  // the contacts, but for unloaded ones of the overflow set
   std::vector<DeviceBytes> parts = gpu.device_buffers();
   EXPECT_GE(part(parts, "world"), n * (3 * sizeof(Vec3) + 3 * sizeof(real)));
   EXPECT_GE(part(parts, "solver bodies"), n * sizeof(narrowphase::SolverBody));
@@ -542,18 +537,18 @@ TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
   EXPECT_GE(part(parts, "records"), contacts * (3 * sizeof(narrowphase::Real4) + sizeof(narrowphase::BodyPair)));
   // Every contact but a wall's is a pair (fewer wall contacts than spheres).
   EXPECT_GE(part(parts, "broad phase pairs"), (contacts - n) * sizeof(narrowphase::BodyPair));
-  EXPECT_GT(part(parts, "cache"), n * sizeof(std::uint32_t));  // the runs' firsts, then the entries
+  // The runs' firsts, then each entry's b, impulses and colour.
+  EXPECT_GE(part(parts, "cache"), (n + 1) * sizeof(std::uint32_t) +
+                                      entries * (sizeof(std::uint32_t) + 7 * sizeof(real) + sizeof(std::uint8_t)));
   EXPECT_GT(part(parts, "scratch"), 0u);
   EXPECT_EQ(part(parts, "watchdog's copy"), 0u);
-  EXPECT_EQ(part(parts, "local order"), 0u);
-  // The device's free memory moves in pages: a few MB of slack.
-  constexpr std::size_t kSlack = std::size_t(8) << 20;
-  EXPECT_LE(named(parts), gpu.device_bytes() + kSlack);
-  EXPECT_GE(named(parts) + kSlack, gpu.device_bytes() / 2) << "most of the memory the step holds is named";
+  if (!narrowphase::local_order_from_environment()) {
+    EXPECT_EQ(part(parts, "local order"), 0u);
+  }
+  EXPECT_EQ(parts.back().name, "runtime");
 
   gpu.set_watchdog(true);
   gpu.step();
   parts = gpu.device_buffers();
   EXPECT_GE(part(parts, "watchdog's copy"), n * 3 * sizeof(Vec3));  // positions, velocities, angular velocities
-  EXPECT_LE(named(parts), gpu.device_bytes() + kSlack);
 }
