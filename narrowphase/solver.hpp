@@ -81,9 +81,8 @@ std::optional<LocalOrder> local_order_from_environment();
 
 // The local order's cubes: contact k (its bodies pairs[k]) is its cube's own
 // where both spheres lie in one cube of edge `edge` (or b is a wall), else
-// it lies between cubes. A sphere's cube is its centre's, 21 bits an axis
-// (clamped to a million cubes either side of the origin, a non-finite
-// coordinate to 0: cubes farther out merge, which loses locality, never the
+// it lies between cubes. A sphere's cube is its centre's (local_cube,
+// solver_math.hpp: cubes far out merge, which loses locality, never the
 // order's determinism).
 struct CubeSplit {
   std::vector<std::pair<std::uint64_t, std::uint32_t>> own;  // (cube, k), by cube, k ascending within

@@ -497,7 +497,7 @@ class CudaStep final : public StepBackend {
     std::vector<DeviceBytes> parts{
         {"world", m_device.device_bytes()},
         {"solver bodies", m_solver_bodies.bytes()},
-        {"broad phase pairs", m_pairs.bytes()},
+        {"contact pairs", m_pairs.bytes()},
         {"broad phase", m_broadphase ? m_broadphase->device_bytes() : 0},
         {"records", m_record_memory.bytes()},
         {"matches and colours", bytes_of(m_match, m_kept_colour, m_sorted_colour)},

@@ -536,7 +536,7 @@ TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
   // Impulse, rolling and geometry words and the body pair, at least.
   EXPECT_GE(part(parts, "records"), contacts * (3 * sizeof(narrowphase::Real4) + sizeof(narrowphase::BodyPair)));
   // Every contact but a wall's is a pair (fewer wall contacts than spheres).
-  EXPECT_GE(part(parts, "broad phase pairs"), (contacts - n) * sizeof(narrowphase::BodyPair));
+  EXPECT_GE(part(parts, "contact pairs"), (contacts - n) * sizeof(narrowphase::BodyPair));
   // The runs' firsts, then each entry's b, impulses and colour.
   EXPECT_GE(part(parts, "cache"), (n + 1) * sizeof(std::uint32_t) +
                                       entries * (sizeof(std::uint32_t) + 7 * sizeof(real) + sizeof(std::uint8_t)));
