@@ -385,6 +385,68 @@ PileState settle_pile(std::size_t n, broadphase::Backend backend, const StepBenc
   return {std::move(w), info};
 }
 
+// --- the spheres' order ---------------------------------------------------------
+
+// Every sphere's state moved to its place in `order` (sphere order[i]
+// becomes sphere i).
+World permuted(const World& w, const std::vector<std::uint32_t>& order) {
+  World p;
+  auto take = [&](const auto& from, auto& to) {
+    to.resize(order.size());
+    for (std::size_t i = 0; i < order.size(); ++i) to[i] = from[order[i]];
+  };
+  take(w.position, p.position);
+  take(w.velocity, p.velocity);
+  take(w.angular_velocity, p.angular_velocity);
+  take(w.radius, p.radius);
+  take(w.inv_mass, p.inv_mass);
+  take(w.inv_inertia, p.inv_inertia);
+  take(w.material, p.material);
+  return p;
+}
+
+// Bits of v spread to every third bit (v < 2^21).
+std::uint64_t spread_bits(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffULL;
+  v = (v | v << 16) & 0x1f0000ff0000ffULL;
+  v = (v | v << 8) & 0x100f00f00f00f00fULL;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+  v = (v | v << 2) & 0x1249249249249249ULL;
+  return v;
+}
+
+// The world in the order options.sphere_order asks for.
+World in_sphere_order(World w, const std::string& how) {
+  if (how == "made" || w.size() == 0) return w;
+  std::vector<std::uint32_t> order(w.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<std::uint32_t>(i);
+  if (how == "shuffled") {
+    std::mt19937_64 rng(1);
+    std::shuffle(order.begin(), order.end(), rng);
+  } else if (how == "morton") {
+    Vec3 lo = w.position[0];
+    real largest = 0;
+    for (std::size_t i = 0; i < w.size(); ++i) {
+      lo = {std::min(lo.x, w.position[i].x), std::min(lo.y, w.position[i].y), std::min(lo.z, w.position[i].z)};
+      largest = std::max(largest, w.radius[i]);
+    }
+    const double cell = 2.0 * std::max<double>(largest, 1e-30);
+    std::vector<std::uint64_t> key(w.size());
+    for (std::size_t i = 0; i < w.size(); ++i) {
+      auto at = [&](real x, real x0) {
+        return static_cast<std::uint64_t>(std::min(2097151.0, std::floor((double(x) - double(x0)) / cell)));
+      };
+      key[i] = spread_bits(at(w.position[i].x, lo.x)) | spread_bits(at(w.position[i].y, lo.y)) << 1 |
+               spread_bits(at(w.position[i].z, lo.z)) << 2;
+    }
+    std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
+  } else {
+    throw InputError({}, "--sphere-order", "unknown order '" + how + "' (made, shuffled or morton)");
+  }
+  return permuted(w, order);
+}
+
 // --- the measurements ----------------------------------------------------------
 
 struct Row {
@@ -545,16 +607,16 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         log << "pile N = " << n << ": saved " << path << "\n";
       }
       const scene::Scene s = pile(n).first;  // the box (the lattice is cheap next to the steps)
-      Simulation sim(s, std::move(state->world), backend);
+      Simulation sim(s, in_sphere_order(std::move(state->world), options.sphere_order), backend);
       rows.push_back(measure(sim, n, warmup, options.repeats));
       rows.back().settle = state->settle;
     } else if (is_settle) {
       auto [s, g] = pile(n, kSettleLattice);
-      Simulation sim(s, make_world(s, g), backend);
+      Simulation sim(s, in_sphere_order(make_world(s, g), options.sphere_order), backend);
       rows.push_back(measure(sim, n, warmup, options.repeats));
     } else {
       auto [s, g] = gas(n, options.effects);
-      Simulation sim(s, make_world(s, g), backend);
+      Simulation sim(s, in_sphere_order(make_world(s, g), options.sphere_order), backend);
       rows.push_back(measure(sim, n, warmup, options.repeats));
     }
   }
@@ -566,6 +628,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                {"precision", kRealName}, {"threads", threads()},
                                {"cpu_lanes", lanes ? nlohmann::ordered_json(lanes) : nlohmann::ordered_json()},
                                {"repeats", options.repeats}, {"warmup", warmup},
+                               {"sphere_order", options.sphere_order},
                                {"launches_per_step", nlohmann::ordered_json::array()},
                                {"results", nlohmann::ordered_json::array()}};
     auto count = [](const std::optional<double>& v) {
@@ -615,8 +678,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
       << (is_pile     ? "settled pile (friction, rolling resistance, 10 iterations, dt 1 ms)"
           : is_settle ? "settling lattice (25 layers, friction, 10 iterations, dt 1 ms)"
                       : "gas at volume fraction 0.1")
-      << ", median of "
-      << options.repeats << " steps after " << warmup << " warm-up)\n";
+      << (options.sphere_order != "made" ? ", spheres in " + options.sphere_order + " order" : std::string())
+      << ", median of " << options.repeats << " steps after " << warmup << " warm-up)\n";
   out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"
       << std::setw(10) << "contacts" << std::setw(7) << "coord" << std::setw(8) << "colours" << std::setw(9)
       << "overflow" << std::setw(9) << "overlap%" << std::setw(7) << "proj" << std::setw(12) << "bytes/step"

@@ -43,6 +43,11 @@ struct StepBenchOptions {
   double settle_ke = 1e-8;           // pile: settled when the kinetic energy per sphere is below this (J)
   int settle_quench = 10;            // pile: zero the velocities every this many settle steps (0: never)
   bool rebuild = false;              // pile: settle again even when a cached pile is there
+  // The spheres' index order the steps see (a study of memory locality):
+  // made (as generated or settled: rows of the lattice), shuffled (a
+  // random permutation, seed 1: the order a long pour drifts towards), or
+  // morton (along a Z curve of cells two largest radii wide).
+  std::string sphere_order = "made";
 };
 
 // The pile cache's file for N spheres (version and precision in the name).
