@@ -26,6 +26,8 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/api_count.hpp"
+#include "broadphase/grid.hpp"
+#include "broadphase/home_cell_math.hpp"
 #include "core/error.hpp"
 #include "narrowphase/solver.hpp"
 #include "sim/particles.hpp"
@@ -441,8 +443,16 @@ World in_sphere_order(World w, const std::string& how) {
                spread_bits(at(w.position[i].z, lo.z)) << 2;
     }
     std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
+  } else if (how == "cells") {
+    std::vector<real> radius(w.radius);
+    const broadphase::HomeGridChoice choice =
+        broadphase::choose_home_grid(broadphase::bounds_of({w.position.data(), radius.data(), w.size()}), 0);
+    std::vector<std::uint64_t> key(w.size());
+    for (std::size_t i = 0; i < w.size(); ++i)
+      key[i] = broadphase::home_key(broadphase::home_cell(w.position[i], choice.grid), choice.grid);
+    std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
   } else {
-    throw InputError({}, "--sphere-order", "unknown order '" + how + "' (made, shuffled or morton)");
+    throw InputError({}, "--sphere-order", "unknown order '" + how + "' (made, shuffled, morton or cells)");
   }
   return permuted(w, order);
 }

@@ -46,7 +46,9 @@ struct StepBenchOptions {
   // The spheres' index order the steps see (a study of memory locality):
   // made (as generated or settled: rows of the lattice), shuffled (a
   // random permutation, seed 1: the order a long pour drifts towards), or
-  // morton (along a Z curve of cells two largest radii wide).
+  // morton (along a Z curve of cells two largest radii wide) or cells (by
+  // the home-cell broad phase's cell key, rows of x, then y, then z: the
+  // order of the pairs it finds).
   std::string sphere_order = "made";
 };
 

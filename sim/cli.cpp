@@ -221,8 +221,8 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   bench_step->add_flag("--rebuild", st.rebuild, "pile: settle again, replacing the cached pile");
   bench_step->add_option("--sphere-order", st.sphere_order,
-                         "the spheres' index order the timed steps see: made (default), shuffled or morton")
-      ->check(CLI::IsMember({"made", "shuffled", "morton"}));
+                         "the spheres' index order the timed steps see: made (default), shuffled, morton or cells")
+      ->check(CLI::IsMember({"made", "shuffled", "morton", "cells"}));
   bench_step->add_flag("--json", st.json, "print JSON only (progress on stderr)");
 
   bench::EffectsBenchOptions ef;

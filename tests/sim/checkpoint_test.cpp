@@ -258,7 +258,7 @@ TEST_F(Checkpoints, BenchSphereOrderPermutesOnly) {
   const test::ScratchDir dir("ck_bench_order");
   const std::string out = dir.path() + "/out.json";
   std::vector<nlohmann::json> rows;
-  for (const std::string order : {"made", "shuffled", "morton"}) {
+  for (const std::string order : {"made", "shuffled", "morton", "cells"}) {
     const std::string args = "bench step --backend cpu --scene settle --n 3000 --warmup 0 --repeats 1 --json --sphere-order " + order;
     ASSERT_EQ(std::system(("'" + kMarbles + "' " + args + " >" + out + " 2>/dev/null").c_str()), 0) << args;
     const nlohmann::json j = nlohmann::json::parse(slurp(out));
