@@ -398,7 +398,7 @@ void read_lattice(ParticleBlock& block, const Field& field) {
 }
 
 void read_random(ParticleBlock& block, const Field& field) {
-  const MapFields map(field, {"count", "min", "max", "radius", "seed"});
+  const MapFields map(field, {"count", "min", "max", "radius", "seed", "order"});
   const Field count = map.required("count");
   const long long n = count.integer();
   if (n < 1) count.fail("must be >= 1, got " + count.node().Scalar());
@@ -413,6 +413,13 @@ void read_random(ParticleBlock& block, const Field& field) {
   check_box(block.lo, block.hi, max);
   block.radius = read_radius(map.required("radius"));
   if (auto f = map.optional("seed")) block.seed = f->seed();
+  if (auto f = map.optional("order")) {
+    static const std::vector<std::string> kOrders = {"placed", "cells"};
+    const std::string order = f->word();
+    if (std::find(kOrders.begin(), kOrders.end(), order) == kOrders.end())
+      f->fail("unknown order '" + order + "' (placed or cells)" + detail::suggestion(order, kOrders));
+    block.order_cells = order == "cells";
+  }
   const double r = largest(block.radius);
   for (int a = 0; a < 3; ++a) {
     if (block.hi[a] - block.lo[a] < 2 * r)

@@ -99,6 +99,11 @@ struct ParticleBlock {
   std::size_t count = 0;
   RadiusSpec radius;
   std::uint64_t seed = 1;
+  // random: the spheres' numbering. false (`order: placed`, the default):
+  // as placed, at random; true (`order: cells`): along rows of cells two
+  // largest radii wide, x, then y, then z, the order in which the broad
+  // phase finds pairs (docs/scene-format.md: large blocks step faster).
+  bool order_cells = false;
 
   // csv: rows x,y,z,r[,vx,vy,vz]; path resolved relative to the scene file
   std::string csv_path;

@@ -10,6 +10,8 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <tuple>
+#include <vector>
 
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
@@ -163,6 +165,53 @@ TEST(Random, DeterministicBySeed) {
   const GeneratedParticles c = generate_particles(scene_from(dir, test::replace_all(block, "SEED", "43")));
   EXPECT_TRUE(same_spheres(a, b));
   EXPECT_FALSE(same_spheres(a, c));
+}
+
+// `order: cells` numbers a random block's spheres along rows of cells two
+// largest radii wide (x, then y, then z): the same spheres as placed (each
+// with its radius; the velocities drawn in the new order), the cells'
+// keys never falling, a block before it untouched, and an unknown order
+// refused where it was written.
+TEST(Random, OrderCellsRenumbersTheBlockOnly) {
+  const ScratchDir dir("random_order");
+  const std::string blocks =
+      "  - random: {count: 200, min: [-1, -1, -1], max: [0, 0, 0], radius: 0.02, seed: 5}\n"
+      "  - random: {count: 3000, min: [0, 0, 0], max: [1, 0.5, 0.5], radius: {uniform: [0.005, 0.015]}, seed: 6ORDER}\n";
+  const GeneratedParticles placed = generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", "")));
+  const GeneratedParticles cells =
+      generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", ", order: cells")));
+  const GeneratedParticles named =
+      generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", ", order: placed")));
+  EXPECT_TRUE(same_spheres(placed, named));
+  ASSERT_EQ(cells.size(), placed.size());
+  EXPECT_FALSE(same_spheres(placed, cells));
+  auto sphere = [](const GeneratedParticles& p, std::size_t i) {
+    return std::tuple(p.position[i].x, p.position[i].y, p.position[i].z, p.radius[i]);
+  };
+  std::vector<std::tuple<real, real, real, real>> a, b;
+  for (std::size_t i = 0; i < placed.size(); ++i) {
+    if (i < 200) EXPECT_EQ(sphere(placed, i), sphere(cells, i)) << i;
+    a.push_back(sphere(placed, i));
+    b.push_back(sphere(cells, i));
+  }
+  std::sort(a.begin(), a.end());
+  std::sort(b.begin(), b.end());
+  EXPECT_EQ(a, b);
+  double largest = 0;  // the generator's cell: two of the block's largest radii
+  for (std::size_t i = 200; i < cells.size(); ++i) largest = std::max(largest, double(cells.radius[i]));
+  const double cell = 2 * largest;
+  auto key = [&](std::size_t i) {
+    const Vec3& c = cells.position[i];
+    return std::tuple(std::floor(c.z / cell), std::floor(c.y / cell), std::floor(c.x / cell));
+  };
+  for (std::size_t i = 201; i < cells.size(); ++i) EXPECT_LE(key(i - 1), key(i)) << i;
+  try {
+    scene_from(dir, test::replace_all(blocks, "ORDER", ", order: cell"));
+    ADD_FAILURE() << "order: cell was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("particles[1].random.order"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("unknown order 'cell'"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Random, HundredThousandSpheres) {
