@@ -221,14 +221,25 @@ class PlacementGrid {
   std::vector<Sphere> m_spheres;
 };
 
-// Spheres [first, end) numbered again along rows of cells `cell` wide from
-// `lo`: x, then y, then z, each cell's spheres in the order they had (a
-// stable sort). The broad phase finds pairs in this order, so the bodies
-// the step reads for them lie nearly in order in memory.
-void number_by_cells(GeneratedParticles& out, std::size_t first, const Vec3& lo, double cell) {
+// Spheres [first, end) numbered again along rows of cells two of their
+// largest radii wide from their lowest corner: x, then y, then z, each
+// cell's spheres in the order they had (a stable sort). The broad phase
+// finds pairs in this order, so the bodies the step reads for them lie
+// nearly in order in memory.
+void number_by_cells(GeneratedParticles& out, std::size_t first) {
   const std::size_t n = out.size() - first;
+  if (n == 0) return;
+  Vec3 lo = out.position[first];
+  double largest = 0;
+  for (std::size_t i = first; i < out.size(); ++i) {
+    const Vec3& c = out.position[i];
+    lo = Vec3(std::min(lo.x, c.x), std::min(lo.y, c.y), std::min(lo.z, c.z));
+    largest = std::max(largest, double(out.radius[i]));
+  }
+  const double cell = largest > 0 ? 2 * largest : 1.0;
   auto cell_of = [&](std::size_t i, int a) {
-    return static_cast<std::uint64_t>(std::max(0.0, double(out.position[first + i][a]) - double(lo[a])) / cell);
+    const double at = std::max(0.0, double(out.position[first + i][a]) - double(lo[a])) / cell;
+    return static_cast<std::uint64_t>(std::min(at, 1e12));  // a far sphere: any key past the rest (no overflow)
   };
   std::uint64_t along[2] = {1, 1};  // cells along x and y
   for (std::size_t i = 0; i < n; ++i)
@@ -284,7 +295,6 @@ void expand_random(const ParticleBlock& block, std::size_t index, std::uint32_t 
                            " attempts for the next one); enlarge the box or lower the count or the radii");
     }
   }
-  if (block.order_cells) number_by_cells(out, out.size() - block.count, block.lo, 2 * r_max);
 }
 
 // --- CSV -------------------------------------------------------------------
@@ -484,6 +494,7 @@ GeneratedParticles generate_particles(const Scene& scene) {
         break;
       }
     }
+    if (block.order_cells) number_by_cells(out, first);  // before the random velocities: drawn in this order
     if (!velocities_given) assign_velocities(block.velocity, out, first);
     if (!spins_given)
       for (std::size_t i = first; i < out.size(); ++i) out.angular_velocity[i] = block.angular_velocity;

@@ -398,7 +398,7 @@ void read_lattice(ParticleBlock& block, const Field& field) {
 }
 
 void read_random(ParticleBlock& block, const Field& field) {
-  const MapFields map(field, {"count", "min", "max", "radius", "seed", "order"});
+  const MapFields map(field, {"count", "min", "max", "radius", "seed"});
   const Field count = map.required("count");
   const long long n = count.integer();
   if (n < 1) count.fail("must be >= 1, got " + count.node().Scalar());
@@ -413,13 +413,6 @@ void read_random(ParticleBlock& block, const Field& field) {
   check_box(block.lo, block.hi, max);
   block.radius = read_radius(map.required("radius"));
   if (auto f = map.optional("seed")) block.seed = f->seed();
-  if (auto f = map.optional("order")) {
-    static const std::vector<std::string> kOrders = {"placed", "cells"};
-    const std::string order = f->word();
-    if (std::find(kOrders.begin(), kOrders.end(), order) == kOrders.end())
-      f->fail("unknown order '" + order + "' (placed or cells)" + detail::suggestion(order, kOrders));
-    block.order_cells = order == "cells";
-  }
   const double r = largest(block.radius);
   for (int a = 0; a < 3; ++a) {
     if (block.hi[a] - block.lo[a] < 2 * r)
@@ -447,7 +440,8 @@ std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field
   static const std::vector<std::string> kinds = {"list", "lattice", "random", "csv"};
   std::vector<ParticleBlock> blocks;
   for (const Field& item : field.items()) {
-    const MapFields map(item, {"list", "lattice", "random", "csv", "material", "velocity", "angular_velocity", "fixed"});
+    const MapFields map(item,
+                        {"list", "lattice", "random", "csv", "material", "velocity", "angular_velocity", "fixed", "order"});
     ParticleBlock block;
     block.where = item.where();
     const MapFields::Entry* source = nullptr;
@@ -495,6 +489,13 @@ std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field
           f->fail("fixed spheres never move: give them no velocity");
         if (map.optional("angular_velocity")) f->fail("fixed spheres never move: give them no angular_velocity");
       }
+    }
+    if (auto f = map.optional("order")) {
+      static const std::vector<std::string> kOrders = {"given", "cells"};
+      const std::string order = f->word();
+      if (std::find(kOrders.begin(), kOrders.end(), order) == kOrders.end())
+        f->fail("unknown order '" + order + "' (given or cells)" + detail::suggestion(order, kOrders));
+      block.order_cells = order == "cells";
     }
     blocks.push_back(std::move(block));
   }

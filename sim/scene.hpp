@@ -99,11 +99,6 @@ struct ParticleBlock {
   std::size_t count = 0;
   RadiusSpec radius;
   std::uint64_t seed = 1;
-  // random: the spheres' numbering. false (`order: placed`, the default):
-  // as placed, at random; true (`order: cells`): along rows of cells two
-  // largest radii wide, x, then y, then z, the order in which the broad
-  // phase finds pairs (docs/scene-format.md: large blocks step faster).
-  bool order_cells = false;
 
   // csv: rows x,y,z,r[,vx,vy,vz]; path resolved relative to the scene file
   std::string csv_path;
@@ -111,6 +106,13 @@ struct ParticleBlock {
   VelocitySpec velocity;  // initial velocities (lists and CSV may give their own)
   Vec3 angular_velocity;  // rad/s, every sphere of the block (CSV may give its own: wx,wy,wz)
   bool fixed = false;     // the spheres collide but never move (pegs, rough floors)
+  // The spheres' numbering (their ids). false (`order: given`, the
+  // default): as the source gives them (a list's or file's rows, a
+  // lattice's rows, a random block's placing); true (`order: cells`): along
+  // rows of cells two largest radii wide, x, then y, then z, the order in
+  // which the broad phase finds pairs (docs/scene-format.md: large blocks
+  // step faster).
+  bool order_cells = false;
   SourceLocation where;
 
   // Where single keys were written, for problems found only while generating

@@ -167,49 +167,64 @@ TEST(Random, DeterministicBySeed) {
   EXPECT_FALSE(same_spheres(a, c));
 }
 
-// `order: cells` numbers a random block's spheres along rows of cells two
-// largest radii wide (x, then y, then z): the same spheres as placed (each
-// with its radius; the velocities drawn in the new order), the cells'
-// keys never falling, a block before it untouched, and an unknown order
-// refused where it was written.
-TEST(Random, OrderCellsRenumbersTheBlockOnly) {
-  const ScratchDir dir("random_order");
+// `order: cells` numbers a block's spheres along rows of cells two largest
+// radii wide from their lowest corner (x, then y, then z): the same spheres
+// as given (each with its radius; a random block's velocities drawn in the
+// new order, a list's carried with their spheres), the cells' keys never
+// falling, a block before it untouched, and an unknown order refused where
+// it was written.
+TEST(Particles, OrderCellsRenumbersTheBlockOnly) {
+  const ScratchDir dir("particles_order");
   const std::string blocks =
       "  - random: {count: 200, min: [-1, -1, -1], max: [0, 0, 0], radius: 0.02, seed: 5}\n"
-      "  - random: {count: 3000, min: [0, 0, 0], max: [1, 0.5, 0.5], radius: {uniform: [0.005, 0.015]}, seed: 6ORDER}\n";
-  const GeneratedParticles placed = generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", "")));
-  const GeneratedParticles cells =
-      generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", ", order: cells")));
-  const GeneratedParticles named =
-      generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", ", order: placed")));
-  EXPECT_TRUE(same_spheres(placed, named));
-  ASSERT_EQ(cells.size(), placed.size());
-  EXPECT_FALSE(same_spheres(placed, cells));
+      "  - random: {count: 3000, min: [0, 0, 0], max: [1, 0.5, 0.5], radius: {uniform: [0.005, 0.015]}, seed: 6}\n"
+      "    ORDER\n"
+      "  - list: {positions: [[5, 0, 0], [4, 0, 0], [3, 1, 0]], radii: [0.1, 0.1, 0.1], velocities: [[1, 0, 0], [2, 0, 0], [3, 0, 0]]}\n"
+      "    ORDER\n";
+  const GeneratedParticles given = generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", "material: glass")));
+  const GeneratedParticles named = generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", "order: given")));
+  const GeneratedParticles cells = generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", "order: cells")));
+  EXPECT_TRUE(same_spheres(given, named));
+  ASSERT_EQ(cells.size(), given.size());
+  EXPECT_FALSE(same_spheres(given, cells));
   auto sphere = [](const GeneratedParticles& p, std::size_t i) {
     return std::tuple(p.position[i].x, p.position[i].y, p.position[i].z, p.radius[i]);
   };
   std::vector<std::tuple<real, real, real, real>> a, b;
-  for (std::size_t i = 0; i < placed.size(); ++i) {
-    if (i < 200) EXPECT_EQ(sphere(placed, i), sphere(cells, i)) << i;
-    a.push_back(sphere(placed, i));
+  for (std::size_t i = 0; i < 3200; ++i) {
+    if (i < 200) EXPECT_EQ(sphere(given, i), sphere(cells, i)) << i;
+    a.push_back(sphere(given, i));
     b.push_back(sphere(cells, i));
   }
   std::sort(a.begin(), a.end());
   std::sort(b.begin(), b.end());
   EXPECT_EQ(a, b);
-  double largest = 0;  // the generator's cell: two of the block's largest radii
-  for (std::size_t i = 200; i < cells.size(); ++i) largest = std::max(largest, double(cells.radius[i]));
+  // The random block's cells: from its lowest corner, two of its largest radii wide.
+  double largest = 0, lo[3] = {1e9, 1e9, 1e9};
+  for (std::size_t i = 200; i < 3200; ++i) {
+    largest = std::max(largest, double(cells.radius[i]));
+    const Vec3& c = cells.position[i];
+    lo[0] = std::min(lo[0], double(c.x)), lo[1] = std::min(lo[1], double(c.y)), lo[2] = std::min(lo[2], double(c.z));
+  }
   const double cell = 2 * largest;
   auto key = [&](std::size_t i) {
     const Vec3& c = cells.position[i];
-    return std::tuple(std::floor(c.z / cell), std::floor(c.y / cell), std::floor(c.x / cell));
+    return std::tuple(std::floor((c.z - lo[2]) / cell), std::floor((c.y - lo[1]) / cell),
+                      std::floor((c.x - lo[0]) / cell));
   };
-  for (std::size_t i = 201; i < cells.size(); ++i) EXPECT_LE(key(i - 1), key(i)) << i;
+  for (std::size_t i = 201; i < 3200; ++i) EXPECT_LE(key(i - 1), key(i)) << i;
+  // The list: rows of x within a row of y; each sphere keeps its velocity.
+  EXPECT_EQ(cells.position[3200], Vec3(4, 0, 0));
+  EXPECT_EQ(cells.position[3201], Vec3(5, 0, 0));
+  EXPECT_EQ(cells.position[3202], Vec3(3, 1, 0));
+  EXPECT_EQ(cells.velocity[3200], Vec3(2, 0, 0));
+  EXPECT_EQ(cells.velocity[3201], Vec3(1, 0, 0));
+  EXPECT_EQ(cells.velocity[3202], Vec3(3, 0, 0));
   try {
-    scene_from(dir, test::replace_all(blocks, "ORDER", ", order: cell"));
+    scene_from(dir, test::replace_all(blocks, "ORDER", "order: cell"));
     ADD_FAILURE() << "order: cell was accepted";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("particles[1].random.order"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("particles[1].order"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("unknown order 'cell'"), std::string::npos) << e.what();
   }
 }
