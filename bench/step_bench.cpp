@@ -418,7 +418,8 @@ std::uint64_t spread_bits(std::uint64_t v) {
   return v;
 }
 
-// The world in the order options.sphere_order asks for.
+}  // namespace
+
 World in_sphere_order(World w, const std::string& how) {
   if (how == "made" || w.size() == 0) return w;
   std::vector<std::uint32_t> order(w.size());
@@ -444,9 +445,10 @@ World in_sphere_order(World w, const std::string& how) {
     }
     std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
   } else if (how == "cells") {
-    std::vector<real> radius(w.radius);
     const broadphase::HomeGridChoice choice =
-        broadphase::choose_home_grid(broadphase::bounds_of({w.position.data(), radius.data(), w.size()}), 0);
+        broadphase::choose_home_grid(broadphase::bounds_of({w.position.data(), w.radius.data(), w.size()}), 0);
+    if (choice.width == broadphase::KeyWidth::too_wide)
+      throw RuntimeFailure("--sphere-order cells: the spheres span too many cells for one key");
     std::vector<std::uint64_t> key(w.size());
     for (std::size_t i = 0; i < w.size(); ++i)
       key[i] = broadphase::home_key(broadphase::home_cell(w.position[i], choice.grid), choice.grid);
@@ -456,6 +458,8 @@ World in_sphere_order(World w, const std::string& how) {
   }
   return permuted(w, order);
 }
+
+namespace {
 
 // --- the measurements ----------------------------------------------------------
 

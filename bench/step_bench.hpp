@@ -28,6 +28,8 @@
 #include <string>
 #include <vector>
 
+#include "sim/world.hpp"
+
 namespace marbles::bench {
 
 struct StepBenchOptions {
@@ -47,10 +49,15 @@ struct StepBenchOptions {
   // made (as generated or settled: rows of the lattice), shuffled (a
   // random permutation, seed 1: the order a long pour drifts towards), or
   // morton (along a Z curve of cells two largest radii wide) or cells (by
-  // the home-cell broad phase's cell key, rows of x, then y, then z: the
-  // order of the pairs it finds).
+  // the home-cell broad phase's cell key for these spheres, rows of x, then
+  // y, then z: nearly the order of the pairs it finds).
   std::string sphere_order = "made";
 };
+
+// The world with its spheres in the order StepBenchOptions::sphere_order
+// names (made: unchanged). Throws InputError naming --sphere-order for
+// another name.
+World in_sphere_order(World world, const std::string& how);
 
 // The pile cache's file for N spheres (version and precision in the name).
 std::string pile_cache_path(const std::string& cache_dir, std::size_t n);

@@ -224,8 +224,9 @@ class PlacementGrid {
 // Spheres [first, end) numbered again along rows of cells two of their
 // largest radii wide from their lowest corner: x, then y, then z, each
 // cell's spheres in the order they had (a stable sort). The broad phase
-// finds pairs in this order, so the bodies the step reads for them lie
-// nearly in order in memory.
+// finds pairs in nearly this order (its cells are as wide, its rows the
+// same), so the bodies the step reads for them lie nearly in order in
+// memory.
 void number_by_cells(GeneratedParticles& out, std::size_t first) {
   const std::size_t n = out.size() - first;
   if (n == 0) return;
@@ -237,21 +238,26 @@ void number_by_cells(GeneratedParticles& out, std::size_t first) {
     largest = std::max(largest, double(out.radius[i]));
   }
   const double cell = largest > 0 ? 2 * largest : 1.0;
-  auto cell_of = [&](std::size_t i, int a) {
-    const double at = std::max(0.0, double(out.position[first + i][a]) - double(lo[a])) / cell;
-    return static_cast<std::uint64_t>(std::min(at, 1e12));  // a far sphere: any key past the rest (no overflow)
+  // Each sphere's cell (z, y, x), compared as a tuple: rows of x, then y,
+  // then z, however many cells the block spans.
+  struct Cell {
+    std::uint64_t z, y, x;
+    auto operator<=>(const Cell&) const = default;
   };
-  std::uint64_t along[2] = {1, 1};  // cells along x and y
-  for (std::size_t i = 0; i < n; ++i)
-    for (int a = 0; a < 2; ++a) along[a] = std::max(along[a], cell_of(i, a) + 1);
-  std::vector<std::uint64_t> key(n);
-  for (std::size_t i = 0; i < n; ++i) key[i] = cell_of(i, 0) + along[0] * (cell_of(i, 1) + along[1] * cell_of(i, 2));
+  auto along = [&](real c, real c0) {
+    return static_cast<std::uint64_t>(std::min((double(c) - double(c0)) / cell, 1e18));
+  };
+  std::vector<Cell> key(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3& c = out.position[first + i];
+    key[i] = {along(c.z, lo.z), along(c.y, lo.y), along(c.x, lo.x)};
+  }
   std::vector<std::size_t> order(n);
   for (std::size_t i = 0; i < n; ++i) order[i] = i;
   std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key[a] < key[b]; });
   auto gather = [&](auto& v) {
-    const auto old = v;
-    for (std::size_t i = 0; i < n; ++i) v[first + i] = old[first + order[i]];
+    const std::vector<typename std::decay_t<decltype(v)>::value_type> old(v.begin() + first, v.end());
+    for (std::size_t i = 0; i < n; ++i) v[first + i] = old[order[i]];
   };
   gather(out.position);
   gather(out.velocity);

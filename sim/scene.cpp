@@ -440,8 +440,8 @@ std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field
   static const std::vector<std::string> kinds = {"list", "lattice", "random", "csv"};
   std::vector<ParticleBlock> blocks;
   for (const Field& item : field.items()) {
-    const MapFields map(item,
-                        {"list", "lattice", "random", "csv", "material", "velocity", "angular_velocity", "fixed", "order"});
+    const MapFields map(
+        item, {"list", "lattice", "random", "csv", "material", "velocity", "angular_velocity", "fixed", "order"});
     ParticleBlock block;
     block.where = item.where();
     const MapFields::Entry* source = nullptr;
@@ -494,7 +494,7 @@ std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field
       static const std::vector<std::string> kOrders = {"given", "cells"};
       const std::string order = f->word();
       if (std::find(kOrders.begin(), kOrders.end(), order) == kOrders.end())
-        f->fail("unknown order '" + order + "' (given or cells)" + detail::suggestion(order, kOrders));
+        f->fail("unknown order '" + order + "'" + detail::suggestion(order, kOrders));
       block.order_cells = order == "cells";
     }
     blocks.push_back(std::move(block));

@@ -250,16 +250,19 @@ TEST_F(Checkpoints, BenchJsonIsJsonOnly) {
   }
 }
 
-// `bench step --sphere-order` permutes the spheres, nothing else: the first
-// step of the same settling lattice finds the same candidate pairs and contacts in every
-// order (a sphere lost or doubled would change them), and an unknown order
+// `bench step --sphere-order` reaches the benchmark: the first step of the
+// same settling lattice finds the same candidate pairs and contacts in every
+// order (a sphere lost or doubled would change them; that every field moves
+// with its sphere: tests/bench/sphere_order_test.cpp), and an unknown order
 // is refused naming the option.
 TEST_F(Checkpoints, BenchSphereOrderPermutesOnly) {
   const test::ScratchDir dir("ck_bench_order");
   const std::string out = dir.path() + "/out.json";
   std::vector<nlohmann::json> rows;
-  for (const std::string order : {"made", "shuffled", "morton", "cells"}) {
-    const std::string args = "bench step --backend cpu --scene settle --n 3000 --warmup 0 --repeats 1 --json --sphere-order " + order;
+  for (const char* order : {"made", "shuffled", "morton", "cells"}) {
+    const std::string args =
+        std::string("bench step --backend cpu --scene settle --n 3000 --warmup 0 --repeats 1 --json --sphere-order ") +
+        order;
     ASSERT_EQ(std::system(("'" + kMarbles + "' " + args + " >" + out + " 2>/dev/null").c_str()), 0) << args;
     const nlohmann::json j = nlohmann::json::parse(slurp(out));
     EXPECT_EQ(j.at("sphere_order"), order);

@@ -172,18 +172,21 @@ TEST(Random, DeterministicBySeed) {
 // as given (each with its radius; a random block's velocities drawn in the
 // new order, a list's carried with their spheres), the cells' keys never
 // falling, a block before it untouched, and an unknown order refused where
-// it was written.
+// it was written (the exact messages: scene_cases.hpp).
 TEST(Particles, OrderCellsRenumbersTheBlockOnly) {
   const ScratchDir dir("particles_order");
   const std::string blocks =
       "  - random: {count: 200, min: [-1, -1, -1], max: [0, 0, 0], radius: 0.02, seed: 5}\n"
       "  - random: {count: 3000, min: [0, 0, 0], max: [1, 0.5, 0.5], radius: {uniform: [0.005, 0.015]}, seed: 6}\n"
+      "    velocity: {random: {speed: 1, seed: 7}}\n"
       "    ORDER\n"
       "  - list: {positions: [[5, 0, 0], [4, 0, 0], [3, 1, 0]], radii: [0.1, 0.1, 0.1], velocities: [[1, 0, 0], [2, 0, 0], [3, 0, 0]]}\n"
       "    ORDER\n";
-  const GeneratedParticles given = generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", "material: glass")));
-  const GeneratedParticles named = generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", "order: given")));
-  const GeneratedParticles cells = generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", "order: cells")));
+  auto generate = [&](const std::string& order) {
+    return generate_particles(scene_from(dir, test::replace_all(blocks, "ORDER", order)));
+  };
+  const GeneratedParticles given = generate("material: glass"), named = generate("order: given"),
+                           cells = generate("order: cells");
   EXPECT_TRUE(same_spheres(given, named));
   ASSERT_EQ(cells.size(), given.size());
   EXPECT_FALSE(same_spheres(given, cells));
@@ -192,7 +195,9 @@ TEST(Particles, OrderCellsRenumbersTheBlockOnly) {
   };
   std::vector<std::tuple<real, real, real, real>> a, b;
   for (std::size_t i = 0; i < 3200; ++i) {
-    if (i < 200) EXPECT_EQ(sphere(given, i), sphere(cells, i)) << i;
+    if (i < 200) {
+      EXPECT_EQ(sphere(given, i), sphere(cells, i)) << i;
+    }
     a.push_back(sphere(given, i));
     b.push_back(sphere(cells, i));
   }
@@ -213,6 +218,8 @@ TEST(Particles, OrderCellsRenumbersTheBlockOnly) {
                       std::floor((c.x - lo[0]) / cell));
   };
   for (std::size_t i = 201; i < 3200; ++i) EXPECT_LE(key(i - 1), key(i)) << i;
+  // The random velocities are drawn in the new order: the same draws by index.
+  for (std::size_t i = 200; i < 3200; ++i) ASSERT_EQ(cells.velocity[i], given.velocity[i]) << i;
   // The list: rows of x within a row of y; each sphere keeps its velocity.
   EXPECT_EQ(cells.position[3200], Vec3(4, 0, 0));
   EXPECT_EQ(cells.position[3201], Vec3(5, 0, 0));
