@@ -26,8 +26,6 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/api_count.hpp"
-#include "broadphase/grid.hpp"
-#include "broadphase/home_cell_math.hpp"
 #include "core/error.hpp"
 #include "narrowphase/solver.hpp"
 #include "sim/particles.hpp"
@@ -389,24 +387,6 @@ PileState settle_pile(std::size_t n, broadphase::Backend backend, const StepBenc
 
 // --- the spheres' order ---------------------------------------------------------
 
-// Every sphere's state moved to its place in `order` (sphere order[i]
-// becomes sphere i).
-World permuted(const World& w, const std::vector<std::uint32_t>& order) {
-  World p;
-  auto take = [&](const auto& from, auto& to) {
-    to.resize(order.size());
-    for (std::size_t i = 0; i < order.size(); ++i) to[i] = from[order[i]];
-  };
-  take(w.position, p.position);
-  take(w.velocity, p.velocity);
-  take(w.angular_velocity, p.angular_velocity);
-  take(w.radius, p.radius);
-  take(w.inv_mass, p.inv_mass);
-  take(w.inv_inertia, p.inv_inertia);
-  take(w.material, p.material);
-  return p;
-}
-
 // Bits of v spread to every third bit (v < 2^21).
 std::uint64_t spread_bits(std::uint64_t v) {
   v &= 0x1fffff;
@@ -445,14 +425,7 @@ World in_sphere_order(World w, const std::string& how) {
     }
     std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
   } else if (how == "cells") {
-    const broadphase::HomeGridChoice choice =
-        broadphase::choose_home_grid(broadphase::bounds_of({w.position.data(), w.radius.data(), w.size()}), 0);
-    if (choice.width == broadphase::KeyWidth::too_wide)
-      throw RuntimeFailure("--sphere-order cells: the spheres span too many cells for one key");
-    std::vector<std::uint64_t> key(w.size());
-    for (std::size_t i = 0; i < w.size(); ++i)
-      key[i] = broadphase::home_key(broadphase::home_cell(w.position[i], choice.grid), choice.grid);
-    std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
+    order = cell_order(w);
   } else {
     throw InputError({}, "--sphere-order", "unknown order '" + how + "' (made, shuffled, morton or cells)");
   }
@@ -620,16 +593,19 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         save_pile(path, state->world, state->settle);
         log << "pile N = " << n << ": saved " << path << "\n";
       }
-      const scene::Scene s = pile(n).first;  // the box (the lattice is cheap next to the steps)
+      scene::Scene s = pile(n).first;  // the box (the lattice is cheap next to the steps)
+      s.solver.renumber = options.renumber;
       Simulation sim(s, in_sphere_order(std::move(state->world), options.sphere_order), backend);
       rows.push_back(measure(sim, n, warmup, options.repeats));
       rows.back().settle = state->settle;
     } else if (is_settle) {
       auto [s, g] = pile(n, kSettleLattice);
+      s.solver.renumber = options.renumber;
       Simulation sim(s, in_sphere_order(make_world(s, g), options.sphere_order), backend);
       rows.push_back(measure(sim, n, warmup, options.repeats));
     } else {
       auto [s, g] = gas(n, options.effects);
+      s.solver.renumber = options.renumber;
       Simulation sim(s, in_sphere_order(make_world(s, g), options.sphere_order), backend);
       rows.push_back(measure(sim, n, warmup, options.repeats));
     }
@@ -642,7 +618,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                {"precision", kRealName}, {"threads", threads()},
                                {"cpu_lanes", lanes ? nlohmann::ordered_json(lanes) : nlohmann::ordered_json()},
                                {"repeats", options.repeats}, {"warmup", warmup},
-                               {"sphere_order", options.sphere_order},
+                               {"sphere_order", options.sphere_order}, {"renumber", options.renumber},
                                {"launches_per_step", nlohmann::ordered_json::array()},
                                {"results", nlohmann::ordered_json::array()}};
     auto count = [](const std::optional<double>& v) {
@@ -693,6 +669,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
           : is_settle ? "settling lattice (25 layers, friction, 10 iterations, dt 1 ms)"
                       : "gas at volume fraction 0.1")
       << (options.sphere_order != "made" ? ", spheres in " + options.sphere_order + " order" : std::string())
+      << (options.renumber > 0 ? ", renumbered every " + std::to_string(options.renumber) + " steps" : std::string())
       << ", median of " << options.repeats << " steps after " << warmup << " warm-up)\n";
   out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"
       << std::setw(10) << "contacts" << std::setw(7) << "coord" << std::setw(8) << "colours" << std::setw(9)

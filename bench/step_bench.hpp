@@ -52,6 +52,9 @@ struct StepBenchOptions {
   // the home-cell broad phase's cell key for these spheres, rows of x, then
   // y, then z: nearly the order of the pairs it finds).
   std::string sphere_order = "made";
+  // solver.renumber of the timed scene (0: never; a numbering at the start
+  // of the first warm-up step and every this many steps after).
+  int renumber = 0;
 };
 
 // The world with its spheres in the order StepBenchOptions::sphere_order

@@ -74,6 +74,36 @@ void key_runs(const std::uint64_t* keys, std::uint32_t m, std::size_t spheres, s
   for (std::size_t i = 0; i < spheres; ++i) first[i + 1] += first[i];
 }
 
+CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>& new_index) {
+  const std::size_t m = e.size();
+  std::vector<std::uint64_t> key(m);
+  std::vector<std::uint8_t> swapped(m, 0);
+  for (std::size_t k = 0; k < m; ++k) {
+    const std::uint32_t a = new_index.at(static_cast<std::uint32_t>(e.key[k] >> 32));
+    const auto b0 = static_cast<std::uint32_t>(e.key[k]);
+    const std::uint32_t b = is_wall(b0) ? b0 : new_index.at(b0);
+    swapped[k] = !is_wall(b) && b < a;
+    key[k] = swapped[k] ? cache_key(b, a) : cache_key(a, b);
+  }
+  std::vector<std::size_t> order(m);
+  for (std::size_t k = 0; k < m; ++k) order[k] = k;
+  std::sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) { return key[x] < key[y]; });
+  CacheEntries out;
+  out.resize(m);
+  const bool colours = e.colour.size() == m;
+  if (!colours) out.colour.clear();
+  for (std::size_t i = 0; i < m; ++i) {
+    const std::size_t k = order[i];
+    const real sign = swapped[k] ? real(-1) : real(1);
+    out.key[i] = key[k];
+    out.normal_impulse[i] = e.normal_impulse[k];
+    out.tangent_impulse[i] = e.tangent_impulse[k] * sign;
+    out.rolling_impulse[i] = e.rolling_impulse[k] * sign;
+    if (colours) out.colour[i] = e.colour[k];
+  }
+  return out;
+}
+
 bool keep_proper_colours(CacheEntries& e) {
   const std::size_t m = e.size();
   bool proper = e.colour.size() == m;

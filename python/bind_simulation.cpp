@@ -208,7 +208,7 @@ class PySimulation {
   void checkpoint(const std::string& path) {
     if (m_views_out) check_views();
     write_checkpoint(path, {m_fingerprint, m_sim->steps(), m_sim->world(), m_sim->save_state(), m_totals,
-                            m_probe ? m_probe->progress() : std::vector<double>{}});
+                            m_probe ? m_probe->progress() : std::vector<double>{}, m_sim->ids()});
   }
 
   void restart(const std::string& path) {
@@ -218,7 +218,7 @@ class PySimulation {
                        "the checkpoint holds " + std::to_string(c.world.size()) + " spheres, the scene makes " +
                            std::to_string(size()));
     if (m_views_out) m_sim->state_written();
-    m_sim->restore(c.world, c.state, c.steps);
+    m_sim->restore(c.world, c.state, c.steps, c.ids);
     host_edited();
     m_totals = c.totals;
     if (m_probe) m_probe->resume(c.probe);

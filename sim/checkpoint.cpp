@@ -19,8 +19,10 @@ namespace fs = std::filesystem;
 
 constexpr char kMagic[8] = {'M', 'A', 'R', 'B', 'L', 'C', 'K', '\n'};
 // Format 2 adds the cache's kept colours; format 1 (without them) still
-// loads, its contacts then coloured afresh in the first substep.
-constexpr std::uint32_t kFormat = 2;
+// loads, its contacts then coloured afresh in the first substep. Format 3
+// adds the step's numbering (solver.renumber; empty where it is the
+// scene's); formats 1 and 2 load with none.
+constexpr std::uint32_t kFormat = 3;
 constexpr char kVersion[16] = "marbles 0.1";
 
 // FNV-1a, 64 bit.
@@ -112,6 +114,7 @@ void body(IO& io, C& c, std::uint32_t format = kFormat) {
   io.field(c.state.walls);
   io.field(c.totals);
   io.field(c.probe);
+  if (format >= 3) io.field(c.ids);
 }
 
 }  // namespace
@@ -169,7 +172,7 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   char magic[sizeof kMagic];
   r.raw(magic, sizeof magic);
   const auto format = r.get<std::uint32_t>();
-  if (format != kFormat && format != 1) r.fail("has another format version");
+  if (format < 1 || format > kFormat) r.fail("has another format version");
   char version[sizeof kVersion];
   r.raw(version, sizeof version);
   if (std::memcmp(version, kVersion, sizeof kVersion) != 0)
@@ -189,6 +192,14 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   for (std::size_t size : {c.world.velocity.size(), c.world.angular_velocity.size(), c.world.radius.size(),
                            c.world.inv_mass.size(), c.world.inv_inertia.size(), c.world.material.size()})
     if (size != n) r.fail("is damaged (array lengths differ)");
+  if (!c.ids.empty()) {  // a permutation of the spheres
+    std::vector<std::uint8_t> seen(n, 0);
+    if (c.ids.size() != n) r.fail("is damaged (the numbering has another length)");
+    for (std::uint32_t id : c.ids) {
+      if (id >= n || seen[id]) r.fail("is damaged (the numbering is not a permutation)");
+      seen[id] = 1;
+    }
+  }
   return c;
 }
 

@@ -44,6 +44,7 @@ struct Checkpoint {
   StepState state;
   RunTotals totals;
   std::vector<double> probe;     // ReferenceProbe::progress()
+  std::vector<std::uint32_t> ids;  // Simulation::ids(): the step's numbering (empty: the scene's)
 };
 
 // What a checkpoint must match: the scene file's bytes and the --set

@@ -223,6 +223,9 @@ int cli_main(int argc, char** argv) {
   bench_step->add_option("--sphere-order", st.sphere_order,
                          "the spheres' index order the timed steps see: made (default), shuffled, morton or cells")
       ->check(CLI::IsMember({"made", "shuffled", "morton", "cells"}));
+  bench_step->add_option("--renumber", st.renumber,
+                         "solver.renumber of the timed scene: the spheres numbered again every this many steps")
+      ->check(CLI::NonNegativeNumber);
   bench_step->add_flag("--json", st.json, "print JSON only (progress on stderr)");
 
   bench::EffectsBenchOptions ef;

@@ -158,7 +158,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       throw InputError(SourceLocation{*options.restart, 0, 0}, "--restart",
                        "the checkpoint holds " + std::to_string(c.world.size()) + " spheres, the scene makes " +
                            std::to_string(sim.world().size()));
-    sim.restore(c.world, c.state, c.steps);
+    sim.restore(c.world, c.state, c.steps, c.ids);
     totals = c.totals;
     if (probe) probe->resume(c.probe);
     if (!options.quiet) out << "resumed from " << *options.restart << " at step " << c.steps << "\n";
@@ -178,7 +178,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
 
   auto save_checkpoint = [&](const std::string& path) {
     write_checkpoint(path, {fingerprint, sim.steps(), sim.world(), sim.save_state(), totals,
-                            probe ? probe->progress() : std::vector<double>{}});
+                            probe ? probe->progress() : std::vector<double>{}, sim.ids()});
   };
 
   for (const std::filesystem::path& file : earlier) {  // --overwrite, once the scene is known to run

@@ -77,7 +77,7 @@ TimeSpec read_time(const Field& field) {
 }
 
 SolverSpec read_solver(const Field& field) {
-  const MapFields map(field, {"iterations", "integrator", "speculative", "precision"});
+  const MapFields map(field, {"iterations", "integrator", "speculative", "precision", "renumber"});
   SolverSpec solver;
   if (auto f = map.optional("iterations")) solver.iterations = f->integer_at_least(1);
   if (auto f = map.optional("integrator")) {
@@ -86,6 +86,7 @@ SolverSpec read_solver(const Field& field) {
       f->fail("unknown integrator '" + solver.integrator + "'" + detail::suggestion(solver.integrator, kIntegrators));
   }
   if (auto f = map.optional("speculative")) solver.speculative = f->boolean();
+  if (auto f = map.optional("renumber")) solver.renumber = f->integer_at_least(0);
   if (auto f = map.optional("precision")) {
     solver.precision = f->word();
     solver.precision_where = f->where();

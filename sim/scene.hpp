@@ -28,6 +28,10 @@ struct SolverSpec {
   bool speculative = true;                    // speculative contacts (gaps that close within a substep)
   std::string precision = "float";            // float | double: the type the run computes in
   SourceLocation precision_where;             // the `precision:` value (line 0 when not given)
+  // Every this many steps the spheres are numbered again in the broad
+  // phase's order, hidden from output, checkpoints and edits (0: never;
+  // docs/scene-format.md).
+  int renumber = 0;
 };
 
 struct Material {

@@ -105,7 +105,106 @@ double Simulation::watch_bound(double e0) const {
   return std::max(1.5 * e0 + 2 * gain, floor);
 }
 
+const World& Simulation::world() const {
+  if (m_ids.empty()) return m_backend->world();
+  if (m_given_stale) {
+    m_given = permuted(m_backend->world(), m_index);
+    m_given_stale = false;
+  }
+  return m_given;
+}
+
+World& Simulation::edit_world() {
+  m_watch.known = false;
+  if (m_ids.empty()) return m_backend->edit_world();
+  world();
+  m_given_edited = true;
+  return m_given;
+}
+
+void Simulation::send_edits() {
+  if (!m_given_edited) return;
+  m_backend->edit_world() = permuted(m_given, m_ids);
+  m_given_edited = false;
+}
+
+BodiesView Simulation::state_in_place() {
+  if (!m_ids.empty())
+    throw RuntimeFailure("the arrays in place are in the step's numbering, which solver.renumber changes: "
+                         "use world() and edit_world(), or renumber: 0");
+  return m_backend->state_in_place();
+}
+
+const std::vector<narrowphase::Contact>& Simulation::contacts() const {
+  if (m_ids.empty()) return m_backend->contacts();
+  m_given_contacts = m_backend->contacts();
+  for (narrowphase::Contact& c : m_given_contacts) {
+    c.a = m_ids[c.a];
+    if (!narrowphase::is_wall(c.b)) c.b = m_ids[c.b];
+  }
+  return m_given_contacts;
+}
+
+StepState Simulation::save_state() {
+  send_edits();
+  StepState state = m_backend->save_state();
+  if (!m_ids.empty()) state.cache = narrowphase::renumbered(state.cache, m_ids);
+  return state;
+}
+
+void Simulation::restore(const World& world, const StepState& state, std::uint64_t steps,
+                         const std::vector<std::uint32_t>& ids) {
+  m_ids = ids;
+  m_index.assign(ids.size(), 0);
+  for (std::size_t i = 0; i < ids.size(); ++i) m_index.at(ids[i]) = static_cast<std::uint32_t>(i);
+  m_given_edited = false;
+  m_given_stale = true;
+  StepState checked = state;
+  if (ids.empty()) {
+    m_backend->edit_world() = world;
+  } else {
+    m_backend->edit_world() = permuted(world, m_ids);
+    checked.cache = narrowphase::renumbered(state.cache, m_index);
+  }
+  narrowphase::keep_proper_colours(checked.cache);  // colours from outside: only a proper colouring is kept
+  m_backend->load_state(checked);
+  m_steps = steps;
+  m_time = static_cast<double>(steps) * m_model->dt;
+  if (m_watchdog) watch_from_host();
+}
+
+// The step's spheres numbered in the broad phase's order (cell_order), the
+// warm-start cache with them (narrowphase::renumbered): the same state,
+// other indices. Both backends do it at the same steps from the same host
+// copies, so they keep the same bits.
+void Simulation::renumber() {
+  send_edits();
+  const World& w = m_backend->world();
+  const std::vector<std::uint32_t> order = cell_order(w);
+  bool same = true;
+  for (std::size_t i = 0; i < order.size() && same; ++i) same = order[i] == i;
+  if (same) return;
+  std::vector<std::uint32_t> new_index(order.size());
+  for (std::size_t i = 0; i < order.size(); ++i) new_index[order[i]] = static_cast<std::uint32_t>(i);
+  World next = permuted(w, order);
+  StepState state = m_backend->save_state();
+  state.cache = narrowphase::renumbered(state.cache, new_index);
+  std::vector<std::uint32_t> ids(order.size());
+  for (std::size_t i = 0; i < order.size(); ++i) ids[i] = m_ids.empty() ? order[i] : m_ids[order[i]];
+  m_backend->edit_world() = std::move(next);
+  m_backend->load_state(state);
+  bool given = true;
+  for (std::size_t i = 0; i < ids.size() && given; ++i) given = ids[i] == i;
+  m_ids = given ? std::vector<std::uint32_t>{} : std::move(ids);
+  m_index.assign(m_ids.size(), 0);
+  for (std::size_t i = 0; i < m_ids.size(); ++i) m_index[m_ids[i]] = static_cast<std::uint32_t>(i);
+  m_given_stale = true;
+}
+
 void Simulation::step() {
+  if (m_model->renumber_every > 0 && m_steps % m_model->renumber_every == 0) renumber();
+  send_edits();
+  m_given_stale = true;
   m_last_rollbacks.clear();
   const StepCounters before = m_last;
   if (m_watchdog) m_backend->keep_step_start();

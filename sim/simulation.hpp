@@ -54,8 +54,11 @@ class Simulation {
   // Advances one step (dt).
   void step();
 
-  // The state, as a host copy (on the CUDA backend downloaded when stale).
-  const World& world() const { return m_backend->world(); }
+  // The state, as a host copy (on the CUDA backend downloaded when stale),
+  // in the scene's numbering (with solver.renumber the step numbers the
+  // spheres its own way: world(), edit_world(), contacts(), save_state() and
+  // restore() translate).
+  const World& world() const;
   const Walls& walls() const { return m_model->walls; }
   const StepModel& model() const { return *m_model; }
   double time() const { return m_time; }
@@ -67,14 +70,13 @@ class Simulation {
   bool non_finite() const { return m_backend->non_finite(); }
   // Direct access to the state, for tests and tools that edit it between
   // steps (sent to the device before the next step).
-  World& edit_world() {
-    m_watch.known = false;
-    return m_backend->edit_world();
-  }
+  World& edit_world();
   // The state where the step keeps it (device pointers on the CUDA backend),
   // to read and write in place between steps; after writing, state_written()
   // (the watchdog then treats the next step as after an edit).
-  BodiesView state_in_place() { return m_backend->state_in_place(); }
+  // Not with solver.renumber (the arrays are in the step's numbering):
+  // throws RuntimeFailure.
+  BodiesView state_in_place();
   void state_written() {
     m_watch.known = false;
     m_backend->state_written();
@@ -82,7 +84,7 @@ class Simulation {
   // Every position, velocity and angular velocity finite (checked where the state lives).
   bool state_finite() { return m_backend->state_finite(); }
   // The contacts of the last substep (solver order), for diagnostics and tests.
-  const std::vector<narrowphase::Contact>& contacts() const { return m_backend->contacts(); }
+  const std::vector<narrowphase::Contact>& contacts() const;
   const broadphase::BroadPhase* broad_phase() const { return m_backend->broad_phase(); }
   std::string backend_name() const { return m_backend->name(); }
 
@@ -96,17 +98,16 @@ class Simulation {
   std::vector<DeviceBytes> device_buffers() const { return m_backend->device_buffers(); }
 
   // The state beside the world that the next step depends on (cache, walls),
-  // and a restart: world, that state and the step count put back.
-  StepState save_state() { return m_backend->save_state(); }
-  void restore(const World& world, const StepState& state, std::uint64_t steps) {
-    m_backend->edit_world() = world;
-    StepState checked = state;
-    narrowphase::keep_proper_colours(checked.cache);  // colours from outside: only a proper colouring is kept
-    m_backend->load_state(checked);
-    m_steps = steps;
-    m_time = static_cast<double>(steps) * m_model->dt;
-    if (m_watchdog) watch_from_host();
-  }
+  // and a restart: world, that state and the step count put back, with the
+  // step's numbering (ids(): empty where it is the scene's).
+  StepState save_state();
+  void restore(const World& world, const StepState& state, std::uint64_t steps,
+               const std::vector<std::uint32_t>& ids = {});
+  // With solver.renumber: each sphere's index in the scene's numbering, by
+  // its index in the step's (empty: the same numbering). The step numbers
+  // the spheres again in the broad phase's order at the start of every
+  // renumber-th step (docs/architecture.md "The spheres' order").
+  const std::vector<std::uint32_t>& ids() const { return m_ids; }
 
   // The watchdog (off unless set; `marbles run` sets it): after each step it
   // checks cheap invariants, in this order:
@@ -146,6 +147,8 @@ class Simulation {
   double watch_bound(double energy_before) const;    // the largest kinetic energy a step may reach
   void watch_from_host();                            // the figures of the host world, into m_last
   void inject_fault();
+  void renumber();    // the spheres numbered again in the broad phase's order
+  void send_edits();  // edits of the scene-numbered copy to the step
   template <class F>
   void run_verb(Verb verb, F&& f);
 
@@ -169,6 +172,14 @@ class Simulation {
     double wall_speed = 0;  // m/s, the fastest wall surface
   } m_watch;
   std::vector<std::string> m_last_rollbacks;
+  // The step's numbering (empty: the scene's): m_ids[i] is the scene's
+  // index of the step's sphere i, m_index its inverse; the world and the
+  // contacts in the scene's numbering, made when asked for.
+  std::vector<std::uint32_t> m_ids, m_index;
+  mutable World m_given;
+  mutable bool m_given_stale = true;
+  bool m_given_edited = false;
+  mutable std::vector<narrowphase::Contact> m_given_contacts;
   double m_verb_ms[static_cast<int>(Verb::count)] = {};
 };
 

@@ -99,6 +99,7 @@ StepModel compile_step_model(const scene::Scene& scene, broadphase::Algorithm al
   m.moving_walls = m.wall_contacts && !std::all_of(m.wall_shapes.begin(), m.wall_shapes.end(),
                                                   narrowphase::surface_at_rest);
   m.speculative = scene.solver.speculative;
+  m.renumber_every = static_cast<std::uint64_t>(scene.solver.renumber);
   m.verlet = scene.solver.integrator == "velocity_verlet";
   m.g = scene.gravity;
   m.dt = scene.time.dt;

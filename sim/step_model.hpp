@@ -54,6 +54,9 @@ struct StepModel {
   broadphase::Algorithm algorithm = broadphase::kDefaultCpuAlgorithm;
   double dt = 0;
   int substeps = 1;
+  // Steps between numberings of the spheres in the broad phase's order (0:
+  // never): Simulation's, between steps, the same on every backend.
+  std::uint64_t renumber_every = 0;
 
   narrowphase::PairTable pair_table() const { return {pair_coefficients.data(), material_count}; }
   real substep() const { return static_cast<real>(dt / substeps); }

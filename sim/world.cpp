@@ -7,6 +7,8 @@
 #include <numbers>
 #include <string>
 
+#include "broadphase/grid.hpp"
+#include "broadphase/home_cell_math.hpp"
 #include "core/error.hpp"
 #include "core/format.hpp"
 
@@ -14,6 +16,36 @@
 #include "sim/scene.hpp"
 
 namespace marbles {
+
+World permuted(const World& w, const std::vector<std::uint32_t>& order) {
+  World p;
+  auto take = [&](const auto& from, auto& to) {
+    to.resize(order.size());
+    for (std::size_t i = 0; i < order.size(); ++i) to[i] = from[order[i]];
+  };
+  take(w.position, p.position);
+  take(w.velocity, p.velocity);
+  take(w.angular_velocity, p.angular_velocity);
+  take(w.radius, p.radius);
+  take(w.inv_mass, p.inv_mass);
+  take(w.inv_inertia, p.inv_inertia);
+  take(w.material, p.material);
+  return p;
+}
+
+std::vector<std::uint32_t> cell_order(const World& w) {
+  std::vector<std::uint32_t> order(w.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<std::uint32_t>(i);
+  if (w.size() == 0) return order;
+  const broadphase::HomeGridChoice choice =
+      broadphase::choose_home_grid(broadphase::bounds_of({w.position.data(), w.radius.data(), w.size()}), 0);
+  if (choice.width == broadphase::KeyWidth::too_wide) return order;
+  std::vector<std::uint64_t> key(w.size());
+  for (std::size_t i = 0; i < w.size(); ++i)
+    key[i] = broadphase::home_key(broadphase::home_cell(w.position[i], choice.grid), choice.grid);
+  std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
+  return order;
+}
 
 double World::kinetic_energy() const {
   double e = 0;

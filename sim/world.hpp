@@ -43,6 +43,16 @@ struct World {
   std::size_t first_non_finite() const;
 };
 
+// Sphere order[i] of `w` as sphere i, every array with it (order: a
+// permutation of [0, w.size())).
+World permuted(const World& w, const std::vector<std::uint32_t>& order);
+
+// The order (new index -> old) that numbers the spheres along rows of the
+// home-cell broad phase's cells for them (x, then y, then z; a cell's
+// spheres as they were): the order in which it finds their pairs. Identity
+// where the grid is too wide for one key.
+std::vector<std::uint32_t> cell_order(const World& w);
+
 // Builds the world from the scene's materials and its generated particles.
 World make_world(const scene::Scene& scene, const scene::GeneratedParticles& particles);
 

@@ -95,6 +95,8 @@ inline const std::vector<BadScene>& bad_scenes() {
        "{scene}:6:22: solver.integrator: unknown integrator 'rk4'; expected one of: symplectic_euler, velocity_verlet"},
       {"integrator_typo", SCENE_VALID "solver: {integrator: velocity_verlett}\n",
        "{scene}:6:22: solver.integrator: unknown integrator 'velocity_verlett' (did you mean 'velocity_verlet'?)"},
+      {"renumber_negative", SCENE_VALID "solver: {renumber: -1}\n",
+       "{scene}:6:20: solver.renumber: must be >= 0, got -1"},
       {"unknown_order", SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "    order: spiral\n",
        "{scene}:6:12: particles[0].order: unknown order 'spiral'; expected one of: given, cells"},
       {"order_typo", SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "    order: cell\n",

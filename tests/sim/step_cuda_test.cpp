@@ -222,6 +222,21 @@ TEST(StepCuda, VerletAndNoSpeculativePoursMatchTheCpuBitForBit) {
   }
 }
 
+// solver.renumber: both backends number the spheres again at the same steps
+// from the same host copies (Simulation::renumber), the GPU's world and
+// cache sent up again: the same bits, seen in the scene's numbering.
+TEST(StepCuda, RenumberedPourMatchesTheCpuBitForBit) {
+  REQUIRE_DEVICE();
+  auto [s, g] = pour_scene(1000, 7);
+  s.solver.renumber = 3;
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  GpuCounts counts;
+  expect_same_steps(cpu, gpu, 120, counts);
+  EXPECT_FALSE(gpu.ids().empty());
+  EXPECT_EQ(gpu.ids(), cpu.ids());
+}
+
 TEST(StepCuda, LargerPourMatchesTheCpuBitForBit) {
   REQUIRE_DEVICE();
   auto [s, g] = pour_scene(3000, 5);

@@ -1,0 +1,74 @@
+// tests/narrowphase/contact_cache_test.cpp — the cache's entries under a
+// new numbering of the spheres (renumbered, for solver.renumber).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <set>
+#include <vector>
+
+#include "narrowphase/contact_cache.hpp"
+#include "narrowphase/contact_cache_math.hpp"
+
+namespace marbles::narrowphase {
+namespace {
+// renumbered: the entries of random pairs (and walls) under a random
+// numbering of the spheres are the same contacts with the new names (a
+// swapped pair with its tangential and rolling impulses negated), sorted
+// by key; the inverse numbering gives back every bit.
+TEST(ContactCacheRenumbered, NewNamesSameImpulsesAndBackAgain) {
+  std::mt19937_64 rng(21);
+  const std::uint32_t n = 300;
+  std::uniform_real_distribution<float> u(-1, 1);
+  std::set<std::uint64_t> keys;
+  while (keys.size() < 900) {
+    const std::uint32_t a = rng() % n, b = rng() % n;
+    if (a < b) keys.insert(cache_key(a, b));
+    if (rng() % 8 == 0) keys.insert(cache_key(a, kWallFlag | static_cast<std::uint32_t>(rng() % 3)));
+  }
+  CacheEntries e;
+  for (std::uint64_t key : keys) {
+    e.key.push_back(key);
+    e.normal_impulse.push_back(std::abs(u(rng)));
+    e.tangent_impulse.push_back({u(rng), u(rng), u(rng)});
+    e.rolling_impulse.push_back({u(rng), u(rng), u(rng)});
+    e.colour.push_back(static_cast<std::uint8_t>(rng() % 20));
+  }
+  std::vector<std::uint32_t> new_index(n), old_index(n);
+  for (std::uint32_t i = 0; i < n; ++i) new_index[i] = i;
+  std::shuffle(new_index.begin(), new_index.end(), rng);
+  for (std::uint32_t i = 0; i < n; ++i) old_index[new_index[i]] = i;
+
+  const CacheEntries r = renumbered(e, new_index);
+  ASSERT_EQ(r.size(), e.size());
+  EXPECT_TRUE(std::is_sorted(r.key.begin(), r.key.end()));
+  std::size_t swapped = 0;
+  for (std::size_t k = 0; k < e.size(); ++k) {
+    const auto a = static_cast<std::uint32_t>(e.key[k] >> 32), b = static_cast<std::uint32_t>(e.key[k]);
+    const std::uint32_t na = new_index[a], nb = is_wall(b) ? b : new_index[b];
+    const bool swap = !is_wall(b) && nb < na;
+    const std::uint64_t key = swap ? cache_key(nb, na) : cache_key(na, nb);
+    const auto at = std::lower_bound(r.key.begin(), r.key.end(), key);
+    ASSERT_TRUE(at != r.key.end() && *at == key) << k;
+    const std::size_t j = at - r.key.begin();
+    const real sign = swap ? -1 : 1;
+    swapped += swap;
+    EXPECT_EQ(r.normal_impulse[j], e.normal_impulse[k]);
+    EXPECT_EQ(r.tangent_impulse[j].x, sign * e.tangent_impulse[k].x);
+    EXPECT_EQ(r.tangent_impulse[j].z, sign * e.tangent_impulse[k].z);
+    EXPECT_EQ(r.rolling_impulse[j].y, sign * e.rolling_impulse[k].y);
+    EXPECT_EQ(r.colour[j], e.colour[k]);
+  }
+  EXPECT_GT(swapped, 100u);
+  const CacheEntries back = renumbered(r, old_index);
+  EXPECT_EQ(back.key, e.key);
+  EXPECT_EQ(back.normal_impulse, e.normal_impulse);
+  EXPECT_EQ(std::memcmp(back.tangent_impulse.data(), e.tangent_impulse.data(), e.size() * sizeof(Vec3)), 0);
+  EXPECT_EQ(std::memcmp(back.rolling_impulse.data(), e.rolling_impulse.data(), e.size() * sizeof(Vec3)), 0);
+  EXPECT_EQ(back.colour, e.colour);
+}
+
+}  // namespace
+}  // namespace marbles::narrowphase
