@@ -4,6 +4,7 @@
 #include <numeric>
 
 #include "core/counting_sort.hpp"
+#include "core/radix_sort.hpp"
 #include "narrowphase/contact_cache_math.hpp"
 #include "narrowphase/solver_math.hpp"
 
@@ -85,9 +86,11 @@ CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>&
     swapped[k] = !is_wall(b) && b < a;
     key[k] = swapped[k] ? cache_key(b, a) : cache_key(a, b);
   }
-  std::vector<std::size_t> order(m);
-  for (std::size_t k = 0; k < m; ++k) order[k] = k;
-  std::sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) { return key[x] < key[y]; });
+  std::vector<std::uint32_t> order(m);
+  for (std::size_t k = 0; k < m; ++k) order[k] = static_cast<std::uint32_t>(k);
+  std::vector<std::uint64_t> sorted_keys = key, scratch_keys;
+  std::vector<std::uint32_t> scratch_order;
+  radix_sort_pairs(sorted_keys, order, 64, scratch_keys, scratch_order);  // keys are unique: any sort's order
   CacheEntries out;
   out.resize(m);
   const bool colours = e.colour.size() == m;

@@ -395,6 +395,7 @@ void bind_simulation(nb::module_& m, const char* name, const char* pairs_name) {
       .def("totals", &PySimulation::totals)
       .def_prop_ro("size", &PySimulation::size)
       .def_prop_ro("on_device", &PySimulation::on_device)
+      .def_prop_ro("renumbers", [](const PySimulation& s) { return s.sim().model().renumber_every > 0; })
       .def_prop_ro("time", [](const PySimulation& s) { return s.sim().time(); })
       .def_prop_ro("steps", [](const PySimulation& s) { return s.sim().steps(); })
       .def_prop_ro("dt", [](const PySimulation& s) { return s.sim().dt(); })

@@ -129,7 +129,9 @@ void Simulation::send_edits() {
 }
 
 BodiesView Simulation::state_in_place() {
-  if (!m_ids.empty())
+  // Refused for the whole run, not only while the numbering differs: a
+  // numbering replaces the arrays, and a view of them would outlive them.
+  if (m_model->renumber_every > 0)
     throw RuntimeFailure("the arrays in place are in the step's numbering, which solver.renumber changes: "
                          "use world() and edit_world(), or renumber: 0");
   return m_backend->state_in_place();
@@ -268,7 +270,7 @@ void Simulation::attempt(int split) {
 
 std::string Simulation::violation(const StepCounters& before) {
   if (m_backend->non_finite())
-    return "non-finite state (sphere " + std::to_string(m_backend->world().first_non_finite()) + ")";
+    return "non-finite state (sphere " + std::to_string(world().first_non_finite()) + ")";  // the scene's numbering
   if (m_watch.known) {
     const double bound = watch_bound(before.kinetic_energy);
     if (!(m_last.kinetic_energy <= bound))

@@ -74,8 +74,8 @@ class Simulation {
   // The state where the step keeps it (device pointers on the CUDA backend),
   // to read and write in place between steps; after writing, state_written()
   // (the watchdog then treats the next step as after an edit).
-  // Not with solver.renumber (the arrays are in the step's numbering):
-  // throws RuntimeFailure.
+  // Not in a scene with solver.renumber (the arrays are in the step's
+  // numbering, and a numbering replaces them): throws RuntimeFailure.
   BodiesView state_in_place();
   void state_written() {
     m_watch.known = false;

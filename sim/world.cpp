@@ -11,6 +11,7 @@
 #include "broadphase/home_cell_math.hpp"
 #include "core/error.hpp"
 #include "core/format.hpp"
+#include "core/radix_sort.hpp"
 
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
@@ -40,10 +41,11 @@ std::vector<std::uint32_t> cell_order(const World& w) {
   const broadphase::HomeGridChoice choice =
       broadphase::choose_home_grid(broadphase::bounds_of({w.position.data(), w.radius.data(), w.size()}), 0);
   if (choice.width == broadphase::KeyWidth::too_wide) return order;
-  std::vector<std::uint64_t> key(w.size());
+  std::vector<std::uint64_t> key(w.size()), scratch_keys;
   for (std::size_t i = 0; i < w.size(); ++i)
     key[i] = broadphase::home_key(broadphase::home_cell(w.position[i], choice.grid), choice.grid);
-  std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
+  std::vector<std::uint32_t> scratch_order;
+  radix_sort_pairs(key, order, choice.grid.key_bits, scratch_keys, scratch_order);  // stable: a cell's spheres in order
   return order;
 }
 

@@ -277,6 +277,10 @@ class Simulation:
 
     # --- the state ---
     def _array(self, what):
+        if self._impl.renumbers:  # solver.renumber: copies in the scene's numbering (docs/python.md)
+            array = self._impl.copy(what)
+            array.flags.writeable = False
+            return array
         if not self._impl.on_device:
             return self._impl.view(what)
         array, address = self._impl.view(what)

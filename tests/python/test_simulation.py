@@ -189,3 +189,31 @@ def test_warnings_and_repr(pile):
     sim = marbles.Simulation.from_dict(pile, backend="cpu")
     assert "64 spheres" in repr(sim) and "pile" in repr(sim)
     assert sim.material_names == ["glass"]
+
+
+def test_renumbered_scene_keeps_the_scene_numbering(pile, tmp_path):
+    # solver.renumber: the step numbers the spheres its own way; Python sees
+    # the scene's numbering, as read-only copies, and writes by assignment.
+    pile["particles"] = [{"random": {"count": 60, "min": [0.01, 0.01, 0.01], "max": [0.09, 0.09, 0.25],
+                                     "radius": {"uniform": [0.006, 0.009]}, "seed": 4}}]
+    pile["solver"] = {"renumber": 3}
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    radii = sim.radii.copy()
+    sim.step(10)
+    assert np.array_equal(sim.radii, radii)  # each sphere keeps its index
+    x = sim.positions
+    assert not x.flags.writeable
+    with pytest.raises(ValueError):
+        x[0, 0] = 1.0
+    v = sim.velocities.copy()
+    v[5] = [0, 0, 1]
+    sim.velocities = v
+    assert np.array_equal(sim.velocities[5], np.array([0, 0, 1], dtype=v.dtype))
+    sim.step(2)  # between two numberings (at the start of steps 10 and 13)
+    path = tmp_path / "r.mck"
+    sim.checkpoint(path)
+    sim.step(7)
+    again = marbles.Simulation.restart(path, backend="cpu")
+    again.step(7)
+    assert np.array_equal(sim.positions, again.positions)
+    assert np.array_equal(sim.velocities, again.velocities)
