@@ -55,11 +55,11 @@ void key_runs(const std::uint64_t* keys, std::uint32_t m, std::size_t spheres, s
 
 // The entries with every sphere i named new_index[i] (walls keep theirs),
 // sorted by key again. A pair of spheres is keyed with its lower index
-// first (a < b: the contact's normal points from a to b, its tangential and
-// rolling impulses act on a as given and on b opposed), so a pair whose
-// spheres change order swaps and its tangential and rolling impulses change
-// sign: the same impulses on the same spheres. Exact: the inverse numbering
-// gives back the entries bit for bit.
+// first (a < b; narrowphase/contact.hpp: the contact's normal from b towards
+// a, its tangential and rolling impulses acting on a as given and on b
+// opposed), so a pair whose spheres change order swaps and its tangential
+// and rolling impulses change sign: the same impulses on the same spheres.
+// Exact: the inverse numbering gives back the entries bit for bit.
 CacheEntries renumbered(const CacheEntries& entries, const std::vector<std::uint32_t>& new_index);
 
 // Entries from outside the run (a checkpoint) keep their colours only if they
