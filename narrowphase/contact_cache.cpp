@@ -97,11 +97,13 @@ CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>&
   if (!colours) out.colour.clear();
   for (std::size_t i = 0; i < m; ++i) {
     const std::size_t k = order[i];
-    const real sign = swapped[k] ? real(-1) : real(1);
+    // Turned round as 0 - x: exact both ways, and +0 stays +0 (an idle
+    // contact's impulses stay clear).
+    const auto turned = [&](const Vec3& v) { return swapped[k] ? Vec3{} - v : v; };
     out.key[i] = key[k];
     out.normal_impulse[i] = e.normal_impulse[k];
-    out.tangent_impulse[i] = e.tangent_impulse[k] * sign;
-    out.rolling_impulse[i] = e.rolling_impulse[k] * sign;
+    out.tangent_impulse[i] = turned(e.tangent_impulse[k]);
+    out.rolling_impulse[i] = turned(e.rolling_impulse[k]);
     if (colours) out.colour[i] = e.colour[k];
   }
   return out;

@@ -10,7 +10,9 @@
 // probe (so a checkpoint written here resumes with `marbles run --restart`
 // and back). The state is handed out in place: NumPy views of the step's own
 // arrays on the CPU, device pointers on the GPU; each step() first checks
-// them (non-finite values are refused) when they are out.
+// them (non-finite values are refused) when they are out. A scene with
+// solver.renumber hands out copies instead (its step numbers the spheres
+// its own way and replaces the arrays).
 #include <algorithm>
 #include <chrono>
 #include <cmath>

@@ -20,8 +20,9 @@ namespace fs = std::filesystem;
 constexpr char kMagic[8] = {'M', 'A', 'R', 'B', 'L', 'C', 'K', '\n'};
 // Format 2 adds the cache's kept colours; format 1 (without them) still
 // loads, its contacts then coloured afresh in the first substep. Format 3
-// adds the step's numbering (solver.renumber; empty where it is the
-// scene's); formats 1 and 2 load with none.
+// adds the step's numbering (solver.renumber), written only where the
+// step has one (else format 2, which earlier builds read too); formats 1
+// and 2 load with none.
 constexpr std::uint32_t kFormat = 3;
 constexpr char kVersion[16] = "marbles 0.1";
 
@@ -87,6 +88,7 @@ class Reader {
     throw InputError(SourceLocation{m_path, 0, 0}, "--restart", "the checkpoint " + what);
   }
   const std::string& bytes() const { return m_bytes; }
+  std::size_t at() const { return m_at; }
 
  private:
   std::string m_bytes;
@@ -149,12 +151,13 @@ std::string checkpoint_path(const std::string& out_dir, std::uint64_t steps) {
 void write_checkpoint(const std::string& path, const Checkpoint& c) {
   Writer w;
   w.raw(kMagic, sizeof kMagic);
-  w.put(kFormat);
+  const std::uint32_t format = c.ids.empty() ? 2 : kFormat;
+  w.put(format);
   w.raw(kVersion, sizeof kVersion);
   w.put<std::uint32_t>(sizeof(real));
   w.put<std::uint32_t>(sizeof(narrowphase::WallShape));
   w.put(c.scene_hash);
-  body(w, c);
+  body(w, c, format);
   fs::create_directories(fs::path(path).parent_path());
   render::write_file_atomic(path, w.finish());
 }
@@ -187,11 +190,16 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   if (c.scene_hash != scene_hash)
     r.fail("belongs to another scene (or other --set overrides): the scene file or its overrides changed");
   body(r, c, format);
+  if (r.at() + 8 != bytes.size()) r.fail("is damaged (bytes past its fields)");
   if (c.state.cache.colour.size() != c.state.cache.key.size()) c.state.cache.colour.clear();
   const std::size_t n = c.world.position.size();
   for (std::size_t size : {c.world.velocity.size(), c.world.angular_velocity.size(), c.world.radius.size(),
                            c.world.inv_mass.size(), c.world.inv_inertia.size(), c.world.material.size()})
     if (size != n) r.fail("is damaged (array lengths differ)");
+  for (std::uint64_t key : c.state.cache.key) {  // pairs of its spheres (a < b) or a sphere and a wall
+    const auto a = static_cast<std::uint32_t>(key >> 32), b = static_cast<std::uint32_t>(key);
+    if (a >= n || (!narrowphase::is_wall(b) && (b >= n || b <= a))) r.fail("is damaged (a cache entry names no pair)");
+  }
   if (!c.ids.empty()) {  // a permutation of the spheres
     std::vector<std::uint8_t> seen(n, 0);
     if (c.ids.size() != n) r.fail("is damaged (the numbering has another length)");

@@ -204,7 +204,8 @@ void Simulation::renumber() {
 }
 
 void Simulation::step() {
-  if (m_model->renumber_every > 0 && m_steps % m_model->renumber_every == 0) renumber();
+  // (Not a state gone non-finite: it has no cells, and the step ends it anyway.)
+  if (m_model->renumber_every > 0 && m_steps % m_model->renumber_every == 0 && !m_backend->non_finite()) renumber();
   send_edits();
   m_given_stale = true;
   m_last_rollbacks.clear();
@@ -216,6 +217,7 @@ void Simulation::step() {
     const std::string broken = m_watchdog ? violation(before) : std::string();
     if (broken.empty()) break;
     m_backend->undo_step();
+    m_given_stale = true;  // the scene-numbered copy may hold the failed try (violation)
     m_last = before;
     ++m_rollbacks;
     m_last_rollbacks.push_back(broken);
@@ -227,6 +229,7 @@ void Simulation::step() {
     }
   }
   m_backend->set_iteration_factor(1);
+  m_given_stale = true;
   m_watch.known = m_watchdog;  // the end-of-step figures describe the next step's start
   ++m_steps;
   m_time = m_steps * m_model->dt;
@@ -235,22 +238,23 @@ void Simulation::step() {
 void Simulation::inject_fault() {
   World& w = m_backend->edit_world();  // within the step: the watchdog's figures of its start stay
   if (w.size() == 0) return;
+  const std::size_t f = m_ids.empty() ? 0 : m_index[0];  // the scene's sphere 0, where the step has it
   switch (m_fault) {
-    case Fault::nan: w.velocity[0].x = std::nan(""); break;
+    case Fault::nan: w.velocity[f].x = std::nan(""); break;
     case Fault::kick: {
       const Vec3 up = m_model->gravity ? -m_model->g / length(m_model->g) : Vec3(1, 0, 0);
-      w.velocity[0] = w.velocity[0] + up * (100 * w.radius[0] / static_cast<real>(m_model->dt));
+      w.velocity[f] = w.velocity[f] + up * (100 * w.radius[f] / static_cast<real>(m_model->dt));
       break;
     }
     case Fault::escape:
       for (const narrowphase::WallShape& shape : m_model->wall_shapes) {
         Vec3 normal;
         real separation = 0;
-        if (!narrowphase::wall_gap(shape, w.position[0], w.radius[0], normal, separation)) continue;
+        if (!narrowphase::wall_gap(shape, w.position[f], w.radius[f], normal, separation)) continue;
         // 20 radii beyond the face: further than the projection can bring
         // it back within a step (max_correction a sweep, deep_position_iterations
         // sweeps), a true escape.
-        w.position[0] = w.position[0] - normal * (separation + 20 * w.radius[0]);
+        w.position[f] = w.position[f] - normal * (separation + 20 * w.radius[f]);
         break;
       }
       break;
@@ -269,8 +273,10 @@ void Simulation::attempt(int split) {
 }
 
 std::string Simulation::violation(const StepCounters& before) {
-  if (m_backend->non_finite())
-    return "non-finite state (sphere " + std::to_string(world().first_non_finite()) + ")";  // the scene's numbering
+  if (m_backend->non_finite()) {
+    const std::size_t i = m_backend->world().first_non_finite();
+    return "non-finite state (sphere " + std::to_string(i < m_ids.size() ? m_ids[i] : i) + ")";  // the scene's numbering
+  }
   if (m_watch.known) {
     const double bound = watch_bound(before.kinetic_energy);
     if (!(m_last.kinetic_energy <= bound))

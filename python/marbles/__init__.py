@@ -290,7 +290,8 @@ class Simulation:
 
     positions = property(lambda self: self._array("position"),
                          lambda self, values: self._assign("position", values),
-                         doc="(N, 3) centres, m: writable in place; assigning copies")
+                         doc="(N, 3) centres, m: writable in place (read-only copies where the "
+                             "scene has solver.renumber); assigning copies")
     velocities = property(lambda self: self._array("velocity"),
                           lambda self, values: self._assign("velocity", values), doc="(N, 3) m/s")
     angular_velocities = property(lambda self: self._array("angular_velocity"),

@@ -399,3 +399,36 @@ TEST(Renumber, APileAtRestStaysAtRest) {
   EXPECT_LT(renumbered, g_dt);
   EXPECT_EQ(hash[1], hash[0]);
 }
+
+// The watchdog in a renumbering scene: a try that went non-finite is rolled
+// back, and world() shows the redone step, not the failed try; the fault and
+// the watchdog's message name the scene's sphere 0; a step that fails every
+// try leaves world() at the step's start.
+TEST(Renumber, TheWatchdogsRollbackIsWhatTheWorldShows) {
+  auto [s, g] = pour_scene(300, 8);
+  s.solver.renumber = 2;
+  auto swap_first_and_last = [](auto& v) {  // sphere 0 on top (arrays left empty stay so)
+    if (!v.empty()) std::swap(v.front(), v.back());
+  };
+  swap_first_and_last(g.position);
+  swap_first_and_last(g.velocity);
+  swap_first_and_last(g.radius);
+  swap_first_and_last(g.angular_velocity);
+  swap_first_and_last(g.material);
+  swap_first_and_last(g.fixed);
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  sim.set_watchdog(true);
+  for (int k = 0; k < 6; ++k) sim.step();
+  const std::vector<std::uint32_t>& ids = sim.ids();
+  ASSERT_FALSE(ids.empty());
+  ASSERT_NE(std::find(ids.begin(), ids.end(), 0u) - ids.begin(), 0) << "the scene's sphere 0 elsewhere in the step";
+  sim.inject_fault_at(sim.steps() + 1);
+  sim.step();
+  ASSERT_EQ(sim.last_rollbacks().size(), 1u);
+  EXPECT_EQ(sim.last_rollbacks()[0], "non-finite state (sphere 0)");
+  EXPECT_EQ(sim.world().first_non_finite(), sim.world().size());
+  const World before = sim.world();
+  sim.inject_fault_at(sim.steps() + 1, true);
+  EXPECT_THROW(sim.step(), WatchdogFailure);
+  EXPECT_EQ(state_hash(sim.world()), state_hash(before)) << "back at the step's start";
+}
