@@ -32,6 +32,7 @@
 #include <string_view>
 
 #include "sim/limits.hpp"
+#include "sim/world.hpp"
 
 namespace marbles::scene {
 
@@ -221,40 +222,13 @@ class PlacementGrid {
   std::vector<Sphere> m_spheres;
 };
 
-// Spheres [first, end) numbered again along rows of cells two of their
-// largest radii wide from their lowest corner: x, then y, then z, each
-// cell's spheres in the order they had (a stable sort). The broad phase
-// finds pairs in nearly this order (its cells are as wide, its rows the
-// same), so the bodies the step reads for them lie nearly in order in
-// memory.
+// Spheres [first, end) numbered again in the broad phase's order for them
+// (cell_order, sim/world.hpp: rows of its cells, x, then y, then z; a cell's
+// spheres in the order they had), so the bodies the step reads for the
+// pairs it finds lie nearly in order in memory.
 void number_by_cells(GeneratedParticles& out, std::size_t first) {
   const std::size_t n = out.size() - first;
-  if (n == 0) return;
-  Vec3 lo = out.position[first];
-  double largest = 0;
-  for (std::size_t i = first; i < out.size(); ++i) {
-    const Vec3& c = out.position[i];
-    lo = Vec3(std::min(lo.x, c.x), std::min(lo.y, c.y), std::min(lo.z, c.z));
-    largest = std::max(largest, double(out.radius[i]));
-  }
-  const double cell = largest > 0 ? 2 * largest : 1.0;
-  // Each sphere's cell (z, y, x), compared as a tuple: rows of x, then y,
-  // then z, however many cells the block spans.
-  struct Cell {
-    std::uint64_t z, y, x;
-    auto operator<=>(const Cell&) const = default;
-  };
-  auto along = [&](real c, real c0) {
-    return static_cast<std::uint64_t>(std::min((double(c) - double(c0)) / cell, 1e18));
-  };
-  std::vector<Cell> key(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const Vec3& c = out.position[first + i];
-    key[i] = {along(c.z, lo.z), along(c.y, lo.y), along(c.x, lo.x)};
-  }
-  std::vector<std::size_t> order(n);
-  for (std::size_t i = 0; i < n; ++i) order[i] = i;
-  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key[a] < key[b]; });
+  const std::vector<std::uint32_t> order = cell_order(out.position.data() + first, out.radius.data() + first, n);
   auto gather = [&](auto& v) {
     const std::vector<typename std::decay_t<decltype(v)>::value_type> old(v.begin() + first, v.end());
     for (std::size_t i = 0; i < n; ++i) v[first + i] = old[order[i]];

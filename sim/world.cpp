@@ -34,16 +34,15 @@ World permuted(const World& w, const std::vector<std::uint32_t>& order) {
   return p;
 }
 
-std::vector<std::uint32_t> cell_order(const World& w) {
-  std::vector<std::uint32_t> order(w.size());
-  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<std::uint32_t>(i);
-  if (w.size() == 0) return order;
-  const broadphase::HomeGridChoice choice =
-      broadphase::choose_home_grid(broadphase::bounds_of({w.position.data(), w.radius.data(), w.size()}), 0);
+std::vector<std::uint32_t> cell_order(const Vec3* position, const real* radius, std::size_t n) {
+  std::vector<std::uint32_t> order(n);
+  for (std::size_t i = 0; i < n; ++i) order[i] = static_cast<std::uint32_t>(i);
+  if (n == 0) return order;
+  const broadphase::HomeGridChoice choice = broadphase::choose_home_grid(broadphase::bounds_of({position, radius, n}), 0);
   if (choice.width == broadphase::KeyWidth::too_wide) return order;
-  std::vector<std::uint64_t> key(w.size()), scratch_keys;
-  for (std::size_t i = 0; i < w.size(); ++i)
-    key[i] = broadphase::home_key(broadphase::home_cell(w.position[i], choice.grid), choice.grid);
+  std::vector<std::uint64_t> key(n), scratch_keys;
+  for (std::size_t i = 0; i < n; ++i)
+    key[i] = broadphase::home_key(broadphase::home_cell(position[i], choice.grid), choice.grid);
   std::vector<std::uint32_t> scratch_order;
   radix_sort_pairs(key, order, choice.grid.key_bits, scratch_keys, scratch_order);  // stable: a cell's spheres in order
   return order;

@@ -51,7 +51,10 @@ World permuted(const World& w, const std::vector<std::uint32_t>& order);
 // home-cell broad phase's cells for them (x, then y, then z; a cell's
 // spheres as they were): the order in which it finds their pairs. Identity
 // where the grid is too wide for one key.
-std::vector<std::uint32_t> cell_order(const World& w);
+std::vector<std::uint32_t> cell_order(const Vec3* position, const real* radius, std::size_t n);
+inline std::vector<std::uint32_t> cell_order(const World& w) {
+  return cell_order(w.position.data(), w.radius.data(), w.size());
+}
 
 // Builds the world from the scene's materials and its generated particles.
 World make_world(const scene::Scene& scene, const scene::GeneratedParticles& particles);

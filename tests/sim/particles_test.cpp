@@ -13,6 +13,7 @@
 #include <tuple>
 #include <vector>
 
+#include "broadphase/grid.hpp"
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
 #include "tests/sim/scene_cases.hpp"
@@ -167,8 +168,8 @@ TEST(Random, DeterministicBySeed) {
   EXPECT_FALSE(same_spheres(a, c));
 }
 
-// `order: cells` numbers a block's spheres along rows of cells two largest
-// radii wide from their lowest corner (x, then y, then z): the same spheres
+// `order: cells` numbers a block's spheres along rows of the broad phase's
+// cells for them (x, then y, then z): the same spheres
 // as given (each with its radius; a random block's velocities drawn in the
 // new order, a list's carried with their spheres), the cells' keys never
 // falling, a block before it untouched, and an unknown order refused where
@@ -204,18 +205,15 @@ TEST(Particles, OrderCellsRenumbersTheBlockOnly) {
   std::sort(a.begin(), a.end());
   std::sort(b.begin(), b.end());
   EXPECT_EQ(a, b);
-  // The random block's cells: from its lowest corner, two of its largest radii wide.
-  double largest = 0, lo[3] = {1e9, 1e9, 1e9};
-  for (std::size_t i = 200; i < 3200; ++i) {
-    largest = std::max(largest, double(cells.radius[i]));
-    const Vec3& c = cells.position[i];
-    lo[0] = std::min(lo[0], double(c.x)), lo[1] = std::min(lo[1], double(c.y)), lo[2] = std::min(lo[2], double(c.z));
-  }
-  const double cell = 2 * largest;
+  // The random block's cells: the home-cell broad phase's grid for its spheres.
+  const broadphase::HomeGrid grid =
+      broadphase::choose_home_grid(broadphase::bounds_of({cells.position.data() + 200, cells.radius.data() + 200, 3000}),
+                                   0)
+          .grid;
   auto key = [&](std::size_t i) {
     const Vec3& c = cells.position[i];
-    return std::tuple(std::floor((c.z - lo[2]) / cell), std::floor((c.y - lo[1]) / cell),
-                      std::floor((c.x - lo[0]) / cell));
+    auto along = [&](real x, int a) { return std::floor((double(x) - grid.origin[a]) * grid.inv_cell); };
+    return std::tuple(along(c.z, 2), along(c.y, 1), along(c.x, 0));
   };
   for (std::size_t i = 201; i < 3200; ++i) EXPECT_LE(key(i - 1), key(i)) << i;
   // The random velocities are drawn in the new order: the same draws by index.
