@@ -77,22 +77,21 @@ void key_runs(const std::uint64_t* keys, std::uint32_t m, std::size_t spheres, s
 
 CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>& new_index) {
   const std::size_t m = e.size();
-  std::vector<std::uint64_t> key(m);
+  CacheEntries out;
+  out.resize(m);
   std::vector<std::uint8_t> swapped(m, 0);
+  std::vector<std::uint32_t> order(m);
   for (std::size_t k = 0; k < m; ++k) {
     const std::uint32_t a = new_index.at(static_cast<std::uint32_t>(e.key[k] >> 32));
     const auto b0 = static_cast<std::uint32_t>(e.key[k]);
     const std::uint32_t b = is_wall(b0) ? b0 : new_index.at(b0);
     swapped[k] = !is_wall(b) && b < a;
-    key[k] = swapped[k] ? cache_key(b, a) : cache_key(a, b);
+    out.key[k] = swapped[k] ? cache_key(b, a) : cache_key(a, b);
+    order[k] = static_cast<std::uint32_t>(k);
   }
-  std::vector<std::uint32_t> order(m);
-  for (std::size_t k = 0; k < m; ++k) order[k] = static_cast<std::uint32_t>(k);
-  std::vector<std::uint64_t> sorted_keys = key, scratch_keys;
+  std::vector<std::uint64_t> scratch_keys;
   std::vector<std::uint32_t> scratch_order;
-  radix_sort_pairs(sorted_keys, order, 64, scratch_keys, scratch_order);  // keys are unique: any sort's order
-  CacheEntries out;
-  out.resize(m);
+  radix_sort_pairs(out.key, order, 64, scratch_keys, scratch_order);  // keys are unique: any sort's order
   const bool colours = e.colour.size() == m;
   if (!colours) out.colour.clear();
   for (std::size_t i = 0; i < m; ++i) {
@@ -100,7 +99,6 @@ CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>&
     // Turned round as 0 - x: exact both ways, and +0 stays +0 (an idle
     // contact's impulses stay clear).
     const auto turned = [&](const Vec3& v) { return swapped[k] ? Vec3{} - v : v; };
-    out.key[i] = key[k];
     out.normal_impulse[i] = e.normal_impulse[k];
     out.tangent_impulse[i] = turned(e.tangent_impulse[k]);
     out.rolling_impulse[i] = turned(e.rolling_impulse[k]);

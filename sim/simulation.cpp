@@ -154,15 +154,28 @@ StepState Simulation::save_state() {
   return state;
 }
 
-void Simulation::restore(const World& world, const StepState& state, std::uint64_t steps,
-                         const std::vector<std::uint32_t>& ids) {
-  m_ids = ids;
-  m_index.assign(ids.size(), 0);
-  for (std::size_t i = 0; i < ids.size(); ++i) m_index.at(ids[i]) = static_cast<std::uint32_t>(i);
+namespace {
+// An order (new index -> old) that changes nothing.
+bool is_identity(const std::vector<std::uint32_t>& order) {
+  for (std::size_t i = 0; i < order.size(); ++i)
+    if (order[i] != i) return false;
+  return true;
+}
+}  // namespace
+
+void Simulation::set_numbering(std::vector<std::uint32_t> ids) {
+  m_ids = is_identity(ids) ? std::vector<std::uint32_t>{} : std::move(ids);
+  m_index.assign(m_ids.size(), 0);
+  for (std::size_t i = 0; i < m_ids.size(); ++i) m_index.at(m_ids[i]) = static_cast<std::uint32_t>(i);
   m_given_edited = false;
   m_given_stale = true;
+}
+
+void Simulation::restore(const World& world, const StepState& state, std::uint64_t steps,
+                         const std::vector<std::uint32_t>& ids) {
+  set_numbering(ids);
   StepState checked = state;
-  if (ids.empty()) {
+  if (m_ids.empty()) {
     m_backend->edit_world() = world;
   } else {
     m_backend->edit_world() = permuted(world, m_ids);
@@ -183,9 +196,7 @@ void Simulation::renumber() {
   send_edits();
   const World& w = m_backend->world();
   const std::vector<std::uint32_t> order = cell_order(w);
-  bool same = true;
-  for (std::size_t i = 0; i < order.size() && same; ++i) same = order[i] == i;
-  if (same) return;
+  if (is_identity(order)) return;
   std::vector<std::uint32_t> new_index(order.size());
   for (std::size_t i = 0; i < order.size(); ++i) new_index[order[i]] = static_cast<std::uint32_t>(i);
   World next = permuted(w, order);
@@ -195,19 +206,14 @@ void Simulation::renumber() {
   for (std::size_t i = 0; i < order.size(); ++i) ids[i] = m_ids.empty() ? order[i] : m_ids[order[i]];
   m_backend->edit_world() = std::move(next);
   m_backend->load_state(state);
-  bool given = true;
-  for (std::size_t i = 0; i < ids.size() && given; ++i) given = ids[i] == i;
-  m_ids = given ? std::vector<std::uint32_t>{} : std::move(ids);
-  m_index.assign(m_ids.size(), 0);
-  for (std::size_t i = 0; i < m_ids.size(); ++i) m_index[m_ids[i]] = static_cast<std::uint32_t>(i);
-  m_given_stale = true;
+  set_numbering(std::move(ids));
 }
 
 void Simulation::step() {
   // (Not a state gone non-finite: it has no cells, and the step ends it anyway.)
   if (m_model->renumber_every > 0 && m_steps % m_model->renumber_every == 0 && !m_backend->non_finite()) renumber();
   send_edits();
-  m_given_stale = true;
+  m_given_stale = true;  // nothing within the step reads the scene-numbered copy (violation reads the step's)
   m_last_rollbacks.clear();
   const StepCounters before = m_last;
   if (m_watchdog) m_backend->keep_step_start();
@@ -217,7 +223,6 @@ void Simulation::step() {
     const std::string broken = m_watchdog ? violation(before) : std::string();
     if (broken.empty()) break;
     m_backend->undo_step();
-    m_given_stale = true;  // the scene-numbered copy may hold the failed try (violation)
     m_last = before;
     ++m_rollbacks;
     m_last_rollbacks.push_back(broken);
@@ -229,7 +234,6 @@ void Simulation::step() {
     }
   }
   m_backend->set_iteration_factor(1);
-  m_given_stale = true;
   m_watch.known = m_watchdog;  // the end-of-step figures describe the next step's start
   ++m_steps;
   m_time = m_steps * m_model->dt;
