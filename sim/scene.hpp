@@ -112,10 +112,9 @@ struct ParticleBlock {
   bool fixed = false;     // the spheres collide but never move (pegs, rough floors)
   // The spheres' numbering (their ids). false (`order: given`, the
   // default): as the source gives them (a list's or file's rows, a
-  // lattice's rows, a random block's placing); true (`order: cells`): along
-  // rows of cells two largest radii wide, x, then y, then z, nearly the order in
-  // which the broad phase finds pairs (docs/scene-format.md: large blocks
-  // step faster).
+  // lattice's rows, a random block's placing); true (`order: cells`): the
+  // order in which the broad phase finds their pairs (cell_order,
+  // sim/world.hpp; docs/scene-format.md: large blocks step faster).
   bool order_cells = false;
   SourceLocation where;
 
