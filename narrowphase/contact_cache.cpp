@@ -82,11 +82,11 @@ CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>&
   std::vector<std::uint8_t> swapped(m, 0);
   std::vector<std::uint32_t> order(m);
   for (std::size_t k = 0; k < m; ++k) {
-    const std::uint32_t a = new_index.at(static_cast<std::uint32_t>(e.key[k] >> 32));
-    const auto b0 = static_cast<std::uint32_t>(e.key[k]);
-    const std::uint32_t b = is_wall(b0) ? b0 : new_index.at(b0);
-    swapped[k] = !is_wall(b) && b < a;
-    out.key[k] = swapped[k] ? cache_key(b, a) : cache_key(a, b);
+    const auto b = static_cast<std::uint32_t>(e.key[k]);
+    const RenamedKey r = renamed_key(new_index.at(static_cast<std::uint32_t>(e.key[k] >> 32)),
+                                     is_wall(b) ? b : new_index.at(b));
+    out.key[k] = r.key;
+    swapped[k] = r.swapped;
     order[k] = static_cast<std::uint32_t>(k);
   }
   std::vector<std::uint64_t> scratch_keys;
@@ -96,12 +96,9 @@ CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>&
   if (!colours) out.colour.clear();
   for (std::size_t i = 0; i < m; ++i) {
     const std::size_t k = order[i];
-    // Turned round as 0 - x: exact both ways, and +0 stays +0 (an idle
-    // contact's impulses stay clear).
-    const auto turned = [&](const Vec3& v) { return swapped[k] ? Vec3{} - v : v; };
     out.normal_impulse[i] = e.normal_impulse[k];
-    out.tangent_impulse[i] = turned(e.tangent_impulse[k]);
-    out.rolling_impulse[i] = turned(e.rolling_impulse[k]);
+    out.tangent_impulse[i] = turned(e.tangent_impulse[k], swapped[k]);
+    out.rolling_impulse[i] = turned(e.rolling_impulse[k], swapped[k]);
     if (colours) out.colour[i] = e.colour[k];
   }
   return out;

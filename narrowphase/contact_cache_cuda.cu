@@ -1,9 +1,11 @@
 #include <cooperative_groups.h>
+#include <cub/device/device_radix_sort.cuh>
 
 #include <algorithm>
 #include <vector>
 
 #include "core/cuda_check.hpp"
+#include "core/lower_bound.hpp"
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_cache_cuda.cuh"
 #include "narrowphase/contact_cache_math.hpp"
@@ -74,6 +76,61 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
     }
     colour[e] = contact_colour ? contact_colour[k] : kNoKeptColour;
   }
+}
+
+// --- renumber: the entries' keys renamed (renamed_key, as the host's
+// renumbered), sorted by CUB's radix sort, gathered, their runs found.
+constexpr std::uint64_t kNoKey = ~std::uint64_t{0};  // past the entries: sorts last
+
+// Sphere a's entries, renamed: key[k] (kNoKey stays where the entry names a
+// sphere past the world's `bodies`) and whether it turned round.
+__global__ void rename_kernel(const std::uint32_t* first, std::uint32_t spheres, const std::uint32_t* b_of,
+                              const std::uint32_t* new_index, std::uint32_t bodies, std::uint64_t* key,
+                              std::uint8_t* swapped) {
+  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < spheres; a += gridDim.x * blockDim.x)
+    for (std::uint32_t k = first[a]; k < first[a + 1]; ++k) {
+      const std::uint32_t b = b_of[k];
+      if (a >= bodies || (!is_wall(b) && b >= bodies)) continue;
+      const RenamedKey r = renamed_key(new_index[a], is_wall(b) ? b : new_index[b]);
+      key[k] = r.key;
+      swapped[k] = r.swapped;
+    }
+}
+
+__global__ void iota_kernel(std::uint32_t* v, std::uint32_t n) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) v[k] = k;
+}
+
+// Entry e of the new order from entry from[e] of the old (keys sorted, those
+// past the entries kNoKey).
+struct RenamedEntries {
+  const std::uint64_t* key;
+  const std::uint32_t* from;
+  const std::uint8_t* swapped;
+  const real* normal;
+  const Vec3* tangent;  // null: none kept
+  const Vec3* rolling;  // null: none kept
+  const std::uint8_t* colour;
+};
+__global__ void renamed_gather_kernel(RenamedEntries in, std::uint32_t m, std::uint32_t* b_of, real* normal,
+                                      Vec3* tangent, Vec3* rolling, std::uint8_t* colour) {
+  for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
+    if (in.key[e] == kNoKey) continue;
+    const std::uint32_t k = in.from[e];
+    const bool turn = in.swapped[k] != 0;
+    b_of[e] = static_cast<std::uint32_t>(in.key[e]);
+    normal[e] = in.normal[k];
+    if (tangent) tangent[e] = turned(in.tangent[k], turn);
+    if (rolling) rolling[e] = turned(in.rolling[k], turn);
+    colour[e] = in.colour[k];
+  }
+}
+
+// first[a] for a <= spheres: the first sorted key of sphere a or above.
+__global__ void renamed_runs_kernel(const std::uint64_t* key, std::uint32_t m, std::uint32_t spheres,
+                                    std::uint32_t* first) {
+  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a <= spheres; a += gridDim.x * blockDim.x)
+    first[a] = lower_bound_key(key, m, cache_key(a, 0));
 }
 
 // Each contact's entry (a scan of its sphere's few entries, as on the CPU)
@@ -335,6 +392,54 @@ void ContactCacheCuda::upload(const CacheEntries& e, std::uint32_t spheres, cuda
   else
     MARBLES_CUDA_CHECK(cudaMemsetAsync(colour, kNoKeptColour, m, s));  // none known: coloured afresh
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+}
+
+void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t spheres, int sm_count,
+                                cudaStream_t s) {
+  const std::uint32_t m = m_bound;
+  const std::uint32_t runs = m_spheres;  // the old runs (a checkpoint's may pass the world's spheres)
+  DeviceBuffer key, key_sorted, from, from_sorted, swapped, temp;
+  DeviceBuffer b_of, normal, tangent, rolling, colour, first;
+  auto* new_first = first.as<std::uint32_t>(std::size_t(spheres) + 1);
+  if (m == 0) {
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(new_first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
+  } else {
+    auto* k = key.as<std::uint64_t>(m);
+    auto* ks = key_sorted.as<std::uint64_t>(m);
+    auto* f = from.as<std::uint32_t>(m);
+    auto* fs = from_sorted.as<std::uint32_t>(m);
+    auto* sw = swapped.as<std::uint8_t>(m);
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(k, 0xff, m * sizeof(std::uint64_t), s));  // kNoKey
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(sw, 0, m, s));
+    rename_kernel<<<grid_for(runs, sm_count), kBlock, 0, s>>>(m_first.get_as<std::uint32_t>(), runs,
+                                                              m_keys.get_as<std::uint32_t>(), new_index, spheres, k,
+                                                              sw);
+    MARBLES_CUDA_CHECK_LAUNCH();
+    iota_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(f, m);
+    MARBLES_CUDA_CHECK_LAUNCH();
+    // The keys are unique (but for kNoKey's, whose entries are dropped): any
+    // sort's order, the host's.
+    std::size_t temp_bytes = 0;
+    MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, k, ks, f, fs, static_cast<int>(m), 0, 64, s));
+    MARBLES_CUDA_CHECK(
+        cub::DeviceRadixSort::SortPairs(temp.as<char>(temp_bytes), temp_bytes, k, ks, f, fs, static_cast<int>(m), 0, 64, s));
+    const RenamedEntries in{ks, fs, sw, m_normal.get_as<real>(), m_keep_tangent ? m_tangent.get_as<Vec3>() : nullptr,
+                            m_keep_rolling ? m_rolling.get_as<Vec3>() : nullptr, m_colour.get_as<std::uint8_t>()};
+    renamed_gather_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(
+        in, m, b_of.as<std::uint32_t>(m), normal.as<real>(m), m_keep_tangent ? tangent.as<Vec3>(m) : nullptr,
+        m_keep_rolling ? rolling.as<Vec3>(m) : nullptr, colour.as<std::uint8_t>(m));
+    MARBLES_CUDA_CHECK_LAUNCH();
+    renamed_runs_kernel<<<grid_for(std::size_t(spheres) + 1, sm_count), kBlock, 0, s>>>(ks, m, spheres, new_first);
+    MARBLES_CUDA_CHECK_LAUNCH();
+    m_keys.swap(b_of);
+    m_normal.swap(normal);
+    if (m_keep_tangent) m_tangent.swap(tangent);
+    if (m_keep_rolling) m_rolling.swap(rolling);
+    m_colour.swap(colour);
+  }
+  m_first.swap(first);
+  m_spheres = spheres;
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));  // before the old buffers and the temporaries go
 }
 
 void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {

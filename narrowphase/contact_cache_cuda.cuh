@@ -82,6 +82,12 @@ class ContactCacheCuda {
   CacheEntries download(cudaStream_t stream);
   // `spheres`: the world's (entries of other spheres are never found).
   void upload(const CacheEntries& entries, std::uint32_t spheres, cudaStream_t stream);
+  // The entries with every sphere i named new_index[i] (device, `spheres`
+  // words: the world's spheres), as renumbered (contact_cache.hpp) names
+  // them: sorted by key again, their runs made again, the same bits as the
+  // host's. Entries of spheres past the world's are dropped (no lookup
+  // finds them). Waits for the device (a renumbering is rare).
+  void renumber(const std::uint32_t* new_index, std::uint32_t spheres, int sm_count, cudaStream_t stream);
   // The entries copied on the device into `to` (the watchdog's undo).
   void copy_to(ContactCacheCuda& to, cudaStream_t stream) const;
   // Which impulses the scene's terms make (before the first store): without

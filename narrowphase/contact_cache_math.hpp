@@ -58,4 +58,20 @@ MARBLES_HD_INLINE bool island_starts_cold(real lost_impulse, real island_max) {
   return lost_impulse >= real(0.25) * island_max;
 }
 
+// An entry's key after a renumbering (renumbered, and its CUDA twin): its
+// spheres a, b named new_a, new_b (a wall keeps its b). A pair of spheres
+// is keyed with its lower index first, so `swapped` says it turned round:
+// its tangential and rolling impulses then change sign (turned).
+struct RenamedKey {
+  std::uint64_t key;
+  bool swapped;
+};
+MARBLES_HD_INLINE RenamedKey renamed_key(std::uint32_t new_a, std::uint32_t new_b) {
+  const bool swapped = !is_wall(new_b) && new_b < new_a;
+  return {swapped ? cache_key(new_b, new_a) : cache_key(new_a, new_b), swapped};
+}
+// Turned round as 0 - v: exact both ways, and +0 stays +0 (an idle
+// contact's impulses stay clear).
+MARBLES_HD_INLINE Vec3 turned(const Vec3& v, bool swapped) { return swapped ? Vec3{} - v : v; }
+
 }  // namespace marbles::narrowphase

@@ -155,6 +155,13 @@ class CpuStep final : public StepBackend {
     m_cache.set_entries(state.cache);
     m_walls = state.walls;
   }
+  std::vector<std::uint32_t> renumber() override {
+    std::vector<std::uint32_t> order = cell_order(m_world);
+    if (is_identity(order)) return {};
+    m_world = permuted(m_world, order);
+    m_cache.set_entries(narrowphase::renumbered(m_cache.entries(), inverse_of(order)));
+    return order;
+  }
 
  private:
   // The watchdog's figures (watch_math.hpp); walls count only where they act.

@@ -41,6 +41,7 @@
 #include <optional>
 #include <string>
 
+#include "broadphase/broadphase_cuda.cuh"
 #include "broadphase/broadphase_cuda.hpp"
 #include "core/cuda_check.hpp"
 #include "core/device.hpp"
@@ -609,6 +610,32 @@ class CudaStep final : public StepBackend {
     m_host_edited = false;
     m_contacts_stale = true;
     m_non_finite = false;
+  }
+  // On the device: the home keys sorted, every array gathered, the cache's
+  // entries renamed and sorted; the order read back for the host copy's
+  // fixed arrays (and the caller's numbering).
+  std::vector<std::uint32_t> renumber() override {
+    if (m_host_edited) {  // edits between steps first
+      m_device.upload(m_host, m_stream);
+      m_host_edited = false;
+    }
+    const std::size_t n = m_device.size();
+    DeviceBuffer orders, keys, temp;
+    std::uint32_t* order = orders.as<std::uint32_t>(2 * n);
+    if (!m_device.cell_order(order, keys, temp, m_sm, m_stream)) return {};
+    std::vector<std::uint32_t> host(n);
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(host.data(), order, n * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, m_stream));
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+    m_bytes += n * sizeof(std::uint32_t) + sizeof(broadphase::cuda::BoundsAccum);
+    if (is_identity(host)) return {};
+    std::uint32_t* new_index = order + n;
+    invert_order(order, n, new_index, m_sm, m_stream);
+    m_device.permute(order, m_sm, m_stream);
+    m_cache.renumber(new_index, static_cast<std::uint32_t>(n), m_sm, m_stream);
+    m_host = permuted(m_host, host);  // its fixed arrays; the moving ones come with the next world()
+    m_host_stale = true;
+    m_contacts_stale = true;
+    return host;
   }
   void load_state(const StepState& state) override {
     m_cache.upload(state.cache, static_cast<std::uint32_t>(m_host.size()), m_stream);  // the world as restored

@@ -1,3 +1,7 @@
+#include "broadphase/broadphase.hpp"
+#include "broadphase/broadphase_cuda.cuh"
+#include "broadphase/grid.hpp"
+#include "broadphase/home_cell_math.hpp"
 #include "core/cuda_check.hpp"
 #include "sim/device_world.cuh"
 
@@ -11,7 +15,84 @@ void get(const ::marbles::cuda::DeviceBuffer& buffer, std::vector<T>& host, std:
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(host.data(), buffer.get(), n * sizeof(T), cudaMemcpyDeviceToHost, s));
 }
 
+using ::marbles::cuda::DeviceBuffer;
+using ::marbles::cuda::grid_for;
+using ::marbles::cuda::kBlock;
+
+// Sphere i's home key (cell_order's) and its index.
+__global__ void home_keys_kernel(const Vec3* position, std::size_t n, broadphase::HomeGrid grid, std::uint64_t* key,
+                                 std::uint32_t* index) {
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n; i += std::size_t(gridDim.x) * blockDim.x) {
+    key[i] = broadphase::home_key(broadphase::home_cell(position[i], grid), grid);
+    index[i] = static_cast<std::uint32_t>(i);
+  }
+}
+
+template <class T>
+__global__ void gather_kernel(const T* from, const std::uint32_t* order, std::size_t n, T* to) {
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n; i += std::size_t(gridDim.x) * blockDim.x)
+    to[i] = from[order[i]];
+}
+
+template <class T>
+void gather(DeviceBuffer& buffer, const std::uint32_t* order, std::size_t n, int sm_count, cudaStream_t s,
+            DeviceBuffer& spare) {
+  T* to = spare.as<T>(n);
+  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(buffer.get_as<T>(), order, n, to);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  buffer.swap(spare);
+}
+
+__global__ void invert_kernel(const std::uint32_t* order, std::size_t n, std::uint32_t* inverse) {
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n; i += std::size_t(gridDim.x) * blockDim.x)
+    inverse[order[i]] = static_cast<std::uint32_t>(i);
+}
+
 }  // namespace
+
+void invert_order(const std::uint32_t* order, std::size_t n, std::uint32_t* inverse, int sm_count, cudaStream_t s) {
+  if (n == 0) return;
+  invert_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(order, n, inverse);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+bool DeviceWorld::cell_order(std::uint32_t* order, DeviceBuffer& keys, DeviceBuffer& temp, int sm_count,
+                             cudaStream_t s) const {
+  namespace bc = broadphase::cuda;
+  if (m_count == 0) return false;
+  auto* acc = temp.as<bc::BoundsAccum>(1);
+  bc::launch_bounds(m_position.get_as<Vec3>(), m_radius.get_as<real>(), m_count, acc, sm_count, s);
+  bc::BoundsAccum read{};
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(&read, acc, sizeof read, cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  if (read.bad != 0) throw broadphase::NonFiniteInput();
+  const broadphase::HomeGridChoice choice = broadphase::choose_home_grid(bc::decode_bounds(read), 0);
+  if (choice.width == broadphase::KeyWidth::too_wide) return false;
+  auto* key = keys.as<std::uint64_t>(2 * m_count);
+  DeviceBuffer index;
+  auto* from = index.as<std::uint32_t>(m_count);
+  home_keys_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(m_position.get_as<Vec3>(), m_count, choice.grid, key,
+                                                                  from);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  // Stable, as the host's radix sort: a cell's spheres keep their order.
+  const bool alt = bc::cub_radix_sort(key, from, key + m_count, order, m_count, choice.grid.key_bits, temp, s);
+  if (!alt)
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(order, from, m_count * sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));  // before `index` goes
+  return true;
+}
+
+void DeviceWorld::permute(const std::uint32_t* order, int sm_count, cudaStream_t s) {
+  DeviceBuffer spare;
+  gather<Vec3>(m_position, order, m_count, sm_count, s, spare);
+  gather<Vec3>(m_velocity, order, m_count, sm_count, s, spare);
+  gather<Vec3>(m_angular_velocity, order, m_count, sm_count, s, spare);
+  gather<real>(m_radius, order, m_count, sm_count, s, spare);
+  gather<real>(m_inv_mass, order, m_count, sm_count, s, spare);
+  gather<real>(m_inv_inertia, order, m_count, sm_count, s, spare);
+  gather<std::uint32_t>(m_material, order, m_count, sm_count, s, spare);
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));  // before the last old array goes
+}
 
 void DeviceWorld::upload(const World& w, cudaStream_t s) {
   m_count = w.size();

@@ -13,6 +13,9 @@
 
 namespace marbles {
 
+// inverse[order[i]] = i for i < n (device arrays).
+void invert_order(const std::uint32_t* order, std::size_t n, std::uint32_t* inverse, int sm_count, cudaStream_t stream);
+
 class DeviceWorld {
  public:
   // Allocates for `world`'s spheres and uploads all of it.
@@ -24,6 +27,16 @@ class DeviceWorld {
   // the device into `to`, which is sized to match.
   void copy_state_to(DeviceWorld& to, cudaStream_t stream) const;
 
+  // The spheres' order by their home cells (cell_order, sim/world.hpp: the
+  // same order, from the same grid) into order[0, size()) (device), through
+  // `keys` and `temp` (grown as needed); false, writing nothing, where
+  // cell_order keeps the given order (no spheres, a grid too wide). Waits
+  // for the bounds. Throws broadphase::NonFiniteInput as cell_order does.
+  bool cell_order(std::uint32_t* order, ::marbles::cuda::DeviceBuffer& keys, ::marbles::cuda::DeviceBuffer& temp,
+                  int sm_count, cudaStream_t stream) const;
+  // Every array in `order` (device; new index -> old), as permuted does on
+  // the host. Waits for the device (the old arrays go).
+  void permute(const std::uint32_t* order, int sm_count, cudaStream_t stream);
   BodiesView view() const;
   std::size_t size() const { return m_count; }
   // Device bytes it holds.

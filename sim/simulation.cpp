@@ -154,19 +154,9 @@ StepState Simulation::save_state() {
   return state;
 }
 
-namespace {
-// An order (new index -> old) that changes nothing.
-bool is_identity(const std::vector<std::uint32_t>& order) {
-  for (std::size_t i = 0; i < order.size(); ++i)
-    if (order[i] != i) return false;
-  return true;
-}
-}  // namespace
-
 void Simulation::set_numbering(std::vector<std::uint32_t> ids) {
   m_ids = is_identity(ids) ? std::vector<std::uint32_t>{} : std::move(ids);
-  m_index.assign(m_ids.size(), 0);
-  for (std::size_t i = 0; i < m_ids.size(); ++i) m_index.at(m_ids[i]) = static_cast<std::uint32_t>(i);
+  m_index = inverse_of(m_ids);
   m_given_edited = false;
   m_given_stale = true;
 }
@@ -188,24 +178,16 @@ void Simulation::restore(const World& world, const StepState& state, std::uint64
   if (m_watchdog) watch_from_host();
 }
 
-// The step's spheres numbered in the broad phase's order (cell_order), the
-// warm-start cache with them (narrowphase::renumbered): the same state,
-// other indices. Both backends do it at the same steps from the same host
-// copies, so they keep the same bits.
+// The step's spheres numbered again in the broad phase's order, and the
+// warm-start cache with them (StepBackend::renumber): the same state, other
+// indices. Both backends do it at the same steps and give the same order
+// and bits (the CPU on its arrays, the GPU on the device's).
 void Simulation::renumber() {
   send_edits();
-  const World& w = m_backend->world();
-  const std::vector<std::uint32_t> order = cell_order(w);
-  if (is_identity(order)) return;
-  std::vector<std::uint32_t> new_index(order.size());
-  for (std::size_t i = 0; i < order.size(); ++i) new_index[order[i]] = static_cast<std::uint32_t>(i);
-  World next = permuted(w, order);
-  StepState state = m_backend->save_state();
-  state.cache = narrowphase::renumbered(state.cache, new_index);
+  const std::vector<std::uint32_t> order = m_backend->renumber();
+  if (order.empty()) return;
   std::vector<std::uint32_t> ids(order.size());
   for (std::size_t i = 0; i < order.size(); ++i) ids[i] = m_ids.empty() ? order[i] : m_ids[order[i]];
-  m_backend->edit_world() = std::move(next);
-  m_backend->load_state(state);
   set_numbering(std::move(ids));
 }
 

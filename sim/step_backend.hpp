@@ -127,6 +127,12 @@ class StepBackend {
   // The watchdog's figures in end_step (kinetic_energy, beyond_walls): one
   // more pass over the spheres per step, folded into the step's one read.
   virtual void set_watch(bool on) = 0;
+  // Numbers the spheres again in the broad phase's order (cell_order,
+  // sim/world.hpp): the world's arrays and the warm-start cache's entries
+  // (narrowphase::renumbered) renamed, between steps. Returns the order
+  // (new index -> old), empty where it changes nothing. The GPU's does it on
+  // the device, with the CPU's order and bits.
+  virtual std::vector<std::uint32_t> renumber() = 0;
   // A retry's effort: the velocity sweeps run `factor` times the model's
   // iterations until set back to 1.
   virtual void set_iteration_factor(int factor) = 0;

@@ -34,6 +34,18 @@ World permuted(const World& w, const std::vector<std::uint32_t>& order) {
   return p;
 }
 
+bool is_identity(const std::vector<std::uint32_t>& order) {
+  for (std::size_t i = 0; i < order.size(); ++i)
+    if (order[i] != i) return false;
+  return true;
+}
+
+std::vector<std::uint32_t> inverse_of(const std::vector<std::uint32_t>& order) {
+  std::vector<std::uint32_t> inverse(order.size(), 0);
+  for (std::size_t i = 0; i < order.size(); ++i) inverse.at(order[i]) = static_cast<std::uint32_t>(i);
+  return inverse;
+}
+
 std::vector<std::uint32_t> cell_order(const Vec3* position, const real* radius, std::size_t n) {
   std::vector<std::uint32_t> order(n);
   for (std::size_t i = 0; i < n; ++i) order[i] = static_cast<std::uint32_t>(i);

@@ -46,6 +46,10 @@ struct World {
 // Sphere order[i] of `w` as sphere i, every array with it (order: a
 // permutation of [0, w.size())).
 World permuted(const World& w, const std::vector<std::uint32_t>& order);
+// True where order[i] == i for every i.
+bool is_identity(const std::vector<std::uint32_t>& order);
+// The inverse of a permutation: inverse[order[i]] == i.
+std::vector<std::uint32_t> inverse_of(const std::vector<std::uint32_t>& order);
 
 // The order (new index -> old) that numbers the spheres along rows of the
 // home-cell broad phase's cells for them (x, then y, then z; a cell's

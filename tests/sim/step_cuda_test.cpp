@@ -10,12 +10,19 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <random>
+#include <set>
 #include <string>
 
 #include "broadphase/grid.hpp"
 #include "core/device.hpp"
 #include "narrowphase/contact.hpp"
+#include "narrowphase/colouring_math.hpp"
+#include "narrowphase/contact_cache.hpp"
+#include "narrowphase/contact_cache_math.hpp"
 #include "narrowphase/solver.hpp"
+#include "sim/step_backend.hpp"
+#include "sim/step_model.hpp"
 #include "tests/require_device.hpp"
 #include "tests/sim/test_scenes.hpp"
 
@@ -235,6 +242,92 @@ TEST(StepCuda, RenumberedPourMatchesTheCpuBitForBit) {
   expect_same_steps(cpu, gpu, 120, counts);
   EXPECT_FALSE(gpu.ids().empty());
   EXPECT_EQ(gpu.ids(), cpu.ids());
+}
+
+// Whether two arrays hold the same bits.
+template <class T>
+bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+// A renumbering on the device (StepBackend::renumber: home keys sorted,
+// arrays gathered, the cache's entries renamed and sorted on the GPU)
+// against the CPU's (cell_order, permuted, renumbered on host arrays): the
+// same order and the same bits, on a random polydisperse world (a few
+// spheres a cell, so the sort's stability counts) with a random cache
+// (pairs that turn round, walls, idle entries, -0 and +0, colours).
+// A host edit just before it reaches both; a second numbering changes
+// nothing.
+TEST(StepCuda, RenumberOnTheDeviceIsTheCpusBitForBit) {
+  REQUIRE_DEVICE();
+  auto [s, ignored] = pour_scene(1, 1);
+  std::mt19937_64 rng(20261127);
+  std::uniform_real_distribution<double> u(0, 1);
+  scene::GeneratedParticles g;
+  const std::uint32_t n = 6000;
+  for (std::uint32_t i = 0; i < n; ++i)
+    add_sphere(g, {real(0.3 * u(rng)), real(0.3 * u(rng)), real(u(rng))}, real(0.004 + 0.008 * u(rng)),
+               {real(u(rng) - 0.5), real(u(rng) - 0.5), real(u(rng) - 0.5)}, static_cast<std::uint32_t>(rng() % 2));
+  World world = make_world(s, g);
+  for (Vec3& w : world.angular_velocity) w = {real(u(rng) - 0.5), real(u(rng) - 0.5), real(u(rng) - 0.5)};
+  std::set<std::uint64_t> keys;
+  for (std::uint32_t a = 0; a + 1 < n; ++a)
+    for (std::uint64_t k = rng() % 5; k > 0; --k) {
+      const std::uint32_t b = rng() % 4 == 0 ? narrowphase::kWallFlag | static_cast<std::uint32_t>(rng() % 3)
+                                             : a + 1 + static_cast<std::uint32_t>(rng() % (n - a - 1));
+      keys.insert(narrowphase::cache_key(a, b));
+    }
+  narrowphase::CacheEntries cache;
+  cache.resize(keys.size());
+  const real signed_zero[] = {real(0), -real(0)};
+  auto component = [&] { return rng() % 4 == 0 ? signed_zero[rng() % 2] : real(u(rng) - 0.5); };
+  std::size_t k = 0;
+  for (std::uint64_t key : keys) {
+    cache.key[k] = key;
+    cache.normal_impulse[k] = rng() % 3 == 0 ? real(0) : real(u(rng));
+    cache.tangent_impulse[k] = {component(), component(), component()};
+    cache.rolling_impulse[k] = {component(), component(), component()};
+    cache.colour[k] = rng() % 5 == 0 ? narrowphase::kNoKeptColour : static_cast<std::uint8_t>(rng() % 24);
+    ++k;
+  }
+  const StepModel model = compile_step_model(s, broadphase::kDefaultCpuAlgorithm);
+  ASSERT_TRUE(model.solver.friction && model.solver.rolling) << "the cache must keep both impulses";
+  auto cpu = make_cpu_step(model, world);
+  auto gpu = make_cuda_step(model, world);
+  const StepState state{cache, model.wall_shapes};
+  cpu->load_state(state);
+  gpu->load_state(state);
+  cpu->edit_world().velocity[17] = {1, 2, 3};
+  gpu->edit_world().velocity[17] = {1, 2, 3};
+  (void)gpu->world();  // a host copy read before: the numbering must leave it stale
+
+  const std::vector<std::uint32_t> order = cpu->renumber();
+  ASSERT_FALSE(order.empty()) << "a random world must be numbered again";
+  EXPECT_EQ(gpu->renumber(), order);
+  const World& c = cpu->world();
+  const World& d = gpu->world();
+  EXPECT_TRUE(same_bits(d.position, c.position));
+  EXPECT_TRUE(same_bits(d.velocity, c.velocity));
+  EXPECT_TRUE(same_bits(d.angular_velocity, c.angular_velocity));
+  EXPECT_TRUE(same_bits(d.radius, c.radius));
+  EXPECT_TRUE(same_bits(d.inv_mass, c.inv_mass));
+  EXPECT_TRUE(same_bits(d.inv_inertia, c.inv_inertia));
+  EXPECT_TRUE(same_bits(d.material, c.material));
+  EXPECT_EQ(c.velocity[inverse_of(order)[17]], Vec3(1, 2, 3));
+
+  const narrowphase::CacheEntries hc = cpu->save_state().cache, dc = gpu->save_state().cache;
+  ASSERT_EQ(hc.size(), cache.size());
+  EXPECT_EQ(dc.key, hc.key);
+  EXPECT_TRUE(same_bits(dc.normal_impulse, hc.normal_impulse));
+  EXPECT_TRUE(same_bits(dc.tangent_impulse, hc.tangent_impulse));
+  EXPECT_TRUE(same_bits(dc.rolling_impulse, hc.rolling_impulse));
+  EXPECT_EQ(dc.colour, hc.colour);
+  std::size_t turned = 0;
+  for (std::size_t e = 0; e < hc.size(); ++e) turned += hc.key[e] != cache.key[e] ? 1 : 0;
+  EXPECT_GT(turned, hc.size() / 2) << "the numbering must rename most entries";
+
+  EXPECT_TRUE(cpu->renumber().empty());
+  EXPECT_TRUE(gpu->renumber().empty());
 }
 
 TEST(StepCuda, LargerPourMatchesTheCpuBitForBit) {
