@@ -518,7 +518,10 @@ class CudaStep final : public StepBackend {
   }
 
   const World& world() override {
-    if (m_host_stale) {
+    if (m_host_renumbered) {
+      m_device.download(m_host, m_stream);
+      m_host_renumbered = m_host_stale = false;
+    } else if (m_host_stale) {
       m_device.download_state(m_host, m_stream);
       m_host_stale = false;
     }
@@ -632,8 +635,7 @@ class CudaStep final : public StepBackend {
     invert_order(order, n, new_index, m_sm, m_stream);
     m_device.permute(order, m_sm, m_stream);
     m_cache.renumber(new_index, static_cast<std::uint32_t>(n), m_sm, m_stream);
-    m_host = permuted(m_host, host);  // its fixed arrays; the moving ones come with the next world()
-    m_host_stale = true;
+    m_host_stale = m_host_renumbered = true;  // the next world() downloads every array
     m_contacts_stale = true;
     return host;
   }
@@ -801,6 +803,7 @@ class CudaStep final : public StepBackend {
   StepCounters m_counters;
   bool m_non_finite_seen = false;  // the broad phase met a non-finite centre in this step
   bool m_non_finite = false, m_host_stale = false, m_host_edited = false, m_contacts_stale = true;
+  bool m_host_renumbered = false;  // the host copy's fixed arrays too are stale (renumber)
 };
 
 }  // namespace

@@ -113,6 +113,14 @@ void DeviceWorld::download_state(World& w, cudaStream_t s) const {
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
 }
 
+void DeviceWorld::download(World& w, cudaStream_t s) const {
+  get(m_radius, w.radius, m_count, s);
+  get(m_inv_mass, w.inv_mass, m_count, s);
+  get(m_inv_inertia, w.inv_inertia, m_count, s);
+  get(m_material, w.material, m_count, s);
+  download_state(w, s);
+}
+
 void DeviceWorld::copy_state_to(DeviceWorld& to, cudaStream_t s) const {
   to.m_count = m_count;
   const std::size_t bytes = m_count * sizeof(Vec3);

@@ -22,6 +22,8 @@ class DeviceWorld {
   void upload(const World& world, cudaStream_t stream);
   // The moving state (positions, velocities, angular velocities) into `world`.
   void download_state(World& world, cudaStream_t stream) const;
+  // Every array into `world` (after a renumbering).
+  void download(World& world, cudaStream_t stream) const;
 
   // The moving state (positions, velocities, angular velocities) copied on
   // the device into `to`, which is sized to match.
