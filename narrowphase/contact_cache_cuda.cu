@@ -400,7 +400,8 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
   const std::uint32_t runs = m_spheres;  // the old runs (a checkpoint's may pass the world's spheres)
   DeviceBuffer key, key_sorted, from, from_sorted, swapped, temp;
   DeviceBuffer b_of, normal, tangent, rolling, colour, first;
-  auto* new_first = first.as<std::uint32_t>(std::size_t(spheres) + 1);
+  // The new entries exactly as many as the old (a store grows them again).
+  auto* new_first = first.as_room<std::uint32_t>(std::size_t(spheres) + 1);
   if (m == 0) {
     MARBLES_CUDA_CHECK(cudaMemsetAsync(new_first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
   } else {
@@ -426,8 +427,8 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
     const RenamedEntries in{ks, fs, sw, m_normal.get_as<real>(), m_keep_tangent ? m_tangent.get_as<Vec3>() : nullptr,
                             m_keep_rolling ? m_rolling.get_as<Vec3>() : nullptr, m_colour.get_as<std::uint8_t>()};
     renamed_gather_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(
-        in, m, b_of.as<std::uint32_t>(m), normal.as<real>(m), m_keep_tangent ? tangent.as<Vec3>(m) : nullptr,
-        m_keep_rolling ? rolling.as<Vec3>(m) : nullptr, colour.as<std::uint8_t>(m));
+        in, m, b_of.as_room<std::uint32_t>(m), normal.as_room<real>(m), m_keep_tangent ? tangent.as_room<Vec3>(m) : nullptr,
+        m_keep_rolling ? rolling.as_room<Vec3>(m) : nullptr, colour.as_room<std::uint8_t>(m));
     MARBLES_CUDA_CHECK_LAUNCH();
     renamed_runs_kernel<<<grid_for(std::size_t(spheres) + 1, sm_count), kBlock, 0, s>>>(ks, m, spheres, new_first);
     MARBLES_CUDA_CHECK_LAUNCH();

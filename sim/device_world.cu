@@ -37,7 +37,7 @@ __global__ void gather_kernel(const T* from, const std::uint32_t* order, std::si
 template <class T>
 void gather(DeviceBuffer& buffer, const std::uint32_t* order, std::size_t n, int sm_count, cudaStream_t s,
             DeviceBuffer& spare) {
-  T* to = spare.as<T>(n);
+  T* to = spare.as_room<T>(n);  // no headroom: the world never grows
   gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(buffer.get_as<T>(), order, n, to);
   MARBLES_CUDA_CHECK_LAUNCH();
   buffer.swap(spare);
