@@ -24,10 +24,19 @@ MARBLES_HD_INLINE float float_of_bits(std::uint32_t bits) { return bit_cast_hd<f
 MARBLES_HD_INLINE std::uint64_t bits_of_double(double x) { return bit_cast_hd<std::uint64_t>(x); }
 MARBLES_HD_INLINE double double_of_bits(std::uint64_t bits) { return bit_cast_hd<double>(bits); }
 
-// The sign bit of a real (set for -0 as for any negative value).
-MARBLES_HD_INLINE bool sign_bit(real x) {
-  if constexpr (sizeof(real) == 4) return (bits_of_float(static_cast<float>(x)) >> 31) != 0u;
-  else return (bits_of_double(static_cast<double>(x)) >> 63) != 0u;
+// A real's bits as an unsigned word (a float's in the low 32 bits), and
+// back. Non-negative reals order as their words do, so an atomic max over
+// the words gives the exact largest real whatever the order.
+MARBLES_HD_INLINE std::uint64_t bits_of_real(real x) {
+  if constexpr (sizeof(real) == 4) return bits_of_float(static_cast<float>(x));
+  else return bits_of_double(static_cast<double>(x));
 }
+MARBLES_HD_INLINE real real_of_bits(std::uint64_t w) {
+  if constexpr (sizeof(real) == 4) return float_of_bits(static_cast<std::uint32_t>(w));
+  else return double_of_bits(w);
+}
+
+// The sign bit of a real (set for -0 as for any negative value).
+MARBLES_HD_INLINE bool sign_bit(real x) { return (bits_of_real(x) >> (8 * sizeof(real) - 1)) != 0u; }
 
 }  // namespace marbles

@@ -93,17 +93,6 @@ __device__ __forceinline__ std::size_t count_within(std::size_t items, const std
   return count <= items ? count : 0;
 }
 
-// A real's bits as an unsigned word, and back. Non-negative reals order as
-// their words do, so an atomic max over the words gives the exact largest
-// real whatever the order (warp_atomic_max, atomicMax).
-__device__ __forceinline__ unsigned long long bits_of(real v) {
-  if constexpr (sizeof(real) == 4) return bits_of_float(v);
-  else return bits_of_double(v);
-}
-__device__ __forceinline__ real real_of_bits(unsigned long long w) {
-  if constexpr (sizeof(real) == 4) return float_of_bits(static_cast<std::uint32_t>(w));
-  else return double_of_bits(w);
-}
 #endif
 
 // *target = max(*target, v) for the warp's values, one atomic per warp. Every

@@ -16,10 +16,8 @@ namespace {
 
 namespace cg = cooperative_groups;
 
-using ::marbles::cuda::bits_of;
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
-using ::marbles::cuda::real_of_bits;
 
 // The store reads the contacts' bodies and impulses from the sweep's records
 // (solver_math.hpp), where the last sweep left them. A contact without load
@@ -235,7 +233,7 @@ __device__ void island_max_pass(const IslandRule& r, std::uint32_t first, std::u
   for (std::uint32_t k = first; k < r.n; k += stride) {
     const real p = restored_normal(r.match, r.normal, k);
     if (!(p > 0)) continue;
-    atomicMax(&r.island_max[r.label[r.pairs[k].a]], bits_of(p));
+    atomicMax(&r.island_max[r.label[r.pairs[k].a]], bits_of_real(p));
   }
 }
 

@@ -9,8 +9,6 @@ namespace {
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 
-using ::marbles::cuda::bits_of;
-using ::marbles::cuda::real_of_bits;
 
 __global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_speed) {
   real v = 0;
@@ -18,7 +16,7 @@ __global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_spee
     const real s = length(bodies.velocity[i]);
     v = s > v ? s : v;
   }
-  ::marbles::cuda::warp_atomic_max(max_speed, bits_of(v));
+  ::marbles::cuda::warp_atomic_max(max_speed, bits_of_real(v));
 }
 
 // With `mixed` (not null), *mixed is set to 1 when some sphere's radius
@@ -27,13 +25,13 @@ __global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_spee
 __global__ void reach_kernel(BodiesView bodies, real h, const unsigned long long* max_speed, real* reach,
                              real* bound, unsigned* mixed, real* radius) {
   const real v_max = real_of_bits(*max_speed);
-  const unsigned long long first = mixed ? bits_of(bodies.radius[0]) : 0;
+  const unsigned long long first = mixed ? bits_of_real(bodies.radius[0]) : 0;
   bool differs = false;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x) {
     const real r = bodies.radius[i];
     reach[i] = contact_reach(length(bodies.velocity[i]), v_max, r, h);
     if (bound) bound[i] = r + reach[i];
-    if (mixed) differs = differs || bits_of(r) != first;
+    if (mixed) differs = differs || bits_of_real(r) != first;
   }
   if (!mixed) return;
   if (__any_sync(0xffffffffu, differs) && (threadIdx.x & 31) == 0) atomicOr(mixed, 1u);

@@ -210,7 +210,7 @@ __global__ void max_overlap_kernel(SweepRecords records, std::uint32_t n, Bodies
     const real o = overlap_ratio(load_position_contact(records, k), bodies, walls);
     d = o > d ? o : d;
   }
-  ::marbles::cuda::warp_atomic_max(deepest, ::marbles::cuda::bits_of(d));
+  ::marbles::cuda::warp_atomic_max(deepest, bits_of_real(d));
 }
 
 
@@ -223,7 +223,7 @@ constexpr std::uint64_t kBetweenCubes = ~std::uint64_t(0);
 __global__ void largest_radius_kernel(const real* radius, std::size_t n, unsigned long long* largest) {
   unsigned long long top = 0;
   for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n; i += std::size_t(gridDim.x) * blockDim.x) {
-    const unsigned long long b = ::marbles::cuda::bits_of(radius[i]);
+    const unsigned long long b = bits_of_real(radius[i]);
     top = b > top ? b : top;
   }
   ::marbles::cuda::warp_atomic_max(largest, top);
@@ -235,7 +235,7 @@ __global__ void largest_radius_kernel(const real* radius, std::size_t n, unsigne
 // `diameters` of the largest diameter.
 __global__ void cube_keys_kernel(const BodyPair* pairs, std::uint32_t n, const Vec3* position, double diameters,
                                  const unsigned long long* largest, std::uint64_t* keys, std::uint32_t* order) {
-  const double edge = local_cube_edge(diameters, ::marbles::cuda::real_of_bits(*largest));
+  const double edge = local_cube_edge(diameters, real_of_bits(*largest));
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const BodyPair ab = pairs[k];
     const std::uint64_t t = local_cube(position[ab.a], edge);
