@@ -2,9 +2,9 @@
 
 #include <algorithm>
 #include <numeric>
+#include <stdexcept>
 
 #include "core/counting_sort.hpp"
-#include "core/radix_sort.hpp"
 #include "narrowphase/contact_cache_math.hpp"
 #include "narrowphase/solver_math.hpp"
 
@@ -76,26 +76,39 @@ void key_runs(const std::uint64_t* keys, std::uint32_t m, std::size_t spheres, s
 }
 
 CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>& new_index) {
-  const std::size_t m = e.size();
-  CacheEntries out;
-  out.resize(m);
+  // Each entry's new key, then a counting sort by the new a (in parallel:
+  // core/counting_sort.hpp) and each sphere's few entries ordered by b, as
+  // the store orders them: the keys are unique, so the sorted order.
+  const auto m = static_cast<std::uint32_t>(e.size());
+  const auto spheres = static_cast<std::uint32_t>(new_index.size());
+  std::vector<std::uint64_t> key(m);
   std::vector<std::uint8_t> swapped(m, 0);
-  std::vector<std::uint32_t> order(m);
-  for (std::size_t k = 0; k < m; ++k) {
+  for (std::uint32_t k = 0; k < m; ++k) {
     const auto b = static_cast<std::uint32_t>(e.key[k]);
     const RenamedKey r = renamed_key(new_index.at(static_cast<std::uint32_t>(e.key[k] >> 32)),
                                      is_wall(b) ? b : new_index.at(b));
-    out.key[k] = r.key;
+    if ((r.key >> 32) >= spheres) throw std::out_of_range("renumbered: a new index past the spheres");
+    key[k] = r.key;
     swapped[k] = r.swapped;
-    order[k] = static_cast<std::uint32_t>(k);
   }
-  std::vector<std::uint64_t> scratch_keys;
-  std::vector<std::uint32_t> scratch_order;
-  radix_sort_pairs(out.key, order, 64, scratch_keys, scratch_order);  // keys are unique: any sort's order
+  std::vector<std::uint32_t> order(m), first, scratch;
+  counting_sort(
+      m, spheres, [&](std::uint32_t k) { return static_cast<std::uint32_t>(key[k] >> 32); },
+      [&](std::uint32_t k, std::uint32_t place) { order[place] = k; }, first, scratch);
+#pragma omp parallel for schedule(static) if (spheres >= kParallelFrom)
+  for (std::ptrdiff_t g = 0; g < static_cast<std::ptrdiff_t>(spheres); ++g) {
+    const auto a = static_cast<std::uint32_t>(g);
+    sort_run(order.data(), first[a], first[a + 1], [&key](std::uint32_t k) { return key[k]; });
+  }
+  CacheEntries out;
+  out.resize(m);
   const bool colours = e.colour.size() == m;
   if (!colours) out.colour.clear();
-  for (std::size_t i = 0; i < m; ++i) {
-    const std::size_t k = order[i];
+#pragma omp parallel for schedule(static) if (m >= kParallelFrom)
+  for (std::ptrdiff_t t = 0; t < static_cast<std::ptrdiff_t>(m); ++t) {
+    const auto i = static_cast<std::size_t>(t);
+    const std::uint32_t k = order[i];
+    out.key[i] = key[k];
     out.normal_impulse[i] = e.normal_impulse[k];
     out.tangent_impulse[i] = turned(e.tangent_impulse[k], swapped[k]);
     out.rolling_impulse[i] = turned(e.rolling_impulse[k], swapped[k]);

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <random>
 #include <set>
+#include <stdexcept>
 #include <vector>
 
 #include "narrowphase/contact_cache.hpp"
@@ -68,6 +69,69 @@ TEST(ContactCacheRenumbered, NewNamesSameImpulsesAndBackAgain) {
   EXPECT_EQ(std::memcmp(back.tangent_impulse.data(), e.tangent_impulse.data(), e.size() * sizeof(Vec3)), 0);
   EXPECT_EQ(std::memcmp(back.rolling_impulse.data(), e.rolling_impulse.data(), e.size() * sizeof(Vec3)), 0);
   EXPECT_EQ(back.colour, e.colour);
+}
+
+// A cache large enough for the parallel counting sort (more entries and
+// spheres than one thread sorts): the same entries as a plain sort of the
+// renamed ones gives, bit for bit; a name past the spheres is refused.
+TEST(ContactCacheRenumbered, LargeCacheAgreesWithAPlainSort) {
+  std::mt19937_64 rng(1127);
+  const std::uint32_t n = 40000;
+  std::uniform_real_distribution<float> u(-1, 1);
+  std::set<std::uint64_t> keys;
+  while (keys.size() < 150000) {
+    const std::uint32_t a = rng() % n, b = rng() % 4 == 0 ? kWallFlag | static_cast<std::uint32_t>(rng() % 5) : rng() % n;
+    if (is_wall(b) || a < b) keys.insert(cache_key(a, b));
+  }
+  CacheEntries e;
+  for (std::uint64_t key : keys) {
+    e.key.push_back(key);
+    e.normal_impulse.push_back(rng() % 3 == 0 ? 0.0f : std::abs(u(rng)));
+    e.tangent_impulse.push_back({u(rng), rng() % 5 == 0 ? -0.0f : u(rng), u(rng)});
+    e.rolling_impulse.push_back({u(rng), u(rng), rng() % 5 == 0 ? 0.0f : u(rng)});
+    e.colour.push_back(static_cast<std::uint8_t>(rng() % 20));
+  }
+  std::vector<std::uint32_t> new_index(n);
+  for (std::uint32_t i = 0; i < n; ++i) new_index[i] = i;
+  std::shuffle(new_index.begin(), new_index.end(), rng);
+
+  struct Renamed {
+    std::uint64_t key;
+    std::size_t from;
+    bool swapped;
+  };
+  std::vector<Renamed> oracle;
+  for (std::size_t k = 0; k < e.size(); ++k) {
+    const auto a = static_cast<std::uint32_t>(e.key[k] >> 32), b = static_cast<std::uint32_t>(e.key[k]);
+    const std::uint32_t na = new_index[a], nb = is_wall(b) ? b : new_index[b];
+    const bool swap = !is_wall(b) && nb < na;
+    oracle.push_back({swap ? cache_key(nb, na) : cache_key(na, nb), k, swap});
+  }
+  std::sort(oracle.begin(), oracle.end(), [](const Renamed& x, const Renamed& y) { return x.key < y.key; });
+
+  const CacheEntries r = renumbered(e, new_index);
+  ASSERT_EQ(r.size(), e.size());
+  std::size_t swapped = 0;
+  for (std::size_t j = 0; j < r.size(); ++j) {
+    const Renamed& o = oracle[j];
+    ASSERT_EQ(r.key[j], o.key) << j;
+    const Vec3 t = o.swapped ? Vec3{} - e.tangent_impulse[o.from] : e.tangent_impulse[o.from];
+    const Vec3 w = o.swapped ? Vec3{} - e.rolling_impulse[o.from] : e.rolling_impulse[o.from];
+    ASSERT_EQ(std::memcmp(&r.normal_impulse[j], &e.normal_impulse[o.from], sizeof(real)), 0) << j;
+    ASSERT_EQ(std::memcmp(&r.tangent_impulse[j], &t, sizeof(Vec3)), 0) << j;
+    ASSERT_EQ(std::memcmp(&r.rolling_impulse[j], &w, sizeof(Vec3)), 0) << j;
+    ASSERT_EQ(r.colour[j], e.colour[o.from]) << j;
+    swapped += o.swapped;
+  }
+  EXPECT_GT(swapped, e.size() / 4);
+
+  // A sphere with a wall entry named past the spheres: that entry's new key
+  // would name it first.
+  const auto wall = std::find_if(e.key.begin(), e.key.end(), [](std::uint64_t k) { return is_wall(static_cast<std::uint32_t>(k)); });
+  ASSERT_NE(wall, e.key.end());
+  std::vector<std::uint32_t> past = new_index;
+  past[static_cast<std::uint32_t>(*wall >> 32)] = n;
+  EXPECT_THROW(renumbered(e, past), std::out_of_range);
 }
 
 }  // namespace
