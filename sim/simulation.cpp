@@ -187,7 +187,10 @@ void Simulation::renumber() {
   const std::vector<std::uint32_t> order = m_backend->renumber();
   if (order.empty()) return;
   std::vector<std::uint32_t> ids(order.size());
-  for (std::size_t i = 0; i < order.size(); ++i) ids[i] = m_ids.empty() ? order[i] : m_ids[order[i]];
+  const auto n = static_cast<std::ptrdiff_t>(order.size());
+  const bool first = m_ids.empty();
+#pragma omp parallel for schedule(static) if (n > 65536)
+  for (std::ptrdiff_t i = 0; i < n; ++i) ids[i] = first ? order[i] : m_ids[order[i]];
   set_numbering(std::move(ids));
 }
 

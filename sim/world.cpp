@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <limits>
 #include <numbers>
+#include <stdexcept>
 #include <string>
 
 #include "broadphase/grid.hpp"
@@ -41,8 +42,14 @@ bool is_identity(const std::vector<std::uint32_t>& order) {
 }
 
 std::vector<std::uint32_t> inverse_of(const std::vector<std::uint32_t>& order) {
+  const auto n = static_cast<std::ptrdiff_t>(order.size());
+  std::uint32_t largest = 0;
+#pragma omp parallel for schedule(static) reduction(max : largest) if (n > 65536)
+  for (std::ptrdiff_t i = 0; i < n; ++i) largest = std::max(largest, order[i]);
+  if (n > 0 && largest >= order.size()) throw std::out_of_range("inverse_of: an index past the order's length");
   std::vector<std::uint32_t> inverse(order.size(), 0);
-  for (std::size_t i = 0; i < order.size(); ++i) inverse.at(order[i]) = static_cast<std::uint32_t>(i);
+#pragma omp parallel for schedule(static) if (n > 65536)
+  for (std::ptrdiff_t i = 0; i < n; ++i) inverse[order[i]] = static_cast<std::uint32_t>(i);
   return inverse;
 }
 

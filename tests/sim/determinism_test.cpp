@@ -14,6 +14,7 @@
 #include <fstream>
 #include <iterator>
 #include <random>
+#include <stdexcept>
 
 #include "narrowphase/solver.hpp"
 #include "sim/checkpoint.hpp"
@@ -290,6 +291,22 @@ TEST(Determinism, LocalOrderStudyRefusesWhatItCannotRead) {
 // name touching spheres in that numbering, a checkpoint's state with its
 // numbering restores bit for bit (its cache translated to the scene's
 // numbering and back), and the arrays in place are refused.
+// inverse_of (the step's numbering and the scene's): a random permutation
+// long enough for its parallel loops, against its definition; an index past
+// the length is refused.
+TEST(Renumber, InverseOfAPermutation) {
+  std::vector<std::uint32_t> order(200000);
+  for (std::uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::mt19937 rng(5);
+  std::shuffle(order.begin(), order.end(), rng);
+  const std::vector<std::uint32_t> inverse = inverse_of(order);
+  ASSERT_EQ(inverse.size(), order.size());
+  for (std::uint32_t i = 0; i < order.size(); ++i) ASSERT_EQ(inverse[order[i]], i) << i;
+  EXPECT_TRUE(is_identity(inverse_of(std::vector<std::uint32_t>{0, 1, 2})));
+  order[123] = static_cast<std::uint32_t>(order.size());
+  EXPECT_THROW(inverse_of(order), std::out_of_range);
+}
+
 TEST(Renumber, HiddenFromWorldContactsAndRestarts) {
   auto [s, g] = pour_scene(400, 5);
   s.solver.renumber = 4;
