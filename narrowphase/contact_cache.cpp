@@ -78,34 +78,43 @@ void key_runs(const std::uint64_t* keys, std::uint32_t m, std::size_t spheres, s
 CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>& new_index) {
   // Each entry's new key, then a counting sort by the new a (in parallel:
   // core/counting_sort.hpp) and each sphere's few entries ordered by b, as
-  // the store orders them: the keys are unique, so the sorted order.
+  // the store orders them: the keys are unique, so the sorted order. An
+  // entry of a sphere past new_index (a world that lost spheres) is
+  // dropped, as the CUDA twin drops it: no lookup would find it.
   const auto m = static_cast<std::uint32_t>(e.size());
   const auto spheres = static_cast<std::uint32_t>(new_index.size());
+  constexpr std::uint64_t dropped = ~std::uint64_t(0);
   std::vector<std::uint64_t> key(m);
   std::vector<std::uint8_t> swapped(m, 0);
+  const auto is_sphere_past = [spheres](std::uint32_t s) { return !is_wall(s) && s >= spheres; };
   for (std::uint32_t k = 0; k < m; ++k) {
-    const auto b = static_cast<std::uint32_t>(e.key[k]);
-    const RenamedKey r = renamed_key(new_index.at(static_cast<std::uint32_t>(e.key[k] >> 32)),
-                                     is_wall(b) ? b : new_index.at(b));
-    if ((r.key >> 32) >= spheres) throw std::out_of_range("renumbered: a new index past the spheres");
+    const auto a = static_cast<std::uint32_t>(e.key[k] >> 32), b = static_cast<std::uint32_t>(e.key[k]);
+    if (a >= spheres || is_sphere_past(b)) {
+      key[k] = dropped;
+      continue;
+    }
+    const RenamedKey r = renamed_key(new_index[a], is_wall(b) ? b : new_index[b]);
+    if ((r.key >> 32) >= spheres || is_sphere_past(static_cast<std::uint32_t>(r.key)))
+      throw std::out_of_range("renumbered: a new index past the spheres (not a numbering of them)");
     key[k] = r.key;
     swapped[k] = r.swapped;
   }
   std::vector<std::uint32_t> order(m), first, scratch;
   counting_sort(
-      m, spheres, [&](std::uint32_t k) { return static_cast<std::uint32_t>(key[k] >> 32); },
+      m, spheres, [&](std::uint32_t k) { return key[k] == dropped ? kSkipItem : static_cast<std::uint32_t>(key[k] >> 32); },
       [&](std::uint32_t k, std::uint32_t place) { order[place] = k; }, first, scratch);
+  const std::uint32_t kept = first[spheres];
 #pragma omp parallel for schedule(static) if (spheres >= kParallelFrom)
   for (std::ptrdiff_t g = 0; g < static_cast<std::ptrdiff_t>(spheres); ++g) {
     const auto a = static_cast<std::uint32_t>(g);
     sort_run(order.data(), first[a], first[a + 1], [&key](std::uint32_t k) { return key[k]; });
   }
   CacheEntries out;
-  out.resize(m);
+  out.resize(kept);
   const bool colours = e.colour.size() == m;
   if (!colours) out.colour.clear();
-#pragma omp parallel for schedule(static) if (m >= kParallelFrom)
-  for (std::ptrdiff_t t = 0; t < static_cast<std::ptrdiff_t>(m); ++t) {
+#pragma omp parallel for schedule(static) if (kept >= kParallelFrom)
+  for (std::ptrdiff_t t = 0; t < static_cast<std::ptrdiff_t>(kept); ++t) {
     const auto i = static_cast<std::size_t>(t);
     const std::uint32_t k = order[i];
     out.key[i] = key[k];

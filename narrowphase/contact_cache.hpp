@@ -59,7 +59,9 @@ void key_runs(const std::uint64_t* keys, std::uint32_t m, std::size_t spheres, s
 // a, its tangential and rolling impulses acting on a as given and on b
 // opposed), so a pair whose spheres change order swaps and its tangential
 // and rolling impulses change sign: the same impulses on the same spheres.
-// Exact: the inverse numbering gives back the entries bit for bit.
+// Exact: the inverse numbering gives back the entries bit for bit. Entries
+// of spheres past new_index are dropped (no lookup finds them); a new index
+// past the spheres throws std::out_of_range.
 CacheEntries renumbered(const CacheEntries& entries, const std::vector<std::uint32_t>& new_index);
 
 // Entries from outside the run (a checkpoint) keep their colours only if they

@@ -158,8 +158,9 @@ class CpuStep final : public StepBackend {
   std::vector<std::uint32_t> renumber() override {
     std::vector<std::uint32_t> order = cell_order(m_world);
     if (is_identity(order)) return {};
-    m_world = permuted(m_world, order);
-    m_cache.set_entries(narrowphase::renumbered(m_cache.entries(), inverse_of(order)));
+    narrowphase::CacheEntries cache = narrowphase::renumbered(m_cache.entries(), inverse_of(order));
+    m_world = permuted(m_world, order);  // after anything that may throw: all or nothing
+    m_cache.set_entries(std::move(cache));
     return order;
   }
 

@@ -49,7 +49,9 @@ World permuted(const World& w, const std::vector<std::uint32_t>& order);
 // True where order[i] == i for every i.
 bool is_identity(const std::vector<std::uint32_t>& order);
 // The inverse of a permutation: inverse[order[i]] == i (in parallel;
-// std::out_of_range where an index is past the order's length).
+// std::out_of_range where an index is past the order's length). `order`
+// must be a permutation (the step's orders are; a checkpoint's numbering
+// is checked as one when read).
 std::vector<std::uint32_t> inverse_of(const std::vector<std::uint32_t>& order);
 
 // The order (new index -> old) that numbers the spheres along rows of the

@@ -134,5 +134,28 @@ TEST(ContactCacheRenumbered, LargeCacheAgreesWithAPlainSort) {
   EXPECT_THROW(renumbered(e, past), std::out_of_range);
 }
 
+// A world that lost spheres: entries that name a sphere past the
+// numbering (as a or as b) are dropped, the rest renamed as ever.
+TEST(ContactCacheRenumbered, EntriesOfSpheresPastTheNumberingAreDropped) {
+  CacheEntries e;
+  const std::uint64_t keys[] = {cache_key(0, 2), cache_key(0, 7), cache_key(1, kWallFlag | 2), cache_key(2, 3),
+                                cache_key(6, kWallFlag), cache_key(6, 9)};
+  for (std::uint64_t key : keys) {
+    e.key.push_back(key);
+    e.normal_impulse.push_back(real(e.key.size()));
+    e.tangent_impulse.push_back({1, 2, 3});
+    e.rolling_impulse.push_back({4, 5, 6});
+    e.colour.push_back(static_cast<std::uint8_t>(e.key.size()));
+  }
+  const std::vector<std::uint32_t> new_index{3, 0, 1, 2};  // spheres 0..3 only
+  const CacheEntries r = renumbered(e, new_index);
+  // (0, 2) -> (3, 1) turned: (1, 3); (1, wall 2) -> (0, wall 2); (2, 3) -> (1, 2).
+  ASSERT_EQ(r.key, (std::vector<std::uint64_t>{cache_key(0, kWallFlag | 2), cache_key(1, 2), cache_key(1, 3)}));
+  EXPECT_EQ(r.normal_impulse, (std::vector<real>{3, 4, 1}));
+  EXPECT_EQ(r.tangent_impulse[2], Vec3(-1, -2, -3));
+  EXPECT_EQ(r.rolling_impulse[0], Vec3(4, 5, 6));
+  EXPECT_EQ(r.colour, (std::vector<std::uint8_t>{3, 4, 1}));
+}
+
 }  // namespace
 }  // namespace marbles::narrowphase

@@ -283,14 +283,6 @@ TEST(Determinism, LocalOrderStudyRefusesWhatItCannotRead) {
   EXPECT_EQ(o->local, 6);
 }
 
-// solver.renumber: the step numbers the spheres again in the broad phase's
-// order every few steps, and hides it. The pour seen through world() keeps
-// the scene's numbering (each sphere its radius, material and mass; once
-// free of the post, spheres move less than a radius a step, so each keeps
-// its place too), contacts()
-// name touching spheres in that numbering, a checkpoint's state with its
-// numbering restores bit for bit (its cache translated to the scene's
-// numbering and back), and the arrays in place are refused.
 // inverse_of (the step's numbering and the scene's): a random permutation
 // long enough for its parallel loops, against its definition; an index past
 // the length is refused.
@@ -307,6 +299,14 @@ TEST(Renumber, InverseOfAPermutation) {
   EXPECT_THROW(inverse_of(order), std::out_of_range);
 }
 
+// solver.renumber: the step numbers the spheres again in the broad phase's
+// order every few steps, and hides it. The pour seen through world() keeps
+// the scene's numbering (each sphere its radius, material and mass; once
+// free of the post, spheres move less than a radius a step, so each keeps
+// its place too), contacts()
+// name touching spheres in that numbering, a checkpoint's state with its
+// numbering restores bit for bit (its cache translated to the scene's
+// numbering and back), and the arrays in place are refused.
 TEST(Renumber, HiddenFromWorldContactsAndRestarts) {
   auto [s, g] = pour_scene(400, 5);
   s.solver.renumber = 4;

@@ -255,9 +255,9 @@ bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
 // against the CPU's (cell_order, permuted, renumbered on host arrays): the
 // same order and the same bits, on a random polydisperse world (a few
 // spheres a cell, so the sort's stability counts) with a random cache
-// (pairs that turn round, walls, idle entries, -0 and +0, colours).
-// A host edit just before it reaches both; a second numbering changes
-// nothing.
+// (pairs that turn round, walls, idle entries, -0 and +0, colours, and
+// three entries of spheres past the world, which both drop). A host edit
+// just before it reaches both; a second numbering changes nothing.
 TEST(StepCuda, RenumberOnTheDeviceIsTheCpusBitForBit) {
   REQUIRE_DEVICE();
   auto [s, ignored] = pour_scene(1, 1);
@@ -277,6 +277,10 @@ TEST(StepCuda, RenumberOnTheDeviceIsTheCpusBitForBit) {
                                              : a + 1 + static_cast<std::uint32_t>(rng() % (n - a - 1));
       keys.insert(narrowphase::cache_key(a, b));
     }
+  const std::size_t in_the_world = keys.size();
+  keys.insert(narrowphase::cache_key(5, n + 2));
+  keys.insert(narrowphase::cache_key(n + 1, n + 4));
+  keys.insert(narrowphase::cache_key(n + 3, narrowphase::kWallFlag | 1));
   narrowphase::CacheEntries cache;
   cache.resize(keys.size());
   const real signed_zero[] = {real(0), -real(0)};
@@ -316,7 +320,7 @@ TEST(StepCuda, RenumberOnTheDeviceIsTheCpusBitForBit) {
   EXPECT_EQ(c.velocity[inverse_of(order)[17]], Vec3(1, 2, 3));
 
   const narrowphase::CacheEntries hc = cpu->save_state().cache, dc = gpu->save_state().cache;
-  ASSERT_EQ(hc.size(), cache.size());
+  ASSERT_EQ(hc.size(), in_the_world);
   EXPECT_EQ(dc.key, hc.key);
   EXPECT_TRUE(same_bits(dc.normal_impulse, hc.normal_impulse));
   EXPECT_TRUE(same_bits(dc.tangent_impulse, hc.tangent_impulse));
@@ -328,6 +332,24 @@ TEST(StepCuda, RenumberOnTheDeviceIsTheCpusBitForBit) {
 
   EXPECT_TRUE(cpu->renumber().empty());
   EXPECT_TRUE(gpu->renumber().empty());
+}
+
+// The same without rolling resistance (the cache keeps no rolling
+// impulses: the device's numbering skips them) and numbered every other
+// step, so each numbering renames a cache the last step stored (its room
+// past the entries included).
+TEST(StepCuda, RenumberedPourWithoutRollingMatchesTheCpu) {
+  REQUIRE_DEVICE();
+  auto [s, g] = pour_scene(800, 11);
+  s.effects.erase(std::remove(s.effects.begin(), s.effects.end(), Effect::rolling_resistance), s.effects.end());
+  s.solver.renumber = 2;
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  ASSERT_FALSE(gpu.model().solver.rolling);
+  GpuCounts counts;
+  expect_same_steps(cpu, gpu, 80, counts);
+  EXPECT_FALSE(gpu.ids().empty());
+  EXPECT_EQ(gpu.ids(), cpu.ids());
 }
 
 TEST(StepCuda, LargerPourMatchesTheCpuBitForBit) {
