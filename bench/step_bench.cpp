@@ -26,6 +26,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/api_count.hpp"
+#include "broadphase/grid.hpp"
 #include "core/error.hpp"
 #include "narrowphase/solver.hpp"
 #include "sim/particles.hpp"
@@ -408,13 +409,9 @@ World in_sphere_order(World w, const std::string& how) {
     std::mt19937_64 rng(1);
     std::shuffle(order.begin(), order.end(), rng);
   } else if (how == "morton") {
-    Vec3 lo = w.position[0];
-    real largest = 0;
-    for (std::size_t i = 0; i < w.size(); ++i) {
-      lo = {std::min(lo.x, w.position[i].x), std::min(lo.y, w.position[i].y), std::min(lo.z, w.position[i].z)};
-      largest = std::max(largest, w.radius[i]);
-    }
-    const double cell = 2.0 * std::max<double>(largest, 1e-30);
+    const broadphase::Bounds b = broadphase::bounds_of({w.position.data(), w.radius.data(), w.size()});
+    const Vec3 lo = b.lo;
+    const double cell = 2.0 * std::max<double>(b.r_max, 1e-30);
     std::vector<std::uint64_t> key(w.size());
     for (std::size_t i = 0; i < w.size(); ++i) {
       auto at = [&](real x, real x0) {
@@ -580,6 +577,13 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   const int warmup = options.warmup >= 0 ? options.warmup : (is_pile ? 5 : is_settle ? kSettleWarmup : 2);
   std::ostream& log = std::cerr;
   std::vector<Row> rows;
+  // The timed steps of scene s from world w, in the order and with the
+  // numbering the options ask for.
+  auto time_steps = [&](scene::Scene s, World w, std::size_t n) {
+    s.solver.renumber = options.renumber;
+    Simulation sim(s, in_sphere_order(std::move(w), options.sphere_order), backend);
+    rows.push_back(measure(sim, n, warmup, options.repeats));
+  };
   for (std::size_t n : options.n) {
     if (is_pile) {
       const std::string path = pile_cache_path(options.cache_dir, n);
@@ -593,21 +597,14 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         save_pile(path, state->world, state->settle);
         log << "pile N = " << n << ": saved " << path << "\n";
       }
-      scene::Scene s = pile(n).first;  // the box (the lattice is cheap next to the steps)
-      s.solver.renumber = options.renumber;
-      Simulation sim(s, in_sphere_order(std::move(state->world), options.sphere_order), backend);
-      rows.push_back(measure(sim, n, warmup, options.repeats));
+      time_steps(pile(n).first, std::move(state->world), n);  // the box (the lattice is cheap next to the steps)
       rows.back().settle = state->settle;
     } else if (is_settle) {
       auto [s, g] = pile(n, kSettleLattice);
-      s.solver.renumber = options.renumber;
-      Simulation sim(s, in_sphere_order(make_world(s, g), options.sphere_order), backend);
-      rows.push_back(measure(sim, n, warmup, options.repeats));
+      time_steps(s, make_world(s, g), n);
     } else {
       auto [s, g] = gas(n, options.effects);
-      s.solver.renumber = options.renumber;
-      Simulation sim(s, in_sphere_order(make_world(s, g), options.sphere_order), backend);
-      rows.push_back(measure(sim, n, warmup, options.repeats));
+      time_steps(s, make_world(s, g), n);
     }
   }
   constexpr int kVerbs = static_cast<int>(Verb::count);
