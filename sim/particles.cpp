@@ -230,8 +230,8 @@ void number_by_cells(GeneratedParticles& out, std::size_t first) {
   const std::size_t n = out.size() - first;
   const std::vector<std::uint32_t> order = cell_order(out.position.data() + first, out.radius.data() + first, n);
   auto gather = [&](auto& v) {
-    const std::vector<typename std::decay_t<decltype(v)>::value_type> old(v.begin() + first, v.end());
-    for (std::size_t i = 0; i < n; ++i) v[first + i] = old[order[i]];
+    const auto in_order = gathered(v.data() + first, order);
+    std::copy(in_order.begin(), in_order.end(), v.begin() + first);
   };
   gather(out.position);
   gather(out.velocity);

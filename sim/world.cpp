@@ -21,17 +21,13 @@ namespace marbles {
 
 World permuted(const World& w, const std::vector<std::uint32_t>& order) {
   World p;
-  auto take = [&](const auto& from, auto& to) {
-    to.resize(order.size());
-    for (std::size_t i = 0; i < order.size(); ++i) to[i] = from[order[i]];
-  };
-  take(w.position, p.position);
-  take(w.velocity, p.velocity);
-  take(w.angular_velocity, p.angular_velocity);
-  take(w.radius, p.radius);
-  take(w.inv_mass, p.inv_mass);
-  take(w.inv_inertia, p.inv_inertia);
-  take(w.material, p.material);
+  p.position = gathered(w.position.data(), order);
+  p.velocity = gathered(w.velocity.data(), order);
+  p.angular_velocity = gathered(w.angular_velocity.data(), order);
+  p.radius = gathered(w.radius.data(), order);
+  p.inv_mass = gathered(w.inv_mass.data(), order);
+  p.inv_inertia = gathered(w.inv_inertia.data(), order);
+  p.material = gathered(w.material.data(), order);
   return p;
 }
 

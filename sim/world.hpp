@@ -43,6 +43,14 @@ struct World {
   std::size_t first_non_finite() const;
 };
 
+// from[order[i]] for each i: an array in a new order of its items.
+template <class T>
+std::vector<T> gathered(const T* from, const std::vector<std::uint32_t>& order) {
+  std::vector<T> to(order.size());
+  for (std::size_t i = 0; i < order.size(); ++i) to[i] = from[order[i]];
+  return to;
+}
+
 // Sphere order[i] of `w` as sphere i, every array with it (order: a
 // permutation of [0, w.size())).
 World permuted(const World& w, const std::vector<std::uint32_t>& order);
