@@ -70,8 +70,12 @@ MARBLES_HD_INLINE RenamedKey renamed_key(std::uint32_t new_a, std::uint32_t new_
   const bool swapped = !is_wall(new_b) && new_b < new_a;
   return {swapped ? cache_key(new_b, new_a) : cache_key(new_a, new_b), swapped};
 }
-// Turned round as 0 - v: exact both ways, and +0 stays +0 (an idle
-// contact's impulses stay clear).
-MARBLES_HD_INLINE Vec3 turned(const Vec3& v, bool swapped) { return swapped ? Vec3{} - v : v; }
+// Turned round: each component negated but a zero, which keeps its sign
+// (+0 stays +0: an idle contact's impulses stay clear). Turning twice gives
+// back every bit, -0 included (0 - x would give -0 back as +0).
+MARBLES_HD_INLINE real turned(real x, bool swapped) { return swapped && x != 0 ? -x : x; }
+MARBLES_HD_INLINE Vec3 turned(const Vec3& v, bool swapped) {
+  return {turned(v.x, swapped), turned(v.y, swapped), turned(v.z, swapped)};
+}
 
 }  // namespace marbles::narrowphase

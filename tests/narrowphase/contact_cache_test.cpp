@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <numeric>
 #include <random>
 #include <set>
 #include <stdexcept>
@@ -15,6 +16,36 @@
 
 namespace marbles::narrowphase {
 namespace {
+
+// `count` cache entries of n spheres, sorted by key: pairs a < b and, one
+// in four, a sphere and one of `walls` walls; random impulses, a third of
+// them idle (normal 0), some components -0 or +0; colours below 20.
+CacheEntries random_entries(std::mt19937_64& rng, std::uint32_t n, std::size_t count, std::uint32_t walls) {
+  std::uniform_real_distribution<float> u(-1, 1);
+  std::set<std::uint64_t> keys;
+  while (keys.size() < count) {
+    const std::uint32_t a = rng() % n, b = rng() % 4 == 0 ? kWallFlag | static_cast<std::uint32_t>(rng() % walls) : rng() % n;
+    if (is_wall(b) || a < b) keys.insert(cache_key(a, b));
+  }
+  CacheEntries e;
+  for (std::uint64_t key : keys) {
+    e.key.push_back(key);
+    e.normal_impulse.push_back(rng() % 3 == 0 ? 0.0f : std::abs(u(rng)));
+    e.tangent_impulse.push_back({u(rng), rng() % 5 == 0 ? -0.0f : u(rng), u(rng)});
+    e.rolling_impulse.push_back({u(rng), u(rng), rng() % 5 == 0 ? 0.0f : u(rng)});
+    e.colour.push_back(static_cast<std::uint8_t>(rng() % 20));
+  }
+  return e;
+}
+
+// A random numbering of n spheres (new_index[i]: sphere i's new index).
+std::vector<std::uint32_t> random_numbering(std::mt19937_64& rng, std::uint32_t n) {
+  std::vector<std::uint32_t> new_index(n);
+  std::iota(new_index.begin(), new_index.end(), 0u);
+  std::shuffle(new_index.begin(), new_index.end(), rng);
+  return new_index;
+}
+
 // renumbered: the entries of random pairs (and walls) under a random
 // numbering of the spheres are the same contacts with the new names (a
 // swapped pair with its tangential and rolling impulses negated), sorted
@@ -22,24 +53,9 @@ namespace {
 TEST(ContactCacheRenumbered, NewNamesSameImpulsesAndBackAgain) {
   std::mt19937_64 rng(21);
   const std::uint32_t n = 300;
-  std::uniform_real_distribution<float> u(-1, 1);
-  std::set<std::uint64_t> keys;
-  while (keys.size() < 900) {
-    const std::uint32_t a = rng() % n, b = rng() % n;
-    if (a < b) keys.insert(cache_key(a, b));
-    if (rng() % 8 == 0) keys.insert(cache_key(a, kWallFlag | static_cast<std::uint32_t>(rng() % 3)));
-  }
-  CacheEntries e;
-  for (std::uint64_t key : keys) {
-    e.key.push_back(key);
-    e.normal_impulse.push_back(std::abs(u(rng)));
-    e.tangent_impulse.push_back({u(rng), u(rng), u(rng)});
-    e.rolling_impulse.push_back({u(rng), u(rng), u(rng)});
-    e.colour.push_back(static_cast<std::uint8_t>(rng() % 20));
-  }
-  std::vector<std::uint32_t> new_index(n), old_index(n);
-  for (std::uint32_t i = 0; i < n; ++i) new_index[i] = i;
-  std::shuffle(new_index.begin(), new_index.end(), rng);
+  const CacheEntries e = random_entries(rng, n, 900, 3);
+  const std::vector<std::uint32_t> new_index = random_numbering(rng, n);
+  std::vector<std::uint32_t> old_index(n);
   for (std::uint32_t i = 0; i < n; ++i) old_index[new_index[i]] = i;
 
   const CacheEntries r = renumbered(e, new_index);
@@ -77,23 +93,8 @@ TEST(ContactCacheRenumbered, NewNamesSameImpulsesAndBackAgain) {
 TEST(ContactCacheRenumbered, LargeCacheAgreesWithAPlainSort) {
   std::mt19937_64 rng(1127);
   const std::uint32_t n = 40000;
-  std::uniform_real_distribution<float> u(-1, 1);
-  std::set<std::uint64_t> keys;
-  while (keys.size() < 150000) {
-    const std::uint32_t a = rng() % n, b = rng() % 4 == 0 ? kWallFlag | static_cast<std::uint32_t>(rng() % 5) : rng() % n;
-    if (is_wall(b) || a < b) keys.insert(cache_key(a, b));
-  }
-  CacheEntries e;
-  for (std::uint64_t key : keys) {
-    e.key.push_back(key);
-    e.normal_impulse.push_back(rng() % 3 == 0 ? 0.0f : std::abs(u(rng)));
-    e.tangent_impulse.push_back({u(rng), rng() % 5 == 0 ? -0.0f : u(rng), u(rng)});
-    e.rolling_impulse.push_back({u(rng), u(rng), rng() % 5 == 0 ? 0.0f : u(rng)});
-    e.colour.push_back(static_cast<std::uint8_t>(rng() % 20));
-  }
-  std::vector<std::uint32_t> new_index(n);
-  for (std::uint32_t i = 0; i < n; ++i) new_index[i] = i;
-  std::shuffle(new_index.begin(), new_index.end(), rng);
+  const CacheEntries e = random_entries(rng, n, 150000, 5);
+  const std::vector<std::uint32_t> new_index = random_numbering(rng, n);
 
   struct Renamed {
     std::uint64_t key;
@@ -115,8 +116,13 @@ TEST(ContactCacheRenumbered, LargeCacheAgreesWithAPlainSort) {
   for (std::size_t j = 0; j < r.size(); ++j) {
     const Renamed& o = oracle[j];
     ASSERT_EQ(r.key[j], o.key) << j;
-    const Vec3 t = o.swapped ? Vec3{} - e.tangent_impulse[o.from] : e.tangent_impulse[o.from];
-    const Vec3 w = o.swapped ? Vec3{} - e.rolling_impulse[o.from] : e.rolling_impulse[o.from];
+    // Turned round: negated, but a zero keeps its sign.
+    const auto turn = [&o](const Vec3& v) {
+      const auto one = [&o](real x) { return o.swapped && x != 0 ? -x : x; };
+      return Vec3{one(v.x), one(v.y), one(v.z)};
+    };
+    const Vec3 t = turn(e.tangent_impulse[o.from]);
+    const Vec3 w = turn(e.rolling_impulse[o.from]);
     ASSERT_EQ(std::memcmp(&r.normal_impulse[j], &e.normal_impulse[o.from], sizeof(real)), 0) << j;
     ASSERT_EQ(std::memcmp(&r.tangent_impulse[j], &t, sizeof(Vec3)), 0) << j;
     ASSERT_EQ(std::memcmp(&r.rolling_impulse[j], &w, sizeof(Vec3)), 0) << j;
