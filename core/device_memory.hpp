@@ -35,7 +35,7 @@ class PinnedBuffer {
   T* m_ptr = nullptr;
 };
 
-// A runtime handle destroyed with its owner (DeviceBuffer, Stream, Event).
+// A runtime handle destroyed with its owner (Stream, Event).
 template <class Handle, cudaError_t (*Destroy)(Handle)>
 class Owned {
  public:
@@ -69,18 +69,35 @@ class Event : public Owned<cudaEvent_t, cudaEventDestroy> {
 // for a settled scene's contacts to come and go without a new allocation,
 // little enough that the headroom is not a fifth of the device memory
 // (docs/architecture.md "Headroom, the extra word and one read for the
-// colouring"). Freed with its owner (Owned, kept private: get() says which
-// pointer is meant).
-class DeviceBuffer : private Owned<void*, cudaFree> {
+// colouring"). Freed with its owner.
+//
+// Made with a stream, it takes and gives back its memory in that stream's
+// order (cudaMallocAsync, cudaFreeAsync): neither waits for the device, and
+// the stream's pool gives the memory back at the next synchronisation, so a
+// rare stage's temporaries (a renumbering's) cost no wait and are not held
+// for the run. Such a buffer stays local to its call (the stream must
+// outlive it; swap() keeps each allocation with its own way of freeing).
+class DeviceBuffer {
  public:
+  DeviceBuffer() = default;
+  explicit DeviceBuffer(cudaStream_t stream) : m_stream(stream), m_ordered(true) {}
+  DeviceBuffer(const DeviceBuffer&) = delete;
+  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
+  ~DeviceBuffer() {
+    if (!m_handle) return;
+    if (m_ordered)
+      cudaFreeAsync(m_handle, m_stream);
+    else
+      cudaFree(m_handle);
+  }
   // headroom false: exactly `bytes` when it grows (for a count that carries
   // its own headroom: a room sized from the last count).
   void* reserve(std::size_t bytes, bool headroom = true) {
     if (bytes > m_bytes) {
-      if (m_handle) MARBLES_CUDA_CHECK(cudaFree(m_handle));
+      if (m_handle) MARBLES_CUDA_CHECK(m_ordered ? cudaFreeAsync(m_handle, m_stream) : cudaFree(m_handle));
       m_handle = nullptr;
       const std::size_t grown = headroom ? bytes + bytes / 16 + 256 : bytes;
-      MARBLES_CUDA_CHECK(cudaMalloc(&m_handle, grown));
+      MARBLES_CUDA_CHECK(m_ordered ? cudaMallocAsync(&m_handle, grown, m_stream) : cudaMalloc(&m_handle, grown));
       m_bytes = grown;
     }
     return m_handle;
@@ -103,10 +120,15 @@ class DeviceBuffer : private Owned<void*, cudaFree> {
   void swap(DeviceBuffer& other) noexcept {
     std::swap(m_handle, other.m_handle);
     std::swap(m_bytes, other.m_bytes);
+    std::swap(m_stream, other.m_stream);
+    std::swap(m_ordered, other.m_ordered);
   }
 
  private:
+  void* m_handle = nullptr;
   std::size_t m_bytes = 0;
+  cudaStream_t m_stream = nullptr;
+  bool m_ordered = false;
 };
 
 // The bytes the buffers hold together.

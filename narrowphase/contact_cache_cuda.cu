@@ -1,5 +1,4 @@
 #include <cooperative_groups.h>
-#include <cub/device/device_radix_sort.cuh>
 
 #include <algorithm>
 #include <vector>
@@ -76,59 +75,77 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
   }
 }
 
-// --- renumber: the entries' keys renamed (renamed_key, as the host's
-// renumbered), sorted by CUB's radix sort, gathered, their runs found.
-constexpr std::uint64_t kNoKey = ~std::uint64_t{0};  // past the entries: sorts last
+// --- renumber: each entry renamed (renamed_key, as the host's renumbered)
+// and counted with its new sphere, then the store's counting sort: the
+// scanned counts are the new runs, each entry goes to its place in its run,
+// each run is ordered by b (sort_run), and the entries are gathered.
+constexpr std::uint64_t kNoKey = ~std::uint64_t{0};  // a dropped entry
 
 // Sphere a's entries, renamed: key[k] (kNoKey stays where the entry names a
-// sphere past the world's `bodies`) and whether it turned round.
-__global__ void rename_kernel(const std::uint32_t* first, std::uint32_t spheres, const std::uint32_t* b_of,
+// sphere past the world's `bodies`: dropped), whether it turned round, and
+// its rank among its new sphere's (counted in count, in the order the
+// atomics came: renamed_runs_kernel puts each run in order).
+__global__ void rename_kernel(const std::uint32_t* first, std::uint32_t runs, const std::uint32_t* b_of,
                               const std::uint32_t* new_index, std::uint32_t bodies, std::uint64_t* key,
-                              std::uint8_t* swapped) {
-  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < spheres; a += gridDim.x * blockDim.x)
+                              std::uint8_t* swapped, std::uint32_t* count, std::uint32_t* rank) {
+  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < runs; a += gridDim.x * blockDim.x)
     for (std::uint32_t k = first[a]; k < first[a + 1]; ++k) {
       const std::uint32_t b = b_of[k];
       if (a >= bodies || (!is_wall(b) && b >= bodies)) continue;
       const RenamedKey r = renamed_key(new_index[a], is_wall(b) ? b : new_index[b]);
+      const auto new_a = static_cast<std::uint32_t>(r.key >> 32), new_b = static_cast<std::uint32_t>(r.key);
+      if (new_a >= bodies || (!is_wall(new_b) && new_b >= bodies)) continue;  // not a numbering: dropped
       key[k] = r.key;
       swapped[k] = r.swapped;
+      rank[k] = atomicAdd(count + new_a, 1u);
     }
 }
 
-__global__ void iota_kernel(std::uint32_t* v, std::uint32_t n) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) v[k] = k;
+// Each kept entry's index at its place in its new sphere's run.
+__global__ void renamed_place_kernel(const std::uint64_t* key, const std::uint32_t* rank, std::uint32_t m,
+                                     const std::uint32_t* first, std::uint32_t* order) {
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < m; k += gridDim.x * blockDim.x)
+    if (key[k] != kNoKey) order[first[key[k] >> 32] + rank[k]] = k;
 }
 
-// Entry e of the new order from entry from[e] of the old (keys sorted, those
-// past the entries kNoKey).
-struct RenamedEntries {
-  const std::uint64_t* key;
-  const std::uint32_t* from;
-  const std::uint8_t* swapped;
-  const real* normal;
-  const Vec3* tangent;  // null: none kept
-  const Vec3* rolling;  // null: none kept
-  const std::uint8_t* colour;
+// Each new run in key order (sort_run, as the host's renumbered).
+__global__ void renamed_runs_kernel(const std::uint64_t* key, const std::uint32_t* first, std::uint32_t spheres,
+                                    std::uint32_t* order) {
+  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < spheres; a += gridDim.x * blockDim.x)
+    sort_run(order, first[a], first[a + 1], [key](std::uint32_t k) { return key[k]; });
+}
+
+// The entries' arrays (b halves, impulses, colours): the old ones in, the
+// new ones out (tangent and rolling null where none are kept).
+struct EntryArrays {
+  std::uint32_t* b;
+  real* normal;
+  Vec3* tangent;
+  Vec3* rolling;
+  std::uint8_t* colour;
 };
-__global__ void renamed_gather_kernel(RenamedEntries in, std::uint32_t m, std::uint32_t* b_of, real* normal,
-                                      Vec3* tangent, Vec3* rolling, std::uint8_t* colour) {
+// Entry e of the new order from entry order[e] of the old, for e below the
+// kept count (*kept); the room past it cleared.
+__global__ void renamed_gather_kernel(const std::uint64_t* key, const std::uint8_t* swapped, const std::uint32_t* order,
+                                      const std::uint32_t* kept, std::uint32_t m, EntryArrays in, EntryArrays out) {
+  const std::uint32_t size = *kept;
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
-    if (in.key[e] == kNoKey) continue;
-    const std::uint32_t k = in.from[e];
-    const bool turn = in.swapped[k] != 0;
-    b_of[e] = static_cast<std::uint32_t>(in.key[e]);
-    normal[e] = in.normal[k];
-    if (tangent) tangent[e] = turned(in.tangent[k], turn);
-    if (rolling) rolling[e] = turned(in.rolling[k], turn);
-    colour[e] = in.colour[k];
+    if (e >= size) {
+      out.b[e] = 0;
+      out.normal[e] = 0;
+      if (out.tangent) out.tangent[e] = Vec3{};
+      if (out.rolling) out.rolling[e] = Vec3{};
+      out.colour[e] = kNoKeptColour;
+      continue;
+    }
+    const std::uint32_t k = order[e];
+    const bool turn = swapped[k] != 0;
+    out.b[e] = static_cast<std::uint32_t>(key[k]);
+    out.normal[e] = in.normal[k];
+    if (out.tangent) out.tangent[e] = turned(in.tangent[k], turn);
+    if (out.rolling) out.rolling[e] = turned(in.rolling[k], turn);
+    out.colour[e] = in.colour[k];
   }
-}
-
-// first[a] for a <= spheres: the first sorted key of sphere a or above.
-__global__ void renamed_runs_kernel(const std::uint64_t* key, std::uint32_t m, std::uint32_t spheres,
-                                    std::uint32_t* first) {
-  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a <= spheres; a += gridDim.x * blockDim.x)
-    first[a] = lower_bound_key(key, m, cache_key(a, 0));
 }
 
 // Each contact's entry (a scan of its sphere's few entries, as on the CPU)
@@ -396,49 +413,75 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
                                 cudaStream_t s) {
   const std::uint32_t m = m_bound;
   const std::uint32_t runs = m_spheres;  // the old runs (a checkpoint's may pass the world's spheres)
-  DeviceBuffer key, key_sorted, from, from_sorted, swapped, temp;
-  DeviceBuffer b_of, normal, tangent, rolling, colour, first;
-  // The new entries exactly as many as the old (a store grows them again).
-  auto* new_first = first.as_room<std::uint32_t>(std::size_t(spheres) + 1);
+  const std::size_t runs_new = std::size_t(spheres) + 1;
   if (m == 0) {
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(new_first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
-  } else {
-    auto* k = key.as<std::uint64_t>(m);
-    auto* ks = key_sorted.as<std::uint64_t>(m);
-    auto* f = from.as<std::uint32_t>(m);
-    auto* fs = from_sorted.as<std::uint32_t>(m);
-    auto* sw = swapped.as<std::uint8_t>(m);
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(k, 0xff, m * sizeof(std::uint64_t), s));  // kNoKey
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(sw, 0, m, s));
-    rename_kernel<<<grid_for(runs, sm_count), kBlock, 0, s>>>(m_first.get_as<std::uint32_t>(), runs,
-                                                              m_keys.get_as<std::uint32_t>(), new_index, spheres, k,
-                                                              sw);
-    MARBLES_CUDA_CHECK_LAUNCH();
-    iota_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(f, m);
-    MARBLES_CUDA_CHECK_LAUNCH();
-    // The keys are unique (but for kNoKey's, whose entries are dropped): any
-    // sort's order, the host's.
-    std::size_t temp_bytes = 0;
-    MARBLES_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, k, ks, f, fs, static_cast<int>(m), 0, 64, s));
-    MARBLES_CUDA_CHECK(
-        cub::DeviceRadixSort::SortPairs(temp.as<char>(temp_bytes), temp_bytes, k, ks, f, fs, static_cast<int>(m), 0, 64, s));
-    const RenamedEntries in{ks, fs, sw, m_normal.get_as<real>(), m_keep_tangent ? m_tangent.get_as<Vec3>() : nullptr,
-                            m_keep_rolling ? m_rolling.get_as<Vec3>() : nullptr, m_colour.get_as<std::uint8_t>()};
-    renamed_gather_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(
-        in, m, b_of.as_room<std::uint32_t>(m), normal.as_room<real>(m), m_keep_tangent ? tangent.as_room<Vec3>(m) : nullptr,
-        m_keep_rolling ? rolling.as_room<Vec3>(m) : nullptr, colour.as_room<std::uint8_t>(m));
-    MARBLES_CUDA_CHECK_LAUNCH();
-    renamed_runs_kernel<<<grid_for(std::size_t(spheres) + 1, sm_count), kBlock, 0, s>>>(ks, m, spheres, new_first);
-    MARBLES_CUDA_CHECK_LAUNCH();
-    m_keys.swap(b_of);
-    m_normal.swap(normal);
-    if (m_keep_tangent) m_tangent.swap(tangent);
-    if (m_keep_rolling) m_rolling.swap(rolling);
-    m_colour.swap(colour);
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(m_first.as<std::uint32_t>(runs_new), 0, runs_new * sizeof(std::uint32_t), s));
+    m_spheres = spheres;
+    return;
   }
-  m_first.swap(first);
+  // The world gained spheres since the last store (an edit between steps):
+  // the old runs are read first, so the room for the new ones grows after
+  // the device is done with them.
+  if (m_first.bytes() < runs_new * sizeof(std::uint32_t) + 16) {
+    DeviceBuffer grown;
+    auto* to = grown.as<std::uint32_t>(runs_new);
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(to, 0, runs_new * sizeof(std::uint32_t), s));
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(to, m_first.get(), (std::size_t(runs) + 1) * sizeof(std::uint32_t),
+                                       cudaMemcpyDeviceToDevice, s));
+    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));  // before the old runs go
+    m_first.swap(grown);
+  }
+  auto* first = m_first.get_as<std::uint32_t>();
+  // The temporaries in the stream's order (no wait; not held past the
+  // call): the new keys, turns and ranks, the counts and their scan (the new
+  // runs), the new order and the entries gathered, copied back over the old
+  // (never more of them: the bound stays).
+  const std::size_t scan_bytes = ::marbles::cuda::exclusive_sum_bytes<std::uint32_t>(runs_new);
+  std::uint64_t* key = nullptr;
+  std::uint8_t* swapped = nullptr;
+  std::uint32_t *rank = nullptr, *count = nullptr, *new_first = nullptr, *order = nullptr;
+  void* scan_temp = nullptr;
+  EntryArrays out{};
+  DeviceBuffer temporaries(s);
+  ::marbles::cuda::carve(temporaries, [&](::marbles::cuda::Carve& c) {
+    key = c.take<std::uint64_t>(m);
+    swapped = c.take<std::uint8_t>(m);
+    rank = c.take<std::uint32_t>(m);
+    count = c.take<std::uint32_t>(runs_new);
+    scan_temp = c.take<char>(scan_bytes);
+    new_first = c.take<std::uint32_t>(runs_new);
+    order = c.take<std::uint32_t>(m);
+    out.b = c.take<std::uint32_t>(m);
+    out.normal = c.take<real>(m);
+    out.tangent = m_keep_tangent ? c.take<Vec3>(m) : nullptr;
+    out.rolling = m_keep_rolling ? c.take<Vec3>(m) : nullptr;
+    out.colour = c.take<std::uint8_t>(m);
+  });
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(key, 0xff, m * sizeof(std::uint64_t), s));  // kNoKey
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, runs_new * sizeof(std::uint32_t), s));
+  rename_kernel<<<grid_for(runs, sm_count), kBlock, 0, s>>>(first, runs, m_keys.get_as<std::uint32_t>(), new_index,
+                                                            spheres, key, swapped, count, rank);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  ::marbles::cuda::device_exclusive_sum(count, new_first, runs_new, scan_temp, scan_bytes, s);
+  renamed_place_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(key, rank, m, new_first, order);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  renamed_runs_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(key, new_first, spheres, order);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  const EntryArrays in{m_keys.get_as<std::uint32_t>(), m_normal.get_as<real>(),
+                       m_keep_tangent ? m_tangent.get_as<Vec3>() : nullptr,
+                       m_keep_rolling ? m_rolling.get_as<Vec3>() : nullptr, m_colour.get_as<std::uint8_t>()};
+  renamed_gather_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(key, swapped, order, new_first + spheres, m, in, out);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  auto back = [&](void* to, const void* from, std::size_t bytes) {
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(to, from, bytes, cudaMemcpyDeviceToDevice, s));
+  };
+  back(in.b, out.b, m * sizeof(std::uint32_t));
+  back(in.normal, out.normal, m * sizeof(real));
+  if (out.tangent) back(in.tangent, out.tangent, m * sizeof(Vec3));
+  if (out.rolling) back(in.rolling, out.rolling, m * sizeof(Vec3));
+  back(in.colour, out.colour, m);
+  back(first, new_first, runs_new * sizeof(std::uint32_t));
   m_spheres = spheres;
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));  // before the old buffers and the temporaries go
 }
 
 void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {

@@ -41,7 +41,6 @@
 #include <optional>
 #include <string>
 
-#include "broadphase/broadphase_cuda.cuh"
 #include "broadphase/broadphase_cuda.hpp"
 #include "core/cuda_check.hpp"
 #include "core/device.hpp"
@@ -623,13 +622,13 @@ class CudaStep final : public StepBackend {
       m_host_edited = false;
     }
     const std::size_t n = m_device.size();
-    DeviceBuffer orders, keys, temp;
+    DeviceBuffer orders(m_stream);  // the stream's: no wait where it goes
     std::uint32_t* order = orders.as<std::uint32_t>(2 * n);
-    if (!m_device.cell_order(order, keys, temp, m_sm, m_stream)) return {};
+    if (!m_device.cell_order(order, m_bytes, m_sm, m_stream)) return {};
     std::vector<std::uint32_t> host(n);
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(host.data(), order, n * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, m_stream));
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
-    m_bytes += n * sizeof(std::uint32_t) + sizeof(broadphase::cuda::BoundsAccum);
+    m_bytes += n * sizeof(std::uint32_t);
     if (is_identity(host)) return {};
     std::uint32_t* new_index = order + n;
     invert_order(order, n, new_index, m_sm, m_stream);

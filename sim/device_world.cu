@@ -56,20 +56,20 @@ void invert_order(const std::uint32_t* order, std::size_t n, std::uint32_t* inve
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-bool DeviceWorld::cell_order(std::uint32_t* order, DeviceBuffer& keys, DeviceBuffer& temp, int sm_count,
-                             cudaStream_t s) const {
+bool DeviceWorld::cell_order(std::uint32_t* order, std::uint64_t& bytes_copied, int sm_count, cudaStream_t s) const {
   namespace bc = broadphase::cuda;
   if (m_count == 0) return false;
-  auto* acc = temp.as<bc::BoundsAccum>(1);
+  DeviceBuffer bounds(s), keys(s), index(s), temp(s);  // the stream's: no wait where they go
+  auto* acc = bounds.as<bc::BoundsAccum>(1);
   bc::launch_bounds(m_position.get_as<Vec3>(), m_radius.get_as<real>(), m_count, acc, sm_count, s);
   bc::BoundsAccum read{};
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(&read, acc, sizeof read, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  bytes_copied += sizeof read;
   if (read.bad != 0) throw broadphase::NonFiniteInput();
   const broadphase::HomeGridChoice choice = broadphase::choose_home_grid(bc::decode_bounds(read), 0);
   if (choice.width == broadphase::KeyWidth::too_wide) return false;
   auto* key = keys.as<std::uint64_t>(2 * m_count);
-  DeviceBuffer index;
   auto* from = index.as<std::uint32_t>(m_count);
   home_keys_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(m_position.get_as<Vec3>(), m_count, choice.grid, key,
                                                                   from);
@@ -78,7 +78,6 @@ bool DeviceWorld::cell_order(std::uint32_t* order, DeviceBuffer& keys, DeviceBuf
   const bool alt = bc::cub_radix_sort(key, from, key + m_count, order, m_count, choice.grid.key_bits, temp, s);
   if (!alt)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(order, from, m_count * sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, s));
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));  // before `index` goes
   return true;
 }
 

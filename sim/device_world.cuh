@@ -30,12 +30,12 @@ class DeviceWorld {
   void copy_state_to(DeviceWorld& to, cudaStream_t stream) const;
 
   // The spheres' order by their home cells (cell_order, sim/world.hpp: the
-  // same order, from the same grid) into order[0, size()) (device), through
-  // `keys` and `temp` (grown as needed); false, writing nothing, where
-  // cell_order keeps the given order (no spheres, a grid too wide). Waits
-  // for the bounds. Throws broadphase::NonFiniteInput as cell_order does.
-  bool cell_order(std::uint32_t* order, ::marbles::cuda::DeviceBuffer& keys, ::marbles::cuda::DeviceBuffer& temp,
-                  int sm_count, cudaStream_t stream) const;
+  // same order, from the same grid) into order[0, size()) (device; its
+  // temporaries the stream's); false, writing nothing, where cell_order
+  // keeps the given order (no spheres, a grid too wide). Waits for the
+  // bounds, whose bytes it adds to `bytes_copied`. Throws
+  // broadphase::NonFiniteInput as cell_order does.
+  bool cell_order(std::uint32_t* order, std::uint64_t& bytes_copied, int sm_count, cudaStream_t stream) const;
   // Every array in `order` (device; new index -> old), as permuted does on
   // the host. Waits for the device (the old arrays go).
   void permute(const std::uint32_t* order, int sm_count, cudaStream_t stream);

@@ -250,26 +250,24 @@ bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
   return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
 }
 
-// A renumbering on the device (StepBackend::renumber: home keys sorted,
-// arrays gathered, the cache's entries renamed and sorted on the GPU)
-// against the CPU's (cell_order, permuted, renumbered on host arrays): the
-// same order and the same bits, on a random polydisperse world (a few
-// spheres a cell, so the sort's stability counts) with a random cache
-// (pairs that turn round, walls, idle entries, -0 and +0, colours, and
-// three entries of spheres past the world, which both drop). A host edit
-// just before it reaches both; a second numbering changes nothing.
-TEST(StepCuda, RenumberOnTheDeviceIsTheCpusBitForBit) {
-  REQUIRE_DEVICE();
-  auto [s, ignored] = pour_scene(1, 1);
-  std::mt19937_64 rng(20261127);
+namespace {
+
+// A world of n random spheres (polydisperse, a few a cell, so the sort's
+// stability counts), random velocities and spins.
+World random_world(const scene::Scene& s, std::uint32_t n, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> u(0, 1);
   scene::GeneratedParticles g;
-  const std::uint32_t n = 6000;
   for (std::uint32_t i = 0; i < n; ++i)
     add_sphere(g, {real(0.3 * u(rng)), real(0.3 * u(rng)), real(u(rng))}, real(0.004 + 0.008 * u(rng)),
                {real(u(rng) - 0.5), real(u(rng) - 0.5), real(u(rng) - 0.5)}, static_cast<std::uint32_t>(rng() % 2));
   World world = make_world(s, g);
   for (Vec3& w : world.angular_velocity) w = {real(u(rng) - 0.5), real(u(rng) - 0.5), real(u(rng) - 0.5)};
+  return world;
+}
+
+// Random cache keys of spheres below n: 0 to 4 a sphere, a quarter of them
+// walls, the rest pairs that the numbering may turn round.
+std::set<std::uint64_t> random_keys(std::uint32_t n, std::mt19937_64& rng) {
   std::set<std::uint64_t> keys;
   for (std::uint32_t a = 0; a + 1 < n; ++a)
     for (std::uint64_t k = rng() % 5; k > 0; --k) {
@@ -277,10 +275,13 @@ TEST(StepCuda, RenumberOnTheDeviceIsTheCpusBitForBit) {
                                              : a + 1 + static_cast<std::uint32_t>(rng() % (n - a - 1));
       keys.insert(narrowphase::cache_key(a, b));
     }
-  const std::size_t in_the_world = keys.size();
-  keys.insert(narrowphase::cache_key(5, n + 2));
-  keys.insert(narrowphase::cache_key(n + 1, n + 4));
-  keys.insert(narrowphase::cache_key(n + 3, narrowphase::kWallFlag | 1));
+  return keys;
+}
+
+// Entries of `keys` with random impulses (idle ones, +0 and -0 among the
+// components) and colours (some none).
+narrowphase::CacheEntries random_cache(const std::set<std::uint64_t>& keys, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(0, 1);
   narrowphase::CacheEntries cache;
   cache.resize(keys.size());
   const real signed_zero[] = {real(0), -real(0)};
@@ -294,6 +295,60 @@ TEST(StepCuda, RenumberOnTheDeviceIsTheCpusBitForBit) {
     cache.colour[k] = rng() % 5 == 0 ? narrowphase::kNoKeptColour : static_cast<std::uint8_t>(rng() % 24);
     ++k;
   }
+  return cache;
+}
+
+// Both backends number their spheres again: the same order, the same bits
+// of every array and of every cache entry. Returns the CPU's order and
+// cache after.
+struct Numbered {
+  std::vector<std::uint32_t> order;
+  narrowphase::CacheEntries cache;
+};
+Numbered expect_same_numbering(StepBackend& cpu, StepBackend& gpu) {
+  std::vector<std::uint32_t> order = cpu.renumber();
+  EXPECT_FALSE(order.empty()) << "a random world must be numbered again";
+  EXPECT_EQ(gpu.renumber(), order);
+  const World& c = cpu.world();
+  const World& d = gpu.world();
+  EXPECT_TRUE(same_bits(d.position, c.position));
+  EXPECT_TRUE(same_bits(d.velocity, c.velocity));
+  EXPECT_TRUE(same_bits(d.angular_velocity, c.angular_velocity));
+  EXPECT_TRUE(same_bits(d.radius, c.radius));
+  EXPECT_TRUE(same_bits(d.inv_mass, c.inv_mass));
+  EXPECT_TRUE(same_bits(d.inv_inertia, c.inv_inertia));
+  EXPECT_TRUE(same_bits(d.material, c.material));
+  narrowphase::CacheEntries hc = cpu.save_state().cache, dc = gpu.save_state().cache;
+  EXPECT_EQ(dc.key, hc.key);
+  EXPECT_TRUE(same_bits(dc.normal_impulse, hc.normal_impulse));
+  EXPECT_TRUE(same_bits(dc.tangent_impulse, hc.tangent_impulse));
+  EXPECT_TRUE(same_bits(dc.rolling_impulse, hc.rolling_impulse));
+  EXPECT_EQ(dc.colour, hc.colour);
+  return {std::move(order), std::move(hc)};
+}
+
+}  // namespace
+
+// A renumbering on the device (StepBackend::renumber: home keys sorted,
+// arrays gathered, the cache's entries renamed and counted into their new
+// runs on the GPU) against the CPU's (cell_order, permuted, renumbered on
+// host arrays): the same order and the same bits, on a random world with a
+// random cache (pairs that turn round, walls, idle entries, -0 and +0,
+// colours, and three entries of spheres past the world, which both drop).
+// A host edit just before it reaches both; a second numbering changes
+// nothing.
+TEST(StepCuda, RenumberOnTheDeviceIsTheCpusBitForBit) {
+  REQUIRE_DEVICE();
+  auto [s, ignored] = pour_scene(1, 1);
+  std::mt19937_64 rng(20261127);
+  const std::uint32_t n = 6000;
+  const World world = random_world(s, n, rng);
+  std::set<std::uint64_t> keys = random_keys(n, rng);
+  const std::size_t in_the_world = keys.size();
+  keys.insert(narrowphase::cache_key(5, n + 2));
+  keys.insert(narrowphase::cache_key(n + 1, n + 4));
+  keys.insert(narrowphase::cache_key(n + 3, narrowphase::kWallFlag | 1));
+  const narrowphase::CacheEntries cache = random_cache(keys, rng);
   const StepModel model = compile_step_model(s, broadphase::kDefaultCpuAlgorithm);
   ASSERT_TRUE(model.solver.friction && model.solver.rolling) << "the cache must keep both impulses";
   auto cpu = make_cpu_step(model, world);
@@ -305,33 +360,41 @@ TEST(StepCuda, RenumberOnTheDeviceIsTheCpusBitForBit) {
   gpu->edit_world().velocity[17] = {1, 2, 3};
   (void)gpu->world();  // a host copy read before: the numbering must leave it stale
 
-  const std::vector<std::uint32_t> order = cpu->renumber();
-  ASSERT_FALSE(order.empty()) << "a random world must be numbered again";
-  EXPECT_EQ(gpu->renumber(), order);
-  const World& c = cpu->world();
-  const World& d = gpu->world();
-  EXPECT_TRUE(same_bits(d.position, c.position));
-  EXPECT_TRUE(same_bits(d.velocity, c.velocity));
-  EXPECT_TRUE(same_bits(d.angular_velocity, c.angular_velocity));
-  EXPECT_TRUE(same_bits(d.radius, c.radius));
-  EXPECT_TRUE(same_bits(d.inv_mass, c.inv_mass));
-  EXPECT_TRUE(same_bits(d.inv_inertia, c.inv_inertia));
-  EXPECT_TRUE(same_bits(d.material, c.material));
-  EXPECT_EQ(c.velocity[inverse_of(order)[17]], Vec3(1, 2, 3));
-
-  const narrowphase::CacheEntries hc = cpu->save_state().cache, dc = gpu->save_state().cache;
+  const auto [order, hc] = expect_same_numbering(*cpu, *gpu);
+  EXPECT_EQ(cpu->world().velocity[inverse_of(order)[17]], Vec3(1, 2, 3));
   ASSERT_EQ(hc.size(), in_the_world);
-  EXPECT_EQ(dc.key, hc.key);
-  EXPECT_TRUE(same_bits(dc.normal_impulse, hc.normal_impulse));
-  EXPECT_TRUE(same_bits(dc.tangent_impulse, hc.tangent_impulse));
-  EXPECT_TRUE(same_bits(dc.rolling_impulse, hc.rolling_impulse));
-  EXPECT_EQ(dc.colour, hc.colour);
   std::size_t turned = 0;
   for (std::size_t e = 0; e < hc.size(); ++e) turned += hc.key[e] != cache.key[e] ? 1 : 0;
   EXPECT_GT(turned, hc.size() / 2) << "the numbering must rename most entries";
 
   EXPECT_TRUE(cpu->renumber().empty());
   EXPECT_TRUE(gpu->renumber().empty());
+}
+
+// A world that gained spheres since its cache was stored (an edit between
+// steps, half as many again): the device reads its old runs before their
+// room grows for the new spheres. The same order and bits as the CPU's.
+TEST(StepCuda, RenumberAfterTheWorldGrewIsTheCpus) {
+  REQUIRE_DEVICE();
+  auto [s, ignored] = pour_scene(1, 1);
+  std::mt19937_64 rng(20261128);
+  const std::uint32_t n = 4000, added = 2000;
+  const World all = random_world(s, n + added, rng);
+  World first = all;
+  for (auto* v : {&first.position, &first.velocity, &first.angular_velocity}) v->resize(n);
+  for (auto* v : {&first.radius, &first.inv_mass, &first.inv_inertia}) v->resize(n);
+  first.material.resize(n);
+  const narrowphase::CacheEntries cache = random_cache(random_keys(n, rng), rng);
+  const StepModel model = compile_step_model(s, broadphase::kDefaultCpuAlgorithm);
+  auto cpu = make_cpu_step(model, first);
+  auto gpu = make_cuda_step(model, first);
+  const StepState state{cache, model.wall_shapes};
+  cpu->load_state(state);
+  gpu->load_state(state);
+  cpu->edit_world() = all;
+  gpu->edit_world() = all;
+  const narrowphase::CacheEntries hc = expect_same_numbering(*cpu, *gpu).cache;
+  EXPECT_EQ(hc.size(), cache.size()) << "every entry names spheres of the grown world";
 }
 
 // The same without rolling resistance (the cache keeps no rolling
