@@ -614,8 +614,8 @@ class CudaStep final : public StepBackend {
     m_non_finite = false;
   }
   // On the device: the home keys sorted, every array gathered, the cache's
-  // entries renamed and sorted; the order read back for the host copy's
-  // fixed arrays (and the caller's numbering).
+  // entries renamed and sorted; the order read back (only where a sphere
+  // moves) for the host copy's fixed arrays and the caller's numbering.
   std::vector<std::uint32_t> renumber() override {
     if (m_host_edited) {  // edits between steps first
       m_device.upload(m_host, m_stream);
@@ -629,7 +629,6 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(host.data(), order, n * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, m_stream));
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     m_bytes += n * sizeof(std::uint32_t);
-    if (is_identity(host)) return {};
     std::uint32_t* new_index = order + n;
     invert_order(order, n, new_index, m_sm, m_stream);
     m_device.permute(order, m_sm, m_stream);

@@ -34,13 +34,22 @@ __global__ void gather_kernel(const T* from, const std::uint32_t* order, std::si
     to[i] = from[order[i]];
 }
 
+// The array in `buffer` gathered by order into `spare`, then copied back:
+// each array keeps its own allocation (swapping would pass the largest
+// one's along the arrays, one numbering after another).
 template <class T>
 void gather(DeviceBuffer& buffer, const std::uint32_t* order, std::size_t n, int sm_count, cudaStream_t s,
             DeviceBuffer& spare) {
-  T* to = spare.as_room<T>(n);  // no headroom: the world never grows
+  T* to = spare.as_room<T>(n);
   gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(buffer.get_as<T>(), order, n, to);
   MARBLES_CUDA_CHECK_LAUNCH();
-  buffer.swap(spare);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(buffer.get(), to, n * sizeof(T), cudaMemcpyDeviceToDevice, s));
+}
+
+// *moved = 1 where order[i] != i for some i (it starts at 0).
+__global__ void moved_kernel(const std::uint32_t* order, std::size_t n, unsigned* moved) {
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n; i += std::size_t(gridDim.x) * blockDim.x)
+    if (order[i] != i) *moved = 1u;  // any writer's 1
 }
 
 __global__ void invert_kernel(const std::uint32_t* order, std::size_t n, std::uint32_t* inverse) {
@@ -78,11 +87,21 @@ bool DeviceWorld::cell_order(std::uint32_t* order, std::uint64_t& bytes_copied, 
   const bool alt = bc::cub_radix_sort(key, from, key + m_count, order, m_count, choice.grid.key_bits, temp, s);
   if (!alt)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(order, from, m_count * sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, s));
-  return true;
+  // Whether any sphere moves, read instead of the order (a pile numbered
+  // often is mostly in its order already).
+  auto* moved = bounds.as<unsigned>(1);
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sizeof(unsigned), s));
+  moved_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(order, m_count, moved);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  unsigned any = 0;
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(&any, moved, sizeof any, cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  bytes_copied += sizeof any;
+  return any != 0;
 }
 
 void DeviceWorld::permute(const std::uint32_t* order, int sm_count, cudaStream_t s) {
-  DeviceBuffer spare;
+  DeviceBuffer spare(s);  // the stream's: no wait where it goes
   gather<Vec3>(m_position, order, m_count, sm_count, s, spare);
   gather<Vec3>(m_velocity, order, m_count, sm_count, s, spare);
   gather<Vec3>(m_angular_velocity, order, m_count, sm_count, s, spare);
@@ -90,7 +109,6 @@ void DeviceWorld::permute(const std::uint32_t* order, int sm_count, cudaStream_t
   gather<real>(m_inv_mass, order, m_count, sm_count, s, spare);
   gather<real>(m_inv_inertia, order, m_count, sm_count, s, spare);
   gather<std::uint32_t>(m_material, order, m_count, sm_count, s, spare);
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));  // before the last old array goes
 }
 
 void DeviceWorld::upload(const World& w, cudaStream_t s) {

@@ -31,13 +31,15 @@ class DeviceWorld {
 
   // The spheres' order by their home cells (cell_order, sim/world.hpp: the
   // same order, from the same grid) into order[0, size()) (device; its
-  // temporaries the stream's); false, writing nothing, where cell_order
-  // keeps the given order (no spheres, a grid too wide). Waits for the
-  // bounds, whose bytes it adds to `bytes_copied`. Throws
-  // broadphase::NonFiniteInput as cell_order does.
+  // temporaries the stream's); false where the spheres keep their order
+  // (no spheres or a grid too wide: nothing written; or already in cell
+  // order: the identity written). Waits for the bounds and for whether any
+  // sphere moves, and adds those reads' bytes to `bytes_copied` (the order
+  // itself stays on the device). Throws broadphase::NonFiniteInput as
+  // cell_order does.
   bool cell_order(std::uint32_t* order, std::uint64_t& bytes_copied, int sm_count, cudaStream_t stream) const;
   // Every array in `order` (device; new index -> old), as permuted does on
-  // the host. Waits for the device (the old arrays go).
+  // the host; each array keeps its allocation. No wait.
   void permute(const std::uint32_t* order, int sm_count, cudaStream_t stream);
   BodiesView view() const;
   std::size_t size() const { return m_count; }
