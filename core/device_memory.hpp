@@ -72,15 +72,17 @@ class Event : public Owned<cudaEvent_t, cudaEventDestroy> {
 // colouring"). Freed with its owner.
 //
 // Made with a stream, it takes and gives back its memory in that stream's
-// order (cudaMallocAsync, cudaFreeAsync): neither waits for the device, and
-// the stream's pool gives the memory back at the next synchronisation, so a
-// rare stage's temporaries (a renumbering's) cost no wait and are not held
-// for the run. Such a buffer stays local to its call (the stream must
-// outlive it; swap() keeps each allocation with its own way of freeing).
+// order (cudaMallocAsync, cudaFreeAsync, from the device's default pool):
+// neither waits for the device, and the pool (release threshold 0) gives
+// the memory back at the next synchronisation, so a rare stage's
+// temporaries (a renumbering's) cost no wait and are not held for the run.
+// Where the device has no memory pools it allocates as a plain buffer does.
+// Such a buffer stays local to its call (the stream must outlive it; swap()
+// keeps each allocation with its own way of freeing).
 class DeviceBuffer {
  public:
   DeviceBuffer() = default;
-  explicit DeviceBuffer(cudaStream_t stream) : m_stream(stream), m_ordered(true) {}
+  explicit DeviceBuffer(cudaStream_t stream) : m_stream(stream), m_ordered(pools()) {}
   DeviceBuffer(const DeviceBuffer&) = delete;
   DeviceBuffer& operator=(const DeviceBuffer&) = delete;
   ~DeviceBuffer() {
@@ -125,6 +127,16 @@ class DeviceBuffer {
   }
 
  private:
+  // Whether the current device has memory pools (asked once).
+  static bool pools() {
+    static const bool supported = [] {
+      int device = 0, value = 0;
+      return cudaGetDevice(&device) == cudaSuccess &&
+             cudaDeviceGetAttribute(&value, cudaDevAttrMemoryPoolsSupported, device) == cudaSuccess && value != 0;
+    }();
+    return supported;
+  }
+
   void* m_handle = nullptr;
   std::size_t m_bytes = 0;
   cudaStream_t m_stream = nullptr;

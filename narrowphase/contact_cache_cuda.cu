@@ -419,13 +419,12 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
     m_spheres = spheres;
     return;
   }
-  // The world gained spheres since the last store (an edit between steps):
-  // the old runs are read first, so the room for the new ones grows after
-  // the device is done with them.
+  // The runs' room too small for the world's spheres (it gained them by an
+  // edit since the room was made): the old runs move to a grown room first,
+  // after which the device is done with the old one.
   if (m_first.bytes() < runs_new * sizeof(std::uint32_t) + 16) {
     DeviceBuffer grown;
     auto* to = grown.as<std::uint32_t>(runs_new);
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(to, 0, runs_new * sizeof(std::uint32_t), s));
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(to, m_first.get(), (std::size_t(runs) + 1) * sizeof(std::uint32_t),
                                        cudaMemcpyDeviceToDevice, s));
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));  // before the old runs go

@@ -85,10 +85,12 @@ class ContactCacheCuda {
   // The entries with every sphere i named new_index[i] (device, `spheres`
   // words: the world's spheres), as renumbered (contact_cache.hpp) names
   // them: sorted by key again with the store's counting sort by sphere, their
-  // runs made again, the same bits as the host's. Entries of spheres past
-  // the world's are dropped (no lookup finds them). The temporaries are the
-  // stream's (no wait); it waits only where the world gained spheres since
-  // the last store (the runs' room grows).
+  // runs made again, the same bits as the host's for a numbering (new_index
+  // a permutation, as the step's are: an entry that one which is not would
+  // send past the world is dropped, where the host throws). Entries of
+  // spheres past the world's are dropped (no lookup finds them). The
+  // temporaries are the stream's (no wait); it waits only where the runs'
+  // room is too small for the world's spheres (it grows).
   void renumber(const std::uint32_t* new_index, std::uint32_t spheres, int sm_count, cudaStream_t stream);
   // The entries copied on the device into `to` (the watchdog's undo).
   void copy_to(ContactCacheCuda& to, cudaStream_t stream) const;

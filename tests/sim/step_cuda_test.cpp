@@ -373,28 +373,40 @@ TEST(StepCuda, RenumberOnTheDeviceIsTheCpusBitForBit) {
 
 // A world that gained spheres since its cache was stored (an edit between
 // steps, half as many again): the device reads its old runs before their
-// room grows for the new spheres. The same order and bits as the CPU's.
+// room grows for the new spheres. The same order and bits as the CPU's,
+// with friction and rolling resistance and without either (the device's
+// cache then keeps neither impulse: a frictionless store leaves them zero).
 TEST(StepCuda, RenumberAfterTheWorldGrewIsTheCpus) {
   REQUIRE_DEVICE();
-  auto [s, ignored] = pour_scene(1, 1);
-  std::mt19937_64 rng(20261128);
-  const std::uint32_t n = 4000, added = 2000;
-  const World all = random_world(s, n + added, rng);
-  World first = all;
-  for (auto* v : {&first.position, &first.velocity, &first.angular_velocity}) v->resize(n);
-  for (auto* v : {&first.radius, &first.inv_mass, &first.inv_inertia}) v->resize(n);
-  first.material.resize(n);
-  const narrowphase::CacheEntries cache = random_cache(random_keys(n, rng), rng);
-  const StepModel model = compile_step_model(s, broadphase::kDefaultCpuAlgorithm);
-  auto cpu = make_cpu_step(model, first);
-  auto gpu = make_cuda_step(model, first);
-  const StepState state{cache, model.wall_shapes};
-  cpu->load_state(state);
-  gpu->load_state(state);
-  cpu->edit_world() = all;
-  gpu->edit_world() = all;
-  const narrowphase::CacheEntries hc = expect_same_numbering(*cpu, *gpu).cache;
-  EXPECT_EQ(hc.size(), cache.size()) << "every entry names spheres of the grown world";
+  for (const bool frictionless : {false, true}) {
+    SCOPED_TRACE(frictionless ? "frictionless" : "friction and rolling resistance");
+    auto [s, ignored] = pour_scene(1, 1);
+    if (frictionless)
+      std::erase_if(s.effects, [](Effect e) { return e == Effect::friction || e == Effect::rolling_resistance; });
+    std::mt19937_64 rng(20261128);
+    const std::uint32_t n = 4000, added = 2000;
+    const World all = random_world(s, n + added, rng);
+    World first = all;
+    for (auto* v : {&first.position, &first.velocity, &first.angular_velocity}) v->resize(n);
+    for (auto* v : {&first.radius, &first.inv_mass, &first.inv_inertia}) v->resize(n);
+    first.material.resize(n);
+    narrowphase::CacheEntries cache = random_cache(random_keys(n, rng), rng);
+    const StepModel model = compile_step_model(s, broadphase::kDefaultCpuAlgorithm);
+    ASSERT_EQ(model.solver.friction, !frictionless);
+    if (frictionless) {
+      std::fill(cache.tangent_impulse.begin(), cache.tangent_impulse.end(), Vec3{});
+      std::fill(cache.rolling_impulse.begin(), cache.rolling_impulse.end(), Vec3{});
+    }
+    auto cpu = make_cpu_step(model, first);
+    auto gpu = make_cuda_step(model, first);
+    const StepState state{cache, model.wall_shapes};
+    cpu->load_state(state);
+    gpu->load_state(state);
+    cpu->edit_world() = all;
+    gpu->edit_world() = all;
+    const narrowphase::CacheEntries hc = expect_same_numbering(*cpu, *gpu).cache;
+    EXPECT_EQ(hc.size(), cache.size()) << "every entry names spheres of the grown world";
+  }
 }
 
 // The same without rolling resistance (the cache keeps no rolling
