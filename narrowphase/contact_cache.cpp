@@ -86,17 +86,12 @@ CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>&
   constexpr std::uint64_t dropped = ~std::uint64_t(0);
   std::vector<std::uint64_t> key(m);
   std::vector<std::uint8_t> swapped(m, 0);
-  const auto is_sphere_past = [spheres](std::uint32_t s) { return !is_wall(s) && s >= spheres; };
   for (std::uint32_t k = 0; k < m; ++k) {
-    const auto a = static_cast<std::uint32_t>(e.key[k] >> 32), b = static_cast<std::uint32_t>(e.key[k]);
-    if (a >= spheres || is_sphere_past(b)) {
-      key[k] = dropped;
-      continue;
-    }
-    const RenamedKey r = renamed_key(new_index[a], is_wall(b) ? b : new_index[b]);
-    if ((r.key >> 32) >= spheres || is_sphere_past(static_cast<std::uint32_t>(r.key)))
+    const RenamedKey r = renamed_key(static_cast<std::uint32_t>(e.key[k] >> 32), static_cast<std::uint32_t>(e.key[k]),
+                                     new_index.data(), spheres);
+    if (r.outcome == Renamed::not_a_numbering)
       throw std::out_of_range("renumbered: a new index past the spheres (not a numbering of them)");
-    key[k] = r.key;
+    key[k] = r.outcome == Renamed::kept ? r.key : dropped;
     swapped[k] = r.swapped;
   }
   std::vector<std::uint32_t> order(m), first, scratch;

@@ -4,7 +4,6 @@
 #include <vector>
 
 #include "core/cuda_check.hpp"
-#include "core/lower_bound.hpp"
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_cache_cuda.cuh"
 #include "narrowphase/contact_cache_math.hpp"
@@ -26,30 +25,52 @@ __device__ __forceinline__ bool stored(const SweepRecords& records, const std::u
   return records.impulse[k].x > 0 || (colour && colour[k] != kNoKeptColour);
 }
 
-// The counting sort by sphere a (ContactCache::store_from's): each stored
-// contact counted with its sphere, rank[k] its place among that sphere's (in
-// the order the atomics came: order_runs_kernel puts each run in order),
-// kNoEntry for a dropped one.
+// The counting sort by sphere a, of the store's contacts and of the
+// renumbering's entries (ContactCache::store_from's and renumbered's):
+// each item counted with its sphere, rank[k] its place among that sphere's
+// (in the order the atomics came: order_runs_kernel puts each run in
+// order), kNoEntry for an item left out; the counts scanned into the runs'
+// firsts (whose last is the entry count); each item placed; each run
+// ordered by key. An item's sphere and key: a contact's bodies, or a
+// renamed entry's key.
+struct ContactSphere {
+  SweepRecords records;
+  __device__ std::uint32_t operator()(std::uint32_t k) const { return records.bodies[k].a; }
+};
+struct ContactB {  // within a run: b, the cache key's order (a wall after every sphere, walls by index)
+  SweepRecords records;
+  __device__ std::uint32_t operator()(std::uint32_t k) const { return records.bodies[k].b; }
+};
+struct EntrySphere {
+  const std::uint64_t* key;
+  __device__ std::uint32_t operator()(std::uint32_t k) const { return static_cast<std::uint32_t>(key[k] >> 32); }
+};
+struct EntryKey {
+  const std::uint64_t* key;
+  __device__ std::uint64_t operator()(std::uint32_t k) const { return key[k]; }
+};
+
+// Each stored contact counted.
 __global__ void count_kernel(SweepRecords records, const std::uint8_t* colour, std::uint32_t n, std::uint32_t* count,
                              std::uint32_t* rank) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
     rank[k] = stored(records, colour, k) ? atomicAdd(count + records.bodies[k].a, 1u) : kNoEntry;
 }
 
-// Each stored contact's index at its place in its sphere's run (first: the
-// scanned counts, whose last is the entry count).
-__global__ void place_kernel(SweepRecords records, std::uint32_t n, const std::uint32_t* rank,
+// Each counted item's index at its place in its sphere's run.
+template <class SphereOf>
+__global__ void place_kernel(SphereOf sphere_of, std::uint32_t n, const std::uint32_t* rank,
                              const std::uint32_t* first, std::uint32_t* index) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
-    if (rank[k] != kNoEntry) index[first[records.bodies[k].a] + rank[k]] = k;
+    if (rank[k] != kNoEntry) index[first[sphere_of(k)] + rank[k]] = k;
 }
 
-// Each sphere's run in key order (sort_run, as on the CPU): by b, the cache
-// key's order within a run (a wall after every sphere, walls by index).
-__global__ void order_runs_kernel(SweepRecords records, const std::uint32_t* first, std::uint32_t spheres,
+// Each sphere's run in key order (sort_run, as on the CPU).
+template <class KeyOf>
+__global__ void order_runs_kernel(KeyOf key_of, const std::uint32_t* first, std::uint32_t spheres,
                                   std::uint32_t* index) {
   for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < spheres; a += gridDim.x * blockDim.x)
-    sort_run(index, first[a], first[a + 1], [&records](std::uint32_t k) { return records.bodies[k].b; });
+    sort_run(index, first[a], first[a + 1], key_of);
 }
 
 // The entries in key order, each with the b half of its cache key (a is its
@@ -76,43 +97,23 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
 }
 
 // --- renumber: each entry renamed (renamed_key, as the host's renumbered)
-// and counted with its new sphere, then the store's counting sort: the
-// scanned counts are the new runs, each entry goes to its place in its run,
-// each run is ordered by b (sort_run), and the entries are gathered.
-constexpr std::uint64_t kNoKey = ~std::uint64_t{0};  // a dropped entry
+// and counted with its new sphere, then the store's counting sort (above),
+// and the entries gathered.
 
-// Sphere a's entries, renamed: key[k] (kNoKey stays where the entry names a
-// sphere past the world's `bodies`: dropped), whether it turned round, and
-// its rank among its new sphere's (counted in count, in the order the
-// atomics came: renamed_runs_kernel puts each run in order).
+// Sphere a's entries, renamed: key[k], whether it turned round, and its
+// rank among its new sphere's (counted in count; rank stays kNoEntry where
+// the entry is dropped: renamed_key).
 __global__ void rename_kernel(const std::uint32_t* first, std::uint32_t runs, const std::uint32_t* b_of,
-                              const std::uint32_t* new_index, std::uint32_t bodies, std::uint64_t* key,
+                              const std::uint32_t* new_index, std::uint32_t spheres, std::uint64_t* key,
                               std::uint8_t* swapped, std::uint32_t* count, std::uint32_t* rank) {
   for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < runs; a += gridDim.x * blockDim.x)
     for (std::uint32_t k = first[a]; k < first[a + 1]; ++k) {
-      const std::uint32_t b = b_of[k];
-      if (a >= bodies || (!is_wall(b) && b >= bodies)) continue;
-      const RenamedKey r = renamed_key(new_index[a], is_wall(b) ? b : new_index[b]);
-      const auto new_a = static_cast<std::uint32_t>(r.key >> 32), new_b = static_cast<std::uint32_t>(r.key);
-      if (new_a >= bodies || (!is_wall(new_b) && new_b >= bodies)) continue;  // not a numbering: dropped
+      const RenamedKey r = renamed_key(a, b_of[k], new_index, spheres);
+      if (r.outcome != Renamed::kept) continue;
       key[k] = r.key;
       swapped[k] = r.swapped;
-      rank[k] = atomicAdd(count + new_a, 1u);
+      rank[k] = atomicAdd(count + (r.key >> 32), 1u);
     }
-}
-
-// Each kept entry's index at its place in its new sphere's run.
-__global__ void renamed_place_kernel(const std::uint64_t* key, const std::uint32_t* rank, std::uint32_t m,
-                                     const std::uint32_t* first, std::uint32_t* order) {
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < m; k += gridDim.x * blockDim.x)
-    if (key[k] != kNoKey) order[first[key[k] >> 32] + rank[k]] = k;
-}
-
-// Each new run in key order (sort_run, as the host's renumbered).
-__global__ void renamed_runs_kernel(const std::uint64_t* key, const std::uint32_t* first, std::uint32_t spheres,
-                                    std::uint32_t* order) {
-  for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < spheres; a += gridDim.x * blockDim.x)
-    sort_run(order, first[a], first[a + 1], [key](std::uint32_t k) { return key[k]; });
 }
 
 // The entries' arrays (b halves, impulses, colours): the old ones in, the
@@ -340,9 +341,9 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   count_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, n, count, rank);
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_exclusive_sum(count, first, std::size_t(spheres) + 1, scan_temp, scan_bytes, s);
-  place_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, n, rank, first, index);
+  place_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(ContactSphere{contacts}, n, rank, first, index);
   MARBLES_CUDA_CHECK_LAUNCH();
-  order_runs_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(contacts, first, spheres, index);
+  order_runs_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(ContactB{contacts}, first, spheres, index);
   MARBLES_CUDA_CHECK_LAUNCH();
   gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, first + spheres,
                                                          m_keys.as<std::uint32_t>(n), m_normal.as<real>(n),
@@ -456,15 +457,15 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
     out.rolling = m_keep_rolling ? c.take<Vec3>(m) : nullptr;
     out.colour = c.take<std::uint8_t>(m);
   });
-  MARBLES_CUDA_CHECK(cudaMemsetAsync(key, 0xff, m * sizeof(std::uint64_t), s));  // kNoKey
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(rank, 0xff, m * sizeof(std::uint32_t), s));  // kNoEntry: past the entries too
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, runs_new * sizeof(std::uint32_t), s));
   rename_kernel<<<grid_for(runs, sm_count), kBlock, 0, s>>>(first, runs, m_keys.get_as<std::uint32_t>(), new_index,
                                                             spheres, key, swapped, count, rank);
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_exclusive_sum(count, new_first, runs_new, scan_temp, scan_bytes, s);
-  renamed_place_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(key, rank, m, new_first, order);
+  place_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(EntrySphere{key}, m, rank, new_first, order);
   MARBLES_CUDA_CHECK_LAUNCH();
-  renamed_runs_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(key, new_first, spheres, order);
+  order_runs_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(EntryKey{key}, new_first, spheres, order);
   MARBLES_CUDA_CHECK_LAUNCH();
   const EntryArrays in{m_keys.get_as<std::uint32_t>(), m_normal.get_as<real>(),
                        m_keep_tangent ? m_tangent.get_as<Vec3>() : nullptr,

@@ -58,17 +58,29 @@ MARBLES_HD_INLINE bool island_starts_cold(real lost_impulse, real island_max) {
   return lost_impulse >= real(0.25) * island_max;
 }
 
-// An entry's key after a renumbering (renumbered, and its CUDA twin): its
-// spheres a, b named new_a, new_b (a wall keeps its b). A pair of spheres
-// is keyed with its lower index first, so `swapped` says it turned round:
-// its tangential and rolling impulses then change sign (turned).
+// Entry (a, b)'s key after a renumbering (renumbered, and its CUDA twin),
+// every sphere i named new_index[i] of `spheres` (a wall keeps its b). A
+// pair of spheres is keyed with its lower index first, so `swapped` says
+// it turned round: its tangential and rolling impulses then change sign
+// (turned). An entry that names a sphere past the spheres is dropped (a
+// world that lost spheres: no lookup would find it); one that new_index
+// would name past them is not_a_numbering (the host throws, the device
+// drops it; the step's numberings are permutations).
+enum class Renamed : std::uint8_t { kept, dropped, not_a_numbering };
 struct RenamedKey {
   std::uint64_t key;
   bool swapped;
+  Renamed outcome;
 };
-MARBLES_HD_INLINE RenamedKey renamed_key(std::uint32_t new_a, std::uint32_t new_b) {
+MARBLES_HD_INLINE bool sphere_past(std::uint32_t b, std::uint32_t spheres) { return !is_wall(b) && b >= spheres; }
+MARBLES_HD_INLINE RenamedKey renamed_key(std::uint32_t a, std::uint32_t b, const std::uint32_t* new_index,
+                                         std::uint32_t spheres) {
+  if (a >= spheres || sphere_past(b, spheres)) return {0, false, Renamed::dropped};
+  const std::uint32_t new_a = new_index[a], new_b = is_wall(b) ? b : new_index[b];
   const bool swapped = !is_wall(new_b) && new_b < new_a;
-  return {swapped ? cache_key(new_b, new_a) : cache_key(new_a, new_b), swapped};
+  const std::uint32_t low = swapped ? new_b : new_a, high = swapped ? new_a : new_b;
+  if (low >= spheres || sphere_past(high, spheres)) return {0, false, Renamed::not_a_numbering};
+  return {cache_key(low, high), swapped, Renamed::kept};
 }
 // Turned round: each component negated but a zero, which keeps its sign
 // (+0 stays +0: an idle contact's impulses stay clear). Turning twice gives
