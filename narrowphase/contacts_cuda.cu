@@ -9,7 +9,6 @@ namespace {
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 
-
 __global__ void max_speed_kernel(BodiesView bodies, unsigned long long* max_speed) {
   real v = 0;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x) {

@@ -430,10 +430,7 @@ class CudaStep final : public StepBackend {
   }
 
   void begin_step() override {
-    if (m_host_edited) {
-      m_device.upload(m_host, m_stream);
-      m_host_edited = false;
-    }
+    send_host_edits();
     m_counters = {};
     MARBLES_CUDA_CHECK(cudaMemsetAsync(m_flags.get(), 0, kFlagWords * sizeof(unsigned long long), m_stream));
   }
@@ -532,10 +529,7 @@ class CudaStep final : public StepBackend {
     return m_host;
   }
   BodiesView state_in_place() override {
-    if (m_host_edited) {  // host edits first, so that the device arrays hold every change
-      m_device.upload(m_host, m_stream);
-      m_host_edited = false;
-    }
+    send_host_edits();  // first, so that the device arrays hold every change
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     return m_device.view();
   }
@@ -590,10 +584,7 @@ class CudaStep final : public StepBackend {
     return state;
   }
   void keep_step_start() override {
-    if (m_host_edited) {  // edits between steps belong to the step's start
-      m_device.upload(m_host, m_stream);
-      m_host_edited = false;
-    }
+    send_host_edits();  // edits between steps belong to the step's start
     m_device.copy_state_to(m_kept, m_stream);
     m_cache.copy_to(m_kept_cache, m_stream);
     const std::size_t wall_bytes = m_model.wall_shapes.size() * sizeof(narrowphase::WallShape);
@@ -617,10 +608,7 @@ class CudaStep final : public StepBackend {
   // entries renamed and sorted; the order read back (only where a sphere
   // moves) for the host copy's fixed arrays and the caller's numbering.
   std::vector<std::uint32_t> renumber() override {
-    if (m_host_edited) {  // edits between steps first
-      m_device.upload(m_host, m_stream);
-      m_host_edited = false;
-    }
+    send_host_edits();  // edits between steps first
     const std::size_t n = m_device.size();
     DeviceBuffer orders(m_stream);  // the stream's: no wait where it goes
     std::uint32_t* order = orders.as<std::uint32_t>(2 * n);
@@ -644,6 +632,13 @@ class CudaStep final : public StepBackend {
 
  private:
   narrowphase::BodyPair* pairs_d() const { return m_pairs.get_as<narrowphase::BodyPair>(); }
+
+  // The host copy's edits (edit_world) to the device, once.
+  void send_host_edits() {
+    if (!m_host_edited) return;
+    m_device.upload(m_host, m_stream);
+    m_host_edited = false;
+  }
 
   // The colouring of this substep's contacts (m_count, or a room of them
   // with their count on the device); the one wait for its ranges.
