@@ -155,13 +155,14 @@ class CpuStep final : public StepBackend {
     m_cache.set_entries(state.cache);
     m_walls = state.walls;
   }
-  std::vector<std::uint32_t> renumber() override {
+  SphereOrder renumber() override {
     std::vector<std::uint32_t> order = cell_order(m_world);
     if (is_identity(order)) return {};
     narrowphase::CacheEntries cache = narrowphase::renumbered(m_cache.entries(), inverse_of(order));
     m_world = permuted(m_world, order);  // after anything that may throw: all or nothing
     m_cache.set_entries(std::move(cache));
-    return order;
+    m_order = std::move(order);
+    return {m_order.data(), m_order.size()};
   }
 
  private:
@@ -185,6 +186,7 @@ class CpuStep final : public StepBackend {
   World m_world;
   std::vector<narrowphase::WallShape> m_walls;  // moving walls move
   World m_kept;             // the moving state at the start of the step (watchdog)
+  std::vector<std::uint32_t> m_order;  // the last renumber's (its return)
   StepState m_kept_state;
   std::unique_ptr<broadphase::BroadPhase> m_broadphase;
   narrowphase::ContactColouring m_colouring;

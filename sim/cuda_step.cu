@@ -607,14 +607,19 @@ class CudaStep final : public StepBackend {
   // On the device: the home keys sorted, every array gathered, the cache's
   // entries renamed and sorted; the order read back (only where a sphere
   // moves) for the host copy's fixed arrays and the caller's numbering.
-  std::vector<std::uint32_t> renumber() override {
+  SphereOrder renumber() override {
     send_host_edits();  // edits between steps first
     const std::size_t n = m_device.size();
     DeviceBuffer orders(m_stream);  // the stream's: no wait where it goes
     std::uint32_t* order = orders.as<std::uint32_t>(2 * n);
     if (!m_device.cell_order(order, m_bytes, m_sm, m_stream)) return {};
-    std::vector<std::uint32_t> host(n);
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(host.data(), order, n * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, m_stream));
+    if (m_order_room < n) {  // grown a sixteenth past the world, as the device's rooms
+      m_order_host.reset();
+      m_order_room = n + n / 16;
+      m_order_host.emplace(m_order_room);
+    }
+    std::uint32_t* host = *m_order_host;
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, order, n * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, m_stream));
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     m_bytes += n * sizeof(std::uint32_t);
     std::uint32_t* new_index = order + n;
@@ -623,7 +628,7 @@ class CudaStep final : public StepBackend {
     m_cache.renumber(new_index, static_cast<std::uint32_t>(n), m_sm, m_stream);
     m_host_stale = m_host_renumbered = true;  // the next world() downloads every array
     m_contacts_stale = true;
-    return host;
+    return {host, n};
   }
   void load_state(const StepState& state) override {
     m_cache.upload(state.cache, static_cast<std::uint32_t>(m_host.size()), m_stream);  // the world as restored
@@ -740,6 +745,8 @@ class CudaStep final : public StepBackend {
   };
   ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{kPlanOutsized + 1};
   ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
+  std::optional<::marbles::cuda::PinnedBuffer<std::uint32_t>> m_order_host;  // renumber's order, read back
+  std::size_t m_order_room = 0;
   bool m_watch = false;
   int m_iteration_factor = 1;
 

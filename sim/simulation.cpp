@@ -182,16 +182,27 @@ void Simulation::restore(const World& world, const StepState& state, std::uint64
 // warm-start cache with them (StepBackend::renumber): the same state, other
 // indices. Both backends do it at the same steps and give the same order
 // and bits (the CPU on its arrays, the GPU on the device's).
+// The new ids are composed into the spare array and the index inverted in
+// place: a run that numbers often allocates nothing after its first time.
 void Simulation::renumber() {
   send_edits();
-  const std::vector<std::uint32_t> order = m_backend->renumber();
+  const SphereOrder order = m_backend->renumber();
   if (order.empty()) return;
-  std::vector<std::uint32_t> ids(order.size());
-  const auto n = static_cast<std::ptrdiff_t>(order.size());
+  const auto n = static_cast<std::ptrdiff_t>(order.size);
   const bool first = m_ids.empty();
+  m_spare_ids.resize(order.size);
+  std::uint32_t* ids = m_spare_ids.data();
 #pragma omp parallel for schedule(static) if (n > 65536)
   for (std::ptrdiff_t i = 0; i < n; ++i) ids[i] = first ? order[i] : m_ids[order[i]];
-  set_numbering(std::move(ids));
+  std::swap(m_ids, m_spare_ids);
+  if (is_identity(m_ids)) {  // back in the scene's order
+    m_ids.clear();
+    m_index.clear();
+  } else {
+    inverse_into(m_ids, m_index);
+  }
+  m_given_edited = false;
+  m_given_stale = true;
 }
 
 void Simulation::step() {

@@ -177,6 +177,7 @@ class Simulation {
   // index of the step's sphere i, m_index its inverse; the world and the
   // contacts in the scene's numbering, made when asked for.
   std::vector<std::uint32_t> m_ids, m_index;
+  std::vector<std::uint32_t> m_spare_ids;  // renumber's next ids, kept for their memory
   mutable World m_given;
   mutable bool m_given_stale = true;
   bool m_given_edited = false;

@@ -68,6 +68,17 @@ struct StepState {
   std::vector<narrowphase::WallShape> walls;
 };
 
+// An order of the spheres (new index -> old) in a backend's memory, valid
+// until its next renumber (std::span's part that CUDA sources, C++17, read).
+struct SphereOrder {
+  const std::uint32_t* data = nullptr;
+  std::size_t size = 0;
+  bool empty() const { return size == 0; }
+  const std::uint32_t* begin() const { return data; }
+  const std::uint32_t* end() const { return data + size; }
+  std::uint32_t operator[](std::size_t i) const { return data[i]; }
+};
+
 class StepBackend {
  public:
   virtual ~StepBackend() = default;
@@ -130,9 +141,11 @@ class StepBackend {
   // Numbers the spheres again in the broad phase's order (cell_order,
   // sim/world.hpp): the world's arrays and the warm-start cache's entries
   // (narrowphase::renumbered) renamed, between steps. Returns the order
-  // (new index -> old), empty where it changes nothing. The GPU's does it on
-  // the device, with the CPU's order and bits.
-  virtual std::vector<std::uint32_t> renumber() = 0;
+  // (new index -> old), empty where it changes nothing, in the backend's
+  // memory (valid until its next renumber: the GPU's is pinned, so the read
+  // of 4 bytes a sphere needs no staging and no fresh pages). The GPU's does
+  // it on the device, with the CPU's order and bits.
+  virtual SphereOrder renumber() = 0;
   // A retry's effort: the velocity sweeps run `factor` times the model's
   // iterations until set back to 1.
   virtual void set_iteration_factor(int factor) = 0;

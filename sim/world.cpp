@@ -38,15 +38,21 @@ bool is_identity(const std::vector<std::uint32_t>& order) {
 }
 
 std::vector<std::uint32_t> inverse_of(const std::vector<std::uint32_t>& order) {
+  std::vector<std::uint32_t> inverse;
+  inverse_into(order, inverse);
+  return inverse;
+}
+
+void inverse_into(const std::vector<std::uint32_t>& order, std::vector<std::uint32_t>& inverse) {
   const auto n = static_cast<std::ptrdiff_t>(order.size());
   std::uint32_t largest = 0;
 #pragma omp parallel for schedule(static) reduction(max : largest) if (n > 65536)
   for (std::ptrdiff_t i = 0; i < n; ++i) largest = std::max(largest, order[i]);
   if (n > 0 && largest >= order.size()) throw std::out_of_range("inverse_of: an index past the order's length");
-  std::vector<std::uint32_t> inverse(order.size(), 0);
+  inverse.assign(order.size(), 0);
+  std::uint32_t* out = inverse.data();
 #pragma omp parallel for schedule(static) if (n > 65536)
-  for (std::ptrdiff_t i = 0; i < n; ++i) inverse[order[i]] = static_cast<std::uint32_t>(i);
-  return inverse;
+  for (std::ptrdiff_t i = 0; i < n; ++i) out[order[i]] = static_cast<std::uint32_t>(i);
 }
 
 std::vector<std::uint32_t> cell_order(const Vec3* position, const real* radius, std::size_t n) {

@@ -61,6 +61,8 @@ bool is_identity(const std::vector<std::uint32_t>& order);
 // must be a permutation (the step's orders are; a checkpoint's numbering
 // is checked as one when read).
 std::vector<std::uint32_t> inverse_of(const std::vector<std::uint32_t>& order);
+// The same into `inverse`, whose memory is kept where it is large enough.
+void inverse_into(const std::vector<std::uint32_t>& order, std::vector<std::uint32_t>& inverse);
 
 // The order (new index -> old) that numbers the spheres along rows of the
 // home-cell broad phase's cells for them (x, then y, then z; a cell's

@@ -299,6 +299,51 @@ TEST(Renumber, InverseOfAPermutation) {
   EXPECT_THROW(inverse_of(order), std::out_of_range);
 }
 
+// inverse_into (renumber's, into kept memory): the inverse of a random
+// permutation whatever the target held before (longer, shorter, stale
+// values), as inverse_of gives it.
+TEST(Renumber, InverseIntoKeptMemory) {
+  std::vector<std::uint32_t> order(100000);
+  for (std::uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::shuffle(order.begin(), order.end(), std::mt19937(11));
+  for (const std::size_t held : {std::size_t(0), order.size() / 3, order.size() * 2}) {
+    std::vector<std::uint32_t> inverse(held, 7u);
+    inverse_into(order, inverse);
+    EXPECT_EQ(inverse, inverse_of(order)) << held << " held before";
+  }
+}
+
+// A numbering that brings the spheres back to the scene's order is
+// dropped: ids() empty again, as before the first. A row of spheres at
+// rest along x is in the broad phase's order; two of them swap places (an
+// edit), the step numbers them so, and swapped back, numbers them back.
+TEST(Renumber, BackInTheScenesOrderDropsTheNumbering) {
+  using scene::Effect;
+  scene::Scene s = make_scene(1e-3, 1, {Effect::collisions}, 0, 0.5);
+  s.solver.renumber = 1;
+  const real r = real(0.01);
+  scene::GeneratedParticles g;
+  for (int x = 0; x < 12; ++x) add_sphere(g, {r * (6 * x + 1), r, r}, r);
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  sim.step();
+  ASSERT_TRUE(sim.ids().empty()) << "the row is in the broad phase's order";
+  const World start = sim.world();
+  auto swap_places = [&] {
+    World& w = sim.edit_world();
+    std::swap(w.position[2], w.position[9]);
+  };
+  swap_places();
+  sim.step();
+  ASSERT_FALSE(sim.ids().empty());
+  EXPECT_EQ(sim.ids()[2], 9u) << "the step's sphere 2 is the scene's 9";
+  EXPECT_EQ(sim.ids()[9], 2u);
+  EXPECT_EQ(sim.world().position[9], start.position[2]);
+  swap_places();
+  sim.step();
+  EXPECT_TRUE(sim.ids().empty());
+  EXPECT_EQ(state_hash(sim.world()), state_hash(start));
+}
+
 // solver.renumber: the step numbers the spheres again in the broad phase's
 // order every few steps, and hides it. The pour seen through world() keeps
 // the scene's numbering (each sphere its radius, material and mass; once
