@@ -63,6 +63,11 @@ struct SubdivisionCuda::Impl {
   DeviceBuffer count_word;                  // the pair count and the plan outsized (find_pairs_device_within)
   DeviceBuffer grid_word;                   // the home grid of the call, chosen on the device
   std::size_t pair_count = 0;
+  // Where the last call left its pairs: `pairs`, or the front of the
+  // scratch (a home-cell call within a room that left its count on the
+  // device).
+  const IndexPair* last_pairs = nullptr;
+  bool pairs_in_scratch = false;
   // The home-cell variant's plan: the shape its buffers and sort take from
   // the grid of the last call that read its bounds, and that grid (for the
   // stats of the calls that do not read theirs). None: the next call reads.
@@ -102,6 +107,8 @@ struct SubdivisionCuda::Impl {
 std::size_t SubdivisionCuda::Impl::run(const SpheresIn& d, real margin, cudaStream_t s, Within within) {
   stats = Stats{};
   pair_count = 0;
+  last_pairs = nullptr;
+  pairs_in_scratch = false;
   const std::size_t n = d.count;
   if (n >= kMaxObjects) throw RuntimeFailure("broad phase: more than 2^28 spheres");
   if (n < 2) return 0;
@@ -186,6 +193,7 @@ std::size_t SubdivisionCuda::Impl::run_keys(const SpheresIn& d, real margin, con
   for (int k = 0; k < 8; ++k) stats.cells_per_type[k] = h_small[4 + k + 1] - h_small[4 + k];
   stats.collision_cells = h_small[4 + 8];
   auto* d_pairs = pairs.as<IndexPair>(pair_count);
+  last_pairs = d_pairs;
   launch_traversal_write(in, m, d_pair_offsets, d_pairs, sm_count, s);
   stats.pairs = pair_count;
   mark(4, s);
@@ -256,12 +264,17 @@ template <class Key>
 std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin, const HomePlan& p,
                                                  const HomeGrid* g, cudaStream_t s, Within within) {
   const std::size_t n = d.count;
-  // Every temporary in the scratch memory, live only during this call.
+  // Every temporary in the scratch memory, live only during this call;
+  // within a room of a shared scratch the pairs too, first (they outlive
+  // the temporaries).
   const bool dense = p.dense;
+  const bool front_pairs = within && scratch != &own_scratch;
   Key *d_keys = nullptr, *d_keys_alt = nullptr;
   std::uint32_t *d_ids = nullptr, *d_ids_alt = nullptr, *d_lb = nullptr, *d_counts = nullptr, *d_offsets = nullptr;
   SortedSphere* d_sorted = nullptr;
+  IndexPair* front = nullptr;
   ::marbles::cuda::carve(*scratch, [&](::marbles::cuda::Carve& c) {
+    if (front_pairs) front = c.take<IndexPair>(*within);
     d_keys = c.take<Key>(n);
     d_keys_alt = c.take<Key>(n);
     d_ids = c.take<std::uint32_t>(n);
@@ -304,8 +317,14 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
   auto* d_count = count_word.get_as<std::uint32_t>();
   launch_home_pair_count<Key>(in, d_offsets, d_count, s);
   if (within) {
-    // No readback: the pairs only if they fit.
-    launch_home_write<Key>(in, d_offsets, *within, pairs.as_room<IndexPair>(*within), sm_count, s);
+    // No readback: the pairs only if they fit, at a shared scratch's front
+    // (the pairs' own buffer, from a call that waited, then goes: once after
+    // each such call), else in their own.
+    IndexPair* to = front_pairs ? front : pairs.as_room<IndexPair>(*within);
+    launch_home_write<Key>(in, d_offsets, *within, to, sm_count, s);
+    last_pairs = to;
+    pairs_in_scratch = front_pairs;
+    if (front_pairs && pairs.get()) DeviceBuffer().swap(pairs);
     mark(4, s);
     finish_timing();
     return SubdivisionCuda::kCountOnDevice;  // stats.pairs and stats.tests stay 0: not read
@@ -321,6 +340,7 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
   std::memcpy(&t, h_small + 2, 8);
   stats.tests = t;
   auto* d_pairs = pairs.as<IndexPair>(pair_count);
+  last_pairs = d_pairs;
   if (pair_count > 0) launch_home_write<Key>(in, d_offsets, pair_count, d_pairs, sm_count, s);
   stats.pairs = pair_count;
   mark(4, s);
@@ -341,6 +361,7 @@ std::size_t SubdivisionCuda::Impl::run_on_cpu(const SpheresIn& d, real margin, c
   std::vector<Pair> out;
   cpu_fallback->find_pairs({c.data(), r.data(), n}, margin, out);
   auto* d_pairs = pairs.as<IndexPair>(out.size());
+  last_pairs = d_pairs;
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(d_pairs, out.data(), out.size() * sizeof(Pair), cudaMemcpyHostToDevice, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   bytes += out.size() * sizeof(Pair);
@@ -370,7 +391,8 @@ void SubdivisionCuda::set_stage_timing(bool on) { m->timing = on; }
 void SubdivisionCuda::share_scratch(::marbles::cuda::DeviceBuffer& scratch) { m->scratch = &scratch; }
 SortKind SubdivisionCuda::sort_kind() const { return m->sort; }
 Algorithm SubdivisionCuda::algorithm() const { return m->algorithm; }
-const Pair* SubdivisionCuda::device_pairs() const { return static_cast<const Pair*>(m->pairs.get()); }
+const Pair* SubdivisionCuda::device_pairs() const { return reinterpret_cast<const Pair*>(m->last_pairs); }
+bool SubdivisionCuda::pairs_in_scratch() const { return m->pairs_in_scratch; }
 
 std::size_t SubdivisionCuda::find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream) {
   return m->run(device_spheres, margin, static_cast<cudaStream_t>(stream));
@@ -406,7 +428,7 @@ void SubdivisionCuda::find_pairs(const SpheresIn& s, real margin, std::vector<Pa
   const std::size_t count = m->run({c, r, n}, margin, stream);
   out.resize(count);
   if (count > 0)
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(out.data(), m->pairs.get(), count * sizeof(Pair), cudaMemcpyDeviceToHost, stream));
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(out.data(), m->last_pairs, count * sizeof(Pair), cudaMemcpyDeviceToHost, stream));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 

@@ -45,14 +45,17 @@ class SubdivisionCuda final : public BroadPhase {
   // seed algorithm, twice (bounds, pair count) for the home-cell variant,
   // which plans from the bounds it read (device_pair_count).
   std::size_t find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream = nullptr);
-  const Pair* device_pairs() const;  // device pointer
+  const Pair* device_pairs() const;  // device pointer (null where the call found none)
 
   // The same without the wait for the pair count where the call can do
   // without (the home-cell variant on the device's keys): the pairs are
   // written only if all of them fit in `capacity`, and their count is left
   // in device_pair_count() for the caller to read with its own (it may be
   // larger than `capacity`: then nothing was written, and the caller asks
-  // again with room for them). Returns kCountOnDevice then; otherwise the
+  // again with room for them). Returns kCountOnDevice then, with the pairs'
+  // room at the front of a shared scratch (pairs_in_scratch(): the first
+  // array a Carve of it takes, `capacity` pairs; see share_scratch), else in
+  // a buffer of its own; otherwise the
   // call waited for the count anyway (the seed algorithm, a grid too wide
   // for the device's keys, fewer than two spheres) and returns it, with
   // every pair written whatever `capacity`.
@@ -73,6 +76,10 @@ class SubdivisionCuda final : public BroadPhase {
   // pairs are right, and a caller may replan() for a smaller plan (the next
   // call then reads its bounds).
   const std::uint32_t* device_pair_count() const;
+  // Whether the last call left its pairs at the front of the scratch (a
+  // call within a room that returned kCountOnDevice) rather than in a
+  // buffer of the broad phase's own.
+  bool pairs_in_scratch() const;
   static constexpr std::uint32_t kNoPairCount = 0xffffffffu;
   static constexpr std::size_t kPairCountWords = 2;  // the count, the plan outsized
   // The next call reads its bounds and plans from its grid.
@@ -89,7 +96,12 @@ class SubdivisionCuda final : public BroadPhase {
   // same time share (a GPU step's; core/device_buffer.cuh: Carve). The
   // call's last kernel still reads them when it returns, so the scratch's
   // next user must run after it on the same stream. By default in the broad
-  // phase's own. The pairs are always its own.
+  // phase's own. A call within a room that leaves its count on the device
+  // puts its pairs in a shared scratch too, first: its next user keeps them by
+  // taking that room of pairs first in its own Carve (the same pointer), and
+  // must not grow the scratch until it is done with them (reserve it to its
+  // size before the call). The other calls' pairs are the broad phase's own,
+  // a buffer it gives back at its next call that puts them in the scratch.
   void share_scratch(::marbles::cuda::DeviceBuffer& scratch);
 
   // Record CUDA events between the stages so that last_stats() carries

@@ -201,6 +201,39 @@ class CudaStep final : public StepBackend {
     unsigned* mixed_radii = m_model.uniform_pairs ? seen + 1 : nullptr;
     auto* radius = reinterpret_cast<real*>(seen + 2);
     nc::launch_contact_reaches(bodies, h, max_speed, reach, bound, mixed_radii, radius, m_sm, m_stream);
+    const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
+    if (m_model.wall_contacts) wall_items = n * wall_count;
+    // The flags and their offsets (and the scans' temporaries) in the scratch
+    // memory, live only until the contacts are written; behind the broad
+    // phase's pairs where it left them there (a call within a room: the
+    // pairs' room first, as it took it). The scratch is grown for that
+    // layout before the broad phase runs, so that the flags' carve does
+    // not move the pairs.
+    namespace dev = ::marbles::cuda;
+    std::uint32_t *pair_flags = nullptr, *wall_flags = nullptr;
+    void *pair_temp = nullptr, *wall_temp = nullptr;
+    const IndexPair* front = nullptr;
+    std::size_t pair_temp_bytes = 0, wall_temp_bytes = 0;
+    // The layout for a room of `front_pairs` pairs first (or none) and flags
+    // for `items` candidates; the scans' temporary bytes set for it.
+    auto layout = [&](std::size_t front_pairs, std::size_t items) {
+      pair_temp_bytes = m_model.collisions ? dev::exclusive_sum_bytes<std::uint32_t>(items + 1) : 0;
+      wall_temp_bytes = m_model.wall_contacts ? dev::exclusive_sum_bytes<std::uint32_t>(wall_items + 1) : 0;
+      return [&, front_pairs, items](dev::Carve& c) {
+        front = front_pairs > 0 ? c.take<IndexPair>(front_pairs) : nullptr;
+        pair_flags = c.take<std::uint32_t>(items + 1);
+        pair_offsets = c.take<std::uint32_t>(items + 1);
+        pair_temp = c.take<char>(pair_temp_bytes);
+        wall_flags = c.take<std::uint32_t>(wall_items + 1);
+        wall_offsets = c.take<std::uint32_t>(wall_items + 1);
+        wall_temp = c.take<char>(wall_temp_bytes);
+      };
+    };
+    if (m_model.collisions && m_pair_room.capacity > 0) {
+      dev::Carve need;
+      layout(m_pair_room.capacity, m_pair_room.capacity)(need);
+      m_scratch.reserve(need.used());
+    }
     if (m_model.collisions) {
       const SpheresIn spheres{bodies.position, bound, n};
       try {
@@ -220,23 +253,11 @@ class CudaStep final : public StepBackend {
     }
     m_pair_items = pair_items;
     m_pair_count_on_device = pair_count_on_device != nullptr;
-    const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
-    if (m_model.wall_contacts) wall_items = n * wall_count;
-    // The flags and their offsets (and the scans' temporaries) in the scratch
-    // memory: live only until the contacts are written.
-    namespace dev = ::marbles::cuda;
-    std::uint32_t *pair_flags = nullptr, *wall_flags = nullptr;
-    void *pair_temp = nullptr, *wall_temp = nullptr;
-    const std::size_t pair_temp_bytes = m_model.collisions ? dev::exclusive_sum_bytes<std::uint32_t>(pair_items + 1) : 0;
-    const std::size_t wall_temp_bytes = m_model.wall_contacts ? dev::exclusive_sum_bytes<std::uint32_t>(wall_items + 1) : 0;
-    dev::carve(m_scratch, [&](dev::Carve& c) {
-      pair_flags = c.take<std::uint32_t>(pair_items + 1);
-      pair_offsets = c.take<std::uint32_t>(pair_items + 1);
-      pair_temp = c.take<char>(pair_temp_bytes);
-      wall_flags = c.take<std::uint32_t>(wall_items + 1);
-      wall_offsets = c.take<std::uint32_t>(wall_items + 1);
-      wall_temp = c.take<char>(wall_temp_bytes);
-    });
+    const bool in_scratch = m_model.collisions && m_broadphase->pairs_in_scratch();
+    const std::size_t scratch_bytes = m_scratch.bytes();
+    dev::carve(m_scratch, layout(in_scratch ? m_pair_room.capacity : 0, pair_items));
+    if (in_scratch && (front != pairs || m_scratch.bytes() != scratch_bytes))
+      throw std::logic_error("the CUDA step: the broad phase's pairs are not at the scratch's front");
     nc::ImpactWatch watch;
     if (m_model.solver.restitution) watch = {seen, m_model.solver.rest_speed};
     // Copied for the read (here where it waits, else the colouring's).

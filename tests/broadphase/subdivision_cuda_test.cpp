@@ -242,6 +242,72 @@ TEST_P(SubdivisionCuda, PairsWithinARoom) {
   }
 }
 
+// Within a room of a shared scratch (a GPU step's), the home-cell variant
+// writes its pairs at the scratch's front, where the step's next carve takes
+// them first, and gives its own pair buffer back: the same pairs in the same
+// order as with a buffer of its own; one short, nothing written there (the
+// front poisoned before is untouched). Where the call waits for its count
+// anyway (the seed algorithm, a grid too wide for the device's keys) the
+// pairs are its own, as before. The scratch is reserved ahead, as the step
+// does, so no call moves it.
+TEST_P(SubdivisionCuda, PairsWithinARoomAtTheSharedScratchsFront) {
+  REQUIRE_DEVICE();
+  mb::SubdivisionCuda gpu(algorithm(), sort());
+  marbles::cuda::DeviceBuffer scratch, centre, radius;  // freed, as the stream is destroyed, however the test ends
+  gpu.share_scratch(scratch);
+  scratch.reserve(std::size_t{64} << 20);
+  marbles::cuda::Stream stream;
+  stream.create();
+  std::size_t fronts = 0;
+  std::uint64_t seed = 23;
+  const std::pair<std::size_t, mt::SetKind> sets[] = {{20000, mt::SetKind::mono},
+                                                      {30000, mt::SetKind::clustered},
+                                                      {3000, mt::SetKind::far_away},
+                                                      {2000, mt::SetKind::outlier}};
+  for (const auto& [n, kind] : sets) {
+    const std::string name = std::string(mt::set_name(kind)) + " n=" + std::to_string(n);
+    mt::SphereSet s = mt::make_set(kind, n, ++seed);
+    const marbles::SpheresIn in = on_device(s, centre, radius);
+    const std::size_t count = gpu.find_pairs_device(in, real(0), stream);
+    ASSERT_GT(count, 1u) << name;
+    const std::vector<mb::Pair> exact = pairs_on_device(gpu, count);
+    EXPECT_FALSE(gpu.pairs_in_scratch()) << name << ": a call that waits keeps its own";
+    const std::size_t own_bytes = gpu.device_bytes();
+    void* const at = scratch.get();
+    auto poison = [&](std::size_t pairs) {
+      ASSERT_EQ(cudaMemset(scratch.get(), 0xa5, pairs * sizeof(mb::Pair)), cudaSuccess);
+    };
+
+    poison(count);
+    const std::size_t told = gpu.find_pairs_device_within(in, real(0), count, stream);
+    ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
+    ASSERT_EQ(scratch.get(), at) << name << ": the scratch did not move";
+    EXPECT_EQ(gpu.pairs_in_scratch(), told == mb::SubdivisionCuda::kCountOnDevice) << name;
+    EXPECT_EQ(pairs_on_device(gpu, count), exact) << name << ": room for all";
+    if (!gpu.pairs_in_scratch()) continue;
+    ++fronts;
+    EXPECT_EQ(static_cast<const void*>(gpu.device_pairs()), at) << name << ": at the front";
+    EXPECT_LE(gpu.device_bytes() + count * sizeof(mb::Pair), own_bytes) << name << ": its own pairs given back";
+
+    poison(count - 1);
+    EXPECT_EQ(gpu.find_pairs_device_within(in, real(0), count - 1, stream), mb::SubdivisionCuda::kCountOnDevice);
+    ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
+    std::uint32_t left_count = 0;
+    ASSERT_EQ(cudaMemcpy(&left_count, gpu.device_pair_count(), sizeof left_count, cudaMemcpyDeviceToHost),
+              cudaSuccess);
+    EXPECT_EQ(left_count, count) << name << ": one short";
+    const std::vector<mb::Pair> left = pairs_on_device(gpu, count - 1);
+    const auto* bytes = reinterpret_cast<const unsigned char*>(left.data());
+    EXPECT_TRUE(std::all_of(bytes, bytes + (count - 1) * sizeof(mb::Pair), [](unsigned char b) { return b == 0xa5; }))
+        << name << ": one short, yet pairs were written";
+  }
+  if (algorithm() == mb::Algorithm::home) {
+    EXPECT_GE(fronts, 2u) << "the home-cell variant's pairs at the front";
+  } else {
+    EXPECT_EQ(fronts, 0u) << "the seed algorithm keeps its own";
+  }
+}
+
 // The home-cell variant within a room chooses its grid on the device from
 // bounds it does not read, for the buffers and sort of the plan made at the
 // last read. Moved sets whose grids fit that plan (shifted, jittered, shrunk;
