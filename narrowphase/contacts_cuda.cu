@@ -79,18 +79,40 @@ __global__ void sphere_flags_kernel(BodiesView bodies, const IndexPair* pairs, s
 __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std::uint32_t wall_count,
                                   PairTable table, real h, const real* reach, std::uint32_t* flags,
                                   ImpactWatch watch) {
-  const std::size_t items = bodies.count * wall_count;
   bool seen = false;
-  for (std::size_t t = blockIdx.x * blockDim.x + threadIdx.x; t <= items; t += gridDim.x * blockDim.x) {
-    if (t == items) {
-      flags[t] = 0;
-      continue;
+  for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i <= bodies.count; i += gridDim.x * blockDim.x) {
+    std::uint32_t found = 0;
+    for (std::uint32_t k = 0; i < bodies.count && k < wall_count; ++k) {
+      Contact c;
+      found += flag_of(make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, reach, c), c,
+                       bodies, watch, seen);
     }
-    const auto i = static_cast<std::uint32_t>(t / wall_count), k = static_cast<std::uint32_t>(t % wall_count);
-    Contact c;
-    flags[t] = flag_of(make_wall_contact(bodies, i, walls[k], k, table, h, reach, c), c, bodies, watch, seen);
+    flags[i] = found;
   }
   raise_if_any(seen, watch);
+}
+
+// Sphere i's wall contacts again, each at the next place from its offset;
+// the item past the last writes the total, where asked for.
+__global__ void wall_pair_write_kernel(BodiesView bodies, const WallShape* walls, std::uint32_t wall_count,
+                                       PairTable table, real h, const real* reach, const std::uint32_t* offsets,
+                                       const std::uint32_t* first, std::uint32_t room, BodyPair* out,
+                                       std::uint32_t* total) {
+  const std::uint32_t base = first ? *first : 0;
+  for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i <= bodies.count; i += gridDim.x * blockDim.x) {
+    std::uint32_t at = base + offsets[i];
+    if (i == bodies.count) {
+      if (total) *total = at;
+      continue;
+    }
+    const std::uint32_t end = base + offsets[i + 1];
+    for (std::uint32_t k = 0; k < wall_count && at < end; ++k) {
+      Contact c;
+      if (!make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, reach, c)) continue;
+      if (at < room) out[at] = {static_cast<std::uint32_t>(i), kWallFlag | k};
+      ++at;
+    }
+  }
 }
 
 // The pair writes: flagged item t's body pair (pair_of(t)) at first +
@@ -113,12 +135,6 @@ __global__ void pair_write_kernel(PairOf pair_of, std::size_t items, const std::
 struct SpherePairOf {
   const IndexPair* pairs;
   __device__ BodyPair operator()(std::size_t k) const { return {pairs[k].i, pairs[k].j}; }
-};
-struct WallPairOf {  // item i * wall_count + k: sphere i, wall k
-  std::uint32_t wall_count;
-  __device__ BodyPair operator()(std::size_t t) const {
-    return {static_cast<std::uint32_t>(t / wall_count), kWallFlag | static_cast<std::uint32_t>(t % wall_count)};
-  }
 };
 template <class PairOf>
 void launch_pair_write(const PairOf& pair_of, std::size_t items, const std::uint32_t* offsets,
@@ -206,16 +222,18 @@ void launch_sphere_pair_write(const IndexPair* pairs, std::size_t items, const s
 void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
                                const PairTable& table, real h, const real* reach, std::uint32_t* flags,
                                const ImpactWatch& watch, int sm_count, cudaStream_t stream) {
-  wall_flags_kernel<<<grid_for(bodies.count * wall_count + 1, sm_count), kBlock, 0, stream>>>(
-      bodies, walls, wall_count, table, h, reach, flags, watch);
+  wall_flags_kernel<<<grid_for(bodies.count + 1, sm_count), kBlock, 0, stream>>>(bodies, walls, wall_count, table,
+                                                                                  h, reach, flags, watch);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_wall_pair_write(std::size_t sphere_count, std::uint32_t wall_count, const std::uint32_t* offsets,
+void launch_wall_pair_write(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
+                            const PairTable& table, real h, const real* reach, const std::uint32_t* offsets,
                             const std::uint32_t* first, std::uint32_t room, BodyPair* out, std::uint32_t* total,
                             int sm_count, cudaStream_t stream) {
-  launch_pair_write(WallPairOf{wall_count}, sphere_count * wall_count, offsets, first, room, out, total, sm_count,
-                    stream);
+  wall_pair_write_kernel<<<grid_for(bodies.count + 1, sm_count), kBlock, 0, stream>>>(
+      bodies, walls, wall_count, table, h, reach, offsets, first, room, out, total);
+  MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 void launch_sorted_records(const ContactInputs& in, const BodyPair* pairs, const std::uint32_t* match,

@@ -58,13 +58,18 @@ void launch_sphere_pair_write(const IndexPair* pairs, std::size_t items, const s
                               std::uint32_t room, BodyPair* out, std::uint32_t* total, int sm_count,
                               cudaStream_t stream);
 
-// The same over sphere i x wall k, item i * wall_count + k.
+// The same for the walls, a count a sphere: flags[i] = how many of the
+// walls sphere i touches (flags[count] = 0), so the flags and their offsets
+// take 8 bytes a sphere whatever the walls (not 8 a sphere and wall).
 void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
                                const PairTable& table, real h, const real* reach, std::uint32_t* flags,
                                const ImpactWatch& watch, int sm_count, cudaStream_t stream);
-// Its write starts at out[*first] (first: the sphere contacts' total on the
-// device; null: at out[0]), and *total = *first + offsets[items].
-void launch_wall_pair_write(std::size_t sphere_count, std::uint32_t wall_count, const std::uint32_t* offsets,
+// Its write: sphere i's wall contacts, in the walls' order (each found again
+// by the same test, on the same inputs), from out[*first + offsets[i]]
+// (first: the sphere contacts' total on the device; null: from out[0]),
+// those that fit `room`; *total = *first + offsets[count].
+void launch_wall_pair_write(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,
+                            const PairTable& table, real h, const real* reach, const std::uint32_t* offsets,
                             const std::uint32_t* first, std::uint32_t room, BodyPair* out, std::uint32_t* total,
                             int sm_count, cudaStream_t stream);
 

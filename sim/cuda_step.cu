@@ -202,7 +202,7 @@ class CudaStep final : public StepBackend {
     auto* radius = reinterpret_cast<real*>(seen + 2);
     nc::launch_contact_reaches(bodies, h, max_speed, reach, bound, mixed_radii, radius, m_sm, m_stream);
     const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
-    if (m_model.wall_contacts) wall_items = n * wall_count;
+    if (m_model.wall_contacts) wall_items = n;  // a count of walls touched a sphere
     // The flags and their offsets (and the scans' temporaries) in the scratch
     // memory, live only until the contacts are written; behind the broad
     // phase's pairs where it left them there (a call within a room: the
@@ -292,8 +292,9 @@ class CudaStep final : public StepBackend {
       nc::launch_sphere_pair_write(pairs, pair_items, pair_offsets, fits, found,
                                    m_model.wall_contacts ? nullptr : contact_count, m_sm, m_stream);
     if (m_model.wall_contacts)
-      nc::launch_wall_pair_write(n, wall_count, wall_offsets, m_model.collisions ? pair_offsets + pair_items : nullptr,
-                                 fits, found, contact_count, m_sm, m_stream);
+      nc::launch_wall_pair_write(bodies, walls(), wall_count, m_table, h, reach, wall_offsets,
+                                 m_model.collisions ? pair_offsets + pair_items : nullptr, fits, found, contact_count,
+                                 m_sm, m_stream);
     m_count = fits;
     if (wait) take_counts(pair_items, room, false);
     else m_count_on_device = contact_count;
