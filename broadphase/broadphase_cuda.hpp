@@ -45,7 +45,7 @@ class SubdivisionCuda final : public BroadPhase {
   // seed algorithm, twice (bounds, pair count) for the home-cell variant,
   // which plans from the bounds it read (device_pair_count).
   std::size_t find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream = nullptr);
-  const Pair* device_pairs() const;  // device pointer (null where the call found none)
+  const Pair* device_pairs() const;  // device pointer (null after a call on fewer than two spheres)
 
   // The same without the wait for the pair count where the call can do
   // without (the home-cell variant on the device's keys): the pairs are
@@ -101,7 +101,9 @@ class SubdivisionCuda final : public BroadPhase {
   // taking that room of pairs first in its own Carve (the same pointer), and
   // must not grow the scratch until it is done with them (reserve it to its
   // size before the call). The other calls' pairs are the broad phase's own,
-  // a buffer it gives back at its next call that puts them in the scratch.
+  // a buffer it gives back at its next call that puts them in the scratch
+  // (a free, which waits for the device: once after the first call of a
+  // step's run and after each replan, both rare).
   void share_scratch(::marbles::cuda::DeviceBuffer& scratch);
 
   // Record CUDA events between the stages so that last_stats() carries

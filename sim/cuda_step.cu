@@ -229,8 +229,8 @@ class CudaStep final : public StepBackend {
         wall_temp = c.take<char>(wall_temp_bytes);
       };
     };
-    if (m_model.collisions && m_pair_room.capacity > 0) {
-      dev::Carve need;
+    if (m_model.collisions && m_pair_room.capacity > 0 && m_broadphase->algorithm() == broadphase::Algorithm::home) {
+      dev::Carve need;  // (the seed algorithm keeps its pairs: no room for them here)
       layout(m_pair_room.capacity, m_pair_room.capacity)(need);
       m_scratch.reserve(need.used());
     }
@@ -637,8 +637,9 @@ class CudaStep final : public StepBackend {
     if (!m_device.cell_order(order, m_bytes, m_sm, m_stream)) return {};
     if (m_order_room < n) {  // grown a sixteenth past the world, as the device's rooms
       m_order_host.reset();
+      m_order_room = 0;  // until the allocation has succeeded
+      m_order_host.emplace(n + n / 16);
       m_order_room = n + n / 16;
-      m_order_host.emplace(m_order_room);
     }
     std::uint32_t* host = *m_order_host;
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, order, n * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, m_stream));
