@@ -155,8 +155,19 @@ StepState Simulation::save_state() {
 }
 
 void Simulation::set_numbering(std::vector<std::uint32_t> ids) {
-  m_ids = is_identity(ids) ? std::vector<std::uint32_t>{} : std::move(ids);
-  m_index = inverse_of(m_ids);
+  m_ids = std::move(ids);
+  adopt_numbering();
+}
+
+// m_ids as the numbering: dropped where it is the identity (back in the
+// scene's order), else inverted into m_index, whose memory is kept.
+void Simulation::adopt_numbering() {
+  if (is_identity(m_ids)) {
+    m_ids.clear();
+    m_index.clear();
+  } else {
+    inverse_into(m_ids, m_index);
+  }
   m_given_edited = false;
   m_given_stale = true;
 }
@@ -195,14 +206,7 @@ void Simulation::renumber() {
 #pragma omp parallel for schedule(static) if (n > 65536)
   for (std::ptrdiff_t i = 0; i < n; ++i) ids[i] = first ? order[i] : m_ids[order[i]];
   std::swap(m_ids, m_spare_ids);
-  if (is_identity(m_ids)) {  // back in the scene's order
-    m_ids.clear();
-    m_index.clear();
-  } else {
-    inverse_into(m_ids, m_index);
-  }
-  m_given_edited = false;
-  m_given_stale = true;
+  adopt_numbering();
 }
 
 void Simulation::step() {

@@ -150,6 +150,7 @@ class Simulation {
   void renumber();    // the spheres numbered again in the broad phase's order
   void send_edits();  // edits of the scene-numbered copy to the step
   void set_numbering(std::vector<std::uint32_t> ids);  // m_ids (empty where the identity), m_index
+  void adopt_numbering();                              // the same for m_ids as they stand
   template <class F>
   void run_verb(Verb verb, F&& f);
 
