@@ -115,35 +115,19 @@ __global__ void wall_pair_write_kernel(BodiesView bodies, const WallShape* walls
   }
 }
 
-// The pair writes: flagged item t's body pair (pair_of(t)) at first +
-// offsets[t] where that fits the room; the item past the last writes the
-// total, where asked for.
-template <class PairOf>
-__global__ void pair_write_kernel(PairOf pair_of, std::size_t items, const std::uint32_t* offsets,
-                                  const std::uint32_t* first, std::uint32_t room, BodyPair* out,
-                                  std::uint32_t* total) {
-  const std::uint32_t base = first ? *first : 0;
+// The sphere pair write: flagged candidate t's body pair at offsets[t]
+// where that fits the room; the item past the last writes the total, where
+// asked for.
+__global__ void sphere_pair_write_kernel(const IndexPair* pairs, std::size_t items, const std::uint32_t* offsets,
+                                         std::uint32_t room, BodyPair* out, std::uint32_t* total) {
   for (std::size_t t = blockIdx.x * blockDim.x + threadIdx.x; t <= items; t += gridDim.x * blockDim.x) {
-    const std::uint32_t at = base + offsets[t];
+    const std::uint32_t at = offsets[t];
     if (t == items) {
       if (total) *total = at;
-    } else if (offsets[t + 1] != offsets[t] && at < room) {
-      out[at] = pair_of(t);
+    } else if (offsets[t + 1] != at && at < room) {
+      out[at] = {pairs[t].i, pairs[t].j};
     }
   }
-}
-struct SpherePairOf {
-  const IndexPair* pairs;
-  __device__ BodyPair operator()(std::size_t k) const { return {pairs[k].i, pairs[k].j}; }
-};
-template <class PairOf>
-void launch_pair_write(const PairOf& pair_of, std::size_t items, const std::uint32_t* offsets,
-                       const std::uint32_t* first, std::uint32_t room, BodyPair* out, std::uint32_t* total,
-                       int sm_count, cudaStream_t stream) {
-  if (items == 0 && !total) return;
-  pair_write_kernel<<<grid_for(items + 1, sm_count), kBlock, 0, stream>>>(pair_of, items, offsets, first, room, out,
-                                                                          total);
-  MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 // make_sphere_contact / make_wall_contact as the flag pass called them (it
@@ -216,7 +200,10 @@ void launch_sphere_contact_flags(const BodiesView& bodies, const IndexPair* pair
 void launch_sphere_pair_write(const IndexPair* pairs, std::size_t items, const std::uint32_t* offsets,
                               std::uint32_t room, BodyPair* out, std::uint32_t* total, int sm_count,
                               cudaStream_t stream) {
-  launch_pair_write(SpherePairOf{pairs}, items, offsets, nullptr, room, out, total, sm_count, stream);
+  if (items == 0 && !total) return;
+  sphere_pair_write_kernel<<<grid_for(items + 1, sm_count), kBlock, 0, stream>>>(pairs, items, offsets, room, out,
+                                                                                 total);
+  MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 void launch_wall_contact_flags(const BodiesView& bodies, const WallShape* walls, std::uint32_t wall_count,

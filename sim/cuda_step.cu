@@ -229,9 +229,14 @@ class CudaStep final : public StepBackend {
         wall_temp = c.take<char>(wall_temp_bytes);
       };
     };
+    // The layout a call within a room leaves (the seed algorithm keeps its
+    // pairs: no room for them here), made once: it is the one carved below
+    // when the pairs are there.
+    std::optional<decltype(layout(0, 0))> within;
     if (m_model.collisions && m_pair_room.capacity > 0 && m_broadphase->algorithm() == broadphase::Algorithm::home) {
-      dev::Carve need;  // (the seed algorithm keeps its pairs: no room for them here)
-      layout(m_pair_room.capacity, m_pair_room.capacity)(need);
+      within.emplace(layout(m_pair_room.capacity, m_pair_room.capacity));
+      dev::Carve need;
+      (*within)(need);
       m_scratch.reserve(need.used());
     }
     if (m_model.collisions) {
@@ -255,7 +260,8 @@ class CudaStep final : public StepBackend {
     m_pair_count_on_device = pair_count_on_device != nullptr;
     const bool in_scratch = m_model.collisions && m_broadphase->pairs_in_scratch();
     const std::size_t scratch_bytes = m_scratch.bytes();
-    dev::carve(m_scratch, layout(in_scratch ? m_pair_room.capacity : 0, pair_items));
+    if (in_scratch && within) dev::carve(m_scratch, *within);  // pair_items is the room's
+    else dev::carve(m_scratch, layout(0, pair_items));
     if (in_scratch && (front != pairs || m_scratch.bytes() != scratch_bytes))
       throw std::logic_error("the CUDA step: the broad phase's pairs are not at the scratch's front");
     nc::ImpactWatch watch;
