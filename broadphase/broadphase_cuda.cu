@@ -219,13 +219,8 @@ void SubdivisionCuda::Impl::finish_timing() {
 // The bounding box of the centres and the largest radius, reduced on the
 // device and read back (the host sync before a grid is chosen on the host).
 Bounds SubdivisionCuda::Impl::device_bounds(const SpheresIn& d, cudaStream_t s) {
-  auto* acc = bounds.as<BoundsAccum>(1);
-  launch_bounds(d.centre, d.radius, d.count, acc, sm_count, s);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(h_bounds, acc, sizeof(BoundsAccum), cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   bytes += sizeof(BoundsAccum);
-  if (h_bounds->bad) throw NonFiniteInput();
-  return decode_bounds(*h_bounds);
+  return read_bounds(d.centre, d.radius, d.count, bounds.as<BoundsAccum>(1), h_bounds, sm_count, s);
 }
 
 // The grid is chosen on the device, from the bounds reduced there, by the

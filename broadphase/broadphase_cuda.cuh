@@ -37,6 +37,11 @@ struct BoundsAccum {
 // (two launches: nothing copied from the host).
 void launch_bounds(const Vec3* centre, const real* radius, std::size_t n, BoundsAccum* acc, int sm_count,
                    cudaStream_t stream);
+// launch_bounds, then the accumulator read into *host (pinned, or any host
+// memory) with a wait: the bounds, for a grid chosen on the host.
+// NonFiniteInput where a centre or radius is not finite.
+Bounds read_bounds(const Vec3* centre, const real* radius, std::size_t n, BoundsAccum* acc, BoundsAccum* host,
+                   int sm_count, cudaStream_t stream);
 // A real as an order-preserving integer (negative reals below positive
 // ones, each in its order), and back.
 MARBLES_HD_INLINE unsigned long long encode_ordered(real v) {

@@ -119,6 +119,15 @@ void launch_bounds(const Vec3* centre, const real* radius, std::size_t n, Bounds
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
+Bounds read_bounds(const Vec3* centre, const real* radius, std::size_t n, BoundsAccum* acc, BoundsAccum* host,
+                   int sm_count, cudaStream_t stream) {
+  launch_bounds(centre, radius, n, acc, sm_count, stream);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, acc, sizeof(BoundsAccum), cudaMemcpyDeviceToHost, stream));
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(stream));
+  if (host->bad) throw NonFiniteInput();
+  return decode_bounds(*host);
+}
+
 void launch_home_grid(const BoundsAccum* acc, real margin, const HomePlan& plan, std::size_t n, HomeGrid* grid,
                       std::uint32_t* outsized, cudaStream_t stream) {
   home_grid_kernel<<<1, 1, 0, stream>>>(acc, margin, plan, n, grid, outsized);

@@ -104,6 +104,21 @@ class DeviceBuffer {
     }
     return m_handle;
   }
+  // As reserve(bytes), keeping the first `keep` bytes where it grows: they
+  // are copied on `stream` (a stream-ordered buffer's own) into the new
+  // memory, then the old is freed after the copy (in the stream's order, or
+  // by cudaFree, which waits for the device).
+  void* reserve_keeping(std::size_t bytes, std::size_t keep, cudaStream_t stream) {
+    if (bytes <= m_bytes) return m_handle;
+    DeviceBuffer grown(m_stream);
+    grown.m_ordered = m_ordered;
+    grown.reserve(bytes);
+    if (keep > 0 && m_handle)
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(grown.m_handle, m_handle, keep < m_bytes ? keep : m_bytes,
+                                         cudaMemcpyDeviceToDevice, stream));
+    swap(grown);  // the old memory goes with `grown`
+    return m_handle;
+  }
   template <class T>
   T* as(std::size_t count) {
     return static_cast<T*>(reserve(count * sizeof(T) + 16));

@@ -421,16 +421,8 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
     return;
   }
   // The runs' room too small for the world's spheres (it gained them by an
-  // edit since the room was made): the old runs move to a grown room first,
-  // after which the device is done with the old one.
-  if (m_first.bytes() < runs_new * sizeof(std::uint32_t) + 16) {
-    DeviceBuffer grown;
-    auto* to = grown.as<std::uint32_t>(runs_new);
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(to, m_first.get(), (std::size_t(runs) + 1) * sizeof(std::uint32_t),
-                                       cudaMemcpyDeviceToDevice, s));
-    MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));  // before the old runs go
-    m_first.swap(grown);
-  }
+  // edit since the room was made): the old runs move to a grown room first.
+  m_first.reserve_keeping(runs_new * sizeof(std::uint32_t) + 16, (std::size_t(runs) + 1) * sizeof(std::uint32_t), s);
   auto* first = m_first.get_as<std::uint32_t>();
   // The temporaries in the stream's order (no wait; not held past the
   // call): the new keys, turns and ranks, the counts and their scan (the new

@@ -19,15 +19,6 @@ using ::marbles::cuda::DeviceBuffer;
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 
-// Sphere i's home key (cell_order's) and its index.
-__global__ void home_keys_kernel(const Vec3* position, std::size_t n, broadphase::HomeGrid grid, std::uint64_t* key,
-                                 std::uint32_t* index) {
-  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n; i += std::size_t(gridDim.x) * blockDim.x) {
-    key[i] = broadphase::home_key(broadphase::home_cell(position[i], grid), grid);
-    index[i] = static_cast<std::uint32_t>(i);
-  }
-}
-
 template <class T>
 __global__ void gather_kernel(const T* from, const std::uint32_t* order, std::size_t n, T* to) {
   for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n; i += std::size_t(gridDim.x) * blockDim.x)
@@ -68,21 +59,23 @@ void invert_order(const std::uint32_t* order, std::size_t n, std::uint32_t* inve
 bool DeviceWorld::cell_order(std::uint32_t* order, std::uint64_t& bytes_copied, int sm_count, cudaStream_t s) const {
   namespace bc = broadphase::cuda;
   if (m_count == 0) return false;
-  DeviceBuffer bounds(s), keys(s), index(s), temp(s);  // the stream's: no wait where they go
-  auto* acc = bounds.as<bc::BoundsAccum>(1);
-  bc::launch_bounds(m_position.get_as<Vec3>(), m_radius.get_as<real>(), m_count, acc, sm_count, s);
+  DeviceBuffer bounds(s), grid_word(s), keys(s), index(s), temp(s);  // the stream's: no wait where they go
   bc::BoundsAccum read{};
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(&read, acc, sizeof read, cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   bytes_copied += sizeof read;
-  if (read.bad != 0) throw broadphase::NonFiniteInput();
-  const broadphase::HomeGridChoice choice = broadphase::choose_home_grid(bc::decode_bounds(read), 0);
+  const broadphase::HomeGridChoice choice = broadphase::choose_home_grid(
+      bc::read_bounds(m_position.get_as<Vec3>(), m_radius.get_as<real>(), m_count, bounds.as<bc::BoundsAccum>(1), &read,
+                      sm_count, s),
+      0);
   if (choice.width == broadphase::KeyWidth::too_wide) return false;
+  // The broad phase's key kernel, which reads its grid on the device (where
+  // the broad phase chooses it): the host's choice copied there (from
+  // pageable memory, but the stream is idle after the bounds' read).
+  auto* grid = grid_word.as<broadphase::HomeGrid>(1);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(grid, &choice.grid, sizeof choice.grid, cudaMemcpyHostToDevice, s));
+  bytes_copied += sizeof choice.grid;
   auto* key = keys.as<std::uint64_t>(2 * m_count);
   auto* from = index.as<std::uint32_t>(m_count);
-  home_keys_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(m_position.get_as<Vec3>(), m_count, choice.grid, key,
-                                                                  from);
-  MARBLES_CUDA_CHECK_LAUNCH();
+  bc::launch_home_keys<std::uint64_t>(m_position.get_as<Vec3>(), m_count, grid, key, from, sm_count, s);
   // Stable, as the host's radix sort: a cell's spheres keep their order.
   const bool alt = bc::cub_radix_sort(key, from, key + m_count, order, m_count, choice.grid.key_bits, temp, s);
   if (!alt)

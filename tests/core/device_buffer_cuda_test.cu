@@ -1,0 +1,66 @@
+// core/device_memory.hpp's DeviceBuffer::reserve_keeping: a buffer grown
+// keeps its first bytes (random contents, read back), a buffer that fits
+// is not moved, and a stream-ordered buffer grows in its stream's order.
+// Label `gpu`; every case skips, saying so, without a CUDA device.
+#include <gtest/gtest.h>
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+#include <random>
+#include <vector>
+
+#include "core/device_memory.hpp"
+#include "tests/require_device.hpp"
+
+namespace dev = ::marbles::cuda;
+
+namespace {
+
+std::vector<std::uint32_t> random_words(std::size_t n, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::vector<std::uint32_t> v(n);
+  for (std::uint32_t& w : v) w = static_cast<std::uint32_t>(rng());
+  return v;
+}
+
+// A buffer of `first` words filled, grown to `grown` words keeping `kept`.
+void expect_kept(dev::DeviceBuffer& buffer, cudaStream_t s, std::size_t first, std::size_t kept, std::size_t grown,
+                 std::uint64_t seed) {
+  const std::vector<std::uint32_t> words = random_words(first, seed);
+  auto* at = buffer.as_room<std::uint32_t>(first);
+  ASSERT_EQ(cudaStreamSynchronize(s), cudaSuccess);  // a stream-ordered allocation, used from the default stream
+  ASSERT_EQ(cudaMemcpy(at, words.data(), first * 4, cudaMemcpyHostToDevice), cudaSuccess);
+  void* moved = buffer.reserve_keeping(grown * 4, kept * 4, s);
+  ASSERT_NE(moved, nullptr);
+  EXPECT_GE(buffer.bytes(), grown * 4);
+  std::vector<std::uint32_t> back(kept, 0);
+  ASSERT_EQ(cudaStreamSynchronize(s), cudaSuccess);
+  ASSERT_EQ(cudaMemcpy(back.data(), moved, kept * 4, cudaMemcpyDeviceToHost), cudaSuccess);
+  for (std::size_t i = 0; i < kept; ++i) ASSERT_EQ(back[i], words[i]) << "word " << i << " of " << kept;
+}
+
+}  // namespace
+
+TEST(DeviceBuffer, ReserveKeepingKeepsTheFirstBytesWhereItGrows) {
+  REQUIRE_DEVICE();
+  dev::Stream stream;
+  stream.create(cudaStreamNonBlocking);
+  std::mt19937_64 rng(3);
+  for (int trial = 0; trial < 20; ++trial) {
+    const std::size_t first = 1 + rng() % 100000, kept = 1 + rng() % first, grown = first + 1 + rng() % 300000;
+    dev::DeviceBuffer plain;
+    expect_kept(plain, stream, first, kept, grown, rng());
+    dev::DeviceBuffer ordered(stream);
+    expect_kept(ordered, stream, first, kept, grown, rng());
+  }
+}
+
+TEST(DeviceBuffer, ReserveKeepingLeavesABufferThatFits) {
+  REQUIRE_DEVICE();
+  dev::DeviceBuffer buffer;
+  void* at = buffer.reserve(4096, false);
+  EXPECT_EQ(buffer.reserve_keeping(4096, 4096, nullptr), at);
+  EXPECT_EQ(buffer.reserve_keeping(100, 100, nullptr), at);
+  EXPECT_EQ(buffer.bytes(), 4096u);
+}
