@@ -137,7 +137,7 @@ class CudaStep final : public StepBackend {
     if (model.collisions) {
       m_broadphase = std::make_unique<broadphase::SubdivisionCuda>(model.algorithm);
       m_broadphase->set_stage_timing(false);  // its events cost a sync per call: profiling only
-      m_broadphase->share_scratch(m_scratch);
+      m_broadphase->share_scratch(m_record_memory);  // the contact search's temporaries: see m_record_memory
     }
     m_terms = {model.solver.friction, model.solver.rolling};
     m_cache.set_terms(m_terms.friction, m_terms.rolling);
@@ -203,12 +203,12 @@ class CudaStep final : public StepBackend {
     nc::launch_contact_reaches(bodies, h, max_speed, reach, bound, mixed_radii, radius, m_sm, m_stream);
     const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
     if (m_model.wall_contacts) wall_items = n;  // a count of walls touched a sphere
-    // The flags and their offsets (and the scans' temporaries) in the scratch
-    // memory, live only until the contacts are written; behind the broad
-    // phase's pairs where it left them there (a call within a room: the
-    // pairs' room first, as it took it). The scratch is grown for that
-    // layout before the broad phase runs, so that the flags' carve does
-    // not move the pairs.
+    // The flags and their offsets (and the scans' temporaries) in the
+    // records' memory (no record is live until the colouring makes them),
+    // live only until the contacts are written; behind the broad phase's
+    // pairs where it left them there (a call within a room: the pairs' room
+    // first, as it took it). That memory is grown for the layout before the
+    // broad phase runs, so that the flags' carve does not move the pairs.
     namespace dev = ::marbles::cuda;
     std::uint32_t *pair_flags = nullptr, *wall_flags = nullptr;
     void *pair_temp = nullptr, *wall_temp = nullptr;
@@ -237,7 +237,7 @@ class CudaStep final : public StepBackend {
       within.emplace(layout(m_pair_room.capacity, m_pair_room.capacity));
       dev::Carve need;
       (*within)(need);
-      m_scratch.reserve(need.used());
+      m_record_memory.reserve(need.used());
     }
     if (m_model.collisions) {
       const SpheresIn spheres{bodies.position, bound, n};
@@ -259,10 +259,10 @@ class CudaStep final : public StepBackend {
     m_pair_items = pair_items;
     m_pair_count_on_device = pair_count_on_device != nullptr;
     const bool in_scratch = m_model.collisions && m_broadphase->pairs_in_scratch();
-    const std::size_t scratch_bytes = m_scratch.bytes();
-    if (in_scratch && within) dev::carve(m_scratch, *within);  // pair_items is the room's
-    else dev::carve(m_scratch, layout(0, pair_items));
-    if (in_scratch && (front != pairs || m_scratch.bytes() != scratch_bytes))
+    const std::size_t scratch_bytes = m_record_memory.bytes();
+    if (in_scratch && within) dev::carve(m_record_memory, *within);  // pair_items is the room's
+    else dev::carve(m_record_memory, layout(0, pair_items));
+    if (in_scratch && (front != pairs || m_record_memory.bytes() != scratch_bytes))
       throw std::logic_error("the CUDA step: the broad phase's pairs are not at the scratch's front");
     nc::ImpactWatch watch;
     if (m_model.solver.restitution) watch = {seen, m_model.solver.rest_speed};
@@ -782,12 +782,15 @@ class CudaStep final : public StepBackend {
   // A substep's contacts: their body pairs as found (m_pairs), each one's
   // cache entry (m_match) and kept colour, then in colour-major order the
   // sweep's records and impact words or approach speeds (m_record_memory)
-  // and colours.
+  // and colours. The records are live from the colouring, which makes them,
+  // to the end of the step (the store, the deepest overlap, contacts());
+  // from the next substep's start until its colouring, their memory holds
+  // the contact search's temporaries instead (the broad phase's, its pairs,
+  // the contact flags and offsets), which are dead by then.
   DeviceBuffer m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
       m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved, m_contact_chunk;
-  // Temporaries of the stages that never run at the same time (the broad
-  // phase's, the contact flags, the colouring's lists and counting sort, the
-  // cache's store and restore):
+  // Temporaries of the stages that never run at the same time (the
+  // colouring's lists and counting sort, the cache's store and restore):
   // the device holds the largest stage's, not their sum.
   DeviceBuffer m_scratch;
   narrowphase::PairTable m_table;

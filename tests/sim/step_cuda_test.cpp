@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <cstdio>
 #include <cstring>
 #include <random>
 #include <set>
@@ -747,11 +748,29 @@ TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
   EXPECT_GE(part(parts, "cache"), (n + 1) * sizeof(std::uint32_t) +
                                       entries * (sizeof(std::uint32_t) + 7 * sizeof(real) + sizeof(std::uint8_t)));
   // The broad phase's candidate pairs (at least the sphere contacts) at the
-  // scratch's front, with a flag and an offset each behind them; the broad
-  // phase holds none of its own.
+  // front of the records' memory (dead while contacts are searched), with a
+  // flag and an offset each behind them; the broad phase holds none of its
+  // own.
   const std::size_t candidates = contacts - n;
-  EXPECT_GE(part(parts, "scratch"), candidates * (sizeof(broadphase::Pair) + 2 * sizeof(std::uint32_t)));
+  EXPECT_GE(part(parts, "records"), candidates * (sizeof(broadphase::Pair) + 2 * sizeof(std::uint32_t)));
   EXPECT_LT(part(parts, "broad phase"), candidates * sizeof(broadphase::Pair));
+  // The scratch holds only the colouring's and the cache's temporaries, the
+  // largest of: the colouring's colours with either its round lists (8
+  // bytes a contact) and two words a body or its counting sort (a word a
+  // contact for the order, two a bucket and tile of 1024 contacts, at most
+  // 252 buckets: the impact levels'); the
+  // store's count a sphere, rank and index a contact; the restore's byte a
+  // contact and 13 a body. With the carve's 256-byte alignment, its scans'
+  // storage and the buffer's headroom (a sixteenth).
+  const std::size_t bodies = n + s.walls.size() + 1;
+  const std::size_t colouring = 4 * contacts + std::max(8 * contacts + 16 * bodies,
+                                                        4 * contacts + 2 * 4 * (252 * (contacts / 1024 + 1) + 1));
+  const std::size_t store = 4 * (n + 1) + 8 * contacts, restore = contacts + 13 * bodies;
+  const std::size_t largest = std::max({colouring, store, restore}) + 64 * 1024;
+  const std::size_t scratch = part(parts, "scratch");
+  EXPECT_LE(scratch, largest + largest / 16 + 256) << "the contact search's temporaries in the scratch?";
+  std::printf("device bytes a sphere: records %.1f, scratch %.1f (its bound %.1f); %.2f contacts a sphere\n",
+              double(part(parts, "records")) / n, double(scratch) / n, double(largest) / n, double(contacts) / n);
   EXPECT_EQ(part(parts, "watchdog's copy"), 0u);
   if (!narrowphase::local_order_from_environment()) {
     EXPECT_EQ(part(parts, "local order"), 0u);
