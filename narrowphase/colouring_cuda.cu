@@ -201,17 +201,23 @@ struct ColouringArrays {
   ::marbles::cuda::CountingSortArrays sort;
 };
 
-ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets,
-                                       bool ordered) {
+ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets, bool ordered,
+                                       DeviceBuffer* rounds_memory) {
+  namespace dev = ::marbles::cuda;
   ColouringArrays at;
-  at.sort = ::marbles::cuda::CountingSortArrays::for_items(n, buckets);
-  ::marbles::cuda::carve(*m_scratch, [&](::marbles::cuda::Carve& c) {
-    at.colour = c.take<std::uint32_t>(n);
-    ::marbles::cuda::Carve rounds = c;
+  at.sort = dev::CountingSortArrays::for_items(n, buckets);
+  auto take_rounds = [&](dev::Carve& rounds) {
     at.active = rounds.take<std::uint32_t>(n);
     at.next = rounds.take<std::uint32_t>(n);
     at.body_word = rounds.take<unsigned long long>(body_count);
     at.body_used = rounds.take<unsigned long long>(body_count);
+  };
+  const bool apart = rounds_memory != nullptr && rounds_memory != m_scratch;
+  if (apart) dev::carve(*rounds_memory, take_rounds);  // before the scratch's carve: two buffers, either order
+  dev::carve(*m_scratch, [&](dev::Carve& c) {
+    at.colour = c.take<std::uint32_t>(n);
+    dev::Carve rounds = c;
+    if (!apart) take_rounds(rounds);
     at.order = ordered ? c.take<std::uint32_t>(n) : nullptr;
     at.sort.take(c);
     c.merge(rounds);
@@ -272,7 +278,7 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
     return 0;
   }
   // Buckets: the colours (< kMaxColours), the overflow's and the inactive's.
-  const ColouringArrays at = lay_out(n, body_count, kMaxColours + 2, false);
+  const ColouringArrays at = lay_out(n, body_count, kMaxColours + 2, false, m_round_memory);
   auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_used, 0, body_count * sizeof(unsigned long long), s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));

@@ -81,12 +81,21 @@ class ColouringCuda {
   // from here on, memory that stages which never run at the same time
   // share (core/device_buffer.cuh: Carve); by default in the colouring's own.
   void share_scratch(DeviceBuffer& scratch) { m_scratch = &scratch; }
+  // colour_and_sort's round lists and body words (dead once the rounds
+  // end, before the sort) in `memory` instead of the scratch: memory whose
+  // own contents are dead while contacts are coloured (the CUDA step's
+  // records'). The impact levels, which run while the records live, keep
+  // theirs in the scratch.
+  void share_round_memory(DeviceBuffer& memory) { m_round_memory = &memory; }
 
  private:
   std::uint64_t m_bytes = 0;
   // A call's temporaries carved out of the scratch memory: a counting sort
   // over `buckets`, and with `ordered` an array for the sorted order.
-  ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets, bool ordered);
+  // `rounds`: where the round lists go (null: the scratch, behind the
+  // colours, overlapping the sort's arrays).
+  ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets, bool ordered,
+                          DeviceBuffer* rounds = nullptr);
   // Every round over the active list (count[0] contacts, set by the
   // caller), in one launch, its scratch cleared first; `entries` makes a
   // contact's spheres and rank from its index (colouring_cuda.cu).
@@ -97,6 +106,7 @@ class ColouringCuda {
   // colour_and_sort, read on the device by the impact stage.
   DeviceBuffer m_count, m_first_of_key, m_own_scratch;
   DeviceBuffer* m_scratch = &m_own_scratch;
+  DeviceBuffer* m_round_memory = nullptr;  // share_round_memory's, else the scratch
   ::marbles::cuda::PinnedBuffer<std::uint32_t> m_host;  // readbacks
   std::uint32_t m_rounds = 0;       // rounds of the last colour_and_sort
   std::uint32_t m_last_count = 0;   // its contacts (last_count)

@@ -70,10 +70,12 @@ struct DeviceContacts {
 
 // kept: colours kept from the last substep (colour_and_sort), or empty;
 // scratch: the temporaries' memory, shared with other users (null: the
-// colouring's own).
+// colouring's own); rounds: the round lists' memory apart from it (null:
+// in the scratch).
 void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
                         const std::vector<std::uint8_t>& kept = {},
-                        ::marbles::cuda::DeviceBuffer* scratch = nullptr) {
+                        ::marbles::cuda::DeviceBuffer* scratch = nullptr,
+                        ::marbles::cuda::DeviceBuffer* rounds = nullptr) {
   std::vector<Contact> cpu = input;
   ColourRanges ranges;
   ContactColouring().colour_and_sort(cpu, bodies, ranges, kept.empty() ? nullptr : kept.data());
@@ -81,6 +83,7 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   DeviceContacts d(input);
   narrowphase::cuda::ColouringCuda gpu;
   if (scratch) gpu.share_scratch(*scratch);
+  if (rounds) gpu.share_round_memory(*rounds);
   std::vector<std::uint32_t> begin;
   const auto n = static_cast<std::uint32_t>(input.size());
   ::marbles::cuda::DeviceBuffer kept_memory, sorted_memory;  // freed however the test ends
@@ -264,6 +267,25 @@ TEST(ColouringCuda, SharedScratchLeftDirtyBetweenCalls) {
     if (scratch.bytes() > 0) ASSERT_EQ(cudaMemset(scratch.get(), 0xa5, scratch.bytes()), cudaSuccess);
     const auto bodies = static_cast<std::uint32_t>(count / 3 + 10);
     expect_same_as_cpu(random_contacts(rng, bodies, count), bodies, {}, &scratch);
+  }
+}
+
+// The round lists in memory of their own (the CUDA step's records', dead
+// while contacts are coloured), as dirty as the scratch, with and without
+// kept colours: the same colouring as the CPU's.
+TEST(ColouringCuda, RoundListsApartFromTheScratch) {
+  REQUIRE_DEVICE();
+  std::mt19937_64 rng(34);
+  ::marbles::cuda::DeviceBuffer scratch, rounds;
+  for (const std::size_t count : {45000, 300, 60000, 1000}) {
+    for (auto* memory : {&scratch, &rounds})
+      if (memory->bytes() > 0) ASSERT_EQ(cudaMemset(memory->get(), 0xa5, memory->bytes()), cudaSuccess);
+    const auto bodies = static_cast<std::uint32_t>(count / 3 + 10);
+    const std::vector<Contact> contacts = random_contacts(rng, bodies, count);
+    std::vector<std::uint8_t> kept(count);
+    for (std::uint8_t& c : kept) c = rng() % 3 == 0 ? kNoKeptColour : static_cast<std::uint8_t>(rng() % 12);
+    expect_same_as_cpu(contacts, bodies, {}, &scratch, &rounds);
+    expect_same_as_cpu(contacts, bodies, kept, &scratch, &rounds);
   }
 }
 
