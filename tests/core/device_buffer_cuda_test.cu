@@ -31,6 +31,9 @@ void expect_kept(dev::DeviceBuffer& buffer, cudaStream_t s, std::size_t first, s
   auto* at = buffer.as_room<std::uint32_t>(first);
   ASSERT_EQ(cudaStreamSynchronize(s), cudaSuccess);  // a stream-ordered allocation, used from the default stream
   ASSERT_EQ(cudaMemcpy(at, words.data(), first * 4, cudaMemcpyHostToDevice), cudaSuccess);
+  // A copy from pageable memory may return before its last DMA lands, and
+  // the stream below does not wait for the default stream's work.
+  ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
   void* moved = buffer.reserve_keeping(grown * 4, kept * 4, s);
   ASSERT_NE(moved, nullptr);
   EXPECT_GE(buffer.bytes(), grown * 4);
