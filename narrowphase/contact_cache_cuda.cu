@@ -325,13 +325,14 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
     MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
     return;
   }
-  // Temporaries in the scratch memory: the counts (one more than the
-  // spheres: the scan's last is the entry count) with the scan's storage,
-  // each contact's rank among its sphere's, and the entries' contacts.
+  // Temporaries in the scratch memory (or the store's own: share_store_memory):
+  // the counts (one more than the spheres: the scan's last is the entry
+  // count) with the scan's storage, each contact's rank among its sphere's,
+  // and the entries' contacts.
   const std::size_t scan_bytes = ::marbles::cuda::exclusive_sum_bytes<std::uint32_t>(std::size_t(spheres) + 1);
   std::uint32_t *count = nullptr, *rank = nullptr, *index = nullptr;
   void* scan_temp = nullptr;
-  ::marbles::cuda::carve(*m_scratch, [&](::marbles::cuda::Carve& c) {
+  ::marbles::cuda::carve(m_store_memory ? *m_store_memory : *m_scratch, [&](::marbles::cuda::Carve& c) {
     count = c.take<std::uint32_t>(std::size_t(spheres) + 1);
     scan_temp = c.take<char>(scan_bytes);
     rank = c.take<std::uint32_t>(n);

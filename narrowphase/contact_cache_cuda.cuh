@@ -103,6 +103,11 @@ class ContactCacheCuda {
   // stages which never run at the same time share (core/device_buffer.cuh:
   // Carve); by default in the cache's own.
   void share_scratch(DeviceBuffer& scratch) { m_scratch = &scratch; }
+  // The store's temporaries (counts, ranks, the entries' contacts) in
+  // `memory` instead of the scratch: memory whose own contents are dead
+  // while the contacts are stored (the CUDA step's body pairs as found,
+  // read last by the records' making).
+  void share_store_memory(DeviceBuffer& memory) { m_store_memory = &memory; }
 
  private:
   // The entries: their keys' b halves (m_keys), impulses and colours.
@@ -112,6 +117,7 @@ class ContactCacheCuda {
   DeviceBuffer m_first;
   std::uint32_t m_spheres = 0;
   DeviceBuffer* m_scratch = &m_own_scratch;
+  DeviceBuffer* m_store_memory = nullptr;  // share_store_memory's, else the scratch
   std::uint32_t m_bound = 0;
   bool m_keep_tangent = true, m_keep_rolling = true;
   Vec3* tangent_entries(std::uint32_t m) { return m_keep_tangent ? m_tangent.as<Vec3>(m) : nullptr; }

@@ -142,6 +142,7 @@ class CudaStep final : public StepBackend {
     m_terms = {model.solver.friction, model.solver.rolling};
     m_cache.set_terms(m_terms.friction, m_terms.rolling);
     m_cache.share_scratch(m_scratch);
+    m_cache.share_store_memory(m_pairs);  // the body pairs are dead from the records' making to the next search
     m_colouring.share_scratch(m_scratch);
     m_colouring.share_round_memory(m_record_memory);  // dead while contacts are coloured
     m_kept_cache.set_terms(m_terms.friction, m_terms.rolling);

@@ -754,19 +754,18 @@ TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
   const std::size_t candidates = contacts - n;
   EXPECT_GE(part(parts, "records"), candidates * (sizeof(broadphase::Pair) + 2 * sizeof(std::uint32_t)));
   EXPECT_LT(part(parts, "broad phase"), candidates * sizeof(broadphase::Pair));
-  // The scratch holds only the colouring's and the cache's temporaries, the
-  // largest of: the colouring's colours with either its round lists (8
+  // The scratch holds only the colouring's temporaries and the restore's,
+  // the largest of: the colouring's colours with either its round lists (8
   // bytes a contact) and two words a body or its counting sort (a word a
   // contact for the order, two a bucket and tile of 1024 contacts, at most
-  // 252 buckets: the impact levels'); the
-  // store's count a sphere, rank and index a contact; the restore's byte a
-  // contact and 13 a body. With the carve's 256-byte alignment, its scans'
-  // storage and the buffer's headroom (a sixteenth).
+  // 252 buckets: the impact levels'); the restore's byte a contact and 13 a
+  // body. With the carve's 256-byte alignment, its scans' storage and the
+  // buffer's headroom (a sixteenth).
   const std::size_t bodies = n + s.walls.size() + 1;
   const std::size_t colouring = 4 * contacts + std::max(8 * contacts + 16 * bodies,
                                                         4 * contacts + 2 * 4 * (252 * (contacts / 1024 + 1) + 1));
-  const std::size_t store = 4 * (n + 1) + 8 * contacts, restore = contacts + 13 * bodies;
-  const std::size_t largest = std::max({colouring, store, restore}) + 64 * 1024;
+  const std::size_t restore = contacts + 13 * bodies;
+  const std::size_t largest = std::max(colouring, restore) + 64 * 1024;
   const std::size_t scratch = part(parts, "scratch");
   EXPECT_LE(scratch, largest + largest / 16 + 256) << "the contact search's temporaries in the scratch?";
   std::printf("device bytes a sphere: records %.1f, scratch %.1f (its bound %.1f); %.2f contacts a sphere\n",
