@@ -142,7 +142,7 @@ class CudaStep final : public StepBackend {
     m_terms = {model.solver.friction, model.solver.rolling};
     m_cache.set_terms(m_terms.friction, m_terms.rolling);
     m_cache.share_scratch(m_scratch);
-    m_cache.share_store_memory(m_pairs);  // the body pairs are dead from the records' making to the next search
+    m_cache.share_store_memory(m_pairs);  // after the solve: see m_pairs
     m_colouring.share_scratch(m_scratch);
     m_colouring.share_round_memory(m_record_memory);  // dead while contacts are coloured
     m_kept_cache.set_terms(m_terms.friction, m_terms.rolling);
@@ -392,7 +392,7 @@ class CudaStep final : public StepBackend {
   void solve_velocities(real h) override {
     if (m_count == 0) return;
     const BodiesView world = m_device.view();
-    auto* bodies = m_solver_bodies.as<narrowphase::SolverBody>(world.count);
+    auto* bodies = m_pairs.as<narrowphase::SolverBody>(world.count);  // the body pairs are read no more
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     if (m_model.solver.restitution) impacts(bodies, h);
     const real inv_h = real(1) / h;
@@ -523,8 +523,7 @@ class CudaStep final : public StepBackend {
     using ::marbles::cuda::bytes_of;
     std::vector<DeviceBytes> parts{
         {"world", m_device.device_bytes()},
-        {"solver bodies", m_solver_bodies.bytes()},
-        {"contact pairs", m_pairs.bytes()},
+        {"contact pairs and solver bodies", m_pairs.bytes()},
         {"broad phase", m_broadphase ? m_broadphase->device_bytes() : 0},
         {"records", m_record_memory.bytes()},
         {"matches and colours", bytes_of(m_match, m_kept_colour, m_sorted_colour)},
@@ -781,6 +780,9 @@ class CudaStep final : public StepBackend {
   bool m_watch = false;
   int m_iteration_factor = 1;
 
+  // m_pairs holds in turn what is live from one search to the next: the
+  // contacts' body pairs as found (read last by the records' making), the
+  // solver bodies (the solve), the cache store's temporaries.
   // A substep's contacts: their body pairs as found (m_pairs), each one's
   // cache entry (m_match) and kept colour, then in colour-major order the
   // sweep's records and impact words or approach speeds (m_record_memory)
@@ -790,7 +792,7 @@ class CudaStep final : public StepBackend {
   // the contact search's temporaries instead (the broad phase's, its pairs,
   // the contact flags and offsets), which are dead by then.
   DeviceBuffer m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
-      m_sorted_colour, m_solver_bodies, m_flags, m_hit, m_moved, m_contact_chunk;
+      m_sorted_colour, m_flags, m_hit, m_moved, m_contact_chunk;
   // Temporaries of the stages that never run at the same time (the
   // colouring's lists and counting sort, the cache's store and restore):
   // the device holds the largest stage's, not their sum.
