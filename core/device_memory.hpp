@@ -8,6 +8,7 @@
 #include <cuda_runtime.h>
 
 #include <cstddef>
+#include <stdexcept>
 #include <utility>
 #include <vector>
 
@@ -110,6 +111,8 @@ class DeviceBuffer {
   // by cudaFree, which waits for the device).
   void* reserve_keeping(std::size_t bytes, std::size_t keep, cudaStream_t stream) {
     if (bytes <= m_bytes) return m_handle;
+    if (m_ordered && stream != m_stream)
+      throw std::logic_error("DeviceBuffer::reserve_keeping: a stream-ordered buffer grows on its own stream");
     DeviceBuffer grown(m_stream);
     grown.m_ordered = m_ordered;
     grown.reserve(bytes);

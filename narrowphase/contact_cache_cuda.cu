@@ -325,7 +325,7 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
     MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
     return;
   }
-  // Temporaries in the scratch memory (or the store's own: share_store_memory):
+  // Temporaries in the scratch memory (or the memory share_store_memory lent):
   // the counts (one more than the spheres: the scan's last is the entry
   // count) with the scan's storage, each contact's rank among its sphere's,
   // and the entries' contacts.

@@ -98,15 +98,16 @@ class ContactCacheCuda {
   // friction the tangential impulses, without rolling resistance the rolling
   // ones stay zero, and the cache neither stores nor reads them.
   void set_terms(bool friction, bool rolling) { m_keep_tangent = friction, m_keep_rolling = rolling; }
-  // The temporaries (the store's flags, keys and sort, the restore's
-  // matches and island labels) live in `scratch` from here on, memory that
+  // The temporaries (the store's counts, ranks and order unless given
+  // share_store_memory, the restore's matches and island labels) live in
+  // `scratch` from here on, memory that
   // stages which never run at the same time share (core/device_buffer.cuh:
   // Carve); by default in the cache's own.
   void share_scratch(DeviceBuffer& scratch) { m_scratch = &scratch; }
   // The store's temporaries (counts, ranks, the entries' contacts) in
-  // `memory` instead of the scratch: memory whose own contents are dead
-  // while the contacts are stored (the CUDA step's body pairs as found,
-  // read last by the records' making).
+  // `memory` instead of the scratch: memory the caller lends, whose own
+  // contents are dead while the contacts are stored (the CUDA step's body
+  // pairs' memory, which holds the solver bodies during the solve).
   void share_store_memory(DeviceBuffer& memory) { m_store_memory = &memory; }
 
  private:

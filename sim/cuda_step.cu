@@ -260,12 +260,12 @@ class CudaStep final : public StepBackend {
     }
     m_pair_items = pair_items;
     m_pair_count_on_device = pair_count_on_device != nullptr;
-    const bool in_scratch = m_model.collisions && m_broadphase->pairs_in_scratch();
-    const std::size_t scratch_bytes = m_record_memory.bytes();
-    if (in_scratch && within) dev::carve(m_record_memory, *within);  // pair_items is the room's
+    const bool pairs_in_front = m_model.collisions && m_broadphase->pairs_in_scratch();
+    const std::size_t memory_bytes = m_record_memory.bytes();
+    if (pairs_in_front && within) dev::carve(m_record_memory, *within);  // pair_items is the room's
     else dev::carve(m_record_memory, layout(0, pair_items));
-    if (in_scratch && (front != pairs || m_record_memory.bytes() != scratch_bytes))
-      throw std::logic_error("the CUDA step: the broad phase's pairs are not at the scratch's front");
+    if (pairs_in_front && (front != pairs || m_record_memory.bytes() != memory_bytes))
+      throw std::logic_error("the CUDA step: the broad phase's pairs are not at the front of the records' memory");
     nc::ImpactWatch watch;
     if (m_model.solver.restitution) watch = {seen, m_model.solver.rest_speed};
     // Copied for the read (here where it waits, else the colouring's).
@@ -787,15 +787,18 @@ class CudaStep final : public StepBackend {
   // cache entry (m_match) and kept colour, then in colour-major order the
   // sweep's records and impact words or approach speeds (m_record_memory)
   // and colours. The records are live from the colouring, which makes them,
-  // to the end of the step (the store, the deepest overlap, contacts());
+  // to their store, and a step's last substep's to the end of the step (the
+  // deepest overlap, contacts());
   // from the next substep's start until its colouring, their memory holds
   // the contact search's temporaries instead (the broad phase's, its pairs,
   // the contact flags and offsets), which are dead by then.
   DeviceBuffer m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
       m_sorted_colour, m_flags, m_hit, m_moved, m_contact_chunk;
-  // Temporaries of the stages that never run at the same time (the
-  // colouring's lists and counting sort, the cache's store and restore):
-  // the device holds the largest stage's, not their sum.
+  // Temporaries of the stages that never run at the same time and must
+  // outlive a dead buffer's next use (the colouring's colours and counting
+  // sort, the impact levels' lists, the cache's restore): the device holds
+  // the largest stage's, not their sum. The search's, the colouring's round
+  // lists and the cache store's live in m_record_memory and m_pairs.
   DeviceBuffer m_scratch;
   narrowphase::PairTable m_table;
   nc::SolverTerms m_terms;
