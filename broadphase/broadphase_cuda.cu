@@ -65,9 +65,8 @@ struct SubdivisionCuda::Impl {
   std::size_t pair_count = 0;
   // Where the last call left its pairs: `pairs`, or the front of the
   // scratch (a home-cell call within a room that left its count on the
-  // device).
+  // device; `pairs` then given back), or none.
   const IndexPair* last_pairs = nullptr;
-  bool pairs_in_scratch = false;
   // The home-cell variant's plan: the shape its buffers and sort take from
   // the grid of the last call that read its bounds, and that grid (for the
   // stats of the calls that do not read theirs). None: the next call reads.
@@ -108,7 +107,6 @@ std::size_t SubdivisionCuda::Impl::run(const SpheresIn& d, real margin, cudaStre
   stats = Stats{};
   pair_count = 0;
   last_pairs = nullptr;
-  pairs_in_scratch = false;
   const std::size_t n = d.count;
   if (n >= kMaxObjects) throw RuntimeFailure("broad phase: more than 2^28 spheres");
   if (n < 2) return 0;
@@ -318,7 +316,6 @@ std::size_t SubdivisionCuda::Impl::run_home_keys(const SpheresIn& d, real margin
     IndexPair* to = front_pairs ? front : pairs.as_room<IndexPair>(*within);
     launch_home_write<Key>(in, d_offsets, *within, to, sm_count, s);
     last_pairs = to;
-    pairs_in_scratch = front_pairs;
     if (front_pairs && pairs.get()) DeviceBuffer().swap(pairs);
     mark(4, s);
     finish_timing();
@@ -387,7 +384,7 @@ void SubdivisionCuda::share_scratch(::marbles::cuda::DeviceBuffer& scratch) { m-
 SortKind SubdivisionCuda::sort_kind() const { return m->sort; }
 Algorithm SubdivisionCuda::algorithm() const { return m->algorithm; }
 const Pair* SubdivisionCuda::device_pairs() const { return reinterpret_cast<const Pair*>(m->last_pairs); }
-bool SubdivisionCuda::pairs_in_scratch() const { return m->pairs_in_scratch; }
+bool SubdivisionCuda::pairs_in_scratch() const { return m->last_pairs && m->last_pairs != m->pairs.get(); }
 
 std::size_t SubdivisionCuda::find_pairs_device(const SpheresIn& device_spheres, real margin, void* stream) {
   return m->run(device_spheres, margin, static_cast<cudaStream_t>(stream));

@@ -23,6 +23,7 @@ class PinnedBuffer {
  public:
   explicit PinnedBuffer(std::size_t count) {
     MARBLES_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&m_ptr), count * sizeof(T)));
+    m_count = count;
   }
   PinnedBuffer(const PinnedBuffer&) = delete;
   PinnedBuffer& operator=(const PinnedBuffer&) = delete;
@@ -31,9 +32,11 @@ class PinnedBuffer {
   }
   operator T*() const { return m_ptr; }
   T* operator->() const { return m_ptr; }
+  std::size_t size() const { return m_count; }
 
  private:
   T* m_ptr = nullptr;
+  std::size_t m_count = 0;
 };
 
 // A runtime handle destroyed with its owner (Stream, Event).

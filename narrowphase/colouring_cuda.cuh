@@ -78,8 +78,9 @@ class ColouringCuda {
   std::size_t device_bytes() const { return ::marbles::cuda::bytes_of(m_count, m_first_of_key, m_own_scratch); }
 
   // The temporaries (colours, lists, the sort's counts; not the lists
-  // given share_round_memory) live in `scratch` from here on, memory that stages which never run at the same time
-  // share (core/device_buffer.cuh: Carve); by default in the colouring's own.
+  // given share_round_memory) live in `scratch` from here on, memory that
+  // stages which never run at the same time share (core/device_buffer.cuh:
+  // Carve); by default in the colouring's own.
   void share_scratch(DeviceBuffer& scratch) { m_scratch = &scratch; }
   // colour_and_sort's round lists and body words (dead once the rounds
   // end, before the sort) in `memory` instead of the scratch: memory whose

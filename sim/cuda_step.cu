@@ -642,11 +642,9 @@ class CudaStep final : public StepBackend {
     DeviceBuffer orders(m_stream);  // the stream's: no wait where it goes
     std::uint32_t* order = orders.as<std::uint32_t>(2 * n);
     if (!m_device.cell_order(order, m_bytes, m_sm, m_stream)) return {};
-    if (m_order_room < n) {  // grown a sixteenth past the world, as the device's rooms
-      m_order_host.reset();
-      m_order_room = 0;  // until the allocation has succeeded
+    if (!m_order_host || m_order_host->size() < n) {  // grown a sixteenth past the world, as the device's rooms
+      m_order_host.reset();  // empty until the allocation has succeeded
       m_order_host.emplace(n + n / 16);
-      m_order_room = n + n / 16;
     }
     std::uint32_t* host = *m_order_host;
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(host, order, n * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, m_stream));
@@ -776,14 +774,12 @@ class CudaStep final : public StepBackend {
   ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{kPlanOutsized + 1};
   ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
   std::optional<::marbles::cuda::PinnedBuffer<std::uint32_t>> m_order_host;  // renumber's order, read back
-  std::size_t m_order_room = 0;
   bool m_watch = false;
   int m_iteration_factor = 1;
 
-  // m_pairs holds in turn what is live from one search to the next: the
-  // contacts' body pairs as found (read last by the records' making), the
-  // solver bodies (the solve), the cache store's temporaries.
-  // A substep's contacts: their body pairs as found (m_pairs), each one's
+  // A substep's contacts: their body pairs as found (m_pairs, which then
+  // holds in turn the solver bodies for the solve and the cache store's
+  // temporaries: the pairs are read last by the records' making), each one's
   // cache entry (m_match) and kept colour, then in colour-major order the
   // sweep's records and impact words or approach speeds (m_record_memory)
   // and colours. The records are live from the colouring, which makes them,
