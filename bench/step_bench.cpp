@@ -308,7 +308,7 @@ void save_pile(const std::string& path, const World& w, const SettleInfo& info) 
 
 // The cached pile, or nothing when the file is missing, of another version,
 // precision or N, or short.
-std::optional<PileState> load_pile(const std::string& path, std::size_t n) {
+std::optional<PileState> load_pile(const std::string& path, std::size_t n, const Lattice& lattice) {
   std::ifstream f(path, std::ios::binary);
   if (!f) return std::nullopt;
   char magic[8];
@@ -323,7 +323,7 @@ std::optional<PileState> load_pile(const std::string& path, std::size_t n) {
   info.backend.assign(backend, strnlen(backend, sizeof backend));
   if (!get(f, info.steps) || !get(f, info.seconds) || !get(f, info.ke_per_sphere) || !get(f, info.max_overlap))
     return std::nullopt;
-  auto [s, g] = pile(n);  // materials, masses; positions replaced below
+  auto [s, g] = pile(n, lattice);  // materials, masses; positions replaced below
   std::vector<Vec3> arrays[3];
   for (auto& v : arrays) {
     v.resize(n);
@@ -346,9 +346,9 @@ std::optional<PileState> load_pile(const std::string& path, std::size_t n) {
 // the energy read is then what the pile gains from rest in that many steps,
 // and no fast sphere widens every sphere's contact reach for long (the
 // settle costs a fraction of the steps and of the time per step).
-PileState settle_pile(std::size_t n, broadphase::Backend backend, const StepBenchOptions& options,
-                      std::ostream& log) {
-  auto [s, g] = pile(n);
+PileState settle_pile(std::size_t n, const Lattice& lattice, broadphase::Backend backend,
+                      const StepBenchOptions& options, std::ostream& log) {
+  auto [s, g] = pile(n, lattice);
   Simulation sim(s, make_world(s, g), backend);
   const int check = 10, min_steps = 50;
   SettleInfo info;
@@ -564,9 +564,10 @@ int threads() {
 
 }  // namespace
 
-std::string pile_cache_path(const std::string& cache_dir, std::size_t n) {
+std::string pile_cache_path(const std::string& cache_dir, std::size_t n, bool rolling) {
   const std::string dir = cache_dir.empty() ? default_cache_dir() : cache_dir;
-  return dir + "/pile-v" + std::to_string(kPileVersion) + "-n" + std::to_string(n) + "-" + kRealName + ".bin";
+  return dir + "/pile-v" + std::to_string(kPileVersion) + (rolling ? "" : "-friction") + "-n" + std::to_string(n) +
+         "-" + kRealName + ".bin";
 }
 
 int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
@@ -574,6 +575,9 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   const bool is_pile = options.scene == "pile", is_settle = options.scene == "settle";
   if (!is_pile && !is_settle && options.scene != "gas")
     throw InputError({}, "--scene", "unknown scene '" + options.scene + "'");
+  if (!options.rolling && !is_pile) throw InputError({}, "--rolling", "'off' is for --scene pile only");
+  Lattice pile_lattice;
+  pile_lattice.rolling = options.rolling;
   const int warmup = options.warmup >= 0 ? options.warmup : (is_pile ? 5 : is_settle ? kSettleWarmup : 2);
   std::ostream& log = std::cerr;
   std::vector<Row> rows;
@@ -586,18 +590,18 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   };
   for (std::size_t n : options.n) {
     if (is_pile) {
-      const std::string path = pile_cache_path(options.cache_dir, n);
-      std::optional<PileState> state = options.rebuild ? std::nullopt : load_pile(path, n);
+      const std::string path = pile_cache_path(options.cache_dir, n, options.rolling);
+      std::optional<PileState> state = options.rebuild ? std::nullopt : load_pile(path, n, pile_lattice);
       if (state) {
         log << "pile N = " << n << ": loaded " << path << " (settled on " << state->settle.backend << " in "
             << state->settle.steps << " steps, " << state->settle.seconds << " s, KE/sphere "
             << state->settle.ke_per_sphere << " J)\n";
       } else {
-        state = settle_pile(n, backend, options, log);
+        state = settle_pile(n, pile_lattice, backend, options, log);
         save_pile(path, state->world, state->settle);
         log << "pile N = " << n << ": saved " << path << "\n";
       }
-      time_steps(pile(n).first, std::move(state->world), n);  // the box (the lattice is cheap next to the steps)
+      time_steps(pile(n, pile_lattice).first, std::move(state->world), n);  // the box (the lattice is cheap next to the steps)
       rows.back().settle = state->settle;
     } else if (is_settle) {
       auto [s, g] = pile(n, kSettleLattice);
@@ -613,6 +617,9 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   if (options.json) {
     nlohmann::ordered_json doc{{"benchmark", "step"}, {"backend", options.backend}, {"scene", options.scene},
                                {"precision", kRealName}, {"threads", threads()},
+                               {"rolling_resistance", is_pile ? options.rolling
+                                                  : !is_settle && std::count(options.effects.begin(), options.effects.end(),
+                                                                             "rolling_resistance") > 0},
                                {"cpu_lanes", lanes ? nlohmann::ordered_json(lanes) : nlohmann::ordered_json()},
                                {"repeats", options.repeats}, {"warmup", warmup},
                                {"sphere_order", options.sphere_order}, {"renumber", options.renumber},
@@ -662,7 +669,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   }
   out << "step benchmark (" << options.backend << ", " << kRealName << ", " << threads() << " thread(s), "
       << (lanes ? std::string("sweep lanes ") + lanes + ", " : "")
-      << (is_pile     ? "settled pile (friction, rolling resistance, 10 iterations, dt 1 ms)"
+      << (is_pile     ? options.rolling ? "settled pile (friction, rolling resistance, 10 iterations, dt 1 ms)"
+                                        : "settled pile (friction, no rolling resistance, 10 iterations, dt 1 ms)"
           : is_settle ? "settling lattice (25 layers, friction, 10 iterations, dt 1 ms)"
                       : "gas at volume fraction 0.1")
       << (options.sphere_order != "made" ? ", spheres in " + options.sphere_order + " order" : std::string())

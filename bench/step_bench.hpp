@@ -55,6 +55,9 @@ struct StepBenchOptions {
   // solver.renumber of the timed scene (0: never; a numbering at the start
   // of the first warm-up step and every this many steps after).
   int renumber = 0;
+  // pile: rolling resistance (rolling friction 0.05) on, or off (friction
+  // only, the issue's own pile; settled and cached apart).
+  bool rolling = true;
 };
 
 // The world with its spheres in the order StepBenchOptions::sphere_order
@@ -63,7 +66,7 @@ struct StepBenchOptions {
 World in_sphere_order(World world, const std::string& how);
 
 // The pile cache's file for N spheres (version and precision in the name).
-std::string pile_cache_path(const std::string& cache_dir, std::size_t n);
+std::string pile_cache_path(const std::string& cache_dir, std::size_t n, bool rolling = true);
 
 int run_step_bench(const StepBenchOptions& options, std::ostream& out);
 

@@ -226,6 +226,10 @@ int cli_main(int argc, char** argv) {
   bench_step->add_option("--renumber", st.renumber,
                          "solver.renumber of the timed scene: the spheres numbered again every this many steps")
       ->check(CLI::NonNegativeNumber);
+  std::string st_rolling = "on";
+  bench_step->add_option("--rolling", st_rolling,
+                         "pile: rolling resistance on (default) or off (friction only; settled and cached apart)")
+      ->check(CLI::IsMember({"on", "off"}));
   bench_step->add_flag("--json", st.json, "print JSON only (progress on stderr)");
 
   bench::EffectsBenchOptions ef;
@@ -289,6 +293,7 @@ int cli_main(int argc, char** argv) {
     }
     if (*bench_step) {
       if (!st_n.empty()) st.n = st_n;
+      st.rolling = st_rolling == "on";
       if (st.backend == "cuda") select_backend(BackendChoice::cuda, std::cerr);
       return bench::run_step_bench(st, std::cout);
     }
