@@ -227,7 +227,11 @@ struct UniformArms {
 
 struct SweepRecords {
   Real4* impulse = nullptr;   // normal_impulse, tangent_impulse               (read and written)
-  Real4* rolling = nullptr;   // rolling_impulse, twisting_friction            (read and written, with rolling)
+  // rolling_impulse, twisting_friction (read and written, with rolling).
+  // Null where no contact has rolling resistance (the GPU's records then
+  // leave it out: nothing reads it, and the twisting friction is the pair
+  // table's, as contact_of_record takes it).
+  Real4* rolling = nullptr;
   Real4* geometry = nullptr;  // normal, separation
   // ra, rb, friction, rolling_friction (with friction or rolling). Null
   // where they are the same for every contact (the GPU's records then leave
@@ -242,17 +246,19 @@ struct SweepRecords {
   UniformArms uniform;        // the arms of every contact, where `arms` is null
 
   // Bytes of the records of n contacts, every array 16-byte aligned.
-  static constexpr std::size_t bytes_for(std::size_t n, bool extra = true, bool arms = true) {
-    return n * ((3 + (arms ? 1 : 0) + (extra ? 1 : 0)) * sizeof(Real4) + sizeof(BodyPair)) + 64;
+  static constexpr std::size_t bytes_for(std::size_t n, bool extra = true, bool arms = true, bool rolling = true) {
+    return n * ((2 + (rolling ? 1 : 0) + (arms ? 1 : 0) + (extra ? 1 : 0)) * sizeof(Real4) + sizeof(BodyPair)) + 64;
   }
   // The arrays of n contacts laid out in `memory` (bytes_for(n, extra,
-  // arms) bytes, 16-byte aligned); without arms, `uniform` gives them.
+  // arms, rolling) bytes, 16-byte aligned); without arms, `uniform` gives
+  // them.
   static SweepRecords in(void* memory, std::size_t n, bool extra = true, bool arms = true,
-                         const UniformArms& uniform = {}) {
+                         const UniformArms& uniform = {}, bool rolling = true) {
     SweepRecords s;
     auto* p = static_cast<Real4*>(memory);
-    s.impulse = p, s.rolling = p + n, s.geometry = p + 2 * n;
-    p += 3 * n;
+    s.impulse = p, p += n;
+    if (rolling) s.rolling = p, p += n;
+    s.geometry = p, p += n;
     if (arms) s.arms = p, p += n;
     else s.uniform = uniform;
     if (extra) s.extra = p, p += n;
@@ -269,14 +275,16 @@ MARBLES_HD_INLINE void pack_position_record(const Contact& c, const SweepRecords
 }
 
 // Every word the sweeps read; they leave out what they do not read: the
-// rolling word without rolling resistance (the CPU's), the extra word of a
-// sphere pair, and of every contact when no wall moves (no extra array); the
-// arms word where every contact has the same (no arms array).
+// rolling word without rolling resistance (the CPU's by Rolling, the GPU's
+// by its absent array), the extra word of a sphere pair, and of every
+// contact when no wall moves (no extra array); the arms word where every
+// contact has the same (no arms array).
 template <bool Rolling = true>
 MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s, std::uint32_t k) {
   s.impulse[k] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
   if constexpr (Rolling)
-    s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.coeff.twisting_friction};
+    if (s.rolling)
+      s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.coeff.twisting_friction};
   if (s.arms) s.arms[k] = {c.ra, c.rb, c.coeff.friction, c.coeff.rolling_friction};
   if (is_wall(c.b) && s.extra) s.extra[k] = {c.wall_velocity.x, c.wall_velocity.y, c.wall_velocity.z, real(0)};
   pack_position_record(c, s, k);
@@ -521,11 +529,17 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::
 // Record k as the whole contact the CPU holds after the step: every field
 // the records and the impact word keep (without impact words, the approach
 // speed and the pair table's restitution, as make_sphere_contact and
-// make_wall_contact take it), the effective masses from the world's inverse
-// masses and inertias.
+// make_wall_contact take it; without rolling words, the rolling impulse +0
+// and the twisting friction the pair table's, as those copy it), the
+// effective masses from the world's inverse masses and inertias.
 MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const ImpactRecords& impacts, std::uint32_t k,
                                             const BodiesView& world, const PairTable& table, const WallShape* walls) {
-  Contact c = load_record<true, true>(s, k, s.impulse[k]);  // a wall's velocity too
+  Contact c = s.rolling ? load_record<true, true>(s, k, s.impulse[k])  // a wall's velocity too
+                        : load_record<true, false>(s, k, s.impulse[k]);
+  if (!s.rolling) {
+    const std::uint32_t b = is_wall(c.b) ? walls[c.b & ~kWallFlag].material : world.material[c.b];
+    c.coeff.twisting_friction = table(world.material[c.a], b).twisting_friction;
+  }
   if (impacts.word) {
     const Real4 i = impacts.word[k];
     c.approach_speed = i.x;

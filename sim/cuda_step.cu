@@ -685,12 +685,13 @@ class CudaStep final : public StepBackend {
   std::size_t pair_count_read() const { return m_pair_count_on_device ? m_pinned[kPairCount] : m_pair_items; }
 
   // The records of m_count contacts (the extra word only where a wall
-  // moves, the arms word only where contacts' arms differ) and their impact
+  // moves, the arms word only where contacts' arms differ, the rolling word
+  // only with rolling resistance) and their impact
   // words (approach speeds only in a substep without impact candidates), in
   // one buffer.
   void lay_out_records() {
     const bool extra = m_model.moving_walls, arms = !m_uniform_arms;
-    const std::size_t words = (narrowphase::SweepRecords::bytes_for(m_count, extra, arms) + 15) / 16;
+    const std::size_t words = (narrowphase::SweepRecords::bytes_for(m_count, extra, arms, m_terms.rolling) + 15) / 16;
     const std::size_t impact_words = m_impact_candidates ? m_count : (m_count * sizeof(real) + 15) / 16;
     auto* memory = m_record_memory.as<narrowphase::Real4>(words + impact_words);
     narrowphase::UniformArms uniform;
@@ -698,7 +699,7 @@ class CudaStep final : public StepBackend {
       const narrowphase::PairCoefficients& c = m_model.pair_coefficients.front();
       uniform = {m_radius, c.friction, c.rolling_friction};
     }
-    m_records = narrowphase::SweepRecords::in(memory, m_count, extra, arms, uniform);
+    m_records = narrowphase::SweepRecords::in(memory, m_count, extra, arms, uniform, m_terms.rolling);
     m_impacts = {};
     if (m_impact_candidates) m_impacts.word = memory + words;
     else m_impacts.approach = reinterpret_cast<real*>(memory + words);

@@ -582,6 +582,59 @@ TEST(Solver, RecordsWithApproachSpeedsOnlyHoldTheWholeContact) {
   EXPECT_GT(walls, 0u);
 }
 
+// Records without the rolling word (the GPU's where no contact has rolling
+// resistance): no rolling array, 16 bytes a contact fewer, and the whole
+// contact as made (rolling impulse +0, the pair table's twisting friction);
+// a sweep of friction alone leaves the same impulses and bodies as on
+// records with the rolling word.
+TEST(Solver, RecordsWithoutRollingHoldTheWholeContact) {
+  const real r = real(0.01);
+  std::mt19937_64 rng(37);
+  MovingLattice packed = MovingLattice::packed(10, r, rng);
+  ASSERT_GT(packed.coeff.twisting_friction, 0);
+  const BodiesView world = packed.view();
+  const PairTable table = packed.table();
+  ColourRanges colours;
+  std::vector<Contact> contacts = packed.lattice.contacts(world, table, real(1e-3), real(2e-4), colours);
+  const auto m = static_cast<std::uint32_t>(contacts.size());
+  ASSERT_GT(m, 2000u);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (Contact& c : contacts) {  // a warm start's, without rolling impulses
+    c.normal_impulse = real(u(rng) * 1e-4);
+    c.tangent_impulse = random_unit(rng) * real(u(rng) * 1e-5);
+  }
+  EXPECT_EQ(SweepRecords::bytes_for(m, false, true, true) - SweepRecords::bytes_for(m, false, true, false),
+            m * sizeof(Real4));
+  std::vector<SolverBody> bodies[2];
+  std::vector<Real4> impulses[2];
+  for (const bool rolling : {true, false}) {
+    std::vector<Real4> memory((SweepRecords::bytes_for(m, false, true, rolling) + 15) / 16);
+    std::vector<real> approach(m);
+    const SweepRecords records = SweepRecords::in(memory.data(), m, false, true, {}, rolling);
+    ASSERT_EQ(records.rolling != nullptr, rolling);
+    ASSERT_EQ(reinterpret_cast<const char*>(records.bodies + m) - reinterpret_cast<const char*>(memory.data()) + 64,
+              static_cast<std::ptrdiff_t>(SweepRecords::bytes_for(m, false, true, rolling)));
+    const ImpactRecords speeds{nullptr, approach.data()};
+    for (std::uint32_t k = 0; k < m; ++k) {
+      pack_sweep_record(contacts[k], records, k);  // as the GPU makes them
+      pack_impact(contacts[k], speeds, k);
+    }
+    for (std::uint32_t k = 0; k < m; ++k) {
+      const Contact c = contact_of_record(records, speeds, k, world, table, packed.lattice.floor.data());
+      ASSERT_EQ(std::memcmp(&c, &contacts[k], sizeof(Contact)), 0) << "contact " << k << " rolling " << rolling;
+    }
+    std::vector<SolverBody>& b = bodies[rolling];
+    for (std::size_t i = 0; i < packed.lattice.n; ++i) b.push_back(gather_solver_body(world, i));
+    for (std::uint32_t k = 0; k < m; ++k) solve_record<true, false>(records, k, b.data(), real(1e3));
+    for (std::uint32_t k = 0; k < m; ++k) impulses[rolling].push_back(records.impulse[k]);
+  }
+  EXPECT_EQ(std::memcmp(bodies[0].data(), bodies[1].data(), bodies[0].size() * sizeof(SolverBody)), 0);
+  EXPECT_EQ(std::memcmp(impulses[0].data(), impulses[1].data(), m * sizeof(Real4)), 0);
+  std::size_t moved = 0;  // the sweep did work
+  for (std::uint32_t k = 0; k < m; ++k) moved += impulses[0][k].x != contacts[k].normal_impulse ? 1 : 0;
+  EXPECT_GT(moved, m / 10);
+}
+
 // A wall at rest (surface_at_rest) has the surface velocity +0 in every
 // component at every point, whatever the signs of its axis and of a zero
 // spin: the value a contact without the extra word takes. A zero of the
