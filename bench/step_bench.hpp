@@ -56,7 +56,7 @@ struct StepBenchOptions {
   // of the first warm-up step and every this many steps after).
   int renumber = 0;
   // pile: rolling resistance (rolling friction 0.05) on, or off (friction
-  // only, the issue's own pile; settled and cached apart).
+  // only; settled and cached apart).
   bool rolling = true;
 };
 

@@ -686,9 +686,8 @@ class CudaStep final : public StepBackend {
 
   // The records of m_count contacts (the extra word only where a wall
   // moves, the arms word only where contacts' arms differ, the rolling word
-  // only with rolling resistance) and their impact
-  // words (approach speeds only in a substep without impact candidates), in
-  // one buffer.
+  // only with rolling resistance) and their impact words (approach speeds
+  // only in a substep without impact candidates), in one buffer.
   void lay_out_records() {
     const bool extra = m_model.moving_walls, arms = !m_uniform_arms;
     const std::size_t words = (narrowphase::SweepRecords::bytes_for(m_count, extra, arms, m_terms.rolling) + 15) / 16;
