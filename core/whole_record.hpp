@@ -10,6 +10,7 @@
 #pragma once
 
 #include <cstddef>
+#include <type_traits>
 
 #include "core/config.hpp"
 
@@ -68,11 +69,13 @@ MARBLES_HD_INLINE void store_whole(T* p, const T& value) {
 // st.global.cs), so the streamed records do not push out of L2 what every
 // launch reads again (the solver's bodies: 32 MB at 10^6 spheres, within the
 // H100's 50 MB L2). Pile of 10^6, H100: solve 9.32 -> 8.38 ms per step. An
-// 8-byte record moves as one 8-byte word.
+// 8-byte record moves as one 8-byte word, a float or double as itself.
 template <class T>
 MARBLES_HD_INLINE T load_streaming(const T* p) {
 #if defined(__CUDA_ARCH__)
-  if constexpr (sizeof(T) == 8 && alignof(T) >= 8) {
+  if constexpr (std::is_same_v<T, float> || std::is_same_v<T, double>) {
+    return __ldcs(p);
+  } else if constexpr (sizeof(T) == 8 && alignof(T) >= 8) {
     const uint2 w = __ldcs(reinterpret_cast<const uint2*>(p));
     T out;
     *reinterpret_cast<uint2*>(&out) = w;
@@ -88,7 +91,8 @@ MARBLES_HD_INLINE T load_streaming(const T* p) {
 template <class T>
 MARBLES_HD_INLINE void store_streaming(T* p, const T& value) {
 #if defined(__CUDA_ARCH__)
-  whole_record_detail::store_words<true>(p, value);
+  if constexpr (std::is_same_v<T, float> || std::is_same_v<T, double>) __stcs(p, value);
+  else whole_record_detail::store_words<true>(p, value);
 #else
   *p = value;
 #endif

@@ -22,7 +22,7 @@ using ::marbles::cuda::kBlock;
 // is kept for its colour alone (ContactCache::store); one with neither is
 // dropped.
 __device__ __forceinline__ bool stored(const SweepRecords& records, const std::uint8_t* colour, std::uint32_t k) {
-  return records.impulse[k].x > 0 || (colour && colour[k] != kNoKeptColour);
+  return impulse_word(records, k).x > 0 || (colour && colour[k] != kNoKeptColour);
 }
 
 // The counting sort by sphere a, of the store's contacts and of the
@@ -84,7 +84,7 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
     const std::uint32_t k = index[e];
     keys[e] = records.bodies[k].b;
-    const Real4 i = records.impulse[k];
+    const Real4 i = impulse_word(records, k);
     const bool loaded = i.x > 0;
     normal[e] = loaded ? i.x : real(0);
     if (tangent) tangent[e] = loaded ? Vec3{i.y, i.z, i.w} : Vec3{};

@@ -88,7 +88,7 @@ __device__ void for_range_early(const ContactRange& r, Load&& load, Work&& work)
 template <bool Friction, bool Rolling>
 __global__ void warm_start_kernel(SweepRecords records, ContactRange r, SolverBody* bodies) {
   for_range_early(
-      r, [&](std::uint32_t k) { return load_streaming(records.impulse + k); },
+      r, [&](std::uint32_t k) { return streamed_impulse_word<Friction>(records, k); },
       [&](std::uint32_t k, const Real4& i) { warm_start_loaded<Friction, Rolling>(records, k, i, bodies); });
 }
 

@@ -226,7 +226,11 @@ struct UniformArms {
 };
 
 struct SweepRecords {
-  Real4* impulse = nullptr;   // normal_impulse, tangent_impulse               (read and written)
+  // normal_impulse, tangent_impulse (read and written). Null where no
+  // contact has friction: `normal` then holds the normal impulse alone (the
+  // GPU's records; the tangent impulse stays +0, as no term changes it).
+  Real4* impulse = nullptr;
+  real* normal = nullptr;
   // rolling_impulse, twisting_friction (read and written, with rolling).
   // Null where no contact has rolling resistance (the GPU's records then
   // leave it out: nothing reads it, and the twisting friction is the pair
@@ -245,18 +249,27 @@ struct SweepRecords {
   BodyPair* bodies = nullptr; // a, b
   UniformArms uniform;        // the arms of every contact, where `arms` is null
 
+  // Real4 words of the impulse array (or of the normal impulses alone,
+  // rounded up to a word).
+  static constexpr std::size_t impulse_words(std::size_t n, bool friction) {
+    return friction ? n : (n * sizeof(real) + sizeof(Real4) - 1) / sizeof(Real4);
+  }
   // Bytes of the records of n contacts, every array 16-byte aligned.
-  static constexpr std::size_t bytes_for(std::size_t n, bool extra = true, bool arms = true, bool rolling = true) {
-    return n * ((2 + (rolling ? 1 : 0) + (arms ? 1 : 0) + (extra ? 1 : 0)) * sizeof(Real4) + sizeof(BodyPair)) + 64;
+  static constexpr std::size_t bytes_for(std::size_t n, bool extra = true, bool arms = true, bool rolling = true,
+                                         bool friction = true) {
+    return impulse_words(n, friction) * sizeof(Real4) +
+           n * ((1 + (rolling ? 1 : 0) + (arms ? 1 : 0) + (extra ? 1 : 0)) * sizeof(Real4) + sizeof(BodyPair)) + 64;
   }
   // The arrays of n contacts laid out in `memory` (bytes_for(n, extra,
-  // arms, rolling) bytes, 16-byte aligned); without arms, `uniform` gives
-  // them.
+  // arms, rolling, friction) bytes, 16-byte aligned); without arms,
+  // `uniform` gives them.
   static SweepRecords in(void* memory, std::size_t n, bool extra = true, bool arms = true,
-                         const UniformArms& uniform = {}, bool rolling = true) {
+                         const UniformArms& uniform = {}, bool rolling = true, bool friction = true) {
     SweepRecords s;
     auto* p = static_cast<Real4*>(memory);
-    s.impulse = p, p += n;
+    if (friction) s.impulse = p;
+    else s.normal = reinterpret_cast<real*>(p);
+    p += impulse_words(n, friction);
     if (rolling) s.rolling = p, p += n;
     s.geometry = p, p += n;
     if (arms) s.arms = p, p += n;
@@ -281,7 +294,8 @@ MARBLES_HD_INLINE void pack_position_record(const Contact& c, const SweepRecords
 // contact has the same (no arms array).
 template <bool Rolling = true>
 MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s, std::uint32_t k) {
-  s.impulse[k] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
+  if (s.impulse) s.impulse[k] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
+  else s.normal[k] = c.normal_impulse;
   if constexpr (Rolling)
     if (s.rolling)
       s.rolling[k] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.coeff.twisting_friction};
@@ -326,17 +340,33 @@ MARBLES_HD_INLINE Contact load_record(const SweepRecords& s, std::uint32_t k, co
   return c;
 }
 
+// Record k's impulse word; where the records keep the normal impulse alone
+// (no friction), it and a tangent impulse of +0. Plainly, or streamed past
+// L2 as the sweeps read it (with Friction the records hold whole words).
+MARBLES_HD_INLINE Real4 impulse_word(const SweepRecords& s, std::uint32_t k) {
+  return s.impulse ? s.impulse[k] : Real4{s.normal[k], real(0), real(0), real(0)};
+}
+template <bool Friction>
+MARBLES_HD_INLINE Real4 streamed_impulse_word(const SweepRecords& s, std::uint32_t k) {
+  if (Friction || s.impulse) return load_streaming(s.impulse + k);
+  return Real4{load_streaming(s.normal + k), real(0), real(0), real(0)};
+}
+
 // The contact as solve_one<Friction, Rolling> reads it, less the effective
 // masses (solve_record adds them).
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE Contact load_sweep_contact(const SweepRecords& s, std::uint32_t k) {
-  return load_record<Friction || Rolling, Rolling>(s, k, load_streaming(s.impulse + k));
+  return load_record<Friction || Rolling, Rolling>(s, k, streamed_impulse_word<Friction>(s, k));
 }
 
-// What a sweep changed: the accumulated impulses.
+// What a sweep changed: the accumulated impulses (the normal impulse alone
+// where the records keep no tangent one).
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void store_sweep_impulses(const SweepRecords& s, std::uint32_t k, const Contact& c) {
-  store_streaming(s.impulse + k, Real4{c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z});
+  if (!Friction && !s.impulse) store_streaming(s.normal + k, c.normal_impulse);
+  else
+    store_streaming(s.impulse + k,
+                    Real4{c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z});
   if constexpr (Rolling)
     store_streaming(s.rolling + k, Real4{c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z,
                                          c.coeff.twisting_friction});
@@ -353,7 +383,7 @@ MARBLES_HD_INLINE void warm_start_loaded(const SweepRecords& s, std::uint32_t k,
 }
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void warm_start_record(const SweepRecords& s, std::uint32_t k, SolverBody* bodies) {
-  warm_start_loaded<Friction, Rolling>(s, k, load_streaming(s.impulse + k), bodies);
+  warm_start_loaded<Friction, Rolling>(s, k, streamed_impulse_word<Friction>(s, k), bodies);
 }
 
 // --- what a sweep writes back -------------------------------------------------
@@ -439,7 +469,7 @@ MARBLES_HD_INLINE Contact load_rebound_contact(const SweepRecords& s, const Real
 // the rolling impulse as it was, when the records were packed without it).
 template <bool Rolling = true>
 MARBLES_HD_INLINE void unpack_sweep_impulses(const SweepRecords& s, std::uint32_t k, Contact& c) {
-  const Real4 i = s.impulse[k];
+  const Real4 i = impulse_word(s, k);
   c.normal_impulse = i.x;
   c.tangent_impulse = {i.y, i.z, i.w};
   if constexpr (Rolling) {
@@ -534,8 +564,9 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::
 // effective masses from the world's inverse masses and inertias.
 MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const ImpactRecords& impacts, std::uint32_t k,
                                             const BodiesView& world, const PairTable& table, const WallShape* walls) {
-  Contact c = s.rolling ? load_record<true, true>(s, k, s.impulse[k])  // a wall's velocity too
-                        : load_record<true, false>(s, k, s.impulse[k]);
+  const Real4 i = impulse_word(s, k);
+  Contact c = s.rolling ? load_record<true, true>(s, k, i)  // a wall's velocity too
+                        : load_record<true, false>(s, k, i);
   if (!s.rolling) {
     const std::uint32_t b = is_wall(c.b) ? walls[c.b & ~kWallFlag].material : world.material[c.b];
     c.coeff.twisting_friction = table(world.material[c.a], b).twisting_friction;

@@ -686,11 +686,13 @@ class CudaStep final : public StepBackend {
 
   // The records of m_count contacts (the extra word only where a wall
   // moves, the arms word only where contacts' arms differ, the rolling word
-  // only with rolling resistance) and their impact words (approach speeds
-  // only in a substep without impact candidates), in one buffer.
+  // only with rolling resistance, the normal impulse alone without friction)
+  // and their impact words (approach speeds only in a substep without impact
+  // candidates), in one buffer.
   void lay_out_records() {
     const bool extra = m_model.moving_walls, arms = !m_uniform_arms;
-    const std::size_t words = (narrowphase::SweepRecords::bytes_for(m_count, extra, arms, m_terms.rolling) + 15) / 16;
+    const std::size_t words =
+        (narrowphase::SweepRecords::bytes_for(m_count, extra, arms, m_terms.rolling, m_terms.friction) + 15) / 16;
     const std::size_t impact_words = m_impact_candidates ? m_count : (m_count * sizeof(real) + 15) / 16;
     auto* memory = m_record_memory.as<narrowphase::Real4>(words + impact_words);
     narrowphase::UniformArms uniform;
@@ -698,7 +700,7 @@ class CudaStep final : public StepBackend {
       const narrowphase::PairCoefficients& c = m_model.pair_coefficients.front();
       uniform = {m_radius, c.friction, c.rolling_friction};
     }
-    m_records = narrowphase::SweepRecords::in(memory, m_count, extra, arms, uniform, m_terms.rolling);
+    m_records = narrowphase::SweepRecords::in(memory, m_count, extra, arms, uniform, m_terms.rolling, m_terms.friction);
     m_impacts = {};
     if (m_impact_candidates) m_impacts.word = memory + words;
     else m_impacts.approach = reinterpret_cast<real*>(memory + words);

@@ -635,6 +635,66 @@ TEST(Solver, RecordsWithoutRollingHoldTheWholeContact) {
   EXPECT_GT(moved, m / 10);
 }
 
+// Records that keep the normal impulse alone (the GPU's where no contact
+// has friction or rolling resistance): no impulse words, a real a contact
+// (rounded up to a word), and the whole contact as made (tangent impulse
+// +0); a warm start and a sweep of the normal term alone leave the same
+// bodies and normal impulses as on whole impulse words, and the impulses go
+// back into a contact the same.
+TEST(Solver, RecordsWithoutFrictionHoldTheWholeContact) {
+  const real r = real(0.01);
+  std::mt19937_64 rng(41);
+  MovingLattice packed = MovingLattice::packed(10, r, rng);
+  const BodiesView world = packed.view();
+  const PairTable table = packed.table();
+  ColourRanges colours;
+  std::vector<Contact> contacts = packed.lattice.contacts(world, table, real(1e-3), real(2e-4), colours);
+  const auto m = static_cast<std::uint32_t>(contacts.size());
+  ASSERT_GT(m, 2000u);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (Contact& c : contacts) c.normal_impulse = u(rng) < 0.3 ? real(0) : real(u(rng) * 1e-4);  // some unloaded
+  for (const std::uint32_t n : {1u, 2u, 3u, 4u, 5u, m})
+    EXPECT_EQ(SweepRecords::bytes_for(n, false, true, false, true) - SweepRecords::bytes_for(n, false, true, false, false),
+              n * sizeof(Real4) - (n * sizeof(real) + 15) / 16 * 16)
+        << n;
+  std::vector<SolverBody> bodies[2];
+  std::vector<real> normals[2];
+  for (const bool friction : {true, false}) {
+    std::vector<Real4> memory((SweepRecords::bytes_for(m, false, true, false, friction) + 15) / 16);
+    std::vector<real> approach(m);
+    const SweepRecords records = SweepRecords::in(memory.data(), m, false, true, {}, false, friction);
+    ASSERT_EQ(records.impulse != nullptr, friction);
+    ASSERT_EQ(records.normal != nullptr, !friction);
+    ASSERT_EQ(reinterpret_cast<const char*>(records.bodies + m) - reinterpret_cast<const char*>(memory.data()) + 64,
+              static_cast<std::ptrdiff_t>(SweepRecords::bytes_for(m, false, true, false, friction)));
+    const ImpactRecords speeds{nullptr, approach.data()};
+    for (std::uint32_t k = 0; k < m; ++k) {
+      pack_sweep_record<false>(contacts[k], records, k);  // as the GPU makes them
+      pack_impact(contacts[k], speeds, k);
+    }
+    for (std::uint32_t k = 0; k < m; ++k) {
+      const Contact c = contact_of_record(records, speeds, k, world, table, packed.lattice.floor.data());
+      ASSERT_EQ(std::memcmp(&c, &contacts[k], sizeof(Contact)), 0) << "contact " << k << " friction " << friction;
+    }
+    std::vector<SolverBody>& b = bodies[friction];
+    for (std::size_t i = 0; i < packed.lattice.n; ++i) b.push_back(gather_solver_body(world, i));
+    for (std::uint32_t k = 0; k < m; ++k) warm_start_record<false, false>(records, k, b.data());
+    for (int sweep = 0; sweep < 2; ++sweep)
+      for (std::uint32_t k = 0; k < m; ++k) solve_record<false, false>(records, k, b.data(), real(1e3));
+    for (std::uint32_t k = 0; k < m; ++k) {
+      Contact c = contacts[k];
+      unpack_sweep_impulses<false>(records, k, c);
+      normals[friction].push_back(c.normal_impulse);
+      ASSERT_TRUE(is_plus_zero(c.tangent_impulse)) << k;
+    }
+  }
+  EXPECT_EQ(std::memcmp(bodies[0].data(), bodies[1].data(), bodies[0].size() * sizeof(SolverBody)), 0);
+  EXPECT_EQ(std::memcmp(normals[0].data(), normals[1].data(), m * sizeof(real)), 0);
+  std::size_t moved = 0;  // the sweeps did work
+  for (std::uint32_t k = 0; k < m; ++k) moved += normals[0][k] != contacts[k].normal_impulse ? 1 : 0;
+  EXPECT_GT(moved, m / 10);
+}
+
 // A wall at rest (surface_at_rest) has the surface velocity +0 in every
 // component at every point, whatever the signs of its axis and of a zero
 // spin: the value a contact without the extra word takes. A zero of the
