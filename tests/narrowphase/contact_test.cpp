@@ -582,117 +582,84 @@ TEST(Solver, RecordsWithApproachSpeedsOnlyHoldTheWholeContact) {
   EXPECT_GT(walls, 0u);
 }
 
-// Records without the rolling word (the GPU's where no contact has rolling
-// resistance): no rolling array, 16 bytes a contact fewer, and the whole
-// contact as made (rolling impulse +0, the pair table's twisting friction);
-// a sweep of friction alone leaves the same impulses and bodies as on
-// records with the rolling word.
-TEST(Solver, RecordsWithoutRollingHoldTheWholeContact) {
+// Lean records, as the GPU lays them out: without the rolling word where no
+// contact has rolling resistance, and keeping the normal impulse alone (a
+// real a contact, rounded up to a word) where none has friction either.
+// Each form holds the whole contact as made (rolling impulse +0 and the pair
+// table's twisting friction; without friction a tangent impulse of +0), and
+// a warm start and two sweeps leave the same bodies and impulses as on the
+// whole records.
+struct LeanRun {
+  std::vector<SolverBody> bodies;
+  std::vector<Real4> impulses;
+};
+template <bool Friction>
+LeanRun run_on_records(MovingLattice& packed, const std::vector<Contact>& contacts, bool rolling, bool friction) {
+  const BodiesView world = packed.view();
+  const auto m = static_cast<std::uint32_t>(contacts.size());
+  std::vector<Real4> memory((SweepRecords::bytes_for(m, false, true, rolling, friction) + 15) / 16);
+  std::vector<real> approach(m);
+  const SweepRecords records = SweepRecords::in(memory.data(), m, false, true, {}, rolling, friction);
+  EXPECT_EQ(records.rolling != nullptr, rolling);
+  EXPECT_EQ(records.impulse != nullptr, friction);
+  EXPECT_EQ(records.normal != nullptr, !friction);
+  EXPECT_EQ(reinterpret_cast<const char*>(records.bodies + m) - reinterpret_cast<const char*>(memory.data()) + 64,
+            static_cast<std::ptrdiff_t>(SweepRecords::bytes_for(m, false, true, rolling, friction)));
+  const ImpactRecords speeds{nullptr, approach.data()};
+  for (std::uint32_t k = 0; k < m; ++k) {
+    pack_sweep_record(contacts[k], records, k);  // as the GPU makes them
+    pack_impact(contacts[k], speeds, k);
+  }
+  for (std::uint32_t k = 0; k < m; ++k) {
+    const Contact c = contact_of_record(records, speeds, k, world, packed.table(), packed.lattice.floor.data());
+    EXPECT_EQ(std::memcmp(&c, &contacts[k], sizeof(Contact)), 0) << "contact " << k;
+    if (::testing::Test::HasFailure()) break;
+  }
+  LeanRun run;
+  for (std::size_t i = 0; i < packed.lattice.n; ++i) run.bodies.push_back(gather_solver_body(world, i));
+  for (std::uint32_t k = 0; k < m; ++k) warm_start_record<Friction, false>(records, k, run.bodies.data());
+  for (int sweep = 0; sweep < 2; ++sweep)
+    for (std::uint32_t k = 0; k < m; ++k) solve_record<Friction, false>(records, k, run.bodies.data(), real(1e3));
+  for (std::uint32_t k = 0; k < m; ++k) run.impulses.push_back(impulse_word(records, k));
+  return run;
+}
+
+TEST(Solver, LeanRecordsHoldTheWholeContact) {
+  for (const std::uint32_t n : {1u, 2u, 3u, 4u, 5u, 1001u}) {
+    EXPECT_EQ(SweepRecords::bytes_for(n, false, true, true) - SweepRecords::bytes_for(n, false, true, false),
+              n * sizeof(Real4));
+    EXPECT_EQ(SweepRecords::bytes_for(n, false, true, false, true) - SweepRecords::bytes_for(n, false, true, false, false),
+              n * sizeof(Real4) - (n * sizeof(real) + 15) / 16 * 16)
+        << n;
+  }
   const real r = real(0.01);
   std::mt19937_64 rng(37);
   MovingLattice packed = MovingLattice::packed(10, r, rng);
   ASSERT_GT(packed.coeff.twisting_friction, 0);
-  const BodiesView world = packed.view();
-  const PairTable table = packed.table();
   ColourRanges colours;
-  std::vector<Contact> contacts = packed.lattice.contacts(world, table, real(1e-3), real(2e-4), colours);
-  const auto m = static_cast<std::uint32_t>(contacts.size());
+  const std::vector<Contact> made =
+      packed.lattice.contacts(packed.view(), packed.table(), real(1e-3), real(2e-4), colours);
+  const auto m = static_cast<std::uint32_t>(made.size());
   ASSERT_GT(m, 2000u);
   std::uniform_real_distribution<double> u(0, 1);
-  for (Contact& c : contacts) {  // a warm start's, without rolling impulses
-    c.normal_impulse = real(u(rng) * 1e-4);
-    c.tangent_impulse = random_unit(rng) * real(u(rng) * 1e-5);
-  }
-  EXPECT_EQ(SweepRecords::bytes_for(m, false, true, true) - SweepRecords::bytes_for(m, false, true, false),
-            m * sizeof(Real4));
-  std::vector<SolverBody> bodies[2];
-  std::vector<Real4> impulses[2];
-  for (const bool rolling : {true, false}) {
-    std::vector<Real4> memory((SweepRecords::bytes_for(m, false, true, rolling) + 15) / 16);
-    std::vector<real> approach(m);
-    const SweepRecords records = SweepRecords::in(memory.data(), m, false, true, {}, rolling);
-    ASSERT_EQ(records.rolling != nullptr, rolling);
-    ASSERT_EQ(reinterpret_cast<const char*>(records.bodies + m) - reinterpret_cast<const char*>(memory.data()) + 64,
-              static_cast<std::ptrdiff_t>(SweepRecords::bytes_for(m, false, true, rolling)));
-    const ImpactRecords speeds{nullptr, approach.data()};
-    for (std::uint32_t k = 0; k < m; ++k) {
-      pack_sweep_record(contacts[k], records, k);  // as the GPU makes them
-      pack_impact(contacts[k], speeds, k);
-    }
-    for (std::uint32_t k = 0; k < m; ++k) {
-      const Contact c = contact_of_record(records, speeds, k, world, table, packed.lattice.floor.data());
-      ASSERT_EQ(std::memcmp(&c, &contacts[k], sizeof(Contact)), 0) << "contact " << k << " rolling " << rolling;
-    }
-    std::vector<SolverBody>& b = bodies[rolling];
-    for (std::size_t i = 0; i < packed.lattice.n; ++i) b.push_back(gather_solver_body(world, i));
-    for (std::uint32_t k = 0; k < m; ++k) solve_record<true, false>(records, k, b.data(), real(1e3));
-    for (std::uint32_t k = 0; k < m; ++k) impulses[rolling].push_back(records.impulse[k]);
-  }
-  EXPECT_EQ(std::memcmp(bodies[0].data(), bodies[1].data(), bodies[0].size() * sizeof(SolverBody)), 0);
-  EXPECT_EQ(std::memcmp(impulses[0].data(), impulses[1].data(), m * sizeof(Real4)), 0);
-  std::size_t moved = 0;  // the sweep did work
-  for (std::uint32_t k = 0; k < m; ++k) moved += impulses[0][k].x != contacts[k].normal_impulse ? 1 : 0;
-  EXPECT_GT(moved, m / 10);
-}
-
-// Records that keep the normal impulse alone (the GPU's where no contact
-// has friction or rolling resistance): no impulse words, a real a contact
-// (rounded up to a word), and the whole contact as made (tangent impulse
-// +0); a warm start and a sweep of the normal term alone leave the same
-// bodies and normal impulses as on whole impulse words, and the impulses go
-// back into a contact the same.
-TEST(Solver, RecordsWithoutFrictionHoldTheWholeContact) {
-  const real r = real(0.01);
-  std::mt19937_64 rng(41);
-  MovingLattice packed = MovingLattice::packed(10, r, rng);
-  const BodiesView world = packed.view();
-  const PairTable table = packed.table();
-  ColourRanges colours;
-  std::vector<Contact> contacts = packed.lattice.contacts(world, table, real(1e-3), real(2e-4), colours);
-  const auto m = static_cast<std::uint32_t>(contacts.size());
-  ASSERT_GT(m, 2000u);
-  std::uniform_real_distribution<double> u(0, 1);
-  for (Contact& c : contacts) c.normal_impulse = u(rng) < 0.3 ? real(0) : real(u(rng) * 1e-4);  // some unloaded
-  for (const std::uint32_t n : {1u, 2u, 3u, 4u, 5u, m})
-    EXPECT_EQ(SweepRecords::bytes_for(n, false, true, false, true) - SweepRecords::bytes_for(n, false, true, false, false),
-              n * sizeof(Real4) - (n * sizeof(real) + 15) / 16 * 16)
-        << n;
-  std::vector<SolverBody> bodies[2];
-  std::vector<real> normals[2];
   for (const bool friction : {true, false}) {
-    std::vector<Real4> memory((SweepRecords::bytes_for(m, false, true, false, friction) + 15) / 16);
-    std::vector<real> approach(m);
-    const SweepRecords records = SweepRecords::in(memory.data(), m, false, true, {}, false, friction);
-    ASSERT_EQ(records.impulse != nullptr, friction);
-    ASSERT_EQ(records.normal != nullptr, !friction);
-    ASSERT_EQ(reinterpret_cast<const char*>(records.bodies + m) - reinterpret_cast<const char*>(memory.data()) + 64,
-              static_cast<std::ptrdiff_t>(SweepRecords::bytes_for(m, false, true, false, friction)));
-    const ImpactRecords speeds{nullptr, approach.data()};
-    for (std::uint32_t k = 0; k < m; ++k) {
-      pack_sweep_record<false>(contacts[k], records, k);  // as the GPU makes them
-      pack_impact(contacts[k], speeds, k);
+    SCOPED_TRACE(friction ? "friction, no rolling word" : "no friction: the normal impulse alone");
+    std::vector<Contact> contacts = made;  // a warm start's, some unloaded, without rolling impulses
+    for (Contact& c : contacts) {
+      c.normal_impulse = u(rng) < 0.3 ? real(0) : real(u(rng) * 1e-4);
+      if (friction) c.tangent_impulse = random_unit(rng) * real(u(rng) * 1e-5);
     }
-    for (std::uint32_t k = 0; k < m; ++k) {
-      const Contact c = contact_of_record(records, speeds, k, world, table, packed.lattice.floor.data());
-      ASSERT_EQ(std::memcmp(&c, &contacts[k], sizeof(Contact)), 0) << "contact " << k << " friction " << friction;
-    }
-    std::vector<SolverBody>& b = bodies[friction];
-    for (std::size_t i = 0; i < packed.lattice.n; ++i) b.push_back(gather_solver_body(world, i));
-    for (std::uint32_t k = 0; k < m; ++k) warm_start_record<false, false>(records, k, b.data());
-    for (int sweep = 0; sweep < 2; ++sweep)
-      for (std::uint32_t k = 0; k < m; ++k) solve_record<false, false>(records, k, b.data(), real(1e3));
-    for (std::uint32_t k = 0; k < m; ++k) {
-      Contact c = contacts[k];
-      unpack_sweep_impulses<false>(records, k, c);
-      normals[friction].push_back(c.normal_impulse);
-      ASSERT_TRUE(is_plus_zero(c.tangent_impulse)) << k;
-    }
+    const LeanRun whole = friction ? run_on_records<true>(packed, contacts, true, true)
+                                   : run_on_records<false>(packed, contacts, true, true);
+    const LeanRun lean = friction ? run_on_records<true>(packed, contacts, false, true)
+                                  : run_on_records<false>(packed, contacts, false, false);
+    ASSERT_FALSE(::testing::Test::HasFailure());
+    EXPECT_EQ(std::memcmp(whole.bodies.data(), lean.bodies.data(), whole.bodies.size() * sizeof(SolverBody)), 0);
+    EXPECT_EQ(std::memcmp(whole.impulses.data(), lean.impulses.data(), m * sizeof(Real4)), 0);
+    std::size_t moved = 0;  // the sweeps did work
+    for (std::uint32_t k = 0; k < m; ++k) moved += lean.impulses[k].x != contacts[k].normal_impulse ? 1 : 0;
+    EXPECT_GT(moved, m / 10);
   }
-  EXPECT_EQ(std::memcmp(bodies[0].data(), bodies[1].data(), bodies[0].size() * sizeof(SolverBody)), 0);
-  EXPECT_EQ(std::memcmp(normals[0].data(), normals[1].data(), m * sizeof(real)), 0);
-  std::size_t moved = 0;  // the sweeps did work
-  for (std::uint32_t k = 0; k < m; ++k) moved += normals[0][k] != contacts[k].normal_impulse ? 1 : 0;
-  EXPECT_GT(moved, m / 10);
 }
 
 // A wall at rest (surface_at_rest) has the surface velocity +0 in every
