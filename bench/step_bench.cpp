@@ -170,21 +170,23 @@ struct Lattice {
   double layers = kPileLayers;  // about this many layers deep
   double spacing = 2.004;       // in-plane, of a radius
   bool rolling = true;          // rolling resistance (rolling friction 0.05)
+  bool friction = true;         // friction (0.5)
 };
 
-scene::Scene pile_scene(bool rolling) {
+scene::Scene pile_scene(bool rolling, bool friction = true) {
   using E = scene::Effect;
   scene::Scene s;
-  s.path = s.name = rolling ? "bench-pile" : "bench-settle";
+  s.path = s.name = !friction ? "bench-pile-frictionless" : rolling ? "bench-pile" : "bench-settle";
   s.time = {1.0, 1e-3, 1};
   s.solver.iterations = 10;
-  s.effects = {E::gravity, E::collisions, E::walls, E::restitution, E::friction};
+  s.effects = {E::gravity, E::collisions, E::walls, E::restitution};
+  if (friction) s.effects.push_back(E::friction);
   if (rolling) s.effects.push_back(E::rolling_resistance);
   scene::Material m;
   m.name = "m";
   m.density = 1000;
   m.restitution = 0.3;
-  m.friction = 0.5;
+  m.friction = friction ? 0.5 : 0;
   m.rolling_friction = rolling ? 0.05 : 0;
   s.materials.push_back(m);
   return s;
@@ -203,7 +205,7 @@ scene::Scene pile_scene(bool rolling) {
 // sphere, then, stepped on, closes its in-plane gaps within some tens of
 // steps and ends at the same 11.
 std::pair<scene::Scene, scene::GeneratedParticles> pile(std::size_t n, const Lattice& lattice = {}) {
-  scene::Scene s = pile_scene(lattice.rolling);
+  scene::Scene s = pile_scene(lattice.rolling, lattice.friction);
   const double r = kPileRadius;
   const double a = lattice.spacing * r;
   const double row = a * std::sqrt(3.0) / 2;                   // between rows of a layer
@@ -564,10 +566,10 @@ int threads() {
 
 }  // namespace
 
-std::string pile_cache_path(const std::string& cache_dir, std::size_t n, bool rolling) {
+std::string pile_cache_path(const std::string& cache_dir, std::size_t n, bool rolling, bool friction) {
   const std::string dir = cache_dir.empty() ? default_cache_dir() : cache_dir;
-  return dir + "/pile-v" + std::to_string(kPileVersion) + (rolling ? "" : "-friction") + "-n" + std::to_string(n) +
-         "-" + kRealName + ".bin";
+  const char* terms = !friction ? "-frictionless" : rolling ? "" : "-friction";
+  return dir + "/pile-v" + std::to_string(kPileVersion) + terms + "-n" + std::to_string(n) + "-" + kRealName + ".bin";
 }
 
 int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
@@ -576,8 +578,12 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   if (!is_pile && !is_settle && options.scene != "gas")
     throw InputError({}, "--scene", "unknown scene '" + options.scene + "'");
   if (!options.rolling && !is_pile) throw InputError({}, "--rolling", "'off' is for --scene pile only");
+  if (!options.friction && !is_pile) throw InputError({}, "--friction", "'off' is for --scene pile only");
+  if (!options.friction && options.rolling)
+    throw InputError({}, "--friction", "'off' makes the pile without rolling resistance too: give --rolling off");
   Lattice pile_lattice;
   pile_lattice.rolling = options.rolling;
+  pile_lattice.friction = options.friction;
   const int warmup = options.warmup >= 0 ? options.warmup : (is_pile ? 5 : is_settle ? kSettleWarmup : 2);
   std::ostream& log = std::cerr;
   std::vector<Row> rows;
@@ -590,7 +596,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   };
   for (std::size_t n : options.n) {
     if (is_pile) {
-      const std::string path = pile_cache_path(options.cache_dir, n, options.rolling);
+      const std::string path = pile_cache_path(options.cache_dir, n, options.rolling, options.friction);
       std::optional<PileState> state = options.rebuild ? std::nullopt : load_pile(path, n, pile_lattice);
       if (state) {
         log << "pile N = " << n << ": loaded " << path << " (settled on " << state->settle.backend << " in "
@@ -617,6 +623,9 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   if (options.json) {
     nlohmann::ordered_json doc{{"benchmark", "step"}, {"backend", options.backend}, {"scene", options.scene},
                                {"precision", kRealName}, {"threads", threads()},
+                               {"friction", is_pile ? options.friction
+                                                    : is_settle || std::count(options.effects.begin(),
+                                                                              options.effects.end(), "friction") > 0},
                                {"rolling_resistance", is_pile ? options.rolling
                                                   : !is_settle && std::count(options.effects.begin(), options.effects.end(),
                                                                              "rolling_resistance") > 0},
@@ -669,8 +678,9 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   }
   out << "step benchmark (" << options.backend << ", " << kRealName << ", " << threads() << " thread(s), "
       << (lanes ? std::string("sweep lanes ") + lanes + ", " : "")
-      << (is_pile     ? options.rolling ? "settled pile (friction, rolling resistance, 10 iterations, dt 1 ms)"
-                                        : "settled pile (friction, no rolling resistance, 10 iterations, dt 1 ms)"
+      << (is_pile     ? !options.friction ? "settled pile (no friction, no rolling resistance, 10 iterations, dt 1 ms)"
+                        : options.rolling ? "settled pile (friction, rolling resistance, 10 iterations, dt 1 ms)"
+                                          : "settled pile (friction, no rolling resistance, 10 iterations, dt 1 ms)"
           : is_settle ? "settling lattice (25 layers, friction, 10 iterations, dt 1 ms)"
                       : "gas at volume fraction 0.1")
       << (options.sphere_order != "made" ? ", spheres in " + options.sphere_order + " order" : std::string())

@@ -58,6 +58,9 @@ struct StepBenchOptions {
   // pile: rolling resistance (rolling friction 0.05) on, or off (friction
   // only; settled and cached apart).
   bool rolling = true;
+  // pile: friction (0.5) on, or off (then rolling off too: a frictionless
+  // pile, settled and cached apart).
+  bool friction = true;
 };
 
 // The world with its spheres in the order StepBenchOptions::sphere_order
@@ -66,7 +69,7 @@ struct StepBenchOptions {
 World in_sphere_order(World world, const std::string& how);
 
 // The pile cache's file for N spheres (version and precision in the name).
-std::string pile_cache_path(const std::string& cache_dir, std::size_t n, bool rolling = true);
+std::string pile_cache_path(const std::string& cache_dir, std::size_t n, bool rolling = true, bool friction = true);
 
 int run_step_bench(const StepBenchOptions& options, std::ostream& out);
 

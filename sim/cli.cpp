@@ -230,6 +230,10 @@ int cli_main(int argc, char** argv) {
   bench_step->add_option("--rolling", st_rolling,
                          "pile: rolling resistance on (default) or off (friction only; settled and cached apart)")
       ->check(CLI::IsMember({"on", "off"}));
+  std::string st_friction = "on";
+  bench_step->add_option("--friction", st_friction,
+                         "pile: friction on (default) or off (with --rolling off: a frictionless pile, cached apart)")
+      ->check(CLI::IsMember({"on", "off"}));
   bench_step->add_flag("--json", st.json, "print JSON only (progress on stderr)");
 
   bench::EffectsBenchOptions ef;
@@ -294,6 +298,7 @@ int cli_main(int argc, char** argv) {
     if (*bench_step) {
       if (!st_n.empty()) st.n = st_n;
       st.rolling = st_rolling == "on";
+      st.friction = st_friction == "on";
       if (st.backend == "cuda") select_backend(BackendChoice::cuda, std::cerr);
       return bench::run_step_bench(st, std::cout);
     }

@@ -43,13 +43,30 @@ nlohmann::json run_json(const StepBenchOptions& options) {
   return nlohmann::json::parse(out.str());
 }
 
-TEST(StepBench, PileWithoutRollingIsCachedApart) {
-  EXPECT_NE(pile_cache_path("d", 1000, false), pile_cache_path("d", 1000, true));
-  EXPECT_EQ(pile_cache_path("d", 1000), pile_cache_path("d", 1000, true));
+TEST(StepBench, EachPileIsCachedApart) {
+  const std::string kinds[] = {pile_cache_path("d", 1000, true, true), pile_cache_path("d", 1000, false, true),
+                               pile_cache_path("d", 1000, false, false)};
+  EXPECT_NE(kinds[0], kinds[1]);
+  EXPECT_NE(kinds[0], kinds[2]);
+  EXPECT_NE(kinds[1], kinds[2]);
+  EXPECT_EQ(pile_cache_path("d", 1000), kinds[0]);
   EXPECT_NE(pile_cache_path("d", 1000, false), pile_cache_path("d", 2000, false));
 }
 
-TEST(StepBench, FrictionOnlyPileSettlesItsOwnFile) {
+// The spheres of a cached pile (past the header, whose settle time differs
+// from run to run anyway).
+std::string spheres_of(const std::string& path) {
+  constexpr std::size_t kHeader = 8 + 4 + 4 + 8 + 8 + 4 * 8;  // magic .. largest overlap
+  const std::string file = contents(path);
+  EXPECT_GT(file.size(), kHeader) << path;
+  return file.size() > kHeader ? file.substr(kHeader) : std::string();
+}
+
+// The default pile, the pile with friction alone and the frictionless one:
+// each settles into its own file, the JSON names its terms, and the three
+// settle to different spheres (the terms reached each scene); the second
+// run of a kind comes from its file.
+TEST(StepBench, EachPileSettlesItsOwnFile) {
   TempDir dir;
   StepBenchOptions o;
   o.backend = "cpu";
@@ -60,45 +77,55 @@ TEST(StepBench, FrictionOnlyPileSettlesItsOwnFile) {
   o.json = true;
   o.cache_dir = dir.path.string();
   o.settle_steps = 60;
-  o.rolling = false;
-  const nlohmann::json off = run_json(o);
-  EXPECT_FALSE(off["rolling_resistance"].get<bool>());
-  EXPECT_TRUE(fs::exists(pile_cache_path(o.cache_dir, 600, false)));
-  EXPECT_FALSE(fs::exists(pile_cache_path(o.cache_dir, 600, true)));
-  const nlohmann::json& row = off["results"][0];
-  EXPECT_FALSE(row["settle"]["cached"].get<bool>());
-  EXPECT_GT(row["contacts_per_sphere"].get<double>(), 1.0);  // a pile, not a gas
-
-  // Again: from its file. The default pile is settled on its own.
-  EXPECT_TRUE(run_json(o)["results"][0]["settle"]["cached"].get<bool>());
-  o.rolling = true;
-  const nlohmann::json on = run_json(o);
-  EXPECT_TRUE(on["rolling_resistance"].get<bool>());
-  EXPECT_FALSE(on["results"][0]["settle"]["cached"].get<bool>());
-  EXPECT_TRUE(fs::exists(pile_cache_path(o.cache_dir, 600, true)));
-  // The two piles' spheres (past the header, whose settle time differs
-  // anyway) settled under different contacts: rolling resistance reached one
-  // and not the other.
-  const std::string off_file = contents(pile_cache_path(o.cache_dir, 600, false));
-  const std::string on_file = contents(pile_cache_path(o.cache_dir, 600, true));
-  constexpr std::size_t kHeader = 8 + 4 + 4 + 8 + 8 + 4 * 8;  // magic .. largest overlap
-  ASSERT_EQ(off_file.size(), on_file.size());
-  ASSERT_GT(off_file.size(), kHeader);
-  EXPECT_NE(off_file.substr(kHeader), on_file.substr(kHeader));
+  struct Kind {
+    bool rolling, friction;
+  };
+  std::vector<std::string> spheres;
+  for (const Kind kind : {Kind{false, true}, Kind{false, false}, Kind{true, true}}) {
+    SCOPED_TRACE(std::string("rolling ") + (kind.rolling ? "on" : "off") + ", friction " + (kind.friction ? "on" : "off"));
+    o.rolling = kind.rolling;
+    o.friction = kind.friction;
+    const std::string path = pile_cache_path(o.cache_dir, 600, kind.rolling, kind.friction);
+    EXPECT_FALSE(fs::exists(path));
+    const nlohmann::json first = run_json(o);
+    EXPECT_EQ(first["rolling_resistance"].get<bool>(), kind.rolling);
+    EXPECT_EQ(first["friction"].get<bool>(), kind.friction);
+    const nlohmann::json& row = first["results"][0];
+    EXPECT_FALSE(row["settle"]["cached"].get<bool>());
+    EXPECT_GT(row["contacts_per_sphere"].get<double>(), 1.0);  // a pile, not a gas
+    EXPECT_TRUE(fs::exists(path));
+    EXPECT_TRUE(run_json(o)["results"][0]["settle"]["cached"].get<bool>());
+    spheres.push_back(spheres_of(path));
+  }
+  ASSERT_EQ(spheres.size(), 3u);
+  EXPECT_NE(spheres[0], spheres[1]);
+  EXPECT_NE(spheres[0], spheres[2]);
+  EXPECT_NE(spheres[1], spheres[2]);
 }
 
-TEST(StepBench, RollingOffOnlyForThePile) {
-  StepBenchOptions o;
-  o.scene = "gas";
-  o.n = {100};
-  o.rolling = false;
-  std::ostringstream out;
-  try {
-    run_step_bench(o, out);
-    FAIL() << "--rolling off accepted for the gas";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("--rolling"), std::string::npos) << e.what();
-  }
+// What the flags cannot mean is refused, naming the flag.
+TEST(StepBench, PileTermsRefusedWhereTheyMeanNothing) {
+  auto refused = [](StepBenchOptions o, const std::string& flag) {
+    o.n = {100};
+    std::ostringstream out;
+    try {
+      run_step_bench(o, out);
+      ADD_FAILURE() << flag << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(flag), std::string::npos) << e.what();
+    }
+  };
+  StepBenchOptions gas;
+  gas.scene = "gas";
+  gas.rolling = false;
+  refused(gas, "--rolling");
+  gas.rolling = true;
+  gas.friction = false;
+  refused(gas, "--friction");
+  StepBenchOptions pile;
+  pile.scene = "pile";
+  pile.friction = false;  // rolling resistance left on
+  refused(pile, "--friction");
 }
 
 }  // namespace
