@@ -1,7 +1,7 @@
-// Tests of `marbles bench step --rolling`: the pile with rolling resistance
-// off is the friction-only pile, settled and cached apart from the default
-// one (each N, each kind its own file), and the flag is refused where it
-// means nothing.
+// Tests of `marbles bench step --rolling` and `--friction`: the pile with
+// friction alone and the frictionless pile are settled and cached apart from
+// the default one (each N, each kind its own file), and the flags are
+// refused where they mean nothing.
 #include <gtest/gtest.h>
 
 #include <filesystem>
