@@ -607,7 +607,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         save_pile(path, state->world, state->settle);
         log << "pile N = " << n << ": saved " << path << "\n";
       }
-      time_steps(pile(n, pile_lattice).first, std::move(state->world), n);  // the box (the lattice is cheap next to the steps)
+      // The box (the lattice is cheap next to the steps).
+      time_steps(pile(n, pile_lattice).first, std::move(state->world), n);
       rows.back().settle = state->settle;
     } else if (is_settle) {
       auto [s, g] = pile(n, kSettleLattice);
@@ -627,8 +628,9 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                                     : is_settle || std::count(options.effects.begin(),
                                                                               options.effects.end(), "friction") > 0},
                                {"rolling_resistance", is_pile ? options.rolling
-                                                  : !is_settle && std::count(options.effects.begin(), options.effects.end(),
-                                                                             "rolling_resistance") > 0},
+                                                              : !is_settle && std::count(options.effects.begin(),
+                                                                                         options.effects.end(),
+                                                                                         "rolling_resistance") > 0},
                                {"cpu_lanes", lanes ? nlohmann::ordered_json(lanes) : nlohmann::ordered_json()},
                                {"repeats", options.repeats}, {"warmup", warmup},
                                {"sphere_order", options.sphere_order}, {"renumber", options.renumber},
@@ -678,9 +680,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   }
   out << "step benchmark (" << options.backend << ", " << kRealName << ", " << threads() << " thread(s), "
       << (lanes ? std::string("sweep lanes ") + lanes + ", " : "")
-      << (is_pile     ? !options.friction ? "settled pile (no friction, no rolling resistance, 10 iterations, dt 1 ms)"
-                        : options.rolling ? "settled pile (friction, rolling resistance, 10 iterations, dt 1 ms)"
-                                          : "settled pile (friction, no rolling resistance, 10 iterations, dt 1 ms)"
+      << (is_pile ? std::string("settled pile (") + (options.friction ? "" : "no ") + "friction, " +
+                        (options.rolling ? "" : "no ") + "rolling resistance, 10 iterations, dt 1 ms)"
           : is_settle ? "settling lattice (25 layers, friction, 10 iterations, dt 1 ms)"
                       : "gas at volume fraction 0.1")
       << (options.sphere_order != "made" ? ", spheres in " + options.sphere_order + " order" : std::string())

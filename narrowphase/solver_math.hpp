@@ -249,11 +249,13 @@ struct SweepRecords {
   BodyPair* bodies = nullptr; // a, b
   UniformArms uniform;        // the arms of every contact, where `arms` is null
 
-  // Real4 words of the impulse array (or of the normal impulses alone,
-  // rounded up to a word).
-  static constexpr std::size_t impulse_words(std::size_t n, bool friction) {
-    return friction ? n : (n * sizeof(real) + sizeof(Real4) - 1) / sizeof(Real4);
+  // Real4 words that hold n reals (an array of reals that leaves the next
+  // one 16-byte aligned).
+  static constexpr std::size_t real_words(std::size_t n) {
+    return (n * sizeof(real) + sizeof(Real4) - 1) / sizeof(Real4);
   }
+  // Real4 words of the impulse array (or of the normal impulses alone).
+  static constexpr std::size_t impulse_words(std::size_t n, bool friction) { return friction ? n : real_words(n); }
   // Bytes of the records of n contacts, every array 16-byte aligned.
   static constexpr std::size_t bytes_for(std::size_t n, bool extra = true, bool arms = true, bool rolling = true,
                                          bool friction = true) {
@@ -567,10 +569,12 @@ MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const ImpactR
   const Real4 i = impulse_word(s, k);
   Contact c = s.rolling ? load_record<true, true>(s, k, i)  // a wall's velocity too
                         : load_record<true, false>(s, k, i);
-  if (!s.rolling) {
+  // The pair table's coefficients, where the records keep some of them not.
+  auto pair = [&]() -> const PairCoefficients& {
     const std::uint32_t b = is_wall(c.b) ? walls[c.b & ~kWallFlag].material : world.material[c.b];
-    c.coeff.twisting_friction = table(world.material[c.a], b).twisting_friction;
-  }
+    return table(world.material[c.a], b);
+  };
+  if (!s.rolling) c.coeff.twisting_friction = pair().twisting_friction;
   if (impacts.word) {
     const Real4 i = impacts.word[k];
     c.approach_speed = i.x;
@@ -579,8 +583,7 @@ MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const ImpactR
     c.rebound_shift = i.w;
   } else {
     c.approach_speed = impacts.approach[k];
-    const std::uint32_t b = is_wall(c.b) ? walls[c.b & ~kWallFlag].material : world.material[c.b];
-    c.coeff.restitution = table(world.material[c.a], b).restitution;
+    c.coeff.restitution = pair().restitution;
   }
   set_masses<true, true>(c, world_body(world, c.a, c), world_body(world, c.b, c));
   return c;

@@ -693,7 +693,8 @@ class CudaStep final : public StepBackend {
     const bool extra = m_model.moving_walls, arms = !m_uniform_arms;
     const std::size_t words =
         (narrowphase::SweepRecords::bytes_for(m_count, extra, arms, m_terms.rolling, m_terms.friction) + 15) / 16;
-    const std::size_t impact_words = m_impact_candidates ? m_count : (m_count * sizeof(real) + 15) / 16;
+    const std::size_t impact_words =
+        m_impact_candidates ? m_count : narrowphase::SweepRecords::real_words(m_count);  // words, or approach speeds
     auto* memory = m_record_memory.as<narrowphase::Real4>(words + impact_words);
     narrowphase::UniformArms uniform;
     if (!arms) {
