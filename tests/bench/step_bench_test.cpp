@@ -6,9 +6,11 @@
 
 #include <filesystem>
 #include <fstream>
+#include <cstring>
 #include <iterator>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 #include <unistd.h>
@@ -53,10 +55,13 @@ TEST(StepBench, EachPileIsCachedApart) {
   EXPECT_NE(pile_cache_path("d", 1000, false), pile_cache_path("d", 2000, false));
 }
 
+// A cached pile's header: magic, version, sizeof(real), N, backend, then
+// the settle's steps, last quench, seconds, energy and largest overlap.
+constexpr std::size_t kHeader = 8 + 4 + 4 + 8 + 8 + 5 * 8;
+
 // The spheres of a cached pile (past the header, whose settle time differs
 // from run to run anyway).
 std::string spheres_of(const std::string& path) {
-  constexpr std::size_t kHeader = 8 + 4 + 4 + 8 + 8 + 4 * 8;  // magic .. largest overlap
   const std::string file = contents(path);
   EXPECT_GT(file.size(), kHeader) << path;
   return file.size() > kHeader ? file.substr(kHeader) : std::string();
@@ -101,6 +106,43 @@ TEST(StepBench, EachPileSettlesItsOwnFile) {
   EXPECT_NE(spheres[0], spheres[1]);
   EXPECT_NE(spheres[0], spheres[2]);
   EXPECT_NE(spheres[1], spheres[2]);
+}
+
+// A settled pile is at rest by itself: the settle stops zeroing the
+// velocities once the energy is below the bound, and calls the pile settled
+// only when the bound holds after 50 steps or more without a quench. The
+// file's velocities, read back here, give the energy the settle reports.
+TEST(StepBench, ASettledPileRestsWithoutQuenches) {
+  TempDir dir;
+  StepBenchOptions o;
+  o.backend = "cpu";
+  o.scene = "pile";
+  o.rolling = false;
+  o.n = {5000};
+  o.repeats = 1;
+  o.warmup = 0;
+  o.json = true;
+  o.cache_dir = dir.path.string();
+  const nlohmann::json settle = run_json(o)["results"][0]["settle"];
+  const auto steps = settle["steps"].get<std::uint64_t>(), quenched = settle["quenched_until"].get<std::uint64_t>();
+  EXPECT_GT(quenched, 0u);  // it was quenched: the test sees both phases
+  EXPECT_GE(steps, quenched + 50);
+  EXPECT_LT(steps, static_cast<std::uint64_t>(o.settle_steps));  // settled within the budget, not cut off
+  EXPECT_LT(settle["ke_per_sphere_J"].get<double>(), o.settle_ke);
+
+  // The energy of the file's velocities and angular velocities (after the
+  // positions): radius 1 cm, density 1000, a solid sphere's inertia.
+  const std::string file = contents(pile_cache_path(o.cache_dir, 5000, false, true));
+  const std::size_t n = 5000;
+  ASSERT_EQ(file.size(), kHeader + 10 * n * sizeof(real));
+  std::vector<real> motion(6 * n);
+  std::memcpy(motion.data(), file.data() + kHeader + 3 * n * sizeof(real), motion.size() * sizeof(real));
+  const double r = 0.01, mass = 1000 * 4.0 / 3.0 * 3.14159265358979 * r * r * r, inertia = 0.4 * mass * r * r;
+  double ke = 0;
+  for (std::size_t i = 0; i < 3 * n; ++i) ke += 0.5 * mass * double(motion[i]) * double(motion[i]);
+  for (std::size_t i = 3 * n; i < 6 * n; ++i) ke += 0.5 * inertia * double(motion[i]) * double(motion[i]);
+  EXPECT_LT(ke / n, o.settle_ke);
+  EXPECT_NEAR(ke / n, settle["ke_per_sphere_J"].get<double>(), 0.05 * o.settle_ke);
 }
 
 // What the flags cannot mean is refused, naming the flag.
