@@ -473,6 +473,10 @@ struct Row {
   double projection_sweeps = 0;    // per substep, mean over the timed steps (the projection sweeps until settled)
   std::uint64_t pair_redos = 0;    // substeps of the timed steps whose contacts were found again (CUDA: rooms)
   std::uint64_t grid_replans = 0;  // of those, the broad phase's grid outgrew its plan (CUDA)
+  // Substeps of the warm-up and timed steps whose records kept whole impact
+  // words (CUDA: a contact was an impact candidate; the records' memory,
+  // which only grows, is then sized for them for the rest of the run).
+  std::uint64_t impact_substeps = 0;
   std::uint64_t grid_shrinks = 0;  // substeps whose grid fit a plan larger than it asks: planned smaller (CUDA)
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   double bytes_per_step = 0;       // median host<->device bytes
@@ -489,7 +493,10 @@ struct Row {
 Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   Row row;
   row.n = n;
-  for (int k = 0; k < warmup; ++k) sim.step();
+  for (int k = 0; k < warmup; ++k) {
+    sim.step();
+    row.impact_substeps += sim.last_step().impact_words;
+  }
   std::vector<double> step_ms, overflow, bytes;
   double max_overlap = 0;
   const bool on_device = sim.backend_name() == "cuda";  // the CPU backend touches no device
@@ -509,6 +516,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     row.pair_redos += c.pair_redos;
     row.grid_replans += c.grid_replans;
     row.grid_shrinks += c.grid_shrinks;
+    row.impact_substeps += c.impact_words;
   }
   if (on_device) profiled_steps(false);  // each step ends with a wait for its flags: nothing of it is still running
   if (sim.non_finite()) throw RuntimeFailure("N = " + std::to_string(n) + ": non-finite state in the timed steps");
@@ -682,6 +690,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"pair_redos", r.pair_redos},
                                  {"grid_replans", r.grid_replans},
                                  {"grid_shrinks", r.grid_shrinks},
+                                 {"impact_word_substeps", r.impact_substeps},
                                  {"ke_per_sphere_J", r.ke_per_sphere},
                                  {"bytes_per_step_median", r.bytes_per_step},
                                  {"device_bytes_per_sphere", r.device_bytes_per_sphere},
