@@ -251,6 +251,9 @@ std::string default_cache_dir() {
   return ".marbles-cache";
 }
 
+// Steps without a quench before a pile counts as settled (settle_pile).
+constexpr int kFreeSteps = 50;
+
 // How the pile was made (from the file when it came from the cache).
 struct SettleInfo {
   bool cached = false;
@@ -260,6 +263,9 @@ struct SettleInfo {
   std::uint64_t quenched_until = 0;  // the step after which the velocities were last zeroed
   double ke_per_sphere = 0;  // J
   double max_overlap = 0;    // of a radius, at the last settle step
+  // At rest by itself below `bound` (settle_pile's rule), not cut off by the
+  // step budget.
+  bool settled(double bound) const { return ke_per_sphere < bound && steps >= quenched_until + kFreeSteps; }
 };
 
 struct PileState {
@@ -355,7 +361,6 @@ std::optional<PileState> load_pile(const std::string& path, std::size_t n, const
 // slides into a denser packing once let go: KE/sphere 10^-8 -> 10^-6 J in
 // 20 steps), so the quenches then stop, and the pile is settled when the
 // bound holds after kFreeSteps steps or more with no quench.
-constexpr int kFreeSteps = 50;
 
 PileState settle_pile(std::size_t n, const Lattice& lattice, broadphase::Backend backend,
                       const StepBenchOptions& options, std::ostream& log) {
@@ -708,7 +713,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         row["settle"] = {{"cached", r.settle->cached},          {"backend", r.settle->backend},
                          {"steps", r.settle->steps},            {"quenched_until", r.settle->quenched_until},
                          {"seconds", r.settle->seconds},
-                         {"ke_per_sphere_J", r.settle->ke_per_sphere}, {"max_overlap_pct", 100 * r.settle->max_overlap}};
+                         {"ke_per_sphere_J", r.settle->ke_per_sphere}, {"max_overlap_pct", 100 * r.settle->max_overlap},
+                         {"settled", r.settle->settled(options.settle_ke)}};
       doc["results"].push_back(std::move(row));
     }
     out << json_text(doc);
@@ -768,7 +774,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   }
   for (const Row& r : rows)
     if (r.settle)
-      out << "pile N = " << r.n << ": " << (r.settle->cached ? "from the cache, " : "") << "settled on "
+      out << "pile N = " << r.n << ": " << (r.settle->cached ? "from the cache, " : "")
+          << (r.settle->settled(options.settle_ke) ? "settled on " : "NOT settled (step budget spent) on ")
           << r.settle->backend << " in " << r.settle->steps << " steps, " << std::setprecision(3)
           << r.settle->seconds << " s, KE/sphere " << r.settle->ke_per_sphere << " J\n"
           << std::defaultfloat;

@@ -97,6 +97,7 @@ TEST(StepBench, EachPileSettlesItsOwnFile) {
     EXPECT_EQ(first["friction"].get<bool>(), kind.friction);
     const nlohmann::json& row = first["results"][0];
     EXPECT_FALSE(row["settle"]["cached"].get<bool>());
+    EXPECT_FALSE(row["settle"]["settled"].get<bool>());  // 60 steps: too few to rest 50 without a quench
     EXPECT_GT(row["contacts_per_sphere"].get<double>(), 1.0);  // a pile, not a gas
     EXPECT_TRUE(fs::exists(path));
     EXPECT_TRUE(run_json(o)["results"][0]["settle"]["cached"].get<bool>());
@@ -129,6 +130,7 @@ TEST(StepBench, ASettledPileRestsWithoutQuenches) {
   EXPECT_GE(steps, quenched + 50);
   EXPECT_LT(steps, static_cast<std::uint64_t>(o.settle_steps));  // settled within the budget, not cut off
   EXPECT_LT(settle["ke_per_sphere_J"].get<double>(), o.settle_ke);
+  EXPECT_TRUE(settle["settled"].get<bool>());
 
   // The energy of the file's velocities and angular velocities (after the
   // positions): radius 1 cm, density 1000, a solid sphere's inertia.
