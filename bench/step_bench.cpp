@@ -261,11 +261,12 @@ struct SettleInfo {
   std::uint64_t steps = 0;
   double seconds = 0;
   std::uint64_t quenched_until = 0;  // the step after which the velocities were last zeroed
+  double bound = 0;          // J a sphere: the settle's bound (--settle-ke)
   double ke_per_sphere = 0;  // J
   double max_overlap = 0;    // of a radius, at the last settle step
-  // At rest by itself below `bound` (settle_pile's rule), not cut off by the
-  // step budget.
-  bool settled(double bound) const { return ke_per_sphere < bound && steps >= quenched_until + kFreeSteps; }
+  // At rest by itself below its bound (settle_pile's rule), not cut off by
+  // the step budget.
+  bool settled() const { return ke_per_sphere < bound && steps >= quenched_until + kFreeSteps; }
 };
 
 struct PileState {
@@ -283,7 +284,7 @@ bool get(std::istream& f, T& v) {
 }
 
 // The file: magic, version, sizeof(real), N, how it settled (backend, steps,
-// the step of the last quench, seconds, kinetic energy per sphere, largest
+// the step of the last quench, the bound, seconds, kinetic energy per sphere, largest
 // overlap), then positions,
 // velocities, angular velocities (x y z per sphere) and radii, all as `real`.
 void save_pile(const std::string& path, const World& w, const SettleInfo& info) {
@@ -302,6 +303,7 @@ void save_pile(const std::string& path, const World& w, const SettleInfo& info) 
     f.write(backend, sizeof backend);
     put(f, info.steps);
     put(f, info.quenched_until);
+    put(f, info.bound);
     put(f, info.seconds);
     put(f, info.ke_per_sphere);
     put(f, info.max_overlap);
@@ -332,7 +334,7 @@ std::optional<PileState> load_pile(const std::string& path, std::size_t n, const
   SettleInfo info;
   info.cached = true;
   info.backend.assign(backend, strnlen(backend, sizeof backend));
-  if (!get(f, info.steps) || !get(f, info.quenched_until) || !get(f, info.seconds) || !get(f, info.ke_per_sphere) || !get(f, info.max_overlap))
+  if (!get(f, info.steps) || !get(f, info.quenched_until) || !get(f, info.bound) || !get(f, info.seconds) || !get(f, info.ke_per_sphere) || !get(f, info.max_overlap))
     return std::nullopt;
   auto [s, g] = pile(n, lattice);  // materials, masses; positions replaced below
   std::vector<Vec3> arrays[3];
@@ -350,17 +352,19 @@ std::optional<PileState> load_pile(const std::string& path, std::size_t n, const
   return PileState{std::move(w), info};
 }
 
-// Steps the loose lattice on `backend` until the kinetic energy per sphere
-// is below options.settle_ke (after the top layer has had time to land) or
-// the budget is spent; progress on `log`. Every options.settle_quench steps
-// the velocities are set to zero once the energy has been read (a quench):
-// the energy read is then what the pile gains from rest in that many steps,
-// and no fast sphere widens every sphere's contact reach for long (the
-// settle costs a fraction of the steps and of the time per step). A quenched
-// pile below the bound need not be at rest (a frictionless bed still
-// slides into a denser packing once let go: KE/sphere 10^-8 -> 10^-6 J in
-// 20 steps), so the quenches then stop, and the pile is settled when the
-// bound holds after kFreeSteps steps or more with no quench.
+// Steps the loose lattice on `backend` until it rests (SettleInfo::settled)
+// or the budget is spent; progress on `log`. Until the kinetic energy per
+// sphere is first below options.settle_ke (read every 10 steps, from step 50,
+// when the top layer has landed), the velocities are set to zero every
+// options.settle_quench steps once the energy has been read (a quench): the
+// energy read is then what the pile gains from rest in that many steps, and
+// no fast sphere widens every sphere's contact reach for long (the settle
+// costs a fraction of the steps and of the time per step). A quenched pile
+// below the bound need not be at rest (a frictionless bed still slides into
+// a denser packing once let go: KE/sphere 10^-8 -> 10^-6 J in 20 steps), so
+// the quenches then stop, and the pile is settled when the energy is below
+// the bound again kFreeSteps steps or more after the last quench. No quench
+// on the budget's last step: the file keeps the energy it reports.
 
 PileState settle_pile(std::size_t n, const Lattice& lattice, broadphase::Backend backend,
                       const StepBenchOptions& options, std::ostream& log) {
@@ -369,6 +373,7 @@ PileState settle_pile(std::size_t n, const Lattice& lattice, broadphase::Backend
   const int check = 10, min_steps = 50;
   SettleInfo info;
   info.backend = sim.backend_name();
+  info.bound = options.settle_ke;
   const auto t0 = std::chrono::steady_clock::now();
   double ke = 0;
   log << "pile N = " << n << ": settling on " << info.backend << " (budget " << options.settle_steps
@@ -379,11 +384,10 @@ PileState settle_pile(std::size_t n, const Lattice& lattice, broadphase::Backend
   log << ")\n";
   bool quenching = options.settle_quench > 0;
   int last_quench = 0;  // the step after which the velocities were last zeroed
-  bool settled = false;
   for (int k = 1; k <= options.settle_steps; ++k) {
     sim.step();
     if (sim.non_finite()) throw RuntimeFailure("pile N = " + std::to_string(n) + ": non-finite state while settling");
-    const bool quench_step = quenching && k % options.settle_quench == 0;
+    const bool quench_step = quenching && k % options.settle_quench == 0 && k != options.settle_steps;
     if (k % check != 0 && !quench_step && k != options.settle_steps) continue;
     ke = sim.world().kinetic_energy() / static_cast<double>(n);
     info.steps = static_cast<std::uint64_t>(k);
@@ -392,13 +396,9 @@ PileState settle_pile(std::size_t n, const Lattice& lattice, broadphase::Backend
       log << "  step " << k << ": KE/sphere " << ke << " J, max overlap " << 100 * sim.last_step().max_overlap
           << " %, " << secs << " s" << (quenching ? "" : " (no quench)") << "\n";
     const bool below = k >= min_steps && ke < options.settle_ke;
-    if (below && k - last_quench >= kFreeSteps) {
-      settled = true;
-      break;
-    }
+    if (below && k - last_quench >= kFreeSteps) break;  // settled
     if (below && quenching) {
       quenching = false;  // from here the pile comes to rest by itself, or is not settled
-      info.quenched_until = static_cast<std::uint64_t>(last_quench);
       log << "  step " << k << ": below the bound with quenches; now without\n";
     }
     if (quench_step && quenching) {
@@ -408,11 +408,11 @@ PileState settle_pile(std::size_t n, const Lattice& lattice, broadphase::Backend
       last_quench = k;
     }
   }
-  if (quenching) info.quenched_until = static_cast<std::uint64_t>(last_quench);
+  info.quenched_until = static_cast<std::uint64_t>(last_quench);
   info.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   info.ke_per_sphere = ke;
   info.max_overlap = sim.last_step().max_overlap;
-  log << "pile N = " << n << ": " << (settled ? "settled" : "step budget spent") << " after " << info.steps
+  log << "pile N = " << n << ": " << (info.settled() ? "settled" : "step budget spent") << " after " << info.steps
       << " steps (the last " << info.steps - info.quenched_until << " without a quench) in " << info.seconds
       << " s, KE/sphere " << ke << " J, max overlap " << 100 * info.max_overlap << " %\n";
   World w = sim.world();
@@ -637,10 +637,16 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
     if (is_pile) {
       const std::string path = pile_cache_path(options.cache_dir, n, options.rolling, options.friction);
       std::optional<PileState> state = options.rebuild ? std::nullopt : load_pile(path, n, pile_lattice);
+      // A pile whose budget ran out is settled again where this run allows more steps.
+      if (state && !state->settle.settled() && state->settle.steps < static_cast<std::uint64_t>(options.settle_steps)) {
+        log << "pile N = " << n << ": " << path << " did not settle in " << state->settle.steps
+            << " steps; settling again with a budget of " << options.settle_steps << "\n";
+        state.reset();
+      }
       if (state) {
-        log << "pile N = " << n << ": loaded " << path << " (settled on " << state->settle.backend << " in "
-            << state->settle.steps << " steps, " << state->settle.seconds << " s, KE/sphere "
-            << state->settle.ke_per_sphere << " J)\n";
+        log << "pile N = " << n << ": loaded " << path << " (" << (state->settle.settled() ? "settled" : "NOT settled")
+            << " on " << state->settle.backend << " in " << state->settle.steps << " steps, " << state->settle.seconds
+            << " s, KE/sphere " << state->settle.ke_per_sphere << " J)\n";
       } else {
         state = settle_pile(n, pile_lattice, backend, options, log);
         save_pile(path, state->world, state->settle);
@@ -714,7 +720,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                          {"steps", r.settle->steps},            {"quenched_until", r.settle->quenched_until},
                          {"seconds", r.settle->seconds},
                          {"ke_per_sphere_J", r.settle->ke_per_sphere}, {"max_overlap_pct", 100 * r.settle->max_overlap},
-                         {"settled", r.settle->settled(options.settle_ke)}};
+                         {"bound_J", r.settle->bound}, {"settled", r.settle->settled()}};
       doc["results"].push_back(std::move(row));
     }
     out << json_text(doc);
@@ -775,7 +781,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   for (const Row& r : rows)
     if (r.settle)
       out << "pile N = " << r.n << ": " << (r.settle->cached ? "from the cache, " : "")
-          << (r.settle->settled(options.settle_ke) ? "settled on " : "NOT settled (step budget spent) on ")
+          << (r.settle->settled() ? "settled on " : "NOT settled (step budget spent) on ")
           << r.settle->backend << " in " << r.settle->steps << " steps, " << std::setprecision(3)
           << r.settle->seconds << " s, KE/sphere " << r.settle->ke_per_sphere << " J\n"
           << std::defaultfloat;

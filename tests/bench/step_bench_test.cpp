@@ -56,8 +56,8 @@ TEST(StepBench, EachPileIsCachedApart) {
 }
 
 // A cached pile's header: magic, version, sizeof(real), N, backend, then
-// the settle's steps, last quench, seconds, energy and largest overlap.
-constexpr std::size_t kHeader = 8 + 4 + 4 + 8 + 8 + 5 * 8;
+// the settle's steps, last quench, bound, seconds, energy and largest overlap.
+constexpr std::size_t kHeader = 8 + 4 + 4 + 8 + 8 + 6 * 8;
 
 // The spheres of a cached pile (past the header, whose settle time differs
 // from run to run anyway).
@@ -124,12 +124,24 @@ TEST(StepBench, ASettledPileRestsWithoutQuenches) {
   o.warmup = 0;
   o.json = true;
   o.cache_dir = dir.path.string();
+  const int budget = o.settle_steps;
+
+  // A budget too small to rest 50 steps after the quenches: cached, not settled.
+  o.settle_steps = 60;
+  const nlohmann::json cut = run_json(o)["results"][0]["settle"];
+  EXPECT_FALSE(cut["settled"].get<bool>());
+  EXPECT_EQ(cut["steps"].get<std::uint64_t>(), 60u);
+
+  // The whole budget: that pile is settled again, not taken from the file.
+  o.settle_steps = budget;
   const nlohmann::json settle = run_json(o)["results"][0]["settle"];
+  EXPECT_FALSE(settle["cached"].get<bool>());
   const auto steps = settle["steps"].get<std::uint64_t>(), quenched = settle["quenched_until"].get<std::uint64_t>();
-  EXPECT_GT(quenched, 0u);  // it was quenched: the test sees both phases
+  EXPECT_GT(quenched, 0u);  // quenched every 10 steps until the energy was first below the bound
   EXPECT_GE(steps, quenched + 50);
-  EXPECT_LT(steps, static_cast<std::uint64_t>(o.settle_steps));  // settled within the budget, not cut off
+  EXPECT_LT(steps, static_cast<std::uint64_t>(budget));  // the quenches stopped: it rested within the budget
   EXPECT_LT(settle["ke_per_sphere_J"].get<double>(), o.settle_ke);
+  EXPECT_EQ(settle["bound_J"].get<double>(), o.settle_ke);
   EXPECT_TRUE(settle["settled"].get<bool>());
 
   // The energy of the file's velocities and angular velocities (after the
@@ -143,8 +155,13 @@ TEST(StepBench, ASettledPileRestsWithoutQuenches) {
   double ke = 0;
   for (std::size_t i = 0; i < 3 * n; ++i) ke += 0.5 * mass * double(motion[i]) * double(motion[i]);
   for (std::size_t i = 3 * n; i < 6 * n; ++i) ke += 0.5 * inertia * double(motion[i]) * double(motion[i]);
+  EXPECT_GT(ke, 0.0);  // the pile as it rests, not zeroed
   EXPECT_LT(ke / n, o.settle_ke);
-  EXPECT_NEAR(ke / n, settle["ke_per_sphere_J"].get<double>(), 0.05 * o.settle_ke);
+  const double reported = settle["ke_per_sphere_J"].get<double>();
+  EXPECT_NEAR(ke / n, reported, 1e-3 * reported);
+
+  // A settled pile is taken from the file.
+  EXPECT_TRUE(run_json(o)["results"][0]["settle"]["cached"].get<bool>());
 }
 
 // What the flags cannot mean is refused, naming the flag.
