@@ -159,7 +159,7 @@ namespace {
 // --- the pile ------------------------------------------------------------------
 
 // Bump when pile() or its scene changes: older cache files are then not used.
-constexpr std::uint32_t kPileVersion = 5;
+constexpr std::uint32_t kPileVersion = 6;
 constexpr char kPileMagic[8] = {'M', 'B', 'L', 'P', 'I', 'L', 'E', '\0'};
 constexpr double kPileRadius = 0.01;
 constexpr double kPileLayers = 30;  // about this many layers deep
