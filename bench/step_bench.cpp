@@ -284,9 +284,9 @@ bool get(std::istream& f, T& v) {
 }
 
 // The file: magic, version, sizeof(real), N, how it settled (backend, steps,
-// the step of the last quench, the bound, seconds, kinetic energy per sphere, largest
-// overlap), then positions,
-// velocities, angular velocities (x y z per sphere) and radii, all as `real`.
+// the step of the last quench, the bound, seconds, kinetic energy per
+// sphere, largest overlap), then positions, velocities, angular velocities
+// (x y z per sphere) and radii, all as `real`.
 void save_pile(const std::string& path, const World& w, const SettleInfo& info) {
   namespace fs = std::filesystem;
   fs::create_directories(fs::path(path).parent_path());
@@ -334,7 +334,8 @@ std::optional<PileState> load_pile(const std::string& path, std::size_t n, const
   SettleInfo info;
   info.cached = true;
   info.backend.assign(backend, strnlen(backend, sizeof backend));
-  if (!get(f, info.steps) || !get(f, info.quenched_until) || !get(f, info.bound) || !get(f, info.seconds) || !get(f, info.ke_per_sphere) || !get(f, info.max_overlap))
+  if (!get(f, info.steps) || !get(f, info.quenched_until) || !get(f, info.bound) || !get(f, info.seconds) ||
+      !get(f, info.ke_per_sphere) || !get(f, info.max_overlap))
     return std::nullopt;
   auto [s, g] = pile(n, lattice);  // materials, masses; positions replaced below
   std::vector<Vec3> arrays[3];
@@ -478,11 +479,11 @@ struct Row {
   double projection_sweeps = 0;    // per substep, mean over the timed steps (the projection sweeps until settled)
   std::uint64_t pair_redos = 0;    // substeps of the timed steps whose contacts were found again (CUDA: rooms)
   std::uint64_t grid_replans = 0;  // of those, the broad phase's grid outgrew its plan (CUDA)
+  std::uint64_t grid_shrinks = 0;  // substeps whose grid fit a plan larger than it asks: planned smaller (CUDA)
   // Substeps of the warm-up and timed steps whose records kept whole impact
   // words (CUDA: a contact was an impact candidate; the records' memory,
   // which only grows, is then sized for them for the rest of the run).
   std::uint64_t impact_substeps = 0;
-  std::uint64_t grid_shrinks = 0;  // substeps whose grid fit a plan larger than it asks: planned smaller (CUDA)
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   double bytes_per_step = 0;       // median host<->device bytes
   double device_bytes_per_sphere = 0;
@@ -644,8 +645,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         state.reset();
       }
       if (state) {
-        log << "pile N = " << n << ": loaded " << path << " (" << (state->settle.settled() ? "settled" : "NOT settled")
-            << " on " << state->settle.backend << " in " << state->settle.steps << " steps, " << state->settle.seconds
+        log << "pile N = " << n << ": loaded " << path << " ("
+            << (state->settle.settled() ? "settled" : "NOT settled") << " on " << state->settle.backend << " in " << state->settle.steps << " steps, " << state->settle.seconds
             << " s, KE/sphere " << state->settle.ke_per_sphere << " J)\n";
       } else {
         state = settle_pile(n, pile_lattice, backend, options, log);

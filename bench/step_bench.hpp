@@ -42,8 +42,8 @@ struct StepBenchOptions {
   std::vector<std::string> effects{"gravity", "collisions", "walls", "restitution"};  // gas only
   std::string cache_dir;             // pile cache; empty: $XDG_CACHE_HOME/marbles or ~/.cache/marbles
   int settle_steps = 3000;           // pile: step budget of the settle
-  double settle_ke = 1e-8;           // pile: the bound of the kinetic energy per sphere (J) of a settled pile
-  int settle_quench = 10;            // pile: zero the velocities every this many settle steps until first below it (0: never)
+  double settle_ke = 1e-8;           // pile: a settled pile's bound of the kinetic energy per sphere (J)
+  int settle_quench = 10;            // pile: zero the velocities every this many steps until first below it (0: never)
   bool rebuild = false;              // pile: settle again even when a cached pile is there
   // The spheres' index order the steps see (a study of memory locality):
   // made (as generated or settled: rows of the lattice), shuffled (a

@@ -212,9 +212,11 @@ int cli_main(int argc, char** argv) {
   bench_step->add_option("--effects", st.effects, "effects of the pipeline (gas only)")->delimiter(',');
   bench_step->add_option("--cache", st.cache_dir,
                          "folder of settled piles (default $XDG_CACHE_HOME/marbles or ~/.cache/marbles)");
-  bench_step->add_option("--settle-steps", st.settle_steps, "pile: step budget of the settle (a cached pile that ran out of a smaller one settles again)")
+  bench_step->add_option("--settle-steps", st.settle_steps,
+                         "pile: step budget of the settle (a cached pile that ran out of a smaller one settles again)")
       ->check(CLI::PositiveNumber);
-  bench_step->add_option("--settle-ke", st.settle_ke, "pile: settled below this kinetic energy per sphere (J), 50 steps or more after the last quench")
+  bench_step->add_option("--settle-ke", st.settle_ke,
+                         "pile: settled below this kinetic energy per sphere (J), 50 steps or more after the last quench")
       ->check(CLI::PositiveNumber);
   bench_step->add_option("--settle-quench", st.settle_quench,
                          "pile: zero the velocities every this many settle steps until first below the bound (0: never)")

@@ -1,12 +1,14 @@
-// Tests of `marbles bench step --rolling` and `--friction`: the pile with
-// friction alone and the frictionless pile are settled and cached apart from
-// the default one (each N, each kind its own file), and the flags are
-// refused where they mean nothing.
+// Tests of `marbles bench step`'s piles: the pile with friction alone
+// (`--rolling off`) and the frictionless pile (`--friction off`) are settled
+// and cached apart from the default one (each N, each kind its own file), the
+// flags are refused where they mean nothing, and a pile counts as settled
+// only once it rests without quenches (a pile whose budget ran out settles
+// again under a larger one).
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <cstring>
 #include <iterator>
 #include <sstream>
 #include <string>
