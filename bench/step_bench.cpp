@@ -645,9 +645,10 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         state.reset();
       }
       if (state) {
-        log << "pile N = " << n << ": loaded " << path << " ("
-            << (state->settle.settled() ? "settled" : "NOT settled") << " on " << state->settle.backend << " in " << state->settle.steps << " steps, " << state->settle.seconds
-            << " s, KE/sphere " << state->settle.ke_per_sphere << " J)\n";
+        const SettleInfo& settle = state->settle;
+        log << "pile N = " << n << ": loaded " << path << " (" << (settle.settled() ? "settled" : "NOT settled")
+            << " on " << settle.backend << " in " << settle.steps << " steps, " << settle.seconds << " s, KE/sphere "
+            << settle.ke_per_sphere << " J)\n";
       } else {
         state = settle_pile(n, pile_lattice, backend, options, log);
         save_pile(path, state->world, state->settle);

@@ -41,7 +41,7 @@ struct StepBenchOptions {
   bool json = false;                 // JSON only on stdout (progress on stderr)
   std::vector<std::string> effects{"gravity", "collisions", "walls", "restitution"};  // gas only
   std::string cache_dir;             // pile cache; empty: $XDG_CACHE_HOME/marbles or ~/.cache/marbles
-  int settle_steps = 3000;           // pile: step budget of the settle
+  int settle_steps = 8000;           // pile: step budget of the settle (a pile that rests stops sooner)
   double settle_ke = 1e-8;           // pile: a settled pile's bound of the kinetic energy per sphere (J)
   int settle_quench = 10;            // pile: zero the velocities every this many steps until first below it (0: never)
   bool rebuild = false;              // pile: settle again even when a cached pile is there
