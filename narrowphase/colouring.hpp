@@ -74,7 +74,8 @@ class ContactColouring {
 // the solve's first launch (the records made, the impacts) counts as having
 // written every record, a warm start writes none, a sweep its own range. Where a forward sweep
 // ends and a backward one starts the same range comes twice in a row (the
-// last colour, or the overflow set), and the second may not load early.
+// last colour, or the overflow set) unless merged into one launch
+// (visit_sweeps), and the second may not load early.
 class LastWrites {
  public:
   explicit LastWrites(std::uint32_t all) : m_end(all) {}
@@ -89,6 +90,35 @@ class LastWrites {
  private:
   std::uint32_t m_begin = 0, m_end;
 };
+
+// The sweeps' walk as launches: `sweeps` walks of visit_colours, forwards
+// and backwards in turn, empty ranges left out. With `merge_turns`, a range
+// that ends one sweep and begins the next (the turn: the last colour, or the
+// overflow set, after a forwards sweep; colour 0 after a backwards one)
+// comes once, visited twice: visit(begin, end, serial, reversed, twice),
+// twice meaning the range again at once the other way (serial: one by one
+// back; in parallel: each contact solved again right after itself, which
+// nothing else can tell apart, as no other contact of its colour shares a
+// sphere). Without, every range comes once a sweep (twice false).
+template <class Begin, class Visit>
+void visit_sweeps(const Begin& begin, std::uint32_t colours, int sweeps, bool merge_turns, Visit&& visit) {
+  struct Held {
+    std::uint32_t begin = 0, end = 0;
+    bool serial = false, reversed = false, held = false;
+  } held;
+  auto flush = [&](bool twice) {
+    if (held.held) visit(held.begin, held.end, held.serial, held.reversed, twice);
+    held.held = false;
+  };
+  for (int it = 0; it < sweeps; ++it)
+    visit_colours(begin, colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
+      if (e <= b) return;
+      if (merge_turns && held.held && held.begin == b && held.end == e) return flush(true);
+      flush(false);
+      held = {b, e, serial, reversed, true};
+    });
+  flush(false);
+}
 
 // True when no two contacts of one colour share a sphere (tests, checks).
 bool colouring_is_proper(const std::vector<Contact>& contacts, const ColourRanges& ranges, std::size_t body_count);

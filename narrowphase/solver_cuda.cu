@@ -20,15 +20,16 @@ using ::marbles::cuda::Launch;
 using ::marbles::cuda::launch;
 
 // Thread t of a range: contact begin + t, or for a serial range, one thread
-// visiting the whole range in order.
+// visiting the whole range in order (and back, twice).
 template <class F>
 __device__ void for_range(const ContactRange& r, F&& f) {
   if (r.serial) {
     if (blockIdx.x != 0 || threadIdx.x != 0) return;
-    if (r.backwards)
-      for (std::uint32_t k = r.end; k > r.begin; --k) f(k - 1);
-    else
-      for (std::uint32_t k = r.begin; k < r.end; ++k) f(k);
+    for (int pass = 0; pass < (r.twice ? 2 : 1); ++pass)
+      if (r.backwards != (pass == 1))
+        for (std::uint32_t k = r.end; k > r.begin; --k) f(k - 1);
+      else
+        for (std::uint32_t k = r.begin; k < r.end; ++k) f(k);
     return;
   }
   const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
@@ -92,11 +93,19 @@ __global__ void warm_start_kernel(SweepRecords records, ContactRange r, SolverBo
       [&](std::uint32_t k, const Real4& i) { warm_start_loaded<Friction, Rolling>(records, k, i, bodies); });
 }
 
-template <bool Friction, bool Rolling>
+// Twice (a parallel range at a turn): each contact solved again at once
+// from what it just wrote; its bodies and record are no other thread's in
+// the launch, so it reads what the next launch would. Its own instance, so
+// the sweep of every other launch keeps its registers. (A serial range at a
+// turn walks back in for_range.)
+template <bool Friction, bool Rolling, bool Twice>
 __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
   for_range_early(
       r, [&](std::uint32_t k) { return load_sweep_contact<Friction, Rolling>(s, k); },
-      [&](std::uint32_t k, const Contact& c) { solve_loaded<Friction, Rolling>(s, k, c, bodies, inv_h); });
+      [&](std::uint32_t k, const Contact& c) {
+        solve_loaded<Friction, Rolling>(s, k, c, bodies, inv_h);
+        if constexpr (Twice) solve_record<Friction, Rolling>(s, k, bodies, inv_h);
+      });
 }
 
 // One range [b, e) of a cooperative launch: spread over the grid, or
@@ -375,7 +384,11 @@ void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodie
                   cudaStream_t s) {
   if (r.end <= r.begin) return;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
-    launch(Launch::dependent, record_sweep_kernel<friction, rolling>, blocks(r), s, records, r, bodies, inv_h);
+    if (r.twice && !r.serial)
+      launch(Launch::dependent, record_sweep_kernel<friction, rolling, true>, blocks(r), s, records, r, bodies, inv_h);
+    else
+      launch(Launch::dependent, record_sweep_kernel<friction, rolling, false>, blocks(r), s, records, r, bodies,
+             inv_h);
   });
 }
 

@@ -33,6 +33,10 @@ struct ContactRange {
   // this range's records, so its threads load theirs while that launch ends
   // (programmatic dependent launch, solver_cuda.cu).
   bool early = false;
+  // The sweep at a turn (visit_sweeps): the range again at once, the other
+  // way (serial: back, one by one; parallel: each contact right after
+  // itself), as the next sweep's first launch would.
+  bool twice = false;
 };
 
 // The packed velocity state (solver_math.hpp) from the world, and back.

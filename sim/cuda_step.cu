@@ -87,16 +87,19 @@ __global__ void watch_kernel(BodiesView b, const narrowphase::WallShape* walls, 
 }
 
 // How the solve is launched (MARBLES_CUDA_SOLVE): auto (the default), a
-// launch per colour (launches), or the warm start and all sweeps in one
-// launch (one). The same bits either way: a choice of speed, and the tests
-// run both.
-enum class SolveMode { auto_, launches, one_launch };
+// launch per colour (launches; the range at a sweep's turn one launch that
+// visits it twice, visit_sweeps), the same with that range launched again
+// for the next sweep (apart: the earlier form, for comparisons), or the warm
+// start and all sweeps in one launch (one). The same bits either way: a
+// choice of speed, and the tests run each.
+enum class SolveMode { auto_, launches, apart, one_launch };
 SolveMode solve_mode_from_environment() {
   const char* asked = std::getenv("MARBLES_CUDA_SOLVE");
   if (asked == nullptr || std::strcmp(asked, "auto") == 0) return SolveMode::auto_;
   if (std::strcmp(asked, "launches") == 0) return SolveMode::launches;
+  if (std::strcmp(asked, "apart") == 0) return SolveMode::apart;
   if (std::strcmp(asked, "one") == 0) return SolveMode::one_launch;
-  throw RuntimeFailure(std::string("MARBLES_CUDA_SOLVE=") + asked + ": expected auto, launches or one");
+  throw RuntimeFailure(std::string("MARBLES_CUDA_SOLVE=") + asked + ": expected auto, launches, apart or one");
 }
 
 // Room for a count the host reads only after the stages that fill it (the
@@ -424,11 +427,15 @@ class CudaStep final : public StepBackend {
         early(r, false);
         nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);
       });
-    for (int it = 0; it < sweeps; ++it)
-      over_colours(it % 2 == 1, [&](nc::ContactRange r) {
-        early(r, true);
-        nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_stream);
-      });
+    narrowphase::visit_sweeps(m_plan.begin, m_plan.colours, sweeps, m_solve_mode != SolveMode::apart,
+                              [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed, bool twice) {
+                                nc::ContactRange r{b, e, serial, reversed};
+                                if (!serial) r.mirrored = m_mirror, m_mirror = !m_mirror;
+                                r.twice = twice;
+                                m_counters.turn_launches += twice ? 1 : 0;
+                                early(r, true);
+                                nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_stream);
+                              });
     nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
   }
 

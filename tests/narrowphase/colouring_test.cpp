@@ -522,38 +522,102 @@ TEST(ContactCache, StoreEqualsASortOfTheKeptContacts) {
 namespace marbles::narrowphase {
 namespace {
 
+// Random colour ranges: 1 to 20 colours, a quarter of them and of the
+// overflow sets empty.
+std::vector<std::uint32_t> random_colour_begins(std::mt19937_64& rng, std::uint32_t& colours) {
+  colours = 1 + static_cast<std::uint32_t>(rng() % 20);
+  std::vector<std::uint32_t> begin{0};
+  for (std::uint32_t c = 0; c <= colours; ++c)
+    begin.push_back(begin.back() + static_cast<std::uint32_t>(rng() % 4 == 0 ? 0 : rng() % 50));
+  return begin;
+}
+
 // The solve's launches as the GPU makes them (the records made, the warm start
 // forwards, then sweeps forwards and backwards in turn, an empty range
-// launching nothing) over random colour ranges, some colours and some
-// overflow sets empty: a launch may load early exactly when the launch just
-// before wrote none of its records, as a record-by-record account says.
+// launching nothing; visit_sweeps, with the turns' ranges merged or apart)
+// over random colour ranges: a launch may load early exactly when the launch
+// just before wrote none of its records, as a record-by-record account says.
 TEST(LastWrites, EarlyExactlyWhenTheLaunchBeforeWroteNoneOfItsRecords) {
-  std::mt19937_64 rng(83);
-  int repeated = 0;
-  for (int trial = 0; trial < 200; ++trial) {
-    const std::uint32_t colours = 1 + static_cast<std::uint32_t>(rng() % 20);
-    std::vector<std::uint32_t> begin{0};
-    for (std::uint32_t c = 0; c <= colours; ++c) begin.push_back(begin.back() + static_cast<std::uint32_t>(rng() % 4 == 0 ? 0 : rng() % 50));
-    const std::uint32_t n = begin.back();
-    std::vector<int> writer(n, 0);  // launch 0, the records made, wrote every record
-    int launch = 0;
-    LastWrites last(n);
-    auto run = [&](std::uint32_t b, std::uint32_t e, bool writes) {
-      if (e <= b) return;
-      ++launch;
-      bool untouched = true;
-      for (std::uint32_t k = b; k < e; ++k) untouched = untouched && writer[k] != launch - 1;
-      const bool early = last.next(b, e, writes);
-      ASSERT_EQ(early, untouched) << "trial " << trial << ", launch " << launch << " over [" << b << ", " << e << ")";
-      repeated += early ? 0 : 1;
-      if (writes)
-        for (std::uint32_t k = b; k < e; ++k) writer[k] = launch;
-    };
-    visit_colours(begin, colours, false, [&](std::uint32_t b, std::uint32_t e, bool, bool) { run(b, e, false); });
-    for (int it = 0; it < 10; ++it)
-      visit_colours(begin, colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t e, bool, bool) { run(b, e, true); });
+  int repeated[2] = {0, 0};  // launches that may not load early: turns apart, merged
+  for (const bool merge : {false, true}) {
+    std::mt19937_64 rng(83);
+    for (int trial = 0; trial < 200; ++trial) {
+      std::uint32_t colours = 0;
+      const std::vector<std::uint32_t> begin = random_colour_begins(rng, colours);
+      const std::uint32_t n = begin.back();
+      std::vector<int> writer(n, 0);  // launch 0, the records made, wrote every record
+      int launch = 0;
+      LastWrites last(n);
+      auto run = [&](std::uint32_t b, std::uint32_t e, bool writes) {
+        if (e <= b) return;
+        ++launch;
+        bool untouched = true;
+        for (std::uint32_t k = b; k < e; ++k) untouched = untouched && writer[k] != launch - 1;
+        const bool early = last.next(b, e, writes);
+        ASSERT_EQ(early, untouched) << "trial " << trial << ", launch " << launch << " over [" << b << ", " << e
+                                    << ")" << (merge ? ", merged" : "");
+        repeated[merge] += early ? 0 : 1;
+        if (writes)
+          for (std::uint32_t k = b; k < e; ++k) writer[k] = launch;
+      };
+      visit_colours(begin, colours, false, [&](std::uint32_t b, std::uint32_t e, bool, bool) { run(b, e, false); });
+      visit_sweeps(begin, colours, 10, merge,
+                   [&](std::uint32_t b, std::uint32_t e, bool, bool, bool) { run(b, e, true); });
+    }
   }
-  EXPECT_GT(repeated, 200 * 9);  // the first warm start, and every turn of direction, wait
+  // The first warm start waits, and apart every turn of direction too;
+  // merged, the turns are one launch each.
+  EXPECT_GT(repeated[0], 200 * 9);
+  EXPECT_LT(repeated[1], repeated[0] - 200 * 4);
+}
+
+// The sweeps as launches (visit_sweeps) over random colour ranges and 0 to
+// 6 sweeps: each launch's range visited once, and twice back the other way,
+// walks exactly what the sweeps' visit_colours walk (empty ranges left
+// out); merged, every turn is merged and no launch repeats the one before
+// it: sweeps - 1 of them, or half the sweeps where one range is all (its
+// launches all cover it, each twice but maybe the last).
+TEST(VisitSweeps, LaunchesWalkTheSweepsAndMergeEveryTurn) {
+  std::mt19937_64 rng(29);
+  struct Visit {
+    std::uint32_t b, e;
+    bool serial, reversed;
+    bool operator==(const Visit&) const = default;
+  };
+  for (int trial = 0; trial < 300; ++trial) {
+    std::uint32_t colours = 0;
+    const std::vector<std::uint32_t> begin = random_colour_begins(rng, colours);
+    const int sweeps = static_cast<int>(rng() % 7);
+    std::vector<Visit> walk;
+    for (int it = 0; it < sweeps; ++it)
+      visit_colours(begin, colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
+        if (e > b) walk.push_back({b, e, serial, reversed});
+      });
+    std::size_t ranges = 0;  // the non-empty ones
+    for (std::uint32_t c = 0; c <= colours; ++c) ranges += begin[c + 1] > begin[c] ? 1 : 0;
+    for (const bool merge : {false, true}) {
+      std::vector<Visit> seen;
+      int launches = 0, twice_launches = 0;
+      std::uint32_t last_b = 0, last_e = 0;
+      visit_sweeps(begin, colours, sweeps, merge,
+                   [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed, bool twice) {
+                     ASSERT_LT(b, e) << "trial " << trial;
+                     if (merge && ranges > 1 && launches > 0) {
+                       EXPECT_FALSE(b == last_b && e == last_e) << "trial " << trial;
+                     }
+                     ++launches;
+                     last_b = b, last_e = e;
+                     seen.push_back({b, e, serial, reversed});
+                     if (twice) {
+                       seen.push_back({b, e, serial, !reversed});
+                       ++twice_launches;
+                     }
+                   });
+      EXPECT_EQ(seen, walk) << "trial " << trial << (merge ? ", merged" : ", apart");
+      const int turns = ranges == 0 || sweeps == 0 ? 0 : ranges == 1 ? sweeps / 2 : sweeps - 1;
+      EXPECT_EQ(twice_launches, merge ? turns : 0) << "trial " << trial << ", " << ranges << " ranges";
+    }
+  }
 }
 
 // The impact levels' ranges from the firsts of their sorted keys (the GPU's
