@@ -25,11 +25,13 @@ template <class F>
 __device__ void for_range(const ContactRange& r, F&& f) {
   if (r.serial) {
     if (blockIdx.x != 0 || threadIdx.x != 0) return;
-    for (int pass = 0; pass < (r.twice ? 2 : 1); ++pass)
-      if (r.backwards != (pass == 1))
+    for (int pass = 0; pass < (r.twice ? 2 : 1); ++pass) {
+      if (r.backwards != (pass == 1)) {
         for (std::uint32_t k = r.end; k > r.begin; --k) f(k - 1);
-      else
+      } else {
         for (std::uint32_t k = r.begin; k < r.end; ++k) f(k);
+      }
+    }
     return;
   }
   const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
