@@ -366,7 +366,6 @@ std::optional<PileState> load_pile(const std::string& path, std::size_t n, const
 // the quenches then stop, and the pile is settled when the energy is below
 // the bound again kFreeSteps steps or more after the last quench. No quench
 // on the budget's last step: the file keeps the energy it reports.
-
 PileState settle_pile(std::size_t n, const Lattice& lattice, broadphase::Backend backend,
                       const StepBenchOptions& options, std::ostream& log) {
   auto [s, g] = pile(n, lattice);
@@ -392,12 +391,14 @@ PileState settle_pile(std::size_t n, const Lattice& lattice, broadphase::Backend
     if (k % check != 0 && !quench_step && k != options.settle_steps) continue;
     ke = sim.world().kinetic_energy() / static_cast<double>(n);
     info.steps = static_cast<std::uint64_t>(k);
+    info.quenched_until = static_cast<std::uint64_t>(last_quench);
+    info.ke_per_sphere = ke;
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (k % (5 * check) == 0)
       log << "  step " << k << ": KE/sphere " << ke << " J, max overlap " << 100 * sim.last_step().max_overlap
           << " %, " << secs << " s" << (quenching ? "" : " (no quench)") << "\n";
+    if (k >= min_steps && info.settled()) break;
     const bool below = k >= min_steps && ke < options.settle_ke;
-    if (below && k - last_quench >= kFreeSteps) break;  // settled
     if (below && quenching) {
       quenching = false;  // from here the pile comes to rest by itself, or is not settled
       log << "  step " << k << ": below the bound with quenches; now without\n";
@@ -409,9 +410,7 @@ PileState settle_pile(std::size_t n, const Lattice& lattice, broadphase::Backend
       last_quench = k;
     }
   }
-  info.quenched_until = static_cast<std::uint64_t>(last_quench);
   info.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  info.ke_per_sphere = ke;
   info.max_overlap = sim.last_step().max_overlap;
   log << "pile N = " << n << ": " << (info.settled() ? "settled" : "step budget spent") << " after " << info.steps
       << " steps (the last " << info.steps - info.quenched_until << " without a quench) in " << info.seconds
