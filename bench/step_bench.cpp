@@ -479,6 +479,7 @@ struct Row {
   std::uint64_t pair_redos = 0;    // substeps of the timed steps whose contacts were found again (CUDA: rooms)
   std::uint64_t grid_replans = 0;  // of those, the broad phase's grid outgrew its plan (CUDA)
   std::uint64_t grid_shrinks = 0;  // substeps whose grid fit a plan larger than it asks: planned smaller (CUDA)
+  std::uint64_t buffer_trims = 0;  // buffers freed at a step's start, held beyond their need (CUDA)
   // Substeps of the warm-up and timed steps whose records kept whole impact
   // words (CUDA: a contact was an impact candidate; the records' memory,
   // which only grows, is then sized for them for the rest of the run).
@@ -521,6 +522,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     row.pair_redos += c.pair_redos;
     row.grid_replans += c.grid_replans;
     row.grid_shrinks += c.grid_shrinks;
+    row.buffer_trims += c.buffer_trims;
     row.impact_substeps += c.impact_words;
   }
   if (on_device) profiled_steps(false);  // each step ends with a wait for its flags: nothing of it is still running
@@ -702,6 +704,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"pair_redos", r.pair_redos},
                                  {"grid_replans", r.grid_replans},
                                  {"grid_shrinks", r.grid_shrinks},
+                                 {"buffer_trims", r.buffer_trims},
                                  {"impact_word_substeps", r.impact_substeps},
                                  {"ke_per_sphere_J", r.ke_per_sphere},
                                  {"bytes_per_step_median", r.bytes_per_step},

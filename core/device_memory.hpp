@@ -69,11 +69,12 @@ class Event : public Owned<cudaEvent_t, cudaEventDestroy> {
   Event() { MARBLES_CUDA_CHECK(cudaEventCreate(&m_handle)); }
 };
 
-// A device allocation that only grows, to a sixteenth more than asked: room
+// A device allocation that grows, to a sixteenth more than asked: room
 // for a settled scene's contacts to come and go without a new allocation,
 // little enough that the headroom is not a fifth of the device memory
 // (docs/architecture.md "Headroom, the extra word and one read for the
-// colouring"). Freed with its owner.
+// colouring"). Freed with its owner, or by trim() where its owner's need
+// fell.
 //
 // Made with a stream, it takes and gives back its memory in that stream's
 // order (cudaMallocAsync, cudaFreeAsync, from the device's default pool):
@@ -99,6 +100,7 @@ class DeviceBuffer {
   // headroom false: exactly `bytes` when it grows (for a count that carries
   // its own headroom: a room sized from the last count).
   void* reserve(std::size_t bytes, bool headroom = true) {
+    m_asked = bytes > m_asked ? bytes : m_asked;
     if (bytes > m_bytes) {
       if (m_handle) MARBLES_CUDA_CHECK(m_ordered ? cudaFreeAsync(m_handle, m_stream) : cudaFree(m_handle));
       m_handle = nullptr;
@@ -113,6 +115,7 @@ class DeviceBuffer {
   // memory, then the old is freed after the copy (in the stream's order, or
   // by cudaFree, which waits for the device).
   void* reserve_keeping(std::size_t bytes, std::size_t keep, cudaStream_t stream) {
+    m_asked = bytes > m_asked ? bytes : m_asked;
     if (bytes <= m_bytes) return m_handle;
     if (m_ordered && stream != m_stream)
       throw std::logic_error("DeviceBuffer::reserve_keeping: a stream-ordered buffer grows on its own stream");
@@ -123,6 +126,7 @@ class DeviceBuffer {
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(grown.m_handle, m_handle, keep < m_bytes ? keep : m_bytes,
                                          cudaMemcpyDeviceToDevice, stream));
     swap(grown);  // the old memory goes with `grown`
+    m_asked = grown.m_asked > m_asked ? grown.m_asked : m_asked;
     return m_handle;
   }
   template <class T>
@@ -140,11 +144,31 @@ class DeviceBuffer {
   }
   void* get() const { return m_handle; }
   std::size_t bytes() const { return m_bytes; }
+  // The most bytes asked of it (reserve's `bytes`) since the last trim().
+  std::size_t asked() const { return m_asked; }
+  // Frees the memory where it holds more than an eighth and 4 KiB beyond
+  // the most bytes asked of it since the last trim (a need that fell: a
+  // transient's records or temporaries), to be reserved again, fitting, at
+  // its next use; then counts the asked bytes afresh. Only while its
+  // contents are dead: they are lost. A plain buffer's free waits for the
+  // device; a stream-ordered one's memory goes back at the stream's next
+  // synchronisation. True where it freed.
+  bool trim() {
+    const std::size_t asked = m_asked;
+    m_asked = 0;
+    if (!m_handle || m_bytes <= asked + asked / 8 + kTrimSlack) return false;
+    MARBLES_CUDA_CHECK(m_ordered ? cudaFreeAsync(m_handle, m_stream) : cudaFree(m_handle));
+    m_handle = nullptr;
+    m_bytes = 0;
+    return true;
+  }
+  static constexpr std::size_t kTrimSlack = 4096;
   void swap(DeviceBuffer& other) noexcept {
     std::swap(m_handle, other.m_handle);
     std::swap(m_bytes, other.m_bytes);
     std::swap(m_stream, other.m_stream);
     std::swap(m_ordered, other.m_ordered);
+    std::swap(m_asked, other.m_asked);
   }
 
  private:
@@ -160,6 +184,7 @@ class DeviceBuffer {
 
   void* m_handle = nullptr;
   std::size_t m_bytes = 0;
+  std::size_t m_asked = 0;  // trim()'s: the most bytes asked since the last
   cudaStream_t m_stream = nullptr;
   bool m_ordered = false;
 };

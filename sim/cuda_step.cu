@@ -102,6 +102,21 @@ SolveMode solve_mode_from_environment() {
   throw RuntimeFailure(std::string("MARBLES_CUDA_SOLVE=") + asked + ": expected auto, launches, apart or one");
 }
 
+// How often (steps) the step's per-contact buffers are trimmed to their
+// need (CudaStep::trim_buffers; MARBLES_CUDA_TRIM_EVERY, 0: never; the
+// tests trim every step, the most often, against the CPU's bits).
+constexpr int kTrimEvery = 16;
+int trim_every_from_environment() {
+  const char* asked = std::getenv("MARBLES_CUDA_TRIM_EVERY");
+  if (asked == nullptr) return kTrimEvery;
+  char* end = nullptr;
+  const long every = std::strtol(asked, &end, 10);
+  if (end == asked || *end != '\0' || every < 0 || every > 1000000)
+    throw RuntimeFailure(std::string("MARBLES_CUDA_TRIM_EVERY=") + asked +
+                         ": expected a whole number of steps from 0 (never) to 1000000");
+  return static_cast<int>(every);
+}
+
 // Room for a count the host reads only after the stages that fill it (the
 // broad phase's pairs, the contacts): from the last count, a sixteenth more
 // (a quarter after a count that outgrew its room) and twice the last
@@ -469,6 +484,7 @@ class CudaStep final : public StepBackend {
   void begin_step() override {
     send_host_edits();
     m_counters = {};
+    trim_buffers();
     MARBLES_CUDA_CHECK(cudaMemsetAsync(m_flags.get(), 0, kFlagWords * sizeof(unsigned long long), m_stream));
   }
 
@@ -717,6 +733,25 @@ class CudaStep final : public StepBackend {
   }
   narrowphase::WallShape* walls() const { return m_walls.get_as<narrowphase::WallShape>(); }
 
+  // Every m_trim_every steps, at a step's start, where the last substep's
+  // contacts are no longer asked for: the buffers sized by the substep's
+  // contacts or temporaries that hold more than their largest need since
+  // the last trim (an eighth and 4 KiB beyond it: DeviceBuffer::trim) are
+  // freed, and grow again to fit at their next use. A transient (impact
+  // words and levels while a pour lands, a contact count that fell) then
+  // holds the device's memory for at most that many steps, not for the
+  // run. Their contents are dead here: the contact search, the colouring and
+  // the records' making write them before they read them. The cache's
+  // entries (the warm start's) are live and stay. The frees wait for the
+  // device, which is idle between steps (end_step waited), and only in a
+  // step that trims.
+  void trim_buffers() {
+    if (m_trim_every <= 0 || ++m_steps_since_trim < m_trim_every) return;
+    m_steps_since_trim = 0;
+    for (DeviceBuffer* b : {&m_record_memory, &m_scratch, &m_pairs, &m_match, &m_kept_colour, &m_sorted_colour})
+      m_counters.buffer_trims += b->trim() ? 1 : 0;
+  }
+
   // One launch per colour range in the solver's order (visit_colours, the
   // CPU solver's too); the overflow set by one thread.
   // Parallel launches take their colour in turn forwards and mirrored (the
@@ -841,6 +876,8 @@ class CudaStep final : public StepBackend {
   // contacts a colour in auto mode.
   static constexpr std::uint32_t kOneLaunchWidest = 16384;
   SolveMode m_solve_mode = solve_mode_from_environment();
+  int m_trim_every = trim_every_from_environment();  // trim_buffers(): steps apart, 0 never
+  int m_steps_since_trim = 0;
   // MARBLES_SOLVE_ORDER's local order (a study; none: the solver's order).
   std::optional<narrowphase::LocalOrder> m_local = narrowphase::local_order_from_environment();
   nc::LocalSweepsCuda m_local_sweeps;

@@ -48,6 +48,7 @@ struct StepCounters {
   std::uint64_t pair_redos = 0;       // substeps whose pairs or contacts outgrew their room: found again (CUDA)
   std::uint64_t grid_replans = 0;     // of those, the broad phase's grid outgrew its plan: found with a wait (CUDA)
   std::uint64_t grid_shrinks = 0;     // substeps whose grid fit a plan larger than it asks: planned again (CUDA)
+  std::uint64_t buffer_trims = 0;     // buffers freed at the step's start, held beyond their need (CUDA)
   // With the watch on (StepBackend::set_watch), the figures of the watchdog's
   // invariants at the end of the step (sim/watch_math.hpp):
   double kinetic_energy = 0;          // J, translational + rotational

@@ -1,11 +1,13 @@
 // core/device_memory.hpp's DeviceBuffer::reserve_keeping: a buffer grown
 // keeps its first bytes (random contents, read back), a buffer that fits
-// is not moved, and a stream-ordered buffer grows in its stream's order.
+// is not moved, and a stream-ordered buffer grows in its stream's order;
+// DeviceBuffer::trim frees exactly what the last asks left over.
 // Label `gpu`; every case skips, saying so, without a CUDA device.
 #include <gtest/gtest.h>
 
 #include <cuda_runtime.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <random>
 #include <vector>
@@ -66,4 +68,56 @@ TEST(DeviceBuffer, ReserveKeepingLeavesABufferThatFits) {
   EXPECT_EQ(buffer.reserve_keeping(4096, 4096, nullptr), at);
   EXPECT_EQ(buffer.reserve_keeping(100, 100, nullptr), at);
   EXPECT_EQ(buffer.bytes(), 4096u);
+}
+
+// trim(): over random windows of asks (some far below what the buffer
+// holds, some near it), the buffer is freed exactly where it holds more
+// than an eighth and kTrimSlack beyond the window's largest ask (counted
+// here from the asks themselves), kept untouched otherwise, and grows again
+// to fit; the asks are counted afresh after each trim. Plain and
+// stream-ordered buffers alike.
+TEST(DeviceBuffer, TrimFreesWhatTheLastNeedLeftOver) {
+  REQUIRE_DEVICE();
+  dev::Stream stream;
+  stream.create(cudaStreamNonBlocking);
+  std::mt19937_64 rng(11);
+  dev::DeviceBuffer plain, ordered(stream);
+  for (dev::DeviceBuffer* b : {&plain, &ordered}) {
+    dev::DeviceBuffer& buffer = *b;
+    std::size_t freed = 0, kept = 0;
+    for (int window = 0; window < 200; ++window) {
+      // Asks around a level that jumps now and then (a transient, a fall).
+      const std::size_t level = std::size_t{1} << (8 + rng() % 14);
+      std::size_t largest = 0;
+      const int asks = static_cast<int>(rng() % 4);  // a window may ask nothing
+      for (int k = 0; k < asks; ++k) {
+        const std::size_t bytes = level / 2 + rng() % level;
+        largest = std::max(largest, bytes);
+        auto* p = static_cast<unsigned char*>(buffer.reserve(bytes, rng() % 2 == 0));
+        ASSERT_NE(p, nullptr);
+        ASSERT_GE(buffer.bytes(), bytes);
+        ASSERT_EQ(cudaMemsetAsync(p, 0x5a, bytes, stream), cudaSuccess);  // the memory is the buffer's, all of it
+      }
+      ASSERT_EQ(buffer.asked(), largest);
+      const std::size_t held = buffer.bytes();
+      const void* at = buffer.get();
+      const bool over = held > largest + largest / 8 + dev::DeviceBuffer::kTrimSlack;
+      ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
+      const bool trimmed = buffer.trim();
+      ASSERT_EQ(trimmed, over && held > 0) << "window " << window << ": held " << held << ", asked " << largest;
+      if (trimmed) {
+        EXPECT_EQ(buffer.bytes(), 0u);
+        EXPECT_EQ(buffer.get(), nullptr);
+        ++freed;
+      } else {
+        EXPECT_EQ(buffer.bytes(), held);
+        EXPECT_EQ(buffer.get(), at);
+        kept += held > 0 ? 1 : 0;
+      }
+      EXPECT_EQ(buffer.asked(), 0u);
+    }
+    EXPECT_GT(freed, 10u) << "the random levels should fall often";
+    EXPECT_GT(kept, 10u) << "and often stay";
+    ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
+  }
 }

@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <cstdio>
 #include <cstring>
+#include <optional>
 #include <random>
 #include <set>
 #include <string>
@@ -57,6 +58,7 @@ struct GpuCounts {
   std::uint64_t pair_redos = 0;    // substeps whose broad phase outgrew its pairs' room and ran again
   std::uint64_t grid_replans = 0;  // of those, the grid outgrew the broad phase's plan
   std::uint64_t grid_shrinks = 0;  // substeps whose grid found the plan outsized: the next one plans
+  std::uint64_t trims = 0;         // buffers freed at a step's start, held beyond their need
 };
 
 // Steps both backends side by side; the first step whose states differ
@@ -73,6 +75,7 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
     counts.pair_redos += gpu.last_step().pair_redos;
     counts.grid_replans += gpu.last_step().grid_replans;
     counts.grid_shrinks += gpu.last_step().grid_shrinks;
+    counts.trims += gpu.last_step().buffer_trims;
     if (cpu.last_step().contacts > 0) counts.solved += 1;
     if (form == "one") {
       ASSERT_EQ(gpu.last_step().one_launch_solves > 0, cpu.last_step().contacts > 0) << "step " << k;
@@ -102,9 +105,10 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
 // one launch at least once (every scene here has small colours).
 // `pair_redos` (if given) adds up the substeps whose broad phase outgrew
 // its pairs' room and ran again; `grid_replans` those whose grid outgrew
-// the broad phase's plan.
+// the broad phase's plan; `trims` the buffers trimmed to their need.
 void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps,
-                     std::uint64_t* pair_redos = nullptr, std::uint64_t* grid_replans = nullptr) {
+                     std::uint64_t* pair_redos = nullptr, std::uint64_t* grid_replans = nullptr,
+                     std::uint64_t* trims = nullptr) {
   Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
   ASSERT_EQ(gpu.backend_name(), "cuda");
@@ -113,6 +117,7 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
   if (::testing::Test::HasFatalFailure()) return;
   if (pair_redos) *pair_redos += counts.pair_redos;
   if (grid_replans) *grid_replans += counts.grid_replans;
+  if (trims) *trims += counts.trims;
   const std::string form = solve_form();
   // A walk of two sweeps or more turns on a range it then visits twice in
   // one launch (visit_sweeps), unless the turns are asked apart.
@@ -223,7 +228,16 @@ TEST(StepCuda, RefusedWithoutADevice) {
 TEST(StepCuda, PourMatchesTheCpuBitForBit) {
   REQUIRE_DEVICE();
   auto [s, g] = pour_scene(400, 3);
-  expect_same_run(s, g, 400);
+  std::uint64_t trims = 0;
+  expect_same_run(s, g, 400, nullptr, nullptr, &trims);
+  // Trimmed every step (ctest step_cuda_test.trim_every_step), the pour's
+  // falling need (a substep's impact words gone) frees buffers: the bits
+  // above held across them.
+  const char* every = std::getenv("MARBLES_CUDA_TRIM_EVERY");
+  if (every && std::strcmp(every, "1") == 0) {
+    EXPECT_GT(trims, 0u);
+  }
+  std::printf("buffers trimmed in the pour: %llu\n", static_cast<unsigned long long>(trims));
 }
 
 // The accuracy knobs: velocity Verlet (its half kicks and its wall impacts at
@@ -815,4 +829,92 @@ TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
   gpu.step();
   parts = gpu.device_buffers();
   EXPECT_GE(part(parts, "watchdog's copy"), n * 3 * sizeof(Vec3));  // positions, velocities, angular velocities
+}
+
+namespace {
+
+// MARBLES_CUDA_TRIM_EVERY set to `value` while it lives (a CudaStep reads it
+// when made), then as it was.
+class TrimEvery {
+ public:
+  explicit TrimEvery(const char* value) {
+    if (const char* was = std::getenv(kName)) m_was = was;
+    setenv(kName, value, 1);
+  }
+  ~TrimEvery() {
+    if (m_was.empty()) unsetenv(kName);
+    else setenv(kName, m_was.c_str(), 1);
+  }
+  TrimEvery(const TrimEvery&) = delete;
+  TrimEvery& operator=(const TrimEvery&) = delete;
+
+ private:
+  static constexpr const char* kName = "MARBLES_CUDA_TRIM_EVERY";
+  std::string m_was;
+};
+
+}  // namespace
+
+// A dense block dropped onto the floor of a box: its first substeps have
+// impact candidates (whole impact words in the records, the impact levels'
+// lists in the scratch), the later ones not. A step that trims its buffers
+// every step gives the bits of one that never does, and once two steps in
+// a row had no impact word, holds less: the records and scratch of its
+// present need, where the untrimmed one still holds the landing's.
+TEST(StepCuda, TrimmedBuffersFollowTheNeedWithTheSameBits) {
+  REQUIRE_DEVICE();
+  scene::Scene s = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
+                                        Effect::friction}, 0.2, 0.5);
+  s.walls.push_back(box({0, 0, 0}, {real(0.5), real(0.5), real(1)}));
+  const scene::GeneratedParticles g = dense_block(24, 24, 12, real(0.01), real(0.02));
+  std::optional<Simulation> trimmed, untrimmed;
+  {
+    TrimEvery every("1");
+    trimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
+  }
+  {
+    TrimEvery never("0");
+    untrimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
+  }
+  auto part = [](const std::vector<DeviceBytes>& parts, const std::string& name) {
+    for (const DeviceBytes& p : parts)
+      if (p.name == name) return p.bytes;
+    ADD_FAILURE() << "no part named " << name;
+    return std::size_t{0};
+  };
+  std::uint64_t trims = 0, untrimmed_trims = 0, impact_steps = 0;
+  bool quiet_before = false, found = false;
+  for (int k = 0; k < 400 && !found; ++k) {
+    trimmed->step();
+    untrimmed->step();
+    trims += trimmed->last_step().buffer_trims;
+    untrimmed_trims += untrimmed->last_step().buffer_trims;
+    ASSERT_EQ(trimmed->last_step().impact_words, untrimmed->last_step().impact_words) << "step " << k;
+    const bool quiet = trimmed->last_step().impact_words == 0;
+    impact_steps += quiet ? 0 : 1;
+    found = impact_steps > 0 && quiet && quiet_before;  // the trim at this step's start saw a quiet step
+    quiet_before = quiet;
+    if (k % 10 == 9 || found) {
+      const World& a = trimmed->world();
+      const World& b = untrimmed->world();
+      for (std::size_t i = 0; i < a.size(); ++i) {
+        ASSERT_EQ(a.position[i], b.position[i]) << "step " << k << " sphere " << i;
+        ASSERT_EQ(a.velocity[i], b.velocity[i]) << "step " << k << " sphere " << i;
+        ASSERT_EQ(a.angular_velocity[i], b.angular_velocity[i]) << "step " << k << " sphere " << i;
+      }
+    }
+  }
+  ASSERT_GT(impact_steps, 0u) << "the landing must have impact candidates";
+  ASSERT_TRUE(found) << "the block must come to two steps in a row without impact candidates";
+  EXPECT_GT(trims, 0u);
+  EXPECT_EQ(untrimmed_trims, 0u);
+  const std::vector<DeviceBytes> a = trimmed->device_buffers(), b = untrimmed->device_buffers();
+  const std::size_t records = part(a, "records"), scratch = part(a, "scratch");
+  std::printf("records %zu bytes trimmed, %zu untrimmed; scratch %zu, %zu; %zu spheres, %llu contacts\n", records,
+              part(b, "records"), scratch, part(b, "scratch"), trimmed->world().size(),
+              static_cast<unsigned long long>(trimmed->last_step().contacts));
+  EXPECT_LE(records, part(b, "records"));
+  EXPECT_LT(records + scratch, part(b, "records") + part(b, "scratch"));
+  // What the step needs stays: the records of every contact at least.
+  EXPECT_GE(records, trimmed->last_step().contacts * (2 * sizeof(narrowphase::Real4) + sizeof(narrowphase::BodyPair)));
 }
