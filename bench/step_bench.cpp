@@ -481,8 +481,8 @@ struct Row {
   std::uint64_t grid_shrinks = 0;  // substeps whose grid fit a plan larger than it asks: planned smaller (CUDA)
   std::uint64_t buffer_trims = 0;  // buffers freed at a step's start, held beyond their need (CUDA)
   // Substeps of the warm-up and timed steps whose records kept whole impact
-  // words (CUDA: a contact was an impact candidate; the records' memory,
-  // which only grows, is then sized for them for the rest of the run).
+  // words (CUDA: a contact was an impact candidate; the records' memory is
+  // then sized for them until a trim finds them gone: buffer_trims).
   std::uint64_t impact_substeps = 0;
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   double bytes_per_step = 0;       // median host<->device bytes

@@ -1,6 +1,7 @@
-// core/device_memory.hpp — device memory that only grows, pinned host
-// memory, streams and events, each freed with its owner (a constructor or a
-// test that stops early leaks nothing). Plain C++ over the CUDA runtime: .cpp
+// core/device_memory.hpp — device memory that grows (and is trimmed where
+// its owner's need fell), pinned host memory, streams and events, each freed
+// with its owner (a constructor or a test that stops early leaks nothing).
+// Plain C++ over the CUDA runtime: .cpp
 // files that talk to the runtime include it too (core/device_buffer.cuh adds
 // what needs the CUDA compiler).
 #pragma once
