@@ -109,6 +109,16 @@ class ContactCacheCuda {
   // contents are dead while the contacts are stored (the CUDA step's body
   // pairs' memory, which holds the solver bodies during the solve).
   void share_store_memory(DeviceBuffer& memory) { m_store_memory = &memory; }
+  // The entries' arrays trimmed to the most entries asked of them since the
+  // last trim (DeviceBuffer::trim); returns how many were freed. Only where
+  // the entries are dead: after the restore and the records' making that
+  // read them, before the store that writes them (or where a copy_to is
+  // about to write them).
+  std::uint32_t trim_entries() {
+    std::uint32_t freed = 0;
+    for (DeviceBuffer* b : {&m_keys, &m_normal, &m_tangent, &m_rolling, &m_colour}) freed += b->trim() ? 1 : 0;
+    return freed;
+  }
 
  private:
   // The entries: their keys' b halves (m_keys), impulses and colours.

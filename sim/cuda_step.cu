@@ -477,6 +477,10 @@ class CudaStep final : public StepBackend {
   }
 
   void store_impulses() override {
+    if (m_cache_trim_due) {  // trim_buffers' step: the entries were read (restore, records), now rewritten
+      m_counters.buffer_trims += m_cache.trim_entries();
+      m_cache_trim_due = false;
+    }
     m_cache.store(m_records, m_sorted_colour.get_as<std::uint8_t>(), m_count,
                   static_cast<std::uint32_t>(m_device.size()), m_sm, m_stream);
   }
@@ -637,6 +641,12 @@ class CudaStep final : public StepBackend {
   }
   void keep_step_start() override {
     send_host_edits();  // edits between steps belong to the step's start
+    // The copy's entries are dead until copied again: trimmed as often as
+    // the step's buffers (trim_buffers).
+    if (m_trim_every > 0 && ++m_kept_since_trim >= m_trim_every) {
+      m_kept_since_trim = 0;
+      m_kept_cache.trim_entries();
+    }
     m_device.copy_state_to(m_kept, m_stream);
     m_cache.copy_to(m_kept_cache, m_stream);
     const std::size_t wall_bytes = m_model.wall_shapes.size() * sizeof(narrowphase::WallShape);
@@ -742,14 +752,17 @@ class CudaStep final : public StepBackend {
   // holds the device's memory for at most that many steps, not for the
   // run. Their contents are dead here: the contact search, the colouring and
   // the records' making write them before they read them. The cache's
-  // entries (the warm start's) are live and stay. The frees wait for the
-  // device, which is idle between steps (end_step waited), and only in a
-  // step that trims.
+  // entries (the warm start's) are live here: they are trimmed in this
+  // step's first store, which rewrites them (store_impulses), and the
+  // watchdog's copy of them before it is copied again (keep_step_start).
+  // The frees wait for the device, which is idle between steps (end_step
+  // waited), and only in a step that trims.
   void trim_buffers() {
     if (m_trim_every <= 0 || ++m_steps_since_trim < m_trim_every) return;
     m_steps_since_trim = 0;
     for (DeviceBuffer* b : {&m_record_memory, &m_scratch, &m_pairs, &m_match, &m_kept_colour, &m_sorted_colour})
       m_counters.buffer_trims += b->trim() ? 1 : 0;
+    m_cache_trim_due = true;
   }
 
   // One launch per colour range in the solver's order (visit_colours, the
@@ -878,6 +891,8 @@ class CudaStep final : public StepBackend {
   SolveMode m_solve_mode = solve_mode_from_environment();
   int m_trim_every = trim_every_from_environment();  // trim_buffers(): steps apart, 0 never
   int m_steps_since_trim = 0;
+  bool m_cache_trim_due = false;  // the cache's entries trimmed at the next store (store_impulses)
+  int m_kept_since_trim = 0;      // keep_step_start's steps since it trimmed the watchdog's copy
   // MARBLES_SOLVE_ORDER's local order (a study; none: the solver's order).
   std::optional<narrowphase::LocalOrder> m_local = narrowphase::local_order_from_environment();
   nc::LocalSweepsCuda m_local_sweeps;

@@ -918,3 +918,67 @@ TEST(StepCuda, TrimmedBuffersFollowTheNeedWithTheSameBits) {
   // What the step needs stays: the records of every contact at least.
   EXPECT_GE(records, trimmed->last_step().contacts * (2 * sizeof(narrowphase::Real4) + sizeof(narrowphase::BodyPair)));
 }
+
+// A block of touching spheres flying apart in empty space (no gravity, each
+// sphere moving away from the centre): contacts at first, none once the
+// gaps outgrow the contacts' reach. Trimmed every step, the step then holds
+// less for its contacts (records, cache, the watchdog's copy of the cache)
+// than one that never trims, with the same bits.
+TEST(StepCuda, TrimmedBuffersFallWithTheContacts) {
+  REQUIRE_DEVICE();
+  scene::Scene s = make_scene(1e-3, 1, {Effect::collisions, Effect::restitution, Effect::friction,
+                                        Effect::rolling_resistance}, 0.5, 0.5, 0.05);
+  const real r = real(0.01);
+  scene::GeneratedParticles g = dense_block(16, 16, 8, r, 0);
+  Vec3 centre{};
+  for (const Vec3& p : g.position) centre = centre + p;
+  centre = centre / static_cast<real>(g.position.size());
+  for (std::size_t i = 0; i < g.position.size(); ++i) g.velocity[i] = (g.position[i] - centre) * real(20);
+  std::optional<Simulation> trimmed, untrimmed;
+  {
+    TrimEvery every("1");
+    trimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
+  }
+  {
+    TrimEvery never("0");
+    untrimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
+  }
+  auto part = [](const std::vector<DeviceBytes>& parts, const std::string& name) {
+    for (const DeviceBytes& p : parts)
+      if (p.name == name) return p.bytes;
+    ADD_FAILURE() << "no part named " << name;
+    return std::size_t{0};
+  };
+  trimmed->set_watchdog(true);
+  untrimmed->set_watchdog(true);
+  trimmed->step();
+  untrimmed->step();
+  ASSERT_GT(trimmed->last_step().contacts, g.position.size()) << "the block must start touching";
+  std::uint64_t trims = trimmed->last_step().buffer_trims;
+  for (int k = 1; k < 60; ++k) {
+    trimmed->step();
+    untrimmed->step();
+    trims += trimmed->last_step().buffer_trims;
+    ASSERT_EQ(untrimmed->last_step().buffer_trims, 0u);
+    ASSERT_EQ(trimmed->last_step().contacts, untrimmed->last_step().contacts) << "step " << k;
+  }
+  ASSERT_EQ(trimmed->last_step().contacts, 0u) << "the block must have flown apart";
+  const World& a = trimmed->world();
+  const World& b = untrimmed->world();
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a.position[i], b.position[i]) << "sphere " << i;
+    ASSERT_EQ(a.velocity[i], b.velocity[i]) << "sphere " << i;
+    ASSERT_EQ(a.angular_velocity[i], b.angular_velocity[i]) << "sphere " << i;
+  }
+  EXPECT_GT(trims, 0u);
+  const std::vector<DeviceBytes> pa = trimmed->device_buffers(), pb = untrimmed->device_buffers();
+  std::printf("records %zu bytes trimmed, %zu untrimmed; cache %zu, %zu; matches and colours %zu, %zu; "
+              "watchdog's copy %zu, %zu\n",
+              part(pa, "records"), part(pb, "records"), part(pa, "cache"), part(pb, "cache"),
+              part(pa, "matches and colours"), part(pb, "matches and colours"), part(pa, "watchdog's copy"),
+              part(pb, "watchdog's copy"));
+  EXPECT_LT(part(pa, "watchdog's copy"), part(pb, "watchdog's copy"));
+  EXPECT_LT(part(pa, "records"), part(pb, "records"));
+  EXPECT_LT(part(pa, "cache"), part(pb, "cache"));
+  EXPECT_LT(part(pa, "matches and colours"), part(pb, "matches and colours"));
+}
