@@ -50,6 +50,15 @@ bool one_radius(const World& w) {
   return true;
 }
 
+// The bytes of the part of the step's device memory named `name`
+// (StepBackend::device_buffers).
+std::size_t part(const std::vector<DeviceBytes>& parts, const std::string& name) {
+  for (const DeviceBytes& p : parts)
+    if (p.name == name) return p.bytes;
+  ADD_FAILURE() << "no part named " << name;
+  return 0;
+}
+
 // What the GPU's steps did, added up over the steps of expect_same_steps.
 struct GpuCounts {
   std::uint64_t one_launch = 0;    // substeps whose solve took one launch
@@ -768,12 +777,6 @@ TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
   s.walls.push_back(box({0, 0, 0}, {real(1.25), real(1.25), real(1)}));
   Simulation gpu(s, make_world(s, dense_block(60, 60, 30, r, real(0.02))), broadphase::Backend::cuda);
   const std::size_t n = gpu.world().size();
-  auto part = [](const std::vector<DeviceBytes>& parts, const std::string& name) {
-    for (const DeviceBytes& p : parts)
-      if (p.name == name) return p.bytes;
-    ADD_FAILURE() << "no part named " << name;
-    return std::size_t{0};
-  };
   for (int k = 0; k < 40; ++k) gpu.step();
   const std::uint64_t contacts = gpu.last_step().contacts;
   ASSERT_GT(contacts, n);  // a block resting in layers: several contacts a sphere
@@ -853,6 +856,28 @@ class TrimEvery {
   std::string m_was;
 };
 
+// One scene on the GPU twice: its buffers trimmed every step, and never.
+struct TrimmedAndNot {
+  TrimmedAndNot(const scene::Scene& s, const scene::GeneratedParticles& g) {
+    {
+      TrimEvery every("1");
+      trimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
+    }
+    TrimEvery never("0");
+    untrimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
+  }
+  std::optional<Simulation> trimmed, untrimmed;
+};
+
+// The two states equal bit for bit.
+void expect_same_state(const World& a, const World& b, int step) {
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a.position[i], b.position[i]) << "step " << step << " sphere " << i;
+    ASSERT_EQ(a.velocity[i], b.velocity[i]) << "step " << step << " sphere " << i;
+    ASSERT_EQ(a.angular_velocity[i], b.angular_velocity[i]) << "step " << step << " sphere " << i;
+  }
+}
+
 }  // namespace
 
 // A dense block dropped onto the floor of a box: its first substeps have
@@ -866,57 +891,39 @@ TEST(StepCuda, TrimmedBuffersFollowTheNeedWithTheSameBits) {
   scene::Scene s = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
                                         Effect::friction}, 0.2, 0.5);
   s.walls.push_back(box({0, 0, 0}, {real(0.5), real(0.5), real(1)}));
-  const scene::GeneratedParticles g = dense_block(24, 24, 12, real(0.01), real(0.02));
-  std::optional<Simulation> trimmed, untrimmed;
-  {
-    TrimEvery every("1");
-    trimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
-  }
-  {
-    TrimEvery never("0");
-    untrimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
-  }
-  auto part = [](const std::vector<DeviceBytes>& parts, const std::string& name) {
-    for (const DeviceBytes& p : parts)
-      if (p.name == name) return p.bytes;
-    ADD_FAILURE() << "no part named " << name;
-    return std::size_t{0};
-  };
+  TrimmedAndNot runs(s, dense_block(24, 24, 12, real(0.01), real(0.02)));
+  Simulation& trimmed = *runs.trimmed;
+  Simulation& untrimmed = *runs.untrimmed;
   std::uint64_t trims = 0, untrimmed_trims = 0, impact_steps = 0;
   bool quiet_before = false, found = false;
   for (int k = 0; k < 400 && !found; ++k) {
-    trimmed->step();
-    untrimmed->step();
-    trims += trimmed->last_step().buffer_trims;
-    untrimmed_trims += untrimmed->last_step().buffer_trims;
-    ASSERT_EQ(trimmed->last_step().impact_words, untrimmed->last_step().impact_words) << "step " << k;
-    const bool quiet = trimmed->last_step().impact_words == 0;
+    trimmed.step();
+    untrimmed.step();
+    trims += trimmed.last_step().buffer_trims;
+    untrimmed_trims += untrimmed.last_step().buffer_trims;
+    ASSERT_EQ(trimmed.last_step().impact_words, untrimmed.last_step().impact_words) << "step " << k;
+    const bool quiet = trimmed.last_step().impact_words == 0;
     impact_steps += quiet ? 0 : 1;
     found = impact_steps > 0 && quiet && quiet_before;  // the trim at this step's start saw a quiet step
     quiet_before = quiet;
     if (k % 10 == 9 || found) {
-      const World& a = trimmed->world();
-      const World& b = untrimmed->world();
-      for (std::size_t i = 0; i < a.size(); ++i) {
-        ASSERT_EQ(a.position[i], b.position[i]) << "step " << k << " sphere " << i;
-        ASSERT_EQ(a.velocity[i], b.velocity[i]) << "step " << k << " sphere " << i;
-        ASSERT_EQ(a.angular_velocity[i], b.angular_velocity[i]) << "step " << k << " sphere " << i;
-      }
+      expect_same_state(trimmed.world(), untrimmed.world(), k);
+      if (::testing::Test::HasFatalFailure()) return;
     }
   }
   ASSERT_GT(impact_steps, 0u) << "the landing must have impact candidates";
   ASSERT_TRUE(found) << "the block must come to two steps in a row without impact candidates";
   EXPECT_GT(trims, 0u);
   EXPECT_EQ(untrimmed_trims, 0u);
-  const std::vector<DeviceBytes> a = trimmed->device_buffers(), b = untrimmed->device_buffers();
+  const std::vector<DeviceBytes> a = trimmed.device_buffers(), b = untrimmed.device_buffers();
   const std::size_t records = part(a, "records"), scratch = part(a, "scratch");
   std::printf("records %zu bytes trimmed, %zu untrimmed; scratch %zu, %zu; %zu spheres, %llu contacts\n", records,
-              part(b, "records"), scratch, part(b, "scratch"), trimmed->world().size(),
-              static_cast<unsigned long long>(trimmed->last_step().contacts));
+              part(b, "records"), scratch, part(b, "scratch"), trimmed.world().size(),
+              static_cast<unsigned long long>(trimmed.last_step().contacts));
   EXPECT_LE(records, part(b, "records"));
   EXPECT_LT(records + scratch, part(b, "records") + part(b, "scratch"));
   // What the step needs stays: the records of every contact at least.
-  EXPECT_GE(records, trimmed->last_step().contacts * (2 * sizeof(narrowphase::Real4) + sizeof(narrowphase::BodyPair)));
+  EXPECT_GE(records, trimmed.last_step().contacts * (2 * sizeof(narrowphase::Real4) + sizeof(narrowphase::BodyPair)));
 }
 
 // A block of touching spheres flying apart in empty space (no gravity, each
@@ -934,44 +941,27 @@ TEST(StepCuda, TrimmedBuffersFallWithTheContacts) {
   for (const Vec3& p : g.position) centre = centre + p;
   centre = centre / static_cast<real>(g.position.size());
   for (std::size_t i = 0; i < g.position.size(); ++i) g.velocity[i] = (g.position[i] - centre) * real(20);
-  std::optional<Simulation> trimmed, untrimmed;
-  {
-    TrimEvery every("1");
-    trimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
-  }
-  {
-    TrimEvery never("0");
-    untrimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
-  }
-  auto part = [](const std::vector<DeviceBytes>& parts, const std::string& name) {
-    for (const DeviceBytes& p : parts)
-      if (p.name == name) return p.bytes;
-    ADD_FAILURE() << "no part named " << name;
-    return std::size_t{0};
-  };
-  trimmed->set_watchdog(true);
-  untrimmed->set_watchdog(true);
-  trimmed->step();
-  untrimmed->step();
-  ASSERT_GT(trimmed->last_step().contacts, g.position.size()) << "the block must start touching";
-  std::uint64_t trims = trimmed->last_step().buffer_trims;
+  TrimmedAndNot runs(s, g);
+  Simulation& trimmed = *runs.trimmed;
+  Simulation& untrimmed = *runs.untrimmed;
+  trimmed.set_watchdog(true);
+  untrimmed.set_watchdog(true);
+  trimmed.step();
+  untrimmed.step();
+  ASSERT_GT(trimmed.last_step().contacts, g.position.size()) << "the block must start touching";
+  std::uint64_t trims = trimmed.last_step().buffer_trims;
   for (int k = 1; k < 60; ++k) {
-    trimmed->step();
-    untrimmed->step();
-    trims += trimmed->last_step().buffer_trims;
-    ASSERT_EQ(untrimmed->last_step().buffer_trims, 0u);
-    ASSERT_EQ(trimmed->last_step().contacts, untrimmed->last_step().contacts) << "step " << k;
+    trimmed.step();
+    untrimmed.step();
+    trims += trimmed.last_step().buffer_trims;
+    ASSERT_EQ(untrimmed.last_step().buffer_trims, 0u);
+    ASSERT_EQ(trimmed.last_step().contacts, untrimmed.last_step().contacts) << "step " << k;
   }
-  ASSERT_EQ(trimmed->last_step().contacts, 0u) << "the block must have flown apart";
-  const World& a = trimmed->world();
-  const World& b = untrimmed->world();
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    ASSERT_EQ(a.position[i], b.position[i]) << "sphere " << i;
-    ASSERT_EQ(a.velocity[i], b.velocity[i]) << "sphere " << i;
-    ASSERT_EQ(a.angular_velocity[i], b.angular_velocity[i]) << "sphere " << i;
-  }
+  ASSERT_EQ(trimmed.last_step().contacts, 0u) << "the block must have flown apart";
+  expect_same_state(trimmed.world(), untrimmed.world(), 60);
+  if (::testing::Test::HasFatalFailure()) return;
   EXPECT_GT(trims, 0u);
-  const std::vector<DeviceBytes> pa = trimmed->device_buffers(), pb = untrimmed->device_buffers();
+  const std::vector<DeviceBytes> pa = trimmed.device_buffers(), pb = untrimmed.device_buffers();
   std::printf("records %zu bytes trimmed, %zu untrimmed; cache %zu, %zu; matches and colours %zu, %zu; "
               "watchdog's copy %zu, %zu\n",
               part(pa, "records"), part(pb, "records"), part(pa, "cache"), part(pb, "cache"),
