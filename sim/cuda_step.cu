@@ -755,8 +755,9 @@ class CudaStep final : public StepBackend {
   // entries (the warm start's) are live here: they are trimmed in this
   // step's first store, which rewrites them (store_impulses), and the
   // watchdog's copy of them before it is copied again (keep_step_start).
-  // The frees wait for the device, which is idle between steps (end_step
-  // waited), and only in a step that trims.
+  // A free waits for the device: here it is idle (end_step waited); the
+  // store's waits for the substep's work. Only a buffer that is freed
+  // costs that wait, in a step that trims.
   void trim_buffers() {
     if (m_trim_every <= 0 || ++m_steps_since_trim < m_trim_every) return;
     m_steps_since_trim = 0;
