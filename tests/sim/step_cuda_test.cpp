@@ -836,34 +836,14 @@ TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
 
 namespace {
 
-// MARBLES_CUDA_TRIM_EVERY set to `value` while it lives (a CudaStep reads it
-// when made), then as it was.
-class TrimEvery {
- public:
-  explicit TrimEvery(const char* value) {
-    if (const char* was = std::getenv(kName)) m_was = was;
-    setenv(kName, value, 1);
-  }
-  ~TrimEvery() {
-    if (m_was.empty()) unsetenv(kName);
-    else setenv(kName, m_was.c_str(), 1);
-  }
-  TrimEvery(const TrimEvery&) = delete;
-  TrimEvery& operator=(const TrimEvery&) = delete;
-
- private:
-  static constexpr const char* kName = "MARBLES_CUDA_TRIM_EVERY";
-  std::string m_was;
-};
-
 // One scene on the GPU twice: its buffers trimmed every step, and never.
 struct TrimmedAndNot {
   TrimmedAndNot(const scene::Scene& s, const scene::GeneratedParticles& g) {
     {
-      TrimEvery every("1");
+      ScopedEnvironment every("MARBLES_CUDA_TRIM_EVERY", "1");
       trimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
     }
-    TrimEvery never("0");
+    ScopedEnvironment never("MARBLES_CUDA_TRIM_EVERY", "0");
     untrimmed.emplace(s, make_world(s, g), broadphase::Backend::cuda);
   }
   std::optional<Simulation> trimmed, untrimmed;

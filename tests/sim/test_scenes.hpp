@@ -26,23 +26,31 @@ inline broadphase::Backend test_backend() {
   return v != nullptr && std::strcmp(v, "cuda") == 0 ? broadphase::Backend::cuda : broadphase::Backend::cpu;
 }
 
-// MARBLES_SOLVE_ORDER (narrowphase/solver.hpp: LocalOrder) set to `value`
-// while it lives, then as it was (a solver reads it when made).
-class SolveOrder {
+// The environment variable `name` set to `value` while it lives, then as it
+// was (for the switches a step or solver reads when made).
+class ScopedEnvironment {
  public:
-  explicit SolveOrder(const std::string& value) {
-    if (const char* was = std::getenv("MARBLES_SOLVE_ORDER")) m_was = was;
-    setenv("MARBLES_SOLVE_ORDER", value.c_str(), 1);
+  ScopedEnvironment(const char* name, const std::string& value) : m_name(name) {
+    if (const char* was = std::getenv(name)) m_was = was;
+    setenv(name, value.c_str(), 1);
   }
-  ~SolveOrder() {
-    if (m_was) setenv("MARBLES_SOLVE_ORDER", m_was->c_str(), 1);
-    else unsetenv("MARBLES_SOLVE_ORDER");
+  ~ScopedEnvironment() {
+    if (m_was) setenv(m_name, m_was->c_str(), 1);
+    else unsetenv(m_name);
   }
-  SolveOrder(const SolveOrder&) = delete;
-  SolveOrder& operator=(const SolveOrder&) = delete;
+  ScopedEnvironment(const ScopedEnvironment&) = delete;
+  ScopedEnvironment& operator=(const ScopedEnvironment&) = delete;
 
  private:
+  const char* m_name;
   std::optional<std::string> m_was;
+};
+
+// MARBLES_SOLVE_ORDER (narrowphase/solver.hpp: LocalOrder) set to `value`
+// while it lives, then as it was (a solver reads it when made).
+class SolveOrder : public ScopedEnvironment {
+ public:
+  explicit SolveOrder(const std::string& value) : ScopedEnvironment("MARBLES_SOLVE_ORDER", value) {}
 };
 
 inline scene::Scene make_scene(double dt, int substeps, std::initializer_list<scene::Effect> effects,
