@@ -485,6 +485,8 @@ struct Row {
   // then sized for them until a trim finds them gone: buffer_trims).
   std::uint64_t impact_substeps = 0;
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
+  std::uint64_t rollbacks = 0;     // steps the watchdog undid and redid (--watchdog on), of all the steps run here
+  std::optional<double> watch_ke_per_sphere;  // J, the watch's own figure at the last step's end (--watchdog on)
   double bytes_per_step = 0;       // median host<->device bytes
   double device_bytes_per_sphere = 0;
   std::vector<DeviceBytes> device_buffers;  // by part (StepBackend::device_buffers)
@@ -593,6 +595,8 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   for (const narrowphase::Contact& c : sim.contacts()) touches += narrowphase::is_wall(c.b) ? 1 : 2;
   row.coordination = static_cast<double>(touches) / static_cast<double>(n);
   row.ke_per_sphere = sim.world().kinetic_energy() / static_cast<double>(n);
+  row.rollbacks = sim.rollbacks();
+  if (sim.watchdog()) row.watch_ke_per_sphere = sim.last_step().kinetic_energy / static_cast<double>(n);
   return row;
 }
 
@@ -633,6 +637,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   auto time_steps = [&](scene::Scene s, World w, std::size_t n) {
     s.solver.renumber = options.renumber;
     Simulation sim(s, in_sphere_order(std::move(w), options.sphere_order), backend);
+    sim.set_watchdog(options.watchdog);
     rows.push_back(measure(sim, n, warmup, options.repeats));
   };
   for (std::size_t n : options.n) {
@@ -682,6 +687,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                {"cpu_lanes", lanes ? nlohmann::ordered_json(lanes) : nlohmann::ordered_json()},
                                {"repeats", options.repeats}, {"warmup", warmup},
                                {"sphere_order", options.sphere_order}, {"renumber", options.renumber},
+                               {"watchdog", options.watchdog},
                                {"launches_per_step", nlohmann::ordered_json::array()},
                                {"results", nlohmann::ordered_json::array()}};
     auto count = [](const std::optional<double>& v) {
@@ -707,6 +713,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"buffer_trims", r.buffer_trims},
                                  {"impact_word_substeps", r.impact_substeps},
                                  {"ke_per_sphere_J", r.ke_per_sphere},
+                                 {"rollbacks", r.rollbacks},
+                                 {"watch_ke_per_sphere_J", count(r.watch_ke_per_sphere)},
                                  {"bytes_per_step_median", r.bytes_per_step},
                                  {"device_bytes_per_sphere", r.device_bytes_per_sphere},
                                  {"launches_per_step", count(r.launches)},
@@ -738,6 +746,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                       : "gas at volume fraction 0.1")
       << (options.sphere_order != "made" ? ", spheres in " + options.sphere_order + " order" : std::string())
       << (options.renumber > 0 ? ", renumbered every " + std::to_string(options.renumber) + " steps" : std::string())
+      << (options.watchdog ? ", watchdog on" : "")
       << ", median of " << options.repeats << " steps after " << warmup << " warm-up)\n";
   out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"
       << std::setw(10) << "contacts" << std::setw(7) << "coord" << std::setw(8) << "colours" << std::setw(9)
@@ -766,6 +775,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
          " busy ms = the device's time a step in kernels, copies and sets, traced in separate steps\n"
          " (ms/step less busy ms: the device waiting on the host)\n"
          " (- where not counted))\n";
+  if (options.watchdog)
+    for (const Row& r : rows) out << "N = " << r.n << ": the watchdog rolled back " << r.rollbacks << " step(s)\n";
   out << "per verb, median ms of " << options.repeats << " profiled steps (profiling waits for each verb)\n";
   out << std::setw(20) << std::left << "verb" << std::right;
   for (const Row& r : rows) out << std::setw(11) << r.n;

@@ -236,6 +236,10 @@ int cli_main(int argc, char** argv) {
   bench_step->add_option("--friction", st_friction,
                          "pile: friction on (default) or off (with --rolling off: a frictionless pile, cached apart)")
       ->check(CLI::IsMember({"on", "off"}));
+  std::string st_watchdog = "off";
+  bench_step->add_option("--watchdog", st_watchdog,
+                         "the run's watchdog in the timed steps: off (default) or on (as marbles run steps)")
+      ->check(CLI::IsMember({"on", "off"}));
   bench_step->add_flag("--json", st.json, "print JSON only (progress on stderr)");
 
   bench::EffectsBenchOptions ef;
@@ -301,6 +305,7 @@ int cli_main(int argc, char** argv) {
       if (!st_n.empty()) st.n = st_n;
       st.rolling = st_rolling == "on";
       st.friction = st_friction == "on";
+      st.watchdog = st_watchdog == "on";
       if (st.backend == "cuda") select_backend(BackendChoice::cuda, std::cerr);
       return bench::run_step_bench(st, std::cout);
     }

@@ -122,6 +122,7 @@ class Simulation {
   // throws WatchdogFailure with the step back at its start. After an edit of
   // the world (edit_world) the next step checks only non-finite and overlap.
   void set_watchdog(bool on);
+  bool watchdog() const { return m_watchdog; }
   static constexpr int kWatchdogRetries = 3;
   static constexpr real kWatchdogOverlap = real(1);
   // Rollbacks of the last step (each with its reason) and of the whole run.

@@ -166,6 +166,33 @@ TEST(StepBench, ASettledPileRestsWithoutQuenches) {
   EXPECT_TRUE(run_json(o)["results"][0]["settle"]["cached"].get<bool>());
 }
 
+// The run's watchdog in the timed steps (--watchdog on) changes no step
+// that passes it: the same contacts, overlaps and energy as without, bit for
+// bit, with no rollback; and it did watch: its own kinetic energy at the
+// last step's end is the world's, summed apart on the host.
+TEST(StepBench, TheWatchdogWatchesAndChangesNoStep) {
+  StepBenchOptions o;
+  o.backend = "cpu";
+  o.scene = "gas";
+  o.n = {4000};
+  o.repeats = 3;
+  o.json = true;
+  const nlohmann::json off = run_json(o);
+  o.watchdog = true;
+  const nlohmann::json on = run_json(o);
+  EXPECT_FALSE(off["watchdog"].get<bool>());
+  EXPECT_TRUE(on["watchdog"].get<bool>());
+  const nlohmann::json& a = off["results"][0];
+  const nlohmann::json& b = on["results"][0];
+  EXPECT_TRUE(a["watch_ke_per_sphere_J"].is_null());
+  EXPECT_EQ(b["rollbacks"].get<std::uint64_t>(), 0u);
+  for (const char* key : {"candidate_pairs", "contacts", "max_overlap_pct", "ke_per_sphere_J", "colours"})
+    EXPECT_EQ(a[key], b[key]) << key;
+  const double ke = b["ke_per_sphere_J"].get<double>();
+  ASSERT_GT(ke, 0.0);  // the gas moves
+  EXPECT_NEAR(b["watch_ke_per_sphere_J"].get<double>(), ke, 1e-5 * ke);
+}
+
 // What the flags cannot mean is refused, naming the flag.
 TEST(StepBench, PileTermsRefusedWhereTheyMeanNothing) {
   auto refused = [](StepBenchOptions o, const std::string& flag) {
