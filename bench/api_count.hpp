@@ -1,7 +1,8 @@
 // bench/api_count.hpp — what the host asks of the GPU, counted as it asks:
 // kernel launches and host waits (stream, event and device synchronizes,
-// synchronous copies, frees), through CUPTI's callbacks on the CUDA runtime.
-// The step benchmark's launches and host waits per step.
+// synchronous copies, frees), through CUPTI's callbacks on the CUDA runtime,
+// and the host's time within each runtime function. The step benchmark's
+// launches, host waits and host time in the runtime per step.
 //
 // Counting is process-wide and costs a call per runtime call, so it is on
 // only while an ApiCounter lives, and never over timed steps. Without CUPTI
@@ -11,12 +12,22 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
+#include <vector>
 
 namespace marbles::bench {
 
 struct ApiCounts {
   std::uint64_t launches = 0;  // kernels launched one by one (plain, extended, cooperative; CUB's each), not graphs
   std::uint64_t waits = 0;     // calls that block the host until the device is done with earlier work
+};
+
+// The host's time within one CUDA runtime function (from its entry to its
+// return, as CUPTI's callbacks see them), and its calls.
+struct ApiTime {
+  std::string function;  // as the runtime names it: cudaLaunchKernel, cudaStreamSynchronize, ...
+  std::uint64_t calls = 0;
+  std::uint64_t ns = 0;
 };
 
 class ApiCounter {
@@ -28,6 +39,8 @@ class ApiCounter {
 
   bool counting() const { return m_subscriber != nullptr; }
   ApiCounts counts() const;  // since this counter began
+  // Since this counter began, each runtime function called, most time first.
+  std::vector<ApiTime> host_times() const;
 
  private:
   void* m_subscriber = nullptr;

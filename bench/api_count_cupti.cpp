@@ -4,7 +4,9 @@
 #include <cupti.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
+#include <chrono>
 #include <cstdlib>
 #include <mutex>
 #include <vector>
@@ -49,11 +51,35 @@ bool is_wait(CUpti_CallbackId id) {
   }
 }
 
+// Each runtime function's calls and host time, by callback id. The entry's
+// time rides in the call's correlation word to its exit.
+struct FunctionTime {
+  std::atomic<const char*> name{nullptr};
+  std::atomic<std::uint64_t> calls{0}, ns{0};
+};
+std::array<FunctionTime, CUPTI_RUNTIME_TRACE_CBID_SIZE> g_times;
+
+std::uint64_t host_ns() {
+  return static_cast<std::uint64_t>(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+          .count());
+}
+
 void CUPTIAPI on_call(void*, CUpti_CallbackDomain domain, CUpti_CallbackId id, const void* data) {
   if (domain != CUPTI_CB_DOMAIN_RUNTIME_API) return;
-  if (static_cast<const CUpti_CallbackData*>(data)->callbackSite != CUPTI_API_ENTER) return;
+  const auto* call = static_cast<const CUpti_CallbackData*>(data);
+  if (call->callbackSite == CUPTI_API_EXIT) {
+    if (id < g_times.size() && call->correlationData && *call->correlationData != 0) {
+      FunctionTime& f = g_times[id];
+      f.ns.fetch_add(host_ns() - *call->correlationData, std::memory_order_relaxed);
+      f.calls.fetch_add(1, std::memory_order_relaxed);
+      if (!f.name.load(std::memory_order_relaxed)) f.name.store(call->functionName, std::memory_order_relaxed);
+    }
+    return;
+  }
   if (is_launch(id)) g_launches.fetch_add(1, std::memory_order_relaxed);
   else if (is_wait(id)) g_waits.fetch_add(1, std::memory_order_relaxed);
+  if (call->correlationData) *call->correlationData = host_ns();  // last: the counting is not the call's time
 }
 
 // The activity records' intervals (kernels, copies, sets), as CUPTI hands
@@ -175,6 +201,7 @@ ApiCounter::ApiCounter() {
   }
   g_launches = 0;
   g_waits = 0;
+  for (FunctionTime& f : g_times) f.calls = 0, f.ns = 0;
   m_subscriber = subscriber;
 }
 
@@ -185,6 +212,18 @@ ApiCounter::~ApiCounter() {
 ApiCounts ApiCounter::counts() const {
   if (!m_subscriber) return {};
   return {g_launches.load(), g_waits.load()};
+}
+
+std::vector<ApiTime> ApiCounter::host_times() const {
+  std::vector<ApiTime> times;
+  if (!m_subscriber) return times;
+  for (const FunctionTime& f : g_times) {
+    const std::uint64_t calls = f.calls.load();
+    const char* name = f.name.load();
+    if (calls > 0) times.push_back({name ? name : "?", calls, f.ns.load()});
+  }
+  std::sort(times.begin(), times.end(), [](const ApiTime& a, const ApiTime& b) { return a.ns > b.ns; });
+  return times;
 }
 
 void profiled_steps(bool on) { (void)(on ? cudaProfilerStart() : cudaProfilerStop()); }

@@ -7,6 +7,7 @@ namespace marbles::bench {
 ApiCounter::ApiCounter() = default;
 ApiCounter::~ApiCounter() = default;
 ApiCounts ApiCounter::counts() const { return {}; }
+std::vector<ApiTime> ApiCounter::host_times() const { return {}; }
 
 DeviceTimeline::DeviceTimeline() = default;
 DeviceTimeline::~DeviceTimeline() = default;

@@ -491,6 +491,14 @@ struct Row {
   double device_bytes_per_sphere = 0;
   std::vector<DeviceBytes> device_buffers;  // by part (StepBackend::device_buffers)
   std::optional<double> launches, waits;  // per step, medians of the counted steps (none where nothing counts)
+  // The host's time within each CUDA runtime function, per step (means of
+  // the counted steps, most time first), and those steps' wall time.
+  struct HostCall {
+    std::string function;
+    double calls = 0, us = 0;
+  };
+  std::vector<HostCall> host_calls;
+  std::optional<double> counted_ms;
   std::optional<double> busy_ms;          // per step, the device at work: median of the traced steps
   std::optional<double> traced_ms;        // per step, the traced steps' wall time (tracing slows the host)
   std::optional<double> idle_ms() const { return busy_ms ? std::optional(std::max(0.0, step_ms - *busy_ms)) : std::nullopt; }
@@ -544,16 +552,30 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     ApiCounter counter;
     if (counter.counting()) {
       std::vector<double> launches, waits;
+      const std::vector<ApiTime> times_before = counter.host_times();
       ApiCounts before = counter.counts();
-      for (int k = 0; k < std::min(repeats, 5); ++k) {
+      const int counted = std::min(repeats, 5);
+      const auto t0 = std::chrono::steady_clock::now();
+      for (int k = 0; k < counted; ++k) {
         sim.step();
         const ApiCounts after = counter.counts();
         launches.push_back(static_cast<double>(after.launches - before.launches));
         waits.push_back(static_cast<double>(after.waits - before.waits));
         before = after;
       }
+      row.counted_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / counted;
       row.launches = median(launches);
       row.waits = median(waits);
+      for (const ApiTime& t : counter.host_times()) {
+        Row::HostCall call{t.function, static_cast<double>(t.calls), static_cast<double>(t.ns)};
+        for (const ApiTime& b : times_before)
+          if (b.function == t.function) call.calls -= static_cast<double>(b.calls), call.us -= static_cast<double>(b.ns);
+        call.calls /= counted;
+        call.us /= 1e3 * counted;
+        if (call.calls > 0) row.host_calls.push_back(call);
+      }
+      std::sort(row.host_calls.begin(), row.host_calls.end(),
+                [](const Row::HostCall& a, const Row::HostCall& b) { return a.us > b.us; });
     }
   }
   // The device's busy time a step (CUDA backend): the union of a step's
@@ -722,7 +744,11 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"device_busy_ms_per_step", count(r.busy_ms)},
                                  {"device_idle_ms_per_step", count(r.idle_ms())},
                                  {"traced_step_ms", count(r.traced_ms)},
+                                 {"counted_step_ms", count(r.counted_ms)},
+                                 {"host_calls_per_step", nlohmann::ordered_json::array()},
                                  {"verb_ms", nlohmann::ordered_json::object()}};
+      for (const Row::HostCall& c : r.host_calls)
+        row["host_calls_per_step"].push_back({{"function", c.function}, {"calls", c.calls}, {"us", c.us}});
       for (int v = 0; v < kVerbs; ++v) row["verb_ms"][kVerbNames[v]] = r.verb_ms[v];
       row["device_bytes_per_sphere_by_part"] = nlohmann::ordered_json::object();
       for (const DeviceBytes& b : r.device_buffers)
@@ -777,6 +803,17 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
          " (- where not counted))\n";
   if (options.watchdog)
     for (const Row& r : rows) out << "N = " << r.n << ": the watchdog rolled back " << r.rollbacks << " step(s)\n";
+  for (const Row& r : rows) {
+    if (r.host_calls.empty()) continue;
+    double in_calls = 0;
+    for (const Row::HostCall& c : r.host_calls) in_calls += c.us;
+    out << "N = " << r.n << ", host time a step in CUDA runtime calls (counted steps, " << std::fixed
+        << std::setprecision(3) << *r.counted_ms << " ms each): " << std::setprecision(0) << in_calls << " us;";
+    for (std::size_t k = 0; k < std::min<std::size_t>(r.host_calls.size(), 6); ++k)
+      out << (k ? "," : "") << " " << r.host_calls[k].function << " " << r.host_calls[k].calls << " calls "
+          << r.host_calls[k].us << " us";
+    out << std::defaultfloat << "\n";
+  }
   out << "per verb, median ms of " << options.repeats << " profiled steps (profiling waits for each verb)\n";
   out << std::setw(20) << std::left << "verb" << std::right;
   for (const Row& r : rows) out << std::setw(11) << r.n;

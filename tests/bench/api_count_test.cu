@@ -131,4 +131,43 @@ TEST(DeviceTimeline, BusyIsTheUnionOfTheDevicesWorkAndTheRestIsIdle) {
   EXPECT_FALSE(second.tracing());
 }
 
+// The host's time within each runtime function against a known wait: a
+// stream synchronize behind a kernel that spins 2 ms holds the host at least
+// the spin's rest; three launches are three launch calls; and no function's
+// time exceeds the wall time around them all.
+TEST(ApiCounter, TimesTheHostWithinEachRuntimeFunction) {
+  REQUIRE_DEVICE();
+  constexpr std::uint64_t kSpin = 2000000;
+  marbles::cuda::DeviceBuffer memory;  // freed, as the stream is destroyed, however the test ends
+  auto* times = memory.as<std::uint64_t>(2);
+  marbles::cuda::Stream s;
+  s.create();
+  spin<<<1, 32, 0, s>>>(1000, times);  // the module loaded before counting
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  marbles::bench::ApiCounter counter;
+  if (!counter.counting()) GTEST_SKIP() << "skipped: CUPTI not available (another tool holds it, or no CUPTI)";
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int k = 0; k < 2; ++k) spin<<<1, 32, 0, s>>>(1000, times);
+  spin<<<1, 32, 0, s>>>(kSpin, times);
+  const auto launched = std::chrono::steady_clock::now();
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  const auto t1 = std::chrono::steady_clock::now();
+  const double wall_ns = std::chrono::duration<double, std::nano>(t1 - t0).count();
+  const double rest_ns = 2e6 - std::chrono::duration<double, std::nano>(launched - t0).count();
+
+  std::uint64_t launch_calls = 0, sync_calls = 0;
+  double sync_ns = 0;
+  std::string seen;
+  for (const marbles::bench::ApiTime& t : counter.host_times()) {
+    seen += t.function + " " + std::to_string(t.calls) + " calls " + std::to_string(t.ns) + " ns; ";
+    EXPECT_LE(static_cast<double>(t.ns), wall_ns) << t.function;
+    if (t.function.find("LaunchKernel") != std::string::npos) launch_calls += t.calls;
+    if (t.function == "cudaStreamSynchronize") sync_calls += t.calls, sync_ns += static_cast<double>(t.ns);
+  }
+  EXPECT_EQ(launch_calls, 3u) << seen;
+  EXPECT_EQ(sync_calls, 1u) << seen;
+  EXPECT_GE(sync_ns, rest_ns - 50000) << seen;  // the spin's rest, less its launch on the device
+  EXPECT_LE(sync_ns, wall_ns) << seen;
+}
+
 }  // namespace
