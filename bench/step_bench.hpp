@@ -61,10 +61,10 @@ struct StepBenchOptions {
   // pile: friction (0.5) on, or off (then rolling off too: a frictionless
   // pile, settled and cached apart).
   bool friction = true;
-  // The run's watchdog (marbles run keeps it on) in the warm-up and timed
-  // steps: the state kept at each step's start and the watch's figures
-  // (kinetic energy, spheres past a wall) read with the step's flags; what
-  // that safety costs a step.
+  // The run's watchdog (marbles run keeps it on) in every step the
+  // benchmark times, counts or profiles (not the pile's settle): the state
+  // kept at each step's start and the watch's figures (kinetic energy,
+  // spheres past a wall) read with the step's flags; what that safety costs.
   bool watchdog = false;
 };
 

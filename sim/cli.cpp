@@ -238,7 +238,7 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::IsMember({"on", "off"}));
   std::string st_watchdog = "off";
   bench_step->add_option("--watchdog", st_watchdog,
-                         "the run's watchdog in the timed steps: off (default) or on (as marbles run steps)")
+                         "the run's watchdog in the benchmark's steps: off (default) or on (as marbles run steps)")
       ->check(CLI::IsMember({"on", "off"}));
   bench_step->add_flag("--json", st.json, "print JSON only (progress on stderr)");
 
