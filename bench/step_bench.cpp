@@ -552,7 +552,6 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     ApiCounter counter;
     if (counter.counting()) {
       std::vector<double> launches, waits;
-      const std::vector<ApiTime> times_before = counter.host_times();
       ApiCounts before = counter.counts();
       const int counted = std::min(repeats, 5);
       const auto t0 = std::chrono::steady_clock::now();
@@ -566,16 +565,9 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
       row.counted_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / counted;
       row.launches = median(launches);
       row.waits = median(waits);
-      for (const ApiTime& t : counter.host_times()) {
-        Row::HostCall call{t.function, static_cast<double>(t.calls), static_cast<double>(t.ns)};
-        for (const ApiTime& b : times_before)
-          if (b.function == t.function) call.calls -= static_cast<double>(b.calls), call.us -= static_cast<double>(b.ns);
-        call.calls /= counted;
-        call.us /= 1e3 * counted;
-        if (call.calls > 0) row.host_calls.push_back(call);
-      }
-      std::sort(row.host_calls.begin(), row.host_calls.end(),
-                [](const Row::HostCall& a, const Row::HostCall& b) { return a.us > b.us; });
+      // The counter began just before these steps: its times are theirs (most first).
+      for (const ApiTime& t : counter.host_times())
+        row.host_calls.push_back({t.function, static_cast<double>(t.calls) / counted, 1e-3 * t.ns / counted});
     }
   }
   // The device's busy time a step (CUDA backend): the union of a step's

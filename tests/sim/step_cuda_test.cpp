@@ -59,6 +59,15 @@ std::size_t part(const std::vector<DeviceBytes>& parts, const std::string& name)
   return 0;
 }
 
+// The two states equal bit for bit.
+void expect_same_state(const World& a, const World& b, int step) {
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a.position[i], b.position[i]) << "step " << step << " sphere " << i;
+    ASSERT_EQ(a.velocity[i], b.velocity[i]) << "step " << step << " sphere " << i;
+    ASSERT_EQ(a.angular_velocity[i], b.angular_velocity[i]) << "step " << step << " sphere " << i;
+  }
+}
+
 // What the GPU's steps did, added up over the steps of expect_same_steps.
 struct GpuCounts {
   std::uint64_t one_launch = 0;    // substeps whose solve took one launch
@@ -97,13 +106,8 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
     ASSERT_EQ(gpu.last_step().projection_sweeps, cpu.last_step().projection_sweeps) << "step " << k;
     ASSERT_EQ(gpu.last_step().max_overlap, cpu.last_step().max_overlap) << "step " << k;
     if (k % 10 == 9 || k + 1 == steps) {
-      const World& a = cpu.world();
-      const World& b = gpu.world();
-      for (std::size_t i = 0; i < a.size(); ++i) {
-        ASSERT_EQ(a.position[i], b.position[i]) << "step " << k << " sphere " << i;
-        ASSERT_EQ(a.velocity[i], b.velocity[i]) << "step " << k << " sphere " << i;
-        ASSERT_EQ(a.angular_velocity[i], b.angular_velocity[i]) << "step " << k << " sphere " << i;
-      }
+      expect_same_state(cpu.world(), gpu.world(), k);
+      if (::testing::Test::HasFatalFailure()) return;
     }
   }
 }
@@ -848,15 +852,6 @@ struct TrimmedAndNot {
   }
   std::optional<Simulation> trimmed, untrimmed;
 };
-
-// The two states equal bit for bit.
-void expect_same_state(const World& a, const World& b, int step) {
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    ASSERT_EQ(a.position[i], b.position[i]) << "step " << step << " sphere " << i;
-    ASSERT_EQ(a.velocity[i], b.velocity[i]) << "step " << step << " sphere " << i;
-    ASSERT_EQ(a.angular_velocity[i], b.angular_velocity[i]) << "step " << step << " sphere " << i;
-  }
-}
 
 }  // namespace
 
