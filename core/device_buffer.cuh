@@ -43,10 +43,13 @@ int resident_blocks() {
 
 // How a kernel is launched: plainly; cooperatively (its blocks may meet at
 // a grid-wide barrier: every block resident at once, so the grid at most
-// grid_for(n, sm_count, resident_blocks<kernel>())); or dependent on the launch
+// grid_for(n, sm_count, resident_blocks<kernel>())); dependent on the launch
 // before it (programmatic stream serialization, sm_90: it may start while
-// that one's last blocks run, its threads waiting in griddepcontrol.wait).
-enum class Launch { plain, cooperative, dependent };
+// that one's last blocks run, its threads waiting in griddepcontrol.wait);
+// or as one cluster (sm_90: the whole grid one cluster, its blocks resident
+// together on one GPC and meeting at the cluster's barrier; at most
+// largest_cluster<kernel>() blocks).
+enum class Launch { plain, cooperative, dependent, cluster };
 
 // `kernel` on `grid` blocks of kBlock threads, launched `how`, checked.
 template <class... Params, class... Args>
@@ -62,11 +65,46 @@ void launch(Launch how, void (*kernel)(Params...), int grid, cudaStream_t s, Arg
   } else if (how == Launch::dependent) {
     attribute[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
     attribute[0].val.programmaticStreamSerializationAllowed = 1;
+  } else if (how == Launch::cluster) {
+    attribute[0].id = cudaLaunchAttributeClusterDimension;
+    attribute[0].val.clusterDim.x = static_cast<unsigned>(grid);
+    attribute[0].val.clusterDim.y = 1;
+    attribute[0].val.clusterDim.z = 1;
   }
   config.attrs = attribute;
   config.numAttrs = how == Launch::plain ? 0 : 1;
   MARBLES_CUDA_CHECK(cudaLaunchKernelEx(&config, kernel, std::forward<Args>(args)...));
   MARBLES_CUDA_CHECK_LAUNCH();  // with MARBLES_CUDA_SYNC=1: a wait, the kernel's error here
+}
+
+// The most blocks of kBlock threads one cluster of `Kernel` may have here
+// (sizes past the portable 8 allowed where the device takes them), or 0
+// where the kernel is not to be launched as a cluster: a device without
+// cluster launches, or the kernel's code not built for sm_90. Asked once
+// per kernel.
+template <auto Kernel>
+int largest_cluster() {
+  static const int most = [] {
+    int device = 0, clusters = 0;
+    if (cudaGetDevice(&device) != cudaSuccess ||
+        cudaDeviceGetAttribute(&clusters, cudaDevAttrClusterLaunch, device) != cudaSuccess || clusters == 0)
+      return 0;
+    cudaFuncAttributes attributes{};
+    MARBLES_CUDA_CHECK(cudaFuncGetAttributes(&attributes, Kernel));
+    if (attributes.binaryVersion < 90) return 0;
+    if (cudaFuncSetAttribute(Kernel, cudaFuncAttributeNonPortableClusterSizeAllowed, 1) != cudaSuccess)
+      (void)cudaGetLastError();  // portable sizes only
+    cudaLaunchConfig_t config{};
+    config.gridDim = dim3(16);
+    config.blockDim = dim3(kBlock);
+    int size = 0;
+    if (cudaOccupancyMaxPotentialClusterSize(&size, Kernel, &config) != cudaSuccess) {
+      (void)cudaGetLastError();
+      return 0;
+    }
+    return size < 1 ? 0 : (size < 16 ? size : 16);
+  }();
+  return most;
 }
 
 // `Kernel` launched cooperatively over n items: as many blocks as n asks

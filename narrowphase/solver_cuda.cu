@@ -1,5 +1,6 @@
 #include "core/cuda_check.hpp"
 #include "core/device_buffer.cuh"
+#include "core/error.hpp"
 #include "core/lower_bound.hpp"
 #include "narrowphase/solver_cuda.cuh"
 
@@ -8,6 +9,7 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <string>
 #include <utility>
 
 namespace marbles::narrowphase::cuda {
@@ -110,12 +112,29 @@ __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* 
       });
 }
 
-// One range [b, e) of a cooperative launch: spread over the grid, or
-// (serial) by one thread in order, reversed when asked; then a grid-wide
-// barrier. Every block skips the same empty ranges. f(k) for each k.
-template <class F>
-__device__ void walk_range(std::uint32_t b, std::uint32_t e, bool serial, bool reversed, const cg::grid_group& grid,
-                           F&& f) {
+// What the blocks of a one-launch stage meet at after each range: the
+// whole grid of a cooperative launch (a barrier in memory), or the one
+// cluster a launch of few blocks is (sm_90: the cluster's barrier in
+// hardware; docs/architecture.md "One cluster for a small solve"). Both
+// release the writes before them to every thread of the launch.
+struct GridSync {
+  __device__ void sync() const { cg::this_grid().sync(); }
+};
+struct ClusterSync {
+  __device__ void sync() const {
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
+    cg::this_cluster().sync();
+#else
+    __trap();  // never launched: the host launches clusters only for sm_90 code (largest_cluster)
+#endif
+  }
+};
+
+// One range [b, e) of a one-launch stage: spread over the launch's threads,
+// or (serial) by one thread in order, reversed when asked; then the
+// launch's barrier. Every block skips the same empty ranges. f(k) for each k.
+template <class Sync, class F>
+__device__ void walk_range(std::uint32_t b, std::uint32_t e, bool serial, bool reversed, const Sync& grid, F&& f) {
   if (e <= b) return;
   const std::uint32_t first = blockIdx.x * blockDim.x + threadIdx.x, stride = gridDim.x * blockDim.x;
   if (!serial)
@@ -129,8 +148,8 @@ __device__ void walk_range(std::uint32_t b, std::uint32_t e, bool serial, bool r
 
 // Every contact of a colour plan in the solver's order (visit_colours), a
 // range at a time (walk_range).
-template <class F>
-__device__ void walk_colours(const ColourPlan& plan, bool backwards, const cg::grid_group& grid, F&& f) {
+template <class Sync, class F>
+__device__ void walk_colours(const ColourPlan& plan, bool backwards, const Sync& grid, F&& f) {
   visit_colours(plan.begin, plan.colours, backwards,
                 [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
                   walk_range(b, e, serial, reversed, grid, f);
@@ -156,10 +175,11 @@ __device__ __forceinline__ void raise_once(bool happened, bool& raised, unsigned
 // solver.cpp runs them. Sweep `it` sets moved[it] (zeroed before), which every block
 // reads after the barrier that ends the sweep's last colour. *total += the
 // sweeps run (solver.cpp ends the projection there too).
+template <class Sync>
 __global__ void project_kernel(ColourPlan plan, SweepRecords records, const Real4* impact, BodiesView bodies,
                                const WallShape* walls, SolverSettings s, const unsigned* hit, int sweeps,
                                unsigned* moved, unsigned long long* total) {
-  const cg::grid_group grid = cg::this_grid();
+  const Sync grid;
   if (hit && flag_set(hit))
     walk_colours(plan, false, grid, [&](std::uint32_t k) {
       rebound_one(load_rebound_contact(records, impact, k), bodies, walls);
@@ -174,7 +194,7 @@ __global__ void project_kernel(ColourPlan plan, SweepRecords records, const Real
     });
     if (!flag_set(moved + it)) break;
   }
-  if (grid.thread_rank() == 0) *total += static_cast<unsigned long long>(ran);
+  if (blockIdx.x == 0 && threadIdx.x == 0) *total += static_cast<unsigned long long>(ran);
 }
 
 // The impact stage in one launch. Pass 0: the candidates level by level
@@ -183,11 +203,11 @@ __global__ void project_kernel(ColourPlan plan, SweepRecords records, const Real
 // by one thread), a grid-wide barrier after each. Pass p > 0: every contact
 // colour by colour, while pass p - 1 hit something. hit[p] (zeroed before)
 // records what pass p hit.
-template <bool Friction>
+template <bool Friction, class Sync>
 __global__ void impact_stage_kernel(ColourPlan plan, SweepRecords records, Real4* impact, const std::uint32_t* order,
                                     const std::uint32_t* first, std::uint32_t n, SolverBody* bodies, ImpactParams p,
                                     int passes, unsigned* hit) {
-  const cg::grid_group grid = cg::this_grid();
+  const Sync grid;
   bool raised = false;
   visit_levels(first, n, [&](std::uint32_t b, std::uint32_t e, bool serial) {
     walk_range(b, e, serial, false, grid, [&](std::uint32_t k) {
@@ -206,9 +226,9 @@ __global__ void impact_stage_kernel(ColourPlan plan, SweepRecords records, Real4
 // the launches per colour (forwards, then backwards every other sweep): the
 // same bits. For contacts few enough a colour that the host's launches, not
 // the device, would set the solve's time.
-template <bool Friction, bool Rolling>
+template <bool Friction, bool Rolling, class Sync>
 __global__ void solve_kernel(ColourPlan plan, SweepRecords s, SolverBody* bodies, real inv_h, bool warm, int sweeps) {
-  const cg::grid_group grid = cg::this_grid();
+  const Sync grid;
   if (warm) walk_colours(plan, false, grid, [&](std::uint32_t k) { warm_start_record<Friction, Rolling>(s, k, bodies); });
   for (int it = 0; it < sweeps; ++it)
     walk_colours(plan, it % 2 == 1, grid, [&](std::uint32_t k) { solve_record<Friction, Rolling>(s, k, bodies, inv_h); });
@@ -394,41 +414,75 @@ void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodie
   });
 }
 
-// `Kernel` on a cooperative grid for a plan's widest colour.
-template <auto Kernel, class... Args>
-void launch_on_plan(const ColourPlan& plan, int sm_count, cudaStream_t s, Args&&... args) {
-  ::marbles::cuda::launch_cooperative<Kernel>(plan.widest(), sm_count, s, plan, std::forward<Args>(args)...);
+// The widest range a one-launch stage takes as one cluster (sm_90):
+// MARBLES_CUDA_CLUSTER, else kClusterWidest; 0: never.
+constexpr std::uint32_t kClusterWidest = 4096;
+std::uint32_t cluster_widest_asked() {
+  static const std::uint32_t widest = [] {
+    const char* asked = std::getenv("MARBLES_CUDA_CLUSTER");
+    if (asked == nullptr) return kClusterWidest;
+    char* end = nullptr;
+    const long v = std::strtol(asked, &end, 10);
+    if (end == asked || *end != '\0' || v < 0 || v > (1l << 30))
+      throw RuntimeFailure(std::string("MARBLES_CUDA_CLUSTER=") + asked +
+                           ": expected the widest colour to solve as one cluster, 0 (never) to 1073741824");
+    return static_cast<std::uint32_t>(v);
+  }();
+  return widest;
 }
 
-void launch_position_stages(const SweepRecords& records, const Real4* impact, const ColourPlan& plan,
+// A one-launch stage over ranges of at most `items` contacts: as one
+// cluster of as many blocks as they ask for where that many fit one
+// (`InCluster`: the kernel with ClusterSync), else on a cooperative grid
+// (`OnGrid`: with GridSync). A barrier a range either way, the same bits;
+// the cluster's costs a fraction of the grid's, which a small scene's
+// solve meets some two hundred times a substep. True: as one cluster.
+template <auto OnGrid, auto InCluster, class... Args>
+bool launch_one(std::size_t items, int sm_count, cudaStream_t s, Args&&... args) {
+  namespace dev = ::marbles::cuda;
+  const std::size_t blocks = items > kBlock ? (items + kBlock - 1) / kBlock : 1;
+  if (items <= cluster_widest_asked() && blocks <= static_cast<std::size_t>(dev::largest_cluster<InCluster>())) {
+    launch(Launch::cluster, InCluster, static_cast<int>(blocks), s, std::forward<Args>(args)...);
+    return true;
+  }
+  dev::launch_cooperative<OnGrid>(items, sm_count, s, std::forward<Args>(args)...);
+  return false;
+}
+
+bool launch_position_stages(const SweepRecords& records, const Real4* impact, const ColourPlan& plan,
                             const BodiesView& bodies, const WallShape* walls, const SolverSettings& settings,
                             const unsigned* hit, int sweeps, unsigned* moved, unsigned long long* total, int sm_count,
                             cudaStream_t s) {
-  if ((sweeps <= 0 && !hit) || plan.empty()) return;
-  launch_on_plan<project_kernel>(plan, sm_count, s, records, impact, bodies, walls, settings, hit, sweeps, moved,
-                                 total);
+  if ((sweeps <= 0 && !hit) || plan.empty()) return false;
+  return launch_one<project_kernel<GridSync>, project_kernel<ClusterSync>>(
+      plan.widest(), sm_count, s, plan, records, impact, bodies, walls, settings, hit, sweeps, moved, total);
 }
 
-void launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
+bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
                          const std::uint32_t* first, std::uint32_t n, const ColourPlan& plan, SolverBody* bodies,
                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
                          cudaStream_t s) {
-  if (n == 0) return;
-  namespace dev = ::marbles::cuda;
+  if (n == 0) return false;
+  // Sized for the candidates, as the first pass walks their levels (the
+  // later passes' colours are spread over the same threads).
   if (friction)
-    dev::launch_cooperative<impact_stage_kernel<true>>(n, sm_count, s, plan, records, impact, order, first, n, bodies,
-                                                       p, passes, hit);
-  else
-    dev::launch_cooperative<impact_stage_kernel<false>>(n, sm_count, s, plan, records, impact, order, first, n,
-                                                        bodies, p, passes, hit);
+    return launch_one<impact_stage_kernel<true, GridSync>, impact_stage_kernel<true, ClusterSync>>(
+        n, sm_count, s, plan, records, impact, order, first, n, bodies, p, passes, hit);
+  return launch_one<impact_stage_kernel<false, GridSync>, impact_stage_kernel<false, ClusterSync>>(
+      n, sm_count, s, plan, records, impact, order, first, n, bodies, p, passes, hit);
 }
 
-void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h, SolverTerms t,
+std::uint32_t cluster_widest() { return cluster_widest_asked(); }
+
+bool launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h, SolverTerms t,
                   bool warm, int sweeps, int sm_count, cudaStream_t s) {
-  if (plan.empty()) return;
+  if (plan.empty()) return false;
+  bool cluster = false;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
-    launch_on_plan<solve_kernel<friction, rolling>>(plan, sm_count, s, records, bodies, inv_h, warm, sweeps);
+    cluster = launch_one<solve_kernel<friction, rolling, GridSync>, solve_kernel<friction, rolling, ClusterSync>>(
+        plan.widest(), sm_count, s, plan, records, bodies, inv_h, warm, sweeps);
   });
+  return cluster;
 }
 
 

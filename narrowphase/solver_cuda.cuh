@@ -68,16 +68,26 @@ struct ColourPlan {
   bool empty() const { return begin[colours + 1] == begin[0]; }
 };
 
-// The stages below walk a plan in one cooperative launch each (the
-// solver's order, visit_colours, a grid-wide barrier after each colour;
-// the overflow set by one thread): the same bits as a launch per colour.
+// The stages below walk a plan in one launch each (the solver's order,
+// visit_colours, a barrier of the whole launch after each colour; the
+// overflow set by one thread): the same bits as a launch per colour. The
+// launch is one cluster (sm_90) where the widest range, or the impact
+// stage's candidates, fit one (at most MARBLES_CUDA_CLUSTER contacts, 4096
+// unless set; 0: never), else a cooperative grid: the same bits again.
+// Each says whether it took one cluster (false too where it launched
+// nothing).
+
+// MARBLES_CUDA_CLUSTER's widest range for one cluster (kept from its first
+// reading; a value that is not a count from 0 to 2^30 is refused with a
+// RuntimeFailure).
+std::uint32_t cluster_widest();
 
 // The position stages: the impacts' rebound shifts (rebound_one; in the
 // impact words) when *hit (the impact stage's flag of its first pass; null:
 // it did not run), then the projection, sweeps until one moves nothing
 // beyond settled_move (project_one), at most `sweeps`; moved[0, sweeps)
 // zeroed before, sweep `it` sets moved[it]; *total += the sweeps run.
-void launch_position_stages(const SweepRecords& records, const Real4* impact, const ColourPlan& plan,
+bool launch_position_stages(const SweepRecords& records, const Real4* impact, const ColourPlan& plan,
                             const BodiesView& bodies, const WallShape* walls, const SolverSettings& settings,
                             const unsigned* hit, int sweeps, unsigned* moved, unsigned long long* total, int sm_count,
                             cudaStream_t stream);
@@ -86,7 +96,7 @@ void launch_position_stages(const SweepRecords& records, const Real4* impact, co
 // (`order` and `first` from ColouringCuda::impact_levels, n contacts), then
 // passes 1 .. passes - 1 over every contact while the pass before hit
 // something; hit[p] (zeroed before) is set when pass p hits.
-void launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
+bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
                          const std::uint32_t* first, std::uint32_t n, const ColourPlan& plan, SolverBody* bodies,
                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
                          cudaStream_t stream);
@@ -94,7 +104,7 @@ void launch_impact_stage(const SweepRecords& records, Real4* impact, const std::
 // The warm start (when `warm`) and `sweeps` sweeps in one launch, where a
 // launch per colour would leave the device waiting for the host's launches
 // (contacts few a colour).
-void launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h,
+bool launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h,
                   SolverTerms terms, bool warm, int sweeps, int sm_count, cudaStream_t stream);
 
 // *deepest = max(*deepest, overlap_ratio) over the records' contacts [0, n) (as the bits

@@ -164,6 +164,7 @@ class CudaStep final : public StepBackend {
     m_colouring.share_scratch(m_scratch);
     m_colouring.share_round_memory(m_record_memory);  // dead while contacts are coloured
     m_kept_cache.set_terms(m_terms.friction, m_terms.rolling);
+    nc::cluster_widest();  // MARBLES_CUDA_CLUSTER read (or refused) before any step
   }
 
   void apply_body_forces(real h) override {
@@ -426,7 +427,9 @@ class CudaStep final : public StepBackend {
     }
     if (solve_in_one_launch()) {
       ++m_counters.one_launch_solves;
-      nc::launch_solve(m_records, m_plan, bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm, m_stream);
+      if (nc::launch_solve(m_records, m_plan, bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm,
+                           m_stream))
+        ++m_counters.cluster_stages;
       nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
       return;
     }
@@ -472,8 +475,9 @@ class CudaStep final : public StepBackend {
     const unsigned* hit = m_impact_candidates ? m_hit.get_as<unsigned>() : nullptr;
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(std::max(sweeps, 1)));
     if (sweeps > 0) MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
-    nc::launch_position_stages(m_records, m_impacts.word, m_plan, m_device.view(), walls(), m_model.solver, hit, sweeps,
-                               moved, m_flags.get_as<unsigned long long>() + 2, m_sm, m_stream);  // flags[2]
+    if (nc::launch_position_stages(m_records, m_impacts.word, m_plan, m_device.view(), walls(), m_model.solver, hit,
+                                   sweeps, moved, m_flags.get_as<unsigned long long>() + 2, m_sm, m_stream))  // flags[2]
+      ++m_counters.cluster_stages;
   }
 
   void store_impulses() override {
@@ -803,8 +807,9 @@ class CudaStep final : public StepBackend {
                               m_sm, m_stream);
     auto* hit = m_hit.as<unsigned>(narrowphase::kImpactPasses);
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, narrowphase::kImpactPasses * sizeof(unsigned), m_stream));
-    nc::launch_impact_stage(m_records, m_impacts.word, order, first, m_count, m_plan, bodies, params,
-                            m_model.solver.friction, narrowphase::kImpactPasses, hit, m_sm, m_stream);
+    if (nc::launch_impact_stage(m_records, m_impacts.word, order, first, m_count, m_plan, bodies, params,
+                                m_model.solver.friction, narrowphase::kImpactPasses, hit, m_sm, m_stream))
+      ++m_counters.cluster_stages;
   }
 
   const StepModel& m_model;

@@ -71,6 +71,7 @@ void expect_same_state(const World& a, const World& b, int step) {
 // What the GPU's steps did, added up over the steps of expect_same_steps.
 struct GpuCounts {
   std::uint64_t one_launch = 0;    // substeps whose solve took one launch
+  std::uint64_t cluster = 0;       // one-launch stages run as one cluster
   std::uint64_t turns = 0;         // sweep launches that visited a turn's range twice
   std::uint64_t solved = 0;        // steps with contacts (the CPU's count)
   std::uint64_t pair_redos = 0;    // substeps whose broad phase outgrew its pairs' room and ran again
@@ -89,6 +90,7 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
     cpu.step();
     gpu.step();
     counts.one_launch += gpu.last_step().one_launch_solves;
+    counts.cluster += gpu.last_step().cluster_stages;
     counts.turns += gpu.last_step().turn_launches;
     counts.pair_redos += gpu.last_step().pair_redos;
     counts.grid_replans += gpu.last_step().grid_replans;
@@ -140,6 +142,16 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
     EXPECT_EQ(counts.turns > 0, form == "launches" && turns) << "MARBLES_CUDA_SOLVE=" << form;
   } else if (counts.solved > 0) {
     EXPECT_GT(counts.one_launch, 0u) << "MARBLES_CUDA_SOLVE=" << form;
+  }
+  // The one-launch stages (the projection at least) take one cluster on a
+  // device with clusters (compute capability 9, this build's default sm_90
+  // code) where MARBLES_CUDA_CLUSTER allows (these scenes' colours are all
+  // narrower than its default), never where it is 0.
+  if (counts.solved > 0) {
+    const char* widest = std::getenv("MARBLES_CUDA_CLUSTER");
+    const bool clusters = cuda_device().compute_major >= 9 && !(widest && std::string(widest) == "0");
+    EXPECT_EQ(counts.cluster > 0, clusters) << counts.cluster << " stages as one cluster; MARBLES_CUDA_CLUSTER="
+                                            << (widest ? widest : "unset");
   }
 }
 
