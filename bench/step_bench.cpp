@@ -484,6 +484,9 @@ struct Row {
   // words (CUDA: a contact was an impact candidate; the records' memory is
   // then sized for them until a trim finds them gone: buffer_trims).
   std::uint64_t impact_substeps = 0;
+  // One-launch stages (solve, projection, impact stage) of the timed steps
+  // that ran as one cluster (CUDA on sm_90: their widest colour small).
+  std::uint64_t cluster_stages = 0;
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   std::uint64_t rollbacks = 0;     // steps the watchdog undid and redid (--watchdog on), of all the steps run here
   std::optional<double> watch_ke_per_sphere;  // J, the watch's own figure at the last step's end (--watchdog on)
@@ -534,6 +537,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     row.grid_shrinks += c.grid_shrinks;
     row.buffer_trims += c.buffer_trims;
     row.impact_substeps += c.impact_words;
+    row.cluster_stages += c.cluster_stages;
   }
   if (on_device) profiled_steps(false);  // each step ends with a wait for its flags: nothing of it is still running
   if (sim.non_finite()) throw RuntimeFailure("N = " + std::to_string(n) + ": non-finite state in the timed steps");
@@ -726,6 +730,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"grid_shrinks", r.grid_shrinks},
                                  {"buffer_trims", r.buffer_trims},
                                  {"impact_word_substeps", r.impact_substeps},
+                                 {"cluster_stages", r.cluster_stages},
                                  {"ke_per_sphere_J", r.ke_per_sphere},
                                  {"rollbacks", r.rollbacks},
                                  {"watch_ke_per_sphere_J", count(r.watch_ke_per_sphere)},

@@ -463,13 +463,16 @@ bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::
                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
                          cudaStream_t s) {
   if (n == 0) return false;
-  // Sized for the candidates, as the first pass walks their levels (the
-  // later passes' colours are spread over the same threads).
+  // Sized for the wider of the candidates (the first pass walks their
+  // levels) and the widest colour (the later passes walk the colours): a
+  // launch sized for a few candidates walked every colour of a pile of
+  // 10^5 on a few blocks.
+  const std::size_t items = std::max<std::size_t>(n, plan.widest());
   if (friction)
     return launch_one<impact_stage_kernel<true, GridSync>, impact_stage_kernel<true, ClusterSync>>(
-        n, sm_count, s, plan, records, impact, order, first, n, bodies, p, passes, hit);
+        items, sm_count, s, plan, records, impact, order, first, n, bodies, p, passes, hit);
   return launch_one<impact_stage_kernel<false, GridSync>, impact_stage_kernel<false, ClusterSync>>(
-      n, sm_count, s, plan, records, impact, order, first, n, bodies, p, passes, hit);
+      items, sm_count, s, plan, records, impact, order, first, n, bodies, p, passes, hit);
 }
 
 std::uint32_t cluster_widest() { return cluster_widest_asked(); }

@@ -71,8 +71,8 @@ struct ColourPlan {
 // The stages below walk a plan in one launch each (the solver's order,
 // visit_colours, a barrier of the whole launch after each colour; the
 // overflow set by one thread): the same bits as a launch per colour. The
-// launch is one cluster (sm_90) where the widest range, or the impact
-// stage's candidates, fit one (at most MARBLES_CUDA_CLUSTER contacts, 4096
+// launch is one cluster (sm_90) where the widest range (the impact
+// stage's: the wider of its candidates and its widest colour) fits one (at most MARBLES_CUDA_CLUSTER contacts, 4096
 // unless set; 0: never), else a cooperative grid: the same bits again.
 // Each says whether it took one cluster (false too where it launched
 // nothing).
