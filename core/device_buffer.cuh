@@ -80,7 +80,7 @@ void launch(Launch how, void (*kernel)(Params...), int grid, cudaStream_t s, Arg
 // The most blocks of kBlock threads one cluster of `Kernel` may have here
 // (sizes past the portable 8 allowed where the device takes them), or 0
 // where the kernel is not to be launched as a cluster: a device without
-// cluster launches, or the kernel's code not built for sm_90. Asked once
+// cluster launches, or the kernel's code not made from sm_90 PTX. Asked once
 // per kernel.
 template <auto Kernel>
 int largest_cluster() {
@@ -89,9 +89,12 @@ int largest_cluster() {
     if (cudaGetDevice(&device) != cudaSuccess ||
         cudaDeviceGetAttribute(&clusters, cudaDevAttrClusterLaunch, device) != cudaSuccess || clusters == 0)
       return 0;
+    // The PTX the code was made from: code for an older architecture runs
+    // here too, compiled at load (its binaryVersion then the device's), and
+    // its cluster barrier is not there.
     cudaFuncAttributes attributes{};
     MARBLES_CUDA_CHECK(cudaFuncGetAttributes(&attributes, Kernel));
-    if (attributes.binaryVersion < 90) return 0;
+    if (attributes.ptxVersion < 90 || attributes.binaryVersion < 90) return 0;
     if (cudaFuncSetAttribute(Kernel, cudaFuncAttributeNonPortableClusterSizeAllowed, 1) != cudaSuccess)
       (void)cudaGetLastError();  // portable sizes only
     cudaLaunchConfig_t config{};
@@ -115,7 +118,7 @@ void launch_cooperative(std::size_t n, int sm_count, cudaStream_t s, Args&&... a
 }
 
 #if defined(__CUDACC__)
-// A word another block wrote before a grid-wide barrier, read past any
+// A word another block wrote before a barrier of the launch, read past any
 // cached copy (every block reads the same value, so all take one branch).
 __device__ __forceinline__ std::uint32_t read_volatile(const std::uint32_t* p) {
   return *static_cast<const volatile std::uint32_t*>(p);

@@ -125,7 +125,7 @@ struct ClusterSync {
 #if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
     cg::this_cluster().sync();
 #else
-    __trap();  // never launched: the host launches clusters only for sm_90 code (largest_cluster)
+    __trap();  // never launched: the host launches clusters only for code made from sm_90 PTX (largest_cluster)
 #endif
   }
 };
@@ -199,8 +199,8 @@ __global__ void project_kernel(ColourPlan plan, SweepRecords records, const Real
 
 // The impact stage in one launch. Pass 0: the candidates level by level
 // (their order and the firsts of the levels' keys from the colouring's
-// impact_levels; a level's contacts spread over the grid, the overflow set
-// by one thread), a grid-wide barrier after each. Pass p > 0: every contact
+// impact_levels; a level's contacts spread over the launch, the overflow
+// set by one thread), the launch's barrier after each. Pass p > 0: every contact
 // colour by colour, while pass p - 1 hit something. hit[p] (zeroed before)
 // records what pass p hit.
 template <bool Friction, class Sync>
@@ -463,16 +463,12 @@ bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::
                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
                          cudaStream_t s) {
   if (n == 0) return false;
-  // Sized for the wider of the candidates (the first pass walks their
-  // levels) and the widest colour (the later passes walk the colours): a
-  // launch sized for a few candidates walked every colour of a pile of
-  // 10^5 on a few blocks.
-  const std::size_t items = std::max<std::size_t>(n, plan.widest());
+  // Sized for all n contacts (its levels and colours are ranges of them).
   if (friction)
     return launch_one<impact_stage_kernel<true, GridSync>, impact_stage_kernel<true, ClusterSync>>(
-        items, sm_count, s, plan, records, impact, order, first, n, bodies, p, passes, hit);
+        n, sm_count, s, plan, records, impact, order, first, n, bodies, p, passes, hit);
   return launch_one<impact_stage_kernel<false, GridSync>, impact_stage_kernel<false, ClusterSync>>(
-      items, sm_count, s, plan, records, impact, order, first, n, bodies, p, passes, hit);
+      n, sm_count, s, plan, records, impact, order, first, n, bodies, p, passes, hit);
 }
 
 std::uint32_t cluster_widest() { return cluster_widest_asked(); }

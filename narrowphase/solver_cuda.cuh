@@ -1,7 +1,7 @@
 // narrowphase/solver_cuda.cuh — the CUDA twin of solver.cpp over the
 // per-contact functions of solver_math.hpp: a launch per colour (a thread
-// per contact) walked by the host, or a whole stage in one cooperative
-// launch that walks the colours itself; either way the overflow set by one
+// per contact) walked by the host, or a whole stage in one launch (a
+// cooperative grid, or one cluster) that walks the colours itself; either way the overflow set by one
 // thread in order and the colours in the CPU's order (visit_colours), so
 // the result is the CPU's bit for bit.
 // Only .cu files include this header.
@@ -71,11 +71,11 @@ struct ColourPlan {
 // The stages below walk a plan in one launch each (the solver's order,
 // visit_colours, a barrier of the whole launch after each colour; the
 // overflow set by one thread): the same bits as a launch per colour. The
-// launch is one cluster (sm_90) where the widest range (the impact
-// stage's: the wider of its candidates and its widest colour) fits one (at most MARBLES_CUDA_CLUSTER contacts, 4096
-// unless set; 0: never), else a cooperative grid: the same bits again.
-// Each says whether it took one cluster (false too where it launched
-// nothing).
+// launch is one cluster (sm_90) where its range fits one (the solve and
+// the projection: the widest colour; the impact stage: all its contacts;
+// at most MARBLES_CUDA_CLUSTER contacts, 4096 unless set; 0: never), else
+// a cooperative grid: the same bits again. Each says whether it took one
+// cluster (false too where it launched nothing).
 
 // MARBLES_CUDA_CLUSTER's widest range for one cluster (kept from its first
 // reading; a value that is not a count from 0 to 2^30 is refused with a

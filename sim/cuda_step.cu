@@ -29,7 +29,7 @@
 // first substep waits for the counts before the colouring too. The cache's
 // entry count, the lost-load count, the impact levels and the flags of the
 // impact and projection passes stay on the device: those stages run as one
-// cooperative launch each. A settled pile and the gas wait 2 times a step.
+// launch each (a cooperative grid, or one cluster where they are small). A settled pile and the gas wait 2 times a step.
 // One wait per step, with every buffer sized from the last step, is the
 // next step.
 #include <cuda_runtime.h>
