@@ -200,9 +200,9 @@ __global__ void project_kernel(ColourPlan plan, SweepRecords records, const Real
 // The impact stage in one launch. Pass 0: the candidates level by level
 // (their order and the firsts of the levels' keys from the colouring's
 // impact_levels; a level's contacts spread over the launch, the overflow
-// set by one thread), the launch's barrier after each. Pass p > 0: every contact
-// colour by colour, while pass p - 1 hit something. hit[p] (zeroed before)
-// records what pass p hit.
+// set by one thread), the launch's barrier after each. Pass p > 0: every
+// contact colour by colour, while pass p - 1 hit something. hit[p] (zeroed
+// before) records what pass p hit.
 template <bool Friction, class Sync>
 __global__ void impact_stage_kernel(ColourPlan plan, SweepRecords records, Real4* impact, const std::uint32_t* order,
                                     const std::uint32_t* first, std::uint32_t n, SolverBody* bodies, ImpactParams p,

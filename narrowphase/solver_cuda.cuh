@@ -1,9 +1,9 @@
 // narrowphase/solver_cuda.cuh — the CUDA twin of solver.cpp over the
 // per-contact functions of solver_math.hpp: a launch per colour (a thread
 // per contact) walked by the host, or a whole stage in one launch (a
-// cooperative grid, or one cluster) that walks the colours itself; either way the overflow set by one
-// thread in order and the colours in the CPU's order (visit_colours), so
-// the result is the CPU's bit for bit.
+// cooperative grid, or one cluster) that walks the colours itself; either
+// way the overflow set by one thread in order and the colours in the CPU's
+// order (visit_colours), so the result is the CPU's bit for bit.
 // Only .cu files include this header.
 #pragma once
 
