@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <utility>
 
+#include <cooperative_groups.h>
 #include <cub/device/device_scan.cuh>
 
 #include "core/bits.hpp"
@@ -118,6 +119,24 @@ void launch_cooperative(std::size_t n, int sm_count, cudaStream_t s, Args&&... a
 }
 
 #if defined(__CUDACC__)
+// What the blocks of one launch meet at: the whole grid of a cooperative
+// launch (a barrier in memory), or the one cluster a Launch::cluster is
+// (sm_90: the cluster's barrier in hardware). Both release the writes
+// before them to every thread of the launch, and their reads after them
+// see those writes (device_buffer_cuda_test: "Barriers").
+struct GridSync {
+  __device__ void sync() const { cooperative_groups::this_grid().sync(); }
+};
+struct ClusterSync {
+  __device__ void sync() const {
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
+    cooperative_groups::this_cluster().sync();
+#else
+    __trap();  // never launched: clusters only for code made from sm_90 PTX (largest_cluster)
+#endif
+  }
+};
+
 // A word another block wrote before a barrier of the launch, read past any
 // cached copy (every block reads the same value, so all take one branch).
 __device__ __forceinline__ std::uint32_t read_volatile(const std::uint32_t* p) {

@@ -4,7 +4,6 @@
 #include "core/lower_bound.hpp"
 #include "narrowphase/solver_cuda.cuh"
 
-#include <cooperative_groups.h>
 #include <cub/device/device_radix_sort.cuh>
 
 #include <algorithm>
@@ -14,8 +13,6 @@
 
 namespace marbles::narrowphase::cuda {
 namespace {
-
-namespace cg = cooperative_groups;
 
 using ::marbles::cuda::kBlock;
 using ::marbles::cuda::Launch;
@@ -112,23 +109,11 @@ __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* 
       });
 }
 
-// What the blocks of a one-launch stage meet at after each range: the
-// whole grid of a cooperative launch (a barrier in memory), or the one
-// cluster a launch of few blocks is (sm_90: the cluster's barrier in
-// hardware; docs/architecture.md "One cluster for a small solve"). Both
-// release the writes before them to every thread of the launch.
-struct GridSync {
-  __device__ void sync() const { cg::this_grid().sync(); }
-};
-struct ClusterSync {
-  __device__ void sync() const {
-#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
-    cg::this_cluster().sync();
-#else
-    __trap();  // never launched: the host launches clusters only for code made from sm_90 PTX (largest_cluster)
-#endif
-  }
-};
+// What the blocks of a one-launch stage meet at after each range
+// (core/device_buffer.cuh; docs/architecture.md "One cluster for a small
+// solve").
+using ::marbles::cuda::ClusterSync;
+using ::marbles::cuda::GridSync;
 
 // One range [b, e) of a one-launch stage: spread over the launch's threads,
 // or (serial) by one thread in order, reversed when asked; then the

@@ -1,7 +1,9 @@
 // core/device_memory.hpp's DeviceBuffer::reserve_keeping: a buffer grown
 // keeps its first bytes (random contents, read back), a buffer that fits
 // is not moved, and a stream-ordered buffer grows in its stream's order;
-// DeviceBuffer::trim frees exactly what the last asks left over.
+// DeviceBuffer::trim frees exactly what the last asks left over; the
+// barriers of one launch (core/device_buffer.cuh GridSync, ClusterSync)
+// let every thread read what other blocks wrote before them.
 // Label `gpu`; every case skips, saying so, without a CUDA device.
 #include <gtest/gtest.h>
 
@@ -12,6 +14,7 @@
 #include <random>
 #include <vector>
 
+#include "core/device_buffer.cuh"
 #include "core/device_memory.hpp"
 #include "tests/require_device.hpp"
 
@@ -121,3 +124,68 @@ TEST(DeviceBuffer, TrimFreesWhatTheLastNeedLeftOver) {
     ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
   }
 }
+
+namespace {
+
+// Each round r, thread w of the launch writes r * n + w into word
+// (w + r * blockDim.x) mod n (a word of the next block's threads), meets
+// the others at the barrier, reads its own word t, which thread
+// (t - r * blockDim.x) mod n of another block wrote, and meets them again
+// before the next round's writes. A read that missed a write (a stale
+// copy in the SM's L1, the barrier not ordering the write before it)
+// counts in *wrong. Word t was read, and so may be cached, in the round
+// before, with another block's value.
+template <class Sync>
+__global__ void exchange_kernel(unsigned* words, int rounds, unsigned long long* tally) {
+  const Sync barrier;
+  const unsigned n = gridDim.x * blockDim.x, t = blockIdx.x * blockDim.x + threadIdx.x;
+  unsigned long long missed = 0, seen = 0;
+  for (int r = 1; r <= rounds; ++r) {
+    const unsigned shift = (static_cast<unsigned>(r) * blockDim.x) % n;
+    words[(t + shift) % n] = static_cast<unsigned>(r) * n + t;
+    barrier.sync();
+    const unsigned writer = (t + n - shift) % n;
+    if (words[t] != static_cast<unsigned>(r) * n + writer) ++missed;
+    else ++seen;
+    barrier.sync();
+  }
+  atomicAdd(tally, missed);
+  atomicAdd(tally + 1, seen);
+}
+
+// Runs exchange_kernel<Sync> on `blocks` blocks launched `how`: the reads
+// that missed a write; every read is counted, missed or seen.
+template <class Sync>
+unsigned long long missed_reads(dev::Launch how, int blocks, int rounds) {
+  const std::size_t n = std::size_t(blocks) * dev::kBlock;
+  dev::DeviceBuffer memory, counts;
+  auto* words = memory.as<unsigned>(n);
+  auto* tally = counts.as<unsigned long long>(2);
+  EXPECT_EQ(cudaMemset(words, 0xff, n * sizeof(unsigned)), cudaSuccess);
+  EXPECT_EQ(cudaMemset(tally, 0, 2 * sizeof(unsigned long long)), cudaSuccess);
+  dev::launch(how, exchange_kernel<Sync>, blocks, nullptr, words, rounds, tally);
+  unsigned long long got[2] = {~0ull, 0};
+  EXPECT_EQ(cudaMemcpy(got, tally, sizeof got, cudaMemcpyDeviceToHost), cudaSuccess);
+  EXPECT_EQ(got[0] + got[1], n * static_cast<unsigned long long>(rounds)) << "not every read was counted";
+  return got[0];
+}
+
+TEST(Barriers, EveryReadAfterTheGridsBarrierSeesTheWritesBeforeIt) {
+  REQUIRE_DEVICE();
+  const int blocks = dev::grid_for(std::size_t(1) << 30, ::marbles::cuda_device().multiprocessors,
+                                   dev::resident_blocks<exchange_kernel<dev::GridSync>>());
+  ASSERT_GT(blocks, 1) << "one block: no other block's writes to see";
+  EXPECT_EQ(missed_reads<dev::GridSync>(dev::Launch::cooperative, blocks, 200), 0ull) << blocks << " blocks";
+}
+
+TEST(Barriers, EveryReadAfterTheClustersBarrierSeesTheWritesBeforeIt) {
+  REQUIRE_DEVICE();
+  const int most = dev::largest_cluster<exchange_kernel<dev::ClusterSync>>();
+  if (most == 0) GTEST_SKIP() << "skipped: no cluster launches here (compute capability below 9, or no sm_90 code)";
+  ASSERT_GT(most, 1) << "a cluster of one block: no other block's writes to see";
+  for (int blocks = 2; blocks <= most; blocks *= 2)
+    EXPECT_EQ(missed_reads<dev::ClusterSync>(dev::Launch::cluster, blocks, 2000), 0ull) << blocks << " blocks";
+  EXPECT_EQ(missed_reads<dev::ClusterSync>(dev::Launch::cluster, most, 2000), 0ull) << most << " blocks";
+}
+
+}  // namespace
