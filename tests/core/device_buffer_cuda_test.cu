@@ -127,21 +127,22 @@ TEST(DeviceBuffer, TrimFreesWhatTheLastNeedLeftOver) {
 
 namespace {
 
-// Each round r, thread w of the launch writes r * n + w into word
-// (w + r * blockDim.x) mod n (a word of the next block's threads), meets
-// the others at the barrier, reads its own word t, which thread
-// (t - r * blockDim.x) mod n of another block wrote, and meets them again
-// before the next round's writes. A read that missed a write (a stale
-// copy in the SM's L1, the barrier not ordering the write before it)
-// counts in *wrong. Word t was read, and so may be cached, in the round
-// before, with another block's value.
+// Each round r, thread w of the launch writes r * n + w into word w +
+// shift (mod n), shift being 1 to gridDim.x - 1 blocks' worth of threads in
+// turn (so a word of another block's threads, never its own), meets the
+// others at the barrier, reads its own word t, which thread t - shift (mod
+// n) wrote, and meets them again before the next round's writes. A read
+// that missed a write (a stale copy in the SM's L1, the barrier not
+// ordering the write before it) counts in tally[0], a read that saw it in
+// tally[1]. Word t was read, and so may be cached, in the round before,
+// with another block's value.
 template <class Sync>
 __global__ void exchange_kernel(unsigned* words, int rounds, unsigned long long* tally) {
   const Sync barrier;
   const unsigned n = gridDim.x * blockDim.x, t = blockIdx.x * blockDim.x + threadIdx.x;
   unsigned long long missed = 0, seen = 0;
   for (int r = 1; r <= rounds; ++r) {
-    const unsigned shift = (static_cast<unsigned>(r) * blockDim.x) % n;
+    const unsigned shift = (1 + static_cast<unsigned>(r - 1) % (gridDim.x - 1)) * blockDim.x;  // gridDim.x >= 2
     words[(t + shift) % n] = static_cast<unsigned>(r) * n + t;
     barrier.sync();
     const unsigned writer = (t + n - shift) % n;
