@@ -126,8 +126,8 @@ class DeviceBuffer {
     if (keep > 0 && m_handle)
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(grown.m_handle, m_handle, keep < m_bytes ? keep : m_bytes,
                                          cudaMemcpyDeviceToDevice, stream));
-    swap(grown);  // the old memory goes with `grown`
-    m_asked = grown.m_asked > m_asked ? grown.m_asked : m_asked;
+    swap(grown);              // the old memory goes with `grown`
+    m_asked = grown.m_asked;  // the old count, which took `bytes` in above
     return m_handle;
   }
   template <class T>

@@ -1,6 +1,6 @@
 #include "core/cuda_check.hpp"
 #include "core/device_buffer.cuh"
-#include "core/error.hpp"
+#include "core/environment.hpp"
 #include "core/lower_bound.hpp"
 #include "narrowphase/solver_cuda.cuh"
 
@@ -403,16 +403,9 @@ void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodie
 // MARBLES_CUDA_CLUSTER, else kClusterWidest; 0: never.
 constexpr std::uint32_t kClusterWidest = 4096;
 std::uint32_t cluster_widest_asked() {
-  static const std::uint32_t widest = [] {
-    const char* asked = std::getenv("MARBLES_CUDA_CLUSTER");
-    if (asked == nullptr) return kClusterWidest;
-    char* end = nullptr;
-    const long v = std::strtol(asked, &end, 10);
-    if (end == asked || *end != '\0' || v < 0 || v > (1l << 30))
-      throw RuntimeFailure(std::string("MARBLES_CUDA_CLUSTER=") + asked +
-                           ": expected the widest colour to solve as one cluster, 0 (never) to 1073741824");
-    return static_cast<std::uint32_t>(v);
-  }();
+  static const auto widest = static_cast<std::uint32_t>(
+      whole_from_environment("MARBLES_CUDA_CLUSTER", kClusterWidest, 1l << 30,
+                             "expected the widest colour to solve as one cluster, 0 (never) to 1073741824"));
   return widest;
 }
 

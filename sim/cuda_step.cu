@@ -29,9 +29,9 @@
 // first substep waits for the counts before the colouring too. The cache's
 // entry count, the lost-load count, the impact levels and the flags of the
 // impact and projection passes stay on the device: those stages run as one
-// launch each (a cooperative grid, or one cluster where they are small). A settled pile and the gas wait 2 times a step.
-// One wait per step, with every buffer sized from the last step, is the
-// next step.
+// launch each (a cooperative grid, or one cluster where they are small). A
+// settled pile and the gas wait 2 times a step. One wait per step, with
+// every buffer sized from the last step, is the next step.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -44,6 +44,7 @@
 #include "broadphase/broadphase_cuda.hpp"
 #include "core/cuda_check.hpp"
 #include "core/device.hpp"
+#include "core/environment.hpp"
 #include "core/error.hpp"
 #include "integrator/integrator_cuda.cuh"
 #include "narrowphase/colouring.hpp"
@@ -107,14 +108,8 @@ SolveMode solve_mode_from_environment() {
 // tests trim every step, the most often, against the CPU's bits).
 constexpr int kTrimEvery = 16;
 int trim_every_from_environment() {
-  const char* asked = std::getenv("MARBLES_CUDA_TRIM_EVERY");
-  if (asked == nullptr) return kTrimEvery;
-  char* end = nullptr;
-  const long every = std::strtol(asked, &end, 10);
-  if (end == asked || *end != '\0' || every < 0 || every > 1000000)
-    throw RuntimeFailure(std::string("MARBLES_CUDA_TRIM_EVERY=") + asked +
-                         ": expected a whole number of steps from 0 (never) to 1000000");
-  return static_cast<int>(every);
+  return static_cast<int>(whole_from_environment("MARBLES_CUDA_TRIM_EVERY", kTrimEvery, 1000000,
+                                                 "expected a whole number of steps from 0 (never) to 1000000"));
 }
 
 // Room for a count the host reads only after the stages that fill it (the
@@ -645,11 +640,11 @@ class CudaStep final : public StepBackend {
   }
   void keep_step_start() override {
     send_host_edits();  // edits between steps belong to the step's start
-    // The copy's entries are dead until copied again: trimmed as often as
-    // the step's buffers (trim_buffers).
-    if (m_trim_every > 0 && ++m_kept_since_trim >= m_trim_every) {
-      m_kept_since_trim = 0;
+    // The copy's entries are dead until copied again: trimmed after a step
+    // that trimmed the step's buffers (trim_buffers).
+    if (m_kept_trim_due) {
       m_kept_cache.trim_entries();
+      m_kept_trim_due = false;
     }
     m_device.copy_state_to(m_kept, m_stream);
     m_cache.copy_to(m_kept_cache, m_stream);
@@ -767,7 +762,7 @@ class CudaStep final : public StepBackend {
     m_steps_since_trim = 0;
     for (DeviceBuffer* b : {&m_record_memory, &m_scratch, &m_pairs, &m_match, &m_kept_colour, &m_sorted_colour})
       m_counters.buffer_trims += b->trim() ? 1 : 0;
-    m_cache_trim_due = true;
+    m_cache_trim_due = m_kept_trim_due = true;
   }
 
   // One launch per colour range in the solver's order (visit_colours, the
@@ -898,7 +893,7 @@ class CudaStep final : public StepBackend {
   int m_trim_every = trim_every_from_environment();  // trim_buffers(): steps apart, 0 never
   int m_steps_since_trim = 0;
   bool m_cache_trim_due = false;  // the cache's entries trimmed at the next store (store_impulses)
-  int m_kept_since_trim = 0;      // keep_step_start's steps since it trimmed the watchdog's copy
+  bool m_kept_trim_due = false;   // the watchdog's copy of the entries trimmed at the next keep_step_start
   // MARBLES_SOLVE_ORDER's local order (a study; none: the solver's order).
   std::optional<narrowphase::LocalOrder> m_local = narrowphase::local_order_from_environment();
   nc::LocalSweepsCuda m_local_sweeps;
