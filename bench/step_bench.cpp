@@ -487,8 +487,6 @@ struct Row {
   // One-launch stages (solve, projection, impact stage) of the timed steps
   // that ran as one cluster (CUDA on sm_90: their widest colour small).
   std::uint64_t cluster_stages = 0;
-  // Of their solves, those run in one block (the bodies in its shared memory).
-  std::uint64_t block_solves = 0;
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   std::uint64_t rollbacks = 0;     // steps the watchdog undid and redid (--watchdog on), of all the steps run here
   std::optional<double> watch_ke_per_sphere;  // J, the watch's own figure at the last step's end (--watchdog on)
@@ -540,7 +538,6 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     row.buffer_trims += c.buffer_trims;
     row.impact_substeps += c.impact_words;
     row.cluster_stages += c.cluster_stages;
-    row.block_solves += c.block_solves;
   }
   if (on_device) profiled_steps(false);  // each step ends with a wait for its flags: nothing of it is still running
   if (sim.non_finite()) throw RuntimeFailure("N = " + std::to_string(n) + ": non-finite state in the timed steps");
@@ -734,7 +731,6 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"buffer_trims", r.buffer_trims},
                                  {"impact_word_substeps", r.impact_substeps},
                                  {"cluster_stages", r.cluster_stages},
-                                 {"block_solves", r.block_solves},
                                  {"ke_per_sphere_J", r.ke_per_sphere},
                                  {"rollbacks", r.rollbacks},
                                  {"watch_ke_per_sphere_J", count(r.watch_ke_per_sphere)},

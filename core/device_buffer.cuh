@@ -78,20 +78,6 @@ void launch(Launch how, void (*kernel)(Params...), int grid, cudaStream_t s, Arg
   MARBLES_CUDA_CHECK_LAUNCH();  // with MARBLES_CUDA_SYNC=1: a wait, the kernel's error here
 }
 
-// `kernel` as one block of `threads` threads with `shared` bytes of
-// dynamic shared memory, checked (the caller has let the kernel take that
-// many: cudaFuncAttributeMaxDynamicSharedMemorySize).
-template <class... Params, class... Args>
-void launch_block(void (*kernel)(Params...), int threads, std::size_t shared, cudaStream_t s, Args&&... args) {
-  cudaLaunchConfig_t config{};
-  config.gridDim = dim3(1);
-  config.blockDim = dim3(static_cast<unsigned>(threads));
-  config.dynamicSmemBytes = shared;
-  config.stream = s;
-  MARBLES_CUDA_CHECK(cudaLaunchKernelEx(&config, kernel, std::forward<Args>(args)...));
-  MARBLES_CUDA_CHECK_LAUNCH();
-}
-
 // The most blocks of kBlock threads one cluster of `Kernel` may have here
 // (sizes past the portable 8 allowed where the device takes them), or 0
 // where the kernel is not to be launched as a cluster: a device without
@@ -140,11 +126,6 @@ void launch_cooperative(std::size_t n, int sm_count, cudaStream_t s, Args&&... a
 // see those writes (device_buffer_cuda_test: "Barriers").
 struct GridSync {
   __device__ void sync() const { cooperative_groups::this_grid().sync(); }
-};
-// Or the one block of a launch (__syncthreads: the block's shared and
-// global writes before it, seen by its reads after it).
-struct BlockSync {
-  __device__ void sync() const { __syncthreads(); }
 };
 struct ClusterSync {
   __device__ void sync() const {

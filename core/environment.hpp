@@ -1,7 +1,6 @@
 // core/environment.hpp — a switch read from the environment: a whole number
 // within bounds, or the program refuses it, naming the variable and what it
-// expects (the CUDA step's MARBLES_CUDA_TRIM_EVERY, MARBLES_CUDA_CLUSTER,
-// MARBLES_CUDA_BLOCK_SOLVE).
+// expects (the CUDA step's MARBLES_CUDA_TRIM_EVERY, MARBLES_CUDA_CLUSTER).
 #pragma once
 
 #include <cstdlib>

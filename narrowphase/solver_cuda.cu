@@ -112,7 +112,6 @@ __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* 
 // What the blocks of a one-launch stage meet at after each range
 // (core/device_buffer.cuh; docs/architecture.md "One cluster for a small
 // solve").
-using ::marbles::cuda::BlockSync;
 using ::marbles::cuda::ClusterSync;
 using ::marbles::cuda::GridSync;
 
@@ -218,30 +217,6 @@ __global__ void solve_kernel(ColourPlan plan, SweepRecords s, SolverBody* bodies
   if (warm) walk_colours(plan, false, grid, [&](std::uint32_t k) { warm_start_record<Friction, Rolling>(s, k, bodies); });
   for (int it = 0; it < sweeps; ++it)
     walk_colours(plan, it % 2 == 1, grid, [&](std::uint32_t k) { solve_record<Friction, Rolling>(s, k, bodies, inv_h); });
-}
-
-// The same in one block of kSolveBlock threads, every solver body staged in
-// the block's shared memory (n bodies, kOneBlockSolveBytes at most): a
-// colour's body loads and stores then cost a trip to the SM's own memory,
-// not to L2, and the barrier after each colour is the block's. The same
-// per-contact functions on the same values in the same order of colours
-// (within a colour no two contacts share a body), so the same bits; the
-// bodies go back to global memory whole at the end.
-constexpr int kSolveBlock = 1024;
-template <bool Friction, bool Rolling>
-__global__ void __launch_bounds__(kSolveBlock, 1)
-    solve_block_kernel(ColourPlan plan, SweepRecords s, SolverBody* bodies, std::uint32_t n, real inv_h, bool warm,
-                       int sweeps) {
-  extern __shared__ int4 stage_words[];
-  SolverBody* staged = reinterpret_cast<SolverBody*>(stage_words);
-  for (std::uint32_t i = threadIdx.x; i < n; i += blockDim.x) store_whole(staged + i, load_whole(bodies + i));
-  __syncthreads();
-  const BlockSync block;
-  if (warm) walk_colours(plan, false, block, [&](std::uint32_t k) { warm_start_record<Friction, Rolling>(s, k, staged); });
-  for (int it = 0; it < sweeps; ++it)
-    walk_colours(plan, it % 2 == 1, block, [&](std::uint32_t k) { solve_record<Friction, Rolling>(s, k, staged, inv_h); });
-  __syncthreads();  // every range's writes (an empty plan walked none)
-  for (std::uint32_t i = threadIdx.x; i < n; i += blockDim.x) store_whole(bodies + i, load_whole(staged + i));
 }
 
 __global__ void max_overlap_kernel(SweepRecords records, std::uint32_t n, BodiesView bodies, const WallShape* walls,
@@ -476,63 +451,15 @@ bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::
 
 std::uint32_t cluster_widest() { return cluster_widest_asked(); }
 
-// MARBLES_CUDA_BLOCK_SOLVE: 1 (unset) lets a small scene's solve run in
-// one block, 0 never.
-bool block_solve_asked() {
-  static const bool asked =
-      whole_from_environment("MARBLES_CUDA_BLOCK_SOLVE", 1, 1, "expected 1 (a small scene's solve in one block) or 0") != 0;
-  return asked;
-}
-
-// Bytes of solver bodies solve_block_kernel<Friction, Rolling> may stage
-// here: kOneBlockSolveBytes, or less where the device lets a block have
-// less; 0 where it cannot run kSolveBlock threads. Asked (and the kernel
-// let take them) once per instance.
-template <bool Friction, bool Rolling>
-std::size_t block_solve_bytes() {
-  static const std::size_t bytes = [] {
-    auto* kernel = solve_block_kernel<Friction, Rolling>;
-    int device = 0, most = 0;
-    MARBLES_CUDA_CHECK(cudaGetDevice(&device));
-    MARBLES_CUDA_CHECK(cudaDeviceGetAttribute(&most, cudaDevAttrMaxSharedMemoryPerBlockOptin, device));
-    cudaFuncAttributes attributes{};
-    MARBLES_CUDA_CHECK(cudaFuncGetAttributes(&attributes, kernel));
-    if (attributes.maxThreadsPerBlock < kSolveBlock) return std::size_t(0);
-    const std::size_t left = most > static_cast<int>(attributes.sharedSizeBytes)
-                                 ? static_cast<std::size_t>(most) - attributes.sharedSizeBytes
-                                 : std::size_t(0);
-    const std::size_t bytes = std::min(kOneBlockSolveBytes, left);
-    MARBLES_CUDA_CHECK(cudaFuncSetAttribute(kernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                            static_cast<int>(bytes)));
-    return bytes;
-  }();
-  return bytes;
-}
-
-// The widest colour the one-block solve takes (four contacts a thread):
-// past it, more SMs walk a colour faster than one SM's cheaper barrier and
-// loads save.
-constexpr std::uint32_t kBlockSolveWidest = 4 * kSolveBlock;
-
-SolveShape launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies,
-                        std::uint32_t body_count, real inv_h, SolverTerms t, bool warm, int sweeps, int sm_count,
-                        cudaStream_t s) {
-  if (plan.empty()) return SolveShape::grid;
-  SolveShape shape = SolveShape::grid;
+bool launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h, SolverTerms t,
+                  bool warm, int sweeps, int sm_count, cudaStream_t s) {
+  if (plan.empty()) return false;
+  bool cluster = false;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
-    const std::size_t staged = std::size_t(body_count) * sizeof(SolverBody);
-    if (block_solve_asked() && plan.widest() <= kBlockSolveWidest && body_count > 0 &&
-        staged <= block_solve_bytes<friction, rolling>()) {
-      ::marbles::cuda::launch_block(solve_block_kernel<friction, rolling>, kSolveBlock, staged, s, plan, records,
-                                    bodies, body_count, inv_h, warm, sweeps);
-      shape = SolveShape::block;
-      return;
-    }
-    if (launch_one<solve_kernel<friction, rolling, GridSync>, solve_kernel<friction, rolling, ClusterSync>>(
-            plan.widest(), sm_count, s, plan, records, bodies, inv_h, warm, sweeps))
-      shape = SolveShape::cluster;
+    cluster = launch_one<solve_kernel<friction, rolling, GridSync>, solve_kernel<friction, rolling, ClusterSync>>(
+        plan.widest(), sm_count, s, plan, records, bodies, inv_h, warm, sweeps);
   });
-  return shape;
+  return cluster;
 }
 
 

@@ -103,18 +103,9 @@ bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::
 
 // The warm start (when `warm`) and `sweeps` sweeps in one launch, where a
 // launch per colour would leave the device waiting for the host's launches
-// (contacts few a colour): in one block with the body_count solver bodies
-// in its shared memory where they fit it (kOneBlockSolveBytes at most) and
-// the widest colour is at most four contacts a thread
-// (MARBLES_CUDA_BLOCK_SOLVE=0: never), else as one cluster or on a
-// cooperative grid as the other one-launch stages. The same bits each way.
-enum class SolveShape { grid, cluster, block };
-SolveShape launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies,
-                        std::uint32_t body_count, real inv_h, SolverTerms terms, bool warm, int sweeps, int sm_count,
-                        cudaStream_t stream);
-// MARBLES_CUDA_BLOCK_SOLVE as asked (kept from its first reading; a value
-// other than 0 or 1 is refused with a RuntimeFailure).
-bool block_solve_asked();
+// (contacts few a colour).
+bool launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h,
+                  SolverTerms terms, bool warm, int sweeps, int sm_count, cudaStream_t stream);
 
 // *deepest = max(*deepest, overlap_ratio) over the records' contacts [0, n) (as the bits
 // of a non-negative real: an atomic max, the same whatever the order).

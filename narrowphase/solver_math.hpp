@@ -90,12 +90,6 @@ struct alignas(4 * sizeof(real)) SolverBody {
   real inv_inertia;
 };
 
-// The GPU's solve of a small scene runs in one block with every solver
-// body staged in its shared memory (narrowphase/solver_cuda.cu,
-// solve_block_kernel) where the bodies take at most this many bytes (6 144
-// spheres in float) and the device lets a block have them.
-inline constexpr std::size_t kOneBlockSolveBytes = std::size_t(192) * 1024;
-
 MARBLES_HD_INLINE SolverBody gather_solver_body(const BodiesView& bodies, std::size_t i) {
   return {bodies.velocity[i], bodies.inv_mass[i], bodies.angular_velocity[i], bodies.inv_inertia[i]};
 }

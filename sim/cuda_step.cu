@@ -160,7 +160,6 @@ class CudaStep final : public StepBackend {
     m_colouring.share_round_memory(m_record_memory);  // dead while contacts are coloured
     m_kept_cache.set_terms(m_terms.friction, m_terms.rolling);
     nc::cluster_widest();  // MARBLES_CUDA_CLUSTER read (or refused) before any step
-    nc::block_solve_asked();  // and MARBLES_CUDA_BLOCK_SOLVE
   }
 
   void apply_body_forces(real h) override {
@@ -423,11 +422,9 @@ class CudaStep final : public StepBackend {
     }
     if (solve_in_one_launch()) {
       ++m_counters.one_launch_solves;
-      const nc::SolveShape shape =
-          nc::launch_solve(m_records, m_plan, bodies, static_cast<std::uint32_t>(m_device.size()), inv_h, m_terms,
-                           m_model.solver.warm_start, sweeps, m_sm, m_stream);
-      if (shape == nc::SolveShape::cluster) ++m_counters.cluster_stages;
-      if (shape == nc::SolveShape::block) ++m_counters.block_solves;
+      if (nc::launch_solve(m_records, m_plan, bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm,
+                           m_stream))
+        ++m_counters.cluster_stages;
       nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
       return;
     }

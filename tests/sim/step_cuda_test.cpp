@@ -72,7 +72,6 @@ void expect_same_state(const World& a, const World& b, int step) {
 struct GpuCounts {
   std::uint64_t one_launch = 0;    // substeps whose solve took one launch
   std::uint64_t cluster = 0;       // one-launch stages run as one cluster
-  std::uint64_t block = 0;         // one-launch solves run in one block
   std::uint64_t turns = 0;         // sweep launches that visited a turn's range twice
   std::uint64_t solved = 0;        // steps with contacts (the CPU's count)
   std::uint64_t pair_redos = 0;    // substeps whose broad phase outgrew its pairs' room and ran again
@@ -92,7 +91,6 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
     gpu.step();
     counts.one_launch += gpu.last_step().one_launch_solves;
     counts.cluster += gpu.last_step().cluster_stages;
-    counts.block += gpu.last_step().block_solves;
     counts.turns += gpu.last_step().turn_launches;
     counts.pair_redos += gpu.last_step().pair_redos;
     counts.grid_replans += gpu.last_step().grid_replans;
@@ -155,18 +153,6 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
   if (counts.solved > 0 && (!widest || std::strtol(widest, nullptr, 10) == 0)) {
     EXPECT_EQ(counts.cluster > 0, !widest && cuda_device().compute_major >= 9)
         << counts.cluster << " stages as one cluster; MARBLES_CUDA_CLUSTER=" << (widest ? widest : "unset");
-  }
-  // A one-launch solve runs in one block, its bodies in shared memory,
-  // where they fit kOneBlockSolveBytes (these scenes' colours are all
-  // narrow enough) on a compute capability 9 device (227 KB a block), never
-  // under MARBLES_CUDA_BLOCK_SOLVE=0.
-  const char* block = std::getenv("MARBLES_CUDA_BLOCK_SOLVE");
-  const bool fits = cpu.world().size() * sizeof(narrowphase::SolverBody) <= narrowphase::kOneBlockSolveBytes;
-  if (block && std::strcmp(block, "0") == 0) {
-    EXPECT_EQ(counts.block, 0u) << "MARBLES_CUDA_BLOCK_SOLVE=0";
-  } else if (!block && counts.one_launch > 0 && cuda_device().compute_major >= 9) {
-    EXPECT_EQ(counts.block > 0, fits) << counts.block << " solves in one block of " << counts.one_launch << ", "
-                                      << cpu.world().size() << " spheres";
   }
 }
 
