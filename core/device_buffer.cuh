@@ -82,7 +82,9 @@ void launch(Launch how, void (*kernel)(Params...), int grid, cudaStream_t s, Arg
 // (sizes past the portable 8 allowed where the device takes them), or 0
 // where the kernel is not to be launched as a cluster: a device without
 // cluster launches, or the kernel's code not made from sm_90 PTX. Asked once
-// per kernel.
+// per kernel, of the device current then, and the kernel let take
+// non-portable sizes there only: the step runs on device 0 alone
+// (cuda_device()), as resident_blocks and the memory pools assume too.
 template <auto Kernel>
 int largest_cluster() {
   static const int most = [] {

@@ -450,6 +450,7 @@ bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::
 }
 
 std::uint32_t cluster_widest() { return cluster_widest_asked(); }
+int cluster_blocks() { return ::marbles::cuda::largest_cluster<project_kernel<ClusterSync>>(); }
 
 bool launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h, SolverTerms t,
                   bool warm, int sweeps, int sm_count, cudaStream_t s) {

@@ -81,6 +81,10 @@ struct ColourPlan {
 // reading; a value that is not a count from 0 to 2^30 is refused with a
 // RuntimeFailure).
 std::uint32_t cluster_widest();
+// The most blocks of one cluster here (largest_cluster of the projection's
+// kernel, which every scene with contacts runs): 0 where no one-launch
+// stage runs as one.
+int cluster_blocks();
 
 // The position stages: the impacts' rebound shifts (rebound_one; in the
 // impact words) when *hit (the impact stage's flag of its first pass; null:

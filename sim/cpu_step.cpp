@@ -217,6 +217,7 @@ std::unique_ptr<StepBackend> make_cpu_step(const StepModel& model, World world) 
 std::unique_ptr<StepBackend> make_cuda_step(const StepModel&, World) {
   throw RuntimeFailure("the CUDA step: this build has no CUDA backend");
 }
+int cuda_cluster_blocks() { return 0; }
 #endif
 
 }  // namespace marbles

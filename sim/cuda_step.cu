@@ -912,4 +912,6 @@ std::unique_ptr<StepBackend> make_cuda_step(const StepModel& model, World world)
   return std::make_unique<CudaStep>(model, std::move(world));
 }
 
+int cuda_cluster_blocks() { return cuda_device().available ? nc::cluster_blocks() : 0; }
+
 }  // namespace marbles

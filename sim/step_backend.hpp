@@ -158,5 +158,10 @@ class StepBackend {
 std::unique_ptr<StepBackend> make_cpu_step(const StepModel& model, World world);
 // Device arrays, one stream. Throws RuntimeFailure without a CUDA build or device.
 std::unique_ptr<StepBackend> make_cuda_step(const StepModel& model, World world);
+// The most blocks the CUDA step's one-launch stages take as one cluster here
+// (16 on an H100 or H200 with this build's default sm_90 code): 0 where
+// they never run as one (no device, a device without cluster launches, code
+// not made from sm_90 PTX, a build without CUDA).
+int cuda_cluster_blocks();
 
 }  // namespace marbles
