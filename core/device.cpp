@@ -39,7 +39,6 @@ static DeviceInfo query() {
   info.available = true;
   info.name = prop.name;
   info.multiprocessors = prop.multiProcessorCount;
-  info.compute_major = prop.major;
 #else
   info.why_not = "this build has no CUDA backend (configured with MARBLES_CUDA=OFF or no nvcc)";
 #endif

@@ -13,7 +13,6 @@ struct DeviceInfo {
   std::string name;       // e.g. "NVIDIA H100 80GB HBM3"
   std::string why_not;    // set when !available
   int multiprocessors = 0;
-  int compute_major = 0;  // compute capability's major number (9: Hopper, thread block clusters)
 };
 
 // True when this build has the CUDA backend compiled in.
