@@ -399,15 +399,9 @@ void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodie
   });
 }
 
-// The widest range a one-launch stage takes as one cluster (sm_90):
-// MARBLES_CUDA_CLUSTER, else kClusterWidest; 0: never.
+// The widest range a one-launch stage takes as one cluster (sm_90) unless
+// MARBLES_CUDA_CLUSTER says (cluster_widest).
 constexpr std::uint32_t kClusterWidest = 4096;
-std::uint32_t cluster_widest_asked() {
-  static const auto widest = static_cast<std::uint32_t>(
-      whole_from_environment("MARBLES_CUDA_CLUSTER", kClusterWidest, 1l << 30,
-                             "expected the widest colour to solve as one cluster, 0 (never) to 1073741824"));
-  return widest;
-}
 
 // A one-launch stage over ranges of at most `items` contacts: as one
 // cluster of as many blocks as they ask for where that many fit one
@@ -419,7 +413,7 @@ template <auto OnGrid, auto InCluster, class... Args>
 bool launch_one(std::size_t items, int sm_count, cudaStream_t s, Args&&... args) {
   namespace dev = ::marbles::cuda;
   const std::size_t blocks = items > kBlock ? (items + kBlock - 1) / kBlock : 1;
-  if (items <= cluster_widest_asked() && blocks <= static_cast<std::size_t>(dev::largest_cluster<InCluster>())) {
+  if (items <= cluster_widest() && blocks <= static_cast<std::size_t>(dev::largest_cluster<InCluster>())) {
     launch(Launch::cluster, InCluster, static_cast<int>(blocks), s, std::forward<Args>(args)...);
     return true;
   }
@@ -449,7 +443,12 @@ bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::
       n, sm_count, s, plan, records, impact, order, first, n, bodies, p, passes, hit);
 }
 
-std::uint32_t cluster_widest() { return cluster_widest_asked(); }
+std::uint32_t cluster_widest() {
+  static const auto widest = static_cast<std::uint32_t>(
+      whole_from_environment("MARBLES_CUDA_CLUSTER", kClusterWidest, 1l << 30,
+                             "expected the widest colour to solve as one cluster, 0 (never) to 1073741824"));
+  return widest;
+}
 int cluster_blocks() { return ::marbles::cuda::largest_cluster<project_kernel<ClusterSync>>(); }
 
 bool launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h, SolverTerms t,
