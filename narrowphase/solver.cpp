@@ -11,6 +11,7 @@
 #include <string>
 #include <string_view>
 
+#include "core/environment.hpp"
 #include "core/error.hpp"
 
 namespace marbles::narrowphase {
@@ -197,9 +198,15 @@ ContactSolver::ContactSolver(const SolverSettings& settings, SweepLanes lanes) :
 }
 
 std::optional<LocalOrder> local_order_from_environment() {
+  const auto threads = static_cast<int>(
+      whole_from_environment("MARBLES_LOCAL_THREADS", 256, 1024, "expected a multiple of 32 from 32 to 1024"));
+  if (threads < 32 || threads % 32 != 0)
+    throw RuntimeFailure("MARBLES_LOCAL_THREADS=" + std::to_string(threads) +
+                         ": expected a multiple of 32 from 32 to 1024");
   const char* asked = std::getenv("MARBLES_SOLVE_ORDER");
   if (asked == nullptr || *asked == '\0' || std::string_view(asked) == "colours") return std::nullopt;
   LocalOrder o;
+  o.threads = threads;
   char tail = 0;
   if (std::sscanf(asked, "tiles:%lf:%d:%d%c", &o.tile_diameters, &o.passes, &o.local, &tail) != 3 ||
       !(o.tile_diameters > 0) || !std::isfinite(o.tile_diameters) || o.passes < 1 || o.local < 1)

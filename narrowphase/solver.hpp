@@ -74,9 +74,13 @@ SweepLanes best_lanes();
 struct LocalOrder {
   double tile_diameters = 0;
   int passes = 0, local = 0;
+  // Threads of a cube's block on the GPU (MARBLES_LOCAL_THREADS: 32 to
+  // 1024, a multiple of 32; 256 unset). The CPU's order does not read it.
+  int threads = 256;
 };
-// The order asked for by MARBLES_SOLVE_ORDER (none: the solver's); throws
-// RuntimeFailure on a value it cannot read.
+// The order asked for by MARBLES_SOLVE_ORDER (none: the solver's), with
+// MARBLES_LOCAL_THREADS; throws RuntimeFailure on a value of either it
+// cannot read (MARBLES_LOCAL_THREADS is checked with or without the order).
 std::optional<LocalOrder> local_order_from_environment();
 
 // The local order's cubes: contact k (its bodies pairs[k]) is its cube's own

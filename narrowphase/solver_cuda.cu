@@ -464,8 +464,8 @@ bool launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBod
 
 
 void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan,
-                          const BodiesView& world, double diameters, int passes, int local, SolverBody* bodies,
-                          real inv_h, SolverTerms t, int sm_count, cudaStream_t s) {
+                          const BodiesView& world, double diameters, int passes, int local, int threads,
+                          SolverBody* bodies, real inv_h, SolverTerms t, int sm_count, cudaStream_t s) {
   if (count == 0) return;
   namespace dev = ::marbles::cuda;
   using dev::Launch;
@@ -501,13 +501,6 @@ void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, cons
   dev::launch(Launch::plain, between_begin_kernel, 1, s, o, count, static_cast<const std::uint32_t*>(starts), cubes,
               plan, between_begin);
 
-  // Threads a cube's block (a study's knob, MARBLES_LOCAL_THREADS: 32 to
-  // 1024, a multiple of 32; 256 unset).
-  static const int threads = [] {
-    const char* v = std::getenv("MARBLES_LOCAL_THREADS");
-    const int t = v ? std::atoi(v) : 256;
-    return t >= 32 && t <= 1024 && t % 32 == 0 ? t : 256;
-  }();
   std::uint32_t index[kMaxColours + 2];
   for (std::uint32_t c = 0; c < kMaxColours + 2; ++c) index[c] = c;
   const int between_grid = dev::grid_for(plan.widest(), sm_count);

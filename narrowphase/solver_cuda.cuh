@@ -131,8 +131,8 @@ class LocalSweepsCuda {
   // of `diameters` of the world's largest diameter (local_cube_edge, the
   // radius found on the device) over its centres (those of the solve).
   void run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan, const BodiesView& world,
-           double diameters, int passes, int local, SolverBody* bodies, real inv_h, SolverTerms terms, int sm_count,
-           cudaStream_t stream);
+           double diameters, int passes, int local, int threads, SolverBody* bodies, real inv_h, SolverTerms terms,
+           int sm_count, cudaStream_t stream);
   // Device bytes it holds (none until it first runs).
   std::size_t device_bytes() const {
     return ::marbles::cuda::bytes_of(m_keys, m_order, m_heads, m_starts, m_temp, m_largest);

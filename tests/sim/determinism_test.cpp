@@ -281,6 +281,27 @@ TEST(Determinism, LocalOrderStudyRefusesWhatItCannotRead) {
   EXPECT_EQ(o->tile_diameters, 12.0);
   EXPECT_EQ(o->passes, 2);
   EXPECT_EQ(o->local, 6);
+  EXPECT_EQ(o->threads, 256) << "a cube's block on the GPU, unset";
+}
+
+// MARBLES_LOCAL_THREADS (a cube's block on the GPU) is read with the order,
+// and refused, with or without the order, where it is no multiple of 32
+// from 32 to 1024.
+TEST(Determinism, LocalOrderThreadsRefusedWhereTheGpuCannotTakeThem) {
+  for (const char* bad : {"0", "16", "33", "100", "1056", "2048", "-32", "64x", "", "sixty-four"}) {
+    for (const char* order : {"tiles:8:2:6", "colours"}) {
+      SolveOrder o(order);
+      ScopedEnvironment threads("MARBLES_LOCAL_THREADS", bad);
+      EXPECT_THROW(narrowphase::local_order_from_environment(), RuntimeFailure) << bad << " with " << order;
+    }
+  }
+  for (const int good : {32, 64, 128, 96, 992, 1024}) {
+    SolveOrder o("tiles:8:2:6");
+    ScopedEnvironment threads("MARBLES_LOCAL_THREADS", std::to_string(good));
+    const auto read = narrowphase::local_order_from_environment();
+    ASSERT_TRUE(read.has_value());
+    EXPECT_EQ(read->threads, good);
+  }
 }
 
 // inverse_of (the step's numbering and the scene's): a random permutation
