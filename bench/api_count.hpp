@@ -30,6 +30,14 @@ struct ApiTime {
   std::uint64_t ns = 0;
 };
 
+// The device's time in one kernel (or in every set, or every copy) over a
+// stretch: its launches and the sum of their durations on the device.
+struct KernelTime {
+  std::string kernel;  // demangled, without its parameters; "(memset)" and "(memcpy)" for sets and copies
+  std::uint64_t launches = 0;
+  std::uint64_t ns = 0;
+};
+
 class ApiCounter {
  public:
   ApiCounter();
@@ -66,6 +74,9 @@ class DeviceTimeline {
   // The device's work that began in [t0, t1), as the length of the union of
   // its intervals (ns). Flushes the records first: call it once the work is done.
   std::uint64_t busy_ns(std::uint64_t t0, std::uint64_t t1);
+  // The same stretch's work by kernel (sets and copies each as one), most
+  // time first. Their times add up to busy_ns where nothing ran at once.
+  std::vector<KernelTime> kernels(std::uint64_t t0, std::uint64_t t1);
 
  private:
   bool m_on = false;

@@ -8,7 +8,10 @@
 #include <atomic>
 #include <chrono>
 #include <cstdlib>
+#include <cxxabi.h>
+#include <map>
 #include <mutex>
+#include <string>
 #include <vector>
 
 #include "bench/api_count.hpp"
@@ -86,7 +89,10 @@ void CUPTIAPI on_call(void*, CUpti_CallbackDomain domain, CUpti_CallbackId id, c
 // over its buffers: from its own thread, or within cuptiActivityFlushAll.
 struct Interval {
   std::uint64_t start = 0, end = 0;
+  const char* name = nullptr;  // a kernel's (mangled; CUPTI keeps it for the process), or kMemset / kMemcpy
 };
+constexpr const char* kMemset = "(memset)";
+constexpr const char* kMemcpy = "(memcpy)";
 std::mutex g_interval_mutex;
 std::vector<Interval> g_intervals;
 std::atomic<std::size_t> g_dropped{0};  // records CUPTI could not keep (a full buffer)
@@ -110,17 +116,17 @@ void CUPTIAPI buffer_completed(CUcontext context, uint32_t stream, uint8_t* buff
     switch (record->kind) {
       case CUPTI_ACTIVITY_KIND_CONCURRENT_KERNEL: {
         const auto* k = reinterpret_cast<const CUpti_ActivityKernel10*>(record);
-        got.push_back({k->start, k->end});
+        got.push_back({k->start, k->end, k->name});
         break;
       }
       case CUPTI_ACTIVITY_KIND_MEMCPY: {
         const auto* c = reinterpret_cast<const CUpti_ActivityMemcpy6*>(record);
-        got.push_back({c->start, c->end});
+        got.push_back({c->start, c->end, kMemcpy});
         break;
       }
       case CUPTI_ACTIVITY_KIND_MEMSET: {
         const auto* m = reinterpret_cast<const CUpti_ActivityMemset4*>(record);
-        got.push_back({m->start, m->end});
+        got.push_back({m->start, m->end, kMemset});
         break;
       }
       default:
@@ -190,6 +196,58 @@ std::uint64_t DeviceTimeline::busy_ns(std::uint64_t t0, std::uint64_t t1) {
   }
   if (open) busy += open_end - open_start;
   return busy;
+}
+
+// A kernel's name as a reader wants it: demangled, without its parameter
+// list and the project's namespaces.
+static std::string readable_kernel(const char* mangled) {
+  if (!mangled) return "?";
+  int status = 0;
+  char* plain = abi::__cxa_demangle(mangled, nullptr, nullptr, &status);
+  std::string name = status == 0 && plain ? plain : mangled;
+  std::free(plain);
+  for (const std::string prefix : {"(anonymous namespace)::", "marbles::narrowphase::cuda::", "marbles::broadphase::",
+                                   "marbles::integrator::cuda::", "marbles::cuda::", "marbles::"})
+    for (std::size_t at; (at = name.find(prefix)) != std::string::npos;) name.erase(at, prefix.size());
+  // The parameter list: from the first '(' at template depth 0.
+  int depth = 0;
+  for (std::size_t i = 0; i < name.size(); ++i) {
+    if (name[i] == '<') ++depth;
+    else if (name[i] == '>') --depth;
+    else if (name[i] == '(' && depth == 0 && i > 0) {
+      name.resize(i);
+      break;
+    }
+  }
+  if (name.rfind("void ", 0) == 0) name.erase(0, 5);
+  return name;
+}
+
+std::vector<KernelTime> DeviceTimeline::kernels(std::uint64_t t0, std::uint64_t t1) {
+  std::vector<KernelTime> out;
+  if (!m_on) return out;
+  cuptiActivityFlushAll(CUPTI_ACTIVITY_FLAG_FLUSH_FORCED);
+  std::map<const char*, KernelTime> by_name;  // CUPTI shares one name string among a kernel's records
+  {
+    const std::lock_guard<std::mutex> lock(g_interval_mutex);
+    for (const Interval& i : g_intervals)
+      if (i.start >= t0 && i.start < t1 && i.end > i.start) {
+        KernelTime& k = by_name[i.name];
+        ++k.launches;
+        k.ns += i.end - i.start;
+      }
+  }
+  std::map<std::string, KernelTime> merged;  // one entry per readable name
+  for (auto& [name, k] : by_name) {
+    KernelTime& m = merged[readable_kernel(name)];
+    m.launches += k.launches;
+    m.ns += k.ns;
+  }
+  for (auto& [name, k] : merged) out.push_back({name, k.launches, k.ns});
+  std::sort(out.begin(), out.end(), [](const KernelTime& a, const KernelTime& b) {
+    return a.ns != b.ns ? a.ns > b.ns : a.kernel < b.kernel;
+  });
+  return out;
 }
 
 ApiCounter::ApiCounter() {

@@ -14,6 +14,7 @@ DeviceTimeline::~DeviceTimeline() = default;
 bool DeviceTimeline::complete() const { return false; }
 std::uint64_t DeviceTimeline::now() const { return 0; }
 std::uint64_t DeviceTimeline::busy_ns(std::uint64_t, std::uint64_t) { return 0; }
+std::vector<KernelTime> DeviceTimeline::kernels(std::uint64_t, std::uint64_t) { return {}; }
 
 void profiled_steps(bool) {}
 

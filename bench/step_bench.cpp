@@ -504,6 +504,13 @@ struct Row {
   std::optional<double> counted_ms;
   std::optional<double> busy_ms;          // per step, the device at work: median of the traced steps
   std::optional<double> traced_ms;        // per step, the traced steps' wall time (tracing slows the host)
+  // The traced steps' device time by kernel (sets and copies each as one),
+  // per step (means of those steps, most time first).
+  struct KernelRow {
+    std::string kernel;
+    double launches = 0, us = 0;
+  };
+  std::vector<KernelRow> kernels;
   std::optional<double> idle_ms() const { return busy_ms ? std::optional(std::max(0.0, step_ms - *busy_ms)) : std::nullopt; }
   double verb_ms[static_cast<int>(Verb::count)] = {};  // medians of the profiled steps
   std::optional<SettleInfo> settle;
@@ -582,16 +589,21 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     DeviceTimeline timeline;
     if (timeline.tracing()) {
       std::vector<double> busy, wall;
-      for (int k = 0; k < std::min(repeats, 5); ++k) {
+      const int traced = std::min(repeats, 5);
+      const std::uint64_t first = timeline.now();
+      for (int k = 0; k < traced; ++k) {
         const std::uint64_t t0 = timeline.now();
         sim.step();  // ends with its wait for the flags: its work is done
         const std::uint64_t t1 = timeline.now();
         busy.push_back(static_cast<double>(timeline.busy_ns(t0, t1)) * 1e-6);
         wall.push_back(static_cast<double>(t1 - t0) * 1e-6);
       }
+      const std::uint64_t last = timeline.now();
       if (timeline.complete()) {  // else a record was dropped: no figure rather than a short one
         row.busy_ms = median(busy);
         row.traced_ms = median(wall);
+        for (const KernelTime& k : timeline.kernels(first, last))
+          row.kernels.push_back({k.kernel, static_cast<double>(k.launches) / traced, 1e-3 * k.ns / traced});
       }
     }
   }
@@ -743,9 +755,12 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"traced_step_ms", count(r.traced_ms)},
                                  {"counted_step_ms", count(r.counted_ms)},
                                  {"host_calls_per_step", nlohmann::ordered_json::array()},
+                                 {"kernels_per_step", nlohmann::ordered_json::array()},
                                  {"verb_ms", nlohmann::ordered_json::object()}};
       for (const Row::HostCall& c : r.host_calls)
         row["host_calls_per_step"].push_back({{"function", c.function}, {"calls", c.calls}, {"us", c.us}});
+      for (const Row::KernelRow& k : r.kernels)
+        row["kernels_per_step"].push_back({{"kernel", k.kernel}, {"launches", k.launches}, {"us", k.us}});
       for (int v = 0; v < kVerbs; ++v) row["verb_ms"][kVerbNames[v]] = r.verb_ms[v];
       row["device_bytes_per_sphere_by_part"] = nlohmann::ordered_json::object();
       for (const DeviceBytes& b : r.device_buffers)

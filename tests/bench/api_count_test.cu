@@ -131,6 +131,79 @@ TEST(DeviceTimeline, BusyIsTheUnionOfTheDevicesWorkAndTheRestIsIdle) {
   EXPECT_FALSE(second.tracing());
 }
 
+// The timeline by kernel against a known sequence: three launches of one
+// kernel spinning 1 ms each, two of another kernel, and a set, on one
+// stream; each kernel's launches counted, its time its spins' (measured on
+// the device's own clock), the set as "(memset)", the kernels named without
+// their parameters, and the parts adding up to the busy time (nothing ran
+// at once).
+__global__ void spin_other(std::uint64_t ns, std::uint64_t* began_ended) {
+  const std::uint64_t start = global_ns();
+  std::uint64_t now = start;
+  while (now - start < ns) now = global_ns();
+  began_ended[0] = start;
+  began_ended[1] = now;
+}
+
+TEST(DeviceTimeline, ByKernelCountsEachKernelsLaunchesAndTime) {
+  REQUIRE_DEVICE();
+  constexpr std::uint64_t kSpin = 1000000;
+  marbles::cuda::DeviceBuffer memory;  // freed, as the stream is destroyed, however the test ends
+  auto* times = memory.as<std::uint64_t>(12);  // [began, ended] of each of the five kernels, two words set
+  marbles::cuda::Stream s;
+  s.create(cudaStreamNonBlocking);
+  spin<<<1, 32, 0, s>>>(1000, times);  // the module loaded before tracing
+  spin_other<<<1, 32, 0, s>>>(1000, times);
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+
+  marbles::bench::DeviceTimeline timeline;
+  if (!timeline.tracing()) GTEST_SKIP() << "skipped: CUPTI activity not available (another tool traces, or no CUPTI)";
+  const std::uint64_t t0 = timeline.now();
+  for (int k = 0; k < 3; ++k) spin<<<1, 32, 0, s>>>(kSpin, times + 2 * k);
+  MARBLES_CUDA_CHECK(cudaMemsetAsync(times + 10, 0, 2 * sizeof(std::uint64_t), s));
+  for (int k = 3; k < 5; ++k) spin_other<<<1, 32, 0, s>>>(kSpin, times + 2 * k);
+  MARBLES_CUDA_CHECK_LAUNCH();
+  MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
+  const std::uint64_t t1 = timeline.now();
+  std::uint64_t t[10] = {};
+  MARBLES_CUDA_CHECK(cudaMemcpy(t, times, sizeof t, cudaMemcpyDeviceToHost));  // after t1: not in the stretch
+  const double busy = static_cast<double>(timeline.busy_ns(t0, t1));
+  const std::vector<marbles::bench::KernelTime> kernels = timeline.kernels(t0, t1);
+  double own[2] = {0, 0};  // each kernel's spins, on the device's clock
+  for (int k = 0; k < 5; ++k) own[k < 3 ? 0 : 1] += static_cast<double>(t[2 * k + 1] - t[2 * k]);
+
+  std::string seen;
+  for (const auto& k : kernels) seen += k.kernel + " " + std::to_string(k.launches) + "x " + std::to_string(k.ns) + " ns; ";
+  const auto find = [&](const std::string& name) -> const marbles::bench::KernelTime* {
+    for (const auto& k : kernels)
+      if (k.kernel == name) return &k;
+    return nullptr;
+  };
+  const auto* a = find("spin");
+  const auto* b = find("spin_other");
+  const auto* set = find("(memset)");
+  ASSERT_NE(a, nullptr) << seen;
+  ASSERT_NE(b, nullptr) << seen;
+  ASSERT_NE(set, nullptr) << seen;
+  EXPECT_EQ(set->launches, 1u) << seen;
+  EXPECT_EQ(a->launches, 3u) << seen;
+  EXPECT_EQ(b->launches, 2u) << seen;
+  // A record spans its kernel's own clock and its launch on the device: a few
+  // microseconds more a launch, never less.
+  EXPECT_GE(static_cast<double>(a->ns), own[0] - 1000) << seen;
+  EXPECT_LE(static_cast<double>(a->ns), own[0] + 3 * 50000) << seen;
+  EXPECT_GE(static_cast<double>(b->ns), own[1] - 1000) << seen;
+  EXPECT_LE(static_cast<double>(b->ns), own[1] + 2 * 50000) << seen;
+  EXPECT_EQ(kernels.front().kernel, "spin") << "most time first: " << seen;
+  double sum = 0;
+  for (const auto& k : kernels) {
+    EXPECT_TRUE(k.kernel == "spin" || k.kernel == "spin_other" || k.kernel == "(memset)") << seen;
+    sum += static_cast<double>(k.ns);
+  }
+  EXPECT_NEAR(sum, busy, 1000) << "one stream, nothing at once: the parts add up to the busy time; " << seen;
+  EXPECT_TRUE(timeline.complete());
+}
+
 // The host's time within each runtime function against a known wait: a
 // stream synchronize behind a kernel that spins 2 ms holds the host at least
 // the spin's rest; three launches are three launch calls; and no function's
