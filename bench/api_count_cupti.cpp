@@ -12,6 +12,7 @@
 #include <map>
 #include <mutex>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "bench/api_count.hpp"
@@ -89,12 +90,20 @@ void CUPTIAPI on_call(void*, CUpti_CallbackDomain domain, CUpti_CallbackId id, c
 // over its buffers: from its own thread, or within cuptiActivityFlushAll.
 struct Interval {
   std::uint64_t start = 0, end = 0;
-  const char* name = nullptr;  // a kernel's (mangled; CUPTI keeps it for the process), or kMemset / kMemcpy
+  std::uint32_t name = 0;  // into g_names: a kernel's mangled name, or kMemset / kMemcpy
 };
-constexpr const char* kMemset = "(memset)";
-constexpr const char* kMemcpy = "(memcpy)";
-std::mutex g_interval_mutex;
+std::mutex g_interval_mutex;  // guards g_intervals and the names
 std::vector<Interval> g_intervals;
+// Each name once, copied out of the record that carried it (CUPTI does not
+// say how long its own string lives).
+std::vector<std::string> g_names{"(memset)", "(memcpy)"};
+std::unordered_map<std::string, std::uint32_t> g_name_index{{"(memset)", 0}, {"(memcpy)", 1}};
+constexpr std::uint32_t kMemset = 0, kMemcpy = 1;
+std::uint32_t name_index(const char* name) {  // with g_interval_mutex held
+  const auto [at, added] = g_name_index.try_emplace(name ? name : "?", static_cast<std::uint32_t>(g_names.size()));
+  if (added) g_names.push_back(at->first);
+  return at->second;
+}
 std::atomic<std::size_t> g_dropped{0};  // records CUPTI could not keep (a full buffer)
 std::atomic<bool> g_timeline_live{false};  // tracing is process-wide: one DeviceTimeline at a time
 constexpr CUpti_ActivityKind kTraced[] = {CUPTI_ACTIVITY_KIND_CONCURRENT_KERNEL, CUPTI_ACTIVITY_KIND_MEMCPY,
@@ -111,12 +120,16 @@ void CUPTIAPI buffer_completed(CUcontext context, uint32_t stream, uint8_t* buff
   std::size_t dropped = 0;
   if (cuptiActivityGetNumDroppedRecords(context, stream, &dropped) == CUPTI_SUCCESS) g_dropped += dropped;
   std::vector<Interval> got;
+  const std::lock_guard<std::mutex> lock(g_interval_mutex);
+  const char* last_name = nullptr;  // a kernel's records come in runs: its name looked up once a run
+  std::uint32_t last_index = 0;
   CUpti_Activity* record = nullptr;
   while (cuptiActivityGetNextRecord(buffer, valid, &record) == CUPTI_SUCCESS) {
     switch (record->kind) {
       case CUPTI_ACTIVITY_KIND_CONCURRENT_KERNEL: {
         const auto* k = reinterpret_cast<const CUpti_ActivityKernel10*>(record);
-        got.push_back({k->start, k->end, k->name});
+        if (!last_name || k->name != last_name) last_name = k->name, last_index = name_index(k->name);
+        got.push_back({k->start, k->end, last_index});
         break;
       }
       case CUPTI_ACTIVITY_KIND_MEMCPY: {
@@ -134,7 +147,6 @@ void CUPTIAPI buffer_completed(CUcontext context, uint32_t stream, uint8_t* buff
     }
   }
   std::free(buffer);
-  const std::lock_guard<std::mutex> lock(g_interval_mutex);
   g_intervals.insert(g_intervals.end(), got.begin(), got.end());
 }
 
@@ -199,16 +211,16 @@ std::uint64_t DeviceTimeline::busy_ns(std::uint64_t t0, std::uint64_t t1) {
 }
 
 // A kernel's name as a reader wants it: demangled, without its parameter
-// list and the project's namespaces.
-static std::string readable_kernel(const char* mangled) {
-  if (!mangled) return "?";
+// list, anonymous namespaces, the project's own name and the `cuda`
+// namespaces within it (narrowphase::record_sweep_kernel<...>; kernels of
+// one name in two folders stay apart).
+static std::string readable_kernel(const std::string& mangled) {
   int status = 0;
-  char* plain = abi::__cxa_demangle(mangled, nullptr, nullptr, &status);
+  char* plain = abi::__cxa_demangle(mangled.c_str(), nullptr, nullptr, &status);
   std::string name = status == 0 && plain ? plain : mangled;
   std::free(plain);
-  for (const std::string prefix : {"(anonymous namespace)::", "marbles::narrowphase::cuda::", "marbles::broadphase::",
-                                   "marbles::integrator::cuda::", "marbles::cuda::", "marbles::"})
-    for (std::size_t at; (at = name.find(prefix)) != std::string::npos;) name.erase(at, prefix.size());
+  for (const std::string cut : {"(anonymous namespace)::", "marbles::", "::cuda::", "cuda::"})
+    for (std::size_t at; (at = name.find(cut)) != std::string::npos;) name.replace(at, cut.size(), cut[0] == ':' ? "::" : "");
   // The parameter list: from the first '(' at template depth 0.
   int depth = 0;
   for (std::size_t i = 0; i < name.size(); ++i) {
@@ -227,12 +239,12 @@ std::vector<KernelTime> DeviceTimeline::kernels(std::uint64_t t0, std::uint64_t 
   std::vector<KernelTime> out;
   if (!m_on) return out;
   cuptiActivityFlushAll(CUPTI_ACTIVITY_FLAG_FLUSH_FORCED);
-  std::map<const char*, KernelTime> by_name;  // CUPTI shares one name string among a kernel's records
+  std::map<std::string, KernelTime> by_name;  // by mangled name
   {
     const std::lock_guard<std::mutex> lock(g_interval_mutex);
     for (const Interval& i : g_intervals)
       if (i.start >= t0 && i.start < t1 && i.end > i.start) {
-        KernelTime& k = by_name[i.name];
+        KernelTime& k = by_name[g_names[i.name]];
         ++k.launches;
         k.ns += i.end - i.start;
       }

@@ -190,9 +190,9 @@ TEST(DeviceTimeline, ByKernelCountsEachKernelsLaunchesAndTime) {
   EXPECT_EQ(b->launches, 2u) << seen;
   // A record spans its kernel's own clock and its launch on the device: a few
   // microseconds more a launch, never less.
-  EXPECT_GE(static_cast<double>(a->ns), own[0] - 1000) << seen;
+  EXPECT_GE(static_cast<double>(a->ns), own[0] - 10000) << seen;
   EXPECT_LE(static_cast<double>(a->ns), own[0] + 3 * 50000) << seen;
-  EXPECT_GE(static_cast<double>(b->ns), own[1] - 1000) << seen;
+  EXPECT_GE(static_cast<double>(b->ns), own[1] - 10000) << seen;
   EXPECT_LE(static_cast<double>(b->ns), own[1] + 2 * 50000) << seen;
   EXPECT_EQ(kernels.front().kernel, "spin") << "most time first: " << seen;
   double sum = 0;
@@ -200,7 +200,7 @@ TEST(DeviceTimeline, ByKernelCountsEachKernelsLaunchesAndTime) {
     EXPECT_TRUE(k.kernel == "spin" || k.kernel == "spin_other" || k.kernel == "(memset)") << seen;
     sum += static_cast<double>(k.ns);
   }
-  EXPECT_NEAR(sum, busy, 1000) << "one stream, nothing at once: the parts add up to the busy time; " << seen;
+  EXPECT_NEAR(sum, busy, 10000) << "one stream, nothing at once: the parts add up to the busy time; " << seen;
   EXPECT_TRUE(timeline.complete());
 }
 
