@@ -140,12 +140,16 @@ void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size
     if (kept < kMaxColours) {
       m_colour[k] = kept;
       m_kept.push_back(k);
-      continue;
+    } else {
+      m_colour[k] = kUncoloured;
+      m_all.push_back(k);
     }
-    m_rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
-    m_colour[k] = kUncoloured;
-    m_all.push_back(k);
   }
+  // The new contacts' ranks in a loop of their own: within the one above,
+  // the compiler read every contact's spheres ahead of the branch, kept or
+  // not (settle scene of 10^5: that serial loop 0.9 -> 0.6 % of the step's
+  // samples; the same colours).
+  for (const std::uint32_t k : m_all) m_rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
   out.colours = colour(contacts.data(), m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
                        &out.rounds, &m_kept);
 
