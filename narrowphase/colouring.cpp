@@ -4,6 +4,7 @@
 #include <atomic>
 
 #include "core/counting_sort.hpp"
+#include "core/parallel.hpp"
 #include "core/radix_sort.hpp"
 #include "narrowphase/solver_math.hpp"
 
@@ -60,24 +61,47 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
   }
   std::uint32_t colours = 0, rounds = 0;
   if (kept) {  // the kept colours hold their spheres first; they take no round
-    // In parallel: an or of bits gives the same masks in any order.
+    // In parallel: an or of bits gives the same masks in any order. With a
+    // few threads each ors into masks of its own (the first into
+    // m_body_used), joined after; with many, into one set of masks by
+    // atomics (settle scene of 10^5, 2 threads: the atomics were 2.3 % of
+    // the step's samples).
     const auto m = static_cast<std::ptrdiff_t>(kept->size());
     const std::uint32_t* kk = kept->data();
     const std::uint32_t* colour_of = colour.data();
     std::uint64_t* used = m_body_used.data();
+    const int threads = m >= 16384 ? thread_count() : 1;
+    const bool own_masks = threads > 1 && threads <= kMostOwnMasks;
+    if (own_masks) m_thread_used.assign(static_cast<std::size_t>(threads - 1) * body_count, 0);
+    std::uint64_t* others = m_thread_used.data();
     std::uint32_t top = 0;
-#pragma omp parallel for schedule(static) reduction(max : top) if (m >= 16384)
-    for (std::ptrdiff_t t = 0; t < m; ++t) {
-      const Contact& c = contacts[kk[t]];
-      const std::uint32_t kept_colour = colour_of[kk[t]];
-      const std::uint64_t bit = std::uint64_t(1) << kept_colour;
+#pragma omp parallel num_threads(threads) reduction(max : top) if (threads > 1)
+    {
+      const int me = thread_index();
+      std::uint64_t* mine = own_masks && me > 0 ? others + static_cast<std::size_t>(me - 1) * body_count : used;
+#pragma omp for schedule(static)
+      for (std::ptrdiff_t t = 0; t < m; ++t) {
+        const Contact& c = contacts[kk[t]];
+        const std::uint32_t kept_colour = colour_of[kk[t]];
+        const std::uint64_t bit = std::uint64_t(1) << kept_colour;
+        if (own_masks || threads == 1) {
+          mine[c.a] |= bit;
+          if (!is_wall(c.b)) mine[c.b] |= bit;
+        } else {
 #pragma omp atomic update
-      used[c.a] |= bit;
-      if (!is_wall(c.b)) {
+          used[c.a] |= bit;
+          if (!is_wall(c.b)) {
 #pragma omp atomic update
-        used[c.b] |= bit;
+            used[c.b] |= bit;
+          }
+        }
+        top = std::max(top, kept_colour + 1);
       }
-      top = std::max(top, kept_colour + 1);
+      if (own_masks) {
+#pragma omp for schedule(static)
+        for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(body_count); ++i)
+          for (int o = 0; o < threads - 1; ++o) used[i] |= others[static_cast<std::size_t>(o) * body_count + i];
+      }
     }
     colours = top;
   }

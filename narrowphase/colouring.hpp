@@ -62,6 +62,11 @@ class ContactColouring {
  private:
   void prefetch_ahead(const Contact* contacts, std::size_t t, std::size_t count) const;
   std::vector<std::uint64_t> m_body_used, m_rank, m_by_rank, m_sort_keys;
+  // The kept colours' masks of threads 1..T-1 where T is at most
+  // kMostOwnMasks (colour()); more threads or them by atomics into
+  // m_body_used instead.
+  std::vector<std::uint64_t> m_thread_used;
+  static constexpr int kMostOwnMasks = 4;
   std::vector<std::uint32_t> m_body_next_round;
   std::vector<std::uint32_t> m_all, m_kept, m_colour, m_bucket_count, m_order, m_sort_values, m_high, m_sort_high,
       m_source;

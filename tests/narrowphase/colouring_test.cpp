@@ -404,6 +404,32 @@ TEST(Colouring, SameColouringTwiceAndForAnyThreadCount) {
 #endif
 }
 
+// Many kept colours (past the 16 384 kept contacts from which their spheres'
+// masks are made in parallel): with masks of each thread's own, joined after
+// (2 to 4 threads), and by atomics into one set (more), the oracle's colours
+// around them, for each thread count.
+TEST(Colouring, ManyKeptColoursGiveTheOracleForAnyThreadCount) {
+  std::mt19937_64 rng(31);
+  const std::uint32_t bodies = 20000;
+  std::vector<Contact> contacts = random_contacts(rng, bodies, 80000, 0.1);
+  ColourRanges ranges;
+  ContactColouring().colour_and_sort(contacts, bodies, ranges);
+  std::vector<std::uint8_t> kept;
+  const std::vector<Contact> next = next_substep(rng, contacts, ranges, bodies, 4000, kept);
+  ASSERT_GT(std::count_if(kept.begin(), kept.end(), [](std::uint8_t c) { return c != kNoKeptColour; }), 16384);
+#if defined(_OPENMP)
+  const int threads = omp_get_max_threads();
+  for (const int t : {1, 2, 3, 4, 6}) {
+    omp_set_num_threads(t);
+    SCOPED_TRACE(t);
+    expect_matches_oracle(next, bodies, kept);
+  }
+  omp_set_num_threads(threads);
+#else
+  expect_matches_oracle(next, bodies, kept);
+#endif
+}
+
 // colour() sorts only the ranks' top 24 bits when the active list's index
 // order already orders their low words, and all 56 bits otherwise (here: the
 // active list shuffled, or ranks whose low words are not the index). Both
