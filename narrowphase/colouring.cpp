@@ -64,8 +64,8 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
     // In parallel: an or of bits gives the same masks in any order. With a
     // few threads each ors into masks of its own (the first into
     // m_body_used), joined after; with many, into one set of masks by
-    // atomics (settle scene of 10^5, 2 threads: the atomics were 2.3 % of
-    // the step's samples).
+    // atomics (settle scene of 10^5, 2 threads: this function 3.3 -> 2.4 %
+    // of the step's samples with masks of their own).
     const auto m = static_cast<std::ptrdiff_t>(kept->size());
     const std::uint32_t* kk = kept->data();
     const std::uint32_t* colour_of = colour.data();
