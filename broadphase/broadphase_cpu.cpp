@@ -203,21 +203,24 @@ void SubdivisionCpu::run(const SpheresIn& s, real margin, const GridChoice& gc, 
     m_cell_chunks.resize(chunks);
 #pragma omp parallel for schedule(static) if (chunks > 1)
     for (std::ptrdiff_t c = 0; c < static_cast<std::ptrdiff_t>(chunks); ++c) {
-      auto& local = m_cell_chunks[static_cast<std::size_t>(c)];
-      local.clear();
-      const std::size_t begin = static_cast<std::size_t>(c) * kEntryChunk;
-      const std::size_t end = std::min(entries, begin + kEntryChunk);
-      std::size_t i = begin;
-      while (i < end && i > 0 && keys[i] == keys[i - 1]) ++i;  // a run begun in the chunk before
-      while (i < end) {
-        std::size_t j = i;
-        std::uint32_t homes = 0;
-        while (j < entries && keys[j] == keys[i]) homes += value_phantom(m_values[j++]) ? 0u : 1u;
-        const auto count = static_cast<std::uint32_t>(j - i);
-        if (count >= 2 && homes >= 1)
-          local.push_back({static_cast<std::uint32_t>(i), homes, count - homes});
-        i = j;
-      }
+      // Into a vector of the thread's own (fill_apart): the chunks' vectors lie side by side.
+      auto cells_of_chunk = [&](std::vector<CollisionCell>& local) {
+        local.clear();
+        const std::size_t begin = static_cast<std::size_t>(c) * kEntryChunk;
+        const std::size_t end = std::min(entries, begin + kEntryChunk);
+        std::size_t i = begin;
+        while (i < end && i > 0 && keys[i] == keys[i - 1]) ++i;  // a run begun in the chunk before
+        while (i < end) {
+          std::size_t j = i;
+          std::uint32_t homes = 0;
+          while (j < entries && keys[j] == keys[i]) homes += value_phantom(m_values[j++]) ? 0u : 1u;
+          const auto count = static_cast<std::uint32_t>(j - i);
+          if (count >= 2 && homes >= 1)
+            local.push_back({static_cast<std::uint32_t>(i), homes, count - homes});
+          i = j;
+        }
+      };
+      fill_apart(m_cell_chunks[static_cast<std::size_t>(c)], cells_of_chunk);
     }
     std::size_t total = 0;
     for (const auto& local : m_cell_chunks) total += local.size();
@@ -242,8 +245,7 @@ void SubdivisionCpu::run(const SpheresIn& s, real margin, const GridChoice& gc, 
     ParallelErrors errors;
 #pragma omp parallel for schedule(dynamic, 4) if (chunks > 1)
     for (std::ptrdiff_t c = 0; c < static_cast<std::ptrdiff_t>(chunks); ++c) {
-      errors.run([&] {
-        auto& local = m_pair_chunks[static_cast<std::size_t>(c)];
+      auto traverse_chunk = [&](std::vector<Pair>& local) {  // into a vector of the thread's own (fill_apart)
         local.clear();
         std::size_t tests = 0;
         const std::size_t end = std::min(cells, (static_cast<std::size_t>(c) + 1) * kCellChunk);
@@ -252,7 +254,8 @@ void SubdivisionCpu::run(const SpheresIn& s, real margin, const GridChoice& gc, 
                                  [&](std::uint32_t i, std::uint32_t j) { local.push_back({i, j}); });
         }
         m_test_chunks[static_cast<std::size_t>(c)] = tests;
-      });
+      };
+      errors.run([&] { fill_apart(m_pair_chunks[static_cast<std::size_t>(c)], traverse_chunk); });
     }
     gather_pair_chunks(m_pair_chunks, errors, out);
     for (std::size_t c = 0; c < chunks; ++c) m_stats.tests += m_test_chunks[c];

@@ -163,8 +163,9 @@ void HomeCellCpu::run(const SpheresIn& s, real margin, const HomeGrid& g, std::v
   ParallelErrors errors;
 #pragma omp parallel for schedule(dynamic, 1) if (chunks > 1)
   for (std::ptrdiff_t c = 0; c < chunks; ++c) {
-    errors.run([&] {
-      auto& local = m_pair_chunks[static_cast<std::size_t>(c)];
+    // Into a vector of the thread's own (fill_apart): the chunks' vectors lie
+    // side by side.
+    auto traverse_chunk = [&](std::vector<Pair>& local) {
       local.clear();
       std::size_t tests = 0;
       const std::size_t end = std::min(n, (static_cast<std::size_t>(c) + 1) * kChunk);
@@ -175,7 +176,8 @@ void HomeCellCpu::run(const SpheresIn& s, real margin, const HomeGrid& g, std::v
             [&](std::uint32_t j) { local.push_back(ordered_pair(m_ids[i], m_ids[j])); });
       }
       m_test_chunks[static_cast<std::size_t>(c)] = tests;
-    });
+    };
+    errors.run([&] { fill_apart(m_pair_chunks[static_cast<std::size_t>(c)], traverse_chunk); });
   }
   gather_pair_chunks(m_pair_chunks, errors, out);
   for (std::size_t c = 0; c < m_pair_chunks.size(); ++c) m_stats.tests += m_test_chunks[c];

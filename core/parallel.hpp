@@ -79,6 +79,20 @@ class ParallelErrors {
   std::atomic<bool> m_failed{false};
 };
 
+// fill(v) on `slot`, pushing into a vector object of this call's own that
+// holds slot's storage and contents, swapped back after. Vectors kept side by
+// side (one a chunk or a thread) share cache lines: pushing into the slot
+// itself would write a line that another thread's pushes write too (the CPU
+// broad phase's traversal ran no faster on two threads than on one until
+// its chunks filled so). If fill throws, the slot keeps nothing.
+template <class T, class Fill>
+void fill_apart(std::vector<T>& slot, Fill&& fill) {
+  std::vector<T> own;
+  own.swap(slot);
+  fill(own);
+  own.swap(slot);
+}
+
 // Appends what make(k, out) appends for k = 0..count-1 to `out`, in order of
 // k, on all threads when count >= parallel_from: each thread fills its own
 // buffer over a contiguous (static) chunk and the buffers are joined in
@@ -98,12 +112,11 @@ void collect_in_order(std::size_t count, std::size_t parallel_from, std::vector<
   for (auto& p : parts) p.clear();
   ParallelErrors errors;
 #pragma omp parallel num_threads(threads)
-  {
-    std::vector<T>& mine = thread_index() == 0 ? out : parts[thread_index()];
+  fill_apart(thread_index() == 0 ? out : parts[thread_index()], [&](std::vector<T>& mine) {
 #pragma omp for schedule(static)
     for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(count); ++k)
       errors.run([&] { make(static_cast<std::size_t>(k), mine); });
-  }
+  });
   errors.rethrow();
   std::size_t total = out.size();
   for (int t = 1; t < threads; ++t) total += parts[t].size();
