@@ -22,7 +22,12 @@ template <class Bucket, class Move>
 void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move&& move,
                    std::vector<std::uint32_t>& begin, std::vector<std::uint32_t>& scratch) {
   const int most = n >= 20000 ? thread_count() : 1;
-  scratch.assign(std::size_t(most) * buckets, 0);
+  // Each thread's counts on cache lines of their own (64 bytes at least
+  // between two threads' counts, wherever the scratch begins): a few
+  // buckets (the colouring's colours) would otherwise put two threads'
+  // counts on one line, which every count writes.
+  const std::size_t stride = (std::size_t(buckets) + 16 + 15) / 16 * 16;
+  scratch.assign(std::size_t(most) * stride, 0);
   begin.assign(std::size_t(buckets) + 1, 0);
   std::uint32_t* count = scratch.data();
 #pragma omp parallel num_threads(most) if (most > 1)
@@ -30,7 +35,7 @@ void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move
     const int t = thread_index(), threads = team_size();
     const auto lo = static_cast<std::uint32_t>(std::uint64_t(n) * t / threads);
     const auto hi = static_cast<std::uint32_t>(std::uint64_t(n) * (t + 1) / threads);
-    std::uint32_t* mine = count + std::size_t(t) * buckets;
+    std::uint32_t* mine = count + std::size_t(t) * stride;
     for (std::uint32_t k = lo; k < hi; ++k) {
       const std::uint32_t b = bucket(k);
       if (b != kSkipItem) ++mine[b];
@@ -42,8 +47,8 @@ void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move
       for (std::uint32_t b = 0; b < buckets; ++b) {
         begin[b] = at;
         for (int u = 0; u < threads; ++u) {
-          const std::uint32_t v = count[std::size_t(u) * buckets + b];
-          count[std::size_t(u) * buckets + b] = at;
+          const std::uint32_t v = count[std::size_t(u) * stride + b];
+          count[std::size_t(u) * stride + b] = at;
           at += v;
         }
       }
