@@ -119,7 +119,6 @@ void CUPTIAPI buffer_requested(uint8_t** buffer, size_t* size, size_t* max_recor
 void CUPTIAPI buffer_completed(CUcontext context, uint32_t stream, uint8_t* buffer, size_t, size_t valid) {
   std::size_t dropped = 0;
   if (cuptiActivityGetNumDroppedRecords(context, stream, &dropped) == CUPTI_SUCCESS) g_dropped += dropped;
-  std::vector<Interval> got;
   const std::lock_guard<std::mutex> lock(g_interval_mutex);
   const char* last_name = nullptr;  // a kernel's records come in runs: its name looked up once a run
   std::uint32_t last_index = 0;
@@ -129,17 +128,17 @@ void CUPTIAPI buffer_completed(CUcontext context, uint32_t stream, uint8_t* buff
       case CUPTI_ACTIVITY_KIND_CONCURRENT_KERNEL: {
         const auto* k = reinterpret_cast<const CUpti_ActivityKernel10*>(record);
         if (!last_name || k->name != last_name) last_name = k->name, last_index = name_index(k->name);
-        got.push_back({k->start, k->end, last_index});
+        g_intervals.push_back({k->start, k->end, last_index});
         break;
       }
       case CUPTI_ACTIVITY_KIND_MEMCPY: {
         const auto* c = reinterpret_cast<const CUpti_ActivityMemcpy6*>(record);
-        got.push_back({c->start, c->end, kMemcpy});
+        g_intervals.push_back({c->start, c->end, kMemcpy});
         break;
       }
       case CUPTI_ACTIVITY_KIND_MEMSET: {
         const auto* m = reinterpret_cast<const CUpti_ActivityMemset4*>(record);
-        got.push_back({m->start, m->end, kMemset});
+        g_intervals.push_back({m->start, m->end, kMemset});
         break;
       }
       default:
@@ -147,7 +146,6 @@ void CUPTIAPI buffer_completed(CUcontext context, uint32_t stream, uint8_t* buff
     }
   }
   std::free(buffer);
-  g_intervals.insert(g_intervals.end(), got.begin(), got.end());
 }
 
 }  // namespace
@@ -219,8 +217,10 @@ static std::string readable_kernel(const std::string& mangled) {
   char* plain = abi::__cxa_demangle(mangled.c_str(), nullptr, nullptr, &status);
   std::string name = status == 0 && plain ? plain : mangled;
   std::free(plain);
-  for (const std::string cut : {"(anonymous namespace)::", "marbles::", "::cuda::", "cuda::"})
-    for (std::size_t at; (at = name.find(cut)) != std::string::npos;) name.replace(at, cut.size(), cut[0] == ':' ? "::" : "");
+  for (const std::string cut : {"(anonymous namespace)::", "marbles::", "::cuda::", "cuda::"}) {
+    const char* keep = cut[0] == ':' ? "::" : "";  // "::cuda::" joins what stood either side
+    for (std::size_t at; (at = name.find(cut)) != std::string::npos;) name.replace(at, cut.size(), keep);
+  }
   // The parameter list: from the first '(' at template depth 0.
   int depth = 0;
   for (std::size_t i = 0; i < name.size(); ++i) {
@@ -239,21 +239,21 @@ std::vector<KernelTime> DeviceTimeline::kernels(std::uint64_t t0, std::uint64_t 
   std::vector<KernelTime> out;
   if (!m_on) return out;
   cuptiActivityFlushAll(CUPTI_ACTIVITY_FLAG_FLUSH_FORCED);
-  std::map<std::string, KernelTime> by_name;  // by mangled name
+  std::map<std::string, KernelTime> merged;  // one entry per readable name
   {
     const std::lock_guard<std::mutex> lock(g_interval_mutex);
+    std::map<std::uint32_t, KernelTime> by_name;  // by the mangled name's index
     for (const Interval& i : g_intervals)
       if (i.start >= t0 && i.start < t1 && i.end > i.start) {
-        KernelTime& k = by_name[g_names[i.name]];
+        KernelTime& k = by_name[i.name];
         ++k.launches;
         k.ns += i.end - i.start;
       }
-  }
-  std::map<std::string, KernelTime> merged;  // one entry per readable name
-  for (auto& [name, k] : by_name) {
-    KernelTime& m = merged[readable_kernel(name)];
-    m.launches += k.launches;
-    m.ns += k.ns;
+    for (const auto& [name, k] : by_name) {
+      KernelTime& m = merged[readable_kernel(g_names[name])];
+      m.launches += k.launches;
+      m.ns += k.ns;
+    }
   }
   for (auto& [name, k] : merged) out.push_back({name, k.launches, k.ns});
   std::sort(out.begin(), out.end(), [](const KernelTime& a, const KernelTime& b) {

@@ -71,7 +71,7 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
     const std::uint32_t* colour_of = colour.data();
     std::uint64_t* used = m_body_used.data();
     const int threads = m >= 16384 ? thread_count() : 1;
-    const bool own_masks = threads > 1 && threads <= kMostOwnMasks;
+    const bool own_masks = threads > 1 && threads <= kMostOwnMasks, atomics = threads > kMostOwnMasks;
     if (own_masks) m_thread_used.assign(static_cast<std::size_t>(threads - 1) * body_count, 0);
     std::uint64_t* others = m_thread_used.data();
     std::uint32_t top = 0;
@@ -84,16 +84,16 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
         const Contact& c = contacts[kk[t]];
         const std::uint32_t kept_colour = colour_of[kk[t]];
         const std::uint64_t bit = std::uint64_t(1) << kept_colour;
-        if (own_masks || threads == 1) {
-          mine[c.a] |= bit;
-          if (!is_wall(c.b)) mine[c.b] |= bit;
-        } else {
+        if (atomics) {
 #pragma omp atomic update
           used[c.a] |= bit;
           if (!is_wall(c.b)) {
 #pragma omp atomic update
             used[c.b] |= bit;
           }
+        } else {
+          mine[c.a] |= bit;
+          if (!is_wall(c.b)) mine[c.b] |= bit;
         }
         top = std::max(top, kept_colour + 1);
       }

@@ -198,11 +198,10 @@ ContactSolver::ContactSolver(const SolverSettings& settings, SweepLanes lanes) :
 }
 
 std::optional<LocalOrder> local_order_from_environment() {
-  const auto threads = static_cast<int>(
-      whole_from_environment("MARBLES_LOCAL_THREADS", 256, 1024, "expected a multiple of 32 from 32 to 1024"));
+  const std::string expected = "expected a multiple of 32 from 32 to 1024";
+  const auto threads = static_cast<int>(whole_from_environment("MARBLES_LOCAL_THREADS", 256, 1024, expected));
   if (threads < 32 || threads % 32 != 0)
-    throw RuntimeFailure("MARBLES_LOCAL_THREADS=" + std::to_string(threads) +
-                         ": expected a multiple of 32 from 32 to 1024");
+    throw RuntimeFailure("MARBLES_LOCAL_THREADS=" + std::to_string(threads) + ": " + expected);
   const char* asked = std::getenv("MARBLES_SOLVE_ORDER");
   if (asked == nullptr || *asked == '\0' || std::string_view(asked) == "colours") return std::nullopt;
   LocalOrder o;

@@ -67,13 +67,14 @@ std::uint64_t __device__ global_ns() {
 
 // Spins for about `ns` on the device's global timer and writes when it began
 // and ended, on that timer.
-__global__ void spin(std::uint64_t ns, std::uint64_t* began_ended) {
+__device__ void spin_for(std::uint64_t ns, std::uint64_t* began_ended) {
   const std::uint64_t start = global_ns();
   std::uint64_t now = start;
   while (now - start < ns) now = global_ns();
   began_ended[0] = start;
   began_ended[1] = now;
 }
+__global__ void spin(std::uint64_t ns, std::uint64_t* began_ended) { spin_for(ns, began_ended); }
 
 // The timeline's busy time against the kernels' own clocks: a kernel alone,
 // then a host pause, then two kernels at once on two streams (their union,
@@ -137,13 +138,7 @@ TEST(DeviceTimeline, BusyIsTheUnionOfTheDevicesWorkAndTheRestIsIdle) {
 // the device's own clock), the set as "(memset)", the kernels named without
 // their parameters, and the parts adding up to the busy time (nothing ran
 // at once).
-__global__ void spin_other(std::uint64_t ns, std::uint64_t* began_ended) {
-  const std::uint64_t start = global_ns();
-  std::uint64_t now = start;
-  while (now - start < ns) now = global_ns();
-  began_ended[0] = start;
-  began_ended[1] = now;
-}
+__global__ void spin_other(std::uint64_t ns, std::uint64_t* began_ended) { spin_for(ns, began_ended); }
 
 TEST(DeviceTimeline, ByKernelCountsEachKernelsLaunchesAndTime) {
   REQUIRE_DEVICE();
