@@ -111,7 +111,19 @@ def main(bench_ab, marbles, work):
           code == 1 and "cannot run" in out and "Traceback" not in out, out)
 
     code, out, _ = fake_run("NAME", "--", "--n", "10")
-    check("a setting that is not NAME=VALUE refused", code != 0 and "expected - or NAME=VALUE" in out, out)
+    check("a setting that is not NAME=VALUE refused", code != 0 and "expected -, NAME=VALUE" in out, out)
+
+    # Another program by setting: a second stand-in whose energy is 4.0
+    # unless FAKE_KE says.
+    other = work / "fake_bench_other"
+    other.write_text(f"#!{sys.executable}\n" + FAKE.replace('os.environ.get("FAKE_KE", "1.0")',
+                                                            'os.environ.get("FAKE_KE", "4.0")'))
+    other.chmod(0o755)
+    code, out, order = fake_run("--rounds", "1", "-", f"@{other}", "--", "--n", "10")
+    check("@PROGRAM runs that program: its other energy found",
+          code == 1 and "[(4.0, 0.5)]" in out and "[(1.0, 0.5)]" in out and len(order) == 2, out)
+    code, out, _ = fake_run("--rounds", "1", "-", f"@{other},FAKE_KE=1.0", "--", "--n", "10")
+    check("@PROGRAM,NAME=VALUE: that program under that setting", code == 0 and "same bits" in out, out)
 
     # The program itself: one and two threads, and SSE lanes, the same bits.
     # Each setting names its thread count, so an exported OMP_NUM_THREADS
