@@ -417,17 +417,13 @@ TEST(Colouring, ManyKeptColoursGiveTheOracleForAnyThreadCount) {
   std::vector<std::uint8_t> kept;
   const std::vector<Contact> next = next_substep(rng, contacts, ranges, bodies, 4000, kept);
   ASSERT_GT(std::count_if(kept.begin(), kept.end(), [](std::uint8_t c) { return c != kNoKeptColour; }), 16384);
-#if defined(_OPENMP)
-  const int threads = omp_get_max_threads();
-  for (const int t : {1, 2, 3, 4, 6}) {
-    omp_set_num_threads(t);
+  const int was = thread_count();
+  for (const int t : {1, 2, 3, 4, 6}) {  // one thread alone without OpenMP
+    set_thread_count(t);
     SCOPED_TRACE(t);
     expect_matches_oracle(next, bodies, kept);
   }
-  omp_set_num_threads(threads);
-#else
-  expect_matches_oracle(next, bodies, kept);
-#endif
+  set_thread_count(was);
 }
 
 // colour() sorts only the ranks' top 24 bits when the active list's index
