@@ -230,6 +230,7 @@ ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, 
 ColouringCuda::ColouringCuda() : m_host(kRead) {
   m_count.as<std::uint32_t>(kMaxColourRounds + 2);
   m_first_of_key.as<std::uint32_t>(kMaxColourRounds + 2);
+  m_plan.as<ColourPlan>(1);
 }
 ColouringCuda::~ColouringCuda() = default;
 
@@ -247,22 +248,20 @@ void ColouringCuda::launch_rounds(const Entries& entries, const ColouringArrays&
                                                               at.colour, rule, at.body_word, at.body_used);
 }
 
-// The ranges (ColourRanges::begin) from the firsts of the colours' keys
-// (host[0, kMaxColours), kNoFirst where no contact has it), then the
-// overflow's and the inactive's.
+// The ranges (ColourRanges::begin) from the firsts read back (plan_of_firsts).
 static void ranges_of(const std::uint32_t* host, std::uint32_t n, std::vector<std::uint32_t>& begin) {
-  // Colours may have gaps (a kept colour whose other contacts are gone): an
-  // empty colour's range is empty.
-  std::uint32_t colours = kMaxColours;
-  while (colours > 0 && host[colours - 1] == kNoFirst) --colours;
-  const std::uint32_t overflow_first = host[kMaxColours], inactive_first = host[kMaxColours + 1];
-  const std::uint32_t coloured_end =
-      overflow_first != kNoFirst ? overflow_first : inactive_first != kNoFirst ? inactive_first : n;
-  const std::uint32_t overflow_end = inactive_first != kNoFirst ? inactive_first : n;
-  begin.assign(colours + 2, 0);
-  begin[colours] = coloured_end;
-  for (std::uint32_t c = colours; c-- > 1;) begin[c] = host[c] != kNoFirst ? host[c] : begin[c + 1];
-  begin[colours + 1] = overflow_first != kNoFirst ? overflow_end : coloured_end;
+  ColourPlan plan;
+  plan_of_firsts(host, n, plan);
+  begin.assign(plan.begin, plan.begin + plan.colours + 2);
+}
+
+// The plan in device memory, from the firsts the sort left there: the
+// ranges the host reads back, for the stages that walk every colour in one
+// launch. n: the contacts, or with count_on_device a room (count_within).
+__global__ void plan_kernel(const std::uint32_t* first, std::uint32_t n, const std::uint32_t* count_on_device,
+                            ColourPlan* plan) {
+  if (blockIdx.x == 0 && threadIdx.x == 0)
+    plan_of_firsts(first, static_cast<std::uint32_t>(::marbles::cuda::count_within(n, count_on_device)), *plan);
 }
 
 std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_t n,
@@ -275,6 +274,7 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   m_last_count = n;
   if (n == 0) {
     begin.assign(2, 0);
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(m_plan.get(), 0, sizeof(ColourPlan), s));
     return 0;
   }
   // Buckets: the colours (< kMaxColours), the overflow's and the inactive's.
@@ -289,6 +289,9 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   ::marbles::cuda::counting_sort(at.sort, n, ColourKey{at.colour, kMaxColours},
                                  PlaceOverColour{at.colour, sorted_colour},
                                  m_first_of_key.get_as<std::uint32_t>(), kNoFirst, s);
+  plan_kernel<<<1, 32, 0, s>>>(m_first_of_key.get_as<std::uint32_t>(), n, count_on_device,
+                               m_plan.get_as<ColourPlan>());
+  MARBLES_CUDA_CHECK_LAUNCH();
   // One read: the firsts of every key, the rounds run and the count.
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_first_of_key.get_as<std::uint32_t>(),
                                      (kMaxColours + 2) * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));

@@ -52,6 +52,11 @@ class ColouringCuda {
                                 std::size_t body_count, const std::uint32_t*& position,
                                 std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t stream,
                                 const std::uint8_t* kept_colour = nullptr, std::uint8_t* sorted_colour = nullptr);
+  // The last colour_and_sort's ranges in device memory (as `begin` and the
+  // colour count; for a room, those of the contacts in it, or none where
+  // they outgrew it): what the stages that walk every colour in one launch
+  // read. Written in the stream's order, valid until the next call.
+  const ColourPlan* device_plan() const { return m_plan.get_as<ColourPlan>(); }
   // The rounds the last colour_and_sort ran (as ContactColouring::colour
   // counts them).
   std::uint32_t rounds() const { return m_rounds; }
@@ -75,7 +80,7 @@ class ColouringCuda {
   // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }
   // Device bytes it holds of its own (not the shared scratch).
-  std::size_t device_bytes() const { return ::marbles::cuda::bytes_of(m_count, m_first_of_key, m_own_scratch); }
+  std::size_t device_bytes() const { return ::marbles::cuda::bytes_of(m_count, m_first_of_key, m_plan, m_own_scratch); }
 
   // The temporaries (colours, lists, the sort's counts; not the lists
   // given share_round_memory) live in `scratch` from here on, memory that
@@ -105,7 +110,7 @@ class ColouringCuda {
                      ColourRule rule, int sm_count, cudaStream_t stream);
   // The firsts of the sort's buckets (kNoFirst where empty), read back by
   // colour_and_sort, read on the device by the impact stage.
-  DeviceBuffer m_count, m_first_of_key, m_own_scratch;
+  DeviceBuffer m_count, m_first_of_key, m_plan, m_own_scratch;
   DeviceBuffer* m_scratch = &m_own_scratch;
   DeviceBuffer* m_round_memory = nullptr;  // share_round_memory's, else the scratch
   ::marbles::cuda::PinnedBuffer<std::uint32_t> m_host;  // readbacks

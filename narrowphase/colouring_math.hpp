@@ -85,6 +85,43 @@ MARBLES_HD_INLINE void visit_levels(const std::uint32_t* first, std::uint32_t n,
   if (overflow != kNoFirst) visit(overflow, others != kNoFirst ? others : n, true);
 }
 
+// The colour ranges of colour-major contacts as a whole stage walks them:
+// colour c is [begin[c], begin[c + 1]), the overflow set [begin[colours],
+// begin[colours + 1]). The same words on the host and in device memory.
+struct ColourPlan {
+  std::uint32_t begin[kMaxColours + 2] = {};
+  std::uint32_t colours = 0;
+
+  // The largest colour (the overflow set is one thread's).
+  MARBLES_HD_INLINE std::uint32_t widest() const {
+    std::uint32_t w = 0;
+    for (std::uint32_t c = 0; c < colours; ++c) w = begin[c + 1] - begin[c] > w ? begin[c + 1] - begin[c] : w;
+    return w;
+  }
+  MARBLES_HD_INLINE bool empty() const { return begin[colours + 1] == begin[0]; }
+};
+
+// The plan of n contacts from the firsts their counting sort by colour left
+// (first[key]: the first sorted position holding key, kNoFirst where none;
+// keys: the colours below kMaxColours, the overflow's kMaxColours, the
+// inactive's kMaxColours + 1). Colours may have gaps (a kept colour whose
+// other contacts are gone): an empty colour's range is empty. The host reads
+// the firsts back and makes it so; the device makes it in place.
+MARBLES_HD_INLINE void plan_of_firsts(const std::uint32_t* first, std::uint32_t n, ColourPlan& plan) {
+  std::uint32_t colours = kMaxColours;
+  while (colours > 0 && first[colours - 1] == kNoFirst) --colours;
+  const std::uint32_t overflow_first = first[kMaxColours], inactive_first = first[kMaxColours + 1];
+  const std::uint32_t coloured_end =
+      overflow_first != kNoFirst ? overflow_first : inactive_first != kNoFirst ? inactive_first : n;
+  const std::uint32_t overflow_end = inactive_first != kNoFirst ? inactive_first : n;
+  plan.colours = colours;
+  plan.begin[0] = 0;
+  plan.begin[colours] = coloured_end;
+  for (std::uint32_t c = colours; c-- > 1;) plan.begin[c] = first[c] != kNoFirst ? first[c] : plan.begin[c + 1];
+  plan.begin[colours + 1] = overflow_first != kNoFirst ? overflow_end : coloured_end;
+  for (std::uint32_t c = colours + 2; c < kMaxColours + 2; ++c) plan.begin[c] = plan.begin[colours + 1];
+}
+
 // A 32-bit integer hash (lowbias32): spreads ranks so that colouring rounds
 // stay few (index order would make long chains of dependent contacts).
 MARBLES_HD_INLINE std::uint32_t mix32(std::uint32_t x) {

@@ -131,6 +131,17 @@ __device__ void walk_range(std::uint32_t b, std::uint32_t e, bool serial, bool r
   grid.sync();
 }
 
+// A one-launch stage's plan, read from device memory into the block's
+// shared memory once (the stage walks it some hundred times).
+__device__ const ColourPlan& shared_plan(const ColourPlan* plan) {
+  constexpr unsigned kWords = sizeof(ColourPlan) / sizeof(std::uint32_t);
+  __shared__ std::uint32_t words[kWords];
+  const auto* from = reinterpret_cast<const std::uint32_t*>(plan);
+  for (unsigned i = threadIdx.x; i < kWords; i += blockDim.x) words[i] = from[i];
+  __syncthreads();
+  return *reinterpret_cast<const ColourPlan*>(words);
+}
+
 // Every contact of a colour plan in the solver's order (visit_colours), a
 // range at a time (walk_range).
 template <class Sync, class F>
@@ -161,10 +172,11 @@ __device__ __forceinline__ void raise_once(bool happened, bool& raised, unsigned
 // reads after the barrier that ends the sweep's last colour. *total += the
 // sweeps run (solver.cpp ends the projection there too).
 template <class Sync>
-__global__ void project_kernel(ColourPlan plan, SweepRecords records, const Real4* impact, BodiesView bodies,
-                               const WallShape* walls, SolverSettings s, const unsigned* hit, int sweeps,
-                               unsigned* moved, unsigned long long* total) {
+__global__ void project_kernel(const ColourPlan* plan_memory, SweepRecords records, const Real4* impact,
+                               BodiesView bodies, const WallShape* walls, SolverSettings s, const unsigned* hit,
+                               int sweeps, unsigned* moved, unsigned long long* total) {
   const Sync grid;
+  const ColourPlan& plan = shared_plan(plan_memory);
   if (hit && flag_set(hit))
     walk_colours(plan, false, grid, [&](std::uint32_t k) {
       rebound_one(load_rebound_contact(records, impact, k), bodies, walls);
@@ -189,10 +201,11 @@ __global__ void project_kernel(ColourPlan plan, SweepRecords records, const Real
 // contact colour by colour, while pass p - 1 hit something. hit[p] (zeroed
 // before) records what pass p hit.
 template <bool Friction, class Sync>
-__global__ void impact_stage_kernel(ColourPlan plan, SweepRecords records, Real4* impact, const std::uint32_t* order,
-                                    const std::uint32_t* first, std::uint32_t n, SolverBody* bodies, ImpactParams p,
-                                    int passes, unsigned* hit) {
+__global__ void impact_stage_kernel(const ColourPlan* plan_memory, SweepRecords records, Real4* impact,
+                                    const std::uint32_t* order, const std::uint32_t* first, std::uint32_t n,
+                                    SolverBody* bodies, ImpactParams p, int passes, unsigned* hit) {
   const Sync grid;
+  const ColourPlan& plan = shared_plan(plan_memory);
   bool raised = false;
   visit_levels(first, n, [&](std::uint32_t b, std::uint32_t e, bool serial) {
     walk_range(b, e, serial, false, grid, [&](std::uint32_t k) {
@@ -212,8 +225,10 @@ __global__ void impact_stage_kernel(ColourPlan plan, SweepRecords records, Real4
 // same bits. For contacts few enough a colour that the host's launches, not
 // the device, would set the solve's time.
 template <bool Friction, bool Rolling, class Sync>
-__global__ void solve_kernel(ColourPlan plan, SweepRecords s, SolverBody* bodies, real inv_h, bool warm, int sweeps) {
+__global__ void solve_kernel(const ColourPlan* plan_memory, SweepRecords s, SolverBody* bodies, real inv_h, bool warm,
+                             int sweeps) {
   const Sync grid;
+  const ColourPlan& plan = shared_plan(plan_memory);
   if (warm) walk_colours(plan, false, grid, [&](std::uint32_t k) { warm_start_record<Friction, Rolling>(s, k, bodies); });
   for (int it = 0; it < sweeps; ++it)
     walk_colours(plan, it % 2 == 1, grid, [&](std::uint32_t k) { solve_record<Friction, Rolling>(s, k, bodies, inv_h); });
@@ -421,17 +436,17 @@ bool launch_one(std::size_t items, int sm_count, cudaStream_t s, Args&&... args)
   return false;
 }
 
-bool launch_position_stages(const SweepRecords& records, const Real4* impact, const ColourPlan& plan,
+bool launch_position_stages(const SweepRecords& records, const Real4* impact, DevicePlan plan,
                             const BodiesView& bodies, const WallShape* walls, const SolverSettings& settings,
                             const unsigned* hit, int sweeps, unsigned* moved, unsigned long long* total, int sm_count,
                             cudaStream_t s) {
-  if ((sweeps <= 0 && !hit) || plan.empty()) return false;
+  if (sweeps <= 0 && !hit) return false;
   return launch_one<project_kernel<GridSync>, project_kernel<ClusterSync>>(
-      plan.widest(), sm_count, s, plan, records, impact, bodies, walls, settings, hit, sweeps, moved, total);
+      plan.widest, sm_count, s, plan.plan, records, impact, bodies, walls, settings, hit, sweeps, moved, total);
 }
 
 bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
-                         const std::uint32_t* first, std::uint32_t n, const ColourPlan& plan, SolverBody* bodies,
+                         const std::uint32_t* first, std::uint32_t n, const ColourPlan* plan, SolverBody* bodies,
                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
                          cudaStream_t s) {
   if (n == 0) return false;
@@ -451,13 +466,12 @@ std::uint32_t cluster_widest() {
 }
 int cluster_blocks() { return ::marbles::cuda::largest_cluster<project_kernel<ClusterSync>>(); }
 
-bool launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h, SolverTerms t,
+bool launch_solve(const SweepRecords& records, DevicePlan plan, SolverBody* bodies, real inv_h, SolverTerms t,
                   bool warm, int sweeps, int sm_count, cudaStream_t s) {
-  if (plan.empty()) return false;
   bool cluster = false;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
     cluster = launch_one<solve_kernel<friction, rolling, GridSync>, solve_kernel<friction, rolling, ClusterSync>>(
-        plan.widest(), sm_count, s, plan, records, bodies, inv_h, warm, sweeps);
+        plan.widest, sm_count, s, plan.plan, records, bodies, inv_h, warm, sweeps);
   });
   return cluster;
 }

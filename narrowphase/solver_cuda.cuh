@@ -52,20 +52,16 @@ void launch_warm_start(const SweepRecords& records, ContactRange range, SolverBo
                        cudaStream_t stream);
 void launch_sweep(const SweepRecords& records, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,
                   cudaStream_t stream);
-// The colour ranges of colour-major contacts as one launch takes them:
-// colour c is [begin[c], begin[c + 1]), the overflow set [begin[colours],
-// begin[colours + 1]).
-struct ColourPlan {
-  std::uint32_t begin[kMaxColours + 2] = {};
-  std::uint32_t colours = 0;
+using ::marbles::narrowphase::ColourPlan;  // colouring_math.hpp
 
-  // The largest colour (the overflow set is one thread's).
-  std::uint32_t widest() const {
-    std::uint32_t w = 0;
-    for (std::uint32_t c = 0; c < colours; ++c) w = begin[c + 1] - begin[c] > w ? begin[c + 1] - begin[c] : w;
-    return w;
-  }
-  bool empty() const { return begin[colours + 1] == begin[0]; }
+// A colour plan in device memory (ColouringCuda::device_plan), as the
+// stages that walk every colour in one launch read it, and the widest colour
+// the launch is shaped for (the host's reading of the plan, or a bound: a
+// walk strides over any width, so a wider colour is walked all the same, and
+// the bits do not depend on the shape).
+struct DevicePlan {
+  const ColourPlan* plan = nullptr;
+  std::uint32_t widest = 0;
 };
 
 // The stages below walk a plan in one launch each (the solver's order,
@@ -91,7 +87,7 @@ int cluster_blocks();
 // it did not run), then the projection, sweeps until one moves nothing
 // beyond settled_move (project_one), at most `sweeps`; moved[0, sweeps)
 // zeroed before, sweep `it` sets moved[it]; *total += the sweeps run.
-bool launch_position_stages(const SweepRecords& records, const Real4* impact, const ColourPlan& plan,
+bool launch_position_stages(const SweepRecords& records, const Real4* impact, DevicePlan plan,
                             const BodiesView& bodies, const WallShape* walls, const SolverSettings& settings,
                             const unsigned* hit, int sweeps, unsigned* moved, unsigned long long* total, int sm_count,
                             cudaStream_t stream);
@@ -101,14 +97,14 @@ bool launch_position_stages(const SweepRecords& records, const Real4* impact, co
 // passes 1 .. passes - 1 over every contact while the pass before hit
 // something; hit[p] (zeroed before) is set when pass p hits.
 bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
-                         const std::uint32_t* first, std::uint32_t n, const ColourPlan& plan, SolverBody* bodies,
+                         const std::uint32_t* first, std::uint32_t n, const ColourPlan* plan, SolverBody* bodies,
                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
                          cudaStream_t stream);
 
 // The warm start (when `warm`) and `sweeps` sweeps in one launch, where a
 // launch per colour would leave the device waiting for the host's launches
 // (contacts few a colour).
-bool launch_solve(const SweepRecords& records, const ColourPlan& plan, SolverBody* bodies, real inv_h,
+bool launch_solve(const SweepRecords& records, DevicePlan plan, SolverBody* bodies, real inv_h,
                   SolverTerms terms, bool warm, int sweeps, int sm_count, cudaStream_t stream);
 
 // *deepest = max(*deepest, overlap_ratio) over the records' contacts [0, n) (as the bits

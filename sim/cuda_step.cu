@@ -422,7 +422,7 @@ class CudaStep final : public StepBackend {
     }
     if (solve_in_one_launch()) {
       ++m_counters.one_launch_solves;
-      if (nc::launch_solve(m_records, m_plan, bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm,
+      if (nc::launch_solve(m_records, device_plan(), bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm,
                            m_stream))
         ++m_counters.cluster_stages;
       nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
@@ -470,7 +470,7 @@ class CudaStep final : public StepBackend {
     const unsigned* hit = m_impact_candidates ? m_hit.get_as<unsigned>() : nullptr;
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(std::max(sweeps, 1)));
     if (sweeps > 0) MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
-    if (nc::launch_position_stages(m_records, m_impacts.word, m_plan, m_device.view(), walls(), m_model.solver, hit,
+    if (nc::launch_position_stages(m_records, m_impacts.word, device_plan(), m_device.view(), walls(), m_model.solver, hit,
                                    sweeps, moved, m_flags.get_as<unsigned long long>() + 2, m_sm, m_stream))  // flags[2]
       ++m_counters.cluster_stages;
   }
@@ -697,6 +697,9 @@ class CudaStep final : public StepBackend {
 
  private:
   narrowphase::BodyPair* pairs_d() const { return m_pairs.get_as<narrowphase::BodyPair>(); }
+  // The substep's plan as the one-launch stages read it: the colouring's in
+  // device memory, shaped for the widest colour the host read.
+  nc::DevicePlan device_plan() const { return {m_colouring.device_plan(), m_plan.widest()}; }
 
   // The host copy's edits (edit_world) to the device, once.
   void send_host_edits() {
@@ -802,7 +805,7 @@ class CudaStep final : public StepBackend {
                               m_sm, m_stream);
     auto* hit = m_hit.as<unsigned>(narrowphase::kImpactPasses);
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, narrowphase::kImpactPasses * sizeof(unsigned), m_stream));
-    if (nc::launch_impact_stage(m_records, m_impacts.word, order, first, m_count, m_plan, bodies, params,
+    if (nc::launch_impact_stage(m_records, m_impacts.word, order, first, m_count, m_colouring.device_plan(), bodies, params,
                                 m_model.solver.friction, narrowphase::kImpactPasses, hit, m_sm, m_stream))
       ++m_counters.cluster_stages;
   }

@@ -68,6 +68,22 @@ struct DeviceContacts {
   }
 };
 
+// Poisons the plan the colouring keeps in device memory (before a call).
+void poison_device_plan(const narrowphase::cuda::ColouringCuda& gpu) {
+  ASSERT_EQ(cudaMemset(const_cast<ColourPlan*>(gpu.device_plan()), 0xab, sizeof(ColourPlan)), cudaSuccess);
+}
+
+// The plan the colouring left in device memory, as the stages that walk
+// every colour in one launch read it: the host's ranges, and past them the
+// last range's end.
+void expect_device_plan(const narrowphase::cuda::ColouringCuda& gpu, const std::vector<std::uint32_t>& begin) {
+  ColourPlan plan;
+  ASSERT_EQ(cudaMemcpy(&plan, gpu.device_plan(), sizeof plan, cudaMemcpyDeviceToHost), cudaSuccess);
+  ASSERT_EQ(plan.colours + 2, begin.size());
+  EXPECT_EQ(std::vector<std::uint32_t>(plan.begin, plan.begin + plan.colours + 2), begin);
+  for (std::uint32_t c = plan.colours + 2; c < kMaxColours + 2; ++c) EXPECT_EQ(plan.begin[c], begin.back()) << c;
+}
+
 // kept: colours kept from the last substep (colour_and_sort), or empty;
 // scratch: the temporaries' memory, shared with other users (null: the
 // colouring's own); rounds: the round lists' memory apart from it (null:
@@ -92,11 +108,13 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   ASSERT_EQ(cudaMemset(sorted_colour, 0xab, n + 1), cudaSuccess);  // poisoned
   if (!kept.empty()) ASSERT_EQ(cudaMemcpy(kept_d, kept.data(), n, cudaMemcpyHostToDevice), cudaSuccess);
   const std::uint32_t* position_d = nullptr;
+  poison_device_plan(gpu);
   const std::uint32_t colours = gpu.colour_and_sort(d.pairs, n, nullptr, bodies, position_d, begin, 8, nullptr,
                                                     kept.empty() ? nullptr : kept_d, sorted_colour);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
   EXPECT_EQ(colours, ranges.colours);
   EXPECT_EQ(begin, ranges.begin);
+  expect_device_plan(gpu, ranges.begin);
   EXPECT_EQ(gpu.rounds(), ranges.rounds);
   std::vector<std::uint32_t> position(n), sorted(n, 0xffffffffu);
   std::vector<std::uint8_t> gpu_colour(n), cpu_colour(n, 0xcd);
@@ -133,11 +151,13 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
           ::marbles::cuda::upload(count_memory, std::vector<std::uint32_t>{count}, nullptr);
       ASSERT_EQ(cudaMemset(sorted_d, 0xab, items), cudaSuccess);
       std::vector<std::uint32_t> room_begin;
+      poison_device_plan(gpu);
       const std::uint32_t room_colours =
           gpu.colour_and_sort(pairs_d, items, count_d, bodies, position_d, room_begin, 8, nullptr,
                               kept.empty() ? nullptr : kept_room_d, sorted_d);
       ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
       EXPECT_EQ(gpu.last_count(), count);
+      expect_device_plan(gpu, room_begin);
       if (count > items) {
         EXPECT_EQ(room_colours, 0u);
         EXPECT_EQ(room_begin, (std::vector<std::uint32_t>{0, 0}));
