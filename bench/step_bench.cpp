@@ -480,6 +480,8 @@ struct Row {
   std::uint64_t grid_replans = 0;  // of those, the broad phase's grid outgrew its plan (CUDA)
   std::uint64_t grid_shrinks = 0;  // substeps whose grid fit a plan larger than it asks: planned smaller (CUDA)
   std::uint64_t buffer_trims = 0;  // buffers freed at a step's start, held beyond their need (CUDA)
+  std::uint64_t unwaited_substeps = 0;  // substeps of the timed steps that waited for nothing (CUDA: one wait a step)
+  std::uint64_t undone_substeps = 0;    // of those, outgrew a room: put back and done again with waits (CUDA)
   // Substeps of the warm-up and timed steps whose records kept whole impact
   // words (CUDA: a contact was an impact candidate; the records' memory is
   // then sized for them until a trim finds them gone: buffer_trims).
@@ -543,6 +545,8 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     row.grid_replans += c.grid_replans;
     row.grid_shrinks += c.grid_shrinks;
     row.buffer_trims += c.buffer_trims;
+    row.unwaited_substeps += c.unwaited_substeps;
+    row.undone_substeps += c.undone_substeps;
     row.impact_substeps += c.impact_words;
     row.cluster_stages += c.cluster_stages;
   }
@@ -741,6 +745,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"grid_replans", r.grid_replans},
                                  {"grid_shrinks", r.grid_shrinks},
                                  {"buffer_trims", r.buffer_trims},
+                                 {"unwaited_substeps", r.unwaited_substeps},
+                                 {"undone_substeps", r.undone_substeps},
                                  {"impact_word_substeps", r.impact_substeps},
                                  {"cluster_stages", r.cluster_stages},
                                  {"ke_per_sphere_J", r.ke_per_sphere},

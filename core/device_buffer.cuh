@@ -155,6 +155,15 @@ __device__ __forceinline__ std::size_t count_within(std::size_t items, const std
   return count <= items ? count : 0;
 }
 
+// Whether a kernel that writes the step's state does nothing: a substep
+// that outgrew a room it was given without a wait runs on (its results
+// bounded by the rooms, and wrong), and the kernels that would make them
+// the state's read this word (a substep's number past 0 once one has
+// outgrown one: sim/cuda_step.cu, one wait a step). Null: never.
+__device__ __forceinline__ bool skipped(const unsigned long long* skip) {
+  return skip != nullptr && *static_cast<const volatile unsigned long long*>(skip) != 0;
+}
+
 #endif
 
 // *target = max(*target, v) for the warp's values, one atomic per warp. Every

@@ -93,10 +93,11 @@ __global__ void contact_ranks_kernel(const BodyPair* pairs, std::uint32_t items,
 // The impact candidates join the active list (in any order: a round's
 // result does not depend on the order it visits its contacts).
 __global__ void impact_candidates_kernel(SweepRecords records, const Real4* impact, std::uint32_t n,
-                                         real rest_speed, std::uint32_t* colour, std::uint32_t* active,
-                                         std::uint32_t* count) {
+                                         const std::uint32_t* count_on_device, real rest_speed, std::uint32_t* colour,
+                                         std::uint32_t* active, std::uint32_t* count) {
+  const std::size_t contacts = ::marbles::cuda::count_within(n, count_on_device);
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const bool candidate = is_impact_candidate(load_approach(records, impact, k), rest_speed);
+    const bool candidate = k < contacts && is_impact_candidate(load_approach(records, impact, k), rest_speed);
     colour[k] = candidate ? kUncoloured : kNotActive;
     append(active, count, k, candidate);
   }
@@ -268,7 +269,7 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
                                              const std::uint32_t* count_on_device, std::size_t body_count,
                                              const std::uint32_t*& position, std::vector<std::uint32_t>& begin,
                                              int sm_count, cudaStream_t s, const std::uint8_t* kept_colour,
-                                             std::uint8_t* sorted_colour) {
+                                             std::uint8_t* sorted_colour, bool read_back) {
   position = nullptr;
   m_rounds = 0;
   m_last_count = n;
@@ -292,6 +293,8 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   plan_kernel<<<1, 32, 0, s>>>(m_first_of_key.get_as<std::uint32_t>(), n, count_on_device,
                                m_plan.get_as<ColourPlan>());
   MARBLES_CUDA_CHECK_LAUNCH();
+  position = at.colour;
+  if (!read_back) return 0;
   // One read: the firsts of every key, the rounds run and the count.
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_first_of_key.get_as<std::uint32_t>(),
                                      (kMaxColours + 2) * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
@@ -304,21 +307,22 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   m_rounds = m_host[kRounds];
   if (count_on_device) m_last_count = m_host[kCount];
   ranges_of(m_host, m_last_count <= n ? m_last_count : 0, begin);
-  position = at.colour;
   return static_cast<std::uint32_t>(begin.size() - 2);
 }
 
 void ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n,
                                   std::size_t body_count, real rest_speed, std::uint32_t*& order,
-                                  const std::uint32_t*& first, int sm_count, cudaStream_t s) {
+                                  const std::uint32_t*& first, int sm_count, cudaStream_t s,
+                                  const std::uint32_t* count_on_device) {
   order = nullptr;
   first = nullptr;
   if (n == 0) return;
   // Buckets: the levels (< kMaxColourRounds), the overflow's and the others'.
   const ColouringArrays at = lay_out(n, body_count, kMaxColourRounds + 2, true);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(m_count.get_as<std::uint32_t>(), 0, sizeof(std::uint32_t), s));
-  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, rest_speed, at.colour,
-                                                                    at.active, m_count.get_as<std::uint32_t>());
+  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, count_on_device, rest_speed,
+                                                                    at.colour, at.active,
+                                                                    m_count.get_as<std::uint32_t>());
   MARBLES_CUDA_CHECK_LAUNCH();
   // A level is the round that coloured it. Nothing is read on the host.
   launch_rounds(ImpactEntries{records, impact}, at, n, body_count, ColourRule::by_round, sm_count, s);

@@ -47,11 +47,14 @@ class ColouringCuda {
   // room and the contacts are its first *count_on_device (count_within;
   // none where they do not fit it): read with the ranges, last_count().
   // position and sorted_colour then have n entries, those past the contacts
-  // placed after them.
+  // placed after them. Without `read_back`, nothing is read and nothing
+  // waits: the ranges are only device_plan()'s (begin is left as it was,
+  // and 0 returned; rounds() and last_count() are not known).
   std::uint32_t colour_and_sort(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* count_on_device,
                                 std::size_t body_count, const std::uint32_t*& position,
                                 std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t stream,
-                                const std::uint8_t* kept_colour = nullptr, std::uint8_t* sorted_colour = nullptr);
+                                const std::uint8_t* kept_colour = nullptr, std::uint8_t* sorted_colour = nullptr,
+                                bool read_back = true);
   // The last colour_and_sort's ranges in device memory (as `begin` and the
   // colour count; for a room, those of the contacts in it, or none where
   // they outgrew it): what the stages that walk every colour in one launch
@@ -72,10 +75,12 @@ class ColouringCuda {
   // keys, from which visit_levels (colouring_math.hpp) gives the ranges.
   // Every round runs in one launch, to the first with no contact left:
   // nothing is read on the host, no wait. `order` lies in the scratch
-  // memory, valid until its next user; `first` until the next call.
+  // memory, valid until its next user; `first` until the next call. With
+  // count_on_device, records [0, n) are a room and the contacts its first
+  // *count_on_device (count_within); the others take no level.
   void impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n, std::size_t body_count,
                      real rest_speed, std::uint32_t*& order, const std::uint32_t*& first, int sm_count,
-                     cudaStream_t stream);
+                     cudaStream_t stream, const std::uint32_t* count_on_device = nullptr);
 
   // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }

@@ -50,17 +50,23 @@ struct EntryKey {
   __device__ std::uint64_t operator()(std::uint32_t k) const { return key[k]; }
 };
 
-// Each stored contact counted.
-__global__ void count_kernel(SweepRecords records, const std::uint8_t* colour, std::uint32_t n, std::uint32_t* count,
+// Each stored contact counted; those past the count on the device (a room's)
+// are not stored.
+__global__ void count_kernel(SweepRecords records, const std::uint8_t* colour, std::uint32_t n,
+                             const std::uint32_t* count_on_device, const unsigned long long* skip, std::uint32_t* count,
                              std::uint32_t* rank) {
+  if (::marbles::cuda::skipped(skip)) return;
+  const std::size_t contacts = ::marbles::cuda::count_within(n, count_on_device);
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
-    rank[k] = stored(records, colour, k) ? atomicAdd(count + records.bodies[k].a, 1u) : kNoEntry;
+    rank[k] = k < contacts && stored(records, colour, k) ? atomicAdd(count + records.bodies[k].a, 1u) : kNoEntry;
 }
 
 // Each counted item's index at its place in its sphere's run.
 template <class SphereOf>
 __global__ void place_kernel(SphereOf sphere_of, std::uint32_t n, const std::uint32_t* rank,
-                             const std::uint32_t* first, std::uint32_t* index) {
+                             const std::uint32_t* first, std::uint32_t* index,
+                             const unsigned long long* skip = nullptr) {
+  if (::marbles::cuda::skipped(skip)) return;
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x)
     if (rank[k] != kNoEntry) index[first[sphere_of(k)] + rank[k]] = k;
 }
@@ -68,9 +74,19 @@ __global__ void place_kernel(SphereOf sphere_of, std::uint32_t n, const std::uin
 // Each sphere's run in key order (sort_run, as on the CPU).
 template <class KeyOf>
 __global__ void order_runs_kernel(KeyOf key_of, const std::uint32_t* first, std::uint32_t spheres,
-                                  std::uint32_t* index) {
+                                  std::uint32_t* index, const unsigned long long* skip = nullptr) {
+  if (::marbles::cuda::skipped(skip)) return;
   for (std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x; a < spheres; a += gridDim.x * blockDim.x)
     sort_run(index, first[a], first[a + 1], key_of);
+}
+
+// The runs' firsts made by a store that may be skipped, taken as the
+// cache's (where it is not).
+__global__ void adopt_firsts_kernel(const std::uint32_t* made, std::uint32_t words, const unsigned long long* skip,
+                                    std::uint32_t* first) {
+  if (::marbles::cuda::skipped(skip)) return;
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < words; k += gridDim.x * blockDim.x)
+    first[k] = made[k];
 }
 
 // The entries in key order, each with the b half of its cache key (a is its
@@ -79,7 +95,8 @@ __global__ void order_runs_kernel(KeyOf key_of, const std::uint32_t* first, std:
 // those impulses stay zero, nothing to keep.
 __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_colour, const std::uint32_t* index,
                               const std::uint32_t* size, std::uint32_t* keys, real* normal, Vec3* tangent,
-                              Vec3* rolling, std::uint8_t* colour) {
+                              Vec3* rolling, std::uint8_t* colour, const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
   const std::uint32_t m = *size;
   for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
     const std::uint32_t k = index[e];
@@ -313,44 +330,62 @@ ContactCacheCuda::ContactCacheCuda() = default;
 ContactCacheCuda::~ContactCacheCuda() = default;
 
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
-                             std::uint32_t spheres, int sm_count, cudaStream_t s) {
+                             std::uint32_t spheres, int sm_count, cudaStream_t s, const std::uint32_t* count_on_device,
+                             const unsigned long long* skip) {
   // Entries: the contacts with load or a colour, at most n, in key order by
   // a counting sort by sphere (count, scan into the kept firsts, place) and
   // an insertion sort of each sphere's run. Their count (the firsts' last)
   // stays on the device, and the host holds only the bound n (no wait).
-  m_bound = n;
+  // A store that may be skipped scans into its temporaries and takes the
+  // firsts over only where it is not; the entries' arrays, where they grow,
+  // keep the entries they hold, and the bound covers both.
+  const std::uint32_t old_bound = m_bound, old_runs = m_bound > 0 ? m_spheres + 1 : 0;
+  m_bound = skip ? std::max(m_bound, n) : n;
   m_spheres = spheres;
-  auto* first = m_first.as<std::uint32_t>(std::size_t(spheres) + 1);
+  auto room = [&](DeviceBuffer& b, std::size_t count, std::size_t keep, std::size_t size) {
+    return skip ? b.reserve_keeping(count * size + 16, keep * size, s) : b.reserve(count * size + 16);
+  };
+  auto* kept_first = static_cast<std::uint32_t*>(room(m_first, std::size_t(spheres) + 1, old_runs, 4));
+  auto* keys = static_cast<std::uint32_t*>(room(m_keys, n, old_bound, sizeof(std::uint32_t)));
+  auto* normal = static_cast<real*>(room(m_normal, n, old_bound, sizeof(real)));
+  auto* tangent = m_keep_tangent ? static_cast<Vec3*>(room(m_tangent, n, old_bound, sizeof(Vec3))) : nullptr;
+  auto* rolling = m_keep_rolling ? static_cast<Vec3*>(room(m_rolling, n, old_bound, sizeof(Vec3))) : nullptr;
+  auto* colour = static_cast<std::uint8_t*>(room(m_colour, n, old_bound, 1));
   if (n == 0) {
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(kept_first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
     return;
   }
   // Temporaries in the scratch memory (or the memory share_store_memory lent):
   // the counts (one more than the spheres: the scan's last is the entry
   // count) with the scan's storage, each contact's rank among its sphere's,
-  // and the entries' contacts.
+  // the entries' contacts, and the firsts where the store may be skipped.
   const std::size_t scan_bytes = ::marbles::cuda::exclusive_sum_bytes<std::uint32_t>(std::size_t(spheres) + 1);
-  std::uint32_t *count = nullptr, *rank = nullptr, *index = nullptr;
+  std::uint32_t *count = nullptr, *rank = nullptr, *index = nullptr, *first = kept_first;
   void* scan_temp = nullptr;
   ::marbles::cuda::carve(m_store_memory ? *m_store_memory : *m_scratch, [&](::marbles::cuda::Carve& c) {
     count = c.take<std::uint32_t>(std::size_t(spheres) + 1);
     scan_temp = c.take<char>(scan_bytes);
     rank = c.take<std::uint32_t>(n);
     index = c.take<std::uint32_t>(n);
+    if (skip) first = c.take<std::uint32_t>(std::size_t(spheres) + 1);
   });
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
-  count_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, n, count, rank);
+  count_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, n, count_on_device, skip, count,
+                                                        rank);
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_exclusive_sum(count, first, std::size_t(spheres) + 1, scan_temp, scan_bytes, s);
-  place_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(ContactSphere{contacts}, n, rank, first, index);
+  place_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(ContactSphere{contacts}, n, rank, first, index, skip);
   MARBLES_CUDA_CHECK_LAUNCH();
-  order_runs_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(ContactB{contacts}, first, spheres, index);
+  order_runs_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(ContactB{contacts}, first, spheres, index, skip);
   MARBLES_CUDA_CHECK_LAUNCH();
-  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, first + spheres,
-                                                         m_keys.as<std::uint32_t>(n), m_normal.as<real>(n),
-                                                         tangent_entries(n), rolling_entries(n),
-                                                         m_colour.as<std::uint8_t>(n));
+  gather_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(contacts, contact_colour, index, first + spheres, keys,
+                                                         normal, tangent, rolling, colour, skip);
   MARBLES_CUDA_CHECK_LAUNCH();
+  if (skip) {
+    adopt_firsts_kernel<<<grid_for(std::size_t(spheres) + 1, sm_count), kBlock, 0, s>>>(first, spheres + 1, skip,
+                                                                                       kept_first);
+    MARBLES_CUDA_CHECK_LAUNCH();
+  }
 }
 
 CacheEntries ContactCacheCuda::download(cudaStream_t s) {

@@ -67,8 +67,13 @@ class ContactCacheCuda {
   // The contacts as the sweep's records hold them after the last sweep, with
   // their colours (contact_colour, device, per contact; null: none).
   // `spheres`: how many there are (every contact's a is one of them).
+  // With count_on_device, contacts [0, n) are a room and the contacts its
+  // first *count_on_device (count_within). With `skip` (not null) the
+  // entries are kept as they were where it is set when the store runs
+  // (cuda::skipped: a substep that outgrew a room without a wait).
   void store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n, std::uint32_t spheres,
-             int sm_count, cudaStream_t stream);
+             int sm_count, cudaStream_t stream, const std::uint32_t* count_on_device = nullptr,
+             const unsigned long long* skip = nullptr);
   // The entries are at most this many (the contacts of the last store): the
   // count itself stays on the device, where the kernels read it.
   std::uint32_t bound() const { return m_bound; }
@@ -131,8 +136,6 @@ class ContactCacheCuda {
   DeviceBuffer* m_store_memory = nullptr;  // share_store_memory's, else the scratch
   std::uint32_t m_bound = 0;
   bool m_keep_tangent = true, m_keep_rolling = true;
-  Vec3* tangent_entries(std::uint32_t m) { return m_keep_tangent ? m_tangent.as<Vec3>(m) : nullptr; }
-  Vec3* rolling_entries(std::uint32_t m) { return m_keep_rolling ? m_rolling.as<Vec3>(m) : nullptr; }
 };
 
 }  // namespace marbles::narrowphase::cuda

@@ -148,8 +148,9 @@ __device__ Contact made_contact(const ContactInputs& in, const BodyPair& ab) {
 // its record at position[i]: colour-major order costs scattered writes, not
 // scattered reads (H100, pile of 10^6: colour verb 1.57 -> 1.38 ms).
 __global__ void records_kernel(ContactInputs in, const BodyPair* pairs, const std::uint32_t* match,
-                               CacheImpulses cache, const std::uint32_t* position, std::uint32_t n,
-                               SweepRecords records, ImpactRecords impacts) {
+                               CacheImpulses cache, const std::uint32_t* position, std::uint32_t items,
+                               const std::uint32_t* count_on_device, SweepRecords records, ImpactRecords impacts) {
+  const auto n = static_cast<std::uint32_t>(::marbles::cuda::count_within(items, count_on_device));
   for (std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
     Contact c = made_contact(in, pairs[i]);
     const std::uint32_t e = match ? match[i] : kNoEntry;
@@ -225,10 +226,11 @@ void launch_wall_pair_write(const BodiesView& bodies, const WallShape* walls, st
 
 void launch_sorted_records(const ContactInputs& in, const BodyPair* pairs, const std::uint32_t* match,
                            const CacheImpulses& cache, const std::uint32_t* position, std::uint32_t n,
-                           const SweepRecords& records, const ImpactRecords& impacts, int sm_count,
-                           cudaStream_t stream) {
+                           const std::uint32_t* count_on_device, const SweepRecords& records,
+                           const ImpactRecords& impacts, int sm_count, cudaStream_t stream) {
   if (n == 0) return;
-  records_kernel<<<grid_for(n, sm_count), kBlock, 0, stream>>>(in, pairs, match, cache, position, n, records, impacts);
+  records_kernel<<<grid_for(n, sm_count), kBlock, 0, stream>>>(in, pairs, match, cache, position, n, count_on_device,
+                                                               records, impacts);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

@@ -88,11 +88,13 @@ struct ContactInputs {
 // solver_math.hpp) of the contacts of pairs[0, n), contact i at position[i]
 // (the colouring's colour-major order): each contact made as it was found,
 // restored from its cache entry (match[i]: an entry of `cache`, or kNoEntry;
-// match null: none), prepared from the world, packed.
+// match null: none), prepared from the world, packed. With count_on_device
+// (not null), pairs[0, n) is a room and the contacts its first
+// *count_on_device (count_within).
 void launch_sorted_records(const ContactInputs& in, const BodyPair* pairs, const std::uint32_t* match,
                            const CacheImpulses& cache, const std::uint32_t* position, std::uint32_t n,
-                           const SweepRecords& records, const ImpactRecords& impacts, int sm_count,
-                           cudaStream_t stream);
+                           const std::uint32_t* count_on_device, const SweepRecords& records,
+                           const ImpactRecords& impacts, int sm_count, cudaStream_t stream);
 
 // Whole contacts of records [first, first + count) into out (device), as the
 // CPU holds them after the step (contact_of_record: the table and walls give

@@ -174,9 +174,12 @@ __device__ __forceinline__ void raise_once(bool happened, bool& raised, unsigned
 template <class Sync>
 __global__ void project_kernel(const ColourPlan* plan_memory, SweepRecords records, const Real4* impact,
                                BodiesView bodies, const WallShape* walls, SolverSettings s, const unsigned* hit,
-                               int sweeps, unsigned* moved, unsigned long long* total) {
+                               int sweeps, unsigned* moved, unsigned long long* total,
+                               const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;  // every block reads the same word: none waits at a barrier alone
   const Sync grid;
   const ColourPlan& plan = shared_plan(plan_memory);
+  if (plan.empty()) return;  // a room without contacts (a step without waits): no sweep, as on the CPU
   if (hit && flag_set(hit))
     walk_colours(plan, false, grid, [&](std::uint32_t k) {
       rebound_one(load_rebound_contact(records, impact, k), bodies, walls);
@@ -234,8 +237,11 @@ __global__ void solve_kernel(const ColourPlan* plan_memory, SweepRecords s, Solv
     walk_colours(plan, it % 2 == 1, grid, [&](std::uint32_t k) { solve_record<Friction, Rolling>(s, k, bodies, inv_h); });
 }
 
-__global__ void max_overlap_kernel(SweepRecords records, std::uint32_t n, BodiesView bodies, const WallShape* walls,
-                                   unsigned long long* deepest) {
+__global__ void max_overlap_kernel(SweepRecords records, std::uint32_t items, const std::uint32_t* count_on_device,
+                                   BodiesView bodies, const WallShape* walls, unsigned long long* deepest,
+                                   const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
+  const auto n = static_cast<std::uint32_t>(::marbles::cuda::count_within(items, count_on_device));
   real d = 0;
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
     const real o = overlap_ratio(load_position_contact(records, k), bodies, walls);
@@ -377,9 +383,11 @@ __global__ void between_kernel(SweepRecords s, const std::uint32_t* order, const
 }  // namespace
 
 void launch_max_overlap(const SweepRecords& records, std::uint32_t n, const BodiesView& bodies, const WallShape* walls,
-                        unsigned long long* deepest, int sm_count, cudaStream_t s) {
+                        unsigned long long* deepest, int sm_count, cudaStream_t s, const std::uint32_t* count_on_device,
+                        const unsigned long long* skip) {
   if (n == 0) return;
-  max_overlap_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(records, n, bodies, walls, deepest);
+  max_overlap_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(records, n, count_on_device, bodies,
+                                                                               walls, deepest, skip);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
@@ -439,10 +447,10 @@ bool launch_one(std::size_t items, int sm_count, cudaStream_t s, Args&&... args)
 bool launch_position_stages(const SweepRecords& records, const Real4* impact, DevicePlan plan,
                             const BodiesView& bodies, const WallShape* walls, const SolverSettings& settings,
                             const unsigned* hit, int sweeps, unsigned* moved, unsigned long long* total, int sm_count,
-                            cudaStream_t s) {
+                            cudaStream_t s, const unsigned long long* skip) {
   if (sweeps <= 0 && !hit) return false;
   return launch_one<project_kernel<GridSync>, project_kernel<ClusterSync>>(
-      plan.widest, sm_count, s, plan.plan, records, impact, bodies, walls, settings, hit, sweeps, moved, total);
+      plan.widest, sm_count, s, plan.plan, records, impact, bodies, walls, settings, hit, sweeps, moved, total, skip);
 }
 
 bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,

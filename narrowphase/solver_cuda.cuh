@@ -87,10 +87,11 @@ int cluster_blocks();
 // it did not run), then the projection, sweeps until one moves nothing
 // beyond settled_move (project_one), at most `sweeps`; moved[0, sweeps)
 // zeroed before, sweep `it` sets moved[it]; *total += the sweeps run.
+// Nothing where `skip` is set (cuda::skipped).
 bool launch_position_stages(const SweepRecords& records, const Real4* impact, DevicePlan plan,
                             const BodiesView& bodies, const WallShape* walls, const SolverSettings& settings,
                             const unsigned* hit, int sweeps, unsigned* moved, unsigned long long* total, int sm_count,
-                            cudaStream_t stream);
+                            cudaStream_t stream, const unsigned long long* skip = nullptr);
 
 // The impact stage (ContactSolver::impacts): the candidates level by level
 // (`order` and `first` from ColouringCuda::impact_levels, n contacts), then
@@ -109,8 +110,11 @@ bool launch_solve(const SweepRecords& records, DevicePlan plan, SolverBody* bodi
 
 // *deepest = max(*deepest, overlap_ratio) over the records' contacts [0, n) (as the bits
 // of a non-negative real: an atomic max, the same whatever the order).
+// With count_on_device, records [0, n) are a room (count_within); with
+// `skip` set (cuda::skipped), nothing.
 void launch_max_overlap(const SweepRecords& records, std::uint32_t n, const BodiesView& bodies, const WallShape* walls,
-                        unsigned long long* deepest, int sm_count, cudaStream_t stream);
+                        unsigned long long* deepest, int sm_count, cudaStream_t stream,
+                        const std::uint32_t* count_on_device = nullptr, const unsigned long long* skip = nullptr);
 
 // The local order's sweeps (solver.hpp LocalOrder, a study switch): the
 // CPU's ContactSolver::local_sweeps on the device, the same bits. Each pass

@@ -69,7 +69,8 @@ constexpr int kWatchBlock = 256;
 // double, summed in no fixed order: it decides a rollback, it never reaches
 // the state), out[1] the spheres beyond a wall.
 __global__ void watch_kernel(BodiesView b, const narrowphase::WallShape* walls, std::uint32_t wall_count,
-                             unsigned long long* out) {
+                             unsigned long long* out, const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
   double energy = 0;
   unsigned long long beyond = 0;
   for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < b.count;
@@ -85,6 +86,120 @@ __global__ void watch_kernel(BodiesView b, const narrowphase::WallShape* walls, 
     if (energy != 0) atomicAdd(reinterpret_cast<double*>(out), energy);
     if (beyond != 0) atomicAdd(out + 1, beyond);
   }
+}
+
+// The words of a step's one read (CudaStep::end_step), in m_flags: the
+// flags of every step, then those a step without a wait a substep adds up
+// on the device (check_substep_kernel).
+enum StepWord {
+  kNonFinite,         // integrate_positions: a state not finite
+  kDeepest,           // the deepest overlap's bits (the step's last records)
+  kProjectionSweeps,  // summed over substeps
+  kKineticEnergy,     // with the watch: a double's bits
+  kBeyondWalls,       // with the watch
+  kRedo,              // 1 + the first substep that outgrew a room it was given (0: none); see cuda::skipped
+  kMostPairs,         // the most candidate pairs of a substep (its room's next size)
+  kMostContacts,      // the most contacts of a substep
+  kCandidateSeen,     // some contact was an impact candidate
+  kMixedSeen,         // some substep's radii were not all the same
+  kPlanOutsized,      // some substep's grid found the broad phase's plan outsized
+  kMostColours,       // the most colours of a substep
+  kWidest,            // its widest colour
+  kOverflowSum,       // contacts of the overflow sets, summed
+  kPairSum,           // candidate pairs, summed
+  kContactSum,        // contacts, summed
+  kGridPast,          // some substep's grid outgrew the broad phase's plan (no pairs)
+  kLastContacts,      // the last substep's contacts
+  kRadiusSeen,        // sphere 0's radius's bits (the last substep's)
+  kSolvedSubsteps,    // substeps with contacts (each solved in one launch)
+  kUniformSubsteps,   // of those, whose records held no arms word
+  kImpactWordSubsteps,  // of those, whose records kept impact words
+  kStepWords
+};
+constexpr int kFlagWords = kKineticEnergy + 2;  // what a step with waits a substep reads
+
+// What a substep that waits for nothing gave, against the rooms and the
+// records' form it was given (CudaStep::colour_contacts).
+struct SubstepCheck {
+  const std::uint32_t* pair_count = nullptr;  // the broad phase's (count, plan outsized); null: host_pairs
+  std::uint32_t host_pairs = 0, pair_room = 0;
+  const std::uint32_t* contact_count = nullptr;
+  std::uint32_t contact_room = 0;
+  const unsigned* seen = nullptr;  // [0] an impact candidate, [1] mixed radii, then sphere 0's radius
+  bool impact_words = false;       // the records keep impact words (else an impact candidate outgrows them)
+  bool approach_only = false;      // the records keep approach speeds only (the scene has restitution)
+  bool uniform = false;            // the records hold no arms word, for radius (mixed radii outgrow them)
+  real radius = 0;
+  const narrowphase::ColourPlan* plan = nullptr;
+  std::uint32_t substep = 0;
+};
+
+// One thread: the substep's counts against its rooms; where one outgrew its
+// room (or the records' form does not fit its contacts), the first such
+// substep is named in words[kRedo], and from there on the kernels that
+// write the state do nothing (cuda::skipped) and no figure is added up.
+__global__ void check_substep_kernel(SubstepCheck c, unsigned long long* words) {
+  if (blockIdx.x != 0 || threadIdx.x != 0 || words[kRedo] != 0) return;
+  constexpr std::uint32_t kNoPairs = broadphase::SubdivisionCuda::kNoPairCount;
+  const std::uint32_t pairs = c.pair_count ? c.pair_count[0] : c.host_pairs;
+  const std::uint32_t contacts = *c.contact_count;
+  const bool grid_past = pairs == kNoPairs;
+  const bool candidate = c.seen[0] != 0, mixed = c.seen[1] != 0;
+  real radius = 0;
+  memcpy(&radius, c.seen + 2, sizeof(real));
+  bool outgrown = grid_past || pairs > c.pair_room || contacts > c.contact_room || (candidate && !c.impact_words);
+  if (c.uniform && (mixed || bits_of_real(radius) != bits_of_real(c.radius))) outgrown = true;
+  if (!grid_past && pairs > words[kMostPairs]) words[kMostPairs] = pairs;
+  if (contacts > words[kMostContacts]) words[kMostContacts] = contacts;
+  if (outgrown) {
+    words[kRedo] = c.substep + 1ull;
+    if (grid_past) words[kGridPast] = 1;
+    return;
+  }
+  const narrowphase::ColourPlan& plan = *c.plan;
+  if (candidate) words[kCandidateSeen] = 1;
+  if (mixed) words[kMixedSeen] = 1;
+  if (c.pair_count && c.pair_count[1] != 0) words[kPlanOutsized] = 1;
+  if (plan.colours > words[kMostColours]) words[kMostColours] = plan.colours;
+  const std::uint32_t widest = plan.widest();
+  if (widest > words[kWidest]) words[kWidest] = widest;
+  words[kOverflowSum] += plan.begin[plan.colours + 1] - plan.begin[plan.colours];
+  words[kPairSum] += pairs;
+  words[kContactSum] += contacts;
+  words[kLastContacts] = contacts;
+  words[kRadiusSeen] = bits_of_real(radius);
+  if (contacts > 0) {  // as a step with waits counts its layouts: those of substeps with contacts
+    ++words[kSolvedSubsteps];
+    if (c.uniform) ++words[kUniformSubsteps];
+    if (!c.approach_only && c.impact_words) ++words[kImpactWordSubsteps];
+  }
+}
+
+// The state a substep starts from (positions, velocities, angular
+// velocities, walls) kept, unless an earlier substep of the step outgrew a
+// room (then the copy still holds that substep's start).
+__global__ void keep_substep_kernel(BodiesView b, const narrowphase::WallShape* walls, std::uint32_t wall_count,
+                                    Vec3* kept, narrowphase::WallShape* kept_walls, const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < b.count;
+       i += std::size_t(gridDim.x) * blockDim.x) {
+    kept[i] = b.position[i];
+    kept[b.count + i] = b.velocity[i];
+    kept[2 * b.count + i] = b.angular_velocity[i];
+  }
+  for (std::size_t k = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; k < wall_count;
+       k += std::size_t(gridDim.x) * blockDim.x)
+    kept_walls[k] = walls[k];
+}
+
+// Whether a step waits once (MARBLES_CUDA_WAITS=step, the default) or once
+// a substep and at its end (substep: the earlier form, for comparisons).
+// The same bits either way.
+bool one_wait_from_environment() {
+  const char* asked = std::getenv("MARBLES_CUDA_WAITS");
+  if (asked == nullptr || std::strcmp(asked, "step") == 0) return true;
+  if (std::strcmp(asked, "substep") == 0) return false;
+  throw RuntimeFailure(std::string("MARBLES_CUDA_WAITS=") + asked + ": expected step or substep");
 }
 
 // How the solve is launched (MARBLES_CUDA_SOLVE): auto (the default), a
@@ -146,7 +261,7 @@ class CudaStep final : public StepBackend {
     ::marbles::cuda::upload(m_pair_table, model.pair_coefficients, m_stream);
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     m_table = {m_pair_table.get_as<narrowphase::PairCoefficients>(), model.material_count};
-    m_flags.as<unsigned long long>(kFlagWords);
+    m_flags.as<unsigned long long>(kStepWords);
     if (model.collisions) {
       m_broadphase = std::make_unique<broadphase::SubdivisionCuda>(model.algorithm);
       m_broadphase->set_stage_timing(false);  // its events cost a sync per call: profiling only
@@ -163,6 +278,8 @@ class CudaStep final : public StepBackend {
   }
 
   void apply_body_forces(real h) override {
+    if (m_one_wait) keep_substep_start();
+    ++m_substep_index;
     const BodiesView bodies = m_device.view();
     if (m_model.gravity)
       integrator::cuda::launch_apply_gravity(bodies, m_model.g, m_model.first_kick(h), m_sm, m_stream);
@@ -284,6 +401,7 @@ class CudaStep final : public StepBackend {
     if (m_model.solver.restitution) watch = {seen, m_model.solver.rest_speed};
     // Copied for the read (here where it waits, else the colouring's).
     auto read = [&](FoundWord word, const void* from, std::size_t bytes) {
+      if (m_one_wait) return;  // check_substep_kernel reads them on the device
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_pinned + word, from, bytes, cudaMemcpyDeviceToHost, m_stream));
       m_bytes += bytes;
     };
@@ -356,6 +474,8 @@ class CudaStep final : public StepBackend {
     m_impact_candidates = m_model.solver.restitution && m_pinned[kCandidates] != 0;
     m_uniform_arms = m_model.uniform_pairs && m_pinned[kMixedRadii] == 0;
     if (m_uniform_arms) std::memcpy(&m_radius, m_pinned + kRadius, sizeof(real));
+    m_expect_impacts = m_impact_candidates;  // the next step without waits lays its records out so
+    m_expect_uniform = m_uniform_arms;
     return true;
   }
 
@@ -368,6 +488,10 @@ class CudaStep final : public StepBackend {
   // the broad phase plans again: a grid past its plan, or a plan outsized):
   // nothing has moved, so the same pairs, contacts and bits.
   void colour_contacts() override {
+    if (m_one_wait) {
+      colour_without_a_wait();
+      return;
+    }
     const std::uint32_t* position = nullptr;
     std::uint32_t colours = colour_and_sort(position);
     if (m_count_on_device && !take_counts(pair_count_read(), m_colouring.last_count(), false)) {
@@ -383,10 +507,11 @@ class CudaStep final : public StepBackend {
       lay_out_records();
       const nc::ContactInputs in{m_device.view(), walls(), m_table, m_lookahead, m_reach.get_as<real>()};
       nc::launch_sorted_records(in, pairs_d(), m_kept_valid ? m_match.get_as<std::uint32_t>() : nullptr,
-                                m_cache.entries(), position, m_count, m_records, m_impacts, m_sm, m_stream);
+                                m_cache.entries(), position, m_count, nullptr, m_records, m_impacts, m_sm, m_stream);
     }
     m_plan.colours = colours;
     std::copy(m_begin.begin(), m_begin.begin() + colours + 2, m_plan.begin);
+    m_last_widest = m_plan.widest();
     m_counters.colours = std::max(m_counters.colours, colours);
     m_counters.overflow += m_plan.begin[colours + 1] - m_plan.begin[colours];
   }
@@ -421,7 +546,7 @@ class CudaStep final : public StepBackend {
       return;
     }
     if (solve_in_one_launch()) {
-      ++m_counters.one_launch_solves;
+      if (!m_one_wait) ++m_counters.one_launch_solves;  // else counted on the device for substeps with contacts
       if (nc::launch_solve(m_records, device_plan(), bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm,
                            m_stream))
         ++m_counters.cluster_stages;
@@ -471,24 +596,32 @@ class CudaStep final : public StepBackend {
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(std::max(sweeps, 1)));
     if (sweeps > 0) MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
     if (nc::launch_position_stages(m_records, m_impacts.word, device_plan(), m_device.view(), walls(), m_model.solver, hit,
-                                   sweeps, moved, m_flags.get_as<unsigned long long>() + 2, m_sm, m_stream))  // flags[2]
+                                   sweeps, moved, flag(kProjectionSweeps), m_sm, m_stream, skip()))
       ++m_counters.cluster_stages;
   }
 
   void store_impulses() override {
-    if (m_cache_trim_due) {  // trim_buffers' step: the entries were read (restore, records), now rewritten
+    // trim_buffers' step: the entries were read (restore, records), now
+    // rewritten; not in a step without waits, whose store a substep that
+    // outgrew a room skips (the entries then stay the warm start's)
+    if (m_cache_trim_due && !m_one_wait) {
       m_counters.buffer_trims += m_cache.trim_entries();
       m_cache_trim_due = false;
     }
     m_cache.store(m_records, m_sorted_colour.get_as<std::uint8_t>(), m_count,
-                  static_cast<std::uint32_t>(m_device.size()), m_sm, m_stream);
+                  static_cast<std::uint32_t>(m_device.size()), m_sm, m_stream, m_count_on_device, skip());
   }
 
   void begin_step() override {
     send_host_edits();
     m_counters = {};
     trim_buffers();
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(m_flags.get(), 0, kFlagWords * sizeof(unsigned long long), m_stream));
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(m_flags.get(), 0, kStepWords * sizeof(unsigned long long), m_stream));
+    m_substep_index = 0;
+    m_redo_from = -1;
+    m_counters_at.clear();
+    m_one_wait = one_wait_possible();
+    m_one_wait_ran = m_one_wait;
   }
 
   // The one read of flags at the end of a step: non_finite, the deepest
@@ -496,18 +629,24 @@ class CudaStep final : public StepBackend {
   void end_step(StepCounters& counters) override {
     // [0]: non_finite, [1]: deepest overlap (bits), [2]: projection sweeps, [3..4]: watch
     auto* flags = m_flags.get_as<unsigned long long>();
-    nc::launch_max_overlap(m_records, m_count, m_device.view(), walls(), flags + 1, m_sm, m_stream);
-    const int words = m_watch ? kFlagWords : 3;
+    nc::launch_max_overlap(m_records, m_count, m_device.view(), walls(), flags + kDeepest, m_sm, m_stream,
+                           m_count_on_device, skip());
+    const int words = m_one_wait_ran ? kStepWords : m_watch ? kFlagWords : kKineticEnergy;
     if (m_watch && m_device.view().count > 0) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
       watch_kernel<<<::marbles::cuda::grid_for(m_device.view().count, m_sm), kWatchBlock, 0, m_stream>>>(
-          m_device.view(), walls(), wall_count, flags + 3);
+          m_device.view(), walls(), wall_count, flags + kKineticEnergy, skip());
       MARBLES_CUDA_CHECK_LAUNCH();
     }
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_end_flags, flags, words * sizeof(unsigned long long), cudaMemcpyDeviceToHost,
                                        m_stream));
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     m_bytes += words * sizeof(unsigned long long);
+    if (m_one_wait && m_end_flags[kRedo] != 0) {
+      undo_outgrown_substep();
+      return;
+    }
+    if (m_one_wait_ran) take_step_words();
     if (m_watch) {
       std::memcpy(&m_counters.kinetic_energy, &m_end_flags[3], sizeof(double));
       m_counters.beyond_walls = m_end_flags[4];
@@ -530,6 +669,7 @@ class CudaStep final : public StepBackend {
     counters = m_counters;
   }
   bool non_finite() const override { return m_non_finite; }
+  int substep_to_redo() override { return std::exchange(m_redo_from, -1); }
   void set_watch(bool on) override { m_watch = on; }
   void set_iteration_factor(int factor) override { m_iteration_factor = factor; }
   void synchronize() override { MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream)); }
@@ -557,6 +697,7 @@ class CudaStep final : public StepBackend {
         {"colouring", m_colouring.device_bytes()},
         {"scratch", m_scratch.bytes()},
         {"watchdog's copy", m_kept.device_bytes() + m_kept_cache.device_bytes() + m_kept_walls.bytes()},
+        {"substep's start", bytes_of(m_substep_start, m_substep_walls)},
         {"local order", m_local_sweeps.device_bytes()},
         {"small", bytes_of(m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_flags, m_hit, m_moved,
                            m_contact_chunk, m_check)},
@@ -699,7 +840,163 @@ class CudaStep final : public StepBackend {
   narrowphase::BodyPair* pairs_d() const { return m_pairs.get_as<narrowphase::BodyPair>(); }
   // The substep's plan as the one-launch stages read it: the colouring's in
   // device memory, shaped for the widest colour the host read.
-  nc::DevicePlan device_plan() const { return {m_colouring.device_plan(), m_plan.widest()}; }
+  // Without waits, shaped for the last step's widest colour.
+  nc::DevicePlan device_plan() const {
+    return {m_colouring.device_plan(), m_one_wait ? m_last_widest : m_plan.widest()};
+  }
+  unsigned long long* flag(StepWord w) const { return m_flags.get_as<unsigned long long>() + w; }
+  // The word the state's kernels skip on (cuda::skipped) in a step without
+  // waits; none otherwise.
+  const unsigned long long* skip() const { return m_one_wait ? flag(kRedo) : nullptr; }
+
+  // --- one wait a step ------------------------------------------------------
+  // A step waits once, at its end, where the last step left rooms for its
+  // pairs and contacts, and its colours were few enough that the solve takes
+  // one launch (solve_in_one_launch: the one-launch stages walk a plan in
+  // device memory whatever its widths). Each substep then keeps its start
+  // (keep_substep_start), colours without reading the ranges back, lays its
+  // records out for the contacts' room (with impact words and arms as the
+  // last step needed them), and checks on the device what it found against
+  // what it was given (check_substep_kernel). A substep that outgrew a room
+  // is named in the step's read; from it on, the kernels that write the
+  // state do nothing, and end_step puts the state back to that substep's
+  // start, grows the rooms and has the substeps from there done again with a
+  // wait each (substep_to_redo). The same bits as a wait a substep.
+  bool one_wait_possible() const {
+    if (!m_one_wait_allowed || m_local || m_replanned) return false;
+    if (!m_model.collisions && !m_model.wall_contacts) return false;
+    if (m_contact_room.capacity == 0 || (m_model.collisions && m_pair_room.capacity == 0)) return false;
+    if (m_solve_mode == SolveMode::auto_) return m_last_widest <= kOneLaunchWidest;
+    return m_solve_mode == SolveMode::one_launch;
+  }
+
+  void keep_substep_start() {
+    m_counters_at.push_back(m_counters);
+    const BodiesView b = m_device.view();
+    const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
+    if (b.count == 0 && wall_count == 0) return;
+    auto* kept = m_substep_start.as<Vec3>(3 * b.count);
+    auto* kept_walls = m_substep_walls.as<narrowphase::WallShape>(wall_count);
+    keep_substep_kernel<<<::marbles::cuda::grid_for(std::max<std::size_t>(b.count, wall_count), m_sm), kWatchBlock, 0,
+                          m_stream>>>(b, walls(), wall_count, kept, kept_walls, skip());
+    MARBLES_CUDA_CHECK_LAUNCH();
+  }
+
+  // colour_contacts without a wait: the colouring leaves its plan on the
+  // device, the substep's counts are checked there, and the records are
+  // made for the room.
+  void colour_without_a_wait() {
+    const std::uint32_t* position = nullptr;
+    m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_begin, m_sm,
+                                m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
+                                m_sorted_colour.as_room<std::uint8_t>(m_count), false);
+    m_impact_candidates = m_model.solver.restitution && m_expect_impacts;
+    m_uniform_arms = m_model.uniform_pairs && m_expect_uniform;
+    SubstepCheck c;
+    if (m_pair_count_on_device) c.pair_count = m_broadphase->device_pair_count();
+    else c.host_pairs = static_cast<std::uint32_t>(m_pair_items);
+    c.pair_room = static_cast<std::uint32_t>(m_pair_items);
+    c.contact_count = m_count_on_device;
+    c.contact_room = m_count;
+    c.seen = reinterpret_cast<const unsigned*>(m_found_words.get_as<unsigned long long>() + 1);
+    c.impact_words = m_impact_candidates || !m_model.solver.restitution;
+    c.approach_only = !m_impact_candidates;
+    c.uniform = m_uniform_arms;
+    c.radius = m_radius;
+    c.plan = m_colouring.device_plan();
+    c.substep = static_cast<std::uint32_t>(m_substep_index - 1);
+    check_substep_kernel<<<1, 32, 0, m_stream>>>(c, m_flags.get_as<unsigned long long>());
+    MARBLES_CUDA_CHECK_LAUNCH();
+    lay_out_records();
+    const nc::ContactInputs in{m_device.view(), walls(), m_table, m_lookahead, m_reach.get_as<real>()};
+    nc::launch_sorted_records(in, pairs_d(), m_kept_valid ? m_match.get_as<std::uint32_t>() : nullptr,
+                              m_cache.entries(), position, m_count, m_count_on_device, m_records, m_impacts, m_sm,
+                              m_stream);
+  }
+
+  // A step without waits whose substep outgrew a room: the state (positions,
+  // velocities, walls) put back to that substep's start (the cache's store
+  // and every later kernel that writes the state skipped it), the rooms
+  // grown past what the step found, and the substeps from there on done
+  // again with a wait each. The figures of the substeps before it stand.
+  void undo_outgrown_substep() {
+    const auto from = static_cast<int>(m_end_flags[kRedo] - 1);
+    m_counters = m_counters_at.at(static_cast<std::size_t>(from));
+    add_step_figures();
+    const BodiesView b = m_device.view();
+    const Vec3* kept = m_substep_start.get_as<Vec3>();
+    auto back = [&](Vec3* to, const Vec3* from_kept) {
+      if (b.count > 0)
+        MARBLES_CUDA_CHECK(cudaMemcpyAsync(to, from_kept, b.count * sizeof(Vec3), cudaMemcpyDeviceToDevice, m_stream));
+    };
+    back(b.position, kept);
+    back(b.velocity, kept + b.count);
+    back(b.angular_velocity, kept + 2 * b.count);
+    const std::size_t wall_bytes = m_model.wall_shapes.size() * sizeof(narrowphase::WallShape);
+    if (wall_bytes > 0)
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_walls.get(), m_substep_walls.get(), wall_bytes, cudaMemcpyDeviceToDevice,
+                                         m_stream));
+    const std::size_t pairs = m_end_flags[kMostPairs], contacts = m_end_flags[kMostContacts];
+    const bool pairs_outgrown = pairs > m_pair_items;
+    if (m_end_flags[kGridPast] != 0) {  // the next call reads its bounds, plans and counts its pairs, waiting
+      m_broadphase->replan();
+      m_pair_room = Room{};
+      ++m_counters.grid_replans;
+    } else if (m_model.collisions) {
+      m_pair_room.fit(pairs, pairs_outgrown);
+    }
+    m_contact_room.fit(pairs_outgrown ? contacts + pairs : contacts, true);
+    ++m_counters.pair_redos;
+    ++m_counters.undone_substeps;
+    m_counters.unwaited_substeps += static_cast<std::uint64_t>(from);
+    // The step's words from here are the redone substeps' own (with waits):
+    // the non-finite flag of the skipped ones is not theirs, and the words
+    // only a step without waits reads are read no more.
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(flag(kNonFinite), 0, sizeof(unsigned long long), m_stream));
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(flag(kRedo), 0, (kStepWords - kRedo) * sizeof(unsigned long long), m_stream));
+    m_one_wait = m_one_wait_ran = false;
+    m_redo_from = from;
+    m_substep_index = from;
+  }
+
+  // The figures a step without waits added up on the device, into the
+  // step's counters.
+  void add_step_figures() {
+    m_counters.candidate_pairs += m_end_flags[kPairSum];
+    m_counters.contacts += m_end_flags[kContactSum];
+    m_counters.colours = std::max(m_counters.colours, static_cast<std::uint32_t>(m_end_flags[kMostColours]));
+    m_counters.overflow += m_end_flags[kOverflowSum];
+    m_counters.one_launch_solves += m_end_flags[kSolvedSubsteps];
+    m_counters.uniform_arms += m_end_flags[kUniformSubsteps];
+    m_counters.impact_words += m_end_flags[kImpactWordSubsteps];
+  }
+
+  // The end of a step without waits: its figures, the next step's rooms and
+  // records' form, and the last substep's contact count (contacts()).
+  void take_step_words() {
+    add_step_figures();
+    m_counters.unwaited_substeps += static_cast<std::uint64_t>(m_substep_index);
+    if (m_model.collisions) m_pair_room.fit(m_end_flags[kMostPairs], false);
+    m_contact_room.fit(m_end_flags[kMostContacts], false);
+    if (m_end_flags[kPlanOutsized] != 0) {
+      m_broadphase->replan();
+      ++m_counters.grid_shrinks;
+    }
+    m_last_widest = static_cast<std::uint32_t>(m_end_flags[kWidest]);
+    m_expect_impacts = m_end_flags[kCandidateSeen] != 0;
+    m_expect_uniform = m_model.uniform_pairs && m_end_flags[kMixedSeen] == 0;
+    if (m_expect_uniform) {
+      const auto bits = m_end_flags[kRadiusSeen];
+      if constexpr (sizeof(real) == 4) {
+        const auto low = static_cast<std::uint32_t>(bits);
+        std::memcpy(&m_radius, &low, sizeof(real));
+      } else {
+        std::memcpy(&m_radius, &bits, sizeof(real));
+      }
+    }
+    m_count = static_cast<std::uint32_t>(m_end_flags[kLastContacts]);
+    m_count_on_device = nullptr;
+  }
 
   // The host copy's edits (edit_world) to the device, once.
   void send_host_edits() {
@@ -740,6 +1037,7 @@ class CudaStep final : public StepBackend {
     m_impacts = {};
     if (m_impact_candidates) m_impacts.word = memory + words;
     else m_impacts.approach = reinterpret_cast<real*>(memory + words);
+    if (m_one_wait) return;  // counted on the device, for substeps with contacts (check_substep_kernel)
     m_counters.uniform_arms += arms ? 0 : 1;
     m_counters.impact_words += m_impact_candidates ? 1 : 0;
   }
@@ -788,6 +1086,7 @@ class CudaStep final : public StepBackend {
   // (auto) where the widest colour is small enough that a launch per colour
   // would leave the device waiting for the host (MARBLES_CUDA_SOLVE).
   bool solve_in_one_launch() const {
+    if (m_one_wait) return true;  // one_wait_possible asked it of the last step's colours
     if (m_solve_mode == SolveMode::auto_) return m_plan.widest() <= kOneLaunchWidest;
     return m_solve_mode == SolveMode::one_launch;
   }
@@ -802,7 +1101,7 @@ class CudaStep final : public StepBackend {
     std::uint32_t* order = nullptr;
     const std::uint32_t* first = nullptr;
     m_colouring.impact_levels(m_records, m_impacts.word, m_count, m_device.size(), params.rest_speed, order, first,
-                              m_sm, m_stream);
+                              m_sm, m_stream, m_count_on_device);
     auto* hit = m_hit.as<unsigned>(narrowphase::kImpactPasses);
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, narrowphase::kImpactPasses * sizeof(unsigned), m_stream));
     if (nc::launch_impact_stage(m_records, m_impacts.word, order, first, m_count, m_colouring.device_plan(), bodies, params,
@@ -817,7 +1116,6 @@ class CudaStep final : public StepBackend {
   int m_sm = 1;
   std::size_t m_free_at_start = 0;
   std::uint64_t m_bytes = 0, m_bytes_at_step_start = 0;  // host<->device bytes copied by this class
-  static constexpr int kFlagWords = 5;
   // find_contacts' read, by word: the contact counts (where it waits), the
   // candidate and mixed-radii flags and sphere 0's radius (one or two words;
   // these three in the order of m_found_words, one copy), the broad phase's
@@ -834,7 +1132,7 @@ class CudaStep final : public StepBackend {
     kPlanOutsized
   };
   ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{kPlanOutsized + 1};
-  ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kFlagWords};  // the end-of-step read
+  ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kStepWords};  // the end-of-step read
   std::optional<::marbles::cuda::PinnedBuffer<std::uint32_t>> m_order_host;  // renumber's order, read back
   bool m_watch = false;
   int m_iteration_factor = 1;
@@ -869,6 +1167,17 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep
+  // One wait a step (one_wait_possible): allowed (MARBLES_CUDA_WAITS), this
+  // attempt's substeps without waits, this step's read holds their words.
+  bool m_one_wait_allowed = one_wait_from_environment();
+  bool m_one_wait = false, m_one_wait_ran = false;
+  int m_substep_index = 0;            // substeps begun in this attempt
+  int m_redo_from = -1;               // substep_to_redo()
+  std::uint32_t m_last_widest = 0;    // the last substep's widest colour (the one-launch stages' shape)
+  bool m_expect_impacts = false;      // the last substep had impact candidates: impact words without a wait
+  bool m_expect_uniform = false;      // the last substep's contacts all had m_radius's arms
+  DeviceBuffer m_substep_start, m_substep_walls;  // positions, velocities, angular velocities; walls: a substep's start
+  std::vector<StepCounters> m_counters_at;  // the counters at each substep's start without waits
   // The rooms of the broad phase's pairs and of the contacts (capacity 0:
   // no count yet, find_contacts waits for the counts).
   Room m_pair_room, m_contact_room;

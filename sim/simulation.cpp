@@ -271,8 +271,14 @@ void Simulation::attempt(int split) {
   m_split = split;
   m_backend->begin_step();
   std::fill(std::begin(m_verb_ms), std::end(m_verb_ms), 0.0);
-  for (int k = 0; k < m_model->substeps * split; ++k) substep(h);
+  const int substeps = m_model->substeps * split;
+  for (int k = 0; k < substeps; ++k) substep(h);
   m_backend->end_step(m_last);
+  // A substep that outgrew a room found without a wait (CUDA): done again.
+  for (int k = m_backend->substep_to_redo(); k >= 0; k = m_backend->substep_to_redo()) {
+    for (; k < substeps; ++k) substep(h);
+    m_backend->end_step(m_last);
+  }
   std::copy(std::begin(m_verb_ms), std::end(m_verb_ms), m_last.verb_ms);
 }
 

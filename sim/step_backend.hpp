@@ -50,6 +50,8 @@ struct StepCounters {
   std::uint64_t grid_replans = 0;     // of those, the broad phase's grid outgrew its plan: found with a wait (CUDA)
   std::uint64_t grid_shrinks = 0;     // substeps whose grid fit a plan larger than it asks: planned again (CUDA)
   std::uint64_t buffer_trims = 0;     // buffers freed at the step's start, held beyond their need (CUDA)
+  std::uint64_t unwaited_substeps = 0;  // substeps that waited for nothing (CUDA: one wait a step)
+  std::uint64_t undone_substeps = 0;  // of those, outgrew a room: put back and done again with waits (CUDA)
   // With the watch on (StepBackend::set_watch), the figures of the watchdog's
   // invariants at the end of the step (sim/watch_math.hpp):
   double kinetic_energy = 0;          // J, translational + rotational
@@ -102,6 +104,13 @@ class StepBackend {
   virtual void end_step(StepCounters& counters) = 0;
   // True when the last step left a non-finite position or velocity.
   virtual bool non_finite() const = 0;
+  // After end_step: the substep to do again from (its start is the state
+  // now), or -1. A backend that found, at the step's one read, that a
+  // substep outgrew a room it was given without a wait (CUDA: one wait a
+  // step) has undone that substep and grown the rooms; the caller runs the
+  // substeps from there to the step's last and calls end_step again. Asked
+  // once: the answer is cleared.
+  virtual int substep_to_redo() { return -1; }
   // Waits until the verbs issued so far are done (profiling only).
   virtual void synchronize() {}
   // Profiling on: stage timings that cost syncs (the CUDA broad phase's events).

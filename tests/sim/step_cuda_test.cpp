@@ -78,7 +78,16 @@ struct GpuCounts {
   std::uint64_t grid_replans = 0;  // of those, the grid outgrew the broad phase's plan
   std::uint64_t grid_shrinks = 0;  // substeps whose grid found the plan outsized: the next one plans
   std::uint64_t trims = 0;         // buffers freed at a step's start, held beyond their need
+  std::uint64_t unwaited = 0;      // substeps that waited for nothing (one wait a step)
+  std::uint64_t undone = 0;        // of those, outgrew a room: put back and done again with waits
 };
+
+// Whether a step waits once (MARBLES_CUDA_WAITS: step, the default) or once
+// a substep (substep).
+bool one_wait_a_step() {
+  const char* asked = std::getenv("MARBLES_CUDA_WAITS");
+  return asked == nullptr || std::string(asked) == "step";
+}
 
 // Steps both backends side by side; the first step whose states differ
 // fails. The GPU's records leave the arms word out exactly where every
@@ -96,6 +105,9 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
     counts.grid_replans += gpu.last_step().grid_replans;
     counts.grid_shrinks += gpu.last_step().grid_shrinks;
     counts.trims += gpu.last_step().buffer_trims;
+    counts.unwaited += gpu.last_step().unwaited_substeps;
+    counts.undone += gpu.last_step().undone_substeps;
+    ASSERT_LE(gpu.last_step().unwaited_substeps, static_cast<std::uint64_t>(gpu.substeps())) << "step " << k;
     if (cpu.last_step().contacts > 0) counts.solved += 1;
     if (form == "one") {
       ASSERT_EQ(gpu.last_step().one_launch_solves > 0, cpu.last_step().contacts > 0) << "step " << k;
@@ -114,16 +126,28 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
   }
 }
 
+// Whether a run of `steps` steps of a small scene runs substeps without a
+// wait: every step after the first where a step waits once and the solve
+// may take one launch (not under MARBLES_CUDA_SOLVE=launches or apart).
+bool unwaits(int steps) {
+  const std::string form = solve_form();
+  return one_wait_a_step() && form != "launches" && form != "apart" && steps > 1;
+}
+
 // A run of both backends from the same scene (expect_same_steps). The GPU's
 // solve takes the form asked for: never one launch when a launch per colour
 // is asked, every substep with contacts in one when one is, and under auto
 // one launch at least once (every scene here has small colours).
 // `pair_redos` (if given) adds up the substeps whose broad phase outgrew
 // its pairs' room and ran again; `grid_replans` those whose grid outgrew
-// the broad phase's plan; `trims` the buffers trimmed to their need.
+// the broad phase's plan; `trims` the buffers trimmed to their need;
+// `undone` the substeps that waited for nothing and outgrew a room.
+// Where a step waits once (MARBLES_CUDA_WAITS) and a colour is small enough
+// that the solve takes one launch (every scene here), the steps after the
+// first run their substeps without a wait; with a wait a substep, none does.
 void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps,
                      std::uint64_t* pair_redos = nullptr, std::uint64_t* grid_replans = nullptr,
-                     std::uint64_t* trims = nullptr) {
+                     std::uint64_t* trims = nullptr, std::uint64_t* undone = nullptr) {
   Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
   ASSERT_EQ(gpu.backend_name(), "cuda");
@@ -133,7 +157,14 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
   if (pair_redos) *pair_redos += counts.pair_redos;
   if (grid_replans) *grid_replans += counts.grid_replans;
   if (trims) *trims += counts.trims;
+  if (undone) *undone += counts.undone;
   const std::string form = solve_form();
+  EXPECT_EQ(counts.unwaited > 0, unwaits(steps))
+      << counts.unwaited << " substeps without a wait; MARBLES_CUDA_WAITS=" << (one_wait_a_step() ? "step" : "substep")
+      << ", solve " << form;
+  if (!unwaits(steps)) {
+    EXPECT_EQ(counts.undone, 0u);
+  }
   // A walk of two sweeps or more turns on a range it then visits twice in
   // one launch (visit_sweeps), unless the turns are asked apart.
   const bool turns = gpu.model().solver.iterations > 1 && counts.solved > 0;
@@ -534,9 +565,10 @@ TEST(StepCuda, PairCountJumpRedoesTheBroadPhase) {
   const std::uint64_t pairs_before = probe.last_step().candidate_pairs;
   for (int k = 0; k < 20; ++k) probe.step();
   ASSERT_GT(probe.last_step().candidate_pairs, 8 * (pairs_before + 64)) << "the scene must make the pairs jump";
-  std::uint64_t redos = 0;
-  expect_same_run(s, g, 20, &redos);
+  std::uint64_t redos = 0, undone = 0;
+  expect_same_run(s, g, 20, &redos, nullptr, nullptr, &undone);
   EXPECT_GT(redos, 0u) << "the jump must outgrow the pairs' room";
+  EXPECT_EQ(undone > 0, unwaits(20)) << "without a wait, the substep that outgrew it is undone and done again";
 }
 
 // A ball shot away from a bed at 100 m/s: the centres' bounds, and with
@@ -551,8 +583,9 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
   const real r = real(0.01);
   auto [s, g] = bed_on_a_floor(real(2.8), 1, r);
   add_sphere(g, {real(0.3), real(0.3), real(0.05)}, r, {real(100), real(0), real(20)});
-  std::uint64_t redos = 0, replans = 0;
-  expect_same_run(s, g, 40, &redos, &replans);
+  std::uint64_t redos = 0, replans = 0, undone = 0;
+  expect_same_run(s, g, 40, &redos, &replans, nullptr, &undone);
+  EXPECT_EQ(undone > 0, unwaits(40)) << "without a wait, a substep whose grid outgrew the plan is undone";
   // Two in these 40 steps on an H100: each plan holds a quarter more cells
   // (and 1024) than the grid it was made from, so the ball's flight outgrows
   // it at shorter and shorter intervals of its growing grid.
@@ -659,9 +692,10 @@ TEST(StepCuda, ContactCountJumpFindsTheContactsAgain) {
   ASSERT_EQ(probe.last_step().contacts, 0u) << "the layer must start clear of the floor";
   for (int k = 0; k < 40; ++k) probe.step();
   ASSERT_EQ(probe.last_step().contacts, 400u) << "the scene must make the contacts jump";
-  std::uint64_t redos = 0;
-  expect_same_run(s, g, 40, &redos);
+  std::uint64_t redos = 0, undone = 0;
+  expect_same_run(s, g, 40, &redos, nullptr, nullptr, &undone);
   EXPECT_GT(redos, 0u) << "the jump must outgrow the contacts' room";
+  EXPECT_EQ(undone > 0, unwaits(40)) << "without a wait, the substep that outgrew it is undone and done again";
 }
 
 // A small block (105 spheres, 7 x 5 x 3: no kernel's block is full) with
