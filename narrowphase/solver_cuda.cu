@@ -436,7 +436,8 @@ template <auto OnGrid, auto InCluster, class... Args>
 bool launch_one(std::size_t items, int sm_count, cudaStream_t s, Args&&... args) {
   namespace dev = ::marbles::cuda;
   const std::size_t blocks = items > kBlock ? (items + kBlock - 1) / kBlock : 1;
-  if (items <= cluster_widest() && blocks <= static_cast<std::size_t>(dev::largest_cluster<InCluster>())) {
+  const std::uint32_t widest = cluster_widest();  // 0: never
+  if (widest > 0 && items <= widest && blocks <= static_cast<std::size_t>(dev::largest_cluster<InCluster>())) {
     launch(Launch::cluster, InCluster, static_cast<int>(blocks), s, std::forward<Args>(args)...);
     return true;
   }

@@ -102,7 +102,7 @@ enum StepWord {
   kMostContacts,      // the most contacts of a substep
   kCandidateSeen,     // some contact was an impact candidate
   kMixedSeen,         // some substep's radii were not all the same
-  kPlanOutsized,      // some substep's grid found the broad phase's plan outsized
+  kOutsizedSeen,      // some substep's grid found the broad phase's plan outsized
   kMostColours,       // the most colours of a substep
   kWidest,            // its widest colour
   kOverflowSum,       // contacts of the overflow sets, summed
@@ -159,7 +159,7 @@ __global__ void check_substep_kernel(SubstepCheck c, unsigned long long* words) 
   const narrowphase::ColourPlan& plan = *c.plan;
   if (candidate) words[kCandidateSeen] = 1;
   if (mixed) words[kMixedSeen] = 1;
-  if (c.pair_count && c.pair_count[1] != 0) words[kPlanOutsized] = 1;
+  if (c.pair_count && c.pair_count[1] != 0) words[kOutsizedSeen] = 1;
   if (plan.colours > words[kMostColours]) words[kMostColours] = plan.colours;
   const std::uint32_t widest = plan.widest();
   if (widest > words[kWidest]) words[kWidest] = widest;
@@ -474,8 +474,8 @@ class CudaStep final : public StepBackend {
     m_impact_candidates = m_model.solver.restitution && m_pinned[kCandidates] != 0;
     m_uniform_arms = m_model.uniform_pairs && m_pinned[kMixedRadii] == 0;
     if (m_uniform_arms) std::memcpy(&m_radius, m_pinned + kRadius, sizeof(real));
-    m_expect_impacts = m_impact_candidates;  // the next step without waits lays its records out so
-    m_expect_uniform = m_uniform_arms;
+    m_step_candidates = m_step_candidates || m_impact_candidates;
+    m_expect_uniform = m_uniform_arms;  // the next step without waits lays its records out so
     return true;
   }
 
@@ -622,6 +622,7 @@ class CudaStep final : public StepBackend {
     m_counters_at.clear();
     m_one_wait = one_wait_possible();
     m_one_wait_ran = m_one_wait;
+    m_step_candidates = false;
   }
 
   // The one read of flags at the end of a step: non_finite, the deepest
@@ -647,6 +648,7 @@ class CudaStep final : public StepBackend {
       return;
     }
     if (m_one_wait_ran) take_step_words();
+    m_quiet_steps = m_step_candidates ? 0 : m_quiet_steps + 1;
     if (m_watch) {
       std::memcpy(&m_counters.kinetic_energy, &m_end_flags[3], sizeof(double));
       m_counters.beyond_walls = m_end_flags[4];
@@ -890,7 +892,7 @@ class CudaStep final : public StepBackend {
     m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_begin, m_sm,
                                 m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
                                 m_sorted_colour.as_room<std::uint8_t>(m_count), false);
-    m_impact_candidates = m_model.solver.restitution && m_expect_impacts;
+    m_impact_candidates = m_model.solver.restitution && m_quiet_steps < kImpactHold;
     m_uniform_arms = m_model.uniform_pairs && m_expect_uniform;
     SubstepCheck c;
     if (m_pair_count_on_device) c.pair_count = m_broadphase->device_pair_count();
@@ -978,12 +980,12 @@ class CudaStep final : public StepBackend {
     m_counters.unwaited_substeps += static_cast<std::uint64_t>(m_substep_index);
     if (m_model.collisions) m_pair_room.fit(m_end_flags[kMostPairs], false);
     m_contact_room.fit(m_end_flags[kMostContacts], false);
-    if (m_end_flags[kPlanOutsized] != 0) {
+    if (m_end_flags[kOutsizedSeen] != 0) {
       m_broadphase->replan();
       ++m_counters.grid_shrinks;
     }
     m_last_widest = static_cast<std::uint32_t>(m_end_flags[kWidest]);
-    m_expect_impacts = m_end_flags[kCandidateSeen] != 0;
+    m_step_candidates = m_step_candidates || m_end_flags[kCandidateSeen] != 0;
     m_expect_uniform = m_model.uniform_pairs && m_end_flags[kMixedSeen] == 0;
     if (m_expect_uniform) {
       const auto bits = m_end_flags[kRadiusSeen];
@@ -1174,7 +1176,13 @@ class CudaStep final : public StepBackend {
   int m_substep_index = 0;            // substeps begun in this attempt
   int m_redo_from = -1;               // substep_to_redo()
   std::uint32_t m_last_widest = 0;    // the last substep's widest colour (the one-launch stages' shape)
-  bool m_expect_impacts = false;      // the last substep had impact candidates: impact words without a wait
+  // Steps since the last with an impact candidate: a step without waits
+  // keeps impact words until kImpactHold steps in a row had none (a pour's
+  // impacts come and go: an impact candidate in records without them is a
+  // substep done again).
+  int m_quiet_steps = 1 << 20;
+  bool m_step_candidates = false;     // this step's substeps had an impact candidate
+  static constexpr int kImpactHold = 8;
   bool m_expect_uniform = false;      // the last substep's contacts all had m_radius's arms
   DeviceBuffer m_substep_start, m_substep_walls;  // positions, velocities, angular velocities; walls: a substep's start
   std::vector<StepCounters> m_counters_at;  // the counters at each substep's start without waits

@@ -750,7 +750,12 @@ TEST(StepCuda, RecordsFollowAnEditedRadius) {
     for (int k = 0; k < 25; ++k) {
       cpu.step(), gpu.step();
       ASSERT_GT(cpu.last_step().contacts, 0u);
-      ASSERT_EQ(gpu.last_step().uniform_arms > 0, phase != 1) << "phase " << phase << " step " << k;
+      // A step that waits once lays its records out as the last step's
+      // contacts asked: the arms word one step longer once the radii agree
+      // again (an edit that makes them differ is found and the step done
+      // again with it).
+      const bool lag = phase == 2 && k == 0 && unwaits(2);
+      ASSERT_EQ(gpu.last_step().uniform_arms > 0, phase != 1 && !lag) << "phase " << phase << " step " << k;
       ASSERT_EQ(state_hash(gpu.world()), state_hash(cpu.world())) << "phase " << phase << " step " << k;
       calm += gpu.last_step().impact_words == 0 ? 1 : 0;
       hit += gpu.last_step().impact_words > 0 ? 1 : 0;
