@@ -18,8 +18,26 @@ using ::marbles::cuda::kBlock;
 using ::marbles::cuda::Launch;
 using ::marbles::cuda::launch;
 
-// Thread t of a range: contact begin + t, or for a serial range, one thread
-// visiting the whole range in order (and back, twice).
+// A range as its launch runs it: a plan's slot read from the plan (the
+// colouring wrote it launches before: it may be read before the wait for the
+// launch just before).
+__device__ ContactRange resolved(ContactRange r) {
+  if (!r.plan) return r;
+  const std::uint32_t colours = r.plan->colours;
+  if (r.slot > colours) {
+    r.begin = r.end = 0;
+    r.serial = false;
+    return r;
+  }
+  r.begin = r.plan->begin[r.slot];
+  r.end = r.plan->begin[r.slot + 1];
+  r.serial = r.slot == colours;
+  return r;
+}
+
+// Thread t of a range: contacts begin + t, + the grid's threads, ...
+// (mirrored: from the end), or for a serial range, one thread visiting the
+// whole range in order (and back, twice).
 template <class F>
 __device__ void for_range(const ContactRange& r, F&& f) {
   if (r.serial) {
@@ -33,11 +51,13 @@ __device__ void for_range(const ContactRange& r, F&& f) {
     }
     return;
   }
-  const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
-  if (t < r.end - r.begin) f(r.mirrored ? r.end - 1 - t : r.begin + t);
+  const std::uint32_t stride = gridDim.x * blockDim.x;
+  for (std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < r.end - r.begin; t += stride)
+    f(r.mirrored ? r.end - 1 - t : r.begin + t);
 }
 
 inline int blocks(const ContactRange& r) {
+  if (r.plan) return static_cast<int>(std::max<std::uint32_t>(1, (r.width + kBlock - 1) / kBlock));
   return r.serial ? 1 : static_cast<int>((r.end - r.begin + kBlock - 1) / kBlock);
 }
 
@@ -74,17 +94,24 @@ __device__ __forceinline__ void wait_for_last_launch() {
 // then does its work (work(k, loaded)); every thread waits, so the launch
 // ends only after the one before it. A serial range waits first.
 template <class Load, class Work>
-__device__ void for_range_early(const ContactRange& r, Load&& load, Work&& work) {
+__device__ void for_range_early(const ContactRange& range, Load&& load, Work&& work) {
+  const ContactRange r = resolved(range);
   const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
   const bool early = r.early && !r.serial && t < r.end - r.begin;
-  const std::uint32_t k = r.mirrored ? r.end - 1 - t : r.begin + t;
+  auto at = [&](std::uint32_t u) { return r.mirrored ? r.end - 1 - u : r.begin + u; };
+  const std::uint32_t k = at(t);
   decltype(load(k)) loaded{};
   if (early) loaded = load(k);
   // Any thread past its wait means the launch before has ended.
   wait_for_last_launch();
   let_next_launch_start();
-  if (early) work(k, loaded);
-  else for_range(r, [&](std::uint32_t j) { work(j, load(j)); });
+  if (early) {
+    work(k, loaded);
+    for (std::uint32_t u = t + gridDim.x * blockDim.x; u < r.end - r.begin; u += gridDim.x * blockDim.x)
+      work(at(u), load(at(u)));  // a colour wider than the grid (a plan's slot)
+  } else {
+    for_range(r, [&](std::uint32_t j) { work(j, load(j)); });
+  }
 }
 
 template <bool Friction, bool Rolling>
@@ -404,7 +431,7 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
 }
 
 void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* bodies, SolverTerms t, cudaStream_t s) {
-  if (r.end <= r.begin) return;
+  if (!r.plan && r.end <= r.begin) return;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
     launch(Launch::dependent, warm_start_kernel<friction, rolling>, blocks(r), s, records, r, bodies);
   });
@@ -412,7 +439,7 @@ void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* 
 
 void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, SolverTerms t,
                   cudaStream_t s) {
-  if (r.end <= r.begin) return;
+  if (!r.plan && r.end <= r.begin) return;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
     if (r.twice && !r.serial)
       launch(Launch::dependent, record_sweep_kernel<friction, rolling, true>, blocks(r), s, records, r, bodies, inv_h);

@@ -23,6 +23,8 @@ struct SolverTerms {
   bool friction = false, rolling = false;
 };
 
+using ::marbles::narrowphase::ColourPlan;  // colouring_math.hpp
+
 // A range of contacts: one colour (in parallel) or the overflow set (serial,
 // forwards or backwards).
 struct ContactRange {
@@ -37,6 +39,13 @@ struct ContactRange {
   // way (serial: back, one by one; parallel: each contact right after
   // itself), as the next sweep's first launch would.
   bool twice = false;
+  // A slot of a plan in device memory instead (a step that waits once: the
+  // host does not know the ranges): the launch reads its range there (slot
+  // < colours: that colour, in parallel; slot == colours: the overflow set,
+  // serial; past it: none), and begin, end and serial are not used. Its
+  // grid is sized for `width` contacts and strides over a wider colour.
+  const ColourPlan* plan = nullptr;
+  std::uint32_t slot = 0, width = 0;
 };
 
 // The packed velocity state (solver_math.hpp) from the world, and back.
@@ -52,8 +61,6 @@ void launch_warm_start(const SweepRecords& records, ContactRange range, SolverBo
                        cudaStream_t stream);
 void launch_sweep(const SweepRecords& records, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,
                   cudaStream_t stream);
-using ::marbles::narrowphase::ColourPlan;  // colouring_math.hpp
-
 // A colour plan in device memory (ColouringCuda::device_plan), as the
 // stages that walk every colour in one launch read it, and the widest colour
 // the launch is shaped for (the host's reading of the plan, or a bound: a

@@ -131,6 +131,7 @@ struct SubstepCheck {
   bool uniform = false;            // the records hold no arms word, for radius (mixed radii outgrow them)
   real radius = 0;
   const narrowphase::ColourPlan* plan = nullptr;
+  std::uint32_t slots = 0;  // the colours and the overflow set launched for (0: one launch walks any plan)
   std::uint32_t substep = 0;
 };
 
@@ -147,16 +148,18 @@ __global__ void check_substep_kernel(SubstepCheck c, unsigned long long* words) 
   const bool candidate = c.seen[0] != 0, mixed = c.seen[1] != 0;
   real radius = 0;
   memcpy(&radius, c.seen + 2, sizeof(real));
-  bool outgrown = grid_past || pairs > c.pair_room || contacts > c.contact_room || (candidate && !c.impact_words);
+  const narrowphase::ColourPlan& plan = *c.plan;
+  bool outgrown = grid_past || pairs > c.pair_room || contacts > c.contact_room || (candidate && !c.impact_words) ||
+                  (c.slots > 0 && plan.colours + 1 > c.slots);
   if (c.uniform && (mixed || bits_of_real(radius) != bits_of_real(c.radius))) outgrown = true;
   if (!grid_past && pairs > words[kMostPairs]) words[kMostPairs] = pairs;
   if (contacts > words[kMostContacts]) words[kMostContacts] = contacts;
   if (outgrown) {
     words[kRedo] = c.substep + 1ull;
     if (grid_past) words[kGridPast] = 1;
+    if (plan.colours > words[kMostColours]) words[kMostColours] = plan.colours;  // the slots' next bound
     return;
   }
-  const narrowphase::ColourPlan& plan = *c.plan;
   if (candidate) words[kCandidateSeen] = 1;
   if (mixed) words[kMixedSeen] = 1;
   if (c.pair_count && c.pair_count[1] != 0) words[kOutsizedSeen] = 1;
@@ -512,6 +515,7 @@ class CudaStep final : public StepBackend {
     m_plan.colours = colours;
     std::copy(m_begin.begin(), m_begin.begin() + colours + 2, m_plan.begin);
     m_last_widest = m_plan.widest();
+    m_last_colours = colours;
     m_counters.colours = std::max(m_counters.colours, colours);
     m_counters.overflow += m_plan.begin[colours + 1] - m_plan.begin[colours];
   }
@@ -547,9 +551,15 @@ class CudaStep final : public StepBackend {
     }
     if (solve_in_one_launch()) {
       if (!m_one_wait) ++m_counters.one_launch_solves;  // else counted on the device for substeps with contacts
+      m_one_launch_step = m_one_wait;
       if (nc::launch_solve(m_records, device_plan(), bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm,
                            m_stream))
         ++m_counters.cluster_stages;
+      nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
+      return;
+    }
+    if (m_one_wait) {
+      solve_in_slots(bodies, inv_h, sweeps);
       nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
       return;
     }
@@ -622,6 +632,8 @@ class CudaStep final : public StepBackend {
     m_counters_at.clear();
     m_one_wait = one_wait_possible();
     m_one_wait_ran = m_one_wait;
+    m_one_launch_step = false;
+    m_slots = std::min(m_last_colours + 2, narrowphase::kMaxColours + 1);
     m_step_candidates = false;
   }
 
@@ -864,12 +876,45 @@ class CudaStep final : public StepBackend {
   // state do nothing, and end_step puts the state back to that substep's
   // start, grows the rooms and has the substeps from there done again with a
   // wait each (substep_to_redo). The same bits as a wait a substep.
+  // The warm start and sweeps of a step without waits where the solve takes
+  // a launch per colour: a launch per slot of the device's plan, for the
+  // last step's colours and one more, then the overflow set (m_slots; a
+  // substep with more is undone: check_substep_kernel), each with a grid for
+  // the last step's widest colour and an eighth more (a wider colour is
+  // strided over). Slots past the colours launch and do nothing. The turns
+  // are launched apart. A launch loads its records early where the launch
+  // before wrote another slot's (ContactRange::early; every slot's range is
+  // its own).
+  void solve_in_slots(narrowphase::SolverBody* bodies, real inv_h, int sweeps) {
+    constexpr int kAll = -2, kNone = -1;
+    int last = kAll;  // the records were made (and the impacts wrote) before
+    const std::uint32_t width = m_last_widest + m_last_widest / 8 + 1;
+    auto slot = [&](std::uint32_t s, bool backwards, bool writes) {
+      nc::ContactRange r;
+      r.plan = m_colouring.device_plan();
+      r.slot = s;
+      r.width = width;
+      r.backwards = backwards;
+      r.mirrored = m_mirror, m_mirror = !m_mirror;
+      r.early = last != kAll && last != static_cast<int>(s);
+      last = writes ? static_cast<int>(s) : kNone;
+      return r;
+    };
+    if (m_model.solver.warm_start)
+      for (std::uint32_t s = 0; s < m_slots; ++s)
+        nc::launch_warm_start(m_records, slot(s, false, false), bodies, m_terms, m_stream);
+    for (int it = 0; it < sweeps; ++it)
+      for (std::uint32_t k = 0; k < m_slots; ++k) {
+        const bool backwards = it % 2 == 1;
+        nc::launch_sweep(m_records, slot(backwards ? m_slots - 1 - k : k, backwards, true), bodies, inv_h, m_terms,
+                         m_stream);
+      }
+  }
+
   bool one_wait_possible() const {
     if (!m_one_wait_allowed || m_local || m_replanned) return false;
     if (!m_model.collisions && !m_model.wall_contacts) return false;
-    if (m_contact_room.capacity == 0 || (m_model.collisions && m_pair_room.capacity == 0)) return false;
-    if (m_solve_mode == SolveMode::auto_) return m_last_widest <= kOneLaunchWidest;
-    return m_solve_mode == SolveMode::one_launch;
+    return m_contact_room.capacity > 0 && (!m_model.collisions || m_pair_room.capacity > 0);
   }
 
   void keep_substep_start() {
@@ -906,6 +951,7 @@ class CudaStep final : public StepBackend {
     c.uniform = m_uniform_arms;
     c.radius = m_radius;
     c.plan = m_colouring.device_plan();
+    c.slots = solve_in_one_launch() ? 0 : m_slots;
     c.substep = static_cast<std::uint32_t>(m_substep_index - 1);
     check_substep_kernel<<<1, 32, 0, m_stream>>>(c, m_flags.get_as<unsigned long long>());
     MARBLES_CUDA_CHECK_LAUNCH();
@@ -939,7 +985,8 @@ class CudaStep final : public StepBackend {
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_walls.get(), m_substep_walls.get(), wall_bytes, cudaMemcpyDeviceToDevice,
                                          m_stream));
     const std::size_t pairs = m_end_flags[kMostPairs], contacts = m_end_flags[kMostContacts];
-    const bool pairs_outgrown = pairs > m_pair_items;
+    const bool pairs_outgrown = pairs > m_pair_items, rooms_outgrown = pairs_outgrown || contacts > m_count;
+    m_last_colours = std::max(m_last_colours, static_cast<std::uint32_t>(m_end_flags[kMostColours]));
     if (m_end_flags[kGridPast] != 0) {  // the next call reads its bounds, plans and counts its pairs, waiting
       m_broadphase->replan();
       m_pair_room = Room{};
@@ -948,7 +995,7 @@ class CudaStep final : public StepBackend {
       m_pair_room.fit(pairs, pairs_outgrown);
     }
     m_contact_room.fit(pairs_outgrown ? contacts + pairs : contacts, true);
-    ++m_counters.pair_redos;
+    if (rooms_outgrown || m_end_flags[kGridPast] != 0) ++m_counters.pair_redos;
     ++m_counters.undone_substeps;
     m_counters.unwaited_substeps += static_cast<std::uint64_t>(from);
     // The step's words from here are the redone substeps' own (with waits):
@@ -968,7 +1015,7 @@ class CudaStep final : public StepBackend {
     m_counters.contacts += m_end_flags[kContactSum];
     m_counters.colours = std::max(m_counters.colours, static_cast<std::uint32_t>(m_end_flags[kMostColours]));
     m_counters.overflow += m_end_flags[kOverflowSum];
-    m_counters.one_launch_solves += m_end_flags[kSolvedSubsteps];
+    if (m_one_launch_step) m_counters.one_launch_solves += m_end_flags[kSolvedSubsteps];
     m_counters.uniform_arms += m_end_flags[kUniformSubsteps];
     m_counters.impact_words += m_end_flags[kImpactWordSubsteps];
   }
@@ -985,6 +1032,7 @@ class CudaStep final : public StepBackend {
       ++m_counters.grid_shrinks;
     }
     m_last_widest = static_cast<std::uint32_t>(m_end_flags[kWidest]);
+    m_last_colours = static_cast<std::uint32_t>(m_end_flags[kMostColours]);
     m_step_candidates = m_step_candidates || m_end_flags[kCandidateSeen] != 0;
     m_expect_uniform = m_model.uniform_pairs && m_end_flags[kMixedSeen] == 0;
     if (m_expect_uniform) {
@@ -1088,7 +1136,7 @@ class CudaStep final : public StepBackend {
   // (auto) where the widest colour is small enough that a launch per colour
   // would leave the device waiting for the host (MARBLES_CUDA_SOLVE).
   bool solve_in_one_launch() const {
-    if (m_one_wait) return true;  // one_wait_possible asked it of the last step's colours
+    if (m_one_wait && m_solve_mode == SolveMode::auto_) return m_last_widest <= kOneLaunchWidest;  // the last step's
     if (m_solve_mode == SolveMode::auto_) return m_plan.widest() <= kOneLaunchWidest;
     return m_solve_mode == SolveMode::one_launch;
   }
@@ -1176,6 +1224,9 @@ class CudaStep final : public StepBackend {
   int m_substep_index = 0;            // substeps begun in this attempt
   int m_redo_from = -1;               // substep_to_redo()
   std::uint32_t m_last_widest = 0;    // the last substep's widest colour (the one-launch stages' shape)
+  std::uint32_t m_last_colours = 0;   // the last substep's colours
+  std::uint32_t m_slots = 0;          // this step's colour launches a sweep without waits (solve_in_slots)
+  bool m_one_launch_step = false;     // this step's solves without waits took one launch
   // Steps since the last with an impact candidate: a step without waits
   // keeps impact words until kImpactHold steps in a row had none (a pour's
   // impacts come and go: an impact candidate in records without them is a

@@ -126,13 +126,11 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
   }
 }
 
-// Whether a run of `steps` steps of a small scene runs substeps without a
-// wait: every step after the first where a step waits once and the solve
-// may take one launch (not under MARBLES_CUDA_SOLVE=launches or apart).
-bool unwaits(int steps) {
-  const std::string form = solve_form();
-  return one_wait_a_step() && form != "launches" && form != "apart" && steps > 1;
-}
+// Whether a run of `steps` steps runs substeps without a wait: every step
+// after the first where a step waits once (its solve in one launch, or a
+// launch per slot of the device's plan under MARBLES_CUDA_SOLVE=launches or
+// apart).
+bool unwaits(int steps) { return one_wait_a_step() && steps > 1; }
 
 // A run of both backends from the same scene (expect_same_steps). The GPU's
 // solve takes the form asked for: never one launch when a launch per colour
@@ -170,7 +168,13 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
   const bool turns = gpu.model().solver.iterations > 1 && counts.solved > 0;
   if (form == "launches" || form == "apart") {
     EXPECT_EQ(counts.one_launch, 0u);
-    EXPECT_EQ(counts.turns > 0, form == "launches" && turns) << "MARBLES_CUDA_SOLVE=" << form;
+    // A step that waits once launches the turns apart (the device's plan):
+    // only a first step with contacts may merge them.
+    if (!unwaits(steps)) {
+      EXPECT_EQ(counts.turns > 0, form == "launches" && turns) << "MARBLES_CUDA_SOLVE=" << form;
+    } else if (form == "apart") {
+      EXPECT_EQ(counts.turns, 0u);
+    }
   } else if (counts.solved > 0) {
     EXPECT_GT(counts.one_launch, 0u) << "MARBLES_CUDA_SOLVE=" << form;
   }
@@ -288,13 +292,17 @@ TEST(StepCuda, RefusedWithoutADevice) {
 TEST(StepCuda, PourMatchesTheCpuBitForBit) {
   REQUIRE_DEVICE();
   auto [s, g] = pour_scene(400, 3);
-  std::uint64_t trims = 0;
-  expect_same_run(s, g, 400, nullptr, nullptr, &trims);
+  std::uint64_t trims = 0, undone = 0;
+  expect_same_run(s, g, 400, nullptr, nullptr, &trims, &undone);
+  std::printf("substeps undone in the pour: %llu\n", static_cast<unsigned long long>(undone));
   // Trimmed every step (ctest step_cuda_test.trim_every_step), the pour's
   // falling need (a substep's impact words gone) frees buffers: the bits
   // above held across them.
+  // A step that waits once lays its records out for the rooms and keeps
+  // impact words while the pour lands: its need does not fall within these
+  // steps (TrimmedBuffers* below trim with it).
   const char* every = std::getenv("MARBLES_CUDA_TRIM_EVERY");
-  if (every && std::strcmp(every, "1") == 0) {
+  if (every && std::strcmp(every, "1") == 0 && !one_wait_a_step()) {
     EXPECT_GT(trims, 0u);
   }
   std::printf("buffers trimmed in the pour: %llu\n", static_cast<unsigned long long>(trims));
