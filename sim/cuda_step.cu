@@ -195,14 +195,20 @@ __global__ void keep_substep_kernel(BodiesView b, const narrowphase::WallShape* 
     kept_walls[k] = walls[k];
 }
 
-// Whether a step waits once (MARBLES_CUDA_WAITS=step, the default) or once
-// a substep and at its end (substep: the earlier form, for comparisons).
-// The same bits either way.
-bool one_wait_from_environment() {
+// Where a step waits once, at its end, rather than once a substep and at
+// its end (MARBLES_CUDA_WAITS): auto (the default) where the solve takes one
+// launch (the small scenes: the wait was much of their step), step in every
+// step (where the solve takes a launch per colour, a launch per slot of the
+// device's plan: measured slower than the wait it saves, docs/architecture.md
+// "One wait a step"), substep never (the earlier form, for comparisons).
+// The same bits in every form.
+enum class Waits { auto_, step, substep };
+Waits waits_from_environment() {
   const char* asked = std::getenv("MARBLES_CUDA_WAITS");
-  if (asked == nullptr || std::strcmp(asked, "step") == 0) return true;
-  if (std::strcmp(asked, "substep") == 0) return false;
-  throw RuntimeFailure(std::string("MARBLES_CUDA_WAITS=") + asked + ": expected step or substep");
+  if (asked == nullptr || std::strcmp(asked, "auto") == 0) return Waits::auto_;
+  if (std::strcmp(asked, "step") == 0) return Waits::step;
+  if (std::strcmp(asked, "substep") == 0) return Waits::substep;
+  throw RuntimeFailure(std::string("MARBLES_CUDA_WAITS=") + asked + ": expected auto, step or substep");
 }
 
 // How the solve is launched (MARBLES_CUDA_SOLVE): auto (the default), a
@@ -912,9 +918,12 @@ class CudaStep final : public StepBackend {
   }
 
   bool one_wait_possible() const {
-    if (!m_one_wait_allowed || m_local || m_replanned) return false;
+    if (m_waits == Waits::substep || m_local || m_replanned) return false;
     if (!m_model.collisions && !m_model.wall_contacts) return false;
-    return m_contact_room.capacity > 0 && (!m_model.collisions || m_pair_room.capacity > 0);
+    if (m_contact_room.capacity == 0 || (m_model.collisions && m_pair_room.capacity == 0)) return false;
+    if (m_waits == Waits::step) return true;
+    return m_solve_mode == SolveMode::one_launch ||
+           (m_solve_mode == SolveMode::auto_ && m_last_widest <= kOneLaunchWidest);  // solve_in_one_launch's
   }
 
   void keep_substep_start() {
@@ -1217,9 +1226,9 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep
-  // One wait a step (one_wait_possible): allowed (MARBLES_CUDA_WAITS), this
+  // One wait a step (one_wait_possible): where (MARBLES_CUDA_WAITS), this
   // attempt's substeps without waits, this step's read holds their words.
-  bool m_one_wait_allowed = one_wait_from_environment();
+  Waits m_waits = waits_from_environment();
   bool m_one_wait = false, m_one_wait_ran = false;
   int m_substep_index = 0;            // substeps begun in this attempt
   int m_redo_from = -1;               // substep_to_redo()

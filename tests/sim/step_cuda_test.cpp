@@ -82,11 +82,11 @@ struct GpuCounts {
   std::uint64_t undone = 0;        // of those, outgrew a room: put back and done again with waits
 };
 
-// Whether a step waits once (MARBLES_CUDA_WAITS: step, the default) or once
-// a substep (substep).
-bool one_wait_a_step() {
+// Where a step waits once (MARBLES_CUDA_WAITS): auto (unset: where the
+// solve takes one launch), step (every step) or substep (none).
+std::string waits_form() {
   const char* asked = std::getenv("MARBLES_CUDA_WAITS");
-  return asked == nullptr || std::string(asked) == "step";
+  return asked ? asked : "auto";
 }
 
 // Steps both backends side by side; the first step whose states differ
@@ -126,11 +126,17 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
   }
 }
 
-// Whether a run of `steps` steps runs substeps without a wait: every step
-// after the first where a step waits once (its solve in one launch, or a
-// launch per slot of the device's plan under MARBLES_CUDA_SOLVE=launches or
-// apart).
-bool unwaits(int steps) { return one_wait_a_step() && steps > 1; }
+// Whether a run of `steps` steps of a small scene (every scene here: its
+// solve takes one launch unless MARBLES_CUDA_SOLVE asks for a launch per
+// colour) runs substeps without a wait: every step after the first, where a
+// step waits once in every step (MARBLES_CUDA_WAITS=step: a launch per slot
+// of the device's plan under launches or apart) or where the solve takes one
+// launch (auto).
+bool unwaits(int steps) {
+  const std::string form = solve_form(), waits = waits_form();
+  if (waits == "substep" || steps < 2) return false;
+  return waits == "step" || (form != "launches" && form != "apart");
+}
 
 // A run of both backends from the same scene (expect_same_steps). The GPU's
 // solve takes the form asked for: never one launch when a launch per colour
@@ -158,8 +164,7 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
   if (undone) *undone += counts.undone;
   const std::string form = solve_form();
   EXPECT_EQ(counts.unwaited > 0, unwaits(steps))
-      << counts.unwaited << " substeps without a wait; MARBLES_CUDA_WAITS=" << (one_wait_a_step() ? "step" : "substep")
-      << ", solve " << form;
+      << counts.unwaited << " substeps without a wait; MARBLES_CUDA_WAITS=" << waits_form() << ", solve " << form;
   if (!unwaits(steps)) {
     EXPECT_EQ(counts.undone, 0u);
   }
@@ -302,7 +307,7 @@ TEST(StepCuda, PourMatchesTheCpuBitForBit) {
   // impact words while the pour lands: its need does not fall within these
   // steps (TrimmedBuffers* below trim with it).
   const char* every = std::getenv("MARBLES_CUDA_TRIM_EVERY");
-  if (every && std::strcmp(every, "1") == 0 && !one_wait_a_step()) {
+  if (every && std::strcmp(every, "1") == 0 && !unwaits(400)) {
     EXPECT_GT(trims, 0u);
   }
   std::printf("buffers trimmed in the pour: %llu\n", static_cast<unsigned long long>(trims));
