@@ -667,6 +667,7 @@ class CudaStep final : public StepBackend {
     }
     if (m_one_wait_ran) take_step_words();
     m_quiet_steps = m_step_candidates ? 0 : m_quiet_steps + 1;
+    ++m_steps_since_undo;
     if (m_watch) {
       std::memcpy(&m_counters.kinetic_energy, &m_end_flags[3], sizeof(double));
       m_counters.beyond_walls = m_end_flags[4];
@@ -918,7 +919,7 @@ class CudaStep final : public StepBackend {
   }
 
   bool one_wait_possible() const {
-    if (m_waits == Waits::substep || m_local || m_replanned) return false;
+    if (m_waits == Waits::substep || m_local || m_replanned || m_steps_since_undo < kUndoHold) return false;
     if (!m_model.collisions && !m_model.wall_contacts) return false;
     if (m_contact_room.capacity == 0 || (m_model.collisions && m_pair_room.capacity == 0)) return false;
     if (m_waits == Waits::step) return true;
@@ -1013,6 +1014,7 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaMemsetAsync(flag(kNonFinite), 0, sizeof(unsigned long long), m_stream));
     MARBLES_CUDA_CHECK(cudaMemsetAsync(flag(kRedo), 0, (kStepWords - kRedo) * sizeof(unsigned long long), m_stream));
     m_one_wait = m_one_wait_ran = false;
+    m_steps_since_undo = 0;
     m_redo_from = from;
     m_substep_index = from;
   }
@@ -1243,6 +1245,12 @@ class CudaStep final : public StepBackend {
   int m_quiet_steps = 1 << 20;
   bool m_step_candidates = false;     // this step's substeps had an impact candidate
   static constexpr int kImpactHold = 8;
+  // Steps since a substep without waits was undone: a scene whose counts
+  // grow step after step (a gas let go: 6 of its first 10 such substeps at
+  // 10^5 on an H200) waits a substep for kUndoHold steps after one, where
+  // outgrowing a room costs a contact search again, not a substep.
+  int m_steps_since_undo = 1 << 20;
+  static constexpr int kUndoHold = 8;
   bool m_expect_uniform = false;      // the last substep's contacts all had m_radius's arms
   DeviceBuffer m_substep_start, m_substep_walls;  // positions, velocities, angular velocities; walls: a substep's start
   std::vector<StepCounters> m_counters_at;  // the counters at each substep's start without waits
