@@ -29,9 +29,13 @@
 // first substep waits for the counts before the colouring too. The cache's
 // entry count, the lost-load count, the impact levels and the flags of the
 // impact and projection passes stay on the device: those stages run as one
-// launch each (a cooperative grid, or one cluster where they are small). A
-// settled pile and the gas wait 2 times a step. One wait per step, with
-// every buffer sized from the last step, is the next step.
+// launch each (a cooperative grid, or one cluster where they are small).
+// Where the last step left rooms and its solve took one launch, a step waits
+// once, at its end (MARBLES_CUDA_WAITS; one_wait_possible below): its
+// substeps colour without reading the ranges back and check their counts on
+// the device, and a substep that outgrew a room is undone and done again
+// with waits. Elsewhere (a solve of a launch per colour: the piles of 10^5
+// and up) a step waits once a substep and at its end.
 #include <cuda_runtime.h>
 
 #include <algorithm>
