@@ -80,6 +80,21 @@ __global__ void order_runs_kernel(KeyOf key_of, const std::uint32_t* first, std:
     sort_run(index, first[a], first[a + 1], key_of);
 }
 
+// The runs of the spheres past those of the last store (the world grew, or
+// nothing was stored: from 0), empty at the entries' end: where a store is
+// skipped, the restore that follows reads them.
+__global__ void extend_firsts_kernel(std::uint32_t* first, std::uint32_t from, std::uint32_t words) {
+  const std::uint32_t end = from > 0 ? first[from - 1] : 0u;
+  for (std::uint32_t k = from + blockIdx.x * blockDim.x + threadIdx.x; k < words; k += gridDim.x * blockDim.x)
+    first[k] = end;
+}
+
+// A store of no contacts: every run empty, unless skipped.
+__global__ void clear_firsts_kernel(std::uint32_t* first, std::uint32_t words, const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < words; k += gridDim.x * blockDim.x) first[k] = 0;
+}
+
 // The runs' firsts made by a store that may be skipped, taken as the
 // cache's (where it is not).
 __global__ void adopt_firsts_kernel(const std::uint32_t* made, std::uint32_t words, const unsigned long long* skip,
@@ -339,8 +354,9 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   // A store that may be skipped scans into its temporaries and takes the
   // firsts over only where it is not; the entries' arrays, where they grow,
   // keep the entries they hold, and the bound covers both.
-  const std::uint32_t old_bound = m_bound, old_runs = m_bound > 0 ? m_spheres + 1 : 0;
+  const std::uint32_t old_bound = m_bound, old_runs = std::min(m_bound > 0 ? m_spheres + 1 : 0u, spheres + 1);
   m_bound = skip ? std::max(m_bound, n) : n;
+  m_stored = n;
   m_spheres = spheres;
   auto room = [&](DeviceBuffer& b, std::size_t count, std::size_t keep, std::size_t size) {
     return skip ? b.reserve_keeping(count * size + 16, keep * size, s) : b.reserve(count * size + 16);
@@ -351,8 +367,19 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   auto* tangent = m_keep_tangent ? static_cast<Vec3*>(room(m_tangent, n, old_bound, sizeof(Vec3))) : nullptr;
   auto* rolling = m_keep_rolling ? static_cast<Vec3*>(room(m_rolling, n, old_bound, sizeof(Vec3))) : nullptr;
   auto* colour = static_cast<std::uint8_t*>(room(m_colour, n, old_bound, 1));
+  if (skip && old_runs < spheres + 1) {
+    extend_firsts_kernel<<<grid_for(std::size_t(spheres) + 1 - old_runs, sm_count), kBlock, 0, s>>>(
+        kept_first, old_runs, spheres + 1);
+    MARBLES_CUDA_CHECK_LAUNCH();
+  }
   if (n == 0) {
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(kept_first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
+    if (skip) {
+      clear_firsts_kernel<<<grid_for(std::size_t(spheres) + 1, sm_count), kBlock, 0, s>>>(kept_first, spheres + 1,
+                                                                                         skip);
+      MARBLES_CUDA_CHECK_LAUNCH();
+    } else {
+      MARBLES_CUDA_CHECK(cudaMemsetAsync(kept_first, 0, (std::size_t(spheres) + 1) * sizeof(std::uint32_t), s));
+    }
     return;
   }
   // Temporaries in the scratch memory (or the memory share_store_memory lent):

@@ -74,9 +74,13 @@ class ContactCacheCuda {
   void store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n, std::uint32_t spheres,
              int sm_count, cudaStream_t stream, const std::uint32_t* count_on_device = nullptr,
              const unsigned long long* skip = nullptr);
-  // The entries are at most this many (the contacts of the last store): the
-  // count itself stays on the device, where the kernels read it.
+  // The entries are at most this many (the contacts of the last store, or
+  // where stores may have been skipped the most of them and of the entries
+  // before): the count itself stays on the device, where the kernels read it.
   std::uint32_t bound() const { return m_bound; }
+  // Every store since stores began to pass `skip` ran: the bound is the last
+  // one's contacts again.
+  void stores_kept() { m_bound = m_stored; }
   // Device bytes it holds of its own (the entries, their runs; not the
   // shared scratch).
   std::size_t device_bytes() const {
@@ -135,6 +139,7 @@ class ContactCacheCuda {
   DeviceBuffer* m_scratch = &m_own_scratch;
   DeviceBuffer* m_store_memory = nullptr;  // share_store_memory's, else the scratch
   std::uint32_t m_bound = 0;
+  std::uint32_t m_stored = 0;  // the contacts of the last store
   bool m_keep_tangent = true, m_keep_rolling = true;
 };
 

@@ -34,8 +34,10 @@
 // once, at its end (MARBLES_CUDA_WAITS; one_wait_possible below): its
 // substeps colour without reading the ranges back and check their counts on
 // the device, and a substep that outgrew a room is undone and done again
-// with waits. Elsewhere (a solve of a launch per colour: the piles of 10^5
-// and up) a step waits once a substep and at its end.
+// with waits (then kUndoHold steps wait a substep). Elsewhere (a solve of a
+// launch per colour: the piles of 10^5 and up) a step waits once a substep
+// and at its end, unless MARBLES_CUDA_WAITS=step (launches by slots of the
+// device's plan: slower, solve_in_slots).
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -647,10 +649,11 @@ class CudaStep final : public StepBackend {
     m_step_candidates = false;
   }
 
-  // The one read of flags at the end of a step: non_finite, the deepest
-  // overlap, and with the watch on the watchdog's figures.
+  // The one read of flags at the end of a step (StepWord): non_finite, the
+  // deepest overlap, the projection's sweeps, with the watch on the
+  // watchdog's figures, and after substeps without waits their words (an
+  // undo, the step's figures, the next step's rooms).
   void end_step(StepCounters& counters) override {
-    // [0]: non_finite, [1]: deepest overlap (bits), [2]: projection sweeps, [3..4]: watch
     auto* flags = m_flags.get_as<unsigned long long>();
     nc::launch_max_overlap(m_records, m_count, m_device.view(), walls(), flags + kDeepest, m_sm, m_stream,
                            m_count_on_device, skip());
@@ -673,21 +676,21 @@ class CudaStep final : public StepBackend {
     m_quiet_steps = m_step_candidates ? 0 : m_quiet_steps + 1;
     ++m_steps_since_undo;
     if (m_watch) {
-      std::memcpy(&m_counters.kinetic_energy, &m_end_flags[3], sizeof(double));
-      m_counters.beyond_walls = m_end_flags[4];
+      std::memcpy(&m_counters.kinetic_energy, &m_end_flags[kKineticEnergy], sizeof(double));
+      m_counters.beyond_walls = m_end_flags[kBeyondWalls];
     }
-    m_counters.projection_sweeps = m_end_flags[2];
+    m_counters.projection_sweeps = m_end_flags[kProjectionSweeps];
     const std::uint64_t bytes =
         m_bytes + m_colouring.bytes_copied() + (m_broadphase ? m_broadphase->bytes_copied() : 0);
     m_counters.bytes_copied = bytes - m_bytes_at_step_start;
     m_bytes_at_step_start = bytes;
-    m_non_finite = m_end_flags[0] != 0 || m_non_finite_seen;
+    m_non_finite = m_end_flags[kNonFinite] != 0 || m_non_finite_seen;
     m_non_finite_seen = false;
     if constexpr (sizeof(real) == 4) {
-      const auto bits = static_cast<std::uint32_t>(m_end_flags[1]);
+      const auto bits = static_cast<std::uint32_t>(m_end_flags[kDeepest]);
       std::memcpy(&m_counters.max_overlap, &bits, sizeof(real));
     } else {
-      std::memcpy(&m_counters.max_overlap, &m_end_flags[1], sizeof(real));
+      std::memcpy(&m_counters.max_overlap, &m_end_flags[kDeepest], sizeof(real));
     }
     m_host_stale = true;
     m_contacts_stale = true;
@@ -947,6 +950,9 @@ class CudaStep final : public StepBackend {
   // device, the substep's counts are checked there, and the records are
   // made for the room.
   void colour_without_a_wait() {
+    // No contact search ran (the broad phase met a non-finite centre: the
+    // step ends non-finite), so nothing to check or make.
+    if (!m_count_on_device) return;
     const std::uint32_t* position = nullptr;
     m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_begin, m_sm,
                                 m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
@@ -1017,8 +1023,9 @@ class CudaStep final : public StepBackend {
     // only a step without waits reads are read no more.
     MARBLES_CUDA_CHECK(cudaMemsetAsync(flag(kNonFinite), 0, sizeof(unsigned long long), m_stream));
     MARBLES_CUDA_CHECK(cudaMemsetAsync(flag(kRedo), 0, (kStepWords - kRedo) * sizeof(unsigned long long), m_stream));
+    m_step_candidates = m_step_candidates || m_end_flags[kCandidateSeen] != 0;  // the substeps before it
     m_one_wait = m_one_wait_ran = false;
-    m_steps_since_undo = 0;
+    m_steps_since_undo = -1;  // this step's end counts it: kUndoHold steps after this one
     m_redo_from = from;
     m_substep_index = from;
   }
@@ -1039,6 +1046,7 @@ class CudaStep final : public StepBackend {
   // records' form, and the last substep's contact count (contacts()).
   void take_step_words() {
     add_step_figures();
+    m_cache.stores_kept();
     m_counters.unwaited_substeps += static_cast<std::uint64_t>(m_substep_index);
     if (m_model.collisions) m_pair_room.fit(m_end_flags[kMostPairs], false);
     m_contact_room.fit(m_end_flags[kMostContacts], false);
@@ -1117,9 +1125,10 @@ class CudaStep final : public StepBackend {
   // holds the device's memory for at most that many steps, not for the
   // run. Their contents are dead here: the contact search, the colouring and
   // the records' making write them before they read them. The cache's
-  // entries (the warm start's) are live here: they are trimmed in this
-  // step's first store, which rewrites them (store_impulses), and the
-  // watchdog's copy of them before it is copied again (keep_step_start).
+  // entries (the warm start's) are live here: they are trimmed in the
+  // first store with waits from here on, which rewrites them (a store
+  // without waits may be skipped: store_impulses), and the watchdog's copy
+  // of them before it is copied again (keep_step_start).
   // A free waits for the device: here it is idle (end_step waited); the
   // store's waits for the substep's work. Only a buffer that is freed
   // costs that wait, in a step that trims.
@@ -1231,15 +1240,17 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_kept_walls;
   DeviceBuffer m_check;  // state_finite()'s flag
 
-  std::uint32_t m_count = 0;          // contacts of this substep
+  std::uint32_t m_count = 0;          // contacts of this substep (their room where m_count_on_device)
   // One wait a step (one_wait_possible): where (MARBLES_CUDA_WAITS), this
   // attempt's substeps without waits, this step's read holds their words.
   Waits m_waits = waits_from_environment();
   bool m_one_wait = false, m_one_wait_ran = false;
   int m_substep_index = 0;            // substeps begun in this attempt
   int m_redo_from = -1;               // substep_to_redo()
-  std::uint32_t m_last_widest = 0;    // the last substep's widest colour (the one-launch stages' shape)
-  std::uint32_t m_last_colours = 0;   // the last substep's colours
+  // The last substep's widest colour and colours (after a step without
+  // waits, the most of its substeps): the one-launch stages' shape, the slots.
+  std::uint32_t m_last_widest = 0;
+  std::uint32_t m_last_colours = 0;
   std::uint32_t m_slots = 0;          // this step's colour launches a sweep without waits (solve_in_slots)
   bool m_one_launch_step = false;     // this step's solves without waits took one launch
   // Steps since the last with an impact candidate: a step without waits

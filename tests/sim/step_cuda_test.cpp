@@ -165,9 +165,6 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
   const std::string form = solve_form();
   EXPECT_EQ(counts.unwaited > 0, unwaits(steps))
       << counts.unwaited << " substeps without a wait; MARBLES_CUDA_WAITS=" << waits_form() << ", solve " << form;
-  if (!unwaits(steps)) {
-    EXPECT_EQ(counts.undone, 0u);
-  }
   // A walk of two sweeps or more turns on a range it then visits twice in
   // one launch (visit_sweeps), unless the turns are asked apart.
   const bool turns = gpu.model().solver.iterations > 1 && counts.solved > 0;
@@ -177,8 +174,6 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
     // only a first step with contacts may merge them.
     if (!unwaits(steps)) {
       EXPECT_EQ(counts.turns > 0, form == "launches" && turns) << "MARBLES_CUDA_SOLVE=" << form;
-    } else if (form == "apart") {
-      EXPECT_EQ(counts.turns, 0u);
     }
   } else if (counts.solved > 0) {
     EXPECT_GT(counts.one_launch, 0u) << "MARBLES_CUDA_SOLVE=" << form;
