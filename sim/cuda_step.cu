@@ -132,8 +132,8 @@ struct SubstepCheck {
   const std::uint32_t* contact_count = nullptr;
   std::uint32_t contact_room = 0;
   const unsigned* seen = nullptr;  // [0] an impact candidate, [1] mixed radii, then sphere 0's radius
-  bool impact_words = false;       // the records keep impact words (else an impact candidate outgrows them)
-  bool approach_only = false;      // the records keep approach speeds only (the scene has restitution)
+  bool words_kept = false;         // the records keep impact words
+  bool candidates_fit = false;     // an impact candidate fits the records (words kept, or no restitution)
   bool uniform = false;            // the records hold no arms word, for radius (mixed radii outgrow them)
   real radius = 0;
   const narrowphase::ColourPlan* plan = nullptr;
@@ -155,7 +155,7 @@ __global__ void check_substep_kernel(SubstepCheck c, unsigned long long* words) 
   real radius = 0;
   memcpy(&radius, c.seen + 2, sizeof(real));
   const narrowphase::ColourPlan& plan = *c.plan;
-  bool outgrown = grid_past || pairs > c.pair_room || contacts > c.contact_room || (candidate && !c.impact_words) ||
+  bool outgrown = grid_past || pairs > c.pair_room || contacts > c.contact_room || (candidate && !c.candidates_fit) ||
                   (c.slots > 0 && plan.colours + 1 > c.slots);
   if (c.uniform && (mixed || bits_of_real(radius) != bits_of_real(c.radius))) outgrown = true;
   if (!grid_past && pairs > words[kMostPairs]) words[kMostPairs] = pairs;
@@ -180,7 +180,7 @@ __global__ void check_substep_kernel(SubstepCheck c, unsigned long long* words) 
   if (contacts > 0) {  // as a step with waits counts its layouts: those of substeps with contacts
     ++words[kSolvedSubsteps];
     if (c.uniform) ++words[kUniformSubsteps];
-    if (!c.approach_only && c.impact_words) ++words[kImpactWordSubsteps];
+    if (c.words_kept) ++words[kImpactWordSubsteps];
   }
 }
 
@@ -867,8 +867,8 @@ class CudaStep final : public StepBackend {
  private:
   narrowphase::BodyPair* pairs_d() const { return m_pairs.get_as<narrowphase::BodyPair>(); }
   // The substep's plan as the one-launch stages read it: the colouring's in
-  // device memory, shaped for the widest colour the host read.
-  // Without waits, shaped for the last step's widest colour.
+  // device memory, shaped for the widest colour the host read (without
+  // waits, the last step's).
   nc::DevicePlan device_plan() const {
     return {m_colouring.device_plan(), m_one_wait ? m_last_widest : m_plan.widest()};
   }
@@ -879,9 +879,10 @@ class CudaStep final : public StepBackend {
 
   // --- one wait a step ------------------------------------------------------
   // A step waits once, at its end, where the last step left rooms for its
-  // pairs and contacts, and its colours were few enough that the solve takes
-  // one launch (solve_in_one_launch: the one-launch stages walk a plan in
-  // device memory whatever its widths). Each substep then keeps its start
+  // pairs and contacts (one_wait_possible; MARBLES_CUDA_WAITS=auto: where
+  // its solve takes one launch, as the one-launch stages walk a plan in
+  // device memory whatever its widths; step: also where it takes a launch
+  // per colour, solve_in_slots). Each substep then keeps its start
   // (keep_substep_start), colours without reading the ranges back, lays its
   // records out for the contacts' room (with impact words and arms as the
   // last step needed them), and checks on the device what it found against
@@ -890,6 +891,7 @@ class CudaStep final : public StepBackend {
   // state do nothing, and end_step puts the state back to that substep's
   // start, grows the rooms and has the substeps from there done again with a
   // wait each (substep_to_redo). The same bits as a wait a substep.
+
   // The warm start and sweeps of a step without waits where the solve takes
   // a launch per colour: a launch per slot of the device's plan, for the
   // last step's colours and one more, then the overflow set (m_slots; a
@@ -966,8 +968,8 @@ class CudaStep final : public StepBackend {
     c.contact_count = m_count_on_device;
     c.contact_room = m_count;
     c.seen = reinterpret_cast<const unsigned*>(m_found_words.get_as<unsigned long long>() + 1);
-    c.impact_words = m_impact_candidates || !m_model.solver.restitution;
-    c.approach_only = !m_impact_candidates;
+    c.words_kept = m_impact_candidates;
+    c.candidates_fit = m_impact_candidates || !m_model.solver.restitution;
     c.uniform = m_uniform_arms;
     c.radius = m_radius;
     c.plan = m_colouring.device_plan();
