@@ -706,6 +706,40 @@ TEST(StepCuda, ContactCountJumpFindsTheContactsAgain) {
   EXPECT_EQ(undone > 0, unwaits(40)) << "without a wait, the substep that outgrew it is undone and done again";
 }
 
+// The same layer with four substeps a step: its contacts jump in a later
+// substep of a step (the premise, from the CPU's count: 400 a substep once
+// they touch), so the substeps before it stand, the one that outgrew the
+// room is put back to its own start (not the step's) and it and the rest
+// are done again with waits: the CPU's bits every step. Where the jump's
+// step ran without waits, its undo came after a substep without one.
+TEST(StepCuda, ContactCountJumpInALaterSubstepIsUndoneThere) {
+  REQUIRE_DEVICE();
+  auto [s, g] = bed_on_a_floor(4, real(1.3), real(0.01));
+  s.time.substeps = 4;
+  Simulation probe(s, make_world(s, g), broadphase::Backend::cpu);
+  int first = -1;
+  std::uint64_t touching = 0;
+  for (int k = 0; k < 80 && first < 0; ++k) {
+    probe.step();
+    if (probe.last_step().contacts > 0) first = k, touching = probe.last_step().contacts;
+  }
+  ASSERT_GE(first, 1) << "the layer must start clear of the floor";
+  ASSERT_EQ(touching % 400, 0u) << "premise: all 400 touch at once";
+  ASSERT_LT(touching, 4u * 400u) << "premise: the contacts jump after the step's first substep";
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  GpuCounts counts;
+  for (int k = 0; k <= first + 2; ++k) {
+    const std::uint64_t undone = counts.undone;
+    expect_same_steps(cpu, gpu, 1, counts);  // every step's counts and state
+    ASSERT_FALSE(HasFatalFailure()) << "step " << k;
+    if (k == first && counts.undone > undone) {
+      EXPECT_GT(gpu.last_step().unwaited_substeps, 0u) << "the substeps before the jump stand";
+    }
+  }
+  EXPECT_EQ(counts.undone > 0, unwaits(first + 3)) << "without a wait, the substep that outgrew it is undone";
+}
+
 // A small block (105 spheres, 7 x 5 x 3: no kernel's block is full) with
 // every contact term on, dropped onto the floor of a box: the partial runs
 // of the block-staged contact writes, gathers and record packs. Short enough
