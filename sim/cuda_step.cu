@@ -1009,7 +1009,7 @@ class CudaStep final : public StepBackend {
     const std::size_t pairs = m_end_flags[kMostPairs], contacts = m_end_flags[kMostContacts];
     const bool pairs_outgrown = pairs > m_pair_items, rooms_outgrown = pairs_outgrown || contacts > m_count;
     m_last_colours = std::max(m_last_colours, static_cast<std::uint32_t>(m_end_flags[kMostColours]));
-    if (m_end_flags[kGridPast] != 0) {  // the next call reads its bounds, plans and counts its pairs, waiting
+    if (m_broadphase && m_end_flags[kGridPast] != 0) {  // the next call reads its bounds and plans, waiting
       m_broadphase->replan();
       m_pair_room = Room{};
       ++m_counters.grid_replans;
@@ -1052,7 +1052,7 @@ class CudaStep final : public StepBackend {
     m_counters.unwaited_substeps += static_cast<std::uint64_t>(m_substep_index);
     if (m_model.collisions) m_pair_room.fit(m_end_flags[kMostPairs], false);
     m_contact_room.fit(m_end_flags[kMostContacts], false);
-    if (m_end_flags[kOutsizedSeen] != 0) {
+    if (m_broadphase && m_end_flags[kOutsizedSeen] != 0) {
       m_broadphase->replan();
       ++m_counters.grid_shrinks;
     }
