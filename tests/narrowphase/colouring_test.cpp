@@ -677,5 +677,60 @@ TEST(VisitLevels, RangesAreThePositionsOfEachKey) {
   }
 }
 
+// The colour plan from the firsts of the colouring's sorted keys (the GPU's
+// colouring makes its host ranges and its device plan with it): on random
+// sorted keys (colours with gaps, a kept colour whose other contacts are
+// gone, then maybe the overflow's and the inactive's keys), colour c's range
+// is exactly the positions of key c, empty ones where they would start, the
+// overflow's those of its key, and the words past them its end; widest() the
+// largest colour and empty() whether any contact is coloured or overflows.
+TEST(ColourPlan, OfFirstsGivesEachKeysPositions) {
+  std::mt19937_64 rng(43);
+  for (int trial = 0; trial < 500; ++trial) {
+    // The first trials: every colour, no contact, only the overflow, only inactive ones.
+    std::vector<std::uint32_t> keys;
+    const std::uint32_t top = trial == 0 ? kMaxColours : 1 + rng() % (trial % 5 == 0 ? kMaxColours : 12);
+    if (trial > 3)
+      for (std::uint32_t c = 0; c < top; ++c)
+        if (c + 1 == top || rng() % 4 != 0) keys.insert(keys.end(), 1 + rng() % 5, c);  // gaps below the top
+    if (trial == 0)
+      for (std::uint32_t c = 0; c < kMaxColours; ++c) keys.push_back(c);
+    if (trial == 2 || (trial > 3 && rng() % 2 == 1)) keys.insert(keys.end(), 1 + rng() % 4, kMaxColours);
+    if (trial == 3 || (trial > 3 && rng() % 3 != 0)) keys.insert(keys.end(), 1 + rng() % 6, kMaxColours + 1);
+    const auto n = static_cast<std::uint32_t>(keys.size());
+    std::vector<std::uint32_t> first(kMaxColours + 2, kNoFirst);
+    for (std::uint32_t j = n; j-- > 0;) first[keys[j]] = j;
+    ColourPlan plan;
+    std::fill(std::begin(plan.begin), std::end(plan.begin), 0xabababu);  // poisoned
+    plan.colours = 0xabababu;
+    plan_of_firsts(first.data(), n, plan);
+    // The oracle: the colours up to the highest present key below kMaxColours,
+    // each range starting at the count of the keys below it.
+    std::uint32_t colours = 0;
+    for (std::uint32_t k : keys)
+      if (k < kMaxColours) colours = std::max(colours, k + 1);
+    ASSERT_EQ(plan.colours, colours) << "trial " << trial;
+    auto below = [&](std::uint32_t key) {
+      return static_cast<std::uint32_t>(std::count_if(keys.begin(), keys.end(), [&](std::uint32_t k) {
+        return k < kMaxColours ? k < key : false;
+      }));
+    };
+    std::uint32_t widest = 0;
+    for (std::uint32_t c = 0; c < colours; ++c) {
+      const auto size = static_cast<std::uint32_t>(std::count(keys.begin(), keys.end(), c));
+      EXPECT_EQ(plan.begin[c], below(c)) << "trial " << trial << " colour " << c;
+      EXPECT_EQ(plan.begin[c + 1] - plan.begin[c], size) << "trial " << trial << " colour " << c;
+      widest = std::max(widest, size);
+    }
+    const auto overflow = static_cast<std::uint32_t>(std::count(keys.begin(), keys.end(), kMaxColours));
+    EXPECT_EQ(plan.begin[colours], below(kMaxColours)) << "trial " << trial;
+    EXPECT_EQ(plan.begin[colours + 1], below(kMaxColours) + overflow) << "trial " << trial;
+    for (std::uint32_t c = colours + 2; c < kMaxColours + 2; ++c)
+      EXPECT_EQ(plan.begin[c], plan.begin[colours + 1]) << "trial " << trial << " word " << c;
+    EXPECT_EQ(plan.widest(), widest) << "trial " << trial;
+    EXPECT_EQ(plan.empty(), below(kMaxColours) + overflow == 0) << "trial " << trial;
+  }
+}
+
 }  // namespace
 }  // namespace marbles::narrowphase
