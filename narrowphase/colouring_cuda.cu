@@ -249,13 +249,6 @@ void ColouringCuda::launch_rounds(const Entries& entries, const ColouringArrays&
                                                               at.colour, rule, at.body_word, at.body_used);
 }
 
-// The ranges (ColourRanges::begin) from the firsts read back (plan_of_firsts).
-static void ranges_of(const std::uint32_t* host, std::uint32_t n, std::vector<std::uint32_t>& begin) {
-  ColourPlan plan;
-  plan_of_firsts(host, n, plan);
-  begin.assign(plan.begin, plan.begin + plan.colours + 2);
-}
-
 // The plan in device memory, from the firsts the sort left there: the
 // ranges the host reads back, for the stages that walk every colour in one
 // launch. n: the contacts, or with count_on_device a room (count_within).
@@ -267,14 +260,14 @@ __global__ void plan_kernel(const std::uint32_t* first, std::uint32_t n, const s
 
 std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_t n,
                                              const std::uint32_t* count_on_device, std::size_t body_count,
-                                             const std::uint32_t*& position, std::vector<std::uint32_t>& begin,
-                                             int sm_count, cudaStream_t s, const std::uint8_t* kept_colour,
+                                             const std::uint32_t*& position, ColourPlan& plan, int sm_count,
+                                             cudaStream_t s, const std::uint8_t* kept_colour,
                                              std::uint8_t* sorted_colour, bool read_back) {
   position = nullptr;
   m_rounds = 0;
   m_last_count = n;
   if (n == 0) {
-    begin.assign(2, 0);
+    plan = ColourPlan{};
     MARBLES_CUDA_CHECK(cudaMemsetAsync(m_plan.get(), 0, sizeof(ColourPlan), s));
     return 0;
   }
@@ -306,8 +299,8 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   m_rounds = m_host[kRounds];
   if (count_on_device) m_last_count = m_host[kCount];
-  ranges_of(m_host, m_last_count <= n ? m_last_count : 0, begin);
-  return static_cast<std::uint32_t>(begin.size() - 2);
+  plan_of_firsts(m_host, m_last_count <= n ? m_last_count : 0, plan);  // as plan_kernel makes it
+  return plan.colours;
 }
 
 void ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n,

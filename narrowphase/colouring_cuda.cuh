@@ -35,8 +35,8 @@ class ColouringCuda {
 
   // The solver colouring of the contacts of body pairs[0, n): colours by
   // contact_rank; `position` (device) gets each contact's place in
-  // colour-major order (index order within a colour, overflow last), `begin`
-  // the host ranges as ColourRanges::begin (colours + 2 entries). Returns
+  // colour-major order (index order within a colour, overflow last), `plan`
+  // the host ranges (plan_of_firsts: as ColourRanges::begin). Returns
   // the colour count. kept_colour (device, one per contact, may be null):
   // colours kept as ContactColouring::colour_and_sort keeps them;
   // sorted_colour (device, may be null) gets each sorted contact's colour
@@ -48,15 +48,15 @@ class ColouringCuda {
   // none where they do not fit it): read with the ranges, last_count().
   // position and sorted_colour then have n entries, those past the contacts
   // placed after them. Without `read_back`, nothing is read and nothing
-  // waits: the ranges are only device_plan()'s (begin is left as it was,
+  // waits: the ranges are only device_plan()'s (`plan` is left as it was,
   // and 0 returned; rounds() and last_count() are not known).
   std::uint32_t colour_and_sort(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* count_on_device,
-                                std::size_t body_count, const std::uint32_t*& position,
-                                std::vector<std::uint32_t>& begin, int sm_count, cudaStream_t stream,
+                                std::size_t body_count, const std::uint32_t*& position, ColourPlan& plan,
+                                int sm_count, cudaStream_t stream,
                                 const std::uint8_t* kept_colour = nullptr, std::uint8_t* sorted_colour = nullptr,
                                 bool read_back = true);
-  // The last colour_and_sort's ranges in device memory (as `begin` and the
-  // colour count; for a room, those of the contacts in it, or none where
+  // The last colour_and_sort's ranges in device memory (as `plan`, word for
+  // word; for a room, those of the contacts in it, or none where
   // they outgrew it): what the stages that walk every colour in one launch
   // read. Written in the stream's order, valid until the next call.
   const ColourPlan* device_plan() const { return m_plan.get_as<ColourPlan>(); }

@@ -171,7 +171,8 @@ __global__ void contacts_of_records_kernel(SweepRecords records, ImpactRecords i
     out[t] = contact_of_record(records, impacts, first + t, world, table, walls);
 }
 
-__global__ void advance_walls_kernel(WallShape* walls, std::uint32_t count, real h) {
+__global__ void advance_walls_kernel(WallShape* walls, std::uint32_t count, real h, const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
   const std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
   if (k < count) walls[k].point += walls[k].velocity * h;
 }
@@ -243,9 +244,10 @@ void launch_contacts_of_records(const SweepRecords& records, const ImpactRecords
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_advance_walls(WallShape* walls, std::uint32_t count, real h, cudaStream_t stream) {
+void launch_advance_walls(WallShape* walls, std::uint32_t count, real h, cudaStream_t stream,
+                          const unsigned long long* skip) {
   if (count == 0) return;
-  advance_walls_kernel<<<(count + kBlock - 1) / kBlock, kBlock, 0, stream>>>(walls, count, h);
+  advance_walls_kernel<<<(count + kBlock - 1) / kBlock, kBlock, 0, stream>>>(walls, count, h, skip);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

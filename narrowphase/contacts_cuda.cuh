@@ -103,7 +103,9 @@ void launch_contacts_of_records(const SweepRecords& records, const ImpactRecords
                                 std::uint32_t count, const BodiesView& world, const PairTable& table,
                                 const WallShape* walls, Contact* out, int sm_count, cudaStream_t stream);
 
-// Moves translating walls by h times their velocity.
-void launch_advance_walls(WallShape* walls, std::uint32_t count, real h, cudaStream_t stream);
+// Moves translating walls by h times their velocity; nothing where `skip`
+// is set (cuda::skipped).
+void launch_advance_walls(WallShape* walls, std::uint32_t count, real h, cudaStream_t stream,
+                          const unsigned long long* skip = nullptr);
 
 }  // namespace marbles::narrowphase::cuda

@@ -184,23 +184,6 @@ __global__ void check_substep_kernel(SubstepCheck c, unsigned long long* words) 
   }
 }
 
-// The state a substep starts from (positions, velocities, angular
-// velocities, walls) kept, unless an earlier substep of the step outgrew a
-// room (then the copy still holds that substep's start).
-__global__ void keep_substep_kernel(BodiesView b, const narrowphase::WallShape* walls, std::uint32_t wall_count,
-                                    Vec3* kept, narrowphase::WallShape* kept_walls, const unsigned long long* skip) {
-  if (::marbles::cuda::skipped(skip)) return;
-  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < b.count;
-       i += std::size_t(gridDim.x) * blockDim.x) {
-    kept[i] = b.position[i];
-    kept[b.count + i] = b.velocity[i];
-    kept[2 * b.count + i] = b.angular_velocity[i];
-  }
-  for (std::size_t k = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; k < wall_count;
-       k += std::size_t(gridDim.x) * blockDim.x)
-    kept_walls[k] = walls[k];
-}
-
 // Where a step waits once, at its end, rather than once a substep and at
 // its end (MARBLES_CUDA_WAITS): auto (the default) where the solve takes one
 // launch (the small scenes: the wait was much of their step), step in every
@@ -455,6 +438,30 @@ class CudaStep final : public StepBackend {
     else m_count_on_device = contact_count;
   }
 
+  // The next substep's rooms from a substep's counts (or a step's most):
+  // false where the pairs or the contacts outgrew theirs (`again`: a second
+  // try). Pairs that outgrew theirs made no contact, so the contacts' room
+  // then holds one for each.
+  bool fit_rooms(std::size_t pairs, std::size_t contacts, bool again) {
+    const bool pairs_fit = pairs <= m_pair_items, contacts_fit = contacts <= m_count;
+    if (m_model.collisions) m_pair_room.fit(pairs, again || !pairs_fit);
+    m_contact_room.fit(pairs_fit ? contacts : contacts + pairs, again || !pairs_fit || !contacts_fit);
+    return pairs_fit && contacts_fit;
+  }
+  // The grid the device chose outgrew the broad phase's plan (no pairs): the
+  // next search reads its bounds and plans, waiting.
+  void plan_again() {
+    m_broadphase->replan();
+    m_pair_room = Room{};
+    ++m_counters.grid_replans;
+  }
+  // The grid fit a plan larger than it asks (a far sphere come back): the
+  // next substep reads its bounds and plans smaller, one wait.
+  void plan_smaller() {
+    m_broadphase->replan();
+    ++m_counters.grid_shrinks;
+  }
+
   // After the read of the counts (find_contacts' where it waited, else the
   // colouring's): the next substep's rooms from them, and the words read
   // with them. False where a count outgrew its room: the pairs or contacts
@@ -463,25 +470,14 @@ class CudaStep final : public StepBackend {
   // contacts' room then holds one for each.
   bool take_counts(std::size_t pair_count, std::size_t contacts, bool again) {
     if (m_pair_count_on_device && pair_count == broadphase::SubdivisionCuda::kNoPairCount) {
-      // The grid the device chose outgrew the broad phase's plan: no pairs.
       // The substep finds them again as the first one does, waiting for the
       // bounds and the counts.
-      m_broadphase->replan();
-      m_pair_room = Room{};
+      plan_again();
       m_replanned = true;
-      ++m_counters.grid_replans;
       return false;
     }
-    if (m_pair_count_on_device && m_pinned[kPlanOutsized] != 0) {
-      // The grid fit a plan larger than it asks (a far sphere come back):
-      // the next substep reads its bounds and plans smaller, one wait.
-      m_broadphase->replan();
-      ++m_counters.grid_shrinks;
-    }
-    const bool pairs_fit = pair_count <= m_pair_items, contacts_fit = contacts <= m_count;
-    if (m_model.collisions) m_pair_room.fit(pair_count, again || !pairs_fit);
-    m_contact_room.fit(pairs_fit ? contacts : contacts + pair_count, again || !pairs_fit || !contacts_fit);
-    if (!pairs_fit || !contacts_fit) return false;
+    if (m_pair_count_on_device && m_pinned[kPlanOutsized] != 0) plan_smaller();
+    if (!fit_rooms(pair_count, contacts, again)) return false;
     m_count = static_cast<std::uint32_t>(contacts);
     m_count_on_device = nullptr;
     m_counters.candidate_pairs += pair_count;
@@ -524,8 +520,6 @@ class CudaStep final : public StepBackend {
       nc::launch_sorted_records(in, pairs_d(), m_kept_valid ? m_match.get_as<std::uint32_t>() : nullptr,
                                 m_cache.entries(), position, m_count, nullptr, m_records, m_impacts, m_sm, m_stream);
     }
-    m_plan.colours = colours;
-    std::copy(m_begin.begin(), m_begin.begin() + colours + 2, m_plan.begin);
     m_last_widest = m_plan.widest();
     m_last_colours = colours;
     m_counters.colours = std::max(m_counters.colours, colours);
@@ -563,7 +557,6 @@ class CudaStep final : public StepBackend {
     }
     if (solve_in_one_launch()) {
       if (!m_one_wait) ++m_counters.one_launch_solves;  // else counted on the device for substeps with contacts
-      m_one_launch_step = m_one_wait;
       if (nc::launch_solve(m_records, device_plan(), bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm,
                            m_stream))
         ++m_counters.cluster_stages;
@@ -603,7 +596,7 @@ class CudaStep final : public StepBackend {
     integrator::cuda::launch_integrate_positions(m_device.view(), h, m_flags.get_as<unsigned>(), m_sm, m_stream);  // flags[0]
     if (m_model.gravity && m_model.verlet)
       integrator::cuda::launch_apply_gravity(m_device.view(), m_model.g, m_model.second_kick(h), m_sm, m_stream);
-    nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream);
+    nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream, skip());
   }
 
   // The rebound shifts (only an impact gives a contact one: they are walked
@@ -643,9 +636,6 @@ class CudaStep final : public StepBackend {
     m_redo_from = -1;
     m_counters_at.clear();
     m_one_wait = one_wait_possible();
-    m_one_wait_ran = m_one_wait;
-    m_one_launch_step = false;
-    m_slots = std::min(m_last_colours + 2, narrowphase::kMaxColours + 1);
     m_step_candidates = false;
   }
 
@@ -657,7 +647,7 @@ class CudaStep final : public StepBackend {
     auto* flags = m_flags.get_as<unsigned long long>();
     nc::launch_max_overlap(m_records, m_count, m_device.view(), walls(), flags + kDeepest, m_sm, m_stream,
                            m_count_on_device, skip());
-    const int words = m_one_wait_ran ? kStepWords : m_watch ? kFlagWords : kKineticEnergy;
+    const int words = m_one_wait ? kStepWords : m_watch ? kFlagWords : kKineticEnergy;
     if (m_watch && m_device.view().count > 0) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
       watch_kernel<<<::marbles::cuda::grid_for(m_device.view().count, m_sm), kWatchBlock, 0, m_stream>>>(
@@ -672,7 +662,7 @@ class CudaStep final : public StepBackend {
       undo_outgrown_substep();
       return;
     }
-    if (m_one_wait_ran) take_step_words();
+    if (m_one_wait) take_step_words();
     m_quiet_steps = m_step_candidates ? 0 : m_quiet_steps + 1;
     ++m_steps_since_undo;
     if (m_watch) {
@@ -725,7 +715,7 @@ class CudaStep final : public StepBackend {
         {"colouring", m_colouring.device_bytes()},
         {"scratch", m_scratch.bytes()},
         {"watchdog's copy", m_kept.device_bytes() + m_kept_cache.device_bytes() + m_kept_walls.bytes()},
-        {"substep's start", bytes_of(m_substep_start, m_substep_walls)},
+        {"substep's start", m_substep_start.device_bytes()},
         {"local order", m_local_sweeps.device_bytes()},
         {"small", bytes_of(m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_flags, m_hit, m_moved,
                            m_contact_chunk, m_check)},
@@ -870,7 +860,7 @@ class CudaStep final : public StepBackend {
   // device memory, shaped for the widest colour the host read (without
   // waits, the last step's).
   nc::DevicePlan device_plan() const {
-    return {m_colouring.device_plan(), m_one_wait ? m_last_widest : m_plan.widest()};
+    return {m_colouring.device_plan(), m_last_widest};
   }
   unsigned long long* flag(StepWord w) const { return m_flags.get_as<unsigned long long>() + w; }
   // The word the state's kernels skip on (cuda::skipped) in a step without
@@ -894,17 +884,18 @@ class CudaStep final : public StepBackend {
 
   // The warm start and sweeps of a step without waits where the solve takes
   // a launch per colour: a launch per slot of the device's plan, for the
-  // last step's colours and one more, then the overflow set (m_slots; a
+  // last step's colours and one more, then the overflow set (slot_count; a
   // substep with more is undone: check_substep_kernel), each with a grid for
   // the last step's widest colour and an eighth more (a wider colour is
   // strided over). Slots past the colours launch and do nothing. The turns
   // are launched apart. A launch loads its records early where the launch
   // before wrote another slot's (ContactRange::early; every slot's range is
   // its own).
+  std::uint32_t slot_count() const { return std::min(m_last_colours + 2, narrowphase::kMaxColours + 1); }
   void solve_in_slots(narrowphase::SolverBody* bodies, real inv_h, int sweeps) {
     constexpr int kAll = -2, kNone = -1;
     int last = kAll;  // the records were made (and the impacts wrote) before
-    const std::uint32_t width = m_last_widest + m_last_widest / 8 + 1;
+    const std::uint32_t width = m_last_widest + m_last_widest / 8 + 1, slots = slot_count();
     auto slot = [&](std::uint32_t s, bool backwards, bool writes) {
       nc::ContactRange r;
       r.plan = m_colouring.device_plan();
@@ -917,12 +908,12 @@ class CudaStep final : public StepBackend {
       return r;
     };
     if (m_model.solver.warm_start)
-      for (std::uint32_t s = 0; s < m_slots; ++s)
+      for (std::uint32_t s = 0; s < slots; ++s)
         nc::launch_warm_start(m_records, slot(s, false, false), bodies, m_terms, m_stream);
     for (int it = 0; it < sweeps; ++it)
-      for (std::uint32_t k = 0; k < m_slots; ++k) {
+      for (std::uint32_t k = 0; k < slots; ++k) {
         const bool backwards = it % 2 == 1;
-        nc::launch_sweep(m_records, slot(backwards ? m_slots - 1 - k : k, backwards, true), bodies, inv_h, m_terms,
+        nc::launch_sweep(m_records, slot(backwards ? slots - 1 - k : k, backwards, true), bodies, inv_h, m_terms,
                          m_stream);
       }
   }
@@ -931,21 +922,15 @@ class CudaStep final : public StepBackend {
     if (m_waits == Waits::substep || m_local || m_replanned || m_steps_since_undo < kUndoHold) return false;
     if (!m_model.collisions && !m_model.wall_contacts) return false;
     if (m_contact_room.capacity == 0 || (m_model.collisions && m_pair_room.capacity == 0)) return false;
-    if (m_waits == Waits::step) return true;
-    return m_solve_mode == SolveMode::one_launch ||
-           (m_solve_mode == SolveMode::auto_ && m_last_widest <= kOneLaunchWidest);  // solve_in_one_launch's
+    return m_waits == Waits::step || solve_in_one_launch();  // with the last step's widest colour
   }
 
+  // The moving state at a substep's start, unless an earlier substep of
+  // the step outgrew a room (the copy then still holds that substep's
+  // start); the walls need no copy, their advance skipped from there on.
   void keep_substep_start() {
     m_counters_at.push_back(m_counters);
-    const BodiesView b = m_device.view();
-    const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
-    if (b.count == 0 && wall_count == 0) return;
-    auto* kept = m_substep_start.as<Vec3>(3 * b.count);
-    auto* kept_walls = m_substep_walls.as<narrowphase::WallShape>(wall_count);
-    keep_substep_kernel<<<::marbles::cuda::grid_for(std::max<std::size_t>(b.count, wall_count), m_sm), kWatchBlock, 0,
-                          m_stream>>>(b, walls(), wall_count, kept, kept_walls, skip());
-    MARBLES_CUDA_CHECK_LAUNCH();
+    m_device.copy_state_to(m_substep_start, m_stream, skip(), m_sm);
   }
 
   // colour_contacts without a wait: the colouring leaves its plan on the
@@ -956,7 +941,7 @@ class CudaStep final : public StepBackend {
     // step ends non-finite), so nothing to check or make.
     if (!m_count_on_device) return;
     const std::uint32_t* position = nullptr;
-    m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_begin, m_sm,
+    m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_plan, m_sm,
                                 m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
                                 m_sorted_colour.as_room<std::uint8_t>(m_count), false);
     m_impact_candidates = m_model.solver.restitution && m_quiet_steps < kImpactHold;
@@ -973,7 +958,7 @@ class CudaStep final : public StepBackend {
     c.uniform = m_uniform_arms;
     c.radius = m_radius;
     c.plan = m_colouring.device_plan();
-    c.slots = solve_in_one_launch() ? 0 : m_slots;
+    c.slots = solve_in_one_launch() ? 0 : slot_count();
     c.substep = static_cast<std::uint32_t>(m_substep_index - 1);
     check_substep_kernel<<<1, 32, 0, m_stream>>>(c, m_flags.get_as<unsigned long long>());
     MARBLES_CUDA_CHECK_LAUNCH();
@@ -984,40 +969,21 @@ class CudaStep final : public StepBackend {
                               m_stream);
   }
 
-  // A step without waits whose substep outgrew a room: the state (positions,
-  // velocities, walls) put back to that substep's start (the cache's store
-  // and every later kernel that writes the state skipped it), the rooms
+  // A step without waits whose substep outgrew a room: the moving state put
+  // back to that substep's start (the cache's store, the walls' advance and
+  // every later kernel that writes what lasts skipped it), the rooms
   // grown past what the step found, and the substeps from there on done
   // again with a wait each. The figures of the substeps before it stand.
   void undo_outgrown_substep() {
     const auto from = static_cast<int>(m_end_flags[kRedo] - 1);
     m_counters = m_counters_at.at(static_cast<std::size_t>(from));
     add_step_figures();
-    const BodiesView b = m_device.view();
-    const Vec3* kept = m_substep_start.get_as<Vec3>();
-    auto back = [&](Vec3* to, const Vec3* from_kept) {
-      if (b.count > 0)
-        MARBLES_CUDA_CHECK(cudaMemcpyAsync(to, from_kept, b.count * sizeof(Vec3), cudaMemcpyDeviceToDevice, m_stream));
-    };
-    back(b.position, kept);
-    back(b.velocity, kept + b.count);
-    back(b.angular_velocity, kept + 2 * b.count);
-    const std::size_t wall_bytes = m_model.wall_shapes.size() * sizeof(narrowphase::WallShape);
-    if (wall_bytes > 0)
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_walls.get(), m_substep_walls.get(), wall_bytes, cudaMemcpyDeviceToDevice,
-                                         m_stream));
-    const std::size_t pairs = m_end_flags[kMostPairs], contacts = m_end_flags[kMostContacts];
-    const bool pairs_outgrown = pairs > m_pair_items, rooms_outgrown = pairs_outgrown || contacts > m_count;
+    m_substep_start.copy_state_to(m_device, m_stream);
     m_last_colours = std::max(m_last_colours, static_cast<std::uint32_t>(m_end_flags[kMostColours]));
-    if (m_broadphase && m_end_flags[kGridPast] != 0) {  // the next call reads its bounds and plans, waiting
-      m_broadphase->replan();
-      m_pair_room = Room{};
-      ++m_counters.grid_replans;
-    } else if (m_model.collisions) {
-      m_pair_room.fit(pairs, pairs_outgrown);
-    }
-    m_contact_room.fit(pairs_outgrown ? contacts + pairs : contacts, true);
-    if (rooms_outgrown || m_end_flags[kGridPast] != 0) ++m_counters.pair_redos;
+    const bool rooms_fit = fit_rooms(m_end_flags[kMostPairs], m_end_flags[kMostContacts], false);
+    const bool grid_past = m_broadphase && m_end_flags[kGridPast] != 0;
+    if (grid_past) plan_again();
+    if (!rooms_fit || grid_past) ++m_counters.pair_redos;
     ++m_counters.undone_substeps;
     m_counters.unwaited_substeps += static_cast<std::uint64_t>(from);
     // The step's words from here are the redone substeps' own (with waits):
@@ -1026,7 +992,7 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaMemsetAsync(flag(kNonFinite), 0, sizeof(unsigned long long), m_stream));
     MARBLES_CUDA_CHECK(cudaMemsetAsync(flag(kRedo), 0, (kStepWords - kRedo) * sizeof(unsigned long long), m_stream));
     m_step_candidates = m_step_candidates || m_end_flags[kCandidateSeen] != 0;  // the substeps before it
-    m_one_wait = m_one_wait_ran = false;
+    m_one_wait = false;
     m_steps_since_undo = -1;  // this step's end counts it: kUndoHold steps after this one
     m_redo_from = from;
     m_substep_index = from;
@@ -1039,7 +1005,7 @@ class CudaStep final : public StepBackend {
     m_counters.contacts += m_end_flags[kContactSum];
     m_counters.colours = std::max(m_counters.colours, static_cast<std::uint32_t>(m_end_flags[kMostColours]));
     m_counters.overflow += m_end_flags[kOverflowSum];
-    if (m_one_launch_step) m_counters.one_launch_solves += m_end_flags[kSolvedSubsteps];
+    if (solve_in_one_launch()) m_counters.one_launch_solves += m_end_flags[kSolvedSubsteps];  // the step's choice
     m_counters.uniform_arms += m_end_flags[kUniformSubsteps];
     m_counters.impact_words += m_end_flags[kImpactWordSubsteps];
   }
@@ -1050,12 +1016,8 @@ class CudaStep final : public StepBackend {
     add_step_figures();
     m_cache.stores_kept();
     m_counters.unwaited_substeps += static_cast<std::uint64_t>(m_substep_index);
-    if (m_model.collisions) m_pair_room.fit(m_end_flags[kMostPairs], false);
-    m_contact_room.fit(m_end_flags[kMostContacts], false);
-    if (m_broadphase && m_end_flags[kOutsizedSeen] != 0) {
-      m_broadphase->replan();
-      ++m_counters.grid_shrinks;
-    }
+    fit_rooms(m_end_flags[kMostPairs], m_end_flags[kMostContacts], false);  // all fit: no undo
+    if (m_broadphase && m_end_flags[kOutsizedSeen] != 0) plan_smaller();
     m_last_widest = static_cast<std::uint32_t>(m_end_flags[kWidest]);
     m_last_colours = static_cast<std::uint32_t>(m_end_flags[kMostColours]);
     m_step_candidates = m_step_candidates || m_end_flags[kCandidateSeen] != 0;
@@ -1083,7 +1045,7 @@ class CudaStep final : public StepBackend {
   // The colouring of this substep's contacts (m_count, or a room of them
   // with their count on the device); the one wait for its ranges.
   std::uint32_t colour_and_sort(const std::uint32_t*& position) {
-    return m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_begin, m_sm,
+    return m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_plan, m_sm,
                                        m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
                                        m_sorted_colour.as_room<std::uint8_t>(m_count));
   }
@@ -1161,9 +1123,10 @@ class CudaStep final : public StepBackend {
   // The solve (warm start and sweeps) in one launch: always, never, or
   // (auto) where the widest colour is small enough that a launch per colour
   // would leave the device waiting for the host (MARBLES_CUDA_SOLVE).
+  // The widest colour is this substep's where it waited for the colours, else
+  // the last step's (m_last_widest).
   bool solve_in_one_launch() const {
-    if (m_one_wait && m_solve_mode == SolveMode::auto_) return m_last_widest <= kOneLaunchWidest;  // the last step's
-    if (m_solve_mode == SolveMode::auto_) return m_plan.widest() <= kOneLaunchWidest;
+    if (m_solve_mode == SolveMode::auto_) return m_last_widest <= kOneLaunchWidest;
     return m_solve_mode == SolveMode::one_launch;
   }
 
@@ -1243,18 +1206,18 @@ class CudaStep final : public StepBackend {
   DeviceBuffer m_check;  // state_finite()'s flag
 
   std::uint32_t m_count = 0;          // contacts of this substep (their room where m_count_on_device)
-  // One wait a step (one_wait_possible): where (MARBLES_CUDA_WAITS), this
-  // attempt's substeps without waits, this step's read holds their words.
+  // One wait a step (one_wait_possible): where (MARBLES_CUDA_WAITS), and
+  // whether this attempt's substeps run without waits (then the step's
+  // read holds their words).
   Waits m_waits = waits_from_environment();
-  bool m_one_wait = false, m_one_wait_ran = false;
+  bool m_one_wait = false;
   int m_substep_index = 0;            // substeps begun in this attempt
   int m_redo_from = -1;               // substep_to_redo()
-  // The last substep's widest colour and colours (after a step without
-  // waits, the most of its substeps): the one-launch stages' shape, the slots.
+  // The widest colour and the colours of the last substep that waited for
+  // them, or of the last step without waits (the most of its substeps): the
+  // one-launch stages' shape and choice, the slots (solve_in_slots).
   std::uint32_t m_last_widest = 0;
   std::uint32_t m_last_colours = 0;
-  std::uint32_t m_slots = 0;          // this step's colour launches a sweep without waits (solve_in_slots)
-  bool m_one_launch_step = false;     // this step's solves without waits took one launch
   // Steps since the last with an impact candidate: a step without waits
   // keeps impact words until kImpactHold steps in a row had none (a pour's
   // impacts come and go: an impact candidate in records without them is a
@@ -1269,7 +1232,7 @@ class CudaStep final : public StepBackend {
   int m_steps_since_undo = 1 << 20;
   static constexpr int kUndoHold = 8;
   bool m_expect_uniform = false;      // the last substep's contacts all had m_radius's arms
-  DeviceBuffer m_substep_start, m_substep_walls;  // positions, velocities, angular velocities; walls: a substep's start
+  DeviceWorld m_substep_start;        // the moving state at a substep's start (the walls move only where not undone)
   std::vector<StepCounters> m_counters_at;  // the counters at each substep's start without waits
   // The rooms of the broad phase's pairs and of the contacts (capacity 0:
   // no count yet, find_contacts waits for the counts).
@@ -1289,7 +1252,6 @@ class CudaStep final : public StepBackend {
   narrowphase::SweepRecords m_records;
   narrowphase::ImpactRecords m_impacts;  // impact words with impact candidates, else approach speeds
   real m_lookahead = 0;  // find_contacts' h: the colouring makes the contacts again with it
-  std::vector<std::uint32_t> m_begin{0, 0};  // the colouring's ranges, copied into m_plan
   nc::ColourPlan m_plan;  // the substep's colours, as the host's walk and the kernels take them
   // The solve in one launch (solve_in_one_launch) at most this many
   // contacts a colour in auto mode.

@@ -19,6 +19,18 @@ using ::marbles::cuda::DeviceBuffer;
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 
+// The moving state copied, unless skipped (DeviceWorld::copy_state_to).
+__global__ void copy_state_kernel(BodiesView from, Vec3* position, Vec3* velocity, Vec3* angular,
+                                  const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < from.count;
+       i += std::size_t(gridDim.x) * blockDim.x) {
+    position[i] = from.position[i];
+    velocity[i] = from.velocity[i];
+    angular[i] = from.angular_velocity[i];
+  }
+}
+
 template <class T>
 __global__ void gather_kernel(const T* from, const std::uint32_t* order, std::size_t n, T* to) {
   for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n; i += std::size_t(gridDim.x) * blockDim.x)
@@ -131,13 +143,20 @@ void DeviceWorld::download(World& w, cudaStream_t s) const {
   download_state(w, s);
 }
 
-void DeviceWorld::copy_state_to(DeviceWorld& to, cudaStream_t s) const {
+void DeviceWorld::copy_state_to(DeviceWorld& to, cudaStream_t s, const unsigned long long* skip, int sm_count) const {
   to.m_count = m_count;
+  Vec3 *position = to.m_position.as<Vec3>(m_count), *velocity = to.m_velocity.as<Vec3>(m_count),
+       *angular = to.m_angular_velocity.as<Vec3>(m_count);
+  if (skip) {
+    if (m_count == 0) return;
+    copy_state_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(view(), position, velocity, angular, skip);
+    MARBLES_CUDA_CHECK_LAUNCH();
+    return;
+  }
   const std::size_t bytes = m_count * sizeof(Vec3);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_position.as<Vec3>(m_count), m_position.get(), bytes, cudaMemcpyDeviceToDevice, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_velocity.as<Vec3>(m_count), m_velocity.get(), bytes, cudaMemcpyDeviceToDevice, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_angular_velocity.as<Vec3>(m_count), m_angular_velocity.get(), bytes,
-                                     cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(position, m_position.get(), bytes, cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(velocity, m_velocity.get(), bytes, cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(angular, m_angular_velocity.get(), bytes, cudaMemcpyDeviceToDevice, s));
 }
 
 BodiesView DeviceWorld::view() const {

@@ -26,8 +26,11 @@ class DeviceWorld {
   void download(World& world, cudaStream_t stream) const;
 
   // The moving state (positions, velocities, angular velocities) copied on
-  // the device into `to`, which is sized to match.
-  void copy_state_to(DeviceWorld& to, cudaStream_t stream) const;
+  // the device into `to`, which is sized to match. With `skip` (not null),
+  // by a kernel that copies nothing where it is set when it runs
+  // (cuda::skipped: a substep's start kept in a step without waits).
+  void copy_state_to(DeviceWorld& to, cudaStream_t stream, const unsigned long long* skip = nullptr,
+                     int sm_count = 1) const;
 
   // The spheres' order by their home cells (cell_order, sim/world.hpp: the
   // same order, from the same grid) into order[0, size()) (device; its

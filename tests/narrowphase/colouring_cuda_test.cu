@@ -73,6 +73,11 @@ void poison_device_plan(const narrowphase::cuda::ColouringCuda& gpu) {
   ASSERT_EQ(cudaMemset(const_cast<ColourPlan*>(gpu.device_plan()), 0xab, sizeof(ColourPlan)), cudaSuccess);
 }
 
+// A plan's ranges as ColourRanges::begin holds them (colours + 2 words).
+std::vector<std::uint32_t> ranges_of(const ColourPlan& plan) {
+  return std::vector<std::uint32_t>(plan.begin, plan.begin + plan.colours + 2);
+}
+
 // The plan the colouring left in device memory, as the stages that walk
 // every colour in one launch read it: the host's ranges, and past them the
 // last range's end.
@@ -80,7 +85,7 @@ void expect_device_plan(const narrowphase::cuda::ColouringCuda& gpu, const std::
   ColourPlan plan;
   ASSERT_EQ(cudaMemcpy(&plan, gpu.device_plan(), sizeof plan, cudaMemcpyDeviceToHost), cudaSuccess);
   ASSERT_EQ(plan.colours + 2, begin.size());
-  EXPECT_EQ(std::vector<std::uint32_t>(plan.begin, plan.begin + plan.colours + 2), begin);
+  EXPECT_EQ(ranges_of(plan), begin);
   for (std::uint32_t c = plan.colours + 2; c < kMaxColours + 2; ++c) EXPECT_EQ(plan.begin[c], begin.back()) << c;
 }
 
@@ -100,7 +105,7 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   narrowphase::cuda::ColouringCuda gpu;
   if (scratch) gpu.share_scratch(*scratch);
   if (rounds) gpu.share_round_memory(*rounds);
-  std::vector<std::uint32_t> begin;
+  ColourPlan plan;
   const auto n = static_cast<std::uint32_t>(input.size());
   ::marbles::cuda::DeviceBuffer kept_memory, sorted_memory;  // freed however the test ends
   auto* kept_d = kept_memory.as<std::uint8_t>(n + 1);
@@ -109,9 +114,10 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   if (!kept.empty()) ASSERT_EQ(cudaMemcpy(kept_d, kept.data(), n, cudaMemcpyHostToDevice), cudaSuccess);
   const std::uint32_t* position_d = nullptr;
   poison_device_plan(gpu);
-  const std::uint32_t colours = gpu.colour_and_sort(d.pairs, n, nullptr, bodies, position_d, begin, 8, nullptr,
+  const std::uint32_t colours = gpu.colour_and_sort(d.pairs, n, nullptr, bodies, position_d, plan, 8, nullptr,
                                                     kept.empty() ? nullptr : kept_d, sorted_colour);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
+  const std::vector<std::uint32_t> begin = ranges_of(plan);
   EXPECT_EQ(colours, ranges.colours);
   EXPECT_EQ(begin, ranges.begin);
   expect_device_plan(gpu, ranges.begin);
@@ -150,12 +156,13 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
       const std::uint32_t* count_d =
           ::marbles::cuda::upload(count_memory, std::vector<std::uint32_t>{count}, nullptr);
       ASSERT_EQ(cudaMemset(sorted_d, 0xab, items), cudaSuccess);
-      std::vector<std::uint32_t> room_begin;
+      ColourPlan room_plan;
       poison_device_plan(gpu);
       const std::uint32_t room_colours =
-          gpu.colour_and_sort(pairs_d, items, count_d, bodies, position_d, room_begin, 8, nullptr,
+          gpu.colour_and_sort(pairs_d, items, count_d, bodies, position_d, room_plan, 8, nullptr,
                               kept.empty() ? nullptr : kept_room_d, sorted_d);
       ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
+      const std::vector<std::uint32_t> room_begin = ranges_of(room_plan);
       EXPECT_EQ(gpu.last_count(), count);
       expect_device_plan(gpu, room_begin);
       if (count > items) {

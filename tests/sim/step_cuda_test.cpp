@@ -145,10 +145,8 @@ bool unwaits(int steps) {
 // `pair_redos` (if given) adds up the substeps whose broad phase outgrew
 // its pairs' room and ran again; `grid_replans` those whose grid outgrew
 // the broad phase's plan; `trims` the buffers trimmed to their need;
-// `undone` the substeps that waited for nothing and outgrew a room.
-// Where a step waits once (MARBLES_CUDA_WAITS) and a colour is small enough
-// that the solve takes one launch (every scene here), the steps after the
-// first run their substeps without a wait; with a wait a substep, none does.
+// `undone` the substeps that waited for nothing and outgrew a room. Some
+// substep runs without a wait exactly where unwaits() says.
 void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps,
                      std::uint64_t* pair_redos = nullptr, std::uint64_t* grid_replans = nullptr,
                      std::uint64_t* trims = nullptr, std::uint64_t* undone = nullptr) {
@@ -297,10 +295,9 @@ TEST(StepCuda, PourMatchesTheCpuBitForBit) {
   std::printf("substeps undone in the pour: %llu\n", static_cast<unsigned long long>(undone));
   // Trimmed every step (ctest step_cuda_test.trim_every_step), the pour's
   // falling need (a substep's impact words gone) frees buffers: the bits
-  // above held across them.
-  // A step that waits once lays its records out for the rooms and keeps
-  // impact words while the pour lands: its need does not fall within these
-  // steps (TrimmedBuffers* below trim with it).
+  // above held across them. Not where a step waits once: it lays its records
+  // out for the rooms and keeps impact words while the pour lands, so its
+  // need does not fall within these steps (TrimmedBuffers* below trim so).
   const char* every = std::getenv("MARBLES_CUDA_TRIM_EVERY");
   if (every && std::strcmp(every, "1") == 0 && !unwaits(400)) {
     EXPECT_GT(trims, 0u);
