@@ -1252,7 +1252,7 @@ class CudaStep final : public StepBackend {
   narrowphase::SweepRecords m_records;
   narrowphase::ImpactRecords m_impacts;  // impact words with impact candidates, else approach speeds
   real m_lookahead = 0;  // find_contacts' h: the colouring makes the contacts again with it
-  nc::ColourPlan m_plan;  // the substep's colours, as the host's walk and the kernels take them
+  nc::ColourPlan m_plan;  // the substep's colours as read back with a wait: the launches per colour walk it
   // The solve in one launch (solve_in_one_launch) at most this many
   // contacts a colour in auto mode.
   static constexpr std::uint32_t kOneLaunchWidest = 16384;
