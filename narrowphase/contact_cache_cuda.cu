@@ -128,6 +128,23 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
   }
 }
 
+// The entries copied into another cache's arrays: the first *size of them
+// (the runs' last first), never the room past it that no store wrote.
+// tangent and rolling are null (both sides) where the scene keeps none.
+__global__ void copy_entries_kernel(const std::uint32_t* size, std::uint32_t bound, const std::uint32_t* keys,
+                                    const real* normal, const Vec3* tangent, const Vec3* rolling,
+                                    const std::uint8_t* colour, std::uint32_t* to_keys, real* to_normal,
+                                    Vec3* to_tangent, Vec3* to_rolling, std::uint8_t* to_colour) {
+  const std::uint32_t m = min(*size, bound);
+  for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
+    to_keys[e] = keys[e];
+    to_normal[e] = normal[e];
+    if (tangent) to_tangent[e] = tangent[e];
+    if (rolling) to_rolling[e] = rolling[e];
+    to_colour[e] = colour[e];
+  }
+}
+
 // --- renumber: each entry renamed (renamed_key, as the host's renumbered)
 // and counted with its new sphere, then the store's counting sort (above),
 // and the entries gathered.
@@ -539,20 +556,24 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
   m_spheres = spheres;
 }
 
-void ContactCacheCuda::copy_to(ContactCacheCuda& to, cudaStream_t s) const {
+void ContactCacheCuda::copy_to(ContactCacheCuda& to, int sm_count, cudaStream_t s) const {
   const std::uint32_t m = m_bound;
   to.m_bound = m;
   to.m_spheres = m_spheres;
-  auto copy = [&](DeviceBuffer& dst, const DeviceBuffer& src, std::size_t bytes) {
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(dst.as<char>(bytes), src.get(), bytes, cudaMemcpyDeviceToDevice, s));
-  };
   if (m == 0) return;  // no restore reads the runs
-  copy(to.m_first, m_first, (std::size_t(m_spheres) + 1) * sizeof(std::uint32_t));
-  copy(to.m_keys, m_keys, m * sizeof(std::uint32_t));
-  copy(to.m_normal, m_normal, m * sizeof(real));
-  if (m_keep_tangent) copy(to.m_tangent, m_tangent, m * sizeof(Vec3));
-  if (m_keep_rolling) copy(to.m_rolling, m_rolling, m * sizeof(Vec3));
-  copy(to.m_colour, m_colour, m);
+  const std::size_t run_bytes = (std::size_t(m_spheres) + 1) * sizeof(std::uint32_t);
+  MARBLES_CUDA_CHECK(
+      cudaMemcpyAsync(to.m_first.as<char>(run_bytes), m_first.get(), run_bytes, cudaMemcpyDeviceToDevice, s));
+  // The entries by a kernel that reads their count on the device: the bound
+  // may be a room (a store without a wait) whose tail no store wrote.
+  const bool tangent = m_keep_tangent, rolling = m_keep_rolling;
+  copy_entries_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(
+      m_first.get_as<std::uint32_t>() + m_spheres, m, m_keys.get_as<std::uint32_t>(), m_normal.get_as<real>(),
+      tangent ? m_tangent.get_as<Vec3>() : nullptr, rolling ? m_rolling.get_as<Vec3>() : nullptr,
+      m_colour.get_as<std::uint8_t>(), to.m_keys.as<std::uint32_t>(m), to.m_normal.as<real>(m),
+      tangent ? to.m_tangent.as<Vec3>(m) : nullptr, rolling ? to.m_rolling.as<Vec3>(m) : nullptr,
+      to.m_colour.as<std::uint8_t>(m));
+  MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* count_on_device,

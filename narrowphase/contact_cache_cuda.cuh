@@ -101,8 +101,9 @@ class ContactCacheCuda {
   // temporaries are the stream's (no wait); it waits only where the runs'
   // room is too small for the world's spheres (it grows).
   void renumber(const std::uint32_t* new_index, std::uint32_t spheres, int sm_count, cudaStream_t stream);
-  // The entries copied on the device into `to` (the watchdog's undo).
-  void copy_to(ContactCacheCuda& to, cudaStream_t stream) const;
+  // The entries copied on the device into `to` (the watchdog's undo): the
+  // runs and the entries they hold, not the room past them.
+  void copy_to(ContactCacheCuda& to, int sm_count, cudaStream_t stream) const;
   // Which impulses the scene's terms make (before the first store): without
   // friction the tangential impulses, without rolling resistance the rolling
   // ones stay zero, and the cache neither stores nor reads them.

@@ -806,7 +806,7 @@ class CudaStep final : public StepBackend {
       m_kept_trim_due = false;
     }
     m_device.copy_state_to(m_kept, m_stream);
-    m_cache.copy_to(m_kept_cache, m_stream);
+    m_cache.copy_to(m_kept_cache, m_sm, m_stream);
     const std::size_t wall_bytes = m_model.wall_shapes.size() * sizeof(narrowphase::WallShape);
     if (wall_bytes > 0)
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_kept_walls.as<char>(wall_bytes), m_walls.get(), wall_bytes,
@@ -814,7 +814,7 @@ class CudaStep final : public StepBackend {
   }
   void undo_step() override {
     m_kept.copy_state_to(m_device, m_stream);
-    m_kept_cache.copy_to(m_cache, m_stream);
+    m_kept_cache.copy_to(m_cache, m_sm, m_stream);
     const std::size_t wall_bytes = m_model.wall_shapes.size() * sizeof(narrowphase::WallShape);
     if (wall_bytes > 0)
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_walls.get(), m_kept_walls.get(), wall_bytes, cudaMemcpyDeviceToDevice,
