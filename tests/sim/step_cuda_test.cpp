@@ -737,6 +737,55 @@ TEST(StepCuda, ContactCountJumpInALaterSubstepIsUndoneThere) {
   EXPECT_EQ(counts.undone > 0, unwaits(first + 3)) << "without a wait, the substep that outgrew it is undone";
 }
 
+// Forty pairs of touching spheres at rest, far apart (one colour), and six
+// spheres closing on a seventh along the axes, all six the same distance
+// away (exact binary coordinates: they meet it in the same step): in one
+// step the seventh takes six contacts, so the colours jump from one to six
+// or more, while the contacts grow by six, within their room. Where a step
+// waits once and launches a sweep per slot of the device's plan (the last
+// step's colours, one more, and the overflow set: MARBLES_CUDA_WAITS=step
+// with a launch per colour), the colours outgrow the slots and that substep
+// is undone and done again with waits; in every other form nothing outgrows
+// a room. The CPU's bits every step.
+TEST(StepCuda, ColourCountJumpPastTheSlotsIsUndone) {
+  scene::Scene s = make_scene(1e-3, 1, {Effect::collisions, Effect::friction}, 0, 0.5);
+  const real r = real(1.0 / 128), v = 1, h = real(1e-3);
+  scene::GeneratedParticles g;
+  for (int x = 0; x < 8; ++x)
+    for (int y = 0; y < 5; ++y) {
+      const Vec3 p{real(x) / 16, real(y) / 16, 0};
+      add_sphere(g, p, r);
+      add_sphere(g, p + Vec3{2 * r, 0, 0}, r);
+    }
+  const Vec3 centre{real(0.25), real(0.5), real(0.25)};
+  add_sphere(g, centre, r);
+  const real from = 2 * r + real(8.5) * v * h;  // 8.5 substeps of travel from the centre: meets it in step 7
+  for (const Vec3 n : {Vec3{1, 0, 0}, Vec3{-1, 0, 0}, Vec3{0, 1, 0}, Vec3{0, -1, 0}, Vec3{0, 0, 1}, Vec3{0, 0, -1}})
+    add_sphere(g, centre + n * from, r, n * -v);
+  constexpr int kSteps = 14;
+  Simulation probe(s, make_world(s, g), broadphase::Backend::cpu);
+  std::uint32_t colours = 0;
+  std::uint64_t contacts = 0;
+  int jump = -1;
+  for (int k = 0; k < kSteps; ++k) {
+    probe.step();
+    if (jump < 0 && probe.last_step().colours >= colours + 2) {
+      jump = k;
+      EXPECT_LE(probe.last_step().contacts, contacts + 6) << "premise: the contacts grow by the six alone";
+    }
+    colours = probe.last_step().colours, contacts = probe.last_step().contacts;
+  }
+  ASSERT_GE(jump, 2) << "premise: the colours jump by two or more in a step after the first two";
+  ASSERT_LT(jump, kSteps - 1);
+  REQUIRE_DEVICE();
+  std::uint64_t redos = 0, undone = 0;
+  expect_same_run(s, g, kSteps, &redos, nullptr, nullptr, &undone);
+  const std::string form = solve_form();
+  const bool slots = waits_form() == "step" && (form == "launches" || form == "apart");
+  EXPECT_EQ(undone > 0, slots) << "MARBLES_CUDA_WAITS=" << waits_form() << ", solve " << form;
+  EXPECT_EQ(redos, 0u) << "the pairs fit their room";
+}
+
 // A small block (105 spheres, 7 x 5 x 3: no kernel's block is full) with
 // every contact term on, dropped onto the floor of a box: the partial runs
 // of the block-staged contact writes, gathers and record packs. Short enough
