@@ -116,16 +116,25 @@ class DeviceBuffer {
   // memory, then the old is freed after the copy (in the stream's order, or
   // by cudaFree, which waits for the device).
   void* reserve_keeping(std::size_t bytes, std::size_t keep, cudaStream_t stream) {
+    return reserve_copying(bytes, stream, [&](void* to, const void* from, std::size_t held) {
+      if (keep > 0) MARBLES_CUDA_CHECK(cudaMemcpyAsync(to, from, keep < held ? keep : held, cudaMemcpyDeviceToDevice,
+                                                       stream));
+    });
+  }
+  // As reserve_keeping, the old contents handed to copy(to, from, held
+  // bytes) on `stream` (where it grows and held memory): for a part known
+  // only on the device (a kernel reading a count), so no byte is copied that
+  // was never written.
+  template <class Copy>
+  void* reserve_copying(std::size_t bytes, cudaStream_t stream, Copy&& copy) {
     m_asked = bytes > m_asked ? bytes : m_asked;
     if (bytes <= m_bytes) return m_handle;
     if (m_ordered && stream != m_stream)
-      throw std::logic_error("DeviceBuffer::reserve_keeping: a stream-ordered buffer grows on its own stream");
+      throw std::logic_error("DeviceBuffer::reserve_copying: a stream-ordered buffer grows on its own stream");
     DeviceBuffer grown(m_stream);
     grown.m_ordered = m_ordered;
     grown.reserve(bytes);
-    if (keep > 0 && m_handle)
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(grown.m_handle, m_handle, keep < m_bytes ? keep : m_bytes,
-                                         cudaMemcpyDeviceToDevice, stream));
+    if (m_handle) copy(grown.m_handle, static_cast<const void*>(m_handle), m_bytes);
     swap(grown);              // the old memory goes with `grown`
     m_asked = grown.m_asked;  // the old count, which took `bytes` in above
     return m_handle;

@@ -145,6 +145,16 @@ __global__ void copy_entries_kernel(const std::uint32_t* size, std::uint32_t bou
   }
 }
 
+// The entries an array held before it grew, into its new memory: the
+// first *end of them (`size` bytes each, at most `bound`), never the room
+// past them that no store wrote.
+__global__ void copy_held_kernel(const std::uint32_t* end, std::uint32_t bound, std::uint32_t size, const char* from,
+                                 char* to) {
+  const std::size_t bytes = std::size_t(min(*end, bound)) * size;
+  for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k < bytes; k += std::size_t(gridDim.x) * blockDim.x)
+    to[k] = from[k];
+}
+
 // --- renumber: each entry renamed (renamed_key, as the host's renumbered)
 // and counted with its new sphere, then the store's counting sort (above),
 // and the entries gathered.
@@ -375,15 +385,26 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   m_bound = skip ? std::max(m_bound, n) : n;
   m_stored = n;
   m_spheres = spheres;
-  auto room = [&](DeviceBuffer& b, std::size_t count, std::size_t keep, std::size_t size) {
-    return skip ? b.reserve_keeping(count * size + 16, keep * size, s) : b.reserve(count * size + 16);
+  // The kept runs are every word written; of the entries, those the kept
+  // runs reach (their last first, read on the device: the room past it was
+  // never written).
+  auto* kept_first = static_cast<std::uint32_t*>(
+      skip ? m_first.reserve_keeping((std::size_t(spheres) + 1) * 4 + 16, std::size_t(old_runs) * 4, s)
+           : m_first.reserve((std::size_t(spheres) + 1) * 4 + 16));
+  auto room = [&](DeviceBuffer& b, std::size_t size) {
+    if (!skip || old_runs == 0) return b.reserve(n * size + 16);
+    return b.reserve_copying(n * size + 16, s, [&](void* to, const void* from, std::size_t) {
+      copy_held_kernel<<<grid_for(std::size_t(old_bound) * size, sm_count), kBlock, 0, s>>>(
+          kept_first + old_runs - 1, old_bound, static_cast<std::uint32_t>(size), static_cast<const char*>(from),
+          static_cast<char*>(to));
+      MARBLES_CUDA_CHECK_LAUNCH();
+    });
   };
-  auto* kept_first = static_cast<std::uint32_t*>(room(m_first, std::size_t(spheres) + 1, old_runs, 4));
-  auto* keys = static_cast<std::uint32_t*>(room(m_keys, n, old_bound, sizeof(std::uint32_t)));
-  auto* normal = static_cast<real*>(room(m_normal, n, old_bound, sizeof(real)));
-  auto* tangent = m_keep_tangent ? static_cast<Vec3*>(room(m_tangent, n, old_bound, sizeof(Vec3))) : nullptr;
-  auto* rolling = m_keep_rolling ? static_cast<Vec3*>(room(m_rolling, n, old_bound, sizeof(Vec3))) : nullptr;
-  auto* colour = static_cast<std::uint8_t*>(room(m_colour, n, old_bound, 1));
+  auto* keys = static_cast<std::uint32_t*>(room(m_keys, sizeof(std::uint32_t)));
+  auto* normal = static_cast<real*>(room(m_normal, sizeof(real)));
+  auto* tangent = m_keep_tangent ? static_cast<Vec3*>(room(m_tangent, sizeof(Vec3))) : nullptr;
+  auto* rolling = m_keep_rolling ? static_cast<Vec3*>(room(m_rolling, sizeof(Vec3))) : nullptr;
+  auto* colour = static_cast<std::uint8_t*>(room(m_colour, 1));
   if (skip && old_runs < spheres + 1) {
     extend_firsts_kernel<<<grid_for(std::size_t(spheres) + 1 - old_runs, sm_count), kBlock, 0, s>>>(
         kept_first, old_runs, spheres + 1);
