@@ -393,9 +393,10 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
            : m_first.reserve((std::size_t(spheres) + 1) * 4 + 16));
   auto room = [&](DeviceBuffer& b, std::size_t size) {
     if (!skip || old_runs == 0) return b.reserve(n * size + 16);
-    return b.reserve_copying(n * size + 16, s, [&](void* to, const void* from, std::size_t) {
-      copy_held_kernel<<<grid_for(std::size_t(old_bound) * size, sm_count), kBlock, 0, s>>>(
-          kept_first + old_runs - 1, old_bound, static_cast<std::uint32_t>(size), static_cast<const char*>(from),
+    return b.reserve_copying(n * size + 16, s, [&](void* to, const void* from, std::size_t held) {
+      const auto bound = static_cast<std::uint32_t>(std::min<std::size_t>(old_bound, held / size));
+      copy_held_kernel<<<grid_for(std::size_t(bound) * size, sm_count), kBlock, 0, s>>>(
+          kept_first + old_runs - 1, bound, static_cast<std::uint32_t>(size), static_cast<const char*>(from),
           static_cast<char*>(to));
       MARBLES_CUDA_CHECK_LAUNCH();
     });
@@ -580,7 +581,9 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
 void ContactCacheCuda::copy_to(ContactCacheCuda& to, int sm_count, cudaStream_t s) const {
   const std::uint32_t m = m_bound;
   to.m_bound = m;
+  to.m_stored = m_stored;
   to.m_spheres = m_spheres;
+  to.m_keep_tangent = m_keep_tangent, to.m_keep_rolling = m_keep_rolling;
   if (m == 0) return;  // no restore reads the runs
   const std::size_t run_bytes = (std::size_t(m_spheres) + 1) * sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(
