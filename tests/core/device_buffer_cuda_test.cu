@@ -1,6 +1,7 @@
 // core/device_memory.hpp's DeviceBuffer::reserve_keeping: a buffer grown
 // keeps its first bytes (random contents, read back), a buffer that fits
 // is not moved, and a stream-ordered buffer grows in its stream's order;
+// reserve_copying hands the old memory to its copy where it grows;
 // DeviceBuffer::trim frees exactly what the last asks left over; the
 // barriers of one launch (core/device_buffer.cuh GridSync, ClusterSync)
 // let every thread read what other blocks wrote before them.
@@ -71,6 +72,49 @@ TEST(DeviceBuffer, ReserveKeepingLeavesABufferThatFits) {
   EXPECT_EQ(buffer.reserve_keeping(4096, 4096, nullptr), at);
   EXPECT_EQ(buffer.reserve_keeping(100, 100, nullptr), at);
   EXPECT_EQ(buffer.bytes(), 4096u);
+}
+
+// reserve_copying: where a buffer that holds memory grows, the callback is
+// handed the new memory, the old and the bytes the old held, once, and what
+// it copies is there after; where it fits or held nothing, no call. The
+// most bytes asked of it count the new ask.
+TEST(DeviceBuffer, ReserveCopyingHandsTheOldMemoryOverWhereItGrows) {
+  REQUIRE_DEVICE();
+  dev::Stream stream;
+  stream.create(cudaStreamNonBlocking);
+  std::mt19937_64 rng(5);
+  for (int trial = 0; trial < 10; ++trial) {
+    const std::size_t first = 1 + rng() % 50000, part = rng() % (first + 1);
+    dev::DeviceBuffer buffer;
+    int calls = 0;
+    auto count_calls = [&](void*, const void*, std::size_t) { ++calls; };
+    ASSERT_NE(buffer.reserve_copying(first * 4, stream, count_calls), nullptr);
+    EXPECT_EQ(calls, 0) << "no memory held: nothing to hand over";
+    const std::vector<std::uint32_t> words = random_words(first, rng());
+    void* old = buffer.get();
+    const std::size_t held = buffer.bytes(), grown = held / 4 + 1 + rng() % 100000;  // words: past what it holds
+    ASSERT_EQ(cudaMemcpy(old, words.data(), first * 4, cudaMemcpyHostToDevice), cudaSuccess);
+    ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
+    EXPECT_EQ(buffer.reserve_copying(held, stream, count_calls), old) << "fits: not moved";
+    EXPECT_EQ(calls, 0);
+    void* handed_to = nullptr;
+    void* moved = buffer.reserve_copying(grown * 4, stream, [&](void* to, const void* from, std::size_t bytes) {
+      ++calls;
+      handed_to = to;
+      EXPECT_EQ(from, old);
+      EXPECT_EQ(bytes, held);
+      ASSERT_EQ(cudaMemcpyAsync(to, from, part * 4, cudaMemcpyDeviceToDevice, stream), cudaSuccess);
+    });
+    EXPECT_EQ(calls, 1);
+    EXPECT_EQ(moved, handed_to);
+    EXPECT_EQ(buffer.get(), moved);
+    EXPECT_GE(buffer.bytes(), grown * 4);
+    EXPECT_EQ(buffer.asked(), grown * 4);
+    std::vector<std::uint32_t> back(part, 0);
+    ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
+    if (part > 0) ASSERT_EQ(cudaMemcpy(back.data(), moved, part * 4, cudaMemcpyDeviceToHost), cudaSuccess);
+    for (std::size_t i = 0; i < part; ++i) ASSERT_EQ(back[i], words[i]) << "word " << i << " of " << part;
+  }
 }
 
 // trim(): over random windows of asks (some far below what the buffer
