@@ -636,6 +636,12 @@ class CudaStep final : public StepBackend {
     m_redo_from = -1;
     m_counters_at.clear();
     m_one_wait = one_wait_possible();
+    // The substep's start is kept for steps without waits; where the solve
+    // has outgrown one launch (auto then waits a substep: a gas whose first
+    // steps ran without waits, then its colours grew), it is let go after
+    // kStartHold such steps, not held for the run (38 bytes a sphere).
+    if (m_waits != Waits::auto_ || solve_in_one_launch()) m_steps_past_one_launch = 0;
+    else if (++m_steps_past_one_launch >= kStartHold && m_substep_start.device_bytes() > 0) m_substep_start.release();
     m_step_candidates = false;
   }
 
@@ -1231,6 +1237,10 @@ class CudaStep final : public StepBackend {
   // outgrowing a room costs a contact search again, not a substep.
   int m_steps_since_undo = 1 << 20;
   static constexpr int kUndoHold = 8;
+  // Steps in a row whose solve took a launch per colour under auto (no
+  // step without waits): after kStartHold of them the substep's start goes.
+  int m_steps_past_one_launch = 0;
+  static constexpr int kStartHold = 4;
   bool m_expect_uniform = false;      // the last substep's contacts all had m_radius's arms
   DeviceWorld m_substep_start;        // the moving state at a substep's start (the walls move only where not undone)
   std::vector<StepCounters> m_counters_at;  // the counters at each substep's start without waits

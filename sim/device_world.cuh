@@ -46,6 +46,16 @@ class DeviceWorld {
   void permute(const std::uint32_t* order, int sm_count, cudaStream_t stream);
   BodiesView view() const;
   std::size_t size() const { return m_count; }
+  // Every array freed (a copy no longer kept): no spheres until the next
+  // upload or copy into it. A plain buffer's free waits for the device.
+  void release() {
+    for (::marbles::cuda::DeviceBuffer* b :
+         {&m_position, &m_velocity, &m_angular_velocity, &m_radius, &m_inv_mass, &m_inv_inertia, &m_material}) {
+      ::marbles::cuda::DeviceBuffer none;
+      b->swap(none);  // the memory goes with `none`
+    }
+    m_count = 0;
+  }
   // Device bytes it holds.
   std::size_t device_bytes() const {
     return ::marbles::cuda::bytes_of(m_position, m_velocity, m_angular_velocity, m_radius, m_inv_mass, m_inv_inertia,

@@ -786,6 +786,46 @@ TEST(StepCuda, ColourCountJumpPastTheSlotsIsUndone) {
   EXPECT_EQ(redos, 0u) << "the pairs fit their room";
 }
 
+// A layer of 22 500 spheres kept apart falls onto a floor. Its first steps
+// have no contacts, so under auto the solve takes one launch and the steps
+// run without waits, keeping each substep's start. Once the layer lands,
+// its wall contacts take one colour (walls take none), wider than one
+// launch takes (16 384), so the steps wait a substep, and a few steps later
+// the start is let go: the device memory's "substep's start" part is 0 at
+// the end. Where every step waits once (MARBLES_CUDA_WAITS=step) or the
+// solve always takes one launch (MARBLES_CUDA_SOLVE=one) it is held; where
+// no step runs without waits it is never there. The CPU's bits at the end.
+TEST(StepCuda, SubstepStartLetGoWhereTheSolveOutgrowsOneLaunch) {
+  scene::Scene s = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::friction}, 0, 0.5);
+  s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
+  const real r = real(0.01);
+  scene::GeneratedParticles g;
+  for (int x = 0; x < 150; ++x)
+    for (int y = 0; y < 150; ++y) add_sphere(g, {real(3) * r * (x + 1), real(3) * r * (y + 1), real(1.3) * r}, r);
+  constexpr int kSteps = 60;
+  REQUIRE_DEVICE();
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  std::size_t held_most = 0, held_last = 0;
+  std::uint64_t first_contacts = 0;
+  for (int k = 0; k < kSteps; ++k) {
+    cpu.step(), gpu.step();
+    if (k == 0) first_contacts = cpu.last_step().contacts;
+    held_last = part(gpu.device_buffers(), "substep's start");
+    held_most = std::max(held_most, held_last);
+  }
+  ASSERT_EQ(first_contacts, 0u) << "premise: the layer starts clear of the floor";
+  ASSERT_EQ(cpu.last_step().contacts, g.position.size()) << "premise: every sphere has landed";
+  const std::string form = solve_form(), waits = waits_form();
+  if (form == "auto") {
+    EXPECT_EQ(gpu.last_step().one_launch_solves, 0u) << "premise: the landed layer's colour outgrows one launch";
+  }
+  EXPECT_EQ(held_most > 0, unwaits(kSteps)) << "MARBLES_CUDA_WAITS=" << waits << ", solve " << form;
+  EXPECT_EQ(held_last > 0, waits == "step" || (waits == "auto" && form == "one"))
+      << "MARBLES_CUDA_WAITS=" << waits << ", solve " << form << ": " << held_last << " bytes held at the end";
+  EXPECT_EQ(state_hash(gpu.world()), state_hash(cpu.world()));
+}
+
 // A small block (105 spheres, 7 x 5 x 3: no kernel's block is full) with
 // every contact term on, dropped onto the floor of a box: the partial runs
 // of the block-staged contact writes, gathers and record packs. Short enough
