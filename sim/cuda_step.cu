@@ -641,7 +641,9 @@ class CudaStep final : public StepBackend {
     // steps ran without waits, then its colours grew), it is let go after
     // kStartHold such steps, not held for the run (38 bytes a sphere).
     if (m_waits != Waits::auto_ || solve_in_one_launch()) m_steps_past_one_launch = 0;
-    else if (++m_steps_past_one_launch >= kStartHold && m_substep_start.device_bytes() > 0) m_substep_start.release();
+    else if ((m_steps_past_one_launch = std::min(m_steps_past_one_launch + 1, kStartHold)) == kStartHold &&
+             m_substep_start.device_bytes() > 0)
+      m_substep_start.release();
     m_step_candidates = false;
   }
 
