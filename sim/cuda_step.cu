@@ -41,6 +41,7 @@
 #include <cuda_runtime.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -123,6 +124,9 @@ enum StepWord {
   kStepWords
 };
 constexpr int kFlagWords = kKineticEnergy + 2;  // what a step with waits a substep reads
+// After the step's words, where a step without waits launches by slots:
+// each colour's most contacts in a substep (its slot's grid next step).
+constexpr int kColourWords = static_cast<int>(narrowphase::kMaxColours);
 
 // What a substep that waits for nothing gave, against the rooms and the
 // records' form it was given (CudaStep::colour_contacts).
@@ -170,6 +174,11 @@ __global__ void check_substep_kernel(SubstepCheck c, unsigned long long* words) 
   if (mixed) words[kMixedSeen] = 1;
   if (c.pair_count && c.pair_count[1] != 0) words[kOutsizedSeen] = 1;
   if (plan.colours > words[kMostColours]) words[kMostColours] = plan.colours;
+  if (c.slots > 0)
+    for (std::uint32_t k = 0; k < plan.colours; ++k) {
+      const std::uint32_t size = plan.begin[k + 1] - plan.begin[k];
+      if (size > words[kStepWords + k]) words[kStepWords + k] = size;
+    }
   const std::uint32_t widest = plan.widest();
   if (widest > words[kWidest]) words[kWidest] = widest;
   words[kOverflowSum] += plan.begin[plan.colours + 1] - plan.begin[plan.colours];
@@ -259,7 +268,7 @@ class CudaStep final : public StepBackend {
     ::marbles::cuda::upload(m_pair_table, model.pair_coefficients, m_stream);
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     m_table = {m_pair_table.get_as<narrowphase::PairCoefficients>(), model.material_count};
-    m_flags.as<unsigned long long>(kStepWords);
+    m_flags.as<unsigned long long>(kStepWords + kColourWords);
     if (model.collisions) {
       m_broadphase = std::make_unique<broadphase::SubdivisionCuda>(model.algorithm);
       m_broadphase->set_stage_timing(false);  // its events cost a sync per call: profiling only
@@ -522,6 +531,8 @@ class CudaStep final : public StepBackend {
     }
     m_last_widest = m_plan.widest();
     m_last_colours = colours;
+    for (std::uint32_t k = 0; k < narrowphase::kMaxColours; ++k)
+      m_last_sizes[k] = k < colours ? m_plan.begin[k + 1] - m_plan.begin[k] : 0;
     m_counters.colours = std::max(m_counters.colours, colours);
     m_counters.overflow += m_plan.begin[colours + 1] - m_plan.begin[colours];
   }
@@ -631,7 +642,8 @@ class CudaStep final : public StepBackend {
     send_host_edits();
     m_counters = {};
     trim_buffers();
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(m_flags.get(), 0, kStepWords * sizeof(unsigned long long), m_stream));
+    MARBLES_CUDA_CHECK(
+        cudaMemsetAsync(m_flags.get(), 0, (kStepWords + kColourWords) * sizeof(unsigned long long), m_stream));
     m_substep_index = 0;
     m_redo_from = -1;
     m_counters_at.clear();
@@ -655,7 +667,9 @@ class CudaStep final : public StepBackend {
     auto* flags = m_flags.get_as<unsigned long long>();
     nc::launch_max_overlap(m_records, m_count, m_device.view(), walls(), flags + kDeepest, m_sm, m_stream,
                            m_count_on_device, skip());
-    const int words = m_one_wait ? kStepWords : m_watch ? kFlagWords : kKineticEnergy;
+    const int words = m_one_wait ? kStepWords + (solve_in_one_launch() ? 0 : kColourWords)
+                      : m_watch  ? kFlagWords
+                                 : kKineticEnergy;
     if (m_watch && m_device.view().count > 0) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
       watch_kernel<<<::marbles::cuda::grid_for(m_device.view().count, m_sm), kWatchBlock, 0, m_stream>>>(
@@ -894,8 +908,8 @@ class CudaStep final : public StepBackend {
   // a launch per colour: a launch per slot of the device's plan, for the
   // last step's colours and one more, then the overflow set (slot_count; a
   // substep with more is undone: check_substep_kernel), each with a grid for
-  // the last step's widest colour and an eighth more (a wider colour is
-  // strided over). Slots past the colours launch and do nothing. The turns
+  // its colour's last size and an eighth more (a wider colour is strided
+  // over). Slots past the colours launch and do nothing. The turns
   // are launched apart. A launch loads its records early where the launch
   // before wrote another slot's (ContactRange::early; every slot's range is
   // its own).
@@ -903,12 +917,17 @@ class CudaStep final : public StepBackend {
   void solve_in_slots(narrowphase::SolverBody* bodies, real inv_h, int sweeps) {
     constexpr int kAll = -2, kNone = -1;
     int last = kAll;  // the records were made (and the impacts wrote) before
-    const std::uint32_t width = m_last_widest + m_last_widest / 8 + 1, slots = slot_count();
+    const std::uint32_t slots = slot_count();
     auto slot = [&](std::uint32_t s, bool backwards, bool writes) {
       nc::ContactRange r;
       r.plan = m_colouring.device_plan();
       r.slot = s;
-      r.width = width;
+      // A grid for the slot's colour's last size and an eighth (the widest
+      // where its size was not read: a step in one launch before); past the
+      // last step's colours (a new colour, the overflow set's one thread,
+      // or none) a block. A wider colour is strided over.
+      const std::uint32_t size = s >= m_last_colours ? 0 : m_last_sizes[s] > 0 ? m_last_sizes[s] : m_last_widest;
+      r.width = size + size / 8 + 1;
       r.backwards = backwards;
       r.mirrored = m_mirror, m_mirror = !m_mirror;
       r.early = last != kAll && last != static_cast<int>(s);
@@ -1026,8 +1045,11 @@ class CudaStep final : public StepBackend {
     m_counters.unwaited_substeps += static_cast<std::uint64_t>(m_substep_index);
     fit_rooms(m_end_flags[kMostPairs], m_end_flags[kMostContacts], false);  // all fit: no undo
     if (m_broadphase && m_end_flags[kOutsizedSeen] != 0) plan_smaller();
+    const bool slots = !solve_in_one_launch();  // the step's form: its colours' sizes were read
     m_last_widest = static_cast<std::uint32_t>(m_end_flags[kWidest]);
     m_last_colours = static_cast<std::uint32_t>(m_end_flags[kMostColours]);
+    for (std::uint32_t k = 0; k < narrowphase::kMaxColours; ++k)
+      m_last_sizes[k] = slots && k < m_last_colours ? static_cast<std::uint32_t>(m_end_flags[kStepWords + k]) : 0;
     m_step_candidates = m_step_candidates || m_end_flags[kCandidateSeen] != 0;
     m_expect_uniform = m_model.uniform_pairs && m_end_flags[kMixedSeen] == 0;
     if (m_expect_uniform) {
@@ -1179,7 +1201,7 @@ class CudaStep final : public StepBackend {
     kPlanOutsized
   };
   ::marbles::cuda::PinnedBuffer<std::uint32_t> m_pinned{kPlanOutsized + 1};
-  ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kStepWords};  // the end-of-step read
+  ::marbles::cuda::PinnedBuffer<unsigned long long> m_end_flags{kStepWords + kColourWords};  // the end-of-step read
   std::optional<::marbles::cuda::PinnedBuffer<std::uint32_t>> m_order_host;  // renumber's order, read back
   bool m_watch = false;
   int m_iteration_factor = 1;
@@ -1226,6 +1248,10 @@ class CudaStep final : public StepBackend {
   // one-launch stages' shape and choice, the slots (solve_in_slots).
   std::uint32_t m_last_widest = 0;
   std::uint32_t m_last_colours = 0;
+  // Each of those colours' contacts (0 past them), from the same substep
+  // or step: the slots' grids (solve_in_slots). A step without waits reads
+  // them only where it launched by slots; else they are 0 (a grid of a block).
+  std::array<std::uint32_t, narrowphase::kMaxColours> m_last_sizes{};
   // Steps since the last with an impact candidate: a step without waits
   // keeps impact words until kImpactHold steps in a row had none (a pour's
   // impacts come and go: an impact candidate in records without them is a
