@@ -533,6 +533,7 @@ class CudaStep final : public StepBackend {
     m_last_colours = colours;
     for (std::uint32_t k = 0; k < narrowphase::kMaxColours; ++k)
       m_last_sizes[k] = k < colours ? m_plan.begin[k + 1] - m_plan.begin[k] : 0;
+    m_sizes_read = true;
     m_counters.colours = std::max(m_counters.colours, colours);
     m_counters.overflow += m_plan.begin[colours + 1] - m_plan.begin[colours];
   }
@@ -667,9 +668,10 @@ class CudaStep final : public StepBackend {
     auto* flags = m_flags.get_as<unsigned long long>();
     nc::launch_max_overlap(m_records, m_count, m_device.view(), walls(), flags + kDeepest, m_sm, m_stream,
                            m_count_on_device, skip());
-    const int words = m_one_wait ? kStepWords + (solve_in_one_launch() ? 0 : kColourWords)
-                      : m_watch  ? kFlagWords
-                                 : kKineticEnergy;
+    // (a step by slots: its colours' sizes too, as many as it had slots
+    // for colours: check_substep_kernel)
+    const int colour_words = solve_in_one_launch() ? 0 : std::min(static_cast<int>(slot_count()) - 1, kColourWords);
+    const int words = m_one_wait ? kStepWords + colour_words : m_watch ? kFlagWords : kKineticEnergy;
     if (m_watch && m_device.view().count > 0) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
       watch_kernel<<<::marbles::cuda::grid_for(m_device.view().count, m_sm), kWatchBlock, 0, m_stream>>>(
@@ -923,10 +925,14 @@ class CudaStep final : public StepBackend {
       r.plan = m_colouring.device_plan();
       r.slot = s;
       // A grid for the slot's colour's last size and an eighth (the widest
-      // where its size was not read: a step in one launch before); past the
-      // last step's colours (a new colour, the overflow set's one thread,
-      // or none) a block. A wider colour is strided over.
-      const std::uint32_t size = s >= m_last_colours ? 0 : m_last_sizes[s] > 0 ? m_last_sizes[s] : m_last_widest;
+      // where the sizes were not read: a step in one launch before); the
+      // slot past the last step's colours (a new colour, or the overflow
+      // set's one thread) an eighth of the widest; the one past that (the
+      // overflow set after a new colour, or none) a block. A wider colour
+      // is strided over.
+      std::uint32_t size = 0;
+      if (s < m_last_colours) size = m_sizes_read ? m_last_sizes[s] : m_last_widest;
+      else if (s == m_last_colours) size = m_last_widest / 8;
       r.width = size + size / 8 + 1;
       r.backwards = backwards;
       r.mirrored = m_mirror, m_mirror = !m_mirror;
@@ -1050,6 +1056,7 @@ class CudaStep final : public StepBackend {
     m_last_colours = static_cast<std::uint32_t>(m_end_flags[kMostColours]);
     for (std::uint32_t k = 0; k < narrowphase::kMaxColours; ++k)
       m_last_sizes[k] = slots && k < m_last_colours ? static_cast<std::uint32_t>(m_end_flags[kStepWords + k]) : 0;
+    m_sizes_read = slots;
     m_step_candidates = m_step_candidates || m_end_flags[kCandidateSeen] != 0;
     m_expect_uniform = m_model.uniform_pairs && m_end_flags[kMixedSeen] == 0;
     if (m_expect_uniform) {
@@ -1250,8 +1257,10 @@ class CudaStep final : public StepBackend {
   std::uint32_t m_last_colours = 0;
   // Each of those colours' contacts (0 past them), from the same substep
   // or step: the slots' grids (solve_in_slots). A step without waits reads
-  // them only where it launched by slots; else they are 0 (a grid of a block).
+  // them only where it launched by slots (m_sizes_read; else the slots take
+  // the widest colour's grid).
   std::array<std::uint32_t, narrowphase::kMaxColours> m_last_sizes{};
+  bool m_sizes_read = false;
   // Steps since the last with an impact candidate: a step without waits
   // keeps impact words until kImpactHold steps in a row had none (a pour's
   // impacts come and go: an impact candidate in records without them is a
