@@ -101,6 +101,18 @@ struct ColourPlan {
   MARBLES_HD_INLINE bool empty() const { return begin[colours + 1] == begin[0]; }
 };
 
+// Each colour's most contacts over the plans it is given (a step's
+// substeps: the CUDA step's slots are sized by them), most[c] for the
+// plan's colours c; the overflow set and the words past the colours are
+// left as they are.
+template <class Word>
+MARBLES_HD_INLINE void keep_most_per_colour(const ColourPlan& plan, Word* most) {
+  for (std::uint32_t c = 0; c < plan.colours; ++c) {
+    const std::uint32_t size = plan.begin[c + 1] - plan.begin[c];
+    if (size > most[c]) most[c] = size;
+  }
+}
+
 // The plan of n contacts from the firsts their counting sort by colour left
 // (first[key]: the first sorted position holding key, kNoFirst where none;
 // keys: the colours below kMaxColours, the overflow's kMaxColours, the

@@ -174,11 +174,7 @@ __global__ void check_substep_kernel(SubstepCheck c, unsigned long long* words) 
   if (mixed) words[kMixedSeen] = 1;
   if (c.pair_count && c.pair_count[1] != 0) words[kOutsizedSeen] = 1;
   if (plan.colours > words[kMostColours]) words[kMostColours] = plan.colours;
-  if (c.slots > 0)
-    for (std::uint32_t k = 0; k < plan.colours; ++k) {
-      const std::uint32_t size = plan.begin[k + 1] - plan.begin[k];
-      if (size > words[kStepWords + k]) words[kStepWords + k] = size;
-    }
+  if (c.slots > 0) narrowphase::keep_most_per_colour(plan, words + kStepWords);
   const std::uint32_t widest = plan.widest();
   if (widest > words[kWidest]) words[kWidest] = widest;
   words[kOverflowSum] += plan.begin[plan.colours + 1] - plan.begin[plan.colours];

@@ -732,5 +732,38 @@ TEST(ColourPlan, OfFirstsGivesEachKeysPositions) {
   }
 }
 
+// Each colour's most contacts over a run of plans (what a CUDA step that
+// waits once keeps for its slots' grids): on random plans of varying
+// colours (gaps, empty colours, overflow sets), most[c] is the largest size
+// colour c had in any plan that had it, 0 where none did; the words past the
+// most colours seen are never written.
+TEST(ColourPlan, KeepMostPerColourIsEachColoursLargestSize) {
+  std::mt19937_64 rng(47);
+  for (int trial = 0; trial < 200; ++trial) {
+    std::vector<unsigned long long> most(kMaxColours + 1, 0);
+    most[kMaxColours] = 0xfeedull;  // past every colour: never written
+    std::vector<std::uint32_t> expect(kMaxColours, 0);
+    std::uint32_t most_colours = 0;
+    const int plans = 1 + static_cast<int>(rng() % 6);
+    for (int p = 0; p < plans; ++p) {
+      ColourPlan plan;
+      plan.colours = static_cast<std::uint32_t>(rng() % (trial % 7 == 0 ? kMaxColours + 1 : 13));
+      std::uint32_t at = static_cast<std::uint32_t>(rng() % 100);
+      for (std::uint32_t c = 0; c <= plan.colours; ++c) {  // the colours, then the overflow set
+        plan.begin[c] = at;
+        const std::uint32_t size = rng() % 4 == 0 ? 0 : static_cast<std::uint32_t>(rng() % 5000);
+        if (c < plan.colours) expect[c] = std::max(expect[c], size);
+        at += size;
+      }
+      for (std::uint32_t c = plan.colours + 1; c < kMaxColours + 2; ++c) plan.begin[c] = at;
+      most_colours = std::max(most_colours, plan.colours);
+      keep_most_per_colour(plan, most.data());
+    }
+    for (std::uint32_t c = 0; c < kMaxColours; ++c)
+      ASSERT_EQ(most[c], expect[c]) << "trial " << trial << " colour " << c << " (most colours " << most_colours << ")";
+    EXPECT_EQ(most[kMaxColours], 0xfeedull) << "trial " << trial;
+  }
+}
+
 }  // namespace
 }  // namespace marbles::narrowphase
