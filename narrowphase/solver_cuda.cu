@@ -35,6 +35,18 @@ __device__ ContactRange resolved(ContactRange r) {
   return r;
 }
 
+// The u-th contact of a parallel range (mirrored: from the end).
+__device__ __forceinline__ std::uint32_t contact_at(const ContactRange& r, std::uint32_t u) {
+  return r.mirrored ? r.end - 1 - u : r.begin + u;
+}
+
+// f(contact_at(r, u)) for u = from, from + the grid's threads, ... within
+// the range.
+template <class F>
+__device__ __forceinline__ void stride_over(const ContactRange& r, std::uint32_t from, F&& f) {
+  for (std::uint32_t u = from; u < r.end - r.begin; u += gridDim.x * blockDim.x) f(contact_at(r, u));
+}
+
 // Thread t of a range: contacts begin + t, + the grid's threads, ...
 // (mirrored: from the end), or for a serial range, one thread visiting the
 // whole range in order (and back, twice).
@@ -51,9 +63,7 @@ __device__ void for_range(const ContactRange& r, F&& f) {
     }
     return;
   }
-  const std::uint32_t stride = gridDim.x * blockDim.x;
-  for (std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < r.end - r.begin; t += stride)
-    f(r.mirrored ? r.end - 1 - t : r.begin + t);
+  stride_over(r, blockIdx.x * blockDim.x + threadIdx.x, f);
 }
 
 inline int blocks(const ContactRange& r) {
@@ -98,8 +108,7 @@ __device__ void for_range_early(const ContactRange& range, Load&& load, Work&& w
   const ContactRange r = resolved(range);
   const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
   const bool early = r.early && !r.serial && t < r.end - r.begin;
-  auto at = [&](std::uint32_t u) { return r.mirrored ? r.end - 1 - u : r.begin + u; };
-  const std::uint32_t k = at(t);
+  const std::uint32_t k = contact_at(r, t);
   decltype(load(k)) loaded{};
   if (early) loaded = load(k);
   // Any thread past its wait means the launch before has ended.
@@ -107,8 +116,8 @@ __device__ void for_range_early(const ContactRange& range, Load&& load, Work&& w
   let_next_launch_start();
   if (early) {
     work(k, loaded);
-    for (std::uint32_t u = t + gridDim.x * blockDim.x; u < r.end - r.begin; u += gridDim.x * blockDim.x)
-      work(at(u), load(at(u)));  // a colour wider than the grid (a plan's slot)
+    // the rest of a colour wider than the grid (a plan's slot)
+    stride_over(r, t + gridDim.x * blockDim.x, [&](std::uint32_t j) { work(j, load(j)); });
   } else {
     for_range(r, [&](std::uint32_t j) { work(j, load(j)); });
   }

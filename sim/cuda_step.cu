@@ -164,16 +164,15 @@ __global__ void check_substep_kernel(SubstepCheck c, unsigned long long* words) 
   if (c.uniform && (mixed || bits_of_real(radius) != bits_of_real(c.radius))) outgrown = true;
   if (!grid_past && pairs > words[kMostPairs]) words[kMostPairs] = pairs;
   if (contacts > words[kMostContacts]) words[kMostContacts] = contacts;
+  if (plan.colours > words[kMostColours]) words[kMostColours] = plan.colours;  // also the slots' next bound
   if (outgrown) {
     words[kRedo] = c.substep + 1ull;
     if (grid_past) words[kGridPast] = 1;
-    if (plan.colours > words[kMostColours]) words[kMostColours] = plan.colours;  // the slots' next bound
     return;
   }
   if (candidate) words[kCandidateSeen] = 1;
   if (mixed) words[kMixedSeen] = 1;
   if (c.pair_count && c.pair_count[1] != 0) words[kOutsizedSeen] = 1;
-  if (plan.colours > words[kMostColours]) words[kMostColours] = plan.colours;
   if (c.slots > 0) narrowphase::keep_most_per_colour(plan, words + kStepWords);
   const std::uint32_t widest = plan.widest();
   if (widest > words[kWidest]) words[kWidest] = widest;
@@ -529,7 +528,6 @@ class CudaStep final : public StepBackend {
     m_last_colours = colours;
     for (std::uint32_t k = 0; k < narrowphase::kMaxColours; ++k)
       m_last_sizes[k] = k < colours ? m_plan.begin[k + 1] - m_plan.begin[k] : 0;
-    m_sizes_read = true;
     m_counters.colours = std::max(m_counters.colours, colours);
     m_counters.overflow += m_plan.begin[colours + 1] - m_plan.begin[colours];
   }
@@ -666,8 +664,9 @@ class CudaStep final : public StepBackend {
                            m_count_on_device, skip());
     // (a step by slots: its colours' sizes too, as many as it had slots
     // for colours: check_substep_kernel)
-    const int colour_words = solve_in_one_launch() ? 0 : std::min(static_cast<int>(slot_count()) - 1, kColourWords);
-    const int words = m_one_wait ? kStepWords + colour_words : m_watch ? kFlagWords : kKineticEnergy;
+    const int words = !m_one_wait           ? (m_watch ? kFlagWords : kKineticEnergy)
+                      : solve_in_one_launch() ? kStepWords
+                                              : kStepWords + std::min(static_cast<int>(slot_count()) - 1, kColourWords);
     if (m_watch && m_device.view().count > 0) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
       watch_kernel<<<::marbles::cuda::grid_for(m_device.view().count, m_sm), kWatchBlock, 0, m_stream>>>(
@@ -920,15 +919,12 @@ class CudaStep final : public StepBackend {
       nc::ContactRange r;
       r.plan = m_colouring.device_plan();
       r.slot = s;
-      // A grid for the slot's colour's last size and an eighth (the widest
-      // where the sizes were not read: a step in one launch before); the
-      // slot past the last step's colours (a new colour, or the overflow
-      // set's one thread) an eighth of the widest; the one past that (the
+      // A grid for the slot's colour's last size and an eighth; the slot
+      // past the last step's colours (a new colour, or the overflow set's
+      // one thread) an eighth of the widest; the one past that (the
       // overflow set after a new colour, or none) a block. A wider colour
       // is strided over.
-      std::uint32_t size = 0;
-      if (s < m_last_colours) size = m_sizes_read ? m_last_sizes[s] : m_last_widest;
-      else if (s == m_last_colours) size = m_last_widest / 8;
+      const std::uint32_t size = s < m_last_colours ? m_last_sizes[s] : s == m_last_colours ? m_last_widest / 8 : 0;
       r.width = size + size / 8 + 1;
       r.backwards = backwards;
       r.mirrored = m_mirror, m_mirror = !m_mirror;
@@ -1050,9 +1046,10 @@ class CudaStep final : public StepBackend {
     const bool slots = !solve_in_one_launch();  // the step's form: its colours' sizes were read
     m_last_widest = static_cast<std::uint32_t>(m_end_flags[kWidest]);
     m_last_colours = static_cast<std::uint32_t>(m_end_flags[kMostColours]);
-    for (std::uint32_t k = 0; k < narrowphase::kMaxColours; ++k)
-      m_last_sizes[k] = slots && k < m_last_colours ? static_cast<std::uint32_t>(m_end_flags[kStepWords + k]) : 0;
-    m_sizes_read = slots;
+    for (std::uint32_t k = 0; k < narrowphase::kMaxColours; ++k)  // not read (a step in one launch): the widest
+      m_last_sizes[k] = k >= m_last_colours ? 0
+                        : slots             ? static_cast<std::uint32_t>(m_end_flags[kStepWords + k])
+                                            : m_last_widest;
     m_step_candidates = m_step_candidates || m_end_flags[kCandidateSeen] != 0;
     m_expect_uniform = m_model.uniform_pairs && m_end_flags[kMixedSeen] == 0;
     if (m_expect_uniform) {
@@ -1253,10 +1250,9 @@ class CudaStep final : public StepBackend {
   std::uint32_t m_last_colours = 0;
   // Each of those colours' contacts (0 past them), from the same substep
   // or step: the slots' grids (solve_in_slots). A step without waits reads
-  // them only where it launched by slots (m_sizes_read; else the slots take
-  // the widest colour's grid).
+  // them only where it launched by slots; after one in one launch each
+  // colour takes the widest.
   std::array<std::uint32_t, narrowphase::kMaxColours> m_last_sizes{};
-  bool m_sizes_read = false;
   // Steps since the last with an impact candidate: a step without waits
   // keeps impact words until kImpactHold steps in a row had none (a pour's
   // impacts come and go: an impact candidate in records without them is a
