@@ -482,6 +482,7 @@ struct Row {
   std::uint64_t buffer_trims = 0;  // buffers freed at a step's start, held beyond their need (CUDA)
   std::uint64_t unwaited_substeps = 0;  // substeps of the timed steps that waited for nothing (CUDA: one wait a step)
   std::uint64_t undone_substeps = 0;    // of those, outgrew a room: put back and done again with waits (CUDA)
+  std::uint32_t undo_causes = 0;        // what they outgrew: UndoCause bits, or-ed (CUDA)
   // Substeps of the warm-up and timed steps whose records kept whole impact
   // words (CUDA: a contact was an impact candidate; the records' memory is
   // then sized for them until a trim finds them gone: buffer_trims).
@@ -547,6 +548,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     row.buffer_trims += c.buffer_trims;
     row.unwaited_substeps += c.unwaited_substeps;
     row.undone_substeps += c.undone_substeps;
+    row.undo_causes |= c.undo_causes;
     row.impact_substeps += c.impact_words;
     row.cluster_stages += c.cluster_stages;
   }
@@ -747,6 +749,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"buffer_trims", r.buffer_trims},
                                  {"unwaited_substeps", r.unwaited_substeps},
                                  {"undone_substeps", r.undone_substeps},
+                                 {"undo_causes", undo_cause_names(r.undo_causes)},
                                  {"impact_word_substeps", r.impact_substeps},
                                  {"cluster_stages", r.cluster_stages},
                                  {"ke_per_sphere_J", r.ke_per_sphere},

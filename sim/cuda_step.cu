@@ -104,7 +104,8 @@ enum StepWord {
   kProjectionSweeps,  // summed over substeps
   kKineticEnergy,     // with the watch: a double's bits
   kBeyondWalls,       // with the watch
-  kRedo,              // 1 + the first substep that outgrew a room it was given (0: none); see cuda::skipped
+  kRedo,              // 1 + the first substep that outgrew a room it was given (0: none), its UndoCause bits
+                      // from bit 32 (kCauseShift); see cuda::skipped
   kMostPairs,         // the most candidate pairs of a substep (its room's next size)
   kMostContacts,      // the most contacts of a substep
   kCandidateSeen,     // some contact was an impact candidate
@@ -124,6 +125,7 @@ enum StepWord {
   kStepWords
 };
 constexpr int kFlagWords = kKineticEnergy + 2;  // what a step with waits a substep reads
+constexpr int kCauseShift = 32;                 // words[kRedo]: the substep below, its causes above
 // After the step's words, where a step without waits launches by slots:
 // each colour's most contacts in a substep (its slot's grid next step).
 constexpr int kColourWords = static_cast<int>(narrowphase::kMaxColours);
@@ -159,14 +161,18 @@ __global__ void check_substep_kernel(SubstepCheck c, unsigned long long* words) 
   real radius = 0;
   memcpy(&radius, c.seen + 2, sizeof(real));
   const narrowphase::ColourPlan& plan = *c.plan;
-  bool outgrown = grid_past || pairs > c.pair_room || contacts > c.contact_room || (candidate && !c.candidates_fit) ||
-                  (c.slots > 0 && plan.colours + 1 > c.slots);
-  if (c.uniform && (mixed || bits_of_real(radius) != bits_of_real(c.radius))) outgrown = true;
+  std::uint32_t causes = 0;
+  if (grid_past) causes |= kUndoGrid;
+  else if (pairs > c.pair_room) causes |= kUndoPairs;
+  if (contacts > c.contact_room) causes |= kUndoContacts;
+  if (candidate && !c.candidates_fit) causes |= kUndoImpactWords;
+  if (c.uniform && (mixed || bits_of_real(radius) != bits_of_real(c.radius))) causes |= kUndoArms;
+  if (c.slots > 0 && plan.colours + 1 > c.slots) causes |= kUndoColours;
   if (!grid_past && pairs > words[kMostPairs]) words[kMostPairs] = pairs;
   if (contacts > words[kMostContacts]) words[kMostContacts] = contacts;
   if (plan.colours > words[kMostColours]) words[kMostColours] = plan.colours;  // also the slots' next bound
-  if (outgrown) {
-    words[kRedo] = c.substep + 1ull;
+  if (causes != 0) {
+    words[kRedo] = (c.substep + 1ull) | static_cast<unsigned long long>(causes) << kCauseShift;
     if (grid_past) words[kGridPast] = 1;
     return;
   }
@@ -1000,7 +1006,7 @@ class CudaStep final : public StepBackend {
   // grown past what the step found, and the substeps from there on done
   // again with a wait each. The figures of the substeps before it stand.
   void undo_outgrown_substep() {
-    const auto from = static_cast<int>(m_end_flags[kRedo] - 1);
+    const auto from = static_cast<int>((m_end_flags[kRedo] & 0xffffffffull) - 1);
     m_counters = m_counters_at.at(static_cast<std::size_t>(from));
     add_step_figures();
     m_substep_start.copy_state_to(m_device, m_stream);
@@ -1010,6 +1016,7 @@ class CudaStep final : public StepBackend {
     if (grid_past) plan_again();
     if (!rooms_fit || grid_past) ++m_counters.pair_redos;
     ++m_counters.undone_substeps;
+    m_counters.undo_causes |= static_cast<std::uint32_t>(m_end_flags[kRedo] >> kCauseShift);
     m_counters.unwaited_substeps += static_cast<std::uint64_t>(from);
     // The step's words from here are the redone substeps' own (with waits):
     // the non-finite flag of the skipped ones is not theirs, and the words

@@ -10,6 +10,7 @@
 #pragma once
 
 #include <cstdint>
+#include <iterator>
 #include <memory>
 #include <string>
 #include <vector>
@@ -30,6 +31,26 @@ enum class Verb : int {
 inline constexpr const char* kVerbNames[] = {"body_forces", "find_contacts", "colour_contacts", "warm_start",
                                              "solve_velocities", "integrate_positions", "project_positions",
                                              "store_impulses"};
+
+// What a substep without waits outgrew, so that it was undone
+// (StepCounters::undo_causes; the CUDA step's check on the device): a bit
+// each, as several can meet in one substep.
+enum UndoCause : std::uint32_t {
+  kUndoPairs = 1u << 0,        // the candidate pairs outgrew their room
+  kUndoContacts = 1u << 1,     // the contacts outgrew theirs
+  kUndoGrid = 1u << 2,         // the broad phase's grid outgrew its plan
+  kUndoImpactWords = 1u << 3,  // an impact candidate, where the records held approach speeds alone
+  kUndoArms = 1u << 4,         // radii not all the one the records' left-out arms word stood for
+  kUndoColours = 1u << 5,      // more colours than the slots launched for them
+};
+inline constexpr const char* kUndoCauseNames[] = {"pairs", "contacts", "grid", "impact_words", "arms", "colours"};
+// The names of the causes set in `causes`, in kUndoCauseNames' order.
+inline std::vector<std::string> undo_cause_names(std::uint32_t causes) {
+  std::vector<std::string> names;
+  for (std::uint32_t k = 0; k < std::size(kUndoCauseNames); ++k)
+    if (causes & (1u << k)) names.emplace_back(kUndoCauseNames[k]);
+  return names;
+}
 
 // Figures of the last step, summed (or maximised) over its substeps.
 struct StepCounters {
@@ -52,6 +73,7 @@ struct StepCounters {
   std::uint64_t buffer_trims = 0;     // buffers freed at the step's start, held beyond their need (CUDA)
   std::uint64_t unwaited_substeps = 0;  // substeps that waited for nothing (CUDA: one wait a step)
   std::uint64_t undone_substeps = 0;  // of those, outgrew a room: put back and done again with waits (CUDA)
+  std::uint32_t undo_causes = 0;      // what the undone substeps outgrew: UndoCause bits, or-ed (CUDA)
   // With the watch on (StepBackend::set_watch), the figures of the watchdog's
   // invariants at the end of the step (sim/watch_math.hpp):
   double kinetic_energy = 0;          // J, translational + rotational

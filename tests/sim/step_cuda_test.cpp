@@ -80,7 +80,15 @@ struct GpuCounts {
   std::uint64_t trims = 0;         // buffers freed at a step's start, held beyond their need
   std::uint64_t unwaited = 0;      // substeps that waited for nothing (one wait a step)
   std::uint64_t undone = 0;        // of those, outgrew a room: put back and done again with waits
+  std::uint32_t causes = 0;        // what those outgrew: UndoCause bits, or-ed
 };
+
+// The undo causes' names, for messages.
+std::string cause_names(std::uint32_t causes) {
+  std::string names;
+  for (const std::string& name : undo_cause_names(causes)) names += (names.empty() ? "" : ",") + name;
+  return names.empty() ? "none" : names;
+}
 
 // Where a step waits once (MARBLES_CUDA_WAITS): auto (unset: where the
 // solve takes one launch), step (every step) or substep (none).
@@ -107,6 +115,10 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
     counts.trims += gpu.last_step().buffer_trims;
     counts.unwaited += gpu.last_step().unwaited_substeps;
     counts.undone += gpu.last_step().undone_substeps;
+    counts.causes |= gpu.last_step().undo_causes;
+    ASSERT_EQ(gpu.last_step().undo_causes != 0, gpu.last_step().undone_substeps > 0)
+        << "step " << k << ": an undo names what its substep outgrew, and only an undo ("
+        << cause_names(gpu.last_step().undo_causes) << ")";
     ASSERT_LE(gpu.last_step().unwaited_substeps, static_cast<std::uint64_t>(gpu.substeps())) << "step " << k;
     if (cpu.last_step().contacts > 0) counts.solved += 1;
     if (form == "one") {
@@ -149,7 +161,8 @@ bool unwaits(int steps) {
 // substep runs without a wait exactly where unwaits() says.
 void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps,
                      std::uint64_t* pair_redos = nullptr, std::uint64_t* grid_replans = nullptr,
-                     std::uint64_t* trims = nullptr, std::uint64_t* undone = nullptr) {
+                     std::uint64_t* trims = nullptr, std::uint64_t* undone = nullptr,
+                     std::uint32_t* causes = nullptr) {
   Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
   ASSERT_EQ(gpu.backend_name(), "cuda");
@@ -160,6 +173,7 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
   if (grid_replans) *grid_replans += counts.grid_replans;
   if (trims) *trims += counts.trims;
   if (undone) *undone += counts.undone;
+  if (causes) *causes |= counts.causes;
   const std::string form = solve_form();
   EXPECT_EQ(counts.unwaited > 0, unwaits(steps))
       << counts.unwaited << " substeps without a wait; MARBLES_CUDA_WAITS=" << waits_form() << ", solve " << form;
@@ -571,9 +585,13 @@ TEST(StepCuda, PairCountJumpRedoesTheBroadPhase) {
   for (int k = 0; k < 20; ++k) probe.step();
   ASSERT_GT(probe.last_step().candidate_pairs, 8 * (pairs_before + 64)) << "the scene must make the pairs jump";
   std::uint64_t redos = 0, undone = 0;
-  expect_same_run(s, g, 20, &redos, nullptr, nullptr, &undone);
+  std::uint32_t causes = 0;
+  expect_same_run(s, g, 20, &redos, nullptr, nullptr, &undone, &causes);
   EXPECT_GT(redos, 0u) << "the jump must outgrow the pairs' room";
   EXPECT_EQ(undone > 0, unwaits(20)) << "without a wait, the substep that outgrew it is undone and done again";
+  if (undone > 0) {
+    EXPECT_TRUE(causes & kUndoPairs) << "undone for " << cause_names(causes);
+  }
 }
 
 // A ball shot away from a bed at 100 m/s: the centres' bounds, and with
@@ -589,8 +607,12 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
   auto [s, g] = bed_on_a_floor(real(2.8), 1, r);
   add_sphere(g, {real(0.3), real(0.3), real(0.05)}, r, {real(100), real(0), real(20)});
   std::uint64_t redos = 0, replans = 0, undone = 0;
-  expect_same_run(s, g, 40, &redos, &replans, nullptr, &undone);
+  std::uint32_t causes = 0;
+  expect_same_run(s, g, 40, &redos, &replans, nullptr, &undone, &causes);
   EXPECT_EQ(undone > 0, unwaits(40)) << "without a wait, a substep whose grid outgrew the plan is undone";
+  if (undone > 0) {
+    EXPECT_TRUE(causes & kUndoGrid) << "undone for " << cause_names(causes);
+  }
   // Two in these 40 steps on an H100: each plan holds a quarter more cells
   // (and 1024) than the grid it was made from, so the ball's flight outgrows
   // it at shorter and shorter intervals of its growing grid.
@@ -698,9 +720,13 @@ TEST(StepCuda, ContactCountJumpFindsTheContactsAgain) {
   for (int k = 0; k < 40; ++k) probe.step();
   ASSERT_EQ(probe.last_step().contacts, 400u) << "the scene must make the contacts jump";
   std::uint64_t redos = 0, undone = 0;
-  expect_same_run(s, g, 40, &redos, nullptr, nullptr, &undone);
+  std::uint32_t causes = 0;
+  expect_same_run(s, g, 40, &redos, nullptr, nullptr, &undone, &causes);
   EXPECT_GT(redos, 0u) << "the jump must outgrow the contacts' room";
   EXPECT_EQ(undone > 0, unwaits(40)) << "without a wait, the substep that outgrew it is undone and done again";
+  if (undone > 0) {
+    EXPECT_TRUE(causes & kUndoContacts) << "undone for " << cause_names(causes);
+  }
 }
 
 // The same layer with four substeps a step: its contacts jump in a later
@@ -735,6 +761,9 @@ TEST(StepCuda, ContactCountJumpInALaterSubstepIsUndoneThere) {
     }
   }
   EXPECT_EQ(counts.undone > 0, unwaits(first + 3)) << "without a wait, the substep that outgrew it is undone";
+  if (counts.undone > 0) {
+    EXPECT_TRUE(counts.causes & kUndoContacts) << "undone for " << cause_names(counts.causes);
+  }
 }
 
 // Forty pairs of touching spheres at rest, far apart (one colour), and six
@@ -779,11 +808,16 @@ TEST(StepCuda, ColourCountJumpPastTheSlotsIsUndone) {
   ASSERT_LT(jump, kSteps - 1);
   REQUIRE_DEVICE();
   std::uint64_t redos = 0, undone = 0;
-  expect_same_run(s, g, kSteps, &redos, nullptr, nullptr, &undone);
+  std::uint32_t causes = 0;
+  expect_same_run(s, g, kSteps, &redos, nullptr, nullptr, &undone, &causes);
   const std::string form = solve_form();
   const bool slots = waits_form() == "step" && (form == "launches" || form == "apart");
   EXPECT_EQ(undone > 0, slots) << "MARBLES_CUDA_WAITS=" << waits_form() << ", solve " << form;
   EXPECT_EQ(redos, 0u) << "the pairs fit their room";
+  if (undone > 0) {
+    EXPECT_TRUE(causes & kUndoColours) << "undone for " << cause_names(causes);
+    EXPECT_FALSE(causes & (kUndoPairs | kUndoContacts | kUndoGrid)) << "undone for " << cause_names(causes);
+  }
 }
 
 // A layer of 22 500 spheres kept apart falls onto a floor. Its first steps

@@ -9,6 +9,7 @@
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
 #include "sim/simulation.hpp"
+#include "sim/step_backend.hpp"
 #include "sim/step_model.hpp"
 #include "tests/sim/test_scenes.hpp"
 
@@ -166,6 +167,28 @@ TEST(Determinism, SameSceneSameState) {
 // The model says whether a wall's surface moves (the GPU's records then keep
 // each wall contact's surface velocity): a box at rest does not, a spinning
 // post or a sliding plane does, and without the walls effect no wall counts.
+// The undo causes a step reports (StepCounters::undo_causes, the bench's
+// undo_causes) name each bit once, in the bits' order, and nothing else.
+TEST(StepCounters, UndoCauseNamesFollowTheBits) {
+  const std::vector<std::pair<UndoCause, std::string>> each{{kUndoPairs, "pairs"},
+                                                            {kUndoContacts, "contacts"},
+                                                            {kUndoGrid, "grid"},
+                                                            {kUndoImpactWords, "impact_words"},
+                                                            {kUndoArms, "arms"},
+                                                            {kUndoColours, "colours"}};
+  EXPECT_TRUE(undo_cause_names(0).empty());
+  std::uint32_t all = 0;
+  std::vector<std::string> names;
+  for (const auto& [bit, name] : each) {
+    EXPECT_EQ(undo_cause_names(bit), std::vector<std::string>{name});
+    EXPECT_EQ(all & bit, 0u) << name << " shares a bit";
+    all |= bit, names.push_back(name);
+  }
+  EXPECT_EQ(undo_cause_names(all), names);
+  EXPECT_EQ(undo_cause_names(kUndoColours | kUndoPairs), (std::vector<std::string>{"pairs", "colours"}));
+  EXPECT_TRUE(undo_cause_names(~all).empty()) << "a bit no cause has names nothing";
+}
+
 TEST(StepModel, MovingWallsAreTheOnesWhoseSurfaceMoves) {
   using namespace marbles::testing;
   using scene::Effect;
