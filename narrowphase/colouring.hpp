@@ -125,6 +125,23 @@ void visit_sweeps(const Begin& begin, std::uint32_t colours, int sweeps, bool me
   flush(false);
 }
 
+// The sweeps' walk by the slots of a plan the host does not read (a step
+// that waits once, CudaStep::solve_in_slots): `sweeps` walks of `slots`
+// slots, forwards and backwards in turn; a launch reads its slot's range
+// on the device (slot < colours: that colour; slot == colours: the overflow
+// set, serial; past it: nothing). With `merge_turns`, the last slot of a
+// sweep, which the next sweep begins with, comes once, visited twice (as
+// visit_sweeps). visit(slot, backwards, twice).
+template <class Visit>
+void visit_slot_sweeps(std::uint32_t slots, int sweeps, bool merge_turns, Visit&& visit) {
+  std::uint32_t first = 0;
+  for (int it = 0; it < sweeps; ++it) {
+    const bool backwards = it % 2 == 1, turn = merge_turns && it + 1 < sweeps;
+    for (std::uint32_t k = first; k < slots; ++k) visit(backwards ? slots - 1 - k : k, backwards, turn && k + 1 == slots);
+    first = turn ? 1 : 0;
+  }
+}
+
 // True when no two contacts of one colour share a sphere (tests, checks).
 bool colouring_is_proper(const std::vector<Contact>& contacts, const ColourRanges& ranges, std::size_t body_count);
 

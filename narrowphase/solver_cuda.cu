@@ -134,14 +134,16 @@ __global__ void warm_start_kernel(SweepRecords records, ContactRange r, SolverBo
 // from what it just wrote; its bodies and record are no other thread's in
 // the launch, so it reads what the next launch would. Its own instance, so
 // the sweep of every other launch keeps its registers. (A serial range at a
-// turn walks back in for_range.)
+// turn walks back in for_range: a plan's slot that turns out to be the
+// overflow set is solved once a visit.)
 template <bool Friction, bool Rolling, bool Twice>
 __global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
+  const bool again = Twice && !(r.plan && r.slot == r.plan->colours);
   for_range_early(
       r, [&](std::uint32_t k) { return load_sweep_contact<Friction, Rolling>(s, k); },
       [&](std::uint32_t k, const Contact& c) {
         solve_loaded<Friction, Rolling>(s, k, c, bodies, inv_h);
-        if constexpr (Twice) solve_record<Friction, Rolling>(s, k, bodies, inv_h);
+        if (again) solve_record<Friction, Rolling>(s, k, bodies, inv_h);
       });
 }
 

@@ -913,7 +913,7 @@ class CudaStep final : public StepBackend {
   // substep with more is undone: check_substep_kernel), each with a grid for
   // its colour's last size and an eighth more (a wider colour is strided
   // over). Slots past the colours launch and do nothing. The turns
-  // are launched apart. A launch loads its records early where the launch
+  // merge as with waits. A launch loads its records early where the launch
   // before wrote another slot's (ContactRange::early; every slot's range is
   // its own).
   std::uint32_t slot_count() const { return std::min(m_last_colours + 2, narrowphase::kMaxColours + 1); }
@@ -941,12 +941,15 @@ class CudaStep final : public StepBackend {
     if (m_model.solver.warm_start)
       for (std::uint32_t s = 0; s < slots; ++s)
         nc::launch_warm_start(m_records, slot(s, false, false), bodies, m_terms, m_stream);
-    for (int it = 0; it < sweeps; ++it)
-      for (std::uint32_t k = 0; k < slots; ++k) {
-        const bool backwards = it % 2 == 1;
-        nc::launch_sweep(m_records, slot(backwards ? slots - 1 - k : k, backwards, true), bodies, inv_h, m_terms,
-                         m_stream);
-      }
+    // The turns merged as with waits (not under `apart`): the overflow
+    // set's slot walked back, a colour's contacts each solved again at once.
+    narrowphase::visit_slot_sweeps(slots, sweeps, m_solve_mode != SolveMode::apart,
+                                   [&](std::uint32_t s, bool backwards, bool twice) {
+                                     nc::ContactRange r = slot(s, backwards, true);
+                                     r.twice = twice;
+                                     m_counters.turn_launches += twice ? 1 : 0;
+                                     nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_stream);
+                                   });
   }
 
   bool one_wait_possible() const {

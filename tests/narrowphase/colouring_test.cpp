@@ -642,6 +642,59 @@ TEST(VisitSweeps, LaunchesWalkTheSweepsAndMergeEveryTurn) {
   }
 }
 
+// The sweeps by slots of a device plan (visit_slot_sweeps) over random
+// colour ranges, 0 to 6 sweeps and as many slots as the plan's colours and
+// one more (its overflow set) up to three more: each slot resolved as the
+// device resolves it (a colour, the overflow set, or nothing), visited once
+// and twice back the other way, walks exactly what the sweeps'
+// visit_colours walk (empty ranges left out); merged, every turn is one
+// launch: sweeps - 1 of them, each of the slot a sweep ended with.
+TEST(VisitSlotSweeps, SlotsWalkTheSweepsAndMergeEveryTurn) {
+  std::mt19937_64 rng(37);
+  struct Visit {
+    std::uint32_t b, e;
+    bool serial, reversed;
+    bool operator==(const Visit&) const = default;
+  };
+  for (int trial = 0; trial < 300; ++trial) {
+    std::uint32_t colours = 0;
+    const std::vector<std::uint32_t> begin = random_colour_begins(rng, colours);
+    const int sweeps = static_cast<int>(rng() % 7);
+    const std::uint32_t slots = colours + 1 + static_cast<std::uint32_t>(rng() % 4);
+    std::vector<Visit> walk;
+    for (int it = 0; it < sweeps; ++it)
+      visit_colours(begin, colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
+        if (e > b) walk.push_back({b, e, serial, reversed});
+      });
+    for (const bool merge : {false, true}) {
+      std::vector<Visit> seen;
+      int launches = 0, twice_launches = 0;
+      std::uint32_t last_slot = slots;
+      visit_slot_sweeps(slots, sweeps, merge, [&](std::uint32_t s, bool backwards, bool twice) {
+        ASSERT_LT(s, slots) << "trial " << trial;
+        if (merge) {
+          EXPECT_NE(s, last_slot) << "trial " << trial << ": a merged turn launched again";
+        }
+        if (twice) {
+          EXPECT_EQ(s, backwards ? 0u : slots - 1) << "trial " << trial << ": a turn is a sweep's last slot";
+        }
+        ++launches, last_slot = s;
+        twice_launches += twice ? 1 : 0;
+        if (s > colours) return;  // past the plan: nothing
+        const std::uint32_t b = begin[s], e = begin[s + 1];
+        if (e <= b) return;
+        const bool serial = s == colours;
+        seen.push_back({b, e, serial, backwards});
+        if (twice) seen.push_back({b, e, serial, !backwards});
+      });
+      EXPECT_EQ(seen, walk) << "trial " << trial << (merge ? ", merged" : ", apart");
+      const int turns = merge && sweeps > 0 ? sweeps - 1 : 0;
+      EXPECT_EQ(twice_launches, turns) << "trial " << trial;
+      EXPECT_EQ(launches, sweeps * static_cast<int>(slots) - turns) << "trial " << trial;
+    }
+  }
+}
+
 // The impact levels' ranges from the firsts of their sorted keys (the GPU's
 // impact stage reads them so): on random sorted keys (levels 0 .. L - 1,
 // each present, then maybe the overflow's and the others' keys), every
