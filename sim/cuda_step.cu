@@ -926,11 +926,12 @@ class CudaStep final : public StepBackend {
       r.plan = m_colouring.device_plan();
       r.slot = s;
       // A grid for the slot's colour's last size and an eighth; the slot
-      // past the last step's colours (a new colour, or the overflow set's
-      // one thread) an eighth of the widest; the one past that (the
-      // overflow set after a new colour, or none) a block. A wider colour
-      // is strided over.
-      const std::uint32_t size = s < m_last_colours ? m_last_sizes[s] : s == m_last_colours ? m_last_widest / 8 : 0;
+      // past the last step's colours (a new colour, which comes last and
+      // small as the tail's colours do, or the overflow set's one thread)
+      // the last colour's; the one past that (the overflow set after a new
+      // colour, or none) a block. A wider colour is strided over.
+      const std::uint32_t tail = m_last_colours > 0 ? m_last_sizes[m_last_colours - 1] : m_last_widest / 8;
+      const std::uint32_t size = s < m_last_colours ? m_last_sizes[s] : s == m_last_colours ? tail : 0;
       r.width = size + size / 8 + 1;
       r.backwards = backwards;
       r.mirrored = m_mirror, m_mirror = !m_mirror;
