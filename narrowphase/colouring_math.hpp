@@ -113,6 +113,15 @@ MARBLES_HD_INLINE void keep_most_per_colour(const ColourPlan& plan, Word* most) 
   }
 }
 
+// Whether launches by `slots` slots of a plan (slot s < colours: colour s;
+// s == colours: the overflow set, serial; past it: nothing; the CUDA step's
+// solve without waits) walk all of it: every colour has its slot (even an
+// empty one: the step reads each slot's colour's size), and the overflow
+// set one too unless it is empty.
+MARBLES_HD_INLINE bool slots_hold(const ColourPlan& plan, std::uint32_t slots) {
+  return plan.colours < slots || (plan.colours == slots && plan.begin[plan.colours + 1] == plan.begin[plan.colours]);
+}
+
 // The plan of n contacts from the firsts their counting sort by colour left
 // (first[key]: the first sorted position holding key, kNoFirst where none;
 // keys: the colours below kMaxColours, the overflow's kMaxColours, the

@@ -167,7 +167,7 @@ __global__ void check_substep_kernel(SubstepCheck c, unsigned long long* words) 
   if (contacts > c.contact_room) causes |= kUndoContacts;
   if (candidate && !c.candidates_fit) causes |= kUndoImpactWords;
   if (c.uniform && (mixed || bits_of_real(radius) != bits_of_real(c.radius))) causes |= kUndoArms;
-  if (c.slots > 0 && plan.colours + 1 > c.slots) causes |= kUndoColours;
+  if (c.slots > 0 && !narrowphase::slots_hold(plan, c.slots)) causes |= kUndoColours;
   if (!grid_past && pairs > words[kMostPairs]) words[kMostPairs] = pairs;
   if (contacts > words[kMostContacts]) words[kMostContacts] = contacts;
   if (plan.colours > words[kMostColours]) words[kMostColours] = plan.colours;  // also the slots' next bound
@@ -672,7 +672,7 @@ class CudaStep final : public StepBackend {
     // for colours: check_substep_kernel)
     const int words = !m_one_wait           ? (m_watch ? kFlagWords : kKineticEnergy)
                       : solve_in_one_launch() ? kStepWords
-                                              : kStepWords + std::min(static_cast<int>(slot_count()) - 1, kColourWords);
+                                              : kStepWords + std::min(static_cast<int>(m_last_colours) + 1, kColourWords);
     if (m_watch && m_device.view().count > 0) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
       watch_kernel<<<::marbles::cuda::grid_for(m_device.view().count, m_sm), kWatchBlock, 0, m_stream>>>(
@@ -909,14 +909,15 @@ class CudaStep final : public StepBackend {
 
   // The warm start and sweeps of a step without waits where the solve takes
   // a launch per colour: a launch per slot of the device's plan, for the
-  // last step's colours and one more, then the overflow set (slot_count; a
-  // substep with more is undone: check_substep_kernel), each with a grid for
-  // its colour's last size and an eighth more (a wider colour is strided
-  // over). Slots past the colours launch and do nothing. The turns
-  // merge as with waits. A launch loads its records early where the launch
+  // last step's colours and one more, for a new colour or the overflow set
+  // (slot_count; a substep whose plan they do not hold, more colours or a
+  // new one with an overflow set, is undone: slots_hold,
+  // check_substep_kernel), each with a grid for its colour's last size and
+  // an eighth more (a wider colour is strided over). A slot past the
+  // colours launches and does nothing. The turns merge as with waits. A launch loads its records early where the launch
   // before wrote another slot's (ContactRange::early; every slot's range is
   // its own).
-  std::uint32_t slot_count() const { return std::min(m_last_colours + 2, narrowphase::kMaxColours + 1); }
+  std::uint32_t slot_count() const { return std::min(m_last_colours + 1, narrowphase::kMaxColours + 1); }
   void solve_in_slots(narrowphase::SolverBody* bodies, real inv_h, int sweeps) {
     constexpr int kAll = -2, kNone = -1;
     int last = kAll;  // the records were made (and the impacts wrote) before
@@ -928,10 +929,9 @@ class CudaStep final : public StepBackend {
       // A grid for the slot's colour's last size and an eighth; the slot
       // past the last step's colours (a new colour, which comes last and
       // small as the tail's colours do, or the overflow set's one thread)
-      // the last colour's; the one past that (the overflow set after a new
-      // colour, or none) a block. A wider colour is strided over.
+      // the last colour's. A wider colour is strided over.
       const std::uint32_t tail = m_last_colours > 0 ? m_last_sizes[m_last_colours - 1] : m_last_widest / 8;
-      const std::uint32_t size = s < m_last_colours ? m_last_sizes[s] : s == m_last_colours ? tail : 0;
+      const std::uint32_t size = s < m_last_colours ? m_last_sizes[s] : tail;
       r.width = size + size / 8 + 1;
       r.backwards = backwards;
       r.mirrored = m_mirror, m_mirror = !m_mirror;

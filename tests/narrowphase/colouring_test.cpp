@@ -643,8 +643,9 @@ TEST(VisitSweeps, LaunchesWalkTheSweepsAndMergeEveryTurn) {
 }
 
 // The sweeps by slots of a device plan (visit_slot_sweeps) over random
-// colour ranges, 0 to 6 sweeps and as many slots as the plan's colours and
-// one more (its overflow set) up to three more: each slot resolved as the
+// colour ranges, 0 to 6 sweeps and as many slots as the plan's colours (where
+// its overflow set is empty) or one more (for it) up to three more, so that
+// the slots hold the plan (slots_hold): each slot resolved as the
 // device resolves it (a colour, the overflow set, or nothing), visited once
 // and twice back the other way, walks exactly what the sweeps'
 // visit_colours walk (empty ranges left out); merged, every turn is one
@@ -660,7 +661,8 @@ TEST(VisitSlotSweeps, SlotsWalkTheSweepsAndMergeEveryTurn) {
     std::uint32_t colours = 0;
     const std::vector<std::uint32_t> begin = random_colour_begins(rng, colours);
     const int sweeps = static_cast<int>(rng() % 7);
-    const std::uint32_t slots = colours + 1 + static_cast<std::uint32_t>(rng() % 4);
+    const bool no_overflow = begin[colours + 1] == begin[colours];
+    const std::uint32_t slots = colours + (no_overflow ? 0 : 1) + static_cast<std::uint32_t>(rng() % 4);
     std::vector<Visit> walk;
     for (int it = 0; it < sweeps; ++it)
       visit_colours(begin, colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
@@ -790,6 +792,39 @@ TEST(ColourPlan, OfFirstsGivesEachKeysPositions) {
 // colours (gaps, empty colours, overflow sets), most[c] is the largest size
 // colour c had in any plan that had it, 0 where none did; the words past the
 // most colours seen are never written.
+// Whether the slots hold a plan (slots_hold, the CUDA step's check for a
+// solve without waits), against walking them: on random plans (a quarter of
+// the colours and overflow sets empty) and 0 to colours + 2 slots, true
+// exactly where every contact of the plan lies in a range some slot reads
+// and every colour, even an empty one, has its slot (the step reads a size
+// for each slot's colour, for the next step's grids).
+TEST(ColourPlan, SlotsHoldExactlyWhereTheyReachEveryContact) {
+  std::mt19937_64 rng(53);
+  int held = 0, not_held = 0;
+  for (int trial = 0; trial < 500; ++trial) {
+    ColourPlan plan;
+    plan.colours = static_cast<std::uint32_t>(rng() % (trial % 9 == 0 ? kMaxColours + 1 : 8));
+    std::uint32_t at = static_cast<std::uint32_t>(rng() % 10);
+    for (std::uint32_t c = 0; c <= plan.colours; ++c) {
+      plan.begin[c] = at;
+      at += rng() % 4 == 0 ? 0 : 1 + static_cast<std::uint32_t>(rng() % 9);
+    }
+    for (std::uint32_t c = plan.colours + 1; c < kMaxColours + 2; ++c) plan.begin[c] = at;
+    for (std::uint32_t slots = 0; slots <= plan.colours + 2; ++slots) {
+      std::vector<bool> reached(at, false);
+      for (std::uint32_t s = 0; s < slots && s <= plan.colours; ++s)  // past the overflow set: nothing
+        for (std::uint32_t k = plan.begin[s]; k < plan.begin[s + 1]; ++k) reached[k] = true;
+      bool every = plan.colours <= slots;
+      for (std::uint32_t k = plan.begin[0]; k < at; ++k) every = every && reached[k];
+      ASSERT_EQ(slots_hold(plan, slots), every)
+          << "trial " << trial << ": " << plan.colours << " colours, " << slots << " slots";
+      (every ? held : not_held) += 1;
+    }
+  }
+  EXPECT_GT(held, 500);
+  EXPECT_GT(not_held, 500);
+}
+
 TEST(ColourPlan, KeepMostPerColourIsEachColoursLargestSize) {
   std::mt19937_64 rng(47);
   for (int trial = 0; trial < 200; ++trial) {
