@@ -769,8 +769,9 @@ TEST(StepCuda, ContactCountJumpInALaterSubstepIsUndoneThere) {
 // step the seventh takes six contacts, so the colours jump from one to six
 // or more, while the contacts grow by six, within their room. Where a step
 // waits once and launches a sweep per slot of the device's plan (the last
-// step's colours, one more, and the overflow set: MARBLES_CUDA_WAITS=step
-// with a launch per colour), the colours outgrow the slots and that substep
+// step's colours and one more, for a new colour or the overflow set:
+// MARBLES_CUDA_WAITS=step with a launch per colour), the colours outgrow the
+// slots and that substep
 // is undone and done again with waits; in every other form nothing outgrows
 // a room. The CPU's bits every step.
 TEST(StepCuda, ColourCountJumpPastTheSlotsIsUndone) {
