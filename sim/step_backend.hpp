@@ -41,7 +41,8 @@ enum UndoCause : std::uint32_t {
   kUndoGrid = 1u << 2,         // the broad phase's grid outgrew its plan
   kUndoImpactWords = 1u << 3,  // an impact candidate, where the records held approach speeds alone
   kUndoArms = 1u << 4,         // radii not all the one the records' left-out arms word stood for
-  kUndoColours = 1u << 5,      // more colours than the slots launched for them
+  kUndoColours = 1u << 5,      // a plan the slots launched for it do not hold (more colours, or a new one
+                               // with an overflow set: narrowphase::slots_hold)
 };
 inline constexpr const char* kUndoCauseNames[] = {"pairs", "contacts", "grid", "impact_words", "arms", "colours"};
 // The names of the causes set in `causes`, in kUndoCauseNames' order.

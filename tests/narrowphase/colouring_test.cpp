@@ -800,11 +800,6 @@ TEST(ColourPlan, OfFirstsGivesEachKeysPositions) {
   }
 }
 
-// Each colour's most contacts over a run of plans (what a CUDA step that
-// waits once keeps for its slots' grids): on random plans of varying
-// colours (gaps, empty colours, overflow sets), most[c] is the largest size
-// colour c had in any plan that had it, 0 where none did; the words past the
-// most colours seen are never written.
 // Whether the slots hold a plan (slots_hold, the CUDA step's check for a
 // solve without waits), against walking them: on random plans (a quarter of
 // the colours and overflow sets empty) and 0 to colours + 2 slots, true
@@ -838,6 +833,11 @@ TEST(ColourPlan, SlotsHoldExactlyWhereTheyReachEveryContact) {
   EXPECT_GT(not_held, 500);
 }
 
+// Each colour's most contacts over a run of plans (what a CUDA step that
+// waits once keeps for its slots' grids): on random plans of varying
+// colours (gaps, empty colours, overflow sets), most[c] is the largest size
+// colour c had in any plan that had it, 0 where none did; the words past the
+// most colours seen are never written.
 TEST(ColourPlan, KeepMostPerColourIsEachColoursLargestSize) {
   std::mt19937_64 rng(47);
   for (int trial = 0; trial < 200; ++trial) {

@@ -164,9 +164,6 @@ TEST(Determinism, SameSceneSameState) {
   EXPECT_EQ(0, std::memcmp(a.velocity.data(), b.velocity.data(), a.size() * sizeof(Vec3)));
 }
 
-// The model says whether a wall's surface moves (the GPU's records then keep
-// each wall contact's surface velocity): a box at rest does not, a spinning
-// post or a sliding plane does, and without the walls effect no wall counts.
 // The undo causes a step reports (StepCounters::undo_causes, the bench's
 // undo_causes) name each bit once, in the bits' order, and nothing else.
 TEST(StepCounters, UndoCauseNamesFollowTheBits) {
@@ -189,6 +186,9 @@ TEST(StepCounters, UndoCauseNamesFollowTheBits) {
   EXPECT_TRUE(undo_cause_names(~all).empty()) << "a bit no cause has names nothing";
 }
 
+// The model says whether a wall's surface moves (the GPU's records then keep
+// each wall contact's surface velocity): a box at rest does not, a spinning
+// post or a sliding plane does, and without the walls effect no wall counts.
 TEST(StepModel, MovingWallsAreTheOnesWhoseSurfaceMoves) {
   using namespace marbles::testing;
   using scene::Effect;
