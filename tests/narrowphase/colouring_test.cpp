@@ -672,7 +672,6 @@ TEST(VisitSlotSweeps, SlotsWalkTheSweepsAndMergeEveryTurn) {
     const bool no_overflow = begin[colours + 1] == begin[colours];
     const std::uint32_t least = colours + (no_overflow ? 0 : 1);
     const std::uint32_t slots = trial % 10 == 0 ? 1 : least + static_cast<std::uint32_t>(rng() % 4);
-    if (slots == 0) continue;  // an empty plan: nothing to launch
     single += slots == 1 ? 1 : 0;
     std::vector<Visit> walk;
     for (int it = 0; it < sweeps; ++it)
