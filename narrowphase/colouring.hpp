@@ -129,29 +129,19 @@ void visit_sweeps(const Begin& begin, std::uint32_t colours, int sweeps, bool me
 // that waits once, CudaStep::solve_in_slots): `sweeps` walks of `slots`
 // slots, forwards and backwards in turn; a launch reads its slot's range
 // on the device (slot < colours: that colour; slot == colours: the overflow
-// set, serial; past it: nothing). With `merge_turns`, a slot that ends one
-// sweep and begins the next comes once, visited twice, as visit_sweeps
-// merges a range (with one slot, each launch but maybe the last takes two
+// set, serial; past it: nothing). It is visit_sweeps over slots as ranges
+// of one (the last in the overflow set's place), each distinct: with
+// `merge_turns` a slot that ends one sweep and begins the next comes once,
+// visited twice (with one slot, each launch but maybe the last takes two
 // sweeps). visit(slot, backwards, twice).
 template <class Visit>
 void visit_slot_sweeps(std::uint32_t slots, int sweeps, bool merge_turns, Visit&& visit) {
-  struct Held {
-    std::uint32_t slot = 0;
-    bool backwards = false, held = false;
-  } held;
-  for (int it = 0; it < sweeps; ++it)
-    for (std::uint32_t k = 0; k < slots; ++k) {
-      const bool backwards = it % 2 == 1;
-      const std::uint32_t s = backwards ? slots - 1 - k : k;
-      if (merge_turns && held.held && held.slot == s) {
-        visit(s, held.backwards, true);
-        held.held = false;
-        continue;
-      }
-      if (held.held) visit(held.slot, held.backwards, false);
-      held = {s, backwards, true};
-    }
-  if (held.held) visit(held.slot, held.backwards, false);
+  if (slots == 0) return;
+  struct Slots {  // slot k as the range [k, k + 1)
+    std::uint32_t operator[](std::uint32_t k) const { return k; }
+  };
+  visit_sweeps(Slots{}, slots - 1, sweeps, merge_turns,
+               [&](std::uint32_t slot, std::uint32_t, bool, bool backwards, bool twice) { visit(slot, backwards, twice); });
 }
 
 // True when no two contacts of one colour share a sphere (tests, checks).
