@@ -914,14 +914,15 @@ class CudaStep final : public StepBackend {
   // new one with an overflow set, is undone: slots_hold,
   // check_substep_kernel), each with a grid for its colour's last size and
   // an eighth more (a wider colour is strided over). A slot past the
-  // colours launches and does nothing. The turns merge as with waits. A launch loads its records early where the launch
-  // before wrote another slot's (ContactRange::early; every slot's range is
-  // its own).
+  // colours launches and does nothing. The turns merge as with waits. A
+  // launch loads its records early where the launch before wrote another
+  // slot's (ContactRange::early; every slot's range is its own).
   std::uint32_t slot_count() const { return std::min(m_last_colours + 1, narrowphase::kMaxColours + 1); }
   void solve_in_slots(narrowphase::SolverBody* bodies, real inv_h, int sweeps) {
-    constexpr int kAll = -2, kNone = -1;
-    int last = kAll;  // the records were made (and the impacts wrote) before
     const std::uint32_t slots = slot_count();
+    // Which slot the launch before wrote, each slot's range its own: the
+    // slots as ranges of one (the records made, the impacts, wrote all).
+    narrowphase::LastWrites last(slots);
     auto slot = [&](std::uint32_t s, bool backwards, bool writes) {
       nc::ContactRange r;
       r.plan = m_colouring.device_plan();
@@ -935,15 +936,15 @@ class CudaStep final : public StepBackend {
       r.width = size + size / 8 + 1;
       r.backwards = backwards;
       r.mirrored = m_mirror, m_mirror = !m_mirror;
-      r.early = last != kAll && last != static_cast<int>(s);
-      last = writes ? static_cast<int>(s) : kNone;
+      r.early = last.next(s, s + 1, writes);
       return r;
     };
     if (m_model.solver.warm_start)
       for (std::uint32_t s = 0; s < slots; ++s)
         nc::launch_warm_start(m_records, slot(s, false, false), bodies, m_terms, m_stream);
-    // The turns merged as with waits (not under `apart`): the overflow
-    // set's slot walked back, a colour's contacts each solved again at once.
+    // The turns merged as with waits (not under `apart`): a slot that is
+    // the overflow set walked back, a colour's contacts each solved again
+    // at once.
     narrowphase::visit_slot_sweeps(slots, sweeps, m_solve_mode != SolveMode::apart,
                                    [&](std::uint32_t s, bool backwards, bool twice) {
                                      nc::ContactRange r = slot(s, backwards, true);
