@@ -593,6 +593,13 @@ TEST(LastWrites, EarlyExactlyWhenTheLaunchBeforeWroteNoneOfItsRecords) {
   EXPECT_LT(repeated[1], repeated[0] - 200 * 4);
 }
 
+// A range visited by a sweep: [b, e), serial or not, reversed or not.
+struct Visit {
+  std::uint32_t b, e;
+  bool serial, reversed;
+  bool operator==(const Visit&) const = default;
+};
+
 // The sweeps as launches (visit_sweeps) over random colour ranges and 0 to
 // 6 sweeps: each launch's range visited once, and twice back the other way,
 // walks exactly what the sweeps' visit_colours walk (empty ranges left
@@ -601,11 +608,6 @@ TEST(LastWrites, EarlyExactlyWhenTheLaunchBeforeWroteNoneOfItsRecords) {
 // launches all cover it, each twice but maybe the last).
 TEST(VisitSweeps, LaunchesWalkTheSweepsAndMergeEveryTurn) {
   std::mt19937_64 rng(29);
-  struct Visit {
-    std::uint32_t b, e;
-    bool serial, reversed;
-    bool operator==(const Visit&) const = default;
-  };
   for (int trial = 0; trial < 300; ++trial) {
     std::uint32_t colours = 0;
     const std::vector<std::uint32_t> begin = random_colour_begins(rng, colours);
@@ -654,11 +656,6 @@ TEST(VisitSweeps, LaunchesWalkTheSweepsAndMergeEveryTurn) {
 // with, or with one slot half the sweeps (each launch two sweeps).
 TEST(VisitSlotSweeps, SlotsWalkTheSweepsAndMergeEveryTurn) {
   std::mt19937_64 rng(37);
-  struct Visit {
-    std::uint32_t b, e;
-    bool serial, reversed;
-    bool operator==(const Visit&) const = default;
-  };
   int single = 0;  // trials with one slot
   for (int trial = 0; trial < 400; ++trial) {
     std::uint32_t colours = 0;
