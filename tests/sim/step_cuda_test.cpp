@@ -771,9 +771,8 @@ TEST(StepCuda, ContactCountJumpInALaterSubstepIsUndoneThere) {
 // waits once and launches a sweep per slot of the device's plan (the last
 // step's colours and one more, for a new colour or the overflow set:
 // MARBLES_CUDA_WAITS=step with a launch per colour), the colours outgrow the
-// slots and that substep
-// is undone and done again with waits; in every other form nothing outgrows
-// a room. The CPU's bits every step.
+// slots and that substep is undone and done again with waits; in every other
+// form nothing outgrows a room. The CPU's bits every step.
 TEST(StepCuda, ColourCountJumpPastTheSlotsIsUndone) {
   scene::Scene s = make_scene(1e-3, 1, {Effect::collisions, Effect::friction}, 0, 0.5);
   const real r = real(1.0 / 128), v = 1, h = real(1e-3);
