@@ -128,31 +128,32 @@ __global__ void gather_kernel(SweepRecords records, const std::uint8_t* contact_
   }
 }
 
-// The entries copied into another cache's arrays: the first *size of them
-// (the runs' last first), never the room past it that no store wrote.
-// tangent and rolling are null (both sides) where the scene keeps none.
-__global__ void copy_entries_kernel(const std::uint32_t* size, std::uint32_t bound, const std::uint32_t* keys,
-                                    const real* normal, const Vec3* tangent, const Vec3* rolling,
-                                    const std::uint8_t* colour, std::uint32_t* to_keys, real* to_normal,
-                                    Vec3* to_tangent, Vec3* to_rolling, std::uint8_t* to_colour) {
-  const std::uint32_t m = min(*size, bound);
-  for (std::uint32_t e = blockIdx.x * blockDim.x + threadIdx.x; e < m; e += gridDim.x * blockDim.x) {
-    to_keys[e] = keys[e];
-    to_normal[e] = normal[e];
-    if (tangent) to_tangent[e] = tangent[e];
-    if (rolling) to_rolling[e] = rolling[e];
-    to_colour[e] = colour[e];
-  }
+// The first *end entries of an array (at most bound, `words` words each)
+// into another: the entries it held before it grew into its new memory, or
+// a cache's entries into another cache's arrays; never the room past them
+// that no store wrote.
+template <typename Word>
+__global__ void copy_held_kernel(const std::uint32_t* end, std::uint32_t bound, std::uint32_t words, const Word* from,
+                                 Word* to) {
+  const std::size_t n = std::size_t(min(*end, bound)) * words;
+  for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += std::size_t(gridDim.x) * blockDim.x)
+    to[k] = from[k];
 }
 
-// The entries an array held before it grew, into its new memory: the
-// first *end of them (`size` bytes each, at most `bound`), never the room
-// past them that no store wrote.
-__global__ void copy_held_kernel(const std::uint32_t* end, std::uint32_t bound, std::uint32_t size, const char* from,
-                                 char* to) {
-  const std::size_t bytes = std::size_t(min(*end, bound)) * size;
-  for (std::size_t k = blockIdx.x * blockDim.x + threadIdx.x; k < bytes; k += std::size_t(gridDim.x) * blockDim.x)
-    to[k] = from[k];
+// copy_held_kernel on entries of `size` bytes, in 4-byte words where the
+// size allows (keys, impulses), else in bytes (colours).
+void copy_held(const std::uint32_t* end, std::uint32_t bound, std::size_t size, const void* from, void* to,
+               int sm_count, cudaStream_t s) {
+  const std::size_t n = std::size_t(bound) * size;
+  if (size % 4 == 0)
+    copy_held_kernel<<<grid_for(n / 4, sm_count), kBlock, 0, s>>>(end, bound, static_cast<std::uint32_t>(size / 4),
+                                                                   static_cast<const std::uint32_t*>(from),
+                                                                   static_cast<std::uint32_t*>(to));
+  else
+    copy_held_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(end, bound, static_cast<std::uint32_t>(size),
+                                                               static_cast<const std::uint8_t*>(from),
+                                                               static_cast<std::uint8_t*>(to));
+  MARBLES_CUDA_CHECK_LAUNCH();
 }
 
 // --- renumber: each entry renamed (renamed_key, as the host's renumbered)
@@ -395,10 +396,7 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
     if (!skip || old_runs == 0) return b.reserve(n * size + 16);
     return b.reserve_copying(n * size + 16, s, [&](void* to, const void* from, std::size_t held) {
       const auto bound = static_cast<std::uint32_t>(std::min<std::size_t>(old_bound, held / size));
-      copy_held_kernel<<<grid_for(std::size_t(bound) * size, sm_count), kBlock, 0, s>>>(
-          kept_first + old_runs - 1, bound, static_cast<std::uint32_t>(size), static_cast<const char*>(from),
-          static_cast<char*>(to));
-      MARBLES_CUDA_CHECK_LAUNCH();
+      copy_held(kept_first + old_runs - 1, bound, size, from, to, sm_count, s);
     });
   };
   auto* keys = static_cast<std::uint32_t*>(room(m_keys, sizeof(std::uint32_t)));
@@ -588,16 +586,17 @@ void ContactCacheCuda::copy_to(ContactCacheCuda& to, int sm_count, cudaStream_t 
   const std::size_t run_bytes = (std::size_t(m_spheres) + 1) * sizeof(std::uint32_t);
   MARBLES_CUDA_CHECK(
       cudaMemcpyAsync(to.m_first.as<char>(run_bytes), m_first.get(), run_bytes, cudaMemcpyDeviceToDevice, s));
-  // The entries by a kernel that reads their count on the device: the bound
+  // The entries by kernels that read their count on the device: the bound
   // may be a room (a store without a wait) whose tail no store wrote.
-  const bool tangent = m_keep_tangent, rolling = m_keep_rolling;
-  copy_entries_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(
-      m_first.get_as<std::uint32_t>() + m_spheres, m, m_keys.get_as<std::uint32_t>(), m_normal.get_as<real>(),
-      tangent ? m_tangent.get_as<Vec3>() : nullptr, rolling ? m_rolling.get_as<Vec3>() : nullptr,
-      m_colour.get_as<std::uint8_t>(), to.m_keys.as<std::uint32_t>(m), to.m_normal.as<real>(m),
-      tangent ? to.m_tangent.as<Vec3>(m) : nullptr, rolling ? to.m_rolling.as<Vec3>(m) : nullptr,
-      to.m_colour.as<std::uint8_t>(m));
-  MARBLES_CUDA_CHECK_LAUNCH();
+  const std::uint32_t* end = m_first.get_as<std::uint32_t>() + m_spheres;
+  auto copy = [&](const DeviceBuffer& from, DeviceBuffer& into, std::size_t size) {
+    copy_held(end, m, size, from.get(), into.as<char>(m * size), sm_count, s);
+  };
+  copy(m_keys, to.m_keys, sizeof(std::uint32_t));
+  copy(m_normal, to.m_normal, sizeof(real));
+  if (m_keep_tangent) copy(m_tangent, to.m_tangent, sizeof(Vec3));
+  if (m_keep_rolling) copy(m_rolling, to.m_rolling, sizeof(Vec3));
+  copy(m_colour, to.m_colour, 1);
 }
 
 bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* count_on_device,
