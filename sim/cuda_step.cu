@@ -668,11 +668,11 @@ class CudaStep final : public StepBackend {
     auto* flags = m_flags.get_as<unsigned long long>();
     nc::launch_max_overlap(m_records, m_count, m_device.view(), walls(), flags + kDeepest, m_sm, m_stream,
                            m_count_on_device, skip());
-    // (a step by slots: its colours' sizes too, as many as it had slots
-    // for colours: check_substep_kernel)
+    // (a step by slots: its colours' sizes too, one a slot, as many as
+    // there are colour words: check_substep_kernel)
     const int words = !m_one_wait           ? (m_watch ? kFlagWords : kKineticEnergy)
                       : solve_in_one_launch() ? kStepWords
-                                              : kStepWords + std::min(static_cast<int>(m_last_colours) + 1, kColourWords);
+                                              : kStepWords + std::min(static_cast<int>(slot_count()), kColourWords);
     if (m_watch && m_device.view().count > 0) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
       watch_kernel<<<::marbles::cuda::grid_for(m_device.view().count, m_sm), kWatchBlock, 0, m_stream>>>(
@@ -923,15 +923,15 @@ class CudaStep final : public StepBackend {
     // Which slot the launch before wrote, each slot's range its own: the
     // slots as ranges of one (the records made, the impacts, wrote all).
     narrowphase::LastWrites last(slots);
+    // A grid for the slot's colour's last size and an eighth; the slot past
+    // the last step's colours (a new colour, which comes last and small as
+    // the tail's colours do, or the overflow set's one thread) the last
+    // colour's. A wider colour is strided over.
+    const std::uint32_t tail = m_last_colours > 0 ? m_last_sizes[m_last_colours - 1] : m_last_widest / 8;
     auto slot = [&](std::uint32_t s, bool backwards, bool writes) {
       nc::ContactRange r;
       r.plan = m_colouring.device_plan();
       r.slot = s;
-      // A grid for the slot's colour's last size and an eighth; the slot
-      // past the last step's colours (a new colour, which comes last and
-      // small as the tail's colours do, or the overflow set's one thread)
-      // the last colour's. A wider colour is strided over.
-      const std::uint32_t tail = m_last_colours > 0 ? m_last_sizes[m_last_colours - 1] : m_last_widest / 8;
       const std::uint32_t size = s < m_last_colours ? m_last_sizes[s] : tail;
       r.width = size + size / 8 + 1;
       r.backwards = backwards;
