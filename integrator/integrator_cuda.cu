@@ -19,7 +19,8 @@ __global__ void drag_kernel(BodiesView bodies, real k1, real k2, real h) {
     if (bodies.inv_mass[i] > 0) bodies.velocity[i] = drag_kick(bodies.velocity[i], k1, k2, h);
 }
 
-__global__ void drift_kernel(BodiesView bodies, real h, unsigned* non_finite) {
+__global__ void drift_kernel(BodiesView bodies, real h, unsigned* non_finite, const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
   bool bad = false;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x) {
     bodies.position[i] = drift(bodies.position[i], bodies.velocity[i], h);
@@ -56,9 +57,9 @@ void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, int s
 }
 
 void launch_integrate_positions(const BodiesView& bodies, real h, unsigned* non_finite, int sm_count,
-                                cudaStream_t stream) {
+                                cudaStream_t stream, const unsigned long long* skip) {
   if (bodies.count == 0) return;
-  drift_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, h, non_finite);
+  drift_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, h, non_finite, skip);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

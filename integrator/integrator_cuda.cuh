@@ -11,9 +11,11 @@ namespace marbles::integrator::cuda {
 void launch_apply_gravity(const BodiesView& bodies, const Vec3& g, real h, int sm_count, cudaStream_t stream);
 void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, int sm_count, cudaStream_t stream);
 // x += h v; sets *non_finite = 1 when a position, velocity or angular
-// velocity is not finite afterwards (never clears it).
+// velocity is not finite afterwards (never clears it). Nothing where `skip`
+// (not null) is set when it runs (cuda::skipped: a substep that outgrew a
+// room in a step without waits).
 void launch_integrate_positions(const BodiesView& bodies, real h, unsigned* non_finite, int sm_count,
-                                cudaStream_t stream);
+                                cudaStream_t stream, const unsigned long long* skip = nullptr);
 
 // Sets *non_finite = 1 when a position, velocity or angular velocity is not
 // finite (never clears it): the check of a state written from outside.

@@ -76,7 +76,8 @@ __global__ void gather_bodies_kernel(BodiesView world, SolverBody* bodies) {
     bodies[i] = gather_solver_body(world, i);
 }
 
-__global__ void scatter_bodies_kernel(const SolverBody* bodies, BodiesView world) {
+__global__ void scatter_bodies_kernel(const SolverBody* bodies, BodiesView world, const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < world.count; i += gridDim.x * blockDim.x)
     scatter_solver_body(world, i, bodies[i]);
 }
@@ -435,9 +436,10 @@ void launch_gather_bodies(const BodiesView& world, SolverBody* bodies, int sm_co
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, int sm_count, cudaStream_t s) {
+void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, int sm_count, cudaStream_t s,
+                           const unsigned long long* skip) {
   if (world.count == 0) return;
-  scatter_bodies_kernel<<<::marbles::cuda::grid_for(world.count, sm_count), kBlock, 0, s>>>(bodies, world);
+  scatter_bodies_kernel<<<::marbles::cuda::grid_for(world.count, sm_count), kBlock, 0, s>>>(bodies, world, skip);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

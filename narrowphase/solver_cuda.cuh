@@ -48,9 +48,12 @@ struct ContactRange {
   std::uint32_t slot = 0, width = 0;
 };
 
-// The packed velocity state (solver_math.hpp) from the world, and back.
+// The packed velocity state (solver_math.hpp) from the world, and back;
+// the way back does nothing where `skip` (not null) is set when it runs
+// (cuda::skipped: a substep that outgrew a room in a step without waits).
 void launch_gather_bodies(const BodiesView& world, SolverBody* bodies, int sm_count, cudaStream_t stream);
-void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, int sm_count, cudaStream_t stream);
+void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, int sm_count, cudaStream_t stream,
+                           const unsigned long long* skip = nullptr);
 
 // The stages on the sweep's records (solver_math.hpp), made in colour-major
 // order by launch_sorted_records (contacts_cuda.cuh): the impacts, the warm

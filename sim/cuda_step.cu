@@ -564,7 +564,7 @@ class CudaStep final : public StepBackend {
         });
       m_local_sweeps.run(m_records, m_count, m_plan, world, m_local->tile_diameters, m_local->passes,
                          m_local->local, m_local->threads, bodies, inv_h, m_terms, m_sm, m_stream);
-      nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
+      nc::launch_scatter_bodies(bodies, world, m_sm, m_stream, skip());
       return;
     }
     if (solve_in_one_launch()) {
@@ -572,12 +572,12 @@ class CudaStep final : public StepBackend {
       if (nc::launch_solve(m_records, device_plan(), bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm,
                            m_stream))
         ++m_counters.cluster_stages;
-      nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
+      nc::launch_scatter_bodies(bodies, world, m_sm, m_stream, skip());
       return;
     }
     if (m_one_wait) {
       solve_in_slots(bodies, inv_h, sweeps);
-      nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
+      nc::launch_scatter_bodies(bodies, world, m_sm, m_stream, skip());
       return;
     }
     // A launch loads its records while the launch just before it ends,
@@ -601,11 +601,12 @@ class CudaStep final : public StepBackend {
                                 early(r, true);
                                 nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_stream);
                               });
-    nc::launch_scatter_bodies(bodies, world, m_sm, m_stream);
+    nc::launch_scatter_bodies(bodies, world, m_sm, m_stream, skip());
   }
 
   void integrate_positions(real h) override {
-    integrator::cuda::launch_integrate_positions(m_device.view(), h, m_flags.get_as<unsigned>(), m_sm, m_stream);  // flags[0]
+    integrator::cuda::launch_integrate_positions(m_device.view(), h, m_flags.get_as<unsigned>(), m_sm, m_stream,
+                                                 skip());  // flags[0]
     if (m_model.gravity && m_model.verlet)
       integrator::cuda::launch_apply_gravity(m_device.view(), m_model.g, m_model.second_kick(h), m_sm, m_stream);
     nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream, skip());
@@ -652,11 +653,14 @@ class CudaStep final : public StepBackend {
     // The substep's start is kept for steps without waits; where the solve
     // has outgrown one launch (auto then waits a substep: a gas whose first
     // steps ran without waits, then its colours grew), it is let go after
-    // kStartHold such steps, not held for the run (38 bytes a sphere).
+    // kStartHold such steps, not held for the run (12 bytes a sphere: the
+    // velocities, keep_substep_start).
     if (m_waits != Waits::auto_ || solve_in_one_launch()) m_steps_past_one_launch = 0;
     else if ((m_steps_past_one_launch = std::min(m_steps_past_one_launch + 1, kStartHold)) == kStartHold &&
-             m_substep_start.device_bytes() > 0)
-      m_substep_start.release();
+             m_start_velocity.bytes() > 0) {
+      DeviceBuffer none;
+      m_start_velocity.swap(none);  // the memory goes with `none`
+    }
     m_step_candidates = false;
   }
 
@@ -740,7 +744,7 @@ class CudaStep final : public StepBackend {
         {"colouring", m_colouring.device_bytes()},
         {"scratch", m_scratch.bytes()},
         {"watchdog's copy", m_kept.device_bytes() + m_kept_cache.device_bytes() + m_kept_walls.bytes()},
-        {"substep's start", m_substep_start.device_bytes()},
+        {"substep's start", m_start_velocity.bytes()},
         {"local order", m_local_sweeps.device_bytes()},
         {"small", bytes_of(m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_flags, m_hit, m_moved,
                            m_contact_chunk, m_check)},
@@ -961,12 +965,16 @@ class CudaStep final : public StepBackend {
     return m_waits == Waits::step || solve_in_one_launch();  // with the last step's widest colour
   }
 
-  // The moving state at a substep's start, unless an earlier substep of
-  // the step outgrew a room (the copy then still holds that substep's
-  // start); the walls need no copy, their advance skipped from there on.
+  // The velocities at a substep's start, unless an earlier substep of the
+  // step outgrew a room (the copy then still holds that substep's start).
+  // The rest of the moving state needs no copy: before the substep's check
+  // only the body forces write the state (the velocities), and from a
+  // substep that outgrew a room on the kernels that write positions and
+  // spins do nothing (the scatter of the solver's bodies, the drift, the
+  // position stages), as the walls' advance does.
   void keep_substep_start() {
     m_counters_at.push_back(m_counters);
-    m_device.copy_state_to(m_substep_start, m_stream, skip(), m_sm);
+    m_device.copy_velocities_to(m_start_velocity, m_stream, skip(), m_sm);
   }
 
   // colour_contacts without a wait: the colouring leaves its plan on the
@@ -1014,7 +1022,7 @@ class CudaStep final : public StepBackend {
     const auto from = static_cast<int>((m_end_flags[kRedo] & 0xffffffffull) - 1);
     m_counters = m_counters_at.at(static_cast<std::size_t>(from));
     add_step_figures();
-    m_substep_start.copy_state_to(m_device, m_stream);
+    m_device.take_velocities(m_start_velocity, m_stream);
     m_last_colours = std::max(m_last_colours, static_cast<std::uint32_t>(m_end_flags[kMostColours]));
     const bool rooms_fit = fit_rooms(m_end_flags[kMostPairs], m_end_flags[kMostContacts], false);
     const bool grid_past = m_broadphase && m_end_flags[kGridPast] != 0;
@@ -1283,7 +1291,7 @@ class CudaStep final : public StepBackend {
   int m_steps_past_one_launch = 0;
   static constexpr int kStartHold = 4;
   bool m_expect_uniform = false;      // the last substep's contacts all had m_radius's arms
-  DeviceWorld m_substep_start;        // the moving state at a substep's start (the walls move only where not undone)
+  DeviceBuffer m_start_velocity;      // the velocities at a substep's start (keep_substep_start)
   std::vector<StepCounters> m_counters_at;  // the counters at each substep's start without waits
   // The rooms of the broad phase's pairs and of the contacts (capacity 0:
   // no count yet, find_contacts waits for the counts).

@@ -19,16 +19,11 @@ using ::marbles::cuda::DeviceBuffer;
 using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 
-// The moving state copied, unless skipped (DeviceWorld::copy_state_to).
-__global__ void copy_state_kernel(BodiesView from, Vec3* position, Vec3* velocity, Vec3* angular,
-                                  const unsigned long long* skip) {
+// The velocities copied, unless skipped (DeviceWorld::copy_velocities_to).
+__global__ void copy_velocities_kernel(const Vec3* from, std::size_t n, Vec3* to, const unsigned long long* skip) {
   if (::marbles::cuda::skipped(skip)) return;
-  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < from.count;
-       i += std::size_t(gridDim.x) * blockDim.x) {
-    position[i] = from.position[i];
-    velocity[i] = from.velocity[i];
-    angular[i] = from.angular_velocity[i];
-  }
+  for (std::size_t i = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x; i < n; i += std::size_t(gridDim.x) * blockDim.x)
+    to[i] = from[i];
 }
 
 template <class T>
@@ -143,20 +138,28 @@ void DeviceWorld::download(World& w, cudaStream_t s) const {
   download_state(w, s);
 }
 
-void DeviceWorld::copy_state_to(DeviceWorld& to, cudaStream_t s, const unsigned long long* skip, int sm_count) const {
+void DeviceWorld::copy_state_to(DeviceWorld& to, cudaStream_t s) const {
   to.m_count = m_count;
-  Vec3 *position = to.m_position.as<Vec3>(m_count), *velocity = to.m_velocity.as<Vec3>(m_count),
-       *angular = to.m_angular_velocity.as<Vec3>(m_count);
-  if (skip) {
-    if (m_count == 0) return;
-    copy_state_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(view(), position, velocity, angular, skip);
-    MARBLES_CUDA_CHECK_LAUNCH();
-    return;
-  }
   const std::size_t bytes = m_count * sizeof(Vec3);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(position, m_position.get(), bytes, cudaMemcpyDeviceToDevice, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(velocity, m_velocity.get(), bytes, cudaMemcpyDeviceToDevice, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(angular, m_angular_velocity.get(), bytes, cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_position.as<Vec3>(m_count), m_position.get(), bytes, cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_velocity.as<Vec3>(m_count), m_velocity.get(), bytes, cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_angular_velocity.as<Vec3>(m_count), m_angular_velocity.get(), bytes,
+                                     cudaMemcpyDeviceToDevice, s));
+}
+
+void DeviceWorld::copy_velocities_to(DeviceBuffer& to, cudaStream_t s, const unsigned long long* skip,
+                                     int sm_count) const {
+  auto* velocity = static_cast<Vec3*>(to.reserve(m_count * sizeof(Vec3), false));  // the spheres do not grow
+  if (m_count == 0) return;
+  copy_velocities_kernel<<<grid_for(m_count, sm_count), kBlock, 0, s>>>(m_velocity.get_as<Vec3>(), m_count, velocity,
+                                                                        skip);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void DeviceWorld::take_velocities(const DeviceBuffer& from, cudaStream_t s) {
+  if (m_count == 0) return;
+  MARBLES_CUDA_CHECK(
+      cudaMemcpyAsync(m_velocity.get(), from.get(), m_count * sizeof(Vec3), cudaMemcpyDeviceToDevice, s));
 }
 
 BodiesView DeviceWorld::view() const {

@@ -26,11 +26,15 @@ class DeviceWorld {
   void download(World& world, cudaStream_t stream) const;
 
   // The moving state (positions, velocities, angular velocities) copied on
-  // the device into `to`, which is sized to match. With `skip` (not null),
-  // by a kernel that copies nothing where it is set when it runs
-  // (cuda::skipped: a substep's start kept in a step without waits).
-  void copy_state_to(DeviceWorld& to, cudaStream_t stream, const unsigned long long* skip = nullptr,
-                     int sm_count = 1) const;
+  // the device into `to`, which is sized to match.
+  void copy_state_to(DeviceWorld& to, cudaStream_t stream) const;
+  // The velocities alone copied into `to` (grown to fit) by a kernel that
+  // copies nothing where `skip` is set when it runs (cuda::skipped: a
+  // substep's start kept in a step without waits, where nothing else of
+  // the state is written before the substep's check), and put back.
+  void copy_velocities_to(::marbles::cuda::DeviceBuffer& to, cudaStream_t stream, const unsigned long long* skip,
+                          int sm_count) const;
+  void take_velocities(const ::marbles::cuda::DeviceBuffer& from, cudaStream_t stream);
 
   // The spheres' order by their home cells (cell_order, sim/world.hpp: the
   // same order, from the same grid) into order[0, size()) (device; its
@@ -46,16 +50,6 @@ class DeviceWorld {
   void permute(const std::uint32_t* order, int sm_count, cudaStream_t stream);
   BodiesView view() const;
   std::size_t size() const { return m_count; }
-  // Every array freed (a copy no longer kept): no spheres until the next
-  // upload or copy into it. A plain buffer's free waits for the device.
-  void release() {
-    for (::marbles::cuda::DeviceBuffer* b :
-         {&m_position, &m_velocity, &m_angular_velocity, &m_radius, &m_inv_mass, &m_inv_inertia, &m_material}) {
-      ::marbles::cuda::DeviceBuffer none;
-      b->swap(none);  // the memory goes with `none`
-    }
-    m_count = 0;
-  }
   // Device bytes it holds.
   std::size_t device_bytes() const {
     return ::marbles::cuda::bytes_of(m_position, m_velocity, m_angular_velocity, m_radius, m_inv_mass, m_inv_inertia,

@@ -826,7 +826,9 @@ TEST(StepCuda, ColourCountJumpPastTheSlotsIsUndone) {
 // the end. Where every step waits once (MARBLES_CUDA_WAITS=step) or the
 // solve always takes one launch (MARBLES_CUDA_SOLVE=one) it is held; where
 // no step runs without waits it is never there. Where it goes, it goes
-// within a few steps of the landing. The CPU's bits at the end.
+// within a few steps of the landing. Where it is held, it is the velocities
+// alone (nothing else of the state is written before a substep's check).
+// The CPU's bits at the end.
 TEST(StepCuda, SubstepStartLetGoWhereTheSolveOutgrowsOneLaunch) {
   scene::Scene s = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::friction}, 0, 0.5);
   s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
@@ -858,6 +860,9 @@ TEST(StepCuda, SubstepStartLetGoWhereTheSolveOutgrowsOneLaunch) {
   EXPECT_EQ(held_most > 0, unwaits(kSteps)) << "MARBLES_CUDA_WAITS=" << waits << ", solve " << form;
   EXPECT_EQ(held_last > 0, waits == "step" || (waits == "auto" && form == "one"))
       << "MARBLES_CUDA_WAITS=" << waits << ", solve " << form << ": " << held_last << " bytes held at the end";
+  if (held_most > 0) {
+    EXPECT_EQ(held_most, g.position.size() * sizeof(Vec3)) << "the substep's start: the velocities alone";
+  }
   if (held_most > 0 && held_last == 0) {
     EXPECT_LE(let_go, landed + 8) << "let go within a few steps of the landing (the step that outgrew one launch)";
   }
