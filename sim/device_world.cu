@@ -140,11 +140,12 @@ void DeviceWorld::download(World& w, cudaStream_t s) const {
 
 void DeviceWorld::copy_state_to(DeviceWorld& to, cudaStream_t s) const {
   to.m_count = m_count;
+  Vec3 *position = to.m_position.as<Vec3>(m_count), *velocity = to.m_velocity.as<Vec3>(m_count),
+       *angular = to.m_angular_velocity.as<Vec3>(m_count);
   const std::size_t bytes = m_count * sizeof(Vec3);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_position.as<Vec3>(m_count), m_position.get(), bytes, cudaMemcpyDeviceToDevice, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_velocity.as<Vec3>(m_count), m_velocity.get(), bytes, cudaMemcpyDeviceToDevice, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(to.m_angular_velocity.as<Vec3>(m_count), m_angular_velocity.get(), bytes,
-                                     cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(position, m_position.get(), bytes, cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(velocity, m_velocity.get(), bytes, cudaMemcpyDeviceToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(angular, m_angular_velocity.get(), bytes, cudaMemcpyDeviceToDevice, s));
 }
 
 void DeviceWorld::copy_velocities_to(DeviceBuffer& to, cudaStream_t s, const unsigned long long* skip,
