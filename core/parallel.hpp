@@ -93,20 +93,20 @@ void fill_apart(std::vector<T>& slot, Fill&& fill) {
   own.swap(slot);
 }
 
-// Appends what make(k, out) appends for k = 0..count-1 to `out`, in order of
-// k, on all threads when count >= parallel_from: each thread fills its own
-// buffer over a contiguous (static) chunk and the buffers are joined in
-// thread order, so the order is the sequential one. The first thread's chunk
-// goes straight into `out` (no other thread touches it), so the serial join
-// copies only the other chunks'. `parts`: the buffers, kept between calls.
-// An exception in make (an allocation) is rethrown here.
+// What make(k, out) appends for k = 0..count-1, on all threads when count >=
+// parallel_from: each thread fills its own buffer over a contiguous (static)
+// chunk, the first thread's straight into `out` (no other thread touches
+// it), thread t's into parts[t]. Read as `out` and then parts[1], parts[2],
+// ... up to the returned thread count, they hold the sequential order.
+// `parts`: the buffers, kept between calls (cleared here). An exception in
+// make (an allocation) is rethrown here.
 template <class T, class Make>
-void collect_in_order(std::size_t count, std::size_t parallel_from, std::vector<T>& out,
-                      std::vector<std::vector<T>>& parts, Make&& make) {
+int collect_in_parts(std::size_t count, std::size_t parallel_from, std::vector<T>& out,
+                     std::vector<std::vector<T>>& parts, Make&& make) {
   const int threads = count >= parallel_from ? thread_count() : 1;
   if (threads == 1) {
     for (std::size_t k = 0; k < count; ++k) make(k, out);
-    return;
+    return 1;
   }
   if (parts.size() < static_cast<std::size_t>(threads)) parts.resize(threads);
   for (auto& p : parts) p.clear();
@@ -118,10 +118,26 @@ void collect_in_order(std::size_t count, std::size_t parallel_from, std::vector<
       errors.run([&] { make(static_cast<std::size_t>(k), mine); });
   });
   errors.rethrow();
-  std::size_t total = out.size();
-  for (int t = 1; t < threads; ++t) total += parts[t].size();
-  out.reserve(total);
-  for (int t = 1; t < threads; ++t) out.insert(out.end(), parts[t].begin(), parts[t].end());
+  return threads;
+}
+
+// parts[from, threads) appended to `to`, in order.
+template <class T>
+void join_parts(std::vector<T>& to, std::vector<std::vector<T>>& parts, int from, int threads) {
+  std::size_t total = to.size();
+  for (int t = from; t < threads; ++t) total += parts[t].size();
+  to.reserve(total);
+  for (int t = from; t < threads; ++t) to.insert(to.end(), parts[t].begin(), parts[t].end());
+}
+
+// Appends what make(k, out) appends for k = 0..count-1 to `out`, in order of
+// k: collect_in_parts, then the other threads' buffers joined in thread
+// order (a serial copy of all but the first thread's chunk).
+template <class T, class Make>
+void collect_in_order(std::size_t count, std::size_t parallel_from, std::vector<T>& out,
+                      std::vector<std::vector<T>>& parts, Make&& make) {
+  const int threads = collect_in_parts(count, parallel_from, out, parts, make);
+  join_parts(out, parts, 1, threads);
 }
 
 }  // namespace marbles

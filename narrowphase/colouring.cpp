@@ -18,7 +18,7 @@ constexpr std::uint64_t kRankMask = (std::uint64_t(1) << 56) - 1;  // ranks are 
 // for the contact 16 visits ahead and for the spheres' words of the contact
 // 8 ahead (by then in cache). Branch-free (GCC drops a prefetch under a
 // condition); hints only, the result is the same.
-void ContactColouring::prefetch_ahead(const Contact* contacts, std::size_t t, std::size_t count) const {
+void ContactColouring::prefetch_ahead(Runs<const Contact> contacts, std::size_t t, std::size_t count) const {
   const std::size_t last = count - 1;
   __builtin_prefetch(&contacts[m_order[t + 16 < last ? t + 16 : last]].a);
   const Contact& c = contacts[m_order[t + 8 < last ? t + 8 : last]];
@@ -34,7 +34,7 @@ void ContactColouring::prefetch_ahead(const Contact* contacts, std::size_t t, st
 // which is the round Jones–Plassmann colours it in; its colour is the lowest
 // free one (or its round). The same result as the rounds of the CUDA twin
 // (colouring_cuda.cu), in one pass.
-std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vector<std::uint32_t>& active,
+std::uint32_t ContactColouring::colour(Runs<const Contact> contacts, const std::vector<std::uint32_t>& active,
                                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
                                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds_out,
                                        const std::vector<std::uint32_t>* kept) {
@@ -154,7 +154,14 @@ std::uint32_t ContactColouring::colour(const Contact* contacts, const std::vecto
 
 void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
                                        const std::uint8_t* kept_colour, const BodiesView* prepare, real rest_speed) {
-  const auto n = static_cast<std::uint32_t>(contacts.size());
+  colour_and_sort(ContactRuns(contacts.data()), contacts.size(), contacts, body_count, out, kept_colour, prepare,
+                  rest_speed);
+}
+
+void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_in, std::vector<Contact>& sorted_out,
+                                       std::size_t body_count, ColourRanges& out, const std::uint8_t* kept_colour,
+                                       const BodiesView* prepare, real rest_speed) {
+  const auto n = static_cast<std::uint32_t>(count_in);
   m_rank.resize(n);
   m_colour.resize(n);
   m_all.clear();
@@ -174,7 +181,7 @@ void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size
   // not (settle scene of 10^5: that serial loop 0.9 -> 0.6 % of the step's
   // samples; the same colours).
   for (const std::uint32_t k : m_all) m_rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
-  out.colours = colour(contacts.data(), m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
+  out.colours = colour(contacts, m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
                        &out.rounds, &m_kept);
 
   // Colour-major, index order within a colour (a stable counting sort, in
@@ -192,16 +199,21 @@ void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size
       n, out.colours + 1,  // the colours, then the overflow set
       [&](std::uint32_t k) { return colour_of[k] == kOverflowColour ? overflow_bucket : colour_of[k]; },
       [&](std::uint32_t k, std::uint32_t place) { source[place] = k; }, out.begin, m_bucket_count);
-  m_sorted.resize(n);
-  const Contact* in = contacts.data();
-  Contact* sorted = m_sorted.data();
+  // Straight into `sorted_out` where it is not being read; it keeps its
+  // size from the last substep, so resize() makes (value-initialises)
+  // only the contacts past it.
+  const bool in_place = !sorted_out.empty() && sorted_out.data() == contacts.first;
+  std::vector<Contact>& into = in_place ? m_sorted : sorted_out;
+  into.resize(n);
+  const Runs<const Contact> in = contacts;
+  Contact* sorted = into.data();
   std::atomic<bool> fast{false};  // written only when seen (rare): no traffic in a pile at rest
   const auto count = static_cast<std::ptrdiff_t>(n);
   auto hint = [](const void* p) { __builtin_prefetch(p); };
 #pragma omp parallel for schedule(static) if (count >= 20000)
   for (std::ptrdiff_t p = 0; p < count; ++p) {
     // Hints only: the contact 16 places ahead, and the bodies of the one 8 ahead.
-    const auto* next = reinterpret_cast<const char*>(in + source[std::min<std::ptrdiff_t>(p + 16, count - 1)]);
+    const auto* next = reinterpret_cast<const char*>(&in[source[std::min<std::ptrdiff_t>(p + 16, count - 1)]]);
     hint(next), hint(next + 64), hint(next + sizeof(Contact) - 1);
     Contact& c = sorted[p];
     c = in[source[p]];
@@ -215,7 +227,7 @@ void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size
     if (is_impact_candidate(c, rest_speed)) fast.store(true, std::memory_order_relaxed);
   }
   out.fast_approach = !prepare || fast.load(std::memory_order_relaxed);
-  contacts.swap(m_sorted);
+  if (in_place) sorted_out.swap(m_sorted);
 }
 
 bool colouring_is_proper(const std::vector<Contact>& contacts, const ColourRanges& ranges, std::size_t body_count) {

@@ -42,7 +42,7 @@ class ContactColouring {
   // `kept` (lowest_free only): contacts whose colour[k] is already set (a
   // proper colouring among themselves); they hold their colours at their
   // spheres and take no part in the rounds.
-  std::uint32_t colour(const Contact* contacts, const std::vector<std::uint32_t>& active,
+  std::uint32_t colour(Runs<const Contact> contacts, const std::vector<std::uint32_t>& active,
                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr,
                        const std::vector<std::uint32_t>* kept = nullptr);
@@ -58,9 +58,16 @@ class ContactColouring {
   void colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
                        const std::uint8_t* kept_colour = nullptr, const BodiesView* prepare = nullptr,
                        real rest_speed = 0);
+  // The same for `count` contacts held in runs (Runs), put in colour-major
+  // order into `sorted` (whose contents go). Where `sorted` holds none of the
+  // runs they are gathered straight into it; where it holds the first run
+  // (the form above), into a buffer of the colouring's, swapped in after.
+  void colour_and_sort(ContactRuns contacts, std::size_t count, std::vector<Contact>& sorted, std::size_t body_count,
+                       ColourRanges& out, const std::uint8_t* kept_colour = nullptr,
+                       const BodiesView* prepare = nullptr, real rest_speed = 0);
 
  private:
-  void prefetch_ahead(const Contact* contacts, std::size_t t, std::size_t count) const;
+  void prefetch_ahead(Runs<const Contact> contacts, std::size_t t, std::size_t count) const;
   std::vector<std::uint64_t> m_body_used, m_rank, m_by_rank, m_sort_keys;
   // The kept colours' masks of threads 1..T-1 where T is at most
   // kMostOwnMasks (colour()); more threads or them by atomics into

@@ -70,4 +70,28 @@ struct alignas(16) Contact {
 };
 static_assert(sizeof(Contact) % 16 == 0);
 
+// A list of contacts held in two runs: first[0, first_count), then second
+// from its start. From a plain array (first_count unbounded) it is that
+// array. The CPU's contact search leaves its threads' parts so, the first
+// thread's and then the others', where joining them into one array would
+// copy half the contacts once more (docs/architecture.md "The CPU's contact
+// search on one thread and two").
+template <class C>  // Contact or const Contact
+struct Runs {
+  C* first = nullptr;
+  C* second = nullptr;
+  std::size_t first_count = ~std::size_t(0);
+  Runs(C* all) : first(all) {}  // NOLINT: an array is one run
+  Runs(C* first_run, std::size_t first_run_count, C* second_run)
+      : first(first_run), second(second_run), first_count(first_run_count) {}
+  template <class D>
+  Runs(const Runs<D>& other) : first(other.first), second(other.second), first_count(other.first_count) {}
+  // Without a branch (selects): the colouring reads the runs in random order.
+  C& operator[](std::size_t k) const {
+    const bool in_first = k < first_count;
+    return (in_first ? first : second)[in_first ? k : k - first_count];
+  }
+};
+using ContactRuns = Runs<Contact>;
+
 }  // namespace marbles::narrowphase

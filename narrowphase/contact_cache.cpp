@@ -21,7 +21,7 @@ constexpr std::ptrdiff_t kParallelFrom = 20000;
 
 }  // namespace
 
-std::size_t cold_start_unloaded_islands(std::vector<Contact>& contacts, const std::uint64_t* keys,
+std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count, const std::uint64_t* keys,
                                         const real* normal_impulse, const std::uint8_t* matched,
                                         std::size_t entry_count, const BodiesView& bodies, real weight_impulse) {
   std::vector<std::uint32_t> unloaded;
@@ -38,10 +38,13 @@ std::size_t cold_start_unloaded_islands(std::vector<Contact>& contacts, const st
   // a stack removed), not when a sphere merely leaves the surface of a deep pile.
   std::vector<std::uint32_t> parent(bodies.count);
   std::iota(parent.begin(), parent.end(), 0u);
-  for (const Contact& c : contacts)
+  for (std::size_t t = 0; t < count; ++t) {
+    const Contact& c = contacts[t];
     if (!is_wall(c.b)) parent[root(parent, c.a)] = root(parent, c.b);
+  }
   std::vector<real> island_max(bodies.count, 0);
-  for (const Contact& c : contacts) {
+  for (std::size_t t = 0; t < count; ++t) {
+    const Contact& c = contacts[t];
     real& m = island_max[root(parent, c.a)];
     m = std::max(m, c.normal_impulse);
   }
@@ -56,7 +59,8 @@ std::size_t cold_start_unloaded_islands(std::vector<Contact>& contacts, const st
     }
   }
   std::size_t set_cold = 0;
-  for (Contact& c : contacts) {
+  for (std::size_t t = 0; t < count; ++t) {
+    Contact& c = contacts[t];
     if (!cold[root(parent, c.a)] || c.normal_impulse <= 0) continue;
     c.normal_impulse = 0;
     c.tangent_impulse = Vec3{};
@@ -150,7 +154,12 @@ bool keep_proper_colours(CacheEntries& e) {
 
 std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse,
                                   std::vector<std::uint8_t>& kept_colour) {
-  kept_colour.assign(contacts.size(), kNoKeptColour);
+  return restore(ContactRuns(contacts.data()), contacts.size(), bodies, weight_impulse, kept_colour);
+}
+
+std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies,
+                                  real weight_impulse, std::vector<std::uint8_t>& kept_colour) {
+  kept_colour.assign(count, kNoKeptColour);
   const auto m = static_cast<std::uint32_t>(m_entries.size());
   if (m == 0) return 0;
   const std::uint8_t* colour = m_entries.colour.size() == m ? m_entries.colour.data() : nullptr;
@@ -163,7 +172,7 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
   const std::size_t spheres = bodies.count;
   key_runs(keys, m, spheres, m_first);
   const std::uint32_t* first = m_first.data();
-  const auto n = static_cast<std::ptrdiff_t>(contacts.size());
+  const auto n = static_cast<std::ptrdiff_t>(count);
   std::size_t matched = 0;
 #pragma omp parallel for schedule(static) reduction(+ : matched) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t) {
@@ -176,8 +185,8 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
     m_matched[k] = 1;  // keys are unique: one contact per entry
     ++matched;
   }
-  return matched - cold_start_unloaded_islands(contacts, keys, m_entries.normal_impulse.data(), m_matched.data(), m,
-                                                bodies, weight_impulse);
+  return matched - cold_start_unloaded_islands(contacts, count, keys, m_entries.normal_impulse.data(),
+                                                m_matched.data(), m, bodies, weight_impulse);
 }
 
 void ContactCache::store(const std::vector<Contact>& contacts, const ColourRanges& ranges) {

@@ -75,7 +75,8 @@ bool keep_proper_colours(CacheEntries& entries);
 // k found its contact. Returns the number of contacts it set cold. Islands
 // by union-find here; the CUDA twin finds the same islands by min-label
 // propagation (contact_cache_cuda.cu).
-std::size_t cold_start_unloaded_islands(std::vector<Contact>& contacts, const std::uint64_t* keys,
+// `contacts`: `count` of them, in runs (Runs).
+std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count, const std::uint64_t* keys,
                                         const real* normal_impulse, const std::uint8_t* matched,
                                         std::size_t entry_count, const BodiesView& bodies, real weight_impulse);
 
@@ -87,6 +88,9 @@ class ContactCache {
   // colour of each matching entry, kNoKeptColour for the others (also for
   // those of an island started cold: a colour does not depend on impulses).
   std::size_t restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse,
+                      std::vector<std::uint8_t>& kept_colour);
+  // The same for `count` contacts held in runs (Runs).
+  std::size_t restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies, real weight_impulse,
                       std::vector<std::uint8_t>& kept_colour);
   // Remembers the impulses and colours of `contacts` (colour-major, as
   // `ranges` says) for the next substep.

@@ -64,15 +64,32 @@ void collect(std::size_t count, std::vector<Contact>& out, ContactScratch* scrat
   collect_in_order(count, kParallelFrom, out, (scratch ? *scratch : local).parts, make);
 }
 
+// Pair k's contact, if any, appended to `to` (sphere_contacts' loop body).
+auto sphere_contact_maker(const BodiesView& bodies, const IndexPair* pairs, const PairTable& table, real h,
+                          const real* reach) {
+  return [&bodies, pairs, &table, h, reach](std::size_t k, std::vector<Contact>& to) {
+    Contact c;
+    if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c)) to.push_back(c);
+  };
+}
+
 }  // namespace
 
 void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
                      const PairTable& table, real h, const real* reach, std::vector<Contact>& out,
                      ContactScratch* scratch) {
-  collect(pair_count, out, scratch, [&](std::size_t k, std::vector<Contact>& to) {
-    Contact c;
-    if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c)) to.push_back(c);
-  });
+  collect(pair_count, out, scratch, sphere_contact_maker(bodies, pairs, table, h, reach));
+}
+
+void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
+                     const PairTable& table, real h, const real* reach, std::vector<Contact>& out,
+                     std::vector<Contact>& rest, ContactScratch& scratch) {
+  const int threads = collect_in_parts(pair_count, kParallelFrom, out, scratch.parts,
+                                       sphere_contact_maker(bodies, pairs, table, h, reach));
+  if (threads == 1) return;
+  if (rest.empty()) rest.swap(scratch.parts[1]);  // the second thread's buffer itself (its old one to the scratch)
+  else join_parts(rest, scratch.parts, 1, 2);
+  join_parts(rest, scratch.parts, 2, threads);
 }
 
 void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,

@@ -41,7 +41,8 @@ class CpuStep final : public StepBackend {
   void find_contacts(real substep) override {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_solver.forget_records();
-    m_contacts.clear();
+    m_contact_first.clear();
+    m_contact_rest.clear();
     if (!m_model.collisions && !m_model.wall_contacts) return;
     if (m_non_finite) return;  // the step ends with "non-finite at step N, sphere i", not a broad-phase error
     const BodiesView bodies = m_world.view();
@@ -56,20 +57,22 @@ class CpuStep final : public StepBackend {
       m_counters.candidate_pairs += m_pairs.size();
       m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
       narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_model.pair_table(), h, m_reach.data(),
-                                   m_contacts, &m_contact_scratch);
+                                   m_contact_first, m_contact_rest, m_contact_scratch);
     }
-    if (m_model.wall_contacts)
-      narrowphase::wall_contacts(bodies, m_walls, m_model.pair_table(), h, m_reach.data(), m_contacts,
-                                 &m_contact_scratch);
-    m_counters.contacts += m_contacts.size();
+    if (m_model.wall_contacts)  // after every sphere pair's: at the end of the last run
+      narrowphase::wall_contacts(bodies, m_walls, m_model.pair_table(), h, m_reach.data(),
+                                 m_contact_rest.empty() ? m_contact_first : m_contact_rest, &m_contact_scratch);
+    m_counters.contacts += contact_count();
   }
 
   void colour_contacts() override {
-    const bool kept = m_kept_colour.size() == m_contacts.size() && !m_contacts.empty();
-    // Prepared on the way: nothing moves the bodies before the solve.
+    const std::size_t n = contact_count();
+    const bool kept = m_kept_colour.size() == n && n > 0;
+    // Prepared on the way: nothing moves the bodies before the solve. The
+    // runs of the contact search become one list here, m_contacts.
     const BodiesView bodies = m_world.view();
-    m_colouring.colour_and_sort(m_contacts, m_world.size(), m_colours, kept ? m_kept_colour.data() : nullptr, &bodies,
-                                m_model.solver.rest_speed);
+    m_colouring.colour_and_sort(contact_runs(), n, m_contacts, m_world.size(), m_colours,
+                                kept ? m_kept_colour.data() : nullptr, &bodies, m_model.solver.rest_speed);
     m_counters.colours = std::max(m_counters.colours, m_colours.colours);
     m_counters.overflow += m_colours.overflow();
   }
@@ -78,9 +81,9 @@ class CpuStep final : public StepBackend {
   // the colour they had (kept by the colouring).
   void warm_start() override {
     m_kept_colour.clear();
-    if (m_contacts.empty()) return;
-    m_cache.restore(m_contacts, m_world.view(), m_model.gravity ? length(m_model.g) * m_model.substep() : real(0),
-                    m_kept_colour);
+    if (contact_count() == 0) return;
+    m_cache.restore(contact_runs(), contact_count(), m_world.view(),
+                    m_model.gravity ? length(m_model.g) * m_model.substep() : real(0), m_kept_colour);
   }
 
   void solve_velocities(real h) override {
@@ -197,8 +200,17 @@ class CpuStep final : public StepBackend {
   std::vector<real> m_reach;         // m, contact_reach per sphere
   std::vector<real> m_bound_radius;  // m, radius + reach: what the broad phase sees
   std::vector<broadphase::Pair> m_pairs;
-  std::vector<narrowphase::Contact> m_contacts;
+  // The contacts, in colour-major order once coloured (m_contacts). From
+  // the contact search to the colouring in two runs (narrowphase::Runs):
+  // the first thread's, then the other threads' (not joined into one list,
+  // which would copy half of them again); the colouring gathers them into
+  // m_contacts, whose memory (its size kept) waits for them meanwhile.
+  std::vector<narrowphase::Contact> m_contacts, m_contact_first, m_contact_rest;
   narrowphase::ContactScratch m_contact_scratch;
+  std::size_t contact_count() const { return m_contact_first.size() + m_contact_rest.size(); }
+  narrowphase::ContactRuns contact_runs() {
+    return {m_contact_first.data(), m_contact_first.size(), m_contact_rest.data()};
+  }
   narrowphase::ColourRanges m_colours;
   std::vector<std::uint8_t> m_kept_colour;  // per contact: its colour of the last substep, or none
   StepCounters m_counters;

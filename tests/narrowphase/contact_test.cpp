@@ -1,12 +1,14 @@
 // Contact generation and single-contact impulses against analytic results.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <random>
 #include <set>
 #include <vector>
 
+#include "core/parallel.hpp"
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_math.hpp"
 #include "narrowphase/contacts.hpp"
@@ -697,4 +699,99 @@ TEST(Walls, ASurfaceAtRestHasTheVelocityPlusZero) {
   EXPECT_FALSE(surface_at_rest(sliding));
   EXPECT_FALSE(surface_at_rest(spinning));
   EXPECT_NE(wall_surface_velocity(spinning, Vec3(1, 0, 0)).y, 0);
+}
+
+// Two runs read as one list (Runs, the CPU's contact search): the search's
+// runs hold the joined list's contacts in its order for 1, 2 and 3 threads
+// (30 492 candidate pairs, past the parallel threshold, thrown apart and
+// together so that some make no contact); and the cache's restore and the
+// colouring on runs split anywhere (empty runs included) give what they give
+// on the one list: the same impulses, kept colours, cold starts, colours and
+// colour-major order.
+TEST(ContactRuns, SearchRestoreAndColouringOnRunsEqualTheOneList) {
+  auto same = [](const std::vector<Contact>& a, const std::vector<Contact>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), sizeof(Contact) * a.size()) == 0;
+  };
+  const real r = real(0.01), h = real(1e-3);
+  std::mt19937_64 rng(41);
+  MovingLattice thrown = MovingLattice::thrown(22, r, rng);
+  const BodiesView bodies = thrown.view();
+  const PairTable table = thrown.table();
+  const std::vector<IndexPair>& pairs = thrown.lattice.pairs;
+  ASSERT_GT(pairs.size(), 20000u) << "premise: the search runs on several threads";
+  const std::vector<real> reaches(bodies.count, real(0));
+  std::vector<Contact> joined;
+  sphere_contacts(bodies, pairs.data(), pairs.size(), table, h, reaches.data(), joined);
+  wall_contacts(bodies, thrown.lattice.floor, table, h, reaches.data(), joined);
+  ASSERT_GT(joined.size(), pairs.size() / 10);
+  ASSERT_LT(joined.size(), pairs.size()) << "premise: some pairs make no contact";
+  const int was = thread_count();
+  for (int threads : {1, 2, 3}) {
+    set_thread_count(threads);
+    std::vector<Contact> first, rest;
+    ContactScratch scratch;
+    sphere_contacts(bodies, pairs.data(), pairs.size(), table, h, reaches.data(), first, rest, scratch);
+    wall_contacts(bodies, thrown.lattice.floor, table, h, reaches.data(), rest.empty() ? first : rest, &scratch);
+    set_thread_count(was);
+    EXPECT_EQ(rest.empty(), threads == 1) << threads << " thread(s)";
+    std::vector<Contact> read(first);
+    read.insert(read.end(), rest.begin(), rest.end());
+    EXPECT_TRUE(same(read, joined)) << threads << " thread(s)";
+  }
+
+  // A cache of the list's contacts with loads (every 9th none), then a
+  // substep in which every 7th contact is gone.
+  ColourRanges colours;
+  std::vector<Contact> stored = joined;
+  ContactColouring().colour_and_sort(stored, bodies.count, colours);
+  std::uniform_real_distribution<double> u(0.1, 1);
+  for (std::size_t k = 0; k < stored.size(); ++k) {
+    Contact& c = stored[k];
+    c.normal_impulse = k % 9 == 0 ? real(0) : real(u(rng));
+    c.tangent_impulse = random_unit(rng) * real(0.1 * u(rng));
+    c.rolling_impulse = random_unit(rng) * real(0.01 * u(rng));
+  }
+  ContactCache cache;
+  cache.store(stored, colours);
+  std::vector<Contact> next;
+  for (std::size_t k = 0; k < joined.size(); ++k)
+    if (k % 7 != 3) next.push_back(joined[k]);
+  const std::size_t n = next.size();
+  std::vector<std::size_t> loaded_by_weight;
+  for (const real weight : {real(1e3), real(1e-6)}) {  // no lost load; every gone contact's a lost load
+    std::vector<Contact> one = next;
+    std::vector<std::uint8_t> kept_one;
+    ContactCache a = cache;
+    const std::size_t warm_one = a.restore(one, bodies, weight, kept_one);
+    std::vector<Contact> coloured_one = one;
+    ColourRanges ranges_one;
+    ContactColouring().colour_and_sort(coloured_one, bodies.count, ranges_one, kept_one.data(), &bodies);
+    std::size_t loaded = 0;
+    for (const Contact& c : one) loaded += c.normal_impulse > 0 ? 1 : 0;
+    loaded_by_weight.push_back(loaded);
+    for (const std::size_t split : {std::size_t(0), std::size_t(1), n / 3, n - 1, n}) {
+      std::vector<Contact> head(next.begin(), next.begin() + static_cast<std::ptrdiff_t>(split)),
+          tail(next.begin() + static_cast<std::ptrdiff_t>(split), next.end());
+      std::vector<std::uint8_t> kept;
+      ContactCache b = cache;
+      const ContactRuns runs(head.data(), head.size(), tail.data());
+      EXPECT_EQ(b.restore(runs, n, bodies, weight, kept), warm_one) << "split " << split;
+      EXPECT_EQ(kept, kept_one) << "split " << split;
+      std::vector<Contact> read(head);
+      read.insert(read.end(), tail.begin(), tail.end());
+      EXPECT_TRUE(same(read, one)) << "restored impulses, split " << split;
+      std::vector<Contact> sorted;
+      ColourRanges ranges;
+      ContactColouring().colour_and_sort(runs, n, sorted, bodies.count, ranges, kept.data(), &bodies);
+      EXPECT_EQ(ranges.begin, ranges_one.begin) << "split " << split;
+      EXPECT_EQ(ranges.colours, ranges_one.colours) << "split " << split;
+      EXPECT_TRUE(same(sorted, coloured_one)) << "colour-major contacts, split " << split;
+    }
+    const auto found = static_cast<std::size_t>(
+        std::count_if(kept_one.begin(), kept_one.end(), [](std::uint8_t c) { return c != kNoKeptColour; }));
+    EXPECT_GT(found, n / 2) << "premise: most contacts find their entry (weight " << weight << ")";
+  }
+  ASSERT_EQ(loaded_by_weight.size(), 2u);
+  EXPECT_LT(loaded_by_weight[1], loaded_by_weight[0]) << "premise: the tiny weight starts some island cold";
+  EXPECT_GT(loaded_by_weight[1], 0u) << "premise: and not every island";
 }
