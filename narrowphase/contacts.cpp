@@ -1,6 +1,7 @@
 #include "narrowphase/contacts.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 #include "core/parallel.hpp"
 
@@ -95,13 +96,34 @@ void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size
 void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
                    const real* reach, std::vector<Contact>& out, ContactScratch* scratch) {
   const auto wall_count = static_cast<std::uint32_t>(walls.size());
+  // A half-space whose surface is at rest (surface_at_rest: +0 at every
+  // point) is passed over where make_wall_contact must refuse the sphere:
+  // its gap (wall_gap's, the same bits) at least the skin, the sphere's
+  // reach, and a bound on what its approach closes in h. The approach is
+  // v . n (the surface's +0 taken off v changes no bit) for a unit n, so
+  // |v . n| h as rounded stays below (|vx| + |vy| + |vz|) h as rounded and
+  // made a ten-thousandth larger; a non-finite gap or speed fails the
+  // comparisons and goes to the whole test. The same contacts
+  // (Walls.PassedOverOnlyWhereTheWholeTestRefuses); about half the work of
+  // a box (10^5 spheres, none touching: 7.3 -> 3.5 ms on one thread).
+  std::vector<char> at_rest(wall_count);
+  for (std::uint32_t k = 0; k < wall_count; ++k)
+    at_rest[k] = walls[k].kind == WallShape::Kind::half_space && surface_at_rest(walls[k]);
   collect(bodies.count, out, scratch, [&](std::size_t i, std::vector<Contact>& to) {
     // One contact for all the sphere's walls: make_wall_contact writes every
     // field it sets on each call and leaves the rest (impulses, masses) at
     // their defaults, so a reused one pushes what a fresh one would.
     Contact c;
-    for (std::uint32_t k = 0; k < wall_count; ++k)
+    const Vec3 p = bodies.position[i], v = bodies.velocity[i];
+    const real r = bodies.radius[i];
+    const real clear = std::max(kContactSkin * r, reach[i]);
+    const real closes = ((std::fabs(v.x) + std::fabs(v.y)) + std::fabs(v.z)) * h * real(1.0001);
+    for (std::uint32_t k = 0; k < wall_count; ++k) {
+      Vec3 normal;
+      real gap = 0;
+      if (at_rest[k] && wall_gap(walls[k], p, r, normal, gap) && gap >= clear && gap >= closes) continue;
       if (make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, reach, c)) to.push_back(c);
+    }
   });
 }
 

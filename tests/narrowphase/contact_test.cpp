@@ -701,6 +701,87 @@ TEST(Walls, ASurfaceAtRestHasTheVelocityPlusZero) {
   EXPECT_NE(wall_surface_velocity(spinning, Vec3(1, 0, 0)).y, 0);
 }
 
+// wall_contacts passes over a wall at rest where a bound says the whole test
+// (make_wall_contact) must refuse the sphere: the same contacts as the whole
+// test on every sphere and wall. Spheres of mixed radii near a box, an
+// inclined plane (both at rest), a sliding plane, a spinning and a resting
+// drum; gaps drawn around the skin, the reach and what the approach closes
+// in h, and spheres moving straight at a face with the gap set to that
+// distance as computed and one float either side of it.
+TEST(Walls, PassedOverOnlyWhereTheWholeTestRefuses) {
+  std::mt19937_64 rng(97);
+  std::uniform_real_distribution<double> u(0, 1);
+  const real h = real(1e-3);
+  Walls walls;
+  walls.boxes.push_back({{0, 0, 0}, {1, 1, 1}, 0, {}});
+  walls.planes.push_back({{real(0.5), 0, 0}, Vec3(1, 2, 3) / length(Vec3(1, 2, 3)), 0, {}});
+  walls.planes.push_back({{0, 0, real(0.9)}, {0, 0, -1}, 0, {0, 0, real(0.2)}});
+  walls.cylinders.push_back({{real(0.5), real(0.5), 0}, {0, 0, 1}, real(0.45), 0, true, real(3), 0});
+  walls.cylinders.push_back({{real(0.5), real(0.5), 0}, {0, 0, 1}, real(0.48), 0, true, 0, 0});
+  const std::vector<WallShape> shapes = wall_shapes(walls);
+  ASSERT_EQ(shapes.size(), 10u);
+  ASSERT_EQ(shapes[6].direction.z, real(1)) << "premise: shapes[6] is the box's floor";
+  const std::size_t n = 30000;
+  std::vector<Vec3> pos(n), vel(n), omega(n);
+  std::vector<real> radius(n), inv_mass(n, 1), inv_inertia(n, 1), reach(n);
+  std::vector<std::uint32_t> material(n, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const real r = real(0.005 + 0.015 * u(rng));
+    radius[i] = r;
+    reach[i] = i % 3 == 0 ? real(0) : real(0.002 * u(rng));
+    const double speed = 20 * u(rng) * u(rng);  // up to 0.02 m in h
+    vel[i] = random_unit(rng) * real(speed);
+    Vec3 p(real(u(rng)), real(u(rng)), real(u(rng)));
+    const int face = static_cast<int>(i % 4);  // the floor, the -x face, the inclined plane, anywhere
+    const double gaps[] = {kContactSkin * r, reach[i], speed * h, 0.03 * u(rng)};
+    const real gap = real(gaps[i % 4 == 3 ? 3 : (i / 4) % 4] * (0.98 + 0.04 * u(rng)));
+    if (face == 0) p.z = r + gap;
+    if (face == 1) p.x = r + gap;
+    if (face == 2) {
+      const Vec3 nn = shapes[0].direction;  // planes come first (wall_shapes)
+      p = p - nn * (dot(p - shapes[0].point, nn) - r - gap);
+    }
+    if (i % 16 == 5) {  // straight at the floor, the gap what the approach closes, as computed, and a float off
+      const real s = real(10 * u(rng));
+      vel[i] = Vec3(0, 0, -s);
+      const real closes = -(-s) * h;
+      const int off = static_cast<int>((i / 16) % 3) - 1;
+      const real target = off == 0 ? closes : std::nextafter(closes, off < 0 ? real(0) : real(1));
+      p = Vec3(p.x, p.y, r);
+      const WallShape& floor = shapes[6];  // the box's -z face
+      for (int t = 0; t < 64 && dot(p - floor.point, floor.direction) - r != target; ++t)
+        p.z = p.z + (target - (dot(p - floor.point, floor.direction) - r));
+    }
+    pos[i] = p;
+  }
+  const BodiesView bodies{pos.data(), vel.data(), omega.data(), radius.data(), inv_mass.data(), inv_inertia.data(),
+                          material.data(), n};
+  PairCoefficients coeff{real(0.5), real(0.5), real(0.01), real(0.01)};
+  const PairTable table{&coeff, 1};
+  std::vector<Contact> whole;
+  std::size_t by_approach = 0, on_the_edge = 0;  // contacts at rest walls made by the approach alone; edge cases met
+  for (std::uint32_t i = 0; i < n; ++i) {
+    Contact c;
+    for (std::uint32_t k = 0; k < shapes.size(); ++k) {
+      if (!make_wall_contact(bodies, i, shapes[k], k, table, h, reach.data(), c)) continue;
+      whole.push_back(c);
+      if (shapes[k].kind == WallShape::Kind::half_space && surface_at_rest(shapes[k]) &&
+          c.separation >= kContactSkin * radius[i] && c.separation >= reach[i])
+        ++by_approach;
+    }
+    if (i % 16 == 5) {
+      const real gap = dot(pos[i] - shapes[6].point, shapes[6].direction) - radius[i];
+      on_the_edge += gap == -vel[i].z * h ? 1 : 0;
+    }
+  }
+  std::vector<Contact> passed;
+  wall_contacts(bodies, shapes, table, h, reach.data(), passed);
+  ASSERT_EQ(passed.size(), whole.size());
+  EXPECT_EQ(std::memcmp(passed.data(), whole.data(), sizeof(Contact) * whole.size()), 0);
+  EXPECT_GT(by_approach, n / 50) << "premise: contacts the approach alone makes at walls at rest";
+  EXPECT_GT(on_the_edge, n / 200) << "premise: gaps exactly what the approach closes";
+}
+
 // Two runs read as one list (Runs, the CPU's contact search): the search's
 // runs hold the joined list's contacts in its order for 1, 2 and 3 threads
 // (30 492 candidate pairs, past the parallel threshold, thrown apart and
