@@ -704,8 +704,8 @@ TEST(Walls, ASurfaceAtRestHasTheVelocityPlusZero) {
 // wall_contacts passes over a wall at rest where a bound says the whole test
 // (make_wall_contact) must refuse the sphere: the same contacts as the whole
 // test on every sphere and wall. Spheres of mixed radii near a box, an
-// inclined plane (both at rest), a sliding plane, a spinning and a resting
-// drum; gaps drawn around the skin, the reach and what the approach closes
+// inclined plane (both at rest), a sliding plane, a plane at rest whose
+// normal is not of unit length, a spinning and a resting drum; gaps drawn around the skin, the reach and what the approach closes
 // in h, and spheres moving straight at a face with the gap set to that
 // distance as computed and one float either side of it.
 TEST(Walls, PassedOverOnlyWhereTheWholeTestRefuses) {
@@ -716,11 +716,12 @@ TEST(Walls, PassedOverOnlyWhereTheWholeTestRefuses) {
   walls.boxes.push_back({{0, 0, 0}, {1, 1, 1}, 0, {}});
   walls.planes.push_back({{real(0.5), 0, 0}, Vec3(1, 2, 3) / length(Vec3(1, 2, 3)), 0, {}});
   walls.planes.push_back({{0, 0, real(0.9)}, {0, 0, -1}, 0, {0, 0, real(0.2)}});
+  walls.planes.push_back({{0, 0, real(0.02)}, {0, 0, 2}, 0, {}});  // not unit: never passed over
   walls.cylinders.push_back({{real(0.5), real(0.5), 0}, {0, 0, 1}, real(0.45), 0, true, real(3), 0});
   walls.cylinders.push_back({{real(0.5), real(0.5), 0}, {0, 0, 1}, real(0.48), 0, true, 0, 0});
   const std::vector<WallShape> shapes = wall_shapes(walls);
-  ASSERT_EQ(shapes.size(), 10u);
-  ASSERT_EQ(shapes[6].direction.z, real(1)) << "premise: shapes[6] is the box's floor";
+  ASSERT_EQ(shapes.size(), 11u);
+  ASSERT_EQ(shapes[7].direction.z, real(1)) << "premise: shapes[7] is the box's floor (the planes come first)";
   const std::size_t n = 30000;
   std::vector<Vec3> pos(n), vel(n), omega(n);
   std::vector<real> radius(n), inv_mass(n, 1), inv_inertia(n, 1), reach(n);
@@ -748,7 +749,7 @@ TEST(Walls, PassedOverOnlyWhereTheWholeTestRefuses) {
       const int off = static_cast<int>((i / 16) % 3) - 1;
       const real target = off == 0 ? closes : std::nextafter(closes, off < 0 ? real(0) : real(1));
       p = Vec3(p.x, p.y, r);
-      const WallShape& floor = shapes[6];  // the box's -z face
+      const WallShape& floor = shapes[7];  // the box's -z face
       for (int t = 0; t < 64 && dot(p - floor.point, floor.direction) - r != target; ++t)
         p.z = p.z + (target - (dot(p - floor.point, floor.direction) - r));
     }
@@ -770,7 +771,7 @@ TEST(Walls, PassedOverOnlyWhereTheWholeTestRefuses) {
         ++by_approach;
     }
     if (i % 16 == 5) {
-      const real gap = dot(pos[i] - shapes[6].point, shapes[6].direction) - radius[i];
+      const real gap = dot(pos[i] - shapes[7].point, shapes[7].direction) - radius[i];
       on_the_edge += gap == -vel[i].z * h ? 1 : 0;
     }
   }
