@@ -154,8 +154,11 @@ std::uint32_t ContactColouring::colour(Runs<const Contact> contacts, const std::
 
 void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
                                        const std::uint8_t* kept_colour, const BodiesView* prepare, real rest_speed) {
-  colour_and_sort(ContactRuns(contacts.data()), contacts.size(), contacts, body_count, out, kept_colour, prepare,
+  // Gathered into the colouring's own buffer (it holds the last call's
+  // contacts, so resize() makes few), then swapped in.
+  colour_and_sort(ContactRuns(contacts.data()), contacts.size(), m_sorted, body_count, out, kept_colour, prepare,
                   rest_speed);
+  contacts.swap(m_sorted);
 }
 
 void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_in, std::vector<Contact>& sorted_out,
@@ -199,14 +202,11 @@ void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_i
       n, out.colours + 1,  // the colours, then the overflow set
       [&](std::uint32_t k) { return colour_of[k] == kOverflowColour ? overflow_bucket : colour_of[k]; },
       [&](std::uint32_t k, std::uint32_t place) { source[place] = k; }, out.begin, m_bucket_count);
-  // Straight into `sorted_out` where it is not being read; it keeps its
-  // size from the last substep, so resize() makes (value-initialises)
-  // only the contacts past it.
-  const bool in_place = !sorted_out.empty() && sorted_out.data() == contacts.first;
-  std::vector<Contact>& into = in_place ? m_sorted : sorted_out;
-  into.resize(n);
+  // resize() makes (value-initialises) only the contacts past its size: the
+  // callers hand a buffer that kept the last substep's.
+  sorted_out.resize(n);
   const Runs<const Contact> in = contacts;
-  Contact* sorted = into.data();
+  Contact* sorted = sorted_out.data();
   std::atomic<bool> fast{false};  // written only when seen (rare): no traffic in a pile at rest
   const auto count = static_cast<std::ptrdiff_t>(n);
   auto hint = [](const void* p) { __builtin_prefetch(p); };
@@ -227,7 +227,6 @@ void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_i
     if (is_impact_candidate(c, rest_speed)) fast.store(true, std::memory_order_relaxed);
   }
   out.fast_approach = !prepare || fast.load(std::memory_order_relaxed);
-  if (in_place) sorted_out.swap(m_sorted);
 }
 
 bool colouring_is_proper(const std::vector<Contact>& contacts, const ColourRanges& ranges, std::size_t body_count) {

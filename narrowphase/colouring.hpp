@@ -58,10 +58,9 @@ class ContactColouring {
   void colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
                        const std::uint8_t* kept_colour = nullptr, const BodiesView* prepare = nullptr,
                        real rest_speed = 0);
-  // The same for `count` contacts held in runs (Runs), put in colour-major
-  // order into `sorted` (whose contents go). Where `sorted` holds none of the
-  // runs they are gathered straight into it; where it holds the first run
-  // (the form above), into a buffer of the colouring's, swapped in after.
+  // The same for `count` contacts held in runs (Runs), gathered in
+  // colour-major order into `sorted` (whose contents go; it holds none of
+  // the runs).
   void colour_and_sort(ContactRuns contacts, std::size_t count, std::vector<Contact>& sorted, std::size_t body_count,
                        ColourRanges& out, const std::uint8_t* kept_colour = nullptr,
                        const BodiesView* prepare = nullptr, real rest_speed = 0);

@@ -88,9 +88,12 @@ void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size
   const int threads = collect_in_parts(pair_count, kParallelFrom, out, scratch.parts,
                                        sphere_contact_maker(bodies, pairs, table, h, reach));
   if (threads == 1) return;
-  if (rest.empty()) rest.swap(scratch.parts[1]);  // the second thread's buffer itself (its old one to the scratch)
-  else join_parts(rest, scratch.parts, 1, 2);
-  join_parts(rest, scratch.parts, 2, threads);
+  // Into an empty `rest`, the second thread's buffer itself (rest's old one
+  // to the scratch); the later threads' (or all, onto a `rest` that holds
+  // some) joined on.
+  int from = 1;
+  if (rest.empty()) rest.swap(scratch.parts[1]), from = 2;
+  join_parts(rest, scratch.parts, from, threads);
 }
 
 void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
