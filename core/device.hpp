@@ -4,6 +4,7 @@
 // CUDA) counts as "no device"; `why` then says which.
 #pragma once
 
+#include <cstddef>
 #include <string>
 
 namespace marbles {
@@ -13,6 +14,15 @@ struct DeviceInfo {
   std::string name;       // e.g. "NVIDIA H100 80GB HBM3"
   std::string why_not;    // set when !available
   int multiprocessors = 0;
+};
+
+// How one kernel fits a multiprocessor of the device: registers a thread,
+// local memory a thread (what the compiler spilled; 0 where nothing did),
+// and blocks of kBlock threads a multiprocessor holds at once.
+struct KernelFit {
+  int registers = 0;
+  std::size_t local_bytes = 0;
+  int blocks_per_sm = 0;
 };
 
 // True when this build has the CUDA backend compiled in.

@@ -16,6 +16,7 @@
 #include "core/bits.hpp"
 #include "core/config.hpp"
 #include "core/cuda_check.hpp"
+#include "core/device.hpp"
 #include "core/device_memory.hpp"
 
 namespace marbles::cuda {
@@ -40,6 +41,18 @@ int resident_blocks() {
     return n > 1 ? n : 1;
   }();
   return per_sm;
+}
+
+// How `Kernel` fits a multiprocessor here (checked calls).
+template <auto Kernel>
+KernelFit kernel_fit() {
+  cudaFuncAttributes attributes{};
+  MARBLES_CUDA_CHECK(cudaFuncGetAttributes(&attributes, Kernel));
+  KernelFit fit;
+  fit.registers = attributes.numRegs;
+  fit.local_bytes = attributes.localSizeBytes;
+  MARBLES_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&fit.blocks_per_sm, Kernel, kBlock, 0));
+  return fit;
 }
 
 // How a kernel is launched: plainly; cooperatively (its blocks may meet at

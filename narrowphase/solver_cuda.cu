@@ -137,8 +137,16 @@ __global__ void warm_start_kernel(SweepRecords records, ContactRange r, SolverBo
 // the sweep of every other launch keeps its registers. (A serial range at a
 // turn walks back in for_range: a plan's slot that turns out to be the
 // overflow set is solved once a visit.)
+//
+// At least three blocks a SM: left to itself the compiler gave the sweep with
+// friction and rolling 94 registers, so two blocks of 256 (a quarter of the
+// SM's warps) waited on their bodies' loads; bounded, it takes 72 and
+// nothing spills (four blocks spill 68 bytes and lose). Pile of 10^6 (H200,
+// bench-ab, two rounds): solve 4.51 -> 4.32 ms (docs/architecture.md "The
+// sweep's warps"). In double three blocks would spill kilobytes: unbounded.
+constexpr int kSweepBlocks = sizeof(real) == 4 ? 3 : 1;
 template <bool Friction, bool Rolling, bool Twice>
-__global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
+__global__ void __launch_bounds__(kBlock, kSweepBlocks) record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
   const bool again = Twice && !(r.plan && r.slot == r.plan->colours);
   for_range_early(
       r, [&](std::uint32_t k) { return load_sweep_contact<Friction, Rolling>(s, k); },
@@ -514,6 +522,18 @@ std::uint32_t cluster_widest() {
   return widest;
 }
 int cluster_blocks() { return ::marbles::cuda::largest_cluster<project_kernel<ClusterSync>>(); }
+
+std::vector<KernelFit> sweep_kernel_fits() {
+  namespace dev = ::marbles::cuda;
+  std::vector<KernelFit> fits;
+  for (const KernelFit& fit :
+       {dev::kernel_fit<record_sweep_kernel<false, false, false>>(), dev::kernel_fit<record_sweep_kernel<false, false, true>>(),
+        dev::kernel_fit<record_sweep_kernel<false, true, false>>(), dev::kernel_fit<record_sweep_kernel<false, true, true>>(),
+        dev::kernel_fit<record_sweep_kernel<true, false, false>>(), dev::kernel_fit<record_sweep_kernel<true, false, true>>(),
+        dev::kernel_fit<record_sweep_kernel<true, true, false>>(), dev::kernel_fit<record_sweep_kernel<true, true, true>>()})
+    fits.push_back(fit);
+  return fits;
+}
 
 bool launch_solve(const SweepRecords& records, DevicePlan plan, SolverBody* bodies, real inv_h, SolverTerms t,
                   bool warm, int sweeps, int sm_count, cudaStream_t s) {

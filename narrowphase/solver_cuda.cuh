@@ -10,7 +10,9 @@
 #include <cuda_runtime.h>
 
 #include <cstdint>
+#include <vector>
 
+#include "core/device.hpp"
 #include "core/device_memory.hpp"
 #include "core/spheres.hpp"
 #include "narrowphase/colouring_math.hpp"
@@ -91,6 +93,10 @@ std::uint32_t cluster_widest();
 // kernel, which every scene with contacts runs): 0 where no one-launch
 // stage runs as one.
 int cluster_blocks();
+
+// How the velocity sweep's kernels fit a multiprocessor here: each
+// instance, friction x rolling x twice (launch_sweep), in that order.
+std::vector<KernelFit> sweep_kernel_fits();
 
 // The position stages: the impacts' rebound shifts (rebound_one; in the
 // impact words) when *hit (the impact stage's flag of its first pass; null:

@@ -230,6 +230,7 @@ std::unique_ptr<StepBackend> make_cuda_step(const StepModel&, World) {
   throw RuntimeFailure("the CUDA step: this build has no CUDA backend");
 }
 int cuda_cluster_blocks() { return 0; }
+std::vector<KernelFit> cuda_sweep_kernel_fits() { return {}; }
 #endif
 
 }  // namespace marbles

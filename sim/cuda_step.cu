@@ -1340,4 +1340,8 @@ std::unique_ptr<StepBackend> make_cuda_step(const StepModel& model, World world)
 
 int cuda_cluster_blocks() { return cuda_device().available ? nc::cluster_blocks() : 0; }
 
+std::vector<KernelFit> cuda_sweep_kernel_fits() {
+  return cuda_device().available ? nc::sweep_kernel_fits() : std::vector<KernelFit>{};
+}
+
 }  // namespace marbles

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "broadphase/broadphase.hpp"
+#include "core/device.hpp"
 #include "narrowphase/contact.hpp"
 #include "sim/step_model.hpp"
 #include "narrowphase/contact_cache.hpp"
@@ -195,5 +196,9 @@ std::unique_ptr<StepBackend> make_cuda_step(const StepModel& model, World world)
 // they never run as one (no device, a device without cluster launches, code
 // not made from sm_90 PTX, a build without CUDA).
 int cuda_cluster_blocks();
+// How the CUDA step's velocity sweep kernels fit a multiprocessor of the
+// device (narrowphase::cuda::sweep_kernel_fits); none without a device or
+// a CUDA build.
+std::vector<KernelFit> cuda_sweep_kernel_fits();
 
 }  // namespace marbles
