@@ -113,7 +113,7 @@ MARBLES_HD_INLINE Vec3 wall_surface_velocity(const WallShape& w, const Vec3& x) 
 // True when wall_surface_velocity is +0, every component, at every point: no
 // translation (each component +0: +0 plus a product of zeros of either sign
 // is +0) and no spin. A contact with such a wall needs no velocity of its own.
-inline bool surface_at_rest(const WallShape& w) {
+MARBLES_HD_INLINE bool surface_at_rest(const WallShape& w) {
   const auto plus_zero = [](real v) { return v == 0 && !std::signbit(v); };
   return plus_zero(w.velocity.x) && plus_zero(w.velocity.y) && plus_zero(w.velocity.z) && w.angular_velocity == 0;
 }
@@ -197,6 +197,47 @@ MARBLES_HD_INLINE bool make_wall_contact(const BodiesView& bodies, std::uint32_t
   c.rb = 0;
   c.coeff = table(bodies.material[i], wall.material);
   return true;
+}
+
+// Walls passed over. A half-space whose surface is at rest (surface_at_rest:
+// +0 at every point) can be passed over where make_wall_contact must refuse
+// the sphere (wall_contacts and its CUDA twin): its gap (wall_gap's, the same
+// bits) at least the skin, the sphere's reach, and a bound on what its
+// approach closes in h. The approach is v . n (the surface's +0 taken off v
+// changes no bit) for a unit n, so |v . n| h as rounded stays below
+// (|vx| + |vy| + |vz|) h as rounded and made a ten-thousandth larger (for a
+// normal whose components reach 1 at most, within a millionth); a
+// non-finite gap or speed fails the comparisons and goes to the whole test.
+// The same contacts (Walls.PassedOverOnlyWhereTheWholeTestRefuses); about
+// half the work of a box (10^5 spheres, none touching, one thread on the
+// CPU: 7.0-10.3 -> 3.8-5.5 ms).
+MARBLES_HD_INLINE bool wall_passable(const WallShape& w) {
+  const Vec3& d = w.direction;  // unit (scene walls are made so); checked, as the bound needs it
+  const real x = std::fabs(d.x), y = std::fabs(d.y), z = std::fabs(d.z);
+  const real most = x > y ? (x > z ? x : z) : (y > z ? y : z);
+  return w.kind == WallShape::Kind::half_space && surface_at_rest(w) && most <= real(1.000001);
+}
+
+// The gaps beyond which sphere i is passed over by a passable wall: `clear`
+// (the skin, its reach) and `closes` (the bound on its approach in h).
+struct WallClearance {
+  real clear = 0;
+  real closes = 0;
+};
+MARBLES_HD_INLINE WallClearance wall_clearance(const BodiesView& bodies, std::uint32_t i, real h, const real* reach) {
+  const Vec3 v = bodies.velocity[i];
+  const real skin = kContactSkin * bodies.radius[i];
+  return {skin > reach[i] ? skin : reach[i], ((std::fabs(v.x) + std::fabs(v.y)) + std::fabs(v.z)) * h * real(1.0001)};
+}
+
+// True where make_wall_contact refuses sphere i at passable wall w for
+// certain (so a caller may skip it).
+MARBLES_HD_INLINE bool wall_passed_over(const WallShape& w, const BodiesView& bodies, std::uint32_t i,
+                                        const WallClearance& clearance) {
+  Vec3 normal;
+  real gap = 0;
+  return wall_gap(w, bodies.position[i], bodies.radius[i], normal, gap) && gap >= clearance.clear &&
+         gap >= clearance.closes;
 }
 
 // Effective masses of a contact between A and B (arms ra, rb along the

@@ -99,37 +99,20 @@ void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size
 void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
                    const real* reach, std::vector<Contact>& out, ContactScratch* scratch) {
   const auto wall_count = static_cast<std::uint32_t>(walls.size());
-  // A half-space whose surface is at rest (surface_at_rest: +0 at every
-  // point) is passed over where make_wall_contact must refuse the sphere:
-  // its gap (wall_gap's, the same bits) at least the skin, the sphere's
-  // reach, and a bound on what its approach closes in h. The approach is
-  // v . n (the surface's +0 taken off v changes no bit) for a unit n, so
-  // |v . n| h as rounded stays below (|vx| + |vy| + |vz|) h as rounded and
-  // made a ten-thousandth larger (for a normal whose components reach 1
-  // at most, within a millionth); a non-finite gap or speed fails the
-  // comparisons and goes to the whole test. The same contacts
-  // (Walls.PassedOverOnlyWhereTheWholeTestRefuses); about half the work of
-  // a box (10^5 spheres, none touching, one thread: 7.0-10.3 -> 3.8-5.5 ms).
-  std::vector<char> at_rest(wall_count);
-  for (std::uint32_t k = 0; k < wall_count; ++k) {
-    const Vec3& d = walls[k].direction;  // unit (scene walls are made so); checked, as the bound needs it
-    const real most = std::max({std::fabs(d.x), std::fabs(d.y), std::fabs(d.z)});
-    at_rest[k] = walls[k].kind == WallShape::Kind::half_space && surface_at_rest(walls[k]) && most <= real(1.000001);
-  }
+  // Walls at rest passed over where the whole test must refuse a sphere
+  // (wall_passable, contact_math.hpp).
+  std::vector<char> passable(wall_count);
+  for (std::uint32_t k = 0; k < wall_count; ++k) passable[k] = wall_passable(walls[k]);
   collect(bodies.count, out, scratch, [&](std::size_t i, std::vector<Contact>& to) {
     // One contact for all the sphere's walls: make_wall_contact writes every
     // field it sets on each call and leaves the rest (impulses, masses) at
     // their defaults, so a reused one pushes what a fresh one would.
     Contact c;
-    const Vec3 p = bodies.position[i], v = bodies.velocity[i];
-    const real r = bodies.radius[i];
-    const real clear = std::max(kContactSkin * r, reach[i]);
-    const real closes = ((std::fabs(v.x) + std::fabs(v.y)) + std::fabs(v.z)) * h * real(1.0001);
+    const auto s = static_cast<std::uint32_t>(i);
+    const WallClearance clearance = wall_clearance(bodies, s, h, reach);
     for (std::uint32_t k = 0; k < wall_count; ++k) {
-      Vec3 normal;
-      real gap = 0;
-      if (at_rest[k] && wall_gap(walls[k], p, r, normal, gap) && gap >= clear && gap >= closes) continue;
-      if (make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, reach, c)) to.push_back(c);
+      if (passable[k] && wall_passed_over(walls[k], bodies, s, clearance)) continue;
+      if (make_wall_contact(bodies, s, walls[k], k, table, h, reach, c)) to.push_back(c);
     }
   });
 }

@@ -82,10 +82,12 @@ __global__ void wall_flags_kernel(BodiesView bodies, const WallShape* walls, std
   bool seen = false;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i <= bodies.count; i += gridDim.x * blockDim.x) {
     std::uint32_t found = 0;
+    const auto s = static_cast<std::uint32_t>(i);
+    const WallClearance clearance = i < bodies.count ? wall_clearance(bodies, s, h, reach) : WallClearance{};
     for (std::uint32_t k = 0; i < bodies.count && k < wall_count; ++k) {
+      if (wall_passable(walls[k]) && wall_passed_over(walls[k], bodies, s, clearance)) continue;
       Contact c;
-      found += flag_of(make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, reach, c), c,
-                       bodies, watch, seen);
+      found += flag_of(make_wall_contact(bodies, s, walls[k], k, table, h, reach, c), c, bodies, watch, seen);
     }
     flags[i] = found;
   }
@@ -106,10 +108,13 @@ __global__ void wall_pair_write_kernel(BodiesView bodies, const WallShape* walls
       continue;
     }
     const std::uint32_t end = base + offsets[i + 1];
+    const auto s = static_cast<std::uint32_t>(i);
+    const WallClearance clearance = at < end ? wall_clearance(bodies, s, h, reach) : WallClearance{};
     for (std::uint32_t k = 0; k < wall_count && at < end; ++k) {
+      if (wall_passable(walls[k]) && wall_passed_over(walls[k], bodies, s, clearance)) continue;
       Contact c;
-      if (!make_wall_contact(bodies, static_cast<std::uint32_t>(i), walls[k], k, table, h, reach, c)) continue;
-      if (at < room) out[at] = {static_cast<std::uint32_t>(i), kWallFlag | k};
+      if (!make_wall_contact(bodies, s, walls[k], k, table, h, reach, c)) continue;
+      if (at < room) out[at] = {s, kWallFlag | k};
       ++at;
     }
   }
