@@ -165,13 +165,24 @@ class DeviceBuffer {
   // synchronisation. True where it freed.
   bool trim() {
     const std::size_t asked = m_asked;
-    m_asked = 0;
-    if (!m_handle || m_bytes <= asked + asked / 8 + kTrimSlack) return false;
-    MARBLES_CUDA_CHECK(m_ordered ? cudaFreeAsync(m_handle, m_stream) : cudaFree(m_handle));
-    m_handle = nullptr;
-    m_bytes = 0;
+    if (!m_handle || m_bytes <= asked + asked / 8 + kTrimSlack) {
+      m_asked = 0;
+      return false;
+    }
+    release();
     return true;
   }
+  // Frees the memory whatever was asked (its contents are lost), freed as
+  // it was taken (a stream-ordered buffer stays one), and counts the asked
+  // bytes afresh; reserved again, fitting, at its next use.
+  void release() {
+    if (m_handle) MARBLES_CUDA_CHECK(m_ordered ? cudaFreeAsync(m_handle, m_stream) : cudaFree(m_handle));
+    m_handle = nullptr;
+    m_bytes = 0;
+    m_asked = 0;
+  }
+  // Whether it takes and gives back its memory in its stream's order.
+  bool stream_ordered() const { return m_ordered; }
   static constexpr std::size_t kTrimSlack = 4096;
   void swap(DeviceBuffer& other) noexcept {
     std::swap(m_handle, other.m_handle);

@@ -658,8 +658,7 @@ class CudaStep final : public StepBackend {
     if (m_waits != Waits::auto_ || solve_in_one_launch()) m_steps_past_one_launch = 0;
     else if ((m_steps_past_one_launch = std::min(m_steps_past_one_launch + 1, kStartHold)) == kStartHold &&
              m_start_velocity.bytes() > 0) {
-      DeviceBuffer none;
-      m_start_velocity.swap(none);  // the memory goes with `none`
+      m_start_velocity.release();
     }
     m_step_candidates = false;
   }

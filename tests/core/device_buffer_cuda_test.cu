@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdio>
 #include <random>
 #include <vector>
 
@@ -167,6 +168,41 @@ TEST(DeviceBuffer, TrimFreesWhatTheLastNeedLeftOver) {
     EXPECT_GT(kept, 10u) << "and often stay";
     ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
   }
+}
+
+// release(): the memory freed whatever was asked, the asks counted afresh,
+// and the buffer still takes its memory as it did (a stream-ordered one in
+// its stream's order: swapped with an empty buffer it would not be), and
+// grows again to fit. Plain and stream-ordered buffers, held or empty.
+TEST(DeviceBuffer, ReleaseFreesAndKeepsTheWayItTakesMemory) {
+  REQUIRE_DEVICE();
+  dev::Stream stream;
+  stream.create(cudaStreamNonBlocking);
+  dev::DeviceBuffer plain, ordered(stream);
+  for (dev::DeviceBuffer* b : {&plain, &ordered}) {
+    dev::DeviceBuffer& buffer = *b;
+    const bool was_ordered = buffer.stream_ordered();
+    for (const std::size_t bytes : {std::size_t{0}, std::size_t{1000}, std::size_t{1} << 20}) {
+      if (bytes > 0) {
+        auto* p = static_cast<unsigned char*>(buffer.reserve(bytes));
+        ASSERT_NE(p, nullptr);
+        ASSERT_EQ(cudaMemsetAsync(p, 0x5a, bytes, stream), cudaSuccess);
+        ASSERT_EQ(buffer.asked(), bytes);
+      }
+      buffer.release();
+      EXPECT_EQ(buffer.get(), nullptr);
+      EXPECT_EQ(buffer.bytes(), 0u);
+      EXPECT_EQ(buffer.asked(), 0u);
+      EXPECT_EQ(buffer.stream_ordered(), was_ordered) << "after " << bytes << " bytes";
+    }
+    auto* again = static_cast<unsigned char*>(buffer.reserve(4096));
+    ASSERT_NE(again, nullptr);
+    EXPECT_GE(buffer.bytes(), 4096u);
+    ASSERT_EQ(cudaMemsetAsync(again, 0, 4096, stream), cudaSuccess);
+    ASSERT_EQ(cudaStreamSynchronize(stream), cudaSuccess);
+  }
+  EXPECT_FALSE(plain.stream_ordered());
+  std::printf("a stream's buffer is %s\n", ordered.stream_ordered() ? "stream-ordered" : "plain (no memory pools)");
 }
 
 namespace {
