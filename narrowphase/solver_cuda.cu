@@ -146,7 +146,8 @@ __global__ void warm_start_kernel(SweepRecords records, ContactRange r, SolverBo
 // sweep's warps"). In double three blocks would spill kilobytes: unbounded.
 constexpr int kSweepBlocks = sizeof(real) == 4 ? 3 : 1;
 template <bool Friction, bool Rolling, bool Twice>
-__global__ void __launch_bounds__(kBlock, kSweepBlocks) record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
+__global__ void __launch_bounds__(kBlock, kSweepBlocks)
+    record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
   const bool again = Twice && !(r.plan && r.slot == r.plan->colours);
   for_range_early(
       r, [&](std::uint32_t k) { return load_sweep_contact<Friction, Rolling>(s, k); },
@@ -524,15 +525,11 @@ std::uint32_t cluster_widest() {
 int cluster_blocks() { return ::marbles::cuda::largest_cluster<project_kernel<ClusterSync>>(); }
 
 std::vector<KernelFit> sweep_kernel_fits() {
-  namespace dev = ::marbles::cuda;
-  std::vector<KernelFit> fits;
-  for (const KernelFit& fit :
-       {dev::kernel_fit<record_sweep_kernel<false, false, false>>(), dev::kernel_fit<record_sweep_kernel<false, false, true>>(),
-        dev::kernel_fit<record_sweep_kernel<false, true, false>>(), dev::kernel_fit<record_sweep_kernel<false, true, true>>(),
-        dev::kernel_fit<record_sweep_kernel<true, false, false>>(), dev::kernel_fit<record_sweep_kernel<true, false, true>>(),
-        dev::kernel_fit<record_sweep_kernel<true, true, false>>(), dev::kernel_fit<record_sweep_kernel<true, true, true>>()})
-    fits.push_back(fit);
-  return fits;
+  using ::marbles::cuda::kernel_fit;
+  return {kernel_fit<record_sweep_kernel<false, false, false>>(), kernel_fit<record_sweep_kernel<false, false, true>>(),
+          kernel_fit<record_sweep_kernel<false, true, false>>(),  kernel_fit<record_sweep_kernel<false, true, true>>(),
+          kernel_fit<record_sweep_kernel<true, false, false>>(),  kernel_fit<record_sweep_kernel<true, false, true>>(),
+          kernel_fit<record_sweep_kernel<true, true, false>>(),   kernel_fit<record_sweep_kernel<true, true, true>>()};
 }
 
 bool launch_solve(const SweepRecords& records, DevicePlan plan, SolverBody* bodies, real inv_h, SolverTerms t,
