@@ -17,7 +17,7 @@ struct DeviceInfo {
 };
 
 // How one kernel fits a multiprocessor of the device: registers a thread,
-// local memory a thread (what the compiler spilled; 0 where nothing did),
+// local memory a thread (spills and local arrays; 0 where there are none),
 // and blocks of kBlock threads a multiprocessor holds at once.
 struct KernelFit {
   int registers = 0;

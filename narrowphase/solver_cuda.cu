@@ -137,17 +137,9 @@ __global__ void warm_start_kernel(SweepRecords records, ContactRange r, SolverBo
 // the sweep of every other launch keeps its registers. (A serial range at a
 // turn walks back in for_range: a plan's slot that turns out to be the
 // overflow set is solved once a visit.)
-//
-// At least three blocks a SM: left to itself the compiler gave the sweep with
-// friction and rolling 94 registers, so two blocks of 256 (a quarter of the
-// SM's warps) waited on their bodies' loads; bounded, it takes 72 and
-// nothing spills (four blocks spill 68 bytes and lose). Pile of 10^6 (H200,
-// bench-ab, two rounds): solve 4.51 -> 4.32 ms (docs/architecture.md "The
-// sweep's warps"). In double three blocks would spill kilobytes: unbounded.
-constexpr int kSweepBlocks = sizeof(real) == 4 ? 3 : 1;
 template <bool Friction, bool Rolling, bool Twice>
-__global__ void __launch_bounds__(kBlock, kSweepBlocks)
-    record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
+__device__ __forceinline__ void sweep_range(const SweepRecords& s, const ContactRange& r, SolverBody* bodies,
+                                            real inv_h) {
   const bool again = Twice && !(r.plan && r.slot == r.plan->colours);
   for_range_early(
       r, [&](std::uint32_t k) { return load_sweep_contact<Friction, Rolling>(s, k); },
@@ -156,6 +148,32 @@ __global__ void __launch_bounds__(kBlock, kSweepBlocks)
         if (again) solve_record<Friction, Rolling>(s, k, bodies, inv_h);
       });
 }
+
+template <bool Friction, bool Rolling, bool Twice>
+__global__ void record_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
+  sweep_range<Friction, Rolling, Twice>(s, r, bodies, inv_h);
+}
+
+// The sweep of a range wider than the SMs hold at two blocks each, bounded
+// to three blocks a SM: left to itself the compiler gives the sweep with
+// friction and rolling 94 registers, two blocks of 256 a SM (a quarter of
+// the warps) waiting on their loads; bounded, 72 and nothing spilled (four
+// blocks spill 68 bytes or more). Pile of 10^6 (H200, two rounds): solve
+// 4.51 -> 4.32 ms. A narrow range keeps the unbounded form: with the bound
+// a colour of the pile of 10^5 (about one block a SM) sweeps slower, 0.695
+// -> 0.747 ms of solve (docs/architecture.md "The sweep's warps"). In
+// double the bound would spill kilobytes, and any bound moves the
+// registers: one form.
+#if defined(MARBLES_DOUBLE)
+template <bool Friction, bool Rolling, bool Twice>
+constexpr auto wide_sweep_kernel = record_sweep_kernel<Friction, Rolling, Twice>;
+#else
+template <bool Friction, bool Rolling, bool Twice>
+__global__ void __launch_bounds__(kBlock, 3)
+    wide_sweep_kernel(SweepRecords s, ContactRange r, SolverBody* bodies, real inv_h) {
+  sweep_range<Friction, Rolling, Twice>(s, r, bodies, inv_h);
+}
+#endif
 
 // What the blocks of a one-launch stage meet at after each range
 // (core/device_buffer.cuh; docs/architecture.md "One cluster for a small
@@ -462,12 +480,17 @@ void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* 
 void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, SolverTerms t,
                   cudaStream_t s) {
   if (!r.plan && r.end <= r.begin) return;
+  const int grid = blocks(r);
+  const bool wide = grid > 2 * cuda_device().multiprocessors;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
     if (r.twice && !r.serial)
-      launch(Launch::dependent, record_sweep_kernel<friction, rolling, true>, blocks(r), s, records, r, bodies, inv_h);
+      launch(Launch::dependent,
+             wide ? wide_sweep_kernel<friction, rolling, true> : record_sweep_kernel<friction, rolling, true>, grid, s,
+             records, r, bodies, inv_h);
     else
-      launch(Launch::dependent, record_sweep_kernel<friction, rolling, false>, blocks(r), s, records, r, bodies,
-             inv_h);
+      launch(Launch::dependent,
+             wide ? wide_sweep_kernel<friction, rolling, false> : record_sweep_kernel<friction, rolling, false>, grid,
+             s, records, r, bodies, inv_h);
   });
 }
 
@@ -529,7 +552,11 @@ std::vector<KernelFit> sweep_kernel_fits() {
   return {kernel_fit<record_sweep_kernel<false, false, false>>(), kernel_fit<record_sweep_kernel<false, false, true>>(),
           kernel_fit<record_sweep_kernel<false, true, false>>(),  kernel_fit<record_sweep_kernel<false, true, true>>(),
           kernel_fit<record_sweep_kernel<true, false, false>>(),  kernel_fit<record_sweep_kernel<true, false, true>>(),
-          kernel_fit<record_sweep_kernel<true, true, false>>(),   kernel_fit<record_sweep_kernel<true, true, true>>()};
+          kernel_fit<record_sweep_kernel<true, true, false>>(),   kernel_fit<record_sweep_kernel<true, true, true>>(),
+          kernel_fit<wide_sweep_kernel<false, false, false>>(),   kernel_fit<wide_sweep_kernel<false, false, true>>(),
+          kernel_fit<wide_sweep_kernel<false, true, false>>(),    kernel_fit<wide_sweep_kernel<false, true, true>>(),
+          kernel_fit<wide_sweep_kernel<true, false, false>>(),    kernel_fit<wide_sweep_kernel<true, false, true>>(),
+          kernel_fit<wide_sweep_kernel<true, true, false>>(),     kernel_fit<wide_sweep_kernel<true, true, true>>()};
 }
 
 bool launch_solve(const SweepRecords& records, DevicePlan plan, SolverBody* bodies, real inv_h, SolverTerms t,

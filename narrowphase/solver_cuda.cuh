@@ -94,8 +94,10 @@ std::uint32_t cluster_widest();
 // stage runs as one.
 int cluster_blocks();
 
-// How the velocity sweep's kernels fit a multiprocessor here: each
-// instance, friction x rolling x twice (launch_sweep), in that order.
+// How the velocity sweep's kernels fit a multiprocessor here: the form for
+// ranges the SMs hold at two blocks each, then the form for wider ones
+// (launch_sweep; the same kernel in double), each friction x rolling x
+// twice in that order.
 std::vector<KernelFit> sweep_kernel_fits();
 
 // The position stages: the impacts' rebound shifts (rebound_one; in the

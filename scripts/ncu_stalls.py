@@ -5,6 +5,8 @@ rate, hit rates, and the stall reasons (cycles a warp spends in each per
 issued instruction), the largest first. Used by scripts/gpu-profile's
 STALLS=REGEX."""
 import csv
+import math
+import re
 import sys
 from collections import defaultdict
 
@@ -22,7 +24,16 @@ SHOWN = [  # (metric, heading)
     ("l1tex__t_sector_hit_rate.pct", "L1 hit%"),
     ("dram__throughput.avg.pct_of_peak_sustained_elapsed", "DRAM %"),
 ]
-TIME_US = {"ns": 1e-3, "nsecond": 1e-3, "us": 1.0, "usecond": 1.0, "ms": 1e3, "msecond": 1e3}
+TIME_US = {"ns": 1e-3, "nsecond": 1e-3, "us": 1.0, "usecond": 1.0, "ms": 1e3, "msecond": 1e3, "s": 1e6, "second": 1e6}
+
+
+def short(name):
+    """A kernel's name without its arguments and namespaces, its template's
+    first letters kept (record_sweep_kernel<true, true, false> -> rsk<ttf>)."""
+    name = re.sub(r"\(.*", "", name.replace("(anonymous namespace)::", "")).replace("void ", "").split("::")[-1]
+    base, _, args = name.partition("<")
+    letters = "".join(w[0] for w in base.split("_") if w)
+    return letters + ("<" + "".join(a.strip()[:1] for a in args.rstrip(">").split(",")) + ">" if args else "")
 
 
 def main(path):
@@ -31,29 +42,39 @@ def main(path):
         print(f"ncu_stalls: no rows in {path}")
         return 1
     head, rows = rows[0], rows[1:]
-    ii, mi, ui, vi = (head.index(k) for k in ("ID", "Metric Name", "Metric Unit", "Metric Value"))
-    launches = defaultdict(dict)
+    columns = ("ID", "Kernel Name", "Metric Name", "Metric Unit", "Metric Value")
+    missing = [k for k in columns if k not in head]
+    if missing:
+        print(f"ncu_stalls: {path} has no column {', '.join(missing)}")
+        return 1
+    ii, ki, mi, ui, vi = (head.index(k) for k in columns)
+    launches, names = defaultdict(dict), {}
     for r in rows:
         try:
             value = float(r[vi].replace(",", ""))
         except ValueError:
             continue
         if r[mi] == "gpu__time_duration.sum":
-            value *= TIME_US.get(r[ui], float("nan"))
+            if r[ui] not in TIME_US:
+                print(f"ncu_stalls: unknown time unit {r[ui]!r}")
+                return 1
+            value *= TIME_US[r[ui]]
         launches[int(r[ii])][r[mi]] = value
+        names[int(r[ii])] = short(r[ki])
     ids = sorted(launches)
     print(f"{len(ids)} launches")
     print(f"{'':28}" + "".join(f"{i:>9}" for i in ids))
+    print(f"{'kernel':28}" + "".join(f"{names[i][:8]:>9}" for i in ids))
     for metric, name in SHOWN:
         if any(metric in launches[i] for i in ids):
             print(f"{name:28}" + "".join(f"{launches[i].get(metric, float('nan')):9.1f}" for i in ids))
     stalls = {m for i in ids for m in launches[i] if m.startswith(STALL) and m.endswith("_per_issue_active.ratio")}
     mean = lambda m: sum(launches[i].get(m, 0.0) for i in ids) / len(ids)
-    print("stalls (cycles per issued instruction)")
+    print("stalls (cycles per issued instruction; nan: not measured for that launch)")
     for m in sorted(stalls, key=lambda m: -mean(m)):
         if mean(m) >= 0.05:
             reason = m[len(STALL):-len("_per_issue_active.ratio")]
-            print(f"  {reason:26}" + "".join(f"{launches[i].get(m, 0.0):9.2f}" for i in ids))
+            print(f"  {reason:26}" + "".join(f"{launches[i].get(m, math.nan):9.2f}" for i in ids))
     return 0
 
 

@@ -2,7 +2,8 @@
 // keeps its first bytes (random contents, read back), a buffer that fits
 // is not moved, and a stream-ordered buffer grows in its stream's order;
 // reserve_copying hands the old memory to its copy where it grows;
-// DeviceBuffer::trim frees exactly what the last asks left over; the
+// DeviceBuffer::trim frees exactly what the last asks left over, and
+// release frees whatever was asked, the buffer still of its kind; the
 // barriers of one launch (core/device_buffer.cuh GridSync, ClusterSync)
 // let every thread read what other blocks wrote before them.
 // Label `gpu`; every case skips, saying so, without a CUDA device.
