@@ -478,10 +478,10 @@ void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* 
 }
 
 void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, SolverTerms t,
-                  cudaStream_t s) {
+                  int sm_count, cudaStream_t s) {
   if (!r.plan && r.end <= r.begin) return;
   const int grid = blocks(r);
-  const bool wide = grid > 2 * cuda_device().multiprocessors;
+  const bool wide = grid > 2 * sm_count;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
     if (r.twice && !r.serial)
       launch(Launch::dependent,

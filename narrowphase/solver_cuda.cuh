@@ -64,8 +64,10 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
 // same bits as on the contacts.
 void launch_warm_start(const SweepRecords& records, ContactRange range, SolverBody* bodies, SolverTerms terms,
                        cudaStream_t stream);
+// A sweep's range wider than sm_count SMs hold at two blocks each runs the
+// sweep's form bounded to three blocks a SM (sweep_kernel_fits).
 void launch_sweep(const SweepRecords& records, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,
-                  cudaStream_t stream);
+                  int sm_count, cudaStream_t stream);
 // A colour plan in device memory (ColouringCuda::device_plan), as the
 // stages that walk every colour in one launch read it, and the widest colour
 // the launch is shaped for (the host's reading of the plan, or a bound: a

@@ -4,11 +4,12 @@ and metric) as a table by launch: grid, time, registers, occupancy, issue
 rate, hit rates, and the stall reasons (cycles a warp spends in each per
 issued instruction), the largest first. Used by scripts/gpu-profile's
 STALLS=REGEX."""
-import csv
 import math
 import re
 import sys
 from collections import defaultdict
+
+from ncu_table import TIME, read_rows
 
 STALL = "smsp__average_warps_issue_stalled_"
 SHOWN = [  # (metric, heading)
@@ -24,7 +25,6 @@ SHOWN = [  # (metric, heading)
     ("l1tex__t_sector_hit_rate.pct", "L1 hit%"),
     ("dram__throughput.avg.pct_of_peak_sustained_elapsed", "DRAM %"),
 ]
-TIME_US = {"ns": 1e-3, "nsecond": 1e-3, "us": 1.0, "usecond": 1.0, "ms": 1e3, "msecond": 1e3, "s": 1e6, "second": 1e6}
 
 
 def short(name):
@@ -37,17 +37,10 @@ def short(name):
 
 
 def main(path):
-    rows = [r for r in csv.reader(line for line in open(path) if line.startswith('"'))]
-    if not rows:
-        print(f"ncu_stalls: no rows in {path}")
+    read = read_rows(path, ("ID", "Kernel Name", "Metric Name", "Metric Unit", "Metric Value"), "ncu_stalls")
+    if read is None:
         return 1
-    head, rows = rows[0], rows[1:]
-    columns = ("ID", "Kernel Name", "Metric Name", "Metric Unit", "Metric Value")
-    missing = [k for k in columns if k not in head]
-    if missing:
-        print(f"ncu_stalls: {path} has no column {', '.join(missing)}")
-        return 1
-    ii, ki, mi, ui, vi = (head.index(k) for k in columns)
+    rows, (ii, ki, mi, ui, vi) = read
     launches, names = defaultdict(dict), {}
     for r in rows:
         try:
@@ -55,10 +48,10 @@ def main(path):
         except ValueError:
             continue
         if r[mi] == "gpu__time_duration.sum":
-            if r[ui] not in TIME_US:
+            if r[ui] not in TIME:
                 print(f"ncu_stalls: unknown time unit {r[ui]!r}")
                 return 1
-            value *= TIME_US[r[ui]]
+            value *= TIME[r[ui]] * 1e3  # us
         launches[int(r[ii])][r[mi]] = value
         names[int(r[ii])] = short(r[ki])
     ids = sorted(launches)

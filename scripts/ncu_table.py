@@ -16,13 +16,26 @@ def short(name):
     return re.sub(r"marbles::(narrowphase::|broadphase::|integrator::)?(cuda::)?(\(anonymous namespace\)::)?", "", name)
 
 
-def main(path):
+def read_rows(path, columns, tool):
+    """Nsight Compute's CSV at `path`: its rows, and where each of `columns`
+    stands in them; None (said why, as `tool`) where it has no rows or
+    lacks a column. Also scripts/ncu_stalls.py's."""
     rows = [r for r in csv.reader(line for line in open(path) if line.startswith('"'))]
     if not rows:
-        print(f"ncu_table: no rows in {path}")
+        print(f"{tool}: no rows in {path}")
+        return None
+    missing = [k for k in columns if k not in rows[0]]
+    if missing:
+        print(f"{tool}: {path} has no column {', '.join(missing)}")
+        return None
+    return rows[1:], [rows[0].index(k) for k in columns]
+
+
+def main(path):
+    read = read_rows(path, ("Kernel Name", "Metric Name", "Metric Unit", "Metric Value"), "ncu_table")
+    if read is None:
         return 1
-    head, rows = rows[0], rows[1:]
-    ki, mi, ui, vi = (head.index(k) for k in ("Kernel Name", "Metric Name", "Metric Unit", "Metric Value"))
+    rows, (ki, mi, ui, vi) = read
     ms, dram, l2, count = defaultdict(float), defaultdict(float), defaultdict(float), defaultdict(int)
     for r in rows:
         name, metric, unit = short(r[ki]), r[mi], r[ui]

@@ -599,7 +599,7 @@ class CudaStep final : public StepBackend {
                                 r.twice = twice;
                                 m_counters.turn_launches += twice ? 1 : 0;
                                 early(r, true);
-                                nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_stream);
+                                nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_sm, m_stream);
                               });
     nc::launch_scatter_bodies(bodies, world, m_sm, m_stream, skip());
   }
@@ -656,10 +656,8 @@ class CudaStep final : public StepBackend {
     // kStartHold such steps, not held for the run (12 bytes a sphere: the
     // velocities, keep_substep_start).
     if (m_waits != Waits::auto_ || solve_in_one_launch()) m_steps_past_one_launch = 0;
-    else if ((m_steps_past_one_launch = std::min(m_steps_past_one_launch + 1, kStartHold)) == kStartHold &&
-             m_start_velocity.bytes() > 0) {
-      m_start_velocity.release();
-    }
+    else if ((m_steps_past_one_launch = std::min(m_steps_past_one_launch + 1, kStartHold)) == kStartHold)
+      m_start_velocity.release();  // nothing where it holds none
     m_step_candidates = false;
   }
 
@@ -953,7 +951,7 @@ class CudaStep final : public StepBackend {
                                      nc::ContactRange r = slot(s, backwards, true);
                                      r.twice = twice;
                                      m_counters.turn_launches += twice ? 1 : 0;
-                                     nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_stream);
+                                     nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_sm, m_stream);
                                    });
   }
 
