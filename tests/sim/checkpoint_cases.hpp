@@ -52,6 +52,8 @@ inline int marbles(const std::string& args, std::string* err_text = nullptr, con
   const std::string err = fs::temp_directory_path() / ("marbles_ck_err_" + std::to_string(::getpid()));
   const int status = std::system((env + " '" + kMarbles + "' " + args + " >/dev/null 2>'" + err + "'").c_str());
   if (err_text) *err_text = slurp(err);
+  std::error_code ignored;
+  fs::remove(err, ignored);  // one a call would pile up in the temporary folder
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
