@@ -7,7 +7,10 @@
 // colours a large share of what is left).
 #pragma once
 
+#include <array>
+#include <cstddef>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "core/spheres.hpp"
@@ -149,6 +152,52 @@ void visit_slot_sweeps(std::uint32_t slots, int sweeps, bool merge_turns, Visit&
   visit_sweeps(Slots{}, slots - 1, sweeps, merge_turns,
                [&](std::uint32_t slot, std::uint32_t, bool, bool backwards, bool twice) { visit(slot, backwards, twice); });
 }
+
+// A launch of the solve's walk (visit_colours, visit_sweeps): its range,
+// and whether it visits it twice (a turn merged).
+struct WalkRange {
+  std::uint32_t begin = 0, end = 0;
+  bool serial = false, reversed = false, twice = false;
+};
+
+// The most ranges one group walks (SmallRangeGroups).
+inline constexpr std::size_t kMostInGroup = 16;
+
+// The walk's launches with each run of small ones made one launch (the
+// GPU walks a group in one block, a barrier between its ranges, in the
+// walk's order: solver_cuda.cuh RangeGroup; the same bits, as the order of
+// the ranges is the walk's and within a range no two contacts share a
+// sphere). A range of at most `widest` contacts is held; a run of held
+// ranges ends at a wider range, at kMostInGroup ranges or at flush(), and
+// goes to group(first, n) where it has two or more, else to single(r), as
+// every wider range does, in the walk's order. widest 0: no group.
+template <class Single, class Group>
+class SmallRangeGroups {
+ public:
+  SmallRangeGroups(std::uint32_t widest, Single single, Group group)
+      : m_widest(widest), m_single(std::move(single)), m_group(std::move(group)) {}
+  void add(const WalkRange& r) {
+    if (r.end - r.begin > m_widest) {
+      flush();
+      m_single(r);
+      return;
+    }
+    m_held[m_count++] = r;
+    if (m_count == kMostInGroup) flush();
+  }
+  void flush() {
+    if (m_count == 1) m_single(m_held[0]);
+    else if (m_count > 1) m_group(static_cast<const WalkRange*>(m_held.data()), m_count);
+    m_count = 0;
+  }
+
+ private:
+  std::uint32_t m_widest;
+  Single m_single;
+  Group m_group;
+  std::array<WalkRange, kMostInGroup> m_held{};
+  std::size_t m_count = 0;
+};
 
 // True when no two contacts of one colour share a sphere (tests, checks).
 bool colouring_is_proper(const std::vector<Contact>& contacts, const ColourRanges& ranges, std::size_t body_count);

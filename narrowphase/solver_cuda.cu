@@ -175,6 +175,45 @@ __global__ void __launch_bounds__(kBlock, 3)
 }
 #endif
 
+// A group's ranges in order by the launch's one block, a barrier after each
+// (RangeGroup): f(k, again) for each contact, again where a parallel range
+// is visited twice; a serial range by thread 0, forwards or back, and back
+// or forwards again where twice (as for_range walks it). It waits for the
+// launch before first: what it reads is mostly that launch's.
+template <class F>
+__device__ void walk_group(const RangeGroup& g, F&& f) {
+  wait_for_last_launch();
+  let_next_launch_start();
+  for (std::uint32_t i = 0; i < g.count; ++i) {
+    const RangeGroup::Range q = g.range[i];
+    if (!q.serial) {
+      for (std::uint32_t k = q.begin + threadIdx.x; k < q.end; k += blockDim.x) f(k, q.twice);
+    } else if (threadIdx.x == 0) {
+      for (int pass = 0; pass < (q.twice ? 2 : 1); ++pass) {
+        if (q.backwards != (pass == 1)) {
+          for (std::uint32_t k = q.end; k > q.begin; --k) f(k - 1, false);
+        } else {
+          for (std::uint32_t k = q.begin; k < q.end; ++k) f(k, false);
+        }
+      }
+    }
+    __syncthreads();  // the range's writes seen by the block's threads
+  }
+}
+
+template <bool Friction, bool Rolling>
+__global__ void group_warm_start_kernel(SweepRecords s, RangeGroup g, SolverBody* bodies) {
+  walk_group(g, [&](std::uint32_t k, bool) { warm_start_record<Friction, Rolling>(s, k, bodies); });
+}
+
+template <bool Friction, bool Rolling>
+__global__ void group_sweep_kernel(SweepRecords s, RangeGroup g, SolverBody* bodies, real inv_h) {
+  walk_group(g, [&](std::uint32_t k, bool again) {
+    solve_record<Friction, Rolling>(s, k, bodies, inv_h);
+    if (again) solve_record<Friction, Rolling>(s, k, bodies, inv_h);
+  });
+}
+
 // What the blocks of a one-launch stage meet at after each range
 // (core/device_buffer.cuh; docs/architecture.md "One cluster for a small
 // solve").
@@ -492,6 +531,28 @@ void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodie
              wide ? wide_sweep_kernel<friction, rolling, false> : record_sweep_kernel<friction, rolling, false>, grid,
              s, records, r, bodies, inv_h);
   });
+}
+
+void launch_warm_start_group(const SweepRecords& records, const RangeGroup& g, SolverBody* bodies, SolverTerms t,
+                             cudaStream_t s) {
+  if (g.count == 0) return;
+  with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
+    launch(Launch::dependent, group_warm_start_kernel<friction, rolling>, 1, s, records, g, bodies);
+  });
+}
+
+void launch_sweep_group(const SweepRecords& records, const RangeGroup& g, SolverBody* bodies, real inv_h,
+                        SolverTerms t, cudaStream_t s) {
+  if (g.count == 0) return;
+  with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
+    launch(Launch::dependent, group_sweep_kernel<friction, rolling>, 1, s, records, g, bodies, inv_h);
+  });
+}
+
+std::uint32_t group_widest() {
+  static const auto widest = static_cast<std::uint32_t>(whole_from_environment(
+      "MARBLES_CUDA_GROUP", 2 * kBlock, 4096, "expected the widest range a group takes, 0 (none) to 4096"));
+  return widest;
 }
 
 // The widest range a one-launch stage takes as one cluster (sm_90) unless

@@ -15,6 +15,7 @@
 #include "core/device.hpp"
 #include "core/device_memory.hpp"
 #include "core/spheres.hpp"
+#include "narrowphase/colouring.hpp"
 #include "narrowphase/colouring_math.hpp"
 #include "narrowphase/solver_math.hpp"
 
@@ -68,6 +69,29 @@ void launch_warm_start(const SweepRecords& records, ContactRange range, SolverBo
 // sweep's form bounded to three blocks a SM (sweep_kernel_fits).
 void launch_sweep(const SweepRecords& records, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,
                   int sm_count, cudaStream_t stream);
+// A run of small ranges of the walk (narrowphase::SmallRangeGroups) as one
+// launch: one block walks them in order, a barrier between them (the
+// threads of a range each a contact, a serial one by its first thread), as
+// their launches one each would (twice: a parallel range's contacts each
+// solved again at once, a serial one walked back). A launch's ramp and
+// tail cost more than such a range's few contacts.
+struct RangeGroup {
+  std::uint32_t count = 0;
+  struct Range {
+    std::uint32_t begin = 0, end = 0;
+    bool serial = false, backwards = false, twice = false;
+  } range[kMostInGroup];
+};
+void launch_warm_start_group(const SweepRecords& records, const RangeGroup& group, SolverBody* bodies,
+                             SolverTerms terms, cudaStream_t stream);
+void launch_sweep_group(const SweepRecords& records, const RangeGroup& group, SolverBody* bodies, real inv_h,
+                        SolverTerms terms, cudaStream_t stream);
+// The widest range a group takes: MARBLES_CUDA_GROUP contacts (two a
+// thread of the block, 512, unless set; 0: no group), kept from its first
+// reading; a value that is not a count from 0 to 4096 is refused with a
+// RuntimeFailure.
+std::uint32_t group_widest();
+
 // A colour plan in device memory (ColouringCuda::device_plan), as the
 // stages that walk every colour in one launch read it, and the widest colour
 // the launch is shaped for (the host's reading of the plan, or a bound: a

@@ -549,6 +549,37 @@ class CudaStep final : public StepBackend {
                                    m_sm, m_stream);
   }
 
+  // The warm start's launches (sweep false) or the sweeps', a range each,
+  // or a run of small ones as one group (narrowphase::SmallRangeGroups,
+  // nc::group_widest), each launch loading its records early where `last`
+  // says the launch before wrote none of them (a group waits first).
+  auto walk_in_groups(narrowphase::LastWrites& last, bool sweep, narrowphase::SolverBody* bodies, real inv_h) {
+    auto single = [this, &last, sweep, bodies, inv_h](const narrowphase::WalkRange& w) {
+      nc::ContactRange r{w.begin, w.end, w.serial, w.reversed};
+      if (!w.serial) r.mirrored = m_mirror, m_mirror = !m_mirror;
+      r.twice = w.twice;
+      m_counters.turn_launches += w.twice ? 1 : 0;
+      r.early = last.next(r.begin, r.end, sweep);
+      if (sweep) nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_sm, m_stream);
+      else nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);
+    };
+    auto group = [this, &last, sweep, bodies, inv_h](const narrowphase::WalkRange* w, std::size_t n) {
+      nc::RangeGroup g;
+      std::uint32_t low = w[0].begin, high = w[0].end;
+      for (std::size_t i = 0; i < n; ++i) {
+        g.range[i] = {w[i].begin, w[i].end, w[i].serial, w[i].reversed, w[i].twice};
+        low = std::min(low, w[i].begin), high = std::max(high, w[i].end);
+        m_counters.turn_launches += w[i].twice ? 1 : 0;
+      }
+      g.count = static_cast<std::uint32_t>(n);
+      last.next(low, high, sweep);  // what the group wrote, for the launch after it
+      ++m_counters.range_groups;
+      if (sweep) nc::launch_sweep_group(m_records, g, bodies, inv_h, m_terms, m_stream);
+      else nc::launch_warm_start_group(m_records, g, bodies, m_terms, m_stream);
+    };
+    return narrowphase::SmallRangeGroups(nc::group_widest(), single, group);
+  }
+
   // The velocity state packed (SolverBody) for the solve, then back.
   void solve_velocities(real h) override {
     if (m_count == 0) return;
@@ -582,25 +613,23 @@ class CudaStep final : public StepBackend {
     }
     // A launch loads its records while the launch just before it ends,
     // unless that one wrote them (LastWrites, ContactRange::early). Empty
-    // ranges launch nothing.
+    // ranges launch nothing. A run of small ranges (the pile's last colours,
+    // a turn among them) is one launch of one block (RangeGroup).
     narrowphase::LastWrites last(m_count);  // the records were made (and the impacts wrote) before
-    auto early = [&](nc::ContactRange& r, bool writes) {
-      if (r.end > r.begin) r.early = last.next(r.begin, r.end, writes);
-    };
-    if (m_model.solver.warm_start)
-      over_colours(false, [&](nc::ContactRange r) {
-        early(r, false);
-        nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);
-      });
+    if (m_model.solver.warm_start) {
+      auto walk = walk_in_groups(last, false, bodies, inv_h);
+      narrowphase::visit_colours(m_plan.begin, m_plan.colours, false,
+                                 [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
+                                   if (e > b) walk.add({b, e, serial, reversed, false});
+                                 });
+      walk.flush();
+    }
+    auto walk = walk_in_groups(last, true, bodies, inv_h);
     narrowphase::visit_sweeps(m_plan.begin, m_plan.colours, sweeps, m_solve_mode != SolveMode::apart,
                               [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed, bool twice) {
-                                nc::ContactRange r{b, e, serial, reversed};
-                                if (!serial) r.mirrored = m_mirror, m_mirror = !m_mirror;
-                                r.twice = twice;
-                                m_counters.turn_launches += twice ? 1 : 0;
-                                early(r, true);
-                                nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_sm, m_stream);
+                                walk.add({b, e, serial, reversed, twice});
                               });
+    walk.flush();
     nc::launch_scatter_bodies(bodies, world, m_sm, m_stream, skip());
   }
 

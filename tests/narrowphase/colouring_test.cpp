@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <map>
 #include <numeric>
 #include <random>
@@ -642,6 +643,67 @@ TEST(VisitSweeps, LaunchesWalkTheSweepsAndMergeEveryTurn) {
       EXPECT_EQ(twice_launches, merge ? turns : 0) << "trial " << trial << ", " << ranges << " ranges";
     }
   }
+}
+
+// The solve's launches with runs of small ranges made one
+// (SmallRangeGroups) over random colour ranges, 0 to 12 sweeps, turns
+// merged or apart, and widths from none grouped to all: the groups and the
+// single launches, expanded in order, are the walk's launches exactly; a
+// group holds two to kMostInGroup ranges, each at most `widest` wide; and
+// every run is whole: after a group that is not full, or a lone small
+// range, comes a wide range or nothing.
+TEST(SmallRangeGroups, RunsOfSmallRangesAreWholeAndInTheWalksOrder) {
+  std::mt19937_64 rng(41);
+  std::size_t grouped = 0, full = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    std::uint32_t colours = 0;
+    const std::vector<std::uint32_t> begin = random_colour_begins(rng, colours);
+    const int sweeps = static_cast<int>(rng() % 13);
+    const bool merge = rng() % 2 == 0;
+    const std::uint32_t widest = std::array<std::uint32_t, 5>{0, 1, 12, 30, 60}[rng() % 5];
+    std::vector<WalkRange> walk;
+    visit_sweeps(begin, colours, sweeps, merge, [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed,
+                                                    bool twice) { walk.push_back({b, e, serial, reversed, twice}); });
+    struct Item {
+      std::vector<WalkRange> ranges;
+      bool group;
+    };
+    std::vector<Item> items;
+    SmallRangeGroups groups(
+        widest, [&](const WalkRange& r) { items.push_back({{r}, false}); },
+        [&](const WalkRange* first, std::size_t n) { items.push_back({{first, first + n}, true}); });
+    for (const WalkRange& r : walk) groups.add(r);
+    groups.flush();
+    std::vector<WalkRange> seen;
+    for (const Item& item : items) seen.insert(seen.end(), item.ranges.begin(), item.ranges.end());
+    ASSERT_EQ(seen.size(), walk.size()) << "trial " << trial;
+    for (std::size_t i = 0; i < walk.size(); ++i) {
+      const WalkRange &a = seen[i], &b = walk[i];
+      EXPECT_TRUE(a.begin == b.begin && a.end == b.end && a.serial == b.serial && a.reversed == b.reversed &&
+                  a.twice == b.twice)
+          << "trial " << trial << ", launch " << i;
+    }
+    auto small = [&](const Item& item) { return item.group || item.ranges[0].end - item.ranges[0].begin <= widest; };
+    for (std::size_t i = 0; i < items.size(); ++i) {
+      const Item& item = items[i];
+      if (item.group) {
+        EXPECT_GE(item.ranges.size(), 2u) << "trial " << trial;
+        EXPECT_LE(item.ranges.size(), kMostInGroup) << "trial " << trial;
+        for (const WalkRange& r : item.ranges) EXPECT_LE(r.end - r.begin, widest) << "trial " << trial;
+        grouped += item.ranges.size();
+        full += item.ranges.size() == kMostInGroup ? 1 : 0;
+      }
+      const bool whole = item.group && item.ranges.size() == kMostInGroup;
+      if (small(item) && !whole && i + 1 < items.size()) {
+        EXPECT_FALSE(small(items[i + 1])) << "trial " << trial << ": a run split at item " << i;
+      }
+    }
+    if (widest == 0) {
+      EXPECT_EQ(items.size(), walk.size()) << "trial " << trial;
+    }
+  }
+  EXPECT_GT(grouped, 1000u);  // the trials group, full groups among them
+  EXPECT_GT(full, 10u);
 }
 
 // The sweeps by slots of a device plan (visit_slot_sweeps) over random

@@ -73,6 +73,7 @@ struct GpuCounts {
   std::uint64_t one_launch = 0;    // substeps whose solve took one launch
   std::uint64_t cluster = 0;       // one-launch stages run as one cluster
   std::uint64_t turns = 0;         // sweep launches that visited a turn's range twice
+  std::uint64_t groups = 0;        // launches that walked a run of small ranges in one block
   std::uint64_t solved = 0;        // steps with contacts (the CPU's count)
   std::uint64_t pair_redos = 0;    // substeps whose broad phase outgrew its pairs' room and ran again
   std::uint64_t grid_replans = 0;  // of those, the grid outgrew the broad phase's plan
@@ -109,6 +110,7 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
     counts.one_launch += gpu.last_step().one_launch_solves;
     counts.cluster += gpu.last_step().cluster_stages;
     counts.turns += gpu.last_step().turn_launches;
+    counts.groups += gpu.last_step().range_groups;
     counts.pair_redos += gpu.last_step().pair_redos;
     counts.grid_replans += gpu.last_step().grid_replans;
     counts.grid_shrinks += gpu.last_step().grid_shrinks;
@@ -138,6 +140,12 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
   }
 }
 
+// Whether MARBLES_CUDA_GROUP=0 asks for no group of small ranges.
+bool groups_off() {
+  const char* asked = std::getenv("MARBLES_CUDA_GROUP");
+  return asked && std::strcmp(asked, "0") == 0;
+}
+
 // Whether a run of `steps` steps of a small scene (every scene here: its
 // solve takes one launch unless MARBLES_CUDA_SOLVE asks for a launch per
 // colour) runs substeps without a wait: every step after the first, where a
@@ -162,7 +170,7 @@ bool unwaits(int steps) {
 void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, int steps,
                      std::uint64_t* pair_redos = nullptr, std::uint64_t* grid_replans = nullptr,
                      std::uint64_t* trims = nullptr, std::uint64_t* undone = nullptr,
-                     std::uint32_t* causes = nullptr) {
+                     std::uint32_t* causes = nullptr, std::uint64_t* groups = nullptr) {
   Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
   ASSERT_EQ(gpu.backend_name(), "cuda");
@@ -174,7 +182,14 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
   if (trims) *trims += counts.trims;
   if (undone) *undone += counts.undone;
   if (causes) *causes |= counts.causes;
+  if (groups) *groups += counts.groups;
   const std::string form = solve_form();
+  // Runs of small ranges go as one launch only where the solve takes a
+  // launch per range (these scenes' colours take one launch under auto),
+  // and never with MARBLES_CUDA_GROUP=0.
+  if ((form != "launches" && form != "apart") || groups_off()) {
+    EXPECT_EQ(counts.groups, 0u) << "MARBLES_CUDA_SOLVE=" << form;
+  }
   EXPECT_EQ(counts.unwaited > 0, unwaits(steps))
       << counts.unwaited << " substeps without a wait; MARBLES_CUDA_WAITS=" << waits_form() << ", solve " << form;
   // A walk of two sweeps or more turns on a range it then visits twice in
@@ -323,9 +338,17 @@ TEST(StepCuda, WideSweepKeepsThreeBlocksASmAndNoSweepSpills) {
 TEST(StepCuda, PourMatchesTheCpuBitForBit) {
   REQUIRE_DEVICE();
   auto [s, g] = pour_scene(400, 3);
-  std::uint64_t trims = 0, undone = 0;
-  expect_same_run(s, g, 400, nullptr, nullptr, &trims, &undone);
+  std::uint64_t trims = 0, undone = 0, groups = 0;
+  expect_same_run(s, g, 400, nullptr, nullptr, &trims, &undone, nullptr, &groups);
   std::printf("substeps undone in the pour: %llu\n", static_cast<unsigned long long>(undone));
+  // A launch per colour with a wait a substep (MARBLES_CUDA_SOLVE=launches
+  // or apart): the pour's colours, all small, go as groups of ranges
+  // (RangeGroup), the same bits as above.
+  const std::string form = solve_form();
+  if ((form == "launches" || form == "apart") && waits_form() != "step" && !groups_off()) {
+    EXPECT_GT(groups, 0u);
+  }
+  std::printf("launches of grouped ranges in the pour: %llu\n", static_cast<unsigned long long>(groups));
   // Trimmed every step (ctest step_cuda_test.trim_every_step), the pour's
   // falling need (a substep's impact words gone) frees buffers: the bits
   // above held across them. Not where a step waits once: it lays its records
