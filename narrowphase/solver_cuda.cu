@@ -551,7 +551,7 @@ void launch_sweep_group(const SweepRecords& records, const RangeGroup& g, Solver
 
 std::uint32_t group_widest() {
   static const auto widest = static_cast<std::uint32_t>(whole_from_environment(
-      "MARBLES_CUDA_GROUP", 2 * kBlock, 4096, "expected the widest range a group takes, 0 (none) to 4096"));
+      "MARBLES_CUDA_GROUP", kBlock, 4096, "expected the widest range a group takes, 0 (none) to 4096"));
   return widest;
 }
 

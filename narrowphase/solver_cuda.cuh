@@ -86,10 +86,10 @@ void launch_warm_start_group(const SweepRecords& records, const RangeGroup& grou
                              SolverTerms terms, cudaStream_t stream);
 void launch_sweep_group(const SweepRecords& records, const RangeGroup& group, SolverBody* bodies, real inv_h,
                         SolverTerms terms, cudaStream_t stream);
-// The widest range a group takes: MARBLES_CUDA_GROUP contacts (two a
-// thread of the block, 512, unless set; 0: no group), kept from its first
-// reading; a value that is not a count from 0 to 4096 is refused with a
-// RuntimeFailure.
+// The widest range a group takes: MARBLES_CUDA_GROUP contacts (one a
+// thread of the block, 256, unless set: two a thread made the pile of
+// 10^5's last colours slower; 0: no group), kept from its first reading; a
+// value that is not a count from 0 to 4096 is refused with a RuntimeFailure.
 std::uint32_t group_widest();
 
 // A colour plan in device memory (ColouringCuda::device_plan), as the
