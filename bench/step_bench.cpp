@@ -490,6 +490,9 @@ struct Row {
   // One-launch stages (solve, projection, impact stage) of the timed steps
   // that ran as one cluster (CUDA on sm_90: their widest colour small).
   std::uint64_t cluster_stages = 0;
+  // Launches of the timed steps that walked a run of small ranges of the
+  // solve in one block (CUDA, a launch per colour: RangeGroup).
+  std::uint64_t range_groups = 0;
   double ke_per_sphere = 0;        // J, after the timed and profiled steps (a settled pile stays still)
   std::uint64_t rollbacks = 0;     // steps the watchdog undid and redid (--watchdog on), of all the steps run here
   std::optional<double> watch_ke_per_sphere;  // J, the watch's own figure at the last step's end (--watchdog on)
@@ -551,6 +554,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     row.undo_causes |= c.undo_causes;
     row.impact_substeps += c.impact_words;
     row.cluster_stages += c.cluster_stages;
+    row.range_groups += c.range_groups;
   }
   if (on_device) profiled_steps(false);  // each step ends with a wait for its flags: nothing of it is still running
   if (sim.non_finite()) throw RuntimeFailure("N = " + std::to_string(n) + ": non-finite state in the timed steps");
@@ -752,6 +756,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"undo_causes", undo_cause_names(r.undo_causes)},
                                  {"impact_word_substeps", r.impact_substeps},
                                  {"cluster_stages", r.cluster_stages},
+                                 {"range_groups", r.range_groups},
                                  {"ke_per_sphere_J", r.ke_per_sphere},
                                  {"rollbacks", r.rollbacks},
                                  {"watch_ke_per_sphere_J", count(r.watch_ke_per_sphere)},
