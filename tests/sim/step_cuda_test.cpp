@@ -185,10 +185,10 @@ void expect_same_run(const scene::Scene& s, const scene::GeneratedParticles& g, 
   if (groups) *groups += counts.groups;
   const std::string form = solve_form();
   // Runs of small ranges go as one launch only where the solve takes a
-  // launch per range (these scenes' colours take one launch under auto),
-  // and never with MARBLES_CUDA_GROUP=0.
-  if ((form != "launches" && form != "apart") || groups_off()) {
-    EXPECT_EQ(counts.groups, 0u) << "MARBLES_CUDA_SOLVE=" << form;
+  // launch per range (never under MARBLES_CUDA_SOLVE=one), and never with
+  // MARBLES_CUDA_GROUP=0.
+  if (form == "one" || groups_off()) {
+    EXPECT_EQ(counts.groups, 0u) << "MARBLES_CUDA_SOLVE=" << form << ", MARBLES_CUDA_GROUP=0: " << groups_off();
   }
   EXPECT_EQ(counts.unwaited > 0, unwaits(steps))
       << counts.unwaited << " substeps without a wait; MARBLES_CUDA_WAITS=" << waits_form() << ", solve " << form;
