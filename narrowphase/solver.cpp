@@ -180,11 +180,12 @@ SweepLanes supported_lanes() {
 }
 
 SweepLanes best_lanes() {
-  SweepLanes best = supported_lanes();
-  if (const char* asked = std::getenv("MARBLES_LANES"))
-    for (SweepLanes l : {SweepLanes::sse2, SweepLanes::avx2, SweepLanes::avx512})
-      if (std::string_view(asked) == name(l) && l < best) best = l;
-  return best;
+  const SweepLanes best = supported_lanes();
+  const char* asked = std::getenv("MARBLES_LANES");
+  if (asked == nullptr || *asked == '\0') return best;
+  for (SweepLanes l : {SweepLanes::sse2, SweepLanes::avx2, SweepLanes::avx512})
+    if (std::string_view(asked) == name(l)) return std::min(l, best);
+  throw RuntimeFailure(std::string("MARBLES_LANES=") + asked + ": expected sse2, avx2 or avx512");
 }
 
 ContactSolver::ContactSolver(const SolverSettings& settings, SweepLanes lanes) : m_settings(settings) {

@@ -56,7 +56,8 @@ enum class SweepLanes { sse2, avx2, avx512 };
 const char* name(SweepLanes lanes);
 SweepLanes supported_lanes();  // the widest this CPU has
 // supported_lanes(), or fewer where the environment's MARBLES_LANES names
-// fewer ("sse2", "avx2"; for comparisons).
+// fewer ("sse2", "avx2"; for comparisons; "avx512" or a kind past the CPU's:
+// what it has). Any other value: RuntimeFailure naming the variable.
 SweepLanes best_lanes();
 
 // A study of another order for the velocity sweeps (docs/architecture.md

@@ -3,11 +3,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <random>
 #include <set>
+#include <string>
 #include <vector>
 
+#include "core/error.hpp"
 #include "core/parallel.hpp"
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_math.hpp"
@@ -246,6 +249,40 @@ TEST(Solver, FrictionStaysInsideTheCone) {
     const bool saturated = length(c.tangent_impulse) > coeff.friction * c.normal_impulse * (1 - 1e-3);
     EXPECT_TRUE(saturated || slip_t < 1e-3) << "slip " << slip_t;
   }
+}
+
+// MARBLES_LANES lowers the sweep's lanes to a kind it names, never past
+// what the CPU has, and refuses a name that is none (naming the variable).
+TEST(Solver, LanesAskedForAreLoweredOrRefused) {
+  const char* before = std::getenv("MARBLES_LANES");
+  const std::string kept = before ? before : "";
+  auto ask = [](const char* value) {
+    if (value) ::setenv("MARBLES_LANES", value, 1);
+    else ::unsetenv("MARBLES_LANES");
+  };
+  const SweepLanes has = supported_lanes();
+  ask(nullptr);
+  EXPECT_EQ(best_lanes(), has);
+  ask("");
+  EXPECT_EQ(best_lanes(), has);
+  ask("sse2");
+  EXPECT_EQ(best_lanes(), SweepLanes::sse2);
+  ask("avx2");
+  EXPECT_EQ(best_lanes(), std::min(SweepLanes::avx2, has));
+  ask("avx512");
+  EXPECT_EQ(best_lanes(), has);
+  for (const char* bad : {"avx9", "SSE2", "sse2 ", "neon"}) {
+    ask(bad);
+    try {
+      (void)best_lanes();
+      ADD_FAILURE() << "MARBLES_LANES=" << bad << " was taken";
+    } catch (const RuntimeFailure& e) {
+      EXPECT_NE(std::string(e.what()).find(std::string("MARBLES_LANES=") + bad + ": expected sse2, avx2 or avx512"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  ask(before ? kept.c_str() : nullptr);
 }
 
 // Every SIMD lane kind this CPU has (solver.hpp: SweepLanes) gives the
