@@ -175,28 +175,19 @@ __global__ void __launch_bounds__(kBlock, 3)
 }
 #endif
 
-// A group's ranges in order by the launch's one block, a barrier after each
-// (RangeGroup): f(k, again) for each contact, again where a parallel range
-// is visited twice; a serial range by thread 0, forwards or back, and back
-// or forwards again where twice (as for_range walks it). It waits for the
-// launch before first: what it reads is mostly that launch's.
+// A group's ranges in order by the launch's one block (RangeGroup), each as
+// for_range walks it, a barrier after each: f(k, again) for each visit,
+// again where a parallel range is visited twice (a serial one for_range
+// walks back itself). It waits for the launch before first: what it reads
+// is mostly that launch's.
 template <class F>
 __device__ void walk_group(const RangeGroup& g, F&& f) {
   wait_for_last_launch();
   let_next_launch_start();
   for (std::uint32_t i = 0; i < g.count; ++i) {
-    const RangeGroup::Range q = g.range[i];
-    if (!q.serial) {
-      for (std::uint32_t k = q.begin + threadIdx.x; k < q.end; k += blockDim.x) f(k, q.twice);
-    } else if (threadIdx.x == 0) {
-      for (int pass = 0; pass < (q.twice ? 2 : 1); ++pass) {
-        if (q.backwards != (pass == 1)) {
-          for (std::uint32_t k = q.end; k > q.begin; --k) f(k - 1, false);
-        } else {
-          for (std::uint32_t k = q.begin; k < q.end; ++k) f(k, false);
-        }
-      }
-    }
+    const ContactRange r = g.range[i];
+    const bool again = r.twice && !r.serial;
+    for_range(r, [&](std::uint32_t k) { f(k, again); });
     __syncthreads();  // the range's writes seen by the block's threads
   }
 }

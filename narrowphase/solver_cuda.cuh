@@ -70,17 +70,15 @@ void launch_warm_start(const SweepRecords& records, ContactRange range, SolverBo
 void launch_sweep(const SweepRecords& records, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,
                   int sm_count, cudaStream_t stream);
 // A run of small ranges of the walk (narrowphase::SmallRangeGroups) as one
-// launch: one block walks them in order, a barrier between them (the
-// threads of a range each a contact, a serial one by its first thread), as
-// their launches one each would (twice: a parallel range's contacts each
-// solved again at once, a serial one walked back). A launch's ramp and
-// tail cost more than such a range's few contacts.
+// launch: one block walks them in order as their launches one each would
+// (for_range: the threads of a range each a contact, a serial one by its
+// first thread; twice: a parallel range's contacts each solved again at
+// once, a serial one walked back), a barrier between them. `plan` and
+// `early` are not used. A launch's ramp and tail cost more than such a
+// range's few contacts.
 struct RangeGroup {
   std::uint32_t count = 0;
-  struct Range {
-    std::uint32_t begin = 0, end = 0;
-    bool serial = false, backwards = false, twice = false;
-  } range[kMostInGroup];
+  ContactRange range[kMostInGroup];
 };
 void launch_warm_start_group(const SweepRecords& records, const RangeGroup& group, SolverBody* bodies,
                              SolverTerms terms, cudaStream_t stream);

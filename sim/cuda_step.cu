@@ -554,22 +554,26 @@ class CudaStep final : public StepBackend {
   // nc::group_widest), each launch loading its records early where `last`
   // says the launch before wrote none of them (a group waits first).
   auto walk_in_groups(narrowphase::LastWrites& last, bool sweep, narrowphase::SolverBody* bodies, real inv_h) {
-    auto single = [this, &last, sweep, bodies, inv_h](const narrowphase::WalkRange& w) {
+    // Range w as a launch takes it, every other parallel one mirrored.
+    auto range_of = [this](const narrowphase::WalkRange& w) {
       nc::ContactRange r{w.begin, w.end, w.serial, w.reversed};
       if (!w.serial) r.mirrored = m_mirror, m_mirror = !m_mirror;
       r.twice = w.twice;
       m_counters.turn_launches += w.twice ? 1 : 0;
+      return r;
+    };
+    auto single = [this, &last, sweep, bodies, inv_h, range_of](const narrowphase::WalkRange& w) {
+      nc::ContactRange r = range_of(w);
       r.early = last.next(r.begin, r.end, sweep);
       if (sweep) nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_sm, m_stream);
       else nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);
     };
-    auto group = [this, &last, sweep, bodies, inv_h](const narrowphase::WalkRange* w, std::size_t n) {
+    auto group = [this, &last, sweep, bodies, inv_h, range_of](const narrowphase::WalkRange* w, std::size_t n) {
       nc::RangeGroup g;
       std::uint32_t low = w[0].begin, high = w[0].end;
       for (std::size_t i = 0; i < n; ++i) {
-        g.range[i] = {w[i].begin, w[i].end, w[i].serial, w[i].reversed, w[i].twice};
+        g.range[i] = range_of(w[i]);
         low = std::min(low, w[i].begin), high = std::max(high, w[i].end);
-        m_counters.turn_launches += w[i].twice ? 1 : 0;
       }
       g.count = static_cast<std::uint32_t>(n);
       last.next(low, high, sweep);  // what the group wrote, for the launch after it
