@@ -5,11 +5,11 @@ rate, hit rates, and the stall reasons (cycles a warp spends in each per
 issued instruction), the largest first. Used by scripts/gpu-profile's
 STALLS=REGEX."""
 import math
-import re
 import sys
 from collections import defaultdict
 
 from ncu_table import TIME, read_rows
+from ncu_table import short as table_short
 
 STALL = "smsp__average_warps_issue_stalled_"
 SHOWN = [  # (metric, heading)
@@ -28,10 +28,11 @@ SHOWN = [  # (metric, heading)
 
 
 def short(name):
-    """A kernel's name without its arguments and namespaces, its template's
-    first letters kept (record_sweep_kernel<true, true, false> -> rsk<ttf>)."""
-    name = re.sub(r"\(.*", "", name.replace("(anonymous namespace)::", "")).replace("void ", "").split("::")[-1]
-    base, _, args = name.partition("<")
+    """A kernel's name as ncu_table's short() gives it, without any
+    namespace, its words and template arguments by their first letters
+    (record_sweep_kernel<true, true, false> -> rsk<ttf>)."""
+    base, _, args = table_short(name).partition("<")
+    base = base.split("::")[-1]
     letters = "".join(w[0] for w in base.split("_") if w)
     return letters + ("<" + "".join(a.strip()[:1] for a in args.rstrip(">").split(",")) + ">" if args else "")
 

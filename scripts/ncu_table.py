@@ -12,8 +12,11 @@ BYTES = {"byte": 1, "B": 1, "Kbyte": 1e3, "KB": 1e3, "Mbyte": 1e6, "MB": 1e6, "G
 
 
 def short(name):
-    name = re.sub(r"\(.*", "", name).replace("void ", "")
-    return re.sub(r"marbles::(narrowphase::|broadphase::|integrator::)?(cuda::)?(\(anonymous namespace\)::)?", "", name)
+    """A kernel's name without its arguments, `void` and marbles' own
+    namespaces (an anonymous one included); its template arguments kept.
+    Also scripts/ncu_stalls.py's."""
+    name = re.sub(r"\(.*", "", name.replace("(anonymous namespace)::", "")).replace("void ", "")
+    return re.sub(r"marbles::(narrowphase::|broadphase::|integrator::)?(cuda::)?", "", name)
 
 
 def read_rows(path, columns, tool):
