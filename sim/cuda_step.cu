@@ -1343,8 +1343,14 @@ class CudaStep final : public StepBackend {
   real m_lookahead = 0;  // find_contacts' h: the colouring makes the contacts again with it
   nc::ColourPlan m_plan;  // the substep's colours as read back with a wait: the launches per colour walk it
   // The solve in one launch (solve_in_one_launch) at most this many
-  // contacts a colour in auto mode.
-  static constexpr std::uint32_t kOneLaunchWidest = 16384;
+  // contacts a colour in auto mode. The gas of 10^5 (a widest colour
+  // between 16 384 and 32 768) then solves in one launch and waits once a
+  // step: H200, eight rounds, median 0.704 ms a step against 0.803 with the
+  // bound at 16 384 (the device busier, 0.505 against 0.465 ms, 12 bytes a
+  // sphere more for the substep's start); the pile of 10^5 (a widest colour
+  // past 32 768) keeps a launch a colour, faster there (docs/architecture.md
+  // "The gas's solve in one launch, measured again").
+  static constexpr std::uint32_t kOneLaunchWidest = 32768;
   SolveMode m_solve_mode = solve_mode_from_environment();
   int m_trim_every = trim_every_from_environment();  // trim_buffers(): steps apart, 0 never
   int m_steps_since_trim = 0;

@@ -862,11 +862,11 @@ TEST(StepCuda, ColourCountJumpPastTheSlotsIsUndone) {
   }
 }
 
-// A layer of 22 500 spheres kept apart falls onto a floor. Its first steps
+// A layer of 40 000 spheres kept apart falls onto a floor. Its first steps
 // have no contacts, so under auto the solve takes one launch and the steps
 // run without waits, keeping each substep's start. Once the layer lands,
 // its wall contacts take one colour (walls take none), wider than one
-// launch takes (16 384), so the steps wait a substep, and a few steps later
+// launch takes (32 768), so the steps wait a substep, and a few steps later
 // the start is let go: the device memory's "substep's start" part is 0 at
 // the end. Where every step waits once (MARBLES_CUDA_WAITS=step) or the
 // solve always takes one launch (MARBLES_CUDA_SOLVE=one) it is held; where
@@ -879,8 +879,8 @@ TEST(StepCuda, SubstepStartLetGoWhereTheSolveOutgrowsOneLaunch) {
   s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
   const real r = real(0.01);
   scene::GeneratedParticles g;
-  for (int x = 0; x < 150; ++x)
-    for (int y = 0; y < 150; ++y) add_sphere(g, {real(3) * r * (x + 1), real(3) * r * (y + 1), real(1.3) * r}, r);
+  for (int x = 0; x < 200; ++x)
+    for (int y = 0; y < 200; ++y) add_sphere(g, {real(3) * r * (x + 1), real(3) * r * (y + 1), real(1.3) * r}, r);
   constexpr int kSteps = 60;
   REQUIRE_DEVICE();
   Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
