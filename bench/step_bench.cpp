@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -18,6 +19,7 @@
 #include <ostream>
 #include <random>
 #include <sstream>
+#include <type_traits>
 
 #ifdef _OPENMP
 #include <omp.h>
@@ -29,6 +31,7 @@
 #include "broadphase/grid.hpp"
 #include "core/error.hpp"
 #include "narrowphase/solver.hpp"
+#include "render/atomic_file.hpp"
 #include "sim/particles.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
@@ -641,6 +644,27 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
 }
 
 
+// The fewest digits that read back (as a double, then as T) to v's bits: a
+// scene file's value that starts a run from the same state.
+template <class T>
+std::string shortest(T v) {
+  char text[64];
+  const std::to_chars_result r = std::to_chars(text, text + sizeof text, v);
+  std::string s(text, r.ptr);
+  // A float's shortest digits read as a double and rounded to a float could
+  // in principle land on its neighbour: then the double's digits.
+  if constexpr (!std::is_same_v<T, double>)
+    if (static_cast<T>(std::strtod(s.c_str(), nullptr)) != v) return shortest(static_cast<double>(v));
+  return s;
+}
+
+// Untimed steps before the timed ones: --warmup, or 5 for the pile (its
+// warm starts rebuilt), 40 for the settle (into the dense phase), 2 for the gas.
+int warmup_steps(const StepBenchOptions& options) {
+  if (options.warmup >= 0) return options.warmup;
+  return options.scene == "pile" ? 5 : options.scene == "settle" ? kSettleWarmup : 2;
+}
+
 int threads() {
 #ifdef _OPENMP
   return omp_get_max_threads();
@@ -650,6 +674,63 @@ int threads() {
 }
 
 }  // namespace
+
+std::pair<scene::Scene, scene::GeneratedParticles> bench_scene(const StepBenchOptions& options, std::size_t n) {
+  if (options.scene == "settle") return pile(n, kSettleLattice);
+  if (options.scene == "gas") return gas(n, options.effects);
+  if (options.scene == "pile")
+    throw InputError({}, "--scene",
+                     "the pile starts from a settled state (spins and cached impulses) that a scene file cannot hold: "
+                     "give settle or gas");
+  throw InputError({}, "--scene", "unknown scene '" + options.scene + "'");
+}
+
+std::string write_bench_scene(const StepBenchOptions& options, std::size_t n, const std::string& dir) {
+  namespace fs = std::filesystem;
+  const auto [s, g] = bench_scene(options, n);
+  const std::string stem = "bench-" + options.scene + "-n" + std::to_string(n);
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) throw InputError({}, "--write-scene", "cannot make the folder '" + dir + "': " + ec.message());
+  auto vec = [](const Vec3& v) { return "[" + shortest(v.x) + ", " + shortest(v.y) + ", " + shortest(v.z) + "]"; };
+  auto number = [](double v) { return shortest(v); };
+
+  std::ostringstream csv;
+  csv << "# the spheres of " << stem << ".yaml: x, y, z, r in m, vx, vy, vz in m/s\nx,y,z,r,vx,vy,vz\n";
+  for (std::size_t i = 0; i < g.position.size(); ++i)
+    csv << shortest(g.position[i].x) << ',' << shortest(g.position[i].y) << ',' << shortest(g.position[i].z) << ','
+        << shortest(g.radius[i]) << ',' << shortest(g.velocity[i].x) << ',' << shortest(g.velocity[i].y) << ','
+        << shortest(g.velocity[i].z) << '\n';
+
+  const scene::Material& m = s.materials.at(0);
+  const int steps = warmup_steps(options) + options.repeats;
+  std::ostringstream yaml;
+  yaml << "# The scene `marbles bench step --scene " << options.scene << " --n " << n
+       << "` starts from; run for its warm-up and timed steps.\n"
+       << "format: 1\nname: " << stem << "\n"
+       << "time: {duration: " << number(steps * s.time.dt) << ", dt: " << number(s.time.dt)
+       << ", substeps: " << s.time.substeps << "}\n"
+       << "solver: {iterations: " << s.solver.iterations << "}\n"
+       << "effects: [";
+  for (std::size_t k = 0; k < s.effects.size(); ++k) yaml << (k ? ", " : "") << scene::effect_name(s.effects[k]);
+  yaml << "]\ngravity: " << vec(s.gravity) << "\n";
+  if (s.has(scene::Effect::drag))
+    yaml << "drag: {linear: " << number(s.drag) << ", quadratic: " << number(s.drag_quadratic) << "}\n";
+  yaml << "materials:\n  " << m.name << ": {density: " << number(m.density) << ", restitution: "
+       << number(m.restitution) << ", friction: " << number(m.friction) << ", rolling_friction: "
+       << number(m.rolling_friction) << ", twisting_friction: " << number(m.twisting_friction) << "}\n"
+       << "walls:\n";
+  for (const scene::WallSpec& w : s.walls) {
+    if (w.kind != scene::WallSpec::Kind::box) throw std::logic_error("write_bench_scene: a bench scene's wall is a box");
+    yaml << "  - box: {min: " << vec(w.lo) << ", max: " << vec(w.hi) << "}\n    material: " << m.name << "\n";
+  }
+  yaml << "particles:\n  - csv: {path: " << stem << ".csv}\n    material: " << m.name << "\n";
+
+  const fs::path base = fs::path(dir) / stem;
+  render::write_file_atomic(base.string() + ".csv", csv.str());
+  render::write_file_atomic(base.string() + ".yaml", yaml.str());
+  return base.string() + ".yaml";
+}
 
 std::string pile_cache_path(const std::string& cache_dir, std::size_t n, bool rolling, bool friction) {
   const std::string dir = cache_dir.empty() ? default_cache_dir() : cache_dir;
@@ -666,10 +747,15 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   if (!options.friction && !is_pile) throw InputError({}, "--friction", "'off' is for --scene pile only");
   if (!options.friction && options.rolling)
     throw InputError({}, "--friction", "'off' makes the pile without rolling resistance too: give --rolling off");
+  if (!options.write_scene.empty()) {
+    for (std::size_t n : options.n)
+      out << write_bench_scene(options, n, options.write_scene) << " (and its .csv)\n";
+    return 0;
+  }
   Lattice pile_lattice;
   pile_lattice.rolling = options.rolling;
   pile_lattice.friction = options.friction;
-  const int warmup = options.warmup >= 0 ? options.warmup : (is_pile ? 5 : is_settle ? kSettleWarmup : 2);
+  const int warmup = warmup_steps(options);
   std::ostream& log = std::cerr;
   std::vector<Row> rows;
   // The timed steps of scene s from world w, in the order and with the
@@ -703,11 +789,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
       // The box (the lattice is cheap next to the steps).
       time_steps(pile(n, pile_lattice).first, std::move(state->world), n);
       rows.back().settle = state->settle;
-    } else if (is_settle) {
-      auto [s, g] = pile(n, kSettleLattice);
-      time_steps(s, make_world(s, g), n);
     } else {
-      auto [s, g] = gas(n, options.effects);
+      auto [s, g] = bench_scene(options, n);
       time_steps(s, make_world(s, g), n);
     }
   }

@@ -26,8 +26,11 @@
 #include <cstddef>
 #include <iosfwd>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "sim/particles.hpp"
+#include "sim/scene.hpp"
 #include "sim/world.hpp"
 
 namespace marbles::bench {
@@ -66,6 +69,9 @@ struct StepBenchOptions {
   // kept at each step's start and the watch's figures (kinetic energy,
   // spheres past a wall) read with the step's flags; what that safety costs.
   bool watchdog = false;
+  // Not empty: each N's scene written to this folder as files
+  // (write_bench_scene), nothing timed.
+  std::string write_scene;
 };
 
 // The world with its spheres in the order StepBenchOptions::sphere_order
@@ -77,6 +83,20 @@ World in_sphere_order(World world, const std::string& how);
 std::string pile_cache_path(const std::string& cache_dir, std::size_t n, bool rolling = true, bool friction = true);
 
 int run_step_bench(const StepBenchOptions& options, std::ostream& out);
+
+// The scene and spheres `bench step` starts from for N spheres: the
+// settling lattice (settle) or the gas (gas, with options.effects). Throws
+// InputError naming --scene for the pile, which starts from a settled state
+// (spins and cached impulses) that a scene file cannot hold.
+std::pair<scene::Scene, scene::GeneratedParticles> bench_scene(const StepBenchOptions& options, std::size_t n);
+
+// That scene as files to run (`marbles run`), look at or time with another
+// build: DIR/bench-SCENE-nN.yaml (format 1: time, solver iterations,
+// effects, gravity, drag, the material, the box) and DIR/bench-SCENE-nN.csv
+// (x, y, z, r, vx, vy, vz; every value with the digits that read back to
+// the same bits), the duration the warm-up and timed steps. Each file is
+// written under a temporary name and renamed. Returns the YAML's path.
+std::string write_bench_scene(const StepBenchOptions& options, std::size_t n, const std::string& dir);
 
 // The cost of each effect: the same dense gas stepped with collisions and
 // walls only, then with each effect added, then with all of them.

@@ -6,12 +6,14 @@
 // again under a larger one).
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -19,6 +21,7 @@
 
 #include "bench/step_bench.hpp"
 #include "core/error.hpp"
+#include "sim/simulation.hpp"
 
 namespace marbles::bench {
 namespace {
@@ -216,6 +219,63 @@ TEST(StepBench, PileTermsRefusedWhereTheyMeanNothing) {
   pile.scene = "pile";
   pile.friction = false;  // rolling resistance left on
   refused(pile, "--friction");
+}
+
+// `--write-scene`: the files hold the scene the benchmark times, so that
+// `marbles run` of them starts from the same bits and steps as the
+// benchmark's own world does (the settling lattice, and the gas with every
+// effect, drag and rolling resistance included).
+TEST(StepBench, TheSceneItWritesRunsAsTheBenchmarksOwn) {
+  TempDir dir;
+  StepBenchOptions settle;
+  settle.scene = "settle";
+  settle.repeats = 3;
+  StepBenchOptions gas;
+  gas.scene = "gas";
+  gas.effects = {"gravity", "collisions", "walls", "restitution", "friction", "rolling_resistance", "drag"};
+  for (const auto& [options, n] : {std::pair{settle, std::size_t{1500}}, std::pair{gas, std::size_t{1000}}}) {
+    SCOPED_TRACE(options.scene);
+    const std::string path = write_bench_scene(options, n, dir.path.string());
+    EXPECT_EQ(fs::path(path).filename(), "bench-" + options.scene + "-n" + std::to_string(n) + ".yaml");
+    const auto [want, want_particles] = bench_scene(options, n);
+    const scene::Scene got = scene::load_scene(path);
+    EXPECT_EQ(std::llround(got.time.duration / got.time.dt), (options.scene == "settle" ? 40 : 2) + options.repeats);
+    EXPECT_EQ(got.time.dt, want.time.dt);
+    EXPECT_EQ(got.time.substeps, want.time.substeps);
+    EXPECT_EQ(got.solver.iterations, want.solver.iterations);
+    EXPECT_EQ(got.effects, want.effects);
+    EXPECT_EQ(got.drag, want.drag);
+    EXPECT_EQ(got.drag_quadratic, want.drag_quadratic);
+    ASSERT_EQ(got.materials.size(), 1u);
+    EXPECT_EQ(got.materials[0].restitution, want.materials[0].restitution);
+    EXPECT_EQ(got.materials[0].friction, want.materials[0].friction);
+    EXPECT_EQ(got.materials[0].rolling_friction, want.materials[0].rolling_friction);
+    ASSERT_EQ(got.walls.size(), 1u);
+    const World from_file = make_world(got, scene::generate_particles(got));
+    const World own = make_world(want, want_particles);
+    ASSERT_EQ(from_file.size(), n);
+    auto same = [](const World& a, const World& b) {
+      for (std::size_t i = 0; i < a.size(); ++i)
+        if (std::memcmp(&a.position[i], &b.position[i], sizeof(Vec3)) != 0 ||
+            std::memcmp(&a.velocity[i], &b.velocity[i], sizeof(Vec3)) != 0 ||
+            std::memcmp(&a.angular_velocity[i], &b.angular_velocity[i], sizeof(Vec3)) != 0 ||
+            a.radius[i] != b.radius[i] || a.inv_mass[i] != b.inv_mass[i] || a.inv_inertia[i] != b.inv_inertia[i])
+          return ::testing::AssertionFailure() << "sphere " << i << " differs";
+      return ::testing::AssertionSuccess();
+    };
+    EXPECT_TRUE(same(from_file, own));
+    Simulation a(got, from_file, broadphase::Backend::cpu), b(want, own, broadphase::Backend::cpu);
+    for (int k = 0; k < 5; ++k) {
+      a.step();
+      b.step();
+    }
+    EXPECT_GT(b.world().kinetic_energy(), 0.0);  // the steps moved something
+    EXPECT_TRUE(same(a.world(), b.world()));
+  }
+  // The pile starts from a settled state, which a scene file cannot hold.
+  StepBenchOptions pile;
+  pile.scene = "pile";
+  EXPECT_THROW(write_bench_scene(pile, 100, dir.path.string()), InputError);
 }
 
 }  // namespace
