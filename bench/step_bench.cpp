@@ -644,6 +644,35 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
 }
 
 
+// The settled pile of N spheres the options name: loaded from the cache,
+// or settled on the options' backend and saved there where it is missing,
+// was asked for again (--rebuild) or ran out of a smaller budget.
+PileState pile_state(const StepBenchOptions& options, std::size_t n, std::ostream& log) {
+  const broadphase::Backend backend = options.backend == "cuda" ? broadphase::Backend::cuda : broadphase::Backend::cpu;
+  Lattice lattice;
+  lattice.rolling = options.rolling;
+  lattice.friction = options.friction;
+  const std::string path = pile_cache_path(options.cache_dir, n, options.rolling, options.friction);
+  std::optional<PileState> state = options.rebuild ? std::nullopt : load_pile(path, n, lattice);
+  // A pile whose budget ran out is settled again where this run allows more steps.
+  if (state && !state->settle.settled() && state->settle.steps < static_cast<std::uint64_t>(options.settle_steps)) {
+    log << "pile N = " << n << ": " << path << " did not settle in " << state->settle.steps
+        << " steps; settling again with a budget of " << options.settle_steps << "\n";
+    state.reset();
+  }
+  if (state) {
+    const SettleInfo& settle = state->settle;
+    log << "pile N = " << n << ": loaded " << path << " (" << (settle.settled() ? "settled" : "NOT settled")
+        << " on " << settle.backend << " in " << settle.steps << " steps, " << settle.seconds << " s, KE/sphere "
+        << settle.ke_per_sphere << " J)\n";
+    return std::move(*state);
+  }
+  PileState settled = settle_pile(n, lattice, backend, options, log);
+  save_pile(path, settled.world, settled.settle);
+  log << "pile N = " << n << ": saved " << path << "\n";
+  return settled;
+}
+
 // The fewest digits that read back (as a double, then as T) to v's bits: a
 // scene file's value that starts a run from the same state.
 template <class T>
@@ -675,32 +704,50 @@ int threads() {
 
 }  // namespace
 
-std::pair<scene::Scene, scene::GeneratedParticles> bench_scene(const StepBenchOptions& options, std::size_t n) {
-  if (options.scene == "settle") return pile(n, kSettleLattice);
-  if (options.scene == "gas") return gas(n, options.effects);
-  if (options.scene == "pile")
-    throw InputError({}, "--scene",
-                     "the pile starts from a settled state (spins and cached impulses) that a scene file cannot hold: "
-                     "give settle or gas");
+std::pair<scene::Scene, World> bench_start(const StepBenchOptions& options, std::size_t n, std::ostream& log) {
+  if (options.scene == "pile") {
+    Lattice lattice;
+    lattice.rolling = options.rolling;
+    lattice.friction = options.friction;
+    PileState state = pile_state(options, n, log);
+    return {pile(n, lattice).first, std::move(state.world)};
+  }
+  auto made = [](std::pair<scene::Scene, scene::GeneratedParticles> sg) {
+    World w = make_world(sg.first, sg.second);
+    return std::pair<scene::Scene, World>{std::move(sg.first), std::move(w)};
+  };
+  if (options.scene == "settle") return made(pile(n, kSettleLattice));
+  if (options.scene == "gas") return made(gas(n, options.effects));
   throw InputError({}, "--scene", "unknown scene '" + options.scene + "'");
 }
 
-std::string write_bench_scene(const StepBenchOptions& options, std::size_t n, const std::string& dir) {
+std::string write_bench_scene(const StepBenchOptions& options, std::size_t n, const std::string& dir,
+                              std::ostream& log) {
   namespace fs = std::filesystem;
-  const auto [s, g] = bench_scene(options, n);
-  const std::string stem = "bench-" + options.scene + "-n" + std::to_string(n);
+  const char* terms = options.scene != "pile" ? "" : !options.friction ? "-frictionless" : !options.rolling ? "-friction" : "";
+  const std::string stem = "bench-" + options.scene + terms + "-n" + std::to_string(n);
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) throw InputError({}, "--write-scene", "cannot make the folder '" + dir + "': " + ec.message());
+  const auto [s, w] = bench_start(options, n, log);
   auto vec = [](const Vec3& v) { return "[" + shortest(v.x) + ", " + shortest(v.y) + ", " + shortest(v.z) + "]"; };
   auto number = [](double v) { return shortest(v); };
 
+  const bool spins = std::any_of(w.angular_velocity.begin(), w.angular_velocity.end(),
+                                 [](const Vec3& v) { return v.x != 0 || v.y != 0 || v.z != 0; });
   std::ostringstream csv;
-  csv << "# the spheres of " << stem << ".yaml: x, y, z, r in m, vx, vy, vz in m/s\nx,y,z,r,vx,vy,vz\n";
-  for (std::size_t i = 0; i < g.position.size(); ++i)
-    csv << shortest(g.position[i].x) << ',' << shortest(g.position[i].y) << ',' << shortest(g.position[i].z) << ','
-        << shortest(g.radius[i]) << ',' << shortest(g.velocity[i].x) << ',' << shortest(g.velocity[i].y) << ','
-        << shortest(g.velocity[i].z) << '\n';
+  csv << "# the spheres of " << stem << ".yaml: x, y, z, r in m, vx, vy, vz in m/s"
+      << (spins ? ", wx, wy, wz in rad/s" : "") << "\nx,y,z,r,vx,vy,vz" << (spins ? ",wx,wy,wz" : "") << "\n";
+  for (std::size_t i = 0; i < w.size(); ++i) {
+    if (w.inv_mass[i] == 0) throw std::logic_error("write_bench_scene: a bench scene has no fixed spheres");
+    csv << shortest(w.position[i].x) << ',' << shortest(w.position[i].y) << ',' << shortest(w.position[i].z) << ','
+        << shortest(w.radius[i]) << ',' << shortest(w.velocity[i].x) << ',' << shortest(w.velocity[i].y) << ','
+        << shortest(w.velocity[i].z);
+    if (spins)
+      csv << ',' << shortest(w.angular_velocity[i].x) << ',' << shortest(w.angular_velocity[i].y) << ','
+          << shortest(w.angular_velocity[i].z);
+    csv << '\n';
+  }
 
   const scene::Material& m = s.materials.at(0);
   const int steps = warmup_steps(options) + options.repeats;
@@ -749,7 +796,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
     throw InputError({}, "--friction", "'off' makes the pile without rolling resistance too: give --rolling off");
   if (!options.write_scene.empty()) {
     for (std::size_t n : options.n)
-      out << write_bench_scene(options, n, options.write_scene) << " (and its .csv)\n";
+      out << write_bench_scene(options, n, options.write_scene, std::cerr) << " (and its .csv)\n";
     return 0;
   }
   Lattice pile_lattice;
@@ -768,30 +815,13 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   };
   for (std::size_t n : options.n) {
     if (is_pile) {
-      const std::string path = pile_cache_path(options.cache_dir, n, options.rolling, options.friction);
-      std::optional<PileState> state = options.rebuild ? std::nullopt : load_pile(path, n, pile_lattice);
-      // A pile whose budget ran out is settled again where this run allows more steps.
-      if (state && !state->settle.settled() && state->settle.steps < static_cast<std::uint64_t>(options.settle_steps)) {
-        log << "pile N = " << n << ": " << path << " did not settle in " << state->settle.steps
-            << " steps; settling again with a budget of " << options.settle_steps << "\n";
-        state.reset();
-      }
-      if (state) {
-        const SettleInfo& settle = state->settle;
-        log << "pile N = " << n << ": loaded " << path << " (" << (settle.settled() ? "settled" : "NOT settled")
-            << " on " << settle.backend << " in " << settle.steps << " steps, " << settle.seconds << " s, KE/sphere "
-            << settle.ke_per_sphere << " J)\n";
-      } else {
-        state = settle_pile(n, pile_lattice, backend, options, log);
-        save_pile(path, state->world, state->settle);
-        log << "pile N = " << n << ": saved " << path << "\n";
-      }
+      PileState state = pile_state(options, n, log);
       // The box (the lattice is cheap next to the steps).
-      time_steps(pile(n, pile_lattice).first, std::move(state->world), n);
-      rows.back().settle = state->settle;
+      time_steps(pile(n, pile_lattice).first, std::move(state.world), n);
+      rows.back().settle = state.settle;
     } else {
-      auto [s, g] = bench_scene(options, n);
-      time_steps(s, make_world(s, g), n);
+      auto [s, w] = bench_start(options, n, log);
+      time_steps(std::move(s), std::move(w), n);
     }
   }
   constexpr int kVerbs = static_cast<int>(Verb::count);

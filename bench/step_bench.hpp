@@ -84,19 +84,24 @@ std::string pile_cache_path(const std::string& cache_dir, std::size_t n, bool ro
 
 int run_step_bench(const StepBenchOptions& options, std::ostream& out);
 
-// The scene and spheres `bench step` starts from for N spheres: the
-// settling lattice (settle) or the gas (gas, with options.effects). Throws
-// InputError naming --scene for the pile, which starts from a settled state
-// (spins and cached impulses) that a scene file cannot hold.
-std::pair<scene::Scene, scene::GeneratedParticles> bench_scene(const StepBenchOptions& options, std::size_t n);
+// The scene and the world `bench step` times for N spheres (before
+// --sphere-order): the settling lattice (settle), the gas (gas, with
+// options.effects) or the settled pile (pile: loaded from the cache, or
+// settled on options.backend and saved there first; progress on `log`).
+std::pair<scene::Scene, World> bench_start(const StepBenchOptions& options, std::size_t n, std::ostream& log);
 
-// That scene as files to run (`marbles run`), look at or time with another
+// That start as files to run (`marbles run`), look at or time with another
 // build: DIR/bench-SCENE-nN.yaml (format 1: time, solver iterations,
-// effects, gravity, drag, the material, the box) and DIR/bench-SCENE-nN.csv
-// (x, y, z, r, vx, vy, vz; every value with the digits that read back to
-// the same bits), the duration the warm-up and timed steps. Each file is
+// effects, gravity, drag, the material, the box; the pile without rolling
+// resistance bench-pile-friction-nN, without friction
+// bench-pile-frictionless-nN) and its .csv of spheres (x, y, z, r, vx, vy,
+// vz, and wx, wy, wz where a sphere spins; every value in the fewest digits
+// that read back to the same bits), the duration the warm-up and timed
+// steps. The pile's warm-start impulses are not in a scene file, nor in the
+// pile's cache: its timed steps start without them either way. Each file is
 // written under a temporary name and renamed. Returns the YAML's path.
-std::string write_bench_scene(const StepBenchOptions& options, std::size_t n, const std::string& dir);
+std::string write_bench_scene(const StepBenchOptions& options, std::size_t n, const std::string& dir,
+                              std::ostream& log);
 
 // The cost of each effect: the same dense gas stepped with collisions and
 // walls only, then with each effect added, then with all of them.
