@@ -752,7 +752,10 @@ std::string write_bench_scene(const StepBenchOptions& options, std::size_t n, co
   const scene::Material& m = s.materials.at(0);
   const int steps = warmup_steps(options) + options.repeats;
   std::ostringstream yaml;
-  yaml << "# The scene `marbles bench step --scene " << options.scene << " --n " << n
+  const std::string flags = options.scene != "pile" ? "" : !options.friction ? " --friction off --rolling off"
+                                                       : !options.rolling    ? " --rolling off"
+                                                                             : "";
+  yaml << "# The scene `marbles bench step --scene " << options.scene << flags << " --n " << n
        << "` starts from; run for its warm-up and timed steps.\n"
        << "format: 1\nname: " << stem << "\n"
        << "time: {duration: " << number(steps * s.time.dt) << ", dt: " << number(s.time.dt)
