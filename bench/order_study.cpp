@@ -152,7 +152,9 @@ std::vector<Order> default_orders() {
   return {{"solver 10", 10, 0, 0},         {"solver 20", 20, 0, 0},        {"solver 3", 3, 0, 0},
           {"local 3x4 tile 4", 3, 4, 4},   {"local 3x4 tile 8", 3, 4, 8},  {"local 4x3 tile 6", 4, 3, 6},
           {"local 3x4 tile 12", 3, 4, 12}, {"local 2x10 tile 8", 2, 10, 8}, {"local 1x10 tile 8", 1, 10, 8},
-          {"local 10x1 tile 8", 10, 1, 8}};
+          {"local 10x1 tile 8", 10, 1, 8}, {"height 10", 10, 0, 0, 0},   {"height 3", 3, 0, 0, 0},
+          {"height 5", 5, 0, 0, 0},        {"bands 1 x 10", 10, 0, 0, 1}, {"bands 3 x 10", 10, 0, 0, 3},
+          {"bands 1 x 5", 5, 0, 0, 1},     {"bands 1 x 3", 3, 0, 0, 1}};
 }
 
 namespace {
@@ -167,6 +169,22 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
   std::vector<std::vector<std::uint32_t>> tiles;
   std::vector<std::uint32_t> between;
   if (o.local > 0) split_by_tile(found, view, o.tile * 2 * r, tiles, between);
+  // The order by height: each contact's key, then a stable sort by band
+  // (bands of height_band diameters; 0: by the key itself) and, within a
+  // band, by colour (the colour-major index order the colouring left).
+  std::vector<std::uint32_t> by_height;
+  if (o.local == 0 && o.height_band >= 0) {
+    std::vector<double> key(m);
+    for (std::size_t k = 0; k < m; ++k) {
+      const Contact& c = found[k];
+      key[k] = narrowphase::is_wall(c.b) ? double(view.position[c.a].z)
+                                         : 0.5 * (double(view.position[c.a].z) + double(view.position[c.b].z));
+      if (o.height_band > 0) key[k] = std::floor(key[k] / (o.height_band * 2 * double(r)));
+    }
+    by_height.resize(m);
+    for (std::uint32_t k = 0; k < m; ++k) by_height[k] = k;
+    std::stable_sort(by_height.begin(), by_height.end(), [&](std::uint32_t x, std::uint32_t y) { return key[x] < key[y]; });
+  }
   res.tiles = tiles.size();
   res.between = m ? double(between.size()) / m : 0;
   std::vector<Contact> cs = found;
@@ -189,6 +207,10 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
     for (Contact& c : cs) narrowphase::prepare_one(c, b);
     for (const Contact& c : cs) narrowphase::warm_start_one<true, Rolling>(c, b);
     for (int p = 0; p < o.passes; ++p) {
+      if (o.local == 0 && !by_height.empty()) {
+        sweep(by_height, p % 2 == 1);
+        continue;
+      }
       if (o.local == 0) {
         for (std::uint32_t k = 0; k < m; ++k) solve(p % 2 == 0 ? k : std::uint32_t(m - 1 - k));
         continue;

@@ -35,6 +35,13 @@ struct Order {
   int passes;     // over memory
   int local;      // sweeps of a tile's own contacts a pass (0: the solver's order)
   int tile;       // the tiles' edge, in diameters
+  // With local 0: -1 the solver's colour-major order; 0 every contact in
+  // the order of its height (the midpoint of its spheres' centres, a wall
+  // contact its sphere's), lowest first on even passes and last on odd
+  // ones; b > 0 horizontal bands b diameters high, lowest first, each
+  // band's contacts colour by colour (groups that share no sphere, as a
+  // parallel sweep needs).
+  int height_band = -1;
 };
 // The orders marbles_order_study compares.
 std::vector<Order> default_orders();

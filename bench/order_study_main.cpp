@@ -70,9 +70,11 @@ int main(int argc, char** argv) {
     char buf[400];
     std::snprintf(buf, sizeof buf,
                   "%s{\"order\": \"%s\", \"passes\": %d, \"local_sweeps\": %d, \"tile_diameters\": %d, "
+                  "\"height_band_diameters\": %d, "
                   "\"p99_speed_over_gh\": %.6g, \"rms_speed_over_gh\": %.6g, \"floor_over_weight\": %.6g, "
                   "\"tiles\": %zu, \"between_fraction\": %.6g, \"ms_per_substep\": %.4g}",
-                  i ? ", " : "", o.name.c_str(), o.passes, o.local, o.tile, res.p99, res.rms, res.floor_ratio,
+                  i ? ", " : "", o.name.c_str(), o.passes, o.local, o.tile, o.height_band, res.p99, res.rms,
+                  res.floor_ratio,
                   res.tiles, res.between, res.ms);
     out += buf;
   }

@@ -49,3 +49,28 @@ TEST(OrderStudy, MoreSweepsLeaveLessUndoneOnColumns) {
   EXPECT_LT(last_rms, 0.05) << "thirty sweeps a substep bring twelve layers near rest";
   EXPECT_GT(last_floor, 0.95);
 }
+
+// The order by height: one band above the whole pile holds every contact
+// in the colouring's colour-major order, so it sweeps as the solver does
+// (the same bits); by height alone, or in thin bands, it is another order.
+TEST(OrderStudy, OneHeightBandIsTheSolversOrder) {
+  for (const os::PileKind kind : {os::PileKind::cubic, os::PileKind::close_packed}) {
+    os::Pile pile = os::make_pile(kind, 6, 5);
+    const os::Result solver = os::run({"solver 5", 5, 0, 0}, pile, 4);
+    const os::Result one_band = os::run({"bands 1000 x 5", 5, 0, 0, 1000}, pile, 4);
+    ASSERT_EQ(one_band.velocity.size(), solver.velocity.size());
+    EXPECT_EQ(std::memcmp(one_band.velocity.data(), solver.velocity.data(),
+                          solver.velocity.size() * sizeof(marbles::Vec3)),
+              0)
+        << "the same updates in the same order";
+    for (const int band : {0, 1}) {
+      const os::Result other = os::run({"height", 5, 0, 0, band}, pile, 4);
+      EXPECT_NE(std::memcmp(other.velocity.data(), solver.velocity.data(),
+                            solver.velocity.size() * sizeof(marbles::Vec3)),
+                0)
+          << "band " << band;
+      EXPECT_LE(other.floor_ratio, 1.001) << "band " << band;
+    }
+  }
+}
+
