@@ -121,6 +121,38 @@ void split_by_tile(const std::vector<Contact>& contacts, const BodiesView& bodie
 
 constexpr real kRadius = real(0.01), kSubstep = real(1e-3), kGravity = real(9.81);
 
+// solve_one with over-relaxation: the friction's and the normal's steps
+// (solve_friction, solve_normal of contact_math.hpp) times omega before
+// their clamps; rolling resistance as the solver's. With omega 1 the same
+// arithmetic, so the same bits.
+template <bool Rolling>
+void solve_one_relaxed(Contact& c, narrowphase::SolverBody* bodies, real inv_h, real omega) {
+  using namespace narrowphase;
+  BodyState A = load_body(bodies, c.a, c);
+  BodyState B = load_body(bodies, c.b, c);
+  {
+    const Vec3 vrel = contact_relative_velocity(c, A, B);
+    const Vec3 vt = vrel - c.normal * dot(vrel, c.normal);
+    const Vec3 old = c.tangent_impulse;
+    c.tangent_impulse = clamp_length(old - vt * c.tangent_mass * omega, c.coeff.friction * c.normal_impulse);
+    apply_impulse(c, A, B, c.tangent_impulse - old);
+  }
+  if constexpr (Rolling) solve_rolling(c, A, B);
+  {
+    const real vn = dot(A.v - B.v, c.normal);
+    const real allowed = c.separation > 0 ? c.separation * inv_h : real(0);
+    real lambda = -c.normal_mass * (vn + allowed) * omega;
+    const real old = c.normal_impulse;
+    c.normal_impulse = old + lambda > 0 ? old + lambda : real(0);
+    lambda = c.normal_impulse - old;
+    const Vec3 p = c.normal * lambda;
+    A.v += p * A.inv_mass;
+    B.v -= p * B.inv_mass;
+  }
+  store_body(bodies, c.a, A);
+  store_body(bodies, c.b, B);
+}
+
 }  // namespace
 
 Pile make_pile(PileKind kind, int side, int layers, bool rolling) {
@@ -154,7 +186,10 @@ std::vector<Order> default_orders() {
           {"local 3x4 tile 12", 3, 4, 12}, {"local 2x10 tile 8", 2, 10, 8}, {"local 1x10 tile 8", 1, 10, 8},
           {"local 10x1 tile 8", 10, 1, 8}, {"height 10", 10, 0, 0, 0},   {"height 3", 3, 0, 0, 0},
           {"height 5", 5, 0, 0, 0},        {"bands 1 x 10", 10, 0, 0, 1}, {"bands 3 x 10", 10, 0, 0, 3},
-          {"bands 1 x 5", 5, 0, 0, 1},     {"bands 1 x 3", 3, 0, 0, 1}};
+          {"bands 1 x 5", 5, 0, 0, 1},     {"bands 1 x 3", 3, 0, 0, 1},
+          {"solver 10 omega 1.3", 10, 0, 0, -1, 1.3}, {"solver 10 omega 1.6", 10, 0, 0, -1, 1.6},
+          {"solver 6 omega 1.3", 6, 0, 0, -1, 1.3},   {"solver 6 omega 1.6", 6, 0, 0, -1, 1.6},
+          {"solver 6 omega 1.8", 6, 0, 0, -1, 1.8}};
 }
 
 namespace {
@@ -192,7 +227,11 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
   std::vector<narrowphase::SolverBody> bodies(n);
   narrowphase::SolverBody* b = bodies.data();
   const real inv_h = 1 / h;
-  auto solve = [&](std::uint32_t k) { narrowphase::solve_one<true, Rolling>(cs[k], b, inv_h); };
+  const real omega = real(o.omega);
+  auto solve = [&](std::uint32_t k) {
+    if (o.omega <= 0) narrowphase::solve_one<true, Rolling>(cs[k], b, inv_h);
+    else solve_one_relaxed<Rolling>(cs[k], b, inv_h, omega);
+  };
   auto sweep = [&](const std::vector<std::uint32_t>& list, bool backwards) {
     if (backwards) std::for_each(list.rbegin(), list.rend(), solve);
     else std::for_each(list.begin(), list.end(), solve);

@@ -42,6 +42,10 @@ struct Order {
   // band's contacts colour by colour (groups that share no sphere, as a
   // parallel sweep needs).
   int height_band = -1;
+  // Over-relaxation: > 0, each sweep's change of the normal and tangential
+  // impulses times omega before the clamps, in the study's own update (with
+  // omega 1 the solver's bits); 0, the solver's own update.
+  double omega = 0;
 };
 // The orders marbles_order_study compares.
 std::vector<Order> default_orders();

@@ -74,3 +74,20 @@ TEST(OrderStudy, OneHeightBandIsTheSolversOrder) {
   }
 }
 
+// Over-relaxation: the study's relaxed update with omega 1 is the solver's,
+// bit for bit (the same steps, times 1); with another omega, other bits.
+TEST(OrderStudy, RelaxedByOneIsTheSolversUpdate) {
+  for (const bool rolling : {false, true}) {
+    os::Pile pile = os::make_pile(os::PileKind::close_packed, 6, 5, rolling);
+    const os::Result solver = os::run({"solver 5", 5, 0, 0}, pile, 4);
+    os::Order relaxed{"relaxed", 5, 0, 0, -1, 1.0};
+    const os::Result same = os::run(relaxed, pile, 4);
+    EXPECT_EQ(std::memcmp(same.velocity.data(), solver.velocity.data(), solver.velocity.size() * sizeof(marbles::Vec3)),
+              0);
+    relaxed.omega = 1.5;
+    const os::Result other = os::run(relaxed, pile, 4);
+    EXPECT_NE(std::memcmp(other.velocity.data(), solver.velocity.data(), solver.velocity.size() * sizeof(marbles::Vec3)),
+              0);
+  }
+}
+
