@@ -35,8 +35,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <iostream>
 #include <utility>
 
+#include "bench/step_bench.hpp"
 #include "broadphase/broadphase.hpp"
 #include "narrowphase/contacts.hpp"
 #include "narrowphase/solver.hpp"
@@ -153,19 +155,14 @@ void solve_one_relaxed(Contact& c, narrowphase::SolverBody* bodies, real inv_h, 
   store_body(bodies, c.b, B);
 }
 
-}  // namespace
-
-Pile make_pile(PileKind kind, int side, int layers, bool rolling) {
-  const bool cubic = kind == PileKind::cubic;
-  const real r = kRadius, h = kSubstep, g = kGravity;
-  Pile p;
-  p.world = cubic ? cubic_pile(side, layers, r) : close_packed_pile(side, layers, r);
-  p.walls = walls_for(cubic, side, r);
+// The pile's contacts (its spheres given gravity's kick, within the skin of
+// 0.001 of a radius) in the colouring's colour-major order.
+void find_contacts(Pile& p, real r) {
+  const real h = kSubstep, g = kGravity;
   World& w = p.world;
   BodiesView view = w.view();
   const std::size_t n = view.count;
-  p.rolling = rolling;
-  const std::vector<narrowphase::PairCoefficients> coefficients{{0, real(0.5), rolling ? real(0.05) : 0, 0}};
+  const std::vector<narrowphase::PairCoefficients> coefficients{{0, real(0.5), p.rolling ? real(0.05) : 0, 0}};
   const narrowphase::PairTable table{coefficients.data(), 1};
   std::vector<broadphase::Pair> pairs;
   broadphase::make_home_cell_cpu()->find_pairs({view.position, view.radius, n}, real(0.001) * r, pairs);
@@ -177,6 +174,42 @@ Pile make_pile(PileKind kind, int side, int layers, bool rolling) {
   narrowphase::ContactColouring colouring;
   colouring.colour_and_sort(p.contacts, n, p.ranges, nullptr, nullptr, 0);
   for (Vec3& v : w.velocity) v = Vec3{};
+}
+
+}  // namespace
+
+Pile make_pile(PileKind kind, int side, int layers, bool rolling) {
+  const bool cubic = kind == PileKind::cubic;
+  const real r = kRadius;
+  Pile p;
+  p.world = cubic ? cubic_pile(side, layers, r) : close_packed_pile(side, layers, r);
+  p.walls = walls_for(cubic, side, r);
+  p.rolling = rolling;
+  find_contacts(p, r);
+  return p;
+}
+
+Pile settled_pile(std::size_t n, const std::string& cache_dir, bool rolling) {
+  bench::StepBenchOptions options;
+  options.scene = "pile";
+  options.rolling = rolling;
+  options.cache_dir = cache_dir;
+  auto [scene, world] = bench::bench_start(options, n, std::cerr);
+  Pile p;
+  p.world = std::move(world);
+  p.rolling = rolling;
+  for (Vec3& v : p.world.angular_velocity) v = Vec3{};
+  // The box's floor and four sides (the lid is far above the pile).
+  const scene::WallSpec& box = scene.walls.at(0);
+  const Vec3 normals[5] = {{0, 0, 1}, {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}};
+  const Vec3 points[5] = {box.lo, box.lo, box.hi, box.lo, box.hi};
+  for (int k = 0; k < 5; ++k) {
+    narrowphase::WallShape w;
+    w.point = points[k];
+    w.direction = normals[k];
+    p.walls.push_back(w);
+  }
+  find_contacts(p, p.world.radius.empty() ? kRadius : p.world.radius[0]);
   return p;
 }
 

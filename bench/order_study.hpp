@@ -29,6 +29,12 @@ struct Pile {
 // ABC on a floor; cubic: columns in a box that touches them), friction 0.5
 // and, with `rolling`, rolling resistance.
 Pile make_pile(PileKind kind, int side, int layers, bool rolling = false);
+// The benchmark's settled pile of n spheres (`marbles bench step --scene
+// pile`, friction 0.5, with `rolling` rolling resistance 0.05; from the
+// cache in cache_dir, settled there first where it is missing) in its box:
+// a pile that rests under the solver's own sweeps, so every order's speeds
+// can fall to 0 (the close-packed rhombus's overhanging edges never do).
+Pile settled_pile(std::size_t n, const std::string& cache_dir, bool rolling = false);
 
 struct Order {
   std::string name;

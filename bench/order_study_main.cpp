@@ -2,7 +2,8 @@
 // --json the figures) of bench/order_study.hpp's orders on one pile.
 //
 //   marbles_order_study [--side 30] [--layers 30] [--substeps 30]
-//                       [--pile close-packed|cubic] [--rolling] [--json]
+//                       [--pile close-packed|cubic|settled] [--n N] [--cache DIR]
+//                       [--rolling] [--json]
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -26,8 +27,9 @@ int parse(const char* name, const char* value, int lo, int hi) {
 
 int main(int argc, char** argv) {
   using namespace marbles::order_study;
-  int side = 30, layers = 30, substeps = 30;
-  bool json = false, rolling = false;
+  int side = 30, layers = 30, substeps = 30, n = 0;
+  bool json = false, rolling = false, settled = false;
+  std::string cache;
   PileKind kind = PileKind::close_packed;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -37,26 +39,41 @@ int main(int argc, char** argv) {
     else if (a == "--substeps") substeps = parse("--substeps", next, 1, 10000), ++i;
     else if (a == "--json") json = true;
     else if (a == "--rolling") rolling = true;
-    else if (a == "--pile") {
+    else if (a == "--n") n = parse("--n", next, 1, 100000000), ++i;
+    else if (a == "--cache") {
+      if (!next) {
+        std::fprintf(stderr, "marbles_order_study: --cache needs a folder\n");
+        return 2;
+      }
+      cache = next, ++i;
+    } else if (a == "--pile") {
       const std::string v = next ? next : "";
-      if (v != "cubic" && v != "close-packed") {
-        std::fprintf(stderr, "marbles_order_study: --pile needs close-packed or cubic, got '%s'\n", v.c_str());
+      if (v != "cubic" && v != "close-packed" && v != "settled") {
+        std::fprintf(stderr, "marbles_order_study: --pile needs close-packed, cubic or settled, got '%s'\n",
+                     v.c_str());
         return 2;
       }
       kind = v == "cubic" ? PileKind::cubic : PileKind::close_packed;
+      settled = v == "settled";
       ++i;
     } else {
       std::fprintf(stderr,
                    "marbles_order_study: unknown argument '%s' (usage: marbles_order_study [--side N] [--layers N] "
-                   "[--substeps N] [--pile close-packed|cubic] [--rolling] [--json])\n",
+                   "[--substeps N] [--pile close-packed|cubic|settled] [--n N] [--cache DIR] [--rolling] "
+                   "[--json])\n",
                    a.c_str());
       return 2;
     }
   }
-  Pile pile = make_pile(kind, side, layers, rolling);
-  std::printf("order study: %s pile%s, %zu spheres (%d layers), %zu contacts, %u colours, %d substeps held still\n",
-              kind == PileKind::cubic ? "cubic" : "close-packed", rolling ? " (rolling resistance)" : "", pile.world.size(), layers, pile.contacts.size(),
-              pile.ranges.colours, substeps);
+  if (settled && n == 0) {
+    std::fprintf(stderr, "marbles_order_study: --pile settled needs --n\n");
+    return 2;
+  }
+  Pile pile = settled ? settled_pile(static_cast<std::size_t>(n), cache, rolling) : make_pile(kind, side, layers, rolling);
+  std::printf("order study: %s pile%s, %zu spheres, %zu contacts, %u colours, %d substeps held still\n",
+              settled ? "the benchmark's settled" : kind == PileKind::cubic ? "cubic" : "close-packed",
+              rolling ? " (rolling resistance)" : "", pile.world.size(), pile.contacts.size(), pile.ranges.colours,
+              substeps);
   std::printf("%-20s %6s %9s %9s %12s %7s %9s %10s\n", "order", "passes", "p99 v/gh", "rms v/gh", "floor/weight",
               "tiles", "between", "ms/substep");
   std::string out = "{\"spheres\": " + std::to_string(pile.world.size()) +
