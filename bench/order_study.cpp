@@ -26,10 +26,19 @@
 //
 //   With --pile cubic, columns of touching spheres on a cubic lattice in a
 //   box that touches them (side walls and floor): every speed is then 0 and
-//   the floor carries the whole weight once converged.
+//   the floor carries the whole weight once converged. With --pile settled
+//   --n N, the benchmark's settled pile of N spheres in its box (from
+//   `marbles bench step`'s cache, --cache DIR), which rests under the
+//   solver: every speed can fall to 0, the walls carrying part of the
+//   weight by friction.
+//
+//   Besides the solver's order and the local orders: sweeps by height
+//   (every contact lowest first, then highest first) or by horizontal
+//   bands colour by colour, and the solver's order over-relaxed (Order).
 //
 //   marbles_order_study [--side 30] [--layers 30] [--substeps 30]
-//                       [--pile close-packed|cubic] [--rolling] [--json]
+//                       [--pile close-packed|cubic|settled] [--n N] [--cache DIR]
+//                       [--rolling] [--json]
 #include "bench/order_study.hpp"
 
 #include <algorithm>
