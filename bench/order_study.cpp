@@ -34,7 +34,8 @@
 //
 //   Besides the solver's order and the local orders: sweeps by height
 //   (every contact lowest first, then highest first) or by horizontal
-//   bands colour by colour, and the solver's order over-relaxed (Order).
+//   bands colour by colour, the solver's order over-relaxed, and
+//   conjugate gradients over the solver's sweeps (Order).
 //
 //   marbles_order_study [--side 30] [--layers 30] [--substeps 30]
 //                       [--pile close-packed|cubic|settled] [--n N] [--cache DIR]
@@ -231,7 +232,10 @@ std::vector<Order> default_orders() {
           {"bands 1 x 5", 5, 0, 0, 1},     {"bands 1 x 3", 3, 0, 0, 1},
           {"solver 10 omega 1.3", 10, 0, 0, -1, 1.3}, {"solver 10 omega 1.6", 10, 0, 0, -1, 1.6},
           {"solver 6 omega 1.3", 6, 0, 0, -1, 1.3},   {"solver 6 omega 1.6", 6, 0, 0, -1, 1.6},
-          {"solver 6 omega 1.8", 6, 0, 0, -1, 1.8}};
+          {"solver 6 omega 1.8", 6, 0, 0, -1, 1.8},   {"nncg 10", 10, 0, 0, -1, 0, 1},
+          {"nncg 6", 6, 0, 0, -1, 0, 1},              {"nncg 5", 5, 0, 0, -1, 0, 1},
+          {"nncg in sweeps 10", 10, 0, 0, -1, 0, 2},  {"nncg in sweeps 6", 6, 0, 0, -1, 0, 2},
+          {"nncg in sweeps 5", 5, 0, 0, -1, 0, 2}};
 }
 
 namespace {
@@ -274,6 +278,16 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
     if (o.omega <= 0) narrowphase::solve_one<true, Rolling>(cs[k], b, inv_h);
     else solve_one_relaxed<Rolling>(cs[k], b, inv_h, omega);
   };
+  // The conjugate gradients' step of one contact: its impulses, and its
+  // bodies through them.
+  auto take_step = [&](Contact& c, real add_n, const Vec3& add_t) {
+    c.normal_impulse += add_n;
+    c.tangent_impulse += add_t;
+    narrowphase::BodyState A = narrowphase::load_body(b, c.a, c), B = narrowphase::load_body(b, c.b, c);
+    narrowphase::apply_impulse(c, A, B, c.normal * add_n + add_t);
+    narrowphase::store_body(b, c.a, A);
+    narrowphase::store_body(b, c.b, B);
+  };
   auto sweep = [&](const std::vector<std::uint32_t>& list, bool backwards) {
     if (backwards) std::for_each(list.rbegin(), list.rend(), solve);
     else std::for_each(list.begin(), list.end(), solve);
@@ -287,6 +301,62 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
     }
     for (Contact& c : cs) narrowphase::prepare_one(c, b);
     for (const Contact& c : cs) narrowphase::warm_start_one<true, Rolling>(c, b);
+    if (o.nncg == 2) {  // the momentum taken contact by contact within the sweep, right after its solve
+      std::vector<real> dir_n(m, 0);
+      std::vector<Vec3> dir_t(m);
+      double last_norm = 0, beta = 0;  // beta of the two sweeps before this one
+      for (int p = 0; p < o.passes; ++p) {
+        double norm = 0;
+        const bool step = beta > 0 && p + 1 < o.passes;
+        for (std::uint32_t i = 0; i < m; ++i) {
+          const std::uint32_t k = p % 2 == 0 ? i : std::uint32_t(m - 1 - i);
+          Contact& c = cs[k];
+          const real before_n = c.normal_impulse;
+          const Vec3 before_t = c.tangent_impulse;
+          solve(k);
+          const real dn = c.normal_impulse - before_n;
+          const Vec3 dt = c.tangent_impulse - before_t;
+          norm += double(dn) * double(dn) + double(dot(dt, dt));
+          const real add_n = real(beta) * dir_n[k];
+          const Vec3 add_t = dir_t[k] * real(beta);
+          if (step) take_step(c, add_n, add_t);
+          dir_n[k] = add_n + dn;
+          dir_t[k] = add_t + dt;
+        }
+        beta = p > 0 && last_norm > 0 ? norm / last_norm : 0;
+        if (beta > 1) beta = 0;
+        last_norm = norm;
+      }
+      continue;
+    }
+    if (o.nncg == 1) {  // the solver's order, each sweep's change kept as a direction
+      std::vector<real> last_n(m), dir_n(m, 0);
+      std::vector<Vec3> last_t(m), dir_t(m);
+      double last_norm = 0;
+      for (int p = 0; p < o.passes; ++p) {
+        for (std::uint32_t k = 0; k < m; ++k) last_n[k] = cs[k].normal_impulse, last_t[k] = cs[k].tangent_impulse;
+        for (std::uint32_t k = 0; k < m; ++k) solve(p % 2 == 0 ? k : std::uint32_t(m - 1 - k));
+        double norm = 0;
+        for (std::uint32_t k = 0; k < m; ++k) {
+          const double dn = cs[k].normal_impulse - last_n[k];
+          const Vec3 dt = cs[k].tangent_impulse - last_t[k];
+          norm += dn * dn + double(dot(dt, dt));
+        }
+        double beta = p > 0 && last_norm > 0 ? norm / last_norm : 0;
+        if (beta > 1) beta = 0;
+        last_norm = norm;
+        const bool step = beta > 0 && p + 1 < o.passes;
+        for (std::uint32_t k = 0; k < m; ++k) {
+          Contact& c = cs[k];
+          const real dn = c.normal_impulse - last_n[k];
+          const Vec3 dt = c.tangent_impulse - last_t[k];
+          if (step) take_step(c, real(beta) * dir_n[k], dir_t[k] * real(beta));
+          dir_n[k] = real(beta) * dir_n[k] + dn;
+          dir_t[k] = dir_t[k] * real(beta) + dt;
+        }
+      }
+      continue;
+    }
     for (int p = 0; p < o.passes; ++p) {
       if (o.local == 0 && !by_height.empty()) {
         sweep(by_height, p % 2 == 1);

@@ -52,6 +52,15 @@ struct Order {
   // impulses times omega before the clamps, in the study's own update (with
   // omega 1 the solver's bits); 0, the solver's own update.
   double omega = 0;
+  // Nonsmooth nonlinear conjugate gradients over the solver's order: after
+  // each sweep but the last, the impulses (and the bodies with them) take
+  // beta times the last direction, beta the ratio of the last two sweeps'
+  // squared changes (0 where it passes 1, a restart). 1: that step as a
+  // pass of its own; 2: each contact's share of it taken in the sweep right
+  // after the contact is solved, beta the ratio of the two sweeps before
+  // (one pass a sweep, as a colour of a parallel sweep could: no two of its
+  // contacts share a sphere).
+  int nncg = 0;
 };
 // The orders marbles_order_study compares.
 std::vector<Order> default_orders();

@@ -115,3 +115,29 @@ TEST(OrderStudy, TheSettledPileComesToRest) {
   EXPECT_LT(last_rms, 0.02) << "forty sweeps a substep bring the settled pile to rest";
 }
 
+// Conjugate gradients over the solver's sweeps take no step after the last
+// sweep, nor before two sweeps have given a ratio: with one or two sweeps
+// (three where the step is taken within the sweeps) they are the solver's
+// sweeps bit for bit; with one sweep more they step, and other bits follow.
+TEST(OrderStudy, ConjugateGradientsStepOnlyBetweenSweeps) {
+  os::Pile pile = os::make_pile(os::PileKind::cubic, 6, 8);
+  auto same = [](const os::Result& a, const os::Result& b) {
+    return a.velocity.size() == b.velocity.size() &&
+           std::memcmp(a.velocity.data(), b.velocity.data(), a.velocity.size() * sizeof(marbles::Vec3)) == 0;
+  };
+  for (const int form : {1, 2}) {
+    SCOPED_TRACE(form == 1 ? "a pass of its own" : "within the sweeps");
+    const int plain = form == 1 ? 2 : 3;
+    for (int passes = 1; passes <= plain; ++passes) {
+      os::Order o{"nncg", passes, 0, 0};
+      o.nncg = form;
+      EXPECT_TRUE(same(os::run(o, pile, 6), os::run({"solver", passes, 0, 0}, pile, 6))) << passes << " sweeps";
+    }
+    os::Order o{"nncg", plain + 1, 0, 0};
+    o.nncg = form;
+    const os::Result stepped = os::run(o, pile, 6);
+    EXPECT_FALSE(same(stepped, os::run({"solver", plain + 1, 0, 0}, pile, 6)));
+    EXPECT_LE(stepped.floor_ratio, 1.001);
+  }
+}
+
