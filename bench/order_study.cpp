@@ -53,6 +53,7 @@
 #include "narrowphase/contacts.hpp"
 #include "narrowphase/solver.hpp"
 #include "narrowphase/solver_math.hpp"
+#include "sim/step_model.hpp"
 
 namespace marbles::order_study {
 namespace {
@@ -133,38 +134,6 @@ void split_by_tile(const std::vector<Contact>& contacts, const BodiesView& bodie
 
 constexpr real kRadius = real(0.01), kSubstep = real(1e-3), kGravity = real(9.81);
 
-// solve_one with over-relaxation: the friction's and the normal's steps
-// (solve_friction, solve_normal of contact_math.hpp) times omega before
-// their clamps; rolling resistance as the solver's. With omega 1 the same
-// arithmetic, so the same bits.
-template <bool Rolling>
-void solve_one_relaxed(Contact& c, narrowphase::SolverBody* bodies, real inv_h, real omega) {
-  using namespace narrowphase;
-  BodyState A = load_body(bodies, c.a, c);
-  BodyState B = load_body(bodies, c.b, c);
-  {
-    const Vec3 vrel = contact_relative_velocity(c, A, B);
-    const Vec3 vt = vrel - c.normal * dot(vrel, c.normal);
-    const Vec3 old = c.tangent_impulse;
-    c.tangent_impulse = clamp_length(old - vt * c.tangent_mass * omega, c.coeff.friction * c.normal_impulse);
-    apply_impulse(c, A, B, c.tangent_impulse - old);
-  }
-  if constexpr (Rolling) solve_rolling(c, A, B);
-  {
-    const real vn = dot(A.v - B.v, c.normal);
-    const real allowed = c.separation > 0 ? c.separation * inv_h : real(0);
-    real lambda = -c.normal_mass * (vn + allowed) * omega;
-    const real old = c.normal_impulse;
-    c.normal_impulse = old + lambda > 0 ? old + lambda : real(0);
-    lambda = c.normal_impulse - old;
-    const Vec3 p = c.normal * lambda;
-    A.v += p * A.inv_mass;
-    B.v -= p * B.inv_mass;
-  }
-  store_body(bodies, c.a, A);
-  store_body(bodies, c.b, B);
-}
-
 // The pile's contacts (its spheres given gravity's kick, within the skin of
 // 0.001 of a radius) in the colouring's colour-major order.
 void find_contacts(Pile& p, real r) {
@@ -208,17 +177,7 @@ Pile settled_pile(std::size_t n, const std::string& cache_dir, bool rolling) {
   Pile p;
   p.world = std::move(world);
   p.rolling = rolling;
-  for (Vec3& v : p.world.angular_velocity) v = Vec3{};
-  // The box's floor and four sides (the lid is far above the pile).
-  const scene::WallSpec& box = scene.walls.at(0);
-  const Vec3 normals[5] = {{0, 0, 1}, {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}};
-  const Vec3 points[5] = {box.lo, box.lo, box.hi, box.lo, box.hi};
-  for (int k = 0; k < 5; ++k) {
-    narrowphase::WallShape w;
-    w.point = points[k];
-    w.direction = normals[k];
-    p.walls.push_back(w);
-  }
+  p.walls = compile_step_model(scene, broadphase::kDefaultCpuAlgorithm).wall_shapes;  // the box, as the step has it
   find_contacts(p, p.world.radius.empty() ? kRadius : p.world.radius[0]);
   return p;
 }
@@ -273,11 +232,7 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
   std::vector<narrowphase::SolverBody> bodies(n);
   narrowphase::SolverBody* b = bodies.data();
   const real inv_h = 1 / h;
-  const real omega = real(o.omega);
-  auto solve = [&](std::uint32_t k) {
-    if (o.omega <= 0) narrowphase::solve_one<true, Rolling>(cs[k], b, inv_h);
-    else solve_one_relaxed<Rolling>(cs[k], b, inv_h, omega);
-  };
+  auto solve = [&](std::uint32_t k) { narrowphase::solve_one<true, Rolling>(cs[k], b, inv_h); };
   // The conjugate gradients' step of one contact: its impulses, and its
   // bodies through them.
   auto take_step = [&](Contact& c, real add_n, const Vec3& add_t) {
@@ -301,6 +256,11 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
     }
     for (Contact& c : cs) narrowphase::prepare_one(c, b);
     for (const Contact& c : cs) narrowphase::warm_start_one<true, Rolling>(c, b);
+    // Over-relaxed: the normal and tangential masses times omega make each
+    // step of solve_normal and solve_friction omega times the solver's
+    // (with omega 1 the same bits); the rolling mass as the solver's.
+    if (o.omega > 0)
+      for (Contact& c : cs) c.normal_mass *= real(o.omega), c.tangent_mass *= real(o.omega);
     if (o.nncg == 2) {  // the momentum taken contact by contact within the sweep, right after its solve
       std::vector<real> dir_n(m, 0);
       std::vector<Vec3> dir_t(m);

@@ -49,8 +49,8 @@ struct Order {
   // parallel sweep needs).
   int height_band = -1;
   // Over-relaxation: > 0, each sweep's change of the normal and tangential
-  // impulses times omega before the clamps, in the study's own update (with
-  // omega 1 the solver's bits); 0, the solver's own update.
+  // impulses times omega before the clamps (their effective masses times
+  // omega; with omega 1 the solver's bits); 0, the solver's masses.
   double omega = 0;
   // Nonsmooth nonlinear conjugate gradients over the solver's order: after
   // each sweep but the last, the impulses (and the bodies with them) take

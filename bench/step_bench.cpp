@@ -644,14 +644,17 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
 }
 
 
-// The settled pile of N spheres the options name: loaded from the cache,
-// or settled on the options' backend and saved there where it is missing,
-// was asked for again (--rebuild) or ran out of a smaller budget.
-PileState pile_state(const StepBenchOptions& options, std::size_t n, std::ostream& log) {
+// The settled pile of N spheres the options name and its scene (the box):
+// loaded from the cache, or settled on the options' backend and saved there
+// where it is missing, was asked for again (--rebuild) or ran out of a
+// smaller budget.
+std::pair<scene::Scene, PileState> pile_start(const StepBenchOptions& options, std::size_t n, std::ostream& log) {
   const broadphase::Backend backend = options.backend == "cuda" ? broadphase::Backend::cuda : broadphase::Backend::cpu;
   Lattice lattice;
   lattice.rolling = options.rolling;
   lattice.friction = options.friction;
+  // The box (the lattice is cheap next to the steps).
+  scene::Scene box = pile(n, lattice).first;
   const std::string path = pile_cache_path(options.cache_dir, n, options.rolling, options.friction);
   std::optional<PileState> state = options.rebuild ? std::nullopt : load_pile(path, n, lattice);
   // A pile whose budget ran out is settled again where this run allows more steps.
@@ -665,12 +668,12 @@ PileState pile_state(const StepBenchOptions& options, std::size_t n, std::ostrea
     log << "pile N = " << n << ": loaded " << path << " (" << (settle.settled() ? "settled" : "NOT settled")
         << " on " << settle.backend << " in " << settle.steps << " steps, " << settle.seconds << " s, KE/sphere "
         << settle.ke_per_sphere << " J)\n";
-    return std::move(*state);
+    return {std::move(box), std::move(*state)};
   }
   PileState settled = settle_pile(n, lattice, backend, options, log);
   save_pile(path, settled.world, settled.settle);
   log << "pile N = " << n << ": saved " << path << "\n";
-  return settled;
+  return {std::move(box), std::move(settled)};
 }
 
 // The fewest digits that read back (as a double, then as T) to v's bits: a
@@ -706,11 +709,8 @@ int threads() {
 
 std::pair<scene::Scene, World> bench_start(const StepBenchOptions& options, std::size_t n, std::ostream& log) {
   if (options.scene == "pile") {
-    Lattice lattice;
-    lattice.rolling = options.rolling;
-    lattice.friction = options.friction;
-    PileState state = pile_state(options, n, log);
-    return {pile(n, lattice).first, std::move(state.world)};
+    auto [box, state] = pile_start(options, n, log);
+    return {std::move(box), std::move(state.world)};
   }
   auto made = [](std::pair<scene::Scene, scene::GeneratedParticles> sg) {
     World w = make_world(sg.first, sg.second);
@@ -802,9 +802,6 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
       out << write_bench_scene(options, n, options.write_scene, std::cerr) << " (and its .csv)\n";
     return 0;
   }
-  Lattice pile_lattice;
-  pile_lattice.rolling = options.rolling;
-  pile_lattice.friction = options.friction;
   const int warmup = warmup_steps(options);
   std::ostream& log = std::cerr;
   std::vector<Row> rows;
@@ -818,9 +815,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   };
   for (std::size_t n : options.n) {
     if (is_pile) {
-      PileState state = pile_state(options, n, log);
-      // The box (the lattice is cheap next to the steps).
-      time_steps(pile(n, pile_lattice).first, std::move(state.world), n);
+      auto [box, state] = pile_start(options, n, log);
+      time_steps(std::move(box), std::move(state.world), n);
       rows.back().settle = state.settle;
     } else {
       auto [s, w] = bench_start(options, n, log);

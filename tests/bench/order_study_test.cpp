@@ -78,8 +78,8 @@ TEST(OrderStudy, OneHeightBandIsTheSolversOrder) {
   }
 }
 
-// Over-relaxation: the study's relaxed update with omega 1 is the solver's,
-// bit for bit (the same steps, times 1); with another omega, other bits.
+// Over-relaxation: the relaxed masses with omega 1 are the solver's, bit
+// for bit (the same steps, times 1); with another omega, other bits.
 TEST(OrderStudy, RelaxedByOneIsTheSolversUpdate) {
   for (const bool rolling : {false, true}) {
     os::Pile pile = os::make_pile(os::PileKind::close_packed, 6, 5, rolling);
