@@ -243,6 +243,12 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
     narrowphase::store_body(b, c.a, A);
     narrowphase::store_body(b, c.b, B);
   };
+  // The conjugate gradients' beta after sweep p: the ratio of its squared
+  // change to the last sweep's, 0 (a restart) past 1 or without a last.
+  auto next_beta = [](double norm, double last_norm, int p) {
+    const double beta = p > 0 && last_norm > 0 ? norm / last_norm : 0;
+    return beta > 1 ? 0 : beta;
+  };
   auto sweep = [&](const std::vector<std::uint32_t>& list, bool backwards) {
     if (backwards) std::for_each(list.rbegin(), list.rend(), solve);
     else std::for_each(list.begin(), list.end(), solve);
@@ -283,36 +289,31 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
           dir_n[k] = add_n + dn;
           dir_t[k] = add_t + dt;
         }
-        beta = p > 0 && last_norm > 0 ? norm / last_norm : 0;
-        if (beta > 1) beta = 0;
+        beta = next_beta(norm, last_norm, p);
         last_norm = norm;
       }
       continue;
     }
     if (o.nncg == 1) {  // the solver's order, each sweep's change kept as a direction
-      std::vector<real> last_n(m), dir_n(m, 0);
-      std::vector<Vec3> last_t(m), dir_t(m);
+      std::vector<real> delta_n(m), dir_n(m, 0);  // delta: the impulses before the sweep, then its change
+      std::vector<Vec3> delta_t(m), dir_t(m);
       double last_norm = 0;
       for (int p = 0; p < o.passes; ++p) {
-        for (std::uint32_t k = 0; k < m; ++k) last_n[k] = cs[k].normal_impulse, last_t[k] = cs[k].tangent_impulse;
+        for (std::uint32_t k = 0; k < m; ++k) delta_n[k] = cs[k].normal_impulse, delta_t[k] = cs[k].tangent_impulse;
         for (std::uint32_t k = 0; k < m; ++k) solve(p % 2 == 0 ? k : std::uint32_t(m - 1 - k));
         double norm = 0;
         for (std::uint32_t k = 0; k < m; ++k) {
-          const double dn = cs[k].normal_impulse - last_n[k];
-          const Vec3 dt = cs[k].tangent_impulse - last_t[k];
-          norm += dn * dn + double(dot(dt, dt));
+          delta_n[k] = cs[k].normal_impulse - delta_n[k];
+          delta_t[k] = cs[k].tangent_impulse - delta_t[k];
+          norm += double(delta_n[k]) * double(delta_n[k]) + double(dot(delta_t[k], delta_t[k]));
         }
-        double beta = p > 0 && last_norm > 0 ? norm / last_norm : 0;
-        if (beta > 1) beta = 0;
+        const double beta = next_beta(norm, last_norm, p);
         last_norm = norm;
         const bool step = beta > 0 && p + 1 < o.passes;
         for (std::uint32_t k = 0; k < m; ++k) {
-          Contact& c = cs[k];
-          const real dn = c.normal_impulse - last_n[k];
-          const Vec3 dt = c.tangent_impulse - last_t[k];
-          if (step) take_step(c, real(beta) * dir_n[k], dir_t[k] * real(beta));
-          dir_n[k] = real(beta) * dir_n[k] + dn;
-          dir_t[k] = dir_t[k] * real(beta) + dt;
+          if (step) take_step(cs[k], real(beta) * dir_n[k], dir_t[k] * real(beta));
+          dir_n[k] = real(beta) * dir_n[k] + delta_n[k];
+          dir_t[k] = dir_t[k] * real(beta) + delta_t[k];
         }
       }
       continue;
