@@ -24,7 +24,7 @@ KERNELS = {  # the CSV's name -> the table's name, the stalls' name
     "void cub::CUB_300001_SM_900::detail::scan::DeviceScanKernel<cub::Policy<int>, int>(int)":
         ("cub::CUB_300001_SM_900::detail::scan::DeviceScanKernel<cub::Policy<int>, int>", "D<ci>"),
 }
-UNITS = {"nsecond": 1e-6, "usecond": 1e-3, "msecond": 1.0}
+UNITS = {"nsecond": 1e-6, "usecond": 1e-3, "msecond": 1.0}  # ms a unit
 
 
 def write_csv(path, rows):
@@ -45,7 +45,7 @@ def main(scripts, work):
         for launch in range(rng.randint(4, 12)):
             name = rng.choice(list(KERNELS))
             unit = rng.choice(list(UNITS))
-            t = rng.uniform(1e3, 5e4) / {"nsecond": 1, "usecond": 1e3, "msecond": 1e6}[unit]  # 1-50 us
+            t = rng.uniform(1e-3, 5e-2) / UNITS[unit]  # 1-50 us
             rows.append([launch, name, "gpu__time_duration.sum", unit, f"{t:,.6f}"])
             rows.append([launch, name, "launch__registers_per_thread", "register/thread", str(rng.randint(32, 128))])
             s = rng.uniform(0.1, 9.0)
