@@ -194,7 +194,11 @@ std::vector<Order> default_orders() {
           {"solver 6 omega 1.8", 6, 0, 0, -1, 1.8},   {"nncg 10", 10, 0, 0, -1, 0, 1},
           {"nncg 6", 6, 0, 0, -1, 0, 1},              {"nncg 5", 5, 0, 0, -1, 0, 1},
           {"nncg in sweeps 10", 10, 0, 0, -1, 0, 2},  {"nncg in sweeps 6", 6, 0, 0, -1, 0, 2},
-          {"nncg in sweeps 5", 5, 0, 0, -1, 0, 2}};
+          {"nncg in sweeps 5", 5, 0, 0, -1, 0, 2},   {"nncg 5 cap 0.4", 5, 0, 0, -1, 0, 1, 0.4},
+          {"nncg 5 cap 0.7", 5, 0, 0, -1, 0, 1, 0.7}, {"nncg by bodies 10", 10, 0, 0, -1, 0, 3},
+          {"nncg by bodies 5", 5, 0, 0, -1, 0, 3},    {"nncg by bodies 5 cap 0.4", 5, 0, 0, -1, 0, 3, 0.4},
+          {"nncg by bodies 6 tail 2", 6, 0, 0, -1, 0, 3, 1, 2}, {"nncg by bodies 7 tail 3", 7, 0, 0, -1, 0, 3, 1, 3},
+          {"nncg by bodies 10 tail 3", 10, 0, 0, -1, 0, 3, 1, 3}};
 }
 
 namespace {
@@ -245,9 +249,9 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
   };
   // The conjugate gradients' beta after sweep p: the ratio of its squared
   // change to the last sweep's, 0 (a restart) past 1 or without a last.
-  auto next_beta = [](double norm, double last_norm, int p) {
+  auto next_beta = [cap = o.beta_cap](double norm, double last_norm, int p) {
     const double beta = p > 0 && last_norm > 0 ? norm / last_norm : 0;
-    return beta > 1 ? 0 : beta;
+    return beta > 1 ? 0 : std::min(beta, cap);
   };
   auto sweep = [&](const std::vector<std::uint32_t>& list, bool backwards) {
     if (backwards) std::for_each(list.rbegin(), list.rend(), solve);
@@ -294,12 +298,19 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
       }
       continue;
     }
-    if (o.nncg == 1) {  // the solver's order, each sweep's change kept as a direction
+    if (o.nncg == 1 || o.nncg == 3) {  // the solver's order, each sweep's change kept as a direction
+      // Form 3 moves the bodies by their own direction and steps the
+      // rolling impulses too; form 1 moves them through each contact's step.
+      const bool by_bodies = o.nncg == 3;
+      const std::size_t mr = by_bodies ? m : 0, nb = by_bodies ? n : 0;
       std::vector<real> delta_n(m), dir_n(m, 0);  // delta: the impulses before the sweep, then its change
-      std::vector<Vec3> delta_t(m), dir_t(m);
+      std::vector<Vec3> delta_t(m), dir_t(m), delta_r(mr), dir_r(mr);
+      std::vector<Vec3> before_v(nb), before_w(nb), dir_v(nb), dir_w(nb);
       double last_norm = 0;
       for (int p = 0; p < o.passes; ++p) {
         for (std::uint32_t k = 0; k < m; ++k) delta_n[k] = cs[k].normal_impulse, delta_t[k] = cs[k].tangent_impulse;
+        for (std::size_t k = 0; k < mr; ++k) delta_r[k] = cs[k].rolling_impulse;
+        for (std::size_t i = 0; i < nb; ++i) before_v[i] = b[i].v, before_w[i] = b[i].w;
         for (std::uint32_t k = 0; k < m; ++k) solve(p % 2 == 0 ? k : std::uint32_t(m - 1 - k));
         double norm = 0;
         for (std::uint32_t k = 0; k < m; ++k) {
@@ -307,13 +318,30 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
           delta_t[k] = cs[k].tangent_impulse - delta_t[k];
           norm += double(delta_n[k]) * double(delta_n[k]) + double(dot(delta_t[k], delta_t[k]));
         }
+        for (std::size_t k = 0; k < mr; ++k) {
+          delta_r[k] = cs[k].rolling_impulse - delta_r[k];
+          norm += double(dot(delta_r[k], delta_r[k]));
+        }
         const double beta = next_beta(norm, last_norm, p);
         last_norm = norm;
-        const bool step = beta > 0 && p + 1 < o.passes;
+        const bool step = beta > 0 && p + o.tail < o.passes;
+        const real be = real(beta);
         for (std::uint32_t k = 0; k < m; ++k) {
-          if (step) take_step(cs[k], real(beta) * dir_n[k], dir_t[k] * real(beta));
-          dir_n[k] = real(beta) * dir_n[k] + delta_n[k];
-          dir_t[k] = dir_t[k] * real(beta) + delta_t[k];
+          Contact& c = cs[k];
+          if (step && by_bodies) c.normal_impulse += be * dir_n[k], c.tangent_impulse += dir_t[k] * be;
+          else if (step) take_step(c, be * dir_n[k], dir_t[k] * be);
+          dir_n[k] = be * dir_n[k] + delta_n[k];
+          dir_t[k] = dir_t[k] * be + delta_t[k];
+        }
+        for (std::size_t k = 0; k < mr; ++k) {
+          if (step) cs[k].rolling_impulse += dir_r[k] * be;
+          dir_r[k] = dir_r[k] * be + delta_r[k];
+        }
+        for (std::size_t i = 0; i < nb; ++i) {
+          const Vec3 dv = b[i].v - before_v[i], dw = b[i].w - before_w[i];  // the sweep's change
+          if (step) b[i].v += dir_v[i] * be, b[i].w += dir_w[i] * be;
+          dir_v[i] = dir_v[i] * be + dv;
+          dir_w[i] = dir_w[i] * be + dw;
         }
       }
       continue;

@@ -59,8 +59,17 @@ struct Order {
   // pass of its own; 2: each contact's share of it taken in the sweep right
   // after the contact is solved, beta the ratio of the two sweeps before
   // (one pass a sweep, as a colour of a parallel sweep could: no two of its
-  // contacts share a sphere).
+  // contacts share a sphere). 3: as 1, but the step's bodies move by a
+  // direction of their own (beta times it plus each sweep's change of their
+  // velocities), so the step is a pass over the impulses and one over the
+  // bodies, in any order (no colours); the direction then holds the rolling
+  // impulses too.
   int nncg = 0;
+  // beta above this cap is taken as the cap (past 1 still a restart).
+  double beta_cap = 1;
+  // Forms 1 and 3: no step before the last `tail` sweeps (with 1, only the
+  // last sweep's; as many as the sweeps: the solver's sweeps).
+  int tail = 1;
 };
 // The orders marbles_order_study compares.
 std::vector<Order> default_orders();

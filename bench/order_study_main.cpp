@@ -3,10 +3,13 @@
 //
 //   marbles_order_study [--side 30] [--layers 30] [--substeps 30]
 //                       [--pile close-packed|cubic|settled] [--n N] [--cache DIR]
-//                       [--rolling] [--json]
+//                       [--rolling] [--order NAME]... [--json]
+// --order: only the orders so named (repeated for more), in the table's order.
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "bench/order_study.hpp"
 
@@ -30,6 +33,7 @@ int main(int argc, char** argv) {
   int side = 30, layers = 30, substeps = 30, n = 0;
   bool json = false, rolling = false, settled = false;
   std::string cache;
+  std::vector<std::string> only;
   PileKind kind = PileKind::close_packed;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -40,6 +44,13 @@ int main(int argc, char** argv) {
     else if (a == "--json") json = true;
     else if (a == "--rolling") rolling = true;
     else if (a == "--n") n = parse("--n", next, 1, 100000000), ++i;
+    else if (a == "--order") {
+      if (!next) {
+        std::fprintf(stderr, "marbles_order_study: --order needs an order's name\n");
+        return 2;
+      }
+      only.push_back(next), ++i;
+    }
     else if (a == "--cache") {
       if (!next) {
         std::fprintf(stderr, "marbles_order_study: --cache needs a folder\n");
@@ -60,6 +71,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr,
                    "marbles_order_study: unknown argument '%s' (usage: marbles_order_study [--side N] [--layers N] "
                    "[--substeps N] [--pile close-packed|cubic|settled] [--n N] [--cache DIR] [--rolling] "
+                   "[--order NAME]... "
                    "[--json])\n",
                    a.c_str());
       return 2;
@@ -78,7 +90,14 @@ int main(int argc, char** argv) {
               "tiles", "between", "ms/substep");
   std::string out = "{\"spheres\": " + std::to_string(pile.world.size()) +
                     ", \"contacts\": " + std::to_string(pile.contacts.size()) + ", \"orders\": [";
-  const auto orders = default_orders();
+  std::vector<Order> orders = default_orders();
+  for (const std::string& name : only)
+    if (std::none_of(orders.begin(), orders.end(), [&](const Order& o) { return o.name == name; })) {
+      std::fprintf(stderr, "marbles_order_study: --order: no order is named '%s'\n", name.c_str());
+      return 2;
+    }
+  if (!only.empty())
+    std::erase_if(orders, [&](const Order& o) { return std::find(only.begin(), only.end(), o.name) == only.end(); });
   for (std::size_t i = 0; i < orders.size(); ++i) {
     const Order& o = orders[i];
     const Result res = run(o, pile, substeps);

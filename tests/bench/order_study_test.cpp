@@ -5,6 +5,7 @@
 // the whole weight), more sweeps of the solver's order leave less undone.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <string>
@@ -125,9 +126,9 @@ TEST(OrderStudy, ConjugateGradientsStepOnlyBetweenSweeps) {
     return a.velocity.size() == b.velocity.size() &&
            std::memcmp(a.velocity.data(), b.velocity.data(), a.velocity.size() * sizeof(marbles::Vec3)) == 0;
   };
-  for (const int form : {1, 2}) {
-    SCOPED_TRACE(form == 1 ? "a pass of its own" : "within the sweeps");
-    const int plain = form == 1 ? 2 : 3;
+  for (const int form : {1, 2, 3}) {
+    SCOPED_TRACE(form == 1 ? "a pass of its own" : form == 2 ? "within the sweeps" : "the bodies by their own direction");
+    const int plain = form == 2 ? 3 : 2;
     for (int passes = 1; passes <= plain; ++passes) {
       os::Order o{"nncg", passes, 0, 0};
       o.nncg = form;
@@ -141,3 +142,45 @@ TEST(OrderStudy, ConjugateGradientsStepOnlyBetweenSweeps) {
   }
 }
 
+
+// The step taken on the bodies by a direction of their own (the sum of
+// their velocities' changes, as the impulses' direction sums the impulses')
+// is the step taken through each contact's impulses, up to rounding: the
+// same speeds left where the two are the same maths (no rolling resistance,
+// whose impulses only the bodies' form steps). A cap of 0 never steps (the
+// solver's bits) and a cap of 1 is no cap; a tail of plain sweeps as long
+// as the solve never steps either.
+TEST(OrderStudy, TheBodiesOwnDirectionStepsThemAsTheImpulsesDo) {
+  os::Pile pile = os::make_pile(os::PileKind::cubic, 8, 12);
+  os::Order through{"nncg", 6, 0, 0}, own{"nncg by bodies", 6, 0, 0};
+  through.nncg = 1, own.nncg = 3;
+  const os::Result a = os::run(through, pile, 20), b = os::run(own, pile, 20);
+  const os::Result plain = os::run({"solver", 6, 0, 0}, pile, 20);
+  ASSERT_EQ(a.velocity.size(), b.velocity.size());
+  double most = 0, apart = 0;
+  for (std::size_t i = 0; i < a.velocity.size(); ++i) {
+    most = std::max(most, double(length(a.velocity[i] - b.velocity[i])));
+    apart = std::max(apart, double(length(a.velocity[i] - plain.velocity[i])));
+  }
+  const double gh = 9.81 * 1e-3;  // the study's g h (kGravity, kSubstep)
+  EXPECT_LT(most, 1e-3 * gh) << "the two forms of the step";
+  EXPECT_GT(apart, 100 * most) << "both step, far from the solver's own sweeps";
+  EXPECT_NEAR(a.rms, b.rms, 1e-3 * a.rms);
+  for (const int form : {1, 3}) {
+    os::Order capped{"nncg", 6, 0, 0};
+    capped.nncg = form;
+    capped.beta_cap = 0;
+    const os::Result none = os::run(capped, pile, 20);
+    EXPECT_EQ(0, std::memcmp(none.velocity.data(), plain.velocity.data(), plain.velocity.size() * sizeof(marbles::Vec3)))
+        << "form " << form << " capped at 0";
+    capped.beta_cap = 1;
+    capped.tail = 6;
+    const os::Result tail = os::run(capped, pile, 20);
+    EXPECT_EQ(0, std::memcmp(tail.velocity.data(), plain.velocity.data(), plain.velocity.size() * sizeof(marbles::Vec3)))
+        << "form " << form << " with no step before its last 6 sweeps";
+    capped.tail = 1;
+    const os::Result open = os::run(capped, pile, 20), uncapped = form == 1 ? a : b;
+    EXPECT_EQ(0, std::memcmp(open.velocity.data(), uncapped.velocity.data(), open.velocity.size() * sizeof(marbles::Vec3)))
+        << "form " << form << " capped at 1";
+  }
+}
