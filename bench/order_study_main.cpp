@@ -50,8 +50,7 @@ int main(int argc, char** argv) {
         return 2;
       }
       only.push_back(next), ++i;
-    }
-    else if (a == "--cache") {
+    } else if (a == "--cache") {
       if (!next) {
         std::fprintf(stderr, "marbles_order_study: --cache needs a folder\n");
         return 2;

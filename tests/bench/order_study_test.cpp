@@ -142,7 +142,6 @@ TEST(OrderStudy, ConjugateGradientsStepOnlyBetweenSweeps) {
   }
 }
 
-
 // The step taken on the bodies by a direction of their own (the sum of
 // their velocities' changes, as the impulses' direction sums the impulses')
 // is the step taken through each contact's impulses, up to rounding: the
