@@ -80,6 +80,14 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "marbles_order_study: --pile settled needs --n\n");
     return 2;
   }
+  std::vector<Order> orders = default_orders();
+  for (const std::string& name : only)
+    if (std::none_of(orders.begin(), orders.end(), [&](const Order& o) { return o.name == name; })) {
+      std::fprintf(stderr, "marbles_order_study: --order: no order is named '%s'\n", name.c_str());
+      return 2;
+    }
+  if (!only.empty())
+    std::erase_if(orders, [&](const Order& o) { return std::find(only.begin(), only.end(), o.name) == only.end(); });
   Pile pile = settled ? settled_pile(static_cast<std::size_t>(n), cache, rolling) : make_pile(kind, side, layers, rolling);
   std::printf("order study: %s pile%s, %zu spheres, %zu contacts, %u colours, %d substeps held still\n",
               settled ? "the benchmark's settled" : kind == PileKind::cubic ? "cubic" : "close-packed",
@@ -89,14 +97,6 @@ int main(int argc, char** argv) {
               "tiles", "between", "ms/substep");
   std::string out = "{\"spheres\": " + std::to_string(pile.world.size()) +
                     ", \"contacts\": " + std::to_string(pile.contacts.size()) + ", \"orders\": [";
-  std::vector<Order> orders = default_orders();
-  for (const std::string& name : only)
-    if (std::none_of(orders.begin(), orders.end(), [&](const Order& o) { return o.name == name; })) {
-      std::fprintf(stderr, "marbles_order_study: --order: no order is named '%s'\n", name.c_str());
-      return 2;
-    }
-  if (!only.empty())
-    std::erase_if(orders, [&](const Order& o) { return std::find(only.begin(), only.end(), o.name) == only.end(); });
   for (std::size_t i = 0; i < orders.size(); ++i) {
     const Order& o = orders[i];
     const Result res = run(o, pile, substeps);
