@@ -253,6 +253,16 @@ class PySimulation {
     return d;
   }
 
+  // summary.json's figures of the world at its end, beside kinetic_energy_end.
+  nb::dict end_figures() const {
+    const World::Motion motion = m_sim->world().motion();
+    nb::dict d;
+    d["kinetic_energy_end_translational"] = motion.translational;
+    d["kinetic_energy_end_rotational"] = motion.rotational;
+    d["max_speed_end"] = motion.max_speed;
+    return d;
+  }
+
   const Simulation& sim() const { return *m_sim; }
   const scene::Scene& scene() const { return m_scene; }
   const std::vector<std::string>& warnings() const { return m_warnings; }
@@ -395,6 +405,7 @@ void bind_simulation(nb::module_& m, const char* name, const char* pairs_name) {
       .def("restart", &PySimulation::restart, nb::arg("path"))
       .def("reference", &PySimulation::reference)
       .def("totals", &PySimulation::totals)
+      .def("end_figures", &PySimulation::end_figures)
       .def_prop_ro("size", &PySimulation::size)
       .def_prop_ro("on_device", &PySimulation::on_device)
       .def_prop_ro("renumbers", [](const PySimulation& s) { return s.sim().model().renumber_every > 0; })

@@ -149,21 +149,18 @@ namespace {
 std::string thermo_row(const Simulation& sim, double ms_per_step) {
   const World& w = sim.world();
   const StepModel& model = sim.model();
-  double translational = 0, rotational = 0, potential = 0, speed2 = 0;
-  for (std::size_t i = 0; i < w.size(); ++i) {
-    speed2 = std::max(speed2, static_cast<double>(length_squared(w.velocity[i])));
-    if (!(w.inv_mass[i] > 0)) continue;
-    const double m = 1.0 / w.inv_mass[i];
-    translational += 0.5 * m * length_squared(w.velocity[i]);
-    if (w.inv_inertia[i] > 0) rotational += 0.5 * length_squared(w.angular_velocity[i]) / w.inv_inertia[i];
-    if (model.gravity) potential -= m * static_cast<double>(dot(model.g, w.position[i]));
-  }
+  const World::Motion motion = w.motion();
+  double potential = 0;
+  if (model.gravity)
+    for (std::size_t i = 0; i < w.size(); ++i)
+      if (w.inv_mass[i] > 0) potential -= (1.0 / w.inv_mass[i]) * static_cast<double>(dot(model.g, w.position[i]));
   const StepCounters& last = sim.last_step();
   std::string row = std::to_string(sim.steps());
   row += ',';
   row += time_text(sim.time());
-  for (const double v : {translational, rotational, potential, static_cast<double>(last.contacts) / sim.substeps(),
-                         static_cast<double>(last.max_overlap), std::sqrt(speed2), ms_per_step}) {
+  for (const double v : {motion.translational, motion.rotational, potential,
+                         static_cast<double>(last.contacts) / sim.substeps(), static_cast<double>(last.max_overlap),
+                         motion.max_speed, ms_per_step}) {
     row += ',';
     row += shortest(v);
   }

@@ -35,6 +35,15 @@ struct World {
 
   // Sum of (1/2) m v^2 + (1/2) I w^2 over movable spheres, J (in double).
   double kinetic_energy() const;
+  // The two sums apart and the largest speed |v| of any sphere (in double):
+  // a pile at rest may keep spheres spinning where nothing resists it (about
+  // a lone contact's normal without twisting friction), so its rest shows in
+  // the translational part and the largest speed. thermo.csv's columns and
+  // summary.json's figures at the end.
+  struct Motion {
+    double translational = 0, rotational = 0, max_speed = 0;
+  };
+  Motion motion() const;
   // Total linear momentum, kg m/s (in double).
   void momentum(double out[3]) const;
   // Largest |v|, m/s.

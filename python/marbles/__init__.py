@@ -354,6 +354,7 @@ class Simulation:
                "simulated_time": self.time}
         out.update(self._impl.totals())
         out["kinetic_energy_end"] = self.kinetic_energy()
+        out.update(self._impl.end_figures())
         return out
 
 

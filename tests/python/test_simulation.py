@@ -140,6 +140,8 @@ def test_python_run_equals_marbles_run(tmp_path):
         assert np.array_equal(getattr(sim, name), getattr(done, name)), name
     summary = json.loads((out / "summary.json").read_text())
     assert sim.kinetic_energy() == summary["kinetic_energy_end"]
+    for key in ("kinetic_energy_end_translational", "kinetic_energy_end_rotational", "max_speed_end"):
+        assert sim.summary()[key] == summary[key], key
     assert sim.summary()["max_overlap"] == summary["max_overlap"]
 
 

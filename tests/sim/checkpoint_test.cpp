@@ -143,6 +143,10 @@ TEST_F(Checkpoints, ThermoRowsFollowTheRun) {
   auto kinetic = [&](std::size_t r) { return std::stod(rows[r][2]) + std::stod(rows[r][3]); };
   EXPECT_NEAR(kinetic(1), summary.at("kinetic_energy_start").get<double>(), 1e-6 * kinetic(1));
   EXPECT_NEAR(kinetic(16), summary.at("kinetic_energy_end").get<double>(), 1e-6 * kinetic(16));
+  // The last row is the end's: the summary's parts and largest speed are its.
+  EXPECT_EQ(std::stod(rows[16][2]), summary.at("kinetic_energy_end_translational").get<double>());
+  EXPECT_EQ(std::stod(rows[16][3]), summary.at("kinetic_energy_end_rotational").get<double>());
+  EXPECT_EQ(std::stod(rows[16][7]), summary.at("max_speed_end").get<double>());
   for (std::size_t r = 1; r < rows.size(); ++r) {
     ASSERT_EQ(rows[r].size(), 9u);
     EXPECT_EQ(std::stoul(rows[r][0]), 20 * (r - 1));

@@ -3,11 +3,14 @@
 // warned of. Runs the real run_scene() on a small scene written here.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "render/frame_output.hpp"
 #include "render/image.hpp"
@@ -276,5 +279,38 @@ TEST(Run, MovingWallsMoveInTheWallSeries) {
     ASSERT_EQ(wall[0], 0.0);  // the plane's square comes first
     for (int corner = 0; corner < 4; ++corner) EXPECT_NEAR(points[3 * corner + 2], w.planes[0].point.z, 1e-6);
   }
+  fs::remove_all(dir);
+}
+
+// summary.json's figures of the end apart: two glass spheres in free flight
+// (no gravity, far apart), one moving at v and one spinning at w, give
+// (1/2) m v^2 and (1/2) I w^2 with m and I from the density and radius
+// (I = 2/5 m r^2), and the largest speed |v|; they sum to the kinetic energy.
+TEST(Run, SummarySplitsTheEndsEnergyAndGivesTheFastestSphere) {
+  const fs::path dir = temp_dir("motion");
+  const std::string yaml = R"(format: 1
+time: {duration: 0.01, dt: 1.0e-3}
+effects: [collisions]
+materials:
+  glass: {density: 2500}
+particles:
+  - list: {positions: [[0, 0, 0]], radius: 0.01}
+    velocity: [0.3, -0.4, 1.2]
+  - list: {positions: [[1, 0, 0]], radius: 0.02}
+    angular_velocity: [0, 5, 0]
+)";
+  std::string err;
+  ASSERT_EQ(run_on_cpu(dir, yaml, err), 0) << err;
+  const nlohmann::json s = nlohmann::json::parse(read_file(dir / "out" / "summary.json"));
+  const double pi = 3.14159265358979323846;
+  const double m1 = 2500 * 4.0 / 3.0 * pi * 0.01 * 0.01 * 0.01, m2 = 2500 * 4.0 / 3.0 * pi * 0.02 * 0.02 * 0.02;
+  const double v2 = 0.3 * 0.3 + 0.4 * 0.4 + 1.2 * 1.2, i2 = 0.4 * m2 * 0.02 * 0.02;
+  const double translational = s.at("kinetic_energy_end_translational").get<double>();
+  const double rotational = s.at("kinetic_energy_end_rotational").get<double>();
+  EXPECT_NEAR(translational, 0.5 * m1 * v2, 1e-6 * 0.5 * m1 * v2);
+  EXPECT_NEAR(rotational, 0.5 * i2 * 25, 1e-6 * 0.5 * i2 * 25);
+  EXPECT_NEAR(s.at("max_speed_end").get<double>(), std::sqrt(v2), 1e-6);
+  const double total = s.at("kinetic_energy_end").get<double>();
+  EXPECT_NEAR(translational + rotational, total, 1e-12 * total);
   fs::remove_all(dir);
 }
