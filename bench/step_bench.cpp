@@ -3,7 +3,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -19,7 +18,6 @@
 #include <ostream>
 #include <random>
 #include <sstream>
-#include <type_traits>
 
 #ifdef _OPENMP
 #include <omp.h>
@@ -30,6 +28,7 @@
 #include "bench/api_count.hpp"
 #include "broadphase/grid.hpp"
 #include "core/error.hpp"
+#include "core/format.hpp"
 #include "narrowphase/solver.hpp"
 #include "render/atomic_file.hpp"
 #include "sim/particles.hpp"
@@ -676,18 +675,11 @@ std::pair<scene::Scene, PileState> pile_start(const StepBenchOptions& options, s
   return {std::move(box), std::move(settled)};
 }
 
-// The fewest digits that read back (as a double, then as T) to v's bits: a
-// scene file's value that starts a run from the same state.
-template <class T>
-std::string shortest(T v) {
-  char text[64];
-  const std::to_chars_result r = std::to_chars(text, text + sizeof text, v);
-  std::string s(text, r.ptr);
-  // A float's shortest digits read as a double and rounded to a float could
-  // in principle land on its neighbour: then the double's digits.
-  if constexpr (!std::is_same_v<T, double>)
-    if (static_cast<T>(std::strtod(s.c_str(), nullptr)) != v) return shortest(static_cast<double>(v));
-  return s;
+// The pile's name for its terms, in its cache file's and scene file's names:
+// "" (friction and rolling resistance), "-friction" (friction alone) or
+// "-frictionless".
+const char* pile_terms(bool rolling, bool friction) {
+  return !friction ? "-frictionless" : rolling ? "" : "-friction";
 }
 
 // Untimed steps before the timed ones: --warmup, or 5 for the pile (its
@@ -724,7 +716,7 @@ std::pair<scene::Scene, World> bench_start(const StepBenchOptions& options, std:
 std::string write_bench_scene(const StepBenchOptions& options, std::size_t n, const std::string& dir,
                               std::ostream& log) {
   namespace fs = std::filesystem;
-  const char* terms = options.scene != "pile" ? "" : !options.friction ? "-frictionless" : !options.rolling ? "-friction" : "";
+  const char* terms = options.scene != "pile" ? "" : pile_terms(options.rolling, options.friction);
   const std::string stem = "bench-" + options.scene + terms + "-n" + std::to_string(n);
   std::error_code ec;
   fs::create_directories(dir, ec);
@@ -784,7 +776,7 @@ std::string write_bench_scene(const StepBenchOptions& options, std::size_t n, co
 
 std::string pile_cache_path(const std::string& cache_dir, std::size_t n, bool rolling, bool friction) {
   const std::string dir = cache_dir.empty() ? default_cache_dir() : cache_dir;
-  const char* terms = !friction ? "-frictionless" : rolling ? "" : "-friction";
+  const char* terms = pile_terms(rolling, friction);
   return dir + "/pile-v" + std::to_string(kPileVersion) + terms + "-n" + std::to_string(n) + "-" + kRealName + ".bin";
 }
 

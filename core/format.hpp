@@ -1,7 +1,8 @@
 // core/format.hpp — numbers as text for output files.
 //
 //   shortest(v)      the shortest text that reads back as exactly v
-//                    (std::to_chars): 0.1, 1e-07, 2.5
+//                    (std::to_chars): 0.1, 1e-07, 2.5; a float's, read as a
+//                    double and rounded to a float (as the scene reader does)
 //   significant(v, n) v to n significant digits (%g): messages
 //   time_text(t)     the shortest text within 1e-13 of t relative: a frame
 //                    time k dt written as 0.03, not 0.030000000000000002
@@ -20,6 +21,17 @@ inline std::string shortest(double v) {
   char text[32];
   const auto result = std::to_chars(text, text + sizeof text, v);
   return std::string(text, result.ptr);
+}
+
+// A float's shortest digits read as a double and rounded to a float could
+// in principle land on its neighbour: then the double's digits.
+inline std::string shortest(float v) {
+  if (!std::isfinite(v)) return shortest(static_cast<double>(v));
+  char text[32];
+  const auto result = std::to_chars(text, text + sizeof text, v);
+  std::string s(text, result.ptr);
+  if (static_cast<float>(std::strtod(s.c_str(), nullptr)) != v) return shortest(static_cast<double>(v));
+  return s;
 }
 
 inline std::string significant(double v, int digits) {
