@@ -257,6 +257,20 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
     if (backwards) std::for_each(list.rbegin(), list.rend(), solve);
     else std::for_each(list.begin(), list.end(), solve);
   };
+  // Pass p in the solver's order: index order, backwards on odd passes.
+  auto solver_pass = [&](int p) {
+    for (std::uint32_t k = 0; k < m; ++k) solve(p % 2 == 0 ? k : std::uint32_t(m - 1 - k));
+  };
+  // The conjugate gradients' arrays, made once (outside the timed substeps'
+  // allocations): each sweep's change (delta: the impulses or velocities
+  // before it, then its change) and the directions, 0 at each substep's
+  // start. Form 3 also steps the rolling impulses and moves the bodies by
+  // their own direction.
+  const bool by_bodies = o.nncg == 3;
+  const std::size_t mc = o.nncg > 0 ? m : 0, mr = by_bodies ? m : 0, nb = by_bodies ? n : 0;
+  std::vector<real> delta_n(mc), dir_n(mc);
+  std::vector<Vec3> delta_t(mc), dir_t(mc), delta_r(mr), dir_r(mr);
+  std::vector<Vec3> before_v(nb), before_w(nb), dir_v(nb), dir_w(nb);
   const auto t0 = std::chrono::steady_clock::now();
   for (int s = 0; s < substeps; ++s) {
     for (std::size_t i = 0; i < n; ++i) {  // at rest, then gravity's kick
@@ -271,9 +285,9 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
     // (with omega 1 the same bits); the rolling mass as the solver's.
     if (o.omega > 0)
       for (Contact& c : cs) c.normal_mass *= real(o.omega), c.tangent_mass *= real(o.omega);
+    std::fill(dir_n.begin(), dir_n.end(), real(0));
+    for (std::vector<Vec3>* d : {&dir_t, &dir_r, &dir_v, &dir_w}) std::fill(d->begin(), d->end(), Vec3{});
     if (o.nncg == 2) {  // the momentum taken contact by contact within the sweep, right after its solve
-      std::vector<real> dir_n(m, 0);
-      std::vector<Vec3> dir_t(m);
       double last_norm = 0, beta = 0;  // beta of the two sweeps before this one
       for (int p = 0; p < o.passes; ++p) {
         double norm = 0;
@@ -299,19 +313,12 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
       continue;
     }
     if (o.nncg == 1 || o.nncg == 3) {  // the solver's order, each sweep's change kept as a direction
-      // Form 3 moves the bodies by their own direction and steps the
-      // rolling impulses too; form 1 moves them through each contact's step.
-      const bool by_bodies = o.nncg == 3;
-      const std::size_t mr = by_bodies ? m : 0, nb = by_bodies ? n : 0;
-      std::vector<real> delta_n(m), dir_n(m, 0);  // delta: the impulses before the sweep, then its change
-      std::vector<Vec3> delta_t(m), dir_t(m), delta_r(mr), dir_r(mr);
-      std::vector<Vec3> before_v(nb), before_w(nb), dir_v(nb), dir_w(nb);
       double last_norm = 0;
       for (int p = 0; p < o.passes; ++p) {
         for (std::uint32_t k = 0; k < m; ++k) delta_n[k] = cs[k].normal_impulse, delta_t[k] = cs[k].tangent_impulse;
         for (std::size_t k = 0; k < mr; ++k) delta_r[k] = cs[k].rolling_impulse;
         for (std::size_t i = 0; i < nb; ++i) before_v[i] = b[i].v, before_w[i] = b[i].w;
-        for (std::uint32_t k = 0; k < m; ++k) solve(p % 2 == 0 ? k : std::uint32_t(m - 1 - k));
+        solver_pass(p);
         double norm = 0;
         for (std::uint32_t k = 0; k < m; ++k) {
           delta_n[k] = cs[k].normal_impulse - delta_n[k];
@@ -352,7 +359,7 @@ Result run_with(const Order& o, Pile& pile, int substeps) {
         continue;
       }
       if (o.local == 0) {
-        for (std::uint32_t k = 0; k < m; ++k) solve(p % 2 == 0 ? k : std::uint32_t(m - 1 - k));
+        solver_pass(p);
         continue;
       }
       for (const auto& t : tiles)
