@@ -203,13 +203,10 @@ std::optional<LocalOrder> local_order_from_environment() {
   const auto threads = static_cast<int>(whole_from_environment("MARBLES_LOCAL_THREADS", 256, 1024, expected));
   if (threads < 32 || threads % 32 != 0)
     throw RuntimeFailure("MARBLES_LOCAL_THREADS=" + std::to_string(threads) + ": " + expected);
-  const auto stage = static_cast<std::uint32_t>(
-      whole_from_environment("MARBLES_LOCAL_STAGE", 0, 4096, "expected the most contacts a cube stages, 0 to 4096"));
   const char* asked = std::getenv("MARBLES_SOLVE_ORDER");
   if (asked == nullptr || *asked == '\0' || std::string_view(asked) == "colours") return std::nullopt;
   LocalOrder o;
   o.threads = threads;
-  o.stage = stage;
   char tail = 0;
   if (std::sscanf(asked, "tiles:%lf:%d:%d%c", &o.tile_diameters, &o.passes, &o.local, &tail) != 3 ||
       !(o.tile_diameters > 0) || !std::isfinite(o.tile_diameters) || o.passes < 1 || o.local < 1)

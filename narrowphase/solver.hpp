@@ -78,16 +78,10 @@ struct LocalOrder {
   // Threads of a cube's block on the GPU (MARBLES_LOCAL_THREADS: 32 to
   // 1024, a multiple of 32; 256 unset). The CPU's order does not read it.
   int threads = 256;
-  // The most own contacts of a cube whose records the GPU stages in shared
-  // memory for its local sweeps (MARBLES_LOCAL_STAGE: 0 to 4096, 0 unset:
-  // none; a larger cube sweeps in place). The same bits either way; the
-  // CPU's order does not read it.
-  std::uint32_t stage = 0;
 };
 // The order asked for by MARBLES_SOLVE_ORDER (none: the solver's), with
-// MARBLES_LOCAL_THREADS and MARBLES_LOCAL_STAGE; throws RuntimeFailure on a
-// value of any it cannot read (the last two are checked with or without
-// the order).
+// MARBLES_LOCAL_THREADS; throws RuntimeFailure on a value of either it
+// cannot read (MARBLES_LOCAL_THREADS is checked with or without the order).
 std::optional<LocalOrder> local_order_from_environment();
 
 // The local order's cubes: contact k (its bodies pairs[k]) is its cube's own

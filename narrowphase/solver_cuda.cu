@@ -410,123 +410,51 @@ __global__ void between_begin_kernel(const std::uint32_t* order, std::uint32_t n
     between_begin[c] = c <= plan.colours ? first_at_or_past(order, own, n, plan.begin[c]) : n;
 }
 
-// `local` sweeps of one cube's own contacts, whose positions in `order`
-// bound[] ranges by colour (bound[colours] to bound[colours + 1] the
-// overflow): forwards where (l + pass) is even (colour by colour, the
-// overflow last, one thread in order), else backwards (the overflow first,
-// in reverse, then the colours from the last); a barrier after each.
-// record(i) is position i's record in `s`. Within a colour no two contacts
-// share a sphere and no two cubes share one, so the threads' order changes
-// no bit: the CPU's walk, one by one in record order.
-template <bool Friction, bool Rolling, bool Streamed, class Record>
-__device__ void sweep_cube(const SweepRecords& s, Record record, const std::uint32_t* bound, std::uint32_t colours,
-                           SolverBody* bodies, real inv_h, int pass, int local) {
-  auto solve = [&](std::uint32_t i) { solve_record<Friction, Rolling, Streamed>(s, record(i), bodies, inv_h); };
-  auto colour = [&](std::uint32_t c) {
-    const std::uint32_t from = bound[c], to = bound[c + 1];
-    if (from == to) return;
-    for (std::uint32_t i = from + threadIdx.x; i < to; i += blockDim.x) solve(i);
-    __syncthreads();
-  };
-  auto overflow = [&](bool backwards) {
-    const std::uint32_t from = bound[colours], to = bound[colours + 1];
-    if (from == to) return;
-    if (threadIdx.x == 0) {
-      if (backwards)
-        for (std::uint32_t i = to; i-- > from;) solve(i);
-      else
-        for (std::uint32_t i = from; i < to; ++i) solve(i);
-    }
-    __syncthreads();
-  };
-  for (int l = 0; l < local; ++l) {
-    if ((l + pass) % 2 == 0) {
-      for (std::uint32_t c = 0; c < colours; ++c) colour(c);
-      overflow(false);
-    } else {
-      overflow(true);
-      for (std::uint32_t c = colours; c-- > 0;) colour(c);
-    }
-  }
-}
-
-// Cube t's colour bounds (positions in order, within its own [b, e)).
-__device__ void cube_bounds(const std::uint32_t* order, std::uint32_t b, std::uint32_t e, const ColourPlan& plan,
-                            std::uint32_t* bound) {
-  for (std::uint32_t c = threadIdx.x; c <= plan.colours + 1; c += blockDim.x)
-    bound[c] = c <= plan.colours ? first_at_or_past(order, b, e, plan.begin[c]) : e;
-  __syncthreads();
-}
-
-// One pass over the cubes, each cube's own contacts swept where they lie.
+// One pass over the cubes: each cube's own contacts swept `local` times,
+// forwards where (l + pass) is even (colour by colour, the overflow last, one
+// thread in order), else backwards (the overflow first, in reverse, then the
+// colours from the last); a barrier after each. Within a colour no two
+// contacts share a sphere and no two cubes share one, so the threads' order
+// changes no bit: the CPU's walk, one by one in record order.
 template <bool Friction, bool Rolling>
 __global__ void local_pass_kernel(SweepRecords s, const std::uint32_t* order, const std::uint32_t* starts,
                                   const std::uint32_t* cubes, ColourPlan plan, SolverBody* bodies, real inv_h,
                                   int pass, int local) {
   __shared__ std::uint32_t bound[kMaxColours + 2];
-  const std::uint32_t count = *cubes;
-  for (std::uint32_t t = blockIdx.x; t < count; t += gridDim.x) {
-    cube_bounds(order, starts[t], starts[t + 1], plan, bound);
-    sweep_cube<Friction, Rolling, true>(s, [&](std::uint32_t i) { return order[i]; }, bound, plan.colours, bodies,
-                                        inv_h, pass, local);
-    __syncthreads();  // every thread done with bound[] before the next cube's
-  }
-}
-
-// Words a staged contact takes in shared memory: its impulse word (the
-// normal impulse alone widened to one), rolling word, geometry word and
-// body pair.
-template <bool Rolling>
-constexpr std::size_t kStagedBytes = (Rolling ? 3 : 2) * sizeof(Real4) + sizeof(BodyPair);
-
-// The same pass with each cube's own records staged in shared memory
-// (MARBLES_LOCAL_STAGE, a study: docs/architecture.md "The local order's
-// records on the chip"): a cube of at most `capacity` own contacts copies
-// their records there in its order, sweeps them `local` times there, and
-// copies the impulses back; a larger cube sweeps in place. Only for records
-// without arms or extra words (every contact's arms the same, no wall
-// moving). The bodies stay in global memory (a cube's few in L1). The same
-// function on the same values in the same order: the same bits.
-template <bool Friction, bool Rolling>
-__global__ void staged_pass_kernel(SweepRecords s, const std::uint32_t* order, const std::uint32_t* starts,
-                                   const std::uint32_t* cubes, ColourPlan plan, SolverBody* bodies, real inv_h,
-                                   int pass, int local, std::uint32_t capacity) {
-  __shared__ std::uint32_t bound[kMaxColours + 2];
-  extern __shared__ Real4 stage[];
-  SweepRecords v;
-  v.uniform = s.uniform;
-  Real4* p = stage;
-  v.impulse = p, p += capacity;
-  if constexpr (Rolling) v.rolling = p, p += capacity;
-  v.geometry = p, p += capacity;
-  v.bodies = reinterpret_cast<BodyPair*>(p);
-  const std::uint32_t count = *cubes;
+  const std::uint32_t count = *cubes, colours = plan.colours;
   for (std::uint32_t t = blockIdx.x; t < count; t += gridDim.x) {
     const std::uint32_t b = starts[t], e = starts[t + 1];
-    cube_bounds(order, b, e, plan, bound);
-    if (e - b > capacity) {
-      sweep_cube<Friction, Rolling, true>(s, [&](std::uint32_t i) { return order[i]; }, bound, plan.colours, bodies,
-                                          inv_h, pass, local);
-      __syncthreads();
-      continue;
-    }
-    for (std::uint32_t j = threadIdx.x; j < e - b; j += blockDim.x) {
-      const std::uint32_t k = order[b + j];
-      v.impulse[j] = streamed_impulse_word<Friction>(s, k);
-      if constexpr (Rolling) v.rolling[j] = load_streaming(s.rolling + k);
-      v.geometry[j] = load_streaming(s.geometry + k);
-      v.bodies[j] = load_streaming(s.bodies + k);
-    }
+    for (std::uint32_t c = threadIdx.x; c <= colours + 1; c += blockDim.x)
+      bound[c] = c <= colours ? first_at_or_past(order, b, e, plan.begin[c]) : e;
     __syncthreads();
-    sweep_cube<Friction, Rolling, false>(v, [&](std::uint32_t i) { return i - b; }, bound, plan.colours, bodies,
-                                         inv_h, pass, local);
-    for (std::uint32_t j = threadIdx.x; j < e - b; j += blockDim.x) {
-      const std::uint32_t k = order[b + j];
-      if (s.impulse) store_streaming(s.impulse + k, v.impulse[j]);
-      else store_streaming(s.normal + k, v.impulse[j].x);
-      if constexpr (Rolling) store_streaming(s.rolling + k, v.rolling[j]);
+    auto colour = [&](std::uint32_t c) {
+      const std::uint32_t from = bound[c], to = bound[c + 1];
+      if (from == to) return;
+      for (std::uint32_t i = from + threadIdx.x; i < to; i += blockDim.x)
+        solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
+      __syncthreads();
+    };
+    auto overflow = [&](bool backwards) {
+      const std::uint32_t from = bound[colours], to = bound[colours + 1];
+      if (from == to) return;
+      if (threadIdx.x == 0) {
+        if (backwards)
+          for (std::uint32_t i = to; i-- > from;) solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
+        else
+          for (std::uint32_t i = from; i < to; ++i) solve_record<Friction, Rolling>(s, order[i], bodies, inv_h);
+      }
+      __syncthreads();
+    };
+    for (int l = 0; l < local; ++l) {
+      if ((l + pass) % 2 == 0) {
+        for (std::uint32_t c = 0; c < colours; ++c) colour(c);
+        overflow(false);
+      } else {
+        overflow(true);
+        for (std::uint32_t c = colours; c-- > 0;) colour(c);
+      }
     }
-    __syncthreads();  // the stage and bound[] free before the next cube's
+    __syncthreads();  // every thread done with bound[] before the next cube's
   }
 }
 
@@ -696,12 +624,8 @@ bool launch_solve(const SweepRecords& records, DevicePlan plan, SolverBody* bodi
 
 void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan,
                           const BodiesView& world, double diameters, int passes, int local, int threads,
-                          std::uint32_t stage, SolverBody* bodies, real inv_h, SolverTerms t, int sm_count,
-                          cudaStream_t s) {
+                          SolverBody* bodies, real inv_h, SolverTerms t, int sm_count, cudaStream_t s) {
   if (count == 0) return;
-  // Staged only where a record is its impulse, rolling, geometry and pair
-  // words (staged_pass_kernel).
-  const bool staged = stage > 0 && records.arms == nullptr && records.extra == nullptr;
   namespace dev = ::marbles::cuda;
   using dev::Launch;
   const std::size_t n = count;
@@ -741,23 +665,8 @@ void LocalSweepsCuda::run(const SweepRecords& records, std::uint32_t count, cons
   const int between_grid = dev::grid_for(plan.widest(), sm_count);
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
     for (int p = 0; p < passes; ++p) {
-      if (staged) {
-        constexpr auto kernel = staged_pass_kernel<friction, rolling>;
-        const std::size_t bytes = stage * kStagedBytes<rolling>;
-        static std::size_t opened = 0;  // the dynamic shared memory this instance is allowed
-        if (bytes > opened) {
-          MARBLES_CUDA_CHECK(cudaFuncSetAttribute(kernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                                  static_cast<int>(bytes)));
-          opened = bytes;
-        }
-        int per_sm = 0;
-        MARBLES_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, kernel, threads, bytes));
-        kernel<<<sm_count * std::max(per_sm, 1), threads, bytes, s>>>(records, o, starts, cubes, plan, bodies, inv_h,
-                                                                       p, local, stage);
-      } else {
-        local_pass_kernel<friction, rolling><<<sm_count * (8 * dev::kBlock / threads), threads, 0, s>>>(
-            records, o, starts, cubes, plan, bodies, inv_h, p, local);
-      }
+      local_pass_kernel<friction, rolling><<<sm_count * (8 * dev::kBlock / threads), threads, 0, s>>>(
+          records, o, starts, cubes, plan, bodies, inv_h, p, local);
       MARBLES_CUDA_CHECK_LAUNCH();
       visit_colours(index, plan.colours, p % 2 == 1, [&](std::uint32_t c, std::uint32_t, bool serial, bool reversed) {
         dev::launch(Launch::plain, between_kernel<friction, rolling>, serial ? 1 : between_grid, s, records, o,

@@ -172,12 +172,9 @@ class LocalSweepsCuda {
   // count records in colour-major order as `plan` ranges them; the cubes
   // of `diameters` of the world's largest diameter (local_cube_edge, the
   // radius found on the device) over its centres (those of the solve).
-  // With `stage` > 0, a cube of at most `stage` own contacts is swept with
-  // its records staged in shared memory (where the records hold no arms or
-  // extra words).
   void run(const SweepRecords& records, std::uint32_t count, const ColourPlan& plan, const BodiesView& world,
-           double diameters, int passes, int local, int threads, std::uint32_t stage, SolverBody* bodies, real inv_h,
-           SolverTerms terms, int sm_count, cudaStream_t stream);
+           double diameters, int passes, int local, int threads, SolverBody* bodies, real inv_h, SolverTerms terms,
+           int sm_count, cudaStream_t stream);
   // Device bytes it holds (none until it first runs).
   std::size_t device_bytes() const {
     return ::marbles::cuda::bytes_of(m_keys, m_order, m_heads, m_starts, m_temp, m_largest);

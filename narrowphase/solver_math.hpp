@@ -306,39 +306,23 @@ MARBLES_HD_INLINE void pack_sweep_record(const Contact& c, const SweepRecords& s
   pack_position_record(c, s, k);
 }
 
-// A record's word read or written as the sweeps over the device's records
-// do (Streamed: load_streaming / store_streaming, past L2), or plainly (a
-// cube's records staged in shared memory by the local order's GPU form,
-// where the streaming instructions, which take global addresses, do not
-// apply). The same value either way; on the CPU both are plain.
-template <bool Streamed, class T>
-MARBLES_HD_INLINE T load_word(const T* p) {
-  if constexpr (Streamed) return load_streaming(p);
-  else return *p;
-}
-template <bool Streamed, class T>
-MARBLES_HD_INLINE void store_word(T* p, const T& value) {
-  if constexpr (Streamed) store_streaming(p, value);
-  else *p = value;
-}
-
 // Record k as a contact, its impulse word `i` already loaded: the bodies,
 // impulses, normal and separation, with Arms the arms and the friction
 // coefficients, with Rolling the rolling impulse and the twisting friction,
 // and a wall's velocity; the other fields are left at their defaults.
-template <bool Arms, bool Rolling, bool Streamed = true>
+template <bool Arms, bool Rolling>
 MARBLES_HD_INLINE Contact load_record(const SweepRecords& s, std::uint32_t k, const Real4& i) {
   Contact c;
-  const BodyPair ab = load_word<Streamed>(s.bodies + k);
+  const BodyPair ab = load_streaming(s.bodies + k);
   c.a = ab.a, c.b = ab.b;
-  const Real4 g = load_word<Streamed>(s.geometry + k);
+  const Real4 g = load_streaming(s.geometry + k);
   c.normal_impulse = i.x;
   c.tangent_impulse = {i.y, i.z, i.w};
   c.normal = {g.x, g.y, g.z};
   c.separation = g.w;
   if constexpr (Arms) {
     if (s.arms) {
-      const Real4 m = load_word<Streamed>(s.arms + k);
+      const Real4 m = load_streaming(s.arms + k);
       c.ra = m.x, c.rb = m.y, c.coeff.friction = m.z, c.coeff.rolling_friction = m.w;
     } else {
       const real r = s.uniform.radius;
@@ -347,12 +331,12 @@ MARBLES_HD_INLINE Contact load_record(const SweepRecords& s, std::uint32_t k, co
     }
   }
   if constexpr (Rolling) {
-    const Real4 r = load_word<Streamed>(s.rolling + k);
+    const Real4 r = load_streaming(s.rolling + k);
     c.rolling_impulse = {r.x, r.y, r.z};
     c.coeff.twisting_friction = r.w;
   }
   if (is_wall(c.b) && s.extra) {
-    const Real4 w = load_word<Streamed>(s.extra + k);
+    const Real4 w = load_streaming(s.extra + k);
     c.wall_velocity = {w.x, w.y, w.z};
   }
   return c;
@@ -364,30 +348,30 @@ MARBLES_HD_INLINE Contact load_record(const SweepRecords& s, std::uint32_t k, co
 MARBLES_HD_INLINE Real4 impulse_word(const SweepRecords& s, std::uint32_t k) {
   return s.impulse ? s.impulse[k] : Real4{s.normal[k], real(0), real(0), real(0)};
 }
-template <bool Friction, bool Streamed = true>
+template <bool Friction>
 MARBLES_HD_INLINE Real4 streamed_impulse_word(const SweepRecords& s, std::uint32_t k) {
-  if (Friction || s.impulse) return load_word<Streamed>(s.impulse + k);
-  return Real4{load_word<Streamed>(s.normal + k), real(0), real(0), real(0)};
+  if (Friction || s.impulse) return load_streaming(s.impulse + k);
+  return Real4{load_streaming(s.normal + k), real(0), real(0), real(0)};
 }
 
 // The contact as solve_one<Friction, Rolling> reads it, less the effective
 // masses (solve_record adds them).
-template <bool Friction, bool Rolling, bool Streamed = true>
+template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE Contact load_sweep_contact(const SweepRecords& s, std::uint32_t k) {
-  return load_record<Friction || Rolling, Rolling, Streamed>(s, k, streamed_impulse_word<Friction, Streamed>(s, k));
+  return load_record<Friction || Rolling, Rolling>(s, k, streamed_impulse_word<Friction>(s, k));
 }
 
 // What a sweep changed: the accumulated impulses (the normal impulse alone
 // where the records keep no tangent one).
-template <bool Friction, bool Rolling, bool Streamed = true>
+template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void store_sweep_impulses(const SweepRecords& s, std::uint32_t k, const Contact& c) {
-  if (!Friction && !s.impulse) store_word<Streamed>(s.normal + k, c.normal_impulse);
+  if (!Friction && !s.impulse) store_streaming(s.normal + k, c.normal_impulse);
   else
-    store_word<Streamed>(s.impulse + k,
-                         Real4{c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z});
+    store_streaming(s.impulse + k,
+                    Real4{c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z});
   if constexpr (Rolling)
-    store_word<Streamed>(s.rolling + k, Real4{c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z,
-                                              c.coeff.twisting_friction});
+    store_streaming(s.rolling + k, Real4{c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z,
+                                         c.coeff.twisting_friction});
 }
 
 // warm_start_one on record k (the GPU's warm start, after the packing): the
@@ -444,7 +428,7 @@ MARBLES_HD_INLINE bool has_minus_zero(const BodyState& b) { return has_minus_zer
 // loaded contact, its effective masses computed from the bodies as the
 // prepare stage computed them (contact_math.hpp), only the ones the terms
 // read; written back where it changed something (above).
-template <bool Friction, bool Rolling, bool Streamed = true>
+template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void solve_loaded(const SweepRecords& s, std::uint32_t k, Contact c, SolverBody* bodies,
                                     real inv_h) {
   BodyState A = load_body(bodies, c.a, c);
@@ -458,12 +442,11 @@ MARBLES_HD_INLINE void solve_loaded(const SweepRecords& s, std::uint32_t k, Cont
   const bool clear = was_clear && impulses_clear<Friction, Rolling>(c);
   if (!clear || a_may_flip) store_body(bodies, c.a, A);
   if (!clear || b_may_flip) store_body(bodies, c.b, B);
-  if (!clear) store_sweep_impulses<Friction, Rolling, Streamed>(s, k, c);
+  if (!clear) store_sweep_impulses<Friction, Rolling>(s, k, c);
 }
-template <bool Friction, bool Rolling, bool Streamed = true>
+template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void solve_record(const SweepRecords& s, std::uint32_t k, SolverBody* bodies, real inv_h) {
-  solve_loaded<Friction, Rolling, Streamed>(s, k, load_sweep_contact<Friction, Rolling, Streamed>(s, k), bodies,
-                                            inv_h);
+  solve_loaded<Friction, Rolling>(s, k, load_sweep_contact<Friction, Rolling>(s, k), bodies, inv_h);
 }
 
 // The contact as the position stages read it (project_one, overlap_ratio):

@@ -598,7 +598,7 @@ class CudaStep final : public StepBackend {
           nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);
         });
       m_local_sweeps.run(m_records, m_count, m_plan, world, m_local->tile_diameters, m_local->passes,
-                         m_local->local, m_local->threads, m_local->stage, bodies, inv_h, m_terms, m_sm, m_stream);
+                         m_local->local, m_local->threads, bodies, inv_h, m_terms, m_sm, m_stream);
       nc::launch_scatter_bodies(bodies, world, m_sm, m_stream, skip());
       return;
     }

@@ -304,30 +304,6 @@ TEST(Determinism, LocalOrderThreadsRefusedWhereTheGpuCannotTakeThem) {
   }
 }
 
-// MARBLES_LOCAL_STAGE (the most contacts of a cube the GPU stages in shared
-// memory) is read with the order, 0 unset, and refused, with or without
-// the order, past 4096 or where it is no whole number.
-TEST(Determinism, LocalOrderStageRefusedPastWhatSharedMemoryHolds) {
-  {
-    SolveOrder o("tiles:8:2:6");
-    EXPECT_EQ(narrowphase::local_order_from_environment()->stage, 0u) << "unset: nothing staged";
-  }
-  for (const char* bad : {"4097", "100000", "-1", "64x", "", "all"}) {
-    for (const char* order : {"tiles:8:2:6", "colours"}) {
-      SolveOrder o(order);
-      ScopedEnvironment stage("MARBLES_LOCAL_STAGE", bad);
-      EXPECT_THROW(narrowphase::local_order_from_environment(), RuntimeFailure) << bad << " with " << order;
-    }
-  }
-  for (const std::uint32_t good : {0u, 1u, 470u, 4096u}) {
-    SolveOrder o("tiles:8:2:6");
-    ScopedEnvironment stage("MARBLES_LOCAL_STAGE", std::to_string(good));
-    const auto read = narrowphase::local_order_from_environment();
-    ASSERT_TRUE(read.has_value());
-    EXPECT_EQ(read->stage, good);
-  }
-}
-
 // inverse_of (the step's numbering and the scene's): a random permutation
 // long enough for its parallel loops, against its definition; an index past
 // the length is refused.

@@ -700,35 +700,6 @@ TEST(StepCuda, LocalOrderSmallCasesMatchTheCpu) {
   run_in_order(s, g, 60);
 }
 
-// The local order's GPU form with each cube's records staged in shared
-// memory (MARBLES_LOCAL_STAGE): the CPU's bits, with room for every cube
-// and with room for a few contacts (cubes staged and cubes swept in place
-// in one launch). A block of one radius and one material at rest in a box
-// with every term: records without arms or extra words, which staging
-// asks for (the premise, asked of the step's own count); a pour of two
-// radii past a spinning post: records with both, swept in place.
-TEST(StepCuda, LocalOrderStagedRecordsMatchTheCpu) {
-  REQUIRE_DEVICE();
-  const scene::Scene box = every_term_box();
-  const scene::GeneratedParticles block = dense_block(8, 8, 6, real(0.01), real(0.005));
-  {
-    Simulation gpu(box, make_world(box, block), broadphase::Backend::cuda);
-    gpu.step();
-    ASSERT_GT(gpu.last_step().uniform_arms, 0u) << "premise: records without arms";
-  }
-  SolveOrder order("tiles:3:3:4");
-  for (const char* stage : {"4096", "12"}) {
-    SCOPED_TRACE(std::string("MARBLES_LOCAL_STAGE=") + stage);
-    ScopedEnvironment staged("MARBLES_LOCAL_STAGE", stage);
-    ASSERT_EQ(narrowphase::local_order_from_environment()->stage, std::stoul(stage));
-    run_in_order(box, block, 40);
-    if (HasFatalFailure()) return;
-  }
-  ScopedEnvironment staged("MARBLES_LOCAL_STAGE", "4096");
-  auto [pour, grains] = pour_scene(400, 3);
-  run_in_order(pour, grains, 60);
-}
-
 // A free ball moved far out along x, then back above the bed (the same
 // edit on both backends): far out, the grid outgrows the broad phase's plan
 // once (27 key bits against 15: four sort digits against two, and binary
