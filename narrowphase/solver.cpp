@@ -133,16 +133,26 @@ void unpack_records(const SweepRecords& s, Contact* contacts, std::size_t count)
   for (std::ptrdiff_t k = 0; k < n; ++k) unpack_sweep_impulses<Rolling>(s, static_cast<std::uint32_t>(k), contacts[k]);
 }
 
-// Impacts of contacts[order[k]] for k in [begin, end) (one level; order null:
-// contacts[k], one colour); true if any hit.
+// Impacts of contacts[order[k]] for k in [begin, end) (one level of the
+// first pass; order null: contacts[k], one colour of a later pass, which
+// passes over the contacts no hit has reached: impact_passed_over, counted
+// in *passed); true if any hit.
 template <bool Friction>
 bool impact_range(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
-                  SolverBody* bodies, const ImpactParams& p) {
+                  SolverBody* bodies, const ImpactParams& p, std::uint64_t* passed) {
   bool hit = false;
+  std::uint64_t over = 0;
   const auto n = static_cast<std::ptrdiff_t>(end - begin);
-#pragma omp parallel for schedule(static) reduction(|| : hit) if (n >= kParallelFrom)
-  for (std::ptrdiff_t t = 0; t < n; ++t)
-    hit = impact_one<Friction>(contacts[order ? order[begin + t] : begin + t], bodies, p) || hit;
+#pragma omp parallel for schedule(static) reduction(|| : hit) reduction(+ : over) if (n >= kParallelFrom)
+  for (std::ptrdiff_t t = 0; t < n; ++t) {
+    Contact& c = contacts[order ? order[begin + t] : begin + t];
+    if (!order && impact_passed_over(c.a, c.b, c.approach_speed, p)) {
+      ++over;
+      continue;
+    }
+    hit = impact_one<Friction>(c, bodies, p) || hit;
+  }
+  *passed += over;
   return hit;
 }
 
@@ -333,14 +343,19 @@ void ContactSolver::unpack_impulses(std::vector<Contact>& contacts) {
 void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& colours, SolverBody* bodies,
                             std::size_t body_count, real h) {
   const real rest = m_settings.rest_speed;
-  const ImpactParams params{rest, h, m_settings.wall_accel};
+  ImpactParams params{rest, h, m_settings.wall_accel};
   const auto n = static_cast<std::uint32_t>(contacts.size());
   m_candidates.clear();  // in index order, scanned on all threads
+  m_impact_passed_over = 0;
   if (!colours.fast_approach) return;  // the colouring's move saw every approach speed: none is a candidate
   collect_in_order(n, kParallelFrom, m_candidates, m_candidate_parts, [&](std::size_t k, std::vector<std::uint32_t>& to) {
     if (is_impact_candidate(contacts[k], rest)) to.push_back(static_cast<std::uint32_t>(k));
   });
   if (m_candidates.empty()) return;
+  if (m_settings.impact_pass_over) {
+    m_hit_spheres.assign(body_count, 0);
+    params.hit_spheres = m_hit_spheres.data();
+  }
   m_rank.resize(n);
   m_level.assign(n, kUncoloured);
   for (std::uint32_t k : m_candidates) m_rank[k] = impact_rank(time_of_impact(contacts[k]), k);
@@ -359,15 +374,17 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
   }
   Contact* cs = contacts.data();
   bool hit = false;
-  for (std::uint32_t l = 0; l < rounds; ++l) hit = m_impact(cs, m_order.data(), begin[l], begin[l + 1], bodies, params) || hit;
+  std::uint64_t* passed = &m_impact_passed_over;
+  for (std::uint32_t l = 0; l < rounds; ++l)
+    hit = m_impact(cs, m_order.data(), begin[l], begin[l + 1], bodies, params, passed) || hit;
   for (std::uint32_t k = begin[rounds]; k < begin[rounds + 1]; ++k)
-    hit = m_impact(cs, m_order.data(), k, k + 1, bodies, params) || hit;
+    hit = m_impact(cs, m_order.data(), k, k + 1, bodies, params, passed) || hit;
 
   m_rebounds = hit;
   for (int pass = 1; pass < kImpactPasses && hit; ++pass) {
     hit = false;
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      hit = m_impact(cs, nullptr, b, e, bodies, params) || hit;
+      hit = m_impact(cs, nullptr, b, e, bodies, params, passed) || hit;
     });
     m_rebounds = m_rebounds || hit;
   }

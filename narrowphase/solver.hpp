@@ -136,6 +136,10 @@ class ContactSolver {
   // (from its records: 8 bytes a contact read where a contact is 112).
   real deepest_overlap(const BodiesView& bodies, const std::vector<WallShape>& walls) const;
 
+  // The contacts the last solve's impact stage passed over in its later
+  // passes (impact_passed_over), summed over those passes.
+  std::uint64_t impact_passed_over() const { return m_impact_passed_over; }
+
  private:
   void impacts(std::vector<Contact>& contacts, const ColourRanges& colours, SolverBody* bodies, std::size_t body_count,
                real h);
@@ -147,7 +151,7 @@ class ContactSolver {
   using RangeFn = void (*)(const SweepRecords& records, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
                            real inv_h);
   using ImpactFn = bool (*)(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
-                            SolverBody* bodies, const ImpactParams& p);
+                            SolverBody* bodies, const ImpactParams& p, std::uint64_t* passed);
   SolverSettings m_settings;
   SweepLanes m_lanes = SweepLanes::sse2;
   bool m_rebounds = false;  // an impact hit in this substep's solve (some contact has a rebound shift)
@@ -160,6 +164,8 @@ class ContactSolver {
   std::vector<std::uint32_t> m_candidates, m_level, m_order;
   std::vector<std::vector<std::uint32_t>> m_candidate_parts;  // per thread
   std::vector<std::uint64_t> m_rank;
+  std::vector<std::uint8_t> m_hit_spheres;  // ImpactParams::hit_spheres
+  std::uint64_t m_impact_passed_over = 0;
   std::vector<SolverBody> m_bodies;  // the velocity state, packed for the solve
   // The sweep's records (SweepRecords::in) of m_record_count contacts,
   // packed by each velocity solve; the projection and deepest_overlap read

@@ -486,6 +486,61 @@ TEST(Solver, ApproachFromWorldIsThePreparedApproach) {
   EXPECT_GT(walls, 0u);
 }
 
+// The impact stage's later passes pass over the contacts no hit of the
+// stage has reached (impact_passed_over): the same bits as trying every
+// contact. Lattices thrown a hair apart, in which only some spheres move
+// (the others at rest, or drifting slower than the rest speed), so that a
+// pass after the first meets contacts of every kind: reached by a hit,
+// candidates, slow, and between spheres no hit has moved; with and without
+// friction. The bodies after the whole solve (impacts, warm start, sweeps),
+// and every contact's impact impulse and rebound shift, bit for bit; the
+// premise that contacts were passed over, and only with the pass-over on.
+TEST(Solver, ImpactPassOverGivesTheSameBits) {
+  const real r = real(0.01), h = real(1e-3);
+  std::uint64_t passed = 0, runs_with_later_passes = 0;
+  for (const std::uint64_t seed : {3u, 5u, 8u, 13u, 21u, 34u}) {
+    for (const double moving : {0.02, 0.1, 0.4}) {
+      for (const bool friction : {true, false}) {
+        std::mt19937_64 rng(seed);
+        MovingLattice thrown = MovingLattice::thrown(7, r, rng);
+        std::bernoulli_distribution moves(moving), drifts(0.5);
+        for (std::size_t i = 0; i < thrown.lattice.n; ++i) {
+          if (moves(rng)) continue;
+          const real slow = drifts(rng) ? real(0.004) : real(0);  // below the rest speed of 0.01
+          thrown.vel[i] = thrown.vel[i] * (slow / std::max(length(thrown.vel[i]), real(1e-9)));
+          thrown.omega[i] = Vec3{};
+        }
+        SolverSettings s;
+        s.friction = friction;
+        s.rest_speed = real(0.01);
+        MovingLattice tried = thrown;
+        ColourRanges colours;
+        std::vector<Contact> over = thrown.lattice.contacts(thrown.view(), thrown.table(), h, real(2e-4), colours);
+        std::vector<Contact> all = over;
+        ASSERT_GT(over.size(), 500u);
+        ContactSolver passing(s);
+        passing.solve_velocities(over, colours, thrown.view(), h);
+        s.impact_pass_over = false;
+        ContactSolver trying(s);
+        trying.solve_velocities(all, colours, tried.view(), h);
+        const std::string at = "seed " + std::to_string(seed) + ", moving " + std::to_string(moving) +
+                               (friction ? ", friction" : "");
+        EXPECT_EQ(trying.impact_passed_over(), 0u) << at;
+        ASSERT_EQ(std::memcmp(thrown.vel.data(), tried.vel.data(), thrown.vel.size() * sizeof(Vec3)), 0) << at;
+        ASSERT_EQ(std::memcmp(thrown.omega.data(), tried.omega.data(), thrown.omega.size() * sizeof(Vec3)), 0) << at;
+        for (std::size_t k = 0; k < over.size(); ++k) {
+          ASSERT_EQ(std::memcmp(&over[k].impact_impulse, &all[k].impact_impulse, sizeof(real)), 0) << at << ", " << k;
+          ASSERT_EQ(std::memcmp(&over[k].rebound_shift, &all[k].rebound_shift, sizeof(real)), 0) << at << ", " << k;
+        }
+        passed += passing.impact_passed_over();
+        runs_with_later_passes += passing.impact_passed_over() > 0 ? 1 : 0;
+      }
+    }
+  }
+  EXPECT_GT(runs_with_later_passes, 20u) << "premise: later passes that pass contacts over";
+  EXPECT_GT(passed, 10000u) << "premise";
+}
+
 // The GPU holds a substep's contacts only as the sweep's records and their
 // impact words (solver_math.hpp): the impact stage on them (impact_record)
 // gives impact_one's bodies and contacts bit for bit, and the whole contacts
