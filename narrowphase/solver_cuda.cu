@@ -297,9 +297,8 @@ __global__ void project_kernel(const ColourPlan* plan_memory, SweepRecords recor
 // (their order and the firsts of the levels' keys from the colouring's
 // impact_levels; a level's contacts spread over the launch, the overflow
 // set by one thread), the launch's barrier after each. Pass p > 0: every
-// contact colour by colour, while pass p - 1 hit something, passing over
-// those no hit has reached (impact_passed_over, with p.hit_spheres). hit[p]
-// (zeroed before) records what pass p hit.
+// contact colour by colour, while pass p - 1 hit something. hit[p] (zeroed
+// before) records what pass p hit.
 template <bool Friction, class Sync>
 __global__ void impact_stage_kernel(const ColourPlan* plan_memory, SweepRecords records, Real4* impact,
                                     const std::uint32_t* order, const std::uint32_t* first, std::uint32_t n,
@@ -315,8 +314,6 @@ __global__ void impact_stage_kernel(const ColourPlan* plan_memory, SweepRecords 
   for (int pass = 1; pass < passes && flag_set(hit + pass - 1); ++pass) {
     raised = false;
     walk_colours(plan, false, grid, [&](std::uint32_t k) {
-      const BodyPair ab = records.bodies[k];
-      if (impact_passed_over(ab.a, ab.b, impact[k].x, p)) return;
       raise_once(impact_record<Friction>(records, impact, k, bodies, p), raised, hit + pass);
     });
   }

@@ -776,8 +776,8 @@ class CudaStep final : public StepBackend {
         {"watchdog's copy", m_kept.device_bytes() + m_kept_cache.device_bytes() + m_kept_walls.bytes()},
         {"substep's start", m_start_velocity.bytes()},
         {"local order", m_local_sweeps.device_bytes()},
-        {"small", bytes_of(m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_flags, m_hit, m_hit_spheres,
-                           m_moved, m_contact_chunk, m_check)},
+        {"small", bytes_of(m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_flags, m_hit, m_moved,
+                           m_contact_chunk, m_check)},
     };
     std::size_t named = 0;
     for (const DeviceBytes& p : parts) named += p.bytes;
@@ -1216,11 +1216,7 @@ class CudaStep final : public StepBackend {
   // substep without candidates (found with the contacts) skips it.
   void impacts(narrowphase::SolverBody* bodies, real h) {
     if (!m_impact_candidates) return;
-    narrowphase::ImpactParams params{m_model.solver.rest_speed, h, m_model.solver.wall_accel};
-    if (m_model.solver.impact_pass_over) {
-      params.hit_spheres = m_hit_spheres.as<std::uint8_t>(m_device.size());
-      MARBLES_CUDA_CHECK(cudaMemsetAsync(params.hit_spheres, 0, m_device.size(), m_stream));
-    }
+    const narrowphase::ImpactParams params{m_model.solver.rest_speed, h, m_model.solver.wall_accel};
     std::uint32_t* order = nullptr;
     const std::uint32_t* first = nullptr;
     m_colouring.impact_levels(m_records, m_impacts.word, m_count, m_device.size(), params.rest_speed, order, first,
@@ -1272,7 +1268,7 @@ class CudaStep final : public StepBackend {
   // the contact search's temporaries instead (the broad phase's, its pairs,
   // the contact flags and offsets), which are dead by then.
   DeviceBuffer m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
-      m_sorted_colour, m_flags, m_hit, m_hit_spheres, m_moved, m_contact_chunk;
+      m_sorted_colour, m_flags, m_hit, m_moved, m_contact_chunk;
   // Temporaries of the stages that never run at the same time and must
   // outlive a dead buffer's next use (the colouring's colours and counting
   // sort, the impact levels' lists, the cache's restore): the device holds
