@@ -133,24 +133,53 @@ void unpack_records(const SweepRecords& s, Contact* contacts, std::size_t count)
   for (std::ptrdiff_t k = 0; k < n; ++k) unpack_sweep_impulses<Rolling>(s, static_cast<std::uint32_t>(k), contacts[k]);
 }
 
+// The impact stage's passes after the first try every contact, colour by
+// colour, while the pass before hit something; most contacts of a pour,
+// and all but a few of a pile's, cannot hit there. A contact none of whose
+// spheres a hit of this stage has moved (hit_spheres: a flag a sphere, set
+// by each hit) meets them as they were when it was prepared (the stage is
+// the first to change a solver body, and a wall's velocity is the
+// contact's own), so apply_impact's normal speed, dot(A.v - B.v, n), is its
+// prepared approach speed bit for bit: the same values in the same
+// expression (approach_speed_of). Where that speed is above -rest_speed,
+// apply_impact's first test refuses the contact and it writes nothing, so
+// passing it over changes no bit. A candidate of the first pass (its
+// approach below -rest_speed) or one exactly at -rest_speed (apply_impact's
+// test, not is_impact_candidate's) is tried as before. The GPU's stage
+// tries every contact: a contact's check there costs about what its
+// refusal does (gas, H200: the stage 57.5 against 50.1 us at 10^5, 144.6
+// against 136.0 at 10^6 with the flags; docs/architecture.md "Impacts
+// passed over").
+bool impact_passed_over(const Contact& c, const std::uint8_t* hit_spheres, real rest_speed) {
+  if (!hit_spheres || !(c.approach_speed > -rest_speed)) return false;
+  return !hit_spheres[c.a] && (is_wall(c.b) || !hit_spheres[c.b]);
+}
+
 // Impacts of contacts[order[k]] for k in [begin, end) (one level of the
 // first pass; order null: contacts[k], one colour of a later pass, which
-// passes over the contacts no hit has reached: impact_passed_over, counted
-// in *passed); true if any hit.
+// passes over the contacts no hit has reached, counted in *passed); each
+// hit sets its spheres' flags (hit_spheres, where not null); true if any
+// hit. Within a level or a colour no two contacts share a sphere, so no
+// two threads write or read another's flag.
 template <bool Friction>
 bool impact_range(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
-                  SolverBody* bodies, const ImpactParams& p, std::uint64_t* passed) {
+                  SolverBody* bodies, const ImpactParams& p, std::uint8_t* hit_spheres, std::uint64_t* passed) {
   bool hit = false;
   std::uint64_t over = 0;
   const auto n = static_cast<std::ptrdiff_t>(end - begin);
 #pragma omp parallel for schedule(static) reduction(|| : hit) reduction(+ : over) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t) {
     Contact& c = contacts[order ? order[begin + t] : begin + t];
-    if (!order && impact_passed_over(c.a, c.b, c.approach_speed, p)) {
+    if (!order && impact_passed_over(c, hit_spheres, p.rest_speed)) {
       ++over;
       continue;
     }
-    hit = impact_one<Friction>(c, bodies, p) || hit;
+    if (!impact_one<Friction>(c, bodies, p)) continue;
+    hit = true;
+    if (hit_spheres) {
+      hit_spheres[c.a] = 1;
+      if (!is_wall(c.b)) hit_spheres[c.b] = 1;
+    }
   }
   *passed += over;
   return hit;
@@ -343,7 +372,7 @@ void ContactSolver::unpack_impulses(std::vector<Contact>& contacts) {
 void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& colours, SolverBody* bodies,
                             std::size_t body_count, real h) {
   const real rest = m_settings.rest_speed;
-  ImpactParams params{rest, h, m_settings.wall_accel};
+  const ImpactParams params{rest, h, m_settings.wall_accel};
   const auto n = static_cast<std::uint32_t>(contacts.size());
   m_candidates.clear();  // in index order, scanned on all threads
   m_impact_passed_over = 0;
@@ -352,9 +381,10 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
     if (is_impact_candidate(contacts[k], rest)) to.push_back(static_cast<std::uint32_t>(k));
   });
   if (m_candidates.empty()) return;
+  std::uint8_t* hit_spheres = nullptr;
   if (m_settings.impact_pass_over) {
     m_hit_spheres.assign(body_count, 0);
-    params.hit_spheres = m_hit_spheres.data();
+    hit_spheres = m_hit_spheres.data();
   }
   m_rank.resize(n);
   m_level.assign(n, kUncoloured);
@@ -376,15 +406,15 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
   bool hit = false;
   std::uint64_t* passed = &m_impact_passed_over;
   for (std::uint32_t l = 0; l < rounds; ++l)
-    hit = m_impact(cs, m_order.data(), begin[l], begin[l + 1], bodies, params, passed) || hit;
+    hit = m_impact(cs, m_order.data(), begin[l], begin[l + 1], bodies, params, hit_spheres, passed) || hit;
   for (std::uint32_t k = begin[rounds]; k < begin[rounds + 1]; ++k)
-    hit = m_impact(cs, m_order.data(), k, k + 1, bodies, params, passed) || hit;
+    hit = m_impact(cs, m_order.data(), k, k + 1, bodies, params, hit_spheres, passed) || hit;
 
   m_rebounds = hit;
   for (int pass = 1; pass < kImpactPasses && hit; ++pass) {
     hit = false;
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      hit = m_impact(cs, nullptr, b, e, bodies, params, passed) || hit;
+      hit = m_impact(cs, nullptr, b, e, bodies, params, hit_spheres, passed) || hit;
     });
     m_rebounds = m_rebounds || hit;
   }

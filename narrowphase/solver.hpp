@@ -151,7 +151,8 @@ class ContactSolver {
   using RangeFn = void (*)(const SweepRecords& records, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
                            real inv_h);
   using ImpactFn = bool (*)(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
-                            SolverBody* bodies, const ImpactParams& p, std::uint64_t* passed);
+                            SolverBody* bodies, const ImpactParams& p, std::uint8_t* hit_spheres,
+                            std::uint64_t* passed);
   SolverSettings m_settings;
   SweepLanes m_lanes = SweepLanes::sse2;
   bool m_rebounds = false;  // an impact hit in this substep's solve (some contact has a rebound shift)
@@ -164,7 +165,7 @@ class ContactSolver {
   std::vector<std::uint32_t> m_candidates, m_level, m_order;
   std::vector<std::vector<std::uint32_t>> m_candidate_parts;  // per thread
   std::vector<std::uint64_t> m_rank;
-  std::vector<std::uint8_t> m_hit_spheres;  // ImpactParams::hit_spheres
+  std::vector<std::uint8_t> m_hit_spheres;  // a flag a sphere: a hit of the impact stage moved it
   std::uint64_t m_impact_passed_over = 0;
   std::vector<SolverBody> m_bodies;  // the velocity state, packed for the solve
   // The sweep's records (SweepRecords::in) of m_record_count contacts,

@@ -41,7 +41,7 @@ struct SolverSettings {
   real deep_move = real(0.02);
   bool warm_start = true;         // start from the last substep's impulses
   bool impact_pass_over = true;   // the CPU's impact stage: its later passes pass over contacts no hit has
-                                  // reached (impact_passed_over: the same bits; false tries every contact)
+                                  // reached (solver.cpp, impact_passed_over: the same bits; false tries all)
   Vec3 wall_accel{};              // m/s^2: the spheres' acceleration seen by wall impacts (gravity under
                                   // velocity Verlet, whose impacts see half-step velocities; else 0)
 };
@@ -79,41 +79,7 @@ struct ImpactParams {
   real rest_speed;  // m/s: slower approaches do not bounce
   real h;           // s, the substep
   Vec3 wall_accel;  // SolverSettings::wall_accel
-  // A flag a sphere (zeroed before the stage), set where a hit of the stage
-  // moved it (mark_hit): the passes after the first pass over a contact
-  // none of whose spheres it has set (impact_passed_over). Null: every
-  // contact of every pass is tried.
-  std::uint8_t* hit_spheres = nullptr;
 };
-
-// The impact stage's passes after the first try every contact, colour by
-// colour, while the pass before hit something; most contacts of a pour,
-// and all but a few of a pile's, cannot hit there. A contact none of whose
-// spheres a hit of this stage has moved meets them as they were when it
-// was prepared (the stage is the first to change a solver body, and a
-// wall's velocity is the contact's own), so apply_impact's normal speed,
-// dot(A.v - B.v, n), is its prepared approach speed bit for bit: the same
-// values in the same expression (approach_speed_of). Where that speed is
-// above -rest_speed, apply_impact's first test refuses the contact and it
-// writes nothing, so passing it over changes no bit. A candidate of the
-// first pass (its approach below -rest_speed) or one exactly at -rest_speed
-// (apply_impact's test, not is_impact_candidate's) is tried as before. The
-// CPU's stage passes contacts over (demo pour: 2.27 against 2.30-2.32 ms a
-// step); the GPU's tries every contact, as a contact's check there costs
-// about what its refusal does (gas, H200: the stage 57.5 against 50.1 us at
-// 10^5, 144.6 against 136.0 at 10^6 with the flags; docs/architecture.md
-// "Impacts passed over").
-MARBLES_HD_INLINE bool impact_passed_over(std::uint32_t a, std::uint32_t b, real approach_speed,
-                                          const ImpactParams& p) {
-  if (!p.hit_spheres || !(approach_speed > -p.rest_speed)) return false;
-  return !p.hit_spheres[a] && (is_wall(b) || !p.hit_spheres[b]);
-}
-// After a hit: its spheres moved (a wall keeps its velocity).
-MARBLES_HD_INLINE void mark_hit(std::uint32_t a, std::uint32_t b, const ImpactParams& p) {
-  if (!p.hit_spheres) return;
-  p.hit_spheres[a] = 1;
-  if (!is_wall(b)) p.hit_spheres[b] = 1;
-}
 
 // The velocity state of one sphere as the velocity stages read and write it,
 // packed: a contact's two random body accesses touch one 32-byte record each
@@ -529,7 +495,6 @@ MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactPa
   if (!impact_states<Friction>(c, A, B, p)) return false;
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
-  mark_hit(c.a, c.b, p);
   return true;
 }
 
@@ -589,7 +554,6 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::
   if (!impact_states<Friction>(c, A, B, p)) return false;
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
-  mark_hit(c.a, c.b, p);
   i.z = c.impact_impulse;
   i.w = c.rebound_shift;
   impact[k] = i;

@@ -81,14 +81,12 @@ double World::kinetic_energy() const {
 
 World::Motion World::motion() const {
   Motion e;
-  double speed2 = 0;
   for (std::size_t i = 0; i < size(); ++i) {
-    speed2 = std::max(speed2, static_cast<double>(length_squared(velocity[i])));
     if (!(inv_mass[i] > 0)) continue;
     e.translational += 0.5 * (1.0 / inv_mass[i]) * length_squared(velocity[i]);
     if (inv_inertia[i] > 0) e.rotational += 0.5 * length_squared(angular_velocity[i]) / inv_inertia[i];
   }
-  e.max_speed = std::sqrt(speed2);
+  e.max_speed = max_speed();
   return e;
 }
 
