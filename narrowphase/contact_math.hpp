@@ -305,12 +305,19 @@ MARBLES_HD_INLINE Vec3 clamp_length(const Vec3& v, real limit) {
   return v * (limit / std::sqrt(len2)) + Vec3{};
 }
 
+// The normal speed at which a leaves b, plus the approach the gap allows
+// this substep (separation / h where open): where it is >= 0 the normal
+// constraint asks for no impulse.
+MARBLES_HD_INLINE real normal_slack(const Contact& c, const BodyState& A, const BodyState& B, real inv_h) {
+  const real vn = dot(A.v - B.v, c.normal);
+  const real allowed = c.separation > 0 ? c.separation * inv_h : real(0);
+  return vn + allowed;
+}
+
 // Normal constraint: the gap may close by at most max(separation, 0) this
 // substep (speculative contact); accumulated impulse stays >= 0.
 MARBLES_HD_INLINE void solve_normal(Contact& c, BodyState& A, BodyState& B, real inv_h) {
-  const real vn = dot(A.v - B.v, c.normal);
-  const real allowed = c.separation > 0 ? c.separation * inv_h : real(0);
-  real lambda = -c.normal_mass * (vn + allowed);
+  real lambda = -c.normal_mass * normal_slack(c, A, B, inv_h);
   const real old = c.normal_impulse;
   c.normal_impulse = old + lambda > 0 ? old + lambda : real(0);
   lambda = c.normal_impulse - old;

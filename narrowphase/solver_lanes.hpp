@@ -25,6 +25,8 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
+#include <type_traits>
 #include <utility>
 
 #if defined(__SSE2__)
@@ -501,13 +503,20 @@ MARBLES_LANE void solve_rolling(ContactLanes<V>& c, BodyLanes<V>& A, BodyLanes<V
   B.w = B.w - d * B.inv_inertia;
 }
 
+// normal_slack
+template <class V>
+MARBLES_LANE V normal_slack(const ContactLanes<V>& c, const BodyLanes<V>& A, const BodyLanes<V>& B, real inv_h) {
+  const V zero{};
+  const V vn = dot(A.v - B.v, c.normal);
+  const V allowed = select<V>(c.separation > zero, c.separation * inv_h, zero);
+  return vn + allowed;
+}
+
 // solve_normal
 template <class V>
 MARBLES_LANE void solve_normal(ContactLanes<V>& c, BodyLanes<V>& A, BodyLanes<V>& B, real inv_h) {
   const V zero{};
-  const V vn = dot(A.v - B.v, c.normal);
-  const V allowed = select<V>(c.separation > zero, c.separation * inv_h, zero);
-  V lambda = (-c.normal_mass) * (vn + allowed);
+  V lambda = (-c.normal_mass) * normal_slack(c, A, B, inv_h);
   const V old = c.normal_impulse;
   c.normal_impulse = select<V>(old + lambda > zero, old + lambda, zero);
   lambda = c.normal_impulse - old;
@@ -516,12 +525,43 @@ MARBLES_LANE void solve_normal(ContactLanes<V>& c, BodyLanes<V>& A, BodyLanes<V>
   B.v = B.v - p * B.inv_mass;
 }
 
+// known_idle (solver_math.hpp) lane by lane, on the bits: +0 is the word 0
+// and -0 the word with the sign bit alone.
+template <class V>
+MARBLES_LANE MaskOf<V> bits_of(V x) {
+  return (MaskOf<V>)x;  // the same bits as integer lanes
+}
+template <class V>
+MARBLES_LANE MaskOf<V> is_plus_zero(const V3<V>& v) {
+  return (bits_of(v.x) | bits_of(v.y) | bits_of(v.z)) == MaskOf<V>{};
+}
+template <class V>
+MARBLES_LANE MaskOf<V> has_minus_zero(const V3<V>& v) {
+  using Bits = std::remove_cvref_t<decltype(MaskOf<V>{}[0])>;
+  const MaskOf<V> minus_zero = MaskOf<V>{} + std::numeric_limits<Bits>::min();
+  return (bits_of(v.x) == minus_zero) | (bits_of(v.y) == minus_zero) | (bits_of(v.z) == minus_zero);
+}
+// True where every lane's update is known idle: the block then writes
+// nothing and does no arithmetic past this test.
+template <bool Friction, bool Rolling, class V>
+MARBLES_LANE bool all_idle(const ContactLanes<V>& c, const BodyLanes<V>& A, const BodyLanes<V>& B, real inv_h) {
+  MaskOf<V> idle = bits_of(c.normal_impulse) == MaskOf<V>{};
+  if constexpr (Friction) idle &= is_plus_zero(c.tangent_impulse);
+  if constexpr (Rolling) idle &= is_plus_zero(c.rolling_impulse);
+  idle &= ~(has_minus_zero(A.v) | has_minus_zero(A.w) | has_minus_zero(B.v) | has_minus_zero(B.w));
+  idle &= normal_slack(c, A, B, inv_h) >= V{};
+  for (std::uint32_t l = 0; l < width<V>; ++l)
+    if (!idle[l]) return false;
+  return true;
+}
+
 // solve_record on records k..k + width<V>, whose contacts share no sphere.
 template <bool Friction, bool Rolling, class V = L>
 MARBLES_LANE void solve_block(const SweepRecords& s, std::uint32_t k, SolverBody* bodies, real inv_h) {
   ContactLanes<V> c = load_records_of<Friction || Rolling, Rolling, V>(s, k);
   BodyLanes<V> A = load_bodies_of<V>(bodies, s, k, false);
   BodyLanes<V> B = load_bodies_of<V>(bodies, s, k, true);
+  if (all_idle<Friction, Rolling>(c, A, B, inv_h)) return;
   c.normal_mass = normal_mass_of(A, B);
   if constexpr (Friction) c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
   if constexpr (Rolling) c.rolling_mass = rolling_mass_of(A, B);

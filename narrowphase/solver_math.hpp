@@ -426,15 +426,36 @@ MARBLES_HD_INLINE bool impulses_clear(const Contact& c) {
 // clear, a body loaded without one kept every bit.
 MARBLES_HD_INLINE bool has_minus_zero(const BodyState& b) { return has_minus_zero(b.v) || has_minus_zero(b.w); }
 
+// An idle update known before its arithmetic: a contact whose impulses are
+// +0 (impulses_clear), whose bodies hold no -0 velocity component, and whose
+// normal term asks for no impulse (normal_slack >= 0) keeps every bit of its
+// impulses and its bodies through the whole update. Its friction and rolling
+// terms, solved first, are clamped to limits of mu * +0 = +0 (the pair
+// table's coefficients are finite), so clamp_length gives +0 and the twist's
+// clamp a zero, each term applying a zero that changes no velocity component
+// but a -0; the bodies' velocities are then the loaded ones, so the normal
+// term sees this same slack, and -m * slack (m >= 0) is not > 0: it sets the
+// literal +0 and applies a zero. In a settled pile about half the updates
+// are such (in-plane neighbours whose gaps no speed closes): the sweeps skip
+// their effective masses and terms (solve_loaded; the CPU's lanes where a
+// whole block is idle, solver_lanes.hpp all_idle), the same bits.
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE bool known_idle(const Contact& c, const BodyState& A, const BodyState& B, real inv_h) {
+  return impulses_clear<Friction, Rolling>(c) && !has_minus_zero(A) && !has_minus_zero(B) &&
+         normal_slack(c, A, B, inv_h) >= 0;
+}
+
 // One sweep's update of record k (the GPU's sweep kernel): solve_one on the
 // loaded contact, its effective masses computed from the bodies as the
 // prepare stage computed them (contact_math.hpp), only the ones the terms
-// read; written back where it changed something (above).
+// read; written back where it changed something (above); nothing at all
+// done where the update is known idle.
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void solve_loaded(const SweepRecords& s, std::uint32_t k, Contact c, SolverBody* bodies,
                                     real inv_h) {
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
+  if (known_idle<Friction, Rolling>(c, A, B, inv_h)) return;
   const bool was_clear = impulses_clear<Friction, Rolling>(c);
   // Asked only where the update may leave everything as it was: a contact
   // that carried an impulse writes its bodies anyway.

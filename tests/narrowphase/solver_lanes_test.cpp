@@ -13,6 +13,7 @@
 #include <cstring>
 #include <numeric>
 #include <random>
+#include <type_traits>
 #include <vector>
 
 #include <signal.h>
@@ -131,6 +132,14 @@ constexpr std::uint32_t WW = lanes::width<lanes::Wide>;
 template <bool Friction, bool Rolling>
 [[gnu::target("avx2")]] void solve_wide_block(const SweepRecords& s, SolverBody* bodies, real inv_h) {
   lanes::solve_block<Friction, Rolling, lanes::Wide>(s, 0, bodies, inv_h);
+}
+
+template <bool Friction, bool Rolling>
+[[gnu::target("avx2")]] bool wide_all_idle(const SweepRecords& s, const SolverBody* bodies, real inv_h) {
+  using V = lanes::Wide;
+  return lanes::all_idle<Friction, Rolling>(lanes::load_records_of<Friction || Rolling, Rolling, V>(s, 0),
+                                            lanes::load_bodies_of<V>(bodies, s, 0, false),
+                                            lanes::load_bodies_of<V>(bodies, s, 0, true), inv_h);
 }
 
 // One block (W records, or WW with Wide) solved side by side against
@@ -321,6 +330,147 @@ TEST(SweepRecords, WhatIsNotWrittenBackIsUnchanged) {
   const int updates = 4 * 300 * 2 * static_cast<int>(W);
   EXPECT_GT(clear, updates / 2) << "of " << updates;  // 61 %; 24 % with the clamps' -0 left in
   EXPECT_GT(kept, clear / 2) << clear << " clear updates";
+}
+
+// known_idle against the whole update: where it says idle, the effective
+// masses and the three terms change no bit of the impulses or of either body.
+// Cases: unloaded contacts (gaps open, spheres moving at random, with and
+// without signed-zero velocity components) and make_case's edge cases
+// (static bodies, walls, subnormal and signed-zero velocities, gaps of +0 and
+// -0, friction 0 and 10^6). Counts the updates it calls idle, and for each of
+// its conditions the updates where that one alone fails and the update does
+// change a bit (the condition is needed: without it the test would fail).
+struct IdleCounts {
+  int updates = 0, idle = 0, needs_clear = 0, needs_no_minus_zero = 0, needs_slack = 0;
+};
+bool update_changes_a_bit(Contact c, BodyState A, BodyState B, real inv_h, bool friction, bool rolling) {
+  const Contact c0 = c;
+  const BodyState A0 = A, B0 = B;
+  auto solve = [&]<bool F, bool R>() {
+    set_masses<F, R>(c, A, B);
+    solve_states<F, R>(c, A, B, inv_h);
+  };
+  if (friction && rolling) solve.template operator()<true, true>();
+  else if (friction) solve.template operator()<true, false>();
+  else if (rolling) solve.template operator()<false, true>();
+  else solve.template operator()<false, false>();
+  return !same_bits(&A.v, &A0.v, sizeof(Vec3)) || !same_bits(&A.w, &A0.w, sizeof(Vec3)) ||
+         !same_bits(&B.v, &B0.v, sizeof(Vec3)) || !same_bits(&B.w, &B0.w, sizeof(Vec3)) ||
+         !same_bits(&c.normal_impulse, &c0.normal_impulse, sizeof(real)) ||
+         (friction && !same_bits(&c.tangent_impulse, &c0.tangent_impulse, sizeof(Vec3))) ||
+         (rolling && !same_bits(&c.rolling_impulse, &c0.rolling_impulse, sizeof(Vec3)));
+}
+template <bool Friction, bool Rolling>
+void expect_known_idle_changes_nothing(IdleCounts& n) {
+  const real inv_h = real(1000);
+  for (std::uint32_t seed = 1; seed <= 300; ++seed)
+    for (int kind = 0; kind < 3; ++kind) {
+      std::mt19937 rng(seed);
+      const Case start = kind == 2 ? make_case(rng, true) : unloaded_case(rng, kind == 1);
+      for (Contact c : start.contacts) {
+        const BodyState A = load_body(start.bodies.data(), c.a, c), B = load_body(start.bodies.data(), c.b, c);
+        const bool changes = update_changes_a_bit(c, A, B, inv_h, Friction, Rolling);
+        ++n.updates;
+        const bool clear = impulses_clear<Friction, Rolling>(c);
+        const bool no_minus_zero = !has_minus_zero(A) && !has_minus_zero(B);
+        const bool slack = normal_slack(c, A, B, inv_h) >= 0;
+        if (known_idle<Friction, Rolling>(c, A, B, inv_h)) {
+          ++n.idle;
+          ASSERT_FALSE(changes) << "seed " << seed << " kind " << kind;
+        }
+        n.needs_clear += !clear && no_minus_zero && slack && changes;
+        n.needs_no_minus_zero += clear && !no_minus_zero && slack && changes;
+        n.needs_slack += clear && no_minus_zero && !slack && changes;
+      }
+    }
+}
+
+TEST(SweepRecords, AnUpdateKnownIdleChangesNoBit) {
+  IdleCounts n;
+  expect_known_idle_changes_nothing<true, true>(n);
+  expect_known_idle_changes_nothing<true, false>(n);
+  expect_known_idle_changes_nothing<false, true>(n);
+  expect_known_idle_changes_nothing<false, false>(n);
+  EXPECT_GT(n.idle, n.updates / 4) << "of " << n.updates;
+  EXPECT_GT(n.needs_clear, 0);
+  EXPECT_GT(n.needs_no_minus_zero, 0);
+  EXPECT_GT(n.needs_slack, 0);
+}
+
+// A block of `count` unloaded contacts whose gaps allow more approach than
+// their spheres can have (|v| <= 1.8 m/s, a gap of 4 mm at h = 1 ms): every
+// update idle, unless a body has a -0 velocity component (`zeros`).
+Case idle_case(std::mt19937& rng, bool zeros, std::uint32_t count) {
+  std::uniform_int_distribution<int> pick(0, 7);
+  Case c = make_case(rng, false, count);
+  for (SolverBody& b : c.bodies)
+    if (zeros && pick(rng) == 0) b.w.y = -real(0);
+  for (Contact& k : c.contacts) {
+    k.normal_impulse = 0, k.tangent_impulse = {}, k.rolling_impulse = {};
+    k.separation = real(4e-3);
+    prepare_one(k, c.bodies.data());
+  }
+  return c;
+}
+
+// Whole idle blocks (all_idle: the block returns before its arithmetic and
+// writes nothing) against solve_one contact by contact, over three sweeps,
+// for every effect set and both widths; blocks with a -0 go the whole way.
+// Counts the blocks all_idle passes (the return is taken) and those it
+// refuses.
+template <bool Friction, bool Rolling, bool Wide>
+void expect_idle_blocks_equal_scalar(std::uint32_t seed, bool zeros, int& skipped, int& solved) {
+  constexpr std::uint32_t count = Wide ? WW : W;
+  std::mt19937 rng(seed);
+  Case scalar = idle_case(rng, zeros, count), block = scalar;
+  RecordsMemory memory(count);
+  const SweepRecords records = memory.records();
+  for (std::uint32_t k = 0; k < count; ++k) pack_sweep_record(block.contacts[k], records, k);
+  const real inv_h = real(1000);
+  for (int sweep = 0; sweep < 3; ++sweep) {
+    using V = std::conditional_t<Wide, lanes::Wide, lanes::L>;
+    bool idle = false;
+    if constexpr (Wide) idle = wide_all_idle<Friction, Rolling>(records, block.bodies.data(), inv_h);
+    else
+      idle = lanes::all_idle<Friction, Rolling>(lanes::load_records_of<Friction || Rolling, Rolling, V>(records, 0),
+                                                lanes::load_bodies_of<V>(block.bodies.data(), records, 0, false),
+                                                lanes::load_bodies_of<V>(block.bodies.data(), records, 0, true), inv_h);
+    (idle ? skipped : solved) += 1;
+    for (Contact& c : scalar.contacts) solve_one<Friction, Rolling>(c, scalar.bodies.data(), inv_h);
+    if constexpr (Wide) solve_wide_block<Friction, Rolling>(records, block.bodies.data(), inv_h);
+    else lanes::solve_block<Friction, Rolling>(records, 0, block.bodies.data(), inv_h);
+    for (std::uint32_t k = 0; k < count; ++k) unpack_sweep_impulses(records, k, block.contacts[k]);
+    ASSERT_TRUE(same_bits(scalar.contacts.data(), block.contacts.data(), sizeof(Contact) * count))
+        << "seed " << seed << " sweep " << sweep;
+    ASSERT_TRUE(same_bits(scalar.bodies.data(), block.bodies.data(), sizeof(SolverBody) * scalar.bodies.size()))
+        << "seed " << seed << " sweep " << sweep;
+  }
+}
+
+template <bool Wide>
+void expect_idle_blocks(int& skipped, int& solved) {
+  for (std::uint32_t seed = 1; seed <= 100; ++seed)
+    for (bool zeros : {false, true}) {
+      expect_idle_blocks_equal_scalar<true, true, Wide>(seed, zeros, skipped, solved);
+      expect_idle_blocks_equal_scalar<true, false, Wide>(seed, zeros, skipped, solved);
+      expect_idle_blocks_equal_scalar<false, true, Wide>(seed, zeros, skipped, solved);
+      expect_idle_blocks_equal_scalar<false, false, Wide>(seed, zeros, skipped, solved);
+    }
+}
+
+TEST(SolverLanes, IdleBlocksEqualSolveOneBitForBit) {
+  int skipped = 0, solved = 0;
+  expect_idle_blocks<false>(skipped, solved);
+  EXPECT_GT(skipped, 600) << solved << " solved";  // of 2400: every block without a -0 is idle
+  EXPECT_GT(solved, 300) << skipped << " skipped";
+}
+
+TEST(SolverLanes, WideIdleBlocksEqualSolveOneBitForBit) {
+  if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "skipped: this CPU has no AVX2";
+  int skipped = 0, solved = 0;
+  expect_idle_blocks<true>(skipped, solved);
+  EXPECT_GT(skipped, 600) << solved << " solved";
+  EXPECT_GT(solved, 300) << skipped << " skipped";
 }
 
 // A contact's records and bodies in pages of their own, read-only once
