@@ -162,17 +162,18 @@ std::uint32_t ContactColouring::colour(Runs<const Contact> contacts, const std::
 }
 
 void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
-                                       const std::uint8_t* kept_colour, const BodiesView* prepare, real rest_speed) {
+                                       const std::uint8_t* kept_colour, const BodiesView* prepare, real rest_speed,
+                                       const std::uint8_t* loaded) {
   // Gathered into the colouring's own buffer (it holds the last call's
   // contacts, so resize() makes few), then swapped in.
   colour_and_sort(ContactRuns(contacts.data()), contacts.size(), m_sorted, body_count, out, kept_colour, prepare,
-                  rest_speed);
+                  rest_speed, loaded);
   contacts.swap(m_sorted);
 }
 
 void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_in, std::vector<Contact>& sorted_out,
                                        std::size_t body_count, ColourRanges& out, const std::uint8_t* kept_colour,
-                                       const BodiesView* prepare, real rest_speed) {
+                                       const BodiesView* prepare, real rest_speed, const std::uint8_t* loaded) {
   const auto n = static_cast<std::uint32_t>(count_in);
   m_rank.resize(n);
   m_colour.resize(n);
@@ -196,21 +197,33 @@ void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_i
   out.colours = colour(contacts, m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
                        &out.rounds, &m_kept);
 
-  // Colour-major, index order within a colour (a stable counting sort, in
-  // parallel): each place's contact first, then the contacts gathered place
-  // by place, each prepared on its way when asked. Gathered, the 112-byte
-  // contacts are written in order and read ahead of need; moved contact by
-  // contact to their places, each write landed on its own lines and the
-  // move waited on them (settle scene of 10^5, 2 threads: see
-  // docs/architecture.md "The CPU's colour-major gather").
+  // Colour-major, within a colour the loaded part then the unloaded one,
+  // each in index order (a stable counting sort, in parallel): each place's
+  // contact first, then the contacts gathered place by place, each prepared
+  // on its way when asked. Gathered, the 112-byte contacts are written in
+  // order and read ahead of need; moved contact by contact to their places,
+  // each write landed on its own lines and the move waited on them (settle
+  // scene of 10^5, 2 threads: see docs/architecture.md "The CPU's
+  // colour-major gather").
   m_source.resize(n);
   std::uint32_t* source = m_source.data();
   const std::uint32_t* colour_of = m_colour.data();
-  const std::uint32_t overflow_bucket = out.colours;
+  const std::uint32_t colours = out.colours, overflow_bucket = 2 * colours;
   counting_sort(
-      n, out.colours + 1,  // the colours, then the overflow set
-      [&](std::uint32_t k) { return colour_of[k] == kOverflowColour ? overflow_bucket : colour_of[k]; },
-      [&](std::uint32_t k, std::uint32_t place) { source[place] = k; }, out.begin, m_bucket_count);
+      n, overflow_bucket + 1,  // the colours' two parts, then the overflow set
+      [&](std::uint32_t k) {
+        const std::uint32_t c = colour_of[k];
+        return c == kOverflowColour ? overflow_bucket : colour_part_key(c, loaded && loaded[k] != 0);
+      },
+      [&](std::uint32_t k, std::uint32_t place) { source[place] = k; }, m_part_begin, m_bucket_count);
+  out.begin.resize(colours + 2);
+  out.unloaded.resize(colours);
+  for (std::uint32_t c = 0; c < colours; ++c) {
+    out.begin[c] = m_part_begin[2 * c];
+    out.unloaded[c] = m_part_begin[2 * c + 1];
+  }
+  out.begin[colours] = m_part_begin[overflow_bucket];
+  out.begin[colours + 1] = n;
   // resize() makes (value-initialises) only the contacts past its size: the
   // callers hand a buffer that kept the last substep's.
   sorted_out.resize(n);

@@ -24,6 +24,10 @@ namespace marbles::narrowphase {
 // a colour may be empty (its contacts all gone).
 struct ColourRanges {
   std::vector<std::uint32_t> begin{0, 0};
+  // Colour c's contacts that carried a load in are [begin[c], unloaded[c]),
+  // the others [unloaded[c], begin[c + 1]) (colour_part_key); one word a
+  // colour, or none where the colouring was not told the loads.
+  std::vector<std::uint32_t> unloaded;
   std::uint32_t colours = 0;
   std::uint32_t rounds = 0;  // colouring rounds it took
   // Whether a contact may approach faster than the rest speed given to
@@ -31,6 +35,8 @@ struct ColourRanges {
   // (the impact stage then skips its scan for candidates: a pile at rest).
   bool fast_approach = true;
   std::size_t overflow() const { return begin[colours + 1] - begin[colours]; }
+  // Where colour c's unloaded contacts start (its end where not told).
+  std::uint32_t unloaded_from(std::uint32_t c) const { return unloaded.empty() ? begin[c + 1] : unloaded[c]; }
   std::size_t size() const { return begin[colours + 1]; }
 };
 
@@ -53,20 +59,22 @@ class ContactColouring {
   // The solver colouring of all contacts: contact k keeps kept_colour[k] when
   // it is not kNoKeptColour (kept_colour null: none kept), the others are
   // coloured by contact_rank around them; then puts `contacts` in
-  // colour-major order. With `prepare` (the world's bodies) each contact is
-  // also prepared on its way (prepare_from_world, solver_math.hpp): the
-  // solver is then told the contacts are prepared.
+  // colour-major order, within each colour those that carry a load
+  // (loaded[k] not 0; loaded null: none does) before the others
+  // (colour_part_key; out.unloaded). With `prepare` (the world's bodies)
+  // each contact is also prepared on its way (prepare_from_world,
+  // solver_math.hpp): the solver is then told the contacts are prepared.
   // `rest_speed`: with `prepare`, out.fast_approach tells whether a contact
   // approaches faster (is_impact_candidate).
   void colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
                        const std::uint8_t* kept_colour = nullptr, const BodiesView* prepare = nullptr,
-                       real rest_speed = 0);
+                       real rest_speed = 0, const std::uint8_t* loaded = nullptr);
   // The same for `count` contacts held in runs (Runs), gathered in
   // colour-major order into `sorted` (whose contents go; it holds none of
   // the runs).
   void colour_and_sort(ContactRuns contacts, std::size_t count, std::vector<Contact>& sorted, std::size_t body_count,
                        ColourRanges& out, const std::uint8_t* kept_colour = nullptr,
-                       const BodiesView* prepare = nullptr, real rest_speed = 0);
+                       const BodiesView* prepare = nullptr, real rest_speed = 0, const std::uint8_t* loaded = nullptr);
 
  private:
   void prefetch_ahead(Runs<const Contact> contacts, std::size_t t, std::size_t count) const;
@@ -78,7 +86,7 @@ class ContactColouring {
   static constexpr int kMostOwnMasks = 4;
   std::vector<std::uint32_t> m_body_next_round;
   std::vector<std::uint32_t> m_all, m_kept, m_colour, m_bucket_count, m_order, m_sort_values, m_high, m_sort_high,
-      m_source;
+      m_source, m_part_begin;
   std::vector<Contact> m_sorted;
 };
 

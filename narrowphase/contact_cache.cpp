@@ -23,7 +23,8 @@ constexpr std::ptrdiff_t kParallelFrom = 20000;
 
 std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count, const std::uint64_t* keys,
                                         const real* normal_impulse, const std::uint8_t* matched,
-                                        std::size_t entry_count, const BodiesView& bodies, real weight_impulse) {
+                                        std::size_t entry_count, const BodiesView& bodies, real weight_impulse,
+                                        std::uint8_t* loaded) {
   std::vector<std::uint32_t> unloaded;
   for (std::size_t k = 0; k < entry_count; ++k) {
     if (matched[k]) continue;
@@ -65,6 +66,7 @@ std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count,
     c.normal_impulse = 0;
     c.tangent_impulse = Vec3{};
     c.rolling_impulse = Vec3{};
+    if (loaded) loaded[t] = 0;
     ++set_cold;
   }
   return set_cold;
@@ -153,13 +155,16 @@ bool keep_proper_colours(CacheEntries& e) {
 }
 
 std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse,
-                                  std::vector<std::uint8_t>& kept_colour) {
-  return restore(ContactRuns(contacts.data()), contacts.size(), bodies, weight_impulse, kept_colour);
+                                  std::vector<std::uint8_t>& kept_colour, std::vector<std::uint8_t>* loaded) {
+  return restore(ContactRuns(contacts.data()), contacts.size(), bodies, weight_impulse, kept_colour, loaded);
 }
 
 std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies,
-                                  real weight_impulse, std::vector<std::uint8_t>& kept_colour) {
+                                  real weight_impulse, std::vector<std::uint8_t>& kept_colour,
+                                  std::vector<std::uint8_t>* loaded) {
   kept_colour.assign(count, kNoKeptColour);
+  if (loaded) loaded->assign(count, 0);
+  std::uint8_t* carried = loaded ? loaded->data() : nullptr;
   const auto m = static_cast<std::uint32_t>(m_entries.size());
   if (m == 0) return 0;
   const std::uint8_t* colour = m_entries.colour.size() == m ? m_entries.colour.data() : nullptr;
@@ -181,12 +186,13 @@ std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const
     const std::uint32_t k = find_in_run(keys, first[c.a], first[c.a + 1], cache_key(c.a, c.b));
     if (k == first[c.a + 1]) continue;
     restore_impulses(c, m_entries.normal_impulse[k], m_entries.tangent_impulse[k], m_entries.rolling_impulse[k]);
+    if (carried) carried[t] = carries_load(m_entries.normal_impulse[k]) ? 1 : 0;
     if (colour) kept_colour[t] = colour[k];
     m_matched[k] = 1;  // keys are unique: one contact per entry
     ++matched;
   }
   return matched - cold_start_unloaded_islands(contacts, count, keys, m_entries.normal_impulse.data(),
-                                                m_matched.data(), m, bodies, weight_impulse);
+                                                m_matched.data(), m, bodies, weight_impulse, carried);
 }
 
 void ContactCache::store(const std::vector<Contact>& contacts, const ColourRanges& ranges) {

@@ -75,10 +75,12 @@ bool keep_proper_colours(CacheEntries& entries);
 // k found its contact. Returns the number of contacts it set cold. Islands
 // by union-find here; the CUDA twin finds the same islands by min-label
 // propagation (contact_cache_cuda.cu).
-// `contacts`: `count` of them, in runs (Runs).
+// `contacts`: `count` of them, in runs (Runs). `loaded` (not null): one
+// flag a contact, cleared where a contact is set cold.
 std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count, const std::uint64_t* keys,
                                         const real* normal_impulse, const std::uint8_t* matched,
-                                        std::size_t entry_count, const BodiesView& bodies, real weight_impulse);
+                                        std::size_t entry_count, const BodiesView& bodies, real weight_impulse,
+                                        std::uint8_t* loaded = nullptr);
 
 class ContactCache {
  public:
@@ -87,11 +89,14 @@ class ContactCache {
   // number of contacts warm-started. `kept_colour` (one per contact) gets the
   // colour of each matching entry, kNoKeptColour for the others (also for
   // those of an island started cold: a colour does not depend on impulses).
+  // `loaded` (not null; one per contact) gets whether each contact carries
+  // a load in (carries_load of its restored normal impulse), which the
+  // colouring orders by.
   std::size_t restore(std::vector<Contact>& contacts, const BodiesView& bodies, real weight_impulse,
-                      std::vector<std::uint8_t>& kept_colour);
+                      std::vector<std::uint8_t>& kept_colour, std::vector<std::uint8_t>* loaded = nullptr);
   // The same for `count` contacts held in runs (Runs).
   std::size_t restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies, real weight_impulse,
-                      std::vector<std::uint8_t>& kept_colour);
+                      std::vector<std::uint8_t>& kept_colour, std::vector<std::uint8_t>* loaded = nullptr);
   // Remembers the impulses and colours of `contacts` (colour-major, as
   // `ranges` says) for the next substep.
   void store(const std::vector<Contact>& contacts, const ColourRanges& ranges);

@@ -46,6 +46,12 @@ MARBLES_HD_INLINE void restore_impulses(Contact& c, real normal, const Vec3& tan
   c.rolling_impulse = rolling;
 }
 
+// Whether a contact carries a load into its substep: the normal impulse it
+// was restored with (after the island rule) is positive. The colouring puts
+// such contacts first within their colour (colouring_math.hpp
+// colour_part_key).
+MARBLES_HD_INLINE bool carries_load(real restored_normal) { return restored_normal > 0; }
+
 // A lost contact counts as a lost load when it carried more than 4 times the
 // weight impulse m |g| h of its sphere (sphere a, inverse mass inv_mass_a).
 MARBLES_HD_INLINE bool is_lost_load(real normal_impulse, real inv_mass_a, real weight_impulse) {

@@ -68,6 +68,14 @@ void for_colour_ahead(const SweepRecords& s, std::uint32_t begin, std::uint32_t 
   }
 }
 
+// The last records of a part of a colour, fewer than a block of the
+// sweep's lanes: blocks of lanes::W, then one by one.
+template <bool Friction, bool Rolling>
+void sweep_rest(const SweepRecords& s, std::uint32_t k, std::uint32_t end, SolverBody* bodies, real inv_h) {
+  for (; end - k >= lanes::W; k += lanes::W) lanes::solve_block<Friction, Rolling>(s, k, bodies, inv_h);
+  for (; k < end; ++k) solve_record<Friction, Rolling>(s, k, bodies, inv_h);
+}
+
 // Block t of a colour's sweep: width<V> records side by side
 // (solver_lanes.hpp, the same bits as solve_record), the bodies of the next
 // ones asked for first.
@@ -80,23 +88,33 @@ template <class V, bool Friction, bool Rolling>
   lanes::solve_block<Friction, Rolling, V>(s, k, bodies, inv_h);
 }
 
-// The sweep over one colour: blocks of width<V> records, then blocks of
-// lanes::W, the rest one by one; defined once per lane kind, each compiled
-// for its instruction set (ATTRIBUTE). The OpenMP loop must sit in that
-// function: its outlined body takes the target of the function it is
-// written in, not of the callee inlined into it. No FMA in any target, so
-// every operation rounds as the scalar's.
+// The sweep over one colour, its two parts ([begin, split) the contacts that
+// carried a load in, [split, end) the others: colour_part_key) each in
+// blocks of width<V> records, each part's blocks dealt out in halves, so
+// that each thread takes as many of the unloaded part's blocks, which are
+// mostly idle (lanes::all_idle), as the other, and works on the same half of
+// the colour's spheres in both; then each part's rest in blocks of lanes::W
+// and one by one. Defined once per lane kind, each compiled for its
+// instruction set (ATTRIBUTE). The OpenMP loops must sit in that function:
+// their outlined bodies take the target of the function they are written
+// in, not of the callee inlined into it. No FMA in any target, so every
+// operation rounds as the scalar's.
 #define MARBLES_SWEEP_RANGE(NAME, ATTRIBUTE, V)                                                                  \
   template <bool Friction, bool Rolling>                                                                         \
-  [[ATTRIBUTE]] void NAME(const SweepRecords& s, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,    \
-                          real inv_h) {                                                                          \
+  [[ATTRIBUTE]] void NAME(const SweepRecords& s, std::uint32_t begin, std::uint32_t split, std::uint32_t end,    \
+                          SolverBody* bodies, real inv_h) {                                                      \
     constexpr std::uint32_t w = lanes::width<V>;                                                                 \
-    const auto blocks = static_cast<std::ptrdiff_t>((end - begin) / w);                                          \
-    _Pragma("omp parallel for schedule(static) if (blocks * w >= kParallelFrom)")                                \
-    for (std::ptrdiff_t t = 0; t < blocks; ++t) sweep_block<V, Friction, Rolling>(s, begin, end, t, bodies, inv_h); \
-    std::uint32_t k = begin + static_cast<std::uint32_t>(blocks) * w;                                            \
-    for (; end - k >= lanes::W; k += lanes::W) lanes::solve_block<Friction, Rolling>(s, k, bodies, inv_h);      \
-    for (; k < end; ++k) solve_record<Friction, Rolling>(s, k, bodies, inv_h);                                   \
+    const auto loaded = static_cast<std::ptrdiff_t>((split - begin) / w);                                        \
+    const auto unloaded = static_cast<std::ptrdiff_t>((end - split) / w);                                        \
+    _Pragma("omp parallel if (end - begin >= kParallelFrom)")                                                    \
+    {                                                                                                            \
+      _Pragma("omp for schedule(static) nowait")                                                                 \
+      for (std::ptrdiff_t t = 0; t < loaded; ++t) sweep_block<V, Friction, Rolling>(s, begin, split, t, bodies, inv_h); \
+      _Pragma("omp for schedule(static) nowait")                                                                 \
+      for (std::ptrdiff_t t = 0; t < unloaded; ++t) sweep_block<V, Friction, Rolling>(s, split, end, t, bodies, inv_h); \
+    }                                                                                                            \
+    sweep_rest<Friction, Rolling>(s, begin + static_cast<std::uint32_t>(loaded) * w, split, bodies, inv_h);      \
+    sweep_rest<Friction, Rolling>(s, split + static_cast<std::uint32_t>(unloaded) * w, end, bodies, inv_h);      \
   }
 MARBLES_SWEEP_RANGE(sweep_range_sse2, , lanes::L)
 MARBLES_SWEEP_RANGE(sweep_range_avx2, gnu::target("avx2"), lanes::Wide)
@@ -197,6 +215,26 @@ void over_colours(const ColourRanges& colours, bool backwards, F&& range) {
                     for (std::uint32_t k = e; k > b; --k) range(k - 1, k);
                   else
                     for (std::uint32_t k = b; k < e; ++k) range(k, k + 1);
+                });
+}
+
+// The sweeps' walk: over_colours with each colour's parts,
+// range(begin, split, end) ([begin, split) the contacts that carried a load
+// in); the overflow set one contact at a time, range(k, k + 1, k + 1). The
+// colours come in visit_colours's order, one call each, counted off here.
+template <class F>
+void over_colour_parts(const ColourRanges& colours, bool backwards, F&& range) {
+  std::uint32_t c = backwards ? colours.colours : 0;
+  visit_colours(colours.begin, colours.colours, backwards,
+                [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
+                  if (!serial) {
+                    const std::uint32_t colour = backwards ? --c : c++;
+                    return range(b, colours.unloaded_from(colour), e);
+                  }
+                  if (reversed)
+                    for (std::uint32_t k = e; k > b; --k) range(k - 1, k, k);
+                  else
+                    for (std::uint32_t k = b; k < e; ++k) range(k, k + 1, k + 1);
                 });
 }
 
@@ -345,8 +383,9 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
   if (m_local) local_sweeps(colours, world, bodies, inv_h);
   else
     for (int it = 0; it < m_settings.iterations; ++it)
-      over_colours(colours, it % 2 == 1,
-                   [&](std::uint32_t b, std::uint32_t e) { m_sweep(records, b, e, bodies, inv_h); });
+      over_colour_parts(colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t split, std::uint32_t e) {
+        m_sweep(records, b, split, e, bodies, inv_h);
+      });
   m_pending_from = contacts.data();
   if (unpack == Unpack::now) unpack_impulses(contacts);
 #pragma omp parallel for schedule(static) if (n > 20000)

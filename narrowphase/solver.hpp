@@ -150,13 +150,16 @@ class ContactSolver {
 
   using RangeFn = void (*)(const SweepRecords& records, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
                            real inv_h);
+  // A colour's sweep: [begin, split) the contacts that carried a load in.
+  using SweepFn = void (*)(const SweepRecords& records, std::uint32_t begin, std::uint32_t split, std::uint32_t end,
+                           SolverBody* bodies, real inv_h);
   using ImpactFn = bool (*)(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
                             SolverBody* bodies, const ImpactParams& p, std::uint8_t* hit_spheres,
                             std::uint64_t* passed);
   SolverSettings m_settings;
   SweepLanes m_lanes = SweepLanes::sse2;
   bool m_rebounds = false;  // an impact hit in this substep's solve (some contact has a rebound shift)
-  RangeFn m_sweep = nullptr;
+  SweepFn m_sweep = nullptr;
   RangeFn m_warm_start = nullptr;
   ImpactFn m_impact = nullptr;
 

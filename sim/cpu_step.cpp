@@ -68,11 +68,13 @@ class CpuStep final : public StepBackend {
   void colour_contacts() override {
     const std::size_t n = contact_count();
     const bool kept = m_kept_colour.size() == n && n > 0;
+    const bool loads = m_loaded.size() == n && n > 0;
     // Prepared on the way: nothing moves the bodies before the solve. The
     // runs of the contact search become one list here, m_contacts.
     const BodiesView bodies = m_world.view();
     m_colouring.colour_and_sort(contact_runs(), n, m_contacts, m_world.size(), m_colours,
-                                kept ? m_kept_colour.data() : nullptr, &bodies, m_model.solver.rest_speed);
+                                kept ? m_kept_colour.data() : nullptr, &bodies, m_model.solver.rest_speed,
+                                loads ? m_loaded.data() : nullptr);
     m_counters.colours = std::max(m_counters.colours, m_colours.colours);
     m_counters.overflow += m_colours.overflow();
   }
@@ -81,9 +83,10 @@ class CpuStep final : public StepBackend {
   // the colour they had (kept by the colouring).
   void warm_start() override {
     m_kept_colour.clear();
+    m_loaded.clear();
     if (contact_count() == 0) return;
     m_cache.restore(contact_runs(), contact_count(), m_world.view(),
-                    m_model.gravity ? length(m_model.g) * m_model.substep() : real(0), m_kept_colour);
+                    m_model.gravity ? length(m_model.g) * m_model.substep() : real(0), m_kept_colour, &m_loaded);
   }
 
   void solve_velocities(real h) override {
@@ -213,6 +216,7 @@ class CpuStep final : public StepBackend {
   }
   narrowphase::ColourRanges m_colours;
   std::vector<std::uint8_t> m_kept_colour;  // per contact: its colour of the last substep, or none
+  std::vector<std::uint8_t> m_loaded;       // per contact: whether it carries a load in (the colouring orders by it)
   StepCounters m_counters;
   bool m_non_finite = false;
   bool m_watch = false;

@@ -104,26 +104,39 @@ std::vector<std::uint32_t> greedy_colours(const std::vector<Contact>& contacts,
   return colour;
 }
 
+// `loaded`: which contacts carry a load in (empty: none); each colour then
+// holds its loaded contacts first, then the others, each part in index
+// order (the overflow set in index order alone).
 void expect_matches_oracle(const std::vector<Contact>& input, std::uint32_t bodies,
-                           const std::vector<std::uint8_t>& kept = {}) {
+                           const std::vector<std::uint8_t>& kept = {}, const std::vector<std::uint8_t>& loaded = {}) {
   std::vector<Contact> contacts = input;
   ColourRanges ranges;
-  ContactColouring().colour_and_sort(contacts, bodies, ranges, kept.empty() ? nullptr : kept.data());
+  ContactColouring().colour_and_sort(contacts, bodies, ranges, kept.empty() ? nullptr : kept.data(), nullptr, 0,
+                                     loaded.empty() ? nullptr : loaded.data());
   ASSERT_EQ(contacts.size(), input.size());
   EXPECT_EQ(ranges.size(), input.size());
+  ASSERT_EQ(ranges.unloaded.size(), ranges.colours);
   EXPECT_TRUE(colouring_is_proper(contacts, ranges, bodies));
   const std::vector<std::uint32_t> expect = greedy_colours(input, kept);
   std::vector<int> seen(input.size(), 0);
-  for (std::uint32_t c = 0; c <= ranges.colours; ++c)
+  for (std::uint32_t c = 0; c <= ranges.colours; ++c) {
+    const std::uint32_t split = c < ranges.colours ? ranges.unloaded_from(c) : ranges.begin[c];
+    ASSERT_LE(ranges.begin[c], split);
+    ASSERT_LE(split, ranges.begin[c + 1]);
     for (std::uint32_t k = ranges.begin[c]; k < ranges.begin[c + 1]; ++k) {
       const auto tag = static_cast<std::size_t>(contacts[k].separation);
       ++seen[tag];
       const std::uint32_t want = expect[tag] == kOverflowColour ? ranges.colours : expect[tag];
       ASSERT_EQ(c, want) << "contact " << tag;
-      if (k > ranges.begin[c]) {
-        EXPECT_LT(contacts[k - 1].separation, contacts[k].separation) << "index order in a colour";
+      if (c < ranges.colours) {
+        const bool is_loaded = !loaded.empty() && loaded[tag] != 0;
+        EXPECT_EQ(is_loaded, k < split) << "contact " << tag << ": the loaded part first";
+      }
+      if (k > ranges.begin[c] && k != split) {
+        EXPECT_LT(contacts[k - 1].separation, contacts[k].separation) << "index order in a part";
       }
     }
+  }
   for (std::size_t k = 0; k < seen.size(); ++k) EXPECT_EQ(seen[k], 1) << "contact " << k;
 
   // The data-parallel form (the GPU's) colours every contact alike.
@@ -174,6 +187,30 @@ TEST(Colouring, MatchesSequentialGreedyOnRandomSets) {
     const std::size_t max_pairs = std::size_t(bodies) * (bodies - 1) / 2;
     const std::size_t count = std::min<std::size_t>(max_pairs, rng() % 9000);
     expect_matches_oracle(random_contacts(rng, bodies, count, trial % 3 == 0 ? 0.3 : 0.05), bodies);
+  }
+}
+
+// With loads carried in (a random share of the contacts, kept colours or
+// not): the same colours, each colour's loaded contacts first, then the
+// others, each part in index order; none loaded and all loaded as well.
+TEST(Colouring, LoadedContactsComeFirstInTheirColour) {
+  std::mt19937_64 rng(31);
+  for (int trial = 0; trial < 30; ++trial) {
+    const std::uint32_t bodies = 2 + static_cast<std::uint32_t>(rng() % 3000);
+    const std::size_t max_pairs = std::size_t(bodies) * (bodies - 1) / 2;
+    const std::size_t count = std::min<std::size_t>(max_pairs, rng() % 9000);
+    const std::vector<Contact> contacts = random_contacts(rng, bodies, count, 0.1);
+    std::vector<std::uint8_t> kept(contacts.size(), kNoKeptColour), loaded(contacts.size());
+    const int share = trial % 3 == 0 ? 0 : trial % 3 == 1 ? 50 : 100;
+    for (std::size_t k = 0; k < contacts.size(); ++k) loaded[k] = static_cast<int>(rng() % 100) < share ? 1 : 0;
+    expect_matches_oracle(contacts, bodies, {}, loaded);
+    ColourRanges ranges;  // kept colours from a first colouring, then loads
+    std::vector<Contact> first = contacts;
+    ContactColouring().colour_and_sort(first, bodies, ranges);
+    for_each_colour(ranges, [&](std::uint32_t k, std::uint8_t c) {
+      if (rng() % 2 == 0) kept[static_cast<std::size_t>(first[k].separation)] = c;
+    });
+    expect_matches_oracle(contacts, bodies, kept, loaded);
   }
 }
 

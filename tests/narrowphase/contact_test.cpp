@@ -7,6 +7,7 @@
 #include <cstring>
 #include <random>
 #include <set>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -78,14 +79,17 @@ struct Lattice {
   }
 
   // Contacts whose gap closes within h or lies within `reach` of each sphere.
+  // `loaded` (not null, as many flags as contacts or more): which carry a
+  // load in, the colouring's order within each colour.
   std::vector<Contact> contacts(const BodiesView& bodies, const PairTable& table, real h, real reach,
-                                ColourRanges& colours) const {
+                                ColourRanges& colours, const std::vector<std::uint8_t>* loaded = nullptr) const {
     const std::vector<real> reaches(n, reach);
     std::vector<Contact> out, wall;
     sphere_contacts(bodies, pairs.data(), pairs.size(), table, h, reaches.data(), out);
     wall_contacts(bodies, floor, table, h, reaches.data(), wall);
     out.insert(out.end(), wall.begin(), wall.end());
-    ContactColouring().colour_and_sort(out, n, colours, nullptr, &bodies);
+    if (loaded && loaded->size() < out.size()) throw std::logic_error("Lattice::contacts: too few load flags");
+    ContactColouring().colour_and_sort(out, n, colours, nullptr, &bodies, 0, loaded ? loaded->data() : nullptr);
     return out;
   }
 };
@@ -332,6 +336,62 @@ TEST(Solver, EveryLaneKindGivesTheSameBits) {
     }
   }
   if (kinds == 0) GTEST_SKIP() << "skipped: this CPU has only the 16-byte lanes";
+}
+
+// No bit of the solve depends on the order within a colour, nor on where a
+// colour's sweep cuts its two parts (ColourRanges::unloaded: the blocks of
+// lanes and the threads' halves are cut there): the packed lattice (~40 000
+// contacts, colours of thousands) coloured without loads, with a random half
+// of its contacts loaded (each colour's loaded ones first), and with the
+// first order but every colour's cut moved to a random place, each solved
+// over two substeps, each combination of the terms, on two threads: the
+// bodies and every pair's impulses bit for bit.
+TEST(Solver, TheOrderWithinAColourAndItsCutChangeNoBit) {
+  const real r = real(0.01);
+  std::mt19937_64 rng(29);
+  MovingLattice packed = MovingLattice::packed(24, r, rng);
+  Lattice& lattice = packed.lattice;
+  const std::size_t n = lattice.n;
+  const PairTable table = packed.table();
+  const real h = real(1e-3);
+  std::vector<std::uint8_t> half(30 * n);
+  for (std::uint8_t& f : half) f = rng() % 2 == 0 ? 1 : 0;
+  struct Run {
+    std::vector<Contact> contacts;
+    std::vector<Vec3> vel, omega;
+  };
+  const int was = thread_count();
+  set_thread_count(2);
+  auto run = [&](const SolverSettings& s, const std::vector<std::uint8_t>* loaded, bool cut_anywhere) {
+    Run out{{}, packed.vel, packed.omega};
+    const BodiesView bodies = lattice.view(lattice.position.data(), out.vel.data(), out.omega.data());
+    ColourRanges colours;
+    out.contacts = lattice.contacts(bodies, table, h, real(1e-4), colours, loaded);
+    if (cut_anywhere)
+      for (std::uint32_t c = 0; c < colours.colours; ++c)
+        colours.unloaded[c] = colours.begin[c] + static_cast<std::uint32_t>(rng() % (colours.begin[c + 1] - colours.begin[c] + 1));
+    ContactSolver solver(s);
+    for (int substep = 0; substep < 2; ++substep) solver.solve_velocities(out.contacts, colours, bodies, h);
+    std::sort(out.contacts.begin(), out.contacts.end(),
+              [](const Contact& x, const Contact& y) { return std::pair(x.a, x.b) < std::pair(y.a, y.b); });
+    return out;
+  };
+  for (int terms = 0; terms < 4; ++terms) {
+    SolverSettings s;
+    s.friction = terms & 1, s.rolling = terms & 2;
+    const Run plain = run(s, nullptr, false);
+    ASSERT_GT(plain.contacts.size(), 30000u);
+    EXPECT_NE(std::memcmp(plain.vel.data(), packed.vel.data(), sizeof(Vec3) * n), 0);  // the sweeps did work
+    for (const bool cut_anywhere : {false, true}) {
+      const Run other = run(s, &half, cut_anywhere);
+      ASSERT_EQ(plain.contacts.size(), other.contacts.size());
+      EXPECT_EQ(std::memcmp(plain.contacts.data(), other.contacts.data(), sizeof(Contact) * plain.contacts.size()), 0)
+          << "terms " << terms << (cut_anywhere ? ", cut anywhere" : "");
+      EXPECT_EQ(std::memcmp(plain.vel.data(), other.vel.data(), sizeof(Vec3) * n), 0) << "terms " << terms;
+      EXPECT_EQ(std::memcmp(plain.omega.data(), other.omega.data(), sizeof(Vec3) * n), 0) << "terms " << terms;
+    }
+  }
+  set_thread_count(was);
 }
 
 // The impulses left in the sweep's records (Unpack::when_asked, as the CPU
@@ -934,30 +994,39 @@ TEST(ContactRuns, SearchRestoreAndColouringOnRunsEqualTheOneList) {
   std::vector<std::size_t> loaded_by_weight;
   for (const real weight : {real(1e3), real(1e-6)}) {  // no lost load; every gone contact's a lost load
     std::vector<Contact> one = next;
-    std::vector<std::uint8_t> kept_one;
+    std::vector<std::uint8_t> kept_one, loaded_one;
     ContactCache a = cache;
-    const std::size_t warm_one = a.restore(one, bodies, weight, kept_one);
+    const std::size_t warm_one = a.restore(one, bodies, weight, kept_one, &loaded_one);
     std::vector<Contact> coloured_one = one;
     ColourRanges ranges_one;
-    ContactColouring().colour_and_sort(coloured_one, bodies.count, ranges_one, kept_one.data(), &bodies);
+    ContactColouring().colour_and_sort(coloured_one, bodies.count, ranges_one, kept_one.data(), &bodies, 0,
+                                       loaded_one.data());
     std::size_t loaded = 0;
-    for (const Contact& c : one) loaded += c.normal_impulse > 0 ? 1 : 0;
+    ASSERT_EQ(loaded_one.size(), n);
+    for (std::size_t t = 0; t < n; ++t) {
+      loaded += one[t].normal_impulse > 0 ? 1 : 0;
+      // The flags say which contacts start with a load, the islands set cold not among them.
+      EXPECT_EQ(loaded_one[t] != 0, one[t].normal_impulse > 0) << "contact " << t << ", weight " << weight;
+    }
     loaded_by_weight.push_back(loaded);
     for (const std::size_t split : {std::size_t(0), std::size_t(1), n / 3, n - 1, n}) {
       std::vector<Contact> head(next.begin(), next.begin() + static_cast<std::ptrdiff_t>(split)),
           tail(next.begin() + static_cast<std::ptrdiff_t>(split), next.end());
-      std::vector<std::uint8_t> kept;
+      std::vector<std::uint8_t> kept, loaded_flags;
       ContactCache b = cache;
       const ContactRuns runs(head.data(), head.size(), tail.data());
-      EXPECT_EQ(b.restore(runs, n, bodies, weight, kept), warm_one) << "split " << split;
+      EXPECT_EQ(b.restore(runs, n, bodies, weight, kept, &loaded_flags), warm_one) << "split " << split;
       EXPECT_EQ(kept, kept_one) << "split " << split;
+      EXPECT_EQ(loaded_flags, loaded_one) << "split " << split;
       std::vector<Contact> read(head);
       read.insert(read.end(), tail.begin(), tail.end());
       EXPECT_TRUE(same(read, one)) << "restored impulses, split " << split;
       std::vector<Contact> sorted;
       ColourRanges ranges;
-      ContactColouring().colour_and_sort(runs, n, sorted, bodies.count, ranges, kept.data(), &bodies);
+      ContactColouring().colour_and_sort(runs, n, sorted, bodies.count, ranges, kept.data(), &bodies, 0,
+                                         loaded_flags.data());
       EXPECT_EQ(ranges.begin, ranges_one.begin) << "split " << split;
+      EXPECT_EQ(ranges.unloaded, ranges_one.unloaded) << "split " << split;
       EXPECT_EQ(ranges.colours, ranges_one.colours) << "split " << split;
       EXPECT_TRUE(same(sorted, coloured_one)) << "colour-major contacts, split " << split;
     }
