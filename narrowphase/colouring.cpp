@@ -197,33 +197,42 @@ void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_i
   out.colours = colour(contacts, m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
                        &out.rounds, &m_kept);
 
-  // Colour-major, within a colour the loaded part then the unloaded one,
-  // each in index order (a stable counting sort, in parallel): each place's
-  // contact first, then the contacts gathered place by place, each prepared
-  // on its way when asked. Gathered, the 112-byte contacts are written in
-  // order and read ahead of need; moved contact by contact to their places,
-  // each write landed on its own lines and the move waited on them (settle
-  // scene of 10^5, 2 threads: see docs/architecture.md "The CPU's
-  // colour-major gather").
+  // Colour-major, index order within a colour (a stable counting sort, in
+  // parallel): each place's contact first, then the contacts gathered place
+  // by place, each prepared on its way when asked. Gathered, the 112-byte
+  // contacts are written in order and read ahead of need; moved contact by
+  // contact to their places, each write landed on its own lines and the
+  // move waited on them (settle scene of 10^5, 2 threads: see
+  // docs/architecture.md "The CPU's colour-major gather").
   m_source.resize(n);
   std::uint32_t* source = m_source.data();
   const std::uint32_t* colour_of = m_colour.data();
-  const std::uint32_t colours = out.colours, overflow_bucket = 2 * colours;
+  const std::uint32_t colours = out.colours, overflow_bucket = colours;
   counting_sort(
-      n, overflow_bucket + 1,  // the colours' two parts, then the overflow set
-      [&](std::uint32_t k) {
-        const std::uint32_t c = colour_of[k];
-        return c == kOverflowColour ? overflow_bucket : colour_part_key(c, loaded && loaded[k] != 0);
-      },
-      [&](std::uint32_t k, std::uint32_t place) { source[place] = k; }, m_part_begin, m_bucket_count);
-  out.begin.resize(colours + 2);
-  out.unloaded.resize(colours);
-  for (std::uint32_t c = 0; c < colours; ++c) {
-    out.begin[c] = m_part_begin[2 * c];
-    out.unloaded[c] = m_part_begin[2 * c + 1];
+      n, colours + 1,  // the colours, then the overflow set
+      [&](std::uint32_t k) { return colour_of[k] == kOverflowColour ? overflow_bucket : colour_of[k]; },
+      [&](std::uint32_t k, std::uint32_t place) { source[place] = k; }, out.begin, m_bucket_count);
+  // With loads, each contact's record: the places of a stable counting sort
+  // by colour_part_key (the colour's loaded part, then its unloaded one),
+  // which leaves each colour's records where its contacts are.
+  std::uint32_t* part_place = nullptr;
+  out.unloaded.clear();
+  out.record.clear();
+  if (loaded) {
+    m_part_place.resize(n);
+    part_place = m_part_place.data();
+    counting_sort(
+        n, 2 * colours + 1,  // the colours' two parts, then the overflow set
+        [&](std::uint32_t k) {
+          const std::uint32_t c = colour_of[k];
+          return c == kOverflowColour ? 2 * colours : colour_part_key(c, loaded[k] != 0);
+        },
+        [&](std::uint32_t k, std::uint32_t place) { part_place[k] = place; }, m_part_begin, m_bucket_count);
+    out.unloaded.resize(colours);
+    for (std::uint32_t c = 0; c < colours; ++c) out.unloaded[c] = m_part_begin[2 * c + 1];
+    out.record.resize(n);
   }
-  out.begin[colours] = m_part_begin[overflow_bucket];
-  out.begin[colours + 1] = n;
+  std::uint32_t* record = out.record.data();
   // resize() makes (value-initialises) only the contacts past its size: the
   // callers hand a buffer that kept the last substep's.
   sorted_out.resize(n);
@@ -240,6 +249,7 @@ void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_i
     hint(next), hint(next + 64), hint(next + sizeof(Contact) - 1);
     Contact& c = sorted[p];
     c = in[source[p]];
+    if (part_place) record[p] = part_place[source[p]];
     if (!prepare) continue;
     const Contact& ahead = in[source[std::min<std::ptrdiff_t>(p + kGatherAhead / 2, count - 1)]];
     hint(prepare->velocity + ahead.a);

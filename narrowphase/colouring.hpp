@@ -24,9 +24,13 @@ namespace marbles::narrowphase {
 // a colour may be empty (its contacts all gone).
 struct ColourRanges {
   std::vector<std::uint32_t> begin{0, 0};
-  // Colour c's contacts that carried a load in are [begin[c], unloaded[c]),
-  // the others [unloaded[c], begin[c + 1]) (colour_part_key); one word a
-  // colour, or none where the colouring was not told the loads.
+  // The CPU solver's records, where the colouring was told the loads the
+  // contacts carry in (else both empty: contact k is record k): contact k
+  // is record[k], and colour c's records are its contacts' places,
+  // [begin[c], begin[c + 1]), those that carried a load first,
+  // [begin[c], unloaded[c]), the others after (colour_part_key), each in
+  // index order; the overflow set's are its own places.
+  std::vector<std::uint32_t> record;
   std::vector<std::uint32_t> unloaded;
   std::uint32_t colours = 0;
   std::uint32_t rounds = 0;  // colouring rounds it took
@@ -35,8 +39,10 @@ struct ColourRanges {
   // (the impact stage then skips its scan for candidates: a pile at rest).
   bool fast_approach = true;
   std::size_t overflow() const { return begin[colours + 1] - begin[colours]; }
-  // Where colour c's unloaded contacts start (its end where not told).
+  // Where colour c's unloaded records start (its end where not told).
   std::uint32_t unloaded_from(std::uint32_t c) const { return unloaded.empty() ? begin[c + 1] : unloaded[c]; }
+  // Contact k's record.
+  std::uint32_t record_of(std::uint32_t k) const { return record.empty() ? k : record[k]; }
   std::size_t size() const { return begin[colours + 1]; }
 };
 
@@ -59,9 +65,9 @@ class ContactColouring {
   // The solver colouring of all contacts: contact k keeps kept_colour[k] when
   // it is not kNoKeptColour (kept_colour null: none kept), the others are
   // coloured by contact_rank around them; then puts `contacts` in
-  // colour-major order, within each colour those that carry a load
-  // (loaded[k] not 0; loaded null: none does) before the others
-  // (colour_part_key; out.unloaded). With `prepare` (the world's bodies)
+  // colour-major order. With `loaded` (loaded[k] not 0: contact k carries a
+  // load in) it also places the solver's records, each colour's loaded ones
+  // first (out.record, out.unloaded). With `prepare` (the world's bodies)
   // each contact is also prepared on its way (prepare_from_world,
   // solver_math.hpp): the solver is then told the contacts are prepared.
   // `rest_speed`: with `prepare`, out.fast_approach tells whether a contact
@@ -86,7 +92,7 @@ class ContactColouring {
   static constexpr int kMostOwnMasks = 4;
   std::vector<std::uint32_t> m_body_next_round;
   std::vector<std::uint32_t> m_all, m_kept, m_colour, m_bucket_count, m_order, m_sort_values, m_high, m_sort_high,
-      m_source, m_part_begin;
+      m_source, m_part_begin, m_part_place;
   std::vector<Contact> m_sorted;
 };
 

@@ -1,13 +1,10 @@
 #include <algorithm>
-#include <cstring>
 
 #include <cooperative_groups.h>
 
 #include "core/counting_sort_cuda.cuh"
 #include "core/cuda_check.hpp"
 #include "narrowphase/colouring_cuda.cuh"
-#include "narrowphase/contact_cache_cuda.cuh"
-#include "narrowphase/contact_cache_math.hpp"
 #include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase::cuda {
@@ -17,15 +14,10 @@ using ::marbles::cuda::grid_for;
 using ::marbles::cuda::kBlock;
 namespace cg = cooperative_groups;
 
-// What colour_and_sort reads back: the plan plan_kernel made, the rounds
-// run and the contact count (where it was on the device), in words.
-constexpr std::uint32_t kPlanWords = sizeof(ColourPlan) / sizeof(std::uint32_t);
-static_assert(sizeof(ColourPlan) == kPlanWords * sizeof(std::uint32_t));
-constexpr std::uint32_t kRounds = kPlanWords, kCount = kRounds + 1, kRead = kCount + 1;
-// The colour sort's keys: each colour's two parts, the overflow's, the
-// inactive's.
-constexpr std::uint32_t kOverflowPartKey = 2 * kMaxColours, kPartKeys = kOverflowPartKey + 2;
-static_assert(kPartKeys <= kMaxColourRounds + 2, "the firsts hold the colour sort's keys");
+// What colour_and_sort reads back: the firsts of the kMaxColours colours'
+// keys, of the overflow's and of the inactive's, the rounds run and the
+// contact count (where it was on the device).
+constexpr std::uint32_t kRounds = kMaxColours + 2, kCount = kRounds + 1, kRead = kCount + 1;
 
 // A contact as a round sees it: its spheres and its rank.
 struct ColourEntry {
@@ -168,38 +160,26 @@ __global__ void rounds_kernel(Entries entries, std::uint32_t* list0, std::uint32
   if (first == 0) count[kMaxColourRounds + 1] = r;
 }
 
-// A contact's bucket in colour-major order: its colour (impact_levels') or
-// its colour's part (colour_and_sort's: colour_part_key, with the loads the
-// contacts carry in), the overflow's key after every colour, the inactive
-// ones last.
+// A contact's bucket in colour-major order: its colour, the overflow's key
+// after every colour, the inactive ones last.
 struct ColourKey {
   const std::uint32_t* colour;
   std::uint32_t overflow_key;
-  bool parts = false;
-  CarriedLoads loads{};
-  __device__ bool carries(std::uint32_t k) const {
-    if (!loads.match) return false;
-    const std::uint32_t e = loads.match[k];
-    return e != kNoEntry && carries_load(loads.normal[e]);
-  }
   __device__ std::uint32_t operator()(std::uint32_t k) const {
     const std::uint32_t c = colour[k];
-    if (c == kNotActive) return overflow_key + 1;
-    if (c == kUncoloured || c == kOverflowColour) return overflow_key;
-    return parts ? colour_part_key(c, carries(k)) : c;
+    return c == kNotActive ? overflow_key + 1 : (c == kUncoloured || c == kOverflowColour) ? overflow_key : c;
   }
 };
 
 // colour_and_sort's: each contact's place in colour-major order, written
 // over its colour (its own, read just before), and each placed contact's
-// colour as the cache keeps it (sorted_colour may be null; the key is its
-// colour's part).
+// colour as the cache keeps it (sorted_colour may be null).
 struct PlaceOverColour {
   std::uint32_t* position;
   std::uint8_t* sorted_colour;
   __device__ void operator()(std::uint32_t k, std::uint32_t place, std::uint32_t key) const {
     position[k] = place;
-    if (sorted_colour) sorted_colour[place] = key < 2 * kMaxColours ? static_cast<std::uint8_t>(key / 2) : kNoKeptColour;
+    if (sorted_colour) sorted_colour[place] = key < kMaxColours ? static_cast<std::uint8_t>(key) : kNoKeptColour;
   }
 };
 
@@ -269,23 +249,20 @@ void ColouringCuda::launch_rounds(const Entries& entries, const ColouringArrays&
                                                               at.colour, rule, at.body_word, at.body_used);
 }
 
-// The plan in device memory, from the firsts of the colours' parts the
-// sort left there: the ranges the host reads back, for the stages that walk
-// every colour in one launch. n: the contacts, or with count_on_device a
-// room (count_within).
-__global__ void plan_kernel(const std::uint32_t* part_first, std::uint32_t n, const std::uint32_t* count_on_device,
+// The plan in device memory, from the firsts the sort left there: the
+// ranges the host reads back, for the stages that walk every colour in one
+// launch. n: the contacts, or with count_on_device a room (count_within).
+__global__ void plan_kernel(const std::uint32_t* first, std::uint32_t n, const std::uint32_t* count_on_device,
                             ColourPlan* plan) {
-  if (blockIdx.x != 0 || threadIdx.x != 0) return;
-  std::uint32_t first[kMaxColours + 2];
-  colour_firsts_of_parts(part_first, first);
-  plan_of_firsts(first, static_cast<std::uint32_t>(::marbles::cuda::count_within(n, count_on_device)), *plan);
+  if (blockIdx.x == 0 && threadIdx.x == 0)
+    plan_of_firsts(first, static_cast<std::uint32_t>(::marbles::cuda::count_within(n, count_on_device)), *plan);
 }
 
 std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_t n,
                                              const std::uint32_t* count_on_device, std::size_t body_count,
                                              const std::uint32_t*& position, ColourPlan& plan, int sm_count,
                                              cudaStream_t s, const std::uint8_t* kept_colour,
-                                             std::uint8_t* sorted_colour, bool read_back, CarriedLoads loads) {
+                                             std::uint8_t* sorted_colour, bool read_back) {
   position = nullptr;
   m_rounds = 0;
   m_last_count = n;
@@ -294,8 +271,8 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
     MARBLES_CUDA_CHECK(cudaMemsetAsync(m_plan.get(), 0, sizeof(ColourPlan), s));
     return 0;
   }
-  // Buckets: the colours' parts (< kOverflowPartKey), the overflow's and the inactive's.
-  const ColouringArrays at = lay_out(n, body_count, kPartKeys, false, m_round_memory);
+  // Buckets: the colours (< kMaxColours), the overflow's and the inactive's.
+  const ColouringArrays at = lay_out(n, body_count, kMaxColours + 2, false, m_round_memory);
   auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_used, 0, body_count * sizeof(unsigned long long), s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
@@ -303,7 +280,7 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
                                                                 at.active, count, at.body_used);
   MARBLES_CUDA_CHECK_LAUNCH();
   launch_rounds(ContactEntries{pairs}, at, n, body_count, ColourRule::lowest_free, sm_count, s);
-  ::marbles::cuda::counting_sort(at.sort, n, ColourKey{at.colour, kOverflowPartKey, true, loads},
+  ::marbles::cuda::counting_sort(at.sort, n, ColourKey{at.colour, kMaxColours},
                                  PlaceOverColour{at.colour, sorted_colour},
                                  m_first_of_key.get_as<std::uint32_t>(), kNoFirst, s);
   plan_kernel<<<1, 32, 0, s>>>(m_first_of_key.get_as<std::uint32_t>(), n, count_on_device,
@@ -311,8 +288,9 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   MARBLES_CUDA_CHECK_LAUNCH();
   position = at.colour;
   if (!read_back) return 0;
-  // One read: the plan, the rounds run and the count.
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_plan.get(), sizeof(ColourPlan), cudaMemcpyDeviceToHost, s));
+  // One read: the firsts of every key, the rounds run and the count.
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host, m_first_of_key.get_as<std::uint32_t>(),
+                                     (kMaxColours + 2) * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_host + kRounds, count + kMaxColourRounds + 1, sizeof(std::uint32_t),
                                      cudaMemcpyDeviceToHost, s));
   if (count_on_device)
@@ -321,7 +299,7 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
   m_rounds = m_host[kRounds];
   if (count_on_device) m_last_count = m_host[kCount];
-  std::memcpy(&plan, m_host, sizeof(ColourPlan));
+  plan_of_firsts(m_host, m_last_count <= n ? m_last_count : 0, plan);  // as plan_kernel makes it
   return plan.colours;
 }
 

@@ -26,15 +26,6 @@ inline constexpr std::uint32_t kNotActive = 0xfffffffdu;
 
 struct ColouringArrays;  // a call's temporaries (colouring_cuda.cu)
 
-// The loads the contacts carry in, as the colouring orders each colour by
-// them (colour_part_key): contact k's cache entry match[k] (kNoEntry: none;
-// ContactCacheCuda::restore's, after the island rule) and the entries'
-// normal impulses. match null: no contact carries one.
-struct CarriedLoads {
-  const std::uint32_t* match = nullptr;
-  const real* normal = nullptr;
-};
-
 class ColouringCuda {
  public:
   ColouringCuda();
@@ -44,8 +35,7 @@ class ColouringCuda {
 
   // The solver colouring of the contacts of body pairs[0, n): colours by
   // contact_rank; `position` (device) gets each contact's place in
-  // colour-major order (within a colour those that carry a load in, by
-  // `loads`, then the others, each in index order; overflow last), `plan`
+  // colour-major order (index order within a colour, overflow last), `plan`
   // the host ranges (plan_of_firsts: as ColourRanges::begin). Returns
   // the colour count. kept_colour (device, one per contact, may be null):
   // colours kept as ContactColouring::colour_and_sort keeps them;
@@ -64,7 +54,7 @@ class ColouringCuda {
                                 std::size_t body_count, const std::uint32_t*& position, ColourPlan& plan,
                                 int sm_count, cudaStream_t stream,
                                 const std::uint8_t* kept_colour = nullptr, std::uint8_t* sorted_colour = nullptr,
-                                bool read_back = true, CarriedLoads loads = {});
+                                bool read_back = true);
   // The last colour_and_sort's ranges in device memory (as `plan`, word for
   // word; for a room, those of the contacts in it, or none where
   // they outgrew it): what the stages that walk every colour in one launch

@@ -45,15 +45,15 @@ inline constexpr std::uint8_t kNoKeptColour = 0xff;
 
 enum class ColourRule : std::uint8_t { lowest_free, by_round };
 
-// Within a colour the contacts that carry a load into the substep
-// (contact_cache_math.hpp carries_load) come first and the others after,
-// each part in index order, on every backend. No bit of a colour's sweep
-// depends on the order within it (its contacts share no sphere); the parts
-// put a settled pile's unloaded contacts side by side, whose updates are
-// mostly known idle (solver_math.hpp known_idle), so that the sweeps meet
-// whole blocks and warps of them. The colour sort's key of contact of
-// colour c (the overflow set keeps one part, in index order: it is solved
-// one by one).
+// The CPU solver's records hold each colour's contacts that carry a load
+// into the substep (contact_cache_math.hpp carries_load) first and the
+// others after, each part in index order (ColourRanges::record). No bit of a
+// colour's sweep depends on the order within it (its contacts share no
+// sphere); the parts put a settled pile's unloaded contacts side by side,
+// whose updates are mostly known idle (solver_math.hpp known_idle), so that
+// the sweep's lanes meet whole blocks of them. The part's key of a contact
+// of colour c (the overflow set keeps one part, in index order: it is
+// solved one by one):
 MARBLES_HD_INLINE std::uint32_t colour_part_key(std::uint32_t colour, bool loaded) {
   return 2 * colour + (loaded ? 0u : 1u);
 }
@@ -86,18 +86,6 @@ MARBLES_HD_INLINE void visit_colours(const Begin& begin, std::uint32_t colours, 
 // kMaxColourRounds + 1, n sorted in all. visit(begin, end, serial) for each
 // level in order, then the overflow set (serial: one by one, in order).
 inline constexpr std::uint32_t kNoFirst = 0xffffffffu;
-
-// The firsts of the colours' keys (kMaxColours + 2 words: the colours, the
-// overflow's, the inactive's) from those of a sort by colour_part_key
-// (2 kMaxColours + 2 words: each colour's two parts, the overflow's, the
-// inactive's): a colour's first is its first part's, or its second's where
-// the first is empty.
-MARBLES_HD_INLINE void colour_firsts_of_parts(const std::uint32_t* part_first, std::uint32_t* first) {
-  for (std::uint32_t c = 0; c < kMaxColours; ++c)
-    first[c] = part_first[2 * c] != kNoFirst ? part_first[2 * c] : part_first[2 * c + 1];
-  first[kMaxColours] = part_first[2 * kMaxColours];
-  first[kMaxColours + 1] = part_first[2 * kMaxColours + 1];
-}
 #if defined(__CUDACC__)
 #pragma nv_exec_check_disable
 #endif

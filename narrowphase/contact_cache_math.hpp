@@ -47,10 +47,12 @@ MARBLES_HD_INLINE void restore_impulses(Contact& c, real normal, const Vec3& tan
 }
 
 // Whether a contact carries a load into its substep: the normal impulse it
-// was restored with (after the island rule) is positive. The colouring puts
-// such contacts first within their colour (colouring_math.hpp
-// colour_part_key).
-MARBLES_HD_INLINE bool carries_load(real restored_normal) { return restored_normal > 0; }
+// was restored with (after the island rule) is not <= 0, the warm start's
+// own test (warm_start_one: a contact that fails it applies nothing; a NaN
+// passes it and counts as carried). The CPU solver's records hold such
+// contacts first within their colour (colouring_math.hpp colour_part_key),
+// and its warm start walks those alone.
+MARBLES_HD_INLINE bool carries_load(real restored_normal) { return !(restored_normal <= 0); }
 
 // A lost contact counts as a lost load when it carried more than 4 times the
 // weight impulse m |g| h of its sphere (sphere a, inverse mass inv_mass_a).

@@ -137,18 +137,21 @@ void warm_start_range(const SweepRecords& s, std::uint32_t begin, std::uint32_t 
   for_colour_ahead(s, begin, end, bodies, [&](std::uint32_t k) { warm_start_record<Friction, Rolling>(s, k, bodies); });
 }
 
-// The contacts into the sweep's records and the impulses back, in parallel.
+// The contacts into the sweep's records (contact k into record
+// colours.record_of(k)) and the impulses back, in parallel.
 template <bool Rolling>
-void pack_records(const Contact* contacts, std::size_t count, const SweepRecords& s) {
+void pack_records(const Contact* contacts, std::size_t count, const ColourRanges& colours, const SweepRecords& s) {
   const auto n = static_cast<std::ptrdiff_t>(count);
 #pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t k = 0; k < n; ++k) pack_sweep_record<Rolling>(contacts[k], s, static_cast<std::uint32_t>(k));
+  for (std::ptrdiff_t k = 0; k < n; ++k)
+    pack_sweep_record<Rolling>(contacts[k], s, colours.record_of(static_cast<std::uint32_t>(k)));
 }
 template <bool Rolling>
-void unpack_records(const SweepRecords& s, Contact* contacts, std::size_t count) {
+void unpack_records(const SweepRecords& s, const ColourRanges& colours, Contact* contacts, std::size_t count) {
   const auto n = static_cast<std::ptrdiff_t>(count);
 #pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t k = 0; k < n; ++k) unpack_sweep_impulses<Rolling>(s, static_cast<std::uint32_t>(k), contacts[k]);
+  for (std::ptrdiff_t k = 0; k < n; ++k)
+    unpack_sweep_impulses<Rolling>(s, colours.record_of(static_cast<std::uint32_t>(k)), contacts[k]);
 }
 
 // The impact stage's passes after the first try every contact, colour by
@@ -375,10 +378,14 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
   size_records(contacts.size());
   const SweepRecords& records = m_records;
   m_packed_from = contacts.data();
-  if (m_settings.rolling) pack_records<true>(contacts.data(), contacts.size(), records);
-  else pack_records<false>(contacts.data(), contacts.size(), records);
+  if (m_settings.rolling) pack_records<true>(contacts.data(), contacts.size(), colours, records);
+  else pack_records<false>(contacts.data(), contacts.size(), colours, records);
+  // The warm start over each colour's loaded records: the others carry no
+  // load in (carries_load), so warm_start_one applies nothing for them.
   if (m_settings.warm_start)
-    over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(records, b, e, bodies, 0); });
+    over_colour_parts(colours, false, [&](std::uint32_t b, std::uint32_t split, std::uint32_t) {
+      m_warm_start(records, b, split, bodies, 0);
+    });
   const real inv_h = real(1) / h;
   if (m_local) local_sweeps(colours, world, bodies, inv_h);
   else
@@ -387,7 +394,7 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
         m_sweep(records, b, split, e, bodies, inv_h);
       });
   m_pending_from = contacts.data();
-  if (unpack == Unpack::now) unpack_impulses(contacts);
+  if (unpack == Unpack::now) unpack_impulses(contacts, colours);
 #pragma omp parallel for schedule(static) if (n > 20000)
   for (std::ptrdiff_t i = 0; i < n; ++i) scatter_solver_body(world, i, m_bodies[i]);
 }
@@ -397,10 +404,10 @@ const SweepRecords* ContactSolver::pending_records(const std::vector<Contact>& c
   return pending ? &m_records : nullptr;
 }
 
-void ContactSolver::unpack_impulses(std::vector<Contact>& contacts) {
+void ContactSolver::unpack_impulses(std::vector<Contact>& contacts, const ColourRanges& colours) {
   if (!pending_records(contacts)) return;
-  if (m_settings.rolling) unpack_records<true>(m_records, contacts.data(), contacts.size());
-  else unpack_records<false>(m_records, contacts.data(), contacts.size());
+  if (m_settings.rolling) unpack_records<true>(m_records, colours, contacts.data(), contacts.size());
+  else unpack_records<false>(m_records, colours, contacts.data(), contacts.size());
   m_pending_from = nullptr;
 }
 

@@ -115,14 +115,17 @@ class ContactSolver {
 
   // impacts, warm start, sweeps on the velocities in `bodies`; `contacts` in
   // colour-major order as `colours` describes, prepared on the way there
-  // (ContactColouring::colour_and_sort with the bodies).
+  // (ContactColouring::colour_and_sort with the bodies); the sweeps' records
+  // placed as `colours` says (ColourRanges::record: each colour's loaded
+  // contacts first, where the colouring was told the loads).
   void solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours, const BodiesView& bodies,
                         real h, Unpack unpack = Unpack::now);
   // The records holding the impulses of the last solve of `contacts` (with
   // Unpack::when_asked) not yet unpacked; null when there are none.
   const SweepRecords* pending_records(const std::vector<Contact>& contacts) const;
-  // Those impulses into the contacts (nothing when none are pending).
-  void unpack_impulses(std::vector<Contact>& contacts);
+  // Those impulses into the contacts (nothing when none are pending), from
+  // their records as `colours` (the solve's) places them.
+  void unpack_impulses(std::vector<Contact>& contacts, const ColourRanges& colours);
   // The solved contacts are being replaced: their records are no longer theirs.
   void forget_records() { m_pending_from = nullptr, m_packed_from = nullptr; }
 

@@ -137,7 +137,7 @@ class CpuStep final : public StepBackend {
   void state_written() override {}
   bool state_finite() override { return m_world.first_non_finite() == m_world.size(); }
   const std::vector<narrowphase::Contact>& contacts() override {
-    m_solver.unpack_impulses(m_contacts);
+    m_solver.unpack_impulses(m_contacts, m_colours);
     return m_contacts;
   }
   const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }

@@ -1017,7 +1017,7 @@ class CudaStep final : public StepBackend {
     const std::uint32_t* position = nullptr;
     m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_plan, m_sm,
                                 m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
-                                m_sorted_colour.as_room<std::uint8_t>(m_count), false, carried_loads());
+                                m_sorted_colour.as_room<std::uint8_t>(m_count), false);
     m_impact_candidates = m_model.solver.restitution && m_quiet_steps < kImpactHold;
     m_uniform_arms = m_model.uniform_pairs && m_expect_uniform;
     SubstepCheck c;
@@ -1127,12 +1127,7 @@ class CudaStep final : public StepBackend {
   std::uint32_t colour_and_sort(const std::uint32_t*& position) {
     return m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_plan, m_sm,
                                        m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
-                                       m_sorted_colour.as_room<std::uint8_t>(m_count), true, carried_loads());
-  }
-  // The loads this substep's contacts carry in (the colouring puts them
-  // first within each colour): their cache entries, as the restore left them.
-  nc::CarriedLoads carried_loads() const {
-    return {m_kept_valid ? m_match.get_as<std::uint32_t>() : nullptr, m_cache.entries().normal};
+                                       m_sorted_colour.as_room<std::uint8_t>(m_count));
   }
   // The broad phase's pair count, read with the colouring's ranges where it
   // stayed on the device.

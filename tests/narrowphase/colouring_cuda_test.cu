@@ -16,8 +16,6 @@
 #include "core/device.hpp"
 #include "narrowphase/colouring.hpp"
 #include "narrowphase/colouring_cuda.cuh"
-#include "narrowphase/contact_cache_cuda.cuh"
-#include "narrowphase/contact_cache_math.hpp"
 #include "narrowphase/solver_math.hpp"
 #include "tests/narrowphase/random_pairs.hpp"
 #include "tests/require_device.hpp"
@@ -91,44 +89,17 @@ void expect_device_plan(const narrowphase::cuda::ColouringCuda& gpu, const std::
   for (std::uint32_t c = plan.colours + 2; c < kMaxColours + 2; ++c) EXPECT_EQ(plan.begin[c], begin.back()) << c;
 }
 
-// The loads contacts carry in as the GPU's colouring reads them (each
-// contact's cache entry, kNoEntry for a fifth of them, and the entries'
-// normal impulses: a third +0, a third -0 or negative, a third positive)
-// and as the CPU's does (a flag a contact).
-struct Loads {
-  std::vector<std::uint32_t> match;
-  std::vector<real> normal;
-  std::vector<std::uint8_t> flags;
-  Loads(std::mt19937_64& rng, std::size_t n) : match(n), normal(n + 1), flags(n) {
-    for (real& x : normal) {
-      const auto third = rng() % 3;
-      x = third == 0 ? real(0) : third == 1 ? (rng() % 2 ? -real(0) : -real(1)) : real(1 + rng() % 7);
-    }
-    for (std::size_t k = 0; k < n; ++k) {
-      match[k] = rng() % 5 == 0 ? narrowphase::cuda::kNoEntry : static_cast<std::uint32_t>(rng() % (n + 1));
-      flags[k] = match[k] != narrowphase::cuda::kNoEntry && carries_load(normal[match[k]]) ? 1 : 0;
-    }
-  }
-};
-
 // kept: colours kept from the last substep (colour_and_sort), or empty;
 // scratch: the temporaries' memory, shared with other users (null: the
 // colouring's own); rounds: the round lists' memory apart from it (null:
-// in the scratch); loads: what the contacts carry in (null: none).
+// in the scratch).
 void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
                         const std::vector<std::uint8_t>& kept = {},
                         ::marbles::cuda::DeviceBuffer* scratch = nullptr,
-                        ::marbles::cuda::DeviceBuffer* rounds = nullptr, const Loads* loads = nullptr) {
+                        ::marbles::cuda::DeviceBuffer* rounds = nullptr) {
   std::vector<Contact> cpu = input;
   ColourRanges ranges;
-  ContactColouring().colour_and_sort(cpu, bodies, ranges, kept.empty() ? nullptr : kept.data(), nullptr, 0,
-                                     loads ? loads->flags.data() : nullptr);
-  ::marbles::cuda::DeviceBuffer match_memory, normal_memory;
-  narrowphase::cuda::CarriedLoads carried;
-  if (loads && !input.empty()) {
-    carried.match = ::marbles::cuda::upload(match_memory, loads->match, nullptr);
-    carried.normal = ::marbles::cuda::upload(normal_memory, loads->normal, nullptr);
-  }
+  ContactColouring().colour_and_sort(cpu, bodies, ranges, kept.empty() ? nullptr : kept.data());
 
   DeviceContacts d(input);
   narrowphase::cuda::ColouringCuda gpu;
@@ -144,7 +115,7 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   const std::uint32_t* position_d = nullptr;
   poison_device_plan(gpu);
   const std::uint32_t colours = gpu.colour_and_sort(d.pairs, n, nullptr, bodies, position_d, plan, 8, nullptr,
-                                                    kept.empty() ? nullptr : kept_d, sorted_colour, true, carried);
+                                                    kept.empty() ? nullptr : kept_d, sorted_colour);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
   const std::vector<std::uint32_t> begin = ranges_of(plan);
   EXPECT_EQ(colours, ranges.colours);
@@ -175,15 +146,9 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
     const std::uint32_t items = n + n / 2 + 3;
     std::vector<BodyPair> pairs(items);
     std::vector<std::uint8_t> kept_room(items, 0);
-    std::vector<std::uint32_t> match_room(items);
     for (std::uint32_t k = 0; k < items; ++k) pairs[k] = {input[k % n].a, input[k % n].b};
     if (!kept.empty()) std::copy(kept.begin(), kept.end(), kept_room.begin());
-    ::marbles::cuda::DeviceBuffer room_pairs, room_kept, room_sorted, count_memory, room_match;
-    narrowphase::cuda::CarriedLoads room_carried = carried;
-    if (loads) {
-      for (std::uint32_t k = 0; k < items; ++k) match_room[k] = loads->match[k % n];
-      room_carried.match = ::marbles::cuda::upload(room_match, match_room, nullptr);
-    }
+    ::marbles::cuda::DeviceBuffer room_pairs, room_kept, room_sorted, count_memory;
     const BodyPair* pairs_d = ::marbles::cuda::upload(room_pairs, pairs, nullptr);
     const std::uint8_t* kept_room_d = ::marbles::cuda::upload(room_kept, kept_room, nullptr);
     auto* sorted_d = room_sorted.as<std::uint8_t>(items);
@@ -195,7 +160,7 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
       poison_device_plan(gpu);
       const std::uint32_t room_colours =
           gpu.colour_and_sort(pairs_d, items, count_d, bodies, position_d, room_plan, 8, nullptr,
-                              kept.empty() ? nullptr : kept_room_d, sorted_d, true, room_carried);
+                              kept.empty() ? nullptr : kept_room_d, sorted_d);
       ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
       const std::vector<std::uint32_t> room_begin = ranges_of(room_plan);
       EXPECT_EQ(gpu.last_count(), count);
@@ -314,29 +279,7 @@ TEST(ColouringCuda, EqualsTheCpuWithKeptColours) {
         kept.push_back(colour);
       }
       expect_same_as_cpu(contacts, bodies, kept);
-      const Loads loads(rng, contacts.size());
-      expect_same_as_cpu(contacts, bodies, kept, nullptr, nullptr, &loads);
     }
-  }
-}
-
-// With loads carried in: the GPU puts each colour's loaded contacts first
-// as the CPU does, contact for contact, with and without kept colours; the
-// premise that both parts of the colours hold contacts is checked.
-TEST(ColouringCuda, EqualsTheCpuWithLoadsCarriedIn) {
-  REQUIRE_DEVICE();
-  std::mt19937_64 rng(33);
-  for (int trial = 0; trial < 12; ++trial) {
-    const std::uint32_t bodies = 2 + static_cast<std::uint32_t>(rng() % 20000);
-    const std::size_t count = std::min<std::size_t>(std::size_t(bodies) * (bodies - 1) / 2, rng() % 60000);
-    const std::vector<Contact> contacts = random_contacts(rng, bodies, count);
-    const Loads loads(rng, contacts.size());
-    const auto carried = std::count(loads.flags.begin(), loads.flags.end(), std::uint8_t(1));
-    if (contacts.size() > 100) {
-      EXPECT_GT(carried, 0);
-      EXPECT_LT(static_cast<std::size_t>(carried), contacts.size());
-    }
-    expect_same_as_cpu(contacts, bodies, {}, nullptr, nullptr, &loads);
   }
 }
 

@@ -104,9 +104,10 @@ std::vector<std::uint32_t> greedy_colours(const std::vector<Contact>& contacts,
   return colour;
 }
 
-// `loaded`: which contacts carry a load in (empty: none); each colour then
-// holds its loaded contacts first, then the others, each part in index
-// order (the overflow set in index order alone).
+// `loaded`: which contacts carry a load in (empty: not told); the solver's
+// records of each colour then hold its loaded contacts first, then the
+// others, each part in index order, and the overflow set's are its own
+// places.
 void expect_matches_oracle(const std::vector<Contact>& input, std::uint32_t bodies,
                            const std::vector<std::uint8_t>& kept = {}, const std::vector<std::uint8_t>& loaded = {}) {
   std::vector<Contact> contacts = input;
@@ -115,30 +116,42 @@ void expect_matches_oracle(const std::vector<Contact>& input, std::uint32_t bodi
                                      loaded.empty() ? nullptr : loaded.data());
   ASSERT_EQ(contacts.size(), input.size());
   EXPECT_EQ(ranges.size(), input.size());
-  ASSERT_EQ(ranges.unloaded.size(), ranges.colours);
   EXPECT_TRUE(colouring_is_proper(contacts, ranges, bodies));
   const std::vector<std::uint32_t> expect = greedy_colours(input, kept);
   std::vector<int> seen(input.size(), 0);
-  for (std::uint32_t c = 0; c <= ranges.colours; ++c) {
-    const std::uint32_t split = c < ranges.colours ? ranges.unloaded_from(c) : ranges.begin[c];
-    ASSERT_LE(ranges.begin[c], split);
-    ASSERT_LE(split, ranges.begin[c + 1]);
+  for (std::uint32_t c = 0; c <= ranges.colours; ++c)
     for (std::uint32_t k = ranges.begin[c]; k < ranges.begin[c + 1]; ++k) {
       const auto tag = static_cast<std::size_t>(contacts[k].separation);
       ++seen[tag];
       const std::uint32_t want = expect[tag] == kOverflowColour ? ranges.colours : expect[tag];
       ASSERT_EQ(c, want) << "contact " << tag;
-      if (c < ranges.colours) {
-        const bool is_loaded = !loaded.empty() && loaded[tag] != 0;
-        EXPECT_EQ(is_loaded, k < split) << "contact " << tag << ": the loaded part first";
-      }
-      if (k > ranges.begin[c] && k != split) {
-        EXPECT_LT(contacts[k - 1].separation, contacts[k].separation) << "index order in a part";
+      if (k > ranges.begin[c]) {
+        EXPECT_LT(contacts[k - 1].separation, contacts[k].separation) << "index order in a colour";
       }
     }
-  }
   for (std::size_t k = 0; k < seen.size(); ++k) EXPECT_EQ(seen[k], 1) << "contact " << k;
-
+  if (loaded.empty()) {
+    EXPECT_TRUE(ranges.record.empty() && ranges.unloaded.empty());
+  } else {
+    // The records: the oracle is a stable partition of each colour's contacts.
+    ASSERT_EQ(ranges.record.size(), input.size());
+    ASSERT_EQ(ranges.unloaded.size(), ranges.colours);
+    std::vector<std::uint32_t> at(input.size(), 0xffffffffu);  // the contact at each record
+    for (std::uint32_t c = 0; c <= ranges.colours; ++c) {
+      std::vector<std::uint32_t> order(contacts.size());
+      auto first = order.begin() + ranges.begin[c], last = order.begin() + ranges.begin[c + 1];
+      std::iota(first, last, ranges.begin[c]);
+      if (c < ranges.colours) {
+        const auto split = std::stable_partition(first, last, [&](std::uint32_t k) {
+          return loaded[static_cast<std::size_t>(contacts[k].separation)] != 0;
+        });
+        EXPECT_EQ(ranges.unloaded_from(c), static_cast<std::uint32_t>(split - order.begin())) << "colour " << c;
+      }
+      for (std::uint32_t r = ranges.begin[c]; r < ranges.begin[c + 1]; ++r) at[ranges.record_of(order[r])] = order[r];
+      for (std::uint32_t r = ranges.begin[c]; r < ranges.begin[c + 1]; ++r)
+        ASSERT_EQ(at[r], order[r]) << "record " << r << " of colour " << c;
+    }
+  }
   // The data-parallel form (the GPU's) colours every contact alike.
   const auto n = static_cast<std::uint32_t>(input.size());
   std::vector<std::uint64_t> rank(n);
@@ -191,9 +204,10 @@ TEST(Colouring, MatchesSequentialGreedyOnRandomSets) {
 }
 
 // With loads carried in (a random share of the contacts, kept colours or
-// not): the same colours, each colour's loaded contacts first, then the
-// others, each part in index order; none loaded and all loaded as well.
-TEST(Colouring, LoadedContactsComeFirstInTheirColour) {
+// not): the same colours and the same colour-major contacts, and the
+// solver's records each colour's loaded contacts first, then the others,
+// each part in index order; none loaded and all loaded as well.
+TEST(Colouring, LoadedContactsFirstInTheirColoursRecords) {
   std::mt19937_64 rng(31);
   for (int trial = 0; trial < 30; ++trial) {
     const std::uint32_t bodies = 2 + static_cast<std::uint32_t>(rng() % 3000);

@@ -14,6 +14,7 @@
 #include "core/error.hpp"
 #include "core/parallel.hpp"
 #include "narrowphase/contact_cache.hpp"
+#include "narrowphase/contact_cache_math.hpp"
 #include "narrowphase/contact_math.hpp"
 #include "narrowphase/contacts.hpp"
 #include "narrowphase/solver.hpp"
@@ -79,17 +80,28 @@ struct Lattice {
   }
 
   // Contacts whose gap closes within h or lies within `reach` of each sphere.
-  // `loaded` (not null, as many flags as contacts or more): which carry a
-  // load in, the colouring's order within each colour.
+  // With `loads`: a random half of the contacts carry a load in (impulses
+  // as a restore gives them), and the colouring is told which (the solver's
+  // records of each colour hold those first).
   std::vector<Contact> contacts(const BodiesView& bodies, const PairTable& table, real h, real reach,
-                                ColourRanges& colours, const std::vector<std::uint8_t>* loaded = nullptr) const {
+                                ColourRanges& colours, std::mt19937_64* loads = nullptr) const {
     const std::vector<real> reaches(n, reach);
     std::vector<Contact> out, wall;
     sphere_contacts(bodies, pairs.data(), pairs.size(), table, h, reaches.data(), out);
     wall_contacts(bodies, floor, table, h, reaches.data(), wall);
     out.insert(out.end(), wall.begin(), wall.end());
-    if (loaded && loaded->size() < out.size()) throw std::logic_error("Lattice::contacts: too few load flags");
-    ContactColouring().colour_and_sort(out, n, colours, nullptr, &bodies, 0, loaded ? loaded->data() : nullptr);
+    std::vector<std::uint8_t> loaded;
+    if (loads) {
+      std::uniform_real_distribution<double> u(0.1, 1);
+      for (Contact& c : out) {
+        const bool carries = (*loads)() % 2 == 0;
+        c.normal_impulse = carries ? real(1e-4 * u(*loads)) : real(0);
+        c.tangent_impulse = carries ? Vec3(real(1e-6 * u(*loads)), 0, real(-1e-6 * u(*loads))) : Vec3{};
+        c.tangent_impulse = c.tangent_impulse - c.normal * dot(c.tangent_impulse, c.normal);
+        loaded.push_back(carries_load(c.normal_impulse) ? 1 : 0);
+      }
+    }
+    ContactColouring().colour_and_sort(out, n, colours, nullptr, &bodies, 0, loads ? loaded.data() : nullptr);
     return out;
   }
 };
@@ -338,15 +350,17 @@ TEST(Solver, EveryLaneKindGivesTheSameBits) {
   if (kinds == 0) GTEST_SKIP() << "skipped: this CPU has only the 16-byte lanes";
 }
 
-// No bit of the solve depends on the order within a colour, nor on where a
-// colour's sweep cuts its two parts (ColourRanges::unloaded: the blocks of
-// lanes and the threads' halves are cut there): the packed lattice (~40 000
-// contacts, colours of thousands) coloured without loads, with a random half
-// of its contacts loaded (each colour's loaded ones first), and with the
-// first order but every colour's cut moved to a random place, each solved
-// over two substeps, each combination of the terms, on two threads: the
-// bodies and every pair's impulses bit for bit.
-TEST(Solver, TheOrderWithinAColourAndItsCutChangeNoBit) {
+// No bit of the solve depends on the order of a colour's records, nor on
+// where a colour's sweeps cut its two parts (ColourRanges::unloaded: the
+// blocks of lanes and the threads' halves are cut there, and the warm start
+// walks the first part alone): the packed lattice (~40 000 contacts, colours
+// of thousands), a random half of its contacts carrying a load in, solved
+// with its records in the contacts' order (the colouring not told the
+// loads), with each colour's loaded records first, and with those records
+// but every colour's cut moved to a random place at or past the last loaded
+// one, each combination of the terms, on two threads: the bodies and every
+// contact bit for bit.
+TEST(Solver, TheRecordsOrderWithinAColourAndItsCutChangeNoBit) {
   const real r = real(0.01);
   std::mt19937_64 rng(29);
   MovingLattice packed = MovingLattice::packed(24, r, rng);
@@ -354,36 +368,35 @@ TEST(Solver, TheOrderWithinAColourAndItsCutChangeNoBit) {
   const std::size_t n = lattice.n;
   const PairTable table = packed.table();
   const real h = real(1e-3);
-  std::vector<std::uint8_t> half(30 * n);
-  for (std::uint8_t& f : half) f = rng() % 2 == 0 ? 1 : 0;
   struct Run {
     std::vector<Contact> contacts;
     std::vector<Vec3> vel, omega;
   };
   const int was = thread_count();
   set_thread_count(2);
-  auto run = [&](const SolverSettings& s, const std::vector<std::uint8_t>* loaded, bool cut_anywhere) {
+  // Each run's loads drawn alike (the same seed); told to the colouring or not.
+  auto run = [&](const SolverSettings& s, bool told, bool cut_anywhere) {
     Run out{{}, packed.vel, packed.omega};
     const BodiesView bodies = lattice.view(lattice.position.data(), out.vel.data(), out.omega.data());
     ColourRanges colours;
-    out.contacts = lattice.contacts(bodies, table, h, real(1e-4), colours, loaded);
-    if (cut_anywhere)
+    std::mt19937_64 loads(31);
+    out.contacts = lattice.contacts(bodies, table, h, real(1e-4), colours, &loads);
+    if (!told) colours.record.clear(), colours.unloaded.clear();
+    if (cut_anywhere)  // the loaded records must stay before the cut (the warm start's part)
       for (std::uint32_t c = 0; c < colours.colours; ++c)
-        colours.unloaded[c] = colours.begin[c] + static_cast<std::uint32_t>(rng() % (colours.begin[c + 1] - colours.begin[c] + 1));
+        colours.unloaded[c] += static_cast<std::uint32_t>(rng() % (colours.begin[c + 1] - colours.unloaded[c] + 1));
     ContactSolver solver(s);
-    for (int substep = 0; substep < 2; ++substep) solver.solve_velocities(out.contacts, colours, bodies, h);
-    std::sort(out.contacts.begin(), out.contacts.end(),
-              [](const Contact& x, const Contact& y) { return std::pair(x.a, x.b) < std::pair(y.a, y.b); });
+    solver.solve_velocities(out.contacts, colours, bodies, h);
     return out;
   };
   for (int terms = 0; terms < 4; ++terms) {
     SolverSettings s;
     s.friction = terms & 1, s.rolling = terms & 2;
-    const Run plain = run(s, nullptr, false);
+    const Run plain = run(s, false, false);
     ASSERT_GT(plain.contacts.size(), 30000u);
     EXPECT_NE(std::memcmp(plain.vel.data(), packed.vel.data(), sizeof(Vec3) * n), 0);  // the sweeps did work
     for (const bool cut_anywhere : {false, true}) {
-      const Run other = run(s, &half, cut_anywhere);
+      const Run other = run(s, true, cut_anywhere);
       ASSERT_EQ(plain.contacts.size(), other.contacts.size());
       EXPECT_EQ(std::memcmp(plain.contacts.data(), other.contacts.data(), sizeof(Contact) * plain.contacts.size()), 0)
           << "terms " << terms << (cut_anywhere ? ", cut anywhere" : "");
@@ -409,14 +422,23 @@ TEST(Solver, CacheFromTheRecordsEqualsCacheFromTheContacts) {
   auto same = [](const auto& a, const auto& b) {
     return a.size() == b.size() && std::memcmp(a.data(), b.data(), sizeof(a[0]) * a.size()) == 0;
   };
-  for (int terms = 0; terms < 4; ++terms) {
+  // With loads (a random half of the contacts carrying one in) the records
+  // are each colour's loaded contacts first, not the contacts' order.
+  for (int terms = 0; terms < 8; ++terms) {
     SolverSettings s;
     s.friction = terms & 1, s.rolling = terms & 2;
     std::vector<Vec3> vel = vel0, omega = omega0, vel_now = vel0, omega_now = omega0;
     const BodiesView bodies = lattice.view(lattice.position.data(), vel.data(), omega.data());
     const BodiesView bodies_now = lattice.view(lattice.position.data(), vel_now.data(), omega_now.data());
     ColourRanges colours;
-    std::vector<Contact> contacts = lattice.contacts(bodies, table, h, real(1e-4), colours);
+    std::mt19937_64 loads(37);
+    std::vector<Contact> contacts = lattice.contacts(bodies, table, h, real(1e-4), colours, terms & 4 ? &loads : nullptr);
+    if (terms & 4) {
+      ASSERT_EQ(colours.record.size(), contacts.size());
+      std::size_t moved = 0;
+      for (std::uint32_t k = 0; k < contacts.size(); ++k) moved += colours.record[k] != k ? 1 : 0;
+      EXPECT_GT(moved, contacts.size() / 4) << "premise: the records are not the contacts' order";
+    }
     std::vector<Contact> contacts_now = contacts;
     ContactSolver asked(s), now(s);
     asked.solve_velocities(contacts, colours, bodies, h, ContactSolver::Unpack::when_asked);
@@ -426,7 +448,7 @@ TEST(Solver, CacheFromTheRecordsEqualsCacheFromTheContacts) {
     ASSERT_NE(records, nullptr);
     ContactCache from_records, from_contacts;
     from_records.store(*records, static_cast<std::uint32_t>(contacts.size()), s.rolling, colours);
-    asked.unpack_impulses(contacts);
+    asked.unpack_impulses(contacts, colours);
     EXPECT_EQ(asked.pending_records(contacts), nullptr);
     from_contacts.store(contacts, colours);
     EXPECT_TRUE(same(contacts, contacts_now)) << "terms " << terms;
