@@ -296,10 +296,13 @@ MARBLES_HD_INLINE void apply_impulse(const Contact& c, BodyState& A, BodyState& 
 
 // Clamp a vector impulse to a disc of radius `limit`. A clamped impulse
 // holds no negative zero (+ 0 turns -0 into +0 and leaves every other value
-// as it is): clamped to a zero limit it is the +0 vector whatever the signs
-// of v, so an unloaded contact's impulse keeps its bits from sweep to sweep
-// (solver_math.hpp, impulses_clear).
+// as it is), and clamped to a zero limit it is the +0 vector whatever v is,
+// so an unloaded contact's impulse keeps its bits from sweep to sweep
+// (solver_math.hpp, impulses_clear, known_idle). The zero limit is asked
+// first: a v so small that its squared length underflows to 0 (|v| under
+// about 4e-23 in float) would pass the test below and be kept as it is.
 MARBLES_HD_INLINE Vec3 clamp_length(const Vec3& v, real limit) {
+  if (limit == 0) return Vec3{};
   const real len2 = length_squared(v);
   if (len2 <= limit * limit) return v;
   return v * (limit / std::sqrt(len2)) + Vec3{};

@@ -466,7 +466,8 @@ MARBLES_LANE void apply_impulse(const ContactLanes<V>& c, BodyLanes<V>& A, BodyL
 template <class V>
 MARBLES_LANE V3<V> clamp_length(const V3<V>& v, V limit) {
   const V len2 = dot(v, v);
-  return select(len2 <= limit * limit, v, v * (limit / sqrt_lanes(len2)) + V3<V>{});
+  const V3<V> clamped = select(len2 <= limit * limit, v, v * (limit / sqrt_lanes(len2)) + V3<V>{});
+  return select(limit == V{}, V3<V>{}, clamped);
 }
 
 // solve_friction

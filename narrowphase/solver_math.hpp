@@ -436,9 +436,12 @@ MARBLES_HD_INLINE bool has_minus_zero(const BodyState& b) { return has_minus_zer
 // but a -0; the bodies' velocities are then the loaded ones, so the normal
 // term sees this same slack, and -m * slack (m >= 0) is not > 0: it sets the
 // literal +0 and applies a zero. In a settled pile about half the updates
-// are such (in-plane neighbours whose gaps no speed closes): the sweeps skip
-// their effective masses and terms (solve_loaded; the CPU's lanes where a
-// whole block is idle, solver_lanes.hpp all_idle), the same bits.
+// are such (in-plane neighbours whose gaps no speed closes): the CPU's lanes
+// skip a block's effective masses and terms where every update of it is
+// known idle (solver_lanes.hpp all_idle), the same bits. The GPU's sweep
+// does not ask (solve_loaded): measured on the H200 it gained nothing there
+// (the warps' updates are idle and not idle side by side) and cost the
+// widest sweep kernel 8 bytes of spilled registers.
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE bool known_idle(const Contact& c, const BodyState& A, const BodyState& B, real inv_h) {
   return impulses_clear<Friction, Rolling>(c) && !has_minus_zero(A) && !has_minus_zero(B) &&
@@ -448,14 +451,12 @@ MARBLES_HD_INLINE bool known_idle(const Contact& c, const BodyState& A, const Bo
 // One sweep's update of record k (the GPU's sweep kernel): solve_one on the
 // loaded contact, its effective masses computed from the bodies as the
 // prepare stage computed them (contact_math.hpp), only the ones the terms
-// read; written back where it changed something (above); nothing at all
-// done where the update is known idle.
+// read; written back where it changed something (above).
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void solve_loaded(const SweepRecords& s, std::uint32_t k, Contact c, SolverBody* bodies,
                                     real inv_h) {
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
-  if (known_idle<Friction, Rolling>(c, A, B, inv_h)) return;
   const bool was_clear = impulses_clear<Friction, Rolling>(c);
   // Asked only where the update may leave everything as it was: a contact
   // that carried an impulse writes its bodies anyway.
