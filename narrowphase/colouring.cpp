@@ -212,27 +212,28 @@ void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_i
       n, colours + 1,  // the colours, then the overflow set
       [&](std::uint32_t k) { return colour_of[k] == kOverflowColour ? overflow_bucket : colour_of[k]; },
       [&](std::uint32_t k, std::uint32_t place) { source[place] = k; }, out.begin, m_bucket_count);
-  // With loads, each contact's record: the places of a stable counting sort
-  // by colour_part_key (the colour's loaded part, then its unloaded one),
-  // which leaves each colour's records where its contacts are.
-  std::uint32_t* part_place = nullptr;
+  // With loads, each contact's record: within each colour the loaded
+  // contacts' places first, then the others', each in index order (the
+  // order of the colour's places): a count and a pass a colour, the colours
+  // on all threads; the overflow set's records are its own places.
   out.unloaded.clear();
   out.record.clear();
   if (loaded) {
-    m_part_place.resize(n);
-    part_place = m_part_place.data();
-    counting_sort(
-        n, 2 * colours + 1,  // the colours' two parts, then the overflow set
-        [&](std::uint32_t k) {
-          const std::uint32_t c = colour_of[k];
-          return c == kOverflowColour ? 2 * colours : colour_part_key(c, loaded[k] != 0);
-        },
-        [&](std::uint32_t k, std::uint32_t place) { part_place[k] = place; }, m_part_begin, m_bucket_count);
     out.unloaded.resize(colours);
-    for (std::uint32_t c = 0; c < colours; ++c) out.unloaded[c] = m_part_begin[2 * c + 1];
     out.record.resize(n);
+    std::uint32_t* record = out.record.data();
+    std::uint32_t* unloaded_at = out.unloaded.data();
+    const std::uint32_t* begin = out.begin.data();
+#pragma omp parallel for schedule(dynamic, 1) if (n >= 20000)
+    for (std::ptrdiff_t c = 0; c < static_cast<std::ptrdiff_t>(colours); ++c) {
+      std::uint32_t carried = 0;
+      for (std::uint32_t p = begin[c]; p < begin[c + 1]; ++p) carried += loaded[source[p]] != 0 ? 1u : 0u;
+      std::uint32_t next[2] = {begin[c], begin[c] + carried};  // the loaded part's, the other's
+      unloaded_at[c] = next[1];
+      for (std::uint32_t p = begin[c]; p < begin[c + 1]; ++p) record[p] = next[loaded[source[p]] != 0 ? 0 : 1]++;
+    }
+    for (std::uint32_t p = begin[colours]; p < n; ++p) record[p] = p;
   }
-  std::uint32_t* record = out.record.data();
   // resize() makes (value-initialises) only the contacts past its size: the
   // callers hand a buffer that kept the last substep's.
   sorted_out.resize(n);
@@ -249,7 +250,6 @@ void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_i
     hint(next), hint(next + 64), hint(next + sizeof(Contact) - 1);
     Contact& c = sorted[p];
     c = in[source[p]];
-    if (part_place) record[p] = part_place[source[p]];
     if (!prepare) continue;
     const Contact& ahead = in[source[std::min<std::ptrdiff_t>(p + kGatherAhead / 2, count - 1)]];
     hint(prepare->velocity + ahead.a);

@@ -28,8 +28,12 @@ struct ColourRanges {
   // contacts carry in (else both empty: contact k is record k): contact k
   // is record[k], and colour c's records are its contacts' places,
   // [begin[c], begin[c + 1]), those that carried a load first,
-  // [begin[c], unloaded[c]), the others after (colour_part_key), each in
-  // index order; the overflow set's are its own places.
+  // [begin[c], unloaded[c]), the others after, each in index order; the
+  // overflow set's are its own places. No bit of a colour's sweep depends
+  // on the order of its records (its contacts share no sphere); the parts
+  // put a settled pile's unloaded contacts side by side, whose updates are
+  // mostly known idle (solver_math.hpp known_idle), so that the sweep's
+  // lanes meet whole blocks of them.
   std::vector<std::uint32_t> record;
   std::vector<std::uint32_t> unloaded;
   std::uint32_t colours = 0;
@@ -92,7 +96,7 @@ class ContactColouring {
   static constexpr int kMostOwnMasks = 4;
   std::vector<std::uint32_t> m_body_next_round;
   std::vector<std::uint32_t> m_all, m_kept, m_colour, m_bucket_count, m_order, m_sort_values, m_high, m_sort_high,
-      m_source, m_part_begin, m_part_place;
+      m_source;
   std::vector<Contact> m_sorted;
 };
 

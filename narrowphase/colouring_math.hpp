@@ -45,19 +45,6 @@ inline constexpr std::uint8_t kNoKeptColour = 0xff;
 
 enum class ColourRule : std::uint8_t { lowest_free, by_round };
 
-// The CPU solver's records hold each colour's contacts that carry a load
-// into the substep (contact_cache_math.hpp carries_load) first and the
-// others after, each part in index order (ColourRanges::record). No bit of a
-// colour's sweep depends on the order within it (its contacts share no
-// sphere); the parts put a settled pile's unloaded contacts side by side,
-// whose updates are mostly known idle (solver_math.hpp known_idle), so that
-// the sweep's lanes meet whole blocks of them. The part's key of a contact
-// of colour c (the overflow set keeps one part, in index order: it is
-// solved one by one):
-MARBLES_HD_INLINE std::uint32_t colour_part_key(std::uint32_t colour, bool loaded) {
-  return 2 * colour + (loaded ? 0u : 1u);
-}
-
 // The solver's order over colour-major contacts, the same on every backend
 // and on the host and the device: forwards, colours 0, 1, ... then the
 // overflow set; backwards, the overflow set then the colours down to 0.

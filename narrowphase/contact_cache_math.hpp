@@ -50,7 +50,7 @@ MARBLES_HD_INLINE void restore_impulses(Contact& c, real normal, const Vec3& tan
 // was restored with (after the island rule) is not <= 0, the warm start's
 // own test (warm_start_one: a contact that fails it applies nothing; a NaN
 // passes it and counts as carried). The CPU solver's records hold such
-// contacts first within their colour (colouring_math.hpp colour_part_key),
+// contacts first within their colour (colouring.hpp ColourRanges::record),
 // and its warm start walks those alone.
 MARBLES_HD_INLINE bool carries_load(real restored_normal) { return !(restored_normal <= 0); }
 

@@ -89,7 +89,7 @@ template <class V, bool Friction, bool Rolling>
 }
 
 // The sweep over one colour, its two parts ([begin, split) the contacts that
-// carried a load in, [split, end) the others: colour_part_key) each in
+// carried a load in, [split, end) the others: ColourRanges::record) each in
 // blocks of width<V> records, each part's blocks dealt out in halves, so
 // that each thread takes as many of the unloaded part's blocks, which are
 // mostly idle (lanes::all_idle), as the other, and works on the same half of

@@ -147,7 +147,11 @@ void expect_matches_oracle(const std::vector<Contact>& input, std::uint32_t bodi
         });
         EXPECT_EQ(ranges.unloaded_from(c), static_cast<std::uint32_t>(split - order.begin())) << "colour " << c;
       }
-      for (std::uint32_t r = ranges.begin[c]; r < ranges.begin[c + 1]; ++r) at[ranges.record_of(order[r])] = order[r];
+      for (std::uint32_t r = ranges.begin[c]; r < ranges.begin[c + 1]; ++r) {
+        const std::uint32_t record = ranges.record_of(order[r]);
+        ASSERT_TRUE(record >= ranges.begin[c] && record < ranges.begin[c + 1]) << "contact " << order[r];
+        at[record] = order[r];
+      }
       for (std::uint32_t r = ranges.begin[c]; r < ranges.begin[c + 1]; ++r)
         ASSERT_EQ(at[r], order[r]) << "record " << r << " of colour " << c;
     }
