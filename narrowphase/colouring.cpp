@@ -216,11 +216,12 @@ void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_i
   // contacts' places first, then the others', each in index order (the
   // order of the colour's places): a count and a pass a colour, the colours
   // on all threads; the overflow set's records are its own places.
-  out.unloaded.clear();
-  out.record.clear();
-  if (loaded) {
+  if (!loaded) {
+    out.unloaded.clear();
+    out.record.clear();
+  } else {
     out.unloaded.resize(colours);
-    out.record.resize(n);
+    out.record.resize(n);  // every word written below; resize() fills only past the last substep's size
     std::uint32_t* record = out.record.data();
     std::uint32_t* unloaded_at = out.unloaded.data();
     const std::uint32_t* begin = out.begin.data();
