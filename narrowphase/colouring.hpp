@@ -32,7 +32,7 @@ struct ColourRanges {
   // overflow set's are its own places. No bit of a colour's sweep depends
   // on the order of its records (its contacts share no sphere); the parts
   // put a settled pile's unloaded contacts side by side, whose updates are
-  // mostly known idle (solver_math.hpp known_idle), so that the sweep's
+  // mostly known idle (solver_lanes.hpp all_idle), so that the sweep's
   // lanes meet whole blocks of them.
   std::vector<std::uint32_t> record;
   std::vector<std::uint32_t> unloaded;

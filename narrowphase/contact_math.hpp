@@ -298,7 +298,7 @@ MARBLES_HD_INLINE void apply_impulse(const Contact& c, BodyState& A, BodyState& 
 // holds no negative zero (+ 0 turns -0 into +0 and leaves every other value
 // as it is), and clamped to a zero limit it is the +0 vector whatever v is,
 // so an unloaded contact's impulse keeps its bits from sweep to sweep
-// (solver_math.hpp, impulses_clear, known_idle). The zero limit is asked
+// (solver_math.hpp impulses_clear, solver_lanes.hpp all_idle). The zero limit is asked
 // first: a v so small that its squared length underflows to 0 (|v| under
 // about 4e-23 in float) would pass the test below and be kept as it is.
 MARBLES_HD_INLINE Vec3 clamp_length(const Vec3& v, real limit) {

@@ -206,25 +206,12 @@ bool impact_range(Contact* contacts, const std::uint32_t* order, std::uint32_t b
   return hit;
 }
 
-// Runs `range(begin, end)` over the colours in the solver's order
+// Runs `range(begin, split, end)` over the colours in the solver's order
 // (visit_colours: forwards with the overflow set last, or backwards with it
-// first); the overflow set one contact at a time.
-template <class F>
-void over_colours(const ColourRanges& colours, bool backwards, F&& range) {
-  visit_colours(colours.begin, colours.colours, backwards,
-                [&](std::uint32_t b, std::uint32_t e, bool serial, bool reversed) {
-                  if (!serial) return range(b, e);
-                  if (reversed)
-                    for (std::uint32_t k = e; k > b; --k) range(k - 1, k);
-                  else
-                    for (std::uint32_t k = b; k < e; ++k) range(k, k + 1);
-                });
-}
-
-// The sweeps' walk: over_colours with each colour's parts,
-// range(begin, split, end) ([begin, split) the contacts that carried a load
-// in); the overflow set one contact at a time, range(k, k + 1, k + 1). The
-// colours come in visit_colours's order, one call each, counted off here.
+// first), [begin, split) a colour's records of the contacts that carried a
+// load in (ColourRanges::unloaded_from); the overflow set one contact at a
+// time, range(k, k + 1, k + 1). The colours come in visit_colours's order,
+// one call each, counted off here.
 template <class F>
 void over_colour_parts(const ColourRanges& colours, bool backwards, F&& range) {
   std::uint32_t c = backwards ? colours.colours : 0;
@@ -239,6 +226,12 @@ void over_colour_parts(const ColourRanges& colours, bool backwards, F&& range) {
                   else
                     for (std::uint32_t k = b; k < e; ++k) range(k, k + 1, k + 1);
                 });
+}
+
+// The same walk, each colour whole: range(begin, end).
+template <class F>
+void over_colours(const ColourRanges& colours, bool backwards, F&& range) {
+  over_colour_parts(colours, backwards, [&](std::uint32_t b, std::uint32_t, std::uint32_t e) { range(b, e); });
 }
 
 }  // namespace

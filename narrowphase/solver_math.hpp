@@ -426,28 +426,6 @@ MARBLES_HD_INLINE bool impulses_clear(const Contact& c) {
 // clear, a body loaded without one kept every bit.
 MARBLES_HD_INLINE bool has_minus_zero(const BodyState& b) { return has_minus_zero(b.v) || has_minus_zero(b.w); }
 
-// An idle update known before its arithmetic: a contact whose impulses are
-// +0 (impulses_clear), whose bodies hold no -0 velocity component, and whose
-// normal term asks for no impulse (normal_slack >= 0) keeps every bit of its
-// impulses and its bodies through the whole update. Its friction and rolling
-// terms, solved first, are clamped to limits of mu * +0 = +0 (the pair
-// table's coefficients are finite), so clamp_length gives +0 and the twist's
-// clamp a zero, each term applying a zero that changes no velocity component
-// but a -0; the bodies' velocities are then the loaded ones, so the normal
-// term sees this same slack, and -m * slack (m >= 0) is not > 0: it sets the
-// literal +0 and applies a zero. In a settled pile about half the updates
-// are such (in-plane neighbours whose gaps no speed closes): the CPU's lanes
-// skip a block's effective masses and terms where every update of it is
-// known idle (solver_lanes.hpp all_idle), the same bits. The GPU's sweep
-// does not ask (solve_loaded): measured on the H200 it gained nothing there
-// (the warps' updates are idle and not idle side by side) and cost the
-// widest sweep kernel 8 bytes of spilled registers.
-template <bool Friction, bool Rolling>
-MARBLES_HD_INLINE bool known_idle(const Contact& c, const BodyState& A, const BodyState& B, real inv_h) {
-  return impulses_clear<Friction, Rolling>(c) && !has_minus_zero(A) && !has_minus_zero(B) &&
-         normal_slack(c, A, B, inv_h) >= 0;
-}
-
 // One sweep's update of record k (the GPU's sweep kernel): solve_one on the
 // loaded contact, its effective masses computed from the bodies as the
 // prepare stage computed them (contact_math.hpp), only the ones the terms

@@ -341,6 +341,15 @@ void make_tiny(std::vector<SolverBody>& bodies) {
   for (SolverBody& b : bodies) b.v = b.v * underflowing_speed(), b.w = b.w * underflowing_speed();
 }
 
+// The idle rule of lanes::all_idle (solver_lanes.hpp) for one contact, the
+// scalar oracle its lanes are held to: impulses +0, no -0 velocity
+// component in either body, a normal slack >= 0.
+template <bool Friction, bool Rolling>
+bool known_idle(const Contact& c, const BodyState& A, const BodyState& B, real inv_h) {
+  return impulses_clear<Friction, Rolling>(c) && !has_minus_zero(A) && !has_minus_zero(B) &&
+         normal_slack(c, A, B, inv_h) >= 0;
+}
+
 // known_idle against the whole update: where it says idle, the effective
 // masses and the three terms change no bit of the impulses or of either body.
 // Cases: unloaded contacts (gaps open, spheres moving at random, with and
@@ -449,6 +458,11 @@ void expect_idle_blocks_equal_scalar(std::uint32_t seed, bool zeros, int& skippe
                                                 lanes::load_bodies_of<V>(block.bodies.data(), records, 0, false),
                                                 lanes::load_bodies_of<V>(block.bodies.data(), records, 0, true), inv_h);
     (idle ? skipped : solved) += 1;
+    bool every_lane = true;  // the scalar rule on each lane's contact, as the block holds it now
+    for (const Contact& c : scalar.contacts)
+      every_lane = every_lane && known_idle<Friction, Rolling>(c, load_body(scalar.bodies.data(), c.a, c),
+                                                               load_body(scalar.bodies.data(), c.b, c), inv_h);
+    ASSERT_EQ(idle, every_lane) << "seed " << seed << " sweep " << sweep;
     for (Contact& c : scalar.contacts) solve_one<Friction, Rolling>(c, scalar.bodies.data(), inv_h);
     if constexpr (Wide) solve_wide_block<Friction, Rolling>(records, block.bodies.data(), inv_h);
     else lanes::solve_block<Friction, Rolling>(records, 0, block.bodies.data(), inv_h);
