@@ -255,11 +255,8 @@ class PySimulation {
 
   // summary.json's figures of the world at its end, beside kinetic_energy_end.
   nb::dict end_figures() const {
-    const World::Motion motion = m_sim->world().motion();
     nb::dict d;
-    d["kinetic_energy_end_translational"] = motion.translational;
-    d["kinetic_energy_end_rotational"] = motion.rotational;
-    d["max_speed_end"] = motion.max_speed;
+    for (const EndFigure& f : ::marbles::end_figures(m_sim->world())) d[f.name] = f.value;
     return d;
   }
 

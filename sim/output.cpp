@@ -144,6 +144,13 @@ struct RunOutput::Impl {
   double thermo_seconds = 0;
 };
 
+std::vector<EndFigure> end_figures(const World& world) {
+  const World::Motion motion = world.motion();
+  return {{"kinetic_energy_end_translational", motion.translational},
+          {"kinetic_energy_end_rotational", motion.rotational},
+          {"max_speed_end", motion.max_speed}};
+}
+
 namespace {
 
 std::string thermo_row(const Simulation& sim, double ms_per_step) {

@@ -19,6 +19,7 @@ namespace scene {
 struct Scene;
 }
 class Simulation;
+struct World;
 
 // The frames' metadata of a scene's run: its material names and the producer.
 render::FrameMetadata frame_metadata(const scene::Scene& scene);
@@ -33,6 +34,15 @@ render::ContactSnapshot make_contact_snapshot(const Simulation& sim);
 // series.pvd, contacts.pvd, walls.pvd, thermo.csv, an old walls.json, materials.txt, movie.mp4, frames/frame_*.vtp,
 // images/frame_*.png, checkpoints/step_*.mck, contacts/contacts_*.vtp); other files are not ours.
 std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir);
+
+// summary.json's figures of the world at a run's end beside
+// kinetic_energy_end (World::motion), named as the summary names them; the
+// Python module's summary() gives the same.
+struct EndFigure {
+  const char* name;
+  double value;
+};
+std::vector<EndFigure> end_figures(const World& world);
 
 // OUTDIR/thermo.csv, one row per output frame (VTK or image):
 //   step,t,ke_translational,ke_rotational,potential_energy,contacts,max_overlap,max_speed,ms_per_step

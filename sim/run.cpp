@@ -285,10 +285,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   summary["rollbacks"] = static_cast<std::uint64_t>(totals.rollbacks);  // a count (held as a double in the checkpoint)
   summary["kinetic_energy_start"] = e_start;
   summary["kinetic_energy_end"] = e_end;
-  const World::Motion motion = sim.world().motion();
-  summary["kinetic_energy_end_translational"] = motion.translational;
-  summary["kinetic_energy_end_rotational"] = motion.rotational;
-  summary["max_speed_end"] = motion.max_speed;
+  for (const EndFigure& f : end_figures(sim.world())) summary[f.name] = f.value;
   if (reference)
     summary["reference"] = {{"kind", reference->kind},
                             {"expected", reference->expected},

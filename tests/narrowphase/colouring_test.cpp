@@ -73,6 +73,12 @@ std::vector<Contact> random_contacts(std::mt19937_64& rng, std::uint32_t bodies,
   return out;
 }
 
+// A random contact count up to 9 000, at most the distinct pairs of `bodies`.
+std::size_t random_count(std::mt19937_64& rng, std::uint32_t bodies) {
+  const std::size_t max_pairs = std::size_t(bodies) * (bodies - 1) / 2;
+  return std::min<std::size_t>(max_pairs, rng() % 9000);
+}
+
 // The oracle: contacts with a kept colour keep it; the others in decreasing
 // rank, each takes the lowest colour its spheres' kept and earlier contacts
 // do not have.
@@ -201,8 +207,7 @@ TEST(Colouring, MatchesSequentialGreedyOnRandomSets) {
   std::mt19937_64 rng(5);
   for (int trial = 0; trial < 40; ++trial) {
     const std::uint32_t bodies = 2 + static_cast<std::uint32_t>(rng() % 3000);
-    const std::size_t max_pairs = std::size_t(bodies) * (bodies - 1) / 2;
-    const std::size_t count = std::min<std::size_t>(max_pairs, rng() % 9000);
+    const std::size_t count = random_count(rng, bodies);
     expect_matches_oracle(random_contacts(rng, bodies, count, trial % 3 == 0 ? 0.3 : 0.05), bodies);
   }
 }
@@ -215,8 +220,7 @@ TEST(Colouring, LoadedContactsFirstInTheirColoursRecords) {
   std::mt19937_64 rng(31);
   for (int trial = 0; trial < 30; ++trial) {
     const std::uint32_t bodies = 2 + static_cast<std::uint32_t>(rng() % 3000);
-    const std::size_t max_pairs = std::size_t(bodies) * (bodies - 1) / 2;
-    const std::size_t count = std::min<std::size_t>(max_pairs, rng() % 9000);
+    const std::size_t count = random_count(rng, bodies);
     const std::vector<Contact> contacts = random_contacts(rng, bodies, count, 0.1);
     std::vector<std::uint8_t> kept(contacts.size(), kNoKeptColour), loaded(contacts.size());
     const int share = trial % 3 == 0 ? 0 : trial % 3 == 1 ? 50 : 100;

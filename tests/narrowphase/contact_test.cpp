@@ -301,6 +301,13 @@ TEST(Solver, LanesAskedForAreLoweredOrRefused) {
   ask(before ? kept.c_str() : nullptr);
 }
 
+// A lattice's contacts and velocities after a solve (the solver tests that
+// compare two ways of solving it).
+struct LatticeRun {
+  std::vector<Contact> contacts;
+  std::vector<Vec3> vel, omega;
+};
+
 // Every SIMD lane kind this CPU has (solver.hpp: SweepLanes) gives the
 // sweeps' bits of the 16-byte lanes, which solver_lanes_test holds to
 // solve_one: a jittered lattice of 24^3 touching spheres on a floor (~40 000
@@ -316,12 +323,8 @@ TEST(Solver, EveryLaneKindGivesTheSameBits) {
   const PairTable table = packed.table();
   const real h = real(1e-3);
 
-  struct Run {
-    std::vector<Contact> contacts;
-    std::vector<Vec3> vel, omega;
-  };
   auto run = [&](const SolverSettings& s, SweepLanes lanes) {
-    Run out{{}, vel0, omega0};
+    LatticeRun out{{}, vel0, omega0};
     const BodiesView bodies = lattice.view(lattice.position.data(), out.vel.data(), out.omega.data());
     ColourRanges colours;
     out.contacts = lattice.contacts(bodies, table, h, real(1e-4), colours);
@@ -337,7 +340,7 @@ TEST(Solver, EveryLaneKindGivesTheSameBits) {
     for (int terms = 0; terms < 4; ++terms) {
       SolverSettings s;
       s.friction = terms & 1, s.rolling = terms & 2;
-      const Run base = run(s, SweepLanes::sse2), wide = run(s, lanes);
+      const LatticeRun base = run(s, SweepLanes::sse2), wide = run(s, lanes);
       ASSERT_GT(base.contacts.size(), 30000u);
       ASSERT_EQ(base.contacts.size(), wide.contacts.size());
       EXPECT_EQ(std::memcmp(base.contacts.data(), wide.contacts.data(), sizeof(Contact) * base.contacts.size()), 0)
@@ -368,15 +371,11 @@ TEST(Solver, TheRecordsOrderWithinAColourAndItsCutChangeNoBit) {
   const std::size_t n = lattice.n;
   const PairTable table = packed.table();
   const real h = real(1e-3);
-  struct Run {
-    std::vector<Contact> contacts;
-    std::vector<Vec3> vel, omega;
-  };
   const int was = thread_count();
   set_thread_count(2);
   // Each run's loads drawn alike (the same seed); told to the colouring or not.
   auto run = [&](const SolverSettings& s, bool told, bool cut_anywhere) {
-    Run out{{}, packed.vel, packed.omega};
+    LatticeRun out{{}, packed.vel, packed.omega};
     const BodiesView bodies = lattice.view(lattice.position.data(), out.vel.data(), out.omega.data());
     ColourRanges colours;
     std::mt19937_64 loads(31);
@@ -392,11 +391,11 @@ TEST(Solver, TheRecordsOrderWithinAColourAndItsCutChangeNoBit) {
   for (int terms = 0; terms < 4; ++terms) {
     SolverSettings s;
     s.friction = terms & 1, s.rolling = terms & 2;
-    const Run plain = run(s, false, false);
+    const LatticeRun plain = run(s, false, false);
     ASSERT_GT(plain.contacts.size(), 30000u);
     EXPECT_NE(std::memcmp(plain.vel.data(), packed.vel.data(), sizeof(Vec3) * n), 0);  // the sweeps did work
     for (const bool cut_anywhere : {false, true}) {
-      const Run other = run(s, true, cut_anywhere);
+      const LatticeRun other = run(s, true, cut_anywhere);
       ASSERT_EQ(plain.contacts.size(), other.contacts.size());
       EXPECT_EQ(std::memcmp(plain.contacts.data(), other.contacts.data(), sizeof(Contact) * plain.contacts.size()), 0)
           << "terms " << terms << (cut_anywhere ? ", cut anywhere" : "");
