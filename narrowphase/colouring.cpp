@@ -27,10 +27,11 @@ constexpr std::ptrdiff_t kGatherAhead = 64;
 // for the contact 16 visits ahead and for the spheres' words of the contact
 // 8 ahead (by then in cache). Branch-free (GCC drops a prefetch under a
 // condition); hints only, the result is the same.
-void ContactColouring::prefetch_ahead(Runs<const Contact> contacts, std::size_t t, std::size_t count) const {
+template <class Pairs>
+void ContactColouring::prefetch_ahead(const Pairs& contacts, std::size_t t, std::size_t count) const {
   const std::size_t last = count - 1;
   __builtin_prefetch(&contacts[m_order[t + 16 < last ? t + 16 : last]].a);
-  const Contact& c = contacts[m_order[t + 8 < last ? t + 8 : last]];
+  const auto& c = contacts[m_order[t + 8 < last ? t + 8 : last]];
   const std::uint32_t b = c.b & ~kWallFlag;  // a wall's: some sphere's words, harmless
   __builtin_prefetch(m_body_next_round.data() + c.a);
   __builtin_prefetch(m_body_next_round.data() + b);
@@ -43,7 +44,8 @@ void ContactColouring::prefetch_ahead(Runs<const Contact> contacts, std::size_t 
 // which is the round Jones–Plassmann colours it in; its colour is the lowest
 // free one (or its round). The same result as the rounds of the CUDA twin
 // (colouring_cuda.cu), in one pass.
-std::uint32_t ContactColouring::colour(Runs<const Contact> contacts, const std::vector<std::uint32_t>& active,
+template <class Pairs>
+std::uint32_t ContactColouring::colour_of(const Pairs& contacts, const std::vector<std::uint32_t>& active,
                                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
                                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds_out,
                                        const std::vector<std::uint32_t>* kept) {
@@ -56,7 +58,7 @@ std::uint32_t ContactColouring::colour(Runs<const Contact> contacts, const std::
   m_body_used.resize(body_count);
   auto clear = [&](const std::vector<std::uint32_t>& list) {
     for (const std::uint32_t k : list) {
-      const Contact& c = contacts[k];
+      const auto& c = contacts[k];
       m_body_next_round[c.a] = 0, m_body_used[c.a] = 0;
       if (!is_wall(c.b)) m_body_next_round[c.b] = 0, m_body_used[c.b] = 0;
     }
@@ -90,7 +92,7 @@ std::uint32_t ContactColouring::colour(Runs<const Contact> contacts, const std::
       std::uint64_t* mine = own_masks && me > 0 ? others + static_cast<std::size_t>(me - 1) * body_count : used;
 #pragma omp for schedule(static)
       for (std::ptrdiff_t t = 0; t < m; ++t) {
-        const Contact& c = contacts[kk[t]];
+        const auto& c = contacts[kk[t]];
         const std::uint32_t kept_colour = colour_of[kk[t]];
         const std::uint64_t bit = std::uint64_t(1) << kept_colour;
         if (atomics) {
@@ -139,7 +141,7 @@ std::uint32_t ContactColouring::colour(Runs<const Contact> contacts, const std::
   for (std::size_t t = 0; t < count; ++t) {
     prefetch_ahead(contacts, t, count);
     const std::uint32_t k = m_order[t];
-    const Contact& c = contacts[k];
+    const auto& c = contacts[k];
     const bool wall = is_wall(c.b);
     std::uint32_t round = m_body_next_round[c.a];
     if (!wall) round = std::max(round, m_body_next_round[c.b]);
@@ -160,6 +162,14 @@ std::uint32_t ContactColouring::colour(Runs<const Contact> contacts, const std::
   if (rounds_out) *rounds_out = rounds;
   return rule == ColourRule::by_round ? rounds : colours;
 }
+template std::uint32_t ContactColouring::colour_of(const Runs<const Contact>&, const std::vector<std::uint32_t>&,
+                                                   const std::uint64_t*, std::size_t, ColourRule,
+                                                   std::vector<std::uint32_t>&, std::uint32_t*,
+                                                   const std::vector<std::uint32_t>*);
+template std::uint32_t ContactColouring::colour_of(const PlacedPairs&, const std::vector<std::uint32_t>&,
+                                                   const std::uint64_t*, std::size_t, ColourRule,
+                                                   std::vector<std::uint32_t>&, std::uint32_t*,
+                                                   const std::vector<std::uint32_t>*);
 
 void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
                                        const std::uint8_t* kept_colour, const BodiesView* prepare, real rest_speed,
@@ -171,9 +181,9 @@ void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size
   contacts.swap(m_sorted);
 }
 
-void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_in, std::vector<Contact>& sorted_out,
-                                       std::size_t body_count, ColourRanges& out, const std::uint8_t* kept_colour,
-                                       const BodiesView* prepare, real rest_speed, const std::uint8_t* loaded) {
+void ContactColouring::colour_and_place(Runs<const Contact> contacts, std::size_t count_in, std::size_t body_count,
+                                        ColourRanges& out, const std::uint8_t* kept_colour,
+                                        const std::uint8_t* loaded) {
   const auto n = static_cast<std::uint32_t>(count_in);
   m_rank.resize(n);
   m_colour.resize(n);
@@ -235,6 +245,14 @@ void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_i
     }
     for (std::uint32_t p = begin[colours]; p < n; ++p) record[p] = p;
   }
+}
+
+void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_in, std::vector<Contact>& sorted_out,
+                                       std::size_t body_count, ColourRanges& out, const std::uint8_t* kept_colour,
+                                       const BodiesView* prepare, real rest_speed, const std::uint8_t* loaded) {
+  colour_and_place(contacts, count_in, body_count, out, kept_colour, loaded);
+  const auto n = static_cast<std::uint32_t>(count_in);
+  const std::uint32_t* source = m_source.data();
   // resize() makes (value-initialises) only the contacts past its size: the
   // callers hand a buffer that kept the last substep's.
   sorted_out.resize(n);

@@ -50,6 +50,15 @@ struct ColourRanges {
   std::size_t size() const { return begin[colours + 1]; }
 };
 
+// The body pairs of colour-major contacts read from the solver's records:
+// place k's pair is bodies[record_of(k)] (ColourRanges::record; record
+// null: place k is record k). What the impact stage colours.
+struct PlacedPairs {
+  const BodyPair* bodies = nullptr;
+  const std::uint32_t* record = nullptr;
+  const BodyPair& operator[](std::size_t k) const { return bodies[record ? record[k] : k]; }
+};
+
 class ContactColouring {
  public:
   // Colours `active` (indices into contacts, ascending) by `rank` (one per
@@ -61,10 +70,20 @@ class ContactColouring {
   // `kept` (lowest_free only): contacts whose colour[k] is already set (a
   // proper colouring among themselves); they hold their colours at their
   // spheres and take no part in the rounds.
+  // `contacts[k]` has the contact's a and b: the contacts, or the records'
+  // pairs by place (PlacedPairs).
   std::uint32_t colour(Runs<const Contact> contacts, const std::vector<std::uint32_t>& active,
                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr,
-                       const std::vector<std::uint32_t>* kept = nullptr);
+                       const std::vector<std::uint32_t>* kept = nullptr) {
+    return colour_of<Runs<const Contact>>(contacts, active, rank, body_count, rule, colour, rounds, kept);
+  }
+  std::uint32_t colour(const PlacedPairs& contacts, const std::vector<std::uint32_t>& active,
+                       const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
+                       std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr,
+                       const std::vector<std::uint32_t>* kept = nullptr) {
+    return colour_of<PlacedPairs>(contacts, active, rank, body_count, rule, colour, rounds, kept);
+  }
 
   // The solver colouring of all contacts: contact k keeps kept_colour[k] when
   // it is not kNoKeptColour (kept_colour null: none kept), the others are
@@ -85,9 +104,23 @@ class ContactColouring {
   void colour_and_sort(ContactRuns contacts, std::size_t count, std::vector<Contact>& sorted, std::size_t body_count,
                        ColourRanges& out, const std::uint8_t* kept_colour = nullptr,
                        const BodiesView* prepare = nullptr, real rest_speed = 0, const std::uint8_t* loaded = nullptr);
+  // The colouring alone: `out` as colour_and_sort gives it (fast_approach
+  // left as it was), the contacts left where they are; places() then names
+  // the contact at each colour-major place, which the CPU step's records
+  // are made from (ContactSolver::make_records).
+  void colour_and_place(Runs<const Contact> contacts, std::size_t count, std::size_t body_count, ColourRanges& out,
+                        const std::uint8_t* kept_colour = nullptr, const std::uint8_t* loaded = nullptr);
+  // places()[p]: the index of the contact at place p of the last
+  // colour_and_place (or colour_and_sort).
+  const std::uint32_t* places() const { return m_source.data(); }
 
  private:
-  void prefetch_ahead(Runs<const Contact> contacts, std::size_t t, std::size_t count) const;
+  template <class Pairs>
+  std::uint32_t colour_of(const Pairs& contacts, const std::vector<std::uint32_t>& active, const std::uint64_t* rank,
+                          std::size_t body_count, ColourRule rule, std::vector<std::uint32_t>& colour,
+                          std::uint32_t* rounds, const std::vector<std::uint32_t>* kept);
+  template <class Pairs>
+  void prefetch_ahead(const Pairs& contacts, std::size_t t, std::size_t count) const;
   std::vector<std::uint64_t> m_body_used, m_rank, m_by_rank, m_sort_keys;
   // The kept colours' masks of threads 1..T-1 where T is at most
   // kMostOwnMasks (colour()); more threads or them by atomics into

@@ -36,6 +36,12 @@ struct PairTable {
   }
 };
 
+// A contact's two bodies (b may be a wall: kWallFlag | index), as the
+// sweep's records and the GPU's contact list hold them.
+struct alignas(8) BodyPair {
+  std::uint32_t a = 0, b = 0;
+};
+
 // 16-byte aligned, fields in 16-byte groups. The GPU holds no Contact
 // array: a contact lives there as the sweep's records (solver_math.hpp) and
 // is made whole only when the host asks for the contacts.

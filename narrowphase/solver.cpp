@@ -138,20 +138,64 @@ void warm_start_range(const SweepRecords& s, std::uint32_t begin, std::uint32_t 
 }
 
 // The contacts into the sweep's records (contact k into record
-// colours.record_of(k)) and the impulses back, in parallel.
+// colours.record_of(k)) with their impact words, and the impulses and the
+// impact stage's words back, in parallel.
 template <bool Rolling>
-void pack_records(const Contact* contacts, std::size_t count, const ColourRanges& colours, const SweepRecords& s) {
+void pack_records(const Contact* contacts, std::size_t count, const ColourRanges& colours, const SweepRecords& s,
+                  const ImpactRecords& impacts) {
   const auto n = static_cast<std::ptrdiff_t>(count);
 #pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t k = 0; k < n; ++k)
-    pack_sweep_record<Rolling>(contacts[k], s, colours.record_of(static_cast<std::uint32_t>(k)));
+  for (std::ptrdiff_t k = 0; k < n; ++k) {
+    const std::uint32_t r = colours.record_of(static_cast<std::uint32_t>(k));
+    pack_sweep_record<Rolling>(contacts[k], s, r);
+    pack_impact(contacts[k], impacts, r);
+  }
 }
 template <bool Rolling>
-void unpack_records(const SweepRecords& s, const ColourRanges& colours, Contact* contacts, std::size_t count) {
+void unpack_records(const SweepRecords& s, const ImpactRecords& impacts, const ColourRanges& colours,
+                    Contact* contacts, std::size_t count) {
   const auto n = static_cast<std::ptrdiff_t>(count);
 #pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t k = 0; k < n; ++k)
-    unpack_sweep_impulses<Rolling>(s, colours.record_of(static_cast<std::uint32_t>(k)), contacts[k]);
+  for (std::ptrdiff_t k = 0; k < n; ++k) {
+    const std::uint32_t r = colours.record_of(static_cast<std::uint32_t>(k));
+    unpack_sweep_impulses<Rolling>(s, r, contacts[k]);
+    if (impacts.word) contacts[k].impact_impulse = impacts.word[r].z, contacts[k].rebound_shift = impacts.word[r].w;
+  }
+}
+
+// How far ahead make_records asks for a found contact (and, half as far,
+// for its spheres' velocities): the colour-major gather's distance
+// (docs/architecture.md "The CPU's colour-major gather").
+constexpr std::ptrdiff_t kMakeAhead = 64;
+
+// ContactSolver::make_records' loop: true when a contact approaches faster
+// than the rest speed (is_impact_candidate).
+template <bool Rolling>
+bool records_made(Runs<const Contact> found, const std::uint32_t* places, const ColourRanges& colours,
+                  const BodiesView& world, const SweepRecords& s, const ImpactRecords& impacts, real rest_speed) {
+  const auto n = static_cast<std::ptrdiff_t>(colours.size());
+  auto hint = [](const void* p) { __builtin_prefetch(p); };
+  bool fast = false;
+#pragma omp parallel for schedule(static) reduction(|| : fast) if (n >= 20000)
+  for (std::ptrdiff_t p = 0; p < n; ++p) {
+    // Hints only: the found contact kMakeAhead places ahead (read in random
+    // order from a list far past the caches), and the bodies of the one
+    // half as far ahead.
+    const auto* next = reinterpret_cast<const char*>(&found[places[std::min<std::ptrdiff_t>(p + kMakeAhead, n - 1)]]);
+    hint(next), hint(next + 64), hint(next + sizeof(Contact) - 1);
+    const Contact& ahead = found[places[std::min<std::ptrdiff_t>(p + kMakeAhead / 2, n - 1)]];
+    hint(world.velocity + ahead.a);
+    hint(world.velocity + (ahead.b & ~kWallFlag));
+    hint(world.angular_velocity + ahead.a);
+    hint(world.angular_velocity + (ahead.b & ~kWallFlag));
+    Contact c = found[places[p]];
+    prepare_from_world(c, world);
+    const std::uint32_t r = colours.record_of(static_cast<std::uint32_t>(p));
+    pack_sweep_record<Rolling>(c, s, r);
+    pack_impact(c, impacts, r);
+    fast = is_impact_candidate(c, rest_speed) || fast;
+  }
+  return fast;
 }
 
 // The impact stage's passes after the first try every contact, colour by
@@ -170,36 +214,42 @@ void unpack_records(const SweepRecords& s, const ColourRanges& colours, Contact*
 // tries every contact: a contact's check there costs about what its
 // refusal does (gas, H200: the stage 57.5 against 50.1 us at 10^5, 144.6
 // against 136.0 at 10^6 with the flags; docs/architecture.md "Impacts
-// passed over").
-bool impact_passed_over(const Contact& c, const std::uint8_t* hit_spheres, real rest_speed) {
-  if (!hit_spheres || !(c.approach_speed > -rest_speed)) return false;
-  return !hit_spheres[c.a] && (is_wall(c.b) || !hit_spheres[c.b]);
+// passed over"). Record k, its impact word's approach speed.
+bool impact_passed_over(const SweepRecords& s, const Real4* impact, std::uint32_t k, const std::uint8_t* hit_spheres,
+                        real rest_speed) {
+  if (!hit_spheres || !(impact[k].x > -rest_speed)) return false;
+  const BodyPair ab = s.bodies[k];
+  return !hit_spheres[ab.a] && (is_wall(ab.b) || !hit_spheres[ab.b]);
 }
 
-// Impacts of contacts[order[k]] for k in [begin, end) (one level of the
-// first pass; order null: contacts[k], one colour of a later pass, which
+// Impacts of the records of places order[t] for t in [begin, end) (one
+// level of the first pass, record[] their records, null: place k is record
+// k; order null: records [begin, end), one colour of a later pass, which
 // passes over the contacts no hit has reached, counted in *passed); each
 // hit sets its spheres' flags (hit_spheres, where not null); true if any
 // hit. Within a level or a colour no two contacts share a sphere, so no
 // two threads write or read another's flag.
 template <bool Friction>
-bool impact_range(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
-                  SolverBody* bodies, const ImpactParams& p, std::uint8_t* hit_spheres, std::uint64_t* passed) {
+bool impact_range(const SweepRecords& s, Real4* impact, const std::uint32_t* order, const std::uint32_t* record,
+                  std::uint32_t begin, std::uint32_t end, SolverBody* bodies, const ImpactParams& p,
+                  std::uint8_t* hit_spheres, std::uint64_t* passed) {
   bool hit = false;
   std::uint64_t over = 0;
   const auto n = static_cast<std::ptrdiff_t>(end - begin);
 #pragma omp parallel for schedule(static) reduction(|| : hit) reduction(+ : over) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t) {
-    Contact& c = contacts[order ? order[begin + t] : begin + t];
-    if (!order && impact_passed_over(c, hit_spheres, p.rest_speed)) {
+    const std::uint32_t place = begin + static_cast<std::uint32_t>(t);
+    const std::uint32_t k = !order ? place : record ? record[order[place]] : order[place];
+    if (!order && impact_passed_over(s, impact, k, hit_spheres, p.rest_speed)) {
       ++over;
       continue;
     }
-    if (!impact_one<Friction>(c, bodies, p)) continue;
+    if (!impact_record<Friction>(s, impact, k, bodies, p)) continue;
     hit = true;
     if (hit_spheres) {
-      hit_spheres[c.a] = 1;
-      if (!is_wall(c.b)) hit_spheres[c.b] = 1;
+      const BodyPair ab = s.bodies[k];
+      hit_spheres[ab.a] = 1;
+      if (!is_wall(ab.b)) hit_spheres[ab.b] = 1;
     }
   }
   *passed += over;
@@ -357,6 +407,33 @@ void ContactSolver::local_sweeps(const ColourRanges& colours, const BodiesView& 
 
 void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const ColourRanges& colours,
                                      const BodiesView& world, real h, Unpack unpack) {
+  // The warm start and the sweeps on the records (48 bytes a contact with
+  // friction where the contact is 112), the impact stage on the records and
+  // their impact words; the impulses back after the last.
+  size_records(contacts.size());
+  m_made = false;
+  m_packed_from = contacts.data();
+  if (m_settings.rolling) pack_records<true>(contacts.data(), contacts.size(), colours, m_records, m_impacts);
+  else pack_records<false>(contacts.data(), contacts.size(), colours, m_records, m_impacts);
+  solve_packed(colours, world, h);
+  m_pending_from = contacts.data();
+  if (unpack == Unpack::now) unpack_impulses(contacts, colours);
+}
+
+void ContactSolver::make_records(Runs<const Contact> found, const std::uint32_t* places, ColourRanges& colours,
+                                 const BodiesView& world) {
+  size_records(colours.size());
+  m_packed_from = nullptr, m_pending_from = nullptr, m_made = true;
+  colours.fast_approach = m_settings.rolling
+                              ? records_made<true>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed)
+                              : records_made<false>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed);
+}
+
+void ContactSolver::solve_records(const ColourRanges& colours, const BodiesView& world, real h) {
+  if (m_made) solve_packed(colours, world, h);
+}
+
+void ContactSolver::solve_packed(const ColourRanges& colours, const BodiesView& world, real h) {
   const auto n = static_cast<std::ptrdiff_t>(world.count);
   m_bodies.resize(world.count);
 #pragma omp parallel for schedule(static) if (n > 20000)
@@ -364,15 +441,9 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
   SolverBody* bodies = m_bodies.data();
 
   m_rebounds = false;
-  if (m_settings.restitution) impacts(contacts, colours, bodies, world.count, h);
+  if (m_settings.restitution) impacts(colours, bodies, world.count, h);
 
-  // The warm start and the sweeps on the records (48 bytes a contact with
-  // friction where the contact is 112); the impulses back after the last.
-  size_records(contacts.size());
   const SweepRecords& records = m_records;
-  m_packed_from = contacts.data();
-  if (m_settings.rolling) pack_records<true>(contacts.data(), contacts.size(), colours, records);
-  else pack_records<false>(contacts.data(), contacts.size(), colours, records);
   // The warm start over each colour's loaded records: the others carry no
   // load in (carries_load), so warm_start_one applies nothing for them.
   if (m_settings.warm_start)
@@ -386,8 +457,6 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
       over_colour_parts(colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t split, std::uint32_t e) {
         m_sweep(records, b, split, e, bodies, inv_h);
       });
-  m_pending_from = contacts.data();
-  if (unpack == Unpack::now) unpack_impulses(contacts, colours);
 #pragma omp parallel for schedule(static) if (n > 20000)
   for (std::ptrdiff_t i = 0; i < n; ++i) scatter_solver_body(world, i, m_bodies[i]);
 }
@@ -399,25 +468,44 @@ const SweepRecords* ContactSolver::pending_records(const std::vector<Contact>& c
 
 void ContactSolver::unpack_impulses(std::vector<Contact>& contacts, const ColourRanges& colours) {
   if (!pending_records(contacts)) return;
-  if (m_settings.rolling) unpack_records<true>(m_records, colours, contacts.data(), contacts.size());
-  else unpack_records<false>(m_records, colours, contacts.data(), contacts.size());
+  if (m_settings.rolling) unpack_records<true>(m_records, m_impacts, colours, contacts.data(), contacts.size());
+  else unpack_records<false>(m_records, m_impacts, colours, contacts.data(), contacts.size());
   m_pending_from = nullptr;
 }
 
-// Impact stage. Pass 0: the candidates, levelled by time of impact (a
-// by_round colouring: of two candidates sharing a sphere the earlier is in
-// the lower level), level by level. Later passes: every contact, colour by
-// colour, while the pass before hit something.
-void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& colours, SolverBody* bodies,
-                            std::size_t body_count, real h) {
+void ContactSolver::contacts_of_records(const ColourRanges& colours, const BodiesView& world, const PairTable& table,
+                                        const std::vector<WallShape>& walls, std::vector<Contact>& out) const {
+  if (!m_made) {
+    out.clear();
+    return;
+  }
+  out.resize(m_record_count);
+  const auto n = static_cast<std::ptrdiff_t>(m_record_count);
+  const WallShape* ws = walls.data();
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t p = 0; p < n; ++p)
+    out[p] = contact_of_record(m_records, m_impacts, colours.record_of(static_cast<std::uint32_t>(p)), world, table, ws);
+}
+
+// Impact stage, on the records and their impact words. Pass 0: the
+// candidates, levelled by time of impact (a by_round colouring: of two
+// candidates sharing a sphere the earlier is in the lower level), level by
+// level. Later passes: every contact, colour by colour, while the pass
+// before hit something. The candidates, ranks and levels go by colour-major
+// place (the contact index of solve_velocities), each read from its record.
+void ContactSolver::impacts(const ColourRanges& colours, SolverBody* bodies, std::size_t body_count, real h) {
   const real rest = m_settings.rest_speed;
   const ImpactParams params{rest, h, m_settings.wall_accel};
-  const auto n = static_cast<std::uint32_t>(contacts.size());
-  m_candidates.clear();  // in index order, scanned on all threads
+  const auto n = static_cast<std::uint32_t>(m_record_count);
+  m_candidates.clear();  // in place order, scanned on all threads
   m_impact_passed_over = 0;
-  if (!colours.fast_approach) return;  // the colouring's move saw every approach speed: none is a candidate
+  if (!colours.fast_approach) return;  // every approach speed was seen: none is a candidate
+  const SweepRecords& s = m_records;
+  Real4* impact = m_impacts.word;
+  const std::uint32_t* record = colours.record.empty() ? nullptr : colours.record.data();
+  auto approach = [&](std::uint32_t place) { return load_approach(s, impact, record ? record[place] : place); };
   collect_in_order(n, kParallelFrom, m_candidates, m_candidate_parts, [&](std::size_t k, std::vector<std::uint32_t>& to) {
-    if (is_impact_candidate(contacts[k], rest)) to.push_back(static_cast<std::uint32_t>(k));
+    if (is_impact_candidate(approach(static_cast<std::uint32_t>(k)), rest)) to.push_back(static_cast<std::uint32_t>(k));
   });
   if (m_candidates.empty()) return;
   std::uint8_t* hit_spheres = nullptr;
@@ -427,11 +515,11 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
   }
   m_rank.resize(n);
   m_level.assign(n, kUncoloured);
-  for (std::uint32_t k : m_candidates) m_rank[k] = impact_rank(time_of_impact(contacts[k]), k);
+  for (std::uint32_t k : m_candidates) m_rank[k] = impact_rank(time_of_impact(approach(k)), k);
   std::uint32_t rounds = 0;
-  m_impact_colouring.colour(contacts.data(), m_candidates, m_rank.data(), body_count, ColourRule::by_round, m_level,
-                            &rounds);
-  // Candidates level by level (overflow last), index order within a level.
+  m_impact_colouring.colour(PlacedPairs{s.bodies, record}, m_candidates, m_rank.data(), body_count,
+                            ColourRule::by_round, m_level, &rounds);
+  // Candidates level by level (overflow last), place order within a level.
   std::vector<std::uint32_t> begin(rounds + 2, 0);
   auto level_of = [&](std::uint32_t k) { return m_level[k] == kOverflowColour ? rounds : m_level[k]; };
   for (std::uint32_t k : m_candidates) ++begin[level_of(k) + 1];
@@ -441,19 +529,21 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
     std::vector<std::uint32_t> cursor(begin.begin(), begin.end() - 1);
     for (std::uint32_t k : m_candidates) m_order[cursor[level_of(k)]++] = k;
   }
-  Contact* cs = contacts.data();
   bool hit = false;
   std::uint64_t* passed = &m_impact_passed_over;
+  const std::uint32_t* order = m_order.data();
   for (std::uint32_t l = 0; l < rounds; ++l)
-    hit = m_impact(cs, m_order.data(), begin[l], begin[l + 1], bodies, params, hit_spheres, passed) || hit;
+    hit = m_impact(s, impact, order, record, begin[l], begin[l + 1], bodies, params, hit_spheres, passed) || hit;
   for (std::uint32_t k = begin[rounds]; k < begin[rounds + 1]; ++k)
-    hit = m_impact(cs, m_order.data(), k, k + 1, bodies, params, hit_spheres, passed) || hit;
+    hit = m_impact(s, impact, order, record, k, k + 1, bodies, params, hit_spheres, passed) || hit;
 
   m_rebounds = hit;
+  // A colour's records are its places' (ColourRanges::record), the same
+  // range: no two share a sphere, in any order.
   for (int pass = 1; pass < kImpactPasses && hit; ++pass) {
     hit = false;
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      hit = m_impact(cs, nullptr, b, e, bodies, params, hit_spheres, passed) || hit;
+      hit = m_impact(s, impact, nullptr, nullptr, b, e, bodies, params, hit_spheres, passed) || hit;
     });
     m_rebounds = m_rebounds || hit;
   }
@@ -461,17 +551,6 @@ void ContactSolver::impacts(std::vector<Contact>& contacts, const ColourRanges& 
 
 int ContactSolver::project_positions(const std::vector<Contact>& contacts, const ColourRanges& colours,
                                      const BodiesView& bodies, const std::vector<WallShape>& walls) const {
-  const Contact* cs = contacts.data();
-  const WallShape* ws = walls.data();
-  // Only an impact gives a contact a rebound shift: a substep without one
-  // (a pile at rest) skips the pass, which would return at every contact.
-  if (m_settings.restitution && m_rebounds)
-    over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      any_in_colour(b, e, [&](std::uint32_t k) {
-        rebound_one(cs[k], bodies, ws);
-        return false;
-      });
-    });
   // The sweeps read the position records (load_position_contact, as the
   // GPU's do): the contacts' a, b and normal, 24 bytes a contact where each
   // sweep over the contacts read two 64-byte lines of each. Settled pile of
@@ -480,14 +559,42 @@ int ContactSolver::project_positions(const std::vector<Contact>& contacts, const
   // (it changes no contact's bodies or normal); packed here only without a
   // solve since the last projection. deepest_overlap reads them after the
   // last sweep.
-  const auto n = static_cast<std::ptrdiff_t>(contacts.size());
-  if (m_packed_from != cs || m_record_count != contacts.size()) {
+  const Contact* cs = contacts.data();
+  const bool solved = m_packed_from == cs && m_record_count == contacts.size();
+  if (!solved) {
+    const auto n = static_cast<std::ptrdiff_t>(contacts.size());
     size_records(contacts.size());
+    m_made = false;
 #pragma omp parallel for schedule(static) if (n > 20000)
     for (std::ptrdiff_t k = 0; k < n; ++k) pack_position_record(cs[k], m_records, static_cast<std::uint32_t>(k));
   }
   m_packed_from = nullptr;
+  // Without a solve no impact stage ran: no rebound is due. The sweeps walk
+  // each colour's range of records, whatever order they hold it in.
+  return project_packed(colours, bodies, walls, solved && m_rebounds);
+}
+
+int ContactSolver::project_records(const ColourRanges& colours, const BodiesView& bodies,
+                                   const std::vector<WallShape>& walls) const {
+  return m_made ? project_packed(colours, bodies, walls, m_rebounds) : 0;
+}
+
+int ContactSolver::project_packed(const ColourRanges& colours, const BodiesView& bodies,
+                                  const std::vector<WallShape>& walls, bool rebounds) const {
+  const WallShape* ws = walls.data();
   const SweepRecords& records = m_records;
+  // Only an impact gives a contact a rebound shift: a substep without one
+  // (a pile at rest) skips the pass, which would return at every contact.
+  // A colour's records are its places'.
+  if (m_settings.restitution && rebounds) {
+    const Real4* impact = m_impacts.word;
+    over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
+      any_in_colour(b, e, [&](std::uint32_t k) {
+        rebound_one(load_rebound_contact(records, impact, k), bodies, ws);
+        return false;
+      });
+    });
+  }
   // Sweeps until one moves no contact by more than settled_move
   // (project_one), position_iterations at most, and on while one moves some
   // contact by more than deep_move (projection_sweep_settings): a pile at
@@ -507,8 +614,18 @@ int ContactSolver::project_positions(const std::vector<Contact>& contacts, const
 }
 
 void ContactSolver::size_records(std::size_t count) const {
-  m_record_words.resize((SweepRecords::bytes_for(count) + sizeof(Real4) - 1) / sizeof(Real4));
-  m_records = SweepRecords::in(m_record_words.data(), count);
+  // The rolling words only with rolling resistance (contact_of_record reads
+  // them where they are); every other array as the CPU's sweeps read them.
+  const bool rolling = m_settings.rolling;
+  m_record_words.resize((SweepRecords::bytes_for(count, true, true, rolling) + sizeof(Real4) - 1) / sizeof(Real4));
+  m_records = SweepRecords::in(m_record_words.data(), count, true, true, {}, rolling);
+  if (m_settings.restitution) {
+    m_impact_words.resize(count);
+    m_impacts = {m_impact_words.data(), nullptr};
+  } else {
+    m_impact_words.resize(SweepRecords::real_words(count));
+    m_impacts = {nullptr, reinterpret_cast<real*>(m_impact_words.data())};
+  }
   m_record_count = count;
 }
 

@@ -127,7 +127,30 @@ class ContactSolver {
   // their records as `colours` (the solve's) places them.
   void unpack_impulses(std::vector<Contact>& contacts, const ColourRanges& colours);
   // The solved contacts are being replaced: their records are no longer theirs.
-  void forget_records() { m_pending_from = nullptr, m_packed_from = nullptr; }
+  void forget_records() { m_pending_from = nullptr, m_packed_from = nullptr, m_made = false; }
+
+  // The CPU step's form, as the GPU's: the records made straight from the
+  // contacts as found, no colour-major copy of the 112-byte contacts.
+  // places[p] is the found contact at colour-major place p
+  // (ContactColouring::places, `colours` its ranges and records); each is
+  // prepared from the world's bodies on its way (nothing moves them before
+  // the solve) and packed into its record with its impact word (on the
+  // GPU's terms: a whole word with restitution, the approach speed alone
+  // without). colours.fast_approach tells whether one approaches faster
+  // than the rest speed.
+  void make_records(Runs<const Contact> found, const std::uint32_t* places, ColourRanges& colours,
+                    const BodiesView& world);
+  // solve_velocities and project_positions on the made records.
+  void solve_records(const ColourRanges& colours, const BodiesView& bodies, real h);
+  int project_records(const ColourRanges& colours, const BodiesView& bodies, const std::vector<WallShape>& walls) const;
+  // The made records (their impulses as the last solve left them), or null
+  // when none were made since forget_records.
+  const SweepRecords* made_records() const { return m_made ? &m_records : nullptr; }
+  // The made records as whole contacts in colour-major order
+  // (contact_of_record: the contacts colour_and_sort and solve_velocities
+  // give, bit for bit), `table` and `walls` the step's.
+  void contacts_of_records(const ColourRanges& colours, const BodiesView& world, const PairTable& table,
+                           const std::vector<WallShape>& walls, std::vector<Contact>& out) const;
 
   // Position projection over the same contacts at the integrated positions
   // (unchanged since solve_velocities, or not solved: the solve's records
@@ -144,9 +167,13 @@ class ContactSolver {
   std::uint64_t impact_passed_over() const { return m_impact_passed_over; }
 
  private:
-  void impacts(std::vector<Contact>& contacts, const ColourRanges& colours, SolverBody* bodies, std::size_t body_count,
-               real h);
-  // m_records over m_record_words for `count` contacts.
+  // The solve and the projection on the records (packed or made).
+  void solve_packed(const ColourRanges& colours, const BodiesView& world, real h);
+  int project_packed(const ColourRanges& colours, const BodiesView& bodies, const std::vector<WallShape>& walls,
+                     bool rebounds) const;
+  void impacts(const ColourRanges& colours, SolverBody* bodies, std::size_t body_count, real h);
+  // m_records over m_record_words and m_impacts over m_impact_words for
+  // `count` contacts.
   void size_records(std::size_t count) const;
   // The sweeps in the local order (LocalOrder) on the packed records.
   void local_sweeps(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies, real inv_h);
@@ -156,9 +183,9 @@ class ContactSolver {
   // A colour's sweep: [begin, split) the contacts that carried a load in.
   using SweepFn = void (*)(const SweepRecords& records, std::uint32_t begin, std::uint32_t split, std::uint32_t end,
                            SolverBody* bodies, real inv_h);
-  using ImpactFn = bool (*)(Contact* contacts, const std::uint32_t* order, std::uint32_t begin, std::uint32_t end,
-                            SolverBody* bodies, const ImpactParams& p, std::uint8_t* hit_spheres,
-                            std::uint64_t* passed);
+  using ImpactFn = bool (*)(const SweepRecords& s, Real4* impact, const std::uint32_t* order,
+                            const std::uint32_t* record, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
+                            const ImpactParams& p, std::uint8_t* hit_spheres, std::uint64_t* passed);
   SolverSettings m_settings;
   SweepLanes m_lanes = SweepLanes::sse2;
   bool m_rebounds = false;  // an impact hit in this substep's solve (some contact has a rebound shift)
@@ -178,11 +205,13 @@ class ContactSolver {
   // packed by each velocity solve; the projection and deepest_overlap read
   // their position part (bodies, geometry). m_packed_from: the contacts the
   // solve packed them from, until a projection used them.
-  mutable std::vector<Real4> m_record_words;
+  mutable std::vector<Real4> m_record_words, m_impact_words;
   mutable SweepRecords m_records;
+  mutable ImpactRecords m_impacts;  // beside the records: an impact word each, or the approach speed
   mutable std::size_t m_record_count = 0;
   mutable const Contact* m_packed_from = nullptr;
   const Contact* m_pending_from = nullptr;  // the contacts whose impulses the records hold, not yet unpacked
+  mutable bool m_made = false;              // the records were made (make_records), not packed from contacts
   std::optional<LocalOrder> m_local = local_order_from_environment();
   CubeSplit m_cubes;                      // the local order's scratch
   std::vector<std::uint32_t> m_between_begin;  // its contacts between cubes, by colour

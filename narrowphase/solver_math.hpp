@@ -211,9 +211,6 @@ MARBLES_HD_INLINE double local_cube_edge(double diameters, real largest_radius) 
 struct alignas(4 * sizeof(real)) Real4 {
   real x = 0, y = 0, z = 0, w = 0;
 };
-struct alignas(8) BodyPair {
-  std::uint32_t a = 0, b = 0;
-};
 // Where every sphere has one radius R and every material pair the same
 // friction and rolling friction (StepModel::uniform_pairs), every sphere
 // pair's arms word is {R, R, friction, rolling friction} and every wall

@@ -69,12 +69,12 @@ class CpuStep final : public StepBackend {
     const std::size_t n = contact_count();
     const bool kept = m_kept_colour.size() == n && n > 0;
     const bool loads = m_loaded.size() == n && n > 0;
-    // Prepared on the way: nothing moves the bodies before the solve. The
-    // runs of the contact search become one list here, m_contacts.
-    const BodiesView bodies = m_world.view();
-    m_colouring.colour_and_sort(contact_runs(), n, m_contacts, m_world.size(), m_colours,
-                                kept ? m_kept_colour.data() : nullptr, &bodies, m_model.solver.rest_speed,
-                                loads ? m_loaded.data() : nullptr);
+    // The records made from the contacts where the search left them (its
+    // runs), each prepared on its way: nothing moves the bodies before the
+    // solve. No colour-major copy of the contacts is made.
+    m_colouring.colour_and_place(contact_runs(), n, m_world.size(), m_colours, kept ? m_kept_colour.data() : nullptr,
+                                 loads ? m_loaded.data() : nullptr);
+    m_solver.make_records(contact_runs(), m_colouring.places(), m_colours, m_world.view());
     m_counters.colours = std::max(m_counters.colours, m_colours.colours);
     m_counters.overflow += m_colours.overflow();
   }
@@ -90,8 +90,7 @@ class CpuStep final : public StepBackend {
   }
 
   void solve_velocities(real h) override {
-    if (!m_contacts.empty())
-      m_solver.solve_velocities(m_contacts, m_colours, m_world.view(), h, narrowphase::ContactSolver::Unpack::when_asked);
+    if (has_records()) m_solver.solve_records(m_colours, m_world.view(), h);
   }
 
   void integrate_positions(real h) override {
@@ -101,18 +100,16 @@ class CpuStep final : public StepBackend {
   }
 
   void project_positions() override {
-    if (!m_contacts.empty())
-      m_counters.projection_sweeps += m_solver.project_positions(m_contacts, m_colours, m_world.view(), m_walls);
+    if (has_records()) m_counters.projection_sweeps += m_solver.project_records(m_colours, m_world.view(), m_walls);
   }
 
   // Also when there are no contacts: no stale impulses survive a contact-free substep.
-  // The impulses from the solve's records, which hold them until the
-  // contacts are asked for (contacts()).
+  // The impulses from the solve's records, the contacts' only form.
   void store_impulses() override {
-    if (const narrowphase::SweepRecords* records = m_solver.pending_records(m_contacts))
-      m_cache.store(*records, static_cast<std::uint32_t>(m_contacts.size()), m_model.solver.rolling, m_colours);
+    if (const narrowphase::SweepRecords* records = m_solver.made_records())
+      m_cache.store(*records, static_cast<std::uint32_t>(m_colours.size()), m_model.solver.rolling, m_colours);
     else
-      m_cache.store(m_contacts, m_colours);
+      m_cache.store(std::vector<narrowphase::Contact>{}, narrowphase::ColourRanges{});
   }
 
   void begin_step() override {
@@ -123,7 +120,7 @@ class CpuStep final : public StepBackend {
     const BodiesView bodies = m_world.view();
     // The last substep projected these contacts (project_positions runs
     // whenever there are any).
-    m_counters.max_overlap = m_contacts.empty() ? real(0) : m_solver.deepest_overlap(bodies, m_walls);
+    m_counters.max_overlap = has_records() ? m_solver.deepest_overlap(bodies, m_walls) : real(0);
     if (m_watch) watch(bodies);
     counters = m_counters;
   }
@@ -136,8 +133,9 @@ class CpuStep final : public StepBackend {
   BodiesView state_in_place() override { return m_world.view(); }
   void state_written() override {}
   bool state_finite() override { return m_world.first_non_finite() == m_world.size(); }
+  // Made whole from the records (contact_of_record), in colour-major order.
   const std::vector<narrowphase::Contact>& contacts() override {
-    m_solver.unpack_impulses(m_contacts, m_colours);
+    m_solver.contacts_of_records(m_colours, m_world.view(), m_model.pair_table(), m_walls, m_contacts);
     return m_contacts;
   }
   const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }
@@ -203,14 +201,16 @@ class CpuStep final : public StepBackend {
   std::vector<real> m_reach;         // m, contact_reach per sphere
   std::vector<real> m_bound_radius;  // m, radius + reach: what the broad phase sees
   std::vector<broadphase::Pair> m_pairs;
-  // The contacts, in colour-major order once coloured (m_contacts). From
-  // the contact search to the colouring in two runs (narrowphase::Runs):
-  // the first thread's, then the other threads' (not joined into one list,
-  // which would copy half of them again); the colouring gathers them into
-  // m_contacts, whose memory (its size kept) waits for them meanwhile.
+  // The contacts as found, in two runs (narrowphase::Runs): the first
+  // thread's, then the other threads' (not joined into one list, which
+  // would copy half of them again). The colouring places them and the
+  // solver makes its records from them where they are; m_contacts holds
+  // them whole only when asked (contacts()).
   std::vector<narrowphase::Contact> m_contacts, m_contact_first, m_contact_rest;
   narrowphase::ContactScratch m_contact_scratch;
   std::size_t contact_count() const { return m_contact_first.size() + m_contact_rest.size(); }
+  // The solver holds records of this substep's contacts, and there are some.
+  bool has_records() const { return m_solver.made_records() && m_colours.size() > 0; }
   narrowphase::ContactRuns contact_runs() {
     return {m_contact_first.data(), m_contact_first.size(), m_contact_rest.data()};
   }
