@@ -567,6 +567,124 @@ TEST(Solver, ApproachFromWorldIsThePreparedApproach) {
   EXPECT_GT(walls, 0u);
 }
 
+// The CPU step's form (make_records over the colouring's places, the
+// solve and the projection on the made records, the contacts made whole
+// from them) against the colour-major contacts (colour_and_sort,
+// solve_velocities, project_positions), the found contacts in two runs
+// split anywhere: the same colours and records' places, the same approach
+// flag, the same bodies, positions, contacts (every byte, impact impulses
+// and rebound shifts included), impacts passed over, projection sweeps,
+// deepest overlap and cache. A lattice thrown at itself and at the floor
+// (impacts, rebounds and later impact passes), with the last substep's
+// impulses and colours restored from a cache; with and without
+// restitution, friction and rolling resistance.
+TEST(Solver, RecordsMadeFromTheFoundContactsEqualTheColourMajorSolve) {
+  const real r = real(0.01), h = real(1e-3);
+  std::uint64_t hits = 0, rebounds = 0, passed = 0;
+  for (int form = 0; form < 6; ++form) {
+    std::mt19937_64 rng(71 + form);
+    MovingLattice start = MovingLattice::thrown(12, r, rng);
+    const PairTable table = start.table();
+    const std::vector<WallShape>& floor = start.lattice.floor;
+    SolverSettings s;
+    s.restitution = form != 5;
+    s.friction = form % 3 != 0;
+    s.rolling = form % 3 == 2;
+    const std::vector<real> reaches(start.lattice.n, real(0));
+    std::vector<Contact> found;
+    const BodiesView start_view = start.view();
+    sphere_contacts(start_view, start.lattice.pairs.data(), start.lattice.pairs.size(), table, h, reaches.data(), found);
+    wall_contacts(start_view, floor, table, h, reaches.data(), found);
+    const auto n = found.size();
+    ASSERT_GT(n, 1000u);
+    // The last substep's cache: most contacts with loads and colours.
+    {
+      std::vector<Contact> stored = found;
+      ColourRanges colours;
+      ContactColouring().colour_and_sort(stored, start_view.count, colours);
+      std::uniform_real_distribution<double> u(0.1, 1);
+      for (std::size_t k = 0; k < stored.size(); ++k) {
+        stored[k].normal_impulse = k % 5 == 0 ? real(0) : real(u(rng) * 1e-5);
+        stored[k].tangent_impulse = random_unit(rng) * real(u(rng) * 1e-6);
+        stored[k].rolling_impulse = s.rolling ? random_unit(rng) * real(u(rng) * 1e-8) : Vec3{};
+      }
+      ContactCache cache;
+      cache.store(stored, colours);
+      std::vector<std::uint8_t> kept, loaded;
+      cache.restore(found, start_view, real(1e3), kept, &loaded);
+      for (std::size_t k = 0; k < n; k += 6) kept[k] = kNoKeptColour;  // every 6th contact new
+      const std::string at = "form " + std::to_string(form);
+
+      // The oracle: the contacts in colour-major order, solved and projected.
+      MovingLattice one = start;
+      const BodiesView one_view = one.view();
+      std::vector<Contact> sorted = found;
+      ColourRanges sorted_ranges;
+      ContactColouring().colour_and_sort(sorted, one_view.count, sorted_ranges, kept.data(), &one_view, s.rest_speed,
+                                         loaded.data());
+      ContactSolver oracle(s);
+      oracle.solve_velocities(sorted, sorted_ranges, one_view, h);
+      for (std::size_t i = 0; i < one.lattice.n; ++i) one.lattice.position[i] += one.vel[i] * h;
+      const int sweeps = oracle.project_positions(sorted, sorted_ranges, one_view, floor);
+      const real deepest = oracle.deepest_overlap(one_view, floor);
+      ContactCache oracle_cache;
+      oracle_cache.store(sorted, sorted_ranges);
+      for (const Contact& c : sorted) {
+        hits += c.impact_impulse > 0 ? 1 : 0;
+        rebounds += c.rebound_shift > 0 ? 1 : 0;
+      }
+      passed += oracle.impact_passed_over();
+
+      for (const std::size_t split : {std::size_t(0), n / 3, n}) {
+        MovingLattice two = start;
+        const BodiesView two_view = two.view();
+        std::vector<Contact> head(found.begin(), found.begin() + static_cast<std::ptrdiff_t>(split)),
+            tail(found.begin() + static_cast<std::ptrdiff_t>(split), found.end());
+        const ContactRuns runs(head.data(), head.size(), tail.data());
+        ColourRanges ranges;
+        ranges.fast_approach = !sorted_ranges.fast_approach;  // make_records must set it
+        ContactColouring colouring;
+        colouring.colour_and_place(runs, n, two_view.count, ranges, kept.data(), loaded.data());
+        ContactSolver made(s);
+        made.make_records(runs, colouring.places(), ranges, two_view);
+        const std::string where = at + ", split " + std::to_string(split);
+        EXPECT_EQ(ranges.begin, sorted_ranges.begin) << where;
+        EXPECT_EQ(ranges.record, sorted_ranges.record) << where;
+        EXPECT_EQ(ranges.fast_approach, sorted_ranges.fast_approach) << where;
+        made.solve_records(ranges, two_view, h);
+        for (std::size_t i = 0; i < two.lattice.n; ++i) two.lattice.position[i] += two.vel[i] * h;
+        EXPECT_EQ(made.project_records(ranges, two_view, floor), sweeps) << where;
+        EXPECT_EQ(made.impact_passed_over(), oracle.impact_passed_over()) << where;
+        auto same_bytes = [](const auto& a, const auto& b) {
+          return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(a[0])) == 0;
+        };
+        EXPECT_TRUE(same_bytes(two.vel, one.vel)) << where;
+        EXPECT_TRUE(same_bytes(two.omega, one.omega)) << where;
+        EXPECT_TRUE(same_bytes(two.lattice.position, one.lattice.position)) << where;
+        const real made_deepest = made.deepest_overlap(two_view, floor);
+        EXPECT_EQ(std::memcmp(&made_deepest, &deepest, sizeof(real)), 0) << where;
+        std::vector<Contact> whole;
+        made.contacts_of_records(ranges, two_view, table, floor, whole);
+        EXPECT_TRUE(same_bytes(whole, sorted)) << where;
+        ASSERT_NE(made.made_records(), nullptr);
+        ContactCache made_cache;
+        made_cache.store(*made.made_records(), static_cast<std::uint32_t>(n), s.rolling, ranges);
+        const CacheEntries &a = made_cache.entries(), &b = oracle_cache.entries();
+        EXPECT_GT(b.size(), n / 2) << where;
+        EXPECT_TRUE(same_bytes(a.key, b.key) && same_bytes(a.normal_impulse, b.normal_impulse) &&
+                    same_bytes(a.tangent_impulse, b.tangent_impulse) &&
+                    same_bytes(a.rolling_impulse, b.rolling_impulse) && same_bytes(a.colour, b.colour))
+            << where;
+        made.forget_records();
+        EXPECT_EQ(made.made_records(), nullptr);
+      }
+    }
+  }
+  EXPECT_GT(hits, 1000u) << "premise: impacts";
+  EXPECT_GT(rebounds, 100u) << "premise: rebound shifts";
+  EXPECT_GT(passed, 0u) << "premise: later impact passes that pass contacts over";
+}
+
 // The impact stage's later passes pass over the contacts no hit of the
 // stage has reached (impact_passed_over): the same bits as trying every
 // contact. Lattices thrown a hair apart, in which only some spheres move
