@@ -9,7 +9,8 @@
 // them four at a time in SIMD lanes, or eight where the CPU has AVX2,
 // solver_lanes.hpp, with the same bits):
 //   prepare       effective masses; approach speed before the solve (done as
-//                 the colouring moves the contacts: prepare_from_world)
+//                 the records are made, make_records, or as the colouring
+//                 moves the contacts: prepare_from_world)
 //   impacts       (with restitution) contacts approaching faster than the
 //                 rest speed collide as binary impacts, P_n = (1 + e) m |v_n|
 //                 with friction limited to mu P_n. The first pass visits them
@@ -202,9 +203,10 @@ class ContactSolver {
   std::uint64_t m_impact_passed_over = 0;
   std::vector<SolverBody> m_bodies;  // the velocity state, packed for the solve
   // The sweep's records (SweepRecords::in) of m_record_count contacts,
-  // packed by each velocity solve; the projection and deepest_overlap read
-  // their position part (bodies, geometry). m_packed_from: the contacts the
-  // solve packed them from, until a projection used them.
+  // made (make_records) or packed by a velocity solve of whole contacts;
+  // the projection and deepest_overlap read their position part (bodies,
+  // geometry). m_packed_from: the contacts a solve packed them from, until
+  // a projection used them.
   mutable std::vector<Real4> m_record_words, m_impact_words;
   mutable SweepRecords m_records;
   mutable ImpactRecords m_impacts;  // beside the records: an impact word each, or the approach speed

@@ -195,8 +195,9 @@ MARBLES_HD_INLINE double local_cube_edge(double diameters, real largest_radius) 
 // sectors. The GPU writes them once per substep as it makes the contacts in
 // colour-major order (they are its only form of the contacts, with an impact
 // word or an approach speed each: ImpactRecords, impact_record,
-// contact_of_record below); the CPU packs them from its contacts
-// (pack_sweep_record). Every sweep reads and writes them
+// contact_of_record below); the CPU makes them and their impact words from
+// its contacts where its search left them (ContactSolver::make_records), or
+// packs them from whole contacts (pack_sweep_record). Every sweep reads and writes them
 // (load_sweep_contact, store_sweep_impulses), the position stages read them
 // (load_position_contact), and on the CPU the impulses go back into the
 // contacts only when the contacts are asked for (unpack_sweep_impulses) or
@@ -241,8 +242,7 @@ struct SweepRecords {
   // them out and read `uniform`).
   Real4* arms = nullptr;
   // wall_velocity, written and read for wall contacts only (the rebound
-  // shift lives in the whole contacts on the CPU, in the impact word on the
-  // GPU). Null where no wall moves (the GPU's records then leave it out: a
+  // shift lives in the impact word). Null where no wall moves (the GPU's records then leave it out: a
   // wall at rest has the surface velocity +0 exactly, a contact's default).
   Real4* extra = nullptr;
   BodyPair* bodies = nullptr; // a, b
@@ -495,9 +495,10 @@ MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactPa
   return true;
 }
 
-// --- the GPU's records: the contact in no other form ------------------------
+// --- the records as the contact's only form ------------------------------------
 // The GPU keeps a substep's contacts only as the sweep's records plus one
-// word each for the impact stage (impact_word: the approach speed, the
+// word each for the impact stage (so does the CPU from its records' making
+// to its store) (impact_word: the approach speed, the
 // restitution, the impact impulse, the rebound shift; the approach speed
 // alone in a substep without impact candidates: ImpactRecords; the records'
 // extra word then holds only a moving wall's velocity, and no word at all
