@@ -45,7 +45,7 @@ void ContactColouring::prefetch_ahead(const Pairs& contacts, std::size_t t, std:
 // free one (or its round). The same result as the rounds of the CUDA twin
 // (colouring_cuda.cu), in one pass.
 template <class Pairs>
-std::uint32_t ContactColouring::colour_of(const Pairs& contacts, const std::vector<std::uint32_t>& active,
+std::uint32_t ContactColouring::colour_from(const Pairs& contacts, const std::vector<std::uint32_t>& active,
                                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
                                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds_out,
                                        const std::vector<std::uint32_t>* kept) {
@@ -162,11 +162,11 @@ std::uint32_t ContactColouring::colour_of(const Pairs& contacts, const std::vect
   if (rounds_out) *rounds_out = rounds;
   return rule == ColourRule::by_round ? rounds : colours;
 }
-template std::uint32_t ContactColouring::colour_of(const Runs<const Contact>&, const std::vector<std::uint32_t>&,
+template std::uint32_t ContactColouring::colour_from(const Runs<const Contact>&, const std::vector<std::uint32_t>&,
                                                    const std::uint64_t*, std::size_t, ColourRule,
                                                    std::vector<std::uint32_t>&, std::uint32_t*,
                                                    const std::vector<std::uint32_t>*);
-template std::uint32_t ContactColouring::colour_of(const PlacedPairs&, const std::vector<std::uint32_t>&,
+template std::uint32_t ContactColouring::colour_from(const PlacedPairs&, const std::vector<std::uint32_t>&,
                                                    const std::uint64_t*, std::size_t, ColourRule,
                                                    std::vector<std::uint32_t>&, std::uint32_t*,
                                                    const std::vector<std::uint32_t>*);

@@ -76,13 +76,13 @@ class ContactColouring {
                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr,
                        const std::vector<std::uint32_t>* kept = nullptr) {
-    return colour_of<Runs<const Contact>>(contacts, active, rank, body_count, rule, colour, rounds, kept);
+    return colour_from<Runs<const Contact>>(contacts, active, rank, body_count, rule, colour, rounds, kept);
   }
   std::uint32_t colour(const PlacedPairs& contacts, const std::vector<std::uint32_t>& active,
                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds = nullptr,
                        const std::vector<std::uint32_t>* kept = nullptr) {
-    return colour_of<PlacedPairs>(contacts, active, rank, body_count, rule, colour, rounds, kept);
+    return colour_from<PlacedPairs>(contacts, active, rank, body_count, rule, colour, rounds, kept);
   }
 
   // The solver colouring of all contacts: contact k keeps kept_colour[k] when
@@ -116,7 +116,7 @@ class ContactColouring {
 
  private:
   template <class Pairs>
-  std::uint32_t colour_of(const Pairs& contacts, const std::vector<std::uint32_t>& active, const std::uint64_t* rank,
+  std::uint32_t colour_from(const Pairs& contacts, const std::vector<std::uint32_t>& active, const std::uint64_t* rank,
                           std::size_t body_count, ColourRule rule, std::vector<std::uint32_t>& colour,
                           std::uint32_t* rounds, const std::vector<std::uint32_t>* kept);
   template <class Pairs>

@@ -197,11 +197,11 @@ MARBLES_HD_INLINE double local_cube_edge(double diameters, real largest_radius) 
 // word or an approach speed each: ImpactRecords, impact_record,
 // contact_of_record below); the CPU makes them and their impact words from
 // its contacts where its search left them (ContactSolver::make_records), or
-// packs them from whole contacts (pack_sweep_record). Every sweep reads and writes them
-// (load_sweep_contact, store_sweep_impulses), the position stages read them
-// (load_position_contact), and on the CPU the impulses go back into the
-// contacts only when the contacts are asked for (unpack_sweep_impulses) or
-// stored in the cache. Each stage runs its per-contact function on the
+// packs them from whole contacts (pack_sweep_record). Every sweep reads and
+// writes them (load_sweep_contact, store_sweep_impulses), the position
+// stages read them (load_position_contact), and the impulses go into whole
+// contacts only when the contacts are asked for (contact_of_record,
+// unpack_sweep_impulses) or into the cache when it stores them. Each stage runs its per-contact function on the
 // contact loaded from them: the same fields, the same arithmetic, the same
 // bits as on the whole Contact. The records move with the evict-first hint
 // (load_streaming), so the bodies every colour reads again stay in L2. The
@@ -242,8 +242,9 @@ struct SweepRecords {
   // them out and read `uniform`).
   Real4* arms = nullptr;
   // wall_velocity, written and read for wall contacts only (the rebound
-  // shift lives in the impact word). Null where no wall moves (the GPU's records then leave it out: a
-  // wall at rest has the surface velocity +0 exactly, a contact's default).
+  // shift lives in the impact word). Null where no wall moves (the GPU's
+  // records then leave it out: a wall at rest has the surface velocity +0
+  // exactly, a contact's default).
   Real4* extra = nullptr;
   BodyPair* bodies = nullptr; // a, b
   UniformArms uniform;        // the arms of every contact, where `arms` is null
