@@ -12,15 +12,6 @@ namespace marbles::narrowphase {
 
 constexpr std::uint64_t kRankMask = (std::uint64_t(1) << 56) - 1;  // ranks are below 2^56
 
-// How far ahead the colour-major gather asks for a contact (and, half as
-// far, for its spheres' velocities): each place copies a 112-byte contact
-// read in random order from a list far past the caches, and prepares it.
-// Settle scene of 10^5, 2 threads, colour verb, six runs alternated: 16
-// ahead 9.1-10.6 ms (median 9.4), 32 ahead 7.5-9.8, 64 ahead 6.9-10.4
-// (median 7.6), 128 ahead 8.0-11.2; then three pairs, 16 against 64:
-// 8.7-9.3 against 6.5-6.9 ms. The same bits (hints only).
-constexpr std::ptrdiff_t kGatherAhead = 64;
-
 // The sequential pass visits the contacts in rank order, which is random in
 // memory: each visit would wait for a contact (a 112-byte record of a list
 // far larger than the caches) and then for its spheres' words. So it asks
@@ -260,21 +251,13 @@ void ContactColouring::colour_and_sort(ContactRuns contacts, std::size_t count_i
   Contact* sorted = sorted_out.data();
   std::atomic<bool> fast{false};  // written only when seen (rare): no traffic in a pile at rest
   const auto count = static_cast<std::ptrdiff_t>(n);
-  auto hint = [](const void* p) { __builtin_prefetch(p); };
 #pragma omp parallel for schedule(static) if (count >= 20000)
   for (std::ptrdiff_t p = 0; p < count; ++p) {
-    // Hints only: the contact kGatherAhead places ahead, and the bodies of
-    // the one half as far ahead (whose spheres are read to ask for them).
-    const auto* next = reinterpret_cast<const char*>(&in[source[std::min<std::ptrdiff_t>(p + kGatherAhead, count - 1)]]);
-    hint(next), hint(next + 64), hint(next + sizeof(Contact) - 1);
+    hint_place_ahead(in, source, p, count);
     Contact& c = sorted[p];
     c = in[source[p]];
     if (!prepare) continue;
-    const Contact& ahead = in[source[std::min<std::ptrdiff_t>(p + kGatherAhead / 2, count - 1)]];
-    hint(prepare->velocity + ahead.a);
-    hint(prepare->velocity + (ahead.b & ~kWallFlag));
-    hint(prepare->angular_velocity + ahead.a);
-    hint(prepare->angular_velocity + (ahead.b & ~kWallFlag));
+    hint_bodies_ahead(in, source, p, count, *prepare);
     prepare_from_world(c, *prepare);
     if (is_impact_candidate(c, rest_speed)) fast.store(true, std::memory_order_relaxed);
   }

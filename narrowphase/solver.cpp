@@ -137,6 +137,13 @@ void warm_start_range(const SweepRecords& s, std::uint32_t begin, std::uint32_t 
   for_colour_ahead(s, begin, end, bodies, [&](std::uint32_t k) { warm_start_record<Friction, Rolling>(s, k, bodies); });
 }
 
+// Contact c into record r with its impact word.
+template <bool Rolling>
+void pack_contact(const Contact& c, const SweepRecords& s, const ImpactRecords& impacts, std::uint32_t r) {
+  pack_sweep_record<Rolling>(c, s, r);
+  pack_impact(c, impacts, r);
+}
+
 // The contacts into the sweep's records (contact k into record
 // colours.record_of(k)) with their impact words, and the impulses and the
 // impact stage's words back, in parallel.
@@ -145,11 +152,8 @@ void pack_records(const Contact* contacts, std::size_t count, const ColourRanges
                   const ImpactRecords& impacts) {
   const auto n = static_cast<std::ptrdiff_t>(count);
 #pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t k = 0; k < n; ++k) {
-    const std::uint32_t r = colours.record_of(static_cast<std::uint32_t>(k));
-    pack_sweep_record<Rolling>(contacts[k], s, r);
-    pack_impact(contacts[k], impacts, r);
-  }
+  for (std::ptrdiff_t k = 0; k < n; ++k)
+    pack_contact<Rolling>(contacts[k], s, impacts, colours.record_of(static_cast<std::uint32_t>(k)));
 }
 template <bool Rolling>
 void unpack_records(const SweepRecords& s, const ImpactRecords& impacts, const ColourRanges& colours,
@@ -163,36 +167,20 @@ void unpack_records(const SweepRecords& s, const ImpactRecords& impacts, const C
   }
 }
 
-// How far ahead make_records asks for a found contact (and, half as far,
-// for its spheres' velocities): the colour-major gather's distance
-// (docs/architecture.md "The CPU's colour-major gather").
-constexpr std::ptrdiff_t kMakeAhead = 64;
-
 // ContactSolver::make_records' loop: true when a contact approaches faster
 // than the rest speed (is_impact_candidate).
 template <bool Rolling>
 bool records_made(Runs<const Contact> found, const std::uint32_t* places, const ColourRanges& colours,
                   const BodiesView& world, const SweepRecords& s, const ImpactRecords& impacts, real rest_speed) {
   const auto n = static_cast<std::ptrdiff_t>(colours.size());
-  auto hint = [](const void* p) { __builtin_prefetch(p); };
   bool fast = false;
 #pragma omp parallel for schedule(static) reduction(|| : fast) if (n >= 20000)
   for (std::ptrdiff_t p = 0; p < n; ++p) {
-    // Hints only: the found contact kMakeAhead places ahead (read in random
-    // order from a list far past the caches), and the bodies of the one
-    // half as far ahead.
-    const auto* next = reinterpret_cast<const char*>(&found[places[std::min<std::ptrdiff_t>(p + kMakeAhead, n - 1)]]);
-    hint(next), hint(next + 64), hint(next + sizeof(Contact) - 1);
-    const Contact& ahead = found[places[std::min<std::ptrdiff_t>(p + kMakeAhead / 2, n - 1)]];
-    hint(world.velocity + ahead.a);
-    hint(world.velocity + (ahead.b & ~kWallFlag));
-    hint(world.angular_velocity + ahead.a);
-    hint(world.angular_velocity + (ahead.b & ~kWallFlag));
+    hint_place_ahead(found, places, p, n);
+    hint_bodies_ahead(found, places, p, n, world);
     Contact c = found[places[p]];
     prepare_from_world(c, world);
-    const std::uint32_t r = colours.record_of(static_cast<std::uint32_t>(p));
-    pack_sweep_record<Rolling>(c, s, r);
-    pack_impact(c, impacts, r);
+    pack_contact<Rolling>(c, s, impacts, colours.record_of(static_cast<std::uint32_t>(p)));
     fast = is_impact_candidate(c, rest_speed) || fast;
   }
   return fast;
@@ -223,14 +211,14 @@ bool impact_passed_over(const SweepRecords& s, const Real4* impact, std::uint32_
 }
 
 // Impacts of the records of places order[t] for t in [begin, end) (one
-// level of the first pass, record[] their records, null: place k is record
-// k; order null: records [begin, end), one colour of a later pass, which
+// level of the first pass, `places` their records; order null: records
+// [begin, end), one colour of a later pass, which
 // passes over the contacts no hit has reached, counted in *passed); each
 // hit sets its spheres' flags (hit_spheres, where not null); true if any
 // hit. Within a level or a colour no two contacts share a sphere, so no
 // two threads write or read another's flag.
 template <bool Friction>
-bool impact_range(const SweepRecords& s, Real4* impact, const std::uint32_t* order, const std::uint32_t* record,
+bool impact_range(const SweepRecords& s, Real4* impact, const std::uint32_t* order, const ColourRanges& places,
                   std::uint32_t begin, std::uint32_t end, SolverBody* bodies, const ImpactParams& p,
                   std::uint8_t* hit_spheres, std::uint64_t* passed) {
   bool hit = false;
@@ -239,7 +227,7 @@ bool impact_range(const SweepRecords& s, Real4* impact, const std::uint32_t* ord
 #pragma omp parallel for schedule(static) reduction(|| : hit) reduction(+ : over) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t) {
     const std::uint32_t place = begin + static_cast<std::uint32_t>(t);
-    const std::uint32_t k = !order ? place : record ? record[order[place]] : order[place];
+    const std::uint32_t k = order ? places.record_of(order[place]) : place;
     if (!order && impact_passed_over(s, impact, k, hit_spheres, p.rest_speed)) {
       ++over;
       continue;
@@ -502,8 +490,7 @@ void ContactSolver::impacts(const ColourRanges& colours, SolverBody* bodies, std
   if (!colours.fast_approach) return;  // every approach speed was seen: none is a candidate
   const SweepRecords& s = m_records;
   Real4* impact = m_impacts.word;
-  const std::uint32_t* record = colours.record.empty() ? nullptr : colours.record.data();
-  auto approach = [&](std::uint32_t place) { return load_approach(s, impact, record ? record[place] : place); };
+  auto approach = [&](std::uint32_t place) { return load_approach(s, impact, colours.record_of(place)); };
   collect_in_order(n, kParallelFrom, m_candidates, m_candidate_parts, [&](std::size_t k, std::vector<std::uint32_t>& to) {
     if (is_impact_candidate(approach(static_cast<std::uint32_t>(k)), rest)) to.push_back(static_cast<std::uint32_t>(k));
   });
@@ -517,7 +504,7 @@ void ContactSolver::impacts(const ColourRanges& colours, SolverBody* bodies, std
   m_level.assign(n, kUncoloured);
   for (std::uint32_t k : m_candidates) m_rank[k] = impact_rank(time_of_impact(approach(k)), k);
   std::uint32_t rounds = 0;
-  m_impact_colouring.colour(PlacedPairs{s.bodies, record}, m_candidates, m_rank.data(), body_count,
+  m_impact_colouring.colour(PlacedPairs{s.bodies, &colours}, m_candidates, m_rank.data(), body_count,
                             ColourRule::by_round, m_level, &rounds);
   // Candidates level by level (overflow last), place order within a level.
   std::vector<std::uint32_t> begin(rounds + 2, 0);
@@ -533,9 +520,9 @@ void ContactSolver::impacts(const ColourRanges& colours, SolverBody* bodies, std
   std::uint64_t* passed = &m_impact_passed_over;
   const std::uint32_t* order = m_order.data();
   for (std::uint32_t l = 0; l < rounds; ++l)
-    hit = m_impact(s, impact, order, record, begin[l], begin[l + 1], bodies, params, hit_spheres, passed) || hit;
+    hit = m_impact(s, impact, order, colours, begin[l], begin[l + 1], bodies, params, hit_spheres, passed) || hit;
   for (std::uint32_t k = begin[rounds]; k < begin[rounds + 1]; ++k)
-    hit = m_impact(s, impact, order, record, k, k + 1, bodies, params, hit_spheres, passed) || hit;
+    hit = m_impact(s, impact, order, colours, k, k + 1, bodies, params, hit_spheres, passed) || hit;
 
   m_rebounds = hit;
   // A colour's records are its places' (ColourRanges::record), the same
@@ -543,7 +530,7 @@ void ContactSolver::impacts(const ColourRanges& colours, SolverBody* bodies, std
   for (int pass = 1; pass < kImpactPasses && hit; ++pass) {
     hit = false;
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      hit = m_impact(s, impact, nullptr, nullptr, b, e, bodies, params, hit_spheres, passed) || hit;
+      hit = m_impact(s, impact, nullptr, colours, b, e, bodies, params, hit_spheres, passed) || hit;
     });
     m_rebounds = m_rebounds || hit;
   }

@@ -185,7 +185,7 @@ class ContactSolver {
   using SweepFn = void (*)(const SweepRecords& records, std::uint32_t begin, std::uint32_t split, std::uint32_t end,
                            SolverBody* bodies, real inv_h);
   using ImpactFn = bool (*)(const SweepRecords& s, Real4* impact, const std::uint32_t* order,
-                            const std::uint32_t* record, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
+                            const ColourRanges& places, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
                             const ImpactParams& p, std::uint8_t* hit_spheres, std::uint64_t* passed);
   SolverSettings m_settings;
   SweepLanes m_lanes = SweepLanes::sse2;

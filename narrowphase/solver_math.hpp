@@ -201,11 +201,11 @@ MARBLES_HD_INLINE double local_cube_edge(double diameters, real largest_radius) 
 // writes them (load_sweep_contact, store_sweep_impulses), the position
 // stages read them (load_position_contact), and the impulses go into whole
 // contacts only when the contacts are asked for (contact_of_record,
-// unpack_sweep_impulses) or into the cache when it stores them. Each stage runs its per-contact function on the
-// contact loaded from them: the same fields, the same arithmetic, the same
-// bits as on the whole Contact. The records move with the evict-first hint
-// (load_streaming), so the bodies every colour reads again stay in L2. The
-// effective masses are not in them: a sweep computes the ones it needs from
+// unpack_sweep_impulses) or into the cache when it stores them. Each stage
+// runs its per-contact function on the contact loaded from them: the same
+// fields, the same arithmetic, the same bits as on the whole Contact. The
+// records move with the evict-first hint (load_streaming), so the bodies
+// every colour reads again stay in L2. The effective masses are not in them: a sweep computes the ones it needs from
 // the two bodies it loads anyway (solve_record), the same expressions the
 // prepare stage used, so a record is 16 bytes shorter with friction and 32
 // without; the sweeps are bound by memory, not arithmetic.
@@ -498,8 +498,8 @@ MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactPa
 
 // --- the records as the contact's only form ------------------------------------
 // The GPU keeps a substep's contacts only as the sweep's records plus one
-// word each for the impact stage (so does the CPU from its records' making
-// to its store) (impact_word: the approach speed, the
+// word each for the impact stage, and so does the CPU's step from the
+// records' making to the store (impact_word: the approach speed, the
 // restitution, the impact impulse, the rebound shift; the approach speed
 // alone in a substep without impact candidates: ImpactRecords; the records'
 // extra word then holds only a moving wall's velocity, and no word at all

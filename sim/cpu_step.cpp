@@ -109,7 +109,7 @@ class CpuStep final : public StepBackend {
     if (const narrowphase::SweepRecords* records = m_solver.made_records())
       m_cache.store(*records, static_cast<std::uint32_t>(m_colours.size()), m_model.solver.rolling, m_colours);
     else
-      m_cache.store(std::vector<narrowphase::Contact>{}, narrowphase::ColourRanges{});
+      m_cache.clear();
   }
 
   void begin_step() override {
