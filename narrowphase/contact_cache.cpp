@@ -197,85 +197,88 @@ std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const
 
 void ContactCache::store(const std::vector<Contact>& contacts, const ColourRanges& ranges) {
   const Contact* cs = contacts.data();
-  store_from(static_cast<std::uint32_t>(contacts.size()), ranges, [cs](std::uint32_t t) {
-    const Contact& c = cs[t];
-    return Stored{c.a, c.b, c.normal_impulse, c.tangent_impulse, c.rolling_impulse};
-  });
+  store_from(
+      static_cast<std::uint32_t>(contacts.size()), ranges, [cs](std::uint32_t t) { return BodyPair{cs[t].a, cs[t].b}; },
+      [cs](std::uint32_t t) { return cs[t].normal_impulse; },
+      [cs](std::uint32_t t) {
+        const Contact& c = cs[t];
+        return Stored{c.normal_impulse, c.tangent_impulse, c.rolling_impulse};
+      },
+      [cs](std::uint32_t t) { __builtin_prefetch(cs + t); });
 }
 
 void ContactCache::store(const SweepRecords& records, std::uint32_t count, bool rolling, const ColourRanges& ranges) {
-  store_from(count, ranges, [&records, rolling](std::uint32_t t) {
+  const BodyPair* bodies = records.bodies;
+  const Real4* impulse = records.impulse;
+  const Real4* rolling_word = records.rolling;
+  auto impulses = [&records, rolling](std::uint32_t t) {
     Contact c;  // the impulses as the unpacking reads them (zero rolling without its words)
     if (rolling) unpack_sweep_impulses<true>(records, t, c);
     else unpack_sweep_impulses<false>(records, t, c);
-    const BodyPair ab = records.bodies[t];
-    return Stored{ab.a, ab.b, c.normal_impulse, c.tangent_impulse, c.rolling_impulse};
-  });
+    return Stored{c.normal_impulse, c.tangent_impulse, c.rolling_impulse};
+  };
+  store_from(
+      count, ranges, [bodies](std::uint32_t t) { return bodies[t]; },
+      [&records](std::uint32_t t) { return impulse_word(records, t).x; }, impulses,
+      [impulse, rolling_word, rolling](std::uint32_t t) {
+        __builtin_prefetch(impulse + t);
+        if (rolling) __builtin_prefetch(rolling_word + t);
+      });
 }
 
-template <class Load>
-void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, Load&& load) {
+template <class PairOf, class NormalOf, class Load, class Hint>
+void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, PairOf&& pair_of, NormalOf&& normal_of,
+                              Load&& load, Hint&& hint) {
   // Only the sustained impulses of the velocity solve are carried over; an
   // impact's impulse (Contact::impact_impulse) is not a load. A contact
   // without load is kept for its colour alone, with no impulses (restored,
-  // it starts as an uncached contact does).
-  // Sorted by key = grouped by sphere a, then by b within a group. The
-  // contacts (112 bytes each, past the L3 at 10^5) are read once: what an
-  // entry keeps is staged in contact order (one 40-byte record), a counting
-  // sort by a over the staged keys (in parallel: core/counting_sort.hpp)
-  // places each kept contact's index, each group (a few entries) is ordered
-  // by b in place, and the entries are filled from the stage in that order
-  // (one record read per entry, the one a few places ahead asked for).
-  constexpr std::uint64_t dropped = ~std::uint64_t(0);  // the key of a contact not kept
-  m_staged.resize(n);
-  StagedEntry* st = m_staged.data();
-  // Contact t of colour `colour` staged; returns its a + 1, 0 when dropped.
-  auto stage = [&](std::uint32_t t, std::uint8_t colour) -> std::uint32_t {
-    const Stored c = load(t);
-    const bool loaded = c.normal_impulse > 0;
-    if (!loaded && colour == kNoKeptColour) {
-      st[t].key = dropped;
-      return 0;
-    }
-    st[t] = {cache_key(c.a, c.b), loaded ? c.normal_impulse : real(0), loaded ? c.tangent_impulse : Vec3{},
-             loaded ? c.rolling_impulse : Vec3{}, colour};
-    return c.a + 1;
-  };
-  // Colour by colour (the overflow set and contacts of unknown colour keep none).
+  // it starts as an uncached contact does); a contact without colour (the
+  // overflow set, or every contact where no colours are known) and without
+  // load is not kept.
+  // Sorted by key = grouped by sphere a, then by b within a group. A
+  // counting sort by a (in parallel: core/counting_sort.hpp) over the body
+  // pairs read in contact order places each kept contact with its b above
+  // its index; each group (a few entries) is ordered by b from the places
+  // alone; then the entries are filled group by group, each contact's
+  // impulses read where they are (one word, or two with rolling, asked for
+  // a few places ahead) and its colour from a byte a contact (in L2).
   const bool coloured = ranges.size() == n;
-  std::uint32_t groups = 0;  // the largest a kept, plus one
-  for (std::uint32_t c = 0; c <= (coloured ? ranges.colours : 0); ++c) {
-    const std::uint8_t colour = coloured && c < ranges.colours ? static_cast<std::uint8_t>(c) : kNoKeptColour;
-    const std::uint32_t begin = coloured ? ranges.begin[c] : 0, end = coloured ? ranges.begin[c + 1] : n;
-    const auto count = static_cast<std::ptrdiff_t>(end - begin);
+  const std::uint32_t coloured_end = coloured ? ranges.begin[ranges.colours] : 0;
+  const auto count = static_cast<std::ptrdiff_t>(n);
+  m_colour_of.resize(n);
+  std::uint8_t* colour_of = m_colour_of.data();
+  std::uint32_t groups = 0;  // the largest a, plus one
 #pragma omp parallel for schedule(static) reduction(max : groups) if (count >= kParallelFrom)
-    for (std::ptrdiff_t t = 0; t < count; ++t) groups = std::max(groups, stage(begin + static_cast<std::uint32_t>(t), colour));
-  }
+  for (std::ptrdiff_t t = 0; t < count; ++t) groups = std::max(groups, pair_of(static_cast<std::uint32_t>(t)).a + 1);
+  for (std::uint32_t c = 0; c < (coloured ? ranges.colours : 0); ++c)
+    std::fill(colour_of + ranges.begin[c], colour_of + ranges.begin[c + 1], static_cast<std::uint8_t>(c));
+  std::fill(colour_of + coloured_end, colour_of + n, kNoKeptColour);
+  auto kept = [&](std::uint32_t k) { return k < coloured_end || normal_of(k) > 0; };
   m_source.resize(n);
-  std::uint32_t* source = m_source.data();
+  std::uint64_t* source = m_source.data();
   counting_sort(
-      n, groups,
-      [&](std::uint32_t k) { return st[k].key == dropped ? kSkipItem : static_cast<std::uint32_t>(st[k].key >> 32); },
-      [&](std::uint32_t k, std::uint32_t place) { source[place] = k; }, m_first, m_order);
+      n, groups, [&](std::uint32_t k) { return kept(k) ? pair_of(k).a : kSkipItem; },
+      [&](std::uint32_t k, std::uint32_t place) { source[place] = (std::uint64_t(pair_of(k).b) << 32) | k; }, m_first,
+      m_order);
   const std::uint32_t m = m_first[groups];
+  CacheEntries& e = m_entries;
+  e.resize(m);
 #pragma omp parallel for schedule(static) if (groups >= kParallelFrom)
   for (std::ptrdiff_t g = 0; g < static_cast<std::ptrdiff_t>(groups); ++g) {
     const auto a = static_cast<std::uint32_t>(g);
-    sort_run(source, m_first[a], m_first[a + 1], [st](std::uint32_t k) { return st[k].key; });
-  }
-  CacheEntries& e = m_entries;
-  e.resize(m);
-#pragma omp parallel for schedule(static) if (m >= kParallelFrom)
-  for (std::ptrdiff_t t = 0; t < static_cast<std::ptrdiff_t>(m); ++t) {
-    const StagedEntry& next = st[source[std::min(static_cast<std::uint32_t>(t) + 8, m - 1)]];
-    __builtin_prefetch(&next.key);
-    __builtin_prefetch(&next.colour);
-    const StagedEntry& x = st[source[t]];
-    e.key[t] = x.key;
-    e.normal_impulse[t] = x.normal_impulse;
-    e.tangent_impulse[t] = x.tangent_impulse;
-    e.rolling_impulse[t] = x.rolling_impulse;
-    e.colour[t] = x.colour;
+    const std::uint32_t first = m_first[a], last = m_first[a + 1];
+    sort_run(source, first, last, [](std::uint64_t b_and_k) { return b_and_k; });
+    for (std::uint32_t t = first; t < last; ++t) {
+      hint(static_cast<std::uint32_t>(source[std::min(t + 8, m - 1)]));
+      const auto k = static_cast<std::uint32_t>(source[t]);
+      const Stored c = load(k);
+      const bool loaded = c.normal_impulse > 0;
+      e.key[t] = cache_key(a, static_cast<std::uint32_t>(source[t] >> 32));
+      e.normal_impulse[t] = loaded ? c.normal_impulse : real(0);
+      e.tangent_impulse[t] = loaded ? c.tangent_impulse : Vec3{};
+      e.rolling_impulse[t] = loaded ? c.rolling_impulse : Vec3{};
+      e.colour[t] = colour_of[k];
+    }
   }
 }
 

@@ -117,21 +117,18 @@ class ContactCache {
   CacheEntries m_entries;
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
-  std::vector<std::uint32_t> m_order, m_first, m_source;
-  struct Stored {  // what store() reads of one contact
-    std::uint32_t a, b;
+  std::vector<std::uint32_t> m_order, m_first;
+  struct Stored {  // the impulses store() keeps of one contact
     real normal_impulse;
     Vec3 tangent_impulse, rolling_impulse;
   };
-  template <class Load>  // Load(t) -> Stored of contact t
-  void store_from(std::uint32_t n, const ColourRanges& ranges, Load&& load);
-  struct StagedEntry {  // store(): one contact's entry, in contact order
-    std::uint64_t key;
-    real normal_impulse;
-    Vec3 tangent_impulse, rolling_impulse;
-    std::uint8_t colour;
-  };
-  std::vector<StagedEntry> m_staged;
+  // pair_of(t) -> BodyPair, normal_of(t) -> its normal impulse, load(t) ->
+  // Stored of contact t; hint(t) asks for what load(t) will read.
+  template <class PairOf, class NormalOf, class Load, class Hint>
+  void store_from(std::uint32_t n, const ColourRanges& ranges, PairOf&& pair_of, NormalOf&& normal_of, Load&& load,
+                  Hint&& hint);
+  std::vector<std::uint64_t> m_source;   // store(): each place's b << 32 | contact
+  std::vector<std::uint8_t> m_colour_of;  // store(): each contact's colour (kNoKeptColour: none)
 };
 
 }  // namespace marbles::narrowphase

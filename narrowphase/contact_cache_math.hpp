@@ -25,11 +25,12 @@ MARBLES_HD_INLINE std::uint32_t find_in_run(const Key* keys, std::uint32_t begin
 }
 
 // One sphere's run of a store, index[begin, end), ordered by key_of(index)
-// (the runs' keys are unique) by insertion: a run is a few entries.
-template <class KeyOf>
-MARBLES_HD_INLINE void sort_run(std::uint32_t* index, std::uint32_t begin, std::uint32_t end, const KeyOf& key_of) {
+// (the runs' keys are unique) by insertion: a run is a few entries. An
+// index may carry its own key (key_of reads only the index itself).
+template <class Index, class KeyOf>
+MARBLES_HD_INLINE void sort_run(Index* index, std::uint32_t begin, std::uint32_t end, const KeyOf& key_of) {
   for (std::uint32_t x = begin + 1; x < end; ++x) {
-    const std::uint32_t k = index[x];
+    const Index k = index[x];
     const auto key = key_of(k);
     std::uint32_t j = x;
     for (; j > begin && key_of(index[j - 1]) > key; --j) index[j] = index[j - 1];
