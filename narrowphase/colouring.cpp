@@ -39,7 +39,7 @@ template <class Pairs>
 std::uint32_t ContactColouring::colour_from(const Pairs& contacts, const std::vector<std::uint32_t>& active,
                                        const std::uint64_t* rank, std::size_t body_count, ColourRule rule,
                                        std::vector<std::uint32_t>& colour, std::uint32_t* rounds_out,
-                                       const std::vector<std::uint32_t>* kept) {
+                                       const std::vector<std::uint32_t>* kept, const KeptMasks* masks) {
   // Clear only the spheres these contacts touch, so that the work stays in
   // proportion to the contacts (the impact stage's few candidates); when the
   // contacts outnumber the spheres (a settled pile keeps ~6 per sphere) the
@@ -62,50 +62,19 @@ std::uint32_t ContactColouring::colour_from(const Pairs& contacts, const std::ve
     if (kept) clear(*kept);
   }
   std::uint32_t colours = 0, rounds = 0;
-  if (kept) {  // the kept colours hold their spheres first; they take no round
-    // In parallel: an or of bits gives the same masks in any order. With a
-    // few threads each ors into masks of its own (the first into
-    // m_body_used), joined after; with many, into one set of masks by
-    // atomics (settle scene of 10^5, 2 threads: this function 3.3 -> 2.4 %
-    // of the step's samples with masks of their own).
-    const auto m = static_cast<std::ptrdiff_t>(kept->size());
+  if (kept && masks) {  // made elsewhere: every sphere's word
+    std::copy(masks->used, masks->used + body_count, m_body_used.begin());
+    colours = masks->colours;
+  } else if (kept) {  // the kept colours hold their spheres first; they take no round
     const std::uint32_t* kk = kept->data();
     const std::uint32_t* colour_of = colour.data();
-    std::uint64_t* used = m_body_used.data();
-    const int threads = m >= 16384 ? thread_count() : 1;
-    const bool own_masks = threads > 1 && threads <= kMostOwnMasks, atomics = threads > kMostOwnMasks;
-    if (own_masks) m_thread_used.assign(static_cast<std::size_t>(threads - 1) * body_count, 0);
-    std::uint64_t* others = m_thread_used.data();
-    std::uint32_t top = 0;
-#pragma omp parallel num_threads(threads) reduction(max : top) if (threads > 1)
-    {
-      const int me = thread_index();
-      std::uint64_t* mine = own_masks && me > 0 ? others + static_cast<std::size_t>(me - 1) * body_count : used;
-#pragma omp for schedule(static)
-      for (std::ptrdiff_t t = 0; t < m; ++t) {
-        const auto& c = contacts[kk[t]];
-        const std::uint32_t kept_colour = colour_of[kk[t]];
-        const std::uint64_t bit = std::uint64_t(1) << kept_colour;
-        if (atomics) {
-#pragma omp atomic update
-          used[c.a] |= bit;
-          if (!is_wall(c.b)) {
-#pragma omp atomic update
-            used[c.b] |= bit;
-          }
-        } else {
-          mine[c.a] |= bit;
-          if (!is_wall(c.b)) mine[c.b] |= bit;
-        }
-        top = std::max(top, kept_colour + 1);
-      }
-      if (own_masks) {
-#pragma omp for schedule(static)
-        for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(body_count); ++i)
-          for (int o = 0; o < threads - 1; ++o) used[i] |= others[static_cast<std::size_t>(o) * body_count + i];
-      }
-    }
-    colours = top;
+    colours = or_kept_colours(
+        kept->size(), body_count,
+        [&](std::uint32_t t) {
+          const auto& c = contacts[kk[t]];
+          return KeptItem{c.a, c.b, static_cast<std::uint8_t>(colour_of[kk[t]])};
+        },
+        m_body_used.data(), m_thread_used);
   }
   // Decreasing rank: an ascending radix sort of (2^56 - 1 - rank) (ranks are
   // 56 bits and unique), carrying the contact index. The ranks of
@@ -156,11 +125,11 @@ std::uint32_t ContactColouring::colour_from(const Pairs& contacts, const std::ve
 template std::uint32_t ContactColouring::colour_from(const Runs<const Contact>&, const std::vector<std::uint32_t>&,
                                                    const std::uint64_t*, std::size_t, ColourRule,
                                                    std::vector<std::uint32_t>&, std::uint32_t*,
-                                                   const std::vector<std::uint32_t>*);
+                                                   const std::vector<std::uint32_t>*, const KeptMasks*);
 template std::uint32_t ContactColouring::colour_from(const PlacedPairs&, const std::vector<std::uint32_t>&,
                                                    const std::uint64_t*, std::size_t, ColourRule,
                                                    std::vector<std::uint32_t>&, std::uint32_t*,
-                                                   const std::vector<std::uint32_t>*);
+                                                   const std::vector<std::uint32_t>*, const KeptMasks*);
 
 void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size_t body_count, ColourRanges& out,
                                        const std::uint8_t* kept_colour, const BodiesView* prepare, real rest_speed,
@@ -174,7 +143,7 @@ void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size
 
 void ContactColouring::colour_and_place(Runs<const Contact> contacts, std::size_t count_in, std::size_t body_count,
                                         ColourRanges& out, const std::uint8_t* kept_colour,
-                                        const std::uint8_t* loaded) {
+                                        const std::uint8_t* loaded, const KeptMasks* masks) {
   const auto n = static_cast<std::uint32_t>(count_in);
   m_rank.resize(n);
   m_colour.resize(n);
@@ -184,7 +153,7 @@ void ContactColouring::colour_and_place(Runs<const Contact> contacts, std::size_
     const std::uint8_t kept = kept_colour ? kept_colour[k] : kNoKeptColour;
     if (kept < kMaxColours) {
       m_colour[k] = kept;
-      m_kept.push_back(k);
+      if (!masks) m_kept.push_back(k);  // with masks no pass reads the kept contacts
     } else {
       m_colour[k] = kUncoloured;
       m_all.push_back(k);
@@ -196,7 +165,7 @@ void ContactColouring::colour_and_place(Runs<const Contact> contacts, std::size_
   // samples; the same colours).
   for (const std::uint32_t k : m_all) m_rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
   out.colours = colour(contacts, m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
-                       &out.rounds, &m_kept);
+                       &out.rounds, &m_kept, kept_colour ? masks : nullptr);
 
   // Colour-major, index order within a colour (a stable counting sort, in
   // parallel): each place's contact first, then the contacts gathered place

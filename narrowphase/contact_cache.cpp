@@ -195,6 +195,22 @@ std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const
                                                 m_matched.data(), m, bodies, weight_impulse, carried);
 }
 
+std::uint32_t ContactCache::kept_masks(std::size_t body_count, std::vector<std::uint64_t>& used) {
+  used.assign(body_count, 0);
+  const std::size_t m = m_entries.size();
+  if (m == 0 || m_entries.colour.size() != m || m_matched.size() != m) return 0;
+  const std::uint64_t* keys = m_entries.key.data();
+  const std::uint8_t* colour = m_entries.colour.data();
+  const std::uint8_t* matched = m_matched.data();
+  return or_kept_colours(
+      m, body_count,
+      [=](std::uint32_t k) {
+        return KeptItem{static_cast<std::uint32_t>(keys[k] >> 32), static_cast<std::uint32_t>(keys[k]),
+                        matched[k] ? colour[k] : kNoKeptColour};
+      },
+      used.data(), m_thread_used);
+}
+
 void ContactCache::store(const std::vector<Contact>& contacts, const ColourRanges& ranges) {
   const Contact* cs = contacts.data();
   store_from(
@@ -242,6 +258,7 @@ void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, PairO
   // alone; then the entries are filled group by group, each contact's
   // impulses read where they are (one word, or two with rolling, asked for
   // a few places ahead) and its colour from a byte a contact (in L2).
+  m_matched.clear();  // of the entries that go
   const bool coloured = ranges.size() == n;
   const std::uint32_t coloured_end = coloured ? ranges.begin[ranges.colours] : 0;
   const auto count = static_cast<std::ptrdiff_t>(n);

@@ -97,6 +97,12 @@ class ContactCache {
   // The same for `count` contacts held in runs (Runs).
   std::size_t restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies, real weight_impulse,
                       std::vector<std::uint8_t>& kept_colour, std::vector<std::uint8_t>* loaded = nullptr);
+  // After restore(): the colours its matched entries keep at their spheres
+  // (`body_count` of them; KeptMasks, colouring.hpp), the same the
+  // colouring's kept contacts would hold, read from the entries' keys in
+  // order instead of from the contacts. Returns KeptMasks::colours (0,
+  // and no colour at any sphere, where the entries changed since).
+  std::uint32_t kept_masks(std::size_t body_count, std::vector<std::uint64_t>& used);
   // Remembers the impulses and colours of `contacts` (colour-major, as
   // `ranges` says) for the next substep.
   void store(const std::vector<Contact>& contacts, const ColourRanges& ranges);
@@ -107,10 +113,10 @@ class ContactCache {
   // their rolling words) the rolling impulses kept are zero, as every
   // contact's is in a scene without rolling resistance.
   void store(const SweepRecords& records, std::uint32_t count, bool rolling, const ColourRanges& ranges);
-  void clear() { m_entries = {}; }
+  void clear() { m_entries = {}, m_matched.clear(); }
   // The entries themselves (a checkpoint's copy).
   const CacheEntries& entries() const { return m_entries; }
-  void set_entries(CacheEntries entries) { m_entries = std::move(entries); }
+  void set_entries(CacheEntries entries) { m_entries = std::move(entries), m_matched.clear(); }
   std::size_t size() const { return m_entries.size(); }
 
  private:
@@ -118,6 +124,7 @@ class ContactCache {
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
   std::vector<std::uint32_t> m_order, m_first;
+  std::vector<std::uint64_t> m_thread_used;  // kept_masks(): or_kept_colours' masks of the later threads
   struct Stored {  // the impulses store() keeps of one contact
     real normal_impulse;
     Vec3 tangent_impulse, rolling_impulse;

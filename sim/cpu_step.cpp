@@ -72,8 +72,9 @@ class CpuStep final : public StepBackend {
     // The records made from the contacts where the search left them (its
     // runs), each prepared on its way: nothing moves the bodies before the
     // solve. No colour-major copy of the contacts is made.
+    const narrowphase::KeptMasks masks{m_kept_masks.data(), m_kept_colours};
     m_colouring.colour_and_place(contact_runs(), n, m_world.size(), m_colours, kept ? m_kept_colour.data() : nullptr,
-                                 loads ? m_loaded.data() : nullptr);
+                                 loads ? m_loaded.data() : nullptr, kept ? &masks : nullptr);
     m_solver.make_records(contact_runs(), m_colouring.places(), m_colours, m_world.view());
     m_counters.colours = std::max(m_counters.colours, m_colours.colours);
     m_counters.overflow += m_colours.overflow();
@@ -87,6 +88,9 @@ class CpuStep final : public StepBackend {
     if (contact_count() == 0) return;
     m_cache.restore(contact_runs(), contact_count(), m_world.view(),
                     m_model.gravity ? length(m_model.g) * m_model.substep() : real(0), m_kept_colour, &m_loaded);
+    // The kept colours at their spheres from the matched entries (in key
+    // order), so that the colouring reads no kept contact.
+    m_kept_colours = m_cache.kept_masks(m_world.size(), m_kept_masks);
   }
 
   void solve_velocities(real h) override {
@@ -217,6 +221,8 @@ class CpuStep final : public StepBackend {
   narrowphase::ColourRanges m_colours;
   std::vector<std::uint8_t> m_kept_colour;  // per contact: its colour of the last substep, or none
   std::vector<std::uint8_t> m_loaded;       // per contact: whether it carries a load in (the colouring orders by it)
+  std::vector<std::uint64_t> m_kept_masks;  // per sphere: the kept colours its contacts hold (KeptMasks)
+  std::uint32_t m_kept_colours = 0;
   StepCounters m_counters;
   bool m_non_finite = false;
   bool m_watch = false;

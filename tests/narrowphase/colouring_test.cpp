@@ -540,6 +540,58 @@ TEST(Colouring, ByRoundOrdersNeighboursByRank) {
   }
 }
 
+// The kept colours at the spheres from the cache's matched entries
+// (ContactCache::kept_masks) are what the kept contacts hold, and the
+// colouring given them colours and places every contact as it does reading
+// the kept contacts: small and large lists (the threaded paths), on one
+// thread, two (masks of their own) and five (atomics).
+TEST(ContactCache, KeptMasksColourAsTheKeptContactsDo) {
+  std::mt19937_64 rng(43);
+  for (const int threads : {1, 2, 5})
+    for (const std::uint32_t bodies : {300u, 20000u}) {
+      std::vector<Contact> contacts = random_contacts(rng, bodies, 3 * bodies, 0.1);
+      for (std::size_t k = 0; k < contacts.size(); ++k) contacts[k].normal_impulse = k % 4 == 0 ? real(0) : real(1e-3);
+      ColourRanges ranges;
+      ContactColouring().colour_and_sort(contacts, bodies, ranges);
+      ContactCache cache;
+      cache.store(contacts, ranges);
+      std::vector<std::uint8_t> unused, kept;
+      std::vector<Contact> next = next_substep(rng, contacts, ranges, bodies, bodies / 3, unused);
+      std::vector<real> inv_mass(bodies, real(1));
+      BodiesView view;
+      view.inv_mass = inv_mass.data();
+      view.count = bodies;
+      const int was = thread_count();
+      set_thread_count(threads);
+      cache.restore(next, view, real(1), kept);
+      std::vector<std::uint64_t> used;
+      const std::uint32_t colours = cache.kept_masks(bodies, used);
+      // The oracle: the kept contacts' colours, or'd one by one.
+      std::vector<std::uint64_t> want(bodies, 0);
+      std::uint32_t want_colours = 0;
+      for (std::size_t k = 0; k < next.size(); ++k) {
+        if (kept[k] == kNoKeptColour) continue;
+        want[next[k].a] |= std::uint64_t(1) << kept[k];
+        if (!is_wall(next[k].b)) want[next[k].b] |= std::uint64_t(1) << kept[k];
+        want_colours = std::max<std::uint32_t>(want_colours, kept[k] + 1u);
+      }
+      const std::string where = "threads " + std::to_string(threads) + ", " + std::to_string(bodies) + " bodies";
+      EXPECT_GT(want_colours, 1u) << where;
+      EXPECT_EQ(colours, want_colours) << where;
+      EXPECT_EQ(used, want) << where;
+      ContactColouring by_contacts, by_masks;
+      ColourRanges from_contacts, from_masks;
+      const KeptMasks masks{used.data(), colours};
+      by_contacts.colour_and_place(ContactRuns(next.data()), next.size(), bodies, from_contacts, kept.data());
+      by_masks.colour_and_place(ContactRuns(next.data()), next.size(), bodies, from_masks, kept.data(), nullptr, &masks);
+      set_thread_count(was);
+      EXPECT_EQ(from_masks.colours, from_contacts.colours) << where;
+      EXPECT_EQ(from_masks.rounds, from_contacts.rounds) << where;
+      EXPECT_EQ(from_masks.begin, from_contacts.begin) << where;
+      EXPECT_TRUE(std::equal(by_masks.places(), by_masks.places() + next.size(), by_contacts.places())) << where;
+    }
+}
+
 // The cache's entries against a plain oracle: every contact with a load or
 // a colour (not the overflow set's), sorted by key, impulses only where
 // loaded. Large lists (the threaded paths), small ones, every contact
