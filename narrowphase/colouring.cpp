@@ -149,14 +149,22 @@ void ContactColouring::colour_and_place(Runs<const Contact> contacts, std::size_
   m_colour.resize(n);
   m_all.clear();
   m_kept.clear();
-  for (std::uint32_t k = 0; k < n; ++k) {
-    const std::uint8_t kept = kept_colour ? kept_colour[k] : kNoKeptColour;
-    if (kept < kMaxColours) {
-      m_colour[k] = kept;
-      if (!masks) m_kept.push_back(k);  // with masks no pass reads the kept contacts
-    } else {
-      m_colour[k] = kUncoloured;
-      m_all.push_back(k);
+  if (kept_colour && masks) {  // no list of the kept: on all threads, the new ones listed in index order
+    collect_in_order(n, 20000, m_all, m_all_parts, [&](std::size_t k, std::vector<std::uint32_t>& to) {
+      const std::uint8_t kept = kept_colour[k];
+      m_colour[k] = kept < kMaxColours ? kept : kUncoloured;
+      if (kept >= kMaxColours) to.push_back(static_cast<std::uint32_t>(k));
+    });
+  } else {
+    for (std::uint32_t k = 0; k < n; ++k) {
+      const std::uint8_t kept = kept_colour ? kept_colour[k] : kNoKeptColour;
+      if (kept < kMaxColours) {
+        m_colour[k] = kept;
+        m_kept.push_back(k);
+      } else {
+        m_colour[k] = kUncoloured;
+        m_all.push_back(k);
+      }
     }
   }
   // The new contacts' ranks in a loop of their own: within the one above,

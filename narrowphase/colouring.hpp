@@ -229,6 +229,7 @@ class ContactColouring {
   std::vector<std::uint32_t> m_all, m_kept, m_colour, m_bucket_count, m_order, m_sort_values, m_high, m_sort_high,
       m_source;
   std::vector<Contact> m_sorted;
+  std::vector<std::vector<std::uint32_t>> m_all_parts;  // colour_and_place's new contacts, by thread
 };
 
 // The records the launch just before wrote, [begin, end), so that the next
