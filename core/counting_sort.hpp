@@ -9,6 +9,7 @@
 #pragma once
 
 #include <cstddef>
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -27,8 +28,9 @@ void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move
   // buckets (the colouring's colours) would otherwise put two threads'
   // counts on one line, which every count writes.
   const std::size_t stride = (std::size_t(buckets) + 16 + 15) / 16 * 16;
-  scratch.assign(std::size_t(most) * stride, 0);
-  begin.assign(std::size_t(buckets) + 1, 0);
+  // Each thread clears its own counts; the single pass writes every begin.
+  scratch.resize(std::size_t(most) * stride);
+  begin.resize(std::size_t(buckets) + 1);
   std::uint32_t* count = scratch.data();
 #pragma omp parallel num_threads(most) if (most > 1)
   {
@@ -36,6 +38,7 @@ void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move
     const auto lo = static_cast<std::uint32_t>(std::uint64_t(n) * t / threads);
     const auto hi = static_cast<std::uint32_t>(std::uint64_t(n) * (t + 1) / threads);
     std::uint32_t* mine = count + std::size_t(t) * stride;
+    std::fill(mine, mine + buckets, 0u);
     for (std::uint32_t k = lo; k < hi; ++k) {
       const std::uint32_t b = bucket(k);
       if (b != kSkipItem) ++mine[b];

@@ -56,7 +56,7 @@ std::uint32_t ContactColouring::colour_from(const Pairs& contacts, const std::ve
   };
   if (active.size() + (kept ? kept->size() : 0) >= body_count) {
     std::fill(m_body_next_round.begin(), m_body_next_round.end(), 0u);
-    std::fill(m_body_used.begin(), m_body_used.end(), std::uint64_t(0));
+    if (!(kept && masks)) std::fill(m_body_used.begin(), m_body_used.end(), std::uint64_t(0));  // else copied below
   } else {
     clear(active);
     if (kept) clear(*kept);

@@ -121,13 +121,14 @@ std::uint32_t or_kept_colours(std::size_t n, std::size_t body_count, Item&& item
   const auto m = static_cast<std::ptrdiff_t>(n);
   const int threads = m >= 16384 ? thread_count() : 1;
   const bool own_masks = threads > 1 && threads <= kMostOwnMasks, atomics = threads > kMostOwnMasks;
-  if (own_masks) thread_used.assign(static_cast<std::size_t>(threads - 1) * body_count, 0);
+  if (own_masks) thread_used.resize(static_cast<std::size_t>(threads - 1) * body_count);
   std::uint64_t* others = thread_used.data();
   std::uint32_t top = 0;
 #pragma omp parallel num_threads(threads) reduction(max : top) if (threads > 1)
   {
     const int me = thread_index();
     std::uint64_t* mine = own_masks && me > 0 ? others + static_cast<std::size_t>(me - 1) * body_count : used;
+    if (mine != used) std::fill(mine, mine + body_count, std::uint64_t(0));  // each thread its own
 #pragma omp for schedule(static)
     for (std::ptrdiff_t t = 0; t < m; ++t) {
       const KeptItem k = item(static_cast<std::uint32_t>(t));

@@ -73,12 +73,20 @@ std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count,
 }
 
 void key_runs(const std::uint64_t* keys, std::uint32_t m, std::size_t spheres, std::vector<std::uint32_t>& first) {
-  first.assign(spheres + 1, 0);
-  for (std::uint32_t k = 0; k < m; ++k) {
-    const std::uint64_t a = keys[k] >> 32;
-    if (a < spheres) ++first[a + 1];
+  // first[s] is the first entry whose a (spheres for those past them) is at
+  // least s: each entry writes the firsts of the spheres from just past the
+  // entry before's a to its own, so every first is written once, on all
+  // threads.
+  first.resize(spheres + 1);
+  std::uint32_t* f = first.data();
+  auto sphere_of = [&](std::uint32_t k) { return static_cast<std::size_t>(std::min<std::uint64_t>(keys[k] >> 32, spheres)); };
+#pragma omp parallel for schedule(static) if (m >= kParallelFrom)
+  for (std::ptrdiff_t t = 0; t < static_cast<std::ptrdiff_t>(m); ++t) {
+    const auto k = static_cast<std::uint32_t>(t);
+    const std::size_t from = k == 0 ? 0 : sphere_of(k - 1) + 1;
+    for (std::size_t s = from; s <= sphere_of(k); ++s) f[s] = k;
   }
-  for (std::size_t i = 0; i < spheres; ++i) first[i + 1] += first[i];
+  for (std::size_t s = m == 0 ? 0 : sphere_of(m - 1) + 1; s <= spheres; ++s) f[s] = m;
 }
 
 CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>& new_index) {
@@ -162,13 +170,21 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
 std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies,
                                   real weight_impulse, std::vector<std::uint8_t>& kept_colour,
                                   std::vector<std::uint8_t>* loaded) {
-  kept_colour.assign(count, kNoKeptColour);
-  if (loaded) loaded->assign(count, 0);
-  std::uint8_t* carried = loaded ? loaded->data() : nullptr;
   const auto m = static_cast<std::uint32_t>(m_entries.size());
-  if (m == 0) return 0;
+  if (m == 0) {
+    kept_colour.assign(count, kNoKeptColour);
+    if (loaded) loaded->assign(count, 0);
+    return 0;
+  }
+  // Each contact's kept colour and load written once in the loop below.
+  kept_colour.resize(count);
+  if (loaded) loaded->resize(count);
+  std::uint8_t* carried = loaded ? loaded->data() : nullptr;
   const std::uint8_t* colour = m_entries.colour.size() == m ? m_entries.colour.data() : nullptr;
-  m_matched.assign(m, 0);
+  m_matched.resize(m);
+  std::uint8_t* matched_entry = m_matched.data();
+#pragma omp parallel for schedule(static) if (m >= kParallelFrom)
+  for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(m); ++k) matched_entry[k] = 0;
   const std::uint64_t* keys = m_entries.key.data();
   // The entries of sphere a are keys[first[a], first[a + 1]) (sorted by key,
   // so grouped by a): a contact scans its sphere's few entries instead of
@@ -182,13 +198,16 @@ std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const
 #pragma omp parallel for schedule(static) reduction(+ : matched) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t) {
     Contact& c = contacts[t];
-    if (c.a >= spheres) continue;
-    const std::uint32_t k = find_in_run(keys, first[c.a], first[c.a + 1], cache_key(c.a, c.b));
-    if (k == first[c.a + 1]) continue;
+    const std::uint32_t k = c.a < spheres ? find_in_run(keys, first[c.a], first[c.a + 1], cache_key(c.a, c.b)) : m;
+    if (k == m || k == first[c.a + 1]) {
+      kept_colour[t] = kNoKeptColour;
+      if (carried) carried[t] = 0;
+      continue;
+    }
     restore_impulses(c, m_entries.normal_impulse[k], m_entries.tangent_impulse[k], m_entries.rolling_impulse[k]);
     if (carried) carried[t] = carries_load(m_entries.normal_impulse[k]) ? 1 : 0;
-    if (colour) kept_colour[t] = colour[k];
-    m_matched[k] = 1;  // keys are unique: one contact per entry
+    kept_colour[t] = colour ? colour[k] : kNoKeptColour;
+    matched_entry[k] = 1;  // keys are unique: one contact per entry
     ++matched;
   }
   return matched - cold_start_unloaded_islands(contacts, count, keys, m_entries.normal_impulse.data(),
@@ -196,7 +215,10 @@ std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const
 }
 
 std::uint32_t ContactCache::kept_masks(std::size_t body_count, std::vector<std::uint64_t>& used) {
-  used.assign(body_count, 0);
+  used.resize(body_count);
+  std::uint64_t* u = used.data();
+#pragma omp parallel for schedule(static) if (body_count >= kParallelFrom)
+  for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(body_count); ++i) u[i] = 0;
   const std::size_t m = m_entries.size();
   if (m == 0 || m_entries.colour.size() != m || m_matched.size() != m) return 0;
   const std::uint64_t* keys = m_entries.key.data();
