@@ -170,55 +170,48 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
 std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies,
                                   real weight_impulse, std::vector<std::uint8_t>& kept_colour,
                                   std::vector<std::uint8_t>* loaded) {
-  begin_restore(bodies.count);
-  // Each contact's kept colour and load written once below.
+  const auto m = static_cast<std::uint32_t>(m_entries.size());
+  if (m == 0) {
+    kept_colour.assign(count, kNoKeptColour);
+    if (loaded) loaded->assign(count, 0);
+    return 0;
+  }
+  // Each contact's kept colour and load written once in the loop below.
   kept_colour.resize(count);
   if (loaded) loaded->resize(count);
   std::uint8_t* carried = loaded ? loaded->data() : nullptr;
+  const std::uint8_t* colour = m_entries.colour.size() == m ? m_entries.colour.data() : nullptr;
+  m_matched.resize(m);
+  std::uint8_t* matched_entry = m_matched.data();
+#pragma omp parallel for schedule(static) if (m >= kParallelFrom)
+  for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(m); ++k) matched_entry[k] = 0;
+  const std::uint64_t* keys = m_entries.key.data();
+  // The entries of sphere a are keys[first[a], first[a + 1]) (sorted by key,
+  // so grouped by a): a contact scans its sphere's few entries instead of
+  // searching all of them, and finds the same entry (keys are unique).
+  // Entries of spheres that no longer exist (a >= count) are never matched.
+  const std::size_t spheres = bodies.count;
+  key_runs(keys, m, spheres, m_first);
+  const std::uint32_t* first = m_first.data();
   const auto n = static_cast<std::ptrdiff_t>(count);
   std::size_t matched = 0;
 #pragma omp parallel for schedule(static) reduction(+ : matched) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t) {
-    const Restored r = restore_one(contacts[t]);
-    kept_colour[t] = r.colour;
-    if (carried) carried[t] = r.loaded;
-    matched += r.found ? 1 : 0;
+    Contact& c = contacts[t];
+    const std::uint32_t k = c.a < spheres ? find_in_run(keys, first[c.a], first[c.a + 1], cache_key(c.a, c.b)) : m;
+    if (k == m || k == first[c.a + 1]) {
+      kept_colour[t] = kNoKeptColour;
+      if (carried) carried[t] = 0;
+      continue;
+    }
+    restore_impulses(c, m_entries.normal_impulse[k], m_entries.tangent_impulse[k], m_entries.rolling_impulse[k]);
+    if (carried) carried[t] = carries_load(m_entries.normal_impulse[k]) ? 1 : 0;
+    kept_colour[t] = colour ? colour[k] : kNoKeptColour;
+    matched_entry[k] = 1;  // keys are unique: one contact per entry
+    ++matched;
   }
-  return matched - finish_restore(contacts, count, bodies, weight_impulse, carried);
-}
-
-void ContactCache::begin_restore(std::size_t spheres) {
-  m_spheres = spheres;
-  const auto m = static_cast<std::uint32_t>(m_entries.size());
-  m_matched.resize(m);
-  std::uint8_t* matched = m_matched.data();
-#pragma omp parallel for schedule(static) if (m >= kParallelFrom)
-  for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(m); ++k) matched[k] = 0;
-  // The entries of sphere a are keys[first[a], first[a + 1]) (sorted by key,
-  // so grouped by a): a contact scans its sphere's few entries instead of
-  // searching all of them, and finds the same entry (keys are unique).
-  // Entries of spheres that no longer exist (a >= spheres) are never matched.
-  key_runs(m_entries.key.data(), m, spheres, m_first);
-}
-
-ContactCache::Restored ContactCache::restore_one(Contact& c) {
-  const auto m = static_cast<std::uint32_t>(m_entries.size());
-  if (c.a >= m_spheres || m == 0) return {};
-  const std::uint32_t end = m_first[c.a + 1];
-  const std::uint32_t k = find_in_run(m_entries.key.data(), m_first[c.a], end, cache_key(c.a, c.b));
-  if (k == end) return {};
-  const real normal = m_entries.normal_impulse[k];
-  restore_impulses(c, normal, m_entries.tangent_impulse[k], m_entries.rolling_impulse[k]);
-  m_matched[k] = 1;  // keys are unique: one contact per entry
-  return {m_entries.colour.size() == m ? m_entries.colour[k] : kNoKeptColour,
-          static_cast<std::uint8_t>(carries_load(normal) ? 1 : 0), true};
-}
-
-std::size_t ContactCache::finish_restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies,
-                                         real weight_impulse, std::uint8_t* loaded) {
-  if (m_entries.size() == 0) return 0;
-  return cold_start_unloaded_islands(contacts, count, m_entries.key.data(), m_entries.normal_impulse.data(),
-                                     m_matched.data(), m_entries.size(), bodies, weight_impulse, loaded);
+  return matched - cold_start_unloaded_islands(contacts, count, keys, m_entries.normal_impulse.data(),
+                                                m_matched.data(), m, bodies, weight_impulse, carried);
 }
 
 std::uint32_t ContactCache::kept_masks(std::size_t body_count, std::vector<std::uint64_t>& used) {

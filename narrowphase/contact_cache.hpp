@@ -97,23 +97,6 @@ class ContactCache {
   // The same for `count` contacts held in runs (Runs).
   std::size_t restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies, real weight_impulse,
                       std::vector<std::uint8_t>& kept_colour, std::vector<std::uint8_t>* loaded = nullptr);
-  // The same, one contact at a time while each is made (the CPU step's
-  // contact search: no pass over the contacts afterwards). begin_restore()
-  // first; then restore_one() on each made contact (impulses zero), on any
-  // thread (keys are unique: no two contacts find one entry), which
-  // restores its impulses and gives its kept colour and load; then
-  // finish_restore() on them all, in the order their flags were given
-  // (the island rule, which sets contacts cold and clears their loads).
-  // Returns the number of contacts it set cold.
-  struct Restored {
-    std::uint8_t colour = kNoKeptColour;  // the entry's colour, kNoKeptColour where none
-    std::uint8_t loaded = 0;              // carries_load of the restored normal impulse
-    bool found = false;                   // it had an entry
-  };
-  void begin_restore(std::size_t spheres);
-  Restored restore_one(Contact& c);
-  std::size_t finish_restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies, real weight_impulse,
-                             std::uint8_t* loaded);
   // After restore(): the colours its matched entries keep at their spheres
   // (`body_count` of them; KeptMasks, colouring.hpp), the same the
   // colouring's kept contacts would hold, read from the entries' keys in
@@ -141,7 +124,6 @@ class ContactCache {
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
   std::vector<std::uint32_t> m_order, m_first;
-  std::size_t m_spheres = 0;  // begin_restore()'s
   std::vector<std::uint64_t> m_thread_used;  // kept_masks(): or_kept_colours' masks of the later threads
   struct Stored {  // the impulses store() keeps of one contact
     real normal_impulse;
