@@ -170,7 +170,8 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
 std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies,
                                   real weight_impulse, std::vector<std::uint8_t>& kept_colour,
                                   std::vector<std::uint8_t>* loaded) {
-  const auto m = static_cast<std::uint32_t>(m_entries.size());
+  const CacheEntries& e = entries();
+  const auto m = static_cast<std::uint32_t>(e.size());
   if (m == 0) {
     kept_colour.assign(count, kNoKeptColour);
     if (loaded) loaded->assign(count, 0);
@@ -180,12 +181,12 @@ std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const
   kept_colour.resize(count);
   if (loaded) loaded->resize(count);
   std::uint8_t* carried = loaded ? loaded->data() : nullptr;
-  const std::uint8_t* colour = m_entries.colour.size() == m ? m_entries.colour.data() : nullptr;
+  const std::uint8_t* colour = e.colour.size() == m ? e.colour.data() : nullptr;
   m_matched.resize(m);
   std::uint8_t* matched_entry = m_matched.data();
 #pragma omp parallel for schedule(static) if (m >= kParallelFrom)
   for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(m); ++k) matched_entry[k] = 0;
-  const std::uint64_t* keys = m_entries.key.data();
+  const std::uint64_t* keys = e.key.data();
   // The entries of sphere a are keys[first[a], first[a + 1]) (sorted by key,
   // so grouped by a): a contact scans its sphere's few entries instead of
   // searching all of them, and finds the same entry (keys are unique).
@@ -204,13 +205,13 @@ std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const
       if (carried) carried[t] = 0;
       continue;
     }
-    restore_impulses(c, m_entries.normal_impulse[k], m_entries.tangent_impulse[k], m_entries.rolling_impulse[k]);
-    if (carried) carried[t] = carries_load(m_entries.normal_impulse[k]) ? 1 : 0;
+    restore_impulses(c, e.normal_impulse[k], e.tangent_impulse[k], e.rolling_impulse[k]);
+    if (carried) carried[t] = carries_load(e.normal_impulse[k]) ? 1 : 0;
     kept_colour[t] = colour ? colour[k] : kNoKeptColour;
     matched_entry[k] = 1;  // keys are unique: one contact per entry
     ++matched;
   }
-  return matched - cold_start_unloaded_islands(contacts, count, keys, m_entries.normal_impulse.data(),
+  return matched - cold_start_unloaded_islands(contacts, count, keys, e.normal_impulse.data(),
                                                 m_matched.data(), m, bodies, weight_impulse, carried);
 }
 
@@ -219,10 +220,11 @@ std::uint32_t ContactCache::kept_masks(std::size_t body_count, std::vector<std::
   std::uint64_t* u = used.data();
 #pragma omp parallel for schedule(static) if (body_count >= kParallelFrom)
   for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(body_count); ++i) u[i] = 0;
-  const std::size_t m = m_entries.size();
-  if (m == 0 || m_entries.colour.size() != m || m_matched.size() != m) return 0;
-  const std::uint64_t* keys = m_entries.key.data();
-  const std::uint8_t* colour = m_entries.colour.data();
+  const CacheEntries& e = entries();
+  const std::size_t m = e.size();
+  if (m == 0 || e.colour.size() != m || m_matched.size() != m) return 0;
+  const std::uint64_t* keys = e.key.data();
+  const std::uint8_t* colour = e.colour.data();
   const std::uint8_t* matched = m_matched.data();
   return or_kept_colours(
       m, body_count,
@@ -280,7 +282,6 @@ void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, PairO
   // alone; then the entries are filled group by group, each contact's
   // impulses read where they are (one word, or two with rolling, asked for
   // a few places ahead) and its colour from a byte a contact (in L2).
-  m_matched.clear();  // of the entries that go
   const bool coloured = ranges.size() == n;
   const std::uint32_t coloured_end = coloured ? ranges.begin[ranges.colours] : 0;
   const auto count = static_cast<std::ptrdiff_t>(n);
@@ -300,7 +301,7 @@ void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, PairO
       [&](std::uint32_t k, std::uint32_t place) { source[place] = (std::uint64_t(pair_of(k).b) << 32) | k; }, m_first,
       m_order);
   const std::uint32_t m = m_first[groups];
-  CacheEntries& e = m_entries;
+  CacheEntries& e = writable();
   e.resize(m);
 #pragma omp parallel for schedule(static) if (groups >= kParallelFrom)
   for (std::ptrdiff_t g = 0; g < static_cast<std::ptrdiff_t>(groups); ++g) {

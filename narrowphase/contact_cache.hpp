@@ -113,14 +113,32 @@ class ContactCache {
   // their rolling words) the rolling impulses kept are zero, as every
   // contact's is in a scene without rolling resistance.
   void store(const SweepRecords& records, std::uint32_t count, bool rolling, const ColourRanges& ranges);
-  void clear() { m_entries = {}, m_matched.clear(); }
+  void clear() { writable().resize(0); }
   // The entries themselves (a checkpoint's copy).
-  const CacheEntries& entries() const { return m_entries; }
-  void set_entries(CacheEntries entries) { m_entries = std::move(entries), m_matched.clear(); }
-  std::size_t size() const { return m_entries.size(); }
+  const CacheEntries& entries() const { return m_arrays[m_current]; }
+  void set_entries(CacheEntries entries) { writable() = std::move(entries); }
+  std::size_t size() const { return entries().size(); }
+  // The entries as they are now kept for back_to_kept() (a watchdog's step
+  // start) without a copy: the cache holds two sets of arrays, and what
+  // changes the entries after (store, clear, set_entries) writes into the
+  // set not kept.
+  void keep() { m_kept = m_current; }
+  // The entries keep() kept become the entries again (and stay kept).
+  void back_to_kept() {
+    if (m_kept < 2) m_current = m_kept;
+    m_matched.clear();
+  }
 
  private:
-  CacheEntries m_entries;
+  // The arrays the next change of the entries writes: the entries' own,
+  // unless kept. Whatever the restore matched is of entries that go.
+  CacheEntries& writable() {
+    if (m_current == m_kept) m_current = 1 - m_current;
+    m_matched.clear();
+    return m_arrays[m_current];
+  }
+  CacheEntries m_arrays[2];
+  unsigned m_current = 0, m_kept = 2;  // m_kept 2: none kept
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
   std::vector<std::uint32_t> m_order, m_first;

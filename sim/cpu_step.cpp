@@ -149,14 +149,15 @@ class CpuStep final : public StepBackend {
     m_kept.position = m_world.position;
     m_kept.velocity = m_world.velocity;
     m_kept.angular_velocity = m_world.angular_velocity;
-    m_kept_state.cache = m_cache.entries();  // assignments reuse the copies' capacity: no allocation per step
-    m_kept_state.walls = m_walls;
+    m_cache.keep();  // no copy: the step's stores write the cache's other arrays
+    m_kept_walls = m_walls;
   }
   void undo_step() override {
     m_world.position = m_kept.position;
     m_world.velocity = m_kept.velocity;
     m_world.angular_velocity = m_kept.angular_velocity;
-    load_state(m_kept_state);
+    m_cache.back_to_kept();
+    m_walls = m_kept_walls;
     m_non_finite = false;
   }
   void load_state(const StepState& state) override {
@@ -195,7 +196,7 @@ class CpuStep final : public StepBackend {
   std::vector<narrowphase::WallShape> m_walls;  // moving walls move
   World m_kept;             // the moving state at the start of the step (watchdog)
   std::vector<std::uint32_t> m_order;  // the last renumber's (its return)
-  StepState m_kept_state;
+  std::vector<narrowphase::WallShape> m_kept_walls;  // at the start of the step (the cache keeps its own)
   std::unique_ptr<broadphase::BroadPhase> m_broadphase;
   narrowphase::ContactColouring m_colouring;
   narrowphase::ContactSolver m_solver;

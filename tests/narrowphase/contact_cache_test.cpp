@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "narrowphase/colouring.hpp"
 #include "narrowphase/contact_cache.hpp"
 #include "narrowphase/contact_cache_math.hpp"
 
@@ -161,6 +162,49 @@ TEST(ContactCacheRenumbered, EntriesOfSpheresPastTheNumberingAreDropped) {
   EXPECT_EQ(r.tangent_impulse[2], Vec3(-1, -2, -3));
   EXPECT_EQ(r.rolling_impulse[0], Vec3(4, 5, 6));
   EXPECT_EQ(r.colour, (std::vector<std::uint8_t>{3, 4, 1}));
+}
+
+
+// keep() holds the entries as they were, with no copy, through whatever
+// changes them after (set_entries, clear, store: each writes the arrays not
+// kept), and back_to_kept() gives them back bit for bit, as often as asked;
+// a later keep() holds the entries of then.
+TEST(ContactCacheKept, TheKeptEntriesComeBackWhateverChangedThemSince) {
+  std::mt19937_64 rng(17);
+  auto same = [](const CacheEntries& x, const CacheEntries& y) {
+    return x.key == y.key && x.colour == y.colour && x.size() == y.size() &&
+           std::memcmp(x.normal_impulse.data(), y.normal_impulse.data(), x.size() * sizeof(real)) == 0 &&
+           std::memcmp(x.tangent_impulse.data(), y.tangent_impulse.data(), x.size() * sizeof(Vec3)) == 0 &&
+           std::memcmp(x.rolling_impulse.data(), y.rolling_impulse.data(), x.size() * sizeof(Vec3)) == 0;
+  };
+  const CacheEntries first = random_entries(rng, 50, 80, 3), second = random_entries(rng, 60, 90, 3),
+                     third = random_entries(rng, 40, 70, 3);
+  ContactCache cache;
+  cache.set_entries(first);
+  cache.keep();
+  cache.set_entries(second);
+  EXPECT_TRUE(same(cache.entries(), second));
+  cache.clear();
+  EXPECT_EQ(cache.size(), 0u);
+  // A store from contacts (one colour each, impulses loaded): what it keeps
+  // is not the kept entries.
+  std::vector<Contact> contacts(3);
+  for (std::uint32_t k = 0; k < 3; ++k) contacts[k].a = k, contacts[k].b = k + 5, contacts[k].normal_impulse = 1;
+  ColourRanges ranges;
+  ranges.colours = 3, ranges.begin = {0, 1, 2, 3, 3};
+  cache.store(contacts, ranges);
+  ASSERT_EQ(cache.size(), 3u);
+  cache.set_entries(third);
+  cache.back_to_kept();
+  EXPECT_TRUE(same(cache.entries(), first));
+  cache.store(contacts, ranges);  // a redone step writes elsewhere: still kept
+  cache.back_to_kept();
+  EXPECT_TRUE(same(cache.entries(), first));
+  cache.set_entries(second);
+  cache.keep();
+  cache.set_entries(third);
+  cache.back_to_kept();
+  EXPECT_TRUE(same(cache.entries(), second));
 }
 
 }  // namespace
