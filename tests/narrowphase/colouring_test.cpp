@@ -592,6 +592,42 @@ TEST(ContactCache, KeptMasksColourAsTheKeptContactsDo) {
     }
 }
 
+// A sphere's entries come out ordered by b however many it has: runs of
+// 2 to 16 (ordered by counting) and past 16 (by insertion), each given in
+// shuffled order, on one thread and two.
+TEST(ContactCache, StoreOrdersRunsOfEveryLength) {
+  std::mt19937_64 rng(47);
+  for (const int threads : {1, 2}) {
+    std::vector<Contact> contacts;
+    const std::uint32_t hubs = 40;
+    for (std::uint32_t a = 0; a < hubs; ++a)
+      for (std::uint32_t j = 0; j <= a; ++j) {  // sphere a: a + 1 partners above the hubs, one a wall
+        Contact c;
+        c.a = a;
+        c.b = j == 0 ? kWallFlag | (a % 3) : hubs + 3 * j + a % 3;
+        c.normal_impulse = real(1 + j);
+        contacts.push_back(c);
+      }
+    std::shuffle(contacts.begin(), contacts.end(), rng);
+    const int was = thread_count();
+    set_thread_count(threads);
+    ContactCache cache;
+    cache.store(contacts, ColourRanges{});  // no colours known: every loaded contact kept
+    set_thread_count(was);
+    const CacheEntries& e = cache.entries();
+    ASSERT_EQ(e.size(), contacts.size()) << threads;
+    EXPECT_TRUE(std::is_sorted(e.key.begin(), e.key.end())) << threads;
+    EXPECT_EQ(std::adjacent_find(e.key.begin(), e.key.end()), e.key.end()) << threads;
+    for (std::size_t k = 0; k < e.size(); ++k) {
+      const auto it = std::find_if(contacts.begin(), contacts.end(), [&](const Contact& c) {
+        return (std::uint64_t(c.a) << 32 | c.b) == e.key[k];
+      });
+      ASSERT_NE(it, contacts.end());
+      EXPECT_EQ(e.normal_impulse[k], it->normal_impulse) << threads << ", entry " << k;
+    }
+  }
+}
+
 // The cache's entries against a plain oracle: every contact with a load or
 // a colour (not the overflow set's), sorted by key, impulses only where
 // loaded. Large lists (the threaded paths), small ones, every contact
