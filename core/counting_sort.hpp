@@ -8,8 +8,8 @@
 // buckets' first places (buckets + 1 entries, the last one the total).
 #pragma once
 
-#include <cstddef>
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 

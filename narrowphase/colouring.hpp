@@ -101,6 +101,12 @@ struct KeptMasks {
   std::uint32_t colours = 0;
 };
 
+// One item of or_kept_colours: a contact's spheres and the colour it keeps.
+struct KeptItem {
+  std::uint32_t a, b;
+  std::uint8_t colour;
+};
+
 // Ors the kept colours of items [0, n) into used[0, body_count) (which the
 // caller has cleared; walls hold no colour): item(t) gives {a, b, colour}
 // (colour kNoKeptColour: none kept). In parallel from 16384 items: an or
@@ -110,10 +116,6 @@ struct KeptMasks {
 // scene of 10^5, 2 threads: the colouring 3.3 -> 2.4 % of the step's
 // samples with masks of their own). Returns one more than the largest
 // colour kept (0: none).
-struct KeptItem {
-  std::uint32_t a, b;
-  std::uint8_t colour;
-};
 template <class Item>
 std::uint32_t or_kept_colours(std::size_t n, std::size_t body_count, Item&& item, std::uint64_t* used,
                               std::vector<std::uint64_t>& thread_used) {

@@ -306,7 +306,7 @@ void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, PairO
   // its index; each group (a few entries) is ordered by b from the places
   // alone; then the entries are filled group by group, each contact's
   // impulses read where they are (one word, or two with rolling, asked for
-  // a few places ahead) and its colour from a byte a contact (in L2).
+  // kStoreAhead places ahead) and its colour from a byte a contact (in L2).
   const bool coloured = ranges.size() == n;
   const std::uint32_t coloured_end = coloured ? ranges.begin[ranges.colours] : 0;
   const auto count = static_cast<std::ptrdiff_t>(n);
