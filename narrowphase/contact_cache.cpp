@@ -262,8 +262,11 @@ std::uint32_t ContactCache::kept_masks(std::size_t body_count, std::vector<std::
 
 void ContactCache::store(const std::vector<Contact>& contacts, const ColourRanges& ranges) {
   const Contact* cs = contacts.data();
+  std::uint32_t groups = 0;  // the largest a, plus one
+  for (const Contact& c : contacts) groups = std::max(groups, c.a + 1);
   store_from(
-      static_cast<std::uint32_t>(contacts.size()), ranges, [cs](std::uint32_t t) { return BodyPair{cs[t].a, cs[t].b}; },
+      static_cast<std::uint32_t>(contacts.size()), groups, ranges,
+      [cs](std::uint32_t t) { return BodyPair{cs[t].a, cs[t].b}; },
       [cs](std::uint32_t t) { return cs[t].normal_impulse; },
       [cs](std::uint32_t t) {
         const Contact& c = cs[t];
@@ -272,7 +275,8 @@ void ContactCache::store(const std::vector<Contact>& contacts, const ColourRange
       [cs](std::uint32_t t) { __builtin_prefetch(cs + t); });
 }
 
-void ContactCache::store(const SweepRecords& records, std::uint32_t count, bool rolling, const ColourRanges& ranges) {
+void ContactCache::store(const SweepRecords& records, std::uint32_t count, bool rolling, const ColourRanges& ranges,
+                         std::uint32_t spheres) {
   const BodyPair* bodies = records.bodies;
   const Real4* impulse = records.impulse;
   const Real4* rolling_word = records.rolling;
@@ -283,7 +287,7 @@ void ContactCache::store(const SweepRecords& records, std::uint32_t count, bool 
     return Stored{c.normal_impulse, c.tangent_impulse, c.rolling_impulse};
   };
   store_from(
-      count, ranges, [bodies](std::uint32_t t) { return bodies[t]; },
+      count, spheres, ranges, [bodies](std::uint32_t t) { return bodies[t]; },
       [&records](std::uint32_t t) { return impulse_word(records, t).x; }, impulses,
       [impulse, rolling_word, rolling](std::uint32_t t) {
         __builtin_prefetch(impulse + t);
@@ -292,8 +296,8 @@ void ContactCache::store(const SweepRecords& records, std::uint32_t count, bool 
 }
 
 template <class PairOf, class NormalOf, class Load, class Hint>
-void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, PairOf&& pair_of, NormalOf&& normal_of,
-                              Load&& load, Hint&& hint) {
+void ContactCache::store_from(std::uint32_t n, std::uint32_t groups, const ColourRanges& ranges, PairOf&& pair_of,
+                              NormalOf&& normal_of, Load&& load, Hint&& hint) {
   // Only the sustained impulses of the velocity solve are carried over; an
   // impact's impulse (Contact::impact_impulse) is not a load. A contact
   // without load is kept for its colour alone, with no impulses (restored,
@@ -309,12 +313,8 @@ void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, PairO
   // kStoreAhead places ahead) and its colour from a byte a contact (in L2).
   const bool coloured = ranges.size() == n;
   const std::uint32_t coloured_end = coloured ? ranges.begin[ranges.colours] : 0;
-  const auto count = static_cast<std::ptrdiff_t>(n);
   m_colour_of.resize(n);
   std::uint8_t* colour_of = m_colour_of.data();
-  std::uint32_t groups = 0;  // the largest a, plus one
-#pragma omp parallel for schedule(static) reduction(max : groups) if (count >= kParallelFrom)
-  for (std::ptrdiff_t t = 0; t < count; ++t) groups = std::max(groups, pair_of(static_cast<std::uint32_t>(t)).a + 1);
   for (std::uint32_t c = 0; c < (coloured ? ranges.colours : 0); ++c)
     std::fill(colour_of + ranges.begin[c], colour_of + ranges.begin[c + 1], static_cast<std::uint8_t>(c));
   std::fill(colour_of + coloured_end, colour_of + n, kNoKeptColour);
@@ -322,7 +322,7 @@ void ContactCache::store_from(std::uint32_t n, const ColourRanges& ranges, PairO
   m_source.resize(n);
   std::uint64_t* source = m_source.data();
   counting_sort(
-      n, groups, [&](std::uint32_t k) { return kept(k) ? pair_of(k).a : kSkipItem; },
+      n, groups, [&](std::uint32_t k) { return kept(k) && pair_of(k).a < groups ? pair_of(k).a : kSkipItem; },
       [&](std::uint32_t k, std::uint32_t place) { source[place] = (std::uint64_t(pair_of(k).b) << 32) | k; }, m_first,
       m_order);
   const std::uint32_t m = m_first[groups];

@@ -112,7 +112,9 @@ class ContactCache {
   // reading the 112-byte contacts. Without `rolling` (records packed without
   // their rolling words) the rolling impulses kept are zero, as every
   // contact's is in a scene without rolling resistance.
-  void store(const SweepRecords& records, std::uint32_t count, bool rolling, const ColourRanges& ranges);
+  // `spheres`: the bodies' count, as the CUDA twin's store takes it.
+  void store(const SweepRecords& records, std::uint32_t count, bool rolling, const ColourRanges& ranges,
+             std::uint32_t spheres);
   void clear() { writable().resize(0); }
   // The entries themselves (a checkpoint's copy).
   const CacheEntries& entries() const { return m_arrays[m_current]; }
@@ -148,10 +150,11 @@ class ContactCache {
     Vec3 tangent_impulse, rolling_impulse;
   };
   // pair_of(t) -> BodyPair, normal_of(t) -> its normal impulse, load(t) ->
-  // Stored of contact t; hint(t) asks for what load(t) will read.
+  // Stored of contact t; hint(t) asks for what load(t) will read; a contact
+  // whose a is not below `groups` is not kept (no lookup would find it).
   template <class PairOf, class NormalOf, class Load, class Hint>
-  void store_from(std::uint32_t n, const ColourRanges& ranges, PairOf&& pair_of, NormalOf&& normal_of, Load&& load,
-                  Hint&& hint);
+  void store_from(std::uint32_t n, std::uint32_t groups, const ColourRanges& ranges, PairOf&& pair_of,
+                  NormalOf&& normal_of, Load&& load, Hint&& hint);
   std::vector<std::uint64_t> m_source;   // store(): each place's b << 32 | contact
   std::vector<std::uint8_t> m_colour_of;  // store(): each contact's colour (kNoKeptColour: none)
 };

@@ -164,8 +164,7 @@ __global__ void records_kernel(ContactInputs in, const BodyPair* pairs, const st
                        cache.rolling ? cache.rolling[e] : Vec3{});
     prepare_from_world(c, in.bodies);
     const std::uint32_t k = position[i];
-    pack_sweep_record(c, records, k);  // the rebound shift in the impact word
-    pack_impact(c, impacts, k);
+    pack_contact(c, records, impacts, k);
   }
 }
 

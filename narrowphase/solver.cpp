@@ -137,13 +137,6 @@ void warm_start_range(const SweepRecords& s, std::uint32_t begin, std::uint32_t 
   for_colour_ahead(s, begin, end, bodies, [&](std::uint32_t k) { warm_start_record<Friction, Rolling>(s, k, bodies); });
 }
 
-// Contact c into record r with its impact word.
-template <bool Rolling>
-void pack_contact(const Contact& c, const SweepRecords& s, const ImpactRecords& impacts, std::uint32_t r) {
-  pack_sweep_record<Rolling>(c, s, r);
-  pack_impact(c, impacts, r);
-}
-
 // The contacts into the sweep's records (contact k into record
 // colours.record_of(k)) with their impact words, and the impulses and the
 // impact stage's words back, in parallel.

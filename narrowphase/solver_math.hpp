@@ -526,6 +526,15 @@ MARBLES_HD_INLINE void pack_impact(const Contact& c, const ImpactRecords& r, std
   else r.approach[k] = c.approach_speed;
 }
 
+// A prepared contact into record k with its impact word: how both backends
+// make the records (ContactSolver's records_made, the GPU's records_kernel).
+template <bool Rolling = true>
+MARBLES_HD_INLINE void pack_contact(const Contact& c, const SweepRecords& s, const ImpactRecords& impacts,
+                                    std::uint32_t k) {
+  pack_sweep_record<Rolling>(c, s, k);  // the rebound shift in the impact word
+  pack_impact(c, impacts, k);
+}
+
 // What the impact stage's levels read: the approach speed and the separation
 // (is_impact_candidate, time_of_impact).
 MARBLES_HD_INLINE Contact load_approach(const SweepRecords& s, const Real4* impact, std::uint32_t k) {

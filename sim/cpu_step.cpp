@@ -111,7 +111,8 @@ class CpuStep final : public StepBackend {
   // The impulses from the solve's records, the contacts' only form.
   void store_impulses() override {
     if (const narrowphase::SweepRecords* records = m_solver.made_records())
-      m_cache.store(*records, static_cast<std::uint32_t>(m_colours.size()), m_model.solver.rolling, m_colours);
+      m_cache.store(*records, static_cast<std::uint32_t>(m_colours.size()), m_model.solver.rolling, m_colours,
+                    static_cast<std::uint32_t>(m_world.size()));
     else
       m_cache.clear();
   }

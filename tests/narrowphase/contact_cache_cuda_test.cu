@@ -178,7 +178,7 @@ Restored expect_same_as_cpu(const Stored& s, std::uint32_t spheres, const std::v
   const std::size_t n = s.contacts.size();
   Records records(s);
   ContactCache cpu;
-  cpu.store(records.host, static_cast<std::uint32_t>(n), true, s.ranges);
+  cpu.store(records.host, static_cast<std::uint32_t>(n), true, s.ranges, spheres);
   ContactCacheCuda gpu;
   DeviceBuffer poison;  // the scratch full of ones: the store must write all it reads
   const std::size_t poison_bytes = 64 * (n + spheres) + (1 << 20);

@@ -446,7 +446,8 @@ TEST(Solver, CacheFromTheRecordsEqualsCacheFromTheContacts) {
     const SweepRecords* records = asked.pending_records(contacts);
     ASSERT_NE(records, nullptr);
     ContactCache from_records, from_contacts;
-    from_records.store(*records, static_cast<std::uint32_t>(contacts.size()), s.rolling, colours);
+    from_records.store(*records, static_cast<std::uint32_t>(contacts.size()), s.rolling, colours,
+                       static_cast<std::uint32_t>(bodies.count));
     asked.unpack_impulses(contacts, colours);
     EXPECT_EQ(asked.pending_records(contacts), nullptr);
     from_contacts.store(contacts, colours);
@@ -461,7 +462,8 @@ TEST(Solver, CacheFromTheRecordsEqualsCacheFromTheContacts) {
     Real4& first = records->impulse[0];
     first.x = first.x > 0 ? first.x * 2 : real(1);
     ContactCache changed;
-    changed.store(*records, static_cast<std::uint32_t>(contacts.size()), s.rolling, colours);
+    changed.store(*records, static_cast<std::uint32_t>(contacts.size()), s.rolling, colours,
+                  static_cast<std::uint32_t>(bodies.count));
     EXPECT_FALSE(same(changed.entries().normal_impulse, b.normal_impulse)) << "terms " << terms;
   }
 }
@@ -668,7 +670,8 @@ TEST(Solver, RecordsMadeFromTheFoundContactsEqualTheColourMajorSolve) {
         EXPECT_TRUE(same_bytes(whole, sorted)) << where;
         ASSERT_NE(made.made_records(), nullptr);
         ContactCache made_cache;
-        made_cache.store(*made.made_records(), static_cast<std::uint32_t>(n), s.rolling, ranges);
+        made_cache.store(*made.made_records(), static_cast<std::uint32_t>(n), s.rolling, ranges,
+                         static_cast<std::uint32_t>(two_view.count));
         const CacheEntries &a = made_cache.entries(), &b = oracle_cache.entries();
         EXPECT_GT(b.size(), n / 2) << where;
         EXPECT_TRUE(same_bytes(a.key, b.key) && same_bytes(a.normal_impulse, b.normal_impulse) &&
