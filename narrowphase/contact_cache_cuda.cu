@@ -375,6 +375,7 @@ ContactCacheCuda::~ContactCacheCuda() = default;
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
                              std::uint32_t spheres, int sm_count, cudaStream_t s, const std::uint32_t* count_on_device,
                              const unsigned long long* skip) {
+  Set& e = writable();
   // Entries: the contacts with load or a colour, at most n, in key order by
   // a counting sort by sphere (count, scan into the kept firsts, place) and
   // an insertion sort of each sphere's run. Their count (the firsts' last)
@@ -382,16 +383,16 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
   // A store that may be skipped scans into its temporaries and takes the
   // firsts over only where it is not; the entries' arrays, where they grow,
   // keep the entries they hold, and the bound covers both.
-  const std::uint32_t old_bound = m_bound, old_runs = std::min(m_bound > 0 ? m_spheres + 1 : 0u, spheres + 1);
-  m_bound = skip ? std::max(m_bound, n) : n;
-  m_stored = n;
-  m_spheres = spheres;
+  const std::uint32_t old_bound = e.bound, old_runs = std::min(e.bound > 0 ? e.spheres + 1 : 0u, spheres + 1);
+  e.bound = skip ? std::max(e.bound, n) : n;
+  e.stored = n;
+  e.spheres = spheres;
   // The kept runs are every word written; of the entries, those the kept
   // runs reach (their last first, read on the device: the room past it was
   // never written).
   auto* kept_first = static_cast<std::uint32_t*>(
-      skip ? m_first.reserve_keeping((std::size_t(spheres) + 1) * 4 + 16, std::size_t(old_runs) * 4, s)
-           : m_first.reserve((std::size_t(spheres) + 1) * 4 + 16));
+      skip ? e.first.reserve_keeping((std::size_t(spheres) + 1) * 4 + 16, std::size_t(old_runs) * 4, s)
+           : e.first.reserve((std::size_t(spheres) + 1) * 4 + 16));
   auto room = [&](DeviceBuffer& b, std::size_t size) {
     if (!skip || old_runs == 0) return b.reserve(n * size + 16);
     return b.reserve_copying(n * size + 16, s, [&](void* to, const void* from, std::size_t held) {
@@ -399,11 +400,11 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
       copy_held(kept_first + old_runs - 1, bound, size, from, to, sm_count, s);
     });
   };
-  auto* keys = static_cast<std::uint32_t*>(room(m_keys, sizeof(std::uint32_t)));
-  auto* normal = static_cast<real*>(room(m_normal, sizeof(real)));
-  auto* tangent = m_keep_tangent ? static_cast<Vec3*>(room(m_tangent, sizeof(Vec3))) : nullptr;
-  auto* rolling = m_keep_rolling ? static_cast<Vec3*>(room(m_rolling, sizeof(Vec3))) : nullptr;
-  auto* colour = static_cast<std::uint8_t*>(room(m_colour, 1));
+  auto* keys = static_cast<std::uint32_t*>(room(e.keys, sizeof(std::uint32_t)));
+  auto* normal = static_cast<real*>(room(e.normal, sizeof(real)));
+  auto* tangent = m_keep_tangent ? static_cast<Vec3*>(room(e.tangent, sizeof(Vec3))) : nullptr;
+  auto* rolling = m_keep_rolling ? static_cast<Vec3*>(room(e.rolling, sizeof(Vec3))) : nullptr;
+  auto* colour = static_cast<std::uint8_t*>(room(e.colour, 1));
   if (skip && old_runs < spheres + 1) {
     extend_firsts_kernel<<<grid_for(std::size_t(spheres) + 1 - old_runs, sm_count), kBlock, 0, s>>>(
         kept_first, old_runs, spheres + 1);
@@ -453,56 +454,58 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
 }
 
 CacheEntries ContactCacheCuda::download(cudaStream_t s) {
+  const Set& held = current();
   // The runs first: their last first is the entry count (the store leaves
   // the room past it unwritten); then that many entries, and the whole keys
   // from each run's sphere and the b.
   CacheEntries e;
-  if (m_bound == 0) return e;
-  std::vector<std::uint32_t> first(std::size_t(m_spheres) + 1);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(first.data(), m_first.get(), first.size() * sizeof(std::uint32_t),
+  if (held.bound == 0) return e;
+  std::vector<std::uint32_t> first(std::size_t(held.spheres) + 1);
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(first.data(), held.first.get(), first.size() * sizeof(std::uint32_t),
                                      cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  const std::size_t m = std::min<std::size_t>(first[m_spheres], m_bound);
+  const std::size_t m = std::min<std::size_t>(first[held.spheres], held.bound);
   e.resize(m);
   if (m == 0) return e;
   std::vector<std::uint32_t> b(m);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(b.data(), m_keys.get(), m * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.normal_impulse.data(), m_normal.get(), m * sizeof(real), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(b.data(), held.keys.get(), m * sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.normal_impulse.data(), held.normal.get(), m * sizeof(real), cudaMemcpyDeviceToHost, s));
   if (m_keep_tangent)  // else zero, as resize left them
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.tangent_impulse.data(), m_tangent.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.tangent_impulse.data(), held.tangent.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
   if (m_keep_rolling)
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.rolling_impulse.data(), m_rolling.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.colour.data(), m_colour.get(), m, cudaMemcpyDeviceToHost, s));
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.rolling_impulse.data(), held.rolling.get(), m * sizeof(Vec3), cudaMemcpyDeviceToHost, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(e.colour.data(), held.colour.get(), m, cudaMemcpyDeviceToHost, s));
   MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
-  for (std::uint32_t a = 0; a < m_spheres; ++a)
+  for (std::uint32_t a = 0; a < held.spheres; ++a)
     for (std::uint32_t k = first[a]; k < std::min<std::size_t>(first[a + 1], m); ++k) e.key[k] = cache_key(a, b[k]);
   return e;
 }
 
 void ContactCacheCuda::upload(const CacheEntries& e, std::uint32_t spheres, cudaStream_t s) {
+  Set& held = edited();
   // Sorted by key, so grouped by sphere a: runs over the world's spheres and
   // any beyond them that have entries (those are never looked up, but a
   // download gives every entry back), and each entry's b.
   const auto m = static_cast<std::uint32_t>(e.size());
-  m_bound = m;
-  m_spheres = m > 0 ? std::max(spheres, static_cast<std::uint32_t>(e.key[m - 1] >> 32) + 1) : spheres;
+  held.bound = m;
+  held.spheres = m > 0 ? std::max(spheres, static_cast<std::uint32_t>(e.key[m - 1] >> 32) + 1) : spheres;
   std::vector<std::uint32_t> first, b(m);
-  key_runs(e.key.data(), m, m_spheres, first);
+  key_runs(e.key.data(), m, held.spheres, first);
   for (std::uint32_t k = 0; k < m; ++k) b[k] = static_cast<std::uint32_t>(e.key[k] & 0xffffffffu);
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_first.as<std::uint32_t>(first.size()), first.data(),
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(held.first.as<std::uint32_t>(first.size()), first.data(),
                                      first.size() * sizeof(std::uint32_t), cudaMemcpyHostToDevice, s));
   if (m == 0) {
     MARBLES_CUDA_CHECK(cudaStreamSynchronize(s));
     return;
   }
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_keys.as<std::uint32_t>(m), b.data(), m * sizeof(std::uint32_t),
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(held.keys.as<std::uint32_t>(m), b.data(), m * sizeof(std::uint32_t),
                                      cudaMemcpyHostToDevice, s));
-  MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_normal.as<real>(m), e.normal_impulse.data(), m * sizeof(real), cudaMemcpyHostToDevice, s));
+  MARBLES_CUDA_CHECK(cudaMemcpyAsync(held.normal.as<real>(m), e.normal_impulse.data(), m * sizeof(real), cudaMemcpyHostToDevice, s));
   if (m_keep_tangent)
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_tangent.as<Vec3>(m), e.tangent_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(held.tangent.as<Vec3>(m), e.tangent_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
   if (m_keep_rolling)
-    MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_rolling.as<Vec3>(m), e.rolling_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
-  auto* colour = m_colour.as<std::uint8_t>(m);
+    MARBLES_CUDA_CHECK(cudaMemcpyAsync(held.rolling.as<Vec3>(m), e.rolling_impulse.data(), m * sizeof(Vec3), cudaMemcpyHostToDevice, s));
+  auto* colour = held.colour.as<std::uint8_t>(m);
   if (e.colour.size() == m)
     MARBLES_CUDA_CHECK(cudaMemcpyAsync(colour, e.colour.data(), m, cudaMemcpyHostToDevice, s));
   else
@@ -512,18 +515,19 @@ void ContactCacheCuda::upload(const CacheEntries& e, std::uint32_t spheres, cuda
 
 void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t spheres, int sm_count,
                                 cudaStream_t s) {
-  const std::uint32_t m = m_bound;
-  const std::uint32_t runs = m_spheres;  // the old runs (a checkpoint's may pass the world's spheres)
+  Set& e = edited();
+  const std::uint32_t m = e.bound;
+  const std::uint32_t runs = e.spheres;  // the old runs (a checkpoint's may pass the world's spheres)
   const std::size_t runs_new = std::size_t(spheres) + 1;
   if (m == 0) {
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(m_first.as<std::uint32_t>(runs_new), 0, runs_new * sizeof(std::uint32_t), s));
-    m_spheres = spheres;
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(e.first.as<std::uint32_t>(runs_new), 0, runs_new * sizeof(std::uint32_t), s));
+    e.spheres = spheres;
     return;
   }
   // The runs' room too small for the world's spheres (it gained them by an
   // edit since the room was made): the old runs move to a grown room first.
-  m_first.reserve_keeping(runs_new * sizeof(std::uint32_t) + 16, (std::size_t(runs) + 1) * sizeof(std::uint32_t), s);
-  auto* first = m_first.get_as<std::uint32_t>();
+  e.first.reserve_keeping(runs_new * sizeof(std::uint32_t) + 16, (std::size_t(runs) + 1) * sizeof(std::uint32_t), s);
+  auto* first = e.first.get_as<std::uint32_t>();
   // The temporaries in the stream's order (no wait; not held past the
   // call): the new keys, turns and ranks, the counts and their scan (the new
   // runs), the new order and the entries gathered, copied back over the old
@@ -551,7 +555,7 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
   });
   MARBLES_CUDA_CHECK(cudaMemsetAsync(rank, 0xff, m * sizeof(std::uint32_t), s));  // kNoEntry: past the entries too
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, runs_new * sizeof(std::uint32_t), s));
-  rename_kernel<<<grid_for(runs, sm_count), kBlock, 0, s>>>(first, runs, m_keys.get_as<std::uint32_t>(), new_index,
+  rename_kernel<<<grid_for(runs, sm_count), kBlock, 0, s>>>(first, runs, e.keys.get_as<std::uint32_t>(), new_index,
                                                             spheres, key, swapped, count, rank);
   MARBLES_CUDA_CHECK_LAUNCH();
   ::marbles::cuda::device_exclusive_sum(count, new_first, runs_new, scan_temp, scan_bytes, s);
@@ -559,9 +563,9 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
   MARBLES_CUDA_CHECK_LAUNCH();
   order_runs_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(EntryKey{key}, new_first, spheres, order);
   MARBLES_CUDA_CHECK_LAUNCH();
-  const EntryArrays in{m_keys.get_as<std::uint32_t>(), m_normal.get_as<real>(),
-                       m_keep_tangent ? m_tangent.get_as<Vec3>() : nullptr,
-                       m_keep_rolling ? m_rolling.get_as<Vec3>() : nullptr, m_colour.get_as<std::uint8_t>()};
+  const EntryArrays in{e.keys.get_as<std::uint32_t>(), e.normal.get_as<real>(),
+                       m_keep_tangent ? e.tangent.get_as<Vec3>() : nullptr,
+                       m_keep_rolling ? e.rolling.get_as<Vec3>() : nullptr, e.colour.get_as<std::uint8_t>()};
   renamed_gather_kernel<<<grid_for(m, sm_count), kBlock, 0, s>>>(key, swapped, order, new_first + spheres, m, in, out);
   MARBLES_CUDA_CHECK_LAUNCH();
   auto back = [&](void* to, const void* from, std::size_t bytes) {
@@ -573,36 +577,14 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
   if (out.rolling) back(in.rolling, out.rolling, m * sizeof(Vec3));
   back(in.colour, out.colour, m);
   back(first, new_first, runs_new * sizeof(std::uint32_t));
-  m_spheres = spheres;
-}
-
-void ContactCacheCuda::copy_to(ContactCacheCuda& to, int sm_count, cudaStream_t s) const {
-  const std::uint32_t m = m_bound;
-  to.m_bound = m;
-  to.m_stored = m_stored;
-  to.m_spheres = m_spheres;
-  to.m_keep_tangent = m_keep_tangent, to.m_keep_rolling = m_keep_rolling;
-  if (m == 0) return;  // no restore reads the runs
-  const std::size_t run_bytes = (std::size_t(m_spheres) + 1) * sizeof(std::uint32_t);
-  MARBLES_CUDA_CHECK(
-      cudaMemcpyAsync(to.m_first.as<char>(run_bytes), m_first.get(), run_bytes, cudaMemcpyDeviceToDevice, s));
-  // The entries by kernels that read their count on the device: the bound
-  // may be a room (a store without a wait) whose tail no store wrote.
-  const std::uint32_t* end = m_first.get_as<std::uint32_t>() + m_spheres;
-  auto copy = [&](const DeviceBuffer& from, DeviceBuffer& into, std::size_t size) {
-    copy_held(end, m, size, from.get(), into.as<char>(m * size), sm_count, s);
-  };
-  copy(m_keys, to.m_keys, sizeof(std::uint32_t));
-  copy(m_normal, to.m_normal, sizeof(real));
-  if (m_keep_tangent) copy(m_tangent, to.m_tangent, sizeof(Vec3));
-  if (m_keep_rolling) copy(m_rolling, to.m_rolling, sizeof(Vec3));
-  copy(m_colour, to.m_colour, 1);
+  e.spheres = spheres;
 }
 
 bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* count_on_device,
                                const BodiesView& bodies, real weight_impulse, std::uint8_t* kept_colour,
                                std::uint32_t* match, int sm_count, cudaStream_t s) {
-  const std::uint32_t m = m_bound;  // the entries are at most this many (their count: the runs' last first)
+  const Set& e = current();
+  const std::uint32_t m = e.bound;  // the entries are at most this many (their count: the runs' last first)
   if (m == 0 || n == 0) return false;
   // Temporaries in the scratch memory: which entries were matched, and for
   // the island rule the bodies' labels, island maxima and cold flags.
@@ -619,12 +601,12 @@ bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const std
   auto* counter = m_counter.as<std::uint32_t>(3);  // the lost loads, then the label passes' two flags
   MARBLES_CUDA_CHECK(cudaMemsetAsync(matched, 0, m, s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(std::uint32_t), s));
-  const auto* keys = m_keys.get_as<std::uint32_t>();
-  const auto* normal = m_normal.get_as<real>();
-  const auto* first = m_first.get_as<std::uint32_t>();
-  const std::uint32_t spheres = std::min(m_spheres, bodies_n);  // the spheres with runs that the world has
+  const auto* keys = e.keys.get_as<std::uint32_t>();
+  const auto* normal = e.normal.get_as<real>();
+  const auto* first = e.first.get_as<std::uint32_t>();
+  const std::uint32_t spheres = std::min(e.spheres, bodies_n);  // the spheres with runs that the world has
   restore_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(pairs, n, count_on_device, keys, first, spheres,
-                                                          m_colour.get_as<std::uint8_t>(), matched, kept_colour, match);
+                                                          e.colour.get_as<std::uint8_t>(), matched, kept_colour, match);
   MARBLES_CUDA_CHECK_LAUNCH();
   if (spheres > 0) {
     lost_loads_kernel<<<grid_for(spheres, sm_count), kBlock, 0, s>>>(first, spheres, normal, matched, bodies,

@@ -10,7 +10,9 @@
 // propagation with pointer jumping (the same islands as the CPU's
 // union-find), their largest impulse by an atomic max, then the cold
 // islands' contacts cleared. Neither store nor restore waits for the
-// device. Only .cu files include it.
+// device. A watchdog's step start is kept without a copy (keep,
+// back_to_kept: two sets of entries, as the CPU's cache holds). Only .cu
+// files include it.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -59,10 +61,11 @@ class ContactCacheCuda {
                real weight_impulse, std::uint8_t* kept_colour, std::uint32_t* match, int sm_count,
                cudaStream_t stream);
   // The entries' impulses (device; tangent and rolling null where the scene
-  // keeps none): valid until the next store, upload or copy into this cache.
+  // keeps none): valid until the next store, upload, renumbering or back_to_kept.
   CacheImpulses entries() const {
-    return {m_normal.get_as<real>(), m_keep_tangent ? m_tangent.get_as<Vec3>() : nullptr,
-            m_keep_rolling ? m_rolling.get_as<Vec3>() : nullptr};
+    const Set& e = current();
+    return {e.normal.get_as<real>(), m_keep_tangent ? e.tangent.get_as<Vec3>() : nullptr,
+            m_keep_rolling ? e.rolling.get_as<Vec3>() : nullptr};
   }
   // The contacts as the sweep's records hold them after the last sweep, with
   // their colours (contact_colour, device, per contact; null: none).
@@ -77,16 +80,18 @@ class ContactCacheCuda {
   // The entries are at most this many (the contacts of the last store, or
   // where stores may have been skipped the most of them and of the entries
   // before): the count itself stays on the device, where the kernels read it.
-  std::uint32_t bound() const { return m_bound; }
+  std::uint32_t bound() const { return current().bound; }
   // Every store since stores began to pass `skip` ran: the bound is the last
   // one's contacts again.
-  void stores_kept() { m_bound = m_stored; }
+  void stores_kept() { m_set[m_current].bound = m_set[m_current].stored; }
   // Device bytes it holds of its own (the entries, their runs; not the
-  // shared scratch).
+  // shared scratch), less the other set of entries (kept_bytes).
   std::size_t device_bytes() const {
-    return ::marbles::cuda::bytes_of(m_keys, m_normal, m_tangent, m_rolling, m_colour, m_counter, m_own_scratch,
-                                     m_first);
+    return current().bytes() + ::marbles::cuda::bytes_of(m_counter, m_own_scratch);
   }
+  // Device bytes of the other set of entries: the kept ones (keep), or the
+  // set a keep once made and that stores write in turn.
+  std::size_t kept_bytes() const { return m_set[1 - m_current].bytes(); }
   // The entries as the CPU cache holds them (a checkpoint's copy), and back.
   CacheEntries download(cudaStream_t stream);
   // `spheres`: the world's (entries of other spheres are never found).
@@ -101,9 +106,18 @@ class ContactCacheCuda {
   // temporaries are the stream's (no wait); it waits only where the runs'
   // room is too small for the world's spheres (it grows).
   void renumber(const std::uint32_t* new_index, std::uint32_t spheres, int sm_count, cudaStream_t stream);
-  // The entries copied on the device into `to` (the watchdog's undo): the
-  // runs and the entries they hold, not the room past them.
-  void copy_to(ContactCacheCuda& to, int sm_count, cudaStream_t stream) const;
+  // The entries as they are now, kept for back_to_kept (a watchdog's step
+  // start), without a copy: the cache holds two sets of entries, and from a
+  // keep on the next store (or trim_entries) moves to the other set, so
+  // the kept one stays as it was until the next keep. An upload or a
+  // renumbering writes the entries in place and keeps none.
+  void keep() { m_kept = m_current; }
+  // The entries keep() kept become the entries again (and stay kept); none
+  // kept: nothing changes. Also a step without waits whose first store was
+  // skipped goes back so: that store found the other set, and wrote nothing.
+  void back_to_kept() {
+    if (m_kept < 2) m_current = m_kept;
+  }
   // Which impulses the scene's terms make (before the first store): without
   // friction the tangential impulses, without rolling resistance the rolling
   // ones stay zero, and the cache neither stores nor reads them.
@@ -122,25 +136,48 @@ class ContactCacheCuda {
   // The entries' arrays trimmed to the most entries asked of them since the
   // last trim (DeviceBuffer::trim); returns how many were freed. Only where
   // the entries are dead: after the restore and the records' making that
-  // read them, before the store that writes them (or where a copy_to is
-  // about to write them).
-  std::uint32_t trim_entries() {
-    std::uint32_t freed = 0;
-    for (DeviceBuffer* b : {&m_keys, &m_normal, &m_tangent, &m_rolling, &m_colour}) freed += b->trim() ? 1 : 0;
-    return freed;
-  }
+  // read them, before the store that writes them (the set it writes: after
+  // a keep, the other one).
+  std::uint32_t trim_entries() { return trim(writable()); }
+  // The other set's entry arrays trimmed so, where they are dead: at a
+  // step's start, before keep (the set the last keep kept is past undoing).
+  std::uint32_t trim_spare() { return trim(m_set[1 - m_current]); }
 
  private:
-  // The entries: their keys' b halves (m_keys), impulses and colours.
-  DeviceBuffer m_keys, m_normal, m_tangent, m_rolling, m_colour, m_counter, m_own_scratch;
-  // The entries of sphere a are [first[a], first[a + 1]) for a < m_spheres
-  // (m_spheres + 1 words, device); a sphere from m_spheres on has none.
-  DeviceBuffer m_first;
-  std::uint32_t m_spheres = 0;
+  // A set of entries: their keys' b halves, impulses and colours, and
+  // their runs: the entries of sphere a are [first[a], first[a + 1]) for
+  // a < spheres (spheres + 1 words, device); a sphere from `spheres` on has
+  // none.
+  struct Set {
+    DeviceBuffer keys, normal, tangent, rolling, colour, first;
+    std::uint32_t spheres = 0;
+    std::uint32_t bound = 0;
+    std::uint32_t stored = 0;  // the contacts of the last store
+    std::size_t bytes() const { return ::marbles::cuda::bytes_of(keys, normal, tangent, rolling, colour, first); }
+  };
+  static std::uint32_t trim(Set& e) {
+    std::uint32_t freed = 0;
+    for (DeviceBuffer* b : {&e.keys, &e.normal, &e.tangent, &e.rolling, &e.colour}) freed += b->trim() ? 1 : 0;
+    return freed;
+  }
+  const Set& current() const { return m_set[m_current]; }
+  Set& current() { return m_set[m_current]; }
+  // The set a store writes: the current one, unless it is kept (then the
+  // other, from here on the current one).
+  Set& writable() {
+    if (m_current == m_kept) m_current = 1 - m_current;
+    return m_set[m_current];
+  }
+  // An edit in place of the current set (upload, renumber): nothing kept.
+  Set& edited() {
+    m_kept = 2;
+    return m_set[m_current];
+  }
+  Set m_set[2];
+  unsigned m_current = 0, m_kept = 2;  // m_kept 2: none kept
+  DeviceBuffer m_counter, m_own_scratch;
   DeviceBuffer* m_scratch = &m_own_scratch;
   DeviceBuffer* m_store_memory = nullptr;  // share_store_memory's, else the scratch
-  std::uint32_t m_bound = 0;
-  std::uint32_t m_stored = 0;  // the contacts of the last store
   bool m_keep_tangent = true, m_keep_rolling = true;
 };
 

@@ -281,7 +281,6 @@ class CudaStep final : public StepBackend {
     m_cache.share_store_memory(m_pairs);  // after the solve: see m_pairs
     m_colouring.share_scratch(m_scratch);
     m_colouring.share_round_memory(m_record_memory);  // dead while contacts are coloured
-    m_kept_cache.set_terms(m_terms.friction, m_terms.rolling);
     nc::cluster_widest();  // MARBLES_CUDA_CLUSTER read (or refused) before any step
   }
 
@@ -773,7 +772,7 @@ class CudaStep final : public StepBackend {
         {"cache", m_cache.device_bytes()},
         {"colouring", m_colouring.device_bytes()},
         {"scratch", m_scratch.bytes()},
-        {"watchdog's copy", m_kept.device_bytes() + m_kept_cache.device_bytes() + m_kept_walls.bytes()},
+        {"watchdog's copy", m_kept.device_bytes() + m_cache.kept_bytes() + m_kept_walls.bytes()},
         {"substep's start", m_start_velocity.bytes()},
         {"local order", m_local_sweeps.device_bytes()},
         {"small", bytes_of(m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_flags, m_hit, m_moved,
@@ -858,14 +857,15 @@ class CudaStep final : public StepBackend {
   }
   void keep_step_start() override {
     send_host_edits();  // edits between steps belong to the step's start
-    // The copy's entries are dead until copied again: trimmed after a step
-    // that trimmed the step's buffers (trim_buffers).
+    // The cache's other set of entries (the last step's start) is dead until
+    // the step's first store writes it: trimmed after a step that trimmed
+    // the step's buffers (trim_buffers). The entries now are kept in place.
     if (m_kept_trim_due) {
-      m_kept_cache.trim_entries();
+      m_cache.trim_spare();
       m_kept_trim_due = false;
     }
     m_device.copy_state_to(m_kept, m_stream);
-    m_cache.copy_to(m_kept_cache, m_sm, m_stream);
+    m_cache.keep();
     const std::size_t wall_bytes = m_model.wall_shapes.size() * sizeof(narrowphase::WallShape);
     if (wall_bytes > 0)
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_kept_walls.as<char>(wall_bytes), m_walls.get(), wall_bytes,
@@ -873,7 +873,7 @@ class CudaStep final : public StepBackend {
   }
   void undo_step() override {
     m_kept.copy_state_to(m_device, m_stream);
-    m_kept_cache.copy_to(m_cache, m_sm, m_stream);
+    m_cache.back_to_kept();
     const std::size_t wall_bytes = m_model.wall_shapes.size() * sizeof(narrowphase::WallShape);
     if (wall_bytes > 0)
       MARBLES_CUDA_CHECK(cudaMemcpyAsync(m_walls.get(), m_kept_walls.get(), wall_bytes, cudaMemcpyDeviceToDevice,
@@ -1053,6 +1053,10 @@ class CudaStep final : public StepBackend {
     m_counters = m_counters_at.at(static_cast<std::size_t>(from));
     add_step_figures();
     m_device.take_velocities(m_start_velocity, m_stream);
+    // Its store and every later one were skipped: where the step's first
+    // store was that one, it wrote nothing into the set it moved to, and the
+    // entries are the kept ones of the step's start (none kept: in place).
+    if (from == 0) m_cache.back_to_kept();
     m_last_colours = std::max(m_last_colours, static_cast<std::uint32_t>(m_end_flags[kMostColours]));
     const bool rooms_fit = fit_rooms(m_end_flags[kMostPairs], m_end_flags[kMostContacts], false);
     const bool grid_past = m_broadphase && m_end_flags[kGridPast] != 0;
@@ -1171,8 +1175,8 @@ class CudaStep final : public StepBackend {
   // the records' making write them before they read them. The cache's
   // entries (the warm start's) are live here: they are trimmed in the
   // first store with waits from here on, which rewrites them (a store
-  // without waits may be skipped: store_impulses), and the watchdog's copy
-  // of them before it is copied again (keep_step_start).
+  // without waits may be skipped: store_impulses), and the cache's other
+  // set at the next step's start (keep_step_start).
   // A free waits for the device: here it is idle (end_step waited); the
   // store's waits for the substep's work. Only a buffer that is freed
   // costs that wait, in a step that trims.
@@ -1281,7 +1285,6 @@ class CudaStep final : public StepBackend {
   nc::ColouringCuda m_colouring;
   nc::ContactCacheCuda m_cache;
   DeviceWorld m_kept;                 // the watchdog's copy of the step's start
-  nc::ContactCacheCuda m_kept_cache;
   DeviceBuffer m_kept_walls;
   DeviceBuffer m_check;  // state_finite()'s flag
 
@@ -1355,7 +1358,7 @@ class CudaStep final : public StepBackend {
   int m_trim_every = trim_every_from_environment();  // trim_buffers(): steps apart, 0 never
   int m_steps_since_trim = 0;
   bool m_cache_trim_due = false;  // the cache's entries trimmed at the next store (store_impulses)
-  bool m_kept_trim_due = false;   // the watchdog's copy of the entries trimmed at the next keep_step_start
+  bool m_kept_trim_due = false;   // the cache's other set of entries trimmed at the next keep_step_start
   // MARBLES_SOLVE_ORDER's local order (a study; none: the solver's order).
   std::optional<narrowphase::LocalOrder> m_local = narrowphase::local_order_from_environment();
   nc::LocalSweepsCuda m_local_sweeps;

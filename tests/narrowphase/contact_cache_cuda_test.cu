@@ -83,6 +83,16 @@ bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
   return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
 }
 
+// Two downloads hold the same entries, bit for bit.
+void expect_same_entries(const CacheEntries& got, const CacheEntries& want, const std::string& what) {
+  EXPECT_EQ(got.size(), want.size()) << what;
+  EXPECT_TRUE(same_bits(got.key, want.key)) << what;
+  EXPECT_TRUE(same_bits(got.normal_impulse, want.normal_impulse)) << what;
+  EXPECT_TRUE(same_bits(got.tangent_impulse, want.tangent_impulse)) << what;
+  EXPECT_TRUE(same_bits(got.rolling_impulse, want.rolling_impulse)) << what;
+  EXPECT_TRUE(same_bits(got.colour, want.colour)) << what;
+}
+
 // The records of `s` on the host and on the device, with the colours.
 struct Records {
   std::vector<Real4> host_words;
@@ -185,14 +195,8 @@ Restored expect_same_as_cpu(const Stored& s, std::uint32_t spheres, const std::v
   EXPECT_EQ(cudaMemset(poison.reserve(poison_bytes), 0xff, poison_bytes), cudaSuccess);
   gpu.share_scratch(poison);
   gpu.store(records.device, records.colour, static_cast<std::uint32_t>(n), spheres, 4, nullptr);
-  const CacheEntries got = gpu.download(nullptr);
   const CacheEntries& want = cpu.entries();
-  EXPECT_EQ(got.size(), want.size()) << what;
-  EXPECT_TRUE(same_bits(got.key, want.key)) << what;
-  EXPECT_TRUE(same_bits(got.normal_impulse, want.normal_impulse)) << what;
-  EXPECT_TRUE(same_bits(got.tangent_impulse, want.tangent_impulse)) << what;
-  EXPECT_TRUE(same_bits(got.rolling_impulse, want.rolling_impulse)) << what;
-  EXPECT_TRUE(same_bits(got.colour, want.colour)) << what;
+  expect_same_entries(gpu.download(nullptr), want, what);
   const Restored r = expect_same_restore(cpu, gpu, next, restore_spheres, weight, what + " (stored)");
   ContactCacheCuda uploaded;
   uploaded.upload(want, restore_spheres, nullptr);
@@ -277,6 +281,73 @@ TEST(ContactCacheCuda, AdversarialContactsAsOnTheCpu) {
     const Stored s = with_impulses(rng, random_pairs(rng, 0, 2000, 6000), 0.6, 0.5, 14);
     expect_same_as_cpu(s, 2000, next_contacts(rng, s, 0.9, 300, 1200), 1200, real(0.1), "fewer spheres");
   }
+}
+
+// The watchdog's entries kept without a copy (keep, back_to_kept): after a
+// keep, stores (a trim between them) write the other set, each the CPU's
+// entries, and back_to_kept gives the kept ones back bit for bit, again
+// after more stores; a store skipped right after a keep (a step without
+// waits whose first substep outgrew a room) writes nothing, and
+// back_to_kept undoes its move; without a keep a skipped store leaves the
+// entries as they were, and after an upload none is kept.
+TEST(ContactCacheCuda, KeptEntriesComeBackWhateverWasStoredSince) {
+  REQUIRE_DEVICE();
+  std::mt19937_64 rng(47);
+  const std::uint32_t spheres = 2000;
+  const Stored a = with_impulses(rng, random_pairs(rng, 0, spheres, 6000), 0.6, 0.5, 14);
+  const Stored b = with_impulses(rng, random_pairs(rng, 0, spheres, 7000), 0.7, 0.4, 15);
+  const Stored c = with_impulses(rng, random_pairs(rng, 0, spheres, 5000), 0.5, 0.5, 13);
+  Records ra(a), rb(b), rc(c);
+  auto count = [](const Stored& s) { return static_cast<std::uint32_t>(s.contacts.size()); };
+  auto cpu_entries = [&](const Stored& s, const Records& r) {
+    ContactCache cpu;
+    cpu.store(r.host, count(s), true, s.ranges, spheres);
+    return cpu.entries();
+  };
+  const CacheEntries want_a = cpu_entries(a, ra), want_b = cpu_entries(b, rb), want_c = cpu_entries(c, rc);
+  ASSERT_NE(want_a.size(), want_b.size());  // premise: the sets differ
+  DeviceBuffer skip_word;
+  auto* skip = skip_word.as<unsigned long long>(1);
+  const unsigned long long skipped = 1;
+  ASSERT_EQ(cudaMemcpy(skip, &skipped, sizeof skipped, cudaMemcpyHostToDevice), cudaSuccess);
+
+  ContactCacheCuda gpu;
+  gpu.back_to_kept();  // none kept: nothing changes
+  gpu.store(ra.device, ra.colour, count(a), spheres, 4, nullptr);
+  expect_same_entries(gpu.download(nullptr), want_a, "a");
+  gpu.keep();
+  EXPECT_EQ(gpu.kept_bytes(), 0u) << "the other set holds nothing before a store after a keep";
+  gpu.store(rb.device, rb.colour, count(b), spheres, 4, nullptr);
+  expect_same_entries(gpu.download(nullptr), want_b, "b after a keep");
+  EXPECT_GT(gpu.kept_bytes(), 0u) << "the kept entries are a set of their own";
+  gpu.trim_entries();
+  gpu.store(rc.device, rc.colour, count(c), spheres, 4, nullptr);
+  expect_same_entries(gpu.download(nullptr), want_c, "c after b");
+  gpu.back_to_kept();
+  expect_same_entries(gpu.download(nullptr), want_a, "back to the kept a");
+  gpu.store(rb.device, rb.colour, count(b), spheres, 4, nullptr);
+  expect_same_entries(gpu.download(nullptr), want_b, "b after the undo");
+  gpu.back_to_kept();
+  expect_same_entries(gpu.download(nullptr), want_a, "back to the kept a again");
+
+  gpu.store(rc.device, rc.colour, count(c), spheres, 4, nullptr);  // in the other set: a stays kept
+  gpu.keep();                                                       // c kept now
+  gpu.store(rb.device, rb.colour, count(b), spheres, 4, nullptr, nullptr, skip);
+  gpu.back_to_kept();
+  expect_same_entries(gpu.download(nullptr), want_c, "a store skipped after the keep, then back");
+  gpu.stores_kept();
+  expect_same_entries(gpu.download(nullptr), want_c, "and its bound the last store's");
+
+  ContactCacheCuda plain;  // no keep: a skipped store leaves the entries in place
+  plain.store(ra.device, ra.colour, count(a), spheres, 4, nullptr);
+  plain.store(rb.device, rb.colour, count(b), spheres, 4, nullptr, nullptr, skip);
+  plain.back_to_kept();
+  expect_same_entries(plain.download(nullptr), want_a, "a skipped store without a keep");
+
+  gpu.keep();
+  gpu.upload(want_b, spheres, nullptr);  // an edit in place: nothing kept from here on
+  gpu.back_to_kept();
+  expect_same_entries(gpu.download(nullptr), want_b, "an upload keeps none");
 }
 
 }  // namespace

@@ -361,6 +361,44 @@ TEST(StepCuda, PourMatchesTheCpuBitForBit) {
   std::printf("buffers trimmed in the pour: %llu\n", static_cast<unsigned long long>(trims));
 }
 
+// The watchdog on both backends (marbles run's default): the cache's
+// entries kept at each step's start without a copy (ContactCacheCuda::keep,
+// two sets written in turn), the pour's steps the CPU's bit for bit, those
+// whose first substep outgrew a room without a wait included (its store was
+// skipped in the set it moved to: back_to_kept); a try rolled back and
+// redone on both alike; and a step that fails every try leaves the world
+// and the cache as they were at its start.
+TEST(StepCuda, WatchdogKeepsTheCacheWithoutACopy) {
+  REQUIRE_DEVICE();
+  auto [s, g] = pour_scene(400, 3);
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  cpu.set_watchdog(true);
+  gpu.set_watchdog(true);
+  GpuCounts counts;
+  expect_same_steps(cpu, gpu, 200, counts);
+  ASSERT_FALSE(HasFatalFailure());
+  std::printf("substeps undone in the watched pour: %llu\n", static_cast<unsigned long long>(counts.undone));
+  cpu.inject_fault_at(cpu.steps() + 1);
+  gpu.inject_fault_at(gpu.steps() + 1);
+  expect_same_steps(cpu, gpu, 1, counts);
+  ASSERT_FALSE(HasFatalFailure());
+  ASSERT_EQ(gpu.last_rollbacks().size(), 1u);
+  EXPECT_EQ(gpu.last_rollbacks(), cpu.last_rollbacks());
+  expect_same_steps(cpu, gpu, 20, counts);
+  ASSERT_FALSE(HasFatalFailure());
+  const World before = gpu.world();
+  const StepState state_before = gpu.save_state();
+  ASSERT_GT(state_before.cache.size(), 0u);
+  gpu.inject_fault_at(gpu.steps() + 1, true);
+  EXPECT_THROW(gpu.step(), WatchdogFailure);
+  EXPECT_EQ(state_hash(gpu.world()), state_hash(before)) << "back at the step's start";
+  const StepState state_after = gpu.save_state();
+  EXPECT_EQ(state_after.cache.key, state_before.cache.key);
+  EXPECT_EQ(state_after.cache.normal_impulse, state_before.cache.normal_impulse);
+  EXPECT_EQ(state_after.cache.colour, state_before.cache.colour);
+}
+
 // The accuracy knobs: velocity Verlet (its half kicks and its wall impacts at
 // the accelerated time of impact) and speculative contacts off.
 TEST(StepCuda, VerletAndNoSpeculativePoursMatchTheCpuBitForBit) {
