@@ -363,11 +363,15 @@ TEST(StepCuda, PourMatchesTheCpuBitForBit) {
 
 // The watchdog on both backends (marbles run's default): the cache's
 // entries kept at each step's start without a copy (ContactCacheCuda::keep,
-// two sets written in turn), the pour's steps the CPU's bit for bit, those
-// whose first substep outgrew a room without a wait included (its store was
-// skipped in the set it moved to: back_to_kept); a try rolled back and
-// redone on both alike; and a step that fails every try leaves the world
-// and the cache as they were at its start.
+// two sets written in turn), the pour's steps the CPU's bit for bit. Then
+// the highest sphere is sent down at 10 m/s mid-pour (on both: an edit),
+// so every sphere's speculative reach grows tenfold and the candidate pairs
+// jump in the next step's first substep: without a wait that substep is
+// undone, its store skipped in the set it moved to (back_to_kept), and the
+// redone step must warm-start from the kept entries, which differ from
+// the other set's (the pour's impulses change from step to step). Then a
+// try rolled back and redone on both alike; and a step that fails every
+// try leaves the world and the cache as they were at its start.
 TEST(StepCuda, WatchdogKeepsTheCacheWithoutACopy) {
   REQUIRE_DEVICE();
   auto [s, g] = pour_scene(400, 3);
@@ -376,9 +380,22 @@ TEST(StepCuda, WatchdogKeepsTheCacheWithoutACopy) {
   cpu.set_watchdog(true);
   gpu.set_watchdog(true);
   GpuCounts counts;
-  expect_same_steps(cpu, gpu, 200, counts);
+  expect_same_steps(cpu, gpu, 120, counts);
   ASSERT_FALSE(HasFatalFailure());
-  std::printf("substeps undone in the watched pour: %llu\n", static_cast<unsigned long long>(counts.undone));
+  const std::uint64_t undone_before = counts.undone;
+  for (Simulation* sim : {&cpu, &gpu}) {
+    World& w = sim->edit_world();
+    const auto top = std::max_element(w.position.begin(), w.position.end(),
+                                      [](const Vec3& a, const Vec3& b) { return a.z < b.z; }) -
+                     w.position.begin();
+    w.velocity[top] = {0, 0, -10};
+  }
+  expect_same_steps(cpu, gpu, 30, counts);
+  ASSERT_FALSE(HasFatalFailure());
+  std::printf("substeps undone in the watched pour: %llu, after the kick %llu\n",
+              static_cast<unsigned long long>(undone_before),
+              static_cast<unsigned long long>(counts.undone - undone_before));
+  EXPECT_EQ(counts.undone > undone_before, unwaits(150)) << "the kick's pairs outgrow their room without a wait";
   cpu.inject_fault_at(cpu.steps() + 1);
   gpu.inject_fault_at(gpu.steps() + 1);
   expect_same_steps(cpu, gpu, 1, counts);
