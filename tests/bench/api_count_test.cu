@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <thread>
@@ -189,7 +190,14 @@ TEST(DeviceTimeline, ByKernelCountsEachKernelsLaunchesAndTime) {
   EXPECT_LE(static_cast<double>(a->ns), own[0] + 3 * 50000) << seen;
   EXPECT_GE(static_cast<double>(b->ns), own[1] - 10000) << seen;
   EXPECT_LE(static_cast<double>(b->ns), own[1] + 2 * 50000) << seen;
-  EXPECT_EQ(kernels.front().kernel, "spin") << "most time first: " << seen;
+  // Most time first. Which kernel that is depends on the spins' own times:
+  // the gpu tests run side by side, and another process's work on the
+  // device can stretch a spin (spin_other's two once took 4.0 ms against
+  // spin's three 3.0), so the order is held to the times, not to the names.
+  for (std::size_t k = 1; k < kernels.size(); ++k)
+    EXPECT_GE(kernels[k - 1].ns, kernels[k].ns) << "most time first: " << seen;
+  if (std::fabs(own[0] - own[1]) > 3 * 50000)  // apart by more than a record's slack
+    EXPECT_EQ(kernels.front().kernel, own[0] > own[1] ? "spin" : "spin_other") << seen;
   double sum = 0;
   for (const auto& k : kernels) {
     EXPECT_TRUE(k.kernel == "spin" || k.kernel == "spin_other" || k.kernel == "(memset)") << seen;
