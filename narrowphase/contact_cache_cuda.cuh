@@ -83,7 +83,10 @@ class ContactCacheCuda {
   std::uint32_t bound() const { return current().bound; }
   // Every store since stores began to pass `skip` ran: the bound is the last
   // one's contacts again.
-  void stores_kept() { m_set[m_current].bound = m_set[m_current].stored; }
+  void stores_kept() {
+    Set& e = current();
+    e.bound = e.stored;
+  }
   // Device bytes it holds of its own (the entries, their runs; not the
   // shared scratch), less the other set of entries (kept_bytes).
   std::size_t device_bytes() const {
