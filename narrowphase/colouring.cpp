@@ -55,15 +55,25 @@ std::uint32_t ContactColouring::colour_from(const Pairs& contacts, const std::ve
     }
   };
   if (active.size() + (kept ? kept->size() : 0) >= body_count) {
-    std::fill(m_body_next_round.begin(), m_body_next_round.end(), 0u);
-    if (!(kept && masks)) std::fill(m_body_used.begin(), m_body_used.end(), std::uint64_t(0));  // else copied below
+    // Every sphere's words on all threads (a settled pile: the masks' copy
+    // below too).
+    const bool copied = kept && masks;
+    std::uint32_t* next_round = m_body_next_round.data();
+    std::uint64_t* used = m_body_used.data();
+    const std::uint64_t* from = copied ? masks->used : nullptr;
+    const auto spheres = static_cast<std::ptrdiff_t>(body_count);
+#pragma omp parallel for schedule(static) if (spheres >= 20000)
+    for (std::ptrdiff_t i = 0; i < spheres; ++i) {
+      next_round[i] = 0;
+      used[i] = from ? from[i] : 0;
+    }
   } else {
     clear(active);
     if (kept) clear(*kept);
   }
   std::uint32_t colours = 0, rounds = 0;
-  if (kept && masks) {  // made elsewhere: every sphere's word
-    std::copy(masks->used, masks->used + body_count, m_body_used.begin());
+  if (kept && masks) {  // made elsewhere: every sphere's word (copied above where every sphere was cleared)
+    if (active.size() + kept->size() < body_count) std::copy(masks->used, masks->used + body_count, m_body_used.begin());
     colours = masks->colours;
   } else if (kept) {  // the kept colours hold their spheres first; they take no round
     const std::uint32_t* kk = kept->data();
@@ -171,7 +181,15 @@ void ContactColouring::colour_and_place(Runs<const Contact> contacts, std::size_
   // the compiler read every contact's spheres ahead of the branch, kept or
   // not (settle scene of 10^5: that serial loop 0.9 -> 0.6 % of the step's
   // samples; the same colours).
-  for (const std::uint32_t k : m_all) m_rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
+  {
+    const std::uint32_t* all = m_all.data();
+    const auto fresh = static_cast<std::ptrdiff_t>(m_all.size());
+#pragma omp parallel for schedule(static) if (fresh >= 2048)
+    for (std::ptrdiff_t t = 0; t < fresh; ++t) {
+      const std::uint32_t k = all[t];
+      m_rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
+    }
+  }
   out.colours = colour(contacts, m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
                        &out.rounds, &m_kept, kept_colour ? masks : nullptr);
 

@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "core/counting_sort.hpp"
+#include "core/parallel.hpp"
 #include "narrowphase/contact_cache_math.hpp"
 #include "narrowphase/solver_math.hpp"
 
@@ -50,13 +51,16 @@ std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count,
                                         const real* normal_impulse, const std::uint8_t* matched,
                                         std::size_t entry_count, const BodiesView& bodies, real weight_impulse,
                                         std::uint8_t* loaded) {
+  // The lost loads, on all threads in entry order (a pile at rest loses
+  // none, and this scan of every entry was the rule's whole cost).
   std::vector<std::uint32_t> unloaded;
-  for (std::size_t k = 0; k < entry_count; ++k) {
-    if (matched[k]) continue;
+  std::vector<std::vector<std::uint32_t>> parts;
+  collect_in_order(entry_count, 20000, unloaded, parts, [&](std::size_t k, std::vector<std::uint32_t>& to) {
+    if (matched[k]) return;
     const auto a = static_cast<std::uint32_t>(keys[k] >> 32);
-    if (a >= bodies.count || !is_lost_load(normal_impulse[k], bodies.inv_mass[a], weight_impulse)) continue;
-    unloaded.push_back(static_cast<std::uint32_t>(k));
-  }
+    if (a >= bodies.count || !is_lost_load(normal_impulse[k], bodies.inv_mass[a], weight_impulse)) return;
+    to.push_back(static_cast<std::uint32_t>(k));
+  });
   if (unloaded.empty()) return 0;
 
   // Islands of touching spheres. An island starts cold when it lost a load
