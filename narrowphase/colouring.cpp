@@ -54,13 +54,13 @@ std::uint32_t ContactColouring::colour_from(const Pairs& contacts, const std::ve
       if (!is_wall(c.b)) m_body_next_round[c.b] = 0, m_body_used[c.b] = 0;
     }
   };
-  if (active.size() + (kept ? kept->size() : 0) >= body_count) {
-    // Every sphere's words on all threads (a settled pile: the masks' copy
-    // below too).
-    const bool copied = kept && masks;
+  const bool every_sphere = active.size() + (kept ? kept->size() : 0) >= body_count;
+  if (every_sphere) {
+    // Every sphere's words on all threads, the masks made elsewhere copied
+    // in the same loop.
     std::uint32_t* next_round = m_body_next_round.data();
     std::uint64_t* used = m_body_used.data();
-    const std::uint64_t* from = copied ? masks->used : nullptr;
+    const std::uint64_t* from = kept && masks ? masks->used : nullptr;
     const auto spheres = static_cast<std::ptrdiff_t>(body_count);
 #pragma omp parallel for schedule(static) if (spheres >= 20000)
     for (std::ptrdiff_t i = 0; i < spheres; ++i) {
@@ -72,8 +72,8 @@ std::uint32_t ContactColouring::colour_from(const Pairs& contacts, const std::ve
     if (kept) clear(*kept);
   }
   std::uint32_t colours = 0, rounds = 0;
-  if (kept && masks) {  // made elsewhere: every sphere's word (copied above where every sphere was cleared)
-    if (active.size() + kept->size() < body_count) std::copy(masks->used, masks->used + body_count, m_body_used.begin());
+  if (kept && masks) {  // made elsewhere: every sphere's word (copied above with every sphere's)
+    if (!every_sphere) std::copy(masks->used, masks->used + body_count, m_body_used.begin());
     colours = masks->colours;
   } else if (kept) {  // the kept colours hold their spheres first; they take no round
     const std::uint32_t* kk = kept->data();
