@@ -21,6 +21,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/kept_sets.hpp"
 #include "core/spheres.hpp"
 #include "narrowphase/colouring.hpp"
 #include "narrowphase/contact.hpp"
@@ -117,17 +118,17 @@ class ContactCache {
              std::uint32_t spheres);
   void clear() { writable().resize(0); }
   // The entries themselves (a checkpoint's copy).
-  const CacheEntries& entries() const { return m_arrays[m_current]; }
+  const CacheEntries& entries() const { return m_arrays.current(); }
   void set_entries(CacheEntries entries) { writable() = std::move(entries); }
   std::size_t size() const { return entries().size(); }
   // The entries as they are now kept for back_to_kept() (a watchdog's step
-  // start) without a copy: the cache holds two sets of arrays, and what
-  // changes the entries after (store, clear, set_entries) writes into the
-  // set not kept.
-  void keep() { m_kept = m_current; }
+  // start) without a copy: the cache holds two sets of arrays (KeptSets),
+  // and what changes the entries after (store, clear, set_entries) writes
+  // into the set not kept.
+  void keep() { m_arrays.keep(); }
   // The entries keep() kept become the entries again (and stay kept).
   void back_to_kept() {
-    if (m_kept < 2) m_current = m_kept;
+    m_arrays.back_to_kept();
     m_matched.clear();
   }
 
@@ -135,12 +136,10 @@ class ContactCache {
   // The arrays the next change of the entries writes: the entries' own,
   // unless kept. Whatever the restore matched is of entries that go.
   CacheEntries& writable() {
-    if (m_current == m_kept) m_current = 1 - m_current;
     m_matched.clear();
-    return m_arrays[m_current];
+    return m_arrays.writable();
   }
-  CacheEntries m_arrays[2];
-  unsigned m_current = 0, m_kept = 2;  // m_kept 2: none kept
+  KeptSets<CacheEntries> m_arrays;
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
   std::vector<std::uint32_t> m_order, m_first;

@@ -375,7 +375,7 @@ ContactCacheCuda::~ContactCacheCuda() = default;
 void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* contact_colour, std::uint32_t n,
                              std::uint32_t spheres, int sm_count, cudaStream_t s, const std::uint32_t* count_on_device,
                              const unsigned long long* skip) {
-  Set& e = writable();
+  Set& e = m_sets.writable();
   // Entries: the contacts with load or a colour, at most n, in key order by
   // a counting sort by sphere (count, scan into the kept firsts, place) and
   // an insertion sort of each sphere's run. Their count (the firsts' last)
@@ -454,7 +454,7 @@ void ContactCacheCuda::store(const SweepRecords& contacts, const std::uint8_t* c
 }
 
 CacheEntries ContactCacheCuda::download(cudaStream_t s) {
-  const Set& held = current();
+  const Set& held = m_sets.current();
   // The runs first: their last first is the entry count (the store leaves
   // the room past it unwritten); then that many entries, and the whole keys
   // from each run's sphere and the b.
@@ -482,7 +482,7 @@ CacheEntries ContactCacheCuda::download(cudaStream_t s) {
 }
 
 void ContactCacheCuda::upload(const CacheEntries& e, std::uint32_t spheres, cudaStream_t s) {
-  Set& held = edited();
+  Set& held = m_sets.edited();
   // Sorted by key, so grouped by sphere a: runs over the world's spheres and
   // any beyond them that have entries (those are never looked up, but a
   // download gives every entry back), and each entry's b.
@@ -515,7 +515,7 @@ void ContactCacheCuda::upload(const CacheEntries& e, std::uint32_t spheres, cuda
 
 void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t spheres, int sm_count,
                                 cudaStream_t s) {
-  Set& e = edited();
+  Set& e = m_sets.edited();
   const std::uint32_t m = e.bound;
   const std::uint32_t runs = e.spheres;  // the old runs (a checkpoint's may pass the world's spheres)
   const std::size_t runs_new = std::size_t(spheres) + 1;
@@ -583,7 +583,7 @@ void ContactCacheCuda::renumber(const std::uint32_t* new_index, std::uint32_t sp
 bool ContactCacheCuda::restore(const BodyPair* pairs, std::uint32_t n, const std::uint32_t* count_on_device,
                                const BodiesView& bodies, real weight_impulse, std::uint8_t* kept_colour,
                                std::uint32_t* match, int sm_count, cudaStream_t s) {
-  const Set& e = current();
+  const Set& e = m_sets.current();
   const std::uint32_t m = e.bound;  // the entries are at most this many (their count: the runs' last first)
   if (m == 0 || n == 0) return false;
   // Temporaries in the scratch memory: which entries were matched, and for

@@ -20,6 +20,7 @@
 #include <cstdint>
 
 #include "core/device_buffer.cuh"
+#include "core/kept_sets.hpp"
 #include "core/spheres.hpp"
 #include "narrowphase/contact.hpp"
 #include "narrowphase/contact_cache.hpp"
@@ -63,7 +64,7 @@ class ContactCacheCuda {
   // The entries' impulses (device; tangent and rolling null where the scene
   // keeps none): valid until the next store, upload, renumbering or back_to_kept.
   CacheImpulses entries() const {
-    const Set& e = current();
+    const Set& e = m_sets.current();
     return {e.normal.get_as<real>(), m_keep_tangent ? e.tangent.get_as<Vec3>() : nullptr,
             m_keep_rolling ? e.rolling.get_as<Vec3>() : nullptr};
   }
@@ -80,21 +81,21 @@ class ContactCacheCuda {
   // The entries are at most this many (the contacts of the last store, or
   // where stores may have been skipped the most of them and of the entries
   // before): the count itself stays on the device, where the kernels read it.
-  std::uint32_t bound() const { return current().bound; }
+  std::uint32_t bound() const { return m_sets.current().bound; }
   // Every store since stores began to pass `skip` ran: the bound is the last
   // one's contacts again.
   void stores_kept() {
-    Set& e = current();
+    Set& e = m_sets.current();
     e.bound = e.stored;
   }
   // Device bytes it holds of its own (the entries, their runs; not the
   // shared scratch), less the other set of entries (kept_bytes).
   std::size_t device_bytes() const {
-    return current().bytes() + ::marbles::cuda::bytes_of(m_counter, m_own_scratch);
+    return m_sets.current().bytes() + ::marbles::cuda::bytes_of(m_counter, m_own_scratch);
   }
   // Device bytes of the other set of entries: the kept ones (keep), or the
   // set a keep once made and that stores write in turn.
-  std::size_t kept_bytes() const { return m_set[1 - m_current].bytes(); }
+  std::size_t kept_bytes() const { return m_sets.other().bytes(); }
   // The entries as the CPU cache holds them (a checkpoint's copy), and back.
   CacheEntries download(cudaStream_t stream);
   // `spheres`: the world's (entries of other spheres are never found).
@@ -114,13 +115,11 @@ class ContactCacheCuda {
   // keep on the next store (or trim_entries) moves to the other set, so
   // the kept one stays as it was until the next keep. An upload or a
   // renumbering writes the entries in place and keeps none.
-  void keep() { m_kept = m_current; }
+  void keep() { m_sets.keep(); }
   // The entries keep() kept become the entries again (and stay kept); none
   // kept: nothing changes. Also a step without waits whose first store was
   // skipped goes back so: that store found the other set, and wrote nothing.
-  void back_to_kept() {
-    if (m_kept < 2) m_current = m_kept;
-  }
+  void back_to_kept() { m_sets.back_to_kept(); }
   // Which impulses the scene's terms make (before the first store): without
   // friction the tangential impulses, without rolling resistance the rolling
   // ones stay zero, and the cache neither stores nor reads them.
@@ -141,10 +140,10 @@ class ContactCacheCuda {
   // the entries are dead: after the restore and the records' making that
   // read them, before the store that writes them (the set it writes: after
   // a keep, the other one).
-  std::uint32_t trim_entries() { return trim(writable()); }
+  std::uint32_t trim_entries() { return trim(m_sets.writable()); }
   // The other set's entry arrays trimmed so, where they are dead: at a
   // step's start, before keep (the set the last keep kept is past undoing).
-  std::uint32_t trim_spare() { return trim(m_set[1 - m_current]); }
+  std::uint32_t trim_spare() { return trim(m_sets.other()); }
 
  private:
   // A set of entries: their keys' b halves, impulses and colours, and
@@ -163,21 +162,9 @@ class ContactCacheCuda {
     for (DeviceBuffer* b : {&e.keys, &e.normal, &e.tangent, &e.rolling, &e.colour}) freed += b->trim() ? 1 : 0;
     return freed;
   }
-  const Set& current() const { return m_set[m_current]; }
-  Set& current() { return m_set[m_current]; }
-  // The set a store writes: the current one, unless it is kept (then the
-  // other, from here on the current one).
-  Set& writable() {
-    if (m_current == m_kept) m_current = 1 - m_current;
-    return m_set[m_current];
-  }
-  // An edit in place of the current set (upload, renumber): nothing kept.
-  Set& edited() {
-    m_kept = 2;
-    return m_set[m_current];
-  }
-  Set m_set[2];
-  unsigned m_current = 0, m_kept = 2;  // m_kept 2: none kept
+  // The entries' two sets: a store writes m_sets.writable(), an upload or
+  // a renumbering m_sets.edited() (in place, nothing kept).
+  KeptSets<Set> m_sets;
   DeviceBuffer m_counter, m_own_scratch;
   DeviceBuffer* m_scratch = &m_own_scratch;
   DeviceBuffer* m_store_memory = nullptr;  // share_store_memory's, else the scratch

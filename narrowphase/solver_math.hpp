@@ -205,10 +205,11 @@ MARBLES_HD_INLINE double local_cube_edge(double diameters, real largest_radius) 
 // runs its per-contact function on the contact loaded from them: the same
 // fields, the same arithmetic, the same bits as on the whole Contact. The
 // records move with the evict-first hint (load_streaming), so the bodies
-// every colour reads again stay in L2. The effective masses are not in them: a sweep computes the ones it needs from
-// the two bodies it loads anyway (solve_record), the same expressions the
-// prepare stage used, so a record is 16 bytes shorter with friction and 32
-// without; the sweeps are bound by memory, not arithmetic.
+// every colour reads again stay in L2. The effective masses are not in
+// them: a sweep computes the ones it needs from the two bodies it loads
+// anyway (solve_record), the same expressions the prepare stage used, so a
+// record is 16 bytes shorter with friction and 32 without; the sweeps are
+// bound by memory, not arithmetic.
 struct alignas(4 * sizeof(real)) Real4 {
   real x = 0, y = 0, z = 0, w = 0;
 };

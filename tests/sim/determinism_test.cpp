@@ -19,6 +19,7 @@
 #include "narrowphase/solver.hpp"
 #include "sim/checkpoint.hpp"
 #include "tests/sim/test_scenes.hpp"
+#include "tests/sim/watchdog_cases.hpp"
 
 using namespace marbles;
 using namespace marbles::testing;
@@ -510,15 +511,5 @@ TEST(Renumber, TheWatchdogsRollbackIsWhatTheWorldShows) {
   ASSERT_EQ(sim.last_rollbacks().size(), 1u);
   EXPECT_EQ(sim.last_rollbacks()[0], "non-finite state (sphere 0)");
   EXPECT_EQ(sim.world().first_non_finite(), sim.world().size());
-  const World before = sim.world();
-  const StepState state_before = sim.save_state();
-  ASSERT_GT(state_before.cache.size(), 0u);
-  sim.inject_fault_at(sim.steps() + 1, true);
-  EXPECT_THROW(sim.step(), WatchdogFailure);
-  EXPECT_EQ(state_hash(sim.world()), state_hash(before)) << "back at the step's start";
-  // And the warm-start cache with it, kept without a copy (ContactCache::keep).
-  const StepState state_after = sim.save_state();
-  EXPECT_EQ(state_after.cache.key, state_before.cache.key);
-  EXPECT_EQ(state_after.cache.normal_impulse, state_before.cache.normal_impulse);
-  EXPECT_EQ(state_after.cache.colour, state_before.cache.colour);
+  expect_a_failed_step_leaves_its_start(sim);
 }

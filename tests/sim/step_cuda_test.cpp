@@ -27,6 +27,7 @@
 #include "sim/step_model.hpp"
 #include "tests/require_device.hpp"
 #include "tests/sim/test_scenes.hpp"
+#include "tests/sim/watchdog_cases.hpp"
 
 using namespace marbles;
 using namespace marbles::testing;
@@ -404,16 +405,7 @@ TEST(StepCuda, WatchdogKeepsTheCacheWithoutACopy) {
   EXPECT_EQ(gpu.last_rollbacks(), cpu.last_rollbacks());
   expect_same_steps(cpu, gpu, 20, counts);
   ASSERT_FALSE(HasFatalFailure());
-  const World before = gpu.world();
-  const StepState state_before = gpu.save_state();
-  ASSERT_GT(state_before.cache.size(), 0u);
-  gpu.inject_fault_at(gpu.steps() + 1, true);
-  EXPECT_THROW(gpu.step(), WatchdogFailure);
-  EXPECT_EQ(state_hash(gpu.world()), state_hash(before)) << "back at the step's start";
-  const StepState state_after = gpu.save_state();
-  EXPECT_EQ(state_after.cache.key, state_before.cache.key);
-  EXPECT_EQ(state_after.cache.normal_impulse, state_before.cache.normal_impulse);
-  EXPECT_EQ(state_after.cache.colour, state_before.cache.colour);
+  expect_a_failed_step_leaves_its_start(gpu);
 }
 
 // The accuracy knobs: velocity Verlet (its half kicks and its wall impacts at
