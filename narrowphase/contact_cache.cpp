@@ -50,12 +50,14 @@ inline void order_run(std::uint64_t* v, std::uint32_t n) {
 std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count, const std::uint64_t* keys,
                                         const real* normal_impulse, const std::uint8_t* matched,
                                         std::size_t entry_count, const BodiesView& bodies, real weight_impulse,
-                                        std::uint8_t* loaded) {
+                                        std::uint8_t* loaded, IslandScratch* scratch) {
   // The lost loads, on all threads in entry order (a pile at rest loses
   // none, and this scan of every entry was the rule's whole cost).
-  std::vector<std::uint32_t> unloaded;
-  std::vector<std::vector<std::uint32_t>> parts;
-  collect_in_order(entry_count, 20000, unloaded, parts, [&](std::size_t k, std::vector<std::uint32_t>& to) {
+  IslandScratch local;
+  IslandScratch& lists = scratch ? *scratch : local;
+  std::vector<std::uint32_t>& unloaded = lists.unloaded;
+  unloaded.clear();  // collect_in_order appends
+  collect_in_order(entry_count, 20000, unloaded, lists.parts, [&](std::size_t k, std::vector<std::uint32_t>& to) {
     if (matched[k]) return;
     const auto a = static_cast<std::uint32_t>(keys[k] >> 32);
     if (a >= bodies.count || !is_lost_load(normal_impulse[k], bodies.inv_mass[a], weight_impulse)) return;
@@ -241,7 +243,7 @@ std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const
     ++matched;
   }
   return matched - cold_start_unloaded_islands(contacts, count, keys, e.normal_impulse.data(),
-                                                m_matched.data(), m, bodies, weight_impulse, carried);
+                                                m_matched.data(), m, bodies, weight_impulse, carried, &m_islands);
 }
 
 std::uint32_t ContactCache::kept_masks(std::size_t body_count, std::vector<std::uint64_t>& used) {

@@ -77,11 +77,16 @@ bool keep_proper_colours(CacheEntries& entries);
 // by union-find here; the CUDA twin finds the same islands by min-label
 // propagation (contact_cache_cuda.cu).
 // `contacts`: `count` of them, in runs (Runs). `loaded` (not null): one
-// flag a contact, cleared where a contact is set cold.
+// flag a contact, cleared where a contact is set cold. `scratch` (not null):
+// the lists of lost loads, reused from call to call (a substep's).
+struct IslandScratch {
+  std::vector<std::uint32_t> unloaded;
+  std::vector<std::vector<std::uint32_t>> parts;
+};
 std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count, const std::uint64_t* keys,
                                         const real* normal_impulse, const std::uint8_t* matched,
                                         std::size_t entry_count, const BodiesView& bodies, real weight_impulse,
-                                        std::uint8_t* loaded = nullptr);
+                                        std::uint8_t* loaded = nullptr, IslandScratch* scratch = nullptr);
 
 class ContactCache {
  public:
@@ -144,6 +149,7 @@ class ContactCache {
   std::vector<std::uint8_t> m_matched;
   std::vector<std::uint32_t> m_order, m_first;
   std::vector<std::uint64_t> m_thread_used;  // kept_masks(): or_kept_colours' masks of the later threads
+  IslandScratch m_islands;                   // restore(): the island rule's lists
   struct Stored {  // the impulses store() keeps of one contact
     real normal_impulse;
     Vec3 tangent_impulse, rolling_impulse;

@@ -1134,11 +1134,13 @@ TEST(ContactRuns, SearchRestoreAndColouringOnRunsEqualTheOneList) {
     if (k % 7 != 3) next.push_back(joined[k]);
   const std::size_t n = next.size();
   std::vector<std::size_t> loaded_by_weight;
+  std::vector<Contact> restored_heavy;  // the restore without a lost load
   for (const real weight : {real(1e3), real(1e-6)}) {  // no lost load; every gone contact's a lost load
     std::vector<Contact> one = next;
     std::vector<std::uint8_t> kept_one, loaded_one;
     ContactCache a = cache;
     const std::size_t warm_one = a.restore(one, bodies, weight, kept_one, &loaded_one);
+    if (weight > 1) restored_heavy = one;
     std::vector<Contact> coloured_one = one;
     ColourRanges ranges_one;
     ContactColouring().colour_and_sort(coloured_one, bodies.count, ranges_one, kept_one.data(), &bodies, 0,
@@ -1179,4 +1181,13 @@ TEST(ContactRuns, SearchRestoreAndColouringOnRunsEqualTheOneList) {
   ASSERT_EQ(loaded_by_weight.size(), 2u);
   EXPECT_LT(loaded_by_weight[1], loaded_by_weight[0]) << "premise: the tiny weight starts some island cold";
   EXPECT_GT(loaded_by_weight[1], 0u) << "premise: and not every island";
+
+  // One cache restoring twice (its lists reused from restore to restore):
+  // after a restore with lost loads, one without any sets nothing cold.
+  ContactCache twice = cache;
+  std::vector<std::uint8_t> kept, loaded_flags;
+  std::vector<Contact> light = next, heavy = next;
+  twice.restore(light, bodies, real(1e-6), kept, &loaded_flags);
+  twice.restore(heavy, bodies, real(1e3), kept, &loaded_flags);
+  EXPECT_TRUE(same(heavy, restored_heavy)) << "the second restore as a fresh cache's";
 }
