@@ -47,11 +47,17 @@ std::uint32_t ContactColouring::colour_from(const Pairs& contacts, const std::ve
   // contacts. Either way every touched sphere starts at 0.
   m_body_next_round.resize(body_count);
   m_body_used.resize(body_count);
+  // With masks made elsewhere every sphere's used word is copied below, so
+  // only the rounds are cleared.
+  const bool used_copied = kept && masks;
   auto clear = [&](const std::vector<std::uint32_t>& list) {
     for (const std::uint32_t k : list) {
       const auto& c = contacts[k];
-      m_body_next_round[c.a] = 0, m_body_used[c.a] = 0;
-      if (!is_wall(c.b)) m_body_next_round[c.b] = 0, m_body_used[c.b] = 0;
+      m_body_next_round[c.a] = 0;
+      if (!is_wall(c.b)) m_body_next_round[c.b] = 0;
+      if (used_copied) continue;
+      m_body_used[c.a] = 0;
+      if (!is_wall(c.b)) m_body_used[c.b] = 0;
     }
   };
   const bool every_sphere = active.size() + (kept ? kept->size() : 0) >= body_count;
@@ -60,7 +66,7 @@ std::uint32_t ContactColouring::colour_from(const Pairs& contacts, const std::ve
     // in the same loop.
     std::uint32_t* next_round = m_body_next_round.data();
     std::uint64_t* used = m_body_used.data();
-    const std::uint64_t* from = kept && masks ? masks->used : nullptr;
+    const std::uint64_t* from = used_copied ? masks->used : nullptr;
     const auto spheres = static_cast<std::ptrdiff_t>(body_count);
 #pragma omp parallel for schedule(static) if (spheres >= 20000)
     for (std::ptrdiff_t i = 0; i < spheres; ++i) {
@@ -72,7 +78,7 @@ std::uint32_t ContactColouring::colour_from(const Pairs& contacts, const std::ve
     if (kept) clear(*kept);
   }
   std::uint32_t colours = 0, rounds = 0;
-  if (kept && masks) {  // made elsewhere: every sphere's word (copied above with every sphere's)
+  if (used_copied) {  // made elsewhere: every sphere's word (copied above with every sphere's)
     if (!every_sphere) std::copy(masks->used, masks->used + body_count, m_body_used.begin());
     colours = masks->colours;
   } else if (kept) {  // the kept colours hold their spheres first; they take no round
