@@ -71,6 +71,13 @@ CacheEntries renumbered(const CacheEntries& entries, const std::vector<std::uint
 // dropped (the next colouring starts afresh). True if they were kept.
 bool keep_proper_colours(CacheEntries& entries);
 
+// The island rule's lists (cold_start_unloaded_islands): the lost loads'
+// entries and the threads' parts of them, reused from substep to substep.
+struct IslandScratch {
+  std::vector<std::uint32_t> unloaded;
+  std::vector<std::vector<std::uint32_t>> parts;
+};
+
 // The island rule: contacts of islands that lost a load (unmatched entries
 // for which is_lost_load holds) start cold. `matched[k]` says whether entry
 // k found its contact. Returns the number of contacts it set cold. Islands
@@ -78,11 +85,7 @@ bool keep_proper_colours(CacheEntries& entries);
 // propagation (contact_cache_cuda.cu).
 // `contacts`: `count` of them, in runs (Runs). `loaded` (not null): one
 // flag a contact, cleared where a contact is set cold. `scratch` (not null):
-// the lists of lost loads, reused from call to call (a substep's).
-struct IslandScratch {
-  std::vector<std::uint32_t> unloaded;
-  std::vector<std::vector<std::uint32_t>> parts;
-};
+// its lists, kept from call to call.
 std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count, const std::uint64_t* keys,
                                         const real* normal_impulse, const std::uint8_t* matched,
                                         std::size_t entry_count, const BodiesView& bodies, real weight_impulse,
