@@ -142,6 +142,11 @@ template std::uint32_t ContactColouring::colour_from(const Runs<const Contact>&,
                                                    const std::uint64_t*, std::size_t, ColourRule,
                                                    std::vector<std::uint32_t>&, std::uint32_t*,
                                                    const std::vector<std::uint32_t>*, const KeptMasks*);
+template std::uint32_t ContactColouring::colour_from(const Runs<const FoundContact>&,
+                                                   const std::vector<std::uint32_t>&, const std::uint64_t*,
+                                                   std::size_t, ColourRule, std::vector<std::uint32_t>&,
+                                                   std::uint32_t*, const std::vector<std::uint32_t>*,
+                                                   const KeptMasks*);
 template std::uint32_t ContactColouring::colour_from(const PlacedPairs&, const std::vector<std::uint32_t>&,
                                                    const std::uint64_t*, std::size_t, ColourRule,
                                                    std::vector<std::uint32_t>&, std::uint32_t*,
@@ -157,9 +162,21 @@ void ContactColouring::colour_and_sort(std::vector<Contact>& contacts, std::size
   contacts.swap(m_sorted);
 }
 
-void ContactColouring::colour_and_place(Runs<const Contact> contacts, std::size_t count_in, std::size_t body_count,
+void ContactColouring::colour_and_place(Runs<const Contact> contacts, std::size_t count, std::size_t body_count,
                                         ColourRanges& out, const std::uint8_t* kept_colour,
                                         const std::uint8_t* loaded, const KeptMasks* masks) {
+  place_runs(contacts, count, body_count, out, kept_colour, loaded, masks);
+}
+void ContactColouring::colour_and_place(Runs<const FoundContact> contacts, std::size_t count, std::size_t body_count,
+                                        ColourRanges& out, const std::uint8_t* kept_colour,
+                                        const std::uint8_t* loaded, const KeptMasks* masks) {
+  place_runs(contacts, count, body_count, out, kept_colour, loaded, masks);
+}
+
+template <class C>
+void ContactColouring::place_runs(Runs<const C> contacts, std::size_t count_in, std::size_t body_count,
+                                  ColourRanges& out, const std::uint8_t* kept_colour, const std::uint8_t* loaded,
+                                  const KeptMasks* masks) {
   const auto n = static_cast<std::uint32_t>(count_in);
   m_rank.resize(n);
   m_colour.resize(n);
@@ -196,8 +213,8 @@ void ContactColouring::colour_and_place(Runs<const Contact> contacts, std::size_
       m_rank[k] = contact_rank(contacts[k].a, contacts[k].b, k);
     }
   }
-  out.colours = colour(contacts, m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
-                       &out.rounds, &m_kept, kept_colour ? masks : nullptr);
+  out.colours = colour_from(contacts, m_all, m_rank.data(), body_count, ColourRule::lowest_free, m_colour,
+                            &out.rounds, &m_kept, kept_colour ? masks : nullptr);
 
   // Colour-major, index order within a colour (a stable counting sort, in
   // parallel): each place's contact first, then the contacts gathered place

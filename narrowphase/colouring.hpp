@@ -77,14 +77,16 @@ inline constexpr std::ptrdiff_t kPlaceAhead = 64;
 // instead of 51 with the second behind a test of its world); hints only,
 // the result is the same. The colouring's gather (colour_and_sort) and the
 // solver's records (ContactSolver::make_records).
-inline void hint_place_ahead(Runs<const Contact> found, const std::uint32_t* places, std::ptrdiff_t p,
-                             std::ptrdiff_t n) {
+template <class C>  // Contact or FoundContact
+inline void hint_place_ahead(Runs<const C> found, const std::uint32_t* places, std::ptrdiff_t p, std::ptrdiff_t n) {
   const auto* next = reinterpret_cast<const char*>(&found[places[p + kPlaceAhead < n ? p + kPlaceAhead : n - 1]]);
-  __builtin_prefetch(next), __builtin_prefetch(next + 64), __builtin_prefetch(next + sizeof(Contact) - 1);
+  __builtin_prefetch(next), __builtin_prefetch(next + sizeof(C) - 1);
+  if constexpr (sizeof(C) > 64) __builtin_prefetch(next + 64);
 }
-inline void hint_bodies_ahead(Runs<const Contact> found, const std::uint32_t* places, std::ptrdiff_t p,
-                              std::ptrdiff_t n, const BodiesView& world) {
-  const Contact& ahead = found[places[p + kPlaceAhead / 2 < n ? p + kPlaceAhead / 2 : n - 1]];
+template <class C>
+inline void hint_bodies_ahead(Runs<const C> found, const std::uint32_t* places, std::ptrdiff_t p, std::ptrdiff_t n,
+                              const BodiesView& world) {
+  const C& ahead = found[places[p + kPlaceAhead / 2 < n ? p + kPlaceAhead / 2 : n - 1]];
   const std::uint32_t b = ahead.b & ~kWallFlag;  // a wall's: some sphere's words, harmless
   __builtin_prefetch(world.velocity + ahead.a), __builtin_prefetch(world.velocity + b);
   __builtin_prefetch(world.angular_velocity + ahead.a), __builtin_prefetch(world.angular_velocity + b);
@@ -214,6 +216,10 @@ class ContactColouring {
   void colour_and_place(Runs<const Contact> contacts, std::size_t count, std::size_t body_count, ColourRanges& out,
                         const std::uint8_t* kept_colour = nullptr, const std::uint8_t* loaded = nullptr,
                         const KeptMasks* masks = nullptr);
+  // The same for the contacts as found (the CPU step's).
+  void colour_and_place(Runs<const FoundContact> contacts, std::size_t count, std::size_t body_count,
+                        ColourRanges& out, const std::uint8_t* kept_colour = nullptr,
+                        const std::uint8_t* loaded = nullptr, const KeptMasks* masks = nullptr);
   // places()[p]: the index of the contact at place p of the last
   // colour_and_place (or colour_and_sort).
   const std::uint32_t* places() const { return m_source.data(); }
@@ -226,6 +232,9 @@ class ContactColouring {
                           const KeptMasks* masks = nullptr);
   template <class Pairs>
   void prefetch_ahead(const Pairs& contacts, std::size_t t, std::size_t count) const;
+  template <class C>
+  void place_runs(Runs<const C> contacts, std::size_t count, std::size_t body_count, ColourRanges& out,
+                  const std::uint8_t* kept_colour, const std::uint8_t* loaded, const KeptMasks* masks);
   std::vector<std::uint64_t> m_body_used, m_rank, m_by_rank, m_sort_keys;
   std::vector<std::uint64_t> m_thread_used;  // or_kept_colours' masks of the threads after the first
   std::vector<std::uint32_t> m_body_next_round;

@@ -9,6 +9,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 
 #include "core/vec3.hpp"
 
@@ -76,6 +77,24 @@ struct alignas(16) Contact {
 };
 static_assert(sizeof(Contact) % 16 == 0);
 
+// A contact as the CPU's search finds it, before its records are made: its
+// bodies, normal and separation, and the impulses the cache's restore gives
+// it; 52 bytes in float where a Contact takes 112 (the search writes them,
+// the restore reads and writes them, the records' making gathers them, and
+// each follows the bytes it moves: docs/architecture.md "The CPU's contacts
+// as found"). The arms, the coefficients and a wall's surface velocity are
+// made again as the records are made (whole_contact, contact_math.hpp) from
+// the bodies and walls, which nothing moves in between: the search's bits.
+struct FoundContact {
+  real normal_impulse = 0;
+  Vec3 tangent_impulse;
+  Vec3 rolling_impulse;
+  std::uint32_t a = 0, b = 0;
+  real separation = 0;
+  Vec3 normal;
+};
+static_assert(sizeof(FoundContact) == 11 * sizeof(real) + 8);
+
 // A list of contacts held in two runs: first[0, first_count), then second
 // from its start. From a plain array (first_count unbounded) it is that
 // array. The CPU's contact search leaves its threads' parts so, the first
@@ -90,7 +109,7 @@ struct Runs {
   Runs(C* all) : first(all) {}  // NOLINT: an array is one run
   Runs(C* first_run, std::size_t first_run_count, C* second_run)
       : first(first_run), second(second_run), first_count(first_run_count) {}
-  template <class D>
+  template <class D, class = std::enable_if_t<std::is_convertible_v<D*, C*>>>  // C++17: the CUDA files
   Runs(const Runs<D>& other) : first(other.first), second(other.second), first_count(other.first_count) {}
   // Without a branch (selects): the colouring reads the runs in random order.
   C& operator[](std::size_t k) const {
@@ -99,5 +118,6 @@ struct Runs {
   }
 };
 using ContactRuns = Runs<Contact>;
+using FoundRuns = Runs<FoundContact>;
 
 }  // namespace marbles::narrowphase

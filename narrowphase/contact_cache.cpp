@@ -47,7 +47,8 @@ inline void order_run(std::uint64_t* v, std::uint32_t n) {
 
 }  // namespace
 
-std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count, const std::uint64_t* keys,
+template <class C>
+std::size_t cold_start_unloaded_islands(Runs<C> contacts, std::size_t count, const std::uint64_t* keys,
                                         const real* normal_impulse, const std::uint8_t* matched,
                                         std::size_t entry_count, const BodiesView& bodies, real weight_impulse,
                                         std::uint8_t* loaded, IslandScratch* scratch) {
@@ -71,12 +72,12 @@ std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count,
   std::vector<std::uint32_t> parent(bodies.count);
   std::iota(parent.begin(), parent.end(), 0u);
   for (std::size_t t = 0; t < count; ++t) {
-    const Contact& c = contacts[t];
+    const auto& c = contacts[t];
     if (!is_wall(c.b)) parent[root(parent, c.a)] = root(parent, c.b);
   }
   std::vector<real> island_max(bodies.count, 0);
   for (std::size_t t = 0; t < count; ++t) {
-    const Contact& c = contacts[t];
+    const auto& c = contacts[t];
     real& m = island_max[root(parent, c.a)];
     m = std::max(m, c.normal_impulse);
   }
@@ -92,7 +93,7 @@ std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count,
   }
   std::size_t set_cold = 0;
   for (std::size_t t = 0; t < count; ++t) {
-    Contact& c = contacts[t];
+    auto& c = contacts[t];
     if (!cold[root(parent, c.a)] || c.normal_impulse <= 0) continue;
     c.normal_impulse = 0;
     c.tangent_impulse = Vec3{};
@@ -102,6 +103,13 @@ std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count,
   }
   return set_cold;
 }
+
+template std::size_t cold_start_unloaded_islands(ContactRuns, std::size_t, const std::uint64_t*, const real*,
+                                                 const std::uint8_t*, std::size_t, const BodiesView&, real,
+                                                 std::uint8_t*, IslandScratch*);
+template std::size_t cold_start_unloaded_islands(FoundRuns, std::size_t, const std::uint64_t*, const real*,
+                                                 const std::uint8_t*, std::size_t, const BodiesView&, real,
+                                                 std::uint8_t*, IslandScratch*);
 
 void key_runs(const std::uint64_t* keys, std::uint32_t m, std::size_t spheres, std::vector<std::uint32_t>& first) {
   // first[s] is the first entry whose a (spheres for those past them) is at
@@ -201,6 +209,18 @@ std::size_t ContactCache::restore(std::vector<Contact>& contacts, const BodiesVi
 std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies,
                                   real weight_impulse, std::vector<std::uint8_t>& kept_colour,
                                   std::vector<std::uint8_t>* loaded) {
+  return restore_runs(contacts, count, bodies, weight_impulse, kept_colour, loaded);
+}
+std::size_t ContactCache::restore(FoundRuns contacts, std::size_t count, const BodiesView& bodies,
+                                  real weight_impulse, std::vector<std::uint8_t>& kept_colour,
+                                  std::vector<std::uint8_t>* loaded) {
+  return restore_runs(contacts, count, bodies, weight_impulse, kept_colour, loaded);
+}
+
+template <class C>
+std::size_t ContactCache::restore_runs(Runs<C> contacts, std::size_t count, const BodiesView& bodies,
+                                       real weight_impulse, std::vector<std::uint8_t>& kept_colour,
+                                       std::vector<std::uint8_t>* loaded) {
   const CacheEntries& e = entries();
   const auto m = static_cast<std::uint32_t>(e.size());
   if (m == 0) {
@@ -229,7 +249,7 @@ std::size_t ContactCache::restore(ContactRuns contacts, std::size_t count, const
   std::size_t matched = 0;
 #pragma omp parallel for schedule(static) reduction(+ : matched) if (n >= kParallelFrom)
   for (std::ptrdiff_t t = 0; t < n; ++t) {
-    Contact& c = contacts[t];
+    C& c = contacts[t];
     const std::uint32_t k = c.a < spheres ? find_in_run(keys, first[c.a], first[c.a + 1], cache_key(c.a, c.b)) : m;
     if (k == m || k == first[c.a + 1]) {
       kept_colour[t] = kNoKeptColour;

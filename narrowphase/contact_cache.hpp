@@ -86,7 +86,9 @@ struct IslandScratch {
 // `contacts`: `count` of them, in runs (Runs). `loaded` (not null): one
 // flag a contact, cleared where a contact is set cold. `scratch` (not null):
 // its lists, kept from call to call.
-std::size_t cold_start_unloaded_islands(ContactRuns contacts, std::size_t count, const std::uint64_t* keys,
+// C: Contact or FoundContact (made for those two in contact_cache.cpp).
+template <class C>
+std::size_t cold_start_unloaded_islands(Runs<C> contacts, std::size_t count, const std::uint64_t* keys,
                                         const real* normal_impulse, const std::uint8_t* matched,
                                         std::size_t entry_count, const BodiesView& bodies, real weight_impulse,
                                         std::uint8_t* loaded = nullptr, IslandScratch* scratch = nullptr);
@@ -105,6 +107,9 @@ class ContactCache {
                       std::vector<std::uint8_t>& kept_colour, std::vector<std::uint8_t>* loaded = nullptr);
   // The same for `count` contacts held in runs (Runs).
   std::size_t restore(ContactRuns contacts, std::size_t count, const BodiesView& bodies, real weight_impulse,
+                      std::vector<std::uint8_t>& kept_colour, std::vector<std::uint8_t>* loaded = nullptr);
+  // The same for the contacts as found (the CPU step's).
+  std::size_t restore(FoundRuns contacts, std::size_t count, const BodiesView& bodies, real weight_impulse,
                       std::vector<std::uint8_t>& kept_colour, std::vector<std::uint8_t>* loaded = nullptr);
   // After restore(): the colours its matched entries keep at their spheres
   // (`body_count` of them; KeptMasks, colouring.hpp), the same the
@@ -147,6 +152,9 @@ class ContactCache {
     m_matched.clear();
     return m_arrays.writable();
   }
+  template <class C>
+  std::size_t restore_runs(Runs<C> contacts, std::size_t count, const BodiesView& bodies, real weight_impulse,
+                           std::vector<std::uint8_t>& kept_colour, std::vector<std::uint8_t>* loaded);
   KeptSets<CacheEntries> m_arrays;
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;

@@ -41,7 +41,8 @@ MARBLES_HD_INLINE void sort_run(Index* index, std::uint32_t begin, std::uint32_t
 // The carried impulses of a matched contact: tangential part projected onto
 // the new tangent plane; rolling (tangential) and twisting (normal) parts as
 // they were.
-MARBLES_HD_INLINE void restore_impulses(Contact& c, real normal, const Vec3& tangent, const Vec3& rolling) {
+template <class C>  // Contact or FoundContact
+MARBLES_HD_INLINE void restore_impulses(C& c, real normal, const Vec3& tangent, const Vec3& rolling) {
   c.normal_impulse = normal;
   c.tangent_impulse = tangent - c.normal * dot(tangent, c.normal);
   c.rolling_impulse = rolling;

@@ -199,6 +199,45 @@ MARBLES_HD_INLINE bool make_wall_contact(const BodiesView& bodies, std::uint32_t
   return true;
 }
 
+// The fields a found contact holds (FoundContact), copied from one form to
+// the other.
+template <class From, class To>
+MARBLES_HD_INLINE void copy_found_fields(const From& from, To& to) {
+  to.normal_impulse = from.normal_impulse;
+  to.tangent_impulse = from.tangent_impulse;
+  to.rolling_impulse = from.rolling_impulse;
+  to.a = from.a, to.b = from.b;
+  to.separation = from.separation;
+  to.normal = from.normal;
+}
+// The search's contact as found (what make_sphere_contact or
+// make_wall_contact found, the restore's impulses on it).
+MARBLES_HD_INLINE FoundContact found_of(const Contact& c) {
+  FoundContact f;
+  copy_found_fields(c, f);
+  return f;
+}
+// The whole contact of a found one, with the fields make_sphere_contact and
+// make_wall_contact set made again by their own expressions from the bodies
+// and walls as the search saw them: the same bits.
+MARBLES_HD_INLINE Contact whole_contact(const FoundContact& f, const BodiesView& bodies, const PairTable& table,
+                                        const WallShape* walls) {
+  Contact c;
+  copy_found_fields(f, c);
+  const real r = bodies.radius[f.a];
+  c.ra = r;
+  if (is_wall(f.b)) {
+    const WallShape& wall = walls[f.b & ~kWallFlag];
+    c.wall_velocity = wall_surface_velocity(wall, bodies.position[f.a] - c.normal * r);
+    c.rb = 0;
+    c.coeff = table(bodies.material[f.a], wall.material);
+  } else {
+    c.rb = bodies.radius[f.b];
+    c.coeff = table(bodies.material[f.a], bodies.material[f.b]);
+  }
+  return c;
+}
+
 // Walls passed over. A half-space whose surface is at rest (surface_at_rest:
 // +0 at every point) can be passed over where make_wall_contact must refuse
 // the sphere (wall_contacts and its CUDA twin): its gap (wall_gap's, the same

@@ -58,52 +58,57 @@ namespace {
 
 constexpr std::size_t kParallelFrom = 20000;
 
+// The threads' buffers of contacts of type C.
+std::vector<std::vector<Contact>>& parts_of(ContactScratch& s, const Contact*) { return s.parts; }
+std::vector<std::vector<FoundContact>>& parts_of(ContactScratch& s, const FoundContact*) { return s.found_parts; }
+
+// A made contact as the list holds it.
+inline const Contact& as_listed(const Contact& c, const Contact*) { return c; }
+inline FoundContact as_listed(const Contact& c, const FoundContact*) { return found_of(c); }
+
 // The per-thread buffers: `scratch`'s when given (kept between calls).
-template <class Make>
-void collect(std::size_t count, std::vector<Contact>& out, ContactScratch* scratch, Make&& make) {
+template <class C, class Make>
+void collect(std::size_t count, std::vector<C>& out, ContactScratch* scratch, Make&& make) {
   ContactScratch local;
-  collect_in_order(count, kParallelFrom, out, (scratch ? *scratch : local).parts, make);
+  collect_in_order(count, kParallelFrom, out, parts_of(scratch ? *scratch : local, out.data()), make);
 }
 
 // Pair k's contact, if any, appended to `to` (sphere_contacts' loop body).
+template <class C>
 auto sphere_contact_maker(const BodiesView& bodies, const IndexPair* pairs, const PairTable& table, real h,
                           const real* reach) {
-  return [&bodies, pairs, &table, h, reach](std::size_t k, std::vector<Contact>& to) {
+  return [&bodies, pairs, &table, h, reach](std::size_t k, std::vector<C>& to) {
     Contact c;
-    if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c)) to.push_back(c);
+    if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c))
+      to.push_back(as_listed(c, static_cast<const C*>(nullptr)));
   };
 }
 
-}  // namespace
-
-void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
-                     const PairTable& table, real h, const real* reach, std::vector<Contact>& out,
-                     ContactScratch* scratch) {
-  collect(pair_count, out, scratch, sphere_contact_maker(bodies, pairs, table, h, reach));
-}
-
-void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
-                     const PairTable& table, real h, const real* reach, std::vector<Contact>& out,
-                     std::vector<Contact>& rest, ContactScratch& scratch) {
-  const int threads = collect_in_parts(pair_count, kParallelFrom, out, scratch.parts,
-                                       sphere_contact_maker(bodies, pairs, table, h, reach));
+template <class C>
+void sphere_contacts_in_runs(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
+                             const PairTable& table, real h, const real* reach, std::vector<C>& out,
+                             std::vector<C>& rest, ContactScratch& scratch) {
+  auto& parts = parts_of(scratch, out.data());
+  const int threads = collect_in_parts(pair_count, kParallelFrom, out, parts,
+                                       sphere_contact_maker<C>(bodies, pairs, table, h, reach));
   if (threads == 1) return;
   // Into an empty `rest`, the second thread's buffer itself (rest's old one
   // to the scratch); the later threads' (or all, onto a `rest` that holds
   // some) joined on.
   int from = 1;
-  if (rest.empty()) rest.swap(scratch.parts[1]), from = 2;
-  join_parts(rest, scratch.parts, from, threads);
+  if (rest.empty()) rest.swap(parts[1]), from = 2;
+  join_parts(rest, parts, from, threads);
 }
 
-void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
-                   const real* reach, std::vector<Contact>& out, ContactScratch* scratch) {
+template <class C>
+void wall_contacts_of(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
+                      const real* reach, std::vector<C>& out, ContactScratch* scratch) {
   const auto wall_count = static_cast<std::uint32_t>(walls.size());
   // Walls at rest passed over where the whole test must refuse a sphere
   // (wall_passable, contact_math.hpp).
   std::vector<char> passable(wall_count);
   for (std::uint32_t k = 0; k < wall_count; ++k) passable[k] = wall_passable(walls[k]);
-  collect(bodies.count, out, scratch, [&](std::size_t i, std::vector<Contact>& to) {
+  collect(bodies.count, out, scratch, [&](std::size_t i, std::vector<C>& to) {
     // One contact for all the sphere's walls: make_wall_contact writes every
     // field it sets on each call and leaves the rest (impulses, masses) at
     // their defaults, so a reused one pushes what a fresh one would.
@@ -112,9 +117,38 @@ void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls
     const WallClearance clearance = wall_clearance(bodies, s, h, reach);
     for (std::uint32_t k = 0; k < wall_count; ++k) {
       if (passable[k] && wall_passed_over(walls[k], bodies, s, clearance)) continue;
-      if (make_wall_contact(bodies, s, walls[k], k, table, h, reach, c)) to.push_back(c);
+      if (make_wall_contact(bodies, s, walls[k], k, table, h, reach, c))
+        to.push_back(as_listed(c, static_cast<const C*>(nullptr)));
     }
   });
+}
+
+}  // namespace
+
+void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
+                     const PairTable& table, real h, const real* reach, std::vector<Contact>& out,
+                     ContactScratch* scratch) {
+  collect(pair_count, out, scratch, sphere_contact_maker<Contact>(bodies, pairs, table, h, reach));
+}
+
+void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
+                     const PairTable& table, real h, const real* reach, std::vector<Contact>& out,
+                     std::vector<Contact>& rest, ContactScratch& scratch) {
+  sphere_contacts_in_runs(bodies, pairs, pair_count, table, h, reach, out, rest, scratch);
+}
+void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
+                     const PairTable& table, real h, const real* reach, std::vector<FoundContact>& out,
+                     std::vector<FoundContact>& rest, ContactScratch& scratch) {
+  sphere_contacts_in_runs(bodies, pairs, pair_count, table, h, reach, out, rest, scratch);
+}
+
+void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
+                   const real* reach, std::vector<Contact>& out, ContactScratch* scratch) {
+  wall_contacts_of(bodies, walls, table, h, reach, out, scratch);
+}
+void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
+                   const real* reach, std::vector<FoundContact>& out, ContactScratch* scratch) {
+  wall_contacts_of(bodies, walls, table, h, reach, out, scratch);
 }
 
 void contact_reaches(const BodiesView& bodies, real h, std::vector<real>& reach) {

@@ -29,6 +29,7 @@ void advance_walls(std::vector<WallShape>& shapes, real h);
 // are 65 MB, and fresh buffers cost more than the contact tests.
 struct ContactScratch {
   std::vector<std::vector<Contact>> parts;
+  std::vector<std::vector<FoundContact>> found_parts;  // the forms that append FoundContacts
 };
 
 // Appends a contact for each pair that overlaps or whose gap closes within
@@ -49,10 +50,17 @@ void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size
                      const PairTable& table, real h, const real* reach, std::vector<Contact>& out,
                      std::vector<Contact>& rest, ContactScratch& scratch);
 
+// The same contacts as found (FoundContact, found_of): the CPU step's form.
+void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
+                     const PairTable& table, real h, const real* reach, std::vector<FoundContact>& out,
+                     std::vector<FoundContact>& rest, ContactScratch& scratch);
+
 // The same for every sphere against every wall (approach speed relative to
 // the wall's surface, a gap within reach[i]).
 void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
                    const real* reach, std::vector<Contact>& out, ContactScratch* scratch = nullptr);
+void wall_contacts(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
+                   const real* reach, std::vector<FoundContact>& out, ContactScratch* scratch = nullptr);
 
 // reach[i] = contact_reach of sphere i for the substep h (the fastest
 // sphere's speed is a reduction over all).

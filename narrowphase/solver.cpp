@@ -162,16 +162,18 @@ void unpack_records(const SweepRecords& s, const ImpactRecords& impacts, const C
 
 // ContactSolver::make_records' loop: true when a contact approaches faster
 // than the rest speed (is_impact_candidate).
-template <bool Rolling>
-bool records_made(Runs<const Contact> found, const std::uint32_t* places, const ColourRanges& colours,
-                  const BodiesView& world, const SweepRecords& s, const ImpactRecords& impacts, real rest_speed) {
+// `whole(f)`: the whole contact of found contact f.
+template <bool Rolling, class C, class Whole>
+bool records_made(Runs<const C> found, const std::uint32_t* places, const ColourRanges& colours,
+                  const BodiesView& world, const SweepRecords& s, const ImpactRecords& impacts, real rest_speed,
+                  Whole&& whole) {
   const auto n = static_cast<std::ptrdiff_t>(colours.size());
   bool fast = false;
 #pragma omp parallel for schedule(static) reduction(|| : fast) if (n >= 20000)
   for (std::ptrdiff_t p = 0; p < n; ++p) {
     hint_place_ahead(found, places, p, n);
     hint_bodies_ahead(found, places, p, n, world);
-    Contact c = found[places[p]];
+    Contact c = whole(found[places[p]]);
     prepare_from_world(c, world);
     pack_contact<Rolling>(c, s, impacts, colours.record_of(static_cast<std::uint32_t>(p)));
     fast = is_impact_candidate(c, rest_speed) || fast;
@@ -405,9 +407,24 @@ void ContactSolver::make_records(Runs<const Contact> found, const std::uint32_t*
                                  const BodiesView& world) {
   size_records(colours.size());
   m_packed_from = nullptr, m_pending_from = nullptr, m_made = true;
-  colours.fast_approach = m_settings.rolling
-                              ? records_made<true>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed)
-                              : records_made<false>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed);
+  auto same = [](const Contact& c) -> const Contact& { return c; };
+  colours.fast_approach =
+      m_settings.rolling
+          ? records_made<true>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed, same)
+          : records_made<false>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed, same);
+}
+
+void ContactSolver::make_records(Runs<const FoundContact> found, const std::uint32_t* places, ColourRanges& colours,
+                                 const BodiesView& world, const PairTable& table,
+                                 const std::vector<WallShape>& walls) {
+  size_records(colours.size());
+  m_packed_from = nullptr, m_pending_from = nullptr, m_made = true;
+  const WallShape* ws = walls.data();
+  auto whole = [&world, &table, ws](const FoundContact& f) { return whole_contact(f, world, table, ws); };
+  colours.fast_approach =
+      m_settings.rolling
+          ? records_made<true>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed, whole)
+          : records_made<false>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed, whole);
 }
 
 void ContactSolver::solve_records(const ColourRanges& colours, const BodiesView& world, real h) {

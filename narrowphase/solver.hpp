@@ -141,6 +141,11 @@ class ContactSolver {
   // than the rest speed.
   void make_records(Runs<const Contact> found, const std::uint32_t* places, ColourRanges& colours,
                     const BodiesView& world);
+  // The same from the contacts as found (the CPU step's), each made whole
+  // (whole_contact) from the world's bodies, the pair table and the walls
+  // the search used.
+  void make_records(Runs<const FoundContact> found, const std::uint32_t* places, ColourRanges& colours,
+                    const BodiesView& world, const PairTable& table, const std::vector<WallShape>& walls);
   // solve_velocities and project_positions on the made records.
   void solve_records(const ColourRanges& colours, const BodiesView& bodies, real h);
   int project_records(const ColourRanges& colours, const BodiesView& bodies, const std::vector<WallShape>& walls) const;

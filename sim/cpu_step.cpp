@@ -75,7 +75,8 @@ class CpuStep final : public StepBackend {
     const narrowphase::KeptMasks masks{m_kept_masks.data(), m_kept_colours};
     m_colouring.colour_and_place(contact_runs(), n, m_world.size(), m_colours, kept ? m_kept_colour.data() : nullptr,
                                  loads ? m_loaded.data() : nullptr, kept ? &masks : nullptr);
-    m_solver.make_records(contact_runs(), m_colouring.places(), m_colours, m_world.view());
+    m_solver.make_records(contact_runs(), m_colouring.places(), m_colours, m_world.view(), m_model.pair_table(),
+                          m_walls);
     m_counters.colours = std::max(m_counters.colours, m_colours.colours);
     m_counters.overflow += m_colours.overflow();
   }
@@ -212,12 +213,13 @@ class CpuStep final : public StepBackend {
   // would copy half of them again). The colouring places them and the
   // solver makes its records from them where they are; m_contacts holds
   // them whole only when asked (contacts()).
-  std::vector<narrowphase::Contact> m_contacts, m_contact_first, m_contact_rest;
+  std::vector<narrowphase::Contact> m_contacts;
+  std::vector<narrowphase::FoundContact> m_contact_first, m_contact_rest;
   narrowphase::ContactScratch m_contact_scratch;
   std::size_t contact_count() const { return m_contact_first.size() + m_contact_rest.size(); }
   // The solver holds records of this substep's contacts, and there are some.
   bool has_records() const { return m_solver.made_records() && m_colours.size() > 0; }
-  narrowphase::ContactRuns contact_runs() {
+  narrowphase::FoundRuns contact_runs() {
     return {m_contact_first.data(), m_contact_first.size(), m_contact_rest.data()};
   }
   narrowphase::ColourRanges m_colours;

@@ -138,6 +138,19 @@ struct MovingLattice {
   }
 };
 
+
+// Loads as a store would keep them: every 9th contact none, the others a
+// random normal, tangential and rolling impulse.
+void give_random_loads(std::vector<Contact>& contacts, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(0.1, 1);
+  for (std::size_t k = 0; k < contacts.size(); ++k) {
+    Contact& c = contacts[k];
+    c.normal_impulse = k % 9 == 0 ? real(0) : real(u(rng));
+    c.tangent_impulse = random_unit(rng) * real(0.1 * u(rng));
+    c.rolling_impulse = random_unit(rng) * real(0.01 * u(rng));
+  }
+}
+
 }  // namespace
 
 TEST(SphereSphere, SeparationAndNormalMatchGeometry) {
@@ -1120,13 +1133,7 @@ TEST(ContactRuns, SearchRestoreAndColouringOnRunsEqualTheOneList) {
   ColourRanges colours;
   std::vector<Contact> stored = joined;
   ContactColouring().colour_and_sort(stored, bodies.count, colours);
-  std::uniform_real_distribution<double> u(0.1, 1);
-  for (std::size_t k = 0; k < stored.size(); ++k) {
-    Contact& c = stored[k];
-    c.normal_impulse = k % 9 == 0 ? real(0) : real(u(rng));
-    c.tangent_impulse = random_unit(rng) * real(0.1 * u(rng));
-    c.rolling_impulse = random_unit(rng) * real(0.01 * u(rng));
-  }
+  give_random_loads(stored, rng);
   ContactCache cache;
   cache.store(stored, colours);
   std::vector<Contact> next;
@@ -1190,4 +1197,148 @@ TEST(ContactRuns, SearchRestoreAndColouringOnRunsEqualTheOneList) {
   twice.restore(light, bodies, real(1e-6), kept, &loaded_flags);
   twice.restore(heavy, bodies, real(1e3), kept, &loaded_flags);
   EXPECT_TRUE(same(heavy, restored_heavy)) << "the second restore as a fresh cache's";
+}
+
+namespace {
+
+// Every array of two sets of sweep records, n of them, byte for byte.
+bool same_records(const SweepRecords& x, const SweepRecords& y, std::size_t n, bool friction, bool rolling) {
+  auto same = [n](const auto* p, const auto* q) {
+    return (p == nullptr) == (q == nullptr) && (!p || std::memcmp(p, q, n * sizeof(*p)) == 0);
+  };
+  return (friction ? same(x.impulse, y.impulse) : same(x.normal, y.normal)) &&
+         (!rolling || same(x.rolling, y.rolling)) && same(x.geometry, y.geometry) && same(x.arms, y.arms) &&
+         same(x.extra, y.extra) && same(x.bodies, y.bodies);
+}
+
+}  // namespace
+
+// The CPU step's contacts as found (FoundContact: the bodies, normal,
+// separation and restored impulses; whole_contact makes the arms, the
+// coefficients and a wall's surface velocity again as the records are made)
+// give the records whole contacts give, bit for bit, through the search,
+// the restore (with and without lost loads), the colouring and the records'
+// making: a thrown lattice of mixed radii and three materials among walls of
+// every kind, moving and spinning, on 1 and 2 threads.
+TEST(FoundContacts, RecordsEqualThoseOfWholeContacts) {
+  const real r = real(0.01), h = real(1e-3);
+  std::mt19937_64 rng(43);
+  MovingLattice thrown = MovingLattice::thrown(22, r, rng);
+  std::uniform_real_distribution<double> u(0.97, 1.03), c(0.05, 0.9);
+  Lattice& l = thrown.lattice;
+  for (std::size_t i = 0; i < l.n; ++i) {
+    l.radius[i] = real(r * u(rng));
+    l.material[i] = static_cast<std::uint32_t>(i % 3);
+  }
+  std::vector<PairCoefficients> coefficients(9);
+  for (PairCoefficients& k : coefficients)
+    k = {real(c(rng)), real(c(rng)), real(0.05 * c(rng)), real(0.05 * c(rng))};
+  const PairTable table{coefficients.data(), 3};
+  const real side = real(2 * r * 1.002 * 21);
+  Walls walls;
+  walls.planes.push_back({{0, 0, real(0.001 * r)}, {0, 0, 1}, 0, {0, 0, real(0.3)}});
+  walls.boxes.push_back({{0, 0, 0}, {side, side, 1}, 1, {real(0.2), real(-0.1), 0}});
+  walls.cylinders.push_back({{side / 2, side / 2, 0}, {0, 0, 1}, real(0.64 * side), 1, true, real(3), 2});
+  walls.spheres.push_back({{side / 2, side / 2, side + real(0.02)}, real(0.04), 2, {0, 0, real(-0.5)}});
+  const std::vector<WallShape> shapes = wall_shapes(walls);
+  const BodiesView bodies = thrown.view();
+  const std::vector<real> reaches(bodies.count, real(0.1) * r);
+
+  SolverSettings settings;
+  settings.friction = settings.rolling = true;
+  const int was = thread_count();
+  std::size_t cold_seen = 0, walls_seen = 0;
+  for (int threads : {1, 2}) {
+    set_thread_count(threads);
+    // The search both ways, as the CPU step runs it (its runs, walls last).
+    std::vector<Contact> first, rest;
+    std::vector<FoundContact> found_first, found_rest;
+    ContactScratch scratch, found_scratch;
+    sphere_contacts(bodies, l.pairs.data(), l.pairs.size(), table, h, reaches.data(), first, rest, scratch);
+    wall_contacts(bodies, shapes, table, h, reaches.data(), rest.empty() ? first : rest, &scratch);
+    sphere_contacts(bodies, l.pairs.data(), l.pairs.size(), table, h, reaches.data(), found_first, found_rest,
+                    found_scratch);
+    wall_contacts(bodies, shapes, table, h, reaches.data(), found_rest.empty() ? found_first : found_rest,
+                  &found_scratch);
+    ASSERT_EQ(found_first.size(), first.size());
+    ASSERT_EQ(found_rest.size(), rest.size());
+    const std::size_t n = first.size() + rest.size();
+    ASSERT_GT(n, l.pairs.size() / 10) << "premise: many contacts";
+    std::size_t on_walls = 0;
+    for (const std::vector<Contact>* run : {&first, &rest})
+      for (const Contact& k : *run) on_walls += is_wall(k.b) ? 1 : 0;
+    ASSERT_GT(on_walls, 100u) << "premise: contacts on the walls";
+    walls_seen = on_walls;
+
+    // A cache of these contacts with loads; then the contacts again, every
+    // 5th of each run gone (its entry unmatched: a lost load under the tiny
+    // weight).
+    std::vector<Contact> stored(first);
+    stored.insert(stored.end(), rest.begin(), rest.end());
+    ColourRanges stored_colours;
+    ContactColouring().colour_and_sort(stored, bodies.count, stored_colours);
+    give_random_loads(stored, rng);
+    ContactCache cache;
+    cache.store(stored, stored_colours);
+    for (const real weight : {real(1e3), real(1e-6)}) {
+      std::vector<Contact> f1 = first, r1 = rest;
+      std::vector<FoundContact> f2 = found_first, r2 = found_rest;
+      auto drop = [](auto& v) {
+        std::size_t at = 0;
+        for (std::size_t k = 0; k < v.size(); ++k)
+          if (k % 5 != 2) v[at++] = v[k];
+        v.resize(at);
+      };
+      drop(f1), drop(r1), drop(f2), drop(r2);
+      const std::size_t m = f1.size() + r1.size();
+      ContactCache a = cache, b = cache;
+      std::vector<std::uint8_t> kept_a, kept_b, loaded_a, loaded_b;
+      const std::size_t warm_a =
+          a.restore(ContactRuns(f1.data(), f1.size(), r1.data()), m, bodies, weight, kept_a, &loaded_a);
+      const std::size_t warm_b =
+          b.restore(FoundRuns(f2.data(), f2.size(), r2.data()), m, bodies, weight, kept_b, &loaded_b);
+      EXPECT_EQ(warm_a, warm_b) << threads << " thread(s), weight " << weight;
+      EXPECT_EQ(kept_a, kept_b);
+      EXPECT_EQ(loaded_a, loaded_b);
+      for (std::size_t k = 0; k < m; ++k) {
+        const Contact& x = k < f1.size() ? f1[k] : r1[k - f1.size()];
+        const FoundContact y = k < f2.size() ? f2[k] : r2[k - f2.size()];
+        const FoundContact fx = found_of(x);
+        ASSERT_EQ(std::memcmp(&fx, &y, sizeof(FoundContact)), 0) << "contact " << k << " as restored";
+        if (weight < 1 && x.normal_impulse == 0 && kept_a[k] != kNoKeptColour) ++cold_seen;
+      }
+      std::vector<std::uint64_t> masks_a, masks_b;
+      const std::uint32_t colours_a = a.kept_masks(bodies.count, masks_a);
+      const std::uint32_t colours_b = b.kept_masks(bodies.count, masks_b);
+      const KeptMasks km_a{masks_a.data(), colours_a}, km_b{masks_b.data(), colours_b};
+      ContactColouring colouring_a, colouring_b;
+      ColourRanges ranges_a, ranges_b;
+      colouring_a.colour_and_place(Runs<const Contact>(ContactRuns(f1.data(), f1.size(), r1.data())), m,
+                                   bodies.count, ranges_a, kept_a.data(), loaded_a.data(), &km_a);
+      colouring_b.colour_and_place(Runs<const FoundContact>(FoundRuns(f2.data(), f2.size(), r2.data())), m,
+                                   bodies.count, ranges_b, kept_b.data(), loaded_b.data(), &km_b);
+      ASSERT_EQ(ranges_a.begin, ranges_b.begin);
+      ASSERT_EQ(ranges_a.record, ranges_b.record);
+      ASSERT_EQ(std::memcmp(colouring_a.places(), colouring_b.places(), m * sizeof(std::uint32_t)), 0);
+      ContactSolver solver_a(settings), solver_b(settings);
+      solver_a.make_records(Runs<const Contact>(ContactRuns(f1.data(), f1.size(), r1.data())),
+                            colouring_a.places(), ranges_a, bodies);
+      solver_b.make_records(Runs<const FoundContact>(FoundRuns(f2.data(), f2.size(), r2.data())),
+                            colouring_b.places(), ranges_b, bodies, table, shapes);
+      ASSERT_NE(solver_a.made_records(), nullptr);
+      ASSERT_NE(solver_b.made_records(), nullptr);
+      EXPECT_TRUE(same_records(*solver_a.made_records(), *solver_b.made_records(), m, true, true))
+          << threads << " thread(s), weight " << weight;
+      EXPECT_EQ(ranges_a.fast_approach, ranges_b.fast_approach);
+      std::vector<Contact> whole_a, whole_b;
+      solver_a.contacts_of_records(ranges_a, bodies, table, shapes, whole_a);
+      solver_b.contacts_of_records(ranges_b, bodies, table, shapes, whole_b);
+      ASSERT_EQ(whole_a.size(), whole_b.size());
+      EXPECT_EQ(std::memcmp(whole_a.data(), whole_b.data(), whole_a.size() * sizeof(Contact)), 0)
+          << "the whole contacts of the records";
+    }
+  }
+  set_thread_count(was);
+  EXPECT_GT(cold_seen, 0u) << "premise: the island rule set some kept contacts cold";
+  EXPECT_GT(walls_seen, 0u);
 }
