@@ -155,6 +155,32 @@ MARBLES_HD_INLINE real rebound_step(real shift, real gap_now) {
   return shift < gap_now ? shift : gap_now;
 }
 
+// What a contact takes from its pair besides its geometry: the bodies, the
+// arms (the radii; a wall's +0) and the pair table's coefficients. Set by
+// the search (make_sphere_contact, make_wall_contact) and again from a found
+// contact as its record is made (whole_contact): one text, the same bits.
+MARBLES_HD_INLINE void name_sphere_pair(const BodiesView& bodies, std::uint32_t i, std::uint32_t j,
+                                        const PairTable& table, Contact& c) {
+  c.a = i;
+  c.b = j;
+  c.ra = bodies.radius[i];
+  c.rb = bodies.radius[j];
+  c.coeff = table(bodies.material[i], bodies.material[j]);
+}
+MARBLES_HD_INLINE void name_wall_pair(const BodiesView& bodies, std::uint32_t i, const WallShape& wall,
+                                      std::uint32_t k, const PairTable& table, Contact& c) {
+  c.a = i;
+  c.b = kWallFlag | k;
+  c.ra = bodies.radius[i];
+  c.rb = 0;
+  c.coeff = table(bodies.material[i], wall.material);
+}
+// The wall's surface velocity where sphere i (at p, radius r) meets it along
+// `normal`.
+MARBLES_HD_INLINE Vec3 wall_velocity_at_sphere(const WallShape& wall, const Vec3& p, real r, const Vec3& normal) {
+  return wall_surface_velocity(wall, p - normal * r);
+}
+
 // One candidate pair of the broad phase -> a contact, when the spheres touch
 // (gap below the skin) or their gap closes within the substep h at the
 // current approach speed. The loop body of sphere_contacts (contacts.cpp) and
@@ -170,11 +196,7 @@ MARBLES_HD_INLINE bool make_sphere_contact(const BodiesView& bodies, std::uint32
   const real margin = (closing > pair_reach ? closing : pair_reach) + skin;  // no wider gap can matter
   if (!sphere_sphere(bodies.position[i], ri, bodies.position[j], rj, margin, c.normal, c.separation)) return false;
   if (!speculative_closes(c.separation, dot(dv, c.normal), h, skin, pair_reach)) return false;
-  c.a = i;
-  c.b = j;
-  c.ra = ri;
-  c.rb = rj;
-  c.coeff = table(bodies.material[i], bodies.material[j]);
+  name_sphere_pair(bodies, i, j, table, c);
   return true;
 }
 
@@ -187,15 +209,11 @@ MARBLES_HD_INLINE bool make_wall_contact(const BodiesView& bodies, std::uint32_t
   const Vec3 p = bodies.position[i];
   const real r = bodies.radius[i];
   if (!wall_gap(wall, p, r, c.normal, c.separation)) return false;
-  c.wall_velocity = wall_surface_velocity(wall, p - c.normal * r);
+  c.wall_velocity = wall_velocity_at_sphere(wall, p, r, c.normal);
   if (!speculative_closes(c.separation, dot(bodies.velocity[i] - c.wall_velocity, c.normal), h, kContactSkin * r,
                           reach[i]))
     return false;
-  c.a = i;
-  c.b = kWallFlag | k;
-  c.ra = r;
-  c.rb = 0;
-  c.coeff = table(bodies.material[i], wall.material);
+  name_wall_pair(bodies, i, wall, k, table, c);
   return true;
 }
 
@@ -217,23 +235,20 @@ MARBLES_HD_INLINE FoundContact found_of(const Contact& c) {
   copy_found_fields(c, f);
   return f;
 }
-// The whole contact of a found one, with the fields make_sphere_contact and
-// make_wall_contact set made again by their own expressions from the bodies
-// and walls as the search saw them: the same bits.
+// The whole contact of a found one: what the search set besides the found
+// fields, made again by the search's own functions (name_sphere_pair,
+// name_wall_pair, wall_velocity_at_sphere) from the bodies and walls as the
+// search saw them: the same bits.
 MARBLES_HD_INLINE Contact whole_contact(const FoundContact& f, const BodiesView& bodies, const PairTable& table,
                                         const WallShape* walls) {
   Contact c;
   copy_found_fields(f, c);
-  const real r = bodies.radius[f.a];
-  c.ra = r;
   if (is_wall(f.b)) {
-    const WallShape& wall = walls[f.b & ~kWallFlag];
-    c.wall_velocity = wall_surface_velocity(wall, bodies.position[f.a] - c.normal * r);
-    c.rb = 0;
-    c.coeff = table(bodies.material[f.a], wall.material);
+    const std::uint32_t k = f.b & ~kWallFlag;
+    c.wall_velocity = wall_velocity_at_sphere(walls[k], bodies.position[f.a], bodies.radius[f.a], c.normal);
+    name_wall_pair(bodies, f.a, walls[k], k, table, c);
   } else {
-    c.rb = bodies.radius[f.b];
-    c.coeff = table(bodies.material[f.a], bodies.material[f.b]);
+    name_sphere_pair(bodies, f.a, f.b, table, c);
   }
   return c;
 }

@@ -405,26 +405,26 @@ void ContactSolver::solve_velocities(std::vector<Contact>& contacts, const Colou
 
 void ContactSolver::make_records(Runs<const Contact> found, const std::uint32_t* places, ColourRanges& colours,
                                  const BodiesView& world) {
-  size_records(colours.size());
-  m_packed_from = nullptr, m_pending_from = nullptr, m_made = true;
-  auto same = [](const Contact& c) -> const Contact& { return c; };
-  colours.fast_approach =
-      m_settings.rolling
-          ? records_made<true>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed, same)
-          : records_made<false>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed, same);
+  make_records_with(found, places, colours, world, [](const Contact& c) -> const Contact& { return c; });
 }
 
 void ContactSolver::make_records(Runs<const FoundContact> found, const std::uint32_t* places, ColourRanges& colours,
                                  const BodiesView& world, const PairTable& table,
                                  const std::vector<WallShape>& walls) {
+  const WallShape* ws = walls.data();
+  make_records_with(found, places, colours, world,
+                    [&world, &table, ws](const FoundContact& f) { return whole_contact(f, world, table, ws); });
+}
+
+template <class C, class Whole>
+void ContactSolver::make_records_with(Runs<const C> found, const std::uint32_t* places, ColourRanges& colours,
+                                      const BodiesView& world, Whole&& whole) {
   size_records(colours.size());
   m_packed_from = nullptr, m_pending_from = nullptr, m_made = true;
-  const WallShape* ws = walls.data();
-  auto whole = [&world, &table, ws](const FoundContact& f) { return whole_contact(f, world, table, ws); };
-  colours.fast_approach =
-      m_settings.rolling
-          ? records_made<true>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed, whole)
-          : records_made<false>(found, places, colours, world, m_records, m_impacts, m_settings.rest_speed, whole);
+  const real rest = m_settings.rest_speed;
+  colours.fast_approach = m_settings.rolling
+                              ? records_made<true>(found, places, colours, world, m_records, m_impacts, rest, whole)
+                              : records_made<false>(found, places, colours, world, m_records, m_impacts, rest, whole);
 }
 
 void ContactSolver::solve_records(const ColourRanges& colours, const BodiesView& world, real h) {

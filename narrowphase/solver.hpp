@@ -181,6 +181,11 @@ class ContactSolver {
   // m_records over m_record_words and m_impacts over m_impact_words for
   // `count` contacts.
   void size_records(std::size_t count) const;
+  // make_records' body for either form of the found contacts: whole(found
+  // contact) is the Contact its record is made from.
+  template <class C, class Whole>
+  void make_records_with(Runs<const C> found, const std::uint32_t* places, ColourRanges& colours,
+                         const BodiesView& world, Whole&& whole);
   // The sweeps in the local order (LocalOrder) on the packed records.
   void local_sweeps(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies, real inv_h);
 
