@@ -281,13 +281,54 @@ MARBLES_LANE void store_words(Real4* p, L r[4]) {
   for (int l = 0; l < 4; ++l) set_group(p + l, 0, r[l]);
 }
 
+// Eight contacts in one 32-byte vector (float, compiled in the AVX2 and
+// AVX-512 sweeps). Each load takes two contacts' words of an array (or one
+// body's whole record) at once, and the transposes work within each
+// 16-byte half (transpose_halves: unpacks and in-lane shuffles), never
+// across: lane i holds contact kWideLane[i] = 0, 2, 4, 6, 1, 3, 5, 7 of the
+// block, the records' and the bodies' alike, and each store moves them back
+// the same way. Lane by lane the arithmetic is the same whichever contact a
+// lane holds. Against two L blocks joined (16-byte loads, 4 x 4 transposes,
+// a join a field), a block moves its words with about a third fewer
+// instructions (docs/architecture.md "The wide sweep's moves within halves").
+inline constexpr std::uint32_t kWideLane[8] = {0, 2, 4, 6, 1, 3, 5, 7};
+
+MARBLES_LANE Wide wide_at(const void* p) {
+  Wide out;
+  __builtin_memcpy(&out, p, sizeof(Wide));
+  return out;
+}
+MARBLES_LANE void set_wide(void* p, Wide value) { __builtin_memcpy(p, &value, sizeof(Wide)); }
+// Within each half, r[i] = row i of a 4 x 4 block -> r[j] = column j (its own inverse).
+MARBLES_LANE void transpose_halves(Wide r[4]) {
+  const Wide t0 = __builtin_shufflevector(r[0], r[1], 0, 8, 1, 9, 4, 12, 5, 13);
+  const Wide t1 = __builtin_shufflevector(r[0], r[1], 2, 10, 3, 11, 6, 14, 7, 15);
+  const Wide t2 = __builtin_shufflevector(r[2], r[3], 0, 8, 1, 9, 4, 12, 5, 13);
+  const Wide t3 = __builtin_shufflevector(r[2], r[3], 2, 10, 3, 11, 6, 14, 7, 15);
+  r[0] = __builtin_shufflevector(t0, t2, 0, 1, 8, 9, 4, 5, 12, 13);
+  r[1] = __builtin_shufflevector(t0, t2, 2, 3, 10, 11, 6, 7, 14, 15);
+  r[2] = __builtin_shufflevector(t1, t3, 0, 1, 8, 9, 4, 5, 12, 13);
+  r[3] = __builtin_shufflevector(t1, t3, 2, 3, 10, 11, 6, 7, 14, 15);
+}
+// Words p[0, 8): field j of the eight in r[j], in kWideLane's order; and back.
+MARBLES_LANE void load_words(const Real4* p, Wide r[4]) {
+  for (int j = 0; j < 4; ++j) r[j] = wide_at(p + 2 * j);
+  transpose_halves(r);
+}
+MARBLES_LANE void store_words(Real4* p, Wide r[4]) {
+  transpose_halves(r);
+  for (int j = 0; j < 4; ++j) set_wide(p + 2 * j, r[j]);
+}
+
 static_assert(sizeof(Real4) == sizeof(L) && sizeof(SolverBody) == 2 * sizeof(L),
               "in float a record word is four reals, a SolverBody two words");
 
-template <bool Arms, bool Rolling>
-MARBLES_LANE ContactLanes<L> load_records(const SweepRecords& s, std::uint32_t k) {
-  ContactLanes<L> c{};
-  L r[4];
+// Records k.. as lanes: V = L (four contacts), or Wide (eight, in
+// kWideLane's order).
+template <bool Arms, bool Rolling, class V = L>
+MARBLES_LANE ContactLanes<V> load_records(const SweepRecords& s, std::uint32_t k) {
+  ContactLanes<V> c{};
+  V r[4];
   load_words(s.impulse + k, r);
   c.normal_impulse = r[0], c.tangent_impulse = {r[1], r[2], r[3]};
   load_words(s.geometry + k, r);
@@ -303,12 +344,12 @@ MARBLES_LANE ContactLanes<L> load_records(const SweepRecords& s, std::uint32_t k
   return c;
 }
 
-template <bool Rolling>
-MARBLES_LANE void store_record_impulses(const ContactLanes<L>& c, const SweepRecords& s, std::uint32_t k) {
-  L r[4] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
+template <bool Rolling, class V = L>
+MARBLES_LANE void store_record_impulses(const ContactLanes<V>& c, const SweepRecords& s, std::uint32_t k) {
+  V r[4] = {c.normal_impulse, c.tangent_impulse.x, c.tangent_impulse.y, c.tangent_impulse.z};
   store_words(s.impulse + k, r);
   if constexpr (Rolling) {
-    L q[4] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.twisting_friction};
+    V q[4] = {c.rolling_impulse.x, c.rolling_impulse.y, c.rolling_impulse.z, c.twisting_friction};
     store_words(s.rolling + k, q);
   }
 }
@@ -348,6 +389,46 @@ MARBLES_LANE void store_bodies(SolverBody* bodies, const SweepRecords& s, std::u
   }
 }
 
+// The bodies of side a or b, eight at once, each record whole (velocity
+// and inverse mass, spin and inverse inertia: one 32-byte load), a pair's
+// velocity halves and spin halves put side by side, then transposed within
+// halves. A wall's lane: its velocity (the record's extra word), no spin,
+// no inverse mass or inertia. Stored back the same way (walls are not).
+MARBLES_LANE BodyLanes<Wide> load_wide_bodies(const SolverBody* bodies, const SweepRecords& s, std::uint32_t k,
+                                              bool side_b) {
+  Wide whole[8];
+  for (std::uint32_t l = 0; l < 8; ++l) {
+    const std::uint32_t index = body_of(s, k + l, side_b);
+    if (is_wall(index)) {
+      const L velocity = __builtin_shuffle(group(s.extra + k + l, 0), L{}, Word{0, 1, 2, 4});
+      whole[l] = join(velocity, L{});
+    } else {
+      whole[l] = wide_at(bodies + index);
+    }
+  }
+  Wide v[4], w[4];
+  for (int j = 0; j < 4; ++j) {
+    v[j] = __builtin_shufflevector(whole[2 * j], whole[2 * j + 1], 0, 1, 2, 3, 8, 9, 10, 11);
+    w[j] = __builtin_shufflevector(whole[2 * j], whole[2 * j + 1], 4, 5, 6, 7, 12, 13, 14, 15);
+  }
+  transpose_halves(v);
+  transpose_halves(w);
+  return {{v[0], v[1], v[2]}, {w[0], w[1], w[2]}, v[3], w[3]};
+}
+
+MARBLES_LANE void store_wide_bodies(SolverBody* bodies, const SweepRecords& s, std::uint32_t k, bool side_b,
+                                    const BodyLanes<Wide>& b) {
+  Wide v[4] = {b.v.x, b.v.y, b.v.z, b.inv_mass};
+  Wide w[4] = {b.w.x, b.w.y, b.w.z, b.inv_inertia};
+  transpose_halves(v);
+  transpose_halves(w);
+  for (int j = 0; j < 4; ++j) {
+    const std::uint32_t first = body_of(s, k + 2 * j, side_b), second = body_of(s, k + 2 * j + 1, side_b);
+    if (!is_wall(first)) set_wide(bodies + first, __builtin_shufflevector(v[j], w[j], 0, 1, 2, 3, 8, 9, 10, 11));
+    if (!is_wall(second)) set_wide(bodies + second, __builtin_shufflevector(v[j], w[j], 4, 5, 6, 7, 12, 13, 14, 15));
+  }
+}
+
 #else
 template <bool Arms, bool Rolling>
 MARBLES_LANE ContactLanes<L> load_records(const SweepRecords& s, std::uint32_t k) {
@@ -373,6 +454,10 @@ template <bool Arms, bool Rolling, class V>
 MARBLES_LANE ContactLanes<V> load_records_of(const SweepRecords& s, std::uint32_t k) {
   if constexpr (sizeof(V) == sizeof(L)) {
     return load_records<Arms, Rolling>(s, k);
+#if !defined(MARBLES_DOUBLE)
+  } else if constexpr (sizeof(V) == sizeof(Wide)) {
+    return load_records<Arms, Rolling, Wide>(s, k);
+#endif
   } else {
     using H = Half<V>;
     const ContactLanes<H> a = load_records_of<Arms, Rolling, H>(s, k);
@@ -396,6 +481,10 @@ template <bool Rolling, class V>
 MARBLES_LANE void store_record_impulses_of(const ContactLanes<V>& c, const SweepRecords& s, std::uint32_t k) {
   if constexpr (sizeof(V) == sizeof(L)) {
     store_record_impulses<Rolling>(c, s, k);
+#if !defined(MARBLES_DOUBLE)
+  } else if constexpr (sizeof(V) == sizeof(Wide)) {
+    store_record_impulses<Rolling, Wide>(c, s, k);
+#endif
   } else {
     using H = Half<V>;
     ContactLanes<H> lo{}, hi{};
@@ -412,6 +501,10 @@ MARBLES_LANE BodyLanes<V> load_bodies_of(const SolverBody* bodies, const SweepRe
                                          bool side_b) {
   if constexpr (sizeof(V) == sizeof(L)) {
     return load_bodies(bodies, s, k, side_b);
+#if !defined(MARBLES_DOUBLE)
+  } else if constexpr (sizeof(V) == sizeof(Wide)) {
+    return load_wide_bodies(bodies, s, k, side_b);
+#endif
   } else {
     using H = Half<V>;
     const BodyLanes<H> a = load_bodies_of<H>(bodies, s, k, side_b);
@@ -424,6 +517,10 @@ MARBLES_LANE void store_bodies_of(SolverBody* bodies, const SweepRecords& s, std
                                   const BodyLanes<V>& b) {
   if constexpr (sizeof(V) == sizeof(L)) {
     store_bodies(bodies, s, k, side_b, b);
+#if !defined(MARBLES_DOUBLE)
+  } else if constexpr (sizeof(V) == sizeof(Wide)) {
+    store_wide_bodies(bodies, s, k, side_b, b);
+#endif
   } else {
     using H = Half<V>;
     store_bodies_of<H>(bodies, s, k, side_b, BodyLanes<H>{low(b.v), low(b.w), low(b.inv_mass), low(b.inv_inertia)});

@@ -244,6 +244,122 @@ TEST(SolverLanes, GroupedMovesEqualFieldByField) {
   EXPECT_GT(stored, 75);  // of 100
 }
 
+#if !defined(MARBLES_DOUBLE)
+// The wide moves (eight contacts a 32-byte vector, transposed within
+// halves: lane i holds contact kWideLane[i]) move the same fields as the
+// field-by-field forms of the baseline, lane for contact, both ways; and
+// every contact of a block lands in one lane.
+// Each vector of a structure of lanes moved from kWideLane's order to the
+// contacts' (to_contacts), or back.
+template <class Lanes>
+Lanes reordered(const Lanes& from, bool to_contacts) {
+  constexpr std::size_t fields = sizeof(Lanes) / sizeof(lanes::Wide);
+  lanes::Wide in[fields], out[fields];
+  std::memcpy(in, &from, sizeof from);
+  for (std::size_t f = 0; f < fields; ++f)
+    for (std::uint32_t l = 0; l < WW; ++l) {
+      const std::uint32_t c = lanes::kWideLane[l];
+      if (to_contacts) out[f][c] = in[f][l];
+      else out[f][l] = in[f][c];
+    }
+  Lanes to;
+  std::memcpy(&to, out, sizeof to);
+  return to;
+}
+template <class Lanes>
+Lanes lane_to_contact_order(const Lanes& wide) {
+  return reordered(wide, true);
+}
+template <class Lanes>
+Lanes contact_to_lane_order(const Lanes& ordered) {
+  return reordered(ordered, false);
+}
+// Two L blocks' fields (contacts 0-3, then 4-7) joined, in the contacts' order.
+template <class Wide, class Half>
+Wide joined(const Half& lo, const Half& hi) {
+  constexpr std::size_t fields = sizeof(Half) / sizeof(lanes::L);
+  lanes::L a[fields], b[fields];
+  lanes::Wide out[fields];
+  std::memcpy(a, &lo, sizeof lo);
+  std::memcpy(b, &hi, sizeof hi);
+  for (std::size_t f = 0; f < fields; ++f)
+    for (std::uint32_t l = 0; l < W; ++l) out[f][l] = a[f][l], out[f][W + l] = b[f][l];
+  Wide w;
+  std::memcpy(&w, out, sizeof w);
+  return w;
+}
+[[gnu::target("avx2")]] lanes::ContactLanes<lanes::Wide> wide_records(const SweepRecords& s) {
+  return lanes::load_records_of<true, true, lanes::Wide>(s, 0);
+}
+[[gnu::target("avx2")]] lanes::BodyLanes<lanes::Wide> wide_bodies(const SolverBody* b, const SweepRecords& s,
+                                                                   bool side_b) {
+  return lanes::load_bodies_of<lanes::Wide>(b, s, 0, side_b);
+}
+[[gnu::target("avx2")]] void store_wide(SolverBody* b, const SweepRecords& s, bool side_b,
+                                        const lanes::BodyLanes<lanes::Wide>& lanes_in) {
+  lanes::store_bodies_of<lanes::Wide>(b, s, 0, side_b, lanes_in);
+}
+[[gnu::target("avx2")]] void store_wide_impulses(const lanes::ContactLanes<lanes::Wide>& c, const SweepRecords& s) {
+  lanes::store_record_impulses_of<true, lanes::Wide>(c, s, 0);
+}
+
+TEST(SolverLanes, WideMovesEqualFieldByField) {
+  if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "skipped: this CPU has no AVX2";
+  static_assert(sizeof(lanes::kWideLane) / sizeof(lanes::kWideLane[0]) == WW);
+  std::uint32_t seen = 0;  // every contact in some lane
+  for (std::uint32_t l = 0; l < WW; ++l) seen |= 1u << lanes::kWideLane[l];
+  ASSERT_EQ(seen, (1u << WW) - 1);
+  using CW = lanes::ContactLanes<lanes::Wide>;
+  using BW = lanes::BodyLanes<lanes::Wide>;
+  int stored = 0;
+  for (std::uint32_t seed = 1; seed <= 50; ++seed) {
+    PackedCase p(seed, seed % 2 == 0, WW);
+    const SweepRecords& s = p.records;
+    const CW each = joined<CW>(lanes::load_records_each<true, true>(s, 0), lanes::load_records_each<true, true>(s, W));
+    const CW wide = lane_to_contact_order(wide_records(s));
+    ASSERT_TRUE(same_bits(&wide, &each, sizeof wide)) << seed;
+    for (bool side_b : {false, true}) {
+      const SolverBody* bodies = p.packed.bodies.data();
+      const BW e =
+          joined<BW>(lanes::load_bodies_each(bodies, s, 0, side_b), lanes::load_bodies_each(bodies, s, W, side_b));
+      const BW g = lane_to_contact_order(wide_bodies(bodies, s, side_b));
+      ASSERT_TRUE(same_bits(&g, &e, sizeof g)) << seed << " side " << side_b;
+      // Changed and stored back through either form: the same bodies.
+      BW changed = e;
+      changed.v.x = changed.v.x + real(1), changed.w.z = changed.w.z - real(2);
+      changed.inv_mass = changed.inv_mass * real(3);
+      std::vector<SolverBody> by_wide = p.packed.bodies, by_field = p.packed.bodies;
+      store_wide(by_wide.data(), s, side_b, contact_to_lane_order(changed));
+      const lanes::BodyLanes<lanes::L> lo{lanes::low(changed.v), lanes::low(changed.w), lanes::low(changed.inv_mass),
+                                          lanes::low(changed.inv_inertia)};
+      const lanes::BodyLanes<lanes::L> hi{lanes::high(changed.v), lanes::high(changed.w),
+                                          lanes::high(changed.inv_mass), lanes::high(changed.inv_inertia)};
+      lanes::store_bodies_each(by_field.data(), s, 0, side_b, lo);
+      lanes::store_bodies_each(by_field.data(), s, W, side_b, hi);
+      ASSERT_TRUE(same_bits(by_wide.data(), by_field.data(), sizeof(SolverBody) * by_wide.size())) << seed;
+      stored += same_bits(by_wide.data(), p.packed.bodies.data(), sizeof(SolverBody) * by_wide.size()) ? 0 : 1;
+    }
+    RecordsMemory other(WW);
+    const SweepRecords t = other.records();
+    CW changed = each;
+    changed.normal_impulse = changed.normal_impulse + real(1);
+    changed.twisting_friction = changed.twisting_friction * real(2);
+    store_wide_impulses(contact_to_lane_order(changed), s);
+    lanes::ContactLanes<lanes::L> lo{}, hi{};
+    lo.normal_impulse = lanes::low(changed.normal_impulse), hi.normal_impulse = lanes::high(changed.normal_impulse);
+    lo.tangent_impulse = lanes::low(changed.tangent_impulse), hi.tangent_impulse = lanes::high(changed.tangent_impulse);
+    lo.rolling_impulse = lanes::low(changed.rolling_impulse), hi.rolling_impulse = lanes::high(changed.rolling_impulse);
+    lo.twisting_friction = lanes::low(changed.twisting_friction);
+    hi.twisting_friction = lanes::high(changed.twisting_friction);
+    lanes::store_record_impulses_each<true>(lo, t, 0);
+    lanes::store_record_impulses_each<true>(hi, t, W);
+    ASSERT_TRUE(same_bits(s.impulse, t.impulse, sizeof(Real4) * WW)) << seed;
+    ASSERT_TRUE(same_bits(s.rolling, t.rolling, sizeof(Real4) * WW)) << seed;
+  }
+  EXPECT_GT(stored, 75);  // of 100
+}
+#endif  // the wide moves are float's (in double a Wide block is two L blocks joined)
+
 // The GPU's sweep on the sweep's records (solver_math.hpp): the contacts
 // packed, swept through solve_record (the effective masses computed from the
 // bodies, not read), and unpacked must equal solve_one on the whole prepared
