@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <type_traits>
 
 #include "core/parallel.hpp"
 
@@ -100,15 +102,71 @@ void sphere_contacts_in_runs(const BodiesView& bodies, const IndexPair* pairs, s
   join_parts(rest, parts, from, threads);
 }
 
+// Spheres near[i] that some wall does not pass over, where every wall is
+// passable (a half-space at rest: wall_passable), four at a time: each
+// wall's pass-over test (wall_clearance, then wall_passed_over's gap and
+// comparisons) in the lanes of 16-byte vectors, the same expressions in the
+// same order lane by lane, so the same answers. A box's six tests a sphere
+// cost most of the wall search where a sphere is near no wall: settle
+// scene of 10^5, 2 threads, 1.1 ms a substep before.
+void near_walls(const BodiesView& b, const std::vector<WallShape>& walls, real h, const real* reach,
+                std::vector<std::uint8_t>& near) {
+  typedef real V __attribute__((vector_size(16)));
+  using Mask = decltype(V{} < V{});
+  constexpr std::size_t w = sizeof(V) / sizeof(real);
+  const std::size_t n = b.count;
+  near.resize(n);
+  std::uint8_t* out = near.data();
+  const auto blocks = static_cast<std::ptrdiff_t>(n / w);
+  const Mask magnitude = ~(Mask{} + std::numeric_limits<std::remove_cvref_t<decltype(Mask{}[0])>>::min());
+  auto fabs_lanes = [&](V x) { return (V)((Mask)x & magnitude); };
+#pragma omp parallel for schedule(static) if (n > kParallelFrom)
+  for (std::ptrdiff_t t = 0; t < blocks; ++t) {
+    const std::size_t i = static_cast<std::size_t>(t) * w;
+    V px, py, pz, vx, vy, vz, r, reach_of;
+    for (std::size_t l = 0; l < w; ++l) {
+      px[l] = b.position[i + l].x, py[l] = b.position[i + l].y, pz[l] = b.position[i + l].z;
+      vx[l] = b.velocity[i + l].x, vy[l] = b.velocity[i + l].y, vz[l] = b.velocity[i + l].z;
+      r[l] = b.radius[i + l], reach_of[l] = reach[i + l];
+    }
+    const V skin = kContactSkin * r;
+    const V clear = skin > reach_of ? skin : reach_of;
+    const V closes = ((fabs_lanes(vx) + fabs_lanes(vy)) + fabs_lanes(vz)) * h * real(1.0001);
+    Mask any = {};
+    for (const WallShape& wall : walls) {
+      const V dx = px - wall.point.x, dy = py - wall.point.y, dz = pz - wall.point.z;
+      const V gap = ((dx * wall.direction.x + dy * wall.direction.y) + dz * wall.direction.z) - r;
+      any |= ~((gap >= clear) & (gap >= closes));
+    }
+    for (std::size_t l = 0; l < w; ++l) out[i + l] = any[l] != 0;
+  }
+  for (std::size_t i = static_cast<std::size_t>(blocks) * w; i < n; ++i) {
+    const WallClearance clearance = wall_clearance(b, static_cast<std::uint32_t>(i), h, reach);
+    out[i] = 0;
+    for (const WallShape& wall : walls)
+      if (!wall_passed_over(wall, b, static_cast<std::uint32_t>(i), clearance)) out[i] = 1;
+  }
+}
+
 template <class C>
 void wall_contacts_of(const BodiesView& bodies, const std::vector<WallShape>& walls, const PairTable& table, real h,
                       const real* reach, std::vector<C>& out, ContactScratch* scratch) {
   const auto wall_count = static_cast<std::uint32_t>(walls.size());
   // Walls at rest passed over where the whole test must refuse a sphere
-  // (wall_passable, contact_math.hpp).
+  // (wall_passable, contact_math.hpp); where every wall is such, the
+  // spheres near none of them are known first (near_walls) and skipped.
   std::vector<char> passable(wall_count);
-  for (std::uint32_t k = 0; k < wall_count; ++k) passable[k] = wall_passable(walls[k]);
+  bool every_passable = wall_count > 0;
+  for (std::uint32_t k = 0; k < wall_count; ++k) {
+    passable[k] = wall_passable(walls[k]);
+    every_passable = every_passable && passable[k];
+  }
+  ContactScratch local;
+  std::vector<std::uint8_t>& near = (scratch ? *scratch : local).near_walls;
+  if (every_passable) near_walls(bodies, walls, h, reach, near);
+  const std::uint8_t* near_of = every_passable ? near.data() : nullptr;
   collect(bodies.count, out, scratch, [&](std::size_t i, std::vector<C>& to) {
+    if (near_of && !near_of[i]) return;
     // One contact for all the sphere's walls: make_wall_contact writes every
     // field it sets on each call and leaves the rest (impulses, masses) at
     // their defaults, so a reused one pushes what a fresh one would.

@@ -30,6 +30,7 @@ void advance_walls(std::vector<WallShape>& shapes, real h);
 struct ContactScratch {
   std::vector<std::vector<Contact>> parts;
   std::vector<std::vector<FoundContact>> found_parts;  // the forms that append FoundContacts
+  std::vector<std::uint8_t> near_walls;                 // the wall search's: a flag a sphere
 };
 
 // Appends a contact for each pair that overlaps or whose gap closes within

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <set>
 #include <stdexcept>
@@ -1010,29 +1011,32 @@ TEST(Walls, ASurfaceAtRestHasTheVelocityPlusZero) {
 
 // wall_contacts passes over a wall at rest where a bound says the whole test
 // (make_wall_contact) must refuse the sphere: the same contacts as the whole
-// test on every sphere and wall. Spheres of mixed radii near a box, an
-// inclined plane (both at rest), a sliding plane, a plane at rest whose
-// normal is not of unit length, a spinning and a resting drum; gaps drawn around the skin, the reach and what the approach closes
-// in h, and spheres moving straight at a face with the gap set to that
-// distance as computed and one float either side of it.
-TEST(Walls, PassedOverOnlyWhereTheWholeTestRefuses) {
-  std::mt19937_64 rng(97);
+// test on every sphere and wall. n spheres of mixed radii near `walls`
+// (among them a box and a plane through (0.5, 0, 0) with the normal
+// (1, 2, 3), both at rest); gaps drawn around the skin, the reach and what
+// the approach closes in h, and spheres moving straight at the box's floor
+// with the gap set to that distance as computed and one float either side
+// of it. `odd`: some spheres also with a NaN or infinite velocity or
+// position, or a velocity of signed zeros.
+void expect_passed_over_only_where_refused(const Walls& walls, std::size_t n, std::uint64_t seed, bool odd) {
+  std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(0, 1);
   const real h = real(1e-3);
-  Walls walls;
-  walls.boxes.push_back({{0, 0, 0}, {1, 1, 1}, 0, {}});
-  walls.planes.push_back({{real(0.5), 0, 0}, Vec3(1, 2, 3) / length(Vec3(1, 2, 3)), 0, {}});
-  walls.planes.push_back({{0, 0, real(0.9)}, {0, 0, -1}, 0, {0, 0, real(0.2)}});
-  walls.planes.push_back({{0, 0, real(0.02)}, {0, 0, 2}, 0, {}});  // not unit: never passed over
-  walls.cylinders.push_back({{real(0.5), real(0.5), 0}, {0, 0, 1}, real(0.45), 0, true, real(3), 0});
-  walls.cylinders.push_back({{real(0.5), real(0.5), 0}, {0, 0, 1}, real(0.48), 0, true, 0, 0});
   const std::vector<WallShape> shapes = wall_shapes(walls);
-  ASSERT_EQ(shapes.size(), 11u);
-  ASSERT_EQ(shapes[7].direction.z, real(1)) << "premise: shapes[7] is the box's floor (the planes come first)";
-  const std::size_t n = 30000;
+  const Vec3 incline = Vec3(1, 2, 3) / length(Vec3(1, 2, 3));
+  std::size_t floor_at = shapes.size(), incline_at = shapes.size();
+  for (std::size_t k = 0; k < shapes.size(); ++k) {
+    if (shapes[k].kind != WallShape::Kind::half_space) continue;
+    if (shapes[k].direction == Vec3(0, 0, 1) && shapes[k].point.z == 0) floor_at = std::min(floor_at, k);
+    if (shapes[k].direction == incline) incline_at = k;
+  }
+  ASSERT_LT(floor_at, shapes.size()) << "premise: a box's floor";
+  ASSERT_LT(incline_at, shapes.size()) << "premise: the inclined plane";
+  const WallShape &floor = shapes[floor_at], &inclined = shapes[incline_at];
   std::vector<Vec3> pos(n), vel(n), omega(n);
   std::vector<real> radius(n), inv_mass(n, 1), inv_inertia(n, 1), reach(n);
   std::vector<std::uint32_t> material(n, 0);
+  const real nan = std::numeric_limits<real>::quiet_NaN(), inf = std::numeric_limits<real>::infinity();
   for (std::size_t i = 0; i < n; ++i) {
     const real r = real(0.005 + 0.015 * u(rng));
     radius[i] = r;
@@ -1045,10 +1049,7 @@ TEST(Walls, PassedOverOnlyWhereTheWholeTestRefuses) {
     const real gap = real(gaps[i % 4 == 3 ? 3 : (i / 4) % 4] * (0.98 + 0.04 * u(rng)));
     if (face == 0) p.z = r + gap;
     if (face == 1) p.x = r + gap;
-    if (face == 2) {
-      const Vec3 nn = shapes[0].direction;  // planes come first (wall_shapes)
-      p = p - nn * (dot(p - shapes[0].point, nn) - r - gap);
-    }
+    if (face == 2) p = p - inclined.direction * (dot(p - inclined.point, inclined.direction) - r - gap);
     if (i % 16 == 5) {  // straight at the floor, the gap what the approach closes, as computed, and a float off
       const real s = real(10 * u(rng));
       vel[i] = Vec3(0, 0, -s);
@@ -1056,9 +1057,17 @@ TEST(Walls, PassedOverOnlyWhereTheWholeTestRefuses) {
       const int off = static_cast<int>((i / 16) % 3) - 1;
       const real target = off == 0 ? closes : std::nextafter(closes, off < 0 ? real(0) : real(1));
       p = Vec3(p.x, p.y, r);
-      const WallShape& floor = shapes[7];  // the box's -z face
       for (int t = 0; t < 64 && dot(p - floor.point, floor.direction) - r != target; ++t)
         p.z = p.z + (target - (dot(p - floor.point, floor.direction) - r));
+    }
+    if (odd && i % 7 == 2) {
+      switch ((i / 7) % 5) {
+        case 0: vel[i].y = nan; break;
+        case 1: vel[i].x = -inf; break;
+        case 2: p.z = nan; break;
+        case 3: p.x = inf; break;
+        default: vel[i] = Vec3(real(-0.0), real(0), real(-0.0)); break;
+      }
     }
     pos[i] = p;
   }
@@ -1078,7 +1087,7 @@ TEST(Walls, PassedOverOnlyWhereTheWholeTestRefuses) {
         ++by_approach;
     }
     if (i % 16 == 5) {
-      const real gap = dot(pos[i] - shapes[7].point, shapes[7].direction) - radius[i];
+      const real gap = dot(pos[i] - floor.point, floor.direction) - radius[i];
       on_the_edge += gap == -vel[i].z * h ? 1 : 0;
     }
   }
@@ -1088,6 +1097,35 @@ TEST(Walls, PassedOverOnlyWhereTheWholeTestRefuses) {
   EXPECT_EQ(std::memcmp(passed.data(), whole.data(), sizeof(Contact) * whole.size()), 0);
   EXPECT_GT(by_approach, n / 50) << "premise: contacts the approach alone makes at walls at rest";
   EXPECT_GT(on_the_edge, n / 200) << "premise: gaps exactly what the approach closes";
+}
+
+// Among a sliding plane, a plane at rest whose normal is not of unit length
+// (never passed over), a spinning and a resting drum: each sphere's walls
+// tested one by one.
+TEST(Walls, PassedOverOnlyWhereTheWholeTestRefuses) {
+  Walls walls;
+  walls.boxes.push_back({{0, 0, 0}, {1, 1, 1}, 0, {}});
+  walls.planes.push_back({{real(0.5), 0, 0}, Vec3(1, 2, 3) / length(Vec3(1, 2, 3)), 0, {}});
+  walls.planes.push_back({{0, 0, real(0.9)}, {0, 0, -1}, 0, {0, 0, real(0.2)}});
+  walls.planes.push_back({{0, 0, real(0.02)}, {0, 0, 2}, 0, {}});  // not unit: never passed over
+  walls.cylinders.push_back({{real(0.5), real(0.5), 0}, {0, 0, 1}, real(0.45), 0, true, real(3), 0});
+  walls.cylinders.push_back({{real(0.5), real(0.5), 0}, {0, 0, 1}, real(0.48), 0, true, 0, 0});
+  ASSERT_EQ(wall_shapes(walls).size(), 11u);
+  expect_passed_over_only_where_refused(walls, 30000, 97, false);
+}
+
+// Where every wall is passable (here the box and the inclined plane), the
+// spheres near none are found four at a time first (near_walls): the same
+// contacts, past the parallel threshold and below it, with a count that
+// leaves a tail of one to three, and with odd values among the spheres.
+TEST(Walls, SpheresNearNoWallFoundInLanesAreThoseTheWholeTestRefuses) {
+  Walls walls;
+  walls.boxes.push_back({{0, 0, 0}, {1, 1, 1}, 0, {}});
+  walls.planes.push_back({{real(0.5), 0, 0}, Vec3(1, 2, 3) / length(Vec3(1, 2, 3)), 0, {}});
+  ASSERT_EQ(wall_shapes(walls).size(), 7u);
+  expect_passed_over_only_where_refused(walls, 30001, 98, false);
+  expect_passed_over_only_where_refused(walls, 30003, 99, true);
+  expect_passed_over_only_where_refused(walls, 4003, 100, true);
 }
 
 // Two runs read as one list (Runs, the CPU's contact search): the search's
