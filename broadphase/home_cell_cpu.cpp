@@ -171,9 +171,22 @@ void HomeCellCpu::run(const SpheresIn& s, real margin, const HomeGrid& g, std::v
       const std::size_t end = std::min(n, (static_cast<std::size_t>(c) + 1) * kChunk);
       for (std::size_t i = static_cast<std::size_t>(c) * kChunk; i < end; ++i) {
         const auto si = static_cast<std::uint32_t>(i);
-        tests += traverse_home_sphere(
-            si, keys[i], m_sorted[i], g, lb, [&](std::uint32_t j) -> const Record& { return m_sorted[j]; }, margin,
-            [&](std::uint32_t j) { local.push_back(ordered_pair(m_ids[i], m_ids[j])); });
+        // Each candidate written, kept by moving on past it where it
+        // overlaps: no branch on the test.
+        const Record own = m_sorted[i];
+        for_each_candidate_range(si, keys[i], g, lb, [&](std::uint32_t begin, std::uint32_t end) {
+          if (end <= begin) return;
+          std::size_t at = local.size();
+          local.resize(at + (end - begin));
+          Pair* to = local.data();
+          for (std::uint32_t j = begin; j < end; ++j) {
+            const Record& o = m_sorted[j];
+            to[at] = ordered_pair(m_ids[i], m_ids[j]);
+            at += spheres_overlap(own.centre, own.radius, o.centre, o.radius, margin) ? 1 : 0;
+          }
+          tests += end - begin;
+          local.resize(at);
+        });
       }
       m_test_chunks[static_cast<std::size_t>(c)] = tests;
     };

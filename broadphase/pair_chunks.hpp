@@ -29,11 +29,13 @@ inline void gather_pair_chunks(const std::vector<std::vector<Pair>>& chunks, con
                          " MiB) found before it ran out; so many spheres overlap (coincident centres?) that "
                          "their pairs do not fit");
   }
-  std::size_t at = 0;
-  for (const auto& local : chunks) {
-    std::copy(local.begin(), local.end(), out.begin() + static_cast<std::ptrdiff_t>(at));
-    at += local.size();
-  }
+  // Each chunk's place, then the copies on all threads.
+  std::vector<std::size_t> place(chunks.size() + 1, 0);
+  for (std::size_t c = 0; c < chunks.size(); ++c) place[c + 1] = place[c] + chunks[c].size();
+  const auto count = static_cast<std::ptrdiff_t>(chunks.size());
+#pragma omp parallel for schedule(dynamic, 1) if (total >= (std::size_t(1) << 16))
+  for (std::ptrdiff_t c = 0; c < count; ++c)
+    std::copy(chunks[c].begin(), chunks[c].end(), out.begin() + static_cast<std::ptrdiff_t>(place[c]));
 }
 
 }  // namespace marbles::broadphase
