@@ -626,13 +626,16 @@ void ContactSolver::size_records(std::size_t count) const {
   m_record_count = count;
 }
 
-// The GPU's max_overlap_kernel on the CPU.
+// The GPU's max_overlap_kernel on the CPU, in chunks taken in turn: with
+// halves, one thread took a third longer than the other (settle scene of
+// 10^5, 2 threads: 1.05 -> 0.90 ms a step in chunks). The largest is the
+// same in any order.
 real ContactSolver::deepest_overlap(const BodiesView& bodies, const std::vector<WallShape>& walls) const {
   const auto n = static_cast<std::ptrdiff_t>(m_record_count);
   const SweepRecords& records = m_records;
   const WallShape* ws = walls.data();
   real deepest = 0;
-#pragma omp parallel for schedule(static) reduction(max : deepest) if (n > 20000)
+#pragma omp parallel for schedule(dynamic, 8192) reduction(max : deepest) if (n > 20000)
   for (std::ptrdiff_t k = 0; k < n; ++k)
     deepest = std::max(deepest, overlap_ratio(load_position_contact(records, static_cast<std::uint32_t>(k)),
                                               bodies, ws));
