@@ -17,9 +17,11 @@
 // doubles), and Wide, 32 bytes (8 floats or 4 doubles), which the solver
 // runs where the CPU has AVX2 or AVX-512 (solver.cpp picks at run time and
 // compiles those sweeps alone for them). The math is written once, for
-// either vector type V; a Wide block moves its contacts and bodies as two L
-// blocks. Every function here is always inlined, so a Wide one is compiled
-// as part of its AVX caller and never on its own with a 16-byte baseline.
+// either vector type V; a Wide block moves its contacts and bodies in
+// 32-byte moves in float (load_wide_bodies and the Wide load_words below)
+// and as two L blocks in double. Every function here is always inlined, so
+// a Wide one is compiled as part of its AVX caller and never on its own
+// with a 16-byte baseline.
 #pragma once
 
 #include <cmath>
@@ -289,8 +291,9 @@ MARBLES_LANE void store_words(Real4* p, L r[4]) {
 // block, the records' and the bodies' alike, and each store moves them back
 // the same way. Lane by lane the arithmetic is the same whichever contact a
 // lane holds. Against two L blocks joined (16-byte loads, 4 x 4 transposes,
-// a join a field), a block moves its words with about a third fewer
-// instructions (docs/architecture.md "The wide sweep's moves within halves").
+// a join a field), the sweep takes about a quarter fewer instructions
+// (docs/architecture.md "The CPU sweep's wide moves, and the walls four at
+// a time").
 inline constexpr std::uint32_t kWideLane[8] = {0, 2, 4, 6, 1, 3, 5, 7};
 
 MARBLES_LANE Wide wide_at(const void* p) {
@@ -551,15 +554,18 @@ MARBLES_LANE void store_bodies_of(SolverBody* bodies, const SweepRecords& s, std
 template <class V>
 MARBLES_LANE void load_arms_of(const SweepRecords& s, std::uint32_t k, ContactLanes<V>& c) {
 #if !defined(MARBLES_DOUBLE)
-  if constexpr (sizeof(V) <= sizeof(Wide)) {
+  constexpr bool in_words = sizeof(V) <= sizeof(Wide);  // load_words' forms (float)
+#else
+  constexpr bool in_words = false;
+#endif
+  if constexpr (in_words) {
     V r[4];
     load_words(s.arms + k, r);
     c.ra = r[0], c.rb = r[1], c.friction = r[2], c.rolling_friction = r[3];
-    return;
+  } else {
+    const ContactLanes<V> a = load_records_of<true, false, V>(s, k);
+    c.ra = a.ra, c.rb = a.rb, c.friction = a.friction, c.rolling_friction = a.rolling_friction;
   }
-#endif
-  const ContactLanes<V> a = load_records_of<true, false, V>(s, k);
-  c.ra = a.ra, c.rb = a.rb, c.friction = a.friction, c.rolling_friction = a.rolling_friction;
 }
 
 // A block's bodies in and out (load_bodies_of, store_bodies_of). The
