@@ -717,6 +717,8 @@ MARBLES_LANE MaskOf<V> has_minus_zero(const V3<V>& v) {
 template <bool Friction, bool Rolling, class V>
 MARBLES_LANE bool all_idle(const ContactLanes<V>& c, const BodyLanes<V>& A, const BodyLanes<V>& B, real inv_h) {
   MaskOf<V> idle = bits_of(c.normal_impulse) == MaskOf<V>{};
+  for (std::uint32_t l = 0; l < width<V>; ++l)  // a lane with a load: busy (the loaded part's blocks, at once)
+    if (!idle[l]) return false;
   if constexpr (Friction) idle &= is_plus_zero(c.tangent_impulse);
   if constexpr (Rolling) idle &= is_plus_zero(c.rolling_impulse);
   idle &= ~(has_minus_zero(A.v) | has_minus_zero(A.w) | has_minus_zero(B.v) | has_minus_zero(B.w));
