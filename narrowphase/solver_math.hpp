@@ -656,10 +656,10 @@ MARBLES_HD_INLINE bool project_one(const Contact& c, const BodiesView& bodies, c
   const real ra = bodies.radius[c.a], rb = bodies.radius[c.b];
   const Vec3 d = bodies.position[c.a] - bodies.position[c.b];
   const real dist = length(d);
-  const Vec3 n = dist > real(1e-7) * (ra + rb) ? d / dist : c.normal;
   const real r_min = ra < rb ? ra : rb;
   const real move = projection_step(dist - ra - rb, s.slop * r_min, s.beta, s.max_correction * r_min);
   if (move <= 0) return false;
+  const Vec3 n = dist > real(1e-7) * (ra + rb) ? d / dist : c.normal;  // only for a move (three divisions)
   bodies.position[c.a] += n * (move * inv_ma / k);
   bodies.position[c.b] -= n * (move * inv_mb / k);
   return move > s.settled_move * r_min;
