@@ -102,7 +102,7 @@ void sphere_contacts_in_runs(const BodiesView& bodies, const IndexPair* pairs, s
   join_parts(rest, parts, from, threads);
 }
 
-// Spheres near[i] that some wall does not pass over, where every wall is
+// Spheres near[i] that some wall may not pass over, where every wall is
 // passable (a half-space at rest: wall_passable), four at a time: each
 // wall's pass-over test (wall_clearance, then wall_passed_over's gap and
 // comparisons) in the lanes of 16-byte vectors, the same expressions in the
@@ -140,12 +140,8 @@ void near_walls(const BodiesView& b, const std::vector<WallShape>& walls, real h
     }
     for (std::size_t l = 0; l < w; ++l) out[i + l] = any[l] != 0;
   }
-  for (std::size_t i = static_cast<std::size_t>(blocks) * w; i < n; ++i) {
-    const WallClearance clearance = wall_clearance(b, static_cast<std::uint32_t>(i), h, reach);
-    out[i] = 0;
-    for (const WallShape& wall : walls)
-      if (!wall_passed_over(wall, b, static_cast<std::uint32_t>(i), clearance)) out[i] = 1;
-  }
+  // The last few: the sphere loop's own test decides them.
+  for (std::size_t i = static_cast<std::size_t>(blocks) * w; i < n; ++i) out[i] = 1;
 }
 
 template <class C>
