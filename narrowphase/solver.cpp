@@ -79,13 +79,13 @@ void sweep_rest(const SweepRecords& s, std::uint32_t k, std::uint32_t end, Solve
 // Block t of a colour's sweep: width<V> records side by side
 // (solver_lanes.hpp, the same bits as solve_record), the bodies of the next
 // ones asked for first.
-template <class V, bool Friction, bool Rolling>
+template <class V, bool Friction, bool Rolling, bool Uniform>
 [[gnu::always_inline]] inline void sweep_block(const SweepRecords& s, std::uint32_t begin, std::uint32_t end,
                                                std::ptrdiff_t t, SolverBody* bodies, real inv_h) {
   constexpr std::uint32_t w = lanes::width<V>;
   const std::uint32_t k = begin + static_cast<std::uint32_t>(t) * w;
   for (std::uint32_t l = 0; l < w; ++l) prefetch_bodies(s.bodies[std::min(k + kPrefetchAhead + l, end - 1)], bodies);
-  lanes::solve_block<Friction, Rolling, V>(s, k, bodies, inv_h);
+  lanes::solve_block_as<Friction, Rolling, V, Uniform>(s, k, bodies, inv_h);
 }
 
 // The sweep over one colour, its two parts ([begin, split) the contacts that
@@ -94,11 +94,22 @@ template <class V, bool Friction, bool Rolling>
 // that each thread takes as many of the unloaded part's blocks, which are
 // mostly idle (lanes::all_idle), as the other, and works on the same half of
 // the colour's spheres in both; then each part's rest in blocks of lanes::W
-// and one by one. Defined once per lane kind, each compiled for its
-// instruction set (ATTRIBUTE). The OpenMP loops must sit in that function:
-// their outlined bodies take the target of the function they are written
-// in, not of the callee inlined into it. No FMA in any target, so every
-// operation rounds as the scalar's.
+// and one by one; the blocks' form, with the records' arms or without
+// (SweepRecords::uniform), chosen once a colour. Defined once per lane
+// kind, each compiled for its instruction set (ATTRIBUTE). The OpenMP
+// loops must sit in that function: their outlined bodies take the target
+// of the function they are written in, not of the callee inlined into it.
+// No FMA in any target, so every operation rounds as the scalar's.
+#define MARBLES_SWEEP_BLOCKS(V, UNIFORM)                                                                         \
+  _Pragma("omp parallel if (end - begin >= kParallelFrom)")                                                      \
+  {                                                                                                              \
+    _Pragma("omp for schedule(static) nowait")                                                                   \
+    for (std::ptrdiff_t t = 0; t < loaded; ++t)                                                                  \
+      sweep_block<V, Friction, Rolling, UNIFORM>(s, begin, split, t, bodies, inv_h);                            \
+    _Pragma("omp for schedule(static) nowait")                                                                   \
+    for (std::ptrdiff_t t = 0; t < unloaded; ++t)                                                                \
+      sweep_block<V, Friction, Rolling, UNIFORM>(s, split, end, t, bodies, inv_h);                              \
+  }
 #define MARBLES_SWEEP_RANGE(NAME, ATTRIBUTE, V)                                                                  \
   template <bool Friction, bool Rolling>                                                                         \
   [[ATTRIBUTE]] void NAME(const SweepRecords& s, std::uint32_t begin, std::uint32_t split, std::uint32_t end,    \
@@ -106,12 +117,10 @@ template <class V, bool Friction, bool Rolling>
     constexpr std::uint32_t w = lanes::width<V>;                                                                 \
     const auto loaded = static_cast<std::ptrdiff_t>((split - begin) / w);                                        \
     const auto unloaded = static_cast<std::ptrdiff_t>((end - split) / w);                                        \
-    _Pragma("omp parallel if (end - begin >= kParallelFrom)")                                                    \
-    {                                                                                                            \
-      _Pragma("omp for schedule(static) nowait")                                                                 \
-      for (std::ptrdiff_t t = 0; t < loaded; ++t) sweep_block<V, Friction, Rolling>(s, begin, split, t, bodies, inv_h); \
-      _Pragma("omp for schedule(static) nowait")                                                                 \
-      for (std::ptrdiff_t t = 0; t < unloaded; ++t) sweep_block<V, Friction, Rolling>(s, split, end, t, bodies, inv_h); \
+    if (s.arms) {                                                                                                \
+      MARBLES_SWEEP_BLOCKS(V, false)                                                                             \
+    } else {                                                                                                     \
+      MARBLES_SWEEP_BLOCKS(V, true)                                                                              \
     }                                                                                                            \
     sweep_rest<Friction, Rolling>(s, begin + static_cast<std::uint32_t>(loaded) * w, split, bodies, inv_h);      \
     sweep_rest<Friction, Rolling>(s, split + static_cast<std::uint32_t>(unloaded) * w, end, bodies, inv_h);      \
@@ -122,6 +131,7 @@ MARBLES_SWEEP_RANGE(sweep_range_avx2, gnu::target("avx2"), lanes::Wide)
 // vectors stay in registers (stack moves in the sweep 264 -> 94).
 MARBLES_SWEEP_RANGE(sweep_range_avx512, gnu::target("avx2,avx512f,avx512vl,avx512dq,avx512bw"), lanes::Wide)
 #undef MARBLES_SWEEP_RANGE
+#undef MARBLES_SWEEP_BLOCKS
 
 template <bool Friction, bool Rolling>
 auto sweep_for(SweepLanes lanes) {
@@ -410,16 +420,17 @@ void ContactSolver::make_records(Runs<const Contact> found, const std::uint32_t*
 
 void ContactSolver::make_records(Runs<const FoundContact> found, const std::uint32_t* places, ColourRanges& colours,
                                  const BodiesView& world, const PairTable& table,
-                                 const std::vector<WallShape>& walls) {
+                                 const std::vector<WallShape>& walls, const UniformArms* uniform) {
   const WallShape* ws = walls.data();
-  make_records_with(found, places, colours, world,
-                    [&world, &table, ws](const FoundContact& f) { return whole_contact(f, world, table, ws); });
+  make_records_with(
+      found, places, colours, world,
+      [&world, &table, ws](const FoundContact& f) { return whole_contact(f, world, table, ws); }, uniform);
 }
 
 template <class C, class Whole>
 void ContactSolver::make_records_with(Runs<const C> found, const std::uint32_t* places, ColourRanges& colours,
-                                      const BodiesView& world, Whole&& whole) {
-  size_records(colours.size());
+                                      const BodiesView& world, Whole&& whole, const UniformArms* uniform) {
+  size_records(colours.size(), uniform);
   m_packed_from = nullptr, m_pending_from = nullptr, m_made = true;
   const real rest = m_settings.rest_speed;
   colours.fast_approach = m_settings.rolling
@@ -610,12 +621,13 @@ int ContactSolver::project_packed(const ColourRanges& colours, const BodiesView&
   return sweeps;
 }
 
-void ContactSolver::size_records(std::size_t count) const {
+void ContactSolver::size_records(std::size_t count, const UniformArms* uniform) const {
   // The rolling words only with rolling resistance (contact_of_record reads
-  // them where they are); every other array as the CPU's sweeps read them.
-  const bool rolling = m_settings.rolling;
-  m_record_words.resize((SweepRecords::bytes_for(count, true, true, rolling) + sizeof(Real4) - 1) / sizeof(Real4));
-  m_records = SweepRecords::in(m_record_words.data(), count, true, true, {}, rolling);
+  // them where they are), the arms only where they differ; every other
+  // array as the CPU's sweeps read them.
+  const bool rolling = m_settings.rolling, arms = uniform == nullptr;
+  m_record_words.resize((SweepRecords::bytes_for(count, true, arms, rolling) + sizeof(Real4) - 1) / sizeof(Real4));
+  m_records = SweepRecords::in(m_record_words.data(), count, true, arms, arms ? UniformArms{} : *uniform, rolling);
   if (m_settings.restitution) {
     m_impact_words.resize(count);
     m_impacts = {m_impact_words.data(), nullptr};

@@ -143,9 +143,13 @@ class ContactSolver {
                     const BodiesView& world);
   // The same from the contacts as found (the CPU step's), each made whole
   // (whole_contact) from the world's bodies, the pair table and the walls
-  // the search used.
+  // the search used. `uniform` (not null): every contact's arms and
+  // friction coefficients are these (UniformArms: one radius, one pair of
+  // coefficients, as the GPU's records take them), and the records leave
+  // their arms word out.
   void make_records(Runs<const FoundContact> found, const std::uint32_t* places, ColourRanges& colours,
-                    const BodiesView& world, const PairTable& table, const std::vector<WallShape>& walls);
+                    const BodiesView& world, const PairTable& table, const std::vector<WallShape>& walls,
+                    const UniformArms* uniform = nullptr);
   // solve_velocities and project_positions on the made records.
   void solve_records(const ColourRanges& colours, const BodiesView& bodies, real h);
   int project_records(const ColourRanges& colours, const BodiesView& bodies, const std::vector<WallShape>& walls) const;
@@ -179,13 +183,13 @@ class ContactSolver {
                      bool rebounds) const;
   void impacts(const ColourRanges& colours, SolverBody* bodies, std::size_t body_count, real h);
   // m_records over m_record_words and m_impacts over m_impact_words for
-  // `count` contacts.
-  void size_records(std::size_t count) const;
+  // `count` contacts; without the arms array where `uniform` gives them.
+  void size_records(std::size_t count, const UniformArms* uniform = nullptr) const;
   // make_records' body for either form of the found contacts: whole(found
   // contact) is the Contact its record is made from.
   template <class C, class Whole>
   void make_records_with(Runs<const C> found, const std::uint32_t* places, ColourRanges& colours,
-                         const BodiesView& world, Whole&& whole);
+                         const BodiesView& world, Whole&& whole, const UniformArms* uniform = nullptr);
   // The sweeps in the local order (LocalOrder) on the packed records.
   void local_sweeps(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies, real inv_h);
 

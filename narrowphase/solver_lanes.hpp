@@ -187,6 +187,46 @@ struct BodyLanes {
 // may be a wall: its lane holds the wall's velocity (the record's extra
 // word, read only for walls), zero spin and zero inverse mass and inertia.
 
+// x in every lane, its bits kept (x + V{} would turn a -0 into +0), as one
+// shuffle of lane 0: filled lane by lane, or from a braced list, GCC stored
+// pairs of lanes and loaded the vector back, a stall on store forwarding in
+// every block.
+template <class V, std::size_t... I>
+MARBLES_LANE V splat(real x, std::index_sequence<I...>) {
+  const L first{x};
+  return __builtin_shufflevector(first, first, (I * 0)...);
+}
+template <class V>
+MARBLES_LANE V splat(real x) {
+  return splat<V>(x, std::make_index_sequence<width<V>>{});
+}
+
+// The contact of a block that lane l holds in a Wide block's moves (float:
+// load_words and the wide body moves below).
+inline constexpr std::uint32_t kWideLane[8] = {0, 2, 4, 6, 1, 3, 5, 7};
+// The record of a block that lane l of V's moves holds.
+template <class V>
+MARBLES_LANE std::uint32_t lane_of(std::uint32_t l) {
+  if constexpr (sizeof(V) == sizeof(L)) return l;
+  else return kWideLane[l];
+}
+
+// The arms and friction coefficients of records k.. where the records leave
+// them out (no arms array: every contact has the same, SweepRecords::
+// uniform): ra the radius, rb the radius or +0 where body b is a wall, the
+// pair table's coefficients, as load_record gives them; lane l holds record
+// k + lane_of<V>(l). The walls are read lane by lane: read as two vectors
+// of body pairs and shuffled, the compiler kept the sweep's body pairs in
+// mask registers, and the sweep was no faster than with the arms words.
+template <class V>
+MARBLES_LANE void uniform_arms(const SweepRecords& s, std::uint32_t k, ContactLanes<V>& c) {
+  MaskOf<V> wall;
+  for (std::uint32_t l = 0; l < width<V>; ++l) wall[l] = is_wall(s.bodies[k + lane_of<V>(l)].b) ? -1 : 0;
+  const V r = splat<V>(s.uniform.radius);
+  c.ra = r, c.rb = (V)((MaskOf<V>)r & ~wall);  // +0 for a wall
+  c.friction = splat<V>(s.uniform.friction), c.rolling_friction = splat<V>(s.uniform.rolling_friction);
+}
+
 // Record k as the sweep's contact (load_sweep_contact, solver_math.hpp).
 template <bool Arms, bool Rolling>
 MARBLES_LANE ContactLanes<L> load_records_each(const SweepRecords& s, std::uint32_t k) {
@@ -198,8 +238,10 @@ MARBLES_LANE ContactLanes<L> load_records_each(const SweepRecords& s, std::uint3
     c.normal.x[l] = g.x, c.normal.y[l] = g.y, c.normal.z[l] = g.z;
     c.separation[l] = g.w;
     if constexpr (Arms) {
-      const Real4 m = s.arms[k + l];
-      c.ra[l] = m.x, c.rb[l] = m.y, c.friction[l] = m.z, c.rolling_friction[l] = m.w;
+      if (s.arms) {
+        const Real4 m = s.arms[k + l];
+        c.ra[l] = m.x, c.rb[l] = m.y, c.friction[l] = m.z, c.rolling_friction[l] = m.w;
+      }
     }
     if constexpr (Rolling) {
       const Real4 r = s.rolling[k + l];
@@ -207,6 +249,8 @@ MARBLES_LANE ContactLanes<L> load_records_each(const SweepRecords& s, std::uint3
       c.twisting_friction[l] = r.w;
     }
   }
+  if constexpr (Arms)
+    if (!s.arms) uniform_arms(s, k, c);
   return c;
 }
 
@@ -294,7 +338,6 @@ MARBLES_LANE void store_words(Real4* p, L r[4]) {
 // a join a field), the sweep takes about a quarter fewer instructions
 // (docs/architecture.md "The CPU sweep's wide moves, and the walls four at
 // a time").
-inline constexpr std::uint32_t kWideLane[8] = {0, 2, 4, 6, 1, 3, 5, 7};
 
 MARBLES_LANE Wide wide_at(const void* p) {
   Wide out;
@@ -337,8 +380,12 @@ MARBLES_LANE ContactLanes<V> load_records(const SweepRecords& s, std::uint32_t k
   load_words(s.geometry + k, r);
   c.normal = {r[0], r[1], r[2]}, c.separation = r[3];
   if constexpr (Arms) {
-    load_words(s.arms + k, r);
-    c.ra = r[0], c.rb = r[1], c.friction = r[2], c.rolling_friction = r[3];
+    if (s.arms) {
+      load_words(s.arms + k, r);
+      c.ra = r[0], c.rb = r[1], c.friction = r[2], c.rolling_friction = r[3];
+    } else {
+      uniform_arms(s, k, c);
+    }
   }
   if constexpr (Rolling) {
     load_words(s.rolling + k, r);
@@ -550,15 +597,18 @@ MARBLES_LANE void store_bodies_of(SolverBody* bodies, const SweepRecords& s, std
 }
 
 // The arms and friction coefficients of records k.. into c (the idle test
-// reads none of them: about half the blocks of a settling pile are idle).
-template <class V>
+// reads none of them: about half the blocks of a settling pile are idle);
+// with Uniform, from SweepRecords::uniform (the records have no arms).
+template <class V, bool Uniform = false>
 MARBLES_LANE void load_arms_of(const SweepRecords& s, std::uint32_t k, ContactLanes<V>& c) {
 #if !defined(MARBLES_DOUBLE)
   constexpr bool in_words = sizeof(V) <= sizeof(Wide);  // load_words' forms (float)
 #else
   constexpr bool in_words = false;
 #endif
-  if constexpr (in_words) {
+  if constexpr (Uniform && in_words) {
+    uniform_arms(s, k, c);
+  } else if constexpr (in_words) {
     V r[4];
     load_words(s.arms + k, r);
     c.ra = r[0], c.rb = r[1], c.friction = r[2], c.rolling_friction = r[3];
@@ -728,15 +778,19 @@ MARBLES_LANE bool all_idle(const ContactLanes<V>& c, const BodyLanes<V>& A, cons
   return true;
 }
 
-// solve_record on records k..k + width<V>, whose contacts share no sphere.
-template <bool Friction, bool Rolling, class V = L>
-MARBLES_LANE void solve_block(const SweepRecords& s, std::uint32_t k, SolverBody* bodies, real inv_h) {
+// solve_record on records k..k + width<V>, whose contacts share no sphere;
+// Uniform: the records have no arms (SweepRecords::uniform gives them). The
+// sweep picks the form once a colour (with a test in every block the
+// sweeps of the settle scene took 19.0 ms a step against 17.3 with the
+// arms words); solve_block picks it a block.
+template <bool Friction, bool Rolling, class V, bool Uniform>
+MARBLES_LANE void solve_block_as(const SweepRecords& s, std::uint32_t k, SolverBody* bodies, real inv_h) {
   ContactLanes<V> c = load_records_of<false, Rolling, V>(s, k);  // the arms once the block is known busy
   const BlockBodies<V> block(s, k);
   BodyLanes<V> A = block.load(bodies, s, k, false);
   BodyLanes<V> B = block.load(bodies, s, k, true);
   if (all_idle<Friction, Rolling>(c, A, B, inv_h)) return;
-  if constexpr (Friction || Rolling) load_arms_of<V>(s, k, c);
+  if constexpr (Friction || Rolling) load_arms_of<V, Uniform>(s, k, c);
   c.normal_mass = normal_mass_of(A, B);
   if constexpr (Friction) c.tangent_mass = tangent_mass_of(A, B, c.ra, c.rb);
   if constexpr (Rolling) c.rolling_mass = rolling_mass_of(A, B);
@@ -746,6 +800,11 @@ MARBLES_LANE void solve_block(const SweepRecords& s, std::uint32_t k, SolverBody
   block.store(bodies, s, k, false, A);
   block.store(bodies, s, k, true, B);
   store_record_impulses_of<Rolling, V>(c, s, k);
+}
+template <bool Friction, bool Rolling, class V = L>
+MARBLES_LANE void solve_block(const SweepRecords& s, std::uint32_t k, SolverBody* bodies, real inv_h) {
+  if (s.arms) solve_block_as<Friction, Rolling, V, false>(s, k, bodies, inv_h);
+  else solve_block_as<Friction, Rolling, V, true>(s, k, bodies, inv_h);
 }
 
 }  // namespace marbles::narrowphase::lanes

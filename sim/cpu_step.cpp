@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/bits.hpp"
 #include "core/error.hpp"
 #include "integrator/symplectic_euler.hpp"
 #include "narrowphase/colouring.hpp"
@@ -75,8 +76,10 @@ class CpuStep final : public StepBackend {
     const narrowphase::KeptMasks masks{m_kept_masks.data(), m_kept_colours};
     m_colouring.colour_and_place(contact_runs(), n, m_world.size(), m_colours, kept ? m_kept_colour.data() : nullptr,
                                  loads ? m_loaded.data() : nullptr, kept ? &masks : nullptr);
+    const narrowphase::UniformArms* uniform = uniform_arms();
     m_solver.make_records(contact_runs(), m_colouring.places(), m_colours, m_world.view(), m_model.pair_table(),
-                          m_walls);
+                          m_walls, uniform);
+    m_counters.uniform_arms += uniform && n > 0 ? 1 : 0;
     m_counters.colours = std::max(m_counters.colours, m_colours.colours);
     m_counters.overflow += m_colours.overflow();
   }
@@ -177,6 +180,25 @@ class CpuStep final : public StepBackend {
   }
 
  private:
+  // Where every material pair has the same friction and rolling friction
+  // (StepModel::uniform_pairs) and every sphere the same radius, bit for
+  // bit, every contact's arms word is the same (UniformArms: the radius,
+  // and +0 for a wall's arm), and the records leave it out, as the GPU's
+  // do: 16 bytes a contact fewer to write and to read in every sweep.
+  const narrowphase::UniformArms* uniform_arms() {
+    const BodiesView b = m_world.view();
+    if (!m_model.uniform_pairs || b.count == 0) return nullptr;
+    const auto n = static_cast<std::ptrdiff_t>(b.count);
+    const std::uint64_t first = bits_of_real(b.radius[0]);
+    bool mixed = false;
+#pragma omp parallel for schedule(static) reduction(|| : mixed) if (n > 20000)
+    for (std::ptrdiff_t i = 0; i < n; ++i) mixed = bits_of_real(b.radius[i]) != first || mixed;
+    if (mixed) return nullptr;
+    const narrowphase::PairCoefficients& c = m_model.pair_coefficients.front();
+    m_uniform = {b.radius[0], c.friction, c.rolling_friction};
+    return &m_uniform;
+  }
+
   // The watchdog's figures (watch_math.hpp); walls count only where they act.
   void watch(const BodiesView& b) {
     const auto n = static_cast<std::ptrdiff_t>(b.count);
@@ -197,6 +219,7 @@ class CpuStep final : public StepBackend {
   World m_world;
   std::vector<narrowphase::WallShape> m_walls;  // moving walls move
   World m_kept;             // the moving state at the start of the step (watchdog)
+  narrowphase::UniformArms m_uniform;  // uniform_arms()' answer
   std::vector<std::uint32_t> m_order;  // the last renumber's (its return)
   std::vector<narrowphase::WallShape> m_kept_walls;  // at the start of the step (the cache keeps its own)
   std::unique_ptr<broadphase::BroadPhase> m_broadphase;

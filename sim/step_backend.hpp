@@ -68,7 +68,7 @@ struct StepCounters {
   std::uint64_t cluster_stages = 0;   // one-launch stages (solve, position, impact) run as one cluster (CUDA, sm_90)
   std::uint64_t turn_launches = 0;    // sweep launches that visited a turn's range twice (CUDA: visit_sweeps)
   std::uint64_t range_groups = 0;     // launches that walked a run of small ranges in one block (CUDA: RangeGroup)
-  std::uint64_t uniform_arms = 0;     // substeps whose records left the arms word out (CUDA: UniformArms)
+  std::uint64_t uniform_arms = 0;     // substeps whose records left the arms word out (UniformArms)
   std::uint64_t impact_words = 0;     // substeps whose records kept whole impact words, not approach speeds (CUDA)
   std::uint64_t pair_redos = 0;       // substeps whose pairs or contacts outgrew their room: found again (CUDA)
   std::uint64_t grid_replans = 0;     // of those, the broad phase's grid outgrew its plan: found with a wait (CUDA)

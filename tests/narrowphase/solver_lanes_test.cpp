@@ -46,7 +46,10 @@ Vec3 unit(std::mt19937& rng) {
 
 // `count` contacts (W unless asked) on 2 count distinct spheres (some b
 // walls); `edge` picks values from the branch boundaries instead of the bulk.
-Case make_case(std::mt19937& rng, bool edge, std::uint32_t count = W) {
+// `uniform` (not null): every contact takes its arms and friction
+// coefficients from it, as contacts of one radius and one pair table entry
+// have them (a wall's arm +0).
+Case make_case(std::mt19937& rng, bool edge, std::uint32_t count = W, const UniformArms* uniform = nullptr) {
   std::uniform_real_distribution<real> u(-1, 1);
   std::uniform_int_distribution<int> pick(0, 7);
   Case out;
@@ -96,33 +99,49 @@ Case make_case(std::mt19937& rng, bool edge, std::uint32_t count = W) {
         default: break;
       }
     }
+    if (uniform) {
+      c.ra = uniform->radius, c.rb = wall ? real(0) : uniform->radius;
+      c.coeff.friction = uniform->friction, c.coeff.rolling_friction = uniform->rolling_friction;
+    }
     prepare_one(c, out.bodies.data());
     out.contacts.push_back(c);
   }
   return out;
 }
 
-// Records of `count` contacts (W unless asked) in 64-byte-aligned host memory.
+// Records of `count` contacts (W unless asked) in 64-byte-aligned host
+// memory; without the arms array where `uniform` gives the arms.
 struct RecordsMemory {
   std::uint32_t count;
   std::vector<unsigned char> bytes;
   explicit RecordsMemory(std::uint32_t n = W) : count(n), bytes(SweepRecords::bytes_for(n) + 64) {}
-  SweepRecords records() {
+  SweepRecords records(const UniformArms* uniform = nullptr) {
     void* aligned = bytes.data() + (64 - reinterpret_cast<std::uintptr_t>(bytes.data()) % 64);
-    return SweepRecords::in(aligned, count);
+    return SweepRecords::in(aligned, count, true, uniform == nullptr, uniform ? *uniform : UniformArms{});
   }
 };
 
-// A case twice: whole contacts, and the same packed into records.
+// The arms of a uniform case: a radius, and coefficients from the friction
+// limit's edges where `edge` (none, or never reached) or from the bulk.
+UniformArms uniform_arms_of(std::mt19937& rng, bool edge) {
+  std::uniform_real_distribution<real> u(-1, 1);
+  const real friction[3] = {real(0.5) + real(0.4) * u(rng), real(0), real(1e6)};
+  return {real(0.01) + real(0.005) * u(rng), friction[edge ? rng() % 3 : 0], real(0.02) + real(0.01) * u(rng)};
+}
+
+// A case twice: whole contacts, and the same packed into records (with
+// `uniform`, contacts of one radius and one pair of coefficients, their
+// records without arms).
 struct PackedCase {
   Case whole, packed;
   RecordsMemory memory;
   SweepRecords records;
-  PackedCase(std::uint32_t seed, bool edge, std::uint32_t count = W) : memory(count) {
+  PackedCase(std::uint32_t seed, bool edge, std::uint32_t count = W, bool uniform = false) : memory(count) {
     std::mt19937 rng(seed);
-    whole = make_case(rng, edge, count);
+    const UniformArms arms = uniform ? uniform_arms_of(rng, edge) : UniformArms{};  // the other cases' draws as before
+    whole = make_case(rng, edge, count, uniform ? &arms : nullptr);
     packed = whole;
-    records = memory.records();
+    records = memory.records(uniform ? &arms : nullptr);
     for (std::uint32_t k = 0; k < count; ++k) pack_sweep_record(packed.contacts[k], records, k);
   }
 };
@@ -147,9 +166,10 @@ template <bool Friction, bool Rolling>
 // solve_one contact by contact on the whole contacts, over three sweeps:
 // the impulses unpacked from the records and the bodies bit for bit.
 template <bool Friction, bool Rolling, bool Wide = false>
-void expect_lanes_equal_scalar(std::uint32_t seed, bool edge) {
+void expect_lanes_equal_scalar(std::uint32_t seed, bool edge, bool uniform = false) {
   constexpr std::uint32_t count = Wide ? WW : W;
-  PackedCase p(seed, edge, count);
+  PackedCase p(seed, edge, count, uniform);
+  ASSERT_EQ(p.records.arms == nullptr, uniform);
   Case &scalar = p.whole, &block = p.packed;
   const real inv_h = real(1000);
   for (int sweep = 0; sweep < 3; ++sweep) {  // later sweeps start from clamped impulses
@@ -207,6 +227,54 @@ TEST(SolverLanes, TheWideComparisonSeesOneBit) {
   solve_wide_block<true, true>(p.records, p.packed.bodies.data(), real(1000));
   for (std::uint32_t k = 0; k < WW; ++k) unpack_sweep_impulses(p.records, k, p.packed.contacts[k]);
   EXPECT_FALSE(same_bits(p.whole.contacts.data(), p.packed.contacts.data(), sizeof(Contact) * WW));
+}
+
+// Records without arms (every contact of one radius and one pair of
+// coefficients: SweepRecords::uniform, as the CPU step and the GPU make
+// them where that holds) solve as the whole contacts do, in both widths;
+// a wall's lane takes the arm +0.
+TEST(SolverLanes, UniformArmsEqualSolveOneBitForBit) {
+  over_cases(200, []<bool F, bool R>(std::uint32_t seed, bool edge) { expect_lanes_equal_scalar<F, R>(seed, edge, true); });
+  if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "skipped: this CPU has no AVX2";
+  over_cases(200, []<bool F, bool R>(std::uint32_t seed, bool edge) {
+    expect_lanes_equal_scalar<F, R, true>(seed, edge, true);
+  });
+}
+
+// It can fail: the uniform radius a millionth off, or a wall's arm taken
+// as a sphere's, is seen in either width.
+TEST(SolverLanes, UniformArmsComparisonSeesOneBit) {
+  auto differs = [](std::uint32_t count, auto&& change) {
+    // The first case with a wall among its contacts.
+    std::uint32_t seed = 1;
+    auto has_wall = [&] {
+      const PackedCase p(seed, false, count, true);
+      return std::any_of(p.whole.contacts.begin(), p.whole.contacts.end(), [](const Contact& c) { return is_wall(c.b); });
+    };
+    while (!has_wall()) ++seed;
+    PackedCase p(seed, false, count, true);
+    change(p);
+    for (Contact& c : p.whole.contacts) solve_one<true, true>(c, p.whole.bodies.data(), real(1000));
+    if (count == W) lanes::solve_block<true, true>(p.records, 0, p.packed.bodies.data(), real(1000));
+    else solve_wide_block<true, true>(p.records, p.packed.bodies.data(), real(1000));
+    for (std::uint32_t k = 0; k < count; ++k) unpack_sweep_impulses(p.records, k, p.packed.contacts[k]);
+    return !same_bits(p.whole.contacts.data(), p.packed.contacts.data(), sizeof(Contact) * count) ||
+           !same_bits(p.whole.bodies.data(), p.packed.bodies.data(), sizeof(SolverBody) * p.whole.bodies.size());
+  };
+  auto radius_off = [](PackedCase& p) { p.records.uniform.radius *= real(1 + 1e-6); };
+  // The oracle's walls given a sphere's arm (the rolling resistance's
+  // radius then differs): the lanes, which give them +0, part from it.
+  auto walls_as_spheres = [](PackedCase& p) {
+    int walls = 0;
+    for (Contact& c : p.whole.contacts)
+      if (is_wall(c.b)) c.rb = p.records.uniform.radius, ++walls;
+    ASSERT_GT(walls, 0);
+  };
+  EXPECT_TRUE(differs(W, radius_off));
+  EXPECT_TRUE(differs(W, walls_as_spheres));
+  if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "skipped: this CPU has no AVX2";
+  EXPECT_TRUE(differs(WW, radius_off));
+  EXPECT_TRUE(differs(WW, walls_as_spheres));
 }
 
 // The grouped moves (float: 4 x 4 transposes of record words and body

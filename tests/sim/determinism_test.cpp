@@ -106,6 +106,39 @@ TEST(Determinism, PourIsTheSameOnEveryRunAndThreadCount) {
 // restored, the run goes on with the same bits; a restored state without
 // colours (a format-1 checkpoint) or with an improper colouring colours
 // afresh, and the run still goes on, properly coloured.
+// Where every sphere has one radius and every material pair the same
+// friction and rolling friction, the CPU's records leave the arms word out
+// (narrowphase::UniformArms, as the GPU's do) and the sweeps take the arms
+// from the one word: the same bits as the records with arms, which the same
+// pour takes when a material no sphere uses has another friction (the pair
+// table no longer uniform). A pour of one radius, with walls at rest and
+// spinning (a wall's arm is +0) and two materials of one friction.
+TEST(Determinism, UniformArmsGiveTheBitsOfTheArmsWords) {
+  auto [s, g] = pour_scene(300, 5);
+  std::fill(g.radius.begin(), g.radius.end(), real(0.011));
+  scene::Scene apart = s;
+  scene::Material unused = s.materials[0];
+  unused.name = "unused";
+  unused.friction = 0.9;
+  apart.materials.push_back(unused);
+  Simulation uniform(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation arms(apart, make_world(apart, g), broadphase::Backend::cpu);
+  std::uint64_t uniform_substeps = 0, contacts = 0, substeps_with_contacts = 0;
+  for (int k = 0; k < 400; ++k) {
+    uniform.step();
+    arms.step();
+    ASSERT_EQ(uniform.last_step().contacts, arms.last_step().contacts) << "step " << k;
+    ASSERT_EQ(arms.last_step().uniform_arms, 0u) << "step " << k;
+    uniform_substeps += uniform.last_step().uniform_arms;
+    contacts += uniform.last_step().contacts;
+    substeps_with_contacts += uniform.last_step().contacts > 0 ? 1 : 0;
+    if (k % 10 == 9) ASSERT_EQ(state_hash(uniform.world()), state_hash(arms.world())) << "step " << k;
+  }
+  EXPECT_GT(contacts, 100000u);  // the pour reaches the floor and piles there
+  EXPECT_GE(uniform_substeps, substeps_with_contacts);  // every step with contacts solved records without arms
+  EXPECT_EQ(state_hash(uniform.world()), state_hash(arms.world()));
+}
+
 TEST(Determinism, KeptColoursTravelWithTheState) {
   auto [s, g] = pour_scene(400, 3);
   Simulation whole(s, make_world(s, g), broadphase::Backend::cpu);
