@@ -243,7 +243,7 @@ std::size_t ContactCache::restore_runs(Runs<C> contacts, std::size_t count, cons
   // searching all of them, and finds the same entry (keys are unique).
   // Entries of spheres that no longer exist (a >= count) are never matched.
   const std::size_t spheres = bodies.count;
-  key_runs(keys, m, spheres, m_first);
+  if (m_runs_spheres != spheres) key_runs(keys, m, spheres, m_first);
   const std::uint32_t* first = m_first.data();
   const auto n = static_cast<std::ptrdiff_t>(count);
   std::size_t matched = 0;
@@ -354,6 +354,7 @@ void ContactCache::store_from(std::uint32_t n, std::uint32_t groups, const Colou
   const std::uint32_t m = m_first[groups];
   CacheEntries& e = writable();
   e.resize(m);
+  m_runs_spheres = groups;  // m_first: the runs key_runs would find in the keys written below
 #pragma omp parallel for schedule(static) if (groups >= kParallelFrom)
   for (std::ptrdiff_t g = 0; g < static_cast<std::ptrdiff_t>(groups); ++g) {
     const auto a = static_cast<std::uint32_t>(g);

@@ -143,6 +143,7 @@ class ContactCache {
   void back_to_kept() {
     m_arrays.back_to_kept();
     m_matched.clear();
+    m_runs_spheres = kNoRuns;
   }
 
  private:
@@ -150,6 +151,7 @@ class ContactCache {
   // unless kept. Whatever the restore matched is of entries that go.
   CacheEntries& writable() {
     m_matched.clear();
+    m_runs_spheres = kNoRuns;
     return m_arrays.writable();
   }
   template <class C>
@@ -159,6 +161,11 @@ class ContactCache {
   // Scratch, reused.
   std::vector<std::uint8_t> m_matched;
   std::vector<std::uint32_t> m_order, m_first;
+  // m_first holds the entries' runs by sphere (key_runs) for this many
+  // spheres: the store's counting sort leaves them so, and the restore that
+  // follows reads them instead of finding them again. kNoRuns: it does not.
+  static constexpr std::size_t kNoRuns = ~std::size_t(0);
+  std::size_t m_runs_spheres = kNoRuns;
   std::vector<std::uint64_t> m_thread_used;  // kept_masks(): or_kept_colours' masks of the later threads
   IslandScratch m_islands;                   // restore(): the island rule's lists
   struct Stored {  // the impulses store() keeps of one contact
