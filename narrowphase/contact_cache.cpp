@@ -256,7 +256,7 @@ std::size_t ContactCache::restore_runs(Runs<C> contacts, std::size_t count, cons
       if (carried) carried[t] = 0;
       continue;
     }
-    restore_impulses(c, e.normal_impulse[k], e.tangent_impulse[k], e.rolling_impulse[k]);
+    restore_impulses(c, e.normal_impulse[k], e.tangent_impulse[k], e.rolling_zero ? Vec3{} : e.rolling_impulse[k]);
     if (carried) carried[t] = carries_load(e.normal_impulse[k]) ? 1 : 0;
     kept_colour[t] = colour ? colour[k] : kNoKeptColour;
     matched_entry[k] = 1;  // keys are unique: one contact per entry
@@ -291,7 +291,7 @@ void ContactCache::store(const std::vector<Contact>& contacts, const ColourRange
   std::uint32_t groups = 0;  // the largest a, plus one
   for (const Contact& c : contacts) groups = std::max(groups, c.a + 1);
   store_from(
-      static_cast<std::uint32_t>(contacts.size()), groups, ranges,
+      static_cast<std::uint32_t>(contacts.size()), groups, ranges, true,
       [cs](std::uint32_t t) { return BodyPair{cs[t].a, cs[t].b}; },
       [cs](std::uint32_t t) { return cs[t].normal_impulse; },
       [cs](std::uint32_t t) {
@@ -313,7 +313,7 @@ void ContactCache::store(const SweepRecords& records, std::uint32_t count, bool 
     return Stored{c.normal_impulse, c.tangent_impulse, c.rolling_impulse};
   };
   store_from(
-      count, spheres, ranges, [bodies](std::uint32_t t) { return bodies[t]; },
+      count, spheres, ranges, rolling, [bodies](std::uint32_t t) { return bodies[t]; },
       [&records](std::uint32_t t) { return impulse_word(records, t).x; }, impulses,
       [impulse, rolling_word, rolling](std::uint32_t t) {
         __builtin_prefetch(impulse + t);
@@ -322,8 +322,8 @@ void ContactCache::store(const SweepRecords& records, std::uint32_t count, bool 
 }
 
 template <class PairOf, class NormalOf, class Load, class Hint>
-void ContactCache::store_from(std::uint32_t n, std::uint32_t groups, const ColourRanges& ranges, PairOf&& pair_of,
-                              NormalOf&& normal_of, Load&& load, Hint&& hint) {
+void ContactCache::store_from(std::uint32_t n, std::uint32_t groups, const ColourRanges& ranges, bool rolling,
+                              PairOf&& pair_of, NormalOf&& normal_of, Load&& load, Hint&& hint) {
   // Only the sustained impulses of the velocity solve are carried over; an
   // impact's impulse (Contact::impact_impulse) is not a load. A contact
   // without load is kept for its colour alone, with no impulses (restored,
@@ -353,8 +353,11 @@ void ContactCache::store_from(std::uint32_t n, std::uint32_t groups, const Colou
       m_order);
   const std::uint32_t m = m_first[groups];
   CacheEntries& e = writable();
-  e.resize(m);
+  e.resize(m);  // entries past the last size made +0
   m_runs_spheres = groups;  // m_first: the runs key_runs would find in the keys written below
+  // Without rolling impulses, the rolling ones are written only where the
+  // entries may hold others (not known all +0).
+  const bool write_rolling = rolling || !e.rolling_zero;
 #pragma omp parallel for schedule(static) if (groups >= kParallelFrom)
   for (std::ptrdiff_t g = 0; g < static_cast<std::ptrdiff_t>(groups); ++g) {
     const auto a = static_cast<std::uint32_t>(g);
@@ -368,10 +371,11 @@ void ContactCache::store_from(std::uint32_t n, std::uint32_t groups, const Colou
       e.key[t] = cache_key(a, static_cast<std::uint32_t>(source[t] >> 32));
       e.normal_impulse[t] = loaded ? c.normal_impulse : real(0);
       e.tangent_impulse[t] = loaded ? c.tangent_impulse : Vec3{};
-      e.rolling_impulse[t] = loaded ? c.rolling_impulse : Vec3{};
+      if (write_rolling) e.rolling_impulse[t] = loaded ? c.rolling_impulse : Vec3{};
       e.colour[t] = colour_of[k];
     }
   }
+  e.rolling_zero = !rolling;
 }
 
 }  // namespace marbles::narrowphase

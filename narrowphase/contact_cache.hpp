@@ -39,6 +39,10 @@ struct CacheEntries {
   std::vector<real> normal_impulse;
   std::vector<Vec3> tangent_impulse, rolling_impulse;
   std::vector<std::uint8_t> colour;
+  // Every rolling impulse is known +0 (a store of contacts without rolling
+  // resistance wrote them so): the next such store leaves them, the restore
+  // reads none (12 bytes an entry each way). False: not known.
+  bool rolling_zero = false;
   std::size_t size() const { return key.size(); }
   void resize(std::size_t n) {
     key.resize(n);
@@ -175,8 +179,10 @@ class ContactCache {
   // pair_of(t) -> BodyPair, normal_of(t) -> its normal impulse, load(t) ->
   // Stored of contact t; hint(t) asks for what load(t) will read; a contact
   // whose a is not below `groups` is not kept (no lookup would find it).
+  // `rolling`: some contact may carry a rolling impulse (false: load(t)'s
+  // are all +0).
   template <class PairOf, class NormalOf, class Load, class Hint>
-  void store_from(std::uint32_t n, std::uint32_t groups, const ColourRanges& ranges, PairOf&& pair_of,
+  void store_from(std::uint32_t n, std::uint32_t groups, const ColourRanges& ranges, bool rolling, PairOf&& pair_of,
                   NormalOf&& normal_of, Load&& load, Hint&& hint);
   std::vector<std::uint64_t> m_source;   // store(): each place's b << 32 | contact
   std::vector<std::uint8_t> m_colour_of;  // store(): each contact's colour (kNoKeptColour: none)

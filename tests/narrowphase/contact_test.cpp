@@ -478,7 +478,9 @@ TEST(Solver, CacheFromTheRecordsEqualsCacheFromTheContacts) {
     // back_to_kept, what one given the kept entries does.
     auto restores_alike = [&](ContactCache& cache, const CacheEntries& entries, const char* what) {
       ContactCache fresh;
-      fresh.set_entries(entries);
+      CacheEntries plain = entries;
+      plain.rolling_zero = false;  // its rolling impulses read, not taken as +0
+      fresh.set_entries(plain);
       std::vector<Contact> x = contacts, y = contacts;
       std::vector<std::uint8_t> kept_x, kept_y, loaded_x, loaded_y;
       const std::size_t nx = cache.restore(x, bodies, real(9.81e-3), kept_x, &loaded_x);
@@ -488,6 +490,7 @@ TEST(Solver, CacheFromTheRecordsEqualsCacheFromTheContacts) {
           << what << ", terms " << terms;
     };
     const CacheEntries stored = from_records.entries();
+    EXPECT_EQ(stored.rolling_zero, !s.rolling) << "terms " << terms;
     restores_alike(from_records, stored, "after the store");
     from_records.keep();
     from_records.store(*records, static_cast<std::uint32_t>(contacts.size() / 3), s.rolling, ColourRanges{},
@@ -503,6 +506,58 @@ TEST(Solver, CacheFromTheRecordsEqualsCacheFromTheContacts) {
                   static_cast<std::uint32_t>(bodies.count));
     EXPECT_FALSE(same(changed.entries().normal_impulse, b.normal_impulse)) << "terms " << terms;
   }
+}
+
+// Without rolling resistance a store writes the rolling impulses +0 once
+// and then leaves them (CacheEntries::rolling_zero): entries that held
+// others, set from outside, are made +0 by the first store, and every later
+// store's entries, grown or shrunk, hold +0 alone.
+TEST(Solver, CacheWithoutRollingKeepsItsRollingImpulsesZero) {
+  const real r = real(0.01);
+  std::mt19937_64 rng(29);
+  MovingLattice packed = MovingLattice::packed(10, r, rng);
+  Lattice& lattice = packed.lattice;
+  const PairTable table = packed.table();
+  const real h = real(1e-3);
+  SolverSettings s;
+  s.friction = true, s.rolling = false;
+  std::vector<Vec3> vel = packed.vel, omega = packed.omega;
+  const BodiesView bodies = lattice.view(lattice.position.data(), vel.data(), omega.data());
+  ColourRanges colours;
+  std::vector<Contact> contacts = lattice.contacts(bodies, table, h, real(1e-4), colours, nullptr);
+  ContactSolver solver(s);
+  solver.solve_velocities(contacts, colours, bodies, h, ContactSolver::Unpack::when_asked);
+  const SweepRecords* records = solver.pending_records(contacts);
+  ASSERT_NE(records, nullptr);
+  const auto n = static_cast<std::uint32_t>(contacts.size());
+  const auto spheres = static_cast<std::uint32_t>(bodies.count);
+  auto all_plus_zero = [](const CacheEntries& e) {
+    const Vec3 zero{};
+    for (const Vec3& v : e.rolling_impulse)
+      if (std::memcmp(&v, &zero, sizeof v) != 0) return false;
+    return e.rolling_impulse.size() == e.size();
+  };
+  // Entries from outside with rolling impulses, some -0 (a renumbering's turn).
+  ContactCache cache;
+  cache.store(*records, n, false, colours, spheres);
+  CacheEntries other = cache.entries();
+  ASSERT_GT(other.size(), n / 2);
+  for (std::size_t k = 0; k < other.size(); ++k)
+    other.rolling_impulse[k] = k % 3 == 0 ? Vec3(-real(0), real(0), -real(0)) : Vec3(real(k), -real(1), real(2));
+  other.rolling_zero = false;
+  cache.set_entries(other);
+  EXPECT_FALSE(all_plus_zero(cache.entries()));
+  cache.store(*records, n, false, colours, spheres);
+  EXPECT_TRUE(cache.entries().rolling_zero);
+  EXPECT_TRUE(all_plus_zero(cache.entries()));
+  // Shrunk, grown back, and after keep() into the other set.
+  cache.store(*records, n / 2, false, ColourRanges{}, spheres);
+  EXPECT_TRUE(all_plus_zero(cache.entries()));
+  cache.keep();
+  cache.store(*records, n, false, colours, spheres);
+  EXPECT_TRUE(all_plus_zero(cache.entries()));
+  cache.back_to_kept();
+  EXPECT_TRUE(all_plus_zero(cache.entries()));
 }
 
 // The projection sweeps until one moves no contact by more than
