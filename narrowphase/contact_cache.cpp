@@ -243,7 +243,10 @@ std::size_t ContactCache::restore_runs(Runs<C> contacts, std::size_t count, cons
   // searching all of them, and finds the same entry (keys are unique).
   // Entries of spheres that no longer exist (a >= count) are never matched.
   const std::size_t spheres = bodies.count;
-  if (m_runs_spheres != spheres) key_runs(keys, m, spheres, m_first);
+  if (m_runs_spheres != spheres) {
+    key_runs(keys, m, spheres, m_first);
+    m_runs_spheres = spheres;
+  }
   const std::uint32_t* first = m_first.data();
   const auto n = static_cast<std::ptrdiff_t>(count);
   std::size_t matched = 0;

@@ -166,8 +166,10 @@ class ContactCache {
   std::vector<std::uint8_t> m_matched;
   std::vector<std::uint32_t> m_order, m_first;
   // m_first holds the entries' runs by sphere (key_runs) for this many
-  // spheres: the store's counting sort leaves them so, and the restore that
-  // follows reads them instead of finding them again. kNoRuns: it does not.
+  // spheres: the store's counting sort leaves them so (and a restore that
+  // found them), and the restore that follows reads them instead of
+  // finding them again. kNoRuns: it does not (any other change of the
+  // entries).
   static constexpr std::size_t kNoRuns = ~std::size_t(0);
   std::size_t m_runs_spheres = kNoRuns;
   std::vector<std::uint64_t> m_thread_used;  // kept_masks(): or_kept_colours' masks of the later threads

@@ -187,7 +187,7 @@ class CpuStep final : public StepBackend {
   // do: 16 bytes a contact fewer to write and to read in every sweep.
   const narrowphase::UniformArms* uniform_arms() {
     const BodiesView b = m_world.view();
-    if (!m_model.uniform_pairs || b.count == 0) return nullptr;
+    if (!m_model.uniform_pairs || m_model.pair_coefficients.empty() || b.count == 0) return nullptr;
     const auto n = static_cast<std::ptrdiff_t>(b.count);
     const std::uint64_t first = bits_of_real(b.radius[0]);
     bool mixed = false;
