@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include "core/parallel.hpp"
@@ -34,13 +35,17 @@ void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move
   std::uint32_t* count = scratch.data();
 #pragma omp parallel num_threads(most) if (most > 1)
   {
+    // The thread's own copies: through the shared references, the loops
+    // read each functor's captures again after every store.
+    const std::decay_t<Bucket> bucket_of = bucket;
+    std::decay_t<Move> move_to = move;
     const int t = thread_index(), threads = team_size();
     const auto lo = static_cast<std::uint32_t>(std::uint64_t(n) * t / threads);
     const auto hi = static_cast<std::uint32_t>(std::uint64_t(n) * (t + 1) / threads);
     std::uint32_t* mine = count + std::size_t(t) * stride;
     std::fill(mine, mine + buckets, 0u);
     for (std::uint32_t k = lo; k < hi; ++k) {
-      const std::uint32_t b = bucket(k);
+      const std::uint32_t b = bucket_of(k);
       if (b != kSkipItem) ++mine[b];
     }
 #pragma omp barrier
@@ -58,8 +63,8 @@ void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move
       begin[buckets] = at;
     }
     for (std::uint32_t k = lo; k < hi; ++k) {
-      const std::uint32_t b = bucket(k);
-      if (b != kSkipItem) move(k, mine[b]++);
+      const std::uint32_t b = bucket_of(k);
+      if (b != kSkipItem) move_to(k, mine[b]++);
     }
   }
 }

@@ -347,13 +347,19 @@ void ContactCache::store_from(std::uint32_t n, std::uint32_t groups, const Colou
   for (std::uint32_t c = 0; c < (coloured ? ranges.colours : 0); ++c)
     std::fill(colour_of + ranges.begin[c], colour_of + ranges.begin[c + 1], static_cast<std::uint8_t>(c));
   std::fill(colour_of + coloured_end, colour_of + n, kNoKeptColour);
-  auto kept = [&](std::uint32_t k) { return k < coloured_end || normal_of(k) > 0; };
   m_source.resize(n);
   std::uint64_t* source = m_source.data();
-  counting_sort(
-      n, groups, [&](std::uint32_t k) { return kept(k) && pair_of(k).a < groups ? pair_of(k).a : kSkipItem; },
-      [&](std::uint32_t k, std::uint32_t place) { source[place] = (std::uint64_t(pair_of(k).b) << 32) | k; }, m_first,
-      m_order);
+  // Captured by value (copies of the small accessors, the bounds and the
+  // pointer): taken by reference, the sort's loops read each through two
+  // or three pointers again after every store.
+  auto bucket = [pair_of, normal_of, coloured_end, groups](std::uint32_t k) {
+    const std::uint32_t a = pair_of(k).a;
+    return (k < coloured_end || normal_of(k) > 0) && a < groups ? a : kSkipItem;
+  };
+  auto place = [pair_of, source](std::uint32_t k, std::uint32_t at) {
+    source[at] = (std::uint64_t(pair_of(k).b) << 32) | k;
+  };
+  counting_sort(n, groups, bucket, place, m_first, m_order);
   const std::uint32_t m = m_first[groups];
   CacheEntries& e = writable();
   e.resize(m);  // entries past the last size made +0
