@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <numeric>
 #include <stdexcept>
+#include <type_traits>
 
 #include "core/counting_sort.hpp"
 #include "core/parallel.hpp"
@@ -309,7 +310,7 @@ void ContactCache::store(const SweepRecords& records, std::uint32_t count, bool 
   const BodyPair* bodies = records.bodies;
   const Real4* impulse = records.impulse;
   const Real4* rolling_word = records.rolling;
-  auto impulses = [&records, rolling](std::uint32_t t) {
+  auto impulses = [records, rolling](std::uint32_t t) {
     Contact c;  // the impulses as the unpacking reads them (zero rolling without its words)
     if (rolling) unpack_sweep_impulses<true>(records, t, c);
     else unpack_sweep_impulses<false>(records, t, c);
@@ -317,7 +318,7 @@ void ContactCache::store(const SweepRecords& records, std::uint32_t count, bool 
   };
   store_from(
       count, spheres, ranges, rolling, [bodies](std::uint32_t t) { return bodies[t]; },
-      [&records](std::uint32_t t) { return impulse_word(records, t).x; }, impulses,
+      [records](std::uint32_t t) { return impulse_word(records, t).x; }, impulses,
       [impulse, rolling_word, rolling](std::uint32_t t) {
         __builtin_prefetch(impulse + t);
         if (rolling) __builtin_prefetch(rolling_word + t);
@@ -366,22 +367,36 @@ void ContactCache::store_from(std::uint32_t n, std::uint32_t groups, const Colou
   m_runs_spheres = groups;  // m_first: the runs key_runs would find in the keys written below
   // Without rolling impulses, the rolling ones are written only where the
   // entries may hold others (not known all +0).
-  const bool write_rolling = rolling || !e.rolling_zero;
-#pragma omp parallel for schedule(static) if (groups >= kParallelFrom)
-  for (std::ptrdiff_t g = 0; g < static_cast<std::ptrdiff_t>(groups); ++g) {
-    const auto a = static_cast<std::uint32_t>(g);
-    const std::uint32_t first = m_first[a], last = m_first[a + 1];
-    order_run(source + first, last - first);
-    for (std::uint32_t t = first; t < last; ++t) {
-      hint(static_cast<std::uint32_t>(source[std::min(t + kStoreAhead, m - 1)]));
-      const auto k = static_cast<std::uint32_t>(source[t]);
-      const Stored c = load(k);
-      const bool loaded = c.normal_impulse > 0;
-      e.key[t] = cache_key(a, static_cast<std::uint32_t>(source[t] >> 32));
-      e.normal_impulse[t] = loaded ? c.normal_impulse : real(0);
-      e.tangent_impulse[t] = loaded ? c.tangent_impulse : Vec3{};
-      if (write_rolling) e.rolling_impulse[t] = loaded ? c.rolling_impulse : Vec3{};
-      e.colour[t] = colour_of[k];
+  // The entries' arrays as pointers, and each thread's own copies of the
+  // accessors: the colour's byte store may alias anything as far as the
+  // compiler knows, and every pointer reached through `e` or a reference
+  // was read again after it.
+  Vec3* rolling_out = rolling || !e.rolling_zero ? e.rolling_impulse.data() : nullptr;
+  std::uint64_t* key_out = e.key.data();
+  real* normal_out = e.normal_impulse.data();
+  Vec3* tangent_out = e.tangent_impulse.data();
+  std::uint8_t* colour_out = e.colour.data();
+  const std::uint32_t* first_of = m_first.data();
+#pragma omp parallel if (groups >= kParallelFrom)
+  {
+    const std::decay_t<Load> load_here = load;
+    const std::decay_t<Hint> hint_here = hint;
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t g = 0; g < static_cast<std::ptrdiff_t>(groups); ++g) {
+      const auto a = static_cast<std::uint32_t>(g);
+      const std::uint32_t first = first_of[a], last = first_of[a + 1];
+      order_run(source + first, last - first);
+      for (std::uint32_t t = first; t < last; ++t) {
+        hint_here(static_cast<std::uint32_t>(source[std::min(t + kStoreAhead, m - 1)]));
+        const auto k = static_cast<std::uint32_t>(source[t]);
+        const Stored c = load_here(k);
+        const bool loaded = c.normal_impulse > 0;
+        key_out[t] = cache_key(a, static_cast<std::uint32_t>(source[t] >> 32));
+        normal_out[t] = loaded ? c.normal_impulse : real(0);
+        tangent_out[t] = loaded ? c.tangent_impulse : Vec3{};
+        if (rolling_out) rolling_out[t] = loaded ? c.rolling_impulse : Vec3{};
+        colour_out[t] = colour_of[k];
+      }
     }
   }
   e.rolling_zero = !rolling;
