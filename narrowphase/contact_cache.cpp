@@ -251,20 +251,32 @@ std::size_t ContactCache::restore_runs(Runs<C> contacts, std::size_t count, cons
   const std::uint32_t* first = m_first.data();
   const auto n = static_cast<std::ptrdiff_t>(count);
   std::size_t matched = 0;
-#pragma omp parallel for schedule(static) reduction(+ : matched) if (n >= kParallelFrom)
-  for (std::ptrdiff_t t = 0; t < n; ++t) {
-    C& c = contacts[t];
-    const std::uint32_t k = c.a < spheres ? find_in_run(keys, first[c.a], first[c.a + 1], cache_key(c.a, c.b)) : m;
-    if (k == m || k == first[c.a + 1]) {
-      kept_colour[t] = kNoKeptColour;
-      if (carried) carried[t] = 0;
-      continue;
+  // The arrays as pointers, and each thread's own copy of the runs: the
+  // flags' byte stores may alias anything as far as the compiler knows,
+  // and every pointer reached through a reference was read again after
+  // each of them.
+  const real* normal = e.normal_impulse.data();
+  const Vec3* tangent = e.tangent_impulse.data();
+  const Vec3* rolling = e.rolling_zero ? nullptr : e.rolling_impulse.data();
+  std::uint8_t* kept_out = kept_colour.data();
+#pragma omp parallel reduction(+ : matched) if (n >= kParallelFrom)
+  {
+    const Runs<C> runs = contacts;
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t t = 0; t < n; ++t) {
+      C& c = runs[t];
+      const std::uint32_t k = c.a < spheres ? find_in_run(keys, first[c.a], first[c.a + 1], cache_key(c.a, c.b)) : m;
+      if (k == m || k == first[c.a + 1]) {
+        kept_out[t] = kNoKeptColour;
+        if (carried) carried[t] = 0;
+        continue;
+      }
+      restore_impulses(c, normal[k], tangent[k], rolling ? rolling[k] : Vec3{});
+      if (carried) carried[t] = carries_load(normal[k]) ? 1 : 0;
+      kept_out[t] = colour ? colour[k] : kNoKeptColour;
+      matched_entry[k] = 1;  // keys are unique: one contact per entry
+      ++matched;
     }
-    restore_impulses(c, e.normal_impulse[k], e.tangent_impulse[k], e.rolling_zero ? Vec3{} : e.rolling_impulse[k]);
-    if (carried) carried[t] = carries_load(e.normal_impulse[k]) ? 1 : 0;
-    kept_colour[t] = colour ? colour[k] : kNoKeptColour;
-    matched_entry[k] = 1;  // keys are unique: one contact per entry
-    ++matched;
   }
   return matched - cold_start_unloaded_islands(contacts, count, keys, e.normal_impulse.data(),
                                                 m_matched.data(), m, bodies, weight_impulse, carried, &m_islands);
