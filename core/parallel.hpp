@@ -16,6 +16,7 @@
 #include <cstddef>
 #include <exception>
 #include <mutex>
+#include <type_traits>
 #include <vector>
 
 #if defined(_OPENMP)
@@ -112,11 +113,16 @@ int collect_in_parts(std::size_t count, std::size_t parallel_from, std::vector<T
   for (auto& p : parts) p.clear();
   ParallelErrors errors;
 #pragma omp parallel num_threads(threads)
-  fill_apart(thread_index() == 0 ? out : parts[thread_index()], [&](std::vector<T>& mine) {
+  {
+    // The thread's own copy of `make`: through the shared reference, its
+    // captures were read again after every append.
+    std::decay_t<Make> make_here = make;
+    fill_apart(thread_index() == 0 ? out : parts[thread_index()], [&](std::vector<T>& mine) {
 #pragma omp for schedule(static)
-    for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(count); ++k)
-      errors.run([&] { make(static_cast<std::size_t>(k), mine); });
-  });
+      for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(count); ++k)
+        errors.run([&] { make_here(static_cast<std::size_t>(k), mine); });
+    });
+  }
   errors.rethrow();
   return threads;
 }

@@ -76,10 +76,13 @@ void collect(std::size_t count, std::vector<C>& out, ContactScratch* scratch, Ma
 }
 
 // Pair k's contact, if any, appended to `to` (sphere_contacts' loop body).
+// The views captured as copies (a few pointers): by reference, each
+// pointer was read again after every append, whose pointer stores may
+// alias them as far as the compiler knows.
 template <class C>
 auto sphere_contact_maker(const BodiesView& bodies, const IndexPair* pairs, const PairTable& table, real h,
                           const real* reach) {
-  return [&bodies, pairs, &table, h, reach](std::size_t k, std::vector<C>& to) {
+  return [bodies, pairs, table, h, reach](std::size_t k, std::vector<C>& to) {
     Contact c;
     if (make_sphere_contact(bodies, pairs[k].i, pairs[k].j, table, h, reach, c))
       to.push_back(as_listed(c, static_cast<const C*>(nullptr)));
