@@ -377,12 +377,11 @@ void ContactCache::store_from(std::uint32_t n, std::uint32_t groups, const Colou
   CacheEntries& e = writable();
   e.resize(m);  // entries past the last size made +0
   m_runs_spheres = groups;  // m_first: the runs key_runs would find in the keys written below
-  // Without rolling impulses, the rolling ones are written only where the
-  // entries may hold others (not known all +0).
   // The entries' arrays as pointers, and each thread's own copies of the
   // accessors: the colour's byte store may alias anything as far as the
   // compiler knows, and every pointer reached through `e` or a reference
-  // was read again after it.
+  // was read again after it. Without rolling impulses, the rolling ones are
+  // written only where the entries may hold others (not known all +0).
   Vec3* rolling_out = rolling || !e.rolling_zero ? e.rolling_impulse.data() : nullptr;
   std::uint64_t* key_out = e.key.data();
   real* normal_out = e.normal_impulse.data();

@@ -138,7 +138,10 @@ class CpuStep final : public StepBackend {
   bool non_finite() const override { return m_non_finite; }
 
   const World& world() override { return m_world; }
-  World& edit_world() override { return m_world; }
+  World& edit_world() override {
+    m_uniform_known = false;  // the radii may change
+    return m_world;
+  }
   BodiesView state_in_place() override { return m_world.view(); }
   void state_written() override {}
   bool state_finite() override { return m_world.first_non_finite() == m_world.size(); }
@@ -184,19 +187,26 @@ class CpuStep final : public StepBackend {
   // (StepModel::uniform_pairs) and every sphere the same radius, bit for
   // bit, every contact's arms word is the same (UniformArms: the radius,
   // and +0 for a wall's arm), and the records leave it out, as the GPU's
-  // do: 16 bytes a contact fewer to write and to read in every sweep.
+  // do: 16 bytes a contact fewer to write and to read in every sweep. The
+  // radii are scanned once, and again only after edit_world (nothing else
+  // changes them; a renumbering permutes them).
   const narrowphase::UniformArms* uniform_arms() {
-    const BodiesView b = m_world.view();
-    if (!m_model.uniform_pairs || m_model.pair_coefficients.empty() || b.count == 0) return nullptr;
-    const auto n = static_cast<std::ptrdiff_t>(b.count);
-    const std::uint64_t first = bits_of_real(b.radius[0]);
-    bool mixed = false;
+    if (!m_uniform_known) {
+      m_uniform_known = true;
+      m_uniform_holds = false;
+      const BodiesView b = m_world.view();
+      if (!m_model.uniform_pairs || m_model.pair_coefficients.empty() || b.count == 0) return nullptr;
+      const auto n = static_cast<std::ptrdiff_t>(b.count);
+      const std::uint64_t first = bits_of_real(b.radius[0]);
+      bool mixed = false;
 #pragma omp parallel for schedule(static) reduction(|| : mixed) if (n > 20000)
-    for (std::ptrdiff_t i = 0; i < n; ++i) mixed = bits_of_real(b.radius[i]) != first || mixed;
-    if (mixed) return nullptr;
-    const narrowphase::PairCoefficients& c = m_model.pair_coefficients.front();
-    m_uniform = {b.radius[0], c.friction, c.rolling_friction};
-    return &m_uniform;
+      for (std::ptrdiff_t i = 0; i < n; ++i) mixed = bits_of_real(b.radius[i]) != first || mixed;
+      if (mixed) return nullptr;
+      const narrowphase::PairCoefficients& c = m_model.pair_coefficients.front();
+      m_uniform = {b.radius[0], c.friction, c.rolling_friction};
+      m_uniform_holds = true;
+    }
+    return m_uniform_holds ? &m_uniform : nullptr;
   }
 
   // The watchdog's figures (watch_math.hpp); walls count only where they act.
@@ -219,7 +229,8 @@ class CpuStep final : public StepBackend {
   World m_world;
   std::vector<narrowphase::WallShape> m_walls;  // moving walls move
   World m_kept;             // the moving state at the start of the step (watchdog)
-  narrowphase::UniformArms m_uniform;  // uniform_arms()' answer
+  narrowphase::UniformArms m_uniform;  // uniform_arms()' answer, where it holds
+  bool m_uniform_known = false, m_uniform_holds = false;
   std::vector<std::uint32_t> m_order;  // the last renumber's (its return)
   std::vector<narrowphase::WallShape> m_kept_walls;  // at the start of the step (the cache keeps its own)
   std::unique_ptr<broadphase::BroadPhase> m_broadphase;
