@@ -20,6 +20,7 @@
 #include "broadphase/broadphase.hpp"
 #include "broadphase/grid.hpp"
 #include "broadphase/pair_chunks.hpp"
+#include "core/counting_sort.hpp"
 #include "core/radix_sort.hpp"
 #include "core/error.hpp"
 
@@ -51,6 +52,7 @@ class HomeCellCpu final : public BroadPhase {
   void run(const SpheresIn& s, real margin, const HomeGrid& g, std::vector<Key>& keys, std::vector<Key>& keys_tmp,
            std::vector<Pair>& out, Clock::time_point t0);
   void compress_axes(const SpheresIn& s, HomeGrid& g);
+  void find_pairs_of(const SpheresIn& s, real margin, std::vector<Pair>& out, Clock::time_point t0);
 
   Stats m_stats;
   std::vector<CellCoord> m_home;             // compressed grids only
@@ -90,11 +92,27 @@ void HomeCellCpu::compress_axes(const SpheresIn& s, HomeGrid& g) {
 
 void HomeCellCpu::find_pairs(const SpheresIn& s, real margin, std::vector<Pair>& out) {
   const auto t0 = Clock::now();
-  out.clear();
+  // `out` is replaced where the pairs are gathered (gather_pair_chunks),
+  // its elements reused: cleared first, every one of them was initialised
+  // again on one thread.
   m_stats = Stats{};
-  if (s.count >= kMaxObjects) throw RuntimeFailure("broad phase: more than 2^28 spheres");
-  if (s.count < 2) return;
+  if (s.count >= kMaxObjects) {
+    out.clear();
+    throw RuntimeFailure("broad phase: more than 2^28 spheres");
+  }
+  if (s.count < 2) {
+    out.clear();
+    return;
+  }
+  try {
+    find_pairs_of(s, margin, out, t0);
+  } catch (...) {
+    out.clear();  // no pairs of an earlier call left where this one failed
+    throw;
+  }
+}
 
+void HomeCellCpu::find_pairs_of(const SpheresIn& s, real margin, std::vector<Pair>& out, Clock::time_point t0) {
   HomeGridChoice hc = choose_home_grid(bounds_of(s), margin);
   m_compressed = hc.width == KeyWidth::too_wide;
   if (m_compressed) {
@@ -145,10 +163,10 @@ void HomeCellCpu::run(const SpheresIn& s, real margin, const HomeGrid& g, std::v
   m_stats.dense_cell_starts = dense;
   if (dense) {
     m_lb.resize(g.cells + 1);
-    std::size_t k = 0;
-    for (std::size_t i = 0; i < n; ++i)
-      for (; k <= keys[i]; ++k) m_lb[k] = static_cast<std::uint32_t>(i);
-    for (; k <= g.cells; ++k) m_lb[k] = static_cast<std::uint32_t>(n);
+    const Key* sorted_keys = keys.data();
+    sorted_bucket_starts(
+        static_cast<std::uint32_t>(n), g.cells, [sorted_keys](std::uint32_t i) { return sorted_keys[i]; },
+        m_lb.data(), static_cast<std::uint32_t>(kParallelMinimum));
   }
   const Key* key_data = keys.data();
   const std::uint32_t* lb_data = m_lb.data();

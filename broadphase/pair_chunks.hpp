@@ -22,7 +22,7 @@ inline void gather_pair_chunks(const std::vector<std::vector<Pair>>& chunks, con
   for (const auto& local : chunks) total += local.size();
   try {
     errors.rethrow();
-    out.resize(total);
+    out.resize(total);  // `out` replaced: its elements reused, only what it grows by initialised
   } catch (const std::bad_alloc&) {
     throw RuntimeFailure("out of memory for the candidate pairs: " + std::to_string(total) + " pairs (" +
                          std::to_string(total * sizeof(Pair) >> 20) +

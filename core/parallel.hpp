@@ -12,6 +12,7 @@
 // collect_in_order: a list built on all threads in the sequential order.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <cstddef>
 #include <exception>
@@ -127,18 +128,42 @@ int collect_in_parts(std::size_t count, std::size_t parallel_from, std::vector<T
   return threads;
 }
 
-// parts[from, threads) appended to `to`, in order.
+// The parts [from, threads) copied to `to` from element `at` on, in order,
+// each part on a thread of its own where they hold `parallel_from` or more
+// in all; `to` must hold them. Joined on one thread, the copy was the one
+// part of the CPU step's contact search that did not shrink with more
+// threads (settle scene of 10^5: the search 6 ms a step on 4, 8 and 16
+// threads; docs/architecture.md "The CPU step on many threads").
 template <class T>
-void join_parts(std::vector<T>& to, std::vector<std::vector<T>>& parts, int from, int threads) {
-  std::size_t total = to.size();
+void copy_parts(T* to, std::size_t at, const std::vector<std::vector<T>>& parts, int from, int threads,
+                std::size_t parallel_from) {
+  std::vector<std::size_t> place(static_cast<std::size_t>(threads > from ? threads - from : 0) + 1, at);
+  for (int t = from; t < threads; ++t) place[t - from + 1] = place[t - from] + parts[t].size();
+  const int count = threads > from ? threads - from : 0;
+#pragma omp parallel for schedule(dynamic, 1) if (place[count] - at >= parallel_from && count > 1)
+  for (int p = 0; p < count; ++p) std::copy(parts[from + p].begin(), parts[from + p].end(), to + place[p]);
+}
+
+// The parts' sizes [from, threads) summed.
+template <class T>
+std::size_t parts_size(const std::vector<std::vector<T>>& parts, int from, int threads) {
+  std::size_t total = 0;
   for (int t = from; t < threads; ++t) total += parts[t].size();
-  to.reserve(total);
-  for (int t = from; t < threads; ++t) to.insert(to.end(), parts[t].begin(), parts[t].end());
+  return total;
+}
+
+// parts[from, threads) appended to `to`, in order (copy_parts).
+template <class T>
+void join_parts(std::vector<T>& to, std::vector<std::vector<T>>& parts, int from, int threads,
+                std::size_t parallel_from = std::size_t(1) << 16) {
+  const std::size_t base = to.size();
+  to.resize(base + parts_size(parts, from, threads));
+  copy_parts(to.data(), base, parts, from, threads, parallel_from);
 }
 
 // Appends what make(k, out) appends for k = 0..count-1 to `out`, in order of
 // k: collect_in_parts, then the other threads' buffers joined in thread
-// order (a serial copy of all but the first thread's chunk).
+// order (join_parts).
 template <class T, class Make>
 void collect_in_order(std::size_t count, std::size_t parallel_from, std::vector<T>& out,
                       std::vector<std::vector<T>>& parts, Make&& make) {

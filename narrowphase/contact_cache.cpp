@@ -113,20 +113,11 @@ template std::size_t cold_start_unloaded_islands(FoundRuns, std::size_t, const s
                                                  std::uint8_t*, IslandScratch*);
 
 void key_runs(const std::uint64_t* keys, std::uint32_t m, std::size_t spheres, std::vector<std::uint32_t>& first) {
-  // first[s] is the first entry whose a (spheres for those past them) is at
-  // least s: each entry writes the firsts of the spheres from just past the
-  // entry before's a to its own, so every first is written once, on all
-  // threads.
+  // The entries' spheres a (spheres for those past them) are sorted.
   first.resize(spheres + 1);
-  std::uint32_t* f = first.data();
-  auto sphere_of = [&](std::uint32_t k) { return static_cast<std::size_t>(std::min<std::uint64_t>(keys[k] >> 32, spheres)); };
-#pragma omp parallel for schedule(static) if (m >= kParallelFrom)
-  for (std::ptrdiff_t t = 0; t < static_cast<std::ptrdiff_t>(m); ++t) {
-    const auto k = static_cast<std::uint32_t>(t);
-    const std::size_t from = k == 0 ? 0 : sphere_of(k - 1) + 1;
-    for (std::size_t s = from; s <= sphere_of(k); ++s) f[s] = k;
-  }
-  for (std::size_t s = m == 0 ? 0 : sphere_of(m - 1) + 1; s <= spheres; ++s) f[s] = m;
+  sorted_bucket_starts(
+      m, spheres, [keys, spheres](std::uint32_t k) { return std::min<std::uint64_t>(keys[k] >> 32, spheres); },
+      first.data(), static_cast<std::uint32_t>(kParallelFrom));
 }
 
 CacheEntries renumbered(const CacheEntries& e, const std::vector<std::uint32_t>& new_index) {

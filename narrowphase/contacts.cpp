@@ -96,13 +96,21 @@ void sphere_contacts_in_runs(const BodiesView& bodies, const IndexPair* pairs, s
   auto& parts = parts_of(scratch, out.data());
   const int threads = collect_in_parts(pair_count, kParallelFrom, out, parts,
                                        sphere_contact_maker<C>(bodies, pairs, table, h, reach));
-  if (threads == 1) return;
-  // Into an empty `rest`, the second thread's buffer itself (rest's old one
-  // to the scratch); the later threads' (or all, onto a `rest` that holds
-  // some) joined on.
-  int from = 1;
-  if (rest.empty()) rest.swap(parts[1]), from = 2;
-  join_parts(rest, parts, from, threads);
+  if (threads == 1) {
+    rest.clear();
+    return;
+  }
+  // The second thread's buffer itself where it is the only other (rest's
+  // old one to the scratch). Else rest's own elements, overwritten: sized
+  // to the new count from the last search's (only what grows is
+  // initialised, where clearing it first would initialise every one on one
+  // thread), the parts copied in on all threads.
+  if (threads == 2) {
+    rest.swap(parts[1]);
+    return;
+  }
+  rest.resize(parts_size(parts, 1, threads));
+  copy_parts(rest.data(), 0, parts, 1, threads, kParallelFrom);
 }
 
 // Spheres near[i] that some wall may not pass over, where every wall is

@@ -44,9 +44,9 @@ void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size
                      const PairTable& table, real h, const real* reach, std::vector<Contact>& out,
                      ContactScratch* scratch = nullptr);
 // The same in two runs, not joined (Runs): the first thread's contacts
-// appended to `out`, the other threads' to `rest` (out's, then rest's, in
-// order, are what the form above appends). Where one thread makes them all,
-// `rest` gets none.
+// appended to `out`, the other threads' in `rest`, which they replace (out's
+// new ones, then rest, in order, are what the form above appends). Where one
+// thread makes them all, `rest` is left empty.
 void sphere_contacts(const BodiesView& bodies, const IndexPair* pairs, std::size_t pair_count,
                      const PairTable& table, real h, const real* reach, std::vector<Contact>& out,
                      std::vector<Contact>& rest, ContactScratch& scratch);

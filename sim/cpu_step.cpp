@@ -43,9 +43,14 @@ class CpuStep final : public StepBackend {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_solver.forget_records();
     m_contact_first.clear();
-    m_contact_rest.clear();
+    // The sphere search replaces the second run, reusing its elements
+    // (sphere_contacts); it is cleared wherever that search does not run.
+    if (!m_model.collisions) m_contact_rest.clear();
     if (!m_model.collisions && !m_model.wall_contacts) return;
-    if (m_non_finite) return;  // the step ends with "non-finite at step N, sphere i", not a broad-phase error
+    if (m_non_finite) {  // the step ends with "non-finite at step N, sphere i", not a broad-phase error
+      m_contact_rest.clear();
+      return;
+    }
     const BodiesView bodies = m_world.view();
     const std::size_t n = m_world.size();
     narrowphase::contact_reaches(bodies, h, m_reach);

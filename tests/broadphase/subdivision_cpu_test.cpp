@@ -110,17 +110,25 @@ TEST_P(SubdivisionCpu, OrderIndependentOfThreadCount) {
   const int before = omp_get_max_threads();
   for (auto kind : {mt::SetKind::mono, mt::SetKind::poly20, mt::SetKind::clustered}) {
     const mt::SphereSet s = mt::make_set(kind, 60000, 77 + int(kind));
-    std::vector<mb::Pair> one, two;
+    std::vector<mb::Pair> one;
     omp_set_num_threads(1);
     bp->find_pairs(s.view(), real(0.01), one);
-    omp_set_num_threads(2);
-    bp->find_pairs(s.view(), real(0.01), two);
-    omp_set_num_threads(3);
-    std::vector<mb::Pair> three;
-    bp->find_pairs(s.view(), real(0.01), three);
     ASSERT_FALSE(one.empty());
-    ASSERT_EQ(one, two) << mt::set_name(kind);
-    ASSERT_EQ(one, three) << mt::set_name(kind);
+    // Into fresh lists and into one kept from call to call (the step's):
+    // its old pairs, more than a call finds, marked so that one left shows.
+    std::vector<mb::Pair> kept(one.size() + 99);
+    for (const int threads : {2, 3, 16, 5}) {
+      omp_set_num_threads(threads);
+      std::vector<mb::Pair> fresh;
+      bp->find_pairs(s.view(), real(0.01), fresh);
+      ASSERT_EQ(one, fresh) << mt::set_name(kind) << ", " << threads << " threads";
+      for (mb::Pair& p : kept) p = {0xdeadbeefu, 0xdeadbeefu};
+      bp->find_pairs(s.view(), real(0.01), kept);
+      ASSERT_EQ(one, kept) << mt::set_name(kind) << ", " << threads << " threads, a kept list";
+    }
+    kept.resize(3);  // a kept list shorter than the pairs
+    bp->find_pairs(s.view(), real(0.01), kept);
+    ASSERT_EQ(one, kept) << mt::set_name(kind);
   }
   omp_set_num_threads(before);
 #else

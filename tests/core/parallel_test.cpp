@@ -41,7 +41,7 @@ TEST(CollectInOrder, AppendsWhatTheSerialLoopAppendsInItsOrder) {
   for (const std::size_t count : {std::size_t(0), std::size_t(7), std::size_t(50000), std::size_t(123457)}) {
     std::vector<std::uint64_t> want{1, 2, 3};  // what was there before stays first
     for (std::size_t k = 0; k < count; ++k) Items()(k, want);
-    for (const int threads : {1, 2, 3, 5}) {
+    for (const int threads : {1, 2, 3, 5, 16}) {  // 123 457 items: past the joins' parallel copy
       with_threads(threads, [&] {
         std::vector<std::uint64_t> out{1, 2, 3};
         std::vector<std::vector<std::uint64_t>> parts(1, std::vector<std::uint64_t>(9, 99));  // stale buffers
@@ -88,7 +88,7 @@ TEST(CountingSort, StableByBucketForAnyThreadCount) {
       std::vector<std::uint32_t> want_begin(buckets + 1, 0);
       for (const std::uint32_t k : want) ++want_begin[bucket_of[k] + 1];
       for (std::uint32_t b = 0; b < buckets; ++b) want_begin[b + 1] += want_begin[b];
-      for (const int threads : {1, 2, 3, 5}) {
+      for (const int threads : {1, 2, 3, 5, 16}) {  // more threads than buckets, and fewer
         with_threads(threads, [&] {
           std::vector<std::uint32_t> placed(want.size(), kSkipItem), begin, scratch(3, 7);
           std::atomic<bool> past_the_end{false};
@@ -104,6 +104,30 @@ TEST(CountingSort, StableByBucketForAnyThreadCount) {
           EXPECT_FALSE(past_the_end) << where;
           EXPECT_EQ(placed, want) << where;
           EXPECT_EQ(begin, want_begin) << where;
+        });
+      }
+    }
+  }
+}
+
+// Each bucket's first place in a list sorted by bucket: the first item at or
+// past the bucket, as a serial search finds it; buckets with no item, runs
+// of one bucket, items in the last bucket (`buckets` itself) and none.
+TEST(SortedBucketStarts, FirstItemAtOrPastEachBucketForAnyThreadCount) {
+  std::mt19937 rng(23);
+  for (const std::uint32_t buckets : {1u, 7u, 5000u, 300000u}) {
+    for (const std::uint32_t n : {0u, 1u, 999u, 70001u}) {
+      std::vector<std::uint32_t> bucket(n);
+      for (auto& b : bucket) b = rng() % (buckets + 1);  // `buckets` itself: past every bucket
+      std::sort(bucket.begin(), bucket.end());
+      std::vector<std::uint32_t> want(std::size_t(buckets) + 1);
+      for (std::uint32_t b = 0; b <= buckets; ++b)
+        want[b] = static_cast<std::uint32_t>(std::lower_bound(bucket.begin(), bucket.end(), b) - bucket.begin());
+      for (const int threads : {1, 2, 3, 16}) {
+        with_threads(threads, [&] {
+          std::vector<std::uint32_t> first(want.size(), 0xdeadbeefu);
+          sorted_bucket_starts(n, buckets, [&](std::uint32_t k) { return bucket[k]; }, first.data(), 1000);
+          EXPECT_EQ(first, want) << n << " items, " << buckets << " buckets, " << threads << " threads";
         });
       }
     }

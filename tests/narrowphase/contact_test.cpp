@@ -1207,8 +1207,9 @@ TEST(Walls, SpheresNearNoWallFoundInLanesAreThoseTheWholeTestRefuses) {
 }
 
 // Two runs read as one list (Runs, the CPU's contact search): the search's
-// runs hold the joined list's contacts in its order for 1, 2 and 3 threads
-// (30 492 candidate pairs, past the parallel threshold, thrown apart and
+// runs hold the joined list's contacts in its order for 1 to 16 threads,
+// into buffers kept from the search before (30 492 candidate pairs, past
+// the parallel threshold, thrown apart and
 // together so that some make no contact); and the cache's restore and the
 // colouring on runs split anywhere (empty runs included) give what they give
 // on the one list: the same impulses, kept colours, cold starts, colours and
@@ -1231,10 +1232,15 @@ TEST(ContactRuns, SearchRestoreAndColouringOnRunsEqualTheOneList) {
   ASSERT_GT(joined.size(), pairs.size() / 10);
   ASSERT_LT(joined.size(), pairs.size()) << "premise: some pairs make no contact";
   const int was = thread_count();
-  for (int threads : {1, 2, 3}) {
+  // The buffers kept from search to search, as the step keeps them: `first`
+  // cleared, `rest` replaced (its stale contacts, more than any search
+  // makes at first, marked so that one left over shows).
+  std::vector<Contact> first, rest(joined.size() + 5);
+  ContactScratch scratch;
+  for (int threads : {1, 2, 3, 5, 16, 3, 2, 5}) {
     set_thread_count(threads);
-    std::vector<Contact> first, rest;
-    ContactScratch scratch;
+    first.clear();
+    for (Contact& c : rest) c.a = 0xdeadbeefu;
     sphere_contacts(bodies, pairs.data(), pairs.size(), table, h, reaches.data(), first, rest, scratch);
     wall_contacts(bodies, thrown.lattice.floor, table, h, reaches.data(), rest.empty() ? first : rest, &scratch);
     set_thread_count(was);
