@@ -160,6 +160,52 @@ std::uint32_t or_kept_colours(std::size_t n, std::size_t body_count, Item&& item
   return top;
 }
 
+// The same for items sorted by their sphere a, each b a wall or a sphere
+// above a (the cache's entries, in key order), on all threads without
+// atomics for almost every item: the items are split between the threads
+// at changes of a, so each thread's spheres a are its own, and so is every
+// b below the next thread's first a; only the items whose b lies past that
+// (across a split) are ored after a barrier, by atomics. Masks of each
+// thread's own, joined after, cost memory in proportion to the threads,
+// and atomics for every item ~40 cycles each: on 16 threads the kept masks
+// of the settle scene of 10^5 took 1.2 ms a step by atomics (12 at 10^6).
+template <class Item>
+std::uint32_t or_kept_colours_by_a(std::size_t n, Item&& item, std::uint64_t* used) {
+  const int threads = n >= 16384 ? thread_count() : 1;
+  std::uint32_t top = 0;
+#pragma omp parallel num_threads(threads) reduction(max : top) if (threads > 1)
+  {
+    const int t = thread_index(), team = team_size();
+    // This thread's items: from the first whose a differs from the item
+    // before's, at or after its even share's start, to the next thread's.
+    auto split = [&](int u) {
+      std::size_t k = n * static_cast<std::size_t>(u) / static_cast<std::size_t>(team);
+      while (k > 0 && k < n && item(static_cast<std::uint32_t>(k)).a == item(static_cast<std::uint32_t>(k - 1)).a) ++k;
+      return k;
+    };
+    const std::size_t lo = split(t), hi = split(t + 1);
+    const std::uint32_t a_next = hi < n ? item(static_cast<std::uint32_t>(hi)).a : ~std::uint32_t(0);
+    std::vector<std::pair<std::uint32_t, std::uint64_t>> across;
+    for (std::size_t k = lo; k < hi; ++k) {
+      const KeptItem i = item(static_cast<std::uint32_t>(k));
+      if (i.colour >= kMaxColours) continue;
+      const std::uint64_t bit = std::uint64_t(1) << i.colour;
+      used[i.a] |= bit;
+      if (!is_wall(i.b)) {
+        if (i.b < a_next) used[i.b] |= bit;
+        else across.push_back({i.b, bit});
+      }
+      top = std::max<std::uint32_t>(top, i.colour + 1u);
+    }
+#pragma omp barrier
+    for (const auto& [b, bit] : across) {
+#pragma omp atomic update
+      used[b] |= bit;
+    }
+  }
+  return top;
+}
+
 class ContactColouring {
  public:
   // Colours `active` (indices into contacts, ascending) by `rank` (one per

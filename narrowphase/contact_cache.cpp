@@ -284,13 +284,14 @@ std::uint32_t ContactCache::kept_masks(std::size_t body_count, std::vector<std::
   const std::uint64_t* keys = e.key.data();
   const std::uint8_t* colour = e.colour.data();
   const std::uint8_t* matched = m_matched.data();
-  return or_kept_colours(
-      m, body_count,
+  // In key order: sorted by a, and a sphere pair's b above its a.
+  return or_kept_colours_by_a(
+      m,
       [=](std::uint32_t k) {
         return KeptItem{static_cast<std::uint32_t>(keys[k] >> 32), static_cast<std::uint32_t>(keys[k]),
                         matched[k] ? colour[k] : kNoKeptColour};
       },
-      used.data(), m_thread_used);
+      used.data());
 }
 
 void ContactCache::store(const std::vector<Contact>& contacts, const ColourRanges& ranges) {

@@ -172,7 +172,6 @@ class ContactCache {
   // entries).
   static constexpr std::size_t kNoRuns = ~std::size_t(0);
   std::size_t m_runs_spheres = kNoRuns;
-  std::vector<std::uint64_t> m_thread_used;  // kept_masks(): or_kept_colours' masks of the later threads
   IslandScratch m_islands;                   // restore(): the island rule's lists
   struct Stored {  // the impulses store() keeps of one contact
     real normal_impulse;

@@ -543,11 +543,12 @@ TEST(Colouring, ByRoundOrdersNeighboursByRank) {
 // The kept colours at the spheres from the cache's matched entries
 // (ContactCache::kept_masks) are what the kept contacts hold, and the
 // colouring given them colours and places every contact as it does reading
-// the kept contacts: small and large lists (the threaded paths), on one
-// thread, two (masks of their own) and five (atomics).
+// the kept contacts: small and large lists (the threaded paths), on 1, 2, 5
+// and 16 threads (each thread's entries split at changes of a; the random
+// pairs put many a b past the next thread's spheres).
 TEST(ContactCache, KeptMasksColourAsTheKeptContactsDo) {
   std::mt19937_64 rng(43);
-  for (const int threads : {1, 2, 5})
+  for (const int threads : {1, 2, 5, 16})
     for (const std::uint32_t bodies : {300u, 20000u}) {
       std::vector<Contact> contacts = random_contacts(rng, bodies, 3 * bodies, 0.1);
       for (std::size_t k = 0; k < contacts.size(); ++k) contacts[k].normal_impulse = k % 4 == 0 ? real(0) : real(1e-3);
