@@ -88,6 +88,29 @@ inline void place_counts(std::uint32_t* count, std::size_t stride, std::uint32_t
 // line, which every count writes.
 inline std::size_t count_stride(std::uint32_t buckets) { return (std::size_t(buckets) + 16 + 15) / 16 * 16; }
 
+// Inside a parallel region, called by every thread: each thread counts its
+// slice of the items by slot (bucket >> shift) into its row of counts, the
+// rows become places (place_counts, `first` each slot's first place), then
+// give(k, bucket, place) for each item of the slice, in order.
+template <class BucketOf, class Give>
+void sort_slices(std::uint32_t n, std::uint32_t slots, std::uint32_t shift, const BucketOf& bucket_of, Give&& give,
+                 std::uint32_t* count, std::size_t stride, std::uint32_t* range_total, std::uint32_t* first) {
+  const int t = thread_index(), threads = team_size();
+  const auto lo = static_cast<std::uint32_t>(std::uint64_t(n) * t / threads);
+  const auto hi = static_cast<std::uint32_t>(std::uint64_t(n) * (t + 1) / threads);
+  std::uint32_t* mine = count + std::size_t(t) * stride;
+  std::fill(mine, mine + slots, 0u);
+  for (std::uint32_t k = lo; k < hi; ++k) {
+    const std::uint32_t b = bucket_of(k);
+    if (b != kSkipItem) ++mine[b >> shift];
+  }
+  place_counts(count, stride, slots, t, threads, range_total, first);
+  for (std::uint32_t k = lo; k < hi; ++k) {
+    const std::uint32_t b = bucket_of(k);
+    if (b != kSkipItem) give(k, b, mine[b >> shift]++);
+  }
+}
+
 }  // namespace detail
 
 // From this many buckets, with more than two threads, the sort goes by
@@ -124,23 +147,13 @@ void wide_counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket,
   {
     const std::decay_t<Bucket> bucket_of = bucket;
     std::decay_t<Move> move_to = move;
-    const int t = thread_index(), threads = team_size();
-    const auto lo = static_cast<std::uint32_t>(std::uint64_t(n) * t / threads);
-    const auto hi = static_cast<std::uint32_t>(std::uint64_t(n) * (t + 1) / threads);
-    std::uint32_t* mine = count + std::size_t(t) * stride;
-    std::fill(mine, mine + groups, 0u);
-    for (std::uint32_t k = lo; k < hi; ++k) {
-      const std::uint32_t b = bucket_of(k);
-      if (b != kSkipItem) ++mine[b >> shift];
-    }
-    detail::place_counts(count, stride, groups, t, threads, totals.data(), group_first);
-    for (std::uint32_t k = lo; k < hi; ++k) {
-      const std::uint32_t b = bucket_of(k);
-      if (b == kSkipItem) continue;
-      const std::uint32_t p = mine[b >> shift]++;
-      item_bucket[p] = b;
-      item[p] = k;
-    }
+    detail::sort_slices(
+        n, groups, shift, bucket_of,
+        [item_bucket, item](std::uint32_t k, std::uint32_t b, std::uint32_t p) {
+          item_bucket[p] = b;
+          item[p] = k;
+        },
+        count, stride, totals.data(), group_first);
 #pragma omp barrier
     std::vector<std::uint32_t> local(width);
 #pragma omp for schedule(dynamic, 1)
@@ -184,20 +197,9 @@ void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move
     // read each functor's captures again after every store.
     const std::decay_t<Bucket> bucket_of = bucket;
     std::decay_t<Move> move_to = move;
-    const int t = thread_index(), threads = team_size();
-    const auto lo = static_cast<std::uint32_t>(std::uint64_t(n) * t / threads);
-    const auto hi = static_cast<std::uint32_t>(std::uint64_t(n) * (t + 1) / threads);
-    std::uint32_t* mine = count + std::size_t(t) * stride;
-    std::fill(mine, mine + buckets, 0u);
-    for (std::uint32_t k = lo; k < hi; ++k) {
-      const std::uint32_t b = bucket_of(k);
-      if (b != kSkipItem) ++mine[b];
-    }
-    detail::place_counts(count, stride, buckets, t, threads, totals.data(), first);
-    for (std::uint32_t k = lo; k < hi; ++k) {
-      const std::uint32_t b = bucket_of(k);
-      if (b != kSkipItem) move_to(k, mine[b]++);
-    }
+    detail::sort_slices(
+        n, buckets, 0, bucket_of, [&move_to](std::uint32_t k, std::uint32_t, std::uint32_t p) { move_to(k, p); },
+        count, stride, totals.data(), first);
   }
 }
 
