@@ -6,6 +6,10 @@
 #include <numeric>
 #include <random>
 
+#if defined(_OPENMP)
+#include <omp.h>
+#endif
+
 #include "core/radix_sort.hpp"
 
 namespace mb = marbles::broadphase;
@@ -70,4 +74,24 @@ TEST(RadixSortCpu, OnlyNeededPasses) {
   EXPECT_EQ(mb::radix_sort_pairs(k, v, 4), 1u);
   EXPECT_EQ(k, (std::vector<std::uint32_t>{1, 3, 5, 9}));
   EXPECT_EQ(v, (std::vector<std::uint32_t>{3, 1, 0, 2}));
+}
+
+// Blocks of 8192 keys and up a thread: 70 000 keys take eight, 300 000 all
+// sixteen; the order is the stable sort's for every thread count.
+TEST(RadixSortCpu, EqualsStableSortOnAnyThreadCount) {
+#if defined(_OPENMP)
+  const int before = omp_get_max_threads();
+  std::uint64_t seed = 3000;
+  for (const int threads : {1, 3, 7, 16}) {
+    omp_set_num_threads(threads);
+    for (Pattern p : {Pattern::random, Pattern::high_bits})
+      for (std::size_t n : {16384ul, 70000ul, 300000ul}) {
+        check<std::uint32_t>(p, n, 24, ++seed);
+        check<std::uint64_t>(p, n, 40, ++seed);
+      }
+  }
+  omp_set_num_threads(before);
+#else
+  GTEST_SKIP() << "skipped: built without OpenMP";
+#endif
 }
