@@ -64,7 +64,7 @@ class NonFiniteInput : public RuntimeFailure {
 class BroadPhase {
  public:
   virtual ~BroadPhase() = default;
-  // Host arrays in, host pairs out: `out` is replaced (emptied where the call throws).
+  // Host arrays in, host pairs out: `out` is replaced (the CPU backends empty it where the call throws).
   virtual void find_pairs(const SpheresIn& spheres, real margin, std::vector<Pair>& out) = 0;
   virtual const Stats& last_stats() const = 0;
   virtual std::string name() const = 0;

@@ -6,7 +6,7 @@
 // slice of the items per bucket; the slices' places follow bucket by bucket
 // and slice by slice (each thread placing a range of buckets); then each
 // thread moves its slice. With many buckets and more than two threads the
-// buckets are first grouped (wide_counting_sort below). `begin` gets the
+// buckets are first grouped (detail::wide_counting_sort below). `begin` gets the
 // buckets' first places (buckets + 1 entries, the last one the total).
 #pragma once
 
@@ -114,8 +114,10 @@ void sort_slices(std::uint32_t n, std::uint32_t slots, std::uint32_t shift, cons
 }  // namespace detail
 
 // From this many buckets, with more than two threads, the sort goes by
-// groups of buckets (wide_counting_sort).
+// groups of buckets (detail::wide_counting_sort).
 inline constexpr std::uint32_t kWideBuckets = 1u << 16;
+
+namespace detail {
 
 // The same sort in two passes, for many buckets: the items are first sorted
 // stably into groups of 2^shift consecutive buckets (at most ~1024 groups),
@@ -124,7 +126,8 @@ inline constexpr std::uint32_t kWideBuckets = 1u << 16;
 // each thread kept a count for every bucket (16 threads x 10^6 spheres: 64
 // MB of counts, cleared, incremented at random, summed and incremented
 // again), and the cache's store's sort of the settle scene of 10^6 took
-// 13.4 ms a step on 16 threads. The same places as the one pass.
+// 13.4 ms a step on 16 threads. The same places as the one pass. For
+// counting_sort alone: 2^16 <= buckets < 2^31, n >= 1.
 template <class Bucket, class Move>
 void wide_counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move&& move,
                         std::vector<std::uint32_t>& begin, std::vector<std::uint32_t>& scratch, int most) {
@@ -176,12 +179,14 @@ void wide_counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket,
   first[buckets] = group_first[groups];
 }
 
+}  // namespace detail
+
 template <class Bucket, class Move>
 void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move&& move,
                    std::vector<std::uint32_t>& begin, std::vector<std::uint32_t>& scratch) {
   const int most = n >= 20000 ? thread_count() : 1;
   if (most > 2 && buckets >= kWideBuckets) {
-    wide_counting_sort(n, buckets, bucket, move, begin, scratch, most);
+    detail::wide_counting_sort(n, buckets, bucket, move, begin, scratch, most);
     return;
   }
   const std::size_t stride = detail::count_stride(buckets);

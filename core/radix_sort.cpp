@@ -54,13 +54,15 @@ unsigned sort_pairs(std::vector<Key>& keys, std::vector<std::uint32_t>& values, 
     bool skip = false;
 #pragma omp parallel num_threads(threads)
     {
+      // Slices by the team the region was given, which may be fewer
+      // threads than asked for (a nested call, a thread limit).
 #if defined(_OPENMP)
-      const int t = omp_get_thread_num();
+      const int t = omp_get_thread_num(), team = omp_get_num_threads();
 #else
-      const int t = 0;
+      const int t = 0, team = 1;
 #endif
-      const std::size_t begin = n * static_cast<std::size_t>(t) / static_cast<std::size_t>(threads);
-      const std::size_t end = n * static_cast<std::size_t>(t + 1) / static_cast<std::size_t>(threads);
+      const std::size_t begin = n * static_cast<std::size_t>(t) / static_cast<std::size_t>(team);
+      const std::size_t end = n * static_cast<std::size_t>(t + 1) / static_cast<std::size_t>(team);
       auto& c = counts[static_cast<std::size_t>(t)];
       c.fill(0);
       for (std::size_t i = begin; i < end; ++i) ++c[(src_k[i] >> shift) & 0xff];
@@ -71,7 +73,7 @@ unsigned sort_pairs(std::vector<Key>& keys, std::vector<std::uint32_t>& values, 
         std::size_t total = 0;
         for (std::size_t d = 0; d < kRadix; ++d) {
           std::size_t in_digit = 0;
-          for (int b = 0; b < threads; ++b) {
+          for (int b = 0; b < team; ++b) {
             const std::size_t k = counts[static_cast<std::size_t>(b)][d];
             counts[static_cast<std::size_t>(b)][d] = total;
             total += k;

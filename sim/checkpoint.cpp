@@ -196,9 +196,14 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   for (std::size_t size : {c.world.velocity.size(), c.world.angular_velocity.size(), c.world.radius.size(),
                            c.world.inv_mass.size(), c.world.inv_inertia.size(), c.world.material.size()})
     if (size != n) r.fail("is damaged (array lengths differ)");
-  for (std::uint64_t key : c.state.cache.key) {  // pairs of its spheres (a < b) or a sphere and a wall
+  // Pairs of its spheres (a < b) or a sphere and a wall, in ascending key
+  // order without repeats: the restore's runs by sphere and the kept
+  // colours' split between the threads (or_kept_colours_by_a) rest on it.
+  for (std::size_t k = 0; k < c.state.cache.key.size(); ++k) {
+    const std::uint64_t key = c.state.cache.key[k];
     const auto a = static_cast<std::uint32_t>(key >> 32), b = static_cast<std::uint32_t>(key);
     if (a >= n || (!narrowphase::is_wall(b) && (b >= n || b <= a))) r.fail("is damaged (a cache entry names no pair)");
+    if (k > 0 && key <= c.state.cache.key[k - 1]) r.fail("is damaged (the cache's entries are not in key order)");
   }
   if (!c.ids.empty()) {  // a permutation of the spheres
     std::vector<std::uint8_t> seen(n, 0);

@@ -44,7 +44,8 @@ class CpuStep final : public StepBackend {
     m_solver.forget_records();
     m_contact_first.clear();
     // The sphere search replaces the second run, reusing its elements
-    // (sphere_contacts); it is cleared wherever that search does not run.
+    // (sphere_contacts); it is cleared wherever that search does not run
+    // or fails.
     if (!m_model.collisions) m_contact_rest.clear();
     if (!m_model.collisions && !m_model.wall_contacts) return;
     if (m_non_finite) {  // the step ends with "non-finite at step N, sphere i", not a broad-phase error
@@ -54,20 +55,26 @@ class CpuStep final : public StepBackend {
     const BodiesView bodies = m_world.view();
     const std::size_t n = m_world.size();
     narrowphase::contact_reaches(bodies, h, m_reach);
-    if (m_model.collisions) {
-      m_bound_radius.resize(n);
+    try {
+      if (m_model.collisions) {
+        m_bound_radius.resize(n);
 #pragma omp parallel for schedule(static) if (n > 20000)
-      for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i)
-        m_bound_radius[i] = bodies.radius[i] + m_reach[i];
-      m_broadphase->find_pairs({bodies.position, m_bound_radius.data(), n}, 0, m_pairs);
-      m_counters.candidate_pairs += m_pairs.size();
-      m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
-      narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_model.pair_table(), h, m_reach.data(),
-                                   m_contact_first, m_contact_rest, m_contact_scratch);
+        for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i)
+          m_bound_radius[i] = bodies.radius[i] + m_reach[i];
+        m_broadphase->find_pairs({bodies.position, m_bound_radius.data(), n}, 0, m_pairs);
+        m_counters.candidate_pairs += m_pairs.size();
+        m_counters.broadphase_ms += m_broadphase->last_stats().ms_total;
+        narrowphase::sphere_contacts(bodies, m_pairs.data(), m_pairs.size(), m_model.pair_table(), h,
+                                     m_reach.data(), m_contact_first, m_contact_rest, m_contact_scratch);
+      }
+      if (m_model.wall_contacts)  // after every sphere pair's: at the end of the last run
+        narrowphase::wall_contacts(bodies, m_walls, m_model.pair_table(), h, m_reach.data(),
+                                   m_contact_rest.empty() ? m_contact_first : m_contact_rest, &m_contact_scratch);
+    } catch (...) {  // no contact of the substep before left in the runs
+      m_contact_first.clear();
+      m_contact_rest.clear();
+      throw;
     }
-    if (m_model.wall_contacts)  // after every sphere pair's: at the end of the last run
-      narrowphase::wall_contacts(bodies, m_walls, m_model.pair_table(), h, m_reach.data(),
-                                 m_contact_rest.empty() ? m_contact_first : m_contact_rest, &m_contact_scratch);
     m_counters.contacts += contact_count();
   }
 

@@ -74,7 +74,7 @@ TEST(FillApart, KeepsTheSlotsContentsAndStorageAndEmptiesItOnAThrow) {
 // The counting sort's places: stable by bucket, skipped items placed
 // nowhere, and each bucket's first place; few buckets (as the colouring's
 // colours) and many (as the cache's spheres: from 2^16 buckets on more
-// than two threads sort by groups of buckets first, wide_counting_sort).
+// than two threads sort by groups of buckets first, detail::wide_counting_sort).
 TEST(CountingSort, StableByBucketForAnyThreadCount) {
   std::mt19937 rng(17);
   for (const std::uint32_t buckets : {1u, 3u, 17u, 65u, 100000u, (1u << 20) + 3u}) {  // the last two by groups

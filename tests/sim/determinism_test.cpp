@@ -16,6 +16,7 @@
 #include <random>
 #include <stdexcept>
 
+#include "core/error.hpp"
 #include "narrowphase/solver.hpp"
 #include "sim/checkpoint.hpp"
 #include "tests/sim/test_scenes.hpp"
@@ -254,6 +255,38 @@ TEST(Determinism, CheckpointsOfBothFormatsLoad) {
   EXPECT_EQ(state_hash(old.world), state_hash(c.world));
   std::remove(path.c_str());
   std::remove(old_path.c_str());
+}
+
+// A checkpoint whose cache's entries are out of key order, or name one pair
+// twice, is refused as damaged: the restore's runs by sphere and the kept
+// colours' split between threads read them in key order.
+TEST(Determinism, CheckpointsWithTheCacheOutOfKeyOrderAreRefused) {
+  auto [s, g] = pour_scene(300, 3);
+  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
+  for (int k = 0; k < 30; ++k) sim.step();
+  Checkpoint c;
+  c.scene_hash = 42;
+  c.steps = 30;
+  c.world = sim.world();
+  c.state = sim.save_state();
+  ASSERT_GT(c.state.cache.size(), 3u);
+  const std::string path = ::testing::TempDir() + "/marbles_key_order.mck";
+  write_checkpoint(path, c);
+  EXPECT_NO_THROW(read_checkpoint(path, 42)) << "premise: the file as written loads";
+  for (const bool repeat : {false, true}) {
+    Checkpoint bad = c;
+    std::vector<std::uint64_t>& key = bad.state.cache.key;
+    if (repeat) key[2] = key[1];
+    else std::swap(key[1], key[2]);
+    write_checkpoint(path, bad);
+    try {
+      read_checkpoint(path, 42);
+      ADD_FAILURE() << (repeat ? "a repeated key" : "two keys swapped") << " loaded";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("not in key order"), std::string::npos) << e.what();
+    }
+  }
+  std::remove(path.c_str());
 }
 
 // A block of spheres on a cubic lattice, each overlapping its neighbours a
