@@ -206,9 +206,8 @@ TEST(Determinism, KeptColoursTravelWithTheState) {
   EXPECT_EQ(guarded.world().first_non_finite(), guarded.world().size());
 }
 
-// A checkpoint carries the cache's colours (format 2); one of format 1 (the
-// same file without them) still loads, with no colours.
-TEST(Determinism, CheckpointsOfBothFormatsLoad) {
+// The checkpoint of a pour of 300 after 30 steps (scene hash 42).
+static Checkpoint pour_checkpoint() {
   auto [s, g] = pour_scene(300, 3);
   Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
   for (int k = 0; k < 30; ++k) sim.step();
@@ -217,6 +216,13 @@ TEST(Determinism, CheckpointsOfBothFormatsLoad) {
   c.steps = 30;
   c.world = sim.world();
   c.state = sim.save_state();
+  return c;
+}
+
+// A checkpoint carries the cache's colours (format 2); one of format 1 (the
+// same file without them) still loads, with no colours.
+TEST(Determinism, CheckpointsOfBothFormatsLoad) {
+  const Checkpoint c = pour_checkpoint();
   ASSERT_GT(c.state.cache.size(), 0u);
   const std::string path = ::testing::TempDir() + "/marbles_formats.mck";
   write_checkpoint(path, c);
@@ -261,14 +267,7 @@ TEST(Determinism, CheckpointsOfBothFormatsLoad) {
 // twice, is refused as damaged: the restore's runs by sphere and the kept
 // colours' split between threads read them in key order.
 TEST(Determinism, CheckpointsWithTheCacheOutOfKeyOrderAreRefused) {
-  auto [s, g] = pour_scene(300, 3);
-  Simulation sim(s, make_world(s, g), broadphase::Backend::cpu);
-  for (int k = 0; k < 30; ++k) sim.step();
-  Checkpoint c;
-  c.scene_hash = 42;
-  c.steps = 30;
-  c.world = sim.world();
-  c.state = sim.save_state();
+  const Checkpoint c = pour_checkpoint();
   ASSERT_GT(c.state.cache.size(), 3u);
   const std::string path = ::testing::TempDir() + "/marbles_key_order.mck";
   write_checkpoint(path, c);
