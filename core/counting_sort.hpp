@@ -135,14 +135,16 @@ void wide_counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket,
   while ((std::uint64_t(buckets - 1) >> shift) >= 1024) ++shift;
   const std::uint32_t groups = ((buckets - 1) >> shift) + 1, width = 1u << shift;
   const std::size_t stride = detail::count_stride(groups);
-  // The scratch: the threads' group counts, the groups' firsts, then each
-  // placed item's bucket and index.
+  // The scratch: the threads' group counts, the groups' firsts, each
+  // placed item's bucket and index, then each thread's counts within a
+  // group (nothing allocated inside the parallel region).
   const std::size_t counts = std::size_t(most) * stride, firsts = groups + 1;
-  scratch.resize(counts + firsts + 2 * std::size_t(n));
+  scratch.resize(counts + firsts + 2 * std::size_t(n) + std::size_t(most) * width);
   std::uint32_t* count = scratch.data();
   std::uint32_t* group_first = count + counts;
   std::uint32_t* item_bucket = group_first + firsts;
   std::uint32_t* item = item_bucket + n;
+  std::uint32_t* group_counts = item + n;
   begin.resize(std::size_t(buckets) + 1);
   std::uint32_t* first = begin.data();
   std::vector<std::uint32_t> totals(static_cast<std::size_t>(most));
@@ -158,13 +160,13 @@ void wide_counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket,
         },
         count, stride, totals.data(), group_first);
 #pragma omp barrier
-    std::vector<std::uint32_t> local(width);
+    std::uint32_t* local = group_counts + std::size_t(thread_index()) * width;
 #pragma omp for schedule(dynamic, 1)
     for (std::ptrdiff_t g = 0; g < static_cast<std::ptrdiff_t>(groups); ++g) {
       const std::uint32_t b_lo = static_cast<std::uint32_t>(g) << shift;
       const std::uint32_t b_hi = std::min(buckets, b_lo + width);
       const std::uint32_t p_lo = group_first[g], p_hi = group_first[g + 1];
-      std::fill(local.begin(), local.begin() + (b_hi - b_lo), 0u);
+      std::fill(local, local + (b_hi - b_lo), 0u);
       for (std::uint32_t p = p_lo; p < p_hi; ++p) ++local[item_bucket[p] - b_lo];
       std::uint32_t at = p_lo;
       for (std::uint32_t b = b_lo; b < b_hi; ++b) {

@@ -93,7 +93,9 @@ std::uint64_t run_block(int threads, int steps) {
 
 TEST(Determinism, LargeBlockIsTheSameForEveryThreadCount) {
   const std::uint64_t one = run_block(1, 4);
-  for (const int threads : {2, 3, 5, 16}) EXPECT_EQ(run_block(threads, 4), one) << threads << " threads";
+  for (const int threads : {2, 3, 5, 16}) {
+    EXPECT_EQ(run_block(threads, 4), one) << threads << " threads";
+  }
 }
 
 TEST(Determinism, PourIsTheSameOnEveryRunAndThreadCount) {
@@ -134,7 +136,9 @@ TEST(Determinism, UniformArmsGiveTheBitsOfTheArmsWords) {
     uniform_substeps += uniform.last_step().uniform_arms;
     contacts += uniform.last_step().contacts;
     substeps_with_contacts += uniform.last_step().contacts > 0 ? 1 : 0;
-    if (k % 10 == 9) ASSERT_EQ(state_hash(uniform.world()), state_hash(arms.world())) << "step " << k;
+    if (k % 10 == 9) {
+      ASSERT_EQ(state_hash(uniform.world()), state_hash(arms.world())) << "step " << k;
+    }
   }
   EXPECT_GT(contacts, 100000u);  // the pour reaches the floor and piles there
   EXPECT_GE(uniform_substeps, substeps_with_contacts);  // every step with contacts solved records without arms
