@@ -186,18 +186,23 @@ std::uint32_t or_kept_colours_by_a(std::size_t n, Item&& item, std::uint64_t* us
     };
     const std::size_t lo = split(t), hi = split(t + 1);
     const std::uint32_t a_next = hi < n ? item(static_cast<std::uint32_t>(hi)).a : ~std::uint32_t(0);
+    std::size_t first_across = hi;
     for (std::size_t k = lo; k < hi; ++k) {
       const KeptItem i = item(static_cast<std::uint32_t>(k));
       if (i.colour >= kMaxColours) continue;
       const std::uint64_t bit = std::uint64_t(1) << i.colour;
       used[i.a] |= bit;
-      if (!is_wall(i.b) && i.b < a_next) used[i.b] |= bit;
+      if (!is_wall(i.b)) {
+        if (i.b < a_next) used[i.b] |= bit;
+        else first_across = std::min(first_across, k);
+      }
       top = std::max<std::uint32_t>(top, i.colour + 1u);
     }
 #pragma omp barrier
-    // The items across: the thread's own items again (no list to allocate
-    // inside the region), those whose b lies past its spheres.
-    for (std::size_t k = lo; k < hi; ++k) {
+    // The items across: the thread's own items again from the first of them
+    // (no list to allocate inside the region; in a pile they lie near the
+    // end of its range), those whose b lies past its spheres.
+    for (std::size_t k = first_across; k < hi; ++k) {
       const KeptItem i = item(static_cast<std::uint32_t>(k));
       if (i.colour >= kMaxColours || is_wall(i.b) || i.b < a_next) continue;
 #pragma omp atomic update
