@@ -5,6 +5,7 @@
 // is the same for any thread count and the same as CudaStep's.
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include "core/bits.hpp"
 #include "core/error.hpp"
@@ -44,14 +45,11 @@ class CpuStep final : public StepBackend {
     m_solver.forget_records();
     m_contact_first.clear();
     // The sphere search replaces the second run, reusing its elements
-    // (sphere_contacts); it is cleared wherever that search does not run
+    // (sphere_contacts); it is emptied wherever that search does not run
     // or fails.
-    if (!m_model.collisions) m_contact_rest.clear();
+    if (!m_model.collisions || m_non_finite) m_contact_rest.clear();
     if (!m_model.collisions && !m_model.wall_contacts) return;
-    if (m_non_finite) {  // the step ends with "non-finite at step N, sphere i", not a broad-phase error
-      m_contact_rest.clear();
-      return;
-    }
+    if (m_non_finite) return;  // the step ends with "non-finite at step N, sphere i", not a broad-phase error
     const BodiesView bodies = m_world.view();
     const std::size_t n = m_world.size();
     narrowphase::contact_reaches(bodies, h, m_reach);
@@ -205,7 +203,7 @@ class CpuStep final : public StepBackend {
   const narrowphase::UniformArms* uniform_arms() {
     if (!m_uniform_known) {
       m_uniform_known = true;
-      m_uniform_holds = false;
+      m_uniform.reset();
       const BodiesView b = m_world.view();
       if (!m_model.uniform_pairs || m_model.pair_coefficients.empty() || b.count == 0) return nullptr;
       const auto n = static_cast<std::ptrdiff_t>(b.count);
@@ -213,12 +211,9 @@ class CpuStep final : public StepBackend {
       bool mixed = false;
 #pragma omp parallel for schedule(static) reduction(|| : mixed) if (n > 20000)
       for (std::ptrdiff_t i = 0; i < n; ++i) mixed = bits_of_real(b.radius[i]) != first || mixed;
-      if (mixed) return nullptr;
-      const narrowphase::PairCoefficients& c = m_model.pair_coefficients.front();
-      m_uniform = {b.radius[0], c.friction, c.rolling_friction};
-      m_uniform_holds = true;
+      if (!mixed) m_uniform = m_model.uniform_arms(b.radius[0]);
     }
-    return m_uniform_holds ? &m_uniform : nullptr;
+    return m_uniform ? &*m_uniform : nullptr;
   }
 
   // The watchdog's figures (watch_math.hpp); walls count only where they act.
@@ -241,8 +236,8 @@ class CpuStep final : public StepBackend {
   World m_world;
   std::vector<narrowphase::WallShape> m_walls;  // moving walls move
   World m_kept;             // the moving state at the start of the step (watchdog)
-  narrowphase::UniformArms m_uniform;  // uniform_arms()' answer, where it holds
-  bool m_uniform_known = false, m_uniform_holds = false;
+  std::optional<narrowphase::UniformArms> m_uniform;  // uniform_arms()' answer, once known
+  bool m_uniform_known = false;
   std::vector<std::uint32_t> m_order;  // the last renumber's (its return)
   std::vector<narrowphase::WallShape> m_kept_walls;  // at the start of the step (the cache keeps its own)
   std::unique_ptr<broadphase::BroadPhase> m_broadphase;

@@ -1149,11 +1149,7 @@ class CudaStep final : public StepBackend {
     const std::size_t impact_words =
         m_impact_candidates ? m_count : narrowphase::SweepRecords::real_words(m_count);  // words, or approach speeds
     auto* memory = m_record_memory.as<narrowphase::Real4>(words + impact_words);
-    narrowphase::UniformArms uniform;
-    if (!arms) {
-      const narrowphase::PairCoefficients& c = m_model.pair_coefficients.front();
-      uniform = {m_radius, c.friction, c.rolling_friction};
-    }
+    const narrowphase::UniformArms uniform = arms ? narrowphase::UniformArms{} : m_model.uniform_arms(m_radius);
     m_records = narrowphase::SweepRecords::in(memory, m_count, extra, arms, uniform, m_terms.rolling, m_terms.friction);
     m_impacts = {};
     if (m_impact_candidates) m_impacts.word = memory + words;

@@ -59,6 +59,12 @@ struct StepModel {
   std::uint64_t renumber_every = 0;
 
   narrowphase::PairTable pair_table() const { return {pair_coefficients.data(), material_count}; }
+  // With uniform_pairs, the one arms word of every contact where every
+  // sphere has `radius` (both backends' records without arms).
+  narrowphase::UniformArms uniform_arms(real radius) const {
+    const narrowphase::PairCoefficients& c = pair_coefficients.front();
+    return {radius, c.friction, c.rolling_friction};
+  }
   real substep() const { return static_cast<real>(dt / substeps); }
   // The gravity kick before the contacts (h, or h/2 for velocity Verlet) and after the drift (0 or h/2).
   real first_kick(real h) const { return verlet ? h / 2 : h; }
