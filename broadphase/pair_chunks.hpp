@@ -18,8 +18,8 @@ namespace marbles::broadphase {
 // memory becomes a RuntimeFailure that says how many pairs it had reached.
 inline void gather_pair_chunks(const std::vector<std::vector<Pair>>& chunks, const ParallelErrors& errors,
                                std::vector<Pair>& out) {
-  std::size_t total = 0;
-  for (const auto& local : chunks) total += local.size();
+  const auto count = static_cast<int>(chunks.size());
+  const std::size_t total = parts_size(chunks, 0, count);
   try {
     errors.rethrow();
     out.resize(total);  // `out` replaced: its elements reused, only what it grows by initialised
@@ -29,13 +29,7 @@ inline void gather_pair_chunks(const std::vector<std::vector<Pair>>& chunks, con
                          " MiB) found before it ran out; so many spheres overlap (coincident centres?) that "
                          "their pairs do not fit");
   }
-  // Each chunk's place, then the copies on all threads.
-  std::vector<std::size_t> place(chunks.size() + 1, 0);
-  for (std::size_t c = 0; c < chunks.size(); ++c) place[c + 1] = place[c] + chunks[c].size();
-  const auto count = static_cast<std::ptrdiff_t>(chunks.size());
-#pragma omp parallel for schedule(dynamic, 1) if (total >= (std::size_t(1) << 16))
-  for (std::ptrdiff_t c = 0; c < count; ++c)
-    std::copy(chunks[c].begin(), chunks[c].end(), out.begin() + static_cast<std::ptrdiff_t>(place[c]));
+  copy_parts(out.data(), 0, chunks, 0, count, std::size_t(1) << 16);  // each chunk on a thread of its own
 }
 
 }  // namespace marbles::broadphase

@@ -130,16 +130,17 @@ int collect_in_parts(std::size_t count, std::size_t parallel_from, std::vector<T
 
 // The parts [from, threads) copied to `to` from element `at` on, in order,
 // each part on a thread of its own where they hold `parallel_from` or more
-// in all; `to` must hold them. Joined on one thread, the copy was the one
+// in all; `to` must hold them (also the broad phase's chunks of pairs,
+// gather_pair_chunks). Joined on one thread, the copy was the one
 // part of the CPU step's contact search that did not shrink with more
 // threads (settle scene of 10^5: the search 6 ms a step on 4, 8 and 16
 // threads; docs/architecture.md "The CPU step on many threads").
 template <class T>
 void copy_parts(T* to, std::size_t at, const std::vector<std::vector<T>>& parts, int from, int threads,
                 std::size_t parallel_from) {
-  std::vector<std::size_t> place(static_cast<std::size_t>(threads > from ? threads - from : 0) + 1, at);
-  for (int t = from; t < threads; ++t) place[t - from + 1] = place[t - from] + parts[t].size();
   const int count = threads > from ? threads - from : 0;
+  std::vector<std::size_t> place(static_cast<std::size_t>(count) + 1, at);
+  for (int p = 0; p < count; ++p) place[p + 1] = place[p] + parts[from + p].size();
 #pragma omp parallel for schedule(dynamic, 1) if (place[count] - at >= parallel_from && count > 1)
   for (int p = 0; p < count; ++p) std::copy(parts[from + p].begin(), parts[from + p].end(), to + place[p]);
 }
