@@ -35,11 +35,13 @@ if os.environ.get("FAKE_FAIL") == "text":
     sys.exit(0)
 sizes = [int(a) for a in args[args.index("--n") + 1:-1] if a.isdigit()]
 ke = float(os.environ.get("FAKE_KE", "1.0"))
+find = float(os.environ.get("FAKE_FIND", "0.5"))
 if "FAKE_AFTER" in os.environ and calls >= int(os.environ["FAKE_AFTER"]):
-    ke = float(os.environ["FAKE_KE_LATER"])
+    ke = float(os.environ.get("FAKE_KE_LATER", ke))
+    find = float(os.environ.get("FAKE_FIND_LATER", find))
 print(json.dumps({"backend": "cuda", "threads": 16, "results": [
     {"n": n, "step_ms_median": 100.0 + n / 1000, "ke_per_sphere_J": ke, "max_overlap_pct": 0.5,
-     "verb_ms": {"solve_velocities": 0.25}, "launches_per_step": 238.0, "host_waits_per_step": 2.0,
+     "verb_ms": {"find_contacts": find, "solve_velocities": 0.25}, "launches_per_step": 238.0, "host_waits_per_step": 2.0,
      "device_busy_ms_per_step": None} for n in sizes]}))
 '''
 
@@ -78,6 +80,19 @@ def main(bench_ab, marbles, work):
     check("every round's figure listed in full, the CUDA figures' medians, a null busy time as -",
           out.count("100.010 100.010 100.010") == 2 and out.count("100.020 100.020 100.020") == 2 and
           out.count(f" {'238':>6} {'2':>5} ") == 4 and f"100.010 {'-':>7} {'0.250':>7}" in out, out)
+
+    check("no verb table unless asked", "verbs, median ms" not in out, out)
+
+    # --verbs: each verb's median over the rounds. The calls go -, F, F, -,
+    # -, F (F: FAKE_FIND=0.75); from the fourth on, every find time is 2.0.
+    # So "-" takes 0.5, 2.0, 2.0 (median 2.0, mean 1.5) and F 0.75, 0.75,
+    # 2.0 (median 0.75, mean 1.17).
+    code, out, _ = fake_run("--rounds", "3", "--verbs", "-", "FAKE_FIND=0.75", "--", "--n", "10",
+                            env={"FAKE_AFTER": "3", "FAKE_FIND_LATER": "2.0"})
+    verb_rows = [line.split() for line in out.splitlines() if line.split()[:2] in (["-", "10"], ["FAKE_FIND=0.75", "10"])]
+    check("--verbs: a header of the verbs and a row a setting with each verb's median over its rounds",
+          code == 0 and "verbs, median ms" in out and "find" in out and "solve" in out and
+          ["-", "10", "2.000", "0.250"] in verb_rows and ["FAKE_FIND=0.75", "10", "0.750", "0.250"] in verb_rows, out)
 
     code, out, _ = fake_run("--rounds", "2", "-", "FAKE_KE=2.5", "--", "--n", "10")
     check("different energies: exit 1, each setting's values named",
