@@ -22,14 +22,13 @@ inline void gather_pair_chunks(const std::vector<std::vector<Pair>>& chunks, con
   const std::size_t total = parts_size(chunks, 0, count);
   try {
     errors.rethrow();
-    out.resize(total);  // `out` replaced: its elements reused, only what it grows by initialised
+    put_parts(out, 0, chunks, 0, count, std::size_t(1) << 16);  // `out` replaced, each chunk on a thread of its own
   } catch (const std::bad_alloc&) {
     throw RuntimeFailure("out of memory for the candidate pairs: " + std::to_string(total) + " pairs (" +
                          std::to_string(total * sizeof(Pair) >> 20) +
                          " MiB) found before it ran out; so many spheres overlap (coincident centres?) that "
                          "their pairs do not fit");
   }
-  copy_parts(out.data(), 0, chunks, 0, count, std::size_t(1) << 16);  // each chunk on a thread of its own
 }
 
 }  // namespace marbles::broadphase

@@ -136,18 +136,19 @@ void wide_counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket,
   const std::uint32_t groups = ((buckets - 1) >> shift) + 1, width = 1u << shift;
   const std::size_t stride = detail::count_stride(groups);
   // The scratch: the threads' group counts, the groups' firsts, each
-  // placed item's bucket and index, then each thread's counts within a
-  // group (nothing allocated inside the parallel region).
+  // placed item's bucket and index, each thread's counts within a group,
+  // then the threads' range totals (nothing allocated inside the parallel
+  // region, nor anything but the scratch in a call).
   const std::size_t counts = std::size_t(most) * stride, firsts = groups + 1;
-  scratch.resize(counts + firsts + 2 * std::size_t(n) + std::size_t(most) * width);
+  scratch.resize(counts + firsts + 2 * std::size_t(n) + std::size_t(most) * width + std::size_t(most));
   std::uint32_t* count = scratch.data();
   std::uint32_t* group_first = count + counts;
   std::uint32_t* item_bucket = group_first + firsts;
   std::uint32_t* item = item_bucket + n;
   std::uint32_t* group_counts = item + n;
+  std::uint32_t* totals = group_counts + std::size_t(most) * width;
   begin.resize(std::size_t(buckets) + 1);
   std::uint32_t* first = begin.data();
-  std::vector<std::uint32_t> totals(static_cast<std::size_t>(most));
 #pragma omp parallel num_threads(most)
   {
     const std::decay_t<Bucket> bucket_of = bucket;
@@ -158,7 +159,7 @@ void wide_counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket,
           item_bucket[p] = b;
           item[p] = k;
         },
-        count, stride, totals.data(), group_first);
+        count, stride, totals, group_first);
 #pragma omp barrier
     std::uint32_t* local = group_counts + std::size_t(thread_index()) * width;
 #pragma omp for schedule(dynamic, 1)
@@ -192,11 +193,12 @@ void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move
     return;
   }
   const std::size_t stride = detail::count_stride(buckets);
-  // Each thread clears its own counts; the threads write every begin.
-  scratch.resize(std::size_t(most) * stride);
+  // Each thread clears its own counts; the threads write every begin. The
+  // threads' range totals after the counts.
+  scratch.resize(std::size_t(most) * stride + std::size_t(most));
   begin.resize(std::size_t(buckets) + 1);
   std::uint32_t* count = scratch.data();
-  std::vector<std::uint32_t> totals(static_cast<std::size_t>(most));
+  std::uint32_t* totals = count + std::size_t(most) * stride;
   std::uint32_t* first = begin.data();
 #pragma omp parallel num_threads(most) if (most > 1)
   {
@@ -206,7 +208,7 @@ void counting_sort(std::uint32_t n, std::uint32_t buckets, Bucket&& bucket, Move
     std::decay_t<Move> move_to = move;
     detail::sort_slices(
         n, buckets, 0, bucket_of, [&move_to](std::uint32_t k, std::uint32_t, std::uint32_t p) { move_to(k, p); },
-        count, stride, totals.data(), first);
+        count, stride, totals, first);
   }
 }
 

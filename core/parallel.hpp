@@ -153,13 +153,23 @@ std::size_t parts_size(const std::vector<std::vector<T>>& parts, int from, int t
   return total;
 }
 
-// parts[from, threads) appended to `to`, in order (copy_parts).
+// parts[from, threads) put in `to` from element `at` on, in order, `to`
+// sized to end with them (copy_parts): at to.size() they are appended, at
+// 0 they replace its elements, which are reused (only what `to` grows by
+// is initialised; cleared first, every element would be initialised
+// again, on one thread).
+template <class T>
+void put_parts(std::vector<T>& to, std::size_t at, const std::vector<std::vector<T>>& parts, int from, int threads,
+               std::size_t parallel_from = std::size_t(1) << 16) {
+  to.resize(at + parts_size(parts, from, threads));
+  copy_parts(to.data(), at, parts, from, threads, parallel_from);
+}
+
+// parts[from, threads) appended to `to`, in order.
 template <class T>
 void join_parts(std::vector<T>& to, std::vector<std::vector<T>>& parts, int from, int threads,
                 std::size_t parallel_from = std::size_t(1) << 16) {
-  const std::size_t base = to.size();
-  to.resize(base + parts_size(parts, from, threads));
-  copy_parts(to.data(), base, parts, from, threads, parallel_from);
+  put_parts(to, to.size(), parts, from, threads, parallel_from);
 }
 
 // Appends what make(k, out) appends for k = 0..count-1 to `out`, in order of

@@ -101,16 +101,13 @@ void sphere_contacts_in_runs(const BodiesView& bodies, const IndexPair* pairs, s
     return;
   }
   // The second thread's buffer itself where it is the only other (rest's
-  // old one to the scratch). Else rest's own elements, overwritten: sized
-  // to the new count from the last search's (only what grows is
-  // initialised, where clearing it first would initialise every one on one
-  // thread), the parts copied in on all threads.
+  // old one to the scratch). Else rest's own elements replaced by the
+  // parts, copied in on all threads.
   if (threads == 2) {
     rest.swap(parts[1]);
     return;
   }
-  rest.resize(parts_size(parts, 1, threads));
-  copy_parts(rest.data(), 0, parts, 1, threads, kParallelFrom);
+  put_parts(rest, 0, parts, 1, threads, kParallelFrom);
 }
 
 // Spheres near[i] that some wall may not pass over, where every wall is
