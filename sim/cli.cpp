@@ -120,7 +120,8 @@ int cli_main(int argc, char** argv) {
   run_cmd->add_option("scene", run.scene_path, "scene file (YAML)")->required();
   run_cmd->add_option("--out", run.out_dir, "output folder (overrides output.dir)");
   std::string run_backend = "auto", run_broadphase = "home";
-  run_cmd->add_option("--backend", run_backend, "broad phase backend: auto (CUDA when a device is there), cpu, cuda")
+  run_cmd
+      ->add_option("--backend", run_backend, "where the whole step runs: auto (CUDA when a device is there), cpu, cuda")
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   run_cmd->add_option("--broadphase", run_broadphase,
                       "broad phase algorithm: home (home-cell variant, default) or seed (8 cells per sphere)")
