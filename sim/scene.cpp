@@ -721,7 +721,9 @@ namespace {
 // ordinary keys: each map takes the keys of the merged maps it does not give
 // itself (of a list, the earlier map wins), then loses its `<<`. Merged
 // values are the anchor's nodes, so an error in one names the anchor's line.
-// Visits are counted: an alias bomb is refused, not expanded.
+// Visits are counted: an alias bomb is refused, not expanded. A node that
+// holds itself through an alias (`a: &x {<<: *x}`, `a: &x {b: *x}`) is
+// refused too, not followed until the stack runs out.
 class MergeKeys {
  public:
   explicit MergeKeys(std::string path) : m_path(std::move(path)) {}
@@ -729,6 +731,14 @@ class MergeKeys {
   void resolve(YAML::Node node, const std::string& key) {
     if (++m_visits > kMaxVisits)
       throw InputError(SourceLocation{m_path, 0, 0}, "", "aliases expand to more than 20,000,000 nodes");
+    if (m_chain.size() >= kMaxDepth)
+      throw InputError(detail::location_of(m_path, node.Mark()), key.size() > 120 ? key.substr(0, 120) + "..." : key,
+                       "nested more than 1,000 levels deep (an alias inside the node it names?)");
+    m_chain.push_back(node);
+    struct Pop {
+      std::vector<YAML::Node>& chain;
+      ~Pop() { chain.pop_back(); }
+    } pop{m_chain};
     if (node.IsSequence()) {
       for (std::size_t i = 0; i < node.size(); ++i) resolve(node[i], key + "[" + std::to_string(i) + "]");
       return;
@@ -744,12 +754,19 @@ class MergeKeys {
       const auto fail = [&] {
         throw InputError(detail::location_of(m_path, value.Mark()), merge_key, "a merge key takes a map or a list of maps");
       };
+      const auto take = [&](const YAML::Node& source) {
+        for (const YAML::Node& around : m_chain)
+          if (around.is(source))
+            throw InputError(detail::location_of(m_path, it->first.Mark()), merge_key,
+                             "a merge key names a map that holds it (its own anchor, or one around it)");
+        sources.push_back(source);
+      };
       if (value.IsMap()) {
-        sources.push_back(value);
+        take(value);
       } else if (value.IsSequence()) {
         for (const YAML::Node& item : value) {
           if (!item.IsMap()) fail();
-          sources.push_back(item);
+          take(item);
         }
       } else {
         fail();
@@ -776,8 +793,10 @@ class MergeKeys {
 
  private:
   static constexpr std::size_t kMaxVisits = 20'000'000;
+  static constexpr std::size_t kMaxDepth = 1'000;
   std::string m_path;
   std::size_t m_visits = 0;
+  std::vector<YAML::Node> m_chain;  // the maps and lists being resolved, outermost first
 };
 
 // A scene's tree is a map of keys.

@@ -132,5 +132,40 @@ TEST(SceneFeatures, MergeKeysSupplyDefaults) {
       << load_error(scalar);
 }
 
+// A map that merges itself, or one around it, and a map that holds itself
+// through an alias are refused with the merge key's (or the node's) place,
+// not followed until the stack runs out.
+TEST(SceneFeatures, MergeKeysThatHoldThemselvesAreRefused) {
+  const ScratchDir dir("features_merge_cycle");
+  const std::string particles = "particles:\n  - list: {positions: [[0, 0, 1]], radius: 0.1}\n";
+  struct Case {
+    const char* name;
+    const char* materials;
+    const char* expected;
+  };
+  for (const Case& c : {
+           Case{"self.yaml", "  a: &x {<<: *x}\n", "self.yaml:3:10: materials.a.<<: a merge key names a map that holds it"},
+           Case{"keys.yaml", "  a: &x {density: 5, <<: *x}\n",
+                "keys.yaml:3:22: materials.a.<<: a merge key names a map that holds it"},
+           Case{"list.yaml", "  c: &y {<<: [{density: 5}, *y]}\n",
+                "list.yaml:3:10: materials.c.<<: a merge key names a map that holds it"},
+           Case{"outer.yaml", "  d: &o {e: {<<: *o}}\n", "outer.yaml:3:14: materials.d.e.<<: a merge key names a map"},
+           Case{"alias.yaml", "  f: &z {density: 5, g: *z, <<: {friction: 0.1}}\n",
+                "...: nested more than 1,000 levels deep (an alias inside the node it names?)"},
+       }) {
+    const std::string path = dir.write(c.name, std::string(SCENE_TIME "materials:\n") + c.materials + particles);
+    const std::string error = load_error(path);
+    EXPECT_NE(error.find(c.expected), std::string::npos) << c.name << ": " << error;
+    EXPECT_NE(error.find(std::string(c.name) + ":3:"), std::string::npos) << c.name << ": " << error;
+  }
+  EXPECT_NE(load_error(dir.path() + "/alias.yaml").find(": materials.f.g.g.g.g.g.g.g.g.g.g"), std::string::npos);
+  // ... and the same maps without the cycle load.
+  const std::string fine = dir.write("fine.yaml", std::string(SCENE_TIME "materials:\n"
+                                                              "  b: &x {density: 5, restitution: 0.5}\n"
+                                                              "  c: {<<: [*x], friction: 0.2}\n") +
+                                                      particles);
+  EXPECT_EQ(scene::load_scene(fine).materials.size(), 2u);
+}
+
 }  // namespace
 }  // namespace marbles
