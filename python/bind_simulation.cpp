@@ -215,10 +215,7 @@ class PySimulation {
 
   void restart(const std::string& path) {
     Checkpoint c = read_checkpoint(path, m_fingerprint);
-    if (c.world.size() != size())
-      throw InputError(SourceLocation{path, 0, 0}, "restart",
-                       "the checkpoint holds " + std::to_string(c.world.size()) + " spheres, the scene makes " +
-                           std::to_string(size()));
+    check_checkpoint_fits(c, path, "restart", size(), m_scene.materials.size());
     if (m_views_out) m_sim->state_written();
     m_sim->restore(c.world, c.state, c.steps, c.ids);
     host_edited();

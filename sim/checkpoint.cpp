@@ -181,6 +181,7 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   if (std::memcmp(version, kVersion, sizeof kVersion) != 0)
     r.fail("was written by " + std::string(version, strnlen(version, sizeof version)) + ", this is " + kVersion);
   const auto real_bytes = r.get<std::uint32_t>();
+  if (real_bytes != 4 && real_bytes != 8) r.fail("is damaged (its precision is neither float nor double)");
   if (real_bytes != sizeof(real))
     r.fail(std::string("is in ") + (real_bytes == 8 ? "double" : "float") + " precision, this run in " + kRealName +
            " (use --precision)");
@@ -196,6 +197,27 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   for (std::size_t size : {c.world.velocity.size(), c.world.angular_velocity.size(), c.world.radius.size(),
                            c.world.inv_mass.size(), c.world.inv_inertia.size(), c.world.material.size()})
     if (size != n) r.fail("is damaged (array lengths differ)");
+  // Values a run could not have written: a sphere's size, mass or state not
+  // finite, a radius not above zero, an inverse mass or inertia below zero
+  // (zero: a fixed sphere), impulses or totals not finite.
+  const auto finite = [](real x) { return x - x == 0; };
+  const auto finite3 = [&](const Vec3& v) { return finite(v.x) && finite(v.y) && finite(v.z); };
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!finite3(c.world.position[i]) || !finite3(c.world.velocity[i]) || !finite3(c.world.angular_velocity[i]))
+      r.fail("is damaged (sphere " + std::to_string(i) + "'s state is not finite)");
+    if (!(c.world.radius[i] > 0) || !finite(c.world.radius[i]) || !(c.world.inv_mass[i] >= 0) ||
+        !finite(c.world.inv_mass[i]) || !(c.world.inv_inertia[i] >= 0) || !finite(c.world.inv_inertia[i]))
+      r.fail("is damaged (sphere " + std::to_string(i) + "'s radius, mass or inertia)");
+  }
+  for (std::size_t k = 0; k < c.state.cache.key.size(); ++k)
+    if (!finite(c.state.cache.normal_impulse[k]) || !finite3(c.state.cache.tangent_impulse[k]) ||
+        !finite3(c.state.cache.rolling_impulse[k]))
+      r.fail("is damaged (a cache entry's impulse is not finite)");
+  for (double t : {c.totals.candidate_sum, c.totals.contact_sum, c.totals.deepest, c.totals.energy_start,
+                   c.totals.overlap_end, c.totals.rollbacks})
+    if (!(t - t == 0) || t < 0) r.fail("is damaged (its running totals)");
+  for (double p : c.probe)
+    if (!(p - p == 0)) r.fail("is damaged (its reference's progress)");
   // Pairs of its spheres (a < b) or a sphere and a wall, in ascending key
   // order without repeats: the restore's runs by sphere and the kept
   // colours' split between the threads (or_kept_colours_by_a) rest on it.
@@ -214,6 +236,19 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
     }
   }
   return c;
+}
+
+void check_checkpoint_fits(const Checkpoint& c, const std::string& path, const std::string& key, std::size_t spheres,
+                           std::size_t materials) {
+  if (c.world.size() != spheres)
+    throw InputError(SourceLocation{path, 0, 0}, key,
+                     "the checkpoint holds " + std::to_string(c.world.size()) + " spheres, the scene makes " +
+                         std::to_string(spheres));
+  for (std::size_t i = 0; i < c.world.material.size(); ++i)
+    if (c.world.material[i] >= materials)
+      throw InputError(SourceLocation{path, 0, 0}, key,
+                       "the checkpoint is damaged (sphere " + std::to_string(i) + " names material " +
+                           std::to_string(c.world.material[i]) + ", the scene has " + std::to_string(materials) + ")");
 }
 
 void prune_checkpoints(const std::string& out_dir, int keep) {

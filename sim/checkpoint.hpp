@@ -60,6 +60,12 @@ void write_checkpoint(const std::string& path, const Checkpoint& checkpoint);
 // InputError naming the file and what does not match.
 Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash);
 
+// Whether a checkpoint read for a scene fits it: as many spheres as the
+// scene makes, each of a material the scene has. Throws InputError naming
+// the file and `key` (the argument that gave it) where not.
+void check_checkpoint_fits(const Checkpoint& checkpoint, const std::string& path, const std::string& key,
+                           std::size_t spheres, std::size_t materials);
+
 // "double" or "float": the precision a checkpoint was written in ("float"
 // when the file is not one; read_checkpoint then says why).
 std::string checkpoint_precision(const std::string& path);

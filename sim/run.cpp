@@ -23,6 +23,7 @@
 #include "core/parallel.hpp"
 #include "render/atomic_file.hpp"
 #include "sim/checkpoint.hpp"
+#include "sim/limits.hpp"
 #include "sim/output.hpp"
 #include "sim/particles.hpp"
 #include "sim/progress.hpp"
@@ -112,7 +113,19 @@ int check_scene(const std::string& scene_path, const std::vector<std::string>& o
 
 int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   scene::Scene sc = scene::load_scene(options.scene_path, options.overrides);
-  if (options.duration) sc.time.duration = *options.duration;
+  if (options.duration) {  // held to time.duration's own rules
+    const double d = *options.duration;
+    const auto refuse = [&](const std::string& why) {
+      throw InputError(SourceLocation{}, "--duration", why + ", got " + shortest(d));
+    };
+    if (!(d > 0) || !(d - d == 0)) refuse("must be a finite number > 0");
+    if (d < sc.time.dt) refuse("must be >= time.dt (" + shortest(sc.time.dt) + ")");
+    const double substeps = d / sc.time.dt * sc.time.substeps;
+    if (!(substeps <= limits().substeps))
+      refuse("makes " + shortest(substeps) + " substeps (duration / time.dt x time.substeps), more than the limit " +
+             shortest(limits().substeps) + " (--limit substeps=N raises it)");
+    sc.time.duration = d;
+  }
   if (options.out_dir) sc.output.dir = *options.out_dir;
   if (options.summary_only) {
     sc.output.vtk_every = 0;
@@ -154,10 +167,12 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   const bool render = options.render;
   if (options.restart) {
     Checkpoint c = read_checkpoint(*options.restart, fingerprint);
-    if (c.world.size() != sim.world().size())
+    check_checkpoint_fits(c, *options.restart, "--restart", sim.world().size(), sc.materials.size());
+    if (c.steps > total_steps)
       throw InputError(SourceLocation{*options.restart, 0, 0}, "--restart",
-                       "the checkpoint holds " + std::to_string(c.world.size()) + " spheres, the scene makes " +
-                           std::to_string(sim.world().size()));
+                       "the checkpoint is at step " + std::to_string(c.steps) + ", past this run's end at step " +
+                           std::to_string(total_steps) + " (a duration of " + shortest(sc.time.duration) +
+                           " s: give a longer --duration)");
     sim.restore(c.world, c.state, c.steps, c.ids);
     totals = c.totals;
     if (probe) probe->resume(c.probe);

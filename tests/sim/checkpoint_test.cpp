@@ -323,6 +323,9 @@ TEST_F(Checkpoints, ForeignOrDamagedCheckpointsAreRefused) {
   EXPECT_NE(err.find("belongs to another scene"), std::string::npos) << err;
   EXPECT_EQ(marbles("run " + scene + " --quiet --precision double --restart " + ck, &err), 2);
   EXPECT_NE(err.find("is in float precision, this run in double"), std::string::npos) << err;
+  // A duration that ends before the checkpoint's step.
+  EXPECT_EQ(marbles("run " + scene + " --quiet --duration 0.05 --restart " + ck, &err), 2);
+  EXPECT_NE(err.find("the checkpoint is at step 100, past this run's end at step 50"), std::string::npos) << err;
   const std::string bytes = slurp(ck);
   const std::string cut = dir.write("cut.mck", bytes.substr(0, bytes.size() / 2));
   EXPECT_EQ(marbles("run " + scene + " --quiet --restart " + cut, &err), 2);

@@ -12,6 +12,8 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <functional>
+#include <limits>
 #include <iterator>
 #include <random>
 #include <stdexcept>
@@ -290,6 +292,80 @@ TEST(Determinism, CheckpointsWithTheCacheOutOfKeyOrderAreRefused) {
       EXPECT_NE(std::string(e.what()).find("not in key order"), std::string::npos) << e.what();
     }
   }
+  std::remove(path.c_str());
+}
+
+// A checkpoint whose checksum holds but whose values no run could have
+// written (a radius not above zero, a mass, state, impulse or total not
+// finite, a negative inverse mass, a precision word of neither type) is
+// refused as damaged; one that names a material the scene lacks, or holds
+// another number of spheres, does not fit the scene.
+TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
+  const Checkpoint c = pour_checkpoint();
+  ASSERT_GT(c.world.size(), 3u);
+  ASSERT_GT(c.state.cache.size(), 0u);
+  const std::string path = ::testing::TempDir() + "/marbles_values.mck";
+  write_checkpoint(path, c);
+  EXPECT_NO_THROW(read_checkpoint(path, 42)) << "premise: the file as written loads";
+  const real nan = std::numeric_limits<real>::quiet_NaN(), inf = std::numeric_limits<real>::infinity();
+  const std::vector<std::pair<std::string, std::function<void(Checkpoint&)>>> damages{
+      {"radius, mass or inertia", [](Checkpoint& k) { k.world.radius[2] = 0; }},
+      {"radius, mass or inertia", [&](Checkpoint& k) { k.world.radius[1] = -k.world.radius[1]; }},
+      {"radius, mass or inertia", [&](Checkpoint& k) { k.world.radius[3] = nan; }},
+      {"radius, mass or inertia", [&](Checkpoint& k) { k.world.inv_mass[0] = nan; }},
+      {"radius, mass or inertia", [](Checkpoint& k) { k.world.inv_mass[2] = -1; }},
+      {"radius, mass or inertia", [&](Checkpoint& k) { k.world.inv_inertia[1] = inf; }},
+      {"state is not finite", [&](Checkpoint& k) { k.world.position[2].y = inf; }},
+      {"state is not finite", [&](Checkpoint& k) { k.world.velocity[0].z = nan; }},
+      {"state is not finite", [&](Checkpoint& k) { k.world.angular_velocity[3].x = -inf; }},
+      {"impulse is not finite", [&](Checkpoint& k) { k.state.cache.normal_impulse[0] = nan; }},
+      {"impulse is not finite", [&](Checkpoint& k) { k.state.cache.tangent_impulse[0].x = inf; }},
+      {"running totals", [](Checkpoint& k) { k.totals.energy_start = std::numeric_limits<double>::quiet_NaN(); }},
+      {"running totals", [](Checkpoint& k) { k.totals.contact_sum = -1; }},
+  };
+  for (const auto& [why, damage] : damages) {
+    Checkpoint bad = c;
+    damage(bad);
+    write_checkpoint(path, bad);
+    try {
+      read_checkpoint(path, 42);
+      ADD_FAILURE() << "a checkpoint damaged in its " << why << " loaded";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  }
+  // The precision word (after the magic, the format and the version) of
+  // neither type, with the checksum made anew.
+  write_checkpoint(path, c);
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const std::uint32_t zero = 0;
+  std::memcpy(bytes.data() + 8 + 4 + 16, &zero, 4);
+  std::uint64_t h = 14695981039346656037ull;  // FNV-1a of all before the checksum
+  for (std::size_t i = 0; i + 8 < bytes.size(); ++i) h = (h ^ static_cast<unsigned char>(bytes[i])) * 1099511628211ull;
+  std::memcpy(bytes.data() + bytes.size() - 8, &h, 8);
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+  try {
+    read_checkpoint(path, 42);
+    ADD_FAILURE() << "a precision word of 0 loaded";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("neither float nor double"), std::string::npos) << e.what();
+  }
+  // Fitting the scene: the materials it has, the spheres it makes.
+  std::uint32_t materials = 0;
+  for (std::uint32_t m : c.world.material) materials = std::max(materials, m + 1);
+  EXPECT_NO_THROW(check_checkpoint_fits(c, path, "--restart", c.world.size(), materials));
+  try {
+    check_checkpoint_fits(c, path, "--restart", c.world.size(), materials - 1);
+    ADD_FAILURE() << "a checkpoint naming a material past the scene's fitted it";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("names material " + std::to_string(materials - 1)), std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(check_checkpoint_fits(c, path, "--restart", c.world.size() + 1, materials), InputError);
   std::remove(path.c_str());
 }
 

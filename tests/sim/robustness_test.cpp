@@ -129,6 +129,17 @@ TEST_F(Robustness, LimitsCanBeRaised) {
       "time: {duration: 1e8, dt: 0.001}\nmaterials: {a: }\nparticles:\n  - list: {positions: [[0, 0, 0]], radius: 0.1}\n");
   EXPECT_EQ(marbles("check " + long_run, dir).exit_code, 2);
   EXPECT_EQ(marbles("check " + long_run + " --limit substeps=1e12", dir).exit_code, 0);
+  // --duration is held to the same limit, and to dt, as time.duration is.
+  const Outcome longer = marbles("run " + scene + " --quiet --no-render --out " + dir.path() + "/o --duration 1e10", dir);
+  EXPECT_EQ(longer.exit_code, 2) << longer.err;
+  EXPECT_NE(longer.err.find("--duration: makes 1e+13 substeps (duration / time.dt x time.substeps), more than the "
+                            "limit 1e+10 (--limit substeps=N raises it), got 1e+10"),
+            std::string::npos)
+      << longer.err;
+  const Outcome shorter = marbles("run " + scene + " --quiet --no-render --out " + dir.path() + "/o --duration 1e-4", dir);
+  EXPECT_EQ(shorter.exit_code, 2) << shorter.err;
+  EXPECT_NE(shorter.err.find("--duration: must be >= time.dt (0.001), got 1e-04"), std::string::npos) << shorter.err;
+  EXPECT_FALSE(std::filesystem::exists(dir.path() + "/o/summary.json"));
   const Outcome bad = marbles("check " + scene + " --limit spheres=lots", dir);
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.err.find("--limit: spheres must be a positive number, got 'lots'"), std::string::npos) << bad.err;
