@@ -196,6 +196,9 @@ MARBLES_HD_INLINE bool make_sphere_contact(const BodiesView& bodies, std::uint32
   const real margin = (closing > pair_reach ? closing : pair_reach) + skin;  // no wider gap can matter
   if (!sphere_sphere(bodies.position[i], ri, bodies.position[j], rj, margin, c.normal, c.separation)) return false;
   if (!speculative_closes(c.separation, dot(dv, c.normal), h, skin, pair_reach)) return false;
+  // Two fixed spheres (a glued floor's, a peg row's) never move each other:
+  // no contact, so their overlap is no pile's and costs no sweep.
+  if (!(bodies.inv_mass[i] > 0) && !(bodies.inv_mass[j] > 0)) return false;
   name_sphere_pair(bodies, i, j, table, c);
   return true;
 }

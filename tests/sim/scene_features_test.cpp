@@ -98,6 +98,55 @@ TEST(SceneFeatures, FixedSpheresCollideButNeverMove) {
             std::string::npos);
 }
 
+// A glued floor: fixed spheres overlapping each other by more than a radius
+// make no contact between themselves (no impulse moves either), so under the
+// watchdog a sphere dropped on them comes to rest, and the step's largest
+// overlap and contacts are the free sphere's alone; the same floor made of
+// free spheres (no gravity, so they stay put until pushed) is all contacts.
+TEST(SceneFeatures, FixedSpheresMakeNoContactsBetweenThemselves) {
+  const ScratchDir dir("features_glued");
+  std::string floor = "  - list:\n      radius: 0.05\n      positions: [";
+  for (int x = -4; x <= 4; ++x)
+    for (int y = -4; y <= 4; ++y)
+      floor += "[" + std::to_string(0.04 * x) + ", " + std::to_string(0.04 * y) + ", 0]" + (x == 4 && y == 4 ? "]\n" : ", ");
+  for (const bool fixed : {true, false}) {
+    const scene::Scene s = scene::load_scene(
+        dir.write("s.yaml", std::string("time: {duration: 1, dt: 0.001}\n") +
+                                (fixed ? "" : "gravity: [0, 0, 0]\n") +
+                                "effects: [gravity, collisions, friction]\n"
+                                "materials:\n  glass: {density: 2500, friction: 0.5}\n"
+                                "particles:\n"
+                                "  - list: {positions: [[0.02, 0.02, 0.2]], radius: 0.05}\n" +  // over a pocket of four
+                                floor + (fixed ? "    fixed: true\n" : "")));
+    const World start = make_world(s, scene::generate_particles(s));
+    const std::size_t n = start.size();
+    ASSERT_GT(n, 50u);
+    Simulation sim(s, start, broadphase::Backend::cpu);
+    if (!fixed) {
+      sim.step();
+      // Every neighbour along an axis overlaps (0.04 apart, radius 0.05), and more.
+      EXPECT_GT(sim.last_step().contacts, 2 * (n - 1));
+      EXPECT_GT(sim.last_step().max_overlap, 1.0f);
+      continue;
+    }
+    sim.set_watchdog(true);
+    real deepest = 0;
+    std::size_t most = 0;
+    for (int k = 0; k < 600; ++k) {
+      ASSERT_NO_THROW(sim.step()) << "step " << k;
+      deepest = std::max(deepest, sim.last_step().max_overlap);
+      most = std::max<std::size_t>(most, sim.last_step().contacts);
+    }
+    EXPECT_EQ(sim.rollbacks(), 0u);
+    EXPECT_LE(most, 8u);  // the free sphere's contacts with the floor's tops
+    EXPECT_LT(deepest, 0.05f);
+    const World& w = sim.world();
+    EXPECT_GT(w.position[0].z, 0.05);  // on the floor, whose tops are at z = 0.05
+    EXPECT_LT(w.position[0].z, 0.12);
+    EXPECT_LT(length(w.velocity[0]), 0.01f);  // at rest in the pocket
+  }
+}
+
 // YAML merge keys: `<<: *anchor` (and a list of them) supply the keys a map
 // does not give itself; errors in merged values still name their lines.
 TEST(SceneFeatures, MergeKeysSupplyDefaults) {
