@@ -19,12 +19,14 @@
 #include "bench/broadphase_bench.hpp"
 #include "bench/step_bench.hpp"
 #include "core/error.hpp"
+#include "core/format.hpp"
 #include "render/camera.hpp"
 #include "render/color_map.hpp"
 #include "render/frame_output.hpp"
 #include "sim/cli.hpp"
 #include "sim/checkpoint.hpp"
 #include "sim/limits.hpp"
+#include "sim/particles.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
 #include "sim/signals.hpp"
@@ -60,6 +62,18 @@ void add_limit_option(CLI::App* command, std::vector<std::string>& limits) {
                       "raise a guard: scene_mib, materials, substeps, spheres (per block) or memory (fraction of the "
                       "available memory), e.g. spheres=2e9 (repeatable)")
       ->allow_extra_args(false);
+}
+
+// A benchmark's sphere counts, held to the guards a scene's block is held
+// to (--limit spheres, memory) before anything is made.
+void check_bench_counts(const std::vector<std::size_t>& counts) {
+  for (const std::size_t n : counts) {
+    if (static_cast<double>(n) > marbles::limits().spheres)
+      throw marbles::InputError(marbles::SourceLocation{}, "--n",
+                                "must be <= " + marbles::shortest(marbles::limits().spheres) +
+                                    " (--limit spheres=N raises it), got " + std::to_string(n));
+    marbles::scene::check_sphere_budget(static_cast<double>(n), marbles::SourceLocation{}, "--n");
+  }
 }
 
 // The --precision option as every command that runs a scene takes it.
@@ -196,6 +210,7 @@ int cli_main(int argc, char** argv) {
   bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(CLI::NonNegativeNumber);
   bench_bp->add_option("--seed", bp.seed, "random seed of the sphere sets");
   bench_bp->add_flag("--json", bp.json, "print JSON");
+  add_limit_option(bench_bp, limit_args);
 
   bench::StepBenchOptions st;
   std::vector<std::size_t> st_n;
@@ -246,6 +261,7 @@ int cli_main(int argc, char** argv) {
                          "the run's watchdog in the benchmark's steps: off (default) or on (as marbles run steps)")
       ->check(CLI::IsMember({"on", "off"}));
   bench_step->add_flag("--json", st.json, "print JSON only (progress on stderr)");
+  add_limit_option(bench_step, limit_args);
 
   bench::EffectsBenchOptions ef;
   auto* bench_effects = bench_cmd->add_subcommand("effects", "time the step with and without each effect");
@@ -254,6 +270,7 @@ int cli_main(int argc, char** argv) {
   bench_effects->add_option("--volume-fraction", ef.volume_fraction, "packing of the gas")->check(CLI::Range(0.01, 0.5));
   bench_effects->add_option("--repeats", ef.repeats, "timed steps per pipeline")->check(CLI::PositiveNumber);
   bench_effects->add_flag("--json", ef.json, "print JSON");
+  add_limit_option(bench_effects, limit_args);
 
   render::RenderOptions rd;
   render::MovieOptions rd_movie;
@@ -304,10 +321,12 @@ int cli_main(int argc, char** argv) {
     if (*pairs_cmd) return print_pairs(pairs_csv, pairs_algorithm, kBackends.at(pairs_backend), pairs_margin, std::cout, std::cerr);
     if (*bench_bp) {
       if (!bp_n.empty()) bp.n = bp_n;
+      check_bench_counts(bp.n);
       return bench::run_broadphase_bench(bp, std::cout);
     }
     if (*bench_step) {
       if (!st_n.empty()) st.n = st_n;
+      check_bench_counts(st.n);
       st.rolling = st_rolling == "on";
       st.friction = st_friction == "on";
       st.watchdog = st_watchdog == "on";
@@ -315,6 +334,7 @@ int cli_main(int argc, char** argv) {
       return bench::run_step_bench(st, std::cout);
     }
     if (*bench_effects) {
+      check_bench_counts({ef.n});
       if (ef.backend == "cuda") select_backend(BackendChoice::cuda, std::cerr);
       return bench::run_effects_bench(ef, std::cout);
     }

@@ -107,18 +107,6 @@ double available_memory() {
   return 0;
 }
 
-// Refuses a block that would take the scene past what memory can hold,
-// before it is generated (never an out-of-memory kill half way through).
-void check_sphere_budget(double total, const SourceLocation& where, const std::string& key) {
-  const double memory = available_memory() * limits().memory;
-  if (memory > 0 && total * kBytesPerSphere > memory)
-    throw InputError(where, key,
-                     "would make " + std::to_string(static_cast<long long>(total)) + " spheres, about " +
-                         std::to_string(static_cast<long long>(total * kBytesPerSphere / 1e9)) +
-                         " GB to run; this machine has " + std::to_string(static_cast<long long>(memory / 1e9)) +
-                         " GB available (--limit memory=F lets the spheres take F times that)");
-}
-
 // --- lattice ---------------------------------------------------------------
 
 void expand_lattice(const ParticleBlock& block, std::size_t index, std::uint32_t material, GeneratedParticles& out) {
@@ -482,6 +470,18 @@ GeneratedParticles generate_particles(const Scene& scene) {
       for (std::size_t i = first; i < out.size(); ++i) out.fixed[i] = 1;
   }
   return out;
+}
+
+// Refuses a block that would take the scene past what memory can hold,
+// before it is generated (never an out-of-memory kill half way through).
+void check_sphere_budget(double total, const SourceLocation& where, const std::string& key) {
+  const double memory = available_memory() * limits().memory;
+  if (memory > 0 && total * kBytesPerSphere > memory)
+    throw InputError(where, key,
+                     "would make " + std::to_string(static_cast<long long>(total)) + " spheres, about " +
+                         std::to_string(static_cast<long long>(total * kBytesPerSphere / 1e9)) +
+                         " GB to run; this machine has " + std::to_string(static_cast<long long>(memory / 1e9)) +
+                         " GB available (--limit memory=F lets the spheres take F times that)");
 }
 
 }  // namespace marbles::scene

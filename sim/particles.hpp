@@ -25,6 +25,11 @@ struct GeneratedParticles {
 // requested count of non-overlapping spheres, or an unknown material.
 GeneratedParticles generate_particles(const Scene& scene);
 
+// Refuses (InputError at `where`, naming `key`) a total of spheres that
+// would need more memory than the machine has available now (times --limit
+// memory), before anything is made.
+void check_sphere_budget(double total, const SourceLocation& where, const std::string& key);
+
 // Reads `x,y,z,r[,vx,vy,vz[,wx,wy,wz]]` rows (an optional header line, '#' comments);
 // used by the csv block and by `marbles pairs`.
 GeneratedParticles read_spheres_csv(const std::string& path);

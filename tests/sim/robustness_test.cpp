@@ -140,6 +140,16 @@ TEST_F(Robustness, LimitsCanBeRaised) {
   EXPECT_EQ(shorter.exit_code, 2) << shorter.err;
   EXPECT_NE(shorter.err.find("--duration: must be >= time.dt (0.001), got 1e-04"), std::string::npos) << shorter.err;
   EXPECT_FALSE(std::filesystem::exists(dir.path() + "/o/summary.json"));
+  // The benchmarks' sphere counts are held to the same guards, before anything is made.
+  for (const std::string bench : {"bench step", "bench effects", "bench broadphase"}) {
+    const Outcome many = marbles(bench + " --n 3000000000", dir);
+    EXPECT_EQ(many.exit_code, 2) << bench << ": " << many.err;
+    EXPECT_NE(many.err.find("--n: must be <= 1e+09 (--limit spheres=N raises it), got 3000000000"), std::string::npos)
+        << bench << ": " << many.err;
+    const Outcome tight = marbles(bench + " --n 1000 --limit memory=1e-12", dir);
+    EXPECT_EQ(tight.exit_code, 2) << bench << ": " << tight.err;
+    EXPECT_NE(tight.err.find("--n: would make 1000 spheres"), std::string::npos) << bench << ": " << tight.err;
+  }
   const Outcome bad = marbles("check " + scene + " --limit spheres=lots", dir);
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.err.find("--limit: spheres must be a positive number, got 'lots'"), std::string::npos) << bad.err;
