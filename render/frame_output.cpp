@@ -128,7 +128,7 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   if (!fs::exists(pvd))
     throw RuntimeFailure(pvd.string() +
                          " not found: `marbles render` draws the VTK frames of a finished run; run the scene with "
-                         "VTK output (output.vtk_every > 0) first");
+                         "VTK output (output.vtk.every) first");
   if (!renderer_available())
     throw RuntimeFailure("marbles was built without OSMesa (libosmesa6-dev): cannot render images");
 

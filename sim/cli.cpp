@@ -283,8 +283,8 @@ int cli_main(int argc, char** argv) {
   render_cmd->add_option("--camera", rd_camera, "camera position and target: x,y,z:lx,ly,lz");
   render_cmd->add_option("--width", rd.width, "image width in pixels")->check(CLI::Range(16, 8192));
   render_cmd->add_option("--height", rd.height, "image height in pixels")->check(CLI::Range(16, 8192));
-  render_cmd->add_option("--fps", rd_movie.fps, "movie frames per second (default: from the frame times)")
-      ->check(CLI::PositiveNumber);
+  render_cmd->add_option("--fps", rd_movie.fps, "movie frames per second, 0.01 to 1000 (default: from the frame times)")
+      ->check(kFinite & CLI::Range(0.01, 1000.0));
   bool rd_no_movie = false;
   render_cmd->add_flag("--no-movie", rd_no_movie, "PNG frames only");
 

@@ -583,7 +583,11 @@ OutputSpec read_output(const Field& field, const std::string& stem) {
   if (auto f = map.optional("movie")) {
     const MapFields movie(*f, {"fps"});
     output.movie.enabled = true;
-    if (auto e = movie.optional("fps")) output.movie.fps = e->positive();
+    if (auto e = movie.optional("fps")) {
+      output.movie.fps = e->positive();
+      if (!(output.movie.fps >= 0.01 && output.movie.fps <= 1000))
+        e->fail("must be within [0.01, 1000] frames per second, got " + e->node().Scalar());
+    }
     if (!output.render.enabled) f->fail("needs output.render: the movie is made of the rendered frames");
     // H.264 in yuv420p, the format every player reads, needs even frame sizes.
     if (output.render.width % 2) {

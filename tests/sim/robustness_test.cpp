@@ -197,6 +197,18 @@ TEST_F(Robustness, NanArgumentsAreBadArguments) {
   EXPECT_NE(run.err.find("--duration: must be a finite number, got nan"), std::string::npos) << run.err;
   const Outcome pairs = marbles("pairs " MARBLES_SOURCE_DIR "/scenes/spheres.csv --margin nan", dir);
   EXPECT_EQ(pairs.exit_code, 2) << pairs.err;
+  // A movie's rate that is not a number or that no encoder takes, on the
+  // command line or in a scene.
+  for (const std::string fps : {"nan", "1e300", "1e-300", "inf"}) {
+    const Outcome render = marbles("render " + dir.path() + " --fps " + fps, dir);
+    EXPECT_EQ(render.exit_code, 2) << fps << ": " << render.err;
+    EXPECT_NE(render.err.find("--fps"), std::string::npos) << fps << ": " << render.err;
+  }
+  const Outcome movie = marbles("check " MARBLES_SOURCE_DIR "/scenes/demo.yaml --set output.movie.fps=5000", dir);
+  EXPECT_EQ(movie.exit_code, 2) << movie.err;
+  EXPECT_NE(movie.err.find("output.movie.fps: must be within [0.01, 1000] frames per second, got 5000"),
+            std::string::npos)
+      << movie.err;
 }
 
 // summary.json stays valid JSON for a scene path with a tab, a quote and a
