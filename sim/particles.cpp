@@ -24,8 +24,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <random>
 #include <sstream>
 #include <string>
@@ -310,7 +312,12 @@ bool parse_number(std::string_view s, double& value) {
 constexpr int kColumns = 10;
 const char* const kColumnNames[kColumns] = {"x", "y", "z", "r", "vx", "vy", "vz", "wx", "wy", "wz"};
 
+constexpr std::size_t kLongestCsvLine = 1 << 20;  // bytes
+
 CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, const std::string& open_key) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw InputError(open_where, open_key, "'" + path + "' is a folder, not a CSV file of spheres");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(open_where, open_key, "cannot open '" + path + "': " + std::strerror(errno));
 
@@ -319,11 +326,23 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
   std::size_t expected_fields = 0;
   int layout_line = 0;  // the line that fixed the layout (header or first row)
   bool header = false;
-  std::string line;
+  // Lines are read into a bounded buffer: a row is a few dozen bytes, and a
+  // stream without line ends (/dev/zero, a binary file) is refused at the
+  // bound instead of filling the memory.
+  std::vector<char> buffer(kLongestCsvLine + 1);
   int line_number = 0;
-  while (std::getline(in, line)) {
+  while (in) {
+    in.getline(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+    const bool ended = in.eof();
+    if (in.fail() && !ended)
+      throw InputError(SourceLocation{path, line_number + 1, 1}, "",
+                       "a line longer than " + std::to_string(kLongestCsvLine) +
+                           " bytes: not a CSV file of spheres (rows x,y,z,r[,vx,vy,vz[,wx,wy,wz]])");
+    const auto got = static_cast<std::size_t>(in.gcount());
+    if (ended && got == 0) break;
     ++line_number;
-    std::string_view content(line);
+    std::string_view content(buffer.data(), ended ? got : got - 1);  // without its '\n'
+    if (!content.empty() && content.back() == '\r') content.remove_suffix(1);
     if (line_number == 1 && content.substr(0, 3) == "\xEF\xBB\xBF") content.remove_prefix(3);  // UTF-8 byte order mark
     if (const std::size_t hash = content.find('#'); hash != std::string_view::npos) content = content.substr(0, hash);
     if (trim(content).empty()) continue;
@@ -384,6 +403,13 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
         fail(field.column, kColumnNames[c], "expected a number, got '" + std::string(field.text) + "'");
       if (!std::isfinite(value[c]))
         fail(field.column, kColumnNames[c], "must be a finite number, got " + std::string(field.text));
+      // As a scene's numbers: finite, and a non-zero one non-zero, in the run's precision.
+      if (!std::isfinite(static_cast<real>(value[c])))
+        fail(field.column, kColumnNames[c],
+             "out of range for " + std::string(kRealName) + " precision, got " + std::string(field.text));
+      if (value[c] != 0 && !(std::abs(static_cast<real>(value[c])) >= std::numeric_limits<real>::min()))
+        fail(field.column, kColumnNames[c],
+             "too small for " + std::string(kRealName) + " precision, got " + std::string(field.text));
       if (c == 3 && !(value[c] > 0))
         fail(field.column, kColumnNames[c], "must be > 0, got " + std::string(field.text));
     }

@@ -378,6 +378,34 @@ TEST(Csv, Errors) {
             "and wx, wy, wz");
   EXPECT_EQ(error_of("x,y,z,r,vx\n"), "e.csv:1:1: the header must name all of vx, vy, vz or none of them");
   EXPECT_EQ(error_of("# nothing\n"), "e.csv: holds no spheres (rows x,y,z,r[,vx,vy,vz[,wx,wy,wz]])");
+  // Values as a scene's: in range, and a non-zero one not below the smallest normal, in the run's precision.
+  EXPECT_EQ(error_of("0,0,0,1\n0,1e-320,0,1\n"),
+            "e.csv:2:3: y: too small for " + std::string(kRealName) + " precision, got 1e-320");
+  if (sizeof(real) == 4) {
+    EXPECT_EQ(error_of("0,0,0,1e39\n"), "e.csv:1:7: r: out of range for float precision, got 1e39");
+  }
+  // A line longer than any row (a binary file, a stream without line ends) is refused at the bound.
+  EXPECT_EQ(error_of("0,0,0,1\n" + std::string(1100000, '7') + "\n"),
+            "e.csv:2:1: a line longer than 1048576 bytes: not a CSV file of spheres (rows x,y,z,r[,vx,vy,vz[,wx,wy,wz]])");
+  // ... and one just within it is read (a comment), as is a last row without its line end and CRLF rows.
+  const GeneratedParticles within =
+      read_spheres_csv(dir.write("w.csv", "#" + std::string(1048574, 'c') + "\r\n0,0,0,1\r\n1,2,3,0.5"));
+  ASSERT_EQ(within.size(), 2u);
+  EXPECT_EQ(within.radius[1], real(0.5));
+  if (std::filesystem::exists("/dev/zero")) {
+    try {
+      read_spheres_csv("/dev/zero");
+      ADD_FAILURE() << "/dev/zero was read";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("/dev/zero:1:1: a line longer than"), std::string::npos) << e.what();
+    }
+  }
+  try {
+    read_spheres_csv(dir.path());
+    ADD_FAILURE() << "a folder was read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("is a folder, not a CSV file of spheres"), std::string::npos) << e.what();
+  }
   try {
     read_spheres_csv(dir.path() + "/absent.csv");
     FAIL() << "no error";
