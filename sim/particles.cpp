@@ -413,6 +413,14 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
       if (c == 3 && !(value[c] > 0))
         fail(field.column, kColumnNames[c], "must be > 0, got " + std::string(field.text));
     }
+    for (int c : {0, 4, 7}) {  // position, velocity, spin: squared by the step, as a scene's vectors are
+      if (column_of[c] < 0) continue;
+      const Vec3 v(real(value[c]), real(value[c + 1]), real(value[c + 2]));
+      if (!std::isfinite(length_squared(v)))
+        fail(fields[std::size_t(column_of[c])].column, kColumnNames[c],
+             "too large for " + std::string(kRealName) + " precision: the squared length of (" + kColumnNames[c] +
+                 ", " + kColumnNames[c + 1] + ", " + kColumnNames[c + 2] + ") overflows");
+    }
     push_sphere(result.spheres, Vec3(real(value[0]), real(value[1]), real(value[2])), value[3], 0);
     result.spheres.velocity.back() = Vec3(real(value[4]), real(value[5]), real(value[6]));
     result.spheres.angular_velocity.back() = Vec3(real(value[7]), real(value[8]), real(value[9]));

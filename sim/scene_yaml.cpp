@@ -242,7 +242,13 @@ Vec3 Field::vec3() const {
   if (m_node.size() != 3)
     fail("expected [x, y, z], got a sequence of " + std::to_string(m_node.size()));
   const std::vector<Field> xyz = items();
-  return {real(xyz[0].number()), real(xyz[1].number()), real(xyz[2].number())};
+  const Vec3 v{real(xyz[0].number()), real(xyz[1].number()), real(xyz[2].number())};
+  // The step squares vectors (speeds into energies, gaps into distances):
+  // one whose square overflows the run's precision would turn into inf there.
+  if (!std::isfinite(length_squared(v)))
+    fail("too large for " + std::string(kRealName) + " precision: its squared length overflows (largest " +
+         format_real(std::sqrt(std::numeric_limits<real>::max() / 3)) + " a component is safe)");
+  return v;
 }
 
 void Field::expect_map() const {

@@ -35,7 +35,13 @@ std::string num(double v) {
 }
 
 // The smallest whole number >= v, for "raise X to at least N".
-std::string at_least(double v) { return std::to_string(static_cast<long long>(std::ceil(v))); }
+// A count to raise a setting to: whole where it fits an integer, else in
+// the form of a double (a count past 2^53 is no advice anyone can take).
+std::string at_least(double v) {
+  const double whole = std::ceil(v);
+  if (whole < 9.007199254740992e15) return std::to_string(static_cast<long long>(whole));
+  return num(whole);
+}
 
 double along(const Vec3& p, const Axis& a) { return double(p.x) * a[0] + double(p.y) * a[1] + double(p.z) * a[2]; }
 

@@ -96,7 +96,8 @@ double Simulation::watch_bound(double e0) const {
   const double sum_speed = std::sqrt(2 * s.mass * std::max(e0, 0.0));
   double gain = 0;
   if (m_model->gravity) {
-    const double gdt = static_cast<double>(length(m_model->g)) * dt;
+    const Vec3 g = m_model->g;  // its length in double: a huge g's square overflows float
+    const double gdt = std::sqrt(double(g.x) * g.x + double(g.y) * g.y + double(g.z) * g.z) * dt;
     gain += gdt * sum_speed + 0.5 * s.mass * gdt * gdt;
   }
   if (m_model->wall_contacts && s.wall_speed > 0)

@@ -175,6 +175,39 @@ TEST_F(Robustness, UnwritableOutputIsExitOneWithThePath) {
   EXPECT_TRUE(fs::is_directory(out + "/summary.json"));
 }
 
+// A vector whose square overflows the run's precision (a speed, a spin, a
+// gravity, a wall's velocity, a position) is an input error naming its key,
+// not a run whose energies turn to inf or whose broad phase fails midway;
+// in double the same values fit. The advice of a warning stays a number.
+TEST_F(Robustness, VectorsWhoseSquareOverflowsAreRefused) {
+  const test::ScratchDir dir("robust_square");
+  const std::string scene = dir.write(
+      "s.yaml", "time: {duration: 0.01, dt: 0.001}\nmaterials: {a: }\n"
+                "walls:\n  - plane: {point: [0, 0, 0], normal: [0, 0, 1]}\n"
+                "particles:\n  - list: {positions: [[0, 0, 1], [0.2, 0, 1]], radius: 0.05}\n");
+  for (const std::string set : {"particles[0].angular_velocity=[1e38,0,0]", "particles[0].velocity=[0,2e19,0]",
+                                "gravity=[0,0,-1e20]", "walls[0].velocity=[0,0,1e30]",
+                                "particles[0].list.positions=[[2e38,0,1],[-2e38,0,1]]"}) {
+    const Outcome f = marbles("check " + scene + " --precision float --set " + set, dir);
+    EXPECT_EQ(f.exit_code, 2) << set << ": " << f.err;
+    EXPECT_NE(f.err.find("too large for float precision: its squared length overflows"), std::string::npos)
+        << set << ": " << f.err;
+    EXPECT_NE(f.err.find(set.substr(0, set.find('='))), std::string::npos) << set << ": " << f.err;
+    EXPECT_EQ(marbles("check " + scene + " --precision double --set " + set, dir).exit_code, 0) << set;
+  }
+  const std::string rows = dir.write("rows.csv", "x,y,z,r,vx,vy,vz\n0,0,1,0.05,0,0,0\n1,0,1,0.05,3e19,0,0\n");
+  const std::string from_csv = dir.write("c.yaml", "time: {duration: 0.01, dt: 0.001}\nmaterials: {a: }\n"
+                                                   "particles:\n  - csv: {path: rows.csv}\n");
+  const Outcome c = marbles("check " + from_csv + " --precision float", dir);
+  EXPECT_EQ(c.exit_code, 2) << c.err;
+  EXPECT_NE(c.err.find("rows.csv:3:12: vx: too large for float precision: the squared length of (vx, vy, vz) overflows"),
+            std::string::npos)
+      << c.err;
+  const Outcome fast = marbles("check " + scene + " --precision float --set 'particles[0].velocity=[1e18,0,0]'", dir);
+  EXPECT_EQ(fast.exit_code, 0) << fast.err;
+  EXPECT_NE(fast.err.find("raise time.substeps to at least 2e+16 (or lower time.dt)"), std::string::npos) << fast.err;
+}
+
 // A mass beyond the precision of the run (radius 1e30) is an input error,
 // not a run with energies of 0.
 TEST_F(Robustness, MassBeyondThePrecisionIsRefused) {
