@@ -61,8 +61,11 @@ class Series {
       : m_dir(std::move(dir)), m_folder(std::move(folder)), m_prefix(std::move(prefix)), m_pvd(std::move(pvd)) {}
   /// Writes the next file and the .pvd; returns the file's path.
   std::filesystem::path add(double time, const std::string& file_text);
-  /// Counts the next file as written at `time` (a resumed run).
-  void adopt(double time);
+  /// Counts the next file as written at `time` (a resumed run). Where it is
+  /// not in DIR but in `from` (the folder of the run that wrote it), it is
+  /// copied first, so that the .pvd names only files DIR holds; where it is
+  /// in neither, throws marbles::InputError naming `from_key`.
+  void adopt(double time, const std::filesystem::path& from = {}, const std::string& from_key = "");
   std::filesystem::path next_path() const;
   std::filesystem::path pvd_path() const { return m_dir / m_pvd; }
   std::size_t size() const { return m_entries.size(); }
@@ -89,8 +92,8 @@ class VtkSeriesWriter {
   std::size_t frames() const { return m_series.size(); }
   std::filesystem::path pvd_path() const { return m_series.pvd_path(); }
   /// A resumed run: counts the next frame (as write() would name it) as
-  /// already written at `time`, without writing it.
-  void adopt(double time);
+  /// already written at `time`, without writing it (Series::adopt).
+  void adopt(double time, const std::filesystem::path& from = {}, const std::string& from_key = "");
 
  private:
   Series m_series;
@@ -120,7 +123,7 @@ class ContactSeriesWriter {
  public:
   ContactSeriesWriter(std::filesystem::path dir, FrameMetadata metadata = {});
   std::filesystem::path write(const ContactSnapshot& contacts);
-  void adopt(double time);
+  void adopt(double time, const std::filesystem::path& from = {}, const std::string& from_key = "");
   std::size_t frames() const { return m_series.size(); }
 
  private:
@@ -138,7 +141,7 @@ class WallSeriesWriter {
  public:
   WallSeriesWriter(std::filesystem::path dir, const Vec3& lo, const Vec3& hi, FrameMetadata metadata = {});
   std::filesystem::path write(const Walls& walls, double time, std::uint64_t step);
-  void adopt(double time);
+  void adopt(double time, const std::filesystem::path& from = {}, const std::string& from_key = "");
   std::size_t frames() const { return m_series.size(); }
 
  private:

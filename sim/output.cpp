@@ -263,10 +263,12 @@ void RunOutput::write(const Simulation& sim, double step_seconds) {
   if (m->frames && step % m->render_every == 0) m->frames->add(snapshot);
 }
 
-void RunOutput::resume(std::uint64_t steps, double dt) {
+void RunOutput::resume(std::uint64_t steps, double dt, const std::filesystem::path& from) {
   m->thermo_step = steps;
   if (m->thermo) {  // the rows up to the checkpoint's step, from the run that wrote it
-    std::ifstream in(std::filesystem::path(m->dir) / "thermo.csv");
+    std::error_code ec;
+    const std::filesystem::path here = std::filesystem::path(m->dir) / "thermo.csv";
+    std::ifstream in(std::filesystem::exists(here, ec) || from.empty() ? here : from / "thermo.csv");
     std::string line;
     if (std::getline(in, line) && line == kThermoHeader) {
       while (std::getline(in, line)) {
@@ -278,11 +280,11 @@ void RunOutput::resume(std::uint64_t steps, double dt) {
   }
   if (m->contacts)
     for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->contacts_every))
-      m->contacts->adopt(static_cast<double>(step) * dt);
+      m->contacts->adopt(static_cast<double>(step) * dt, from, "--restart");
   if (!m->vtk) return;
   for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->vtk_every)) {
-    m->vtk->adopt(static_cast<double>(step) * dt);
-    if (m->walls) m->walls->adopt(static_cast<double>(step) * dt);
+    m->vtk->adopt(static_cast<double>(step) * dt, from, "--restart");
+    if (m->walls) m->walls->adopt(static_cast<double>(step) * dt, from, "--restart");
   }
 }
 

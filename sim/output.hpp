@@ -72,7 +72,10 @@ class RunOutput {
   void write(const Simulation& sim, double step_seconds = 0);
   // A run resumed at `steps`: the frames due up to it count as written, and
   // thermo.csv keeps its rows up to it.
-  void resume(std::uint64_t steps, double dt);
+  // `from`: the folder of the run that wrote the checkpoint, whose frames,
+  // contact and wall frames and thermo rows up to `steps` are copied where
+  // this folder lacks them (a run resumed elsewhere is whole too).
+  void resume(std::uint64_t steps, double dt, const std::filesystem::path& from);
   // Closes the movie (a resumed run: renders images and movie from the
   // frames); returns a short description of what was written.
   std::string finish();

@@ -205,7 +205,9 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   Progress progress(!options.quiet);
   double step_seconds = 0;
   const std::uint64_t first_step = sim.steps();
-  if (options.restart) output.resume(sim.steps(), sim.dt());
+  // The checkpoint's run folder: OUTDIR of OUTDIR/checkpoints/step_NNNNNN.mck.
+  if (options.restart)
+    output.resume(sim.steps(), sim.dt(), std::filesystem::absolute(*options.restart).parent_path().parent_path());
   else output.write(sim);
   const auto t0 = std::chrono::steady_clock::now();
   // Test hook: MARBLES_FAULT_SIGNAL=NAME@N raises SIGNAME (SEGV, ABRT, INT, TERM) after step N.

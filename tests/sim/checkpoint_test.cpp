@@ -298,6 +298,34 @@ TEST_F(Checkpoints, RestartIntoAnotherFolderWritesEverySeries) {
   for (const std::string file : {"frames/frame_000015.vtp", "walls/walls_000015.vtp", "contacts/contacts_000006.vtp",
                                  "series.pvd", "walls.pvd", "contacts.pvd", "summary.json"})
     EXPECT_TRUE(fs::exists(dir.path() + "/second/" + file)) << file;
+  // The frames before the cut come along, so every file a .pvd names is in
+  // the folder, the same bytes as the first run's; and the thermo rows start
+  // at step 0.
+  for (const std::string pvd : {"series.pvd", "walls.pvd", "contacts.pvd"}) {
+    const std::string text = slurp(dir.path() + "/second/" + pvd);
+    std::size_t named = 0;
+    for (std::size_t at = text.find("file=\""); at != std::string::npos; at = text.find("file=\"", at + 1)) {
+      const std::string file = text.substr(at + 6, text.find('"', at + 6) - at - 6);
+      ++named;
+      ASSERT_TRUE(fs::exists(dir.path() + "/second/" + file)) << pvd << " names " << file;
+      if (fs::exists(dir.path() + "/first/" + file))
+        EXPECT_EQ(slurp(dir.path() + "/second/" + file), slurp(dir.path() + "/first/" + file)) << file;
+    }
+    EXPECT_GT(named, 5u) << pvd;
+  }
+  EXPECT_TRUE(fs::exists(dir.path() + "/second/frames/frame_000000.vtp"));
+  const std::string thermo = slurp(dir.path() + "/second/thermo.csv");
+  EXPECT_EQ(thermo.substr(0, thermo.find('\n', thermo.find('\n') + 1) + 1),
+            slurp(dir.path() + "/first/thermo.csv").substr(0, thermo.find('\n', thermo.find('\n') + 1) + 1));
+  // A checkpoint moved away from its run's folder, resumed into a new one:
+  // the earlier frames are nowhere to be had, which is said (exit 2).
+  fs::copy_file(dir.path() + "/first/checkpoints/step_000100.mck", dir.path() + "/lone.mck");
+  EXPECT_EQ(marbles("run " + scene + common + " --out " + dir.path() + "/third --restart " + dir.path() + "/lone.mck",
+                    &err),
+            2);
+  EXPECT_NE(err.find("_000000.vtp, written before the checkpoint's step, is in neither"),
+            std::string::npos)
+      << err;
 }
 
 // The newest `keep` checkpoints stay.
