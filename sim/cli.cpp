@@ -306,6 +306,8 @@ int cli_main(int argc, char** argv) {
     for (const std::string& l : study.limits) raise_limit(l);
     if (*run_cmd) {
       if (run_duration > 0) run.duration = run_duration;
+      if (run.out_dir && run.out_dir->empty())
+        throw InputError(SourceLocation{}, "--out", "an empty folder name (leave --out out for the scene's output.dir)");
       run.backend = kBackends.at(run_backend);
       run.algorithm = run_broadphase == "seed" ? broadphase::Algorithm::seed : broadphase::Algorithm::home;
       run.render = !no_render;
@@ -313,7 +315,14 @@ int cli_main(int argc, char** argv) {
     }
     if (*check_cmd) return check_scene(check_path, check_overrides, std::cout, std::cerr);
     if (*study_cmd) {
-      for (const std::string& v : study_vary) study.vary.push_back(parse_vary(v));
+      for (const std::string& v : study_vary) {
+        StudyVary vary = parse_vary(v);
+        for (const StudyVary& earlier : study.vary)
+          if (earlier.key == vary.key)
+            throw InputError(SourceLocation{"--vary " + v, 0, 0}, vary.key,
+                             "varied twice: give all its values in one --vary " + vary.key + "=v1,v2,...");
+        study.vary.push_back(std::move(vary));
+      }
       study.progress = !study_quiet;
       run_study(study, std::cout, std::cerr);
       return 0;

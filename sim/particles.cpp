@@ -415,7 +415,7 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
     }
     for (int c : {0, 4, 7}) {  // position, velocity, spin: squared by the step, as a scene's vectors are
       if (column_of[c] < 0) continue;
-      const Vec3 v(real(value[c]), real(value[c + 1]), real(value[c + 2]));
+      const Vec3 v{real(value[c]), real(value[c + 1]), real(value[c + 2])};
       if (!std::isfinite(length_squared(v)))
         fail(fields[std::size_t(column_of[c])].column, kColumnNames[c],
              "too large for " + std::string(kRealName) + " precision: the squared length of (" + kColumnNames[c] +
@@ -502,6 +502,7 @@ GeneratedParticles generate_particles(const Scene& scene) {
       for (std::size_t i = first; i < out.size(); ++i) out.angular_velocity[i] = block.angular_velocity;
     if (block.fixed)
       for (std::size_t i = first; i < out.size(); ++i) out.fixed[i] = 1;
+    out.block_end.push_back(out.size());
   }
   return out;
 }

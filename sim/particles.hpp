@@ -16,6 +16,7 @@ struct GeneratedParticles {
   std::vector<Vec3> angular_velocity;   // rad/s
   std::vector<std::uint32_t> material;  // index into Scene::materials
   std::vector<std::uint8_t> fixed;      // 1: collides, never moves (inverse mass and inertia 0)
+  std::vector<std::size_t> block_end;   // the end of each block's spheres, in the scene's order (generate_particles)
   std::size_t size() const { return position.size(); }
 };
 

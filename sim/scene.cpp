@@ -294,8 +294,8 @@ std::vector<ContactPairSpec> read_contact_pairs(const Scene& scene, const Field&
     for (const ContactPairSpec& other : pairs) {
       if ((other.first == pair.first && other.second == pair.second) ||
           (other.first == pair.second && other.second == pair.first))
-        names.fail("the pair " + pair.first + "/" + pair.second + " is already given at line " +
-                   std::to_string(other.where.line));
+        names.fail("the pair " + pair.first + "/" + pair.second + " is already given" +
+                   (other.where.line > 0 ? " at line " + std::to_string(other.where.line) : " earlier in the list"));
     }
     pairs.push_back(std::move(pair));
   }

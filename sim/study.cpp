@@ -142,12 +142,27 @@ StudyVary parse_vary(const std::string& text) {
   if (eq == std::string::npos || eq == 0) throw InputError(where, "", "expected KEY=v1,v2,...");
   StudyVary v;
   v.key = text.substr(0, eq);
-  std::stringstream s(text.substr(eq + 1));
+  // Values split at the commas outside brackets and braces, so that a
+  // vector's or a map's own commas stay in it (gravity=[0,0,-1],[0,0,-2]).
+  const std::string list = text.substr(eq + 1);
   std::string item;
-  while (std::getline(s, item, ',')) {
+  int depth = 0;
+  const auto take = [&] {
     if (item.empty()) throw InputError(where, v.key, "an empty value in the list");
     v.values.push_back(item);
+    item.clear();
+  };
+  for (const char c : list) {
+    if (c == ',' && depth == 0) {
+      take();
+      continue;
+    }
+    if (c == '[' || c == '{') ++depth;
+    if ((c == ']' || c == '}') && --depth < 0) throw InputError(where, v.key, "a ']' or '}' without its opening");
+    item += c;
   }
+  if (depth != 0) throw InputError(where, v.key, "a '[' or '{' without its closing");
+  if (!list.empty()) take();
   if (v.values.empty()) throw InputError(where, v.key, "no values");
   return v;
 }

@@ -137,11 +137,18 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
     w.inv_mass[i] = static_cast<real>(1.0 / mass);
     w.inv_inertia[i] = static_cast<real>(1.0 / (0.4 * mass * r * r));
     const auto usable = [](real v) { return std::isfinite(v) && v >= std::numeric_limits<real>::min(); };
-    if (!usable(w.inv_mass[i]) || !usable(w.inv_inertia[i]))
-      throw InputError(SourceLocation{scene.path, 0, 0}, "particles",
-                       "sphere " + std::to_string(i) + " (radius " + significant(r, 6) + " m, density " +
+    if (!usable(w.inv_mass[i]) || !usable(w.inv_inertia[i])) {
+      // The block it came from, where the particles say (else the scene's particles).
+      const auto& ends = particles.block_end;
+      const auto b = static_cast<std::size_t>(std::upper_bound(ends.begin(), ends.end(), i) - ends.begin());
+      const bool known = b < ends.size() && b < scene.particles.size();
+      const std::size_t first = known && b > 0 ? ends[b - 1] : 0;
+      throw InputError(known ? scene.particles[b].where : SourceLocation{scene.path, 0, 0},
+                       known ? "particles[" + std::to_string(b) + "]" : "particles",
+                       "sphere " + std::to_string(known ? i - first : i) + (known ? " of the block" : "") + " (radius " + significant(r, 6) + " m, density " +
                            significant(density, 6) + " kg/m^3): its mass " + significant(mass, 6) +
                            " kg or moment of inertia is out of range for " + kRealName + " precision");
+    }
   }
   return w;
 }

@@ -140,6 +140,32 @@ TEST_F(Study, FinestSettingIsTheReference) {
 // The Pareto front against a second oracle: sorted by cost, a row is on the
 // front when it is strictly more accurate than every cheaper row and no row
 // of equal cost is more accurate.
+// A varied key's values split at the commas outside brackets and braces;
+// an empty value or an unbalanced bracket is a located error, and a key
+// varied twice (on the command line) is refused.
+TEST(Vary, ValuesSplitOutsideBrackets) {
+  EXPECT_EQ(parse_vary("time.dt=1e-3,5e-4").values, (std::vector<std::string>{"1e-3", "5e-4"}));
+  const StudyVary g = parse_vary("gravity=[0,0,-1],[0,0,-2],[0, 0, -9.81]");
+  EXPECT_EQ(g.key, "gravity");
+  EXPECT_EQ(g.values, (std::vector<std::string>{"[0,0,-1]", "[0,0,-2]", "[0, 0, -9.81]"}));
+  EXPECT_EQ(parse_vary("materials.a={density: 5, friction: 1},{density: 6}").values,
+            (std::vector<std::string>{"{density: 5, friction: 1}", "{density: 6}"}));
+  for (const std::string bad : {"time.dt=1e-3,,5e-4", "time.dt=1e-3,", "gravity=[0,0,-1", "gravity=0,0]", "time.dt=",
+                                "=1,2"}) {
+    try {
+      parse_vary(bad);
+      ADD_FAILURE() << bad << " was taken";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("--vary " + bad), std::string::npos) << e.what();
+    }
+  }
+  const std::string command = kMarbles + " study " MARBLES_SOURCE_DIR
+                              "/scenes/validation/bouncing_ball.yaml --vary time.dt=4e-3 --vary time.dt=2e-3 "
+                              "--quiet --out " + ::testing::TempDir() + "/vary_twice > /dev/null 2>&1";
+  const int status = std::system(command.c_str());
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << command;
+}
+
 TEST(Pareto, EqualsTheSweepOracle) {
   std::mt19937 rng(7);
   std::uniform_int_distribution<int> pick(0, 5);
