@@ -982,6 +982,30 @@ TEST(StepCuda, OverflowSetMatchesTheCpu) {
   expect_same_run(s, g, 100);
 }
 
+// A glued floor (fixed spheres overlapping their neighbours by half a
+// radius, no contacts among them on either backend) under a block falling
+// onto it, with every contact term: the CPU's bits.
+TEST(StepCuda, GluedFloorMatchesTheCpu) {
+  const real r = real(0.01);
+  scene::GeneratedParticles g = dense_block(6, 6, 3, r, real(0.03));
+  const std::size_t free = g.size();
+  for (int x = 0; x < 12; ++x)
+    for (int y = 0; y < 12; ++y) add_sphere(g, {r * (real(1.5) * x + 1), r * (real(1.5) * y + 1), r}, r);
+  g.fixed.assign(g.size(), 0);
+  for (std::size_t i = free; i < g.size(); ++i) g.fixed[i] = 1;
+  const scene::Scene s = every_term_box();
+  Simulation probe(s, make_world(s, g), broadphase::Backend::cpu);
+  for (int k = 0; k < 30; ++k) probe.step();
+  std::size_t on_floor = 0;
+  for (const narrowphase::Contact& c : probe.contacts()) {
+    ASSERT_FALSE(c.a >= free && !narrowphase::is_wall(c.b) && c.b >= free) << "a contact between two fixed spheres";
+    on_floor += (c.a >= free) != (!narrowphase::is_wall(c.b) && c.b >= free);
+  }
+  ASSERT_GT(on_floor, 0u) << "the block must reach the floor";
+  REQUIRE_DEVICE();
+  expect_same_run(s, g, 60);
+}
+
 TEST(StepCuda, NewtonsCradleMatchesTheCpu) {
   REQUIRE_DEVICE();
   scene::Scene s = make_scene(1e-3, 1, {Effect::collisions, Effect::restitution}, 1.0);
