@@ -290,7 +290,7 @@ class PolyDataFile {
 
 // --- a series: numbered files and their .pvd ---------------------------------
 
-fs::path Series::next_path() const { return m_dir / m_folder / numbered(m_prefix.c_str(), m_entries.size()); }
+fs::path Series::next_path() const { return m_dir / m_folder / numbered(m_prefix.c_str(), m_count); }
 
 fs::path Series::add(double time, const std::string& file_text) {
   const fs::path path = next_path();
@@ -301,19 +301,18 @@ fs::path Series::add(double time, const std::string& file_text) {
     if (ec) throw RuntimeFailure("cannot create " + (m_dir / m_folder).string() + ": " + ec.message());
   }
   write_file_atomic(path, file_text);
-  adopt(time);
+  m_entries.emplace_back(time, m_folder + "/" + numbered(m_prefix.c_str(), m_count++));
   write_file_atomic(pvd_path(), pvd_text(m_entries));
   return path;
 }
 
-void Series::adopt(double time, const fs::path& from, const std::string& from_key) {
-  const std::string file = m_folder + "/" + numbered(m_prefix.c_str(), m_entries.size());
+void Series::adopt(double time, const fs::path& from) {
+  const std::string file = m_folder + "/" + numbered(m_prefix.c_str(), m_count++);
   std::error_code ec;
   if (!from.empty() && !fs::exists(m_dir / file, ec)) {
-    if (!fs::is_regular_file(from / file, ec))
-      throw InputError(SourceLocation{}, from_key,
-                       file + ", written before the checkpoint's step, is in neither " + m_dir.string() + " nor " +
-                           from.string() + ": resume into the run's own folder");
+    // In neither folder (a run that wrote no frames, or a checkpoint moved
+    // away from its run): numbered, but not listed.
+    if (!fs::is_regular_file(from / file, ec)) return;
     std::ifstream in(from / file, std::ios::binary);
     const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     if (!in.good() && !in.eof()) throw RuntimeFailure("cannot read " + (from / file).string());
@@ -333,9 +332,7 @@ VtkSeriesWriter::VtkSeriesWriter(fs::path dir, std::vector<PointField> fields, F
   if (ec) throw RuntimeFailure("cannot create " + (dir / "frames").string() + ": " + ec.message());
 }
 
-void VtkSeriesWriter::adopt(double time, const fs::path& from, const std::string& from_key) {
-  m_series.adopt(time, from, from_key);
-}
+void VtkSeriesWriter::adopt(double time, const fs::path& from) { m_series.adopt(time, from); }
 
 fs::path VtkSeriesWriter::write(const Snapshot& s) {
   const std::size_t n = s.size();
@@ -390,9 +387,7 @@ fs::path VtkSeriesWriter::write(const Snapshot& s) {
 ContactSeriesWriter::ContactSeriesWriter(fs::path dir, FrameMetadata metadata)
     : m_series(std::move(dir), "contacts", "contacts", "contacts.pvd"), m_metadata(std::move(metadata)) {}
 
-void ContactSeriesWriter::adopt(double time, const fs::path& from, const std::string& from_key) {
-  m_series.adopt(time, from, from_key);
-}
+void ContactSeriesWriter::adopt(double time, const fs::path& from) { m_series.adopt(time, from); }
 
 fs::path ContactSeriesWriter::write(const ContactSnapshot& c) {
   const std::size_t n = c.a.size();
@@ -459,9 +454,7 @@ constexpr int kSegments = 48;  // around cylinders and spheres
 WallSeriesWriter::WallSeriesWriter(fs::path dir, const Vec3& lo, const Vec3& hi, FrameMetadata metadata)
     : m_series(std::move(dir), "walls", "walls", "walls.pvd"), m_lo(lo), m_hi(hi), m_metadata(std::move(metadata)) {}
 
-void WallSeriesWriter::adopt(double time, const fs::path& from, const std::string& from_key) {
-  m_series.adopt(time, from, from_key);
-}
+void WallSeriesWriter::adopt(double time, const fs::path& from) { m_series.adopt(time, from); }
 
 fs::path WallSeriesWriter::write(const Walls& walls, double time, std::uint64_t step) {
   const Vec3 centre = (m_lo + m_hi) * real(0.5);

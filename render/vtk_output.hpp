@@ -63,9 +63,9 @@ class Series {
   std::filesystem::path add(double time, const std::string& file_text);
   /// Counts the next file as written at `time` (a resumed run). Where it is
   /// not in DIR but in `from` (the folder of the run that wrote it), it is
-  /// copied first, so that the .pvd names only files DIR holds; where it is
-  /// in neither, throws marbles::InputError naming `from_key`.
-  void adopt(double time, const std::filesystem::path& from = {}, const std::string& from_key = "");
+  /// copied first; where it is in neither, it keeps its number but the .pvd
+  /// leaves it out, so that the .pvd names only files DIR holds.
+  void adopt(double time, const std::filesystem::path& from = {});
   std::filesystem::path next_path() const;
   std::filesystem::path pvd_path() const { return m_dir / m_pvd; }
   std::size_t size() const { return m_entries.size(); }
@@ -73,7 +73,8 @@ class Series {
  private:
   std::filesystem::path m_dir;
   std::string m_folder, m_prefix, m_pvd;
-  std::vector<std::pair<double, std::string>> m_entries;  // time, file relative to m_dir
+  std::vector<std::pair<double, std::string>> m_entries;  // time, file relative to m_dir: the files listed
+  std::size_t m_count = 0;                                 // files numbered, listed or not
   bool m_folder_made = false;
 };
 
@@ -93,7 +94,7 @@ class VtkSeriesWriter {
   std::filesystem::path pvd_path() const { return m_series.pvd_path(); }
   /// A resumed run: counts the next frame (as write() would name it) as
   /// already written at `time`, without writing it (Series::adopt).
-  void adopt(double time, const std::filesystem::path& from = {}, const std::string& from_key = "");
+  void adopt(double time, const std::filesystem::path& from = {});
 
  private:
   Series m_series;
@@ -123,7 +124,7 @@ class ContactSeriesWriter {
  public:
   ContactSeriesWriter(std::filesystem::path dir, FrameMetadata metadata = {});
   std::filesystem::path write(const ContactSnapshot& contacts);
-  void adopt(double time, const std::filesystem::path& from = {}, const std::string& from_key = "");
+  void adopt(double time, const std::filesystem::path& from = {});
   std::size_t frames() const { return m_series.size(); }
 
  private:
@@ -141,7 +142,7 @@ class WallSeriesWriter {
  public:
   WallSeriesWriter(std::filesystem::path dir, const Vec3& lo, const Vec3& hi, FrameMetadata metadata = {});
   std::filesystem::path write(const Walls& walls, double time, std::uint64_t step);
-  void adopt(double time, const std::filesystem::path& from = {}, const std::string& from_key = "");
+  void adopt(double time, const std::filesystem::path& from = {});
   std::size_t frames() const { return m_series.size(); }
 
  private:

@@ -280,11 +280,11 @@ void RunOutput::resume(std::uint64_t steps, double dt, const std::filesystem::pa
   }
   if (m->contacts)
     for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->contacts_every))
-      m->contacts->adopt(static_cast<double>(step) * dt, from, "--restart");
+      m->contacts->adopt(static_cast<double>(step) * dt, from);
   if (!m->vtk) return;
   for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->vtk_every)) {
-    m->vtk->adopt(static_cast<double>(step) * dt, from, "--restart");
-    if (m->walls) m->walls->adopt(static_cast<double>(step) * dt, from, "--restart");
+    m->vtk->adopt(static_cast<double>(step) * dt, from);
+    if (m->walls) m->walls->adopt(static_cast<double>(step) * dt, from);
   }
 }
 
