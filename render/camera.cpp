@@ -150,10 +150,6 @@ Camera parse_camera(std::string_view text, std::string_view key) {
   Camera cam;
   if (!parse3(text.substr(0, colon), cam.position) || !parse3(text.substr(colon + 1), cam.look_at)) return fail();
   if (cam.position == cam.look_at) throw InputError({}, k, "camera position and look-at point coincide");
-  const Vec3 view = cam.look_at - cam.position;
-  if (!(length(cross(view, cam.up)) > real(1e-6) * length(view)))
-    throw InputError({}, k, "the view is parallel to the up direction [0, 0, 1]: look from a point off the vertical "
-                            "through the look-at point (a scene's output.render.camera.up takes another up)");
   return cam;
 }
 

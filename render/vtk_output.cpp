@@ -8,7 +8,6 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
-#include <iterator>
 #include <regex>
 #include <sstream>
 
@@ -309,18 +308,27 @@ fs::path Series::add(double time, const std::string& file_text) {
 void Series::adopt(double time, const fs::path& from) {
   const std::string file = m_folder + "/" + numbered(m_prefix.c_str(), m_count++);
   std::error_code ec;
-  if (!from.empty() && !fs::exists(m_dir / file, ec)) {
-    // In neither folder (a run that wrote no frames, or a checkpoint moved
-    // away from its run): numbered, but not listed.
-    if (!fs::is_regular_file(from / file, ec)) return;
-    std::ifstream in(from / file, std::ios::binary);
-    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (!in.good() && !in.eof()) throw RuntimeFailure("cannot read " + (from / file).string());
+  if (!fs::exists(m_dir / file, ec)) {
+    // In neither folder (a run that wrote no frames, or a checkpoint away
+    // from its run's folder): numbered, but not listed.
+    if (from.empty() || !fs::is_regular_file(from / file, ec)) return;
     fs::create_directories(m_dir / m_folder, ec);
     if (ec) throw RuntimeFailure("cannot create " + (m_dir / m_folder).string() + ": " + ec.message());
-    write_file_atomic(m_dir / file, bytes);
+    // Copied under a temporary name and renamed, as every output is written.
+    const fs::path to = m_dir / file, part = to.string() + ".part";
+    fs::copy_file(from / file, part, fs::copy_options::overwrite_existing, ec);
+    if (!ec) fs::rename(part, to, ec);
+    if (ec) {
+      std::error_code ignored;
+      fs::remove(part, ignored);
+      throw RuntimeFailure("cannot copy " + (from / file).string() + " to " + to.string() + ": " + ec.message());
+    }
   }
   m_entries.emplace_back(time, file);
+}
+
+void Series::write_pvd() const {
+  if (!m_entries.empty()) write_file_atomic(pvd_path(), pvd_text(m_entries));
 }
 
 // --- spheres ------------------------------------------------------------------

@@ -66,6 +66,8 @@ class Series {
   /// copied first; where it is in neither, it keeps its number but the .pvd
   /// leaves it out, so that the .pvd names only files DIR holds.
   void adopt(double time, const std::filesystem::path& from = {});
+  /// Writes the .pvd of the files listed so far (a resumed run that adds none).
+  void write_pvd() const;
   std::filesystem::path next_path() const;
   std::filesystem::path pvd_path() const { return m_dir / m_pvd; }
   std::size_t size() const { return m_entries.size(); }
@@ -95,6 +97,7 @@ class VtkSeriesWriter {
   /// A resumed run: counts the next frame (as write() would name it) as
   /// already written at `time`, without writing it (Series::adopt).
   void adopt(double time, const std::filesystem::path& from = {});
+  void write_pvd() const { m_series.write_pvd(); }
 
  private:
   Series m_series;
@@ -125,6 +128,7 @@ class ContactSeriesWriter {
   ContactSeriesWriter(std::filesystem::path dir, FrameMetadata metadata = {});
   std::filesystem::path write(const ContactSnapshot& contacts);
   void adopt(double time, const std::filesystem::path& from = {});
+  void write_pvd() const { m_series.write_pvd(); }
   std::size_t frames() const { return m_series.size(); }
 
  private:
@@ -143,6 +147,7 @@ class WallSeriesWriter {
   WallSeriesWriter(std::filesystem::path dir, const Vec3& lo, const Vec3& hi, FrameMetadata metadata = {});
   std::filesystem::path write(const Walls& walls, double time, std::uint64_t step);
   void adopt(double time, const std::filesystem::path& from = {});
+  void write_pvd() const { m_series.write_pvd(); }
   std::size_t frames() const { return m_series.size(); }
 
  private:

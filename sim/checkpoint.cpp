@@ -197,6 +197,9 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   for (std::size_t size : {c.world.velocity.size(), c.world.angular_velocity.size(), c.world.radius.size(),
                            c.world.inv_mass.size(), c.world.inv_inertia.size(), c.world.material.size()})
     if (size != n) r.fail("is damaged (array lengths differ)");
+  for (std::size_t size : {c.state.cache.normal_impulse.size(), c.state.cache.tangent_impulse.size(),
+                           c.state.cache.rolling_impulse.size()})
+    if (size != c.state.cache.key.size()) r.fail("is damaged (the cache's array lengths differ)");
   // Values a run could not have written: a sphere's size, mass or state not
   // finite, a radius not above zero, an inverse mass or inertia below zero
   // (zero: a fixed sphere), impulses or totals not finite.

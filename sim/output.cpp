@@ -281,11 +281,17 @@ void RunOutput::resume(std::uint64_t steps, double dt, const std::filesystem::pa
   if (m->contacts)
     for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->contacts_every))
       m->contacts->adopt(static_cast<double>(step) * dt, from);
+  // Written now too, so that a resumed run with no frame or row left to
+  // write still leaves its folder whole.
+  if (m->contacts) m->contacts->write_pvd();
+  if (m->thermo) render::write_file_atomic((std::filesystem::path(m->dir) / "thermo.csv").string(), m->thermo_text);
   if (!m->vtk) return;
   for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->vtk_every)) {
     m->vtk->adopt(static_cast<double>(step) * dt, from);
     if (m->walls) m->walls->adopt(static_cast<double>(step) * dt, from);
   }
+  m->vtk->write_pvd();
+  if (m->walls) m->walls->write_pvd();
 }
 
 std::string RunOutput::finish() {

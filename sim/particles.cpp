@@ -329,11 +329,12 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
   // Lines are read into a bounded buffer: a row is a few dozen bytes, and a
   // stream without line ends (/dev/zero, a binary file) is refused at the
   // bound instead of filling the memory.
-  std::vector<char> buffer(kLongestCsvLine + 1);
+  std::vector<char> buffer(kLongestCsvLine + 2);  // and a '\r' before the '\n'
   int line_number = 0;
   while (in) {
     in.getline(buffer.data(), static_cast<std::streamsize>(buffer.size()));
     const bool ended = in.eof();
+    if (in.bad()) throw InputError(SourceLocation{path, line_number + 1, 1}, "", "cannot be read");
     if (in.fail() && !ended)
       throw InputError(SourceLocation{path, line_number + 1, 1}, "",
                        "a line longer than " + std::to_string(kLongestCsvLine) +
@@ -343,6 +344,10 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
     ++line_number;
     std::string_view content(buffer.data(), ended ? got : got - 1);  // without its '\n'
     if (!content.empty() && content.back() == '\r') content.remove_suffix(1);
+    if (content.size() > kLongestCsvLine)
+      throw InputError(SourceLocation{path, line_number, 1}, "",
+                       "a line longer than " + std::to_string(kLongestCsvLine) +
+                           " bytes: not a CSV file of spheres (rows x,y,z,r[,vx,vy,vz[,wx,wy,wz]])");
     if (line_number == 1 && content.substr(0, 3) == "\xEF\xBB\xBF") content.remove_prefix(3);  // UTF-8 byte order mark
     if (const std::size_t hash = content.find('#'); hash != std::string_view::npos) content = content.substr(0, hash);
     if (trim(content).empty()) continue;

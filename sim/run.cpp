@@ -79,6 +79,7 @@ std::size_t count_initial_overlaps(const World& world, double tolerance) {
   bp->find_pairs({world.position.data(), world.radius.data(), world.size()}, 0, pairs);
   std::size_t deep = 0;
   for (const auto& p : pairs) {
+    if (!(world.inv_mass[p.i] > 0) && !(world.inv_mass[p.j] > 0)) continue;  // two fixed spheres: glued, no contact
     const double d = length(world.position[p.i] - world.position[p.j]);
     const double depth = world.radius[p.i] + world.radius[p.j] - d;
     if (depth > tolerance * std::min(world.radius[p.i], world.radius[p.j])) ++deep;
@@ -132,10 +133,24 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     sc.output.render.enabled = false;
     sc.output.movie.enabled = false;
   }
+  // A checkpoint's run folder, where it lies in one (OUTDIR/checkpoints/
+  // step_N.mck): a restart elsewhere copies the output before the
+  // checkpoint's step from it.
+  std::filesystem::path restart_from;
+  bool restart_here = false;
+  if (options.restart) {
+    std::error_code ec;
+    const std::filesystem::path at = std::filesystem::absolute(*options.restart, ec);
+    if (!ec && at.parent_path().filename() == "checkpoints") restart_from = at.parent_path().parent_path();
+    restart_here = restart_from.empty() ||
+                   std::filesystem::weakly_canonical(restart_from, ec) ==
+                       std::filesystem::weakly_canonical(std::filesystem::absolute(sc.output.dir, ec), ec);
+  }
   // An earlier run's output in the folder: replaced with --overwrite, else
-  // refused (stale frames would mix with new ones). A restart goes on in it.
+  // refused (stale frames would mix with new ones). A restart goes on in
+  // its own run's folder (or one its checkpoint is not in a run's folder of).
   const std::vector<std::filesystem::path> earlier =
-      options.restart ? std::vector<std::filesystem::path>{} : earlier_run_files(sc.output.dir);
+      restart_here ? std::vector<std::filesystem::path>{} : earlier_run_files(sc.output.dir);
   if (!earlier.empty() && !options.overwrite)
     throw InputError(SourceLocation{}, options.out_dir ? "--out" : "output.dir",
                      sc.output.dir + " holds the output of an earlier run (" + std::to_string(earlier.size()) +
@@ -206,8 +221,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   double step_seconds = 0;
   const std::uint64_t first_step = sim.steps();
   // The checkpoint's run folder: OUTDIR of OUTDIR/checkpoints/step_NNNNNN.mck.
-  if (options.restart)
-    output.resume(sim.steps(), sim.dt(), std::filesystem::absolute(*options.restart).parent_path().parent_path());
+  if (options.restart) output.resume(sim.steps(), sim.dt(), restart_here ? std::filesystem::path{} : restart_from);
   else output.write(sim);
   const auto t0 = std::chrono::steady_clock::now();
   // Test hook: MARBLES_FAULT_SIGNAL=NAME@N raises SIGNAME (SEGV, ABRT, INT, TERM) after step N.

@@ -726,8 +726,10 @@ namespace {
 // itself (of a list, the earlier map wins), then loses its `<<`. Merged
 // values are the anchor's nodes, so an error in one names the anchor's line.
 // Visits are counted: an alias bomb is refused, not expanded. A node that
-// holds itself through an alias (`a: &x {<<: *x}`, `a: &x {b: *x}`) is
-// refused too, not followed until the stack runs out.
+// holds itself through an alias (`a: &x {<<: *x}`, `a: &x {b: *x}` in a file
+// with merge keys) is refused too, not followed until the stack runs out.
+// (Without merge keys this pass does not run; the readers then meet such a
+// node as a key they do not know.)
 class MergeKeys {
  public:
   explicit MergeKeys(std::string path) : m_path(std::move(path)) {}

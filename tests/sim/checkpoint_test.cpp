@@ -308,8 +308,9 @@ TEST_F(Checkpoints, RestartIntoAnotherFolderWritesEverySeries) {
       const std::string file = text.substr(at + 6, text.find('"', at + 6) - at - 6);
       ++named;
       ASSERT_TRUE(fs::exists(dir.path() + "/second/" + file)) << pvd << " names " << file;
-      if (fs::exists(dir.path() + "/first/" + file))
+      if (fs::exists(dir.path() + "/first/" + file)) {
         EXPECT_EQ(slurp(dir.path() + "/second/" + file), slurp(dir.path() + "/first/" + file)) << file;
+      }
     }
     EXPECT_GT(named, 5u) << pvd;
   }
@@ -335,6 +336,21 @@ TEST_F(Checkpoints, RestartIntoAnotherFolderWritesEverySeries) {
     EXPECT_EQ(slurp(dir.path() + "/third/" + file), slurp(dir.path() + "/second/" + file)) << file;
   }
   EXPECT_GT(listed, 5u);
+  // Into a folder that holds another run: refused unless --overwrite, which replaces it.
+  const std::string again = "run " + scene + common + " --out " + dir.path() + "/second --restart " + dir.path() +
+                            "/first/checkpoints/step_000100.mck";
+  EXPECT_EQ(marbles(again, &err), 2);
+  EXPECT_NE(err.find("holds the output of an earlier run"), std::string::npos) << err;
+  EXPECT_EQ(marbles(again + " --overwrite", &err), 0) << err;
+  // Resumed at its last step: nothing is left to write, and the folder is whole still.
+  ASSERT_EQ(marbles("run " + scene + common + " --duration 0.1 --out " + dir.path() + "/fourth --restart " + dir.path() +
+                        "/first/checkpoints/step_000100.mck",
+                    &err),
+            0)
+      << err;
+  for (const std::string file : {"series.pvd", "walls.pvd", "contacts.pvd", "thermo.csv", "frames/frame_000005.vtp"})
+    EXPECT_TRUE(fs::exists(dir.path() + "/fourth/" + file)) << file;
+  EXPECT_EQ(slurp(dir.path() + "/fourth/thermo.csv"), slurp(dir.path() + "/first/thermo.csv"));
 }
 
 // The newest `keep` checkpoints stay.

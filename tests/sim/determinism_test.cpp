@@ -322,6 +322,8 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
       {"impulse is not finite", [&](Checkpoint& k) { k.state.cache.tangent_impulse[0].x = inf; }},
       {"running totals", [](Checkpoint& k) { k.totals.energy_start = std::numeric_limits<double>::quiet_NaN(); }},
       {"running totals", [](Checkpoint& k) { k.totals.contact_sum = -1; }},
+      {"cache's array lengths differ", [](Checkpoint& k) { k.state.cache.normal_impulse.pop_back(); }},
+      {"cache's array lengths differ", [](Checkpoint& k) { k.state.cache.rolling_impulse.pop_back(); }},
   };
   for (const auto& [why, damage] : damages) {
     Checkpoint bad = c;

@@ -385,11 +385,13 @@ TEST(Csv, Errors) {
     EXPECT_EQ(error_of("0,0,0,1e39\n"), "e.csv:1:7: r: out of range for float precision, got 1e39");
   }
   // A line longer than any row (a binary file, a stream without line ends) is refused at the bound.
+  EXPECT_EQ(error_of("0,0,0,1\n#" + std::string(1048576, '7') + "\r\n"),
+            "e.csv:2:1: a line longer than 1048576 bytes: not a CSV file of spheres (rows x,y,z,r[,vx,vy,vz[,wx,wy,wz]])");
   EXPECT_EQ(error_of("0,0,0,1\n" + std::string(1100000, '7') + "\n"),
             "e.csv:2:1: a line longer than 1048576 bytes: not a CSV file of spheres (rows x,y,z,r[,vx,vy,vz[,wx,wy,wz]])");
   // ... and one just within it is read (a comment), as is a last row without its line end and CRLF rows.
   const GeneratedParticles within =
-      read_spheres_csv(dir.write("w.csv", "#" + std::string(1048574, 'c') + "\r\n0,0,0,1\r\n1,2,3,0.5"));
+      read_spheres_csv(dir.write("w.csv", "#" + std::string(1048575, 'c') + "\r\n0,0,0,1\r\n1,2,3,0.5"));
   ASSERT_EQ(within.size(), 2u);
   EXPECT_EQ(within.radius[1], real(0.5));
   if (std::filesystem::exists("/dev/zero")) {

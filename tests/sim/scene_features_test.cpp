@@ -2,6 +2,7 @@
 // per CSV row), fixed spheres (collide, never move) and YAML merge keys.
 #include <gtest/gtest.h>
 
+#include <sstream>
 #include <string>
 
 #include "broadphase/broadphase.hpp"
@@ -107,8 +108,11 @@ TEST(SceneFeatures, FixedSpheresMakeNoContactsBetweenThemselves) {
   const ScratchDir dir("features_glued");
   std::string floor = "  - list:\n      radius: 0.05\n      positions: [";
   for (int x = -4; x <= 4; ++x)
-    for (int y = -4; y <= 4; ++y)
-      floor += "[" + std::to_string(0.04 * x) + ", " + std::to_string(0.04 * y) + ", 0]" + (x == 4 && y == 4 ? "]\n" : ", ");
+    for (int y = -4; y <= 4; ++y) {
+      std::ostringstream at;
+      at << "[" << 0.04 * x << ", " << 0.04 * y << ", 0]" << (x == 4 && y == 4 ? "]\n" : ", ");
+      floor += at.str();
+    }
   for (const bool fixed : {true, false}) {
     const scene::Scene s = scene::load_scene(
         dir.write("s.yaml", std::string("time: {duration: 1, dt: 0.001}\n") +

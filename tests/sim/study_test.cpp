@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <random>
 #include <sstream>
@@ -161,9 +162,13 @@ TEST(Vary, ValuesSplitOutsideBrackets) {
   }
   const std::string command = kMarbles + " study " MARBLES_SOURCE_DIR
                               "/scenes/validation/bouncing_ball.yaml --vary time.dt=4e-3 --vary time.dt=2e-3 "
-                              "--quiet --out " + ::testing::TempDir() + "/vary_twice > /dev/null 2>&1";
+                              "--quiet --out " + ::testing::TempDir() + "/vary_twice > /dev/null 2> " +
+                              ::testing::TempDir() + "/vary_twice.err";
   const int status = std::system(command.c_str());
   EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << command;
+  std::ifstream in(::testing::TempDir() + "/vary_twice.err");
+  const std::string err((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(err.find("--vary time.dt=2e-3: time.dt: varied twice"), std::string::npos) << err;
 }
 
 TEST(Pareto, EqualsTheSweepOracle) {
