@@ -841,6 +841,13 @@ Scene read_scene(YAML::Node document, const std::string& path, const std::string
                  const std::vector<std::string>& overrides) {
   detail::Origins origins;
   detail::apply_overrides(document, overrides, origins);
+  // Merge keys in an override's value, as in a file (the file's own were
+  // resolved as it was read; resolving again finds none of them).
+  for (const std::string& o : overrides)
+    if (o.find("<<") != std::string::npos) {
+      MergeKeys("--set " + o).resolve(document, "");
+      break;
+    }
   const Field root(document, "", path, &origins);
   const MapFields top(root, {"format", "name", "time", "solver", "effects", "gravity", "drag", "materials",
                              "contact_pairs", "walls", "particles", "output", "reference"});

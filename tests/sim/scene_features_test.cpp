@@ -183,6 +183,18 @@ TEST(SceneFeatures, MergeKeysSupplyDefaults) {
   EXPECT_NE(load_error(scalar).find("scalar.yaml:3:11: materials.a.<<: a merge key takes a map or a list of maps"),
             std::string::npos)
       << load_error(scalar);
+  // A merge key in a --set value is resolved as one in the file is.
+  const scene::Scene over = scene::load_scene(path, {"materials.heavy={<<: {density: 5, friction: 0.2}, density: 7}"});
+  EXPECT_DOUBLE_EQ(over.materials[2].density, 7);
+  EXPECT_DOUBLE_EQ(over.materials[2].friction, 0.2);
+  try {
+    scene::load_scene(path, {"materials.heavy={<<: 3, density: 7}"});
+    ADD_FAILURE() << "a scalar merged through --set was taken";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("materials.heavy.<<: a merge key takes a map or a list of maps"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 // A map that merges itself, or one around it, and a map that holds itself
