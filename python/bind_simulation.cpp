@@ -19,6 +19,7 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -91,10 +92,19 @@ class PySimulation {
   }
 
   // Advances n steps (the GIL released); views handed out are checked first.
+  // Between steps it looks for a pending signal (Ctrl-C: KeyboardInterrupt,
+  // the steps done kept). One thread steps a simulation at a time.
   void step(std::uint64_t n) {
+    const Busy busy(*this);
     if (m_views_out) check_views();
     nb::gil_scoped_release release;
+    auto last_check = std::chrono::steady_clock::now();
     for (std::uint64_t i = 0; i < n; ++i) {
+      if (i > 0 && std::chrono::steady_clock::now() - last_check > std::chrono::milliseconds(100)) {
+        last_check = std::chrono::steady_clock::now();
+        nb::gil_scoped_acquire acquire;
+        if (PyErr_CheckSignals() != 0) throw nb::python_error();
+      }
       try {
         m_sim->step();
       } catch (const WatchdogFailure& e) {
@@ -150,12 +160,13 @@ class PySimulation {
   // Writes a whole array from a host array of the same shape (a copy; the
   // values are checked first).
   void assign(const std::string& what, HostArray<const real, kAny, 3> values) {
+    const Busy busy(*this);
     const std::size_t n = size();
     if (values.shape(0) != n)
-      throw nb::value_error((what + "s: expected " + std::to_string(n) + " rows, got " + std::to_string(values.shape(0))).c_str());
+      throw nb::value_error((plural(what) + ": expected " + std::to_string(n) + " rows, got " + std::to_string(values.shape(0))).c_str());
     for (std::size_t i = 0; i < 3 * n; ++i)
       if (!std::isfinite(values.data()[i]))
-        throw nb::value_error((what + "s[" + std::to_string(i / 3) + "] is not finite; the state is unchanged").c_str());
+        throw nb::value_error((plural(what) + "[" + std::to_string(i / 3) + "] is not finite; the state is unchanged").c_str());
     if (m_views_out) m_sim->state_written();
     World& w = m_sim->edit_world();
     std::vector<Vec3>& vec = what == "position" ? w.position : what == "velocity" ? w.velocity : w.angular_velocity;
@@ -194,6 +205,7 @@ class PySimulation {
   // writes them (the scene's point fields); frames written to one folder
   // from one simulation make one series.
   std::string write_frame(const std::string& dir) {
+    const Busy busy(*this);
     if (m_views_out) check_views();
     auto it = m_frames.find(dir);
     if (it == m_frames.end()) {
@@ -208,12 +220,14 @@ class PySimulation {
 
   // A checkpoint `marbles run --restart` reads (and restart() here).
   void checkpoint(const std::string& path) {
+    const Busy busy(*this);
     if (m_views_out) check_views();
     write_checkpoint(path, {m_fingerprint, m_sim->steps(), m_sim->world(), m_sim->save_state(), m_totals,
                             m_probe ? m_probe->progress() : std::vector<double>{}, m_sim->ids()});
   }
 
   void restart(const std::string& path) {
+    const Busy busy(*this);
     Checkpoint c = read_checkpoint(path, m_fingerprint);
     check_checkpoint_fits(c, path, "restart", size(), m_scene.materials.size());
     if (m_views_out) m_sim->state_written();
@@ -308,6 +322,19 @@ class PySimulation {
   std::optional<ReferenceProbe> m_probe;
   std::uint64_t m_probe_every = 1, m_total_steps = 0;
   bool m_views_out = false;
+  // Held by the call that steps or changes the simulation: a call from
+  // another thread meanwhile (step() lets the GIL go) is refused, not raced.
+  std::mutex m_busy;
+  struct Busy {
+    std::unique_lock<std::mutex> lock;
+    explicit Busy(PySimulation& s) : lock(s.m_busy, std::try_to_lock) {
+      if (!lock.owns_lock())
+        throw RuntimeFailure("this Simulation is stepping in another thread; step or change it from one thread at a time");
+    }
+  };
+  static std::string plural(const std::string& what) {
+    return what == "velocity" ? "velocities" : what == "angular_velocity" ? "angular_velocities" : what + "s";
+  }
   std::map<std::string, std::unique_ptr<render::VtkSeriesWriter>> m_frames;
 };
 

@@ -313,7 +313,8 @@ class Simulation:
             values = values.get()
         array = np.ascontiguousarray(values, dtype=dtype)
         if array.shape != (len(self), 3):
-            raise ValueError(f"{what}s: expected shape ({len(self)}, 3), got {array.shape}")
+            plural = {"velocity": "velocities", "angular_velocity": "angular_velocities"}.get(what, what + "s")
+            raise ValueError(f"{plural}: expected shape ({len(self)}, 3), got {array.shape}")
         self._impl.assign(what, array)
 
     def contacts(self):
@@ -403,11 +404,27 @@ def study(scene, vary, set=None, backend="auto", repeats=1, out=None):
     if not isinstance(vary, dict) or not vary:
         raise SceneError("vary: give a dict of key -> list of values", key="vary",
                          message="give a dict of key -> list of values")
+    if isinstance(repeats, bool) or int(repeats) != repeats or repeats < 1:
+        raise ValueError(f"repeats: a whole number of runs >= 1, got {repeats!r}")
+
+    def top_level_comma(text):
+        depth = 0
+        for c in text:
+            depth += c in "[{"
+            depth -= c in "]}"
+            if c == "," and depth == 0:
+                return True
+        return False
+
     texts = []
     for key, values in vary.items():
         if isinstance(values, (str, bytes)) or not hasattr(values, "__iter__"):
             values = [values]
-        texts.append(f"{key}=" + ",".join(_yaml_text(v, key) for v in values))
+        items = [_yaml_text(v, key) for v in values]
+        for text in items:
+            if top_level_comma(text):  # the study's list is comma-separated
+                raise ValueError(f"vary[{key!r}]: a value may not hold a comma outside brackets, got {text!r}")
+        texts.append(f"{key}=" + ",".join(items))
     return _marbles.study(os.fspath(scene), texts, _overrides(set), backend, int(repeats),
                           os.fspath(out) if out is not None else "", _program())
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import marbles
-from conftest import HAS_CUDA, PROGRAM
+from conftest import HAS_CUDA, PROGRAM, SCENES
 
 
 def test_file_error_names_line_column_and_key(tmp_path):
@@ -73,3 +73,62 @@ def test_missing_file_and_bad_arguments(tmp_path, pile):
 def test_cuda_without_a_device_is_a_runtime_failure(pile):
     with pytest.raises(marbles.RuntimeFailure, match="no CUDA device"):
         marbles.Simulation.from_dict(pile, backend="cuda")
+
+
+def test_one_thread_steps_a_simulation_at_a_time(pile):
+    # step() lets the GIL go; a second thread stepping or changing the same
+    # simulation meanwhile is refused with RuntimeFailure, never raced (which
+    # crashed the interpreter), and no step is lost or doubled.
+    import threading
+    sim = marbles.Simulation.from_dict(pile)
+    done, refused = [0], []
+
+    def stepper():
+        for _ in range(300):
+            try:
+                sim.step()
+                done[0] += 1
+            except marbles.RuntimeFailure as e:
+                refused.append(str(e))
+
+    threads = [threading.Thread(target=stepper) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert done[0] + len(refused) == 1200
+    assert sim.steps == done[0]
+    assert all("stepping in another thread" in r for r in refused)
+
+
+def test_a_long_step_stops_on_an_interrupt(pile):
+    # A pending SIGINT (Ctrl-C) ends step(n) between two steps with
+    # KeyboardInterrupt; the steps done are kept and the simulation goes on.
+    import signal
+    import threading
+    sim = marbles.Simulation.from_dict(pile)
+    timer = threading.Timer(0.3, lambda: signal.raise_signal(signal.SIGINT))
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        sim.step(10**9)
+    timer.join()
+    done = sim.steps
+    assert 0 < done < 10**9
+    sim.step(2)
+    assert sim.steps == done + 2
+
+
+def test_array_and_study_argument_errors(pile, tmp_path):
+    sim = marbles.Simulation.from_dict(pile)
+    with pytest.raises(ValueError, match=r"^velocities: expected shape"):
+        sim.velocities = np.zeros((2, 3))
+    bad = np.zeros((len(sim), 3))
+    bad[1, 0] = np.nan
+    with pytest.raises(ValueError, match=r"^angular_velocities\[1\] is not finite"):
+        sim.angular_velocities = bad
+    scene = SCENES / "validation" / "bouncing_ball.yaml"
+    for repeats in (0, -3, 1.5):
+        with pytest.raises(ValueError, match="repeats"):
+            marbles.study(scene, vary={"time.dt": [1e-3]}, repeats=repeats, out=tmp_path)
+    with pytest.raises(ValueError, match="comma outside brackets"):
+        marbles.study(scene, vary={"time.dt": ["1e-3,2e-3"]}, out=tmp_path)

@@ -79,7 +79,7 @@ def test_non_finite_writes_are_refused(pile):
     assert sim.steps == 3
     v = np.array(sim.velocities)
     v[2, 0] = np.inf
-    with pytest.raises(ValueError, match=r"velocity"):
+    with pytest.raises(ValueError, match=r"velocities\[2\] is not finite"):
         sim.velocities = v
     with pytest.raises(ValueError, match="shape"):
         sim.angular_velocities = np.zeros((3, 3))
