@@ -221,6 +221,8 @@ class PySimulation {
   // A checkpoint `marbles run --restart` reads (and restart() here).
   void checkpoint(const std::string& path) {
     const Busy busy(*this);
+    if (path.empty() || path.find('\0') != std::string::npos)
+      throw nb::value_error("checkpoint: a path is needed (not empty, no NUL byte)");
     if (m_views_out) check_views();
     write_checkpoint(path, {m_fingerprint, m_sim->steps(), m_sim->world(), m_sim->save_state(), m_totals,
                             m_probe ? m_probe->progress() : std::vector<double>{}, m_sim->ids()});

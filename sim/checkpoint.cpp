@@ -163,6 +163,8 @@ void write_checkpoint(const std::string& path, const Checkpoint& c) {
 }
 
 Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) throw InputError(SourceLocation{path, 0, 0}, "--restart", "is a folder, not a checkpoint");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(SourceLocation{path, 0, 0}, "--restart", "cannot open the checkpoint");
   Reader r(std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>()), path);

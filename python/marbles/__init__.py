@@ -202,6 +202,14 @@ class Simulation:
                 raise SceneError(f"{path}: restart: no {os.path.basename(path)}.scene.json beside the checkpoint "
                                  "says which scene it belongs to; give scene=", file=path, key="restart",
                                  message="give scene=") from None
+            except ValueError as e:  # not JSON
+                raise SceneError(f"{path}.scene.json: restart: not the record of a scene ({e}); give scene=",
+                                 file=path + ".scene.json", key="restart", message="give scene=") from None
+            if (not isinstance(source, dict) or not isinstance(source.get("set"), list)
+                    or not isinstance(source.get("scene", ""), str)
+                    or not (isinstance(source.get("dict"), str) or isinstance(source.get("scene"), str))):
+                raise SceneError(f"{path}.scene.json: restart: not the record of a scene; give scene=",
+                                 file=path + ".scene.json", key="restart", message="give scene=")
             overrides = source["set"] if set is None else _overrides(set)
             if source.get("dict") is not None:
                 self = cls.from_dict(json.loads(source["dict"]), backend=backend, set=overrides, threads=threads,

@@ -132,3 +132,20 @@ def test_array_and_study_argument_errors(pile, tmp_path):
             marbles.study(scene, vary={"time.dt": [1e-3]}, repeats=repeats, out=tmp_path)
     with pytest.raises(ValueError, match="comma outside brackets"):
         marbles.study(scene, vary={"time.dt": ["1e-3,2e-3"]}, out=tmp_path)
+
+
+def test_checkpoint_paths_that_are_no_file(pile, tmp_path):
+    sim = marbles.Simulation.from_dict(pile)
+    with pytest.raises(marbles.SceneError, match="is a folder, not a checkpoint"):
+        marbles.Simulation.restart(tmp_path, scene=pile)
+    for path in ("", "a\x00b"):
+        with pytest.raises(ValueError, match="a path is needed"):
+            sim.checkpoint(path)
+    # A damaged record of the scene beside a checkpoint.
+    ck = tmp_path / "c.mck"
+    sim.checkpoint(ck)
+    assert marbles.Simulation.restart(ck).steps == 0  # premise: it restarts as written
+    for text in ("{bad", "[1, 2]", "{}", '{"scene": 5, "set": []}'):
+        (tmp_path / "c.mck.scene.json").write_text(text)
+        with pytest.raises(marbles.SceneError, match="not the record of a scene"):
+            marbles.Simulation.restart(ck)
