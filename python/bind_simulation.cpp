@@ -358,6 +358,8 @@ void translate(const std::exception_ptr& p, void*) {
           e.message());
   } catch (const RuntimeFailure& e) {
     raise("RuntimeFailure", std::string(e.what()));
+  } catch (const std::filesystem::filesystem_error& e) {  // an I/O failure is a run's failure
+    raise("RuntimeFailure", std::string(e.what()));
   }
 }
 

@@ -175,7 +175,11 @@ class Simulation:
             raise SceneError(f"<dict>: a scene is a dict of keys (time, materials, particles, ...), got "
                              f"{type(scene).__name__}", file="<dict>",
                              message="a scene is a dict of keys (time, materials, particles, ...)")
-        text = json.dumps(_plain(scene, ""))
+        try:
+            text = json.dumps(_plain(scene, ""))
+        except RecursionError:  # a dict that holds itself, or nests past Python's depth
+            raise SceneError("<dict>: the scene holds itself, or nests deeper than any scene does", file="<dict>",
+                             message="the scene holds itself, or nests deeper than any scene does") from None
         overrides = _overrides(set)
         solver = scene.get("solver")
         precision = _requested_precision(overrides) or (

@@ -149,3 +149,24 @@ def test_checkpoint_paths_that_are_no_file(pile, tmp_path):
         (tmp_path / "c.mck.scene.json").write_text(text)
         with pytest.raises(marbles.SceneError, match="not the record of a scene"):
             marbles.Simulation.restart(ck)
+
+
+def test_dicts_that_hold_themselves_or_nest_too_deep(pile):
+    looped = dict(pile)
+    looped["materials"] = {"glass": {"density": 2500}}
+    looped["materials"]["glass"]["again"] = looped
+    deep = dict(pile)
+    nest = deep["reference"] = {}
+    for _ in range(50000):
+        nest["x"] = {}
+        nest = nest["x"]
+    for scene in (looped, deep):
+        with pytest.raises(marbles.SceneError, match="holds itself, or nests deeper"):
+            marbles.Simulation.from_dict(scene)
+
+
+def test_a_study_into_a_folder_it_cannot_make_is_a_runtime_failure(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    with pytest.raises(marbles.RuntimeFailure):
+        marbles.study(SCENES / "validation" / "bouncing_ball.yaml", vary={"time.dt": [1e-3]}, out=blocker / "study")
