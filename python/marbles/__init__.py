@@ -391,7 +391,7 @@ def pairs(xyzr, backend="auto", algorithm="home", margin=0.0):
     return find(array, algorithm, backend, float(margin))
 
 
-def _program():
+def _program_path():  # not `_program`: importing the submodule of that name would replace it
     """The marbles program that runs each combination of a study."""
     here = os.path.dirname(os.path.abspath(__file__))
     candidates = [os.environ.get("MARBLES_PROGRAM"), os.path.join(here, "bin", "marbles")]
@@ -438,7 +438,7 @@ def study(scene, vary, set=None, backend="auto", repeats=1, out=None):
                 raise ValueError(f"vary[{key!r}]: a value may not hold a comma outside brackets, got {text!r}")
         texts.append(f"{key}=" + ",".join(items))
     return _marbles.study(os.fspath(scene), texts, _overrides(set), backend, int(repeats),
-                          os.fspath(out) if out is not None else "", _program())
+                          os.fspath(out) if out is not None else "", _program_path())
 
 
 def cuda_device():

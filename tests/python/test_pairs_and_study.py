@@ -60,3 +60,12 @@ def test_study_returns_the_table(tmp_path):
     assert (tmp_path / "study.csv").exists() and (tmp_path / "study.md").exists()
     with pytest.raises(marbles.SceneError):
         marbles.study(SCENES / "validation" / "bouncing_ball.yaml", vary={})
+
+
+def test_study_twice_in_one_process(tmp_path):
+    # The program's path comes from the submodule marbles._program; importing
+    # it once must not shadow what the second study calls.
+    scene = SCENES / "validation" / "bouncing_ball.yaml"
+    for k in range(2):
+        rows = marbles.study(scene, vary={"time.dt": [2e-3]}, out=tmp_path / str(k))
+        assert len(rows) == 1
