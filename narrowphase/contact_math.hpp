@@ -155,6 +155,11 @@ MARBLES_HD_INLINE real rebound_step(real shift, real gap_now) {
   return shift < gap_now ? shift : gap_now;
 }
 
+// Two fixed spheres (a glued floor's, a peg row's: inverse masses 0) never
+// move each other: they make no contact, so their overlap is no pile's and
+// costs no sweep (make_sphere_contact; the run's initial-overlap warning).
+MARBLES_HD_INLINE bool both_fixed(real inv_mass_a, real inv_mass_b) { return !(inv_mass_a > 0) && !(inv_mass_b > 0); }
+
 // What a contact takes from its pair besides its geometry: the bodies, the
 // arms (the radii; a wall's +0) and the pair table's coefficients. Set by
 // the search (make_sphere_contact, make_wall_contact) and again from a found
@@ -196,9 +201,7 @@ MARBLES_HD_INLINE bool make_sphere_contact(const BodiesView& bodies, std::uint32
   const real margin = (closing > pair_reach ? closing : pair_reach) + skin;  // no wider gap can matter
   if (!sphere_sphere(bodies.position[i], ri, bodies.position[j], rj, margin, c.normal, c.separation)) return false;
   if (!speculative_closes(c.separation, dot(dv, c.normal), h, skin, pair_reach)) return false;
-  // Two fixed spheres (a glued floor's, a peg row's) never move each other:
-  // no contact, so their overlap is no pile's and costs no sweep.
-  if (!(bodies.inv_mass[i] > 0) && !(bodies.inv_mass[j] > 0)) return false;
+  if (both_fixed(bodies.inv_mass[i], bodies.inv_mass[j])) return false;
   name_sphere_pair(bodies, i, j, table, c);
   return true;
 }

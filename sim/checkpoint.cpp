@@ -205,24 +205,22 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   // Values a run could not have written: a sphere's size, mass or state not
   // finite, a radius not above zero, an inverse mass or inertia below zero
   // (zero: a fixed sphere), impulses or totals not finite.
-  const auto finite = [](real x) { return x - x == 0; };
-  const auto finite3 = [&](const Vec3& v) { return finite(v.x) && finite(v.y) && finite(v.z); };
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!finite3(c.world.position[i]) || !finite3(c.world.velocity[i]) || !finite3(c.world.angular_velocity[i]))
-      r.fail("is damaged (sphere " + std::to_string(i) + "'s state is not finite)");
+  const auto finite = [](double x) { return x - x == 0; };
+  if (const std::size_t i = c.world.first_non_finite(); i < n)
+    r.fail("is damaged (sphere " + std::to_string(i) + "'s state is not finite)");
+  for (std::size_t i = 0; i < n; ++i)
     if (!(c.world.radius[i] > 0) || !finite(c.world.radius[i]) || !(c.world.inv_mass[i] >= 0) ||
         !finite(c.world.inv_mass[i]) || !(c.world.inv_inertia[i] >= 0) || !finite(c.world.inv_inertia[i]))
       r.fail("is damaged (sphere " + std::to_string(i) + "'s radius, mass or inertia)");
-  }
   for (std::size_t k = 0; k < c.state.cache.key.size(); ++k)
-    if (!finite(c.state.cache.normal_impulse[k]) || !finite3(c.state.cache.tangent_impulse[k]) ||
-        !finite3(c.state.cache.rolling_impulse[k]))
+    if (!finite(c.state.cache.normal_impulse[k]) || !is_finite(c.state.cache.tangent_impulse[k]) ||
+        !is_finite(c.state.cache.rolling_impulse[k]))
       r.fail("is damaged (a cache entry's impulse is not finite)");
   for (double t : {c.totals.candidate_sum, c.totals.contact_sum, c.totals.deepest, c.totals.energy_start,
                    c.totals.overlap_end, c.totals.rollbacks})
-    if (!(t - t == 0) || t < 0) r.fail("is damaged (its running totals)");
+    if (!finite(t) || t < 0) r.fail("is damaged (its running totals)");
   for (double p : c.probe)
-    if (!(p - p == 0)) r.fail("is damaged (its reference's progress)");
+    if (!finite(p)) r.fail("is damaged (its reference's progress)");
   // Pairs of its spheres (a < b) or a sphere and a wall, in ascending key
   // order without repeats: the restore's runs by sphere and the kept
   // colours' split between the threads (or_kept_colours_by_a) rest on it.

@@ -34,6 +34,7 @@
 #include <string_view>
 
 #include "sim/limits.hpp"
+#include "sim/scene_yaml.hpp"
 #include "sim/world.hpp"
 
 namespace marbles::scene {
@@ -335,19 +336,18 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
     in.getline(buffer.data(), static_cast<std::streamsize>(buffer.size()));
     const bool ended = in.eof();
     if (in.bad()) throw InputError(SourceLocation{path, line_number + 1, 1}, "", "cannot be read");
-    if (in.fail() && !ended)
-      throw InputError(SourceLocation{path, line_number + 1, 1}, "",
+    const auto too_long = [&](int line) {
+      throw InputError(SourceLocation{path, line, 1}, "",
                        "a line longer than " + std::to_string(kLongestCsvLine) +
                            " bytes: not a CSV file of spheres (rows x,y,z,r[,vx,vy,vz[,wx,wy,wz]])");
+    };
+    if (in.fail() && !ended) too_long(line_number + 1);
     const auto got = static_cast<std::size_t>(in.gcount());
     if (ended && got == 0) break;
     ++line_number;
     std::string_view content(buffer.data(), ended ? got : got - 1);  // without its '\n'
     if (!content.empty() && content.back() == '\r') content.remove_suffix(1);
-    if (content.size() > kLongestCsvLine)
-      throw InputError(SourceLocation{path, line_number, 1}, "",
-                       "a line longer than " + std::to_string(kLongestCsvLine) +
-                           " bytes: not a CSV file of spheres (rows x,y,z,r[,vx,vy,vz[,wx,wy,wz]])");
+    if (content.size() > kLongestCsvLine) too_long(line_number);
     if (line_number == 1 && content.substr(0, 3) == "\xEF\xBB\xBF") content.remove_prefix(3);  // UTF-8 byte order mark
     if (const std::size_t hash = content.find('#'); hash != std::string_view::npos) content = content.substr(0, hash);
     if (trim(content).empty()) continue;
@@ -408,20 +408,16 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
         fail(field.column, kColumnNames[c], "expected a number, got '" + std::string(field.text) + "'");
       if (!std::isfinite(value[c]))
         fail(field.column, kColumnNames[c], "must be a finite number, got " + std::string(field.text));
-      // As a scene's numbers: finite, and a non-zero one non-zero, in the run's precision.
-      if (!std::isfinite(static_cast<real>(value[c])))
-        fail(field.column, kColumnNames[c],
-             "out of range for " + std::string(kRealName) + " precision, got " + std::string(field.text));
-      if (value[c] != 0 && !(std::abs(static_cast<real>(value[c])) >= std::numeric_limits<real>::min()))
-        fail(field.column, kColumnNames[c],
-             "too small for " + std::string(kRealName) + " precision, got " + std::string(field.text));
+      // As a scene's numbers (Field::number's rule).
+      if (const std::string problem = detail::real_range_problem(value[c], false); !problem.empty())
+        fail(field.column, kColumnNames[c], problem + ", got " + std::string(field.text));
       if (c == 3 && !(value[c] > 0))
         fail(field.column, kColumnNames[c], "must be > 0, got " + std::string(field.text));
     }
     for (int c : {0, 4, 7}) {  // position, velocity, spin: squared by the step, as a scene's vectors are
       if (column_of[c] < 0) continue;
       const Vec3 v{real(value[c]), real(value[c + 1]), real(value[c + 2])};
-      if (!std::isfinite(length_squared(v)))
+      if (detail::square_overflows(v))
         fail(fields[std::size_t(column_of[c])].column, kColumnNames[c],
              "too large for " + std::string(kRealName) + " precision: the squared length of (" + kColumnNames[c] +
                  ", " + kColumnNames[c + 1] + ", " + kColumnNames[c + 2] + ") overflows");

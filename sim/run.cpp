@@ -21,6 +21,7 @@
 #include "core/error.hpp"
 #include "core/format.hpp"
 #include "core/parallel.hpp"
+#include "narrowphase/contact_math.hpp"
 #include "render/atomic_file.hpp"
 #include "sim/checkpoint.hpp"
 #include "sim/limits.hpp"
@@ -79,7 +80,7 @@ std::size_t count_initial_overlaps(const World& world, double tolerance) {
   bp->find_pairs({world.position.data(), world.radius.data(), world.size()}, 0, pairs);
   std::size_t deep = 0;
   for (const auto& p : pairs) {
-    if (!(world.inv_mass[p.i] > 0) && !(world.inv_mass[p.j] > 0)) continue;  // two fixed spheres: glued, no contact
+    if (narrowphase::both_fixed(world.inv_mass[p.i], world.inv_mass[p.j])) continue;  // glued: no contact
     const double d = length(world.position[p.i] - world.position[p.j]);
     const double depth = world.radius[p.i] + world.radius[p.j] - d;
     if (depth > tolerance * std::min(world.radius[p.i], world.radius[p.j])) ++deep;

@@ -169,13 +169,19 @@ double Field::number() const {
   if (!std::isfinite(value)) fail("must be a finite number, got " + text);
   // Every value reaches the step as `real`: it must stay finite, and a
   // non-zero one non-zero, in the precision of the run.
-  if (!std::isfinite(static_cast<real>(value)))
-    fail("out of range for " + std::string(kRealName) + " precision (largest " +
-         format_real(std::numeric_limits<real>::max()) + "), got " + text);
-  if (value != 0 && !(std::abs(static_cast<real>(value)) >= std::numeric_limits<real>::min()))
-    fail("too small for " + std::string(kRealName) + " precision (smallest " +
-         format_real(std::numeric_limits<real>::min()) + "), got " + text);
+  if (const std::string problem = real_range_problem(value, true); !problem.empty()) fail(problem + ", got " + text);
   return value;
+}
+
+std::string real_range_problem(double value, bool bound) {
+  const std::string precision = " for " + std::string(kRealName) + " precision";
+  if (!std::isfinite(static_cast<real>(value)))
+    return "out of range" + precision +
+           (bound ? " (largest " + format_real(std::numeric_limits<real>::max()) + ")" : std::string());
+  if (value != 0 && !(std::abs(static_cast<real>(value)) >= std::numeric_limits<real>::min()))
+    return "too small" + precision +
+           (bound ? " (smallest " + format_real(std::numeric_limits<real>::min()) + ")" : std::string());
+  return "";
 }
 
 double Field::positive() const {
@@ -245,7 +251,7 @@ Vec3 Field::vec3() const {
   const Vec3 v{real(xyz[0].number()), real(xyz[1].number()), real(xyz[2].number())};
   // The step squares vectors (speeds into energies, gaps into distances):
   // one whose square overflows the run's precision would turn into inf there.
-  if (!std::isfinite(length_squared(v)))
+  if (square_overflows(v))
     fail("too large for " + std::string(kRealName) + " precision: its squared length overflows (largest " +
          format_real(std::sqrt(std::numeric_limits<real>::max() / 3)) + " a component is safe)");
   return v;

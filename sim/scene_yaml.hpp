@@ -11,6 +11,7 @@
 // a file line.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <initializer_list>
 #include <optional>
@@ -41,6 +42,15 @@ std::string suggestion(std::string_view word, const std::vector<std::string>& ca
 std::string format_number(double value);
 // The same for a value stored as `real` (0.1f prints as 0.1, not 0.10000000149011612).
 std::string format_real(real value);
+
+// What keeps a number read from input out of the run's precision ("" where
+// it fits): not finite in `real`, or non-zero and below the smallest normal;
+// with `bound`, the bound it passed. The scene's numbers (Field::number) and
+// a CSV's rows share the rule.
+std::string real_range_problem(double value, bool bound);
+// Whether a vector's squared length, which the step forms (speeds into
+// energies, gaps into distances), overflows the run's precision.
+inline bool square_overflows(const Vec3& v) { return !std::isfinite(length_squared(v)); }
 
 // The nodes that `--set` overrides put into a tree, each with the text of its
 // override ("--set time.dt=-1").

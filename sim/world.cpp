@@ -145,7 +145,8 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
       const std::size_t first = known && b > 0 ? ends[b - 1] : 0;
       throw InputError(known ? scene.particles[b].where : SourceLocation{scene.path, 0, 0},
                        known ? "particles[" + std::to_string(b) + "]" : "particles",
-                       "sphere " + std::to_string(known ? i - first : i) + (known ? " of the block" : "") + " (radius " + significant(r, 6) + " m, density " +
+                       "sphere " + std::to_string(known ? i - first : i) + (known ? " of the block" : "") +
+                           " (radius " + significant(r, 6) + " m, density " +
                            significant(density, 6) + " kg/m^3): its mass " + significant(mass, 6) +
                            " kg or moment of inertia is out of range for " + kRealName + " precision");
     }
