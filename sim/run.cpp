@@ -117,15 +117,10 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   scene::Scene sc = scene::load_scene(options.scene_path, options.overrides);
   if (options.duration) {  // held to time.duration's own rules
     const double d = *options.duration;
-    const auto refuse = [&](const std::string& why) {
-      throw InputError(SourceLocation{}, "--duration", why + ", got " + shortest(d));
-    };
-    if (!(d > 0) || !(d - d == 0)) refuse("must be a finite number > 0");
-    if (d < sc.time.dt) refuse("must be >= time.dt (" + shortest(sc.time.dt) + ")");
-    const double substeps = d / sc.time.dt * sc.time.substeps;
-    if (!(substeps <= limits().substeps))
-      refuse("makes " + shortest(substeps) + " substeps (duration / time.dt x time.substeps), more than the limit " +
-             shortest(limits().substeps) + " (--limit substeps=N raises it)");
+    if (!(d > 0) || !(d - d == 0))
+      throw InputError(SourceLocation{}, "--duration", "must be a finite number > 0, got " + shortest(d));
+    if (const std::string why = scene::duration_problem(d, sc.time); !why.empty())
+      throw InputError(SourceLocation{}, "--duration", why);
     sc.time.duration = d;
   }
   if (options.out_dir) sc.output.dir = *options.out_dir;

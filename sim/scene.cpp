@@ -58,19 +58,30 @@ void check_box(const Vec3& lo, const Vec3& hi, const Field& max_field) {
   }
 }
 
+}  // namespace
+
+std::string duration_problem(double duration, const TimeSpec& time) {
+  if (duration < time.dt)
+    return "a duration of " + format_number(duration) + " s is shorter than a step, time.dt = " +
+           format_number(time.dt) + " s";
+  const double substeps = duration / time.dt * time.substeps;
+  if (!(substeps <= limits().substeps))
+    return "a duration of " + format_number(duration) + " s makes " + format_number(substeps) +
+           " substeps (duration / time.dt x time.substeps), more than the limit " +
+           format_number(limits().substeps) + " (--limit substeps=N raises it)";
+  return {};
+}
+
+namespace {
+
 TimeSpec read_time(const Field& field) {
   const MapFields map(field, {"duration", "dt", "substeps"});
   TimeSpec time;
   time.duration = map.required("duration").positive();
   const Field dt = map.required("dt");
   time.dt = dt.positive();
-  if (time.dt > time.duration)
-    dt.fail("must be <= time.duration (" + format_number(time.duration) + "), got " + dt.node().Scalar());
   if (auto f = map.optional("substeps")) time.substeps = f->integer_at_least(1);
-  const double steps = time.duration / time.dt * time.substeps;
-  if (!(steps <= limits().substeps))
-    dt.fail("time.duration / time.dt x time.substeps = " + format_number(steps) + " substeps, more than the limit " +
-            format_number(limits().substeps) + " (--limit substeps=N raises it)");
+  if (const std::string why = duration_problem(time.duration, time); !why.empty()) dt.fail(why);
   if (!(static_cast<real>(time.dt / time.substeps) > 0))
     dt.fail("the substep dt / substeps rounds to 0 in " + std::string(kRealName) + " precision");
   return time;

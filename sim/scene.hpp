@@ -22,6 +22,13 @@ struct TimeSpec {
   int substeps = 1;     // substeps per step, h = dt / substeps
 };
 
+// What is wrong with a run of `duration` seconds at `time`'s step and
+// substeps, or empty: the rules time.duration obeys against time.dt and the
+// substeps limit, shared by the scene's `time` block and `run --duration`.
+// The duration is taken to be a finite number > 0 (each caller refuses
+// other values in its own words first).
+std::string duration_problem(double duration, const TimeSpec& time);
+
 struct SolverSpec {
   int iterations = 10;                        // velocity sweeps per substep
   std::string integrator = "symplectic_euler";  // symplectic_euler | velocity_verlet

@@ -74,7 +74,7 @@ inline const std::vector<BadScene>& bad_scenes() {
       {"duration_negative", "time: {duration: -1, dt: 0.001}\n" SCENE_MATERIALS SCENE_PARTICLES,
        "{scene}:1:18: time.duration: must be > 0, got -1"},
       {"dt_above_duration", "time: {duration: 1, dt: 2}\n" SCENE_MATERIALS SCENE_PARTICLES,
-       "{scene}:1:25: time.dt: must be <= time.duration (1), got 2"},
+       "{scene}:1:25: time.dt: a duration of 1 s is shorter than a step, time.dt = 2 s"},
       {"spacing_zero",
        SCENE_TIME SCENE_MATERIALS
        "particles:\n  - lattice: {min: [0, 0, 0], max: [1, 1, 1], spacing: 0, radius: 0.1}\n",
@@ -141,8 +141,8 @@ inline const std::vector<BadScene>& bad_scenes() {
       {"normal_beyond_real", SCENE_VALID "walls:\n  - plane: {point: [0, 0, 0], normal: [1e39, 0, 0]}\n",
        "{scene}:7:40: walls[0].plane.normal[0]: out of range for ..."},
       {"too_many_substeps", "time: {duration: 1e9, dt: 1e-3, substeps: 4}\n" SCENE_MATERIALS SCENE_PARTICLES,
-       "{scene}:1:27: time.dt: time.duration / time.dt x time.substeps = 4e+12 substeps, more than the limit 1e+10 "
-       "(--limit substeps=N raises it)"},
+       "{scene}:1:27: time.dt: a duration of 1e+09 s makes 4e+12 substeps (duration / time.dt x time.substeps), "
+       "more than the limit 1e+10 (--limit substeps=N raises it)"},
       {"material_name_newline", SCENE_TIME "materials:\n  \"gl\\nass\": {density: 2500}\n" SCENE_PARTICLES,
        "{scene}:3:3: materials: a material name cannot hold a control character (tab, newline)"},
       {"render_too_wide", SCENE_VALID "output: {render: {width: 9000}}\n",
