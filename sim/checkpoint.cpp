@@ -9,6 +9,7 @@
 #include <iterator>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "render/atomic_file.hpp"
 
 namespace marbles {
@@ -134,6 +135,7 @@ std::uint64_t text_fingerprint(const std::string& text, const std::vector<std::s
 }
 
 std::string checkpoint_precision(const std::string& path) {
+  if (not_a_plain_file(path)) return "float";  // read_checkpoint says what it is
   std::ifstream in(path, std::ios::binary);
   char head[sizeof kMagic + 4 + sizeof kVersion + 4] = {};
   if (!in.read(head, sizeof head) || std::memcmp(head, kMagic, sizeof kMagic) != 0) return "float";
@@ -163,8 +165,8 @@ void write_checkpoint(const std::string& path, const Checkpoint& c) {
 }
 
 Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
-  std::error_code ec;
-  if (fs::is_directory(path, ec)) throw InputError(SourceLocation{path, 0, 0}, "--restart", "is a folder, not a checkpoint");
+  if (const char* what = not_a_plain_file(path))
+    throw InputError(SourceLocation{path, 0, 0}, "--restart", std::string("is ") + what + ", not a checkpoint");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(SourceLocation{path, 0, 0}, "--restart", "cannot open the checkpoint");
   Reader r(std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>()), path);

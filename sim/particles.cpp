@@ -33,6 +33,7 @@
 #include <string>
 #include <string_view>
 
+#include "core/files.hpp"
 #include "sim/limits.hpp"
 #include "sim/scene_yaml.hpp"
 #include "sim/world.hpp"
@@ -316,9 +317,8 @@ const char* const kColumnNames[kColumns] = {"x", "y", "z", "r", "vx", "vy", "vz"
 constexpr std::size_t kLongestCsvLine = 1 << 20;  // bytes
 
 CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, const std::string& open_key) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec))
-    throw InputError(open_where, open_key, "'" + path + "' is a folder, not a CSV file of spheres");
+  if (const char* what = not_a_plain_file(path))
+    throw InputError(open_where, open_key, "'" + path + "' is " + what + ", not a CSV file of spheres");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(open_where, open_key, "cannot open '" + path + "': " + std::strerror(errno));
 

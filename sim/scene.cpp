@@ -23,6 +23,7 @@
 #include <nlohmann/json.hpp>
 #include <yaml-cpp/eventhandler.h>
 
+#include "core/files.hpp"
 #include "sim/limits.hpp"
 #include "sim/scene_overrides.hpp"
 #include "sim/scene_yaml.hpp"
@@ -442,8 +443,8 @@ void read_csv(ParticleBlock& block, const Field& field, const std::string& scene
   if (resolved.is_relative()) resolved = std::filesystem::path(scene_path).parent_path() / resolved;
   block.csv_path = resolved.lexically_normal().string();
   block.csv_path_where = path.where();
-  std::error_code ec;
-  if (std::filesystem::is_directory(block.csv_path, ec)) path.fail("'" + block.csv_path + "' is a folder, not a CSV file");
+  if (const char* what = not_a_plain_file(block.csv_path))
+    path.fail("'" + block.csv_path + "' is " + what + ", not a CSV file");
   std::ifstream probe(block.csv_path);
   if (!probe) path.fail("cannot open '" + block.csv_path + "': " + std::strerror(errno));
 }
@@ -627,9 +628,8 @@ std::string printable(const std::string& text) {
 }
 
 std::string read_file(const std::string& path) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec))
-    throw InputError(SourceLocation{path, 0, 0}, "", "is a folder, not a scene file");
+  if (const char* what = not_a_plain_file(path))
+    throw InputError(SourceLocation{path, 0, 0}, "", std::string("is ") + what + ", not a scene file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(SourceLocation{path, 0, 0}, "", std::string("cannot open the scene file: ") + std::strerror(errno));
   // Read in chunks up to the limit: /dev/zero or a runaway pipe is refused

@@ -399,7 +399,8 @@ TEST(Csv, Errors) {
       read_spheres_csv("/dev/zero");
       ADD_FAILURE() << "/dev/zero was read";
     } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("/dev/zero:1:1: a line longer than"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("'/dev/zero' is a device, not a CSV file of spheres"), std::string::npos)
+          << e.what();
     }
   }
   try {

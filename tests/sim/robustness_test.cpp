@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <sys/stat.h>
 #include <sys/wait.h>
 
 #include <cstdlib>
@@ -64,12 +65,47 @@ TEST_F(Robustness, LeadingCommaIsAnErrorNotAnEndlessAllocation) {
   EXPECT_NE(o.err.find(":1:1: not valid YAML"), std::string::npos) << o.err;
 }
 
-// A device that never ends is refused after the size limit.
+// A device that never ends is refused for what it is, and a plain file past
+// the size limit after the limit, not when the memory runs out.
 TEST_F(Robustness, EndlessFileIsRefused) {
   const test::ScratchDir dir("robust_zero");
-  const Outcome o = marbles("check /dev/zero", dir);
-  EXPECT_EQ(o.exit_code, 2) << o.err;
-  EXPECT_NE(o.err.find("larger than 64 MiB"), std::string::npos) << o.err;
+  const Outcome device = marbles("check /dev/zero", dir);
+  EXPECT_EQ(device.exit_code, 2) << device.err;
+  EXPECT_NE(device.err.find("/dev/zero: is a device, not a scene file"), std::string::npos) << device.err;
+  const std::string big = dir.write("big.yaml", "# " + std::string(3 << 20, 'x') + "\n");
+  const Outcome large = marbles("check " + big + " --limit scene_mib=2", dir);
+  EXPECT_EQ(large.exit_code, 2) << large.err;
+  EXPECT_NE(large.err.find("larger than 2 MiB: not a scene file"), std::string::npos) << large.err;
+  EXPECT_EQ(marbles("check " + big + " --limit scene_mib=4", dir).exit_code, 2);  // read whole: no map
+}
+
+// A pipe is read more than once (the scene for its precision, its hash and
+// its text) and opening one without a writer waits: every input that names a
+// file refuses a pipe up front instead of waiting (the runs are bounded by
+// `timeout 20`, whose exit would be 124).
+TEST_F(Robustness, PipesAreRefusedNotWaitedOn) {
+  const test::ScratchDir dir("robust_fifo");
+  const std::string fifo = dir.path() + "/pipe";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const std::string scene = dir.write(
+      "s.yaml", "time: {duration: 0.01, dt: 0.001}\nmaterials: {a: }\nparticles:\n  - list: {positions: [[0, 0, 0]], "
+                "radius: 0.1}\n");
+  const std::string csv = dir.write(
+      "c.yaml", "time: {duration: 0.01, dt: 0.001}\nmaterials: {a: }\nparticles:\n  - csv: {path: pipe}\n");
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"check " + fifo, fifo + ": is a pipe, not a scene file"},
+      {"run " + fifo + " --out " + dir.path() + "/o", fifo + ": is a pipe, not a scene file"},
+      {"check " + csv, "particles[0].csv.path: '" + fifo + "' is a pipe, not a CSV file"},
+      {"pairs " + fifo, "'" + fifo + "' is a pipe, not a CSV file of spheres"},
+      {"run " + scene + " --out " + dir.path() + "/r --restart " + fifo, "--restart: is a pipe, not a checkpoint"},
+  };
+  for (const auto& [args, message] : cases) {
+    const Outcome o = marbles(args, dir);
+    EXPECT_EQ(o.exit_code, 2) << args << ": " << o.err;
+    EXPECT_NE(o.err.find(message), std::string::npos) << args << ": " << o.err;
+  }
+  EXPECT_FALSE(fs::exists(dir.path() + "/o/summary.json"));
+  EXPECT_FALSE(fs::exists(dir.path() + "/r/summary.json"));
 }
 
 // A pair set that cannot fit (coincident centres) is a message with the
