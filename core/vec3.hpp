@@ -40,5 +40,9 @@ MARBLES_HD_INLINE real length(const Vec3& a) { return std::sqrt(dot(a, a)); }
 MARBLES_HD_INLINE bool is_finite(const Vec3& a) {
   return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z);
 }
+// Whether a vector's squared length, which the step forms (speeds into
+// energies, gaps into distances), overflows the precision: such a vector is
+// refused where it comes in (a scene, a CSV row, an array from Python).
+MARBLES_HD_INLINE bool square_overflows(const Vec3& a) { return !std::isfinite(length_squared(a)); }
 
 }  // namespace marbles

@@ -164,9 +164,16 @@ class PySimulation {
     const std::size_t n = size();
     if (values.shape(0) != n)
       throw nb::value_error((plural(what) + ": expected " + std::to_string(n) + " rows, got " + std::to_string(values.shape(0))).c_str());
-    for (std::size_t i = 0; i < 3 * n; ++i)
-      if (!std::isfinite(values.data()[i]))
-        throw nb::value_error((plural(what) + "[" + std::to_string(i / 3) + "] is not finite; the state is unchanged").c_str());
+    for (std::size_t i = 0; i < n; ++i) {
+      const real* row = values.data() + 3 * i;
+      const auto refuse = [&](const std::string& why) {
+        const std::string text = plural(what) + "[" + std::to_string(i) + "] " + why + "; the state is unchanged";
+        throw nb::value_error(text.c_str());
+      };
+      if (!std::isfinite(row[0]) || !std::isfinite(row[1]) || !std::isfinite(row[2])) refuse("is not finite");
+      if (square_overflows(Vec3{row[0], row[1], row[2]}))  // as a scene's vectors: the step squares them
+        refuse("is too large for " + std::string(kRealName) + " precision: its squared length overflows");
+    }
     if (m_views_out) m_sim->state_written();
     World& w = m_sim->edit_world();
     std::vector<Vec3>& vec = what == "position" ? w.position : what == "velocity" ? w.velocity : w.angular_velocity;

@@ -417,7 +417,7 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
     for (int c : {0, 4, 7}) {  // position, velocity, spin: squared by the step, as a scene's vectors are
       if (column_of[c] < 0) continue;
       const Vec3 v{real(value[c]), real(value[c + 1]), real(value[c + 2])};
-      if (detail::square_overflows(v))
+      if (square_overflows(v))
         fail(fields[std::size_t(column_of[c])].column, kColumnNames[c],
              "too large for " + std::string(kRealName) + " precision: the squared length of (" + kColumnNames[c] +
                  ", " + kColumnNames[c + 1] + ", " + kColumnNames[c + 2] + ") overflows");

@@ -48,9 +48,6 @@ std::string format_real(real value);
 // with `bound`, the bound it passed. The scene's numbers (Field::number) and
 // a CSV's rows share the rule.
 std::string real_range_problem(double value, bool bound);
-// Whether a vector's squared length, which the step forms (speeds into
-// energies, gaps into distances), overflows the run's precision.
-inline bool square_overflows(const Vec3& v) { return !std::isfinite(length_squared(v)); }
 
 // The nodes that `--set` overrides put into a tree, each with the text of its
 // override ("--set time.dt=-1").

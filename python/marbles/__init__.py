@@ -11,6 +11,7 @@ The scene format, its checks and its error messages are those of ``marbles run``
 
 import json
 import math
+import numbers
 import os
 import warnings
 
@@ -26,6 +27,21 @@ __version__ = _marbles.version
 
 
 # --- scenes and overrides ------------------------------------------------------
+
+def _whole(value, what, least):
+    """A count: an int (or NumPy integer), or a float without a fraction
+    (``1e3``); a bool, a string or 2.5 is refused rather than rounded."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{what}: a whole number, got {value!r}")
+    if not isinstance(value, numbers.Integral):
+        if not float(value).is_integer():
+            raise ValueError(f"{what}: a whole number, got {value!r}")
+        value = float(value)
+    value = int(value)
+    if value < least:
+        raise ValueError(f"{what} must be >= {least}, got {value}")
+    return value
+
 
 def _yaml_text(value, key):
     """A value as the YAML text of a ``--set key=value`` override."""
@@ -245,9 +261,7 @@ class Simulation:
     def step(self, n=1):
         """Advances n steps of dt. Arrays handed out are checked first (a
         non-finite value raises ValueError and nothing moves)."""
-        n = int(n)
-        if n < 0:
-            raise ValueError(f"step: n must be >= 0, got {n}")
+        n = _whole(n, "step: n", 0)
         self._impl.step(n)
         return self
 
@@ -255,9 +269,11 @@ class Simulation:
         """Steps until the time ``until`` (default: the scene's duration),
         calling ``callback(sim)`` every ``every`` steps; a callback that
         returns False stops the run."""
-        every = int(every)
-        if every < 1:
-            raise ValueError(f"run: every must be >= 1, got {every}")
+        every = _whole(every, "run: every", 1)
+        if until is not None and (isinstance(until, (bool, np.bool_)) or not isinstance(until, numbers.Real)):
+            raise TypeError(f"run: until: a time in seconds, got {until!r}")
+        if until is not None and not (math.isfinite(until) and until >= 0):
+            raise ValueError(f"run: until must be a finite time >= 0, got {until!r}")
         target = self._impl.total_steps if until is None else int(round(float(until) / self.dt))
         while self.steps < target:
             self._impl.step(min(every, target - self.steps))

@@ -118,6 +118,24 @@ def test_a_long_step_stops_on_an_interrupt(pile):
     assert sim.steps == done + 2
 
 
+def test_counts_are_whole_numbers(pile):
+    sim = marbles.Simulation.from_dict(pile)
+    for n, error in ((2.5, ValueError), ("3", TypeError), (True, TypeError), (None, TypeError), (-1, ValueError),
+                     (float("nan"), ValueError)):
+        with pytest.raises(error, match="step: n"):
+            sim.step(n)
+    assert sim.steps == 0  # nothing was rounded into steps
+    sim.step(np.int64(2)).step(3.0).step(1e1)
+    assert sim.steps == 15
+    for every, error in ((0.5, ValueError), (0, ValueError), ("2", TypeError)):
+        with pytest.raises(error, match="run: every"):
+            sim.run(until=1.0, every=every)
+    for until, error in ((float("nan"), ValueError), (-1.0, ValueError), ("1", TypeError)):
+        with pytest.raises(error, match="run: until"):
+            sim.run(until=until)
+    assert sim.steps == 15
+
+
 def test_array_and_study_argument_errors(pile, tmp_path):
     sim = marbles.Simulation.from_dict(pile)
     with pytest.raises(ValueError, match=r"^velocities: expected shape"):
@@ -126,6 +144,20 @@ def test_array_and_study_argument_errors(pile, tmp_path):
     bad[1, 0] = np.nan
     with pytest.raises(ValueError, match=r"^angular_velocities\[1\] is not finite"):
         sim.angular_velocities = bad
+    # Finite, but squared by the step (energies) past float's range: refused as a scene's vectors are.
+    before = sim.velocities.copy()
+    huge = np.zeros((len(sim), 3))
+    huge[2] = [3e38, 0, 0]
+    with pytest.raises(ValueError, match=r"^velocities\[2\] is too large for float precision: its squared length "
+                                         r"overflows; the state is unchanged"):
+        sim.velocities = huge
+    huge[2] = [2e19, 0, 0]  # each component finite, the square past 3.4e38
+    with pytest.raises(ValueError, match=r"^positions\[2\] is too large"):
+        sim.positions = sim.positions + huge
+    np.testing.assert_array_equal(sim.velocities, before)
+    huge[2] = [1e18, 0, 0]  # its square fits: taken
+    sim.velocities = huge
+    assert sim.velocities[2, 0] == np.float32(1e18)
     scene = SCENES / "validation" / "bouncing_ball.yaml"
     for repeats in (0, -3, 1.5):
         with pytest.raises(ValueError, match="repeats"):
