@@ -243,6 +243,7 @@ void SubdivisionCpu::run(const SpheresIn& s, real margin, const GridChoice& gc, 
     m_pair_chunks.resize(chunks);
     m_test_chunks.assign(chunks, 0);
     ParallelErrors errors;
+    PairGrowth growth;
 #pragma omp parallel for schedule(dynamic, 4) if (chunks > 1)
     for (std::ptrdiff_t c = 0; c < static_cast<std::ptrdiff_t>(chunks); ++c) {
       auto traverse_chunk = [&](std::vector<Pair>& local) {  // into a vector of the thread's own (fill_apart)
@@ -251,7 +252,10 @@ void SubdivisionCpu::run(const SpheresIn& s, real margin, const GridChoice& gc, 
         const std::size_t end = std::min(cells, (static_cast<std::size_t>(c) + 1) * kCellChunk);
         for (std::size_t k = static_cast<std::size_t>(c) * kCellChunk; k < end; ++k) {
           tests += traverse_cell(m_cells[k], m_values.data(), s.centre, s.radius, m_info.data(), margin,
-                                 [&](std::uint32_t i, std::uint32_t j) { local.push_back({i, j}); });
+                                 [&](std::uint32_t i, std::uint32_t j) {
+                                   growth.before(local.capacity(), local.size() + 1);
+                                   local.push_back({i, j});
+                                 });
         }
         m_test_chunks[static_cast<std::size_t>(c)] = tests;
       };
@@ -274,11 +278,18 @@ std::unique_ptr<BroadPhase> make_subdivision_cpu(Algorithm algorithm) {
 
 void brute_force_pairs(const SpheresIn& s, real margin, std::vector<Pair>& out) {
   out.clear();
+  PairGrowth growth;
   const std::size_t n = s.count;
-  for (std::size_t i = 0; i < n; ++i)
-    for (std::size_t j = i + 1; j < n; ++j)
-      if (spheres_overlap(s.centre[i], s.radius[i], s.centre[j], s.radius[j], margin))
-        out.push_back({static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j)});
+  try {
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t j = i + 1; j < n; ++j)
+        if (spheres_overlap(s.centre[i], s.radius[i], s.centre[j], s.radius[j], margin)) {
+          growth.before(out.capacity(), out.size() + 1);
+          out.push_back({static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j)});
+        }
+  } catch (const std::bad_alloc&) {
+    pairs_beyond_memory(out.size());
+  }
 }
 
 #if !defined(MARBLES_BROADPHASE_CUDA)

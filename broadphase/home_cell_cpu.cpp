@@ -184,6 +184,7 @@ void HomeCellCpu::run(const SpheresIn& s, real margin, const HomeGrid& g, std::v
   m_pair_chunks.resize(static_cast<std::size_t>(chunks));
   m_test_chunks.assign(static_cast<std::size_t>(chunks), 0);
   ParallelErrors errors;
+  PairGrowth growth;
 #pragma omp parallel for schedule(dynamic, 1) if (chunks > 1 && n > kParallelMinimum)
   for (std::ptrdiff_t c = 0; c < chunks; ++c) {
     // Into a vector of the thread's own (fill_apart): the chunks' vectors lie
@@ -200,6 +201,7 @@ void HomeCellCpu::run(const SpheresIn& s, real margin, const HomeGrid& g, std::v
         for_each_candidate_range(si, keys[i], g, lb, [&](std::uint32_t begin, std::uint32_t end) {
           if (end <= begin) return;
           std::size_t at = local.size();
+          growth.before(local.capacity(), at + (end - begin));
           local.resize(at + (end - begin));
           Pair* to = local.data();
           for (std::uint32_t j = begin; j < end; ++j) {

@@ -86,13 +86,17 @@ class ParallelErrors {
 // side (one a chunk or a thread) share cache lines: pushing into the slot
 // itself would write a line that another thread's pushes write too (the CPU
 // broad phase's traversal ran no faster on two threads than on one until
-// its chunks filled so). If fill throws, the slot keeps nothing.
+// its chunks filled so). If fill throws, the slot keeps what it had filled
+// (a pair search out of memory says how many pairs it had found).
 template <class T, class Fill>
 void fill_apart(std::vector<T>& slot, Fill&& fill) {
-  std::vector<T> own;
-  own.swap(slot);
-  fill(own);
-  own.swap(slot);
+  struct SwapBack {
+    std::vector<T>& slot;
+    std::vector<T> own;
+    ~SwapBack() { own.swap(slot); }
+  } apart{slot, {}};
+  apart.own.swap(slot);
+  fill(apart.own);
 }
 
 // What make(k, out) appends for k = 0..count-1, on all threads when count >=

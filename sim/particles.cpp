@@ -34,6 +34,7 @@
 #include <string_view>
 
 #include "core/files.hpp"
+#include "core/host_memory.hpp"
 #include "sim/limits.hpp"
 #include "sim/scene_yaml.hpp"
 #include "sim/world.hpp"
@@ -99,17 +100,6 @@ std::string format_count(double n) {
 }
 
 constexpr double kBytesPerSphere = 120.0 * sizeof(real) + 300.0;
-
-// Bytes of memory available now (MemAvailable), or 0 when unknown.
-double available_memory() {
-  std::ifstream in("/proc/meminfo");
-  std::string key;
-  double kib = 0;
-  std::string unit;
-  while (in >> key >> kib >> unit)
-    if (key == "MemAvailable:") return kib * 1024;
-  return 0;
-}
 
 // --- lattice ---------------------------------------------------------------
 

@@ -118,6 +118,20 @@ TEST_F(Robustness, PairSetBeyondMemoryIsAMessage) {
   const Outcome o = marbles("pairs " + dir.path() + "/c.csv", dir, "ulimit -v 1500000;");
   EXPECT_EQ(o.exit_code, 1) << o.err;
   EXPECT_NE(o.err.find("out of memory for the candidate pairs: "), std::string::npos) << o.err;
+  // Where the allocator would not refuse (memory overcommitted), the pair
+  // lists' growth is held to the memory available (here said to be 300 MB:
+  // the 8 * 10^8 pairs would take 6.4 GB), on every algorithm, and the pairs
+  // found are counted (kept where a chunk's list was when it stopped).
+  for (const std::string algorithm : {"home", "subdivision", "brute"}) {
+    const Outcome held = marbles("pairs " + dir.path() + "/c.csv --algorithm " + algorithm, dir,
+                                 "MARBLES_MEMORY_AVAILABLE=300000000");
+    EXPECT_EQ(held.exit_code, 1) << algorithm << ": " << held.err;
+    const std::size_t at = held.err.find("out of memory for the candidate pairs: ");
+    ASSERT_NE(at, std::string::npos) << algorithm << ": " << held.err;
+    const long long found = std::atoll(held.err.c_str() + at + 39);
+    EXPECT_GT(found, 1000000) << algorithm << ": " << held.err;
+    EXPECT_LT(found, 40000000) << algorithm << ": " << held.err;  // stopped near 300 MB, not at the end
+  }
 }
 
 // Counts a machine cannot hold are refused up front, with the number.
