@@ -71,7 +71,8 @@ double median(std::vector<double> v) {
   return n == 0 ? std::nan("") : (n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]));
 }
 
-// Runs argv[0] with stdout and stderr to `log`; returns its exit status (-1 if it did not exit).
+// Runs argv[0] (a path, or a name looked up on PATH) with stdout and stderr
+// to `log`, no shell between; returns its exit status (-1 if it did not exit).
 int run_process(const std::vector<std::string>& args, const std::string& log) {
   std::vector<char*> argv;
   for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
@@ -81,7 +82,7 @@ int run_process(const std::vector<std::string>& args, const std::string& log) {
   posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   posix_spawn_file_actions_adddup2(&actions, 1, 2);
   pid_t pid = 0;
-  const int rc = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  const int rc = posix_spawnp(&pid, argv[0], &actions, nullptr, argv.data(), environ);
   posix_spawn_file_actions_destroy(&actions);
   if (rc != 0) throw RuntimeFailure("cannot start " + args[0] + ": " + std::strerror(rc));
   int status = 0;
@@ -132,7 +133,25 @@ void show_progress(std::ostream& err, bool tty, std::size_t done, std::size_t to
   }
 }
 
-bool have_gnuplot() { return std::system("gnuplot --version >/dev/null 2>&1") == 0; }
+bool have_gnuplot() {
+  try {
+    return run_process({"gnuplot", "--version"}, "/dev/null") == 0;
+  } catch (const RuntimeFailure&) {  // not on PATH
+    return false;
+  }
+}
+
+// Text as a gnuplot single-quoted string: a quote doubled, control
+// characters (which would end the script's line) as spaces. The scene's name
+// and the paths are data, never gnuplot commands.
+std::string gnuplot_quoted(const std::string& text) {
+  std::string out = "'";
+  for (const char c : text) {
+    if (c == '\'') out += "''";
+    else out += static_cast<unsigned char>(c) < 0x20 || c == 0x7f ? ' ' : c;
+  }
+  return out + "'";
+}
 
 }  // namespace
 
@@ -321,21 +340,25 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   const std::string png = (dir / "study.png").string();
   std::ostringstream gp;
   gp << "set terminal pngcairo size 1000,700 noenhanced\n"
-     << "set output '" << png << ".tmp'\n"
+     << "set output " << gnuplot_quoted(png + ".tmp") << "\n"
      << "set logscale xy\nset grid\nset key top right\n"
-     << "set title '" << scene.name << ": error against cost (" << result.reference << ")'\n"
+     << "set title " << gnuplot_quoted(scene.name + ": error against cost (" + result.reference + ")") << "\n"
      << "set xlabel 'wall ms per simulated second'\nset ylabel 'relative error (0 drawn at 1e-15)'\n"
-     << "plot '" << (dir / "study.dat").string() << "' using 1:2 with points pt 7 ps 1.5 title 'settings', \\\n"
+     << "plot " << gnuplot_quoted((dir / "study.dat").string())
+     << " using 1:2 with points pt 7 ps 1.5 title 'settings', \\\n"
      << "     '' using 1:2:3 with labels font ',8' left offset 0.7,0.5 notitle, \\\n"
-     << "     '" << (dir / "study_front.dat").string() << "' using 1:2 with linespoints lw 2 pt 6 ps 2.2 title 'Pareto front'\n";
+     << "     " << gnuplot_quoted((dir / "study_front.dat").string())
+     << " using 1:2 with linespoints lw 2 pt 6 ps 2.2 title 'Pareto front'\n";
   render::write_file_atomic((dir / "study.gp").string(), gp.str());
   if (have_gnuplot()) {
-    const std::string command = "gnuplot '" + (dir / "study.gp").string() + "' 2>'" + (dir / "study.gp.log").string() + "'";
-    if (std::system(command.c_str()) == 0 && fs::exists(png + ".tmp")) {
+    const std::string log = (dir / "study.gp.log").string();
+    if (run_process({"gnuplot", (dir / "study.gp").string()}, log) == 0 && fs::exists(png + ".tmp")) {
       fs::rename(png + ".tmp", png);
       result.plotted = true;
     } else {
-      err << "warning: gnuplot failed (see " << (dir / "study.gp.log").string() << "); study.png not written\n";
+      std::error_code ec;
+      fs::remove(png + ".tmp", ec);  // a half-drawn image is no study.png
+      err << "warning: gnuplot failed (see " << log << "); study.png not written\n";
     }
   } else {
     err << "warning: gnuplot not found: study.png not written (install gnuplot-nox; study.gp is ready for it)\n";

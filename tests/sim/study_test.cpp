@@ -115,6 +115,40 @@ TEST_F(Study, AWrongReferenceShowsAsALargeError) {
   EXPECT_GT(r.rows[0].error, 0.2);
 }
 
+// The scene's name and the output folder are data to the plot, never
+// commands: a name and a folder that close gnuplot's quotes (and the shell's)
+// and call system() draw a plot titled with them, and run nothing. Without
+// gnuplot the study.gp written is checked alone.
+TEST_F(Study, NamesAndPathsAreNeverRunAsCommands) {
+  const test::ScratchDir dir("study_quotes");
+  const std::string marker = dir.path() + "/ran";
+  std::string scene = slurp(kValidation + "bouncing_ball.yaml");
+  const std::size_t name = scene.find("name: bouncing_ball");
+  ASSERT_NE(name, std::string::npos);
+  scene.replace(name, 19, "name: \"x'; print system('touch " + marker + "'); set title '\"");
+  const std::string path = dir.write("named.yaml", scene);
+  const std::string out = dir.path() + "/o';touch " + marker + ";'";
+  StudyOptions o;
+  o.scene_path = path;
+  o.out_dir = out;
+  o.repeats = 1;
+  o.marbles = kMarbles;
+  o.progress = false;
+  std::ostringstream text, err;
+  const StudyResult r = run_study(o, text, err);
+  ASSERT_EQ(r.rows.size(), 1u);
+  EXPECT_FALSE(fs::exists(marker)) << err.str();
+  EXPECT_FALSE(fs::exists(out + "/study.png.tmp"));
+  const std::string gp = slurp(out + "/study.gp");
+  EXPECT_NE(gp.find("set title 'x''; print system(''touch " + marker + "''); set title '': error against cost"),
+            std::string::npos)
+      << gp;
+  if (std::system("gnuplot --version >/dev/null 2>&1") == 0) {
+    EXPECT_TRUE(r.plotted) << err.str();
+    EXPECT_TRUE(fs::exists(out + "/study.png")) << err.str();
+  }
+}
+
 // A scene without a reference is a located error (file:line:col).
 TEST_F(Study, MissingReferenceIsALocatedError) {
   const test::ScratchDir dir("study_missing");
