@@ -9,7 +9,10 @@
 namespace marbles::integrator::cuda {
 
 void launch_apply_gravity(const BodiesView& bodies, const Vec3& g, real h, int sm_count, cudaStream_t stream);
-void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, int sm_count, cudaStream_t stream);
+// first_half: velocity Verlet's first half kick, drag and gravity g together
+// (drag_first_half), else drag_kick.
+void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, bool first_half, const Vec3& g,
+                       int sm_count, cudaStream_t stream);
 // x += h v; sets *non_finite = 1 when a position, velocity or angular
 // velocity is not finite afterwards (never clears it). Nothing where `skip`
 // (not null) is set when it runs (cuda::skipped: a substep that outgrew a

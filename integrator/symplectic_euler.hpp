@@ -11,7 +11,9 @@ void apply_gravity(const BodiesView& bodies, const Vec3& g, real h);
 
 // Body-force stage: air drag with linear rate k1 (1/s) and quadratic
 // coefficient k2 (1/m), see drag_kick.
-void apply_drag(const BodiesView& bodies, real k1, real k2, real h);
+// first_half: velocity Verlet's first half kick, drag and gravity g together
+// (drag_first_half), else drag_kick.
+void apply_drag(const BodiesView& bodies, real k1, real k2, real h, bool first_half = false, const Vec3& g = {});
 
 // Position stage: x += h v. Returns true when a position, velocity or
 // angular velocity is not finite afterwards (the step's non_finite flag).

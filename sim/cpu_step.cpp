@@ -31,6 +31,13 @@ class CpuStep final : public StepBackend {
 
   void apply_body_forces(real h) override {
     const BodiesView bodies = m_world.view();
+    // Velocity Verlet with drag: gravity's half kick and drag's in one, with
+    // the second half (after the drift) the trapezoidal rule (integrator_math.hpp).
+    if (m_model.drag && m_model.verlet) {
+      integrator::apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, m_model.first_kick(h), true,
+                             m_model.gravity ? m_model.g : Vec3{});
+      return;
+    }
     if (m_model.gravity) integrator::apply_gravity(bodies, m_model.g, m_model.first_kick(h));
     if (m_model.drag) integrator::apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h);
   }
@@ -114,6 +121,8 @@ class CpuStep final : public StepBackend {
   void integrate_positions(real h) override {
     m_non_finite = integrator::integrate_positions(m_world.view(), h) || m_non_finite;
     if (m_model.gravity && m_model.verlet) integrator::apply_gravity(m_world.view(), m_model.g, m_model.second_kick(h));
+    if (m_model.drag && m_model.verlet)
+      integrator::apply_drag(m_world.view(), m_model.drag_linear, m_model.drag_quadratic, m_model.second_kick(h));
     narrowphase::advance_walls(m_walls, h);
   }
 

@@ -288,10 +288,17 @@ class CudaStep final : public StepBackend {
     if (m_one_wait) keep_substep_start();
     ++m_substep_index;
     const BodiesView bodies = m_device.view();
+    // Velocity Verlet with drag: gravity's half kick and drag's in one (as on the CPU).
+    if (m_model.drag && m_model.verlet) {
+      integrator::cuda::launch_apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, m_model.first_kick(h),
+                                          true, m_model.gravity ? m_model.g : Vec3{}, m_sm, m_stream);
+      return;
+    }
     if (m_model.gravity)
       integrator::cuda::launch_apply_gravity(bodies, m_model.g, m_model.first_kick(h), m_sm, m_stream);
     if (m_model.drag)
-      integrator::cuda::launch_apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h, m_sm, m_stream);
+      integrator::cuda::launch_apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h, false, {}, m_sm,
+                                          m_stream);
   }
 
   // Swept bounds -> broad phase -> sphere contacts (in pair order), then wall
@@ -641,6 +648,9 @@ class CudaStep final : public StepBackend {
                                                  skip());  // flags[0]
     if (m_model.gravity && m_model.verlet)
       integrator::cuda::launch_apply_gravity(m_device.view(), m_model.g, m_model.second_kick(h), m_sm, m_stream);
+    if (m_model.drag && m_model.verlet)
+      integrator::cuda::launch_apply_drag(m_device.view(), m_model.drag_linear, m_model.drag_quadratic,
+                                          m_model.second_kick(h), false, {}, m_sm, m_stream);
     nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream, skip());
   }
 

@@ -250,3 +250,45 @@ TEST(Impacts, NewtonsCradlePassesTheEnergyToTheLastBall) {
   EXPECT_NEAR(w.kinetic_energy(), e0, 1e-3 * e0);
   EXPECT_GT(w.velocity[4].x, 0.95);
 }
+
+// Gravity and linear drag, dv/dt = g - k v, against the closed form, through
+// the step: a sphere launched sideways at v0 falls with
+//   v(t) = v0 e^{-kt} + (g / k)(1 - e^{-kt}),  x(t) = v0 (1 - e^{-kt}) / k + (g / k)(t - (1 - e^{-kt}) / k).
+// Velocity Verlet's two half kicks are the trapezoidal rule: its errors fall
+// four times when h halves; symplectic Euler's twice. Both keep the terminal
+// speed g / k exactly, also where drag is stiff for the step (h k = 20).
+TEST(Drag, VelocityVerletIsSecondOrderWithDrag) {
+  const double k = 2.0, t_end = 0.5, v0 = 3.0, g = 9.81;
+  const auto run = [&](const std::string& integrator, double dt, double drag, double duration) {
+    scene::Scene s = make_scene(dt, 1, {Effect::gravity, Effect::drag}, 0.0);
+    s.gravity = {0, 0, real(-g)};
+    s.drag = drag;
+    s.solver.integrator = integrator;
+    scene::GeneratedParticles p;
+    add_sphere(p, {0, 0, 0}, real(0.05), {real(v0), 0, 0});
+    Simulation sim(s, make_world(s, p), test_backend());
+    for (int n = 0; n < static_cast<int>(std::lround(duration / dt)); ++n) sim.step();
+    return std::pair{sim.world().position[0], sim.world().velocity[0]};
+  };
+  const double decay = std::exp(-k * t_end);
+  const double vx = v0 * decay, vz = -(g / k) * (1 - decay);
+  const double x = v0 * (1 - decay) / k, z = -(g / k) * (t_end - (1 - decay) / k);
+  for (const std::string integrator : {"velocity_verlet", "symplectic_euler"}) {
+    std::vector<double> errors;
+    for (double dt : {0.04, 0.02, 0.01}) {
+      const auto [pos, vel] = run(integrator, dt, k, t_end);
+      errors.push_back(std::abs(vel.x - vx) + std::abs(vel.z - vz) + std::abs(pos.x - x) + std::abs(pos.z - z));
+    }
+    const double order = std::log2(errors[1] / errors[2]);
+    if (integrator == "velocity_verlet") {
+      EXPECT_GT(std::log2(errors[0] / errors[1]), 1.8) << errors[0] << " " << errors[1];
+      EXPECT_GT(order, 1.8) << errors[1] << " " << errors[2];
+    } else {
+      EXPECT_NEAR(order, 1.0, 0.2) << errors[1] << " " << errors[2];
+    }
+    // Stiff drag: k = 2000 / s at dt = 10 ms. The terminal speed within float's rounding.
+    const auto [pos, vel] = run(integrator, 0.01, 2000.0, 0.1);
+    EXPECT_NEAR(vel.z, -g / 2000.0, 1e-6 * g / 2000.0) << integrator;
+    EXPECT_GT(vel.x, 0) << integrator;  // never reversed
+  }
+}
