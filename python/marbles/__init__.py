@@ -58,6 +58,8 @@ def _yaml_text(value, key):
         return repr(v)
     if isinstance(value, str):
         return value
+    if isinstance(value, np.ndarray) and value.ndim == 0:  # np.array(1e-3): its one value
+        return _yaml_text(value.item(), key)
     if isinstance(value, (list, tuple, np.ndarray)):
         return "[" + ", ".join(_yaml_text(v, key) for v in value) + "]"
     if isinstance(value, dict):
@@ -89,6 +91,8 @@ def _plain(value, key):
                                  message=f"keys are strings, got {k!r}")
             out[k] = _plain(v, f"{key}.{k}" if key else k)
         return out
+    if isinstance(value, np.ndarray) and value.ndim == 0:  # np.array(0.05): its one value
+        return _plain(value.item(), key)
     if isinstance(value, (list, tuple, np.ndarray)):
         return [_plain(v, f"{key}[{i}]") for i, v in enumerate(value)]
     if isinstance(value, (bool, np.bool_)):
@@ -258,10 +262,18 @@ class Simulation:
             warnings.warn(text, stacklevel=3)
 
     # --- stepping ---
+    _SUBSTEPS_LIMIT = 1e10  # a run's substeps, as `marbles run` holds them (README "Limits")
+
+    def _check_substeps(self, steps, what):
+        if steps * self.substeps > self._SUBSTEPS_LIMIT:
+            raise ValueError(f"{what}: {steps} steps make {steps * self.substeps:.3g} substeps, more than the "
+                             f"limit {self._SUBSTEPS_LIMIT:.0e} a call")
+
     def step(self, n=1):
         """Advances n steps of dt. Arrays handed out are checked first (a
         non-finite value raises ValueError and nothing moves)."""
         n = _whole(n, "step: n", 0)
+        self._check_substeps(n, "step: n")
         self._impl.step(n)
         return self
 
@@ -275,6 +287,7 @@ class Simulation:
         if until is not None and not (math.isfinite(until) and until >= 0):
             raise ValueError(f"run: until must be a finite time >= 0, got {until!r}")
         target = self._impl.total_steps if until is None else int(round(float(until) / self.dt))
+        self._check_substeps(target - self.steps, "run: until")
         while self.steps < target:
             self._impl.step(min(every, target - self.steps))
             if callback is not None and callback(self) is False:

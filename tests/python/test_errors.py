@@ -134,6 +134,16 @@ def test_counts_are_whole_numbers(pile):
         with pytest.raises(error, match="run: until"):
             sim.run(until=until)
     assert sim.steps == 15
+    # Held to the run's substeps limit (1e10), as `marbles run --duration` is: no endless call.
+    for call in (lambda: sim.step(np.uint64(2**64 - 1)), lambda: sim.step(np.float32(1e11)),
+                 lambda: sim.run(until=1e20)):
+        with pytest.raises(ValueError, match="more than the limit"):
+            call()
+    assert sim.steps == 15
+    # A 0-d array is its one value, in a scene dict and in an override.
+    zero_d = dict(pile)
+    zero_d["time"] = dict(pile["time"], dt=np.array(pile["time"]["dt"]))
+    assert marbles.Simulation.from_dict(zero_d, set={"solver.iterations": np.array(5)}).dt == pile["time"]["dt"]
 
 
 def test_array_and_study_argument_errors(pile, tmp_path):
