@@ -144,6 +144,16 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   Renderer renderer(with_names);
   const auto t0 = std::chrono::steady_clock::now();
 
+  // A frame without its spheres' radii cannot be drawn: said with its file.
+  const auto read_frame = [](const fs::path& path) {
+    Snapshot s = read_vtp(path);
+    if (s.radius.size() != s.position.size())
+      throw InputError(SourceLocation{path.string(), 0, 0}, "",
+                       "has no radius array: images need the spheres' radii (the run's output.fields must list "
+                       "radius)");
+    return s;
+  };
+
   // Pass 1 (only when needed): the view and colour range that suit every frame.
   Bounds bounds;
   ColorRange range{1e300, -1e300};
@@ -151,7 +161,7 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   const bool need_range = !(options.color_min && options.color_max);
   if (need_camera || need_range) {
     for (std::size_t k = 0; k < entries.size(); ++k) {
-      const Snapshot s = read_vtp(entries[k].path);
+      const Snapshot s = read_frame(entries[k].path);
       if (need_camera) bounds.add(scene_bounds(s, walls_of(k)));
       if (need_range) range.add(data_range(s, options.color_by));
       if (progress) draw_progress(log, "scan  ", k + 1, entries.size(), seconds_since(t0));
@@ -185,7 +195,7 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   static const std::regex numbered(R"(frame_(\d+)\.vtp)");
   const auto t1 = std::chrono::steady_clock::now();
   for (std::size_t k = 0; k < entries.size(); ++k) {
-    Snapshot s = read_vtp(entries[k].path);
+    Snapshot s = read_frame(entries[k].path);
     if (s.time == 0 && entries[k].time != 0) s.time = entries[k].time;
     const Image image = renderer.render(s, walls_of(k), camera, range);
     std::size_t number = k;

@@ -213,8 +213,12 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
     m->contacts_every = scene.output.contacts_every;
   }
   if (render && scene.output.render.enabled && resumed) {
+    const std::vector<std::string>& fields = scene.output.fields;
     if (!m->vtk) {
       log << "warning: a resumed run renders its images from the VTK frames, and this run writes none: no images\n";
+    } else if (std::find(fields.begin(), fields.end(), "radius") == fields.end()) {
+      log << "warning: a resumed run renders its images from the VTK frames, and output.fields lacks radius: no "
+             "images\n";
     } else if (!render::renderer_available()) {
       log << "warning: no images: this build has no OSMesa\n";
     } else {
@@ -300,10 +304,14 @@ std::string RunOutput::finish() {
   if (m->walls) out << "walls in walls/, walls.pvd, ";
   if (m->contacts) out << m->contacts->frames() << " contact frames in contacts/, contacts.pvd, ";
   if (m->render_at_finish) {
-    render::render_output_dir(m->dir, m->render_options, m->movie, false, *m->log);
-    out << "images in images/";
-    if (std::filesystem::exists(std::filesystem::path(m->dir) / "movie.mp4")) out << ", movie.mp4";
-    out << ", ";
+    try {  // the run's own outputs (summary, thermo) stand whatever the images do
+      render::render_output_dir(m->dir, m->render_options, m->movie, false, *m->log);
+      out << "images in images/";
+      if (std::filesystem::exists(std::filesystem::path(m->dir) / "movie.mp4")) out << ", movie.mp4";
+      out << ", ";
+    } catch (const std::exception& e) {
+      *m->log << "warning: no images: " << e.what() << "\n";
+    }
   }
   if (m->frames) {
     m->frames->finish();

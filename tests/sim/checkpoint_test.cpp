@@ -76,6 +76,31 @@ TEST_F(Checkpoints, ResumedRunRendersItsImagesAndMovie) {
   EXPECT_EQ(fs::exists(resumed + "/movie.mp4"), fs::exists(dir.path() + "/whole/movie.mp4")) << err;
 }
 
+// A run whose frames carry no radius (output.fields without it) resumes and
+// ends whole, its images left out with a warning (they are drawn from the
+// frames), and `marbles render` of its folder names the frame and the field.
+TEST_F(Checkpoints, ResumedRunWithoutRadiiEndsWhole) {
+  const test::ScratchDir dir("ck_no_radius");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string common = " --quiet --backend cpu --set 'output.fields=[speed, contacts]'"
+                             " --set output.render.every=20 --set output.render.width=32 --set output.render.height=24";
+  const std::string first = dir.path() + "/first", resumed = dir.path() + "/resumed";
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + first + " --duration 0.1"), 0);
+  std::string err;
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + resumed + " --restart " + first +
+                        "/checkpoints/step_000100.mck", &err),
+            0)
+      << err;
+  EXPECT_TRUE(fs::exists(resumed + "/summary.json")) << err;
+  EXPECT_TRUE(fs::exists(resumed + "/thermo.csv")) << err;
+  EXPECT_NE(err.find("output.fields lacks radius: no images"), std::string::npos) << err;
+  const int render = marbles("render " + first, &err);
+  if (err.find("OSMesa") == std::string::npos) {  // a build that renders
+    EXPECT_EQ(render, 2) << err;
+    EXPECT_NE(err.find("frames/frame_000000.vtp: has no radius array"), std::string::npos) << err;
+  }
+}
+
 // A folder holding an earlier run is refused (exit 2, nothing touched);
 // --overwrite replaces that run's files, so no stale frame survives, and
 // leaves the user's own files.
