@@ -211,11 +211,23 @@ class PySimulation {
   // OUTDIR/frames/frame_NNNNNN.vtp and OUTDIR/series.pvd, as `marbles run`
   // writes them (the scene's point fields); frames written to one folder
   // from one simulation make one series.
-  std::string write_frame(const std::string& dir) {
+  std::string write_frame(const std::string& dir, bool overwrite) {
     const Busy busy(*this);
+    if (dir.empty() || dir.find('\0') != std::string::npos)
+      throw nb::value_error("write_frame: a folder is needed (not empty, no NUL byte)");
     if (m_views_out) check_views();
     auto it = m_frames.find(dir);
     if (it == m_frames.end()) {
+      // A folder new to this simulation that holds another run's output is
+      // refused, as `marbles run` refuses it: new frames would replace some
+      // of its frames and its series.pvd would no longer name the rest.
+      const std::vector<std::filesystem::path> earlier = earlier_run_files(dir);
+      if (!earlier.empty() && !overwrite)
+        throw nb::value_error((dir + " holds the output of an earlier run (" + std::to_string(earlier.size()) +
+                               " files, e.g. " + earlier.front().filename().string() +
+                               "); write_frame(dir, overwrite=True) replaces it, or choose another folder")
+                                  .c_str());
+      for (const std::filesystem::path& file : earlier) std::filesystem::remove(file);
       auto writer = std::make_unique<render::VtkSeriesWriter>(dir, render::parse_point_fields(m_scene.output.fields),
                                                               frame_metadata(m_scene));
       it = m_frames.emplace(dir, std::move(writer)).first;
@@ -432,7 +444,7 @@ void bind_simulation(nb::module_& m, const char* name, const char* pairs_name) {
       .def("assign", &PySimulation::assign, nb::arg("what"), nb::arg("values"))
       .def("contacts", &PySimulation::contacts)
       .def("kinetic_energy", &PySimulation::kinetic_energy)
-      .def("write_frame", &PySimulation::write_frame, nb::arg("dir"))
+      .def("write_frame", &PySimulation::write_frame, nb::arg("dir"), nb::arg("overwrite"))
       .def("checkpoint", &PySimulation::checkpoint, nb::arg("path"))
       .def("restart", &PySimulation::restart, nb::arg("path"))
       .def("reference", &PySimulation::reference)

@@ -369,10 +369,13 @@ class Simulation:
         """Translational and rotational kinetic energy of the movable spheres, J."""
         return self._impl.kinetic_energy()
 
-    def write_frame(self, dir):
+    def write_frame(self, dir, overwrite=False):
         """Writes the state as ``dir/frames/frame_NNNNNN.vtp`` and keeps
-        ``dir/series.pvd`` (ParaView) up to date; returns the frame's path."""
-        return self._impl.write_frame(os.fspath(dir))
+        ``dir/series.pvd`` (ParaView) up to date; returns the frame's path.
+        A folder this simulation has not written to that holds another
+        run's output raises ValueError, unless ``overwrite=True``, which
+        first removes that run's files (as ``marbles run --overwrite``)."""
+        return self._impl.write_frame(os.fspath(dir), bool(overwrite))
 
     def checkpoint(self, path):
         """Writes a checkpoint (``marbles run --restart`` reads it too) and,

@@ -185,6 +185,21 @@ def test_write_frame(pile, tmp_path):
     assert times == [0.0, pytest.approx(5 * sim.dt)]
     head = pathlib.Path(second).read_bytes()[:4000].decode("latin-1")
     assert f'NumberOfPoints="{len(sim)}"' in head
+    # Another simulation's frames in that folder are refused, not mixed in
+    # (frame_000000 replaced, series.pvd naming one frame of two).
+    other = marbles.Simulation.from_dict(pile, backend="cpu")
+    before = (tmp_path / "series.pvd").read_bytes(), pathlib.Path(first).read_bytes()
+    with pytest.raises(ValueError, match="holds the output of an earlier run"):
+        other.write_frame(tmp_path)
+    assert ((tmp_path / "series.pvd").read_bytes(), pathlib.Path(first).read_bytes()) == before
+    # ... unless asked: that run's files go first, so the series is this one's alone.
+    (tmp_path / "notes.txt").write_text("mine")
+    assert pathlib.Path(other.write_frame(tmp_path, overwrite=True)).name == "frame_000000.vtp"
+    assert not pathlib.Path(second).exists() and (tmp_path / "notes.txt").read_text() == "mine"
+    assert len(list(ET.parse(tmp_path / "series.pvd").getroot().iter("DataSet"))) == 1
+    for bad in ("", "a\0b"):
+        with pytest.raises(ValueError, match="a folder is needed"):
+            sim.write_frame(bad)
 
 
 def test_warnings_and_repr(pile):
