@@ -105,7 +105,9 @@ int check_scene(const std::string& scene_path, const std::vector<std::string>& o
                 std::ostream& err) {
   const scene::Scene sc = scene::load_scene(scene_path, overrides);
   const scene::GeneratedParticles particles = scene::generate_particles(sc);
-  make_world(sc, particles);  // masses and inertias in range for the precision
+  const World world = make_world(sc, particles);  // masses and inertias in range for the precision
+  // The reference's own rules (the sphere it names, the effects it needs), as `run` holds them.
+  if (sc.reference.kind != scene::ReferenceSpec::Kind::none) ReferenceProbe(sc, world);
   out << scene_path << ": ok (" << particles.size() << " spheres, " << sc.materials.size() << " material(s), "
       << sc.walls.size() << " wall(s), " << std::llround(sc.time.duration / sc.time.dt) << " steps of "
       << sc.time.dt << " s, " << kRealName << ")\n";
@@ -160,6 +162,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   const broadphase::Backend backend = select_backend(options.backend, options.quiet ? quiet_sink : out);
 
   World world = make_world(sc, particles);
+  // The reference's rules before anything runs or is printed (the probe itself is made from the step's world).
+  if (sc.reference.kind != scene::ReferenceSpec::Kind::none) ReferenceProbe(sc, world);
   if (std::size_t deep = count_initial_overlaps(world, 0.01))
     err << "warning: " << deep << " pair(s) of spheres start overlapping by more than 1% of the smaller radius\n";
 

@@ -273,6 +273,27 @@ TEST_F(Robustness, MassBeyondThePrecisionIsRefused) {
   EXPECT_EQ(marbles("check " + scene + " --precision double", dir).exit_code, 0);
 }
 
+// `check` holds a scene to what `run` refuses: the reference's own rules (the
+// sphere it names, the effects it needs) are checked by both, with the same
+// message, and `run` refuses before it prints its pipeline.
+TEST_F(Robustness, CheckRefusesWhatRunRefuses) {
+  const test::ScratchDir dir("robust_check_run");
+  const std::string scene = MARBLES_SOURCE_DIR "/scenes/validation/bouncing_ball.yaml";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"--set 'effects=[walls]'", "reference.rebound_heights: needs the gravity effect"},
+      {"--set reference.rebound_heights.sphere=5", "reference.rebound_heights.sphere: sphere 5 does not exist"},
+  };
+  for (const auto& [set, message] : cases) {
+    const Outcome check = marbles("check " + scene + " " + set, dir);
+    EXPECT_EQ(check.exit_code, 2) << set << ": " << check.err;
+    EXPECT_NE(check.err.find(message), std::string::npos) << set << ": " << check.err;
+    const Outcome run = marbles("run " + scene + " " + set + " --out " + dir.path() + "/o", dir);
+    EXPECT_EQ(run.exit_code, 2) << set << ": " << run.err;
+    EXPECT_NE(run.err.find(message), std::string::npos) << set << ": " << run.err;
+  }
+  EXPECT_EQ(marbles("check " + scene, dir).exit_code, 0);
+}
+
 // Non-finite numbers on the command line are bad arguments (exit 2).
 TEST_F(Robustness, NanArgumentsAreBadArguments) {
   const test::ScratchDir dir("robust_nan");
