@@ -11,6 +11,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <limits>
 #include <new>
 #include <iostream>
 #include <string>
@@ -47,6 +49,28 @@ const CLI::Validator kFinite(
       return std::isfinite(v) ? std::string() : "must be a finite number, got " + text;
     },
     "FINITE");
+
+// Lengths that reach the step in its precision: finite there too.
+const CLI::Validator kFiniteReal(
+    [](std::string& text) {
+      const double v = std::strtod(text.c_str(), nullptr);
+      if (!std::isfinite(v)) return "must be a finite number, got " + text;
+      if (std::abs(v) > static_cast<double>(std::numeric_limits<marbles::real>::max()))
+        return "out of range for " + std::string(marbles::kRealName) + " precision, got " + text;
+      return std::string();
+    },
+    "FINITE");
+
+// A folder the command writes into: one, or nothing yet (made then).
+const CLI::Validator kFolderOrNew(
+    [](std::string& text) {
+      std::error_code ec;
+      const auto status = std::filesystem::status(text, ec);
+      if (std::filesystem::exists(status) && !std::filesystem::is_directory(status))
+        return "'" + text + "' exists and is not a folder";
+      return std::string();
+    },
+    "FOLDER");
 
 // `--set key.path=value`, repeatable; one value per `--set`.
 void add_set_option(CLI::App* command, std::vector<std::string>& overrides) {
@@ -177,7 +201,7 @@ int cli_main(int argc, char** argv) {
   add_limit_option(study_cmd, study.limits);
   study_cmd->add_option("--backend", study.backend, "auto|cpu|cuda (unless varied)")
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
-  study_cmd->add_option("--out", study.out_dir, "output folder (default out/study/<scene>)");
+  study_cmd->add_option("--out", study.out_dir, "output folder (default out/study/<scene>)")->check(kFolderOrNew);
   study_cmd->add_option("--repeats", study.repeats, "runs per setting (the cost is their median)")
       ->check(CLI::Range(1, 1000));
   bool study_quiet = false;
@@ -194,7 +218,7 @@ int cli_main(int argc, char** argv) {
   pairs_cmd->add_option("--backend", pairs_backend, "cpu (default), cuda or auto (subdivision and home)")
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   pairs_cmd->add_option("--margin", pairs_margin, "report pairs whose gap is below this (m)")
-      ->check(kFinite & CLI::NonNegativeNumber);
+      ->check(kFiniteReal & CLI::NonNegativeNumber);
 
   auto* bench_cmd = app.add_subcommand("bench", "benchmarks (JSON and a table)");
   bench_cmd->require_subcommand(1);
@@ -207,7 +231,7 @@ int cli_main(int argc, char** argv) {
   bench_bp->add_option("--scene", bp.scene, "gas|pile|poly")->check(CLI::IsMember({"gas", "pile", "poly"}));
   bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(CLI::PositiveNumber);
   bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")->check(CLI::PositiveNumber);
-  bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(CLI::NonNegativeNumber);
+  bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(kFiniteReal & CLI::NonNegativeNumber);
   bench_bp->add_option("--seed", bp.seed, "random seed of the sphere sets");
   bench_bp->add_flag("--json", bp.json, "print JSON");
   add_limit_option(bench_bp, limit_args);
@@ -227,13 +251,14 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   bench_step->add_option("--effects", st.effects, "effects of the pipeline (gas only)")->delimiter(',');
   bench_step->add_option("--cache", st.cache_dir,
-                         "folder of settled piles (default $XDG_CACHE_HOME/marbles or ~/.cache/marbles)");
+                         "folder of settled piles (default $XDG_CACHE_HOME/marbles or ~/.cache/marbles)")
+      ->check(kFolderOrNew);
   bench_step->add_option("--settle-steps", st.settle_steps,
                          "pile: step budget of the settle (a cached pile that ran out of a smaller one settles again)")
       ->check(CLI::PositiveNumber);
   bench_step->add_option("--settle-ke", st.settle_ke,
                          "pile: settled below this kinetic energy per sphere (J), 50 steps or more after the last quench")
-      ->check(CLI::PositiveNumber);
+      ->check(kFinite & CLI::PositiveNumber);
   bench_step->add_option("--settle-quench", st.settle_quench,
                          "pile: zero the velocities every this many settle steps until first below the bound (0: never)")
       ->check(CLI::NonNegativeNumber);
@@ -267,7 +292,7 @@ int cli_main(int argc, char** argv) {
   auto* bench_effects = bench_cmd->add_subcommand("effects", "time the step with and without each effect");
   bench_effects->add_option("--backend", ef.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
   bench_effects->add_option("--n", ef.n, "sphere count")->check(CLI::PositiveNumber);
-  bench_effects->add_option("--volume-fraction", ef.volume_fraction, "packing of the gas")->check(CLI::Range(0.01, 0.5));
+  bench_effects->add_option("--volume-fraction", ef.volume_fraction, "packing of the gas")->check(kFinite & CLI::Range(0.01, 0.5));
   bench_effects->add_option("--repeats", ef.repeats, "timed steps per pipeline")->check(CLI::PositiveNumber);
   bench_effects->add_flag("--json", ef.json, "print JSON");
   add_limit_option(bench_effects, limit_args);
@@ -277,7 +302,9 @@ int cli_main(int argc, char** argv) {
   rd_movie.fps = 0;  // from the frame times unless given
   std::string rd_dir, rd_color_by, rd_camera;
   auto* render_cmd = app.add_subcommand("render", "render the frames of an output folder to PNG and a movie");
-  render_cmd->add_option("outdir", rd_dir, "output folder of a run (holds series.pvd)")->required();
+  render_cmd->add_option("outdir", rd_dir, "output folder of a run (holds series.pvd)")
+      ->required()
+      ->check(CLI::ExistingDirectory);
   render_cmd->add_option("--color-by", rd_color_by, "speed|id|radius|material")
       ->check(CLI::IsMember({"speed", "id", "radius", "material"}));
   render_cmd->add_option("--camera", rd_camera, "camera position and target: x,y,z:lx,ly,lz");

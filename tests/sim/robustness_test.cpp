@@ -314,6 +314,25 @@ TEST_F(Robustness, NanArgumentsAreBadArguments) {
   EXPECT_NE(movie.err.find("output.movie.fps: must be within [0.01, 1000] frames per second, got 5000"),
             std::string::npos)
       << movie.err;
+  // Numbers the step takes in its precision, and folders that are files:
+  // refused by their argument (exit 2) before any work, not failing later.
+  const std::string file = dir.write("afile", "");
+  const std::string csv = MARBLES_SOURCE_DIR "/scenes/spheres.csv";
+  const std::string ball = MARBLES_SOURCE_DIR "/scenes/validation/bouncing_ball.yaml";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"bench effects --n 100 --volume-fraction nan", "--volume-fraction: must be a finite number"},
+      {"bench broadphase --n 100 --margin 1e300", "--margin: out of range for float precision"},
+      {"pairs " + csv + " --margin=1e39", "--margin: out of range for float precision"},
+      {"bench step --scene pile --n 10 --cache " + file, "--cache: '" + file + "' exists and is not a folder"},
+      {"bench step --settle-ke nan", "--settle-ke: must be a finite number"},
+      {"study " + ball + " --out " + file, "--out: '" + file + "' exists and is not a folder"},
+      {"render " + dir.path() + "/absent", "Directory does not exist"},
+  };
+  for (const auto& [args, message] : cases) {
+    const Outcome o = marbles(args, dir);
+    EXPECT_EQ(o.exit_code, 2) << args << ": " << o.err;
+    EXPECT_NE(o.err.find(message), std::string::npos) << args << ": " << o.err;
+  }
 }
 
 // summary.json stays valid JSON for a scene path with a tab, a quote and a
