@@ -1,6 +1,7 @@
 // render/frame_output.cpp — see frame_output.hpp.
 #include "render/frame_output.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -194,6 +195,7 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   // Pass 2: render. Images keep the frame numbers of the .vtp files.
   static const std::regex numbered(R"(frame_(\d+)\.vtp)");
   const auto t1 = std::chrono::steady_clock::now();
+  std::vector<fs::path> drawn;
   for (std::size_t k = 0; k < entries.size(); ++k) {
     Snapshot s = read_frame(entries[k].path);
     if (s.time == 0 && entries[k].time != 0) s.time = entries[k].time;
@@ -203,11 +205,23 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
     const std::string name = entries[k].path.filename().string();
     if (std::regex_match(name, m, numbered)) number = std::stoul(m[1].str());
     if (png_available()) write_png(image_path(dir, number), image);
+    drawn.push_back(image_path(dir, number).filename());
     if (writer) writer->add(image);
     if (progress) draw_progress(log, "render", k + 1, entries.size(), seconds_since(t1));
   }
   if (progress) log << "\n";
   if (writer) writer->finish();
+  // Images of frames the series no longer names (an earlier render of a
+  // longer series) would pass for this render's: removed, once it is whole.
+  std::sort(drawn.begin(), drawn.end());
+  std::vector<fs::path> stale;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(dir / "images", ec))
+    if (entry.path().filename().string().rfind("frame_", 0) == 0 && entry.path().extension() == ".png" &&
+        !std::binary_search(drawn.begin(), drawn.end(), entry.path().filename()))
+      stale.push_back(entry.path());
+  for (const fs::path& image : stale) fs::remove(image, ec);
+  if (!stale.empty()) log << "removed " << stale.size() << " image(s) of frames the series no longer names\n";
 
   const double total = seconds_since(t1);
   char line[256];

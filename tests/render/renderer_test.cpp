@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <random>
+#include <fstream>
 #include <sstream>
 
 #include "core/error.hpp"
@@ -407,6 +408,27 @@ TEST(RenderOutputDir, RerendersEveryFrameOfASeries) {
   }
   for (const auto& e : fs::recursive_directory_iterator(dir))
     EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << e.path();
+
+  // Rendered again with the series cut to its first two frames: the third
+  // image, which no frame of the series names now, goes; a file of the
+  // user's in images/ stays.
+  {
+    std::ifstream in(dir / "series.pvd");
+    std::stringstream text;
+    text << in.rdbuf();
+    std::string pvd = text.str();
+    const std::size_t last = pvd.find("frame_000002.vtp");
+    ASSERT_NE(last, std::string::npos);
+    pvd.erase(pvd.rfind('<', last), pvd.find('>', last) - pvd.rfind('<', last) + 1);
+    std::ofstream(dir / "series.pvd") << pvd;
+  }
+  std::ofstream(dir / "images" / "notes.png") << "mine";
+  std::ostringstream again;
+  EXPECT_EQ(render_output_dir(dir.string(), o, m, false, again), 0);
+  EXPECT_NE(again.str().find("rendered 2 frames"), std::string::npos) << again.str();
+  EXPECT_TRUE(fs::exists(dir / "images" / "frame_000001.png"));
+  EXPECT_FALSE(fs::exists(dir / "images" / "frame_000002.png")) << again.str();
+  EXPECT_TRUE(fs::exists(dir / "images" / "notes.png"));
 
   EXPECT_THROW(render_output_dir((dir / "nothing-here").string(), o, m, false, log), RuntimeFailure);
 }
