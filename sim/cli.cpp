@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -60,6 +61,30 @@ const CLI::Validator kFiniteReal(
       return std::string();
     },
     "FINITE");
+
+// Counts and amounts, said in plain words (CLI11's own ranges print the
+// largest double in full). A NaN is kFinite's to refuse, in its words.
+const CLI::Validator kPositive(
+    [](std::string& text) {
+      return std::strtod(text.c_str(), nullptr) <= 0 ? "must be > 0, got " + text : std::string();
+    },
+    "POSITIVE");
+const CLI::Validator kNonNegative(
+    [](std::string& text) {
+      return std::strtod(text.c_str(), nullptr) < 0 ? "must be >= 0, got " + text : std::string();
+    },
+    "NON-NEGATIVE");
+// A seed: a whole number 0 ... 2^64 - 1, as written (no wrap of -1, no
+// saturation past the top).
+const CLI::Validator kSeed(
+    [](std::string& text) {
+      std::uint64_t v = 0;
+      const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+      return ec == std::errc() && end == text.data() + text.size()
+                 ? std::string()
+                 : "must be a whole number from 0 to 18446744073709551615, got " + text;
+    },
+    "SEED");
 
 // A folder the command writes into: one, or nothing yet (made then).
 const CLI::Validator kFolderOrNew(
@@ -167,7 +192,7 @@ int cli_main(int argc, char** argv) {
   run_cmd->add_flag("--quiet", run.quiet, "print only the summary");
   run_cmd->add_flag("--no-render", no_render, "skip images and movie even if the scene asks for them");
   run_cmd->add_option("--duration", run_duration, "simulated seconds (overrides time.duration)")
-      ->check(kFinite & CLI::PositiveNumber);
+      ->check(kFinite & kPositive);
   add_set_option(run_cmd, run.overrides);
   std::vector<std::string> limit_args;
   add_limit_option(run_cmd, limit_args);
@@ -218,7 +243,7 @@ int cli_main(int argc, char** argv) {
   pairs_cmd->add_option("--backend", pairs_backend, "cpu (default), cuda or auto (subdivision and home)")
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   pairs_cmd->add_option("--margin", pairs_margin, "report pairs whose gap is below this (m)")
-      ->check(kFiniteReal & CLI::NonNegativeNumber);
+      ->check(kFiniteReal & kNonNegative);
 
   auto* bench_cmd = app.add_subcommand("bench", "benchmarks (JSON and a table)");
   bench_cmd->require_subcommand(1);
@@ -229,10 +254,10 @@ int cli_main(int argc, char** argv) {
   bench_bp->add_option("--algorithm", bp.algorithm, "seed|home")->check(CLI::IsMember({"seed", "home"}));
   bench_bp->add_option("--sort", bp.sort, "seed|cub (cuda)")->check(CLI::IsMember({"seed", "cub"}));
   bench_bp->add_option("--scene", bp.scene, "gas|pile|poly")->check(CLI::IsMember({"gas", "pile", "poly"}));
-  bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(CLI::PositiveNumber);
-  bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")->check(CLI::PositiveNumber);
-  bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(kFiniteReal & CLI::NonNegativeNumber);
-  bench_bp->add_option("--seed", bp.seed, "random seed of the sphere sets");
+  bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(kPositive);
+  bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")->check(kPositive);
+  bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(kFiniteReal & kNonNegative);
+  bench_bp->add_option("--seed", bp.seed, "random seed of the sphere sets")->check(kSeed);
   bench_bp->add_flag("--json", bp.json, "print JSON");
   add_limit_option(bench_bp, limit_args);
 
@@ -244,31 +269,31 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::IsMember({"cpu", "cuda"}));
   bench_step->add_option("--scene", st.scene, "gas (default) | pile | settle")
       ->check(CLI::IsMember({"gas", "pile", "settle"}));
-  bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->check(CLI::PositiveNumber);
+  bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->check(kPositive);
   bench_step->add_option("--repeats", st.repeats, "timed steps per size (and as many profiled ones)")
-      ->check(CLI::PositiveNumber);
+      ->check(kPositive);
   bench_step->add_option("--warmup", st.warmup, "untimed steps first (default 2 for gas, 5 for pile)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegative);
   bench_step->add_option("--effects", st.effects, "effects of the pipeline (gas only)")->delimiter(',');
   bench_step->add_option("--cache", st.cache_dir,
                          "folder of settled piles (default $XDG_CACHE_HOME/marbles or ~/.cache/marbles)")
       ->check(kFolderOrNew);
   bench_step->add_option("--settle-steps", st.settle_steps,
                          "pile: step budget of the settle (a cached pile that ran out of a smaller one settles again)")
-      ->check(CLI::PositiveNumber);
+      ->check(kPositive);
   bench_step->add_option("--settle-ke", st.settle_ke,
                          "pile: settled below this kinetic energy per sphere (J), 50 steps or more after the last quench")
-      ->check(kFinite & CLI::PositiveNumber);
+      ->check(kFinite & kPositive);
   bench_step->add_option("--settle-quench", st.settle_quench,
                          "pile: zero the velocities every this many settle steps until first below the bound (0: never)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegative);
   bench_step->add_flag("--rebuild", st.rebuild, "pile: settle again, replacing the cached pile");
   bench_step->add_option("--sphere-order", st.sphere_order,
                          "the spheres' index order the timed steps see: made (default), shuffled, morton or cells")
       ->check(CLI::IsMember({"made", "shuffled", "morton", "cells"}));
   bench_step->add_option("--renumber", st.renumber,
                          "solver.renumber of the timed scene: the spheres numbered again every this many steps")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegative);
   bench_step->add_option("--write-scene", st.write_scene,
                          "write each N's start (the settle, the gas or the settled pile) to this folder as "
                          "bench-SCENE-nN.yaml and .csv, to run with `marbles run` or time with another build; "
@@ -291,9 +316,9 @@ int cli_main(int argc, char** argv) {
   bench::EffectsBenchOptions ef;
   auto* bench_effects = bench_cmd->add_subcommand("effects", "time the step with and without each effect");
   bench_effects->add_option("--backend", ef.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
-  bench_effects->add_option("--n", ef.n, "sphere count")->check(CLI::PositiveNumber);
+  bench_effects->add_option("--n", ef.n, "sphere count")->check(kPositive);
   bench_effects->add_option("--volume-fraction", ef.volume_fraction, "packing of the gas")->check(kFinite & CLI::Range(0.01, 0.5));
-  bench_effects->add_option("--repeats", ef.repeats, "timed steps per pipeline")->check(CLI::PositiveNumber);
+  bench_effects->add_option("--repeats", ef.repeats, "timed steps per pipeline")->check(kPositive);
   bench_effects->add_flag("--json", ef.json, "print JSON");
   add_limit_option(bench_effects, limit_args);
 
@@ -356,11 +381,19 @@ int cli_main(int argc, char** argv) {
     }
     if (*pairs_cmd) return print_pairs(pairs_csv, pairs_algorithm, kBackends.at(pairs_backend), pairs_margin, std::cout, std::cerr);
     if (*bench_bp) {
+      if (bench_bp->count("--sort") > 0 && bp.backend != "cuda")
+        throw InputError(SourceLocation{}, "--sort", "chooses the GPU's sort: give --backend cuda (the CPU's is its own)");
       if (!bp_n.empty()) bp.n = bp_n;
       check_bench_counts(bp.n);
       return bench::run_broadphase_bench(bp, std::cout);
     }
     if (*bench_step) {
+      if (bench_step->count("--effects") > 0 && st.scene != "gas")
+        throw InputError(SourceLocation{}, "--effects",
+                         "is for --scene gas only (the pile's terms: --friction, --rolling)");
+      for (std::size_t i = 0; i < st.effects.size(); ++i)
+        if (std::find(st.effects.begin(), st.effects.begin() + i, st.effects[i]) != st.effects.begin() + i)
+          throw InputError(SourceLocation{}, "--effects", "'" + st.effects[i] + "' is given twice");
       if (!st_n.empty()) st.n = st_n;
       check_bench_counts(st.n);
       st.rolling = st_rolling == "on";

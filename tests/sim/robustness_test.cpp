@@ -327,6 +327,14 @@ TEST_F(Robustness, NanArgumentsAreBadArguments) {
       {"bench step --settle-ke nan", "--settle-ke: must be a finite number"},
       {"study " + ball + " --out " + file, "--out: '" + file + "' exists and is not a folder"},
       {"render " + dir.path() + "/absent", "Directory does not exist"},
+      // Options that meant nothing where given, or given twice, and ranges in plain words.
+      {"bench step --scene pile --n 10 --effects gravity", "--effects: is for --scene gas only"},
+      {"bench step --n 10 --effects gravity,walls,gravity", "--effects: 'gravity' is given twice"},
+      {"bench broadphase --n 100 --sort cub", "--sort: chooses the GPU's sort: give --backend cuda"},
+      {"bench broadphase --n 100 --seed -1", "--seed: must be a whole number from 0 to 18446744073709551615"},
+      {"bench broadphase --n 100 --seed 18446744073709551616", "--seed: must be a whole number"},
+      {"run " + ball + " --duration 0", "--duration: must be > 0, got 0"},
+      {"bench broadphase --margin -1", "--margin: must be >= 0, got -1"},
   };
   for (const auto& [args, message] : cases) {
     const Outcome o = marbles(args, dir);
