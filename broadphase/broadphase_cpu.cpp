@@ -241,6 +241,7 @@ void SubdivisionCpu::run(const SpheresIn& s, real margin, const GridChoice& gc, 
     const std::size_t cells = m_cells.size();
     const std::size_t chunks = n_chunks(cells, kCellChunk);
     m_pair_chunks.resize(chunks);
+    for (std::vector<Pair>& chunk : m_pair_chunks) chunk.clear();  // a chunk skipped after a throw counts none
     m_test_chunks.assign(chunks, 0);
     ParallelErrors errors;
     PairGrowth growth;

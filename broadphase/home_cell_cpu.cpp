@@ -182,6 +182,7 @@ void HomeCellCpu::run(const SpheresIn& s, real margin, const HomeGrid& g, std::v
   // --- traversal ------------------------------------------------------------------
   const std::ptrdiff_t chunks = chunks_of(n);
   m_pair_chunks.resize(static_cast<std::size_t>(chunks));
+  for (std::vector<Pair>& chunk : m_pair_chunks) chunk.clear();  // a chunk skipped after a throw counts none
   m_test_chunks.assign(static_cast<std::size_t>(chunks), 0);
   ParallelErrors errors;
   PairGrowth growth;

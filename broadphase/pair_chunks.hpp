@@ -32,14 +32,21 @@ class PairGrowth {
     const std::size_t room = std::max(needed, 2 * capacity);
     const std::size_t grown = m_grown.fetch_add(room - capacity, std::memory_order_relaxed) + (room - capacity);
     if (grown * sizeof(Pair) < kQuiet) return;
+    // The memory is read again each time the growth has risen by an eighth
+    // since it was last read (not at every list's growth), and held as read.
+    std::size_t next = m_next_read.load(std::memory_order_relaxed);
+    if (grown >= next && m_next_read.compare_exchange_strong(next, grown + grown / 8, std::memory_order_relaxed))
+      m_free.store(available_memory(), std::memory_order_relaxed);
     // The new block beside the old, and the gather's copy of what grew.
-    const double free = available_memory();
+    const double free = m_free.load(std::memory_order_relaxed);
     if (free > 0 && double(room + grown) * sizeof(Pair) > free) throw std::bad_alloc();
   }
 
  private:
   static constexpr std::size_t kQuiet = std::size_t(64) << 20;
   std::atomic<std::size_t> m_grown{0};
+  std::atomic<std::size_t> m_next_read{0};
+  std::atomic<double> m_free{0};
 };
 
 // A pair set that does not fit in memory, as a RuntimeFailure that says how

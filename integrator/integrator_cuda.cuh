@@ -5,13 +5,14 @@
 #include <cuda_runtime.h>
 
 #include "core/spheres.hpp"
+#include "integrator/integrator_math.hpp"
 
 namespace marbles::integrator::cuda {
 
 void launch_apply_gravity(const BodiesView& bodies, const Vec3& g, real h, int sm_count, cudaStream_t stream);
-// first_half: velocity Verlet's first half kick, drag and gravity g together
-// (drag_first_half), else drag_kick.
-void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, bool first_half, const Vec3& g,
+// The kick (integrator_math.hpp drag_update); g: gravity, for velocity
+// Verlet's first half, which takes gravity's half kick with drag's.
+void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kick, const Vec3& g,
                        int sm_count, cudaStream_t stream);
 // x += h v; sets *non_finite = 1 when a position, velocity or angular
 // velocity is not finite afterwards (never clears it). Nothing where `skip`

@@ -10,7 +10,7 @@
 // Velocity Verlet (solver.integrator: velocity_verlet) is the same functions
 // in kick-drift-kick order: gravity_kick(h/2) (with drag: drag_first_half,
 // gravity's half kick and drag's together), contacts, drift(h),
-// gravity_kick(h/2), drag_kick(h/2). Under constant
+// gravity_kick(h/2), drag_second_half(h/2). Under constant
 // forces x(t+h) = x + h v + h^2 g / 2 exactly; contacts act on the half-step
 // velocity, the one the drift uses, so speculative contacts keep their
 // no-tunnelling guarantee. With drag the two halves are the trapezoidal
@@ -47,6 +47,27 @@ MARBLES_HD_INLINE Vec3 drag_kick(const Vec3& v, real k1, real k2, real h) {
 MARBLES_HD_INLINE Vec3 drag_first_half(const Vec3& v, const Vec3& gh, real k1, real k2, real h) {
   const real e = h * (k1 + k2 * length(v));
   return e <= real(1) ? v * (real(1) - e) + gh : (v + gh) / (real(1) + e);
+}
+
+// Velocity Verlet's second half of drag, after its gravity half kick: the
+// implicit half of the trapezoidal rule, v' = v - h (k1 + k2 |v'|) v',
+// solved exactly for the speed s = |v'|: h k2 s^2 + (1 + h k1) s = |v|, taken
+// in the form that neither cancels nor divides by k2. (drag_kick's |v| of the
+// velocity before the kick would leave quadratic drag first order.)
+MARBLES_HD_INLINE Vec3 drag_second_half(const Vec3& v, real k1, real k2, real h) {
+  const real speed = length(v);
+  const real a = real(1) + h * k1;
+  const real scale = real(2) / (a + std::sqrt(a * a + real(4) * h * k2 * speed));
+  return v * scale;
+}
+
+// The drag update a pass applies: symplectic Euler's whole kick, or velocity
+// Verlet's first (gravity's half with it: gh = g h) or second half.
+enum class DragKick : unsigned char { whole, verlet_first, verlet_second };
+MARBLES_HD_INLINE Vec3 drag_update(DragKick kick, const Vec3& v, const Vec3& gh, real k1, real k2, real h) {
+  return kick == DragKick::verlet_first    ? drag_first_half(v, gh, k1, k2, h)
+         : kick == DragKick::verlet_second ? drag_second_half(v, k1, k2, h)
+                                           : drag_kick(v, k1, k2, h);
 }
 
 // x += h v

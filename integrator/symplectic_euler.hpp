@@ -3,6 +3,7 @@
 #pragma once
 
 #include "core/spheres.hpp"
+#include "integrator/integrator_math.hpp"
 
 namespace marbles::integrator {
 
@@ -11,9 +12,10 @@ void apply_gravity(const BodiesView& bodies, const Vec3& g, real h);
 
 // Body-force stage: air drag with linear rate k1 (1/s) and quadratic
 // coefficient k2 (1/m), see drag_kick.
-// first_half: velocity Verlet's first half kick, drag and gravity g together
-// (drag_first_half), else drag_kick.
-void apply_drag(const BodiesView& bodies, real k1, real k2, real h, bool first_half = false, const Vec3& g = {});
+// The kick (integrator_math.hpp drag_update); g: gravity, for velocity
+// Verlet's first half, which takes gravity's half kick with drag's.
+void apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kick = DragKick::whole,
+                const Vec3& g = {});
 
 // Position stage: x += h v. Returns true when a position, velocity or
 // angular velocity is not finite afterwards (the step's non_finite flag).

@@ -216,7 +216,9 @@ class PySimulation {
     if (dir.empty() || dir.find('\0') != std::string::npos)
       throw nb::value_error("write_frame: a folder is needed (not empty, no NUL byte)");
     if (m_views_out) check_views();
-    auto it = m_frames.find(dir);
+    // By the folder, however it is written ("out", "out/", "./out").
+    const std::string key = std::filesystem::absolute(dir).lexically_normal().string();
+    auto it = m_frames.find(key);
     if (it == m_frames.end()) {
       // A folder new to this simulation that holds another run's output is
       // refused, as `marbles run` refuses it: new frames would replace some
@@ -227,10 +229,14 @@ class PySimulation {
                                " files, e.g. " + earlier.front().filename().string() +
                                "); write_frame(dir, overwrite=True) replaces it, or choose another folder")
                                   .c_str());
-      for (const std::filesystem::path& file : earlier) std::filesystem::remove(file);
+      for (const std::filesystem::path& file : earlier) {
+        std::error_code ec;
+        if (!std::filesystem::remove(file, ec) && ec)
+          throw RuntimeFailure("write_frame: cannot remove " + file.string() + ": " + ec.message());
+      }
       auto writer = std::make_unique<render::VtkSeriesWriter>(dir, render::parse_point_fields(m_scene.output.fields),
                                                               frame_metadata(m_scene));
-      it = m_frames.emplace(dir, std::move(writer)).first;
+      it = m_frames.emplace(key, std::move(writer)).first;
     }
     const bool counts = std::find(m_scene.output.fields.begin(), m_scene.output.fields.end(), "contacts") !=
                         m_scene.output.fields.end();

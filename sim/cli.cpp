@@ -64,14 +64,19 @@ const CLI::Validator kFiniteReal(
 
 // Counts and amounts, said in plain words (CLI11's own ranges print the
 // largest double in full). A NaN is kFinite's to refuse, in its words.
+// Text that is no number is the conversion's to refuse.
 const CLI::Validator kPositive(
     [](std::string& text) {
-      return std::strtod(text.c_str(), nullptr) <= 0 ? "must be > 0, got " + text : std::string();
+      char* end = nullptr;
+      const double v = std::strtod(text.c_str(), &end);
+      return end != text.c_str() && v <= 0 ? "must be > 0, got " + text : std::string();
     },
     "POSITIVE");
 const CLI::Validator kNonNegative(
     [](std::string& text) {
-      return std::strtod(text.c_str(), nullptr) < 0 ? "must be >= 0, got " + text : std::string();
+      char* end = nullptr;
+      const double v = std::strtod(text.c_str(), &end);
+      return end != text.c_str() && v < 0 ? "must be >= 0, got " + text : std::string();
     },
     "NON-NEGATIVE");
 // A seed: a whole number 0 ... 2^64 - 1, as written (no wrap of -1, no
@@ -80,9 +85,10 @@ const CLI::Validator kSeed(
     [](std::string& text) {
       std::uint64_t v = 0;
       const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
-      return ec == std::errc() && end == text.data() + text.size()
-                 ? std::string()
-                 : "must be a whole number from 0 to 18446744073709551615, got " + text;
+      if (ec != std::errc() || end != text.data() + text.size())
+        return "must be a whole number from 0 to 18446744073709551615, got " + text;
+      text = std::to_string(v);  // as read here, in decimal (not "010" as octal)
+      return std::string();
     },
     "SEED");
 

@@ -34,7 +34,8 @@ class CpuStep final : public StepBackend {
     // Velocity Verlet with drag: gravity's half kick and drag's in one, with
     // the second half (after the drift) the trapezoidal rule (integrator_math.hpp).
     if (m_model.drag && m_model.verlet) {
-      integrator::apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, m_model.first_kick(h), true,
+      integrator::apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, m_model.first_kick(h),
+                             integrator::DragKick::verlet_first,
                              m_model.gravity ? m_model.g : Vec3{});
       return;
     }
@@ -122,7 +123,8 @@ class CpuStep final : public StepBackend {
     m_non_finite = integrator::integrate_positions(m_world.view(), h) || m_non_finite;
     if (m_model.gravity && m_model.verlet) integrator::apply_gravity(m_world.view(), m_model.g, m_model.second_kick(h));
     if (m_model.drag && m_model.verlet)
-      integrator::apply_drag(m_world.view(), m_model.drag_linear, m_model.drag_quadratic, m_model.second_kick(h));
+      integrator::apply_drag(m_world.view(), m_model.drag_linear, m_model.drag_quadratic, m_model.second_kick(h),
+                             integrator::DragKick::verlet_second);
     narrowphase::advance_walls(m_walls, h);
   }
 

@@ -291,14 +291,15 @@ class CudaStep final : public StepBackend {
     // Velocity Verlet with drag: gravity's half kick and drag's in one (as on the CPU).
     if (m_model.drag && m_model.verlet) {
       integrator::cuda::launch_apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, m_model.first_kick(h),
-                                          true, m_model.gravity ? m_model.g : Vec3{}, m_sm, m_stream);
+                                          integrator::DragKick::verlet_first, m_model.gravity ? m_model.g : Vec3{},
+                                          m_sm, m_stream);
       return;
     }
     if (m_model.gravity)
       integrator::cuda::launch_apply_gravity(bodies, m_model.g, m_model.first_kick(h), m_sm, m_stream);
     if (m_model.drag)
-      integrator::cuda::launch_apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h, false, {}, m_sm,
-                                          m_stream);
+      integrator::cuda::launch_apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h,
+                                          integrator::DragKick::whole, {}, m_sm, m_stream);
   }
 
   // Swept bounds -> broad phase -> sphere contacts (in pair order), then wall
@@ -650,7 +651,8 @@ class CudaStep final : public StepBackend {
       integrator::cuda::launch_apply_gravity(m_device.view(), m_model.g, m_model.second_kick(h), m_sm, m_stream);
     if (m_model.drag && m_model.verlet)
       integrator::cuda::launch_apply_drag(m_device.view(), m_model.drag_linear, m_model.drag_quadratic,
-                                          m_model.second_kick(h), false, {}, m_sm, m_stream);
+                                          m_model.second_kick(h), integrator::DragKick::verlet_second, {}, m_sm,
+                                          m_stream);
     nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream, skip());
   }
 

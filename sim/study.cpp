@@ -206,8 +206,10 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
                      "or `reference: finest` to compare with the finest setting");
   StudyResult result;
   result.reference = scene::reference_name(scene.reference.kind);
-  const fs::path dir = options.out_dir.empty() ? fs::path("out/study") / fs::path(scene.path).stem()
-                                               : fs::path(options.out_dir);
+  // Absolute: the plot's script names its files by it, and gnuplot reads a
+  // name starting with '<' or '|' as a command.
+  const fs::path dir = fs::absolute(options.out_dir.empty() ? fs::path("out/study") / fs::path(scene.path).stem()
+                                                            : fs::path(options.out_dir));
   fs::create_directories(dir / "runs");
 
   const auto combos = combinations(options.vary);

@@ -286,6 +286,8 @@ class Simulation:
             raise TypeError(f"run: until: a time in seconds, got {until!r}")
         if until is not None and not (math.isfinite(until) and until >= 0):
             raise ValueError(f"run: until must be a finite time >= 0, got {until!r}")
+        if until is not None and not math.isfinite(float(until) / self.dt):
+            raise ValueError(f"run: until is too large a time, got {until!r}")
         target = self._impl.total_steps if until is None else int(round(float(until) / self.dt))
         self._check_substeps(target - self.steps, "run: until")
         while self.steps < target:

@@ -286,6 +286,43 @@ TEST(Drag, VelocityVerletIsSecondOrderWithDrag) {
     } else {
       EXPECT_NEAR(order, 1.0, 0.2) << errors[1] << " " << errors[2];
     }
+    // Quadratic drag, dv/dt = g - k2 |v| v (falling from rest: v(t) = -sqrt(g / k2) tanh(sqrt(g k2) t)),
+    // the same orders.
+    std::vector<double> quadratic;
+    for (double dt : {0.04, 0.02, 0.01}) {
+      scene::Scene s = make_scene(dt, 1, {Effect::gravity, Effect::drag}, 0.0);
+      s.gravity = {0, 0, real(-g)};
+      s.drag_quadratic = 0.5;
+      s.solver.integrator = integrator;
+      scene::GeneratedParticles p;
+      add_sphere(p, {0, 0, 0}, real(0.05));
+      Simulation sim(s, make_world(s, p), test_backend());
+      for (int n = 0; n < static_cast<int>(std::lround(t_end / dt)); ++n) sim.step();
+      const double c = std::sqrt(g / 0.5), t = t_end;
+      quadratic.push_back(std::abs(sim.world().velocity[0].z + c * std::tanh(std::sqrt(g * 0.5) * t)) +
+                          std::abs(sim.world().position[0].z + (c / std::sqrt(g * 0.5)) *
+                                                                   std::log(std::cosh(std::sqrt(g * 0.5) * t))));
+    }
+    const double quadratic_order = std::log2(quadratic[1] / quadratic[2]);
+    if (integrator == "velocity_verlet")
+      EXPECT_GT(quadratic_order, 1.8) << quadratic[1] << " " << quadratic[2];
+    else
+      EXPECT_NEAR(quadratic_order, 1.0, 0.2) << quadratic[1] << " " << quadratic[2];
+    // Quadratic drag's terminal speed sqrt(g / k2), fallen long enough: velocity
+    // Verlet's exactly, symplectic Euler's within g h (its |v| is the kick's
+    // input: Drag.QuadraticDragGivesTerminalVelocity).
+    {
+      scene::Scene s = make_scene(0.02, 1, {Effect::gravity, Effect::drag}, 0.0);
+      s.gravity = {0, 0, real(-g)};
+      s.drag_quadratic = 0.5;
+      s.solver.integrator = integrator;
+      scene::GeneratedParticles p;
+      add_sphere(p, {0, 0, 0}, real(0.05));
+      Simulation sim(s, make_world(s, p), test_backend());
+      for (int n = 0; n < 400; ++n) sim.step();
+      const double tolerance = integrator == "velocity_verlet" ? 1e-5 * std::sqrt(g / 0.5) : g * 0.02;
+      EXPECT_NEAR(sim.world().velocity[0].z, -std::sqrt(g / 0.5), tolerance) << integrator;
+    }
     // Stiff drag: k = 2000 / s at dt = 10 ms. The terminal speed within float's rounding.
     const auto [pos, vel] = run(integrator, 0.01, 2000.0, 0.1);
     EXPECT_NEAR(vel.z, -g / 2000.0, 1e-6 * g / 2000.0) << integrator;
