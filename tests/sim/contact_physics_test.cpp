@@ -251,21 +251,27 @@ TEST(Impacts, NewtonsCradlePassesTheEnergyToTheLastBall) {
   EXPECT_GT(w.velocity[4].x, 0.95);
 }
 
-// Gravity and linear drag, dv/dt = g - k v, against the closed form, through
-// the step: a sphere launched sideways at v0 falls with
+// Gravity and drag against the closed forms, through the step. Linear drag,
+// dv/dt = g - k v, a sphere launched sideways at v0:
 //   v(t) = v0 e^{-kt} + (g / k)(1 - e^{-kt}),  x(t) = v0 (1 - e^{-kt}) / k + (g / k)(t - (1 - e^{-kt}) / k).
+// Quadratic drag, dv/dt = g - k2 |v| v, falling from rest with c = sqrt(g / k2):
+//   v(t) = -c tanh(t sqrt(g k2)),  z(t) = -(c / sqrt(g k2)) ln cosh(t sqrt(g k2)).
 // Velocity Verlet's two half kicks are the trapezoidal rule: its errors fall
-// four times when h halves; symplectic Euler's twice. Both keep the terminal
-// speed g / k exactly, also where drag is stiff for the step (h k = 20).
+// four times when h halves; symplectic Euler's twice. Both keep linear drag's
+// terminal speed g / k exactly, also where drag is stiff for the step (h k =
+// 20); velocity Verlet also quadratic drag's c (symplectic Euler's is within
+// g h: its |v| is the kick's input, Drag.QuadraticDragGivesTerminalVelocity).
 TEST(Drag, VelocityVerletIsSecondOrderWithDrag) {
-  const double k = 2.0, t_end = 0.5, v0 = 3.0, g = 9.81;
-  const auto run = [&](const std::string& integrator, double dt, double drag, double duration) {
+  const double k = 2.0, k2 = 0.5, t_end = 0.5, v0 = 3.0, g = 9.81;
+  const auto run = [&](const std::string& integrator, double dt, double linear, double quadratic, double vx0,
+                       double duration) {
     scene::Scene s = make_scene(dt, 1, {Effect::gravity, Effect::drag}, 0.0);
     s.gravity = {0, 0, real(-g)};
-    s.drag = drag;
+    s.drag = linear;
+    s.drag_quadratic = quadratic;
     s.solver.integrator = integrator;
     scene::GeneratedParticles p;
-    add_sphere(p, {0, 0, 0}, real(0.05), {real(v0), 0, 0});
+    add_sphere(p, {0, 0, 0}, real(0.05), {real(vx0), 0, 0});
     Simulation sim(s, make_world(s, p), test_backend());
     for (int n = 0; n < static_cast<int>(std::lround(duration / dt)); ++n) sim.step();
     return std::pair{sim.world().position[0], sim.world().velocity[0]};
@@ -273,58 +279,31 @@ TEST(Drag, VelocityVerletIsSecondOrderWithDrag) {
   const double decay = std::exp(-k * t_end);
   const double vx = v0 * decay, vz = -(g / k) * (1 - decay);
   const double x = v0 * (1 - decay) / k, z = -(g / k) * (t_end - (1 - decay) / k);
+  const double c = std::sqrt(g / k2), rate = std::sqrt(g * k2);
+  const double quadratic_vz = -c * std::tanh(rate * t_end);
+  const double quadratic_z = -(c / rate) * std::log(std::cosh(rate * t_end));
   for (const std::string integrator : {"velocity_verlet", "symplectic_euler"}) {
-    std::vector<double> errors;
+    std::vector<double> linear_errors, quadratic_errors;
     for (double dt : {0.04, 0.02, 0.01}) {
-      const auto [pos, vel] = run(integrator, dt, k, t_end);
-      errors.push_back(std::abs(vel.x - vx) + std::abs(vel.z - vz) + std::abs(pos.x - x) + std::abs(pos.z - z));
+      const auto [pos, vel] = run(integrator, dt, k, 0, v0, t_end);
+      linear_errors.push_back(std::abs(vel.x - vx) + std::abs(vel.z - vz) + std::abs(pos.x - x) +
+                              std::abs(pos.z - z));
+      const auto [qpos, qvel] = run(integrator, dt, 0, k2, 0, t_end);
+      quadratic_errors.push_back(std::abs(qvel.z - quadratic_vz) + std::abs(qpos.z - quadratic_z));
     }
-    const double order = std::log2(errors[1] / errors[2]);
-    if (integrator == "velocity_verlet") {
-      EXPECT_GT(std::log2(errors[0] / errors[1]), 1.8) << errors[0] << " " << errors[1];
-      EXPECT_GT(order, 1.8) << errors[1] << " " << errors[2];
-    } else {
-      EXPECT_NEAR(order, 1.0, 0.2) << errors[1] << " " << errors[2];
+    for (const std::vector<double>& errors : {linear_errors, quadratic_errors}) {
+      const double order = std::log2(errors[1] / errors[2]);
+      if (integrator == "velocity_verlet") {
+        EXPECT_GT(std::log2(errors[0] / errors[1]), 1.8) << errors[0] << " " << errors[1];
+        EXPECT_GT(order, 1.8) << errors[1] << " " << errors[2];
+      } else {
+        EXPECT_NEAR(order, 1.0, 0.2) << errors[1] << " " << errors[2];
+      }
     }
-    // Quadratic drag, dv/dt = g - k2 |v| v (falling from rest: v(t) = -sqrt(g / k2) tanh(sqrt(g k2) t)),
-    // the same orders.
-    std::vector<double> quadratic;
-    for (double dt : {0.04, 0.02, 0.01}) {
-      scene::Scene s = make_scene(dt, 1, {Effect::gravity, Effect::drag}, 0.0);
-      s.gravity = {0, 0, real(-g)};
-      s.drag_quadratic = 0.5;
-      s.solver.integrator = integrator;
-      scene::GeneratedParticles p;
-      add_sphere(p, {0, 0, 0}, real(0.05));
-      Simulation sim(s, make_world(s, p), test_backend());
-      for (int n = 0; n < static_cast<int>(std::lround(t_end / dt)); ++n) sim.step();
-      const double c = std::sqrt(g / 0.5), t = t_end;
-      quadratic.push_back(std::abs(sim.world().velocity[0].z + c * std::tanh(std::sqrt(g * 0.5) * t)) +
-                          std::abs(sim.world().position[0].z + (c / std::sqrt(g * 0.5)) *
-                                                                   std::log(std::cosh(std::sqrt(g * 0.5) * t))));
-    }
-    const double quadratic_order = std::log2(quadratic[1] / quadratic[2]);
-    if (integrator == "velocity_verlet")
-      EXPECT_GT(quadratic_order, 1.8) << quadratic[1] << " " << quadratic[2];
-    else
-      EXPECT_NEAR(quadratic_order, 1.0, 0.2) << quadratic[1] << " " << quadratic[2];
-    // Quadratic drag's terminal speed sqrt(g / k2), fallen long enough: velocity
-    // Verlet's exactly, symplectic Euler's within g h (its |v| is the kick's
-    // input: Drag.QuadraticDragGivesTerminalVelocity).
-    {
-      scene::Scene s = make_scene(0.02, 1, {Effect::gravity, Effect::drag}, 0.0);
-      s.gravity = {0, 0, real(-g)};
-      s.drag_quadratic = 0.5;
-      s.solver.integrator = integrator;
-      scene::GeneratedParticles p;
-      add_sphere(p, {0, 0, 0}, real(0.05));
-      Simulation sim(s, make_world(s, p), test_backend());
-      for (int n = 0; n < 400; ++n) sim.step();
-      const double tolerance = integrator == "velocity_verlet" ? 1e-5 * std::sqrt(g / 0.5) : g * 0.02;
-      EXPECT_NEAR(sim.world().velocity[0].z, -std::sqrt(g / 0.5), tolerance) << integrator;
-    }
+    const auto [far, terminal] = run(integrator, 0.02, 0, k2, 0, 8.0);  // fallen long enough
+    EXPECT_NEAR(terminal.z, -c, integrator == "velocity_verlet" ? 1e-5 * c : g * 0.02) << integrator;
     // Stiff drag: k = 2000 / s at dt = 10 ms. The terminal speed within float's rounding.
-    const auto [pos, vel] = run(integrator, 0.01, 2000.0, 0.1);
+    const auto [pos, vel] = run(integrator, 0.01, 2000.0, 0, v0, 0.1);
     EXPECT_NEAR(vel.z, -g / 2000.0, 1e-6 * g / 2000.0) << integrator;
     EXPECT_GT(vel.x, 0) << integrator;  // never reversed
   }
