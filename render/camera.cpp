@@ -150,6 +150,11 @@ Camera parse_camera(std::string_view text, std::string_view key) {
   Camera cam;
   if (!parse3(text.substr(0, colon), cam.position) || !parse3(text.substr(colon + 1), cam.look_at)) return fail();
   if (cam.position == cam.look_at) throw InputError({}, k, "camera position and look-at point coincide");
+  // The view is made from their difference and its squared length: both
+  // points within the precision with room for that (as a scene's vectors).
+  if (square_overflows(cam.position) || square_overflows(cam.look_at) || square_overflows(cam.look_at - cam.position))
+    throw InputError({}, k, "too large for " + std::string(kRealName) + " precision: a camera point's squared length "
+                            "overflows, got '" + std::string(text) + "'");
   return cam;
 }
 

@@ -198,6 +198,11 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   std::vector<fs::path> drawn;
   for (std::size_t k = 0; k < entries.size(); ++k) {
     Snapshot s = read_frame(entries[k].path);
+    if (k == 0 && !has_color_data(s, options.color_by))
+      log << "warning: " << entries[k].path.filename().string() << " carries no "
+          << (options.color_by == ColorBy::speed ? "velocity" : color_by_name(options.color_by))
+          << " array: colouring by " << color_by_name(options.color_by)
+          << " draws every sphere in one colour (the run's output.fields lacks it)\n";
     if (s.time == 0 && entries[k].time != 0) s.time = entries[k].time;
     const Image image = renderer.render(s, walls_of(k), camera, range);
     std::size_t number = k;

@@ -62,6 +62,8 @@ double color_value(const Snapshot& s, ColorBy by, std::size_t i) {
   return 0;
 }
 
+}  // namespace
+
 bool has_color_data(const Snapshot& s, ColorBy by) {
   const std::size_t n = s.size();
   switch (by) {
@@ -72,8 +74,6 @@ bool has_color_data(const Snapshot& s, ColorBy by) {
   }
   return false;
 }
-
-}  // namespace
 
 ColorRange data_range(const Snapshot& s, ColorBy by) {
   if (s.size() == 0 || !has_color_data(s, by)) return {0, 1};

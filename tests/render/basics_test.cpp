@@ -311,6 +311,17 @@ TEST(Camera, ParsesTheCommandLineForm) {
   EXPECT_EQ(c.up, Vec3(0, 0, 1));
   for (const char* bad : {"1,2,3", "1,2:0,0,0", "1,2,3:0,0,0,4", "a,b,c:0,0,0", "1,1,1:1,1,1", ""})
     EXPECT_THROW(parse_camera(bad), InputError) << bad;
+  // Beyond the precision (1e39 is inf in float), or squared beyond it: an
+  // empty image before, now refused with the argument's name.
+  for (const char* huge : {"1e39,0,0:0,0,0", "0,0,0:0,3e19,0", "2e19,0,0:-2e19,0,0"}) {
+    if (sizeof(real) == 8) continue;  // all of them fit in double
+    try {
+      parse_camera(huge, "--camera");
+      ADD_FAILURE() << huge << " was taken";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("--camera: too large for float precision"), std::string::npos) << e.what();
+    }
+  }
   // Straight down the vertical: the renderer takes another up there.
   EXPECT_NO_THROW(parse_camera("0,0,10:0,0,0", "--camera"));
 }

@@ -432,4 +432,36 @@ TEST(RenderOutputDir, RerendersEveryFrameOfASeries) {
 
   EXPECT_THROW(render_output_dir((dir / "nothing-here").string(), o, m, false, log), RuntimeFailure);
 }
+// Colouring by an array the frames do not carry draws one colour: said once,
+// with the frame and the array, not left to be guessed from the image.
+TEST(RenderOutputDir, ColouringByAMissingArrayIsAWarning) {
+  if (!renderer_available()) GTEST_SKIP() << "skipped: built without OSMesa";
+  const fs::path dir = fresh_dir("render_missing_colour");
+  {
+    VtkSeriesWriter vtk(dir, {PointField::radius});
+    for (int f = 0; f < 2; ++f) {
+      Snapshot s;
+      s.position = {{0, 0, 0}, {0.2f, 0, 0}};
+      s.radius = {0.05f, 0.05f};
+      s.velocity = {{1, 0, 0}, {0, 1, 0}};  // not written: the series holds radius alone
+      s.time = 0.1 * f;
+      vtk.write(s);
+    }
+  }
+  RenderOptions o;
+  o.width = 32, o.height = 24;
+  o.color_by = ColorBy::speed;
+  MovieOptions m;
+  m.enabled = false;
+  std::ostringstream log;
+  EXPECT_EQ(render_output_dir(dir.string(), o, m, false, log), 0);
+  EXPECT_NE(log.str().find("warning: frame_000000.vtp carries no velocity array: colouring by speed draws every "
+                           "sphere in one colour"),
+            std::string::npos)
+      << log.str();
+  std::ostringstream by_radius;
+  o.color_by = ColorBy::radius;
+  EXPECT_EQ(render_output_dir(dir.string(), o, m, false, by_radius), 0);
+  EXPECT_EQ(by_radius.str().find("warning"), std::string::npos) << by_radius.str();
+}
 #endif
