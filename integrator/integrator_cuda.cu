@@ -14,9 +14,9 @@ __global__ void gravity_kernel(BodiesView bodies, Vec3 g, real h) {
     bodies.velocity[i] = gravity_kick(bodies.velocity[i], g, bodies.inv_mass[i], h);
 }
 
-__global__ void drag_kernel(BodiesView bodies, real k1, real k2, real h, DragKick kick, Vec3 gh) {
+__global__ void drag_kernel(BodiesView bodies, real k1, real k2, real h, DragKick kick, bool gravity, Vec3 gh) {
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x)
-    if (bodies.inv_mass[i] > 0) bodies.velocity[i] = drag_update(kick, bodies.velocity[i], gh, k1, k2, h);
+    if (bodies.inv_mass[i] > 0) bodies.velocity[i] = drag_update(kick, bodies.velocity[i], gravity, gh, k1, k2, h);
 }
 
 __global__ void drift_kernel(BodiesView bodies, real h, unsigned* non_finite, const unsigned long long* skip) {
@@ -50,10 +50,11 @@ void launch_apply_gravity(const BodiesView& bodies, const Vec3& g, real h, int s
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 
-void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kick, const Vec3& g,
+void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kick, const Vec3* g,
                        int sm_count, cudaStream_t stream) {
   if (bodies.count == 0) return;
-  drag_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, k1, k2, h, kick, g * h);
+  const Vec3 gh = g ? *g * h : Vec3{};
+  drag_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, k1, k2, h, kick, g != nullptr, gh);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

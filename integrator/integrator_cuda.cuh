@@ -10,9 +10,9 @@
 namespace marbles::integrator::cuda {
 
 void launch_apply_gravity(const BodiesView& bodies, const Vec3& g, real h, int sm_count, cudaStream_t stream);
-// The kick (integrator_math.hpp drag_update); g: gravity, for velocity
-// Verlet's first half, which takes gravity's half kick with drag's.
-void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kick, const Vec3& g,
+// The kick (integrator_math.hpp drag_update), gravity's kick over h with it
+// where g is given (one launch: no launch_apply_gravity then).
+void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kick, const Vec3* g,
                        int sm_count, cudaStream_t stream);
 // x += h v; sets *non_finite = 1 when a position, velocity or angular
 // velocity is not finite afterwards (never clears it). Nothing where `skip`

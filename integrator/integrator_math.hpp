@@ -8,9 +8,9 @@
 // g h^2 / 2 per substep (first order in h over a flight).
 //
 // Velocity Verlet (solver.integrator: velocity_verlet) is the same functions
-// in kick-drift-kick order: gravity_kick(h/2) (with drag: drag_first_half,
-// gravity's half kick and drag's together), contacts, drift(h),
-// gravity_kick(h/2), drag_second_half(h/2). Under constant
+// in kick-drift-kick order: gravity_kick(h/2), contacts, drift(h),
+// gravity_kick(h/2); with drag each kick is drag_update's, gravity's half
+// with drag's (drag_first_half, then drag_second_half). Under constant
 // forces x(t+h) = x + h v + h^2 g / 2 exactly; contacts act on the half-step
 // velocity, the one the drift uses, so speculative contacts keep their
 // no-tunnelling guarantee. With drag the two halves are the trapezoidal
@@ -40,8 +40,8 @@ MARBLES_HD_INLINE Vec3 drag_kick(const Vec3& v, real k1, real k2, real h) {
 // v (1 - e) + gh with e = h (k1 + k2 |v|), where that keeps the velocity's
 // direction (e <= 1); past it (h k > 2 for the whole step: drag stiff for
 // the step) a backward-Euler half, (v + gh) / (1 + e), so that no drag
-// reverses a velocity. Either way, with the second half (gravity_kick, then
-// drag_kick) the terminal speed is g / k exactly. (Both halves backward
+// reverses a velocity. Either way, with the second half (gravity's half kick,
+// then drag_second_half) the terminal speed is g / k exactly. (Both halves backward
 // Euler, as first written, left the positions first order: off by v0 h / 4
 // over a decay.)
 MARBLES_HD_INLINE Vec3 drag_first_half(const Vec3& v, const Vec3& gh, real k1, real k2, real h) {
@@ -61,13 +61,17 @@ MARBLES_HD_INLINE Vec3 drag_second_half(const Vec3& v, real k1, real k2, real h)
   return v * scale;
 }
 
-// The drag update a pass applies: symplectic Euler's whole kick, or velocity
-// Verlet's first (gravity's half with it: gh = g h) or second half.
+// A velocity kick where drag is on, gravity's (gh = g h, where `gravity`)
+// taken with it in the same pass: symplectic Euler's whole kick (gravity,
+// then drag_kick), or velocity Verlet's first half (drag_first_half) or
+// second (gravity, then drag_second_half). Without gravity nothing is added,
+// so that no zero changes its sign.
 enum class DragKick : unsigned char { whole, verlet_first, verlet_second };
-MARBLES_HD_INLINE Vec3 drag_update(DragKick kick, const Vec3& v, const Vec3& gh, real k1, real k2, real h) {
-  return kick == DragKick::verlet_first    ? drag_first_half(v, gh, k1, k2, h)
-         : kick == DragKick::verlet_second ? drag_second_half(v, k1, k2, h)
-                                           : drag_kick(v, k1, k2, h);
+MARBLES_HD_INLINE Vec3 drag_update(DragKick kick, const Vec3& v, bool gravity, const Vec3& gh, real k1, real k2,
+                                   real h) {
+  if (kick == DragKick::verlet_first) return drag_first_half(v, gravity ? gh : Vec3{}, k1, k2, h);
+  const Vec3 w = gravity ? v + gh : v;
+  return kick == DragKick::verlet_second ? drag_second_half(w, k1, k2, h) : drag_kick(w, k1, k2, h);
 }
 
 // x += h v

@@ -11,12 +11,13 @@ void apply_gravity(const BodiesView& bodies, const Vec3& g, real h) {
     bodies.velocity[i] = gravity_kick(bodies.velocity[i], g, bodies.inv_mass[i], h);
 }
 
-void apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kick, const Vec3& g) {
+void apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kick, const Vec3* g) {
   const auto n = static_cast<std::ptrdiff_t>(bodies.count);
-  const Vec3 gh = g * h;
+  const Vec3 gh = g ? *g * h : Vec3{};
 #pragma omp parallel for schedule(static) if (n > 20000)
   for (std::ptrdiff_t i = 0; i < n; ++i)
-    if (bodies.inv_mass[i] > 0) bodies.velocity[i] = drag_update(kick, bodies.velocity[i], gh, k1, k2, h);
+    if (bodies.inv_mass[i] > 0)
+      bodies.velocity[i] = drag_update(kick, bodies.velocity[i], g != nullptr, gh, k1, k2, h);
 }
 
 bool integrate_positions(const BodiesView& bodies, real h) {

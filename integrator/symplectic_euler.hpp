@@ -12,10 +12,10 @@ void apply_gravity(const BodiesView& bodies, const Vec3& g, real h);
 
 // Body-force stage: air drag with linear rate k1 (1/s) and quadratic
 // coefficient k2 (1/m), see drag_kick.
-// The kick (integrator_math.hpp drag_update); g: gravity, for velocity
-// Verlet's first half, which takes gravity's half kick with drag's.
+// The kick (integrator_math.hpp drag_update), gravity's kick over h with it
+// where g is given (one pass: no apply_gravity then).
 void apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kick = DragKick::whole,
-                const Vec3& g = {});
+                const Vec3* g = nullptr);
 
 // Position stage: x += h v. Returns true when a position, velocity or
 // angular velocity is not finite afterwards (the step's non_finite flag).

@@ -30,17 +30,14 @@ class CpuStep final : public StepBackend {
         m_solver(model.solver) {}
 
   void apply_body_forces(real h) override {
+    // With drag, gravity's kick is taken in drag's pass (drag_update).
     const BodiesView bodies = m_world.view();
-    // Velocity Verlet with drag: gravity's half kick and drag's in one, with
-    // the second half (after the drift) the trapezoidal rule (integrator_math.hpp).
-    if (m_model.drag && m_model.verlet) {
+    if (m_model.drag)
       integrator::apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, m_model.first_kick(h),
-                             integrator::DragKick::verlet_first,
-                             m_model.gravity ? m_model.g : Vec3{});
-      return;
-    }
-    if (m_model.gravity) integrator::apply_gravity(bodies, m_model.g, m_model.first_kick(h));
-    if (m_model.drag) integrator::apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h);
+                             m_model.verlet ? integrator::DragKick::verlet_first : integrator::DragKick::whole,
+                             m_model.gravity ? &m_model.g : nullptr);
+    else if (m_model.gravity)
+      integrator::apply_gravity(bodies, m_model.g, m_model.first_kick(h));
   }
 
   // Swept bounds: the broad phase sees each sphere grown by its reach (its
@@ -121,10 +118,11 @@ class CpuStep final : public StepBackend {
 
   void integrate_positions(real h) override {
     m_non_finite = integrator::integrate_positions(m_world.view(), h) || m_non_finite;
-    if (m_model.gravity && m_model.verlet) integrator::apply_gravity(m_world.view(), m_model.g, m_model.second_kick(h));
-    if (m_model.drag && m_model.verlet)
+    if (m_model.verlet && m_model.drag)
       integrator::apply_drag(m_world.view(), m_model.drag_linear, m_model.drag_quadratic, m_model.second_kick(h),
-                             integrator::DragKick::verlet_second);
+                             integrator::DragKick::verlet_second, m_model.gravity ? &m_model.g : nullptr);
+    else if (m_model.verlet && m_model.gravity)
+      integrator::apply_gravity(m_world.view(), m_model.g, m_model.second_kick(h));
     narrowphase::advance_walls(m_walls, h);
   }
 

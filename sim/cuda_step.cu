@@ -288,18 +288,14 @@ class CudaStep final : public StepBackend {
     if (m_one_wait) keep_substep_start();
     ++m_substep_index;
     const BodiesView bodies = m_device.view();
-    // Velocity Verlet with drag: gravity's half kick and drag's in one (as on the CPU).
-    if (m_model.drag && m_model.verlet) {
-      integrator::cuda::launch_apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, m_model.first_kick(h),
-                                          integrator::DragKick::verlet_first, m_model.gravity ? m_model.g : Vec3{},
-                                          m_sm, m_stream);
-      return;
-    }
-    if (m_model.gravity)
-      integrator::cuda::launch_apply_gravity(bodies, m_model.g, m_model.first_kick(h), m_sm, m_stream);
+    // With drag, gravity's kick is taken in drag's launch (as on the CPU).
     if (m_model.drag)
-      integrator::cuda::launch_apply_drag(bodies, m_model.drag_linear, m_model.drag_quadratic, h,
-                                          integrator::DragKick::whole, {}, m_sm, m_stream);
+      integrator::cuda::launch_apply_drag(
+          bodies, m_model.drag_linear, m_model.drag_quadratic, m_model.first_kick(h),
+          m_model.verlet ? integrator::DragKick::verlet_first : integrator::DragKick::whole,
+          m_model.gravity ? &m_model.g : nullptr, m_sm, m_stream);
+    else if (m_model.gravity)
+      integrator::cuda::launch_apply_gravity(bodies, m_model.g, m_model.first_kick(h), m_sm, m_stream);
   }
 
   // Swept bounds -> broad phase -> sphere contacts (in pair order), then wall
@@ -647,12 +643,12 @@ class CudaStep final : public StepBackend {
   void integrate_positions(real h) override {
     integrator::cuda::launch_integrate_positions(m_device.view(), h, m_flags.get_as<unsigned>(), m_sm, m_stream,
                                                  skip());  // flags[0]
-    if (m_model.gravity && m_model.verlet)
-      integrator::cuda::launch_apply_gravity(m_device.view(), m_model.g, m_model.second_kick(h), m_sm, m_stream);
-    if (m_model.drag && m_model.verlet)
+    if (m_model.verlet && m_model.drag)
       integrator::cuda::launch_apply_drag(m_device.view(), m_model.drag_linear, m_model.drag_quadratic,
-                                          m_model.second_kick(h), integrator::DragKick::verlet_second, {}, m_sm,
-                                          m_stream);
+                                          m_model.second_kick(h), integrator::DragKick::verlet_second,
+                                          m_model.gravity ? &m_model.g : nullptr, m_sm, m_stream);
+    else if (m_model.verlet && m_model.gravity)
+      integrator::cuda::launch_apply_gravity(m_device.view(), m_model.g, m_model.second_kick(h), m_sm, m_stream);
     nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream, skip());
   }
 
