@@ -51,34 +51,32 @@ const CLI::Validator kFinite(
     },
     "FINITE");
 
-// Lengths that reach the step in its precision: finite there too.
-const CLI::Validator kFiniteReal(
+// Lengths that reach the step in its precision (after kFinite): within it.
+const CLI::Validator kWithinReal(
     [](std::string& text) {
       const double v = std::strtod(text.c_str(), nullptr);
-      if (!std::isfinite(v)) return "must be a finite number, got " + text;
-      if (std::abs(v) > static_cast<double>(std::numeric_limits<marbles::real>::max()))
-        return "out of range for " + std::string(marbles::kRealName) + " precision, got " + text;
-      return std::string();
+      return std::abs(v) > static_cast<double>(std::numeric_limits<marbles::real>::max())
+                 ? "out of range for " + std::string(marbles::kRealName) + " precision, got " + text
+                 : std::string();
     },
-    "FINITE");
+    "WITHIN-PRECISION");
 
-// Counts and amounts, said in plain words (CLI11's own ranges print the
-// largest double in full). A NaN is kFinite's to refuse, in its words.
-// Text that is no number is the conversion's to refuse.
-const CLI::Validator kPositive(
-    [](std::string& text) {
-      char* end = nullptr;
-      const double v = std::strtod(text.c_str(), &end);
-      return end != text.c_str() && v <= 0 ? "must be > 0, got " + text : std::string();
-    },
-    "POSITIVE");
-const CLI::Validator kNonNegative(
-    [](std::string& text) {
-      char* end = nullptr;
-      const double v = std::strtod(text.c_str(), &end);
-      return end != text.c_str() && v < 0 ? "must be >= 0, got " + text : std::string();
-    },
-    "NON-NEGATIVE");
+// Counts and amounts at or above 0, said in plain words (CLI11's own ranges
+// print the largest double in full). A NaN is kFinite's to refuse, in its
+// words, and text that is no number the conversion's.
+CLI::Validator at_least_zero(bool strictly) {
+  return CLI::Validator(
+      [strictly](std::string& text) {
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        const bool below = strictly ? v <= 0 : v < 0;
+        return end != text.c_str() && below ? std::string(strictly ? "must be > 0" : "must be >= 0") + ", got " + text
+                                            : std::string();
+      },
+      strictly ? "POSITIVE" : "NON-NEGATIVE");
+}
+const CLI::Validator kPositive = at_least_zero(true);
+const CLI::Validator kNonNegative = at_least_zero(false);
 // A seed: a whole number 0 ... 2^64 - 1, as written (no wrap of -1, no
 // saturation past the top).
 const CLI::Validator kSeed(
@@ -249,7 +247,7 @@ int cli_main(int argc, char** argv) {
   pairs_cmd->add_option("--backend", pairs_backend, "cpu (default), cuda or auto (subdivision and home)")
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   pairs_cmd->add_option("--margin", pairs_margin, "report pairs whose gap is below this (m)")
-      ->check(kFiniteReal & kNonNegative);
+      ->check(kFinite & kWithinReal & kNonNegative);
 
   auto* bench_cmd = app.add_subcommand("bench", "benchmarks (JSON and a table)");
   bench_cmd->require_subcommand(1);
@@ -262,7 +260,7 @@ int cli_main(int argc, char** argv) {
   bench_bp->add_option("--scene", bp.scene, "gas|pile|poly")->check(CLI::IsMember({"gas", "pile", "poly"}));
   bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(kPositive);
   bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")->check(kPositive);
-  bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(kFiniteReal & kNonNegative);
+  bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(kFinite & kWithinReal & kNonNegative);
   bench_bp->add_option("--seed", bp.seed, "random seed of the sphere sets")->check(kSeed);
   bench_bp->add_flag("--json", bp.json, "print JSON");
   add_limit_option(bench_bp, limit_args);
