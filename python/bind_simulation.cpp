@@ -225,15 +225,10 @@ class PySimulation {
       // of its frames and its series.pvd would no longer name the rest.
       const std::vector<std::filesystem::path> earlier = earlier_run_files(dir);
       if (!earlier.empty() && !overwrite)
-        throw nb::value_error((dir + " holds the output of an earlier run (" + std::to_string(earlier.size()) +
-                               " files, e.g. " + earlier.front().filename().string() +
-                               "); write_frame(dir, overwrite=True) replaces it, or choose another folder")
+        throw nb::value_error((earlier_run_text(dir, earlier) +
+                               "; write_frame(dir, overwrite=True) replaces it, or choose another folder")
                                   .c_str());
-      for (const std::filesystem::path& file : earlier) {
-        std::error_code ec;
-        if (!std::filesystem::remove(file, ec) && ec)
-          throw RuntimeFailure("write_frame: cannot remove " + file.string() + ": " + ec.message());
-      }
+      remove_earlier_run(earlier);
       auto writer = std::make_unique<render::VtkSeriesWriter>(dir, render::parse_point_fields(m_scene.output.fields),
                                                               frame_metadata(m_scene));
       it = m_frames.emplace(key, std::move(writer)).first;

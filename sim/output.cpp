@@ -111,6 +111,19 @@ std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path
   return found;
 }
 
+std::string earlier_run_text(const std::string& dir, const std::vector<std::filesystem::path>& files) {
+  return dir + " holds the output of an earlier run (" + std::to_string(files.size()) + " files, e.g. " +
+         files.front().filename().string() + ")";
+}
+
+void remove_earlier_run(const std::vector<std::filesystem::path>& files) {
+  for (const std::filesystem::path& file : files) {
+    std::error_code ec;
+    std::filesystem::remove(file, ec);
+    if (ec) throw RuntimeFailure("cannot remove " + file.string() + " of the earlier run: " + ec.message());
+  }
+}
+
 render::RenderOptions render_options(const scene::Scene& scene) {
   const scene::RenderSpec& spec = scene.output.render;
   render::RenderOptions o;

@@ -34,6 +34,11 @@ render::ContactSnapshot make_contact_snapshot(const Simulation& sim);
 // series.pvd, contacts.pvd, walls.pvd, thermo.csv, an old walls.json, materials.txt, movie.mp4, frames/frame_*.vtp,
 // images/frame_*.png, checkpoints/step_*.mck, contacts/contacts_*.vtp); other files are not ours.
 std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir);
+// "DIR holds the output of an earlier run (N files, e.g. NAME)": a refusal's
+// first words, its remedy the caller's (`files` not empty).
+std::string earlier_run_text(const std::string& dir, const std::vector<std::filesystem::path>& files);
+// Removes them (overwriting that run); RuntimeFailure naming a file that stays.
+void remove_earlier_run(const std::vector<std::filesystem::path>& files);
 
 // summary.json's figures of the world at a run's end beside
 // kinetic_energy_end (World::motion), named as the summary names them; the

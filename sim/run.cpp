@@ -151,9 +151,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       restart_here ? std::vector<std::filesystem::path>{} : earlier_run_files(sc.output.dir);
   if (!earlier.empty() && !options.overwrite)
     throw InputError(SourceLocation{}, options.out_dir ? "--out" : "output.dir",
-                     sc.output.dir + " holds the output of an earlier run (" + std::to_string(earlier.size()) +
-                         " files, e.g. " + earlier.front().filename().string() +
-                         "); --overwrite replaces it, or choose another folder");
+                     earlier_run_text(sc.output.dir, earlier) + "; --overwrite replaces it, or choose another folder");
   const scene::GeneratedParticles particles = scene::generate_particles(sc);
   warn_risky_settings(sc, particles, err);
   std::ostringstream quiet_sink;  // --quiet: only the summary
@@ -211,11 +209,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
                             probe ? probe->progress() : std::vector<double>{}, sim.ids()});
   };
 
-  for (const std::filesystem::path& file : earlier) {  // --overwrite, once the scene is known to run
-    std::error_code ec;
-    std::filesystem::remove(file, ec);
-    if (ec) throw RuntimeFailure("cannot remove " + file.string() + " of the earlier run: " + ec.message());
-  }
+  remove_earlier_run(earlier);  // --overwrite, once the scene is known to run
   RunOutput output(sc, sc.output.dir, sim.walls(), render, err, options.restart.has_value(), &view);
   Progress progress(!options.quiet);
   double step_seconds = 0;
