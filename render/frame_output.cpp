@@ -200,8 +200,7 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
     Snapshot s = read_frame(entries[k].path);
     if (k == 0 && !has_color_data(s, options.color_by))
       log << "warning: " << entries[k].path.filename().string() << " carries no "
-          << (options.color_by == ColorBy::speed ? "velocity" : color_by_name(options.color_by))
-          << " array: colouring by " << color_by_name(options.color_by)
+          << color_data_name(options.color_by) << " array: colouring by " << color_by_name(options.color_by)
           << " draws every sphere in one colour (the run's output.fields lacks it)\n";
     if (s.time == 0 && entries[k].time != 0) s.time = entries[k].time;
     const Image image = renderer.render(s, walls_of(k), camera, range);

@@ -75,6 +75,8 @@ bool has_color_data(const Snapshot& s, ColorBy by) {
   return false;
 }
 
+const char* color_data_name(ColorBy by) { return by == ColorBy::speed ? "velocity" : color_by_name(by); }
+
 ColorRange data_range(const Snapshot& s, ColorBy by) {
   if (s.size() == 0 || !has_color_data(s, by)) return {0, 1};
   ColorRange r{1e300, -1e300};

@@ -60,8 +60,10 @@ struct ColorRange {
 /// Smallest and largest value of the colouring quantity in `snapshot`
 /// ({0, 1} when the snapshot lacks it or is empty).
 ColorRange data_range(const Snapshot& snapshot, ColorBy by);
-// Whether the snapshot carries the array `by` colours by (speed: velocity).
+// Whether the snapshot carries the array `by` colours by, and its name in
+// the frames (speed's is velocity).
 bool has_color_data(const Snapshot& snapshot, ColorBy by);
+const char* color_data_name(ColorBy by);
 
 /// The walls where they are at `time` (s) when each moves with its constant
 /// velocity from its given position at time 0 (what the narrow phase does).
