@@ -41,15 +41,20 @@ class Study : public ::testing::Test {
   void SetUp() override {
     if (!fs::exists(kMarbles)) GTEST_SKIP() << kMarbles << " is not built";
   }
-  StudyResult study(const std::string& scene, std::vector<std::string> vary, const test::ScratchDir& dir) {
+  // One run a setting into `out`, quietly, with the built program.
+  static StudyOptions options(const std::string& scene, const std::string& out) {
     StudyOptions o;
     o.scene_path = scene;
-    for (const std::string& v : vary) o.vary.push_back(parse_vary(v));
-    o.backend = "cpu";
-    o.out_dir = dir.path();
+    o.out_dir = out;
     o.repeats = 1;
     o.marbles = kMarbles;
     o.progress = false;
+    return o;
+  }
+  StudyResult study(const std::string& scene, std::vector<std::string> vary, const test::ScratchDir& dir) {
+    StudyOptions o = options(scene, dir.path());
+    for (const std::string& v : vary) o.vary.push_back(parse_vary(v));
+    o.backend = "cpu";
     std::ostringstream out, err;
     return run_study(o, out, err);
   }
@@ -102,13 +107,8 @@ TEST_F(Study, ErrorFallsWithDtAtTheIntegratorsOrder) {
 // A reference that is deliberately wrong shows as a large error in the study.
 TEST_F(Study, AWrongReferenceShowsAsALargeError) {
   const test::ScratchDir dir("study_wrong");
-  StudyOptions o;
-  o.scene_path = kValidation + "bouncing_ball.yaml";
+  StudyOptions o = options(kValidation + "bouncing_ball.yaml", dir.path());
   o.set = {"reference.rebound_heights.restitution=0.7"};
-  o.out_dir = dir.path();
-  o.repeats = 1;
-  o.marbles = kMarbles;
-  o.progress = false;
   std::ostringstream out, err;
   const StudyResult r = run_study(o, out, err);
   ASSERT_EQ(r.rows.size(), 1u);
@@ -128,14 +128,8 @@ TEST_F(Study, NamesAndPathsAreNeverRunAsCommands) {
   scene.replace(name, 19, "name: \"x'; print system('touch " + marker + "'); set title '\"");
   const std::string path = dir.write("named.yaml", scene);
   const std::string out = dir.path() + "/o';touch " + marker + ";'";
-  StudyOptions o;
-  o.scene_path = path;
-  o.out_dir = out;
-  o.repeats = 1;
-  o.marbles = kMarbles;
-  o.progress = false;
   std::ostringstream text, err;
-  const StudyResult r = run_study(o, text, err);
+  const StudyResult r = run_study(options(path, out), text, err);
   ASSERT_EQ(r.rows.size(), 1u);
   EXPECT_FALSE(fs::exists(marker)) << err.str();
   EXPECT_FALSE(fs::exists(out + "/study.png.tmp"));
