@@ -10,7 +10,7 @@
 // Velocity Verlet (solver.integrator: velocity_verlet) is the same functions
 // in kick-drift-kick order: gravity_kick(h/2), contacts, drift(h),
 // gravity_kick(h/2); with drag each kick is drag_update's, gravity's half
-// with drag's (drag_first_half, then drag_second_half). Under constant
+// with drag's (drag_first_half, then drag_kick). Under constant
 // forces x(t+h) = x + h v + h^2 g / 2 exactly; contacts act on the half-step
 // velocity, the one the drift uses, so speculative contacts keep their
 // no-tunnelling guarantee. With drag the two halves are the trapezoidal
@@ -27,12 +27,22 @@ MARBLES_HD_INLINE Vec3 gravity_kick(const Vec3& v, const Vec3& g, real inv_mass,
   return inv_mass > 0 ? v + g * h : v;
 }
 
-// Air drag dv/dt = -(k1 + k2 |v|) v, integrated implicitly in the speed:
-//   v' = v / (1 + h (k1 + k2 |v|))
-// which never reverses a velocity, however large h k is (explicit Euler would).
+// Air drag dv/dt = -(k1 + k2 |v|) v over h, backward Euler:
+//   v' = v - h (k1 + k2 |v'|) v',
+// solved exactly for the speed s = |v'|: h k2 s^2 + (1 + h k1) s = |v|, taken
+// in the form that neither cancels nor divides by k2. It never reverses a
+// velocity and never overshoots, however large h k is, and after gravity's
+// kick it keeps the terminal speed (g / k1, or sqrt(g / k2)) exactly.
+// Symplectic Euler's whole kick and velocity Verlet's second half. (With |v|
+// of the velocity before the update instead of |v'|, as first written,
+// quadratic drag settled g h / 2 off its terminal speed, alternated about it
+// where stiff, and left velocity Verlet first order.)
 // k1 in 1/s (linear), k2 in 1/m (quadratic).
 MARBLES_HD_INLINE Vec3 drag_kick(const Vec3& v, real k1, real k2, real h) {
-  return v / (real(1) + h * (k1 + k2 * length(v)));
+  const real speed = length(v);
+  const real a = real(1) + h * k1;
+  const real scale = real(2) / (a + std::sqrt(a * a + real(4) * h * k2 * speed));
+  return v * scale;
 }
 
 // Velocity Verlet's first half kick with drag, gravity's half (gh = g h,
@@ -41,7 +51,7 @@ MARBLES_HD_INLINE Vec3 drag_kick(const Vec3& v, real k1, real k2, real h) {
 // direction (e <= 1); past it (h k > 2 for the whole step: drag stiff for
 // the step) a backward-Euler half, (v + gh) / (1 + e), so that no drag
 // reverses a velocity. Either way, with the second half (gravity's half kick,
-// then drag_second_half) the terminal speed is g / k exactly. (Both halves backward
+// then drag_kick) the terminal speed is g / k exactly. (Both halves backward
 // Euler, as first written, left the positions first order: off by v0 h / 4
 // over a decay.)
 MARBLES_HD_INLINE Vec3 drag_first_half(const Vec3& v, const Vec3& gh, real k1, real k2, real h) {
@@ -49,29 +59,17 @@ MARBLES_HD_INLINE Vec3 drag_first_half(const Vec3& v, const Vec3& gh, real k1, r
   return e <= real(1) ? v * (real(1) - e) + gh : (v + gh) / (real(1) + e);
 }
 
-// Velocity Verlet's second half of drag, after its gravity half kick: the
-// implicit half of the trapezoidal rule, v' = v - h (k1 + k2 |v'|) v',
-// solved exactly for the speed s = |v'|: h k2 s^2 + (1 + h k1) s = |v|, taken
-// in the form that neither cancels nor divides by k2. (drag_kick's |v| of the
-// velocity before the kick would leave quadratic drag first order.)
-MARBLES_HD_INLINE Vec3 drag_second_half(const Vec3& v, real k1, real k2, real h) {
-  const real speed = length(v);
-  const real a = real(1) + h * k1;
-  const real scale = real(2) / (a + std::sqrt(a * a + real(4) * h * k2 * speed));
-  return v * scale;
-}
-
 // A velocity kick where drag is on, gravity's (gh = g h, where `gravity`)
 // taken with it in the same pass: symplectic Euler's whole kick (gravity,
 // then drag_kick), or velocity Verlet's first half (drag_first_half) or
-// second (gravity, then drag_second_half). Without gravity nothing is added,
+// second (gravity, then drag_kick over the half step). Without gravity nothing is added,
 // so that no zero changes its sign.
 enum class DragKick : unsigned char { whole, verlet_first, verlet_second };
 MARBLES_HD_INLINE Vec3 drag_update(DragKick kick, const Vec3& v, bool gravity, const Vec3& gh, real k1, real k2,
                                    real h) {
   if (kick == DragKick::verlet_first) return drag_first_half(v, gravity ? gh : Vec3{}, k1, k2, h);
   const Vec3 w = gravity ? v + gh : v;
-  return kick == DragKick::verlet_second ? drag_second_half(w, k1, k2, h) : drag_kick(w, k1, k2, h);
+  return drag_kick(w, k1, k2, h);
 }
 
 // x += h v

@@ -14,6 +14,7 @@
 #include "core/device.hpp"
 #include "core/error.hpp"
 #include "sim/checkpoint.hpp"
+#include "sim/limits.hpp"
 #include "sim/scene.hpp"
 #include "sim/study.hpp"
 #include "sim/version.hpp"
@@ -76,6 +77,8 @@ NB_MODULE(_marbles, m) {
     const marbles::DeviceInfo& d = marbles::cuda_device();
     return nb::make_tuple(d.available, d.available ? d.name : d.why_not);
   });
+  // The substeps a run may take (sim/limits.hpp), to which Simulation.step and run hold each call.
+  m.def("substeps_limit", [] { return marbles::limits().substeps; });
   m.attr("version") = marbles::kMarblesVersion;
   m.attr("commit") = marbles::kMarblesCommit;
 }

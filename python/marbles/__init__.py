@@ -262,12 +262,12 @@ class Simulation:
             warnings.warn(text, stacklevel=3)
 
     # --- stepping ---
-    _SUBSTEPS_LIMIT = 1e10  # a run's substeps, as `marbles run` holds them (README "Limits")
-
     def _check_substeps(self, steps, what):
-        if steps * self.substeps > self._SUBSTEPS_LIMIT:
+        # A run's substeps limit, the one `marbles run` holds a run to (README "Limits").
+        limit = _marbles.substeps_limit()
+        if steps * self.substeps > limit:
             raise ValueError(f"{what}: {steps} steps make {steps * self.substeps:.3g} substeps, more than the "
-                             f"limit {self._SUBSTEPS_LIMIT:.0e} a call")
+                             f"limit {limit:.0e} a call")
 
     def step(self, n=1):
         """Advances n steps of dt. Arrays handed out are checked first (a

@@ -60,17 +60,41 @@ TEST(Drag, LinearDecayIsExponential) {
   }
 }
 
-// Quadratic drag against gravity: the fall speed approaches sqrt(g / k2),
-// to first order in h (the scheme settles g h / 2 below it).
+// Quadratic drag against gravity: the fall speed settles on sqrt(g / k2)
+// itself, not within g h of it (the update is implicit in the new speed), at a
+// substep of 1 ms and where drag is stiff for it (h k2 c = 44 at 0.1 s).
 TEST(Drag, QuadraticDragGivesTerminalVelocity) {
-  const double g = 9.81, k2 = 0.5;
-  OneBody b;
-  const real h = real(1e-3);
-  for (int s = 0; s < 20000; ++s) {
-    integrator::apply_gravity(b.view(), {0, 0, real(-g)}, h);
-    integrator::apply_drag(b.view(), 0, real(k2), h);
+  const double g = 9.81, k2 = 0.5, c = std::sqrt(g / k2);
+  for (const double h : {1e-3, 0.1}) {
+    OneBody b;
+    for (int s = 0; s < static_cast<int>(20.0 / h); ++s) {
+      integrator::apply_gravity(b.view(), {0, 0, real(-g)}, real(h));
+      integrator::apply_drag(b.view(), 0, real(k2), real(h));
+    }
+    EXPECT_NEAR(-b.v[0].z, c, 1e-5 * c) << "h = " << h;
   }
-  EXPECT_NEAR(-b.v[0].z, std::sqrt(g / k2), g * h);
+}
+
+// Stiff quadratic drag (h k2 |v| up to 10^4) falling from far above the
+// terminal speed, and rising from rest: the speed approaches sqrt(g / k2)
+// from one side, never past it (a |v| of the velocity before the update made
+// it alternate about c), and each update moves it towards c.
+TEST(Drag, StiffQuadraticDragApproachesTheTerminalSpeedFromOneSide) {
+  const double g = 9.81, k2 = 50.0, h = 0.05, c = std::sqrt(g / k2);
+  for (const double v0 : {-400.0, 0.0}) {
+    OneBody b;
+    b.v[0] = {0, 0, real(v0)};
+    const Vec3 gravity{0, 0, real(-g)};
+    double gap = std::abs(-v0 - c);
+    for (int s = 0; s < 200; ++s) {
+      integrator::apply_drag(b.view(), 0, real(k2), real(h), integrator::DragKick::whole, &gravity);
+      const double speed = -static_cast<double>(b.v[0].z);
+      ASSERT_TRUE(v0 < 0 ? speed >= c * (1 - 1e-6) : speed <= c * (1 + 1e-6)) << "step " << s << ": " << speed;
+      EXPECT_LE(std::abs(speed - c), gap * (1 + 1e-6) + 1e-6 * c) << "step " << s;
+      gap = std::abs(speed - c);
+    }
+    EXPECT_NEAR(-b.v[0].z, c, 1e-5 * c) << "from " << v0;
+  }
 }
 
 // The implicit drag never reverses a velocity, even for h k >> 1.

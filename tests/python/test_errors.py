@@ -1,5 +1,6 @@
 # tests/python/test_errors.py — bad input raises marbles.SceneError with the
 # place it names (file, line, column, key), as the command line says it.
+import re
 import subprocess
 
 import numpy as np
@@ -134,10 +135,13 @@ def test_counts_are_whole_numbers(pile):
         with pytest.raises(error, match="run: until"):
             sim.run(until=until)
     assert sim.steps == 15
-    # Held to the run's substeps limit (1e10), as `marbles run --duration` is: no endless call.
-    for call in (lambda: sim.step(np.uint64(2**64 - 1)), lambda: sim.step(np.float32(1e11)),
-                 lambda: sim.run(until=1e20)):
-        with pytest.raises(ValueError, match="more than the limit"):
+    # Held to the run's substeps limit (the program's own, sim/limits.hpp), as `marbles run --duration` is:
+    # no endless call.
+    limit = marbles._marbles.substeps_limit()
+    assert limit > 0
+    for call in (lambda: sim.step(np.uint64(2**64 - 1)), lambda: sim.step(np.float32(limit * 10)),
+                 lambda: sim.step(int(limit // sim.substeps) + 1), lambda: sim.run(until=1e20)):
+        with pytest.raises(ValueError, match=re.escape(f"more than the limit {limit:.0e}")):
             call()
     assert sim.steps == 15
     # A 0-d array is its one value, in a scene dict and in an override.
