@@ -210,8 +210,11 @@ std::optional<std::string> coarse_substeps(const Setting& s, const scene::Scene&
          at_least(s.dt * std::sqrt(s.g / slop)) + " (or lower time.dt)";
 }
 
-// Float keeps 24 bits: positions across the scene are rounded to about
-// extent * 2^-24, which reaches the solver's slop at 1e5 smallest radii.
+// Float keeps 24 bits: a position is rounded to about 2^-24 of its own size,
+// so the scene's farthest point from the origin (the box around every sphere
+// and finite wall) sets the rounding, not the scene's span: a small pile 10
+// km from the origin rounds as a 10 km scene does. That reaches the solver's
+// slop at 1e5 smallest radii.
 std::optional<std::string> float_precision(const Setting& s, const scene::Scene& scene,
                                            const scene::GeneratedParticles& p, bool single_precision) {
   if (!single_precision) return std::nullopt;
@@ -219,13 +222,16 @@ std::optional<std::string> float_precision(const Setting& s, const scene::Scene&
   for (std::size_t i = 0; i < p.size(); ++i) box.add(p.position[i], p.radius[i]);
   for (const scene::WallSpec& w : scene.walls)
     if (auto b = wall_box(w)) box.add(*b);
+  double reach = 0;  // the largest coordinate's size
+  for (int a = 0; a < 3; ++a) reach = std::max({reach, std::fabs(box.lo[a]), std::fabs(box.hi[a])});
+  if (!(reach > kFloatRange * s.r_min)) return std::nullopt;
+  const double rounding = std::ldexp(reach, -24);
   const double extent = box.largest_side();
-  if (!(extent > kFloatRange * s.r_min)) return std::nullopt;
-  const double rounding = std::ldexp(extent, -24);
-  return "float precision: the scene spans " + num(extent) + " m, " + num(extent / s.r_min) +
-         " times the smallest radius (more than " + num(kFloatRange) + "): float positions there are rounded to about " +
-         num(rounding) + " m, " + num(100 * rounding / s.r_min) +
-         " % of that radius; build with -DMARBLES_DOUBLE=ON or make the scene smaller";
+  return "float precision: the scene reaches " + num(reach) + " m from the origin (it spans " + num(extent) +
+         " m), " + num(reach / s.r_min) + " times the smallest radius (more than " + num(kFloatRange) +
+         "): float positions there are rounded to about " + num(rounding) + " m, " + num(100 * rounding / s.r_min) +
+         " % of that radius; set solver.precision: double (or --precision double)" +
+         (reach > 2 * extent ? ", or move the scene to the origin" : ", or make the scene smaller");
 }
 
 }  // namespace

@@ -110,6 +110,30 @@ TEST_F(CliCheck, RiskySettingsWarnOnStderrAndExitZero) {
   EXPECT_EQ(o.err.rfind("warning: substeps too coarse for gravity: ", 0), 0u) << o.err;
 }
 
+// Spheres that start overlapping: `check` warns as `run` does, counting the
+// pairs deeper than 1 % of the smaller radius (three of four here: the fourth
+// pair overlaps by 0.5 %), and exits 0.
+TEST_F(CliCheck, InitialOverlapsWarnOnStderrAsRunDoes) {
+  const test::ScratchDir scratch("cli_overlap");
+  const std::string scene = scratch.path() + "/overlap.yaml";
+  std::ofstream(scene) << SCENE_TIME SCENE_MATERIALS
+      "particles:\n"
+      "  - list: {positions: [[0, 0, 1], [0.15, 0, 1], [0, 0, 1]], radius: 0.1}\n"
+      "  - list: {positions: [[5, 0, 1], [5.1995, 0, 1]], radius: 0.1}\n";
+  const Outcome o = run_check(scene, scratch);
+  EXPECT_EQ(o.exit_code, 0) << o.err;
+  EXPECT_NE(o.err.find("warning: 3 pair(s) of spheres start overlapping by more than 1% of the smaller radius"),
+            std::string::npos)
+      << o.err;
+
+  std::ofstream(scene) << SCENE_TIME SCENE_MATERIALS
+      "particles:\n"
+      "  - list: {positions: [[5, 0, 1], [5.1995, 0, 1]], radius: 0.1}\n";
+  const Outcome touching = run_check(scene, scratch);
+  EXPECT_EQ(touching.exit_code, 0) << touching.err;
+  EXPECT_EQ(touching.err.find("start overlapping"), std::string::npos) << touching.err;
+}
+
 class CliCheckBad : public ::testing::TestWithParam<test::BadScene> {
  protected:
   void SetUp() override {

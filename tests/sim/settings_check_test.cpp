@@ -135,8 +135,25 @@ TEST(SettingsCheck, FloatPrecisionOnlyInFloat) {
 
   const std::vector<std::string> w = warnings(s, g, kFloat);
   ASSERT_EQ(w.size(), 1u);
-  const double extent = apart + 2 * r;
-  EXPECT_TRUE(contains(w[0], "the scene spans " + sig3(extent) + " m, " + sig3(extent / r) + " times")) << w[0];
+  const double reach = apart + r, extent = apart + 2 * r;
+  EXPECT_TRUE(contains(w[0], "the scene reaches " + sig3(reach) + " m from the origin (it spans " + sig3(extent) +
+                                 " m), " + sig3(reach / r) + " times"))
+      << w[0];
+  EXPECT_TRUE(contains(w[0], "set solver.precision: double (or --precision double), or make the scene smaller")) << w[0];
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+
+  // Two close spheres far from the origin: rounded as coarsely as a scene that large.
+  const double far = 1000;
+  g = {};
+  add_sphere(g, {real(far), real(-far), 0}, real(r));
+  add_sphere(g, {real(far + 4 * r), real(-far), 0}, real(r));
+  const std::vector<std::string> distant = warnings(s, g, kFloat);
+  ASSERT_EQ(distant.size(), 1u);
+  const double span = double(g.position[1].x) - double(g.position[0].x) + 2 * r;  // as the float positions hold it
+  EXPECT_TRUE(contains(distant[0], "the scene reaches " + sig3(double(g.position[1].x) + r) +
+                                       " m from the origin (it spans " + sig3(span) + " m)"))
+      << distant[0];
+  EXPECT_TRUE(contains(distant[0], "or move the scene to the origin")) << distant[0];
   EXPECT_TRUE(warnings(s, g, kDouble).empty());
 
   // Close spheres in a large box: the walls count too.
@@ -147,7 +164,9 @@ TEST(SettingsCheck, FloatPrecisionOnlyInFloat) {
   s.walls.push_back(box({-300, -1, -1}, {300, 1, 1}));
   const std::vector<std::string> boxed = warnings(s, g, kFloat);
   ASSERT_EQ(boxed.size(), 1u);
-  EXPECT_TRUE(contains(boxed[0], "the scene spans " + sig3(600.0) + " m")) << boxed[0];
+  EXPECT_TRUE(contains(boxed[0], "the scene reaches " + sig3(300.0) + " m from the origin (it spans " + sig3(600.0) +
+                                     " m)"))
+      << boxed[0];
 }
 
 TEST(SettingsCheck, ShippedScenesAreSilent) {
