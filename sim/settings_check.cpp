@@ -147,8 +147,22 @@ Setting read_setting(const scene::Scene& scene, const scene::GeneratedParticles&
   return s;
 }
 
-// Fastest sphere: its initial speed plus a fall from the highest centre to
-// the lowest centre or wall bottom, against the smallest radius per substep.
+// The fastest a moving wall can set a sphere going: twice a translating
+// wall's speed (a sphere at rest struck elastically), a spinning cylinder's
+// surface speed (friction carries a sphere up to it). 0 without walls.
+double wall_push(const scene::Scene& scene) {
+  if (!scene.has(Effect::walls)) return 0;
+  double push = 0;
+  for (const scene::WallSpec& w : scene.walls) {
+    push = std::max(push, 2 * double(length(w.velocity)));
+    if (w.kind == scene::WallSpec::Kind::cylinder) push = std::max(push, std::fabs(w.angular_velocity) * w.radius);
+  }
+  return push;
+}
+
+// Fastest sphere: its initial speed, or what a moving wall gives it, plus a
+// fall from the highest centre to the lowest centre or wall bottom, against
+// the smallest radius per substep.
 std::optional<std::string> fast_motion(const Setting& s, const scene::Scene& scene,
                                        const scene::GeneratedParticles& p) {
   double fall = 0;
@@ -163,11 +177,15 @@ std::optional<std::string> fast_motion(const Setting& s, const scene::Scene& sce
         if (auto b = wall_bottom(w, s.up)) bottom = std::min(bottom, *b);
     fall = std::max(0.0, top - bottom);
   }
-  const double v = s.speed + std::sqrt(2 * s.g * fall);
+  const double pushed = wall_push(scene);
+  const double v = std::max(s.speed, pushed) + std::sqrt(2 * s.g * fall);
   const double move = v * s.h;
   if (!(move > s.r_min)) return std::nullopt;
+  const std::string start = s.speed >= pushed ? num(s.speed) + " m/s at the start"
+                                              : num(pushed) + " m/s from a moving wall (twice a moving wall's speed, or "
+                                                              "a spinning wall's surface speed)";
   return "dt so large that the fastest sphere moves " + num(move) + " m (" + num(move / s.r_min) +
-         " radii) per substep: up to " + num(v) + " m/s (" + num(s.speed) + " m/s at the start, plus a fall of " +
+         " radii) per substep: up to " + num(v) + " m/s (" + start + ", plus a fall of " +
          num(fall) + " m) over h = dt / substeps = " + num(s.h) + " s, more than the smallest radius " +
          num(s.r_min) + " m, so it can pass through a sphere or a wall; raise time.substeps to at least " +
          at_least(v * s.dt / s.r_min) + " (or lower time.dt)";

@@ -83,6 +83,46 @@ TEST(SettingsCheck, FastMotionFromTheInitialSpeed) {
   EXPECT_TRUE(contains(w[0], "moves " + sig3(move) + " m (" + sig3(move / r) + " radii) per substep")) << w[0];
 }
 
+// Spheres at rest, a wall driven at 30 m/s: a struck sphere can leave at
+// twice that, which the rule counts (a piston at 50 m/s, dt = 1 ms, 1 cm
+// spheres, once let spheres pass through each other with no warning). A
+// spinning drum counts its surface speed.
+TEST(SettingsCheck, FastMotionFromAMovingWall) {
+  const double dt = 1e-3, r = 0.01, speed = 30;
+  scene::Scene s = make_scene(dt, 1, {Effect::collisions, Effect::walls}, 0.5);
+  scene::WallSpec piston = plane({-0.05, 0, 0}, {1, 0, 0});
+  piston.velocity = {real(speed), 0, 0};
+  s.walls.push_back(piston);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, 0}, real(r));
+  add_sphere(g, {0.06, 0, 0}, real(r));
+
+  const std::vector<std::string> w = warnings(s, g, kDouble);
+  ASSERT_EQ(w.size(), 1u);
+  const double move = 2 * speed * dt, stored_r = g.radius[0];  // the radius as the spheres hold it
+  EXPECT_TRUE(contains(w[0], "moves " + sig3(move) + " m (" + sig3(move / stored_r) + " radii) per substep: up to " +
+                                 sig3(2 * speed) + " m/s (" + sig3(2 * speed) + " m/s from a moving wall"))
+      << w[0];
+  s.time.substeps = static_cast<int>(std::ceil(move / stored_r));
+  EXPECT_TRUE(contains(w[0], "raise time.substeps to at least " + std::to_string(s.time.substeps))) << w[0];
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  s.time.substeps = 1;
+  s.effects = {Effect::collisions};  // without the walls effect the wall moves nothing
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+
+  // A drum of radius 0.5 m spinning at 100 rad/s: 50 m/s at its surface.
+  s.effects = {Effect::collisions, Effect::walls};
+  s.walls[0] = {};
+  s.walls[0].kind = scene::WallSpec::Kind::cylinder;
+  s.walls[0].radius = 0.5;
+  s.walls[0].angular_velocity = -100;
+  const std::vector<std::string> drum = warnings(s, g, kDouble);
+  ASSERT_EQ(drum.size(), 1u);
+  EXPECT_TRUE(contains(drum[0], "up to " + sig3(50.0) + " m/s (" + sig3(50.0) + " m/s from a moving wall")) << drum[0];
+  s.walls[0].angular_velocity = 0;
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+}
+
 TEST(SettingsCheck, TallStackWantsMoreIterations) {
   // A column of 2 x 2 x 50 touching spheres on a floor.
   const double r = 0.01;
