@@ -37,7 +37,8 @@ std::vector<std::string> warnings(const scene::Scene& s, const scene::GeneratedP
   const std::vector<std::string> w = risky_settings(s, g, single);
   for (const std::string& m : w) {
     const bool known = m.rfind("dt so large", 0) == 0 || m.rfind("stack too tall", 0) == 0 ||
-                       m.rfind("substeps too coarse", 0) == 0 || m.rfind("float precision", 0) == 0;
+                       m.rfind("substeps too coarse", 0) == 0 || m.rfind("float precision", 0) == 0 ||
+                       m.rfind("spheres up to", 0) == 0;
     EXPECT_TRUE(known) << m;
   }
   return w;
@@ -120,6 +121,42 @@ TEST(SettingsCheck, FastMotionFromAMovingWall) {
   ASSERT_EQ(drum.size(), 1u);
   EXPECT_TRUE(contains(drum[0], "up to " + sig3(50.0) + " m/s (" + sig3(50.0) + " m/s from a moving wall")) << drum[0];
   s.walls[0].angular_velocity = 0;
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+}
+
+// A sphere 50 times heavier than another (denser, and larger): at dt = 1 ms
+// the rule fires past h x ratio = 30 ms and asks for 12 ms, so 5 substeps; a
+// fixed heavy sphere is a wall and counts for nothing, nor does any ratio
+// without collisions.
+TEST(SettingsCheck, MassRatioWantsSubsteps) {
+  const double dt = 1e-3, r = 0.01, density_ratio = 6.25, size = 2;  // 6.25 x 2^3 = 50
+  scene::Scene s = make_scene(dt, 1, {Effect::collisions}, 0.5);
+  s.materials.push_back(s.materials[0]);
+  s.materials[1].name = "heavy";
+  s.materials[1].density *= density_ratio;
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, 0}, real(r));
+  add_sphere(g, {1, 0, 0}, real(size * r), {}, 1);
+  add_sphere(g, {2, 0, 0}, real(r));
+
+  const std::vector<std::string> w = warnings(s, g, kDouble);
+  ASSERT_EQ(w.size(), 1u);
+  const double ratio = density_ratio * size * size * size;
+  EXPECT_TRUE(contains(w[0], "spheres up to " + sig3(ratio) + " times heavier than the lightest")) << w[0];
+  s.time.substeps = static_cast<int>(std::ceil(dt * ratio / 12e-3));
+  EXPECT_TRUE(contains(w[0], "raise time.substeps to at least " + std::to_string(s.time.substeps))) << w[0];
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  s.time.substeps = 1;
+
+  g.fixed = {0, 1, 0};  // the heavy one fixed
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  g.fixed = {0, 0, 0};
+  s.materials[1].density = s.materials[0].density * 32 / (size * size * size);  // 32: h x ratio = 32 ms
+  ASSERT_EQ(warnings(s, g, kDouble).size(), 1u);
+  s.materials[1].density = s.materials[0].density * 28 / (size * size * size);  // 28: 28 ms, within the rule
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  s.materials[1].density = s.materials[0].density * density_ratio;
+  s.effects = {Effect::walls};
   EXPECT_TRUE(warnings(s, g, kDouble).empty());
 }
 
