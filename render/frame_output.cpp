@@ -117,6 +117,8 @@ void write_material_names(const fs::path& dir, const std::vector<std::string>& n
 
 std::vector<std::string> read_material_names(const fs::path& dir) {
   std::vector<std::string> names;
+  if (!fs::exists(dir / "materials.txt")) return names;
+  require_plain_file(dir / "materials.txt");
   std::ifstream in(dir / "materials.txt");
   for (std::string line; std::getline(in, line);) names.push_back(line);
   return names;

@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "core/format.hpp"
 #include "render/atomic_file.hpp"
 
@@ -77,7 +78,16 @@ namespace {
 
 }  // namespace
 
+void require_plain_file(const fs::path& path) {
+  // A run's outputs are plain files; a device or pipe named in their place
+  // (a .pvd edited, a link) would be read without end or wait for a writer.
+  if (const char* what = not_a_plain_file(path.string()))
+    throw InputError(SourceLocation{path.string(), 0, 0}, "",
+                     std::string("is ") + what + ", not a run's output file (render reads plain files only)");
+}
+
 std::vector<SeriesEntry> read_pvd(const fs::path& pvd_path) {
+  require_plain_file(pvd_path);
   std::ifstream in(pvd_path, std::ios::binary);
   if (!in) throw RuntimeFailure("cannot read " + pvd_path.string());
   std::stringstream buffer;
@@ -670,6 +680,7 @@ std::vector<double> decode_numbers(const fs::path& path, const ArrayTag& tag, co
 }  // namespace
 
 VtpArrays read_vtp_arrays(const fs::path& vtp_path) {
+  require_plain_file(vtp_path);
   std::ifstream in(vtp_path, std::ios::binary);
   if (!in) throw RuntimeFailure("cannot read " + vtp_path.string() + ": no such file");
   std::stringstream buffer;

@@ -186,6 +186,10 @@ VtpArrays read_vtp_arrays(const std::filesystem::path& vtp_path);
 /// some of the arrays radius, velocity, angular_velocity, id, material) into a
 /// snapshot; missing arrays stay empty; time and step come from the field data
 /// TimeValue and step when present. Throws marbles::RuntimeFailure.
+// Refuses (InputError naming the path) a path that is a folder, pipe, socket
+// or device: the readers below and render's read only plain files.
+void require_plain_file(const std::filesystem::path& path);
+
 Snapshot read_vtp(const std::filesystem::path& vtp_path);
 
 }  // namespace marbles::render

@@ -3,6 +3,8 @@
 // camera, occlusion culling, .pvd parsing.
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -302,6 +304,41 @@ TEST(Pvd, ParsesEntriesRelativeToItsFolder) {
   EXPECT_EQ(entries[1].time, 0.25);
   EXPECT_EQ(entries[1].path, dir / "frames" / "frame_000001.vtp");
   EXPECT_THROW(read_pvd(dir / "missing.pvd"), RuntimeFailure);
+}
+
+// A device or a pipe where a run's file should be (a .pvd edited or linked
+// to one): refused by what it is, naming the path, before any byte is read
+// (a device would be read without end, a pipe would wait for a writer).
+TEST(Pvd, DevicesAndPipesAreRefusedByWhatTheyAre) {
+  const fs::path dir = fresh_dir("pvd_devices");
+  const fs::path pipe = dir / "frame_000001.vtp";
+  ASSERT_EQ(mkfifo(pipe.c_str(), 0600), 0);
+  write_file_atomic(dir / "series.pvd",
+                    "<VTKFile type=\"Collection\"><Collection>\n"
+                    "  <DataSet timestep=\"0\" file=\"/dev/zero\"/>\n"
+                    "  <DataSet timestep=\"1\" file=\"frame_000001.vtp\"/>\n"
+                    "</Collection></VTKFile>\n");
+  const auto entries = read_pvd(dir / "series.pvd");
+  ASSERT_EQ(entries.size(), 2u);
+  const auto refusal = [](const fs::path& path, const auto& read) {
+    try {
+      read(path);
+      ADD_FAILURE() << path << " was read";
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const auto frame = [](const fs::path& p) { read_vtp(p); };
+  const auto walls = [](const fs::path& p) { read_walls_vtp(p); };
+  const auto pvd = [](const fs::path& p) { read_pvd(p); };
+  EXPECT_NE(refusal(entries[0].path, frame).find("/dev/zero: is a device"), std::string::npos);
+  EXPECT_NE(refusal(entries[0].path, walls).find("is a device"), std::string::npos);
+  EXPECT_NE(refusal(entries[1].path, frame).find("frame_000001.vtp: is a pipe"), std::string::npos);
+  EXPECT_NE(refusal(pipe, pvd).find("is a pipe"), std::string::npos);
+  EXPECT_NE(refusal(dir, pvd).find("is a folder"), std::string::npos);
+  fs::create_symlink("/dev/zero", dir / "walls.pvd");  // a link is followed
+  EXPECT_NE(refusal(dir / "walls.pvd", pvd).find("is a device"), std::string::npos);
 }
 
 TEST(Camera, ParsesTheCommandLineForm) {
