@@ -203,7 +203,9 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) throw RuntimeFailure("cannot create the output folder " + dir + ": " + ec.message());
-  for (const char* sub : {"", "frames", "images"}) render::remove_stale_temporaries(std::filesystem::path(dir) / sub);
+  // A dead run's temporaries, in every folder a run writes files into.
+  for (const char* sub : {"", "frames", "images", "contacts", "walls", "checkpoints"})
+    render::remove_stale_temporaries(std::filesystem::path(dir) / sub);
   const render::FrameMetadata metadata = frame_metadata(scene);
   render::write_material_names(dir, metadata.material_names);
   if (scene.output.vtk_every > 0) {

@@ -12,6 +12,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include "render/frame_output.hpp"
 #include "render/image.hpp"
 #include "render/movie.hpp"
@@ -91,6 +94,32 @@ output:
 }
 
 }  // namespace
+
+// A killed run leaves its temporaries (hidden names ending .tmp-PID-N) in
+// each folder it was writing into; the next run into the folder removes
+// those of a writer that is gone, in every such folder, and keeps those of
+// a live one (this process's).
+TEST(Run, RemovesADeadRunsTemporariesInEveryFolder) {
+  const fs::path dir = temp_dir("temporaries");
+  const pid_t dead = ::fork();
+  if (dead == 0) ::_exit(0);
+  ASSERT_GT(dead, 0);
+  int status = 0;
+  ASSERT_EQ(::waitpid(dead, &status, 0), dead);
+  const std::vector<std::string> folders = {"", "frames", "images", "contacts", "walls", "checkpoints"};
+  std::vector<fs::path> stale, live;
+  for (const std::string& sub : folders) {
+    fs::create_directories(dir / "out" / sub);
+    stale.push_back(dir / "out" / sub / (".file_000020.bin.tmp-" + std::to_string(dead) + "-3"));
+    live.push_back(dir / "out" / sub / (".file_000020.bin.tmp-" + std::to_string(::getpid()) + "-3"));
+    std::ofstream(stale.back()) << "half";
+    std::ofstream(live.back()) << "half";
+  }
+  std::string err;
+  ASSERT_EQ(run_on_cpu(dir, rising_floor_scene(0.01, 0, 0.1, "  vtk: {every: 5}\n"), err), 0) << err;
+  for (const fs::path& p : stale) EXPECT_FALSE(fs::exists(p)) << p;
+  for (const fs::path& p : live) EXPECT_TRUE(fs::exists(p)) << p;
+}
 
 TEST(Run, RenderingDoesNotChangeTheSimulation) {
   const fs::path dir = temp_dir("render");
