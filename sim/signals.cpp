@@ -3,7 +3,10 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <csignal>
+#include <cstdint>
+#include <ctime>
 #include <cstring>
 #include <exception>
 #include <initializer_list>
@@ -12,6 +15,19 @@ namespace marbles {
 namespace {
 
 volatile std::sig_atomic_t g_stop = 0;
+// When the first stop request came (CLOCK_MONOTONIC, ms). A sender that
+// signals the process and then its group (`timeout`, a job control kill)
+// delivers one request twice within microseconds: a repeat this soon is
+// that request again, not a second one.
+std::atomic<std::int64_t> g_first_ms{0};
+static_assert(std::atomic<std::int64_t>::is_always_lock_free, "read and written in a signal handler");
+constexpr std::int64_t kSameRequestMs = 1000;
+
+std::int64_t now_ms() {  // clock_gettime is async-signal-safe
+  timespec t{};
+  ::clock_gettime(CLOCK_MONOTONIC, &t);
+  return std::int64_t(t.tv_sec) * 1000 + t.tv_nsec / 1000000;
+}
 struct sigaction g_previous_int, g_previous_term;
 
 // Async-signal-safe: write(2) and _exit only.
@@ -50,11 +66,13 @@ void on_terminate() {
 }
 
 void on_stop(int sig) {
-  if (g_stop != 0) {  // the second request: now
-    ::signal(sig, SIG_DFL);
+  if (g_stop != 0) {
+    if (now_ms() - g_first_ms.load() < kSameRequestMs) return;  // the first request, delivered again
+    ::signal(sig, SIG_DFL);  // a second request: now
     ::raise(sig);
     return;
   }
+  g_first_ms.store(now_ms());
   g_stop = sig;
 }
 

@@ -6,7 +6,9 @@
 //   written under a temporary name and renamed once checked).
 //   SIGINT, SIGTERM during `marbles run`'s steps: a request to stop. The run
 //   ends the step it is in, writes a checkpoint and exits 1 with the command
-//   that resumes it. A second one ends the process at once.
+//   that resumes it. A second one, a second or more after the first, ends
+//   the process at once (sooner it is the first delivered twice, as a
+//   sender that signals the process and then its group does).
 #pragma once
 
 namespace marbles {

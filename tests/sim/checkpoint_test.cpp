@@ -529,6 +529,27 @@ TEST_F(Checkpoints, InterruptFromOutsideLeavesAResumableCheckpoint) {
       << err2;
 }
 
+// One request delivered twice at once (as `timeout` sends SIGTERM to the
+// process and then to its group): still a stop with its checkpoint and
+// message, not the second request that ends the process at once (exit 143,
+// no message, as it was).
+TEST_F(Checkpoints, ARequestDeliveredTwiceIsOneRequest) {
+  const test::ScratchDir dir("ck_twice");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const auto stop = [&](const std::string& name, const std::string& signals) {
+    const std::string out = dir.path() + "/" + name, err_file = dir.path() + "/" + name + ".txt";
+    const std::string script = "'" + kMarbles + "' run " + scene + " --quiet --backend cpu --duration 1000 --out " +
+                               out + " >/dev/null 2>" + err_file + " & pid=$!; for i in $(seq 600); do [ -e " + out +
+                               "/checkpoints/step_000050.mck ] && break; sleep 0.05; done; " + signals +
+                               "; wait $pid; echo $? >>" + err_file;
+    std::system(("bash -c '" + replace_all(script, "'", "'\\''") + "'").c_str());
+    return slurp(err_file);
+  };
+  const std::string twice = stop("twice", "kill -TERM $pid; kill -TERM $pid");
+  EXPECT_NE(twice.find("marbles: stopped by SIGTERM after step "), std::string::npos) << twice;
+  EXPECT_EQ(twice.substr(twice.rfind('\n', twice.size() - 2) + 1), "1\n") << twice;
+}
+
 // Internal errors (a test hook raises the signal): one line naming it, exit 1.
 TEST_F(Checkpoints, FatalSignalsBecomeAMessageAndExitOne) {
   const test::ScratchDir dir("ck_fatal");
