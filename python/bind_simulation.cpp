@@ -196,7 +196,7 @@ class PySimulation {
     d["wall"] = to_numpy(c.wall.data(), {m}).attr("astype")("bool");
     d["normal"] = to_numpy(m ? &c.normal[0].x : nullptr, {m, 3});
     d["normal_force"] = to_numpy(c.normal_force.data(), {m});
-    d["tangential_force"] = to_numpy(m ? &c.tangential_force[0].x : nullptr, {m, 3});
+    d["tangential_force"] = to_numpy(m ? c.tangential_force[0].data() : nullptr, {m, 3});
     d["overlap"] = to_numpy(c.overlap.data(), {m});
     d["point_a"] = to_numpy(m ? &c.a[0].x : nullptr, {m, 3});
     d["point_b"] = to_numpy(m ? &c.b[0].x : nullptr, {m, 3});

@@ -414,12 +414,12 @@ fs::path ContactSeriesWriter::write(const ContactSnapshot& c) {
                                  c.material_b.size()})
     if (size != n) throw RuntimeFailure("contact output: arrays of different lengths");
   std::vector<Vec3> points(2 * n);
-  std::vector<Vec3> force(n);
+  std::vector<std::array<double, 3>> force(n);
   std::vector<std::uint32_t> wall(n);
   for (std::size_t k = 0; k < n; ++k) {
     points[2 * k] = c.a[k];
     points[2 * k + 1] = c.b[k];
-    force[k] = c.normal[k] * c.normal_force[k] + c.tangential_force[k];
+    for (int d = 0; d < 3; ++d) force[k][d] = double(c.normal[k][d]) * c.normal_force[k] + c.tangential_force[k][d];
     wall[k] = c.wall[k];
   }
   PolyDataFile file;
@@ -429,8 +429,8 @@ fs::path ContactSeriesWriter::write(const ContactSnapshot& c) {
   file.points(points.data(), points.size());
   file.cells("Lines", n, 2);
   file.cell_array("normal_force", 1, c.normal_force.data(), n);
-  file.cell_array("tangential_force", 3, &c.tangential_force.data()->x, n);
-  file.cell_array("force", 3, &force.data()->x, n);
+  file.cell_array("tangential_force", 3, n ? c.tangential_force[0].data() : nullptr, n);
+  file.cell_array("force", 3, n ? force[0].data() : nullptr, n);
   file.cell_array("normal", 3, &c.normal.data()->x, n);
   file.cell_array("overlap", 1, c.overlap.data(), n);
   file.cell_array("sphere_a", 1, c.sphere_a.data(), n);

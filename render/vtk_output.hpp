@@ -20,6 +20,7 @@
 // vtkXMLPolyDataWriter's appended ones) back.
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -112,8 +113,11 @@ struct ContactSnapshot {
   std::uint64_t step = 0;
   std::vector<Vec3> a, b;                    // line ends, m
   std::vector<Vec3> normal;                  // unit, from b towards a
-  std::vector<real> normal_force;            // N, >= 0 (impulse / substep)
-  std::vector<Vec3> tangential_force;        // N (impulse / substep)
+  // Forces in double whatever the run's precision: impulse / substep can
+  // pass float's range where the impulses do not (a dense heavy pair at a
+  // short substep), and a force written inf is no force.
+  std::vector<double> normal_force;                   // N, >= 0 (impulse / substep)
+  std::vector<std::array<double, 3>> tangential_force;  // N (impulse / substep)
   std::vector<real> overlap;                 // m, >= 0
   std::vector<std::uint32_t> sphere_a, sphere_b;      // ids (b: the wall's index for a wall)
   std::vector<std::uint32_t> material_a, material_b;  // material ids (b: the wall's material)

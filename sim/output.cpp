@@ -52,8 +52,9 @@ render::ContactSnapshot make_contact_snapshot(const Simulation& sim) {
     // The wall end: the contact point on the wall's surface.
     c.b.push_back(wall ? w.position[k.a] - k.normal * (w.radius[k.a] + k.separation) : w.position[b]);
     c.normal.push_back(k.normal);
-    c.normal_force.push_back(static_cast<real>((k.normal_impulse + k.impact_impulse) / h));
-    c.tangential_force.push_back(k.tangent_impulse * static_cast<real>(1 / h));
+    c.normal_force.push_back((double(k.normal_impulse) + double(k.impact_impulse)) / h);
+    c.tangential_force.push_back({double(k.tangent_impulse.x) / h, double(k.tangent_impulse.y) / h,
+                                  double(k.tangent_impulse.z) / h});
     c.overlap.push_back(k.separation < 0 ? -k.separation : real(0));
     c.sphere_a.push_back(k.a);
     c.sphere_b.push_back(b);

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -251,6 +252,41 @@ TEST(Run, ContactForcesOfARestingStackBalanceItsWeight) {
 // afterwards from its frames are the same pixels, moving walls included (the
 // run moves the scene's walls to each frame's time; the frames' walls are
 // already there and are drawn where they are, not moved again).
+// Two spheres of density 1e30 meeting head on at 1000 m/s with a substep of
+// 1 us: impulses of ~4e33 N s (within float) make forces of ~4e39 N, past
+// float's range. The contact frames hold them finite, in Float64, and equal
+// to momentum over the substep (the impact reverses each sphere's speed at
+// most: |F| <= 2 m v / h).
+TEST(Run, ContactForcesPastFloatsRangeAreWrittenFinite) {
+  const fs::path dir = temp_dir("huge_forces");
+  const std::string yaml = R"(format: 1
+time: {duration: 2.0e-5, dt: 1.0e-6}
+effects: [collisions]
+materials: {a: {density: 1.0e30}}
+particles:
+  - list: {positions: [[0, 0, 0], [2.001, 0, 0]], radius: 1, velocities: [[1000, 0, 0], [-1000, 0, 0]]}
+output: {contacts: {every: 1}}
+)";
+  std::string err;
+  ASSERT_EQ(run_on_cpu(dir, yaml, err), 0) << err;
+  const double mass = 1e30 * 4.0 / 3.0 * 3.141592653589793, bound = 2 * mass * 1000 / 1e-6;
+  std::size_t pressing = 0;
+  for (const render::SeriesEntry& e : render::read_pvd(dir / "out" / "contacts.pvd")) {
+    const render::VtpArrays c = render::read_vtp_arrays(e.path);
+    for (const char* name : {"CellData/normal_force", "CellData/tangential_force", "CellData/force"})
+      for (const double v : c.arrays.at(name).values) {
+        ASSERT_TRUE(std::isfinite(v)) << e.path << " " << name;
+        EXPECT_LE(std::fabs(v), bound * 1.01) << e.path << " " << name;
+      }
+    const std::string text = read_file(e.path);
+    EXPECT_NE(text.find("Name=\"normal_force\""), std::string::npos);
+    EXPECT_EQ(text.find("Float32\" Name=\"normal_force\""), std::string::npos) << e.path;
+    for (const double v : c.arrays.at("CellData/normal_force").values)
+      if (v > std::numeric_limits<float>::max()) ++pressing;  // a force float could not have held
+  }
+  EXPECT_GT(pressing, 0u) << "no force past float's range: the case no longer tests anything";
+}
+
 TEST(Run, ImagesOfTheRunEqualImagesRenderedFromItsFrames) {
   if (!render::renderer_available() || !render::png_available()) GTEST_SKIP() << "skipped: built without OSMesa or libpng";
   const fs::path dir = temp_dir("images_equal");
