@@ -1,6 +1,7 @@
 #include "sim/checkpoint.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -218,9 +219,18 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
     if (!finite(c.state.cache.normal_impulse[k]) || !is_finite(c.state.cache.tangent_impulse[k]) ||
         !is_finite(c.state.cache.rolling_impulse[k]))
       r.fail("is damaged (a cache entry's impulse is not finite)");
+  // A state whose squares overflow (a speed or a distance past the
+  // precision's range once squared): its kinetic energy would be inf.
+  for (std::size_t i = 0; i < n; ++i)
+    if (square_overflows(c.world.position[i]) || square_overflows(c.world.velocity[i]) ||
+        square_overflows(c.world.angular_velocity[i]))
+      r.fail("is damaged (sphere " + std::to_string(i) + "'s position, velocity or spin is past " + kRealName +
+             "'s range once squared)");
+  // Totals: finite, not negative, printable as percentages; rollbacks whole.
   for (double t : {c.totals.candidate_sum, c.totals.contact_sum, c.totals.deepest, c.totals.energy_start,
                    c.totals.overlap_end, c.totals.rollbacks})
-    if (!finite(t) || t < 0) r.fail("is damaged (its running totals)");
+    if (!finite(t) || t < 0 || !(t < 1e300)) r.fail("is damaged (its running totals)");
+  if (c.totals.rollbacks != std::floor(c.totals.rollbacks)) r.fail("is damaged (its running totals)");
   for (double p : c.probe)
     if (!finite(p)) r.fail("is damaged (its reference's progress)");
   // Pairs of its spheres (a < b) or a sphere and a wall, in ascending key
@@ -244,7 +254,7 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
 }
 
 void check_checkpoint_fits(const Checkpoint& c, const std::string& path, const std::string& key, std::size_t spheres,
-                           std::size_t materials) {
+                           std::size_t materials, const std::vector<narrowphase::WallShape>& walls) {
   if (c.world.size() != spheres)
     throw InputError(SourceLocation{path, 0, 0}, key,
                      "the checkpoint holds " + std::to_string(c.world.size()) + " spheres, the scene makes " +
@@ -254,6 +264,23 @@ void check_checkpoint_fits(const Checkpoint& c, const std::string& path, const s
       throw InputError(SourceLocation{path, 0, 0}, key,
                        "the checkpoint is damaged (sphere " + std::to_string(i) + " names material " +
                            std::to_string(c.world.material[i]) + ", the scene has " + std::to_string(materials) + ")");
+  // The walls: the scene's, of which a run moves only the point (advance_walls).
+  if (c.state.walls.size() != walls.size())
+    throw InputError(SourceLocation{path, 0, 0}, key,
+                     "the checkpoint holds " + std::to_string(c.state.walls.size()) + " wall shape(s), the scene makes " +
+                         std::to_string(walls.size()));
+  for (std::size_t k = 0; k < walls.size(); ++k) {
+    const narrowphase::WallShape& w = c.state.walls[k];
+    const narrowphase::WallShape& scene_wall = walls[k];
+    const bool same = w.kind == scene_wall.kind && w.direction == scene_wall.direction &&
+                      w.radius == scene_wall.radius && w.length == scene_wall.length &&
+                      w.velocity == scene_wall.velocity && w.angular_velocity == scene_wall.angular_velocity &&
+                      w.material == scene_wall.material;
+    if (!same || !is_finite(w.point))
+      throw InputError(SourceLocation{path, 0, 0}, key,
+                       "the checkpoint is damaged (wall shape " + std::to_string(k) +
+                           " is not the scene's: only a moving wall's point may differ, and it must be finite)");
+  }
 }
 
 void prune_checkpoints(const std::string& out_dir, int keep) {

@@ -61,10 +61,13 @@ void write_checkpoint(const std::string& path, const Checkpoint& checkpoint);
 Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash);
 
 // Whether a checkpoint read for a scene fits it: as many spheres as the
-// scene makes, each of a material the scene has. Throws InputError naming
-// the file and `key` (the argument that gave it) where not.
+// scene makes, each of a material the scene has, and the scene's walls (its
+// `walls`: the step model's shapes at t = 0), each as the scene makes it but
+// for the point a moving wall has moved. Throws InputError naming the file
+// and `key` (the argument that gave it) where not.
 void check_checkpoint_fits(const Checkpoint& checkpoint, const std::string& path, const std::string& key,
-                           std::size_t spheres, std::size_t materials);
+                           std::size_t spheres, std::size_t materials,
+                           const std::vector<narrowphase::WallShape>& walls);
 
 // "double" or "float": the precision a checkpoint was written in ("float"
 // when the file is not one; read_checkpoint then says why).

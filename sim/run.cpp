@@ -190,7 +190,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   const bool render = options.render;
   if (options.restart) {
     Checkpoint c = read_checkpoint(*options.restart, fingerprint);
-    check_checkpoint_fits(c, *options.restart, "--restart", sim.world().size(), sc.materials.size());
+    check_checkpoint_fits(c, *options.restart, "--restart", sim.world().size(), sc.materials.size(),
+                          sim.model().wall_shapes);
     if (c.steps > total_steps)
       throw InputError(SourceLocation{*options.restart, 0, 0}, "--restart",
                        "the checkpoint is at step " + std::to_string(c.steps) + ", past this run's end at step " +

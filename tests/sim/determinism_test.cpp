@@ -308,6 +308,7 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
   write_checkpoint(path, c);
   EXPECT_NO_THROW(read_checkpoint(path, 42)) << "premise: the file as written loads";
   const real nan = std::numeric_limits<real>::quiet_NaN(), inf = std::numeric_limits<real>::infinity();
+  const real beyond_square = real(2) * std::sqrt(std::numeric_limits<real>::max());  // finite, its square not
   const std::vector<std::pair<std::string, std::function<void(Checkpoint&)>>> damages{
       {"radius, mass or inertia", [](Checkpoint& k) { k.world.radius[2] = 0; }},
       {"radius, mass or inertia", [&](Checkpoint& k) { k.world.radius[1] = -k.world.radius[1]; }},
@@ -322,6 +323,11 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
       {"impulse is not finite", [&](Checkpoint& k) { k.state.cache.tangent_impulse[0].x = inf; }},
       {"running totals", [](Checkpoint& k) { k.totals.energy_start = std::numeric_limits<double>::quiet_NaN(); }},
       {"running totals", [](Checkpoint& k) { k.totals.contact_sum = -1; }},
+      {"running totals", [](Checkpoint& k) { k.totals.deepest = 1e308; }},  // "inf %" once printed
+      {"running totals", [](Checkpoint& k) { k.totals.rollbacks = 0.5; }},
+      {"range once squared", [&](Checkpoint& k) { k.world.velocity[1].x = beyond_square; }},
+      {"range once squared", [&](Checkpoint& k) { k.world.angular_velocity[2].z = -beyond_square; }},
+      {"range once squared", [&](Checkpoint& k) { k.world.position[0].y = beyond_square; }},
       {"cache's array lengths differ", [](Checkpoint& k) { k.state.cache.normal_impulse.pop_back(); }},
       {"cache's array lengths differ", [](Checkpoint& k) { k.state.cache.rolling_impulse.pop_back(); }},
   };
@@ -356,18 +362,46 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("neither float nor double"), std::string::npos) << e.what();
   }
-  // Fitting the scene: the materials it has, the spheres it makes.
+  // Fitting the scene: the materials it has, the spheres it makes, its walls.
   std::uint32_t materials = 0;
   for (std::uint32_t m : c.world.material) materials = std::max(materials, m + 1);
-  EXPECT_NO_THROW(check_checkpoint_fits(c, path, "--restart", c.world.size(), materials));
+  auto [s, g] = pour_scene(300, 3);
+  const std::vector<narrowphase::WallShape> walls =
+      Simulation(s, make_world(s, g), broadphase::Backend::cpu).model().wall_shapes;
+  ASSERT_FALSE(walls.empty());
+  ASSERT_EQ(c.state.walls.size(), walls.size());
+  EXPECT_NO_THROW(check_checkpoint_fits(c, path, "--restart", c.world.size(), materials, walls));
   try {
-    check_checkpoint_fits(c, path, "--restart", c.world.size(), materials - 1);
+    check_checkpoint_fits(c, path, "--restart", c.world.size(), materials - 1, walls);
     ADD_FAILURE() << "a checkpoint naming a material past the scene's fitted it";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("names material " + std::to_string(materials - 1)), std::string::npos)
         << e.what();
   }
-  EXPECT_THROW(check_checkpoint_fits(c, path, "--restart", c.world.size() + 1, materials), InputError);
+  EXPECT_THROW(check_checkpoint_fits(c, path, "--restart", c.world.size() + 1, materials, walls), InputError);
+  // A wall moved along (its point) fits; one whose point is not finite, whose
+  // shape is another, or a wall more or fewer, does not (a NaN point had made
+  // the floor vanish).
+  Checkpoint moved = c;
+  moved.state.walls[0].point += Vec3(0, 0, real(0.25));
+  EXPECT_NO_THROW(check_checkpoint_fits(moved, path, "--restart", c.world.size(), materials, walls));
+  const std::vector<std::function<void(Checkpoint&)>> wall_damages{
+      [&](Checkpoint& k) { k.state.walls[0].point.x = nan; },
+      [&](Checkpoint& k) { k.state.walls.back().direction.z = -k.state.walls.back().direction.z + real(0.5); },
+      [&](Checkpoint& k) { k.state.walls[0].velocity.y = real(1); },
+      [&](Checkpoint& k) { k.state.walls[0].material += 1; },
+      [](Checkpoint& k) { k.state.walls.pop_back(); },
+  };
+  for (const auto& damage : wall_damages) {
+    Checkpoint bad = c;
+    damage(bad);
+    try {
+      check_checkpoint_fits(bad, path, "--restart", c.world.size(), materials, walls);
+      ADD_FAILURE() << "a checkpoint with a damaged wall fitted the scene";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("wall shape"), std::string::npos) << e.what();
+    }
+  }
   std::remove(path.c_str());
 }
 
