@@ -13,6 +13,7 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <iterator>
 #include <numbers>
 #include <optional>
 #include <ostream>
@@ -28,7 +29,9 @@
 #include "bench/api_count.hpp"
 #include "broadphase/grid.hpp"
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "core/format.hpp"
+#include "core/hash.hpp"
 #include "narrowphase/solver.hpp"
 #include "render/atomic_file.hpp"
 #include "sim/particles.hpp"
@@ -161,7 +164,7 @@ namespace {
 // --- the pile ------------------------------------------------------------------
 
 // Bump when pile() or its scene changes: older cache files are then not used.
-constexpr std::uint32_t kPileVersion = 6;
+constexpr std::uint32_t kPileVersion = 7;  // 7: a checksum at the end
 constexpr char kPileMagic[8] = {'M', 'B', 'L', 'P', 'I', 'L', 'E', '\0'};
 constexpr double kPileRadius = 0.01;
 constexpr double kPileLayers = 30;  // about this many layers deep
@@ -288,14 +291,14 @@ bool get(std::istream& f, T& v) {
 // The file: magic, version, sizeof(real), N, how it settled (backend, steps,
 // the step of the last quench, the bound, seconds, kinetic energy per
 // sphere, largest overlap), then positions, velocities, angular velocities
-// (x y z per sphere) and radii, all as `real`.
+// (x y z per sphere) and radii, all as `real`, then the FNV-1a of all before
+// it (a file cut short or with flipped bytes is settled again, not used).
 void save_pile(const std::string& path, const World& w, const SettleInfo& info) {
   namespace fs = std::filesystem;
   fs::create_directories(fs::path(path).parent_path());
   const std::string tmp = path + ".tmp." + std::to_string(::getpid());
   {
-    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    if (!f) throw RuntimeFailure("cannot write " + tmp);
+    std::ostringstream f(std::ios::binary);
     f.write(kPileMagic, sizeof kPileMagic);
     put(f, kPileVersion);
     put(f, static_cast<std::uint32_t>(sizeof(real)));
@@ -316,16 +319,33 @@ void save_pile(const std::string& path, const World& w, const SettleInfo& info) 
         put(f, p.z);
       }
     for (real x : w.radius) put(f, x);
-    if (!f.flush()) throw RuntimeFailure("cannot write " + tmp);
+    const std::string bytes = f.str();
+    std::ofstream file(tmp, std::ios::binary | std::ios::trunc);
+    if (!file) throw RuntimeFailure("cannot write " + tmp);
+    file.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    put(file, fnv1a(bytes.data(), bytes.size()));
+    if (!file.flush()) throw RuntimeFailure("cannot write " + tmp);
   }
   fs::rename(tmp, path);
 }
 
 // The cached pile, or nothing when the file is missing, of another version,
-// precision or N, or short.
+// precision or N, short, damaged (its checksum) or holding a state no settle
+// writes (not finite, a radius not above zero).
 std::optional<PileState> load_pile(const std::string& path, std::size_t n, const Lattice& lattice) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) return std::nullopt;
+  if (not_a_plain_file(path)) return std::nullopt;
+  std::string bytes;
+  {
+    std::ifstream file(path, std::ios::binary);
+    if (!file) return std::nullopt;
+    bytes.assign(std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>());
+  }
+  std::uint64_t sum = 0;
+  if (bytes.size() < sizeof sum) return std::nullopt;
+  std::memcpy(&sum, bytes.data() + bytes.size() - sizeof sum, sizeof sum);
+  bytes.resize(bytes.size() - sizeof sum);
+  if (sum != fnv1a(bytes.data(), bytes.size())) return std::nullopt;
+  std::istringstream f(bytes, std::ios::binary);
   char magic[8];
   std::uint32_t version = 0, real_bytes = 0;
   std::uint64_t count = 0;
@@ -347,7 +367,11 @@ std::optional<PileState> load_pile(const std::string& path, std::size_t n, const
       if (!get(f, p.x) || !get(f, p.y) || !get(f, p.z)) return std::nullopt;
   }
   for (real& x : g.radius)
-    if (!get(f, x)) return std::nullopt;
+    if (!get(f, x) || !(x > 0) || !std::isfinite(x)) return std::nullopt;
+  if (f.peek() != std::char_traits<char>::eof()) return std::nullopt;  // bytes past the fields
+  for (const auto& v : arrays)
+    for (const Vec3& p : v)
+      if (square_overflows(p)) return std::nullopt;
   g.position = arrays[0];
   g.velocity = arrays[1];
   World w = make_world(s, g);

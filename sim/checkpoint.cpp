@@ -11,6 +11,7 @@
 
 #include "core/error.hpp"
 #include "core/files.hpp"
+#include "core/hash.hpp"
 #include "render/atomic_file.hpp"
 
 namespace marbles {
@@ -27,13 +28,6 @@ constexpr char kMagic[8] = {'M', 'A', 'R', 'B', 'L', 'C', 'K', '\n'};
 // and 2 load with none.
 constexpr std::uint32_t kFormat = 3;
 constexpr char kVersion[16] = "marbles 0.1";
-
-// FNV-1a, 64 bit.
-std::uint64_t fnv1a(const void* data, std::size_t size, std::uint64_t h = 14695981039346656037ull) {
-  const auto* p = static_cast<const unsigned char*>(data);
-  for (std::size_t i = 0; i < size; ++i) h = (h ^ p[i]) * 1099511628211ull;
-  return h;
-}
 
 class Writer {
  public:

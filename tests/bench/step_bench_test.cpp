@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <iterator>
 #include <sstream>
@@ -62,7 +63,8 @@ TEST(StepBench, EachPileIsCachedApart) {
 }
 
 // A cached pile's header: magic, version, sizeof(real), N, backend, then
-// the settle's steps, last quench, bound, seconds, energy and largest overlap.
+// the settle's steps, last quench, bound, seconds, energy and largest
+// overlap. (Its spheres follow, then an 8-byte checksum.)
 constexpr std::size_t kHeader = 8 + 4 + 4 + 8 + 8 + 6 * 8;
 
 // The spheres of a cached pile (past the header, whose settle time differs
@@ -115,6 +117,42 @@ TEST(StepBench, EachPileSettlesItsOwnFile) {
   EXPECT_NE(spheres[1], spheres[2]);
 }
 
+// A damaged cache file (a flipped byte among the spheres, cut short, bytes
+// added, its last byte changed) is not used: the pile is settled again, to
+// the same spheres, and saved over it.
+TEST(StepBench, ADamagedPileCacheIsSettledAgain) {
+  TempDir dir;
+  StepBenchOptions o;
+  o.backend = "cpu";
+  o.scene = "pile";
+  o.rolling = false;
+  o.n = {600};
+  o.repeats = 1;
+  o.warmup = 1;
+  o.json = true;
+  o.cache_dir = dir.path.string();
+  o.settle_steps = 60;
+  const std::string path = pile_cache_path(o.cache_dir, 600, false, true);
+  ASSERT_FALSE(run_json(o)["results"][0]["settle"]["cached"].get<bool>());
+  const std::string good = contents(path);
+  ASSERT_TRUE(run_json(o)["results"][0]["settle"]["cached"].get<bool>()) << "premise: the file as written loads";
+  const std::vector<std::pair<const char*, std::function<void(std::string&)>>> damages{
+      {"a flipped byte", [](std::string& b) { b[kHeader + 100] = static_cast<char>(b[kHeader + 100] ^ 0x40); }},
+      {"cut short", [](std::string& b) { b.resize(b.size() - 12); }},
+      {"bytes added", [](std::string& b) { b += "xxxx"; }},
+      {"its checksum changed", [](std::string& b) { b.back() = static_cast<char>(b.back() + 1); }},
+  };
+  for (const auto& [what, damage] : damages) {
+    SCOPED_TRACE(what);
+    std::string bytes = good;
+    damage(bytes);
+    std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+    EXPECT_FALSE(run_json(o)["results"][0]["settle"]["cached"].get<bool>());
+    EXPECT_EQ(spheres_of(path).substr(0, 600 * 3 * sizeof(real)), good.substr(kHeader, 600 * 3 * sizeof(real)))
+        << "settled again to other spheres";
+  }
+}
+
 // A settled pile is at rest by itself: the settle stops zeroing the
 // velocities once the energy is below the bound, and calls the pile settled
 // only when the bound holds after 50 steps or more without a quench. The
@@ -154,7 +192,7 @@ TEST(StepBench, ASettledPileRestsWithoutQuenches) {
   // positions): radius 1 cm, density 1000, a solid sphere's inertia.
   const std::string file = contents(pile_cache_path(o.cache_dir, 5000, false, true));
   const std::size_t n = 5000;
-  ASSERT_EQ(file.size(), kHeader + 10 * n * sizeof(real));
+  ASSERT_EQ(file.size(), kHeader + 10 * n * sizeof(real) + 8);  // the checksum last
   std::vector<real> motion(6 * n);
   std::memcpy(motion.data(), file.data() + kHeader + 3 * n * sizeof(real), motion.size() * sizeof(real));
   const double r = 0.01, mass = 1000 * 4.0 / 3.0 * 3.14159265358979 * r * r * r, inertia = 0.4 * mass * r * r;
