@@ -117,20 +117,27 @@ TEST(StepBench, EachPileSettlesItsOwnFile) {
   EXPECT_NE(spheres[1], spheres[2]);
 }
 
+// One timed step of the pile with friction alone, N spheres, on the CPU,
+// as JSON, cached in `dir`.
+StepBenchOptions one_step_pile(const TempDir& dir, std::size_t n, int warmup) {
+  StepBenchOptions o;
+  o.backend = "cpu";
+  o.scene = "pile";
+  o.rolling = false;
+  o.n = {n};
+  o.repeats = 1;
+  o.warmup = warmup;
+  o.json = true;
+  o.cache_dir = dir.path.string();
+  return o;
+}
+
 // A damaged cache file (a flipped byte among the spheres, cut short, bytes
 // added, its last byte changed) is not used: the pile is settled again, to
 // the same spheres, and saved over it.
 TEST(StepBench, ADamagedPileCacheIsSettledAgain) {
   TempDir dir;
-  StepBenchOptions o;
-  o.backend = "cpu";
-  o.scene = "pile";
-  o.rolling = false;
-  o.n = {600};
-  o.repeats = 1;
-  o.warmup = 1;
-  o.json = true;
-  o.cache_dir = dir.path.string();
+  StepBenchOptions o = one_step_pile(dir, 600, 1);
   o.settle_steps = 60;
   const std::string path = pile_cache_path(o.cache_dir, 600, false, true);
   ASSERT_FALSE(run_json(o)["results"][0]["settle"]["cached"].get<bool>());
@@ -159,15 +166,7 @@ TEST(StepBench, ADamagedPileCacheIsSettledAgain) {
 // file's velocities, read back here, give the energy the settle reports.
 TEST(StepBench, ASettledPileRestsWithoutQuenches) {
   TempDir dir;
-  StepBenchOptions o;
-  o.backend = "cpu";
-  o.scene = "pile";
-  o.rolling = false;
-  o.n = {5000};
-  o.repeats = 1;
-  o.warmup = 0;
-  o.json = true;
-  o.cache_dir = dir.path.string();
+  StepBenchOptions o = one_step_pile(dir, 5000, 0);
   const int budget = o.settle_steps;
 
   // A budget too small to rest 50 steps after the quenches: cached, not settled.
