@@ -38,7 +38,7 @@ std::vector<std::string> warnings(const scene::Scene& s, const scene::GeneratedP
   for (const std::string& m : w) {
     const bool known = m.rfind("dt so large", 0) == 0 || m.rfind("stack too tall", 0) == 0 ||
                        m.rfind("substeps too coarse", 0) == 0 || m.rfind("float precision", 0) == 0 ||
-                       m.rfind("spheres up to", 0) == 0;
+                       m.rfind("spheres up to", 0) == 0 || m.rfind("radii from", 0) == 0;
     EXPECT_TRUE(known) << m;
   }
   return w;
@@ -157,6 +157,34 @@ TEST(SettingsCheck, MassRatioWantsSubsteps) {
   EXPECT_TRUE(warnings(s, g, kDouble).empty());
   s.materials[1].density = s.materials[0].density * density_ratio;
   s.effects = {Effect::walls};
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+}
+
+// 1000 small spheres and one 4 times their radius: a cell of the larger's
+// size holds about 1.15 x 4^3 = 73 of the small ones, past 64; at 3.5 times
+// (49) the rule is quiet, as it is with fewer than 1000 spheres or without
+// collisions (no broad phase).
+TEST(SettingsCheck, RadiusSpreadCrowdsTheCells) {
+  const double r = 0.01;
+  scene::Scene s = make_scene(1e-4, 1, {Effect::collisions}, 0.5);  // a substep the mass ratio (64) allows
+  scene::GeneratedParticles g;
+  for (int k = 0; k < 999; ++k) add_sphere(g, {real(3 * r * (k % 10)), real(3 * r * (k / 10 % 10)), real(3 * r * (k / 100))}, real(r));
+  add_sphere(g, {0, 0, 1}, real(4 * r));
+  const std::vector<std::string> w = warnings(s, g, kDouble);
+  ASSERT_EQ(w.size(), 1u);
+  const double crowd = 0.6 * 6 / 3.141592653589793 * 64;
+  EXPECT_TRUE(contains(w[0], "radii from " + sig3(g.radius[0]) + " to " + sig3(g.radius.back()) + " m (")) << w[0];
+  EXPECT_TRUE(contains(w[0], "a cell can hold about " + sig3(crowd) + " of the smallest")) << w[0];
+  g.radius.back() = real(3.5 * r);
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  g.radius.back() = real(4 * r);
+  s.effects = {Effect::walls};
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  s.effects = {Effect::collisions};
+  g.position.pop_back(), g.velocity.pop_back(), g.radius.pop_back(), g.material.pop_back();
+  add_sphere(g, {0, 0, 1}, real(4 * r));
+  g.position.erase(g.position.begin()), g.velocity.erase(g.velocity.begin()), g.radius.erase(g.radius.begin()),
+      g.material.erase(g.material.begin());  // 999 spheres
   EXPECT_TRUE(warnings(s, g, kDouble).empty());
 }
 
