@@ -9,10 +9,12 @@
 #include <cmath>
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <optional>
 #include <ostream>
 #include <sstream>
 #include <tuple>
@@ -166,8 +168,20 @@ StudyVary parse_vary(const std::string& text) {
   const std::string list = text.substr(eq + 1);
   std::string item;
   int depth = 0;
+  // A number's value, where the whole text is one (1e-3 and 0.001 are one setting).
+  const auto number = [](const std::string& text) -> std::optional<double> {
+    char* end = nullptr;
+    const double x = std::strtod(text.c_str(), &end);
+    if (end == text.c_str() || *end != '\0') return std::nullopt;
+    return x;
+  };
   const auto take = [&] {
     if (item.empty()) throw InputError(where, v.key, "an empty value in the list");
+    for (const std::string& earlier : v.values)
+      if (earlier == item || (number(earlier) && number(item) && *number(earlier) == *number(item)))
+        throw InputError(where, v.key,
+                         "the value " + item + " is given twice" + (earlier == item ? "" : " (as " + earlier + ")") +
+                             ": each setting runs once (--repeats repeats them all)");
     v.values.push_back(item);
     item.clear();
   };
@@ -213,6 +227,20 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   fs::create_directories(dir / "runs");
 
   const auto combos = combinations(options.vary);
+  // An earlier study's runs past this one's count (runs/N and runs/N.log):
+  // removed, so that the folder holds this study's runs only. Nothing else
+  // in runs/ is touched.
+  {
+    std::vector<fs::path> stale;
+    std::error_code ec;
+    for (fs::directory_iterator it(dir / "runs", ec), end; !ec && it != end; it.increment(ec)) {
+      std::string name = it->path().filename().string();
+      if (name.size() > 4 && name.ends_with(".log")) name.resize(name.size() - 4);
+      if (name.empty() || name.size() > 18 || name.find_first_not_of("0123456789") != std::string::npos) continue;
+      if (std::stoull(name) >= combos.size()) stale.push_back(it->path());
+    }
+    for (const fs::path& p : stale) fs::remove_all(p, ec);
+  }
   const std::size_t total = combos.size() * static_cast<std::size_t>(options.repeats);
   const bool tty = options.progress && isatty(fileno(stderr));
   std::size_t done = 0;

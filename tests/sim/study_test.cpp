@@ -115,6 +115,20 @@ TEST_F(Study, AWrongReferenceShowsAsALargeError) {
   EXPECT_GT(r.rows[0].error, 0.2);
 }
 
+// A study into the folder of an earlier, larger one: the earlier runs past
+// this study's count (runs/N, runs/N.log) are removed, this study's kept,
+// and a file of the user's in runs/ is left alone.
+TEST_F(Study, AnEarlierStudysExtraRunsAreRemoved) {
+  const test::ScratchDir dir("study_again");
+  const fs::path runs = fs::path(dir.path()) / "runs";
+  ASSERT_EQ(study(kValidation + "bouncing_ball.yaml", {"time.dt=4e-3,2e-3,1e-3"}, dir).rows.size(), 3u);
+  for (const char* name : {"0", "1", "2", "2.log"}) ASSERT_TRUE(fs::exists(runs / name)) << name;
+  std::ofstream(runs / "notes.txt") << "mine";
+  ASSERT_EQ(study(kValidation + "bouncing_ball.yaml", {"time.dt=4e-3,2e-3"}, dir).rows.size(), 2u);
+  for (const char* name : {"0", "1", "1.log", "notes.txt"}) EXPECT_TRUE(fs::exists(runs / name)) << name;
+  for (const char* name : {"2", "2.log"}) EXPECT_FALSE(fs::exists(runs / name)) << name;
+}
+
 // The scene's name and the output folder are data to the plot, never
 // commands: a name and a folder that close gnuplot's quotes (and the shell's)
 // and call system() draw a plot titled with them, and run nothing. Without
@@ -170,8 +184,9 @@ TEST_F(Study, FinestSettingIsTheReference) {
 // front when it is strictly more accurate than every cheaper row and no row
 // of equal cost is more accurate.
 // A varied key's values split at the commas outside brackets and braces;
-// an empty value or an unbalanced bracket is a located error, and a key
-// varied twice (on the command line) is refused.
+// an empty value, an unbalanced bracket or a value given twice (1e-3 and
+// 0.001 too) is a located error, and a key varied twice (on the command
+// line) is refused.
 TEST(Vary, ValuesSplitOutsideBrackets) {
   EXPECT_EQ(parse_vary("time.dt=1e-3,5e-4").values, (std::vector<std::string>{"1e-3", "5e-4"}));
   const StudyVary g = parse_vary("gravity=[0,0,-1],[0,0,-2],[0, 0, -9.81]");
@@ -180,7 +195,7 @@ TEST(Vary, ValuesSplitOutsideBrackets) {
   EXPECT_EQ(parse_vary("materials.a={density: 5, friction: 1},{density: 6}").values,
             (std::vector<std::string>{"{density: 5, friction: 1}", "{density: 6}"}));
   for (const std::string bad : {"time.dt=1e-3,,5e-4", "time.dt=1e-3,", "gravity=[0,0,-1", "gravity=0,0]", "time.dt=",
-                                "=1,2"}) {
+                                "=1,2", "time.dt=1e-3,5e-4,1e-3", "time.dt=1e-3,0.001", "gravity=[0,0,-1],[0,0,-1]"}) {
     try {
       parse_vary(bad);
       ADD_FAILURE() << bad << " was taken";
