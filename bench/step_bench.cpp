@@ -319,7 +319,7 @@ void save_pile(const std::string& path, const World& w, const SettleInfo& info) 
         put(f, p.z);
       }
     for (real x : w.radius) put(f, x);
-    const std::string bytes = f.str();
+    const std::string bytes = std::move(f).str();  // the buffer itself, not a copy
     std::ofstream file(tmp, std::ios::binary | std::ios::trunc);
     if (!file) throw RuntimeFailure("cannot write " + tmp);
     file.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
@@ -345,7 +345,7 @@ std::optional<PileState> load_pile(const std::string& path, std::size_t n, const
   std::memcpy(&sum, bytes.data() + bytes.size() - sizeof sum, sizeof sum);
   bytes.resize(bytes.size() - sizeof sum);
   if (sum != fnv1a(bytes.data(), bytes.size())) return std::nullopt;
-  std::istringstream f(bytes, std::ios::binary);
+  std::istringstream f(std::move(bytes), std::ios::binary);  // the bytes themselves, not a copy
   char magic[8];
   std::uint32_t version = 0, real_bytes = 0;
   std::uint64_t count = 0;

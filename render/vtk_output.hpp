@@ -186,14 +186,16 @@ struct VtpArrays {
 };
 VtpArrays read_vtp_arrays(const std::filesystem::path& vtp_path);
 
+/// Refuses (InputError naming the path) a path that is a folder, pipe,
+/// socket or device: read_pvd, read_vtp_arrays (so read_vtp and
+/// read_walls_vtp) and render read plain files only.
+void require_plain_file(const std::filesystem::path& path);
+
 /// Reads a .vtp written by VtkSeriesWriter (or any poly data with points and
 /// some of the arrays radius, velocity, angular_velocity, id, material) into a
 /// snapshot; missing arrays stay empty; time and step come from the field data
-/// TimeValue and step when present. Throws marbles::RuntimeFailure.
-// Refuses (InputError naming the path) a path that is a folder, pipe, socket
-// or device: the readers below and render's read only plain files.
-void require_plain_file(const std::filesystem::path& path);
-
+/// TimeValue and step when present. Throws marbles::RuntimeFailure (a file it
+/// cannot read) or InputError (a path that is no plain file).
 Snapshot read_vtp(const std::filesystem::path& vtp_path);
 
 }  // namespace marbles::render

@@ -270,7 +270,8 @@ void check_checkpoint_fits(const Checkpoint& c, const std::string& path, const s
                       w.radius == scene_wall.radius && w.length == scene_wall.length &&
                       w.velocity == scene_wall.velocity && w.angular_velocity == scene_wall.angular_velocity &&
                       w.material == scene_wall.material;
-    if (!same || !is_finite(w.point))
+    const bool moves = !(scene_wall.velocity == Vec3{});
+    if (!same || !is_finite(w.point) || (!moves && !(w.point == scene_wall.point)))
       throw InputError(SourceLocation{path, 0, 0}, key,
                        "the checkpoint is damaged (wall shape " + std::to_string(k) +
                            " is not the scene's: only a moving wall's point may differ, and it must be finite)");

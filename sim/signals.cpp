@@ -14,7 +14,11 @@
 namespace marbles {
 namespace {
 
-volatile std::sig_atomic_t g_stop = 0;
+// The signal that asked to stop, or 0. Atomic (and stored after the time
+// below): the run's OpenMP threads may take the two deliveries of one
+// request at once, and the second must see the first's time.
+std::atomic<int> g_stop{0};
+static_assert(std::atomic<int>::is_always_lock_free, "read and written in a signal handler");
 // When the first stop request came (CLOCK_MONOTONIC, ms). A sender that
 // signals the process and then its group (`timeout`, a job control kill)
 // delivers one request twice within microseconds: a repeat this soon is
@@ -66,14 +70,15 @@ void on_terminate() {
 }
 
 void on_stop(int sig) {
-  if (g_stop != 0) {
-    if (now_ms() - g_first_ms.load() < kSameRequestMs) return;  // the first request, delivered again
+  if (g_stop.load() != 0) {
+    const std::int64_t first = g_first_ms.load();
+    if (first == 0 || now_ms() - first < kSameRequestMs) return;  // the first request, delivered again
     ::signal(sig, SIG_DFL);  // a second request: now
     ::raise(sig);
     return;
   }
   g_first_ms.store(now_ms());
-  g_stop = sig;
+  g_stop.store(sig);
 }
 
 }  // namespace
@@ -107,7 +112,8 @@ void install_fatal_handlers() {
 }
 
 StopRequests::StopRequests() {
-  g_stop = 0;
+  g_stop.store(0);
+  g_first_ms.store(0);
   struct sigaction action {};
   action.sa_handler = on_stop;
   sigemptyset(&action.sa_mask);
@@ -120,6 +126,6 @@ StopRequests::~StopRequests() {
   ::sigaction(SIGTERM, &g_previous_term, nullptr);
 }
 
-int StopRequests::received() const { return g_stop; }
+int StopRequests::received() const { return g_stop.load(); }
 
 }  // namespace marbles

@@ -176,6 +176,10 @@ StudyVary parse_vary(const std::string& text) {
     return x;
   };
   const auto take = [&] {
+    // Blanks around a value are not part of it (a value given twice is found
+    // with them too).
+    const std::size_t first = item.find_first_not_of(" \t"), last = item.find_last_not_of(" \t");
+    item = first == std::string::npos ? std::string() : item.substr(first, last - first + 1);
     if (item.empty()) throw InputError(where, v.key, "an empty value in the list");
     for (const std::string& earlier : v.values)
       if (earlier == item || (number(earlier) && number(item) && *number(earlier) == *number(item)))

@@ -379,13 +379,17 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
         << e.what();
   }
   EXPECT_THROW(check_checkpoint_fits(c, path, "--restart", c.world.size() + 1, materials, walls), InputError);
-  // A wall moved along (its point) fits; one whose point is not finite, whose
-  // shape is another, or a wall more or fewer, does not (a NaN point had made
-  // the floor vanish).
+  // A moving wall moved along (its point) fits; a wall at rest moved, one
+  // whose point is not finite, whose shape is another, or a wall more or
+  // fewer, does not (a NaN point had made the floor vanish).
+  std::vector<narrowphase::WallShape> moving = walls;
+  moving[0].velocity = Vec3(0, 0, real(0.5));
   Checkpoint moved = c;
+  moved.state.walls[0].velocity = moving[0].velocity;
   moved.state.walls[0].point += Vec3(0, 0, real(0.25));
-  EXPECT_NO_THROW(check_checkpoint_fits(moved, path, "--restart", c.world.size(), materials, walls));
+  EXPECT_NO_THROW(check_checkpoint_fits(moved, path, "--restart", c.world.size(), materials, moving));
   const std::vector<std::function<void(Checkpoint&)>> wall_damages{
+      [&](Checkpoint& k) { k.state.walls[0].point.z += real(0.25); },  // a wall at rest moved
       [&](Checkpoint& k) { k.state.walls[0].point.x = nan; },
       [&](Checkpoint& k) { k.state.walls.back().direction.z = -k.state.walls.back().direction.z + real(0.5); },
       [&](Checkpoint& k) { k.state.walls[0].velocity.y = real(1); },

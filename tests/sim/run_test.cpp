@@ -248,10 +248,6 @@ TEST(Run, ContactForcesOfARestingStackBalanceItsWeight) {
   fs::remove_all(dir);
 }
 
-// The images a run draws as it goes and the images `marbles render` draws
-// afterwards from its frames are the same pixels, moving walls included (the
-// run moves the scene's walls to each frame's time; the frames' walls are
-// already there and are drawn where they are, not moved again).
 // Two spheres of density 1e30 meeting head on at 1000 m/s with a substep of
 // 1 us: impulses of ~4e33 N s (within float) make forces of ~4e39 N, past
 // float's range. The contact frames hold them finite, in Float64, and equal
@@ -287,6 +283,10 @@ output: {contacts: {every: 1}}
   EXPECT_GT(pressing, 0u) << "no force past float's range: the case no longer tests anything";
 }
 
+// The images a run draws as it goes and the images `marbles render` draws
+// afterwards from its frames are the same pixels, moving walls included (the
+// run moves the scene's walls to each frame's time; the frames' walls are
+// already there and are drawn where they are, not moved again).
 TEST(Run, ImagesOfTheRunEqualImagesRenderedFromItsFrames) {
   if (!render::renderer_available() || !render::png_available()) GTEST_SKIP() << "skipped: built without OSMesa or libpng";
   const fs::path dir = temp_dir("images_equal");

@@ -158,6 +158,16 @@ TEST(SettingsCheck, MassRatioWantsSubsteps) {
   s.materials[1].density = s.materials[0].density * density_ratio;
   s.effects = {Effect::walls};
   EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  // Spheres of one mass (or one sphere) at a substep of 40 ms: no ratio to
+  // speak of (the coarse-substep rule needs gravity, the fast-motion rule speed).
+  s.effects = {Effect::collisions};
+  s.time.dt = 0.04;
+  s.materials[1].density = s.materials[0].density / (size * size * size);
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  s.materials[1].density = s.materials[0].density * 9 / (size * size * size);  // 9: below 10
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  s.materials[1].density = s.materials[0].density * 10 / (size * size * size);
+  EXPECT_EQ(warnings(s, g, kDouble).size(), 1u);
 }
 
 // 1000 small spheres and one 4 times their radius: a cell of the larger's

@@ -189,13 +189,15 @@ TEST_F(Study, FinestSettingIsTheReference) {
 // line) is refused.
 TEST(Vary, ValuesSplitOutsideBrackets) {
   EXPECT_EQ(parse_vary("time.dt=1e-3,5e-4").values, (std::vector<std::string>{"1e-3", "5e-4"}));
+  EXPECT_EQ(parse_vary("time.dt= 1e-3 , 5e-4").values, (std::vector<std::string>{"1e-3", "5e-4"}));
   const StudyVary g = parse_vary("gravity=[0,0,-1],[0,0,-2],[0, 0, -9.81]");
   EXPECT_EQ(g.key, "gravity");
   EXPECT_EQ(g.values, (std::vector<std::string>{"[0,0,-1]", "[0,0,-2]", "[0, 0, -9.81]"}));
   EXPECT_EQ(parse_vary("materials.a={density: 5, friction: 1},{density: 6}").values,
             (std::vector<std::string>{"{density: 5, friction: 1}", "{density: 6}"}));
   for (const std::string bad : {"time.dt=1e-3,,5e-4", "time.dt=1e-3,", "gravity=[0,0,-1", "gravity=0,0]", "time.dt=",
-                                "=1,2", "time.dt=1e-3,5e-4,1e-3", "time.dt=1e-3,0.001", "gravity=[0,0,-1],[0,0,-1]"}) {
+                                "=1,2", "time.dt=1e-3,5e-4,1e-3", "time.dt=1e-3,0.001", "time.dt=1e-3,0.001 ", "time.dt=1e-3, ",
+                                "gravity=[0,0,-1],[0,0,-1]"}) {
     try {
       parse_vary(bad);
       ADD_FAILURE() << bad << " was taken";
