@@ -32,7 +32,7 @@ __global__ void drift_kernel(BodiesView bodies, real h, unsigned* non_finite, co
 __global__ void finite_kernel(BodiesView bodies, unsigned* non_finite) {
   bool bad = false;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x)
-    bad = bad || !body_is_finite(bodies.position[i], bodies.velocity[i], bodies.angular_velocity[i]);
+    bad = bad || !body_in_range(bodies.position[i], bodies.velocity[i], bodies.angular_velocity[i]);
   if (bad) *non_finite = 1u;
 }
 

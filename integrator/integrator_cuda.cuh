@@ -22,7 +22,8 @@ void launch_integrate_positions(const BodiesView& bodies, real h, unsigned* non_
                                 cudaStream_t stream, const unsigned long long* skip = nullptr);
 
 // Sets *non_finite = 1 when a position, velocity or angular velocity is not
-// finite (never clears it): the check of a state written from outside.
+// finite or its square overflows (body_in_range; never clears it): the check
+// of a state written from outside.
 void launch_check_finite(const BodiesView& bodies, unsigned* non_finite, int sm_count, cudaStream_t stream);
 
 }  // namespace marbles::integrator::cuda

@@ -80,4 +80,11 @@ MARBLES_HD_INLINE bool body_is_finite(const Vec3& x, const Vec3& v, const Vec3& 
   return is_finite(x) && is_finite(v) && is_finite(w);
 }
 
+// The check of a state edited from outside (arrays written through views):
+// finite, and no square past the precision's range (a speed whose square
+// overflows makes the kinetic energy inf, a position's the distances).
+MARBLES_HD_INLINE bool body_in_range(const Vec3& x, const Vec3& v, const Vec3& w) {
+  return !square_overflows(x) && !square_overflows(v) && !square_overflows(w);
+}
+
 }  // namespace marbles::integrator

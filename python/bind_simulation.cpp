@@ -64,6 +64,13 @@ BackendChoice backend_choice(const std::string& name) {
   throw InputError(SourceLocation{}, "backend", "must be auto, cpu or cuda, got '" + name + "'");
 }
 
+// The process's thread count before any simulation set its own: OMP_NUM_THREADS,
+// else every core (read once, at the first simulation made).
+int default_threads() {
+  static const int n = thread_count();
+  return n;
+}
+
 class PySimulation {
  public:
   // `source`: a scene file's path, or a scene as JSON text when `label` is
@@ -76,7 +83,10 @@ class PySimulation {
     const scene::GeneratedParticles particles = scene::generate_particles(m_scene);
     m_warnings = risky_settings(m_scene, particles, sizeof(real) == 4);
     const BackendChoice choice = backend_choice(backend);
-    set_thread_count(threads);
+    // Its own count, set again before each of its steps: OpenMP's count is
+    // the process's, which another simulation may have changed since.
+    m_threads = threads > 0 ? threads : default_threads();
+    set_thread_count(m_threads);
     std::ostringstream log;
     m_backend = select_backend(choice, log);
     m_backend_note = log.str();
@@ -97,6 +107,7 @@ class PySimulation {
   void step(std::uint64_t n) {
     const Busy busy(*this);
     if (m_views_out) check_views();
+    set_thread_count(m_threads);
     nb::gil_scoped_release release;
     auto last_check = std::chrono::steady_clock::now();
     for (std::uint64_t i = 0; i < n; ++i) {
@@ -327,14 +338,19 @@ class PySimulation {
     for (const auto& [name, vec] : arrays)
       for (std::size_t i = 0; i < vec->size(); ++i) {
         const Vec3& p = (*vec)[i];
-        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+        if (!is_finite(p))
           throw nb::value_error((std::string(name) + "[" + std::to_string(i) +
                                  "] is not finite; write a finite value before stepping")
+                                    .c_str());
+        if (square_overflows(p))
+          throw nb::value_error((std::string(name) + "[" + std::to_string(i) + "] is too large for " + kRealName +
+                                 " precision: its squared length overflows; write a smaller value before stepping")
                                     .c_str());
       }
   }
 
   scene::Scene m_scene;
+  int m_threads = 1;  // the CPU threads its steps run on
   std::uint64_t m_fingerprint = 0;
   std::vector<std::string> m_warnings;
   broadphase::Backend m_backend = broadphase::Backend::cpu;
@@ -400,13 +416,16 @@ nb::object pairs(HostArray<const real, kAny, 4> xyzr, const std::string& algorit
     radius[i] = row[3];
   }
   if (!(margin >= 0) || !std::isfinite(margin)) throw InputError(SourceLocation{}, "margin", "must be finite and >= 0");
+  if (!std::isfinite(static_cast<real>(margin)))  // finite in double, inf once the precision's
+    throw InputError(SourceLocation{}, "margin", std::string("out of range for ") + kRealName + " precision");
+  const BackendChoice where_asked = backend_choice(backend);  // checked for every algorithm
   const SpheresIn in{centre.data(), radius.data(), n};
   std::vector<broadphase::Pair> found;
   if (algorithm == "brute") {
     broadphase::brute_force_pairs(in, static_cast<real>(margin), found);
   } else if (algorithm == "home" || algorithm == "subdivision") {
     std::ostringstream log;
-    const broadphase::Backend where = select_backend(backend_choice(backend), log);
+    const broadphase::Backend where = select_backend(where_asked, log);
     const auto alg = algorithm == "home" ? broadphase::Algorithm::home : broadphase::Algorithm::seed;
     auto bp = where == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda(alg)
                                                  : broadphase::make_subdivision_cpu(alg);

@@ -81,7 +81,7 @@ class Simulation {
     m_watch.known = false;
     m_backend->state_written();
   }
-  // Every position, velocity and angular velocity finite (checked where the state lives).
+  // Every position, velocity and angular velocity finite, its square too (checked where the state lives).
   bool state_finite() { return m_backend->state_finite(); }
   // The contacts of the last substep (solver order), for diagnostics and tests.
   const std::vector<narrowphase::Contact>& contacts() const;

@@ -159,7 +159,8 @@ class StepBackend {
   // The arrays of state_in_place() may have changed (the host copy is stale).
   virtual void state_written() = 0;
   // True when every position, velocity and angular velocity of the arrays
-  // the step works on is finite (on the GPU, checked there: one flag read).
+  // the step works on is finite, its square too (integrator::body_in_range;
+  // on the GPU, checked there: one flag read).
   virtual bool state_finite() = 0;
   // The contacts of the last substep, in solver (colour-major) order.
   virtual const std::vector<narrowphase::Contact>& contacts() = 0;

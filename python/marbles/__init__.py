@@ -125,6 +125,19 @@ def _implementation(precision):
     return _marbles.SimulationDouble if precision == "double" else _marbles.SimulationFloat
 
 
+def _is_false(value):
+    """False, or NumPy's False (a callback's ``x > limit`` on arrays gives one)."""
+    return value is False or (isinstance(value, np.bool_) and not value)
+
+
+def _threads(value):
+    """``threads``: 0 (OMP_NUM_THREADS, else every core) or 1 to 4096, as ``--threads``."""
+    value = _whole(value, "threads", 0)
+    if value > 4096:
+        raise ValueError(f"threads must be <= 4096, got {value}")
+    return value
+
+
 # --- device arrays -------------------------------------------------------------
 
 class DeviceArray:
@@ -183,7 +196,7 @@ class Simulation:
         path = os.fspath(scene)
         overrides = _overrides(set)
         precision = _requested_precision(overrides) or _marbles.scene_precision(path)
-        impl = _implementation(precision)(path, "", "", overrides, backend, threads)
+        impl = _implementation(precision)(path, "", "", overrides, backend, _threads(threads))
         self._setup(impl, {"scene": os.path.abspath(path), "set": overrides})
 
     @classmethod
@@ -205,7 +218,7 @@ class Simulation:
         precision = _requested_precision(overrides) or (
             solver.get("precision", "float") if isinstance(solver, dict) else "float")
         stem = name or (scene.get("name") if isinstance(scene.get("name"), str) else None) or "scene"
-        impl = _implementation(precision)(text, "<dict>", stem, overrides, backend, threads)
+        impl = _implementation(precision)(text, "<dict>", stem, overrides, backend, _threads(threads))
         self = cls.__new__(cls)
         self._setup(impl, {"dict": text, "name": stem, "set": overrides})
         return self
@@ -245,14 +258,24 @@ class Simulation:
         else:
             self = cls(scene, backend=backend, set=set, threads=threads)
         if self.precision != _marbles.checkpoint_precision(path) and os.path.exists(path):
-            # The checkpoint's precision wins, as with marbles run --restart.
-            overrides = self._source["set"] + [f"solver.precision={_marbles.checkpoint_precision(path)}"]
-            if "dict" in self._source:
-                self = cls.from_dict(json.loads(self._source["dict"]), backend=backend, set=overrides,
-                                     threads=threads, name=self._source.get("name"))
-            else:
-                self = cls(self._source["scene"], backend=backend, set=overrides, threads=threads)
+            # The checkpoint's precision wins, as with marbles run --restart:
+            # the same scene and overrides in it, no override added (the
+            # checkpoint holds the fingerprint of the scene and its overrides,
+            # which one more would change; marbles run --precision adds none).
+            self = cls._in_precision(self._source, _marbles.checkpoint_precision(path), backend, threads)
         self._impl.restart(path)
+        return self
+
+    @classmethod
+    def _in_precision(cls, source, precision, backend, threads):
+        overrides = source["set"]
+        if "dict" in source:
+            impl = _implementation(precision)(source["dict"], "<dict>", source["name"], overrides, backend,
+                                              _threads(threads))
+        else:
+            impl = _implementation(precision)(source["scene"], "", "", overrides, backend, _threads(threads))
+        self = cls.__new__(cls)
+        self._setup(impl, dict(source))
         return self
 
     def _setup(self, impl, source):
@@ -282,8 +305,14 @@ class Simulation:
         calling ``callback(sim)`` every ``every`` steps; a callback that
         returns False stops the run."""
         every = _whole(every, "run: every", 1)
+        if callback is not None and not callable(callback):
+            raise TypeError(f"run: callback: a function of the simulation, got {callback!r}")
         if until is not None and (isinstance(until, (bool, np.bool_)) or not isinstance(until, numbers.Real)):
             raise TypeError(f"run: until: a time in seconds, got {until!r}")
+        try:
+            float(until if until is not None else 0)
+        except OverflowError:  # an int past any float
+            raise ValueError(f"run: until is too large a time, got {until!r}") from None
         if until is not None and not (math.isfinite(until) and until >= 0):
             raise ValueError(f"run: until must be a finite time >= 0, got {until!r}")
         if until is not None and not math.isfinite(float(until) / self.dt):
@@ -292,7 +321,7 @@ class Simulation:
         self._check_substeps(target - self.steps, "run: until")
         while self.steps < target:
             self._impl.step(min(every, target - self.steps))
-            if callback is not None and callback(self) is False:
+            if callback is not None and _is_false(callback(self)):
                 break
         return self
 
@@ -377,6 +406,8 @@ class Simulation:
         A folder this simulation has not written to that holds another
         run's output raises ValueError, unless ``overwrite=True``, which
         first removes that run's files (as ``marbles run --overwrite``)."""
+        if not isinstance(overwrite, (bool, np.bool_)):  # "False" would be true, and remove a run's files
+            raise TypeError(f"write_frame: overwrite is True or False, got {overwrite!r}")
         return self._impl.write_frame(os.fspath(dir), bool(overwrite))
 
     def checkpoint(self, path):
@@ -450,8 +481,9 @@ def study(scene, vary, set=None, backend="auto", repeats=1, out=None):
     if not isinstance(vary, dict) or not vary:
         raise SceneError("vary: give a dict of key -> list of values", key="vary",
                          message="give a dict of key -> list of values")
-    if isinstance(repeats, bool) or int(repeats) != repeats or repeats < 1:
-        raise ValueError(f"repeats: a whole number of runs >= 1, got {repeats!r}")
+    repeats = _whole(repeats, "repeats", 1)
+    if repeats > 1000:  # as marbles study --repeats
+        raise ValueError(f"repeats must be <= 1000, got {repeats}")
 
     def top_level_comma(text):
         depth = 0
@@ -471,7 +503,7 @@ def study(scene, vary, set=None, backend="auto", repeats=1, out=None):
             if top_level_comma(text):  # the study's list is comma-separated
                 raise ValueError(f"vary[{key!r}]: a value may not hold a comma outside brackets, got {text!r}")
         texts.append(f"{key}=" + ",".join(items))
-    return _marbles.study(os.fspath(scene), texts, _overrides(set), backend, int(repeats),
+    return _marbles.study(os.fspath(scene), texts, _overrides(set), backend, repeats,
                           os.fspath(out) if out is not None else "", _program_path())
 
 

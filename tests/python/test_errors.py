@@ -131,10 +131,19 @@ def test_counts_are_whole_numbers(pile):
     for every, error in ((0.5, ValueError), (0, ValueError), ("2", TypeError)):
         with pytest.raises(error, match="run: every"):
             sim.run(until=1.0, every=every)
-    for until, error in ((float("nan"), ValueError), (-1.0, ValueError), ("1", TypeError)):
+    for until, error in ((float("nan"), ValueError), (-1.0, ValueError), ("1", TypeError), (10**400, ValueError)):
         with pytest.raises(error, match="run: until"):
             sim.run(until=until)
+    with pytest.raises(TypeError, match="run: callback"):
+        sim.run(until=1.0, callback=5)
     assert sim.steps == 15
+    # A callback's NumPy False stops the run as False does.
+    sim.run(until=sim.time + 10 * sim.dt, callback=lambda s: np.False_, every=2)
+    assert sim.steps == 17
+    # threads: 0 (the default count) or 1 to 4096, a whole number.
+    for threads, error in ((-7, ValueError), (10**6, ValueError), (1.5, ValueError), ("2", TypeError)):
+        with pytest.raises(error, match="threads"):
+            marbles.Simulation.from_dict(pile, threads=threads)
     # Held to the run's substeps limit (the program's own, sim/limits.hpp), as `marbles run --duration` is:
     # no endless call.
     limit = marbles._marbles.substeps_limit()
@@ -143,11 +152,27 @@ def test_counts_are_whole_numbers(pile):
                  lambda: sim.step(int(limit // sim.substeps) + 1), lambda: sim.run(until=1e20)):
         with pytest.raises(ValueError, match=re.escape(f"more than the limit {limit:.0e}")):
             call()
-    assert sim.steps == 15
+    assert sim.steps == 17
     # A 0-d array is its one value, in a scene dict and in an override.
     zero_d = dict(pile)
     zero_d["time"] = dict(pile["time"], dt=np.array(pile["time"]["dt"]))
     assert marbles.Simulation.from_dict(zero_d, set={"solver.iterations": np.array(5)}).dt == pile["time"]["dt"]
+
+
+def test_each_simulation_steps_on_its_own_threads(pile):
+    # OpenMP's thread count is the process's: a simulation made later with
+    # another count must not change the count an earlier one steps with.
+    ctypes = pytest.importorskip("ctypes")
+    try:
+        gomp = ctypes.CDLL("libgomp.so.1")
+    except OSError:
+        pytest.skip("no libgomp to ask")
+    one = marbles.Simulation.from_dict(pile, backend="cpu", threads=1)
+    two = marbles.Simulation.from_dict(pile, backend="cpu", threads=2)
+    one.step(1)
+    assert gomp.omp_get_max_threads() == 1
+    two.step(1)
+    assert gomp.omp_get_max_threads() == 2
 
 
 def test_array_and_study_argument_errors(pile, tmp_path):
@@ -173,9 +198,17 @@ def test_array_and_study_argument_errors(pile, tmp_path):
     sim.velocities = huge
     assert sim.velocities[2, 0] == np.float32(1e18)
     scene = SCENES / "validation" / "bouncing_ball.yaml"
-    for repeats in (0, -3, 1.5):
-        with pytest.raises(ValueError, match="repeats"):
+    for repeats, error in ((0, ValueError), (-3, ValueError), (1.5, ValueError), (float("nan"), ValueError),
+                           (float("inf"), ValueError), (2**40, ValueError), (None, TypeError), ("2", TypeError)):
+        with pytest.raises(error, match="repeats"):
             marbles.study(scene, vary={"time.dt": [1e-3]}, repeats=repeats, out=tmp_path)
+    # pairs: a margin past the precision's range, or an unknown backend, whatever the algorithm.
+    xyzr = np.random.default_rng(1).random((20, 4)).astype(np.float32)
+    for algorithm in ("brute", "home"):
+        with pytest.raises(marbles.SceneError, match="margin: out of range for float precision"):
+            marbles.pairs(xyzr, algorithm=algorithm, margin=1e39)
+        with pytest.raises(marbles.SceneError, match="backend: must be auto, cpu or cuda"):
+            marbles.pairs(xyzr, algorithm=algorithm, backend="gpu")
     with pytest.raises(ValueError, match="comma outside brackets"):
         marbles.study(scene, vary={"time.dt": ["1e-3,2e-3"]}, out=tmp_path)
 

@@ -84,6 +84,17 @@ def test_non_finite_writes_are_refused(pile):
     with pytest.raises(ValueError, match="shape"):
         sim.angular_velocities = np.zeros((3, 3))
     assert np.isfinite(sim.velocities).all()
+    # Finite, but its square past the precision's range (its kinetic energy
+    # would be inf): refused through a view as in an assignment.
+    big = np.sqrt(np.finfo(sim.angular_velocities.dtype).max) * 2
+    w = sim.angular_velocities
+    w[3] = [big, 0, 0]
+    with pytest.raises(ValueError, match=r"angular_velocities\[3\] is too large for float precision: its squared"):
+        sim.step()
+    assert sim.steps == 3
+    w[3] = 0
+    sim.step()
+    assert np.isfinite(sim.kinetic_energy())
 
 
 def test_kinetic_energy_from_the_arrays(pile):
@@ -145,6 +156,27 @@ def test_python_run_equals_marbles_run(tmp_path):
     assert sim.summary()["max_overlap"] == summary["max_overlap"]
 
 
+def test_restart_takes_a_marbles_run_checkpoint_in_double(tmp_path):
+    # marbles run --precision double writes a double checkpoint of a float
+    # scene; restart() resumes it in double with the run's overrides (the
+    # precision is no override: the checkpoint's fingerprint holds).
+    scene = SCENES / "demo.yaml"
+    overrides = ["time.duration=0.03", "output.checkpoint={every: 30, keep: 1}"]
+    out = tmp_path / "run"
+    args = [PROGRAM, "run", str(scene), "--out", str(out), "--summary-only", "--quiet", "--backend", "cpu",
+            "--precision", "double"]
+    for o in overrides:
+        args += ["--set", o]
+    subprocess.run(args, check=True, capture_output=True)
+    done = marbles.Simulation.restart(out / "checkpoints" / "step_000030.mck", scene=scene, backend="cpu",
+                                      set=overrides)
+    assert done.precision == "double" and done.steps == 30
+    assert done.positions.dtype == np.float64
+    sim = marbles.Simulation(scene, backend="cpu", set=overrides + ["solver.precision=double"])
+    sim.run()
+    assert np.array_equal(sim.positions, done.positions)
+
+
 def test_checkpoint_and_restart_go_on_bit_for_bit(pile, tmp_path):
     sim = marbles.Simulation.from_dict(pile, backend="cpu")
     sim.step(10)
@@ -191,6 +223,9 @@ def test_write_frame(pile, tmp_path):
     before = (tmp_path / "series.pvd").read_bytes(), pathlib.Path(first).read_bytes()
     with pytest.raises(ValueError, match="holds the output of an earlier run"):
         other.write_frame(tmp_path)
+    for truthy_text in ("False", "no", 1):  # not a bool: refused, not taken as true (it would remove the run)
+        with pytest.raises(TypeError, match="overwrite is True or False"):
+            other.write_frame(tmp_path, overwrite=truthy_text)
     assert ((tmp_path / "series.pvd").read_bytes(), pathlib.Path(first).read_bytes()) == before
     # ... unless asked: that run's files go first, so the series is this one's alone.
     (tmp_path / "notes.txt").write_text("mine")

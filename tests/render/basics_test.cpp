@@ -192,6 +192,34 @@ TEST(AtomicFile, WritesAndLeavesNoTemporaries) {
   EXPECT_THROW(write_file_atomic(dir / "no-such-folder" / "b.txt", "x"), RuntimeFailure);
 }
 
+// A pipe or a folder under the name is not replaced by the file (run as root,
+// a checkpoint written to /dev/full had replaced the device node); a link is
+// replaced itself and its target left alone.
+TEST(AtomicFile, ReplacesNoDevicePipeOrFolder) {
+  const fs::path dir = fresh_dir("atomic_special");
+  ASSERT_EQ(mkfifo((dir / "pipe").c_str(), 0600), 0);
+  fs::create_directory(dir / "folder");
+  for (const char* name : {"pipe", "folder"}) {
+    try {
+      write_file_atomic(dir / name, "x");
+      ADD_FAILURE() << name << " was replaced";
+    } catch (const RuntimeFailure& e) {
+      EXPECT_NE(std::string(e.what()).find("nothing was replaced"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(fs::status(dir / "pipe").type(), fs::file_type::fifo);
+  EXPECT_TRUE(fs::is_directory(dir / "folder"));
+  EXPECT_EQ(count_temp_files(dir), 0u);
+  write_file_atomic(dir / "target.txt", "kept");
+  fs::create_symlink(dir / "target.txt", dir / "link.txt");
+  write_file_atomic(dir / "link.txt", "new");
+  EXPECT_FALSE(fs::is_symlink(dir / "link.txt"));
+  std::ifstream in(dir / "target.txt");
+  std::string text;
+  in >> text;
+  EXPECT_EQ(text, "kept");
+}
+
 TEST(Camera, DefaultViewFramesTheBounds) {
   Bounds b;
   b.add(-1, -2, 0);
