@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <optional>
 #include <random>
 #include <set>
@@ -28,6 +29,10 @@
 #include "tests/require_device.hpp"
 #include "tests/sim/test_scenes.hpp"
 #include "tests/sim/watchdog_cases.hpp"
+
+#if defined(MARBLES_HAVE_CUDA)
+#include <cuda_runtime.h>
+#endif
 
 using namespace marbles;
 using namespace marbles::testing;
@@ -334,6 +339,42 @@ TEST(StepCuda, WideSweepKeepsThreeBlocksASmAndNoSweepSpills) {
       EXPECT_GE(fits[i].blocks_per_sm, 3) << which;
     }
   }
+}
+
+// Values written into the step's own arrays from outside (as Python's views
+// do, on the device with CUDA) are checked where they live: a NaN, or a
+// speed finite but past float's range once squared (its energy inf), makes
+// state_finite() false on both backends alike; back in range, true again.
+TEST(StepCuda, StateWrittenFromOutsideIsCheckedWhereItLives) {
+  REQUIRE_DEVICE();
+#if defined(MARBLES_HAVE_CUDA)
+  auto [s, g] = pour_scene(100, 3);
+  const real big = real(2) * std::sqrt(std::numeric_limits<real>::max());
+  for (const broadphase::Backend backend : {broadphase::Backend::cpu, broadphase::Backend::cuda}) {
+    SCOPED_TRACE(backend == broadphase::Backend::cuda ? "cuda" : "cpu");
+    Simulation sim(s, make_world(s, g), backend);
+    sim.step();
+    const Vec3 good = sim.world().velocity[5];
+    const BodiesView v = sim.state_in_place();
+    const auto write = [&](Vec3* at, const Vec3& value) {
+      if (backend == broadphase::Backend::cuda)
+        ASSERT_EQ(cudaMemcpy(at, &value, sizeof value, cudaMemcpyHostToDevice), cudaSuccess);
+      else
+        *at = value;
+      sim.state_written();
+    };
+    EXPECT_TRUE(sim.state_finite());
+    write(v.velocity + 5, Vec3(big, 0, 0));
+    EXPECT_FALSE(sim.state_finite());
+    write(v.velocity + 5, good);
+    EXPECT_TRUE(sim.state_finite());
+    write(v.angular_velocity + 7, Vec3(0, std::numeric_limits<real>::quiet_NaN(), 0));
+    EXPECT_FALSE(sim.state_finite());
+    write(v.angular_velocity + 7, Vec3{});
+    write(v.position + 9, Vec3(0, 0, big));
+    EXPECT_FALSE(sim.state_finite());
+  }
+#endif
 }
 
 TEST(StepCuda, PourMatchesTheCpuBitForBit) {
