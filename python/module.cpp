@@ -71,7 +71,8 @@ NB_MODULE(_marbles, m) {
   marbles_f64::bind_simulation(m, "SimulationDouble", "pairs_double");
   m.def("study", &study, nb::arg("scene"), nb::arg("vary"), nb::arg("set"), nb::arg("backend"), nb::arg("repeats"),
         nb::arg("out"), nb::arg("program"));
-  m.def("scene_precision", &marbles::scene::scene_precision, nb::arg("path"));
+  m.def("scene_precision", &marbles::scene::scene_precision, nb::arg("path"), nb::arg("overrides"));
+  m.def("scene_precision_json", &marbles::scene::scene_precision_json, nb::arg("text"), nb::arg("overrides"));
   m.def("checkpoint_precision", &marbles::checkpoint_precision, nb::arg("path"));
   m.def("cuda_device", [] {
     const marbles::DeviceInfo& d = marbles::cuda_device();

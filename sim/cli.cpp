@@ -143,6 +143,7 @@ std::string requested_precision(int argc, char** argv) {
   static const std::vector<std::string> kTakesValue{"--out", "--backend", "--broadphase", "--duration", "--set",
                                                     "--limit", "--threads"};
   std::string command, scene_path, from_set, restart;
+  std::vector<std::string> sets;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--precision" && i + 1 < argc) return argv[i + 1];
@@ -150,6 +151,7 @@ std::string requested_precision(int argc, char** argv) {
     if (a == "--set" && i + 1 < argc) {
       const std::string s = argv[++i];
       if (s.rfind("solver.precision=", 0) == 0) from_set = s.substr(17);
+      sets.push_back(s);
       continue;
     }
     if (a == "--restart" && i + 1 < argc) {
@@ -164,9 +166,15 @@ std::string requested_precision(int argc, char** argv) {
     if (command.empty()) command = a;
     else if (scene_path.empty()) scene_path = a;
   }
-  if (!from_set.empty()) return from_set;
+  // A set of solver.precision wins over a checkpoint's precision; its value
+  // read as the loader reads it (a quoted "double" too) where there is a scene.
+  if (!from_set.empty())
+    return (command == "run" || command == "check") && !scene_path.empty() ? scene::scene_precision(scene_path, sets)
+                                                                             : from_set;
   if (!restart.empty()) return checkpoint_precision(restart);
-  if ((command == "run" || command == "check") && !scene_path.empty()) return scene::scene_precision(scene_path);
+  // The scene's, with every --set applied as the loader applies them (a
+  // nested or quoted solver.precision too).
+  if ((command == "run" || command == "check") && !scene_path.empty()) return scene::scene_precision(scene_path, sets);
   return "float";
 }
 

@@ -719,17 +719,6 @@ std::uint32_t Scene::material_index(const std::string& name, const SourceLocatio
   throw InputError(where, key, "unknown material '" + name + "'" + detail::suggestion(name, names));
 }
 
-std::string scene_precision(const std::string& path) {
-  try {
-    const YAML::Node root = YAML::Load(read_file(path));
-    if (root.IsMap() && root["solver"].IsMap() && root["solver"]["precision"].IsScalar() &&
-        root["solver"]["precision"].Scalar() == "double")
-      return "double";
-  } catch (const std::exception&) {
-  }
-  return "float";
-}
-
 namespace {
 
 // YAML merge keys (`<<: *anchor`, `<<: [*a, *b]`), which yaml-cpp leaves as
@@ -960,6 +949,37 @@ Scene load_scene_json(const std::string& text, const std::string& label, const s
   const YAML::Node document = yaml_of(json);
   expect_scene_map(document, label);
   return read_scene(document, label, stem, overrides);
+}
+
+namespace {
+
+// solver.precision of a scene's tree once the overrides are applied.
+std::string precision_of(YAML::Node document, const std::vector<std::string>& overrides) {
+  detail::Origins origins;
+  detail::apply_overrides(document, overrides, origins);
+  const YAML::Node& root = document;
+  if (root.IsMap() && root["solver"].IsMap() && root["solver"]["precision"].IsScalar() &&
+      root["solver"]["precision"].Scalar() == "double")
+    return "double";
+  return "float";
+}
+
+}  // namespace
+
+std::string scene_precision(const std::string& path, const std::vector<std::string>& overrides) {
+  try {
+    return precision_of(read_document(path), overrides);
+  } catch (const std::exception&) {
+    return "float";
+  }
+}
+
+std::string scene_precision_json(const std::string& text, const std::vector<std::string>& overrides) {
+  try {
+    return precision_of(yaml_of(nlohmann::ordered_json::parse(text)), overrides);
+  } catch (const std::exception&) {
+    return "float";
+  }
 }
 
 }  // namespace marbles::scene

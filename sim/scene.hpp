@@ -233,8 +233,13 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
 // relative paths in it (CSV blocks) are taken from the current directory.
 Scene load_scene_json(const std::string& text, const std::string& label, const std::string& stem,
                       const std::vector<std::string>& overrides = {});
-// The scene's `solver.precision` ("float" or "double"), read without
-// validating anything else; "float" when the file cannot be read or parsed.
-std::string scene_precision(const std::string& path);
+// The scene's `solver.precision` ("float" or "double") once the `--set`
+// overrides are applied to its tree, as the loader applies them (so a
+// nested `solver={precision: double}` or a quoted "double" counts), read
+// without validating anything else; "float" when the file or an override
+// cannot be read (loading the scene then says why).
+std::string scene_precision(const std::string& path, const std::vector<std::string>& overrides = {});
+// The same of a scene given as JSON text (load_scene_json's).
+std::string scene_precision_json(const std::string& text, const std::vector<std::string>& overrides = {});
 
 }  // namespace marbles::scene

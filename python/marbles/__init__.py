@@ -112,15 +112,6 @@ def _plain(value, key):
                      message=f"not a scene value: {value!r}")
 
 
-def _requested_precision(overrides):
-    """The precision a ``solver.precision`` override asks for, or None."""
-    for text in reversed(overrides):
-        key, _, value = text.partition("=")
-        if key.strip() == "solver.precision":
-            return value.strip()
-    return None
-
-
 def _implementation(precision):
     return _marbles.SimulationDouble if precision == "double" else _marbles.SimulationFloat
 
@@ -195,7 +186,7 @@ class Simulation:
     def __init__(self, scene, backend="auto", set=None, threads=0):
         path = os.fspath(scene)
         overrides = _overrides(set)
-        precision = _requested_precision(overrides) or _marbles.scene_precision(path)
+        precision = _marbles.scene_precision(path, overrides)  # the overrides applied, as the loader applies them
         impl = _implementation(precision)(path, "", "", overrides, backend, _threads(threads))
         self._setup(impl, {"scene": os.path.abspath(path), "set": overrides})
 
@@ -214,9 +205,7 @@ class Simulation:
             raise SceneError("<dict>: the scene holds itself, or nests deeper than any scene does", file="<dict>",
                              message="the scene holds itself, or nests deeper than any scene does") from None
         overrides = _overrides(set)
-        solver = scene.get("solver")
-        precision = _requested_precision(overrides) or (
-            solver.get("precision", "float") if isinstance(solver, dict) else "float")
+        precision = _marbles.scene_precision_json(text, overrides)
         stem = name or (scene.get("name") if isinstance(scene.get("name"), str) else None) or "scene"
         impl = _implementation(precision)(text, "<dict>", stem, overrides, backend, _threads(threads))
         self = cls.__new__(cls)

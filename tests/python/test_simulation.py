@@ -201,6 +201,14 @@ def test_double_precision_scene(pile):
     assert sim.precision == "double" and sim.positions.dtype == np.float64
     single = marbles.Simulation.from_dict(pile, backend="cpu", set={"solver.precision": "float"})
     assert single.precision == "float"
+    # A set of it in any form the loader takes: nested, quoted, in a map of the solver (from a dict and a file).
+    del pile["solver"]
+    scene = SCENES / "validation" / "bouncing_ball.yaml"
+    for form in ({"solver": {"precision": "double"}}, ['solver.precision="double"'],
+                 ["solver={precision: double, iterations: 5}"]):
+        assert marbles.Simulation.from_dict(pile, backend="cpu", set=form).precision == "double", form
+        assert marbles.Simulation(scene, backend="cpu", set=form).precision == "double", form
+    assert marbles.Simulation(scene, backend="cpu", set=["solver={iterations: 5}"]).precision == "float"
     sim.step(20)
     single.step(20)
     assert np.allclose(sim.positions, single.positions, atol=1e-5)

@@ -85,6 +85,13 @@ TEST_F(CliCheck, SetOverridesTheScene) {
                               {"time.dt=5e-4", "solver.iterations=20"});
   EXPECT_EQ(o.exit_code, 0) << o.err;
   EXPECT_NE(o.out.find("6000 steps of 0.0005 s"), std::string::npos) << o.out;
+  EXPECT_NE(o.out.find(", float)"), std::string::npos) << o.out;
+  // The precision from a set in any form the loader takes (nested, quoted), not only solver.precision=double.
+  for (const char* form : {"solver.precision=double", "solver={precision: double}", "solver.precision=\"double\""}) {
+    const Outcome d = run_check(MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml", scratch, {form});
+    EXPECT_EQ(d.exit_code, 0) << d.err;
+    EXPECT_NE(d.out.find(", double)"), std::string::npos) << form << ": " << d.out;
+  }
 }
 
 TEST_F(CliCheck, BadSetValueExitsTwoNamingTheOverride) {
