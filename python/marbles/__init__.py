@@ -112,6 +112,17 @@ def _plain(value, key):
                      message=f"not a scene value: {value!r}")
 
 
+def _json_text(text):
+    """Whether a record's scene dict, where it has one, is JSON text."""
+    if text is None:
+        return True
+    try:
+        json.loads(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _implementation(precision):
     return _marbles.SimulationDouble if precision == "double" else _marbles.SimulationFloat
 
@@ -228,12 +239,17 @@ class Simulation:
                 raise SceneError(f"{path}: restart: no {os.path.basename(path)}.scene.json beside the checkpoint "
                                  "says which scene it belongs to; give scene=", file=path, key="restart",
                                  message="give scene=") from None
+            except OSError as e:  # a folder, unreadable
+                raise RuntimeFailure(f"cannot read {path}.scene.json: {e.strerror or e}") from None
             except ValueError as e:  # not JSON
                 raise SceneError(f"{path}.scene.json: restart: not the record of a scene ({e}); give scene=",
                                  file=path + ".scene.json", key="restart", message="give scene=") from None
             if (not isinstance(source, dict) or not isinstance(source.get("set"), list)
+                    or not all(isinstance(o, str) for o in source["set"])
                     or not isinstance(source.get("scene", ""), str)
-                    or not (isinstance(source.get("dict"), str) or isinstance(source.get("scene"), str))):
+                    or not isinstance(source.get("name", ""), (str, type(None)))
+                    or not (isinstance(source.get("dict"), str) or isinstance(source.get("scene"), str))
+                    or not _json_text(source.get("dict"))):
                 raise SceneError(f"{path}.scene.json: restart: not the record of a scene; give scene=",
                                  file=path + ".scene.json", key="restart", message="give scene=")
             overrides = source["set"] if set is None else _overrides(set)
@@ -403,11 +419,20 @@ class Simulation:
         """Writes a checkpoint (``marbles run --restart`` reads it too) and,
         beside it, ``path + ".scene.json"``: the scene it belongs to."""
         path = os.fspath(path)
+        record = path + ".scene.json"
+        if path and os.path.exists(record) and not os.path.isfile(record):  # a folder or device: refused up front
+            raise RuntimeFailure(f"cannot write {record}: it is not a file; nothing was written")
         self._impl.checkpoint(path)
-        tmp = path + ".scene.json.tmp"
-        with open(tmp, "w", encoding="utf-8") as f:
-            json.dump(self._source, f)
-        os.replace(tmp, path + ".scene.json")
+        tmp = f"{record}.tmp-{os.getpid()}"
+        try:
+            with open(tmp, "w", encoding="utf-8") as f:
+                json.dump(self._source, f)
+            os.replace(tmp, record)
+        except OSError as e:
+            raise RuntimeFailure(f"cannot write {record}: {e.strerror or e}") from None
+        finally:
+            if os.path.lexists(tmp):
+                os.remove(tmp)
 
     def reference(self):
         """The scene's reference (``reference:``) against the run so far, as a

@@ -224,10 +224,18 @@ def test_checkpoint_paths_that_are_no_file(pile, tmp_path):
     ck = tmp_path / "c.mck"
     sim.checkpoint(ck)
     assert marbles.Simulation.restart(ck).steps == 0  # premise: it restarts as written
-    for text in ("{bad", "[1, 2]", "{}", '{"scene": 5, "set": []}'):
+    for text in ("{bad", "[1, 2]", "{}", '{"scene": 5, "set": []}', '{"dict": "not json", "set": []}',
+                 '{"dict": "{}", "name": 5, "set": []}', '{"scene": "a.yaml", "set": [5]}'):
         (tmp_path / "c.mck.scene.json").write_text(text)
         with pytest.raises(marbles.SceneError, match="not the record of a scene"):
             marbles.Simulation.restart(ck)
+    # The record's place a folder: nothing written, a RuntimeFailure naming it; restart says the same.
+    (tmp_path / "d.mck.scene.json").mkdir()
+    with pytest.raises(marbles.RuntimeFailure, match=r"d\.mck\.scene\.json: it is not a file; nothing was written"):
+        sim.checkpoint(tmp_path / "d.mck")
+    assert not (tmp_path / "d.mck").exists()
+    with pytest.raises(marbles.RuntimeFailure, match=r"cannot read .*d\.mck\.scene\.json"):
+        marbles.Simulation.restart(tmp_path / "d.mck")
 
 
 def test_dicts_that_hold_themselves_or_nest_too_deep(pile):
