@@ -235,7 +235,7 @@ std::optional<std::string> coarse_substeps(const Setting& s, const scene::Scene&
 // ms, 10 iterations; the largest overlap): R = 20, 2.9 % at 1 substep, 0.6 %
 // at 4; R = 50, 10.6 % at 1, 2.9 % at 4, 0.5 % at 16; R = 100, the watchdog
 // gives up at 1, 6.3 % at 4, 1.1 % at 16; the same at 20 iterations. The
-// demo pour (h R = 24.9 ms: steel on wood, twice the radius) keeps 2.9 %, a
+// demo pour (h R = 24.9 ms: steel on glass, twice the radius) keeps 2.9 %, a
 // heavy sphere landing on several light ones shares its load. The rule
 // fires past h R = 30 ms and asks for 12 ms, where every case above stays
 // within 3 % (R = 100 at h R = 25 ms, 6.3 %, is below its trigger: the
