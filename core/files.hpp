@@ -11,11 +11,13 @@
 
 namespace marbles {
 
-// "a folder", "a pipe", "a socket" or "a device"; nullptr for a plain file (a
-// link is followed) or a path naming nothing (opening it then says why).
-inline const char* not_a_plain_file(const std::string& path) {
+// "a folder", "a pipe", "a socket" or "a device"; nullptr for a plain file
+// or a path naming nothing (opening it then says why). A link is followed,
+// or with `follow_links` false taken as itself (nullptr: a name a rename
+// may replace, its target left alone).
+inline const char* not_a_plain_file(const std::string& path, bool follow_links = true) {
   std::error_code ec;
-  switch (std::filesystem::status(path, ec).type()) {
+  switch ((follow_links ? std::filesystem::status(path, ec) : std::filesystem::symlink_status(path, ec)).type()) {
     case std::filesystem::file_type::directory: return "a folder";
     case std::filesystem::file_type::fifo: return "a pipe";
     case std::filesystem::file_type::socket: return "a socket";

@@ -14,6 +14,7 @@
 #include <string>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 
 namespace marbles::render {
 
@@ -85,16 +86,7 @@ void commit_file(const fs::path& tmp, const fs::path& final_path, const Complete
   // A device, pipe, socket or folder under the name is not replaced (the
   // rename would put a file in place of /dev/full when run as root). A link
   // is replaced itself, its target left alone, as before.
-  const char* what = nullptr;
-  switch (fs::symlink_status(final_path, ec).type()) {
-    case fs::file_type::directory: what = "a folder"; break;
-    case fs::file_type::fifo: what = "a pipe"; break;
-    case fs::file_type::socket: what = "a socket"; break;
-    case fs::file_type::block:
-    case fs::file_type::character: what = "a device"; break;
-    default: break;
-  }
-  if (what != nullptr) {
+  if (const char* what = not_a_plain_file(final_path.string(), /*follow_links=*/false)) {
     fs::remove(tmp, ec);
     throw RuntimeFailure("cannot write " + final_path.string() + ": it is " + what +
                          ", not a file; nothing was replaced");

@@ -215,11 +215,9 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
       r.fail("is damaged (a cache entry's impulse is not finite)");
   // A state whose squares overflow (a speed or a distance past the
   // precision's range once squared): its kinetic energy would be inf.
-  for (std::size_t i = 0; i < n; ++i)
-    if (square_overflows(c.world.position[i]) || square_overflows(c.world.velocity[i]) ||
-        square_overflows(c.world.angular_velocity[i]))
-      r.fail("is damaged (sphere " + std::to_string(i) + "'s position, velocity or spin is past " + kRealName +
-             "'s range once squared)");
+  if (const std::size_t i = c.world.first_out_of_range(); i < n)
+    r.fail("is damaged (sphere " + std::to_string(i) + "'s position, velocity or spin is past " + kRealName +
+           "'s range once squared)");
   // Totals: finite, not negative, printable as percentages; rollbacks whole.
   for (double t : {c.totals.candidate_sum, c.totals.contact_sum, c.totals.deepest, c.totals.energy_start,
                    c.totals.overlap_end, c.totals.rollbacks})

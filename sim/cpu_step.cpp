@@ -163,12 +163,7 @@ class CpuStep final : public StepBackend {
   }
   BodiesView state_in_place() override { return m_world.view(); }
   void state_written() override {}
-  bool state_finite() override {
-    for (std::size_t i = 0; i < m_world.size(); ++i)
-      if (!integrator::body_in_range(m_world.position[i], m_world.velocity[i], m_world.angular_velocity[i]))
-        return false;
-    return true;
-  }
+  bool state_finite() override { return m_world.first_out_of_range() == m_world.size(); }
   // Made whole from the records (contact_of_record), in colour-major order.
   const std::vector<narrowphase::Contact>& contacts() override {
     m_solver.contacts_of_records(m_colours, m_world.view(), m_model.pair_table(), m_walls, m_contacts);

@@ -10,6 +10,7 @@
 
 #include "broadphase/grid.hpp"
 #include "broadphase/home_cell_math.hpp"
+#include "integrator/integrator_math.hpp"
 #include "core/error.hpp"
 #include "core/format.hpp"
 #include "core/radix_sort.hpp"
@@ -105,6 +106,12 @@ real World::max_speed() const {
   real v2 = 0;
   for (const Vec3& v : velocity) v2 = std::max(v2, length_squared(v));
   return std::sqrt(v2);
+}
+
+std::size_t World::first_out_of_range() const {
+  for (std::size_t i = 0; i < size(); ++i)
+    if (!integrator::body_in_range(position[i], velocity[i], angular_velocity[i])) return i;
+  return size();
 }
 
 std::size_t World::first_non_finite() const {

@@ -50,6 +50,9 @@ struct World {
   real max_speed() const;
   // Index of the first sphere with a non-finite position or velocity, or size().
   std::size_t first_non_finite() const;
+  // The first sphere whose position, velocity or spin is not finite or
+  // squares past the precision's range (integrator::body_in_range), or size().
+  std::size_t first_out_of_range() const;
 };
 
 // from[order[i]] for each i: an array in a new order of its items.

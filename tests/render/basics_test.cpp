@@ -319,14 +319,18 @@ TEST(PointFields, ParseAndReject) {
     EXPECT_EQ(parse_point_field(point_field_name(f)), f);
 }
 
+// DIR/series.pvd holding `datasets` (its DataSet lines), read back.
+std::vector<SeriesEntry> pvd_of(const fs::path& dir, const std::string& datasets) {
+  write_file_atomic(dir / "series.pvd", "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\">\n<Collection>\n" +
+                                            datasets + "</Collection>\n</VTKFile>\n");
+  return read_pvd(dir / "series.pvd");
+}
+
 TEST(Pvd, ParsesEntriesRelativeToItsFolder) {
   const fs::path dir = fresh_dir("pvd");
-  write_file_atomic(dir / "series.pvd",
-                    "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\">\n<Collection>\n"
-                    "  <DataSet timestep=\"0\" part=\"0\" file=\"frames/frame_000000.vtp\"/>\n"
-                    "  <DataSet file='frames/frame_000001.vtp' timestep='0.25'/>\n"
-                    "</Collection>\n</VTKFile>\n");
-  const auto entries = read_pvd(dir / "series.pvd");
+  const auto entries = pvd_of(dir,
+                              "  <DataSet timestep=\"0\" part=\"0\" file=\"frames/frame_000000.vtp\"/>\n"
+                              "  <DataSet file='frames/frame_000001.vtp' timestep='0.25'/>\n");
   ASSERT_EQ(entries.size(), 2u);
   EXPECT_EQ(entries[0].time, 0);
   EXPECT_EQ(entries[1].time, 0.25);
@@ -341,12 +345,9 @@ TEST(Pvd, DevicesAndPipesAreRefusedByWhatTheyAre) {
   const fs::path dir = fresh_dir("pvd_devices");
   const fs::path pipe = dir / "frame_000001.vtp";
   ASSERT_EQ(mkfifo(pipe.c_str(), 0600), 0);
-  write_file_atomic(dir / "series.pvd",
-                    "<VTKFile type=\"Collection\"><Collection>\n"
-                    "  <DataSet timestep=\"0\" file=\"/dev/zero\"/>\n"
-                    "  <DataSet timestep=\"1\" file=\"frame_000001.vtp\"/>\n"
-                    "</Collection></VTKFile>\n");
-  const auto entries = read_pvd(dir / "series.pvd");
+  const auto entries = pvd_of(dir,
+                              "  <DataSet timestep=\"0\" file=\"/dev/zero\"/>\n"
+                              "  <DataSet timestep=\"1\" file=\"frame_000001.vtp\"/>\n");
   ASSERT_EQ(entries.size(), 2u);
   const auto refusal = [](const fs::path& path, const auto& read) {
     try {
