@@ -75,6 +75,15 @@ MARBLES_HD_INLINE Vec3 drag_update(DragKick kick, const Vec3& v, bool gravity, c
 // x += h v
 MARBLES_HD_INLINE Vec3 drift(const Vec3& x, const Vec3& v, real h) { return x + v * h; }
 
+// A sphere that moved farther than the reach its contacts were found with
+// (narrowphase::contact_reach, m) by more than kUnsweptSlack of its radius:
+// the solve set it moving past what the substep swept (sim/watch_math.hpp
+// checks where it went).
+inline constexpr real kUnsweptSlack = real(0.01);
+MARBLES_HD_INLINE bool moved_past_reach(const Vec3& v, real radius, real reach, real h) {
+  return length(v) * h > reach + kUnsweptSlack * radius;
+}
+
 // The non-finite check of the position stage.
 MARBLES_HD_INLINE bool body_is_finite(const Vec3& x, const Vec3& v, const Vec3& w) {
   return is_finite(x) && is_finite(v) && is_finite(w);

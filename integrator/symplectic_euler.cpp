@@ -20,14 +20,17 @@ void apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kic
       bodies.velocity[i] = drag_update(kick, bodies.velocity[i], g != nullptr, gh, k1, k2, h);
 }
 
-bool integrate_positions(const BodiesView& bodies, real h) {
+bool integrate_positions(const BodiesView& bodies, real h, const real* reach, std::size_t* past) {
   const auto n = static_cast<std::ptrdiff_t>(bodies.count);
   bool bad = false;
-#pragma omp parallel for schedule(static) reduction(|| : bad) if (n > 20000)
+  std::size_t moved_past = 0;
+#pragma omp parallel for schedule(static) reduction(|| : bad) reduction(+ : moved_past) if (n > 20000)
   for (std::ptrdiff_t i = 0; i < n; ++i) {
     bodies.position[i] = drift(bodies.position[i], bodies.velocity[i], h);
     bad = bad || !body_is_finite(bodies.position[i], bodies.velocity[i], bodies.angular_velocity[i]);
+    if (reach != nullptr && moved_past_reach(bodies.velocity[i], bodies.radius[i], reach[i], h)) ++moved_past;
   }
+  if (past != nullptr) *past = moved_past;
   return bad;
 }
 

@@ -19,6 +19,8 @@ void apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kic
 
 // Position stage: x += h v. Returns true when a position, velocity or
 // angular velocity is not finite afterwards (the step's non_finite flag).
-bool integrate_positions(const BodiesView& bodies, real h);
+// With `reach` (m a sphere, contact_reach), the spheres that moved past it
+// (moved_past_reach) are counted into *past.
+bool integrate_positions(const BodiesView& bodies, real h, const real* reach = nullptr, std::size_t* past = nullptr);
 
 }  // namespace marbles::integrator

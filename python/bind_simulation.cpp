@@ -122,7 +122,7 @@ class PySimulation {
         throw RuntimeFailure(std::string(e.what()) + " (the state is back at the start of step " +
                              std::to_string(m_sim->steps() + 1) + ")");
       }
-      m_totals.add(m_sim->last_step(), m_sim->substeps(), m_sim->last_rollbacks().size());
+      m_totals.add(m_sim->last_step(), m_sim->substeps(), m_sim->last_rollbacks().size(), !m_sim->last_kept().empty());
       if (m_probe && m_sim->steps() % m_probe_every == 0) m_probe->sample(m_sim->time(), m_sim->world());
     }
   }
@@ -293,6 +293,7 @@ class PySimulation {
     d["max_overlap"] = m_totals.deepest;
     d["max_overlap_end"] = m_totals.overlap_end;
     d["rollbacks"] = static_cast<std::uint64_t>(m_totals.rollbacks);
+    d["unswept_steps"] = static_cast<std::uint64_t>(m_totals.unswept);
     d["kinetic_energy_start"] = m_totals.energy_start;
     return d;
   }

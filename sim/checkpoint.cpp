@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstddef>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -25,8 +26,12 @@ constexpr char kMagic[8] = {'M', 'A', 'R', 'B', 'L', 'C', 'K', '\n'};
 // loads, its contacts then coloured afresh in the first substep. Format 3
 // adds the step's numbering (solver.renumber), written only where the
 // step has one (else format 2, which earlier builds read too); formats 1
-// and 2 load with none.
-constexpr std::uint32_t kFormat = 3;
+// and 2 load with none. Format 4 adds the steps kept unswept to the running
+// totals, written only where there are some (RunTotals::unswept).
+constexpr std::uint32_t kFormat = 4;
+// The running totals' bytes before format 4.
+constexpr std::size_t kTotalsBefore4 = offsetof(RunTotals, unswept);
+static_assert(sizeof(RunTotals) == kTotalsBefore4 + sizeof(double), "format 4 adds one total, at the end");
 constexpr char kVersion[16] = "marbles 0.1";
 
 class Writer {
@@ -110,7 +115,8 @@ void body(IO& io, C& c, std::uint32_t format = kFormat) {
   io.field(c.state.cache.rolling_impulse);
   if (format >= 2) io.field(c.state.cache.colour);
   io.field(c.state.walls);
-  io.field(c.totals);
+  if (format >= 4) io.field(c.totals);
+  else io.raw(&c.totals, kTotalsBefore4);
   io.field(c.probe);
   if (format >= 3) io.field(c.ids);
 }
@@ -148,7 +154,7 @@ std::string checkpoint_path(const std::string& out_dir, std::uint64_t steps) {
 void write_checkpoint(const std::string& path, const Checkpoint& c) {
   Writer w;
   w.raw(kMagic, sizeof kMagic);
-  const std::uint32_t format = c.ids.empty() ? 2 : kFormat;
+  const std::uint32_t format = c.totals.unswept > 0 ? 4 : c.ids.empty() ? 2 : 3;
   w.put(format);
   w.raw(kVersion, sizeof kVersion);
   w.put<std::uint32_t>(sizeof(real));
@@ -220,9 +226,10 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
            "'s range once squared)");
   // Totals: finite, not negative, printable as percentages; rollbacks whole.
   for (double t : {c.totals.candidate_sum, c.totals.contact_sum, c.totals.deepest, c.totals.energy_start,
-                   c.totals.overlap_end, c.totals.rollbacks})
+                   c.totals.overlap_end, c.totals.rollbacks, c.totals.unswept})
     if (!finite(t) || t < 0 || !(t < 1e300)) r.fail("is damaged (its running totals)");
-  if (c.totals.rollbacks != std::floor(c.totals.rollbacks)) r.fail("is damaged (its running totals)");
+  if (c.totals.rollbacks != std::floor(c.totals.rollbacks) || c.totals.unswept != std::floor(c.totals.unswept))
+    r.fail("is damaged (its running totals)");
   for (double p : c.probe)
     if (!finite(p)) r.fail("is damaged (its reference's progress)");
   // Pairs of its spheres (a < b) or a sphere and a wall, in ascending key

@@ -26,9 +26,12 @@ struct RunTotals {
   double energy_start = 0;   // kinetic energy at step 0, J
   double overlap_end = 0;    // the last step's largest overlap
   double rollbacks = 0;      // steps the watchdog redid
+  double unswept = 0;        // steps kept with the unswept rule failing at the last retry (format 4)
 
-  // Adds a step: its counters (of `substeps` substeps) and the rollbacks it took.
-  void add(const StepCounters& last, int substeps, std::size_t step_rollbacks) {
+  // Adds a step: its counters (of `substeps` substeps), the rollbacks it
+  // took, and whether it was kept unswept (Simulation::last_kept).
+  void add(const StepCounters& last, int substeps, std::size_t step_rollbacks, bool kept_unswept = false) {
+    unswept += kept_unswept ? 1 : 0;
     candidate_sum += static_cast<double>(last.candidate_pairs) / substeps;
     contact_sum += static_cast<double>(last.contacts) / substeps;
     deepest = deepest > static_cast<double>(last.max_overlap) ? deepest : static_cast<double>(last.max_overlap);

@@ -49,6 +49,7 @@ class CpuStep final : public StepBackend {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_solver.forget_records();
     m_contact_first.clear();
+    m_reach_fresh = false;
     // The sphere search replaces the second run, reusing its elements
     // (sphere_contacts); it is emptied wherever that search does not run
     // or fails.
@@ -58,6 +59,7 @@ class CpuStep final : public StepBackend {
     const BodiesView bodies = m_world.view();
     const std::size_t n = m_world.size();
     narrowphase::contact_reaches(bodies, h, m_reach);
+    m_reach_fresh = true;
     try {
       if (m_model.collisions) {
         m_bound_radius.resize(n);
@@ -117,7 +119,13 @@ class CpuStep final : public StepBackend {
   }
 
   void integrate_positions(real h) override {
-    m_non_finite = integrator::integrate_positions(m_world.view(), h) || m_non_finite;
+    // With the watch and speculative contacts, where the reaches were made
+    // for this substep: the spheres that moved past theirs, checked.
+    const bool check = m_watch && m_model.speculative && m_reach_fresh && m_reach.size() == m_world.size();
+    std::size_t past = 0;
+    m_non_finite =
+        integrator::integrate_positions(m_world.view(), h, check ? m_reach.data() : nullptr, &past) || m_non_finite;
+    if (past > 0 && !m_non_finite) check_unswept(h, past);
     if (m_model.verlet && m_model.drag)
       integrator::apply_drag(m_world.view(), m_model.drag_linear, m_model.drag_quadratic, m_model.second_kick(h),
                              integrator::DragKick::verlet_second, m_model.gravity ? &m_model.g : nullptr);
@@ -225,6 +233,32 @@ class CpuStep final : public StepBackend {
     return m_uniform ? &*m_uniform : nullptr;
   }
 
+  // The `past` spheres that moved past their reach this substep, against
+  // every sphere and wall (watch_math.hpp: swept_deepening); more than
+  // kUnsweptChecked are not checked, and count as such.
+  void check_unswept(real h, std::size_t past) {
+    if (past > watch::kUnsweptChecked) {
+      m_counters.unswept_unchecked = 1;
+      return;
+    }
+    const BodiesView b = m_world.view();
+    m_past.clear();
+    for (std::size_t i = 0; i < b.count && m_past.size() < past; ++i)
+      if (integrator::moved_past_reach(b.velocity[i], b.radius[i], m_reach[i], h))
+        m_past.push_back(static_cast<std::uint32_t>(i));
+    const auto n = static_cast<std::ptrdiff_t>(b.count);
+    real deepest = m_counters.unswept_depth;
+    for (const std::uint32_t i : m_past) {
+#pragma omp parallel for schedule(static) reduction(max : deepest) if (n > 20000)
+      for (std::ptrdiff_t j = 0; j < n; ++j)
+        deepest = std::max(deepest, watch::unswept_pair(b, i, static_cast<std::size_t>(j), h));
+      if (m_model.wall_contacts)
+        for (const narrowphase::WallShape& w : m_walls)
+          deepest = std::max(deepest, watch::wall_swept_deepening(w, b.position[i], b.velocity[i], b.radius[i], h));
+    }
+    m_counters.unswept_depth = deepest;
+  }
+
   // The watchdog's figures (watch_math.hpp); walls count only where they act.
   void watch(const BodiesView& b) {
     const auto n = static_cast<std::ptrdiff_t>(b.count);
@@ -256,6 +290,8 @@ class CpuStep final : public StepBackend {
 
   // Per-substep buffers, reused.
   std::vector<real> m_reach;         // m, contact_reach per sphere
+  bool m_reach_fresh = false;        // m_reach made by this substep's find_contacts
+  std::vector<std::uint32_t> m_past;  // check_unswept's spheres
   std::vector<real> m_bound_radius;  // m, radius + reach: what the broad phase sees
   std::vector<broadphase::Pair> m_pairs;
   // The contacts as found, in two runs (narrowphase::Runs): the first

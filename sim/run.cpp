@@ -257,7 +257,13 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       progress.finish();
       err << "watchdog: step " << sim.steps() << ": " << why << "; rolled back and redone with the substep halved and the sweeps doubled\n";
     }
-    totals.add(sim.last_step(), sim.substeps(), sim.last_rollbacks().size());
+    if (!sim.last_kept().empty()) {
+      progress.finish();
+      err << "watchdog: step " << sim.steps() << ": " << sim.last_kept() << ", still at "
+          << (sim.substeps() << Simulation::kWatchdogRetries)
+          << " substeps: kept (more time.substeps sweep what the solve sets moving)\n";
+    }
+    totals.add(sim.last_step(), sim.substeps(), sim.last_rollbacks().size(), !sim.last_kept().empty());
     if (probe && sim.steps() % probe_every == 0) probe->sample(sim.time(), sim.world());
     if (output.due(sim.steps())) {
       progress.finish();
@@ -319,6 +325,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   summary["max_overlap"] = deepest;
   summary["max_overlap_end"] = totals.overlap_end;
   summary["rollbacks"] = static_cast<std::uint64_t>(totals.rollbacks);  // a count (held as a double in the checkpoint)
+  summary["unswept_steps"] = static_cast<std::uint64_t>(totals.unswept);
   summary["kinetic_energy_start"] = e_start;
   summary["kinetic_energy_end"] = e_end;
   for (const EndFigure& f : end_figures(sim.world())) summary[f.name] = f.value;

@@ -216,12 +216,23 @@ void Simulation::step() {
   send_edits();
   m_given_stale = true;  // nothing within the step reads the scene-numbered copy (violation reads the step's)
   m_last_rollbacks.clear();
+  m_last_kept.clear();
   const StepCounters before = m_last;
   if (m_watchdog) m_backend->keep_step_start();
   for (int retry = 0;; ++retry) {
     m_backend->set_iteration_factor(1 << retry);
     attempt(1 << retry);
-    const std::string broken = m_watchdog ? violation(before) : std::string();
+    std::string broken = m_watchdog ? violation(before) : std::string();
+    if (broken.empty() && m_watchdog) {
+      broken = unswept_violation();
+      // Still unswept at the last retry: kept, as the step was before the
+      // rule (a sphere set moving faster than even the finest substep sweeps).
+      if (!broken.empty() && retry == kWatchdogRetries) {
+        m_last_kept = std::move(broken);
+        ++m_unswept_kept;
+        break;
+      }
+    }
     if (broken.empty()) break;
     m_backend->undo_step();
     m_last = before;
@@ -299,6 +310,16 @@ std::string Simulation::violation(const StepCounters& before) {
   }
   if (m_last.max_overlap > kWatchdogOverlap && before.max_overlap < kWatchdogOverlap / 2)
     return "overlap " + significant(m_last.max_overlap, 4) + " of a radius";
+  return {};
+}
+
+std::string Simulation::unswept_violation() const {
+  if (m_last.unswept_unchecked != 0)
+    return "more than " + std::to_string(watch::kUnsweptChecked) +
+           " spheres moved past the reach their contacts were found with in one substep (set moving within it)";
+  if (m_last.unswept_depth > kUnsweptDepth)
+    return "a sphere set moving within a substep went " + significant(m_last.unswept_depth, 3) +
+           " of a radius into a sphere or wall its contacts were not found with";
   return {};
 }
 

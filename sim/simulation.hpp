@@ -117,17 +117,27 @@ class Simulation {
   //   escape          more spheres lie wholly beyond a wall than before
   //   overlap         an overlap deeper than kWatchdogOverlap of a radius
   //                   appeared (from below half of it)
+  //   unswept         a sphere the solve set moving past the reach its
+  //                   contacts were found with went more than kUnsweptDepth
+  //                   of a radius deeper into a sphere or wall (watch_math.hpp)
   // A violation rolls the step back and redoes it with the substep halved and
   // the velocity sweeps doubled, up to kWatchdogRetries times; then step()
-  // throws WatchdogFailure with the step back at its start. After an edit of
-  // the world (edit_world) the next step checks only non-finite and overlap.
+  // throws WatchdogFailure with the step back at its start, except where only
+  // the unswept rule still fails: that step is kept and counted
+  // (unswept_kept, last_kept). After an edit of the world (edit_world) the
+  // next step checks only non-finite, overlap and unswept.
   void set_watchdog(bool on);
   bool watchdog() const { return m_watchdog; }
   static constexpr int kWatchdogRetries = 3;
   static constexpr real kWatchdogOverlap = real(1);
+  static constexpr real kUnsweptDepth = real(0.01);
   // Rollbacks of the last step (each with its reason) and of the whole run.
   const std::vector<std::string>& last_rollbacks() const { return m_last_rollbacks; }
   std::uint64_t rollbacks() const { return m_rollbacks; }
+  // The last step kept with the unswept rule still failing at the last
+  // retry: why (empty where it was not), and how many steps of the run were.
+  const std::string& last_kept() const { return m_last_kept; }
+  std::uint64_t unswept_kept() const { return m_unswept_kept; }
   // Test hooks: the first try (or every try) of step `step` starts with a
   // fault in sphere 0: a NaN velocity, a kick of 100 radii per step, or the
   // sphere put wholly beyond the first wall.
@@ -145,6 +155,7 @@ class Simulation {
   void substep(real h);
   void attempt(int split);  // one try of the step with `split` times the substeps
   std::string violation(const StepCounters& before);  // the broken invariant after a try, or empty
+  std::string unswept_violation() const;             // the unswept rule's, checked after the others
   double watch_bound(double energy_before) const;    // the largest kinetic energy a step may reach
   void watch_from_host();                            // the figures of the host world, into m_last
   void inject_fault();
@@ -175,6 +186,8 @@ class Simulation {
     double wall_speed = 0;  // m/s, the fastest wall surface
   } m_watch;
   std::vector<std::string> m_last_rollbacks;
+  std::string m_last_kept;
+  std::uint64_t m_unswept_kept = 0;
   // The step's numbering (empty: the scene's): m_ids[i] is the scene's
   // index of the step's sphere i, m_index its inverse; the world and the
   // contacts in the scene's numbering, made when asked for.

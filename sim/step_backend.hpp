@@ -81,6 +81,12 @@ struct StepCounters {
   // invariants at the end of the step (sim/watch_math.hpp):
   double kinetic_energy = 0;          // J, translational + rotational
   std::uint64_t beyond_walls = 0;     // spheres wholly past a wall's surface
+  // A meeting no contact stood for (watch_math.hpp, "Motion the substep did
+  // not sweep"), over the step's substeps: the most a sphere set moving past
+  // its reach went deeper into a sphere or wall (of the smaller radius), and
+  // 1 where some substep had more such spheres than are checked.
+  real unswept_depth = 0;
+  std::uint64_t unswept_unchecked = 0;
   double verb_ms[static_cast<int>(Verb::count)] = {};  // with profiling on: wall ms per verb, summed
 };
 

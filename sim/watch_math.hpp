@@ -5,10 +5,16 @@
 //   kinetic energy   translational + rotational, J (immovable spheres: 0)
 //   beyond a wall    the whole sphere lies past a wall's surface (its centre
 //                    deeper than one radius into the wall): it went through
+//   unswept motion   a sphere the solve set moving past the reach its
+//                    contacts were found with went deeper into a sphere or
+//                    wall than it was at the substep's start: a meeting no
+//                    contact stood for (checked as the positions move,
+//                    every substep: integrate_positions)
 #pragma once
 
 #include "core/vec3.hpp"
 #include "narrowphase/contact_math.hpp"
+#include "integrator/integrator_math.hpp"
 
 namespace marbles::watch {
 
@@ -26,6 +32,77 @@ MARBLES_HD_INLINE bool beyond_walls(const Vec3& p, real r, const narrowphase::Wa
     if (narrowphase::wall_gap(walls[k], p, r, normal, separation) && separation < real(-2) * r) return true;
   }
   return false;
+}
+
+// --- Motion the substep did not sweep (docs/solver.md "No tunnelling") ---
+//
+// The broad phase and the contact test saw each sphere grown by its reach
+// (narrowphase::contact_reach), from the velocities before the solve. A
+// sphere the solve sets moving faster (struck within the substep, or pushed
+// by a wall) can meet a sphere or wall with no contact between them, and
+// pass into it or through it. Such a sphere is found as the positions move
+// (integrator::moved_past_reach), and only those, at most kUnsweptChecked a
+// substep, are checked against every sphere and wall; more than that count
+// as unchecked, and the watchdog splits the step as for a meeting.
+inline constexpr std::uint32_t kUnsweptChecked = 64;
+
+// The parameter in [0, 1] of the point of d0 + t m nearest the origin.
+MARBLES_HD_INLINE real nearest_on_path(const Vec3& d0, const Vec3& m) {
+  const real mm = length_squared(m);
+  if (!(mm > 0)) return 0;
+  const real t = -dot(d0, m) / mm;
+  return t < 0 ? real(0) : (t > 1 ? real(1) : t);
+}
+
+// How much deeper (of the smaller radius) spheres a and b overlapped while
+// both moved on straight lines from p - v h to where they stand, p, than at
+// the substep's start: 0 where they came no deeper. A contact the solve
+// held never deepens (its gap closes at most to zero, and an overlap does
+// not grow), so a deepening is a meeting the contacts did not see.
+MARBLES_HD_INLINE real swept_deepening(const Vec3& pa, const Vec3& va, real ra, const Vec3& pb, const Vec3& vb,
+                                      real rb, real h) {
+  const Vec3 m = (va - vb) * h;
+  const Vec3 d0 = (pa - pb) - m;
+  const real touch = ra + rb;
+  const real deepest = touch - length(d0 + m * nearest_on_path(d0, m));
+  if (!(deepest > 0)) return 0;
+  const real start = touch - length(d0);
+  const real deeper = start > 0 ? deepest - start : deepest;
+  return deeper > 0 ? deeper / (ra < rb ? ra : rb) : real(0);
+}
+
+// swept_deepening of spheres i and j of `b`; 0 for a sphere with itself and
+// for two fixed spheres (they make no contact: narrowphase::both_fixed).
+MARBLES_HD_INLINE real unswept_pair(const BodiesView& b, std::size_t i, std::size_t j, real h) {
+  if (i == j || narrowphase::both_fixed(b.inv_mass[i], b.inv_mass[j])) return 0;
+  return swept_deepening(b.position[i], b.velocity[i], b.radius[i], b.position[j], b.velocity[j], b.radius[j], h);
+}
+
+// The same for a sphere against a wall as it stands (the substep's start:
+// walls move after the spheres). Along a straight path a half-space's and a
+// tube's inside are deepest at an end; a sphere's and a cylinder's outside
+// where the path passes nearest their centre or axis.
+MARBLES_HD_INLINE real wall_swept_deepening(const narrowphase::WallShape& w, const Vec3& p, const Vec3& v, real r,
+                                           real h) {
+  using Kind = narrowphase::WallShape::Kind;
+  const Vec3 m = v * h;
+  const Vec3 s = p - m;
+  Vec3 normal;
+  real gap = 0;
+  real start = 0;  // the overlap at the start (none where the wall does not act there)
+  if (narrowphase::wall_gap(w, s, r, normal, gap) && gap < 0) start = -gap;
+  real deepest = 0;
+  if (narrowphase::wall_gap(w, p, r, normal, gap) && -gap > deepest) deepest = -gap;
+  if (w.kind == Kind::sphere || w.kind == Kind::cylinder_outside) {
+    Vec3 d0 = s - w.point, dm = m;
+    if (w.kind == Kind::cylinder_outside) {  // across the axis
+      d0 = d0 - w.direction * dot(d0, w.direction);
+      dm = dm - w.direction * dot(dm, w.direction);
+    }
+    if (narrowphase::wall_gap(w, s + m * nearest_on_path(d0, dm), r, normal, gap) && -gap > deepest) deepest = -gap;
+  }
+  const real deeper = deepest - start;
+  return deeper > 0 ? deeper / r : real(0);
 }
 
 }  // namespace marbles::watch

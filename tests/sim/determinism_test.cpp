@@ -270,6 +270,36 @@ TEST(Determinism, CheckpointsOfBothFormatsLoad) {
   std::remove(old_path.c_str());
 }
 
+// The steps kept unswept (format 4) travel with the totals; a run without
+// them writes format 2, as before, which earlier builds read.
+TEST(Determinism, CheckpointsKeepTheStepsKeptUnswept) {
+  Checkpoint c = pour_checkpoint();
+  const std::string path = ::testing::TempDir() + "/marbles_unswept.mck";
+  const auto format_of = [&] {
+    std::ifstream in(path, std::ios::binary);
+    char head[12] = {};
+    in.read(head, sizeof head);
+    std::uint32_t format = 0;
+    std::memcpy(&format, head + 8, 4);
+    return format;
+  };
+  write_checkpoint(path, c);
+  EXPECT_EQ(format_of(), 2u);
+  EXPECT_EQ(read_checkpoint(path, 42).totals.unswept, 0.0);
+  c.totals.unswept = 3;
+  write_checkpoint(path, c);
+  EXPECT_EQ(format_of(), 4u);
+  const Checkpoint back = read_checkpoint(path, 42);
+  EXPECT_EQ(back.totals.unswept, 3.0);
+  EXPECT_EQ(back.totals.rollbacks, c.totals.rollbacks);
+  EXPECT_EQ(back.totals.contact_sum, c.totals.contact_sum);
+  EXPECT_EQ(state_hash(back.world), state_hash(c.world));
+  c.totals.unswept = 2.5;
+  write_checkpoint(path, c);
+  EXPECT_THROW(read_checkpoint(path, 42), InputError);
+  std::remove(path.c_str());
+}
+
 // A checkpoint whose cache's entries are out of key order, or name one pair
 // twice, is refused as damaged: the restore's runs by sphere and the kept
 // colours' split between threads read them in key order.

@@ -283,6 +283,31 @@ output: {contacts: {every: 1}}
   EXPECT_GT(pressing, 0u) << "no force past float's range: the case no longer tests anything";
 }
 
+// A sphere struck at 100 m/s with dt = 1/60 s leaves past what even the
+// watchdog's finest substep sweeps: the run says so on stderr, keeps the
+// step and counts it in summary.json (the Stability tests hold the rule).
+TEST(Run, StepsKeptUnsweptAreSaidAndCounted) {
+  const fs::path dir = temp_dir("unswept");
+  const std::string yaml = R"(format: 1
+time: {duration: 0.05, dt: 0.016666666666666666}
+effects: [collisions, restitution]
+materials: {a: {density: 1000, restitution: 0.5}}
+particles:
+  - list: {positions: [[0, 0, 0], [1.5, 0, 0], [1.7, 0.02, 0]], radius: 0.05, velocities: [[100, 0, 0], [0, 0, 0], [0, 0, 0]]}
+)";
+  std::string err;
+  ASSERT_EQ(run_on_cpu(dir, yaml, err), 0) << err;
+  const nlohmann::json summary = nlohmann::json::parse(read_file(dir / "out" / "summary.json"));
+  const auto kept = summary.at("unswept_steps").get<std::uint64_t>();
+  EXPECT_GE(kept, 1u);
+  std::size_t said = 0;
+  for (std::size_t at = err.find("substeps: kept"); at != std::string::npos; at = err.find("substeps: kept", at + 1))
+    ++said;
+  EXPECT_EQ(said, kept) << err;
+  EXPECT_NE(err.find("still at 8 substeps"), std::string::npos) << err;
+  EXPECT_GE(summary.at("rollbacks").get<std::uint64_t>(), 3 * kept);
+}
+
 // The images a run draws as it goes and the images `marbles render` draws
 // afterwards from its frames are the same pixels, moving walls included (the
 // run moves the scene's walls to each frame's time; the frames' walls are

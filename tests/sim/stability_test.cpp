@@ -299,3 +299,84 @@ TEST(Stability, ElasticGasConservesEnergy) {
   EXPECT_GT(contacts, 10000u);
   EXPECT_NEAR(sim.world().kinetic_energy(), e0, 1e-4 * e0);
 }
+
+// --- Motion the substep did not sweep (sim/watch_math.hpp) -----------------
+
+namespace {
+
+// A striker at 9.9 m/s into a row of four touching spheres of 1 cm, the
+// last 7.5 mm from a wall, dt = 1 ms, e = 1: the wave leaves the last sphere
+// at nearly the striker's speed within the substep, unswept (its reach was
+// half a radius), and it ends the substep inside the wall.
+struct StruckRow {
+  scene::Scene scene;
+  scene::GeneratedParticles spheres;
+  real wall = real(0.0775), r = real(0.01);
+  StruckRow() : scene(make_scene(1e-3, 1, {Effect::collisions, Effect::walls, Effect::restitution}, 1.0)) {
+    scene.walls.push_back(plane({wall, 0, 0}, {-1, 0, 0}));
+    add_sphere(spheres, {real(-0.025), 0, 0}, r, {real(9.9), 0, 0});
+    for (int k = 0; k < 4; ++k) add_sphere(spheres, {real(0.02 * k), 0, 0}, r);
+  }
+  // The deepest any sphere went into the wall or into another (of a radius)
+  // at the end of any of `steps` steps.
+  double deepest(Simulation& sim, int steps) const {
+    double d = 0;
+    for (int k = 0; k < steps; ++k) {
+      sim.step();
+      const World& w = sim.world();
+      for (std::size_t i = 0; i < w.size(); ++i) {
+        d = std::max(d, double((w.position[i].x + w.radius[i] - wall) / w.radius[i]));
+        for (std::size_t j = i + 1; j < w.size(); ++j)
+          d = std::max(d, double((w.radius[i] + w.radius[j] - length(w.position[i] - w.position[j])) / r));
+      }
+    }
+    return d;
+  }
+};
+
+}  // namespace
+
+TEST(Stability, ASphereStruckIntoAWallWithinASubstepIsSweptAgain) {
+  const StruckRow row;
+  Simulation unwatched(row.scene, make_world(row.scene, row.spheres), test_backend());
+  const double before = row.deepest(unwatched, 20);
+  EXPECT_GT(before, 0.05) << "the case this test is about: a sphere ends a substep inside the wall";
+
+  Simulation sim(row.scene, make_world(row.scene, row.spheres), test_backend());
+  sim.set_watchdog(true);
+  sim.step();
+  ASSERT_GE(sim.last_rollbacks().size(), 1u);
+  EXPECT_NE(sim.last_rollbacks()[0].find("set moving within a substep"), std::string::npos) << sim.last_rollbacks()[0];
+  EXPECT_TRUE(sim.last_kept().empty());
+  EXPECT_LT(row.deepest(sim, 19), 0.01);
+  EXPECT_EQ(sim.unswept_kept(), 0u);
+  EXPECT_NEAR(sim.world().kinetic_energy(), unwatched.world().kinetic_energy(),
+              0.05 * unwatched.world().kinetic_energy());
+}
+
+// A sphere struck at 100 m/s with dt = 1/60 s leaves 33 radii a step: past
+// what even the watchdog's finest substep sweeps. The step is kept, and
+// counted, as before the rule; without the watchdog nothing is checked.
+TEST(Stability, ASphereUnsweptEvenAtTheFinestSubstepIsKeptAndCounted) {
+  scene::Scene s = make_scene(1.0 / 60, 1, {Effect::collisions, Effect::restitution}, 0.5);
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, 0}, r, {100, 0, 0});
+  add_sphere(g, {real(1.5), 0, 0}, r);
+  add_sphere(g, {real(1.5 + 4 * r), real(0.02), 0}, r);  // where the struck one goes, beyond its reach
+  Simulation unwatched(s, make_world(s, g), test_backend());
+  Simulation sim(s, make_world(s, g), test_backend());
+  sim.set_watchdog(true);
+  for (int k = 0; k < 3; ++k) {
+    unwatched.step();
+    sim.step();
+    EXPECT_EQ(unwatched.unswept_kept(), 0u);
+    if (!sim.last_kept().empty())
+      EXPECT_NE(sim.last_kept().find("into a sphere or wall its contacts were not found with"), std::string::npos)
+          << sim.last_kept();
+  }
+  EXPECT_GT(unwatched.world().position[1].x, unwatched.world().position[2].x)
+      << "the case this test is about: the struck sphere passes through the third";
+  EXPECT_GE(sim.unswept_kept(), 1u);
+  EXPECT_GE(sim.rollbacks(), static_cast<std::uint64_t>(Simulation::kWatchdogRetries));
+}

@@ -11,6 +11,7 @@
 #include "sim/simulation.hpp"
 #include "sim/step_backend.hpp"
 #include "sim/step_model.hpp"
+#include "sim/watch_math.hpp"
 #include "tests/sim/test_scenes.hpp"
 
 using namespace marbles;
@@ -274,3 +275,82 @@ TEST(Walls, BoxKeepsEverySphereInside) {
     EXPECT_GE(p.z, -0.1 * r); EXPECT_LE(p.z, 1.0 + 0.1 * r);
   }
 }
+
+// --- The unswept check's geometry (sim/watch_math.hpp) against paths
+// sampled finely: the deepest point of each straight path, less the depth
+// at its start. Random paths, many of them grazing, through or past.
+namespace {
+
+// The depth of a path sampled at `samples` + 1 points (oracle).
+template <class Depth>
+double sampled_deepening(Depth depth_at, int samples = 20000) {
+  double deepest = 0;
+  for (int k = 0; k <= samples; ++k) deepest = std::max(deepest, depth_at(double(k) / samples));
+  const double start = std::max(0.0, depth_at(0.0));
+  return std::max(0.0, deepest - start);
+}
+
+}  // namespace
+
+TEST(Unswept, SphereDeepeningIsTheDeepestPointOfTheSampledPaths) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1, 1), radius(0.5, 2);
+  int met = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    const real ra = real(radius(rng)), rb = real(radius(rng)), h = real(0.01);
+    const Vec3 pa(real(3 * u(rng)), real(3 * u(rng)), real(3 * u(rng))), pb(real(u(rng)), real(u(rng)), real(u(rng)));
+    const Vec3 va(real(400 * u(rng)), real(400 * u(rng)), real(400 * u(rng))), vb(real(50 * u(rng)), real(50 * u(rng)), 0);
+    const double got = watch::swept_deepening(pa, va, ra, pb, vb, rb, h);
+    const double want = sampled_deepening([&](double t) {
+      const Vec3 a = pa - va * real(h * (1 - t)), b = pb - vb * real(h * (1 - t));
+      return (double(ra) + rb - double(length(a - b))) / std::min(ra, rb);
+    });
+    EXPECT_NEAR(got, want, 1e-3 * (1 + want)) << "trial " << trial;
+    met += want > 0.01 ? 1 : 0;
+  }
+  EXPECT_GT(met, 200);  // the paths meet often enough to test the depth
+}
+
+TEST(Unswept, WallDeepeningIsTheDeepestPointOfTheSampledPaths) {
+  using Kind = narrowphase::WallShape::Kind;
+  std::mt19937_64 rng(12);
+  std::uniform_real_distribution<double> u(-1, 1), radius(0.2, 1);
+  for (const Kind kind : {Kind::half_space, Kind::sphere, Kind::cylinder_inside, Kind::cylinder_outside}) {
+    int met = 0;
+    for (int trial = 0; trial < 1000; ++trial) {
+      narrowphase::WallShape w;
+      w.kind = kind;
+      w.point = Vec3(real(u(rng)), real(u(rng)), real(u(rng)));
+      const Vec3 d(real(u(rng)), real(u(rng)), real(u(rng)) + real(2));
+      w.direction = d / length(d);
+      w.radius = kind == Kind::cylinder_inside ? real(4) : real(1.5);
+      w.length = kind == Kind::cylinder_outside && trial % 2 == 0 ? real(2) : real(0);
+      const real r = real(radius(rng)), h = real(0.01);
+      const Vec3 p(real(3 * u(rng)), real(3 * u(rng)), real(3 * u(rng))),
+          v(real(400 * u(rng)), real(400 * u(rng)), real(400 * u(rng)));
+      const double got = watch::wall_swept_deepening(w, p, v, r, h);
+      const double want = sampled_deepening([&](double t) {
+        Vec3 normal;
+        real gap = 0;
+        if (!narrowphase::wall_gap(w, p - v * real(h * (1 - t)), r, normal, gap)) return 0.0;
+        return -double(gap) / r;
+      });
+      if (w.length > 0) {  // a finite post: its ends are not swept (the check takes the nearest point, the ends)
+        EXPECT_LE(got, want + 1e-3 * (1 + want)) << "kind " << int(kind) << " trial " << trial;
+        continue;
+      }
+      EXPECT_NEAR(got, want, 1e-3 * (1 + want)) << "kind " << int(kind) << " trial " << trial;
+      met += want > 0.01 ? 1 : 0;
+    }
+    EXPECT_GT(met, 50) << "kind " << int(kind);
+  }
+}
+
+TEST(Unswept, MovedPastReachIsTheTravelBeyondTheReachAndSlack) {
+  const real r = real(0.01), h = real(0.001), reach = real(0.005);
+  const real edge = (reach + integrator::kUnsweptSlack * r) / h;  // m/s
+  EXPECT_FALSE(integrator::moved_past_reach({real(0.999) * edge, 0, 0}, r, reach, h));
+  EXPECT_TRUE(integrator::moved_past_reach({0, real(1.001) * edge, 0}, r, reach, h));
+  EXPECT_FALSE(integrator::moved_past_reach({0, 0, 0}, r, 0, h));
+}
+
