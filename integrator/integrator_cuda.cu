@@ -19,12 +19,17 @@ __global__ void drag_kernel(BodiesView bodies, real k1, real k2, real h, DragKic
     if (bodies.inv_mass[i] > 0) bodies.velocity[i] = drag_update(kick, bodies.velocity[i], gravity, gh, k1, k2, h);
 }
 
-__global__ void drift_kernel(BodiesView bodies, real h, unsigned* non_finite, const unsigned long long* skip) {
+__global__ void drift_kernel(BodiesView bodies, real h, unsigned* non_finite, const unsigned long long* skip,
+                             const real* reach, std::uint32_t* past, std::uint32_t past_room) {
   if (::marbles::cuda::skipped(skip)) return;
   bool bad = false;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x) {
     bodies.position[i] = drift(bodies.position[i], bodies.velocity[i], h);
     bad = bad || !body_is_finite(bodies.position[i], bodies.velocity[i], bodies.angular_velocity[i]);
+    if (reach != nullptr && moved_past_reach(bodies.velocity[i], bodies.radius[i], reach[i], h)) {
+      const std::uint32_t slot = atomicAdd(past, 1u);  // its order reaches no state: a set, checked whole
+      if (slot < past_room) past[1 + slot] = static_cast<std::uint32_t>(i);
+    }
   }
   if (bad) *non_finite = 1u;  // a plain store: every writer writes the same value
 }
@@ -59,9 +64,12 @@ void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragK
 }
 
 void launch_integrate_positions(const BodiesView& bodies, real h, unsigned* non_finite, int sm_count,
-                                cudaStream_t stream, const unsigned long long* skip) {
+                                cudaStream_t stream, const unsigned long long* skip, const real* reach,
+                                std::uint32_t* past, std::uint32_t past_room) {
   if (bodies.count == 0) return;
-  drift_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, h, non_finite, skip);
+  drift_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, h, non_finite, skip,
+                                                                        past != nullptr ? reach : nullptr, past,
+                                                                        past_room);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

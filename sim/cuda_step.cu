@@ -95,6 +95,38 @@ __global__ void watch_kernel(BodiesView b, const narrowphase::WallShape* walls, 
   }
 }
 
+// The unswept check (watch_math.hpp): the spheres the drift found past
+// their reach (past[0] of them, the first kUnsweptChecked from past[1] on)
+// against every sphere (a thread a sphere) and every wall (a thread a
+// listed sphere); the deepest meeting's bits into *word by atomicMax (a
+// maximum: the same whatever the order), or every bit where there were
+// more than are checked.
+__global__ void unswept_kernel(BodiesView b, const narrowphase::WallShape* walls, std::uint32_t wall_count,
+                               const std::uint32_t* past, real h, unsigned long long* word,
+                               const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
+  const std::uint32_t count = past[0];
+  if (count == 0) return;
+  const std::size_t first = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x;
+  if (count > watch::kUnsweptChecked) {
+    if (first == 0) atomicMax(word, ~0ull);
+    return;
+  }
+  real deepest = 0;
+  for (std::size_t j = first; j < b.count; j += std::size_t(gridDim.x) * blockDim.x)
+    for (std::uint32_t k = 0; k < count; ++k) {
+      const real d = watch::unswept_pair(b, past[1 + k], j, h);
+      deepest = d > deepest ? d : deepest;
+    }
+  if (first < count)
+    for (std::uint32_t w = 0; w < wall_count; ++w) {
+      const std::uint32_t i = past[1 + first];
+      const real d = watch::wall_swept_deepening(walls[w], b.position[i], b.velocity[i], b.radius[i], h);
+      deepest = d > deepest ? d : deepest;
+    }
+  ::marbles::cuda::warp_atomic_max(word, bits_of_real(deepest));
+}
+
 // The words of a step's one read (CudaStep::end_step), in m_flags: the
 // flags of every step, then those a step without a wait a substep adds up
 // on the device (check_substep_kernel).
@@ -104,6 +136,8 @@ enum StepWord {
   kProjectionSweeps,  // summed over substeps
   kKineticEnergy,     // with the watch: a double's bits
   kBeyondWalls,       // with the watch
+  kUnswept,           // with the watch: the unswept check's deepest meeting's bits, max over substeps
+                      // (every bit: more spheres past their reach than are checked)
   kRedo,              // 1 + the first substep that outgrew a room it was given (0: none), its UndoCause bits
                       // from bit 32 (kCauseShift); see cuda::skipped
   kMostPairs,         // the most candidate pairs of a substep (its room's next size)
@@ -124,7 +158,7 @@ enum StepWord {
   kImpactWordSubsteps,  // of those, whose records kept impact words
   kStepWords
 };
-constexpr int kFlagWords = kKineticEnergy + 2;  // what a step with waits a substep reads
+constexpr int kFlagWords = kUnswept + 1;  // what a step with waits a substep reads
 constexpr int kCauseShift = 32;                 // words[kRedo]: the substep below, its causes above
 // After the step's words, where a step without waits launches by slots:
 // each colour's most contacts in a substep (its slot's grid next step).
@@ -315,6 +349,7 @@ class CudaStep final : public StepBackend {
   void find_contacts_within(real substep, bool wait) {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_lookahead = h;
+    m_reach_fresh = false;
     m_count = 0;
     m_count_on_device = nullptr;
     m_pair_items = 0;
@@ -345,6 +380,7 @@ class CudaStep final : public StepBackend {
     unsigned* mixed_radii = m_model.uniform_pairs ? seen + 1 : nullptr;
     auto* radius = reinterpret_cast<real*>(seen + 2);
     nc::launch_contact_reaches(bodies, h, max_speed, reach, bound, mixed_radii, radius, m_sm, m_stream);
+    m_reach_fresh = true;
     const auto wall_count = static_cast<std::uint32_t>(m_model.wall_shapes.size());
     if (m_model.wall_contacts) wall_items = n;  // a count of walls touched a sphere
     // The flags and their offsets (and the scans' temporaries) in the
@@ -641,8 +677,22 @@ class CudaStep final : public StepBackend {
   }
 
   void integrate_positions(real h) override {
-    integrator::cuda::launch_integrate_positions(m_device.view(), h, m_flags.get_as<unsigned>(), m_sm, m_stream,
-                                                 skip());  // flags[0]
+    // With the watch and speculative contacts, where the reaches were made
+    // for this substep: the spheres that moved past theirs, checked
+    // (unswept_kernel, before the walls move).
+    const BodiesView bodies = m_device.view();
+    const bool check = m_watch && m_model.speculative && m_reach_fresh && bodies.count > 0;
+    std::uint32_t* past = check ? m_past.as<std::uint32_t>(1 + watch::kUnsweptChecked) : nullptr;
+    if (check) MARBLES_CUDA_CHECK(cudaMemsetAsync(past, 0, sizeof(std::uint32_t), m_stream));
+    integrator::cuda::launch_integrate_positions(bodies, h, m_flags.get_as<unsigned>(), m_sm, m_stream, skip(),
+                                                 m_reach.get_as<real>(), past,
+                                                 watch::kUnsweptChecked);  // flags[0]
+    if (check) {
+      const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
+      unswept_kernel<<<::marbles::cuda::grid_for(bodies.count, m_sm), kWatchBlock, 0, m_stream>>>(
+          bodies, walls(), wall_count, past, h, flag(kUnswept), skip());
+      MARBLES_CUDA_CHECK_LAUNCH();
+    }
     if (m_model.verlet && m_model.drag)
       integrator::cuda::launch_apply_drag(m_device.view(), m_model.drag_linear, m_model.drag_quadratic,
                                           m_model.second_kick(h), integrator::DragKick::verlet_second,
@@ -734,6 +784,8 @@ class CudaStep final : public StepBackend {
     if (m_watch) {
       std::memcpy(&m_counters.kinetic_energy, &m_end_flags[kKineticEnergy], sizeof(double));
       m_counters.beyond_walls = m_end_flags[kBeyondWalls];
+      if (m_end_flags[kUnswept] == ~0ull) m_counters.unswept_unchecked = 1;
+      else m_counters.unswept_depth = real_of_bits(m_end_flags[kUnswept]);
     }
     m_counters.projection_sweeps = m_end_flags[kProjectionSweeps];
     const std::uint64_t bytes =
@@ -742,12 +794,7 @@ class CudaStep final : public StepBackend {
     m_bytes_at_step_start = bytes;
     m_non_finite = m_end_flags[kNonFinite] != 0 || m_non_finite_seen;
     m_non_finite_seen = false;
-    if constexpr (sizeof(real) == 4) {
-      const auto bits = static_cast<std::uint32_t>(m_end_flags[kDeepest]);
-      std::memcpy(&m_counters.max_overlap, &bits, sizeof(real));
-    } else {
-      std::memcpy(&m_counters.max_overlap, &m_end_flags[kDeepest], sizeof(real));
-    }
+    m_counters.max_overlap = real_of_bits(m_end_flags[kDeepest]);
     m_host_stale = true;
     m_contacts_stale = true;
     counters = m_counters;
@@ -784,7 +831,7 @@ class CudaStep final : public StepBackend {
         {"substep's start", m_start_velocity.bytes()},
         {"local order", m_local_sweeps.device_bytes()},
         {"small", bytes_of(m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_flags, m_hit, m_moved,
-                           m_contact_chunk, m_check)},
+                           m_contact_chunk, m_check, m_past)},
     };
     std::size_t named = 0;
     for (const DeviceBytes& p : parts) named += p.bytes;
@@ -930,6 +977,17 @@ class CudaStep final : public StepBackend {
     return {m_colouring.device_plan(), m_last_widest};
   }
   unsigned long long* flag(StepWord w) const { return m_flags.get_as<unsigned long long>() + w; }
+  // A real from its bits in a step word (bits_of_real's: a float's in the low half).
+  static real real_of_bits(unsigned long long word) {
+    real x = 0;
+    if constexpr (sizeof(real) == 4) {
+      const auto bits = static_cast<std::uint32_t>(word);
+      std::memcpy(&x, &bits, sizeof(real));
+    } else {
+      std::memcpy(&x, &word, sizeof(real));
+    }
+    return x;
+  }
   // The word the state's kernels skip on (cuda::skipped) in a step without
   // waits; none otherwise.
   const unsigned long long* skip() const { return m_one_wait ? flag(kRedo) : nullptr; }
@@ -1276,7 +1334,7 @@ class CudaStep final : public StepBackend {
   // the contact search's temporaries instead (the broad phase's, its pairs,
   // the contact flags and offsets), which are dead by then.
   DeviceBuffer m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
-      m_sorted_colour, m_flags, m_hit, m_moved, m_contact_chunk;
+      m_sorted_colour, m_flags, m_hit, m_moved, m_contact_chunk, m_past;
   // Temporaries of the stages that never run at the same time and must
   // outlive a dead buffer's next use (the colouring's colours and counting
   // sort, the impact levels' lists, the cache's restore): the device holds
@@ -1369,6 +1427,7 @@ class CudaStep final : public StepBackend {
   std::vector<narrowphase::Contact> m_host_contacts;
   StepCounters m_counters;
   bool m_non_finite_seen = false;  // the broad phase met a non-finite centre in this step
+  bool m_reach_fresh = false;      // m_reach made by this substep's contact search (integrate_positions' check)
   bool m_non_finite = false, m_host_stale = false, m_host_edited = false, m_contacts_stale = true;
   bool m_host_renumbered = false;  // the host copy's fixed arrays too are stale (renumber)
 };

@@ -6,7 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <tuple>
 
+#include "sim/watch_math.hpp"
 #include "tests/sim/test_scenes.hpp"
 
 using namespace marbles;
@@ -304,19 +306,12 @@ TEST(Stability, ElasticGasConservesEnergy) {
 
 namespace {
 
-// A striker at 9.9 m/s into a row of four touching spheres of 1 cm, the
-// last 7.5 mm from a wall, dt = 1 ms, e = 1: the wave leaves the last sphere
-// at nearly the striker's speed within the substep, unswept (its reach was
-// half a radius), and it ends the substep inside the wall.
+// struck_row_scene, with the wall where it puts it.
 struct StruckRow {
   scene::Scene scene;
   scene::GeneratedParticles spheres;
   real wall = real(0.0775), r = real(0.01);
-  StruckRow() : scene(make_scene(1e-3, 1, {Effect::collisions, Effect::walls, Effect::restitution}, 1.0)) {
-    scene.walls.push_back(plane({wall, 0, 0}, {-1, 0, 0}));
-    add_sphere(spheres, {real(-0.025), 0, 0}, r, {real(9.9), 0, 0});
-    for (int k = 0; k < 4; ++k) add_sphere(spheres, {real(0.02 * k), 0, 0}, r);
-  }
+  StruckRow() { std::tie(scene, spheres) = struck_row_scene(); }
   // The deepest any sphere went into the wall or into another (of a radius)
   // at the end of any of `steps` steps.
   double deepest(Simulation& sim, int steps) const {
@@ -379,4 +374,21 @@ TEST(Stability, ASphereUnsweptEvenAtTheFinestSubstepIsKeptAndCounted) {
       << "the case this test is about: the struck sphere passes through the third";
   EXPECT_GE(sim.unswept_kept(), 1u);
   EXPECT_GE(sim.rollbacks(), static_cast<std::uint64_t>(Simulation::kWatchdogRetries));
+}
+
+// 70 rows struck at once: more spheres past their reach in a substep than
+// are checked (watch::kUnsweptChecked). The step is split unchecked, and
+// the split steps sweep them all.
+TEST(Stability, MoreSpheresPastTheirReachThanAreCheckedSplitTheStep) {
+  auto [s, g] = struck_row_scene(70);
+  ASSERT_GT(70u, watch::kUnsweptChecked);
+  Simulation sim(s, make_world(s, g), test_backend());
+  sim.set_watchdog(true);
+  sim.step();
+  ASSERT_GE(sim.last_rollbacks().size(), 1u);
+  EXPECT_EQ(sim.last_rollbacks()[0].rfind("more than 64 spheres moved past the reach", 0), 0u) << sim.last_rollbacks()[0];
+  for (int k = 0; k < 19; ++k) sim.step();
+  EXPECT_EQ(sim.unswept_kept(), 0u);
+  const World& w = sim.world();
+  for (std::size_t i = 0; i < w.size(); ++i) EXPECT_LT(w.position[i].x + w.radius[i], real(0.0775) + real(1e-4));
 }

@@ -139,6 +139,10 @@ void expect_same_steps(Simulation& cpu, Simulation& gpu, int steps, GpuCounts& c
     ASSERT_EQ(gpu.last_step().overflow, cpu.last_step().overflow) << "step " << k;
     ASSERT_EQ(gpu.last_step().projection_sweeps, cpu.last_step().projection_sweeps) << "step " << k;
     ASSERT_EQ(gpu.last_step().max_overlap, cpu.last_step().max_overlap) << "step " << k;
+    ASSERT_EQ(gpu.last_step().unswept_depth, cpu.last_step().unswept_depth) << "step " << k;
+    ASSERT_EQ(gpu.last_step().unswept_unchecked, cpu.last_step().unswept_unchecked) << "step " << k;
+    ASSERT_EQ(gpu.last_rollbacks(), cpu.last_rollbacks()) << "step " << k;
+    ASSERT_EQ(gpu.last_kept(), cpu.last_kept()) << "step " << k;
     if (k % 10 == 9 || k + 1 == steps) {
       expect_same_state(cpu.world(), gpu.world(), k);
       if (::testing::Test::HasFatalFailure()) return;
@@ -447,6 +451,45 @@ TEST(StepCuda, WatchdogKeepsTheCacheWithoutACopy) {
   expect_same_steps(cpu, gpu, 20, counts);
   ASSERT_FALSE(HasFatalFailure());
   expect_a_failed_step_leaves_its_start(gpu);
+}
+
+// The unswept check (sim/watch_math.hpp) on the device as on the CPU: a
+// row struck into a wall within a substep (found, the step split), 70 such
+// rows (more spheres past their reach than are checked: split unchecked),
+// and a sphere struck at 100 m/s with dt = 1/60 s (past even the finest
+// substep: kept and counted). The same rollbacks, reasons and bits.
+TEST(StepCuda, UnsweptMotionIsCheckedAsOnTheCpu) {
+  REQUIRE_DEVICE();
+  GpuCounts counts;
+  for (const int copies : {1, 70}) {
+    auto [s, g] = struck_row_scene(copies);
+    Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+    Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+    cpu.set_watchdog(true);
+    gpu.set_watchdog(true);
+    cpu.step();
+    gpu.step();
+    ASSERT_FALSE(cpu.last_rollbacks().empty()) << "the case this test is about: the row's first step is split";
+    EXPECT_EQ(gpu.last_rollbacks(), cpu.last_rollbacks());
+    expect_same_state(cpu.world(), gpu.world(), 0);
+    expect_same_steps(cpu, gpu, 20, counts);
+    ASSERT_FALSE(HasFatalFailure());
+    EXPECT_EQ(gpu.rollbacks(), cpu.rollbacks());
+  }
+  scene::Scene s = make_scene(1.0 / 60, 1, {scene::Effect::collisions, scene::Effect::restitution}, 0.5);
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  add_sphere(g, {0, 0, 0}, r, {100, 0, 0});
+  add_sphere(g, {real(1.5), 0, 0}, r);
+  add_sphere(g, {real(1.5 + 4 * r), real(0.02), 0}, r);
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  cpu.set_watchdog(true);
+  gpu.set_watchdog(true);
+  expect_same_steps(cpu, gpu, 3, counts);
+  ASSERT_FALSE(HasFatalFailure());
+  EXPECT_GE(cpu.unswept_kept(), 1u);
+  EXPECT_EQ(gpu.unswept_kept(), cpu.unswept_kept());
 }
 
 // The accuracy knobs: velocity Verlet (its half kicks and its wall impacts at

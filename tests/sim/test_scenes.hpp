@@ -108,6 +108,26 @@ inline std::uint64_t state_hash(const World& w) {
   return h;
 }
 
+// A striker at 9.9 m/s into a row of four touching spheres of 1 cm, the
+// last 7.5 mm from a wall at x = 0.0775, dt = 1 ms, e = 1: the wave leaves
+// the last sphere at nearly the striker's speed within the substep, past the
+// reach its contacts were found with (half a radius), and it ends the
+// substep inside the wall (sim/watch_math.hpp, the unswept check). `copies`
+// rows side by side, 5 cm apart in y.
+inline std::pair<scene::Scene, scene::GeneratedParticles> struck_row_scene(int copies = 1) {
+  using scene::Effect;
+  std::pair<scene::Scene, scene::GeneratedParticles> out{
+      make_scene(1e-3, 1, {Effect::collisions, Effect::walls, Effect::restitution}, 1.0), {}};
+  out.first.walls.push_back(plane({real(0.0775), 0, 0}, {-1, 0, 0}));
+  const real r = real(0.01);
+  for (int c = 0; c < copies; ++c) {
+    const real y = real(0.05 * c);
+    add_sphere(out.second, {real(-0.025), y, 0}, r, {real(9.9), 0, 0});
+    for (int k = 0; k < 4; ++k) add_sphere(out.second, {real(0.02 * k), y, 0}, r);
+  }
+  return out;
+}
+
 // Scenes that exercise every stage, for the determinism and backend-parity
 // tests: a polydisperse pour of two materials into a box with every effect,
 // over a fixed sphere and past a spinning post, under air drag.
