@@ -81,8 +81,8 @@ def _overrides(set):
 
 def _plain(value, key):
     """A scene dict as JSON-ready data: NumPy arrays and scalars as lists and
-    numbers; non-finite numbers as YAML's .nan/.inf, which the checks refuse
-    with the key's name."""
+    numbers; non-finite numbers, and integers past any double, as YAML's
+    .nan/.inf, which the checks refuse with the key's name."""
     if isinstance(value, dict):
         out = {}
         for k, v in value.items():
@@ -98,7 +98,12 @@ def _plain(value, key):
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     if isinstance(value, (int, np.integer)):
-        return int(value)
+        v = int(value)
+        try:
+            float(v)
+        except OverflowError:  # past any double (10**400): infinite, as such a number in a scene file is
+            return ".inf" if v > 0 else "-.inf"
+        return v
     if isinstance(value, (float, np.floating)):
         v = float(value)
         if math.isfinite(v):

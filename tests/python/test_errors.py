@@ -42,6 +42,8 @@ def test_dict_error_names_the_key_path(pile):
     (lambda s: s.update(gravity=[0, 0]), "gravity"),
     (lambda s: s.update(efects=[]), "efects"),
     (lambda s: s["walls"][0]["box"].update(max=np.array([0.1, 0.1, np.inf])), "walls[0].box.max"),
+    (lambda s: s["time"].update(duration=10**400), "time.duration"),  # past any double
+    (lambda s: s["materials"]["glass"].update(density=-10**400), "materials.glass.density"),
 ])
 def test_dict_values_are_checked(pile, edit, key):
     edit(pile)
