@@ -164,7 +164,7 @@ namespace {
 // --- the pile ------------------------------------------------------------------
 
 // Bump when pile() or its scene changes: older cache files are then not used.
-constexpr std::uint32_t kPileVersion = 7;  // 7: a checksum at the end
+constexpr std::uint32_t kPileVersion = 8;  // 7: a checksum at the end; 8: settled with 16 impact passes
 constexpr char kPileMagic[8] = {'M', 'B', 'L', 'P', 'I', 'L', 'E', '\0'};
 constexpr double kPileRadius = 0.01;
 constexpr double kPileLayers = 30;  // about this many layers deep

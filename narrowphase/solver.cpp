@@ -548,7 +548,7 @@ void ContactSolver::impacts(const ColourRanges& colours, SolverBody* bodies, std
   m_rebounds = hit;
   // A colour's records are its places' (ColourRanges::record), the same
   // range: no two share a sphere, in any order.
-  for (int pass = 1; pass < kImpactPasses && hit; ++pass) {
+  for (int pass = 1; pass < m_settings.impact_passes && hit; ++pass) {
     hit = false;
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
       hit = m_impact(s, impact, nullptr, colours, b, e, bodies, params, hit_spheres, passed) || hit;

@@ -17,8 +17,8 @@
 //                 in time-of-impact order wherever two share a sphere (a
 //                 by_round colouring by time of impact); later passes, while
 //                 impacts make new approaches (a chain of touching spheres),
-//                 visit every contact colour by colour, kImpactPasses passes
-//                 in all at most.
+//                 visit every contact colour by colour, impact_passes passes
+//                 in all at most (SolverSettings; kImpactPasses by default).
 //   warm start    apply the impulses carried over from the last substep
 //                 (ContactCache, matched by body pair) when enabled
 //   solve         `iterations` sweeps, alternately forwards and backwards
@@ -47,8 +47,6 @@
 #include "narrowphase/solver_math.hpp"
 
 namespace marbles::narrowphase {
-
-inline constexpr int kImpactPasses = 4;
 
 // The SIMD lanes the CPU's sweep runs in (solver_lanes.hpp): 4 floats
 // (SSE2, every x86-64 CPU), 8 floats (AVX2), 8 floats with AVX-512's 32

@@ -18,10 +18,17 @@
 
 namespace marbles::narrowphase {
 
+// The impact stage's passes per substep at most, by default (a scene's
+// solver.impact_passes sets it). A wave through a row of touching spheres
+// advances about one sphere a pass, so a free row of N needs about N and a
+// row against a wall 2 N (docs/solver.md).
+inline constexpr int kImpactPasses = 16;
+
 // Settings of the solver stages (the plain values every stage reads).
 struct SolverSettings {
   int iterations = 10;            // velocity sweeps per substep
   bool restitution = true;        // impact stage (without it impacts are plastic)
+  int impact_passes = kImpactPasses;  // its passes, at most (solver.impact_passes)
   bool friction = false;          // Coulomb friction term
   bool rolling = false;           // rolling resistance term
   real rest_speed = real(0.01);   // m/s: slower approaches do not bounce

@@ -1287,10 +1287,11 @@ class CudaStep final : public StepBackend {
     const std::uint32_t* first = nullptr;
     m_colouring.impact_levels(m_records, m_impacts.word, m_count, m_device.size(), params.rest_speed, order, first,
                               m_sm, m_stream, m_count_on_device);
-    auto* hit = m_hit.as<unsigned>(narrowphase::kImpactPasses);
-    MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, narrowphase::kImpactPasses * sizeof(unsigned), m_stream));
+    const int passes = m_model.solver.impact_passes;
+    auto* hit = m_hit.as<unsigned>(static_cast<std::size_t>(passes));
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, passes * sizeof(unsigned), m_stream));
     if (nc::launch_impact_stage(m_records, m_impacts.word, order, first, m_count, m_colouring.device_plan(), bodies, params,
-                                m_model.solver.friction, narrowphase::kImpactPasses, hit, m_sm, m_stream))
+                                m_model.solver.friction, passes, hit, m_sm, m_stream))
       ++m_counters.cluster_stages;
   }
 

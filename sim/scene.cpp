@@ -89,9 +89,10 @@ TimeSpec read_time(const Field& field) {
 }
 
 SolverSpec read_solver(const Field& field) {
-  const MapFields map(field, {"iterations", "integrator", "speculative", "precision", "renumber"});
+  const MapFields map(field, {"iterations", "impact_passes", "integrator", "speculative", "precision", "renumber"});
   SolverSpec solver;
   if (auto f = map.optional("iterations")) solver.iterations = f->integer_at_least(1);
+  if (auto f = map.optional("impact_passes")) solver.impact_passes = f->integer_at_least(1, SolverSpec::kMostImpactPasses);
   if (auto f = map.optional("integrator")) {
     solver.integrator = f->word();
     if (std::find(kIntegrators.begin(), kIntegrators.end(), solver.integrator) == kIntegrators.end())

@@ -31,6 +31,8 @@ std::string duration_problem(double duration, const TimeSpec& time);
 
 struct SolverSpec {
   int iterations = 10;                        // velocity sweeps per substep
+  int impact_passes = 16;                     // passes of the impact stage per substep, at most (narrowphase::kImpactPasses)
+  static constexpr int kMostImpactPasses = 4096;  // the most a scene may ask for
   std::string integrator = "symplectic_euler";  // symplectic_euler | velocity_verlet
   bool speculative = true;                    // speculative contacts (gaps that close within a substep)
   std::string precision = "float";            // float | double: the type the run computes in

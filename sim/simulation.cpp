@@ -42,7 +42,8 @@ std::string Simulation::describe_pipeline() const {
     out << "  contact solver " << s.iterations << " sequential-impulse sweeps, colour by colour: normal";
     if (s.friction) out << " + friction";
     if (s.rolling) out << " + rolling resistance";
-    out << (s.restitution ? "; impacts with restitution" : "; plastic impacts (no restitution)")
+    out << (s.restitution ? "; impacts with restitution (" + std::to_string(s.impact_passes) + " passes at most)"
+                          : std::string("; plastic impacts (no restitution)"))
         << (s.warm_start ? "; warm start" : "") << "\n";
   }
   out << (m.verlet ? "  integrate      velocity Verlet (gravity in half kicks around the drift)\n"

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <string>
 
+#include "narrowphase/solver_math.hpp"
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
 #include "tests/sim/scene_cases.hpp"
@@ -81,6 +82,7 @@ TEST(SceneLoad, MinimalSceneTakesDocumentedDefaults) {
   EXPECT_DOUBLE_EQ(s.time.dt, 0.001);
   EXPECT_EQ(s.time.substeps, 1);
   EXPECT_EQ(s.solver.iterations, 10);
+  EXPECT_EQ(s.solver.impact_passes, narrowphase::kImpactPasses);  // the solver's own default
   EXPECT_EQ(s.solver.integrator, "symplectic_euler");
   const std::vector<Effect> defaults = {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
                                         Effect::friction};
