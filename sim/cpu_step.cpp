@@ -158,6 +158,9 @@ class CpuStep final : public StepBackend {
     // whenever there are any).
     m_counters.max_overlap = has_records() ? m_solver.deepest_overlap(bodies, m_walls) : real(0);
     if (m_watch) watch(bodies);
+    // A step with an unchecked substep reports no depth (as the GPU's one
+    // step word, kUnswept, holds either).
+    if (m_counters.unswept_unchecked != 0) m_counters.unswept_depth = 0;
     counters = m_counters;
   }
   void set_watch(bool on) override { m_watch = on; }
@@ -248,9 +251,10 @@ class CpuStep final : public StepBackend {
         m_past.push_back(static_cast<std::uint32_t>(i));
     const auto n = static_cast<std::ptrdiff_t>(b.count);
     real deepest = m_counters.unswept_depth;
+    const std::ptrdiff_t spheres = m_model.collisions ? n : 0;  // without collisions spheres pass through each other
     for (const std::uint32_t i : m_past) {
 #pragma omp parallel for schedule(static) reduction(max : deepest) if (n > 20000)
-      for (std::ptrdiff_t j = 0; j < n; ++j)
+      for (std::ptrdiff_t j = 0; j < spheres; ++j)
         deepest = std::max(deepest, watch::unswept_pair(b, i, static_cast<std::size_t>(j), h));
       if (m_model.wall_contacts)
         for (const narrowphase::WallShape& w : m_walls)

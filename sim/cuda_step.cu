@@ -97,12 +97,12 @@ __global__ void watch_kernel(BodiesView b, const narrowphase::WallShape* walls, 
 
 // The unswept check (watch_math.hpp): the spheres the drift found past
 // their reach (past[0] of them, the first kUnsweptChecked from past[1] on)
-// against every sphere (a thread a sphere) and every wall (a thread a
-// listed sphere); the deepest meeting's bits into *word by atomicMax (a
+// against the first `spheres` spheres (a thread a sphere: all of them, or
+// none without collisions) and every wall (a thread a listed sphere); the deepest meeting's bits into *word by atomicMax (a
 // maximum: the same whatever the order), or every bit where there were
 // more than are checked.
-__global__ void unswept_kernel(BodiesView b, const narrowphase::WallShape* walls, std::uint32_t wall_count,
-                               const std::uint32_t* past, real h, unsigned long long* word,
+__global__ void unswept_kernel(BodiesView b, std::size_t spheres, const narrowphase::WallShape* walls,
+                               std::uint32_t wall_count, const std::uint32_t* past, real h, unsigned long long* word,
                                const unsigned long long* skip) {
   if (::marbles::cuda::skipped(skip)) return;
   const std::uint32_t count = past[0];
@@ -113,7 +113,7 @@ __global__ void unswept_kernel(BodiesView b, const narrowphase::WallShape* walls
     return;
   }
   real deepest = 0;
-  for (std::size_t j = first; j < b.count; j += std::size_t(gridDim.x) * blockDim.x)
+  for (std::size_t j = first; j < spheres; j += std::size_t(gridDim.x) * blockDim.x)
     for (std::uint32_t k = 0; k < count; ++k) {
       const real d = watch::unswept_pair(b, past[1 + k], j, h);
       deepest = d > deepest ? d : deepest;
@@ -690,7 +690,7 @@ class CudaStep final : public StepBackend {
     if (check) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
       unswept_kernel<<<::marbles::cuda::grid_for(bodies.count, m_sm), kWatchBlock, 0, m_stream>>>(
-          bodies, walls(), wall_count, past, h, flag(kUnswept), skip());
+          bodies, m_model.collisions ? bodies.count : 0, walls(), wall_count, past, h, flag(kUnswept), skip());
       MARBLES_CUDA_CHECK_LAUNCH();
     }
     if (m_model.verlet && m_model.drag)

@@ -259,9 +259,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     }
     if (!sim.last_kept().empty()) {
       progress.finish();
-      err << "watchdog: step " << sim.steps() << ": " << sim.last_kept() << ", still at "
-          << (sim.substeps() << Simulation::kWatchdogRetries)
-          << " substeps: kept (more time.substeps sweep what the solve sets moving)\n";
+      err << "watchdog: step " << sim.steps() << ": " << sim.last_kept()
+          << " (more time.substeps sweep what the solve sets moving)\n";
     }
     totals.add(sim.last_step(), sim.substeps(), sim.last_rollbacks().size(), !sim.last_kept().empty());
     if (probe && sim.steps() % probe_every == 0) probe->sample(sim.time(), sim.world());

@@ -220,25 +220,39 @@ void Simulation::step() {
   m_last_kept.clear();
   const StepCounters before = m_last;
   if (m_watchdog) m_backend->keep_step_start();
+  std::string first_unswept;  // the first try's broken rule, where the unswept rule was its only one
   for (int retry = 0;; ++retry) {
     m_backend->set_iteration_factor(1 << retry);
     attempt(1 << retry);
     std::string broken = m_watchdog ? violation(before) : std::string();
+    bool unswept_only = false;
     if (broken.empty() && m_watchdog) {
       broken = unswept_violation();
-      // Still unswept at the last retry: kept, as the step was before the
-      // rule (a sphere set moving faster than even the finest substep sweeps).
-      if (!broken.empty() && retry == kWatchdogRetries) {
-        m_last_kept = std::move(broken);
-        ++m_unswept_kept;
-        break;
-      }
+      unswept_only = !broken.empty();
+    }
+    if (retry == 0 && unswept_only) first_unswept = broken;
+    // Still unswept at the last retry: kept (a sphere set moving faster
+    // than even the finest substep sweeps), as every step was before the rule.
+    if (unswept_only && retry == kWatchdogRetries) {
+      m_last_kept = broken + ", still at " + std::to_string(m_model->substeps << kWatchdogRetries) + " substeps: kept";
+      ++m_unswept_kept;
+      break;
     }
     if (broken.empty()) break;
     m_backend->undo_step();
     m_last = before;
     ++m_rollbacks;
     m_last_rollbacks.push_back(broken);
+    if (retry == kWatchdogRetries && !first_unswept.empty()) {
+      // The finer substeps broke a rule the first try kept: the first try
+      // again (the same bits), kept as unswept, so the rule never ends a
+      // run that ran before it.
+      m_backend->set_iteration_factor(1);
+      attempt(1);
+      m_last_kept = first_unswept + ", and the finer substeps broke another rule: the first try kept";
+      ++m_unswept_kept;
+      break;
+    }
     if (retry == kWatchdogRetries) {
       m_backend->set_iteration_factor(1);
       throw WatchdogFailure("watchdog: step " + std::to_string(m_steps + 1) + ": " + broken + " after " +
@@ -279,7 +293,8 @@ void Simulation::inject_fault() {
 }
 
 void Simulation::attempt(int split) {
-  if ((split == 1 || m_fault_every_try) && m_fault_step == m_steps + 1) inject_fault();
+  const bool faulted = m_fault_retries_only ? split > 1 : (split == 1 || m_fault_every_try);
+  if (faulted && m_fault_step == m_steps + 1) inject_fault();
   const real h = m_model->substep() / static_cast<real>(split);
   m_split = split;
   m_backend->begin_step();
@@ -319,8 +334,8 @@ std::string Simulation::unswept_violation() const {
     return "more than " + std::to_string(watch::kUnsweptChecked) +
            " spheres moved past the reach their contacts were found with in one substep (set moving within it)";
   if (m_last.unswept_depth > kUnsweptDepth)
-    return "a sphere set moving within a substep went " + significant(m_last.unswept_depth, 3) +
-           " of a radius into a sphere or wall its contacts were not found with";
+    return "a sphere set moving within a substep past the reach its contacts were found with went " +
+           significant(m_last.unswept_depth, 3) + " of a radius deeper into a sphere or wall than at the substep's start";
   return {};
 }
 

@@ -124,7 +124,9 @@ class Simulation {
   // the velocity sweeps doubled, up to kWatchdogRetries times; then step()
   // throws WatchdogFailure with the step back at its start, except where only
   // the unswept rule still fails: that step is kept and counted
-  // (unswept_kept, last_kept). After an edit of the world (edit_world) the
+  // (unswept_kept, last_kept); and where a retry breaks another rule that
+  // the first try, broken by the unswept rule alone, kept, the first try is
+  // done again and kept so. After an edit of the world (edit_world) the
   // next step checks only non-finite, overlap and unswept.
   void set_watchdog(bool on);
   bool watchdog() const { return m_watchdog; }
@@ -134,17 +136,21 @@ class Simulation {
   // Rollbacks of the last step (each with its reason) and of the whole run.
   const std::vector<std::string>& last_rollbacks() const { return m_last_rollbacks; }
   std::uint64_t rollbacks() const { return m_rollbacks; }
-  // The last step kept with the unswept rule still failing at the last
-  // retry: why (empty where it was not), and how many steps of the run were.
+  // The last step kept with the unswept rule failing (at the last retry,
+  // or on the first try where a finer one broke another rule): why, and
+  // what was kept (empty where it was not), and how many steps of the run were.
   const std::string& last_kept() const { return m_last_kept; }
   std::uint64_t unswept_kept() const { return m_unswept_kept; }
   // Test hooks: the first try (or every try) of step `step` starts with a
   // fault in sphere 0: a NaN velocity, a kick of 100 radii per step, or the
   // sphere put wholly beyond the first wall.
   enum class Fault { nan, kick, escape };
-  void inject_fault_at(std::uint64_t step, bool every_try = false, Fault kind = Fault::nan) {
+  // `retries_only`: the retries have it, the first try not.
+  void inject_fault_at(std::uint64_t step, bool every_try = false, Fault kind = Fault::nan,
+                       bool retries_only = false) {
     m_fault_step = step;
     m_fault_every_try = every_try;
+    m_fault_retries_only = retries_only;
     m_fault = kind;
   }
 
@@ -174,7 +180,7 @@ class Simulation {
   bool m_profiling = false;
   bool m_watchdog = false;
   std::uint64_t m_rollbacks = 0, m_fault_step = 0;
-  bool m_fault_every_try = false;
+  bool m_fault_every_try = false, m_fault_retries_only = false;
   Fault m_fault = Fault::nan;
   int m_split = 1;  // the try's substeps per model substep
   // The watchdog's view of the state before the step, and the scene's scales.
