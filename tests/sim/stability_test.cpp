@@ -353,12 +353,7 @@ TEST(Stability, ASphereStruckIntoAWallWithinASubstepIsSweptAgain) {
 // what even the watchdog's finest substep sweeps. The step is kept, and
 // counted, as before the rule; without the watchdog nothing is checked.
 TEST(Stability, ASphereUnsweptEvenAtTheFinestSubstepIsKeptAndCounted) {
-  scene::Scene s = make_scene(1.0 / 60, 1, {Effect::collisions, Effect::restitution}, 0.5);
-  const real r = real(0.05);
-  scene::GeneratedParticles g;
-  add_sphere(g, {0, 0, 0}, r, {100, 0, 0});
-  add_sphere(g, {real(1.5), 0, 0}, r);
-  add_sphere(g, {real(1.5 + 4 * r), real(0.02), 0}, r);  // where the struck one goes, beyond its reach
+  auto [s, g] = struck_through_scene();
   Simulation unwatched(s, make_world(s, g), test_backend());
   Simulation sim(s, make_world(s, g), test_backend());
   sim.set_watchdog(true);
@@ -381,12 +376,7 @@ TEST(Stability, ASphereUnsweptEvenAtTheFinestSubstepIsKeptAndCounted) {
 // (here a NaN put into every retry, not the first), the first try is done
 // again and kept, the state the unwatched step gives.
 TEST(Stability, AFirstTryBrokenOnlyUnsweptIsKeptWhereTheRetriesBreakMore) {
-  scene::Scene s = make_scene(1.0 / 60, 1, {Effect::collisions, Effect::restitution}, 0.5);
-  const real r = real(0.05);
-  scene::GeneratedParticles g;
-  add_sphere(g, {0, 0, 0}, r, {100, 0, 0});
-  add_sphere(g, {real(1.5), 0, 0}, r);
-  add_sphere(g, {real(1.5 + 4 * r), real(0.02), 0}, r);
+  auto [s, g] = struck_through_scene();
   Simulation unwatched(s, make_world(s, g), test_backend());
   Simulation sim(s, make_world(s, g), test_backend());
   sim.set_watchdog(true);

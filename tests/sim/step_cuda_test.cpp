@@ -479,12 +479,7 @@ TEST(StepCuda, UnsweptMotionIsCheckedAsOnTheCpu) {
     ASSERT_FALSE(HasFatalFailure());
     EXPECT_EQ(gpu.rollbacks(), cpu.rollbacks());
   }
-  scene::Scene s = make_scene(1.0 / 60, 1, {scene::Effect::collisions, scene::Effect::restitution}, 0.5);
-  const real r = real(0.05);
-  scene::GeneratedParticles g;
-  add_sphere(g, {0, 0, 0}, r, {100, 0, 0});
-  add_sphere(g, {real(1.5), 0, 0}, r);
-  add_sphere(g, {real(1.5 + 4 * r), real(0.02), 0}, r);
+  auto [s, g] = struck_through_scene();
   Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
   Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
   cpu.set_watchdog(true);

@@ -128,6 +128,22 @@ inline std::pair<scene::Scene, scene::GeneratedParticles> struck_row_scene(int c
   return out;
 }
 
+// A 5 cm sphere at 100 m/s into one at rest, dt = 1/60 s, e = 0.5; a third
+// sphere lies where the struck one goes, 2 radii past it (beyond the reach
+// its contacts are found with) and off-centre: the struck sphere leaves 33
+// radii a step and passes through it, past what even the watchdog's finest
+// substep sweeps.
+inline std::pair<scene::Scene, scene::GeneratedParticles> struck_through_scene() {
+  using scene::Effect;
+  std::pair<scene::Scene, scene::GeneratedParticles> out{
+      make_scene(1.0 / 60, 1, {Effect::collisions, Effect::restitution}, 0.5), {}};
+  const real r = real(0.05);
+  add_sphere(out.second, {0, 0, 0}, r, {100, 0, 0});
+  add_sphere(out.second, {real(1.5), 0, 0}, r);
+  add_sphere(out.second, {real(1.5 + 4 * r), real(0.02), 0}, r);
+  return out;
+}
+
 // Scenes that exercise every stage, for the determinism and backend-parity
 // tests: a polydisperse pour of two materials into a box with every effect,
 // over a fixed sphere and past a spinning post, under air drag.
