@@ -493,7 +493,8 @@ void bind_simulation(nb::module_& m, const char* name, const char* pairs_name) {
       .def_prop_ro("precision", [](const PySimulation&) { return std::string(kRealName); })
       .def_prop_ro("warnings", &PySimulation::warnings)
       .def_prop_ro("max_overlap", [](const PySimulation& s) { return static_cast<double>(s.sim().last_step().max_overlap); })
-      .def_prop_ro("rollbacks", [](const PySimulation& s) { return s.sim().rollbacks(); });
+      .def_prop_ro("rollbacks", [](const PySimulation& s) { return s.sim().rollbacks(); })
+      .def_prop_ro("unswept_steps", [](const PySimulation& s) { return s.sim().unswept_kept(); });
 }
 
 }  // namespace marbles

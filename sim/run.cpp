@@ -342,7 +342,12 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       << wall << " s (" << 1e3 * step_seconds / steps_run << " ms/step; " << candidate_sum / steps
       << " candidate pairs, " << contact_sum / steps << " contacts per substep); largest overlap "
       << 100 * deepest << " % of a radius (" << 100 * totals.overlap_end << " % at the end); kinetic energy " << e_start
-      << " -> " << e_end << " J\n"
+      << " -> " << e_end << " J"
+      << (totals.rollbacks > 0 || totals.unswept > 0
+              ? "; watchdog: " + std::to_string(static_cast<std::uint64_t>(totals.rollbacks)) + " rollback(s), " +
+                    std::to_string(static_cast<std::uint64_t>(totals.unswept)) + " step(s) kept unswept"
+              : std::string())
+      << "\n"
       << (reference && std::isfinite(reference->error)
               ? "reference " + reference->kind + ": error " + significant(100 * reference->error, 10) + " %\n"
               : std::string())

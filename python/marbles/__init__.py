@@ -349,6 +349,8 @@ class Simulation:
     max_overlap = property(lambda self: self._impl.max_overlap,
                            doc="the last step's deepest overlap, of the smaller radius")
     rollbacks = property(lambda self: self._impl.rollbacks, doc="steps the watchdog redid")
+    unswept_steps = property(lambda self: self._impl.unswept_steps,
+                             doc="steps the watchdog kept with a sphere still unswept at its finest substep")
 
     def __len__(self):
         return self._impl.size

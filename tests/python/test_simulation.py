@@ -301,6 +301,7 @@ def test_steps_kept_unswept_are_counted_as_marbles_run_counts_them(tmp_path):
     assert summary["unswept_steps"] >= 1
     assert sim.summary()["unswept_steps"] == summary["unswept_steps"]
     assert sim.summary()["rollbacks"] == summary["rollbacks"]
+    assert sim.unswept_steps == summary["unswept_steps"] and sim.rollbacks == summary["rollbacks"]
     again = marbles.Simulation.restart(tmp_path / "one.mck", scene=path, backend="cpu")
     again.run()
     assert again.summary()["unswept_steps"] == summary["unswept_steps"]

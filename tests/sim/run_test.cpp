@@ -309,6 +309,35 @@ particles:
   EXPECT_GE(summary.at("rollbacks").get<std::uint64_t>(), 3 * kept);
 }
 
+// The run's closing line says what the watchdog did, where it did anything.
+TEST(Run, TheClosingLineSaysWhatTheWatchdogDid) {
+  const fs::path dir = temp_dir("closing_line");
+  const std::string yaml = R"(format: 1
+time: {duration: 0.05, dt: 0.016666666666666666}
+effects: [collisions, restitution]
+materials: {a: {density: 1000, restitution: 0.5}}
+particles:
+  - list: {positions: [[0, 0, 0], [1.5, 0, 0], [1.7, 0.02, 0]], radius: 0.05, velocities: [[100, 0, 0], [0, 0, 0], [0, 0, 0]]}
+)";
+  for (const bool struck : {true, false}) {
+    std::ofstream(dir / "scene.yaml") << (struck ? yaml : yaml.substr(0, yaml.find("[100, 0, 0]")) + "[1, 0, 0], [0, 0, 0], [0, 0, 0]]}\n");
+    RunOptions options;
+    options.scene_path = (dir / "scene.yaml").string();
+    const fs::path out_dir = dir / (struck ? "struck" : "gentle");
+    options.out_dir = out_dir.string();
+    options.backend = BackendChoice::cpu;
+    options.quiet = true;
+    std::ostringstream out, errors;
+    ASSERT_EQ(run_scene(options, out, errors), 0) << errors.str();
+    const nlohmann::json summary = nlohmann::json::parse(read_file(out_dir / "summary.json"));
+    const std::string said = "; watchdog: " + std::to_string(summary.at("rollbacks").get<std::uint64_t>()) +
+                             " rollback(s), " + std::to_string(summary.at("unswept_steps").get<std::uint64_t>()) +
+                             " step(s) kept unswept\n";
+    if (struck) EXPECT_NE(out.str().find(said), std::string::npos) << out.str();
+    else EXPECT_EQ(out.str().find("watchdog"), std::string::npos) << out.str();
+  }
+}
+
 // The images a run draws as it goes and the images `marbles render` draws
 // afterwards from its frames are the same pixels, moving walls included (the
 // run moves the scene's walls to each frame's time; the frames' walls are
