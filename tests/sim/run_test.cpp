@@ -283,18 +283,22 @@ output: {contacts: {every: 1}}
   EXPECT_GT(pressing, 0u) << "no force past float's range: the case no longer tests anything";
 }
 
-// A sphere struck at 100 m/s with dt = 1/60 s leaves past what even the
-// watchdog's finest substep sweeps: the run says so on stderr, keeps the
-// step and counts it in summary.json (the Stability tests hold the rule).
-TEST(Run, StepsKeptUnsweptAreSaidAndCounted) {
-  const fs::path dir = temp_dir("unswept");
-  const std::string yaml = R"(format: 1
+// A sphere struck at 100 m/s with dt = 1/60 s through a third sphere (the
+// scene file of tests/sim/test_scenes.hpp's struck_through_scene).
+const std::string kStruckThrough = R"(format: 1
 time: {duration: 0.05, dt: 0.016666666666666666}
 effects: [collisions, restitution]
 materials: {a: {density: 1000, restitution: 0.5}}
 particles:
   - list: {positions: [[0, 0, 0], [1.5, 0, 0], [1.7, 0.02, 0]], radius: 0.05, velocities: [[100, 0, 0], [0, 0, 0], [0, 0, 0]]}
 )";
+
+// A sphere struck at 100 m/s with dt = 1/60 s leaves past what even the
+// watchdog's finest substep sweeps: the run says so on stderr, keeps the
+// step and counts it in summary.json (the Stability tests hold the rule).
+TEST(Run, StepsKeptUnsweptAreSaidAndCounted) {
+  const fs::path dir = temp_dir("unswept");
+  const std::string yaml = kStruckThrough;
   std::string err;
   ASSERT_EQ(run_on_cpu(dir, yaml, err), 0) << err;
   const nlohmann::json summary = nlohmann::json::parse(read_file(dir / "out" / "summary.json"));
@@ -312,13 +316,7 @@ particles:
 // The run's closing line says what the watchdog did, where it did anything.
 TEST(Run, TheClosingLineSaysWhatTheWatchdogDid) {
   const fs::path dir = temp_dir("closing_line");
-  const std::string yaml = R"(format: 1
-time: {duration: 0.05, dt: 0.016666666666666666}
-effects: [collisions, restitution]
-materials: {a: {density: 1000, restitution: 0.5}}
-particles:
-  - list: {positions: [[0, 0, 0], [1.5, 0, 0], [1.7, 0.02, 0]], radius: 0.05, velocities: [[100, 0, 0], [0, 0, 0], [0, 0, 0]]}
-)";
+  const std::string yaml = kStruckThrough;
   for (const bool struck : {true, false}) {
     std::ofstream(dir / "scene.yaml") << (struck ? yaml : yaml.substr(0, yaml.find("[100, 0, 0]")) + "[1, 0, 0], [0, 0, 0], [0, 0, 0]]}\n");
     RunOptions options;
