@@ -49,7 +49,7 @@ class CpuStep final : public StepBackend {
     const real h = m_model.lookahead(substep);  // 0 without speculative contacts: touching pairs only
     m_solver.forget_records();
     m_contact_first.clear();
-    m_reach_fresh = false;
+    m_reach.clear();  // made again below where the search runs: integrate_positions' check reads it then only
     // The sphere search replaces the second run, reusing its elements
     // (sphere_contacts); it is emptied wherever that search does not run
     // or fails.
@@ -59,7 +59,6 @@ class CpuStep final : public StepBackend {
     const BodiesView bodies = m_world.view();
     const std::size_t n = m_world.size();
     narrowphase::contact_reaches(bodies, h, m_reach);
-    m_reach_fresh = true;
     try {
       if (m_model.collisions) {
         m_bound_radius.resize(n);
@@ -121,7 +120,7 @@ class CpuStep final : public StepBackend {
   void integrate_positions(real h) override {
     // With the watch and speculative contacts, where the reaches were made
     // for this substep: the spheres that moved past theirs, checked.
-    const bool check = m_watch && m_model.speculative && m_reach_fresh && m_reach.size() == m_world.size();
+    const bool check = m_watch && m_model.speculative && m_reach.size() == m_world.size();
     std::size_t past = 0;
     m_non_finite =
         integrator::integrate_positions(m_world.view(), h, check ? m_reach.data() : nullptr, &past) || m_non_finite;
@@ -236,9 +235,11 @@ class CpuStep final : public StepBackend {
     return m_uniform ? &*m_uniform : nullptr;
   }
 
-  // The `past` spheres that moved past their reach this substep, against
-  // every sphere and wall (watch_math.hpp: swept_deepening); more than
-  // kUnsweptChecked are not checked, and count as such.
+  // The `past` spheres that moved past their reach this substep (found
+  // again here: a rare substep's one scan), against every sphere and wall
+  // (watch_math.hpp: swept_deepening) in one pass over the spheres, as the
+  // GPU's unswept_kernel; more than kUnsweptChecked are not checked, and
+  // count as such.
   void check_unswept(real h, std::size_t past) {
     if (past > watch::kUnsweptChecked) {
       m_counters.unswept_unchecked = 1;
@@ -249,17 +250,19 @@ class CpuStep final : public StepBackend {
     for (std::size_t i = 0; i < b.count && m_past.size() < past; ++i)
       if (integrator::moved_past_reach(b.velocity[i], b.radius[i], m_reach[i], h))
         m_past.push_back(static_cast<std::uint32_t>(i));
-    const auto n = static_cast<std::ptrdiff_t>(b.count);
+    const std::uint32_t* listed = m_past.data();
+    const std::size_t count = m_past.size();
+    const auto spheres = static_cast<std::ptrdiff_t>(m_model.collisions ? b.count : 0);  // without collisions
+                                                                                       // spheres pass through
     real deepest = m_counters.unswept_depth;
-    const std::ptrdiff_t spheres = m_model.collisions ? n : 0;  // without collisions spheres pass through each other
-    for (const std::uint32_t i : m_past) {
-#pragma omp parallel for schedule(static) reduction(max : deepest) if (n > 20000)
-      for (std::ptrdiff_t j = 0; j < spheres; ++j)
-        deepest = std::max(deepest, watch::unswept_pair(b, i, static_cast<std::size_t>(j), h));
-      if (m_model.wall_contacts)
+#pragma omp parallel for schedule(static) reduction(max : deepest) if (spheres > 20000)
+    for (std::ptrdiff_t j = 0; j < spheres; ++j)
+      for (std::size_t k = 0; k < count; ++k)
+        deepest = std::max(deepest, watch::unswept_pair(b, listed[k], static_cast<std::size_t>(j), h));
+    if (m_model.wall_contacts)
+      for (const std::uint32_t i : m_past)
         for (const narrowphase::WallShape& w : m_walls)
           deepest = std::max(deepest, watch::wall_swept_deepening(w, b.position[i], b.velocity[i], b.radius[i], h));
-    }
     m_counters.unswept_depth = deepest;
   }
 
@@ -294,7 +297,6 @@ class CpuStep final : public StepBackend {
 
   // Per-substep buffers, reused.
   std::vector<real> m_reach;         // m, contact_reach per sphere
-  bool m_reach_fresh = false;        // m_reach made by this substep's find_contacts
   std::vector<std::uint32_t> m_past;  // check_unswept's spheres
   std::vector<real> m_bound_radius;  // m, radius + reach: what the broad phase sees
   std::vector<broadphase::Pair> m_pairs;

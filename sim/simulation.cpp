@@ -221,6 +221,10 @@ void Simulation::step() {
   const StepCounters before = m_last;
   if (m_watchdog) m_backend->keep_step_start();
   std::string first_unswept;  // the first try's broken rule, where the unswept rule was its only one
+  const auto keep_unswept = [&](std::string why) {
+    m_last_kept = std::move(why);
+    ++m_unswept_kept;
+  };
   for (int retry = 0;; ++retry) {
     m_backend->set_iteration_factor(1 << retry);
     attempt(1 << retry);
@@ -234,8 +238,7 @@ void Simulation::step() {
     // Still unswept at the last retry: kept (a sphere set moving faster
     // than even the finest substep sweeps), as every step was before the rule.
     if (unswept_only && retry == kWatchdogRetries) {
-      m_last_kept = broken + ", still at " + std::to_string(m_model->substeps << kWatchdogRetries) + " substeps: kept";
-      ++m_unswept_kept;
+      keep_unswept(broken + ", still at " + std::to_string(m_model->substeps << kWatchdogRetries) + " substeps: kept");
       break;
     }
     if (broken.empty()) break;
@@ -249,8 +252,7 @@ void Simulation::step() {
       // run that ran before it.
       m_backend->set_iteration_factor(1);
       attempt(1);
-      m_last_kept = first_unswept + ", and the finer substeps broke another rule: the first try kept";
-      ++m_unswept_kept;
+      keep_unswept(first_unswept + ", and the finer substeps broke another rule: the first try kept");
       break;
     }
     if (retry == kWatchdogRetries) {

@@ -14,7 +14,6 @@
 
 #include "core/vec3.hpp"
 #include "narrowphase/contact_math.hpp"
-#include "integrator/integrator_math.hpp"
 
 namespace marbles::watch {
 

@@ -310,8 +310,12 @@ namespace {
 struct StruckRow {
   scene::Scene scene;
   scene::GeneratedParticles spheres;
-  real wall = real(0.0775), r = real(0.01);
-  StruckRow() { std::tie(scene, spheres) = struck_row_scene(); }
+  real wall = 0, r = 0;  // the wall's face (x) and the spheres' radius, as the scene has them
+  StruckRow() {
+    std::tie(scene, spheres) = struck_row_scene();
+    wall = scene.walls[0].point.x;
+    r = spheres.radius[0];
+  }
   // The deepest any sphere went into the wall or into another (of a radius)
   // at the end of any of `steps` steps.
   double deepest(Simulation& sim, int steps) const {
@@ -427,5 +431,5 @@ TEST(Stability, MoreSpheresPastTheirReachThanAreCheckedSplitTheStep) {
   for (int k = 0; k < 19; ++k) sim.step();
   EXPECT_EQ(sim.unswept_kept(), 0u);
   const World& w = sim.world();
-  for (std::size_t i = 0; i < w.size(); ++i) EXPECT_LT(w.position[i].x + w.radius[i], real(0.0775) + real(1e-4));
+  for (std::size_t i = 0; i < w.size(); ++i) EXPECT_LT(w.position[i].x + w.radius[i], s.walls[0].point.x + real(1e-4));
 }

@@ -11,6 +11,7 @@
 #include "sim/simulation.hpp"
 #include "sim/step_backend.hpp"
 #include "sim/step_model.hpp"
+#include "integrator/integrator_math.hpp"
 #include "sim/watch_math.hpp"
 #include "tests/sim/test_scenes.hpp"
 
