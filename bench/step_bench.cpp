@@ -1,7 +1,5 @@
 #include "bench/step_bench.hpp"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -296,9 +294,8 @@ bool get(std::istream& f, T& v) {
 void save_pile(const std::string& path, const World& w, const SettleInfo& info) {
   namespace fs = std::filesystem;
   fs::create_directories(fs::path(path).parent_path());
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  std::ostringstream f(std::ios::binary);
   {
-    std::ostringstream f(std::ios::binary);
     f.write(kPileMagic, sizeof kPileMagic);
     put(f, kPileVersion);
     put(f, static_cast<std::uint32_t>(sizeof(real)));
@@ -319,14 +316,11 @@ void save_pile(const std::string& path, const World& w, const SettleInfo& info) 
         put(f, p.z);
       }
     for (real x : w.radius) put(f, x);
-    const std::string bytes = std::move(f).str();  // the buffer itself, not a copy
-    std::ofstream file(tmp, std::ios::binary | std::ios::trunc);
-    if (!file) throw RuntimeFailure("cannot write " + tmp);
-    file.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-    put(file, fnv1a(bytes.data(), bytes.size()));
-    if (!file.flush()) throw RuntimeFailure("cannot write " + tmp);
   }
-  fs::rename(tmp, path);
+  std::string bytes = std::move(f).str();  // the buffer itself, not a copy
+  const std::uint64_t sum = fnv1a(bytes.data(), bytes.size());
+  bytes.append(reinterpret_cast<const char*>(&sum), sizeof sum);
+  render::write_file_atomic(path, bytes);  // a temporary renamed: a reader sees the old file or the whole new one
 }
 
 // The cached pile, or nothing when the file is missing, of another version,
@@ -369,13 +363,11 @@ std::optional<PileState> load_pile(const std::string& path, std::size_t n, const
   for (real& x : g.radius)
     if (!get(f, x) || !(x > 0) || !std::isfinite(x)) return std::nullopt;
   if (f.peek() != std::char_traits<char>::eof()) return std::nullopt;  // bytes past the fields
-  for (const auto& v : arrays)
-    for (const Vec3& p : v)
-      if (square_overflows(p)) return std::nullopt;
   g.position = arrays[0];
   g.velocity = arrays[1];
   World w = make_world(s, g);
   w.angular_velocity = arrays[2];
+  if (w.first_out_of_range() < w.size()) return std::nullopt;  // not finite, or a square past the range
   return PileState{std::move(w), info};
 }
 

@@ -122,7 +122,7 @@ struct Setting {
   double dt = 0, h = 0;  // step, substep
   double g = 0;          // |g| when gravity is on, else 0
   Axis up{0, 0, 1};      // against gravity
-  double r_min = kInf, r_mean = 0;
+  double r_min = kInf, r_max = 0, r_mean = 0;
   double volume = 0;     // of all spheres
   double speed = 0;      // the largest initial speed
 };
@@ -140,6 +140,7 @@ Setting read_setting(const scene::Scene& scene, const scene::GeneratedParticles&
   for (std::size_t i = 0; i < p.size(); ++i) {
     const double r = p.radius[i];
     s.r_min = std::min(s.r_min, r);
+    s.r_max = std::max(s.r_max, r);
     s.r_mean += r / double(p.size());
     s.volume += 4.0 / 3.0 * std::numbers::pi * r * r * r;
     s.speed = std::max(s.speed, double(length(p.velocity[i])));
@@ -285,8 +286,7 @@ constexpr std::size_t kCrowdSpheres = 1000;
 std::optional<std::string> radius_spread(const Setting& s, const scene::Scene& scene,
                                          const scene::GeneratedParticles& p) {
   if (!scene.has(Effect::collisions) || p.size() < kCrowdSpheres) return std::nullopt;
-  double r_max = 0;
-  for (real r : p.radius) r_max = std::max(r_max, double(r));
+  const double r_max = s.r_max;
   const double ratio = r_max / s.r_min;
   const double crowd = kPacking * 6 / std::numbers::pi * ratio * ratio * ratio;  // of the smallest in a cell
   if (!(crowd > kCellCrowd)) return std::nullopt;
