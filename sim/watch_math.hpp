@@ -77,10 +77,33 @@ MARBLES_HD_INLINE real unswept_pair(const BodiesView& b, std::size_t i, std::siz
   return swept_deepening(b.position[i], b.velocity[i], b.radius[i], b.position[j], b.velocity[j], b.radius[j], h);
 }
 
+// The part [lo, hi] of the path s + t m, t in [0, 1], that a cylinder of
+// finite length acts on (its points' axial coordinates within [0, length]:
+// narrowphase::wall_gap); false where the path never passes beside it.
+MARBLES_HD_INLINE bool beside_span(const narrowphase::WallShape& w, const Vec3& s, const Vec3& m, real& lo, real& hi) {
+  const real t0 = dot(s - w.point, w.direction), dt = dot(m, w.direction);
+  lo = 0;
+  hi = 1;
+  if (dt == 0) return t0 >= 0 && t0 <= w.length;
+  real a = -t0 / dt, b = (w.length - t0) / dt;
+  if (a > b) {
+    const real c = a;
+    a = b;
+    b = c;
+  }
+  if (a > lo) lo = a;
+  if (b < hi) hi = b;
+  return lo <= hi;
+}
+
 // The same for a sphere against a wall as it stands (the substep's start:
 // walls move after the spheres). Along a straight path a half-space's and a
 // tube's inside are deepest at an end; a sphere's and a cylinder's outside
-// where the path passes nearest their centre or axis.
+// where the path passes nearest their centre or axis. A cylinder of finite
+// length acts only on the part of the path beside it, so there the ends are
+// that part's and the nearest point is taken within it (measured as from
+// the endless cylinder: a point at the part's end may round past the
+// length).
 MARBLES_HD_INLINE real wall_swept_deepening(const narrowphase::WallShape& w, const Vec3& p, const Vec3& v, real r,
                                            real h) {
   using Kind = narrowphase::WallShape::Kind;
@@ -92,13 +115,26 @@ MARBLES_HD_INLINE real wall_swept_deepening(const narrowphase::WallShape& w, con
   if (narrowphase::wall_gap(w, s, r, normal, gap) && gap < 0) start = -gap;
   real deepest = 0;
   if (narrowphase::wall_gap(w, p, r, normal, gap) && -gap > deepest) deepest = -gap;
+  const bool cylinder = w.kind == Kind::cylinder_inside || w.kind == Kind::cylinder_outside;
+  real lo = 0, hi = 1;
+  if (cylinder && w.length > 0) {
+    if (!beside_span(w, s, m, lo, hi)) return 0;
+    narrowphase::WallShape endless = w;
+    endless.length = 0;
+    if (narrowphase::wall_gap(endless, s + m * lo, r, normal, gap) && -gap > deepest) deepest = -gap;
+    if (narrowphase::wall_gap(endless, s + m * hi, r, normal, gap) && -gap > deepest) deepest = -gap;
+  }
   if (w.kind == Kind::sphere || w.kind == Kind::cylinder_outside) {
     Vec3 d0 = s - w.point, dm = m;
+    narrowphase::WallShape endless = w;
     if (w.kind == Kind::cylinder_outside) {  // across the axis
       d0 = d0 - w.direction * dot(d0, w.direction);
       dm = dm - w.direction * dot(dm, w.direction);
+      endless.length = 0;
     }
-    if (narrowphase::wall_gap(w, s + m * nearest_on_path(d0, dm), r, normal, gap) && -gap > deepest) deepest = -gap;
+    real t = nearest_on_path(d0, dm);
+    t = t < lo ? lo : (t > hi ? hi : t);
+    if (narrowphase::wall_gap(endless, s + m * t, r, normal, gap) && -gap > deepest) deepest = -gap;
   }
   const real deeper = deepest - start;
   return deeper > 0 ? deeper / r : real(0);

@@ -365,9 +365,10 @@ TEST(Stability, ASphereUnsweptEvenAtTheFinestSubstepIsKeptAndCounted) {
     unwatched.step();
     sim.step();
     EXPECT_EQ(unwatched.unswept_kept(), 0u);
-    if (!sim.last_kept().empty())
+    if (!sim.last_kept().empty()) {
       EXPECT_NE(sim.last_kept().find("deeper into a sphere or wall than at the substep's start"), std::string::npos)
           << sim.last_kept();
+    }
   }
   EXPECT_GT(unwatched.world().position[1].x, unwatched.world().position[2].x)
       << "the case this test is about: the struck sphere passes through the third";

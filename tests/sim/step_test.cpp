@@ -317,7 +317,7 @@ TEST(Unswept, WallDeepeningIsTheDeepestPointOfTheSampledPaths) {
   std::mt19937_64 rng(12);
   std::uniform_real_distribution<double> u(-1, 1), radius(0.2, 1);
   for (const Kind kind : {Kind::half_space, Kind::sphere, Kind::cylinder_inside, Kind::cylinder_outside}) {
-    int met = 0;
+    int met = 0, finite_met = 0;
     for (int trial = 0; trial < 1000; ++trial) {
       narrowphase::WallShape w;
       w.kind = kind;
@@ -325,7 +325,9 @@ TEST(Unswept, WallDeepeningIsTheDeepestPointOfTheSampledPaths) {
       const Vec3 d(real(u(rng)), real(u(rng)), real(u(rng)) + real(2));
       w.direction = d / length(d);
       w.radius = kind == Kind::cylinder_inside ? real(4) : real(1.5);
-      w.length = kind == Kind::cylinder_outside && trial % 2 == 0 ? real(2) : real(0);
+      // Half the cylinders have a length: the path passes beside them only in part.
+      const bool cylinder = kind == Kind::cylinder_inside || kind == Kind::cylinder_outside;
+      w.length = cylinder && trial % 2 == 0 ? real(2) : real(0);
       const real r = real(radius(rng)), h = real(0.01);
       const Vec3 p(real(3 * u(rng)), real(3 * u(rng)), real(3 * u(rng))),
           v(real(400 * u(rng)), real(400 * u(rng)), real(400 * u(rng)));
@@ -336,14 +338,14 @@ TEST(Unswept, WallDeepeningIsTheDeepestPointOfTheSampledPaths) {
         if (!narrowphase::wall_gap(w, p - v * real(h * (1 - t)), r, normal, gap)) return 0.0;
         return -double(gap) / r;
       });
-      if (w.length > 0) {  // a finite post: its ends are not swept (the check takes the nearest point, the ends)
-        EXPECT_LE(got, want + 1e-3 * (1 + want)) << "kind " << int(kind) << " trial " << trial;
-        continue;
-      }
-      EXPECT_NEAR(got, want, 1e-3 * (1 + want)) << "kind " << int(kind) << " trial " << trial;
+      EXPECT_NEAR(got, want, 1e-3 * (1 + want)) << "kind " << int(kind) << " trial " << trial << " length " << w.length;
       met += want > 0.01 ? 1 : 0;
+      finite_met += want > 0.01 && w.length > 0 ? 1 : 0;
     }
     EXPECT_GT(met, 50) << "kind " << int(kind);
+    if (kind == Kind::cylinder_inside || kind == Kind::cylinder_outside) {
+      EXPECT_GT(finite_met, 25) << "kind " << int(kind);
+    }
   }
 }
 
