@@ -238,14 +238,14 @@ class CpuStep final : public StepBackend {
   // The `past` spheres that moved past their reach this substep (found
   // again here: a rare substep's one scan), against every sphere and wall
   // (watch_math.hpp: swept_deepening) in one pass over the spheres, as the
-  // GPU's unswept_kernel; more than kUnsweptChecked are not checked, and
-  // count as such.
+  // GPU's unswept_kernel; more than watch::unswept_checked are not checked,
+  // and count as such.
   void check_unswept(real h, std::size_t past) {
-    if (past > watch::kUnsweptChecked) {
-      m_counters.unswept_unchecked = 1;
+    const BodiesView b = m_world.view();
+    if (past > watch::unswept_checked(b.count)) {
+      m_counters.unswept_unchecked = watch::unswept_checked(b.count);
       return;
     }
-    const BodiesView b = m_world.view();
     m_past.clear();
     for (std::size_t i = 0; i < b.count && m_past.size() < past; ++i)
       if (integrator::moved_past_reach(b.velocity[i], b.radius[i], m_reach[i], h))

@@ -96,19 +96,19 @@ __global__ void watch_kernel(BodiesView b, const narrowphase::WallShape* walls, 
 }
 
 // The unswept check (watch_math.hpp): the spheres the drift found past
-// their reach (past[0] of them, the first kUnsweptChecked from past[1] on)
+// their reach (past[0] of them, the first `checked` from past[1] on)
 // against the first `spheres` spheres (a thread a sphere: all of them, or
 // none without collisions) and every wall (a thread a listed sphere); the deepest meeting's bits into *word by atomicMax (a
 // maximum: the same whatever the order), or every bit where there were
 // more than are checked.
 __global__ void unswept_kernel(BodiesView b, std::size_t spheres, const narrowphase::WallShape* walls,
-                               std::uint32_t wall_count, const std::uint32_t* past, real h, unsigned long long* word,
-                               const unsigned long long* skip) {
+                               std::uint32_t wall_count, const std::uint32_t* past, std::uint32_t checked, real h,
+                               unsigned long long* word, const unsigned long long* skip) {
   if (::marbles::cuda::skipped(skip)) return;
   const std::uint32_t count = past[0];
   if (count == 0) return;
   const std::size_t first = blockIdx.x * std::size_t(blockDim.x) + threadIdx.x;
-  if (count > watch::kUnsweptChecked) {
+  if (count > checked) {
     if (first == 0) atomicMax(word, ~0ull);
     return;
   }
@@ -682,15 +682,15 @@ class CudaStep final : public StepBackend {
     // (unswept_kernel, before the walls move).
     const BodiesView bodies = m_device.view();
     const bool check = m_watch && m_model.speculative && m_reach_fresh && bodies.count > 0;
-    std::uint32_t* past = check ? m_past.as<std::uint32_t>(1 + watch::kUnsweptChecked) : nullptr;
+    const std::uint32_t checked = watch::unswept_checked(bodies.count);
+    std::uint32_t* past = check ? m_past.as<std::uint32_t>(1 + checked) : nullptr;
     if (check) MARBLES_CUDA_CHECK(cudaMemsetAsync(past, 0, sizeof(std::uint32_t), m_stream));
     integrator::cuda::launch_integrate_positions(bodies, h, m_flags.get_as<unsigned>(), m_sm, m_stream, skip(),
-                                                 m_reach.get_as<real>(), past,
-                                                 watch::kUnsweptChecked);  // flags[0]
+                                                 m_reach.get_as<real>(), past, checked);  // flags[0]
     if (check) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
       unswept_kernel<<<::marbles::cuda::grid_for(bodies.count, m_sm), kWatchBlock, 0, m_stream>>>(
-          bodies, m_model.collisions ? bodies.count : 0, walls(), wall_count, past, h, flag(kUnswept), skip());
+          bodies, m_model.collisions ? bodies.count : 0, walls(), wall_count, past, checked, h, flag(kUnswept), skip());
       MARBLES_CUDA_CHECK_LAUNCH();
     }
     if (m_model.verlet && m_model.drag)
@@ -784,7 +784,7 @@ class CudaStep final : public StepBackend {
     if (m_watch) {
       std::memcpy(&m_counters.kinetic_energy, &m_end_flags[kKineticEnergy], sizeof(double));
       m_counters.beyond_walls = m_end_flags[kBeyondWalls];
-      if (m_end_flags[kUnswept] == ~0ull) m_counters.unswept_unchecked = 1;
+      if (m_end_flags[kUnswept] == ~0ull) m_counters.unswept_unchecked = watch::unswept_checked(m_device.size());
       else m_counters.unswept_depth = real_of_bits(m_end_flags[kUnswept]);
     }
     m_counters.projection_sweeps = m_end_flags[kProjectionSweeps];

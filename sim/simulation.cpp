@@ -333,7 +333,7 @@ std::string Simulation::violation(const StepCounters& before) {
 
 std::string Simulation::unswept_violation() const {
   if (m_last.unswept_unchecked != 0)
-    return "more than " + std::to_string(watch::kUnsweptChecked) +
+    return "more than " + std::to_string(m_last.unswept_unchecked) +
            " spheres moved past the reach their contacts were found with in one substep (set moving within it)";
   if (m_last.unswept_depth > kUnsweptDepth)
     return "a sphere set moving within a substep past the reach its contacts were found with went " +

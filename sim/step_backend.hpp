@@ -84,7 +84,8 @@ struct StepCounters {
   // A meeting no contact stood for (watch_math.hpp, "Motion the substep did
   // not sweep"), over the step's substeps: the most a sphere set moving past
   // its reach went deeper into a sphere or wall (of the smaller radius), and
-  // 1 where some substep had more such spheres than are checked.
+  // where some substep had more such spheres than are checked, how many are
+  // (watch::unswept_checked; else 0).
   real unswept_depth = 0;
   std::uint64_t unswept_unchecked = 0;
   double verb_ms[static_cast<int>(Verb::count)] = {};  // with profiling on: wall ms per verb, summed

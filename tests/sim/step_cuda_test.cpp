@@ -458,13 +458,14 @@ TEST(StepCuda, WatchdogKeepsTheCacheWithoutACopy) {
 
 // The unswept check (sim/watch_math.hpp) on the device as on the CPU: a
 // row struck into a wall within a substep (found, the step split), 70 such
-// rows (more spheres past their reach than are checked: split unchecked),
+// rows (each checked: found, split), 480 (more spheres past their reach
+// than are checked at 2 400 spheres: split unchecked),
 // and a sphere struck at 100 m/s with dt = 1/60 s (past even the finest
 // substep: kept and counted). The same rollbacks, reasons and bits.
 TEST(StepCuda, UnsweptMotionIsCheckedAsOnTheCpu) {
   REQUIRE_DEVICE();
   GpuCounts counts;
-  for (const int copies : {1, 70}) {
+  for (const int copies : {1, 70, 480}) {
     auto [s, g] = struck_row_scene(copies);
     Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
     Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);

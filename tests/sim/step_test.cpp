@@ -349,6 +349,25 @@ TEST(Unswept, WallDeepeningIsTheDeepestPointOfTheSampledPaths) {
   }
 }
 
+// How many spheres past their reach a substep checks: all of a small scene,
+// at least 64, never past the GPU's list, and the pair tests bounded.
+TEST(Unswept, TheSpheresCheckedKeepTheCheckBounded) {
+  std::uint32_t last = watch::kUnsweptListed;
+  for (std::size_t n = 1; n < 5000000; n += 1 + n / 7) {
+    const std::uint32_t checked = watch::unswept_checked(n);
+    EXPECT_GE(checked, 64u) << n;
+    EXPECT_LE(checked, watch::kUnsweptListed) << n;
+    EXPECT_LE(checked, last) << n;  // fewer as the scene grows
+    if (n * n <= watch::kUnsweptPairs) {
+      EXPECT_GE(checked, n) << n;  // a small scene's every sphere
+    }
+    if (checked > 64) {
+      EXPECT_LE(std::uint64_t(checked) * n, watch::kUnsweptPairs) << n;
+    }
+    last = checked;
+  }
+}
+
 TEST(Unswept, MovedPastReachIsTheTravelBeyondTheReachAndSlack) {
   const real r = real(0.01), h = real(0.001), reach = real(0.005);
   const real edge = (reach + integrator::kUnsweptSlack * r) / h;  // m/s
