@@ -33,6 +33,7 @@
 #include "broadphase/grid.hpp"
 #include "core/error.hpp"
 #include "core/parallel.hpp"
+#include "render/atomic_file.hpp"
 #include "render/vtk_output.hpp"
 #include "sim/checkpoint.hpp"
 #include "sim/output.hpp"
@@ -249,14 +250,17 @@ class PySimulation {
     return it->second->write(make_snapshot(*m_sim, counts)).string();
   }
 
-  // A checkpoint `marbles run --restart` reads (and restart() here).
-  void checkpoint(const std::string& path) {
+  // A checkpoint `marbles run --restart` reads (and restart() here), and
+  // where given, `record` beside it (path + ".scene.json"), each written to
+  // a temporary and renamed.
+  void checkpoint(const std::string& path, const std::string& record) {
     const Busy busy(*this);
     if (path.empty() || path.find('\0') != std::string::npos)
       throw nb::value_error("checkpoint: a path is needed (not empty, no NUL byte)");
     if (m_views_out) check_views();
     write_checkpoint(path, {m_fingerprint, m_sim->steps(), m_sim->world(), m_sim->save_state(), m_totals,
                             m_probe ? m_probe->progress() : std::vector<double>{}, m_sim->ids()});
+    if (!record.empty()) render::write_file_atomic(path + ".scene.json", record);
   }
 
   void restart(const std::string& path) {
@@ -466,7 +470,7 @@ void bind_simulation(nb::module_& m, const char* name, const char* pairs_name) {
       .def("contacts", &PySimulation::contacts)
       .def("kinetic_energy", &PySimulation::kinetic_energy)
       .def("write_frame", &PySimulation::write_frame, nb::arg("dir"), nb::arg("overwrite"))
-      .def("checkpoint", &PySimulation::checkpoint, nb::arg("path"))
+      .def("checkpoint", &PySimulation::checkpoint, nb::arg("path"), nb::arg("record") = std::string())
       .def("restart", &PySimulation::restart, nb::arg("path"))
       .def("reference", &PySimulation::reference)
       .def("totals", &PySimulation::totals)

@@ -88,6 +88,22 @@ render::Snapshot make_snapshot(const Simulation& sim, bool with_contacts) {
   return s;
 }
 
+namespace {
+
+// The folders of a run's numbered files (beside the files at its top).
+struct Numbered {
+  const char* folder;
+  const char* prefix;
+  const char* extension;
+};
+constexpr Numbered kNumbered[] = {{"frames", "frame_", ".vtp"},
+                                  {"images", "frame_", ".png"},
+                                  {"checkpoints", "step_", ".mck"},
+                                  {"contacts", "contacts_", ".vtp"},
+                                  {"walls", "walls_", ".vtp"}};
+
+}  // namespace
+
 std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir) {
   namespace fs = std::filesystem;
   std::vector<fs::path> found;
@@ -95,14 +111,7 @@ std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path
   for (const char* name : {"summary.json", "series.pvd", "contacts.pvd", "walls.pvd", "thermo.csv", "walls.json",
                            "materials.txt", "movie.mp4"})
     if (fs::is_regular_file(dir / name, ec)) found.push_back(dir / name);
-  struct Numbered {
-    const char* folder;
-    const char* prefix;
-    const char* extension;
-  };
-  for (const Numbered& n : {Numbered{"frames", "frame_", ".vtp"}, Numbered{"images", "frame_", ".png"},
-                            Numbered{"checkpoints", "step_", ".mck"}, Numbered{"contacts", "contacts_", ".vtp"},
-                            Numbered{"walls", "walls_", ".vtp"}}) {
+  for (const Numbered& n : kNumbered) {
     if (!fs::is_directory(dir / n.folder, ec)) continue;
     for (const auto& entry : fs::directory_iterator(dir / n.folder, ec))
       if (entry.is_regular_file(ec) && entry.path().extension() == n.extension &&
@@ -205,8 +214,8 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
   std::filesystem::create_directories(dir, ec);
   if (ec) throw RuntimeFailure("cannot create the output folder " + dir + ": " + ec.message());
   // A dead run's temporaries, in every folder a run writes files into.
-  for (const char* sub : {"", "frames", "images", "contacts", "walls", "checkpoints"})
-    render::remove_stale_temporaries(std::filesystem::path(dir) / sub);
+  render::remove_stale_temporaries(dir);
+  for (const Numbered& n : kNumbered) render::remove_stale_temporaries(std::filesystem::path(dir) / n.folder);
   const render::FrameMetadata metadata = frame_metadata(scene);
   render::write_material_names(dir, metadata.material_names);
   if (scene.output.vtk_every > 0) {

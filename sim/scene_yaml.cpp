@@ -57,7 +57,17 @@ bool is_yaml_non_finite(std::string_view s) {
   return t == ".nan" || t == ".inf" || t == "+.inf" || t == "-.inf";
 }
 
-// Parses the whole of `text` as a double; false on any leftover character.
+template <typename Int>
+bool parse_integer(std::string_view text, Int& value) {
+  std::string_view s = trimmed(text);
+  if (!s.empty() && s.front() == '+') s.remove_prefix(1);
+  if (s.empty()) return false;
+  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), value);
+  return ec == std::errc() && end == s.data() + s.size();
+}
+
+}  // namespace
+
 bool parse_double(std::string_view text, double& value) {
   std::string_view s = trimmed(text);
   if (!s.empty() && s.front() == '+') s.remove_prefix(1);
@@ -69,17 +79,6 @@ bool parse_double(std::string_view text, double& value) {
   }
   return ec == std::errc() && end == s.data() + s.size();
 }
-
-template <typename Int>
-bool parse_integer(std::string_view text, Int& value) {
-  std::string_view s = trimmed(text);
-  if (!s.empty() && s.front() == '+') s.remove_prefix(1);
-  if (s.empty()) return false;
-  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), value);
-  return ec == std::errc() && end == s.data() + s.size();
-}
-
-}  // namespace
 
 std::string nearest_name(std::string_view word, const std::vector<std::string>& candidates) {
   std::string best;

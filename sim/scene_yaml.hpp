@@ -38,6 +38,10 @@ std::string nearest_name(std::string_view word, const std::vector<std::string>& 
 // " (did you mean 'x'?)" when one candidate is close, else "; expected one of: a, b, c".
 std::string suggestion(std::string_view word, const std::vector<std::string>& candidates);
 
+// Parses the whole of `text` (blanks around it, a leading '+' allowed) as a
+// double, as the scene's numbers are read: false on any leftover character.
+bool parse_double(std::string_view text, double& value);
+
 // Shortest text that reads back as the same double ("0.1", "1e-05").
 std::string format_number(double value);
 // The same for a value stored as `real` (0.1f prints as 0.1, not 0.10000000149011612).

@@ -26,6 +26,7 @@
 #include "render/atomic_file.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
+#include "sim/scene_yaml.hpp"
 
 extern char** environ;
 
@@ -168,11 +169,11 @@ StudyVary parse_vary(const std::string& text) {
   const std::string list = text.substr(eq + 1);
   std::string item;
   int depth = 0;
-  // A number's value, where the whole text is one (1e-3 and 0.001 are one setting).
+  // A number's value, where the whole text is one as the scene reads it (1e-3
+  // and 0.001 are one setting).
   const auto number = [](const std::string& text) -> std::optional<double> {
-    char* end = nullptr;
-    const double x = std::strtod(text.c_str(), &end);
-    if (end == text.c_str() || *end != '\0') return std::nullopt;
+    double x = 0;
+    if (!scene::detail::parse_double(text, x)) return std::nullopt;
     return x;
   };
   const auto take = [&] {

@@ -429,17 +429,7 @@ class Simulation:
         record = path + ".scene.json"
         if path and os.path.exists(record) and not os.path.isfile(record):  # a folder or device: refused up front
             raise RuntimeFailure(f"cannot write {record}: it is not a file; nothing was written")
-        self._impl.checkpoint(path)
-        tmp = f"{record}.tmp-{os.getpid()}"
-        try:
-            with open(tmp, "w", encoding="utf-8") as f:
-                json.dump(self._source, f)
-            os.replace(tmp, record)
-        except OSError as e:
-            raise RuntimeFailure(f"cannot write {record}: {e.strerror or e}") from None
-        finally:
-            if os.path.lexists(tmp):
-                os.remove(tmp)
+        self._impl.checkpoint(path, json.dumps(self._source))  # both written to a temporary and renamed
 
     def reference(self):
         """The scene's reference (``reference:``) against the run so far, as a

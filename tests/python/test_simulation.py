@@ -182,6 +182,10 @@ def test_checkpoint_and_restart_go_on_bit_for_bit(pile, tmp_path):
     sim.step(10)
     path = tmp_path / "c.mck"
     sim.checkpoint(path)
+    # The checkpoint and the scene's record, each renamed from its temporary: nothing else is left.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.mck", "c.mck.scene.json"]
+    sim.checkpoint(path)  # again over both
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.mck", "c.mck.scene.json"]
     sim.step(10)
     again = marbles.Simulation.restart(path, backend="cpu")  # the scene from path.scene.json
     assert again.steps == 10

@@ -190,6 +190,10 @@ TEST_F(Study, FinestSettingIsTheReference) {
 TEST(Vary, ValuesSplitOutsideBrackets) {
   EXPECT_EQ(parse_vary("time.dt=1e-3,5e-4").values, (std::vector<std::string>{"1e-3", "5e-4"}));
   EXPECT_EQ(parse_vary("time.dt= 1e-3 , 5e-4").values, (std::vector<std::string>{"1e-3", "5e-4"}));
+  // Values are numbers as the scene reads them: a hexadecimal text is none
+  // (the scene refuses it, naming it), so not the same setting as its value.
+  EXPECT_EQ(parse_vary("time.dt=0x1p-10,0.0009765625").values,
+            (std::vector<std::string>{"0x1p-10", "0.0009765625"}));
   const StudyVary g = parse_vary("gravity=[0,0,-1],[0,0,-2],[0, 0, -9.81]");
   EXPECT_EQ(g.key, "gravity");
   EXPECT_EQ(g.values, (std::vector<std::string>{"[0,0,-1]", "[0,0,-2]", "[0, 0, -9.81]"}));
@@ -197,6 +201,7 @@ TEST(Vary, ValuesSplitOutsideBrackets) {
             (std::vector<std::string>{"{density: 5, friction: 1}", "{density: 6}"}));
   for (const std::string bad : {"time.dt=1e-3,,5e-4", "time.dt=1e-3,", "gravity=[0,0,-1", "gravity=0,0]", "time.dt=",
                                 "=1,2", "time.dt=1e-3,5e-4,1e-3", "time.dt=1e-3,0.001", "time.dt=1e-3,0.001 ", "time.dt=1e-3, ",
+                                "time.dt=+1e-3,0.001",
                                 "gravity=[0,0,-1],[0,0,-1]"}) {
     try {
       parse_vary(bad);
