@@ -200,17 +200,31 @@ class Simulation:
     """
 
     def __init__(self, scene, backend="auto", set=None, threads=0):
+        source, precision = Simulation._file_source(scene, set)
+        self._build(source, precision, backend, threads)
+
+    @staticmethod
+    def _file_source(scene, set):
+        """A scene file's record (its path and overrides) and precision."""
         path = os.fspath(scene)
         overrides = _overrides(set)
         precision = _marbles.scene_precision(path, overrides)  # the overrides applied, as the loader applies them
-        impl = _implementation(precision)(path, "", "", overrides, backend, _threads(threads))
-        self._setup(impl, {"scene": os.path.abspath(path), "set": overrides})
+        return {"scene": path, "set": overrides}, precision
+
 
     @classmethod
     def from_dict(cls, scene, backend="auto", set=None, threads=0, name=None):
         """A scene given as a dict with the keys of a scene file. Errors name
         the key path (``SceneError.key``; ``line`` is 0). ``name`` (or the
         scene's ``name``) names the default output folder, ``out/<name>``."""
+        source, precision = cls._dict_source(scene, set, name)
+        self = cls.__new__(cls)
+        self._build(source, precision, backend, threads)
+        return self
+
+    @staticmethod
+    def _dict_source(scene, set, name):
+        """A scene dict's record (its JSON text, name and overrides) and precision."""
         if not isinstance(scene, dict):
             raise SceneError(f"<dict>: a scene is a dict of keys (time, materials, particles, ...), got "
                              f"{type(scene).__name__}", file="<dict>",
@@ -223,10 +237,7 @@ class Simulation:
         overrides = _overrides(set)
         precision = _marbles.scene_precision_json(text, overrides)
         stem = name or (scene.get("name") if isinstance(scene.get("name"), str) else None) or "scene"
-        impl = _implementation(precision)(text, "<dict>", stem, overrides, backend, _threads(threads))
-        self = cls.__new__(cls)
-        self._setup(impl, {"dict": text, "name": stem, "set": overrides})
-        return self
+        return {"dict": text, "name": stem, "set": overrides}, precision
 
     @classmethod
     def restart(cls, path, scene=None, backend="auto", set=None, threads=0):
@@ -259,40 +270,43 @@ class Simulation:
                                  file=path + ".scene.json", key="restart", message="give scene=")
             overrides = source["set"] if set is None else _overrides(set)
             if source.get("dict") is not None:
-                self = cls.from_dict(json.loads(source["dict"]), backend=backend, set=overrides, threads=threads,
-                                     name=source.get("name"))
+                # The recorded text as it was (its fingerprint is the checkpoint's).
+                text = source["dict"]
+                recorded = json.loads(text)
+                named = recorded.get("name") if isinstance(recorded, dict) else None
+                stem = source.get("name") or (named if isinstance(named, str) else None) or "scene"
+                source, precision = ({"dict": text, "name": stem, "set": overrides},
+                                     _marbles.scene_precision_json(text, overrides))
             else:
-                self = cls(source["scene"], backend=backend, set=overrides, threads=threads)
+                source, precision = cls._file_source(source["scene"], overrides)
         elif isinstance(scene, dict):
-            self = cls.from_dict(scene, backend=backend, set=set, threads=threads)
+            source, precision = cls._dict_source(scene, set, None)
         else:
-            self = cls(scene, backend=backend, set=set, threads=threads)
-        if self.precision != _marbles.checkpoint_precision(path) and os.path.exists(path):
+            source, precision = cls._file_source(scene, set)
+        if os.path.exists(path):
             # The checkpoint's precision wins, as with marbles run --restart:
             # the same scene and overrides in it, no override added (the
             # checkpoint holds the fingerprint of the scene and its overrides,
             # which one more would change; marbles run --precision adds none).
-            self = cls._in_precision(self._source, _marbles.checkpoint_precision(path), backend, threads)
+            # The scene is built once, in it.
+            precision = _marbles.checkpoint_precision(path)
+        self = cls.__new__(cls)
+        self._build(source, precision, backend, threads)
         self._impl.restart(path)
         return self
 
-    @classmethod
-    def _in_precision(cls, source, precision, backend, threads):
+    def _build(self, source, precision, backend, threads):
+        """The simulation of a scene's record in a precision; its warnings said once."""
         overrides = source["set"]
         if "dict" in source:
             impl = _implementation(precision)(source["dict"], "<dict>", source["name"], overrides, backend,
                                               _threads(threads))
         else:
             impl = _implementation(precision)(source["scene"], "", "", overrides, backend, _threads(threads))
-        self = cls.__new__(cls)
-        self._setup(impl, dict(source))
-        return self
-
-    def _setup(self, impl, source):
         self._impl = impl
-        self._source = source
+        self._source = dict(source, scene=os.path.abspath(source["scene"])) if "scene" in source else source
         for text in impl.warnings:
-            warnings.warn(text, stacklevel=3)
+            warnings.warn(text, stacklevel=3)  # at the caller of __init__, from_dict or restart
 
     # --- stepping ---
     def _check_substeps(self, steps, what):

@@ -4,6 +4,7 @@
 import json
 import pathlib
 import subprocess
+import warnings
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -159,17 +160,23 @@ def test_python_run_equals_marbles_run(tmp_path):
 def test_restart_takes_a_marbles_run_checkpoint_in_double(tmp_path):
     # marbles run --precision double writes a double checkpoint of a float
     # scene; restart() resumes it in double with the run's overrides (the
-    # precision is no override: the checkpoint's fingerprint holds).
+    # precision is no override: the checkpoint's fingerprint holds). The
+    # scene is built once, in double: its warning (a mass ratio of 50 at a
+    # substep of 1 ms) is said once, at the caller's line.
     scene = SCENES / "demo.yaml"
-    overrides = ["time.duration=0.03", "output.checkpoint={every: 30, keep: 1}"]
+    overrides = ["time.duration=0.03", "output.checkpoint={every: 30, keep: 1}", "materials.steel.density=15600"]
     out = tmp_path / "run"
     args = [PROGRAM, "run", str(scene), "--out", str(out), "--summary-only", "--quiet", "--backend", "cpu",
             "--precision", "double"]
     for o in overrides:
         args += ["--set", o]
     subprocess.run(args, check=True, capture_output=True)
-    done = marbles.Simulation.restart(out / "checkpoints" / "step_000030.mck", scene=scene, backend="cpu",
-                                      set=overrides)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        done = marbles.Simulation.restart(out / "checkpoints" / "step_000030.mck", scene=scene, backend="cpu",
+                                          set=overrides)
+    assert ["times heavier than the lightest" in str(w.message) for w in said] == [True], [str(w.message) for w in said]
+    assert said[0].filename == __file__
     assert done.precision == "double" and done.steps == 30
     assert done.positions.dtype == np.float64
     sim = marbles.Simulation(scene, backend="cpu", set=overrides + ["solver.precision=double"])
