@@ -838,17 +838,27 @@ YAML::Node read_document(const std::string& path) {
 
 // `path`: where the scene came from (errors name it); `stem`: the default name
 // and output folder; the `--set` overrides are applied to the tree first.
-Scene read_scene(YAML::Node document, const std::string& path, const std::string& stem,
-                 const std::vector<std::string>& overrides) {
-  detail::Origins origins;
+namespace {
+
+// The overrides applied to a scene's tree, as `--set` applies them: each
+// value put in, then merge keys in their values resolved as in a file (the
+// file's own were resolved as it was read; resolving again finds none).
+void apply_overrides_whole(YAML::Node document, const std::vector<std::string>& overrides,
+                           detail::Origins& origins) {
   detail::apply_overrides(document, overrides, origins);
-  // Merge keys in an override's value, as in a file (the file's own were
-  // resolved as it was read; resolving again finds none of them).
   for (const std::string& o : overrides)
     if (o.find("<<") != std::string::npos) {
       MergeKeys("--set " + o).resolve(document, "");
       break;
     }
+}
+
+}  // namespace
+
+Scene read_scene(YAML::Node document, const std::string& path, const std::string& stem,
+                 const std::vector<std::string>& overrides) {
+  detail::Origins origins;
+  apply_overrides_whole(document, overrides, origins);
   const Field root(document, "", path, &origins);
   const MapFields top(root, {"format", "name", "time", "solver", "effects", "gravity", "drag", "materials",
                              "contact_pairs", "walls", "particles", "output", "reference"});
@@ -954,10 +964,11 @@ Scene load_scene_json(const std::string& text, const std::string& label, const s
 
 namespace {
 
-// solver.precision of a scene's tree once the overrides are applied.
+// solver.precision of a scene's tree once the overrides are applied (as
+// read_scene applies them).
 std::string precision_of(YAML::Node document, const std::vector<std::string>& overrides) {
   detail::Origins origins;
-  detail::apply_overrides(document, overrides, origins);
+  apply_overrides_whole(document, overrides, origins);
   const YAML::Node& root = document;
   if (root.IsMap() && root["solver"].IsMap() && root["solver"]["precision"].IsScalar() &&
       root["solver"]["precision"].Scalar() == "double")

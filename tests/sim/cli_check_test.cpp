@@ -86,8 +86,10 @@ TEST_F(CliCheck, SetOverridesTheScene) {
   EXPECT_EQ(o.exit_code, 0) << o.err;
   EXPECT_NE(o.out.find("6000 steps of 0.0005 s"), std::string::npos) << o.out;
   EXPECT_NE(o.out.find(", float)"), std::string::npos) << o.out;
-  // The precision from a set in any form the loader takes (nested, quoted), not only solver.precision=double.
-  for (const char* form : {"solver.precision=double", "solver={precision: double}", "solver.precision=\"double\""}) {
+  // The precision from a set in any form the loader takes (nested, quoted, by a merge key), not only
+  // solver.precision=double.
+  for (const char* form : {"solver.precision=double", "solver={precision: double}", "solver.precision=\"double\"",
+                           "solver={<<: {precision: double}, iterations: 10}"}) {
     const Outcome d = run_check(MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml", scratch, {form});
     EXPECT_EQ(d.exit_code, 0) << d.err;
     EXPECT_NE(d.out.find(", double)"), std::string::npos) << form << ": " << d.out;
