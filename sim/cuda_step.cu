@@ -98,7 +98,7 @@ __global__ void watch_kernel(BodiesView b, const narrowphase::WallShape* walls, 
 // The unswept check (watch_math.hpp): the spheres the drift found past
 // their reach (past[0] of them, the first `checked` from past[1] on)
 // against the first `spheres` spheres (a thread a sphere: all of them, or
-// none without collisions) and every wall (a thread a listed sphere); the deepest meeting's bits into *word by atomicMax (a
+// none without collisions) and every wall (a thread a listed sphere, grid-stride); the deepest meeting's bits into *word by atomicMax (a
 // maximum: the same whatever the order), or every bit where there were
 // more than are checked.
 __global__ void unswept_kernel(BodiesView b, std::size_t spheres, const narrowphase::WallShape* walls,
@@ -118,9 +118,9 @@ __global__ void unswept_kernel(BodiesView b, std::size_t spheres, const narrowph
       const real d = watch::unswept_pair(b, past[1 + k], j, h);
       deepest = d > deepest ? d : deepest;
     }
-  if (first < count)
+  for (std::size_t k = first; k < count; k += std::size_t(gridDim.x) * blockDim.x)
     for (std::uint32_t w = 0; w < wall_count; ++w) {
-      const std::uint32_t i = past[1 + first];
+      const std::uint32_t i = past[1 + k];
       const real d = watch::wall_swept_deepening(walls[w], b.position[i], b.velocity[i], b.radius[i], h);
       deepest = d > deepest ? d : deepest;
     }
