@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <charconv>
+#include <cstdlib>
 #include <cmath>
 #include <limits>
 
@@ -74,8 +75,11 @@ bool parse_double(std::string_view text, double& value) {
   if (s.empty()) return false;
   const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), value);
   if (ec == std::errc::result_out_of_range) {
-    value = std::numeric_limits<double>::infinity();
-    return end == s.data() + s.size();
+    // A number past double's range either way: its value rounded as strtod
+    // rounds it (+-inf past the top, +-0 or a subnormal below), with its sign.
+    if (end != s.data() + s.size()) return false;
+    value = std::strtod(std::string(s).c_str(), nullptr);
+    return true;
   }
   return ec == std::errc() && end == s.data() + s.size();
 }

@@ -1,7 +1,7 @@
 // sim/scene_yaml.hpp — reading validated values out of a yaml-cpp tree.
 //
-// Private to the scene loader (sim/scene.cpp): nothing outside sim/ includes
-// yaml-cpp. A Field is a node plus the dotted key that leads to it
+// Private to the scene loader (sim/scene.cpp; sim/study.cpp reads numbers
+// with its parse_double): nothing outside sim/ includes yaml-cpp. A Field is a node plus the dotted key that leads to it
 // ("materials.glass.restitution", "particles[2].random.count") and the file
 // it came from, so that every check can throw an InputError that reads
 // `file:line:column: key: message` with the node's own position.

@@ -134,6 +134,11 @@ inline const std::vector<BadScene>& bad_scenes() {
       {"nan", SCENE_VALID "gravity: [0, 0, .nan]\n", "{scene}:6:17: gravity[2]: must be a finite number, got .nan"},
       {"inf", "time: {duration: .inf, dt: 0.001}\n" SCENE_MATERIALS SCENE_PARTICLES,
        "{scene}:1:18: time.duration: must be a finite number, got .inf"},
+      // Past double's range: a number too small is 0 (with its sign), not infinite.
+      {"underflow", "time: {duration: 1, dt: 1e-400}\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:1:25: time.dt: must be > 0, got 1e-400"},
+      {"overflow_negative", "time: {duration: 1, dt: -1e400}\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:1:25: time.dt: must be a finite number, got -1e400"},
       {"not_yaml", "time: {duration: 1, dt: [0.001\nmaterials:\n",
        "{scene}:2:10: not valid YAML: end of sequence flow not found"},
       {"not_a_map", "- time\n- materials\n",

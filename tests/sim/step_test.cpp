@@ -349,6 +349,51 @@ TEST(Unswept, WallDeepeningIsTheDeepestPointOfTheSampledPaths) {
   }
 }
 
+// Finite cylinders where random paths seldom go: a path square to the axis,
+// one along it (entering the span from past an end), and paths that end
+// exactly on an end's plane coming from beyond it (the span found from the
+// path may round to empty there, where the end point is beside the post).
+TEST(Unswept, FiniteCylindersAtTheirEndsAndAlongTheirAxis) {
+  using Kind = narrowphase::WallShape::Kind;
+  const real r = real(0.3), h = real(0.01);
+  std::mt19937_64 rng(13);
+  std::uniform_real_distribution<double> u(-1, 1);
+  int met = 0;
+  for (const Kind kind : {Kind::cylinder_outside, Kind::cylinder_inside}) {
+    narrowphase::WallShape w;
+    w.kind = kind;
+    w.point = Vec3(0, 0, 0);
+    w.direction = Vec3(0, 0, 1);
+    w.radius = kind == Kind::cylinder_inside ? real(4) : real(1.5);
+    w.length = real(2);
+    const auto check = [&](const Vec3& p, const Vec3& v, const std::string& what) {
+      const double got = watch::wall_swept_deepening(w, p, v, r, h);
+      const double want = sampled_deepening([&](double t) {
+        Vec3 normal;
+        real gap = 0;
+        if (!narrowphase::wall_gap(w, p - v * real(h * (1 - t)), r, normal, gap)) return 0.0;
+        return -double(gap) / r;
+      });
+      EXPECT_NEAR(got, want, 1e-3 * (1 + want)) << "kind " << int(kind) << ": " << what;
+      met += want > 0.01 ? 1 : 0;
+    };
+    const real inside_wall = kind == Kind::cylinder_inside ? real(3.9) : real(1.6);  // a radius the sphere overlaps at
+    for (int k = 0; k < 200; ++k) {
+      const real z = real(0.1 + 1.8 * (k + 0.5) / 200);
+      // Square to the axis, at height z, across the wall's surface.
+      const real angle = real(0.0314 * k);
+      const Vec3 out(std::cos(angle), std::sin(angle), 0);
+      check(out * inside_wall + Vec3(0, 0, z), out * real(kind == Kind::cylinder_inside ? 30 : -30), "square to the axis");
+      // Along the axis, from past the lower end into the span.
+      check(out * inside_wall + Vec3(0, 0, z), Vec3(0, 0, real(100 + 50 * u(rng))), "along the axis");
+      // Ending on the upper end's plane, coming down and in from beyond it.
+      const Vec3 v(real(40 * u(rng)), real(40 * u(rng)), -real(20 + 100 * (u(rng) + 1)));
+      check(out * inside_wall + Vec3(0, 0, w.length), v, "ending on the end's plane");
+    }
+  }
+  EXPECT_GT(met, 400);
+}
+
 // How many spheres past their reach a substep checks: all of a small scene,
 // at least 64, never past the GPU's list, and the pair tests bounded.
 TEST(Unswept, TheSpheresCheckedKeepTheCheckBounded) {

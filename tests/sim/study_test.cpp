@@ -194,6 +194,8 @@ TEST(Vary, ValuesSplitOutsideBrackets) {
   // (the scene refuses it, naming it), so not the same setting as its value.
   EXPECT_EQ(parse_vary("time.dt=0x1p-10,0.0009765625").values,
             (std::vector<std::string>{"0x1p-10", "0.0009765625"}));
+  // Past double's range above, of either sign, and below (0): three settings (each refused by the scene, named).
+  EXPECT_EQ(parse_vary("time.dt=1e-400,1e400,-1e400").values.size(), 3u);
   const StudyVary g = parse_vary("gravity=[0,0,-1],[0,0,-2],[0, 0, -9.81]");
   EXPECT_EQ(g.key, "gravity");
   EXPECT_EQ(g.values, (std::vector<std::string>{"[0,0,-1]", "[0,0,-2]", "[0, 0, -9.81]"}));
