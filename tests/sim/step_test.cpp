@@ -291,6 +291,16 @@ double sampled_deepening(Depth depth_at, int samples = 20000) {
   return std::max(0.0, deepest - start);
 }
 
+// The same of a sphere's path against a wall as it stands.
+double sampled_wall_deepening(const narrowphase::WallShape& w, const Vec3& p, const Vec3& v, real r, real h) {
+  return sampled_deepening([&](double t) {
+    Vec3 normal;
+    real gap = 0;
+    if (!narrowphase::wall_gap(w, p - v * real(h * (1 - t)), r, normal, gap)) return 0.0;
+    return -double(gap) / r;
+  });
+}
+
 }  // namespace
 
 TEST(Unswept, SphereDeepeningIsTheDeepestPointOfTheSampledPaths) {
@@ -332,12 +342,7 @@ TEST(Unswept, WallDeepeningIsTheDeepestPointOfTheSampledPaths) {
       const Vec3 p(real(3 * u(rng)), real(3 * u(rng)), real(3 * u(rng))),
           v(real(400 * u(rng)), real(400 * u(rng)), real(400 * u(rng)));
       const double got = watch::wall_swept_deepening(w, p, v, r, h);
-      const double want = sampled_deepening([&](double t) {
-        Vec3 normal;
-        real gap = 0;
-        if (!narrowphase::wall_gap(w, p - v * real(h * (1 - t)), r, normal, gap)) return 0.0;
-        return -double(gap) / r;
-      });
+      const double want = sampled_wall_deepening(w, p, v, r, h);
       EXPECT_NEAR(got, want, 1e-3 * (1 + want)) << "kind " << int(kind) << " trial " << trial << " length " << w.length;
       met += want > 0.01 ? 1 : 0;
       finite_met += want > 0.01 && w.length > 0 ? 1 : 0;
@@ -368,12 +373,7 @@ TEST(Unswept, FiniteCylindersAtTheirEndsAndAlongTheirAxis) {
     w.length = real(2);
     const auto check = [&](const Vec3& p, const Vec3& v, const std::string& what) {
       const double got = watch::wall_swept_deepening(w, p, v, r, h);
-      const double want = sampled_deepening([&](double t) {
-        Vec3 normal;
-        real gap = 0;
-        if (!narrowphase::wall_gap(w, p - v * real(h * (1 - t)), r, normal, gap)) return 0.0;
-        return -double(gap) / r;
-      });
+      const double want = sampled_wall_deepening(w, p, v, r, h);
       EXPECT_NEAR(got, want, 1e-3 * (1 + want)) << "kind " << int(kind) << ": " << what;
       met += want > 0.01 ? 1 : 0;
     };
