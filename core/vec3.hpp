@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cmath>
+#include <limits>
 
 #include "core/config.hpp"
 
@@ -44,5 +45,18 @@ MARBLES_HD_INLINE bool is_finite(const Vec3& a) {
 // energies, gaps into distances), overflows the precision: such a vector is
 // refused where it comes in (a scene, a CSV row, an array from Python).
 MARBLES_HD_INLINE bool square_overflows(const Vec3& a) { return !std::isfinite(length_squared(a)); }
+// Whether a radius above zero is too small for the overlap test, which
+// compares squared distances with squared sums of radii: its square is
+// below the precision's smallest normal number (below about 1.1e-19 m in
+// float), and two such spheres on one spot would be found apart. Refused
+// where radii come in without a mass (a CSV row, `marbles pairs`, Python's
+// pairs(); a scene's spheres that small have no mass in range either).
+inline bool radius_squares_below_normal(real r) { return r > 0 && !(r * r >= std::numeric_limits<real>::min()); }
+// The smallest radius that is not (for messages).
+inline real smallest_squarable_radius() {
+  real r = std::sqrt(std::numeric_limits<real>::min());
+  while (radius_squares_below_normal(r)) r = std::nextafter(r, std::numeric_limits<real>::max());
+  return r;
+}
 
 }  // namespace marbles

@@ -32,6 +32,7 @@
 
 #include "broadphase/grid.hpp"
 #include "core/error.hpp"
+#include "core/format.hpp"
 #include "core/parallel.hpp"
 #include "render/atomic_file.hpp"
 #include "render/vtk_output.hpp"
@@ -417,6 +418,11 @@ nb::object pairs(HostArray<const real, kAny, 4> xyzr, const std::string& algorit
         !std::isfinite(row[3]))
       throw InputError(SourceLocation{}, "xyzr[" + std::to_string(i) + "]",
                        "a sphere needs a finite centre and a finite radius >= 0");
+    if (radius_squares_below_normal(row[3]))
+      throw InputError(SourceLocation{}, "xyzr[" + std::to_string(i) + "]",
+                       "radius " + shortest(row[3]) + " too small for " + kRealName +
+                           " precision: the overlap test squares it (smallest " +
+                           shortest(smallest_squarable_radius()) + ")");
     centre[i] = {row[0], row[1], row[2]};
     radius[i] = row[3];
   }

@@ -47,6 +47,11 @@ def test_pairs_double_and_margin():
     found = marbles.pairs(xyzr, backend="cpu", margin=0.01)
     assert {tuple(p) for p in found.tolist()} == brute(xyzr, 0.01)
     assert len(marbles.pairs(np.zeros((0, 4)))) == 0
+    # Two spheres on one spot: found in double; too small for float's squares, refused there (not found apart).
+    tiny = np.array([[0, 0, 0, 1e-25], [0, 0, 0, 1e-25]])
+    assert marbles.pairs(tiny, backend="cpu").tolist() == [[0, 1]]
+    with pytest.raises(marbles.SceneError, match="too small for float precision"):
+        marbles.pairs(tiny.astype(np.float32), backend="cpu")
 
 
 def test_study_returns_the_table(tmp_path):
