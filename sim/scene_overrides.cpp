@@ -80,6 +80,17 @@ YAML::Node child(YAML::Node node, const Step& step, bool last, std::string& key,
   return next;
 }
 
+void add_subtree(const YAML::Node& node, const std::string& label, Origins& origins) {
+  origins.add(node, label);
+  if (node.IsSequence())
+    for (const YAML::Node& item : node) add_subtree(item, label, origins);
+  if (node.IsMap())
+    for (const auto& entry : node) {
+      origins.add(entry.first, label);
+      add_subtree(entry.second, label, origins);
+    }
+}
+
 void apply_override(YAML::Node root, const std::string& text, Origins& origins) {
   const std::string label = "--set " + text;
   const std::size_t equals = text.find('=');
@@ -93,12 +104,28 @@ void apply_override(YAML::Node root, const std::string& text, Origins& origins) 
   }
   YAML::Node node = root;
   std::string key;
+  std::vector<YAML::Node> parents;  // the node before each step
   for (std::size_t k = 0; k < steps.size(); ++k) {
+    parents.push_back(node);
     YAML::Node next = child(node, steps[k], k + 1 == steps.size(), key, label, origins);
     node.reset(next);
   }
   node = value;
   origins.add(value, label);
+  // A merge key in the value moves the nodes under it into the map that
+  // holds it (read_scene resolves them after the overrides): each names the
+  // override, not the place in the override's text as if in the file.
+  if (text.find("<<") != std::string::npos) add_subtree(value, label, origins);
+  // An item of a vector (gravity[2], positions[0][1]) changes the vector,
+  // which is read and checked whole: a problem with it names the override.
+  // Only sequences of scalars: a list of maps (particles, walls) keeps its
+  // other items' places in the file.
+  for (std::size_t k = steps.size(); k-- > 0 && steps[k].name.empty();) {
+    const YAML::Node& vector = parents[k];
+    const bool scalars =
+        std::all_of(vector.begin(), vector.end(), [](const YAML::Node& item) { return item.IsScalar(); });
+    if (scalars) origins.add(vector, label);
+  }
 }
 
 }  // namespace

@@ -318,6 +318,13 @@ const BadOverride kBadOverrides[] = {
     {"created_key_unknown", "time.dtt=5", "--set time.dtt=5: time: unknown key 'dtt' (did you mean 'dt'?)"},
     {"created_section_unknown", "solvr.iterations=5", "--set solvr.iterations=5: unknown key 'solvr' (did you mean 'solver'?)"},
     {"short_vector", "gravity=[0, -1]", "--set gravity=[0, -1]: gravity: expected [x, y, z], got a sequence of 2"},
+    // keys a merge key in the override brings: at the override, not at a place in its text taken for the file's
+    {"merge_key_in_the_path", "materials.glass.<<={densty: 5}",
+     "--set materials.glass.<<={densty: 5}: materials.glass: unknown key 'densty' (did you mean 'density'?)"},
+    {"merge_key_in_the_value", "time={<<: {dtt: 5}}", "--set time={<<: {dtt: 5}}: time: unknown key 'dtt' ..."},
+    // one item of a vector in the file: the vector is checked whole, at the override
+    {"vector_item", "particles[0].random.min[2]=1e30",
+     "--set particles[0].random.min[2]=1e30: particles[0].random.min: too large for float precision: ..."},
     {"empty_value", "solver.iterations=", "--set solver.iterations=: solver.iterations: expected an integer, got nothing (null)"},
     {"found_while_generating", "particles[0].random={count: 1000, min: [0, 0, 0], max: [0.1, 0.1, 0.1], radius: 0.02}",
      "--set particles[0].random={count: 1000, min: [0, 0, 0], max: [0.1, 0.1, 0.1], radius: 0.02}: "
