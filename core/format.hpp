@@ -40,6 +40,15 @@ inline std::string significant(double v, int digits) {
   return text;
 }
 
+// A size in bytes for messages: three significant digits in GB, MB, kB or
+// bytes ("1.23 GB", "640 bytes").
+inline std::string bytes_text(double bytes) {
+  if (bytes >= 1e9) return significant(bytes / 1e9, 3) + " GB";
+  if (bytes >= 1e6) return significant(bytes / 1e6, 3) + " MB";
+  if (bytes >= 1e3) return significant(bytes / 1e3, 3) + " kB";
+  return significant(bytes, 3) + " bytes";
+}
+
 inline std::string time_text(double t) {
   if (!std::isfinite(t)) return shortest(t);
   char text[40];

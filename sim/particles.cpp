@@ -34,6 +34,7 @@
 #include <string_view>
 
 #include "core/files.hpp"
+#include "core/format.hpp"
 #include "core/host_memory.hpp"
 #include "sim/limits.hpp"
 #include "sim/scene_yaml.hpp"
@@ -505,13 +506,16 @@ GeneratedParticles generate_particles(const Scene& scene) {
 // Refuses a block that would take the scene past what memory can hold,
 // before it is generated (never an out-of-memory kill half way through).
 void check_sphere_budget(double total, const SourceLocation& where, const std::string& key) {
-  const double memory = available_memory() * limits().memory;
+  const double available = available_memory(), fraction = limits().memory;
+  const double memory = available * fraction;
   if (memory > 0 && total * kBytesPerSphere > memory)
     throw InputError(where, key,
-                     "would make " + std::to_string(static_cast<long long>(total)) + " spheres, about " +
-                         std::to_string(static_cast<long long>(total * kBytesPerSphere / 1e9)) +
-                         " GB to run; this machine has " + std::to_string(static_cast<long long>(memory / 1e9)) +
-                         " GB available (--limit memory=F lets the spheres take F times that)");
+                     "would make " + significant(total, 12) + " spheres, about " +
+                         bytes_text(total * kBytesPerSphere) + " to run; the spheres may take " +
+                         (fraction == 1 ? bytes_text(memory) + ", what this machine has available"
+                                        : bytes_text(memory) + " (" + significant(fraction, 3) + " of the " +
+                                              bytes_text(available) + " this machine has available)") +
+                         " (--limit memory=F lets them take F times what is available)");
 }
 
 }  // namespace marbles::scene

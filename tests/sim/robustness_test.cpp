@@ -167,6 +167,7 @@ TEST_F(Robustness, LimitsCanBeRaised) {
       {"materials=1", "2 materials, more than the limit 1"},
       {"spheres=299", "must be <= 299 (--limit spheres=N raises it), got 300"},
       {"memory=1e-12", "would make 300 spheres"},
+      {"memory=1e-12", " (1e-12 of the "},  // what the spheres may take, and of what
       {"scene_mib=1e-5", "larger than 1e-05 MiB"}};
   for (const auto& [limit, message] : cases) {
     const Outcome o = marbles("check " + scene + " --limit " + limit, dir);
