@@ -76,6 +76,19 @@ CLI::Validator at_least_zero(bool strictly) {
       strictly ? "POSITIVE" : "NON-NEGATIVE");
 }
 const CLI::Validator kPositive = at_least_zero(true);
+// A sphere count past 64 bits, said as typed (the conversion would make it
+// 18446744073709551615); counts within are held to --limit spheres after
+// parsing (check_bench_counts).
+const CLI::Validator kCount(
+    [](std::string& text) {
+      std::uint64_t v = 0;
+      const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+      return ec == std::errc::result_out_of_range && end == text.data() + text.size()
+                 ? "must be <= " + marbles::shortest(marbles::limits().spheres) +
+                       " (--limit spheres=N raises it), got " + text
+                 : std::string();
+    },
+    "COUNT");
 const CLI::Validator kNonNegative = at_least_zero(false);
 // A seed: a whole number 0 ... 2^64 - 1, as written (no wrap of -1, no
 // saturation past the top).
@@ -266,7 +279,7 @@ int cli_main(int argc, char** argv) {
   bench_bp->add_option("--algorithm", bp.algorithm, "seed|home")->check(CLI::IsMember({"seed", "home"}));
   bench_bp->add_option("--sort", bp.sort, "seed|cub (cuda)")->check(CLI::IsMember({"seed", "cub"}));
   bench_bp->add_option("--scene", bp.scene, "gas|pile|poly")->check(CLI::IsMember({"gas", "pile", "poly"}));
-  bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(kPositive);
+  bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(kPositive)->check(kCount);
   bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")->check(kPositive);
   bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(kFinite & kWithinReal & kNonNegative);
   bench_bp->add_option("--seed", bp.seed, "random seed of the sphere sets")->check(kSeed);
@@ -281,7 +294,7 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::IsMember({"cpu", "cuda"}));
   bench_step->add_option("--scene", st.scene, "gas (default) | pile | settle")
       ->check(CLI::IsMember({"gas", "pile", "settle"}));
-  bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->check(kPositive);
+  bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->check(kPositive)->check(kCount);
   bench_step->add_option("--repeats", st.repeats, "timed steps per size (and as many profiled ones)")
       ->check(kPositive);
   bench_step->add_option("--warmup", st.warmup, "untimed steps first (default 2 for gas, 5 for pile)")
@@ -328,7 +341,7 @@ int cli_main(int argc, char** argv) {
   bench::EffectsBenchOptions ef;
   auto* bench_effects = bench_cmd->add_subcommand("effects", "time the step with and without each effect");
   bench_effects->add_option("--backend", ef.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
-  bench_effects->add_option("--n", ef.n, "sphere count")->check(kPositive);
+  bench_effects->add_option("--n", ef.n, "sphere count")->check(kPositive)->check(kCount);
   bench_effects->add_option("--volume-fraction", ef.volume_fraction, "packing of the gas")->check(kFinite & CLI::Range(0.01, 0.5));
   bench_effects->add_option("--repeats", ef.repeats, "timed steps per pipeline")->check(kPositive);
   bench_effects->add_flag("--json", ef.json, "print JSON");

@@ -211,7 +211,12 @@ long long Field::integer() const {
   long long value = 0;
   if (parse_integer(m_node.Scalar(), value)) return value;
   const double d = number();  // reports non-numbers and non-finite values
-  if (d != std::floor(d) || std::fabs(d) > 9.0e15) fail("expected an integer, got " + m_node.Scalar());
+  if (d != std::floor(d)) fail("expected an integer, got " + m_node.Scalar());
+  // A whole number past long long's range (written out, or as 1e20): the
+  // nearest end, for the caller's bounds to name ("must be <= ...").
+  constexpr double kTop = 9223372036854775808.0;  // 2^63
+  if (d >= kTop) return std::numeric_limits<long long>::max();
+  if (d <= -kTop) return std::numeric_limits<long long>::min();
   return static_cast<long long>(d);
 }
 
@@ -226,9 +231,11 @@ std::uint64_t Field::seed() const {
   if (!is_scalar()) fail("expected an integer, got " + description());
   std::uint64_t value = 0;
   if (parse_integer(m_node.Scalar(), value)) return value;
-  const long long v = integer();
-  if (v < 0) fail("must be >= 0, got " + m_node.Scalar());
-  return static_cast<std::uint64_t>(v);
+  const double d = number();
+  if (d != std::floor(d)) fail("expected an integer, got " + m_node.Scalar());
+  if (d < 0) fail("must be >= 0, got " + m_node.Scalar());
+  if (d >= 18446744073709551616.0) fail("must be <= 18446744073709551615, got " + m_node.Scalar());  // 2^64
+  return static_cast<std::uint64_t>(d);  // whole and below 2^64: exact
 }
 
 std::string Field::word() const {

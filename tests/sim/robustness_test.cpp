@@ -336,6 +336,7 @@ TEST_F(Robustness, NanArgumentsAreBadArguments) {
       // Options that meant nothing where given, or given twice, and ranges in plain words.
       {"bench step --scene pile --n 10 --effects gravity", "--effects: is for --scene gas only"},
       {"bench step --n 10 --effects gravity,walls,gravity", "--effects: 'gravity' is given twice"},
+      {"bench step --n 99999999999999999999", "--n: must be <= 1e+09 (--limit spheres=N raises it), got 99999999999999999999"},
       {"bench broadphase --n 100 --sort cub", "--sort: chooses the GPU's sort: give --backend cuda"},
       {"bench broadphase --n 100 --seed -1", "--seed: must be a whole number from 0 to 18446744073709551615"},
       {"bench broadphase --n 100 --seed 18446744073709551616", "--seed: must be a whole number"},

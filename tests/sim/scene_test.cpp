@@ -326,6 +326,12 @@ const BadOverride kBadOverrides[] = {
     {"vector_item", "particles[0].random.min[2]=1e30",
      "--set particles[0].random.min[2]=1e30: particles[0].random.min: too large for float precision: ..."},
     {"empty_value", "solver.iterations=", "--set solver.iterations=: solver.iterations: expected an integer, got nothing (null)"},
+    // whole numbers past 64 bits: the bound they pass, not "not an integer"
+    {"huge_count", "time.substeps=9999999999999999999999",
+     "--set time.substeps=9999999999999999999999: time.substeps: must be <= 1000000000, got 9999999999999999999999"},
+    {"huge_seed", "particles[0].random.seed=1e20",
+     "--set particles[0].random.seed=1e20: particles[0].random.seed: must be <= 18446744073709551615, got 1e20"},
+    {"huge_negative", "solver.renumber=-1e30", "--set solver.renumber=-1e30: solver.renumber: must be >= 0, got -1e30"},
     {"found_while_generating", "particles[0].random={count: 1000, min: [0, 0, 0], max: [0.1, 0.1, 0.1], radius: 0.02}",
      "--set particles[0].random={count: 1000, min: [0, 0, 0], max: [0.1, 0.1, 0.1], radius: 0.02}: "
      "particles[0].random.count: could place only ..."},
