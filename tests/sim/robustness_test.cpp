@@ -323,11 +323,14 @@ TEST_F(Robustness, NanArgumentsAreBadArguments) {
   const std::string csv = MARBLES_SOURCE_DIR "/scenes/spheres.csv";
   // Two spheres on one spot, too small for the overlap test's squares: refused, not found apart.
   const std::string tiny = dir.write("tiny.csv", "0,0,0,1e-25\n0,0,0,1e-25\n");
+  // A NUL in a row: shown as \x00, the message whole after it.
+  const std::string nul = dir.write("nul.csv", std::string("0,0,1,0.1\0junk\n", 15));
   const std::string ball = MARBLES_SOURCE_DIR "/scenes/validation/bouncing_ball.yaml";
   const std::vector<std::pair<std::string, std::string>> cases = {
       {"bench effects --n 100 --volume-fraction nan", "--volume-fraction: must be a finite number"},
       {"bench broadphase --n 100 --margin 1e300", "--margin: out of range for float precision"},
       {"pairs " + csv + " --margin=1e39", "--margin: out of range for float precision"},
+      {"pairs " + nul, "nul.csv:1:7: r: expected a number, got '0.1\\x00junk'"},
       {"pairs " + tiny, "tiny.csv:1:7: r: too small for float precision: the overlap test squares it (smallest 1.0842022e-19), got 1e-25"},
       {"bench step --scene pile --n 10 --cache " + file, "--cache: '" + file + "' exists and is not a folder"},
       {"bench step --settle-ke nan", "--settle-ke: must be a finite number"},
