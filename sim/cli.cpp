@@ -103,13 +103,26 @@ const CLI::Validator kSeed(
     },
     "SEED");
 
-// A folder the command writes into: one, or nothing yet (made then).
+// A folder the command writes into: one, or nothing yet (made then, with
+// the folders above it that are not there: the nearest one there must be a
+// folder).
 const CLI::Validator kFolderOrNew(
     [](std::string& text) {
       std::error_code ec;
       const auto status = std::filesystem::status(text, ec);
       if (std::filesystem::exists(status) && !std::filesystem::is_directory(status))
         return "'" + text + "' exists and is not a folder";
+      for (std::filesystem::path above = std::filesystem::path(text).parent_path(); !above.empty();
+           above = above.parent_path()) {
+        const auto there = std::filesystem::status(above, ec);
+        if (!std::filesystem::exists(there)) {
+          if (above == above.parent_path()) break;  // the root
+          continue;
+        }
+        if (!std::filesystem::is_directory(there))
+          return "'" + text + "' cannot be made: '" + above.string() + "' is not a folder";
+        break;
+      }
       return std::string();
     },
     "FOLDER");

@@ -335,6 +335,7 @@ TEST_F(Robustness, NanArgumentsAreBadArguments) {
       {"bench step --scene pile --n 10 --cache " + file, "--cache: '" + file + "' exists and is not a folder"},
       {"bench step --settle-ke nan", "--settle-ke: must be a finite number"},
       {"study " + ball + " --out " + file, "--out: '" + file + "' exists and is not a folder"},
+      {"study " + ball + " --out " + file + "/sub", "--out: '" + file + "/sub' cannot be made: '" + file + "' is not a folder"},
       {"render " + dir.path() + "/absent", "Directory does not exist"},
       // Options that meant nothing where given, or given twice, and ranges in plain words.
       {"bench step --scene pile --n 10 --effects gravity", "--effects: is for --scene gas only"},
