@@ -21,6 +21,7 @@
 #include <sstream>
 
 #include <nlohmann/json.hpp>
+#include <yaml-cpp/depthguard.h>
 #include <yaml-cpp/eventhandler.h>
 
 #include "core/files.hpp"
@@ -822,6 +823,9 @@ YAML::Node read_document(const std::string& path) {
   try {
     document = YAML::Load(text);
     count = DocumentCounter::count(text, 2, second);
+  } catch (const YAML::DeepRecursion& e) {  // yaml-cpp's own message for it is "bad file"
+    throw InputError(detail::location_of(path, e.mark), "",
+                     "nested deeper than the YAML reader follows (" + std::to_string(e.depth()) + " levels)");
   } catch (const YAML::Exception& e) {
     throw InputError(detail::location_of(path, e.mark), "", "not valid YAML: " + printable(e.msg));
   }

@@ -134,6 +134,20 @@ TEST_F(Robustness, PairSetBeyondMemoryIsAMessage) {
   }
 }
 
+// A scene nested past what the YAML reader follows: said so, at the file
+// (the reader's own message for it is "bad file").
+TEST_F(Robustness, NestingPastTheReadersDepthIsSaid) {
+  const test::ScratchDir dir("robust_deep");
+  const std::string scene = dir.write(
+      "deep.yaml", "time: {duration: 1, dt: 0.001}\nmaterials: {a: }\nparticles:\n"
+                   "  - list: {positions: [[0, 0, 1]], radius: 0.1}\nreference: " +
+                       std::string(600, '[') + std::string(600, ']') + "\n");
+  const Outcome o = marbles("check " + scene, dir);
+  EXPECT_EQ(o.exit_code, 2) << o.err;
+  EXPECT_NE(o.err.find(scene + ":5:"), std::string::npos) << o.err;
+  EXPECT_NE(o.err.find("nested deeper than the YAML reader follows"), std::string::npos) << o.err;
+}
+
 // Counts a machine cannot hold are refused up front, with the number.
 TEST_F(Robustness, AbsurdCountsAreRefusedUpFront) {
   const test::ScratchDir dir("robust_count");
