@@ -32,6 +32,7 @@
 #include "sim/particles.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
+#include "sim/scene_yaml.hpp"
 #include "sim/signals.hpp"
 #include "sim/study.hpp"
 
@@ -42,11 +43,13 @@ const std::map<std::string, marbles::BackendChoice> kBackends{
     {"cpu", marbles::BackendChoice::cpu},
     {"cuda", marbles::BackendChoice::cuda}};
 
-// Numbers given on the command line must be finite (CLI11 reads "nan").
+// Numbers given on the command line: written as a scene writes them (no
+// hexadecimal, which CLI11's conversion would take: 0x10 as 16) and finite
+// (CLI11 reads "nan").
 const CLI::Validator kFinite(
     [](std::string& text) {
-      char* end = nullptr;
-      const double v = std::strtod(text.c_str(), &end);
+      double v = 0;
+      if (!marbles::scene::detail::parse_double(text, v)) return "expected a number, got " + text;
       return std::isfinite(v) ? std::string() : "must be a finite number, got " + text;
     },
     "FINITE");

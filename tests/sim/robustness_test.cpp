@@ -344,6 +344,7 @@ TEST_F(Robustness, NanArgumentsAreBadArguments) {
       {"bench effects --n 100 --volume-fraction nan", "--volume-fraction: must be a finite number"},
       {"bench broadphase --n 100 --margin 1e300", "--margin: out of range for float precision"},
       {"pairs " + csv + " --margin=1e39", "--margin: out of range for float precision"},
+      {"pairs " + csv + " --margin=0x10", "--margin: expected a number, got 0x10"},  // not CLI11's 16
       {"pairs " + nul, "nul.csv:1:7: r: expected a number, got '0.1\\x00junk'"},
       {"pairs " + tiny, "tiny.csv:1:7: r: too small for float precision: the overlap test squares it (smallest 1.0842022e-19), got 1e-25"},
       {"bench step --scene pile --n 10 --cache " + file, "--cache: '" + file + "' exists and is not a folder"},
