@@ -242,8 +242,8 @@ class CpuStep final : public StepBackend {
   // and count as such.
   void check_unswept(real h, std::size_t past) {
     const BodiesView b = m_world.view();
-    if (past > watch::unswept_checked(b.count)) {
-      m_counters.unswept_unchecked = watch::unswept_checked(b.count);
+    if (const std::uint32_t checked = watch::unswept_checked(b.count); past > checked) {
+      m_counters.unswept_unchecked = checked;
       return;
     }
     m_past.clear();

@@ -137,25 +137,24 @@ MARBLES_HD_INLINE real wall_swept_deepening(const narrowphase::WallShape& w, con
   if (narrowphase::wall_gap(w, s, r, normal, gap) && gap < 0) start = -gap;
   real deepest = 0;
   if (narrowphase::wall_gap(w, p, r, normal, gap) && -gap > deepest) deepest = -gap;
-  const bool cylinder = w.kind == Kind::cylinder_inside || w.kind == Kind::cylinder_outside;
+  // Points of the path within [lo, hi] are measured on the endless wall
+  // (the length is a cylinder's only; other kinds ignore it).
+  narrowphase::WallShape endless = w;
+  endless.length = 0;
   real lo = 0, hi = 1;
   // The span found from the path can round to empty where p, found beside
   // the cylinder by wall_gap, lies on an end's plane: p's depth stands.
   bool beside = true;
-  if (cylinder && w.length > 0) {
+  if ((w.kind == Kind::cylinder_inside || w.kind == Kind::cylinder_outside) && w.length > 0) {
     beside = beside_span(w, s, m, lo, hi);
-    narrowphase::WallShape endless = w;
-    endless.length = 0;
     if (beside && narrowphase::wall_gap(endless, s + m * lo, r, normal, gap) && -gap > deepest) deepest = -gap;
     if (beside && narrowphase::wall_gap(endless, s + m * hi, r, normal, gap) && -gap > deepest) deepest = -gap;
   }
   if (beside && (w.kind == Kind::sphere || w.kind == Kind::cylinder_outside)) {
     Vec3 d0 = s - w.point, dm = m;
-    narrowphase::WallShape endless = w;
     if (w.kind == Kind::cylinder_outside) {  // across the axis
       d0 = d0 - w.direction * dot(d0, w.direction);
       dm = dm - w.direction * dot(dm, w.direction);
-      endless.length = 0;
     }
     real t = nearest_on_path(d0, dm);
     t = t < lo ? lo : (t > hi ? hi : t);
