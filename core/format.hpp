@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <string_view>
 
 namespace marbles {
 
@@ -38,6 +39,23 @@ inline std::string significant(double v, int digits) {
   char text[40];
   std::snprintf(text, sizeof text, "%.*g", digits, v);
   return text;
+}
+
+// Text quoted from input in a message, its control bytes (a NUL would end
+// the message where it is printed) as \xNN; with `ascii`, every byte past
+// ASCII too (a binary file's), else those kept (UTF-8 text).
+inline std::string printable(std::string_view text, bool ascii = true) {
+  std::string out;
+  for (const unsigned char c : text) {
+    if (c >= 0x20 && c != 0x7f && (c < 0x80 || !ascii)) {
+      out += char(c);
+    } else {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "\\x%02x", c);
+      out += hex;
+    }
+  }
+  return out;
 }
 
 // A size in bytes for messages: three significant digits in GB, MB, kB or

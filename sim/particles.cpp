@@ -343,20 +343,9 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
     if (const std::size_t hash = content.find('#'); hash != std::string_view::npos) content = content.substr(0, hash);
     if (trim(content).empty()) continue;
     const std::vector<CsvField> fields = split_row(content);
-    // A row's bytes quoted in a message: control bytes (a NUL would end the
-    // message where it is printed) as \xNN.
+    // A row's bytes quoted in a message: its control bytes as \xNN.
     auto fail = [&](int column, const std::string& key, const std::string& message) -> void {
-      std::string shown;
-      for (const char ch : message) {
-        if (static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f) {
-          char escaped[8];
-          std::snprintf(escaped, sizeof escaped, "\\x%02x", static_cast<unsigned>(static_cast<unsigned char>(ch)));
-          shown += escaped;
-        } else {
-          shown += ch;
-        }
-      }
-      throw InputError(SourceLocation{path, line_number, column}, key, shown);
+      throw InputError(SourceLocation{path, line_number, column}, key, printable(message, false));
     };
 
     if (layout_line == 0) {

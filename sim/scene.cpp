@@ -25,6 +25,7 @@
 #include <yaml-cpp/eventhandler.h>
 
 #include "core/files.hpp"
+#include "core/format.hpp"
 #include "sim/limits.hpp"
 #include "sim/scene_overrides.hpp"
 #include "sim/scene_yaml.hpp"
@@ -614,21 +615,6 @@ OutputSpec read_output(const Field& field, const std::string& stem) {
   return output;
 }
 
-// yaml-cpp quotes the offending character, which may be any byte of a binary file.
-std::string printable(const std::string& text) {
-  std::string out;
-  for (unsigned char c : text) {
-    if (c >= 0x20 && c < 0x7f) {
-      out += char(c);
-    } else {
-      char hex[8];
-      std::snprintf(hex, sizeof hex, "\\x%02x", c);
-      out += hex;
-    }
-  }
-  return out;
-}
-
 std::string read_file(const std::string& path) {
   if (const char* what = not_a_plain_file(path))
     throw InputError(SourceLocation{path, 0, 0}, "", std::string("is ") + what + ", not a scene file");
@@ -826,7 +812,7 @@ YAML::Node read_document(const std::string& path) {
   } catch (const YAML::DeepRecursion& e) {  // yaml-cpp's own message for it is "bad file"
     throw InputError(detail::location_of(path, e.mark), "",
                      "nested deeper than the YAML reader follows (" + std::to_string(e.depth()) + " levels)");
-  } catch (const YAML::Exception& e) {
+  } catch (const YAML::Exception& e) {  // its message quotes the offending byte, which may be any
     throw InputError(detail::location_of(path, e.mark), "", "not valid YAML: " + printable(e.msg));
   }
   if (document.IsNull() && blank_yaml(text)) throw InputError(SourceLocation{path, 0, 0}, "", "the scene file is empty");
@@ -840,8 +826,6 @@ YAML::Node read_document(const std::string& path) {
   return document;
 }
 
-// `path`: where the scene came from (errors name it); `stem`: the default name
-// and output folder; the `--set` overrides are applied to the tree first.
 namespace {
 
 // The overrides applied to a scene's tree, as `--set` applies them: each
@@ -859,6 +843,8 @@ void apply_overrides_whole(YAML::Node document, const std::vector<std::string>& 
 
 }  // namespace
 
+// `path`: where the scene came from (errors name it); `stem`: the default name
+// and output folder; the `--set` overrides are applied to the tree first.
 Scene read_scene(YAML::Node document, const std::string& path, const std::string& stem,
                  const std::vector<std::string>& overrides) {
   detail::Origins origins;
