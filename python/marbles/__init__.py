@@ -200,31 +200,40 @@ class Simulation:
     """
 
     def __init__(self, scene, backend="auto", set=None, threads=0):
-        source, precision = Simulation._file_source(scene, set)
-        self._build(source, precision, backend, threads)
+        source = Simulation._file_source(scene, set)
+        self._build(source, Simulation._precision(source), backend, threads)
 
     @staticmethod
     def _file_source(scene, set):
-        """A scene file's record (its path and overrides) and precision."""
-        path = os.fspath(scene)
-        overrides = _overrides(set)
-        precision = _marbles.scene_precision(path, overrides)  # the overrides applied, as the loader applies them
-        return {"scene": path, "set": overrides}, precision
+        """A scene file's record: its path and overrides."""
+        return {"scene": os.fspath(scene), "set": _overrides(set)}
 
+    @staticmethod
+    def _precision(source):
+        """A record's solver.precision, its overrides applied as the loader applies them."""
+        if "dict" in source:
+            return _marbles.scene_precision_json(source["dict"], source["set"])
+        return _marbles.scene_precision(source["scene"], source["set"])
 
     @classmethod
     def from_dict(cls, scene, backend="auto", set=None, threads=0, name=None):
         """A scene given as a dict with the keys of a scene file. Errors name
         the key path (``SceneError.key``; ``line`` is 0). ``name`` (or the
         scene's ``name``) names the default output folder, ``out/<name>``."""
-        source, precision = cls._dict_source(scene, set, name)
+        source = cls._dict_source(scene, set, name)
         self = cls.__new__(cls)
-        self._build(source, precision, backend, threads)
+        self._build(source, cls._precision(source), backend, threads)
         return self
 
     @staticmethod
+    def _stem(name, scene):
+        """The default output folder's name: ``name``, else the scene dict's, else "scene"."""
+        named = scene.get("name") if isinstance(scene, dict) else None
+        return name or (named if isinstance(named, str) else None) or "scene"
+
+    @staticmethod
     def _dict_source(scene, set, name):
-        """A scene dict's record (its JSON text, name and overrides) and precision."""
+        """A scene dict's record: its JSON text, name and overrides."""
         if not isinstance(scene, dict):
             raise SceneError(f"<dict>: a scene is a dict of keys (time, materials, particles, ...), got "
                              f"{type(scene).__name__}", file="<dict>",
@@ -234,10 +243,7 @@ class Simulation:
         except RecursionError:  # a dict that holds itself, or nests past Python's depth
             raise SceneError("<dict>: the scene holds itself, or nests deeper than any scene does", file="<dict>",
                              message="the scene holds itself, or nests deeper than any scene does") from None
-        overrides = _overrides(set)
-        precision = _marbles.scene_precision_json(text, overrides)
-        stem = name or (scene.get("name") if isinstance(scene.get("name"), str) else None) or "scene"
-        return {"dict": text, "name": stem, "set": overrides}, precision
+        return {"dict": text, "name": Simulation._stem(name, scene), "set": _overrides(set)}
 
     @classmethod
     def restart(cls, path, scene=None, backend="auto", set=None, threads=0):
@@ -272,24 +278,20 @@ class Simulation:
             if source.get("dict") is not None:
                 # The recorded text as it was (its fingerprint is the checkpoint's).
                 text = source["dict"]
-                recorded = json.loads(text)
-                named = recorded.get("name") if isinstance(recorded, dict) else None
-                stem = source.get("name") or (named if isinstance(named, str) else None) or "scene"
-                source, precision = ({"dict": text, "name": stem, "set": overrides},
-                                     _marbles.scene_precision_json(text, overrides))
+                source = {"dict": text, "name": cls._stem(source.get("name"), json.loads(text)), "set": overrides}
             else:
-                source, precision = cls._file_source(source["scene"], overrides)
+                source = cls._file_source(source["scene"], overrides)
         elif isinstance(scene, dict):
-            source, precision = cls._dict_source(scene, set, None)
+            source = cls._dict_source(scene, set, None)
         else:
-            source, precision = cls._file_source(scene, set)
-        if os.path.exists(path):
-            # The checkpoint's precision wins, as with marbles run --restart:
-            # the same scene and overrides in it, no override added (the
-            # checkpoint holds the fingerprint of the scene and its overrides,
-            # which one more would change; marbles run --precision adds none).
-            # The scene is built once, in it.
-            precision = _marbles.checkpoint_precision(path)
+            source = cls._file_source(scene, set)
+        # The checkpoint's precision wins, as with marbles run --restart: the
+        # same scene and overrides in it, no override added (the checkpoint
+        # holds the fingerprint of the scene and its overrides, which one more
+        # would change; marbles run --precision adds none). The scene is built
+        # once, in it; without a checkpoint there, in its own (the restart
+        # then says what is missing).
+        precision = _marbles.checkpoint_precision(path) if os.path.exists(path) else cls._precision(source)
         self = cls.__new__(cls)
         self._build(source, precision, backend, threads)
         self._impl.restart(path)
