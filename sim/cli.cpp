@@ -118,13 +118,12 @@ const CLI::Validator kFolderOrNew(
       for (std::filesystem::path above = std::filesystem::path(text).parent_path(); !above.empty();
            above = above.parent_path()) {
         const auto there = std::filesystem::status(above, ec);
-        if (!std::filesystem::exists(there)) {
-          if (above == above.parent_path()) break;  // the root
-          continue;
+        if (std::filesystem::exists(there)) {
+          if (!std::filesystem::is_directory(there))
+            return "'" + text + "' cannot be made: '" + above.string() + "' is not a folder";
+          break;
         }
-        if (!std::filesystem::is_directory(there))
-          return "'" + text + "' cannot be made: '" + above.string() + "' is not a folder";
-        break;
+        if (above == above.parent_path()) break;  // a root that cannot be read
       }
       return std::string();
     },
