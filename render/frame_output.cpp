@@ -129,9 +129,9 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   const fs::path dir(out_dir);
   const fs::path pvd = dir / "series.pvd";
   if (!fs::exists(pvd))
-    throw RuntimeFailure(pvd.string() +
-                         " not found: `marbles render` draws the VTK frames of a finished run; run the scene with "
-                         "VTK output (output.vtk.every) first");
+    throw InputError(SourceLocation{pvd.string(), 0, 0}, "",
+                     "not found: `marbles render` draws the VTK frames of a finished run; run the scene with "
+                     "VTK output (output.vtk.every) first");
   if (!renderer_available())
     throw RuntimeFailure("marbles was built without OSMesa (libosmesa6-dev): cannot render images");
 

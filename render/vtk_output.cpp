@@ -89,7 +89,10 @@ void require_plain_file(const fs::path& path) {
 std::vector<SeriesEntry> read_pvd(const fs::path& pvd_path) {
   require_plain_file(pvd_path);
   std::ifstream in(pvd_path, std::ios::binary);
-  if (!in) throw RuntimeFailure("cannot read " + pvd_path.string());
+  if (!in) {
+    if (!fs::exists(pvd_path)) throw InputError(SourceLocation{pvd_path.string(), 0, 0}, "", "no such file");
+    throw RuntimeFailure("cannot read " + pvd_path.string());
+  }
   std::stringstream buffer;
   buffer << in.rdbuf();
   const std::string text = buffer.str();
@@ -116,7 +119,7 @@ std::vector<SeriesEntry> read_pvd(const fs::path& pvd_path) {
     const fs::path p(file);
     entries.push_back({time.value_or(double(entries.size())), p.is_absolute() ? p : pvd_path.parent_path() / p});
   }
-  if (entries.empty()) throw RuntimeFailure(pvd_path.string() + " lists no frames");
+  if (entries.empty()) throw InputError(SourceLocation{pvd_path.string(), 0, 0}, "", "lists no frames");
   return entries;
 }
 
@@ -551,8 +554,8 @@ Walls read_walls_vtp(const fs::path& path) {
     const auto it = file.arrays.find(std::string("FieldData/") + name);
     if (it == file.arrays.end()) return out;
     if (it->second.components != components || it->second.values.size() % std::size_t(components) != 0)
-      throw RuntimeFailure("cannot read " + path.string() + ": '" + name + "' is not rows of " +
-                           std::to_string(components));
+      throw InputError(SourceLocation{path.string(), 0, 0}, "",
+                       "'" + std::string(name) + "' is not rows of " + std::to_string(components));
     for (std::size_t k = 0; k < it->second.values.size(); k += std::size_t(components))
       out.emplace_back(it->second.values.begin() + long(k), it->second.values.begin() + long(k) + components);
     return out;
@@ -649,7 +652,7 @@ class AppendedReader {
 
  private:
   [[noreturn]] void fail() const {
-    throw RuntimeFailure("cannot read " + m_path.string() + ": its appended data is truncated or damaged");
+    throw InputError(SourceLocation{m_path.string(), 0, 0}, "", "its appended data is truncated or damaged");
   }
   fs::path m_path;
   std::string_view m_bytes;
@@ -674,7 +677,8 @@ std::vector<double> decode_numbers(const fs::path& path, const ArrayTag& tag, co
   if (tag.type == "Int32") return as_doubles<std::int32_t>(bytes);
   if (tag.type == "UInt64") return as_doubles<std::uint64_t>(bytes);
   if (tag.type == "Int64") return as_doubles<std::int64_t>(bytes);
-  throw RuntimeFailure("cannot read " + path.string() + ": array '" + tag.name + "' has the unsupported type " + tag.type);
+  throw InputError(SourceLocation{path.string(), 0, 0}, "",
+                   "array '" + tag.name + "' has the unsupported type " + tag.type);
 }
 
 }  // namespace
@@ -682,11 +686,14 @@ std::vector<double> decode_numbers(const fs::path& path, const ArrayTag& tag, co
 VtpArrays read_vtp_arrays(const fs::path& vtp_path) {
   require_plain_file(vtp_path);
   std::ifstream in(vtp_path, std::ios::binary);
-  if (!in) throw RuntimeFailure("cannot read " + vtp_path.string() + ": no such file");
+  if (!in) {
+    if (!fs::exists(vtp_path)) throw InputError(SourceLocation{vtp_path.string(), 0, 0}, "", "no such file");
+    throw RuntimeFailure("cannot read " + vtp_path.string());
+  }
   std::stringstream buffer;
   buffer << in.rdbuf();
   const std::string text = buffer.str();
-  const auto bad = [&](const std::string& why) { return RuntimeFailure("cannot read " + vtp_path.string() + ": " + why); };
+  const auto bad = [&](const std::string& why) { return InputError(SourceLocation{vtp_path.string(), 0, 0}, "", why); };
 
   const std::size_t appended = text.find("<AppendedData");
   const std::string head = text.substr(0, appended);
@@ -765,8 +772,8 @@ Snapshot read_vtp(const fs::path& vtp_path) {
     }
   };
   if (!find("Points/Points", 3) && points > 0)
-    throw RuntimeFailure("cannot read " + vtp_path.string() + ": its points are not " + std::to_string(points) +
-                         " triples");
+    throw InputError(SourceLocation{vtp_path.string(), 0, 0}, "",
+                     "its points are not " + std::to_string(points) + " triples");
   vectors("Points/Points", s.position);
   scalars("PointData/radius", s.radius);
   vectors("PointData/velocity", s.velocity);

@@ -163,6 +163,26 @@ void add_precision_option(CLI::App* cmd, std::string& precision) {
       ->check(CLI::IsMember({"float", "double"}));
 }
 
+// A list option given only delimiters ("--effects ,"): CLI11 reads no item
+// from it and then takes the next argument as the list, so "--effects ,
+// --n 5" named an effect "--n". Refused here, before the parse, by the
+// option's name.
+void refuse_empty_lists(int argc, char** argv) {
+  static const std::vector<std::string> kLists{"--effects"};
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    for (const std::string& name : kLists) {
+      std::string value;
+      if (a == name && i + 1 < argc) value = argv[i + 1];
+      else if (a.rfind(name + "=", 0) == 0) value = a.substr(name.size() + 1);
+      else continue;
+      if (value.find_first_not_of(',') == std::string::npos)
+        throw marbles::InputError(marbles::SourceLocation{}, name,
+                                  "names nothing in '" + value + "' (a list like gravity,walls)");
+    }
+  }
+}
+
 }  // namespace
 
 namespace marbles {
@@ -380,6 +400,12 @@ int cli_main(int argc, char** argv) {
   bool rd_no_movie = false;
   render_cmd->add_flag("--no-movie", rd_no_movie, "PNG frames only");
 
+  try {
+    refuse_empty_lists(argc, argv);
+  } catch (const InputError& e) {
+    std::cerr << e.what() << "\n";
+    return 2;
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -335,7 +335,7 @@ TEST(Pvd, ParsesEntriesRelativeToItsFolder) {
   EXPECT_EQ(entries[0].time, 0);
   EXPECT_EQ(entries[1].time, 0.25);
   EXPECT_EQ(entries[1].path, dir / "frames" / "frame_000001.vtp");
-  EXPECT_THROW(read_pvd(dir / "missing.pvd"), RuntimeFailure);
+  EXPECT_THROW(read_pvd(dir / "missing.pvd"), InputError);
 }
 
 // A device or a pipe where a run's file should be (a .pvd edited or linked

@@ -430,7 +430,7 @@ TEST(RenderOutputDir, RerendersEveryFrameOfASeries) {
   EXPECT_FALSE(fs::exists(dir / "images" / "frame_000002.png")) << again.str();
   EXPECT_TRUE(fs::exists(dir / "images" / "notes.png"));
 
-  EXPECT_THROW(render_output_dir((dir / "nothing-here").string(), o, m, false, log), RuntimeFailure);
+  EXPECT_THROW(render_output_dir((dir / "nothing-here").string(), o, m, false, log), InputError);
 }
 // Colouring by an array the frames do not carry draws one colour: said once,
 // with the frame and the array, not left to be guessed from the image.

@@ -207,7 +207,7 @@ TEST(VtkOutput, ManyBlocksRoundTrip) {
   for (const std::size_t keep : {bytes.size() / 2, bytes.size() - 100}) {
     const fs::path cut = dir / ("cut_" + std::to_string(keep) + ".vtp");
     std::ofstream(cut, std::ios::binary) << bytes.substr(0, keep);
-    EXPECT_THROW(read_vtp(cut), RuntimeFailure) << keep;
+    EXPECT_THROW(read_vtp(cut), InputError) << keep;
   }
 }
 
@@ -287,7 +287,7 @@ TEST(VtkOutput, OnlyTheAskedFieldsAndClearErrors) {
   Snapshot bad = make_snapshot(3, 0, 0);
   bad.radius.pop_back();
   EXPECT_THROW(writer.write(bad), RuntimeFailure);
-  EXPECT_THROW(read_vtp(dir / "nope.vtp"), RuntimeFailure);
+  EXPECT_THROW(read_vtp(dir / "nope.vtp"), InputError);
 
   // An empty snapshot is a valid (empty) frame.
   const Snapshot empty = read_vtp(writer.write(Snapshot{}));

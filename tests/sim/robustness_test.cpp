@@ -355,6 +355,8 @@ TEST_F(Robustness, NanArgumentsAreBadArguments) {
       // Options that meant nothing where given, or given twice, and ranges in plain words.
       {"bench step --scene pile --n 10 --effects gravity", "--effects: is for --scene gas only"},
       {"bench step --n 10 --effects gravity,walls,gravity", "--effects: 'gravity' is given twice"},
+      {"bench step --effects , --n 10", "--effects: names nothing in ','"},  // not an effect named --n
+      {"bench step --n 10 --effects=", "--effects: names nothing in ''"},
       {"bench step --n 99999999999999999999", "--n: must be <= 1e+09 (--limit spheres=N raises it), got 99999999999999999999"},
       {"bench broadphase --n 100 --sort cub", "--sort: chooses the GPU's sort: give --backend cuda"},
       {"bench broadphase --n 100 --seed -1", "--seed: must be a whole number from 0 to 18446744073709551615"},
@@ -405,6 +407,42 @@ TEST_F(Robustness, IncompleteFilesAreNeverCommitted) {
       EXPECT_EQ(name.find(victim), std::string::npos) << "left behind: " << entry.path();
     }
   }
+}
+
+// `marbles render` reads a run's folder: what is wrong in it (no series, a
+// series of no frames, a frame missing or cut short) is bad input, exit 2
+// naming the file, as a frame without radii is; never exit 1 or a crash.
+TEST_F(Robustness, DamagedRunFoldersAreBadInputToRender) {
+  const test::ScratchDir dir("robust_render");
+  const Outcome empty = marbles("render " + dir.path() + " --no-movie", dir);
+  EXPECT_EQ(empty.exit_code, 2) << empty.err;
+  EXPECT_NE(empty.err.find(dir.path() + "/series.pvd: not found"), std::string::npos) << empty.err;
+
+  const std::string out = dir.path() + "/o";
+  const Outcome run = marbles("run " MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml --quiet --no-render --backend cpu "
+                              "--duration 0.05 --out " + out, dir);
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  if (!fs::exists(out + "/series.pvd")) GTEST_SKIP() << "a build without VTK output";
+  const Outcome whole = marbles("render " + out + " --no-movie --width 16 --height 16", dir);
+  if (whole.err.find("OSMesa") != std::string::npos) GTEST_SKIP() << "a build without OSMesa";
+  ASSERT_EQ(whole.exit_code, 0) << whole.err;
+
+  const std::string frame = out + "/frames/frame_000002.vtp";
+  const std::string bytes = slurp(frame);
+  std::ofstream(frame, std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  const Outcome cut = marbles("render " + out + " --no-movie --width 16 --height 16", dir);
+  EXPECT_EQ(cut.exit_code, 2) << cut.err;
+  EXPECT_NE(cut.err.find(frame + ": "), std::string::npos) << cut.err;
+
+  fs::remove(frame);
+  const Outcome missing = marbles("render " + out + " --no-movie --width 16 --height 16", dir);
+  EXPECT_EQ(missing.exit_code, 2) << missing.err;
+  EXPECT_NE(missing.err.find(frame + ": no such file"), std::string::npos) << missing.err;
+
+  std::ofstream(out + "/series.pvd") << "<VTKFile type=\"Collection\"><Collection></Collection></VTKFile>\n";
+  const Outcome none = marbles("render " + out + " --no-movie", dir);
+  EXPECT_EQ(none.exit_code, 2) << none.err;
+  EXPECT_NE(none.err.find(out + "/series.pvd: lists no frames"), std::string::npos) << none.err;
 }
 
 // Mutation test of `marbles pairs` input: 300 mutants of scenes/spheres.csv
