@@ -93,7 +93,9 @@ class PySimulation {
     m_backend = select_backend(choice, log);
     m_backend_note = log.str();
     if (!m_backend_note.empty() && m_backend_note.back() == '\n') m_backend_note.pop_back();
-    m_sim = std::make_unique<Simulation>(m_scene, make_world(m_scene, particles), m_backend);
+    World world = make_world(m_scene, particles);
+    if (std::string w = initial_overlap_warning(world); !w.empty()) m_warnings.push_back(std::move(w));
+    m_sim = std::make_unique<Simulation>(m_scene, std::move(world), m_backend);
     m_totals.energy_start = m_sim->world().kinetic_energy();
     m_total_steps = static_cast<std::uint64_t>(std::llround(m_scene.time.duration / m_scene.time.dt));
     if (m_scene.reference.kind != scene::ReferenceSpec::Kind::none) {
@@ -136,6 +138,7 @@ class PySimulation {
   // A view of one of the step's own arrays: `what` is position, velocity,
   // angular_velocity (writable), radius or material (read-only).
   nb::object view(const std::string& what) {
+    check_array_name(what);
     nb::object owner = nb::find(this);
     const BodiesView v = m_sim->state_in_place();
     m_views_out = true;
@@ -161,6 +164,7 @@ class PySimulation {
 
   // A host copy of one array (any backend).
   nb::object copy(const std::string& what) {
+    check_array_name(what);
     if (m_views_out) m_sim->state_written();  // device views may have been written
     const World& w = m_sim->world();
     const std::size_t n = w.size();
@@ -174,6 +178,8 @@ class PySimulation {
   // values are checked first).
   void assign(const std::string& what, HostArray<const real, kAny, 3> values) {
     const Busy busy(*this);
+    check_array_name(what);
+    if (what == "radius" || what == "material") throw nb::value_error((plural(what) + " are read-only").c_str());
     const std::size_t n = size();
     if (values.shape(0) != n)
       throw nb::value_error((plural(what) + ": expected " + std::to_string(n) + " rows, got " + std::to_string(values.shape(0))).c_str());
@@ -216,8 +222,10 @@ class PySimulation {
     return d;
   }
 
+  // A state written non-finite through a view is refused here too (as by
+  // step, write_frame and checkpoint), not summed into a NaN.
   double kinetic_energy() {
-    if (m_views_out) m_sim->state_written();
+    if (m_views_out) check_views();
     return m_sim->world().kinetic_energy();
   }
 
@@ -229,20 +237,24 @@ class PySimulation {
     if (dir.empty() || dir.find('\0') != std::string::npos)
       throw nb::value_error("write_frame: a folder is needed (not empty, no NUL byte)");
     if (m_views_out) check_views();
-    // By the folder, however it is written ("out", "out/", "./out").
-    const std::string key = std::filesystem::absolute(dir).lexically_normal().string();
+    // By the folder, however it is written ("out", "out/", "./out"), and
+    // written there by that name: a later chdir moves neither.
+    std::filesystem::path folder = std::filesystem::absolute(dir).lexically_normal();
+    if (!folder.has_filename() && folder.has_parent_path() && folder != folder.root_path())
+      folder = folder.parent_path();  // "out/" normalises to "/.../out/": the folder is "/.../out"
+    const std::string key = folder.string();
     auto it = m_frames.find(key);
     if (it == m_frames.end()) {
       // A folder new to this simulation that holds another run's output is
       // refused, as `marbles run` refuses it: new frames would replace some
       // of its frames and its series.pvd would no longer name the rest.
-      const std::vector<std::filesystem::path> earlier = earlier_run_files(dir);
+      const std::vector<std::filesystem::path> earlier = earlier_run_files(key);
       if (!earlier.empty() && !overwrite)
         throw nb::value_error((earlier_run_text(dir, earlier) +
                                "; write_frame(dir, overwrite=True) replaces it, or choose another folder")
                                   .c_str());
       remove_earlier_run(earlier);
-      auto writer = std::make_unique<render::VtkSeriesWriter>(dir, render::parse_point_fields(m_scene.output.fields),
+      auto writer = std::make_unique<render::VtkSeriesWriter>(folder, render::parse_point_fields(m_scene.output.fields),
                                                               frame_metadata(m_scene));
       it = m_frames.emplace(key, std::move(writer)).first;
     }
@@ -259,9 +271,13 @@ class PySimulation {
     if (path.empty() || path.find('\0') != std::string::npos)
       throw nb::value_error("checkpoint: a path is needed (not empty, no NUL byte)");
     if (m_views_out) check_views();
-    write_checkpoint(path, {m_fingerprint, m_sim->steps(), m_sim->world(), m_sim->save_state(), m_totals,
-                            m_probe ? m_probe->progress() : std::vector<double>{}, m_sim->ids()});
-    if (!record.empty()) render::write_file_atomic(path + ".scene.json", record);
+    const std::string bytes =
+        checkpoint_bytes({m_fingerprint, m_sim->steps(), m_sim->world(), m_sim->save_state(), m_totals,
+                          m_probe ? m_probe->progress() : std::vector<double>{}, m_sim->ids()});
+    make_parent_folder(path);
+    // Both or neither: a checkpoint without its record, or beside another's, is not restarted from.
+    if (record.empty()) render::write_file_atomic(path, bytes);
+    else render::write_files_atomic({{path, bytes}, {path + ".scene.json", record}});
   }
 
   void restart(const std::string& path) {
@@ -335,6 +351,12 @@ class PySimulation {
 
   // The arrays handed out may have been written: the step takes them as an
   // edit, after checking that every value is finite.
+  static void check_array_name(const std::string& what) {
+    for (const char* name : {"position", "velocity", "angular_velocity", "radius", "material"})
+      if (what == name) return;
+    throw nb::value_error(("no state array '" + what + "' (position, velocity, angular_velocity, radius, material)").c_str());
+  }
+
   void check_views() {
     m_sim->state_written();
     if (m_sim->state_finite()) return;  // on the GPU a flag, not a copy
@@ -346,7 +368,7 @@ class PySimulation {
         const Vec3& p = (*vec)[i];
         if (!is_finite(p))
           throw nb::value_error((std::string(name) + "[" + std::to_string(i) +
-                                 "] is not finite; write a finite value before stepping")
+                                 "] is not finite; write a finite value before stepping or reading the state")
                                     .c_str());
         if (square_overflows(p))
           throw nb::value_error((std::string(name) + "[" + std::to_string(i) + "] is too large for " + kRealName +

@@ -115,18 +115,54 @@ std::size_t remove_stale_temporaries(const fs::path& dir) {
   return removed;
 }
 
-void write_file_atomic(const fs::path& path, std::string_view contents) {
+namespace {
+
+// `contents` under a fresh temporary name beside `path`; that name.
+fs::path write_temporary(const fs::path& path, std::string_view contents) {
   const fs::path tmp = temp_path_beside(path);
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
   if (!f) throw RuntimeFailure("cannot create " + tmp.string() + ": " + std::strerror(errno));
   const bool written = std::fwrite(contents.data(), 1, contents.size(), f) == contents.size();
   const bool closed = std::fclose(f) == 0;
   if (!written || !closed) {
+    const int error = errno;
     std::error_code ec;
     fs::remove(tmp, ec);
-    throw RuntimeFailure("cannot write " + tmp.string() + ": " + std::strerror(errno));
+    throw RuntimeFailure("cannot write " + tmp.string() + ": " + std::strerror(error));
   }
-  commit_file(tmp, path, has_size(contents.size()));
+  return tmp;
+}
+
+}  // namespace
+
+void write_file_atomic(const fs::path& path, std::string_view contents) {
+  commit_file(write_temporary(path, contents), path, has_size(contents.size()));
+}
+
+void write_files_atomic(const std::vector<std::pair<fs::path, std::string_view>>& files) {
+  std::vector<fs::path> temps;
+  const auto drop = [&temps](std::size_t from) {
+    std::error_code ec;
+    for (std::size_t k = from; k < temps.size(); ++k) fs::remove(temps[k], ec);
+  };
+  try {
+    for (const auto& [path, contents] : files) {
+      if (const char* what = not_a_plain_file(path.string(), /*follow_links=*/false))
+        throw RuntimeFailure("cannot write " + path.string() + ": it is " + what + ", not a file; nothing was written");
+      temps.push_back(write_temporary(path, contents));
+    }
+  } catch (...) {
+    drop(0);
+    throw;
+  }
+  for (std::size_t k = 0; k < files.size(); ++k) {
+    try {
+      commit_file(temps[k], files[k].first, has_size(files[k].second.size()));
+    } catch (...) {
+      drop(k + 1);
+      throw;
+    }
+  }
 }
 
 }  // namespace marbles::render

@@ -10,6 +10,8 @@
 #include <filesystem>
 #include <functional>
 #include <string_view>
+#include <utility>
+#include <vector>
 
 namespace marbles::render {
 
@@ -38,5 +40,12 @@ std::size_t remove_stale_temporaries(const std::filesystem::path& dir);
 /// Writes `contents` to `path` atomically (temporary file + rename).
 /// Throws marbles::RuntimeFailure on any I/O error.
 void write_file_atomic(const std::filesystem::path& path, std::string_view contents);
+
+/// Files that belong together (a frame and the series that lists it, a
+/// checkpoint and its record): every one is written to its temporary first,
+/// and only then are they renamed, in the order given. A failure while
+/// writing (a name too long, a folder in the way, a full disk) leaves none
+/// of them written and every earlier file as it was.
+void write_files_atomic(const std::vector<std::pair<std::filesystem::path, std::string_view>>& files);
 
 }  // namespace marbles::render

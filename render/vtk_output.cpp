@@ -312,9 +312,17 @@ fs::path Series::add(double time, const std::string& file_text) {
     fs::create_directories(m_dir / m_folder, ec);
     if (ec) throw RuntimeFailure("cannot create " + (m_dir / m_folder).string() + ": " + ec.message());
   }
-  write_file_atomic(path, file_text);
-  m_entries.emplace_back(time, m_folder + "/" + numbered(m_prefix.c_str(), m_count++));
-  write_file_atomic(pvd_path(), pvd_text(m_entries));
+  // The file and the series that lists it are written together: where
+  // either cannot be, neither is, and the series stays as it was.
+  m_entries.emplace_back(time, m_folder + "/" + numbered(m_prefix.c_str(), m_count));
+  try {
+    const std::string pvd = pvd_text(m_entries);
+    write_files_atomic({{path, file_text}, {pvd_path(), pvd}});
+  } catch (...) {
+    m_entries.pop_back();
+    throw;
+  }
+  ++m_count;
   return path;
 }
 

@@ -151,7 +151,7 @@ std::string checkpoint_path(const std::string& out_dir, std::uint64_t steps) {
   return (fs::path(out_dir) / "checkpoints" / name).string();
 }
 
-void write_checkpoint(const std::string& path, const Checkpoint& c) {
+std::string checkpoint_bytes(const Checkpoint& c) {
   Writer w;
   w.raw(kMagic, sizeof kMagic);
   const std::uint32_t format = c.totals.unswept > 0 ? 4 : c.ids.empty() ? 2 : 3;
@@ -161,8 +161,21 @@ void write_checkpoint(const std::string& path, const Checkpoint& c) {
   w.put<std::uint32_t>(sizeof(narrowphase::WallShape));
   w.put(c.scene_hash);
   body(w, c, format);
-  fs::create_directories(fs::path(path).parent_path());
-  render::write_file_atomic(path, w.finish());
+  return w.finish();
+}
+
+void write_checkpoint(const std::string& path, const Checkpoint& c) {
+  make_parent_folder(path);
+  render::write_file_atomic(path, checkpoint_bytes(c));
+}
+
+void make_parent_folder(const std::string& path) {
+  // A bare file name ("state.mck") has no parent to make.
+  const fs::path parent = fs::path(path).parent_path();
+  if (parent.empty()) return;
+  std::error_code ec;
+  fs::create_directories(parent, ec);
+  if (ec) throw RuntimeFailure("cannot create " + parent.string() + ": " + ec.message());
 }
 
 Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {

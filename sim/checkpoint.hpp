@@ -56,8 +56,13 @@ std::uint64_t scene_fingerprint(const std::string& scene_path, const std::vector
 // The same of a scene's text (a scene given as JSON).
 std::uint64_t text_fingerprint(const std::string& text, const std::vector<std::string>& overrides);
 
-// Writes atomically; throws RuntimeFailure on I/O errors.
+// Writes atomically, making the folder it goes in; throws RuntimeFailure on
+// I/O errors. checkpoint_bytes is the file's text (written beside another
+// file with render::write_files_atomic); make_parent_folder makes a path's
+// folder where it has one.
 void write_checkpoint(const std::string& path, const Checkpoint& checkpoint);
+std::string checkpoint_bytes(const Checkpoint& checkpoint);
+void make_parent_folder(const std::string& path);
 
 // Reads and checks (format, precision, scene, completeness); throws
 // InputError naming the file and what does not match.

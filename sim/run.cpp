@@ -92,11 +92,20 @@ std::size_t count_initial_overlaps(const World& world, double tolerance) {
 // smaller radius: the solver pushes them apart over the first steps, faster
 // than a pile settles, which a user who meant them to touch should know.
 void warn_initial_overlaps(const World& world, std::ostream& err) {
-  if (std::size_t deep = count_initial_overlaps(world, 0.01))
-    err << "warning: " << deep
-        << " pair(s) of spheres start overlapping by more than 1% of the smaller radius; the solver pushes them "
-           "apart over the first steps\n";
+  if (const std::string w = initial_overlap_warning(world); !w.empty()) err << "warning: " << w << "\n";
 }
+
+}  // namespace
+
+std::string initial_overlap_warning(const World& world) {
+  const std::size_t deep = count_initial_overlaps(world, 0.01);
+  if (deep == 0) return {};
+  return std::to_string(deep) +
+         " pair(s) of spheres start overlapping by more than 1% of the smaller radius; the solver pushes them "
+         "apart over the first steps";
+}
+
+namespace {
 
 // The risky-settings warnings (sim/settings_check.hpp), one line each.
 void warn_risky_settings(const scene::Scene& sc, const scene::GeneratedParticles& particles, std::ostream& err) {

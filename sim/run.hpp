@@ -12,6 +12,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "broadphase/broadphase.hpp"
+#include "sim/world.hpp"
 
 namespace marbles {
 
@@ -25,6 +26,10 @@ enum class BackendChoice { automatic, cpu, cuda };
 // Resolves auto/cpu/cuda to a backend; says on `log` what auto chose and why.
 // `cuda` without a device (or without the CUDA build) throws RuntimeFailure.
 broadphase::Backend select_backend(BackendChoice choice, std::ostream& log);
+
+// The warning `run` and `check` give where spheres start overlapping by more
+// than 1 % of the smaller radius (without "warning: "); empty where none do.
+std::string initial_overlap_warning(const World& world);
 
 struct RunOptions {
   std::string scene_path;

@@ -217,6 +217,38 @@ void mark_pareto(std::vector<StudyRow>& rows) {
   }
 }
 
+namespace {
+
+// Every combination's scene loaded before anything is made or run: a key or
+// value the scene refuses is said as the scene says it (file, line, key,
+// and the combination), with no run folder or log left behind.
+void check_combinations(const StudyOptions& options, const std::vector<std::vector<std::string>>& combos) {
+  const auto one_of = [](const std::string& key, const std::string& value, std::initializer_list<const char*> names) {
+    for (const char* name : names)
+      if (value == name) return;
+    std::string list;
+    for (const char* name : names) list += (list.empty() ? "" : ", ") + std::string(name);
+    throw InputError(SourceLocation{}, key, "expected one of " + list + ", got '" + value + "'");
+  };
+  one_of("backend", options.backend, {"auto", "cpu", "cuda"});
+  for (const std::vector<std::string>& values : combos) {
+    std::vector<std::string> sets = options.set;
+    for (std::size_t k = 0; k < options.vary.size(); ++k) {
+      const std::string& key = options.vary[k].key;
+      if (key == "backend") one_of("--vary backend", values[k], {"auto", "cpu", "cuda"});
+      else if (key == "precision") one_of("--vary precision", values[k], {"float", "double"});
+      else sets.push_back(key + "=" + values[k]);
+    }
+    try {
+      (void)scene::load_scene(options.scene_path, sets);
+    } catch (const InputError& e) {
+      throw InputError(e.where(), e.key(), e.message() + " (study run " + label_of(options.vary, values) + ")");
+    }
+  }
+}
+
+}  // namespace
+
 StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostream& err) {
   const scene::Scene scene = scene::load_scene(options.scene_path, options.set);
   if (scene.reference.kind == scene::ReferenceSpec::Kind::none)
@@ -229,9 +261,10 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   // name starting with '<' or '|' as a command.
   const fs::path dir = fs::absolute(options.out_dir.empty() ? fs::path("out/study") / fs::path(scene.path).stem()
                                                             : fs::path(options.out_dir));
+  const auto combos = combinations(options.vary);
+  check_combinations(options, combos);
   fs::create_directories(dir / "runs");
 
-  const auto combos = combinations(options.vary);
   // An earlier study's runs past this one's count (runs/N and runs/N.log):
   // removed, so that the folder holds this study's runs only. Nothing else
   // in runs/ is touched.

@@ -10,6 +10,7 @@ The scene format, its checks and its error messages are those of ``marbles run``
 """
 
 import json
+import re
 import math
 import numbers
 import os
@@ -43,6 +44,10 @@ def _whole(value, what, least):
     return value
 
 
+# Strings YAML reads plainly as themselves: names, numbers, words.
+_PLAIN = re.compile(r"[+-]?[A-Za-z0-9_.][A-Za-z0-9_.+-]*")
+
+
 def _yaml_text(value, key):
     """A value as the YAML text of a ``--set key=value`` override."""
     if isinstance(value, (bool, np.bool_)):
@@ -57,7 +62,10 @@ def _yaml_text(value, key):
             return ".inf" if v > 0 else "-.inf"
         return repr(v)
     if isinstance(value, str):
-        return value
+        # A string is the string: plain where YAML reads it back as itself,
+        # else double-quoted ("run #2" would end at the #, "&a x" be an
+        # anchor). A list's or map's YAML text goes in set=["key=[a, b]"].
+        return value if _PLAIN.fullmatch(value) else json.dumps(value)
     if isinstance(value, np.ndarray) and value.ndim == 0:  # np.array(1e-3): its one value
         return _yaml_text(value.item(), key)
     if isinstance(value, (list, tuple, np.ndarray)):
@@ -445,6 +453,11 @@ class Simulation:
         record = path + ".scene.json"
         if path and os.path.exists(record) and not os.path.isfile(record):  # a folder or device: refused up front
             raise RuntimeFailure(f"cannot write {record}: it is not a file; nothing was written")
+        scene = self._source.get("scene")
+        for target in (path, record):
+            if scene and target and os.path.isfile(target) and os.path.isfile(scene) and os.path.samefile(target, scene):
+                raise ValueError(f"checkpoint: {target} is this simulation's scene file; choose another path "
+                                 "(nothing was written)")
         self._impl.checkpoint(path, json.dumps(self._source))  # both written to a temporary and renamed
 
     def reference(self):

@@ -1,7 +1,9 @@
 # tests/python/test_errors.py — bad input raises marbles.SceneError with the
 # place it names (file, line, column, key), as the command line says it.
+import pathlib
 import re
 import subprocess
+import warnings
 
 import numpy as np
 import pytest
@@ -259,3 +261,111 @@ def test_a_study_into_a_folder_it_cannot_make_is_a_runtime_failure(tmp_path):
     blocker.write_text("not a folder")
     with pytest.raises(marbles.RuntimeFailure):
         marbles.study(SCENES / "validation" / "bouncing_ball.yaml", vary={"time.dt": [1e-3]}, out=blocker / "study")
+
+
+def test_a_checkpoint_by_its_bare_name_and_never_over_its_scene(pile, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    sim = marbles.Simulation.from_dict(pile)
+    sim.step(2)
+    sim.checkpoint("state.mck")  # no folder in the name: written where the process is
+    assert marbles.Simulation.restart("state.mck").steps == 2
+    scene = tmp_path / "ball.yaml"
+    scene.write_bytes((SCENES / "validation" / "bouncing_ball.yaml").read_bytes())
+    before = scene.read_bytes()
+    ball = marbles.Simulation(scene)
+    for path in (scene, "./ball.yaml", "ball.yaml"):
+        with pytest.raises(ValueError, match="is this simulation's scene file"):
+            ball.checkpoint(path)
+    assert scene.read_bytes() == before
+
+
+def test_a_checkpoint_and_its_record_are_written_together(pile, tmp_path):
+    sim = marbles.Simulation.from_dict(pile)
+    # The record's name past the file system's longest (255): neither file, nothing half-made.
+    long = tmp_path / ("y" * 240)
+    with pytest.raises(marbles.RuntimeFailure):
+        sim.checkpoint(long)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+    # A name that fits beside one that does not: neither is written.
+    fits = tmp_path / ("y" * 244)  # the checkpoint's temporary fits, the record's (".scene.json" more) does not
+    with pytest.raises(marbles.RuntimeFailure):
+        sim.checkpoint(fits)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_frames_of_one_folder_however_it_is_named(pile, tmp_path, monkeypatch):
+    sim = marbles.Simulation.from_dict(pile)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "elsewhere").mkdir()
+    written = []
+    for name in ("o", "o/", "./o"):
+        written.append(sim.write_frame(name))
+        sim.step()
+    monkeypatch.chdir(tmp_path / "elsewhere")  # a later chdir moves nothing
+    written.append(sim.write_frame(tmp_path / "o"))
+    assert [pathlib.Path(p).name for p in written] == [f"frame_{k:06d}.vtp" for k in range(4)]
+    assert all(pathlib.Path(p).parent == tmp_path / "o" / "frames" for p in written)
+    listed = re.findall(r'file="([^"]+)"', (tmp_path / "o" / "series.pvd").read_text())
+    assert listed == [f"frames/frame_{k:06d}.vtp" for k in range(4)]
+    assert all((tmp_path / "o" / f).is_file() for f in listed)
+    assert not (tmp_path / "elsewhere" / "o").exists()
+
+
+def test_a_frame_is_not_left_where_its_series_cannot_be_written(pile, tmp_path):
+    sim = marbles.Simulation.from_dict(pile)
+    (tmp_path / "series.pvd").mkdir()
+    with pytest.raises(marbles.RuntimeFailure, match=r"series\.pvd: it is a folder"):
+        sim.write_frame(tmp_path)
+    assert not list((tmp_path / "frames").glob("*.vtp")) if (tmp_path / "frames").exists() else True
+    (tmp_path / "series.pvd").rmdir()
+    first = sim.write_frame(tmp_path)  # the series goes on at frame 0, none skipped
+    assert pathlib.Path(first).name == "frame_000000.vtp"
+
+
+def test_string_overrides_are_the_strings_given(pile):
+    ball = SCENES / "validation" / "bouncing_ball.yaml"
+    for name in ("run #2", "&a x", "a: b", "x\ny", " lead", "[1]", "", "plain_name-2.0"):
+        assert marbles.Simulation(ball, set={"name": name}).name == name
+        assert marbles.Simulation.from_dict(pile, set={"name": name}).name == name
+    # Numbers and words given as strings still read as the scene reads them.
+    assert marbles.Simulation(ball, set={"time.dt": "5e-4", "solver.precision": "double"}).dt == 5e-4
+    # A list's YAML text is a list only as set=["key=..."]; as a dict's string it is refused, not changed.
+    with pytest.raises(marbles.SceneError, match="expected a sequence"):
+        marbles.Simulation(ball, set={"effects": "[gravity, walls]"})
+    assert marbles.Simulation(ball, set=["effects=[gravity, walls]"]).name
+
+
+def test_the_state_read_after_a_bad_write_is_refused(pile):
+    sim = marbles.Simulation.from_dict(pile)
+    sim.velocities[0, 2] = np.nan
+    with pytest.raises(ValueError, match=r"velocities\[0\] is not finite"):
+        sim.kinetic_energy()
+    with pytest.raises(ValueError, match=r"velocities\[0\] is not finite"):
+        sim.summary()
+    sim.velocities[0, 2] = 0
+    assert np.isfinite(sim.kinetic_energy())
+    for name in ("bogus", "positions", ""):
+        with pytest.raises(ValueError, match="no state array"):
+            sim._impl.view(name)
+    with pytest.raises(ValueError, match="read-only"):
+        sim._impl.assign("radius", np.zeros((len(sim), 3), dtype=np.float32))
+
+
+def test_spheres_that_start_overlapping_are_a_warning(pile):
+    scene = dict(pile)
+    scene["particles"] = [{"list": {"positions": [[0.05, 0.05, 0.05], [0.05, 0.05, 0.05]], "radius": 0.01}}]
+    with pytest.warns(UserWarning, match="1 pair\\(s\\) of spheres start overlapping"):
+        marbles.Simulation.from_dict(scene)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        marbles.Simulation.from_dict(pile)  # the pile's spheres start apart: no warning
+
+
+def test_a_study_checks_every_run_before_the_first(tmp_path):
+    scene = SCENES / "validation" / "bouncing_ball.yaml"
+    for vary, backend, match in (({"nokey": [1]}, "auto", "unknown key 'nokey'"),
+                                 ({"time.dt": [1e-3, -1]}, "auto", r"time\.dt: must be > 0.*study run time\.dt=-1"),
+                                 ({"time.dt": [1e-3]}, "bad", "backend: expected one of auto, cpu, cuda")):
+        with pytest.raises(marbles.SceneError, match=match):
+            marbles.study(scene, vary=vary, backend=backend, out=tmp_path / "s")
+        assert not (tmp_path / "s").exists()
