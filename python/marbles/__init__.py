@@ -84,6 +84,8 @@ def _overrides(set):
         return [f"{key}={_yaml_text(value, key)}" for key, value in set.items()]
     if isinstance(set, str):
         return [set]
+    if not hasattr(set, "__iter__"):
+        raise TypeError(f"set: a dict of key -> value, or a list of 'key=value' texts, got {set!r}")
     return [str(item) for item in set]
 
 
@@ -143,6 +145,33 @@ def _implementation(precision):
 def _is_false(value):
     """False, or NumPy's False (a callback's ``x > limit`` on arrays gives one)."""
     return value is False or (isinstance(value, np.bool_) and not value)
+
+
+def _path(value, what):
+    """A path argument as the text the program takes: a str, bytes or
+    os.PathLike; refused by its name where it is none, or holds bytes that
+    are not UTF-8 (the program's paths are UTF-8 text)."""
+    try:
+        value = os.fspath(value)
+    except TypeError:
+        raise TypeError(f"{what}: a path (str, bytes or os.PathLike), got {value!r}") from None
+    if isinstance(value, bytes):
+        value = os.fsdecode(value)
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        raise ValueError(f"{what}: a path of UTF-8 text, got {value!r} (rename the file or folder)") from None
+    return value
+
+
+def _choice(value, what, choices):
+    """A string argument among ``choices`` (the program says which, by name, for other strings)."""
+    if not isinstance(value, str):
+        raise TypeError(f"{what}: one of {', '.join(choices)}, got {value!r}")
+    return value
+
+
+_BACKENDS = ("auto", "cpu", "cuda")
 
 
 def _threads(value):
@@ -214,7 +243,11 @@ class Simulation:
     @staticmethod
     def _file_source(scene, set):
         """A scene file's record: its path and overrides."""
-        return {"scene": os.fspath(scene), "set": _overrides(set)}
+        path = _path(scene, "scene")
+        if not path:
+            raise SceneError("scene: a scene file is needed, got an empty path", key="scene",
+                             message="a scene file is needed, got an empty path")
+        return {"scene": path, "set": _overrides(set)}
 
     @staticmethod
     def _precision(source):
@@ -236,6 +269,8 @@ class Simulation:
     @staticmethod
     def _stem(name, scene):
         """The default output folder's name: ``name``, else the scene dict's, else "scene"."""
+        if name is not None and not isinstance(name, str):
+            raise TypeError(f"name: the output folder's name, a string, got {name!r}")
         named = scene.get("name") if isinstance(scene, dict) else None
         return name or (named if isinstance(named, str) else None) or "scene"
 
@@ -260,7 +295,7 @@ class Simulation:
         those recorded beside a checkpoint written from Python
         (``path + ".scene.json"``); a checkpoint of ``marbles run`` needs
         ``scene`` (and the run's ``set``)."""
-        path = os.fspath(path)
+        path = _path(path, "restart: path")
         if scene is None:
             try:
                 with open(path + ".scene.json", encoding="utf-8") as f:
@@ -307,6 +342,7 @@ class Simulation:
 
     def _build(self, source, precision, backend, threads):
         """The simulation of a scene's record in a precision; its warnings said once."""
+        backend = _choice(backend, "backend", _BACKENDS)
         overrides = source["set"]
         if "dict" in source:
             impl = _implementation(precision)(source["dict"], "<dict>", source["name"], overrides, backend,
@@ -323,7 +359,8 @@ class Simulation:
         # A run's substeps limit, the one `marbles run` holds a run to (README "Limits").
         limit = _marbles.substeps_limit()
         if steps * self.substeps > limit:
-            raise ValueError(f"{what}: {steps} steps make {steps * self.substeps:.3g} substeps, more than the "
+            count = f"{steps}" if steps < 10**15 else f"{steps:.3e}"
+            raise ValueError(f"{what}: {count} steps make {steps * self.substeps:.3g} substeps, more than the "
                              f"limit {limit:.0e} a call")
 
     def step(self, n=1):
@@ -346,12 +383,15 @@ class Simulation:
         try:
             float(until if until is not None else 0)
         except OverflowError:  # an int past any float
-            raise ValueError(f"run: until is too large a time, got {until!r}") from None
+            raise ValueError(f"run: until is too large a time, got a number of {len(str(abs(int(until))))} digits") \
+                from None
         if until is not None and not (math.isfinite(until) and until >= 0):
             raise ValueError(f"run: until must be a finite time >= 0, got {until!r}")
         if until is not None and not math.isfinite(float(until) / self.dt):
-            raise ValueError(f"run: until is too large a time, got {until!r}")
+            raise ValueError(f"run: until is too large a time, got {float(until):g}")
         target = self._impl.total_steps if until is None else int(round(float(until) / self.dt))
+        if until is not None and target < self.steps:
+            raise ValueError(f"run: until = {float(until):g} s is before the simulation's time, {self.time:g} s")
         self._check_substeps(target - self.steps, "run: until")
         while self.steps < target:
             self._impl.step(min(every, target - self.steps))
@@ -419,6 +459,8 @@ class Simulation:
         dtype = np.float64 if self.precision == "double" else np.float32
         if hasattr(values, "__cuda_array_interface__") and hasattr(values, "get"):
             values = values.get()
+        if np.iscomplexobj(values):  # the imaginary part would be dropped without a word
+            raise TypeError(f"{what}: real numbers, got a complex array")
         array = np.ascontiguousarray(values, dtype=dtype)
         if array.shape != (len(self), 3):
             plural = {"velocity": "velocities", "angular_velocity": "angular_velocities"}.get(what, what + "s")
@@ -444,12 +486,12 @@ class Simulation:
         first removes that run's files (as ``marbles run --overwrite``)."""
         if not isinstance(overwrite, (bool, np.bool_)):  # "False" would be true, and remove a run's files
             raise TypeError(f"write_frame: overwrite is True or False, got {overwrite!r}")
-        return self._impl.write_frame(os.fspath(dir), bool(overwrite))
+        return self._impl.write_frame(_path(dir, "write_frame: dir"), bool(overwrite))
 
     def checkpoint(self, path):
         """Writes a checkpoint (``marbles run --restart`` reads it too) and,
         beside it, ``path + ".scene.json"``: the scene it belongs to."""
-        path = os.fspath(path)
+        path = _path(path, "checkpoint: path")
         record = path + ".scene.json"
         if path and os.path.exists(record) and not os.path.isfile(record):  # a folder or device: refused up front
             raise RuntimeFailure(f"cannot write {record}: it is not a file; nothing was written")
@@ -487,6 +529,12 @@ def pairs(xyzr, backend="auto", algorithm="home", margin=0.0):
     if hasattr(xyzr, "__cuda_array_interface__"):
         xyzr = xyzr.get() if hasattr(xyzr, "get") else xyzr.cpu().numpy()
     array = np.asarray(xyzr)
+    if np.iscomplexobj(array):  # the imaginary part would be dropped without a word
+        raise TypeError("xyzr: real numbers, got a complex array")
+    if isinstance(margin, (bool, np.bool_)) or not isinstance(margin, numbers.Real):
+        raise TypeError(f"margin: a distance in m, got {margin!r}")
+    algorithm = _choice(algorithm, "algorithm", ("home", "subdivision", "brute"))
+    backend = _choice(backend, "backend", _BACKENDS)
     double = array.dtype == np.float64
     array = np.ascontiguousarray(array, dtype=np.float64 if double else np.float32)
     if array.ndim != 2 or array.shape[1] != 4:
@@ -543,8 +591,9 @@ def study(scene, vary, set=None, backend="auto", repeats=1, out=None):
             if top_level_comma(text):  # the study's list is comma-separated
                 raise ValueError(f"vary[{key!r}]: a value may not hold a comma outside brackets, got {text!r}")
         texts.append(f"{key}=" + ",".join(items))
-    return _marbles.study(os.fspath(scene), texts, _overrides(set), backend, repeats,
-                          os.fspath(out) if out is not None else "", _program_path())
+    return _marbles.study(_path(scene, "study: scene"), texts, _overrides(set), _choice(backend, "study: backend",
+                                                                                       _BACKENDS), repeats,
+                          _path(out, "study: out") if out is not None else "", _program_path())
 
 
 def cuda_device():

@@ -1,5 +1,6 @@
 # tests/python/test_errors.py — bad input raises marbles.SceneError with the
 # place it names (file, line, column, key), as the command line says it.
+import os
 import pathlib
 import re
 import subprocess
@@ -369,3 +370,38 @@ def test_a_study_checks_every_run_before_the_first(tmp_path):
         with pytest.raises(marbles.SceneError, match=match):
             marbles.study(scene, vary=vary, backend=backend, out=tmp_path / "s")
         assert not (tmp_path / "s").exists()
+
+
+def test_arguments_of_the_wrong_kind_are_named(pile, tmp_path):
+    ball = SCENES / "validation" / "bouncing_ball.yaml"
+    sim = marbles.Simulation.from_dict(pile)
+    cases = [
+        (lambda: marbles.Simulation(ball, backend=None), TypeError, "backend: one of auto, cpu, cuda, got None"),
+        (lambda: marbles.Simulation.from_dict(pile, backend=5), TypeError, "backend: one of"),
+        (lambda: marbles.Simulation.from_dict(pile, name=5), TypeError, "name: the output folder's name"),
+        (lambda: marbles.Simulation(ball, set=5), TypeError, "set: a dict of key -> value"),
+        (lambda: marbles.Simulation(5), TypeError, "scene: a path"),
+        (lambda: marbles.Simulation(""), marbles.SceneError, "scene: a scene file is needed"),
+        (lambda: marbles.Simulation(os.fsdecode(b"ball\xff.yaml")), ValueError, "scene: a path of UTF-8 text"),
+        (lambda: sim.write_frame(None), TypeError, "write_frame: dir: a path"),
+        (lambda: sim.checkpoint(3.5), TypeError, "checkpoint: path: a path"),
+        (lambda: marbles.pairs(np.zeros((2, 4)), algorithm=None), TypeError, "algorithm: one of home"),
+        (lambda: marbles.pairs(np.zeros((2, 4)), backend=None), TypeError, "backend: one of"),
+        (lambda: marbles.pairs(np.zeros((2, 4)), margin="0.1"), TypeError, "margin: a distance"),
+        (lambda: marbles.pairs(np.zeros((2, 4)), margin=True), TypeError, "margin: a distance"),
+        (lambda: marbles.pairs(np.zeros((2, 4), dtype=complex)), TypeError, "xyzr: real numbers"),
+        (lambda: setattr(sim, "positions", sim.positions.astype(complex)), TypeError, "position: real numbers"),
+        (lambda: marbles.study(ball, vary={"time.dt": [1e-3]}, backend=None, out=tmp_path / "s"), TypeError,
+         "study: backend: one of"),
+        (lambda: sim.run(until=10**400), ValueError, "a number of 401 digits"),
+    ]
+    for call, error, match in cases:
+        with pytest.raises(error, match=re.escape(match)):
+            call()
+    # A bytes path is a path; the same scene as its str.
+    assert marbles.Simulation(os.fsencode(str(ball))).name == marbles.Simulation(ball).name
+    # A time already past is said, not passed over.
+    sim.step(3)
+    with pytest.raises(ValueError, match=r"run: until = 0\.001 s is before the simulation's time, 0\.003 s"):
+        sim.run(until=0.001)
+    sim.run(until=sim.time)  # the time it is at: nothing to do
