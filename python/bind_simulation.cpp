@@ -237,9 +237,11 @@ class PySimulation {
     if (dir.empty() || dir.find('\0') != std::string::npos)
       throw nb::value_error("write_frame: a folder is needed (not empty, no NUL byte)");
     if (m_views_out) check_views();
-    // By the folder, however it is written ("out", "out/", "./out"), and
-    // written there by that name: a later chdir moves neither.
-    std::filesystem::path folder = std::filesystem::absolute(dir).lexically_normal();
+    // By the folder, however it is written ("out", "out/", "./out", through
+    // a link), and written there by that name: a later chdir moves neither.
+    // Its links resolved as the system resolves them ("link/.." is the
+    // link's target's parent, not the folder the link is in).
+    std::filesystem::path folder = std::filesystem::weakly_canonical(std::filesystem::absolute(dir));
     if (!folder.has_filename() && folder.has_parent_path() && folder != folder.root_path())
       folder = folder.parent_path();  // "out/" normalises to "/.../out/": the folder is "/.../out"
     const std::string key = folder.string();

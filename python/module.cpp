@@ -16,6 +16,7 @@
 #include "sim/checkpoint.hpp"
 #include "sim/limits.hpp"
 #include "sim/scene.hpp"
+#include "sim/scene_overrides.hpp"
 #include "sim/study.hpp"
 #include "sim/version.hpp"
 
@@ -80,6 +81,7 @@ NB_MODULE(_marbles, m) {
   });
   // The substeps a run may take (sim/limits.hpp), to which Simulation.step and run hold each call.
   m.def("substeps_limit", [] { return marbles::limits().substeps; });
+  m.def("reads_as_itself", &marbles::scene::detail::reads_as_itself, nb::arg("value"));
   m.attr("version") = marbles::kMarblesVersion;
   m.attr("commit") = marbles::kMarblesCommit;
 }

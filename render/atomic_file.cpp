@@ -73,7 +73,12 @@ CompleteCheck mp4_has_index() {
   };
 }
 
-void commit_file(const fs::path& tmp, const fs::path& final_path, const CompleteCheck& complete) {
+namespace {
+
+// What commit_file checks before its rename (the fault hook, completeness,
+// nothing but a plain file under the name); on failure removes `tmp` and
+// throws.
+void check_before_rename(const fs::path& tmp, const fs::path& final_path, const CompleteCheck& complete) {
   std::error_code ec;
   if (const char* fault = std::getenv("MARBLES_FAULT_TRUNCATE");
       fault != nullptr && *fault != '\0' && final_path.filename().string().find(fault) != std::string::npos)
@@ -91,12 +96,23 @@ void commit_file(const fs::path& tmp, const fs::path& final_path, const Complete
     throw RuntimeFailure("cannot write " + final_path.string() + ": it is " + what +
                          ", not a file; nothing was replaced");
   }
+}
+
+void rename_over(const fs::path& tmp, const fs::path& final_path) {
+  std::error_code ec;
   fs::rename(tmp, final_path, ec);
   if (ec) {
     const std::string why = ec.message();  // before the clean-up reuses ec
     fs::remove(tmp, ec);
     throw RuntimeFailure("cannot rename " + tmp.string() + " to " + final_path.string() + ": " + why);
   }
+}
+
+}  // namespace
+
+void commit_file(const fs::path& tmp, const fs::path& final_path, const CompleteCheck& complete) {
+  check_before_rename(tmp, final_path, complete);
+  rename_over(tmp, final_path);
 }
 
 std::size_t remove_stale_temporaries(const fs::path& dir) {
@@ -140,10 +156,12 @@ void write_file_atomic(const fs::path& path, std::string_view contents) {
 }
 
 void write_files_atomic(const std::vector<std::pair<fs::path, std::string_view>>& files) {
+  // Every file written and checked before the first rename; only a rename
+  // itself failing (within one folder, after every check) can part them.
   std::vector<fs::path> temps;
-  const auto drop = [&temps](std::size_t from) {
+  const auto drop = [&temps] {
     std::error_code ec;
-    for (std::size_t k = from; k < temps.size(); ++k) fs::remove(temps[k], ec);
+    for (const fs::path& t : temps) fs::remove(t, ec);
   };
   try {
     for (const auto& [path, contents] : files) {
@@ -151,15 +169,17 @@ void write_files_atomic(const std::vector<std::pair<fs::path, std::string_view>>
         throw RuntimeFailure("cannot write " + path.string() + ": it is " + what + ", not a file; nothing was written");
       temps.push_back(write_temporary(path, contents));
     }
+    for (std::size_t k = 0; k < files.size(); ++k) check_before_rename(temps[k], files[k].first, has_size(files[k].second.size()));
   } catch (...) {
-    drop(0);
+    drop();
     throw;
   }
   for (std::size_t k = 0; k < files.size(); ++k) {
     try {
-      commit_file(temps[k], files[k].first, has_size(files[k].second.size()));
+      rename_over(temps[k], files[k].first);
     } catch (...) {
-      drop(k + 1);
+      std::error_code ec;
+      for (std::size_t j = k + 1; j < temps.size(); ++j) fs::remove(temps[j], ec);
       throw;
     }
   }

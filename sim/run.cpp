@@ -120,13 +120,21 @@ std::string json_text(const nlohmann::ordered_json& document) {
   return document.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
 }
 
+CheckedScene checked_scene(const std::string& scene_path, const std::vector<std::string>& overrides) {
+  CheckedScene c{scene::load_scene(scene_path, overrides), {}, {}};
+  c.particles = scene::generate_particles(c.scene);
+  c.world = make_world(c.scene, c.particles);  // masses and inertias in range for the precision
+  // The reference's own rules (the sphere it names, the effects it needs), as `run` holds them.
+  if (c.scene.reference.kind != scene::ReferenceSpec::Kind::none) ReferenceProbe(c.scene, c.world);
+  return c;
+}
+
 int check_scene(const std::string& scene_path, const std::vector<std::string>& overrides, std::ostream& out,
                 std::ostream& err) {
-  const scene::Scene sc = scene::load_scene(scene_path, overrides);
-  const scene::GeneratedParticles particles = scene::generate_particles(sc);
-  const World world = make_world(sc, particles);  // masses and inertias in range for the precision
-  // The reference's own rules (the sphere it names, the effects it needs), as `run` holds them.
-  if (sc.reference.kind != scene::ReferenceSpec::Kind::none) ReferenceProbe(sc, world);
+  const CheckedScene checked = checked_scene(scene_path, overrides);
+  const scene::Scene& sc = checked.scene;
+  const scene::GeneratedParticles& particles = checked.particles;
+  const World& world = checked.world;
   out << scene_path << ": ok (" << particles.size() << " spheres, " << sc.materials.size() << " material(s), "
       << sc.walls.size() << " wall(s), " << std::llround(sc.time.duration / sc.time.dt) << " steps of "
       << sc.time.dt << " s, " << kRealName << ")\n";

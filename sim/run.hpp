@@ -12,6 +12,8 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "broadphase/broadphase.hpp"
+#include "sim/particles.hpp"
+#include "sim/scene.hpp"
 #include "sim/world.hpp"
 
 namespace marbles {
@@ -26,6 +28,16 @@ enum class BackendChoice { automatic, cpu, cuda };
 // Resolves auto/cpu/cuda to a backend; says on `log` what auto chose and why.
 // `cuda` without a device (or without the CUDA build) throws RuntimeFailure.
 broadphase::Backend select_backend(BackendChoice choice, std::ostream& log);
+
+// What `marbles check` holds a scene to, without a word: the scene with its
+// overrides, its particles, its world (masses in range for the precision)
+// and its reference's own rules; throws InputError.
+struct CheckedScene {
+  scene::Scene scene;
+  scene::GeneratedParticles particles;
+  World world;
+};
+CheckedScene checked_scene(const std::string& scene_path, const std::vector<std::string>& overrides);
 
 // The warning `run` and `check` give where spheres start overlapping by more
 // than 1 % of the smaller radius (without "warning: "); empty where none do.

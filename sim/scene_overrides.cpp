@@ -130,6 +130,15 @@ void apply_override(YAML::Node root, const std::string& text, Origins& origins) 
 
 }  // namespace
 
+bool reads_as_itself(const std::string& value) {
+  try {
+    const YAML::Node node = YAML::Load(value);
+    return node.IsScalar() && node.Tag() == "?" && node.Scalar() == value;
+  } catch (const YAML::Exception&) {
+    return false;
+  }
+}
+
 void apply_overrides(YAML::Node root, const std::vector<std::string>& overrides, Origins& origins) {
   for (const std::string& text : overrides) apply_override(root, text, origins);
 }

@@ -23,4 +23,9 @@ namespace marbles::scene::detail {
 // does not fit the tree.
 void apply_overrides(YAML::Node root, const std::vector<std::string>& overrides, Origins& origins);
 
+// Whether `value`, as the text after an override's `=`, is read as the
+// plain string `value` itself (not null, a list, a map, a quoted or cut
+// text): Python's set={"name": "run #2"} quotes only what is not.
+bool reads_as_itself(const std::string& value);
+
 }  // namespace marbles::scene::detail

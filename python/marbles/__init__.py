@@ -10,7 +10,6 @@ The scene format, its checks and its error messages are those of ``marbles run``
 """
 
 import json
-import re
 import math
 import numbers
 import os
@@ -44,12 +43,12 @@ def _whole(value, what, least):
     return value
 
 
-# Strings YAML reads plainly as themselves: names, numbers, words.
-_PLAIN = re.compile(r"[+-]?[A-Za-z0-9_.][A-Za-z0-9_.+-]*")
-
-
-def _yaml_text(value, key):
-    """A value as the YAML text of a ``--set key=value`` override."""
+def _yaml_text(value, key, strings="values"):
+    """A value as the YAML text of a ``--set key=value`` override. A string is
+    that string (``strings="values"``: double-quoted where the scene's reader
+    would not read it plainly as itself, so ``--set`` of the same plain text
+    gives the same override), or YAML text as given (``strings="text"``: a
+    study's values, ``"[0, 0, -9.81]"``)."""
     if isinstance(value, (bool, np.bool_)):
         return "true" if value else "false"
     if isinstance(value, (int, np.integer)):
@@ -62,16 +61,17 @@ def _yaml_text(value, key):
             return ".inf" if v > 0 else "-.inf"
         return repr(v)
     if isinstance(value, str):
-        # A string is the string: plain where YAML reads it back as itself,
-        # else double-quoted ("run #2" would end at the #, "&a x" be an
-        # anchor). A list's or map's YAML text goes in set=["key=[a, b]"].
-        return value if _PLAIN.fullmatch(value) else json.dumps(value)
+        # "run #2" would end at the #, "&a x" be an anchor, "null" nothing.
+        # A list's or map's YAML text goes in set=["key=[a, b]"].
+        if strings == "text" or _marbles.reads_as_itself(value):
+            return value
+        return json.dumps(value, ensure_ascii=False)
     if isinstance(value, np.ndarray) and value.ndim == 0:  # np.array(1e-3): its one value
-        return _yaml_text(value.item(), key)
+        return _yaml_text(value.item(), key, strings)
     if isinstance(value, (list, tuple, np.ndarray)):
-        return "[" + ", ".join(_yaml_text(v, key) for v in value) + "]"
+        return "[" + ", ".join(_yaml_text(v, key, strings) for v in value) + "]"
     if isinstance(value, dict):
-        return "{" + ", ".join(f"{k}: {_yaml_text(v, key)}" for k, v in value.items()) + "}"
+        return "{" + ", ".join(f"{k}: {_yaml_text(v, key, strings)}" for k, v in value.items()) + "}"
     raise SceneError(f"set: {key}: cannot be written as a scene value: {value!r}", key=key,
                      message=f"cannot be written as a scene value: {value!r}")
 
@@ -586,7 +586,7 @@ def study(scene, vary, set=None, backend="auto", repeats=1, out=None):
     for key, values in vary.items():
         if isinstance(values, (str, bytes)) or not hasattr(values, "__iter__"):
             values = [values]
-        items = [_yaml_text(v, key) for v in values]
+        items = [_yaml_text(v, key, strings="text") for v in values]
         for text in items:
             if top_level_comma(text):  # the study's list is comma-separated
                 raise ValueError(f"vary[{key!r}]: a value may not hold a comma outside brackets, got {text!r}")

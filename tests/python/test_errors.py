@@ -280,18 +280,22 @@ def test_a_checkpoint_by_its_bare_name_and_never_over_its_scene(pile, tmp_path, 
     assert scene.read_bytes() == before
 
 
-def test_a_checkpoint_and_its_record_are_written_together(pile, tmp_path):
+def test_a_checkpoint_and_its_record_are_written_together(pile, tmp_path, monkeypatch):
     sim = marbles.Simulation.from_dict(pile)
-    # The record's name past the file system's longest (255): neither file, nothing half-made.
-    long = tmp_path / ("y" * 240)
-    with pytest.raises(marbles.RuntimeFailure):
-        sim.checkpoint(long)
-    assert sorted(p.name for p in tmp_path.iterdir()) == []
-    # A name that fits beside one that does not: neither is written.
-    fits = tmp_path / ("y" * 244)  # the checkpoint's temporary fits, the record's (".scene.json" more) does not
-    with pytest.raises(marbles.RuntimeFailure):
-        sim.checkpoint(fits)
-    assert sorted(p.name for p in tmp_path.iterdir()) == []
+    ck = tmp_path / "c.mck"
+    sim.checkpoint(ck)
+    old = ck.read_bytes(), (tmp_path / "c.mck.scene.json").read_bytes()
+    sim.step(3)
+    # The record left incomplete (the full-disk hook): the new checkpoint is not put beside the old record.
+    monkeypatch.setenv("MARBLES_FAULT_TRUNCATE", "scene.json")
+    with pytest.raises(marbles.RuntimeFailure, match="left incomplete"):
+        sim.checkpoint(ck)
+    with pytest.raises(marbles.RuntimeFailure, match="left incomplete"):
+        sim.checkpoint(tmp_path / "new.mck")
+    monkeypatch.delenv("MARBLES_FAULT_TRUNCATE")
+    assert (ck.read_bytes(), (tmp_path / "c.mck.scene.json").read_bytes()) == old
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.mck", "c.mck.scene.json"]
+    assert marbles.Simulation.restart(ck).steps == 0
 
 
 def test_frames_of_one_folder_however_it_is_named(pile, tmp_path, monkeypatch):
@@ -312,28 +316,47 @@ def test_frames_of_one_folder_however_it_is_named(pile, tmp_path, monkeypatch):
     assert not (tmp_path / "elsewhere" / "o").exists()
 
 
-def test_a_frame_is_not_left_where_its_series_cannot_be_written(pile, tmp_path):
+def test_a_frame_is_not_left_where_its_series_cannot_be_written(pile, tmp_path, monkeypatch):
     sim = marbles.Simulation.from_dict(pile)
     (tmp_path / "series.pvd").mkdir()
     with pytest.raises(marbles.RuntimeFailure, match=r"series\.pvd: it is a folder"):
         sim.write_frame(tmp_path)
-    assert not list((tmp_path / "frames").glob("*.vtp")) if (tmp_path / "frames").exists() else True
     (tmp_path / "series.pvd").rmdir()
+    monkeypatch.setenv("MARBLES_FAULT_TRUNCATE", "series.pvd")
+    with pytest.raises(marbles.RuntimeFailure, match="left incomplete"):
+        sim.write_frame(tmp_path)
+    monkeypatch.delenv("MARBLES_FAULT_TRUNCATE")
+    assert not list(tmp_path.rglob("*.vtp")) and not (tmp_path / "series.pvd").exists()
     first = sim.write_frame(tmp_path)  # the series goes on at frame 0, none skipped
     assert pathlib.Path(first).name == "frame_000000.vtp"
 
 
-def test_string_overrides_are_the_strings_given(pile):
+def test_string_overrides_are_the_strings_given(pile, tmp_path):
     ball = SCENES / "validation" / "bouncing_ball.yaml"
-    for name in ("run #2", "&a x", "a: b", "x\ny", " lead", "[1]", "", "plain_name-2.0"):
-        assert marbles.Simulation(ball, set={"name": name}).name == name
-        assert marbles.Simulation.from_dict(pile, set={"name": name}).name == name
+    for name in ("run #2", "&a x", "a: b", "x\ny", " lead", "[1]", "", "null", "~", "...", "run \U0001F600",
+                 "plain_name-2.0", "my run", "true"):
+        assert marbles.Simulation(ball, set={"name": name}).name == name, name
+        assert marbles.Simulation.from_dict(pile, set={"name": name}).name == name, name
     # Numbers and words given as strings still read as the scene reads them.
     assert marbles.Simulation(ball, set={"time.dt": "5e-4", "solver.precision": "double"}).dt == 5e-4
     # A list's YAML text is a list only as set=["key=..."]; as a dict's string it is refused, not changed.
     with pytest.raises(marbles.SceneError, match="expected a sequence"):
         marbles.Simulation(ball, set={"effects": "[gravity, walls]"})
     assert marbles.Simulation(ball, set=["effects=[gravity, walls]"]).name
+    # A string the scene reads plainly is passed as the same text as --set gives it: a checkpoint of
+    # marbles run restarts with the dict form of its overrides.
+    out = tmp_path / "run"
+    cli = subprocess.run([PROGRAM, "run", str(ball), "--backend", "cpu", "--quiet", "--summary-only", "--out", str(out),
+                          "--duration", "0.02", "--set", "output.checkpoint={every: 10}", "--set", "name=my run"],
+                         capture_output=True, text=True)
+    assert cli.returncode == 0, cli.stderr
+    resumed = marbles.Simulation.restart(out / "checkpoints" / "step_000010.mck", scene=ball,
+                                         set={"output.checkpoint": {"every": 10}, "name": "my run"})
+    assert resumed.steps == 10
+    # A study's values are YAML text, as marbles study --vary takes them.
+    rows = marbles.study(ball, vary={"gravity": ["[0, 0, -9.81]", "[0, 0, -5]"]}, set={"time.duration": 0.05},
+                         out=tmp_path / "study")
+    assert len(rows) == 2
 
 
 def test_the_state_read_after_a_bad_write_is_refused(pile):

@@ -220,6 +220,39 @@ TEST(AtomicFile, ReplacesNoDevicePipeOrFolder) {
   EXPECT_EQ(text, "kept");
 }
 
+// Files written together: where any one cannot be (its temporary's name too
+// long, its final name a folder, left incomplete), none is, and the files
+// there before keep their contents; otherwise every one is written.
+TEST(AtomicFile, FilesWrittenTogetherOrNotAtAll) {
+  const fs::path dir = fresh_dir("atomic_together");
+  const auto text_of = [](const fs::path& p) {
+    std::ifstream in(p);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  };
+  write_files_atomic({{dir / "a", "old a"}, {dir / "b", "old b"}});
+  ASSERT_EQ(text_of(dir / "a"), "old a");
+  ASSERT_EQ(text_of(dir / "b"), "old b");
+  // A name whose temporary (".NAME.tmp-PID-K") passes 255 bytes where the name itself fits.
+  const fs::path long_name = dir / std::string(250, 'y');
+  fs::create_directory(dir / "folder");
+  for (const fs::path& second : {long_name, dir / "folder"}) {
+    EXPECT_THROW(write_files_atomic({{dir / "a", "new a"}, {second, "new"}}), RuntimeFailure) << second;
+    EXPECT_EQ(text_of(dir / "a"), "old a") << second;
+    EXPECT_FALSE(fs::exists(long_name));
+    EXPECT_EQ(count_temp_files(dir), 0u);
+  }
+  // The second left incomplete (the full-disk hook truncates files named with "b"): the first is not renamed either.
+  setenv("MARBLES_FAULT_TRUNCATE", "b", 1);
+  EXPECT_THROW(write_files_atomic({{dir / "a", "new a"}, {dir / "b", "new b"}}), RuntimeFailure);
+  unsetenv("MARBLES_FAULT_TRUNCATE");
+  EXPECT_EQ(text_of(dir / "a"), "old a");
+  EXPECT_EQ(text_of(dir / "b"), "old b");
+  EXPECT_EQ(count_temp_files(dir), 0u);
+  write_files_atomic({{dir / "a", "new a"}, {dir / "b", "new b"}});
+  EXPECT_EQ(text_of(dir / "a"), "new a");
+  EXPECT_EQ(text_of(dir / "b"), "new b");
+}
+
 TEST(Camera, DefaultViewFramesTheBounds) {
   Bounds b;
   b.add(-1, -2, 0);

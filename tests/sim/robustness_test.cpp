@@ -352,6 +352,8 @@ TEST_F(Robustness, NanArgumentsAreBadArguments) {
       {"study " + ball + " --out " + file, "--out: '" + file + "' exists and is not a folder"},
       // Each combination's scene is checked before the first run (no run's log left behind).
       {"study " + ball + " --vary time.dt=1e-3,-1 --out " + dir.path() + "/s", "time.dt: must be > 0, got -1 (study run time.dt=-1)"},
+      {"study " + ball + " --vary 'gravity=[0,0,-9.81],[0,0,0]' --out " + dir.path() + "/s",  // held as check holds it
+       "needs the gravity effect and a non-zero gravity (study run gravity=[0,0,0])"},
       {"study " + ball + " --out " + file + "/sub", "--out: '" + file + "/sub' cannot be made: '" + file + "' is not a folder"},
       {"render " + dir.path() + "/absent", "Directory does not exist"},
       // Options that meant nothing where given, or given twice, and ranges in plain words.
