@@ -93,9 +93,8 @@ class PySimulation {
     m_backend = select_backend(choice, log);
     m_backend_note = log.str();
     if (!m_backend_note.empty() && m_backend_note.back() == '\n') m_backend_note.pop_back();
-    World world = make_world(m_scene, particles);
-    if (std::string w = initial_overlap_warning(world); !w.empty()) m_warnings.push_back(std::move(w));
-    m_sim = std::make_unique<Simulation>(m_scene, std::move(world), m_backend);
+    m_sim = std::make_unique<Simulation>(m_scene, make_world(m_scene, particles), m_backend);
+    for (std::string& w : initial_overlap_warnings(m_sim->world(), m_sim->model())) m_warnings.push_back(std::move(w));
     m_totals.energy_start = m_sim->world().kinetic_energy();
     m_total_steps = static_cast<std::uint64_t>(std::llround(m_scene.time.duration / m_scene.time.dt));
     if (m_scene.reference.kind != scene::ReferenceSpec::Kind::none) {

@@ -14,6 +14,7 @@
 #include "broadphase/broadphase.hpp"
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
+#include "sim/step_model.hpp"
 #include "sim/world.hpp"
 
 namespace marbles {
@@ -39,9 +40,10 @@ struct CheckedScene {
 };
 CheckedScene checked_scene(const std::string& scene_path, const std::vector<std::string>& overrides);
 
-// The warning `run` and `check` give where spheres start overlapping by more
-// than 1 % of the smaller radius (without "warning: "); empty where none do.
-std::string initial_overlap_warning(const World& world);
+// The warnings `run` and `check` give where spheres start overlapping each
+// other or a wall by more than 1 % of the smaller radius (without
+// "warning: "); none where none do.
+std::vector<std::string> initial_overlap_warnings(const World& world, const StepModel& model);
 
 struct RunOptions {
   std::string scene_path;

@@ -10,6 +10,7 @@
 #include "core/format.hpp"
 #include "core/parallel.hpp"
 #include "sim/scene.hpp"
+#include "narrowphase/solver_math.hpp"
 #include "sim/watch_math.hpp"
 
 namespace marbles {
@@ -58,11 +59,45 @@ void Simulation::set_watchdog(bool on) {
   if (on) watch_from_host();
 }
 
+StateOverlaps state_overlaps(const World& world, const StepModel& model, double tolerance) {
+  StateOverlaps o;
+  const BodiesView b = const_cast<World&>(world).view();
+  if (model.collisions) {
+    std::vector<broadphase::Pair> pairs;
+    broadphase::make_subdivision_cpu()->find_pairs({world.position.data(), world.radius.data(), world.size()}, 0,
+                                                   pairs);
+    for (const broadphase::Pair& p : pairs) {
+      if (narrowphase::both_fixed(world.inv_mass[p.i], world.inv_mass[p.j])) continue;  // glued: no contact
+      narrowphase::Contact c;
+      c.a = p.i, c.b = p.j;
+      const double r = narrowphase::overlap_ratio(c, b, nullptr);
+      o.deepest = std::max(o.deepest, r);
+      o.pairs += r > tolerance ? 1 : 0;
+    }
+  }
+  if (model.wall_contacts)
+    for (std::uint32_t i = 0; i < world.size(); ++i) {
+      double deepest = 0;
+      for (std::uint32_t k = 0; k < model.wall_shapes.size(); ++k) {
+        narrowphase::Contact c;
+        c.a = i, c.b = k | narrowphase::kWallFlag;
+        deepest = std::max(deepest, static_cast<double>(narrowphase::overlap_ratio(c, b, model.wall_shapes.data())));
+      }
+      o.deepest = std::max(o.deepest, deepest);
+      o.deepest_wall = std::max(o.deepest_wall, deepest);
+      o.walls += deepest > tolerance ? 1 : 0;
+    }
+  return o;
+}
+
 void Simulation::watch_from_host() {
   const World& w = world();
   const auto& walls = m_model->wall_shapes;
   const auto wall_count = m_model->wall_contacts ? static_cast<std::uint32_t>(walls.size()) : 0u;
-  // The figures of the state as it stands, as the step's end would give them.
+  // The figures of the state as it stands, as the step's end would give them:
+  // the overlap rule then judges the first step from the overlaps it starts
+  // with (spheres placed overlapping are pushed apart, not a blow-up).
+  m_last.max_overlap = static_cast<real>(state_overlaps(w, *m_model, 0).deepest);
   m_last.kinetic_energy = 0;
   m_last.beyond_walls = 0;
   Watch& s = m_watch;

@@ -33,6 +33,19 @@
 
 namespace marbles {
 
+// How the spheres of `world` overlap as they stand, measured as a step's
+// end measures its max_overlap (narrowphase::overlap_ratio: of the smaller
+// radius, a wall's of the sphere's): sphere pairs where `model` has
+// collisions (two fixed spheres make no contact), sphere and wall where it
+// has wall contacts. Counted where deeper than `tolerance`; the deepest.
+struct StateOverlaps {
+  std::size_t pairs = 0;  // sphere pairs deeper than the tolerance
+  std::size_t walls = 0;  // spheres deeper than it into a wall (or beyond one)
+  double deepest = 0;
+  double deepest_wall = 0;  // of the sphere-wall overlaps alone
+};
+StateOverlaps state_overlaps(const World& world, const StepModel& model, double tolerance);
+
 // The watchdog gave up: the step is back at its start (a checkpoint of it is
 // the last good state).
 class WatchdogFailure : public RuntimeFailure {

@@ -298,6 +298,7 @@ TEST_F(Robustness, CheckRefusesWhatRunRefuses) {
   const std::string scene = MARBLES_SOURCE_DIR "/scenes/validation/bouncing_ball.yaml";
   const std::vector<std::pair<std::string, std::string>> cases = {
       {"--set 'effects=[walls]'", "reference.rebound_heights: needs the gravity effect"},
+      {"--set solver.iterations=1000000", "solver.iterations: must be <= 100000, got 1000000"},  // 8x of it an int
       {"--set reference.rebound_heights.sphere=5", "reference.rebound_heights.sphere: sphere 5 does not exist"},
   };
   for (const auto& [set, message] : cases) {

@@ -16,6 +16,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "core/format.hpp"
 #include "render/frame_output.hpp"
 #include "render/image.hpp"
 #include "render/movie.hpp"
@@ -311,6 +312,63 @@ TEST(Run, StepsKeptUnsweptAreSaidAndCounted) {
   EXPECT_EQ(said, kept) << err;
   EXPECT_NE(err.find("still at 8 substeps"), std::string::npos) << err;
   EXPECT_GE(summary.at("rollbacks").get<std::uint64_t>(), 3 * kept);
+}
+
+// Spheres placed deep in each other (twenty on one spot, a row overlapping
+// by half) or a sphere placed far beyond a wall are warned of and pushed
+// apart over the first steps: the watchdog's overlap rule judges the first
+// step from the overlap the run starts with, so it is not taken for a blow-up
+// (it was exit 1 at step 1, "overlap 1.12 of a radius after 3 retries").
+TEST(Run, SpheresPlacedDeepInEachOtherAreSeparatedNotRefused) {
+  const fs::path dir = temp_dir("placed_deep");
+  std::string coincident, row;
+  for (int k = 0; k < 20; ++k) {
+    coincident += std::string(k ? ", " : "") + "[0, 0, 0]";
+    row += std::string(k ? ", " : "") + "[" + std::to_string(0.01 * k) + ", 0, 0]";
+  }
+  const std::string head = "format: 1\ntime: {duration: 0.1, dt: 1.0e-3}\neffects: [collisions]\n"
+                           "materials: {m: {density: 1000}}\nparticles:\n  - list: {radius: 0.01, positions: [";
+  const std::string outside = "format: 1\ntime: {duration: 0.5, dt: 1.0e-3}\neffects: [gravity, walls]\n"
+                              "materials: {m: {density: 1000}}\n"
+                              "walls:\n  - box: {min: [0, 0, 0], max: [1, 1, 1]}\n"
+                              "particles:\n  - list: {radius: 0.02, positions: [[0.5, 0.5, 0.5], [1.5, 0.5, 0.5]]}\n";
+  const std::pair<std::string, std::string> cases[] = {
+      {head + coincident + "]}\n", "190 pair(s) of spheres start overlapping"},
+      {head + row + "]}\n", "19 pair(s) of spheres start overlapping"},
+      {outside, "1 sphere(s) start more than 1% of their radius into a wall or beyond it (up to 26 radii)"}};
+  for (const auto& [yaml, warning] : cases) {
+    std::string err;
+    ASSERT_EQ(run_on_cpu(dir, yaml, err), 0) << err << yaml;
+    EXPECT_NE(err.find("warning: " + warning), std::string::npos) << err;
+    const nlohmann::json summary = nlohmann::json::parse(read_file(dir / "out" / "summary.json"));
+    EXPECT_LT(summary.at("max_overlap_end").get<double>(), 0.01) << yaml;
+    EXPECT_GT(summary.at("max_overlap").get<double>(), 0.5) << yaml;  // premise: they started deep
+    fs::remove_all(dir / "out");
+  }
+}
+
+// A run whose spheres end deep in each other says so (exit 0: the run is
+// whole): a sphere 10^6 times denser dropped on a light one on a floor
+// passes into it; a ball that bounces and rests does not warn.
+TEST(Run, SpheresThatEndDeepInEachOtherAreWarnedOf) {
+  const fs::path dir = temp_dir("end_deep");
+  const std::string crushed =
+      "format: 1\ntime: {duration: 1.0, dt: 1.0e-3}\neffects: [gravity, collisions, walls, restitution, friction]\n"
+      "materials:\n  light: {density: 1000, restitution: 0.5, friction: 0.5}\n"
+      "  heavy: {density: 1.0e9, restitution: 0.5, friction: 0.5}\n"
+      "walls:\n  - plane: {point: [0, 0, 0], normal: [0, 0, 1]}\n"
+      "particles:\n  - list: {positions: [[0, 0, 0.01]], radius: 0.01}\n    material: light\n"
+      "  - list: {positions: [[0, 0, 0.2]], radius: 0.01}\n    material: heavy\n";
+  std::string err;
+  ASSERT_EQ(run_on_cpu(dir, crushed, err), 0) << err;
+  const double end = nlohmann::json::parse(read_file(dir / "out" / "summary.json")).at("max_overlap_end").get<double>();
+  ASSERT_GT(end, 0.1);  // premise: the heavy sphere went into the light one
+  EXPECT_NE(err.find("warning: spheres end overlapping by up to " + significant(100 * end, 4) + " % of a radius"),
+            std::string::npos)
+      << err;
+  fs::remove_all(dir / "out");
+  ASSERT_EQ(run_on_cpu(dir, read_file(MARBLES_SOURCE_DIR "/scenes/validation/bouncing_ball.yaml"), err), 0) << err;
+  EXPECT_EQ(err.find("end overlapping"), std::string::npos) << err;
 }
 
 // The run's closing line says what the watchdog did, where it did anything.
