@@ -56,10 +56,11 @@ std::string Simulation::describe_pipeline() const {
 void Simulation::set_watchdog(bool on) {
   m_watchdog = on;
   m_backend->set_watch(on);
-  if (on) watch_from_host();
+  if (on) watch_from_host(m_backend->save_state().walls);
 }
 
-StateOverlaps state_overlaps(const World& world, const StepModel& model, double tolerance) {
+StateOverlaps state_overlaps(const World& world, const StepModel& model,
+                             const std::vector<narrowphase::WallShape>& walls, double tolerance) {
   StateOverlaps o;
   const BodiesView b = const_cast<World&>(world).view();
   if (model.collisions) {
@@ -72,32 +73,35 @@ StateOverlaps state_overlaps(const World& world, const StepModel& model, double 
       c.a = p.i, c.b = p.j;
       const double r = narrowphase::overlap_ratio(c, b, nullptr);
       o.deepest = std::max(o.deepest, r);
+      o.deepest_free = std::max(o.deepest_free, r);
       o.pairs += r > tolerance ? 1 : 0;
     }
   }
   if (model.wall_contacts)
     for (std::uint32_t i = 0; i < world.size(); ++i) {
       double deepest = 0;
-      for (std::uint32_t k = 0; k < model.wall_shapes.size(); ++k) {
+      for (std::uint32_t k = 0; k < walls.size(); ++k) {
         narrowphase::Contact c;
         c.a = i, c.b = k | narrowphase::kWallFlag;
-        deepest = std::max(deepest, static_cast<double>(narrowphase::overlap_ratio(c, b, model.wall_shapes.data())));
+        deepest = std::max(deepest, static_cast<double>(narrowphase::overlap_ratio(c, b, walls.data())));
       }
       o.deepest = std::max(o.deepest, deepest);
+      if (!(world.inv_mass[i] > 0)) continue;  // glued where it stands: the solver never moves it
+      o.deepest_free = std::max(o.deepest_free, deepest);
       o.deepest_wall = std::max(o.deepest_wall, deepest);
       o.walls += deepest > tolerance ? 1 : 0;
     }
   return o;
 }
 
-void Simulation::watch_from_host() {
+void Simulation::watch_from_host(const std::vector<narrowphase::WallShape>& walls_now) {
   const World& w = world();
-  const auto& walls = m_model->wall_shapes;
+  const auto& walls = walls_now;  // where they stand (after a restart, moved)
   const auto wall_count = m_model->wall_contacts ? static_cast<std::uint32_t>(walls.size()) : 0u;
   // The figures of the state as it stands, as the step's end would give them:
   // the overlap rule then judges the first step from the overlaps it starts
   // with (spheres placed overlapping are pushed apart, not a blow-up).
-  m_last.max_overlap = static_cast<real>(state_overlaps(w, *m_model, 0).deepest);
+  m_last.max_overlap = static_cast<real>(state_overlaps(w, *m_model, walls_now, 0).deepest);
   m_last.kinetic_energy = 0;
   m_last.beyond_walls = 0;
   Watch& s = m_watch;
@@ -223,7 +227,7 @@ void Simulation::restore(const World& world, const StepState& state, std::uint64
   m_backend->load_state(checked);
   m_steps = steps;
   m_time = static_cast<double>(steps) * m_model->dt;
-  if (m_watchdog) watch_from_host();
+  if (m_watchdog) watch_from_host(checked.walls);
 }
 
 // The step's spheres numbered again in the broad phase's order, and the
@@ -254,6 +258,13 @@ void Simulation::step() {
   m_last_rollbacks.clear();
   m_last_kept.clear();
   const StepCounters before = m_last;
+  // What the rules compare with. After an edit (state written between steps)
+  // the state's overlap is not known: the overlap rule waits a step rather
+  // than take spheres placed in each other for a blow-up (that step is
+  // checked for non-finite values; watch_from_host measures it where the
+  // state comes whole, at the start and at a restart).
+  StepCounters judged = before;
+  if (!m_watch.known) judged.max_overlap = kWatchdogOverlap;
   if (m_watchdog) m_backend->keep_step_start();
   std::string first_unswept;  // the first try's broken rule, where the unswept rule was its only one
   const auto keep_unswept = [&](std::string why) {
@@ -263,7 +274,7 @@ void Simulation::step() {
   for (int retry = 0;; ++retry) {
     m_backend->set_iteration_factor(1 << retry);
     attempt(1 << retry);
-    std::string broken = m_watchdog ? violation(before) : std::string();
+    std::string broken = m_watchdog ? violation(judged) : std::string();
     bool unswept_only = false;
     if (broken.empty() && m_watchdog) {
       broken = unswept_violation();

@@ -36,15 +36,21 @@ namespace marbles {
 // How the spheres of `world` overlap as they stand, measured as a step's
 // end measures its max_overlap (narrowphase::overlap_ratio: of the smaller
 // radius, a wall's of the sphere's): sphere pairs where `model` has
-// collisions (two fixed spheres make no contact), sphere and wall where it
-// has wall contacts. Counted where deeper than `tolerance`; the deepest.
+// collisions (two fixed spheres make no contact), sphere and `walls` (as
+// they stand: moving walls move) where it has wall contacts. `deepest` is
+// the step's measure, fixed spheres in a wall included (a rough floor of
+// glued spheres set into it); the counts, deeper than `tolerance`, and
+// `deepest_free` are of what the solver moves: pairs with a movable sphere,
+// movable spheres in a wall.
 struct StateOverlaps {
   std::size_t pairs = 0;  // sphere pairs deeper than the tolerance
-  std::size_t walls = 0;  // spheres deeper than it into a wall (or beyond one)
+  std::size_t walls = 0;  // movable spheres deeper than it into a wall (or beyond one)
   double deepest = 0;
-  double deepest_wall = 0;  // of the sphere-wall overlaps alone
+  double deepest_free = 0;  // of pairs and of movable spheres in walls
+  double deepest_wall = 0;  // of movable spheres in walls alone
 };
-StateOverlaps state_overlaps(const World& world, const StepModel& model, double tolerance);
+StateOverlaps state_overlaps(const World& world, const StepModel& model,
+                             const std::vector<narrowphase::WallShape>& walls, double tolerance);
 
 // The watchdog gave up: the step is back at its start (a checkpoint of it is
 // the last good state).
@@ -176,7 +182,8 @@ class Simulation {
   std::string violation(const StepCounters& before);  // the broken invariant after a try, or empty
   std::string unswept_violation() const;             // the unswept rule's, checked after the others
   double watch_bound(double energy_before) const;    // the largest kinetic energy a step may reach
-  void watch_from_host();                            // the figures of the host world, into m_last
+  // The figures of the host world, its walls as they stand, into m_last.
+  void watch_from_host(const std::vector<narrowphase::WallShape>& walls);
   void inject_fault();
   void renumber();    // the spheres numbered again in the broad phase's order
   void send_edits();  // edits of the scene-numbered copy to the step

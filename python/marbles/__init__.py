@@ -411,7 +411,8 @@ class Simulation:
     name = property(lambda self: self._impl.name, doc="the scene's name")
     material_names = property(lambda self: self._impl.materials, doc="material names, by material id")
     max_overlap = property(lambda self: self._impl.max_overlap,
-                           doc="the last step's deepest overlap, of the smaller radius")
+                           doc="the last step's deepest overlap, of the smaller radius (before the first step, "
+                               "the state's at the start or restart)")
     rollbacks = property(lambda self: self._impl.rollbacks, doc="steps the watchdog redid")
     unswept_steps = property(lambda self: self._impl.unswept_steps,
                              doc="steps the watchdog kept with a sphere still unswept at its finest substep")

@@ -316,3 +316,17 @@ def test_steps_kept_unswept_are_counted_as_marbles_run_counts_them(tmp_path):
     again = marbles.Simulation.restart(tmp_path / "one.mck", scene=path, backend="cpu")
     again.run()
     assert again.summary()["unswept_steps"] == summary["unswept_steps"]
+
+
+def test_spheres_written_into_each_other_are_pushed_apart(pile):
+    # The watchdog's overlap rule waits a step after an edit: spheres written onto one spot are pushed apart
+    # over the next steps, as if a scene had placed them so, not taken for a blow-up.
+    scene = dict(pile, effects=["collisions"], walls=[])
+    scene["particles"] = [{"list": {"positions": [[0.02 * k, 0, 0] for k in range(20)], "radius": 0.01}}]
+    for when in (0, 1):
+        sim = marbles.Simulation.from_dict(scene, backend="cpu")
+        sim.step(when)
+        sim.positions = np.zeros((20, 3))
+        sim.step(100)
+        assert sim.rollbacks == 0
+        assert sim.max_overlap < 0.01
