@@ -296,6 +296,7 @@ class Simulation:
         (``path + ".scene.json"``); a checkpoint of ``marbles run`` needs
         ``scene`` (and the run's ``set``)."""
         path = _path(path, "restart: path")
+        label = "<dict>"  # a scene dict's name in errors
         if scene is None:
             try:
                 with open(path + ".scene.json", encoding="utf-8") as f:
@@ -322,6 +323,7 @@ class Simulation:
                 # The recorded text as it was (its fingerprint is the checkpoint's).
                 text = source["dict"]
                 source = {"dict": text, "name": cls._stem(source.get("name"), json.loads(text)), "set": overrides}
+                label = path + ".scene.json"
             else:
                 source = cls._file_source(source["scene"], overrides)
         elif isinstance(scene, dict):
@@ -336,16 +338,17 @@ class Simulation:
         # then says what is missing).
         precision = _marbles.checkpoint_precision(path) if os.path.exists(path) else cls._precision(source)
         self = cls.__new__(cls)
-        self._build(source, precision, backend, threads)
+        self._build(source, precision, backend, threads, label)
         self._impl.restart(path)
         return self
 
-    def _build(self, source, precision, backend, threads):
-        """The simulation of a scene's record in a precision; its warnings said once."""
+    def _build(self, source, precision, backend, threads, label="<dict>"):
+        """The simulation of a scene's record in a precision; its warnings said once. ``label``
+        names a scene dict in errors: "<dict>", or the record file it was read from."""
         backend = _choice(backend, "backend", _BACKENDS)
         overrides = source["set"]
         if "dict" in source:
-            impl = _implementation(precision)(source["dict"], "<dict>", source["name"], overrides, backend,
+            impl = _implementation(precision)(source["dict"], label, source["name"], overrides, backend,
                                               _threads(threads))
         else:
             impl = _implementation(precision)(source["scene"], "", "", overrides, backend, _threads(threads))

@@ -234,6 +234,12 @@ def test_checkpoint_paths_that_are_no_file(pile, tmp_path):
         (tmp_path / "c.mck.scene.json").write_text(text)
         with pytest.raises(marbles.SceneError, match="not the record of a scene"):
             marbles.Simulation.restart(ck)
+    # A record whose scene dict is JSON but no scene: the error names the record, not "<dict>".
+    for text in ('{"dict": "null", "set": []}', '{"dict": "{\\"time\\": 5}", "set": []}'):
+        (tmp_path / "c.mck.scene.json").write_text(text)
+        with pytest.raises(marbles.SceneError) as caught:
+            marbles.Simulation.restart(ck)
+        assert caught.value.file == str(ck) + ".scene.json", str(caught.value)
     # The record's place a folder: nothing written, a RuntimeFailure naming it; restart says the same.
     (tmp_path / "d.mck.scene.json").mkdir()
     with pytest.raises(marbles.RuntimeFailure, match=r"d\.mck\.scene\.json: it is not a file; nothing was written"):
