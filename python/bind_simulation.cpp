@@ -94,14 +94,14 @@ class PySimulation {
     m_backend_note = log.str();
     if (!m_backend_note.empty() && m_backend_note.back() == '\n') m_backend_note.pop_back();
     m_sim = std::make_unique<Simulation>(m_scene, make_world(m_scene, particles), m_backend);
-    for (std::string& w : initial_overlap_warnings(m_sim->world(), m_sim->model())) m_warnings.push_back(std::move(w));
+    m_sim->set_watchdog(true);  // measures the start, which the warnings read
+    for (std::string& w : initial_overlap_warnings(m_sim->watched_overlaps())) m_warnings.push_back(std::move(w));
     m_totals.energy_start = m_sim->world().kinetic_energy();
     m_total_steps = static_cast<std::uint64_t>(std::llround(m_scene.time.duration / m_scene.time.dt));
     if (m_scene.reference.kind != scene::ReferenceSpec::Kind::none) {
       m_probe.emplace(m_scene, m_sim->world());
       m_probe_every = m_probe->every(m_total_steps);
     }
-    m_sim->set_watchdog(true);
   }
 
   // Advances n steps (the GIL released); views handed out are checked first.

@@ -164,11 +164,7 @@ void write_files_atomic(const std::vector<std::pair<fs::path, std::string_view>>
     for (const fs::path& t : temps) fs::remove(t, ec);
   };
   try {
-    for (const auto& [path, contents] : files) {
-      if (const char* what = not_a_plain_file(path.string(), /*follow_links=*/false))
-        throw RuntimeFailure("cannot write " + path.string() + ": it is " + what + ", not a file; nothing was written");
-      temps.push_back(write_temporary(path, contents));
-    }
+    for (const auto& [path, contents] : files) temps.push_back(write_temporary(path, contents));
     for (std::size_t k = 0; k < files.size(); ++k) check_before_rename(temps[k], files[k].first, has_size(files[k].second.size()));
   } catch (...) {
     drop();

@@ -82,14 +82,13 @@ std::string radii_text(double radii) {
 // smaller radius into each other or a wall: the solver pushes them apart
 // over the first steps, faster than a pile settles, which a user who meant
 // them to touch should know.
-void warn_initial_overlaps(const World& world, const StepModel& model, std::ostream& err) {
-  for (const std::string& w : initial_overlap_warnings(world, model)) err << "warning: " << w << "\n";
+void warn_initial_overlaps(const StateOverlaps& start, std::ostream& err) {
+  for (const std::string& w : initial_overlap_warnings(start)) err << "warning: " << w << "\n";
 }
 
 }  // namespace
 
-std::vector<std::string> initial_overlap_warnings(const World& world, const StepModel& model) {
-  const StateOverlaps o = state_overlaps(world, model, model.wall_shapes, 0.01);
+std::vector<std::string> initial_overlap_warnings(const StateOverlaps& o) {
   std::vector<std::string> out;
   if (o.pairs > 0)
     out.push_back(std::to_string(o.pairs) +
@@ -136,7 +135,8 @@ int check_scene(const std::string& scene_path, const std::vector<std::string>& o
       << sc.walls.size() << " wall(s), " << std::llround(sc.time.duration / sc.time.dt) << " steps of "
       << sc.time.dt << " s, " << kRealName << ")\n";
   warn_risky_settings(sc, particles, err);
-  warn_initial_overlaps(world, compile_step_model(sc, broadphase::Algorithm::home), err);
+  const StepModel model = compile_step_model(sc, broadphase::Algorithm::home);
+  warn_initial_overlaps(state_overlaps(world, model, model.wall_shapes, kStartOverlapTolerance), err);
   return 0;
 }
 
@@ -193,7 +193,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   if (sc.reference.kind != scene::ReferenceSpec::Kind::none) ReferenceProbe(sc, world);
 
   Simulation sim(sc, std::move(world), backend, options.algorithm);
-  warn_initial_overlaps(sim.world(), sim.model(), err);
+  sim.set_watchdog(true);  // measures the start (and a restart below, again)
+  warn_initial_overlaps(sim.watched_overlaps(), err);
   const render::Bounds view = render::scene_bounds(make_snapshot(sim), sim.walls());  // before any restart
   if (!options.quiet) out << sc.name << ": " << sim.world().size() << " spheres\n" << sim.describe_pipeline();
 
@@ -221,7 +222,6 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     if (!options.quiet) out << "resumed from " << *options.restart << " at step " << c.steps << "\n";
   }
 
-  sim.set_watchdog(true);
   // Test hooks: MARBLES_FAULT_NAN_STEP=N (the first try of step N goes
   // non-finite) or N:all (every try); MARBLES_FAULT_KICK_STEP=N[:all] (sphere
   // 0 kicked to 100 radii per step), MARBLES_FAULT_ESCAPE_STEP=N[:all]
@@ -375,7 +375,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   // Measured on the state as it ends, of what the solver moves (glued
   // spheres set into a wall on purpose are not its doing).
   if (totals.overlap_end > kDeepAtTheEnd) {
-    const double deepest = state_overlaps(sim.world(), sim.model(), sim.save_state().walls, 0).deepest_free;
+    const double deepest = state_overlaps(sim.world(), sim.model(), sim.save_state().walls, 0).deepest_free();
     if (deepest > kDeepAtTheEnd)
       err << "warning: spheres end overlapping by up to " << significant(100 * deepest, 4)
           << " % of a radius: the solve did not hold them apart (a heavy sphere on light ones, or too few "

@@ -14,6 +14,7 @@
 #include "broadphase/broadphase.hpp"
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
+#include "sim/simulation.hpp"
 #include "sim/step_model.hpp"
 #include "sim/world.hpp"
 
@@ -41,9 +42,9 @@ struct CheckedScene {
 CheckedScene checked_scene(const std::string& scene_path, const std::vector<std::string>& overrides);
 
 // The warnings `run` and `check` give where spheres start overlapping each
-// other or a wall by more than 1 % of the smaller radius (without
-// "warning: "); none where none do.
-std::vector<std::string> initial_overlap_warnings(const World& world, const StepModel& model);
+// other or a wall by more than 1 % of the smaller radius (a measure of the
+// start past kStartOverlapTolerance; without "warning: "); none where none do.
+std::vector<std::string> initial_overlap_warnings(const StateOverlaps& start);
 
 struct RunOptions {
   std::string scene_path;

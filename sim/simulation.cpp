@@ -73,7 +73,7 @@ StateOverlaps state_overlaps(const World& world, const StepModel& model,
       c.a = p.i, c.b = p.j;
       const double r = narrowphase::overlap_ratio(c, b, nullptr);
       o.deepest = std::max(o.deepest, r);
-      o.deepest_free = std::max(o.deepest_free, r);
+      o.deepest_pair = std::max(o.deepest_pair, r);
       o.pairs += r > tolerance ? 1 : 0;
     }
   }
@@ -87,7 +87,6 @@ StateOverlaps state_overlaps(const World& world, const StepModel& model,
       }
       o.deepest = std::max(o.deepest, deepest);
       if (!(world.inv_mass[i] > 0)) continue;  // glued where it stands: the solver never moves it
-      o.deepest_free = std::max(o.deepest_free, deepest);
       o.deepest_wall = std::max(o.deepest_wall, deepest);
       o.walls += deepest > tolerance ? 1 : 0;
     }
@@ -101,7 +100,8 @@ void Simulation::watch_from_host(const std::vector<narrowphase::WallShape>& wall
   // The figures of the state as it stands, as the step's end would give them:
   // the overlap rule then judges the first step from the overlaps it starts
   // with (spheres placed overlapping are pushed apart, not a blow-up).
-  m_last.max_overlap = static_cast<real>(state_overlaps(w, *m_model, walls_now, 0).deepest);
+  m_watched_overlaps = state_overlaps(w, *m_model, walls_now, kStartOverlapTolerance);
+  m_last.max_overlap = static_cast<real>(m_watched_overlaps.deepest);
   m_last.kinetic_energy = 0;
   m_last.beyond_walls = 0;
   Watch& s = m_watch;

@@ -40,15 +40,18 @@ namespace marbles {
 // they stand: moving walls move) where it has wall contacts. `deepest` is
 // the step's measure, fixed spheres in a wall included (a rough floor of
 // glued spheres set into it); the counts, deeper than `tolerance`, and
-// `deepest_free` are of what the solver moves: pairs with a movable sphere,
-// movable spheres in a wall.
+// deepest_free() are of what the solver moves: pairs with a movable
+// sphere, movable spheres in a wall.
 struct StateOverlaps {
   std::size_t pairs = 0;  // sphere pairs deeper than the tolerance
   std::size_t walls = 0;  // movable spheres deeper than it into a wall (or beyond one)
   double deepest = 0;
-  double deepest_free = 0;  // of pairs and of movable spheres in walls
-  double deepest_wall = 0;  // of movable spheres in walls alone
+  double deepest_pair = 0;
+  double deepest_wall = 0;  // of movable spheres in walls
+  double deepest_free() const { return deepest_pair > deepest_wall ? deepest_pair : deepest_wall; }
 };
+// The tolerance of the warnings of spheres that start overlapping.
+inline constexpr double kStartOverlapTolerance = 0.01;
 StateOverlaps state_overlaps(const World& world, const StepModel& model,
                              const std::vector<narrowphase::WallShape>& walls, double tolerance);
 
@@ -80,6 +83,10 @@ class Simulation {
   const World& world() const;
   const Walls& walls() const { return m_model->walls; }
   const StepModel& model() const { return *m_model; }
+  // How the state overlapped where the watchdog last measured it whole (its
+  // start, set_watchdog(true), or a restart), counted past
+  // kStartOverlapTolerance: the start's warnings read it.
+  const StateOverlaps& watched_overlaps() const { return m_watched_overlaps; }
   double time() const { return m_time; }
   std::uint64_t steps() const { return m_steps; }
   double dt() const { return m_model->dt; }
@@ -182,6 +189,7 @@ class Simulation {
   std::string violation(const StepCounters& before);  // the broken invariant after a try, or empty
   std::string unswept_violation() const;             // the unswept rule's, checked after the others
   double watch_bound(double energy_before) const;    // the largest kinetic energy a step may reach
+  StateOverlaps m_watched_overlaps;  // watch_from_host's measure of the state
   // The figures of the host world, its walls as they stand, into m_last.
   void watch_from_host(const std::vector<narrowphase::WallShape>& walls);
   void inject_fault();

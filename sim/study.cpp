@@ -220,6 +220,24 @@ void mark_pareto(std::vector<StudyRow>& rows) {
 
 namespace {
 
+// What one combination runs with: the backend and precision where varied
+// (the program's own options), the other varied keys as overrides after the
+// study's own.
+struct RunSettings {
+  std::string backend, precision;
+  std::vector<std::string> sets;
+};
+RunSettings settings_of(const StudyOptions& options, const std::vector<std::string>& values) {
+  RunSettings r{options.backend, "", options.set};
+  for (std::size_t k = 0; k < options.vary.size(); ++k) {
+    const std::string& key = options.vary[k].key;
+    if (key == "backend") r.backend = values[k];
+    else if (key == "precision") r.precision = values[k];
+    else r.sets.push_back(key + "=" + values[k]);
+  }
+  return r;
+}
+
 // Every combination's scene loaded before anything is made or run: a key or
 // value the scene refuses is said as the scene says it (file, line, key,
 // and the combination), with no run folder or log left behind.
@@ -233,19 +251,14 @@ void check_combinations(const StudyOptions& options, const std::vector<std::vect
   };
   one_of("backend", options.backend, {"auto", "cpu", "cuda"});
   for (const std::vector<std::string>& values : combos) {
-    std::vector<std::string> sets = options.set;
-    std::string precision;
-    for (std::size_t k = 0; k < options.vary.size(); ++k) {
-      const std::string& key = options.vary[k].key;
-      if (key == "backend") one_of("--vary backend", values[k], {"auto", "cpu", "cuda"});
-      else if (key == "precision") one_of("--vary precision", precision = values[k], {"float", "double"});
-      else sets.push_back(key + "=" + values[k]);
-    }
+    RunSettings run = settings_of(options, values);
+    one_of("--vary backend", run.backend, {"auto", "cpu", "cuda"});
+    if (!run.precision.empty()) one_of("--vary precision", run.precision, {"float", "double"});
     try {
       // Held as `marbles check` holds it, in this build's precision; a run in
       // the other one is checked by that run (its ranges are its own).
-      if (precision.empty()) precision = scene::scene_precision(options.scene_path, sets);
-      if (precision == kRealName) (void)checked_scene(options.scene_path, sets);
+      if (run.precision.empty()) run.precision = scene::scene_precision(options.scene_path, run.sets);
+      if (run.precision == kRealName) (void)checked_scene(options.scene_path, run.sets);
     } catch (const InputError& e) {
       throw InputError(e.where(), e.key(), e.message() + " (study run " + label_of(options.vary, values) + ")");
     }
@@ -295,18 +308,12 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     StudyRow row;
     row.values = combos[c];
     std::vector<double> per_step, per_second;
-    std::string backend = options.backend, precision;
+    const RunSettings run = settings_of(options, row.values);
     std::vector<std::string> args{options.marbles, "run", options.scene_path, "--quiet", "--summary-only", "--overwrite"};
-    for (const std::string& s : options.set) args.insert(args.end(), {"--set", s});
+    for (const std::string& s : run.sets) args.insert(args.end(), {"--set", s});
     for (const std::string& l : options.limits) args.insert(args.end(), {"--limit", l});
-    for (std::size_t k = 0; k < options.vary.size(); ++k) {
-      const std::string& key = options.vary[k].key;
-      if (key == "backend") backend = row.values[k];
-      else if (key == "precision") precision = row.values[k];
-      else args.insert(args.end(), {"--set", key + "=" + row.values[k]});
-    }
-    args.insert(args.end(), {"--backend", backend});
-    if (!precision.empty()) args.insert(args.end(), {"--precision", precision});
+    args.insert(args.end(), {"--backend", run.backend});
+    if (!run.precision.empty()) args.insert(args.end(), {"--precision", run.precision});
     const fs::path run_dir = dir / "runs" / std::to_string(c);
     args.insert(args.end(), {"--out", run_dir.string()});
     nlohmann::json summary;
