@@ -9,6 +9,7 @@ The scene format, its checks and its error messages are those of ``marbles run``
 (docs/scene-format.md); docs/python.md describes this module.
 """
 
+import inspect
 import json
 import math
 import numbers
@@ -140,6 +141,21 @@ def _json_text(text):
 
 def _implementation(precision):
     return _marbles.SimulationDouble if precision == "double" else _marbles.SimulationFloat
+
+
+def _check_called_with_one(function, what):
+    """Refuses, before any step, a function that cannot be called with one
+    argument (the simulation). One whose signature Python cannot read (some
+    built-ins) is left to its call."""
+    try:
+        signature = inspect.signature(function)
+    except (TypeError, ValueError):
+        return
+    try:
+        signature.bind(None)
+    except TypeError as e:
+        raise TypeError(f"{what}: is called with one argument, the simulation; {function!r} "
+                        f"takes {signature} ({e})") from None
 
 
 def _is_false(value):
@@ -381,6 +397,8 @@ class Simulation:
         every = _whole(every, "run: every", 1)
         if callback is not None and not callable(callback):
             raise TypeError(f"run: callback: a function of the simulation, got {callback!r}")
+        if callback is not None:
+            _check_called_with_one(callback, "run: callback")
         if until is not None and (isinstance(until, (bool, np.bool_)) or not isinstance(until, numbers.Real)):
             raise TypeError(f"run: until: a time in seconds, got {until!r}")
         try:

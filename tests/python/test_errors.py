@@ -141,10 +141,18 @@ def test_counts_are_whole_numbers(pile):
             sim.run(until=until)
     with pytest.raises(TypeError, match="run: callback"):
         sim.run(until=1.0, callback=5)
+    # A callback that cannot take the simulation is refused before the first step.
+    for callback in (lambda: None, lambda s, t: None, lambda *, s: None):
+        with pytest.raises(TypeError, match="run: callback: is called with one argument"):
+            sim.run(until=1.0, callback=callback)
     assert sim.steps == 15
+    seen = []
+    sim.run(until=sim.time + 2 * sim.dt, callback=lambda s, extra=1, *rest: seen.append(extra))
+    sim.run(until=sim.time + sim.dt, callback=lambda *a: seen.append(len(a)))
+    assert seen == [1, 1, 1] and sim.steps == 18
     # A callback's NumPy False stops the run as False does.
     sim.run(until=sim.time + 10 * sim.dt, callback=lambda s: np.False_, every=2)
-    assert sim.steps == 17
+    assert sim.steps == 20
     # threads: 0 (the default count) or 1 to 4096, a whole number.
     for threads, error in ((-7, ValueError), (10**6, ValueError), (1.5, ValueError), ("2", TypeError)):
         with pytest.raises(error, match="threads"):
@@ -157,7 +165,7 @@ def test_counts_are_whole_numbers(pile):
                  lambda: sim.step(int(limit // sim.substeps) + 1), lambda: sim.run(until=1e20)):
         with pytest.raises(ValueError, match=re.escape(f"more than the limit {limit:.0e}")):
             call()
-    assert sim.steps == 17
+    assert sim.steps == 20
     # A 0-d array is its one value, in a scene dict and in an override.
     zero_d = dict(pile)
     zero_d["time"] = dict(pile["time"], dt=np.array(pile["time"]["dt"]))
