@@ -178,7 +178,7 @@ void make_parent_folder(const std::string& path) {
   if (ec) throw RuntimeFailure("cannot create " + parent.string() + ": " + ec.message());
 }
 
-Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
+Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash, std::optional<std::uint64_t> text_hash) {
   if (const char* what = not_a_plain_file(path))
     throw InputError(SourceLocation{path, 0, 0}, "--restart", std::string("is ") + what + ", not a checkpoint");
   std::ifstream in(path, std::ios::binary);
@@ -206,7 +206,7 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash) {
   if (r.get<std::uint32_t>() != sizeof(narrowphase::WallShape)) r.fail("comes from an incompatible build");
   Checkpoint c;
   c.scene_hash = r.get<std::uint64_t>();
-  if (c.scene_hash != scene_hash)
+  if (c.scene_hash != scene_hash && c.scene_hash != text_hash)
     r.fail("belongs to another scene (or other --set overrides): the scene file or its overrides changed");
   body(r, c, format);
   if (r.at() + 8 != bytes.size()) r.fail("is damaged (bytes past its fields)");

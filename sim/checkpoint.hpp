@@ -10,6 +10,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -41,7 +42,7 @@ struct RunTotals {
 };
 
 struct Checkpoint {
-  std::uint64_t scene_hash = 0;  // scene_fingerprint of the run that wrote it
+  std::uint64_t scene_hash = 0;  // Scene::fingerprint of the run that wrote it
   std::uint64_t steps = 0;
   World world;
   StepState state;
@@ -50,8 +51,10 @@ struct Checkpoint {
   std::vector<std::uint32_t> ids;  // Simulation::ids(): the step's numbering (empty: the scene's)
 };
 
-// What a checkpoint must match: the scene file's bytes and the --set
-// overrides (not --duration or --out: a resumed run may run longer, elsewhere).
+// What a checkpoint must match is Scene::fingerprint: the scene as read, its
+// overrides applied (not --duration or --out: a resumed run may run longer,
+// elsewhere). Checkpoints written before it hold the fingerprint of the
+// texts, the scene file's bytes and each --set text, which these make.
 std::uint64_t scene_fingerprint(const std::string& scene_path, const std::vector<std::string>& overrides);
 // The same of a scene's text (a scene given as JSON).
 std::uint64_t text_fingerprint(const std::string& text, const std::vector<std::string>& overrides);
@@ -65,8 +68,11 @@ std::string checkpoint_bytes(const Checkpoint& checkpoint);
 void make_parent_folder(const std::string& path);
 
 // Reads and checks (format, precision, scene, completeness); throws
-// InputError naming the file and what does not match.
-Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash);
+// InputError naming the file and what does not match. Its scene is
+// `scene_hash` (Scene::fingerprint) or, where given, `text_hash` (an
+// earlier checkpoint's: scene_fingerprint, text_fingerprint).
+Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash,
+                           std::optional<std::uint64_t> text_hash = std::nullopt);
 
 // Whether a checkpoint read for a scene fits it: as many spheres as the
 // scene makes, each of a material the scene has, and the scene's walls (its

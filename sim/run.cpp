@@ -202,13 +202,14 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   std::optional<ReferenceProbe> probe;
   if (sc.reference.kind != scene::ReferenceSpec::Kind::none) probe.emplace(sc, sim.world());
   const std::uint64_t probe_every = probe ? probe->every(total_steps) : 0;
-  const std::uint64_t fingerprint = scene_fingerprint(options.scene_path, options.overrides);
+  const std::uint64_t fingerprint = sc.fingerprint;
 
   RunTotals totals;
   totals.energy_start = sim.world().kinetic_energy();
   const bool render = options.render;
   if (options.restart) {
-    Checkpoint c = read_checkpoint(*options.restart, fingerprint);
+    Checkpoint c =
+        read_checkpoint(*options.restart, fingerprint, scene_fingerprint(options.scene_path, options.overrides));
     check_checkpoint_fits(c, *options.restart, "--restart", sim.world().size(), sc.materials.size(),
                           sim.model().wall_shapes);
     if (c.steps > total_steps)

@@ -26,6 +26,7 @@
 
 #include "core/files.hpp"
 #include "core/format.hpp"
+#include "core/hash.hpp"
 #include "sim/limits.hpp"
 #include "sim/scene_overrides.hpp"
 #include "sim/scene_yaml.hpp"
@@ -841,6 +842,46 @@ void apply_overrides_whole(YAML::Node document, const std::vector<std::string>& 
     }
 }
 
+// Folds `node` (at `key`, a Field's key) into the fingerprint `h`
+// (Scene::fingerprint): each scalar as the reader took it, else its text;
+// a map's keys sorted where the reader did not take them in order. Each
+// part is a tag and a counted text, so no two trees fold alike. (Nodes are
+// sorted by index: assigning a YAML::Node would rewrite the tree.)
+void fold_tree(const YAML::Node& node, const std::string& key, const detail::Origins& origins, std::uint64_t& h) {
+  const auto put = [&h](char tag, const std::string& text) {
+    const std::uint64_t size = text.size();
+    h = fnv1a(&tag, 1, h);
+    h = fnv1a(&size, sizeof size, h);
+    h = fnv1a(text.data(), text.size(), h);
+  };
+  if (node.IsScalar()) {
+    const std::string* value = origins.taken(key, node.Scalar());
+    put(value ? 'v' : 's', value ? *value : node.Scalar());
+  } else if (node.IsSequence()) {
+    put('[', std::to_string(node.size()));
+    std::size_t i = 0;
+    for (const YAML::Node& item : node) fold_tree(item, key + "[" + std::to_string(i++) + "]", origins, h);
+  } else if (node.IsMap()) {
+    std::vector<std::string> names;
+    std::vector<YAML::Node> values;
+    for (const auto& entry : node) {
+      names.push_back(entry.first.Scalar());
+      values.push_back(entry.second);
+    }
+    std::vector<std::size_t> order(names.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    if (!origins.is_ordered(key))
+      std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return names[a] < names[b]; });
+    put('{', std::to_string(names.size()));
+    for (const std::size_t i : order) {
+      put('k', names[i]);
+      fold_tree(values[i], key.empty() ? names[i] : key + "." + names[i], origins, h);
+    }
+  } else {
+    put('~', "");
+  }
+}
+
 }  // namespace
 
 // `path`: where the scene came from (errors name it); `stem`: the default name
@@ -895,6 +936,8 @@ Scene read_scene(YAML::Node document, const std::string& path, const std::string
   scene.output.dir = "out/" + stem;
   if (auto f = top.optional("output")) scene.output = read_output(*f, stem);
   if (auto f = top.optional("reference")) scene.reference = read_reference(*f);
+  scene.fingerprint = fnv1a("marbles scene 1", 16);  // apart from text_fingerprint's (sim/checkpoint.hpp)
+  fold_tree(document, "", origins, scene.fingerprint);
   return scene;
 }
 

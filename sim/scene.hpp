@@ -215,6 +215,12 @@ struct Scene {
   std::vector<ParticleBlock> particles;
   OutputSpec output;
   ReferenceSpec reference;
+  // What a checkpoint must match (sim/checkpoint.hpp): FNV-1a of the scene's
+  // tree once the overrides are applied, each value as the reader took it
+  // (5e-4 and 0.0005 alike, True and true, quoted or not; a name as
+  // written), each map's keys sorted but where their order counts. Set by
+  // the loaders; run --duration and --out change the scene after it.
+  std::uint64_t fingerprint = 0;
 
   bool has(Effect e) const {
     for (Effect x : effects) if (x == e) return true;

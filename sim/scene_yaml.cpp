@@ -129,6 +129,16 @@ const std::string* Origins::find(const YAML::Node& node) const {
   return nullptr;
 }
 
+void Origins::took(const std::string& key, const std::string& text, const std::string& value) const {
+  const auto [at, added] = m_taken.try_emplace(key, text, value);
+  if (!added && (at->second.first != text || at->second.second != value)) at->second.second.clear();
+}
+
+const std::string* Origins::taken(const std::string& key, const std::string& text) const {
+  const auto at = m_taken.find(key);
+  return at != m_taken.end() && at->second.first == text && !at->second.second.empty() ? &at->second.second : nullptr;
+}
+
 // --- Field -----------------------------------------------------------------
 
 Field::Field(YAML::Node node, std::string key, const std::string& file, const Origins* origins)
@@ -163,7 +173,17 @@ std::string Field::description() const {
   }
 }
 
+void Field::took(const std::string& value) const {
+  if (m_origins && is_scalar()) m_origins->took(m_key, m_node.Scalar(), value);
+}
+
 double Field::number() const {
+  const double value = finite_number();
+  took("n:" + format_number(value));
+  return value;
+}
+
+double Field::finite_number() const {
   if (!is_scalar()) fail("expected a number, got " + description());
   const std::string& text = m_node.Scalar();
   if (is_yaml_non_finite(text)) fail("must be a finite number, got " + text);
@@ -209,15 +229,18 @@ double Field::within(double lo, double hi) const {
 long long Field::integer() const {
   if (!is_scalar()) fail("expected an integer, got " + description());
   long long value = 0;
-  if (parse_integer(m_node.Scalar(), value)) return value;
-  const double d = number();  // reports non-numbers and non-finite values
-  if (d != std::floor(d)) fail("expected an integer, got " + m_node.Scalar());
-  // A whole number past long long's range (written out, or as 1e20): the
-  // nearest end, for the caller's bounds to name ("must be <= ...").
-  constexpr double kTop = 9223372036854775808.0;  // 2^63
-  if (d >= kTop) return std::numeric_limits<long long>::max();
-  if (d <= -kTop) return std::numeric_limits<long long>::min();
-  return static_cast<long long>(d);
+  if (!parse_integer(m_node.Scalar(), value)) {
+    const double d = finite_number();  // reports non-numbers and non-finite values
+    if (d != std::floor(d)) fail("expected an integer, got " + m_node.Scalar());
+    // A whole number past long long's range (written out, or as 1e20): the
+    // nearest end, for the caller's bounds to name ("must be <= ...").
+    constexpr double kTop = 9223372036854775808.0;  // 2^63
+    value = d >= kTop ? std::numeric_limits<long long>::max()
+            : d <= -kTop ? std::numeric_limits<long long>::min()
+                         : static_cast<long long>(d);
+  }
+  took("i:" + std::to_string(value));
+  return value;
 }
 
 int Field::integer_at_least(long long lo, long long hi) const {
@@ -230,16 +253,20 @@ int Field::integer_at_least(long long lo, long long hi) const {
 std::uint64_t Field::seed() const {
   if (!is_scalar()) fail("expected an integer, got " + description());
   std::uint64_t value = 0;
-  if (parse_integer(m_node.Scalar(), value)) return value;
-  const double d = number();
-  if (d != std::floor(d)) fail("expected an integer, got " + m_node.Scalar());
-  if (d < 0) fail("must be >= 0, got " + m_node.Scalar());
-  if (d >= 18446744073709551616.0) fail("must be <= 18446744073709551615, got " + m_node.Scalar());  // 2^64
-  return static_cast<std::uint64_t>(d);  // whole and below 2^64: exact
+  if (!parse_integer(m_node.Scalar(), value)) {
+    const double d = finite_number();
+    if (d != std::floor(d)) fail("expected an integer, got " + m_node.Scalar());
+    if (d < 0) fail("must be >= 0, got " + m_node.Scalar());
+    if (d >= 18446744073709551616.0) fail("must be <= 18446744073709551615, got " + m_node.Scalar());  // 2^64
+    value = static_cast<std::uint64_t>(d);  // whole and below 2^64: exact
+  }
+  took("u:" + std::to_string(value));
+  return value;
 }
 
 std::string Field::word() const {
   if (!is_scalar()) fail("expected a name, got " + description());
+  took("");  // a name is its text
   return m_node.Scalar();
 }
 
@@ -247,8 +274,11 @@ bool Field::boolean() const {
   if (is_scalar()) {
     std::string t;
     for (char c : m_node.Scalar()) t += lower(c);
-    if (t == "true" || t == "yes" || t == "on") return true;
-    if (t == "false" || t == "no" || t == "off") return false;
+    const bool yes = t == "true" || t == "yes" || t == "on";
+    if (yes || t == "false" || t == "no" || t == "off") {
+      took(yes ? "b:1" : "b:0");
+      return yes;
+    }
   }
   fail("expected true or false, got " + description());
 }

@@ -18,6 +18,7 @@
 #include <string>
 #include <string_view>
 #include <unordered_map>
+#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -54,15 +55,29 @@ std::string format_real(real value);
 std::string real_range_problem(double value, bool bound);
 
 // The nodes that `--set` overrides put into a tree, each with the text of its
-// override ("--set time.dt=-1").
+// override ("--set time.dt=-1"); and, for the scene's fingerprint
+// (Scene::fingerprint), how the reader took the tree's values.
 class Origins {
  public:
   void add(const YAML::Node& node, const std::string& text);
   // The override that put `node` in (the latest when several did), or nullptr.
   const std::string* find(const YAML::Node& node) const;
 
+  // The scalar `text` at `key` read as `value` (a typed read's one spelling:
+  // "n:0.0005", "i:12", "b:1"), or, with `value` empty, as a name: a key
+  // read as a name, or from two texts, keeps its text.
+  void took(const std::string& key, const std::string& text, const std::string& value) const;
+  // What the scalar `text` at `key` was taken for, or nullptr (its text stands).
+  const std::string* taken(const std::string& key, const std::string& text) const;
+  // A map whose entries the reader took in order (MapFields::entries):
+  // its order counts (the materials' is their numbering).
+  void ordered(const std::string& key) const { m_ordered.insert(key); }
+  bool is_ordered(const std::string& key) const { return m_ordered.count(key) > 0; }
+
  private:
   std::vector<std::pair<YAML::Node, std::string>> m_nodes;
+  mutable std::unordered_map<std::string, std::pair<std::string, std::string>> m_taken;  // key -> text, value
+  mutable std::unordered_set<std::string> m_ordered;
 };
 
 class Field {
@@ -79,6 +94,7 @@ class Field {
   const std::string& key() const { return m_key; }
   const std::string& file() const { return m_file; }
   bool from_override() const { return m_from_override; }
+  const Origins* origins() const { return m_origins; }
   // file:line:column, or the override's text without a line.
   SourceLocation where() const;
 
@@ -109,6 +125,9 @@ class Field {
   std::vector<Field> items() const;
 
  private:
+  double finite_number() const;  // number() without the fingerprint's record
+  void took(const std::string& value) const;  // Origins::took of this scalar
+
   YAML::Node m_node;
   std::string m_key;
   std::string m_file;
@@ -133,7 +152,10 @@ class MapFields {
     SourceLocation name_where;
     Field value;
   };
-  const std::vector<Entry>& entries() const { return m_entries; }
+  const std::vector<Entry>& entries() const {
+    if (m_self.origins()) m_self.origins()->ordered(m_self.key());
+    return m_entries;
+  }
 
  private:
   void read(const std::vector<std::string>& allowed);

@@ -206,6 +206,28 @@ def test_checkpoint_and_restart_go_on_bit_for_bit(pile, tmp_path):
         marbles.Simulation.restart(path)
 
 
+def test_restart_takes_the_same_scene_in_other_texts(pile, tmp_path):
+    # The checkpoint holds the scene as read: overrides that read alike (in
+    # another order, 5e-4 as 0.0005, True as true, quoted) resume it, from
+    # the record or a scene given anew; another value is refused.
+    sim = marbles.Simulation.from_dict(pile, backend="cpu", set=["time.dt=5e-4", "solver.speculative=true"])
+    sim.step(10)
+    path = tmp_path / "c.mck"
+    sim.checkpoint(path)
+    sim.step(10)
+    for form in (["solver.speculative=True", "time.dt=0.0005"], {"time.dt": 0.0005, "solver.speculative": True},
+                 ['time.dt="5e-4"', "solver={speculative: yes}"]):
+        again = marbles.Simulation.restart(path, backend="cpu", set=form)
+        assert again.steps == 10, form
+        again.step(10)
+        assert np.array_equal(sim.positions, again.positions), form
+    same = marbles.Simulation.restart(path, scene=pile, backend="cpu",
+                                      set={"time.dt": 5e-4, "solver.speculative": True})
+    assert same.steps == 10
+    with pytest.raises(marbles.SceneError, match="another scene"):
+        marbles.Simulation.restart(path, backend="cpu", set={"time.dt": 4e-4, "solver.speculative": True})
+
+
 def test_double_precision_scene(pile):
     pile["solver"] = {"precision": "double"}
     sim = marbles.Simulation.from_dict(pile, backend="cpu")

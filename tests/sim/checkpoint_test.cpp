@@ -7,10 +7,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <sstream>
 #include <string>
 #include <vector>
 
+#include "core/hash.hpp"
 #include "tests/sim/checkpoint_cases.hpp"
 #include "tests/sim/scene_cases.hpp"
 
@@ -411,6 +413,66 @@ TEST_F(Checkpoints, ForeignOrDamagedCheckpointsAreRefused) {
   const std::string other = dir.write("other.mck", "not a checkpoint at all, just text");
   EXPECT_EQ(marbles("run " + scene + " --quiet --restart " + other, &err), 2);
   EXPECT_NE(err.find("is not a marbles checkpoint"), std::string::npos) << err;
+}
+
+// What a checkpoint must match is the scene as read, not its texts: the same
+// values written otherwise (5e-4 and 0.0005, 12.0 and 12, True and true,
+// quoted or not, a map for dotted keys, the file's own value), in another
+// order or set twice, resume it, and the run ends as the uninterrupted one;
+// another value, an override left out, or a name written otherwise (a name is
+// its text: 1 is not 1.0) is refused.
+TEST_F(Checkpoints, OverridesThatReadAlikeResume) {
+  const test::ScratchDir dir("ck_alike");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string common = " --quiet --backend cpu";
+  const std::string given = " --set time.dt=5e-4 --set solver.iterations=12.0 --set solver.speculative=true"
+                            " --set materials.glass.friction=0.3 --set 'solver.integrator=\"velocity_verlet\"'"
+                            " --set name=1";
+  const std::string whole = dir.path() + "/whole", cut = dir.path() + "/cut";
+  ASSERT_EQ(marbles("run " + scene + common + given + " --out " + whole), 0);
+  ASSERT_EQ(marbles("run " + scene + common + given + " --out " + cut + " --duration 0.05"), 0);
+  const std::string ck = " --restart " + cut + "/checkpoints/step_000100.mck";
+  const std::string alike = " --set name=1 --set materials.glass.friction=0.30 --set solver.iterations=5"
+                            " --set 'solver={iterations: 12, integrator: velocity_verlet, speculative: True}'"
+                            " --set 'time.dt=\"0.0005\"' --set time.substeps=2";
+  std::string err;
+  for (const std::string& other : {replace_all(given, "dt=5e-4", "dt=4e-4"), replace_all(given, "name=1", "name=1.0"),
+                                   replace_all(given, " --set materials.glass.friction=0.3", "")}) {
+    EXPECT_EQ(marbles("run " + scene + common + other + " --out " + dir.path() + "/other" + ck, &err), 2) << other;
+    EXPECT_NE(err.find("belongs to another scene"), std::string::npos) << other << ": " << err;
+  }
+  ASSERT_EQ(marbles("run " + scene + common + alike + " --out " + cut + ck, &err), 0) << err;
+  expect_same_output(whole, cut);
+}
+
+// A checkpoint of an earlier build holds the fingerprint of the texts (the
+// scene file's bytes, then each --set text with its NUL): it resumes with
+// the same texts still, and only with them.
+TEST_F(Checkpoints, CheckpointsOfTheTextsStillResume) {
+  const test::ScratchDir dir("ck_texts");
+  const std::string scene = dir.write("s.yaml", kScene);
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --set time.dt=5e-4 --duration 0.05 --out " + dir.path() +
+                    "/o"),
+            0);
+  const std::string ck = dir.path() + "/o/checkpoints/step_000100.mck";
+  std::string bytes = slurp(ck);
+  std::uint64_t texts = fnv1a(kScene, std::strlen(kScene));
+  texts = fnv1a("time.dt=5e-4", 13, texts);
+  std::memcpy(bytes.data() + 8 + 4 + 16 + 4 + 4, &texts, 8);  // after magic, format, version, real and wall sizes
+  const std::uint64_t sum = fnv1a(bytes.data(), bytes.size() - 8);
+  std::memcpy(bytes.data() + bytes.size() - 8, &sum, 8);
+  std::ofstream(ck, std::ios::binary) << bytes;
+  std::string err;
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --set time.dt=0.0005 --out " + dir.path() +
+                        "/o --restart " + ck,
+                    &err),
+            2);
+  EXPECT_NE(err.find("belongs to another scene"), std::string::npos) << err;
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --set time.dt=5e-4 --out " + dir.path() +
+                        "/o --restart " + ck,
+                    &err),
+            0)
+      << err;
 }
 
 // The watchdog: an injected non-finite velocity (test hook) is rolled back
