@@ -162,11 +162,12 @@ double wall_push(const scene::Scene& scene) {
 }
 
 // Fastest sphere: its initial speed, or what a moving wall gives it, plus a
-// fall from the highest centre to the lowest centre or wall bottom, against
-// the smallest radius per substep.
-std::optional<std::string> fast_motion(const Setting& s, const scene::Scene& scene,
-                                       const scene::GeneratedParticles& p) {
-  double fall = 0;
+// fall from the highest centre to the lowest centre or wall bottom.
+struct Fastest {
+  double v = 0, fall = 0, pushed = 0;
+};
+Fastest fastest(const Setting& s, const scene::Scene& scene, const scene::GeneratedParticles& p) {
+  Fastest f;
   if (s.g > 0) {
     double top = -kInf, bottom = kInf;
     for (const Vec3& c : p.position) {
@@ -176,10 +177,17 @@ std::optional<std::string> fast_motion(const Setting& s, const scene::Scene& sce
     if (scene.has(Effect::walls))
       for (const scene::WallSpec& w : scene.walls)
         if (auto b = wall_bottom(w, s.up)) bottom = std::min(bottom, *b);
-    fall = std::max(0.0, top - bottom);
+    f.fall = std::max(0.0, top - bottom);
   }
-  const double pushed = wall_push(scene);
-  const double v = std::max(s.speed, pushed) + std::sqrt(2 * s.g * fall);
+  f.pushed = wall_push(scene);
+  f.v = std::max(s.speed, f.pushed) + std::sqrt(2 * s.g * f.fall);
+  return f;
+}
+
+// The fastest sphere against the smallest radius per substep.
+std::optional<std::string> fast_motion(const Setting& s, const scene::Scene& scene,
+                                       const scene::GeneratedParticles& p) {
+  const auto [v, fall, pushed] = fastest(s, scene, p);
   const double move = v * s.h;
   if (!(move > s.r_min)) return std::nullopt;
   const std::string start = s.speed >= pushed ? num(s.speed) + " m/s at the start"
@@ -323,6 +331,11 @@ std::optional<std::string> float_precision(const Setting& s, const scene::Scene&
 }
 
 }  // namespace
+
+double fastest_speed(const scene::Scene& scene, const scene::GeneratedParticles& particles) {
+  if (particles.size() == 0) return 0;
+  return fastest(read_setting(scene, particles), scene, particles).v;
+}
 
 std::vector<std::string> risky_settings(const scene::Scene& scene, const scene::GeneratedParticles& particles,
                                         bool single_precision) {

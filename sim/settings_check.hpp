@@ -21,4 +21,10 @@ namespace marbles {
 std::vector<std::string> risky_settings(const scene::Scene& scene, const scene::GeneratedParticles& particles,
                                         bool single_precision);
 
+// The speed the fast-motion rule finds for the fastest sphere, m/s: the
+// largest initial speed, or twice a moving wall's speed (a spinning wall's
+// surface speed), plus a fall under gravity from the highest centre to the
+// lowest centre or wall bottom. make_world holds the contact impulses to it.
+double fastest_speed(const scene::Scene& scene, const scene::GeneratedParticles& particles);
+
 }  // namespace marbles

@@ -17,6 +17,7 @@
 
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
+#include "sim/settings_check.hpp"
 
 namespace marbles {
 
@@ -120,6 +121,28 @@ std::size_t World::first_non_finite() const {
   return size();
 }
 
+namespace {
+
+// A sphere's mass and moment of inertia, and the contact impulses they make
+// at the scene's speeds, within the run's precision:
+// - Inverse mass and inertia from the smallest normal number up to 1/8 of
+//   the largest: an effective mass sums two of each (1/m_a + 1/m_b + r_a^2/I_a
+//   + r_b^2/I_b = 3.5 (1/m_a + 1/m_b): narrowphase/contact_math.hpp), which
+//   past the range is inf, and the pair's friction or rolling resistance 0.
+// - An impulse (1 + e) m_n |v_n| is at most 4 u M, u the fastest speed
+//   (fastest_speed, and the fastest spin's surface speed), M the movable
+//   spheres' mass (a column that lands rests on one contact), and its moment
+//   about a centre r times that (apply_impulse); 16 u M max(1 m, r) within
+//   the range leaves a factor 4 for speeds the run reaches past the
+//   estimate. Past it an impulse is inf, and inf times a normal's zero
+//   component NaN: the run ended "non-finite state" (exit 1).
+// - The kinetic energy, at most M u^2 / 2, is summed in double (World::motion,
+//   the watchdog's figures), in float runs too; past double's range it was
+//   inf (null in summary.json). Held to the same factor 16.
+constexpr double kHeadroom = 16;
+
+}  // namespace
+
 World make_world(const scene::Scene& scene, const scene::GeneratedParticles& particles) {
   World w;
   const std::size_t n = particles.size();
@@ -132,32 +155,59 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
   w.material = particles.material;
   w.inv_mass.resize(n);
   w.inv_inertia.resize(n);
+  // Sphere i refused, named by the block it came from, where the particles say (else the scene's particles).
+  const auto refuse = [&](std::size_t i, const std::string& why) {
+    const auto& ends = particles.block_end;
+    const auto b = static_cast<std::size_t>(std::upper_bound(ends.begin(), ends.end(), i) - ends.begin());
+    const bool known = b < ends.size() && b < scene.particles.size();
+    const std::size_t first = known && b > 0 ? ends[b - 1] : 0;
+    throw InputError(known ? scene.particles[b].where : SourceLocation{scene.path, 0, 0},
+                     known ? "particles[" + std::to_string(b) + "]" : "particles",
+                     "sphere " + std::to_string(known ? i - first : i) + (known ? " of the block" : "") + " (radius " +
+                         significant(w.radius[i], 6) + " m, density " +
+                         significant(scene.materials.at(w.material[i]).density, 6) + " kg/m^3): " + why);
+  };
+  const double most = std::numeric_limits<real>::max();
+  double total = 0, reach = 1, spin = 0;  // movable mass, max(1 m, largest radius), fastest surface speed of a spin
+  std::size_t heaviest = n;
+  double heaviest_mass = 0;
   for (std::size_t i = 0; i < n; ++i) {
+    reach = std::max(reach, double(w.radius[i]));  // a fixed sphere's too: its spin takes 0 x the moment
     if (i < particles.fixed.size() && particles.fixed[i]) {  // collides, never moves
       w.inv_mass[i] = 0;
       w.inv_inertia[i] = 0;
       continue;
     }
     const double r = w.radius[i];
-    const double density = scene.materials.at(w.material[i]).density;
-    const double mass = density * 4.0 / 3.0 * std::numbers::pi * r * r * r;
+    const double mass = scene.materials.at(w.material[i]).density * 4.0 / 3.0 * std::numbers::pi * r * r * r;
     w.inv_mass[i] = static_cast<real>(1.0 / mass);
     w.inv_inertia[i] = static_cast<real>(1.0 / (0.4 * mass * r * r));
-    const auto usable = [](real v) { return std::isfinite(v) && v >= std::numeric_limits<real>::min(); };
-    if (!usable(w.inv_mass[i]) || !usable(w.inv_inertia[i])) {
-      // The block it came from, where the particles say (else the scene's particles).
-      const auto& ends = particles.block_end;
-      const auto b = static_cast<std::size_t>(std::upper_bound(ends.begin(), ends.end(), i) - ends.begin());
-      const bool known = b < ends.size() && b < scene.particles.size();
-      const std::size_t first = known && b > 0 ? ends[b - 1] : 0;
-      throw InputError(known ? scene.particles[b].where : SourceLocation{scene.path, 0, 0},
-                       known ? "particles[" + std::to_string(b) + "]" : "particles",
-                       "sphere " + std::to_string(known ? i - first : i) + (known ? " of the block" : "") +
-                           " (radius " + significant(r, 6) + " m, density " +
-                           significant(density, 6) + " kg/m^3): its mass " + significant(mass, 6) +
-                           " kg or moment of inertia is out of range for " + kRealName + " precision");
-    }
+    const auto usable = [most](real v) { return v >= std::numeric_limits<real>::min() && v <= most / 8; };
+    if (!usable(w.inv_mass[i]) || !usable(w.inv_inertia[i]))
+      refuse(i, "its mass " + significant(mass, 6) + " kg or moment of inertia is out of range for " + kRealName +
+                    " precision");
+    total += mass;
+    spin = std::max(spin, double(length(w.angular_velocity[i])) * r);
+    if (mass > heaviest_mass) heaviest = i, heaviest_mass = mass;
   }
+  const double speed = fastest_speed(scene, particles) + spin;
+  const double impulse = kHeadroom * total * reach * speed;       // N s, and N m s about a centre
+  const double energy = kHeadroom * 0.5 * total * speed * speed;  // J, summed in double in either precision
+  const bool contacts = scene.has(scene::Effect::collisions) || scene.has(scene::Effect::walls);
+  std::string past;
+  if (contacts && !(impulse <= most))
+    past = "contact impulses out of range for " + std::string(kRealName) + " precision (16 x mass x max(1 m, largest "
+           "radius) x speed = " + significant(impulse, 3) + ", more than " + significant(most, 3) + ")";
+  else if (!(energy <= std::numeric_limits<double>::max()))
+    past = "a kinetic energy out of range of its sums in double (16 x mass x speed^2 / 2 is more than " +
+           significant(std::numeric_limits<double>::max(), 3) + " J)";
+  if (heaviest < n && !past.empty())
+    refuse(heaviest, "too heavy for the scene's speeds: the movable spheres' mass, " + significant(total, 6) +
+                         " kg in all (this sphere the heaviest), at up to " + significant(speed, 6) +
+                         " m/s (the fast-motion warning's estimate of the fastest sphere, and the fastest spin's "
+                         "surface speed) makes " + past +
+                         (sizeof(real) == 4 ? "; set solver.precision: double (or --precision double), or lower the "
+                                              "density" : "; lower the density"));
   return w;
 }
 

@@ -290,6 +290,50 @@ TEST_F(Robustness, MassBeyondThePrecisionIsRefused) {
   EXPECT_EQ(marbles("check " + scene + " --precision double", dir).exit_code, 0);
 }
 
+// Masses whose contact impulses leave the precision's range are refused by
+// `check` and `run` (exit 2), not run into a NaN at the first meeting (exit
+// 1): two spheres of density 2e37 meeting head on at 100 m/s made an impulse
+// of 7.9e38 N s, inf in float. Slower, the same spheres run; in double they
+// fit. At the light end, an inverse mass past 1/8 of float's range made the
+// pair's tangential effective mass 1 / inf = 0: friction silently off.
+TEST_F(Robustness, ImpulsesBeyondThePrecisionAreRefused) {
+  const test::ScratchDir dir("robust_impulse");
+  const std::string scene =
+      dir.write("s.yaml", "time: {duration: 0.3, dt: 0.001}\neffects: [collisions, restitution, friction]\n"
+                          "materials: {a: {density: 2e37, restitution: 0.5, friction: 0.5}}\nparticles:\n"
+                          "  - list: {positions: [[-0.6, 0, 0], [0.6, 0, 0]], radius: 0.5, "
+                          "velocities: [[50, 0, 0], [-50, 0, 0]]}\n");
+  for (const std::string& command : {"check " + scene, "run " + scene + " --backend cpu --out " + dir.path() + "/o"}) {
+    const Outcome o = marbles(command, dir);
+    EXPECT_EQ(o.exit_code, 2) << command << ": " << o.err;
+    EXPECT_NE(o.err.find("s.yaml:5:5: particles[0]: sphere 0 of the block (radius 0.5 m, density 2e+37 kg/m^3): too "
+                         "heavy for the scene's speeds"),
+              std::string::npos)
+        << o.err;
+    EXPECT_NE(o.err.find("contact impulses out of range for float precision"), std::string::npos) << o.err;
+    EXPECT_NE(o.err.find("set solver.precision: double"), std::string::npos) << o.err;
+  }
+  EXPECT_EQ(marbles("check " + scene + " --precision double", dir).exit_code, 0);
+  // In double the kinetic energy's sums overflow first (they were inf: null in summary.json).
+  const Outcome e = marbles("check " + scene + " --precision double --set materials.a.density=1e302 "
+                            "--set 'particles[0].list.velocities=[[1e4,0,0],[-1e4,0,0]]'", dir);
+  EXPECT_EQ(e.exit_code, 2) << e.err;
+  EXPECT_NE(e.err.find("a kinetic energy out of range of its sums in double"), std::string::npos) << e.err;
+  const std::string slow = " --set 'particles[0].list.velocities=[[0.5,0,0],[-0.5,0,0]]'";
+  EXPECT_EQ(marbles("run " + scene + slow + " --backend cpu --out " + dir.path() + "/slow", dir).exit_code, 0);
+
+  const std::string light =
+      dir.write("l.yaml", "time: {duration: 0.1, dt: 0.001}\nmaterials: {a: {density: 1.2e-38}}\nparticles:\n"
+                          "  - list: {positions: [[0, 0, 0], [2, 0.7, 0]], radius: 0.7}\n");
+  const Outcome l = marbles("check " + light, dir);
+  EXPECT_EQ(l.exit_code, 2) << l.err;
+  EXPECT_NE(l.err.find("l.yaml:4:5: particles[0]: sphere 0 of the block (radius 0.7 m, density 1.2e-38 kg/m^3): its "
+                       "mass 1.72411e-38 kg or moment of inertia is out of range for float precision"),
+            std::string::npos)
+      << l.err;
+  EXPECT_EQ(marbles("check " + light + " --precision double", dir).exit_code, 0);
+}
+
 // `check` holds a scene to what `run` refuses: the reference's own rules (the
 // sphere it names, the effects it needs) are checked by both, with the same
 // message, and `run` refuses before it prints its pipeline.
