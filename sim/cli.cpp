@@ -183,6 +183,46 @@ void refuse_empty_lists(int argc, char** argv) {
   }
 }
 
+// An option given an empty value (`--repeats ''`, `--camera=`): CLI11 takes
+// it as the option's zero or empty string, past the option's checks
+// (`--repeats ''` was 0 repeats, which --repeats 0 is refused for). Refused by
+// name in the subcommands given, flags aside.
+void refuse_empty_values(const CLI::App& app) {
+  for (const CLI::Option* option : app.get_options()) {
+    if (option->get_type_size_min() == 0 || !option->nonpositional()) continue;
+    for (const std::string& value : option->results())
+      if (value.empty())
+        throw marbles::InputError(marbles::SourceLocation{}, option->get_name(),
+                                  "an empty value (leave the option out for its default)");
+  }
+  for (const CLI::App* sub : app.get_subcommands()) refuse_empty_values(*sub);
+}
+
+// A command CLI11 would answer only with "A subcommand is required"
+// (`marbles runn x.yaml`, `marbles bench bogus`, `marbles --bogus`): named,
+// with the nearest command. Help and version pass.
+void refuse_unknown_commands(const CLI::App& app, int argc, char** argv) {
+  const CLI::App* at = &app;
+  std::string path = "marbles";
+  for (int i = 1; i < argc && at->get_require_subcommand_min() > 0; ++i) {
+    const std::string a = argv[i];
+    if (a == "-h" || a == "--help" || a == "--help-all" || a == "--version") return;
+    std::vector<std::string> names;
+    const CLI::App* next = nullptr;
+    for (const CLI::App* sub : at->get_subcommands([](const CLI::App*) { return true; })) {
+      names.push_back(sub->get_name());
+      if (sub->get_name() == a) next = sub;
+    }
+    if (!next)
+      throw marbles::InputError(marbles::SourceLocation{}, path,
+                                (a.rfind('-', 0) == 0 ? "unknown option '" + a + "' where a command goes"
+                                                       : "unknown command '" + a + "'") +
+                                    marbles::scene::detail::suggestion(a, names));
+    at = next;
+    path += " " + a;
+  }
+}
+
 }  // namespace
 
 namespace marbles {
@@ -241,7 +281,7 @@ int cli_main(int argc, char** argv) {
   bool no_render = false;
   auto* run_cmd = app.add_subcommand("run", "run a scene and write its output");
   run_cmd->add_option("scene", run.scene_path, "scene file (YAML)")->required();
-  run_cmd->add_option("--out", run.out_dir, "output folder (overrides output.dir)");
+  run_cmd->add_option("--out", run.out_dir, "output folder (overrides output.dir)")->check(kFolderOrNew);
   std::string run_backend = "auto", run_broadphase = "home";
   run_cmd
       ->add_option("--backend", run_backend, "where the whole step runs: auto (CUDA when a device is there), cpu, cuda")
@@ -402,6 +442,7 @@ int cli_main(int argc, char** argv) {
 
   try {
     refuse_empty_lists(argc, argv);
+    refuse_unknown_commands(app, argc, argv);
   } catch (const InputError& e) {
     std::cerr << e.what() << "\n";
     return 2;
@@ -420,12 +461,11 @@ int cli_main(int argc, char** argv) {
   }
 
   try {
+    refuse_empty_values(app);
     for (const std::string& l : limit_args) raise_limit(l);
     for (const std::string& l : study.limits) raise_limit(l);
     if (*run_cmd) {
       if (run_duration > 0) run.duration = run_duration;
-      if (run.out_dir && run.out_dir->empty())
-        throw InputError(SourceLocation{}, "--out", "an empty folder name (leave --out out for the scene's output.dir)");
       run.backend = kBackends.at(run_backend);
       run.algorithm = run_broadphase == "seed" ? broadphase::Algorithm::seed : broadphase::Algorithm::home;
       run.render = !no_render;

@@ -103,6 +103,31 @@ std::vector<std::string> initial_overlap_warnings(const StateOverlaps& o) {
 
 namespace {
 
+// `text` as one word of a POSIX shell: as it is where it holds only
+// characters no shell treats apart, else in single quotes.
+std::string shell_word(const std::string& text) {
+  const bool plain = !text.empty() && text.find_first_not_of("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz"
+                                                             "0123456789_./=:,+-@%") == std::string::npos;
+  if (plain) return text;
+  std::string quoted = "'";
+  for (const char c : text) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return quoted + "'";
+}
+
+// The command that resumes this run from the checkpoint at `path`: its
+// scene, folder, overrides and duration (the checkpoint holds the scene as
+// they made it), what it writes and the backend it was given.
+std::string resume_command(const RunOptions& options, const std::string& out_dir, const std::string& path) {
+  std::string command = "marbles run " + shell_word(options.scene_path) + " --out " + shell_word(out_dir);
+  for (const std::string& o : options.overrides) command += " --set " + shell_word(o);
+  if (options.duration) command += " --duration " + shortest(*options.duration);
+  if (options.summary_only) command += " --summary-only";
+  if (!options.render) command += " --no-render";
+  if (options.backend != BackendChoice::automatic)
+    command += options.backend == BackendChoice::cuda ? " --backend cuda" : " --backend cpu";
+  return command + " --restart " + shell_word(path);
+}
+
 // The risky-settings warnings (sim/settings_check.hpp), one line each.
 void warn_risky_settings(const scene::Scene& sc, const scene::GeneratedParticles& particles, std::ostream& err) {
   for (const std::string& w : risky_settings(sc, particles, sizeof(real) == 4)) err << "warning: " << w << "\n";
@@ -268,8 +293,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       progress.finish();
       const std::string path = checkpoint_path(sc.output.dir, sim.steps());
       save_checkpoint(path);
-      throw RuntimeFailure(std::string(e.what()) + "; the last good state is in " + path +
-                           " (resume with marbles run --restart)");
+      throw RuntimeFailure(std::string(e.what()) + "; the last good state is in " + path + " (resume with " +
+                           resume_command(options, sc.output.dir, path) + ")");
     }
     step_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
     for (const std::string& why : sim.last_rollbacks()) {
@@ -298,9 +323,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       const std::string path = checkpoint_path(sc.output.dir, sim.steps());
       if (!std::filesystem::exists(path)) save_checkpoint(path);
       throw RuntimeFailure(std::string("stopped by ") + signal_name(sig) + " after step " + std::to_string(sim.steps()) +
-                           " of " + std::to_string(total_steps) + "; the state is in " + path +
-                           " (resume with marbles run " + options.scene_path + " --out " + sc.output.dir +
-                           " --restart " + path + ")");
+                           " of " + std::to_string(total_steps) + "; the state is in " + path + " (resume with " +
+                           resume_command(options, sc.output.dir, path) + ")");
     }
   }
   progress.finish();

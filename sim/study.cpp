@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/config.hpp"
+#include "core/device.hpp"
 #include "core/error.hpp"
 #include "core/format.hpp"
 #include "render/atomic_file.hpp"
@@ -254,6 +255,9 @@ void check_combinations(const StudyOptions& options, const std::vector<std::vect
     RunSettings run = settings_of(options, values);
     one_of("--vary backend", run.backend, {"auto", "cpu", "cuda"});
     if (!run.precision.empty()) one_of("--vary precision", run.precision, {"float", "double"});
+    if (run.backend == "cuda" && !cuda_device().available)
+      throw RuntimeFailure("study run " + label_of(options.vary, values) + ": --backend cuda: no CUDA device (" +
+                           cuda_device().why_not + "); nothing was run");
     try {
       // Held as `marbles check` holds it, in this build's precision; a run in
       // the other one is checked by that run (its ranges are its own).
@@ -263,6 +267,28 @@ void check_combinations(const StudyOptions& options, const std::vector<std::vect
       throw InputError(e.where(), e.key(), e.message() + " (study run " + label_of(options.vary, values) + ")");
     }
   }
+}
+
+// The study's runs (`staging`/N and N.log) moved into `runs`, in the place
+// of an earlier study's; that study's runs past this one's count (runs/N and
+// runs/N.log) removed, so that runs/ holds this study's runs only. Nothing
+// else in runs/ is touched.
+void keep_runs(const fs::path& staging, const fs::path& runs, std::size_t count) {
+  fs::create_directories(runs);
+  std::vector<fs::path> stale;
+  std::error_code ec;
+  for (fs::directory_iterator it(runs, ec), end; !ec && it != end; it.increment(ec)) {
+    std::string name = it->path().filename().string();
+    if (name.size() > 4 && name.ends_with(".log")) name.resize(name.size() - 4);
+    if (name.empty() || name.size() > 18 || name.find_first_not_of("0123456789") != std::string::npos) continue;
+    if (std::stoull(name) >= count) stale.push_back(it->path());
+  }
+  for (const fs::path& p : stale) fs::remove_all(p, ec);
+  for (std::size_t c = 0; c < count; ++c)
+    for (const std::string& name : {std::to_string(c), std::to_string(c) + ".log"}) {
+      fs::remove_all(runs / name);
+      fs::rename(staging / name, runs / name);
+    }
 }
 
 }  // namespace
@@ -281,22 +307,16 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
                                                             : fs::path(options.out_dir));
   const auto combos = combinations(options.vary);
   check_combinations(options, combos);
-  fs::create_directories(dir / "runs");
-
-  // An earlier study's runs past this one's count (runs/N and runs/N.log):
-  // removed, so that the folder holds this study's runs only. Nothing else
-  // in runs/ is touched.
-  {
-    std::vector<fs::path> stale;
-    std::error_code ec;
-    for (fs::directory_iterator it(dir / "runs", ec), end; !ec && it != end; it.increment(ec)) {
-      std::string name = it->path().filename().string();
-      if (name.size() > 4 && name.ends_with(".log")) name.resize(name.size() - 4);
-      if (name.empty() || name.size() > 18 || name.find_first_not_of("0123456789") != std::string::npos) continue;
-      if (std::stoull(name) >= combos.size()) stale.push_back(it->path());
-    }
-    for (const fs::path& p : stale) fs::remove_all(p, ec);
-  }
+  // The runs are made in a folder of their own (`.runs-PID`) and take the
+  // place of an earlier study's in runs/ only once all of them have run: a
+  // study that fails or is stopped leaves the earlier one whole, its tables
+  // and its runs. A failed or dead study's folder (the failed run's log is
+  // in it) is removed at the next start.
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
+    if (it->path().filename().string().starts_with(".runs-")) fs::remove_all(it->path(), ec);
+  const fs::path staging = dir / (".runs-" + std::to_string(getpid()));
+  fs::create_directories(staging);
   const std::size_t total = combos.size() * static_cast<std::size_t>(options.repeats);
   const bool tty = options.progress && isatty(fileno(stderr));
   std::size_t done = 0;
@@ -314,7 +334,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     for (const std::string& l : options.limits) args.insert(args.end(), {"--limit", l});
     args.insert(args.end(), {"--backend", run.backend});
     if (!run.precision.empty()) args.insert(args.end(), {"--precision", run.precision});
-    const fs::path run_dir = dir / "runs" / std::to_string(c);
+    const fs::path run_dir = staging / std::to_string(c);
     args.insert(args.end(), {"--out", run_dir.string()});
     nlohmann::json summary;
     for (int r = 0; r < options.repeats; ++r) {
@@ -351,6 +371,8 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     result.rows.push_back(std::move(row));
   }
   if (options.progress) show_progress(err, tty, done, total, "done");
+  keep_runs(staging, dir / "runs", combos.size());
+  fs::remove_all(staging);
 
   if (scene.reference.kind == scene::ReferenceSpec::Kind::finest) {
     // The finest combination (smallest substep, most iterations, double, ...) is the

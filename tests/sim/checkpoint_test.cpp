@@ -565,6 +565,30 @@ TEST_F(Checkpoints, StopRequestCheckpointsAndResumes) {
   }
 }
 
+// The command a stopped run says resumes it does, as typed: with the run's
+// overrides (one with a blank, quoted for the shell) and duration, it ends as
+// the run that was never stopped. Without them it was refused as another
+// scene, or stopped at the scene's own duration.
+TEST_F(Checkpoints, TheResumeCommandSaidResumes) {
+  const test::ScratchDir dir("ck_resume_said");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string given = " --set time.dt=5e-4 --set 'name=run two' --duration 0.1 --summary-only --backend cpu";
+  ASSERT_EQ(marbles("run " + scene + " --quiet" + given + " --out " + dir.path() + "/whole"), 0);
+  const std::string out = dir.path() + "/stopped";
+  std::string err;
+  ASSERT_EQ(marbles("run " + scene + " --quiet" + given + " --out " + out, &err, "MARBLES_FAULT_SIGNAL=INT@60"), 1);
+  const std::size_t from = err.find("(resume with marbles "), to = err.rfind(')');
+  ASSERT_NE(from, std::string::npos) << err;
+  ASSERT_NE(to, std::string::npos) << err;
+  const std::string command = err.substr(from + 21, to - from - 21);
+  for (const std::string& part : {std::string("--set time.dt=5e-4"), std::string("--set 'name=run two'"),
+                                  std::string("--duration 0.1"), std::string("--summary-only"),
+                                  std::string("--backend cpu"), "--restart " + out + "/checkpoints/step_000060.mck"})
+    EXPECT_NE(command.find(part), std::string::npos) << part << " in " << command;
+  ASSERT_EQ(marbles(command + " --quiet", &err), 0) << command << ": " << err;
+  expect_same_output(dir.path() + "/whole", out);
+}
+
 // A real SIGINT from outside, once the steps run: exit 1, and the checkpoint
 // it names resumes.
 TEST_F(Checkpoints, InterruptFromOutsideLeavesAResumableCheckpoint) {

@@ -227,7 +227,7 @@ TEST_F(Robustness, UnwritableOutputIsExitOneWithThePath) {
   const test::ScratchDir dir("robust_unwritable");
   const std::string blocker = dir.write("file", "not a folder");
   const Outcome a = marbles("run " MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml --quiet --summary-only --backend cpu "
-                            "--out " + blocker + "/out", dir);
+                            "--set output.dir=" + blocker + "/out", dir);
   EXPECT_EQ(a.exit_code, 1) << a.err;
   EXPECT_NE(a.err.find("cannot create the output folder " + blocker + "/out: Not a directory"), std::string::npos)
       << a.err;
@@ -240,6 +240,39 @@ TEST_F(Robustness, UnwritableOutputIsExitOneWithThePath) {
             std::string::npos)
       << b.err;
   EXPECT_TRUE(fs::is_directory(out + "/summary.json"));
+}
+
+// Mistakes on the command line are named, exit 2: a command that is not one
+// (CLI11 said only "A subcommand is required"), an option given an empty
+// value (`--repeats ""` was 0 repeats past the check that refuses 0, and
+// crashed; `--n ""` timed nothing), and an --out that is a file (exit 1,
+// without the option's name). Output that standard output could not take is
+// not a success (exit 1).
+TEST_F(Robustness, CommandLineMistakesAreNamed) {
+  const test::ScratchDir dir("robust_command_line");
+  const std::string scene = MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml";
+  const std::string file = dir.write("file", "not a folder");
+  const std::pair<std::string, std::string> cases[] = {
+      {"runn " + scene, "marbles: unknown command 'runn' (did you mean 'run'?)"},
+      {"bench bogus", "marbles bench: unknown command 'bogus'; expected one of: broadphase, step, effects"},
+      {"--bogus", "marbles: unknown option '--bogus' where a command goes"},
+      {"bench step --backend cpu --n 10 --repeats \"\"", "--repeats: an empty value"},
+      {"bench step --backend cpu --n \"\" --repeats 1", "--n: an empty value"},
+      {"bench effects --backend cpu --n 10 --repeats=", "--repeats"},
+      {"run " + scene + " --backend cpu --out \"\"", "--out: an empty value"},
+      {"run " + scene + " --backend cpu --quiet --out " + file, "--out: '" + file + "' exists and is not a folder"},
+      {"study " + scene + " --vary time.dt=1e-3 --out \"\"", "--out: an empty value"},
+  };
+  for (const auto& [args, said] : cases) {
+    const Outcome o = marbles(args, dir);
+    EXPECT_EQ(o.exit_code, 2) << args << ": " << o.err;
+    EXPECT_NE(o.err.find(said), std::string::npos) << args << ": " << o.err;
+  }
+  EXPECT_EQ(slurp(file), "not a folder");
+  const Outcome full = marbles("check " + scene + " >/dev/full", dir);
+  EXPECT_EQ(full.exit_code, 1) << full.err;
+  EXPECT_NE(full.err.find("marbles: cannot write the standard output"), std::string::npos) << full.err;
+  EXPECT_EQ(marbles("check " + scene, dir).exit_code, 0);
 }
 
 // A vector whose square overflows the run's precision (a speed, a spin, a

@@ -129,6 +129,29 @@ TEST_F(Study, AnEarlierStudysExtraRunsAreRemoved) {
   for (const char* name : {"2", "2.log"}) EXPECT_FALSE(fs::exists(runs / name)) << name;
 }
 
+// A study that fails midway leaves the earlier study in its folder whole:
+// its tables and all of its runs, none of the failed study's. The next study
+// clears the failed one's runs away.
+TEST_F(Study, AFailedStudyLeavesTheEarlierOneWhole) {
+  const test::ScratchDir dir("study_failed");
+  const fs::path runs = fs::path(dir.path()) / "runs";
+  ASSERT_EQ(study(kValidation + "bouncing_ball.yaml", {"time.dt=4e-3,2e-3,1e-3"}, dir).rows.size(), 3u);
+  const std::string table = slurp(dir.path() + "/study.csv"), first = slurp((runs / "0" / "summary.json").string());
+  ASSERT_FALSE(table.empty());
+  ASSERT_FALSE(first.empty());
+  ::setenv("MARBLES_FAULT_NAN_STEP", "3:all", 1);  // every run's step 3 fails every try: exit 1
+  EXPECT_THROW(study(kValidation + "bouncing_ball.yaml", {"time.dt=2e-3,1e-3"}, dir), RuntimeFailure);
+  ::unsetenv("MARBLES_FAULT_NAN_STEP");
+  EXPECT_EQ(slurp(dir.path() + "/study.csv"), table);
+  EXPECT_EQ(slurp((runs / "0" / "summary.json").string()), first);
+  for (const char* name : {"0.log", "1", "2", "2.log"}) EXPECT_TRUE(fs::exists(runs / name)) << name;
+  ASSERT_EQ(study(kValidation + "bouncing_ball.yaml", {"time.dt=4e-3"}, dir).rows.size(), 1u);
+  for (const fs::directory_entry& e : fs::directory_iterator(dir.path()))
+    EXPECT_FALSE(e.path().filename().string().starts_with(".runs-")) << e.path();
+  EXPECT_NE(slurp(dir.path() + "/study.csv"), table);
+  EXPECT_FALSE(fs::exists(runs / "1"));
+}
+
 // The scene's name and the output folder are data to the plot, never
 // commands: a name and a folder that close gnuplot's quotes (and the shell's)
 // and call system() draw a plot titled with them, and run nothing. Without
