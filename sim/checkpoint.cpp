@@ -207,7 +207,7 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash, st
   Checkpoint c;
   c.scene_hash = r.get<std::uint64_t>();
   if (c.scene_hash != scene_hash && c.scene_hash != text_hash)
-    r.fail("belongs to another scene (or other --set overrides): the scene file or its overrides changed");
+    r.fail("belongs to another scene (or other --set overrides): a value of the scene file or of its overrides differs");
   body(r, c, format);
   if (r.at() + 8 != bytes.size()) r.fail("is damaged (bytes past its fields)");
   if (c.state.cache.colour.size() != c.state.cache.key.size()) c.state.cache.colour.clear();

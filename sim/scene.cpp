@@ -190,6 +190,7 @@ std::vector<Effect> read_effects(const Field& field) {
 
 std::vector<Material> read_materials(const Field& field) {
   const MapFields map(field, std::vector<std::string>{});
+  if (field.origins()) field.origins()->ordered(field.key());  // their order is their numbering
   std::vector<Material> materials;
   for (const MapFields::Entry& entry : map.entries()) {
     Material m;
@@ -842,6 +843,10 @@ void apply_overrides_whole(YAML::Node document, const std::vector<std::string>& 
     }
 }
 
+// The fingerprint's first bytes: no scene's equals a fingerprint of the
+// texts (text_fingerprint, sim/checkpoint.hpp) by the way it starts.
+constexpr char kFingerprintTag[] = "marbles scene 1";
+
 // Folds `node` (at `key`, a Field's key) into the fingerprint `h`
 // (Scene::fingerprint): each scalar as the reader took it, else its text;
 // a map's keys sorted where the reader did not take them in order. Each
@@ -855,8 +860,8 @@ void fold_tree(const YAML::Node& node, const std::string& key, const detail::Ori
     h = fnv1a(text.data(), text.size(), h);
   };
   if (node.IsScalar()) {
-    const std::string* value = origins.taken(key, node.Scalar());
-    put(value ? 'v' : 's', value ? *value : node.Scalar());
+    const std::uint64_t value = origins.taken(key, node.Scalar());
+    put(value ? 'v' : 's', value ? std::string(reinterpret_cast<const char*>(&value), sizeof value) : node.Scalar());
   } else if (node.IsSequence()) {
     put('[', std::to_string(node.size()));
     std::size_t i = 0;
@@ -936,7 +941,7 @@ Scene read_scene(YAML::Node document, const std::string& path, const std::string
   scene.output.dir = "out/" + stem;
   if (auto f = top.optional("output")) scene.output = read_output(*f, stem);
   if (auto f = top.optional("reference")) scene.reference = read_reference(*f);
-  scene.fingerprint = fnv1a("marbles scene 1", 16);  // apart from text_fingerprint's (sim/checkpoint.hpp)
+  scene.fingerprint = fnv1a(kFingerprintTag, sizeof kFingerprintTag);
   fold_tree(document, "", origins, scene.fingerprint);
   return scene;
 }

@@ -12,6 +12,8 @@
 #include <cmath>
 #include <limits>
 
+#include "core/hash.hpp"
+
 namespace marbles::scene::detail {
 
 SourceLocation location_of(const std::string& file, const YAML::Mark& mark) {
@@ -130,13 +132,15 @@ const std::string* Origins::find(const YAML::Node& node) const {
 }
 
 void Origins::took(const std::string& key, const std::string& text, const std::string& value) const {
-  const auto [at, added] = m_taken.try_emplace(key, text, value);
-  if (!added && (at->second.first != text || at->second.second != value)) at->second.second.clear();
+  const std::uint64_t text_hash = fnv1a(text.data(), text.size());
+  const std::uint64_t value_hash = value.empty() ? 0 : std::max<std::uint64_t>(1, fnv1a(value.data(), value.size()));
+  const auto [at, added] = m_taken.try_emplace(fnv1a(key.data(), key.size()), Taken{text_hash, value_hash});
+  if (!added && (at->second.text != text_hash || at->second.value != value_hash)) at->second.value = 0;
 }
 
-const std::string* Origins::taken(const std::string& key, const std::string& text) const {
-  const auto at = m_taken.find(key);
-  return at != m_taken.end() && at->second.first == text && !at->second.second.empty() ? &at->second.second : nullptr;
+std::uint64_t Origins::taken(const std::string& key, const std::string& text) const {
+  const auto at = m_taken.find(fnv1a(key.data(), key.size()));
+  return at != m_taken.end() && at->second.text == fnv1a(text.data(), text.size()) ? at->second.value : 0;
 }
 
 // --- Field -----------------------------------------------------------------

@@ -65,18 +65,22 @@ class Origins {
 
   // The scalar `text` at `key` read as `value` (a typed read's one spelling:
   // "n:0.0005", "i:12", "b:1"), or, with `value` empty, as a name: a key
-  // read as a name, or from two texts, keeps its text.
+  // read as a name, or from two texts, keeps its text. Kept as hashes (a
+  // scene of 10^6 inline numbers holds 10^6 of them).
   void took(const std::string& key, const std::string& text, const std::string& value) const;
-  // What the scalar `text` at `key` was taken for, or nullptr (its text stands).
-  const std::string* taken(const std::string& key, const std::string& text) const;
-  // A map whose entries the reader took in order (MapFields::entries):
-  // its order counts (the materials' is their numbering).
+  // The hash of what the scalar `text` at `key` was taken for, or 0 (its text stands).
+  std::uint64_t taken(const std::string& key, const std::string& text) const;
+  // A map whose order the reader keeps (the materials': their numbering),
+  // said by its reader.
   void ordered(const std::string& key) const { m_ordered.insert(key); }
   bool is_ordered(const std::string& key) const { return m_ordered.count(key) > 0; }
 
  private:
   std::vector<std::pair<YAML::Node, std::string>> m_nodes;
-  mutable std::unordered_map<std::string, std::pair<std::string, std::string>> m_taken;  // key -> text, value
+  struct Taken {
+    std::uint64_t text = 0, value = 0;  // value 0: the text stands
+  };
+  mutable std::unordered_map<std::uint64_t, Taken> m_taken;  // by the key's hash
   mutable std::unordered_set<std::string> m_ordered;
 };
 
@@ -152,10 +156,7 @@ class MapFields {
     SourceLocation name_where;
     Field value;
   };
-  const std::vector<Entry>& entries() const {
-    if (m_self.origins()) m_self.origins()->ordered(m_self.key());
-    return m_entries;
-  }
+  const std::vector<Entry>& entries() const { return m_entries; }
 
  private:
   void read(const std::vector<std::string>& allowed);

@@ -136,10 +136,11 @@ namespace {
 //   the range leaves a factor 4 for speeds the run reaches past the
 //   estimate. Past it an impulse is inf, and inf times a normal's zero
 //   component NaN: the run ended "non-finite state" (exit 1).
-// - With friction or rolling resistance, that impulse times the largest
-//   coefficient squared within the range: the clamp to the cone squares an
-//   impulse and its limit (clamp_length), and past the range it let friction
-//   through unbounded (spheres of 1e30 kg with mu = 0.05 slid as with 0.5).
+// - The clamps to the friction cone square an impulse and its limit
+//   (clamp_length): with friction, 16 u M max(1, mu) squared within the
+//   range; with rolling resistance, 16 u M max(1 m, r) max(1, mu_r). Past it
+//   friction went through unbounded (spheres of 1e30 kg with mu = 0.05 slid
+//   as with 0.5). The twist's clamp squares nothing.
 // - The kinetic energy, at most M u^2 / 2, is summed in double (World::motion,
 //   the watchdog's figures), in float runs too; past double's range it was
 //   inf (null in summary.json). Held to the same factor 16.
@@ -198,25 +199,26 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
   const double impulse = kHeadroom * total * reach * speed;       // N s, and N m s about a centre
   const double energy = kHeadroom * 0.5 * total * speed * speed;  // J, summed in double in either precision
   const bool contacts = scene.has(scene::Effect::collisions) || scene.has(scene::Effect::walls);
-  // The friction and rolling clamps square an impulse and its limit (clamp_length), so with either effect the
-  // impulse times the largest coefficient (a rolling one times the largest radius) must square within the range.
-  double coefficient = 0;
+  // The friction and rolling clamps square an impulse and its limit (clamp_length): the sliding one
+  // 4 M u max(1, mu) at most, the rolling one (an angular impulse) 4 M u max(1 m, r) max(1, mu_r).
+  double mu = 0, mu_rolling = 0;
   for (const scene::Material& m : scene.materials)
-    coefficient = std::max({coefficient, m.friction, m.rolling_friction * reach, m.twisting_friction * reach});
+    mu = std::max(mu, m.friction), mu_rolling = std::max(mu_rolling, m.rolling_friction);
   for (const scene::ContactPairSpec& p : scene.contact_pairs)
-    coefficient = std::max({coefficient, p.friction, p.rolling_friction * reach, p.twisting_friction * reach});
-  const double clamped = impulse * std::max(1.0, coefficient);
-  const bool clamps = scene.has(scene::Effect::friction) || scene.has(scene::Effect::rolling_resistance);
-  std::string past;
-  if (contacts && !(impulse <= most))
+    mu = std::max(mu, p.friction), mu_rolling = std::max(mu_rolling, p.rolling_friction);
+  const double squared = std::max(scene.has(scene::Effect::friction) ? impulse / reach * std::max(1.0, mu) : 0.0,
+                                  scene.has(scene::Effect::rolling_resistance)
+                                      ? impulse * std::max(1.0, mu_rolling) : 0.0);
+  std::string past;  // what the start's speeds would take out of range; nothing where nothing moves
+  if (speed > 0 && contacts && !(impulse <= most))
     past = "contact impulses out of range for " + std::string(kRealName) + " precision (16 x mass x max(1 m, largest "
            "radius) x speed = " + significant(impulse, 3) + ", more than " + significant(most, 3) + ")";
-  else if (contacts && clamps && !(clamped <= std::sqrt(most)))
+  else if (speed > 0 && contacts && !(squared <= std::sqrt(most)))
     past = "friction impulses whose squares are out of range for " + std::string(kRealName) +
-           " precision (the clamp to the friction cone squares them: 16 x mass x max(1 m, largest radius) x speed x "
-           "max(1, the largest coefficient) = " + significant(clamped, 3) + ", more than " +
-           significant(std::sqrt(most), 3) + ")";
-  else if (!(energy <= std::numeric_limits<double>::max()))
+           " precision (the clamp to the friction cone squares them: 16 x mass x speed x max(1, the largest "
+           "coefficient), times max(1 m, largest radius) for rolling resistance, = " + significant(squared, 3) +
+           ", more than " + significant(std::sqrt(most), 3) + ")";
+  else if (speed > 0 && !(energy <= std::numeric_limits<double>::max()))
     past = "a kinetic energy out of range of its sums in double (16 x mass x speed^2 / 2 is more than " +
            significant(std::numeric_limits<double>::max(), 3) + " J)";
   if (heaviest < n && !past.empty())

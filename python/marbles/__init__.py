@@ -148,7 +148,7 @@ def _check_called_with_one(function, what):
     argument (the simulation). One whose signature Python cannot read (some
     built-ins) is left to its call."""
     try:
-        signature = inspect.signature(function)
+        signature = inspect.signature(function, follow_wrapped=False)  # a wrapper is called as it is
     except (TypeError, ValueError):
         return
     try:

@@ -1,5 +1,6 @@
 # tests/python/test_errors.py — bad input raises marbles.SceneError with the
 # place it names (file, line, column, key), as the command line says it.
+import functools
 import os
 import pathlib
 import re
@@ -150,9 +151,19 @@ def test_counts_are_whole_numbers(pile):
     sim.run(until=sim.time + 2 * sim.dt, callback=lambda s, extra=1, *rest: seen.append(extra))
     sim.run(until=sim.time + sim.dt, callback=lambda *a: seen.append(len(a)))
     assert seen == [1, 1, 1] and sim.steps == 18
+
+    def with_extra(s, extra):
+        seen.append(extra)
+
+    @functools.wraps(with_extra)
+    def wrapped(s):  # called as it is, not as the function it wraps
+        return with_extra(s, 7)
+
+    sim.run(until=sim.time + sim.dt, callback=wrapped)
+    assert seen[-1] == 7 and sim.steps == 19
     # A callback's NumPy False stops the run as False does.
     sim.run(until=sim.time + 10 * sim.dt, callback=lambda s: np.False_, every=2)
-    assert sim.steps == 20
+    assert sim.steps == 21
     # threads: 0 (the default count) or 1 to 4096, a whole number.
     for threads, error in ((-7, ValueError), (10**6, ValueError), (1.5, ValueError), ("2", TypeError)):
         with pytest.raises(error, match="threads"):
@@ -165,7 +176,7 @@ def test_counts_are_whole_numbers(pile):
                  lambda: sim.step(int(limit // sim.substeps) + 1), lambda: sim.run(until=1e20)):
         with pytest.raises(ValueError, match=re.escape(f"more than the limit {limit:.0e}")):
             call()
-    assert sim.steps == 20
+    assert sim.steps == 21
     # A 0-d array is its one value, in a scene dict and in an override.
     zero_d = dict(pile)
     zero_d["time"] = dict(pile["time"], dt=np.array(pile["time"]["dt"]))

@@ -441,6 +441,17 @@ TEST_F(Checkpoints, OverridesThatReadAlikeResume) {
     EXPECT_EQ(marbles("run " + scene + common + other + " --out " + dir.path() + "/other" + ck, &err), 2) << other;
     EXPECT_NE(err.find("belongs to another scene"), std::string::npos) << other << ": " << err;
   }
+  // The file written otherwise: a comment, a wall's and a block's keys in another order (only the materials'
+  // order counts: it is their numbering).
+  std::string text = replace_all(kScene, "  - plane: {point: [0, 0, 0.05], normal: [0, 0, 1]}\n    velocity: [0, 0, 0.02]",
+                                 "  - velocity: [0, 0, 0.02]  # rising\n    plane: {point: [0, 0, 0.05], normal: [0, 0, 1]}");
+  text = replace_all(text, "  - random: {count: 300, min: [0.02, 0.02, 0.08], max: [0.18, 0.18, 0.55], radius: "
+                           "{uniform: [0.006, 0.01]}, seed: 3}\n    velocity: {random: {speed: 0.3, seed: 4}}",
+                     "  - velocity: {random: {seed: 4, speed: 0.30}}\n    random: {count: 300, min: [0.02, 0.02, 0.08], "
+                     "max: [0.18, 0.18, 0.55], radius: {uniform: [0.006, 0.01]}, seed: 3}");
+  ASSERT_NE(text, kScene);
+  const std::string respelled = dir.write("respelled.yaml", text);
+  EXPECT_EQ(marbles("run " + respelled + common + given + " --out " + dir.path() + "/respelled" + ck, &err), 0) << err;
   ASSERT_EQ(marbles("run " + scene + common + alike + " --out " + cut + ck, &err), 0) << err;
   expect_same_output(whole, cut);
 }
