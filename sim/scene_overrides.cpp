@@ -8,6 +8,10 @@
 #include <algorithm>
 #include <charconv>
 
+#include <yaml-cpp/depthguard.h>
+
+#include "core/format.hpp"
+
 namespace marbles::scene::detail {
 
 namespace {
@@ -99,8 +103,11 @@ void apply_override(YAML::Node root, const std::string& text, Origins& origins) 
   YAML::Node value;
   try {
     value = YAML::Load(text.substr(equals + 1));
-  } catch (const YAML::Exception& e) {
-    fail(label, "", "the value is not valid YAML: " + e.msg);
+  } catch (const YAML::DeepRecursion& e) {  // yaml-cpp's own message for it is "bad file", as for a scene file
+    fail(label, "", "the value is nested deeper than the YAML reader follows (" + std::to_string(e.depth()) +
+                        " levels)");
+  } catch (const YAML::Exception& e) {  // its message quotes the offending byte, which may be any
+    fail(label, "", "the value is not valid YAML: " + printable(e.msg));
   }
   YAML::Node node = root;
   std::string key;

@@ -146,6 +146,13 @@ TEST_F(Robustness, NestingPastTheReadersDepthIsSaid) {
   EXPECT_EQ(o.exit_code, 2) << o.err;
   EXPECT_NE(o.err.find(scene + ":5:"), std::string::npos) << o.err;
   EXPECT_NE(o.err.find("nested deeper than the YAML reader follows"), std::string::npos) << o.err;
+  // The same in an override (yaml-cpp's own word for it was "bad file").
+  const Outcome set = marbles("check " MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml --set reference=" +
+                                  std::string(600, '[') + std::string(600, ']'),
+                              dir);
+  EXPECT_EQ(set.exit_code, 2) << set.err;
+  EXPECT_NE(set.err.find("--set reference=[[["), std::string::npos) << set.err;
+  EXPECT_NE(set.err.find("the value is nested deeper than the YAML reader follows"), std::string::npos) << set.err;
 }
 
 // Counts a machine cannot hold are refused up front, with the number.
