@@ -17,12 +17,15 @@
 #include <cstddef>
 #include <exception>
 #include <mutex>
+#include <string>
 #include <type_traits>
 #include <vector>
 
 #if defined(_OPENMP)
 #include <omp.h>
 #endif
+
+#include "core/error.hpp"
 
 namespace marbles {
 
@@ -48,6 +51,22 @@ inline int team_size() {
 #else
   return 1;
 #endif
+}
+
+// The most threads a run takes, however given (--threads, Python's
+// threads=, OMP_NUM_THREADS).
+inline constexpr int kMostThreads = 4096;
+
+// OpenMP's count where the run gives none (OMP_NUM_THREADS, else every
+// core), held to kMostThreads as --threads is: OMP_NUM_THREADS=100000 was
+// taken as it was.
+inline int default_thread_count() {
+  const int n = thread_count();
+  if (n > kMostThreads)
+    throw InputError(SourceLocation{}, "OMP_NUM_THREADS",
+                     "must be <= " + std::to_string(kMostThreads) + ", got " + std::to_string(n) +
+                         " (or give the run its count: --threads)");
+  return n;
 }
 
 inline void set_thread_count(int n) {

@@ -69,7 +69,7 @@ BackendChoice backend_choice(const std::string& name) {
 // The process's thread count before any simulation set its own: OMP_NUM_THREADS,
 // else every core (read once, at the first simulation made).
 int default_threads() {
-  static const int n = thread_count();
+  static const int n = default_thread_count();
   return n;
 }
 

@@ -23,6 +23,7 @@
 #include "bench/step_bench.hpp"
 #include "core/error.hpp"
 #include "core/format.hpp"
+#include "core/parallel.hpp"
 #include "render/camera.hpp"
 #include "render/color_map.hpp"
 #include "render/frame_output.hpp"
@@ -300,7 +301,7 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   run_cmd->add_flag("--summary-only", run.summary_only, "write only summary.json (no frames, images or movie)");
   run_cmd->add_option("--threads", run.threads, "CPU threads (default: OMP_NUM_THREADS, else every core)")
-      ->check(CLI::Range(1, 4096));
+      ->check(CLI::Range(1, kMostThreads));
   run_cmd->add_flag("--overwrite", run.overwrite,
                     "replace an earlier run's output in the folder (without it such a folder is refused)");
   std::string precision;

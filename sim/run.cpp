@@ -209,7 +209,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   const scene::GeneratedParticles particles = scene::generate_particles(sc);
   warn_risky_settings(sc, particles, err);
   std::ostringstream quiet_sink;  // --quiet: only the summary
-  set_thread_count(options.threads);
+  set_thread_count(options.threads > 0 ? options.threads : default_thread_count());
   const std::string started_at = utc_now();
   const broadphase::Backend backend = select_backend(options.backend, options.quiet ? quiet_sink : out);
 

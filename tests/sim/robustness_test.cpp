@@ -252,9 +252,9 @@ TEST_F(Robustness, UnwritableOutputIsExitOneWithThePath) {
 // Mistakes on the command line are named, exit 2: a command that is not one
 // (CLI11 said only "A subcommand is required"), an option given an empty
 // value (`--repeats ""` was 0 repeats past the check that refuses 0, and
-// crashed; `--n ""` timed nothing), and an --out that is a file (exit 1,
-// without the option's name). Output that standard output could not take is
-// not a success (exit 1).
+// crashed; `--n ""` timed nothing), an --out that is a file (exit 1,
+// without the option's name), and an OMP_NUM_THREADS past --threads' bound.
+// Output that standard output could not take is not a success (exit 1).
 TEST_F(Robustness, CommandLineMistakesAreNamed) {
   const test::ScratchDir dir("robust_command_line");
   const std::string scene = MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml";
@@ -276,6 +276,12 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
     EXPECT_NE(o.err.find(said), std::string::npos) << args << ": " << o.err;
   }
   EXPECT_EQ(slurp(file), "not a folder");
+  // OMP_NUM_THREADS is held to --threads' bound (it was taken as it was); --threads stands over it.
+  const std::string run = "run " + scene + " --backend cpu --quiet --summary-only --duration 0.01 --out " + dir.path();
+  const Outcome threads = marbles(run + "/t", dir, "OMP_NUM_THREADS=100000");
+  EXPECT_EQ(threads.exit_code, 2) << threads.err;
+  EXPECT_NE(threads.err.find("OMP_NUM_THREADS: must be <= 4096, got 100000"), std::string::npos) << threads.err;
+  EXPECT_EQ(marbles(run + "/t --threads 2", dir, "OMP_NUM_THREADS=100000").exit_code, 0);
   const Outcome full = marbles("check " + scene + " >/dev/full", dir);
   EXPECT_EQ(full.exit_code, 1) << full.err;
   EXPECT_NE(full.err.find("marbles: cannot write the standard output"), std::string::npos) << full.err;
