@@ -65,7 +65,7 @@ inline int default_thread_count() {
   if (n > kMostThreads)
     throw InputError(SourceLocation{}, "OMP_NUM_THREADS",
                      "must be <= " + std::to_string(kMostThreads) + ", got " + std::to_string(n) +
-                         " (or give the run its count: --threads)");
+                         " (or give the run its count: --threads, or threads= in Python)");
   return n;
 }
 
