@@ -470,6 +470,7 @@ int cli_main(int argc, char** argv) {
       run.backend = kBackends.at(run_backend);
       run.algorithm = run_broadphase == "seed" ? broadphase::Algorithm::seed : broadphase::Algorithm::home;
       run.render = !no_render;
+      run.limits = limit_args;
       return run_scene(run, std::cout, std::cerr);
     }
     if (*check_cmd) return check_scene(check_path, check_overrides, std::cout, std::cerr);
@@ -486,6 +487,7 @@ int cli_main(int argc, char** argv) {
       run_study(study, std::cout, std::cerr);
       return 0;
     }
+    if (*bench_bp || *bench_step || *bench_effects) (void)default_thread_count();  // OMP_NUM_THREADS, bounded
     if (*pairs_cmd) return print_pairs(pairs_csv, pairs_algorithm, kBackends.at(pairs_backend), pairs_margin, std::cout, std::cerr);
     if (*bench_bp) {
       if (bench_bp->count("--sort") > 0 && bp.backend != "cuda")

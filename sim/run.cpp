@@ -114,18 +114,26 @@ std::string shell_word(const std::string& text) {
   return quoted + "'";
 }
 
+// A path as one word of a shell command that reads no option from it: a
+// relative one starting with '-' behind "./".
+std::string path_word(const std::string& path) { return shell_word(path.starts_with('-') ? "./" + path : path); }
+
 // The command that resumes this run from the checkpoint at `path`: its
 // scene, folder, overrides and duration (the checkpoint holds the scene as
-// they made it), what it writes and the backend it was given.
+// they made it), its limits, what it writes, and the backend, broad phase
+// and threads it was given.
 std::string resume_command(const RunOptions& options, const std::string& out_dir, const std::string& path) {
-  std::string command = "marbles run " + shell_word(options.scene_path) + " --out " + shell_word(out_dir);
+  std::string command = "marbles run " + path_word(options.scene_path) + " --out " + path_word(out_dir);
   for (const std::string& o : options.overrides) command += " --set " + shell_word(o);
   if (options.duration) command += " --duration " + shortest(*options.duration);
+  for (const std::string& l : options.limits) command += " --limit " + shell_word(l);
   if (options.summary_only) command += " --summary-only";
   if (!options.render) command += " --no-render";
   if (options.backend != BackendChoice::automatic)
     command += options.backend == BackendChoice::cuda ? " --backend cuda" : " --backend cpu";
-  return command + " --restart " + shell_word(path);
+  if (options.algorithm == broadphase::Algorithm::seed) command += " --broadphase seed";
+  if (options.threads > 0) command += " --threads " + std::to_string(options.threads);
+  return command + " --restart " + path_word(path);
 }
 
 // The risky-settings warnings (sim/settings_check.hpp), one line each.
@@ -293,8 +301,9 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       progress.finish();
       const std::string path = checkpoint_path(sc.output.dir, sim.steps());
       save_checkpoint(path);
-      throw RuntimeFailure(std::string(e.what()) + "; the last good state is in " + path + " (resume with " +
-                           resume_command(options, sc.output.dir, path) + ")");
+      throw RuntimeFailure(std::string(e.what()) + "; the last good state is in " + path +
+                           " (a run resumed from it with the same settings fails there again: more time.substeps or "
+                           "a smaller time.dt, from the start, may get past it)");
     }
     step_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
     for (const std::string& why : sim.last_rollbacks()) {

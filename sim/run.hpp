@@ -59,6 +59,7 @@ struct RunOptions {
   bool summary_only = false;           // write only summary.json (no frames, images or movie)
   bool overwrite = false;              // replace an earlier run's output in the folder (else refused)
   int threads = 0;                     // CPU threads (0: OpenMP's default, OMP_NUM_THREADS or every core)
+  std::vector<std::string> limits;     // --limit NAME=VALUE as given (raised already), for the resume command
   std::string command_line;            // as typed, for summary.json
 };
 

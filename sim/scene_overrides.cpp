@@ -96,7 +96,8 @@ void add_subtree(const YAML::Node& node, const std::string& label, Origins& orig
 }
 
 void apply_override(YAML::Node root, const std::string& text, Origins& origins) {
-  const std::string label = "--set " + text;
+  // The override as its errors name it: printable, and cut after 200 bytes (a value nested 600 deep was echoed whole).
+  const std::string label = "--set " + printable(text.size() > 200 ? text.substr(0, 200) + "..." : text, false);
   const std::size_t equals = text.find('=');
   if (equals == std::string::npos || equals == 0) fail(label, "", "expected key.path=value, e.g. time.dt=5e-4");
   const std::vector<Step> steps = parse_path(text.substr(0, equals), label);

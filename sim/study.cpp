@@ -1,6 +1,7 @@
 #include "sim/study.hpp"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -269,11 +270,33 @@ void check_combinations(const StudyOptions& options, const std::vector<std::vect
   }
 }
 
+// The staging folders (`.runs-PID`) in `dir` of studies no longer running:
+// a failed one's, or one stopped by a signal. A live study's is its own.
+void remove_dead_stagings(const fs::path& dir) {
+  std::error_code ec;
+  std::vector<fs::path> dead;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.size() <= 6 || name.size() > 16 || !name.starts_with(".runs-") ||
+        name.find_first_not_of("0123456789", 6) != std::string::npos)
+      continue;
+    const long pid = std::stol(name.substr(6));
+    if (pid != getpid() && ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH) dead.push_back(it->path());
+  }
+  for (const fs::path& p : dead) fs::remove_all(p, ec);
+}
+
 // The study's runs (`staging`/N and N.log) moved into `runs`, in the place
 // of an earlier study's; that study's runs past this one's count (runs/N and
 // runs/N.log) removed, so that runs/ holds this study's runs only. Nothing
 // else in runs/ is touched.
 void keep_runs(const fs::path& staging, const fs::path& runs, std::size_t count) {
+  for (std::size_t c = 0; c < count; ++c)  // all there before anything of the earlier study goes
+    for (const std::string& name : {std::to_string(c), std::to_string(c) + ".log"})
+      if (!fs::exists(staging / name))
+        throw RuntimeFailure("the study's run " + (staging / name).string() + " is gone (another study in " +
+                             staging.parent_path().string() + "?); the earlier runs in " + runs.string() +
+                             " are left as they were");
   fs::create_directories(runs);
   std::vector<fs::path> stale;
   std::error_code ec;
@@ -311,10 +334,9 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   // place of an earlier study's in runs/ only once all of them have run: a
   // study that fails or is stopped leaves the earlier one whole, its tables
   // and its runs. A failed or dead study's folder (the failed run's log is
-  // in it) is removed at the next start.
-  std::error_code ec;
-  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
-    if (it->path().filename().string().starts_with(".runs-")) fs::remove_all(it->path(), ec);
+  // in it) is removed at the next start; a live one's is left alone. A
+  // run's summary.json and log name the folder it was made in.
+  remove_dead_stagings(dir);
   const fs::path staging = dir / (".runs-" + std::to_string(getpid()));
   fs::create_directories(staging);
   const std::size_t total = combos.size() * static_cast<std::size_t>(options.repeats);

@@ -583,7 +583,8 @@ TEST_F(Checkpoints, StopRequestCheckpointsAndResumes) {
 TEST_F(Checkpoints, TheResumeCommandSaidResumes) {
   const test::ScratchDir dir("ck_resume_said");
   const std::string scene = dir.write("s.yaml", kScene);
-  const std::string given = " --set time.dt=5e-4 --set 'name=run two' --duration 0.1 --summary-only --backend cpu";
+  const std::string given = " --set time.dt=5e-4 --set 'name=run two' --duration 0.1 --summary-only --backend cpu"
+                            " --broadphase seed --threads 1 --limit substeps=1e11";
   ASSERT_EQ(marbles("run " + scene + " --quiet" + given + " --out " + dir.path() + "/whole"), 0);
   const std::string out = dir.path() + "/stopped";
   std::string err;
@@ -594,7 +595,9 @@ TEST_F(Checkpoints, TheResumeCommandSaidResumes) {
   const std::string command = err.substr(from + 21, to - from - 21);
   for (const std::string& part : {std::string("--set time.dt=5e-4"), std::string("--set 'name=run two'"),
                                   std::string("--duration 0.1"), std::string("--summary-only"),
-                                  std::string("--backend cpu"), "--restart " + out + "/checkpoints/step_000060.mck"})
+                                  std::string("--backend cpu"), std::string("--broadphase seed"),
+                                  std::string("--threads 1"), std::string("--limit substeps=1e11"),
+                                  "--restart " + out + "/checkpoints/step_000060.mck"})
     EXPECT_NE(command.find(part), std::string::npos) << part << " in " << command;
   ASSERT_EQ(marbles(command + " --quiet", &err), 0) << command << ": " << err;
   expect_same_output(dir.path() + "/whole", out);

@@ -282,6 +282,7 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
   EXPECT_EQ(threads.exit_code, 2) << threads.err;
   EXPECT_NE(threads.err.find("OMP_NUM_THREADS: must be <= 4096, got 100000"), std::string::npos) << threads.err;
   EXPECT_EQ(marbles(run + "/t --threads 2", dir, "OMP_NUM_THREADS=100000").exit_code, 0);
+  EXPECT_EQ(marbles("bench step --backend cpu --n 100 --repeats 1", dir, "OMP_NUM_THREADS=5000").exit_code, 2);
   const Outcome full = marbles("check " + scene + " >/dev/full", dir);
   EXPECT_EQ(full.exit_code, 1) << full.err;
   EXPECT_NE(full.err.find("marbles: cannot write the standard output"), std::string::npos) << full.err;

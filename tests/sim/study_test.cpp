@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -145,9 +146,21 @@ TEST_F(Study, AFailedStudyLeavesTheEarlierOneWhole) {
   EXPECT_EQ(slurp(dir.path() + "/study.csv"), table);
   EXPECT_EQ(slurp((runs / "0" / "summary.json").string()), first);
   for (const char* name : {"0.log", "1", "2", "2.log"}) EXPECT_TRUE(fs::exists(runs / name)) << name;
+  // The failed study's folder is removed at the next start, as is any study's that no longer runs; a live one's
+  // (process 1's) and a folder of another name are left alone.
+  const pid_t dead = ::fork();
+  if (dead == 0) ::_exit(0);
+  ASSERT_GT(dead, 0);
+  ::waitpid(dead, nullptr, 0);
+  const fs::path root(dir.path());
+  for (const std::string& name : {".runs-" + std::to_string(dead), std::string(".runs-1"), std::string(".runs-notes")})
+    fs::create_directories(root / name);
   ASSERT_EQ(study(kValidation + "bouncing_ball.yaml", {"time.dt=4e-3"}, dir).rows.size(), 1u);
-  for (const fs::directory_entry& e : fs::directory_iterator(dir.path()))
-    EXPECT_FALSE(e.path().filename().string().starts_with(".runs-")) << e.path();
+  std::vector<std::string> left;
+  for (const fs::directory_entry& e : fs::directory_iterator(root))
+    if (e.path().filename().string().starts_with(".runs-")) left.push_back(e.path().filename().string());
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(left, (std::vector<std::string>{".runs-1", ".runs-notes"}));
   EXPECT_NE(slurp(dir.path() + "/study.csv"), table);
   EXPECT_FALSE(fs::exists(runs / "1"));
 }
