@@ -273,15 +273,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   };
 
   remove_earlier_run(earlier);  // --overwrite, once the scene is known to run
-  RunOutput output(sc, sc.output.dir, sim.walls(), render, err, options.restart.has_value(), &view);
-  Progress progress(!options.quiet);
-  double step_seconds = 0;
-  const std::uint64_t first_step = sim.steps();
-  // The checkpoint's run folder: OUTDIR of OUTDIR/checkpoints/step_NNNNNN.mck.
-  if (options.restart) output.resume(sim.steps(), sim.dt(), restart_here ? std::filesystem::path{} : restart_from);
-  else output.write(sim);
-  const auto t0 = std::chrono::steady_clock::now();
-  // Test hook: MARBLES_FAULT_SIGNAL=NAME@N raises SIGNAME (SEGV, ABRT, INT, TERM) after step N.
+  // Test hook: MARBLES_FAULT_SIGNAL=NAME@N raises SIGNAME (SEGV, ABRT, INT, TERM) after step N (0: after the
+  // start's output).
   int fault_signal = 0;
   std::uint64_t fault_signal_step = 0;
   if (const char* hook = std::getenv("MARBLES_FAULT_SIGNAL")) {
@@ -291,7 +284,19 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     fault_signal = name == "SEGV" ? SIGSEGV : name == "ABRT" ? SIGABRT : name == "INT" ? SIGINT : name == "TERM" ? SIGTERM : 0;
     if (at != std::string::npos) fault_signal_step = std::strtoull(text.c_str() + at + 1, nullptr, 10);
   }
-  const StopRequests stop;  // SIGINT, SIGTERM: end this step, checkpoint, exit 1
+  // SIGINT, SIGTERM: end the step in progress, checkpoint, exit 1. Taken from
+  // the start's output on (its first image may take long): a stop asked
+  // there ends the first step.
+  const StopRequests stop;
+  RunOutput output(sc, sc.output.dir, sim.walls(), render, err, options.restart.has_value(), &view);
+  Progress progress(!options.quiet);
+  double step_seconds = 0;
+  const std::uint64_t first_step = sim.steps();
+  // The checkpoint's run folder: OUTDIR of OUTDIR/checkpoints/step_NNNNNN.mck.
+  if (options.restart) output.resume(sim.steps(), sim.dt(), restart_here ? std::filesystem::path{} : restart_from);
+  else output.write(sim);
+  if (fault_signal != 0 && fault_signal_step == 0) std::raise(fault_signal);
+  const auto t0 = std::chrono::steady_clock::now();
   while (sim.steps() < total_steps) {
     const auto s0 = std::chrono::steady_clock::now();
     try {

@@ -601,6 +601,17 @@ TEST_F(Checkpoints, TheResumeCommandSaidResumes) {
     EXPECT_NE(command.find(part), std::string::npos) << part << " in " << command;
   ASSERT_EQ(marbles(command + " --quiet", &err), 0) << command << ": " << err;
   expect_same_output(dir.path() + "/whole", out);
+  // A stop asked while the start's output is written (a first image may take long) ends the first step, with
+  // its checkpoint: the process was ended at once, exit 130, with nothing to resume.
+  const std::string early = dir.path() + "/early";
+  ASSERT_EQ(marbles("run " + scene + " --quiet" + given + " --out " + early, &err, "MARBLES_FAULT_SIGNAL=INT@0"), 1)
+      << err;
+  EXPECT_NE(err.find("stopped by SIGINT after step 1 of 200"), std::string::npos) << err;
+  ASSERT_EQ(marbles("run " + scene + " --quiet" + given + " --out " + early + " --restart " + early +
+                    "/checkpoints/step_000001.mck", &err),
+            0)
+      << err;
+  expect_same_output(dir.path() + "/whole", early);
 }
 
 // A real SIGINT from outside, once the steps run: exit 1, and the checkpoint
