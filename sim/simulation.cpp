@@ -93,14 +93,14 @@ StateOverlaps state_overlaps(const World& world, const StepModel& model,
   return o;
 }
 
-void Simulation::watch_from_host(const std::vector<narrowphase::WallShape>& walls_now) {
+// `walls`: where they stand (after a restart, moved).
+void Simulation::watch_from_host(const std::vector<narrowphase::WallShape>& walls) {
   const World& w = world();
-  const auto& walls = walls_now;  // where they stand (after a restart, moved)
   const auto wall_count = m_model->wall_contacts ? static_cast<std::uint32_t>(walls.size()) : 0u;
   // The figures of the state as it stands, as the step's end would give them:
   // the overlap rule then judges the first step from the overlaps it starts
   // with (spheres placed overlapping are pushed apart, not a blow-up).
-  m_watched_overlaps = state_overlaps(w, *m_model, walls_now, kStartOverlapTolerance);
+  m_watched_overlaps = state_overlaps(w, *m_model, walls, kStartOverlapTolerance);
   m_last.max_overlap = static_cast<real>(m_watched_overlaps.deepest);
   m_last.kinetic_energy = 0;
   m_last.beyond_walls = 0;

@@ -15,9 +15,11 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <limits>
 #include <optional>
 #include <ostream>
 #include <sstream>
+#include <string_view>
 #include <tuple>
 
 #include <nlohmann/json.hpp>
@@ -270,6 +272,14 @@ void check_combinations(const StudyOptions& options, const std::vector<std::vect
   }
 }
 
+// A file name's whole number (1 to 18 digits, nothing else), as the study
+// names its runs (N, N.log) and its staging folders (.runs-PID).
+std::optional<std::uint64_t> whole_number(std::string_view text) {
+  if (text.empty() || text.size() > 18 || text.find_first_not_of("0123456789") != std::string_view::npos)
+    return std::nullopt;
+  return std::stoull(std::string(text));
+}
+
 // The staging folders (`.runs-PID`) in `dir` of studies no longer running:
 // a failed one's, or one stopped by a signal. A live study's is its own.
 void remove_dead_stagings(const fs::path& dir) {
@@ -277,11 +287,10 @@ void remove_dead_stagings(const fs::path& dir) {
   std::vector<fs::path> dead;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     const std::string name = it->path().filename().string();
-    if (name.size() <= 6 || name.size() > 16 || !name.starts_with(".runs-") ||
-        name.find_first_not_of("0123456789", 6) != std::string::npos)
-      continue;
-    const long pid = std::stol(name.substr(6));
-    if (pid != getpid() && ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH) dead.push_back(it->path());
+    const auto pid = name.starts_with(".runs-") ? whole_number(std::string_view(name).substr(6)) : std::nullopt;
+    if (pid && *pid != static_cast<std::uint64_t>(getpid()) && *pid <= std::numeric_limits<pid_t>::max() &&
+        ::kill(static_cast<pid_t>(*pid), 0) != 0 && errno == ESRCH)
+      dead.push_back(it->path());
   }
   for (const fs::path& p : dead) fs::remove_all(p, ec);
 }
@@ -302,9 +311,8 @@ void keep_runs(const fs::path& staging, const fs::path& runs, std::size_t count)
   std::error_code ec;
   for (fs::directory_iterator it(runs, ec), end; !ec && it != end; it.increment(ec)) {
     std::string name = it->path().filename().string();
-    if (name.size() > 4 && name.ends_with(".log")) name.resize(name.size() - 4);
-    if (name.empty() || name.size() > 18 || name.find_first_not_of("0123456789") != std::string::npos) continue;
-    if (std::stoull(name) >= count) stale.push_back(it->path());
+    if (name.ends_with(".log")) name.resize(name.size() - 4);
+    if (const auto n = whole_number(name); n && *n >= count) stale.push_back(it->path());
   }
   for (const fs::path& p : stale) fs::remove_all(p, ec);
   for (std::size_t c = 0; c < count; ++c)
