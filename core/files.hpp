@@ -1,13 +1,25 @@
 #pragma once
 // not_a_plain_file(path): what a path names when it is not a plain file.
+// whole_number(text), folders_of_ended_processes(dir, prefix): the
+// PREFIX-PID folders (a study's staging, a run's earlier output set aside)
+// whose process no longer runs.
 //
 // The scene, its CSV blocks and checkpoints are each read more than once (the
 // scene for its precision, its hash and its text), so a pipe would give its
 // bytes to the first read only, and opening a pipe that has no writer waits
 // for one. Such paths are refused up front, by what they are.
 
+#include <signal.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdint>
 #include <filesystem>
+#include <limits>
+#include <optional>
 #include <string>
+#include <string_view>
+#include <vector>
 
 namespace marbles {
 
@@ -25,6 +37,29 @@ inline const char* not_a_plain_file(const std::string& path, bool follow_links =
     case std::filesystem::file_type::character: return "a device";
     default: return nullptr;
   }
+}
+
+// A file name's whole number: 1 to 18 digits, nothing else.
+inline std::optional<std::uint64_t> whole_number(std::string_view text) {
+  if (text.empty() || text.size() > 18 || text.find_first_not_of("0123456789") != std::string_view::npos)
+    return std::nullopt;
+  return std::stoull(std::string(text));
+}
+
+// The folders PREFIX-PID in `dir` whose process has ended (this process's
+// own and a running one's are not among them).
+inline std::vector<std::filesystem::path> folders_of_ended_processes(const std::filesystem::path& dir,
+                                                                     std::string_view prefix) {
+  std::error_code ec;
+  std::vector<std::filesystem::path> ended;
+  for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    const auto pid = name.starts_with(prefix) ? whole_number(std::string_view(name).substr(prefix.size())) : std::nullopt;
+    if (pid && *pid != static_cast<std::uint64_t>(getpid()) && *pid <= std::numeric_limits<pid_t>::max() &&
+        ::kill(static_cast<pid_t>(*pid), 0) != 0 && errno == ESRCH && it->is_directory(ec))
+      ended.push_back(it->path());
+  }
+  return ended;
 }
 
 }  // namespace marbles

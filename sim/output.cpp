@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "core/format.hpp"
 #include "render/atomic_file.hpp"
 #include "render/frame_output.hpp"
@@ -132,6 +133,43 @@ void remove_earlier_run(const std::vector<std::filesystem::path>& files) {
     std::filesystem::remove(file, ec);
     if (ec) throw RuntimeFailure("cannot remove " + file.string() + " of the earlier run: " + ec.message());
   }
+}
+
+EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::vector<std::filesystem::path>& files,
+                                 std::ostream& log)
+    : m_log(log) {
+  namespace fs = std::filesystem;
+  for (const fs::path& left : folders_of_ended_processes(dir, ".earlier-run-"))
+    log << "note: " << left.string() << " holds an earlier run's output, set aside by a run with --overwrite that did "
+        << "not end; remove it when it is not needed\n";
+  if (files.empty()) return;
+  m_folder = dir / (".earlier-run-" + std::to_string(getpid()));
+  std::error_code ec;
+  fs::remove_all(m_folder, ec);  // a folder of an earlier process of this number
+  for (const fs::path& file : files) {
+    const fs::path to = m_folder / file.lexically_relative(dir);
+    fs::create_directories(to.parent_path(), ec);
+    if (!ec) fs::rename(file, to, ec);
+    if (ec)
+      throw RuntimeFailure("cannot move " + file.string() + " of the earlier run aside into " + m_folder.string() +
+                           ": " + ec.message() + " (what was moved lies there)");
+  }
+}
+
+EarlierRunAside::~EarlierRunAside() {
+  if (!m_folder.empty())
+    m_log << "note: the earlier run's output, which --overwrite was to replace, is kept whole in " << m_folder.string()
+          << "\n";
+}
+
+void EarlierRunAside::discard() {
+  if (m_folder.empty()) return;
+  std::error_code ec;
+  std::filesystem::remove_all(m_folder, ec);
+  if (ec)
+    m_log << "warning: cannot remove " << m_folder.string() << " (the earlier run's output, replaced): " << ec.message()
+          << "\n";
+  m_folder.clear();
 }
 
 render::RenderOptions render_options(const scene::Scene& scene) {

@@ -40,6 +40,25 @@ std::string earlier_run_text(const std::string& dir, const std::vector<std::file
 // Removes them (overwriting that run); RuntimeFailure naming a file that stays.
 void remove_earlier_run(const std::vector<std::filesystem::path>& files);
 
+// `run --overwrite`: the earlier run's files moved (renamed, by their paths
+// below `dir`) into DIR/.earlier-run-PID while the new run runs, so that a
+// run that fails, or a process that dies, loses nothing. `discard()` once
+// the new run stands (ended, or stopped with its checkpoint) removes them;
+// otherwise they stay whole there and the destructor says where on `log`.
+// Such folders of processes that ended are named on `log` at the start.
+class EarlierRunAside {
+ public:
+  EarlierRunAside(const std::filesystem::path& dir, const std::vector<std::filesystem::path>& files, std::ostream& log);
+  ~EarlierRunAside();
+  EarlierRunAside(const EarlierRunAside&) = delete;
+  EarlierRunAside& operator=(const EarlierRunAside&) = delete;
+  void discard();
+
+ private:
+  std::filesystem::path m_folder;  // empty: nothing set aside
+  std::ostream& m_log;
+};
+
 // summary.json's figures of the world at a run's end beside
 // kinetic_energy_end (World::motion), named as the summary names them; the
 // Python module's summary() gives the same.

@@ -272,7 +272,9 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
                             probe ? probe->progress() : std::vector<double>{}, sim.ids()});
   };
 
-  remove_earlier_run(earlier);  // --overwrite, once the scene is known to run
+  // --overwrite, once the scene is known to run: the earlier run set aside
+  // until this one stands.
+  EarlierRunAside earlier_aside(sc.output.dir, earlier, err);
   // Test hook: MARBLES_FAULT_SIGNAL=NAME@N raises SIGNAME (SEGV, ABRT, INT, TERM) after step N (0: after the
   // start's output).
   int fault_signal = 0;
@@ -336,6 +338,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       progress.finish();
       const std::string path = checkpoint_path(sc.output.dir, sim.steps());
       if (!std::filesystem::exists(path)) save_checkpoint(path);
+      earlier_aside.discard();  // this run resumes in its place
       throw RuntimeFailure(std::string("stopped by ") + signal_name(sig) + " after step " + std::to_string(sim.steps()) +
                            " of " + std::to_string(total_steps) + "; the state is in " + path + " (resume with " +
                            resume_command(options, sc.output.dir, path) + ")");
@@ -394,6 +397,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   std::filesystem::create_directories(sc.output.dir);
   const std::string summary_path = (std::filesystem::path(sc.output.dir) / "summary.json").string();
   render::write_file_atomic(summary_path, json_text(summary));
+  earlier_aside.discard();
 
   out << std::setprecision(4) << sc.name << ": " << sim.steps() << " steps, " << sim.time() << " s simulated in "
       << wall << " s (" << 1e3 * step_seconds / steps_run << " ms/step; " << candidate_sum / steps

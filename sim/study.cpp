@@ -27,6 +27,7 @@
 #include "core/config.hpp"
 #include "core/device.hpp"
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "core/format.hpp"
 #include "render/atomic_file.hpp"
 #include "sim/run.hpp"
@@ -272,27 +273,11 @@ void check_combinations(const StudyOptions& options, const std::vector<std::vect
   }
 }
 
-// A file name's whole number (1 to 18 digits, nothing else), as the study
-// names its runs (N, N.log) and its staging folders (.runs-PID).
-std::optional<std::uint64_t> whole_number(std::string_view text) {
-  if (text.empty() || text.size() > 18 || text.find_first_not_of("0123456789") != std::string_view::npos)
-    return std::nullopt;
-  return std::stoull(std::string(text));
-}
-
 // The staging folders (`.runs-PID`) in `dir` of studies no longer running:
 // a failed one's, or one stopped by a signal. A live study's is its own.
 void remove_dead_stagings(const fs::path& dir) {
   std::error_code ec;
-  std::vector<fs::path> dead;
-  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    const std::string name = it->path().filename().string();
-    const auto pid = name.starts_with(".runs-") ? whole_number(std::string_view(name).substr(6)) : std::nullopt;
-    if (pid && *pid != static_cast<std::uint64_t>(getpid()) && *pid <= std::numeric_limits<pid_t>::max() &&
-        ::kill(static_cast<pid_t>(*pid), 0) != 0 && errno == ESRCH)
-      dead.push_back(it->path());
-  }
-  for (const fs::path& p : dead) fs::remove_all(p, ec);
+  for (const fs::path& p : folders_of_ended_processes(dir, ".runs-")) fs::remove_all(p, ec);
 }
 
 // The study's runs (`staging`/N and N.log) moved into `runs`, in the place

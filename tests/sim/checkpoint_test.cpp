@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -138,6 +139,60 @@ TEST_F(Checkpoints, EarlierRunIsRefusedOrOverwritten) {
   std::sort(expected.begin(), expected.end());
   EXPECT_EQ(listing(), expected);
   expect_same_output(fresh, out);
+}
+
+// --overwrite sets the earlier run aside (DIR/.earlier-run-PID) until the
+// new one stands: a run that fails keeps it whole there and says so; a
+// process that dies leaves it, and the next run into the folder names it; a
+// run that ends, or is stopped with its checkpoint, removes it.
+TEST_F(Checkpoints, OverwriteKeepsTheEarlierRunUntilTheNewOneStands) {
+  const test::ScratchDir dir("ck_overwrite_aside");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string out = dir.path() + "/o";
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + out), 0);
+  auto files_in = [](const fs::path& folder) {  // each file below `folder` with its bytes
+    std::map<std::string, std::string> files;
+    for (const auto& entry : fs::recursive_directory_iterator(folder))
+      if (entry.is_regular_file()) files[fs::relative(entry.path(), folder).string()] = slurp(entry.path().string());
+    return files;
+  };
+  auto asides = [&] {
+    std::vector<fs::path> found;
+    for (const auto& entry : fs::directory_iterator(out))
+      if (entry.path().filename().string().starts_with(".earlier-run-")) found.push_back(entry.path());
+    return found;
+  };
+  const std::map<std::string, std::string> earlier = files_in(out);
+  const std::string again = "run " + scene + " --quiet --backend cpu --duration 0.2 --overwrite --out " + out;
+
+  std::string err;
+  EXPECT_EQ(marbles(again, &err, "MARBLES_FAULT_NAN_STEP=120:all"), 1);
+  ASSERT_EQ(asides().size(), 1u) << err;
+  const fs::path kept = asides().front();
+  EXPECT_NE(err.find("the earlier run's output, which --overwrite was to replace, is kept whole in " + kept.string()),
+            std::string::npos)
+      << err;
+  EXPECT_EQ(files_in(kept), earlier);
+  EXPECT_TRUE(fs::exists(out + "/checkpoints/step_000119.mck")) << "the failed run's last good state";
+
+  EXPECT_EQ(marbles(again, &err, "MARBLES_FAULT_SIGNAL=SEGV@40"), 1);
+  EXPECT_NE(err.find("note: " + kept.string() + " holds an earlier run's output, set aside by a run with --overwrite"),
+            std::string::npos)
+      << err;
+  EXPECT_EQ(asides().size(), 2u) << "the dead process's folder stays";
+  EXPECT_EQ(files_in(kept), earlier);
+
+  EXPECT_EQ(marbles(again, &err, "MARBLES_FAULT_SIGNAL=INT@60"), 1);
+  EXPECT_NE(err.find("stopped by SIGINT after step 60"), std::string::npos) << err;
+  EXPECT_EQ(asides().size(), 2u) << "the stopped run resumes in the folder: what it replaced is gone";
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --duration 0.2 --out " + out + " --restart " + out +
+                        "/checkpoints/step_000060.mck",
+                    &err),
+            0)
+      << err;
+  for (const fs::path& folder : asides()) fs::remove_all(folder);
+  EXPECT_EQ(marbles(again, &err), 0) << err;
+  EXPECT_TRUE(asides().empty()) << "a run that ends removes what it replaced";
 }
 
 // thermo.csv: one row per frame; its energies are the summary's at the
