@@ -178,15 +178,7 @@ int check_scene(const std::string& scene_path, const std::vector<std::string>& o
 constexpr double kDeepAtTheEnd = 0.1;
 
 int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
-  scene::Scene sc = scene::load_scene(options.scene_path, options.overrides);
-  if (options.duration) {  // held to time.duration's own rules
-    const double d = *options.duration;
-    if (!(d > 0) || !(d - d == 0))
-      throw InputError(SourceLocation{}, "--duration", "must be a finite number > 0, got " + shortest(d));
-    if (const std::string why = scene::duration_problem(d, sc.time); !why.empty())
-      throw InputError(SourceLocation{}, "--duration", why);
-    sc.time.duration = d;
-  }
+  scene::Scene sc = scene::load_scene(options.scene_path, options.overrides, options.duration);
   if (options.out_dir) sc.output.dir = *options.out_dir;
   if (options.summary_only) {
     sc.output.vtk_every = 0;

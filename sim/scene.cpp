@@ -62,8 +62,8 @@ void check_box(const Vec3& lo, const Vec3& hi, const Field& max_field) {
   }
 }
 
-}  // namespace
-
+// What is wrong with a run of `duration` seconds (finite, > 0) at `time`'s
+// step and substeps, or empty: the rules of time.duration and run --duration.
 std::string duration_problem(double duration, const TimeSpec& time) {
   if (duration < time.dt)
     return "a duration of " + format_number(duration) + " s is shorter than a step, time.dt = " +
@@ -76,16 +76,24 @@ std::string duration_problem(double duration, const TimeSpec& time) {
   return {};
 }
 
-namespace {
-
-TimeSpec read_time(const Field& field) {
+// `duration`: run --duration's, in the place of the file's (which must
+// still be a number > 0) and held to the same rules under its own name.
+TimeSpec read_time(const Field& field, std::optional<double> duration) {
   const MapFields map(field, {"duration", "dt", "substeps"});
   TimeSpec time;
   time.duration = map.required("duration").positive();
   const Field dt = map.required("dt");
   time.dt = dt.positive();
   if (auto f = map.optional("substeps")) time.substeps = f->integer_at_least(1);
-  if (const std::string why = duration_problem(time.duration, time); !why.empty()) dt.fail(why);
+  if (duration) {
+    if (!(*duration > 0) || !(*duration - *duration == 0))
+      throw InputError(SourceLocation{}, "--duration", "must be a finite number > 0, got " + shortest(*duration));
+    if (const std::string why = duration_problem(*duration, time); !why.empty())
+      throw InputError(SourceLocation{}, "--duration", why);
+    time.duration = *duration;
+  } else if (const std::string why = duration_problem(time.duration, time); !why.empty()) {
+    dt.fail(why);
+  }
   if (!(static_cast<real>(time.dt / time.substeps) > 0))
     dt.fail("the substep dt / substeps rounds to 0 in " + std::string(kRealName) + " precision");
   return time;
@@ -890,9 +898,10 @@ void fold_tree(const YAML::Node& node, const std::string& key, const detail::Ori
 }  // namespace
 
 // `path`: where the scene came from (errors name it); `stem`: the default name
-// and output folder; the `--set` overrides are applied to the tree first.
+// and output folder; the `--set` overrides are applied to the tree first;
+// `duration` (run --duration) replaces time.duration's value, not the tree.
 Scene read_scene(YAML::Node document, const std::string& path, const std::string& stem,
-                 const std::vector<std::string>& overrides) {
+                 const std::vector<std::string>& overrides, std::optional<double> duration) {
   detail::Origins origins;
   apply_overrides_whole(document, overrides, origins);
   const Field root(document, "", path, &origins);
@@ -911,7 +920,7 @@ Scene read_scene(YAML::Node document, const std::string& path, const std::string
   scene.name = stem;
   if (auto f = top.optional("name")) scene.name = f->word();
 
-  scene.time = read_time(top.required("time"));
+  scene.time = read_time(top.required("time"), duration);
   if (auto f = top.optional("solver")) scene.solver = read_solver(*f);
 
   scene.effects = kDefaultEffects;
@@ -950,8 +959,8 @@ Scene read_scene(YAML::Node document, const std::string& path, const std::string
 
 Scene load_scene(const std::string& path) { return load_scene(path, {}); }
 
-Scene load_scene(const std::string& path, const std::vector<std::string>& overrides) {
-  return read_scene(read_document(path), path, std::filesystem::path(path).stem().string(), overrides);
+Scene load_scene(const std::string& path, const std::vector<std::string>& overrides, std::optional<double> duration) {
+  return read_scene(read_document(path), path, std::filesystem::path(path).stem().string(), overrides, duration);
 }
 
 namespace {
@@ -997,7 +1006,7 @@ Scene load_scene_json(const std::string& text, const std::string& label, const s
   }
   const YAML::Node document = yaml_of(json);
   expect_scene_map(document, label);
-  return read_scene(document, label, stem, overrides);
+  return read_scene(document, label, stem, overrides, std::nullopt);
 }
 
 namespace {

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -21,13 +22,6 @@ struct TimeSpec {
   double dt = 0;        // s, one step (output cadence counts steps)
   int substeps = 1;     // substeps per step, h = dt / substeps
 };
-
-// What is wrong with a run of `duration` seconds at `time`'s step and
-// substeps, or empty: the rules time.duration obeys against time.dt and the
-// substeps limit, shared by the scene's `time` block and `run --duration`.
-// The duration is taken to be a finite number > 0 (each caller refuses
-// other values in its own words first).
-std::string duration_problem(double duration, const TimeSpec& time);
 
 struct SolverSpec {
   int iterations = 10;                        // velocity sweeps per substep
@@ -219,7 +213,7 @@ struct Scene {
   // tree once the overrides are applied, each value as the reader took it
   // (5e-4 and 0.0005 alike, True and true, quoted or not; a name as
   // written), each map's keys sorted but where their order counts. Set by
-  // the loaders; run --duration and --out change the scene after it.
+  // the loaders; run --duration and --out are not part of it.
   std::uint64_t fingerprint = 0;
 
   bool has(Effect e) const {
@@ -237,7 +231,11 @@ Scene load_scene(const std::string& path);
 // "gravity=[0, 0, -1]": a dotted key path, then a YAML value) applied in order to
 // the file's tree before validation. A problem in an overridden value is
 // reported at the override ("--set time.dt=-1: time.dt: must be > 0, got -1").
-Scene load_scene(const std::string& path, const std::vector<std::string>& overrides);
+// `duration` (run --duration) takes time.duration's place, held to its
+// rules against the time block as overridden (errors name --duration); it
+// is not part of the fingerprint, so a restart may run on further.
+Scene load_scene(const std::string& path, const std::vector<std::string>& overrides,
+                 std::optional<double> duration = std::nullopt);
 
 // A scene given as JSON text (the Python module's dicts): the same keys, the
 // same checks and messages; errors name `label` and the key path (there are

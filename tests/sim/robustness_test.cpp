@@ -212,6 +212,12 @@ TEST_F(Robustness, LimitsCanBeRaised) {
   EXPECT_EQ(shorter.exit_code, 2) << shorter.err;
   EXPECT_NE(shorter.err.find("--duration: a duration of 1e-04 s is shorter than a step, time.dt = 0.001 s"), std::string::npos) << shorter.err;
   EXPECT_FALSE(std::filesystem::exists(dir.path() + "/o/summary.json"));
+  // --duration takes the file's place before the rules: a file whose own
+  // duration they refuse runs for a --duration they allow.
+  const Outcome instead =
+      marbles("run " + long_run + " --quiet --summary-only --backend cpu --out " + dir.path() + "/o --duration 0.01", dir);
+  EXPECT_EQ(instead.exit_code, 0) << instead.err;
+  EXPECT_NE(slurp(dir.path() + "/o/summary.json").find("\"steps\": 10,"), std::string::npos);
   // The benchmarks' sphere counts are held to the same guards, before anything is made.
   for (const std::string bench : {"bench step", "bench effects", "bench broadphase"}) {
     const Outcome many = marbles(bench + " --n 3000000000", dir);
