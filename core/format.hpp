@@ -58,6 +58,29 @@ inline std::string printable(std::string_view text, bool ascii = true) {
   return out;
 }
 
+// The offset of the first byte of `text` that does not begin a whole UTF-8
+// character (an overlong form, a surrogate or past U+10FFFF), else npos.
+inline std::size_t first_non_utf8(std::string_view text) {
+  std::size_t i = 0;
+  while (i < text.size()) {
+    const unsigned char c = text[i];
+    int more = 0;                        // bytes that follow
+    unsigned char lo = 0x80, hi = 0xbf;  // the second byte's range
+    if (c < 0x80) more = 0;
+    else if (c >= 0xc2 && c <= 0xdf) more = 1;
+    else if (c >= 0xe0 && c <= 0xef) more = 2, lo = c == 0xe0 ? 0xa0 : 0x80, hi = c == 0xed ? 0x9f : 0xbf;
+    else if (c >= 0xf0 && c <= 0xf4) more = 3, lo = c == 0xf0 ? 0x90 : 0x80, hi = c == 0xf4 ? 0x8f : 0xbf;
+    else return i;
+    if (i + more >= text.size()) return i;  // cut short
+    for (int k = 1; k <= more; ++k) {
+      const unsigned char b = text[i + k];
+      if (k == 1 ? (b < lo || b > hi) : (b < 0x80 || b > 0xbf)) return i;
+    }
+    i += 1 + more;
+  }
+  return std::string_view::npos;
+}
+
 // A size in bytes for messages: three significant digits in GB, MB, kB or
 // bytes ("1.23 GB", "640 bytes").
 inline std::string bytes_text(double bytes) {

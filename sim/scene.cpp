@@ -813,6 +813,18 @@ void expect_scene_map(const YAML::Node& document, const std::string& source) {
 // The file's one YAML document, which must be a map.
 YAML::Node read_document(const std::string& path) {
   const std::string text = read_file(path);
+  // YAML is Unicode: UTF-8, or UTF-16/32 with its byte order mark (which the
+  // reader decodes). Bytes that are no UTF-8 it would keep in names, or
+  // read as a mark ("\xff\xfe"), so they are refused where they stand.
+  const bool utf16_or_32 = text.starts_with("\xfe\xff") || text.starts_with("\xff\xfe") ||
+                           text.starts_with(std::string_view("\0\0\xfe\xff", 4));
+  if (const std::size_t at = first_non_utf8(text); at != std::string::npos && !utf16_or_32) {
+    const std::size_t line_start = text.rfind('\n', at);
+    const auto line = 1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n');
+    const std::size_t column = at - (line_start == std::string::npos ? 0 : line_start + 1) + 1;
+    throw InputError(SourceLocation{path, static_cast<int>(line), static_cast<int>(column)}, "",
+                     "not UTF-8 text: " + printable(text.substr(at, 1)) + " (save the file as UTF-8)");
+  }
   YAML::Node document;
   std::size_t count = 0;
   YAML::Mark second;

@@ -96,11 +96,16 @@ void add_subtree(const YAML::Node& node, const std::string& label, Origins& orig
 }
 
 void apply_override(YAML::Node root, const std::string& text, Origins& origins) {
-  // The override as its errors name it: printable, and cut after 200 bytes (a value nested 600 deep was echoed whole).
-  const std::string label = "--set " + printable(text.size() > 200 ? text.substr(0, 200) + "..." : text, false);
+  // The override as its errors name it: printable (its bytes past ASCII kept
+  // where it is UTF-8), and cut after 200 bytes (a value nested 600 deep was echoed whole).
+  const std::size_t not_utf8 = first_non_utf8(text);
+  const std::string label =
+      "--set " + printable(text.size() > 200 ? text.substr(0, 200) + "..." : text, not_utf8 != std::string::npos);
   const std::size_t equals = text.find('=');
   if (equals == std::string::npos || equals == 0) fail(label, "", "expected key.path=value, e.g. time.dt=5e-4");
   const std::vector<Step> steps = parse_path(text.substr(0, equals), label);
+  if (not_utf8 != std::string::npos)
+    fail(label, "", "not UTF-8 text: " + printable(text.substr(not_utf8, 1)) + " at byte " + std::to_string(not_utf8 + 1));
   YAML::Node value;
   try {
     value = YAML::Load(text.substr(equals + 1));

@@ -165,6 +165,11 @@ inline const std::vector<BadScene>& bad_scenes() {
        "'-' or ':'?)"},
       {"leading_comma_then_map", ",a: 1\n", "{scene}:1:1: not valid YAML: no document could be read (does it begin "
        "with a stray ',', '-' or ':'?)"},
+      // bytes that are no UTF-8 (a name in Latin-1, a cut character), where they stand
+      {"latin1_name", SCENE_TIME "name: caf\xe9\n" SCENE_MATERIALS SCENE_PARTICLES,
+       "{scene}:2:10: not UTF-8 text: \\xe9 (save the file as UTF-8)"},
+      {"cut_character", SCENE_TIME SCENE_MATERIALS "# \xe2\x82\n" SCENE_PARTICLES,
+       "{scene}:4:3: not UTF-8 text: \\xe2 (save the file as UTF-8)"},
       {"two_documents", SCENE_VALID "---\nname: second\n",
        "{scene}:6:1: a scene is one YAML document, this file holds more"},
       {"missing_file", nullptr, "{scene}: cannot open the scene file: No such file or directory"},

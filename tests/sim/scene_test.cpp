@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <string>
+#include <utility>
 
 #include "narrowphase/solver_math.hpp"
 #include "sim/particles.hpp"
@@ -284,6 +285,41 @@ TEST(SceneOverrides, NullValueBecomesAMap) {
   const Scene s = load_scene(path, {"materials.glass.density=3000", "particles[0].list.positions[0]=[1, 2, 3]"});
   EXPECT_DOUBLE_EQ(s.materials[0].density, 3000);
   EXPECT_FLOAT_EQ(s.particles[0].positions[0].y, 2.0f);
+}
+
+// YAML is Unicode: a file in UTF-16 (with its byte order mark) reads as its
+// UTF-8 twin; an override with bytes that are no UTF-8 is refused (yaml-cpp
+// took "\xff\xfe" for a byte order mark and the value for null), named in
+// printable form.
+TEST(SceneLoad, UnicodeTextOnly) {
+  const ScratchDir dir("unicode");
+  const std::string text = SCENE_TIME "name: caf\xc3\xa9 \xe2\x82\xac\n" SCENE_MATERIALS SCENE_PARTICLES;
+  std::string utf16 = "\xff\xfe";  // little-endian; every character of `text` is below U+0800
+  for (std::size_t i = 0; i < text.size();) {
+    const unsigned char c = text[i];
+    const unsigned code = c < 0x80 ? c
+                          : c < 0xe0 ? ((c & 0x1fu) << 6) | (text[i + 1] & 0x3fu)
+                                     : ((c & 0x0fu) << 12) | ((text[i + 1] & 0x3fu) << 6) | (text[i + 2] & 0x3fu);
+    i += c < 0x80 ? 1 : c < 0xe0 ? 2 : 3;
+    utf16 += char(code & 0xff);
+    utf16 += char(code >> 8);
+  }
+  const Scene plain = load_scene(dir.write("s.yaml", text));
+  EXPECT_EQ(plain.name, "caf\xc3\xa9 \xe2\x82\xac");
+  EXPECT_EQ(load_scene(dir.write("s16.yaml", utf16)).name, plain.name);
+  EXPECT_EQ(load_scene(dir.write("o.yaml", SET_SCENE), {"name=caf\xc3\xa9"}).name, "caf\xc3\xa9");
+  const std::pair<std::string, std::string> refused[] = {
+      {"name=\xff\xfe", "--set name=\\xff\\xfe: not UTF-8 text: \\xff at byte 6"},
+      {"name=ab\xff", "--set name=ab\\xff: not UTF-8 text: \\xff at byte 8"},
+      {"name=caf\xe9", "--set name=caf\\xe9: not UTF-8 text: \\xe9 at byte 9"}};
+  for (const auto& [bad, message] : refused) {
+    try {
+      load_scene(dir.write("o.yaml", SET_SCENE), {bad});
+      FAIL() << "no error for " << message;
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()), message);
+    }
+  }
 }
 
 struct BadOverride {
