@@ -408,7 +408,7 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
       if (c == 3 && radius_squares_below_normal(real(value[c])))
         fail(field.column, kColumnNames[c],
              "too small for " + std::string(kRealName) + " precision: the overlap test squares it (smallest " +
-                 detail::format_real(smallest_squarable_radius()) + "), got " + std::string(field.text));
+                 shortest(smallest_squarable_radius()) + "), got " + std::string(field.text));
     }
     for (int c : {0, 4, 7}) {  // position, velocity, spin: squared by the step, as a scene's vectors are
       if (column_of[c] < 0) continue;

@@ -34,7 +34,6 @@
 namespace marbles::scene {
 
 using detail::Field;
-using detail::format_number;
 using detail::MapFields;
 
 namespace {
@@ -58,7 +57,7 @@ void check_box(const Vec3& lo, const Vec3& hi, const Field& max_field) {
   for (int a = 0; a < 3; ++a) {
     if (!(lo[a] < hi[a]))
       max_field.fail("must be greater than min on every axis, got max." + axis_name(a) + " = " +
-                     detail::format_real(hi[a]) + " <= min." + axis_name(a) + " = " + detail::format_real(lo[a]));
+                     shortest(hi[a]) + " <= min." + axis_name(a) + " = " + shortest(lo[a]));
   }
 }
 
@@ -66,13 +65,13 @@ void check_box(const Vec3& lo, const Vec3& hi, const Field& max_field) {
 // step and substeps, or empty: the rules of time.duration and run --duration.
 std::string duration_problem(double duration, const TimeSpec& time) {
   if (duration < time.dt)
-    return "a duration of " + format_number(duration) + " s is shorter than a step, time.dt = " +
-           format_number(time.dt) + " s";
+    return "a duration of " + shortest(duration) + " s is shorter than a step, time.dt = " +
+           shortest(time.dt) + " s";
   const double substeps = duration / time.dt * time.substeps;
   if (!(substeps <= limits().substeps))
-    return "a duration of " + format_number(duration) + " s makes " + format_number(substeps) +
+    return "a duration of " + shortest(duration) + " s makes " + shortest(substeps) +
            " substeps (duration / time.dt x time.substeps), more than the limit " +
-           format_number(limits().substeps) + " (--limit substeps=N raises it)";
+           shortest(limits().substeps) + " (--limit substeps=N raises it)";
   return {};
 }
 
@@ -220,7 +219,7 @@ std::vector<Material> read_materials(const Field& field) {
   }
   if (materials.empty()) field.fail("needs at least one material, e.g. `steel: {density: 7800}`");
   if (static_cast<double>(materials.size()) > limits().materials)
-    field.fail(std::to_string(materials.size()) + " materials, more than the limit " + format_number(limits().materials) +
+    field.fail(std::to_string(materials.size()) + " materials, more than the limit " + shortest(limits().materials) +
                " (the step keeps a coefficient table of every pair; --limit materials=N raises it)");
   return materials;
 }
@@ -354,7 +353,7 @@ RadiusSpec read_radius(const Field& field) {
   radius.min = range[0].positive();
   radius.max = range[1].positive();
   if (radius.min > radius.max)
-    range[1].fail("must be >= the minimum radius " + format_number(radius.min) + ", got " + range[1].node().Scalar());
+    range[1].fail("must be >= the minimum radius " + shortest(radius.min) + ", got " + range[1].node().Scalar());
   return radius;
 }
 
@@ -414,12 +413,12 @@ void read_lattice(ParticleBlock& block, const Field& field) {
   if (auto f = map.optional("seed")) block.seed = f->seed();
   const double margin = largest(block.radius) + block.jitter;
   if (block.spacing < 2 * margin)
-    spacing.fail("must be >= 2 * (largest radius + jitter) = " + format_number(2 * margin) +
+    spacing.fail("must be >= 2 * (largest radius + jitter) = " + shortest(2 * margin) +
                  " so that spheres cannot overlap, got " + spacing.node().Scalar());
   for (int a = 0; a < 3; ++a) {
     if (block.hi[a] - block.lo[a] < 2 * margin)
-      max.fail("the box is too small on " + axis_name(a) + " for one sphere (needs " + format_number(2 * margin) +
-               " = 2 * (largest radius + jitter), has " + detail::format_real(block.hi[a] - block.lo[a]) + ")");
+      max.fail("the box is too small on " + axis_name(a) + " for one sphere (needs " + shortest(2 * margin) +
+               " = 2 * (largest radius + jitter), has " + shortest(block.hi[a] - block.lo[a]) + ")");
   }
 }
 
@@ -429,7 +428,7 @@ void read_random(ParticleBlock& block, const Field& field) {
   const long long n = count.integer();
   if (n < 1) count.fail("must be >= 1, got " + count.node().Scalar());
   if (static_cast<double>(n) > limits().spheres)
-    count.fail("must be <= " + format_number(limits().spheres) + " (--limit spheres=N raises it), got " +
+    count.fail("must be <= " + shortest(limits().spheres) + " (--limit spheres=N raises it), got " +
                count.node().Scalar());
   block.count = static_cast<std::size_t>(n);
   block.count_where = count.where();
@@ -442,8 +441,8 @@ void read_random(ParticleBlock& block, const Field& field) {
   const double r = largest(block.radius);
   for (int a = 0; a < 3; ++a) {
     if (block.hi[a] - block.lo[a] < 2 * r)
-      max.fail("the box is too small on " + axis_name(a) + " for the largest sphere (needs " + format_number(2 * r) +
-               ", has " + detail::format_real(block.hi[a] - block.lo[a]) + ")");
+      max.fail("the box is too small on " + axis_name(a) + " for the largest sphere (needs " + shortest(2 * r) +
+               ", has " + shortest(block.hi[a] - block.lo[a]) + ")");
   }
 }
 
@@ -638,7 +637,7 @@ std::string read_file(const std::string& path) {
     text.append(chunk, static_cast<std::size_t>(in.gcount()));
     if (static_cast<double>(text.size()) > limits().scene_mib * 1048576.0)
       throw InputError(SourceLocation{path, 0, 0}, "",
-                       "larger than " + format_number(limits().scene_mib) + " MiB: not a scene file (particles in "
+                       "larger than " + shortest(limits().scene_mib) + " MiB: not a scene file (particles in "
                        "bulk belong in a csv block; --limit scene_mib=N raises it)");
   }
   return text;
@@ -1000,7 +999,7 @@ YAML::Node yaml_of(const nlohmann::ordered_json& value) {
     case nlohmann::ordered_json::value_t::number_unsigned:
       return YAML::Node(std::to_string(value.get<std::uint64_t>()));
     case nlohmann::ordered_json::value_t::number_float:
-      return YAML::Node(detail::format_number(value.get<double>()));
+      return YAML::Node(shortest(value.get<double>()));
     default:
       return YAML::Node(YAML::NodeType::Null);
   }

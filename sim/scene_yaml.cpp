@@ -12,6 +12,7 @@
 #include <cmath>
 #include <limits>
 
+#include "core/format.hpp"
 #include "core/hash.hpp"
 
 namespace marbles::scene::detail {
@@ -109,18 +110,6 @@ std::string suggestion(std::string_view word, const std::vector<std::string>& ca
   return out;
 }
 
-std::string format_number(double value) {
-  char buffer[64];
-  const auto [end, ec] = std::to_chars(buffer, buffer + sizeof buffer, value);
-  return ec == std::errc() ? std::string(buffer, end) : std::to_string(value);
-}
-
-std::string format_real(real value) {
-  char buffer[64];
-  const auto [end, ec] = std::to_chars(buffer, buffer + sizeof buffer, value);
-  return ec == std::errc() ? std::string(buffer, end) : std::to_string(value);
-}
-
 // --- Origins ---------------------------------------------------------------
 
 void Origins::add(const YAML::Node& node, const std::string& text) { m_nodes.emplace_back(node, text); }
@@ -183,7 +172,7 @@ void Field::took(const std::string& value) const {
 
 double Field::number() const {
   const double value = finite_number();
-  took("n:" + format_number(value));
+  took("n:" + shortest(value));
   return value;
 }
 
@@ -204,10 +193,10 @@ std::string real_range_problem(double value, bool bound) {
   const std::string precision = " for " + std::string(kRealName) + " precision";
   if (!std::isfinite(static_cast<real>(value)))
     return "out of range" + precision +
-           (bound ? " (largest " + format_real(std::numeric_limits<real>::max()) + ")" : std::string());
+           (bound ? " (largest " + shortest(std::numeric_limits<real>::max()) + ")" : std::string());
   if (value != 0 && !(std::abs(static_cast<real>(value)) >= std::numeric_limits<real>::min()))
     return "too small" + precision +
-           (bound ? " (smallest " + format_real(std::numeric_limits<real>::min()) + ")" : std::string());
+           (bound ? " (smallest " + shortest(std::numeric_limits<real>::min()) + ")" : std::string());
   return "";
 }
 
@@ -226,7 +215,7 @@ double Field::non_negative() const {
 double Field::within(double lo, double hi) const {
   const double v = number();
   if (!(v >= lo && v <= hi))
-    fail("must be within [" + format_number(lo) + ", " + format_number(hi) + "], got " + m_node.Scalar());
+    fail("must be within [" + shortest(lo) + ", " + shortest(hi) + "], got " + m_node.Scalar());
   return v;
 }
 
@@ -297,7 +286,7 @@ Vec3 Field::vec3() const {
   // one whose square overflows the run's precision would turn into inf there.
   if (square_overflows(v))
     fail("too large for " + std::string(kRealName) + " precision: its squared length overflows (largest " +
-         format_real(std::sqrt(std::numeric_limits<real>::max() / 3)) + " a component is safe)");
+         shortest(std::sqrt(std::numeric_limits<real>::max() / 3)) + " a component is safe)");
   return v;
 }
 

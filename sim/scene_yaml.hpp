@@ -43,11 +43,6 @@ std::string suggestion(std::string_view word, const std::vector<std::string>& ca
 // double, as the scene's numbers are read: false on any leftover character.
 bool parse_double(std::string_view text, double& value);
 
-// Shortest text that reads back as the same double ("0.1", "1e-05").
-std::string format_number(double value);
-// The same for a value stored as `real` (0.1f prints as 0.1, not 0.10000000149011612).
-std::string format_real(real value);
-
 // What keeps a number read from input out of the run's precision ("" where
 // it fits): not finite in `real`, or non-zero and below the smallest normal;
 // with `bound`, the bound it passed. The scene's numbers (Field::number) and
