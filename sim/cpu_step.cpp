@@ -182,6 +182,7 @@ class CpuStep final : public StepBackend {
   const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }
   std::string name() const override { return "cpu"; }
   StepState save_state() override { return {m_cache.entries(), m_walls}; }
+  std::vector<narrowphase::WallShape> wall_shapes() override { return m_walls; }
   void keep_step_start() override {
     m_kept.position = m_world.position;
     m_kept.velocity = m_world.velocity;

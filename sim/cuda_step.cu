@@ -899,16 +899,15 @@ class CudaStep final : public StepBackend {
   }
   const broadphase::BroadPhase* broad_phase() const override { return m_broadphase.get(); }
   std::string name() const override { return "cuda"; }
-  StepState save_state() override {
-    StepState state;
-    state.cache = m_cache.download(m_stream);
-    state.walls.resize(m_model.wall_shapes.size());
-    if (!state.walls.empty()) {
-      MARBLES_CUDA_CHECK(cudaMemcpyAsync(state.walls.data(), walls(), state.walls.size() * sizeof(narrowphase::WallShape),
+  StepState save_state() override { return {m_cache.download(m_stream), wall_shapes()}; }
+  std::vector<narrowphase::WallShape> wall_shapes() override {
+    std::vector<narrowphase::WallShape> shapes(m_model.wall_shapes.size());
+    if (!shapes.empty()) {
+      MARBLES_CUDA_CHECK(cudaMemcpyAsync(shapes.data(), walls(), shapes.size() * sizeof(narrowphase::WallShape),
                                          cudaMemcpyDeviceToHost, m_stream));
       MARBLES_CUDA_CHECK(cudaStreamSynchronize(m_stream));
     }
-    return state;
+    return shapes;
   }
   void keep_step_start() override {
     send_host_edits();  // edits between steps belong to the step's start

@@ -410,7 +410,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   // Measured on the state as it ends, of what the solver moves (glued
   // spheres set into a wall on purpose are not its doing).
   if (totals.overlap_end > kDeepAtTheEnd) {
-    const double deepest = state_overlaps(sim.world(), sim.model(), sim.save_state().walls, 0).deepest_free();
+    const double deepest = state_overlaps(sim.world(), sim.model(), sim.wall_shapes(), 0).deepest_free();
     if (deepest > kDeepAtTheEnd)
       err << "warning: spheres end overlapping by up to " << significant(100 * deepest, 4)
           << " % of a radius: the solve did not hold them apart (a heavy sphere on light ones, or too few "

@@ -56,7 +56,7 @@ std::string Simulation::describe_pipeline() const {
 void Simulation::set_watchdog(bool on) {
   m_watchdog = on;
   m_backend->set_watch(on);
-  if (on) watch_from_host(m_backend->save_state().walls);
+  if (on) watch_from_host(m_backend->wall_shapes());
 }
 
 StateOverlaps state_overlaps(const World& world, const StepModel& model,

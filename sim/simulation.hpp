@@ -127,6 +127,8 @@ class Simulation {
   // and a restart: world, that state and the step count put back, with the
   // step's numbering (ids(): empty where it is the scene's).
   StepState save_state();
+  // The walls where they stand now (save_state()'s, without the cache).
+  std::vector<narrowphase::WallShape> wall_shapes() { return m_backend->wall_shapes(); }
   void restore(const World& world, const StepState& state, std::uint64_t steps,
                const std::vector<std::uint32_t>& ids = {});
   // With solver.renumber: each sphere's index in the scene's numbering, by

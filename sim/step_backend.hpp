@@ -175,6 +175,9 @@ class StepBackend {
   virtual std::string name() const = 0;
   // The state beside the world, between steps (a host copy on the GPU).
   virtual StepState save_state() = 0;
+  // save_state()'s walls alone, where they stand (on the GPU, their copy
+  // without the cache's).
+  virtual std::vector<narrowphase::WallShape> wall_shapes() = 0;
   virtual void load_state(const StepState& state) = 0;
   // The watchdog's undo: keep the state at the start of a step (positions,
   // velocities, cache, walls; in device memory on the GPU), and go back to it.
