@@ -17,6 +17,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -82,7 +83,13 @@ class PySimulation {
     const bool from_text = !label.empty();
     m_scene = from_text ? scene::load_scene_json(source, label, stem, overrides) : scene::load_scene(source, overrides);
     m_fingerprint = m_scene.fingerprint;
-    m_text_fingerprint = from_text ? text_fingerprint(source, overrides) : scene_fingerprint(source, overrides);
+    if (from_text) {
+      m_text_fingerprint = [fingerprint = text_fingerprint(source, overrides)] { return fingerprint; };
+    } else {  // the file read again only by a restart, as `marbles run --restart` reads it (a later chdir aside)
+      m_text_fingerprint = [path = std::filesystem::absolute(source).string(), overrides] {
+        return scene_fingerprint(path, overrides);
+      };
+    }
     const scene::GeneratedParticles particles = scene::generate_particles(m_scene);
     m_warnings = risky_settings(m_scene, particles, sizeof(real) == 4);
     const BackendChoice choice = backend_choice(backend);
@@ -284,7 +291,7 @@ class PySimulation {
 
   void restart(const std::string& path) {
     const Busy busy(*this);
-    Checkpoint c = read_checkpoint(path, m_fingerprint, m_text_fingerprint);
+    Checkpoint c = read_checkpoint(path, m_fingerprint, m_text_fingerprint());
     check_checkpoint_fits(c, path, "restart", size(), m_scene.materials.size(), m_sim->model().wall_shapes);
     if (m_views_out) m_sim->state_written();
     m_sim->restore(c.world, c.state, c.steps, c.ids);
@@ -382,7 +389,7 @@ class PySimulation {
   scene::Scene m_scene;
   int m_threads = 1;  // the CPU threads its steps run on
   std::uint64_t m_fingerprint = 0;       // Scene::fingerprint, which its checkpoints hold
-  std::uint64_t m_text_fingerprint = 0;  // an earlier checkpoint's, of the texts
+  std::function<std::uint64_t()> m_text_fingerprint;  // an earlier checkpoint's, of the texts
   std::vector<std::string> m_warnings;
   broadphase::Backend m_backend = broadphase::Backend::cpu;
   std::string m_backend_note;

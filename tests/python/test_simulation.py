@@ -228,6 +228,37 @@ def test_restart_takes_the_same_scene_in_other_texts(pile, tmp_path):
         marbles.Simulation.restart(path, backend="cpu", set={"time.dt": 4e-4, "solver.speculative": True})
 
 
+def test_restart_takes_a_checkpoint_of_the_texts(pile, tmp_path, monkeypatch):
+    # A checkpoint of the earlier fingerprint (a hash of the file's bytes and
+    # the overrides' texts, FNV-1a) still resumes its scene file with the
+    # same texts; others, even alike, are refused (the texts are all it has).
+    scene = tmp_path / "s.yaml"
+    scene.write_text(json.dumps(pile))  # JSON is YAML
+    monkeypatch.chdir(tmp_path)
+    sim = marbles.Simulation("s.yaml", backend="cpu", set=["time.dt=5e-4"])
+    sim.step(5)
+    ck = tmp_path / "c.mck"
+    sim.checkpoint(ck)
+    data = bytearray(ck.read_bytes())
+
+    def fnv1a(data, h=14695981039346656037):
+        for byte in data:
+            h = ((h ^ byte) * 1099511628211) % 2**64
+        return h
+
+    texts = fnv1a(b"time.dt=5e-4\0", fnv1a(scene.read_bytes()))
+    data[8 + 4 + 16 + 4 + 4:8 + 4 + 16 + 4 + 4 + 8] = texts.to_bytes(8, "little")  # after magic, format, version, sizes
+    data[-8:] = fnv1a(data[:-8]).to_bytes(8, "little")
+    ck.write_bytes(bytes(data))
+    resumed = marbles.Simulation.restart(ck, scene="s.yaml", backend="cpu", set=["time.dt=5e-4"])
+    assert resumed.steps == 5
+    resumed.step(5)
+    sim.step(5)
+    assert np.array_equal(sim.positions, resumed.positions)
+    with pytest.raises(marbles.SceneError, match="another scene"):
+        marbles.Simulation.restart(ck, scene="s.yaml", backend="cpu", set=["time.dt=0.0005"])
+
+
 def test_double_precision_scene(pile):
     pile["solver"] = {"precision": "double"}
     sim = marbles.Simulation.from_dict(pile, backend="cpu")
