@@ -45,6 +45,28 @@ class Writer {
     put<std::uint64_t>(v.size());
     raw(v.data(), v.size() * sizeof(T));
   }
+  // The walls field by field into zeroed records: their padding (after
+  // `kind`, at the end) written as 0, not as whatever memory held, so that
+  // two runs alike write the same bytes. The reader takes the records whole.
+  void put(const std::vector<narrowphase::WallShape>& walls) {
+    using narrowphase::WallShape;
+    static_assert(sizeof(WallShape) - (offsetof(WallShape, material) + sizeof(std::uint32_t)) < alignof(WallShape),
+                  "`material` is the record's last field: a field after it is written here too");
+    put<std::uint64_t>(walls.size());
+    for (const WallShape& w : walls) {
+      char record[sizeof(WallShape)] = {};
+      const auto at = [&record](std::size_t offset, const auto& v) { std::memcpy(record + offset, &v, sizeof v); };
+      at(offsetof(WallShape, kind), w.kind);
+      at(offsetof(WallShape, point), w.point);
+      at(offsetof(WallShape, direction), w.direction);
+      at(offsetof(WallShape, radius), w.radius);
+      at(offsetof(WallShape, length), w.length);
+      at(offsetof(WallShape, velocity), w.velocity);
+      at(offsetof(WallShape, angular_velocity), w.angular_velocity);
+      at(offsetof(WallShape, material), w.material);
+      raw(record, sizeof record);
+    }
+  }
   template <class T>
   void field(const T& v) {
     put(v);
