@@ -255,7 +255,9 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
   render::remove_stale_temporaries(dir);
   for (const Numbered& n : kNumbered) render::remove_stale_temporaries(std::filesystem::path(dir) / n.folder);
   const render::FrameMetadata metadata = frame_metadata(scene);
-  render::write_material_names(dir, metadata.material_names);
+  // The material names of the frames and images (`marbles render` reads them).
+  if (scene.output.vtk_every > 0 || scene.output.contacts_every > 0 || (render && scene.output.render.enabled))
+    render::write_material_names(dir, metadata.material_names);
   if (scene.output.vtk_every > 0) {
     const std::vector<render::PointField> fields = render::parse_point_fields(scene.output.fields);
     m->with_contact_counts =

@@ -180,8 +180,9 @@ constexpr double kDeepAtTheEnd = 0.1;
 int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   scene::Scene sc = scene::load_scene(options.scene_path, options.overrides, options.duration);
   if (options.out_dir) sc.output.dir = *options.out_dir;
-  if (options.summary_only) {
+  if (options.summary_only) {  // checkpoints stay: a stopped run resumes from them
     sc.output.vtk_every = 0;
+    sc.output.contacts_every = 0;
     sc.output.render.enabled = false;
     sc.output.movie.enabled = false;
   }

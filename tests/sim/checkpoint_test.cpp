@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <map>
 #include <sstream>
@@ -193,6 +194,32 @@ TEST_F(Checkpoints, OverwriteKeepsTheEarlierRunUntilTheNewOneStands) {
   for (const fs::path& folder : asides()) fs::remove_all(folder);
   EXPECT_EQ(marbles(again, &err), 0) << err;
   EXPECT_TRUE(asides().empty()) << "a run that ends removes what it replaced";
+}
+
+// --summary-only: summary.json, and the checkpoints a stopped run resumes
+// from; no frame of any series (contact frames were written), no thermo rows,
+// no material names.
+TEST_F(Checkpoints, SummaryOnlyWritesTheSummaryAndCheckpointsAlone) {
+  const test::ScratchDir dir("ck_summary_only");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string out = dir.path() + "/o";
+  std::string err;
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --summary-only --set output.contacts.every=10 --out " + out,
+                    &err),
+            0)
+      << err;
+  std::vector<std::string> names;
+  for (const auto& entry : fs::recursive_directory_iterator(out))
+    if (entry.is_regular_file()) names.push_back(fs::relative(entry.path(), out).string());
+  std::sort(names.begin(), names.end());
+  std::vector<std::string> expected{"summary.json"};
+  for (const int step : {50, 100, 150, 200, 250, 300}) {  // output.checkpoint.every 50 of 300 steps
+    char name[40];
+    std::snprintf(name, sizeof name, "checkpoints/step_%06d.mck", step);
+    expected.push_back(name);
+  }
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(names, expected);
 }
 
 // thermo.csv: one row per frame; its energies are the summary's at the
