@@ -96,6 +96,14 @@ std::vector<SeriesEntry> read_pvd(const fs::path& pvd_path) {
   std::stringstream buffer;
   buffer << in.rdbuf();
   const std::string text = buffer.str();
+  // Cut short (a copy that stopped, a disk that filled): the frames it no
+  // longer names would be taken for gone, and their images removed.
+  const std::size_t collection_end = text.rfind("</Collection>");
+  if (collection_end == std::string::npos || text.find("</VTKFile>", collection_end) == std::string::npos ||
+      text.find("<DataSet", collection_end) != std::string::npos)
+    throw InputError(SourceLocation{pvd_path.string(), 0, 0}, "",
+                     "is cut short or damaged: it does not end with </Collection></VTKFile> (marbles run writes it "
+                     "whole: run again, or resume the run from a checkpoint)");
 
   static const std::regex dataset(R"(<DataSet\b([^>]*)>)");
   static const std::regex attribute(R"re(([A-Za-z_]+)\s*=\s*(?:"([^"]*)"|'([^']*)'))re");

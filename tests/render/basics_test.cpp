@@ -7,8 +7,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <random>
 #include <set>
 
@@ -369,6 +371,31 @@ TEST(Pvd, ParsesEntriesRelativeToItsFolder) {
   EXPECT_EQ(entries[1].time, 0.25);
   EXPECT_EQ(entries[1].path, dir / "frames" / "frame_000001.vtp");
   EXPECT_THROW(read_pvd(dir / "missing.pvd"), InputError);
+}
+
+// A series cut anywhere before its closing tags (a copy that stopped, a
+// full disk) is refused, not read as the frames before the cut.
+TEST(Pvd, ASeriesCutShortIsRefused) {
+  const fs::path dir = fresh_dir("pvd_cut");
+  pvd_of(dir, "  <DataSet timestep=\"0\" file=\"frames/frame_000000.vtp\"/>\n"
+              "  <DataSet timestep=\"1\" file=\"frames/frame_000001.vtp\"/>\n");
+  const std::string whole = [&] {
+    std::ifstream in(dir / "series.pvd", std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }();
+  const std::size_t closed = whole.rfind("</VTKFile>") + std::strlen("</VTKFile>");
+  for (std::size_t cut = 0; cut < closed; ++cut) {
+    write_file_atomic(dir / "series.pvd", whole.substr(0, cut));
+    try {
+      read_pvd(dir / "series.pvd");
+      ADD_FAILURE() << "read when cut at byte " << cut;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("series.pvd: is cut short or damaged"), std::string::npos)
+          << cut << ": " << e.what();
+    }
+  }
+  write_file_atomic(dir / "series.pvd", whole.substr(0, closed));
+  EXPECT_EQ(read_pvd(dir / "series.pvd").size(), 2u);
 }
 
 // A device or a pipe where a run's file should be (a .pvd edited or linked
