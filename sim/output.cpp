@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <ostream>
@@ -122,6 +123,31 @@ std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path
   return found;
 }
 
+std::vector<std::filesystem::path> run_files_past(const std::filesystem::path& dir, std::uint64_t step,
+                                                  const scene::OutputSpec& output) {
+  namespace fs = std::filesystem;
+  std::vector<fs::path> found;
+  std::error_code ec;
+  for (const char* name : {"summary.json", "movie.mp4"})
+    if (fs::is_regular_file(dir / name, ec)) found.push_back(dir / name);
+  for (const Numbered& n : kNumbered) {
+    const std::string folder = n.folder;
+    const int every = folder == "checkpoints"                          ? 1  // numbered by their step
+                      : folder == "contacts"                           ? output.contacts_every
+                      : folder == "images"                             ? (output.render.enabled ? output.render.every : 0)
+                                                                       : output.vtk_every;  // frames, walls
+    if (every <= 0 || !fs::is_directory(dir / n.folder, ec)) continue;
+    for (const auto& entry : fs::directory_iterator(dir / n.folder, ec)) {
+      const std::string name = entry.path().filename().string();
+      if (!entry.is_regular_file(ec) || !name.starts_with(n.prefix) || !name.ends_with(n.extension)) continue;
+      const std::size_t digits = name.size() - std::strlen(n.prefix) - std::strlen(n.extension);
+      const auto index = whole_number(std::string_view(name).substr(std::strlen(n.prefix), digits));
+      if (index && *index > step / static_cast<std::uint64_t>(every)) found.push_back(entry.path());
+    }
+  }
+  return found;
+}
+
 std::string earlier_run_text(const std::string& dir, const std::vector<std::filesystem::path>& files) {
   return dir + " holds the output of an earlier run (" + std::to_string(files.size()) + " files, e.g. " +
          files.front().filename().string() + ")";
@@ -158,7 +184,7 @@ EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::ve
 
 EarlierRunAside::~EarlierRunAside() {
   if (!m_folder.empty())
-    m_log << "note: the earlier run's output, which --overwrite was to replace, is kept whole in " << m_folder.string()
+    m_log << "note: the files of the earlier run that this run was to replace are kept whole in " << m_folder.string()
           << "\n";
 }
 

@@ -17,6 +17,7 @@ namespace marbles {
 
 namespace scene {
 struct Scene;
+struct OutputSpec;
 }
 class Simulation;
 struct World;
@@ -34,15 +35,22 @@ render::ContactSnapshot make_contact_snapshot(const Simulation& sim);
 // series.pvd, contacts.pvd, walls.pvd, thermo.csv, an old walls.json, materials.txt, movie.mp4, frames/frame_*.vtp,
 // images/frame_*.png, checkpoints/step_*.mck, contacts/contacts_*.vtp); other files are not ours.
 std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir);
+// The files in `dir` that a run resumed there at `step` replaces: those of
+// later steps (frames, wall and contact frames, images, checkpoints, by the
+// cadences of `output`: an every of 0 leaves that kind alone), summary.json
+// and movie.mp4 (the whole earlier run's).
+std::vector<std::filesystem::path> run_files_past(const std::filesystem::path& dir, std::uint64_t step,
+                                                  const scene::OutputSpec& output);
 // "DIR holds the output of an earlier run (N files, e.g. NAME)": a refusal's
 // first words, its remedy the caller's (`files` not empty).
 std::string earlier_run_text(const std::string& dir, const std::vector<std::filesystem::path>& files);
 // Removes them (overwriting that run); RuntimeFailure naming a file that stays.
 void remove_earlier_run(const std::vector<std::filesystem::path>& files);
 
-// `run --overwrite`: the earlier run's files moved (renamed, by their paths
-// below `dir`) into DIR/.earlier-run-PID while the new run runs, so that a
-// run that fails, or a process that dies, loses nothing. `discard()` once
+// `run --overwrite` (or a resume in its run's folder, run_files_past): the
+// earlier run's files moved (renamed, by their paths below `dir`) into
+// DIR/.earlier-run-PID while the new run runs, so that a run that fails, or
+// a process that dies, loses nothing. `discard()` once
 // the new run stands (ended, or stopped with its checkpoint) removes them;
 // otherwise they stay whole there and the destructor says where on `log`.
 // Such folders of processes that ended are named on `log` at the start.

@@ -195,13 +195,14 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     std::error_code ec;
     const std::filesystem::path at = std::filesystem::absolute(*options.restart, ec);
     if (!ec && at.parent_path().filename() == "checkpoints") restart_from = at.parent_path().parent_path();
-    restart_here = restart_from.empty() ||
+    restart_here = !restart_from.empty() &&
                    std::filesystem::weakly_canonical(restart_from, ec) ==
                        std::filesystem::weakly_canonical(std::filesystem::absolute(sc.output.dir, ec), ec);
   }
   // An earlier run's output in the folder: replaced with --overwrite, else
   // refused (stale frames would mix with new ones). A restart goes on in
-  // its own run's folder (or one its checkpoint is not in a run's folder of).
+  // its own run's folder; one from a checkpoint kept elsewhere (not in a
+  // run's checkpoints/) brings no output, and is held to this rule.
   const std::vector<std::filesystem::path> earlier =
       restart_here ? std::vector<std::filesystem::path>{} : earlier_run_files(sc.output.dir);
   if (!earlier.empty() && !options.overwrite)
@@ -266,8 +267,10 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   };
 
   // --overwrite, once the scene is known to run: the earlier run set aside
-  // until this one stands.
-  EarlierRunAside earlier_aside(sc.output.dir, earlier, err);
+  // until this one stands; a resume in its own folder, the files of the
+  // steps it makes again (and of any beyond its end).
+  EarlierRunAside earlier_aside(sc.output.dir,
+                                restart_here ? run_files_past(sc.output.dir, sim.steps(), sc.output) : earlier, err);
   // Test hook: MARBLES_FAULT_SIGNAL=NAME@N raises SIGNAME (SEGV, ABRT, INT, TERM) after step N (0: after the
   // start's output).
   int fault_signal = 0;

@@ -170,7 +170,7 @@ TEST_F(Checkpoints, OverwriteKeepsTheEarlierRunUntilTheNewOneStands) {
   EXPECT_EQ(marbles(again, &err, "MARBLES_FAULT_NAN_STEP=120:all"), 1);
   ASSERT_EQ(asides().size(), 1u) << err;
   const fs::path kept = asides().front();
-  EXPECT_NE(err.find("the earlier run's output, which --overwrite was to replace, is kept whole in " + kept.string()),
+  EXPECT_NE(err.find("the files of the earlier run that this run was to replace are kept whole in " + kept.string()),
             std::string::npos)
       << err;
   EXPECT_EQ(files_in(kept), earlier);
@@ -194,6 +194,47 @@ TEST_F(Checkpoints, OverwriteKeepsTheEarlierRunUntilTheNewOneStands) {
   for (const fs::path& folder : asides()) fs::remove_all(folder);
   EXPECT_EQ(marbles(again, &err), 0) << err;
   EXPECT_TRUE(asides().empty()) << "a run that ends removes what it replaced";
+}
+
+// A resume in its run's folder replaces the steps after its checkpoint: a
+// shorter run leaves no frame, wall frame or checkpoint of the longer one
+// (a checkpoint past the new end outranked the new ones under `keep`), and
+// its folder holds what a run of that length alone writes. A checkpoint kept
+// outside a run's checkpoints/ brings no output, so it resumes into a folder
+// holding a run only with --overwrite.
+TEST_F(Checkpoints, AResumeInItsFolderReplacesTheStepsAfterIt) {
+  const test::ScratchDir dir("ck_resume_shorter");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string out = dir.path() + "/o", alone = dir.path() + "/alone";
+  const std::string common = " --quiet --backend cpu --no-render";
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + out), 0);
+  ASSERT_EQ(marbles("run " + scene + common + " --duration 0.2 --out " + alone), 0);
+  std::string err;
+  ASSERT_EQ(marbles("run " + scene + common + " --duration 0.2 --out " + out + " --restart " + out +
+                        "/checkpoints/step_000150.mck",
+                    &err),
+            0)
+      << err;
+  auto listing = [](const std::string& folder) {
+    std::vector<std::string> names;
+    for (const auto& entry : fs::recursive_directory_iterator(folder))
+      if (entry.is_regular_file()) names.push_back(fs::relative(entry.path(), folder).string());
+    std::sort(names.begin(), names.end());
+    return names;
+  };
+  EXPECT_EQ(listing(out), listing(alone));
+  expect_same_output(alone, out);
+
+  fs::copy_file(out + "/checkpoints/step_000100.mck", dir.path() + "/loose.mck");
+  EXPECT_EQ(marbles("run " + scene + common + " --out " + out + " --restart " + dir.path() + "/loose.mck", &err), 2);
+  EXPECT_NE(err.find("--out: " + out + " holds the output of an earlier run"), std::string::npos) << err;
+  EXPECT_EQ(listing(out), listing(alone)) << "a refusal touches nothing";
+  EXPECT_EQ(marbles("run " + scene + common + " --overwrite --out " + out + " --restart " + dir.path() + "/loose.mck",
+                    &err),
+            0)
+      << err;
+  EXPECT_FALSE(fs::exists(out + "/frames/frame_000000.vtp")) << "a loose checkpoint brings no frames";
+  EXPECT_TRUE(fs::exists(out + "/frames/frame_000015.vtp"));
 }
 
 // --summary-only: summary.json, and the checkpoints a stopped run resumes
