@@ -1,6 +1,12 @@
 #include "sim/output.hpp"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -159,6 +165,51 @@ void remove_earlier_run(const std::vector<std::filesystem::path>& files) {
     std::filesystem::remove(file, ec);
     if (ec) throw RuntimeFailure("cannot remove " + file.string() + " of the earlier run: " + ec.message());
   }
+}
+
+RunFolderLock::RunFolderLock(const std::filesystem::path& dir, const std::string& option) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const bool existed = fs::exists(dir, ec);
+  fs::create_directories(dir, ec);
+  if (ec) throw RuntimeFailure("cannot create the output folder " + dir.string() + ": " + ec.message());
+  if (!existed) m_made = dir;
+  m_path = dir / ".marbles-run.lock";
+  // The run that held the lock removes its file as it ends: a lock taken on
+  // the file it removed is no lock, so it is taken again on the one there.
+  for (int tries = 0;; ++tries) {
+    m_fd = ::open(m_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (m_fd < 0) throw RuntimeFailure("cannot open " + m_path.string() + ": " + std::strerror(errno));
+    if (::flock(m_fd, LOCK_EX | LOCK_NB) != 0) {
+      char holder[32] = {};
+      const ssize_t n = ::pread(m_fd, holder, sizeof holder - 1, 0);
+      ::close(m_fd);
+      m_fd = -1;
+      const auto pid = whole_number(std::string_view(holder, n > 0 ? static_cast<std::size_t>(n) : 0));
+      throw InputError(SourceLocation{}, option,
+                       dir.string() + " is being written by another marbles run" +
+                           (pid ? " (process " + std::to_string(*pid) + ")" : std::string()) +
+                           "; wait for it to end, or choose another folder");
+    }
+    struct stat held {}, named {};
+    if (::fstat(m_fd, &held) == 0 && ::stat(m_path.c_str(), &named) == 0 && held.st_ino == named.st_ino &&
+        held.st_dev == named.st_dev)
+      break;
+    ::close(m_fd);
+    m_fd = -1;
+    if (tries == 100) throw RuntimeFailure("cannot lock " + m_path.string() + ": it is removed and made again");
+  }
+  // The process's number, for another run's message only (its loss is no failure).
+  const std::string pid = std::to_string(getpid());
+  [[maybe_unused]] const bool said =
+      ::ftruncate(m_fd, 0) == 0 && ::pwrite(m_fd, pid.data(), pid.size(), 0) == static_cast<ssize_t>(pid.size());
+}
+
+RunFolderLock::~RunFolderLock() {
+  std::error_code ec;
+  std::filesystem::remove(m_path, ec);  // before the lock is let go: a run that opened it meanwhile tries again
+  ::close(m_fd);
+  if (!m_made.empty()) std::filesystem::remove(m_made, ec);  // where it is empty
 }
 
 EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::vector<std::filesystem::path>& files,

@@ -47,6 +47,25 @@ std::string earlier_run_text(const std::string& dir, const std::vector<std::file
 // Removes them (overwriting that run); RuntimeFailure naming a file that stays.
 void remove_earlier_run(const std::vector<std::filesystem::path>& files);
 
+// One run at a time in an output folder: DIR/.marbles-run.lock, locked
+// (flock) from before the check for an earlier run to the run's end, then
+// removed; another run into the folder meanwhile is refused (InputError
+// naming `option` and the process that holds it). The system lets go of the
+// lock however the process ends. A folder it made is removed again where
+// the run leaves it empty (refused before writing anything).
+class RunFolderLock {
+ public:
+  RunFolderLock(const std::filesystem::path& dir, const std::string& option);
+  ~RunFolderLock();
+  RunFolderLock(const RunFolderLock&) = delete;
+  RunFolderLock& operator=(const RunFolderLock&) = delete;
+
+ private:
+  std::filesystem::path m_path;
+  std::filesystem::path m_made;  // the folder, where this lock made it
+  int m_fd = -1;
+};
+
 // `run --overwrite` (or a resume in its run's folder, run_files_past): the
 // earlier run's files moved (renamed, by their paths below `dir`) into
 // DIR/.earlier-run-PID while the new run runs, so that a run that fails, or

@@ -186,6 +186,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     sc.output.render.enabled = false;
     sc.output.movie.enabled = false;
   }
+  // One run at a time in the folder, from before the check for an earlier run on.
+  const RunFolderLock folder_lock(sc.output.dir, options.out_dir ? "--out" : "output.dir");
   // A checkpoint's run folder, where it lies in one (OUTDIR/checkpoints/
   // step_N.mck): a restart elsewhere copies the output before the
   // checkpoint's step from it.

@@ -5,6 +5,10 @@
 // one is refused with exit 2. checkpoint_cuda_test.cpp does it on the GPU.
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -194,6 +198,42 @@ TEST_F(Checkpoints, OverwriteKeepsTheEarlierRunUntilTheNewOneStands) {
   for (const fs::path& folder : asides()) fs::remove_all(folder);
   EXPECT_EQ(marbles(again, &err), 0) << err;
   EXPECT_TRUE(asides().empty()) << "a run that ends removes what it replaced";
+}
+
+// One run at a time in a folder: while another process holds the folder's
+// lock, a run into it is refused (exit 2, naming that process) and touches
+// nothing, --overwrite or not; a lock file left by a process that ended
+// holds nothing; a run removes its lock file as it ends, and a refused run
+// leaves no folder it made.
+TEST_F(Checkpoints, OneRunAtATimeInAFolder) {
+  const test::ScratchDir dir("ck_lock");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string out = dir.path() + "/o";
+  const std::string run = "run " + scene + " --quiet --backend cpu --no-render --duration 0.05 --out " + out;
+  ASSERT_EQ(marbles(run), 0);
+  EXPECT_FALSE(fs::exists(out + "/.marbles-run.lock"));
+  const std::string summary = slurp(out + "/summary.json");
+  {
+    const int fd = ::open((out + "/.marbles-run.lock").c_str(), O_RDWR | O_CREAT, 0644);
+    ASSERT_GE(fd, 0);
+    ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);
+    ASSERT_EQ(::write(fd, "4242", 4), 4);
+    for (const std::string extra : {"", " --overwrite"}) {
+      std::string err;
+      EXPECT_EQ(marbles(run + extra, &err), 2) << extra;
+      EXPECT_NE(err.find("--out: " + out + " is being written by another marbles run (process 4242); wait for it to "
+                         "end, or choose another folder"),
+                std::string::npos)
+          << err;
+      EXPECT_EQ(slurp(out + "/summary.json"), summary);
+    }
+    ::close(fd);  // as a process that ended: its file stays, unlocked
+  }
+  std::string err;
+  EXPECT_EQ(marbles(run + " --overwrite", &err), 0) << err;
+  EXPECT_FALSE(fs::exists(out + "/.marbles-run.lock"));
+  EXPECT_EQ(marbles("run " + scene + " --quiet --out " + dir.path() + "/new --restart " + dir.path() + "/none.mck"), 2);
+  EXPECT_FALSE(fs::exists(dir.path() + "/new")) << "a refused run leaves no folder it made";
 }
 
 // A resume in its run's folder replaces the steps after its checkpoint: a
