@@ -30,6 +30,7 @@
 #include "core/files.hpp"
 #include "core/format.hpp"
 #include "render/atomic_file.hpp"
+#include "sim/output.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
 #include "sim/scene_yaml.hpp"
@@ -323,6 +324,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
                                                             : fs::path(options.out_dir));
   const auto combos = combinations(options.vary);
   check_combinations(options, combos);
+  const RunFolderLock lock(dir, "--out");  // one study at a time in the folder (its runs/, tables and plots)
   // The runs are made in a folder of their own (`.runs-PID`) and take the
   // place of an earlier study's in runs/ only once all of them have run: a
   // study that fails or is stopped leaves the earlier one whole, its tables

@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -163,6 +165,30 @@ TEST_F(Study, AFailedStudyLeavesTheEarlierOneWhole) {
   EXPECT_EQ(left, (std::vector<std::string>{".runs-1", ".runs-notes"}));
   EXPECT_NE(slurp(dir.path() + "/study.csv"), table);
   EXPECT_FALSE(fs::exists(runs / "1"));
+}
+
+// One study at a time in a folder (as one run at a time): while another
+// process holds the folder's lock, a study there is refused and touches
+// nothing; once it is let go, the study runs.
+TEST_F(Study, OneStudyAtATimeInAFolder) {
+  const test::ScratchDir dir("study_lock");
+  ASSERT_EQ(study(kValidation + "bouncing_ball.yaml", {"time.dt=4e-3"}, dir).rows.size(), 1u);
+  const std::string table = slurp(dir.path() + "/study.csv");
+  const int fd = ::open((dir.path() + "/.marbles-run.lock").c_str(), O_RDWR | O_CREAT, 0644);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);  // another open file: refused even in this process
+  try {
+    study(kValidation + "bouncing_ball.yaml", {"time.dt=2e-3"}, dir);
+    ADD_FAILURE() << "a study ran in a folder another held";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("--out: " + dir.path() + " is being written by another marbles run"),
+              std::string::npos)
+        << e.what();
+  }
+  ::close(fd);
+  EXPECT_EQ(slurp(dir.path() + "/study.csv"), table);
+  EXPECT_EQ(study(kValidation + "bouncing_ball.yaml", {"time.dt=2e-3"}, dir).rows.size(), 1u);
+  EXPECT_FALSE(fs::exists(dir.path() + "/.marbles-run.lock"));
 }
 
 // The scene's name and the output folder are data to the plot, never
