@@ -46,15 +46,16 @@ inline std::optional<std::uint64_t> whole_number(std::string_view text) {
   return std::stoull(std::string(text));
 }
 
-// The folders PREFIX-PID in `dir` whose process has ended (this process's
-// own and a running one's are not among them).
+// The folders PREFIX-PID (or PREFIX-PID.N) in `dir` whose process has
+// ended (this process's own and a running one's are not among them).
 inline std::vector<std::filesystem::path> folders_of_ended_processes(const std::filesystem::path& dir,
                                                                      std::string_view prefix) {
   std::error_code ec;
   std::vector<std::filesystem::path> ended;
   for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     const std::string name = it->path().filename().string();
-    const auto pid = name.starts_with(prefix) ? whole_number(std::string_view(name).substr(prefix.size())) : std::nullopt;
+    const std::string_view rest = name.starts_with(prefix) ? std::string_view(name).substr(prefix.size()) : "";
+    const auto pid = whole_number(rest.substr(0, rest.find('.')));
     if (pid && *pid != static_cast<std::uint64_t>(getpid()) && *pid <= std::numeric_limits<pid_t>::max() &&
         ::kill(static_cast<pid_t>(*pid), 0) != 0 && errno == ESRCH && it->is_directory(ec))
       ended.push_back(it->path());

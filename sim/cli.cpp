@@ -31,6 +31,7 @@
 #include "sim/checkpoint.hpp"
 #include "sim/limits.hpp"
 #include "sim/particles.hpp"
+#include "sim/output.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
 #include "sim/scene_yaml.hpp"
@@ -520,6 +521,7 @@ int cli_main(int argc, char** argv) {
       if (!rd_color_by.empty()) rd.color_by = *render::parse_color_by(rd_color_by);
       if (!rd_camera.empty()) rd.camera = render::parse_camera(rd_camera, "--camera");
       rd_movie.enabled = !rd_no_movie;
+      const RunFolderLock lock(rd_dir, "outdir");  // not while a run writes the folder (its images would go)
       return render::render_output_dir(rd_dir, rd, rd_movie, isatty(fileno(stderr)) != 0, std::cerr);
     }
   } catch (const InputError& e) {

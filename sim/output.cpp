@@ -112,46 +112,52 @@ constexpr Numbered kNumbered[] = {{"frames", "frame_", ".vtp"},
 
 }  // namespace
 
-std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir) {
+namespace {
+
+// The files of a run's in `dir`: those at its top named in `top`, and the
+// numbered ones (kNumbered: PREFIX + digits + EXTENSION) for which
+// `take(folder, number)` holds.
+template <class Take>
+std::vector<std::filesystem::path> run_files(const std::filesystem::path& dir, std::initializer_list<const char*> top,
+                                             Take take) {
   namespace fs = std::filesystem;
   std::vector<fs::path> found;
   std::error_code ec;
-  for (const char* name : {"summary.json", "series.pvd", "contacts.pvd", "walls.pvd", "thermo.csv", "walls.json",
-                           "materials.txt", "movie.mp4"})
+  for (const char* name : top)
     if (fs::is_regular_file(dir / name, ec)) found.push_back(dir / name);
   for (const Numbered& n : kNumbered) {
     if (!fs::is_directory(dir / n.folder, ec)) continue;
-    for (const auto& entry : fs::directory_iterator(dir / n.folder, ec))
-      if (entry.is_regular_file(ec) && entry.path().extension() == n.extension &&
-          entry.path().filename().string().rfind(n.prefix, 0) == 0)
-        found.push_back(entry.path());
+    for (const auto& entry : fs::directory_iterator(dir / n.folder, ec)) {
+      const std::string name = entry.path().filename().string();
+      if (!entry.is_regular_file(ec) || !name.starts_with(n.prefix) || !name.ends_with(n.extension)) continue;
+      const std::size_t prefix = std::strlen(n.prefix), digits = name.size() - prefix - std::strlen(n.extension);
+      const auto number = whole_number(std::string_view(name).substr(prefix, digits));
+      if (number && take(std::string_view(n.folder), *number)) found.push_back(entry.path());
+    }
   }
   return found;
 }
 
-std::vector<std::filesystem::path> run_files_past(const std::filesystem::path& dir, std::uint64_t step,
-                                                  const scene::OutputSpec& output) {
-  namespace fs = std::filesystem;
-  std::vector<fs::path> found;
-  std::error_code ec;
-  for (const char* name : {"summary.json", "movie.mp4"})
-    if (fs::is_regular_file(dir / name, ec)) found.push_back(dir / name);
-  for (const Numbered& n : kNumbered) {
-    const std::string folder = n.folder;
-    const int every = folder == "checkpoints"                          ? 1  // numbered by their step
-                      : folder == "contacts"                           ? output.contacts_every
-                      : folder == "images"                             ? (output.render.enabled ? output.render.every : 0)
-                                                                       : output.vtk_every;  // frames, walls
-    if (every <= 0 || !fs::is_directory(dir / n.folder, ec)) continue;
-    for (const auto& entry : fs::directory_iterator(dir / n.folder, ec)) {
-      const std::string name = entry.path().filename().string();
-      if (!entry.is_regular_file(ec) || !name.starts_with(n.prefix) || !name.ends_with(n.extension)) continue;
-      const std::size_t digits = name.size() - std::strlen(n.prefix) - std::strlen(n.extension);
-      const auto index = whole_number(std::string_view(name).substr(std::strlen(n.prefix), digits));
-      if (index && *index > step / static_cast<std::uint64_t>(every)) found.push_back(entry.path());
-    }
-  }
-  return found;
+}  // namespace
+
+std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir) {
+  return run_files(dir,
+                   {"summary.json", "series.pvd", "contacts.pvd", "walls.pvd", "thermo.csv", "walls.json",
+                    "materials.txt", "movie.mp4"},
+                   [](std::string_view, std::uint64_t) { return true; });
+}
+
+ReplacedFiles run_files_past(const std::filesystem::path& dir, std::uint64_t step, const scene::OutputSpec& output) {
+  const auto none = [](std::string_view, std::uint64_t) { return false; };
+  return {run_files(dir, {"summary.json", "movie.mp4"},
+                    [&](std::string_view folder, std::uint64_t number) {
+                      const int every = folder == "checkpoints" ? 1  // numbered by their step
+                                        : folder == "contacts"  ? output.contacts_every
+                                        : folder == "images"    ? (output.render.enabled ? output.render.every : 0)
+                                                                : output.vtk_every;  // frames, walls
+                      return every > 0 && number > step / static_cast<std::uint64_t>(every);
+                    }),
+          run_files(dir, {"series.pvd", "walls.pvd", "contacts.pvd", "thermo.csv"}, none)};
 }
 
 std::string earlier_run_text(const std::string& dir, const std::vector<std::filesystem::path>& files) {
@@ -170,15 +176,18 @@ void remove_earlier_run(const std::vector<std::filesystem::path>& files) {
 RunFolderLock::RunFolderLock(const std::filesystem::path& dir, const std::string& option) {
   namespace fs = std::filesystem;
   std::error_code ec;
-  const bool existed = fs::exists(dir, ec);
+  for (fs::path p = fs::absolute(dir, ec).lexically_normal(); !p.empty() && !fs::exists(p, ec); p = p.parent_path()) {
+    m_made.push_back(p);
+    if (p == p.parent_path()) break;
+  }
   fs::create_directories(dir, ec);
   if (ec) throw RuntimeFailure("cannot create the output folder " + dir.string() + ": " + ec.message());
-  if (!existed) m_made = dir;
   m_path = dir / ".marbles-run.lock";
   // The run that held the lock removes its file as it ends: a lock taken on
   // the file it removed is no lock, so it is taken again on the one there.
   for (int tries = 0;; ++tries) {
     m_fd = ::open(m_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (m_fd < 0 && errno == EACCES) m_fd = ::open(m_path.c_str(), O_RDONLY | O_CLOEXEC);  // another user's: locks too
     if (m_fd < 0) throw RuntimeFailure("cannot open " + m_path.string() + ": " + std::strerror(errno));
     if (::flock(m_fd, LOCK_EX | LOCK_NB) != 0) {
       char holder[32] = {};
@@ -187,7 +196,7 @@ RunFolderLock::RunFolderLock(const std::filesystem::path& dir, const std::string
       m_fd = -1;
       const auto pid = whole_number(std::string_view(holder, n > 0 ? static_cast<std::size_t>(n) : 0));
       throw InputError(SourceLocation{}, option,
-                       dir.string() + " is being written by another marbles run" +
+                       dir.string() + " is being written by another marbles command" +
                            (pid ? " (process " + std::to_string(*pid) + ")" : std::string()) +
                            "; wait for it to end, or choose another folder");
     }
@@ -209,28 +218,67 @@ RunFolderLock::~RunFolderLock() {
   std::error_code ec;
   std::filesystem::remove(m_path, ec);  // before the lock is let go: a run that opened it meanwhile tries again
   ::close(m_fd);
-  if (!m_made.empty()) std::filesystem::remove(m_made, ec);  // where it is empty
+  for (const std::filesystem::path& made : m_made) std::filesystem::remove(made, ec);  // where it is empty
 }
 
-EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::vector<std::filesystem::path>& files,
-                                 std::ostream& log)
+namespace {
+
+// A rename, or across filesystems (a folder linked to another) a copy and a removal.
+void move_file(const std::filesystem::path& from, const std::filesystem::path& to, std::error_code& ec) {
+  std::filesystem::rename(from, to, ec);
+  if (ec == std::errc::cross_device_link) {
+    ec.clear();
+    std::filesystem::copy_file(from, to, ec);
+    if (!ec) std::filesystem::remove(from, ec);
+  }
+}
+
+}  // namespace
+
+EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::vector<std::filesystem::path>& moved,
+                                 const std::vector<std::filesystem::path>& copied, std::ostream& log)
     : m_log(log) {
   namespace fs = std::filesystem;
   for (const fs::path& left : folders_of_ended_processes(dir, ".earlier-run-"))
-    log << "note: " << left.string() << " holds an earlier run's output, set aside by a run with --overwrite that did "
-        << "not end; remove it when it is not needed\n";
-  if (files.empty()) return;
-  m_folder = dir / (".earlier-run-" + std::to_string(getpid()));
+    log << "note: " << left.string() << " holds an earlier run's files, set aside by a run that did not end "
+        << "(--overwrite, or a resume in its folder); remove it when it is not needed\n";
+  if (moved.empty()) return;
+  // A folder of its own: one of this number (an earlier process's) is kept.
+  const fs::path base = dir / (".earlier-run-" + std::to_string(getpid()));
+  fs::path folder = base;
   std::error_code ec;
-  fs::remove_all(m_folder, ec);  // a folder of an earlier process of this number
-  for (const fs::path& file : files) {
-    const fs::path to = m_folder / file.lexically_relative(dir);
+  for (int k = 2; fs::exists(folder, ec); ++k) folder = base.string() + "." + std::to_string(k);
+  std::vector<std::pair<fs::path, fs::path>> done;  // from, to
+  auto place = [&](const fs::path& file, bool copy) {
+    const fs::path to = folder / file.lexically_relative(dir);
     fs::create_directories(to.parent_path(), ec);
-    if (!ec) fs::rename(file, to, ec);
-    if (ec)
-      throw RuntimeFailure("cannot move " + file.string() + " of the earlier run aside into " + m_folder.string() +
-                           ": " + ec.message() + " (what was moved lies there)");
+    if (ec) return;
+    if (copy) {
+      fs::copy_file(file, to, ec);
+    } else {
+      move_file(file, to, ec);
+      if (!ec) done.emplace_back(file, to);
+    }
+  };
+  for (const fs::path& file : copied) {
+    place(file, true);
+    if (ec) break;
   }
+  for (std::size_t k = 0; k < moved.size() && !ec; ++k) place(moved[k], false);
+  if (!ec) {
+    m_folder = folder;
+    return;
+  }
+  // Put back what was moved: the earlier run stays as it was.
+  const std::string why = ec.message();
+  bool back = true;
+  for (auto it = done.rbegin(); it != done.rend(); ++it) {
+    move_file(it->second, it->first, ec);
+    back = back && !ec;
+  }
+  if (back) fs::remove_all(folder, ec);
+  throw RuntimeFailure("cannot set the earlier run's files aside in " + folder.string() + ": " + why +
+                       (back ? " (they are left as they were)" : " (what could not be put back lies there)"));
 }
 
 EarlierRunAside::~EarlierRunAside() {

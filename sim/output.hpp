@@ -35,24 +35,29 @@ render::ContactSnapshot make_contact_snapshot(const Simulation& sim);
 // series.pvd, contacts.pvd, walls.pvd, thermo.csv, an old walls.json, materials.txt, movie.mp4, frames/frame_*.vtp,
 // images/frame_*.png, checkpoints/step_*.mck, contacts/contacts_*.vtp); other files are not ours.
 std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path& dir);
-// The files in `dir` that a run resumed there at `step` replaces: those of
-// later steps (frames, wall and contact frames, images, checkpoints, by the
-// cadences of `output`: an every of 0 leaves that kind alone), summary.json
-// and movie.mp4 (the whole earlier run's).
-std::vector<std::filesystem::path> run_files_past(const std::filesystem::path& dir, std::uint64_t step,
-                                                  const scene::OutputSpec& output);
+// The files in `dir` that a run resumed there at `step` replaces: `later`,
+// those of later steps (frames, wall and contact frames, images,
+// checkpoints, by the cadences of `output`: an every of 0 leaves that kind
+// alone), summary.json and movie.mp4 (the whole earlier run's);
+// `rewritten`, the series and thermo.csv, written again from their entries
+// up to the step.
+struct ReplacedFiles {
+  std::vector<std::filesystem::path> later, rewritten;
+};
+ReplacedFiles run_files_past(const std::filesystem::path& dir, std::uint64_t step, const scene::OutputSpec& output);
 // "DIR holds the output of an earlier run (N files, e.g. NAME)": a refusal's
 // first words, its remedy the caller's (`files` not empty).
 std::string earlier_run_text(const std::string& dir, const std::vector<std::filesystem::path>& files);
 // Removes them (overwriting that run); RuntimeFailure naming a file that stays.
 void remove_earlier_run(const std::vector<std::filesystem::path>& files);
 
-// One run at a time in an output folder: DIR/.marbles-run.lock, locked
-// (flock) from before the check for an earlier run to the run's end, then
-// removed; another run into the folder meanwhile is refused (InputError
-// naming `option` and the process that holds it). The system lets go of the
-// lock however the process ends. A folder it made is removed again where
-// the run leaves it empty (refused before writing anything).
+// One command at a time writing in an output folder (run, study, render):
+// DIR/.marbles-run.lock, locked (flock) from before the check for an
+// earlier run to the command's end, then removed; another command into the
+// folder meanwhile is refused (InputError naming `option` and the process
+// that holds it). The system lets go of the lock however the process ends.
+// The folders it made are removed again where the command leaves them
+// empty (refused before writing anything).
 class RunFolderLock {
  public:
   RunFolderLock(const std::filesystem::path& dir, const std::string& option);
@@ -62,20 +67,25 @@ class RunFolderLock {
 
  private:
   std::filesystem::path m_path;
-  std::filesystem::path m_made;  // the folder, where this lock made it
+  std::vector<std::filesystem::path> m_made;  // the folders it made, the deepest first
   int m_fd = -1;
 };
 
 // `run --overwrite` (or a resume in its run's folder, run_files_past): the
-// earlier run's files moved (renamed, by their paths below `dir`) into
-// DIR/.earlier-run-PID while the new run runs, so that a run that fails, or
-// a process that dies, loses nothing. `discard()` once
-// the new run stands (ended, or stopped with its checkpoint) removes them;
-// otherwise they stay whole there and the destructor says where on `log`.
-// Such folders of processes that ended are named on `log` at the start.
+// earlier run's files `moved` (by their paths below `dir`) into a folder of
+// this process's, DIR/.earlier-run-PID (.2, .3 where one of that number
+// lies there), with copies of the files `copied` (those the new run writes
+// again from their rows, a resume's series and thermo.csv), while the new
+// run runs, so that a run that fails, or a process that dies, loses
+// nothing. Where a file cannot be moved, those moved are put back and
+// RuntimeFailure says so. `discard()` once the new run stands (ended, or
+// stopped with its checkpoint) removes them; otherwise they stay whole there
+// and the destructor says where on `log`. Such folders of processes that
+// ended are named on `log` at the start.
 class EarlierRunAside {
  public:
-  EarlierRunAside(const std::filesystem::path& dir, const std::vector<std::filesystem::path>& files, std::ostream& log);
+  EarlierRunAside(const std::filesystem::path& dir, const std::vector<std::filesystem::path>& moved,
+                  const std::vector<std::filesystem::path>& copied, std::ostream& log);
   ~EarlierRunAside();
   EarlierRunAside(const EarlierRunAside&) = delete;
   EarlierRunAside& operator=(const EarlierRunAside&) = delete;

@@ -268,11 +268,17 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
                             probe ? probe->progress() : std::vector<double>{}, sim.ids()});
   };
 
+  // SIGINT, SIGTERM: end the step in progress, checkpoint, exit 1. Taken from
+  // before the earlier run's files are set aside (a stop there would split
+  // them) and the start's output (its first image may take long) on: a stop
+  // asked there ends the first step.
+  const StopRequests stop;
   // --overwrite, once the scene is known to run: the earlier run set aside
   // until this one stands; a resume in its own folder, the files of the
   // steps it makes again (and of any beyond its end).
-  EarlierRunAside earlier_aside(sc.output.dir,
-                                restart_here ? run_files_past(sc.output.dir, sim.steps(), sc.output) : earlier, err);
+  const ReplacedFiles replaced =
+      restart_here ? run_files_past(sc.output.dir, sim.steps(), sc.output) : ReplacedFiles{earlier, {}};
+  EarlierRunAside earlier_aside(sc.output.dir, replaced.later, replaced.rewritten, err);
   // Test hook: MARBLES_FAULT_SIGNAL=NAME@N raises SIGNAME (SEGV, ABRT, INT, TERM) after step N (0: after the
   // start's output).
   int fault_signal = 0;
@@ -284,10 +290,6 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     fault_signal = name == "SEGV" ? SIGSEGV : name == "ABRT" ? SIGABRT : name == "INT" ? SIGINT : name == "TERM" ? SIGTERM : 0;
     if (at != std::string::npos) fault_signal_step = std::strtoull(text.c_str() + at + 1, nullptr, 10);
   }
-  // SIGINT, SIGTERM: end the step in progress, checkpoint, exit 1. Taken from
-  // the start's output on (its first image may take long): a stop asked
-  // there ends the first step.
-  const StopRequests stop;
   RunOutput output(sc, sc.output.dir, sim.walls(), render, err, options.restart.has_value(), &view);
   Progress progress(!options.quiet);
   double step_seconds = 0;

@@ -84,9 +84,7 @@ TimeSpec read_time(const Field& field, std::optional<double> duration) {
   const Field dt = map.required("dt");
   time.dt = dt.positive();
   if (auto f = map.optional("substeps")) time.substeps = f->integer_at_least(1);
-  if (duration) {
-    if (!(*duration > 0) || !(*duration - *duration == 0))
-      throw InputError(SourceLocation{}, "--duration", "must be a finite number > 0, got " + shortest(*duration));
+  if (duration) {  // the command line took it finite and > 0
     if (const std::string why = duration_problem(*duration, time); !why.empty())
       throw InputError(SourceLocation{}, "--duration", why);
     time.duration = *duration;

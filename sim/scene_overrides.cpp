@@ -97,10 +97,13 @@ void add_subtree(const YAML::Node& node, const std::string& label, Origins& orig
 
 void apply_override(YAML::Node root, const std::string& text, Origins& origins) {
   // The override as its errors name it: printable (its bytes past ASCII kept
-  // where it is UTF-8), and cut after 200 bytes (a value nested 600 deep was echoed whole).
+  // where it is UTF-8), and cut after 200 bytes, before a character's
+  // continuation bytes (a value nested 600 deep was echoed whole).
   const std::size_t not_utf8 = first_non_utf8(text);
+  std::size_t cut = std::min<std::size_t>(text.size(), 200);
+  while (cut < text.size() && cut > 0 && (static_cast<unsigned char>(text[cut]) & 0xc0) == 0x80) --cut;
   const std::string label =
-      "--set " + printable(text.size() > 200 ? text.substr(0, 200) + "..." : text, not_utf8 != std::string::npos);
+      "--set " + printable(cut < text.size() ? text.substr(0, cut) + "..." : text, not_utf8 != std::string::npos);
   const std::size_t equals = text.find('=');
   if (equals == std::string::npos || equals == 0) fail(label, "", "expected key.path=value, e.g. time.dt=5e-4");
   const std::vector<Step> steps = parse_path(text.substr(0, equals), label);

@@ -324,7 +324,8 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
                                                             : fs::path(options.out_dir));
   const auto combos = combinations(options.vary);
   check_combinations(options, combos);
-  const RunFolderLock lock(dir, "--out");  // one study at a time in the folder (its runs/, tables and plots)
+  // One study at a time in the folder (its runs/, tables and plots).
+  const RunFolderLock lock(dir, options.out_dir.empty() ? "study" : "--out");
   // The runs are made in a folder of their own (`.runs-PID`) and take the
   // place of an earlier study's in runs/ only once all of them have run: a
   // study that fails or is stopped leaves the earlier one whole, its tables

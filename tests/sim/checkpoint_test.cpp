@@ -181,7 +181,7 @@ TEST_F(Checkpoints, OverwriteKeepsTheEarlierRunUntilTheNewOneStands) {
   EXPECT_TRUE(fs::exists(out + "/checkpoints/step_000119.mck")) << "the failed run's last good state";
 
   EXPECT_EQ(marbles(again, &err, "MARBLES_FAULT_SIGNAL=SEGV@40"), 1);
-  EXPECT_NE(err.find("note: " + kept.string() + " holds an earlier run's output, set aside by a run with --overwrite"),
+  EXPECT_NE(err.find("note: " + kept.string() + " holds an earlier run's files, set aside by a run that did not end"),
             std::string::npos)
       << err;
   EXPECT_EQ(asides().size(), 2u) << "the dead process's folder stays";
@@ -198,6 +198,15 @@ TEST_F(Checkpoints, OverwriteKeepsTheEarlierRunUntilTheNewOneStands) {
   for (const fs::path& folder : asides()) fs::remove_all(folder);
   EXPECT_EQ(marbles(again, &err), 0) << err;
   EXPECT_TRUE(asides().empty()) << "a run that ends removes what it replaced";
+  // A folder of the run's own process number (numbers come round again, a
+  // container's first process is 1 each time) is another's: kept, and the
+  // run sets its own aside beside it (its shell's number, through exec).
+  EXPECT_EQ(marbles(again, &err,
+                    "mkdir -p '" + out + "/.earlier-run-'$$ && echo mine > '" + out + "/.earlier-run-'$$/notes.txt && exec"),
+            0)
+      << err;
+  ASSERT_EQ(asides().size(), 1u) << err;
+  EXPECT_EQ(slurp((asides().front() / "notes.txt").string()), "mine\n");
 }
 
 // One run at a time in a folder: while another process holds the folder's
@@ -221,18 +230,26 @@ TEST_F(Checkpoints, OneRunAtATimeInAFolder) {
     for (const std::string extra : {"", " --overwrite"}) {
       std::string err;
       EXPECT_EQ(marbles(run + extra, &err), 2) << extra;
-      EXPECT_NE(err.find("--out: " + out + " is being written by another marbles run (process 4242); wait for it to "
-                         "end, or choose another folder"),
+      EXPECT_NE(err.find("--out: " + out + " is being written by another marbles command (process 4242); wait for it "
+                         "to end, or choose another folder"),
                 std::string::npos)
           << err;
       EXPECT_EQ(slurp(out + "/summary.json"), summary);
     }
+    std::string err;  // nor is the folder rendered meanwhile (the run's newer images would be taken for stale)
+    EXPECT_EQ(marbles("render " + out + " --no-movie", &err), 2);
+    EXPECT_NE(err.find("outdir: " + out + " is being written by another marbles command (process 4242)"),
+              std::string::npos)
+        << err;
     ::close(fd);  // as a process that ended: its file stays, unlocked
   }
   std::string err;
   EXPECT_EQ(marbles(run + " --overwrite", &err), 0) << err;
   EXPECT_FALSE(fs::exists(out + "/.marbles-run.lock"));
-  EXPECT_EQ(marbles("run " + scene + " --quiet --out " + dir.path() + "/new --restart " + dir.path() + "/none.mck"), 2);
+  // Refused after the lock (the scene file is no checkpoint): no folder it made is left.
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + dir.path() + "/new/a/b --restart " + scene, &err),
+            2);
+  EXPECT_NE(err.find("s.yaml"), std::string::npos) << err;
   EXPECT_FALSE(fs::exists(dir.path() + "/new")) << "a refused run leaves no folder it made";
 }
 
@@ -264,6 +281,24 @@ TEST_F(Checkpoints, AResumeInItsFolderReplacesTheStepsAfterIt) {
   };
   EXPECT_EQ(listing(out), listing(alone));
   expect_same_output(alone, out);
+  // A resume in place that fails keeps what it replaced whole: the later
+  // files, and the series and thermo rows as they were.
+  const std::string thermo = slurp(out + "/thermo.csv"), series = slurp(out + "/series.pvd");
+  EXPECT_EQ(marbles("run " + scene + common + " --out " + out + " --restart " + out + "/checkpoints/step_000100.mck",
+                    &err, "MARBLES_FAULT_NAN_STEP=150:all"),
+            1);
+  std::vector<fs::path> kept;
+  for (const auto& entry : fs::directory_iterator(out))
+    if (entry.path().filename().string().starts_with(".earlier-run-")) kept.push_back(entry.path());
+  ASSERT_EQ(kept.size(), 1u) << err;
+  EXPECT_NE(err.find("are kept whole in " + kept[0].string()), std::string::npos) << err;
+  EXPECT_EQ(slurp((kept[0] / "thermo.csv").string()), thermo);
+  EXPECT_EQ(slurp((kept[0] / "series.pvd").string()), series);
+  EXPECT_TRUE(fs::exists(kept[0] / "frames" / "frame_000010.vtp"));
+  EXPECT_TRUE(fs::exists(kept[0] / "checkpoints" / "step_000200.mck"));
+  EXPECT_TRUE(fs::exists(kept[0] / "summary.json"));
+  fs::remove_all(out);
+  fs::copy(alone, out, fs::copy_options::recursive);
 
   fs::copy_file(out + "/checkpoints/step_000100.mck", dir.path() + "/loose.mck");
   EXPECT_EQ(marbles("run " + scene + common + " --out " + out + " --restart " + dir.path() + "/loose.mck", &err), 2);

@@ -6,6 +6,7 @@
 #include <string>
 #include <utility>
 
+#include "core/format.hpp"
 #include "narrowphase/solver_math.hpp"
 #include "sim/particles.hpp"
 #include "sim/scene.hpp"
@@ -319,6 +320,38 @@ TEST(SceneLoad, UnicodeTextOnly) {
     } catch (const InputError& e) {
       EXPECT_EQ(std::string(e.what()), message);
     }
+  }
+}
+
+// first_non_utf8 against RFC 3629's table: whole characters of one to four
+// bytes pass; a stray continuation byte, an overlong form, a surrogate, a
+// character past U+10FFFF, a byte that never occurs and a cut character are
+// found where they begin.
+TEST(Utf8, FindsTheFirstByteThatIsNoUtf8) {
+  for (const std::string good : {"", "abc", "\xc2\x80", "\xdf\xbf", "\xe0\xa0\x80", "\xed\x9f\xbf", "\xee\x80\x80",
+                                 "\xf0\x90\x80\x80", "\xf4\x8f\xbf\xbf", "caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x98\x80"})
+    EXPECT_EQ(first_non_utf8(good), std::string::npos) << printable(good);
+  const std::pair<std::string, std::size_t> bad[] = {
+      {"\x80", 0},          {"ab\xbf", 2},           {"\xc0\xaf", 0},         {"\xc1\xbf", 0},
+      {"\xe0\x80\xaf", 0},  {"\xed\xa0\x80", 0},     {"\xf0\x80\x80\xaf", 0}, {"\xf4\x90\x80\x80", 0},
+      {"\xf5\x80\x80\x80", 0}, {"a\xff", 1},          {"\xfe", 0},             {"x\xe2\x82", 1},
+      {"\xc3", 0},          {"\xc3\xa9\xc3(", 2}};
+  for (const auto& [text, at] : bad) EXPECT_EQ(first_non_utf8(text), at) << printable(text);
+}
+
+// An override's label is cut after 200 bytes, before a character's
+// continuation bytes: the message stays UTF-8 text.
+TEST(SceneOverrides, ALongLabelIsCutBetweenCharacters) {
+  const ScratchDir dir("set_cut");
+  const std::string path = dir.write("s.yaml", SET_SCENE);
+  const std::string value = "time.dt=" + std::string(191, 'a') + "\xc3\xa9tail";  // the character at bytes 199-200
+  try {
+    load_scene(path, {value});
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_EQ(first_non_utf8(m), std::string::npos) << printable(m);
+    EXPECT_EQ(m.substr(0, 6 + 199 + 3), "--set " + value.substr(0, 199) + "...");
   }
 }
 

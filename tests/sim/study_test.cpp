@@ -181,7 +181,7 @@ TEST_F(Study, OneStudyAtATimeInAFolder) {
     study(kValidation + "bouncing_ball.yaml", {"time.dt=2e-3"}, dir);
     ADD_FAILURE() << "a study ran in a folder another held";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("--out: " + dir.path() + " is being written by another marbles run"),
+    EXPECT_NE(std::string(e.what()).find("--out: " + dir.path() + " is being written by another marbles command"),
               std::string::npos)
         << e.what();
   }
