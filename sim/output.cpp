@@ -260,11 +260,10 @@ EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::ve
       if (!ec) done.emplace_back(file, to);
     }
   };
-  for (const fs::path& file : copied) {
-    place(file, true);
-    if (ec) break;
-  }
-  for (std::size_t k = 0; k < moved.size() && !ec; ++k) place(moved[k], false);
+  for (const fs::path& file : copied)
+    if (!ec) place(file, true);
+  for (const fs::path& file : moved)
+    if (!ec) place(file, false);
   if (!ec) {
     m_folder = folder;
     return;
