@@ -19,6 +19,7 @@
 #include "broadphase/grid.hpp"
 #include "core/device.hpp"
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "core/format.hpp"
 #include "core/parallel.hpp"
 #include "narrowphase/contact_math.hpp"
@@ -207,9 +208,14 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   // run's checkpoints/) brings no output, and is held to this rule.
   const std::vector<std::filesystem::path> earlier =
       restart_here ? std::vector<std::filesystem::path>{} : earlier_run_files(sc.output.dir);
-  if (!earlier.empty() && !options.overwrite)
+  if (!earlier.empty() && !options.overwrite) {
+    std::string set_aside;  // where a run that did not end left what it replaced (it may be the rest of this one)
+    for (const std::filesystem::path& folder : folders_of_ended_processes(sc.output.dir, ".earlier-run-"))
+      set_aside += "; " + folder.string() + " holds files set aside by a run that did not end";
     throw InputError(SourceLocation{}, options.out_dir ? "--out" : "output.dir",
-                     earlier_run_text(sc.output.dir, earlier) + "; --overwrite replaces it, or choose another folder");
+                     earlier_run_text(sc.output.dir, earlier) + set_aside +
+                         "; --overwrite replaces it, or choose another folder");
+  }
   const scene::GeneratedParticles particles = scene::generate_particles(sc);
   warn_risky_settings(sc, particles, err);
   std::ostringstream quiet_sink;  // --quiet: only the summary

@@ -186,6 +186,11 @@ TEST_F(Checkpoints, OverwriteKeepsTheEarlierRunUntilTheNewOneStands) {
       << err;
   EXPECT_EQ(asides().size(), 2u) << "the dead process's folder stays";
   EXPECT_EQ(files_in(kept), earlier);
+  // A run without --overwrite is refused, naming the folders set aside too.
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --duration 0.2 --out " + out, &err), 2);
+  for (const fs::path& folder : asides())
+    EXPECT_NE(err.find("; " + folder.string() + " holds files set aside by a run that did not end"), std::string::npos)
+        << err;
 
   EXPECT_EQ(marbles(again, &err, "MARBLES_FAULT_SIGNAL=INT@60"), 1);
   EXPECT_NE(err.find("stopped by SIGINT after step 60"), std::string::npos) << err;
