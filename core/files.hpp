@@ -55,7 +55,10 @@ inline std::vector<std::filesystem::path> folders_of_ended_processes(const std::
   for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     const std::string name = it->path().filename().string();
     const std::string_view rest = name.starts_with(prefix) ? std::string_view(name).substr(prefix.size()) : "";
-    const auto pid = whole_number(rest.substr(0, rest.find('.')));
+    const std::size_t dot = rest.find('.');  // PID.N: N whole too
+    const auto pid = dot == std::string_view::npos || whole_number(rest.substr(dot + 1))
+                         ? whole_number(rest.substr(0, dot))
+                         : std::nullopt;
     if (pid && *pid != static_cast<std::uint64_t>(getpid()) && *pid <= std::numeric_limits<pid_t>::max() &&
         ::kill(static_cast<pid_t>(*pid), 0) != 0 && errno == ESRCH && it->is_directory(ec))
       ended.push_back(it->path());

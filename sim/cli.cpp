@@ -300,7 +300,8 @@ int cli_main(int argc, char** argv) {
   add_limit_option(run_cmd, limit_args);
   run_cmd->add_option("--restart", run.restart, "resume from a checkpoint (OUTDIR/checkpoints/step_NNNNNN.mck)")
       ->check(CLI::ExistingFile);
-  run_cmd->add_flag("--summary-only", run.summary_only, "write only summary.json and any checkpoints (no frames of any series, images or movie)");
+  run_cmd->add_flag("--summary-only", run.summary_only,
+                    "write only summary.json and any checkpoints (no frames of any series, images or movie)");
   run_cmd->add_option("--threads", run.threads, "CPU threads (default: OMP_NUM_THREADS, else every core)")
       ->check(CLI::Range(1, kMostThreads));
   run_cmd->add_flag("--overwrite", run.overwrite,

@@ -149,20 +149,23 @@ TEST_F(Study, AFailedStudyLeavesTheEarlierOneWhole) {
   EXPECT_EQ(slurp((runs / "0" / "summary.json").string()), first);
   for (const char* name : {"0.log", "1", "2", "2.log"}) EXPECT_TRUE(fs::exists(runs / name)) << name;
   // The failed study's folder is removed at the next start, as is any study's that no longer runs; a live one's
-  // (process 1's) and a folder of another name are left alone.
+  // (process 1's) and folders of other names (a dead one's with a suffix too) are left alone.
   const pid_t dead = ::fork();
   if (dead == 0) ::_exit(0);
   ASSERT_GT(dead, 0);
   ::waitpid(dead, nullptr, 0);
   const fs::path root(dir.path());
-  for (const std::string& name : {".runs-" + std::to_string(dead), std::string(".runs-1"), std::string(".runs-notes")})
+  for (const std::string& name : {".runs-" + std::to_string(dead), std::string(".runs-1"), std::string(".runs-notes"),
+                                   ".runs-" + std::to_string(dead) + ".bak"})
     fs::create_directories(root / name);
   ASSERT_EQ(study(kValidation + "bouncing_ball.yaml", {"time.dt=4e-3"}, dir).rows.size(), 1u);
   std::vector<std::string> left;
   for (const fs::directory_entry& e : fs::directory_iterator(root))
     if (e.path().filename().string().starts_with(".runs-")) left.push_back(e.path().filename().string());
   std::sort(left.begin(), left.end());
-  EXPECT_EQ(left, (std::vector<std::string>{".runs-1", ".runs-notes"}));
+  std::vector<std::string> kept{".runs-" + std::to_string(dead) + ".bak", ".runs-1", ".runs-notes"};
+  std::sort(kept.begin(), kept.end());
+  EXPECT_EQ(left, kept);
   EXPECT_NE(slurp(dir.path() + "/study.csv"), table);
   EXPECT_FALSE(fs::exists(runs / "1"));
 }
