@@ -505,7 +505,9 @@ class Simulation:
         ``dir/series.pvd`` (ParaView) up to date; returns the frame's path.
         A folder this simulation has not written to that holds another
         run's output raises ValueError, unless ``overwrite=True``, which
-        first removes that run's files (as ``marbles run --overwrite``)."""
+        first removes that run's files (those ``marbles run --overwrite``
+        replaces; the command keeps them aside until its run ends, and a
+        series written from Python has no end)."""
         if not isinstance(overwrite, (bool, np.bool_)):  # "False" would be true, and remove a run's files
             raise TypeError(f"write_frame: overwrite is True or False, got {overwrite!r}")
         return self._impl.write_frame(_path(dir, "write_frame: dir"), bool(overwrite))
