@@ -81,6 +81,12 @@ inline std::size_t first_non_utf8(std::string_view text) {
   return std::string_view::npos;
 }
 
+// "not UTF-8 text: \xNN": a refusal's words for the byte at `at`
+// (first_non_utf8), its place the caller's.
+inline std::string not_utf8_text(std::string_view text, std::size_t at) {
+  return "not UTF-8 text: " + printable(text.substr(at, 1));
+}
+
 // A size in bytes for messages: three significant digits in GB, MB, kB or
 // bytes ("1.23 GB", "640 bytes").
 inline std::string bytes_text(double bytes) {

@@ -820,7 +820,7 @@ YAML::Node read_document(const std::string& path) {
     const auto line = 1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n');
     const std::size_t column = at - (line_start == std::string::npos ? 0 : line_start + 1) + 1;
     throw InputError(SourceLocation{path, static_cast<int>(line), static_cast<int>(column)}, "",
-                     "not UTF-8 text: " + printable(text.substr(at, 1)) + " (save the file as UTF-8)");
+                     not_utf8_text(text, at) + " (save the file as UTF-8)");
   }
   YAML::Node document;
   std::size_t count = 0;

@@ -108,7 +108,7 @@ void apply_override(YAML::Node root, const std::string& text, Origins& origins) 
   if (equals == std::string::npos || equals == 0) fail(label, "", "expected key.path=value, e.g. time.dt=5e-4");
   const std::vector<Step> steps = parse_path(text.substr(0, equals), label);
   if (not_utf8 != std::string::npos)
-    fail(label, "", "not UTF-8 text: " + printable(text.substr(not_utf8, 1)) + " at byte " + std::to_string(not_utf8 + 1));
+    fail(label, "", not_utf8_text(text, not_utf8) + " at byte " + std::to_string(not_utf8 + 1));
   YAML::Node value;
   try {
     value = YAML::Load(text.substr(equals + 1));

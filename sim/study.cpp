@@ -1,7 +1,6 @@
 #include "sim/study.hpp"
 
 #include <fcntl.h>
-#include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -15,11 +14,9 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
-#include <limits>
 #include <optional>
 #include <ostream>
 #include <sstream>
-#include <string_view>
 #include <tuple>
 
 #include <nlohmann/json.hpp>
