@@ -18,6 +18,7 @@
 #include <cmath>
 #include <filesystem>
 #include <functional>
+#include <iostream>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -28,6 +29,7 @@
 
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
@@ -244,32 +246,57 @@ class PySimulation {
     if (dir.empty() || dir.find('\0') != std::string::npos)
       throw nb::value_error("write_frame: a folder is needed (not empty, no NUL byte)");
     if (m_views_out) check_views();
-    // By the folder, however it is written ("out", "out/", "./out", through
-    // a link), and written there by that name: a later chdir moves neither.
-    // Its links resolved as the system resolves them ("link/.." is the
-    // link's target's parent, not the folder the link is in).
-    std::filesystem::path folder = std::filesystem::weakly_canonical(std::filesystem::absolute(dir));
-    if (!folder.has_filename() && folder.has_parent_path() && folder != folder.root_path())
-      folder = folder.parent_path();  // "out/" normalises to "/.../out/": the folder is "/.../out"
+    const std::filesystem::path folder = series_key(dir);
     const std::string key = folder.string();
     auto it = m_frames.find(key);
     if (it == m_frames.end()) {
       // A folder new to this simulation that holds another run's output is
       // refused, as `marbles run` refuses it: new frames would replace some
       // of its frames and its series.pvd would no longer name the rest.
+      // The folder is this series' alone until it ends (end_frames(), or
+      // the simulation's end), as a run's is: another command, or another
+      // simulation, writing there is refused.
+      auto series = std::make_unique<FrameSeries>();
+      series->lock = std::make_unique<RunFolderLock>(folder, "write_frame: dir");
       const std::vector<std::filesystem::path> earlier = earlier_run_files(key);
       if (!earlier.empty() && !overwrite)
         throw nb::value_error((earlier_run_text(dir, earlier) +
                                "; write_frame(dir, overwrite=True) replaces it, or choose another folder")
                                   .c_str());
-      remove_earlier_run(earlier);
-      auto writer = std::make_unique<render::VtkSeriesWriter>(folder, render::parse_point_fields(m_scene.output.fields),
-                                                              frame_metadata(m_scene));
-      it = m_frames.emplace(key, std::move(writer)).first;
+      // Set aside, as `marbles run --overwrite` sets them aside, and removed
+      // only once this series stands (its first frame written) and ends.
+      series->aside = std::make_unique<EarlierRunAside>(folder, earlier, std::vector<std::filesystem::path>{}, std::cerr);
+      series->writer = std::make_unique<render::VtkSeriesWriter>(
+          folder, render::parse_point_fields(m_scene.output.fields), frame_metadata(m_scene));
+      it = m_frames.emplace(key, std::move(series)).first;
     }
     const bool counts = std::find(m_scene.output.fields.begin(), m_scene.output.fields.end(), "contacts") !=
                         m_scene.output.fields.end();
-    return it->second->write(make_snapshot(*m_sim, counts)).string();
+    try {
+      const std::filesystem::path written = it->second->writer->write(make_snapshot(*m_sim, counts));
+      it->second->stands = true;
+      return written.string();
+    } catch (...) {
+      // A series with no frame yet ends here: the folder is let go, and an
+      // earlier run set aside stays whole beside it (its note says where).
+      if (!it->second->stands) m_frames.erase(it);
+      throw;
+    }
+  }
+
+  // Ends the series written to `dir` (all of them with none): its folder is
+  // let go (`marbles render` may read it, another run write there) and the
+  // files of an earlier run it replaced are removed. A later write_frame
+  // there finds this series as an earlier run's output.
+  void end_frames(const std::optional<std::string>& dir) {
+    const Busy busy(*this);
+    if (!dir) {
+      m_frames.clear();
+      return;
+    }
+    if (dir->empty() || dir->find('\0') != std::string::npos)
+      throw nb::value_error("end_frames: a folder is needed (not empty, no NUL byte)");
+    m_frames.erase(series_key(*dir));
   }
 
   // A checkpoint `marbles run --restart` reads (and restart() here), and
@@ -411,7 +438,35 @@ class PySimulation {
   static std::string plural(const std::string& what) {
     return what == "velocity" ? "velocities" : what == "angular_velocity" ? "angular_velocities" : what + "s";
   }
-  std::map<std::string, std::unique_ptr<render::VtkSeriesWriter>> m_frames;
+  // A folder's frames: the writer, the lock that keeps the folder this
+  // series' own, and an earlier run's files set aside (overwrite=True),
+  // removed as the series ends if it has a frame.
+  struct FrameSeries {
+    std::unique_ptr<RunFolderLock> lock;
+    std::unique_ptr<EarlierRunAside> aside;
+    std::unique_ptr<render::VtkSeriesWriter> writer;
+    bool stands = false;
+    FrameSeries() = default;
+    FrameSeries(const FrameSeries&) = delete;
+    FrameSeries& operator=(const FrameSeries&) = delete;
+    ~FrameSeries() {
+      writer.reset();
+      if (stands && aside) aside->discard();
+      aside.reset();
+      lock.reset();  // last: the folder is let go once nothing more is written in it
+    }
+  };
+  // By the folder, however it is written ("out", "out/", "./out", through
+  // a link), and written there by that name: a later chdir moves neither.
+  // Its links resolved as the system resolves them ("link/.." is the
+  // link's target's parent, not the folder the link is in).
+  static std::filesystem::path series_key(const std::string& dir) {
+    std::filesystem::path folder = std::filesystem::weakly_canonical(std::filesystem::absolute(dir));
+    if (!folder.has_filename() && folder.has_parent_path() && folder != folder.root_path())
+      folder = folder.parent_path();  // "out/" normalises to "/.../out/": the folder is "/.../out"
+    return folder;
+  }
+  std::map<std::string, std::unique_ptr<FrameSeries>> m_frames;
 };
 
 // Raises marbles.errors.<name>(*args) as the pending Python exception.
@@ -508,6 +563,7 @@ void bind_simulation(nb::module_& m, const char* name, const char* pairs_name) {
       .def("contacts", &PySimulation::contacts)
       .def("kinetic_energy", &PySimulation::kinetic_energy)
       .def("write_frame", &PySimulation::write_frame, nb::arg("dir"), nb::arg("overwrite"))
+      .def("end_frames", &PySimulation::end_frames, nb::arg("dir").none())
       .def("checkpoint", &PySimulation::checkpoint, nb::arg("path"), nb::arg("record") = std::string())
       .def("restart", &PySimulation::restart, nb::arg("path"))
       .def("reference", &PySimulation::reference)

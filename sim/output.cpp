@@ -195,6 +195,10 @@ RunFolderLock::RunFolderLock(const std::filesystem::path& dir, const std::string
       ::close(m_fd);
       m_fd = -1;
       const auto pid = whole_number(std::string_view(holder, n > 0 ? static_cast<std::size_t>(n) : 0));
+      if (pid && *pid == static_cast<std::uint64_t>(getpid()))  // a Python simulation's frames, in this process
+        throw InputError(SourceLocation{}, option,
+                         dir.string() + " is being written by another series of frames of this process; " +
+                             "end_frames() of the simulation that writes it lets it go, or choose another folder");
       throw InputError(SourceLocation{}, option,
                        dir.string() + " is being written by another marbles command" +
                            (pid ? " (process " + std::to_string(*pid) + ")" : std::string()) +

@@ -504,13 +504,25 @@ class Simulation:
         """Writes the state as ``dir/frames/frame_NNNNNN.vtp`` and keeps
         ``dir/series.pvd`` (ParaView) up to date; returns the frame's path.
         A folder this simulation has not written to that holds another
-        run's output raises ValueError, unless ``overwrite=True``, which
-        first removes that run's files (those ``marbles run --overwrite``
-        replaces; the command keeps them aside until its run ends, and a
-        series written from Python has no end)."""
-        if not isinstance(overwrite, (bool, np.bool_)):  # "False" would be true, and remove a run's files
+        run's output raises ValueError, unless ``overwrite=True``: then that
+        run's files (those ``marbles run --overwrite`` replaces) are set
+        aside in ``dir/.earlier-run-PID`` and removed when this series ends
+        (``end_frames``, or the simulation's end), as the command removes
+        them when its run ends; a process that dies first leaves them whole
+        there. Until the series ends the folder is its own: another
+        simulation's frames, ``marbles run`` and ``marbles render`` there
+        are refused."""
+        if not isinstance(overwrite, (bool, np.bool_)):  # "False" would be true, and replace a run's files
             raise TypeError(f"write_frame: overwrite is True or False, got {overwrite!r}")
         return self._impl.write_frame(_path(dir, "write_frame: dir"), bool(overwrite))
+
+    def end_frames(self, dir=None):
+        """Ends the series of frames written to ``dir`` (every series with
+        none): the folder is let go (``marbles render`` may read it, another
+        run write there), and the files of an earlier run it replaced are
+        removed. A later ``write_frame`` there finds its frames as an
+        earlier run's output. A folder with no series is no error."""
+        return self._impl.end_frames(None if dir is None else _path(dir, "end_frames: dir"))
 
     def checkpoint(self, path):
         """Writes a checkpoint (``marbles run --restart`` reads it too) and,

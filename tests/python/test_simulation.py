@@ -1,8 +1,10 @@
 # tests/python/test_simulation.py — stepping, the state as arrays, contacts,
 # frames and checkpoints from Python, each against an oracle: the program
 # itself (marbles run), NumPy arithmetic on the arrays, the laws of statics.
+import gc
 import json
 import pathlib
+import shutil
 import subprocess
 import warnings
 import xml.etree.ElementTree as ET
@@ -293,13 +295,16 @@ def test_write_frame(pile, tmp_path):
     # (frame_000000 replaced, series.pvd naming one frame of two).
     other = marbles.Simulation.from_dict(pile, backend="cpu")
     before = (tmp_path / "series.pvd").read_bytes(), pathlib.Path(first).read_bytes()
+    with pytest.raises(marbles.SceneError, match="another series of frames of this process"):
+        other.write_frame(tmp_path, overwrite=True)  # while the first series goes on
+    sim.end_frames(tmp_path)
     with pytest.raises(ValueError, match="holds the output of an earlier run"):
         other.write_frame(tmp_path)
     for truthy_text in ("False", "no", 1):  # not a bool: refused, not taken as true (it would remove the run)
         with pytest.raises(TypeError, match="overwrite is True or False"):
             other.write_frame(tmp_path, overwrite=truthy_text)
     assert ((tmp_path / "series.pvd").read_bytes(), pathlib.Path(first).read_bytes()) == before
-    # ... unless asked: that run's files go first, so the series is this one's alone.
+    # ... unless asked: that run's files are set aside, so the series is this one's alone.
     (tmp_path / "notes.txt").write_text("mine")
     assert pathlib.Path(other.write_frame(tmp_path, overwrite=True)).name == "frame_000000.vtp"
     assert not pathlib.Path(second).exists() and (tmp_path / "notes.txt").read_text() == "mine"
@@ -307,6 +312,61 @@ def test_write_frame(pile, tmp_path):
     for bad in ("", "a\0b"):
         with pytest.raises(ValueError, match="a folder is needed"):
             sim.write_frame(bad)
+
+
+def _tree(folder):
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_a_series_holds_its_folder_and_replaces_an_earlier_run_only_as_it_ends(pile, tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    scene = tmp_path / "pile.yaml"
+    scene.write_text(json.dumps(pile))
+    run = subprocess.run([str(PROGRAM), "run", str(scene), "--backend", "cpu", "--duration", "0.01",
+                          "--quiet", "--out", str(out), "--set", "output.vtk.every=2"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    earlier = _tree(out)
+    assert "series.pvd" in earlier and "summary.json" in earlier
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    # A first frame that fails: the folder is let go, and the earlier run is
+    # kept whole beside it (none of it lost), with a note saying where.
+    monkeypatch.setenv("MARBLES_FAULT_TRUNCATE", "series.pvd")
+    with pytest.raises(marbles.RuntimeFailure, match="left incomplete"):
+        sim.write_frame(out, overwrite=True)
+    monkeypatch.delenv("MARBLES_FAULT_TRUNCATE")
+    (kept,) = out.glob(".earlier-run-*")
+    assert _tree(kept) == earlier
+    shutil.rmtree(kept)
+    shutil.rmtree(out)
+    assert subprocess.run(run.args, capture_output=True).returncode == 0
+    earlier = _tree(out)
+    # While the series runs, the earlier run lies aside and the folder is the series' alone.
+    sim.write_frame(out, overwrite=True)
+    sim.step(2)
+    sim.write_frame(out)
+    (aside,) = out.glob(".earlier-run-*")
+    assert _tree(aside) == earlier
+    for command in (run.args + ["--overwrite"], [str(PROGRAM), "render", str(out)]):
+        refused = subprocess.run(command, capture_output=True, text=True)
+        assert refused.returncode == 2 and "is being written by another marbles command" in refused.stderr, command
+    with pytest.raises(marbles.SceneError, match="another series of frames of this process"):
+        marbles.Simulation.from_dict(pile, backend="cpu").write_frame(out, overwrite=True)
+    # Its end removes the earlier run and lets the folder go.
+    sim.end_frames()
+    sim.end_frames(out)  # no series there: no error
+    assert not list(out.glob(".earlier-run-*")) and not (out / ".marbles-run.lock").exists()
+    assert sorted(_tree(out)) == ["frames/frame_000000.vtp", "frames/frame_000001.vtp", "series.pvd"]
+    with pytest.raises(ValueError, match="holds the output of an earlier run"):
+        sim.write_frame(out)  # its own ended series, now an earlier run's output
+    # The simulation's end ends its series too.
+    other = marbles.Simulation.from_dict(pile, backend="cpu")
+    other.write_frame(out, overwrite=True)
+    assert list(out.glob(".earlier-run-*"))
+    del other
+    gc.collect()
+    assert not list(out.glob(".earlier-run-*")) and not (out / ".marbles-run.lock").exists()
+    rendered = subprocess.run(run.args + ["--overwrite"], capture_output=True, text=True)
+    assert rendered.returncode == 0, rendered.stderr
 
 
 def test_warnings_and_repr(pile):
