@@ -1,12 +1,15 @@
 // sim/scene_overrides.cpp — `--set` overrides on a YAML tree (see scene_overrides.hpp).
 //
 // yaml-cpp nodes are handles with value semantics on assignment: `a = b`
-// replaces the node `a` refers to inside its tree, while `a.reset(b)` only
-// makes the handle refer elsewhere. Walking down therefore uses reset().
+// replaces the node `a` refers to inside its tree (and so every place an
+// alias shares it), while `a.reset(b)` only makes the handle refer
+// elsewhere. An override therefore writes into no node of the tree: it makes
+// its path again as new nodes, and only the root takes the new tree.
 #include "sim/scene_overrides.hpp"
 
 #include <algorithm>
 #include <charconv>
+#include <unordered_set>
 
 #include <yaml-cpp/depthguard.h>
 
@@ -59,9 +62,10 @@ std::string description(const YAML::Node& node) { return Field(node, "", "").des
 std::string item_text(std::size_t index) { return std::string(1, '[').append(std::to_string(index)).append("]"); }
 
 // The child of `node` at `step`, created as a map when it is a missing key
-// and not the last step (`last`: the caller assigns it).
-YAML::Node child(YAML::Node node, const Step& step, bool last, std::string& key, const std::string& label,
-                 Origins& origins) {
+// and not the last step (`last`: the caller assigns it). For a tree whose
+// nodes are each in one place only (shares_nodes).
+YAML::Node child_in_place(YAML::Node node, const Step& step, bool last, std::string& key, const std::string& label,
+                          Origins& origins) {
   if (step.name.empty()) {
     if (!node.IsSequence())
       fail(label, key, "cannot take item " + item_text(step.index) + ": expected a sequence, got " + description(node));
@@ -84,6 +88,70 @@ YAML::Node child(YAML::Node node, const Step& step, bool last, std::string& key,
   return next;
 }
 
+// Whether a node of the tree stands in more than one place: an alias (`b:
+// *a`, `friction: *d`) or a merge key's values. A file's nodes are told
+// apart by where they start in its text (a key starts where its map does:
+// keys are left out); nodes from an override's text may share a place with
+// the file's, which only makes the answer yes where it could be no. Stops at
+// the first node seen twice (an alias bomb is not expanded).
+bool shares_nodes(const YAML::Node& root) {
+  std::unordered_set<int> seen;
+  std::vector<YAML::Node> todo{root};
+  while (!todo.empty()) {
+    const YAML::Node node = todo.back();
+    todo.pop_back();
+    if (const int at = node.Mark().pos; at >= 0 && !seen.insert(at).second) return true;
+    if (node.IsSequence())
+      for (const YAML::Node& item : node) todo.push_back(item);
+    else if (node.IsMap())
+      for (const auto& entry : node) todo.push_back(entry.second);
+  }
+  return false;
+}
+
+// The child of `node` at `step` as the tree has it: an undefined node for a
+// missing key (or a key below a missing or null one), whose map the
+// override makes.
+YAML::Node child_as_is(const YAML::Node& node, const Step& step, std::string& key, const std::string& label) {
+  if (step.name.empty()) {
+    if (!node.IsSequence())
+      fail(label, key, "cannot take item " + item_text(step.index) + ": expected a sequence, got " + description(node));
+    if (step.index >= node.size())
+      fail(label, key, "has " + std::to_string(node.size()) + " item(s); " + item_text(step.index) + " is past the end");
+    key += item_text(step.index);
+    return node[step.index];
+  }
+  const bool absent = !node.IsDefined() || node.IsNull();
+  if (!absent && !node.IsMap())
+    fail(label, key, "cannot hold key '" + step.name + "': expected a map, got " + description(node));
+  key += (key.empty() ? "" : ".") + step.name;
+  return absent ? YAML::Node(YAML::NodeType::Undefined) : node[step.name];
+}
+
+// `node` with its child at `step` replaced by `value`, as a new node: the
+// tree's own node may be shared through an alias (`b: *a`, a merge key's
+// values, `friction: *d`), and an override of one place must leave the
+// others as the file has them. Its other children are the tree's own.
+YAML::Node with_child(const YAML::Node& node, const Step& step, const YAML::Node& value, const std::string& label,
+                      Origins& origins) {
+  YAML::Node copy(step.name.empty() ? YAML::NodeType::Sequence : YAML::NodeType::Map);
+  if (step.name.empty()) {
+    for (std::size_t i = 0; i < node.size(); ++i) copy.push_back(i == step.index ? value : node[i]);
+  } else {
+    bool placed = false;
+    if (node.IsDefined() && node.IsMap())
+      for (const auto& entry : node) {
+        const bool here = entry.first.IsScalar() && entry.first.Scalar() == step.name;
+        copy.force_insert(entry.first, here ? value : entry.second);
+        placed = placed || here;
+      }
+    if (!placed) copy.force_insert(step.name, value);
+  }
+  if (node.IsDefined() && !node.IsNull()) origins.copied(copy, node);
+  else origins.add(copy, label);  // a map the override made: its errors name the override
+  return copy;
+}
+
 void add_subtree(const YAML::Node& node, const std::string& label, Origins& origins) {
   origins.add(node, label);
   if (node.IsSequence())
@@ -95,7 +163,7 @@ void add_subtree(const YAML::Node& node, const std::string& label, Origins& orig
     }
 }
 
-void apply_override(YAML::Node root, const std::string& text, Origins& origins) {
+void apply_override(YAML::Node root, const std::string& text, Origins& origins, bool shared) {
   // The override as its errors name it: printable (its bytes past ASCII kept
   // where it is UTF-8), and cut after 200 bytes, before a character's
   // continuation bytes (a value nested 600 deep was echoed whole).
@@ -118,16 +186,34 @@ void apply_override(YAML::Node root, const std::string& text, Origins& origins) 
   } catch (const YAML::Exception& e) {  // its message quotes the offending byte, which may be any
     fail(label, "", "the value is not valid YAML: " + printable(e.msg));
   }
-  YAML::Node node = root;
+  std::vector<YAML::Node> parents(steps.size());  // the node before each step, as the override leaves it
   std::string key;
-  std::vector<YAML::Node> parents;  // the node before each step
-  for (std::size_t k = 0; k < steps.size(); ++k) {
-    parents.push_back(node);
-    YAML::Node next = child(node, steps[k], k + 1 == steps.size(), key, label, origins);
-    node.reset(next);
+  if (!shared) {  // the value put in where the path ends
+    YAML::Node node = root;
+    for (std::size_t k = 0; k < steps.size(); ++k) {
+      parents[k].reset(node);
+      YAML::Node next = child_in_place(node, steps[k], k + 1 == steps.size(), key, label, origins);
+      node.reset(next);
+    }
+    node = value;
+    origins.add(value, label);
+  } else {
+    // The nodes on the path as the tree has them (the root first), then the
+    // path made again from the value up, each a new node: nothing is
+    // written into a node another place shares. (Linking new nodes into
+    // the tree merges yaml-cpp's node sets, a few seconds for a scene of
+    // 10^6 nodes: so only where the tree shares nodes.)
+    std::vector<YAML::Node> path{root};
+    for (std::size_t k = 0; k + 1 < steps.size(); ++k) path.push_back(child_as_is(path.back(), steps[k], key, label));
+    child_as_is(path.back(), steps.back(), key, label);  // checked: a sequence's item, or a map's key
+    origins.add(value, label);
+    YAML::Node made = value;
+    for (std::size_t k = steps.size(); k-- > 0;) {
+      made.reset(with_child(path[k], steps[k], made, label, origins));
+      parents[k].reset(made);
+    }
+    root = made;  // the root is no other node's: its handle takes the new tree
   }
-  node = value;
-  origins.add(value, label);
   // A merge key in the value moves the nodes under it into the map that
   // holds it (read_scene resolves them after the overrides): each names the
   // override, not the place in the override's text as if in the file.
@@ -156,7 +242,12 @@ bool reads_as_itself(const std::string& value) {
 }
 
 void apply_overrides(YAML::Node root, const std::vector<std::string>& overrides, Origins& origins) {
-  for (const std::string& text : overrides) apply_override(root, text, origins);
+  if (overrides.empty()) return;
+  bool shared = shares_nodes(root);
+  for (const std::string& text : overrides) {
+    apply_override(root, text, origins, shared);
+    shared = shared || text.find('*') != std::string::npos;  // an alias in the value (or a text that may hold one)
+  }
 }
 
 }  // namespace marbles::scene::detail

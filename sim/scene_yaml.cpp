@@ -120,6 +120,17 @@ const std::string* Origins::find(const YAML::Node& node) const {
   return nullptr;
 }
 
+void Origins::copied(const YAML::Node& copy, const YAML::Node& original) {
+  const YAML::Mark* earlier = mark_of(original);  // a copy of a copy
+  m_marks.emplace_back(copy, earlier ? *earlier : original.Mark());
+}
+
+const YAML::Mark* Origins::mark_of(const YAML::Node& node) const {
+  for (auto it = m_marks.rbegin(); it != m_marks.rend(); ++it)
+    if (it->first.is(node)) return &it->second;
+  return nullptr;
+}
+
 void Origins::took(const std::string& key, const std::string& text, const std::string& value) const {
   const std::uint64_t text_hash = fnv1a(text.data(), text.size());
   const std::uint64_t value_hash = value.empty() ? 0 : std::max<std::uint64_t>(1, fnv1a(value.data(), value.size()));
@@ -135,7 +146,9 @@ std::uint64_t Origins::taken(const std::string& key, const std::string& text) co
 // --- Field -----------------------------------------------------------------
 
 Field::Field(YAML::Node node, std::string key, const std::string& file, const Origins* origins)
-    : m_node(std::move(node)), m_key(std::move(key)), m_file(file), m_mark(m_node.Mark()), m_origins(origins) {}
+    : m_node(std::move(node)), m_key(std::move(key)), m_file(file), m_mark(m_node.Mark()), m_origins(origins) {
+  if (const YAML::Mark* mark = m_origins ? m_origins->mark_of(m_node) : nullptr) m_mark = *mark;
+}
 
 Field::Field(YAML::Node node, std::string key, const Field& parent)
     : Field(std::move(node), std::move(key), parent.m_file, parent.m_origins) {

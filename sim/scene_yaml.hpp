@@ -65,6 +65,13 @@ class Origins {
   void took(const std::string& key, const std::string& text, const std::string& value) const;
   // The hash of what the scalar `text` at `key` was taken for, or 0 (its text stands).
   std::uint64_t taken(const std::string& key, const std::string& text) const;
+  // `copy` stands where `original` stood (an override's path, copied so that
+  // a node shared through an alias keeps its other places): it is placed
+  // where the original was in the file.
+  void copied(const YAML::Node& copy, const YAML::Node& original);
+  // Where the file had the node `copied` stands for, or nullptr.
+  const YAML::Mark* mark_of(const YAML::Node& node) const;
+
   // A map whose order the reader keeps (the materials': their numbering),
   // said by its reader.
   void ordered(const std::string& key) const { m_ordered.insert(key); }
@@ -72,6 +79,7 @@ class Origins {
 
  private:
   std::vector<std::pair<YAML::Node, std::string>> m_nodes;
+  std::vector<std::pair<YAML::Node, YAML::Mark>> m_marks;
   struct Taken {
     std::uint64_t text = 0, value = 0;  // value 0: the text stands
   };

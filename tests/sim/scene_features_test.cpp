@@ -197,6 +197,82 @@ TEST(SceneFeatures, MergeKeysSupplyDefaults) {
   }
 }
 
+// An override changes the one place it names: a value the file shares
+// through an alias (`b: *a`, a merge key's values, `friction: *d`) keeps
+// its other places, and an error names the place overridden; what the
+// override copied on its way keeps its lines in the file.
+TEST(SceneFeatures, OverridesChangeOnePlaceOfAnAlias) {
+  const ScratchDir dir("features_alias_override");
+  const std::string path = dir.write("s.yaml",
+                                     "time: {duration: &d 0.5, dt: 0.001}\n"
+                                     "materials:\n"
+                                     "  a: &g {density: 2500, restitution: 0.9, friction: *d}\n"
+                                     "  b: *g\n"
+                                     "  c: {<<: *g, rolling_friction: 0.01}\n"
+                                     "particles:\n"
+                                     "  - {list: {positions: &p [[0, 0, 1], [1, 0, 1]], radius: 0.1}, material: a}\n"
+                                     "  - {list: {positions: *p, radius: 0.1}, material: b}\n"
+                                     "  - {list: &l {positions: [[5, 0, 1]], radius: 0.1}, material: c}\n"
+                                     "  - {list: *l, material: c}\n");
+  const scene::Scene plain = scene::load_scene(path);
+  ASSERT_EQ(plain.materials.size(), 3u);
+  for (const scene::Material& m : plain.materials) {
+    EXPECT_DOUBLE_EQ(m.density, 2500);
+    EXPECT_DOUBLE_EQ(m.friction, 0.5);
+  }
+  const auto materials = [](const scene::Scene& s, auto figure) {
+    std::vector<double> out;
+    for (const scene::Material& m : s.materials) out.push_back(figure(m));
+    return out;
+  };
+  const auto density = [](const scene::Material& m) { return m.density; };
+  const auto friction = [](const scene::Material& m) { return m.friction; };
+  EXPECT_EQ(materials(scene::load_scene(path, {"materials.b.density=7"}), density), (std::vector<double>{2500, 7, 2500}));
+  EXPECT_EQ(materials(scene::load_scene(path, {"materials.c.density=7"}), density), (std::vector<double>{2500, 2500, 7}));
+  EXPECT_EQ(materials(scene::load_scene(path, {"materials.a.density=7"}), density), (std::vector<double>{7, 2500, 2500}));
+  const scene::Scene longer = scene::load_scene(path, {"time.duration=2"});
+  EXPECT_DOUBLE_EQ(longer.time.duration, 2);
+  EXPECT_EQ(materials(longer, friction), (std::vector<double>{0.5, 0.5, 0.5}));
+  const scene::Scene rough = scene::load_scene(path, {"materials.b.friction=0.25"});
+  EXPECT_DOUBLE_EQ(rough.time.duration, 0.5);
+  EXPECT_EQ(materials(rough, friction), (std::vector<double>{0.5, 0.25, 0.5}));
+  // A shared list of positions, and an item of it.
+  const auto xs = [](const scene::Scene& s) {
+    std::vector<double> out;
+    for (const Vec3& p : scene::generate_particles(s).position) out.push_back(p.x);
+    return out;
+  };
+  EXPECT_EQ(xs(plain), (std::vector<double>{0, 1, 0, 1, 5, 5}));
+  EXPECT_EQ(xs(scene::load_scene(path, {"particles[1].list.positions[1][0]=3"})),
+            (std::vector<double>{0, 1, 0, 3, 5, 5}));
+  EXPECT_EQ(xs(scene::load_scene(path, {"particles[3].list.positions=[[9, 0, 1]]"})),
+            (std::vector<double>{0, 1, 0, 1, 5, 9}));
+  EXPECT_EQ(xs(scene::load_scene(path, {"particles[0].list.positions[0][0]=2", "particles[0].list.positions[1][0]=4"})),
+            (std::vector<double>{2, 4, 0, 1, 5, 5}));
+  // Errors name the place overridden, not another place of the alias.
+  for (const char* set : {"materials.b.density=-1", "materials.c.density=-1"}) {
+    try {
+      scene::load_scene(path, {set});
+      ADD_FAILURE() << set << " was taken";
+    } catch (const InputError& e) {
+      const std::string place = std::string(set).substr(0, std::string(set).find('='));
+      EXPECT_NE(std::string(e.what()).find(place + ": must be > 0"), std::string::npos) << e.what();
+    }
+  }
+  // A map the override copied keeps its place in the file: a key it lacks is
+  // reported at the map's line and column, as without the override.
+  const std::string lacking = dir.write("lacking.yaml", SCENE_TIME SCENE_MATERIALS
+                                        "particles:\n"
+                                        "  - list: &l {radius: 0.1}\n"
+                                        "  - list: *l\n");
+  try {
+    scene::load_scene(lacking, {"particles[1].list.radius=0.2"});
+    ADD_FAILURE() << "a list without positions was taken";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("lacking.yaml:5:"), std::string::npos) << e.what();
+  }
+}
+
 // A map that merges itself, or one around it, and a map that holds itself
 // through an alias are refused with the merge key's (or the node's) place,
 // not followed until the stack runs out.
