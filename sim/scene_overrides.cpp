@@ -61,19 +61,22 @@ std::string description(const YAML::Node& node) { return Field(node, "", "").des
 
 std::string item_text(std::size_t index) { return std::string(1, '[').append(std::to_string(index)).append("]"); }
 
+// A sequence's item at `step` (an index).
+YAML::Node item(const YAML::Node& node, const Step& step, std::string& key, const std::string& label) {
+  if (!node.IsSequence())
+    fail(label, key, "cannot take item " + item_text(step.index) + ": expected a sequence, got " + description(node));
+  if (step.index >= node.size())
+    fail(label, key, "has " + std::to_string(node.size()) + " item(s); " + item_text(step.index) + " is past the end");
+  key += item_text(step.index);
+  return node[step.index];
+}
+
 // The child of `node` at `step`, created as a map when it is a missing key
 // and not the last step (`last`: the caller assigns it). For a tree whose
 // nodes are each in one place only (shares_nodes).
 YAML::Node child_in_place(YAML::Node node, const Step& step, bool last, std::string& key, const std::string& label,
                           Origins& origins) {
-  if (step.name.empty()) {
-    if (!node.IsSequence())
-      fail(label, key, "cannot take item " + item_text(step.index) + ": expected a sequence, got " + description(node));
-    if (step.index >= node.size())
-      fail(label, key, "has " + std::to_string(node.size()) + " item(s); " + item_text(step.index) + " is past the end");
-    key += item_text(step.index);
-    return node[step.index];
-  }
+  if (step.name.empty()) return item(node, step, key, label);
   if (node.IsNull()) {
     node = YAML::Node(YAML::NodeType::Map);
     origins.add(node, label);
@@ -113,14 +116,7 @@ bool shares_nodes(const YAML::Node& root) {
 // missing key (or a key below a missing or null one), whose map the
 // override makes.
 YAML::Node child_as_is(const YAML::Node& node, const Step& step, std::string& key, const std::string& label) {
-  if (step.name.empty()) {
-    if (!node.IsSequence())
-      fail(label, key, "cannot take item " + item_text(step.index) + ": expected a sequence, got " + description(node));
-    if (step.index >= node.size())
-      fail(label, key, "has " + std::to_string(node.size()) + " item(s); " + item_text(step.index) + " is past the end");
-    key += item_text(step.index);
-    return node[step.index];
-  }
+  if (step.name.empty()) return item(node, step, key, label);
   const bool absent = !node.IsDefined() || node.IsNull();
   if (!absent && !node.IsMap())
     fail(label, key, "cannot hold key '" + step.name + "': expected a map, got " + description(node));
