@@ -34,6 +34,7 @@
 #include <nanobind/stl/vector.h>
 
 #include "broadphase/grid.hpp"
+#include "python/gil.hpp"
 #include "core/error.hpp"
 #include "core/format.hpp"
 #include "core/parallel.hpp"
@@ -107,6 +108,7 @@ class PySimulation {
     m_sim->set_watchdog(true);  // measures the start, which the warnings read
     for (std::string& w : initial_overlap_warnings(m_sim->watched_overlaps())) m_warnings.push_back(std::move(w));
     m_totals.energy_start = m_sim->world().kinetic_energy();
+    m_size = m_sim->world().size();
     m_total_steps = static_cast<std::uint64_t>(std::llround(m_scene.time.duration / m_scene.time.dt));
     if (m_scene.reference.kind != scene::ReferenceSpec::Kind::none) {
       m_probe.emplace(m_scene, m_sim->world());
@@ -121,10 +123,14 @@ class PySimulation {
     const Busy busy(*this);
     if (m_views_out) check_views();
     set_thread_count(m_threads);
-    nb::gil_scoped_release release;
+    // Signals are Python's to handle on its main thread only: another
+    // thread's step takes the GIL back at its end alone (python/gil.hpp).
+    const bool signals_here = _PyOS_IsMainThread() != 0;
+    const python::GilLetGo release;
     auto last_check = std::chrono::steady_clock::now();
     for (std::uint64_t i = 0; i < n; ++i) {
-      if (i > 0 && std::chrono::steady_clock::now() - last_check > std::chrono::milliseconds(100)) {
+      if (i > 0) python::park_if_ending();  // a daemon thread's step as the interpreter ends
+      if (signals_here && i > 0 && std::chrono::steady_clock::now() - last_check > std::chrono::milliseconds(100)) {
         last_check = std::chrono::steady_clock::now();
         nb::gil_scoped_acquire acquire;
         if (PyErr_CheckSignals() != 0) throw nb::python_error();
@@ -141,12 +147,13 @@ class PySimulation {
   }
 
   // --- the state ---------------------------------------------------------
-  std::size_t size() const { return m_sim->world().size(); }
+  std::size_t size() const { return m_size; }  // fixed: read while another thread steps
   bool on_device() const { return m_backend == broadphase::Backend::cuda; }
 
   // A view of one of the step's own arrays: `what` is position, velocity,
   // angular_velocity (writable), radius or material (read-only).
   nb::object view(const std::string& what) {
+    const Busy busy(*this);
     check_array_name(what);
     nb::object owner = nb::find(this);
     const BodiesView v = m_sim->state_in_place();
@@ -173,6 +180,7 @@ class PySimulation {
 
   // A host copy of one array (any backend).
   nb::object copy(const std::string& what) {
+    const Busy busy(*this);
     check_array_name(what);
     if (m_views_out) m_sim->state_written();  // device views may have been written
     const World& w = m_sim->world();
@@ -211,7 +219,8 @@ class PySimulation {
 
   // --- what the step knows ------------------------------------------------
   nb::dict contacts() {
-    if (m_views_out) m_sim->state_written();
+    const Busy busy(*this);
+    if (m_views_out) check_views();
     const render::ContactSnapshot c = make_contact_snapshot(*m_sim);
     const std::size_t m = c.sphere_a.size();
     std::vector<std::uint32_t> pairs(2 * m);
@@ -234,6 +243,7 @@ class PySimulation {
   // A state written non-finite through a view is refused here too (as by
   // step, write_frame and checkpoint), not summed into a NaN.
   double kinetic_energy() {
+    const Busy busy(*this);
     if (m_views_out) check_views();
     return m_sim->world().kinetic_energy();
   }
@@ -329,8 +339,9 @@ class PySimulation {
 
   // The reference's verdict so far (kind, expected, measured, error, note).
   nb::object reference() {
+    const Busy busy(*this);
     if (!m_probe) return nb::none();
-    if (m_views_out) m_sim->state_written();
+    if (m_views_out) check_views();
     ReferenceProbe probe = *m_probe;  // finish() on a copy: stepping may go on
     const ReferenceResult r = probe.finish(m_sim->time(), m_sim->world());
     nb::dict d;
@@ -343,6 +354,7 @@ class PySimulation {
   }
 
   nb::dict totals() const {
+    const Busy busy(*this);
     const double steps = std::max<double>(1, static_cast<double>(m_sim->steps()));
     nb::dict d;
     d["mean_candidate_pairs"] = m_totals.candidate_sum / steps;
@@ -357,12 +369,14 @@ class PySimulation {
 
   // summary.json's figures of the world at its end, beside kinetic_energy_end.
   nb::dict end_figures() const {
+    const Busy busy(*this);
     nb::dict d;
     for (const EndFigure& f : ::marbles::end_figures(m_sim->world())) d[f.name] = f.value;
     return d;
   }
 
   const Simulation& sim() const { return *m_sim; }
+  int threads() const { return m_threads; }
   const scene::Scene& scene() const { return m_scene; }
   const std::vector<std::string>& warnings() const { return m_warnings; }
   const std::string& backend_note() const { return m_backend_note; }
@@ -415,6 +429,7 @@ class PySimulation {
 
   scene::Scene m_scene;
   int m_threads = 1;  // the CPU threads its steps run on
+  std::size_t m_size = 0;  // its spheres (a restart keeps the count)
   std::uint64_t m_fingerprint = 0;       // Scene::fingerprint, which its checkpoints hold
   std::function<std::uint64_t()> m_text_fingerprint;  // an earlier checkpoint's, of the texts
   std::vector<std::string> m_warnings;
@@ -427,10 +442,10 @@ class PySimulation {
   bool m_views_out = false;
   // Held by the call that steps or changes the simulation: a call from
   // another thread meanwhile (step() lets the GIL go) is refused, not raced.
-  std::mutex m_busy;
+  mutable std::mutex m_busy;
   struct Busy {
     std::unique_lock<std::mutex> lock;
-    explicit Busy(PySimulation& s) : lock(s.m_busy, std::try_to_lock) {
+    explicit Busy(const PySimulation& s) : lock(s.m_busy, std::try_to_lock) {
       if (!lock.owns_lock())
         throw RuntimeFailure("this Simulation is stepping in another thread; step or change it from one thread at a time");
     }
@@ -585,7 +600,7 @@ void bind_simulation(nb::module_& m, const char* name, const char* pairs_name) {
         for (const scene::Material& mat : s.scene().materials) names.push_back(mat.name);
         return names;
       })
-      .def_prop_ro("pipeline", [](const PySimulation& s) { return s.sim().describe_pipeline(); })
+      .def_prop_ro("pipeline", [](const PySimulation& s) { return s.sim().describe_pipeline(s.threads()); })
       .def_prop_ro("backend", [](const PySimulation& s) { return s.sim().backend_name(); })
       .def_prop_ro("backend_note", &PySimulation::backend_note)
       .def_prop_ro("precision", [](const PySimulation&) { return std::string(kRealName); })

@@ -3,7 +3,9 @@
 // Holds the Simulation and the broad phase of both precisions, each with
 // the translation of its failures into Python exceptions
 // (bind_simulation.cpp, built twice), and the study.
+#include <chrono>
 #include <sstream>
+#include <thread>
 #include <string>
 #include <vector>
 
@@ -12,6 +14,7 @@
 #include <nanobind/stl/vector.h>
 
 #include "core/device.hpp"
+#include "python/gil.hpp"
 #include "core/error.hpp"
 #include "sim/checkpoint.hpp"
 #include "sim/limits.hpp"
@@ -75,6 +78,20 @@ NB_MODULE(_marbles, m) {
   m.def("scene_precision", &marbles::scene::scene_precision, nb::arg("path"), nb::arg("overrides"));
   m.def("scene_precision_json", &marbles::scene::scene_precision_json, nb::arg("text"), nb::arg("overrides"));
   m.def("checkpoint_precision", &marbles::checkpoint_precision, nb::arg("path"));
+  // The interpreter's end (atexit, python/gil.hpp): each step that let go
+  // of the GIL takes it back or parks before the interpreter lets its
+  // threads go. A parked step holds its simulation, which nanobind would
+  // otherwise report as leaked.
+  m.def("at_exit", [] {
+    namespace py = marbles::python;
+    py::ending = true;
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (py::let_go.load() > py::parked.load() && std::chrono::steady_clock::now() < until) {
+      nb::gil_scoped_release release;
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    if (py::parked.load() > 0) nb::set_leak_warnings(false);
+  });
   m.def("cuda_device", [] {
     const marbles::DeviceInfo& d = marbles::cuda_device();
     return nb::make_tuple(d.available, d.available ? d.name : d.why_not);

@@ -21,14 +21,15 @@ Simulation::Simulation(const scene::Scene& scene, World world, broadphase::Backe
       m_backend(backend == broadphase::Backend::cuda ? make_cuda_step(*m_model, std::move(world))
                                                      : make_cpu_step(*m_model, std::move(world))) {}
 
-std::string Simulation::describe_pipeline() const {
+std::string Simulation::describe_pipeline(int threads) const {
   const StepModel& m = *m_model;
+  if (threads <= 0) threads = thread_count();
   const narrowphase::SolverSettings& s = m.solver;
   std::ostringstream out;
   out << "pipeline (" << m.substeps << " substep" << (m.substeps > 1 ? "s" : "") << " of h = " << m.dt / m.substeps
       << " s per step, " << kRealName << ", " << (m_backend->name() == "cuda" ? std::string("on the GPU")
-                                         : "on the CPU, " + std::to_string(thread_count()) + " thread" +
-                                               (thread_count() > 1 ? "s" : ""))
+                                         : "on the CPU, " + std::to_string(threads) + " thread" +
+                                               (threads > 1 ? "s" : ""))
       << "):\n";
   if (m.gravity) out << "  body forces    gravity (" << m.g.x << ", " << m.g.y << ", " << m.g.z << ") m/s^2\n";
   if (m.drag) out << "  body forces    air drag (linear " << m.drag_linear << " 1/s, quadratic " << m.drag_quadratic << " 1/m)\n";

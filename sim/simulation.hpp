@@ -182,8 +182,9 @@ class Simulation {
     m_fault = kind;
   }
 
-  // The stages this scene's pipeline runs, one per line.
-  std::string describe_pipeline() const;
+  // The stages this scene's pipeline runs, one per line, on `threads` CPU
+  // threads (the calling thread's count where 0: the count is a thread's).
+  std::string describe_pipeline(int threads = 0) const;
 
  private:
   void substep(real h);

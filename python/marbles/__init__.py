@@ -9,6 +9,7 @@ The scene format, its checks and its error messages are those of ``marbles run``
 (docs/scene-format.md); docs/python.md describes this module.
 """
 
+import atexit
 import inspect
 import json
 import math
@@ -177,6 +178,8 @@ def _path(value, what):
         value.encode("utf-8")
     except UnicodeEncodeError:
         raise ValueError(f"{what}: a path of UTF-8 text, got {value!r} (rename the file or folder)") from None
+    if "\0" in value:  # the program would read the path only up to it: another file
+        raise ValueError(f"{what}: a path holds no NUL byte, got {value!r}")
     return value
 
 
@@ -188,6 +191,21 @@ def _choice(value, what, choices):
 
 
 _BACKENDS = ("auto", "cpu", "cuda")
+
+
+@atexit.register
+def _at_exit():
+    # A step still running in a daemon thread waits out the interpreter's
+    # end instead of being stopped where it cannot be (python/gil.hpp).
+    _marbles.at_exit()
+
+
+def _steps_in(time, dt):
+    """The steps of dt in a time, rounded half away from zero, as the
+    program rounds a duration (std::llround): 2.5 steps are 3."""
+    steps = time / dt
+    whole = math.floor(steps)
+    return int(whole) + (1 if steps - whole >= 0.5 else 0)
 
 
 def _threads(value):
@@ -410,7 +428,7 @@ class Simulation:
             raise ValueError(f"run: until must be a finite time >= 0, got {until!r}")
         if until is not None and not math.isfinite(float(until) / self.dt):
             raise ValueError(f"run: until is too large a time, got {float(until):g}")
-        target = self._impl.total_steps if until is None else int(round(float(until) / self.dt))
+        target = self._impl.total_steps if until is None else _steps_in(float(until), self.dt)
         if until is not None and target < self.steps:
             raise ValueError(f"run: until = {float(until):g} s is before the simulation's time, {self.time:g} s")
         self._check_substeps(target - self.steps, "run: until")
@@ -440,6 +458,17 @@ class Simulation:
 
     def __len__(self):
         return self._impl.size
+
+    def __copy__(self):
+        raise TypeError("a marbles.Simulation cannot be copied (a copy would share its state); checkpoint() "
+                        "writes the state, Simulation.restart() makes another simulation from it")
+
+    def __deepcopy__(self, memo):
+        self.__copy__()
+
+    def __reduce__(self):
+        raise TypeError("a marbles.Simulation cannot be pickled; checkpoint() writes the state, "
+                        "Simulation.restart() makes another simulation from it")
 
     def __repr__(self):
         return (f"<marbles.Simulation {self.name!r}: {len(self)} spheres, {self.backend}, {self.precision}, "
@@ -540,8 +569,21 @@ class Simulation:
 
     def reference(self):
         """The scene's reference (``reference:``) against the run so far, as a
-        dict (kind, expected, measured, error, note), or None."""
-        return self._impl.reference()
+        dict (kind, expected, measured, error, note), or None. A figure
+        the run does not give (a ``finest`` reference's error: the study's
+        finest setting gives it) is None, as summary.json writes null."""
+        result = self._impl.reference()
+        if result is None:
+            return None
+
+        def known(value):
+            if isinstance(value, float):
+                return None if math.isnan(value) else value
+            if isinstance(value, list):
+                return [known(v) for v in value]
+            return value
+
+        return {key: known(value) for key, value in result.items()}
 
     def summary(self):
         """The run's figures as summary.json has them (means over the steps)."""

@@ -1,10 +1,12 @@
 # tests/python/test_errors.py — bad input raises marbles.SceneError with the
 # place it names (file, line, column, key), as the command line says it.
 import functools
+import json
 import os
 import pathlib
 import re
 import subprocess
+import sys
 import warnings
 
 import numpy as np
@@ -106,6 +108,71 @@ def test_one_thread_steps_a_simulation_at_a_time(pile):
     assert done[0] + len(refused) == 1200
     assert sim.steps == done[0]
     assert all("stepping in another thread" in r for r in refused)
+
+
+def test_a_path_with_a_nul_byte_is_refused_not_cut(pile, tmp_path):
+    # The program reads a path up to a NUL byte: "ball.yaml\0junk" loaded
+    # ball.yaml, and a study ran it.
+    scene = str(SCENES / "validation" / "bouncing_ball.yaml")
+    for call in (lambda: marbles.Simulation(scene + "\0junk"),
+                 lambda: marbles.Simulation.restart(str(tmp_path / "c.mck") + "\0x", scene=scene),
+                 lambda: marbles.study(scene + "\0x", vary={"time.dt": [1e-3, 5e-4]}, out=tmp_path / "s"),
+                 lambda: marbles.Simulation(scene).checkpoint(str(tmp_path / "c.mck") + "\0x")):
+        with pytest.raises(ValueError, match="a path holds no NUL byte"):
+            call()
+    assert not (tmp_path / "s").exists() and not list(tmp_path.iterdir())
+
+
+def test_readers_in_another_thread_wait_for_no_step_and_never_race_it(pile):
+    # contacts(), kinetic_energy(), the arrays, summary() and reference()
+    # from a thread while another steps are refused (RuntimeFailure), not
+    # run beside the step (which crashed the interpreter, most often with
+    # solver.renumber, whose host copy the readers make); len() and the
+    # pipeline are read. What a reader gets between steps is the stepper's.
+    import threading
+    for renumber in (0, 1):
+        sim = marbles.Simulation.from_dict(pile, backend="cpu", threads=1, set={"solver.renumber": renumber})
+        stepper = threading.Thread(target=sim.step, args=(400,))
+        stepper.start()
+        read, refused = 0, []
+        while stepper.is_alive():
+            for reader in (sim.contacts, sim.kinetic_energy, lambda: sim.positions, sim.summary, sim.reference,
+                           lambda: sim.velocities.copy(), lambda: len(sim), lambda: sim.pipeline):
+                try:
+                    reader()
+                    read += 1
+                except marbles.RuntimeFailure as e:
+                    refused.append(str(e))
+        stepper.join()
+        assert sim.steps == 400 and read > 0
+        assert refused and all("stepping in another thread" in r for r in refused)
+        assert np.isfinite(sim.kinetic_energy()) and len(sim.contacts()["pairs"]) > 0
+
+
+def test_a_step_left_running_at_the_end_of_a_script_ends_quietly(pile, tmp_path):
+    # A daemon thread still inside step() as the interpreter ends waits out
+    # the end (the process ends with the script's status), where taking
+    # the GIL back aborted the process ("terminate called without an
+    # active exception"); its simulation is not reported as leaked.
+    script = tmp_path / "left.py"
+    script.write_text(
+        "import json, sys, threading, time, marbles\n"
+        f"sim = marbles.Simulation.from_dict(json.loads({json.dumps(json.dumps(pile))}), threads=1)\n"
+        "threading.Thread(target=sim.step, args=(10**9,), daemon=True).start()\n"
+        "other = marbles.Simulation.from_dict(json.loads(" + repr(json.dumps(pile)) + "), threads=1)\n"
+        "def loop():\n"
+        "    while True:\n"
+        "        other.step()\n"  # a step that ends, and takes the GIL back, again and again
+        "threading.Thread(target=loop, daemon=True).start()\n"
+        "time.sleep(0.5)\n"
+        "print('ending', flush=True)\n"
+        "sys.exit(3)\n")
+    for _ in range(3):
+        ended = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
+                               env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
+        assert ended.returncode == 3, ended.stderr
+        assert ended.stdout == "ending\n" and "leaked" not in ended.stderr and "terminate" not in ended.stderr, \
+            ended.stderr
 
 
 def test_a_long_step_stops_on_an_interrupt(pile):
@@ -253,7 +320,7 @@ def test_checkpoint_paths_that_are_no_file(pile, tmp_path):
     with pytest.raises(marbles.SceneError, match="is a folder, not a checkpoint"):
         marbles.Simulation.restart(tmp_path, scene=pile)
     for path in ("", "a\x00b"):
-        with pytest.raises(ValueError, match="a path is needed"):
+        with pytest.raises(ValueError, match="a path is needed|a path holds no NUL byte"):
             sim.checkpoint(path)
     # A damaged record of the scene beside a checkpoint.
     ck = tmp_path / "c.mck"

@@ -3,6 +3,7 @@
 # itself (marbles run), NumPy arithmetic on the arrays, the laws of statics.
 import gc
 import json
+import math
 import pathlib
 import shutil
 import subprocess
@@ -309,9 +310,10 @@ def test_write_frame(pile, tmp_path):
     assert pathlib.Path(other.write_frame(tmp_path, overwrite=True)).name == "frame_000000.vtp"
     assert not pathlib.Path(second).exists() and (tmp_path / "notes.txt").read_text() == "mine"
     assert len(list(ET.parse(tmp_path / "series.pvd").getroot().iter("DataSet"))) == 1
-    for bad in ("", "a\0b"):
-        with pytest.raises(ValueError, match="a folder is needed"):
-            sim.write_frame(bad)
+    with pytest.raises(ValueError, match="a folder is needed"):
+        sim.write_frame("")
+    with pytest.raises(ValueError, match="write_frame: dir: a path holds no NUL byte"):
+        sim.write_frame("a\0b")
 
 
 def _tree(folder):
@@ -367,6 +369,51 @@ def test_a_series_holds_its_folder_and_replaces_an_earlier_run_only_as_it_ends(p
     assert not list(out.glob(".earlier-run-*")) and not (out / ".marbles-run.lock").exists()
     rendered = subprocess.run(run.args + ["--overwrite"], capture_output=True, text=True)
     assert rendered.returncode == 0, rendered.stderr
+
+
+def test_reference_says_none_where_the_run_gives_no_figure_and_refuses_a_nan_state():
+    # A finest reference's error comes from the study: None here, as
+    # summary.json's null (it was NaN). A state written non-finite through a
+    # view is refused by reference() and contacts() too, not measured.
+    finest = marbles.Simulation(SCENES / "validation" / "resting_stack.yaml", backend="cpu")
+    finest.step(3)
+    r = finest.reference()
+    assert r["kind"] == "finest" and r["error"] is None
+    sim = marbles.Simulation(SCENES / "validation" / "momentum_free.yaml", backend="cpu")
+    sim.step(5)
+    r = sim.reference()
+    assert r["kind"] == "momentum" and r["error"] is not None and math.isfinite(r["error"])
+    assert all(math.isfinite(v) for v in r["measured"])
+    sim.velocities[0] = [np.nan, 0, 0]
+    for reader in (sim.reference, sim.contacts):
+        with pytest.raises(ValueError, match=r"velocities\[0\] is not finite"):
+            reader()
+
+
+def test_run_until_rounds_as_the_program_and_each_pipeline_names_its_threads(pile):
+    # A time of 2.5 steps is 3 steps, as the program rounds a duration
+    # (run(until=duration) took 2 where run() took 3: Python's round(2.5) is 2).
+    short = {"time.dt": 0.002, "time.duration": 0.005}
+    whole = marbles.Simulation.from_dict(pile, backend="cpu", set=short).run()
+    until = marbles.Simulation.from_dict(pile, backend="cpu", set=short)
+    until.run(until=until.duration)
+    assert whole.steps == until.steps == 3
+    assert marbles.Simulation.from_dict(pile, backend="cpu").run(until=0.0035).steps == 4  # 3.5 steps of 1 ms
+    # The pipeline names the simulation's own threads, not the last one made.
+    one = marbles.Simulation.from_dict(pile, backend="cpu", threads=1)
+    marbles.Simulation.from_dict(pile, backend="cpu", threads=3)
+    assert "on the CPU, 1 thread)" in one.pipeline
+
+
+def test_a_simulation_is_not_copied_by_copy_or_pickle(pile):
+    # copy.copy handed back the same simulation under two names (stepping
+    # one stepped the other); it and pickling say what to use instead.
+    import copy
+    import pickle
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    for make in (copy.copy, copy.deepcopy, pickle.dumps):
+        with pytest.raises(TypeError, match="checkpoint\\(\\) writes the state"):
+            make(sim)
 
 
 def test_warnings_and_repr(pile):
