@@ -64,16 +64,23 @@ std::vector<PointField> parse_point_fields(const std::vector<std::string>& names
 
 namespace {
 
-[[maybe_unused]] std::string pvd_text(const std::vector<std::pair<double, std::string>>& entries) {
-  std::ostringstream out;
-  out << "<?xml version=\"1.0\"?>\n"
-         "<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
-         "  <Collection>\n";
-  for (const auto& [t, file] : entries) {
-    out << "    <DataSet timestep=\"" << time_text(t) << "\" group=\"\" part=\"0\" file=\"" << file << "\"/>\n";
-  }
-  out << "  </Collection>\n</VTKFile>\n";
-  return out.str();
+// One file's line of a .pvd.
+std::string dataset_line(double time, const std::string& file) {
+  return "    <DataSet timestep=\"" + time_text(time) + "\" group=\"\" part=\"0\" file=\"" + file + "\"/>\n";
+}
+
+// A .pvd around its files' lines (kept as text: a run of 10^4 frames formatted
+// every time in each rewrite spent most of its time writing numbers).
+std::string pvd_text(std::string_view lines) {
+  constexpr std::string_view head =
+      "<?xml version=\"1.0\"?>\n"
+      "<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
+      "  <Collection>\n";
+  constexpr std::string_view tail = "  </Collection>\n</VTKFile>\n";
+  std::string out;
+  out.reserve(head.size() + lines.size() + tail.size());
+  out.append(head).append(lines).append(tail);
+  return out;
 }
 
 }  // namespace
@@ -322,14 +329,16 @@ fs::path Series::add(double time, const std::string& file_text) {
   }
   // The file and the series that lists it are written together: where
   // either cannot be, neither is, and the series stays as it was.
-  m_entries.emplace_back(time, m_folder + "/" + numbered(m_prefix.c_str(), m_count));
+  const std::size_t before = m_lines.size();
+  m_lines += dataset_line(time, m_folder + "/" + numbered(m_prefix.c_str(), m_count));
   try {
-    const std::string pvd = pvd_text(m_entries);
+    const std::string pvd = pvd_text(m_lines);
     write_files_atomic({{path, file_text}, {pvd_path(), pvd}});
   } catch (...) {
-    m_entries.pop_back();
+    m_lines.resize(before);
     throw;
   }
+  ++m_listed;
   ++m_count;
   return path;
 }
@@ -353,11 +362,12 @@ void Series::adopt(double time, const fs::path& from) {
       throw RuntimeFailure("cannot copy " + (from / file).string() + " to " + to.string() + ": " + ec.message());
     }
   }
-  m_entries.emplace_back(time, file);
+  m_lines += dataset_line(time, file);
+  ++m_listed;
 }
 
 void Series::write_pvd() const {
-  if (!m_entries.empty()) write_file_atomic(pvd_path(), pvd_text(m_entries));
+  if (m_listed > 0) write_file_atomic(pvd_path(), pvd_text(m_lines));
 }
 
 // --- spheres ------------------------------------------------------------------

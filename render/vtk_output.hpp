@@ -71,12 +71,13 @@ class Series {
   void write_pvd() const;
   std::filesystem::path next_path() const;
   std::filesystem::path pvd_path() const { return m_dir / m_pvd; }
-  std::size_t size() const { return m_entries.size(); }
+  std::size_t size() const { return m_listed; }
 
  private:
   std::filesystem::path m_dir;
   std::string m_folder, m_prefix, m_pvd;
-  std::vector<std::pair<double, std::string>> m_entries;  // time, file relative to m_dir: the files listed
+  std::string m_lines;       // the .pvd's line of each file listed (time, file relative to m_dir)
+  std::size_t m_listed = 0;  // files listed
   std::size_t m_count = 0;                                 // files numbered, listed or not
   bool m_folder_made = false;
 };
