@@ -5,13 +5,16 @@
 //                    double and rounded to a float (as the scene reader does)
 //   significant(v, n) v to n significant digits (%g): messages
 //   time_text(t)     the shortest text within 1e-13 of t relative: a frame
-//                    time k dt written as 0.03, not 0.030000000000000002
+//                    time k dt written as 0.03, not 0.030000000000000002,
+//                    and 10 or 120, not 1e+01 or 1.2e+02
 #pragma once
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <string>
 #include <string_view>
 
@@ -101,7 +104,16 @@ inline std::string time_text(double t) {
   char text[40];
   for (int digits = 1; digits <= 17; ++digits) {
     std::snprintf(text, sizeof text, "%.*g", digits, t);
-    if (std::fabs(std::strtod(text, nullptr) - t) <= 1e-13 * std::fabs(t)) return text;
+    if (std::fabs(std::strtod(text, nullptr) - t) <= 1e-13 * std::fabs(t)) {
+      const char* e = std::strchr(text, 'e');
+      if (!e) return text;
+      // "1e+01" or "1.2e+02" where "10" or "120" says the same digits in
+      // fewer characters: the shorter (a tie, the plain one).
+      const int exponent = std::atoi(e + 1);
+      char plain[400];
+      std::snprintf(plain, sizeof plain, "%.*f", std::max(0, digits - 1 - exponent), t);
+      return std::strlen(plain) <= std::strlen(text) ? plain : text;
+    }
   }
   return shortest(t);
 }

@@ -3,6 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <random>
 #include <string>
 #include <utility>
 
@@ -337,6 +341,32 @@ TEST(Utf8, FindsTheFirstByteThatIsNoUtf8) {
       {"\xf5\x80\x80\x80", 0}, {"a\xff", 1},          {"\xfe", 0},             {"x\xe2\x82", 1},
       {"\xc3", 0},          {"\xc3\xa9\xc3(", 2}};
   for (const auto& [text, at] : bad) EXPECT_EQ(first_non_utf8(text), at) << printable(text);
+}
+
+// time_text: the fewest characters that read back within 1e-13 of the time
+// (relative), plain digits where they are no longer than the exponent form
+// ("10" and "120", not "1e+01" and "1.2e+02"; "1e-05" stays, "0.00001" is
+// longer). Checked against the rule itself on random multiples of steps.
+TEST(TimeText, FewestCharactersWithinTheTolerance) {
+  const std::pair<double, const char*> known[] = {
+      {10, "10"},        {120, "120"},  {1000, "1000"}, {1e5, "1e+05"}, {0.03, "0.03"}, {1e-5, "1e-05"},
+      {2.5e-7, "2.5e-07"}, {0, "0"},    {-40, "-40"},    {3 * 0.1, "0.3"}, {1e17, "1e+17"}};
+  for (const auto& [t, text] : known) EXPECT_EQ(time_text(t), text) << t;
+  std::mt19937_64 rng(11);
+  std::uniform_int_distribution<int> steps(0, 2'000'000), exponent(-7, 1);
+  for (int k = 0; k < 20000; ++k) {
+    const double dt = std::pow(10.0, exponent(rng)) * (1 + (k % 7) * 0.25);
+    const double t = steps(rng) * dt;
+    const std::string text = time_text(t);
+    ASSERT_LE(std::fabs(std::strtod(text.c_str(), nullptr) - t), 1e-13 * std::fabs(t)) << text << " for " << t;
+    // No shorter text (of %g with fewer digits, or plain) is as close.
+    char shorter[64];
+    for (int digits = 1; digits <= 17; ++digits) {
+      std::snprintf(shorter, sizeof shorter, "%.*g", digits, t);
+      if (std::strlen(shorter) >= text.size()) continue;
+      EXPECT_GT(std::fabs(std::strtod(shorter, nullptr) - t), 1e-13 * std::fabs(t)) << shorter << " for " << text;
+    }
+  }
 }
 
 // An override's label is cut after 200 bytes, before a character's
