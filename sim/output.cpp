@@ -187,7 +187,10 @@ RunFolderLock::RunFolderLock(const std::filesystem::path& dir, const std::string
   // the file it removed is no lock, so it is taken again on the one there.
   for (int tries = 0;; ++tries) {
     m_fd = ::open(m_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-    if (m_fd < 0 && errno == EACCES) m_fd = ::open(m_path.c_str(), O_RDONLY | O_CLOEXEC);  // another user's: locks too
+    const int why = errno;
+    if (m_fd < 0 && why == EACCES) m_fd = ::open(m_path.c_str(), O_RDONLY | O_CLOEXEC);  // another user's: locks too
+    if (m_fd < 0 && why == EACCES && errno == ENOENT)  // none there, and none may be made: the folder is not ours
+      throw RuntimeFailure("cannot write in the output folder " + dir.string() + ": " + std::strerror(why));
     if (m_fd < 0) throw RuntimeFailure("cannot open " + m_path.string() + ": " + std::strerror(errno));
     if (::flock(m_fd, LOCK_EX | LOCK_NB) != 0) {
       char holder[32] = {};

@@ -346,10 +346,13 @@ void MapFields::read(const std::vector<std::string>& allowed) {
     if (!allowed.empty() && std::find(allowed.begin(), allowed.end(), name) == allowed.end())
       throw InputError(key_where, key_where.line > 0 || value.from_override() ? m_self.key() : value.key(),
                        "unknown key '" + name + "'" + suggestion(name, allowed));
-    if (const auto first = m_index.find(name); first != m_index.end())
+    if (const auto first = m_index.find(name); first != m_index.end()) {
+      // A line to point at in a file; in an override's value or a dict, none.
+      const int line = m_entries[first->second].name_where.line;
       throw InputError(key_where, m_self.key(),
-                       "duplicate key '" + name + "' (first given at line " +
-                           std::to_string(m_entries[first->second].name_where.line) + ")");
+                       "duplicate key '" + name + "'" +
+                           (line > 0 ? " (first given at line " + std::to_string(line) + ")" : std::string()));
+    }
     m_index.emplace(name, m_entries.size());
     m_entries.push_back({name, key_where, value});
   }

@@ -214,6 +214,31 @@ TEST_F(Checkpoints, OverwriteKeepsTheEarlierRunUntilTheNewOneStands) {
   EXPECT_EQ(slurp((asides().front() / "notes.txt").string()), "mine\n");
 }
 
+// An output folder the user may not write in is named as such, with the
+// system's reason (it said "cannot open DIR/.marbles-run.lock: No such file
+// or directory", the second try's reason). Run as another user where the
+// test runs as root, which may write anywhere.
+TEST_F(Checkpoints, AFolderThatMayNotBeWrittenIsNamed) {
+  const test::ScratchDir dir("ck_read_only");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string out = dir.path() + "/ro";
+  fs::create_directories(out);
+  fs::permissions(out, fs::perms::owner_read | fs::perms::owner_exec | fs::perms::group_read | fs::perms::group_exec |
+                           fs::perms::others_read | fs::perms::others_exec);
+  std::string as_another;
+  if (::geteuid() == 0) {
+    if (std::system("setpriv --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "root, and no setpriv to drop it";
+    as_another = "setpriv --reuid=65534 --regid=65534 --clear-groups";
+    fs::permissions(dir.path(), fs::perms::others_read | fs::perms::others_exec, fs::perm_options::add);
+    fs::permissions(scene, fs::perms::others_read, fs::perm_options::add);
+  }
+  std::string err;
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --no-render --duration 0.05 --out " + out, &err, as_another),
+            1);
+  EXPECT_NE(err.find("cannot write in the output folder " + out + ": Permission denied"), std::string::npos) << err;
+  EXPECT_TRUE(fs::is_empty(out));
+}
+
 // One run at a time in a folder: while another process holds the folder's
 // lock, a run into it is refused (exit 2, naming that process) and touches
 // nothing, --overwrite or not; a lock file left by a process that ended

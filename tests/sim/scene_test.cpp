@@ -425,6 +425,9 @@ const BadOverride kBadOverrides[] = {
     {"vector_item", "particles[0].random.min[2]=1e30",
      "--set particles[0].random.min[2]=1e30: particles[0].random.min: too large for float precision: ..."},
     {"empty_value", "solver.iterations=", "--set solver.iterations=: solver.iterations: expected an integer, got nothing (null)"},
+    // a key twice in the value: no file line to name (it said "first given at line 0")
+    {"duplicate_in_value", "materials.glass={density: 1, density: 2}",
+     "--set materials.glass={density: 1, density: 2}: materials.glass: duplicate key 'density'"},
     // whole numbers past 64 bits: the bound they pass, not "not an integer"
     {"huge_count", "time.substeps=9999999999999999999999",
      "--set time.substeps=9999999999999999999999: time.substeps: must be <= 1000000000, got 9999999999999999999999"},
