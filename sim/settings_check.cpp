@@ -151,13 +151,16 @@ Setting read_setting(const scene::Scene& scene, const scene::GeneratedParticles&
 // The fastest a moving wall can set a sphere going: twice a translating
 // wall's speed (a sphere at rest struck elastically), a spinning cylinder's
 // surface speed (friction carries a sphere up to it). 0 without walls.
+double push_of(const scene::WallSpec& w) {
+  const double moving = 2 * double(length(w.velocity));
+  return w.kind == scene::WallSpec::Kind::cylinder ? std::max(moving, std::fabs(w.angular_velocity) * w.radius)
+                                                   : moving;
+}
+
 double wall_push(const scene::Scene& scene) {
   if (!scene.has(Effect::walls)) return 0;
   double push = 0;
-  for (const scene::WallSpec& w : scene.walls) {
-    push = std::max(push, 2 * double(length(w.velocity)));
-    if (w.kind == scene::WallSpec::Kind::cylinder) push = std::max(push, std::fabs(w.angular_velocity) * w.radius);
-  }
+  for (const scene::WallSpec& w : scene.walls) push = std::max(push, push_of(w));
   return push;
 }
 
@@ -335,6 +338,22 @@ std::optional<std::string> float_precision(const Setting& s, const scene::Scene&
 double fastest_speed(const scene::Scene& scene, const scene::GeneratedParticles& particles) {
   if (particles.size() == 0) return 0;
   return fastest(read_setting(scene, particles), scene, particles).v;
+}
+
+std::optional<SpeedingWall> speeding_wall(const scene::Scene& scene, const scene::GeneratedParticles& particles) {
+  if (particles.size() == 0 || !scene.has(Effect::walls)) return std::nullopt;
+  double push = read_setting(scene, particles).speed;
+  std::optional<SpeedingWall> found;
+  for (std::size_t k = 0; k < scene.walls.size(); ++k) {
+    const scene::WallSpec& w = scene.walls[k];
+    if (!(push_of(w) > push)) continue;
+    push = push_of(w);
+    const bool spin = w.kind == scene::WallSpec::Kind::cylinder && std::fabs(w.angular_velocity) * w.radius >= push;
+    found = SpeedingWall{k, spin ? "walls[" + std::to_string(k) + "].cylinder.angular_velocity"
+                                 : "walls[" + std::to_string(k) + "].velocity",
+                         push};
+  }
+  return found;
 }
 
 std::vector<std::string> risky_settings(const scene::Scene& scene, const scene::GeneratedParticles& particles,

@@ -8,6 +8,8 @@
 // stated for users in docs/scene-format.md ("Warnings").
 #pragma once
 
+#include <cstddef>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -26,5 +28,15 @@ std::vector<std::string> risky_settings(const scene::Scene& scene, const scene::
 // surface speed), plus a fall under gravity from the highest centre to the
 // lowest centre or wall bottom. make_world holds the contact impulses to it.
 double fastest_speed(const scene::Scene& scene, const scene::GeneratedParticles& particles);
+
+// The wall whose motion sets that speed (twice its speed, or a spinning
+// wall's surface speed, past every sphere's initial speed), where one does:
+// its index, the key of its speed and the speed it gives.
+struct SpeedingWall {
+  std::size_t index = 0;
+  std::string key;
+  double push = 0;
+};
+std::optional<SpeedingWall> speeding_wall(const scene::Scene& scene, const scene::GeneratedParticles& particles);
 
 }  // namespace marbles

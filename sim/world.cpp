@@ -221,6 +221,15 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
   else if (speed > 0 && !(energy <= std::numeric_limits<double>::max()))
     past = "a kinetic energy out of range of its sums in double (16 x mass x speed^2 / 2 is more than " +
            significant(std::numeric_limits<double>::max(), 3) + " J)";
+  // Where a wall's motion sets the speed, the wall's speed is what to change.
+  if (const auto wall = past.empty() ? std::nullopt : speeding_wall(scene, particles))
+    throw InputError(scene.walls[wall->index].where, wall->key,
+                     "too fast for the spheres' mass: it gives spheres up to " + significant(wall->push, 6) +
+                         " m/s (twice a moving wall's speed, or a spinning wall's surface speed), and the movable "
+                         "spheres' mass, " + significant(total, 6) + " kg in all, at " + significant(speed, 6) +
+                         " m/s makes " + past +
+                         (sizeof(real) == 4 ? "; lower the wall's speed, or set solver.precision: double" : "; lower "
+                                                                                                             "the wall's speed"));
   if (heaviest < n && !past.empty())
     refuse(heaviest, "too heavy for the scene's speeds: the movable spheres' mass, " + significant(total, 6) +
                          " kg in all (this sphere the heaviest), at up to " + significant(speed, 6) +

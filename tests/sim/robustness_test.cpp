@@ -401,6 +401,28 @@ TEST_F(Robustness, ImpulsesBeyondThePrecisionAreRefused) {
       << f.err;
   EXPECT_EQ(marbles("check " + oblique + " --precision double", dir).exit_code, 0);
   EXPECT_EQ(marbles("check " + oblique + " --set 'effects=[collisions]'", dir).exit_code, 0);
+  // Where a wall's motion sets the speed, the wall's key is named, not a sphere's block (a drum spun at 1e30
+  // rad/s was refused as "particles[0]: ... too heavy for the scene's speeds").
+  const std::string drum =
+      dir.write("d.yaml", "time: {duration: 0.1, dt: 0.001}\neffects: [gravity, collisions, walls, friction]\n"
+                          "materials: {a: {density: 1000, friction: 0.5}}\n"
+                          "walls:\n  - plane: {point: [0, 0, 0], normal: [0, 0, 1]}\n"
+                          "  - cylinder: {base: [0, 0, 0], axis: [0, 0, 1], radius: 1, angular_velocity: 1e30}\n"
+                          "particles:\n  - list: {positions: [[0, 0, 0.1]], radius: 0.05}\n");
+  const Outcome d = marbles("check " + drum, dir);
+  EXPECT_EQ(d.exit_code, 2) << d.err;
+  EXPECT_NE(d.err.find("d.yaml:6:5: walls[1].cylinder.angular_velocity: too fast for the spheres' mass: it gives "
+                       "spheres up to 1e+30 m/s"),
+            std::string::npos)
+      << d.err;
+  EXPECT_EQ(d.err.find("particles["), std::string::npos) << d.err;
+  const Outcome pushed = marbles("check " + drum + " --set walls[1].cylinder.angular_velocity=1 "
+                                 "--set walls[0].velocity=[0,0,1e19]", dir);
+  EXPECT_EQ(pushed.exit_code, 2) << pushed.err;
+  EXPECT_NE(pushed.err.find("walls[0].velocity: too fast for the spheres' mass: it gives spheres up to 2e+19 m/s"),
+            std::string::npos)
+      << pushed.err;
+  EXPECT_EQ(marbles("check " + drum + " --set walls[1].cylinder.angular_velocity=10", dir).exit_code, 0);
   // Spheres at rest make no impulse the start can bound: the heaviest double holds is not refused (16 x its mass
   // was inf, and inf x 0 a NaN that refused it).
   EXPECT_EQ(marbles("check " + oblique + " --precision double --set materials.a.density=2.5e307 "
