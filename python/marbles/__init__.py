@@ -63,6 +63,11 @@ def _yaml_text(value, key, strings="values"):
             return ".inf" if v > 0 else "-.inf"
         return repr(v)
     if isinstance(value, str):
+        try:
+            value.encode("utf-8")
+        except UnicodeEncodeError:  # a lone surrogate ("\ud800"): no scene text holds it
+            raise SceneError(f"set: {key}: not UTF-8 text: {value!r}", key=key,
+                             message=f"not UTF-8 text: {value!r}") from None
         # "run #2" would end at the #, "&a x" be an anchor, "null" nothing.
         # A list's or map's YAML text goes in set=["key=[a, b]"].
         if strings == "text" or _marbles.reads_as_itself(value):
@@ -206,6 +211,18 @@ def _steps_in(time, dt):
     steps = time / dt
     whole = math.floor(steps)
     return int(whole) + (1 if steps - whole >= 0.5 else 0)
+
+
+def _real_array(values, what):
+    """``values`` as a NumPy array of numbers (bool, text, dates and ragged
+    lists refused by name, where NumPy's own errors named nothing)."""
+    try:
+        array = np.asarray(values)
+    except (TypeError, ValueError) as e:  # a ragged list
+        raise TypeError(f"{what}: an array of numbers, got {type(values).__name__} ({e})") from None
+    if array.dtype.kind not in "iufc":  # bool, text, objects, dates: no coordinates or speeds
+        raise TypeError(f"{what}: an array of numbers, got {array.dtype} ({type(values).__name__})")
+    return array
 
 
 def _threads(value):
@@ -510,11 +527,12 @@ class Simulation:
         dtype = np.float64 if self.precision == "double" else np.float32
         if hasattr(values, "__cuda_array_interface__") and hasattr(values, "get"):
             values = values.get()
-        if np.iscomplexobj(values):  # the imaginary part would be dropped without a word
+        plural = {"velocity": "velocities", "angular_velocity": "angular_velocities"}.get(what, what + "s")
+        array = _real_array(values, plural)
+        if np.iscomplexobj(array):  # the imaginary part would be dropped without a word
             raise TypeError(f"{what}: real numbers, got a complex array")
-        array = np.ascontiguousarray(values, dtype=dtype)
+        array = np.ascontiguousarray(array, dtype=dtype)
         if array.shape != (len(self), 3):
-            plural = {"velocity": "velocities", "angular_velocity": "angular_velocities"}.get(what, what + "s")
             raise ValueError(f"{plural}: expected shape ({len(self)}, 3), got {array.shape}")
         self._impl.assign(what, array)
 
@@ -606,11 +624,16 @@ def pairs(xyzr, backend="auto", algorithm="home", margin=0.0):
     else in float; a device array (CuPy, PyTorch) is copied to the host."""
     if hasattr(xyzr, "__cuda_array_interface__"):
         xyzr = xyzr.get() if hasattr(xyzr, "get") else xyzr.cpu().numpy()
-    array = np.asarray(xyzr)
+    array = _real_array(xyzr, "xyzr")
     if np.iscomplexobj(array):  # the imaginary part would be dropped without a word
         raise TypeError("xyzr: real numbers, got a complex array")
     if isinstance(margin, (bool, np.bool_)) or not isinstance(margin, numbers.Real):
         raise TypeError(f"margin: a distance in m, got {margin!r}")
+    try:
+        margin = float(margin)
+    except OverflowError:  # an int past any float
+        raise ValueError(f"margin: too large a distance, got a number of {len(str(abs(int(margin))))} digits") \
+            from None
     algorithm = _choice(algorithm, "algorithm", ("home", "subdivision", "brute"))
     backend = _choice(backend, "backend", _BACKENDS)
     double = array.dtype == np.float64
@@ -619,7 +642,7 @@ def pairs(xyzr, backend="auto", algorithm="home", margin=0.0):
         raise SceneError(f"xyzr: expected an (N, 4) array of x, y, z, r, got shape {array.shape}", key="xyzr",
                          message=f"expected an (N, 4) array of x, y, z, r, got shape {array.shape}")
     find = _marbles.pairs_double if double else _marbles.pairs_float
-    return find(array, algorithm, backend, float(margin))
+    return find(array, algorithm, backend, margin)
 
 
 def _program_path():  # not `_program`: importing the submodule of that name would replace it
