@@ -4,6 +4,7 @@
 // the translation of its failures into Python exceptions
 // (bind_simulation.cpp, built twice), and the study.
 #include <chrono>
+#include <exception>
 #include <sstream>
 #include <thread>
 #include <string>
@@ -46,11 +47,29 @@ nb::list study(const std::string& scene_path, const std::vector<std::string>& va
   options.out_dir = out_dir;
   options.marbles = program;
   options.progress = false;
+  // Ctrl-C (Python's, on its main thread: a notebook's interrupt reaches this
+  // process alone, not its runs) stops the study between two looks, its run
+  // ended, and raises KeyboardInterrupt; the earlier study stays whole.
+  std::exception_ptr interrupt;
+  if (_PyOS_IsMainThread())
+    options.stop = [&interrupt] {
+      nb::gil_scoped_acquire acquire;
+      if (PyErr_CheckSignals() == 0) return false;
+      try {
+        throw nb::python_error();  // takes the pending KeyboardInterrupt
+      } catch (...) {
+        interrupt = std::current_exception();
+      }
+      return true;
+    };
   std::ostringstream out, err;
   marbles::StudyResult result;
-  {
+  try {
     nb::gil_scoped_release release;
     result = marbles::run_study(options, out, err);
+  } catch (const marbles::StudyStopped&) {
+    if (interrupt) std::rethrow_exception(interrupt);
+    throw marbles::RuntimeFailure("the study was stopped");
   }
   nb::list rows;
   for (const marbles::StudyRow& r : result.rows) {

@@ -6,8 +6,10 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <cmath>
 #include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -17,6 +19,7 @@
 #include <optional>
 #include <ostream>
 #include <sstream>
+#include <thread>
 #include <tuple>
 
 #include <nlohmann/json.hpp>
@@ -80,7 +83,9 @@ double median(std::vector<double> v) {
 
 // Runs argv[0] (a path, or a name looked up on PATH) with stdout and stderr
 // to `log`, no shell between; returns its exit status (-1 if it did not exit).
-int run_process(const std::vector<std::string>& args, const std::string& log) {
+// Where `stop` says so while it runs, it is ended (SIGTERM) and StudyStopped thrown.
+int run_process(const std::vector<std::string>& args, const std::string& log,
+                const std::function<bool()>& stop = {}) {
   std::vector<char*> argv;
   for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
@@ -93,7 +98,26 @@ int run_process(const std::vector<std::string>& args, const std::string& log) {
   posix_spawn_file_actions_destroy(&actions);
   if (rc != 0) throw RuntimeFailure("cannot start " + args[0] + ": " + std::strerror(rc));
   int status = 0;
-  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  if (stop) {
+    for (;;) {
+      const pid_t done = waitpid(pid, &status, WNOHANG);
+      if (done == pid || (done < 0 && errno != EINTR)) break;
+      bool stopping = true;
+      try {
+        stopping = stop();
+      } catch (...) {  // as a stop: the run is not left behind
+      }
+      if (stopping) {
+        ::kill(pid, SIGTERM);
+        while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+        }
+        throw StudyStopped();
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  } else {
+    while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
   }
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
@@ -356,7 +380,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
       if (options.progress) show_progress(err, tty, done, total, label_of(options.vary, row.values));
       const std::string log = (run_dir.string() + ".log");
       fs::create_directories(run_dir);
-      const int status = run_process(args, log);
+      const int status = run_process(args, log, options.stop);
       if (status != 0) {
         if (tty) err << "\n";
         const std::string text = read_text(log);

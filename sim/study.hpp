@@ -12,6 +12,8 @@
 
 #include <cstdint>
 #include <iosfwd>
+#include <functional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -32,6 +34,17 @@ struct StudyOptions {
   int repeats = 3;                  // runs per combination; the cost is their median
   std::string marbles = "/proc/self/exe";  // the program that runs each combination
   bool progress = true;
+  // Asked about every 50 ms while a run runs (from the study's thread): true
+  // stops the study, its run killed (SIGTERM), with StudyStopped. The Python
+  // module's Ctrl-C, whose signal reaches its process alone (a notebook's
+  // interrupt), not the runs.
+  std::function<bool()> stop;
+};
+
+// A study ended by StudyOptions::stop: the earlier study's runs and tables are
+// left whole, as by any study that does not end.
+struct StudyStopped : std::runtime_error {
+  StudyStopped() : std::runtime_error("the study was stopped") {}
 };
 
 struct StudyRow {

@@ -175,6 +175,43 @@ def test_a_step_left_running_at_the_end_of_a_script_ends_quietly(pile, tmp_path)
             ended.stderr
 
 
+def test_a_study_stops_on_an_interrupt_and_leaves_the_earlier_one_whole(tmp_path):
+    # Ctrl-C reaching the Python process alone (a notebook's interrupt) ran
+    # on until every run of the study had run. It now ends the running run
+    # and raises KeyboardInterrupt; the earlier study in the folder is whole.
+    import signal
+    import threading
+    scene = SCENES / "validation" / "bouncing_ball.yaml"
+    out = tmp_path / "study"
+    marbles.study(scene, vary={"time.dt": [1e-3, 5e-4]}, out=out)
+    earlier = {str(p.relative_to(out)): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    long_runs = {"time.dt": [2e-5, 1e-5, 5e-6]}  # each run takes many seconds here
+    started = threading.Event()
+
+    def press():  # Ctrl-C, again every 0.3 s, until the study returns
+        started.wait()
+        while not stopping.wait(0.3):
+            os.kill(os.getpid(), signal.SIGINT)
+
+    stopping = threading.Event()
+    presser = threading.Thread(target=press)
+    presser.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            started.set()
+            marbles.study(scene, vary=long_runs, set={"time.duration": 60}, out=out)
+    finally:
+        stopping.set()
+        presser.join()
+    now = {str(p.relative_to(out)): p.read_bytes() for p in out.rglob("*") if p.is_file()
+           if not str(p.relative_to(out)).startswith(".runs-")}
+    assert now == earlier
+    (staging,) = out.glob(".runs-*")  # the stopped study's: one run started, none after it
+    assert [p.name for p in staging.iterdir() if p.suffix == ".log"] == ["0.log"]
+    ps = subprocess.run(["ps", "-eo", "args"], capture_output=True, text=True).stdout
+    assert str(staging) not in ps, "the stopped run was left running"
+
+
 def test_a_long_step_stops_on_an_interrupt(pile):
     # A pending SIGINT (Ctrl-C) ends step(n) between two steps with
     # KeyboardInterrupt; the steps done are kept and the simulation goes on.
