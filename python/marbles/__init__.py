@@ -213,6 +213,18 @@ def _steps_in(time, dt):
     return int(whole) + (1 if steps - whole >= 0.5 else 0)
 
 
+def _on_host(values):
+    """A device array's host copy (CuPy's get(), a marbles.DeviceArray's
+    numpy(), PyTorch's cpu()); anything else as it is."""
+    if not hasattr(values, "__cuda_array_interface__"):
+        return values
+    if hasattr(values, "get"):
+        return values.get()
+    if isinstance(values, DeviceArray):
+        return values.numpy()
+    return values.cpu().numpy() if hasattr(values, "cpu") else values
+
+
 def _real_array(values, what):
     """``values`` as a NumPy array of numbers (bool, text, dates and ragged
     lists refused by name, where NumPy's own errors named nothing)."""
@@ -525,8 +537,7 @@ class Simulation:
 
     def _assign(self, what, values):
         dtype = np.float64 if self.precision == "double" else np.float32
-        if hasattr(values, "__cuda_array_interface__") and hasattr(values, "get"):
-            values = values.get()
+        values = _on_host(values)
         plural = {"velocity": "velocities", "angular_velocity": "angular_velocities"}.get(what, what + "s")
         array = _real_array(values, plural)
         if np.iscomplexobj(array):  # the imaginary part would be dropped without a word
@@ -622,9 +633,7 @@ def pairs(xyzr, backend="auto", algorithm="home", margin=0.0):
     home, subdivision (the broad phase of the step) or brute (the oracle);
     ``backend`` auto|cpu|cuda. A float64 array is searched in double, anything
     else in float; a device array (CuPy, PyTorch) is copied to the host."""
-    if hasattr(xyzr, "__cuda_array_interface__"):
-        xyzr = xyzr.get() if hasattr(xyzr, "get") else xyzr.cpu().numpy()
-    array = _real_array(xyzr, "xyzr")
+    array = _real_array(_on_host(xyzr), "xyzr")
     if np.iscomplexobj(array):  # the imaginary part would be dropped without a word
         raise TypeError("xyzr: real numbers, got a complex array")
     if isinstance(margin, (bool, np.bool_)) or not isinstance(margin, numbers.Real):

@@ -315,7 +315,7 @@ def test_each_simulation_steps_on_its_own_threads(pile):
 
 
 def test_array_and_study_argument_errors(pile, tmp_path):
-    sim = marbles.Simulation.from_dict(pile)
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")  # host views
     with pytest.raises(ValueError, match=r"^velocities: expected shape"):
         sim.velocities = np.zeros((2, 3))
     bad = np.zeros((len(sim), 3))
@@ -500,7 +500,7 @@ def test_string_overrides_are_the_strings_given(pile, tmp_path):
 
 
 def test_the_state_read_after_a_bad_write_is_refused(pile):
-    sim = marbles.Simulation.from_dict(pile)
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")  # host views
     sim.velocities[0, 2] = np.nan
     with pytest.raises(ValueError, match=r"velocities\[0\] is not finite"):
         sim.kinetic_energy()
@@ -537,7 +537,7 @@ def test_a_study_checks_every_run_before_the_first(tmp_path):
 
 def test_arguments_of_the_wrong_kind_are_named(pile, tmp_path):
     ball = SCENES / "validation" / "bouncing_ball.yaml"
-    sim = marbles.Simulation.from_dict(pile)
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")  # host views
     cases = [
         (lambda: marbles.Simulation(ball, backend=None), TypeError, "backend: one of auto, cpu, cuda, got None"),
         (lambda: marbles.Simulation.from_dict(pile, backend=5), TypeError, "backend: one of"),

@@ -73,6 +73,7 @@ def test_assignment_and_restart_with_device_arrays_out(pile, tmp_path):
     v[3] += np.float32([0, 0, 1])
     gpu.velocities = v
     cpu.velocities = v
+    gpu.angular_velocities = gpu.angular_velocities  # a marbles.DeviceArray assigned: its host copy, unchanged
     cpu.checkpoint(tmp_path / "c.mck")
     for s in (gpu, cpu):
         s.step(5)
