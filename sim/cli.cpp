@@ -486,7 +486,15 @@ int cli_main(int argc, char** argv) {
         study.vary.push_back(std::move(vary));
       }
       study.progress = !study_quiet;
-      run_study(study, std::cout, std::cerr);
+      // Ctrl-C (or SIGTERM) stops the study, its running run too, as it stops a run.
+      const StopRequests stops;
+      study.stop = [&stops] { return stops.received() != 0; };
+      try {
+        run_study(study, std::cout, std::cerr);
+      } catch (const StudyStopped& e) {
+        std::cerr << "marbles: stopped by " << signal_name(stops.received()) << ": " << e.what() << "\n";
+        return 1;
+      }
       return 0;
     }
     if (*bench_bp || *bench_step || *bench_effects) (void)default_thread_count();  // OMP_NUM_THREADS, bounded

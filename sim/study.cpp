@@ -380,7 +380,20 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
       if (options.progress) show_progress(err, tty, done, total, label_of(options.vary, row.values));
       const std::string log = (run_dir.string() + ".log");
       fs::create_directories(run_dir);
-      const int status = run_process(args, log, options.stop);
+      const auto stopped = [&] {
+        if (tty) err << "\n";
+        return StudyStopped("the study was stopped during run " + label_of(options.vary, row.values) + " (" +
+                            std::to_string(done + 1) + " of " + std::to_string(total) + "); its runs so far are in " +
+                            staging.string() + " (the next study in the folder removes them), and an earlier "
+                            "study's runs and tables in " + dir.string() + " are left whole");
+      };
+      int status = 0;
+      try {
+        status = run_process(args, log, options.stop);
+      } catch (const StudyStopped&) {
+        throw stopped();
+      }
+      if (status != 0 && options.stop && options.stop()) throw stopped();  // the run stopped by the same signal
       if (status != 0) {
         if (tty) err << "\n";
         const std::string text = read_text(log);

@@ -44,7 +44,7 @@ struct StudyOptions {
 // A study ended by StudyOptions::stop: the earlier study's runs and tables are
 // left whole, as by any study that does not end.
 struct StudyStopped : std::runtime_error {
-  StudyStopped() : std::runtime_error("the study was stopped") {}
+  explicit StudyStopped(const std::string& what = "the study was stopped") : std::runtime_error(what) {}
 };
 
 struct StudyRow {

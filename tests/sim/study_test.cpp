@@ -5,11 +5,14 @@
 #include <nlohmann/json.hpp>
 
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -19,6 +22,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/error.hpp"
@@ -168,6 +172,78 @@ TEST_F(Study, AFailedStudyLeavesTheEarlierOneWhole) {
   EXPECT_EQ(left, kept);
   EXPECT_NE(slurp(dir.path() + "/study.csv"), table);
   EXPECT_FALSE(fs::exists(runs / "1"));
+}
+
+// A study asked to stop (StudyOptions::stop: the Python module's interrupt)
+// ends its running run and throws StudyStopped, naming the run and where its
+// runs so far are; an earlier study is left whole, and no run is left.
+TEST_F(Study, AStoppedStudyEndsItsRunAndLeavesTheEarlierOneWhole) {
+  const test::ScratchDir dir("study_stopped");
+  ASSERT_EQ(study(kValidation + "bouncing_ball.yaml", {"time.dt=4e-3,2e-3"}, dir).rows.size(), 2u);
+  const std::string table = slurp(dir.path() + "/study.csv");
+  StudyOptions o = options(kValidation + "bouncing_ball.yaml", dir.path());
+  o.vary.push_back(parse_vary("time.dt=2e-5,1e-5"));
+  o.set = {"time.duration=600"};  // runs of minutes: only a stop ends them
+  o.backend = "cpu";
+  int asked = 0;
+  o.stop = [&] { return ++asked >= 3; };  // about 100 ms into the first run
+  std::ostringstream out, err;
+  try {
+    run_study(o, out, err);
+    ADD_FAILURE() << "the study ran to its end";
+  } catch (const StudyStopped& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("the study was stopped during run time.dt=2e-5 (1 of 2); its runs so far are in " +
+                        dir.path() + "/.runs-" + std::to_string(::getpid())),
+              std::string::npos)
+        << what;
+    EXPECT_NE(what.find("left whole"), std::string::npos) << what;
+  }
+  EXPECT_EQ(asked, 3);
+  EXPECT_EQ(slurp(dir.path() + "/study.csv"), table);
+  errno = 0;
+  EXPECT_EQ(::waitpid(-1, nullptr, WNOHANG), -1) << "a run is left";  // no child, running or unreaped
+  EXPECT_EQ(errno, ECHILD);
+}
+
+// `marbles study` stopped by Ctrl-C in a terminal (SIGINT to its process
+// group, so to its run as well, which may end first): "stopped by SIGINT",
+// exit 1, not "study run ... failed"; no run is left, the earlier study whole.
+TEST_F(Study, CtrlCStopsTheCommandsStudy) {
+  const test::ScratchDir dir("study_ctrl_c");
+  ASSERT_EQ(study(kValidation + "bouncing_ball.yaml", {"time.dt=4e-3"}, dir).rows.size(), 1u);
+  const std::string table = slurp(dir.path() + "/study.csv");
+  const std::string err_path = dir.path() + "/err.txt";
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    ::setpgid(0, 0);
+    const int fd = ::open(err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(fd, 2);
+    const std::string scene = kValidation + "bouncing_ball.yaml";
+    ::execl(kMarbles.c_str(), kMarbles.c_str(), "study", scene.c_str(), "--vary", "time.dt=2e-5,1e-5", "--set",
+            "time.duration=600", "--backend", "cpu", "--repeats", "1", "--quiet", "--out", dir.path().c_str(),
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ::setpgid(child, child);
+  // Once its first run has started (its log is there), Ctrl-C.
+  const fs::path first_log = fs::path(dir.path()) / (".runs-" + std::to_string(child)) / "0.log";
+  for (int k = 0; k < 600 && !fs::exists(first_log); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  ASSERT_TRUE(fs::exists(first_log));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the run under way (not timed: either way it stops)
+  ASSERT_EQ(::kill(-child, SIGINT), 0);
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  const std::string text = slurp(err_path);
+  EXPECT_NE(text.find("marbles: stopped by SIGINT: the study was stopped during run time.dt=2e-5 (1 of 2)"),
+            std::string::npos)
+      << text;
+  EXPECT_EQ(text.find("failed"), std::string::npos) << text;
+  EXPECT_EQ(::kill(-child, 0), -1) << "a run of the study is left";
+  EXPECT_EQ(slurp(dir.path() + "/study.csv"), table);
 }
 
 // One study at a time in a folder (as one run at a time): while another
