@@ -63,6 +63,8 @@ std::string item_text(std::size_t index) { return std::string(1, '[').append(std
 
 // A sequence's item at `step` (an index).
 YAML::Node item(const YAML::Node& node, const Step& step, std::string& key, const std::string& label) {
+  if (!node.IsDefined() || node.IsNull())  // a key the scene lacks, or gives nothing
+    fail(label, key, "cannot take item " + item_text(step.index) + ": the scene has no list there");
   if (!node.IsSequence())
     fail(label, key, "cannot take item " + item_text(step.index) + ": expected a sequence, got " + description(node));
   if (step.index >= node.size())
@@ -74,8 +76,8 @@ YAML::Node item(const YAML::Node& node, const Step& step, std::string& key, cons
 // The child of `node` at `step`, created as a map when it is a missing key
 // and not the last step (`last`: the caller assigns it). For a tree whose
 // nodes are each in one place only (shares_nodes).
-YAML::Node child_in_place(YAML::Node node, const Step& step, bool last, std::string& key, const std::string& label,
-                          Origins& origins) {
+YAML::Node child_in_place(YAML::Node node, const Step& step, bool last, bool index_next, std::string& key,
+                          const std::string& label, Origins& origins) {
   if (step.name.empty()) return item(node, step, key, label);
   if (node.IsNull()) {
     node = YAML::Node(YAML::NodeType::Map);
@@ -84,7 +86,7 @@ YAML::Node child_in_place(YAML::Node node, const Step& step, bool last, std::str
   if (!node.IsMap()) fail(label, key, "cannot hold key '" + step.name + "': expected a map, got " + description(node));
   key += (key.empty() ? "" : ".") + step.name;
   YAML::Node next = node[step.name];
-  if (!next.IsDefined() && !last) {
+  if (!next.IsDefined() && !last && !index_next) {  // an item of a missing list is refused by item()
     next = YAML::Node(YAML::NodeType::Map);
     origins.add(next, label);
   }
@@ -121,7 +123,9 @@ YAML::Node child_as_is(const YAML::Node& node, const Step& step, std::string& ke
   if (!absent && !node.IsMap())
     fail(label, key, "cannot hold key '" + step.name + "': expected a map, got " + description(node));
   key += (key.empty() ? "" : ".") + step.name;
-  return absent ? YAML::Node(YAML::NodeType::Undefined) : node[step.name];
+  if (absent) return YAML::Node(YAML::NodeType::Undefined);
+  const YAML::Node next = node[step.name];  // a missing key's is an invalid node, whose questions throw
+  return next.IsDefined() ? next : YAML::Node(YAML::NodeType::Undefined);
 }
 
 // `node` with its child at `step` replaced by `value`, as a new node: the
@@ -143,8 +147,12 @@ YAML::Node with_child(const YAML::Node& node, const Step& step, const YAML::Node
       }
     if (!placed) copy.force_insert(step.name, value);
   }
-  if (node.IsDefined() && !node.IsNull()) origins.copied(copy, node);
-  else origins.add(copy, label);  // a map the override made: its errors name the override
+  if (const std::string* from = node.IsDefined() ? origins.find(node) : nullptr)
+    origins.add(copy, *from);  // an earlier override's node: its errors name that override
+  else if (node.IsDefined() && !node.IsNull())
+    origins.copied(copy, node);
+  else
+    origins.add(copy, label);  // a map the override made: its errors name the override
   return copy;
 }
 
@@ -188,7 +196,8 @@ void apply_override(YAML::Node root, const std::string& text, Origins& origins, 
     YAML::Node node = root;
     for (std::size_t k = 0; k < steps.size(); ++k) {
       parents[k].reset(node);
-      YAML::Node next = child_in_place(node, steps[k], k + 1 == steps.size(), key, label, origins);
+      const bool last = k + 1 == steps.size();
+      YAML::Node next = child_in_place(node, steps[k], last, !last && steps[k + 1].name.empty(), key, label, origins);
       node.reset(next);
     }
     node = value;

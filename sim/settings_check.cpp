@@ -157,10 +157,12 @@ double push_of(const scene::WallSpec& w) {
                                                    : moving;
 }
 
-double wall_push(const scene::Scene& scene) {
+// The largest push of the walls, `skip` (an index) left out.
+double wall_push(const scene::Scene& scene, std::size_t skip = std::size_t(-1)) {
   if (!scene.has(Effect::walls)) return 0;
   double push = 0;
-  for (const scene::WallSpec& w : scene.walls) push = std::max(push, push_of(w));
+  for (std::size_t k = 0; k < scene.walls.size(); ++k)
+    if (k != skip) push = std::max(push, push_of(scene.walls[k]));
   return push;
 }
 
@@ -169,7 +171,8 @@ double wall_push(const scene::Scene& scene) {
 struct Fastest {
   double v = 0, fall = 0, pushed = 0;
 };
-Fastest fastest(const Setting& s, const scene::Scene& scene, const scene::GeneratedParticles& p) {
+Fastest fastest(const Setting& s, const scene::Scene& scene, const scene::GeneratedParticles& p,
+                std::size_t skip_wall = std::size_t(-1)) {
   Fastest f;
   if (s.g > 0) {
     double top = -kInf, bottom = kInf;
@@ -182,7 +185,7 @@ Fastest fastest(const Setting& s, const scene::Scene& scene, const scene::Genera
         if (auto b = wall_bottom(w, s.up)) bottom = std::min(bottom, *b);
     f.fall = std::max(0.0, top - bottom);
   }
-  f.pushed = wall_push(scene);
+  f.pushed = wall_push(scene, skip_wall);
   f.v = std::max(s.speed, f.pushed) + std::sqrt(2 * s.g * f.fall);
   return f;
 }
@@ -335,9 +338,10 @@ std::optional<std::string> float_precision(const Setting& s, const scene::Scene&
 
 }  // namespace
 
-double fastest_speed(const scene::Scene& scene, const scene::GeneratedParticles& particles) {
+double fastest_speed(const scene::Scene& scene, const scene::GeneratedParticles& particles,
+                     std::optional<std::size_t> without_wall) {
   if (particles.size() == 0) return 0;
-  return fastest(read_setting(scene, particles), scene, particles).v;
+  return fastest(read_setting(scene, particles), scene, particles, without_wall.value_or(std::size_t(-1))).v;
 }
 
 std::optional<SpeedingWall> speeding_wall(const scene::Scene& scene, const scene::GeneratedParticles& particles) {

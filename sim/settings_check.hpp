@@ -27,7 +27,9 @@ std::vector<std::string> risky_settings(const scene::Scene& scene, const scene::
 // largest initial speed, or twice a moving wall's speed (a spinning wall's
 // surface speed), plus a fall under gravity from the highest centre to the
 // lowest centre or wall bottom. make_world holds the contact impulses to it.
-double fastest_speed(const scene::Scene& scene, const scene::GeneratedParticles& particles);
+// `without_wall`: as if that wall (an index into scene.walls) did not move.
+double fastest_speed(const scene::Scene& scene, const scene::GeneratedParticles& particles,
+                     std::optional<std::size_t> without_wall = std::nullopt);
 
 // The wall whose motion sets that speed (twice its speed, or a spinning
 // wall's surface speed, past every sphere's initial speed), where one does:

@@ -195,9 +195,6 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
     spin = std::max(spin, double(length(w.angular_velocity[i])) * r);
     if (mass > heaviest_mass) heaviest = i, heaviest_mass = mass;
   }
-  const double speed = fastest_speed(scene, particles) + spin;
-  const double impulse = kHeadroom * total * reach * speed;       // N s, and N m s about a centre
-  const double energy = kHeadroom * 0.5 * total * speed * speed;  // J, summed in double in either precision
   const bool contacts = scene.has(scene::Effect::collisions) || scene.has(scene::Effect::walls);
   // The friction and rolling clamps square an impulse and its limit (clamp_length): the sliding one
   // 4 M u max(1, mu) at most, the rolling one (an angular impulse) 4 M u max(1 m, r) max(1, mu_r).
@@ -206,23 +203,32 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
     mu = std::max(mu, m.friction), mu_rolling = std::max(mu_rolling, m.rolling_friction);
   for (const scene::ContactPairSpec& p : scene.contact_pairs)
     mu = std::max(mu, p.friction), mu_rolling = std::max(mu_rolling, p.rolling_friction);
-  const double squared = std::max(scene.has(scene::Effect::friction) ? impulse / reach * std::max(1.0, mu) : 0.0,
-                                  scene.has(scene::Effect::rolling_resistance)
-                                      ? impulse * std::max(1.0, mu_rolling) : 0.0);
-  std::string past;  // what the start's speeds would take out of range; nothing where nothing moves
-  if (speed > 0 && contacts && !(impulse <= most))
-    past = "contact impulses out of range for " + std::string(kRealName) + " precision (16 x mass x max(1 m, largest "
-           "radius) x speed = " + significant(impulse, 3) + ", more than " + significant(most, 3) + ")";
-  else if (speed > 0 && contacts && !(squared <= std::sqrt(most)))
-    past = "friction impulses whose squares are out of range for " + std::string(kRealName) +
-           " precision (the clamp to the friction cone squares them: 16 x mass x speed x max(1, the largest "
-           "coefficient), times max(1 m, largest radius) for rolling resistance, = " + significant(squared, 3) +
-           ", more than " + significant(std::sqrt(most), 3) + ")";
-  else if (speed > 0 && !(energy <= std::numeric_limits<double>::max()))
-    past = "a kinetic energy out of range of its sums in double (16 x mass x speed^2 / 2 is more than " +
-           significant(std::numeric_limits<double>::max(), 3) + " J)";
-  // Where a wall's motion sets the speed, the wall's speed is what to change.
-  if (const auto wall = past.empty() ? std::nullopt : speeding_wall(scene, particles))
+  // What speeds up to `speed` would take out of range; nothing where nothing moves.
+  const auto past_at = [&](double speed) -> std::string {
+    const double impulse = kHeadroom * total * reach * speed;       // N s, and N m s about a centre
+    const double energy = kHeadroom * 0.5 * total * speed * speed;  // J, summed in double in either precision
+    const double squared = std::max(scene.has(scene::Effect::friction) ? impulse / reach * std::max(1.0, mu) : 0.0,
+                                    scene.has(scene::Effect::rolling_resistance)
+                                        ? impulse * std::max(1.0, mu_rolling) : 0.0);
+    if (speed > 0 && contacts && !(impulse <= most))
+      return "contact impulses out of range for " + std::string(kRealName) + " precision (16 x mass x max(1 m, "
+             "largest radius) x speed = " + significant(impulse, 3) + ", more than " + significant(most, 3) + ")";
+    if (speed > 0 && contacts && !(squared <= std::sqrt(most)))
+      return "friction impulses whose squares are out of range for " + std::string(kRealName) +
+             " precision (the clamp to the friction cone squares them: 16 x mass x speed x max(1, the largest "
+             "coefficient), times max(1 m, largest radius) for rolling resistance, = " + significant(squared, 3) +
+             ", more than " + significant(std::sqrt(most), 3) + ")";
+    if (speed > 0 && !(energy <= std::numeric_limits<double>::max()))
+      return "a kinetic energy out of range of its sums in double (16 x mass x speed^2 / 2 is more than " +
+             significant(std::numeric_limits<double>::max(), 3) + " J)";
+    return {};
+  };
+  const double speed = fastest_speed(scene, particles) + spin;
+  const std::string past = past_at(speed);
+  // Where a wall's motion sets the speed, and the scene would pass without
+  // it, the wall's speed is what to change.
+  const auto wall = past.empty() ? std::nullopt : speeding_wall(scene, particles);
+  if (wall && past_at(fastest_speed(scene, particles, wall->index) + spin).empty())
     throw InputError(scene.walls[wall->index].where, wall->key,
                      "too fast for the spheres' mass: it gives spheres up to " + significant(wall->push, 6) +
                          " m/s (twice a moving wall's speed, or a spinning wall's surface speed), and the movable "

@@ -423,6 +423,12 @@ TEST_F(Robustness, ImpulsesBeyondThePrecisionAreRefused) {
             std::string::npos)
       << pushed.err;
   EXPECT_EQ(marbles("check " + drum + " --set walls[1].cylinder.angular_velocity=10", dir).exit_code, 0);
+  // A slow wall beside spheres too heavy for their fall is not blamed: without its motion they are refused still.
+  const Outcome heavy = marbles("check " + drum + " --set walls[1].cylinder.angular_velocity=0.01 "
+                                "--set materials.a.density=1e21", dir);
+  EXPECT_EQ(heavy.exit_code, 2) << heavy.err;
+  EXPECT_NE(heavy.err.find("particles[0]: sphere 0 of the block"), std::string::npos) << heavy.err;
+  EXPECT_NE(heavy.err.find("too heavy for the scene's speeds"), std::string::npos) << heavy.err;
   // Spheres at rest make no impulse the start can bound: the heaviest double holds is not refused (16 x its mass
   // was inf, and inf x 0 a NaN that refused it).
   EXPECT_EQ(marbles("check " + oblique + " --precision double --set materials.a.density=2.5e307 "

@@ -259,6 +259,22 @@ TEST(SceneFeatures, OverridesChangeOnePlaceOfAnAlias) {
       EXPECT_NE(std::string(e.what()).find(place + ": must be > 0"), std::string::npos) << e.what();
     }
   }
+  // In a tree that shares nodes, an item of a list the scene lacks is refused
+  // as such (it was yaml-cpp's "invalid node", exit 1), and a later override
+  // through an earlier one's value names that override, not a place in its
+  // text taken for the file's.
+  const auto error_of = [&](const std::vector<std::string>& sets) {
+    try {
+      scene::load_scene(path, sets);
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(error_of({"walls[0].velocity=[0,0,1]"}),
+            "--set walls[0].velocity=[0,0,1]: walls: cannot take item [0]: the scene has no list there");
+  EXPECT_EQ(error_of({"materials.x={density: -1, restitution: 0.5}", "materials.x.friction=0.2"}),
+            "--set materials.x={density: -1, restitution: 0.5}: materials.x.density: must be > 0, got -1");
   // A map the override copied keeps its place in the file: a key it lacks is
   // reported at the map's line and column, as without the override.
   const std::string lacking = dir.write("lacking.yaml", SCENE_TIME SCENE_MATERIALS

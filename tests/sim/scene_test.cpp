@@ -425,6 +425,9 @@ const BadOverride kBadOverrides[] = {
     {"vector_item", "particles[0].random.min[2]=1e30",
      "--set particles[0].random.min[2]=1e30: particles[0].random.min: too large for float precision: ..."},
     {"empty_value", "solver.iterations=", "--set solver.iterations=: solver.iterations: expected an integer, got nothing (null)"},
+    // an item of a list the scene lacks: said so (it said "expected a sequence, got a map", a map it made)
+    {"item_of_a_missing_list", "walls[0].velocity=[0,0,1]",
+     "--set walls[0].velocity=[0,0,1]: walls: cannot take item [0]: the scene has no list there"},
     // a key twice in the value: no file line to name (it said "first given at line 0")
     {"duplicate_in_value", "materials.glass={density: 1, density: 2}",
      "--set materials.glass={density: 1, density: 2}: materials.glass: duplicate key 'density'"},
