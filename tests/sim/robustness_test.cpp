@@ -425,7 +425,7 @@ TEST_F(Robustness, ImpulsesBeyondThePrecisionAreRefused) {
   EXPECT_EQ(marbles("check " + drum + " --set walls[1].cylinder.angular_velocity=10", dir).exit_code, 0);
   // A slow wall beside spheres too heavy for their fall is not blamed: without its motion they are refused still.
   const Outcome heavy = marbles("check " + drum + " --set walls[1].cylinder.angular_velocity=0.01 "
-                                "--set materials.a.density=1e21", dir);
+                                "--set materials.a.density=1e22", dir);
   EXPECT_EQ(heavy.exit_code, 2) << heavy.err;
   EXPECT_NE(heavy.err.find("particles[0]: sphere 0 of the block"), std::string::npos) << heavy.err;
   EXPECT_NE(heavy.err.find("too heavy for the scene's speeds"), std::string::npos) << heavy.err;
