@@ -14,6 +14,7 @@
 // solver.renumber hands out copies instead (its step numbers the spheres
 // its own way and replaces the arrays).
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -25,6 +26,7 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <nanobind/nanobind.h>
@@ -121,6 +123,7 @@ class PySimulation {
   // the steps done kept). One thread steps a simulation at a time.
   void step(std::uint64_t n) {
     const Busy busy(*this);
+    const Stepping stepping(*this);
     if (m_views_out) check_views();
     set_thread_count(m_threads);
     // Signals are Python's to handle on its main thread only: another
@@ -129,7 +132,7 @@ class PySimulation {
     const python::GilLetGo release;
     auto last_check = std::chrono::steady_clock::now();
     for (std::uint64_t i = 0; i < n; ++i) {
-      if (i > 0) python::park_if_ending();  // a daemon thread's step as the interpreter ends
+      if (i > 0) python::park_if_ending(signals_here);  // a daemon thread's step as the interpreter ends
       if (signals_here && i > 0 && std::chrono::steady_clock::now() - last_check > std::chrono::milliseconds(100)) {
         last_check = std::chrono::steady_clock::now();
         nb::gil_scoped_acquire acquire;
@@ -153,7 +156,7 @@ class PySimulation {
   // A view of one of the step's own arrays: `what` is position, velocity,
   // angular_velocity (writable), radius or material (read-only).
   nb::object view(const std::string& what) {
-    const Busy busy(*this);
+    const Busy busy(*this, Busy::reads);
     check_array_name(what);
     nb::object owner = nb::find(this);
     const BodiesView v = m_sim->state_in_place();
@@ -180,7 +183,7 @@ class PySimulation {
 
   // A host copy of one array (any backend).
   nb::object copy(const std::string& what) {
-    const Busy busy(*this);
+    const Busy busy(*this, Busy::reads);
     check_array_name(what);
     if (m_views_out) m_sim->state_written();  // device views may have been written
     const World& w = m_sim->world();
@@ -219,7 +222,7 @@ class PySimulation {
 
   // --- what the step knows ------------------------------------------------
   nb::dict contacts() {
-    const Busy busy(*this);
+    const Busy busy(*this, Busy::reads);
     if (m_views_out) check_views();
     const render::ContactSnapshot c = make_contact_snapshot(*m_sim);
     const std::size_t m = c.sphere_a.size();
@@ -243,7 +246,7 @@ class PySimulation {
   // A state written non-finite through a view is refused here too (as by
   // step, write_frame and checkpoint), not summed into a NaN.
   double kinetic_energy() {
-    const Busy busy(*this);
+    const Busy busy(*this, Busy::reads);
     if (m_views_out) check_views();
     return m_sim->world().kinetic_energy();
   }
@@ -287,9 +290,12 @@ class PySimulation {
       it->second->stands = true;
       return written.string();
     } catch (...) {
-      // A series with no frame yet ends here: the folder is let go, and an
-      // earlier run set aside stays whole beside it (its note says where).
-      if (!it->second->stands) m_frames.erase(it);
+      // A series with no frame yet ends here: the earlier run set aside goes
+      // back (nothing took its place), and the folder is let go.
+      if (!it->second->stands) {
+        if (it->second->aside) it->second->aside->put_back();
+        m_frames.erase(it);
+      }
       throw;
     }
   }
@@ -339,7 +345,7 @@ class PySimulation {
 
   // The reference's verdict so far (kind, expected, measured, error, note).
   nb::object reference() {
-    const Busy busy(*this);
+    const Busy busy(*this, Busy::reads);
     if (!m_probe) return nb::none();
     if (m_views_out) check_views();
     ReferenceProbe probe = *m_probe;  // finish() on a copy: stepping may go on
@@ -354,7 +360,7 @@ class PySimulation {
   }
 
   nb::dict totals() const {
-    const Busy busy(*this);
+    const Busy busy(*this, Busy::reads);
     const double steps = std::max<double>(1, static_cast<double>(m_sim->steps()));
     nb::dict d;
     d["mean_candidate_pairs"] = m_totals.candidate_sum / steps;
@@ -369,7 +375,7 @@ class PySimulation {
 
   // summary.json's figures of the world at its end, beside kinetic_energy_end.
   nb::dict end_figures() const {
-    const Busy busy(*this);
+    const Busy busy(*this, Busy::reads);
     nb::dict d;
     for (const EndFigure& f : ::marbles::end_figures(m_sim->world())) d[f.name] = f.value;
     return d;
@@ -442,13 +448,31 @@ class PySimulation {
   bool m_views_out = false;
   // Held by the call that steps or changes the simulation: a call from
   // another thread meanwhile (step() lets the GIL go) is refused, not raced.
+  // A reader called from within the step's own thread (a Python signal
+  // handler, run at the step's look for Ctrl-C between two steps, where the
+  // state is whole) reads; a call that would step or change it there is
+  // refused (and never try_locks the mutex its thread holds).
   mutable std::mutex m_busy;
+  mutable std::atomic<std::thread::id> m_stepping{};  // the thread inside step(), where one is
   struct Busy {
+    enum Kind { changes, reads };
     std::unique_lock<std::mutex> lock;
-    explicit Busy(const PySimulation& s) : lock(s.m_busy, std::try_to_lock) {
+    explicit Busy(const PySimulation& s, Kind kind = changes) {
+      if (s.m_stepping.load() == std::this_thread::get_id()) {
+        if (kind == reads) return;
+        throw RuntimeFailure("this Simulation is stepping in this thread (a signal handler during step()): read it "
+                             "there, step or change it once step() has returned");
+      }
+      lock = std::unique_lock<std::mutex>(s.m_busy, std::try_to_lock);
       if (!lock.owns_lock())
         throw RuntimeFailure("this Simulation is stepping in another thread; step or change it from one thread at a time");
     }
+  };
+  // step()'s thread, named while it steps.
+  struct Stepping {
+    const PySimulation& s;
+    explicit Stepping(const PySimulation& sim) : s(sim) { s.m_stepping.store(std::this_thread::get_id()); }
+    ~Stepping() { s.m_stepping.store(std::thread::id{}); }
   };
   static std::string plural(const std::string& what) {
     return what == "velocity" ? "velocities" : what == "angular_velocity" ? "angular_velocities" : what + "s";
@@ -542,7 +566,7 @@ nb::object pairs(HostArray<const real, kAny, 4> xyzr, const std::string& algorit
     const auto alg = algorithm == "home" ? broadphase::Algorithm::home : broadphase::Algorithm::seed;
     auto bp = where == broadphase::Backend::cuda ? broadphase::make_subdivision_cuda(alg)
                                                  : broadphase::make_subdivision_cpu(alg);
-    nb::gil_scoped_release release;
+    const python::GilLetGo release;
     try {
       bp->find_pairs(in, static_cast<real>(margin), found);
     } catch (const broadphase::SpanTooLarge& e) {

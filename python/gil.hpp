@@ -25,8 +25,11 @@ inline std::atomic<bool> ending{false};
 inline std::atomic<int> let_go{0};  // calls that let go of the GIL and have not taken it back
 inline std::atomic<int> parked{0};  // of those, the ones waiting for the process's end
 
-// Where the interpreter is ending, never returns (the process's end stops the thread).
-inline void park_if_ending() {
+// Where the interpreter is ending, never returns (the process's end stops
+// the thread); not on the main thread (`main`), which the end never stops
+// and which may step in an atexit hook of its own, run after the module's.
+inline void park_if_ending(bool main) {
+  if (main) return;
 #if PY_VERSION_HEX >= 0x030D0000
   const bool finalizing = Py_IsFinalizing() != 0;
 #else
@@ -38,15 +41,16 @@ inline void park_if_ending() {
 }
 
 // The GIL let go for a call (made with the GIL held), taken back at its end
-// unless the interpreter is ending.
+// unless the interpreter is ending. Every call that lets the GIL go for long
+// uses it (the step, pairs(), the study).
 class GilLetGo {
  public:
-  GilLetGo() {
+  GilLetGo() : m_main(_PyOS_IsMainThread() != 0) {
     let_go.fetch_add(1);  // with the GIL held: at_exit, which holds it too, counts this call
     m_state = PyEval_SaveThread();
   }
   ~GilLetGo() {
-    park_if_ending();
+    park_if_ending(m_main);
     PyEval_RestoreThread(m_state);
     let_go.fetch_sub(1);
   }
@@ -54,6 +58,7 @@ class GilLetGo {
   GilLetGo& operator=(const GilLetGo&) = delete;
 
  private:
+  bool m_main;  // on Python's main thread (asked with the GIL held)
   PyThreadState* m_state = nullptr;
 };
 

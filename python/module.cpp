@@ -50,6 +50,7 @@ nb::list study(const std::string& scene_path, const std::vector<std::string>& va
   // Ctrl-C (Python's, on its main thread: a notebook's interrupt reaches this
   // process alone, not its runs) stops the study between two looks, its run
   // ended, and raises KeyboardInterrupt; the earlier study stays whole.
+  // In another thread, the interpreter's end stops it (python/gil.hpp).
   std::exception_ptr interrupt;
   if (_PyOS_IsMainThread())
     options.stop = [&interrupt] {
@@ -62,10 +63,12 @@ nb::list study(const std::string& scene_path, const std::vector<std::string>& va
       }
       return true;
     };
+  else
+    options.stop = [] { return marbles::python::ending.load(); };
   std::ostringstream out, err;
   marbles::StudyResult result;
   try {
-    nb::gil_scoped_release release;
+    const marbles::python::GilLetGo release;
     result = marbles::run_study(options, out, err);
   } catch (const marbles::StudyStopped&) {
     if (interrupt) std::rethrow_exception(interrupt);

@@ -293,6 +293,32 @@ EarlierRunAside::~EarlierRunAside() {
           << "\n";
 }
 
+void EarlierRunAside::put_back() {
+  namespace fs = std::filesystem;
+  if (m_folder.empty()) return;
+  const fs::path dir = m_folder.parent_path();
+  std::error_code ec;
+  std::vector<fs::path> files;
+  for (auto it = fs::recursive_directory_iterator(m_folder, ec); !ec && it != fs::recursive_directory_iterator();
+       it.increment(ec))
+    if (it->is_regular_file(ec)) files.push_back(it->path());
+  bool all = !ec;
+  for (const fs::path& file : files) {
+    const fs::path to = dir / file.lexically_relative(m_folder);
+    std::error_code moved;
+    if (fs::exists(to, moved)) {  // taken meanwhile: the earlier file stays aside
+      all = false;
+      continue;
+    }
+    fs::create_directories(to.parent_path(), moved);
+    if (!moved) move_file(file, to, moved);
+    all = all && !moved;
+  }
+  if (!all) return;
+  fs::remove_all(m_folder, ec);
+  m_folder.clear();
+}
+
 void EarlierRunAside::discard() {
   if (m_folder.empty()) return;
   std::error_code ec;

@@ -90,6 +90,10 @@ class EarlierRunAside {
   EarlierRunAside(const EarlierRunAside&) = delete;
   EarlierRunAside& operator=(const EarlierRunAside&) = delete;
   void discard();
+  // Where nothing took their places (a series whose first frame failed),
+  // the files go back where they were; those that cannot stay aside, and
+  // the destructor says where.
+  void put_back();
 
  private:
   std::filesystem::path m_folder;  // empty: nothing set aside

@@ -108,8 +108,17 @@ int run_process(const std::vector<std::string>& args, const std::string& log,
       } catch (...) {  // as a stop: the run is not left behind
       }
       if (stopping) {
+        // Asked to end (a run stops at its next step); one that has not after 10 s is killed.
         ::kill(pid, SIGTERM);
-        while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+        bool ended = false;
+        for (int k = 0; k < 100 && !ended; ++k) {
+          ended = waitpid(pid, &status, WNOHANG) != 0;
+          if (!ended) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        }
+        if (!ended) {
+          ::kill(pid, SIGKILL);
+          while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+          }
         }
         throw StudyStopped();
       }

@@ -35,7 +35,7 @@ struct StudyOptions {
   std::string marbles = "/proc/self/exe";  // the program that runs each combination
   bool progress = true;
   // Asked about every 50 ms while a run runs (from the study's thread): true
-  // stops the study, its run killed (SIGTERM), with StudyStopped. The Python
+  // stops the study, its run ended (SIGTERM; SIGKILL after 10 s), with StudyStopped. The Python
   // module's Ctrl-C, whose signal reaches its process alone (a notebook's
   // interrupt), not the runs.
   std::function<bool()> stop;

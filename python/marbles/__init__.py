@@ -88,12 +88,20 @@ def _overrides(set):
     if set is None:
         return []
     if isinstance(set, dict):
-        return [f"{key}={_yaml_text(value, key)}" for key, value in set.items()]
-    if isinstance(set, str):
-        return [set]
-    if not hasattr(set, "__iter__"):
+        texts = [f"{key}={_yaml_text(value, key)}" for key, value in set.items()]
+    elif isinstance(set, str):
+        texts = [set]
+    elif not hasattr(set, "__iter__"):
         raise TypeError(f"set: a dict of key -> value, or a list of 'key=value' texts, got {set!r}")
-    return [str(item) for item in set]
+    else:
+        texts = [str(item) for item in set]
+    for text in texts:  # a lone surrogate ("\ud800"), in a key or a text: no scene text holds it
+        try:
+            text.encode("utf-8")
+        except UnicodeEncodeError:
+            raise SceneError(f"set: not UTF-8 text: {text!r}", key="set", message=f"not UTF-8 text: {text!r}") \
+                from None
+    return texts
 
 
 def _plain(value, key):

@@ -2,6 +2,7 @@
 # place it names (file, line, column, key), as the command line says it.
 import functools
 import json
+import math
 import os
 import pathlib
 import re
@@ -128,25 +129,28 @@ def test_readers_in_another_thread_wait_for_no_step_and_never_race_it(pile):
     # from a thread while another steps are refused (RuntimeFailure), not
     # run beside the step (which crashed the interpreter, most often with
     # solver.renumber, whose host copy the readers make); len() and the
-    # pipeline are read. What a reader gets between steps is the stepper's.
+    # pipeline are read. The readers leave the run's bits as they were.
     import threading
     for renumber in (0, 1):
         sim = marbles.Simulation.from_dict(pile, backend="cpu", threads=1, set={"solver.renumber": renumber})
         stepper = threading.Thread(target=sim.step, args=(400,))
         stepper.start()
-        read, refused = 0, []
+        refused = []
         while stepper.is_alive():
             for reader in (sim.contacts, sim.kinetic_energy, lambda: sim.positions, sim.summary, sim.reference,
                            lambda: sim.velocities.copy(), lambda: len(sim), lambda: sim.pipeline):
                 try:
                     reader()
-                    read += 1
                 except marbles.RuntimeFailure as e:
                     refused.append(str(e))
         stepper.join()
-        assert sim.steps == 400 and read > 0
+        assert sim.steps == 400
         assert refused and all("stepping in another thread" in r for r in refused)
-        assert np.isfinite(sim.kinetic_energy()) and len(sim.contacts()["pairs"]) > 0
+        # The readers left the run as it was: the same bits as a run no one read.
+        alone = marbles.Simulation.from_dict(pile, backend="cpu", threads=1, set={"solver.renumber": renumber})
+        alone.step(400)
+        assert np.array_equal(sim.positions, alone.positions) and np.array_equal(sim.velocities, alone.velocities)
+        assert sim.kinetic_energy() == alone.kinetic_energy()
 
 
 def test_a_step_left_running_at_the_end_of_a_script_ends_quietly(pile, tmp_path):
@@ -154,9 +158,14 @@ def test_a_step_left_running_at_the_end_of_a_script_ends_quietly(pile, tmp_path)
     # the end (the process ends with the script's status), where taking
     # the GIL back aborted the process ("terminate called without an
     # active exception"); its simulation is not reported as leaked.
+    # So do pairs() called again and again in daemon threads; and a step on
+    # the main thread in an atexit hook that runs after the module's (it had
+    # parked there for ever).
     script = tmp_path / "left.py"
     script.write_text(
-        "import json, sys, threading, time, marbles\n"
+        "import atexit, json, sys, threading, time\n"
+        "atexit.register(lambda: print('last step', sim.step(3).steps, flush=True))\n"
+        "import marbles, numpy as np\n"
         f"sim = marbles.Simulation.from_dict(json.loads({json.dumps(json.dumps(pile))}), threads=1)\n"
         "threading.Thread(target=sim.step, args=(10**9,), daemon=True).start()\n"
         "other = marbles.Simulation.from_dict(json.loads(" + repr(json.dumps(pile)) + "), threads=1)\n"
@@ -164,15 +173,57 @@ def test_a_step_left_running_at_the_end_of_a_script_ends_quietly(pile, tmp_path)
         "    while True:\n"
         "        other.step()\n"  # a step that ends, and takes the GIL back, again and again
         "threading.Thread(target=loop, daemon=True).start()\n"
+        "xyzr = np.random.default_rng(1).uniform(0, 1, (20000, 4)).astype(np.float32)\n"
+        "xyzr[:, 3] = 0.004\n"
+        "def search():\n"
+        "    while True:\n"
+        "        marbles.pairs(xyzr)\n"
+        "for _ in range(2):\n"
+        "    threading.Thread(target=search, daemon=True).start()\n"
         "time.sleep(0.5)\n"
         "print('ending', flush=True)\n"
+        "sim = marbles.Simulation.from_dict(json.loads(" + repr(json.dumps(pile)) + "), threads=1)\n"
         "sys.exit(3)\n")
     for _ in range(3):
         ended = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
                                env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
         assert ended.returncode == 3, ended.stderr
-        assert ended.stdout == "ending\n" and "leaked" not in ended.stderr and "terminate" not in ended.stderr, \
-            ended.stderr
+        assert ended.stdout == "ending\nlast step 3\n", ended.stdout
+        assert "leaked" not in ended.stderr and "terminate" not in ended.stderr, ended.stderr
+
+
+def test_a_signal_handler_reads_the_simulation_it_interrupts(pile):
+    # Python runs a signal handler in the stepping thread, between two steps
+    # (where step() looks for Ctrl-C): there it may read the simulation
+    # (readers had been refused as "stepping in another thread"), but not
+    # step or change it.
+    import signal
+    sim = marbles.Simulation.from_dict(pile, backend="cpu", threads=1)
+    read, refused = [], []
+
+    def handler(*_):
+        read.append(sim.kinetic_energy())
+        read.append(len(sim.contacts()["pairs"]))
+        if len(read) >= 6:
+            try:
+                sim.step(1)
+            except marbles.RuntimeFailure as e:
+                refused.append(str(e))
+            raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGALRM, handler)
+    signal.setitimer(signal.ITIMER_REAL, 0.15, 0.15)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            sim.step(10**9)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    assert len(read) >= 6 and all(math.isfinite(v) for v in read)
+    assert refused and "stepping in this thread (a signal handler during step())" in refused[0]
+    done = sim.steps
+    sim.step(2)  # the simulation goes on
+    assert sim.steps == done + 2
 
 
 def test_a_study_stops_on_an_interrupt_and_leaves_the_earlier_one_whole(tmp_path):
@@ -556,6 +607,8 @@ def test_arguments_of_the_wrong_kind_are_named(pile, tmp_path):
         (lambda: setattr(sim, "velocities", "abc"), TypeError, "velocities: an array of numbers"),
         (lambda: setattr(sim, "positions", [[0, 0]] * len(sim)), ValueError, r"positions: expected shape"),
         (lambda: marbles.Simulation(ball, set={"name": "\ud800"}), marbles.SceneError, "set: name: not UTF-8 text"),
+        (lambda: marbles.Simulation(ball, set=["name=\ud800"]), marbles.SceneError, "set: not UTF-8 text"),
+        (lambda: marbles.Simulation(ball, set={"na\ud800me": 1}), marbles.SceneError, "set: not UTF-8 text"),
         (lambda: sim.checkpoint(3.5), TypeError, "checkpoint: path: a path"),
         (lambda: marbles.pairs(np.zeros((2, 4)), algorithm=None), TypeError, "algorithm: one of home"),
         (lambda: marbles.pairs(np.zeros((2, 4)), backend=None), TypeError, "backend: one of"),
