@@ -36,10 +36,10 @@
 #include <nanobind/stl/vector.h>
 
 #include "broadphase/grid.hpp"
-#include "python/gil.hpp"
 #include "core/error.hpp"
 #include "core/format.hpp"
 #include "core/parallel.hpp"
+#include "python/gil.hpp"
 #include "render/atomic_file.hpp"
 #include "render/vtk_output.hpp"
 #include "sim/checkpoint.hpp"

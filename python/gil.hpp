@@ -7,10 +7,10 @@
 // ended aborted the process ("terminate called without an active
 // exception"). So the module's atexit hook (at_exit, python/module.cpp),
 // which runs before the interpreter lets such threads go, sets `ending` and
-// lets go of the GIL until every step it let go of the GIL for has either
-// taken the GIL back or parked: a step that meets `ending` (between two of
-// its steps, or at its end) waits without the GIL until the process ends,
-// as Python 3.14 makes such threads wait.
+// lets go of the GIL until every call that let go of it has either taken it
+// back or parked: a call that meets `ending` off the main thread (a step
+// between two of its steps, any call at its end) waits without the GIL until
+// the process ends, as Python 3.14 makes such threads wait.
 #pragma once
 
 #include <atomic>

@@ -6,8 +6,8 @@
 #include <chrono>
 #include <exception>
 #include <sstream>
-#include <thread>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <nanobind/nanobind.h>
@@ -15,8 +15,8 @@
 #include <nanobind/stl/vector.h>
 
 #include "core/device.hpp"
-#include "python/gil.hpp"
 #include "core/error.hpp"
+#include "python/gil.hpp"
 #include "sim/checkpoint.hpp"
 #include "sim/limits.hpp"
 #include "sim/scene.hpp"
@@ -100,10 +100,10 @@ NB_MODULE(_marbles, m) {
   m.def("scene_precision", &marbles::scene::scene_precision, nb::arg("path"), nb::arg("overrides"));
   m.def("scene_precision_json", &marbles::scene::scene_precision_json, nb::arg("text"), nb::arg("overrides"));
   m.def("checkpoint_precision", &marbles::checkpoint_precision, nb::arg("path"));
-  // The interpreter's end (atexit, python/gil.hpp): each step that let go
-  // of the GIL takes it back or parks before the interpreter lets its
-  // threads go. A parked step holds its simulation, which nanobind would
-  // otherwise report as leaked.
+  // The interpreter's end (atexit, python/gil.hpp): each call that let go
+  // of the GIL (a step, pairs(), a study) takes it back or parks before the
+  // interpreter lets its threads go. A parked step holds its simulation,
+  // which nanobind would otherwise report as leaked.
   m.def("at_exit", [] {
     namespace py = marbles::python;
     py::ending = true;

@@ -83,7 +83,8 @@ double median(std::vector<double> v) {
 
 // Runs argv[0] (a path, or a name looked up on PATH) with stdout and stderr
 // to `log`, no shell between; returns its exit status (-1 if it did not exit).
-// Where `stop` says so while it runs, it is ended (SIGTERM) and StudyStopped thrown.
+// Where `stop` says so while it runs, it is ended (SIGTERM; SIGKILL after
+// 10 s) and StudyStopped thrown.
 int run_process(const std::vector<std::string>& args, const std::string& log,
                 const std::function<bool()>& stop = {}) {
   std::vector<char*> argv;
