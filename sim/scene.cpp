@@ -800,6 +800,22 @@ class MergeKeys {
   std::vector<YAML::Node> m_chain;  // the maps and lists being resolved, outermost first
 };
 
+// Whether the text, its comments and document markers aside, is YAML's null
+// alone (yaml-cpp reads it as it reads a document it could not read).
+bool null_yaml(const std::string& text) {
+  std::string rest;
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);) {
+    if (const std::size_t hash = line.find(" #"); hash != std::string::npos) line.erase(hash);
+    const std::size_t first = line.find_first_not_of(" \t\r");
+    if (first == std::string::npos || line[first] == '#') continue;
+    line = line.substr(first, line.find_last_not_of(" \t\r") - first + 1);
+    if (line == "---" || line == "...") continue;
+    rest += line;
+  }
+  return rest == "~" || rest == "null" || rest == "Null" || rest == "NULL";
+}
+
 // A scene's tree is a map of keys.
 void expect_scene_map(const YAML::Node& document, const std::string& source) {
   const Field root(document, "", source);
@@ -822,6 +838,14 @@ YAML::Node read_document(const std::string& path) {
     throw InputError(SourceLocation{path, static_cast<int>(line), static_cast<int>(column)}, "",
                      not_utf8_text(text, at) + " (save the file as UTF-8)");
   }
+  // A NUL byte is no text (yaml-cpp read one as a bad escape): where it stands.
+  if (const std::size_t at = text.find('\0'); at != std::string::npos && !utf16_or_32) {
+    const std::size_t line_start = text.rfind('\n', at);
+    const auto line = 1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n');
+    const std::size_t column = at - (line_start == std::string::npos ? 0 : line_start + 1) + 1;
+    throw InputError(SourceLocation{path, static_cast<int>(line), static_cast<int>(column)}, "",
+                     "a NUL byte: not text (a binary file, or one saved as UTF-16 without its byte order mark?)");
+  }
   YAML::Node document;
   std::size_t count = 0;
   YAML::Mark second;
@@ -835,6 +859,9 @@ YAML::Node read_document(const std::string& path) {
     throw InputError(detail::location_of(path, e.mark), "", "not valid YAML: " + printable(e.msg));
   }
   if (document.IsNull() && blank_yaml(text)) throw InputError(SourceLocation{path, 0, 0}, "", "the scene file is empty");
+  if (document.IsNull() && null_yaml(text))  // `~` or `null`: a document, but no map
+    throw InputError(SourceLocation{path, 1, 1}, "",
+                     "a scene is a map of keys (time, materials, particles, ...), got nothing (null)");
   if (document.IsNull())
     throw InputError(SourceLocation{path, 1, 1}, "", "not valid YAML: no document could be read (does it begin with "
                                                      "a stray ',', '-' or ':'?)");

@@ -161,6 +161,10 @@ inline const std::vector<BadScene>& bad_scenes() {
        "every pair; --limit materials=N raises it)"},
       {"empty_file", "", "{scene}: the scene file is empty"},
       {"only_comments", "# nothing here\n", "{scene}: the scene file is empty"},
+      // YAML's null alone: a document, not a map (it was "no document could be read")
+      {"null_document", "~\n", "{scene}:1:1: a scene is a map of keys (time, materials, particles, ...), got nothing (null)"},
+      {"null_word", "# a scene\n---\nnull  # for now\n",
+       "{scene}:1:1: a scene is a map of keys (time, materials, particles, ...), got nothing (null)"},
       {"leading_comma", ",", "{scene}:1:1: not valid YAML: no document could be read (does it begin with a stray ',', "
        "'-' or ':'?)"},
       {"leading_comma_then_map", ",a: 1\n", "{scene}:1:1: not valid YAML: no document could be read (does it begin "

@@ -327,6 +327,20 @@ TEST(SceneLoad, UnicodeTextOnly) {
   }
 }
 
+// A NUL byte in a scene file is refused where it stands (yaml-cpp read one
+// as an escape: "unknown escape character: m").
+TEST(SceneFile, ANulByteIsRefusedWhereItStands) {
+  const ScratchDir dir("nul_byte");
+  const std::string path = dir.write("s.yaml", std::string(SCENE_TIME) + std::string("na\0me: x\n", 9));
+  try {
+    load_scene(path);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), path + ":2:3: a NUL byte: not text (a binary file, or one saved as UTF-16 "
+                                           "without its byte order mark?)");
+  }
+}
+
 // first_non_utf8 against RFC 3629's table: whole characters of one to four
 // bytes pass; a stray continuation byte, an overlong form, a surrogate, a
 // character past U+10FFFF, a byte that never occurs and a cut character are
