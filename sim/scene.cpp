@@ -838,13 +838,16 @@ YAML::Node read_document(const std::string& path) {
     throw InputError(SourceLocation{path, static_cast<int>(line), static_cast<int>(column)}, "",
                      not_utf8_text(text, at) + " (save the file as UTF-8)");
   }
-  // A NUL byte is no text (yaml-cpp read one as a bad escape): where it stands.
-  if (const std::size_t at = text.find('\0'); at != std::string::npos && !utf16_or_32) {
+  // A NUL byte is no text (yaml-cpp read one as a bad escape): where it
+  // stands. Not in UTF-16/32 without a mark, which YAML tells by the NUL
+  // bytes around the first character (as the reader does).
+  const bool unmarked_wide = text.size() >= 2 && (text[0] == '\0' || text[1] == '\0');
+  if (const std::size_t at = text.find('\0'); at != std::string::npos && !utf16_or_32 && !unmarked_wide) {
     const std::size_t line_start = text.rfind('\n', at);
     const auto line = 1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n');
     const std::size_t column = at - (line_start == std::string::npos ? 0 : line_start + 1) + 1;
     throw InputError(SourceLocation{path, static_cast<int>(line), static_cast<int>(column)}, "",
-                     "a NUL byte: not text (a binary file, or one saved as UTF-16 without its byte order mark?)");
+                     "a NUL byte: not text (a binary file?)");
   }
   YAML::Node document;
   std::size_t count = 0;
