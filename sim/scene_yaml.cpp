@@ -183,22 +183,31 @@ void Field::took(const std::string& value) const {
   if (m_origins && is_scalar()) m_origins->took(m_key, m_node.Scalar(), value);
 }
 
-double Field::number() const {
-  const double value = finite_number();
-  took("n:" + shortest(value));
-  return value;
-}
+double Field::number() const { return taken(parsed_number()); }
 
-double Field::finite_number() const {
+double Field::finite_number() const { return in_precision(parsed_number()); }
+
+double Field::parsed_number() const {
   if (!is_scalar()) fail("expected a number, got " + description());
   const std::string& text = m_node.Scalar();
   if (is_yaml_non_finite(text)) fail("must be a finite number, got " + text);
   double value = 0;
   if (!parse_double(text, value)) fail("expected a number, got " + description());
   if (!std::isfinite(value)) fail("must be a finite number, got " + text);
-  // Every value reaches the step as `real`: it must stay finite, and a
-  // non-zero one non-zero, in the precision of the run.
-  if (const std::string problem = real_range_problem(value, true); !problem.empty()) fail(problem + ", got " + text);
+  return value;
+}
+
+// Every value reaches the step as `real`: it must stay finite, and a
+// non-zero one non-zero, in the precision of the run.
+double Field::in_precision(double value) const {
+  if (const std::string problem = real_range_problem(value, true); !problem.empty())
+    fail(problem + ", got " + m_node.Scalar());
+  return value;
+}
+
+double Field::taken(double value) const {
+  in_precision(value);
+  took("n:" + shortest(value));
   return value;
 }
 
@@ -213,23 +222,25 @@ std::string real_range_problem(double value, bool bound) {
   return "";
 }
 
+// The key's own bounds before the precision's: a restitution of -1e-300
+// is outside [0, 1], not "too small for float precision".
 double Field::positive() const {
-  const double v = number();
+  const double v = parsed_number();
   if (!(v > 0)) fail("must be > 0, got " + m_node.Scalar());
-  return v;
+  return taken(v);
 }
 
 double Field::non_negative() const {
-  const double v = number();
+  const double v = parsed_number();
   if (!(v >= 0)) fail("must be >= 0, got " + m_node.Scalar());
-  return v;
+  return taken(v);
 }
 
 double Field::within(double lo, double hi) const {
-  const double v = number();
+  const double v = parsed_number();
   if (!(v >= lo && v <= hi))
     fail("must be within [" + shortest(lo) + ", " + shortest(hi) + "], got " + m_node.Scalar());
-  return v;
+  return taken(v);
 }
 
 long long Field::integer() const {

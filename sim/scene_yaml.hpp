@@ -133,6 +133,9 @@ class Field {
 
  private:
   double finite_number() const;  // number() without the fingerprint's record
+  double parsed_number() const;  // a finite double, the precision not asked
+  double in_precision(double value) const;  // `value`, refused where the run's precision cannot hold it
+  double taken(double value) const;         // in_precision, and the fingerprint's record
   void took(const std::string& value) const;  // Origins::took of this scalar
 
   YAML::Node m_node;

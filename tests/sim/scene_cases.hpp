@@ -127,6 +127,12 @@ inline const std::vector<BadScene>& bad_scenes() {
        "rebound_heights, time_to_rest, incline, slide_to_roll, oblique_rebound, kinetic_energy, momentum, finest"},
       {"restitution_range", SCENE_TIME "materials:\n  glass: {density: 2500, restitution: 1.3}\n" SCENE_PARTICLES,
        "{scene}:3:39: materials.glass.restitution: must be within [0, 1], got 1.3"},
+      // the key's own bounds before the precision's (they said "too small for float precision")
+      {"restitution_tiny_negative",
+       SCENE_TIME "materials:\n  glass: {density: 2500, restitution: -1e-300}\n" SCENE_PARTICLES,
+       "{scene}:3:39: materials.glass.restitution: must be within [0, 1], got -1e-300"},
+      {"density_tiny_negative", SCENE_TIME "materials:\n  glass: {density: -1e-300}\n" SCENE_PARTICLES,
+       "{scene}:3:20: materials.glass.density: must be > 0, got -1e-300"},
       {"friction_negative", SCENE_TIME "materials:\n  glass: {friction: -0.2}\n" SCENE_PARTICLES,
        "{scene}:3:21: materials.glass.friction: must be >= 0, got -0.2"},
       {"no_materials", SCENE_TIME "materials: {}\n" SCENE_PARTICLES,
