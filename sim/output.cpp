@@ -165,14 +165,6 @@ std::string earlier_run_text(const std::string& dir, const std::vector<std::file
          files.front().filename().string() + ")";
 }
 
-void remove_earlier_run(const std::vector<std::filesystem::path>& files) {
-  for (const std::filesystem::path& file : files) {
-    std::error_code ec;
-    std::filesystem::remove(file, ec);
-    if (ec) throw RuntimeFailure("cannot remove " + file.string() + " of the earlier run: " + ec.message());
-  }
-}
-
 RunFolderLock::RunFolderLock(const std::filesystem::path& dir, const std::string& option) {
   namespace fs = std::filesystem;
   std::error_code ec;
@@ -255,7 +247,6 @@ EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::ve
   fs::path folder = base;
   std::error_code ec;
   for (int k = 2; fs::exists(folder, ec); ++k) folder = base.string() + "." + std::to_string(k);
-  std::vector<std::pair<fs::path, fs::path>> done;  // from, to
   auto place = [&](const fs::path& file, bool copy) {
     const fs::path to = folder / file.lexically_relative(dir);
     fs::create_directories(to.parent_path(), ec);
@@ -264,7 +255,7 @@ EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::ve
       fs::copy_file(file, to, ec);
     } else {
       move_file(file, to, ec);
-      if (!ec) done.emplace_back(file, to);
+      if (!ec) m_moved.emplace_back(file, to);
     }
   };
   for (const fs::path& file : copied)
@@ -277,11 +268,7 @@ EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::ve
   }
   // Put back what was moved: the earlier run stays as it was.
   const std::string why = ec.message();
-  bool back = true;
-  for (auto it = done.rbegin(); it != done.rend(); ++it) {
-    move_file(it->second, it->first, ec);
-    back = back && !ec;
-  }
+  const bool back = move_back();
   if (back) fs::remove_all(folder, ec);
   throw RuntimeFailure("cannot set the earlier run's files aside in " + folder.string() + ": " + why +
                        (back ? " (they are left as they were)" : " (what could not be put back lies there)"));
@@ -293,29 +280,24 @@ EarlierRunAside::~EarlierRunAside() {
           << "\n";
 }
 
-void EarlierRunAside::put_back() {
-  namespace fs = std::filesystem;
-  if (m_folder.empty()) return;
-  const fs::path dir = m_folder.parent_path();
-  std::error_code ec;
-  std::vector<fs::path> files;
-  for (auto it = fs::recursive_directory_iterator(m_folder, ec); !ec && it != fs::recursive_directory_iterator();
-       it.increment(ec))
-    if (it->is_regular_file(ec)) files.push_back(it->path());
-  bool all = !ec;
-  for (const fs::path& file : files) {
-    const fs::path to = dir / file.lexically_relative(m_folder);
-    std::error_code moved;
-    if (fs::exists(to, moved)) {  // taken meanwhile: the earlier file stays aside
+bool EarlierRunAside::move_back() {
+  bool all = true;
+  for (auto it = m_moved.rbegin(); it != m_moved.rend(); ++it) {
+    std::error_code ec;
+    if (std::filesystem::exists(it->first, ec)) {  // taken meanwhile: the earlier file stays aside
       all = false;
       continue;
     }
-    fs::create_directories(to.parent_path(), moved);
-    if (!moved) move_file(file, to, moved);
-    all = all && !moved;
+    move_file(it->second, it->first, ec);
+    all = all && !ec;
   }
-  if (!all) return;
-  fs::remove_all(m_folder, ec);
+  return all;
+}
+
+void EarlierRunAside::put_back() {
+  if (m_folder.empty() || !move_back()) return;
+  std::error_code ec;
+  std::filesystem::remove_all(m_folder, ec);
   m_folder.clear();
 }
 

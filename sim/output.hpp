@@ -48,8 +48,6 @@ ReplacedFiles run_files_past(const std::filesystem::path& dir, std::uint64_t ste
 // "DIR holds the output of an earlier run (N files, e.g. NAME)": a refusal's
 // first words, its remedy the caller's (`files` not empty).
 std::string earlier_run_text(const std::string& dir, const std::vector<std::filesystem::path>& files);
-// Removes them (overwriting that run); RuntimeFailure naming a file that stays.
-void remove_earlier_run(const std::vector<std::filesystem::path>& files);
 
 // One command at a time writing in an output folder (run, study, render):
 // DIR/.marbles-run.lock, locked (flock) from before the check for an
@@ -96,7 +94,11 @@ class EarlierRunAside {
   void put_back();
 
  private:
+  // The moved files back where they were (those whose place is free); all of them?
+  bool move_back();
+
   std::filesystem::path m_folder;  // empty: nothing set aside
+  std::vector<std::pair<std::filesystem::path, std::filesystem::path>> m_moved;  // from, to
   std::ostream& m_log;
 };
 

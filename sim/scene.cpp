@@ -831,24 +831,21 @@ YAML::Node read_document(const std::string& path) {
   // read as a mark ("\xff\xfe"), so they are refused where they stand.
   const bool utf16_or_32 = text.starts_with("\xfe\xff") || text.starts_with("\xff\xfe") ||
                            text.starts_with(std::string_view("\0\0\xfe\xff", 4));
-  if (const std::size_t at = first_non_utf8(text); at != std::string::npos && !utf16_or_32) {
+  // The line and column of the byte at `at`.
+  const auto place_of = [&](std::size_t at) {
     const std::size_t line_start = text.rfind('\n', at);
     const auto line = 1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n');
     const std::size_t column = at - (line_start == std::string::npos ? 0 : line_start + 1) + 1;
-    throw InputError(SourceLocation{path, static_cast<int>(line), static_cast<int>(column)}, "",
-                     not_utf8_text(text, at) + " (save the file as UTF-8)");
-  }
+    return SourceLocation{path, static_cast<int>(line), static_cast<int>(column)};
+  };
+  if (const std::size_t at = first_non_utf8(text); at != std::string::npos && !utf16_or_32)
+    throw InputError(place_of(at), "", not_utf8_text(text, at) + " (save the file as UTF-8)");
   // A NUL byte is no text (yaml-cpp read one as a bad escape): where it
   // stands. Not in UTF-16/32 without a mark, which YAML tells by the NUL
   // bytes around the first character (as the reader does).
   const bool unmarked_wide = text.size() >= 2 && (text[0] == '\0' || text[1] == '\0');
-  if (const std::size_t at = text.find('\0'); at != std::string::npos && !utf16_or_32 && !unmarked_wide) {
-    const std::size_t line_start = text.rfind('\n', at);
-    const auto line = 1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n');
-    const std::size_t column = at - (line_start == std::string::npos ? 0 : line_start + 1) + 1;
-    throw InputError(SourceLocation{path, static_cast<int>(line), static_cast<int>(column)}, "",
-                     "a NUL byte: not text (a binary file?)");
-  }
+  if (const std::size_t at = text.find('\0'); at != std::string::npos && !utf16_or_32 && !unmarked_wide)
+    throw InputError(place_of(at), "", "a NUL byte: not text (a binary file?)");
   YAML::Node document;
   std::size_t count = 0;
   YAML::Mark second;
