@@ -111,7 +111,7 @@ void expand_lattice(const ParticleBlock& block, std::size_t index, std::uint32_t
   std::array<double, 3> room{};
   double total = 1;
   for (int a = 0; a < 3; ++a) {
-    room[a] = double(block.hi[a]) - double(block.lo[a]) - 2 * margin;
+    room[a] = block.hi_written[a] - block.lo_written[a] - 2 * margin;
     total *= std::floor(room[a] / block.spacing + 1e-9) + 1;  // in double: no cast before the cap
   }
   if (!(total <= limits().spheres))
@@ -121,7 +121,7 @@ void expand_lattice(const ParticleBlock& block, std::size_t index, std::uint32_t
   check_sphere_budget(double(out.size()) + total, block.where, block_key(index) + ".lattice");
   for (int a = 0; a < 3; ++a) {
     n[a] = static_cast<long long>(std::floor(room[a] / block.spacing + 1e-9)) + 1;
-    start[a] = double(block.lo[a]) + margin + 0.5 * (room[a] - double(n[a] - 1) * block.spacing);  // centred in the box
+    start[a] = block.lo_written[a] + margin + 0.5 * (room[a] - double(n[a] - 1) * block.spacing);  // centred in the box
   }
   Random rng(block.seed);
   out.position.reserve(out.size() + std::size_t(total));

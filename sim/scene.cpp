@@ -400,8 +400,10 @@ void read_list(ParticleBlock& block, const Field& field) {
 
 void read_lattice(ParticleBlock& block, const Field& field) {
   const MapFields map(field, {"min", "max", "spacing", "radius", "jitter", "seed"});
+  block.lo_written = map.required("min").triple();
   block.lo = map.required("min").vec3();
   const Field max = map.required("max");
+  block.hi_written = max.triple();
   block.hi = max.vec3();
   check_box(block.lo, block.hi, max);
   const Field spacing = map.required("spacing");
@@ -414,9 +416,11 @@ void read_lattice(ParticleBlock& block, const Field& field) {
     spacing.fail("must be >= 2 * (largest radius + jitter) = " + shortest(2 * margin) +
                  " so that spheres cannot overlap, got " + spacing.node().Scalar());
   for (int a = 0; a < 3; ++a) {
-    if (block.hi[a] - block.lo[a] < 2 * margin)
+    // within the count's tolerance (particles.cpp): 0.64 - 0.58 is 0.0599...94
+    const double room = block.hi_written[a] - block.lo_written[a];
+    if (room < 2 * margin * (1 - 1e-9))
       max.fail("the box is too small on " + axis_name(a) + " for one sphere (needs " + shortest(2 * margin) +
-               " = 2 * (largest radius + jitter), has " + shortest(block.hi[a] - block.lo[a]) + ")");
+               " = 2 * (largest radius + jitter), has " + shortest(room) + ")");
   }
 }
 

@@ -7,6 +7,7 @@
 // All quantities are SI: m, s, kg, kg/m^3, m/s, rad/s.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -105,6 +106,10 @@ struct ParticleBlock {
   // each centre moved by a uniform jitter in [-jitter, jitter] per axis
   // random: `count` non-overlapping spheres with centres in [lo, hi] (whole sphere inside)
   Vec3 lo, hi;
+  // lattice: min and max as written, in double: a float run counts the
+  // lattice's sites as a double run does (0.7 in float is 0.69999999, and
+  // floor(0.6999999 / 0.1) would drop a row).
+  std::array<double, 3> lo_written{}, hi_written{};
   double spacing = 0;
   double jitter = 0;
   std::size_t count = 0;

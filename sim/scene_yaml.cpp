@@ -301,17 +301,23 @@ bool Field::boolean() const {
 }
 
 Vec3 Field::vec3() const {
+  const std::array<double, 3> xyz = triple();
+  return {real(xyz[0]), real(xyz[1]), real(xyz[2])};
+}
+
+std::array<double, 3> Field::triple() const {
   if (!is_sequence()) fail("expected [x, y, z], got " + description());
   if (m_node.size() != 3)
     fail("expected [x, y, z], got a sequence of " + std::to_string(m_node.size()));
-  const std::vector<Field> xyz = items();
-  const Vec3 v{real(xyz[0].number()), real(xyz[1].number()), real(xyz[2].number())};
+  const std::vector<Field> item = items();
+  const std::array<double, 3> xyz{item[0].number(), item[1].number(), item[2].number()};
+  const Vec3 v{real(xyz[0]), real(xyz[1]), real(xyz[2])};
   // The step squares vectors (speeds into energies, gaps into distances):
   // one whose square overflows the run's precision would turn into inf there.
   if (square_overflows(v))
     fail("too large for " + std::string(kRealName) + " precision: its squared length overflows (largest " +
          shortest(std::sqrt(std::numeric_limits<real>::max() / 3)) + " a component is safe)");
-  return v;
+  return xyz;
 }
 
 void Field::expect_map() const {

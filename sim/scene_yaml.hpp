@@ -11,6 +11,7 @@
 // a file line.
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <initializer_list>
@@ -125,6 +126,7 @@ class Field {
   std::string word() const;                     // a scalar (string)
   bool boolean() const;                         // true/false (also yes/no, on/off)
   Vec3 vec3() const;                            // [x, y, z], finite
+  std::array<double, 3> triple() const;         // vec3() as written, in double
   void expect_map() const;
   void expect_sequence() const;
 

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -86,6 +87,45 @@ TEST(Lattice, ExactFitKeepsTheLastLayer) {
   // 5 spheres of radius 0.05 touching across exactly 0.5 m.
   const Scene s = scene_from(dir, "  - lattice: {min: [0, 0, 0], max: [0.5, 0.1, 0.1], spacing: 0.1, radius: 0.05}\n");
   EXPECT_EQ(generate_particles(s).size(), 5u);
+}
+
+// The count follows the numbers as written, not their rounding to the run's
+// precision: 0.7 is 0.69999999 in float, and a float count dropped a row of
+// a 0.7 m box at spacing 0.1 (216 spheres where the rule, and double, give
+// 343). Random boxes and spacings in whole centimetres (many of them exact
+// fits, whose last layer touches the wall), counted in integers.
+TEST(Lattice, CountFollowsTheWrittenNumbersInEveryPrecision) {
+  const ScratchDir dir("lattice_written");
+  std::uint64_t state = 12345;
+  auto next = [&state](int below) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return int((state >> 33) % std::uint64_t(below));
+  };
+  int exact_fits = 0;
+  for (int round = 0; round < 60; ++round) {
+    const int radius = 1 + next(4), spacing = 2 * radius + next(20);  // centimetres
+    int lo[3], hi[3];
+    long long expected = 1;
+    bool exact = false;
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = next(200) - 100;
+      hi[a] = lo[a] + 2 * radius + next(4) * spacing + (next(3) == 0 ? 0 : next(spacing));
+      const int room = hi[a] - lo[a] - 2 * radius;
+      expected *= room / spacing + 1;  // centres at lo + r + k * spacing, k * spacing <= room
+      exact = exact || room % spacing == 0;
+    }
+    exact_fits += exact ? 1 : 0;
+    auto metres = [](int cm) { return std::to_string(cm / 100.0); };
+    const std::string block = "  - lattice: {min: [" + metres(lo[0]) + ", " + metres(lo[1]) + ", " + metres(lo[2]) +
+                              "], max: [" + metres(hi[0]) + ", " + metres(hi[1]) + ", " + metres(hi[2]) +
+                              "], spacing: " + metres(spacing) + ", radius: " + metres(radius) + "}\n";
+    EXPECT_EQ(generate_particles(scene_from(dir, block)).size(), std::size_t(expected)) << block;
+  }
+  EXPECT_GT(exact_fits, 10);  // the cases that rounding can tip
+  EXPECT_EQ(generate_particles(scene_from(
+                dir, "  - lattice: {min: [0, 0, 0], max: [0.7, 0.7, 0.7], spacing: 0.1, radius: 0.05}\n"))
+                .size(),
+            343u);
 }
 
 TEST(Lattice, JitterStaysInsideAndIsSeeded) {
