@@ -482,7 +482,7 @@ GeneratedParticles generate_particles(const Scene& scene) {
         }
         if (csv.has_angular_velocity) {
           spins_given = true;
-          if (block.angular_velocity_where.line > 0)
+          if (block.angular_velocity_given)
             throw InputError(block.angular_velocity_where, block_key(b) + ".angular_velocity",
                              "'" + block.csv_path +
                                  "' gives every sphere its angular velocity (wx,wy,wz); give one or the other");

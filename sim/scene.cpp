@@ -505,6 +505,7 @@ std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field
     block.angular_velocity_where.file = scene.path;
     if (auto f = map.optional("angular_velocity")) {
       block.angular_velocity = f->vec3();
+      block.angular_velocity_given = true;
       block.angular_velocity_where = f->where();
     }
     block.fixed_where.file = scene.path;

@@ -121,6 +121,7 @@ struct ParticleBlock {
 
   VelocitySpec velocity;  // initial velocities (lists and CSV may give their own)
   Vec3 angular_velocity;  // rad/s, every sphere of the block (CSV may give its own: wx,wy,wz)
+  bool angular_velocity_given = false;  // the key was given (in the file or by an override)
   bool fixed = false;     // the spheres collide but never move (pegs, rough floors)
   // The spheres' numbering (their ids). false (`order: given`, the
   // default): as the source gives them (a list's or file's rows, a

@@ -59,6 +59,19 @@ TEST(SceneFeatures, AngularVelocityPerBlockAndPerCsvRow) {
                       "/rows.csv' gives every sphere its angular velocity"),
             std::string::npos)
       << both;
+  // The same through an override (which has no line in the file): the
+  // file's spins were kept and the override dropped without a word.
+  const std::string csv_only =
+      dir.write("c.yaml", SCENE_TIME SCENE_MATERIALS "particles:\n  - csv: {path: rows.csv}\n");
+  EXPECT_EQ(load_error(csv_only), "");
+  const std::string by_override = load_error(csv_only, {"particles[0].angular_velocity=[0,0,1]"});
+  EXPECT_NE(by_override.find("particles[0].angular_velocity: '" + dir.path() +
+                             "/rows.csv' gives every sphere its angular velocity"),
+            std::string::npos)
+      << by_override;
+  EXPECT_NE(load_error(csv_only, {"particles[0].velocity=[0,0,1]"})
+                .find("particles[0].velocity: '" + dir.path() + "/rows.csv' gives every sphere its velocity"),
+            std::string::npos);
 }
 
 // Pegs: a fixed row under a falling sphere hold it up, and never move (bit
