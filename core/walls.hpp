@@ -18,6 +18,7 @@ struct PlaneWall {
   Vec3 normal{0, 0, 1};
   std::uint32_t material = 0;
   Vec3 velocity;
+  std::uint32_t index = 0;  // its place in the scene's `walls` list (output names it so)
 };
 
 // The inside of an axis-aligned box: spheres are kept within [lo, hi].
@@ -25,6 +26,7 @@ struct BoxWall {
   Vec3 lo, hi;
   std::uint32_t material = 0;
   Vec3 velocity;  // m/s, the whole box translates
+  std::uint32_t index = 0;  // its place in the scene's `walls` list (output names it so)
 };
 
 // A circular cylinder around the axis through `base` along unit `axis`,
@@ -40,6 +42,7 @@ struct CylinderWall {
   bool inside = true;
   real angular_velocity = 0;
   std::uint32_t material = 0;
+  std::uint32_t index = 0;  // its place in the scene's `walls` list (output names it so)
 };
 
 // A fixed sphere (an obstacle): spheres stay outside it.
@@ -48,6 +51,7 @@ struct SphereWall {
   real radius = 1;
   std::uint32_t material = 0;
   Vec3 velocity;
+  std::uint32_t index = 0;  // its place in the scene's `walls` list (output names it so)
 };
 
 struct Walls {

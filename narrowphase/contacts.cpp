@@ -52,6 +52,15 @@ std::vector<WallShape> wall_shapes(const Walls& walls) {
   return out;
 }
 
+std::vector<std::uint32_t> wall_shape_owners(const Walls& walls) {
+  std::vector<std::uint32_t> out;
+  for (const PlaneWall& p : walls.planes) out.push_back(p.index);
+  for (const BoxWall& box : walls.boxes) out.insert(out.end(), 6, box.index);
+  for (const CylinderWall& c : walls.cylinders) out.push_back(c.index);
+  for (const SphereWall& s : walls.spheres) out.push_back(s.index);
+  return out;
+}
+
 void advance_walls(std::vector<WallShape>& shapes, real h) {
   for (WallShape& w : shapes) w.point += w.velocity * h;
 }

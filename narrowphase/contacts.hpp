@@ -20,6 +20,9 @@ namespace marbles::narrowphase {
 // Every wall as a WallShape, in contact-index order: planes, then each box's
 // six inner faces (-x, +x, -y, +y, -z, +z), then cylinders, then spheres.
 std::vector<WallShape> wall_shapes(const Walls& walls);
+// The scene's wall (its place in the `walls` list: PlaneWall::index, ...) of
+// each of wall_shapes' shapes: what output names a wall contact by.
+std::vector<std::uint32_t> wall_shape_owners(const Walls& walls);
 
 // Moves translating walls by h times their velocity.
 void advance_walls(std::vector<WallShape>& shapes, real h);

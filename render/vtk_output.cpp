@@ -507,7 +507,6 @@ fs::path WallSeriesWriter::write(const Walls& walls, double time, std::uint64_t 
   const Vec3 centre = (m_lo + m_hi) * real(0.5);
   const real size = std::max(real(0.6) * length(m_hi - m_lo), real(1e-3));  // half the side of a plane's square
   WallMesh mesh;
-  std::uint32_t index = 0;
   std::vector<double> planes, boxes, cylinders, spheres;  // the parameters, to read the walls back
   auto push = [](std::vector<double>& out, std::initializer_list<double> values) {
     out.insert(out.end(), values.begin(), values.end());
@@ -515,7 +514,7 @@ fs::path WallSeriesWriter::write(const Walls& walls, double time, std::uint64_t 
   for (const PlaneWall& p : walls.planes) {
     const Vec3 c = centre - p.normal * dot(centre - p.point, p.normal);
     const Vec3 u = perpendicular(p.normal) * size, v = cross(p.normal, perpendicular(p.normal)) * size;
-    mesh.quad(c - u - v, c + u - v, c + u + v, c - u + v, index++, p.material);
+    mesh.quad(c - u - v, c + u - v, c + u + v, c - u + v, p.index, p.material);
     push(planes, {p.point.x, p.point.y, p.point.z, p.normal.x, p.normal.y, p.normal.z, p.velocity.x, p.velocity.y,
                   p.velocity.z, double(p.material)});
   }
@@ -524,8 +523,7 @@ fs::path WallSeriesWriter::write(const Walls& walls, double time, std::uint64_t 
     const Vec3 c[8] = {{l.x, l.y, l.z}, {h.x, l.y, l.z}, {h.x, h.y, l.z}, {l.x, h.y, l.z},
                        {l.x, l.y, h.z}, {h.x, l.y, h.z}, {h.x, h.y, h.z}, {l.x, h.y, h.z}};
     const int faces[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4}, {2, 3, 7, 6}, {1, 2, 6, 5}, {0, 4, 7, 3}};
-    for (const auto& f : faces) mesh.quad(c[f[0]], c[f[1]], c[f[2]], c[f[3]], index, b.material);
-    ++index;
+    for (const auto& f : faces) mesh.quad(c[f[0]], c[f[1]], c[f[2]], c[f[3]], b.index, b.material);
     push(boxes, {l.x, l.y, l.z, h.x, h.y, h.z, b.velocity.x, b.velocity.y, b.velocity.z, double(b.material)});
   }
   for (const CylinderWall& c : walls.cylinders) {
@@ -540,9 +538,8 @@ fs::path WallSeriesWriter::write(const Walls& walls, double time, std::uint64_t 
       const double a0 = 2 * M_PI * k / kSegments, a1 = 2 * M_PI * (k + 1) / kSegments;
       const Vec3 r0 = (u * real(std::cos(a0)) + v * real(std::sin(a0))) * c.radius;
       const Vec3 r1 = (u * real(std::cos(a1)) + v * real(std::sin(a1))) * c.radius;
-      mesh.quad(base + r0, base + r1, base + r1 + c.axis * len, base + r0 + c.axis * len, index, c.material);
+      mesh.quad(base + r0, base + r1, base + r1 + c.axis * len, base + r0 + c.axis * len, c.index, c.material);
     }
-    ++index;
     push(cylinders, {c.base.x, c.base.y, c.base.z, c.axis.x, c.axis.y, c.axis.z, c.radius, c.length,
                      c.inside ? 1.0 : 0.0, c.angular_velocity, double(c.material)});
   }
@@ -553,8 +550,8 @@ fs::path WallSeriesWriter::write(const Walls& walls, double time, std::uint64_t 
                              real(std::cos(theta))) * s.radius;
     };
     for (int i = 0; i < kSegments / 2; ++i)
-      for (int j = 0; j < kSegments; ++j) mesh.quad(at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1), index, s.material);
-    ++index;
+      for (int j = 0; j < kSegments; ++j)
+        mesh.quad(at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1), s.index, s.material);
     push(spheres, {s.centre.x, s.centre.y, s.centre.z, s.radius, s.velocity.x, s.velocity.y, s.velocity.z,
                    double(s.material)});
   }

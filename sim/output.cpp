@@ -18,6 +18,7 @@
 #include "core/error.hpp"
 #include "core/files.hpp"
 #include "core/format.hpp"
+#include "narrowphase/contacts.hpp"
 #include "render/atomic_file.hpp"
 #include "render/frame_output.hpp"
 #include "render/renderer.hpp"
@@ -48,6 +49,7 @@ render::FrameMetadata frame_metadata(const scene::Scene& scene) {
 render::ContactSnapshot make_contact_snapshot(const Simulation& sim) {
   const World& w = sim.world();
   const auto& shapes = sim.model().wall_shapes;
+  const std::vector<std::uint32_t> owners = narrowphase::wall_shape_owners(sim.model().walls);
   const double h = sim.dt() / sim.substeps();  // the contacts are the last substep's
   render::ContactSnapshot c;
   c.time = sim.time();
@@ -65,7 +67,7 @@ render::ContactSnapshot make_contact_snapshot(const Simulation& sim) {
                                   double(k.tangent_impulse.z) / h});
     c.overlap.push_back(k.separation < 0 ? -k.separation : real(0));
     c.sphere_a.push_back(k.a);
-    c.sphere_b.push_back(b);
+    c.sphere_b.push_back(wall ? owners.at(b) : b);  // a wall by its place in the scene
     c.material_a.push_back(w.material[k.a]);
     c.material_b.push_back(wall ? shapes.at(b).material : w.material[b]);
     c.wall.push_back(wall ? 1 : 0);

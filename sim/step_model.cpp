@@ -19,21 +19,23 @@ namespace {
 
 Walls make_walls(const scene::Scene& scene) {
   Walls walls;
-  for (const scene::WallSpec& w : scene.walls) {
+  for (std::size_t k = 0; k < scene.walls.size(); ++k) {
+    const scene::WallSpec& w = scene.walls[k];
     const std::uint32_t material = scene.material_index(w.material, w.where, "walls.material");
+    const auto index = static_cast<std::uint32_t>(k);
     switch (w.kind) {
       case scene::WallSpec::Kind::plane:
-        walls.planes.push_back({w.point, w.normal, material, w.velocity});
+        walls.planes.push_back({w.point, w.normal, material, w.velocity, index});
         break;
       case scene::WallSpec::Kind::box:
-        walls.boxes.push_back({w.lo, w.hi, material, w.velocity});
+        walls.boxes.push_back({w.lo, w.hi, material, w.velocity, index});
         break;
       case scene::WallSpec::Kind::cylinder:
         walls.cylinders.push_back({w.base, w.axis, static_cast<real>(w.radius), static_cast<real>(w.length), w.inside,
-                                   static_cast<real>(w.angular_velocity), material});
+                                   static_cast<real>(w.angular_velocity), material, index});
         break;
       case scene::WallSpec::Kind::sphere:
-        walls.spheres.push_back({w.centre, static_cast<real>(w.radius), material, w.velocity});
+        walls.spheres.push_back({w.centre, static_cast<real>(w.radius), material, w.velocity, index});
         break;
     }
   }

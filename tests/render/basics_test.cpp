@@ -131,10 +131,12 @@ TEST(WallsVtp, RoundTripsEveryKindOfWall) {
   p.normal = Vec3(0, 0, 1);
   p.velocity = Vec3(1, 0, 0);
   p.material = 2;
+  p.index = 3;  // the scene's order, not the kinds': plane last
   w.planes.push_back(p);
   BoxWall b;
   b.lo = Vec3(-1, -1, 0);
   b.hi = Vec3(1, 1, 2.5f);
+  b.index = 0;
   w.boxes.push_back(b);
   CylinderWall c;
   c.base = Vec3(0, 0, 0.25f);
@@ -144,10 +146,12 @@ TEST(WallsVtp, RoundTripsEveryKindOfWall) {
   c.inside = false;
   c.angular_velocity = 3.5f;
   c.material = 1;
+  c.index = 1;
   w.cylinders.push_back(c);
   SphereWall s;
   s.centre = Vec3(0.5f, 0.5f, 1);
   s.radius = 0.2f;
+  s.index = 2;
   w.spheres.push_back(s);
 
   const fs::path dir = fresh_dir("walls_vtp");
@@ -157,9 +161,11 @@ TEST(WallsVtp, RoundTripsEveryKindOfWall) {
   const Walls r = read_walls_vtp(first);
   const VtpArrays surfaces = read_vtp_arrays(first);
   const auto& wall_of_cell = surfaces.arrays.at("CellData/wall").values;
-  EXPECT_EQ(std::count(wall_of_cell.begin(), wall_of_cell.end(), 0.0), 1);  // the plane: one square
-  EXPECT_EQ(std::count(wall_of_cell.begin(), wall_of_cell.end(), 1.0), 6);  // the box: six faces
-  EXPECT_GT(std::count(wall_of_cell.begin(), wall_of_cell.end(), 2.0), 8);  // the cylinder: a band of quads
+  // Each wall's cells carry its place in the scene.
+  EXPECT_EQ(std::count(wall_of_cell.begin(), wall_of_cell.end(), 3.0), 1);  // the plane: one square
+  EXPECT_EQ(std::count(wall_of_cell.begin(), wall_of_cell.end(), 0.0), 6);  // the box: six faces
+  EXPECT_GT(std::count(wall_of_cell.begin(), wall_of_cell.end(), 1.0), 8);  // the cylinder: a band of quads
+  EXPECT_GT(std::count(wall_of_cell.begin(), wall_of_cell.end(), 2.0), 8);  // the sphere
   ASSERT_EQ(r.planes.size(), 1u);
   ASSERT_EQ(r.boxes.size(), 1u);
   ASSERT_EQ(r.cylinders.size(), 1u);

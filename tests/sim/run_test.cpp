@@ -249,6 +249,87 @@ TEST(Run, ContactForcesOfARestingStackBalanceItsWeight) {
   fs::remove_all(dir);
 }
 
+// A wall contact names its wall by its place in the scene's `walls` list,
+// whatever the wall's kind (the step keeps planes, box faces, cylinders and
+// spheres apart, in that order): four walls listed sphere, box, cylinder,
+// plane, a sphere resting on each. Each contact's wall end lies on the
+// surface of the wall it names, and on no other; the walls' frame labels its
+// cells with the same numbers.
+TEST(Run, WallContactsNameTheirWallByItsPlaceInTheScene) {
+  const fs::path dir = temp_dir("wall_index");
+  // Each sphere 0.5 mm from its wall, moving into it at 0.1 m/s (a plastic
+  // impact after five steps). The box holds them all; the drum acts on
+  // y in [-1, 1] alone, where only sphere 2 lies.
+  const std::string yaml = R"(format: 1
+time: {duration: 0.01, dt: 1.0e-3}
+effects: [collisions, walls]
+materials: {a: {}}
+walls:
+  - sphere: {centre: [-2, 3, 3], radius: 1}
+  - box: {min: [-5, -5, -1], max: [5, 5, 10]}
+  - cylinder: {base: [2, -1, 3], axis: [0, 1, 0], radius: 0.5, length: 2, inside: true}
+  - plane: {point: [0, 0, 0], normal: [0, 0, 1]}
+particles:
+  - list:
+      positions: [[-2, 3, 4.1005], [4.8995, -3, 3], [2, 0, 2.6005], [2, 3, 0.1005]]
+      velocities: [[0, 0, -0.1], [0.1, 0, 0], [0, 0, -0.1], [0, 0, -0.1]]
+      radius: 0.1
+output: {vtk: {every: 1}, contacts: {every: 1}}
+)";
+  std::string err;
+  ASSERT_EQ(run_on_cpu(dir, yaml, err), 0) << err;
+  // The distance of point x from each wall's surface, from the scene above.
+  auto distance = [](int wall, const double* x) {
+    switch (wall) {
+      case 0: return std::fabs(std::hypot(x[0] + 2, x[1] - 3, x[2] - 3) - 1);
+      case 1: {
+        double d = 1e30;
+        const double lo[3] = {-5, -5, -1}, hi[3] = {5, 5, 10};
+        for (int a = 0; a < 3; ++a) d = std::min({d, std::fabs(x[a] - lo[a]), std::fabs(hi[a] - x[a])});
+        return d;
+      }
+      case 2: return std::fabs(std::hypot(x[0] - 2, x[2] - 3) - 0.5);
+      default: return std::fabs(x[2]);
+    }
+  };
+  // The frame of the impacts: the one with the most contacts.
+  render::VtpArrays c;
+  for (const render::SeriesEntry& e : render::read_pvd(dir / "out" / "contacts.pvd")) {
+    render::VtpArrays frame = render::read_vtp_arrays(e.path);
+    if (frame.arrays.at("CellData/wall").values.size() > c.arrays["CellData/wall"].values.size()) c = std::move(frame);
+  }
+  ASSERT_EQ(c.arrays.at("CellData/wall").values.size(), 4u);
+  const auto& wall = c.arrays.at("CellData/wall").values;
+  const auto& a = c.arrays.at("CellData/sphere_a").values;
+  const auto& b = c.arrays.at("CellData/sphere_b").values;
+  const auto& points = c.arrays.at("Points/Points").values;
+  std::vector<int> named(4, -1);  // the wall each sphere's contact names
+  for (std::size_t k = 0; k < wall.size(); ++k) {
+    ASSERT_NE(wall[k], 0.0) << "the spheres lie apart";
+    const double* end = &points[3 * (2 * k + 1)];  // the line's second point: on the wall
+    const int w = int(b[k]);
+    ASSERT_GE(w, 0);
+    ASSERT_LT(w, 4);
+    EXPECT_LT(distance(w, end), 1e-3) << "contact " << k << " names wall " << w;
+    for (int other = 0; other < 4; ++other)
+      if (other != w) EXPECT_GT(distance(other, end), 0.05) << "contact " << k << " lies on wall " << other;
+    named.at(std::size_t(a[k])) = w;
+  }
+  EXPECT_EQ(named, (std::vector<int>{0, 1, 2, 3}));  // sphere i rests on wall i
+  // The walls' frame: each wall's cells carry its place in the scene.
+  const render::VtpArrays walls = render::read_vtp_arrays(render::read_pvd(dir / "out" / "walls.pvd").back().path);
+  const auto& cell_wall = walls.arrays.at("CellData/wall").values;
+  const auto& cell_points = walls.arrays.at("Points/Points").values;
+  const auto& connectivity = walls.arrays.at("Polys/connectivity").values;
+  const auto& offsets = walls.arrays.at("Polys/offsets").values;
+  ASSERT_EQ(offsets.size(), cell_wall.size());
+  for (std::size_t cell = 0, first = 0; cell < cell_wall.size(); first = std::size_t(offsets[cell++])) {
+    const double* corner = &cell_points[3 * std::size_t(connectivity[first])];
+    if (cell_wall[cell] != 3) EXPECT_LT(distance(int(cell_wall[cell]), corner), 1e-4) << "cell " << cell;
+  }
+  fs::remove_all(dir);
+}
+
 // Two spheres of density 1e30 meeting head on at 1000 m/s with a substep of
 // 1 us: impulses of ~4e33 N s (within float) make forces of ~4e39 N, past
 // float's range. The contact frames hold them finite, in Float64, and equal
@@ -465,7 +546,7 @@ TEST(Run, MovingWallsMoveInTheWallSeries) {
     const render::VtpArrays surfaces = render::read_vtp_arrays(walls[k].path);
     const auto& wall = surfaces.arrays.at("CellData/wall").values;
     const auto& points = surfaces.arrays.at("Points/Points").values;
-    ASSERT_EQ(wall[0], 0.0);  // the plane's square comes first
+    ASSERT_EQ(wall[0], 1.0);  // the plane's square comes first, labelled by its place in the scene (after the box)
     for (int corner = 0; corner < 4; ++corner) EXPECT_NEAR(points[3 * corner + 2], w.planes[0].point.z, 1e-6);
   }
   fs::remove_all(dir);
