@@ -31,7 +31,8 @@ struct BoxWall {
 
 // A circular cylinder around the axis through `base` along unit `axis`,
 // from base to base + length·axis (length 0: infinite). `inside` keeps
-// spheres within radius (a tube or drum); otherwise outside (a post). It may
+// spheres within radius (a tube or drum, its ends open); otherwise outside
+// (a post, a solid with flat ends where it is finite). It may
 // spin about its axis at `angular_velocity` rad/s (right-handed about axis),
 // which drags touching spheres (a rotating drum).
 struct CylinderWall {

@@ -68,9 +68,49 @@ MARBLES_HD_INLINE Vec3 any_perpendicular(const Vec3& a) {
   return c / length(c);
 }
 
+// A post of finite length (a cylinder's outside, `length` > 0) is a solid
+// with flat ends: beside it the gap is wall_gap's radial one; past an end,
+// over the end's disc, the gap to that disc (normal along the axis), and
+// beyond its rim the gap to the rim's circle; a centre inside the solid goes
+// out by the nearest face (side, or either end). This is the solid's exact
+// distance less r, convex along any path (watch_math.hpp relies on it).
+// `out` is the unit radial direction of p, `dist` its distance from the
+// axis, `t` its coordinate along it.
+MARBLES_HD_INLINE void post_gap(const WallShape& w, const Vec3& out, real dist, real t, real r, Vec3& normal,
+                                real& separation) {
+  const real L = w.length;
+  if (t >= 0 && t <= L) {  // beside the post, or inside it
+    const real side = w.radius - dist, top = L - t;
+    if (side <= 0 || (side <= top && side <= t)) {
+      normal = out;
+      separation = dist - w.radius - r;
+    } else if (top <= t) {
+      normal = w.direction;
+      separation = -top - r;
+    } else {
+      normal = -w.direction;
+      separation = -t - r;
+    }
+    return;
+  }
+  const real beyond = t > L ? t - L : -t;  // > 0: past an end along the axis
+  const Vec3 axial = t > L ? w.direction : -w.direction;
+  const real radial = dist - w.radius;
+  if (radial <= 0) {  // over the end's disc
+    normal = axial;
+    separation = beyond - r;
+    return;
+  }
+  const Vec3 d = out * radial + axial * beyond;  // from the rim's nearest point
+  const real reach = length(d);
+  normal = reach > 0 ? d / reach : axial;
+  separation = reach - r;
+}
+
 // Signed gap between sphere (p, r) and wall `w` and the normal from the wall
 // towards the sphere. Returns false where the wall does not act on the sphere
-// (beyond the ends of a finite cylinder).
+// (beyond the open ends of a finite tube: a cylinder's inside; a finite
+// post's ends are closed: post_gap).
 MARBLES_HD_INLINE bool wall_gap(const WallShape& w, const Vec3& p, real r, Vec3& normal, real& separation) {
   switch (w.kind) {
     case WallShape::Kind::half_space:
@@ -88,11 +128,14 @@ MARBLES_HD_INLINE bool wall_gap(const WallShape& w, const Vec3& p, real r, Vec3&
     case WallShape::Kind::cylinder_outside: {
       const Vec3 q = p - w.point;
       const real t = dot(q, w.direction);
-      if (w.length > 0 && (t < 0 || t > w.length)) return false;
+      const bool post = w.kind == WallShape::Kind::cylinder_outside && w.length > 0;
+      if (w.length > 0 && !post && (t < 0 || t > w.length)) return false;
       const Vec3 rho = q - w.direction * t;
       const real dist = length(rho);
       const Vec3 out = dist > real(1e-7) * w.radius ? rho / dist : any_perpendicular(w.direction);
-      if (w.kind == WallShape::Kind::cylinder_inside) {
+      if (post) {
+        post_gap(w, out, dist, t, r, normal, separation);
+      } else if (w.kind == WallShape::Kind::cylinder_inside) {
         normal = -out;
         separation = w.radius - dist - r;
       } else {

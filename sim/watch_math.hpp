@@ -125,7 +125,8 @@ MARBLES_HD_INLINE bool beside_span(const narrowphase::WallShape& w, const Vec3& 
 // length acts only on the part of the path beside it, so there the ends are
 // that part's and the nearest point is taken within it (measured as from
 // the endless cylinder: a point at the part's end may round past the
-// length).
+// length); a finite post's closed ends make it a convex solid, searched
+// along the path.
 MARBLES_HD_INLINE real wall_swept_deepening(const narrowphase::WallShape& w, const Vec3& p, const Vec3& v, real r,
                                            real h) {
   using Kind = narrowphase::WallShape::Kind;
@@ -137,6 +138,31 @@ MARBLES_HD_INLINE real wall_swept_deepening(const narrowphase::WallShape& w, con
   if (narrowphase::wall_gap(w, s, r, normal, gap) && gap < 0) start = -gap;
   real deepest = 0;
   if (narrowphase::wall_gap(w, p, r, normal, gap) && -gap > deepest) deepest = -gap;
+  if (w.kind == Kind::cylinder_outside && w.length > 0) {
+    // A finite post is a convex solid and its gap the solid's distance
+    // (narrowphase::post_gap): along the path the depth is concave, its
+    // largest value found by a golden-section search (48 halvings by the
+    // golden ratio: below a float's resolution of [0, 1]).
+    const auto depth = [&](real t) {
+      narrowphase::wall_gap(w, s + m * t, r, normal, gap);
+      return -gap;
+    };
+    const real g = real(0.3819660112501051);  // 2 - the golden ratio
+    real a = 0, b = 1, x1 = g, x2 = 1 - g, f1 = depth(x1), f2 = depth(x2);
+    for (int k = 0; k < 48; ++k) {
+      if (f1 < f2) {
+        a = x1, x1 = x2, f1 = f2;
+        x2 = b - g * (b - a), f2 = depth(x2);
+      } else {
+        b = x2, x2 = x1, f2 = f1;
+        x1 = a + g * (b - a), f1 = depth(x1);
+      }
+    }
+    const real inner = f1 > f2 ? f1 : f2;
+    if (inner > deepest) deepest = inner;
+    const real deeper = deepest - start;
+    return deeper > 0 ? deeper / r : real(0);
+  }
   // Points of the path within [lo, hi] are measured on the endless wall
   // (the length is a cylinder's only; other kinds ignore it).
   narrowphase::WallShape endless = w;

@@ -209,6 +209,80 @@ TEST(BoxWall, SixInwardFacesKeepSpheresInside) {
   for (const WallShape& f : faces) EXPECT_LT(dot(f.point + f.direction * real(-0.5) - f.point, f.direction), 0);
 }
 
+// A finite post is a solid with flat ends: the gap is the distance to the
+// solid less r, against the clamp oracle (the solid's nearest point: the
+// axial coordinate clamped to [0, L], the radial one to R; a point inside
+// goes out by its nearest face), at random points around posts of random
+// axes, all around the ends and rims. Beside the post (the axial coordinate
+// within [0, L], outside the radius) the gap is the endless cylinder's, bit
+// for bit; a tube's ends stay open.
+TEST(PostWall, FiniteEndsAreClosedDiscs) {
+  std::mt19937_64 rng(21);
+  std::uniform_real_distribution<double> u(-1, 1);
+  int over_ends = 0, rims = 0, inside = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    WallShape w;
+    w.kind = WallShape::Kind::cylinder_outside;
+    w.point = Vec3(real(u(rng)), real(u(rng)), real(u(rng)));
+    const Vec3 d(real(u(rng)), real(u(rng)), real(u(rng)) + real(1.5));
+    w.direction = d / length(d);
+    w.radius = real(0.5 + 0.4 * u(rng));
+    w.length = real(1.5 + u(rng));
+    const real r = real(0.2);
+    const Vec3 p = w.point + w.direction * real(w.length * (0.5 + 0.9 * u(rng))) +
+                   Vec3(real(1.5 * u(rng)), real(1.5 * u(rng)), real(1.5 * u(rng)));
+    // The oracle, in double.
+    const double px[3] = {p.x - w.point.x, p.y - w.point.y, p.z - w.point.z};
+    const double ax[3] = {w.direction.x, w.direction.y, w.direction.z};
+    const double t = px[0] * ax[0] + px[1] * ax[1] + px[2] * ax[2];
+    double radial[3], dist = 0;
+    for (int k = 0; k < 3; ++k) radial[k] = px[k] - t * ax[k], dist += radial[k] * radial[k];
+    dist = std::sqrt(dist);
+    const double L = w.length, R = w.radius;
+    double want = 0, want_normal[3];
+    if (t >= 0 && t <= L && dist <= R) {  // inside: out by the nearest face
+      ++inside;
+      const double side = R - dist, top = L - t, bottom = t;
+      want = -std::min({side, top, bottom}) - r;
+      for (int k = 0; k < 3; ++k)
+        want_normal[k] = side <= top && side <= bottom ? radial[k] / dist : (top <= bottom ? ax[k] : -ax[k]);
+    } else {
+      const double tc = std::clamp(t, 0.0, L), rc = std::min(dist, R);
+      double gap[3], g = 0;
+      for (int k = 0; k < 3; ++k) gap[k] = px[k] - (tc * ax[k] + rc * radial[k] / dist), g += gap[k] * gap[k];
+      g = std::sqrt(g);
+      want = g - r;
+      for (int k = 0; k < 3; ++k) want_normal[k] = gap[k] / g;
+      over_ends += (t < 0 || t > L) && dist <= R ? 1 : 0;
+      rims += (t < 0 || t > L) && dist > R ? 1 : 0;
+    }
+    Vec3 normal;
+    real separation = 0;
+    ASSERT_TRUE(wall_gap(w, p, r, normal, separation)) << trial;
+    EXPECT_NEAR(separation, want, 2e-6) << trial;
+    if (std::fabs(want + r) > 1e-3) {  // a normal is defined away from the surface's edges
+      EXPECT_NEAR(normal.x, want_normal[0], 1e-4) << trial;
+      EXPECT_NEAR(normal.y, want_normal[1], 1e-4) << trial;
+      EXPECT_NEAR(normal.z, want_normal[2], 1e-4) << trial;
+    }
+    if (t >= 0 && t <= L && dist >= R) {
+      WallShape endless = w;
+      endless.length = 0;
+      Vec3 n_endless;
+      real s_endless = 0;
+      ASSERT_TRUE(wall_gap(endless, p, r, n_endless, s_endless));
+      EXPECT_EQ(separation, s_endless) << trial;
+      EXPECT_EQ(normal, n_endless) << trial;
+    }
+    WallShape tube = w;
+    tube.kind = WallShape::Kind::cylinder_inside;
+    EXPECT_EQ(wall_gap(tube, p, r, normal, separation), t >= 0 && t <= L) << trial;
+  }
+  EXPECT_GT(over_ends, 1000);
+  EXPECT_GT(rims, 2000);
+  EXPECT_GT(inside, 500);
+}
+
 // Head-on impact of two free spheres: the 1-D rigid-body impact law
 //   v1' = (m1 v1 + m2 v2 - m2 e (v1 - v2)) / (m1 + m2), and symmetric for v2'.
 TEST(Solver, HeadOnImpactFollowsImpactLaw) {

@@ -277,6 +277,58 @@ TEST(Walls, BoxKeepsEverySphereInside) {
   }
 }
 
+// A finite post's ends are closed: balls dropped over its top disc (over
+// the axis, near the rim) come to rest on it, one beside it falls to the
+// floor, and one thrown at its side bounces off. (The ends were open: a
+// ball fell into the post and was thrown out sideways.)
+TEST(Walls, AFinitePostHoldsWhatFallsOnItsTop) {
+  using scene::Effect;
+  scene::Scene s = base_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution}, 0.3);
+  scene::WallSpec floor;
+  floor.kind = scene::WallSpec::Kind::plane;
+  floor.point = {0, 0, 0};
+  floor.normal = {0, 0, 1};
+  s.walls.push_back(floor);
+  scene::WallSpec post;
+  post.kind = scene::WallSpec::Kind::cylinder;
+  post.base = {0, 0, 0};
+  post.axis = {0, 0, 1};
+  post.radius = 0.2;
+  post.length = 1;
+  post.inside = false;
+  s.walls.push_back(post);
+  const real r = real(0.05);
+  scene::GeneratedParticles g;
+  const Vec3 starts[] = {{0, 0, real(1.5)}, {real(0.15), real(0.05), real(1.3)}, {real(0.6), 0, real(1.5)},
+                         {real(-0.6), real(0.1), real(0.5)}};
+  for (const Vec3& p : starts) {
+    g.position.push_back(p);
+    g.velocity.push_back({});
+    g.radius.push_back(r);
+    g.material.push_back(0);
+  }
+  g.velocity[3] = {3, 0, 0};  // at the side, mid-height
+  Simulation sim(s, make_world(s, g), test_backend());
+  double side_x = -1;  // the thrown ball's furthest reach towards the axis
+  for (int k = 0; k < 1500; ++k) {
+    sim.step();
+    side_x = std::max(side_x, double(sim.world().position[3].x));
+  }
+  const World& w = sim.world();
+  for (int i : {0, 1}) {  // on the top disc, where they fell
+    EXPECT_NEAR(w.position[i].z, 1 + r, 0.02 * r) << "ball " << i;
+    EXPECT_NEAR(w.position[i].x, starts[i].x, 1e-4) << "ball " << i;
+    EXPECT_NEAR(w.position[i].y, starts[i].y, 1e-4) << "ball " << i;
+    EXPECT_LT(length(w.velocity[i]), 1e-3) << "ball " << i;
+  }
+  EXPECT_NEAR(w.position[2].z, r, 0.02 * r);  // beside the post, on the floor
+  // The thrown ball met the side where its centre came within r of it
+  // (x^2 + 0.1^2 = (0.2 + r)^2) and went back.
+  EXPECT_NEAR(side_x, -std::sqrt((0.2 + r) * (0.2 + r) - 0.01), 0.05 * r);
+  EXPECT_LT(w.velocity[3].x, 0);
+  EXPECT_EQ(w.first_non_finite(), w.size());
+}
+
 // --- The unswept check's geometry (sim/watch_math.hpp) against paths
 // sampled finely: the deepest point of each straight path, less the depth
 // at its start. Random paths, many of them grazing, through or past.
