@@ -125,7 +125,7 @@ std::vector<std::string> read_material_names(const fs::path& dir) {
 }
 
 int render_output_dir(const std::string& out_dir, const RenderOptions& options, const MovieOptions& movie,
-                      bool progress, std::ostream& log) {
+                      bool progress, std::ostream& log, const RunImages* as_run) {
   const fs::path dir(out_dir);
   const fs::path pvd = dir / "series.pvd";
   if (!fs::exists(pvd))
@@ -135,10 +135,19 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   if (!renderer_available())
     throw RuntimeFailure("marbles was built without OSMesa (libosmesa6-dev): cannot render images");
 
-  const std::vector<SeriesEntry> entries = read_pvd(pvd);
+  std::vector<SeriesEntry> entries = read_pvd(pvd);
   // The walls of each frame (moving walls move), from walls.pvd when the run had walls.
   std::vector<SeriesEntry> wall_entries;
   if (fs::exists(dir / "walls.pvd")) wall_entries = read_pvd(dir / "walls.pvd");
+  if (as_run && as_run->stride > 1) {  // the frames at the images' cadence, with their walls
+    std::vector<SeriesEntry> frames, walls;
+    for (std::size_t k = 0; k < entries.size(); k += as_run->stride) {
+      frames.push_back(entries[k]);
+      if (!wall_entries.empty()) walls.push_back(wall_entries[std::min(k, wall_entries.size() - 1)]);
+    }
+    entries = std::move(frames);
+    wall_entries = std::move(walls);
+  }
   auto walls_of = [&](std::size_t k) {
     return wall_entries.empty() ? Walls{} : read_walls_vtp(wall_entries[std::min(k, wall_entries.size() - 1)].path);
   };
@@ -160,8 +169,8 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   // Pass 1 (only when needed): the view and colour range that suit every frame.
   Bounds bounds;
   ColorRange range{1e300, -1e300};
-  const bool need_camera = !options.camera;
-  const bool need_range = !(options.color_min && options.color_max);
+  const bool need_camera = !options.camera && !as_run;
+  const bool need_range = !(options.color_min && options.color_max) && !as_run;
   if (need_camera || need_range) {
     for (std::size_t k = 0; k < entries.size(); ++k) {
       const Snapshot s = read_frame(entries[k].path);
@@ -174,7 +183,9 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   if (range.lo > range.hi) range = {0, 1};
   if (options.color_min) range.lo = *options.color_min;
   if (options.color_max) range.hi = *options.color_max;
-  const Camera camera = options.camera ? *options.camera : default_camera(bounds, options.width, options.height);
+  const Camera camera = options.camera ? *options.camera
+                        : default_camera(as_run ? as_run->view : bounds, options.width, options.height);
+  std::optional<ColorRange> so_far;  // as_run: the frames drawn so far
 
   double fps = movie.fps;
   if (fps <= 0) {
@@ -205,11 +216,19 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
           << color_data_name(options.color_by) << " array: colouring by " << color_by_name(options.color_by)
           << " draws every sphere in one colour (the run's output.fields lacks it)\n";
     if (s.time == 0 && entries[k].time != 0) s.time = entries[k].time;
+    if (as_run) {
+      ColorRange r = data_range(s, options.color_by);
+      if (so_far) r.add(*so_far);
+      so_far = r;
+      if (options.color_min) r.lo = *options.color_min;
+      if (options.color_max) r.hi = *options.color_max;
+      range = r;
+    }
     const Image image = renderer.render(s, walls_of(k), camera, range);
     std::size_t number = k;
     std::smatch m;
     const std::string name = entries[k].path.filename().string();
-    if (std::regex_match(name, m, numbered)) number = std::stoul(m[1].str());
+    if (!as_run && std::regex_match(name, m, numbered)) number = std::stoul(m[1].str());
     if (png_available()) write_png(image_path(dir, number), image);
     drawn.push_back(image_path(dir, number).filename());
     if (writer) writer->add(image);

@@ -88,7 +88,19 @@ std::vector<std::string> read_material_names(const std::filesystem::path& dir);
 /// otherwise only a summary line is printed. Returns 0 on success. Throws
 /// marbles::RuntimeFailure when there is no series.pvd, when the build lacks
 /// VTK or OSMesa, or on I/O errors; a missing ffmpeg is only a warning.
+///
+/// With `as_run`, the images are those the run itself would have drawn as
+/// it went (FrameOutput), for a resumed run's closing render: every
+/// `stride`-th frame of the series (the images' cadence over the frames'),
+/// numbered 0, 1, 2, ... as FrameOutput numbers them, seen by the camera of
+/// the run's first view (`view`: the scene's bounds at step 0, unless
+/// `options` has a camera), each coloured over the range of the frames drawn
+/// so far (it only widens, as FrameOutput's does).
+struct RunImages {
+  std::size_t stride = 1;
+  Bounds view;
+};
 int render_output_dir(const std::string& out_dir, const RenderOptions& options, const MovieOptions& movie,
-                      bool progress, std::ostream& log);
+                      bool progress, std::ostream& log, const RunImages* as_run = nullptr);
 
 }  // namespace marbles::render

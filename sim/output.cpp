@@ -12,6 +12,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <numeric>
 #include <ostream>
 #include <sstream>
 
@@ -336,6 +337,7 @@ struct RunOutput::Impl {
   int contacts_every = 0;
   bool with_contact_counts = false;  // the `contacts` point field is asked for
   bool render_at_finish = false;  // a resumed run: images and movie from the frames
+  render::RunImages run_images;   // drawn at the run's own cadence, camera and colours
   render::RenderOptions render_options;
   render::MovieOptions movie;
   std::ostream* log = nullptr;
@@ -432,6 +434,18 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
       m->render_options = render_options(scene);
       m->movie.enabled = scene.output.movie.enabled;
       m->movie.fps = scene.output.movie.fps;
+      // The images the run draws as it goes come every render.every steps,
+      // the frames every vtk.every: the frames at the images' steps, where
+      // every image step has a frame; else at the steps both share, said.
+      const auto frames_every = static_cast<std::uint64_t>(scene.output.vtk_every);
+      const auto images_every = static_cast<std::uint64_t>(scene.output.render.every);
+      const std::uint64_t both = std::lcm(frames_every, images_every);
+      m->run_images.stride = static_cast<std::size_t>(both / frames_every);
+      if (both != images_every)
+        log << "warning: a resumed run draws its images from the VTK frames, every " << scene.output.vtk_every
+            << " steps, and the images come every " << scene.output.render.every << ": its images come every "
+            << both << " steps (the frames' and images' common steps)\n";
+      if (view) m->run_images.view = *view;
     }
   } else if (render && scene.output.render.enabled) {
     try {
@@ -511,7 +525,7 @@ std::string RunOutput::finish() {
   if (m->contacts) out << m->contacts->frames() << " contact frames in contacts/, contacts.pvd, ";
   if (m->render_at_finish) {
     try {  // the run's own outputs (summary, thermo) stand whatever the images do
-      render::render_output_dir(m->dir, m->render_options, m->movie, false, *m->log);
+      render::render_output_dir(m->dir, m->render_options, m->movie, false, *m->log, &m->run_images);
       out << "images in images/";
       if (std::filesystem::exists(std::filesystem::path(m->dir) / "movie.mp4")) out << ", movie.mp4";
       out << ", ";

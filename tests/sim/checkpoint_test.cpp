@@ -56,13 +56,17 @@ TEST_F(Checkpoints, RestartEqualsTheUninterruptedRun) {
   }
 }
 
-// A resumed run that renders makes the images (one per frame, the ones
-// before the cut included) and the movie the uninterrupted run makes.
+// A resumed run that renders makes the images and the movie the
+// uninterrupted run makes: one image every render.every steps, numbered as
+// the run numbers them, the same bytes (the same camera, the colour range of
+// the images so far), though it draws them from the frames, here twice as
+// many as the images; the ones before the cut included. Where the images'
+// steps are not all frames' it draws the steps both share, and says so.
 TEST_F(Checkpoints, ResumedRunRendersItsImagesAndMovie) {
   const test::ScratchDir dir("ck_render");
   const std::string scene = dir.write("s.yaml", kScene);
-  const std::string common = " --quiet --backend cpu --set output.render.every=20 --set output.render.width=64"
-                             " --set output.render.height=48";
+  const std::string common = " --quiet --backend cpu --set output.vtk.every=10 --set output.render.every=20"
+                             " --set output.render.width=64 --set output.render.height=48";
   ASSERT_EQ(marbles("run " + scene + common + " --out " + dir.path() + "/whole"), 0);
   const std::string resumed = dir.path() + "/resumed";
   ASSERT_EQ(marbles("run " + scene + common + " --out " + resumed + " --duration 0.1"), 0);
@@ -80,8 +84,29 @@ TEST_F(Checkpoints, ResumedRunRendersItsImagesAndMovie) {
     std::sort(out.begin(), out.end());
     return out;
   };
-  EXPECT_EQ(names(resumed + "/images"), names(dir.path() + "/whole/images")) << err;
+  const std::vector<std::string> images = names(dir.path() + "/whole/images");
+  EXPECT_EQ(names(resumed + "/images"), images) << err;
+  if (!images.empty()) {  // a build that renders
+    EXPECT_EQ(images.size(), 16u);  // steps 0, 20, ..., 300
+    for (const std::string& image : images)
+      EXPECT_TRUE(slurp(resumed + "/images/" + image) == slurp(dir.path() + "/whole/images/" + image)) << image;
+  }
   EXPECT_EQ(fs::exists(resumed + "/movie.mp4"), fs::exists(dir.path() + "/whole/movie.mp4")) << err;
+
+  // Frames every 15 steps, images every 20: the resumed run's images at the
+  // steps both share (0, 60, ...), with a warning.
+  const std::string odd = " --quiet --backend cpu --set output.vtk.every=15 --set output.render.every=20"
+                          " --set output.render.width=32 --set output.render.height=24";
+  const std::string stepped = dir.path() + "/stepped";
+  ASSERT_EQ(marbles("run " + scene + odd + " --out " + stepped + " --duration 0.1"), 0);
+  ASSERT_EQ(marbles("run " + scene + odd + " --out " + stepped + " --restart " + stepped +
+                        "/checkpoints/step_000100.mck", &err),
+            0)
+      << err;
+  if (!images.empty()) {
+    EXPECT_NE(err.find("its images come every 60 steps"), std::string::npos) << err;
+    EXPECT_EQ(names(stepped + "/images").size(), 6u) << err;  // steps 0, 60, ..., 300
+  }
 }
 
 // A run whose frames carry no radius (output.fields without it) resumes and
