@@ -64,6 +64,11 @@ std::vector<PointField> parse_point_fields(const std::vector<std::string>& names
 
 namespace {
 
+// The time a frame's TimeValue holds: the number its .pvd line (and
+// thermo.csv's row) spells, so the three match exactly (175 steps of 1 ms
+// are 0.17500000000000002 s, listed as 0.175).
+double listed_time(double time) { return std::strtod(time_text(time).c_str(), nullptr); }
+
 // One file's line of a .pvd.
 std::string dataset_line(double time, const std::string& file) {
   return "    <DataSet timestep=\"" + time_text(time) + "\" group=\"\" part=\"0\" file=\"" + file + "\"/>\n";
@@ -384,7 +389,7 @@ void VtkSeriesWriter::adopt(double time, const fs::path& from) { m_series.adopt(
 fs::path VtkSeriesWriter::write(const Snapshot& s) {
   const std::size_t n = s.size();
   PolyDataFile file;
-  file.field("TimeValue", s.time);
+  file.field("TimeValue", listed_time(s.time));
   file.field("step", std::uint64_t(s.step));
   file.metadata(m_metadata);
   file.points(s.position.data(), n);
@@ -452,7 +457,7 @@ fs::path ContactSeriesWriter::write(const ContactSnapshot& c) {
     wall[k] = c.wall[k];
   }
   PolyDataFile file;
-  file.field("TimeValue", c.time);
+  file.field("TimeValue", listed_time(c.time));
   file.field("step", std::uint64_t(c.step));
   file.metadata(m_metadata);
   file.points(points.data(), points.size());
@@ -556,7 +561,7 @@ fs::path WallSeriesWriter::write(const Walls& walls, double time, std::uint64_t 
                    double(s.material)});
   }
   PolyDataFile file;
-  file.field("TimeValue", time);
+  file.field("TimeValue", listed_time(time));
   file.field("step", step);
   file.metadata(m_metadata);
   file.field_array("planes", 10, planes.data(), planes.size() / 10);

@@ -249,6 +249,46 @@ TEST(Run, ContactForcesOfARestingStackBalanceItsWeight) {
   fs::remove_all(dir);
 }
 
+// A frame's TimeValue is the time its .pvd line and thermo.csv's row spell,
+// exactly: 175 steps of 1 ms are 0.17500000000000002 s in double arithmetic
+// and 0.175 in the lists, and a join of frames to rows by time found no row.
+TEST(Run, FrameTimesMatchTheSeriesAndThermoExactly) {
+  const fs::path dir = temp_dir("frame_times");
+  const std::string yaml = R"(format: 1
+time: {duration: 0.3, dt: 1.0e-3}
+effects: [gravity, collisions, walls]
+materials: {a: {}}
+walls: [{plane: {point: [0, 0, 0], normal: [0, 0, 1]}}]
+particles:
+  - list: {positions: [[0, 0, 0.5]], radius: 0.05}
+output: {vtk: {every: 1}, contacts: {every: 5}}
+)";
+  std::string err;
+  ASSERT_EQ(run_on_cpu(dir, yaml, err), 0) << err;
+  std::vector<double> rows;  // thermo.csv's times
+  {
+    std::ifstream thermo(dir / "out" / "thermo.csv");
+    std::string line;
+    std::getline(thermo, line);
+    while (std::getline(thermo, line)) rows.push_back(std::strtod(line.substr(line.find(',') + 1).c_str(), nullptr));
+  }
+  int inexact = 0;  // frames whose step times dt is not its listed time
+  for (const char* series : {"series.pvd", "walls.pvd", "contacts.pvd"}) {
+    const auto entries = render::read_pvd(dir / "out" / series);
+    ASSERT_GT(entries.size(), 50u) << series;
+    for (const render::SeriesEntry& e : entries) {
+      const render::VtpArrays frame = render::read_vtp_arrays(e.path);
+      const double time = frame.arrays.at("FieldData/TimeValue").values.at(0);
+      EXPECT_EQ(time, e.time) << e.path;
+      EXPECT_TRUE(std::find(rows.begin(), rows.end(), time) != rows.end()) << e.path;
+      const double step = frame.arrays.at("FieldData/step").values.at(0);
+      inexact += step * 1e-3 != time ? 1 : 0;
+    }
+  }
+  EXPECT_GT(inexact, 10);  // the times that differed
+  fs::remove_all(dir);
+}
+
 // A wall contact names its wall by its place in the scene's `walls` list,
 // whatever the wall's kind (the step keeps planes, box faces, cylinders and
 // spheres apart, in that order): four walls listed sphere, box, cylinder,
