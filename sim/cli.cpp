@@ -24,6 +24,7 @@
 #include "core/error.hpp"
 #include "core/format.hpp"
 #include "core/parallel.hpp"
+#include "render/atomic_file.hpp"
 #include "render/camera.hpp"
 #include "render/color_map.hpp"
 #include "render/frame_output.hpp"
@@ -531,6 +532,9 @@ int cli_main(int argc, char** argv) {
       if (!rd_camera.empty()) rd.camera = render::parse_camera(rd_camera, "--camera");
       rd_movie.enabled = !rd_no_movie;
       const RunFolderLock lock(rd_dir, "outdir");  // not while a run writes the folder (its images would go)
+      // A killed render's (or run's) temporaries: its movie, its log, a half-written image.
+      render::remove_stale_temporaries(rd_dir);
+      render::remove_stale_temporaries(std::filesystem::path(rd_dir) / "images");
       return render::render_output_dir(rd_dir, rd, rd_movie, isatty(fileno(stderr)) != 0, std::cerr);
     }
   } catch (const InputError& e) {

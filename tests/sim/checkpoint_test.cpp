@@ -107,6 +107,20 @@ TEST_F(Checkpoints, ResumedRunRendersItsImagesAndMovie) {
     EXPECT_NE(err.find("its images come every 60 steps"), std::string::npos) << err;
     EXPECT_EQ(names(stepped + "/images").size(), 6u) << err;  // steps 0, 60, ..., 300
   }
+
+  // A killed render leaves its movie, the movie's log and an image under
+  // temporary names: the next `marbles render` removes them (a writer that
+  // lives keeps its own).
+  const std::string dead = std::to_string(999999999), alive = std::to_string(::getpid());
+  const std::vector<std::string> stale = {resumed + "/.movie.mp4.tmp-" + dead + "-0",
+                                          resumed + "/.movie.mp4.tmp-" + dead + "-0.log",
+                                          resumed + "/images/.frame_000003.png.tmp-" + dead + "-3"};
+  const std::string kept = resumed + "/images/.frame_000004.png.tmp-" + alive + "-4";
+  for (const std::string& path : stale) std::ofstream(path) << "x";
+  std::ofstream(kept) << "x";
+  marbles("render " + resumed + " --no-movie --width 32 --height 24", &err);
+  for (const std::string& path : stale) EXPECT_FALSE(fs::exists(path)) << path << "\n" << err;
+  EXPECT_TRUE(fs::exists(kept));
 }
 
 // A run whose frames carry no radius (output.fields without it) resumes and
