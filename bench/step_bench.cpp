@@ -1,5 +1,7 @@
 #include "bench/step_bench.hpp"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -685,9 +687,26 @@ std::pair<scene::Scene, PileState> pile_start(const StepBenchOptions& options, s
         << settle.ke_per_sphere << " J)\n";
     return {std::move(box), std::move(*state)};
   }
+  // A cache that cannot be written is found before the settle, not after
+  // it: the pile is settled for this run alone (a warning), and a save that
+  // fails all the same is a warning too.
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path folder = fs::path(path).parent_path();
+  fs::create_directories(folder, ec);
+  if (!ec && ::access(folder.c_str(), W_OK) != 0) ec = std::error_code(errno, std::generic_category());
+  if (ec)
+    log << "warning: cannot cache the settled pile in " << folder.string() << " (" << ec.message()
+        << "): settling it for this run alone\n";
   PileState settled = settle_pile(n, lattice, backend, options, log);
-  save_pile(path, settled.world, settled.settle);
-  log << "pile N = " << n << ": saved " << path << "\n";
+  if (!ec) {
+    try {
+      save_pile(path, settled.world, settled.settle);
+      log << "pile N = " << n << ": saved " << path << "\n";
+    } catch (const std::exception& e) {
+      log << "warning: the settled pile was not cached: " << e.what() << "\n";
+    }
+  }
   return {std::move(box), std::move(settled)};
 }
 

@@ -132,6 +132,24 @@ StepBenchOptions one_step_pile(const TempDir& dir, std::size_t n, int warmup) {
   return o;
 }
 
+// A cache folder that cannot be made (here under a plain file) is a warning
+// said before the settle, and the bench runs on the pile settled for it
+// alone: it ended with a filesystem error after the settle.
+TEST(StepBench, ACacheThatCannotBeWrittenIsAWarning) {
+  TempDir dir;
+  std::ofstream(dir.path / "file") << "x";
+  StepBenchOptions o = one_step_pile(dir, 600, 1);
+  o.settle_steps = 60;
+  o.cache_dir = (dir.path / "file" / "cache").string();
+  ::testing::internal::CaptureStderr();
+  const nlohmann::json j = run_json(o);
+  const std::string err = ::testing::internal::GetCapturedStderr();
+  EXPECT_FALSE(j["results"][0]["settle"]["cached"].get<bool>());
+  EXPECT_GT(j["results"][0]["step_ms_median"].get<double>(), 0.0);
+  EXPECT_NE(err.find("warning: cannot cache the settled pile in " + o.cache_dir), std::string::npos) << err;
+  EXPECT_LT(err.find("warning: cannot cache"), err.find("settled on")) << err;  // said before the settle ends
+}
+
 // A damaged cache file (a flipped byte among the spheres, cut short, bytes
 // added, its last byte changed) is not used: the pile is settled again, to
 // the same spheres, and saved over it.
