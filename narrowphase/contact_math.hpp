@@ -39,6 +39,48 @@ MARBLES_HD_INLINE bool sphere_sphere(const Vec3& pa, real ra, const Vec3& pb, re
   return true;
 }
 
+// Two spheres apart (separation > 0) and closing take the normal of the
+// line of centres at the moment tau in the substep where it matters, not at
+// its start: where they touch within h, the moment they touch (an
+// off-centre impact leaves along the line of centres at impact, as
+// rigid-body impact theory has it; the start's line turned it by about the
+// distance closed in h over R: 7.5 % of the approach speed for 5 cm
+// spheres meeting off-centre at 10 m/s at dt 1 ms); else the substep's end,
+// or their closest approach where it comes first. Along the start's normal
+// a gap closing at the normal speed closes sooner than the spheres meet
+// (their surfaces curve away), which struck an oblique pair early along
+// the wrong line; along the line at tau the gap closes exactly when they
+// touch, and not within h where they do not. d is the centres' offset (a's
+// less b's), dv the velocities' (a's less b's), R the sum of the radii,
+// dist |d|. The moment of touch solves |d + dv t| = R, its smaller root, in
+// the form that keeps the digits: with b = d.dv < 0, a = |dv|^2 and
+// c = separation (dist + R) = |d|^2 - R^2, t = c / (-b + sqrt(b^2 - a c));
+// without a root they pass each other, closest at -b / a. The separation
+// is then d's along the new normal less R (at least +0). Left as it is
+// where they touch already or move apart.
+MARBLES_HD_INLINE void normal_at_touch(const Vec3& d, const Vec3& dv, real R, real dist, real h, Vec3& normal,
+                                       real& separation) {
+  if (!(separation > 0)) return;
+  const real b = dot(d, dv);
+  if (!(b < 0)) return;
+  const real a = dot(dv, dv), c = separation * (dist + R);
+  const real disc = b * b - a * c;
+  real tau = h;
+  if (disc >= 0) {
+    const real t = c / (std::sqrt(disc) - b);
+    if (t < tau) tau = t;
+  } else {
+    const real closest = -b / a;
+    if (closest < tau) tau = closest;
+  }
+  const Vec3 m = d + dv * tau;
+  const real len = length(m);
+  if (!(len > 0)) return;
+  normal = m / len;
+  const real s = dot(normal, d) - R;
+  separation = s > 0 ? s : real(0);
+}
+
 // Sphere against a half-space (point on plane q, unit normal n towards free space).
 MARBLES_HD_INLINE bool sphere_plane(const Vec3& p, real r, const Vec3& q, const Vec3& n, real margin,
                                     real& separation) {
@@ -245,6 +287,8 @@ MARBLES_HD_INLINE bool make_sphere_contact(const BodiesView& bodies, std::uint32
   if (!sphere_sphere(bodies.position[i], ri, bodies.position[j], rj, margin, c.normal, c.separation)) return false;
   if (!speculative_closes(c.separation, dot(dv, c.normal), h, skin, pair_reach)) return false;
   if (both_fixed(bodies.inv_mass[i], bodies.inv_mass[j])) return false;
+  const Vec3 d = bodies.position[i] - bodies.position[j];
+  normal_at_touch(d, dv, ri + rj, length(d), h, c.normal, c.separation);
   name_sphere_pair(bodies, i, j, table, c);
   return true;
 }
@@ -262,6 +306,10 @@ MARBLES_HD_INLINE bool make_wall_contact(const BodiesView& bodies, std::uint32_t
   if (!speculative_closes(c.separation, dot(bodies.velocity[i] - c.wall_velocity, c.normal), h, kContactSkin * r,
                           reach[i]))
     return false;
+  if (wall.kind == WallShape::Kind::sphere) {  // its surface velocity is its translation, whatever the normal
+    const Vec3 d = p - wall.point;
+    normal_at_touch(d, bodies.velocity[i] - wall.velocity, r + wall.radius, length(d), h, c.normal, c.separation);
+  }
   name_wall_pair(bodies, i, wall, k, table, c);
   return true;
 }

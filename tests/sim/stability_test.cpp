@@ -299,7 +299,11 @@ TEST(Stability, ElasticGasConservesEnergy) {
     contacts += sim.last_step().contacts;
   }
   EXPECT_GT(contacts, 10000u);
-  EXPECT_NEAR(sim.world().kinetic_energy(), e0, 1e-4 * e0);
+  // Float's rounding gains about 1e-6 of the energy a simulated second here
+  // (9.4e-5 over these 100 s with each impact along the line of centres at
+  // the substep's start, 1.09e-4 along the line at the moment of touch: the
+  // gas of 64 spheres run alike in double gains 1.0e-13 and 1.1e-13).
+  EXPECT_NEAR(sim.world().kinetic_energy(), e0, 1.5e-4 * e0);
 }
 
 // --- Motion the substep did not sweep (sim/watch_math.hpp) -----------------
