@@ -51,18 +51,19 @@ MARBLES_HD_INLINE bool sphere_sphere(const Vec3& pa, real ra, const Vec3& pb, re
 // (their surfaces curve away), which struck an oblique pair early along
 // the wrong line; along the line at tau the gap closes exactly when they
 // touch, and not within h where they do not. d is the centres' offset (a's
-// less b's), dv the velocities' (a's less b's), R the sum of the radii,
-// dist |d|. The moment of touch solves |d + dv t| = R, its smaller root, in
+// less b's), dv the velocities' (a's less b's), R the sum of the radii
+// (|d|, dist, is taken only past the early returns). The moment of touch solves |d + dv t| = R, its smaller root, in
 // the form that keeps the digits: with b = d.dv < 0, a = |dv|^2 and
 // c = separation (dist + R) = |d|^2 - R^2, t = c / (-b + sqrt(b^2 - a c));
 // without a root they pass each other, closest at -b / a. The separation
 // is then d's along the new normal less R (at least +0). Left as it is
 // where they touch already or move apart.
-MARBLES_HD_INLINE void normal_at_touch(const Vec3& d, const Vec3& dv, real R, real dist, real h, Vec3& normal,
+MARBLES_HD_INLINE void normal_at_touch(const Vec3& d, const Vec3& dv, real R, real h, Vec3& normal,
                                        real& separation) {
   if (!(separation > 0)) return;
   const real b = dot(d, dv);
   if (!(b < 0)) return;
+  const real dist = length(d);
   const real a = dot(dv, dv), c = separation * (dist + R);
   const real disc = b * b - a * c;
   real tau = h;
@@ -287,8 +288,7 @@ MARBLES_HD_INLINE bool make_sphere_contact(const BodiesView& bodies, std::uint32
   if (!sphere_sphere(bodies.position[i], ri, bodies.position[j], rj, margin, c.normal, c.separation)) return false;
   if (!speculative_closes(c.separation, dot(dv, c.normal), h, skin, pair_reach)) return false;
   if (both_fixed(bodies.inv_mass[i], bodies.inv_mass[j])) return false;
-  const Vec3 d = bodies.position[i] - bodies.position[j];
-  normal_at_touch(d, dv, ri + rj, length(d), h, c.normal, c.separation);
+  normal_at_touch(bodies.position[i] - bodies.position[j], dv, ri + rj, h, c.normal, c.separation);
   name_sphere_pair(bodies, i, j, table, c);
   return true;
 }
@@ -307,8 +307,7 @@ MARBLES_HD_INLINE bool make_wall_contact(const BodiesView& bodies, std::uint32_t
                           reach[i]))
     return false;
   if (wall.kind == WallShape::Kind::sphere) {  // its surface velocity is its translation, whatever the normal
-    const Vec3 d = p - wall.point;
-    normal_at_touch(d, bodies.velocity[i] - wall.velocity, r + wall.radius, length(d), h, c.normal, c.separation);
+    normal_at_touch(p - wall.point, bodies.velocity[i] - wall.velocity, r + wall.radius, h, c.normal, c.separation);
   }
   name_wall_pair(bodies, i, wall, k, table, c);
   return true;

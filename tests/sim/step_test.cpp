@@ -284,11 +284,7 @@ TEST(Walls, BoxKeepsEverySphereInside) {
 TEST(Walls, AFinitePostHoldsWhatFallsOnItsTop) {
   using scene::Effect;
   scene::Scene s = base_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution}, 0.3);
-  scene::WallSpec floor;
-  floor.kind = scene::WallSpec::Kind::plane;
-  floor.point = {0, 0, 0};
-  floor.normal = {0, 0, 1};
-  s.walls.push_back(floor);
+  s.walls.push_back(marbles::testing::plane({0, 0, 0}, {0, 0, 1}));
   scene::WallSpec post;
   post.kind = scene::WallSpec::Kind::cylinder;
   post.base = {0, 0, 0};
@@ -301,12 +297,7 @@ TEST(Walls, AFinitePostHoldsWhatFallsOnItsTop) {
   scene::GeneratedParticles g;
   const Vec3 starts[] = {{0, 0, real(1.5)}, {real(0.15), real(0.05), real(1.3)}, {real(0.6), 0, real(1.5)},
                          {real(-0.6), real(0.1), real(0.5)}};
-  for (const Vec3& p : starts) {
-    g.position.push_back(p);
-    g.velocity.push_back({});
-    g.radius.push_back(r);
-    g.material.push_back(0);
-  }
+  for (const Vec3& p : starts) marbles::testing::add_sphere(g, p, r);
   g.velocity[3] = {3, 0, 0};  // at the side, mid-height
   Simulation sim(s, make_world(s, g), test_backend());
   double side_x = -1;  // the thrown ball's furthest reach towards the axis
@@ -352,13 +343,7 @@ TEST(Impacts, OffCentreImpactsLeaveAlongTheLineOfCentresAtTouch) {
     const double b = bfrac * R, along = std::sqrt(R * R - b * b);
     const double x1 = -(along + speed * 1e-3 * (10 + phase));
     scene::GeneratedParticles g;
-    auto add = [&g](double x, double y, double r, double vx) {
-      g.position.push_back({real(x), real(y), 0});
-      g.velocity.push_back({real(vx), 0, 0});
-      g.radius.push_back(real(r));
-      g.material.push_back(0);
-    };
-    add(x1, 0, r1, speed);
+    marbles::testing::add_sphere(g, {real(x1), 0, 0}, real(r1), {real(speed), 0, 0});
     if (wall) {
       scene::WallSpec rock;
       rock.kind = scene::WallSpec::Kind::sphere;
@@ -366,7 +351,7 @@ TEST(Impacts, OffCentreImpactsLeaveAlongTheLineOfCentresAtTouch) {
       rock.radius = r2;
       s.walls.push_back(rock);
     } else {
-      add(0, b, r2, 0);
+      marbles::testing::add_sphere(g, {0, real(b), 0}, real(r2));
     }
     Simulation sim(s, make_world(s, g), test_backend());
     for (int k = 0; k < 40; ++k) sim.step();
