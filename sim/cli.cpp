@@ -317,6 +317,9 @@ int cli_main(int argc, char** argv) {
   add_set_option(check_cmd, check_overrides);
   add_limit_option(check_cmd, limit_args);
   add_precision_option(check_cmd, precision);
+  bool check_pipeline = false;
+  check_cmd->add_flag("--pipeline", check_pipeline,
+                      "also print the stages a run would build (as `marbles run --backend cpu` prints them)");
 
   StudyOptions study;
   std::vector<std::string> study_vary;
@@ -476,7 +479,7 @@ int cli_main(int argc, char** argv) {
       run.limits = limit_args;
       return run_scene(run, std::cout, std::cerr);
     }
-    if (*check_cmd) return check_scene(check_path, check_overrides, std::cout, std::cerr);
+    if (*check_cmd) return check_scene(check_path, check_overrides, std::cout, std::cerr, check_pipeline);
     if (*study_cmd) {
       for (const std::string& v : study_vary) {
         StudyVary vary = parse_vary(v);
@@ -487,6 +490,7 @@ int cli_main(int argc, char** argv) {
         study.vary.push_back(std::move(vary));
       }
       study.progress = !study_quiet;
+      study.program_name = argv[0];  // the runs' summaries name the program as typed
       // Ctrl-C (or SIGTERM) stops the study, its running run too, as it stops a run.
       const StopRequests stops;
       study.stop = [&stops] { return stops.received() != 0; };

@@ -160,8 +160,8 @@ CheckedScene checked_scene(const std::string& scene_path, const std::vector<std:
 }
 
 int check_scene(const std::string& scene_path, const std::vector<std::string>& overrides, std::ostream& out,
-                std::ostream& err) {
-  const CheckedScene checked = checked_scene(scene_path, overrides);
+                std::ostream& err, bool pipeline) {
+  CheckedScene checked = checked_scene(scene_path, overrides);
   const scene::Scene& sc = checked.scene;
   const scene::GeneratedParticles& particles = checked.particles;
   const World& world = checked.world;
@@ -171,6 +171,8 @@ int check_scene(const std::string& scene_path, const std::vector<std::string>& o
   warn_risky_settings(sc, particles, err);
   const StepModel model = compile_step_model(sc, broadphase::Algorithm::home);
   warn_initial_overlaps(state_overlaps(world, model, model.wall_shapes, kStartOverlapTolerance), err);
+  // The stages `marbles run --backend cpu` would build, as its run prints them.
+  if (pipeline) out << Simulation(sc, std::move(checked.world), broadphase::Backend::cpu).describe_pipeline();
   return 0;
 }
 
@@ -364,6 +366,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   if (probe) reference = probe->finish(sim.time(), sim.world());
   nlohmann::ordered_json summary;
   summary["scene"] = sc.path;
+  summary["scene_name"] = sc.name;
   summary["marbles_version"] = kMarblesVersion;
   summary["commit"] = kMarblesCommit;
   summary["command_line"] = options.command_line;

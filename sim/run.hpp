@@ -68,9 +68,10 @@ struct RunOptions {
 int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err);
 
 // `marbles check`: loads (with the `--set` overrides), validates and
-// generates the particles without running; prints a one-line summary.
+// generates the particles without running; prints a one-line summary, and
+// with `pipeline` (--pipeline) the stages a CPU run of it would build.
 int check_scene(const std::string& scene_path, const std::vector<std::string>& overrides, std::ostream& out,
-                std::ostream& err);
+                std::ostream& err, bool pipeline = false);
 
 // `marbles pairs`: prints the overlapping pairs "i j" (i < j, sorted) of the
 // spheres in a CSV of x,y,z,r rows. `algorithm`: subdivision (the seed's

@@ -52,6 +52,26 @@ std::string read_text(const fs::path& path) {
 
 // A run's summary.json (sim/run.cpp), parsed; a file that is not JSON is a
 // failure of that run, named by its path.
+// A run's summary.json with the `--out FROM` of its command_line made
+// `--out TO` (the study moves its runs there when it ends); nothing else
+// changes.
+void rename_out_folder(const fs::path& path, const fs::path& from, const fs::path& to) {
+  nlohmann::ordered_json summary;
+  try {
+    summary = nlohmann::ordered_json::parse(read_text(path));
+  } catch (const nlohmann::json::exception& e) {
+    throw RuntimeFailure("cannot read " + path.string() + ": " + e.what());
+  }
+  if (!summary.contains("command_line") || !summary["command_line"].is_string()) return;
+  std::string line = summary["command_line"].get<std::string>();
+  const std::string old_out = " --out " + from.string();
+  const std::size_t at = line.rfind(old_out);
+  if (at == std::string::npos) return;
+  line.replace(at, old_out.size(), " --out " + to.string());
+  summary["command_line"] = line;
+  render::write_file_atomic(path.string(), json_text(summary));
+}
+
 nlohmann::json read_summary(const fs::path& path) {
   try {
     return nlohmann::json::parse(read_text(path));
@@ -81,11 +101,12 @@ double median(std::vector<double> v) {
   return n == 0 ? std::nan("") : (n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]));
 }
 
-// Runs argv[0] (a path, or a name looked up on PATH) with stdout and stderr
-// to `log`, no shell between; returns its exit status (-1 if it did not exit).
+// Runs `program` (a path, or a name looked up on PATH) with the arguments
+// `args` (args[0] its name as it sees it) and stdout and stderr to `log`, no
+// shell between; returns its exit status (-1 if it did not exit).
 // Where `stop` says so while it runs, it is ended (SIGTERM; SIGKILL after
 // 10 s) and StudyStopped thrown.
-int run_process(const std::vector<std::string>& args, const std::string& log,
+int run_process(const std::string& program, const std::vector<std::string>& args, const std::string& log,
                 const std::function<bool()>& stop = {}) {
   std::vector<char*> argv;
   for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
@@ -95,9 +116,9 @@ int run_process(const std::vector<std::string>& args, const std::string& log,
   posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   posix_spawn_file_actions_adddup2(&actions, 1, 2);
   pid_t pid = 0;
-  const int rc = posix_spawnp(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  const int rc = posix_spawnp(&pid, program.c_str(), &actions, nullptr, argv.data(), environ);
   posix_spawn_file_actions_destroy(&actions);
-  if (rc != 0) throw RuntimeFailure("cannot start " + args[0] + ": " + std::strerror(rc));
+  if (rc != 0) throw RuntimeFailure("cannot start " + program + ": " + std::strerror(rc));
   int status = 0;
   if (stop) {
     for (;;) {
@@ -176,7 +197,7 @@ void show_progress(std::ostream& err, bool tty, std::size_t done, std::size_t to
 
 bool have_gnuplot() {
   try {
-    return run_process({"gnuplot", "--version"}, "/dev/null") == 0;
+    return run_process("gnuplot", {"gnuplot", "--version"}, "/dev/null") == 0;
   } catch (const RuntimeFailure&) {  // not on PATH
     return false;
   }
@@ -378,7 +399,8 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     row.values = combos[c];
     std::vector<double> per_step, per_second;
     const RunSettings run = settings_of(options, row.values);
-    std::vector<std::string> args{options.marbles, "run", options.scene_path, "--quiet", "--summary-only", "--overwrite"};
+    const std::string& name = options.program_name.empty() ? options.marbles : options.program_name;
+    std::vector<std::string> args{name, "run", options.scene_path, "--quiet", "--summary-only", "--overwrite"};
     for (const std::string& s : run.sets) args.insert(args.end(), {"--set", s});
     for (const std::string& l : options.limits) args.insert(args.end(), {"--limit", l});
     args.insert(args.end(), {"--backend", run.backend});
@@ -399,7 +421,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
       };
       int status = 0;
       try {
-        status = run_process(args, log, options.stop);
+        status = run_process(options.marbles, args, log, options.stop);
       } catch (const StudyStopped&) {
         throw stopped();
       }
@@ -419,6 +441,8 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
       row.steps = static_cast<std::uint64_t>(steps);
       ++done;
     }
+    // The run's command line names the folder it ends in (runs/N), not its staging folder.
+    rename_out_folder(run_dir / "summary.json", run_dir, dir / "runs" / std::to_string(c));
     row.ms_per_step = median(per_step);
     row.ms_per_simulated_second = median(per_second);
     const nlohmann::json reference = summary.value("reference", nlohmann::json::object());
@@ -516,7 +540,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   render::write_file_atomic((dir / "study.gp").string(), gp.str());
   if (have_gnuplot()) {
     const std::string log = (dir / "study.gp.log").string();
-    if (run_process({"gnuplot", (dir / "study.gp").string()}, log) == 0 && fs::exists(png + ".tmp")) {
+    if (run_process("gnuplot", {"gnuplot", (dir / "study.gp").string()}, log) == 0 && fs::exists(png + ".tmp")) {
       fs::rename(png + ".tmp", png);
       result.plotted = true;
     } else {

@@ -33,6 +33,9 @@ struct StudyOptions {
   std::string out_dir;              // default: out/study/<scene stem>
   int repeats = 3;                  // runs per combination; the cost is their median
   std::string marbles = "/proc/self/exe";  // the program that runs each combination
+  // The name each run is given as its argv[0] (the start of its summary's
+  // command_line): the study's own as typed; empty: `marbles`'s path above.
+  std::string program_name;
   bool progress = true;
   // Asked about every 50 ms while a run runs (from the study's thread): true
   // stops the study, its run ended (SIGTERM; SIGKILL after 10 s), with StudyStopped. The Python

@@ -41,11 +41,11 @@ std::string slurp(const std::string& path) {
   return text.str();
 }
 
-// `marbles check SCENE [--set OVERRIDE]...`
+// `marbles check SCENE [--set OVERRIDE]... [FLAGS]`
 Outcome run_check(const std::string& scene, const test::ScratchDir& scratch,
-                  const std::vector<std::string>& overrides = {}) {
+                  const std::vector<std::string>& overrides = {}, const std::string& flags = "") {
   const std::string out = scratch.path() + "/stdout.txt", err = scratch.path() + "/stderr.txt";
-  std::string command = quoted(kMarbles) + " check " + quoted(scene);
+  std::string command = quoted(kMarbles) + " check " + quoted(scene) + flags;
   for (const std::string& o : overrides) command += " --set " + quoted(o);
   command += " >" + quoted(out) + " 2>" + quoted(err);
   const int status = std::system(command.c_str());
@@ -94,6 +94,29 @@ TEST_F(CliCheck, SetOverridesTheScene) {
     EXPECT_EQ(d.exit_code, 0) << d.err;
     EXPECT_NE(d.out.find(", double)"), std::string::npos) << form << ": " << d.out;
   }
+}
+
+// --pipeline adds the stages a run builds, as the run itself prints them:
+// the scene's effects and settings, a --set among them.
+TEST_F(CliCheck, PipelineListsTheStagesARunBuilds) {
+  const test::ScratchDir scratch("cli_pipeline");
+  const std::string scene = MARBLES_SOURCE_DIR "/scenes/demo.yaml";
+  const Outcome o = run_check(scene, scratch, {"solver.iterations=17"}, " --pipeline");
+  ASSERT_EQ(o.exit_code, 0) << o.err;
+  EXPECT_NE(o.out.find("\npipeline (1 substep"), std::string::npos) << o.out;
+  EXPECT_NE(o.out.find("17 sequential-impulse sweeps"), std::string::npos) << o.out;
+  const std::string run_out = scratch.path() + "/run.out";
+  const std::string command = quoted(kMarbles) + " run " + quoted(scene) + " --backend cpu --duration 0.001 --summary-only"
+                              " --overwrite --set solver.iterations=17 --out " + quoted(scratch.path() + "/run") +
+                              " > " + quoted(run_out) + " 2>/dev/null";
+  ASSERT_EQ(std::system(command.c_str()), 0) << command;
+  const std::string ran = slurp(run_out);
+  const std::size_t from = ran.find("pipeline ("), to = ran.find("\n", ran.find("  project"));
+  ASSERT_NE(from, std::string::npos) << ran;
+  EXPECT_NE(o.out.find(ran.substr(from, to + 1 - from)), std::string::npos) << o.out << "\nagainst\n" << ran;
+  const Outcome gas = run_check(scene, scratch, {"effects=[gravity]"}, " --pipeline");
+  ASSERT_EQ(gas.exit_code, 0) << gas.err;
+  EXPECT_EQ(gas.out.find("contact solver"), std::string::npos) << gas.out;
 }
 
 TEST_F(CliCheck, BadSetValueExitsTwoNamingTheOverride) {

@@ -539,6 +539,24 @@ TEST_F(Robustness, SummaryEscapesControlCharacters) {
   EXPECT_EQ(j.at("scene"), dir.path() + "/ball\t\"x\xef\xbf\xbd.yaml");
 }
 
+// summary.json names the scene as the run printed it: its `name`, else the
+// file's stem; a --set of the name wins.
+TEST_F(Robustness, SummaryNamesTheScene) {
+  const test::ScratchDir dir("robust_scene_name");
+  std::string text = slurp(MARBLES_SOURCE_DIR "/scenes/validation/bouncing_ball.yaml");
+  const std::size_t at = text.find("\nname: ");
+  ASSERT_NE(at, std::string::npos);
+  text.erase(at + 1, text.find('\n', at + 1) - at);
+  std::ofstream(dir.path() + "/drop_42.yaml") << text;
+  for (const auto& [set, name] : {std::pair<std::string, std::string>{"", "drop_42"}, {" --set name=pour_7", "pour_7"}}) {
+    const Outcome o = marbles("run " + dir.path() + "/drop_42.yaml --quiet --summary-only --backend cpu --duration 0.01"
+                              " --overwrite --out " + dir.path() + "/out" + set, dir);
+    ASSERT_EQ(o.exit_code, 0) << o.err;
+    const nlohmann::json j = nlohmann::json::parse(slurp(dir.path() + "/out/summary.json"));
+    EXPECT_EQ(j.at("scene_name"), name) << set;
+  }
+}
+
 // A full disk (simulated: MARBLES_FAULT_TRUNCATE cuts the file in half
 // before it is checked) is exit 1 with the path, and nothing incomplete under
 // a final name.

@@ -136,6 +136,30 @@ TEST_F(Study, AnEarlierStudysExtraRunsAreRemoved) {
   for (const char* name : {"2", "2.log"}) EXPECT_FALSE(fs::exists(runs / name)) << name;
 }
 
+// Each run's summary names the program as the study was typed (argv[0]),
+// not the path the study starts it by (/proc/self/exe), so a run's
+// command_line can be typed again.
+TEST_F(Study, RunsNameTheProgramAsTyped) {
+  const test::ScratchDir dir("study_argv0");
+  const std::string command = "'" + kMarbles + "' study " + kValidation +
+                              "bouncing_ball.yaml --vary time.dt=4e-3 --repeats 1 --backend cpu --quiet --out " +
+                              dir.path() + " > /dev/null 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0) << command;
+  const auto summary = nlohmann::json::parse(slurp(dir.path() + "/runs/0/summary.json"));
+  const std::string line = summary.at("command_line").get<std::string>();
+  EXPECT_EQ(line.rfind(kMarbles + " run " + kValidation + "bouncing_ball.yaml ", 0), 0u) << line;
+  EXPECT_EQ(line.find("/proc/"), std::string::npos) << line;
+  // and the folder the run ends in, where its summary lies: typed again, the line runs.
+  const std::string out = " --out " + dir.path() + "/runs/0";
+  EXPECT_EQ(line.size() - line.rfind(out), out.size()) << line;
+  const test::ScratchDir again("study_argv0_again");
+  std::string retyped = line.substr(0, line.rfind(out)) + " --out " + again.path() + " > /dev/null 2>&1";
+  ASSERT_EQ(std::system(retyped.c_str()), 0) << retyped;
+  const auto second = nlohmann::json::parse(slurp(again.path() + "/summary.json"));
+  EXPECT_EQ(second.at("steps"), summary.at("steps"));
+  EXPECT_EQ(second.at("kinetic_energy_end"), summary.at("kinetic_energy_end"));
+}
+
 // A study that fails midway leaves the earlier study in its folder whole:
 // its tables and all of its runs, none of the failed study's. The next study
 // clears the failed one's runs away.
