@@ -2,14 +2,17 @@
 // not_a_plain_file(path): what a path names when it is not a plain file.
 // whole_number(text), folders_of_ended_processes(dir, prefix): the
 // PREFIX-PID folders (a study's staging, a run's earlier output set aside)
-// whose process no longer runs.
+// whose process no longer runs. copy_plain_file(from, to, ec): a copy that says
+// why it failed.
 //
 // The scene, its CSV blocks and checkpoints are each read more than once (the
 // scene for its precision, its hash and its text), so a pipe would give its
 // bytes to the first read only, and opening a pipe that has no writer waits
 // for one. Such paths are refused up front, by what they are.
 
+#include <fcntl.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -19,6 +22,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <vector>
 
 namespace marbles {
@@ -64,6 +68,43 @@ inline std::vector<std::filesystem::path> folders_of_ended_processes(const std::
       ended.push_back(it->path());
   }
   return ended;
+}
+
+// Copies the plain file `from` to `to` (replaced where it is there; with
+// from's permission bits), setting `ec` to the error that stopped it:
+// std::filesystem::copy_file reports a full disk as "Input/output error"
+// (libstdc++ takes a short copy for EIO; ENOSPC underneath). On failure
+// what was made of `to` is removed (where it is a plain file).
+inline void copy_plain_file(const std::filesystem::path& from, const std::filesystem::path& to, std::error_code& ec) {
+  ec.clear();
+  const int in = ::open(from.c_str(), O_RDONLY | O_CLOEXEC);
+  if (in < 0) {
+    ec.assign(errno, std::generic_category());
+    return;
+  }
+  struct stat st {};
+  int out = -1;
+  if (::fstat(in, &st) != 0)
+    ec.assign(errno, std::generic_category());
+  else if ((out = ::open(to.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, st.st_mode & 07777)) < 0)
+    ec.assign(errno, std::generic_category());
+  char buffer[1 << 16];
+  while (!ec) {
+    const ssize_t got = ::read(in, buffer, sizeof buffer);
+    if (got < 0 && errno == EINTR) continue;
+    if (got < 0) ec.assign(errno, std::generic_category());
+    if (got <= 0) break;
+    for (ssize_t done = 0; done < got && !ec;) {
+      const ssize_t put = ::write(out, buffer + done, static_cast<std::size_t>(got - done));
+      if (put < 0 && errno != EINTR) ec.assign(errno, std::generic_category());
+      if (put > 0) done += put;
+    }
+  }
+  struct stat made {};
+  const bool plain = out >= 0 && ::fstat(out, &made) == 0 && S_ISREG(made.st_mode);  // not a device's node
+  if (out >= 0 && ::close(out) != 0 && !ec) ec.assign(errno, std::generic_category());  // a delayed write's error
+  ::close(in);
+  if (ec && plain) ::unlink(to.c_str());
 }
 
 }  // namespace marbles

@@ -359,7 +359,7 @@ void Series::adopt(double time, const fs::path& from) {
     if (ec) throw RuntimeFailure("cannot create " + (m_dir / m_folder).string() + ": " + ec.message());
     // Copied under a temporary name and renamed, as every output is written.
     const fs::path to = m_dir / file, part = to.string() + ".part";
-    fs::copy_file(from / file, part, fs::copy_options::overwrite_existing, ec);
+    copy_plain_file(from / file, part, ec);
     if (!ec) fs::rename(part, to, ec);
     if (ec) {
       std::error_code ignored;

@@ -230,7 +230,7 @@ void move_file(const std::filesystem::path& from, const std::filesystem::path& t
   std::filesystem::rename(from, to, ec);
   if (ec == std::errc::cross_device_link) {
     ec.clear();
-    std::filesystem::copy_file(from, to, ec);
+    copy_plain_file(from, to, ec);
     if (!ec) std::filesystem::remove(from, ec);
   }
 }
@@ -255,7 +255,7 @@ EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::ve
     fs::create_directories(to.parent_path(), ec);
     if (ec) return;
     if (copy) {
-      fs::copy_file(file, to, ec);
+      copy_plain_file(file, to, ec);
     } else {
       move_file(file, to, ec);
       if (!ec) m_moved.emplace_back(file, to);
