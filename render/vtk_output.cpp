@@ -333,12 +333,18 @@ fs::path Series::add(double time, const std::string& file_text) {
     if (ec) throw RuntimeFailure("cannot create " + (m_dir / m_folder).string() + ": " + ec.message());
   }
   // The file and the series that lists it are written together: where
-  // either cannot be, neither is, and the series stays as it was.
+  // either cannot be, neither is, and the series stays as it was. Where the
+  // .pvd is not due, the file alone (listed at the .pvd's next write).
   const std::size_t before = m_lines.size();
   m_lines += dataset_line(time, m_folder + "/" + numbered(m_prefix.c_str(), m_count));
   try {
-    const std::string pvd = pvd_text(m_lines);
-    write_files_atomic({{path, file_text}, {pvd_path(), pvd}});
+    if (m_relisting.due(m_lines.size())) {
+      const std::string pvd = pvd_text(m_lines);
+      write_files_atomic({{path, file_text}, {pvd_path(), pvd}});
+      m_relisting.written(m_lines.size());
+    } else {
+      write_file_atomic(path, file_text);
+    }
   } catch (...) {
     m_lines.resize(before);
     throw;
@@ -371,8 +377,16 @@ void Series::adopt(double time, const fs::path& from) {
   ++m_listed;
 }
 
-void Series::write_pvd() const {
+void Series::write_pvd() {
   if (m_listed > 0) write_file_atomic(pvd_path(), pvd_text(m_lines));
+  m_relisting.written(m_lines.size());
+}
+
+Series::~Series() {
+  try {
+    flush();
+  } catch (...) {  // a run that fails or stops: its earlier .pvd stands, naming files that are there
+  }
 }
 
 // --- spheres ------------------------------------------------------------------

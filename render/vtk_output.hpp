@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "core/walls.hpp"
+#include "render/atomic_file.hpp"
 #include "render/snapshot.hpp"
 
 namespace marbles::render {
@@ -60,15 +61,26 @@ class Series {
  public:
   Series(std::filesystem::path dir, std::string folder, std::string prefix, std::string pvd)
       : m_dir(std::move(dir)), m_folder(std::move(folder)), m_prefix(std::move(prefix)), m_pvd(std::move(pvd)) {}
-  /// Writes the next file and the .pvd; returns the file's path.
+  Series(const Series&) = delete;
+  Series& operator=(const Series&) = delete;
+  /// Writes the .pvd where it lags behind its files (best effort).
+  ~Series();
+  /// Writes the next file, and with it the .pvd where it is due
+  /// (Relisting: at once for the first 16, then once a sixteenth of the
+  /// files, or a second, is unlisted); returns the file's path.
   std::filesystem::path add(double time, const std::string& file_text);
   /// Counts the next file as written at `time` (a resumed run). Where it is
   /// not in DIR but in `from` (the folder of the run that wrote it), it is
   /// copied first; where it is in neither, it keeps its number but the .pvd
   /// leaves it out, so that the .pvd names only files DIR holds.
   void adopt(double time, const std::filesystem::path& from = {});
-  /// Writes the .pvd of the files listed so far (a resumed run that adds none).
-  void write_pvd() const;
+  /// Writes the .pvd of the files listed so far (a resumed run that adds
+  /// none, the end of a run, a checkpoint).
+  void write_pvd();
+  /// Writes the .pvd where it lags behind its files.
+  void flush() {
+    if (m_relisting.stale(m_lines.size())) write_pvd();
+  }
   std::filesystem::path next_path() const;
   std::filesystem::path pvd_path() const { return m_dir / m_pvd; }
   std::size_t size() const { return m_listed; }
@@ -80,6 +92,7 @@ class Series {
   std::size_t m_listed = 0;  // files listed
   std::size_t m_count = 0;                                 // files numbered, listed or not
   bool m_folder_made = false;
+  Relisting m_relisting;     // when the .pvd is written (m_lines' size at its last write)
 };
 
 /// Writes DIR/frames/frame_NNNNNN.vtp and keeps DIR/series.pvd up to date.
@@ -99,7 +112,8 @@ class VtkSeriesWriter {
   /// A resumed run: counts the next frame (as write() would name it) as
   /// already written at `time`, without writing it (Series::adopt).
   void adopt(double time, const std::filesystem::path& from = {});
-  void write_pvd() const { m_series.write_pvd(); }
+  void write_pvd() { m_series.write_pvd(); }
+  void flush() { m_series.flush(); }
 
  private:
   Series m_series;
@@ -133,7 +147,8 @@ class ContactSeriesWriter {
   ContactSeriesWriter(std::filesystem::path dir, FrameMetadata metadata = {});
   std::filesystem::path write(const ContactSnapshot& contacts);
   void adopt(double time, const std::filesystem::path& from = {});
-  void write_pvd() const { m_series.write_pvd(); }
+  void write_pvd() { m_series.write_pvd(); }
+  void flush() { m_series.flush(); }
   std::size_t frames() const { return m_series.size(); }
 
  private:
@@ -152,7 +167,8 @@ class WallSeriesWriter {
   WallSeriesWriter(std::filesystem::path dir, const Vec3& lo, const Vec3& hi, FrameMetadata metadata = {});
   std::filesystem::path write(const Walls& walls, double time, std::uint64_t step);
   void adopt(double time, const std::filesystem::path& from = {});
-  void write_pvd() const { m_series.write_pvd(); }
+  void write_pvd() { m_series.write_pvd(); }
+  void flush() { m_series.flush(); }
   std::size_t frames() const { return m_series.size(); }
 
  private:

@@ -343,9 +343,15 @@ struct RunOutput::Impl {
   std::ostream* log = nullptr;
   bool thermo = false;
   int thermo_every = 0;     // steps: the VTK cadence, else the images' (also in builds without VTK or OSMesa)
-  std::string thermo_text;  // header and rows so far, rewritten whole (atomically) per row
+  std::string thermo_text;  // header and rows so far, rewritten whole (atomically) where due
+  render::Relisting thermo_relisting;  // when thermo.csv is written (as a .pvd)
   std::uint64_t thermo_step = 0;
   double thermo_seconds = 0;
+
+  void write_thermo() {
+    render::write_file_atomic((std::filesystem::path(dir) / "thermo.csv").string(), thermo_text);
+    thermo_relisting.written(thermo_text.size());
+  }
 };
 
 std::vector<EndFigure> end_figures(const World& world) {
@@ -460,7 +466,19 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
   }
 }
 
-RunOutput::~RunOutput() = default;
+RunOutput::~RunOutput() {
+  try {
+    flush();
+  } catch (...) {  // a run that fails or stops: the listings written before stand, naming files that are there
+  }
+}
+
+void RunOutput::flush() {
+  if (m->vtk) m->vtk->flush();
+  if (m->walls) m->walls->flush();
+  if (m->contacts) m->contacts->flush();
+  if (m->thermo && m->thermo_relisting.stale(m->thermo_text.size())) m->write_thermo();
+}
 
 bool RunOutput::due(std::uint64_t step) const {
   return (m->vtk && step % m->vtk_every == 0) || (m->frames && step % m->render_every == 0) ||
@@ -475,7 +493,7 @@ void RunOutput::write(const Simulation& sim, double step_seconds) {
     m->thermo_text += thermo_row(sim, ms);
     m->thermo_step = step;
     m->thermo_seconds = step_seconds;
-    render::write_file_atomic((std::filesystem::path(m->dir) / "thermo.csv").string(), m->thermo_text);
+    if (m->thermo_relisting.due(m->thermo_text.size())) m->write_thermo();
   }
   if (m->contacts && step % m->contacts_every == 0) m->contacts->write(make_contact_snapshot(sim));
   if (!(m->vtk && step % m->vtk_every == 0) && !(m->frames && step % m->render_every == 0)) return;
@@ -508,7 +526,7 @@ void RunOutput::resume(std::uint64_t steps, double dt, const std::filesystem::pa
   // Written now too, so that a resumed run with no frame or row left to
   // write still leaves its folder whole.
   if (m->contacts) m->contacts->write_pvd();
-  if (m->thermo) render::write_file_atomic((std::filesystem::path(m->dir) / "thermo.csv").string(), m->thermo_text);
+  if (m->thermo) m->write_thermo();
   if (!m->vtk) return;
   for (std::uint64_t step = 0; step <= steps; step += static_cast<std::uint64_t>(m->vtk_every)) {
     m->vtk->adopt(static_cast<double>(step) * dt, from);
@@ -519,6 +537,7 @@ void RunOutput::resume(std::uint64_t steps, double dt, const std::filesystem::pa
 }
 
 std::string RunOutput::finish() {
+  flush();  // the listings whole before the closing render reads series.pvd
   std::ostringstream out;
   if (m->vtk) out << m->vtk->frames() << " frames in frames/, series.pvd, ";
   if (m->walls) out << "walls in walls/, walls.pvd, ";

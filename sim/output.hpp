@@ -129,7 +129,6 @@ class RunOutput {
   // across it): the scene at its start, so a resumed run draws the same.
   RunOutput(const scene::Scene& scene, const std::string& dir, const Walls& walls, bool render, std::ostream& log,
             bool resumed = false, const render::Bounds* view = nullptr);
-  ~RunOutput();
 
   // True when the step just completed (or step 0) has output due.
   bool due(std::uint64_t step) const;
@@ -143,9 +142,16 @@ class RunOutput {
   // contact and wall frames and thermo rows up to `steps` are copied where
   // this folder lacks them (a run resumed elsewhere is whole too).
   void resume(std::uint64_t steps, double dt, const std::filesystem::path& from);
+  // Writes the listings (series.pvd, walls.pvd, contacts.pvd, thermo.csv)
+  // where they lag behind what was written (render::Relisting: while a run
+  // goes on they are rewritten once a sixteenth of them, or a second, is
+  // new); a checkpoint's step, the end and a stop have them whole.
+  void flush();
   // Closes the movie (a resumed run: renders images and movie from the
   // frames); returns a short description of what was written.
   std::string finish();
+  // Flushes (best effort: a run that fails keeps the listings it wrote).
+  ~RunOutput();
 
  private:
   struct Impl;

@@ -271,11 +271,6 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     if (const char* fault = std::getenv(name))
       sim.inject_fault_at(std::strtoull(fault, nullptr, 10), std::strstr(fault, ":all") != nullptr, kind);
 
-  auto save_checkpoint = [&](const std::string& path) {
-    write_checkpoint(path, {fingerprint, sim.steps(), sim.world(), sim.save_state(), totals,
-                            probe ? probe->progress() : std::vector<double>{}, sim.ids()});
-  };
-
   // SIGINT, SIGTERM: end the step in progress, checkpoint, exit 1. Taken from
   // before the earlier run's files are set aside (a stop there would split
   // them) and the start's output (its first image may take long) on: a stop
@@ -299,6 +294,11 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     if (at != std::string::npos) fault_signal_step = std::strtoull(text.c_str() + at + 1, nullptr, 10);
   }
   RunOutput output(sc, sc.output.dir, sim.walls(), render, err, options.restart.has_value(), &view);
+  auto save_checkpoint = [&](const std::string& path) {
+    output.flush();  // a resume from it reads thermo.csv's rows up to its step
+    write_checkpoint(path, {fingerprint, sim.steps(), sim.world(), sim.save_state(), totals,
+                            probe ? probe->progress() : std::vector<double>{}, sim.ids()});
+  };
   Progress progress(!options.quiet);
   double step_seconds = 0;
   const std::uint64_t first_step = sim.steps();

@@ -6,6 +6,7 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -402,6 +403,47 @@ TEST(Pvd, ASeriesCutShortIsRefused) {
   }
   write_file_atomic(dir / "series.pvd", whole.substr(0, closed));
   EXPECT_EQ(read_pvd(dir / "series.pvd").size(), 2u);
+}
+
+// A series of many files rewrites its .pvd once a sixteenth of it is new
+// (or a second has passed), not at every file, so that the writes grow with
+// the files and not with their square; meanwhile it lists the first files in
+// order, every one there, and lags by at most a sixteenth of them; once the
+// series is gone (the end of a run, a stop or a failure) it lists them all.
+TEST(Pvd, ASeriesRelistsItsFilesInStepsAndWhollyAtItsEnd) {
+  const fs::path dir = fresh_dir("pvd_relisting");
+  const std::size_t n = 1000;
+  std::size_t writes = 0;
+  const auto start = std::chrono::steady_clock::now();
+  {
+    Series series(dir, "frames", "frame", "series.pvd");
+    ino_t inode = 0;
+    for (std::size_t k = 1; k <= n; ++k) {
+      series.add(0.001 * static_cast<double>(k), "frame " + std::to_string(k) + "\n");
+      struct stat st {};
+      ASSERT_EQ(::stat((dir / "series.pvd").c_str(), &st), 0);
+      const bool written = st.st_ino != inode;  // each write renames a new file over it
+      writes += written ? 1 : 0;
+      inode = st.st_ino;
+      if (written || k <= 20 || k % 97 == 0) {
+        const auto entries = read_pvd(dir / "series.pvd");
+        ASSERT_LE(entries.size(), k);
+        ASSERT_GE(16 * entries.size() + 16, 15 * k) << k;  // lags by a sixteenth at most
+        if (k <= 16) {
+          ASSERT_EQ(entries.size(), k);  // the first ones at once
+        }
+        for (std::size_t e = 0; e < entries.size(); ++e) {
+          ASSERT_EQ(entries[e].path, dir / "frames" / ("frame_" + std::string(6 - std::to_string(e).size(), '0') +
+                                                       std::to_string(e) + ".vtp"));
+          ASSERT_TRUE(fs::exists(entries[e].path));
+        }
+      }
+    }
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  // Growth by 16/15 a write past the first 16: 16 + ln(1000 / 16) / ln(16 / 15), 80; one more a second.
+  EXPECT_LE(static_cast<double>(writes), 82.0 + seconds) << seconds << " s";
+  EXPECT_EQ(read_pvd(dir / "series.pvd").size(), n);
 }
 
 // A device or a pipe where a run's file should be (a .pvd edited or linked

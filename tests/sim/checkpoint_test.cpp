@@ -473,6 +473,44 @@ TEST_F(Checkpoints, ThermoRowsFollowTheRun) {
   }
 }
 
+// A run of many frames rewrites its listings (series.pvd, walls.pvd,
+// thermo.csv) in steps, not at every frame; each checkpoint has them whole,
+// so a run that dies one step past a checkpoint (no listing written since)
+// resumes from it into the same listings as the run that never stopped.
+TEST_F(Checkpoints, ListingsOfManyFramesAreWholeAtEachCheckpoint) {
+  const test::ScratchDir dir("ck_listings");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string sets = " --quiet --backend cpu --set output.vtk.every=1 --set output.checkpoint.every=100";
+  ASSERT_EQ(marbles("run " + scene + sets + " --out " + dir.path() + "/whole"), 0);
+  const std::string out = dir.path() + "/died";
+  std::string err;
+  ASSERT_EQ(marbles("run " + scene + sets + " --out " + out, &err, "MARBLES_FAULT_SIGNAL=SEGV@201"), 1) << err;
+  // Where the run died its listings may lag, but name only frames that are there.
+  if (fs::exists(out + "/frames")) {
+    const std::string series = slurp(out + "/series.pvd");
+    for (std::size_t at = series.find("file=\""); at != std::string::npos; at = series.find("file=\"", at + 1)) {
+      const std::size_t from = at + 6, to = series.find('"', from);
+      EXPECT_TRUE(fs::exists(out + "/" + series.substr(from, to - from))) << series.substr(from, to - from);
+    }
+  }
+  ASSERT_EQ(marbles("run " + scene + sets + " --out " + out + " --restart " + out + "/checkpoints/step_000200.mck", &err),
+            0)
+      << err;
+  expect_same_output(dir.path() + "/whole", out);
+  auto physics = [](std::vector<std::vector<std::string>> table) {
+    for (auto& row : table) row.pop_back();  // ms_per_step times this process
+    return table;
+  };
+  const auto rows = csv_rows(dir.path() + "/whole/thermo.csv");
+  ASSERT_EQ(rows.size(), 302u);  // the header and a row a step, 0 to 300
+  EXPECT_EQ(physics(csv_rows(out + "/thermo.csv")), physics(rows));
+  if (fs::exists(out + "/frames")) {
+    EXPECT_EQ(slurp(out + "/walls.pvd"), slurp(dir.path() + "/whole/walls.pvd"));
+    const std::string series = slurp(out + "/series.pvd"), walls = slurp(out + "/walls.pvd");
+    EXPECT_EQ(std::count(series.begin(), series.end(), '\n'), std::count(walls.begin(), walls.end(), '\n'));
+  }
+}
+
 // summary.json says what made it: version, the commit of this source tree,
 // the command line, the threads asked for, units and material names; the
 // pipeline line prints the threads.
