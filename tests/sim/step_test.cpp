@@ -379,6 +379,55 @@ TEST(Impacts, OffCentreImpactsLeaveAlongTheLineOfCentresAtTouch) {
   EXPECT_GT(oblique, 8);
 }
 
+// The same against a cylinder's side, across its axis: a post (its outside,
+// infinite or finite with the path beside its side) and a drum (its inside,
+// infinite or a finite tube, spinning in some trials: frictionless, so the
+// spin gives no impulse). A sphere moving along +x meets the side where its
+// centre is R from the axis (the post's radius plus r, the drum's less r)
+// and leaves by the impact law at the normal there.
+TEST(Impacts, OffCentreImpactsOnACylindersSideLeaveAlongItsNormalAtTouch) {
+  using scene::Effect;
+  std::mt19937_64 rng(37);
+  std::uniform_real_distribution<double> u(0, 1);
+  int oblique = 0;
+  for (int trial = 0; trial < 24; ++trial) {
+    const bool drum = trial % 4 >= 2, finite = trial % 2 == 1;
+    const double e = trial % 3 ? 0.5 : 1.0;
+    scene::Scene s = base_scene(1e-3, 1, {Effect::collisions, Effect::walls, Effect::restitution}, e);
+    const double r1 = 0.02 + 0.06 * u(rng), speed = 5 + 10 * u(rng), bfrac = 0.95 * u(rng), phase = u(rng);
+    scene::WallSpec side;
+    side.kind = scene::WallSpec::Kind::cylinder;
+    side.inside = drum;
+    side.radius = drum ? 0.6 : 0.02 + 0.06 * u(rng);
+    side.length = finite ? 2 : 0;
+    side.angular_velocity = drum && trial % 3 == 2 ? 7 : 0;
+    const double R = drum ? double(real(side.radius)) - double(real(r1)) : double(real(side.radius)) + double(real(r1));
+    const double b = bfrac * R;  // the axis at (0, b) for a post, the path at y = b in a drum
+    side.base = {0, drum ? real(0) : real(b), real(finite ? -1 : 0)};
+    s.walls.push_back(side);
+    // At touch the centre is at (x_t, y_t) from the axis: a post's outside
+    // from the left, a drum's inside from within.
+    const double x_t = drum ? std::sqrt(R * R - b * b) : -std::sqrt(R * R - b * b), y_t = drum ? b : -b;
+    const double x1 = x_t - speed * 1e-3 * (5 + phase);
+    scene::GeneratedParticles g;
+    marbles::testing::add_sphere(g, {real(x1), drum ? real(b) : real(0), 0}, real(r1), {real(speed), 0, 0});
+    Simulation sim(s, make_world(s, g), test_backend());
+    for (int k = 0; k < 12; ++k) sim.step();
+    const World& w = sim.world();
+    const double v = double(real(speed));
+    const double nx = (drum ? -x_t : x_t) / R, ny = (drum ? -y_t : y_t) / R;  // towards the sphere's side
+    const double vn = v * nx;                                                  // < 0: approaching
+    const std::string what = "trial " + std::to_string(trial) + (drum ? " (drum" : " (post") +
+                             (finite ? ", finite)" : ")");
+    ASSERT_LT(vn, 0) << what;
+    EXPECT_NEAR(w.velocity[0].x, v - (1 + e) * vn * nx, 2e-4 * v) << what;
+    EXPECT_NEAR(w.velocity[0].y, -(1 + e) * vn * ny, 2e-4 * v) << what;
+    EXPECT_NEAR(w.velocity[0].z, 0, 1e-6 * v) << what;
+    oblique += bfrac > 0.5 ? 1 : 0;
+  }
+  EXPECT_GT(oblique, 8);
+}
+
 // --- The unswept check's geometry (sim/watch_math.hpp) against paths
 // sampled finely: the deepest point of each straight path, less the depth
 // at its start. Random paths, many of them grazing, through or past.
