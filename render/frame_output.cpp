@@ -210,6 +210,9 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   const auto t1 = std::chrono::steady_clock::now();
   std::vector<fs::path> drawn;
   for (std::size_t k = 0; k < entries.size(); ++k) {
+    if (as_run && as_run->stopped)
+      if (const int sig = as_run->stopped())
+        throw RenderStopped(sig, "stopped at image " + std::to_string(k) + " of " + std::to_string(entries.size()));
     Snapshot s = read_frame(entries[k].path);
     if (k == 0 && !has_color_data(s, options.color_by))
       log << "warning: " << entries[k].path.filename().string() << " carries no "

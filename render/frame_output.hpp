@@ -10,6 +10,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -17,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "core/error.hpp"
 #include "core/walls.hpp"
 #include "render/movie.hpp"
 #include "render/renderer.hpp"
@@ -96,9 +98,17 @@ std::vector<std::string> read_material_names(const std::filesystem::path& dir);
 /// the run's first view (`view`: the scene's bounds at step 0, unless
 /// `options` has a camera), each coloured over the range of the frames drawn
 /// so far (it only widens, as FrameOutput's does).
+/// `stopped`, where given, is asked before each frame: a signal number
+/// (SIGINT, SIGTERM) ends the render there with RenderStopped.
 struct RunImages {
   std::size_t stride = 1;
   Bounds view;
+  std::function<int()> stopped;
+};
+/// A closing render ended by a stop request (RunImages::stopped).
+struct RenderStopped : RuntimeFailure {
+  RenderStopped(int sig, const std::string& what) : RuntimeFailure(what), signal(sig) {}
+  int signal;
 };
 int render_output_dir(const std::string& out_dir, const RenderOptions& options, const MovieOptions& movie,
                       bool progress, std::ostream& log, const RunImages* as_run = nullptr);

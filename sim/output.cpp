@@ -25,6 +25,7 @@
 #include "render/renderer.hpp"
 #include "render/vtk_output.hpp"
 #include "sim/scene.hpp"
+#include "sim/signals.hpp"
 #include "sim/simulation.hpp"
 #include "sim/version.hpp"
 
@@ -337,7 +338,8 @@ struct RunOutput::Impl {
   int contacts_every = 0;
   bool with_contact_counts = false;  // the `contacts` point field is asked for
   bool render_at_finish = false;  // a resumed run: images and movie from the frames
-  render::RunImages run_images;   // drawn at the run's own cadence, camera and colours
+  render::RunImages run_images;   // drawn at the run's own cadence, camera and colours (stopped: a stop request)
+  int render_stopped = 0;         // the signal that stopped the closing render
   render::RenderOptions render_options;
   render::MovieOptions movie;
   std::ostream* log = nullptr;
@@ -473,6 +475,10 @@ RunOutput::~RunOutput() {
   }
 }
 
+void RunOutput::stop_render_when(std::function<int()> stopped) { m->run_images.stopped = std::move(stopped); }
+
+int RunOutput::stopped_render() const { return m->render_stopped; }
+
 void RunOutput::flush() {
   if (m->vtk) m->vtk->flush();
   if (m->walls) m->walls->flush();
@@ -548,6 +554,10 @@ std::string RunOutput::finish() {
       out << "images in images/";
       if (std::filesystem::exists(std::filesystem::path(m->dir) / "movie.mp4")) out << ", movie.mp4";
       out << ", ";
+    } catch (const render::RenderStopped& e) {
+      m->render_stopped = e.signal;
+      *m->log << "warning: no images: the closing render was stopped by " << signal_name(e.signal) << " ("
+              << e.what() << "); `marbles render " << m->dir << "` draws them from the frames\n";
     } catch (const std::exception& e) {
       *m->log << "warning: no images: " << e.what() << "\n";
     }

@@ -5,6 +5,7 @@
 #include <iosfwd>
 #include <memory>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -142,6 +143,11 @@ class RunOutput {
   // contact and wall frames and thermo rows up to `steps` are copied where
   // this folder lacks them (a run resumed elsewhere is whole too).
   void resume(std::uint64_t steps, double dt, const std::filesystem::path& from);
+  // A resumed run's closing render (finish) asks `stopped` before each
+  // image: a signal number ends it there (its images left as they are,
+  // a warning) and finish() returns; stopped_render() then says which.
+  void stop_render_when(std::function<int()> stopped);
+  int stopped_render() const;
   // Writes the listings (series.pvd, walls.pvd, contacts.pvd, thermo.csv)
   // where they lag behind what was written (render::Relisting: while a run
   // goes on they are rewritten once a sixteenth of them, or a second, is

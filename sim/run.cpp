@@ -13,6 +13,7 @@
 #include <iostream>
 #include <optional>
 #include <sstream>
+#include <utility>
 
 #include <nlohmann/json.hpp>
 
@@ -283,17 +284,24 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       restart_here ? run_files_past(sc.output.dir, sim.steps(), sc.output) : ReplacedFiles{earlier, {}};
   EarlierRunAside earlier_aside(sc.output.dir, replaced.later, replaced.rewritten, err);
   // Test hook: MARBLES_FAULT_SIGNAL=NAME@N raises SIGNAME (SEGV, ABRT, INT, TERM) after step N (0: after the
-  // start's output).
+  // start's output; `render`: as a resumed run's closing render begins).
   int fault_signal = 0;
   std::uint64_t fault_signal_step = 0;
+  bool fault_at_render = false;
   if (const char* hook = std::getenv("MARBLES_FAULT_SIGNAL")) {
     const std::string text = hook;
     const std::size_t at = text.find('@');
     const std::string name = text.substr(0, at);
     fault_signal = name == "SEGV" ? SIGSEGV : name == "ABRT" ? SIGABRT : name == "INT" ? SIGINT : name == "TERM" ? SIGTERM : 0;
-    if (at != std::string::npos) fault_signal_step = std::strtoull(text.c_str() + at + 1, nullptr, 10);
+    fault_at_render = at != std::string::npos && text.substr(at + 1) == "render";
+    if (at != std::string::npos) fault_signal_step = fault_at_render ? ~std::uint64_t{0} : std::strtoull(text.c_str() + at + 1, nullptr, 10);
   }
   RunOutput output(sc, sc.output.dir, sim.walls(), render, err, options.restart.has_value(), &view);
+  // A stop during a resumed run's closing render ends the render (the run is whole by then).
+  output.stop_render_when([&stop, fault = fault_at_render ? fault_signal : 0]() mutable {
+    if (fault != 0) std::raise(std::exchange(fault, 0));
+    return stop.received();
+  });
   auto save_checkpoint = [&](const std::string& path) {
     output.flush();  // a resume from it reads thermo.csv's rows up to its step
     write_checkpoint(path, {fingerprint, sim.steps(), sim.world(), sim.save_state(), totals,
@@ -407,6 +415,10 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   const std::string summary_path = (std::filesystem::path(sc.output.dir) / "summary.json").string();
   render::write_file_atomic(summary_path, json_text(summary));
   earlier_aside.discard();
+  if (const int sig = output.stopped_render())
+    throw RuntimeFailure(std::string("stopped by ") + signal_name(sig) + " during the closing render: the run is whole (" +
+                         summary_path + ") but its images are not; `marbles render " + sc.output.dir +
+                         "` draws them from the frames");
 
   out << std::setprecision(4) << sc.name << ": " << sim.steps() << " steps, " << sim.time() << " s simulated in "
       << wall << " s (" << 1e3 * step_seconds / steps_run << " ms/step; " << candidate_sum / steps

@@ -93,6 +93,25 @@ TEST_F(Checkpoints, ResumedRunRendersItsImagesAndMovie) {
   }
   EXPECT_EQ(fs::exists(resumed + "/movie.mp4"), fs::exists(dir.path() + "/whole/movie.mp4")) << err;
 
+  // Ctrl-C during the closing render ends the render at once (it ran on, and
+  // a second one ended the run with no summary): exit 1 saying so, the run's
+  // summary whole, the images left to `marbles render`.
+  if (!images.empty()) {
+    const std::string stopped = dir.path() + "/stopped";
+    ASSERT_EQ(marbles("run " + scene + common + " --out " + stopped + " --duration 0.1"), 0);
+    EXPECT_EQ(marbles("run " + scene + common + " --out " + stopped + " --restart " + stopped +
+                          "/checkpoints/step_000100.mck",
+                      &err, "MARBLES_FAULT_SIGNAL=INT@render"),
+              1)
+        << err;
+    EXPECT_NE(err.find("stopped by SIGINT during the closing render: the run is whole (" + stopped +
+                       "/summary.json) but its images are not; `marbles render " + stopped + "`"),
+              std::string::npos)
+        << err;
+    EXPECT_NE(err.find("stopped at image 0 of 16"), std::string::npos) << err;
+    EXPECT_EQ(physics_of(stopped + "/summary.json"), physics_of(dir.path() + "/whole/summary.json"));
+  }
+
   // Frames every 15 steps, images every 20: the resumed run's images at the
   // steps both share (0, 60, ...), with a warning.
   const std::string odd = " --quiet --backend cpu --set output.vtk.every=15 --set output.render.every=20"
