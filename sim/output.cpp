@@ -151,17 +151,61 @@ std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path
                    [](std::string_view, std::uint64_t) { return true; });
 }
 
-ReplacedFiles run_files_past(const std::filesystem::path& dir, std::uint64_t step, const scene::OutputSpec& output) {
+ReplacedFiles run_files_past(const std::filesystem::path& dir, std::uint64_t step, const scene::OutputSpec& output,
+                             std::uint64_t kept_to) {
   const auto none = [](std::string_view, std::uint64_t) { return false; };
   return {run_files(dir, {"summary.json", "movie.mp4"},
                     [&](std::string_view folder, std::uint64_t number) {
-                      const int every = folder == "checkpoints" ? 1  // numbered by their step
-                                        : folder == "contacts"  ? output.contacts_every
-                                        : folder == "images"    ? (output.render.enabled ? output.render.every : 0)
-                                                                : output.vtk_every;  // frames, walls
-                      return every > 0 && number > step / static_cast<std::uint64_t>(every);
+                      if (folder == "checkpoints") return number > step;  // numbered by their step
+                      const int every = folder == "contacts" ? output.contacts_every
+                                        : folder == "images" ? (output.render.enabled ? output.render.every : 0)
+                                                             : output.vtk_every;  // frames, walls
+                      return every > 0 && number > kept_to / static_cast<std::uint64_t>(every);
                     }),
           run_files(dir, {"series.pvd", "walls.pvd", "contacts.pvd", "thermo.csv"}, none)};
+}
+
+void cut_listings(const std::filesystem::path& dir, std::uint64_t step, const scene::OutputSpec& output) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  // Each line kept where `keep` takes it; the file rewritten where one is not.
+  const auto cut = [&](const fs::path& path, const auto& keep) {
+    if (!fs::is_regular_file(path, ec)) return;
+    std::ifstream file(path, std::ios::binary);
+    std::stringstream text;
+    text << file.rdbuf();
+    if (!file) throw RuntimeFailure("cannot read " + path.string());
+    std::istringstream in(text.str());
+    std::string kept, line;
+    bool dropped = false;
+    while (std::getline(in, line)) {
+      if (keep(line)) kept += line + "\n";
+      else dropped = true;
+    }
+    if (dropped) render::write_file_atomic(path, kept);
+  };
+  // A .pvd's DataSet line names FOLDER/PREFIXnnnnnn.vtp: numbered past step / every, it goes.
+  const auto series = [&](const char* pvd, int every) {
+    if (every <= 0) return;
+    cut(dir / pvd, [&](const std::string& line) {
+      const std::size_t file = line.find("file=\""), dot = line.rfind(".vtp\"");
+      if (line.find("<DataSet") == std::string::npos || file == std::string::npos || dot == std::string::npos)
+        return true;
+      std::size_t digits = dot;
+      while (digits > file && std::isdigit(static_cast<unsigned char>(line[digits - 1]))) --digits;
+      const auto number = whole_number(std::string_view(line).substr(digits, dot - digits));
+      return !number || *number <= step / static_cast<std::uint64_t>(every);
+    });
+  };
+  series("series.pvd", output.vtk_every);
+  series("walls.pvd", output.vtk_every);
+  series("contacts.pvd", output.contacts_every);
+  bool header = true;
+  cut(dir / "thermo.csv", [&](const std::string& line) {
+    if (std::exchange(header, false)) return true;
+    return !line.empty() && std::isdigit(static_cast<unsigned char>(line[0])) &&
+           std::strtoull(line.c_str(), nullptr, 10) <= step;
+  });
 }
 
 std::string earlier_run_text(const std::string& dir, const std::vector<std::filesystem::path>& files) {
@@ -239,7 +283,8 @@ void move_file(const std::filesystem::path& from, const std::filesystem::path& t
 }  // namespace
 
 EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::vector<std::filesystem::path>& moved,
-                                 const std::vector<std::filesystem::path>& copied, std::ostream& log)
+                                 const std::vector<std::filesystem::path>& copied, std::ostream& log,
+                                 const std::function<void()>& before_moving)
     : m_log(log) {
   namespace fs = std::filesystem;
   for (const fs::path& left : folders_of_ended_processes(dir, ".earlier-run-"))
@@ -264,6 +309,15 @@ EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::ve
   };
   for (const fs::path& file : copied)
     if (!ec) place(file, true);
+  if (!ec && before_moving) {
+    try {
+      before_moving();
+    } catch (...) {  // the copies back in their places: the earlier run's files as they were
+      for (const fs::path& file : copied) fs::rename(folder / file.lexically_relative(dir), file, ec);
+      fs::remove_all(folder, ec);
+      throw;
+    }
+  }
   for (const fs::path& file : moved)
     if (!ec) place(file, false);
   if (!ec) {

@@ -45,7 +45,19 @@ std::vector<std::filesystem::path> earlier_run_files(const std::filesystem::path
 struct ReplacedFiles {
   std::vector<std::filesystem::path> later, rewritten;
 };
-ReplacedFiles run_files_past(const std::filesystem::path& dir, std::uint64_t step, const scene::OutputSpec& output);
+// `kept_to` (>= step): the numbered files of the series and images past it
+// are replaced; those between `step` and it stay (a `--summary-only` resume,
+// which writes none of them: its folder then holds the earlier run's files
+// up to its own end and none past it).
+ReplacedFiles run_files_past(const std::filesystem::path& dir, std::uint64_t step, const scene::OutputSpec& output,
+                             std::uint64_t kept_to);
+// The listings in `dir` cut to what a run of `step` steps lists: series.pvd,
+// walls.pvd and contacts.pvd to the files numbered up to `step` by their
+// cadences in `output`, thermo.csv to its rows up to `step`; each rewritten
+// (atomically) only where it lists more. A resume in its run's folder cuts
+// them before it sets the files past its step aside, so that no listing
+// names a file that is gone, whenever the process dies.
+void cut_listings(const std::filesystem::path& dir, std::uint64_t step, const scene::OutputSpec& output);
 // "DIR holds the output of an earlier run (N files, e.g. NAME)": a refusal's
 // first words, its remedy the caller's (`files` not empty).
 std::string earlier_run_text(const std::string& dir, const std::vector<std::filesystem::path>& files);
@@ -83,8 +95,10 @@ class RunFolderLock {
 // ended are named on `log` at the start.
 class EarlierRunAside {
  public:
+  // `before_moving` runs once the copies are made, before the first move.
   EarlierRunAside(const std::filesystem::path& dir, const std::vector<std::filesystem::path>& moved,
-                  const std::vector<std::filesystem::path>& copied, std::ostream& log);
+                  const std::vector<std::filesystem::path>& copied, std::ostream& log,
+                  const std::function<void()>& before_moving = {});
   ~EarlierRunAside();
   EarlierRunAside(const EarlierRunAside&) = delete;
   EarlierRunAside& operator=(const EarlierRunAside&) = delete;

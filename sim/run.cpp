@@ -184,6 +184,7 @@ constexpr double kDeepAtTheEnd = 0.1;
 int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   scene::Scene sc = scene::load_scene(options.scene_path, options.overrides, options.duration);
   if (options.out_dir) sc.output.dir = *options.out_dir;
+  const scene::OutputSpec written_output = sc.output;  // the cadences the folder's earlier files were written at
   if (options.summary_only) {  // checkpoints stay: a stopped run resumes from them
     sc.output.vtk_every = 0;
     sc.output.contacts_every = 0;
@@ -280,9 +281,14 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   // --overwrite, once the scene is known to run: the earlier run set aside
   // until this one stands; a resume in its own folder, the files of the
   // steps it makes again (and of any beyond its end).
-  const ReplacedFiles replaced =
-      restart_here ? run_files_past(sc.output.dir, sim.steps(), sc.output) : ReplacedFiles{earlier, {}};
-  EarlierRunAside earlier_aside(sc.output.dir, replaced.later, replaced.rewritten, err);
+  // A --summary-only resume writes no frame, image or thermo row: the
+  // earlier run's up to its end stay (the same run's), those past it go.
+  const std::uint64_t kept_to = options.summary_only ? std::max(total_steps, sim.steps()) : sim.steps();
+  const ReplacedFiles replaced = restart_here ? run_files_past(sc.output.dir, sim.steps(), written_output, kept_to)
+                                              : ReplacedFiles{earlier, {}};
+  EarlierRunAside earlier_aside(sc.output.dir, replaced.later, replaced.rewritten, err, [&] {
+    if (restart_here) cut_listings(sc.output.dir, kept_to, written_output);
+  });
   // Test hook: MARBLES_FAULT_SIGNAL=NAME@N raises SIGNAME (SEGV, ABRT, INT, TERM) after step N (0: after the
   // start's output; `render`: as a resumed run's closing render begins).
   int fault_signal = 0;

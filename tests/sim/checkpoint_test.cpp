@@ -530,6 +530,43 @@ TEST_F(Checkpoints, ListingsOfManyFramesAreWholeAtEachCheckpoint) {
   }
 }
 
+// A --summary-only resume in its run's folder with a shorter duration: the
+// folder reads as a run of that length, the earlier run's frames, contact
+// frames, images and thermo rows up to its end kept (the same run's) and
+// those past it gone, listed by no .pvd; it left them all, and listed.
+TEST_F(Checkpoints, ASummaryOnlyResumeLeavesNothingPastItsEnd) {
+  const test::ScratchDir dir("ck_summary_only_resume");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string common = " --quiet --backend cpu --set output.contacts.every=10";
+  const std::string out = dir.path() + "/o", shorter = dir.path() + "/shorter";
+  std::string err;
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + out), 0);
+  ASSERT_EQ(marbles("run " + scene + common + " --duration 0.2 --out " + shorter), 0);
+  ASSERT_EQ(marbles("run " + scene + common + " --summary-only --duration 0.2 --out " + out + " --restart " + out +
+                        "/checkpoints/step_000100.mck",
+                    &err),
+            0)
+      << err;
+  EXPECT_EQ(physics_of(out + "/summary.json"), physics_of(shorter + "/summary.json"));
+  auto physics = [](std::vector<std::vector<std::string>> table) {
+    for (auto& row : table) row.pop_back();  // ms_per_step times each process
+    return table;
+  };
+  EXPECT_EQ(physics(csv_rows(out + "/thermo.csv")), physics(csv_rows(shorter + "/thermo.csv")));
+  for (const char* folder : {"frames", "walls", "contacts", "images", "checkpoints"}) {
+    std::vector<std::string> here, there;
+    for (const auto& [path, names] : {std::pair{out, &here}, std::pair{shorter, &there}})
+      if (fs::exists(path + "/" + folder))
+        for (const auto& entry : fs::directory_iterator(path + "/" + folder)) names->push_back(entry.path().filename());
+    std::sort(here.begin(), here.end());
+    std::sort(there.begin(), there.end());
+    EXPECT_EQ(here, there) << folder;
+  }
+  for (const char* pvd : {"series.pvd", "walls.pvd", "contacts.pvd"})
+    EXPECT_EQ(slurp(out + "/" + pvd), slurp(shorter + "/" + pvd)) << pvd;
+  EXPECT_FALSE(fs::exists(out + "/movie.mp4"));  // the earlier run's, of its whole length
+}
+
 // summary.json says what made it: version, the commit of this source tree,
 // the command line, the threads asked for, units and material names; the
 // pipeline line prints the threads.
