@@ -26,6 +26,7 @@ using Axis = std::array<double, 3>;
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kPacking = 0.6;     // volume fraction of a settled random pile
 constexpr double kFloatRange = 1e5;  // scene extent over the smallest radius that float still resolves well
+constexpr double kCreepShare = 0.01;  // of sqrt(|g| r_min): the slowest speed float positions must still resolve
 const double kSlop = narrowphase::SolverSettings{}.slop;  // overlap the solver leaves, of the smaller radius
 
 std::string num(double v) {
@@ -326,14 +327,30 @@ std::optional<std::string> float_precision(const Setting& s, const scene::Scene&
     if (auto b = wall_box(w)) box.add(*b);
   double reach = 0;  // the largest coordinate's size
   for (int a = 0; a < 3; ++a) reach = std::max({reach, std::fabs(box.lo[a]), std::fabs(box.hi[a])});
-  if (!(reach > kFloatRange * s.r_min)) return std::nullopt;
+  // Float positions at `reach` are `spacing` apart; a sphere moving less than
+  // half of it in a substep does not move: below `still` (m/s). Under gravity
+  // grains creep at a small part of sqrt(|g| r), the speed a sphere gains
+  // falling by half its radius: where `still` passes 1 % of it for the
+  // smallest sphere, slow motion is lost (a sphere rolling at 3 mm/s 10^4
+  // radii out stood still, with no warning before).
+  const double spacing = reach > 0 ? std::ldexp(1.0, std::ilogb(reach) - 23) : 0;
+  const double still = spacing / (2 * s.h), creep = kCreepShare * std::sqrt(s.g * s.r_min);
+  const bool coarse = reach > kFloatRange * s.r_min, stills = s.g > 0 && still > creep;
+  if (!coarse && !stills) return std::nullopt;
   const double rounding = std::ldexp(reach, -24);
   const double extent = box.largest_side();
+  const std::string remedy = std::string("set solver.precision: double (or --precision double)") +
+                             (reach > 2 * extent ? ", or move the scene to the origin" : ", or make the scene smaller");
+  if (!coarse)
+    return "float precision: the scene reaches " + num(reach) + " m from the origin (it spans " + num(extent) +
+           " m), where float positions are " + num(spacing) + " m apart: a sphere slower than " + num(still) +
+           " m/s (half that spacing per substep of " + num(s.h) + " s) does not move at all, more than 1 % of " +
+           "sqrt(|g| r) = " + num(creep / kCreepShare) + " m/s for the smallest radius, so creeping motion is lost; " +
+           remedy;
   return "float precision: the scene reaches " + num(reach) + " m from the origin (it spans " + num(extent) +
          " m), " + num(reach / s.r_min) + " times the smallest radius (more than " + num(kFloatRange) +
          "): float positions there are rounded to about " + num(rounding) + " m, " + num(100 * rounding / s.r_min) +
-         " % of that radius; set solver.precision: double (or --precision double)" +
-         (reach > 2 * extent ? ", or move the scene to the origin" : ", or make the scene smaller");
+         " % of that radius; " + remedy;
 }
 
 }  // namespace

@@ -4,6 +4,8 @@
 // is silent.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <cmath>
 #include <filesystem>
 #include <iomanip>
@@ -282,6 +284,47 @@ TEST(SettingsCheck, FloatPrecisionOnlyInFloat) {
   EXPECT_TRUE(contains(boxed[0], "the scene reaches " + sig3(300.0) + " m from the origin (it spans " + sig3(600.0) +
                                      " m)"))
       << boxed[0];
+}
+
+// Under gravity, float positions so coarse that a sphere creeping at 1 % of
+// sqrt(|g| r) moves less than half their spacing in a substep (and so not
+// at all) are warned of, with the spacing and that speed, though the scene
+// is far under 10^5 radii (a sphere rolling at 3 mm/s 10^4 radii out stood
+// still); nearer the origin silent, and warned again with more substeps;
+// silent in double and without gravity (no speed scale: the 10^5 rule).
+TEST(SettingsCheck, FloatPositionsTooCoarseForCreepingMotion) {
+  const double r = 0.01, h = 1e-3, out = 100;  // 10^4 radii
+  scene::Scene s = make_scene(h, 1, {Effect::gravity, Effect::walls}, 0.5);
+  s.walls.push_back(plane({0, 0, real(out - r)}, {0, 0, 1}));
+  scene::GeneratedParticles g;
+  add_sphere(g, {real(out), real(out), real(out)}, real(r));
+  // The oracle: float's spacing at the reach, from nextafter, not ilogb.
+  const auto spacing_at = [](double x) {
+    const float f = static_cast<float>(x);
+    return double(std::nextafter(f, 2 * f)) - double(f);
+  };
+  const double spacing = spacing_at(double(g.position[0].x) + r), creep = 0.01 * std::sqrt(9.81 * r);
+  ASSERT_GT(spacing / (2 * h), creep);
+  std::vector<std::string> w = warnings(s, g, kFloat);
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_TRUE(contains(w[0], "where float positions are " + sig3(spacing) + " m apart")) << w[0];
+  EXPECT_TRUE(contains(w[0], "a sphere slower than " + sig3(spacing / (2 * h)) + " m/s")) << w[0];
+  EXPECT_TRUE(contains(w[0], "sqrt(|g| r) = " + sig3(creep / 0.01) + " m/s")) << w[0];
+  EXPECT_TRUE(warnings(s, g, kDouble).empty());
+  // Eight times nearer the origin the spacing is an eighth: silent; with 8 substeps warned again.
+  g = {};
+  add_sphere(g, {real(out / 8), real(out / 8), real(out / 8)}, real(r));
+  s.walls[0] = plane({0, 0, real(out / 8 - r)}, {0, 0, 1});
+  const double near = spacing_at(double(g.position[0].x) + r);
+  ASSERT_LT(near / (2 * h), creep);
+  EXPECT_TRUE(warnings(s, g, kFloat).empty());
+  s.time.substeps = 8;
+  ASSERT_GT(near / (2 * h / 8), creep);
+  ASSERT_EQ(warnings(s, g, kFloat).size(), 1u);
+  EXPECT_TRUE(contains(warnings(s, g, kFloat)[0], "a sphere slower than " + sig3(near / (2 * h / 8)) + " m/s"));
+  // Without gravity no speed scale: the 10^5 radii rule alone.
+  s.effects.erase(std::remove(s.effects.begin(), s.effects.end(), Effect::gravity), s.effects.end());
+  EXPECT_TRUE(warnings(s, g, kFloat).empty());
 }
 
 TEST(SettingsCheck, ShippedScenesAreSilent) {
