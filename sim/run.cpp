@@ -25,6 +25,7 @@
 #include "core/parallel.hpp"
 #include "narrowphase/contact_math.hpp"
 #include "render/atomic_file.hpp"
+#include "render/vtk_output.hpp"
 #include "sim/checkpoint.hpp"
 #include "sim/limits.hpp"
 #include "sim/output.hpp"
@@ -136,6 +137,41 @@ std::string resume_command(const RunOptions& options, const std::string& out_dir
   if (options.algorithm == broadphase::Algorithm::seed) command += " --broadphase seed";
   if (options.threads > 0) command += " --threads " + std::to_string(options.threads);
   return command + " --restart " + path_word(path);
+}
+
+// A checkpoint in another run's folder, resumed into a new one, brings that
+// folder's frames up to its step (RunOutput::resume): only where they are
+// its own run's. The frame at the checkpoint's step (or the first, where the
+// step has none) must hold as many spheres as the checkpoint, and at the
+// step the very positions; else the folder is another run's (a checkpoint
+// copied beside it) and the resume is refused, naming the frame.
+void check_frames_beside(const std::filesystem::path& from, const World& world, std::uint64_t step, int every,
+                         const std::string& restart) {
+  if (every <= 0) return;
+  const auto frame_at = [&](std::uint64_t k) {
+    char name[48];
+    std::snprintf(name, sizeof name, "frame_%06llu.vtp", static_cast<unsigned long long>(k));
+    return from / "frames" / name;
+  };
+  const std::uint64_t at = step / static_cast<std::uint64_t>(every);
+  std::error_code ec;
+  const bool on_step = step % static_cast<std::uint64_t>(every) == 0 && std::filesystem::is_regular_file(frame_at(at), ec);
+  const std::filesystem::path frame = on_step ? frame_at(at) : frame_at(0);
+  if (!std::filesystem::is_regular_file(frame, ec)) return;
+  const render::Snapshot s = render::read_vtp(frame);
+  const std::string remedy = "; resume from a copy of the checkpoint kept outside a run's checkpoints/ folder (it "
+                             "brings no frames), or into the folder of its own run";
+  if (s.size() != world.size())
+    throw InputError(SourceLocation{restart, 0, 0}, "--restart",
+                     "the frames beside this checkpoint are another run's: " + frame.string() + " holds " +
+                         std::to_string(s.size()) + " spheres, the checkpoint " + std::to_string(world.size()) + remedy);
+  if (!on_step) return;
+  for (std::size_t i = 0; i < s.size(); ++i)
+    if (!(s.position[i] == world.position[i]))
+      throw InputError(SourceLocation{restart, 0, 0}, "--restart",
+                       "the frames beside this checkpoint are another run's: " + frame.string() +
+                           ", at the checkpoint's step " + std::to_string(step) + ", holds sphere " + std::to_string(i) +
+                           " elsewhere than the checkpoint does" + remedy);
 }
 
 // The risky-settings warnings (sim/settings_check.hpp), one line each.
@@ -260,6 +296,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     totals = c.totals;
     if (probe) probe->resume(c.probe);
     if (!options.quiet) out << "resumed from " << *options.restart << " at step " << c.steps << "\n";
+    if (!restart_here && !restart_from.empty())  // before anything is written in the new folder
+      check_frames_beside(restart_from, sim.world(), sim.steps(), sc.output.vtk_every, *options.restart);
   }
 
   // Test hooks: MARBLES_FAULT_NAN_STEP=N (the first try of step N goes

@@ -672,6 +672,47 @@ TEST_F(Checkpoints, BenchSphereOrderPermutesOnly) {
 
 // A restart into another folder (the checkpoint taken elsewhere) writes
 // every series there too: frames, walls and contacts.
+// A checkpoint copied beside another run's frames, resumed into a new
+// folder, would have brought that run's frames: refused (exit 2), naming the
+// frame, where it holds another count of spheres, or other positions at the
+// checkpoint's step; nothing written in the new folder. Its own run's frames
+// come along as before (RestartIntoAnotherFolderWritesEverySeries).
+TEST_F(Checkpoints, FramesOfAnotherRunBesideACheckpointAreRefused) {
+  const test::ScratchDir dir("ck_beside_other");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string fewer = dir.write("fewer.yaml", replace_all(kScene, "count: 300", "count: 200"));
+  const std::string moved = dir.write("moved.yaml", replace_all(kScene, "seed: 3", "seed: 5"));
+  const std::string common = " --quiet --backend cpu --duration 0.1";
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + dir.path() + "/first"), 0);
+  for (const auto& [other, what] : {std::pair{fewer, std::string("frame_000005.vtp holds 200 spheres, the checkpoint 300")},
+                                    std::pair{moved, std::string("frame_000005.vtp, at the checkpoint's step 100, holds "
+                                                                 "sphere 0 elsewhere than the checkpoint does")}}) {
+    const std::string there = dir.path() + "/other", into = dir.path() + "/into";
+    fs::remove_all(there);
+    ASSERT_EQ(marbles("run " + other + common + " --out " + there), 0);
+    fs::copy_file(dir.path() + "/first/checkpoints/step_000100.mck", there + "/checkpoints/step_000100.mck",
+                  fs::copy_options::overwrite_existing);
+    std::string err;
+    EXPECT_EQ(marbles("run " + scene + common + " --out " + into + " --restart " + there + "/checkpoints/step_000100.mck",
+                      &err),
+              2)
+        << err;
+    EXPECT_NE(err.find("--restart: the frames beside this checkpoint are another run's: " + there + "/frames/" + what),
+              std::string::npos)
+        << err;
+    EXPECT_FALSE(fs::exists(into + "/frames")) << err;
+    EXPECT_FALSE(fs::exists(into + "/summary.json")) << err;
+  }
+  // The checkpoint beside its own run's frames, at a step off their cadence (50 of every 20): frame 0 counted, taken.
+  std::string err;
+  EXPECT_EQ(marbles("run " + scene + common + " --out " + dir.path() + "/own --restart " + dir.path() +
+                        "/first/checkpoints/step_000050.mck",
+                    &err),
+            0)
+      << err;
+  expect_same_output(dir.path() + "/first", dir.path() + "/own");
+}
+
 TEST_F(Checkpoints, RestartIntoAnotherFolderWritesEverySeries) {
   const test::ScratchDir dir("ck_elsewhere");
   const std::string scene = dir.write("s.yaml", kScene);
