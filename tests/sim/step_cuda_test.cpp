@@ -781,7 +781,7 @@ TEST(StepCuda, PairCountJumpRedoesTheBroadPhase) {
   }
 }
 
-// A ball shot away from a bed at 100 m/s: the centres' bounds, and with
+// A ball shot up and away from a bed at 112 m/s: the centres' bounds, and with
 // them the broad phase's grid (chosen on the device from bounds the host
 // does not read), grow by three cells a step, past the plan the host laid the
 // broad phase's buffers out for (dense lower bounds a quarter larger than
@@ -792,17 +792,21 @@ TEST(StepCuda, GridOutgrowingItsPlanIsPlannedAgain) {
   REQUIRE_DEVICE();
   const real r = real(0.01);
   auto [s, g] = bed_on_a_floor(real(2.8), 1, r);
-  add_sphere(g, {real(0.3), real(0.3), real(0.05)}, r, {real(100), real(0), real(20)});
+  add_sphere(g, {real(0.3), real(0.3), real(0.05)}, r, {real(100), real(0), real(50)});
   std::uint64_t redos = 0, replans = 0, undone = 0;
   std::uint32_t causes = 0;
-  expect_same_run(s, g, 40, &redos, &replans, nullptr, &undone, &causes);
-  EXPECT_EQ(undone > 0, unwaits(40)) << "without a wait, a substep whose grid outgrew the plan is undone";
+  expect_same_run(s, g, 80, &redos, &replans, nullptr, &undone, &causes);
+  EXPECT_EQ(undone > 0, unwaits(80)) << "without a wait, a substep whose grid outgrew the plan is undone";
   if (undone > 0) {
     EXPECT_TRUE(causes & kUndoGrid) << "undone for " << cause_names(causes);
   }
-  // Two in these 40 steps on an H100: each plan holds a quarter more cells
-  // (and 1024) than the grid it was made from, so the ball's flight outgrows
-  // it at shorter and shorter intervals of its growing grid.
+  // Each plan holds a quarter more cells (and 1024) than the grid it was
+  // made from, so the ball's flight outgrows it at shorter and shorter
+  // intervals of its growing grid: four in these 80 steps by grid.hpp's
+  // plan_of and plan_fits over the CPU's states (shot at 20 m/s up for 40
+  // steps, as this test had it, the ball outgrew it once since contacts take
+  // the normal of the moment of touch, twice before: the start's line of
+  // centres to the bed spheres it flies over had acted on it).
   EXPECT_GE(replans, 2u) << "the growing grid must outgrow the plan, and again";
   EXPECT_GE(redos, replans) << "a replan is a redo";
 }
