@@ -338,7 +338,7 @@ fs::path Series::add(double time, const std::string& file_text) {
   const std::size_t before = m_lines.size();
   m_lines += dataset_line(time, m_folder + "/" + numbered(m_prefix.c_str(), m_count));
   try {
-    if (m_relisting.due(m_lines.size())) {
+    if (!m_in_steps || m_relisting.due(m_lines.size())) {
       const std::string pvd = pvd_text(m_lines);
       write_files_atomic({{path, file_text}, {pvd_path(), pvd}});
       m_relisting.written(m_lines.size());

@@ -65,10 +65,13 @@ class Series {
   Series& operator=(const Series&) = delete;
   /// Writes the .pvd where it lags behind its files (best effort).
   ~Series();
-  /// Writes the next file, and with it the .pvd where it is due
-  /// (Relisting: at once for the first 16, then once a sixteenth of the
-  /// files, or a second, is unlisted); returns the file's path.
+  /// Writes the next file and the .pvd; returns the file's path. With
+  /// list_in_steps() the .pvd only where it is due (Relisting: at once for
+  /// the first 16, then once a sixteenth of the files, or a second, is
+  /// unlisted): a run, whose end, checkpoints and stops flush() it. Without
+  /// (a Python simulation's frames, written as its caller goes), at every file.
   std::filesystem::path add(double time, const std::string& file_text);
+  void list_in_steps() { m_in_steps = true; }
   /// Counts the next file as written at `time` (a resumed run). Where it is
   /// not in DIR but in `from` (the folder of the run that wrote it), it is
   /// copied first; where it is in neither, it keeps its number but the .pvd
@@ -93,6 +96,7 @@ class Series {
   std::size_t m_count = 0;                                 // files numbered, listed or not
   bool m_folder_made = false;
   Relisting m_relisting;     // when the .pvd is written (m_lines' size at its last write)
+  bool m_in_steps = false;   // list_in_steps(): the .pvd written where m_relisting finds it due
 };
 
 /// Writes DIR/frames/frame_NNNNNN.vtp and keeps DIR/series.pvd up to date.
@@ -114,6 +118,7 @@ class VtkSeriesWriter {
   void adopt(double time, const std::filesystem::path& from = {});
   void write_pvd() { m_series.write_pvd(); }
   void flush() { m_series.flush(); }
+  void list_in_steps() { m_series.list_in_steps(); }
 
  private:
   Series m_series;
@@ -149,6 +154,7 @@ class ContactSeriesWriter {
   void adopt(double time, const std::filesystem::path& from = {});
   void write_pvd() { m_series.write_pvd(); }
   void flush() { m_series.flush(); }
+  void list_in_steps() { m_series.list_in_steps(); }
   std::size_t frames() const { return m_series.size(); }
 
  private:
@@ -169,6 +175,7 @@ class WallSeriesWriter {
   void adopt(double time, const std::filesystem::path& from = {});
   void write_pvd() { m_series.write_pvd(); }
   void flush() { m_series.flush(); }
+  void list_in_steps() { m_series.list_in_steps(); }
   std::size_t frames() const { return m_series.size(); }
 
  private:

@@ -468,6 +468,7 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
     m->with_contact_counts =
         std::find(fields.begin(), fields.end(), render::PointField::contacts) != fields.end();
     m->vtk = std::make_unique<render::VtkSeriesWriter>(dir, fields, metadata);
+    m->vtk->list_in_steps();
     m->vtk_every = scene.output.vtk_every;
     if (!walls.empty()) {
       const render::Bounds b = view ? *view : render::Bounds{};
@@ -475,11 +476,13 @@ RunOutput::RunOutput(const scene::Scene& scene, const std::string& dir, const Wa
       const Vec3 lo = known ? Vec3(real(b.lo[0]), real(b.lo[1]), real(b.lo[2])) : Vec3(-1, -1, -1);
       const Vec3 hi = known ? Vec3(real(b.hi[0]), real(b.hi[1]), real(b.hi[2])) : Vec3(1, 1, 1);
       m->walls = std::make_unique<render::WallSeriesWriter>(dir, lo, hi, metadata);
+      m->walls->list_in_steps();
       m->initial_walls = walls;
     }
   }
   if (scene.output.contacts_every > 0) {
     m->contacts = std::make_unique<render::ContactSeriesWriter>(dir, metadata);
+    m->contacts->list_in_steps();
     m->contacts_every = scene.output.contacts_every;
   }
   if (render && scene.output.render.enabled && resumed) {

@@ -405,7 +405,7 @@ TEST(Pvd, ASeriesCutShortIsRefused) {
   EXPECT_EQ(read_pvd(dir / "series.pvd").size(), 2u);
 }
 
-// A series of many files rewrites its .pvd once a sixteenth of it is new
+// A run's series of many files rewrites its .pvd once a sixteenth of it is new
 // (or a second has passed), not at every file, so that the writes grow with
 // the files and not with their square; meanwhile it lists the first files in
 // order, every one there, and lags by at most a sixteenth of them; once the
@@ -417,6 +417,7 @@ TEST(Pvd, ASeriesRelistsItsFilesInStepsAndWhollyAtItsEnd) {
   const auto start = std::chrono::steady_clock::now();
   {
     Series series(dir, "frames", "frame", "series.pvd");
+    series.list_in_steps();
     ino_t inode = 0;
     for (std::size_t k = 1; k <= n; ++k) {
       series.add(0.001 * static_cast<double>(k), "frame " + std::to_string(k) + "\n");
@@ -444,6 +445,14 @@ TEST(Pvd, ASeriesRelistsItsFilesInStepsAndWhollyAtItsEnd) {
   // Growth by 16/15 a write past the first 16: 16 + ln(1000 / 16) / ln(16 / 15), 80; one more a second.
   EXPECT_LE(static_cast<double>(writes), 82.0 + seconds) << seconds << " s";
   EXPECT_EQ(read_pvd(dir / "series.pvd").size(), n);
+  // Without list_in_steps (a Python simulation's frames, written as its
+  // caller goes) every file is listed as it is written.
+  const fs::path each = fresh_dir("pvd_each");
+  Series series(each, "frames", "frame", "series.pvd");
+  for (std::size_t k = 1; k <= 40; ++k) {
+    series.add(0.001 * static_cast<double>(k), "frame\n");
+    ASSERT_EQ(read_pvd(each / "series.pvd").size(), k);
+  }
 }
 
 // A device or a pipe where a run's file should be (a .pvd edited or linked
