@@ -71,13 +71,14 @@ inline std::vector<std::filesystem::path> folders_of_ended_processes(const std::
 }
 
 // Copies the plain file `from` to `to` (replaced where it is there; with
-// from's permission bits), setting `ec` to the error that stopped it:
+// from's permission bits; anything but a plain file `from` is refused,
+// without waiting on a pipe), setting `ec` to the error that stopped it:
 // std::filesystem::copy_file reports a full disk as "Input/output error"
 // (libstdc++ takes a short copy for EIO; ENOSPC underneath). On failure
 // what was made of `to` is removed (where it is a plain file).
 inline void copy_plain_file(const std::filesystem::path& from, const std::filesystem::path& to, std::error_code& ec) {
   ec.clear();
-  const int in = ::open(from.c_str(), O_RDONLY | O_CLOEXEC);
+  const int in = ::open(from.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);  // a pipe put there does not wait
   if (in < 0) {
     ec.assign(errno, std::generic_category());
     return;
@@ -86,7 +87,10 @@ inline void copy_plain_file(const std::filesystem::path& from, const std::filesy
   int out = -1;
   if (::fstat(in, &st) != 0)
     ec.assign(errno, std::generic_category());
-  else if ((out = ::open(to.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, st.st_mode & 07777)) < 0)
+  else if (!S_ISREG(st.st_mode))
+    ec = std::make_error_code(std::errc::invalid_argument);  // not a plain file
+  else if ((out = ::open(to.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600)) < 0 ||
+           ::fchmod(out, st.st_mode & 07777) != 0)  // the source's bits, whatever the umask or an earlier file's
     ec.assign(errno, std::generic_category());
   char buffer[1 << 16];
   while (!ec) {
@@ -97,6 +101,7 @@ inline void copy_plain_file(const std::filesystem::path& from, const std::filesy
     for (ssize_t done = 0; done < got && !ec;) {
       const ssize_t put = ::write(out, buffer + done, static_cast<std::size_t>(got - done));
       if (put < 0 && errno != EINTR) ec.assign(errno, std::generic_category());
+      if (put == 0) ec = std::make_error_code(std::errc::io_error);  // no progress: not a loop for ever
       if (put > 0) done += put;
     }
   }

@@ -54,10 +54,13 @@ void write_files_atomic(const std::vector<std::pair<std::filesystem::path, std::
 /// square of its length (16 000 one-sphere frames: 56 s, most of it
 /// writing three listings of a megabyte each at every frame); written once
 /// its unwritten part is a sixteenth of it, or a second after its last
-/// write, whichever comes first, it costs at most 17 times its length in
-/// all, and lags by at most a sixteenth of it, and a second, behind its
-/// files. Its first 16 additions are written at once, each. The owner
-/// writes it whole at the end, at a checkpoint and where the run stops.
+/// write, whichever comes first, its rewrites by the first rule cost at
+/// most 17 times its length in all, and the second adds at most one rewrite
+/// a second (so a listing of L bytes costs at most L bytes a second beyond
+/// that); it lags by at most a sixteenth of it, and a second, behind its
+/// files. Its first additions are written at once, each (a .pvd's first
+/// 16, whose size is its lines'). The owner writes it whole at the end, at
+/// a checkpoint and where the run stops.
 class Relisting {
  public:
   using Clock = std::chrono::steady_clock;

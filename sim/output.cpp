@@ -290,7 +290,7 @@ EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::ve
   for (const fs::path& left : folders_of_ended_processes(dir, ".earlier-run-"))
     log << "note: " << left.string() << " holds an earlier run's files, set aside by a run that did not end "
         << "(--overwrite, or a resume in its folder); remove it when it is not needed\n";
-  if (moved.empty()) return;
+  if (moved.empty() && copied.empty()) return;
   // A folder of its own: one of this number (an earlier process's) is kept.
   const fs::path base = dir / (".earlier-run-" + std::to_string(getpid()));
   fs::path folder = base;
@@ -309,12 +309,24 @@ EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::ve
   };
   for (const fs::path& file : copied)
     if (!ec) place(file, true);
+  // The copies back over the files before_moving rewrote (all of them, or
+  // the folder stays: it holds the only whole ones).
+  const auto copies_back = [&] {
+    bool all = true;
+    for (const fs::path& file : copied) {
+      std::error_code renamed;
+      fs::rename(folder / file.lexically_relative(dir), file, renamed);
+      all = all && !renamed;
+    }
+    return all;
+  };
+  bool rewrote = false;
   if (!ec && before_moving) {
     try {
+      rewrote = true;
       before_moving();
-    } catch (...) {  // the copies back in their places: the earlier run's files as they were
-      for (const fs::path& file : copied) fs::rename(folder / file.lexically_relative(dir), file, ec);
-      fs::remove_all(folder, ec);
+    } catch (...) {
+      if (copies_back()) fs::remove_all(folder, ec);
       throw;
     }
   }
@@ -324,9 +336,10 @@ EarlierRunAside::EarlierRunAside(const std::filesystem::path& dir, const std::ve
     m_folder = folder;
     return;
   }
-  // Put back what was moved: the earlier run stays as it was.
+  // Put back what was moved, and the copies over what was rewritten: the
+  // earlier run stays as it was.
   const std::string why = ec.message();
-  const bool back = move_back();
+  const bool back = move_back() && (!rewrote || copies_back());
   if (back) fs::remove_all(folder, ec);
   throw RuntimeFailure("cannot set the earlier run's files aside in " + folder.string() + ": " + why +
                        (back ? " (they are left as they were)" : " (what could not be put back lies there)"));
@@ -616,6 +629,9 @@ std::string RunOutput::finish() {
       *m->log << "warning: no images: the closing render was stopped by " << signal_name(e.signal) << " ("
               << e.what() << "); `marbles render " << m->dir << "` draws them from the frames\n";
     } catch (const std::exception& e) {
+      // A Ctrl-C from the terminal reaches ffmpeg too, whose end the movie
+      // reports first: still a stop.
+      if (m->run_images.stopped) m->render_stopped = m->run_images.stopped();
       *m->log << "warning: no images: " << e.what() << "\n";
     }
   }

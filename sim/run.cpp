@@ -171,7 +171,8 @@ void check_frames_beside(const std::filesystem::path& from, const World& world, 
       throw InputError(SourceLocation{restart, 0, 0}, "--restart",
                        "the frames beside this checkpoint are another run's: " + frame.string() +
                            ", at the checkpoint's step " + std::to_string(step) + ", holds sphere " + std::to_string(i) +
-                           " elsewhere than the checkpoint does" + remedy);
+                           " elsewhere than the checkpoint does (or was written at another output.vtk.every)" +
+                           remedy);
 }
 
 // The risky-settings warnings (sim/settings_check.hpp), one line each.

@@ -50,8 +50,6 @@ std::string read_text(const fs::path& path) {
   return s.str();
 }
 
-// A run's summary.json (sim/run.cpp), parsed; a file that is not JSON is a
-// failure of that run, named by its path.
 // A run's summary.json with the `--out FROM` of its command_line made
 // `--out TO` (the study moves its runs there when it ends); nothing else
 // changes.
@@ -72,6 +70,8 @@ void rename_out_folder(const fs::path& path, const fs::path& from, const fs::pat
   render::write_file_atomic(path.string(), json_text(summary));
 }
 
+// A run's summary.json (sim/run.cpp), parsed; a file that is not JSON is a
+// failure of that run, named by its path.
 nlohmann::json read_summary(const fs::path& path) {
   try {
     return nlohmann::json::parse(read_text(path));
@@ -383,7 +383,8 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   // study that fails or is stopped leaves the earlier one whole, its tables
   // and its runs. A failed or dead study's folder (the failed run's log is
   // in it) is removed at the next start; a live one's is left alone. A
-  // run's summary.json and log name the folder it was made in.
+  // failed run's log names the folder it was made in; a kept run's
+  // summary.json names its folder in runs/ (rename_out_folder).
   remove_dead_stagings(dir);
   const fs::path staging = dir / (".runs-" + std::to_string(getpid()));
   fs::create_directories(staging);

@@ -54,9 +54,14 @@ TEST(CopyPlainFile, CopiesTheBytesAndPermissionsOverAnEarlierFile) {
     copy_plain_file(s.dir / "from", s.dir / "to", ec);
     ASSERT_FALSE(ec) << ec.message();
     EXPECT_EQ(slurp(s.dir / "to"), bytes) << n;
-    fs::remove(s.dir / "to");
-    copy_plain_file(s.dir / "from", s.dir / "to", ec);  // a new file takes the source's bits
     struct stat st {};
+    ASSERT_EQ(::stat((s.dir / "to").c_str(), &st), 0);
+    EXPECT_EQ(st.st_mode & 07777, 0640u) << "an earlier file takes the source's bits";
+    fs::remove(s.dir / "to");
+    const mode_t mask = ::umask(077);  // a new file too, whatever the umask
+    copy_plain_file(s.dir / "from", s.dir / "to", ec);
+    ::umask(mask);
+    ASSERT_FALSE(ec) << ec.message();
     ASSERT_EQ(::stat((s.dir / "to").c_str(), &st), 0);
     EXPECT_EQ(st.st_mode & 07777, 0640u);
   }
@@ -71,6 +76,11 @@ TEST(CopyPlainFile, SaysWhyItFailed) {
   std::ofstream(s.dir / "from", std::ios::binary) << random_bytes(100000, 3);
   copy_plain_file(s.dir / "from", s.dir / "no_folder" / "to", ec);
   EXPECT_EQ(ec, std::errc::no_such_file_or_directory) << ec.message();
+  // A pipe where the file should be: refused at once, not waited on.
+  ASSERT_EQ(::mkfifo((s.dir / "pipe").c_str(), 0600), 0);
+  copy_plain_file(s.dir / "pipe", s.dir / "to", ec);
+  EXPECT_EQ(ec, std::errc::invalid_argument) << ec.message();
+  EXPECT_FALSE(fs::exists(s.dir / "to"));
   // A full disk: /dev/full takes no byte (ENOSPC), and is left in place.
   if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
   copy_plain_file(s.dir / "from", "/dev/full", ec);

@@ -347,6 +347,34 @@ TEST_F(Checkpoints, OneRunAtATimeInAFolder) {
 // its folder holds what a run of that length alone writes. A checkpoint kept
 // outside a run's checkpoints/ brings no output, so it resumes into a folder
 // holding a run only with --overwrite.
+// A resume in its folder that cannot set a later file aside (here a frames
+// folder made immutable, where the filesystem and the user allow it) leaves
+// the folder as it was: the files moved are put back, and the listings it
+// had cut to its step come back whole from their copies.
+TEST_F(Checkpoints, AResumeThatCannotSetFilesAsideLeavesTheFolderAsItWas) {
+  const test::ScratchDir dir("ck_resume_stuck");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string out = dir.path() + "/o";
+  const std::string common = " --quiet --backend cpu --no-render --set output.vtk.every=10";
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + out), 0);
+  const std::string series = slurp(out + "/series.pvd"), walls = slurp(out + "/walls.pvd"),
+                    thermo = slurp(out + "/thermo.csv");
+  if (std::system(("chattr +i '" + out + "/frames' 2>/dev/null").c_str()) != 0) GTEST_SKIP() << "no chattr +i here";
+  std::string err;
+  const int code = marbles("run " + scene + common + " --out " + out + " --restart " + out +
+                               "/checkpoints/step_000150.mck",
+                           &err);
+  std::system(("chattr -i '" + out + "/frames'").c_str());
+  EXPECT_EQ(code, 1) << err;
+  EXPECT_NE(err.find("cannot set the earlier run's files aside"), std::string::npos) << err;
+  EXPECT_NE(err.find("(they are left as they were)"), std::string::npos) << err;
+  EXPECT_EQ(slurp(out + "/series.pvd"), series);
+  EXPECT_EQ(slurp(out + "/walls.pvd"), walls);
+  EXPECT_EQ(slurp(out + "/thermo.csv"), thermo);
+  for (const auto& entry : fs::directory_iterator(out))
+    EXPECT_EQ(entry.path().filename().string().rfind(".earlier-run-", 0), std::string::npos) << entry.path();
+}
+
 TEST_F(Checkpoints, AResumeInItsFolderReplacesTheStepsAfterIt) {
   const test::ScratchDir dir("ck_resume_shorter");
   const std::string scene = dir.write("s.yaml", kScene);
@@ -670,8 +698,6 @@ TEST_F(Checkpoints, BenchSphereOrderPermutesOnly) {
   EXPECT_NE(err.find("--sphere-order"), std::string::npos) << err;
 }
 
-// A restart into another folder (the checkpoint taken elsewhere) writes
-// every series there too: frames, walls and contacts.
 // A checkpoint copied beside another run's frames, resumed into a new
 // folder, would have brought that run's frames: refused (exit 2), naming the
 // frame, where it holds another count of spheres, or other positions at the
@@ -713,6 +739,8 @@ TEST_F(Checkpoints, FramesOfAnotherRunBesideACheckpointAreRefused) {
   expect_same_output(dir.path() + "/first", dir.path() + "/own");
 }
 
+// A restart into another folder (the checkpoint taken elsewhere) writes
+// every series there too: frames, walls and contacts.
 TEST_F(Checkpoints, RestartIntoAnotherFolderWritesEverySeries) {
   const test::ScratchDir dir("ck_elsewhere");
   const std::string scene = dir.write("s.yaml", kScene);
