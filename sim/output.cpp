@@ -407,6 +407,7 @@ struct RunOutput::Impl {
   bool render_at_finish = false;  // a resumed run: images and movie from the frames
   render::RunImages run_images;   // drawn at the run's own cadence, camera and colours (stopped: a stop request)
   int render_stopped = 0;         // the signal that stopped the closing render
+  bool render_failed = false;     // the closing render failed otherwise
   render::RenderOptions render_options;
   render::MovieOptions movie;
   std::ostream* log = nullptr;
@@ -549,6 +550,8 @@ void RunOutput::stop_render_when(std::function<int()> stopped) { m->run_images.s
 
 int RunOutput::stopped_render() const { return m->render_stopped; }
 
+bool RunOutput::render_failed() const { return m->render_failed; }
+
 void RunOutput::flush() {
   if (m->vtk) m->vtk->flush();
   if (m->walls) m->walls->flush();
@@ -632,6 +635,7 @@ std::string RunOutput::finish() {
       // A Ctrl-C from the terminal reaches ffmpeg too, whose end the movie
       // reports first: still a stop.
       if (m->run_images.stopped) m->render_stopped = m->run_images.stopped();
+      m->render_failed = m->render_stopped == 0;
       *m->log << "warning: no images: " << e.what() << "\n";
     }
   }

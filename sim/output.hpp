@@ -162,6 +162,9 @@ class RunOutput {
   // a warning) and finish() returns; stopped_render() then says which.
   void stop_render_when(std::function<int()> stopped);
   int stopped_render() const;
+  // True where the closing render failed (a full disk, say; a warning):
+  // the run then keeps what it replaced of the earlier run's images.
+  bool render_failed() const;
   // Writes the listings (series.pvd, walls.pvd, contacts.pvd, thermo.csv)
   // where they lag behind what was written (render::Relisting: while a run
   // goes on they are rewritten once a sixteenth of them, or a second, is

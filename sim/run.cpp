@@ -459,7 +459,9 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   std::filesystem::create_directories(sc.output.dir);
   const std::string summary_path = (std::filesystem::path(sc.output.dir) / "summary.json").string();
   render::write_file_atomic(summary_path, json_text(summary));
-  earlier_aside.discard();
+  // A closing render that failed (a full disk) left part of the images: the
+  // earlier run's that this one replaced stay aside, whole (the note says where).
+  if (!output.render_failed()) earlier_aside.discard();
   if (const int sig = output.stopped_render())
     throw RuntimeFailure(std::string("stopped by ") + signal_name(sig) + " during the closing render: the run is whole (" +
                          summary_path + ") but its images are not; `marbles render " + sc.output.dir +

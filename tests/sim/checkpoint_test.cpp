@@ -110,6 +110,29 @@ TEST_F(Checkpoints, ResumedRunRendersItsImagesAndMovie) {
         << err;
     EXPECT_NE(err.find("stopped at image 0 of 16"), std::string::npos) << err;
     EXPECT_EQ(physics_of(stopped + "/summary.json"), physics_of(dir.path() + "/whole/summary.json"));
+
+    // A closing render that fails midway (a full disk: the fault hook cuts
+    // image 10 short) is a warning, and the earlier run's images and movie
+    // that the resume set aside stay there, whole, where the note says
+    // (they were discarded with the run's end, past those it redrew).
+    const std::string failed = dir.path() + "/failed";
+    ASSERT_EQ(marbles("run " + scene + common + " --out " + failed), 0);
+    EXPECT_EQ(marbles("run " + scene + common + " --out " + failed + " --restart " + failed +
+                          "/checkpoints/step_000100.mck",
+                      &err, "MARBLES_FAULT_TRUNCATE=frame_000010.png"),
+              0)
+        << err;
+    EXPECT_NE(err.find("warning: no images: cannot write " + failed + "/images/frame_000010.png"), std::string::npos)
+        << err;
+    const std::size_t at = err.find("kept whole in " + failed + "/.earlier-run-");
+    ASSERT_NE(at, std::string::npos) << err;
+    const fs::path aside = err.substr(at + 14, err.find('\n', at) - at - 14);
+    for (int k = 6; k < 16; ++k) {  // the images past the checkpoint's step 100 (one every 20 steps)
+      char name[40];
+      std::snprintf(name, sizeof name, "frame_%06d.png", k);
+      EXPECT_TRUE(slurp(aside / "images" / name) == slurp(dir.path() + "/whole/images/" + name)) << name;
+    }
+    EXPECT_EQ(fs::exists(aside / "movie.mp4"), fs::exists(dir.path() + "/whole/movie.mp4"));
   }
 
   // Frames every 15 steps, images every 20: the resumed run's images at the
