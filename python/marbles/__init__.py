@@ -624,7 +624,8 @@ class Simulation:
 
     def summary(self):
         """The run's figures as summary.json has them (means over the steps)."""
-        out = {"scene": self._source.get("scene", "<dict>"), "spheres": len(self), "backend": self.backend,
+        out = {"scene": self._source.get("scene", "<dict>"), "scene_name": self.name, "spheres": len(self),
+               "backend": self.backend,
                "precision": self.precision, "steps": self.steps, "substeps": self.substeps, "dt": self.dt,
                "simulated_time": self.time}
         out.update(self._impl.totals())

@@ -157,6 +157,7 @@ def test_python_run_equals_marbles_run(tmp_path):
     for key in ("kinetic_energy_end_translational", "kinetic_energy_end_rotational", "max_speed_end"):
         assert sim.summary()[key] == summary[key], key
     assert sim.summary()["max_overlap"] == summary["max_overlap"]
+    assert sim.summary()["scene_name"] == summary["scene_name"]
 
 
 def test_restart_takes_a_marbles_run_checkpoint_in_double(tmp_path):
