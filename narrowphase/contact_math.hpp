@@ -52,61 +52,45 @@ MARBLES_HD_INLINE bool sphere_sphere(const Vec3& pa, real ra, const Vec3& pb, re
 // the wrong line; along the line at tau the gap closes exactly when they
 // touch, and not within h where they do not. d is the centres' offset (a's
 // less b's), dv the velocities' (a's less b's), R the sum of the radii
-// (|d|, dist, is taken only past the early returns). The moment of touch solves |d + dv t| = R, its smaller root, in
-// the form that keeps the digits: with b = d.dv < 0, a = |dv|^2 and
-// c = separation (dist + R) = |d|^2 - R^2, t = c / (-b + sqrt(b^2 - a c));
-// without a root they pass each other, closest at -b / a. The separation
-// is then d's along the new normal less R (at least +0). Left as it is
-// where they touch already or move apart.
+// (|d|, dist, is taken only past the early returns). The moment of touch
+// solves |d + dv t| = R, its smaller root, in the form that keeps the
+// digits: with beta = -d.dv > 0, a = |dv|^2 and c = separation (dist + R) =
+// |d|^2 - R^2, t = c / (beta + sqrt(beta^2 - a c)); without a root they pass
+// each other, closest at beta / a. The separation is then d's along the new
+// normal less R (at least +0). Left as it is where they touch already or
+// move apart.
+//
+// `inside`: the same inside a circle of radius R (a sphere inside a drum or
+// tube, across its axis: R the drum's radius less the sphere's; d the
+// centre's offset from the axis, dv its velocity across it). Apart is then
+// |d| < R, closing is moving outwards (beta = d.dv > 0), and the touch is the
+// positive root of a t^2 - 2 beta t - c = 0 with c = R^2 - |d|^2 = separation
+// (R + dist) > 0: t = c / (beta + sqrt(beta^2 + a c)), always real; the
+// normal points back to the axis, and the gap along it is R less d's part
+// along its outward line.
 MARBLES_HD_INLINE void normal_at_touch(const Vec3& d, const Vec3& dv, real R, real h, Vec3& normal,
-                                       real& separation) {
+                                       real& separation, bool inside = false) {
   if (!(separation > 0)) return;
-  const real b = dot(d, dv);
-  if (!(b < 0)) return;
+  const real beta = inside ? dot(d, dv) : -dot(d, dv);
+  if (!(beta > 0)) return;
   const real dist = length(d);
   const real a = dot(dv, dv), c = separation * (dist + R);
-  const real disc = b * b - a * c;
+  const real disc = inside ? beta * beta + a * c : beta * beta - a * c;
   real tau = h;
   if (disc >= 0) {
-    const real t = c / (std::sqrt(disc) - b);
+    const real t = c / (beta + std::sqrt(disc));
     if (t < tau) tau = t;
   } else {
-    const real closest = -b / a;
+    const real closest = beta / a;
     if (closest < tau) tau = closest;
   }
   const Vec3 m = d + dv * tau;
   const real len = length(m);
   if (!(len > 0)) return;
-  normal = m / len;
-  const real s = dot(normal, d) - R;
-  separation = s > 0 ? s : real(0);
-}
-
-// The same inside a circle of radius R (a sphere inside a drum or tube,
-// across its axis: R the drum's radius less the sphere's): d is the centre's
-// offset from the axis, dv its velocity across it. A sphere apart (separation
-// > 0) and moving outwards (d.dv > 0) touches where |d + dv t| = R, the
-// positive root of a t^2 + 2 b t - c = 0 with c = R^2 - |d|^2 = separation
-// (R + |d|) > 0: t = c / (b + sqrt(b^2 + a c)), no cancellation; the normal
-// there points back to the axis, and the gap along it is R less d's part
-// along its outward line (it closes at the approach speed exactly at touch).
-// Left as it is where it touches already or moves inwards.
-MARBLES_HD_INLINE void normal_at_touch_inside(const Vec3& d, const Vec3& dv, real R, real h, Vec3& normal,
-                                              real& separation) {
-  if (!(separation > 0)) return;
-  const real b = dot(d, dv);
-  if (!(b > 0)) return;
-  const real dist = length(d);
-  const real a = dot(dv, dv), c = separation * (R + dist);
-  const real t = c / (b + std::sqrt(b * b + a * c));
-  const real tau = t < h ? t : h;
-  const Vec3 m = d + dv * tau;
-  const real len = length(m);
-  if (!(len > 0)) return;
   const Vec3 out = m / len;
-  normal = -out;
-  const real s = R - dot(out, d);
-  separation = s > 0 ? s : real(0);
+  const real s = dot(out, d) - R;
+  normal = inside ? -out : out;
+  separation = inside ? (s < 0 ? -s : real(0)) : (s > 0 ? s : real(0));
 }
 
 // Sphere against a half-space (point on plane q, unit normal n towards free space).
@@ -221,8 +205,7 @@ MARBLES_HD_INLINE bool wall_gap(const WallShape& w, const Vec3& p, real r, Vec3&
 // A sphere closing on a cylinder's side takes the normal of the moment of
 // touch, as against a sphere: across the axis the side is a circle, so the
 // problem is normal_at_touch's (a post's outside: a circle of the radius
-// plus r) or normal_at_touch_inside's (a drum's or tube's inside: the radius
-// less r), in the offset and velocity across the axis (the spin moves no
+// plus r; a drum's or tube's inside: the radius less r, `inside`), in the offset and velocity across the axis (the spin moves no
 // point of the surface across it). Only where the sphere stays beside a
 // finite cylinder's side for the whole substep; past an end (a post's end
 // or rim, a tube's open end) the start's normal stays. `normal` and
@@ -237,10 +220,8 @@ MARBLES_HD_INLINE void cylinder_normal_at_touch(const WallShape& w, const Vec3& 
     if (!(t >= 0 && t <= w.length && t_end >= 0 && t_end <= w.length)) return;
   }
   const Vec3 d = q - w.direction * t, across = dv - w.direction * vt;
-  if (w.kind == WallShape::Kind::cylinder_outside)
-    normal_at_touch(d, across, w.radius + r, h, normal, separation);
-  else
-    normal_at_touch_inside(d, across, w.radius - r, h, normal, separation);
+  const bool inside = w.kind == WallShape::Kind::cylinder_inside;
+  normal_at_touch(d, across, inside ? w.radius - r : w.radius + r, h, normal, separation, inside);
 }
 
 // Velocity of the wall's surface at world point x.

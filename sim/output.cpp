@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -13,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <numeric>
+#include <optional>
 #include <ostream>
 #include <sstream>
 
@@ -113,6 +115,22 @@ constexpr Numbered kNumbered[] = {{"frames", "frame_", ".vtp"},
                                   {"checkpoints", "step_", ".mck"},
                                   {"contacts", "contacts_", ".vtp"},
                                   {"walls", "walls_", ".vtp"}};
+constexpr const Numbered& kFrames = kNumbered[0];
+constexpr const Numbered& kContacts = kNumbered[3];
+constexpr const Numbered& kWalls = kNumbered[4];
+
+// The number of a file named PREFIX + digits + EXTENSION of `n`; none for another name.
+std::optional<std::uint64_t> number_of(std::string_view name, const Numbered& n) {
+  if (!name.starts_with(n.prefix) || !name.ends_with(n.extension)) return std::nullopt;
+  const std::size_t prefix = std::strlen(n.prefix), digits = name.size() - prefix - std::strlen(n.extension);
+  return whole_number(name.substr(prefix, digits));
+}
+
+// A thermo.csv row of a step up to `step` (a row of digits first, its step).
+bool thermo_row_up_to(const std::string& line, std::uint64_t step) {
+  return !line.empty() && std::isdigit(static_cast<unsigned char>(line[0])) &&
+         std::strtoull(line.c_str(), nullptr, 10) <= step;
+}
 
 }  // namespace
 
@@ -132,10 +150,8 @@ std::vector<std::filesystem::path> run_files(const std::filesystem::path& dir, s
   for (const Numbered& n : kNumbered) {
     if (!fs::is_directory(dir / n.folder, ec)) continue;
     for (const auto& entry : fs::directory_iterator(dir / n.folder, ec)) {
-      const std::string name = entry.path().filename().string();
-      if (!entry.is_regular_file(ec) || !name.starts_with(n.prefix) || !name.ends_with(n.extension)) continue;
-      const std::size_t prefix = std::strlen(n.prefix), digits = name.size() - prefix - std::strlen(n.extension);
-      const auto number = whole_number(std::string_view(name).substr(prefix, digits));
+      if (!entry.is_regular_file(ec)) continue;
+      const auto number = number_of(entry.path().filename().string(), n);
       if (number && take(std::string_view(n.folder), *number)) found.push_back(entry.path());
     }
   }
@@ -185,27 +201,22 @@ void cut_listings(const std::filesystem::path& dir, std::uint64_t step, const sc
     if (dropped) render::write_file_atomic(path, kept);
   };
   // A .pvd's DataSet line names FOLDER/PREFIXnnnnnn.vtp: numbered past step / every, it goes.
-  const auto series = [&](const char* pvd, int every) {
+  const auto series = [&](const char* pvd, const Numbered& n, int every) {
     if (every <= 0) return;
     cut(dir / pvd, [&](const std::string& line) {
-      const std::size_t file = line.find("file=\""), dot = line.rfind(".vtp\"");
-      if (line.find("<DataSet") == std::string::npos || file == std::string::npos || dot == std::string::npos)
+      const std::size_t from = line.find("file=\""), to = line.find('"', from + 6);
+      if (line.find("<DataSet") == std::string::npos || from == std::string::npos || to == std::string::npos)
         return true;
-      std::size_t digits = dot;
-      while (digits > file && std::isdigit(static_cast<unsigned char>(line[digits - 1]))) --digits;
-      const auto number = whole_number(std::string_view(line).substr(digits, dot - digits));
+      const auto number = number_of(fs::path(line.substr(from + 6, to - from - 6)).filename().string(), n);
       return !number || *number <= step / static_cast<std::uint64_t>(every);
     });
   };
-  series("series.pvd", output.vtk_every);
-  series("walls.pvd", output.vtk_every);
-  series("contacts.pvd", output.contacts_every);
+  series("series.pvd", kFrames, output.vtk_every);
+  series("walls.pvd", kWalls, output.vtk_every);
+  series("contacts.pvd", kContacts, output.contacts_every);
   bool header = true;
-  cut(dir / "thermo.csv", [&](const std::string& line) {
-    if (std::exchange(header, false)) return true;
-    return !line.empty() && std::isdigit(static_cast<unsigned char>(line[0])) &&
-           std::strtoull(line.c_str(), nullptr, 10) <= step;
-  });
+  cut(dir / "thermo.csv",
+      [&](const std::string& line) { return std::exchange(header, false) || thermo_row_up_to(line, step); });
 }
 
 std::string earlier_run_text(const std::string& dir, const std::vector<std::filesystem::path>& files) {
@@ -592,11 +603,7 @@ void RunOutput::resume(std::uint64_t steps, double dt, const std::filesystem::pa
     std::ifstream in(std::filesystem::exists(here, ec) || from.empty() ? here : from / "thermo.csv");
     std::string line;
     if (std::getline(in, line) && line == kThermoHeader) {
-      while (std::getline(in, line)) {
-        const std::uint64_t row_step = std::strtoull(line.c_str(), nullptr, 10);
-        if (row_step > steps || line.empty()) break;
-        m->thermo_text += line + "\n";
-      }
+      while (std::getline(in, line) && thermo_row_up_to(line, steps)) m->thermo_text += line + "\n";
     }
   }
   if (m->contacts)

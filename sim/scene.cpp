@@ -400,12 +400,11 @@ void read_list(ParticleBlock& block, const Field& field) {
 
 void read_lattice(ParticleBlock& block, const Field& field) {
   const MapFields map(field, {"min", "max", "spacing", "radius", "jitter", "seed"});
-  const auto in_run = [](const std::array<double, 3>& v) { return Vec3(real(v[0]), real(v[1]), real(v[2])); };
   block.lo_written = map.required("min").triple();
-  block.lo = in_run(block.lo_written);
+  block.lo = detail::vec3_of(block.lo_written);
   const Field max = map.required("max");
   block.hi_written = max.triple();
-  block.hi = in_run(block.hi_written);
+  block.hi = detail::vec3_of(block.hi_written);
   check_box(block.lo, block.hi, max);
   const Field spacing = map.required("spacing");
   block.spacing = spacing.positive();

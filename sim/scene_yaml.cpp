@@ -300,10 +300,7 @@ bool Field::boolean() const {
   fail("expected true or false, got " + description());
 }
 
-Vec3 Field::vec3() const {
-  const std::array<double, 3> xyz = triple();
-  return {real(xyz[0]), real(xyz[1]), real(xyz[2])};
-}
+Vec3 Field::vec3() const { return vec3_of(triple()); }
 
 std::array<double, 3> Field::triple() const {
   if (!is_sequence()) fail("expected [x, y, z], got " + description());

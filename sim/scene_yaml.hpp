@@ -50,6 +50,9 @@ bool parse_double(std::string_view text, double& value);
 // a CSV's rows share the rule.
 std::string real_range_problem(double value, bool bound);
 
+// [x, y, z] as written (Field::triple) in the run's precision: Field::vec3's value.
+inline Vec3 vec3_of(const std::array<double, 3>& xyz) { return {real(xyz[0]), real(xyz[1]), real(xyz[2])}; }
+
 // The nodes that `--set` overrides put into a tree, each with the text of its
 // override ("--set time.dt=-1"); and, for the scene's fingerprint
 // (Scene::fingerprint), how the reader took the tree's values.

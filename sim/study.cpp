@@ -50,16 +50,23 @@ std::string read_text(const fs::path& path) {
   return s.str();
 }
 
+// A run's summary.json (sim/run.cpp), parsed (ordered_json: its keys in
+// their order, to write it again); a file that is not JSON is a failure of
+// that run, named by its path.
+template <class Json = nlohmann::json>
+Json read_summary(const fs::path& path) {
+  try {
+    return Json::parse(read_text(path));
+  } catch (const nlohmann::json::exception& e) {
+    throw RuntimeFailure("cannot read " + path.string() + ": " + e.what());
+  }
+}
+
 // A run's summary.json with the `--out FROM` of its command_line made
 // `--out TO` (the study moves its runs there when it ends); nothing else
 // changes.
 void rename_out_folder(const fs::path& path, const fs::path& from, const fs::path& to) {
-  nlohmann::ordered_json summary;
-  try {
-    summary = nlohmann::ordered_json::parse(read_text(path));
-  } catch (const nlohmann::json::exception& e) {
-    throw RuntimeFailure("cannot read " + path.string() + ": " + e.what());
-  }
+  nlohmann::ordered_json summary = read_summary<nlohmann::ordered_json>(path);
   if (!summary.contains("command_line") || !summary["command_line"].is_string()) return;
   std::string line = summary["command_line"].get<std::string>();
   const std::string old_out = " --out " + from.string();
@@ -68,16 +75,6 @@ void rename_out_folder(const fs::path& path, const fs::path& from, const fs::pat
   line.replace(at, old_out.size(), " --out " + to.string());
   summary["command_line"] = line;
   render::write_file_atomic(path.string(), json_text(summary));
-}
-
-// A run's summary.json (sim/run.cpp), parsed; a file that is not JSON is a
-// failure of that run, named by its path.
-nlohmann::json read_summary(const fs::path& path) {
-  try {
-    return nlohmann::json::parse(read_text(path));
-  } catch (const nlohmann::json::exception& e) {
-    throw RuntimeFailure("cannot read " + path.string() + ": " + e.what());
-  }
 }
 
 // A number in study.csv and the plot's data: 10 significant digits ("nan"
