@@ -20,11 +20,11 @@ __global__ void drag_kernel(BodiesView bodies, real k1, real k2, real h, DragKic
 }
 
 __global__ void drift_kernel(BodiesView bodies, real h, unsigned* non_finite, const unsigned long long* skip,
-                             const real* reach, std::uint32_t* past, std::uint32_t past_room) {
+                             const real* reach, std::uint32_t* past, std::uint32_t past_room, const Vec3* shift) {
   if (::marbles::cuda::skipped(skip)) return;
   bool bad = false;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < bodies.count; i += gridDim.x * blockDim.x) {
-    bodies.position[i] = drift(bodies.position[i], bodies.velocity[i], h);
+    bodies.position[i] = drift(bodies.position[i], bodies.velocity[i], h, shift, i);
     bad = bad || !body_is_finite(bodies.position[i], bodies.velocity[i], bodies.angular_velocity[i]);
     if (reach != nullptr && moved_past_reach(bodies.velocity[i], bodies.radius[i], reach[i], h)) {
       const std::uint32_t slot = atomicAdd(past, 1u);  // its order reaches no state: a set, checked whole
@@ -65,11 +65,11 @@ void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragK
 
 void launch_integrate_positions(const BodiesView& bodies, real h, unsigned* non_finite, int sm_count,
                                 cudaStream_t stream, const unsigned long long* skip, const real* reach,
-                                std::uint32_t* past, std::uint32_t past_room) {
+                                std::uint32_t* past, std::uint32_t past_room, const Vec3* shift) {
   if (bodies.count == 0) return;
   drift_kernel<<<grid_for(bodies.count, sm_count), kBlock, 0, stream>>>(bodies, h, non_finite, skip,
                                                                         past != nullptr ? reach : nullptr, past,
-                                                                        past_room);
+                                                                        past_room, shift);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

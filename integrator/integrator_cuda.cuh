@@ -23,11 +23,12 @@ void launch_apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragK
 // With `reach` (m a sphere, contact_reach) and `past` (a count, then room
 // for `past_room` indices), the spheres that moved past their reach
 // (moved_past_reach) are counted into past[0], all of them, and the first
-// `past_room` of them, in no fixed order, written from past[1] on.
+// `past_room` of them, in no fixed order, written from past[1] on. `shift`:
+// the impacts' shifts (drift; null: none).
 void launch_integrate_positions(const BodiesView& bodies, real h, unsigned* non_finite, int sm_count,
                                 cudaStream_t stream, const unsigned long long* skip = nullptr,
                                 const real* reach = nullptr, std::uint32_t* past = nullptr,
-                                std::uint32_t past_room = 0);
+                                std::uint32_t past_room = 0, const Vec3* shift = nullptr);
 
 // Sets *non_finite = 1 when a position, velocity or angular velocity is not
 // finite or its square overflows (body_in_range; never clears it): the check

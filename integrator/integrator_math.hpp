@@ -75,6 +75,18 @@ MARBLES_HD_INLINE Vec3 drag_update(DragKick kick, const Vec3& v, bool gravity, c
 // x += h v
 MARBLES_HD_INLINE Vec3 drift(const Vec3& x, const Vec3& v, real h) { return x + v * h; }
 
+// The same for sphere i, then its shift from the substep's impacts (a word a
+// sphere, narrowphase::ImpactParams::shift; null where none hit): an impact
+// at time t changed its velocity, which the drift applies for the whole
+// substep, t too long, and the shift takes that back. A sphere no impact
+// moved (shift +0) keeps its bits.
+MARBLES_HD_INLINE Vec3 drift(const Vec3& x, const Vec3& v, real h, const Vec3* shift, std::size_t i) {
+  const Vec3 y = drift(x, v, h);
+  if (!shift) return y;
+  const Vec3 s = shift[i];
+  return s.x != 0 || s.y != 0 || s.z != 0 ? y + s : y;
+}
+
 // A sphere that moved farther than the reach its contacts were found with
 // (narrowphase::contact_reach, m) by more than kUnsweptSlack of its radius:
 // the solve set it moving past what the substep swept (sim/watch_math.hpp

@@ -20,13 +20,13 @@ void apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kic
       bodies.velocity[i] = drag_update(kick, bodies.velocity[i], g != nullptr, gh, k1, k2, h);
 }
 
-bool integrate_positions(const BodiesView& bodies, real h, const real* reach, std::size_t* past) {
+bool integrate_positions(const BodiesView& bodies, real h, const real* reach, std::size_t* past, const Vec3* shift) {
   const auto n = static_cast<std::ptrdiff_t>(bodies.count);
   bool bad = false;
   std::size_t moved_past = 0;
 #pragma omp parallel for schedule(static) reduction(|| : bad) reduction(+ : moved_past) if (n > 20000)
   for (std::ptrdiff_t i = 0; i < n; ++i) {
-    bodies.position[i] = drift(bodies.position[i], bodies.velocity[i], h);
+    bodies.position[i] = drift(bodies.position[i], bodies.velocity[i], h, shift, static_cast<std::size_t>(i));
     bad = bad || !body_is_finite(bodies.position[i], bodies.velocity[i], bodies.angular_velocity[i]);
     if (reach != nullptr && moved_past_reach(bodies.velocity[i], bodies.radius[i], reach[i], h)) ++moved_past;
   }

@@ -17,10 +17,12 @@ void apply_gravity(const BodiesView& bodies, const Vec3& g, real h);
 void apply_drag(const BodiesView& bodies, real k1, real k2, real h, DragKick kick = DragKick::whole,
                 const Vec3* g = nullptr);
 
-// Position stage: x += h v. Returns true when a position, velocity or
-// angular velocity is not finite afterwards (the step's non_finite flag).
-// With `reach` (m a sphere, contact_reach), the spheres that moved past it
-// (moved_past_reach) are counted into *past.
-bool integrate_positions(const BodiesView& bodies, real h, const real* reach = nullptr, std::size_t* past = nullptr);
+// Position stage: x += h v, and the impacts' shifts where given (drift).
+// Returns true when a position, velocity or angular velocity is not finite
+// afterwards (the step's non_finite flag). With `reach` (m a sphere,
+// contact_reach), the spheres that moved past it (moved_past_reach) are
+// counted into *past.
+bool integrate_positions(const BodiesView& bodies, real h, const real* reach = nullptr, std::size_t* past = nullptr,
+                         const Vec3* shift = nullptr);
 
 }  // namespace marbles::integrator

@@ -61,10 +61,6 @@ struct alignas(16) Contact {
 
   std::uint32_t a = 0, b = 0;
   real separation = 0;     // m, < 0 when overlapping
-  // Set by the impact stage when a speculative contact (gap > 0)
-  // bounced: how far (m) the bodies must come back together after the
-  // position update, so the bounce happens at the surface and not at the gap.
-  real rebound_shift = 0;
   Vec3 normal;             // from b towards a, unit
   real ra = 0, rb = 0;     // m, lever arms along the normal
   Vec3 wall_velocity;      // m/s, velocity of the wall surface (b is a wall)

@@ -264,16 +264,6 @@ MARBLES_HD_INLINE real contact_reach(real speed, real max_speed, real radius, re
   return own > passed ? own : passed;
 }
 
-// The rebound shift actually applied: it brings the pair back to the
-// distance a bounce at the time of impact leaves, never into overlap (gap_now:
-// the gap after the position update). When the solve left the pair slower
-// apart than e |v_n| (neighbours pushed them together), the full (1 + e) gap
-// shift would overlap them by up to e times the gap.
-MARBLES_HD_INLINE real rebound_step(real shift, real gap_now) {
-  if (gap_now <= 0) return 0;
-  return shift < gap_now ? shift : gap_now;
-}
-
 // Two fixed spheres (a glued floor's, a peg row's: inverse masses 0) never
 // move each other: they make no contact, so their overlap is no pile's and
 // costs no sweep (make_sphere_contact; the run's initial-overlap warning).
@@ -571,25 +561,33 @@ MARBLES_HD_INLINE void solve_rolling(Contact& c, BodyState& A, BodyState& B) {
 // accelerated gap closes, with the speed it has then, and the bodies leave
 // with the velocity and gap that the exact motion reaches at the end of the
 // substep: a ball bouncing on a floor keeps its rebound heights exactly.
+//
+// `lead`: how far the substep's earlier impacts of either body have moved
+// the gap along the normal (dot(n, shift_a - shift_b), impact_states): a
+// body whose velocity changed at time t moves as x0 + v t + shift, so the
+// gap is separation + lead + v_n t, and this impact happens when that
+// closes. In a chain (a column of touching balls on a floor) the impacts
+// after the first happen at the first one's time, not at the substep's
+// start. `toi` is set to the time of impact (0 for a contact already
+// closed).
 template <bool Friction>
-MARBLES_HD_INLINE bool apply_impact(Contact& c, BodyState& A, BodyState& B, real rest_speed, real h, real accel_n) {
+MARBLES_HD_INLINE bool apply_impact(Contact& c, BodyState& A, BodyState& B, real rest_speed, real h, real accel_n,
+                                    real lead, real& toi) {
   const real vn = dot(A.v - B.v, c.normal);
-  if (vn > -rest_speed || !(c.separation < -vn * h)) return false;
+  const real gap = c.separation + lead;
+  if (vn > -rest_speed || !(gap < -vn * h)) return false;
   const real e = c.coeff.restitution;
   real target = -e * vn;  // the normal velocity after the impact
-  real shift = c.separation > 0 ? (1 + e) * c.separation : real(0);
-  if (accel_n != 0 && c.separation > 0) {
+  toi = gap > 0 ? gap / -vn : real(0);
+  if (accel_n != 0 && gap > 0) {
     const real half = real(0.5) * h;
     const real vs = vn - accel_n * half;  // at the start of the substep
-    const real disc = vs * vs - 2 * accel_n * c.separation;
-    real toi = disc > 0 ? 2 * c.separation / (-vs + std::sqrt(disc)) : c.separation / -vn;
+    const real disc = vs * vs - 2 * accel_n * gap;
+    toi = disc > 0 ? 2 * gap / (-vs + std::sqrt(disc)) : gap / -vn;
     if (!(toi >= 0)) toi = 0;
     if (toi > h) toi = h;
     const real v_hit = vn + accel_n * (toi - half);  // < 0
-    const real left = h - toi;
     target = -e * v_hit + accel_n * (half - toi);
-    const real gap_end = -e * v_hit * left + real(0.5) * accel_n * left * left;
-    shift = c.separation + h * target - gap_end;
   }
   const real lambda = c.normal_mass * (target - vn);
   c.impact_impulse += lambda;
@@ -599,11 +597,11 @@ MARBLES_HD_INLINE bool apply_impact(Contact& c, BodyState& A, BodyState& B, real
     const Vec3 vt = vrel - c.normal * dot(vrel, c.normal);
     apply_impulse(c, A, B, clamp_length(vt * (-c.tangent_mass), c.coeff.friction * lambda));
   }
-  // Time of impact: the bodies meet at t = gap / |v_n| into the substep and
-  // separate at e |v_n| from then on; with the new velocity acting over the
-  // whole substep they would end (1 + e) gap too far apart. The projection
-  // stage takes that back (positions only).
-  if (shift > 0) c.rebound_shift += shift;
+  // Time of impact: the bodies meet at toi into the substep and separate at
+  // the target speed from then on; with the new velocity acting over the
+  // whole substep they would end (target - v_n) toi too far apart ((1 + e)
+  // gap without acceleration). The bodies' shifts (impact_states) take that
+  // back at the integration.
   return true;
 }
 

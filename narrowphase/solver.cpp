@@ -166,7 +166,7 @@ void unpack_records(const SweepRecords& s, const ImpactRecords& impacts, const C
   for (std::ptrdiff_t k = 0; k < n; ++k) {
     const std::uint32_t r = colours.record_of(static_cast<std::uint32_t>(k));
     unpack_sweep_impulses<Rolling>(s, r, contacts[k]);
-    if (impacts.word) contacts[k].impact_impulse = impacts.word[r].z, contacts[k].rebound_shift = impacts.word[r].w;
+    if (impacts.word) contacts[k].impact_impulse = impacts.word[r].z;
   }
 }
 
@@ -504,7 +504,7 @@ void ContactSolver::contacts_of_records(const ColourRanges& colours, const Bodie
 // place (the contact index of solve_velocities), each read from its record.
 void ContactSolver::impacts(const ColourRanges& colours, SolverBody* bodies, std::size_t body_count, real h) {
   const real rest = m_settings.rest_speed;
-  const ImpactParams params{rest, h, m_settings.wall_accel};
+  ImpactParams params{rest, h, m_settings.wall_accel};
   const auto n = static_cast<std::uint32_t>(m_record_count);
   m_candidates.clear();  // in place order, scanned on all threads
   m_impact_passed_over = 0;
@@ -516,6 +516,8 @@ void ContactSolver::impacts(const ColourRanges& colours, SolverBody* bodies, std
     if (is_impact_candidate(approach(static_cast<std::uint32_t>(k)), rest)) to.push_back(static_cast<std::uint32_t>(k));
   });
   if (m_candidates.empty()) return;
+  m_shift.assign(body_count, Vec3{});
+  params.shift = m_shift.data();
   std::uint8_t* hit_spheres = nullptr;
   if (m_settings.impact_pass_over) {
     m_hit_spheres.assign(body_count, 0);
@@ -555,6 +557,11 @@ void ContactSolver::impacts(const ColourRanges& colours, SolverBody* bodies, std
     });
     m_rebounds = m_rebounds || hit;
   }
+  if (!m_rebounds) return;
+  const Vec3* shift = m_shift.data();
+#pragma omp parallel for schedule(static) if (n >= kParallelFrom)
+  for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(n); ++k)
+    shifted_gap(s, shift, static_cast<std::uint32_t>(k));
 }
 
 int ContactSolver::project_positions(const std::vector<Contact>& contacts, const ColourRanges& colours,
@@ -577,32 +584,19 @@ int ContactSolver::project_positions(const std::vector<Contact>& contacts, const
     for (std::ptrdiff_t k = 0; k < n; ++k) pack_position_record(cs[k], m_records, static_cast<std::uint32_t>(k));
   }
   m_packed_from = nullptr;
-  // Without a solve no impact stage ran: no rebound is due. The sweeps walk
-  // each colour's range of records, whatever order they hold it in.
-  return project_packed(colours, bodies, walls, solved && m_rebounds);
+  // The sweeps walk each colour's range of records, whatever order they hold it in.
+  return project_packed(colours, bodies, walls);
 }
 
 int ContactSolver::project_records(const ColourRanges& colours, const BodiesView& bodies,
                                    const std::vector<WallShape>& walls) const {
-  return m_made ? project_packed(colours, bodies, walls, m_rebounds) : 0;
+  return m_made ? project_packed(colours, bodies, walls) : 0;
 }
 
 int ContactSolver::project_packed(const ColourRanges& colours, const BodiesView& bodies,
-                                  const std::vector<WallShape>& walls, bool rebounds) const {
+                                  const std::vector<WallShape>& walls) const {
   const WallShape* ws = walls.data();
   const SweepRecords& records = m_records;
-  // Only an impact gives a contact a rebound shift: a substep without one
-  // (a pile at rest) skips the pass, which would return at every contact.
-  // A colour's records are its places'.
-  if (m_settings.restitution && rebounds) {
-    const Real4* impact = m_impacts.word;
-    over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) {
-      any_in_colour(b, e, [&](std::uint32_t k) {
-        rebound_one(load_rebound_contact(records, impact, k), bodies, ws);
-        return false;
-      });
-    });
-  }
   // Sweeps until one moves no contact by more than settled_move
   // (project_one), position_iterations at most, and on while one moves some
   // contact by more than deep_move (projection_sweep_settings): a pile at

@@ -170,6 +170,10 @@ class ContactSolver {
   // (from its records: 8 bytes a contact read where a contact is 112).
   real deepest_overlap(const BodiesView& bodies, const std::vector<WallShape>& walls) const;
 
+  // What the last solve's impacts owe each sphere's position
+  // (ImpactParams::shift), for the integration to add; null where none hit.
+  const Vec3* impact_shift() const { return m_rebounds ? m_shift.data() : nullptr; }
+
   // The contacts the last solve's impact stage passed over in its later
   // passes (impact_passed_over), summed over those passes.
   std::uint64_t impact_passed_over() const { return m_impact_passed_over; }
@@ -177,8 +181,7 @@ class ContactSolver {
  private:
   // The solve and the projection on the records (packed or made).
   void solve_packed(const ColourRanges& colours, const BodiesView& world, real h);
-  int project_packed(const ColourRanges& colours, const BodiesView& bodies, const std::vector<WallShape>& walls,
-                     bool rebounds) const;
+  int project_packed(const ColourRanges& colours, const BodiesView& bodies, const std::vector<WallShape>& walls) const;
   void impacts(const ColourRanges& colours, SolverBody* bodies, std::size_t body_count, real h);
   // m_records over m_record_words and m_impacts over m_impact_words for
   // `count` contacts; without the arms array where `uniform` gives them.
@@ -201,7 +204,7 @@ class ContactSolver {
                             const ImpactParams& p, std::uint8_t* hit_spheres, std::uint64_t* passed);
   SolverSettings m_settings;
   SweepLanes m_lanes = SweepLanes::sse2;
-  bool m_rebounds = false;  // an impact hit in this substep's solve (some contact has a rebound shift)
+  bool m_rebounds = false;  // an impact hit in this substep's solve (some sphere has a shift: m_shift)
   SweepFn m_sweep = nullptr;
   RangeFn m_warm_start = nullptr;
   ImpactFn m_impact = nullptr;
@@ -212,6 +215,7 @@ class ContactSolver {
   std::vector<std::vector<std::uint32_t>> m_candidate_parts;  // per thread
   std::vector<std::uint64_t> m_rank;
   std::vector<std::uint8_t> m_hit_spheres;  // a flag a sphere: a hit of the impact stage moved it
+  std::vector<Vec3> m_shift;                // a sphere's shift from the impacts (ImpactParams), for the integration
   std::uint64_t m_impact_passed_over = 0;
   std::vector<SolverBody> m_bodies;  // the velocity state, packed for the solve
   // The sweep's records (SweepRecords::in) of m_record_count contacts,

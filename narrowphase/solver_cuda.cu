@@ -259,27 +259,20 @@ __device__ __forceinline__ void raise_once(bool happened, bool& raised, unsigned
   }
 }
 
-// The position stages in one launch: the impacts' rebound shifts, colour
-// by colour, when the impact stage hit something (hit: its first pass's
-// flag, null when it did not run; only a hit gives a shift); then sweeps
+// The projection in one launch: sweeps
 // until one moves nothing beyond settled_move (project_one), at most
 // `sweeps` (projection_limit), each with projection_sweep_settings, as
 // solver.cpp runs them. Sweep `it` sets moved[it] (zeroed before), which every block
 // reads after the barrier that ends the sweep's last colour. *total += the
 // sweeps run (solver.cpp ends the projection there too).
 template <class Sync>
-__global__ void project_kernel(const ColourPlan* plan_memory, SweepRecords records, const Real4* impact,
-                               BodiesView bodies, const WallShape* walls, SolverSettings s, const unsigned* hit,
-                               int sweeps, unsigned* moved, unsigned long long* total,
-                               const unsigned long long* skip) {
+__global__ void project_kernel(const ColourPlan* plan_memory, SweepRecords records, BodiesView bodies,
+                               const WallShape* walls, SolverSettings s, int sweeps, unsigned* moved,
+                               unsigned long long* total, const unsigned long long* skip) {
   if (::marbles::cuda::skipped(skip)) return;  // every block reads the same word: none waits at a barrier alone
   const Sync grid;
   const ColourPlan& plan = shared_plan(plan_memory);
   if (plan.empty()) return;  // a room without contacts (a step without waits): no sweep, as on the CPU
-  if (hit && flag_set(hit))
-    walk_colours(plan, false, grid, [&](std::uint32_t k) {
-      rebound_one(load_rebound_contact(records, impact, k), bodies, walls);
-    });
   int ran = 0;
   for (int it = 0; it < sweeps; ++it) {
     ++ran;
@@ -298,7 +291,8 @@ __global__ void project_kernel(const ColourPlan* plan_memory, SweepRecords recor
 // impact_levels; a level's contacts spread over the launch, the overflow
 // set by one thread), the launch's barrier after each. Pass p > 0: every
 // contact colour by colour, while pass p - 1 hit something. hit[p] (zeroed
-// before) records what pass p hit.
+// before) records what pass p hit. Then, where pass 0 hit, every contact's
+// gap takes its bodies' shifts (shifted_gap).
 template <bool Friction, class Sync>
 __global__ void impact_stage_kernel(const ColourPlan* plan_memory, SweepRecords records, Real4* impact,
                                     const std::uint32_t* order, const std::uint32_t* first, std::uint32_t n,
@@ -317,6 +311,12 @@ __global__ void impact_stage_kernel(const ColourPlan* plan_memory, SweepRecords 
       raise_once(impact_record<Friction>(records, impact, k, bodies, p), raised, hit + pass);
     });
   }
+  if (!flag_set(hit)) return;  // every block reads the same word after the last barrier
+  grid.sync();
+  // The plan's contacts (n may be a room's: past them the records are not this substep's).
+  const std::uint32_t contacts = plan.begin[plan.colours + 1];
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < contacts; k += gridDim.x * blockDim.x)
+    shifted_gap(records, p.shift, k);
 }
 
 // The warm start and every sweep of a substep in one launch, in the order of
@@ -569,13 +569,12 @@ bool launch_one(std::size_t items, int sm_count, cudaStream_t s, Args&&... args)
   return false;
 }
 
-bool launch_position_stages(const SweepRecords& records, const Real4* impact, DevicePlan plan,
-                            const BodiesView& bodies, const WallShape* walls, const SolverSettings& settings,
-                            const unsigned* hit, int sweeps, unsigned* moved, unsigned long long* total, int sm_count,
-                            cudaStream_t s, const unsigned long long* skip) {
-  if (sweeps <= 0 && !hit) return false;
+bool launch_position_stages(const SweepRecords& records, DevicePlan plan, const BodiesView& bodies,
+                            const WallShape* walls, const SolverSettings& settings, int sweeps, unsigned* moved,
+                            unsigned long long* total, int sm_count, cudaStream_t s, const unsigned long long* skip) {
+  if (sweeps <= 0) return false;
   return launch_one<project_kernel<GridSync>, project_kernel<ClusterSync>>(
-      plan.widest, sm_count, s, plan.plan, records, impact, bodies, walls, settings, hit, sweeps, moved, total, skip);
+      plan.widest, sm_count, s, plan.plan, records, bodies, walls, settings, sweeps, moved, total, skip);
 }
 
 bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,

@@ -124,21 +124,20 @@ int cluster_blocks();
 // twice in that order.
 std::vector<KernelFit> sweep_kernel_fits();
 
-// The position stages: the impacts' rebound shifts (rebound_one; in the
-// impact words) when *hit (the impact stage's flag of its first pass; null:
-// it did not run), then the projection, sweeps until one moves nothing
+// The projection: sweeps until one moves nothing
 // beyond settled_move (project_one), at most `sweeps`; moved[0, sweeps)
 // zeroed before, sweep `it` sets moved[it]; *total += the sweeps run.
 // Nothing where `skip` is set (cuda::skipped).
-bool launch_position_stages(const SweepRecords& records, const Real4* impact, DevicePlan plan,
-                            const BodiesView& bodies, const WallShape* walls, const SolverSettings& settings,
-                            const unsigned* hit, int sweeps, unsigned* moved, unsigned long long* total, int sm_count,
-                            cudaStream_t stream, const unsigned long long* skip = nullptr);
+bool launch_position_stages(const SweepRecords& records, DevicePlan plan, const BodiesView& bodies,
+                            const WallShape* walls, const SolverSettings& settings, int sweeps, unsigned* moved,
+                            unsigned long long* total, int sm_count, cudaStream_t stream,
+                            const unsigned long long* skip = nullptr);
 
 // The impact stage (ContactSolver::impacts): the candidates level by level
 // (`order` and `first` from ColouringCuda::impact_levels, n contacts), then
 // passes 1 .. passes - 1 over every contact while the pass before hit
-// something; hit[p] (zeroed before) is set when pass p hits.
+// something; hit[p] (zeroed before) is set when pass p hits. p.shift: a
+// word a sphere, zeroed before.
 bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
                          const std::uint32_t* first, std::uint32_t n, const ColourPlan* plan, SolverBody* bodies,
                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,

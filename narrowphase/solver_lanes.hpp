@@ -411,7 +411,7 @@ MARBLES_LANE BodyLanes<L> load_bodies(const SolverBody* bodies, const SweepRecor
   for (int l = 0; l < 4; ++l) {
     const std::uint32_t index = body_of(s, k + l, side_b);
     if (is_wall(index)) {
-      // The wall's velocity, its fourth real (the rebound shift) made the zero inverse mass.
+      // The wall's velocity, its fourth real (+0) made the zero inverse mass.
       r[l] = __builtin_shuffle(group(s.extra + k + l, 0), L{}, Word{0, 1, 2, 4});
       q[l] = group(&kNone, 1);
     } else {

@@ -86,6 +86,13 @@ struct ImpactParams {
   real rest_speed;  // m/s: slower approaches do not bounce
   real h;           // s, the substep
   Vec3 wall_accel;  // SolverSettings::wall_accel
+  // A sphere's shift: what the substep's impacts owe its position. An impact
+  // at time t changes a velocity by dv, which the integration applies for the
+  // whole substep, t too long: the sphere's shift takes -dv t, so that it
+  // moves as x0 + v t + shift from then on (the integration adds it:
+  // integrator::drift). Zeroed before the stage; null: not kept (no lead
+  // either).
+  Vec3* shift = nullptr;
 };
 
 // The velocity state of one sphere as the velocity stages read and write it,
@@ -249,8 +256,8 @@ struct SweepRecords {
   // where they are the same for every contact (the GPU's records then leave
   // them out and read `uniform`).
   Real4* arms = nullptr;
-  // wall_velocity, written and read for wall contacts only (the rebound
-  // shift lives in the impact word). Null where no wall moves (the GPU's
+  // wall_velocity, written and read for wall contacts only. Null where no
+  // wall moves (the GPU's
   // records then leave it out: a wall at rest has the surface velocity +0
   // exactly, a contact's default).
   Real4* extra = nullptr;
@@ -467,14 +474,6 @@ MARBLES_HD_INLINE Contact load_position_contact(const SweepRecords& s, std::uint
   c.normal = {g.x, g.y, g.z};
   return c;
 }
-// The same with its rebound shift from its impact word (impact_word, the
-// GPU's), as rebound_one reads it.
-MARBLES_HD_INLINE Contact load_rebound_contact(const SweepRecords& s, const Real4* impact, std::uint32_t k) {
-  Contact c = load_position_contact(s, k);
-  c.rebound_shift = impact[k].w;
-  return c;
-}
-
 // The impulses back into the contact after the last sweep (Rolling false:
 // the rolling impulse as it was, when the records were packed without it).
 template <bool Rolling = true>
@@ -488,11 +487,28 @@ MARBLES_HD_INLINE void unpack_sweep_impulses(const SweepRecords& s, std::uint32_
   }
 }
 
-// The impact of one contact on its loaded bodies (apply_impact); true if it hit.
+// The impact of one contact on its loaded bodies (apply_impact), at the
+// time the gap closes with the bodies' shifts so far; each body's shift then
+// takes its velocity change times that time. True if it hit.
 template <bool Friction>
 MARBLES_HD_INLINE bool impact_states(Contact& c, BodyState& A, BodyState& B, const ImpactParams& p) {
-  const real accel_n = is_wall(c.b) ? dot(p.wall_accel, c.normal) : real(0);
-  return apply_impact<Friction>(c, A, B, p.rest_speed, p.h, accel_n);
+  const bool wall = is_wall(c.b);
+  const real accel_n = wall ? dot(p.wall_accel, c.normal) : real(0);
+  Vec3 shift_a{}, shift_b{};
+  real lead = 0;
+  if (p.shift) {
+    shift_a = p.shift[c.a];
+    if (!wall) shift_b = p.shift[c.b];
+    lead = dot(c.normal, shift_a - shift_b);
+  }
+  const Vec3 va = A.v, vb = B.v;
+  real toi = 0;
+  if (!apply_impact<Friction>(c, A, B, p.rest_speed, p.h, accel_n, lead, toi)) return false;
+  if (p.shift && toi > 0) {
+    p.shift[c.a] = shift_a - (A.v - va) * toi;
+    if (!wall) p.shift[c.b] = shift_b - (B.v - vb) * toi;
+  }
+  return true;
 }
 template <bool Friction>
 MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactParams& p) {
@@ -508,7 +524,8 @@ MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactPa
 // The GPU keeps a substep's contacts only as the sweep's records plus one
 // word each for the impact stage, and so does the CPU's step from the
 // records' making to the store (impact_word: the approach speed, the
-// restitution, the impact impulse, the rebound shift; the approach speed
+// restitution, the impact impulse, the separation as found, which the
+// record's own may leave for the shifted gap: shifted_gap; the approach speed
 // alone in a substep without impact candidates: ImpactRecords; the records'
 // extra word then holds only a moving wall's velocity, and no word at all
 // where no wall moves), made in colour-major order from the body
@@ -517,13 +534,13 @@ MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactPa
 // The effective masses are computed from the bodies where a stage needs
 // them, as the sweeps do.
 MARBLES_HD_INLINE Real4 impact_word(const Contact& c) {
-  return {c.approach_speed, c.coeff.restitution, c.impact_impulse, c.rebound_shift};
+  return {c.approach_speed, c.coeff.restitution, c.impact_impulse, c.separation};
 }
 
 // What the GPU keeps beside the records for the impact stage: an impact word
 // a contact in a substep with impact candidates; in one without, the
 // approach speeds alone (4 bytes a contact, not 16). No impact stage runs
-// there, so every impact impulse and rebound shift stays +0, and the
+// there, so every impact impulse stays +0, no gap is shifted, and the
 // restitution is the pair table's (contact_of_record looks it up).
 struct ImpactRecords {
   Real4* word = nullptr;     // with impact candidates
@@ -539,7 +556,7 @@ MARBLES_HD_INLINE void pack_impact(const Contact& c, const ImpactRecords& r, std
 template <bool Rolling = true>
 MARBLES_HD_INLINE void pack_contact(const Contact& c, const SweepRecords& s, const ImpactRecords& impacts,
                                     std::uint32_t k) {
-  pack_sweep_record<Rolling>(c, s, k);  // the rebound shift in the impact word
+  pack_sweep_record<Rolling>(c, s, k);
   pack_impact(c, impacts, k);
 }
 
@@ -554,8 +571,8 @@ MARBLES_HD_INLINE Contact load_approach(const SweepRecords& s, const Real4* impa
 
 // impact_one on record k: the contact as apply_impact reads it (the bodies,
 // geometry, arms, friction, a wall's velocity, the restitution, the impact
-// impulse so far and the rebound shift), its masses from the bodies; writes
-// back the impact impulse and the rebound shift (its impact word).
+// impulse so far), its masses from the bodies, the shifts in p; writes back
+// the impact impulse (its impact word).
 template <bool Friction>
 MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::uint32_t k, SolverBody* bodies,
                                      const ImpactParams& p) {
@@ -563,7 +580,6 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::
   Real4 i = impact[k];
   c.coeff.restitution = i.y;
   c.impact_impulse = i.z;
-  c.rebound_shift = i.w;
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
   set_masses<Friction, false>(c, A, B);
@@ -571,9 +587,24 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
   i.z = c.impact_impulse;
-  i.w = c.rebound_shift;
   impact[k] = i;
   return true;
+}
+
+// After an impact stage that hit something: record k's gap as the
+// integration will leave it, its bodies' shifts taken in (the lead
+// impact_states takes). The velocity solve then lets it close by no more
+// than that: a pair a chain's impact timed at the substep's end does not
+// meet the solve as closed (its plastic impulse took a row's energy), and a
+// shift that brings a pair together cannot put it into overlap. A contact
+// whose bodies no impact moved keeps its bits.
+MARBLES_HD_INLINE void shifted_gap(const SweepRecords& s, const Vec3* shift, std::uint32_t k) {
+  const BodyPair ab = s.bodies[k];
+  const Vec3 da = shift[ab.a], db = is_wall(ab.b) ? Vec3{} : shift[ab.b];
+  if (da.x == 0 && da.y == 0 && da.z == 0 && db.x == 0 && db.y == 0 && db.z == 0) return;
+  Real4 g = s.geometry[k];
+  g.w = g.w + dot(Vec3{g.x, g.y, g.z}, da - db);
+  s.geometry[k] = g;
 }
 
 // Record k as the whole contact the CPU holds after the step: every field
@@ -598,7 +629,7 @@ MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const ImpactR
     c.approach_speed = i.x;
     c.coeff.restitution = i.y;
     c.impact_impulse = i.z;
-    c.rebound_shift = i.w;
+    c.separation = i.w;  // as found: an impact stage may have taken shifts into the record's (shifted_gap)
   } else {
     c.approach_speed = impacts.approach[k];
     c.coeff.restitution = pair().restitution;
@@ -614,28 +645,6 @@ MARBLES_HD_INLINE bool is_impact_candidate(const Contact& c, real rest_speed) {
 }
 MARBLES_HD_INLINE real time_of_impact(const Contact& c) {
   return c.separation > 0 ? c.separation / -c.approach_speed : real(0);
-}
-
-// After a speculative bounce: bring the bodies back together by the
-// contact's rebound shift, never into overlap (rebound_step), split by
-// inverse mass (positions only).
-MARBLES_HD_INLINE void rebound_one(const Contact& c, const BodiesView& bodies, const WallShape* walls) {
-  if (c.rebound_shift <= 0) return;
-  const real inv_ma = bodies.inv_mass[c.a];
-  const real inv_mb = is_wall(c.b) ? real(0) : bodies.inv_mass[c.b];
-  const real k = inv_ma + inv_mb;
-  if (k <= 0) return;
-  real gap;
-  if (is_wall(c.b)) {
-    Vec3 normal;
-    if (!wall_gap(walls[c.b & ~kWallFlag], bodies.position[c.a], bodies.radius[c.a], normal, gap)) return;
-  } else {
-    gap = length(bodies.position[c.a] - bodies.position[c.b]) - bodies.radius[c.a] - bodies.radius[c.b];
-  }
-  const real shift = rebound_step(c.rebound_shift, gap);
-  if (shift <= 0) return;
-  bodies.position[c.a] -= c.normal * (shift * inv_ma / k);
-  if (!is_wall(c.b)) bodies.position[c.b] += c.normal * (shift * inv_mb / k);
 }
 
 // Position projection of one contact at the integrated positions: remove a

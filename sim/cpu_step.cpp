@@ -122,8 +122,9 @@ class CpuStep final : public StepBackend {
     // for this substep: the spheres that moved past theirs, checked.
     const bool check = m_watch && m_model.speculative && m_reach.size() == m_world.size();
     std::size_t past = 0;
-    m_non_finite =
-        integrator::integrate_positions(m_world.view(), h, check ? m_reach.data() : nullptr, &past) || m_non_finite;
+    const Vec3* shift = has_records() ? m_solver.impact_shift() : nullptr;
+    m_non_finite = integrator::integrate_positions(m_world.view(), h, check ? m_reach.data() : nullptr, &past, shift) ||
+                   m_non_finite;
     if (past > 0 && !m_non_finite) check_unswept(h, past);
     if (m_model.verlet && m_model.drag)
       integrator::apply_drag(m_world.view(), m_model.drag_linear, m_model.drag_quadratic, m_model.second_kick(h),

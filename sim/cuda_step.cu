@@ -627,7 +627,11 @@ class CudaStep final : public StepBackend {
   void solve_velocities(real h) override {
     if (m_count == 0) return;
     const BodiesView world = m_device.view();
-    auto* bodies = m_pairs.as<narrowphase::SolverBody>(world.count);  // the body pairs are read no more
+    // The body pairs are read no more; behind the bodies, where restitution
+    // is on, the spheres' shifts from the impacts (shift_d), read by the
+    // integration before the cache's store takes this memory.
+    const std::size_t shift_words = m_model.solver.restitution ? shift_bodies(world.count) : 0;
+    auto* bodies = m_pairs.as<narrowphase::SolverBody>(world.count + shift_words);
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     if (m_model.solver.restitution) impacts(bodies, h);
     const real inv_h = real(1) / h;
@@ -685,8 +689,11 @@ class CudaStep final : public StepBackend {
     const std::uint32_t checked = watch::unswept_checked(bodies.count);
     std::uint32_t* past = check ? m_past.as<std::uint32_t>(1 + checked) : nullptr;
     if (check) MARBLES_CUDA_CHECK(cudaMemsetAsync(past, 0, sizeof(std::uint32_t), m_stream));
+    // The impacts' shifts where the impact stage ran (zeroed there: a sphere
+    // no hit moved keeps its bits).
+    const Vec3* shift = m_impact_candidates && m_count > 0 ? shift_d() : nullptr;
     integrator::cuda::launch_integrate_positions(bodies, h, m_flags.get_as<unsigned>(), m_sm, m_stream, skip(),
-                                                 m_reach.get_as<real>(), past, checked);  // flags[0]
+                                                 m_reach.get_as<real>(), past, checked, shift);  // flags[0]
     if (check) {
       const auto wall_count = m_model.wall_contacts ? static_cast<std::uint32_t>(m_model.wall_shapes.size()) : 0u;
       unswept_kernel<<<::marbles::cuda::grid_for(bodies.count, m_sm), kWatchBlock, 0, m_stream>>>(
@@ -702,19 +709,15 @@ class CudaStep final : public StepBackend {
     nc::launch_advance_walls(walls(), static_cast<std::uint32_t>(m_model.wall_shapes.size()), h, m_stream, skip());
   }
 
-  // The rebound shifts (only an impact gives a contact one: they are walked
-  // when the impact stage, which ran only with impact candidates, raised its
-  // first pass's flag; a pile at rest has none), then the CPU's projection
-  // sweeps until one moves nothing beyond settled_move: one launch, no
-  // read-back.
+  // The CPU's projection sweeps until one moves nothing beyond
+  // settled_move: one launch, no read-back.
   void project_positions() override {
     if (m_count == 0) return;
     const int sweeps = narrowphase::projection_limit(m_model.solver);
-    const unsigned* hit = m_impact_candidates ? m_hit.get_as<unsigned>() : nullptr;
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(std::max(sweeps, 1)));
     if (sweeps > 0) MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
-    if (nc::launch_position_stages(m_records, m_impacts.word, device_plan(), m_device.view(), walls(), m_model.solver, hit,
-                                   sweeps, moved, flag(kProjectionSweeps), m_sm, m_stream, skip()))
+    if (nc::launch_position_stages(m_records, device_plan(), m_device.view(), walls(), m_model.solver, sweeps, moved,
+                                   flag(kProjectionSweeps), m_sm, m_stream, skip()))
       ++m_counters.cluster_stages;
   }
 
@@ -969,6 +972,14 @@ class CudaStep final : public StepBackend {
 
  private:
   narrowphase::BodyPair* pairs_d() const { return m_pairs.get_as<narrowphase::BodyPair>(); }
+  // The spheres' shifts from the impacts: n words behind the solver bodies
+  // (solve_velocities sized m_pairs for both), as many bodies' room as they take.
+  static std::size_t shift_bodies(std::size_t n) {
+    return (n * sizeof(Vec3) + sizeof(narrowphase::SolverBody) - 1) / sizeof(narrowphase::SolverBody);
+  }
+  Vec3* shift_d() const {
+    return reinterpret_cast<Vec3*>(m_pairs.get_as<narrowphase::SolverBody>() + m_device.size());
+  }
   // The substep's plan as the one-launch stages read it: the colouring's in
   // device memory, shaped for the widest colour the host read (without
   // waits, the last step's).
@@ -1281,7 +1292,9 @@ class CudaStep final : public StepBackend {
   // substep without candidates (found with the contacts) skips it.
   void impacts(narrowphase::SolverBody* bodies, real h) {
     if (!m_impact_candidates) return;
-    const narrowphase::ImpactParams params{m_model.solver.rest_speed, h, m_model.solver.wall_accel};
+    narrowphase::ImpactParams params{m_model.solver.rest_speed, h, m_model.solver.wall_accel};
+    params.shift = shift_d();
+    MARBLES_CUDA_CHECK(cudaMemsetAsync(params.shift, 0, m_device.size() * sizeof(Vec3), m_stream));
     std::uint32_t* order = nullptr;
     const std::uint32_t* first = nullptr;
     m_colouring.impact_levels(m_records, m_impacts.word, m_count, m_device.size(), params.rest_speed, order, first,

@@ -415,7 +415,7 @@ time: {duration: 0.05, dt: 0.016666666666666666}
 effects: [collisions, restitution]
 materials: {a: {density: 1000, restitution: 0.5}}
 particles:
-  - list: {positions: [[0, 0, 0], [1.5, 0, 0], [1.7, 0.02, 0]], radius: 0.05, velocities: [[100, 0, 0], [0, 0, 0], [0, 0, 0]]}
+  - list: {positions: [[1.38, 0, 0], [1.5, 0, 0], [1.7, 0.02, 0]], radius: 0.05, velocities: [[100, 0, 0], [0, 0, 0], [0, 0, 0]]}
 )";
 
 // A sphere struck at 100 m/s with dt = 1/60 s leaves past what even the
