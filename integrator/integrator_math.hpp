@@ -76,7 +76,8 @@ MARBLES_HD_INLINE Vec3 drag_update(DragKick kick, const Vec3& v, bool gravity, c
 MARBLES_HD_INLINE Vec3 drift(const Vec3& x, const Vec3& v, real h) { return x + v * h; }
 
 // The same for sphere i, then its shift from the substep's impacts (a word a
-// sphere, narrowphase::ImpactParams::shift; null where none hit): an impact
+// sphere, narrowphase::ImpactParams::shift; null where no impact stage ran
+// or, on the CPU, none hit; +0 for a sphere no hit moved): an impact
 // at time t changed its velocity, which the drift applies for the whole
 // substep, t too long, and the shift takes that back. A sphere no impact
 // moved (shift +0) keeps its bits.

@@ -61,6 +61,7 @@ struct alignas(16) Contact {
 
   std::uint32_t a = 0, b = 0;
   real separation = 0;     // m, < 0 when overlapping
+  real spare = 0;          // unused: keeps the fields in 16-byte groups and no padding (contacts compare whole)
   Vec3 normal;             // from b towards a, unit
   real ra = 0, rb = 0;     // m, lever arms along the normal
   Vec3 wall_velocity;      // m/s, velocity of the wall surface (b is a wall)

@@ -19,15 +19,17 @@
 //                 impacts make new approaches (a chain of touching spheres),
 //                 visit every contact colour by colour, impact_passes passes
 //                 in all at most (SolverSettings; kImpactPasses by default).
+//                 Each impact at its time toi: its spheres' shifts take
+//                 -dv toi (ImpactParams::shift, impact_shift()), and the
+//                 contacts' gaps the shifts (shifted_gap)
 //   warm start    apply the impulses carried over from the last substep
 //                 (ContactCache, matched by body pair) when enabled
 //   solve         `iterations` sweeps, alternately forwards and backwards
 //                 through the colours: friction, rolling resistance (when the
 //                 scene enables them), then the normal impulse (speculative:
 //                 a positive gap may close within the substep, never more)
-// and after the positions are integrated:
-//   project       undo the speculative bounces' extra travel, then remove
-//                 overlap beyond a slop by moving positions only (no velocity
+// and after the positions are integrated (with the impacts' shifts):
+//   project       remove overlap beyond a slop by moving positions only (no velocity
 //                 change, so no kinetic energy is added), colour by colour,
 //                 in sweeps until one moves no contact by more than
 //                 settled_move (position_iterations sweeps at most)

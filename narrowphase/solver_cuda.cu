@@ -259,11 +259,11 @@ __device__ __forceinline__ void raise_once(bool happened, bool& raised, unsigned
   }
 }
 
-// The projection in one launch: sweeps
-// until one moves nothing beyond settled_move (project_one), at most
-// `sweeps` (projection_limit), each with projection_sweep_settings, as
-// solver.cpp runs them. Sweep `it` sets moved[it] (zeroed before), which every block
-// reads after the barrier that ends the sweep's last colour. *total += the
+// The projection in one launch: sweeps until one moves nothing beyond
+// settled_move (project_one), at most `sweeps` (projection_limit), each with
+// projection_sweep_settings, as solver.cpp runs them. Sweep `it` sets
+// moved[it] (zeroed before), which every block reads after the barrier that
+// ends the sweep's last colour. *total += the
 // sweeps run (solver.cpp ends the projection there too).
 template <class Sync>
 __global__ void project_kernel(const ColourPlan* plan_memory, SweepRecords records, BodiesView bodies,
@@ -569,9 +569,9 @@ bool launch_one(std::size_t items, int sm_count, cudaStream_t s, Args&&... args)
   return false;
 }
 
-bool launch_position_stages(const SweepRecords& records, DevicePlan plan, const BodiesView& bodies,
-                            const WallShape* walls, const SolverSettings& settings, int sweeps, unsigned* moved,
-                            unsigned long long* total, int sm_count, cudaStream_t s, const unsigned long long* skip) {
+bool launch_projection(const SweepRecords& records, DevicePlan plan, const BodiesView& bodies, const WallShape* walls,
+                       const SolverSettings& settings, int sweeps, unsigned* moved, unsigned long long* total,
+                       int sm_count, cudaStream_t s, const unsigned long long* skip) {
   if (sweeps <= 0) return false;
   return launch_one<project_kernel<GridSync>, project_kernel<ClusterSync>>(
       plan.widest, sm_count, s, plan.plan, records, bodies, walls, settings, sweeps, moved, total, skip);

@@ -124,14 +124,13 @@ int cluster_blocks();
 // twice in that order.
 std::vector<KernelFit> sweep_kernel_fits();
 
-// The projection: sweeps until one moves nothing
-// beyond settled_move (project_one), at most `sweeps`; moved[0, sweeps)
-// zeroed before, sweep `it` sets moved[it]; *total += the sweeps run.
-// Nothing where `skip` is set (cuda::skipped).
-bool launch_position_stages(const SweepRecords& records, DevicePlan plan, const BodiesView& bodies,
-                            const WallShape* walls, const SolverSettings& settings, int sweeps, unsigned* moved,
-                            unsigned long long* total, int sm_count, cudaStream_t stream,
-                            const unsigned long long* skip = nullptr);
+// The projection: sweeps until one moves nothing beyond settled_move
+// (project_one), at most `sweeps`; moved[0, sweeps) zeroed before, sweep
+// `it` sets moved[it]; *total += the sweeps run. Nothing where `skip` is set
+// (cuda::skipped).
+bool launch_projection(const SweepRecords& records, DevicePlan plan, const BodiesView& bodies, const WallShape* walls,
+                       const SolverSettings& settings, int sweeps, unsigned* moved, unsigned long long* total,
+                       int sm_count, cudaStream_t stream, const unsigned long long* skip = nullptr);
 
 // The impact stage (ContactSolver::impacts): the candidates level by level
 // (`order` and `first` from ColouringCuda::impact_levels, n contacts), then

@@ -716,8 +716,8 @@ class CudaStep final : public StepBackend {
     const int sweeps = narrowphase::projection_limit(m_model.solver);
     auto* moved = m_moved.as<unsigned>(static_cast<std::size_t>(std::max(sweeps, 1)));
     if (sweeps > 0) MARBLES_CUDA_CHECK(cudaMemsetAsync(moved, 0, sweeps * sizeof(unsigned), m_stream));
-    if (nc::launch_position_stages(m_records, device_plan(), m_device.view(), walls(), m_model.solver, sweeps, moved,
-                                   flag(kProjectionSweeps), m_sm, m_stream, skip()))
+    if (nc::launch_projection(m_records, device_plan(), m_device.view(), walls(), m_model.solver, sweeps, moved,
+                              flag(kProjectionSweeps), m_sm, m_stream, skip()))
       ++m_counters.cluster_stages;
   }
 
@@ -1336,8 +1336,9 @@ class CudaStep final : public StepBackend {
   int m_iteration_factor = 1;
 
   // A substep's contacts: their body pairs as found (m_pairs, which then
-  // holds in turn the solver bodies for the solve and the cache store's
-  // temporaries: the pairs are read last by the records' making), each one's
+  // holds in turn the solver bodies for the solve, with the impacts' shifts
+  // behind them until the integration, and the cache store's temporaries:
+  // the pairs are read last by the records' making), each one's
   // cache entry (m_match) and kept colour, then in colour-major order the
   // sweep's records and impact words or approach speeds (m_record_memory)
   // and colours. The records are live from the colouring, which makes them,

@@ -76,7 +76,9 @@ MARBLES_HD_INLINE bool path_may_come_within(const Vec3& d0, const Vec3& m, real 
 
 // How much deeper (of the smaller radius) spheres a and b overlapped while
 // both moved on straight lines from p - v h to where they stand, p, than at
-// the substep's start: 0 where they came no deeper. A contact the solve
+// p - v h: 0 where they came no deeper. p - v h is the substep's start, or
+// for a sphere an impact moved, x0 + its shift: the path it took from its
+// last impact on, drawn back to the substep's start. A contact the solve
 // held never deepens (its gap closes at most to zero, and an overlap does
 // not grow), so a deepening is a meeting the contacts did not see.
 MARBLES_HD_INLINE real swept_deepening(const Vec3& pa, const Vec3& va, real ra, const Vec3& pb, const Vec3& vb,

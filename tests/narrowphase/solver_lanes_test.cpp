@@ -87,7 +87,7 @@ Case make_case(std::mt19937& rng, bool edge, std::uint32_t count = W, const Unif
     c.rolling_impulse = Vec3(u(rng), u(rng), u(rng)) * real(1e-6);
     c.impact_impulse = u(rng);
     c.approach_speed = u(rng);
-    u(rng);  // a draw kept where the contact had a rebound shift: the same cases as before
+    u(rng);  // a draw kept where the contact had a per-contact impact word: the same cases as before
     c.coeff = {real(0.3), real(0.5) + real(0.4) * u(rng), real(0.05), real(0.02)};
     if (edge) {
       switch (pick(rng)) {
