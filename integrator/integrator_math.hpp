@@ -85,7 +85,7 @@ MARBLES_HD_INLINE Vec3 drift(const Vec3& x, const Vec3& v, real h, const Vec3* s
   const Vec3 y = drift(x, v, h);
   if (!shift) return y;
   const Vec3 s = shift[i];
-  return s.x != 0 || s.y != 0 || s.z != 0 ? y + s : y;
+  return s == Vec3{} ? y : y + s;
 }
 
 // A sphere that moved farther than the reach its contacts were found with

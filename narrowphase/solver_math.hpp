@@ -257,9 +257,8 @@ struct SweepRecords {
   // them out and read `uniform`).
   Real4* arms = nullptr;
   // wall_velocity, written and read for wall contacts only. Null where no
-  // wall moves (the GPU's
-  // records then leave it out: a wall at rest has the surface velocity +0
-  // exactly, a contact's default).
+  // wall moves (the GPU's records then leave it out: a wall at rest has the
+  // surface velocity +0 exactly, a contact's default).
   Real4* extra = nullptr;
   BodyPair* bodies = nullptr; // a, b
   UniformArms uniform;        // the arms of every contact, where `arms` is null
@@ -487,6 +486,13 @@ MARBLES_HD_INLINE void unpack_sweep_impulses(const SweepRecords& s, std::uint32_
   }
 }
 
+// Body i's shift (ImpactParams::shift); a wall's is none.
+MARBLES_HD_INLINE Vec3 shift_of(const Vec3* shift, std::uint32_t i) { return is_wall(i) ? Vec3{} : shift[i]; }
+// How far two bodies' shifts move their gap along `normal` (b towards a).
+MARBLES_HD_INLINE real shift_lead(const Vec3& normal, const Vec3& shift_a, const Vec3& shift_b) {
+  return dot(normal, shift_a - shift_b);
+}
+
 // The impact of one contact on its loaded bodies (apply_impact), at the
 // time the gap closes with the bodies' shifts so far; each body's shift then
 // takes its velocity change times that time. True if it hit.
@@ -494,16 +500,12 @@ template <bool Friction>
 MARBLES_HD_INLINE bool impact_states(Contact& c, BodyState& A, BodyState& B, const ImpactParams& p) {
   const bool wall = is_wall(c.b);
   const real accel_n = wall ? dot(p.wall_accel, c.normal) : real(0);
-  Vec3 shift_a{}, shift_b{};
-  real lead = 0;
-  if (p.shift) {
-    shift_a = p.shift[c.a];
-    if (!wall) shift_b = p.shift[c.b];
-    lead = dot(c.normal, shift_a - shift_b);
-  }
+  const Vec3 shift_a = p.shift ? p.shift[c.a] : Vec3{}, shift_b = p.shift ? shift_of(p.shift, c.b) : Vec3{};
   const Vec3 va = A.v, vb = B.v;
   real toi = 0;
-  if (!apply_impact<Friction>(c, A, B, p.rest_speed, p.h, accel_n, lead, toi)) return false;
+  if (!apply_impact<Friction>(c, A, B, p.rest_speed, p.h, accel_n, p.shift ? shift_lead(c.normal, shift_a, shift_b) : 0,
+                              toi))
+    return false;
   if (p.shift && toi > 0) {
     p.shift[c.a] = shift_a - (A.v - va) * toi;
     if (!wall) p.shift[c.b] = shift_b - (B.v - vb) * toi;
@@ -600,10 +602,10 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::
 // whose bodies no impact moved keeps its bits.
 MARBLES_HD_INLINE void shifted_gap(const SweepRecords& s, const Vec3* shift, std::uint32_t k) {
   const BodyPair ab = s.bodies[k];
-  const Vec3 da = shift[ab.a], db = is_wall(ab.b) ? Vec3{} : shift[ab.b];
-  if (da.x == 0 && da.y == 0 && da.z == 0 && db.x == 0 && db.y == 0 && db.z == 0) return;
+  const Vec3 da = shift[ab.a], db = shift_of(shift, ab.b);
+  if (da == Vec3{} && db == Vec3{}) return;
   Real4 g = s.geometry[k];
-  g.w = g.w + dot(Vec3{g.x, g.y, g.z}, da - db);
+  g.w = g.w + shift_lead(Vec3{g.x, g.y, g.z}, da, db);
   s.geometry[k] = g;
 }
 

@@ -143,16 +143,11 @@ std::vector<SeriesEntry> read_pvd(const fs::path& pvd_path) {
   return entries;
 }
 
-namespace {
-
-// NAME_NNNNNN.vtp, numbered in write order.
-std::string numbered(const char* prefix, std::size_t index) {
+std::string numbered_vtp(const char* prefix, std::size_t index) {
   char name[48];
   std::snprintf(name, sizeof name, "%s_%06zu.vtp", prefix, index);
   return name;
 }
-
-}  // namespace
 
 bool vtk_compressed() {
 #if defined(MARBLES_HAVE_ZLIB)
@@ -322,7 +317,7 @@ class PolyDataFile {
 
 // --- a series: numbered files and their .pvd ---------------------------------
 
-fs::path Series::next_path() const { return m_dir / m_folder / numbered(m_prefix.c_str(), m_count); }
+fs::path Series::next_path() const { return m_dir / m_folder / numbered_vtp(m_prefix.c_str(), m_count); }
 
 fs::path Series::add(double time, const std::string& file_text) {
   const fs::path path = next_path();
@@ -336,7 +331,7 @@ fs::path Series::add(double time, const std::string& file_text) {
   // either cannot be, neither is, and the series stays as it was. Where the
   // .pvd is not due, the file alone (listed at the .pvd's next write).
   const std::size_t before = m_lines.size();
-  m_lines += dataset_line(time, m_folder + "/" + numbered(m_prefix.c_str(), m_count));
+  m_lines += dataset_line(time, m_folder + "/" + numbered_vtp(m_prefix.c_str(), m_count));
   try {
     if (!m_in_steps || m_relisting.due(m_lines.size())) {
       const std::string pvd = pvd_text(m_lines);
@@ -355,7 +350,7 @@ fs::path Series::add(double time, const std::string& file_text) {
 }
 
 void Series::adopt(double time, const fs::path& from) {
-  const std::string file = m_folder + "/" + numbered(m_prefix.c_str(), m_count++);
+  const std::string file = m_folder + "/" + numbered_vtp(m_prefix.c_str(), m_count++);
   std::error_code ec;
   if (!fs::exists(m_dir / file, ec)) {
     // In neither folder (a run that wrote no frames, or a checkpoint away

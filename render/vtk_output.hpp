@@ -38,6 +38,9 @@ namespace marbles::render {
 /// True when frames are zlib-compressed (the build has zlib).
 bool vtk_compressed();
 
+/// A series' file name: PREFIX_NNNNNN.vtp (frame_000012.vtp), numbered in write order.
+std::string numbered_vtp(const char* prefix, std::size_t index);
+
 /// What every frame's field data carries besides its time and step.
 struct FrameMetadata {
   std::vector<std::string> material_names;  ///< by material id

@@ -149,9 +149,7 @@ void check_frames_beside(const std::filesystem::path& from, const World& world, 
                          const std::string& restart) {
   if (every <= 0) return;
   const auto frame_at = [&](std::uint64_t k) {
-    char name[48];
-    std::snprintf(name, sizeof name, "frame_%06llu.vtp", static_cast<unsigned long long>(k));
-    return from / "frames" / name;
+    return from / "frames" / render::numbered_vtp("frame", static_cast<std::size_t>(k));
   };
   const std::uint64_t at = step / static_cast<std::uint64_t>(every);
   std::error_code ec;
