@@ -443,31 +443,68 @@ void ContactSolver::solve_records(const ColourRanges& colours, const BodiesView&
 }
 
 void ContactSolver::solve_packed(const ColourRanges& colours, const BodiesView& world, real h) {
-  const auto n = static_cast<std::ptrdiff_t>(world.count);
-  m_bodies.resize(world.count);
-#pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t i = 0; i < n; ++i) m_bodies[i] = gather_solver_body(world, i);
-  SolverBody* bodies = m_bodies.data();
-
+  SolverBody* bodies = gathered_bodies(world);
   m_rebounds = false;
   if (m_settings.restitution) impacts(colours, bodies, world.count, h);
 
-  const SweepRecords& records = m_records;
   // The warm start over each colour's loaded records: the others carry no
   // load in (carries_load), so warm_start_one applies nothing for them.
   if (m_settings.warm_start)
     over_colour_parts(colours, false, [&](std::uint32_t b, std::uint32_t split, std::uint32_t) {
-      m_warm_start(records, b, split, bodies, 0);
+      m_warm_start(m_records, b, split, bodies, 0);
     });
+  sweep_all(colours, world, bodies, h);
+  scatter_bodies(world);
+}
+
+void ContactSolver::close_velocities(const ColourRanges& colours, const BodiesView& world,
+                                     const std::vector<WallShape>& walls, real h) {
+  if (!m_made || m_record_count == 0) return;
+  SolverBody* bodies = gathered_bodies(world);
+  const SweepRecords& records = m_records;
+  const auto n = static_cast<std::ptrdiff_t>(m_record_count);
+  m_kept_gap.resize(m_record_count);
+  real* kept = m_kept_gap.data();
+  const WallShape* ws = walls.data();
+  const real rest = m_settings.rest_speed;
+  const Vec3 wall_kick = m_settings.wall_accel * (h / 2);
+  with_terms(m_settings.friction, m_settings.rolling, [&](auto friction, auto rolling) {
+#pragma omp parallel for schedule(static) if (n > 20000)
+    for (std::ptrdiff_t k = 0; k < n; ++k)
+      close_record<friction, rolling>(records, static_cast<std::uint32_t>(k), bodies, world, ws, rest, wall_kick,
+                                      kept);
+  });
+  // Any record may carry impulses now, the first solve's: each colour whole.
+  if (m_settings.warm_start)
+    over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(records, b, e, bodies, 0); });
+  sweep_all(colours, world, bodies, h);
+  scatter_bodies(world);
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t k = 0; k < n; ++k) reopen_record(records, static_cast<std::uint32_t>(k), kept);
+}
+
+SolverBody* ContactSolver::gathered_bodies(const BodiesView& world) {
+  const auto n = static_cast<std::ptrdiff_t>(world.count);
+  m_bodies.resize(world.count);
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t i = 0; i < n; ++i) m_bodies[i] = gather_solver_body(world, i);
+  return m_bodies.data();
+}
+
+void ContactSolver::scatter_bodies(const BodiesView& world) {
+  const auto n = static_cast<std::ptrdiff_t>(world.count);
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (std::ptrdiff_t i = 0; i < n; ++i) scatter_solver_body(world, i, m_bodies[i]);
+}
+
+void ContactSolver::sweep_all(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies, real h) {
   const real inv_h = real(1) / h;
   if (m_local) local_sweeps(colours, world, bodies, inv_h);
   else
     for (int it = 0; it < m_settings.iterations; ++it)
       over_colour_parts(colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t split, std::uint32_t e) {
-        m_sweep(records, b, split, e, bodies, inv_h);
+        m_sweep(m_records, b, split, e, bodies, inv_h);
       });
-#pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t i = 0; i < n; ++i) scatter_solver_body(world, i, m_bodies[i]);
 }
 
 const SweepRecords* ContactSolver::pending_records(const std::vector<Contact>& contacts) const {

@@ -153,6 +153,13 @@ class ContactSolver {
   // solve_velocities and project_positions on the made records.
   void solve_records(const ColourRanges& colours, const BodiesView& bodies, real h);
   int project_records(const ColourRanges& colours, const BodiesView& bodies, const std::vector<WallShape>& walls) const;
+  // Velocity Verlet's closing solve on the made records, after the second
+  // half kick and the projection (close_record: each record's gap at the
+  // substep's end, an approach faster than the rest speed left to the next
+  // substep's impacts), then each record's separation put back
+  // (reopen_record). `walls` the step's, moved to the substep's end.
+  void close_velocities(const ColourRanges& colours, const BodiesView& world, const std::vector<WallShape>& walls,
+                        real h);
   // The made records (their impulses as the last solve left them), or null
   // when none were made since forget_records.
   const SweepRecords* made_records() const { return m_made ? &m_records : nullptr; }
@@ -185,6 +192,11 @@ class ContactSolver {
   void solve_packed(const ColourRanges& colours, const BodiesView& world, real h);
   int project_packed(const ColourRanges& colours, const BodiesView& bodies, const std::vector<WallShape>& walls) const;
   void impacts(const ColourRanges& colours, SolverBody* bodies, std::size_t body_count, real h);
+  // The velocity state packed into m_bodies, and back to the world.
+  SolverBody* gathered_bodies(const BodiesView& world);
+  void scatter_bodies(const BodiesView& world);
+  // The sweeps of a solve (the solver's order, or the local order's).
+  void sweep_all(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies, real h);
   // m_records over m_record_words and m_impacts over m_impact_words for
   // `count` contacts; without the arms array where `uniform` gives them.
   void size_records(std::size_t count, const UniformArms* uniform = nullptr) const;
@@ -220,6 +232,7 @@ class ContactSolver {
   std::vector<Vec3> m_shift;                // a sphere's shift from the impacts (ImpactParams), for the integration
   std::uint64_t m_impact_passed_over = 0;
   std::vector<SolverBody> m_bodies;  // the velocity state, packed for the solve
+  std::vector<real> m_kept_gap;      // the records' separations while the closing solve holds their gaps
   // The sweep's records (SweepRecords::in) of m_record_count contacts,
   // made (make_records) or packed by a velocity solve of whole contacts;
   // the projection and deepest_overlap read their position part (bodies,

@@ -76,6 +76,27 @@ __global__ void gather_bodies_kernel(BodiesView world, SolverBody* bodies) {
     bodies[i] = gather_solver_body(world, i);
 }
 
+// Velocity Verlet's closing solve: each of the plan's records takes its gap
+// at the substep's end (close_record), then its separation back
+// (reopen_record). The plan's contacts: n may be a room's.
+template <bool Friction, bool Rolling>
+__global__ void close_records_kernel(const ColourPlan* plan, SweepRecords s, const SolverBody* bodies,
+                                     BodiesView world, const WallShape* walls, real rest_speed, Vec3 wall_kick,
+                                     real* kept, const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
+  const std::uint32_t contacts = plan->begin[plan->colours + 1];
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < contacts; k += gridDim.x * blockDim.x)
+    close_record<Friction, Rolling>(s, k, bodies, world, walls, rest_speed, wall_kick, kept);
+}
+
+__global__ void reopen_records_kernel(const ColourPlan* plan, SweepRecords s, const real* kept,
+                                      const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
+  const std::uint32_t contacts = plan->begin[plan->colours + 1];
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < contacts; k += gridDim.x * blockDim.x)
+    reopen_record(s, k, kept);
+}
+
 __global__ void scatter_bodies_kernel(const SolverBody* bodies, BodiesView world, const unsigned long long* skip) {
   if (::marbles::cuda::skipped(skip)) return;
   for (std::size_t i = blockIdx.x * blockDim.x + threadIdx.x; i < world.count; i += gridDim.x * blockDim.x)
@@ -497,6 +518,25 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
                            const unsigned long long* skip) {
   if (world.count == 0) return;
   scatter_bodies_kernel<<<::marbles::cuda::grid_for(world.count, sm_count), kBlock, 0, s>>>(bodies, world, skip);
+  MARBLES_CUDA_CHECK_LAUNCH();
+}
+
+void launch_close_records(const SweepRecords& records, const ColourPlan* plan, std::uint32_t n,
+                          const SolverBody* bodies, const BodiesView& world, const WallShape* walls, real rest_speed,
+                          const Vec3& wall_kick, real* kept, SolverTerms t, int sm_count, cudaStream_t s,
+                          const unsigned long long* skip) {
+  if (n == 0) return;
+  with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
+    close_records_kernel<friction, rolling><<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(
+        plan, records, bodies, world, walls, rest_speed, wall_kick, kept, skip);
+    MARBLES_CUDA_CHECK_LAUNCH();
+  });
+}
+
+void launch_reopen_records(const SweepRecords& records, const ColourPlan* plan, std::uint32_t n, const real* kept,
+                           int sm_count, cudaStream_t s, const unsigned long long* skip) {
+  if (n == 0) return;
+  reopen_records_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(plan, records, kept, skip);
   MARBLES_CUDA_CHECK_LAUNCH();
 }
 

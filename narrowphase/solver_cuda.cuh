@@ -142,6 +142,19 @@ bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::
                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
                          cudaStream_t stream);
 
+// Velocity Verlet's closing solve around its warm start and sweeps
+// (ContactSolver::close_velocities): each of the plan's records its gap at
+// the substep's end (close_record; `bodies` gathered after the second kick,
+// `world` and `walls` at the substep's end), its separation kept in
+// kept[k]; then put back (reopen_record). n: the contacts or their room.
+// Nothing where `skip` is set (cuda::skipped).
+void launch_close_records(const SweepRecords& records, const ColourPlan* plan, std::uint32_t n,
+                          const SolverBody* bodies, const BodiesView& world, const WallShape* walls, real rest_speed,
+                          const Vec3& wall_kick, real* kept, SolverTerms terms, int sm_count, cudaStream_t stream,
+                          const unsigned long long* skip = nullptr);
+void launch_reopen_records(const SweepRecords& records, const ColourPlan* plan, std::uint32_t n, const real* kept,
+                           int sm_count, cudaStream_t stream, const unsigned long long* skip = nullptr);
+
 // The warm start (when `warm`) and `sweeps` sweeps in one launch, where a
 // launch per colour would leave the device waiting for the host's launches
 // (contacts few a colour).

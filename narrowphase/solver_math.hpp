@@ -683,21 +683,73 @@ MARBLES_HD_INLINE bool project_one(const Contact& c, const BodiesView& bodies, c
   return move > s.settled_move * r_min;
 }
 
+// The gap a contact's bodies have now (a wall's from its shape: wall_gap)
+// and the smaller radius (a wall contact's: the sphere's). False where a
+// wall has no gap to the sphere there (wall_gap's false).
+MARBLES_HD_INLINE bool gap_now(const Contact& c, const BodiesView& bodies, const WallShape* walls, real& gap,
+                               real& r_min) {
+  const real ra = bodies.radius[c.a];
+  r_min = ra;
+  if (is_wall(c.b)) {
+    Vec3 normal;
+    return wall_gap(walls[c.b & ~kWallFlag], bodies.position[c.a], ra, normal, gap);
+  }
+  const real rb = bodies.radius[c.b];
+  gap = length(bodies.position[c.a] - bodies.position[c.b]) - ra - rb;
+  r_min = ra < rb ? ra : rb;
+  return true;
+}
+
 // How deep a contact's bodies overlap now, as a fraction of the smaller
 // radius (a wall's: of the sphere's radius); 0 when apart. The step's
 // max_overlap is the largest of these after the projection.
 MARBLES_HD_INLINE real overlap_ratio(const Contact& c, const BodiesView& bodies, const WallShape* walls) {
-  const real ra = bodies.radius[c.a];
-  real gap, r_min = ra;
-  if (is_wall(c.b)) {
-    Vec3 normal;
-    if (!wall_gap(walls[c.b & ~kWallFlag], bodies.position[c.a], ra, normal, gap)) return 0;
-  } else {
-    const real rb = bodies.radius[c.b];
-    gap = length(bodies.position[c.a] - bodies.position[c.b]) - ra - rb;
-    r_min = ra < rb ? ra : rb;
-  }
+  real gap, r_min;
+  if (!gap_now(c, bodies, walls, gap, r_min)) return 0;
   return gap < 0 ? -gap / r_min : real(0);
+}
+
+// --- velocity Verlet's closing solve --------------------------------------------
+// Velocity Verlet kicks the velocities by (h/2) g once more after the
+// contacts' solve and the drift. Left so, a substep would end with every
+// resting contact closing at (h/2) g: a ball at rest on a floor would report
+// g h / 2 downward, and a pile at rest the kinetic energy of that speed. The
+// closing solve (the second stage of RATTLE) sweeps the substep's records
+// again after that kick and the projection: the warm start from the
+// impulses the first solve found, then the sweeps, each record's
+// separation the gap its bodies have at the substep's end (close_record), so
+// that a resting contact ends the substep at rest. Its impulses are the ones
+// the cache stores. A contact that approaches faster than the rest speed,
+// leaving the kick aside (a sphere pair's kicks are alike; a wall's is (h/2)
+// g along its normal), is the next substep's impact, whose speed its impact
+// stage must see: its impulses are cleared and its gap opened (kOpenGap), so
+// that no sweep touches it. Each record's own separation is kept aside and
+// put back after (reopen_record): the contacts a step reports keep it.
+inline constexpr real kOpenGap = real(1e20);  // m: no sweep's bound binds (h >= 1e-9 s keeps gap / h finite)
+
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE void close_record(const SweepRecords& s, std::uint32_t k, const SolverBody* bodies,
+                                    const BodiesView& world, const WallShape* walls, real rest_speed,
+                                    const Vec3& wall_kick, real* kept) {
+  Contact c = load_record<false, Rolling>(s, k, impulse_word(s, k));
+  kept[k] = c.separation;
+  const BodyState A = load_body(bodies, c.a, c), B = load_body(bodies, c.b, c);
+  real approach = dot(A.v - B.v, c.normal);
+  if (is_wall(c.b)) approach = approach - dot(wall_kick, c.normal);
+  real gap, r_min;
+  const bool near = gap_now(c, world, walls, gap, r_min);
+  if (near && !(approach < -rest_speed)) {
+    s.geometry[k].w = gap;
+    return;
+  }
+  s.geometry[k].w = kOpenGap;
+  c.normal_impulse = 0;
+  c.tangent_impulse = Vec3{};
+  c.rolling_impulse = Vec3{};
+  store_sweep_impulses<Friction, Rolling>(s, k, c);
+}
+MARBLES_HD_INLINE void reopen_record(const SweepRecords& s, std::uint32_t k, const real* kept) {
+  s.geometry[k].w = kept[k];
 }
 
 }  // namespace marbles::narrowphase

@@ -138,6 +138,10 @@ class CpuStep final : public StepBackend {
     if (has_records()) m_counters.projection_sweeps += m_solver.project_records(m_colours, m_world.view(), m_walls);
   }
 
+  void close_velocities(real h) override {
+    if (has_records()) m_solver.close_velocities(m_colours, m_world.view(), m_walls, h);
+  }
+
   // Also when there are no contacts: no stale impulses survive a contact-free substep.
   // The impulses from the solve's records, the contacts' only form.
   void store_impulses() override {

@@ -69,6 +69,9 @@ struct StepModel {
   // The gravity kick before the contacts (h, or h/2 for velocity Verlet) and after the drift (0 or h/2).
   real first_kick(real h) const { return verlet ? h / 2 : h; }
   real second_kick(real h) const { return verlet ? h / 2 : real(0); }
+  // Velocity Verlet with a second kick that changes something: the substep
+  // ends with the closing solve (StepBackend::close_velocities).
+  bool closing_solve() const { return verlet && (gravity || drag); }
   // The substep the contact test looks ahead (0 without speculative contacts).
   real lookahead(real h) const { return speculative ? h : real(0); }
 };
