@@ -735,16 +735,20 @@ int threads() {
 }  // namespace
 
 std::pair<scene::Scene, World> bench_start(const StepBenchOptions& options, std::size_t n, std::ostream& log) {
+  auto timed = [&options](std::pair<scene::Scene, World> start) {
+    start.first.solver.integrator = options.integrator;
+    return start;
+  };
   if (options.scene == "pile") {
     auto [box, state] = pile_start(options, n, log);
-    return {std::move(box), std::move(state.world)};
+    return timed({std::move(box), std::move(state.world)});
   }
   auto made = [](std::pair<scene::Scene, scene::GeneratedParticles> sg) {
     World w = make_world(sg.first, sg.second);
     return std::pair<scene::Scene, World>{std::move(sg.first), std::move(w)};
   };
-  if (options.scene == "settle") return made(pile(n, kSettleLattice));
-  if (options.scene == "gas") return made(gas(n, options.effects));
+  if (options.scene == "settle") return timed(made(pile(n, kSettleLattice)));
+  if (options.scene == "gas") return timed(made(gas(n, options.effects)));
   throw InputError({}, "--scene", "unknown scene '" + options.scene + "'");
 }
 
@@ -787,7 +791,9 @@ std::string write_bench_scene(const StepBenchOptions& options, std::size_t n, co
        << "format: 1\nname: " << stem << "\n"
        << "time: {duration: " << number(steps * s.time.dt) << ", dt: " << number(s.time.dt)
        << ", substeps: " << s.time.substeps << "}\n"
-       << "solver: {iterations: " << s.solver.iterations << "}\n"
+       << "solver: {iterations: " << s.solver.iterations
+       << (s.solver.integrator != "symplectic_euler" ? ", integrator: " + s.solver.integrator : std::string())
+       << "}\n"
        << "effects: [";
   for (std::size_t k = 0; k < s.effects.size(); ++k) yaml << (k ? ", " : "") << scene::effect_name(s.effects[k]);
   yaml << "]\ngravity: " << vec(s.gravity) << "\n";
@@ -836,6 +842,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   // numbering the options ask for.
   auto time_steps = [&](scene::Scene s, World w, std::size_t n) {
     s.solver.renumber = options.renumber;
+    s.solver.integrator = options.integrator;
     Simulation sim(s, in_sphere_order(std::move(w), options.sphere_order), backend);
     sim.set_watchdog(options.watchdog);
     rows.push_back(measure(sim, n, warmup, options.repeats));
@@ -866,6 +873,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                {"cpu_lanes", lanes ? nlohmann::ordered_json(lanes) : nlohmann::ordered_json()},
                                {"repeats", options.repeats}, {"warmup", warmup},
                                {"sphere_order", options.sphere_order}, {"renumber", options.renumber},
+                               {"integrator", options.integrator},
                                {"watchdog", options.watchdog},
                                {"launches_per_step", nlohmann::ordered_json::array()},
                                {"results", nlohmann::ordered_json::array()}};
@@ -938,6 +946,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
       << (options.sphere_order != "made" ? ", spheres in " + options.sphere_order + " order" : std::string())
       << (options.renumber > 0 ? ", renumbered every " + std::to_string(options.renumber) + " steps" : std::string())
       << (options.watchdog ? ", watchdog on" : "")
+      << (options.integrator != "symplectic_euler" ? ", " + options.integrator : std::string())
       << ", median of " << options.repeats << " steps after " << warmup << " warm-up)\n";
   out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"
       << std::setw(10) << "contacts" << std::setw(7) << "coord" << std::setw(8) << "colours" << std::setw(9)

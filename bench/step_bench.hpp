@@ -58,6 +58,10 @@ struct StepBenchOptions {
   // solver.renumber of the timed scene (0: never; a numbering at the start
   // of the first warm-up step and every this many steps after).
   int renumber = 0;
+  // solver.integrator of the timed steps (the pile settles as cached):
+  // symplectic_euler (the scenes' own) or velocity_verlet, whose closing
+  // solve the verb breakdown times apart (close_velocities).
+  std::string integrator = "symplectic_euler";
   // pile: rolling resistance (rolling friction 0.05) on, or off (friction
   // only; settled and cached apart).
   bool rolling = true;

@@ -453,7 +453,7 @@ void ContactSolver::solve_packed(const ColourRanges& colours, const BodiesView& 
     over_colour_parts(colours, false, [&](std::uint32_t b, std::uint32_t split, std::uint32_t) {
       m_warm_start(m_records, b, split, bodies, 0);
     });
-  sweep_all(colours, world, bodies, h);
+  sweep_all(colours, world, bodies, h, m_settings.iterations);
   scatter_bodies(world);
 }
 
@@ -477,7 +477,7 @@ void ContactSolver::close_velocities(const ColourRanges& colours, const BodiesVi
   // Any record may carry impulses now, the first solve's: each colour whole.
   if (m_settings.warm_start)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(records, b, e, bodies, 0); });
-  sweep_all(colours, world, bodies, h);
+  sweep_all(colours, world, bodies, h, m_settings.closing_iterations);
   scatter_bodies(world);
 #pragma omp parallel for schedule(static) if (n > 20000)
   for (std::ptrdiff_t k = 0; k < n; ++k) reopen_record(records, static_cast<std::uint32_t>(k), kept);
@@ -497,11 +497,12 @@ void ContactSolver::scatter_bodies(const BodiesView& world) {
   for (std::ptrdiff_t i = 0; i < n; ++i) scatter_solver_body(world, i, m_bodies[i]);
 }
 
-void ContactSolver::sweep_all(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies, real h) {
+void ContactSolver::sweep_all(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies, real h,
+                              int sweeps) {
   const real inv_h = real(1) / h;
   if (m_local) local_sweeps(colours, world, bodies, inv_h);
   else
-    for (int it = 0; it < m_settings.iterations; ++it)
+    for (int it = 0; it < sweeps; ++it)
       over_colour_parts(colours, it % 2 == 1, [&](std::uint32_t b, std::uint32_t split, std::uint32_t e) {
         m_sweep(m_records, b, split, e, bodies, inv_h);
       });

@@ -71,7 +71,7 @@ SweepLanes best_lanes();
 // colour by colour. Unset (or empty, or `colours`): the solver's order. It
 // changes the results, the same bits on both backends (the CUDA step's
 // LocalSweepsCuda, slower there than the solver's order). A study: the watchdog's
-// extra sweeps (set_iterations) do not reach it, and the run's description
+// extra sweeps (set_iteration_factor) do not reach it, and the run's description
 // still names the scene's iterations.
 struct LocalOrder {
   double tile_diameters = 0;
@@ -106,7 +106,12 @@ class ContactSolver {
 
   const SolverSettings& settings() const { return m_settings; }
   // The velocity sweeps per substep (the watchdog's retries raise it).
-  void set_iterations(int n) { m_settings.iterations = n; }
+  // The scene's sweeps times `factor` (the watchdog's retries), the closing
+  // solve's too.
+  void set_iteration_factor(int factor, int iterations, int closing_iterations) {
+    m_settings.iterations = iterations * factor;
+    m_settings.closing_iterations = closing_iterations * factor;
+  }
 
   // When the solve's impulses go back into the contacts: at its end, or
   // when asked (unpack_impulses), the cache storing them from the records
@@ -154,7 +159,7 @@ class ContactSolver {
   void solve_records(const ColourRanges& colours, const BodiesView& bodies, real h);
   int project_records(const ColourRanges& colours, const BodiesView& bodies, const std::vector<WallShape>& walls) const;
   // Velocity Verlet's closing solve on the made records, after the second
-  // half kick and the projection (close_record: each record's gap at the
+  // half kick, the projection and the store (close_record: each record's gap at the
   // substep's end, an approach faster than the rest speed left to the next
   // substep's impacts), then each record's separation put back
   // (reopen_record). `walls` the step's, moved to the substep's end.
@@ -195,8 +200,8 @@ class ContactSolver {
   // The velocity state packed into m_bodies, and back to the world.
   SolverBody* gathered_bodies(const BodiesView& world);
   void scatter_bodies(const BodiesView& world);
-  // The sweeps of a solve (the solver's order, or the local order's).
-  void sweep_all(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies, real h);
+  // `sweeps` sweeps in the solver's order (or the local order's passes).
+  void sweep_all(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies, real h, int sweeps);
   // m_records over m_record_words and m_impacts over m_impact_words for
   // `count` contacts; without the arms array where `uniform` gives them.
   void size_records(std::size_t count, const UniformArms* uniform = nullptr) const;

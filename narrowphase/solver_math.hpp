@@ -27,6 +27,7 @@ inline constexpr int kImpactPasses = 16;
 // Settings of the solver stages (the plain values every stage reads).
 struct SolverSettings {
   int iterations = 10;            // velocity sweeps per substep
+  int closing_iterations = 2;     // velocity Verlet's closing solve's sweeps (close_record)
   bool restitution = true;        // impact stage (without it impacts are plastic)
   int impact_passes = kImpactPasses;  // its passes, at most (solver.impact_passes)
   bool friction = false;          // Coulomb friction term
@@ -715,11 +716,11 @@ MARBLES_HD_INLINE real overlap_ratio(const Contact& c, const BodiesView& bodies,
 // resting contact closing at (h/2) g: a ball at rest on a floor would report
 // g h / 2 downward, and a pile at rest the kinetic energy of that speed. The
 // closing solve (the second stage of RATTLE) sweeps the substep's records
-// again after that kick and the projection: the warm start from the
-// impulses the first solve found, then the sweeps, each record's
-// separation the gap its bodies have at the substep's end (close_record), so
-// that a resting contact ends the substep at rest. Its impulses are the ones
-// the cache stores. A contact that approaches faster than the rest speed,
+// again after that kick, the projection and the cache's store (which keeps
+// the first solve's impulses: each solve starts from its own): the warm
+// start from the impulses the first solve found, then the sweeps, each
+// record's separation the gap its bodies have at the substep's end
+// (close_record), so that a resting contact ends the substep at rest. A contact that approaches faster than the rest speed,
 // leaving the kick aside (a sphere pair's kicks are alike; a wall's is (h/2)
 // g along its normal), is the next substep's impact, whose speed its impact
 // stage must see: its impulses are cleared and its gap opened (kOpenGap), so

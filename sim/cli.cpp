@@ -401,6 +401,10 @@ int cli_main(int argc, char** argv) {
   bench_step->add_option("--renumber", st.renumber,
                          "solver.renumber of the timed scene: the spheres numbered again every this many steps")
       ->check(kNonNegative);
+  bench_step->add_option("--integrator", st.integrator,
+                         "solver.integrator of the timed steps: symplectic_euler (default) or velocity_verlet "
+                         "(its closing solve timed apart)")
+      ->check(CLI::IsMember({"symplectic_euler", "velocity_verlet"}));
   bench_step->add_option("--write-scene", st.write_scene,
                          "write each N's start (the settle, the gas or the settled pile) to this folder as "
                          "bench-SCENE-nN.yaml and .csv, to run with `marbles run` or time with another build; "

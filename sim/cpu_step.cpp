@@ -168,7 +168,9 @@ class CpuStep final : public StepBackend {
     counters = m_counters;
   }
   void set_watch(bool on) override { m_watch = on; }
-  void set_iteration_factor(int factor) override { m_solver.set_iterations(m_model.solver.iterations * factor); }
+  void set_iteration_factor(int factor) override {
+    m_solver.set_iteration_factor(factor, m_model.solver.iterations, m_model.solver.closing_iterations);
+  }
   bool non_finite() const override { return m_non_finite; }
 
   const World& world() override { return m_world; }

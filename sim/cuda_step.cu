@@ -634,14 +634,15 @@ class CudaStep final : public StepBackend {
     auto* bodies = m_pairs.as<narrowphase::SolverBody>(world.count + shift_words);
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     if (m_model.solver.restitution) impacts(bodies, h);
-    sweep_bodies(bodies, world, h);
+    sweep_bodies(bodies, world, h, m_model.solver.iterations);
   }
 
   // Velocity Verlet's closing solve (narrowphase::close_record): the bodies
   // gathered again into m_pairs, the records' separations kept behind them
   // while the records hold their gaps at the substep's end, the warm start
   // and sweeps of the solve, then the separations back. The impacts' shifts
-  // were read by the integration: their words are free.
+  // were read by the integration and the cache's store is done: the pairs'
+  // memory is free.
   void close_velocities(real h) override {
     if (m_count == 0) return;
     const BodiesView world = m_device.view();
@@ -653,16 +654,17 @@ class CudaStep final : public StepBackend {
     nc::launch_close_records(m_records, m_colouring.device_plan(), m_count, bodies, world, walls(),
                              m_model.solver.rest_speed, m_model.solver.wall_accel * (h / 2), kept, m_terms, m_sm,
                              m_stream, skip());
-    sweep_bodies(bodies, world, h);
+    sweep_bodies(bodies, world, h, m_model.solver.closing_iterations);
     nc::launch_reopen_records(m_records, m_colouring.device_plan(), m_count, kept, m_sm, m_stream, skip());
   }
 
   // The solve's warm start (each colour whole: a record that carries no
-  // load applies nothing) and sweeps on the gathered bodies, in the step's
-  // form, then the bodies back to the world.
-  void sweep_bodies(narrowphase::SolverBody* bodies, const BodiesView& world, real h) {
+  // load applies nothing) and `iterations` sweeps (times the watchdog's
+  // factor) on the gathered bodies, in the step's form, then the bodies
+  // back to the world.
+  void sweep_bodies(narrowphase::SolverBody* bodies, const BodiesView& world, real h, int iterations) {
     const real inv_h = real(1) / h;
-    const int sweeps = m_model.solver.iterations * m_iteration_factor;
+    const int sweeps = iterations * m_iteration_factor;
     if (m_local) {  // the local order study: the warm start as always, then its passes
       if (m_model.solver.warm_start) over_colours(false, [&](nc::ContactRange r) {
           nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);

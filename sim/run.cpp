@@ -434,6 +434,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   summary["substeps"] = sim.substeps();
   summary["iterations"] = sc.solver.iterations;
   summary["integrator"] = sc.solver.integrator;
+  if (sim.model().closing_solve()) summary["closing_iterations"] = sc.solver.closing_iterations;
   summary["speculative"] = sc.solver.speculative;
   summary["dt"] = sim.dt();
   summary["simulated_time"] = sim.time();

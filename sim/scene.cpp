@@ -97,9 +97,12 @@ TimeSpec read_time(const Field& field, std::optional<double> duration) {
 }
 
 SolverSpec read_solver(const Field& field) {
-  const MapFields map(field, {"iterations", "impact_passes", "integrator", "speculative", "precision", "renumber"});
+  const MapFields map(field, {"iterations", "closing_iterations", "impact_passes", "integrator", "speculative",
+                              "precision", "renumber"});
   SolverSpec solver;
   if (auto f = map.optional("iterations")) solver.iterations = f->integer_at_least(1, SolverSpec::kMostIterations);
+  if (auto f = map.optional("closing_iterations"))
+    solver.closing_iterations = f->integer_at_least(1, SolverSpec::kMostIterations);
   if (auto f = map.optional("impact_passes")) solver.impact_passes = f->integer_at_least(1, SolverSpec::kMostImpactPasses);
   if (auto f = map.optional("integrator")) {
     solver.integrator = f->word();

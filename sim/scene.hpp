@@ -26,6 +26,7 @@ struct TimeSpec {
 
 struct SolverSpec {
   int iterations = 10;                        // velocity sweeps per substep
+  int closing_iterations = 2;                 // velocity Verlet's closing solve's sweeps per substep
   int impact_passes = 16;                     // passes of the impact stage per substep, at most (narrowphase::kImpactPasses)
   static constexpr int kMostImpactPasses = 4096;  // the most a scene may ask for
   // The most velocity sweeps a scene may ask for: a step of one sphere at

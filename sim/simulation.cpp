@@ -52,7 +52,7 @@ std::string Simulation::describe_pipeline(int threads) const {
                    : "  integrate      symplectic Euler\n");
   if (m.collisions || m.wall_contacts) out << "  project        positions (overlap beyond slop)\n";
   if (m.closing_solve() && (m.collisions || m.wall_contacts))
-    out << "  closing solve  " << s.iterations << " sweeps after the second half kick (resting contacts end at rest)\n";
+    out << "  closing solve  " << s.closing_iterations << " sweeps after the second half kick (resting contacts end at rest)\n";
   return out.str();
 }
 
@@ -399,8 +399,8 @@ void Simulation::substep(real h) {
   run_verb(Verb::solve_velocities, [&] { b.solve_velocities(h); });
   run_verb(Verb::integrate_positions, [&] { b.integrate_positions(h); });
   run_verb(Verb::project_positions, [&] { b.project_positions(); });
-  if (m_model->closing_solve()) run_verb(Verb::close_velocities, [&] { b.close_velocities(h); });
   run_verb(Verb::store_impulses, [&] { b.store_impulses(); });
+  if (m_model->closing_solve()) run_verb(Verb::close_velocities, [&] { b.close_velocities(h); });
 }
 
 // Runs one verb; with profiling on, waits for it and adds its wall time.

@@ -27,11 +27,11 @@ namespace marbles {
 // The verbs of a substep, for per-verb timing.
 enum class Verb : int {
   body_forces, find_contacts, colour_contacts, warm_start, solve_velocities, integrate_positions,
-  project_positions, close_velocities, store_impulses, count
+  project_positions, store_impulses, close_velocities, count
 };
 inline constexpr const char* kVerbNames[] = {"body_forces", "find_contacts", "colour_contacts", "warm_start",
                                              "solve_velocities", "integrate_positions", "project_positions",
-                                             "close_velocities", "store_impulses"};
+                                             "store_impulses", "close_velocities"};
 
 // What a substep without waits outgrew, so that it was undone
 // (StepCounters::undo_causes; the CUDA step's check on the device): a bit
@@ -128,10 +128,10 @@ class StepBackend {
   virtual void solve_velocities(real h) = 0;     // impacts, warm start, sweeps: colour by colour
   virtual void integrate_positions(real h) = 0;  // x += h v, walls move; raises non_finite
   virtual void project_positions() = 0;          // colour by colour; positions only
-  // Velocity Verlet's closing solve after its second kick, where the model
-  // asks for it (StepModel::closing_solve; narrowphase::close_record).
-  virtual void close_velocities(real h) = 0;
   virtual void store_impulses() = 0;             // for the next substep's warm start
+  // Velocity Verlet's closing solve after its second kick and the store, where
+  // the model asks for it (StepModel::closing_solve; narrowphase::close_record).
+  virtual void close_velocities(real h) = 0;
 
   // --- around a step --------------------------------------------------------
   virtual void begin_step() = 0;

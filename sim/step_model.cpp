@@ -65,6 +65,7 @@ std::vector<narrowphase::PairCoefficients> pair_coefficients(const scene::Scene&
 narrowphase::SolverSettings solver_settings(const scene::Scene& scene) {
   narrowphase::SolverSettings s;
   s.iterations = scene.solver.iterations;
+  s.closing_iterations = scene.solver.closing_iterations;
   s.impact_passes = scene.solver.impact_passes;
   s.restitution = scene.has(scene::Effect::restitution);
   s.friction = scene.has(scene::Effect::friction);

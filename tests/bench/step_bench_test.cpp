@@ -281,7 +281,8 @@ TEST(StepBench, PileTermsRefusedWhereTheyMeanNothing) {
 // `marbles run` of them starts from the same bits and steps as the
 // benchmark's own world does: the settling lattice, the gas with every
 // effect (drag and rolling resistance included), and a settled pile with
-// friction alone (its spheres spin: the CSV's wx, wy, wz).
+// friction alone (its spheres spin: the CSV's wx, wy, wz), timed under
+// velocity Verlet (`--integrator`: its closing solve runs in the steps).
 TEST(StepBench, TheSceneItWritesRunsAsTheBenchmarksOwn) {
   TempDir dir;
   StepBenchOptions settle;
@@ -295,6 +296,7 @@ TEST(StepBench, TheSceneItWritesRunsAsTheBenchmarksOwn) {
   pile.rolling = false;
   pile.cache_dir = (dir.path / "cache").string();
   pile.settle_steps = 60;
+  pile.integrator = "velocity_verlet";
   std::ostringstream log;
   const std::pair<StepBenchOptions, std::size_t> cases[] = {{settle, 1500}, {gas, 1000}, {pile, 600}};
   for (const auto& [options, n] : cases) {
@@ -309,6 +311,8 @@ TEST(StepBench, TheSceneItWritesRunsAsTheBenchmarksOwn) {
     EXPECT_EQ(got.time.dt, want.time.dt);
     EXPECT_EQ(got.time.substeps, want.time.substeps);
     EXPECT_EQ(got.solver.iterations, want.solver.iterations);
+    EXPECT_EQ(got.solver.integrator, options.integrator);
+    EXPECT_EQ(want.solver.integrator, options.integrator);
     EXPECT_EQ(got.effects, want.effects);
     EXPECT_EQ(got.drag, want.drag);
     EXPECT_EQ(got.drag_quadratic, want.drag_quadratic);

@@ -91,6 +91,8 @@ inline const std::vector<BadScene>& bad_scenes() {
        "{scene}:1:42: time.substeps: must be >= 1, got 0"},
       {"iterations_zero", SCENE_VALID "solver: {iterations: 0}\n",
        "{scene}:6:22: solver.iterations: must be >= 1, got 0"},
+      {"closing_iterations_zero", SCENE_VALID "solver: {integrator: velocity_verlet, closing_iterations: 0}\n",
+       "{scene}:6:59: solver.closing_iterations: must be >= 1, got 0"},
       {"impact_passes_zero", SCENE_VALID "solver: {impact_passes: 0}\n",
        "{scene}:6:25: solver.impact_passes: must be >= 1, got 0"},
       {"impact_passes_past_limit", SCENE_VALID "solver: {impact_passes: 5000}\n",
