@@ -464,23 +464,26 @@ void ContactSolver::close_velocities(const ColourRanges& colours, const BodiesVi
   const SweepRecords& records = m_records;
   const auto n = static_cast<std::ptrdiff_t>(m_record_count);
   m_kept_gap.resize(m_record_count);
-  real* kept = m_kept_gap.data();
+  m_kept_impulse.resize(m_record_count);
+  m_kept_rolling.resize(m_settings.rolling ? m_record_count : 0);
+  const ClosingKept kept{m_kept_gap.data(), m_kept_impulse.data(), m_kept_rolling.data()};
   const WallShape* ws = walls.data();
   const real rest = m_settings.rest_speed;
-  const Vec3 wall_kick = m_settings.wall_accel * (h / 2);
   with_terms(m_settings.friction, m_settings.rolling, [&](auto friction, auto rolling) {
 #pragma omp parallel for schedule(static) if (n > 20000)
     for (std::ptrdiff_t k = 0; k < n; ++k)
-      close_record<friction, rolling>(records, static_cast<std::uint32_t>(k), bodies, world, ws, rest, wall_kick,
-                                      kept);
+      close_record<friction, rolling>(records, static_cast<std::uint32_t>(k), bodies, world, ws, rest,
+                                      m_settings.wall_accel, h, kept);
   });
   // Any record may carry impulses now, the first solve's: each colour whole.
   if (m_settings.warm_start)
     over_colours(colours, false, [&](std::uint32_t b, std::uint32_t e) { m_warm_start(records, b, e, bodies, 0); });
   sweep_all(colours, world, bodies, h, m_settings.closing_iterations);
   scatter_bodies(world);
+  with_terms(m_settings.friction, m_settings.rolling, [&](auto friction, auto rolling) {
 #pragma omp parallel for schedule(static) if (n > 20000)
-  for (std::ptrdiff_t k = 0; k < n; ++k) reopen_record(records, static_cast<std::uint32_t>(k), kept);
+    for (std::ptrdiff_t k = 0; k < n; ++k) reopen_record<friction, rolling>(records, static_cast<std::uint32_t>(k), kept);
+  });
 }
 
 SolverBody* ContactSolver::gathered_bodies(const BodiesView& world) {

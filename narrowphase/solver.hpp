@@ -105,9 +105,8 @@ class ContactSolver {
   SweepLanes lanes() const { return m_lanes; }
 
   const SolverSettings& settings() const { return m_settings; }
-  // The velocity sweeps per substep (the watchdog's retries raise it).
-  // The scene's sweeps times `factor` (the watchdog's retries), the closing
-  // solve's too.
+  // The velocity sweeps per substep: the scene's times `factor` (the
+  // watchdog's retries raise it), the closing solve's too.
   void set_iteration_factor(int factor, int iterations, int closing_iterations) {
     m_settings.iterations = iterations * factor;
     m_settings.closing_iterations = closing_iterations * factor;
@@ -161,8 +160,9 @@ class ContactSolver {
   // Velocity Verlet's closing solve on the made records, after the second
   // half kick, the projection and the store (close_record: each record's gap at the
   // substep's end, an approach faster than the rest speed left to the next
-  // substep's impacts), then each record's separation put back
-  // (reopen_record). `walls` the step's, moved to the substep's end.
+  // substep's impacts), then each record's separation put back and its
+  // impulses both solves' (reopen_record). `walls` the step's, moved to the
+  // substep's end.
   void close_velocities(const ColourRanges& colours, const BodiesView& world, const std::vector<WallShape>& walls,
                         real h);
   // The made records (their impulses as the last solve left them), or null
@@ -200,7 +200,8 @@ class ContactSolver {
   // The velocity state packed into m_bodies, and back to the world.
   SolverBody* gathered_bodies(const BodiesView& world);
   void scatter_bodies(const BodiesView& world);
-  // `sweeps` sweeps in the solver's order (or the local order's passes).
+  // `sweeps` sweeps in the solver's order; under the local order study its
+  // passes instead, whatever `sweeps` asks (the closing solve's too).
   void sweep_all(const ColourRanges& colours, const BodiesView& world, SolverBody* bodies, real h, int sweeps);
   // m_records over m_record_words and m_impacts over m_impact_words for
   // `count` contacts; without the arms array where `uniform` gives them.
@@ -237,7 +238,10 @@ class ContactSolver {
   std::vector<Vec3> m_shift;                // a sphere's shift from the impacts (ImpactParams), for the integration
   std::uint64_t m_impact_passed_over = 0;
   std::vector<SolverBody> m_bodies;  // the velocity state, packed for the solve
-  std::vector<real> m_kept_gap;      // the records' separations while the closing solve holds their gaps
+  // The records' separations and first solve's impulses while the closing
+  // solve holds the records (ClosingKept).
+  std::vector<real> m_kept_gap;
+  std::vector<Real4> m_kept_impulse, m_kept_rolling;
   // The sweep's records (SweepRecords::in) of m_record_count contacts,
   // made (make_records) or packed by a velocity solve of whole contacts;
   // the projection and deepest_overlap read their position part (bodies,

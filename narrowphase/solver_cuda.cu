@@ -79,22 +79,30 @@ __global__ void gather_bodies_kernel(BodiesView world, SolverBody* bodies) {
 // Velocity Verlet's closing solve: each of the plan's records takes its gap
 // at the substep's end (close_record), then its separation back
 // (reopen_record). The plan's contacts: n may be a room's.
-template <bool Friction, bool Rolling>
-__global__ void close_records_kernel(const ColourPlan* plan, SweepRecords s, const SolverBody* bodies,
-                                     BodiesView world, const WallShape* walls, real rest_speed, Vec3 wall_kick,
-                                     real* kept, const unsigned long long* skip) {
-  if (::marbles::cuda::skipped(skip)) return;
-  const std::uint32_t contacts = plan->begin[plan->colours + 1];
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < contacts; k += gridDim.x * blockDim.x)
-    close_record<Friction, Rolling>(s, k, bodies, world, walls, rest_speed, wall_kick, kept);
+// f(k) for each of a plan's contacts, over the launch's threads (n, the
+// launch's size, may be a room's: past the plan's contacts the records are
+// not this substep's).
+template <class F>
+__device__ void for_plan_contacts(const ColourPlan& plan, F&& f) {
+  const std::uint32_t contacts = plan.begin[plan.colours + 1];
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < contacts; k += gridDim.x * blockDim.x) f(k);
 }
 
-__global__ void reopen_records_kernel(const ColourPlan* plan, SweepRecords s, const real* kept,
+template <bool Friction, bool Rolling>
+__global__ void close_records_kernel(const ColourPlan* plan, SweepRecords s, const SolverBody* bodies,
+                                     BodiesView world, const WallShape* walls, real rest_speed, Vec3 accel, real h,
+                                     ClosingKept kept, const unsigned long long* skip) {
+  if (::marbles::cuda::skipped(skip)) return;
+  for_plan_contacts(*plan, [&](std::uint32_t k) {
+    close_record<Friction, Rolling>(s, k, bodies, world, walls, rest_speed, accel, h, kept);
+  });
+}
+
+template <bool Friction, bool Rolling>
+__global__ void reopen_records_kernel(const ColourPlan* plan, SweepRecords s, ClosingKept kept,
                                       const unsigned long long* skip) {
   if (::marbles::cuda::skipped(skip)) return;
-  const std::uint32_t contacts = plan->begin[plan->colours + 1];
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < contacts; k += gridDim.x * blockDim.x)
-    reopen_record(s, k, kept);
+  for_plan_contacts(*plan, [&](std::uint32_t k) { reopen_record<Friction, Rolling>(s, k, kept); });
 }
 
 __global__ void scatter_bodies_kernel(const SolverBody* bodies, BodiesView world, const unsigned long long* skip) {
@@ -334,10 +342,7 @@ __global__ void impact_stage_kernel(const ColourPlan* plan_memory, SweepRecords 
   }
   if (!flag_set(hit)) return;  // every block reads the same word after the last barrier
   grid.sync();
-  // The plan's contacts (n may be a room's: past them the records are not this substep's).
-  const std::uint32_t contacts = plan.begin[plan.colours + 1];
-  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < contacts; k += gridDim.x * blockDim.x)
-    shifted_gap(records, p.shift, k);
+  for_plan_contacts(plan, [&](std::uint32_t k) { shifted_gap(records, p.shift, k); });
 }
 
 // The warm start and every sweep of a substep in one launch, in the order of
@@ -523,21 +528,25 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
 
 void launch_close_records(const SweepRecords& records, const ColourPlan* plan, std::uint32_t n,
                           const SolverBody* bodies, const BodiesView& world, const WallShape* walls, real rest_speed,
-                          const Vec3& wall_kick, real* kept, SolverTerms t, int sm_count, cudaStream_t s,
-                          const unsigned long long* skip) {
+                          const Vec3& accel, real h, const ClosingKept& kept, SolverTerms t, int sm_count,
+                          cudaStream_t s, const unsigned long long* skip) {
   if (n == 0) return;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
     close_records_kernel<friction, rolling><<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(
-        plan, records, bodies, world, walls, rest_speed, wall_kick, kept, skip);
+        plan, records, bodies, world, walls, rest_speed, accel, h, kept, skip);
     MARBLES_CUDA_CHECK_LAUNCH();
   });
 }
 
-void launch_reopen_records(const SweepRecords& records, const ColourPlan* plan, std::uint32_t n, const real* kept,
-                           int sm_count, cudaStream_t s, const unsigned long long* skip) {
+void launch_reopen_records(const SweepRecords& records, const ColourPlan* plan, std::uint32_t n,
+                           const ClosingKept& kept, SolverTerms t, int sm_count, cudaStream_t s,
+                           const unsigned long long* skip) {
   if (n == 0) return;
-  reopen_records_kernel<<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(plan, records, kept, skip);
-  MARBLES_CUDA_CHECK_LAUNCH();
+  with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
+    reopen_records_kernel<friction, rolling><<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(
+        plan, records, kept, skip);
+    MARBLES_CUDA_CHECK_LAUNCH();
+  });
 }
 
 void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* bodies, SolverTerms t, cudaStream_t s) {

@@ -720,23 +720,44 @@ MARBLES_HD_INLINE real overlap_ratio(const Contact& c, const BodiesView& bodies,
 // the first solve's impulses: each solve starts from its own): the warm
 // start from the impulses the first solve found, then the sweeps, each
 // record's separation the gap its bodies have at the substep's end
-// (close_record), so that a resting contact ends the substep at rest. A contact that approaches faster than the rest speed,
-// leaving the kick aside (a sphere pair's kicks are alike; a wall's is (h/2)
-// g along its normal), is the next substep's impact, whose speed its impact
-// stage must see: its impulses are cleared and its gap opened (kOpenGap), so
-// that no sweep touches it. Each record's own separation is kept aside and
-// put back after (reopen_record): the contacts a step reports keep it.
-inline constexpr real kOpenGap = real(1e20);  // m: no sweep's bound binds (h >= 1e-9 s keeps gap / h finite)
+// (close_record), so that a resting contact ends the substep at rest. A
+// contact that approaches faster than the rest speed, each body's half kick
+// left aside, is the next substep's impact, whose speed its impact stage must
+// see: its impulses are cleared and its gap opened (kOpenGap), so that no
+// sweep touches it. What the records held is kept aside (ClosingKept) and
+// given back after (reopen_record): the contacts a step reports keep their
+// gaps as found, and their impulses are both solves' together, the
+// substep's whole impulse.
+//
+// kOpenGap over a tiny h may make a bound of inf; solve_normal's clamp
+// still gives +0 (an approach less than inf, or NaN from 0 times inf where
+// both bodies are fixed, fails its test), so nothing non-finite is left.
+inline constexpr real kOpenGap = real(1e20);  // m
+
+// A record's words while the closing solve holds the records: its
+// separation, its impulse word and, with rolling resistance, its rolling word.
+struct ClosingKept {
+  real* gap = nullptr;
+  Real4* impulse = nullptr;
+  Real4* rolling = nullptr;
+};
 
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void close_record(const SweepRecords& s, std::uint32_t k, const SolverBody* bodies,
                                     const BodiesView& world, const WallShape* walls, real rest_speed,
-                                    const Vec3& wall_kick, real* kept) {
-  Contact c = load_record<false, Rolling>(s, k, impulse_word(s, k));
-  kept[k] = c.separation;
+                                    const Vec3& accel, real h, const ClosingKept& kept) {
+  const Real4 impulse = impulse_word(s, k);
+  Contact c = load_record<false, Rolling>(s, k, impulse);
+  kept.gap[k] = c.separation;
+  kept.impulse[k] = impulse;
+  if constexpr (Rolling) kept.rolling[k] = s.rolling[k];
   const BodyState A = load_body(bodies, c.a, c), B = load_body(bodies, c.b, c);
-  real approach = dot(A.v - B.v, c.normal);
-  if (is_wall(c.b)) approach = approach - dot(wall_kick, c.normal);
+  // The velocities before the second half kick, which moves a sphere that
+  // is not fixed by (h/2) accel (gravity's; a wall and a fixed sphere stay).
+  const Vec3 half_kick = accel * (h / 2);
+  const Vec3 kick_a = A.inv_mass > 0 ? half_kick : Vec3{};
+  const Vec3 kick_b = !is_wall(c.b) && B.inv_mass > 0 ? half_kick : Vec3{};
+  const real approach = dot((A.v - kick_a) - (B.v - kick_b), c.normal);
   real gap, r_min;
   const bool near = gap_now(c, world, walls, gap, r_min);
   if (near && !(approach < -rest_speed)) {
@@ -749,8 +770,19 @@ MARBLES_HD_INLINE void close_record(const SweepRecords& s, std::uint32_t k, cons
   c.rolling_impulse = Vec3{};
   store_sweep_impulses<Friction, Rolling>(s, k, c);
 }
-MARBLES_HD_INLINE void reopen_record(const SweepRecords& s, std::uint32_t k, const real* kept) {
-  s.geometry[k].w = kept[k];
+template <bool Friction, bool Rolling>
+MARBLES_HD_INLINE void reopen_record(const SweepRecords& s, std::uint32_t k, const ClosingKept& kept) {
+  const Real4 first = kept.impulse[k], closing = impulse_word(s, k);
+  Contact c;
+  c.normal_impulse = first.x + closing.x;
+  c.tangent_impulse = Vec3{first.y, first.z, first.w} + Vec3{closing.y, closing.z, closing.w};
+  if constexpr (Rolling) {
+    const Real4 r1 = kept.rolling[k], r2 = s.rolling[k];
+    c.rolling_impulse = Vec3{r1.x, r1.y, r1.z} + Vec3{r2.x, r2.y, r2.z};
+    c.coeff.twisting_friction = r2.w;
+  }
+  store_sweep_impulses<Friction, Rolling>(s, k, c);
+  s.geometry[k].w = kept.gap[k];
 }
 
 }  // namespace marbles::narrowphase

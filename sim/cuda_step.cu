@@ -634,35 +634,44 @@ class CudaStep final : public StepBackend {
     auto* bodies = m_pairs.as<narrowphase::SolverBody>(world.count + shift_words);
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     if (m_model.solver.restitution) impacts(bodies, h);
-    sweep_bodies(bodies, world, h, m_model.solver.iterations);
+    sweep_bodies(bodies, world, h, m_model.solver.iterations, true);
   }
 
   // Velocity Verlet's closing solve (narrowphase::close_record): the bodies
-  // gathered again into m_pairs, the records' separations kept behind them
-  // while the records hold their gaps at the substep's end, the warm start
-  // and sweeps of the solve, then the separations back. The impacts' shifts
-  // were read by the integration and the cache's store is done: the pairs'
+  // gathered again into m_pairs, what the records held kept behind them
+  // (ClosingKept: each record's impulse word, its rolling word with rolling
+  // resistance, its separation) while the records hold their gaps at the
+  // substep's end, the warm start and sweeps of the solve, then the
+  // separations back and both solves' impulses. The impacts' shifts were
+  // read by the integration and the cache's store is done: the pairs'
   // memory is free.
   void close_velocities(real h) override {
     if (m_count == 0) return;
     const BodiesView world = m_device.view();
-    constexpr std::size_t kGapsAWord = sizeof(narrowphase::SolverBody) / sizeof(real);
-    const std::size_t gap_words = (std::size_t(m_count) + kGapsAWord - 1) / kGapsAWord;
-    auto* bodies = m_pairs.as<narrowphase::SolverBody>(world.count + gap_words);
-    auto* kept = reinterpret_cast<real*>(bodies + world.count);
+    using narrowphase::Real4;
+    const std::size_t n = m_count, words = n * (m_terms.rolling ? 2 : 1) + narrowphase::SweepRecords::real_words(n);
+    const std::size_t behind = (words * sizeof(Real4) + sizeof(narrowphase::SolverBody) - 1) /
+                               sizeof(narrowphase::SolverBody);
+    auto* bodies = m_pairs.as<narrowphase::SolverBody>(world.count + behind);
+    auto* word = reinterpret_cast<Real4*>(bodies + world.count);
+    narrowphase::ClosingKept kept;
+    kept.impulse = word, word += n;
+    if (m_terms.rolling) kept.rolling = word, word += n;
+    kept.gap = reinterpret_cast<real*>(word);
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     nc::launch_close_records(m_records, m_colouring.device_plan(), m_count, bodies, world, walls(),
-                             m_model.solver.rest_speed, m_model.solver.wall_accel * (h / 2), kept, m_terms, m_sm,
-                             m_stream, skip());
-    sweep_bodies(bodies, world, h, m_model.solver.closing_iterations);
-    nc::launch_reopen_records(m_records, m_colouring.device_plan(), m_count, kept, m_sm, m_stream, skip());
+                             m_model.solver.rest_speed, m_model.solver.wall_accel, h, kept, m_terms, m_sm, m_stream,
+                             skip());
+    sweep_bodies(bodies, world, h, m_model.solver.closing_iterations, false);
+    nc::launch_reopen_records(m_records, m_colouring.device_plan(), m_count, kept, m_terms, m_sm, m_stream, skip());
   }
 
   // The solve's warm start (each colour whole: a record that carries no
   // load applies nothing) and `iterations` sweeps (times the watchdog's
   // factor) on the gathered bodies, in the step's form, then the bodies
-  // back to the world.
-  void sweep_bodies(narrowphase::SolverBody* bodies, const BodiesView& world, real h, int iterations) {
+  // back to the world. `first`: the substep's first solve, the one the
+  // counters of one-launch solves count (not the closing solve).
+  void sweep_bodies(narrowphase::SolverBody* bodies, const BodiesView& world, real h, int iterations, bool first) {
     const real inv_h = real(1) / h;
     const int sweeps = iterations * m_iteration_factor;
     if (m_local) {  // the local order study: the warm start as always, then its passes
@@ -675,7 +684,7 @@ class CudaStep final : public StepBackend {
       return;
     }
     if (solve_in_one_launch()) {
-      if (!m_one_wait) ++m_counters.one_launch_solves;  // else counted on the device for substeps with contacts
+      if (!m_one_wait && first) ++m_counters.one_launch_solves;  // else counted on the device for substeps with contacts
       if (nc::launch_solve(m_records, device_plan(), bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm,
                            m_stream))
         ++m_counters.cluster_stages;
@@ -691,7 +700,7 @@ class CudaStep final : public StepBackend {
     // unless that one wrote them (LastWrites, ContactRange::early). Empty
     // ranges launch nothing. A run of small ranges (the pile's last colours,
     // a turn among them) is one launch of one block (RangeGroup).
-    narrowphase::LastWrites last(m_count);  // the records were made (and the impacts wrote) before
+    narrowphase::LastWrites last(m_count);  // the records were written before (made, the impacts, the closing gaps)
     if (m_model.solver.warm_start) {
       auto walk = walk_in_groups(last, false, bodies, inv_h);
       narrowphase::visit_colours(m_plan.begin, m_plan.colours, false,
@@ -1366,13 +1375,15 @@ class CudaStep final : public StepBackend {
 
   // A substep's contacts: their body pairs as found (m_pairs, which then
   // holds in turn the solver bodies for the solve, with the impacts' shifts
-  // behind them until the integration, and the cache store's temporaries:
-  // the pairs are read last by the records' making), each one's
+  // behind them until the integration, the cache store's temporaries, and
+  // under velocity Verlet the closing solve's bodies and what it keeps of
+  // the records: the pairs are read last by the records' making), each one's
   // cache entry (m_match) and kept colour, then in colour-major order the
   // sweep's records and impact words or approach speeds (m_record_memory)
   // and colours. The records are live from the colouring, which makes them,
-  // to their store, and a step's last substep's to the end of the step (the
-  // deepest overlap, contacts());
+  // to their store (under velocity Verlet to the closing solve's end), and
+  // a step's last substep's to the end of the step (the deepest overlap,
+  // contacts());
   // from the next substep's start until its colouring, their memory holds
   // the contact search's temporaries instead (the broad phase's, its pairs,
   // the contact flags and offsets), which are dead by then.

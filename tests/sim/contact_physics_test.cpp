@@ -333,14 +333,18 @@ TEST(Impacts, AColumnBouncingOnAFloorKeepsItsEnergy) {
 // Velocity Verlet ends each substep with its second half kick, (h/2) g; its
 // closing solve then takes that kick out of every resting contact, as the
 // contacts' impulses would over the next half substep. A ball resting on a
-// floor and a lattice resting in a box (friction, spheres and walls, dt from
-// 0.5 to 4 ms, whose kick g h / 2 is past the rest speed from 2 ms on) must
-// end their steps at rest: their largest speed a small part of the kick.
-// Without the closing solve each ends every step at g h / 2 downward.
+// floor, a ball resting on top of a fixed sphere (which no kick moves) and a
+// lattice resting in a box (friction, spheres and walls, dt from 0.5 to 4
+// ms) must end their steps at rest: their largest speed a hundredth of the
+// kick at most. Without the closing solve each ends every step at g h / 2
+// downward. The contacts a step reports carry the whole weight (both
+// solves' impulses: the closing solve's alone carry about half of it).
 TEST(Verlet, RestingSpheresEndTheirStepsAtRest) {
   const double g = 9.81;
+  enum class Setup { floor, fixed_sphere, lattice };
   for (const double dt : {5e-4, 1e-3, 2e-3, 4e-3}) {
-    for (const bool lattice : {false, true}) {
+    for (const Setup setup : {Setup::floor, Setup::fixed_sphere, Setup::lattice}) {
+      const char* name = setup == Setup::floor ? "ball on a floor" : setup == Setup::fixed_sphere ? "ball on a fixed sphere" : "lattice";
       scene::Scene s = make_scene(dt, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::friction,
                                           Effect::restitution},
                                   0.5, 0.5);
@@ -348,12 +352,17 @@ TEST(Verlet, RestingSpheresEndTheirStepsAtRest) {
       s.gravity = {0, 0, real(-g)};
       const real r = real(0.01);
       scene::GeneratedParticles p;
-      if (lattice) {
+      if (setup == Setup::lattice) {
         const int side = 4, layers = 5;
         s.walls.push_back(box({0, 0, 0}, {real(2 * r * side), real(2 * r * side), real(1)}));
         for (int z = 0; z < layers; ++z)
           for (int y = 0; y < side; ++y)
             for (int x = 0; x < side; ++x) add_sphere(p, {r * (2 * x + 1), r * (2 * y + 1), r * (2 * z + 1)}, r);
+      } else if (setup == Setup::fixed_sphere) {
+        s.walls.push_back(plane({0, 0, -1}, {0, 0, 1}));  // far below: no contact
+        add_sphere(p, {0, 0, 0}, 2 * r);
+        add_sphere(p, {0, 0, 3 * r}, r);
+        p.fixed = {1, 0};
       } else {
         s.walls.push_back(plane({0, 0, 0}, {0, 0, 1}));
         add_sphere(p, {0, 0, r}, r);
@@ -367,8 +376,19 @@ TEST(Verlet, RestingSpheresEndTheirStepsAtRest) {
         for (const Vec3& v : sim.world().velocity) fastest = std::max(fastest, double(length(v)));
       }
       const double kick = g * dt / 2;
-      EXPECT_LT(fastest, 1e-2 * kick) << (lattice ? "lattice" : "ball") << ", dt " << dt << ": " << fastest
-                                      << " m/s against the kick's " << kick;
+      EXPECT_LT(fastest, 1e-2 * kick) << name << ", dt " << dt << ": " << fastest << " m/s against the kick's "
+                                      << kick;
+      // What carries the movable spheres: the walls, and the fixed sphere.
+      const World& w = sim.world();
+      double weight = 0, carried = 0;
+      for (std::size_t i = 0; i < w.size(); ++i)
+        if (w.inv_mass[i] > 0) weight += g / w.inv_mass[i];
+      for (const narrowphase::Contact& c : sim.contacts()) {
+        const Vec3 impulse = c.normal * (c.normal_impulse + c.impact_impulse) + c.tangent_impulse;
+        if (narrowphase::is_wall(c.b) || w.inv_mass[c.b] == 0) carried += impulse.z / dt;  // on a
+        else if (w.inv_mass[c.a] == 0) carried -= impulse.z / dt;                            // on b
+      }
+      EXPECT_NEAR(carried / weight, 1.0, 1e-3) << name << ", dt " << dt;
     }
   }
 }
