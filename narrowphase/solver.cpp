@@ -482,7 +482,8 @@ void ContactSolver::close_velocities(const ColourRanges& colours, const BodiesVi
   scatter_bodies(world);
   with_terms(m_settings.friction, m_settings.rolling, [&](auto friction, auto rolling) {
 #pragma omp parallel for schedule(static) if (n > 20000)
-    for (std::ptrdiff_t k = 0; k < n; ++k) reopen_record<friction, rolling>(records, static_cast<std::uint32_t>(k), kept);
+    for (std::ptrdiff_t k = 0; k < n; ++k)
+      reopen_record<friction, rolling>(records, static_cast<std::uint32_t>(k), kept);
   });
 }
 

@@ -684,7 +684,8 @@ class CudaStep final : public StepBackend {
       return;
     }
     if (solve_in_one_launch()) {
-      if (!m_one_wait && first) ++m_counters.one_launch_solves;  // else counted on the device for substeps with contacts
+      // (else counted on the device for substeps with contacts)
+      if (!m_one_wait && first) ++m_counters.one_launch_solves;
       if (nc::launch_solve(m_records, device_plan(), bodies, inv_h, m_terms, m_model.solver.warm_start, sweeps, m_sm,
                            m_stream))
         ++m_counters.cluster_stages;

@@ -52,7 +52,8 @@ std::string Simulation::describe_pipeline(int threads) const {
                    : "  integrate      symplectic Euler\n");
   if (m.collisions || m.wall_contacts) out << "  project        positions (overlap beyond slop)\n";
   if (m.closing_solve() && (m.collisions || m.wall_contacts))
-    out << "  closing solve  " << s.closing_iterations << " sweeps after the second half kick (resting contacts end at rest)\n";
+    out << "  closing solve  " << s.closing_iterations
+        << " sweeps after the second half kick (resting contacts end at rest)\n";
   return out.str();
 }
 

@@ -344,7 +344,9 @@ TEST(Verlet, RestingSpheresEndTheirStepsAtRest) {
   enum class Setup { floor, fixed_sphere, lattice };
   for (const double dt : {5e-4, 1e-3, 2e-3, 4e-3}) {
     for (const Setup setup : {Setup::floor, Setup::fixed_sphere, Setup::lattice}) {
-      const char* name = setup == Setup::floor ? "ball on a floor" : setup == Setup::fixed_sphere ? "ball on a fixed sphere" : "lattice";
+      const char* name = setup == Setup::floor          ? "ball on a floor"
+                         : setup == Setup::fixed_sphere ? "ball on a fixed sphere"
+                                                        : "lattice";
       scene::Scene s = make_scene(dt, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::friction,
                                           Effect::restitution},
                                   0.5, 0.5);
