@@ -472,8 +472,7 @@ void ContactSolver::close_velocities(const ColourRanges& colours, const BodiesVi
   with_terms(m_settings.friction, m_settings.rolling, [&](auto friction, auto rolling) {
 #pragma omp parallel for schedule(static) if (n > 20000)
     for (std::ptrdiff_t k = 0; k < n; ++k)
-      close_record<friction, rolling>(records, static_cast<std::uint32_t>(k), bodies, world, ws, rest,
-                                      m_settings.wall_accel, h, kept);
+      close_record<friction, rolling>(records, static_cast<std::uint32_t>(k), bodies, world, ws, rest, kept);
   });
   // Any record may carry impulses now, the first solve's: each colour whole.
   if (m_settings.warm_start)

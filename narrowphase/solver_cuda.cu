@@ -76,9 +76,6 @@ __global__ void gather_bodies_kernel(BodiesView world, SolverBody* bodies) {
     bodies[i] = gather_solver_body(world, i);
 }
 
-// Velocity Verlet's closing solve: each of the plan's records takes its gap
-// at the substep's end (close_record), then its separation back
-// (reopen_record). The plan's contacts: n may be a room's.
 // f(k) for each of a plan's contacts, over the launch's threads (n, the
 // launch's size, may be a room's: past the plan's contacts the records are
 // not this substep's).
@@ -88,13 +85,16 @@ __device__ void for_plan_contacts(const ColourPlan& plan, F&& f) {
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < contacts; k += gridDim.x * blockDim.x) f(k);
 }
 
+// Velocity Verlet's closing solve: each of the plan's records takes its gap
+// at the substep's end (close_record), then its separation back and both
+// solves' impulses (reopen_record).
 template <bool Friction, bool Rolling>
 __global__ void close_records_kernel(const ColourPlan* plan, SweepRecords s, const SolverBody* bodies,
-                                     BodiesView world, const WallShape* walls, real rest_speed, Vec3 accel, real h,
-                                     ClosingKept kept, const unsigned long long* skip) {
+                                     BodiesView world, const WallShape* walls, real rest_speed, ClosingKept kept,
+                                     const unsigned long long* skip) {
   if (::marbles::cuda::skipped(skip)) return;
   for_plan_contacts(*plan, [&](std::uint32_t k) {
-    close_record<Friction, Rolling>(s, k, bodies, world, walls, rest_speed, accel, h, kept);
+    close_record<Friction, Rolling>(s, k, bodies, world, walls, rest_speed, kept);
   });
 }
 
@@ -528,12 +528,12 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
 
 void launch_close_records(const SweepRecords& records, const ColourPlan* plan, std::uint32_t n,
                           const SolverBody* bodies, const BodiesView& world, const WallShape* walls, real rest_speed,
-                          const Vec3& accel, real h, const ClosingKept& kept, SolverTerms t, int sm_count,
-                          cudaStream_t s, const unsigned long long* skip) {
+                          const ClosingKept& kept, SolverTerms t, int sm_count, cudaStream_t s,
+                          const unsigned long long* skip) {
   if (n == 0) return;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
     close_records_kernel<friction, rolling><<<::marbles::cuda::grid_for(n, sm_count), kBlock, 0, s>>>(
-        plan, records, bodies, world, walls, rest_speed, accel, h, kept, skip);
+        plan, records, bodies, world, walls, rest_speed, kept, skip);
     MARBLES_CUDA_CHECK_LAUNCH();
   });
 }

@@ -145,14 +145,14 @@ bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::
 // Velocity Verlet's closing solve around its warm start and sweeps
 // (ContactSolver::close_velocities): each of the plan's records its gap at
 // the substep's end (close_record; `bodies` gathered after the second kick,
-// `world` and `walls` at the substep's end, `accel` the half kicks'), what
+// `world` and `walls` at the substep's end), what
 // it held kept in `kept` (a word each of n); then its separation back and
 // both solves' impulses (reopen_record). n: the contacts or their room.
 // Nothing where `skip` is set (cuda::skipped).
 void launch_close_records(const SweepRecords& records, const ColourPlan* plan, std::uint32_t n,
                           const SolverBody* bodies, const BodiesView& world, const WallShape* walls, real rest_speed,
-                          const Vec3& accel, real h, const ClosingKept& kept, SolverTerms terms, int sm_count,
-                          cudaStream_t stream, const unsigned long long* skip = nullptr);
+                          const ClosingKept& kept, SolverTerms terms, int sm_count, cudaStream_t stream,
+                          const unsigned long long* skip = nullptr);
 void launch_reopen_records(const SweepRecords& records, const ColourPlan* plan, std::uint32_t n,
                            const ClosingKept& kept, SolverTerms terms, int sm_count, cudaStream_t stream,
                            const unsigned long long* skip = nullptr);

@@ -721,10 +721,11 @@ MARBLES_HD_INLINE real overlap_ratio(const Contact& c, const BodiesView& bodies,
 // start from the impulses the first solve found, then the sweeps, each
 // record's separation the gap its bodies have at the substep's end
 // (close_record), so that a resting contact ends the substep at rest. A
-// contact that approaches faster than the rest speed, each body's half kick
-// left aside, is the next substep's impact, whose speed its impact stage must
-// see: its impulses are cleared and its gap opened (kOpenGap), so that no
-// sweep touches it. What the records held is kept aside (ClosingKept) and
+// contact that approaches faster than the rest speed is the next substep's
+// impact, whose speed its impact stage must see: its impulses are cleared
+// and its gap opened (kOpenGap), so that no sweep touches it. A resting
+// contact closes at no more than the half kick, g h / 2, an eighth of the
+// rest speed (4 g h: step_model.cpp), so it is never one. What the records held is kept aside (ClosingKept) and
 // given back after (reopen_record): the contacts a step reports keep their
 // gaps as found, and their impulses are both solves' together, the
 // substep's whole impulse.
@@ -745,19 +746,13 @@ struct ClosingKept {
 template <bool Friction, bool Rolling>
 MARBLES_HD_INLINE void close_record(const SweepRecords& s, std::uint32_t k, const SolverBody* bodies,
                                     const BodiesView& world, const WallShape* walls, real rest_speed,
-                                    const Vec3& accel, real h, const ClosingKept& kept) {
+                                    const ClosingKept& kept) {
   const Real4 impulse = impulse_word(s, k);
   Contact c = load_record<false, Rolling>(s, k, impulse);
   kept.gap[k] = c.separation;
   kept.impulse[k] = impulse;
   if constexpr (Rolling) kept.rolling[k] = s.rolling[k];
-  const BodyState A = load_body(bodies, c.a, c), B = load_body(bodies, c.b, c);
-  // The velocities before the second half kick, which moves a sphere that
-  // is not fixed by (h/2) accel (gravity's; a wall and a fixed sphere stay).
-  const Vec3 half_kick = accel * (h / 2);
-  const Vec3 kick_a = A.inv_mass > 0 ? half_kick : Vec3{};
-  const Vec3 kick_b = !is_wall(c.b) && B.inv_mass > 0 ? half_kick : Vec3{};
-  const real approach = dot((A.v - kick_a) - (B.v - kick_b), c.normal);
+  const real approach = dot(load_body(bodies, c.a, c).v - load_body(bodies, c.b, c).v, c.normal);
   real gap, r_min;
   const bool near = gap_now(c, world, walls, gap, r_min);
   if (near && !(approach < -rest_speed)) {

@@ -660,8 +660,7 @@ class CudaStep final : public StepBackend {
     kept.gap = reinterpret_cast<real*>(word);
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     nc::launch_close_records(m_records, m_colouring.device_plan(), m_count, bodies, world, walls(),
-                             m_model.solver.rest_speed, m_model.solver.wall_accel, h, kept, m_terms, m_sm, m_stream,
-                             skip());
+                             m_model.solver.rest_speed, kept, m_terms, m_sm, m_stream, skip());
     sweep_bodies(bodies, world, h, m_model.solver.closing_iterations, false);
     nc::launch_reopen_records(m_records, m_colouring.device_plan(), m_count, kept, m_terms, m_sm, m_stream, skip());
   }
