@@ -517,7 +517,12 @@ struct Row {
   std::uint64_t rollbacks = 0;     // steps the watchdog undid and redid (--watchdog on), of all the steps run here
   std::optional<double> watch_ke_per_sphere;  // J, the watch's own figure at the last step's end (--watchdog on)
   double bytes_per_step = 0;       // median host<->device bytes
-  double device_bytes_per_sphere = 0;
+  double device_bytes_per_sphere = 0;  // held after the last timed step
+  // The most held after any warm-up or timed step: a substep's transients
+  // (impact words and levels while some contact is an impact candidate)
+  // stay until a trim frees them, so the figure after the last step may
+  // miss them, or keep them after they are gone.
+  double device_peak_bytes_per_sphere = 0;
   std::vector<DeviceBytes> device_buffers;  // by part (StepBackend::device_buffers)
   std::optional<double> launches, waits;  // per step, medians of the counted steps (none where nothing counts)
   // The host's time within each CUDA runtime function, per step (means of
@@ -545,9 +550,12 @@ struct Row {
 Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   Row row;
   row.n = n;
+  std::size_t peak = 0;  // device bytes held after a step, the most (outside the timed interval)
+  auto held = [&] { peak = std::max(peak, sim.device_bytes()); };
   for (int k = 0; k < warmup; ++k) {
     sim.step();
     row.impact_substeps += sim.last_step().impact_words;
+    held();
   }
   std::vector<double> step_ms, overflow, bytes;
   double max_overlap = 0;
@@ -557,6 +565,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
     const auto t0 = std::chrono::steady_clock::now();
     sim.step();
     step_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    held();
     const StepCounters& c = sim.last_step();
     row.pairs += static_cast<double>(c.candidate_pairs) / repeats;
     row.contacts += static_cast<double>(c.contacts) / repeats;
@@ -585,6 +594,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   row.max_overlap_pct = 100 * max_overlap;
   row.bytes_per_step = median(bytes);
   row.device_bytes_per_sphere = static_cast<double>(sim.device_bytes()) / static_cast<double>(n);
+  row.device_peak_bytes_per_sphere = static_cast<double>(peak) / static_cast<double>(n);
   row.device_buffers = sim.device_buffers();
 
   // Kernel launches and host waits (CUDA backend): a few more steps, counted apart, since
@@ -909,6 +919,7 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
                                  {"watch_ke_per_sphere_J", count(r.watch_ke_per_sphere)},
                                  {"bytes_per_step_median", r.bytes_per_step},
                                  {"device_bytes_per_sphere", r.device_bytes_per_sphere},
+                                 {"device_peak_bytes_per_sphere", r.device_peak_bytes_per_sphere},
                                  {"launches_per_step", count(r.launches)},
                                  {"host_waits_per_step", count(r.waits)},
                                  {"device_busy_ms_per_step", count(r.busy_ms)},
@@ -951,8 +962,8 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   out << std::setw(9) << "N" << std::setw(10) << "ms/step" << std::setw(9) << "min ms" << std::setw(9) << "bp ms"
       << std::setw(10) << "contacts" << std::setw(7) << "coord" << std::setw(8) << "colours" << std::setw(9)
       << "overflow" << std::setw(9) << "overlap%" << std::setw(7) << "proj" << std::setw(12) << "bytes/step"
-      << std::setw(11) << "dev B/sph" << std::setw(9) << "launches" << std::setw(7) << "waits" << std::setw(8) << "busy ms"
-      << "\n";
+      << std::setw(11) << "dev B/sph" << std::setw(11) << "peak B/sph" << std::setw(9) << "launches" << std::setw(7)
+      << "waits" << std::setw(8) << "busy ms" << "\n";
   auto counted = [](const std::optional<double>& v) { return v ? std::to_string(std::lround(*v)) : std::string("-"); };
   auto milliseconds = [](const std::optional<double>& v) {
     char text[32] = "-";
@@ -966,13 +977,15 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
         << r.colours << std::setprecision(0) << std::setw(9) << r.overflow << std::setprecision(3) << std::setw(9)
         << r.max_overlap_pct << std::setprecision(2) << std::setw(7) << r.projection_sweeps << std::setprecision(0)
         << std::setw(12) << r.bytes_per_step << std::setprecision(1)
-        << std::setw(11) << r.device_bytes_per_sphere << std::setw(9) << counted(r.launches) << std::setw(7)
+        << std::setw(11) << r.device_bytes_per_sphere << std::setw(11) << r.device_peak_bytes_per_sphere
+        << std::setw(9) << counted(r.launches) << std::setw(7)
         << counted(r.waits) << std::setw(8) << milliseconds(r.busy_ms) << "\n"
         << std::defaultfloat;
   out << "(contacts = contacts per sphere per substep; coord = contacts a sphere takes part in; overlap% = largest,\n"
          " of a radius; proj = projection sweeps per substep (until settled); bp ms: of the profiled steps;\n"
          " launches, waits = kernel launches and host waits per step, counted in separate steps;\n"
          " busy ms = the device's time a step in kernels, copies and sets, traced in separate steps\n"
+         " dev B/sph = device memory held after the last timed step, peak B/sph = the most after any step\n"
          " (ms/step less busy ms: the device waiting on the host)\n"
          " (- where not counted))\n";
   if (options.watchdog)

@@ -107,6 +107,7 @@ TEST(StepBench, EachPileSettlesItsOwnFile) {
     EXPECT_FALSE(row["settle"]["cached"].get<bool>());
     EXPECT_FALSE(row["settle"]["settled"].get<bool>());  // 60 steps: too few to rest 50 without a quench
     EXPECT_GT(row["contacts_per_sphere"].get<double>(), 1.0);  // a pile, not a gas
+    EXPECT_GE(row["device_peak_bytes_per_sphere"].get<double>(), row["device_bytes_per_sphere"].get<double>());
     EXPECT_TRUE(fs::exists(path));
     EXPECT_TRUE(run_json(o)["results"][0]["settle"]["cached"].get<bool>());
     spheres.push_back(spheres_of(path));
