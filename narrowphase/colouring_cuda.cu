@@ -203,18 +203,24 @@ struct ColouringArrays {
 };
 
 ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets, bool ordered,
-                                       DeviceBuffer* rounds_memory) {
+                                       DeviceBuffer* rounds_memory, DeviceBuffer* word_memory) {
   namespace dev = ::marbles::cuda;
   ColouringArrays at;
   at.sort = dev::CountingSortArrays::for_items(n, buckets);
+  auto take_words = [&](dev::Carve& words) {
+    at.body_word = words.take<unsigned long long>(body_count);
+    at.body_used = words.take<unsigned long long>(body_count);
+  };
+  const bool words_apart = word_memory != nullptr;
   auto take_rounds = [&](dev::Carve& rounds) {
     at.active = rounds.take<std::uint32_t>(n);
     at.next = rounds.take<std::uint32_t>(n);
-    at.body_word = rounds.take<unsigned long long>(body_count);
-    at.body_used = rounds.take<unsigned long long>(body_count);
+    if (!words_apart) take_words(rounds);
   };
+  // Each buffer carved before the scratch's: several buffers, any order.
+  if (words_apart) dev::carve(*word_memory, take_words);
   const bool apart = rounds_memory != nullptr && rounds_memory != m_scratch;
-  if (apart) dev::carve(*rounds_memory, take_rounds);  // before the scratch's carve: two buffers, either order
+  if (apart) dev::carve(*rounds_memory, take_rounds);
   dev::carve(*m_scratch, [&](dev::Carve& c) {
     at.colour = c.take<std::uint32_t>(n);
     dev::Carve rounds = c;
@@ -306,12 +312,12 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
 void ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n,
                                   std::size_t body_count, real rest_speed, std::uint32_t*& order,
                                   const std::uint32_t*& first, int sm_count, cudaStream_t s,
-                                  const std::uint32_t* count_on_device) {
+                                  const std::uint32_t* count_on_device, DeviceBuffer* word_memory) {
   order = nullptr;
   first = nullptr;
   if (n == 0) return;
   // Buckets: the levels (< kMaxColourRounds), the overflow's and the others'.
-  const ColouringArrays at = lay_out(n, body_count, kMaxColourRounds + 2, true);
+  const ColouringArrays at = lay_out(n, body_count, kMaxColourRounds + 2, true, nullptr, word_memory);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(m_count.get_as<std::uint32_t>(), 0, sizeof(std::uint32_t), s));
   impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, count_on_device, rest_speed,
                                                                     at.colour, at.active,

@@ -77,10 +77,15 @@ class ColouringCuda {
   // nothing is read on the host, no wait. `order` lies in the scratch
   // memory, valid until its next user; `first` until the next call. With
   // count_on_device, records [0, n) are a room and the contacts its first
-  // *count_on_device (count_within); the others take no level.
+  // *count_on_device (count_within); the others take no level. The rounds'
+  // body words (two 8-byte words a body) go to `word_memory` where given,
+  // memory whose contents are dead meanwhile (the CUDA step's cache
+  // matches: a pile's 4 bytes a contact of the room hold them), else to the
+  // scratch with the lists.
   void impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n, std::size_t body_count,
                      real rest_speed, std::uint32_t*& order, const std::uint32_t*& first, int sm_count,
-                     cudaStream_t stream, const std::uint32_t* count_on_device = nullptr);
+                     cudaStream_t stream, const std::uint32_t* count_on_device = nullptr,
+                     DeviceBuffer* word_memory = nullptr);
 
   // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }
@@ -104,9 +109,10 @@ class ColouringCuda {
   // A call's temporaries carved out of the scratch memory: a counting sort
   // over `buckets`, and with `ordered` an array for the sorted order.
   // `rounds`: where the round lists go (null: the scratch, behind the
-  // colours, overlapping the sort's arrays).
+  // colours, overlapping the sort's arrays); `words`: where the rounds'
+  // body words go (null: with the lists).
   ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets, bool ordered,
-                          DeviceBuffer* rounds = nullptr);
+                          DeviceBuffer* rounds = nullptr, DeviceBuffer* words = nullptr);
   // Every round over the active list (count[0] contacts, set by the
   // caller), in one launch, its scratch cleared first; `entries` makes a
   // contact's spheres and rank from its index (colouring_cuda.cu).

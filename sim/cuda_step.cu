@@ -767,7 +767,7 @@ class CudaStep final : public StepBackend {
       m_counters.buffer_trims += m_cache.trim_entries();
       m_cache_trim_due = false;
     }
-    m_cache.store(m_records, m_sorted_colour.get_as<std::uint8_t>(), m_count,
+    m_cache.store(m_records, m_kept_colour.get_as<std::uint8_t>(), m_count,
                   static_cast<std::uint32_t>(m_device.size()), m_sm, m_stream, m_count_on_device, skip());
   }
 
@@ -864,7 +864,7 @@ class CudaStep final : public StepBackend {
         {"contact pairs and solver bodies", m_pairs.bytes()},
         {"broad phase", m_broadphase ? m_broadphase->device_bytes() : 0},
         {"records", m_record_memory.bytes()},
-        {"matches and colours", bytes_of(m_match, m_kept_colour, m_sorted_colour)},
+        {"matches and colours", bytes_of(m_match, m_kept_colour)},
         {"cache", m_cache.device_bytes()},
         {"colouring", m_colouring.device_bytes()},
         {"scratch", m_scratch.bytes()},
@@ -1131,7 +1131,7 @@ class CudaStep final : public StepBackend {
     const std::uint32_t* position = nullptr;
     m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_plan, m_sm,
                                 m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
-                                m_sorted_colour.as_room<std::uint8_t>(m_count), false);
+                                sorted_colour(), false);
     m_impact_candidates = m_model.solver.restitution && m_quiet_steps < kImpactHold;
     m_uniform_arms = m_model.uniform_pairs && m_expect_uniform;
     SubstepCheck c;
@@ -1240,12 +1240,20 @@ class CudaStep final : public StepBackend {
     m_host_edited = false;
   }
 
+  // The colours of the contacts in colour-major order, as the colouring's
+  // sort places them, for the cache's store: in the kept colours' memory
+  // (m_kept_colour, a byte a contact of the room). The kept colours are read
+  // last by the colouring's first kernel (contact ranks), the sorted ones
+  // written first by its sort's last, on the same stream; the warm start
+  // writes the kept colours again before each colouring.
+  std::uint8_t* sorted_colour() { return m_kept_colour.as_room<std::uint8_t>(m_count); }
+
   // The colouring of this substep's contacts (m_count, or a room of them
   // with their count on the device); the one wait for its ranges.
   std::uint32_t colour_and_sort(const std::uint32_t*& position) {
     return m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_plan, m_sm,
                                        m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
-                                       m_sorted_colour.as_room<std::uint8_t>(m_count));
+                                       sorted_colour());
   }
   // The broad phase's pair count, read with the colouring's ranges where it
   // stayed on the device.
@@ -1293,7 +1301,7 @@ class CudaStep final : public StepBackend {
   void trim_buffers() {
     if (m_trim_every <= 0 || ++m_steps_since_trim < m_trim_every) return;
     m_steps_since_trim = 0;
-    for (DeviceBuffer* b : {&m_record_memory, &m_scratch, &m_pairs, &m_match, &m_kept_colour, &m_sorted_colour})
+    for (DeviceBuffer* b : {&m_record_memory, &m_scratch, &m_pairs, &m_match, &m_kept_colour})
       m_counters.buffer_trims += b->trim() ? 1 : 0;
     m_cache_trim_due = m_kept_trim_due = true;
   }
@@ -1335,8 +1343,10 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaMemsetAsync(params.shift, 0, m_device.size() * sizeof(Vec3), m_stream));
     std::uint32_t* order = nullptr;
     const std::uint32_t* first = nullptr;
+    // The levels' body words in the cache matches' memory: read last by the
+    // records' making, written again by the next warm start.
     m_colouring.impact_levels(m_records, m_impacts.word, m_count, m_device.size(), params.rest_speed, order, first,
-                              m_sm, m_stream, m_count_on_device);
+                              m_sm, m_stream, m_count_on_device, &m_match);
     const int passes = m_model.solver.impact_passes;
     auto* hit = m_hit.as<unsigned>(static_cast<std::size_t>(passes));
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, passes * sizeof(unsigned), m_stream));
@@ -1388,7 +1398,7 @@ class CudaStep final : public StepBackend {
   // the contact search's temporaries instead (the broad phase's, its pairs,
   // the contact flags and offsets), which are dead by then.
   DeviceBuffer m_walls, m_pair_table, m_found_words, m_reach, m_bound, m_pairs, m_match, m_kept_colour, m_record_memory,
-      m_sorted_colour, m_flags, m_hit, m_moved, m_contact_chunk, m_past;
+      m_flags, m_hit, m_moved, m_contact_chunk, m_past;
   // Temporaries of the stages that never run at the same time and must
   // outlive a dead buffer's next use (the colouring's colours and counting
   // sort, the impact levels' lists, the cache's restore): the device holds
