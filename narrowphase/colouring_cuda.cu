@@ -40,10 +40,10 @@ struct ContactEntries {
 // impact.
 struct ImpactEntries {
   SweepRecords records;
-  const Real4* impact;
+  const real* approach;
   __device__ ColourEntry operator()(std::uint32_t k) const {
     const BodyPair ab = records.bodies[k];
-    return {ab.a, ab.b, impact_rank(time_of_impact(load_approach(records, impact, k)), k)};
+    return {ab.a, ab.b, impact_rank(time_of_impact(load_approach(records, approach, k)), k)};
   }
 };
 
@@ -92,12 +92,12 @@ __global__ void contact_ranks_kernel(const BodyPair* pairs, std::uint32_t items,
 
 // The impact candidates join the active list (in any order: a round's
 // result does not depend on the order it visits its contacts).
-__global__ void impact_candidates_kernel(SweepRecords records, const Real4* impact, std::uint32_t n,
+__global__ void impact_candidates_kernel(SweepRecords records, const real* approach, std::uint32_t n,
                                          const std::uint32_t* count_on_device, real rest_speed, std::uint32_t* colour,
                                          std::uint32_t* active, std::uint32_t* count) {
   const std::size_t contacts = ::marbles::cuda::count_within(n, count_on_device);
   for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < n; k += gridDim.x * blockDim.x) {
-    const bool candidate = k < contacts && is_impact_candidate(load_approach(records, impact, k), rest_speed);
+    const bool candidate = k < contacts && is_impact_candidate(load_approach(records, approach, k), rest_speed);
     colour[k] = candidate ? kUncoloured : kNotActive;
     append(active, count, k, candidate);
   }
@@ -309,7 +309,7 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
   return plan.colours;
 }
 
-void ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n,
+void ColouringCuda::impact_levels(const SweepRecords& records, const real* approach, std::uint32_t n,
                                   std::size_t body_count, real rest_speed, std::uint32_t*& order,
                                   const std::uint32_t*& first, int sm_count, cudaStream_t s,
                                   const std::uint32_t* count_on_device, DeviceBuffer* word_memory) {
@@ -319,12 +319,12 @@ void ColouringCuda::impact_levels(const SweepRecords& records, const Real4* impa
   // Buckets: the levels (< kMaxColourRounds), the overflow's and the others'.
   const ColouringArrays at = lay_out(n, body_count, kMaxColourRounds + 2, true, nullptr, word_memory);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(m_count.get_as<std::uint32_t>(), 0, sizeof(std::uint32_t), s));
-  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, impact, n, count_on_device, rest_speed,
+  impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, approach, n, count_on_device, rest_speed,
                                                                     at.colour, at.active,
                                                                     m_count.get_as<std::uint32_t>());
   MARBLES_CUDA_CHECK_LAUNCH();
   // A level is the round that coloured it. Nothing is read on the host.
-  launch_rounds(ImpactEntries{records, impact}, at, n, body_count, ColourRule::by_round, sm_count, s);
+  launch_rounds(ImpactEntries{records, approach}, at, n, body_count, ColourRule::by_round, sm_count, s);
   auto* firsts = m_first_of_key.get_as<std::uint32_t>();
   ::marbles::cuda::counting_sort(at.sort, n, ColourKey{at.colour, kMaxColourRounds}, PlaceInOrder{at.order}, firsts,
                                  kNoFirst, s);

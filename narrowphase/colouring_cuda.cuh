@@ -67,8 +67,8 @@ class ColouringCuda {
   // (more than n where they did not fit the room; then it coloured none).
   std::uint32_t last_count() const { return m_last_count; }
 
-  // The impact stage's levels over records[0, n) and their impact words
-  // (solver_math.hpp): the candidates (approach faster than rest_speed)
+  // The impact stage's levels over records[0, n) and their approach speeds
+  // (solver_math.hpp: ImpactRecords): the candidates (approach faster than rest_speed)
   // coloured by_round on impact_rank; `order` (device) gets every contact,
   // the candidates level by level (overflow next, then the others), and
   // `first` (device, kMaxColourRounds + 2 words) the firsts of the levels'
@@ -82,7 +82,7 @@ class ColouringCuda {
   // memory whose contents are dead meanwhile (the CUDA step's cache
   // matches: a pile's 4 bytes a contact of the room hold them), else to the
   // scratch with the lists.
-  void impact_levels(const SweepRecords& records, const Real4* impact, std::uint32_t n, std::size_t body_count,
+  void impact_levels(const SweepRecords& records, const real* approach, std::uint32_t n, std::size_t body_count,
                      real rest_speed, std::uint32_t*& order, const std::uint32_t*& first, int sm_count,
                      cudaStream_t stream, const std::uint32_t* count_on_device = nullptr,
                      DeviceBuffer* word_memory = nullptr);

@@ -166,7 +166,7 @@ void unpack_records(const SweepRecords& s, const ImpactRecords& impacts, const C
   for (std::ptrdiff_t k = 0; k < n; ++k) {
     const std::uint32_t r = colours.record_of(static_cast<std::uint32_t>(k));
     unpack_sweep_impulses<Rolling>(s, r, contacts[k]);
-    if (impacts.word) contacts[k].impact_impulse = impacts.word[r].z;
+    if (impacts.words()) contacts[k].impact_impulse = impacts.impulse[r];
   }
 }
 
@@ -207,10 +207,10 @@ bool records_made(Runs<const C> found, const std::uint32_t* places, const Colour
 // tries every contact: a contact's check there costs about what its
 // refusal does (gas, H200: the stage 57.5 against 50.1 us at 10^5, 144.6
 // against 136.0 at 10^6 with the flags; docs/architecture.md "Impacts
-// passed over"). Record k, its impact word's approach speed.
-bool impact_passed_over(const SweepRecords& s, const Real4* impact, std::uint32_t k, const std::uint8_t* hit_spheres,
+// passed over"). Record k, its approach speed.
+bool impact_passed_over(const SweepRecords& s, const real* approach, std::uint32_t k, const std::uint8_t* hit_spheres,
                         real rest_speed) {
-  if (!hit_spheres || !(impact[k].x > -rest_speed)) return false;
+  if (!hit_spheres || !(approach[k] > -rest_speed)) return false;
   const BodyPair ab = s.bodies[k];
   return !hit_spheres[ab.a] && (is_wall(ab.b) || !hit_spheres[ab.b]);
 }
@@ -223,7 +223,7 @@ bool impact_passed_over(const SweepRecords& s, const Real4* impact, std::uint32_
 // hit. Within a level or a colour no two contacts share a sphere, so no
 // two threads write or read another's flag.
 template <bool Friction>
-bool impact_range(const SweepRecords& s, Real4* impact, const std::uint32_t* order, const ColourRanges& places,
+bool impact_range(const SweepRecords& s, const ImpactRecords& impact, const std::uint32_t* order, const ColourRanges& places,
                   std::uint32_t begin, std::uint32_t end, SolverBody* bodies, const ImpactParams& p,
                   std::uint8_t* hit_spheres, std::uint64_t* passed) {
   bool hit = false;
@@ -233,7 +233,7 @@ bool impact_range(const SweepRecords& s, Real4* impact, const std::uint32_t* ord
   for (std::ptrdiff_t t = 0; t < n; ++t) {
     const std::uint32_t place = begin + static_cast<std::uint32_t>(t);
     const std::uint32_t k = order ? places.record_of(order[place]) : place;
-    if (!order && impact_passed_over(s, impact, k, hit_spheres, p.rest_speed)) {
+    if (!order && impact_passed_over(s, impact.approach, k, hit_spheres, p.rest_speed)) {
       ++over;
       continue;
     }
@@ -551,8 +551,8 @@ void ContactSolver::impacts(const ColourRanges& colours, SolverBody* bodies, std
   m_impact_passed_over = 0;
   if (!colours.fast_approach) return;  // every approach speed was seen: none is a candidate
   const SweepRecords& s = m_records;
-  Real4* impact = m_impacts.word;
-  auto approach = [&](std::uint32_t place) { return load_approach(s, impact, colours.record_of(place)); };
+  const ImpactRecords& impact = m_impacts;
+  auto approach = [&](std::uint32_t place) { return load_approach(s, impact.approach, colours.record_of(place)); };
   collect_in_order(n, kParallelFrom, m_candidates, m_candidate_parts, [&](std::size_t k, std::vector<std::uint32_t>& to) {
     if (is_impact_candidate(approach(static_cast<std::uint32_t>(k)), rest)) to.push_back(static_cast<std::uint32_t>(k));
   });
@@ -663,13 +663,13 @@ void ContactSolver::size_records(std::size_t count, const UniformArms* uniform) 
   const bool rolling = m_settings.rolling, arms = uniform == nullptr;
   m_record_words.resize((SweepRecords::bytes_for(count, true, arms, rolling) + sizeof(Real4) - 1) / sizeof(Real4));
   m_records = SweepRecords::in(m_record_words.data(), count, true, arms, arms ? UniformArms{} : *uniform, rolling);
-  if (m_settings.restitution) {
-    m_impact_words.resize(count);
-    m_impacts = {m_impact_words.data(), nullptr};
-  } else {
-    m_impact_words.resize(SweepRecords::real_words(count));
-    m_impacts = {nullptr, reinterpret_cast<real*>(m_impact_words.data())};
-  }
+  // The approach speeds, and with restitution the impact impulses, the
+  // separations as found and the restitutions (ImpactRecords).
+  const std::size_t words = SweepRecords::real_words(count);
+  m_impact_words.resize(words * (m_settings.restitution ? 4 : 1));
+  auto array = [&](std::size_t a) { return reinterpret_cast<real*>(m_impact_words.data() + a * words); };
+  m_impacts = {array(0)};
+  if (m_settings.restitution) m_impacts.impulse = array(1), m_impacts.found_gap = array(2), m_impacts.restitution = array(3);
   m_record_count = count;
 }
 

@@ -219,7 +219,7 @@ class ContactSolver {
   // A colour's sweep: [begin, split) the contacts that carried a load in.
   using SweepFn = void (*)(const SweepRecords& records, std::uint32_t begin, std::uint32_t split, std::uint32_t end,
                            SolverBody* bodies, real inv_h);
-  using ImpactFn = bool (*)(const SweepRecords& s, Real4* impact, const std::uint32_t* order,
+  using ImpactFn = bool (*)(const SweepRecords& s, const ImpactRecords& impact, const std::uint32_t* order,
                             const ColourRanges& places, std::uint32_t begin, std::uint32_t end, SolverBody* bodies,
                             const ImpactParams& p, std::uint8_t* hit_spheres, std::uint64_t* passed);
   SolverSettings m_settings;
@@ -249,7 +249,7 @@ class ContactSolver {
   // a projection used them.
   mutable std::vector<Real4> m_record_words, m_impact_words;
   mutable SweepRecords m_records;
-  mutable ImpactRecords m_impacts;  // beside the records: an impact word each, or the approach speed
+  mutable ImpactRecords m_impacts;  // beside the records: the approach speeds, with restitution the impact words
   mutable std::size_t m_record_count = 0;
   mutable const Contact* m_packed_from = nullptr;
   const Contact* m_pending_from = nullptr;  // the contacts whose impulses the records hold, not yet unpacked

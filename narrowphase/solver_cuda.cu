@@ -323,7 +323,7 @@ __global__ void project_kernel(const ColourPlan* plan_memory, SweepRecords recor
 // before) records what pass p hit. Then, where pass 0 hit, every contact's
 // gap takes its bodies' shifts (shifted_gap).
 template <bool Friction, class Sync>
-__global__ void impact_stage_kernel(const ColourPlan* plan_memory, SweepRecords records, Real4* impact,
+__global__ void impact_stage_kernel(const ColourPlan* plan_memory, SweepRecords records, ImpactRecords impact,
                                     const std::uint32_t* order, const std::uint32_t* first, std::uint32_t n,
                                     SolverBody* bodies, ImpactParams p, int passes, unsigned* hit) {
   const Sync grid;
@@ -626,7 +626,7 @@ bool launch_projection(const SweepRecords& records, DevicePlan plan, const Bodie
       plan.widest, sm_count, s, plan.plan, records, bodies, walls, settings, sweeps, moved, total, skip);
 }
 
-bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
+bool launch_impact_stage(const SweepRecords& records, const ImpactRecords& impact, const std::uint32_t* order,
                          const std::uint32_t* first, std::uint32_t n, const ColourPlan* plan, SolverBody* bodies,
                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
                          cudaStream_t s) {

@@ -137,7 +137,7 @@ bool launch_projection(const SweepRecords& records, DevicePlan plan, const Bodie
 // passes 1 .. passes - 1 over every contact while the pass before hit
 // something; hit[p] (zeroed before) is set when pass p hits. p.shift: a
 // word a sphere, zeroed before.
-bool launch_impact_stage(const SweepRecords& records, Real4* impact, const std::uint32_t* order,
+bool launch_impact_stage(const SweepRecords& records, const ImpactRecords& impact, const std::uint32_t* order,
                          const std::uint32_t* first, std::uint32_t n, const ColourPlan* plan, SolverBody* bodies,
                          const ImpactParams& p, bool friction, int passes, unsigned* hit, int sm_count,
                          cudaStream_t stream);

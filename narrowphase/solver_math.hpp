@@ -94,7 +94,20 @@ struct ImpactParams {
   // integrator::drift). Zeroed before the stage; null: not kept (no lead
   // either).
   Vec3* shift = nullptr;
+  // Where the impact records keep no restitution a contact (the GPU's), a
+  // contact's is the pair table's for its bodies' materials (a sphere's, a
+  // wall's): pair_coefficients.
+  const std::uint32_t* material = nullptr;
+  const WallShape* walls = nullptr;
+  PairTable table{};
 };
+
+// The pair table's coefficients of the bodies a, b (b a sphere or a wall):
+// make_sphere_contact and make_wall_contact copy these into a contact.
+MARBLES_HD_INLINE const PairCoefficients& pair_coefficients(BodyPair ab, const std::uint32_t* material,
+                                                            const WallShape* walls, const PairTable& table) {
+  return table(material[ab.a], is_wall(ab.b) ? walls[ab.b & ~kWallFlag].material : material[ab.b]);
+}
 
 // The velocity state of one sphere as the velocity stages read and write it,
 // packed: a contact's two random body accesses touch one 32-byte record each
@@ -524,37 +537,42 @@ MARBLES_HD_INLINE bool impact_one(Contact& c, SolverBody* bodies, const ImpactPa
 }
 
 // --- the records as the contact's only form ------------------------------------
-// The GPU keeps a substep's contacts only as the sweep's records plus one
-// word each for the impact stage, and so does the CPU's step from the
-// records' making to the store (impact_word: the approach speed, the
-// restitution, the impact impulse, the separation as found, which the
-// record's own may leave for the shifted gap: shifted_gap; the approach speed
-// alone in a substep without impact candidates: ImpactRecords; the records'
-// extra word then holds only a moving wall's velocity, and no word at all
-// where no wall moves), made in colour-major order from the body
-// pairs (make_sphere_contact / make_wall_contact, restore_impulses,
-// prepare_from_world, pack_sweep_record: the CPU's functions, so its bits).
-// The effective masses are computed from the bodies where a stage needs
-// them, as the sweeps do.
-MARBLES_HD_INLINE Real4 impact_word(const Contact& c) {
-  return {c.approach_speed, c.coeff.restitution, c.impact_impulse, c.separation};
-}
+// The GPU keeps a substep's contacts only as the sweep's records plus what
+// the impact stage keeps of each, and so does the CPU's step from the
+// records' making to the store (ImpactRecords: the approach speed, and in a
+// substep with impact candidates the impact impulse and the separation as
+// found, which the record's own may leave for the shifted gap: shifted_gap;
+// the CPU's the restitution too; the records' extra word holds only a
+// moving wall's velocity, and there is no such word where no wall moves),
+// made in colour-major order from the body pairs (make_sphere_contact /
+// make_wall_contact, restore_impulses, prepare_from_world,
+// pack_sweep_record: the CPU's functions, so its bits). The effective
+// masses are computed from the bodies where a stage needs them, as the
+// sweeps do.
 
-// What the GPU keeps beside the records for the impact stage: an impact word
-// a contact in a substep with impact candidates; in one without, the
-// approach speeds alone (4 bytes a contact, not 16). No impact stage runs
-// there, so every impact impulse stays +0, no gap is shifted, and the
-// restitution is the pair table's (contact_of_record looks it up).
+// What the impact stage keeps beside the records, an array each (4 bytes a
+// contact in float): the approach speed, always; in a substep with impact
+// candidates also its impact words, the impact impulse and the separation
+// as found (the GPU's 12 bytes a contact there, 4 without). The restitution is the pair table's where no
+// array holds it (the GPU's: pair_coefficients, from ImpactParams); the
+// CPU keeps its contacts' own. Without impact words no impact stage runs,
+// so every impact impulse stays +0 and no gap is shifted.
 struct ImpactRecords {
-  Real4* word = nullptr;     // with impact candidates
-  real* approach = nullptr;  // without
+  real* approach = nullptr;
+  real* impulse = nullptr;      // with impact candidates
+  real* found_gap = nullptr;    // with impact candidates
+  real* restitution = nullptr;  // the CPU's, with impact candidates
+  MARBLES_HD_INLINE bool words() const { return impulse != nullptr; }
 };
 MARBLES_HD_INLINE void pack_impact(const Contact& c, const ImpactRecords& r, std::uint32_t k) {
-  if (r.word) r.word[k] = impact_word(c);
-  else r.approach[k] = c.approach_speed;
+  r.approach[k] = c.approach_speed;
+  if (!r.words()) return;
+  r.impulse[k] = c.impact_impulse;
+  r.found_gap[k] = c.separation;
+  if (r.restitution) r.restitution[k] = c.coeff.restitution;
 }
 
-// A prepared contact into record k with its impact word: how both backends
+// A prepared contact into record k with its impact words: how both backends
 // make the records (ContactSolver's records_made, the GPU's records_kernel).
 template <bool Rolling = true>
 MARBLES_HD_INLINE void pack_contact(const Contact& c, const SweepRecords& s, const ImpactRecords& impacts,
@@ -565,32 +583,31 @@ MARBLES_HD_INLINE void pack_contact(const Contact& c, const SweepRecords& s, con
 
 // What the impact stage's levels read: the approach speed and the separation
 // (is_impact_candidate, time_of_impact).
-MARBLES_HD_INLINE Contact load_approach(const SweepRecords& s, const Real4* impact, std::uint32_t k) {
+MARBLES_HD_INLINE Contact load_approach(const SweepRecords& s, const real* approach, std::uint32_t k) {
   Contact c;
   c.separation = s.geometry[k].w;
-  c.approach_speed = impact[k].x;
+  c.approach_speed = approach[k];
   return c;
 }
 
 // impact_one on record k: the contact as apply_impact reads it (the bodies,
 // geometry, arms, friction, a wall's velocity, the restitution, the impact
 // impulse so far), its masses from the bodies, the shifts in p; writes back
-// the impact impulse (its impact word).
+// the impact impulse.
 template <bool Friction>
-MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, Real4* impact, std::uint32_t k, SolverBody* bodies,
-                                     const ImpactParams& p) {
+MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, const ImpactRecords& impacts, std::uint32_t k,
+                                     SolverBody* bodies, const ImpactParams& p) {
   Contact c = load_record<true, false>(s, k, Real4{});
-  Real4 i = impact[k];
-  c.coeff.restitution = i.y;
-  c.impact_impulse = i.z;
+  c.coeff.restitution = impacts.restitution ? impacts.restitution[k]
+                                            : pair_coefficients({c.a, c.b}, p.material, p.walls, p.table).restitution;
+  c.impact_impulse = impacts.impulse[k];
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
   set_masses<Friction, false>(c, A, B);
   if (!impact_states<Friction>(c, A, B, p)) return false;
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
-  i.z = c.impact_impulse;
-  impact[k] = i;
+  impacts.impulse[k] = c.impact_impulse;
   return true;
 }
 
@@ -611,31 +628,25 @@ MARBLES_HD_INLINE void shifted_gap(const SweepRecords& s, const Vec3* shift, std
 }
 
 // Record k as the whole contact the CPU holds after the step: every field
-// the records and the impact word keep (without impact words, the approach
-// speed and the pair table's restitution, as make_sphere_contact and
-// make_wall_contact take it; without rolling words, the rolling impulse +0
-// and the twisting friction the pair table's, as those copy it), the
-// effective masses from the world's inverse masses and inertias.
+// the records and the impact records keep (the restitution the pair
+// table's where they keep none, as make_sphere_contact and
+// make_wall_contact take it; without impact words the impact impulse +0;
+// without rolling words, the rolling impulse +0 and the twisting friction
+// the pair table's, as those copy it), the effective masses from the
+// world's inverse masses and inertias.
 MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const ImpactRecords& impacts, std::uint32_t k,
                                             const BodiesView& world, const PairTable& table, const WallShape* walls) {
   const Real4 i = impulse_word(s, k);
   Contact c = s.rolling ? load_record<true, true>(s, k, i)  // a wall's velocity too
                         : load_record<true, false>(s, k, i);
   // The pair table's coefficients, where the records keep some of them not.
-  auto pair = [&]() -> const PairCoefficients& {
-    const std::uint32_t b = is_wall(c.b) ? walls[c.b & ~kWallFlag].material : world.material[c.b];
-    return table(world.material[c.a], b);
-  };
+  auto pair = [&]() -> const PairCoefficients& { return pair_coefficients({c.a, c.b}, world.material, walls, table); };
   if (!s.rolling) c.coeff.twisting_friction = pair().twisting_friction;
-  if (impacts.word) {
-    const Real4 i = impacts.word[k];
-    c.approach_speed = i.x;
-    c.coeff.restitution = i.y;
-    c.impact_impulse = i.z;
-    c.separation = i.w;  // as found: an impact stage may have taken shifts into the record's (shifted_gap)
-  } else {
-    c.approach_speed = impacts.approach[k];
-    c.coeff.restitution = pair().restitution;
+  c.approach_speed = impacts.approach[k];
+  c.coeff.restitution = impacts.restitution ? impacts.restitution[k] : pair().restitution;
+  if (impacts.words()) {
+    c.impact_impulse = impacts.impulse[k];
+    c.separation = impacts.found_gap[k];  // as found: an impact stage may have taken shifts into the record's (shifted_gap)
   }
   set_masses<true, true>(c, world_body(world, c.a, c), world_body(world, c.b, c));
   return c;

@@ -1268,14 +1268,16 @@ class CudaStep final : public StepBackend {
     const bool extra = m_model.moving_walls, arms = !m_uniform_arms;
     const std::size_t words =
         (narrowphase::SweepRecords::bytes_for(m_count, extra, arms, m_terms.rolling, m_terms.friction) + 15) / 16;
-    const std::size_t impact_words =
-        m_impact_candidates ? m_count : narrowphase::SweepRecords::real_words(m_count);  // words, or approach speeds
-    auto* memory = m_record_memory.as<narrowphase::Real4>(words + impact_words);
+    // The approach speeds, and with impact candidates the impact impulses
+    // and the separations as found (ImpactRecords; the restitution the pair
+    // table's: ImpactParams).
+    const std::size_t reals = narrowphase::SweepRecords::real_words(m_count);
+    auto* memory = m_record_memory.as<narrowphase::Real4>(words + reals * (m_impact_candidates ? 3 : 1));
     const narrowphase::UniformArms uniform = arms ? narrowphase::UniformArms{} : m_model.uniform_arms(m_radius);
     m_records = narrowphase::SweepRecords::in(memory, m_count, extra, arms, uniform, m_terms.rolling, m_terms.friction);
-    m_impacts = {};
-    if (m_impact_candidates) m_impacts.word = memory + words;
-    else m_impacts.approach = reinterpret_cast<real*>(memory + words);
+    auto array = [&](std::size_t a) { return reinterpret_cast<real*>(memory + words + a * reals); };
+    m_impacts = {array(0)};
+    if (m_impact_candidates) m_impacts.impulse = array(1), m_impacts.found_gap = array(2);
     if (m_one_wait) return;  // counted on the device, for substeps with contacts (check_substep_kernel)
     m_counters.uniform_arms += arms ? 0 : 1;
     m_counters.impact_words += m_impact_candidates ? 1 : 0;
@@ -1340,17 +1342,20 @@ class CudaStep final : public StepBackend {
     if (!m_impact_candidates) return;
     narrowphase::ImpactParams params{m_model.solver.rest_speed, h, m_model.solver.wall_accel};
     params.shift = shift_d();
+    params.material = m_device.view().material;
+    params.walls = walls();
+    params.table = m_table;
     MARBLES_CUDA_CHECK(cudaMemsetAsync(params.shift, 0, m_device.size() * sizeof(Vec3), m_stream));
     std::uint32_t* order = nullptr;
     const std::uint32_t* first = nullptr;
     // The levels' body words in the cache matches' memory: read last by the
     // records' making, written again by the next warm start.
-    m_colouring.impact_levels(m_records, m_impacts.word, m_count, m_device.size(), params.rest_speed, order, first,
+    m_colouring.impact_levels(m_records, m_impacts.approach, m_count, m_device.size(), params.rest_speed, order, first,
                               m_sm, m_stream, m_count_on_device, &m_match);
     const int passes = m_model.solver.impact_passes;
     auto* hit = m_hit.as<unsigned>(static_cast<std::size_t>(passes));
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, passes * sizeof(unsigned), m_stream));
-    if (nc::launch_impact_stage(m_records, m_impacts.word, order, first, m_count, m_colouring.device_plan(), bodies, params,
+    if (nc::launch_impact_stage(m_records, m_impacts, order, first, m_count, m_colouring.device_plan(), bodies, params,
                                 m_model.solver.friction, passes, hit, m_sm, m_stream))
       ++m_counters.cluster_stages;
   }

@@ -40,31 +40,31 @@ std::vector<Contact> random_contacts(std::mt19937_64& rng, std::uint32_t bodies,
 }
 
 // The contacts as the GPU step holds them: their body pairs before the
-// colouring, the sweep's records and impact words after it (records in
+// colouring, the sweep's records and approach speeds after it (records in
 // input order here: the impact levels read them by contact index).
 struct DeviceContacts {
   ::marbles::cuda::DeviceBuffer pairs_memory, records_memory;  // freed however the test ends
   BodyPair* pairs = nullptr;
-  Real4* impact = nullptr;
+  real* approach = nullptr;
   SweepRecords records;
   explicit DeviceContacts(const std::vector<Contact>& c) {
     const std::size_t n = c.size();
     std::vector<BodyPair> pairs_h(n);
     const std::size_t bytes = SweepRecords::bytes_for(n);
-    std::vector<Real4> words((bytes + 15) / 16 + n);
+    std::vector<Real4> words((bytes + 15) / 16 + SweepRecords::real_words(n));
     const SweepRecords host = SweepRecords::in(words.data(), n);
-    Real4* impact_h = words.data() + (bytes + 15) / 16;
+    auto* approach_h = reinterpret_cast<real*>(words.data() + (bytes + 15) / 16);
     for (std::size_t k = 0; k < n; ++k) {
       pairs_h[k] = {c[k].a, c[k].b};
       pack_sweep_record(c[k], host, static_cast<std::uint32_t>(k));
-      impact_h[k] = impact_word(c[k]);
+      approach_h[k] = c[k].approach_speed;
     }
     pairs = pairs_memory.as<BodyPair>(n + 1);
     Real4* memory = records_memory.as<Real4>(words.size());
     EXPECT_EQ(cudaMemcpy(pairs, pairs_h.data(), n * sizeof(BodyPair), cudaMemcpyHostToDevice), cudaSuccess);
     EXPECT_EQ(cudaMemcpy(memory, words.data(), words.size() * sizeof(Real4), cudaMemcpyHostToDevice), cudaSuccess);
     records = SweepRecords::in(memory, n);
-    impact = memory + (bytes + 15) / 16;
+    approach = reinterpret_cast<real*>(memory + (bytes + 15) / 16);
   }
 };
 
@@ -195,7 +195,7 @@ void expect_same_as_cpu(const std::vector<Contact>& input, std::uint32_t bodies,
   ContactColouring().colour(input.data(), candidates, rank.data(), bodies, ColourRule::by_round, level, &cpu_levels);
   std::uint32_t* order = nullptr;
   const std::uint32_t* first_d = nullptr;
-  gpu.impact_levels(d.records, d.impact, n, bodies, rest, order, first_d, 8, nullptr);
+  gpu.impact_levels(d.records, d.approach, n, bodies, rest, order, first_d, 8, nullptr);
   ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
   if (n == 0) {
     EXPECT_EQ(order, nullptr);

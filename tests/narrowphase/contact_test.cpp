@@ -926,7 +926,7 @@ TEST(Solver, ImpactPassOverGivesTheSameBits) {
 }
 
 // The GPU holds a substep's contacts only as the sweep's records and their
-// impact words (solver_math.hpp): the impact stage on them (impact_record)
+// impact records (solver_math.hpp): the impact stage on them (impact_record)
 // gives impact_one's bodies and contacts bit for bit, and the whole contacts
 // made from them (contact_of_record) equal the contacts, every field. A
 // lattice of spheres thrown at each other and at the floor (so that most
@@ -934,18 +934,29 @@ TEST(Solver, ImpactPassOverGivesTheSameBits) {
 // the records with the extra word and without it (the GPU's where no wall
 // moves: the floor here is at rest), and with the arms word and without it
 // (the GPU's where every sphere has one radius and every pair the same
-// coefficients, as here: UniformArms). Without the arms word a sweep also
-// leaves the same bodies and impulses as with it.
+// coefficients, as here: UniformArms), and with each contact's restitution
+// kept (the CPU's) and looked up from the pair table (the GPU's:
+// ImpactParams). Without the arms word a sweep also leaves the same bodies
+// and impulses as with it.
 TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
   const real r = real(0.01);
   std::mt19937_64 rng(29);
   MovingLattice thrown = MovingLattice::thrown(10, r, rng);
   const std::size_t n = thrown.lattice.n;
+  // Two materials, alternating, the floor of the second: every pair's
+  // restitution its own (the friction the same: UniformArms).
+  for (std::size_t i = 0; i < n; ++i) thrown.lattice.material[i] = static_cast<std::uint32_t>(i % 2);
+  thrown.lattice.floor[0].material = 1;
+  PairCoefficients pairs[4] = {thrown.coeff, thrown.coeff, thrown.coeff, thrown.coeff};
+  pairs[0].restitution = real(0.3);
+  pairs[1].restitution = pairs[2].restitution = real(0.6);
+  pairs[3].restitution = real(0.9);
+  const PairTable table{pairs, 2};
   std::uniform_real_distribution<double> u(0, 1);
   const real h = real(1e-3);
   const BodiesView world = thrown.view();
   ColourRanges colours;
-  std::vector<Contact> contacts = thrown.lattice.contacts(world, thrown.table(), h, real(2e-4), colours);
+  std::vector<Contact> contacts = thrown.lattice.contacts(world, table, h, real(2e-4), colours);
   const auto m = static_cast<std::uint32_t>(contacts.size());
   ASSERT_GT(m, 2000u);
   for (Contact& c : contacts) {  // as a warm start restores them
@@ -953,28 +964,30 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
     c.tangent_impulse = random_unit(rng) * real(u(rng) * 1e-5);
     c.rolling_impulse = random_unit(rng) * real(u(rng) * 1e-7);
   }
-  const ImpactParams params{real(0.01), h, Vec3(0, 0, real(-9.81))};
   for (std::size_t i = 1; i < n; ++i) ASSERT_EQ(world.radius[i], world.radius[0]);
   const UniformArms uniform{world.radius[0], thrown.coeff.friction, thrown.coeff.rolling_friction};
-  const PairTable table = thrown.table();
   const WallShape* floor = thrown.lattice.floor.data();
   std::vector<Real4> after_sweep[2][2];  // [friction][arms]: impulses after a sweep, then the bodies
-  for (int form = 0; form < 8; ++form) {
-    const bool extra = form % 4 < 2, friction = form % 2 == 1, arms = form < 4;
+  for (int form = 0; form < 16; ++form) {
+    const bool extra = form % 4 < 2, friction = form % 2 == 1, arms = form % 8 < 4, looked_up = form >= 8;
+    ImpactParams params{real(0.01), h, Vec3(0, 0, real(-9.81))};
+    if (looked_up) params.material = world.material, params.walls = floor, params.table = table;
     std::vector<SolverBody> expect_bodies(n), got_bodies(n);
     for (std::size_t i = 0; i < n; ++i) expect_bodies[i] = got_bodies[i] = gather_solver_body(world, i);
     std::vector<Contact> expect = contacts;
     const std::size_t record_words = (SweepRecords::bytes_for(m, extra, arms) + 15) / 16;
-    std::vector<Real4> memory(record_words + m);
+    const std::size_t reals = SweepRecords::real_words(m);
+    std::vector<Real4> memory(record_words + 4 * reals);
     const SweepRecords records = SweepRecords::in(memory.data(), m, extra, arms, uniform);
     ASSERT_EQ(records.extra != nullptr, extra);
     ASSERT_EQ(records.arms != nullptr, arms);
     ASSERT_EQ(reinterpret_cast<const char*>(records.bodies + m) - reinterpret_cast<const char*>(memory.data()) + 64,
               static_cast<std::ptrdiff_t>(SweepRecords::bytes_for(m, extra, arms)));
-    Real4* impact = memory.data() + record_words;
+    auto array = [&](std::size_t a) { return reinterpret_cast<real*>(memory.data() + record_words + a * reals); };
+    ImpactRecords impact{array(0), array(1), array(2), looked_up ? nullptr : array(3)};
     for (std::uint32_t k = 0; k < m; ++k) {
       pack_sweep_record(contacts[k], records, k);  // as the GPU makes them
-      impact[k] = impact_word(contacts[k]);
+      pack_impact(contacts[k], impact, k);
     }
     std::uint32_t hits = 0;
     for (std::uint32_t k = 0; k < m; ++k) {
@@ -982,21 +995,24 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
                                 : impact_one<false>(expect[k], expect_bodies.data(), params);
       const bool got = friction ? impact_record<true>(records, impact, k, got_bodies.data(), params)
                                 : impact_record<false>(records, impact, k, got_bodies.data(), params);
-      ASSERT_EQ(hit, got) << "contact " << k;
+      ASSERT_EQ(hit, got) << "contact " << k << " looked up " << looked_up;
       hits += hit ? 1 : 0;
     }
     EXPECT_GT(hits, m / 10) << "friction " << friction;  // the impacts did work
     EXPECT_EQ(std::memcmp(expect_bodies.data(), got_bodies.data(), n * sizeof(SolverBody)), 0) << friction;
     std::uint32_t walls = 0, rebounds = 0;
+    std::set<real> restitutions;
     for (std::uint32_t k = 0; k < m; ++k) {
-      const Contact c = contact_of_record(records, {impact, nullptr}, k, world, table, floor);
+      const Contact c = contact_of_record(records, impact, k, world, table, floor);
       ASSERT_EQ(std::memcmp(&c, &expect[k], sizeof(Contact)), 0)
-          << "contact " << k << " friction " << friction << " extra " << extra;
+          << "contact " << k << " friction " << friction << " extra " << extra << " looked up " << looked_up;
       walls += is_wall(c.b) ? 1 : 0;
       rebounds += c.impact_impulse > 0 && c.separation > 0 ? 1 : 0;
+      restitutions.insert(c.coeff.restitution);
     }
     EXPECT_GT(walls, 0u);
     EXPECT_GT(rebounds, 0u);
+    EXPECT_EQ(restitutions.size(), 3u);
     // One sweep (friction and rolling, or rolling alone: both read the
     // arms) on the records as they are now: the same with and without the
     // arms word.
@@ -1012,7 +1028,7 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
   for (const bool friction : {false, true}) {
     const std::vector<Real4>& with = after_sweep[friction][true];
     const std::vector<Real4>& without = after_sweep[friction][false];
-    ASSERT_EQ(with.size(), 4 * (std::size_t(m) + n));  // both extra forms, appended in turn
+    ASSERT_EQ(with.size(), 8 * (std::size_t(m) + n));  // both extra and restitution forms, appended in turn
     ASSERT_EQ(without.size(), with.size());
     EXPECT_EQ(std::memcmp(with.data(), without.data(), with.size() * sizeof(Real4)), 0) << "friction " << friction;
   }
@@ -1043,7 +1059,7 @@ TEST(Solver, RecordsWithApproachSpeedsOnlyHoldTheWholeContact) {
   std::vector<Real4> memory((SweepRecords::bytes_for(m, false) + 15) / 16);
   const SweepRecords records = SweepRecords::in(memory.data(), m, false);
   std::vector<real> approach(m);
-  const ImpactRecords speeds{nullptr, approach.data()};
+  const ImpactRecords speeds{approach.data()};
   for (std::uint32_t k = 0; k < m; ++k) {
     pack_sweep_record(contacts[k], records, k);
     pack_impact(contacts[k], speeds, k);
@@ -1083,7 +1099,7 @@ LeanRun run_on_records(MovingLattice& packed, const std::vector<Contact>& contac
   EXPECT_EQ(records.normal != nullptr, !friction);
   EXPECT_EQ(reinterpret_cast<const char*>(records.bodies + m) - reinterpret_cast<const char*>(memory.data()) + 64,
             static_cast<std::ptrdiff_t>(SweepRecords::bytes_for(m, false, true, rolling, friction)));
-  const ImpactRecords speeds{nullptr, approach.data()};
+  const ImpactRecords speeds{approach.data()};
   for (std::uint32_t k = 0; k < m; ++k) {
     pack_sweep_record(contacts[k], records, k);  // as the GPU makes them
     pack_impact(contacts[k], speeds, k);
