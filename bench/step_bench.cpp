@@ -550,8 +550,13 @@ struct Row {
 Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   Row row;
   row.n = n;
-  std::size_t peak = 0;  // device bytes held after a step, the most (outside the timed interval)
-  auto held = [&] { peak = std::max(peak, sim.device_bytes()); };
+  // Device bytes held after a step (read outside the timed interval): the
+  // last step's and the most.
+  std::size_t last = 0, peak = 0;
+  auto held = [&] {
+    last = sim.device_bytes();
+    peak = std::max(peak, last);
+  };
   for (int k = 0; k < warmup; ++k) {
     sim.step();
     row.impact_substeps += sim.last_step().impact_words;
@@ -593,7 +598,7 @@ Row measure(Simulation& sim, std::size_t n, int warmup, int repeats) {
   row.overflow = median(overflow);
   row.max_overlap_pct = 100 * max_overlap;
   row.bytes_per_step = median(bytes);
-  row.device_bytes_per_sphere = static_cast<double>(sim.device_bytes()) / static_cast<double>(n);
+  row.device_bytes_per_sphere = static_cast<double>(last) / static_cast<double>(n);
   row.device_peak_bytes_per_sphere = static_cast<double>(peak) / static_cast<double>(n);
   row.device_buffers = sim.device_buffers();
 

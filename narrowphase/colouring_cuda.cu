@@ -211,7 +211,13 @@ ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, 
     at.body_word = words.take<unsigned long long>(body_count);
     at.body_used = words.take<unsigned long long>(body_count);
   };
-  const bool words_apart = word_memory != nullptr;
+  // The words go to word_memory only where it holds them as it is (a pile's
+  // matches): grown for them it would hold more than the scratch saves (a
+  // gas's matches are a byte or two a sphere).
+  dev::Carve words_need;
+  take_words(words_need);
+  const bool words_apart = word_memory != nullptr && word_memory != m_scratch && word_memory != rounds_memory &&
+                           word_memory->bytes() >= words_need.used();
   auto take_rounds = [&](dev::Carve& rounds) {
     at.active = rounds.take<std::uint32_t>(n);
     at.next = rounds.take<std::uint32_t>(n);

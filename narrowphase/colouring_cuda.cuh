@@ -78,10 +78,10 @@ class ColouringCuda {
   // memory, valid until its next user; `first` until the next call. With
   // count_on_device, records [0, n) are a room and the contacts its first
   // *count_on_device (count_within); the others take no level. The rounds'
-  // body words (two 8-byte words a body) go to `word_memory` where given,
-  // memory whose contents are dead meanwhile (the CUDA step's cache
-  // matches: a pile's 4 bytes a contact of the room hold them), else to the
-  // scratch with the lists.
+  // body words (two 8-byte words a body) go to `word_memory` where given and
+  // it holds them without growing, memory whose contents are dead meanwhile
+  // (the CUDA step's cache matches: a pile's 4 bytes a contact of the room
+  // hold them, a gas's do not), else to the scratch with the lists.
   void impact_levels(const SweepRecords& records, const real* approach, std::uint32_t n, std::size_t body_count,
                      real rest_speed, std::uint32_t*& order, const std::uint32_t*& first, int sm_count,
                      cudaStream_t stream, const std::uint32_t* count_on_device = nullptr,
@@ -101,7 +101,7 @@ class ColouringCuda {
   // end, before the sort) in `memory` instead of the scratch: memory whose
   // own contents are dead while contacts are coloured (the CUDA step's
   // records'). The impact levels, which run while the records live, keep
-  // theirs in the scratch.
+  // their lists in the scratch (their body words: impact_levels).
   void share_round_memory(DeviceBuffer& memory) { m_round_memory = &memory; }
 
  private:
@@ -110,7 +110,8 @@ class ColouringCuda {
   // over `buckets`, and with `ordered` an array for the sorted order.
   // `rounds`: where the round lists go (null: the scratch, behind the
   // colours, overlapping the sort's arrays); `words`: where the rounds'
-  // body words go (null: with the lists).
+  // body words go where it holds them as it is (else, or null: with the
+  // lists).
   ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets, bool ordered,
                           DeviceBuffer* rounds = nullptr, DeviceBuffer* words = nullptr);
   // Every round over the active list (count[0] contacts, set by the

@@ -221,9 +221,10 @@ MARBLES_HD_INLINE double local_cube_edge(double diameters, real largest_radius) 
 // request is whole sectors, where a whole Contact per thread made every
 // request span 32 records, and a field-by-field update of one wrote partial
 // sectors. The GPU writes them once per substep as it makes the contacts in
-// colour-major order (they are its only form of the contacts, with an impact
-// word or an approach speed each: ImpactRecords, impact_record,
-// contact_of_record below); the CPU makes them and their impact words from
+// colour-major order (they are its only form of the contacts, with an
+// approach speed each and, with impact candidates, impact words:
+// ImpactRecords, impact_record, contact_of_record below); the CPU makes them
+// and their impact words from
 // its contacts where its search left them (ContactSolver::make_records), or
 // packs them from whole contacts (pack_sweep_record). Every sweep reads and
 // writes them (load_sweep_contact, store_sweep_impulses), the position

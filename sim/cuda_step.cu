@@ -8,8 +8,9 @@
 // CpuStep give the same bits.
 //
 // A contact is found as its body pair (8 bytes) and made whole once, in
-// colour-major order, straight into the sweep's records and an impact word
-// or approach speed (narrowphase/solver_math.hpp: ImpactRecords): the device
+// colour-major order, straight into the sweep's records and its approach
+// speed, with impact candidates its impact words too (narrowphase/
+// solver_math.hpp: ImpactRecords): the device
 // holds no 112-byte Contact array. contacts() makes whole contacts from the
 // records when the host asks.
 //
@@ -1129,9 +1130,9 @@ class CudaStep final : public StepBackend {
     // step ends non-finite), so nothing to check or make.
     if (!m_count_on_device) return;
     const std::uint32_t* position = nullptr;
+    std::uint8_t* sorted = sorted_colour();  // the kept colours' memory, as the warm start sized it
     m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_plan, m_sm,
-                                m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
-                                sorted_colour(), false);
+                                m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr, sorted, false);
     m_impact_candidates = m_model.solver.restitution && m_quiet_steps < kImpactHold;
     m_uniform_arms = m_model.uniform_pairs && m_expect_uniform;
     SubstepCheck c;
@@ -1251,9 +1252,9 @@ class CudaStep final : public StepBackend {
   // The colouring of this substep's contacts (m_count, or a room of them
   // with their count on the device); the one wait for its ranges.
   std::uint32_t colour_and_sort(const std::uint32_t*& position) {
+    std::uint8_t* sorted = sorted_colour();  // the kept colours' memory, as the warm start sized it
     return m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_plan, m_sm,
-                                       m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
-                                       sorted_colour());
+                                       m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr, sorted);
   }
   // The broad phase's pair count, read with the colouring's ranges where it
   // stayed on the device.
@@ -1348,8 +1349,9 @@ class CudaStep final : public StepBackend {
     MARBLES_CUDA_CHECK(cudaMemsetAsync(params.shift, 0, m_device.size() * sizeof(Vec3), m_stream));
     std::uint32_t* order = nullptr;
     const std::uint32_t* first = nullptr;
-    // The levels' body words in the cache matches' memory: read last by the
-    // records' making, written again by the next warm start.
+    // The levels' body words in the cache matches' memory where it holds
+    // them: read last by the records' making, written again by the next
+    // warm start.
     m_colouring.impact_levels(m_records, m_impacts.approach, m_count, m_device.size(), params.rest_speed, order, first,
                               m_sm, m_stream, m_count_on_device, &m_match);
     const int passes = m_model.solver.impact_passes;
@@ -1393,9 +1395,12 @@ class CudaStep final : public StepBackend {
   // behind them until the integration, the cache store's temporaries, and
   // under velocity Verlet the closing solve's bodies and what it keeps of
   // the records: the pairs are read last by the records' making), each one's
-  // cache entry (m_match) and kept colour, then in colour-major order the
-  // sweep's records and impact words or approach speeds (m_record_memory)
-  // and colours. The records are live from the colouring, which makes them,
+  // cache entry (m_match; the impact levels' body words while the impact
+  // stage runs, where it holds them) and kept colour (from the colouring's
+  // sort, in the same memory, the colours in colour-major order for the
+  // store: sorted_colour), then in colour-major order the sweep's records
+  // and approach speeds, with impact candidates their impact words too
+  // (m_record_memory). The records are live from the colouring, which makes them,
   // to their store (under velocity Verlet to the closing solve's end), and
   // a step's last substep's to the end of the step (the deepest overlap,
   // contacts());
@@ -1408,7 +1413,8 @@ class CudaStep final : public StepBackend {
   // outlive a dead buffer's next use (the colouring's colours and counting
   // sort, the impact levels' lists, the cache's restore): the device holds
   // the largest stage's, not their sum. The search's, the colouring's round
-  // lists and the cache store's live in m_record_memory and m_pairs.
+  // lists and the cache store's live in m_record_memory and m_pairs, the
+  // impact levels' body words in m_match where it holds them.
   DeviceBuffer m_scratch;
   narrowphase::PairTable m_table;
   nc::SolverTerms m_terms;

@@ -1300,7 +1300,7 @@ struct TrimmedAndNot {
 }  // namespace
 
 // A dense block dropped onto the floor of a box: its first substeps have
-// impact candidates (whole impact words in the records, the impact levels'
+// impact candidates (impact words in the records, the impact levels'
 // lists in the scratch), the later ones not. A step that trims its buffers
 // every step gives the bits of one that never does, and once two steps in
 // a row had no impact word, holds less: the records and scratch of its
