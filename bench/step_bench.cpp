@@ -747,24 +747,32 @@ int threads() {
 #endif
 }
 
+// bench_start, and the pile's settle (loaded or made) in `settle`.
+std::pair<scene::Scene, World> bench_start(const StepBenchOptions& options, std::size_t n, std::ostream& log,
+                                           std::optional<SettleInfo>& settle) {
+  std::pair<scene::Scene, World> start;
+  if (options.scene == "pile") {
+    auto [box, state] = pile_start(options, n, log);
+    settle = state.settle;
+    start = {std::move(box), std::move(state.world)};
+  } else {
+    auto made = [](std::pair<scene::Scene, scene::GeneratedParticles> sg) {
+      World w = make_world(sg.first, sg.second);
+      return std::pair<scene::Scene, World>{std::move(sg.first), std::move(w)};
+    };
+    if (options.scene == "settle") start = made(pile(n, kSettleLattice));
+    else if (options.scene == "gas") start = made(gas(n, options.effects));
+    else throw InputError({}, "--scene", "unknown scene '" + options.scene + "'");
+  }
+  start.first.solver.integrator = options.integrator;  // the timed steps' (the pile settled as cached)
+  return start;
+}
+
 }  // namespace
 
 std::pair<scene::Scene, World> bench_start(const StepBenchOptions& options, std::size_t n, std::ostream& log) {
-  auto timed = [&options](std::pair<scene::Scene, World> start) {
-    start.first.solver.integrator = options.integrator;
-    return start;
-  };
-  if (options.scene == "pile") {
-    auto [box, state] = pile_start(options, n, log);
-    return timed({std::move(box), std::move(state.world)});
-  }
-  auto made = [](std::pair<scene::Scene, scene::GeneratedParticles> sg) {
-    World w = make_world(sg.first, sg.second);
-    return std::pair<scene::Scene, World>{std::move(sg.first), std::move(w)};
-  };
-  if (options.scene == "settle") return timed(made(pile(n, kSettleLattice)));
-  if (options.scene == "gas") return timed(made(gas(n, options.effects)));
-  throw InputError({}, "--scene", "unknown scene '" + options.scene + "'");
+  std::optional<SettleInfo> settle;
+  return bench_start(options, n, log, settle);
 }
 
 std::string write_bench_scene(const StepBenchOptions& options, std::size_t n, const std::string& dir,
@@ -853,24 +861,16 @@ int run_step_bench(const StepBenchOptions& options, std::ostream& out) {
   const int warmup = warmup_steps(options);
   std::ostream& log = std::cerr;
   std::vector<Row> rows;
-  // The timed steps of scene s from world w, in the order and with the
-  // numbering the options ask for.
-  auto time_steps = [&](scene::Scene s, World w, std::size_t n) {
+  // Each N's timed steps: the benchmark's scene and world (bench_start),
+  // in the order and with the numbering the options ask for.
+  for (std::size_t n : options.n) {
+    std::optional<SettleInfo> settle;
+    auto [s, w] = bench_start(options, n, log, settle);
     s.solver.renumber = options.renumber;
-    s.solver.integrator = options.integrator;
     Simulation sim(s, in_sphere_order(std::move(w), options.sphere_order), backend);
     sim.set_watchdog(options.watchdog);
     rows.push_back(measure(sim, n, warmup, options.repeats));
-  };
-  for (std::size_t n : options.n) {
-    if (is_pile) {
-      auto [box, state] = pile_start(options, n, log);
-      time_steps(std::move(box), std::move(state.world), n);
-      rows.back().settle = state.settle;
-    } else {
-      auto [s, w] = bench_start(options, n, log);
-      time_steps(std::move(s), std::move(w), n);
-    }
+    rows.back().settle = settle;
   }
   constexpr int kVerbs = static_cast<int>(Verb::count);
   // The CPU sweep's SIMD lanes (solver.hpp: SweepLanes); none on the GPU.

@@ -1254,16 +1254,18 @@ TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
   EXPECT_LT(part(parts, "broad phase"), candidates * sizeof(broadphase::Pair));
   // The scratch holds only the colouring's temporaries and the restore's,
   // the largest of: the colouring's colours with either the impact levels'
-  // round lists (8 bytes a contact; their body words in the matches'
-  // memory, the colouring's lists and words in the records') or its
-  // counting sort (a word a contact for the order, two a bucket and tile of
-  // 1024 contacts, at most 252 buckets: the impact levels'); the restore's
-  // byte a contact and 13 a body. With the carve's 256-byte alignment, its
-  // scans' storage and the buffer's headroom (a sixteenth).
+  // round lists (8 bytes a contact) and two words a body (in the matches'
+  // memory instead where it holds them; the colouring's lists and words are
+  // in the records') or its counting sort (a word a contact for the order,
+  // two a bucket and tile of 1024 contacts, at most 252 buckets: the impact
+  // levels'); the restore's byte a contact and 13 a body. With the carve's
+  // 256-byte alignment, its scans' storage and the buffer's headroom (a
+  // sixteenth).
   // The arrays are sized for the contacts' room, not their count: a quarter
   // more at most (Room, after a count that outgrew its room).
   const std::size_t bodies = n + s.walls.size() + 1, room = contacts + contacts / 4 + 64;
-  const std::size_t colouring = 4 * room + std::max(8 * room, 4 * room + 2 * 4 * (252 * (room / 1024 + 1) + 1));
+  const std::size_t colouring = 4 * room + std::max(8 * room + 16 * bodies,
+                                                    4 * room + 2 * 4 * (252 * (room / 1024 + 1) + 1));
   const std::size_t restore = room + 13 * bodies;
   const std::size_t largest = std::max(colouring, restore) + 64 * 1024;
   const std::size_t scratch = part(parts, "scratch");
