@@ -192,8 +192,9 @@ struct PlaceInOrder {
 }  // namespace
 
 // A call's temporaries: the colours and, never live at once, the rounds'
-// lists and body words, or the counting sort's (core/counting_sort_cuda.cuh)
-// and the impact levels' order.
+// lists and body words (body_used only for the rule lowest_free), or the
+// counting sort's (core/counting_sort_cuda.cuh) and the impact levels'
+// order.
 struct ColouringArrays {
   std::uint32_t* colour = nullptr;
   std::uint32_t *active = nullptr, *next = nullptr;
@@ -203,13 +204,13 @@ struct ColouringArrays {
 };
 
 ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets, bool ordered,
-                                       DeviceBuffer* rounds_memory, DeviceBuffer* word_memory) {
+                                       ColourRule rule, DeviceBuffer* rounds_memory, DeviceBuffer* word_memory) {
   namespace dev = ::marbles::cuda;
   ColouringArrays at;
   at.sort = dev::CountingSortArrays::for_items(n, buckets);
   auto take_words = [&](dev::Carve& words) {
     at.body_word = words.take<unsigned long long>(body_count);
-    at.body_used = words.take<unsigned long long>(body_count);
+    if (rule == ColourRule::lowest_free) at.body_used = words.take<unsigned long long>(body_count);
   };
   // The words go to word_memory only where it holds them as it is (a pile's
   // matches): grown for them it would hold more than the scratch saves (a
@@ -284,7 +285,7 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
     return 0;
   }
   // Buckets: the colours (< kMaxColours), the overflow's and the inactive's.
-  const ColouringArrays at = lay_out(n, body_count, kMaxColours + 2, false, m_round_memory);
+  const ColouringArrays at = lay_out(n, body_count, kMaxColours + 2, false, ColourRule::lowest_free, m_round_memory);
   auto* count = m_count.get_as<std::uint32_t>();
   MARBLES_CUDA_CHECK(cudaMemsetAsync(at.body_used, 0, body_count * sizeof(unsigned long long), s));
   MARBLES_CUDA_CHECK(cudaMemsetAsync(count, 0, sizeof(std::uint32_t), s));
@@ -323,7 +324,7 @@ void ColouringCuda::impact_levels(const SweepRecords& records, const real* appro
   first = nullptr;
   if (n == 0) return;
   // Buckets: the levels (< kMaxColourRounds), the overflow's and the others'.
-  const ColouringArrays at = lay_out(n, body_count, kMaxColourRounds + 2, true, nullptr, word_memory);
+  const ColouringArrays at = lay_out(n, body_count, kMaxColourRounds + 2, true, ColourRule::by_round, nullptr, word_memory);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(m_count.get_as<std::uint32_t>(), 0, sizeof(std::uint32_t), s));
   impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, approach, n, count_on_device, rest_speed,
                                                                     at.colour, at.active,

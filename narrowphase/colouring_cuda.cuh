@@ -78,10 +78,12 @@ class ColouringCuda {
   // memory, valid until its next user; `first` until the next call. With
   // count_on_device, records [0, n) are a room and the contacts its first
   // *count_on_device (count_within); the others take no level. The rounds'
-  // body words (two 8-byte words a body) go to `word_memory` where given and
-  // it holds them without growing, memory whose contents are dead meanwhile
-  // (the CUDA step's cache matches: a pile's 4 bytes a contact of the room
-  // hold them, a gas's do not), else to the scratch with the lists.
+  // body words (an 8-byte word a body: the offers; a level is its round, so
+  // no colours used are kept) go to `word_memory` where given and it holds
+  // them without growing, memory whose contents are dead meanwhile (the
+  // CUDA step's cache matches: 4 bytes a contact of the room, which hold
+  // them where there are two contacts a sphere; a gas's do not), else to
+  // the scratch with the lists.
   void impact_levels(const SweepRecords& records, const real* approach, std::uint32_t n, std::size_t body_count,
                      real rest_speed, std::uint32_t*& order, const std::uint32_t*& first, int sm_count,
                      cudaStream_t stream, const std::uint32_t* count_on_device = nullptr,
@@ -111,9 +113,10 @@ class ColouringCuda {
   // `rounds`: where the round lists go (null: the scratch, behind the
   // colours, overlapping the sort's arrays); `words`: where the rounds'
   // body words go where it holds them as it is (else, or null: with the
-  // lists).
+  // lists). The words: the offers, and under `rule` lowest_free each body's
+  // colours used (by_round reads none).
   ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets, bool ordered,
-                          DeviceBuffer* rounds = nullptr, DeviceBuffer* words = nullptr);
+                          ColourRule rule, DeviceBuffer* rounds = nullptr, DeviceBuffer* words = nullptr);
   // Every round over the active list (count[0] contacts, set by the
   // caller), in one launch, its scratch cleared first; `entries` makes a
   // contact's spheres and rank from its index (colouring_cuda.cu).

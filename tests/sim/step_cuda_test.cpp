@@ -1254,7 +1254,7 @@ TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
   EXPECT_LT(part(parts, "broad phase"), candidates * sizeof(broadphase::Pair));
   // The scratch holds only the colouring's temporaries and the restore's,
   // the largest of: the colouring's colours with either the impact levels'
-  // round lists (8 bytes a contact) and two words a body (in the matches'
+  // round lists (8 bytes a contact) and a word a body (in the matches'
   // memory instead where it holds them; the colouring's lists and words are
   // in the records') or its counting sort (a word a contact for the order,
   // two a bucket and tile of 1024 contacts, at most 252 buckets: the impact
@@ -1264,7 +1264,7 @@ TEST(StepCuda, DeviceBuffersAccountForTheStepsMemory) {
   // The arrays are sized for the contacts' room, not their count: a quarter
   // more at most (Room, after a count that outgrew its room).
   const std::size_t bodies = n + s.walls.size() + 1, room = contacts + contacts / 4 + 64;
-  const std::size_t colouring = 4 * room + std::max(8 * room + 16 * bodies,
+  const std::size_t colouring = 4 * room + std::max(8 * room + 8 * bodies,
                                                     4 * room + 2 * 4 * (252 * (room / 1024 + 1) + 1));
   const std::size_t restore = room + 13 * bodies;
   const std::size_t largest = std::max(colouring, restore) + 64 * 1024;
