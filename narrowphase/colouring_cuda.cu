@@ -204,7 +204,8 @@ struct ColouringArrays {
 };
 
 ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets, bool ordered,
-                                       ColourRule rule, DeviceBuffer* rounds_memory, DeviceBuffer* word_memory) {
+                                       ColourRule rule, DeviceBuffer* rounds_memory, DeviceBuffer* word_memory,
+                                       DeviceBuffer* part_memory) {
   namespace dev = ::marbles::cuda;
   ColouringArrays at;
   at.sort = dev::CountingSortArrays::for_items(n, buckets);
@@ -218,24 +219,30 @@ ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, 
   dev::Carve words_need;
   take_words(words_need);
   const bool words_apart = word_memory != nullptr && word_memory != m_scratch && word_memory != rounds_memory &&
-                           word_memory->bytes() >= words_need.used();
+                           word_memory != part_memory && word_memory->bytes() >= words_need.used();
   auto take_rounds = [&](dev::Carve& rounds) {
     at.active = rounds.take<std::uint32_t>(n);
     at.next = rounds.take<std::uint32_t>(n);
     if (!words_apart) take_words(rounds);
   };
-  // Each buffer carved before the scratch's: several buffers, any order.
-  if (words_apart) dev::carve(*word_memory, take_words);
-  const bool apart = rounds_memory != nullptr && rounds_memory != m_scratch;
-  if (apart) dev::carve(*rounds_memory, take_rounds);
-  dev::carve(*m_scratch, [&](dev::Carve& c) {
+  const bool apart = rounds_memory != nullptr && rounds_memory != m_scratch && rounds_memory != part_memory;
+  auto take_part = [&](dev::Carve& c) {
     at.colour = c.take<std::uint32_t>(n);
     dev::Carve rounds = c;
     if (!apart) take_rounds(rounds);
     at.order = ordered ? c.take<std::uint32_t>(n) : nullptr;
     at.sort.take(c);
     c.merge(rounds);
-  });
+  };
+  // The colours, sort and order (with the lists unless apart) go to
+  // part_memory only where it holds them as it is, else to the scratch.
+  dev::Carve part_need;
+  take_part(part_need);
+  DeviceBuffer* part = part_memory != nullptr && part_memory->bytes() >= part_need.used() ? part_memory : m_scratch;
+  // Each buffer carved before the scratch's: several buffers, any order.
+  if (words_apart) dev::carve(*word_memory, take_words);
+  if (apart) dev::carve(*rounds_memory, take_rounds);
+  dev::carve(*part, take_part);
   return at;
 }
 
@@ -319,12 +326,14 @@ std::uint32_t ColouringCuda::colour_and_sort(const BodyPair* pairs, std::uint32_
 void ColouringCuda::impact_levels(const SweepRecords& records, const real* approach, std::uint32_t n,
                                   std::size_t body_count, real rest_speed, std::uint32_t*& order,
                                   const std::uint32_t*& first, int sm_count, cudaStream_t s,
-                                  const std::uint32_t* count_on_device, DeviceBuffer* word_memory) {
+                                  const std::uint32_t* count_on_device, DeviceBuffer* word_memory,
+                                  DeviceBuffer* level_memory) {
   order = nullptr;
   first = nullptr;
   if (n == 0) return;
   // Buckets: the levels (< kMaxColourRounds), the overflow's and the others'.
-  const ColouringArrays at = lay_out(n, body_count, kMaxColourRounds + 2, true, ColourRule::by_round, nullptr, word_memory);
+  const ColouringArrays at = lay_out(n, body_count, kMaxColourRounds + 2, true, ColourRule::by_round, nullptr, word_memory,
+                                             level_memory);
   MARBLES_CUDA_CHECK(cudaMemsetAsync(m_count.get_as<std::uint32_t>(), 0, sizeof(std::uint32_t), s));
   impact_candidates_kernel<<<grid_for(n, sm_count), kBlock, 0, s>>>(records, approach, n, count_on_device, rest_speed,
                                                                     at.colour, at.active,

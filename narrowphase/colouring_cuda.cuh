@@ -75,7 +75,8 @@ class ColouringCuda {
   // keys, from which visit_levels (colouring_math.hpp) gives the ranges.
   // Every round runs in one launch, to the first with no contact left:
   // nothing is read on the host, no wait. `order` lies in the scratch
-  // memory, valid until its next user; `first` until the next call. With
+  // memory (or level_memory: below), valid until its next user; `first`
+  // until the next call. With
   // count_on_device, records [0, n) are a room and the contacts its first
   // *count_on_device (count_within); the others take no level. The rounds'
   // body words (an 8-byte word a body: the offers; a level is its round, so
@@ -83,11 +84,15 @@ class ColouringCuda {
   // them without growing, memory whose contents are dead meanwhile (the
   // CUDA step's cache matches: 4 bytes a contact of the room, which hold
   // them where there are two contacts a sphere; a gas's do not), else to
-  // the scratch with the lists.
+  // the scratch with the lists. The rest (the colours, the lists, the order
+  // and the sort's counts: about 12 bytes a contact of the room) go to
+  // `level_memory` where given and it holds them without growing (the CUDA
+  // step's cache entries, dead while the impact stage runs in a step that
+  // waits: ContactCacheCuda::dead_entries), else to the scratch.
   void impact_levels(const SweepRecords& records, const real* approach, std::uint32_t n, std::size_t body_count,
                      real rest_speed, std::uint32_t*& order, const std::uint32_t*& first, int sm_count,
                      cudaStream_t stream, const std::uint32_t* count_on_device = nullptr,
-                     DeviceBuffer* word_memory = nullptr);
+                     DeviceBuffer* word_memory = nullptr, DeviceBuffer* level_memory = nullptr);
 
   // Host<->device bytes copied so far (all calls).
   std::uint64_t bytes_copied() const { return m_bytes; }
@@ -114,9 +119,12 @@ class ColouringCuda {
   // colours, overlapping the sort's arrays); `words`: where the rounds'
   // body words go where it holds them as it is (else, or null: with the
   // lists). The words: the offers, and under `rule` lowest_free each body's
-  // colours used (by_round reads none).
+  // colours used (by_round reads none). `part`: where the colours, the
+  // sort's arrays and the order (and the lists, where not apart) go where it
+  // holds them as it is (else, or null: the scratch).
   ColouringArrays lay_out(std::uint32_t n, std::size_t body_count, std::uint32_t buckets, bool ordered,
-                          ColourRule rule, DeviceBuffer* rounds = nullptr, DeviceBuffer* words = nullptr);
+                          ColourRule rule, DeviceBuffer* rounds = nullptr, DeviceBuffer* words = nullptr,
+                          DeviceBuffer* part = nullptr);
   // Every round over the active list (count[0] contacts, set by the
   // caller), in one launch, its scratch cleared first; `entries` makes a
   // contact's spheres and rank from its index (colouring_cuda.cu).

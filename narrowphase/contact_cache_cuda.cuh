@@ -135,6 +135,22 @@ class ContactCacheCuda {
   // contents are dead while the contacts are stored (the CUDA step's body
   // pairs' memory, which holds the solver bodies during the solve).
   void share_store_memory(DeviceBuffer& memory) { m_store_memory = &memory; }
+  // Memory for another stage's temporaries, whose contents are dead from
+  // the records' making, which read the entries (entries()), to the next
+  // store, which writes them anew: the largest impulse array (tangent or
+  // rolling, 12 bytes an entry of the last store's room, and a sixteenth
+  // more; null where neither is kept) of the set that store writes, taken
+  // as the store takes it (after a keep, the other set: the kept one stays
+  // as it was). Only in a step whose stores are never skipped (with a
+  // skipped store the entries stay the warm start's, for the substep done
+  // again: `store`'s skip). The pointer is valid until that store.
+  DeviceBuffer* dead_entries() {
+    Set& e = m_sets.writable();
+    DeviceBuffer* largest = nullptr;
+    if (m_keep_tangent) largest = &e.tangent;
+    if (m_keep_rolling && (largest == nullptr || e.rolling.bytes() > largest->bytes())) largest = &e.rolling;
+    return largest;
+  }
   // The entries' arrays trimmed to the most entries asked of them since the
   // last trim (DeviceBuffer::trim); returns how many were freed. Only where
   // the entries are dead: after the restore and the records' making that

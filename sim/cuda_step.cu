@@ -1351,9 +1351,13 @@ class CudaStep final : public StepBackend {
     const std::uint32_t* first = nullptr;
     // The levels' body words in the cache matches' memory where it holds
     // them: read last by the records' making, written again by the next
-    // warm start.
+    // warm start. Their colours, lists and order in the cache's entries
+    // where they hold them, in a step that waits: read by the records'
+    // making, written by the store (a step without waits may skip its
+    // store and do the substep again from them).
     m_colouring.impact_levels(m_records, m_impacts.approach, m_count, m_device.size(), params.rest_speed, order, first,
-                              m_sm, m_stream, m_count_on_device, &m_match);
+                              m_sm, m_stream, m_count_on_device, &m_match,
+                              m_one_wait ? nullptr : m_cache.dead_entries());
     const int passes = m_model.solver.impact_passes;
     auto* hit = m_hit.as<unsigned>(static_cast<std::size_t>(passes));
     MARBLES_CUDA_CHECK(cudaMemsetAsync(hit, 0, passes * sizeof(unsigned), m_stream));
@@ -1414,7 +1418,9 @@ class CudaStep final : public StepBackend {
   // sort, the impact levels' lists, the cache's restore): the device holds
   // the largest stage's, not their sum. The search's, the colouring's round
   // lists and the cache store's live in m_record_memory and m_pairs, the
-  // impact levels' body words in m_match where it holds them.
+  // impact levels' body words in m_match where it holds them, and their
+  // colours, lists and order, in a step that waits, in the cache's entries
+  // where they hold them (ContactCacheCuda::dead_entries).
   DeviceBuffer m_scratch;
   narrowphase::PairTable m_table;
   nc::SolverTerms m_terms;

@@ -1347,6 +1347,42 @@ TEST(StepCuda, TrimmedBuffersFollowTheNeedWithTheSameBits) {
   EXPECT_GE(records, trimmed.last_step().contacts * (2 * sizeof(narrowphase::Real4) + sizeof(narrowphase::BodyPair)));
 }
 
+// A dense block with every term dropped onto the floor of a box, a wait a
+// substep: while it lands, the impact levels' colours, lists and order (12
+// bytes a contact of the room at least, with their body words in the
+// matches) take the cache's entries, dead from the records' making to the
+// store, wherever those hold them (the room no larger than the last
+// store's), so a step with impact words keeps a scratch below that (the
+// colouring's colours and sort, the restore's), trimmed to its need every
+// step. The CPU's bits all along.
+TEST(StepCuda, ImpactLevelsTakeTheCachesDeadEntriesInAStepThatWaits) {
+  REQUIRE_DEVICE();
+  ScopedEnvironment waits("MARBLES_CUDA_WAITS", "substep");
+  ScopedEnvironment every("MARBLES_CUDA_TRIM_EVERY", "1");
+  scene::Scene s = make_scene(1e-3, 1, {Effect::gravity, Effect::collisions, Effect::walls, Effect::restitution,
+                                        Effect::friction, Effect::rolling_resistance}, 0.2, 0.5, 0.02);
+  s.walls.push_back(box({0, 0, 0}, {real(0.5), real(0.5), real(1)}));
+  const scene::GeneratedParticles g = dense_block(24, 24, 12, real(0.01), real(0.02));
+  Simulation cpu(s, make_world(s, g), broadphase::Backend::cpu);
+  Simulation gpu(s, make_world(s, g), broadphase::Backend::cuda);
+  std::uint64_t impact_steps = 0, within = 0;
+  for (int k = 0; k < 120; ++k) {
+    cpu.step();
+    gpu.step();
+    if (gpu.last_step().impact_words == 0) continue;
+    ++impact_steps;
+    const std::size_t scratch = part(gpu.device_buffers(), "scratch");
+    const std::uint64_t contacts = gpu.last_step().contacts;
+    if (scratch < 12 * contacts) ++within;
+    if (impact_steps <= 3 || scratch < 12 * contacts)
+      std::printf("step %d: scratch %zu bytes, %llu contacts (%.2f bytes a contact)\n", k, scratch,
+                  static_cast<unsigned long long>(contacts), double(scratch) / double(contacts));
+  }
+  expect_same_state(cpu.world(), gpu.world(), 120);
+  ASSERT_GT(impact_steps, 0u) << "the landing must have impact candidates";
+  EXPECT_GT(within, 0u) << "no step with impact words kept the impact levels out of the scratch";
+}
+
 // A block of touching spheres flying apart in empty space (no gravity, each
 // sphere moving away from the centre): contacts at first, none once the
 // gaps outgrow the contacts' reach. Trimmed every step, the step then holds
