@@ -62,7 +62,9 @@ class ContactCacheCuda {
                real weight_impulse, std::uint8_t* kept_colour, std::uint32_t* match, int sm_count,
                cudaStream_t stream);
   // The entries' impulses (device; tangent and rolling null where the scene
-  // keeps none): valid until the next store, upload, renumbering or back_to_kept.
+  // keeps none): valid until the next store, upload, renumbering,
+  // back_to_kept or dead_entries (which, after a keep, moves to the other
+  // set as the store would: entries, bound and download then read that set).
   CacheImpulses entries() const {
     const Set& e = m_sets.current();
     return {e.normal.get_as<real>(), m_keep_tangent ? e.tangent.get_as<Vec3>() : nullptr,
@@ -143,7 +145,9 @@ class ContactCacheCuda {
   // as the store takes it (after a keep, the other set: the kept one stays
   // as it was). Only in a step whose stores are never skipped (with a
   // skipped store the entries stay the warm start's, for the substep done
-  // again: `store`'s skip). The pointer is valid until that store.
+  // again: `store`'s skip). The pointer is valid until that store; nothing
+  // may read the entries in between (a step that throws there leaves them
+  // for a reload, not a download).
   DeviceBuffer* dead_entries() {
     Set& e = m_sets.writable();
     DeviceBuffer* largest = nullptr;
