@@ -214,14 +214,20 @@ class Carve {
   std::size_t m_used = 0;
 };
 
-// Runs layout(Carve&) on `memory`, grown to fit: the pointers it takes are
-// valid until the next carve of the same memory.
+// carve(memory, layout) runs layout(Carve&) on `memory`, grown to fit: the
+// pointers it takes are valid until the next carve of the same memory.
+// carve_counted: the same, the layout's bytes already counted (`counted`:
+// the layout run on no memory), so it runs once more, on the memory.
+template <class Layout>
+void carve_counted(DeviceBuffer& memory, Layout&& layout, const Carve& counted) {
+  Carve at(static_cast<char*>(memory.reserve(counted.used())));
+  layout(at);
+}
 template <class Layout>
 void carve(DeviceBuffer& memory, Layout&& layout) {
   Carve count;
   layout(count);
-  Carve at(static_cast<char*>(memory.reserve(count.used())));
-  layout(at);
+  carve_counted(memory, layout, count);
 }
 
 // Temporary bytes of device_exclusive_sum over n items.

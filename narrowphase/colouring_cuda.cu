@@ -240,9 +240,9 @@ ColouringArrays ColouringCuda::lay_out(std::uint32_t n, std::size_t body_count, 
   take_part(part_need);
   DeviceBuffer* part = part_memory != nullptr && part_memory->bytes() >= part_need.used() ? part_memory : m_scratch;
   // Each buffer carved before the scratch's: several buffers, any order.
-  if (words_apart) dev::carve(*word_memory, take_words);
+  if (words_apart) dev::carve_counted(*word_memory, take_words, words_need);
   if (apart) dev::carve(*rounds_memory, take_rounds);
-  dev::carve(*part, take_part);
+  dev::carve_counted(*part, take_part, part_need);
   return at;
 }
 

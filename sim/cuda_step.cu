@@ -639,7 +639,7 @@ class CudaStep final : public StepBackend {
   }
 
   // Velocity Verlet's closing solve (narrowphase::close_record): the bodies
-  // gathered again into m_pairs, what the records held kept behind them
+  // gathered again into m_pairs, what the records held carved behind them
   // (ClosingKept: each record's impulse word, its rolling word with rolling
   // resistance, its separation) while the records hold their gaps at the
   // substep's end, the warm start and sweeps of the solve, then the
@@ -649,16 +649,15 @@ class CudaStep final : public StepBackend {
   void close_velocities(real h) override {
     if (m_count == 0) return;
     const BodiesView world = m_device.view();
-    using narrowphase::Real4;
-    const std::size_t n = m_count, words = n * (m_terms.rolling ? 2 : 1) + narrowphase::SweepRecords::real_words(n);
-    const std::size_t behind = (words * sizeof(Real4) + sizeof(narrowphase::SolverBody) - 1) /
-                               sizeof(narrowphase::SolverBody);
-    auto* bodies = m_pairs.as<narrowphase::SolverBody>(world.count + behind);
-    auto* word = reinterpret_cast<Real4*>(bodies + world.count);
+    const std::size_t n = m_count;
+    narrowphase::SolverBody* bodies = nullptr;
     narrowphase::ClosingKept kept;
-    kept.impulse = word, word += n;
-    if (m_terms.rolling) kept.rolling = word, word += n;
-    kept.gap = reinterpret_cast<real*>(word);
+    ::marbles::cuda::carve(m_pairs, [&](::marbles::cuda::Carve& c) {
+      bodies = c.take<narrowphase::SolverBody>(world.count);
+      kept.impulse = c.take<narrowphase::Real4>(n);
+      if (m_terms.rolling) kept.rolling = c.take<narrowphase::Real4>(n);
+      kept.gap = c.take<real>(n);
+    });
     nc::launch_gather_bodies(world, bodies, m_sm, m_stream);
     nc::launch_close_records(m_records, m_colouring.device_plan(), m_count, bodies, world, walls(),
                              m_model.solver.rest_speed, kept, m_terms, m_sm, m_stream, skip());
@@ -1130,9 +1129,7 @@ class CudaStep final : public StepBackend {
     // step ends non-finite), so nothing to check or make.
     if (!m_count_on_device) return;
     const std::uint32_t* position = nullptr;
-    std::uint8_t* sorted = sorted_colour();  // the kept colours' memory, as the warm start sized it
-    m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_plan, m_sm,
-                                m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr, sorted, false);
+    colour_and_sort(position, false);
     m_impact_candidates = m_model.solver.restitution && m_quiet_steps < kImpactHold;
     m_uniform_arms = m_model.uniform_pairs && m_expect_uniform;
     SubstepCheck c;
@@ -1250,11 +1247,13 @@ class CudaStep final : public StepBackend {
   std::uint8_t* sorted_colour() { return m_kept_colour.as_room<std::uint8_t>(m_count); }
 
   // The colouring of this substep's contacts (m_count, or a room of them
-  // with their count on the device); the one wait for its ranges.
-  std::uint32_t colour_and_sort(const std::uint32_t*& position) {
-    std::uint8_t* sorted = sorted_colour();  // the kept colours' memory, as the warm start sized it
+  // with their count on the device); `read_back`: the one wait for its
+  // ranges (else the plan stays on the device: colour_without_a_wait). The
+  // sorted colours go to the kept colours' memory, as the warm start sized it.
+  std::uint32_t colour_and_sort(const std::uint32_t*& position, bool read_back = true) {
     return m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_plan, m_sm,
-                                       m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr, sorted);
+                                       m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
+                                       sorted_colour(), read_back);
   }
   // The broad phase's pair count, read with the colouring's ranges where it
   // stayed on the device.
