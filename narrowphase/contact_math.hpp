@@ -570,12 +570,20 @@ MARBLES_HD_INLINE void solve_rolling(Contact& c, BodyState& A, BodyState& B) {
 // after the first happen at the first one's time, not at the substep's
 // start. `toi` is set to the time of impact (0 for a contact already
 // closed).
-template <bool Friction>
+//
+// `hit(c, A, B)` runs only past the refusal, before anything else reads the
+// contact: it may fill in what only a hit reads (the restitution, the
+// effective masses), so that a contact refused costs none of that.
+struct NothingMore {
+  MARBLES_HD_INLINE void operator()(Contact&, const BodyState&, const BodyState&) const {}
+};
+template <bool Friction, class Hit = NothingMore>
 MARBLES_HD_INLINE bool apply_impact(Contact& c, BodyState& A, BodyState& B, real rest_speed, real h, real accel_n,
-                                    real lead, real& toi) {
+                                    real lead, real& toi, Hit&& hit = {}) {
   const real vn = dot(A.v - B.v, c.normal);
   const real gap = c.separation + lead;
   if (vn > -rest_speed || !(gap < -vn * h)) return false;
+  hit(c, static_cast<const BodyState&>(A), static_cast<const BodyState&>(B));
   const real e = c.coeff.restitution;
   real target = -e * vn;  // the normal velocity after the impact
   toi = gap > 0 ? gap / -vn : real(0);

@@ -510,16 +510,17 @@ MARBLES_HD_INLINE real shift_lead(const Vec3& normal, const Vec3& shift_a, const
 
 // The impact of one contact on its loaded bodies (apply_impact), at the
 // time the gap closes with the bodies' shifts so far; each body's shift then
-// takes its velocity change times that time. True if it hit.
-template <bool Friction>
-MARBLES_HD_INLINE bool impact_states(Contact& c, BodyState& A, BodyState& B, const ImpactParams& p) {
+// takes its velocity change times that time. True if it hit. `hit` as
+// apply_impact's.
+template <bool Friction, class Hit = NothingMore>
+MARBLES_HD_INLINE bool impact_states(Contact& c, BodyState& A, BodyState& B, const ImpactParams& p, Hit&& hit = {}) {
   const bool wall = is_wall(c.b);
   const real accel_n = wall ? dot(p.wall_accel, c.normal) : real(0);
   const Vec3 shift_a = p.shift ? p.shift[c.a] : Vec3{}, shift_b = p.shift ? shift_of(p.shift, c.b) : Vec3{};
   const Vec3 va = A.v, vb = B.v;
   real toi = 0;
   if (!apply_impact<Friction>(c, A, B, p.rest_speed, p.h, accel_n, p.shift ? shift_lead(c.normal, shift_a, shift_b) : 0,
-                              toi))
+                              toi, hit))
     return false;
   if (p.shift && toi > 0) {
     p.shift[c.a] = shift_a - (A.v - va) * toi;
@@ -592,20 +593,23 @@ MARBLES_HD_INLINE Contact load_approach(const SweepRecords& s, const real* appro
 }
 
 // impact_one on record k: the contact as apply_impact reads it (the bodies,
-// geometry, arms, friction, a wall's velocity, the restitution, the impact
-// impulse so far), its masses from the bodies, the shifts in p; writes back
-// the impact impulse.
+// geometry, arms, friction, a wall's velocity, the impact impulse so far),
+// the shifts in p, and only for a contact that hits its restitution and its
+// masses from the bodies (apply_impact's `hit`: a contact refused reads no
+// pair table and makes no masses); writes back the impact impulse.
 template <bool Friction>
 MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, const ImpactRecords& impacts, std::uint32_t k,
                                      SolverBody* bodies, const ImpactParams& p) {
   Contact c = load_record<true, false>(s, k, Real4{});
-  c.coeff.restitution = impacts.restitution ? impacts.restitution[k]
-                                            : pair_coefficients({c.a, c.b}, p.material, p.walls, p.table).restitution;
   c.impact_impulse = impacts.impulse[k];
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
-  set_masses<Friction, false>(c, A, B);
-  if (!impact_states<Friction>(c, A, B, p)) return false;
+  const auto hit = [&](Contact& h, const BodyState& a, const BodyState& b) {
+    h.coeff.restitution = impacts.restitution ? impacts.restitution[k]
+                                              : pair_coefficients({h.a, h.b}, p.material, p.walls, p.table).restitution;
+    set_masses<Friction, false>(h, a, b);
+  };
+  if (!impact_states<Friction>(c, A, B, p, hit)) return false;
   store_body(bodies, c.a, A);
   store_body(bodies, c.b, B);
   impacts.impulse[k] = c.impact_impulse;
