@@ -28,6 +28,10 @@ class KeptSets {
     if (m_current == m_kept) m_current = 1 - m_current;
     return m_set[m_current];
   }
+  // The set the next writable() returns, without moving to it: current()
+  // stays what it was (for memory of that set lent or trimmed before the
+  // write, while the current set may still be read).
+  Set& next_written() { return m_set[m_current == m_kept ? 1 - m_current : m_current]; }
   // The current set, edited in place: nothing is kept from here on.
   Set& edited() {
     m_kept = 2;

@@ -63,8 +63,8 @@ class ContactCacheCuda {
                cudaStream_t stream);
   // The entries' impulses (device; tangent and rolling null where the scene
   // keeps none): valid until the next store, upload, renumbering,
-  // back_to_kept or dead_entries (which, after a keep, moves to the other
-  // set as the store would: entries, bound and download then read that set).
+  // back_to_kept or dead_entries (whose memory is this set's where nothing
+  // was kept since the last store: the next store writes the current set).
   CacheImpulses entries() const {
     const Set& e = m_sets.current();
     return {e.normal.get_as<real>(), m_keep_tangent ? e.tangent.get_as<Vec3>() : nullptr,
@@ -141,15 +141,15 @@ class ContactCacheCuda {
   // the records' making, which read the entries (entries()), to the next
   // store, which writes them anew: the largest impulse array (tangent or
   // rolling, 12 bytes an entry of the last store's room, and a sixteenth
-  // more; null where neither is kept) of the set that store writes, taken
-  // as the store takes it (after a keep, the other set: the kept one stays
-  // as it was). Only in a step whose stores are never skipped (with a
-  // skipped store the entries stay the warm start's, for the substep done
-  // again: `store`'s skip). The pointer is valid until that store; nothing
-  // may read the entries in between (a step that throws there leaves them
-  // for a reload, not a download).
+  // more; null where neither is kept) of the set that store writes (after
+  // a keep, the other set: the kept one stays as it was, and current until
+  // the store moves past it). Only in a step whose stores are never skipped
+  // (with a skipped store the entries stay the warm start's, for the
+  // substep done again: `store`'s skip). The pointer is valid until that
+  // store; nothing may read the entries in between (a step that throws
+  // there leaves them for a reload, not a download).
   DeviceBuffer* dead_entries() {
-    Set& e = m_sets.writable();
+    Set& e = m_sets.next_written();
     DeviceBuffer* largest = nullptr;
     if (m_keep_tangent) largest = &e.tangent;
     if (m_keep_rolling && (largest == nullptr || e.rolling.bytes() > largest->bytes())) largest = &e.rolling;
@@ -160,7 +160,7 @@ class ContactCacheCuda {
   // the entries are dead: after the restore and the records' making that
   // read them, before the store that writes them (the set it writes: after
   // a keep, the other one).
-  std::uint32_t trim_entries() { return trim(m_sets.writable()); }
+  std::uint32_t trim_entries() { return trim(m_sets.next_written()); }
   // The other set's entry arrays trimmed so, where they are dead: at a
   // step's start, before keep (the set the last keep kept is past undoing).
   std::uint32_t trim_spare() { return trim(m_sets.other()); }
