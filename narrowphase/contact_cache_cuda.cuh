@@ -63,8 +63,9 @@ class ContactCacheCuda {
                cudaStream_t stream);
   // The entries' impulses (device; tangent and rolling null where the scene
   // keeps none): valid until the next store, upload, renumbering,
-  // back_to_kept or dead_entries (whose memory is this set's where nothing
-  // was kept since the last store: the next store writes the current set).
+  // back_to_kept, trim_entries or dead_entries (the last two take this
+  // set's memory where the current set is not the kept one: the next store
+  // then writes it).
   CacheImpulses entries() const {
     const Set& e = m_sets.current();
     return {e.normal.get_as<real>(), m_keep_tangent ? e.tangent.get_as<Vec3>() : nullptr,
@@ -114,8 +115,9 @@ class ContactCacheCuda {
   void renumber(const std::uint32_t* new_index, std::uint32_t spheres, int sm_count, cudaStream_t stream);
   // The entries as they are now, kept for back_to_kept (a watchdog's step
   // start), without a copy: the cache holds two sets of entries, and from a
-  // keep on the next store (or trim_entries) moves to the other set, so
-  // the kept one stays as it was until the next keep. An upload or a
+  // keep on the next store moves to the other set (which trim_entries and
+  // dead_entries take before it, not moving), so the kept one stays as it
+  // was until the next keep. An upload or a
   // renumbering writes the entries in place and keeps none.
   void keep() { m_sets.keep(); }
   // The entries keep() kept become the entries again (and stay kept); none

@@ -1251,9 +1251,10 @@ class CudaStep final : public StepBackend {
   // ranges (else the plan stays on the device: colour_without_a_wait). The
   // sorted colours go to the kept colours' memory, as the warm start sized it.
   std::uint32_t colour_and_sort(const std::uint32_t*& position, bool read_back = true) {
+    std::uint8_t* sorted = sorted_colour();  // before the kept colours' pointer is read: it may grow the memory
     return m_colouring.colour_and_sort(pairs_d(), m_count, m_count_on_device, m_device.size(), position, m_plan, m_sm,
-                                       m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr,
-                                       sorted_colour(), read_back);
+                                       m_stream, m_kept_valid ? m_kept_colour.get_as<std::uint8_t>() : nullptr, sorted,
+                                       read_back);
   }
   // The broad phase's pair count, read with the colouring's ranges where it
   // stayed on the device.

@@ -55,6 +55,7 @@ TEST(KeptSets, WritesLendsAndUndosAgainstAModel) {
           int& lent = sets.next_written();
           ASSERT_EQ(&sets.current(), before) << "a lend moved the current set: trial " << trial << " op " << op;
           if (current_is_kept) ASSERT_NE(&lent, before) << "the kept set lent: trial " << trial << " op " << op;
+          else ASSERT_EQ(&lent, before) << "a lend past the set the store writes: trial " << trial << " op " << op;
           lent = kTrashed;
           if (!current_is_kept) current = kTrashed;
           break;
