@@ -665,11 +665,9 @@ void ContactSolver::size_records(std::size_t count, const UniformArms* uniform) 
   m_records = SweepRecords::in(m_record_words.data(), count, true, arms, arms ? UniformArms{} : *uniform, rolling);
   // The approach speeds, and with restitution the impact impulses, the
   // separations as found and the restitutions (ImpactRecords).
-  const std::size_t words = SweepRecords::real_words(count);
-  m_impact_words.resize(words * (m_settings.restitution ? 4 : 1));
-  auto array = [&](std::size_t a) { return reinterpret_cast<real*>(m_impact_words.data() + a * words); };
-  m_impacts = {array(0)};
-  if (m_settings.restitution) m_impacts.impulse = array(1), m_impacts.found_gap = array(2), m_impacts.restitution = array(3);
+  const bool words = m_settings.restitution;
+  m_impact_words.resize(ImpactRecords::real4_words(count, words, true));
+  m_impacts = ImpactRecords::in(m_impact_words.data(), count, words, true);
   m_record_count = count;
 }
 

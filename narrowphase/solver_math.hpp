@@ -565,7 +565,28 @@ struct ImpactRecords {
   real* found_gap = nullptr;    // with impact candidates
   real* restitution = nullptr;  // the CPU's, with impact candidates
   MARBLES_HD_INLINE bool words() const { return impulse != nullptr; }
+  // Real4 words of n contacts' arrays: the approach speeds; with `words`
+  // the impact impulses and the separations as found; with `restitution`
+  // (and words) the restitutions.
+  static constexpr std::size_t real4_words(std::size_t n, bool words, bool restitution = false) {
+    return SweepRecords::real_words(n) * (words ? (restitution ? 4 : 3) : 1);
+  }
+  // The arrays laid out in `memory` (real4_words(n, words, restitution)).
+  static ImpactRecords in(Real4* memory, std::size_t n, bool words, bool restitution = false) {
+    const std::size_t each = SweepRecords::real_words(n);
+    auto array = [&](std::size_t a) { return reinterpret_cast<real*>(memory + a * each); };
+    ImpactRecords r{array(0)};
+    if (words) r.impulse = array(1), r.found_gap = array(2);
+    if (words && restitution) r.restitution = array(3);
+    return r;
+  }
 };
+// Record k's restitution: the impact records' where they keep one (the
+// CPU's), else the pair table's for its bodies' materials.
+MARBLES_HD_INLINE real restitution_of(const ImpactRecords& r, std::uint32_t k, BodyPair ab,
+                                      const std::uint32_t* material, const WallShape* walls, const PairTable& table) {
+  return r.restitution ? r.restitution[k] : pair_coefficients(ab, material, walls, table).restitution;
+}
 MARBLES_HD_INLINE void pack_impact(const Contact& c, const ImpactRecords& r, std::uint32_t k) {
   r.approach[k] = c.approach_speed;
   if (!r.words()) return;
@@ -605,8 +626,7 @@ MARBLES_HD_INLINE bool impact_record(const SweepRecords& s, const ImpactRecords&
   BodyState A = load_body(bodies, c.a, c);
   BodyState B = load_body(bodies, c.b, c);
   const auto hit = [&](Contact& h, const BodyState& a, const BodyState& b) {
-    h.coeff.restitution = impacts.restitution ? impacts.restitution[k]
-                                              : pair_coefficients({h.a, h.b}, p.material, p.walls, p.table).restitution;
+    h.coeff.restitution = restitution_of(impacts, k, {h.a, h.b}, p.material, p.walls, p.table);
     set_masses<Friction, false>(h, a, b);
   };
   if (!impact_states<Friction>(c, A, B, p, hit)) return false;
@@ -645,10 +665,10 @@ MARBLES_HD_INLINE Contact contact_of_record(const SweepRecords& s, const ImpactR
   Contact c = s.rolling ? load_record<true, true>(s, k, i)  // a wall's velocity too
                         : load_record<true, false>(s, k, i);
   // The pair table's coefficients, where the records keep some of them not.
-  auto pair = [&]() -> const PairCoefficients& { return pair_coefficients({c.a, c.b}, world.material, walls, table); };
-  if (!s.rolling) c.coeff.twisting_friction = pair().twisting_friction;
+  if (!s.rolling)
+    c.coeff.twisting_friction = pair_coefficients({c.a, c.b}, world.material, walls, table).twisting_friction;
   c.approach_speed = impacts.approach[k];
-  c.coeff.restitution = impacts.restitution ? impacts.restitution[k] : pair().restitution;
+  c.coeff.restitution = restitution_of(impacts, k, {c.a, c.b}, world.material, walls, table);
   if (impacts.words()) {
     c.impact_impulse = impacts.impulse[k];
     c.separation = impacts.found_gap[k];  // as found: an impact stage may have taken shifts into the record's (shifted_gap)

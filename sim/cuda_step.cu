@@ -1272,13 +1272,11 @@ class CudaStep final : public StepBackend {
     // The approach speeds, and with impact candidates the impact impulses
     // and the separations as found (ImpactRecords; the restitution the pair
     // table's: ImpactParams).
-    const std::size_t reals = narrowphase::SweepRecords::real_words(m_count);
-    auto* memory = m_record_memory.as<narrowphase::Real4>(words + reals * (m_impact_candidates ? 3 : 1));
+    auto* memory = m_record_memory.as<narrowphase::Real4>(
+        words + narrowphase::ImpactRecords::real4_words(m_count, m_impact_candidates));
     const narrowphase::UniformArms uniform = arms ? narrowphase::UniformArms{} : m_model.uniform_arms(m_radius);
     m_records = narrowphase::SweepRecords::in(memory, m_count, extra, arms, uniform, m_terms.rolling, m_terms.friction);
-    auto array = [&](std::size_t a) { return reinterpret_cast<real*>(memory + words + a * reals); };
-    m_impacts = {array(0)};
-    if (m_impact_candidates) m_impacts.impulse = array(1), m_impacts.found_gap = array(2);
+    m_impacts = narrowphase::ImpactRecords::in(memory + words, m_count, m_impact_candidates);
     if (m_one_wait) return;  // counted on the device, for substeps with contacts (check_substep_kernel)
     m_counters.uniform_arms += arms ? 0 : 1;
     m_counters.impact_words += m_impact_candidates ? 1 : 0;

@@ -976,15 +976,13 @@ TEST(Solver, RecordsHoldTheWholeContactAndItsImpacts) {
     for (std::size_t i = 0; i < n; ++i) expect_bodies[i] = got_bodies[i] = gather_solver_body(world, i);
     std::vector<Contact> expect = contacts;
     const std::size_t record_words = (SweepRecords::bytes_for(m, extra, arms) + 15) / 16;
-    const std::size_t reals = SweepRecords::real_words(m);
-    std::vector<Real4> memory(record_words + 4 * reals);
+    std::vector<Real4> memory(record_words + ImpactRecords::real4_words(m, true, true));
     const SweepRecords records = SweepRecords::in(memory.data(), m, extra, arms, uniform);
     ASSERT_EQ(records.extra != nullptr, extra);
     ASSERT_EQ(records.arms != nullptr, arms);
     ASSERT_EQ(reinterpret_cast<const char*>(records.bodies + m) - reinterpret_cast<const char*>(memory.data()) + 64,
               static_cast<std::ptrdiff_t>(SweepRecords::bytes_for(m, extra, arms)));
-    auto array = [&](std::size_t a) { return reinterpret_cast<real*>(memory.data() + record_words + a * reals); };
-    ImpactRecords impact{array(0), array(1), array(2), looked_up ? nullptr : array(3)};
+    const ImpactRecords impact = ImpactRecords::in(memory.data() + record_words, m, true, !looked_up);
     for (std::uint32_t k = 0; k < m; ++k) {
       pack_sweep_record(contacts[k], records, k);  // as the GPU makes them
       pack_impact(contacts[k], impact, k);
