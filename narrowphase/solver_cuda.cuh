@@ -51,8 +51,11 @@ struct ContactRange {
   std::uint32_t slot = 0, width = 0;
   // Parallel, the sweep: each thread asks the L2 for the record `ahead`
   // contacts on from its own (a wave of blocks later), so a later block's
-  // first load finds it there; 0: none. A hint only: no bit depends on it.
+  // first load finds it there; 0: none. With `ahead_bodies` it asks for the
+  // record two waves on and for the bodies of the one a wave on. Hints
+  // only: no bit depends on them.
   std::uint32_t ahead = 0;
+  bool ahead_bodies = false;
 };
 
 // The packed velocity state (solver_math.hpp) from the world, and back;
