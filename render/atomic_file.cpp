@@ -115,14 +115,31 @@ void commit_file(const fs::path& tmp, const fs::path& final_path, const Complete
   rename_over(tmp, final_path);
 }
 
+namespace {
+
+// The writer's process of a name temp_path_beside gives (`.NAME.tmp-PID-K`,
+// or a movie's `.NAME.tmp-PID-K.log` beside it), else 0: any other file,
+// a user's `.notes.tmp-1` among them, is none of ours.
+long temporary_writer(const std::string& name) {
+  const std::size_t tag = name.rfind(".tmp-");
+  if (name.size() < 2 || name[0] != '.' || tag == std::string::npos || tag < 2) return 0;
+  std::string_view rest = std::string_view(name).substr(tag + 5);
+  if (rest.ends_with(".log")) rest.remove_suffix(4);
+  const std::size_t dash = rest.find('-');
+  const auto digits = [](std::string_view s) {
+    return !s.empty() && s.size() <= 18 && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
+  };
+  if (dash == std::string_view::npos || !digits(rest.substr(0, dash)) || !digits(rest.substr(dash + 1))) return 0;
+  return std::strtol(std::string(rest.substr(0, dash)).c_str(), nullptr, 10);
+}
+
+}  // namespace
+
 std::size_t remove_stale_temporaries(const fs::path& dir) {
   std::size_t removed = 0;
   std::error_code ec;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    const std::string name = it->path().filename().string();
-    const std::size_t tag = name.rfind(".tmp-");
-    if (name.empty() || name[0] != '.' || tag == std::string::npos) continue;
-    const long pid = std::strtol(name.c_str() + tag + 5, nullptr, 10);
+    const long pid = temporary_writer(it->path().filename().string());
     const bool writer_gone = pid > 0 && ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
     if (!writer_gone) continue;
     std::error_code remove_ec;

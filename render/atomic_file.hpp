@@ -35,7 +35,9 @@ void commit_file(const std::filesystem::path& tmp, const std::filesystem::path& 
                  const CompleteCheck& complete = nullptr);
 
 /// Removes the temporary files in `dir` (not below) left by processes that
-/// no longer run (a `kill -9` mid-write); returns how many it removed.
+/// no longer run (a `kill -9` mid-write); returns how many it removed. Only
+/// names temp_path_beside gives (`.NAME.tmp-PID-K`, and a movie's log
+/// `.NAME.tmp-PID-K.log`) are temporaries: any other file stays.
 std::size_t remove_stale_temporaries(const std::filesystem::path& dir);
 
 /// Writes `contents` to `path` atomically (temporary file + rename).

@@ -100,7 +100,8 @@ output:
 // A killed run leaves its temporaries (hidden names ending .tmp-PID-N) in
 // each folder it was writing into; the next run into the folder removes
 // those of a writer that is gone, in every such folder, and keeps those of
-// a live one (this process's).
+// a live one (this process's), and every file not named as a temporary,
+// however like one (a user's `.notes.tmp-PID`).
 TEST(Run, RemovesADeadRunsTemporariesInEveryFolder) {
   const fs::path dir = temp_dir("temporaries");
   const pid_t dead = ::fork();
@@ -116,6 +117,12 @@ TEST(Run, RemovesADeadRunsTemporariesInEveryFolder) {
     live.push_back(dir / "out" / sub / (".file_000020.bin.tmp-" + std::to_string(::getpid()) + "-3"));
     std::ofstream(stale.back()) << "half";
     std::ofstream(live.back()) << "half";
+    const std::string d = std::to_string(dead);
+    for (const std::string& name : {".notes.tmp-" + d, ".notes.tmp-" + d + "-", ".notes.tmp-" + d + "-3x",
+                                    ".notes.tmp-" + d + "-3.bak", "notes.tmp-" + d + "-3", "..tmp-" + d + "-3"}) {
+      live.push_back(dir / "out" / sub / name);
+      std::ofstream(live.back()) << "a user's";
+    }
   }
   std::string err;
   ASSERT_EQ(run_on_cpu(dir, rising_floor_scene(0.01, 0, 0.1, "  vtk: {every: 5}\n"), err), 0) << err;
