@@ -2,14 +2,17 @@
 #include "render/vtk_output.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <initializer_list>
+#include <limits>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
-#include <regex>
 #include <sstream>
+#include <string_view>
+#include <type_traits>
 
 #include "core/error.hpp"
 #include "core/files.hpp"
@@ -88,6 +91,64 @@ std::string pvd_text(std::string_view lines) {
   return out;
 }
 
+// XML scanned by hand: a regular expression over an attribute tens of
+// kilobytes long recurses once a character in libstdc++ and overflows the
+// stack, and a run's files are read back (render, a resume) as they lie.
+bool is_name_char(char c) { return std::isalpha(static_cast<unsigned char>(c)) != 0 || c == '_'; }
+bool is_space(char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r' || c == '\f' || c == '\v'; }
+
+// f(name, value) for each `name = "value"` in `text` (name: letters and _;
+// with `single`, 'value' too), in order; anything else is passed over.
+template <class F>
+void for_each_attribute(std::string_view text, bool single, F&& f) {
+  std::size_t i = 0;
+  while (i < text.size()) {
+    if (!is_name_char(text[i])) {
+      ++i;
+      continue;
+    }
+    std::size_t j = i;
+    while (j < text.size() && is_name_char(text[j])) ++j;
+    std::size_t k = j;
+    while (k < text.size() && is_space(text[k])) ++k;
+    if (k < text.size() && text[k] == '=') {
+      ++k;
+      while (k < text.size() && is_space(text[k])) ++k;
+      if (k < text.size() && (text[k] == '"' || (single && text[k] == '\''))) {
+        const std::size_t close = text.find(text[k], k + 1);
+        if (close != std::string_view::npos) {
+          f(text.substr(i, j - i), text.substr(k + 1, close - k - 1));
+          i = close + 1;
+          continue;
+        }
+      }
+    }
+    i = j;
+  }
+}
+
+// f(closing, name, attributes) for each tag `<name ...>` or `</name ...>`
+// in `text` (name: letters), in order.
+template <class F>
+void for_each_tag(std::string_view text, F&& f) {
+  std::size_t i = 0;
+  while ((i = text.find('<', i)) != std::string_view::npos) {
+    std::size_t j = i + 1;
+    const bool closing = j < text.size() && text[j] == '/';
+    if (closing) ++j;
+    std::size_t k = j;
+    while (k < text.size() && std::isalpha(static_cast<unsigned char>(text[k])) != 0) ++k;
+    if (k == j) {
+      ++i;
+      continue;
+    }
+    const std::size_t end = text.find('>', k);
+    if (end == std::string_view::npos) return;
+    f(closing, text.substr(j, k - j), text.substr(k, end - k));
+    i = end + 1;
+  }
+}
+
 }  // namespace
 
 void require_plain_file(const fs::path& path) {
@@ -96,6 +157,13 @@ void require_plain_file(const fs::path& path) {
   if (const char* what = not_a_plain_file(path.string()))
     throw InputError(SourceLocation{path.string(), 0, 0}, "",
                      std::string("is ") + what + ", not a run's output file (render reads plain files only)");
+}
+
+void require_whole_vtk(const fs::path& path, const std::string& why) {
+  require_plain_file(path);
+  if (!ends_with("</VTKFile>")(path))
+    throw InputError(SourceLocation{path.string(), 0, 0}, "",
+                     "is cut short or damaged: it does not end with </VTKFile> (" + why + ")");
 }
 
 std::vector<SeriesEntry> read_pvd(const fs::path& pvd_path) {
@@ -117,28 +185,29 @@ std::vector<SeriesEntry> read_pvd(const fs::path& pvd_path) {
                      "is cut short or damaged: it does not end with </Collection></VTKFile> (marbles run writes it "
                      "whole: run again, or resume the run from a checkpoint)");
 
-  static const std::regex dataset(R"(<DataSet\b([^>]*)>)");
-  static const std::regex attribute(R"re(([A-Za-z_]+)\s*=\s*(?:"([^"]*)"|'([^']*)'))re");
   std::vector<SeriesEntry> entries;
-  for (auto it = std::sregex_iterator(text.begin(), text.end(), dataset); it != std::sregex_iterator(); ++it) {
-    const std::string attrs = (*it)[1].str();
+  for_each_tag(text, [&](bool closing, std::string_view name, std::string_view attrs) {
+    if (closing || name != "DataSet") return;
     std::optional<double> time;
     std::string file;
-    for (auto a = std::sregex_iterator(attrs.begin(), attrs.end(), attribute); a != std::sregex_iterator(); ++a) {
-      const std::string key = (*a)[1].str();
-      const std::string value = (*a)[2].matched ? (*a)[2].str() : (*a)[3].str();
+    for_each_attribute(attrs, true, [&](std::string_view key, std::string_view value) {
       if (key == "timestep") {
+        // A time a run writes: a finite number, the whole attribute.
+        const std::string v(value);
         char* end = nullptr;
-        const double t = std::strtod(value.c_str(), &end);
-        if (end != value.c_str()) time = t;
+        const double t = std::strtod(v.c_str(), &end);
+        if (v.empty() || end != v.c_str() + v.size() || !std::isfinite(t))
+          throw InputError(SourceLocation{pvd_path.string(), 0, 0}, "",
+                           "a DataSet's timestep \"" + v + "\" is not a finite number");
+        time = t;
       } else if (key == "file") {
         file = value;
       }
-    }
-    if (file.empty()) continue;
+    });
+    if (file.empty()) return;
     const fs::path p(file);
     entries.push_back({time.value_or(double(entries.size())), p.is_absolute() ? p : pvd_path.parent_path() / p});
-  }
+  });
   if (entries.empty()) throw InputError(SourceLocation{pvd_path.string(), 0, 0}, "", "lists no frames");
   return entries;
 }
@@ -356,6 +425,7 @@ void Series::adopt(double time, const fs::path& from) {
     // In neither folder (a run that wrote no frames, or a checkpoint away
     // from its run's folder): numbered, but not listed.
     if (from.empty() || !fs::is_regular_file(from / file, ec)) return;
+    require_whole_vtk(from / file, "a resume copies its checkpoint's run's files, which must be whole");
     fs::create_directories(m_dir / m_folder, ec);
     if (ec) throw RuntimeFailure("cannot create " + (m_dir / m_folder).string() + ": " + ec.message());
     // Copied under a temporary name and renamed, as every output is written.
@@ -614,11 +684,9 @@ Walls read_walls_vtp(const fs::path& path) {
 namespace {
 
 // The attributes of one XML tag, e.g. type="Float32" Name="radius".
-std::vector<std::pair<std::string, std::string>> attributes_of(const std::string& tag) {
-  static const std::regex attribute(R"re(([A-Za-z_]+)\s*=\s*"([^"]*)")re");
+std::vector<std::pair<std::string, std::string>> attributes_of(std::string_view tag) {
   std::vector<std::pair<std::string, std::string>> out;
-  for (auto a = std::sregex_iterator(tag.begin(), tag.end(), attribute); a != std::sregex_iterator(); ++a)
-    out.emplace_back((*a)[1].str(), (*a)[2].str());
+  for_each_attribute(tag, false, [&](std::string_view k, std::string_view v) { out.emplace_back(k, v); });
   return out;
 }
 
@@ -748,14 +816,11 @@ VtpArrays read_vtp_arrays(const fs::path& vtp_path) {
   std::vector<ArrayTag> tags;
   std::string section;
   std::size_t points = 0;
-  static const std::regex tag_re(R"(<(/?)([A-Za-z]+)([^>]*)>)");
-  for (auto it = std::sregex_iterator(head.begin(), head.end(), tag_re); it != std::sregex_iterator(); ++it) {
-    const std::string name = (*it)[2].str();
-    const bool closing = (*it)[1].matched && (*it)[1].length() > 0;
-    const auto attrs = attributes_of((*it)[3].str());
+  for_each_tag(head, [&](bool closing, std::string_view name, std::string_view tag_attrs) {
+    const auto attrs = attributes_of(tag_attrs);
     if (name == "FieldData" || name == "PointData" || name == "Points" || name == "Verts" || name == "CellData" ||
         name == "Lines" || name == "Polys" || name == "Strips") {
-      section = closing ? "" : name;
+      section = closing ? std::string() : std::string(name);
     } else if (name == "Piece" && !closing) {
       points = std::strtoull(attribute(attrs, "NumberOfPoints").c_str(), nullptr, 10);
     } else if ((name == "DataArray" || name == "Array") && !closing) {
@@ -770,7 +835,7 @@ VtpArrays read_vtp_arrays(const fs::path& vtp_path) {
       tag.offset = std::strtoull(attribute(attrs, "offset").c_str(), nullptr, 10);
       tags.push_back(tag);
     }
-  }
+  });
   if (appended == std::string::npos) throw bad("no appended data");
   const std::size_t underscore = text.find('_', text.find('>', appended));
   if (underscore == std::string::npos) throw bad("no appended data");
@@ -796,16 +861,36 @@ Snapshot read_vtp(const fs::path& vtp_path) {
       return nullptr;
     return &it->second.values;
   };
+  // Values a run writes: finite and within the precision (a sphere's size
+  // above zero, its numbers whole); any other is a damaged or foreign file,
+  // refused naming the array and the point rather than drawn as it falls.
+  const double most = std::numeric_limits<real>::max();
+  auto refuse = [&](const std::string& key, std::size_t i, double value, const char* rule) {
+    throw InputError(SourceLocation{vtp_path.string(), 0, 0}, "",
+                     key + ": point " + std::to_string(i) + " holds " + significant(value, 9) + ", not " + rule);
+  };
   auto vectors = [&](const std::string& key, std::vector<Vec3>& out) {
     if (const auto* v = find(key, 3)) {
       out.resize(points);
+      for (std::size_t k = 0; k < 3 * points; ++k)
+        if (!(std::fabs((*v)[k]) <= most)) refuse(key, k / 3, (*v)[k], "a finite number within the precision");
       for (std::size_t i = 0; i < points; ++i) out[i] = Vec3(real((*v)[3 * i]), real((*v)[3 * i + 1]), real((*v)[3 * i + 2]));
     }
   };
   auto scalars = [&](const std::string& key, auto& out) {
+    using T = std::decay_t<decltype(out[0])>;
     if (const auto* v = find(key, 1)) {
       out.resize(points);
-      for (std::size_t i = 0; i < points; ++i) out[i] = static_cast<std::decay_t<decltype(out[0])>>((*v)[i]);
+      for (std::size_t i = 0; i < points; ++i) {
+        const double x = (*v)[i];
+        if constexpr (std::is_integral_v<T>) {
+          if (!(x >= 0 && x <= double(std::numeric_limits<T>::max()) && x == std::floor(x)))
+            refuse(key, i, x, "a whole number in range");
+        } else if (!(x > 0 && x <= most)) {
+          refuse(key, i, x, "a finite number above zero");
+        }
+        out[i] = static_cast<T>(x);
+      }
     }
   };
   if (!find("Points/Points", 3) && points > 0)
@@ -818,10 +903,15 @@ Snapshot read_vtp(const fs::path& vtp_path) {
   scalars("PointData/id", s.id);
   scalars("PointData/material", s.material);
   scalars("PointData/contacts", s.contacts);
-  if (const auto it = file.arrays.find("FieldData/TimeValue"); it != file.arrays.end() && !it->second.values.empty())
+  if (const auto it = file.arrays.find("FieldData/TimeValue"); it != file.arrays.end() && !it->second.values.empty()) {
     s.time = it->second.values[0];
-  if (const auto it = file.arrays.find("FieldData/step"); it != file.arrays.end() && !it->second.values.empty())
-    s.step = static_cast<std::uint64_t>(it->second.values[0]);
+    if (!std::isfinite(s.time)) refuse("FieldData/TimeValue", 0, s.time, "a finite number");
+  }
+  if (const auto it = file.arrays.find("FieldData/step"); it != file.arrays.end() && !it->second.values.empty()) {
+    const double step = it->second.values[0];
+    if (!(step >= 0 && step < 1.8e19 && step == std::floor(step))) refuse("FieldData/step", 0, step, "a whole number in range");
+    s.step = static_cast<std::uint64_t>(step);
+  }
   return s;
 }
 

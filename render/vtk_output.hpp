@@ -213,6 +213,11 @@ struct VtpArrays {
 };
 VtpArrays read_vtp_arrays(const std::filesystem::path& vtp_path);
 
+/// A VTK file a run wrote whole ends with </VTKFile>; one cut short (a copy
+/// that stopped, a disk that filled) or overwritten does not, and throws
+/// InputError naming it (`why`: what the caller was about to do with it).
+void require_whole_vtk(const std::filesystem::path& path, const std::string& why);
+
 /// Refuses (InputError naming the path) a path that is a folder, pipe,
 /// socket or device: read_pvd, read_vtp_arrays (so read_vtp and
 /// read_walls_vtp) and render read plain files only.

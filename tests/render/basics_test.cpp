@@ -11,6 +11,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <functional>
 #include <iterator>
 #include <random>
 #include <set>
@@ -378,6 +380,104 @@ TEST(Pvd, ParsesEntriesRelativeToItsFolder) {
   EXPECT_EQ(entries[1].time, 0.25);
   EXPECT_EQ(entries[1].path, dir / "frames" / "frame_000001.vtp");
   EXPECT_THROW(read_pvd(dir / "missing.pvd"), InputError);
+}
+
+// Attributes and tags of any length are read by a scan, not a regular
+// expression (libstdc++'s recursed once a character and overflowed the
+// stack on an attribute of 30 kB: SIGSEGV in render and in a resume): a
+// DataSet behind a 400 kB attribute, and one behind 100 000 tags left open,
+// read as written.
+TEST(Pvd, LongAttributesAndOpenTagsAreReadWithoutRecursion) {
+  const fs::path dir = fresh_dir("pvd_long");
+  const std::string long_value(400'000, 'a');
+  std::string open_tags;
+  for (int k = 0; k < 100'000; ++k) open_tags += "<DataSet ";
+  const auto entries = pvd_of(dir, "  <DataSet x=\"" + long_value + "\" timestep=\"0.5\" file=\"f0.vtp\"/>\n  " +
+                                       open_tags + "timestep=\"2\" file=\"f1.vtp\"/>\n");
+  ASSERT_EQ(entries.size(), 2u);
+  EXPECT_EQ(entries[0].time, 0.5);
+  EXPECT_EQ(entries[0].path, dir / "f0.vtp");
+  EXPECT_EQ(entries[1].time, 2);
+  EXPECT_EQ(entries[1].path, dir / "f1.vtp");
+  // The same in a frame's tags: an attribute of 400 kB on its root.
+  VtkSeriesWriter writer(dir, parse_point_fields({"radius"}));
+  Snapshot one;
+  one.position = {Vec3(1, 2, 3)};
+  one.radius = {real(0.25)};
+  const fs::path frame = writer.write(one);
+  std::string text = [&] {
+    std::ifstream in(frame, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }();
+  text.insert(text.find("<PolyData") + 9, " x=\"" + long_value + "\"");
+  write_file_atomic(frame, text);
+  const Snapshot back = read_vtp(frame);
+  ASSERT_EQ(back.size(), 1u);
+  EXPECT_EQ(back.position[0], Vec3(1, 2, 3));
+  EXPECT_EQ(back.radius[0], real(0.25));
+}
+
+// A series' time that is not a finite number (nan, inf, words, nothing, a
+// number with more after it) is refused naming the .pvd; a DataSet with no
+// timestep takes its place in the series, as before.
+TEST(Pvd, TimesThatAreNotFiniteNumbersAreRefused) {
+  const fs::path dir = fresh_dir("pvd_times");
+  for (const std::string bad : {"nan", "inf", "-inf", "abc", "", "1.5x", "1e999"}) {
+    try {
+      pvd_of(dir, "  <DataSet timestep=\"" + bad + "\" file=\"f.vtp\"/>\n");
+      ADD_FAILURE() << "timestep \"" << bad << "\" read";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("series.pvd: a DataSet's timestep \"" + bad + "\" is not a finite number"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  const auto entries = pvd_of(dir, "  <DataSet file=\"f.vtp\"/>\n  <DataSet timestep=\" 3\" file=\"g.vtp\"/>\n");
+  ASSERT_EQ(entries.size(), 2u);
+  EXPECT_EQ(entries[0].time, 0);
+  EXPECT_EQ(entries[1].time, 3);
+}
+
+// A frame holding what no run writes (a position, speed or time not finite,
+// a radius not above zero, an id or material that is not a whole number in
+// range) is refused naming the frame, the array and the point, not drawn
+// with the sphere left out or its colour at the scale's end.
+TEST(Frames, ValuesNoRunWritesAreRefused) {
+  const fs::path dir = fresh_dir("frames_values");
+  VtkSeriesWriter writer(dir, parse_point_fields({"radius", "velocity", "id", "material"}));
+  const auto snapshot = [] {
+    Snapshot s;
+    for (int i = 0; i < 4; ++i) {
+      s.position.push_back(Vec3(real(i), 0, 1));
+      s.velocity.push_back(Vec3(0, real(i), 0));
+      s.radius.push_back(real(0.1));
+      s.id.push_back(std::uint32_t(i));
+      s.material.push_back(0);
+    }
+    return s;
+  };
+  const real nan = std::numeric_limits<real>::quiet_NaN(), inf = std::numeric_limits<real>::infinity();
+  EXPECT_NO_THROW(read_vtp(writer.write(snapshot()))) << "premise: a frame as a run writes it";
+  const std::vector<std::pair<std::string, std::function<void(Snapshot&)>>> damages{
+      {"Points/Points: point 2", [&](Snapshot& s) { s.position[2].y = nan; }},
+      {"Points/Points: point 1", [&](Snapshot& s) { s.position[1].x = -inf; }},
+      {"PointData/velocity: point 3", [&](Snapshot& s) { s.velocity[3].z = inf; }},
+      {"PointData/radius: point 0", [&](Snapshot& s) { s.radius[0] = 0; }},
+      {"PointData/radius: point 1", [&](Snapshot& s) { s.radius[1] = -s.radius[1]; }},
+      {"PointData/radius: point 2", [&](Snapshot& s) { s.radius[2] = nan; }},
+      {"FieldData/TimeValue", [&](Snapshot& s) { s.time = std::numeric_limits<double>::infinity(); }},
+  };
+  for (const auto& [what, damage] : damages) {
+    Snapshot bad = snapshot();
+    damage(bad);
+    const fs::path frame = writer.write(bad);
+    try {
+      read_vtp(frame);
+      ADD_FAILURE() << what << " read";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(frame.filename().string() + ": " + what), std::string::npos) << e.what();
+    }
+  }
 }
 
 // A series cut anywhere before its closing tags (a copy that stopped, a
