@@ -1,5 +1,6 @@
 #pragma once
 // not_a_plain_file(path): what a path names when it is not a plain file.
+// folder_problem(path): why a command cannot write into that folder.
 // whole_number(text), folders_of_ended_processes(dir, prefix): the
 // PREFIX-PID folders (a study's staging, a run's earlier output set aside)
 // whose process no longer runs. copy_plain_file(from, to, ec): a copy that says
@@ -26,6 +27,30 @@
 #include <vector>
 
 namespace marbles {
+
+// Why `path` cannot be an output folder (empty: it can): it must be one,
+// or nothing yet (made then, with the folders above it that are not there:
+// the nearest one there must be a folder). A link to nothing names nothing
+// that could be made.
+inline std::string folder_problem(const std::string& path) {
+  std::error_code ec;
+  const auto status = std::filesystem::status(path, ec);
+  if (std::filesystem::exists(status) && !std::filesystem::is_directory(status))
+    return "'" + path + "' exists and is not a folder";
+  if (!std::filesystem::exists(status) && std::filesystem::is_symlink(std::filesystem::symlink_status(path, ec)))
+    return "'" + path + "' is a link to nothing (a link whose target is gone): no folder can be made there";
+  for (std::filesystem::path above = std::filesystem::path(path).parent_path(); !above.empty();
+       above = above.parent_path()) {
+    const auto there = std::filesystem::status(above, ec);
+    if (std::filesystem::exists(there)) {
+      if (!std::filesystem::is_directory(there))
+        return "'" + path + "' cannot be made: '" + above.string() + "' is not a folder";
+      break;
+    }
+    if (above == above.parent_path()) break;  // a root that cannot be read
+  }
+  return {};
+}
 
 // "a folder", "a pipe", "a socket" or "a device"; nullptr for a plain file
 // or a path naming nothing (opening it then says why). A link is followed,

@@ -14,6 +14,7 @@
 #include "core/files.hpp"
 #include "core/hash.hpp"
 #include "render/atomic_file.hpp"
+#include "sim/world.hpp"
 
 namespace marbles {
 
@@ -247,8 +248,8 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash, st
   if (const std::size_t i = c.world.first_non_finite(); i < n)
     r.fail("is damaged (sphere " + std::to_string(i) + "'s state is not finite)");
   for (std::size_t i = 0; i < n; ++i)
-    if (!(c.world.radius[i] > 0) || !finite(c.world.radius[i]) || !(c.world.inv_mass[i] >= 0) ||
-        !finite(c.world.inv_mass[i]) || !(c.world.inv_inertia[i] >= 0) || !finite(c.world.inv_inertia[i]))
+    if (!(c.world.radius[i] > 0) || !finite(c.world.radius[i]) ||
+        !masses_as_made(c.world.radius[i], c.world.inv_mass[i], c.world.inv_inertia[i]))
       r.fail("is damaged (sphere " + std::to_string(i) + "'s radius, mass or inertia)");
   for (std::size_t k = 0; k < c.state.cache.key.size(); ++k)
     if (!finite(c.state.cache.normal_impulse[k]) || !is_finite(c.state.cache.tangent_impulse[k]) ||

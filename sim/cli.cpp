@@ -22,6 +22,7 @@
 #include "bench/broadphase_bench.hpp"
 #include "bench/step_bench.hpp"
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "core/format.hpp"
 #include "core/parallel.hpp"
 #include "render/atomic_file.hpp"
@@ -112,25 +113,7 @@ const CLI::Validator kSeed(
 // A folder the command writes into: one, or nothing yet (made then, with
 // the folders above it that are not there: the nearest one there must be a
 // folder).
-const CLI::Validator kFolderOrNew(
-    [](std::string& text) {
-      std::error_code ec;
-      const auto status = std::filesystem::status(text, ec);
-      if (std::filesystem::exists(status) && !std::filesystem::is_directory(status))
-        return "'" + text + "' exists and is not a folder";
-      for (std::filesystem::path above = std::filesystem::path(text).parent_path(); !above.empty();
-           above = above.parent_path()) {
-        const auto there = std::filesystem::status(above, ec);
-        if (std::filesystem::exists(there)) {
-          if (!std::filesystem::is_directory(there))
-            return "'" + text + "' cannot be made: '" + above.string() + "' is not a folder";
-          break;
-        }
-        if (above == above.parent_path()) break;  // a root that cannot be read
-      }
-      return std::string();
-    },
-    "FOLDER");
+const CLI::Validator kFolderOrNew([](std::string& text) { return ::marbles::folder_problem(text); }, "FOLDER");
 
 // `--set key.path=value`, repeatable; one value per `--set`.
 void add_set_option(CLI::App* command, std::vector<std::string>& overrides) {

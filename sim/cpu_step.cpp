@@ -74,6 +74,15 @@ class CpuStep final : public StepBackend {
       if (m_model.wall_contacts)  // after every sphere pair's: at the end of the last run
         narrowphase::wall_contacts(bodies, m_walls, m_model.pair_table(), h, m_reach.data(),
                                    m_contact_rest.empty() ? m_contact_first : m_contact_rest, &m_contact_scratch);
+    } catch (const broadphase::NonFiniteInput&) {
+      // A reach past the precision's range (a speed times the substep): the
+      // state goes non-finite as it moves, and the step ends with that
+      // ("non-finite state", the watchdog's to repair), not a broad-phase
+      // error, as on the GPU.
+      m_contact_first.clear();
+      m_contact_rest.clear();
+      m_non_finite = true;
+      return;
     } catch (...) {  // no contact of the substep before left in the runs
       m_contact_first.clear();
       m_contact_rest.clear();

@@ -13,6 +13,7 @@
 #include <iostream>
 #include <optional>
 #include <sstream>
+#include <tuple>
 #include <utility>
 
 #include <nlohmann/json.hpp>
@@ -146,7 +147,20 @@ std::string resume_command(const RunOptions& options, const std::string& out_dir
 // step the very positions; else the folder is another run's (a checkpoint
 // copied beside it) and the resume is refused, naming the frame.
 void check_frames_beside(const std::filesystem::path& from, const World& world, std::uint64_t step, int every,
-                         const std::string& restart) {
+                         int contacts_every, const std::string& restart) {
+  // Every file the resume will copy (RunOutput::resume) whole, before anything is written.
+  const std::string copied = "a resume copies the files of its checkpoint's run up to its step, which must be whole; "
+                             "resume from a copy of the checkpoint kept outside a run's checkpoints/ folder (it "
+                             "brings no files), or mend the run's folder";
+  for (const auto& [folder, prefix, n] : {std::tuple{"frames", "frame", every}, std::tuple{"walls", "walls", every},
+                                          std::tuple{"contacts", "contacts", contacts_every}}) {
+    if (n <= 0) continue;
+    for (std::uint64_t k = 0; k * static_cast<std::uint64_t>(n) <= step; ++k) {
+      const std::filesystem::path p = from / folder / render::numbered_vtp(prefix, static_cast<std::size_t>(k));
+      std::error_code ec;
+      if (std::filesystem::exists(p, ec)) render::require_whole_vtk(p, copied);
+    }
+  }
   if (every <= 0) return;
   const auto frame_at = [&](std::uint64_t k) {
     return from / "frames" / render::numbered_vtp("frame", static_cast<std::size_t>(k));
@@ -226,6 +240,11 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     sc.output.render.enabled = false;
     sc.output.movie.enabled = false;
   }
+  // A folder that cannot be made (a file in its place, a link to nothing):
+  // named by where it was given, before anything is made.
+  if (const std::string why = folder_problem(sc.output.dir); !why.empty())
+    throw InputError(options.out_dir ? SourceLocation{} : sc.output.dir_where,
+                     options.out_dir ? "--out" : "output.dir", why);
   // One run at a time in the folder, from before the check for an earlier run on.
   const RunFolderLock folder_lock(sc.output.dir, options.out_dir ? "--out" : "output.dir");
   // A checkpoint's run folder, where it lies in one (OUTDIR/checkpoints/
@@ -296,7 +315,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
     if (probe) probe->resume(c.probe);
     if (!options.quiet) out << "resumed from " << *options.restart << " at step " << c.steps << "\n";
     if (!restart_here && !restart_from.empty())  // before anything is written in the new folder
-      check_frames_beside(restart_from, sim.world(), sim.steps(), sc.output.vtk_every, *options.restart);
+      check_frames_beside(restart_from, sim.world(), sim.steps(), sc.output.vtk_every, sc.output.contacts_every,
+                          *options.restart);
   }
 
   // Test hooks: MARBLES_FAULT_NAN_STEP=N (the first try of step N goes

@@ -18,6 +18,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -83,6 +84,7 @@ TimeSpec read_time(const Field& field, std::optional<double> duration) {
   time.duration = map.required("duration").positive();
   const Field dt = map.required("dt");
   time.dt = dt.positive();
+  time.dt_where = dt.where();
   if (auto f = map.optional("substeps")) time.substeps = f->integer_at_least(1);
   if (duration) {  // the command line took it finite and > 0
     if (const std::string why = duration_problem(*duration, time); !why.empty())
@@ -225,11 +227,19 @@ std::vector<Material> read_materials(const Field& field) {
   return materials;
 }
 
+// A material named where one is referred to: a name, not empty (an empty
+// name stands for "none given" in Scene::material_index, the first material).
+std::string material_name(const Field& field) {
+  std::string name = field.word();
+  if (name.empty()) field.fail("expected a material's name, got an empty name");
+  return name;
+}
+
 // Reads `material: NAME` of a wall or block and checks that the material exists.
 void read_material_ref(const Scene& scene, const MapFields& map, std::string& name, SourceLocation& where) {
   where.file = scene.path;
   if (auto f = map.optional("material")) {
-    name = f->word();
+    name = material_name(*f);
     where = f->where();
     scene.material_index(name, where, f->key());
   }
@@ -306,8 +316,8 @@ std::vector<ContactPairSpec> read_contact_pairs(const Scene& scene, const Field&
       names.fail("expected [material, material], got " +
                  (names.is_sequence() ? "a sequence of " + std::to_string(names.node().size()) : names.description()));
     const std::vector<Field> two = names.items();
-    pair.first = two[0].word();
-    pair.second = two[1].word();
+    pair.first = material_name(two[0]);
+    pair.second = material_name(two[1]);
     scene.material_index(pair.first, two[0].where(), two[0].key());
     scene.material_index(pair.second, two[1].where(), two[1].key());
     if (auto f = map.optional("restitution")) pair.restitution = f->within(0, 1);
@@ -565,6 +575,7 @@ OutputSpec read_output(const Field& field, const std::string& stem) {
   output.dir = "out/" + stem;
   if (auto f = map.optional("dir")) {
     output.dir = f->word();
+    output.dir_where = f->where();
     if (output.dir.empty()) f->fail("must not be empty");
   }
   if (auto f = map.optional("checkpoint")) {
@@ -970,6 +981,22 @@ Scene read_scene(YAML::Node document, const std::string& path, const std::string
   scene.effects = kDefaultEffects;
   if (auto f = top.optional("effects")) scene.effects = read_effects(*f);
   if (auto f = top.optional("gravity")) scene.gravity = f->vec3();
+  // A substep's fall under gravity, g h^2, and so each sphere's travel and
+  // reach in it, in the precision's range (with room for a few sums): past
+  // it the first substep's contact search meets no finite bound.
+  if (scene.has(Effect::gravity)) {
+    const double h = scene.time.dt / scene.time.substeps;
+    const double gx = scene.gravity.x, gy = scene.gravity.y, gz = scene.gravity.z;
+    const double fall = std::sqrt(gx * gx + gy * gy + gz * gz) * h * h;
+    const double most = double(std::numeric_limits<real>::max()) / 16;
+    if (!(fall <= most))
+      throw InputError(scene.time.dt_where, "time.dt",
+                       "a substep of h = " + shortest(h) + " s lets gravity move a sphere |g| h^2 = " +
+                           (std::isfinite(fall) ? shortest(fall) : "more than " + shortest(most)) +
+                           " m in it, more than " + std::string(kRealName) +
+                           " precision holds with room for its sums (" + shortest(most) +
+                           " m); lower time.dt or raise time.substeps");
+  }
   if (auto f = top.optional("drag")) {
     if (f->is_map()) {
       const MapFields drag(*f, {"linear", "quadratic"});

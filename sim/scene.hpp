@@ -22,6 +22,7 @@ struct TimeSpec {
   double duration = 0;  // s, simulated time
   double dt = 0;        // s, one step (output cadence counts steps)
   int substeps = 1;     // substeps per step, h = dt / substeps
+  SourceLocation dt_where;  // the `dt:` value
 };
 
 struct SolverSpec {
@@ -163,6 +164,7 @@ struct MovieSpec {
 
 struct OutputSpec {
   std::string dir = "out";          // resolved relative to the current directory
+  SourceLocation dir_where;         // the `dir:` value (no file where not given)
   int vtk_every = 0;                // steps; 0 = no VTK frames
   int contacts_every = 0;           // steps; 0 = no contact frames (OUTDIR/contacts/, contacts.pvd)
   std::vector<std::string> fields{"radius", "velocity", "angular_velocity", "id", "material"};

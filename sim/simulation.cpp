@@ -365,6 +365,9 @@ void Simulation::attempt(int split) {
 std::string Simulation::violation(const StepCounters& before) {
   if (m_backend->non_finite()) {
     const std::size_t i = m_backend->world().first_non_finite();
+    if (i >= m_backend->world().size())  // every state finite: a reach in a substep was not
+      return "non-finite state (a sphere's reach in a substep, its speed times the substep, past " +
+             std::string(kRealName) + " precision's range)";
     return "non-finite state (sphere " + std::to_string(i < m_ids.size() ? m_ids[i] : i) + ")";  // the scene's numbering
   }
   if (m_watch.known) {

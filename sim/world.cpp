@@ -148,6 +148,24 @@ constexpr double kHeadroom = 16;
 
 }  // namespace
 
+namespace {
+
+// An inverse mass or inertia the step's arithmetic takes: normal, and with
+// room for the sums and products of a few of them.
+bool usable_inverse(real v) {
+  return v >= std::numeric_limits<real>::min() && v <= std::numeric_limits<real>::max() / 8;
+}
+
+}  // namespace
+
+bool masses_as_made(real radius, real inv_mass, real inv_inertia) {
+  if (inv_mass == 0 && inv_inertia == 0) return true;
+  if (!usable_inverse(inv_mass) || !usable_inverse(inv_inertia)) return false;
+  const double r = radius;
+  const double expected = double(inv_mass) / (0.4 * r * r);  // 1 / (2/5 m r^2)
+  return std::isfinite(expected) && std::abs(double(inv_inertia) - expected) <= 1e-4 * expected;
+}
+
 World make_world(const scene::Scene& scene, const scene::GeneratedParticles& particles) {
   World w;
   const std::size_t n = particles.size();
@@ -187,8 +205,7 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
     const double mass = scene.materials.at(w.material[i]).density * 4.0 / 3.0 * std::numbers::pi * r * r * r;
     w.inv_mass[i] = static_cast<real>(1.0 / mass);
     w.inv_inertia[i] = static_cast<real>(1.0 / (0.4 * mass * r * r));
-    const auto usable = [most](real v) { return v >= std::numeric_limits<real>::min() && v <= most / 8; };
-    if (!usable(w.inv_mass[i]) || !usable(w.inv_inertia[i]))
+    if (!usable_inverse(w.inv_mass[i]) || !usable_inverse(w.inv_inertia[i]))
       refuse(i, "its mass " + significant(mass, 6) + " kg or moment of inertia is out of range for " + kRealName +
                     " precision");
     total += mass;
@@ -224,6 +241,17 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
     return {};
   };
   const double speed = fastest_speed(scene, particles) + spin;
+  // The fastest sphere's travel in a substep is its reach in the contact
+  // search: past the precision's range (with room for its sums) the first
+  // substep meets no finite bound.
+  const double h = scene.time.dt / scene.time.substeps, travel = speed * h, room = most / 16;
+  if (!(travel <= room))
+    throw InputError(scene.time.dt_where, "time.dt",
+                     "a substep of h = " + significant(h, 6) + " s moves the fastest sphere, at up to " +
+                         significant(speed, 6) + " m/s (the fast-motion warning's estimate), " +
+                         (std::isfinite(travel) ? significant(travel, 6) : "more than " + significant(room, 6)) +
+                         " m in it, more than " + kRealName + " precision holds with room for its sums (" +
+                         significant(room, 6) + " m); lower time.dt or raise time.substeps");
   const std::string past = past_at(speed);
   // Where a wall's motion sets the speed, and the scene would pass without
   // it, the wall's speed is what to change.

@@ -88,4 +88,11 @@ inline std::vector<std::uint32_t> cell_order(const World& w) {
 // Builds the world from the scene's materials and its generated particles.
 World make_world(const scene::Scene& scene, const scene::GeneratedParticles& particles);
 
+// A sphere's inverse mass and inertia as make_world makes them: both 0 (a
+// fixed sphere), or both in the precision's usable range (from its smallest
+// normal number to an eighth of its largest) with the inertia a solid
+// sphere's of that mass and radius (2/5 m r^2, to a part in 10^4). A
+// checkpoint's spheres are held to it (sim/checkpoint.cpp).
+bool masses_as_made(real radius, real inv_mass, real inv_inertia);
+
 }  // namespace marbles

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <map>
 #include <sstream>
 #include <string>
@@ -760,6 +761,38 @@ TEST_F(Checkpoints, FramesOfAnotherRunBesideACheckpointAreRefused) {
             0)
       << err;
   expect_same_output(dir.path() + "/first", dir.path() + "/own");
+}
+
+// A restart into another folder copies its run's files up to the
+// checkpoint's step: one of them overwritten or cut short (frames, walls,
+// contacts; an early one, not the frame at the step that is compared) is
+// refused (exit 2) naming it, before anything is written in the new folder.
+TEST_F(Checkpoints, DamagedFilesOfItsRunAreRefusedOnAResume) {
+  const test::ScratchDir dir("ck_damaged_frames");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string common = " --quiet --backend cpu --set output.contacts.every=50";
+  ASSERT_EQ(marbles("run " + scene + common + " --out " + dir.path() + "/first --duration 0.1"), 0);
+  for (const std::string file : {"frames/frame_000000.vtp", "walls/walls_000002.vtp", "contacts/contacts_000001.vtp"}) {
+    for (const bool cut : {false, true}) {
+      const std::string there = dir.path() + "/damaged", into = dir.path() + "/into";
+      fs::remove_all(there);
+      fs::remove_all(into);
+      fs::copy(dir.path() + "/first", there, fs::copy_options::recursive);
+      const std::string whole = slurp(there + "/" + file);
+      ASSERT_GT(whole.size(), 1000u) << file;
+      std::ofstream(there + "/" + file, std::ios::binary | std::ios::trunc)
+          << (cut ? whole.substr(0, whole.size() / 2) : std::string("junk\n"));
+      std::string err;
+      EXPECT_EQ(marbles("run " + scene + common + " --out " + into + " --restart " + there +
+                            "/checkpoints/step_000100.mck",
+                        &err),
+                2)
+          << file << (cut ? " cut" : " overwritten") << ": " << err;
+      EXPECT_NE(err.find(there + "/" + file + ": is cut short or damaged"), std::string::npos) << err;
+      EXPECT_FALSE(fs::exists(into + "/frames")) << err;
+      EXPECT_FALSE(fs::exists(into + "/summary.json")) << err;
+    }
+  }
 }
 
 // A restart into another folder (the checkpoint taken elsewhere) writes

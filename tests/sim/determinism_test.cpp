@@ -358,7 +358,8 @@ TEST(Determinism, CheckpointsWithTheCacheOutOfKeyOrderAreRefused) {
 
 // A checkpoint whose checksum holds but whose values no run could have
 // written (a radius not above zero, a mass, state, impulse or total not
-// finite, a negative inverse mass, a precision word of neither type) is
+// finite, a negative inverse mass, masses a sphere of its radius could not
+// have (masses_as_made), a precision word of neither type) is
 // refused as damaged; one that names a material the scene lacks, or holds
 // another number of spheres, does not fit the scene.
 TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
@@ -377,6 +378,15 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
       {"radius, mass or inertia", [&](Checkpoint& k) { k.world.inv_mass[0] = nan; }},
       {"radius, mass or inertia", [](Checkpoint& k) { k.world.inv_mass[2] = -1; }},
       {"radius, mass or inertia", [&](Checkpoint& k) { k.world.inv_inertia[1] = inf; }},
+      // Finite, but no world make_world builds: a radius past the masses it
+      // came with, an inertia gone where the mass stays, a mass past the
+      // precision's usable range, a fixed sphere that still turns.
+      {"radius, mass or inertia", [](Checkpoint& k) { k.world.radius[3] = real(3e37); }},
+      {"radius, mass or inertia", [](Checkpoint& k) { k.world.radius[0] *= real(2); }},
+      {"radius, mass or inertia", [](Checkpoint& k) { k.world.radius[2] = std::numeric_limits<real>::denorm_min(); }},
+      {"radius, mass or inertia", [](Checkpoint& k) { k.world.inv_inertia[3] = 0; }},
+      {"radius, mass or inertia", [](Checkpoint& k) { k.world.inv_mass[1] = std::numeric_limits<real>::max() / 4; }},
+      {"radius, mass or inertia", [](Checkpoint& k) { k.world.inv_mass[0] = 0; }},
       {"state is not finite", [&](Checkpoint& k) { k.world.position[2].y = inf; }},
       {"state is not finite", [&](Checkpoint& k) { k.world.velocity[0].z = nan; }},
       {"state is not finite", [&](Checkpoint& k) { k.world.angular_velocity[3].x = -inf; }},
@@ -750,6 +760,28 @@ TEST(Renumber, APileAtRestStaysAtRest) {
   EXPECT_LT(still, g_dt);
   EXPECT_LT(renumbered, g_dt);
   EXPECT_EQ(hash[1], hash[0]);
+}
+
+// A speed whose travel in a substep is past the precision's range (the
+// contact search's reach), the state itself still finite, ends the step as
+// a state gone non-finite does: the watchdog's to repair, else to report
+// with the step, not a broad-phase error (it was "broad phase: a centre or
+// radius is not finite" with two spheres or more, exit 1 without a
+// checkpoint).
+TEST(Determinism, AReachPastThePrecisionIsANonFiniteState) {
+  auto [s, g] = pour_scene(300, 8);
+  s.time.dt = 4;  // a reach of |v| h: past the range for a speed of half of it
+  World w = make_world(s, g);
+  w.velocity[5] = Vec3{std::numeric_limits<real>::max() / 2, 0, 0};
+  ASSERT_EQ(w.first_non_finite(), w.size()) << "premise: the state is finite";
+  Simulation sim(s, w, broadphase::Backend::cpu);
+  sim.set_watchdog(true);
+  try {
+    sim.step();
+    ADD_FAILURE() << "the step went on";
+  } catch (const WatchdogFailure& e) {
+    EXPECT_NE(std::string(e.what()).find("step 1: non-finite state"), std::string::npos) << e.what();
+  }
 }
 
 // The watchdog in a renumbering scene: a try that went non-finite is rolled

@@ -258,13 +258,19 @@ TEST_F(Robustness, UnwritableOutputIsExitOneWithThePath) {
 // Mistakes on the command line are named, exit 2: a command that is not one
 // (CLI11 said only "A subcommand is required"), an option given an empty
 // value (`--repeats ""` was 0 repeats past the check that refuses 0, and
-// crashed; `--n ""` timed nothing), an --out that is a file (exit 1,
-// without the option's name), and an OMP_NUM_THREADS past --threads' bound.
+// crashed; `--n ""` timed nothing), an --out or output.dir that is a file or
+// a link to nothing (exit 1, without the option's name or the key's place),
+// and an OMP_NUM_THREADS past --threads' bound.
 // Output that standard output could not take is not a success (exit 1).
 TEST_F(Robustness, CommandLineMistakesAreNamed) {
   const test::ScratchDir dir("robust_command_line");
   const std::string scene = MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml";
   const std::string file = dir.write("file", "not a folder");
+  const std::string dir_scene =
+      dir.write("d.yaml", "time: {duration: 0.01, dt: 0.001}\nmaterials: {a: {}}\n"
+                          "particles:\n  - list: {positions: [[0, 0, 1]], radius: 0.1}\noutput: {dir: " + file + "}\n");
+  const std::string dangling = dir.path() + "/gone";
+  fs::create_symlink(dir.path() + "/nothing-here", dangling);
   const std::pair<std::string, std::string> cases[] = {
       {"runn " + scene, "marbles: unknown command 'runn' (did you mean 'run'?)"},
       {"bench bogus", "marbles bench: unknown command 'bogus'; expected one of: broadphase, step, effects"},
@@ -275,6 +281,13 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
       {"run " + scene + " --backend cpu --out \"\"", "--out: an empty value"},
       {"run " + scene + " --backend cpu --quiet --out " + file, "--out: '" + file + "' exists and is not a folder"},
       {"study " + scene + " --vary time.dt=1e-3 --out \"\"", "--out: an empty value"},
+      // The scene's output.dir a file, or a link to nothing: named where it was given (exit 1 without it before).
+      {"run " + scene + " --backend cpu --quiet --set output.dir=" + file,
+       "--set output.dir=" + file + ": output.dir: '" + file + "' exists and is not a folder"},
+      {"run " + dir_scene + " --backend cpu --quiet", dir_scene + ":5:15: output.dir: '" + file + "' exists and is not a folder"},
+      {"run " + scene + " --backend cpu --quiet --out " + dangling, "--out: '" + dangling + "' is a link to nothing"},
+      {"run " + scene + " --backend cpu --quiet --set output.dir=" + dangling,
+       "output.dir: '" + dangling + "' is a link to nothing"},
   };
   for (const auto& [args, said] : cases) {
     const Outcome o = marbles(args, dir);
@@ -282,6 +295,8 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
     EXPECT_NE(o.err.find(said), std::string::npos) << args << ": " << o.err;
   }
   EXPECT_EQ(slurp(file), "not a folder");
+  EXPECT_FALSE(fs::exists(dir.path() + "/nothing-here"));
+  EXPECT_TRUE(fs::is_symlink(dangling));
   // OMP_NUM_THREADS is held to --threads' bound (it was taken as it was); --threads stands over it.
   const std::string run = "run " + scene + " --backend cpu --quiet --summary-only --duration 0.01 --out " + dir.path();
   const Outcome threads = marbles(run + "/t", dir, "OMP_NUM_THREADS=100000");

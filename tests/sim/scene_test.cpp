@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <string>
 #include <utility>
@@ -57,6 +58,40 @@ TEST(SceneErrors, CarryLocationAndKeySeparately) {
     EXPECT_EQ(e.key(), "materials.glass.restitution");
     EXPECT_EQ(e.message(), "must be within [0, 1], got 1.3");
   }
+}
+
+// A substep in which gravity alone moves a sphere past what the precision
+// holds (|g| h^2 beyond an sixteenth of its largest number) is refused at
+// time.dt, in either precision; just inside it, or without the gravity
+// effect, or with the substeps that bring h back, the scene loads.
+TEST(SceneErrors, GravitysFallInASubstepPastThePrecisionIsRefusedAtDt) {
+  const ScratchDir dir("fall_past_range");
+  const double most = double(std::numeric_limits<real>::max()) / 16;
+  const double g = 9.81;
+  const double edge = std::sqrt(most / g);  // |g| h^2 = most
+  const auto scene = [&](double dt, const std::string& more) {
+    return "time: {duration: " + shortest(4 * dt) + ", dt: " + shortest(dt) + more + "}\n" SCENE_MATERIALS
+           "particles:\n  - list: {positions: [[0, 0, 1], [1, 0, 1]], radius: 0.1}\n";
+  };
+  for (const double dt : {1.01 * edge, 1e3 * edge, std::sqrt(double(std::numeric_limits<double>::max()))}) {
+    const std::string path = dir.write("s.yaml", scene(dt, ""));
+    try {
+      load_scene(path);
+      ADD_FAILURE() << "dt " << dt << " loaded";
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.where().file, path);
+      EXPECT_EQ(e.where().line, 1);
+      EXPECT_GT(e.where().column, 1);
+      EXPECT_EQ(e.key(), "time.dt");
+      EXPECT_NE(e.message().find("lets gravity move a sphere |g| h^2 = "), std::string::npos) << e.what();
+      EXPECT_NE(e.message().find(std::string("more than ") + kRealName + " precision holds"), std::string::npos)
+          << e.what();
+      EXPECT_EQ(e.message().find("inf"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_NO_THROW(load_scene(dir.write("s.yaml", scene(0.99 * edge, ""))));
+  EXPECT_NO_THROW(load_scene(dir.write("s.yaml", scene(1e3 * edge, ", substeps: 1000000"))));
+  EXPECT_NO_THROW(load_scene(dir.write("s.yaml", scene(1e3 * edge, "") + "effects: [collisions]\n")));
 }
 
 TEST(SceneErrors, RandomOverfullSaysHowManyWerePlaced) {
