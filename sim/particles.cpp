@@ -301,6 +301,12 @@ bool parse_number(std::string_view s, double& value) {
   return ec == std::errc() && end == s.data() + s.size();
 }
 
+// A digit first, or a point, after an optional sign.
+bool begins_as_number(std::string_view s) {
+  if (!s.empty() && (s.front() == '+' || s.front() == '-')) s.remove_prefix(1);
+  return !s.empty() && (std::isdigit(static_cast<unsigned char>(s.front())) != 0 || s.front() == '.');
+}
+
 // Columns: x y z r vx vy vz wx wy wz (indices 0..9) → position in the row, or -1.
 constexpr int kColumns = 10;
 const char* const kColumnNames[kColumns] = {"x", "y", "z", "r", "vx", "vy", "vz", "wx", "wy", "wz"};
@@ -350,7 +356,10 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
 
     if (layout_line == 0) {
       double probe = 0;
-      header = !parse_number(fields[0].text, probe);
+      // A header names its columns; a first value that begins as a number
+      // does (1e400, 0x10, a number of 400 digits) is a row, and its value
+      // is refused as such, not read as a column's name.
+      header = !parse_number(fields[0].text, probe) && !begins_as_number(fields[0].text);
       layout_line = line_number;
       column_of.fill(-1);
       if (header) {

@@ -424,6 +424,16 @@ TEST(Csv, Errors) {
   if (sizeof(real) == 4) {
     EXPECT_EQ(error_of("0,0,0,1e39\n"), "e.csv:1:7: r: out of range for float precision, got 1e39");
   }
+  // A first value that begins as a number but is none the precision holds (out of double's range, hex, 400
+  // digits) is a row's, refused as on any later line: it was taken for a header ("unknown column '1e400'").
+  for (const std::string v : {"1e400", "-1e400", "1e-400", "0x10", "0x1p3", ".5e999", std::string(400, '9')}) {
+    const std::string first = error_of(v + ",0,0,1\n");
+    std::string later = error_of("0,0,0,1\n" + v + ",0,0,1\n");
+    ASSERT_EQ(later.rfind("e.csv:2:", 0), 0u) << later;
+    later.replace(0, 8, "e.csv:1:");
+    EXPECT_EQ(first, later) << v;
+    EXPECT_EQ(first.find("header"), std::string::npos) << first;
+  }
   // A line longer than any row (a binary file, a stream without line ends) is refused at the bound.
   EXPECT_EQ(error_of("0,0,0,1\n#" + std::string(1048576, '7') + "\r\n"),
             "e.csv:2:1: a line longer than 1048576 bytes: not a CSV file of spheres (rows x,y,z,r[,vx,vy,vz[,wx,wy,wz]])");
