@@ -590,6 +590,13 @@ void launch_reopen_records(const SweepRecords& records, const ColourPlan* plan, 
   });
 }
 
+void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* bodies, SolverTerms t, cudaStream_t s) {
+  if (!r.plan && r.end <= r.begin) return;
+  with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
+    launch(Launch::dependent, warm_start_kernel<friction, rolling>, blocks(r), s, records, r, bodies);
+  });
+}
+
 namespace {
 
 // MARBLES_CUDA_PREFETCH: what a sweep's thread asks the L2 for ahead of
@@ -601,35 +608,20 @@ int prefetch_mode() {
   return mode;
 }
 
-// The range's threads of `Kernel` asking the L2 for the records a wave of
-// blocks on (as many blocks as the SMs hold at once), as prefetch_mode says.
+// A sweep launch of `Kernel`, its threads asking the L2 for the records a
+// wave of blocks on (as many blocks as the SMs hold at once).
 template <auto Kernel>
-void prefetching(ContactRange& r, int sm_count) {
+void launch_sweep_kernel(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, int grid,
+                         int sm_count, cudaStream_t s) {
   const int mode = prefetch_mode();
   r.ahead = mode == 0 ? 0
                       : static_cast<std::uint32_t>(::marbles::cuda::resident_blocks<Kernel>() * sm_count) *
                             static_cast<std::uint32_t>(kBlock);
   r.ahead_bodies = mode == 2;
-}
-
-template <auto Kernel>
-void launch_sweep_kernel(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, int grid,
-                         int sm_count, cudaStream_t s) {
-  prefetching<Kernel>(r, sm_count);
   launch(Launch::dependent, Kernel, grid, s, records, r, bodies, inv_h);
 }
 
 }  // namespace
-
-void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* bodies, SolverTerms t, int sm_count,
-                       cudaStream_t s) {
-  if (!r.plan && r.end <= r.begin) return;
-  with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
-    prefetching<warm_start_kernel<friction, rolling>>(r, sm_count);
-    launch(Launch::dependent, warm_start_kernel<friction, rolling>, blocks(r), s, records, r, bodies);
-  });
-}
-
 
 void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, SolverTerms t,
                   int sm_count, cudaStream_t s) {

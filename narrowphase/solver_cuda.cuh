@@ -71,7 +71,7 @@ void launch_scatter_bodies(const SolverBody* bodies, const BodiesView& world, in
 // whole contacts are made from them when asked for (contact_of_record). The
 // same bits as on the contacts.
 void launch_warm_start(const SweepRecords& records, ContactRange range, SolverBody* bodies, SolverTerms terms,
-                       int sm_count, cudaStream_t stream);
+                       cudaStream_t stream);
 // A sweep's range wider than sm_count SMs hold at two blocks each runs the
 // sweep's form bounded to three blocks a SM (sweep_kernel_fits).
 void launch_sweep(const SweepRecords& records, ContactRange range, SolverBody* bodies, real inv_h, SolverTerms terms,

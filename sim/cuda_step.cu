@@ -606,7 +606,7 @@ class CudaStep final : public StepBackend {
       nc::ContactRange r = range_of(w);
       r.early = last.next(r.begin, r.end, sweep);
       if (sweep) nc::launch_sweep(m_records, r, bodies, inv_h, m_terms, m_sm, m_stream);
-      else nc::launch_warm_start(m_records, r, bodies, m_terms, m_sm, m_stream);
+      else nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);
     };
     auto group = [this, &last, sweep, bodies, inv_h, range_of](const narrowphase::WalkRange* w, std::size_t n) {
       nc::RangeGroup g;
@@ -675,7 +675,7 @@ class CudaStep final : public StepBackend {
     const int sweeps = iterations * m_iteration_factor;
     if (m_local) {  // the local order study: the warm start as always, then its passes
       if (m_model.solver.warm_start) over_colours(false, [&](nc::ContactRange r) {
-          nc::launch_warm_start(m_records, r, bodies, m_terms, m_sm, m_stream);
+          nc::launch_warm_start(m_records, r, bodies, m_terms, m_stream);
         });
       m_local_sweeps.run(m_records, m_count, m_plan, world, m_local->tile_diameters, m_local->passes,
                          m_local->local, m_local->threads, bodies, inv_h, m_terms, m_sm, m_stream);
@@ -1089,7 +1089,7 @@ class CudaStep final : public StepBackend {
     };
     if (m_model.solver.warm_start)
       for (std::uint32_t s = 0; s < slots; ++s)
-        nc::launch_warm_start(m_records, slot(s, false, false), bodies, m_terms, m_sm, m_stream);
+        nc::launch_warm_start(m_records, slot(s, false, false), bodies, m_terms, m_stream);
     // The turns merged as with waits (not under `apart`): a slot that is
     // the overflow set walked back, a colour's contacts each solved again
     // at once.
