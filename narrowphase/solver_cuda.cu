@@ -150,37 +150,24 @@ __device__ __forceinline__ void prefetch_record(const SweepRecords& s, std::uint
   prefetch_l2(s.bodies + k);
 }
 
-// Record k's two bodies (a wall none), asked of the L2: the record's body
-// pair is loaded (the one read here).
-__device__ __forceinline__ void prefetch_bodies(const SweepRecords& s, std::uint32_t k, const SolverBody* bodies) {
-  const BodyPair p = s.bodies[k];
-  if (!is_wall(p.a)) prefetch_l2(bodies + p.a);
-  if (!is_wall(p.b)) prefetch_l2(bodies + p.b);
-}
-
 // A parallel range's thread loads what it may before its wait (load(k)),
 // then does its work (work(k, loaded)); every thread waits, so the launch
 // ends only after the one before it. A serial range waits first. With
-// r.ahead, each thread first asks the L2 for the record that many contacts
-// on (prefetch(k)): the grid's later blocks, which start as the first ones
-// end, then find their records there rather than in DRAM. With
-// r.ahead_bodies, the record two waves on, and the bodies of the one a wave
-// on (prefetch_bodies(k), whose record the wave before asked for).
-template <class Load, class Work, class Prefetch, class PrefetchBodies>
-__device__ void for_range_early(const ContactRange& range, Load&& load, Work&& work, Prefetch&& prefetch,
-                                PrefetchBodies&& prefetch_bodies) {
+// r.ahead, each thread first asks the L2 for the contact that many on
+// (prefetch(k)): the grid's later blocks, which start as the first ones end,
+// then find their records there rather than in DRAM.
+template <class Load, class Work, class Prefetch>
+__device__ void for_range_early(const ContactRange& range, Load&& load, Work&& work, Prefetch&& prefetch) {
   const ContactRange r = resolved(range);
   const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
   const bool early = r.early && !r.serial && t < r.end - r.begin;
   const std::uint32_t k = contact_at(r, t);
-  const std::uint32_t records_on = r.ahead_bodies ? 2 * r.ahead : r.ahead;
-  if (r.ahead != 0 && !r.serial && t + records_on < r.end - r.begin) prefetch(contact_at(r, t + records_on));
+  if (r.ahead != 0 && !r.serial && t + r.ahead < r.end - r.begin) prefetch(contact_at(r, t + r.ahead));
   decltype(load(k)) loaded{};
   if (early) loaded = load(k);
   // Any thread past its wait means the launch before has ended.
   wait_for_last_launch();
   let_next_launch_start();
-  if (r.ahead_bodies && !r.serial && t + r.ahead < r.end - r.begin) prefetch_bodies(contact_at(r, t + r.ahead));
   if (early) {
     work(k, loaded);
     // the rest of a colour wider than the grid (a plan's slot)
@@ -195,8 +182,7 @@ __global__ void warm_start_kernel(SweepRecords records, ContactRange r, SolverBo
   for_range_early(
       r, [&](std::uint32_t k) { return streamed_impulse_word<Friction>(records, k); },
       [&](std::uint32_t k, const Real4& i) { warm_start_loaded<Friction, Rolling>(records, k, i, bodies); },
-      [&](std::uint32_t k) { prefetch_record<Friction, Rolling>(records, k); },
-      [&](std::uint32_t k) { prefetch_bodies(records, k, bodies); });
+      [&](std::uint32_t k) { prefetch_record<Friction, Rolling>(records, k); });
 }
 
 // Twice (a parallel range at a turn): each contact solved again at once
@@ -215,8 +201,7 @@ __device__ __forceinline__ void sweep_range(const SweepRecords& s, const Contact
         solve_loaded<Friction, Rolling>(s, k, c, bodies, inv_h);
         if (again) solve_record<Friction, Rolling>(s, k, bodies, inv_h);
       },
-      [&](std::uint32_t k) { prefetch_record<Friction, Rolling>(s, k); },
-      [&](std::uint32_t k) { prefetch_bodies(s, k, bodies); });
+      [&](std::uint32_t k) { prefetch_record<Friction, Rolling>(s, k); });
 }
 
 template <bool Friction, bool Rolling, bool Twice>
@@ -599,13 +584,12 @@ void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* 
 
 namespace {
 
-// MARBLES_CUDA_PREFETCH: what a sweep's thread asks the L2 for ahead of
-// its own contact (ContactRange::ahead): 0 nothing, 1 the record a wave of
-// blocks on, 2 also the bodies of that record.
-int prefetch_mode() {
-  static const int mode = static_cast<int>(whole_from_environment(
-      "MARBLES_CUDA_PREFETCH", 1, 2, "expected what a sweep asks the L2 for ahead, 0 (nothing), 1 or 2"));
-  return mode;
+// MARBLES_CUDA_PREFETCH: the waves of blocks a sweep's thread asks the L2
+// for ahead of its own contact (ContactRange::ahead; 0: none).
+std::uint32_t prefetch_waves() {
+  static const auto waves = static_cast<std::uint32_t>(whole_from_environment(
+      "MARBLES_CUDA_PREFETCH", 1, 8, "expected the waves of blocks a sweep prefetches ahead, 0 (none) to 8"));
+  return waves;
 }
 
 // A sweep launch of `Kernel`, its threads asking the L2 for the records a
@@ -613,11 +597,8 @@ int prefetch_mode() {
 template <auto Kernel>
 void launch_sweep_kernel(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, int grid,
                          int sm_count, cudaStream_t s) {
-  const int mode = prefetch_mode();
-  r.ahead = mode == 0 ? 0
-                      : static_cast<std::uint32_t>(::marbles::cuda::resident_blocks<Kernel>() * sm_count) *
-                            static_cast<std::uint32_t>(kBlock);
-  r.ahead_bodies = mode == 2;
+  r.ahead = prefetch_waves() * static_cast<std::uint32_t>(::marbles::cuda::resident_blocks<Kernel>() * sm_count) *
+            static_cast<std::uint32_t>(kBlock);
   launch(Launch::dependent, Kernel, grid, s, records, r, bodies, inv_h);
 }
 

@@ -51,11 +51,8 @@ struct ContactRange {
   std::uint32_t slot = 0, width = 0;
   // Parallel, the sweep: each thread asks the L2 for the record `ahead`
   // contacts on from its own (a wave of blocks later), so a later block's
-  // first load finds it there; 0: none. With `ahead_bodies` it asks for the
-  // record two waves on and for the bodies of the one a wave on. Hints
-  // only: no bit depends on them.
+  // first load finds it there; 0: none. A hint only: no bit depends on it.
   std::uint32_t ahead = 0;
-  bool ahead_bodies = false;
 };
 
 // The packed velocity state (solver_math.hpp) from the world, and back;
