@@ -130,39 +130,15 @@ __device__ __forceinline__ void wait_for_last_launch() {
 #endif
 }
 
-// A hint, not a read: the L2 fetches the line that holds p (global memory)
-// for a later load. No fault, no wait, no register held.
-__device__ __forceinline__ void prefetch_l2(const void* p) {
-#if defined(__CUDA_ARCH__)
-  asm volatile("prefetch.global.L2 [%0];" ::"l"(__cvta_generic_to_global(p)));
-#endif
-}
-
-// Record k's words, as load_sweep_contact reads them, asked of the L2.
-template <bool Friction, bool Rolling>
-__device__ __forceinline__ void prefetch_record(const SweepRecords& s, std::uint32_t k) {
-  if (Friction || s.impulse) prefetch_l2(s.impulse + k);
-  else prefetch_l2(s.normal + k);
-  if (Rolling) prefetch_l2(s.rolling + k);
-  prefetch_l2(s.geometry + k);
-  if (s.arms) prefetch_l2(s.arms + k);
-  if (s.extra) prefetch_l2(s.extra + k);
-  prefetch_l2(s.bodies + k);
-}
-
 // A parallel range's thread loads what it may before its wait (load(k)),
 // then does its work (work(k, loaded)); every thread waits, so the launch
-// ends only after the one before it. A serial range waits first. With
-// r.ahead, each thread first asks the L2 for the contact that many on
-// (prefetch(k)): the grid's later blocks, which start as the first ones end,
-// then find their records there rather than in DRAM.
-template <class Load, class Work, class Prefetch>
-__device__ void for_range_early(const ContactRange& range, Load&& load, Work&& work, Prefetch&& prefetch) {
+// ends only after the one before it. A serial range waits first.
+template <class Load, class Work>
+__device__ void for_range_early(const ContactRange& range, Load&& load, Work&& work) {
   const ContactRange r = resolved(range);
   const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
   const bool early = r.early && !r.serial && t < r.end - r.begin;
   const std::uint32_t k = contact_at(r, t);
-  if (r.ahead != 0 && !r.serial && t + r.ahead < r.end - r.begin) prefetch(contact_at(r, t + r.ahead));
   decltype(load(k)) loaded{};
   if (early) loaded = load(k);
   // Any thread past its wait means the launch before has ended.
@@ -181,8 +157,7 @@ template <bool Friction, bool Rolling>
 __global__ void warm_start_kernel(SweepRecords records, ContactRange r, SolverBody* bodies) {
   for_range_early(
       r, [&](std::uint32_t k) { return streamed_impulse_word<Friction>(records, k); },
-      [&](std::uint32_t k, const Real4& i) { warm_start_loaded<Friction, Rolling>(records, k, i, bodies); },
-      [&](std::uint32_t k) { prefetch_record<Friction, Rolling>(records, k); });
+      [&](std::uint32_t k, const Real4& i) { warm_start_loaded<Friction, Rolling>(records, k, i, bodies); });
 }
 
 // Twice (a parallel range at a turn): each contact solved again at once
@@ -200,8 +175,7 @@ __device__ __forceinline__ void sweep_range(const SweepRecords& s, const Contact
       [&](std::uint32_t k, const Contact& c) {
         solve_loaded<Friction, Rolling>(s, k, c, bodies, inv_h);
         if (again) solve_record<Friction, Rolling>(s, k, bodies, inv_h);
-      },
-      [&](std::uint32_t k) { prefetch_record<Friction, Rolling>(s, k); });
+      });
 }
 
 template <bool Friction, bool Rolling, bool Twice>
@@ -582,41 +556,20 @@ void launch_warm_start(const SweepRecords& records, ContactRange r, SolverBody* 
   });
 }
 
-namespace {
-
-// MARBLES_CUDA_PREFETCH: the waves of blocks a sweep's thread asks the L2
-// for ahead of its own contact (ContactRange::ahead; 0: none).
-std::uint32_t prefetch_waves() {
-  static const auto waves = static_cast<std::uint32_t>(whole_from_environment(
-      "MARBLES_CUDA_PREFETCH", 1, 8, "expected the waves of blocks a sweep prefetches ahead, 0 (none) to 8"));
-  return waves;
-}
-
-// A sweep launch of `Kernel`, its threads asking the L2 for the records a
-// wave of blocks on (as many blocks as the SMs hold at once).
-template <auto Kernel>
-void launch_sweep_kernel(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, int grid,
-                         int sm_count, cudaStream_t s) {
-  r.ahead = prefetch_waves() * static_cast<std::uint32_t>(::marbles::cuda::resident_blocks<Kernel>() * sm_count) *
-            static_cast<std::uint32_t>(kBlock);
-  launch(Launch::dependent, Kernel, grid, s, records, r, bodies, inv_h);
-}
-
-}  // namespace
-
 void launch_sweep(const SweepRecords& records, ContactRange r, SolverBody* bodies, real inv_h, SolverTerms t,
                   int sm_count, cudaStream_t s) {
   if (!r.plan && r.end <= r.begin) return;
   const int grid = blocks(r);
   const bool wide = grid > 2 * sm_count;
   with_terms(t.friction, t.rolling, [&](auto friction, auto rolling) {
-    if (r.twice && !r.serial) {
-      if (wide) launch_sweep_kernel<wide_sweep_kernel<friction, rolling, true>>(records, r, bodies, inv_h, grid, sm_count, s);
-      else launch_sweep_kernel<record_sweep_kernel<friction, rolling, true>>(records, r, bodies, inv_h, grid, sm_count, s);
-    } else {
-      if (wide) launch_sweep_kernel<wide_sweep_kernel<friction, rolling, false>>(records, r, bodies, inv_h, grid, sm_count, s);
-      else launch_sweep_kernel<record_sweep_kernel<friction, rolling, false>>(records, r, bodies, inv_h, grid, sm_count, s);
-    }
+    if (r.twice && !r.serial)
+      launch(Launch::dependent,
+             wide ? wide_sweep_kernel<friction, rolling, true> : record_sweep_kernel<friction, rolling, true>, grid, s,
+             records, r, bodies, inv_h);
+    else
+      launch(Launch::dependent,
+             wide ? wide_sweep_kernel<friction, rolling, false> : record_sweep_kernel<friction, rolling, false>, grid,
+             s, records, r, bodies, inv_h);
   });
 }
 

@@ -49,10 +49,6 @@ struct ContactRange {
   // grid is sized for `width` contacts and strides over a wider colour.
   const ColourPlan* plan = nullptr;
   std::uint32_t slot = 0, width = 0;
-  // Parallel, the sweep: each thread asks the L2 for the record `ahead`
-  // contacts on from its own (a wave of blocks later), so a later block's
-  // first load finds it there; 0: none. A hint only: no bit depends on it.
-  std::uint32_t ahead = 0;
 };
 
 // The packed velocity state (solver_math.hpp) from the world, and back;
