@@ -78,13 +78,13 @@ std::string duration_problem(double duration, const TimeSpec& time) {
 
 // `duration`: run --duration's, in the place of the file's (which must
 // still be a number > 0) and held to the same rules under its own name.
-TimeSpec read_time(const Field& field, std::optional<double> duration) {
+TimeSpec read_time(const Field& field, std::optional<double> duration, SourceLocation& dt_where) {
   const MapFields map(field, {"duration", "dt", "substeps"});
   TimeSpec time;
   time.duration = map.required("duration").positive();
   const Field dt = map.required("dt");
   time.dt = dt.positive();
-  time.dt_where = dt.where();
+  dt_where = dt.where();
   if (auto f = map.optional("substeps")) time.substeps = f->integer_at_least(1);
   if (duration) {  // the command line took it finite and > 0
     if (const std::string why = duration_problem(*duration, time); !why.empty())
@@ -975,7 +975,7 @@ Scene read_scene(YAML::Node document, const std::string& path, const std::string
   scene.name = stem;
   if (auto f = top.optional("name")) scene.name = f->word();
 
-  scene.time = read_time(top.required("time"), duration);
+  scene.time = read_time(top.required("time"), duration, scene.dt_where);
   if (auto f = top.optional("solver")) scene.solver = read_solver(*f);
 
   scene.effects = kDefaultEffects;
@@ -990,7 +990,7 @@ Scene read_scene(YAML::Node document, const std::string& path, const std::string
     const double fall = std::sqrt(gx * gx + gy * gy + gz * gz) * h * h;
     const double most = double(std::numeric_limits<real>::max()) / 16;
     if (!(fall <= most))
-      throw InputError(scene.time.dt_where, "time.dt",
+      throw InputError(scene.dt_where, "time.dt",
                        "a substep of h = " + shortest(h) + " s lets gravity move a sphere |g| h^2 = " +
                            (std::isfinite(fall) ? shortest(fall) : "more than " + shortest(most)) +
                            " m in it, more than " + std::string(kRealName) +

@@ -22,7 +22,6 @@ struct TimeSpec {
   double duration = 0;  // s, simulated time
   double dt = 0;        // s, one step (output cadence counts steps)
   int substeps = 1;     // substeps per step, h = dt / substeps
-  SourceLocation dt_where;  // the `dt:` value
 };
 
 struct SolverSpec {
@@ -207,6 +206,7 @@ struct Scene {
   std::string path;  // the file it came from
   std::string name;  // optional `name:`; defaults to the file stem
   TimeSpec time;
+  SourceLocation dt_where;  // time.dt's value (the rules of a substep's motion name it)
   SolverSpec solver;
   std::vector<Effect> effects;
   Vec3 gravity{0, 0, -9.81};

@@ -246,7 +246,7 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
   // substep meets no finite bound.
   const double h = scene.time.dt / scene.time.substeps, travel = speed * h, room = most / 16;
   if (!(travel <= room))
-    throw InputError(scene.time.dt_where, "time.dt",
+    throw InputError(scene.dt_where, "time.dt",
                      "a substep of h = " + significant(h, 6) + " s moves the fastest sphere, at up to " +
                          significant(speed, 6) + " m/s (the fast-motion warning's estimate), " +
                          (std::isfinite(travel) ? significant(travel, 6) : "more than " + significant(room, 6)) +

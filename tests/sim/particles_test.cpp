@@ -426,7 +426,8 @@ TEST(Csv, Errors) {
   }
   // A first value that begins as a number but is none the precision holds (out of double's range, hex, 400
   // digits) is a row's, refused as on any later line: it was taken for a header ("unknown column '1e400'").
-  for (const std::string v : {"1e400", "-1e400", "1e-400", "0x10", "0x1p3", ".5e999", std::string(400, '9')}) {
+  for (const std::string& v :
+       std::vector<std::string>{"1e400", "-1e400", "1e-400", "0x10", "0x1p3", ".5e999", std::string(400, '9')}) {
     const std::string first = error_of(v + ",0,0,1\n");
     std::string later = error_of("0,0,0,1\n" + v + ",0,0,1\n");
     ASSERT_EQ(later.rfind("e.csv:2:", 0), 0u) << later;

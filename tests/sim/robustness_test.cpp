@@ -233,16 +233,19 @@ TEST_F(Robustness, LimitsCanBeRaised) {
   EXPECT_NE(bad.err.find("--limit: spheres must be a positive number, got 'lots'"), std::string::npos) << bad.err;
 }
 
-// Output that cannot be written (the folder is a file; a folder sits where
-// summary.json goes; as root, permissions would not stop us): exit 1 with
-// the path and the reason.
+// Output that cannot be written: a folder sits where summary.json goes (as
+// root, permissions would not stop us): exit 1 with the path and the
+// reason. An output folder that cannot be made (a file above it) is bad
+// input, named where it was given (exit 2; it was exit 1 without the key).
 TEST_F(Robustness, UnwritableOutputIsExitOneWithThePath) {
   const test::ScratchDir dir("robust_unwritable");
   const std::string blocker = dir.write("file", "not a folder");
   const Outcome a = marbles("run " MARBLES_SOURCE_DIR "/scenes/bouncing_ball.yaml --quiet --summary-only --backend cpu "
                             "--set output.dir=" + blocker + "/out", dir);
-  EXPECT_EQ(a.exit_code, 1) << a.err;
-  EXPECT_NE(a.err.find("cannot create the output folder " + blocker + "/out: Not a directory"), std::string::npos)
+  EXPECT_EQ(a.exit_code, 2) << a.err;
+  EXPECT_NE(a.err.find("--set output.dir=" + blocker + "/out: output.dir: '" + blocker + "/out' cannot be made: '" +
+                       blocker + "' is not a folder"),
+            std::string::npos)
       << a.err;
   const std::string out = dir.path() + "/o";
   fs::create_directories(out + "/summary.json");

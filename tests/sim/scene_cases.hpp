@@ -201,7 +201,7 @@ inline const std::vector<BadScene>& bad_scenes() {
       {"empty_material", SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "    material: \"\"\n",
        "{scene}:6:15: particles[0].material: expected a material's name, got an empty name"},
       {"empty_pair_material", SCENE_VALID "contact_pairs:\n  - {materials: ['', glass], friction: 0.1}\n",
-       "{scene}:7:19: contact_pairs[0].materials[0]: expected a material's name, got an empty name"},
+       "{scene}:7:18: contact_pairs[0].materials[0]: expected a material's name, got an empty name"},
       {"unknown_wall_material", SCENE_VALID "walls:\n  - plane: {point: [0, 0, 0], normal: [0, 0, 1]}\n"
                                             "    material: rubber\n",
        "{scene}:8:15: walls[0].material: unknown material 'rubber'; expected one of: glass"},

@@ -10,6 +10,7 @@
 #include <random>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "core/format.hpp"
 #include "narrowphase/solver_math.hpp"
@@ -73,7 +74,10 @@ TEST(SceneErrors, GravitysFallInASubstepPastThePrecisionIsRefusedAtDt) {
     return "time: {duration: " + shortest(4 * dt) + ", dt: " + shortest(dt) + more + "}\n" SCENE_MATERIALS
            "particles:\n  - list: {positions: [[0, 0, 1], [1, 0, 1]], radius: 0.1}\n";
   };
-  for (const double dt : {1.01 * edge, 1e3 * edge, std::sqrt(double(std::numeric_limits<double>::max()))}) {
+  std::vector<double> past = {1.01 * edge, 1e3 * edge};
+  // In double, a fall past double's own range (said as "more than", not inf).
+  if (sizeof(real) == 8) past.push_back(std::sqrt(std::numeric_limits<double>::max()));
+  for (const double dt : past) {
     const std::string path = dir.write("s.yaml", scene(dt, ""));
     try {
       load_scene(path);
