@@ -43,6 +43,7 @@ CompleteCheck ends_with(std::string_view tail) {
     std::ifstream in(p, std::ios::binary);
     in.seekg(0, std::ios::end);
     const std::streamoff size = in.tellg();
+    if (!in || size < 0) return false;  // unreadable: not a finished file
     const std::streamoff span = std::min<std::streamoff>(size, static_cast<std::streamoff>(tail.size()) + 16);
     std::string end(static_cast<std::size_t>(span), '\0');
     in.seekg(size - span);

@@ -9,6 +9,7 @@
 #include <regex>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "render/atomic_file.hpp"
 #include "render/image.hpp"
 #include "render/vtk_output.hpp"
@@ -231,7 +232,8 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
     std::size_t number = k;
     std::smatch m;
     const std::string name = entries[k].path.filename().string();
-    if (!as_run && std::regex_match(name, m, numbered)) number = std::stoul(m[1].str());
+    if (!as_run && std::regex_match(name, m, numbered))
+      if (const auto n = whole_number(m[1].str())) number = static_cast<std::size_t>(*n);  // (more digits: its place)
     if (png_available()) write_png(image_path(dir, number), image);
     drawn.push_back(image_path(dir, number).filename());
     if (writer) writer->add(image);

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <initializer_list>
 #include <limits>
@@ -161,6 +162,7 @@ void require_plain_file(const fs::path& path) {
 
 void require_whole_vtk(const fs::path& path, const std::string& why) {
   require_plain_file(path);
+  if (!std::ifstream(path, std::ios::binary)) throw RuntimeFailure("cannot read " + path.string() + ": " + std::strerror(errno));
   if (!ends_with("</VTKFile>")(path))
     throw InputError(SourceLocation{path.string(), 0, 0}, "",
                      "is cut short or damaged: it does not end with </VTKFile> (" + why + ")");
@@ -429,7 +431,7 @@ void Series::adopt(double time, const fs::path& from) {
     fs::create_directories(m_dir / m_folder, ec);
     if (ec) throw RuntimeFailure("cannot create " + (m_dir / m_folder).string() + ": " + ec.message());
     // Copied under a temporary name and renamed, as every output is written.
-    const fs::path to = m_dir / file, part = to.string() + ".part";
+    const fs::path to = m_dir / file, part = temp_path_beside(to);
     copy_plain_file(from / file, part, ec);
     if (!ec) fs::rename(part, to, ec);
     if (ec) {
@@ -873,7 +875,9 @@ Snapshot read_vtp(const fs::path& vtp_path) {
     if (const auto* v = find(key, 3)) {
       out.resize(points);
       for (std::size_t k = 0; k < 3 * points; ++k)
-        if (!(std::fabs((*v)[k]) <= most)) refuse(key, k / 3, (*v)[k], "a finite number within the precision");
+        if (!(std::fabs((*v)[k]) <= most))
+          refuse(key, k / 3, (*v)[k], sizeof(real) == 4 ? "a finite number within float precision (render reads in float)"
+                                                       : "a finite number within double precision");
       for (std::size_t i = 0; i < points; ++i) out[i] = Vec3(real((*v)[3 * i]), real((*v)[3 * i + 1]), real((*v)[3 * i + 2]));
     }
   };

@@ -197,7 +197,8 @@ struct SeriesEntry {
 };
 
 /// The <DataSet> entries of a .pvd file, in file order. Throws
-/// marbles::RuntimeFailure when the file cannot be read or lists no valid entry.
+/// marbles::RuntimeFailure when the file cannot be read, InputError when it
+/// is cut short, lists no entry or gives a timestep that is no finite number.
 std::vector<SeriesEntry> read_pvd(const std::filesystem::path& pvd_path);
 
 /// Every numeric array of a .vtp in appended format, by "Section/Name"
@@ -227,7 +228,10 @@ void require_plain_file(const std::filesystem::path& path);
 /// some of the arrays radius, velocity, angular_velocity, id, material) into a
 /// snapshot; missing arrays stay empty; time and step come from the field data
 /// TimeValue and step when present. Throws marbles::RuntimeFailure (a file it
-/// cannot read) or InputError (a path that is no plain file).
+/// cannot read) or InputError (a path that is no plain file, or a value no
+/// run writes: a position, velocity, spin or time not finite or past the
+/// precision, a radius not above zero, an id, material, contact count or
+/// step that is not a whole number in range).
 Snapshot read_vtp(const std::filesystem::path& vtp_path);
 
 }  // namespace marbles::render

@@ -158,7 +158,7 @@ void check_frames_beside(const std::filesystem::path& from, const World& world, 
     for (std::uint64_t k = 0; k * static_cast<std::uint64_t>(n) <= step; ++k) {
       const std::filesystem::path p = from / folder / render::numbered_vtp(prefix, static_cast<std::size_t>(k));
       std::error_code ec;
-      if (std::filesystem::exists(p, ec)) render::require_whole_vtk(p, copied);
+      if (std::filesystem::is_regular_file(p, ec)) render::require_whole_vtk(p, copied);  // what the resume copies
     }
   }
   if (every <= 0) return;
@@ -213,6 +213,9 @@ int check_scene(const std::string& scene_path, const std::vector<std::string>& o
                 std::ostream& err, bool pipeline) {
   CheckedScene checked = checked_scene(scene_path, overrides);
   const scene::Scene& sc = checked.scene;
+  // The folder `run` would write into, held to run's rule (without --out).
+  if (const std::string why = folder_problem(sc.output.dir); !why.empty())
+    throw InputError(sc.output.dir_where, "output.dir", why);
   const scene::GeneratedParticles& particles = checked.particles;
   const World& world = checked.world;
   out << scene_path << ": ok (" << particles.size() << " spheres, " << sc.materials.size() << " material(s), "

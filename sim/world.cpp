@@ -248,7 +248,8 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
   if (!(travel <= room))
     throw InputError(scene.dt_where, "time.dt",
                      "a substep of h = " + significant(h, 6) + " s moves the fastest sphere, at up to " +
-                         significant(speed, 6) + " m/s (the fast-motion warning's estimate), " +
+                         significant(speed, 6) + " m/s (the fast-motion warning's estimate, and the fastest spin's "
+                         "surface speed), " +
                          (std::isfinite(travel) ? significant(travel, 6) : "more than " + significant(room, 6)) +
                          " m in it, more than " + kRealName + " precision holds with room for its sums (" +
                          significant(room, 6) + " m); lower time.dt or raise time.substeps");

@@ -288,6 +288,7 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
       {"run " + scene + " --backend cpu --quiet --set output.dir=" + file,
        "--set output.dir=" + file + ": output.dir: '" + file + "' exists and is not a folder"},
       {"run " + dir_scene + " --backend cpu --quiet", dir_scene + ":5:15: output.dir: '" + file + "' exists and is not a folder"},
+      {"check " + dir_scene, dir_scene + ":5:15: output.dir: '" + file + "' exists and is not a folder"},
       {"run " + scene + " --backend cpu --quiet --out " + dangling, "--out: '" + dangling + "' is a link to nothing"},
       {"run " + scene + " --backend cpu --quiet --set output.dir=" + dangling,
        "output.dir: '" + dangling + "' is a link to nothing"},
