@@ -285,6 +285,18 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   const broadphase::Backend backend = select_backend(options.backend, options.quiet ? quiet_sink : out);
 
   World world = make_world(sc, particles);
+  // The seed's grid keys every cell of the spheres' box: spheres too far
+  // apart for it are refused here, naming the option (they ended the first
+  // step, exit 1); the default broad phase hashes its cells and takes them.
+  if (options.algorithm == broadphase::Algorithm::seed && world.size() > 0) {
+    try {
+      broadphase::choose_grid(broadphase::bounds_of({world.position.data(), world.radius.data(), world.size()}), 0);
+    } catch (const broadphase::SpanTooLarge&) {
+      throw InputError(SourceLocation{}, "--broadphase",
+                       "seed: the spheres span more than 2^62 cells of their largest diameter, more than its grid "
+                       "keys (coordinates too far apart for their radii); --broadphase home, the default, takes them");
+    }
+  }
   // The reference's rules before anything runs or is printed (the probe itself is made from the step's world).
   if (sc.reference.kind != scene::ReferenceSpec::Kind::none) ReferenceProbe(sc, world);
 

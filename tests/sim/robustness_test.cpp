@@ -272,6 +272,9 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
   const std::string dir_scene =
       dir.write("d.yaml", "time: {duration: 0.01, dt: 0.001}\nmaterials: {a: {}}\n"
                           "particles:\n  - list: {positions: [[0, 0, 1]], radius: 0.1}\noutput: {dir: " + file + "}\n");
+  const std::string far_scene =
+      dir.write("far.yaml", "time: {duration: 0.002, dt: 0.001}\neffects: [collisions]\nmaterials: {a: {}}\n"
+                            "particles:\n  - list: {positions: [[-1e30, 0, 0], [1e30, 0, 0]], radius: 0.1}\n");
   const std::string dangling = dir.path() + "/gone";
   fs::create_symlink(dir.path() + "/nothing-here", dangling);
   const std::pair<std::string, std::string> cases[] = {
@@ -289,6 +292,9 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
        "--set output.dir=" + file + ": output.dir: '" + file + "' exists and is not a folder"},
       {"run " + dir_scene + " --backend cpu --quiet", dir_scene + ":5:15: output.dir: '" + file + "' exists and is not a folder"},
       {"check " + dir_scene, dir_scene + ":5:15: output.dir: '" + file + "' exists and is not a folder"},
+      // Spheres too far apart for the seed's grid: the option named up front (exit 1 at the first step before).
+      {"run " + far_scene + " --backend cpu --quiet --broadphase seed --precision double --out " + dir.path() + "/far",
+       "--broadphase: seed: the spheres span more than 2^62 cells"},
       {"run " + scene + " --backend cpu --quiet --out " + dangling, "--out: '" + dangling + "' is a link to nothing"},
       {"run " + scene + " --backend cpu --quiet --set output.dir=" + dangling,
        "output.dir: '" + dangling + "' is a link to nothing"},
@@ -300,6 +306,10 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
   }
   EXPECT_EQ(slurp(file), "not a folder");
   EXPECT_FALSE(fs::exists(dir.path() + "/nothing-here"));
+  // The same spheres run with the default broad phase.
+  EXPECT_EQ(marbles("run " + far_scene + " --backend cpu --quiet --precision double --out " + dir.path() + "/far2", dir)
+                .exit_code,
+            0);
   EXPECT_TRUE(fs::is_symlink(dangling));
   // OMP_NUM_THREADS is held to --threads' bound (it was taken as it was); --threads stands over it.
   const std::string run = "run " + scene + " --backend cpu --quiet --summary-only --duration 0.01 --out " + dir.path();
