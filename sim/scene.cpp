@@ -973,12 +973,7 @@ Scene read_scene(YAML::Node document, const std::string& path, const std::string
   Scene scene;
   scene.path = path;
   scene.name = stem;
-  if (auto f = top.optional("name")) {
-    scene.name = f->word();
-    // Printed in the summary, the images' label and the run's lines: one line of text.
-    if (std::any_of(scene.name.begin(), scene.name.end(), [](char c) { return static_cast<unsigned char>(c) < 0x20; }))
-      f->fail("a scene name cannot hold a control character (tab, newline)");
-  }
+  if (auto f = top.optional("name")) scene.name = f->word();
 
   scene.time = read_time(top.required("time"), duration, scene.dt_where);
   if (auto f = top.optional("solver")) scene.solver = read_solver(*f);

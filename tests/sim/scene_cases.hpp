@@ -198,8 +198,6 @@ inline const std::vector<BadScene>& bad_scenes() {
        "# spheres\n0,0,0,1,2\n"},
       {"unknown_material", SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "    material: glas\n",
        "{scene}:6:15: particles[0].material: unknown material 'glas' (did you mean 'glass'?)"},
-      {"name_control_character", "name: \"a\\ab\"\n" SCENE_VALID,
-       "{scene}:1:7: name: a scene name cannot hold a control character (tab, newline)"},
       {"empty_material", SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "    material: \"\"\n",
        "{scene}:6:15: particles[0].material: expected a material's name, got an empty name"},
       {"empty_pair_material", SCENE_VALID "contact_pairs:\n  - {materials: ['', glass], friction: 0.1}\n",
