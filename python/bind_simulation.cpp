@@ -146,6 +146,7 @@ class PySimulation {
       }
       m_totals.add(m_sim->last_step(), m_sim->substeps(), m_sim->last_rollbacks().size(), !m_sim->last_kept().empty());
       if (m_probe && m_sim->steps() % m_probe_every == 0) m_probe->sample(m_sim->time(), m_sim->world());
+      if (m_views_out && i + 1 == n) m_known_state = state_hash();  // what the views hold, unwritten
     }
   }
 
@@ -160,7 +161,14 @@ class PySimulation {
     check_array_name(what);
     nb::object owner = nb::find(this);
     const BodiesView v = m_sim->state_in_place();
-    m_views_out = true;
+    const bool writable = what == "position" || what == "velocity" || what == "angular_velocity";
+    // Read-only arrays (radius, material) cannot be written through: only a
+    // writable view can edit the state, and on the host only once its bytes
+    // change (views_written).
+    if (writable && !m_views_out) {
+      m_views_out = true;
+      m_known_state = state_hash();
+    }
     const std::size_t n = v.count;
     real* vec = what == "position" ? &v.position[0].x
                 : what == "velocity" ? &v.velocity[0].x
@@ -185,7 +193,7 @@ class PySimulation {
   nb::object copy(const std::string& what) {
     const Busy busy(*this, Busy::reads);
     check_array_name(what);
-    if (m_views_out) m_sim->state_written();  // device views may have been written
+    if (views_written()) m_sim->state_written();  // views may have been written
     const World& w = m_sim->world();
     const std::size_t n = w.size();
     if (what == "radius") return nb::cast(to_numpy(w.radius.data(), {n}));
@@ -402,7 +410,9 @@ class PySimulation {
   // An edit of the host copy goes to the arrays handed out at once (on the
   // GPU they are device memory, which would otherwise win at the next step).
   void host_edited() {
-    if (m_views_out) m_sim->state_in_place();
+    if (!m_views_out) return;
+    m_sim->state_in_place();
+    m_known_state = state_hash();  // the edit is the step's own (an assignment, a restart): known
   }
 
   // The arrays handed out may have been written: the step takes them as an
@@ -413,7 +423,39 @@ class PySimulation {
     throw nb::value_error(("no state array '" + what + "' (position, velocity, angular_velocity, radius, material)").c_str());
   }
 
+  // Whether the writable views handed out may have been written since the
+  // state was last known (handed out, or after the last step): on the host
+  // where their bytes changed, on the GPU always (device memory, not hashed
+  // here). Reading them is no edit: the next step keeps the watchdog's
+  // figures of its start, as `marbles run` does, and the same bits.
+  bool views_written() {
+    if (!m_views_out) return false;
+    return on_device() || state_hash() != m_known_state;
+  }
+  // The bytes of the writable arrays on the host (0 on the GPU: not read).
+  std::uint64_t state_hash() {
+    if (on_device()) return 0;
+    const BodiesView v = m_sim->state_in_place();
+    std::uint64_t h = 14695981039346656037ull;
+    for (const Vec3* a : {v.position, v.velocity, v.angular_velocity})
+      if (v.count > 0) h = words_hash(a, v.count * sizeof(Vec3), h);
+    return h;
+  }
+  static std::uint64_t words_hash(const void* data, std::size_t bytes, std::uint64_t h) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    std::size_t k = 0;
+    for (; k + 8 <= bytes; k += 8) {
+      std::uint64_t w;
+      std::memcpy(&w, p + k, 8);
+      h = (h ^ w) * 1099511628211ull;
+      h ^= h >> 29;
+    }
+    for (; k < bytes; ++k) h = (h ^ p[k]) * 1099511628211ull;
+    return h;
+  }
+
   void check_views() {
+    if (!views_written()) return;  // nothing written: the state as the last step left it
     m_sim->state_written();
     if (m_sim->state_finite()) return;  // on the GPU a flag, not a copy
     const World& w = m_sim->world();
@@ -445,7 +487,8 @@ class PySimulation {
   RunTotals m_totals;
   std::optional<ReferenceProbe> m_probe;
   std::uint64_t m_probe_every = 1, m_total_steps = 0;
-  bool m_views_out = false;
+  bool m_views_out = false;       // a writable view of the state handed out
+  std::uint64_t m_known_state = 0;  // state_hash() when the state was last known unwritten
   // Held by the call that steps or changes the simulation: a call from
   // another thread meanwhile (step() lets the GIL go) is refused, not raced.
   // A reader called from within the step's own thread (a Python signal

@@ -68,6 +68,38 @@ def test_writes_through_views_change_the_next_step(pile):
     assert not np.array_equal(edited.positions, untouched.positions)
 
 
+def test_reading_the_state_is_no_edit():
+    # A box with 100 spheres dropped at one point: the watchdog refuses the
+    # first step (spheres pushed through a wall, every retry). Reading the
+    # state first, through any view or a copy, writes nothing: the step is
+    # judged as it is without the read (it was taken for an edit, which the
+    # watchdog does not judge, and the step passed with spheres outside).
+    scene = {"time": {"duration": 0.5, "dt": 1e-3}, "effects": ["gravity", "collisions", "walls"],
+             "materials": {"glass": {"density": 2500}},
+             "walls": [{"box": {"min": [0, 0, 0], "max": [0.1, 0.1, 0.3]}}],
+             "particles": [{"list": {"positions": [[0.05, 0.05, 0.05]] * 100, "radius": 0.01}}]}
+    reads = [None, lambda s: s.radii, lambda s: s.materials, lambda s: s.positions,
+             lambda s: s.velocities.copy(), lambda s: s.angular_velocities, lambda s: s.contacts()]
+    for read in reads:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sim = marbles.Simulation.from_dict(scene, backend="cpu", threads=1)
+        if read:
+            read(sim)
+        with pytest.raises(marbles.RuntimeFailure, match="went through a wall"):
+            sim.step()
+        assert sim.steps == 0
+    # A value written back unchanged is no edit either; a changed one is (the
+    # step then starts from it unjudged, as after an assignment).
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = marbles.Simulation.from_dict(scene, backend="cpu", threads=1)
+    x = sim.positions
+    x[3] = x[3].copy()
+    with pytest.raises(marbles.RuntimeFailure, match="went through a wall"):
+        sim.step()
+
+
 def test_non_finite_writes_are_refused(pile):
     sim = marbles.Simulation.from_dict(pile, backend="cpu")
     sim.step(2)
