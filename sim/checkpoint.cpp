@@ -268,6 +268,9 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash, st
     r.fail("is damaged (its running totals)");
   for (double p : c.probe)
     if (!finite(p)) r.fail("is damaged (its reference's progress)");
+  // Steps a run could have made: at most 2^53 (its time, steps x dt, exact in
+  // double; no count wraps past it), far past the substep limit's 10^10.
+  if (c.steps > (std::uint64_t{1} << 53)) r.fail("is damaged (its step count, " + std::to_string(c.steps) + ")");
   // Pairs of its spheres (a < b) or a sphere and a wall, in ascending key
   // order without repeats: the restore's runs by sphere and the kept
   // colours' split between the threads (or_kept_colours_by_a) rest on it.

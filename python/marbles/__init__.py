@@ -88,7 +88,16 @@ def _overrides(set):
     if set is None:
         return []
     if isinstance(set, dict):
-        texts = [f"{key}={_yaml_text(value, key)}" for key, value in set.items()]
+        texts = []
+        for key, value in set.items():
+            try:
+                texts.append(f"{key}={_yaml_text(value, key)}")
+            except RecursionError:  # a list that holds itself, or nests past Python's depth
+                raise SceneError(f"set: {key}: the value holds itself, or nests deeper than any scene value does",
+                                 key=key, message="the value holds itself, or nests deeper than any scene value "
+                                 "does") from None
+    elif isinstance(set, (bytes, bytearray, memoryview)):  # iterated, they would be numbers
+        raise TypeError(f"set: a dict of key -> value, or a list of 'key=value' texts (str), got {type(set).__name__}")
     elif isinstance(set, str):
         texts = [set]
     elif not hasattr(set, "__iter__"):
@@ -148,7 +157,7 @@ def _json_text(text):
         return True
     try:
         json.loads(text)
-    except ValueError:
+    except (ValueError, RecursionError):
         return False
     return True
 
@@ -378,6 +387,10 @@ class Simulation:
                                  message="give scene=") from None
             except OSError as e:  # a folder, unreadable
                 raise RuntimeFailure(f"cannot read {path}.scene.json: {e.strerror or e}") from None
+            except RecursionError:  # JSON nested past Python's depth: no record is
+                raise SceneError(f"{path}.scene.json: restart: not the record of a scene (nested past any "
+                                 "scene's depth); give scene=", file=path + ".scene.json", key="restart",
+                                 message="give scene=") from None
             except ValueError as e:  # not JSON
                 raise SceneError(f"{path}.scene.json: restart: not the record of a scene ({e}); give scene=",
                                  file=path + ".scene.json", key="restart", message="give scene=") from None

@@ -415,7 +415,9 @@ def test_checkpoint_paths_that_are_no_file(pile, tmp_path):
     sim.checkpoint(ck)
     assert marbles.Simulation.restart(ck).steps == 0  # premise: it restarts as written
     for text in ("{bad", "[1, 2]", "{}", '{"scene": 5, "set": []}', '{"dict": "not json", "set": []}',
-                 '{"dict": "{}", "name": 5, "set": []}', '{"scene": "a.yaml", "set": [5]}'):
+                 '{"dict": "{}", "name": 5, "set": []}', '{"scene": "a.yaml", "set": [5]}',
+                 # JSON nested past Python's depth, the record or its scene dict (a RecursionError before)
+                 "[" * 100000 + "]" * 100000, json.dumps({"dict": "[" * 100000 + "]" * 100000, "set": []})):
         (tmp_path / "c.mck.scene.json").write_text(text)
         with pytest.raises(marbles.SceneError, match="not the record of a scene"):
             marbles.Simulation.restart(ck)
@@ -446,6 +448,15 @@ def test_dicts_that_hold_themselves_or_nest_too_deep(pile):
     for scene in (looped, deep):
         with pytest.raises(marbles.SceneError, match="holds itself, or nests deeper"):
             marbles.Simulation.from_dict(scene)
+    # The same in an override's value (a RecursionError before), and overrides given as bytes, which
+    # iterated are numbers ("--set 116: expected key.path=value" before).
+    value = [1e-3]
+    value.append(value)
+    with pytest.raises(marbles.SceneError, match=r"set: time\.dt: the value holds itself, or nests deeper"):
+        marbles.Simulation.from_dict(pile, set={"time.dt": value})
+    for given in (b"time.dt=5e-4", bytearray(b"time.dt=5e-4")):
+        with pytest.raises(TypeError, match="set: a dict of key -> value, or a list of 'key=value' texts"):
+            marbles.Simulation.from_dict(pile, set=given)
 
 
 def test_a_study_into_a_folder_it_cannot_make_is_a_runtime_failure(tmp_path):

@@ -396,6 +396,8 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
       {"running totals", [](Checkpoint& k) { k.totals.contact_sum = -1; }},
       {"running totals", [](Checkpoint& k) { k.totals.deepest = 1e308; }},  // "inf %" once printed
       {"running totals", [](Checkpoint& k) { k.totals.rollbacks = 0.5; }},
+      {"step count", [](Checkpoint& k) { k.steps = ~std::uint64_t{0}; }},  // a Python restart wrapped it to 1
+      {"step count", [](Checkpoint& k) { k.steps = (std::uint64_t{1} << 53) + 1; }},
       {"range once squared", [&](Checkpoint& k) { k.world.velocity[1].x = beyond_square; }},
       {"range once squared", [&](Checkpoint& k) { k.world.angular_velocity[2].z = -beyond_square; }},
       {"range once squared", [&](Checkpoint& k) { k.world.position[0].y = beyond_square; }},
