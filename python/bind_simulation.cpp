@@ -38,6 +38,7 @@
 #include "broadphase/grid.hpp"
 #include "core/error.hpp"
 #include "core/format.hpp"
+#include "core/hash.hpp"
 #include "core/parallel.hpp"
 #include "python/gil.hpp"
 #include "render/atomic_file.hpp"
@@ -146,8 +147,8 @@ class PySimulation {
       }
       m_totals.add(m_sim->last_step(), m_sim->substeps(), m_sim->last_rollbacks().size(), !m_sim->last_kept().empty());
       if (m_probe && m_sim->steps() % m_probe_every == 0) m_probe->sample(m_sim->time(), m_sim->world());
-      if (m_views_out && i + 1 == n) m_known_state = state_hash();  // what the views hold, unwritten
     }
+    if (m_views_out) m_known_state = state_hash();  // what the views hold, unwritten
   }
 
   // --- the state ---------------------------------------------------------
@@ -436,22 +437,8 @@ class PySimulation {
   std::uint64_t state_hash() {
     if (on_device()) return 0;
     const BodiesView v = m_sim->state_in_place();
-    std::uint64_t h = 14695981039346656037ull;
-    for (const Vec3* a : {v.position, v.velocity, v.angular_velocity})
-      if (v.count > 0) h = words_hash(a, v.count * sizeof(Vec3), h);
-    return h;
-  }
-  static std::uint64_t words_hash(const void* data, std::size_t bytes, std::uint64_t h) {
-    const auto* p = static_cast<const unsigned char*>(data);
-    std::size_t k = 0;
-    for (; k + 8 <= bytes; k += 8) {
-      std::uint64_t w;
-      std::memcpy(&w, p + k, 8);
-      h = (h ^ w) * 1099511628211ull;
-      h ^= h >> 29;
-    }
-    for (; k < bytes; ++k) h = (h ^ p[k]) * 1099511628211ull;
-    return h;
+    const std::size_t bytes = v.count * sizeof(Vec3);
+    return fnv1a(v.angular_velocity, bytes, fnv1a(v.velocity, bytes, fnv1a(v.position, bytes)));
   }
 
   void check_views() {

@@ -127,11 +127,9 @@ long temporary_writer(const std::string& name) {
   std::string_view rest = std::string_view(name).substr(tag + 5);
   if (rest.ends_with(".log")) rest.remove_suffix(4);
   const std::size_t dash = rest.find('-');
-  const auto digits = [](std::string_view s) {
-    return !s.empty() && s.size() <= 18 && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
-  };
-  if (dash == std::string_view::npos || !digits(rest.substr(0, dash)) || !digits(rest.substr(dash + 1))) return 0;
-  return std::strtol(std::string(rest.substr(0, dash)).c_str(), nullptr, 10);
+  if (dash == std::string_view::npos || !whole_number(rest.substr(dash + 1))) return 0;
+  const auto pid = whole_number(rest.substr(0, dash));
+  return pid ? static_cast<long>(*pid) : 0;
 }
 
 }  // namespace

@@ -426,8 +426,9 @@ void Series::adopt(double time, const fs::path& from) {
   if (!fs::exists(m_dir / file, ec)) {
     // In neither folder (a run that wrote no frames, or a checkpoint away
     // from its run's folder): numbered, but not listed.
+    // (Whole: the resume holds every file it copies to require_whole_vtk
+    // before it writes anything, sim/run.cpp check_frames_beside.)
     if (from.empty() || !fs::is_regular_file(from / file, ec)) return;
-    require_whole_vtk(from / file, "a resume copies its checkpoint's run's files, which must be whole");
     fs::create_directories(m_dir / m_folder, ec);
     if (ec) throw RuntimeFailure("cannot create " + (m_dir / m_folder).string() + ": " + ec.message());
     // Copied under a temporary name and renamed, as every output is written.

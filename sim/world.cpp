@@ -146,10 +146,6 @@ namespace {
 //   inf (null in summary.json). Held to the same factor 16.
 constexpr double kHeadroom = 16;
 
-}  // namespace
-
-namespace {
-
 // An inverse mass or inertia the step's arithmetic takes: normal, and with
 // room for the sums and products of a few of them.
 bool usable_inverse(real v) {
