@@ -23,7 +23,6 @@
 
 #include <nlohmann/json.hpp>
 #include <yaml-cpp/depthguard.h>
-#include <yaml-cpp/eventhandler.h>
 
 #include "core/files.hpp"
 #include "core/format.hpp"
@@ -660,38 +659,6 @@ std::string read_file(const std::string& path) {
   return text;
 }
 
-// Counts the YAML documents of `text`, stopping at `limit` (yaml-cpp 0.7's
-// LoadAll yields empty documents forever after a leading ','); `second` is
-// where the second one starts.
-class DocumentCounter : public YAML::EventHandler {
- public:
-  void OnDocumentStart(const YAML::Mark& mark) override {
-    if (++m_count == 2) m_second = mark;
-  }
-  void OnDocumentEnd() override {}
-  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
-  void OnAlias(const YAML::Mark&, YAML::anchor_t) override {}
-  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t, const std::string&) override {}
-  void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {}
-  void OnSequenceEnd() override {}
-  void OnMapStart(const YAML::Mark&, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {}
-  void OnMapEnd() override {}
-
-  static std::size_t count(const std::string& text, std::size_t limit, YAML::Mark& second) {
-    std::istringstream in(text);
-    YAML::Parser parser(in);
-    DocumentCounter counter;
-    while (counter.m_count < limit && parser.HandleNextDocument(counter)) {
-    }
-    second = counter.m_second;
-    return counter.m_count;
-  }
-
- private:
-  std::size_t m_count = 0;
-  YAML::Mark m_second;
-};
-
 // True when the text holds nothing but blanks and comments.
 bool blank_yaml(const std::string& text) {
   std::istringstream in(text);
@@ -866,11 +833,10 @@ YAML::Node read_document(const std::string& path) {
   if (const std::size_t at = text.find('\0'); at != std::string::npos && !utf16_or_32 && !unmarked_wide)
     throw InputError(place_of(at), "", "a NUL byte: not text (a binary file?)");
   YAML::Node document;
-  std::size_t count = 0;
-  YAML::Mark second;
+  detail::YamlScan scan;
   try {
     document = YAML::Load(text);
-    count = DocumentCounter::count(text, 2, second);
+    scan = detail::scan_yaml(text, 2, !utf16_or_32 && !unmarked_wide);
   } catch (const YAML::DeepRecursion& e) {  // yaml-cpp's own message for it is "bad file"
     throw InputError(detail::location_of(path, e.mark), "",
                      "nested deeper than the YAML reader follows (" + std::to_string(e.depth()) + " levels)");
@@ -884,8 +850,10 @@ YAML::Node read_document(const std::string& path) {
   if (document.IsNull())
     throw InputError(SourceLocation{path, 1, 1}, "", "not valid YAML: no document could be read (does it begin with "
                                                      "a stray ',', '-' or ':'?)");
-  if (count > 1)
-    throw InputError(detail::location_of(path, second), "", "a scene is one YAML document, this file holds more");
+  if (scan.documents > 1)
+    throw InputError(detail::location_of(path, scan.second), "", "a scene is one YAML document, this file holds more");
+  if (scan.problem)
+    throw InputError(detail::location_of(path, scan.problem->mark), scan.problem->key, scan.problem->what);
   expect_scene_map(document, path);
   if (text.find("<<") != std::string::npos) MergeKeys(path).resolve(document, "");
   return document;

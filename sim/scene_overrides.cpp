@@ -190,6 +190,8 @@ void apply_override(YAML::Node root, const std::string& text, Origins& origins, 
   } catch (const YAML::Exception& e) {  // its message quotes the offending byte, which may be any
     fail(label, "", "the value is not valid YAML: " + printable(e.msg));
   }
+  if (const YamlScan scan = scan_yaml(text.substr(equals + 1), 1, true); scan.problem)
+    fail(label, "", scan.problem->what);
   std::vector<YAML::Node> parents(steps.size());  // the node before each step, as the override leaves it
   std::string key;
   if (!shared) {  // the value put in where the path ends

@@ -11,6 +11,9 @@
 #include <cstdlib>
 #include <cmath>
 #include <limits>
+#include <sstream>
+
+#include <yaml-cpp/eventhandler.h>
 
 #include "core/format.hpp"
 #include "core/hash.hpp"
@@ -26,6 +29,105 @@ SourceLocation location_of(const std::string& file, const YAML::Mark& mark) {
 }
 
 namespace {
+
+// The events of a YAML text, as scan_yaml reads them, with the dotted key
+// of each node ("materials.glass.density", "particles[2]"; a map's key
+// takes its map's).
+class ScanHandler : public YAML::EventHandler {
+ public:
+  ScanHandler(const std::string& text, bool utf8, YamlScan& scan) : m_text(text), m_utf8(utf8), m_scan(scan) {}
+
+  void OnDocumentStart(const YAML::Mark& mark) override {
+    if (++m_scan.documents == 2) m_scan.second = mark;
+    m_levels.clear();
+  }
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark&, YAML::anchor_t) override { after(nullptr); }
+  void OnAlias(const YAML::Mark&, YAML::anchor_t) override { after(nullptr); }
+  void OnScalar(const YAML::Mark& mark, const std::string& tag, YAML::anchor_t, const std::string& value) override {
+    tagged(mark, tag);
+    if (tag == "!" && m_utf8) quoted(mark);
+    after(&value);
+  }
+  void OnSequenceStart(const YAML::Mark& mark, const std::string& tag, YAML::anchor_t,
+                       YAML::EmitterStyle::value) override {
+    tagged(mark, tag);
+    m_levels.push_back({false, here()});
+  }
+  void OnSequenceEnd() override { end(); }
+  void OnMapStart(const YAML::Mark& mark, const std::string& tag, YAML::anchor_t, YAML::EmitterStyle::value) override {
+    tagged(mark, tag);
+    m_levels.push_back({true, here()});
+  }
+  void OnMapEnd() override { end(); }
+
+ private:
+  struct Level {
+    bool map;
+    std::string key;  // the level's own
+    bool key_next = true;
+    std::string last = {};  // a map's last key
+    std::size_t index = 0;
+  };
+
+  // The key of the node that starts now.
+  std::string here() const {
+    if (m_levels.empty()) return "";
+    const Level& level = m_levels.back();
+    if (!level.map) return level.key + "[" + std::to_string(level.index) + "]";
+    if (level.key_next) return level.key;
+    return level.key.empty() ? level.last : level.key + "." + level.last;
+  }
+  // A node has ended: the next is its map's value or key, or its sequence's next item.
+  void after(const std::string* scalar) {
+    if (m_levels.empty()) return;
+    Level& level = m_levels.back();
+    if (!level.map) {
+      ++level.index;
+      return;
+    }
+    if (level.key_next) level.last = scalar ? printable(*scalar) : "?";
+    level.key_next = !level.key_next;
+  }
+  void end() {
+    if (!m_levels.empty()) m_levels.pop_back();
+    after(nullptr);
+  }
+  void found(const YAML::Mark& mark, std::string what) {
+    if (m_scan.documents == 1 && !m_scan.problem) m_scan.problem = YamlScan::Problem{mark, here(), std::move(what)};
+  }
+  // "?" is no tag, "!" a quoted value's (or the bare `!`, which asks for nothing).
+  void tagged(const YAML::Mark& mark, const std::string& tag) {
+    if (tag == "?" || tag == "!") return;
+    static constexpr std::string_view core = "tag:yaml.org,2002:";
+    const std::string said = tag.starts_with(core) ? "!!" + tag.substr(core.size()) : tag;
+    found(mark, "a YAML tag ('" + printable(said) + "'): a scene's values take none (remove it)");
+  }
+  // The value at the mark, where it is quoted, must close its quote before
+  // the text ends (in double quotes a backslash escapes the next byte, in
+  // single quotes a doubled quote is one).
+  void quoted(const YAML::Mark& mark) {
+    if (mark.pos < 0) return;
+    const std::size_t start = (m_text.starts_with("\xef\xbb\xbf") ? 3 : 0) + static_cast<std::size_t>(mark.pos);
+    if (start >= m_text.size()) return;
+    const char quote = m_text[start];
+    if (quote != '"' && quote != '\'') return;  // a block scalar's `|` or `>`
+    for (std::size_t k = start + 1; k < m_text.size(); ++k) {
+      if (quote == '"' && m_text[k] == '\\') {
+        ++k;
+      } else if (m_text[k] == quote) {
+        if (quote == '"' || k + 1 == m_text.size() || m_text[k + 1] != '\'') return;
+        ++k;
+      }
+    }
+    found(mark, std::string("a quoted value never closed (its ") + quote + " is missing)");
+  }
+
+  const std::string& m_text;
+  bool m_utf8;
+  YamlScan& m_scan;
+  std::vector<Level> m_levels;
+};
 
 char lower(char c) { return (c >= 'A' && c <= 'Z') ? char(c - 'A' + 'a') : c; }
 
@@ -71,6 +173,16 @@ bool parse_integer(std::string_view text, Int& value) {
 }
 
 }  // namespace
+
+YamlScan scan_yaml(const std::string& text, std::size_t limit, bool utf8) {
+  YamlScan scan;
+  std::istringstream in(text);
+  YAML::Parser parser(in);
+  ScanHandler handler(text, utf8, scan);
+  while (scan.documents < limit && parser.HandleNextDocument(handler)) {
+  }
+  return scan;
+}
 
 bool parse_double(std::string_view text, double& value) {
   std::string_view s = trimmed(text);

@@ -33,6 +33,27 @@ namespace marbles::scene::detail {
 // Position of a yaml-cpp mark as 1-based line and column (0 when unknown).
 SourceLocation location_of(const std::string& file, const YAML::Mark& mark);
 
+// A YAML text read event by event, for what yaml-cpp takes without a word
+// but a scene must not hold: `problem` is the first, in the first document,
+// of a tag (`!foo 2500`, `!!str 5`: the reader keeps the value and drops
+// the tag's meaning) and a quoted value never closed (the reader takes
+// `"abc` as a whole value where a line break ends the text). `documents`
+// counts the documents, up to the limit asked (yaml-cpp 0.7 reads empty
+// documents forever after a leading ','), and `second` is where the second
+// begins. Quotes are looked for only in UTF-8 text (`utf8`), where a
+// mark's position is a byte's (past a byte order mark).
+struct YamlScan {
+  struct Problem {
+    YAML::Mark mark;
+    std::string key;  // dotted, as a Field's
+    std::string what;
+  };
+  std::size_t documents = 0;
+  YAML::Mark second;
+  std::optional<Problem> problem;
+};
+YamlScan scan_yaml(const std::string& text, std::size_t limit, bool utf8);
+
 // The closest candidate by edit distance, or empty when none is close enough
 // to be a likely typo.
 std::string nearest_name(std::string_view word, const std::vector<std::string>& candidates);

@@ -366,6 +366,48 @@ TEST(SceneLoad, UnicodeTextOnly) {
   }
 }
 
+// A quoted value is read whole where its quote closes, however it ends
+// (escaped quotes and backslashes, doubled single quotes, a line break
+// inside, a byte order mark before); where it does not close before the
+// file ends it is refused, also where yaml-cpp took it (a line break last).
+TEST(SceneLoad, QuotedValuesCloseOrAreRefused) {
+  const ScratchDir dir("quotes");
+  const std::pair<std::string, std::string> closed[] = {
+      {R"("a\"b")", R"(a"b)"},     {R"("a\\")", R"(a\)"}, {"'it''s'", "it's"}, {"''''", "'"},
+      {"\"two\n  lines\"", "two lines"}, {"|\n  \"open\n", "\"open\n"}, {"'\"'", "\""}, {"\"'\"", "'"}};
+  for (const auto& [value, name] : closed)
+    for (const std::string bom : {"", "\xef\xbb\xbf"}) {
+      const std::string text = bom + SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "name: " + value + "\n";
+      EXPECT_EQ(load_scene(dir.write("s.yaml", text)).name, name) << value;
+    }
+  const std::pair<std::string, char> open[] = {{R"("a\")", '"'}, {R"("a\\\")", '"'}, {"'it''", '\''},
+                                               {"'''", '\''},    {"\"'\n", '"'},     {"'\"\n\n", '\''}};
+  for (const auto& [value, quote] : open)
+    for (const std::string bom : {"", "\xef\xbb\xbf"}) {
+      const std::string text = bom + SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "name: " + value + "\n";
+      try {
+        load_scene(dir.write("s.yaml", text));
+        ADD_FAILURE() << "no error for " << value;
+      } catch (const InputError& e) {
+        EXPECT_EQ(std::string(e.what()), dir.path() + "/s.yaml:6:7: name: a quoted value never closed (its " +
+                                             std::string(1, quote) + " is missing)")
+            << value;
+      }
+    }
+  // The same two checks hold a --set value.
+  EXPECT_EQ(load_scene(dir.write("o.yaml", SET_SCENE), {"name='it''s'"}).name, "it's");
+  const std::pair<std::string, std::string> refused[] = {
+      {"name=\"x\n", R"(--set name="x\x0a: a quoted value never closed (its " is missing))"},
+      {"time.dt=!!float 1e-3", "--set time.dt=!!float 1e-3: a YAML tag ('!!float'): a scene's values take none (remove it)"}};
+  for (const auto& [bad, message] : refused)
+    try {
+      load_scene(dir.write("o.yaml", SET_SCENE), {bad});
+      ADD_FAILURE() << "no error for " << bad;
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()), message);
+    }
+}
+
 // A NUL byte in a scene file is refused where it stands (yaml-cpp read one
 // as an escape: "unknown escape character: m").
 TEST(SceneFile, ANulByteIsRefusedWhereItStands) {
