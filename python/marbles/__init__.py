@@ -244,7 +244,15 @@ def _on_host(values):
 
 def _real_array(values, what):
     """``values`` as a NumPy array of numbers (bool, text, dates and ragged
-    lists refused by name, where NumPy's own errors named nothing)."""
+    lists refused by name, where NumPy's own errors named nothing; a masked
+    array's hidden entries refused, where they were read as numbers)."""
+    if np.ma.isMaskedArray(values):
+        masked = np.flatnonzero(np.ma.getmaskarray(values))
+        if masked.size:
+            raise ValueError(f"{what}: a masked array with {masked.size} masked entr"
+                             f"{'y' if masked.size == 1 else 'ies'} (the first at flat index {masked[0]}); "
+                             "fill them first (.filled(value))")
+        values = np.ma.getdata(values)
     try:
         array = np.asarray(values)
     except (TypeError, ValueError) as e:  # a ragged list
@@ -563,9 +571,9 @@ class Simulation:
         array = _real_array(values, plural)
         if np.iscomplexobj(array):  # the imaginary part would be dropped without a word
             raise TypeError(f"{what}: real numbers, got a complex array")
-        array = np.ascontiguousarray(array, dtype=dtype)
-        if array.shape != (len(self), 3):
+        if array.shape != (len(self), 3):  # before the copy, which makes a 0-d array (1,)
             raise ValueError(f"{plural}: expected shape ({len(self)}, 3), got {array.shape}")
+        array = np.ascontiguousarray(array, dtype=dtype)
         self._impl.assign(what, array)
 
     def contacts(self):
@@ -667,11 +675,11 @@ def pairs(xyzr, backend="auto", algorithm="home", margin=0.0):
             from None
     algorithm = _choice(algorithm, "algorithm", ("home", "subdivision", "brute"))
     backend = _choice(backend, "backend", _BACKENDS)
-    double = array.dtype == np.float64
-    array = np.ascontiguousarray(array, dtype=np.float64 if double else np.float32)
-    if array.ndim != 2 or array.shape[1] != 4:
+    if array.ndim != 2 or array.shape[1] != 4:  # before the copy, which makes a 0-d array (1,)
         raise SceneError(f"xyzr: expected an (N, 4) array of x, y, z, r, got shape {array.shape}", key="xyzr",
                          message=f"expected an (N, 4) array of x, y, z, r, got shape {array.shape}")
+    double = array.dtype == np.float64
+    array = np.ascontiguousarray(array, dtype=np.float64 if double else np.float32)
     find = _marbles.pairs_double if double else _marbles.pairs_float
     return find(array, algorithm, backend, margin)
 

@@ -630,10 +630,20 @@ def test_arguments_of_the_wrong_kind_are_named(pile, tmp_path):
         (lambda: marbles.study(ball, vary={"time.dt": [1e-3]}, backend=None, out=tmp_path / "s"), TypeError,
          "study: backend: one of"),
         (lambda: sim.run(until=10**400), ValueError, "a number of 401 digits"),
+        # a 0-d array is said as it is (the copy made it (1,)); a masked entry is not read as a number
+        (lambda: marbles.pairs(np.array(3.0)), marbles.SceneError, "got shape ()"),
+        (lambda: setattr(sim, "velocities", np.float64(0)), ValueError, f"expected shape ({len(sim)}, 3), got ()"),
+        (lambda: marbles.pairs(np.ma.masked_array(np.zeros((2, 4)), mask=[[0, 0, 0, 0], [0, 0, 1, 0]])),
+         ValueError, "xyzr: a masked array with 1 masked entry (the first at flat index 6)"),
+        (lambda: setattr(sim, "positions", np.ma.masked_invalid(np.full((len(sim), 3), np.nan))), ValueError,
+         f"positions: a masked array with {3 * len(sim)} masked entries (the first at flat index 0)"),
     ]
     for call, error, match in cases:
         with pytest.raises(error, match=re.escape(match)):
             call()
+    # A masked array with nothing masked is its data.
+    xyzr = np.array([[0, 0, 0, 1.0], [0, 0, 1.5, 1.0], [0, 0, 5, 1.0]])
+    np.testing.assert_array_equal(marbles.pairs(np.ma.masked_array(xyzr, mask=False)), marbles.pairs(xyzr))
     # A bytes path is a path; the same scene as its str.
     assert marbles.Simulation(os.fsencode(str(ball))).name == marbles.Simulation(ball).name
     # A time already past is said, not passed over.
