@@ -52,31 +52,32 @@ class ScanHandler : public YAML::EventHandler {
   void OnSequenceStart(const YAML::Mark& mark, const std::string& tag, YAML::anchor_t,
                        YAML::EmitterStyle::value) override {
     tagged(mark, tag);
-    m_levels.push_back({false, here()});
+    m_levels.push_back({false});
   }
   void OnSequenceEnd() override { end(); }
   void OnMapStart(const YAML::Mark& mark, const std::string& tag, YAML::anchor_t, YAML::EmitterStyle::value) override {
     tagged(mark, tag);
-    m_levels.push_back({true, here()});
+    m_levels.push_back({true});
   }
   void OnMapEnd() override { end(); }
 
  private:
   struct Level {
     bool map;
-    std::string key;  // the level's own
     bool key_next = true;
     std::string last = {};  // a map's last key
-    std::size_t index = 0;
+    std::size_t index = 0;  // a sequence's next item
   };
 
-  // The key of the node that starts now.
+  // The key of the node that starts now (made only for a problem: a scene
+  // of 10^6 inline positions starts 10^6 sequences).
   std::string here() const {
-    if (m_levels.empty()) return "";
-    const Level& level = m_levels.back();
-    if (!level.map) return level.key + "[" + std::to_string(level.index) + "]";
-    if (level.key_next) return level.key;
-    return level.key.empty() ? level.last : level.key + "." + level.last;
+    std::string key;
+    for (const Level& level : m_levels) {
+      if (level.map && level.key_next) break;  // a key: its map's (only the innermost level waits for one)
+      key += level.map ? (key.empty() ? "" : ".") + printable(level.last) : "[" + std::to_string(level.index) + "]";
+    }
+    return key;
   }
   // A node has ended: the next is its map's value or key, or its sequence's next item.
   void after(const std::string* scalar) {
@@ -86,7 +87,7 @@ class ScanHandler : public YAML::EventHandler {
       ++level.index;
       return;
     }
-    if (level.key_next) level.last = scalar ? printable(*scalar) : "?";
+    if (level.key_next) level.last = scalar ? *scalar : "?";
     level.key_next = !level.key_next;
   }
   void end() {
