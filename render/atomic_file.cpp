@@ -31,6 +31,19 @@ fs::path temp_path_beside(const fs::path& final_path) {
   return final_path.parent_path() / name;
 }
 
+std::string cannot_create(const fs::path& tmp, int error) {
+  std::string said = "cannot create " + tmp.string() + ": " + std::strerror(error);
+  if (error != ENOENT || tmp.parent_path().empty()) return said;
+  // The outermost folder of the path that is not there (the nearest one
+  // above it is).
+  std::error_code ec;
+  fs::path gone = tmp.parent_path();
+  if (fs::exists(gone, ec) || ec) return said;
+  while (gone.has_relative_path() && gone.parent_path() != gone && !fs::exists(gone.parent_path(), ec) && !ec)
+    gone = gone.parent_path();
+  return said + " (the folder " + gone.string() + " is gone: moved or removed while this wrote into it)";
+}
+
 CompleteCheck has_size(std::uintmax_t bytes) {
   return [bytes](const fs::path& p) {
     std::error_code ec;
@@ -153,7 +166,7 @@ namespace {
 fs::path write_temporary(const fs::path& path, std::string_view contents) {
   const fs::path tmp = temp_path_beside(path);
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) throw RuntimeFailure("cannot create " + tmp.string() + ": " + std::strerror(errno));
+  if (!f) throw RuntimeFailure(cannot_create(tmp, errno));
   const bool written = std::fwrite(contents.data(), 1, contents.size(), f) == contents.size();
   const bool closed = std::fclose(f) == 0;
   if (!written || !closed) {

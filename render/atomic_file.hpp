@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <string>
 #include <string_view>
 #include <utility>
 #include <vector>
@@ -19,6 +20,11 @@ namespace marbles::render {
 /// A fresh temporary name beside `final_path` (same folder, hidden, unique per
 /// process and call).
 std::filesystem::path temp_path_beside(const std::filesystem::path& final_path);
+
+/// Why the temporary `tmp` could not be made (`error`, an errno): "cannot
+/// create TMP: REASON", and where a folder on its way is gone, which one (a
+/// series folder moved or removed while a run writes into it).
+std::string cannot_create(const std::filesystem::path& tmp, int error);
 
 /// What a finished file of a kind looks like; a writer that reported success
 /// on a full disk leaves a file that is not.

@@ -44,7 +44,7 @@ void write_png(const fs::path& path, const Image& image) {
     throw RuntimeFailure("write_png: " + path.string() + ": image has inconsistent size");
   const fs::path tmp = temp_path_beside(path);
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) throw RuntimeFailure("cannot create " + tmp.string() + ": " + std::strerror(errno));
+  if (!f) throw RuntimeFailure(cannot_create(tmp, errno));
 
   std::string error;
   png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &error, png_fail, nullptr);

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -201,6 +202,37 @@ TEST(AtomicFile, WritesAndLeavesNoTemporaries) {
   EXPECT_NE(temp_path_beside(dir / "a.txt"), temp_path_beside(dir / "a.txt"));
   EXPECT_EQ(temp_path_beside(dir / "a.txt").parent_path(), dir);
   EXPECT_THROW(write_file_atomic(dir / "no-such-folder" / "b.txt", "x"), RuntimeFailure);
+}
+
+// A folder on the way that is gone (a series folder moved while a run writes
+// into it) is named: the outermost one missing.
+TEST(AtomicFile, AFolderGoneIsNamed) {
+  const fs::path dir = fresh_dir("atomic_gone");
+  fs::create_directories(dir / "out" / "frames");
+  write_file_atomic(dir / "out" / "frames" / "a.vtp", "x");
+  fs::rename(dir / "out", dir / "moved");
+  for (const fs::path& path : {dir / "out" / "frames" / "b.vtp", dir / "out" / "b.vtp"})
+    try {
+      write_file_atomic(path, "x");
+      ADD_FAILURE() << "no error for " << path;
+    } catch (const RuntimeFailure& e) {
+      const std::string said = e.what();
+      EXPECT_NE(said.find("No such file or directory (the folder " + (dir / "out").string() +
+                          " is gone: moved or removed while this wrote into it)"),
+                std::string::npos)
+          << said;
+    }
+  EXPECT_TRUE(fs::exists(dir / "moved" / "frames" / "a.vtp"));
+  // Another reason is said as it is, with no folder named.
+  fs::create_directories(dir / "locked");
+  fs::permissions(dir / "locked", fs::perms::owner_read | fs::perms::owner_exec);
+  try {
+    write_file_atomic(dir / "locked" / "c.txt", "x");
+    if (::geteuid() != 0) ADD_FAILURE() << "no error in a folder without write permission";
+  } catch (const RuntimeFailure& e) {
+    EXPECT_EQ(std::string(e.what()).find("is gone"), std::string::npos) << e.what();
+  }
+  fs::permissions(dir / "locked", fs::perms::owner_all);
 }
 
 // A pipe or a folder under the name is not replaced by the file (run as root,
