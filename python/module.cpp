@@ -37,7 +37,8 @@ namespace {
 
 // `marbles study`, each combination run by `program`; the rows as dicts.
 nb::list study(const std::string& scene_path, const std::vector<std::string>& vary, const std::vector<std::string>& set,
-               const std::string& backend, int repeats, const std::string& out_dir, const std::string& program) {
+               const std::string& backend, int repeats, const std::string& out_dir, const std::string& program,
+               bool overwrite) {
   marbles::StudyOptions options;
   options.scene_path = scene_path;
   for (const std::string& v : vary) options.vary.push_back(marbles::parse_vary(v));
@@ -46,6 +47,7 @@ nb::list study(const std::string& scene_path, const std::vector<std::string>& va
   options.repeats = repeats;
   options.out_dir = out_dir;
   options.marbles = program;
+  options.overwrite = overwrite;
   options.progress = false;
   // Ctrl-C (Python's, on its main thread: a notebook's interrupt reaches this
   // process alone, not its runs) stops the study between two looks, its run
@@ -96,7 +98,7 @@ NB_MODULE(_marbles, m) {
   marbles::bind_simulation(m, "SimulationFloat", "pairs_float");
   marbles_f64::bind_simulation(m, "SimulationDouble", "pairs_double");
   m.def("study", &study, nb::arg("scene"), nb::arg("vary"), nb::arg("set"), nb::arg("backend"), nb::arg("repeats"),
-        nb::arg("out"), nb::arg("program"));
+        nb::arg("out"), nb::arg("program"), nb::arg("overwrite"));
   m.def("scene_precision", &marbles::scene::scene_precision, nb::arg("path"), nb::arg("overrides"));
   m.def("scene_precision_json", &marbles::scene::scene_precision_json, nb::arg("text"), nb::arg("overrides"));
   m.def("checkpoint_precision", &marbles::checkpoint_precision, nb::arg("path"));

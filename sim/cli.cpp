@@ -321,6 +321,9 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::Range(1, 1000));
   bool study_quiet = false;
   study_cmd->add_flag("--quiet", study_quiet, "no progress bar");
+  study_cmd->add_flag("--overwrite", study.overwrite,
+                      "also replace files in the folder that no earlier study there wrote (its tables' names, "
+                      "runs/N)");
 
   std::string pairs_csv, pairs_algorithm = "subdivision";
   std::string pairs_backend = "cpu";

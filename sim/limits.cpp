@@ -28,10 +28,11 @@ void raise_limit(const std::string& assignment) {
                    : name == "substeps"  ? &l.substeps
                    : name == "spheres"   ? &l.spheres
                    : name == "memory"    ? &l.memory
+                   : name == "study_runs" ? &l.study_runs
                                          : nullptr;
   if (!target)
     throw InputError(where, "--limit",
-                     "unknown limit '" + name + "'; expected one of: scene_mib, materials, substeps, spheres, memory");
+                     "unknown limit '" + name + "'; expected one of: scene_mib, materials, substeps, spheres, memory, study_runs");
   if (!number || value < 0 || (value == 0 && name != "memory"))
     throw InputError(where, "--limit", name + " must be a positive number, got '" + text + "'");
   if (name == "spheres" && value > 2147483647.0)

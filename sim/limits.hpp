@@ -15,6 +15,7 @@ struct Limits {
   double substeps = 1e10;      // per run: duration / dt x substeps
   double spheres = 1e9;        // per particle block: lattice sites, random count
   double memory = 1;           // the spheres may take this fraction of the available memory (0: not checked)
+  double study_runs = 1e4;     // a study's runs: its combinations x --repeats
 };
 
 // The process's limits: set by the command line before any scene is read.

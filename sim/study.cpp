@@ -17,6 +17,7 @@
 #include <fstream>
 #include <iomanip>
 #include <optional>
+#include <set>
 #include <ostream>
 #include <sstream>
 #include <thread>
@@ -30,6 +31,7 @@
 #include "core/files.hpp"
 #include "core/format.hpp"
 #include "render/atomic_file.hpp"
+#include "sim/limits.hpp"
 #include "sim/output.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
@@ -305,7 +307,11 @@ void check_combinations(const StudyOptions& options, const std::vector<std::vect
     throw InputError(SourceLocation{}, key, "expected one of " + list + ", got '" + value + "'");
   };
   one_of("backend", options.backend, {"auto", "cpu", "cuda"});
-  for (const std::vector<std::string>& values : combos) {
+  for (std::size_t c = 0; c < combos.size(); ++c) {
+    const std::vector<std::string>& values = combos[c];
+    if (options.stop && options.stop())
+      throw StudyStopped("the study was stopped while its settings were checked (" + std::to_string(c + 1) + " of " +
+                         std::to_string(combos.size()) + "); nothing was run or written");
     RunSettings run = settings_of(options, values);
     one_of("--vary backend", run.backend, {"auto", "cpu", "cuda"});
     if (!run.precision.empty()) one_of("--vary precision", run.precision, {"float", "double"});
@@ -330,11 +336,57 @@ void remove_dead_stagings(const fs::path& dir) {
   for (const fs::path& p : folders_of_ended_processes(dir, ".runs-")) fs::remove_all(p, ec);
 }
 
+// What a study writes in its folder, named relative to it: the tables, the
+// plot with its script, data and log, and each setting's run and log. The
+// study's record (`.marbles-study`, a name a line) names those of the last
+// study there, so that a study replaces only what a study wrote.
+constexpr const char* kStudyRecord = ".marbles-study";
+
+std::vector<std::string> study_files(std::size_t runs) {
+  std::vector<std::string> names{"study.csv", "study.md", "study.dat", "study_front.dat",
+                                 "study.gp",  "study.gp.log", "study.png"};
+  for (std::size_t c = 0; c < runs; ++c) names.insert(names.end(), {"runs/" + std::to_string(c), "runs/" + std::to_string(c) + ".log"});
+  return names;
+}
+
+std::set<std::string> earlier_study_files(const fs::path& dir) {
+  std::set<std::string> names;
+  std::ifstream in(dir / kStudyRecord);
+  for (std::string line; std::getline(in, line);)
+    if (!line.empty()) names.insert(line);
+  return names;
+}
+
+void write_study_record(const fs::path& dir, const std::set<std::string>& names) {
+  std::string text;
+  for (const std::string& name : names) text += name + "\n";
+  render::write_file_atomic(dir / kStudyRecord, text);
+}
+
+bool there(const fs::path& path) {
+  std::error_code ec;
+  return fs::symlink_status(path, ec).type() != fs::file_type::not_found;
+}
+
+// Refuses (naming `key`, --out or study) a file this study would replace
+// that no earlier study in the folder wrote: a folder of the user's, or a
+// study's from before the record, is replaced only with --overwrite.
+void check_study_folder(const fs::path& dir, std::size_t runs, const std::set<std::string>& earlier,
+                        const std::string& key) {
+  for (const std::string& name : study_files(runs))
+    if (!earlier.contains(name) && there(dir / name))
+      throw InputError(SourceLocation{}, key,
+                       (dir / name).string() + " is there, and no earlier study in " + dir.string() +
+                           " wrote it: a study replaces only its own files (move it, or give --overwrite)");
+}
+
 // The study's runs (`staging`/N and N.log) moved into `runs`, in the place
 // of an earlier study's; that study's runs past this one's count (runs/N and
-// runs/N.log) removed, so that runs/ holds this study's runs only. Nothing
-// else in runs/ is touched.
-void keep_runs(const fs::path& staging, const fs::path& runs, std::size_t count) {
+// runs/N.log that `earlier` names, or any so named with `overwrite`)
+// removed, so that runs/ holds this study's runs only. Nothing else in
+// runs/ is touched.
+void keep_runs(const fs::path& staging, const fs::path& runs, std::size_t count, const std::set<std::string>& earlier,
+               bool overwrite) {
   for (std::size_t c = 0; c < count; ++c)  // all there before anything of the earlier study goes
     for (const std::string& name : {std::to_string(c), std::to_string(c) + ".log"})
       if (!fs::exists(staging / name))
@@ -347,7 +399,8 @@ void keep_runs(const fs::path& staging, const fs::path& runs, std::size_t count)
   for (fs::directory_iterator it(runs, ec), end; !ec && it != end; it.increment(ec)) {
     std::string name = it->path().filename().string();
     if (name.ends_with(".log")) name.resize(name.size() - 4);
-    if (const auto n = whole_number(name); n && *n >= count) stale.push_back(it->path());
+    const bool studys = overwrite || earlier.contains("runs/" + it->path().filename().string());
+    if (const auto n = whole_number(name); n && *n >= count && studys) stale.push_back(it->path());
   }
   for (const fs::path& p : stale) fs::remove_all(p, ec);
   for (std::size_t c = 0; c < count; ++c)
@@ -371,10 +424,20 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   // name starting with '<' or '|' as a command.
   const fs::path dir = fs::absolute(options.out_dir.empty() ? fs::path("out/study") / fs::path(scene.path).stem()
                                                             : fs::path(options.out_dir));
+  double runs = options.repeats;
+  for (const StudyVary& v : options.vary) runs *= static_cast<double>(v.values.size());
+  if (runs > limits().study_runs)
+    throw InputError(SourceLocation{}, "--vary",
+                     shortest(runs) + " runs (the settings' combinations x --repeats " +
+                         std::to_string(options.repeats) + "), more than the limit " + shortest(limits().study_runs) +
+                         " (--limit study_runs=N raises it)");
   const auto combos = combinations(options.vary);
   check_combinations(options, combos);
   // One study at a time in the folder (its runs/, tables and plots).
-  const RunFolderLock lock(dir, options.out_dir.empty() ? "study" : "--out");
+  const std::string key = options.out_dir.empty() ? "study" : "--out";
+  const RunFolderLock lock(dir, key);
+  const std::set<std::string> earlier = earlier_study_files(dir);
+  if (!options.overwrite) check_study_folder(dir, combos.size(), earlier, key);
   // The runs are made in a folder of their own (`.runs-PID`) and take the
   // place of an earlier study's in runs/ only once all of them have run: a
   // study that fails or is stopped leaves the earlier one whole, its tables
@@ -455,7 +518,12 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     result.rows.push_back(std::move(row));
   }
   if (options.progress) show_progress(err, tty, done, total, "done");
-  keep_runs(staging, dir / "runs", combos.size());
+  {  // the record names what the folder may hold meanwhile: the earlier study's and this one's
+    std::set<std::string> both = earlier;
+    for (const std::string& name : study_files(combos.size())) both.insert(name);
+    write_study_record(dir, both);
+  }
+  keep_runs(staging, dir / "runs", combos.size(), earlier, options.overwrite);
   fs::remove_all(staging);
 
   if (scene.reference.kind == scene::ReferenceSpec::Kind::finest) {
@@ -560,6 +628,10 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     out << std::left << std::setw(static_cast<int>(width)) << label_of(options.vary, r.values) << std::right << std::setw(12)
         << fixed(100 * r.error, 3) << std::setw(14) << fixed(r.ms_per_simulated_second, 4) << std::setw(12)
         << fixed(r.ms_per_step, 4) << (r.pareto ? "  *" : "") << "\n";
+  std::set<std::string> written;  // the record now names this study's files alone
+  for (const std::string& name : study_files(result.rows.size()))
+    if (there(dir / name)) written.insert(name);
+  write_study_record(dir, written);
   out << "output: " << dir.string() << "  (study.md, study.csv" << (result.plotted ? ", study.png" : "") << ")\n";
   return result;
 }

@@ -37,6 +37,9 @@ struct StudyOptions {
   // command_line): the study's own as typed; empty: `marbles`'s path above.
   std::string program_name;
   bool progress = true;
+  // Replace files in the folder that no earlier study there wrote (its
+  // tables' names, runs/N): refused without it.
+  bool overwrite = false;
   // Asked about every 50 ms while a run runs (from the study's thread): true
   // stops the study, its run ended (SIGTERM; SIGKILL after 10 s), with StudyStopped. The Python
   // module's Ctrl-C, whose signal reaches its process alone (a notebook's

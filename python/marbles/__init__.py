@@ -699,13 +699,16 @@ def _program_path():  # not `_program`: importing the submodule of that name wou
     raise RuntimeFailure("the marbles program is not found (set MARBLES_PROGRAM)")
 
 
-def study(scene, vary, set=None, backend="auto", repeats=1, out=None):
+def study(scene, vary, set=None, backend="auto", repeats=1, out=None, overwrite=False):
     """``marbles study``: the scene at every combination of ``vary``
     (``{"time.dt": [1e-3, 5e-4], "solver.iterations": [5, 10]}``), each run
     ``repeats`` times; returns the table as a list of dicts (the varied keys,
     reference, error, measured, ms_per_step, ms_per_simulated_second, steps,
     pareto) and writes study.md, study.csv (and study.png) under ``out``
-    (default out/study/<scene>)."""
+    (default out/study/<scene>). A file there that no earlier study wrote
+    (one of the tables' names, runs/N) is refused unless ``overwrite``."""
+    if not isinstance(overwrite, (bool, np.bool_)):  # "False" would be true, and replace a user's files
+        raise TypeError(f"study: overwrite is True or False, got {overwrite!r}")
     if not isinstance(vary, dict) or not vary:
         raise SceneError("vary: give a dict of key -> list of values", key="vary",
                          message="give a dict of key -> list of values")
@@ -733,7 +736,7 @@ def study(scene, vary, set=None, backend="auto", repeats=1, out=None):
         texts.append(f"{key}=" + ",".join(items))
     return _marbles.study(_path(scene, "study: scene"), texts, _overrides(set), _choice(backend, "study: backend",
                                                                                        _BACKENDS), repeats,
-                          _path(out, "study: out") if out is not None else "", _program_path())
+                          _path(out, "study: out") if out is not None else "", _program_path(), bool(overwrite))
 
 
 def cuda_device():

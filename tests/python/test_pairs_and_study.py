@@ -67,6 +67,19 @@ def test_study_returns_the_table(tmp_path):
         marbles.study(SCENES / "validation" / "bouncing_ball.yaml", vary={})
 
 
+def test_a_study_replaces_a_users_files_only_when_told(tmp_path):
+    scene = SCENES / "validation" / "bouncing_ball.yaml"
+    (tmp_path / "study.md").write_text("my notes")
+    with pytest.raises(marbles.SceneError, match="study.md is there, and no earlier study"):
+        marbles.study(scene, vary={"time.dt": [2e-3]}, out=tmp_path)
+    assert (tmp_path / "study.md").read_text() == "my notes"
+    with pytest.raises(TypeError, match="study: overwrite is True or False"):
+        marbles.study(scene, vary={"time.dt": [2e-3]}, out=tmp_path, overwrite="False")
+    assert len(marbles.study(scene, vary={"time.dt": [2e-3]}, out=tmp_path, overwrite=True)) == 1
+    assert (tmp_path / "study.md").read_text() != "my notes"
+    assert len(marbles.study(scene, vary={"time.dt": [2e-3]}, out=tmp_path)) == 1  # its own files now
+
+
 def test_study_twice_in_one_process(tmp_path):
     # The program's path comes from the submodule marbles._program; importing
     # it once must not shadow what the second study calls.

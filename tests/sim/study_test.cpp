@@ -136,6 +136,107 @@ TEST_F(Study, AnEarlierStudysExtraRunsAreRemoved) {
   for (const char* name : {"2", "2.log"}) EXPECT_FALSE(fs::exists(runs / name)) << name;
 }
 
+// A study replaces only what a study wrote (its record, .marbles-study, names
+// the last one's files): a user's folder runs/0 or table study.md where the
+// study would write is refused up front, naming --out, with nothing touched;
+// files of the user's that are past the study's count (runs/5, runs/9.log)
+// stay, also when a smaller study removes the earlier study's runs/1. With
+// overwrite the user's files are replaced, and its runs/N past the count go.
+TEST_F(Study, AStudyReplacesOnlyWhatAStudyWrote) {
+  const test::ScratchDir dir("study_users_files");
+  const fs::path root = dir.path(), runs = root / "runs";
+  fs::create_directories(runs / "5" / "sub");
+  fs::create_directories(runs / "0");
+  std::ofstream(runs / "5" / "sub" / "deep.txt") << "x";
+  std::ofstream(runs / "9.log") << "y";
+  std::ofstream(runs / "0" / "mine.txt") << "z";
+  const std::string ball = kValidation + "bouncing_ball.yaml";
+  const auto refused = [&](const std::string& name) {
+    try {
+      study(ball, {"time.dt=4e-3,2e-3"}, dir);
+      ADD_FAILURE() << "no error for " << name;
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.key(), "--out");
+      EXPECT_NE(e.message().find((root / name).string() + " is there, and no earlier study in " + root.string() +
+                                 " wrote it: a study replaces only its own files (move it, or give --overwrite)"),
+                std::string::npos)
+          << e.message();
+    }
+  };
+  refused("runs/0");
+  EXPECT_EQ(slurp((runs / "0" / "mine.txt").string()), "z");
+  EXPECT_FALSE(fs::exists(root / "study.csv"));
+  fs::remove_all(runs / "0");
+  ASSERT_EQ(study(ball, {"time.dt=4e-3,2e-3"}, dir).rows.size(), 2u);
+  ASSERT_EQ(study(ball, {"time.dt=4e-3"}, dir).rows.size(), 1u);
+  for (const char* name : {"0", "0.log", "5/sub/deep.txt", "9.log"}) EXPECT_TRUE(fs::exists(runs / name)) << name;
+  for (const char* name : {"1", "1.log"}) EXPECT_FALSE(fs::exists(runs / name)) << name;
+  // A table of the user's in a folder of its own.
+  const test::ScratchDir other("study_users_table");
+  std::ofstream(fs::path(other.path()) / "study.md") << "my notes";
+  fs::create_directories(fs::path(other.path()) / "runs" / "7");
+  try {
+    study(ball, {"time.dt=4e-3"}, other);
+    ADD_FAILURE() << "no error for study.md";
+  } catch (const InputError& e) {
+    EXPECT_NE(e.message().find("/study.md is there"), std::string::npos) << e.message();
+  }
+  EXPECT_EQ(slurp(other.path() + "/study.md"), "my notes");
+  StudyOptions o = options(ball, other.path());
+  o.vary.push_back(parse_vary("time.dt=4e-3"));
+  o.backend = "cpu";
+  o.overwrite = true;
+  std::ostringstream out, err;
+  ASSERT_EQ(run_study(o, out, err).rows.size(), 1u);
+  EXPECT_NE(slurp(other.path() + "/study.md"), "my notes");
+  EXPECT_FALSE(fs::exists(fs::path(other.path()) / "runs" / "7"));
+}
+
+// A stop while the settings are checked ends the study there, with nothing
+// run or written (a cross product of 10^4 settings takes seconds to check).
+TEST_F(Study, AStopWhileTheSettingsAreCheckedRunsNothing) {
+  const test::ScratchDir dir("study_stopped_checking");
+  StudyOptions o = options(kValidation + "bouncing_ball.yaml", dir.path() + "/out");
+  o.vary.push_back(parse_vary("time.dt=4e-3,2e-3,1e-3"));
+  o.backend = "cpu";
+  int asked = 0;
+  o.stop = [&] { return ++asked >= 2; };
+  std::ostringstream out, err;
+  try {
+    run_study(o, out, err);
+    ADD_FAILURE() << "the study ran to its end";
+  } catch (const StudyStopped& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "the study was stopped while its settings were checked (2 of 3); nothing was run or written");
+  }
+  EXPECT_FALSE(fs::exists(dir.path() + "/out"));
+}
+
+// More runs than the limit (combinations x repeats) are refused before any
+// setting is checked, naming --vary and the limit that raises it.
+TEST_F(Study, MoreRunsThanTheLimitAreRefusedUpFront) {
+  const test::ScratchDir dir("study_too_many");
+  StudyOptions o = options(kValidation + "bouncing_ball.yaml", dir.path() + "/out");
+  std::string iterations = "solver.iterations=1", substeps = "time.substeps=1";
+  for (int k = 2; k <= 101; ++k) (iterations += ',') += std::to_string(k);  // (GCC 12 warns falsely on "," + string)
+  for (int k = 2; k <= 50; ++k) (substeps += ',') += std::to_string(k);
+  o.vary = {parse_vary(iterations), parse_vary(substeps)};
+  o.repeats = 2;
+  std::ostringstream out, err;
+  try {
+    run_study(o, out, err);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.key(), "--vary");
+    EXPECT_EQ(e.message(), "10100 runs (the settings' combinations x --repeats 2), more than the limit 10000 "
+                           "(--limit study_runs=N raises it)");
+  }
+  EXPECT_FALSE(fs::exists(dir.path() + "/out"));
+  o.repeats = 1;  // 5 050 runs: within it (stopped at once, while checked)
+  o.stop = [] { return true; };
+  EXPECT_THROW(run_study(o, out, err), StudyStopped);
+}
+
 // Each run's summary names the program as the study was typed (argv[0]),
 // not the path the study starts it by (/proc/self/exe), so a run's
 // command_line can be typed again.
@@ -210,7 +311,7 @@ TEST_F(Study, AStoppedStudyEndsItsRunAndLeavesTheEarlierOneWhole) {
   o.set = {"time.duration=600"};  // runs of minutes: only a stop ends them
   o.backend = "cpu";
   int asked = 0;
-  o.stop = [&] { return ++asked >= 3; };  // about 100 ms into the first run
+  o.stop = [&] { return ++asked >= 5; };  // two looks while the settings are checked, then about 100 ms into the first run
   std::ostringstream out, err;
   try {
     run_study(o, out, err);
@@ -223,7 +324,7 @@ TEST_F(Study, AStoppedStudyEndsItsRunAndLeavesTheEarlierOneWhole) {
         << what;
     EXPECT_NE(what.find("left whole"), std::string::npos) << what;
   }
-  EXPECT_EQ(asked, 3);
+  EXPECT_EQ(asked, 5);
   EXPECT_EQ(slurp(dir.path() + "/study.csv"), table);
   errno = 0;
   EXPECT_EQ(::waitpid(-1, nullptr, WNOHANG), -1) << "a run is left";  // no child, running or unreaped
