@@ -695,6 +695,13 @@ std::pair<scene::Scene, PileState> pile_start(const StepBenchOptions& options, s
         << " steps; settling again with a budget of " << options.settle_steps << "\n";
     state.reset();
   }
+  // A settled pile whose energy is not below this run's bound (one settled
+  // to a looser --settle-ke) is settled again, to this run's bound.
+  if (state && state->settle.settled() && !(state->settle.ke_per_sphere < options.settle_ke)) {
+    log << "pile N = " << n << ": " << path << " rests at KE/sphere " << state->settle.ke_per_sphere
+        << " J, not below this run's bound " << options.settle_ke << " J; settling again\n";
+    state.reset();
+  }
   if (state) {
     const SettleInfo& settle = state->settle;
     log << "pile N = " << n << ": loaded " << path << " (" << (settle.settled() ? "settled" : "NOT settled")

@@ -226,6 +226,28 @@ TEST(StepBench, ASettledPileRestsWithoutQuenches) {
   EXPECT_TRUE(run_json(o)["results"][0]["settle"]["cached"].get<bool>());
 }
 
+// A pile settled to a loose bound (--settle-ke) is not taken as settled by
+// a run that asks a stricter one: settled again to that bound, and cached.
+// A run whose bound the cached pile's energy is below takes it.
+TEST(StepBench, APileSettledLooselyIsSettledAgainForAStricterBound) {
+  TempDir dir;
+  StepBenchOptions o = one_step_pile(dir, 600, 0);
+  const double strict = o.settle_ke;
+  o.settle_ke = 1e30;
+  const nlohmann::json loose = run_json(o)["results"][0]["settle"];
+  ASSERT_TRUE(loose["settled"].get<bool>());
+  ASSERT_GT(loose["ke_per_sphere_J"].get<double>(), strict) << "premise: the loose pile is not at rest";
+  o.settle_ke = strict;
+  const nlohmann::json again = run_json(o)["results"][0]["settle"];
+  EXPECT_FALSE(again["cached"].get<bool>());
+  EXPECT_LT(again["ke_per_sphere_J"].get<double>(), strict);
+  EXPECT_EQ(again["bound_J"].get<double>(), strict);
+  o.settle_ke = 1e30;  // the strict pile serves a looser bound
+  const nlohmann::json taken = run_json(o)["results"][0]["settle"];
+  EXPECT_TRUE(taken["cached"].get<bool>());
+  EXPECT_EQ(taken["ke_per_sphere_J"].get<double>(), again["ke_per_sphere_J"].get<double>());
+}
+
 // The run's watchdog in the timed steps (--watchdog on) changes no step
 // that passes it: the same contacts, overlaps and energy as without, bit for
 // bit, with no rollback; and it did watch: its own kinetic energy at the
