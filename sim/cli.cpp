@@ -13,8 +13,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <new>
+#include <set>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -97,6 +99,18 @@ const CLI::Validator kCount(
     },
     "COUNT");
 const CLI::Validator kNonNegative = at_least_zero(false);
+// A whole number as a person writes one: decimal digits, a sign at most (CLI11's
+// conversion took 0x10 as 16, 0b11 as 3 and " 100" as 100, where the scene's
+// numbers and --seed refuse them).
+const CLI::Validator kWhole(
+    [](std::string& text) {
+      const std::size_t digits = !text.empty() && (text[0] == '+' || text[0] == '-') ? 1 : 0;
+      const bool whole = digits < text.size() && text.find_first_not_of("0123456789", digits) == std::string::npos;
+      return whole ? std::string() : "expected a whole number, got '" + text + "'";
+    },
+    "WHOLE");
+// Timed calls or steps a benchmark keeps every one of (for their median).
+constexpr int kMostRepeats = 1000000;
 // A seed: a whole number 0 ... 2^64 - 1, as written (no wrap of -1, no
 // saturation past the top).
 const CLI::Validator kSeed(
@@ -173,15 +187,41 @@ void refuse_empty_lists(int argc, char** argv) {
 // it as the option's zero or empty string, past the option's checks
 // (`--repeats ''` was 0 repeats, which --repeats 0 is refused for). Refused by
 // name in the subcommands given, flags aside.
+marbles::InputError empty_value(const std::string& option) {
+  return marbles::InputError(marbles::SourceLocation{}, option, "an empty value (leave the option out for its default)");
+}
 void refuse_empty_values(const CLI::App& app) {
   for (const CLI::Option* option : app.get_options()) {
     if (option->get_type_size_min() == 0 || !option->nonpositional()) continue;
     for (const std::string& value : option->results())
-      if (value.empty())
-        throw marbles::InputError(marbles::SourceLocation{}, option->get_name(),
-                                  "an empty value (leave the option out for its default)");
+      if (value.empty()) throw empty_value(option->get_name());
   }
   for (const CLI::App* sub : app.get_subcommands()) refuse_empty_values(*sub);
+}
+
+// The option given an empty value on the command line where it takes one
+// (`--repeats ''`, `--margin=`), or "": where the option's own check fails
+// on the empty text first ("Value  not in range 1 to 1000"), the parse's
+// error is this one.
+std::string option_given_nothing(const CLI::App& app, int argc, char** argv) {
+  std::set<std::string> takes;  // --name and -n of the options of any command that take a value
+  const std::function<void(const CLI::App&)> gather = [&](const CLI::App& a) {
+    for (const CLI::Option* option : a.get_options())
+      if (option->get_type_size_min() > 0 && option->nonpositional()) {
+        for (const std::string& name : option->get_lnames()) takes.insert("--" + name);
+        for (const std::string& name : option->get_snames()) takes.insert("-" + name);
+      }
+    for (const CLI::App* sub : a.get_subcommands([](const CLI::App*) { return true; })) gather(*sub);
+  };
+  gather(app);
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const std::size_t equals = a.find('=');
+    if (a.starts_with("--") && equals + 1 == a.size() && takes.contains(a.substr(0, equals)))
+      return a.substr(0, equals);
+    if (takes.contains(a) && i + 1 < argc && argv[i + 1][0] == '\0') return a;
+  }
+  return "";
 }
 
 // A command CLI11 would answer only with "A subcommand is required"
@@ -287,6 +327,7 @@ int cli_main(int argc, char** argv) {
   run_cmd->add_flag("--summary-only", run.summary_only,
                     "write only summary.json and any checkpoints (no frames of any series, images or movie)");
   run_cmd->add_option("--threads", run.threads, "CPU threads (default: OMP_NUM_THREADS, else every core)")
+      ->check(kWhole)
       ->check(CLI::Range(1, kMostThreads));
   run_cmd->add_flag("--overwrite", run.overwrite,
                     "replace an earlier run's output in the folder (without it such a folder is refused)");
@@ -318,6 +359,7 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   study_cmd->add_option("--out", study.out_dir, "output folder (default out/study/<scene>)")->check(kFolderOrNew);
   study_cmd->add_option("--repeats", study.repeats, "runs per setting (the cost is their median)")
+      ->check(kWhole)
       ->check(CLI::Range(1, 1000));
   bool study_quiet = false;
   study_cmd->add_flag("--quiet", study_quiet, "no progress bar");
@@ -347,8 +389,10 @@ int cli_main(int argc, char** argv) {
   bench_bp->add_option("--algorithm", bp.algorithm, "seed|home")->check(CLI::IsMember({"seed", "home"}));
   bench_bp->add_option("--sort", bp.sort, "seed|cub (cuda)")->check(CLI::IsMember({"seed", "cub"}));
   bench_bp->add_option("--scene", bp.scene, "gas|pile|poly")->check(CLI::IsMember({"gas", "pile", "poly"}));
-  bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(kPositive)->check(kCount);
-  bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")->check(kPositive);
+  bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(kWhole)->check(kPositive)->check(kCount);
+  bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")
+      ->check(kWhole)
+      ->check(CLI::Range(1, kMostRepeats));
   bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(kFinite & kWithinReal & kNonNegative);
   bench_bp->add_option("--seed", bp.seed, "random seed of the sphere sets")->check(kSeed);
   bench_bp->add_flag("--json", bp.json, "print JSON");
@@ -362,10 +406,12 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::IsMember({"cpu", "cuda"}));
   bench_step->add_option("--scene", st.scene, "gas (default) | pile | settle")
       ->check(CLI::IsMember({"gas", "pile", "settle"}));
-  bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->check(kPositive)->check(kCount);
+  bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->check(kWhole)->check(kPositive)->check(kCount);
   bench_step->add_option("--repeats", st.repeats, "timed steps per size (and as many profiled ones)")
-      ->check(kPositive);
+      ->check(kWhole)
+      ->check(CLI::Range(1, kMostRepeats));
   bench_step->add_option("--warmup", st.warmup, "untimed steps first (default 2 for gas, 5 for pile)")
+      ->check(kWhole)
       ->check(kNonNegative);
   bench_step->add_option("--effects", st.effects, "effects of the pipeline (gas only)")->delimiter(',');
   bench_step->add_option("--cache", st.cache_dir,
@@ -373,12 +419,14 @@ int cli_main(int argc, char** argv) {
       ->check(kFolderOrNew);
   bench_step->add_option("--settle-steps", st.settle_steps,
                          "pile: step budget of the settle (a cached pile that ran out of a smaller one settles again)")
+      ->check(kWhole)
       ->check(kPositive);
   bench_step->add_option("--settle-ke", st.settle_ke,
                          "pile: settled below this kinetic energy per sphere (J), 50 steps or more after the last quench")
       ->check(kFinite & kPositive);
   bench_step->add_option("--settle-quench", st.settle_quench,
                          "pile: zero the velocities every this many settle steps until first below the bound (0: never)")
+      ->check(kWhole)
       ->check(kNonNegative);
   bench_step->add_flag("--rebuild", st.rebuild, "pile: settle again, replacing the cached pile");
   bench_step->add_option("--sphere-order", st.sphere_order,
@@ -386,6 +434,7 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::IsMember({"made", "shuffled", "morton", "cells"}));
   bench_step->add_option("--renumber", st.renumber,
                          "solver.renumber of the timed scene: the spheres numbered again every this many steps")
+      ->check(kWhole)
       ->check(kNonNegative);
   bench_step->add_option("--integrator", st.integrator,
                          "solver.integrator of the timed steps: symplectic_euler (default) or velocity_verlet "
@@ -413,9 +462,11 @@ int cli_main(int argc, char** argv) {
   bench::EffectsBenchOptions ef;
   auto* bench_effects = bench_cmd->add_subcommand("effects", "time the step with and without each effect");
   bench_effects->add_option("--backend", ef.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
-  bench_effects->add_option("--n", ef.n, "sphere count")->check(kPositive)->check(kCount);
+  bench_effects->add_option("--n", ef.n, "sphere count")->check(kWhole)->check(kPositive)->check(kCount);
   bench_effects->add_option("--volume-fraction", ef.volume_fraction, "packing of the gas")->check(kFinite & CLI::Range(0.01, 0.5));
-  bench_effects->add_option("--repeats", ef.repeats, "timed steps per pipeline")->check(kPositive);
+  bench_effects->add_option("--repeats", ef.repeats, "timed steps per pipeline")
+      ->check(kWhole)
+      ->check(CLI::Range(1, kMostRepeats));
   bench_effects->add_flag("--json", ef.json, "print JSON");
   add_limit_option(bench_effects, limit_args);
 
@@ -430,8 +481,8 @@ int cli_main(int argc, char** argv) {
   render_cmd->add_option("--color-by", rd_color_by, "speed|id|radius|material")
       ->check(CLI::IsMember({"speed", "id", "radius", "material"}));
   render_cmd->add_option("--camera", rd_camera, "camera position and target: x,y,z:lx,ly,lz");
-  render_cmd->add_option("--width", rd.width, "image width in pixels")->check(CLI::Range(16, 8192));
-  render_cmd->add_option("--height", rd.height, "image height in pixels")->check(CLI::Range(16, 8192));
+  render_cmd->add_option("--width", rd.width, "image width in pixels")->check(kWhole)->check(CLI::Range(16, 8192));
+  render_cmd->add_option("--height", rd.height, "image height in pixels")->check(kWhole)->check(CLI::Range(16, 8192));
   render_cmd->add_option("--fps", rd_movie.fps, "movie frames per second, 0.01 to 1000 (default: from the frame times)")
       ->check(kFinite & CLI::Range(0.01, 1000.0));
   bool rd_no_movie = false;
@@ -453,6 +504,10 @@ int cli_main(int argc, char** argv) {
   } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
+    if (const std::string option = option_given_nothing(app, argc, argv); !option.empty()) {
+      std::cerr << empty_value(option).what() << "\n";
+      return 2;
+    }
     std::cerr << "marbles: " << e.what() << "\n(see marbles --help)\n";
     return 2;
   }

@@ -287,6 +287,17 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
       {"run " + scene + " --backend cpu --out \"\"", "--out: an empty value"},
       {"run " + scene + " --backend cpu --quiet --out " + file, "--out: '" + file + "' exists and is not a folder"},
       {"study " + scene + " --vary time.dt=1e-3 --out \"\"", "--out: an empty value"},
+      // An empty value where the option's own check would fail on it first ("Value  not in range").
+      {"study " + scene + " --vary time.dt=1e-3 --repeats \"\"", "--repeats: an empty value"},
+      {"pairs " + file + " --margin=", "--margin: an empty value"},
+      {"check " + scene + " --precision \"\"", "--precision: an empty value"},
+      // Whole numbers in decimal, as a scene's (CLI11 read 0x10 as 16 and " 100" as 100).
+      {"bench step --backend cpu --n 0x10 --repeats 1", "--n: expected a whole number, got '0x10'"},
+      {"bench step --backend cpu --n \" 100\" --repeats 1", "--n: expected a whole number, got ' 100'"},
+      {"study " + scene + " --vary time.dt=1e-3 --repeats 0x2", "--repeats: expected a whole number, got '0x2'"},
+      {"run " + scene + " --threads 0b11", "--threads: expected a whole number, got '0b11'"},
+      // A benchmark keeps every call's time: at most 10^6 of them (2^31 - 1 grew without bound).
+      {"bench broadphase --backend cpu --n 1 --repeats 2147483647", "--repeats: Value 2147483647 not in range 1 to 1000000"},
       // The scene's output.dir a file, or a link to nothing: named where it was given (exit 1 without it before).
       {"run " + scene + " --backend cpu --quiet --set output.dir=" + file,
        "--set output.dir=" + file + ": output.dir: '" + file + "' exists and is not a folder"},
