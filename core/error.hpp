@@ -10,6 +10,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/format.hpp"
+
 namespace marbles {
 
 struct SourceLocation {
@@ -31,7 +33,7 @@ class InputError : public std::runtime_error {
   static std::string format(const SourceLocation& where, const std::string& key, const std::string& message) {
     std::string out;
     if (!where.file.empty()) {
-      out += where.file;
+      out += printable_path(where.file);  // one line, whatever the file's name holds
       if (where.line > 0) {
         out += ':';
         out += std::to_string(where.line);

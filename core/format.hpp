@@ -84,6 +84,12 @@ inline std::size_t first_non_utf8(std::string_view text) {
   return std::string_view::npos;
 }
 
+// A path in a message, in one line: its control bytes as \xNN, and every
+// byte past ASCII too where it is no UTF-8 text (a name in Latin-1).
+inline std::string printable_path(std::string_view path) {
+  return printable(path, first_non_utf8(path) != std::string_view::npos);
+}
+
 // "not UTF-8 text: \xNN": a refusal's words for the byte at `at`
 // (first_non_utf8), its place the caller's.
 inline std::string not_utf8_text(std::string_view text, std::size_t at) {

@@ -317,7 +317,7 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
   if (const char* what = not_a_plain_file(path))
     throw InputError(open_where, open_key, "'" + path + "' is " + what + ", not a CSV file of spheres");
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(open_where, open_key, "cannot open '" + path + "': " + std::strerror(errno));
+  if (!in) throw InputError(open_where, open_key, "cannot open '" + printable_path(path) + "': " + std::strerror(errno));
 
   CsvSpheres result;
   std::array<int, kColumns> column_of{};

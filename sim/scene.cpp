@@ -472,7 +472,7 @@ void read_csv(ParticleBlock& block, const Field& field, const std::string& scene
   if (const char* what = not_a_plain_file(block.csv_path))
     path.fail("'" + block.csv_path + "' is " + what + ", not a CSV file");
   std::ifstream probe(block.csv_path);
-  if (!probe) path.fail("cannot open '" + block.csv_path + "': " + std::strerror(errno));
+  if (!probe) path.fail("cannot open '" + printable_path(block.csv_path) + "': " + std::strerror(errno));
 }
 
 std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field) {
@@ -483,6 +483,12 @@ std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field
         item, {"list", "lattice", "random", "csv", "material", "velocity", "angular_velocity", "fixed", "order"});
     ParticleBlock block;
     block.where = item.where();
+    // A block a --set changed in part (its radius) is named by that override
+    // in what is checked of the whole block (its spheres' masses, a random
+    // block's fill), not by the file's line, which holds another value.
+    if (const std::string* by = item.origins() ? item.origins()->find_under(item.key()) : nullptr;
+        by && !item.from_override())
+      block.where = SourceLocation{*by, 0, 0};
     const MapFields::Entry* source = nullptr;
     for (const MapFields::Entry& e : map.entries()) {
       if (std::find(kinds.begin(), kinds.end(), e.name) == kinds.end()) continue;

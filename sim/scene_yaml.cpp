@@ -233,6 +233,18 @@ const std::string* Origins::find(const YAML::Node& node) const {
   return nullptr;
 }
 
+const std::string* Origins::find_under(const std::string& key) const {
+  for (auto it = m_nodes.rbegin(); it != m_nodes.rend(); ++it) {
+    std::string_view path = it->second;  // "--set KEY.PATH=VALUE"
+    if (!path.starts_with("--set ")) continue;
+    path.remove_prefix(6);
+    path = path.substr(0, path.find('='));
+    if (path.starts_with(key) && (path.size() == key.size() || path[key.size()] == '.' || path[key.size()] == '['))
+      return &it->second;
+  }
+  return nullptr;
+}
+
 void Origins::copied(const YAML::Node& copy, const YAML::Node& original) {
   const YAML::Mark* earlier = mark_of(original);  // a copy of a copy
   m_marks.emplace_back(copy, earlier ? *earlier : original.Mark());

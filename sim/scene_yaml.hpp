@@ -82,6 +82,10 @@ class Origins {
   void add(const YAML::Node& node, const std::string& text);
   // The override that put `node` in (the latest when several did), or nullptr.
   const std::string* find(const YAML::Node& node) const;
+  // The latest override whose path is `key` or lies below it
+  // ("particles[0]": --set particles[0].list.radius=1e38), or nullptr: what
+  // a check of the whole (a block's masses) names when a part was overridden.
+  const std::string* find_under(const std::string& key) const;
 
   // The scalar `text` at `key` read as `value` (a typed read's one spelling:
   // "n:0.0005", "i:12", "b:1"), or, with `value` empty, as a name: a key

@@ -7,6 +7,7 @@
 #include <sys/stat.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -315,6 +316,21 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
     EXPECT_EQ(o.exit_code, 2) << args << ": " << o.err;
     EXPECT_NE(o.err.find(said), std::string::npos) << args << ": " << o.err;
   }
+  // A block's masses out of range through an override: named by the override, not the file's line
+  // (which holds radius 0.05).
+  const Outcome heavy = marbles("check " + scene + " --set particles[0].list.radius=1e38", dir);
+  EXPECT_EQ(heavy.exit_code, 2) << heavy.err;
+  EXPECT_EQ(heavy.err.rfind("--set particles[0].list.radius=1e38: particles[0]: sphere 0 of the block", 0), 0u)
+      << heavy.err;
+  // A file's name with a line break is said in one line.
+  const std::string broken = dir.write("nl\nrows.csv", "0,0,0,0.1\nnan,0,0,0.1\n");
+  const Outcome named = marbles("pairs \"" + broken + "\" --backend cpu", dir);
+  EXPECT_EQ(named.exit_code, 2) << named.err;
+  EXPECT_NE(named.err.find(dir.path() + "/nl\\x0arows.csv:2:"), std::string::npos) << named.err;
+  EXPECT_EQ(std::count(named.err.begin(), named.err.end(), '\n'), 1) << named.err;
+  const Outcome missing = marbles("pairs \"" + dir.path() + "/no\nsuch.csv\" --backend cpu", dir);
+  EXPECT_EQ(missing.exit_code, 2) << missing.err;
+  EXPECT_EQ(std::count(missing.err.begin(), missing.err.end(), '\n'), 1) << missing.err;
   EXPECT_EQ(slurp(file), "not a folder");
   EXPECT_FALSE(fs::exists(dir.path() + "/nothing-here"));
   // The same spheres run with the default broad phase.
