@@ -600,7 +600,8 @@ nb::object pairs(HostArray<const real, kAny, 4> xyzr, const std::string& algorit
     try {
       bp->find_pairs(in, static_cast<real>(margin), found);
     } catch (const broadphase::SpanTooLarge& e) {
-      throw InputError(SourceLocation{}, "xyzr", e.what());
+      throw InputError(SourceLocation{}, "algorithm",
+                       algorithm + ": " + e.what() + "; algorithm='home' or 'brute' take them");
     }
   } else {
     throw InputError(SourceLocation{}, "algorithm", "must be home, subdivision or brute, got '" + algorithm + "'");

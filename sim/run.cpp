@@ -544,7 +544,8 @@ int print_pairs(const std::string& csv_path, const std::string& algorithm, Backe
     try {
       bp->find_pairs(in, static_cast<real>(margin), pairs);
     } catch (const broadphase::SpanTooLarge& e) {  // a property of the input, not a failure of the run
-      throw InputError(SourceLocation{csv_path, 0, 0}, "", e.what());
+      throw InputError(SourceLocation{csv_path, 0, 0}, "--algorithm",
+                       algorithm + ": " + e.what() + "; --algorithm home or brute take them");
     }
   }
   std::sort(pairs.begin(), pairs.end());

@@ -322,6 +322,14 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
   EXPECT_EQ(heavy.exit_code, 2) << heavy.err;
   EXPECT_EQ(heavy.err.rfind("--set particles[0].list.radius=1e38: particles[0]: sphere 0 of the block", 0), 0u)
       << heavy.err;
+  // Spheres too far apart for the subdivision's grid: the option named (home and brute take them).
+  const std::string spread = dir.write("spread.csv", "1e18,0,0,1e-3\n-1e18,0,0,1e-3\n0,0,0,1e-3\n0,0,0.001,1e-3\n");
+  const Outcome wide = marbles("pairs " + spread + " --backend cpu --algorithm subdivision", dir);
+  EXPECT_EQ(wide.exit_code, 2) << wide.err;
+  EXPECT_EQ(wide.err.rfind(spread + ": --algorithm: subdivision: broad phase: the spheres span more than 2^62 cells", 0),
+            0u)
+      << wide.err;
+  EXPECT_NE(wide.err.find("; --algorithm home or brute take them"), std::string::npos) << wide.err;
   // A file's name with a line break is said in one line.
   const std::string broken = dir.write("nl\nrows.csv", "0,0,0,0.1\nnan,0,0,0.1\n");
   const Outcome named = marbles("pairs \"" + broken + "\" --backend cpu", dir);
