@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <map>
 #include <optional>
 #include <set>
 #include <ostream>
@@ -307,6 +308,7 @@ void check_combinations(const StudyOptions& options, const std::vector<std::vect
     throw InputError(SourceLocation{}, key, "expected one of " + list + ", got '" + value + "'");
   };
   one_of("backend", options.backend, {"auto", "cpu", "cuda"});
+  std::map<std::tuple<std::string, std::string, std::uint64_t>, std::size_t> made;  // backend, precision, scene
   for (std::size_t c = 0; c < combos.size(); ++c) {
     const std::vector<std::string>& values = combos[c];
     if (options.stop && options.stop())
@@ -318,14 +320,23 @@ void check_combinations(const StudyOptions& options, const std::vector<std::vect
     if (run.backend == "cuda" && !cuda_device().available)
       throw RuntimeFailure("study run " + label_of(options.vary, values) + ": --backend cuda: no CUDA device (" +
                            cuda_device().why_not + "); nothing was run");
+    std::optional<std::uint64_t> fingerprint;
     try {
       // Held as `marbles check` holds it, in this build's precision; a run in
       // the other one is checked by that run (its ranges are its own).
       if (run.precision.empty()) run.precision = scene::scene_precision(options.scene_path, run.sets);
-      if (run.precision == kRealName) (void)checked_scene(options.scene_path, run.sets);
+      if (run.precision == kRealName) fingerprint = checked_scene(options.scene_path, run.sets).scene.fingerprint;
     } catch (const InputError& e) {
       throw InputError(e.where(), e.key(), e.message() + " (study run " + label_of(options.vary, values) + ")");
     }
+    // Two settings that make one scene (solver.speculative=true,yes) would run it twice.
+    if (!fingerprint) continue;
+    const auto [at, fresh] = made.try_emplace(std::tuple(run.backend, run.precision, *fingerprint), c);
+    if (!fresh)
+      throw InputError(SourceLocation{}, "--vary",
+                       "the settings " + label_of(options.vary, combos[at->second]) + " and " +
+                           label_of(options.vary, values) +
+                           " make the same scene: each setting runs once (--repeats repeats them all)");
   }
 }
 

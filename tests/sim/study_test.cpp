@@ -489,6 +489,29 @@ TEST(Vary, ValuesSplitOutsideBrackets) {
   EXPECT_NE(err.find("--vary time.dt=2e-3: time.dt: varied twice"), std::string::npos) << err;
 }
 
+// Values that differ as text but make one scene (true and yes, a vector
+// with and without blanks, a name quoted or not) are refused before
+// anything runs, naming both settings; values that make different scenes run.
+TEST_F(Study, SettingsThatMakeOneSceneAreRefused) {
+  const test::ScratchDir dir("study_same_scene");
+  for (const std::string vary : {"solver.speculative=true,yes", "gravity=[0,0,-9.81],[0, 0, -9.81]",
+                                 "solver.integrator=symplectic_euler,\"symplectic_euler\""}) {
+    StudyOptions o = options(kValidation + "bouncing_ball.yaml", dir.path() + "/out");
+    o.vary.push_back(parse_vary(vary));
+    o.backend = "cpu";
+    std::ostringstream out, err;
+    try {
+      run_study(o, out, err);
+      ADD_FAILURE() << vary << " ran";
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.key(), "--vary");
+      EXPECT_NE(e.message().find(" make the same scene: each setting runs once"), std::string::npos) << e.message();
+    }
+    EXPECT_FALSE(fs::exists(dir.path() + "/out")) << vary;
+  }
+  EXPECT_EQ(study(kValidation + "bouncing_ball.yaml", {"solver.speculative=true,no"}, dir).rows.size(), 2u);
+}
+
 TEST(Pareto, EqualsTheSweepOracle) {
   std::mt19937 rng(7);
   std::uniform_int_distribution<int> pick(0, 5);
