@@ -179,6 +179,10 @@ void refuse_empty_lists(int argc, char** argv) {
       if (value.find_first_not_of(',') == std::string::npos)
         throw marbles::InputError(marbles::SourceLocation{}, name,
                                   "names nothing in '" + value + "' (a list like gravity,walls)");
+      // "gravity,,walls" or "gravity,": CLI11 passes over the empty item, as --vary refuses it.
+      if (value.find(",,") != std::string::npos || value.front() == ',' || value.back() == ',')
+        throw marbles::InputError(marbles::SourceLocation{}, name,
+                                  "an empty item in '" + value + "' (a list like gravity,walls)");
     }
   }
 }

@@ -297,6 +297,7 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
       {"bench step --backend cpu --n \" 100\" --repeats 1", "--n: expected a whole number, got ' 100'"},
       {"study " + scene + " --vary time.dt=1e-3 --repeats 0x2", "--repeats: expected a whole number, got '0x2'"},
       {"run " + scene + " --threads 0b11", "--threads: expected a whole number, got '0b11'"},
+      {"bench step --backend cpu --n 100 --repeats 1 --effects gravity,,collisions", "--effects: an empty item in 'gravity,,collisions'"},
       // A benchmark keeps every call's time: at most 10^6 of them (2^31 - 1 grew without bound).
       {"bench broadphase --backend cpu --n 1 --repeats 2147483647", "--repeats: Value 2147483647 not in range 1 to 1000000"},
       // The scene's output.dir a file, or a link to nothing: named where it was given (exit 1 without it before).
