@@ -692,6 +692,23 @@ TEST_F(Checkpoints, BenchJsonIsJsonOnly) {
       }
     }
   }
+  // The effects' cost a contact where the gas met contacts, none where it met none
+  // (a gas of two spheres said 9.5 us a contact of 0 contacts).
+  for (const auto& [args, met] : {std::pair<std::string, bool>{"bench effects --n 2 --volume-fraction 0.01 --repeats 2 --json", false},
+                                  {"bench effects --n 2000 --volume-fraction 0.4 --repeats 2 --json", true}}) {
+    ASSERT_EQ(std::system(("'" + kMarbles + "' " + args + " >" + out + " 2>/dev/null").c_str()), 0) << args;
+    for (const auto& r : nlohmann::json::parse(slurp(out)).at("results")) {
+      const double contacts = r.at("contacts").get<double>();
+      EXPECT_EQ(contacts >= 1, met) << args << ": " << r.dump();
+      if (met) {
+        EXPECT_NEAR(r.at("us_per_contact").get<double>(), 1e3 * r.at("step_ms_median").get<double>() / contacts,
+                    1e-9 * r.at("us_per_contact").get<double>())
+            << r.dump();
+      } else {
+        EXPECT_TRUE(r.at("us_per_contact").is_null()) << r.dump();
+      }
+    }
+  }
 }
 
 // `bench step --sphere-order` reaches the benchmark: the first step of the
