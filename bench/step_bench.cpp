@@ -1,5 +1,6 @@
 #include "bench/step_bench.hpp"
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -726,7 +727,12 @@ std::pair<scene::Scene, PileState> pile_start(const StepBenchOptions& options, s
   std::error_code ec;
   const fs::path folder = fs::path(path).parent_path();
   fs::create_directories(folder, ec);
-  if (!ec && ::access(folder.c_str(), W_OK) != 0) ec = std::error_code(errno, std::generic_category());
+  if (!ec) {  // a file made there and removed: access(W_OK) says yes to root where nothing can be made (/proc)
+    const fs::path probe = render::temp_path_beside(folder / "probe");
+    const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0600);
+    if (fd < 0) ec = std::error_code(errno, std::generic_category());
+    else ::close(fd), ::unlink(probe.c_str());
+  }
   if (ec)
     log << "warning: cannot cache the settled pile in " << folder.string() << " (" << ec.message()
         << "): settling it for this run alone\n";

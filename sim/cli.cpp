@@ -447,7 +447,8 @@ int cli_main(int argc, char** argv) {
   bench_step->add_option("--write-scene", st.write_scene,
                          "write each N's start (the settle, the gas or the settled pile) to this folder as "
                          "bench-SCENE-nN.yaml and .csv, to run with `marbles run` or time with another build; "
-                         "nothing is timed");
+                         "nothing is timed")
+      ->check(kFolderOrNew);
   std::string st_rolling = "on";
   bench_step->add_option("--rolling", st_rolling,
                          "pile: rolling resistance on (default) or off (friction only; settled and cached apart)")

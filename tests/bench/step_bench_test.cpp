@@ -149,6 +149,13 @@ TEST(StepBench, ACacheThatCannotBeWrittenIsAWarning) {
   EXPECT_GT(j["results"][0]["step_ms_median"].get<double>(), 0.0);
   EXPECT_NE(err.find("warning: cannot cache the settled pile in " + o.cache_dir), std::string::npos) << err;
   EXPECT_LT(err.find("warning: cannot cache"), err.find("settled on")) << err;  // said before the settle ends
+  // A folder that is there but takes no file (/proc: access() said yes to root).
+  o.cache_dir = "/proc";
+  ::testing::internal::CaptureStderr();
+  EXPECT_FALSE(run_json(o)["results"][0]["settle"]["cached"].get<bool>());
+  const std::string proc = ::testing::internal::GetCapturedStderr();
+  EXPECT_NE(proc.find("warning: cannot cache the settled pile in /proc"), std::string::npos) << proc;
+  EXPECT_LT(proc.find("warning: cannot cache"), proc.find("settled on")) << proc;
 }
 
 // A damaged cache file (a flipped byte among the spheres, cut short, bytes

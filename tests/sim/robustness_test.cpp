@@ -309,6 +309,8 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
       {"run " + far_scene + " --backend cpu --quiet --broadphase seed --precision double --out " + dir.path() + "/far",
        "--broadphase: seed: the spheres span more than 2^62 cells"},
       {"run " + scene + " --backend cpu --quiet --out " + dangling, "--out: '" + dangling + "' is a link to nothing"},
+      {"bench step --backend cpu --n 10 --write-scene " + dangling, "--write-scene: '" + dangling + "' is a link to nothing"},
+      {"bench step --backend cpu --n 10 --write-scene " + file, "--write-scene: '" + file + "' exists and is not a folder"},
       {"run " + scene + " --backend cpu --quiet --set output.dir=" + dangling,
        "output.dir: '" + dangling + "' is a link to nothing"},
   };
