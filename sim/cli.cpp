@@ -101,12 +101,16 @@ const CLI::Validator kCount(
 const CLI::Validator kNonNegative = at_least_zero(false);
 // A whole number as a person writes one: decimal digits, a sign at most (CLI11's
 // conversion took 0x10 as 16, 0b11 as 3 and " 100" as 100, where the scene's
-// numbers and --seed refuse them).
+// numbers and --seed refuse them), passed on without its leading zeros (which
+// the conversion reads as octal: 010 as 8).
 const CLI::Validator kWhole(
     [](std::string& text) {
       const std::size_t digits = !text.empty() && (text[0] == '+' || text[0] == '-') ? 1 : 0;
       const bool whole = digits < text.size() && text.find_first_not_of("0123456789", digits) == std::string::npos;
-      return whole ? std::string() : "expected a whole number, got '" + text + "'";
+      if (!whole) return "expected a whole number, got '" + text + "'";
+      const std::size_t first = std::min(text.find_first_not_of('0', digits), text.size() - 1);
+      text.erase(digits, first - digits);
+      return std::string();
     },
     "WHOLE");
 // Timed calls or steps a benchmark keeps every one of (for their median).
@@ -331,7 +335,7 @@ int cli_main(int argc, char** argv) {
   run_cmd->add_flag("--summary-only", run.summary_only,
                     "write only summary.json and any checkpoints (no frames of any series, images or movie)");
   run_cmd->add_option("--threads", run.threads, "CPU threads (default: OMP_NUM_THREADS, else every core)")
-      ->check(kWhole)
+      ->transform(kWhole)
       ->check(CLI::Range(1, kMostThreads));
   run_cmd->add_flag("--overwrite", run.overwrite,
                     "replace an earlier run's output in the folder (without it such a folder is refused)");
@@ -363,7 +367,7 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   study_cmd->add_option("--out", study.out_dir, "output folder (default out/study/<scene>)")->check(kFolderOrNew);
   study_cmd->add_option("--repeats", study.repeats, "runs per setting (the cost is their median)")
-      ->check(kWhole)
+      ->transform(kWhole)
       ->check(CLI::Range(1, 1000));
   bool study_quiet = false;
   study_cmd->add_flag("--quiet", study_quiet, "no progress bar");
@@ -393,12 +397,12 @@ int cli_main(int argc, char** argv) {
   bench_bp->add_option("--algorithm", bp.algorithm, "seed|home")->check(CLI::IsMember({"seed", "home"}));
   bench_bp->add_option("--sort", bp.sort, "seed|cub (cuda)")->check(CLI::IsMember({"seed", "cub"}));
   bench_bp->add_option("--scene", bp.scene, "gas|pile|poly")->check(CLI::IsMember({"gas", "pile", "poly"}));
-  bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->check(kWhole)->check(kPositive)->check(kCount);
+  bench_bp->add_option("--n", bp_n, "sphere counts (repeatable)")->transform(kWhole)->check(kPositive)->check(kCount);
   bench_bp->add_option("--repeats", bp.repeats, "timed calls per size")
-      ->check(kWhole)
+      ->transform(kWhole)
       ->check(CLI::Range(1, kMostRepeats));
   bench_bp->add_option("--margin", bp.margin, "pair margin (m)")->check(kFinite & kWithinReal & kNonNegative);
-  bench_bp->add_option("--seed", bp.seed, "random seed of the sphere sets")->check(kSeed);
+  bench_bp->add_option("--seed", bp.seed, "random seed of the sphere sets")->transform(kSeed);
   bench_bp->add_flag("--json", bp.json, "print JSON");
   add_limit_option(bench_bp, limit_args);
 
@@ -410,12 +414,12 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::IsMember({"cpu", "cuda"}));
   bench_step->add_option("--scene", st.scene, "gas (default) | pile | settle")
       ->check(CLI::IsMember({"gas", "pile", "settle"}));
-  bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->check(kWhole)->check(kPositive)->check(kCount);
+  bench_step->add_option("--n", st_n, "sphere counts (repeatable)")->transform(kWhole)->check(kPositive)->check(kCount);
   bench_step->add_option("--repeats", st.repeats, "timed steps per size (and as many profiled ones)")
-      ->check(kWhole)
+      ->transform(kWhole)
       ->check(CLI::Range(1, kMostRepeats));
   bench_step->add_option("--warmup", st.warmup, "untimed steps first (default 2 for gas, 5 for pile)")
-      ->check(kWhole)
+      ->transform(kWhole)
       ->check(kNonNegative);
   bench_step->add_option("--effects", st.effects, "effects of the pipeline (gas only)")->delimiter(',');
   bench_step->add_option("--cache", st.cache_dir,
@@ -423,14 +427,14 @@ int cli_main(int argc, char** argv) {
       ->check(kFolderOrNew);
   bench_step->add_option("--settle-steps", st.settle_steps,
                          "pile: step budget of the settle (a cached pile that ran out of a smaller one settles again)")
-      ->check(kWhole)
+      ->transform(kWhole)
       ->check(kPositive);
   bench_step->add_option("--settle-ke", st.settle_ke,
                          "pile: settled below this kinetic energy per sphere (J), 50 steps or more after the last quench")
       ->check(kFinite & kPositive);
   bench_step->add_option("--settle-quench", st.settle_quench,
                          "pile: zero the velocities every this many settle steps until first below the bound (0: never)")
-      ->check(kWhole)
+      ->transform(kWhole)
       ->check(kNonNegative);
   bench_step->add_flag("--rebuild", st.rebuild, "pile: settle again, replacing the cached pile");
   bench_step->add_option("--sphere-order", st.sphere_order,
@@ -438,7 +442,7 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::IsMember({"made", "shuffled", "morton", "cells"}));
   bench_step->add_option("--renumber", st.renumber,
                          "solver.renumber of the timed scene: the spheres numbered again every this many steps")
-      ->check(kWhole)
+      ->transform(kWhole)
       ->check(kNonNegative);
   bench_step->add_option("--integrator", st.integrator,
                          "solver.integrator of the timed steps: symplectic_euler (default) or velocity_verlet "
@@ -467,10 +471,10 @@ int cli_main(int argc, char** argv) {
   bench::EffectsBenchOptions ef;
   auto* bench_effects = bench_cmd->add_subcommand("effects", "time the step with and without each effect");
   bench_effects->add_option("--backend", ef.backend, "cpu|cuda")->check(CLI::IsMember({"cpu", "cuda"}));
-  bench_effects->add_option("--n", ef.n, "sphere count")->check(kWhole)->check(kPositive)->check(kCount);
+  bench_effects->add_option("--n", ef.n, "sphere count")->transform(kWhole)->check(kPositive)->check(kCount);
   bench_effects->add_option("--volume-fraction", ef.volume_fraction, "packing of the gas")->check(kFinite & CLI::Range(0.01, 0.5));
   bench_effects->add_option("--repeats", ef.repeats, "timed steps per pipeline")
-      ->check(kWhole)
+      ->transform(kWhole)
       ->check(CLI::Range(1, kMostRepeats));
   bench_effects->add_flag("--json", ef.json, "print JSON");
   add_limit_option(bench_effects, limit_args);
@@ -486,8 +490,8 @@ int cli_main(int argc, char** argv) {
   render_cmd->add_option("--color-by", rd_color_by, "speed|id|radius|material")
       ->check(CLI::IsMember({"speed", "id", "radius", "material"}));
   render_cmd->add_option("--camera", rd_camera, "camera position and target: x,y,z:lx,ly,lz");
-  render_cmd->add_option("--width", rd.width, "image width in pixels")->check(kWhole)->check(CLI::Range(16, 8192));
-  render_cmd->add_option("--height", rd.height, "image height in pixels")->check(kWhole)->check(CLI::Range(16, 8192));
+  render_cmd->add_option("--width", rd.width, "image width in pixels")->transform(kWhole)->check(CLI::Range(16, 8192));
+  render_cmd->add_option("--height", rd.height, "image height in pixels")->transform(kWhole)->check(CLI::Range(16, 8192));
   render_cmd->add_option("--fps", rd_movie.fps, "movie frames per second, 0.01 to 1000 (default: from the frame times)")
       ->check(kFinite & CLI::Range(0.01, 1000.0));
   bool rd_no_movie = false;

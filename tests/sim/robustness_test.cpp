@@ -297,6 +297,8 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
       {"bench step --backend cpu --n \" 100\" --repeats 1", "--n: expected a whole number, got ' 100'"},
       {"study " + scene + " --vary time.dt=1e-3 --repeats 0x2", "--repeats: expected a whole number, got '0x2'"},
       {"run " + scene + " --threads 0b11", "--threads: expected a whole number, got '0b11'"},
+      // Leading zeros are decimal (the conversion read 010 as octal 8): 0100000 is 100000, past render's bound.
+      {"render " + dir.path() + " --width 08193", "--width: Value 8193 not in range 16 to 8192"},
       {"bench step --backend cpu --n 100 --repeats 1 --effects gravity,,collisions", "--effects: an empty item in 'gravity,,collisions'"},
       // A benchmark keeps every call's time: at most 10^6 of them (2^31 - 1 grew without bound).
       {"bench broadphase --backend cpu --n 1 --repeats 2147483647", "--repeats: Value 2147483647 not in range 1 to 1000000"},
@@ -319,6 +321,20 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
     EXPECT_EQ(o.exit_code, 2) << args << ": " << o.err;
     EXPECT_NE(o.err.find(said), std::string::npos) << args << ": " << o.err;
   }
+  // Leading zeros are decimal, as written (the conversion read 010 as octal 8): the same
+  // spheres for --seed 010 as for 10, and 10 of them for --n 010.
+  const auto printed = [&](const std::string& args) {
+    const std::string out = dir.path() + "/stdout.txt";
+    EXPECT_EQ(std::system(("'" + kMarbles + "' " + args + " > '" + out + "' 2>/dev/null").c_str()), 0) << args;
+    return slurp(out);
+  };
+  const auto pairs_of = [](const std::string& json) { return nlohmann::json::parse(json).at("pairs").get<int>(); };
+  const std::string seeds = "bench broadphase --backend cpu --n 1000 --repeats 1 --json --seed ";
+  EXPECT_EQ(pairs_of(printed(seeds + "010")), pairs_of(printed(seeds + "10")));
+  EXPECT_NE(pairs_of(printed(seeds + "010")), pairs_of(printed(seeds + "8"))) << "premise: the seeds' sets differ";
+  EXPECT_EQ(nlohmann::json::parse(printed("bench step --backend cpu --n 010 --repeats 1 --json"))
+                .at("results")[0].at("n").get<int>(),
+            10);
   // A block's masses out of range through an override: named by the override, not the file's line
   // (which holds radius 0.05).
   const Outcome heavy = marbles("check " + scene + " --set particles[0].list.radius=1e38", dir);
