@@ -708,10 +708,12 @@ std::pair<scene::Scene, PileState> pile_start(const StepBenchOptions& options, s
   }
   // A settled pile whose energy is not below this run's bound (one settled
   // to a looser --settle-ke) is settled again, to this run's bound.
+  bool keep_cached = false;  // a settled pile, not to be replaced by one that runs out of budget
   if (state && state->settle.settled() && !(state->settle.ke_per_sphere < options.settle_ke)) {
     log << "pile N = " << n << ": " << path << " rests at KE/sphere " << state->settle.ke_per_sphere
         << " J, not below this run's bound " << options.settle_ke << " J; settling again\n";
     state.reset();
+    keep_cached = true;
   }
   if (state) {
     const SettleInfo& settle = state->settle;
@@ -737,7 +739,9 @@ std::pair<scene::Scene, PileState> pile_start(const StepBenchOptions& options, s
     log << "warning: cannot cache the settled pile in " << folder.string() << " (" << ec.message()
         << "): settling it for this run alone\n";
   PileState settled = settle_pile(n, lattice, backend, options, log);
-  if (!ec) {
+  if (!ec && keep_cached && !settled.settle.settled()) {
+    log << "pile N = " << n << ": this settle ran out of its budget; the settled pile in " << path << " is kept\n";
+  } else if (!ec) {
     try {
       save_pile(path, settled.world, settled.settle);
       log << "pile N = " << n << ": saved " << path << "\n";

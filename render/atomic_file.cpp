@@ -37,8 +37,8 @@ std::string cannot_create(const fs::path& tmp, int error) {
   // The outermost folder of the path that is not there (the nearest one
   // above it is).
   std::error_code ec;
-  fs::path gone = tmp.parent_path();
-  if (fs::exists(gone, ec) || ec) return said;
+  fs::path gone = fs::absolute(tmp, ec).parent_path();  // a run's folder is often relative ("out/demo")
+  if (ec || fs::exists(gone, ec) || ec) return said;
   while (gone.has_relative_path() && gone.parent_path() != gone && !fs::exists(gone.parent_path(), ec) && !ec)
     gone = gone.parent_path();
   return said + " (the folder " + gone.string() + " is gone: moved or removed while this wrote into it)";

@@ -144,8 +144,8 @@ void add_set_option(CLI::App* command, std::vector<std::string>& overrides) {
 // `--limit NAME=VALUE`, repeatable: raises a guard (sim/limits.hpp).
 void add_limit_option(CLI::App* command, std::vector<std::string>& limits) {
   command->add_option("--limit", limits,
-                      "raise a guard: scene_mib, materials, substeps, spheres (per block) or memory (fraction of the "
-                      "available memory), e.g. spheres=2e9 (repeatable)")
+                      "raise a guard: scene_mib, materials, substeps, spheres (per block), memory (fraction of the "
+                      "available memory) or study_runs, e.g. spheres=2e9 (repeatable)")
       ->allow_extra_args(false);
 }
 

@@ -315,7 +315,7 @@ constexpr std::size_t kLongestCsvLine = 1 << 20;  // bytes
 
 CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, const std::string& open_key) {
   if (const char* what = not_a_plain_file(path))
-    throw InputError(open_where, open_key, "'" + path + "' is " + what + ", not a CSV file of spheres");
+    throw InputError(open_where, open_key, "'" + printable_path(path) + "' is " + what + ", not a CSV file of spheres");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(open_where, open_key, "cannot open '" + printable_path(path) + "': " + std::strerror(errno));
 

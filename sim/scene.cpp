@@ -470,7 +470,7 @@ void read_csv(ParticleBlock& block, const Field& field, const std::string& scene
   block.csv_path = resolved.lexically_normal().string();
   block.csv_path_where = path.where();
   if (const char* what = not_a_plain_file(block.csv_path))
-    path.fail("'" + block.csv_path + "' is " + what + ", not a CSV file");
+    path.fail("'" + printable_path(block.csv_path) + "' is " + what + ", not a CSV file");
   std::ifstream probe(block.csv_path);
   if (!probe) path.fail("cannot open '" + printable_path(block.csv_path) + "': " + std::strerror(errno));
 }
@@ -483,12 +483,6 @@ std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field
         item, {"list", "lattice", "random", "csv", "material", "velocity", "angular_velocity", "fixed", "order"});
     ParticleBlock block;
     block.where = item.where();
-    // A block a --set changed in part (its radius) is named by that override
-    // in what is checked of the whole block (its spheres' masses, a random
-    // block's fill), not by the file's line, which holds another value.
-    if (const std::string* by = item.origins() ? item.origins()->find_under(item.key()) : nullptr;
-        by && !item.from_override())
-      block.where = SourceLocation{*by, 0, 0};
     const MapFields::Entry* source = nullptr;
     for (const MapFields::Entry& e : map.entries()) {
       if (std::find(kinds.begin(), kinds.end(), e.name) == kinds.end()) continue;
@@ -498,6 +492,15 @@ std::vector<ParticleBlock> read_particles(const Scene& scene, const Field& field
       source = &e;
     }
     if (!source) item.fail("missing the block's source: one of list, lattice, random, csv");
+    // A block a --set changed in what makes its spheres (its source's radius,
+    // its material) is named by that override in what is checked of the whole
+    // block (its spheres' masses, a random block's fill), not by the file's
+    // line, which holds another value.
+    if (const detail::Origins* origins = item.origins(); origins && !item.from_override()) {
+      const std::string* by = origins->find_under(item.key() + "." + source->name);
+      if (!by) by = origins->find_under(item.key() + ".material");
+      if (by) block.where = SourceLocation{*by, 0, 0};
+    }
     const Field& spec = source->value;
     if (source->name == "list") {
       block.kind = ParticleBlock::Kind::list;

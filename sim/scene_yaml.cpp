@@ -109,7 +109,14 @@ class ScanHandler : public YAML::EventHandler {
   // single quotes a doubled quote is one).
   void quoted(const YAML::Mark& mark) {
     if (mark.pos < 0) return;
-    const std::size_t start = (m_text.starts_with("\xef\xbb\xbf") ? 3 : 0) + static_cast<std::size_t>(mark.pos);
+    std::size_t start = (m_text.starts_with("\xef\xbb\xbf") ? 3 : 0) + static_cast<std::size_t>(mark.pos);
+    if (start >= m_text.size()) return;
+    // The mark stands before the node's properties: an anchor (`&a "x`) or a bare `!`.
+    while (start < m_text.size() && (m_text[start] == '&' || m_text[start] == '!')) {
+      while (start < m_text.size() && m_text[start] != ' ' && m_text[start] != '\t' && m_text[start] != '\n')
+        ++start;
+      while (start < m_text.size() && (m_text[start] == ' ' || m_text[start] == '\t')) ++start;
+    }
     if (start >= m_text.size()) return;
     const char quote = m_text[start];
     if (quote != '"' && quote != '\'') return;  // a block scalar's `|` or `>`

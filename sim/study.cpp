@@ -384,8 +384,13 @@ bool there(const fs::path& path) {
 // study's from before the record, is replaced only with --overwrite.
 void check_study_folder(const fs::path& dir, std::size_t runs, const std::set<std::string>& earlier,
                         const std::string& key) {
+  std::error_code ec;
+  if (there(dir / "runs") && !fs::is_directory(dir / "runs", ec))
+    throw InputError(SourceLocation{}, key, (dir / "runs").string() + " is there and is not a folder: the study keeps its "
+                                            "runs in it (move it)");
+  const bool plots = have_gnuplot();  // study.png and study.gp.log are written only by gnuplot
   for (const std::string& name : study_files(runs))
-    if (!earlier.contains(name) && there(dir / name))
+    if ((plots || (name != "study.png" && name != "study.gp.log")) && !earlier.contains(name) && there(dir / name))
       throw InputError(SourceLocation{}, key,
                        (dir / name).string() + " is there, and no earlier study in " + dir.string() +
                            " wrote it: a study replaces only its own files (move it, or give --overwrite)");
@@ -529,6 +534,8 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     result.rows.push_back(std::move(row));
   }
   if (options.progress) show_progress(err, tty, done, total, "done");
+  // Again once the runs have run (hours, it may be): a file put there meanwhile is not replaced.
+  if (!options.overwrite) check_study_folder(dir, combos.size(), earlier, key);
   {  // the record names what the folder may hold meanwhile: the earlier study's and this one's
     std::set<std::string> both = earlier;
     for (const std::string& name : study_files(combos.size())) both.insert(name);
@@ -615,7 +622,8 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
      << "     " << gnuplot_quoted((dir / "study_front.dat").string())
      << " using 1:2 with linespoints lw 2 pt 6 ps 2.2 title 'Pareto front'\n";
   render::write_file_atomic((dir / "study.gp").string(), gp.str());
-  if (have_gnuplot()) {
+  const bool gnuplot_ran = have_gnuplot();
+  if (gnuplot_ran) {
     const std::string log = (dir / "study.gp.log").string();
     if (run_process("gnuplot", {"gnuplot", (dir / "study.gp").string()}, log) == 0 && fs::exists(png + ".tmp")) {
       fs::rename(png + ".tmp", png);
@@ -641,7 +649,10 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
         << fixed(r.ms_per_step, 4) << (r.pareto ? "  *" : "") << "\n";
   std::set<std::string> written;  // the record now names this study's files alone
   for (const std::string& name : study_files(result.rows.size()))
-    if (there(dir / name)) written.insert(name);
+    if ((name != "study.png" || result.plotted) && (name != "study.gp.log" || gnuplot_ran) && there(dir / name))
+      written.insert(name);
+  for (const char* plot : {"study.png", "study.gp.log"})  // an earlier study's, where this one drew none: still its
+    if (earlier.contains(plot) && there(dir / plot)) written.insert(plot);
   write_study_record(dir, written);
   out << "output: " << dir.string() << "  (study.md, study.csv" << (result.plotted ? ", study.png" : "") << ")\n";
   return result;

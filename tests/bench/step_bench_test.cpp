@@ -253,6 +253,12 @@ TEST(StepBench, APileSettledLooselyIsSettledAgainForAStricterBound) {
   const nlohmann::json taken = run_json(o)["results"][0]["settle"];
   EXPECT_TRUE(taken["cached"].get<bool>());
   EXPECT_EQ(taken["ke_per_sphere_J"].get<double>(), again["ke_per_sphere_J"].get<double>());
+  // A stricter bound still, in too small a budget: settled again for the run, the settled pile kept in the cache.
+  const std::string file = contents(pile_cache_path(o.cache_dir, 600, false, true));
+  o.settle_ke = 1e-30;
+  o.settle_steps = 60;
+  EXPECT_FALSE(run_json(o)["results"][0]["settle"]["settled"].get<bool>());
+  EXPECT_EQ(contents(pile_cache_path(o.cache_dir, 600, false, true)), file);
 }
 
 // The run's watchdog in the timed steps (--watchdog on) changes no step

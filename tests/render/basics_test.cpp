@@ -223,6 +223,19 @@ TEST(AtomicFile, AFolderGoneIsNamed) {
           << said;
     }
   EXPECT_TRUE(fs::exists(dir / "moved" / "frames" / "a.vtp"));
+  // A run's folder as it is often given, relative: the folder is named, not "".
+  const fs::path was = fs::current_path();
+  fs::current_path(dir);
+  fs::create_directories("rel/frames");
+  fs::rename("rel", "rel-moved");
+  try {
+    write_file_atomic("rel/frames/c.vtp", "x");
+    ADD_FAILURE() << "no error for a relative path";
+  } catch (const RuntimeFailure& e) {
+    EXPECT_NE(std::string(e.what()).find("(the folder " + (dir / "rel").string() + " is gone"), std::string::npos)
+        << e.what();
+  }
+  fs::current_path(was);
   // Another reason is said as it is, with no folder named.
   fs::create_directories(dir / "locked");
   fs::permissions(dir / "locked", fs::perms::owner_read | fs::perms::owner_exec);

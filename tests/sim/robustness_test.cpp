@@ -349,6 +349,12 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
             0u)
       << wide.err;
   EXPECT_NE(wide.err.find("; --algorithm home or brute take them"), std::string::npos) << wide.err;
+  // An override elsewhere in the block (fixed) is not blamed for the file's radius.
+  const std::string heavy_scene = dir.write("heavy.yaml", "time: {duration: 0.01, dt: 0.001}\nmaterials: {a: {}}\n"
+                                                    "particles:\n  - list: {positions: [[0, 0, 1]], radius: 1e30}\n");
+  const Outcome file_radius = marbles("check " + heavy_scene + " --set particles[0].fixed=false", dir);
+  EXPECT_EQ(file_radius.exit_code, 2) << file_radius.err;
+  EXPECT_EQ(file_radius.err.rfind(heavy_scene + ":4:5: particles[0]: sphere 0 of the block", 0), 0u) << file_radius.err;
   // A file's name with a line break is said in one line.
   const std::string broken = dir.write("nl\nrows.csv", "0,0,0,0.1\nnan,0,0,0.1\n");
   const Outcome named = marbles("pairs \"" + broken + "\" --backend cpu", dir);

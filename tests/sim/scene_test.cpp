@@ -374,14 +374,16 @@ TEST(SceneLoad, QuotedValuesCloseOrAreRefused) {
   const ScratchDir dir("quotes");
   const std::pair<std::string, std::string> closed[] = {
       {R"("a\"b")", R"(a"b)"},     {R"("a\\")", R"(a\)"}, {"'it''s'", "it's"}, {"''''", "'"},
-      {"\"two\n  lines\"", "two lines"}, {"|\n  \"open\n", "\"open\n"}, {"'\"'", "\""}, {"\"'\"", "'"}};
+      {"\"two\n  lines\"", "two lines"}, {"|\n  \"open\n", "\"open\n"}, {"'\"'", "\""}, {"\"'\"", "'"},
+      {"&n \"anchored\"", "anchored"},   {"! \"bare\"", "bare"}};
   for (const auto& [value, name] : closed)
     for (const std::string bom : {"", "\xef\xbb\xbf"}) {
       const std::string text = bom + SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "name: " + value + "\n";
       EXPECT_EQ(load_scene(dir.write("s.yaml", text)).name, name) << value;
     }
   const std::pair<std::string, char> open[] = {{R"("a\")", '"'}, {R"("a\\\")", '"'}, {"'it''", '\''},
-                                               {"'''", '\''},    {"\"'\n", '"'},     {"'\"\n\n", '\''}};
+                                               {"'''", '\''},    {"\"'\n", '"'},     {"'\"\n\n", '\''},
+                                               {"&n \"a", '"'},  {"! 'b", '\''}};
   for (const auto& [value, quote] : open)
     for (const std::string bom : {"", "\xef\xbb\xbf"}) {
       const std::string text = bom + SCENE_TIME SCENE_MATERIALS SCENE_PARTICLES "name: " + value + "\n";

@@ -190,6 +190,27 @@ TEST_F(Study, AStudyReplacesOnlyWhatAStudyWrote) {
   ASSERT_EQ(run_study(o, out, err).rows.size(), 1u);
   EXPECT_NE(slurp(other.path() + "/study.md"), "my notes");
   EXPECT_FALSE(fs::exists(fs::path(other.path()) / "runs" / "7"));
+  // A table of the user's put there while the runs run: found before the record names it.
+  const test::ScratchDir late("study_users_late_table");
+  StudyOptions l = options(ball, late.path());
+  l.vary.push_back(parse_vary("time.dt=4e-3"));
+  l.backend = "cpu";
+  l.stop = [&] {
+    if (fs::exists(late.path() + "/.runs-" + std::to_string(::getpid()))) std::ofstream(late.path() + "/study.csv") << "mine";
+    return false;
+  };
+  EXPECT_THROW(run_study(l, out, err), InputError);
+  EXPECT_EQ(slurp(late.path() + "/study.csv"), "mine");
+  // A `runs` that is no folder: refused before anything runs.
+  const test::ScratchDir file_runs("study_runs_a_file");
+  std::ofstream(fs::path(file_runs.path()) / "runs") << "x";
+  try {
+    study(ball, {"time.dt=4e-3"}, file_runs);
+    ADD_FAILURE() << "no error for runs as a file";
+  } catch (const InputError& e) {
+    EXPECT_NE(e.message().find("/runs is there and is not a folder"), std::string::npos) << e.message();
+  }
+  EXPECT_FALSE(fs::exists(file_runs.path() + "/study.csv"));
 }
 
 // A stop while the settings are checked ends the study there, with nothing
