@@ -33,7 +33,7 @@ fs::path temp_path_beside(const fs::path& final_path) {
 
 std::string cannot_create(const fs::path& tmp, int error) {
   std::string said = "cannot create " + tmp.string() + ": " + std::strerror(error);
-  if (error != ENOENT || tmp.parent_path().empty()) return said;
+  if (error != ENOENT) return said;
   // The outermost folder of the path that is not there (the nearest one
   // above it is).
   std::error_code ec;

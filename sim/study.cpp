@@ -374,6 +374,9 @@ void write_study_record(const fs::path& dir, const std::set<std::string>& names)
   render::write_file_atomic(dir / kStudyRecord, text);
 }
 
+// study.png and study.gp.log: the files gnuplot writes, where it is there.
+bool drawn_by_gnuplot(const std::string& name) { return name == "study.png" || name == "study.gp.log"; }
+
 bool there(const fs::path& path) {
   std::error_code ec;
   return fs::symlink_status(path, ec).type() != fs::file_type::not_found;
@@ -388,9 +391,9 @@ void check_study_folder(const fs::path& dir, std::size_t runs, const std::set<st
   if (there(dir / "runs") && !fs::is_directory(dir / "runs", ec))
     throw InputError(SourceLocation{}, key, (dir / "runs").string() + " is there and is not a folder: the study keeps its "
                                             "runs in it (move it)");
-  const bool plots = have_gnuplot();  // study.png and study.gp.log are written only by gnuplot
+  const bool plots = have_gnuplot();
   for (const std::string& name : study_files(runs))
-    if ((plots || (name != "study.png" && name != "study.gp.log")) && !earlier.contains(name) && there(dir / name))
+    if ((plots || !drawn_by_gnuplot(name)) && !earlier.contains(name) && there(dir / name))
       throw InputError(SourceLocation{}, key,
                        (dir / name).string() + " is there, and no earlier study in " + dir.string() +
                            " wrote it: a study replaces only its own files (move it, or give --overwrite)");
@@ -647,12 +650,14 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     out << std::left << std::setw(static_cast<int>(width)) << label_of(options.vary, r.values) << std::right << std::setw(12)
         << fixed(100 * r.error, 3) << std::setw(14) << fixed(r.ms_per_simulated_second, 4) << std::setw(12)
         << fixed(r.ms_per_step, 4) << (r.pareto ? "  *" : "") << "\n";
-  std::set<std::string> written;  // the record now names this study's files alone
-  for (const std::string& name : study_files(result.rows.size()))
-    if ((name != "study.png" || result.plotted) && (name != "study.gp.log" || gnuplot_ran) && there(dir / name))
-      written.insert(name);
-  for (const char* plot : {"study.png", "study.gp.log"})  // an earlier study's, where this one drew none: still its
-    if (earlier.contains(plot) && there(dir / plot)) written.insert(plot);
+  // The record now names this study's files alone, and an earlier study's
+  // plot where this one drew none (still that study's).
+  std::set<std::string> written;
+  for (const std::string& name : study_files(result.rows.size())) {
+    const bool drawn = name == "study.png" ? result.plotted : gnuplot_ran;
+    const bool ours = !drawn_by_gnuplot(name) || drawn || earlier.contains(name);
+    if (ours && there(dir / name)) written.insert(name);
+  }
   write_study_record(dir, written);
   out << "output: " << dir.string() << "  (study.md, study.csv" << (result.plotted ? ", study.png" : "") << ")\n";
   return result;
