@@ -40,8 +40,9 @@ nb::list study(const std::string& scene_path, const std::vector<std::string>& va
                const std::string& backend, int repeats, const std::string& out_dir, const std::string& program,
                bool overwrite) {
   marbles::StudyOptions options;
+  options.names = marbles::StudyNames::python();
   options.scene_path = scene_path;
-  for (const std::string& v : vary) options.vary.push_back(marbles::parse_vary(v));
+  for (const std::string& v : vary) options.vary.push_back(marbles::parse_vary(v, options.names));
   options.set = set;
   options.backend = backend;
   options.repeats = repeats;

@@ -217,9 +217,9 @@ std::string gnuplot_quoted(const std::string& text) {
 
 }  // namespace
 
-StudyVary parse_vary(const std::string& text) {
+StudyVary parse_vary(const std::string& text, const StudyNames& names) {
   const std::size_t eq = text.find('=');
-  const SourceLocation where{"--vary " + text, 0, 0};
+  const SourceLocation where{names.vary + " " + text, 0, 0};
   if (eq == std::string::npos || eq == 0) throw InputError(where, "", "expected KEY=v1,v2,...");
   StudyVary v;
   v.key = text.substr(0, eq);
@@ -245,7 +245,7 @@ StudyVary parse_vary(const std::string& text) {
       if (earlier == item || (number(earlier) && number(item) && *number(earlier) == *number(item)))
         throw InputError(where, v.key,
                          "the value " + item + " is given twice" + (earlier == item ? "" : " (as " + earlier + ")") +
-                             ": each setting runs once (--repeats repeats them all)");
+                             ": each setting runs once (" + names.repeats + " repeats them all)");
     v.values.push_back(item);
     item.clear();
   };
@@ -315,10 +315,11 @@ void check_combinations(const StudyOptions& options, const std::vector<std::vect
       throw StudyStopped("the study was stopped while its settings were checked (" + std::to_string(c + 1) + " of " +
                          std::to_string(combos.size()) + "); nothing was run or written");
     RunSettings run = settings_of(options, values);
-    one_of("--vary backend", run.backend, {"auto", "cpu", "cuda"});
-    if (!run.precision.empty()) one_of("--vary precision", run.precision, {"float", "double"});
+    one_of(options.names.vary + " backend", run.backend, {"auto", "cpu", "cuda"});
+    if (!run.precision.empty()) one_of(options.names.vary + " precision", run.precision, {"float", "double"});
     if (run.backend == "cuda" && !cuda_device().available)
-      throw RuntimeFailure("study run " + label_of(options.vary, values) + ": --backend cuda: no CUDA device (" +
+      throw RuntimeFailure("study run " + label_of(options.vary, values) + ": " + options.names.backend +
+                           " cuda: no CUDA device (" +
                            cuda_device().why_not + "); nothing was run");
     std::optional<std::uint64_t> fingerprint;
     try {
@@ -333,10 +334,10 @@ void check_combinations(const StudyOptions& options, const std::vector<std::vect
     if (!fingerprint) continue;
     const auto [at, fresh] = made.try_emplace(std::tuple(run.backend, run.precision, *fingerprint), c);
     if (!fresh)
-      throw InputError(SourceLocation{}, "--vary",
+      throw InputError(SourceLocation{}, options.names.vary,
                        "the settings " + label_of(options.vary, combos[at->second]) + " and " +
-                           label_of(options.vary, values) +
-                           " make the same scene: each setting runs once (--repeats repeats them all)");
+                           label_of(options.vary, values) + " make the same scene: each setting runs once (" +
+                           options.names.repeats + " repeats them all)");
   }
 }
 
@@ -386,7 +387,7 @@ bool there(const fs::path& path) {
 // that no earlier study in the folder wrote: a folder of the user's, or a
 // study's from before the record, is replaced only with --overwrite.
 void check_study_folder(const fs::path& dir, std::size_t runs, const std::set<std::string>& earlier,
-                        const std::string& key) {
+                        const std::string& key, const StudyNames& names) {
   std::error_code ec;
   if (there(dir / "runs") && !fs::is_directory(dir / "runs", ec))
     throw InputError(SourceLocation{}, key, (dir / "runs").string() + " is there and is not a folder: the study keeps its "
@@ -396,7 +397,7 @@ void check_study_folder(const fs::path& dir, std::size_t runs, const std::set<st
     if ((plots || !drawn_by_gnuplot(name)) && !earlier.contains(name) && there(dir / name))
       throw InputError(SourceLocation{}, key,
                        (dir / name).string() + " is there, and no earlier study in " + dir.string() +
-                           " wrote it: a study replaces only its own files (move it, or give --overwrite)");
+                           " wrote it: a study replaces only its own files (move it, or " + names.overwrite + ")");
 }
 
 // The study's runs (`staging`/N and N.log) moved into `runs`, in the place
@@ -446,17 +447,17 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   double runs = options.repeats;
   for (const StudyVary& v : options.vary) runs *= static_cast<double>(v.values.size());
   if (runs > limits().study_runs)
-    throw InputError(SourceLocation{}, "--vary",
-                     shortest(runs) + " runs (the settings' combinations x --repeats " +
+    throw InputError(SourceLocation{}, options.names.vary,
+                     shortest(runs) + " runs (the settings' combinations x " + options.names.repeats + " " +
                          std::to_string(options.repeats) + "), more than the limit " + shortest(limits().study_runs) +
-                         " (--limit study_runs=N raises it)");
+                         " (" + options.names.runs_limit + ")");
   const auto combos = combinations(options.vary);
   check_combinations(options, combos);
   // One study at a time in the folder (its runs/, tables and plots).
-  const std::string key = options.out_dir.empty() ? "study" : "--out";
+  const std::string key = options.out_dir.empty() ? "study" : options.names.out;
   const RunFolderLock lock(dir, key);
   const std::set<std::string> earlier = earlier_study_files(dir);
-  if (!options.overwrite) check_study_folder(dir, combos.size(), earlier, key);
+  if (!options.overwrite) check_study_folder(dir, combos.size(), earlier, key, options.names);
   // The runs are made in a folder of their own (`.runs-PID`) and take the
   // place of an earlier study's in runs/ only once all of them have run: a
   // study that fails or is stopped leaves the earlier one whole, its tables
@@ -538,7 +539,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   }
   if (options.progress) show_progress(err, tty, done, total, "done");
   // Again once the runs have run (hours, it may be): a file put there meanwhile is not replaced.
-  if (!options.overwrite) check_study_folder(dir, combos.size(), earlier, key);
+  if (!options.overwrite) check_study_folder(dir, combos.size(), earlier, key, options.names);
   {  // the record names what the folder may hold meanwhile: the earlier study's and this one's
     std::set<std::string> both = earlier;
     for (const std::string& name : study_files(combos.size())) both.insert(name);

@@ -24,6 +24,21 @@ struct StudyVary {
   std::vector<std::string> values;  // as written on the command line
 };
 
+// How a study's messages name what its caller gave: the command line's
+// options (the default), or the Python function's arguments (python()).
+struct StudyNames {
+  std::string vary = "--vary";                            // a setting's list, and the settings
+  std::string repeats = "--repeats";                      // the runs a setting
+  std::string backend = "--backend";                      // the backend a run is given
+  std::string out = "--out";                              // the study's folder, where given
+  std::string overwrite = "give --overwrite";             // what replaces a user's files
+  std::string runs_limit = "--limit study_runs=N raises it";  // past the runs' limit
+  static StudyNames python() {
+    return {"vary", "repeats", "backend", "out", "give overwrite=True",
+            "a study from Python keeps to it: fewer values or repeats, or several studies"};
+  }
+};
+
 struct StudyOptions {
   std::string scene_path;
   std::vector<StudyVary> vary;      // the cartesian product is run, first key slowest
@@ -45,6 +60,7 @@ struct StudyOptions {
   // module's Ctrl-C, whose signal reaches its process alone (a notebook's
   // interrupt), not the runs.
   std::function<bool()> stop;
+  StudyNames names;  // how its messages name the options
 };
 
 // A study ended by StudyOptions::stop: the earlier study's runs and tables are
@@ -71,7 +87,7 @@ struct StudyResult {
 };
 
 // "time.dt=1e-3,5e-4" -> {time.dt, {1e-3, 5e-4}}; throws InputError naming --vary.
-StudyVary parse_vary(const std::string& text);
+StudyVary parse_vary(const std::string& text, const StudyNames& names = {});
 
 // Runs the study and writes its files; throws InputError (a scene without a
 // reference, file:line:col) or RuntimeFailure (a run that failed, with its log).

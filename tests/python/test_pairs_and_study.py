@@ -80,14 +80,35 @@ def test_study_returns_the_table(tmp_path):
 def test_a_study_replaces_a_users_files_only_when_told(tmp_path):
     scene = SCENES / "validation" / "bouncing_ball.yaml"
     (tmp_path / "study.md").write_text("my notes")
-    with pytest.raises(marbles.SceneError, match="study.md is there, and no earlier study"):
+    with pytest.raises(marbles.SceneError, match="study.md is there, and no earlier study") as refused:
         marbles.study(scene, vary={"time.dt": [2e-3]}, out=tmp_path)
+    assert "give overwrite=True" in str(refused.value) and "--overwrite" not in str(refused.value)
     assert (tmp_path / "study.md").read_text() == "my notes"
     with pytest.raises(TypeError, match="study: overwrite is True or False"):
         marbles.study(scene, vary={"time.dt": [2e-3]}, out=tmp_path, overwrite="False")
     assert len(marbles.study(scene, vary={"time.dt": [2e-3]}, out=tmp_path, overwrite=True)) == 1
     assert (tmp_path / "study.md").read_text() != "my notes"
     assert len(marbles.study(scene, vary={"time.dt": [2e-3]}, out=tmp_path)) == 1  # its own files now
+
+
+def test_a_studys_messages_name_the_functions_arguments(tmp_path):
+    # The function's arguments, not the command line's options, which a
+    # caller from Python did not give (and could not: it takes no --limit).
+    scene = SCENES / "validation" / "bouncing_ball.yaml"
+    cases = [
+        (dict(vary={"time.dt": [1e-3], "solver.iterations": list(range(1, 101))}, repeats=101),
+         r"^vary: 10100 runs \(the settings' combinations x repeats 101\), more than the limit 10000 "
+         r"\(a study from Python keeps to it"),
+        (dict(vary={"time.dt": ["2e-3", "0.002"]}), r"^vary time.dt=2e-3,0.002: .*given twice.*\(repeats repeats"),
+        (dict(vary={"solver.speculative": [True, "yes"]}), r"^vary: the settings .* make the same scene.*\(repeats "),
+        (dict(vary={"backend": ["gpu"]}), r"^vary backend: expected one of auto, cpu, cuda"),
+        (dict(vary={"precision": ["half"]}), r"^vary precision: expected one of float, double"),
+    ]
+    for kwargs, message in cases:
+        with pytest.raises(marbles.SceneError, match=message) as refused:
+            marbles.study(scene, out=tmp_path, **kwargs)
+        assert "--" not in str(refused.value), str(refused.value)
+    assert not any(tmp_path.iterdir())  # refused before anything ran
 
 
 def test_study_twice_in_one_process(tmp_path):
