@@ -517,6 +517,19 @@ int cli_main(int argc, char** argv) {
       std::cerr << empty_value(option).what() << "\n";
       return 2;
     }
+    // CLI11 lists the arguments it did not expect bare, so an empty one
+    // said nothing (`marbles run x.yaml ''`): each is quoted here.
+    if (dynamic_cast<const CLI::ExtrasError*>(&e)) {
+      const std::vector<std::string> extra = app.remaining(true);
+      std::string list;
+      for (const std::string& x : extra)
+        list += (list.empty() ? "'" : ", '") + marbles::printable_path(x) + "'" + (x.empty() ? " (an empty one)" : "");
+      if (!list.empty()) {
+        std::cerr << "marbles: " << (extra.size() == 1 ? "an argument" : "arguments")
+                  << " that no command or option here takes: " << list << "\n(see marbles --help)\n";
+        return 2;
+      }
+    }
     std::cerr << "marbles: " << e.what() << "\n(see marbles --help)\n";
     return 2;
   }

@@ -291,6 +291,10 @@ TEST_F(Robustness, CommandLineMistakesAreNamed) {
       // An empty value where the option's own check would fail on it first ("Value  not in range").
       {"study " + scene + " --vary time.dt=1e-3 --repeats \"\"", "--repeats: an empty value"},
       {"pairs " + file + " --margin=", "--margin: an empty value"},
+      // Arguments nobody takes, quoted: an empty one said nothing ("was not expected: ").
+      {"run " + scene + " --backend cpu \"\"", "an argument that no command or option here takes: '' (an empty one)"},
+      {"bench step --backend cpu --n 10 --repeats 1 extra \"\"",
+       "arguments that no command or option here takes: 'extra', '' (an empty one)"},
       {"check " + scene + " --precision \"\"", "--precision: an empty value"},
       // Whole numbers in decimal, as a scene's (CLI11 read 0x10 as 16 and " 100" as 100).
       {"bench step --backend cpu --n 0x10 --repeats 1", "--n: expected a whole number, got '0x10'"},
