@@ -203,16 +203,21 @@ bool have_gnuplot() {
   }
 }
 
-// Text as a gnuplot single-quoted string: a quote doubled, control
-// characters (which would end the script's line) as spaces. The scene's name
-// and the paths are data, never gnuplot commands.
+// Text as a gnuplot double-quoted string, every byte kept: a backslash and
+// a quote escaped, and as octal escapes the control bytes (a line break
+// would end the script's line: a folder named with one lost its plot) and
+// the backquote (gnuplot runs `...` as a shell command before it reads the
+// escapes). The scene's name and the paths are data, never commands.
 std::string gnuplot_quoted(const std::string& text) {
-  std::string out = "'";
+  std::string out = "\"";
   for (const char c : text) {
-    if (c == '\'') out += "''";
-    else out += static_cast<unsigned char>(c) < 0x20 || c == 0x7f ? ' ' : c;
+    const auto u = static_cast<unsigned char>(c);
+    if (c == '\\' || c == '"') out += {'\\', c};
+    else if (u < 0x20 || u == 0x7f || c == '`')
+      out += {'\\', char('0' + (u >> 6)), char('0' + ((u >> 3) & 7)), char('0' + (u & 7))};
+    else out += c;
   }
-  return out + "'";
+  return out + "\"";
 }
 
 }  // namespace

@@ -418,24 +418,29 @@ TEST_F(Study, OneStudyAtATimeInAFolder) {
 
 // The scene's name and the output folder are data to the plot, never
 // commands: a name and a folder that close gnuplot's quotes (and the shell's)
-// and call system() draw a plot titled with them, and run nothing. Without
-// gnuplot the study.gp written is checked alone.
+// and call system() or `...` draw a plot titled with them, and run nothing;
+// a folder named with a line break, a quote and a backslash has its plot too.
+// Without gnuplot the study.gp written is checked alone.
 TEST_F(Study, NamesAndPathsAreNeverRunAsCommands) {
   const test::ScratchDir dir("study_quotes");
   const std::string marker = dir.path() + "/ran";
   std::string scene = slurp(kValidation + "bouncing_ball.yaml");
   const std::size_t name = scene.find("name: bouncing_ball");
   ASSERT_NE(name, std::string::npos);
-  scene.replace(name, 19, "name: \"x'; print system('touch " + marker + "'); set title '\"");
+  scene.replace(name, 19, "name: \"x'; print system('touch " + marker + "'); set title '`touch " + marker + "`\"");
   const std::string path = dir.write("named.yaml", scene);
-  const std::string out = dir.path() + "/o';touch " + marker + ";'";
+  const std::string out = dir.path() + "/o';touch " + marker + ";'\n\"`touch " + marker + "`\\\"";
   std::ostringstream text, err;
   const StudyResult r = run_study(options(path, out), text, err);
   ASSERT_EQ(r.rows.size(), 1u);
   EXPECT_FALSE(fs::exists(marker)) << err.str();
   EXPECT_FALSE(fs::exists(out + "/study.png.tmp"));
   const std::string gp = slurp(out + "/study.gp");
-  EXPECT_NE(gp.find("set title 'x''; print system(''touch " + marker + "''); set title '': error against cost"),
+  EXPECT_NE(gp.find("set title \"x'; print system('touch " + marker + "'); set title '\\140touch " + marker +
+                    "\\140: error against cost"),
+            std::string::npos)
+      << gp;
+  EXPECT_NE(gp.find("o';touch " + marker + ";'\\012\\\"\\140touch " + marker + "\\140\\\\\\\"/study.png.tmp\""),
             std::string::npos)
       << gp;
   if (std::system("gnuplot --version >/dev/null 2>&1") == 0) {
