@@ -28,9 +28,10 @@ namespace marbles::broadphase {
 // grid (sized from the largest radius) along an axis.
 class SpanTooLarge : public RuntimeFailure {
  public:
-  SpanTooLarge()
-      : RuntimeFailure("broad phase: the spheres span more than 2^62 cells of their largest diameter: coordinates too "
-                       "far apart for their radii") {}
+  // Why, as the messages that name the option say it (run, pairs, Python's pairs).
+  static constexpr const char* kWhy =
+      "the spheres span more than 2^62 cells of their largest diameter: coordinates too far apart for their radii";
+  SpanTooLarge() : RuntimeFailure(std::string("broad phase: ") + kWhy) {}
 };
 
 enum class KeyWidth { bits32, bits64, too_wide };

@@ -599,9 +599,9 @@ nb::object pairs(HostArray<const real, kAny, 4> xyzr, const std::string& algorit
     const python::GilLetGo release;
     try {
       bp->find_pairs(in, static_cast<real>(margin), found);
-    } catch (const broadphase::SpanTooLarge& e) {
+    } catch (const broadphase::SpanTooLarge&) {
       throw InputError(SourceLocation{}, "algorithm",
-                       algorithm + ": " + e.what() + "; algorithm='home' or 'brute' take them");
+                       algorithm + ": " + broadphase::SpanTooLarge::kWhy + "; algorithm='home' or 'brute' take them");
     }
   } else {
     throw InputError(SourceLocation{}, "algorithm", "must be home, subdivision or brute, got '" + algorithm + "'");

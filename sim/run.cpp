@@ -293,8 +293,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       broadphase::choose_grid(broadphase::bounds_of({world.position.data(), world.radius.data(), world.size()}), 0);
     } catch (const broadphase::SpanTooLarge&) {
       throw InputError(SourceLocation{}, "--broadphase",
-                       "seed: the spheres span more than 2^62 cells of their largest diameter, more than its grid "
-                       "keys (coordinates too far apart for their radii); --broadphase home, the default, takes them");
+                       std::string("seed: ") + broadphase::SpanTooLarge::kWhy +
+                           "; --broadphase home, the default, takes them");
     }
   }
   // The reference's rules before anything runs or is printed (the probe itself is made from the step's world).
@@ -543,9 +543,9 @@ int print_pairs(const std::string& csv_path, const std::string& algorithm, Backe
                                                    : broadphase::make_subdivision_cpu(alg);
     try {
       bp->find_pairs(in, static_cast<real>(margin), pairs);
-    } catch (const broadphase::SpanTooLarge& e) {  // a property of the input, not a failure of the run
+    } catch (const broadphase::SpanTooLarge&) {  // a property of the input, not a failure of the run
       throw InputError(SourceLocation{csv_path, 0, 0}, "--algorithm",
-                       algorithm + ": " + e.what() + "; --algorithm home or brute take them");
+                       algorithm + ": " + broadphase::SpanTooLarge::kWhy + "; --algorithm home or brute take them");
     }
   }
   std::sort(pairs.begin(), pairs.end());

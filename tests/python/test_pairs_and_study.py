@@ -44,7 +44,7 @@ def test_pairs_equal_brute_force(name, algorithm):
 
 def test_spheres_too_far_apart_for_the_subdivision_name_the_algorithm():
     spread = np.array([[1e18, 0, 0, 1e-3], [-1e18, 0, 0, 1e-3], [0, 0, 0, 1e-3], [0, 0, 0.001, 1e-3]])
-    with pytest.raises(marbles.SceneError, match=r"^algorithm: subdivision: broad phase: the spheres span more than "
+    with pytest.raises(marbles.SceneError, match=r"^algorithm: subdivision: the spheres span more than "
                                                  r"2\^62 cells.*; algorithm='home' or 'brute' take them$") as e:
         marbles.pairs(spread, backend="cpu", algorithm="subdivision")
     assert e.value.key == "algorithm"
