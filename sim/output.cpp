@@ -237,12 +237,21 @@ RunFolderLock::RunFolderLock(const std::filesystem::path& dir, const std::string
   // The run that held the lock removes its file as it ends: a lock taken on
   // the file it removed is no lock, so it is taken again on the one there.
   for (int tries = 0;; ++tries) {
-    m_fd = ::open(m_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    // Never through a link: the process's number written into the file would
+    // replace whatever the link names, outside the folder.
+    m_fd = ::open(m_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0644);
     const int why = errno;
-    if (m_fd < 0 && why == EACCES) m_fd = ::open(m_path.c_str(), O_RDONLY | O_CLOEXEC);  // another user's: locks too
+    if (m_fd < 0 && why == EACCES)  // another user's: locks too
+      m_fd = ::open(m_path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
     if (m_fd < 0 && why == EACCES && errno == ENOENT)  // none there, and none may be made: the folder is not ours
-      throw RuntimeFailure("cannot write in the output folder " + dir.string() + ": " + std::strerror(why));
-    if (m_fd < 0) throw RuntimeFailure("cannot open " + m_path.string() + ": " + std::strerror(errno));
+      throw RuntimeFailure("cannot write in the output folder " + printable_path(dir.string()) + ": " +
+                           std::strerror(why));
+    if (m_fd < 0 && (errno == ELOOP || errno == EISDIR))
+      throw InputError(SourceLocation{}, option,
+                       printable_path(m_path.string()) + (errno == ELOOP ? " is a link" : " is a folder") +
+                           " where a run keeps its lock file, which is made there and never through a link "
+                           "(remove it)");
+    if (m_fd < 0) throw RuntimeFailure("cannot open " + printable_path(m_path.string()) + ": " + std::strerror(errno));
     if (::flock(m_fd, LOCK_EX | LOCK_NB) != 0) {
       char holder[32] = {};
       const ssize_t n = ::pread(m_fd, holder, sizeof holder - 1, 0);
@@ -259,7 +268,7 @@ RunFolderLock::RunFolderLock(const std::filesystem::path& dir, const std::string
                            "; wait for it to end, or choose another folder");
     }
     struct stat held {}, named {};
-    if (::fstat(m_fd, &held) == 0 && ::stat(m_path.c_str(), &named) == 0 && held.st_ino == named.st_ino &&
+    if (::fstat(m_fd, &held) == 0 && ::lstat(m_path.c_str(), &named) == 0 && held.st_ino == named.st_ino &&
         held.st_dev == named.st_dev)
       break;
     ::close(m_fd);

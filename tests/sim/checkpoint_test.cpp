@@ -365,6 +365,35 @@ TEST_F(Checkpoints, OneRunAtATimeInAFolder) {
   EXPECT_FALSE(fs::exists(dir.path() + "/new")) << "a refused run leaves no folder it made";
 }
 
+// The lock file is made in the folder, never through a link: a link there
+// (to a file, or to none) is refused, exit 2, and what it names is left as
+// it was (the process's number replaced a file's contents, and a link to
+// nothing made a file outside the folder); a folder there is refused so too.
+TEST_F(Checkpoints, TheLockIsNeverTakenThroughALink) {
+  const test::ScratchDir dir("ck_lock_link");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string victim = dir.write("victim.txt", "precious\n");
+  const std::string out = dir.path() + "/o", lock = out + "/.marbles-run.lock";
+  fs::create_directories(out);
+  for (const std::string& target : {victim, dir.path() + "/none"}) {
+    fs::create_symlink(target, lock);
+    for (const std::string& command : {"run " + scene + " --quiet --backend cpu --no-render --duration 0.05 --out " + out,
+                                       "render " + out + " --no-movie"}) {
+      std::string err;
+      EXPECT_EQ(marbles(command, &err), 2) << command;
+      EXPECT_NE(err.find(lock + " is a link where a run keeps its lock file"), std::string::npos) << err;
+    }
+    EXPECT_TRUE(fs::is_symlink(lock));
+    EXPECT_EQ(slurp(victim), "precious\n");
+    EXPECT_FALSE(fs::exists(dir.path() + "/none"));
+    fs::remove(lock);
+  }
+  fs::create_directory(lock);
+  std::string err;
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --no-render --duration 0.05 --out " + out, &err), 2);
+  EXPECT_NE(err.find(lock + " is a folder where a run keeps its lock file"), std::string::npos) << err;
+}
+
 // A resume in its run's folder replaces the steps after its checkpoint: a
 // shorter run leaves no frame, wall frame or checkpoint of the longer one
 // (a checkpoint past the new end outranked the new ones under `keep`), and
