@@ -14,6 +14,7 @@
 #include "core/files.hpp"
 #include "core/hash.hpp"
 #include "render/atomic_file.hpp"
+#include "sim/simulation.hpp"
 #include "sim/world.hpp"
 
 namespace marbles {
@@ -271,6 +272,13 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash, st
   // Steps a run could have made: at most 2^53 (its time, steps x dt, exact in
   // double; no count wraps past it), far past the substep limit's 10^10.
   if (c.steps > (std::uint64_t{1} << 53)) r.fail("is damaged (its step count, " + std::to_string(c.steps) + ")");
+  // Counts its steps could have made: a step kept unswept at most once, and
+  // redone at most once a retry and once more for its first try (the
+  // summary's counts are whole numbers: 2^64 and more read as 0).
+  const double steps = static_cast<double>(c.steps);
+  if (c.totals.unswept > steps || c.totals.rollbacks > steps * (Simulation::kWatchdogRetries + 1))
+    r.fail("is damaged (its running totals: more rollbacks or steps kept unswept than its " + std::to_string(c.steps) +
+           " steps make)");
   // Pairs of its spheres (a < b) or a sphere and a wall, in ascending key
   // order without repeats: the restore's runs by sphere and the kept
   // colours' split between the threads (or_kept_colours_by_a) rest on it.

@@ -369,6 +369,14 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
   const std::string path = ::testing::TempDir() + "/marbles_values.mck";
   write_checkpoint(path, c);
   EXPECT_NO_THROW(read_checkpoint(path, 42)) << "premise: the file as written loads";
+  {  // as many as its steps make: every step redone four times, and kept unswept
+    ASSERT_GT(c.steps, 0u);
+    Checkpoint most = c;
+    most.totals.rollbacks = double(c.steps) * 4;
+    most.totals.unswept = double(c.steps);
+    write_checkpoint(path, most);
+    EXPECT_NO_THROW(read_checkpoint(path, 42));
+  }
   const real nan = std::numeric_limits<real>::quiet_NaN(), inf = std::numeric_limits<real>::infinity();
   const real beyond_square = real(2) * std::sqrt(std::numeric_limits<real>::max());  // finite, its square not
   const std::vector<std::pair<std::string, std::function<void(Checkpoint&)>>> damages{
@@ -396,6 +404,11 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
       {"running totals", [](Checkpoint& k) { k.totals.contact_sum = -1; }},
       {"running totals", [](Checkpoint& k) { k.totals.deepest = 1e308; }},  // "inf %" once printed
       {"running totals", [](Checkpoint& k) { k.totals.rollbacks = 0.5; }},
+      // More than its steps make (2^64 and more read as 0 in the summary).
+      {"running totals", [](Checkpoint& k) { k.totals.rollbacks = 18446744073709551616.0; }},
+      {"running totals", [](Checkpoint& k) { k.totals.unswept = 1e299; }},
+      {"running totals", [](Checkpoint& k) { k.totals.rollbacks = double(k.steps) * 4 + 1; }},
+      {"running totals", [](Checkpoint& k) { k.totals.unswept = double(k.steps) + 1; }},
       {"step count", [](Checkpoint& k) { k.steps = ~std::uint64_t{0}; }},  // a Python restart wrapped it to 1
       {"step count", [](Checkpoint& k) { k.steps = (std::uint64_t{1} << 53) + 1; }},
       {"range once squared", [&](Checkpoint& k) { k.world.velocity[1].x = beyond_square; }},
