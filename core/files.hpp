@@ -26,6 +26,8 @@
 #include <system_error>
 #include <vector>
 
+#include "core/format.hpp"
+
 namespace marbles {
 
 // Why `path` cannot be an output folder (empty: it can): it must be one,
@@ -36,15 +38,16 @@ inline std::string folder_problem(const std::string& path) {
   std::error_code ec;
   const auto status = std::filesystem::status(path, ec);
   if (std::filesystem::exists(status) && !std::filesystem::is_directory(status))
-    return "'" + path + "' exists and is not a folder";
+    return "'" + printable_path(path) + "' exists and is not a folder";
   if (!std::filesystem::exists(status) && std::filesystem::is_symlink(std::filesystem::symlink_status(path, ec)))
-    return "'" + path + "' is a link to nothing (a link whose target is gone): no folder can be made there";
+    return "'" + printable_path(path) +
+           "' is a link to nothing (a link whose target is gone): no folder can be made there";
   for (std::filesystem::path above = std::filesystem::path(path).parent_path(); !above.empty();
        above = above.parent_path()) {
     const auto there = std::filesystem::status(above, ec);
     if (std::filesystem::exists(there)) {
       if (!std::filesystem::is_directory(there))
-        return "'" + path + "' cannot be made: '" + above.string() + "' is not a folder";
+        return "'" + printable_path(path) + "' cannot be made: '" + printable_path(above.string()) + "' is not a folder";
       break;
     }
     if (above == above.parent_path()) break;  // a root that cannot be read

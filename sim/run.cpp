@@ -402,7 +402,8 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       progress.finish();
       const std::string path = checkpoint_path(sc.output.dir, sim.steps());
       save_checkpoint(path);
-      throw RuntimeFailure(std::string(e.what()) + "; the last good state is in " + path +
+      prune_checkpoints(sc.output.dir, sc.output.checkpoint_keep);  // the newest K, this one among them
+      throw RuntimeFailure(std::string(e.what()) + "; the last good state is in " + printable_path(path) +
                            " (a run resumed from it with the same settings fails there again: more time.substeps or "
                            "a smaller time.dt, from the start, may get past it)");
     }
@@ -432,9 +433,11 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       progress.finish();
       const std::string path = checkpoint_path(sc.output.dir, sim.steps());
       if (!std::filesystem::exists(path)) save_checkpoint(path);
+      prune_checkpoints(sc.output.dir, sc.output.checkpoint_keep);  // the newest K, this one among them
       earlier_aside.discard();  // this run resumes in its place
       throw RuntimeFailure(std::string("stopped by ") + signal_name(sig) + " after step " + std::to_string(sim.steps()) +
-                           " of " + std::to_string(total_steps) + "; the state is in " + path + " (resume with " +
+                           " of " + std::to_string(total_steps) + "; the state is in " + printable_path(path) +
+                           " (resume with " +
                            resume_command(options, sc.output.dir, path) + ")");
     }
   }

@@ -16,6 +16,7 @@
 #include <fstream>
 #include <map>
 #include <sstream>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -1106,6 +1107,28 @@ TEST_F(Checkpoints, StopRequestCheckpointsAndResumes) {
     ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --out " + out + " --restart " + path, &err), 0) << err;
     expect_same_output(dir.path() + "/whole", out);
   }
+}
+
+// A stop's checkpoint is one of the newest `keep`, as every checkpoint is (it
+// left keep + 1), and a folder named with a line break is said in one line,
+// the break as \x0a, where the run stops and where it is no folder.
+TEST_F(Checkpoints, AStopKeepsTheNewestAndNamesItsFolderInOneLine) {
+  const test::ScratchDir dir("ck_stop_keep");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string out = dir.path() + "/stop\nped";
+  std::string err;
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --set output.checkpoint.keep=2 --out '" + out + "'", &err,
+                    "MARBLES_FAULT_SIGNAL=INT@130"),
+            1);
+  EXPECT_NE(err.find("the state is in " + dir.path() + "/stop\\x0aped/checkpoints/step_000130.mck (resume with"),
+            std::string::npos)
+      << err;
+  std::set<std::string> kept;
+  for (const auto& entry : fs::directory_iterator(out + "/checkpoints")) kept.insert(entry.path().filename().string());
+  EXPECT_EQ(kept, (std::set<std::string>{"step_000100.mck", "step_000130.mck"}));
+  const std::string file = dir.write("f\nile", "a file");
+  EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --out '" + file + "'", &err), 2);
+  EXPECT_NE(err.find("'" + dir.path() + "/f\\x0aile' exists and is not a folder\n"), std::string::npos) << err;
 }
 
 // The command a stopped run says resumes it does, as typed: with the run's
