@@ -49,6 +49,7 @@
 #include "sim/reference.hpp"
 #include "sim/run.hpp"
 #include "sim/scene.hpp"
+#include "sim/scene_yaml.hpp"
 #include "sim/settings_check.hpp"
 #include "sim/simulation.hpp"
 #include "sim/version.hpp"
@@ -222,6 +223,9 @@ class PySimulation {
       if (square_overflows(Vec3{row[0], row[1], row[2]}))  // as a scene's vectors: the step squares them
         refuse("is too large for " + std::string(kRealName) + " precision: its squared length overflows");
     }
+    // The other arrays' views first: the assignment makes the state known
+    // (host_edited), and a value written through them would pass unchecked.
+    if (m_views_out) check_views(plural(what));
     if (m_views_out) m_sim->state_written();
     World& w = m_sim->edit_world();
     std::vector<Vec3>& vec = what == "position" ? w.position : what == "velocity" ? w.velocity : w.angular_velocity;
@@ -441,7 +445,9 @@ class PySimulation {
     return fnv1a(v.angular_velocity, bytes, fnv1a(v.velocity, bytes, fnv1a(v.position, bytes)));
   }
 
-  void check_views() {
+  // `replaced`: an array an assignment is about to write whole, whose
+  // values are not looked at.
+  void check_views(const std::string& replaced = "") {
     if (!views_written()) return;  // nothing written: the state as the last step left it
     m_sim->state_written();
     if (m_sim->state_finite()) return;  // on the GPU a flag, not a copy
@@ -449,7 +455,7 @@ class PySimulation {
     const std::pair<const char*, const std::vector<Vec3>*> arrays[] = {
         {"positions", &w.position}, {"velocities", &w.velocity}, {"angular_velocities", &w.angular_velocity}};
     for (const auto& [name, vec] : arrays)
-      for (std::size_t i = 0; i < vec->size(); ++i) {
+      for (std::size_t i = 0; i < vec->size() && name != replaced; ++i) {
         const Vec3& p = (*vec)[i];
         if (!is_finite(p))
           throw nb::value_error((std::string(name) + "[" + std::to_string(i) +
@@ -574,6 +580,17 @@ nb::object pairs(HostArray<const real, kAny, 4> xyzr, const std::string& algorit
         !std::isfinite(row[3]))
       throw InputError(SourceLocation{}, "xyzr[" + std::to_string(i) + "]",
                        "a sphere needs a finite centre and a finite radius >= 0");
+    // As `marbles pairs` reads a row (read_spheres_csv): a number too small
+    // for the precision, and a centre whose squared length overflows (the
+    // overlap test squares the distances: two such spheres were found apart).
+    for (int c = 0; c < 4; ++c)
+      if (const std::string problem = scene::detail::real_range_problem(row[c], false); !problem.empty())
+        throw InputError(SourceLocation{}, "xyzr[" + std::to_string(i) + "]",
+                         std::string(1, "xyzr"[c]) + ": " + problem + ", got " + shortest(row[c]));
+    if (square_overflows(Vec3{row[0], row[1], row[2]}))
+      throw InputError(SourceLocation{}, "xyzr[" + std::to_string(i) + "]",
+                       "too large for " + std::string(kRealName) +
+                           " precision: the squared length of (x, y, z) overflows");
     if (radius_squares_below_normal(row[3]))
       throw InputError(SourceLocation{}, "xyzr[" + std::to_string(i) + "]",
                        "radius " + shortest(row[3]) + " too small for " + kRealName +

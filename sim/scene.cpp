@@ -1014,17 +1014,23 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
 namespace {
 
 // A JSON value as the YAML tree the file loader would have built; nodes made
-// here carry no position, so errors name the key path alone.
-YAML::Node yaml_of(const nlohmann::ordered_json& value) {
+// here carry no position, so errors name the key path alone. Nested no
+// deeper than a scene file may be (the YAML reader's bound): a dict of 20 000
+// levels from Python overflowed the stack here.
+constexpr int kJsonDepth = 500;
+YAML::Node yaml_of(const nlohmann::ordered_json& value, const std::string& label, int depth = 0) {
+  if ((value.is_object() || value.is_array()) && depth >= kJsonDepth)
+    throw InputError(SourceLocation{label, 0, 0}, "",
+                     "nested deeper than the YAML reader follows (" + std::to_string(kJsonDepth) + " levels)");
   switch (value.type()) {
     case nlohmann::ordered_json::value_t::object: {
       YAML::Node map(YAML::NodeType::Map);
-      for (const auto& [key, item] : value.items()) map.force_insert(key, yaml_of(item));
+      for (const auto& [key, item] : value.items()) map.force_insert(key, yaml_of(item, label, depth + 1));
       return map;
     }
     case nlohmann::ordered_json::value_t::array: {
       YAML::Node sequence(YAML::NodeType::Sequence);
-      for (const auto& item : value) sequence.push_back(yaml_of(item));
+      for (const auto& item : value) sequence.push_back(yaml_of(item, label, depth + 1));
       return sequence;
     }
     case nlohmann::ordered_json::value_t::string:
@@ -1052,7 +1058,7 @@ Scene load_scene_json(const std::string& text, const std::string& label, const s
   } catch (const nlohmann::json::exception& e) {
     throw InputError(SourceLocation{label, 0, 0}, "", std::string("not a scene: ") + e.what());
   }
-  const YAML::Node document = yaml_of(json);
+  const YAML::Node document = yaml_of(json, label);
   expect_scene_map(document, label);
   return read_scene(document, label, stem, overrides, std::nullopt);
 }
@@ -1083,7 +1089,7 @@ std::string scene_precision(const std::string& path, const std::vector<std::stri
 
 std::string scene_precision_json(const std::string& text, const std::vector<std::string>& overrides) {
   try {
-    return precision_of(yaml_of(nlohmann::ordered_json::parse(text)), overrides);
+    return precision_of(yaml_of(nlohmann::ordered_json::parse(text), ""), overrides);
   } catch (const std::exception&) {
     return "float";
   }

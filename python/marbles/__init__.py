@@ -45,12 +45,24 @@ def _whole(value, what, least):
     return value
 
 
-def _yaml_text(value, key, strings="values"):
+def _flow_text(text):
+    """A string inside a list or a map (a key, or a value there) as YAML
+    text: plain where it is a plain word that reads as itself, else
+    double-quoted, since a comma, bracket or brace there would split or end it
+    (``{"steel,glass": ...}`` made two materials, ``"'glass'"`` lost its
+    quotes, ``"null"`` read as nothing)."""
+    if text and all(c.isalnum() or c in "_.-+/" for c in text) and _marbles.reads_as_itself(text):
+        return text
+    return json.dumps(text, ensure_ascii=False)
+
+
+def _yaml_text(value, key, strings="values", nested=False):
     """A value as the YAML text of a ``--set key=value`` override. A string is
     that string (``strings="values"``: double-quoted where the scene's reader
     would not read it plainly as itself, so ``--set`` of the same plain text
     gives the same override), or YAML text as given (``strings="text"``: a
     study's values, ``"[0, 0, -9.81]"``)."""
+    value = _unmasked(value, key)
     if isinstance(value, (bool, np.bool_)):
         return "true" if value else "false"
     if isinstance(value, (int, np.integer)):
@@ -70,15 +82,23 @@ def _yaml_text(value, key, strings="values"):
                              message=f"not UTF-8 text: {value!r}") from None
         # "run #2" would end at the #, "&a x" be an anchor, "null" nothing.
         # A list's or map's YAML text goes in set=["key=[a, b]"].
-        if strings == "text" or _marbles.reads_as_itself(value):
+        if strings == "text":  # a study's value: YAML text as given, also inside a list
+            return value
+        if nested:
+            return _flow_text(value)
+        if _marbles.reads_as_itself(value):
             return value
         return json.dumps(value, ensure_ascii=False)
     if isinstance(value, np.ndarray) and value.ndim == 0:  # np.array(1e-3): its one value
-        return _yaml_text(value.item(), key, strings)
+        return _yaml_text(value.item(), key, strings, nested)
     if isinstance(value, (list, tuple, np.ndarray)):
-        return "[" + ", ".join(_yaml_text(v, key, strings) for v in value) + "]"
+        return "[" + ", ".join(_yaml_text(v, key, strings, True) for v in value) + "]"
     if isinstance(value, dict):
-        return "{" + ", ".join(f"{k}: {_yaml_text(v, key, strings)}" for k, v in value.items()) + "}"
+        for k in value:
+            if not isinstance(k, str):
+                raise SceneError(f"set: {key}: keys are strings, got {k!r}", key=key,
+                                 message=f"keys are strings, got {k!r}")
+        return "{" + ", ".join(f"{_flow_text(k)}: {_yaml_text(v, key, strings, True)}" for k, v in value.items()) + "}"
     raise SceneError(f"set: {key}: cannot be written as a scene value: {value!r}", key=key,
                      message=f"cannot be written as a scene value: {value!r}")
 
@@ -117,6 +137,7 @@ def _plain(value, key):
     """A scene dict as JSON-ready data: NumPy arrays and scalars as lists and
     numbers; non-finite numbers, and integers past any double, as YAML's
     .nan/.inf, which the checks refuse with the key's name."""
+    value = _unmasked(value, key)
     if isinstance(value, dict):
         out = {}
         for k, v in value.items():
@@ -242,17 +263,25 @@ def _on_host(values):
     return values.cpu().numpy() if hasattr(values, "cpu") else values
 
 
+def _unmasked(values, what):
+    """A masked array's data, where no entry is masked; one with masked
+    entries (or NumPy's masked constant, an entry taken from one) is refused:
+    their hidden values would be read as numbers. Anything else as it is."""
+    if not np.ma.isMaskedArray(values):
+        return values
+    masked = np.flatnonzero(np.ma.getmaskarray(values))
+    if masked.size:
+        raise ValueError(f"{what}: a masked array with {masked.size} masked entr"
+                         f"{'y' if masked.size == 1 else 'ies'} (the first at flat index {masked[0]}); "
+                         "fill them first (.filled(value))")
+    return np.ma.getdata(values)
+
+
 def _real_array(values, what):
     """``values`` as a NumPy array of numbers (bool, text, dates and ragged
     lists refused by name, where NumPy's own errors named nothing; a masked
     array's hidden entries refused, where they were read as numbers)."""
-    if np.ma.isMaskedArray(values):
-        masked = np.flatnonzero(np.ma.getmaskarray(values))
-        if masked.size:
-            raise ValueError(f"{what}: a masked array with {masked.size} masked entr"
-                             f"{'y' if masked.size == 1 else 'ies'} (the first at flat index {masked[0]}); "
-                             "fill them first (.filled(value))")
-        values = np.ma.getdata(values)
+    values = _unmasked(values, what)
     try:
         array = np.asarray(values)
     except (TypeError, ValueError) as e:  # a ragged list
@@ -360,7 +389,13 @@ class Simulation:
         if name is not None and not isinstance(name, str):
             raise TypeError(f"name: the output folder's name, a string, got {name!r}")
         named = scene.get("name") if isinstance(scene, dict) else None
-        return name or (named if isinstance(named, str) else None) or "scene"
+        stem = name or (named if isinstance(named, str) else None) or "scene"
+        try:
+            stem.encode("utf-8")
+        except UnicodeEncodeError:  # a lone surrogate ("\udcff"): no folder's name holds it
+            raise SceneError(f"name: not UTF-8 text: {stem!r}", key="name", message=f"not UTF-8 text: {stem!r}") \
+                from None
+        return stem
 
     @staticmethod
     def _dict_source(scene, set, name):
@@ -573,8 +608,14 @@ class Simulation:
             raise TypeError(f"{what}: real numbers, got a complex array")
         if array.shape != (len(self), 3):  # before the copy, which makes a 0-d array (1,)
             raise ValueError(f"{plural}: expected shape ({len(self)}, 3), got {array.shape}")
-        array = np.ascontiguousarray(array, dtype=dtype)
-        self._impl.assign(what, array)
+        with np.errstate(over="ignore"):  # a value past the precision's range: named below, not warned of
+            cast = np.ascontiguousarray(array, dtype=dtype)
+        if cast.dtype != array.dtype:  # finite as given, infinite in the precision ("not finite" said 1e39)
+            lost = np.flatnonzero(np.isfinite(array).all(axis=1) & ~np.isfinite(cast).all(axis=1))
+            if lost.size:
+                raise ValueError(f"{plural}[{lost[0]}] is too large for {self.precision} precision; "
+                                 "the state is unchanged")
+        self._impl.assign(what, cast)
 
     def contacts(self):
         """The contacts of the last substep that press: a dict of arrays —
@@ -661,8 +702,9 @@ def pairs(xyzr, backend="auto", algorithm="home", margin=0.0):
     """The overlapping pairs of an (N, 4) array of x, y, z, r: an (M, 2) uint32
     array of i < j, sorted — what ``marbles pairs`` prints. ``algorithm``:
     home, subdivision (the broad phase of the step) or brute (the oracle);
-    ``backend`` auto|cpu|cuda. A float64 array is searched in double, anything
-    else in float; a device array (CuPy, PyTorch) is copied to the host."""
+    ``backend`` auto|cpu|cuda. A float64 array (either byte order) or a wider
+    float is searched in double, anything else in float; a device array
+    (CuPy, PyTorch) is copied to the host."""
     array = _real_array(_on_host(xyzr), "xyzr")
     if np.iscomplexobj(array):  # the imaginary part would be dropped without a word
         raise TypeError("xyzr: real numbers, got a complex array")
@@ -678,7 +720,8 @@ def pairs(xyzr, backend="auto", algorithm="home", margin=0.0):
     if array.ndim != 2 or array.shape[1] != 4:  # before the copy, which makes a 0-d array (1,)
         raise SceneError(f"xyzr: expected an (N, 4) array of x, y, z, r, got shape {array.shape}", key="xyzr",
                          message=f"expected an (N, 4) array of x, y, z, r, got shape {array.shape}")
-    double = array.dtype == np.float64
+    # By kind and size: a big-endian float64 (">f8") is no np.float64, and was searched in float.
+    double = array.dtype.kind == "f" and array.dtype.itemsize >= 8
     array = np.ascontiguousarray(array, dtype=np.float64 if double else np.float32)
     find = _marbles.pairs_double if double else _marbles.pairs_float
     return find(array, algorithm, backend, margin)
@@ -697,6 +740,19 @@ def _program_path():  # not `_program`: importing the submodule of that name wou
         if candidate and os.access(candidate, os.X_OK):
             return candidate
     raise RuntimeFailure("the marbles program is not found (set MARBLES_PROGRAM)")
+
+
+def _study_out(out):
+    """A study's folder as the program takes it: "" for the default
+    (out/study/<scene>); an empty path given is refused, as ``--out ''`` is,
+    where it chose the default without a word."""
+    if out is None:
+        return ""
+    path = _path(out, "study: out")
+    if not path:
+        raise SceneError("study: out: an empty path (leave it out for out/study/<scene>)", key="out",
+                         message="an empty path (leave it out for out/study/<scene>)")
+    return path
 
 
 def study(scene, vary, set=None, backend="auto", repeats=1, out=None, overwrite=False):
@@ -736,7 +792,7 @@ def study(scene, vary, set=None, backend="auto", repeats=1, out=None, overwrite=
         texts.append(f"{key}=" + ",".join(items))
     return _marbles.study(_path(scene, "study: scene"), texts, _overrides(set), _choice(backend, "study: backend",
                                                                                        _BACKENDS), repeats,
-                          _path(out, "study: out") if out is not None else "", _program_path(), bool(overwrite))
+                          _study_out(out), _program_path(), bool(overwrite))
 
 
 def cuda_device():

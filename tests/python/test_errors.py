@@ -651,3 +651,108 @@ def test_arguments_of_the_wrong_kind_are_named(pile, tmp_path):
     with pytest.raises(ValueError, match=r"run: until = 0\.001 s is before the simulation's time, 0\.003 s"):
         sim.run(until=0.001)
     sim.run(until=sim.time)  # the time it is at: nothing to do
+
+
+def test_pairs_reads_any_byte_order_and_refuses_what_marbles_pairs_refuses():
+    # A big-endian float64 array is float64: searched in double (it was cast to float, and this pair lost).
+    near = np.array([[0, 0, 0, 0.5], [0.99999999999, 0, 0, 0.5]])
+    assert marbles.pairs(near, backend="cpu").tolist() == [[0, 1]]
+    assert marbles.pairs(near.astype(">f8"), backend="cpu").tolist() == [[0, 1]]
+    # Centres whose squared distance overflows (the two overlap: they were found apart), and a
+    # number too small for the precision, as `marbles pairs` refuses them in a CSV row.
+    cases = [(np.array([[0, 0, 0, 1e20], [1e20, 0, 0, 1e20]], dtype=np.float32),
+              r"^xyzr\[1\]: too large for float precision: the squared length of \(x, y, z\) overflows$"),
+             (np.array([[0, 0, 0, 1e200], [1e200, 0, 0, 1e200]]),
+              r"^xyzr\[1\]: too large for double precision: the squared length of \(x, y, z\) overflows$"),
+             (np.array([[0, 0, 0, 1], [0, 1e-40, 0, 1]], dtype=np.float32),
+              r"^xyzr\[1\]: y: too small for float precision, got 1e-40$")]
+    for xyzr, message in cases:
+        with pytest.raises(marbles.SceneError, match=message):
+            marbles.pairs(xyzr, backend="cpu")
+        csv = "\n".join(",".join(repr(float(x)) for x in row) for row in xyzr)
+        path = pathlib.Path(os.environ.get("TMPDIR", "/tmp")) / f"marbles_pairs_{os.getpid()}.csv"
+        path.write_text(csv + "\n")
+        precision = "double" if xyzr.dtype == np.float64 else "float"
+        cli = subprocess.run([PROGRAM, "pairs", str(path), "--backend", "cpu", "--precision", precision],
+                             capture_output=True, text=True)
+        path.unlink()
+        assert cli.returncode == 2, (xyzr, cli.stdout)  # the oracle: the program refuses them too
+
+
+def test_a_value_written_through_a_view_is_checked_before_another_array_is_assigned(pile):
+    sim = marbles.Simulation.from_dict(pile, backend="cpu")
+    sim.positions[0, 2] = np.nan
+    before = np.array(sim.velocities)
+    with pytest.raises(ValueError, match=r"positions\[0\] is not finite"):
+        sim.velocities = np.zeros((len(sim), 3))  # made the NaN known, and it went on unchecked
+    np.testing.assert_array_equal(sim.velocities, before)
+    with pytest.raises(ValueError, match=r"positions\[0\] is not finite"):
+        sim.kinetic_energy()
+    good = np.array(sim.positions)
+    good[0, 2] = 0.5
+    sim.positions = good  # the array that holds it, written whole: taken
+    sim.velocities = np.zeros((len(sim), 3))
+    sim.step()
+    assert np.isfinite(sim.positions).all()
+    # Finite as given, past float once cast: named as such (it said "is not finite").
+    with pytest.raises(ValueError, match=r"^velocities\[0\] is too large for float precision; the state is unchanged"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # and no NumPy overflow warning beside it
+            sim.velocities = np.full((len(sim), 3), 1e39)
+
+
+def test_masked_entries_are_refused_wherever_a_scene_value_is_taken(pile, tmp_path):
+    ball = SCENES / "bouncing_ball.yaml"
+    g = np.ma.masked_array([0, 0, -9.81], mask=[0, 0, 1])  # read as 0: no gravity, and no word
+    with pytest.raises(ValueError, match=r"gravity: a masked array with 1 masked entry"):
+        marbles.Simulation(ball, backend="cpu", set={"gravity": g})
+    scene = dict(pile)
+    scene["gravity"] = g
+    with pytest.raises(ValueError, match=r"gravity: a masked array with 1 masked entry"):
+        marbles.Simulation.from_dict(scene, backend="cpu")
+    with pytest.raises(ValueError, match=r"time.dt: a masked array with 1 masked entry"):
+        marbles.study(ball, vary={"time.dt": np.ma.masked_array([1e-3, 5e-4], mask=[0, 1])}, out=tmp_path / "s")
+    assert not (tmp_path / "s").exists()
+    # Nothing masked: its data.
+    full = np.ma.masked_array([0, 0, -9.81], mask=False)
+    assert marbles.Simulation(ball, backend="cpu", set={"gravity": full}).name
+
+
+def test_keys_of_a_dict_override_are_the_keys_given():
+    ball = SCENES / "bouncing_ball.yaml"
+    rubber = {"density": 1100, "restitution": 0.8, "friction": 0.5}
+    for name in ("steel,glass", "'glass'", "null", "~", "a #b", "?x", "[x]", "k: v", "plain-2.0"):
+        sim = marbles.Simulation(ball, backend="cpu", set={"materials": {"rubber": rubber, name: {"density": 2500}}})
+        assert sim.material_names == ["rubber", name], name
+    with pytest.raises(marbles.SceneError, match=r"set: materials: keys are strings, got 1"):
+        marbles.Simulation(ball, backend="cpu", set={"materials": {"rubber": rubber, 1: {"density": 2500}}})
+    # A string inside a list is the string given too: "walls,collisions" was two effects.
+    with pytest.raises(marbles.SceneError, match="walls,collisions"):
+        marbles.Simulation(ball, backend="cpu", set={"effects": ["gravity", "walls,collisions"]})
+    assert marbles.Simulation(ball, backend="cpu", set={"effects": ["gravity", "walls"]}).name
+
+
+def test_a_dict_nested_deeper_than_a_scene_file_may_be_is_refused_not_a_crash():
+    # With Python's own bound raised, the dict reached the C++ loader, whose recursion overflowed the stack.
+    limit = sys.getrecursionlimit()
+    sys.setrecursionlimit(100000)
+    try:
+        x = 1
+        for _ in range(20000):
+            x = [x]
+        with pytest.raises(marbles.SceneError, match=r"nested deeper than the YAML reader follows \(500 levels\)"):
+            marbles.Simulation.from_dict({"format": 1, "gravity": x}, backend="cpu")
+    finally:
+        sys.setrecursionlimit(limit)
+
+
+def test_a_name_or_study_folder_no_file_could_have_is_refused(pile, tmp_path, monkeypatch):
+    for given in ({"name": "\udcff"}, {}):
+        scene = dict(pile)
+        scene.update({} if given else {"name": "\ud800"})
+        with pytest.raises(marbles.SceneError, match="name: not UTF-8 text"):
+            marbles.Simulation.from_dict(scene, backend="cpu", **given)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(marbles.SceneError, match=r"study: out: an empty path"):
+        marbles.study(SCENES / "validation" / "bouncing_ball.yaml", vary={"time.dt": [2e-3]}, out="")
+    assert not (tmp_path / "out").exists()  # it wrote into out/study/<scene>
