@@ -248,9 +248,10 @@ RunFolderLock::RunFolderLock(const std::filesystem::path& dir, const std::string
                            std::strerror(why));
     if (m_fd < 0 && (errno == ELOOP || errno == EISDIR))
       throw InputError(SourceLocation{}, option,
-                       printable_path(m_path.string()) + (errno == ELOOP ? " is a link" : " is a folder") +
-                           " where a run keeps its lock file, which is made there and never through a link "
-                           "(remove it)");
+                       printable_path(m_path.string()) +
+                           (errno == ELOOP ? " is a link where a run keeps its lock file (made there, never through "
+                                             "a link: remove it)"
+                                           : " is a folder where a run keeps its lock file (remove it)"));
     if (m_fd < 0) throw RuntimeFailure("cannot open " + printable_path(m_path.string()) + ": " + std::strerror(errno));
     if (::flock(m_fd, LOCK_EX | LOCK_NB) != 0) {
       char holder[32] = {};

@@ -86,7 +86,7 @@ struct StudyResult {
   bool plotted = false;             // study.png written
 };
 
-// "time.dt=1e-3,5e-4" -> {time.dt, {1e-3, 5e-4}}; throws InputError naming --vary.
+// "time.dt=1e-3,5e-4" -> {time.dt, {1e-3, 5e-4}}; throws InputError naming --vary (names.vary).
 StudyVary parse_vary(const std::string& text, const StudyNames& names = {});
 
 // Runs the study and writes its files; throws InputError (a scene without a
