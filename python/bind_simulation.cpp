@@ -348,7 +348,8 @@ class PySimulation {
   void restart(const std::string& path) {
     const Busy busy(*this);
     Checkpoint c = read_checkpoint(path, m_fingerprint, m_text_fingerprint());
-    check_checkpoint_fits(c, path, "restart", size(), m_scene.materials.size(), m_sim->model().wall_shapes);
+    check_checkpoint_fits(c, path, "restart", m_sim->world(), m_sim->ids(), m_scene.materials.size(),
+                          m_sim->model().wall_shapes);
     if (m_views_out) m_sim->state_written();
     m_sim->restore(c.world, c.state, c.steps, c.ids);
     host_edited();

@@ -71,19 +71,25 @@ CompleteCheck mp4_has_index() {
     std::ifstream in(p, std::ios::binary);
     std::error_code ec;
     const std::uintmax_t size = fs::file_size(p, ec);
+    // Every top-level box whole, the last ending at the file's end: with
+    // +faststart the index comes before the media data (mdat), so an index
+    // that fits said nothing of a movie cut short after it.
     std::uintmax_t at = 0;
+    bool index = false;
     unsigned char h[16];
     while (!ec && at + 8 <= size && in.seekg(static_cast<std::streamoff>(at)) && in.read(reinterpret_cast<char*>(h), 8)) {
       std::uintmax_t box = (std::uintmax_t(h[0]) << 24) | (h[1] << 16) | (h[2] << 8) | h[3];
-      if (std::string(reinterpret_cast<char*>(h + 4), 4) == "moov") return at + box <= size;
       if (box == 1 && in.read(reinterpret_cast<char*>(h + 8), 8)) {  // 64-bit size
         box = 0;
         for (int k = 8; k < 16; ++k) box = (box << 8) | h[k];
+      } else if (box == 0) {
+        box = size - at;  // to the end of the file
       }
-      if (box < 8) return false;
+      if (box < 8 || box > size - at) return false;
+      index = index || std::string(reinterpret_cast<char*>(h + 4), 4) == "moov";
       at += box;
     }
-    return false;
+    return !ec && index && at == size;
   };
 }
 

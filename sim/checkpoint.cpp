@@ -299,17 +299,37 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash, st
   return c;
 }
 
-void check_checkpoint_fits(const Checkpoint& c, const std::string& path, const std::string& key, std::size_t spheres,
-                           std::size_t materials, const std::vector<narrowphase::WallShape>& walls) {
+void check_checkpoint_fits(const Checkpoint& c, const std::string& path, const std::string& key, const World& scene,
+                           const std::vector<std::uint32_t>& ids, std::size_t materials,
+                           const std::vector<narrowphase::WallShape>& walls) {
+  const std::size_t spheres = scene.size();
   if (c.world.size() != spheres)
     throw InputError(SourceLocation{path, 0, 0}, key,
                      "the checkpoint holds " + std::to_string(c.world.size()) + " spheres, the scene makes " +
                          std::to_string(spheres));
-  for (std::size_t i = 0; i < c.world.material.size(); ++i)
+  // Each sphere's material and whether it is fixed, by its place in the
+  // scene's numbering (the step's own numbering maps to it through ids).
+  std::vector<std::uint32_t> material(spheres);
+  std::vector<std::uint8_t> fixed(spheres);
+  for (std::size_t j = 0; j < spheres; ++j) {
+    const std::uint32_t id = ids.empty() ? static_cast<std::uint32_t>(j) : ids[j];
+    material[id] = scene.material[j];
+    fixed[id] = scene.inv_mass[j] == 0;
+  }
+  for (std::size_t i = 0; i < c.world.material.size(); ++i) {
     if (c.world.material[i] >= materials)
       throw InputError(SourceLocation{path, 0, 0}, key,
                        "the checkpoint is damaged (sphere " + std::to_string(i) + " names material " +
                            std::to_string(c.world.material[i]) + ", the scene has " + std::to_string(materials) + ")");
+    const std::uint32_t id = c.ids.empty() ? static_cast<std::uint32_t>(i) : c.ids[i];
+    if (c.world.material[i] != material[id] || (c.world.inv_mass[i] == 0) != (fixed[id] != 0))
+      throw InputError(SourceLocation{path, 0, 0}, key,
+                       "the checkpoint is damaged (sphere " + std::to_string(id) + " is not the scene's: " +
+                           (c.world.material[i] != material[id] ? std::string("another material")
+                                                                : fixed[id] ? "it moves where the scene's is fixed"
+                                                                            : "fixed where the scene's moves") +
+                           ")");
+  }
   // The walls: the scene's, of which a run moves only the point (advance_walls).
   if (c.state.walls.size() != walls.size())
     throw InputError(SourceLocation{path, 0, 0}, key,

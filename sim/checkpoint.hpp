@@ -79,8 +79,11 @@ Checkpoint read_checkpoint(const std::string& path, std::uint64_t scene_hash,
 // `walls`: the step model's shapes at t = 0), each as the scene makes it but
 // for the point a moving wall has moved. Throws InputError naming the file
 // and `key` (the argument that gave it) where not.
+// `scene` is the world the scene makes (or the simulation's now, `ids` its
+// numbering): each sphere of the checkpoint is of its sphere's material and
+// fixed where it is (a run changes neither).
 void check_checkpoint_fits(const Checkpoint& checkpoint, const std::string& path, const std::string& key,
-                           std::size_t spheres, std::size_t materials,
+                           const World& scene, const std::vector<std::uint32_t>& ids, std::size_t materials,
                            const std::vector<narrowphase::WallShape>& walls);
 
 // "double" or "float": the precision a checkpoint was written in ("float"

@@ -220,8 +220,8 @@ void cut_listings(const std::filesystem::path& dir, std::uint64_t step, const sc
 }
 
 std::string earlier_run_text(const std::string& dir, const std::vector<std::filesystem::path>& files) {
-  return dir + " holds the output of an earlier run (" + std::to_string(files.size()) + " files, e.g. " +
-         files.front().filename().string() + ")";
+  return printable_path(dir) + " holds the output of an earlier run (" + std::to_string(files.size()) +
+         " files, e.g. " + printable_path(files.front().filename().string()) + ")";
 }
 
 RunFolderLock::RunFolderLock(const std::filesystem::path& dir, const std::string& option) {

@@ -318,7 +318,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
   if (options.restart) {
     Checkpoint c =
         read_checkpoint(*options.restart, fingerprint, scene_fingerprint(options.scene_path, options.overrides));
-    check_checkpoint_fits(c, *options.restart, "--restart", sim.world().size(), sc.materials.size(),
+    check_checkpoint_fits(c, *options.restart, "--restart", sim.world(), sim.ids(), sc.materials.size(),
                           sim.model().wall_shapes);
     if (c.steps > total_steps)
       throw InputError(SourceLocation{*options.restart, 0, 0}, "--restart",
@@ -517,7 +517,7 @@ int run_scene(const RunOptions& options, std::ostream& out, std::ostream& err) {
       << (reference && std::isfinite(reference->error)
               ? "reference " + reference->kind + ": error " + significant(100 * reference->error, 10) + " %\n"
               : std::string())
-      << "output: " << sc.output.dir << "  (" << written << "summary.json)\n";
+      << "output: " << printable_path(sc.output.dir) << "  (" << written << "summary.json)\n";
   // Spheres that end deep in each other or a wall: the run is whole, but
   // its state is not what rigid spheres do; said, not left to summary.json.
   // Measured on the state as it ends, of what the solver moves (glued

@@ -199,9 +199,12 @@ bool parse_double(std::string_view text, double& value) {
   const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), value);
   if (ec == std::errc::result_out_of_range) {
     // A number past double's range either way: its value rounded as strtod
-    // rounds it (+-inf past the top, +-0 or a subnormal below), with its sign.
+    // rounds it (+-inf past the top, a subnormal below), with its sign. One
+    // that rounds to 0 is kept off zero (the smallest subnormal), so that the
+    // range check refuses it as too small: 1e-400 was taken as 0.
     if (end != s.data() + s.size()) return false;
     value = std::strtod(std::string(s).c_str(), nullptr);
+    if (value == 0) value = std::copysign(std::numeric_limits<double>::denorm_min(), value);
     return true;
   }
   return ec == std::errc() && end == s.data() + s.size();

@@ -665,7 +665,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
     if (ours && there(dir / name)) written.insert(name);
   }
   write_study_record(dir, written);
-  out << "output: " << dir.string() << "  (study.md, study.csv" << (result.plotted ? ", study.png" : "") << ")\n";
+  out << "output: " << printable_path(dir.string()) << "  (study.md, study.csv" << (result.plotted ? ", study.png" : "") << ")\n";
   return result;
 }
 

@@ -1129,6 +1129,15 @@ TEST_F(Checkpoints, AStopKeepsTheNewestAndNamesItsFolderInOneLine) {
   const std::string file = dir.write("f\nile", "a file");
   EXPECT_EQ(marbles("run " + scene + " --quiet --backend cpu --out '" + file + "'", &err), 2);
   EXPECT_NE(err.find("'" + dir.path() + "/f\\x0aile' exists and is not a folder\n"), std::string::npos) << err;
+  // A run's closing line, and a run refused a folder holding an earlier run's output.
+  const std::string done = dir.path() + "/do\nne", said = dir.path() + "/said.txt";
+  const std::string run = "'" + kMarbles + "' run " + scene + " --quiet --backend cpu --duration 0.02 --out '" + done + "'";
+  ASSERT_EQ(std::system((run + " > '" + said + "' 2>&1").c_str()), 0);
+  EXPECT_NE(slurp(said).find("output: " + dir.path() + "/do\\x0ane  ("), std::string::npos) << slurp(said);
+  EXPECT_NE(std::system((run + " > '" + said + "' 2>&1").c_str()), 0);
+  EXPECT_NE(slurp(said).find("--out: " + dir.path() + "/do\\x0ane holds the output of an earlier run"),
+            std::string::npos)
+      << slurp(said);
 }
 
 // The command a stopped run says resumes it does, as typed: with the run's

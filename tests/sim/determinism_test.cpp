@@ -456,15 +456,49 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
       Simulation(s, make_world(s, g), broadphase::Backend::cpu).model().wall_shapes;
   ASSERT_FALSE(walls.empty());
   ASSERT_EQ(c.state.walls.size(), walls.size());
-  EXPECT_NO_THROW(check_checkpoint_fits(c, path, "--restart", c.world.size(), materials, walls));
+  EXPECT_NO_THROW(check_checkpoint_fits(c, path, "--restart", c.world, c.ids, materials, walls));
   try {
-    check_checkpoint_fits(c, path, "--restart", c.world.size(), materials - 1, walls);
+    check_checkpoint_fits(c, path, "--restart", c.world, c.ids, materials - 1, walls);
     ADD_FAILURE() << "a checkpoint naming a material past the scene's fitted it";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("names material " + std::to_string(materials - 1)), std::string::npos)
         << e.what();
   }
-  EXPECT_THROW(check_checkpoint_fits(c, path, "--restart", c.world.size() + 1, materials, walls), InputError);
+  World more = c.world;  // the scene makes one sphere more
+  for (auto* v : {&more.position, &more.velocity, &more.angular_velocity}) v->push_back(Vec3{});
+  more.radius.push_back(1), more.inv_mass.push_back(1), more.inv_inertia.push_back(1), more.material.push_back(0);
+  EXPECT_THROW(check_checkpoint_fits(c, path, "--restart", more, c.ids, materials, walls), InputError);
+  // Each sphere of its sphere's material, fixed where that one is (a forged
+  // checkpoint's sphere of zero masses ran as a fixed one), by the scene's
+  // numbering: a checkpoint in another numbering fits through its ids.
+  ASSERT_TRUE(c.ids.empty());
+  ASSERT_GT(c.world.inv_mass[1], 0);
+  const auto fits_or_why = [&](const Checkpoint& k, const World& scene, std::size_t with_materials) -> std::string {
+    try {
+      check_checkpoint_fits(k, path, "--restart", scene, {}, with_materials, walls);
+      return "";
+    } catch (const InputError& e) {
+      return e.what();
+    }
+  };
+  Checkpoint held = c;
+  held.world.inv_mass[1] = 0, held.world.inv_inertia[1] = 0;
+  EXPECT_NE(fits_or_why(held, c.world, materials).find("(sphere 1 is not the scene's: fixed where the scene's moves)"),
+            std::string::npos);
+  EXPECT_NE(fits_or_why(c, held.world, materials).find("(sphere 1 is not the scene's: it moves where the scene's is fixed)"),
+            std::string::npos);
+  World other = c.world;
+  other.material[2] = c.world.material[2] + 1;
+  EXPECT_NE(fits_or_why(c, other, materials + 1).find("(sphere 2 is not the scene's: another material)"),
+            std::string::npos);
+  std::vector<std::uint32_t> reversed(c.world.size());
+  for (std::size_t i = 0; i < reversed.size(); ++i) reversed[i] = static_cast<std::uint32_t>(reversed.size() - 1 - i);
+  Checkpoint renumbered = c;
+  renumbered.world = permuted(held.world, reversed);
+  renumbered.ids = reversed;
+  EXPECT_EQ(fits_or_why(renumbered, held.world, materials), "");
+  renumbered.ids = {};  // the same arrays read in the scene's numbering: sphere 1 is another's
+  EXPECT_NE(fits_or_why(renumbered, held.world, materials).find("is not the scene's"), std::string::npos);
   // A moving wall moved along (its point) fits; a wall at rest moved, one
   // whose point is not finite, whose shape is another, or a wall more or
   // fewer, does not (a NaN point had made the floor vanish).
@@ -473,7 +507,7 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
   Checkpoint moved = c;
   moved.state.walls[0].velocity = moving[0].velocity;
   moved.state.walls[0].point += Vec3(0, 0, real(0.25));
-  EXPECT_NO_THROW(check_checkpoint_fits(moved, path, "--restart", c.world.size(), materials, moving));
+  EXPECT_NO_THROW(check_checkpoint_fits(moved, path, "--restart", c.world, c.ids, materials, moving));
   const std::vector<std::function<void(Checkpoint&)>> wall_damages{
       [&](Checkpoint& k) { k.state.walls[0].point.z += real(0.25); },  // a wall at rest moved
       [&](Checkpoint& k) { k.state.walls[0].point.x = nan; },
@@ -486,7 +520,7 @@ TEST(Determinism, CheckpointsWithImpossibleValuesAreRefused) {
     Checkpoint bad = c;
     damage(bad);
     try {
-      check_checkpoint_fits(bad, path, "--restart", c.world.size(), materials, walls);
+      check_checkpoint_fits(bad, path, "--restart", c.world, c.ids, materials, walls);
       ADD_FAILURE() << "a checkpoint with a damaged wall fitted the scene";
     } catch (const InputError& e) {
       EXPECT_NE(std::string(e.what()).find("wall shape"), std::string::npos) << e.what();

@@ -738,7 +738,9 @@ TEST_F(Robustness, MutatedCsvNeverCrashes) {
   }
 }
 
-// The movie check: an MP4 without its index (moov box) is incomplete.
+// The movie check: an MP4 without its index (moov box) is incomplete, and
+// so is one whose last box is cut short, also where the index comes first
+// (ffmpeg's +faststart, which the movie is made with: a cut mdat passed).
 TEST(CompleteChecks, Mp4NeedsItsIndex) {
   const test::ScratchDir dir("robust_mp4");
   auto box = [](const std::string& type, std::size_t payload) {
@@ -753,6 +755,13 @@ TEST(CompleteChecks, Mp4NeedsItsIndex) {
   EXPECT_TRUE(render::mp4_has_index()(good));
   EXPECT_FALSE(render::mp4_has_index()(cut));
   EXPECT_FALSE(render::mp4_has_index()(none));
+  const std::string fast = box("ftyp", 12) + box("moov", 40) + box("mdat", 100);
+  EXPECT_TRUE(render::mp4_has_index()(dir.write("fast.mp4", fast)));
+  EXPECT_FALSE(render::mp4_has_index()(dir.write("fast_cut.mp4", fast.substr(0, fast.size() - 20))));
+  EXPECT_FALSE(render::mp4_has_index()(dir.write("fast_tail.mp4", fast + "xyz")));  // a box header cut short
+  std::string to_end = box("ftyp", 12) + box("moov", 40) + box("mdat", 100);  // mdat's size 0: to the file's end
+  to_end.replace(12 + 8 + 40 + 8, 4, std::string(4, '\0'));
+  EXPECT_TRUE(render::mp4_has_index()(dir.write("to_end.mp4", to_end)));
   EXPECT_TRUE(render::ends_with("</VTKFile>")(dir.write("a.vtp", "<VTKFile>...</VTKFile>\n")));
   EXPECT_FALSE(render::ends_with("</VTKFile>")(dir.write("b.vtp", "<VTKFile>...</VTKF")));
 }

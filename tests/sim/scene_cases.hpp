@@ -142,9 +142,13 @@ inline const std::vector<BadScene>& bad_scenes() {
       {"nan", SCENE_VALID "gravity: [0, 0, .nan]\n", "{scene}:6:17: gravity[2]: must be a finite number, got .nan"},
       {"inf", "time: {duration: .inf, dt: 0.001}\n" SCENE_MATERIALS SCENE_PARTICLES,
        "{scene}:1:18: time.duration: must be a finite number, got .inf"},
-      // Past double's range: a number too small is 0 (with its sign), not infinite.
+      // Past double's range: a number too small is too small, not 0 (a
+      // restitution or a coordinate of 1e-400 was taken as 0), nor infinite.
       {"underflow", "time: {duration: 1, dt: 1e-400}\n" SCENE_MATERIALS SCENE_PARTICLES,
-       "{scene}:1:25: time.dt: must be > 0, got 1e-400"},
+       "{scene}:1:25: time.dt: too small for ..."},
+      {"underflow_zero_allowed", SCENE_TIME "materials:\n  glass: {density: 2500, restitution: 1e-400}\n" SCENE_PARTICLES,
+       "{scene}:3:39: materials.glass.restitution: too small for ..."},
+      {"underflow_negative", SCENE_VALID "gravity: [0, 0, -1e-400]\n", "{scene}:6:17: gravity[2]: too small for ..."},
       {"overflow_negative", "time: {duration: 1, dt: -1e400}\n" SCENE_MATERIALS SCENE_PARTICLES,
        "{scene}:1:25: time.dt: must be a finite number, got -1e400"},
       {"not_yaml", "time: {duration: 1, dt: [0.001\nmaterials:\n",
