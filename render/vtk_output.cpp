@@ -857,11 +857,17 @@ Snapshot read_vtp(const fs::path& vtp_path) {
   const VtpArrays file = read_vtp_arrays(vtp_path);
   const std::size_t points = file.points;
   Snapshot s;
+  // An array absent is null; one of another shape than the frame's points
+  // (a value short, a velocity of one component) is refused, where it was
+  // taken as absent ("has no radius array", a velocity dropped).
   auto find = [&](const std::string& key, int components) -> const std::vector<double>* {
     const auto it = file.arrays.find(key);
-    if (it == file.arrays.end() || it->second.components != components ||
-        it->second.values.size() != points * std::size_t(components))
-      return nullptr;
+    if (it == file.arrays.end()) return nullptr;
+    if (it->second.components != components || it->second.values.size() != points * std::size_t(components))
+      throw InputError(SourceLocation{vtp_path.string(), 0, 0}, "",
+                       key + ": " + std::to_string(it->second.values.size()) + " values of " +
+                           std::to_string(it->second.components) + " component(s), not the frame's " +
+                           std::to_string(points) + " points of " + std::to_string(components));
     return &it->second.values;
   };
   // Values a run writes: finite and within the precision (a sphere's size

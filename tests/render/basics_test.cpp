@@ -523,6 +523,26 @@ TEST(Frames, ValuesNoRunWritesAreRefused) {
       EXPECT_NE(std::string(e.what()).find(frame.filename().string() + ": " + what), std::string::npos) << e.what();
     }
   }
+  // An array of another shape than the frame's points is refused by its
+  // name, where it was read as absent (a velocity of one component dropped).
+  const fs::path frame = writer.write(snapshot());
+  std::string text;
+  {
+    std::ifstream in(frame, std::ios::binary);
+    text.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const std::string three = "Name=\"velocity\" NumberOfComponents=\"3\"";
+  ASSERT_NE(text.find(three), std::string::npos);
+  text.replace(text.find(three), three.size(), "Name=\"velocity\" NumberOfComponents=\"1\"");
+  std::ofstream(frame, std::ios::binary | std::ios::trunc) << text;
+  try {
+    read_vtp(frame);
+    ADD_FAILURE() << "a velocity of one component read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("PointData/velocity: 12 values of 1 component(s), not the frame's 4 points of 3"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 // A series cut anywhere before its closing tags (a copy that stopped, a
