@@ -6,7 +6,9 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <optional>
 #include <regex>
+#include <utility>
 
 #include "core/error.hpp"
 #include "core/files.hpp"
@@ -158,12 +160,21 @@ int render_output_dir(const std::string& out_dir, const RenderOptions& options, 
   const auto t0 = std::chrono::steady_clock::now();
 
   // A frame without its spheres' radii cannot be drawn: said with its file.
-  const auto read_frame = [](const fs::path& path) {
+  // Nor is a frame of another count of spheres than the series' first (a
+  // frame of another run mixed in): every frame of a run holds its spheres.
+  std::optional<std::pair<std::size_t, fs::path>> first;
+  const auto read_frame = [&first](const fs::path& path) {
     Snapshot s = read_vtp(path);
     if (s.radius.size() != s.position.size())
       throw InputError(SourceLocation{path.string(), 0, 0}, "",
                        "has no radius array: images need the spheres' radii (the run's output.fields must list "
                        "radius)");
+    if (!first) first.emplace(s.position.size(), path);
+    if (s.position.size() != first->first)
+      throw InputError(SourceLocation{path.string(), 0, 0}, "",
+                       "holds " + std::to_string(s.position.size()) + " spheres where the series' first frame, " +
+                           printable_path(first->second.string()) + ", holds " + std::to_string(first->first) +
+                           ": every frame of a run holds its spheres (a frame of another run?)");
     return s;
   };
 

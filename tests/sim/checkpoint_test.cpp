@@ -192,6 +192,29 @@ TEST_F(Checkpoints, ResumedRunWithoutRadiiEndsWhole) {
   }
 }
 
+// A frame of another run (another count of spheres) mixed into a series is
+// refused by `marbles render`, naming it and the series' first frame, where
+// it was drawn among the others without a word.
+TEST_F(Checkpoints, RenderRefusesAFrameOfAnotherRun) {
+  const test::ScratchDir dir("ck_mixed_frames");
+  const std::string scene = dir.write("s.yaml", kScene);
+  const std::string a = dir.path() + "/a", b = dir.path() + "/b";
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --no-render --duration 0.06 --out " + a), 0);
+  ASSERT_EQ(marbles("run " + scene + " --quiet --backend cpu --no-render --duration 0.06 --out " + b +
+                    " --set particles[0].random.count=200"),
+            0);
+  std::string err;
+  const int whole = marbles("render " + a + " --no-movie --width 32 --height 24", &err);
+  if (err.find("OSMesa") != std::string::npos) GTEST_SKIP() << "a build that does not render";
+  ASSERT_EQ(whole, 0) << err;
+  fs::copy_file(b + "/frames/frame_000002.vtp", a + "/frames/frame_000002.vtp", fs::copy_options::overwrite_existing);
+  EXPECT_EQ(marbles("render " + a + " --no-movie --width 32 --height 24", &err), 2);
+  EXPECT_NE(err.find(a + "/frames/frame_000002.vtp: holds 200 spheres where the series' first frame, " + a +
+                     "/frames/frame_000000.vtp, holds 300"),
+            std::string::npos)
+      << err;
+}
+
 // A folder holding an earlier run is refused (exit 2, nothing touched);
 // --overwrite replaces that run's files, so no stale frame survives, and
 // leaves the user's own files.
