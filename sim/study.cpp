@@ -390,18 +390,20 @@ bool there(const fs::path& path) {
 
 // Refuses (naming `key`, --out or study) a file this study would replace
 // that no earlier study in the folder wrote: a folder of the user's, or a
-// study's from before the record, is replaced only with --overwrite.
+// study's from before the record, is replaced only with --overwrite. `plots`:
+// gnuplot runs (its files are this study's to write).
 void check_study_folder(const fs::path& dir, std::size_t runs, const std::set<std::string>& earlier,
-                        const std::string& key, const StudyNames& names) {
+                        const std::string& key, const StudyNames& names, bool plots) {
   std::error_code ec;
   if (there(dir / "runs") && !fs::is_directory(dir / "runs", ec))
-    throw InputError(SourceLocation{}, key, (dir / "runs").string() + " is there and is not a folder: the study keeps its "
-                                            "runs in it (move it)");
-  const bool plots = have_gnuplot();
+    throw InputError(SourceLocation{}, key,
+                     printable_path((dir / "runs").string()) +
+                         " is there and is not a folder: the study keeps its runs in it (move it)");
   for (const std::string& name : study_files(runs))
     if ((plots || !drawn_by_gnuplot(name)) && !earlier.contains(name) && there(dir / name))
       throw InputError(SourceLocation{}, key,
-                       (dir / name).string() + " is there, and no earlier study in " + dir.string() +
+                       printable_path((dir / name).string()) + " is there, and no earlier study in " +
+                           printable_path(dir.string()) +
                            " wrote it: a study replaces only its own files (move it, or " + names.overwrite + ")");
 }
 
@@ -462,7 +464,8 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   const std::string key = options.out_dir.empty() ? "study" : options.names.out;
   const RunFolderLock lock(dir, key);
   const std::set<std::string> earlier = earlier_study_files(dir);
-  if (!options.overwrite) check_study_folder(dir, combos.size(), earlier, key, options.names);
+  const bool gnuplot = have_gnuplot();  // asked once: each ask starts gnuplot
+  if (!options.overwrite) check_study_folder(dir, combos.size(), earlier, key, options.names, gnuplot);
   // The runs are made in a folder of their own (`.runs-PID`) and take the
   // place of an earlier study's in runs/ only once all of them have run: a
   // study that fails or is stopped leaves the earlier one whole, its tables
@@ -544,7 +547,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   }
   if (options.progress) show_progress(err, tty, done, total, "done");
   // Again once the runs have run (hours, it may be): a file put there meanwhile is not replaced.
-  if (!options.overwrite) check_study_folder(dir, combos.size(), earlier, key, options.names);
+  if (!options.overwrite) check_study_folder(dir, combos.size(), earlier, key, options.names, gnuplot);
   {  // the record names what the folder may hold meanwhile: the earlier study's and this one's
     std::set<std::string> both = earlier;
     for (const std::string& name : study_files(combos.size())) both.insert(name);
@@ -631,8 +634,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
      << "     " << gnuplot_quoted((dir / "study_front.dat").string())
      << " using 1:2 with linespoints lw 2 pt 6 ps 2.2 title 'Pareto front'\n";
   render::write_file_atomic((dir / "study.gp").string(), gp.str());
-  const bool gnuplot_ran = have_gnuplot();
-  if (gnuplot_ran) {
+  if (gnuplot) {
     const std::string log = (dir / "study.gp.log").string();
     if (run_process("gnuplot", {"gnuplot", (dir / "study.gp").string()}, log) == 0 && fs::exists(png + ".tmp")) {
       fs::rename(png + ".tmp", png);
@@ -660,7 +662,7 @@ StudyResult run_study(const StudyOptions& options, std::ostream& out, std::ostre
   // plot where this one drew none (still that study's).
   std::set<std::string> written;
   for (const std::string& name : study_files(result.rows.size())) {
-    const bool drawn = name == "study.png" ? result.plotted : gnuplot_ran;
+    const bool drawn = name == "study.png" ? result.plotted : gnuplot;
     const bool ours = !drawn_by_gnuplot(name) || drawn || earlier.contains(name);
     if (ours && there(dir / name)) written.insert(name);
   }

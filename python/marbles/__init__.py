@@ -45,6 +45,17 @@ def _whole(value, what, least):
     return value
 
 
+def _utf8_text(text, key, where):
+    """``text``, where it is UTF-8 text; a lone surrogate ("\\ud800"), which no
+    scene text or folder's name holds, raises SceneError naming ``where``."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        raise SceneError(f"{where}: not UTF-8 text: {text!r}", key=key, message=f"not UTF-8 text: {text!r}") \
+            from None
+    return text
+
+
 def _flow_text(text):
     """A string inside a list or a map (a key, or a value there) as YAML
     text: plain where it is a plain word that reads as itself, else
@@ -75,11 +86,7 @@ def _yaml_text(value, key, strings="values", nested=False):
             return ".inf" if v > 0 else "-.inf"
         return repr(v)
     if isinstance(value, str):
-        try:
-            value.encode("utf-8")
-        except UnicodeEncodeError:  # a lone surrogate ("\ud800"): no scene text holds it
-            raise SceneError(f"set: {key}: not UTF-8 text: {value!r}", key=key,
-                             message=f"not UTF-8 text: {value!r}") from None
+        _utf8_text(value, key, f"set: {key}")
         # "run #2" would end at the #, "&a x" be an anchor, "null" nothing.
         # A list's or map's YAML text goes in set=["key=[a, b]"].
         if strings == "text":  # a study's value: YAML text as given, also inside a list
@@ -124,12 +131,8 @@ def _overrides(set):
         raise TypeError(f"set: a dict of key -> value, or a list of 'key=value' texts, got {set!r}")
     else:
         texts = [str(item) for item in set]
-    for text in texts:  # a lone surrogate ("\ud800"), in a key or a text: no scene text holds it
-        try:
-            text.encode("utf-8")
-        except UnicodeEncodeError:
-            raise SceneError(f"set: not UTF-8 text: {text!r}", key="set", message=f"not UTF-8 text: {text!r}") \
-                from None
+    for text in texts:  # in a key or a text
+        _utf8_text(text, "set", "set")
     return texts
 
 
@@ -389,13 +392,7 @@ class Simulation:
         if name is not None and not isinstance(name, str):
             raise TypeError(f"name: the output folder's name, a string, got {name!r}")
         named = scene.get("name") if isinstance(scene, dict) else None
-        stem = name or (named if isinstance(named, str) else None) or "scene"
-        try:
-            stem.encode("utf-8")
-        except UnicodeEncodeError:  # a lone surrogate ("\udcff"): no folder's name holds it
-            raise SceneError(f"name: not UTF-8 text: {stem!r}", key="name", message=f"not UTF-8 text: {stem!r}") \
-                from None
-        return stem
+        return _utf8_text(name or (named if isinstance(named, str) else None) or "scene", "name", "name")
 
     @staticmethod
     def _dict_source(scene, set, name):
