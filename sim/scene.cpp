@@ -965,14 +965,7 @@ Scene read_scene(YAML::Node document, const std::string& path, const std::string
     const double h = scene.time.dt / scene.time.substeps;
     const double gx = scene.gravity.x, gy = scene.gravity.y, gz = scene.gravity.z;
     const double fall = std::sqrt(gx * gx + gy * gy + gz * gz) * h * h;
-    const double most = double(std::numeric_limits<real>::max()) / 16;
-    if (!(fall <= most))
-      throw InputError(scene.dt_where, "time.dt",
-                       "a substep of h = " + shortest(h) + " s lets gravity move a sphere |g| h^2 = " +
-                           (std::isfinite(fall) ? shortest(fall) : "more than " + shortest(most)) +
-                           " m in it, more than " + std::string(kRealName) +
-                           " precision holds with room for its sums (" + shortest(most) +
-                           " m); lower time.dt or raise time.substeps");
+    if (!(fall <= kSubstepRoom)) refuse_substep_motion(scene, "lets gravity move a sphere |g| h^2 =", fall);
   }
   if (auto f = top.optional("drag")) {
     if (f->is_map()) {
@@ -1004,6 +997,15 @@ Scene read_scene(YAML::Node document, const std::string& path, const std::string
 }
 
 }  // namespace
+
+void refuse_substep_motion(const Scene& scene, const std::string& moves, double amount) {
+  const double h = scene.time.dt / scene.time.substeps;
+  throw InputError(scene.dt_where, "time.dt",
+                   "a substep of h = " + shortest(h) + " s " + moves + " " +
+                       (std::isfinite(amount) ? significant(amount, 6) : "more than " + significant(kSubstepRoom, 6)) +
+                       " m in it, more than " + std::string(kRealName) + " precision holds with room for its sums (" +
+                       significant(kSubstepRoom, 6) + " m); lower time.dt or raise time.substeps");
+}
 
 Scene load_scene(const std::string& path) { return load_scene(path, {}); }
 

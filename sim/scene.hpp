@@ -9,6 +9,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -232,6 +233,16 @@ struct Scene {
   // Index of a material by name (empty = 0); throws InputError at `where` if unknown.
   std::uint32_t material_index(const std::string& name, const SourceLocation& where, const std::string& key) const;
 };
+
+// How far a substep may move a sphere, by its fall under gravity or its
+// travel at its speed: the precision's largest number with room for a few
+// sums. Past it the first substep's contact search meets no finite bound.
+inline constexpr double kSubstepRoom = double(std::numeric_limits<real>::max()) / 16;
+
+// Refuses `scene`'s time.dt: a substep of it `moves` (the motion and its
+// cause, e.g. "lets gravity move a sphere |g| h^2 =") `amount` m, past
+// kSubstepRoom (an amount past double's range is said as "more than").
+[[noreturn]] void refuse_substep_motion(const Scene& scene, const std::string& moves, double amount);
 
 // Parses and validates; throws InputError (file:line:column: key: message).
 Scene load_scene(const std::string& path);

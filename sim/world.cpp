@@ -240,15 +240,12 @@ World make_world(const scene::Scene& scene, const scene::GeneratedParticles& par
   // The fastest sphere's travel in a substep is its reach in the contact
   // search: past the precision's range (with room for its sums) the first
   // substep meets no finite bound.
-  const double h = scene.time.dt / scene.time.substeps, travel = speed * h, room = most / 16;
-  if (!(travel <= room))
-    throw InputError(scene.dt_where, "time.dt",
-                     "a substep of h = " + significant(h, 6) + " s moves the fastest sphere, at up to " +
-                         significant(speed, 6) + " m/s (the fast-motion warning's estimate, and the fastest spin's "
-                         "surface speed), " +
-                         (std::isfinite(travel) ? significant(travel, 6) : "more than " + significant(room, 6)) +
-                         " m in it, more than " + kRealName + " precision holds with room for its sums (" +
-                         significant(room, 6) + " m); lower time.dt or raise time.substeps");
+  const double travel = speed * (scene.time.dt / scene.time.substeps);
+  if (!(travel <= scene::kSubstepRoom))
+    scene::refuse_substep_motion(scene,
+                          "moves the fastest sphere, at up to " + significant(speed, 6) +
+                              " m/s (the fast-motion warning's estimate, and the fastest spin's surface speed),",
+                          travel);
   const std::string past = past_at(speed);
   // Where a wall's motion sets the speed, and the scene would pass without
   // it, the wall's speed is what to change.

@@ -10,12 +10,14 @@
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <fstream>
 #include <random>
 #include <sstream>
 #include <string>
 #include <vector>
 
+#include "core/format.hpp"
 #include "render/atomic_file.hpp"
 #include "tests/sim/scene_cases.hpp"
 
@@ -526,6 +528,40 @@ TEST_F(Robustness, ImpulsesBeyondThePrecisionAreRefused) {
   // was inf, and inf x 0 a NaN that refused it).
   EXPECT_EQ(marbles("check " + oblique + " --precision double --set materials.a.density=2.5e307 "
                     "--set 'particles[0].list.velocities=[[0,0,0],[0,0,0]]'", dir).exit_code, 0);
+}
+
+// A substep that moves the fastest sphere past what the precision holds (its
+// speed times h beyond a sixteenth of the largest number) is refused at
+// time.dt, in the precision the scene asks, with the speed and the travel
+// named (a travel past double's own range as "more than", not inf); the
+// substeps that bring h back make it load.
+TEST_F(Robustness, TravelInASubstepPastThePrecisionIsRefusedAtDt) {
+  const test::ScratchDir dir("robust_travel");
+  const auto scene = [&](const std::string& precision, const std::string& speed, const std::string& dt) {
+    return dir.write(precision + ".yaml", "time: {duration: " + dt + ", dt: " + dt + "}\nsolver: {precision: " +
+                                              precision + "}\neffects: [collisions]\nmaterials: {a: {density: "
+                                              "2500}}\nparticles:\n  - list: {positions: [[0, 0, 1], [1, 0, 1]], "
+                                              "radius: 0.1, velocities: [[" + speed + ", 0, 0], [0, 0, 0]]}\n");
+  };
+  // float: 1e19 m/s (near the largest a velocity may be) for h = 1e19 s moves it 1e38 m, past 3.4e38 / 16.
+  const std::string fast = scene("float", "1e19", "1e19");
+  const Outcome f = marbles("check " + fast, dir);
+  EXPECT_EQ(f.exit_code, 2) << f.err;
+  EXPECT_NE(f.err.find("float.yaml:1:"), std::string::npos) << f.err;
+  EXPECT_NE(f.err.find("time.dt: a substep of h = 1e+19 s moves the fastest sphere, at up to 1e+19 m/s"),
+            std::string::npos) << f.err;
+  EXPECT_NE(f.err.find("more than float precision holds with room for its sums (" +
+                       significant(double(std::numeric_limits<float>::max()) / 16, 6) + " m)"),
+            std::string::npos) << f.err;
+  EXPECT_EQ(marbles("check " + fast + " --set time.substeps=100", dir).exit_code, 0);
+  EXPECT_EQ(marbles("check " + fast + " --precision double", dir).exit_code, 0);
+  // double: 7e153 m/s for h = 1e160 s is past double's own range.
+  const Outcome d = marbles("check " + scene("double", "7e153", "1e160"), dir);
+  EXPECT_EQ(d.exit_code, 2) << d.err;
+  EXPECT_NE(d.err.find("moves the fastest sphere, at up to 7e+153 m/s"), std::string::npos) << d.err;
+  EXPECT_NE(d.err.find("), more than " + significant(std::numeric_limits<double>::max() / 16, 6) + " m in it"),
+            std::string::npos) << d.err;
+  EXPECT_EQ(d.err.find("inf"), std::string::npos) << d.err;
 }
 
 // `check` holds a scene to what `run` refuses: the reference's own rules (the
