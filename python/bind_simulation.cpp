@@ -577,26 +577,14 @@ nb::object pairs(HostArray<const real, kAny, 4> xyzr, const std::string& algorit
   std::vector<real> radius(n);
   for (std::size_t i = 0; i < n; ++i) {
     const real* row = xyzr.data() + 4 * i;
-    if (!std::isfinite(row[0]) || !std::isfinite(row[1]) || !std::isfinite(row[2]) || !(row[3] >= 0) ||
-        !std::isfinite(row[3]))
-      throw InputError(SourceLocation{}, "xyzr[" + std::to_string(i) + "]",
-                       "a sphere needs a finite centre and a finite radius >= 0");
-    // As `marbles pairs` reads a row (read_spheres_csv): a number too small
-    // for the precision, and a centre whose squared length overflows (the
-    // overlap test squares the distances: two such spheres were found apart).
+    // As `marbles pairs` reads a row of its CSV (sphere_value_problem): a
+    // centre whose squared length overflows was found apart from its neighbours.
+    const std::string key = "xyzr[" + std::to_string(i) + "]";
     for (int c = 0; c < 4; ++c)
-      if (const std::string problem = scene::detail::real_range_problem(row[c], false); !problem.empty())
-        throw InputError(SourceLocation{}, "xyzr[" + std::to_string(i) + "]",
-                         std::string(1, "xyzr"[c]) + ": " + problem + ", got " + shortest(row[c]));
-    if (square_overflows(Vec3{row[0], row[1], row[2]}))
-      throw InputError(SourceLocation{}, "xyzr[" + std::to_string(i) + "]",
-                       "too large for " + std::string(kRealName) +
-                           " precision: the squared length of (x, y, z) overflows");
-    if (radius_squares_below_normal(row[3]))
-      throw InputError(SourceLocation{}, "xyzr[" + std::to_string(i) + "]",
-                       "radius " + shortest(row[3]) + " too small for " + kRealName +
-                           " precision: the overlap test squares it (smallest " +
-                           shortest(smallest_squarable_radius()) + ")");
+      if (const std::string problem = scene::sphere_value_problem(c, row[c]); !problem.empty())
+        throw InputError(SourceLocation{}, key, std::string(1, "xyzr"[c]) + ": " + problem + ", got " + shortest(row[c]));
+    if (const std::string problem = scene::sphere_vector_problem({row[0], row[1], row[2]}, "x, y, z"); !problem.empty())
+      throw InputError(SourceLocation{}, key, problem);
     centre[i] = {row[0], row[1], row[2]};
     radius[i] = row[3];
   }

@@ -407,25 +407,16 @@ CsvSpheres read_csv(const std::string& path, const SourceLocation& open_where, c
       const CsvField& field = fields[std::size_t(column_of[c])];
       if (!parse_number(field.text, value[c]))
         fail(field.column, kColumnNames[c], "expected a number, got '" + std::string(field.text) + "'");
-      if (!std::isfinite(value[c]))
-        fail(field.column, kColumnNames[c], "must be a finite number, got " + std::string(field.text));
-      // As a scene's numbers (Field::number's rule).
-      if (const std::string problem = detail::real_range_problem(value[c], false); !problem.empty())
+      if (const std::string problem = sphere_value_problem(c, value[c]); !problem.empty())
         fail(field.column, kColumnNames[c], problem + ", got " + std::string(field.text));
-      if (c == 3 && !(value[c] > 0))
-        fail(field.column, kColumnNames[c], "must be > 0, got " + std::string(field.text));
-      if (c == 3 && radius_squares_below_normal(real(value[c])))
-        fail(field.column, kColumnNames[c],
-             "too small for " + std::string(kRealName) + " precision: the overlap test squares it (smallest " +
-                 shortest(smallest_squarable_radius()) + "), got " + std::string(field.text));
     }
-    for (int c : {0, 4, 7}) {  // position, velocity, spin: squared by the step, as a scene's vectors are
+    for (int c : {0, 4, 7}) {  // position, velocity, spin
       if (column_of[c] < 0) continue;
-      const Vec3 v{real(value[c]), real(value[c + 1]), real(value[c + 2])};
-      if (square_overflows(v))
-        fail(fields[std::size_t(column_of[c])].column, kColumnNames[c],
-             "too large for " + std::string(kRealName) + " precision: the squared length of (" + kColumnNames[c] +
-                 ", " + kColumnNames[c + 1] + ", " + kColumnNames[c + 2] + ") overflows");
+      const std::string names = std::string(kColumnNames[c]) + ", " + kColumnNames[c + 1] + ", " + kColumnNames[c + 2];
+      if (const std::string problem = sphere_vector_problem({real(value[c]), real(value[c + 1]), real(value[c + 2])},
+                                                            names);
+          !problem.empty())
+        fail(fields[std::size_t(column_of[c])].column, kColumnNames[c], problem);
     }
     push_sphere(result.spheres, Vec3(real(value[0]), real(value[1]), real(value[2])), value[3], 0);
     result.spheres.velocity.back() = Vec3(real(value[4]), real(value[5]), real(value[6]));
@@ -453,6 +444,22 @@ void assign_velocities(const VelocitySpec& spec, GeneratedParticles& out, std::s
 }
 
 }  // namespace
+
+std::string sphere_value_problem(int column, double value) {
+  if (!std::isfinite(value)) return "must be a finite number";
+  // As a scene's numbers (Field::number's rule).
+  if (std::string problem = detail::real_range_problem(value, false); !problem.empty()) return problem;
+  if (column == 3 && !(value > 0)) return "must be > 0";
+  if (column == 3 && radius_squares_below_normal(real(value)))
+    return "too small for " + std::string(kRealName) + " precision: the overlap test squares it (smallest " +
+           shortest(smallest_squarable_radius()) + ")";
+  return {};
+}
+
+std::string sphere_vector_problem(const Vec3& v, const std::string& names) {
+  if (!square_overflows(v)) return {};
+  return "too large for " + std::string(kRealName) + " precision: the squared length of (" + names + ") overflows";
+}
 
 GeneratedParticles read_spheres_csv(const std::string& path) {
   return read_csv(path, SourceLocation{path, 0, 0}, "").spheres;

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "core/vec3.hpp"
@@ -34,5 +35,17 @@ void check_sphere_budget(double total, const SourceLocation& where, const std::s
 // Reads `x,y,z,r[,vx,vy,vz[,wx,wy,wz]]` rows (an optional header line, '#' comments);
 // used by the csv block and by `marbles pairs`.
 GeneratedParticles read_spheres_csv(const std::string& path);
+
+// The rules each value of a sphere's row holds to, alike in a scene's CSV
+// block, `marbles pairs` and marbles.pairs() (column 0-9: x y z r vx vy vz
+// wx wy wz): a finite number that the precision holds, and a radius > 0
+// whose square the overlap test can take. What the value breaks, or "";
+// the caller says where and what it got.
+std::string sphere_value_problem(int column, double value);
+
+// The same for a row's centre, velocity or spin, whose squared length the
+// step takes: "too large for <precision> ...: the squared length of (`names`)
+// overflows", or "".
+std::string sphere_vector_problem(const Vec3& v, const std::string& names);
 
 }  // namespace marbles::scene

@@ -665,7 +665,10 @@ def test_pairs_reads_any_byte_order_and_refuses_what_marbles_pairs_refuses():
              (np.array([[0, 0, 0, 1e200], [1e200, 0, 0, 1e200]]),
               r"^xyzr\[1\]: too large for double precision: the squared length of \(x, y, z\) overflows$"),
              (np.array([[0, 0, 0, 1], [0, 1e-40, 0, 1]], dtype=np.float32),
-              r"^xyzr\[1\]: y: too small for float precision, got 1e-40$")]
+              r"^xyzr\[1\]: y: too small for float precision, got 1e-40$"),
+             # A radius of 0 (taken here, refused by the program) and a centre that is not finite.
+             (np.array([[0, 0, 0, 1], [0, 0, 0.5, 0]]), r"^xyzr\[1\]: r: must be > 0, got 0$"),
+             (np.array([[0, 0, 0, 1], [np.nan, 0, 0, 1]]), r"^xyzr\[1\]: x: must be a finite number, got nan$")]
     for xyzr, message in cases:
         with pytest.raises(marbles.SceneError, match=message):
             marbles.pairs(xyzr, backend="cpu")
