@@ -1021,7 +1021,8 @@ namespace {
 // levels from Python overflowed the stack here.
 constexpr int kJsonDepth = 500;
 YAML::Node yaml_of(const nlohmann::ordered_json& value, const std::string& label, int depth = 0) {
-  if ((value.is_object() || value.is_array()) && depth >= kJsonDepth)
+  // A value of kJsonDepth levels (the top the first) is refused, as the file loader refuses one.
+  if ((value.is_object() || value.is_array()) && depth + 1 >= kJsonDepth)
     throw InputError(SourceLocation{label, 0, 0}, "",
                      "nested deeper than the YAML reader follows (" + std::to_string(kJsonDepth) + " levels)");
   switch (value.type()) {

@@ -98,6 +98,36 @@ TEST(SceneErrors, GravitysFallInASubstepPastThePrecisionIsRefusedAtDt) {
   EXPECT_NO_THROW(load_scene(dir.write("s.yaml", scene(1e3 * edge, "") + "effects: [collisions]\n")));
 }
 
+// A scene given as JSON (the Python module's dicts) nests as deep as a scene
+// file may: the same document, its reference nested d levels (flow YAML is
+// JSON), is refused for its depth by both readers or by neither, on either
+// side of the YAML reader's bound (which the JSON reader repeats: yaml-cpp
+// keeps it private).
+TEST(SceneErrors, JsonNestsAsDeepAsTheYamlReaderFollows) {
+  const ScratchDir dir("json_depth");
+  const auto too_deep = [](auto&& load) {
+    try {
+      load();
+    } catch (const InputError& e) {
+      return e.message().find("nested deeper than the YAML reader follows") != std::string::npos;
+    }
+    return false;
+  };
+  int refused = 0, taken = 0;
+  for (int d = 470; d <= 530; ++d) {
+    const std::string text = R"({"time": {"duration": 1, "dt": 0.001}, "materials": {"a": {}}, )"
+                             R"("particles": [{"list": {"positions": [[0, 0, 1]], "radius": 0.1}}], "reference": )" +
+                             std::string(std::size_t(d), '[') + std::string(std::size_t(d), ']') + "}";
+    const std::string path = dir.write("deep.yaml", text);
+    const bool yaml = too_deep([&] { load_scene(path); });
+    const bool json = too_deep([&] { load_scene_json(text, "dict", "deep"); });
+    EXPECT_EQ(yaml, json) << d << " levels: refused by the " << (yaml ? "YAML" : "JSON") << " reader alone";
+    (yaml ? refused : taken) += 1;
+  }
+  EXPECT_GT(refused, 0);  // the bound is within the range tried
+  EXPECT_GT(taken, 0);
+}
+
 TEST(SceneErrors, RandomOverfullSaysHowManyWerePlaced) {
   const ScratchDir dir("overfull");
   const std::string path = dir.write(
