@@ -188,6 +188,7 @@ std::vector<SeriesEntry> read_pvd(const fs::path& pvd_path) {
                      "whole: run again, or resume the run from a checkpoint)");
 
   std::vector<SeriesEntry> entries;
+  std::optional<double> last_time;  // the last entry's that gave one
   for_each_tag(text, [&](bool closing, std::string_view name, std::string_view attrs) {
     if (closing || name != "DataSet") return;
     std::optional<double> time;
@@ -207,6 +208,13 @@ std::vector<SeriesEntry> read_pvd(const fs::path& pvd_path) {
       }
     });
     if (file.empty()) return;
+    // In time order, as a run lists them (the movie and its frame rate follow the list).
+    if (time && last_time && !(*time > *last_time))
+      throw InputError(SourceLocation{pvd_path.string(), 0, 0}, "",
+                       "frame " + std::to_string(entries.size()) + "'s timestep " + shortest(*time) +
+                           " is not after the one before it, " + shortest(*last_time) +
+                           ": a run lists its frames in time order (a series edited, or mixed with another run's?)");
+    if (time) last_time = time;
     const fs::path p(file);
     entries.push_back({time.value_or(double(entries.size())), p.is_absolute() ? p : pvd_path.parent_path() / p});
   });

@@ -198,7 +198,8 @@ struct SeriesEntry {
 
 /// The <DataSet> entries of a .pvd file, in file order. Throws
 /// marbles::RuntimeFailure when the file cannot be read, InputError when it
-/// is cut short, lists no entry or gives a timestep that is no finite number.
+/// is cut short, lists no entry, gives a timestep that is no finite number,
+/// or one not after the timestep before it (a run lists them in time order).
 std::vector<SeriesEntry> read_pvd(const std::filesystem::path& pvd_path);
 
 /// Every numeric array of a .vtp in appended format, by "Section/Name"

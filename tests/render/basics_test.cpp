@@ -483,6 +483,32 @@ TEST(Pvd, TimesThatAreNotFiniteNumbersAreRefused) {
   EXPECT_EQ(entries[1].time, 3);
 }
 
+// A series lists its frames in time order, as a run writes them (the movie
+// and its frame rate follow the list): a timestep not after the one before
+// (earlier, or the same) is refused naming both; a DataSet with no timestep
+// between two is passed over in the comparison.
+TEST(Pvd, TimesOutOfOrderAreRefused) {
+  const fs::path dir = fresh_dir("pvd_order");
+  for (const auto& [times, at] : std::vector<std::pair<std::vector<std::string>, std::string>>{
+           {{"0", "0.5", "0.25"}, "frame 2's timestep 0.25 is not after the one before it, 0.5"},
+           {{"0", "0", "1"}, "frame 1's timestep 0 is not after the one before it, 0"},
+           {{"1e300", "2"}, "frame 1's timestep 2 is not after the one before it, 1e+300"}}) {
+    std::string datasets;
+    for (std::size_t k = 0; k < times.size(); ++k)
+      datasets += "  <DataSet timestep=\"" + times[k] + "\" file=\"f" + std::to_string(k) + ".vtp\"/>\n";
+    try {
+      pvd_of(dir, datasets);
+      ADD_FAILURE() << datasets << " read";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("series.pvd: " + at), std::string::npos) << e.what();
+    }
+  }
+  const auto entries = pvd_of(dir, "  <DataSet timestep=\"1\" file=\"f.vtp\"/>\n  <DataSet file=\"g.vtp\"/>\n"
+                                   "  <DataSet timestep=\"2\" file=\"h.vtp\"/>\n");
+  ASSERT_EQ(entries.size(), 3u);
+  EXPECT_EQ(entries[2].time, 2);
+}
+
 // A frame holding what no run writes (a position, speed or time not finite,
 // a radius not above zero, an id or material that is not a whole number in
 // range) is refused naming the frame, the array and the point, not drawn
